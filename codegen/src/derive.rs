@@ -1,0 +1,637 @@
+//! The derivation stage: spec -> symbolica -> model IR.
+//!
+//! Everything symbolic in kinegen happens here, on the calling thread. The result,
+//! a [`ModelIr`], is symbolica-free and is what the emitter and the analysis use.
+//!
+//! Removable singularities are handled generically: every derived expression is
+//! scanned for a denominator that vanishes when a designated increment symbol is 0
+//! (the exact-integration rotation `dth = omega*dt`, the pose increment `dtheta` of
+//! the integrated inverse). Such an output gets a Taylor series in that symbol,
+//! computed by symbolica, and a `NearZero` branch that uses it for |s| < EPS. If the
+//! series still has negative powers the singularity is not removable and derivation
+//! fails instead of emitting code that blows up.
+use crate::symbolic::{check_no_placeholder, number_f64, to_atom, Funcs, SymbolicError};
+use crate::tape::TapeBuilder;
+use kinegen_model::expr::Expr;
+use kinegen_model::ir::{ArgSpec, Function, ModelIr, Op};
+use kinegen_model::spec::{InputKind, Model, STATE};
+use kinegen_model::{SourceError, SourcePos};
+use std::collections::HashMap;
+use symbolica::atom::{Atom, AtomCore, AtomView, Symbol};
+use symbolica::poly::series::SeriesDepth;
+use symbolica::symbol;
+
+/// Below this |s| the series branch is used. Chosen with SERIES_ORDER so that the
+/// truncation error (< EPS^(N+1)/(N+1)! ~ 1e-19) and the cancellation error of the
+/// closed form at the switch point (~1e-16/EPS^2 ~ 4e-14) are both negligible.
+pub const EPS: f64 = 0.05;
+pub const SERIES_ORDER: i64 = 8;
+
+struct Sym {
+    fx: Funcs,
+    by_name: HashMap<String, Atom>,
+}
+
+impl Sym {
+    fn s(&self, name: &str) -> Symbol {
+        self.by_name[name].get_symbol().expect("symbol")
+    }
+    fn a(&self, name: &str) -> Atom {
+        self.by_name[name].clone()
+    }
+}
+
+/// One argument group of a derived function: its spec and its symbols.
+#[derive(Clone)]
+struct Arg {
+    spec: ArgSpec,
+    syms: Vec<Symbol>,
+}
+
+fn arg(sym: &Sym, name: &str, names: &[String]) -> Arg {
+    Arg {
+        spec: ArgSpec { name: name.to_string(), names: names.to_vec() },
+        syms: names.iter().map(|n| sym.s(n)).collect(),
+    }
+}
+
+fn strings(v: &[&str]) -> Vec<String> {
+    v.iter().map(|s| s.to_string()).collect()
+}
+
+fn err_at(model: &Model, e: &Expr, msg: impl Into<String>) -> SourceError {
+    SourceError::new(&model.path, Some(SourcePos::from_offset(&model.source, e.span.0)), msg)
+}
+
+fn sym_err(model: &Model, e: SymbolicError) -> SourceError {
+    SourceError::new(&model.path, None, e.0)
+}
+
+fn is_zero(a: &Atom) -> bool {
+    a.expand().is_zero()
+}
+
+fn substitute(a: &Atom, s: Symbol, by: &Atom) -> Atom {
+    a.replace(Atom::var(s).to_pattern()).with(by.to_pattern())
+}
+
+/// Does `a` divide by something that vanishes at s = 0?
+fn has_vanishing_denominator(a: AtomView, s: Symbol) -> bool {
+    match a {
+        AtomView::Pow(p) => {
+            let (base, exp) = p.get_base_exp();
+            let negative = crate::symbolic::as_f64(exp).is_some_and(|n| n < 0.0);
+            if negative && base.contains_symbol(s) && is_zero(&substitute(&base.to_owned(), s, &Atom::num(0))) {
+                return true;
+            }
+            has_vanishing_denominator(base, s) || has_vanishing_denominator(exp, s)
+        }
+        AtomView::Mul(m) => m.iter().any(|x| has_vanishing_denominator(x, s)),
+        AtomView::Add(m) => m.iter().any(|x| has_vanishing_denominator(x, s)),
+        AtomView::Fun(f) => f.iter().any(|x| has_vanishing_denominator(x, s)),
+        _ => false,
+    }
+}
+
+/// A derived function before lowering.
+struct Spec {
+    name: String,
+    doc: String,
+    args: Vec<Arg>,
+    /// Intermediates computed once from the arguments (e.g. dth = omega*dt).
+    lets: Vec<(Symbol, Atom)>,
+    rows: usize,
+    cols: usize,
+    row_names: Vec<String>,
+    col_names: Vec<String>,
+    outputs: Vec<Atom>,
+    /// Symbols at which removable singularities are looked for.
+    singular: Vec<Symbol>,
+}
+
+fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), SymbolicError> {
+    let mut tb = TapeBuilder::new(fx, cse);
+    for (ai, a) in spec.args.iter().enumerate() {
+        for (i, s) in a.syms.iter().enumerate() {
+            let slot = tb.push(Op::Arg(ai as u16, i as u16));
+            tb.bind(*s, slot);
+        }
+    }
+    for (s, e) in &spec.lets {
+        let slot = tb.atom(e.as_view())?;
+        tb.bind(*s, slot);
+    }
+    let mut outs = Vec::new();
+    for (k, o) in spec.outputs.iter().enumerate() {
+        check_no_placeholder(o, &format!("{} output {k}", spec.name))?;
+        let mut o = o.clone();
+        for &s in &spec.singular {
+            o = regularize(&o, s, fx).map_err(|e| SymbolicError(format!("{} output {k}: {}", spec.name, e.0)))?;
+        }
+        outs.push(tb.atom(o.as_view())?);
+    }
+    Ok(tb.finish(&outs))
+}
+
+/// Replace every subexpression with a removable singularity at s = 0 by
+/// `kg_near(s, series, closed)`. The whole expression is tried first (singular
+/// terms of a sum may cancel only together); if symbolica cannot expand it (e.g. it
+/// contains one of our own functions of s) its parts are regularised one by one.
+fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
+    if !has_vanishing_denominator(a.as_view(), s) {
+        return Ok(a.clone());
+    }
+    let own_fn = |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs].contains(&f);
+    if !matches!(a.as_view(), AtomView::Fun(f) if own_fn(f.get_symbol())) {
+        if let Ok(series) = a.series(s, Atom::num(0), SeriesDepth::absolute(SERIES_ORDER)) {
+            let series = series.to_atom();
+            if has_negative_power(series.as_view(), s) {
+                return Err(SymbolicError(format!("singular at {} = 0 and the singularity is not removable", Atom::var(s))));
+            }
+            if !has_vanishing_denominator(series.as_view(), s) {
+                check_no_placeholder(&series, "series")?;
+                return Ok(symbolica::function!(fx.near, Atom::var(s), series, a.clone()));
+            }
+        }
+    }
+    // Rebuild from regularised parts.
+    Ok(match a.as_view() {
+        AtomView::Add(add) => add.iter().try_fold(Atom::num(0), |acc, t| Ok::<_, SymbolicError>(acc + regularize(&t.to_owned(), s, fx)?))?,
+        AtomView::Mul(m) => m.iter().try_fold(Atom::num(1), |acc, t| Ok::<_, SymbolicError>(acc * regularize(&t.to_owned(), s, fx)?))?,
+        AtomView::Pow(p) => {
+            let (b, e) = p.get_base_exp();
+            let b2 = regularize(&b.to_owned(), s, fx)?;
+            if has_vanishing_denominator(b2.as_view(), s) || (crate::symbolic::as_f64(e).is_some_and(|n| n < 0.0) && is_zero(&substitute(&b.to_owned(), s, &Atom::num(0)))) {
+                return Err(SymbolicError(format!("singular at {} = 0 in `{}` and symbolica found no series for it", Atom::var(s), a)));
+            }
+            b2.pow(e.to_owned())
+        }
+        AtomView::Fun(f) => {
+            let mut args = Vec::new();
+            for x in f.iter() {
+                args.push(regularize(&x.to_owned(), s, fx)?);
+            }
+            let mut fb = symbolica::atom::FunctionBuilder::new(f.get_symbol());
+            for x in &args {
+                fb = fb.add_arg(x);
+            }
+            fb.finish()
+        }
+        _ => a.clone(),
+    })
+}
+
+fn has_negative_power(a: AtomView, s: Symbol) -> bool {
+    match a {
+        AtomView::Pow(p) => {
+            let (base, exp) = p.get_base_exp();
+            (matches!(base, AtomView::Var(v) if v.get_symbol() == s) && crate::symbolic::as_f64(exp).is_some_and(|n| n < 0.0))
+                || has_negative_power(base, s)
+        }
+        AtomView::Mul(m) => m.iter().any(|x| has_negative_power(x, s)),
+        AtomView::Add(m) => m.iter().any(|x| has_negative_power(x, s)),
+        AtomView::Fun(f) => f.iter().any(|x| has_negative_power(x, s)),
+        _ => false,
+    }
+}
+
+fn finish(spec: Spec, fx: Funcs) -> Result<Function, SymbolicError> {
+    let (tape, outputs) = lower(&spec, fx, true)?;
+    let (tree, _) = lower(&spec, fx, false)?;
+    let ops_tree = tree.iter().filter(|o| o.is_arithmetic()).count();
+    Ok(Function {
+        name: spec.name,
+        doc: spec.doc,
+        args: spec.args.into_iter().map(|a| a.spec).collect(),
+        rows: spec.rows,
+        cols: spec.cols,
+        row_names: spec.row_names,
+        col_names: spec.col_names,
+        tape,
+        outputs,
+        ops_tree,
+    })
+}
+
+/// Jacobian of `outs` w.r.t. `vars`, row-major. With `chain = (s, e)` the
+/// outputs depend on the let-bound symbol s = e(vars) too (chain rule).
+fn jacobian(outs: &[Atom], vars: &[Symbol], chain: Option<(Symbol, &Atom)>) -> Vec<Atom> {
+    let mut j = Vec::new();
+    for o in outs {
+        let d_chain = chain.map(|(s, _)| o.derivative(s));
+        for &v in vars {
+            let mut d = o.derivative(v);
+            if let (Some((_, e)), Some(dc)) = (chain, &d_chain) {
+                d = d + dc * e.derivative(v);
+            }
+            j.push(d);
+        }
+    }
+    j
+}
+
+/// Derive every function of a model.
+pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
+    let fx = Funcs::get();
+    let mut by_name = HashMap::new();
+    let mut names: Vec<String> = STATE.iter().map(|s| s.to_string()).collect();
+    names.extend(model.inputs.iter().map(|i| i.name.clone()));
+    names.extend(model.noise.iter().map(|n| n.name.clone()));
+    names.extend(model.runtime_params().map(|p| p.name.clone()));
+    names.extend(strings(&["dt", "xl", "yl", "vx", "vy", "omega", "dx", "dy", "dtheta", "kg_dth"]));
+    for n in &names {
+        by_name.insert(n.clone(), Atom::var(symbol!(&format!("kg_v_{n}"))));
+    }
+    // const parameters are folded in as exact numbers
+    for p in model.params.iter().filter(|p| p.constant) {
+        by_name.insert(p.name.clone(), number_f64(p.nominal));
+    }
+    let sym = Sym { fx, by_name };
+    let se = |e| sym_err(model, e);
+
+    let state: Vec<String> = strings(&STATE);
+    let u_names: Vec<String> = model.inputs.iter().map(|i| i.name.clone()).collect();
+    let w_names: Vec<String> = model.noise.iter().map(|n| n.name.clone()).collect();
+    let p_names: Vec<String> = model.runtime_params().map(|p| p.name.clone()).collect();
+    let (ax, au, aw, ap) = (arg(&sym, "x", &state), arg(&sym, "u", &u_names), arg(&sym, "w", &w_names), arg(&sym, "p", &p_names));
+    let adt = arg(&sym, "dt", &strings(&["dt"]));
+
+    // Body twist with and without noise.
+    let twist_noisy: Vec<Atom> = model
+        .twist
+        .iter()
+        .map(|e| to_atom(&model.expand(e), &sym.by_name, &fx))
+        .collect::<Result<_, _>>()
+        .map_err(se)?;
+    let zero_noise = |a: &Atom| w_names.iter().fold(a.clone(), |acc, n| substitute(&acc, sym.s(n), &Atom::num(0)));
+    let twist: Vec<Atom> = twist_noisy.iter().map(zero_noise).collect();
+
+    let mut fns = Vec::new();
+    let twist_rows = strings(&["vx", "vy", "omega"]);
+    let pose_rows = strings(&["x", "y", "theta"]);
+    fns.push(Spec {
+        name: "twist".into(),
+        doc: format!("Body twist [vx, vy, omega] (m/s, m/s, rad/s) from the inputs: the forward kinematics. {}", model.motion_doc),
+        args: vec![au.clone(), ap.clone()],
+        lets: vec![],
+        rows: 3,
+        cols: 1,
+        row_names: twist_rows.clone(),
+        col_names: vec![],
+        outputs: twist.clone(),
+        singular: vec![],
+    });
+
+    // Discrete motion models.
+    let (x, y, th, dt) = (sym.a("x"), sym.a("y"), sym.a("theta"), sym.a("dt"));
+    let (vx, vy, om) = (&twist_noisy[0], &twist_noisy[1], &twist_noisy[2]);
+    let euler = vec![
+        &x + (th.cos() * vx - th.sin() * vy) * &dt,
+        &y + (th.sin() * vx + th.cos() * vy) * &dt,
+        &th + om * &dt,
+    ];
+    let dth_sym = sym.s("kg_dth");
+    let dth = sym.a("kg_dth");
+    let dth_expr = om * &dt;
+    let s_fun = dth.sin() / &dth;
+    let c_fun = (Atom::num(1) - dth.cos()) / &dth;
+    let (a, b) = (vx * &dt, vy * &dt);
+    let bx = &s_fun * &a - &c_fun * &b;
+    let by = &c_fun * &a + &s_fun * &b;
+    let exact = vec![&x + th.cos() * &bx - th.sin() * &by, &y + th.sin() * &bx + th.cos() * &by, &th + &dth_expr];
+
+    let step_args = |with_w: bool| {
+        let mut v = vec![ax.clone(), au.clone()];
+        if with_w && !w_names.is_empty() {
+            v.push(aw.clone());
+        }
+        v.extend([ap.clone(), adt.clone()]);
+        v
+    };
+    let groups: Vec<(&str, &Arg)> = [("x", &ax), ("u", &au), ("w", &aw), ("p", &ap)]
+        .into_iter()
+        .filter(|(_, a)| !a.syms.is_empty())
+        .collect();
+    for (form, outs, chain, doc) in [
+        ("euler", &euler, None, "Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading."),
+        ("exact", &exact, Some((dth_sym, &dth_expr)), "Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch)."),
+    ] {
+        let lets = chain.map(|(s, e): (Symbol, &Atom)| vec![(s, e.clone())]).unwrap_or_default();
+        let singular = if chain.is_some() { vec![dth_sym] } else { vec![] };
+        fns.push(Spec {
+            name: format!("step_{form}"),
+            doc: doc.to_string(),
+            args: step_args(true),
+            lets: lets.clone(),
+            rows: 3,
+            cols: 1,
+            row_names: pose_rows.clone(),
+            col_names: vec![],
+            outputs: outs.clone(),
+            singular: singular.clone(),
+        });
+        for (g, garg) in &groups {
+            let j = jacobian(outs, &garg.syms, chain);
+            let what = match *g {
+                "x" => "state (seed 001 eq. 4 for Euler)",
+                "u" => "inputs",
+                "w" => "noise inputs (seed 001 eq. 5 for Euler)",
+                _ => "parameters",
+            };
+            fns.push(Spec {
+                name: format!("step_{form}_jac_{g}"),
+                doc: format!("Jacobian of `step_{form}` with respect to the {what}; rows x, y, theta."),
+                args: step_args(true),
+                lets: lets.clone(),
+                rows: 3,
+                cols: garg.syms.len(),
+                row_names: pose_rows.clone(),
+                col_names: garg.spec.names.clone(),
+                outputs: j,
+                singular: singular.clone(),
+            });
+        }
+    }
+
+    // Observation models.
+    let mut obs_vars = sym.by_name.clone();
+    for (n, t) in ["vx", "vy", "omega"].iter().zip(&twist) {
+        obs_vars.insert(n.to_string(), t.clone());
+    }
+    for o in &model.observations {
+        let outs: Vec<Atom> = o
+            .exprs
+            .iter()
+            .map(|e| to_atom(&model.expand(e), &obs_vars, &fx))
+            .collect::<Result<_, _>>()
+            .map_err(se)?;
+        let mut args = vec![ax.clone(), au.clone(), ap.clone()];
+        if o.landmark {
+            args.push(arg(&sym, "lm", &strings(&["xl", "yl"])));
+        }
+        let doc = if o.doc.is_empty() { format!("Observation `{}`", o.name) } else { o.doc.clone() };
+        fns.push(Spec {
+            name: format!("obs_{}", o.name),
+            doc: format!("{doc} Predicted columns: {}.", o.columns.join(", ")),
+            args: args.clone(),
+            lets: vec![],
+            rows: outs.len(),
+            cols: 1,
+            row_names: o.columns.clone(),
+            col_names: vec![],
+            outputs: outs.clone(),
+            singular: vec![],
+        });
+        for (g, garg) in [("x", &ax), ("p", &ap)] {
+            if garg.syms.is_empty() {
+                continue;
+            }
+            fns.push(Spec {
+                name: format!("obs_{}_jac_{g}", o.name),
+                doc: format!("Jacobian of `obs_{}` with respect to the {} (seed 001 eq. 7 for range-bearing).", o.name, if g == "x" { "state" } else { "parameters" }),
+                args: args.clone(),
+                lets: vec![],
+                rows: outs.len(),
+                cols: garg.syms.len(),
+                row_names: o.columns.clone(),
+                col_names: garg.spec.names.clone(),
+                outputs: jacobian(&outs, &garg.syms, None),
+                singular: vec![],
+            });
+        }
+    }
+
+    // Inverse kinematics.
+    fns.extend(inverse_kinematics(model, &sym, &twist, &ap, &adt)?);
+
+    let mut functions = Vec::new();
+    for s in fns {
+        functions.push(finish(s, fx).map_err(se)?);
+    }
+    Ok(ModelIr {
+        name: model.name.clone(),
+        doc: model.doc.clone(),
+        seed: model.seed.clone(),
+        spec_fingerprint: model.fingerprint(),
+        inputs: model.inputs.clone(),
+        params: model.params.clone(),
+        noise: model.noise.clone(),
+        observations: model.observations.clone(),
+        effects: model.effects.clone(),
+        functions,
+    })
+}
+
+/// Evaluate an atom numerically with symbol values (used for rank and
+/// consistency checks at sample points, never for emitted code).
+fn eval_at(a: &Atom, values: &[(Symbol, f64)], fx: Funcs) -> Result<f64, SymbolicError> {
+    let mut tb = TapeBuilder::new(fx, true);
+    let vals: Vec<f64> = values.iter().map(|v| v.1).collect();
+    for (i, (s, _)) in values.iter().enumerate() {
+        let slot = tb.push(Op::Arg(0, i as u16));
+        tb.bind(*s, slot);
+    }
+    let out = tb.atom(a.as_view())?;
+    let (tape, outputs) = tb.finish(&[out]);
+    let f = Function {
+        name: String::new(),
+        doc: String::new(),
+        args: vec![ArgSpec { name: "v".into(), names: vec![String::new(); vals.len()] }],
+        rows: 1,
+        cols: 1,
+        row_names: vec![],
+        col_names: vec![],
+        tape,
+        outputs,
+        ops_tree: 0,
+    };
+    Ok(f.eval(&[&vals])[0])
+}
+
+/// Deterministic pseudo-random sample points (no RNG dependency in the derive stage).
+fn sample(k: usize, i: usize) -> f64 {
+    let h = ((k as u64 + 1).wrapping_mul(0x9E3779B97F4A7C15) ^ (i as u64 + 7).wrapping_mul(0xBF58476D1CE4E5B9)) >> 11;
+    (h as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+}
+
+/// Inverse kinematics: inputs from a body twist, and the integrated form (seed 001
+/// eq. 12-18): inputs that produce a given pose increment over dt.
+fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &Arg) -> Result<Vec<Spec>, SourceError> {
+    let fx = sym.fx;
+    let se = |e| sym_err(model, e);
+    let rates: Vec<&kinegen_model::spec::Input> = model.inputs.iter().filter(|i| i.kind == InputKind::Cumulative).collect();
+    let cfg_names: Vec<String> = model.inputs.iter().filter(|i| i.kind == InputKind::Absolute).map(|i| i.name.clone()).collect();
+    let rate_syms: Vec<Symbol> = rates.iter().map(|i| sym.s(&i.name)).collect();
+    let tw_syms = [sym.s("vx"), sym.s("vy"), sym.s("omega")];
+    let tw_atoms = [sym.a("vx"), sym.a("vy"), sym.a("omega")];
+
+    // Which twist rows can be non-zero at all?
+    let structurally_zero: Vec<bool> = twist.iter().map(is_zero).collect();
+    // Sample values for parameters (nominal, perturbed) and configuration inputs.
+    let point = |k: usize| -> Vec<(Symbol, f64)> {
+        let mut v: Vec<(Symbol, f64)> = model
+            .runtime_params()
+            .enumerate()
+            .map(|(i, p)| (sym.s(&p.name), p.nominal * (1.0 + 0.1 * sample(k, i))))
+            .collect();
+        for (i, c) in cfg_names.iter().enumerate() {
+            v.push((sym.s(c), 0.7 * sample(k, 100 + i)));
+        }
+        v
+    };
+
+    let (inverse_outs, out_names, doc): (Vec<Atom>, Vec<String>, String) = if let Some((exprs, idoc)) = &model.inverse {
+        // Declared inverse: check it numerically against the forward model.
+        let mut vars = sym.by_name.clone();
+        for (n, a) in ["vx", "vy", "omega"].iter().zip(&tw_atoms) {
+            vars.insert(n.to_string(), a.clone());
+        }
+        let outs: Vec<Atom> = exprs.iter().map(|e| to_atom(e, &vars, &fx)).collect::<Result<_, _>>().map_err(se)?;
+        for k in 0..8 {
+            let mut pt = point(k);
+            pt.retain(|(s, _)| !model.inputs.iter().any(|i| sym.s(&i.name) == *s));
+            let tw: Vec<f64> = (0..3).map(|r| if structurally_zero[r] { 0.0 } else { 0.2 + 0.5 * sample(k, 200 + r).abs() }).collect();
+            let mut at = pt.clone();
+            at.extend(tw_syms.iter().copied().zip(tw.iter().copied()));
+            let mut fwd_at = pt.clone();
+            for (i, o) in model.inputs.iter().zip(&outs) {
+                fwd_at.push((sym.s(&i.name), eval_at(o, &at, fx).map_err(se)?));
+            }
+            for r in 0..3 {
+                let back = eval_at(&twist[r], &fwd_at, fx).map_err(se)?;
+                if (back - tw[r]).abs() > 1e-9 * (1.0 + tw[r].abs()) {
+                    return Err(err_at(
+                        model,
+                        &exprs[0],
+                        format!("declared inverse does not invert the motion model: twist {:?} maps back to {} = {back} instead of {}", tw, ["vx", "vy", "omega"][r], tw[r]),
+                    ));
+                }
+            }
+        }
+        (outs, model.inputs.iter().map(|i| i.name.clone()).collect(), idoc.clone())
+    } else {
+        // Derived inverse: the twist must be linear in the input rates, M(cfg, p) * rates.
+        let rows: Vec<usize> = (0..3).filter(|&r| !structurally_zero[r]).collect();
+        let nonlinear = twist.iter().any(|t| {
+            let at_zero = rate_syms.iter().fold(t.clone(), |acc, s| substitute(&acc, *s, &Atom::num(0)));
+            !is_zero(&at_zero) || rate_syms.iter().any(|a| rate_syms.iter().any(|b| !is_zero(&t.derivative(*a).derivative(*b))))
+        });
+        if nonlinear || rows.len() != rate_syms.len() || rows.is_empty() || rows.len() > 3 {
+            return Err(err_at(
+                model,
+                &model.twist[0],
+                format!(
+                    "cannot derive inverse kinematics: the twist is {} in the {} input rate(s) with {} non-zero twist row(s); declare an [inverse] section",
+                    if nonlinear { "not linear" } else { "linear" },
+                    rate_syms.len(),
+                    rows.len()
+                ),
+            ));
+        }
+        let m: Vec<Vec<Atom>> = rows.iter().map(|&r| rate_syms.iter().map(|s| twist[r].derivative(*s)).collect()).collect();
+        let (inv, det) = symbolic_inverse(&m);
+        let singular_everywhere = (0..6).all(|k| eval_at(&det, &point(k), fx).map(|d| d.abs() < 1e-12).unwrap_or(true));
+        if singular_everywhere {
+            return Err(err_at(model, &model.twist[0], "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0)"));
+        }
+        let outs: Vec<Atom> = (0..rows.len())
+            .map(|i| rows.iter().enumerate().fold(Atom::num(0), |acc, (j, &r)| acc + &inv[i][j] * &tw_atoms[r]))
+            .collect();
+        let names = rates.iter().map(|i| i.name.clone()).collect();
+        (outs, names, "Input rates from a body twist: the inverse of the (square, invertible) map from input rates to the twist rows that are not identically zero, derived symbolically (seed 003: W = (V_T_W)^-1 V).".into())
+    };
+
+    let twist_arg = arg(sym, "twist", &strings(&["vx", "vy", "omega"]));
+    let cfg_arg = arg(sym, "cfg", &cfg_names);
+    let mut args = vec![twist_arg];
+    if model.inverse.is_none() && !cfg_names.is_empty() {
+        args.push(cfg_arg.clone());
+    }
+    args.push(ap.clone());
+    let mut specs = vec![Spec {
+        name: "inverse_twist".into(),
+        doc,
+        args,
+        lets: vec![],
+        rows: inverse_outs.len(),
+        cols: 1,
+        row_names: out_names.clone(),
+        col_names: vec![],
+        outputs: inverse_outs.clone(),
+        singular: vec![],
+    }];
+
+    // Integrated inverse: the constant twist that moves the robot by (dx, dy, dtheta)
+    // (start body frame) in dt, i.e. the SE(2) logarithm. A model whose twist has no
+    // lateral component follows seed 001 eq. 12/15: x and theta are imposed, y follows.
+    let (dx, dy, d, dt) = (sym.a("dx"), sym.a("dy"), sym.a("dtheta"), sym.a("dt"));
+    let lateral = !structurally_zero[1];
+    let (vx_i, vy_i) = if lateral {
+        let half = &d / Atom::num(2);
+        let k = &half * d.sin() / (Atom::num(1) - d.cos());
+        (( &k * &dx + &half * &dy) / &dt, (&k * &dy - &half * &dx) / &dt)
+    } else {
+        (&dx * &d / (d.sin() * &dt), Atom::num(0))
+    };
+    let om_i = &d / &dt;
+    let subst = |a: &Atom| {
+        let a = substitute(a, tw_syms[0], &vx_i);
+        let a = substitute(&a, tw_syms[1], &vy_i);
+        substitute(&a, tw_syms[2], &om_i)
+    };
+    let mut args = vec![arg(sym, "dpose", &strings(&["dx", "dy", "dtheta"])), adt.clone()];
+    if model.inverse.is_none() && !cfg_names.is_empty() {
+        args.push(cfg_arg);
+    }
+    args.push(ap.clone());
+    specs.push(Spec {
+        name: "inverse_increment".into(),
+        doc: format!(
+            "Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. {} Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.",
+            if lateral { "Holonomic: dx, dy and dtheta are all imposed (exact SE(2) logarithm)." } else { "Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15)." }
+        ),
+        args,
+        lets: vec![],
+        rows: inverse_outs.len(),
+        cols: 1,
+        row_names: out_names,
+        col_names: vec![],
+        outputs: inverse_outs.iter().map(subst).collect(),
+        singular: vec![sym.s("dtheta")],
+    });
+    Ok(specs)
+}
+
+/// Inverse of a 1x1, 2x2 or 3x3 symbolic matrix by the adjugate; returns (inverse, det).
+fn symbolic_inverse(m: &[Vec<Atom>]) -> (Vec<Vec<Atom>>, Atom) {
+    let n = m.len();
+    let minor = |r: usize, c: usize| -> Atom {
+        let rows: Vec<usize> = (0..n).filter(|&i| i != r).collect();
+        let cols: Vec<usize> = (0..n).filter(|&j| j != c).collect();
+        match n {
+            2 => m[rows[0]][cols[0]].clone(),
+            3 => &m[rows[0]][cols[0]] * &m[rows[1]][cols[1]] - &m[rows[0]][cols[1]] * &m[rows[1]][cols[0]],
+            _ => Atom::num(1),
+        }
+    };
+    let det = match n {
+        1 => m[0][0].clone(),
+        _ => (0..n).fold(Atom::num(0), |acc, c| {
+            let sign = if c % 2 == 0 { Atom::num(1) } else { Atom::num(-1) };
+            acc + sign * &m[0][c] * minor(0, c)
+        }),
+    };
+    let det = det.expand();
+    let inv = (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| {
+                    let sign = if (i + j) % 2 == 0 { Atom::num(1) } else { Atom::num(-1) };
+                    // adj[i][j] = cofactor[j][i]
+                    (sign * minor(j, i) / &det).cancel()
+                })
+                .collect()
+        })
+        .collect();
+    (inv, det)
+}

@@ -1,0 +1,69 @@
+//! kinegen-codegen: the derivation stage and the Rust emitter.
+//!
+//! This is the only crate that links symbolica. [`derive_model`] runs every
+//! symbolic computation on one dedicated worker thread per process, after taking a
+//! machine-wide lock file, because unlicensed symbolica allows one thread per user
+//! machine-wide and aborts a second one. Concurrent callers (test threads, parallel
+//! processes) therefore queue instead of crashing.
+pub mod derive;
+pub mod emit;
+pub mod generate;
+mod symbolic;
+mod tape;
+
+use kinegen_model::ir::ModelIr;
+use kinegen_model::spec::Model;
+use kinegen_model::SourceError;
+use std::sync::mpsc::{channel, Sender};
+use std::sync::{Mutex, OnceLock};
+
+type Job = Box<dyn FnOnce() + Send>;
+
+fn worker() -> &'static Mutex<Sender<Job>> {
+    static WORKER: OnceLock<Mutex<Sender<Job>>> = OnceLock::new();
+    WORKER.get_or_init(|| {
+        let (tx, rx) = channel::<Job>();
+        std::thread::Builder::new()
+            .name("kinegen-symbolica".into())
+            .spawn(move || {
+                // Held until the process exits, like symbolica's own per-thread permit.
+                let _lock = machine_lock();
+                for job in rx {
+                    job();
+                }
+            })
+            .expect("spawn the symbolica worker thread");
+        Mutex::new(tx)
+    })
+}
+
+/// Block until this process may use symbolica (no other kinegen process is deriving).
+fn machine_lock() -> Option<fd_lock::RwLockWriteGuard<'static, std::fs::File>> {
+    // Keep symbolica's licence banner off stdout: machine-readable output goes there.
+    std::env::set_var("SYMBOLICA_HIDE_BANNER", "1");
+    let path = std::env::temp_dir().join("kinegen-symbolica.lock");
+    let file = std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&path).ok()?;
+    let lock: &'static mut fd_lock::RwLock<std::fs::File> = Box::leak(Box::new(fd_lock::RwLock::new(file)));
+    lock.write().ok()
+}
+
+/// Run `f` on the process's symbolica thread and wait for its result. A panic in
+/// `f` is caught there (the thread survives for the next job) and returned as Err.
+pub fn on_symbolica_thread<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> Result<T, String> {
+    let (tx, rx) = channel();
+    let job: Job = Box::new(move || {
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
+            p.downcast_ref::<String>().cloned().or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string())).unwrap_or_default()
+        });
+        let _ = tx.send(r);
+    });
+    worker().lock().map_err(|e| e.to_string())?.send(job).map_err(|e| e.to_string())?;
+    rx.recv().map_err(|e| e.to_string())?
+}
+
+/// Derive the IR of a validated model (symbolica, on the dedicated thread).
+pub fn derive_model(model: &Model) -> Result<ModelIr, SourceError> {
+    let m = model.clone();
+    on_symbolica_thread(move || derive::derive(&m))
+        .unwrap_or_else(|panic| Err(SourceError::new(&model.path, None, format!("internal error while deriving: {panic}"))))
+}

@@ -1,0 +1,163 @@
+//! Bridge between spec expressions and symbolica atoms.
+//!
+//! Symbolica differentiates sin, cos, exp, log and powers itself. For tan, atan,
+//! atan2 and abs it would leave `der(...)` placeholders, so we declare our own
+//! function symbols with explicit derivative rules ([`Funcs`]). After every
+//! derivation [`check_no_placeholder`] makes a leftover placeholder a hard error.
+use kinegen_model::expr::{BinOp, Expr, ExprKind};
+use std::collections::HashMap;
+use symbolica::atom::{Atom, AtomCore, AtomView, Symbol};
+use symbolica::{function, symbol};
+
+/// Our function symbols with their derivative rules.
+#[derive(Clone, Copy)]
+pub struct Funcs {
+    pub tan: Symbol,
+    pub atan: Symbol,
+    pub atan2: Symbol,
+    pub abs: Symbol,
+    /// `kg_near(s, series, closed)`: the series branch of a removable singularity
+    /// at s = 0 (lowered to `Op::NearZero`; never differentiated).
+    pub near: Symbol,
+}
+
+impl Funcs {
+    /// The process-wide function symbols (symbolica symbols can be defined once).
+    pub fn get() -> Funcs {
+        static FUNCS: std::sync::OnceLock<Funcs> = std::sync::OnceLock::new();
+        *FUNCS.get_or_init(Funcs::define)
+    }
+
+    fn define() -> Funcs {
+        let tan = symbol!("kg_tan", der = |x, i, out| {
+            // d tan(a)/da = 1 + tan(a)^2
+            if let (0, AtomView::Fun(f)) = (i, x) {
+                let a = f.iter().next().unwrap().to_owned();
+                let t = function!(symbol!("kg_tan"), a);
+                **out = Atom::num(1) + &t * &t;
+            }
+        });
+        let atan = symbol!("kg_atan", der = |x, i, out| {
+            // d atan(a)/da = 1 / (1 + a^2)
+            if let (0, AtomView::Fun(f)) = (i, x) {
+                let a = f.iter().next().unwrap().to_owned();
+                **out = (Atom::num(1) + &a * &a).pow(Atom::num(-1));
+            }
+        });
+        let atan2 = symbol!("kg_atan2", der = |x, i, out| {
+            // atan2(y, x): d/dy = x/(x^2+y^2), d/dx = -y/(x^2+y^2)
+            if let AtomView::Fun(f) = x {
+                let mut it = f.iter();
+                let (y, xx) = (it.next().unwrap().to_owned(), it.next().unwrap().to_owned());
+                let r2inv = (&xx * &xx + &y * &y).pow(Atom::num(-1));
+                **out = if i == 0 { &xx * &r2inv } else { -(&y * &r2inv) };
+            }
+        });
+        let abs = symbol!("kg_abs", der = |x, i, out| {
+            // d|a|/da = a/|a| (undefined at a = 0, like the function's kink)
+            if let (0, AtomView::Fun(f)) = (i, x) {
+                let a = f.iter().next().unwrap().to_owned();
+                **out = &a * function!(symbol!("kg_abs"), a.clone()).pow(Atom::num(-1));
+            }
+        });
+        let near = symbol!("kg_near");
+        Funcs { tan, atan, atan2, abs, near }
+    }
+}
+
+/// An error while building or converting symbolic expressions.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{0}")]
+pub struct SymbolicError(pub String);
+
+/// Exact rational for a decimal literal such as `0.042` or `1e-3`, so the
+/// derivation works with exact numbers; falls back to a float beyond i64.
+pub fn number(text: &str) -> Atom {
+    let lower = text.to_ascii_lowercase();
+    let (mantissa, exp10) = match lower.split_once('e') {
+        Some((m, e)) => (m.to_string(), e.parse::<i32>().unwrap_or(0)),
+        None => (lower.clone(), 0),
+    };
+    let (int_part, frac_part) = mantissa.split_once('.').unwrap_or((&mantissa, ""));
+    let digits = format!("{int_part}{frac_part}");
+    let scale = exp10 - frac_part.len() as i32;
+    if let Ok(n) = digits.trim_start_matches('0').parse::<i64>().or_else(|_| if digits.chars().all(|c| c == '0') { Ok(0) } else { Err(()) }) {
+        if scale.unsigned_abs() <= 18 {
+            let p = 10i64.pow(scale.unsigned_abs());
+            return if scale >= 0 {
+                n.checked_mul(p).map(Atom::num).unwrap_or_else(|| Atom::num(text.parse::<f64>().unwrap()))
+            } else {
+                Atom::num((n, p))
+            };
+        }
+    }
+    Atom::num(text.parse::<f64>().unwrap_or(f64::NAN))
+}
+
+/// Exact rational of an f64 (via its shortest decimal representation).
+pub fn number_f64(v: f64) -> Atom {
+    let s = format!("{v:e}");
+    let neg = s.starts_with('-');
+    let a = number(s.trim_start_matches('-'));
+    if neg {
+        -a
+    } else {
+        a
+    }
+}
+
+/// Convert a spec expression (definitions already expanded) to an atom.
+pub fn to_atom(e: &Expr, vars: &HashMap<String, Atom>, fx: &Funcs) -> Result<Atom, SymbolicError> {
+    Ok(match &e.kind {
+        ExprKind::Num(n) => number(n),
+        ExprKind::Var(v) if v == "pi" => Atom::var(Symbol::PI),
+        ExprKind::Var(v) => vars.get(v).cloned().ok_or_else(|| SymbolicError(format!("unbound symbol `{v}`")))?,
+        ExprKind::Neg(a) => -to_atom(a, vars, fx)?,
+        ExprKind::Bin(op, a, b) => {
+            let (a, b) = (to_atom(a, vars, fx)?, to_atom(b, vars, fx)?);
+            match op {
+                BinOp::Add => a + b,
+                BinOp::Sub => a - b,
+                BinOp::Mul => a * b,
+                BinOp::Div => a / b,
+                BinOp::Pow => a.pow(b),
+            }
+        }
+        ExprKind::Call(f, args) => {
+            let a: Vec<Atom> = args.iter().map(|x| to_atom(x, vars, fx)).collect::<Result<_, _>>()?;
+            match f.as_str() {
+                "sin" => a[0].sin(),
+                "cos" => a[0].cos(),
+                "exp" => a[0].exp(),
+                "ln" => a[0].log(),
+                "sqrt" => a[0].pow(Atom::num((1, 2))),
+                "tan" => function!(fx.tan, a[0]),
+                "atan" => function!(fx.atan, a[0]),
+                "atan2" => function!(fx.atan2, a[0], a[1]),
+                "abs" => function!(fx.abs, a[0]),
+                other => return Err(SymbolicError(format!("function `{other}` has no symbolic form"))),
+            }
+        }
+    })
+}
+
+/// Fail if symbolica left a derivative placeholder (a function it cannot differentiate).
+pub fn check_no_placeholder(a: &Atom, what: &str) -> Result<(), SymbolicError> {
+    let s = a.to_string();
+    if a.contains_symbol(Symbol::DERIVATIVE) || s.contains("der(") {
+        return Err(SymbolicError(format!("{what}: symbolica left a derivative placeholder in `{s}`")));
+    }
+    Ok(())
+}
+
+/// f64 value of a numeric atom, if it is one.
+pub fn as_f64(a: AtomView) -> Option<f64> {
+    use symbolica::coefficient::CoefficientView;
+    let AtomView::Num(n) = a else { return None };
+    match n.get_coeff_view() {
+        CoefficientView::Natural(nr, dr, ni, _) if ni == 0 => Some(nr as f64 / dr as f64),
+        CoefficientView::Large(r, i) if i.to_rat().is_zero() => Some(r.to_rat().to_f64()),
+        CoefficientView::Float(r, i) if i.is_zero() => Some(symbolica::domains::float::RealLike::to_f64(&r.to_float())),
+        _ => None,
+    }
+}

@@ -1,0 +1,280 @@
+//! Lowering symbolica atoms to IR tapes, with common-subexpression elimination.
+//!
+//! CSE is hash-consing: every op is looked up by its opcode and operand slots
+//! before it is pushed, so identical subexpressions anywhere in a function (across
+//! all its outputs) share one slot. Commutative operands are put in a canonical
+//! order first so `a*b` and `b*a` meet. Built with `cse = false` the same lowering
+//! gives the "before CSE" operation count.
+use crate::symbolic::{as_f64, Funcs, SymbolicError};
+use kinegen_model::ir::Op;
+use std::collections::HashMap;
+use symbolica::atom::{AtomView, Symbol};
+
+pub struct TapeBuilder {
+    pub tape: Vec<Op>,
+    dedup: HashMap<String, u32>,
+    leaves: HashMap<Symbol, u32>,
+    fx: Funcs,
+    cse: bool,
+}
+
+impl TapeBuilder {
+    pub fn new(fx: Funcs, cse: bool) -> Self {
+        TapeBuilder { tape: Vec::new(), dedup: HashMap::new(), leaves: HashMap::new(), fx, cse }
+    }
+
+    /// Push an op, reusing an identical earlier one when CSE is on.
+    pub fn push(&mut self, op: Op) -> u32 {
+        let op = match op {
+            Op::Add(a, b) if a > b => Op::Add(b, a),
+            Op::Mul(a, b) if a > b => Op::Mul(b, a),
+            o => o,
+        };
+        let key = match &op {
+            Op::Const(c) => format!("c{}", c.to_bits()),
+            o => format!("{o:?}"),
+        };
+        if self.cse || !op.is_arithmetic() {
+            if let Some(&slot) = self.dedup.get(&key) {
+                return slot;
+            }
+        }
+        let slot = self.tape.len() as u32;
+        self.tape.push(op);
+        self.dedup.insert(key, slot);
+        slot
+    }
+
+    /// Make `sym` read from `slot` (function arguments, let-bound intermediates).
+    pub fn bind(&mut self, sym: Symbol, slot: u32) {
+        self.leaves.insert(sym, slot);
+    }
+
+    pub fn constant(&mut self, c: f64) -> u32 {
+        self.push(Op::Const(c))
+    }
+
+    /// Lower one atom; returns the slot holding its value.
+    pub fn atom(&mut self, a: AtomView) -> Result<u32, SymbolicError> {
+        match a {
+            AtomView::Num(_) => {
+                let v = as_f64(a).ok_or_else(|| SymbolicError(format!("non-real constant `{a}`")))?;
+                Ok(self.constant(v))
+            }
+            AtomView::Var(v) => {
+                let s = v.get_symbol();
+                if s == Symbol::PI {
+                    Ok(self.constant(std::f64::consts::PI))
+                } else if s == Symbol::E {
+                    Ok(self.constant(std::f64::consts::E))
+                } else {
+                    self.leaves.get(&s).copied().ok_or_else(|| SymbolicError(format!("unbound symbol `{a}` in derived code")))
+                }
+            }
+            AtomView::Fun(f) => {
+                let s = f.get_symbol();
+                let args: Vec<u32> = f.iter().map(|x| self.atom(x)).collect::<Result<_, _>>()?;
+                let op = if s == Symbol::SIN {
+                    Op::Sin(args[0])
+                } else if s == Symbol::COS {
+                    Op::Cos(args[0])
+                } else if s == Symbol::EXP {
+                    Op::Exp(args[0])
+                } else if s == Symbol::LOG {
+                    Op::Ln(args[0])
+                } else if s == Symbol::SQRT {
+                    Op::Sqrt(args[0])
+                } else if s == Symbol::ABS || s == self.fx.abs {
+                    Op::Abs(args[0])
+                } else if s == self.fx.tan {
+                    Op::Tan(args[0])
+                } else if s == self.fx.atan {
+                    Op::Atan(args[0])
+                } else if s == self.fx.atan2 {
+                    Op::Atan2(args[0], args[1])
+                } else if s == self.fx.near {
+                    Op::NearZero { x: args[0], eps: crate::derive::EPS, near: args[1], far: args[2] }
+                } else {
+                    return Err(SymbolicError(format!("no code for function `{a}` (a derivative placeholder?)")));
+                };
+                Ok(self.push(op))
+            }
+            AtomView::Pow(p) => {
+                let (base, exp) = p.get_base_exp();
+                if let AtomView::Var(v) = base {
+                    if v.get_symbol() == Symbol::E {
+                        let e = self.atom(exp)?;
+                        return Ok(self.push(Op::Exp(e)));
+                    }
+                }
+                let b = self.atom(base)?;
+                match as_f64(exp) {
+                    Some(n) if n.fract() == 0.0 => Ok(self.powi(b, n as i32)),
+                    Some(h) if (2.0 * h).fract() == 0.0 => {
+                        let s = self.push(Op::Sqrt(b));
+                        Ok(self.powi(s, (2.0 * h) as i32))
+                    }
+                    _ => {
+                        let e = self.atom(exp)?;
+                        Ok(self.push(Op::Pow(b, e)))
+                    }
+                }
+            }
+            AtomView::Mul(m) => {
+                // numerator and denominator collected separately: x*y/z costs two ops,
+                // not a reciprocal and two multiplications.
+                let mut coef = 1.0;
+                let mut num = Vec::new();
+                let mut den = Vec::new();
+                for f in m.iter() {
+                    if let Some(c) = as_f64(f) {
+                        coef *= c;
+                        continue;
+                    }
+                    if let AtomView::Pow(p) = f {
+                        let (base, exp) = p.get_base_exp();
+                        if let Some(n) = as_f64(exp) {
+                            if n < 0.0 && (2.0 * n).fract() == 0.0 {
+                                let b = self.atom(base)?;
+                                let d = if n.fract() == 0.0 {
+                                    self.powi(b, (-n) as i32)
+                                } else {
+                                    let s = self.push(Op::Sqrt(b));
+                                    self.powi(s, (-2.0 * n) as i32)
+                                };
+                                den.push(d);
+                                continue;
+                            }
+                        }
+                    }
+                    num.push(self.atom(f)?);
+                }
+                let mut acc = num.into_iter().reduce(|a, b| self.push(Op::Mul(a, b)));
+                if coef.abs() != 1.0 {
+                    let c = self.constant(coef.abs());
+                    acc = Some(match acc {
+                        Some(a) => self.push(Op::Mul(c, a)),
+                        None => c,
+                    });
+                }
+                let mut v = acc.unwrap_or_else(|| self.constant(1.0));
+                if let Some(d) = den.into_iter().reduce(|a, b| self.push(Op::Mul(a, b))) {
+                    v = self.push(Op::Div(v, d));
+                }
+                if coef < 0.0 {
+                    v = self.push(Op::Neg(v));
+                }
+                Ok(v)
+            }
+            AtomView::Add(add) => {
+                let mut acc: Option<u32> = None;
+                let mut pending_neg = Vec::new();
+                for t in add.iter() {
+                    let (neg, slot) = self.term(t)?;
+                    if neg {
+                        match acc {
+                            Some(a) => acc = Some(self.push(Op::Sub(a, slot))),
+                            None => pending_neg.push(slot),
+                        }
+                    } else {
+                        acc = Some(match acc {
+                            Some(a) => self.push(Op::Add(a, slot)),
+                            None => slot,
+                        });
+                    }
+                }
+                let mut v = match acc {
+                    Some(a) => a,
+                    None => {
+                        let first = pending_neg.remove(0);
+                        self.push(Op::Neg(first))
+                    }
+                };
+                for s in pending_neg {
+                    v = self.push(Op::Sub(v, s));
+                }
+                Ok(v)
+            }
+        }
+    }
+
+    /// A sum term as (is_negative, slot of its absolute value), so sums use `-`
+    /// instead of negating.
+    fn term(&mut self, t: AtomView) -> Result<(bool, u32), SymbolicError> {
+        if let Some(c) = as_f64(t) {
+            return Ok((c < 0.0, self.constant(c.abs())));
+        }
+        if let AtomView::Mul(m) = t {
+            let negative = m.iter().filter_map(as_f64).product::<f64>() < 0.0;
+            if negative {
+                let s = self.atom(t)?;
+                // atom() ends a negative product with Neg(x): take x back.
+                if let Some(Op::Neg(inner)) = self.tape.get(s as usize) {
+                    return Ok((true, *inner));
+                }
+                return Ok((false, s));
+            }
+        }
+        Ok((false, self.atom(t)?))
+    }
+
+    fn powi(&mut self, b: u32, n: i32) -> u32 {
+        match n {
+            0 => self.constant(1.0),
+            1 => b,
+            2 => self.push(Op::Mul(b, b)),
+            n if n < 0 => {
+                let one = self.constant(1.0);
+                let d = self.powi(b, -n);
+                self.push(Op::Div(one, d))
+            }
+            n => self.push(Op::PowI(b, n)),
+        }
+    }
+
+    /// Drop ops no output needs and renumber; returns (tape, outputs).
+    pub fn finish(self, outputs: &[u32]) -> (Vec<Op>, Vec<u32>) {
+        let mut live = vec![false; self.tape.len()];
+        for &o in outputs {
+            live[o as usize] = true;
+        }
+        for i in (0..self.tape.len()).rev() {
+            if live[i] {
+                for r in self.tape[i].operands() {
+                    live[r as usize] = true;
+                }
+            }
+        }
+        let mut new_index = vec![u32::MAX; self.tape.len()];
+        let mut tape = Vec::new();
+        for (i, op) in self.tape.into_iter().enumerate() {
+            if !live[i] {
+                continue;
+            }
+            let m = |r: u32| new_index[r as usize];
+            let op = match op {
+                Op::Add(a, b) => Op::Add(m(a), m(b)),
+                Op::Sub(a, b) => Op::Sub(m(a), m(b)),
+                Op::Mul(a, b) => Op::Mul(m(a), m(b)),
+                Op::Div(a, b) => Op::Div(m(a), m(b)),
+                Op::Pow(a, b) => Op::Pow(m(a), m(b)),
+                Op::Atan2(a, b) => Op::Atan2(m(a), m(b)),
+                Op::Neg(a) => Op::Neg(m(a)),
+                Op::PowI(a, n) => Op::PowI(m(a), n),
+                Op::Sqrt(a) => Op::Sqrt(m(a)),
+                Op::Sin(a) => Op::Sin(m(a)),
+                Op::Cos(a) => Op::Cos(m(a)),
+                Op::Tan(a) => Op::Tan(m(a)),
+                Op::Atan(a) => Op::Atan(m(a)),
+                Op::Exp(a) => Op::Exp(m(a)),
+                Op::Ln(a) => Op::Ln(m(a)),
+                Op::Abs(a) => Op::Abs(m(a)),
+                Op::NearZero { x, eps, near, far } => Op::NearZero { x: m(x), eps, near: m(near), far: m(far) },
+                o @ (Op::Const(_) | Op::Arg(..)) => o,
+            };
+            new_index[i] = tape.len() as u32;
+            tape.push(op);
+        }
+        (tape, outputs.iter().map(|&o| new_index[o as usize]).collect())
+    }
+}

@@ -1,0 +1,15 @@
+//! kinegen-model: everything about a kinematic model that does not need symbolic algebra.
+//!
+//! * [`spec`]: the TOML spec language (`spec/*.toml`), parsed and validated with
+//!   errors that point at file, line and column.
+//! * [`expr`]: the math-expression language used inside specs (parser with spans).
+//! * [`ir`]: the serialisable model IR that the derivation stage (kinegen-codegen,
+//!   which owns symbolica) produces, and a fast evaluator for it. The Rust emitter,
+//!   the verification suite and the analysis commands all consume this IR, so none of
+//!   them ever touches symbolica.
+pub mod error;
+pub mod expr;
+pub mod ir;
+pub mod spec;
+
+pub use error::{SourceError, SourcePos};

@@ -1,0 +1,558 @@
+//! The spec language: one TOML file per model (see `spec/README.md`).
+//!
+//! [`Model::load`] parses and validates a spec and reports every problem as a
+//! [`SourceError`] naming the file, line and column.
+use crate::error::{SourceError, SourcePos};
+use crate::expr::{self, Expr, ExprKind, CONSTANTS, FUNCTIONS};
+use serde::{Deserialize, Serialize};
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// Names every spec may use without declaring them.
+/// `dt`: step length (s); `xl`, `yl`: landmark position of a landmark observation;
+/// `vx`, `vy`, `omega`: the body twist (only inside observations).
+pub const RESERVED: &[&str] = &["dt", "xl", "yl", "vx", "vy", "omega"];
+
+/// The planar pose every model integrates.
+pub const STATE: [&str; 3] = ["x", "y", "theta"];
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSpec {
+    name: Spanned<String>,
+    #[serde(default)]
+    doc: String,
+    #[serde(default)]
+    seed: String,
+    state: Spanned<Vec<String>>,
+    #[serde(default)]
+    input: Vec<RawInput>,
+    #[serde(default)]
+    parameter: Vec<RawParam>,
+    #[serde(default)]
+    noise: Vec<RawNoise>,
+    #[serde(default)]
+    define: Vec<RawDefine>,
+    motion: RawMotion,
+    #[serde(default)]
+    observation: Vec<RawObservation>,
+    #[serde(default)]
+    inverse: Option<RawInverse>,
+    #[serde(default)]
+    effects: Vec<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInput {
+    name: Spanned<String>,
+    column: String,
+    kind: InputKind,
+    #[serde(default)]
+    unit: String,
+    #[serde(default)]
+    doc: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawParam {
+    name: Spanned<String>,
+    nominal: Spanned<f64>,
+    #[serde(default)]
+    unit: String,
+    #[serde(default)]
+    doc: String,
+    min: Option<f64>,
+    max: Option<f64>,
+    #[serde(default = "yes")]
+    free: bool,
+    #[serde(default, rename = "const")]
+    constant: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawNoise {
+    name: Spanned<String>,
+    #[serde(default)]
+    doc: String,
+    #[serde(default)]
+    sigma: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDefine {
+    name: Spanned<String>,
+    expr: Spanned<String>,
+    #[serde(default)]
+    doc: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMotion {
+    #[serde(default)]
+    doc: String,
+    vx: Spanned<String>,
+    vy: Spanned<String>,
+    omega: Spanned<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObservation {
+    name: Spanned<String>,
+    #[serde(default)]
+    doc: String,
+    columns: Spanned<Vec<String>>,
+    expr: Vec<Spanned<String>>,
+    #[serde(default)]
+    angle: Vec<bool>,
+    #[serde(default)]
+    sigma: Vec<f64>,
+    #[serde(default)]
+    landmark: bool,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInverse {
+    #[serde(default)]
+    doc: String,
+    /// One expression per input, in input order, in terms of vx, vy, omega and parameters.
+    inputs: Spanned<Vec<Spanned<String>>>,
+}
+
+/// How a log column feeds an input symbol.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum InputKind {
+    /// Cumulative counter or wheel angle; the input symbol is its rate over the step
+    /// (increment / dt), constant within the step.
+    Cumulative,
+    /// Absolute value (e.g. a steering angle) held from the start of the step.
+    Absolute,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Input {
+    pub name: String,
+    pub column: String,
+    pub kind: InputKind,
+    pub unit: String,
+    pub doc: String,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Param {
+    pub name: String,
+    pub nominal: f64,
+    pub unit: String,
+    pub doc: String,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    /// Calibrated by `fit` unless false.
+    pub free: bool,
+    /// Folded into generated code; not a runtime argument.
+    pub constant: bool,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Noise {
+    pub name: String,
+    pub doc: String,
+    pub sigma: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Observation {
+    pub name: String,
+    pub doc: String,
+    pub columns: Vec<String>,
+    pub angle: Vec<bool>,
+    pub sigma: Vec<f64>,
+    pub landmark: bool,
+    #[serde(skip)]
+    pub exprs: Vec<Expr>,
+}
+
+/// A validated model: every expression parsed, every name resolved, definitions
+/// ordered so each depends only on earlier ones.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub path: PathBuf,
+    pub source: String,
+    pub name: String,
+    pub doc: String,
+    pub seed: String,
+    pub inputs: Vec<Input>,
+    pub params: Vec<Param>,
+    pub noise: Vec<Noise>,
+    /// (name, expression, doc), topologically ordered.
+    pub defines: Vec<(String, Expr, String)>,
+    pub motion_doc: String,
+    /// Body twist [vx, vy, omega] in terms of inputs, parameters, noise, definitions.
+    pub twist: [Expr; 3],
+    pub observations: Vec<Observation>,
+    /// Hand-declared inverse (input values from a body twist) for models whose
+    /// inputs do not enter the twist linearly; verified by the generator.
+    pub inverse: Option<(Vec<Expr>, String)>,
+    pub effects: Vec<String>,
+}
+
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err_at(&self, offset: usize, msg: impl Into<String>) -> SourceError {
+        SourceError::new(self.path, Some(SourcePos::from_offset(self.text, offset)), msg)
+    }
+    fn err_span<T>(&self, s: &Spanned<T>, msg: impl Into<String>) -> SourceError {
+        self.err_at(s.span().start, msg)
+    }
+    /// Parse an expression stored in a TOML string; positions inside it map back to
+    /// the file (the +1 skips the opening quote).
+    fn parse_expr(&self, s: &Spanned<String>) -> Result<Expr, SourceError> {
+        let base = s.span().start + 1;
+        let mut e = expr::parse(s.get_ref()).map_err(|pe| self.err_at(base + pe.offset, pe.message))?;
+        shift_spans(&mut e, base);
+        Ok(e)
+    }
+}
+
+fn shift_spans(e: &mut Expr, by: usize) {
+    e.span = (e.span.0 + by, e.span.1 + by);
+    match &mut e.kind {
+        ExprKind::Neg(a) => shift_spans(a, by),
+        ExprKind::Bin(_, a, b) => {
+            shift_spans(a, by);
+            shift_spans(b, by);
+        }
+        ExprKind::Call(_, args) => args.iter_mut().for_each(|a| shift_spans(a, by)),
+        _ => {}
+    }
+}
+
+fn is_identifier(s: &str) -> bool {
+    let mut c = s.chars();
+    matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
+        && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+}
+
+impl Model {
+    /// Read and validate a spec file.
+    pub fn load(path: &Path) -> Result<Model, SourceError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| SourceError::new(path, None, format!("cannot read spec: {e}")))?;
+        Model::parse(path, &text)
+    }
+
+    /// Validate spec text (`path` is used in messages only).
+    pub fn parse(path: &Path, text: &str) -> Result<Model, SourceError> {
+        let cx = Ctx { path, text };
+        let raw: RawSpec = toml::from_str(text).map_err(|e| {
+            let pos = e.span().map(|s| SourcePos::from_offset(text, s.start));
+            SourceError::new(path, pos, e.message().to_string())
+        })?;
+
+        if raw.state.get_ref().iter().map(String::as_str).ne(STATE) {
+            return Err(cx.err_span(&raw.state, "state must be [\"x\", \"y\", \"theta\"] (the planar pose)"));
+        }
+        if !is_identifier(raw.name.get_ref()) {
+            return Err(cx.err_span(&raw.name, "model name must be an identifier (letters, digits, _)"));
+        }
+
+        // Every declared name, where it was declared, and what it is.
+        let mut declared: HashMap<String, (usize, &'static str)> = HashMap::new();
+        for s in STATE {
+            declared.insert(s.to_string(), (raw.state.span().start, "state"));
+        }
+        let mut declare = |name: &Spanned<String>, what: &'static str| -> Result<(), SourceError> {
+            let n = name.get_ref();
+            if !is_identifier(n) {
+                return Err(cx.err_span(name, format!("`{n}` is not a valid name")));
+            }
+            if RESERVED.contains(&n.as_str()) || CONSTANTS.contains(&n.as_str()) || FUNCTIONS.iter().any(|f| f.0 == n) {
+                return Err(cx.err_span(name, format!("`{n}` is a reserved name")));
+            }
+            if let Some((at, other)) = declared.get(n) {
+                let p = SourcePos::from_offset(text, *at);
+                return Err(cx.err_span(
+                    name,
+                    format!("duplicate name `{n}`: already declared as {other} at line {}", p.line),
+                ));
+            }
+            declared.insert(n.clone(), (name.span().start, what));
+            Ok(())
+        };
+        for i in &raw.input {
+            declare(&i.name, "input")?;
+        }
+        for p in &raw.parameter {
+            declare(&p.name, "parameter")?;
+        }
+        for n in &raw.noise {
+            declare(&n.name, "noise")?;
+        }
+        for d in &raw.define {
+            declare(&d.name, "definition")?;
+        }
+
+        let params: Vec<Param> = raw
+            .parameter
+            .iter()
+            .map(|p| {
+                let nominal = *p.nominal.get_ref();
+                if !nominal.is_finite() {
+                    return Err(cx.err_span(&p.nominal, "nominal value must be finite"));
+                }
+                if p.min.is_some_and(|m| nominal < m) || p.max.is_some_and(|m| nominal > m) {
+                    return Err(cx.err_span(&p.nominal, format!("nominal {nominal} is outside the declared bounds")));
+                }
+                Ok(Param {
+                    name: p.name.get_ref().clone(),
+                    nominal,
+                    unit: p.unit.clone(),
+                    doc: p.doc.clone(),
+                    min: p.min,
+                    max: p.max,
+                    free: p.free && !p.constant,
+                    constant: p.constant,
+                })
+            })
+            .collect::<Result<_, _>>()?;
+
+        // Parse definitions, check names, then order them (and reject cycles).
+        let def_names: HashSet<&str> = raw.define.iter().map(|d| d.name.get_ref().as_str()).collect();
+        let check_names = |e: &Expr, allow: &dyn Fn(&str) -> bool| -> Result<(), SourceError> {
+            for (v, span) in e.variables() {
+                if CONSTANTS.contains(&v) || declared.contains_key(v) && allow(v) {
+                    continue;
+                }
+                let why = if declared.contains_key(v) || RESERVED.contains(&v) {
+                    format!("`{v}` cannot be used here")
+                } else {
+                    format!("unknown symbol `{v}`")
+                };
+                return Err(cx.err_at(span.0, why));
+            }
+            Ok(())
+        };
+        let noise_names: HashSet<&str> = raw.noise.iter().map(|n| n.name.get_ref().as_str()).collect();
+        let not_state = |v: &str| !STATE.contains(&v);
+        let mut parsed_defs = Vec::new();
+        for d in &raw.define {
+            let e = cx.parse_expr(&d.expr)?;
+            check_names(&e, &not_state)?;
+            parsed_defs.push((d, e));
+        }
+        let defines = order_definitions(&cx, &parsed_defs, &def_names)?;
+
+        let twist_exprs = [&raw.motion.vx, &raw.motion.vy, &raw.motion.omega]
+            .map(|s| cx.parse_expr(s).and_then(|e| check_names(&e, &not_state).map(|_| e)));
+        let [vx, vy, omega] = twist_exprs;
+        let twist = [vx?, vy?, omega?];
+
+        let mut observations = Vec::new();
+        for o in &raw.observation {
+            declare_free_name(&cx, &o.name, &declared)?;
+            let ncols = o.columns.get_ref().len();
+            if o.expr.len() != ncols {
+                return Err(cx.err_span(
+                    &o.columns,
+                    format!("observation `{}` has {ncols} column(s) but {} expression(s)", o.name.get_ref(), o.expr.len()),
+                ));
+            }
+            if !o.angle.is_empty() && o.angle.len() != ncols || !o.sigma.is_empty() && o.sigma.len() != ncols {
+                return Err(cx.err_span(&o.columns, "`angle` and `sigma` must have one entry per column"));
+            }
+            let mut exprs = Vec::new();
+            for s in &o.expr {
+                let e = cx.parse_expr(s)?;
+                for (v, span) in e.variables() {
+                    let ok = CONSTANTS.contains(&v)
+                        || ["vx", "vy", "omega"].contains(&v)
+                        || (["xl", "yl"].contains(&v) && o.landmark)
+                        || declared.contains_key(v) && !noise_names.contains(v);
+                    if !ok {
+                        let msg = if ["xl", "yl"].contains(&v) {
+                            format!("`{v}` needs `landmark = true` on this observation")
+                        } else {
+                            format!("unknown symbol `{v}`")
+                        };
+                        return Err(cx.err_at(span.0, msg));
+                    }
+                }
+                exprs.push(e);
+            }
+            observations.push(Observation {
+                name: o.name.get_ref().clone(),
+                doc: o.doc.clone(),
+                columns: o.columns.get_ref().clone(),
+                angle: if o.angle.is_empty() { vec![false; ncols] } else { o.angle.clone() },
+                sigma: if o.sigma.is_empty() { vec![0.0; ncols] } else { o.sigma.clone() },
+                landmark: o.landmark,
+                exprs,
+            });
+        }
+
+        let inverse = match &raw.inverse {
+            None => None,
+            Some(inv) => {
+                if inv.inputs.get_ref().len() != raw.input.len() {
+                    return Err(cx.err_span(
+                        &inv.inputs,
+                        format!("inverse gives {} expression(s) for {} input(s)", inv.inputs.get_ref().len(), raw.input.len()),
+                    ));
+                }
+                let mut es = Vec::new();
+                for s in inv.inputs.get_ref() {
+                    let e = cx.parse_expr(s)?;
+                    for (v, span) in e.variables() {
+                        let is_param = raw.parameter.iter().any(|p| p.name.get_ref() == v);
+                        if !(CONSTANTS.contains(&v) || ["vx", "vy", "omega"].contains(&v) || is_param) {
+                            return Err(cx.err_at(span.0, format!("inverse may use vx, vy, omega and parameters only, not `{v}`")));
+                        }
+                    }
+                    es.push(e);
+                }
+                Some((es, inv.doc.clone()))
+            }
+        };
+
+        Ok(Model {
+            path: path.to_path_buf(),
+            source: text.to_string(),
+            name: raw.name.get_ref().clone(),
+            doc: raw.doc,
+            seed: raw.seed,
+            inputs: raw
+                .input
+                .iter()
+                .map(|i| Input {
+                    name: i.name.get_ref().clone(),
+                    column: i.column.clone(),
+                    kind: i.kind,
+                    unit: i.unit.clone(),
+                    doc: i.doc.clone(),
+                })
+                .collect(),
+            params,
+            noise: raw
+                .noise
+                .iter()
+                .map(|n| Noise { name: n.name.get_ref().clone(), doc: n.doc.clone(), sigma: n.sigma })
+                .collect(),
+            defines,
+            motion_doc: raw.motion.doc,
+            twist,
+            observations,
+            inverse,
+            effects: raw.effects,
+        })
+    }
+
+    /// Substitute definitions (recursively) so only inputs, parameters, noise, state
+    /// and reserved names remain.
+    pub fn expand(&self, e: &Expr) -> Expr {
+        let map: HashMap<&str, &Expr> = self.defines.iter().map(|(n, e, _)| (n.as_str(), e)).collect();
+        fn go(e: &Expr, map: &HashMap<&str, &Expr>) -> Expr {
+            e.substitute(&|v| map.get(v).map(|d| go(d, map)))
+        }
+        go(e, &map)
+    }
+
+    /// Parameters that are runtime arguments (everything not `const`).
+    pub fn runtime_params(&self) -> impl Iterator<Item = &Param> {
+        self.params.iter().filter(|p| !p.constant)
+    }
+
+    /// A stable fingerprint of the spec text (FNV-1a; not security relevant, only
+    /// used to notice that generated code or a cached IR is stale).
+    pub fn fingerprint(&self) -> String {
+        fingerprint(&self.source)
+    }
+}
+
+/// FNV-1a 64-bit of a text, as 16 hex digits.
+pub fn fingerprint(text: &str) -> String {
+    let mut h: u64 = 0xcbf29ce484222325;
+    for b in text.bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x100000001b3);
+    }
+    format!("{h:016x}")
+}
+
+fn declare_free_name(
+    cx: &Ctx,
+    name: &Spanned<String>,
+    declared: &HashMap<String, (usize, &'static str)>,
+) -> Result<(), SourceError> {
+    if !is_identifier(name.get_ref()) {
+        return Err(cx.err_span(name, "observation name must be an identifier"));
+    }
+    if declared.contains_key(name.get_ref()) {
+        return Err(cx.err_span(name, format!("duplicate name `{}`", name.get_ref())));
+    }
+    Ok(())
+}
+
+/// Depth-first topological order of definitions; a cycle is an error at the first
+/// definition found on it.
+fn order_definitions(
+    cx: &Ctx,
+    defs: &[(&RawDefine, Expr)],
+    def_names: &HashSet<&str>,
+) -> Result<Vec<(String, Expr, String)>, SourceError> {
+    let index: HashMap<&str, usize> = defs.iter().enumerate().map(|(i, (d, _))| (d.name.get_ref().as_str(), i)).collect();
+    // 0 = unvisited, 1 = on the stack, 2 = done
+    let mut mark = vec![0u8; defs.len()];
+    let mut order = Vec::new();
+    fn visit(
+        i: usize,
+        defs: &[(&RawDefine, Expr)],
+        index: &HashMap<&str, usize>,
+        def_names: &HashSet<&str>,
+        mark: &mut [u8],
+        order: &mut Vec<usize>,
+        chain: &mut Vec<String>,
+    ) -> Result<(), usize> {
+        if mark[i] == 2 {
+            return Ok(());
+        }
+        if mark[i] == 1 {
+            return Err(i);
+        }
+        mark[i] = 1;
+        chain.push(defs[i].0.name.get_ref().clone());
+        for (v, _) in defs[i].1.variables() {
+            if def_names.contains(v) {
+                visit(index[v], defs, index, def_names, mark, order, chain)?;
+            }
+        }
+        chain.pop();
+        mark[i] = 2;
+        order.push(i);
+        Ok(())
+    }
+    for i in 0..defs.len() {
+        let mut chain = Vec::new();
+        if let Err(at) = visit(i, defs, &index, def_names, &mut mark, &mut order, &mut chain) {
+            let start = chain.iter().position(|n| n == defs[at].0.name.get_ref()).unwrap_or(0);
+            let mut cycle = chain[start..].to_vec();
+            cycle.push(defs[at].0.name.get_ref().clone());
+            return Err(cx.err_span(&defs[at].0.name, format!("cyclic definition: {}", cycle.join(" -> "))));
+        }
+    }
+    Ok(order.into_iter().map(|i| (defs[i].0.name.get_ref().clone(), defs[i].1.clone(), defs[i].0.doc.clone())).collect())
+}
