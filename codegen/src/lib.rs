@@ -44,7 +44,27 @@ fn machine_lock() -> Option<fd_lock::RwLockWriteGuard<'static, std::fs::File>> {
     let path = std::env::temp_dir().join("kinegen-symbolica.lock");
     let file = std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&path).ok()?;
     let lock: &'static mut fd_lock::RwLock<std::fs::File> = Box::leak(Box::new(fd_lock::RwLock::new(file)));
-    lock.write().ok()
+    let guard = lock.write().ok();
+    wait_for_symbolica_permit();
+    guard
+}
+
+/// Wait (politely, without taking it) until symbolica's own per-user thread permit
+/// is free, so a permit still held by another program, or by a kinegen process that
+/// is exiting, makes us wait instead of making symbolica abort. The lock file is
+/// symbolica's: same directory rule (SYMBOLICA_LOCK_DIR, else the per-user runtime
+/// or cache directory), same name, same flock.
+fn wait_for_symbolica_permit() {
+    let dir = std::env::var_os("SYMBOLICA_LOCK_DIR").map(std::path::PathBuf::from).or_else(|| {
+        directories::ProjectDirs::from("io", "symbolica", "symbolica")
+            .map(|d| d.runtime_dir().unwrap_or_else(|| d.cache_dir()).join("locks"))
+    });
+    let Some(dir) = dir else { return };
+    if let Ok(f) = std::fs::OpenOptions::new().read(true).write(true).open(dir.join("symbolica-restricted-thread-0.lock")) {
+        if f.lock().is_ok() {
+            let _ = f.unlock();
+        }
+    }
 }
 
 /// Run `f` on the process's symbolica thread and wait for its result. A panic in
