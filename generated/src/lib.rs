@@ -8,6 +8,18 @@ pub mod diff_drive;
 pub mod omni3;
 pub mod tricycle;
 pub mod unicycle_ekf;
+/// The models in this crate.
+pub const MODELS: &[&str] = &["diff_drive", "omni3", "tricycle", "unicycle_ekf"];
+/// Call `model::function` by name (see each module's `call`).
+pub fn call(model: &str, function: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+    match model {
+        "diff_drive" => diff_drive::call(function, args, out),
+        "omni3" => omni3::call(function, args, out),
+        "tricycle" => tricycle::call(function, args, out),
+        "unicycle_ekf" => unicycle_ekf::call(function, args, out),
+        _ => false,
+    }
+}
 /// Conversions between the kernels' plain arrays and nalgebra types.
 #[cfg(feature = "nalgebra")]
 pub mod na {

@@ -1226,3 +1226,431 @@ pub fn inverse_increment(
     let t35: f64 = t1 / t2;
     [t34, t35]
 }
+/// Call a kernel by name with slices (arguments in declaration order, output
+/// row-major), for verification tools. Returns false for an unknown name or
+/// wrong lengths.
+pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+    match name {
+        "twist" => {
+            if args.len() != 2usize || out.len() != 3usize {
+                return false;
+            }
+            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = twist(a0, a1);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "step_euler" => {
+            if args.len() != 5usize || out.len() != 3usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_euler(a0, a1, a2, a3, a4);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "step_euler_jac_x" => {
+            if args.len() != 5usize || out.len() != 9usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_euler_jac_x(a0, a1, a2, a3, a4);
+            let r = r.as_flattened();
+            out.copy_from_slice(r);
+            true
+        }
+        "step_euler_jac_u" => {
+            if args.len() != 5usize || out.len() != 6usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_euler_jac_u(a0, a1, a2, a3, a4);
+            let r = r.as_flattened();
+            out.copy_from_slice(r);
+            true
+        }
+        "step_euler_jac_w" => {
+            if args.len() != 5usize || out.len() != 6usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_euler_jac_w(a0, a1, a2, a3, a4);
+            let r = r.as_flattened();
+            out.copy_from_slice(r);
+            true
+        }
+        "step_euler_jac_p" => {
+            if args.len() != 5usize || out.len() != 3usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_euler_jac_p(a0, a1, a2, a3, a4);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "step_exact" => {
+            if args.len() != 5usize || out.len() != 3usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_exact(a0, a1, a2, a3, a4);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "step_exact_jac_x" => {
+            if args.len() != 5usize || out.len() != 9usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_exact_jac_x(a0, a1, a2, a3, a4);
+            let r = r.as_flattened();
+            out.copy_from_slice(r);
+            true
+        }
+        "step_exact_jac_u" => {
+            if args.len() != 5usize || out.len() != 6usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_exact_jac_u(a0, a1, a2, a3, a4);
+            let r = r.as_flattened();
+            out.copy_from_slice(r);
+            true
+        }
+        "step_exact_jac_w" => {
+            if args.len() != 5usize || out.len() != 6usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_exact_jac_w(a0, a1, a2, a3, a4);
+            let r = r.as_flattened();
+            out.copy_from_slice(r);
+            true
+        }
+        "step_exact_jac_p" => {
+            if args.len() != 5usize || out.len() != 3usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a4: f64 = match args[4usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let r = step_exact_jac_p(a0, a1, a2, a3, a4);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "obs_landmark" => {
+            if args.len() != 4usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = obs_landmark(a0, a1, a2, a3);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "obs_landmark_jac_x" => {
+            if args.len() != 4usize || out.len() != 6usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = obs_landmark_jac_x(a0, a1, a2, a3);
+            let r = r.as_flattened();
+            out.copy_from_slice(r);
+            true
+        }
+        "obs_landmark_jac_p" => {
+            if args.len() != 4usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = obs_landmark_jac_p(a0, a1, a2, a3);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "inverse_twist" => {
+            if args.len() != 2usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = inverse_twist(a0, a1);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "inverse_increment" => {
+            if args.len() != 3usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: f64 = match args[1usize] {
+                [v] => *v,
+                _ => return false,
+            };
+            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = inverse_increment(a0, a1, a2);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        _ => false,
+    }
+}

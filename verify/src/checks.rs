@@ -1,0 +1,459 @@
+//! The checks. Each returns one [`Finding`] per (function, check) with the worst
+//! normalised error found: error / tolerance, so a value above 1 fails.
+use crate::kernel::{IrKernel, Kernel};
+use crate::sample::Sampler;
+use kinegen_model::ir::{Function, ModelIr};
+use std::f64::consts::PI;
+
+/// Series/closed-form switch of the generator (kinegen-codegen's derive::EPS).
+pub const SWITCH: f64 = 0.05;
+
+#[derive(Debug, Clone)]
+pub struct Finding {
+    pub model: String,
+    pub function: String,
+    pub check: &'static str,
+    pub samples: usize,
+    /// Worst raw error measure of the check (relative error for most checks).
+    pub max_err: f64,
+    /// Worst error / tolerance; > 1 fails.
+    pub ratio: f64,
+    /// Worst entry (row, column) with names.
+    pub entry: Option<(usize, usize, String)>,
+    pub worst_input: String,
+}
+
+impl Finding {
+    fn new(ir: &ModelIr, function: &str, check: &'static str) -> Self {
+        Finding { model: ir.name.clone(), function: function.into(), check, samples: 0, max_err: 0.0, ratio: 0.0, entry: None, worst_input: String::new() }
+    }
+    pub fn passed(&self) -> bool {
+        self.ratio <= 1.0 && self.ratio.is_finite()
+    }
+    fn record(&mut self, err: f64, ratio: f64, entry: Option<(usize, usize, String)>, args: &[Vec<f64>], f: &Function) {
+        let ratio = if ratio.is_nan() { f64::INFINITY } else { ratio };
+        if ratio > self.ratio || self.samples == 0 && self.worst_input.is_empty() {
+            self.ratio = ratio.max(self.ratio);
+            self.max_err = err;
+            self.entry = entry;
+            self.worst_input = describe(f, args);
+        }
+        self.max_err = self.max_err.max(if err.is_nan() { f64::INFINITY } else { err });
+    }
+}
+
+fn describe(f: &Function, args: &[Vec<f64>]) -> String {
+    f.args
+        .iter()
+        .zip(args)
+        .map(|(a, v)| {
+            let vals: Vec<String> = a.names.iter().zip(v).map(|(n, x)| format!("{n}={x:.6e}")).collect();
+            format!("{}: [{}]", a.name, vals.join(", "))
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+fn refs(args: &[Vec<f64>]) -> Vec<&[f64]> {
+    args.iter().map(|a| &a[..]).collect()
+}
+
+fn eval(k: &dyn Kernel, f: &Function, args: &[Vec<f64>]) -> Vec<f64> {
+    let mut out = vec![f64::NAN; f.rows * f.cols];
+    if !k.eval(f, &refs(args), &mut out) {
+        out.fill(f64::NAN);
+    }
+    out
+}
+
+/// All checks' results for one model and kernel.
+#[derive(Debug, Default)]
+pub struct Report {
+    pub findings: Vec<Finding>,
+}
+
+impl Report {
+    pub fn failures(&self) -> Vec<&Finding> {
+        self.findings.iter().filter(|f| !f.passed()).collect()
+    }
+
+    /// A per-function table for people.
+    pub fn table(&self) -> String {
+        let mut s = format!("{:<26} {:<22} {:>7} {:>10} {:>8}  {}\n", "function", "check", "samples", "max err", "err/tol", "status");
+        for f in &self.findings {
+            s += &format!(
+                "{:<26} {:<22} {:>7} {:>10.2e} {:>8.3}  {}\n",
+                f.function,
+                f.check,
+                f.samples,
+                f.max_err,
+                f.ratio,
+                if f.passed() { "ok".to_string() } else { format!("FAIL at {}", where_(f)) }
+            );
+        }
+        s
+    }
+}
+
+/// "model::function entry (r, c) [names] at input ..." for failure messages.
+pub fn where_(f: &Finding) -> String {
+    let e = f.entry.as_ref().map(|(r, c, n)| format!(" entry ({r}, {c}) {n}")).unwrap_or_default();
+    format!("{}::{}{e}, worst input {}", f.model, f.function, f.worst_input)
+}
+
+/// Run every check with `n` samples per property.
+pub fn run_all(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Report {
+    let mut r = Report::default();
+    r.findings.extend(jacobians_vs_finite_differences(ir, k, n, seed));
+    r.findings.extend(exact_vs_euler(ir, k, n, seed + 1));
+    r.findings.extend(inverse_round_trips(ir, k, n, seed + 2));
+    r.findings.extend(singularities(ir, k, n.min(16), seed + 3));
+    r.findings.extend(se2_equivariance(ir, k, n, seed + 4));
+    r
+}
+
+/// Every `*_jac_<group>` against Richardson-extrapolated central differences of
+/// the function it differentiates. An entry passes when |J - D| <= 1e-6 |J| + the
+/// difference quotient's own round-off bound, so entries are judged relative to
+/// their size, never by a fixed absolute margin.
+pub fn jacobians_vs_finite_differences(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+    const TOL: f64 = 1e-6;
+    let mut out = Vec::new();
+    let mut sampler = Sampler::new(ir, seed);
+    for jf in ir.functions.iter().filter(|f| f.name.contains("_jac_")) {
+        let (base_name, group) = jf.name.rsplit_once("_jac_").unwrap();
+        let Some(base) = ir.function(base_name) else { continue };
+        let Some(gi) = base.args.iter().position(|a| a.name == group) else { continue };
+        let mut fd = Finding::new(ir, &jf.name, "jacobian vs FD");
+        for _ in 0..n {
+            let args = sampler.args(base);
+            let j = eval(k, jf, &args);
+            let f0 = eval(k, base, &args);
+            for c in 0..jf.cols {
+                let v = args[gi][c];
+                let scale = v.abs().max(if group == "p" { v.abs() } else { 1.0 }).max(1e-6);
+                let diff = |h: f64| {
+                    let (mut a, mut b) = (args.clone(), args.clone());
+                    a[gi][c] = v + h;
+                    b[gi][c] = v - h;
+                    let (fa, fb) = (eval(k, base, &a), eval(k, base, &b));
+                    fa.iter().zip(&fb).map(|(x, y)| (x - y) / (2.0 * h)).collect::<Vec<_>>()
+                };
+                // Steps 1e-2 .. 1e-6 of the value's scale; each estimate is Richardson-
+                // extrapolated (error O(h^4)). The best-agreeing step is kept: near a
+                // pole (tan at pi/2) only small steps are accurate, elsewhere larger
+                // ones beat round-off; a wrong entry disagrees at every step.
+                let steps: Vec<(f64, Vec<f64>)> = (0..5)
+                    .map(|e| {
+                        let h = scale * 1e-2 * 10f64.powi(-e);
+                        let (d1, d2) = (diff(h), diff(h / 2.0));
+                        (h, d1.iter().zip(&d2).map(|(a, b)| (4.0 * b - a) / 3.0).collect())
+                    })
+                    .collect();
+                for r in 0..jf.rows {
+                    let jv = j[r * jf.cols + c];
+                    // (relative error, error / allowed) at the best step; allowed =
+                    // TOL * |J| + the difference quotient's round-off bound
+                    // 100 * eps * (|f_i| + 1) / h, which shrinks with the values.
+                    let (err, ratio) = steps
+                        .iter()
+                        .map(|(h, d)| {
+                            let roundoff = 100.0 * f64::EPSILON * (f0[r].abs() + 1.0) / h;
+                            let e = (jv - d[r]).abs();
+                            (e / jv.abs().max(roundoff), e / (TOL * jv.abs() + roundoff))
+                        })
+                        .fold((f64::INFINITY, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+                    let name = format!("d {} / d {}", jf.row_names[r], jf.col_names[c]);
+                    fd.record(err, ratio, Some((r, c, name)), &args, base);
+                }
+            }
+            fd.samples += 1;
+        }
+        out.push(fd);
+    }
+    out
+}
+
+/// Compare two kernels on every function (generated Rust vs IR evaluator).
+pub fn kernels_agree(ir: &ModelIr, a: &dyn Kernel, b: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+    const TOL: f64 = 1e-12;
+    let mut sampler = Sampler::new(ir, seed);
+    ir.functions
+        .iter()
+        .map(|f| {
+            let mut fd = Finding::new(ir, &f.name, "generated vs IR");
+            for _ in 0..n {
+                let args = sampler.args(f);
+                let (x, y) = (eval(a, f, &args), eval(b, f, &args));
+                for (i, (p, q)) in x.iter().zip(&y).enumerate() {
+                    let err = (p - q).abs() / p.abs().max(q.abs()).max(1e-300);
+                    let err = if p == q { 0.0 } else { err };
+                    fd.record(err, err / TOL, Some((i / f.cols, i % f.cols, String::new())), &args, f);
+                }
+                fd.samples += 1;
+            }
+            fd
+        })
+        .collect()
+}
+
+fn arg_pos(f: &Function, name: &str) -> Option<usize> {
+    f.args.iter().position(|a| a.name == name)
+}
+
+/// Exact integration against N Euler sub-steps, N = 1, 64, 4096. Euler's error
+/// on an arc of length s turning by a = omega*dt is about s*|a|/(2N); we require
+/// err <= 0.55*s*|a|/N + 1e-12*(s+1). This also checks Euler -> exact as dt -> 0.
+pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+    let (Some(ex), Some(eu), Some(tw)) = (ir.function("step_exact"), ir.function("step_euler"), ir.function("twist")) else {
+        return vec![];
+    };
+    let mut sampler = Sampler::new(ir, seed);
+    let mut fd = Finding::new(ir, "step_exact", "exact vs Euler substeps");
+    for _ in 0..n {
+        let args = sampler.args(ex);
+        let (pi, ui, dti) = (arg_pos(ex, "p").unwrap(), arg_pos(ex, "u").unwrap(), arg_pos(ex, "dt").unwrap());
+        let mut args = args;
+        if let Some(wi) = arg_pos(ex, "w") {
+            args[wi].iter_mut().for_each(|w| *w = 0.0);
+        }
+        let t = eval(k, tw, &[args[ui].clone(), args[pi].clone()]);
+        let dt = args[dti][0];
+        let s = (t[0] * t[0] + t[1] * t[1]).sqrt() * dt;
+        let a = (t[2] * dt).abs();
+        let exact = eval(k, ex, &args);
+        for nsub in [1usize, 64, 4096] {
+            let mut a2 = args.clone();
+            a2[dti][0] = dt / nsub as f64;
+            for _ in 0..nsub {
+                let next = eval(k, eu, &a2);
+                a2[0] = next;
+            }
+            let err = ((a2[0][0] - exact[0]).powi(2) + (a2[0][1] - exact[1]).powi(2)).sqrt();
+            let bound = 0.55 * s * a / nsub as f64 + 1e-12 * (s + 1.0);
+            let th_err = (a2[0][2] - exact[2]).abs();
+            fd.record(err, (err / bound).max(th_err / (1e-12 * (exact[2].abs() + 1.0))), Some((0, nsub, format!("{nsub} Euler sub-steps"))), &args, ex);
+        }
+        fd.samples += 1;
+    }
+    // The twist is the Euler step's velocity: step_euler(0, u, 0, p, dt) = twist * dt.
+    let mut ft = Finding::new(ir, "twist", "twist = Euler step / dt");
+    for _ in 0..n {
+        let mut args = sampler.args(eu);
+        args[0] = vec![0.0; 3];
+        if let Some(wi) = arg_pos(eu, "w") {
+            args[wi].iter_mut().for_each(|w| *w = 0.0);
+        }
+        let (ui, pi, dti) = (arg_pos(eu, "u").unwrap(), arg_pos(eu, "p").unwrap(), arg_pos(eu, "dt").unwrap());
+        let t = eval(k, tw, &[args[ui].clone(), args[pi].clone()]);
+        let step = eval(k, eu, &args);
+        for r in 0..3 {
+            let v = step[r] / args[dti][0];
+            let err = (v - t[r]).abs() / (t[r].abs() + 1e-12);
+            ft.record(err, err / 1e-12, Some((r, 0, ["vx", "vy", "omega"][r].into())), &[args[ui].clone(), args[pi].clone()], tw);
+        }
+        ft.samples += 1;
+    }
+    vec![fd, ft]
+}
+
+fn twist_of(ir: &ModelIr, k: &dyn Kernel, u: &[f64], p: &[f64]) -> Vec<f64> {
+    eval(k, ir.function("twist").unwrap(), &[u.to_vec(), p.to_vec()])
+}
+
+/// Assemble the model's input vector from an inverse-kinematics output (rates or
+/// all inputs) plus configuration inputs.
+fn inputs_from(ir: &ModelIr, inv: &Function, out: &[f64], cfg: &[f64]) -> Vec<f64> {
+    let cfg_names: Vec<String> = arg_pos(inv, "cfg").map(|i| inv.args[i].names.clone()).unwrap_or_default();
+    ir.inputs
+        .iter()
+        .map(|i| {
+            inv.row_names
+                .iter()
+                .position(|r| *r == i.name)
+                .map(|k| out[k])
+                .or_else(|| cfg_names.iter().position(|c| *c == i.name).map(|k| cfg[k]))
+                .unwrap_or(0.0)
+        })
+        .collect()
+}
+
+/// forward(inverse(twist)) = twist; and the integrated inverse (seed 001 eq. 12-18)
+/// reproduces the pose increment it was asked for when integrated exactly.
+pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let mut sampler = Sampler::new(ir, seed);
+    let rows = sampler.twist_rows;
+    if let Some(inv) = ir.function("inverse_twist") {
+        let mut fd = Finding::new(ir, "inverse_twist", "forward(inverse) = id");
+        for _ in 0..n {
+            let args = sampler.args(inv);
+            let o = eval(k, inv, &args);
+            let cfg = arg_pos(inv, "cfg").map(|i| args[i].clone()).unwrap_or_default();
+            let p = args[arg_pos(inv, "p").unwrap()].clone();
+            let u = inputs_from(ir, inv, &o, &cfg);
+            let back = twist_of(ir, k, &u, &p);
+            let t = &args[0];
+            for r in 0..3 {
+                let err = (back[r] - t[r]).abs() / (t[r].abs() + 1e-12);
+                fd.record(err, err / 1e-9, Some((r, 0, ["vx", "vy", "omega"][r].into())), &args, inv);
+            }
+            fd.samples += 1;
+        }
+        out.push(fd);
+    }
+    if let (Some(inv), Some(ex)) = (ir.function("inverse_increment"), ir.function("step_exact")) {
+        let mut fd = Finding::new(ir, "inverse_increment", "integrated inverse");
+        for _ in 0..n {
+            let args = sampler.args(inv);
+            let o = eval(k, inv, &args);
+            let cfg = arg_pos(inv, "cfg").map(|i| args[i].clone()).unwrap_or_default();
+            let p = args[arg_pos(inv, "p").unwrap()].clone();
+            let dt = args[arg_pos(inv, "dt").unwrap()].clone();
+            let u = inputs_from(ir, inv, &o, &cfg);
+            let mut sa: Vec<Vec<f64>> = Vec::new();
+            for a in &ex.args {
+                sa.push(match a.name.as_str() {
+                    "x" => vec![0.0; 3],
+                    "u" => u.clone(),
+                    "p" => p.clone(),
+                    "dt" => dt.clone(),
+                    _ => vec![0.0; a.names.len()],
+                });
+            }
+            let pose = eval(k, ex, &sa);
+            let d = &args[0];
+            for r in [0usize, 1, 2] {
+                if r == 1 && !rows[1] {
+                    continue; // non-holonomic: y follows from x and theta (seed 001 eq. 12)
+                }
+                let err = (pose[r] - d[r]).abs() / (d[r].abs() + 1e-9);
+                fd.record(err, err / 1e-8, Some((r, 0, ["dx", "dy", "dtheta"][r].into())), &args, inv);
+            }
+            fd.samples += 1;
+        }
+        out.push(fd);
+    }
+    out
+}
+
+/// Removable singularities: the exact step (and its Jacobians) at omega*dt = s and
+/// the integrated inverse at dtheta = s, for s = 0, +-1e-12, +-1e-8, +-1e-4 and just
+/// either side of the series switch: finite, equal to the s = 0 limit to within
+/// what the slope allows, and continuous across the switch.
+pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let mut sampler = Sampler::new(ir, seed);
+    let small = [1e-12, -1e-12, 1e-8, -1e-8, 1e-4, -1e-4];
+    let names: Vec<String> = ir.functions.iter().filter(|f| f.name.starts_with("step_exact") || f.name == "inverse_increment").map(|f| f.name.clone()).collect();
+    for name in names {
+        let f = ir.function(&name).unwrap();
+        let mut fd = Finding::new(ir, &name, "singular limit");
+        for _ in 0..n {
+            let base = sampler.args(f);
+            // Argument values that put the singular variable at s, everything else
+            // fixed (same twist, same random configuration inputs).
+            let tw0 = sampler.twist();
+            let rng0 = sampler.rng.clone();
+            let mut eval_at = |s: f64| {
+                let mut a = base.clone();
+                if name == "inverse_increment" {
+                    a[0][2] = s;
+                } else {
+                    let (ui, pi, dti) = (arg_pos(f, "u").unwrap(), arg_pos(f, "p").unwrap(), arg_pos(f, "dt").unwrap());
+                    let mut tw = tw0.clone();
+                    tw[2] = s / a[dti][0];
+                    sampler.rng = rng0.clone();
+                    a[ui] = sampler.inputs_for(&tw, &a[pi]);
+                    if let Some(wi) = arg_pos(f, "w") {
+                        a[wi].iter_mut().for_each(|w| *w = 0.0);
+                    }
+                }
+                (eval(k, f, &a), a)
+            };
+            let (f0, _) = eval_at(0.0);
+            let scale = f0.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            let (f_small, _) = eval_at(1e-6);
+            let slope = f_small.iter().zip(&f0).fold(0.0f64, |m, (a, b)| m.max((a - b).abs() / 1e-6));
+            for s in small {
+                let (fs, a) = eval_at(s);
+                for (i, (x, y)) in fs.iter().zip(&f0).enumerate() {
+                    let allowed = 2.0 * slope * s.abs() + 1e-9 * scale;
+                    let err = (x - y).abs();
+                    let ratio = if x.is_finite() { err / allowed } else { f64::INFINITY };
+                    fd.record(err / scale, ratio, Some((i / f.cols, i % f.cols, format!("s = {s:e}"))), &a, f);
+                }
+            }
+            for sign in [1.0, -1.0] {
+                let (lo, _) = eval_at(sign * SWITCH * (1.0 - 1e-9));
+                let (hi, a) = eval_at(sign * SWITCH * (1.0 + 1e-9));
+                // local slope on the closed-form side, away from the switch
+                let (f1, _) = eval_at(sign * SWITCH * 1.01);
+                let (f2, _) = eval_at(sign * SWITCH * 1.001);
+                for (i, (x, y)) in lo.iter().zip(&hi).enumerate() {
+                    let err = (x - y).abs();
+                    let local = (f1[i] - f2[i]).abs() / (SWITCH * 0.009);
+                    let allowed = 1e-9 * scale + 10.0 * local * SWITCH * 2e-9;
+                    fd.record(err / scale, err / allowed, Some((i / f.cols, i % f.cols, "across the series switch".into())), &a, f);
+                }
+            }
+            fd.samples += 1;
+        }
+        out.push(fd);
+    }
+    out
+}
+
+fn wrap(a: f64) -> f64 {
+    let r = (a + PI).rem_euclid(2.0 * PI) - PI;
+    if r <= -PI { r + 2.0 * PI } else { r }
+}
+
+/// SE(2) equivariance: moving the world by g moves the next pose by g; landmark
+/// range and bearing do not change when robot and landmark move together.
+pub fn se2_equivariance(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let mut sampler = Sampler::new(ir, seed);
+    for f in ir.functions.iter().filter(|f| f.name == "step_euler" || f.name == "step_exact" || (f.name.starts_with("obs_") && !f.name.contains("_jac_"))) {
+        let mut fd = Finding::new(ir, &f.name, "SE(2) equivariance");
+        for _ in 0..n {
+            let args = sampler.args(f);
+            let (tx, ty, phi): (f64, f64, f64) = (sampler_range(&mut sampler, 5.0), sampler_range(&mut sampler, 5.0), sampler_range(&mut sampler, 3.0));
+            let g = |p: &[f64]| [phi.cos() * p[0] - phi.sin() * p[1] + tx, phi.sin() * p[0] + phi.cos() * p[1] + ty];
+            let mut moved = args.clone();
+            let [gx, gy] = g(&args[0]);
+            moved[0] = vec![gx, gy, args[0][2] + phi];
+            if let Some(li) = arg_pos(f, "lm") {
+                let [lx, ly] = g(&args[li]);
+                moved[li] = vec![lx, ly];
+            }
+            let (a, b) = (eval(k, f, &args), eval(k, f, &moved));
+            let expect: Vec<f64> = if f.name.starts_with("step") {
+                let [ex, ey] = g(&a);
+                vec![ex, ey, a[2] + phi]
+            } else {
+                a.clone()
+            };
+            let scale = 1.0 + args[0][0].abs() + args[0][1].abs() + tx.abs() + ty.abs();
+            for (i, (x, y)) in b.iter().zip(&expect).enumerate() {
+                let angle = f.name.starts_with("step") && i == 2 || ir.observations.iter().any(|o| format!("obs_{}", o.name) == f.name && o.angle[i]);
+                let d = if angle { wrap(x - y) } else { x - y };
+                let err = d.abs() / scale;
+                fd.record(err, err / 1e-12, Some((i, 0, f.row_names[i].clone())), &args, f);
+            }
+            fd.samples += 1;
+        }
+        out.push(fd);
+    }
+    out
+}
+
+fn sampler_range(s: &mut Sampler, r: f64) -> f64 {
+    use rand::Rng;
+    s.rng.gen_range(-r..r)
+}
+
+/// Convenience: run everything against the IR evaluator.
+pub fn run_ir(ir: &ModelIr, n: usize) -> Report {
+    run_all(ir, &IrKernel, n, 1)
+}

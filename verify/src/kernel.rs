@@ -1,0 +1,76 @@
+//! What is verified: a way to evaluate a model's functions by name.
+use kinegen_model::ir::{Function, ModelIr, Op};
+
+pub trait Kernel {
+    /// Evaluate `f` (row-major output); false if this kernel lacks the function.
+    fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool;
+    fn label(&self) -> String;
+}
+
+/// The IR evaluator (what `fit` and `diagnose` use).
+pub struct IrKernel;
+
+impl Kernel for IrKernel {
+    fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool {
+        f.eval_into(args, out, &mut Vec::new());
+        true
+    }
+    fn label(&self) -> String {
+        "IR evaluator".into()
+    }
+}
+
+/// The compiled kernels of the `kinegen-generated` crate.
+pub struct Generated(pub String);
+
+impl Kernel for Generated {
+    fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool {
+        kinegen_generated::call(&self.0, &f.name, args, out)
+    }
+    fn label(&self) -> String {
+        format!("generated Rust ({})", self.0)
+    }
+}
+
+/// A kernel with one deliberate mistake in one function: one term of one output
+/// entry gets its sign flipped (the kind of slip a hand derivation makes). The
+/// corrupted tape is what the emitter would turn into code.
+pub struct Corrupted {
+    pub function: String,
+    pub tape: Vec<Op>,
+    pub outputs: Vec<u32>,
+}
+
+impl Corrupted {
+    /// Flip the sign of one term of output `entry` of `function`.
+    pub fn flip_term(ir: &ModelIr, function: &str, entry: usize) -> Corrupted {
+        let f = ir.function(function).expect("function exists");
+        let mut tape = f.tape.clone();
+        let mut outputs = f.outputs.clone();
+        let slot = outputs[entry] as usize;
+        match tape[slot] {
+            Op::Add(a, b) => tape[slot] = Op::Sub(a, b),
+            Op::Sub(a, b) => tape[slot] = Op::Add(a, b),
+            _ => {
+                tape.push(Op::Neg(slot as u32));
+                outputs[entry] = (tape.len() - 1) as u32;
+            }
+        }
+        Corrupted { function: function.to_string(), tape, outputs }
+    }
+}
+
+impl Kernel for Corrupted {
+    fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool {
+        if f.name == self.function {
+            let g = Function { tape: self.tape.clone(), outputs: self.outputs.clone(), ..f.clone() };
+            g.eval_into(args, out, &mut Vec::new());
+        } else {
+            f.eval_into(args, out, &mut Vec::new());
+        }
+        true
+    }
+    fn label(&self) -> String {
+        format!("corrupted {}", self.function)
+    }
+}
