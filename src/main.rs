@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 mod generate_cmd;
+mod verify_cmd;
 
 #[derive(Parser)]
 #[command(name = "kinegen", version, about = "Kinematic model generator and calibration toolkit for wheeled mobile robots")]
@@ -29,11 +30,26 @@ enum Command {
         #[arg(long)]
         check: bool,
     },
+    /// Verify a spec's kernels: Jacobians against finite differences, exact vs
+    /// Euler integration, inverse-kinematics round trips, singular limits, SE(2)
+    /// equivariance; and the compiled kernels against the IR when the spec is one
+    /// of the generated crate's (and not changed since).
+    ///
+    /// Example: kinegen verify --spec spec/tricycle.toml --samples 500
+    Verify {
+        /// The spec to verify (default: every spec in spec/).
+        #[arg(long)]
+        spec: Option<PathBuf>,
+        /// Samples per property.
+        #[arg(long, default_value_t = 200)]
+        samples: usize,
+    },
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Generate { spec_dir, out, check } => generate_cmd::run(&spec_dir, &out, check),
+        Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
     }
 }

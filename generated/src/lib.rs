@@ -10,6 +10,16 @@ pub mod tricycle;
 pub mod unicycle_ekf;
 /// The models in this crate.
 pub const MODELS: &[&str] = &["diff_drive", "omni3", "tricycle", "unicycle_ekf"];
+/// The fingerprint of the spec a model was generated from.
+pub fn spec_fingerprint(model: &str) -> Option<&'static str> {
+    match model {
+        "diff_drive" => Some(diff_drive::SPEC_FINGERPRINT),
+        "omni3" => Some(omni3::SPEC_FINGERPRINT),
+        "tricycle" => Some(tricycle::SPEC_FINGERPRINT),
+        "unicycle_ekf" => Some(unicycle_ekf::SPEC_FINGERPRINT),
+        _ => None,
+    }
+}
 /// Call `model::function` by name (see each module's `call`).
 pub fn call(model: &str, function: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
     match model {

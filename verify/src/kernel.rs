@@ -21,8 +21,10 @@ impl Kernel for IrKernel {
 }
 
 /// The compiled kernels of the `kinegen-generated` crate.
+#[cfg(feature = "compiled")]
 pub struct Generated(pub String);
 
+#[cfg(feature = "compiled")]
 impl Kernel for Generated {
     fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool {
         kinegen_generated::call(&self.0, &f.name, args, out)
