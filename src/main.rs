@@ -4,7 +4,11 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+mod analysis_cmd;
 mod generate_cmd;
+mod ir_source;
+mod output;
+mod report;
 mod verify_cmd;
 
 #[derive(Parser)]
@@ -44,6 +48,31 @@ enum Command {
         #[arg(long, default_value_t = 200)]
         samples: usize,
     },
+    /// Run the model against logs with nominal parameters: how large the error is,
+    /// and where and when it grows.
+    ///
+    /// Example: kinegen compare --spec spec/diff_drive.toml --data ../shared/real/optiodom-diff-square/run-01.csv --report report
+    Compare(analysis_cmd::Common),
+    /// Calibrate the spec's free parameters (bounded Levenberg-Marquardt on the
+    /// generated parameter Jacobians): before/after error, estimates with standard
+    /// deviations, correlations and identifiability warnings.
+    ///
+    /// Example: kinegen fit --spec spec/diff_drive.toml --data run-01.csv --data run-04.csv --holdout run-02.csv --json -
+    Fit {
+        #[command(flatten)]
+        common: analysis_cmd::Common,
+        /// Calibration method.
+        #[arg(long, default_value = "lm", value_parser = ["lm", "gd", "ekf"])]
+        method: String,
+    },
+    /// Derive one spec's IR into a file (used internally by the analysis commands).
+    #[command(hide = true)]
+    Derive {
+        #[arg(long)]
+        spec: PathBuf,
+        #[arg(long)]
+        ir_out: PathBuf,
+    },
 }
 
 fn main() -> ExitCode {
@@ -51,5 +80,11 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Generate { spec_dir, out, check } => generate_cmd::run(&spec_dir, &out, check),
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
+        Command::Compare(c) => analysis_cmd::compare(c),
+        Command::Fit { common, method } => analysis_cmd::run_fit(common, &method),
+        Command::Derive { spec, ir_out } => match ir_source::derive_to(&spec, &ir_out) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => analysis_cmd::bad(e),
+        },
     }
 }

@@ -1,0 +1,76 @@
+//! A log turned into model steps: per-step inputs (rates of cumulative columns,
+//! held values of absolute ones), step lengths, and the measurements.
+use crate::log::{unwrap, Log, LogError};
+use crate::model::Runner;
+use kinegen_model::spec::InputKind;
+
+#[derive(Debug, Clone)]
+pub struct Run {
+    pub name: String,
+    pub t: Vec<f64>,
+    /// Step k goes from row k to row k+1.
+    pub dt: Vec<f64>,
+    pub u: Vec<Vec<f64>>,
+    /// Ground-truth pose per row, heading unwrapped.
+    pub gt: Option<Vec<[f64; 3]>>,
+    /// Gyro yaw rate per row; row k+1 is compared with the model rate of step k.
+    pub gyro: Option<Vec<f64>>,
+}
+
+impl Run {
+    pub fn steps(&self) -> usize {
+        self.dt.len()
+    }
+
+    /// Columns a model needs from a log.
+    pub fn wanted(r: &Runner) -> Vec<String> {
+        let mut w: Vec<String> = vec!["t".into(), "gt_x".into(), "gt_y".into(), "gt_theta".into(), "gyro_z".into()];
+        w.extend(r.ir.inputs.iter().map(|i| i.column.clone()));
+        w
+    }
+
+    pub fn from_log(log: &Log, r: &Runner) -> Result<Run, LogError> {
+        if log.len < 3 {
+            return Err(log.err(None, None, format!("the log has {} row(s); the model needs at least 3", log.len)));
+        }
+        let t = log.col("t")?.to_vec();
+        let dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        let mut sorted = dt.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        if let Some(k) = dt.iter().position(|&d| d > 20.0 * median) {
+            return Err(log.err(Some(k + 3), Some("t"), format!("gap of {:.3} s in the log (median step {:.4} s)", dt[k], median)));
+        }
+        let mut cols = Vec::new();
+        for i in &r.ir.inputs {
+            cols.push((log.col(&i.column)?, i.kind));
+        }
+        let u = (0..dt.len())
+            .map(|k| {
+                cols.iter()
+                    .map(|(c, kind)| match kind {
+                        InputKind::Cumulative => (c[k + 1] - c[k]) / dt[k],
+                        InputKind::Absolute => c[k],
+                    })
+                    .collect()
+            })
+            .collect();
+        let gt = if log.has("gt_x") && log.has("gt_y") && log.has("gt_theta") {
+            let (x, y, th) = (log.col("gt_x")?, log.col("gt_y")?, unwrap(log.col("gt_theta")?));
+            Some((0..log.len).map(|k| [x[k], y[k], th[k]]).collect())
+        } else {
+            None
+        };
+        let gyro = log.columns.get("gyro_z").cloned();
+        let name = log.path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        Ok(Run { name, t, dt, u, gt, gyro })
+    }
+
+    /// Read a log for a model.
+    pub fn read(path: &std::path::Path, r: &Runner) -> Result<Run, LogError> {
+        let wanted = Run::wanted(r);
+        let w: Vec<&str> = wanted.iter().map(String::as_str).collect();
+        let log = Log::read(path, &w)?;
+        Run::from_log(&log, r)
+    }
+}

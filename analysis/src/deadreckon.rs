@@ -1,0 +1,50 @@
+//! Dead reckoning with the exact step, optionally with the sensitivities
+//! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
+use crate::dataset::Run;
+use crate::model::Runner;
+use nalgebra::{DMatrix, Matrix3};
+
+pub struct Track {
+    pub pose: Vec<[f64; 3]>,
+    /// Per row, 3 x P sensitivity of the pose to all runtime parameters.
+    pub sens: Option<Vec<DMatrix<f64>>>,
+    /// Model yaw rate of each step.
+    pub omega: Vec<f64>,
+    /// Model body twist of each step.
+    pub twist: Vec<[f64; 3]>,
+}
+
+/// Integrate the model over a run from `start` (the first ground-truth pose).
+pub fn run(r: &Runner, p: &[f64], data: &Run, start: [f64; 3], with_sens: bool) -> Track {
+    let (fx, jx, jp, tw) = (r.f("step_exact"), r.f("step_exact_jac_x"), r.f("step_exact_jac_p"), r.f("twist"));
+    let np = p.len();
+    let zeros = vec![0.0; 16];
+    let mut scratch = Vec::new();
+    let mut pose = vec![start];
+    let mut sens = with_sens.then(|| vec![DMatrix::zeros(3, np)]);
+    let mut omega = Vec::with_capacity(data.steps());
+    let mut twist = Vec::with_capacity(data.steps());
+    let mut out3 = [0.0; 3];
+    let mut jxo = [0.0; 9];
+    let mut jpo = vec![0.0; 3 * np];
+    for k in 0..data.steps() {
+        let x = *pose.last().unwrap();
+        let dt = [data.dt[k]];
+        let args = Runner::step_args(fx, &x, &data.u[k], p, &dt, &zeros);
+        fx.eval_into(&args, &mut out3, &mut scratch);
+        tw.eval_into(&[&data.u[k], p], &mut jxo[..3], &mut scratch);
+        twist.push([jxo[0], jxo[1], jxo[2]]);
+        omega.push(jxo[2]);
+        if let Some(s) = sens.as_mut() {
+            jx.eval_into(&args, &mut jxo, &mut scratch);
+            jp.eval_into(&args, &mut jpo, &mut scratch);
+            let fxm = Matrix3::from_row_slice(&jxo);
+            let fpm = DMatrix::from_row_slice(3, np, &jpo);
+            let prev = s.last().unwrap();
+            let next = DMatrix::from_iterator(3, 3, fxm.iter().copied()) * prev + fpm;
+            s.push(next);
+        }
+        pose.push(out3);
+    }
+    Track { pose, sens, omega, twist }
+}

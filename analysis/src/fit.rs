@@ -1,0 +1,273 @@
+//! Calibration: bounded Levenberg-Marquardt on the generated parameter Jacobians.
+//!
+//! Residuals, each divided by its sigma: dead-reckoned pose minus ground truth at
+//! every row (through the model's `pose` observation when it has one, e.g. an
+//! off-centre marker), and model minus measured gyro yaw rate at every step
+//! (through `obs_gyro`, so gyro effects enter naturally). The Jacobian comes from
+//! the forward sensitivities of the exact step, so it is exact, not numerical.
+use crate::dataset::Run;
+use crate::deadreckon;
+use crate::log::wrap;
+use crate::model::Runner;
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use serde::Serialize;
+
+#[derive(Debug, Clone)]
+pub struct FitOptions {
+    pub pos_sigma: f64,
+    pub heading_sigma: f64,
+    pub gyro_sigma: f64,
+    pub use_pose: bool,
+    pub use_gyro: bool,
+    pub max_iter: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, max_iter: 100 }
+    }
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct ParamEstimate {
+    pub nominal: f64,
+    pub estimate: f64,
+    pub std: f64,
+}
+
+#[derive(Debug, Clone)]
+pub struct FitResult {
+    pub p: Vec<f64>,
+    pub free: Vec<usize>,
+    pub std: Vec<f64>,
+    pub corr: DMatrix<f64>,
+    pub cost_before: f64,
+    pub cost_after: f64,
+    pub iterations: usize,
+    pub n_residuals: usize,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    #[error("nothing to fit: the logs have neither ground truth (gt_x, gt_y, gt_theta) nor a gyro (gyro_z) the model can predict")]
+    NoResiduals,
+    #[error("the fit diverged: {0}")]
+    Diverged(String),
+}
+
+/// Weighted residuals (and their Jacobian w.r.t. the free parameters) over all runs.
+pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOptions, with_jac: bool) -> (Vec<f64>, Option<DMatrix<f64>>) {
+    let parts: Vec<(Vec<f64>, Vec<Vec<f64>>)> = runs.par_iter().map(|run| run_residuals(r, p, free, run, o, with_jac)).collect();
+    let n: usize = parts.iter().map(|x| x.0.len()).sum();
+    let mut res = Vec::with_capacity(n);
+    let mut jac = with_jac.then(|| DMatrix::zeros(n, free.len()));
+    let mut row = 0;
+    for (rv, jv) in parts {
+        if let Some(j) = jac.as_mut() {
+            for (i, jr) in jv.iter().enumerate() {
+                for (c, v) in jr.iter().enumerate() {
+                    j[(row + i, c)] = *v;
+                }
+            }
+        }
+        row += rv.len();
+        res.extend(rv);
+    }
+    (res, jac)
+}
+
+fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOptions, with_jac: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let mut res = Vec::new();
+    let mut jac = Vec::new();
+    let Some(start) = run.gt.as_ref().map(|g| g[0]).or(Some([0.0; 3])) else { unreachable!() };
+    let track = deadreckon::run(r, p, run, start, with_jac);
+    let np = p.len();
+    let mut scratch = Vec::new();
+    if o.use_pose {
+        if let Some(gt) = &run.gt {
+            let obs = r.ir.function("obs_pose");
+            for k in 1..gt.len() {
+                let x = track.pose[k];
+                let u = &run.u[k - 1];
+                let (pred, hx, hp) = match obs {
+                    Some(h) => {
+                        let args = Runner::obs_args(h, &x, u, p, &[]);
+                        let pred = h.eval(&args);
+                        let (hx, hp) = if with_jac {
+                            let (fx, fp) = (r.f("obs_pose_jac_x"), r.f("obs_pose_jac_p"));
+                            (fx.eval(&Runner::obs_args(fx, &x, u, p, &[])), fp.eval(&Runner::obs_args(fp, &x, u, p, &[])))
+                        } else {
+                            (vec![], vec![])
+                        };
+                        (pred, hx, hp)
+                    }
+                    None => (x.to_vec(), vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], vec![0.0; 3 * np]),
+                };
+                let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
+                for i in 0..3 {
+                    let d = pred[i] - gt[k][i];
+                    res.push(if i == 2 { wrap(d) } else { d } / sig[i]);
+                    if with_jac {
+                        let s = &track.sens.as_ref().unwrap()[k];
+                        jac.push(
+                            free.iter()
+                                .map(|&c| ((0..3).map(|m| hx[i * 3 + m] * s[(m, c)]).sum::<f64>() + hp[i * np + c]) / sig[i])
+                                .collect(),
+                        );
+                    }
+                }
+            }
+        }
+    }
+    if o.use_gyro {
+        if let (Some(g), Some(h)) = (&run.gyro, r.ir.function("obs_gyro")) {
+            let hp = r.ir.function("obs_gyro_jac_p");
+            let hx = r.ir.function("obs_gyro_jac_x");
+            let mut out = [0.0];
+            let mut jp = vec![0.0; np];
+            let mut jx = [0.0; 3];
+            for k in 0..run.steps() {
+                let x = track.pose[k];
+                h.eval_into(&Runner::obs_args(h, &x, &run.u[k], p, &[]), &mut out, &mut scratch);
+                res.push((out[0] - g[k + 1]) / o.gyro_sigma);
+                if with_jac {
+                    let (hp, hx) = (hp.unwrap(), hx.unwrap());
+                    hp.eval_into(&Runner::obs_args(hp, &x, &run.u[k], p, &[]), &mut jp, &mut scratch);
+                    hx.eval_into(&Runner::obs_args(hx, &x, &run.u[k], p, &[]), &mut jx, &mut scratch);
+                    let s = &track.sens.as_ref().unwrap()[k];
+                    jac.push(free.iter().map(|&c| (jp[c] + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>()) / o.gyro_sigma).collect());
+                }
+            }
+        }
+    }
+    (res, jac)
+}
+
+fn cost(res: &[f64]) -> f64 {
+    0.5 * res.iter().map(|r| r * r).sum::<f64>()
+}
+
+/// Calibrate the free parameters of `r` (starting from `r.p`).
+pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+    let free = r.free.clone();
+    let bounds: Vec<(f64, f64)> = {
+        let rp = r.ir.runtime_params();
+        free.iter()
+            .map(|&i| {
+                let p = rp[i];
+                // strict lower bounds such as r > 0: stay a hair inside
+                let lo = p.min.map_or(f64::NEG_INFINITY, |m| m + 1e-9 * p.nominal.abs().max(1e-9));
+                (lo, p.max.unwrap_or(f64::INFINITY))
+            })
+            .collect()
+    };
+    // work in scaled variables so radii (cm) and offsets (rad) weigh alike
+    let scale: Vec<f64> = free.iter().map(|&i| r.p[i].abs().max(1e-3)).collect();
+    let mut p = r.p.clone();
+    let (mut res, mut jac) = residuals(r, &p, &free, runs, o, true);
+    if res.is_empty() {
+        return Err(FitError::NoResiduals);
+    }
+    let cost_before = cost(&res);
+    if !cost_before.is_finite() {
+        return Err(FitError::Diverged("the residuals at the starting point are not finite".into()));
+    }
+    let mut c = cost_before;
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    for it in 0..o.max_iter {
+        iterations = it + 1;
+        let j = jac.as_ref().unwrap() * DMatrix::from_diagonal(&DVector::from_vec(scale.clone()));
+        let jtj = j.transpose() * &j;
+        let g = j.transpose() * DVector::from_vec(res.clone());
+        let mut improved = false;
+        for _ in 0..30 {
+            let mut a = jtj.clone();
+            for d in 0..a.nrows() {
+                a[(d, d)] += lambda * jtj[(d, d)].max(1e-12);
+            }
+            let Some(step) = a.clone().cholesky().map(|ch| ch.solve(&(-&g))).or_else(|| a.svd(true, true).solve(&(-&g), 1e-14).ok()) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut trial = p.clone();
+            for (k, &i) in free.iter().enumerate() {
+                trial[i] = (p[i] + step[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
+            }
+            let (tres, _) = residuals(r, &trial, &free, runs, o, false);
+            let tc = cost(&tres);
+            if tc.is_finite() && tc < c {
+                let rel = (c - tc) / c.max(1e-300);
+                p = trial;
+                c = tc;
+                lambda = (lambda / 3.0).max(1e-12);
+                improved = true;
+                let (r2, j2) = residuals(r, &p, &free, runs, o, true);
+                res = r2;
+                jac = j2;
+                if rel < 1e-12 {
+                    improved = false;
+                }
+                break;
+            }
+            lambda *= 4.0;
+            if lambda > 1e16 {
+                break;
+            }
+        }
+        if !improved {
+            break;
+        }
+    }
+    if !c.is_finite() {
+        return Err(FitError::Diverged("cost became non-finite".into()));
+    }
+    // Uncertainty: s^2 (J^T J)^-1 with s^2 from the residuals (assumes independent
+    // residuals; dead-reckoning residuals are correlated, so these are optimistic).
+    let j = jac.unwrap();
+    let n = res.len();
+    let m = free.len();
+    let s2 = 2.0 * c / (n.saturating_sub(m).max(1)) as f64;
+    let jtj = j.transpose() * &j;
+    let svd = jtj.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    let mut warnings = Vec::new();
+    let names: Vec<&str> = free.iter().map(|&i| r.names[i].as_str()).collect();
+    let rank = svd.singular_values.iter().filter(|&&s| s > 1e-10 * smax).count();
+    if rank < m {
+        let v_t = svd.v_t.as_ref().unwrap();
+        for (k, &s) in svd.singular_values.iter().enumerate() {
+            if s <= 1e-10 * smax {
+                let row = v_t.row(k);
+                let mut parts: Vec<(f64, &str)> = row.iter().zip(&names).map(|(v, n)| (v.abs(), *n)).filter(|(v, _)| *v > 0.2).collect();
+                parts.sort_by(|a, b| b.0.total_cmp(&a.0));
+                warnings.push(format!(
+                    "not identifiable from these logs: the combination of {} cannot be separated (rank {rank} of {m})",
+                    parts.iter().map(|p| p.1).collect::<Vec<_>>().join(" and ")
+                ));
+            }
+        }
+    }
+    let cov = svd.pseudo_inverse(1e-10 * smax).unwrap_or_else(|_| DMatrix::zeros(m, m)) * s2;
+    let std: Vec<f64> = (0..m).map(|k| cov[(k, k)].max(0.0).sqrt()).collect();
+    let corr = DMatrix::from_fn(m, m, |a, b| {
+        let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
+        if d > 0.0 { cov[(a, b)] / d } else if a == b { 1.0 } else { 0.0 }
+    });
+    for a in 0..m {
+        for b in a + 1..m {
+            if corr[(a, b)].abs() > 0.98 {
+                warnings.push(format!("{} and {} are strongly correlated (r = {:.3}): this log barely tells them apart", names[a], names[b], corr[(a, b)]));
+            }
+        }
+    }
+    for (k, &i) in free.iter().enumerate() {
+        let (lo, hi) = bounds[k];
+        if (p[i] - lo).abs() < 1e-6 * scale[k] || (p[i] - hi).abs() < 1e-6 * scale[k] {
+            warnings.push(format!("{} ended on its physical bound ({}): the estimate is not meaningful", names[k], p[i]));
+        }
+    }
+    Ok(FitResult { p, free, std, corr, cost_before, cost_after: c, iterations, n_residuals: n, warnings })
+}

@@ -1,0 +1,16 @@
+//! kinegen-analysis: confront a model with measurements.
+//!
+//! Everything here runs on the model IR ([`kinegen_model::ir::ModelIr`]) through
+//! its evaluator, so a freshly edited spec can be simulated, compared, calibrated
+//! and diagnosed without compiling anything, and nothing here touches symbolica
+//! (so it may use threads freely).
+pub mod dataset;
+pub mod deadreckon;
+pub mod effects;
+pub mod fit;
+pub mod log;
+pub mod metrics;
+pub mod model;
+pub mod simulate;
+
+pub use kinegen_model::ir::ModelIr;

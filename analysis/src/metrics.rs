@@ -1,0 +1,204 @@
+//! How wrong is the model, and where: absolute trajectory error, relative pose
+//! error over distance and time windows, gyro residuals, and which motion regimes
+//! and segments carry the error.
+use crate::dataset::Run;
+use crate::deadreckon::Track;
+use crate::log::wrap;
+use serde::Serialize;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RegimeShare {
+    pub regime: String,
+    pub time_s: f64,
+    pub distance_m: f64,
+    /// Position error accumulated while in this regime (m), and its share.
+    pub position_error_growth_m: f64,
+    pub position_share: f64,
+    /// Heading error accumulated while in this regime (rad), and its share.
+    pub heading_error_growth_rad: f64,
+    pub heading_share: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Segment {
+    pub run: String,
+    pub t_start: f64,
+    pub t_end: f64,
+    pub regime: String,
+    /// Growth of the position error over the segment (m).
+    pub position_error_growth_m: f64,
+    pub heading_error_growth_rad: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct Errors {
+    /// Position RMSE over all rows (absolute trajectory error), m.
+    pub rmse: f64,
+    pub heading_rmse_rad: f64,
+    pub final_position_error_m: f64,
+    pub final_heading_error_rad: f64,
+    pub max_position_error_m: f64,
+    pub max_error_at_s: f64,
+    /// Relative pose error: translation drift per metre travelled, over 1 m windows.
+    pub rpe_per_m: Option<f64>,
+    /// Translation drift over 5 s windows, m.
+    pub rpe_5s_m: Option<f64>,
+    pub gyro_rmse_rad_s: Option<f64>,
+    pub samples: usize,
+}
+
+/// Per-row errors of a track against a run's ground truth.
+pub struct RowErrors {
+    pub pos: Vec<f64>,
+    pub head: Vec<f64>,
+}
+
+pub fn row_errors(track: &Track, gt: &[[f64; 3]]) -> RowErrors {
+    let pos = track.pose.iter().zip(gt).map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()).collect();
+    let head = track.pose.iter().zip(gt).map(|(a, b)| wrap(a[2] - b[2])).collect();
+    RowErrors { pos, head }
+}
+
+/// Motion regime of a step from its body twist.
+pub fn regime(tw: &[f64; 3], fast: f64) -> &'static str {
+    let v = (tw[0] * tw[0] + tw[1] * tw[1]).sqrt();
+    if v < 0.02 && tw[2].abs() < 0.05 {
+        "standing"
+    } else if v < 0.02 {
+        "turn in place"
+    } else if tw[1].abs() > 0.5 * v {
+        "sideways"
+    } else if tw[2].abs() < 0.1 {
+        if v > fast { "straight fast" } else { "straight slow" }
+    } else if tw[2] > 0.0 {
+        "turn left"
+    } else {
+        "turn right"
+    }
+}
+
+fn rel(a: &[f64; 3], b: &[f64; 3]) -> [f64; 2] {
+    // b expressed in a's frame (translation only)
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let (c, s) = (a[2].cos(), a[2].sin());
+    [c * dx + s * dy, -s * dx + c * dy]
+}
+
+/// Error summary over several runs (each with its own track).
+pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
+    let mut e = Errors::default();
+    let (mut sp, mut sh, mut n) = (0.0, 0.0, 0usize);
+    let (mut gsum, mut gn) = (0.0, 0usize);
+    let (mut rpe_d, mut rpe_dn, mut rpe_t, mut rpe_tn) = (0.0, 0usize, 0.0, 0usize);
+    for (run, tr) in runs {
+        if let Some(gt) = &run.gt {
+            let re = row_errors(tr, gt);
+            for k in 0..re.pos.len() {
+                sp += re.pos[k].powi(2);
+                sh += re.head[k].powi(2);
+                n += 1;
+                if re.pos[k] > e.max_position_error_m {
+                    e.max_position_error_m = re.pos[k];
+                    e.max_error_at_s = run.t[k] - run.t[0];
+                }
+            }
+            e.final_position_error_m = *re.pos.last().unwrap();
+            e.final_heading_error_rad = *re.head.last().unwrap();
+            // RPE: windows of 1 m travelled and of 5 s
+            let mut dist = vec![0.0];
+            for k in 1..gt.len() {
+                let d = ((gt[k][0] - gt[k - 1][0]).powi(2) + (gt[k][1] - gt[k - 1][1]).powi(2)).sqrt();
+                dist.push(dist[k - 1] + d);
+            }
+            let mut j = 0;
+            for i in 0..gt.len() {
+                while j < gt.len() && dist[j] - dist[i] < 1.0 {
+                    j += 1;
+                }
+                if j >= gt.len() {
+                    break;
+                }
+                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.pose[i], &tr.pose[j]));
+                rpe_d += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / (dist[j] - dist[i]);
+                rpe_dn += 1;
+            }
+            let mut j = 0;
+            for i in 0..gt.len() {
+                while j < gt.len() && run.t[j] - run.t[i] < 5.0 {
+                    j += 1;
+                }
+                if j >= gt.len() {
+                    break;
+                }
+                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.pose[i], &tr.pose[j]));
+                rpe_t += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+                rpe_tn += 1;
+            }
+        }
+        if let Some(g) = &run.gyro {
+            for k in 0..tr.omega.len() {
+                gsum += (tr.omega[k] - g[k + 1]).powi(2);
+                gn += 1;
+            }
+        }
+    }
+    if n > 0 {
+        e.rmse = (sp / n as f64).sqrt();
+        e.heading_rmse_rad = (sh / n as f64).sqrt();
+    }
+    e.samples = n.max(gn);
+    e.rpe_per_m = (rpe_dn > 0).then(|| rpe_d / rpe_dn as f64);
+    e.rpe_5s_m = (rpe_tn > 0).then(|| rpe_t / rpe_tn as f64);
+    e.gyro_rmse_rad_s = (gn > 0).then(|| (gsum / gn as f64).sqrt());
+    e
+}
+
+/// Which regimes carry the error growth, and the worst 1 s segments.
+pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment>) {
+    let mut speeds: Vec<f64> = runs.iter().flat_map(|(_, t)| t.twist.iter().map(|w| (w[0] * w[0] + w[1] * w[1]).sqrt())).filter(|v| *v > 0.02).collect();
+    speeds.sort_by(f64::total_cmp);
+    let fast = speeds.get(speeds.len() / 2).copied().unwrap_or(0.0);
+    let mut shares: Vec<RegimeShare> = Vec::new();
+    let mut segments = Vec::new();
+    for (run, tr) in runs {
+        let Some(gt) = &run.gt else { continue };
+        let re = row_errors(tr, gt);
+        let mut seg_start = 0;
+        for k in 0..run.steps() {
+            let reg = regime(&tr.twist[k], fast);
+            let s = match shares.iter_mut().find(|s| s.regime == reg) {
+                Some(s) => s,
+                None => {
+                    shares.push(RegimeShare { regime: reg.into(), time_s: 0.0, distance_m: 0.0, position_error_growth_m: 0.0, position_share: 0.0, heading_error_growth_rad: 0.0, heading_share: 0.0 });
+                    shares.last_mut().unwrap()
+                }
+            };
+            s.time_s += run.dt[k];
+            s.distance_m += (tr.twist[k][0].powi(2) + tr.twist[k][1].powi(2)).sqrt() * run.dt[k];
+            s.position_error_growth_m += (re.pos[k + 1] - re.pos[k]).max(0.0);
+            s.heading_error_growth_rad += (re.head[k + 1].abs() - re.head[k].abs()).max(0.0);
+            if run.t[k + 1] - run.t[seg_start] >= 1.0 || k + 1 == run.steps() {
+                // dominant regime of the segment: the one of its middle step
+                let mid = (seg_start + k) / 2;
+                segments.push(Segment {
+                    run: run.name.clone(),
+                    t_start: run.t[seg_start] - run.t[0],
+                    t_end: run.t[k + 1] - run.t[0],
+                    regime: regime(&tr.twist[mid], fast).into(),
+                    position_error_growth_m: re.pos[k + 1] - re.pos[seg_start],
+                    heading_error_growth_rad: re.head[k + 1].abs() - re.head[seg_start].abs(),
+                });
+                seg_start = k + 1;
+            }
+        }
+    }
+    let (tp, th): (f64, f64) = shares.iter().fold((0.0, 0.0), |a, s| (a.0 + s.position_error_growth_m, a.1 + s.heading_error_growth_rad));
+    for s in &mut shares {
+        s.position_share = if tp > 0.0 { s.position_error_growth_m / tp } else { 0.0 };
+        s.heading_share = if th > 0.0 { s.heading_error_growth_rad / th } else { 0.0 };
+    }
+    shares.sort_by(|a, b| b.position_share.total_cmp(&a.position_share));
+    segments.sort_by(|a, b| b.position_error_growth_m.total_cmp(&a.position_error_growth_m));
+    segments.truncate(5);
+    (shares, segments)
+}

@@ -1,0 +1,100 @@
+//! A model ready to run: its IR, the runtime parameter vector (nominal values with
+//! `--set` overrides) and which parameters are free.
+use kinegen_model::ir::{Function, ModelIr};
+use kinegen_model::spec::InputKind;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("unknown parameter `{name}` in --set (the model `{model}` has: {known})")]
+    UnknownParam { name: String, model: String, known: String },
+    #[error("--set {0}: expected NAME=VALUE with a finite number")]
+    BadSet(String),
+    #[error("model `{0}` lacks the function `{1}` (regenerate its IR)")]
+    Missing(String, String),
+}
+
+#[derive(Debug, Clone)]
+pub struct Runner {
+    pub ir: ModelIr,
+    /// Values of the runtime parameters, in the `p` argument order.
+    pub p: Vec<f64>,
+    pub names: Vec<String>,
+    /// Indices (into `p`) of the parameters `fit` calibrates.
+    pub free: Vec<usize>,
+}
+
+/// Parse `NAME=VALUE` pairs.
+pub fn parse_sets(sets: &[String]) -> Result<Vec<(String, f64)>, ModelError> {
+    sets.iter()
+        .map(|s| {
+            let (n, v) = s.split_once('=').ok_or_else(|| ModelError::BadSet(s.clone()))?;
+            let v: f64 = v.trim().parse().map_err(|_| ModelError::BadSet(s.clone()))?;
+            if !v.is_finite() {
+                return Err(ModelError::BadSet(s.clone()));
+            }
+            Ok((n.trim().to_string(), v))
+        })
+        .collect()
+}
+
+impl Runner {
+    pub fn new(ir: ModelIr, sets: &[(String, f64)]) -> Result<Runner, ModelError> {
+        let rp = ir.runtime_params();
+        let names: Vec<String> = rp.iter().map(|p| p.name.clone()).collect();
+        let mut p: Vec<f64> = rp.iter().map(|p| p.nominal).collect();
+        let free = rp.iter().enumerate().filter(|(_, p)| p.free).map(|(i, _)| i).collect();
+        for (n, v) in sets {
+            let i = names.iter().position(|x| x == n).ok_or_else(|| ModelError::UnknownParam {
+                name: n.clone(),
+                model: ir.name.clone(),
+                known: names.join(", "),
+            })?;
+            p[i] = *v;
+        }
+        for f in ["step_exact", "step_exact_jac_x", "step_exact_jac_p", "twist"] {
+            if ir.function(f).is_none() {
+                return Err(ModelError::Missing(ir.name.clone(), f.into()));
+            }
+        }
+        Ok(Runner { ir, p, names, free })
+    }
+
+    pub fn f(&self, name: &str) -> &Function {
+        self.ir.function(name).expect("checked in Runner::new")
+    }
+
+    pub fn param_index(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == name)
+    }
+
+    pub fn cumulative(&self) -> Vec<bool> {
+        self.ir.inputs.iter().map(|i| i.kind == InputKind::Cumulative).collect()
+    }
+
+    /// Build the argument list of a step-shaped function (x, u, [w = 0], p, dt).
+    pub fn step_args<'a>(f: &Function, x: &'a [f64], u: &'a [f64], p: &'a [f64], dt: &'a [f64], zeros: &'a [f64]) -> Vec<&'a [f64]> {
+        f.args
+            .iter()
+            .map(|a| match a.name.as_str() {
+                "x" => x,
+                "u" => u,
+                "p" => p,
+                "dt" => dt,
+                _ => &zeros[..a.names.len()],
+            })
+            .collect()
+    }
+
+    /// Observation-shaped arguments (x, u, p, [lm]).
+    pub fn obs_args<'a>(f: &Function, x: &'a [f64], u: &'a [f64], p: &'a [f64], lm: &'a [f64]) -> Vec<&'a [f64]> {
+        f.args
+            .iter()
+            .map(|a| match a.name.as_str() {
+                "x" => x,
+                "u" => u,
+                "p" => p,
+                _ => lm,
+            })
+            .collect()
+    }
+}

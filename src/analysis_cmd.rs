@@ -1,0 +1,193 @@
+//! `kinegen compare` and `kinegen fit`.
+use crate::ir_source;
+use crate::output::Out;
+use clap::Args;
+use kinegen_analysis::dataset::Run;
+use kinegen_analysis::deadreckon;
+use kinegen_analysis::fit::{fit, FitOptions, FitResult};
+use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
+use kinegen_analysis::model::{parse_sets, Runner};
+use serde_json::{json, Value};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Args, Debug, Clone)]
+pub struct Common {
+    /// The model spec.
+    #[arg(long)]
+    pub spec: PathBuf,
+    /// Measurement log (CSV, CONTRACT section 2); repeat for several runs.
+    #[arg(long, required = true)]
+    pub data: Vec<PathBuf>,
+    /// Runs scored but not fitted; repeatable.
+    #[arg(long)]
+    pub holdout: Vec<PathBuf>,
+    /// Override a parameter's nominal value: NAME=VALUE; repeatable.
+    #[arg(long = "set")]
+    pub set: Vec<String>,
+    /// Write a self-contained HTML report to DIR/index.html.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write one JSON document to PATH (`-`: stdout).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Exit 2 with a message naming the problem.
+pub fn bad(msg: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {msg}");
+    ExitCode::from(2)
+}
+
+pub struct Prepared {
+    pub runner: Runner,
+    pub runs: Vec<Run>,
+    pub holdout: Vec<Run>,
+}
+
+pub fn prepare(c: &Common) -> Result<Prepared, String> {
+    let ir = ir_source::load(&c.spec)?;
+    let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
+    let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;
+    let read = |paths: &[PathBuf]| paths.iter().map(|p| Run::read(p, &runner).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>();
+    let runs = read(&c.data)?;
+    let holdout = read(&c.holdout)?;
+    Ok(Prepared { runner, runs, holdout })
+}
+
+pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
+    let tracks: Vec<_> = runs.iter().map(|run| deadreckon::run(r, p, run, run.gt.as_ref().map_or([0.0; 3], |g| g[0]), false)).collect();
+    let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
+    errors(&pairs)
+}
+
+fn fmt_errors(e: &Errors) -> String {
+    let mut s = format!(
+        "position RMSE {:.4} m, heading RMSE {:.4} rad; final error {:.4} m / {:.4} rad; worst {:.4} m at {:.1} s",
+        e.rmse, e.heading_rmse_rad, e.final_position_error_m, e.final_heading_error_rad, e.max_position_error_m, e.max_error_at_s
+    );
+    if let Some(d) = e.rpe_per_m {
+        s += &format!("\n  drift {:.2}% of distance (relative pose error over 1 m)", 100.0 * d);
+    }
+    if let Some(d) = e.rpe_5s_m {
+        s += &format!(", {:.4} m per 5 s", d);
+    }
+    if let Some(g) = e.gyro_rmse_rad_s {
+        s += &format!("\n  gyro yaw-rate residual RMSE {:.5} rad/s", g);
+    }
+    s
+}
+
+pub fn compare(c: Common) -> ExitCode {
+    let out = Out::new(c.json.as_deref());
+    let prep = match prepare(&c) {
+        Ok(p) => p,
+        Err(e) => return bad(e),
+    };
+    let r = &prep.runner;
+    let all: Vec<Run> = prep.runs.iter().chain(&prep.holdout).cloned().collect();
+    let tracks: Vec<_> = all.iter().map(|run| deadreckon::run(r, &r.p, run, run.gt.as_ref().map_or([0.0; 3], |g| g[0]), false)).collect();
+    let pairs: Vec<_> = all.iter().zip(&tracks).collect();
+    let e = errors(&pairs);
+    let (regimes, segments) = where_it_fails(&pairs);
+    let secs: f64 = all.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
+    out.say(&format!("{} against {} run(s), {:.1} s of data, nominal parameters", r.ir.name, all.len(), secs));
+    out.say(&format!("  {}", fmt_errors(&e)));
+    if !regimes.is_empty() {
+        out.say("where the error grows (share of position / heading error growth):");
+        for g in &regimes {
+            out.say(&format!(
+                "  {:<14} {:>7.1} s {:>7.2} m   {:>5.1}% / {:>5.1}%",
+                g.regime, g.time_s, g.distance_m, 100.0 * g.position_share, 100.0 * g.heading_share
+            ));
+        }
+        out.say("worst 1 s segments:");
+        for s in &segments {
+            out.say(&format!(
+                "  {} {:.1}-{:.1} s ({}): position error +{:.4} m, heading error {:+.4} rad",
+                s.run, s.t_start, s.t_end, s.regime, s.position_error_growth_m, s.heading_error_growth_rad
+            ));
+        }
+    }
+    let per_run: Vec<Value> = all.iter().zip(&tracks).map(|(run, t)| json!({"run": run.name, "errors": errors(&[(run, t)])})).collect();
+    let doc = json!({
+        "model": r.ir.name, "metric": "position_rmse_m",
+        "errors": e, "rmse": e.rmse, "regimes": regimes, "worst_segments": segments, "runs": per_run,
+        "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
+    });
+    if let Some(dir) = &c.report {
+        if let Err(e) = crate::report::compare_report(dir, r, &all, &tracks, &doc) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
+
+/// JSON for a finished fit (CONTRACT section 4).
+pub fn fit_json(r: &Runner, res: &FitResult, before: &Errors, after: &Errors) -> Value {
+    let params: serde_json::Map<String, Value> = res
+        .free
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k]})))
+        .collect();
+    let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
+    let corr: Vec<Vec<f64>> = (0..names.len()).map(|a| (0..names.len()).map(|b| res.corr[(a, b)]).collect()).collect();
+    json!({
+        "model": r.ir.name, "metric": "position_rmse_m",
+        "before": {"rmse": before.rmse, "errors": before}, "after": {"rmse": after.rmse, "errors": after},
+        "parameters": params, "correlation": {"parameters": names, "matrix": corr},
+        "warnings": res.warnings, "iterations": res.iterations, "residuals": res.n_residuals,
+    })
+}
+
+pub fn run_fit(c: Common, method: &str) -> ExitCode {
+    let out = Out::new(c.json.as_deref());
+    let prep = match prepare(&c) {
+        Ok(p) => p,
+        Err(e) => return bad(e),
+    };
+    let r = &prep.runner;
+    if method != "lm" {
+        return bad(format!("--method {method}: only `lm` is implemented in this version (gd and ekf are not yet)"));
+    }
+    let res = match fit(r, &prep.runs, &FitOptions::default()) {
+        Ok(x) => x,
+        Err(e) => return bad(e),
+    };
+    let before = evaluate(r, &r.p, &prep.runs);
+    let after = evaluate(r, &res.p, &prep.runs);
+    out.say(&format!("{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)", r.ir.name, res.free.len(), prep.runs.len(), res.n_residuals, res.iterations));
+    out.say(&format!("  before: {}", fmt_errors(&before)));
+    out.say(&format!("  after:  {}", fmt_errors(&after)));
+    out.say(&format!("  {:<16} {:>12} {:>12} {:>10}", "parameter", "nominal", "estimate", "std"));
+    for (k, &i) in res.free.iter().enumerate() {
+        out.say(&format!("  {:<16} {:>12.6} {:>12.6} {:>10.2e}", r.names[i], r.p[i], res.p[i], res.std[k]));
+    }
+    for w in &res.warnings {
+        out.say(&format!("warning: {w}"));
+    }
+    let mut doc = fit_json(r, &res, &before, &after);
+    if !prep.holdout.is_empty() {
+        let hb = evaluate(r, &r.p, &prep.holdout);
+        let ha = evaluate(r, &res.p, &prep.holdout);
+        out.say(&format!("  holdout before: {}\n  holdout after:  {}", fmt_errors(&hb), fmt_errors(&ha)));
+        doc["holdout"] = json!({"before": {"rmse": hb.rmse, "errors": hb}, "after": {"rmse": ha.rmse, "errors": ha}});
+    }
+    if let Some(dir) = &c.report {
+        let tracks_b: Vec<_> = prep.runs.iter().map(|run| deadreckon::run(r, &r.p, run, run.gt.as_ref().map_or([0.0; 3], |g| g[0]), false)).collect();
+        let tracks_a: Vec<_> = prep.runs.iter().map(|run| deadreckon::run(r, &res.p, run, run.gt.as_ref().map_or([0.0; 3], |g| g[0]), false)).collect();
+        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &tracks_b, &tracks_a, &doc) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}

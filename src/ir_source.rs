@@ -1,0 +1,66 @@
+//! Getting a spec's IR without running symbolica in this process.
+//!
+//! 1. The committed IR of the generated crate, when its spec fingerprint matches.
+//! 2. A cache of earlier derivations (temp dir, keyed by fingerprint).
+//! 3. Otherwise `kinegen derive` in a child process: symbolica's one-thread permit is
+//!    then held only while deriving, its output never reaches our stdout, and this
+//!    process (fitting, diagnosing) stays free to use threads.
+use kinegen_model::ir::ModelIr;
+use kinegen_model::spec::Model;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+pub fn cache_dir() -> PathBuf {
+    std::env::temp_dir().join("kinegen-ir-cache")
+}
+
+fn committed_candidates(spec: &Path, name: &str) -> Vec<PathBuf> {
+    let mut v = vec![PathBuf::from("generated/ir").join(format!("{name}.json"))];
+    if let Some(dir) = spec.parent() {
+        v.push(dir.join("../generated/ir").join(format!("{name}.json")));
+    }
+    v
+}
+
+/// Load and validate a spec and return its IR.
+pub fn load(spec: &Path) -> Result<ModelIr, String> {
+    let model = Model::load(spec).map_err(|e| e.to_string())?;
+    let fp = model.fingerprint();
+    for c in committed_candidates(spec, &model.name) {
+        if let Ok(text) = std::fs::read_to_string(&c) {
+            if let Ok(ir) = ModelIr::from_json(&text) {
+                if ir.spec_fingerprint == fp {
+                    return Ok(ir);
+                }
+            }
+        }
+    }
+    let cached = cache_dir().join(format!("{}-{fp}.json", model.name));
+    if let Ok(text) = std::fs::read_to_string(&cached) {
+        if let Ok(ir) = ModelIr::from_json(&text) {
+            return Ok(ir);
+        }
+    }
+    let exe = std::env::current_exe().map_err(|e| format!("cannot find the kinegen binary: {e}"))?;
+    let status = Command::new(exe)
+        .args(["derive", "--spec"])
+        .arg(spec)
+        .arg("--ir-out")
+        .arg(&cached)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .status()
+        .map_err(|e| format!("cannot run `kinegen derive`: {e}"))?;
+    if !status.success() {
+        return Err(format!("{}: derivation failed", spec.display()));
+    }
+    let text = std::fs::read_to_string(&cached).map_err(|e| format!("{}: {e}", cached.display()))?;
+    ModelIr::from_json(&text).map_err(|e| format!("{}: {e}", cached.display()))
+}
+
+/// `kinegen derive`: derive one spec's IR into a file (used by `load`).
+pub fn derive_to(spec: &Path, out: &Path) -> Result<(), String> {
+    let model = Model::load(spec).map_err(|e| e.to_string())?;
+    let ir = kinegen_codegen::derive_model(&model).map_err(|e| e.to_string())?;
+    kinegen_codegen::generate::write_atomic(out, &ir.to_json()).map_err(|e| e.to_string())
+}

@@ -1,0 +1,208 @@
+//! `--report DIR`: one self-contained HTML page (inline SVG figures drawn with
+//! plotters, no external files or scripts).
+use kinegen_analysis::dataset::Run;
+use kinegen_analysis::deadreckon::Track;
+use kinegen_analysis::log::wrap;
+use kinegen_analysis::metrics::regime;
+use kinegen_analysis::model::Runner;
+use plotters::prelude::*;
+use serde_json::Value;
+use std::path::Path;
+
+const W: u32 = 560;
+const H: u32 = 420;
+
+type Series<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
+
+fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
+    let pts = series.iter().flat_map(|s| s.2.iter());
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for &(x, y) in pts {
+        if x.is_finite() && y.is_finite() {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+    }
+    if !x0.is_finite() {
+        return ((0.0, 1.0), (0.0, 1.0));
+    }
+    let (px, py) = (((x1 - x0) * 0.05).max(1e-9), ((y1 - y0) * 0.05).max(1e-9));
+    ((x0 - px, x1 + px), (y0 - py, y1 + py))
+}
+
+/// A line (or scatter) chart as an SVG string.
+fn chart(title: &str, xl: &str, yl: &str, series: &[Series], scatter: bool, equal: bool, marks: &[(f64, f64)]) -> Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (W, H)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let ((mut x0, mut x1), (mut y0, mut y1)) = bounds(series);
+        if equal {
+            let (cx, cy, half) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0, (x1 - x0).max(y1 - y0) / 2.0);
+            (x0, x1, y0, y1) = (cx - half, cx + half, cy - half, cy + half);
+        }
+        let mut c = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(36)
+            .y_label_area_size(56)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| e.to_string())?;
+        c.configure_mesh().x_desc(xl).y_desc(yl).light_line_style(WHITE.mix(0.0)).draw().map_err(|e| e.to_string())?;
+        for (a, b) in marks {
+            c.draw_series(std::iter::once(Rectangle::new([(*a, y0), (*b, y1)], RGBColor(255, 200, 200).mix(0.5).filled()))).map_err(|e| e.to_string())?;
+        }
+        for (name, color, pts) in series {
+            let color = *color;
+            if scatter {
+                c.draw_series(pts.iter().map(|p| Circle::new(*p, 1, color.filled())))
+                    .map_err(|e| e.to_string())?
+                    .label(*name)
+                    .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
+            } else {
+                c.draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
+                    .map_err(|e| e.to_string())?
+                    .label(*name)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2)));
+            }
+        }
+        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+fn page(title: &str, intro: &str, figures: &[String], tables: &str, doc: &Value) -> String {
+    let figs: String = figures.iter().map(|f| format!("<figure>{f}</figure>")).collect();
+    format!(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
+body{{font-family:sans-serif;margin:24px;color:#222;max-width:1200px}}\
+figure{{display:inline-block;margin:6px;border:1px solid #ddd}}\
+table{{border-collapse:collapse;margin:12px 0}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
+th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{{background:#f7f7f7;padding:8px;overflow:auto;max-height:300px}}\
+</style></head><body><h1>{t}</h1>{intro}{tables}<div>{figs}</div>\
+<details><summary>JSON</summary><pre>{json}</pre></details></body></html>\n",
+        t = esc(title),
+        json = esc(&serde_json::to_string_pretty(doc).unwrap_or_default())
+    )
+}
+
+fn traj(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
+    let _ = run;
+    tr.pose.iter().map(|p| (p[0], p[1])).collect()
+}
+
+fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
+    run.gt.as_ref().map(|g| g.iter().map(|p| (p[0], p[1])).collect()).unwrap_or_default()
+}
+
+fn pos_err(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
+    let Some(g) = &run.gt else { return vec![] };
+    g.iter().zip(&tr.pose).zip(&run.t).map(|((a, b), t)| (t - run.t[0], ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())).collect()
+}
+
+/// Heading-error rate residual per step against speed, turn rate and heading.
+fn residual_scatter(run: &Run, tr: &Track) -> [Vec<(f64, f64)>; 3] {
+    let mut out = [vec![], vec![], vec![]];
+    let Some(g) = &run.gt else { return out };
+    for k in 0..run.steps() {
+        let meas = wrap(g[k + 1][2] - g[k][2]) / run.dt[k];
+        let res = tr.twist[k][2] - meas;
+        let v = (tr.twist[k][0].powi(2) + tr.twist[k][1].powi(2)).sqrt();
+        out[0].push((v, res));
+        out[1].push((tr.twist[k][2], res));
+        out[2].push((wrap(g[k][2]), res));
+    }
+    out
+}
+
+fn write(dir: &Path, html: &str) -> Result<(), String> {
+    kinegen_codegen::generate::write_atomic(&dir.join("index.html"), html).map_err(|e| e.to_string())
+}
+
+fn worst_marks(doc: &Value, run: &str) -> Vec<(f64, f64)> {
+    doc["worst_segments"]
+        .as_array()
+        .map(|a| a.iter().filter(|s| s["run"] == run).map(|s| (s["t_start"].as_f64().unwrap_or(0.0), s["t_end"].as_f64().unwrap_or(0.0))).collect())
+        .unwrap_or_default()
+}
+
+pub fn compare_report(dir: &Path, r: &Runner, runs: &[Run], tracks: &[Track], doc: &Value) -> Result<(), String> {
+    let mut figs = Vec::new();
+    for (run, tr) in runs.iter().zip(tracks) {
+        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &[("measured", BLACK, gt_xy(run)), ("model (nominal)", RED, traj(run, tr))], false, true, &[])?);
+        figs.push(chart(&format!("{}: position error, worst 1 s segments shaded", run.name), "t (s)", "error (m)", &[("model (nominal)", RED, pos_err(run, tr))], false, false, &worst_marks(doc, &run.name))?);
+        let [a, b, c] = residual_scatter(run, tr);
+        figs.push(chart("turn-rate residual vs speed", "speed (m/s)", "model - measured yaw rate (rad/s)", &[("residual", BLUE, a)], true, false, &[])?);
+        figs.push(chart("turn-rate residual vs turn rate", "yaw rate (rad/s)", "residual (rad/s)", &[("residual", BLUE, b)], true, false, &[])?);
+        figs.push(chart("turn-rate residual vs heading", "heading (rad)", "residual (rad/s)", &[("residual", BLUE, c)], true, false, &[])?);
+    }
+    let mut t = String::from("<h2>Where the error grows</h2><table><tr><th>regime</th><th>time (s)</th><th>distance (m)</th><th>position error share</th><th>heading error share</th></tr>");
+    for g in doc["regimes"].as_array().into_iter().flatten() {
+        t += &format!(
+            "<tr><td>{}</td><td>{:.1}</td><td>{:.2}</td><td>{:.1}%</td><td>{:.1}%</td></tr>",
+            esc(g["regime"].as_str().unwrap_or("")),
+            g["time_s"].as_f64().unwrap_or(0.0),
+            g["distance_m"].as_f64().unwrap_or(0.0),
+            100.0 * g["position_share"].as_f64().unwrap_or(0.0),
+            100.0 * g["heading_share"].as_f64().unwrap_or(0.0)
+        );
+    }
+    t += "</table>";
+    let e = &doc["errors"];
+    let intro = format!(
+        "<p>Model <b>{}</b> with nominal parameters against {} run(s): position RMSE <b>{:.4} m</b>, heading RMSE {:.4} rad, final error {:.4} m.</p>",
+        esc(&r.ir.name),
+        runs.len(),
+        e["rmse"].as_f64().unwrap_or(0.0),
+        e["heading_rmse_rad"].as_f64().unwrap_or(0.0),
+        e["final_position_error_m"].as_f64().unwrap_or(0.0)
+    );
+    write(dir, &page(&format!("kinegen compare: {}", r.ir.name), &intro, &figs, &t, doc))
+}
+
+pub fn param_table(doc: &Value) -> String {
+    let mut t = String::from("<h2>Parameters</h2><table><tr><th>parameter</th><th>nominal</th><th>estimate</th><th>std</th></tr>");
+    if let Some(ps) = doc["parameters"].as_object() {
+        for (n, p) in ps {
+            t += &format!(
+                "<tr><td>{}</td><td>{:.6}</td><td>{:.6}</td><td>{:.2e}</td></tr>",
+                esc(n),
+                p["nominal"].as_f64().unwrap_or(f64::NAN),
+                p["estimate"].as_f64().unwrap_or(f64::NAN),
+                p["std"].as_f64().unwrap_or(f64::NAN)
+            );
+        }
+    }
+    t += "</table>";
+    for w in doc["warnings"].as_array().into_iter().flatten() {
+        t += &format!("<p class=\"warn\">warning: {}</p>", esc(w.as_str().unwrap_or("")));
+    }
+    t
+}
+
+pub fn fit_report(dir: &Path, r: &Runner, runs: &[Run], before: &[Track], after: &[Track], doc: &Value) -> Result<(), String> {
+    let mut figs = Vec::new();
+    for ((run, b), a) in runs.iter().zip(before).zip(after) {
+        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &[("measured", BLACK, gt_xy(run)), ("before calibration", RED, traj(run, b)), ("after calibration", GREEN, traj(run, a))], false, true, &[])?);
+        figs.push(chart(&format!("{}: position error", run.name), "t (s)", "error (m)", &[("before", RED, pos_err(run, b)), ("after", GREEN, pos_err(run, a))], false, false, &[])?);
+        let [sb, _, _] = residual_scatter(run, b);
+        let [sa, _, _] = residual_scatter(run, a);
+        figs.push(chart("turn-rate residual vs speed", "speed (m/s)", "residual (rad/s)", &[("before", RED, sb), ("after", GREEN, sa)], true, false, &[])?);
+        let _ = regime;
+    }
+    let intro = format!(
+        "<p>Model <b>{}</b> calibrated on {} run(s): position RMSE <b>{:.4} m</b> before, <b>{:.4} m</b> after.</p>",
+        esc(&r.ir.name),
+        runs.len(),
+        doc["before"]["rmse"].as_f64().unwrap_or(0.0),
+        doc["after"]["rmse"].as_f64().unwrap_or(0.0)
+    );
+    write(dir, &page(&format!("kinegen fit: {}", r.ir.name), &intro, &figs, &param_table(doc), doc))
+}
