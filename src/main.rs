@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 mod analysis_cmd;
+mod effects_cmd;
 mod generate_cmd;
 mod ir_source;
 mod output;
@@ -65,6 +66,43 @@ enum Command {
         #[arg(long, default_value = "lm", value_parser = ["lm", "gd", "ekf"])]
         method: String,
     },
+    /// Synthetic logs in the real-log format, optionally with hidden effects.
+    ///
+    /// Example: kinegen simulate --spec spec/diff_drive.toml --effect lateral_slip=0.05 --set b=0.21 --trajectory square --seed 3 --out sim.csv
+    Simulate {
+        #[arg(long)]
+        spec: PathBuf,
+        /// Hidden effect from spec/effects: NAME=VALUE (its first parameter) or NAME.PARAM=VALUE; repeatable.
+        #[arg(long)]
+        effect: Vec<String>,
+        /// True parameter value NAME=VALUE (default: nominal); repeatable.
+        #[arg(long = "set")]
+        set: Vec<String>,
+        /// square (UMBMark, both directions), figure8, random, spin.
+        #[arg(long, default_value = "square")]
+        trajectory: String,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Repetitions of the trajectory.
+        #[arg(long, default_value_t = 1)]
+        laps: usize,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Write a copy of a spec with an effect from the catalogue added.
+    ///
+    /// Example: kinegen add-effect --spec spec/diff_drive.toml --effect lateral_slip --value k_slip=0.05 --out my_robot.toml
+    AddEffect {
+        #[arg(long)]
+        spec: PathBuf,
+        #[arg(long)]
+        effect: String,
+        /// Starting value PARAM=VALUE of an effect parameter; repeatable.
+        #[arg(long)]
+        value: Vec<String>,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Derive one spec's IR into a file (used internally by the analysis commands).
     #[command(hide = true)]
     Derive {
@@ -82,6 +120,10 @@ fn main() -> ExitCode {
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Fit { common, method } => analysis_cmd::run_fit(common, &method),
+        Command::Simulate { spec, effect, set, trajectory, seed, laps, out } => {
+            effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out })
+        }
+        Command::AddEffect { spec, effect, value, out } => effects_cmd::run_add_effect(&spec, &effect, &value, &out),
         Command::Derive { spec, ir_out } => match ir_source::derive_to(&spec, &ir_out) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => analysis_cmd::bad(e),

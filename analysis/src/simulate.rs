@@ -1,0 +1,250 @@
+//! Synthetic logs in exactly the real-log format (CONTRACT section 2).
+//!
+//! The robot's controller commands inputs (as its own sensors read them) through the
+//! *base* model's inverse kinematics with the true parameters; the true motion is
+//! integrated with the *truth* model, which may carry hidden effects, at 10
+//! sub-steps per sample between jittered time stamps. Sensors: quantised cumulative
+//! encoder counts, quantised wheel angles, noisy steering encoder, noisy motion
+//! capture with wrapped heading, noisy gyro.
+use crate::log::wrap;
+use crate::model::Runner;
+use kinegen_model::spec::InputKind;
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use std::f64::consts::PI;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Trajectory {
+    /// UMBMark bidirectional square (seed 004): a 1 m square counter-clockwise, then clockwise.
+    Square,
+    FigureEight,
+    /// Smooth random driving.
+    Random,
+    /// Turning in place, both ways (models that can).
+    Spin,
+}
+
+impl std::str::FromStr for Trajectory {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "square" | "umbmark" => Ok(Trajectory::Square),
+            "figure8" | "figure-eight" => Ok(Trajectory::FigureEight),
+            "random" => Ok(Trajectory::Random),
+            "spin" | "turn-in-place" => Ok(Trajectory::Spin),
+            _ => Err(format!("unknown trajectory `{s}` (square, figure8, random, spin)")),
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    pub trajectory: Trajectory,
+    pub seed: u64,
+    pub rate_hz: f64,
+    /// Repeat the trajectory this many times.
+    pub laps: usize,
+    pub pos_noise: f64,
+    pub heading_noise: f64,
+    pub gyro_noise: f64,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions { trajectory: Trajectory::Square, seed: 1, rate_hz: 20.0, laps: 1, pos_noise: 0.001, heading_noise: 0.002, gyro_noise: 0.005 }
+    }
+}
+
+/// A smooth 0 -> 1 ramp.
+fn smooth(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
+/// A segment of constant-shape motion: duration and a profile of body twist.
+struct Seg {
+    dur: f64,
+    twist: [f64; 3],
+}
+
+/// Trapezoid-ish speed profile inside a segment (smooth start and stop).
+fn profile(t: f64, dur: f64) -> f64 {
+    let ramp = (0.2 * dur).min(0.8);
+    smooth(t / ramp) * smooth((dur - t) / ramp)
+}
+
+fn square(can_spin: bool) -> Vec<Seg> {
+    let (v, w) = (0.3, 0.8);
+    let side = 1.0;
+    let mut segs = Vec::new();
+    for dir in [1.0, -1.0] {
+        for _ in 0..4 {
+            segs.push(Seg { dur: side / v * 1.35, twist: [v, 0.0, 0.0] });
+            if can_spin {
+                segs.push(Seg { dur: (PI / 2.0) / w * 1.35, twist: [0.0, 0.0, dir * w] });
+            } else {
+                // quarter arc of radius 0.5 m
+                let r = 0.5;
+                segs.push(Seg { dur: (PI / 2.0 * r) / 0.2 * 1.35, twist: [0.2, 0.0, dir * 0.2 / r] });
+            }
+            segs.push(Seg { dur: 0.5, twist: [0.0; 3] });
+        }
+    }
+    segs
+}
+
+/// The desired body twist at time t, and the total duration.
+fn planner(o: &SimOptions, can_spin: bool, lateral: bool, rng: &mut SmallRng) -> (Box<dyn Fn(f64) -> [f64; 3]>, f64) {
+    match o.trajectory {
+        Trajectory::Square => {
+            let segs = square(can_spin);
+            let total: f64 = segs.iter().map(|s| s.dur).sum();
+            (
+                Box::new(move |t| {
+                    let mut t0 = 0.0;
+                    for s in &segs {
+                        if t < t0 + s.dur {
+                            let k = profile(t - t0, s.dur);
+                            return [s.twist[0] * k, s.twist[1] * k, s.twist[2] * k];
+                        }
+                        t0 += s.dur;
+                    }
+                    [0.0; 3]
+                }),
+                total,
+            )
+        }
+        Trajectory::FigureEight => (
+            Box::new(|t| {
+                let k = smooth(t / 2.0);
+                [0.35 * k, 0.0, 0.7 * (2.0 * PI * t / 20.0).sin() * k]
+            }),
+            40.0,
+        ),
+        Trajectory::Random => {
+            let ph: Vec<f64> = (0..9).map(|_| rng.gen_range(0.0..2.0 * PI)).collect();
+            let fr: Vec<f64> = (0..9).map(|_| rng.gen_range(0.03..0.25)).collect();
+            (
+                Box::new(move |t| {
+                    let k = smooth(t / 2.0);
+                    let s = |i: usize| (2.0 * PI * fr[i] * t + ph[i]).sin();
+                    let v = 0.3 + 0.1 * s(0) + 0.05 * s(1);
+                    let vy = if lateral { 0.15 * s(6) + 0.05 * s(7) } else { 0.0 };
+                    [v * k, vy * k, (0.6 * s(2) + 0.3 * s(3) + 0.2 * s(4)) * k]
+                }),
+                90.0,
+            )
+        }
+        Trajectory::Spin => (
+            Box::new(|t| {
+                let k = smooth(t / 1.0);
+                [0.0, 0.0, 1.0 * (2.0 * PI * t / 12.0).sin().signum() * k * smooth((t % 6.0) / 1.0) * smooth((6.0 - t % 6.0) / 1.0)]
+            }),
+            36.0,
+        ),
+    }
+}
+
+/// Inputs (as the robot's sensors read them) that realise `twist` in `base`.
+pub fn command(base: &Runner, twist: &[f64; 3]) -> Vec<f64> {
+    let inv = base.f("inverse_twist");
+    let args: Vec<&[f64]> = inv.args.iter().map(|a| if a.name == "twist" { &twist[..] } else if a.name == "p" { &base.p[..] } else { &[][..] }).collect();
+    let out = inv.eval(&args);
+    base.ir.inputs.iter().map(|i| inv.row_names.iter().position(|r| *r == i.name).map_or(0.0, |k| out[k])).collect()
+}
+
+/// Can the base model turn in place (is the pure rotation in the image of its inputs)?
+pub fn can_spin(base: &Runner) -> bool {
+    let u = command(base, &[0.0, 0.0, 1.0]);
+    let t = base.f("twist").eval(&[&u, &base.p]);
+    (t[2] - 1.0).abs() < 1e-6 && t[0].abs() < 1e-9
+}
+
+/// Simulate a log: returns (header, rows).
+pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, Vec<Vec<f64>>) {
+    let mut rng = SmallRng::seed_from_u64(o.seed);
+    let lateral = {
+        let u = command(base, &[0.0, 1.0, 0.0]);
+        base.f("twist").eval(&[&u, &base.p])[1] > 0.5
+    };
+    let (plan, dur) = planner(o, can_spin(base), lateral, &mut rng);
+    let total = dur * o.laps as f64;
+    let n = (total * o.rate_hz).ceil() as usize + 1;
+    let period = 1.0 / o.rate_hz;
+    let jitter = 0.1 * period;
+    let times: Vec<f64> = (0..n).map(|k| if k == 0 { 0.0 } else { k as f64 * period + rng.gen_range(-jitter..jitter) }).collect();
+    let step = truth.f("step_exact");
+    let zeros = [0.0; 16];
+    let inputs = &truth.ir.inputs;
+    let mut cum = vec![0.0; inputs.len()];
+    let mut x = [0.0, 0.0, 0.0];
+    let noise = |s: f64, rng: &mut SmallRng| if s > 0.0 { Normal::new(0.0, s).unwrap().sample(rng) } else { 0.0 };
+    let obs_pose = truth.ir.function("obs_pose");
+    let obs_gyro = truth.ir.function("obs_gyro");
+    let mut header: Vec<String> = vec!["t".into()];
+    header.extend(inputs.iter().map(|i| i.column.clone()));
+    header.extend(["gt_x", "gt_y", "gt_theta"].map(String::from));
+    if obs_gyro.is_some() {
+        header.push("gyro_z".into());
+    }
+    let mut rows = Vec::with_capacity(n);
+    let mut last_u = command(base, &plan(0.0));
+    for k in 0..n {
+        if k > 0 {
+            let (t0, t1) = (times[k - 1], times[k]);
+            let m = 10;
+            let h = (t1 - t0) / m as f64;
+            for j in 0..m {
+                let tm = (t0 + (j as f64 + 0.5) * h) % dur;
+                let u = command(base, &plan(tm));
+                let dt = [h];
+                x = {
+                    let out = step.eval(&Runner::step_args(step, &x, &u, &truth.p, &dt, &zeros));
+                    [out[0], out[1], out[2]]
+                };
+                for (c, ui) in cum.iter_mut().zip(&u) {
+                    *c += ui * h;
+                }
+                last_u = u;
+            }
+        }
+        let mut row = vec![times[k]];
+        for (i, inp) in inputs.iter().enumerate() {
+            row.push(match inp.kind {
+                InputKind::Cumulative if inp.unit.contains("count") => cum[i].floor(),
+                // wheel-angle encoders: 4096 lines per revolution
+                InputKind::Cumulative => (cum[i] / (2.0 * PI / 4096.0)).floor() * (2.0 * PI / 4096.0),
+                InputKind::Absolute => last_u[i] + noise(0.002, &mut rng),
+            });
+        }
+        let pose = match obs_pose {
+            Some(h) => h.eval(&Runner::obs_args(h, &x, &last_u, &truth.p, &[])),
+            None => x.to_vec(),
+        };
+        row.push(pose[0] + noise(o.pos_noise, &mut rng));
+        row.push(pose[1] + noise(o.pos_noise, &mut rng));
+        row.push(wrap(pose[2] + noise(o.heading_noise, &mut rng)));
+        if let Some(g) = obs_gyro {
+            let v = g.eval(&Runner::obs_args(g, &x, &last_u, &truth.p, &[]))[0];
+            row.push(v + noise(o.gyro_noise, &mut rng));
+        }
+        rows.push(row);
+    }
+    (header, rows)
+}
+
+/// Format a simulated log as CSV text.
+pub fn to_csv(header: &[String], rows: &[Vec<f64>], cumulative_counts: &[bool]) -> String {
+    let mut s = header.join(",") + "\n";
+    for r in rows {
+        let cells: Vec<String> = r
+            .iter()
+            .enumerate()
+            .map(|(i, v)| if i > 0 && cumulative_counts.get(i - 1).copied().unwrap_or(false) { format!("{}", *v as i64) } else { format!("{v:.9}") })
+            .collect();
+        s += &cells.join(",");
+        s.push('\n');
+    }
+    s
+}

@@ -1,0 +1,114 @@
+//! `kinegen simulate` and `kinegen add-effect`.
+use crate::analysis_cmd::bad;
+use crate::ir_source;
+use kinegen_analysis::effects::{default_dir, load_catalogue, Applicability, Effect};
+use kinegen_analysis::model::{parse_sets, Runner};
+use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
+use kinegen_model::spec::InputKind;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+pub fn find_effect(dir: &Path, name: &str) -> Result<Effect, String> {
+    let cat = load_catalogue(dir).map_err(|e| e.to_string())?;
+    let names: Vec<String> = cat.iter().map(|e| e.name.clone()).collect();
+    cat.into_iter().find(|e| e.name == name).ok_or_else(|| format!("unknown effect `{name}` (the catalogue {} has: {})", dir.display(), names.join(", ")))
+}
+
+/// Write an augmented spec where `ir_source` can derive it; returns its path.
+pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> {
+    let dir = ir_source::cache_dir().join("specs");
+    let path = dir.join(format!("{name_hint}-{}.toml", kinegen_model::spec::fingerprint(spec_text)));
+    if !path.exists() {
+        kinegen_codegen::generate::write_atomic(&path, spec_text).map_err(|e| e.to_string())?;
+    }
+    Ok(path)
+}
+
+/// Apply `--effect NAME=VALUE` / `NAME.PARAM=VALUE` to a spec text.
+pub fn with_effects(spec_text: &str, effects: &[String], dir: &Path) -> Result<(String, Vec<(String, f64)>), String> {
+    let mut text = spec_text.to_string();
+    let mut values = Vec::new();
+    for e in effects {
+        let (key, v) = e.split_once('=').ok_or_else(|| format!("--effect {e}: expected NAME=VALUE or NAME.PARAM=VALUE"))?;
+        let v: f64 = v.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| format!("--effect {e}: `{v}` is not a finite number"))?;
+        let (name, param) = key.split_once('.').map_or((key, None), |(a, b)| (a, Some(b)));
+        let eff = find_effect(dir, name)?;
+        let param = match param {
+            Some(p) => p.to_string(),
+            None => eff.parameter.first().and_then(|p| p.get("name")).and_then(|n| n.as_str()).unwrap_or("").to_string(),
+        };
+        if !eff.parameter.iter().any(|p| p.get("name").and_then(|n| n.as_str()) == Some(param.as_str())) {
+            return Err(format!("--effect {e}: the effect `{name}` has no parameter `{param}`"));
+        }
+        match eff.applicability(&text) {
+            Applicability::Applies | Applicability::Redundant(_) => text = eff.apply(&text, &BTreeMap::new())?,
+            Applicability::AlreadyIn => {}
+            Applicability::NotForThisModel => return Err(format!("the effect `{name}` does not apply to this model")),
+        }
+        values.push((param, v));
+    }
+    Ok((text, values))
+}
+
+pub struct SimArgs {
+    pub spec: PathBuf,
+    pub effect: Vec<String>,
+    pub set: Vec<String>,
+    pub trajectory: String,
+    pub seed: u64,
+    pub laps: usize,
+    pub out: PathBuf,
+}
+
+pub fn run_simulate(a: SimArgs) -> ExitCode {
+    let go = || -> Result<String, String> {
+        let text = std::fs::read_to_string(&a.spec).map_err(|e| format!("{}: {e}", a.spec.display()))?;
+        let traj: Trajectory = a.trajectory.parse()?;
+        let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
+        let base = Runner::new(ir_source::load(&a.spec)?, &sets).map_err(|e| e.to_string())?;
+        let (truth_text, values) = with_effects(&text, &a.effect, &default_dir())?;
+        let truth_ir = if a.effect.is_empty() { base.ir.clone() } else { ir_source::load(&materialise(&truth_text, &base.ir.name)?)? };
+        let mut all = sets.clone();
+        all.extend(values);
+        let truth = Runner::new(truth_ir, &all).map_err(|e| e.to_string())?;
+        let o = SimOptions { trajectory: traj, seed: a.seed, laps: a.laps.max(1), ..SimOptions::default() };
+        let (header, rows) = simulate(&base, &truth, &o);
+        let counts: Vec<bool> = truth.ir.inputs.iter().map(|i| i.kind == InputKind::Cumulative && i.unit.contains("count")).collect();
+        kinegen_codegen::generate::write_atomic(&a.out, &to_csv(&header, &rows, &counts)).map_err(|e| e.to_string())?;
+        Ok(format!("wrote {} rows ({:.1} s) to {}", rows.len(), rows.last().map_or(0.0, |r| r[0]), a.out.display()))
+    };
+    match go() {
+        Ok(msg) => {
+            eprintln!("{msg}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => bad(e),
+    }
+}
+
+pub fn run_add_effect(spec: &Path, effect: &str, values: &[String], out: &Path) -> ExitCode {
+    let go = || -> Result<String, String> {
+        let text = std::fs::read_to_string(spec).map_err(|e| format!("{}: {e}", spec.display()))?;
+        let eff = find_effect(&default_dir(), effect)?;
+        match eff.applicability(&text) {
+            Applicability::Applies => {}
+            Applicability::Redundant(why) => return Err(format!("`{effect}` is redundant for this spec: {why}")),
+            Applicability::AlreadyIn => return Err(format!("the spec already has `{effect}`")),
+            Applicability::NotForThisModel => return Err(format!("`{effect}` does not apply to this model")),
+        }
+        let vals: BTreeMap<String, f64> = parse_sets(values).map_err(|e| e.to_string())?.into_iter().collect();
+        let new = eff.apply(&text, &vals)?;
+        // validate before writing
+        kinegen_model::spec::Model::parse(out, &new).map_err(|e| format!("the augmented spec is invalid: {e}"))?;
+        kinegen_codegen::generate::write_atomic(out, &new).map_err(|e| e.to_string())?;
+        Ok(format!("added `{effect}` to {} -> {}:\n{}", spec.display(), out.display(), eff.spec_change(&text, &vals)?))
+    };
+    match go() {
+        Ok(msg) => {
+            println!("{msg}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => bad(e),
+    }
+}
