@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 mod analysis_cmd;
+mod diagnose_cmd;
 mod effects_cmd;
 mod generate_cmd;
 mod ir_source;
@@ -66,6 +67,12 @@ enum Command {
         #[arg(long, default_value = "lm", value_parser = ["lm", "gd", "ekf"])]
         method: String,
     },
+    /// Calibrate, then test each applicable effect of the catalogue (spec/effects),
+    /// rank them, say which effect is missing (or that none is, or that unexplained
+    /// structure remains) and print the spec change that adds the winner.
+    ///
+    /// Example: kinegen diagnose --spec spec/diff_drive.toml --data data/hidden_effect.csv --report report
+    Diagnose(analysis_cmd::Common),
     /// Synthetic logs in the real-log format, optionally with hidden effects.
     ///
     /// Example: kinegen simulate --spec spec/diff_drive.toml --effect lateral_slip=0.05 --set b=0.21 --trajectory square --seed 3 --out sim.csv
@@ -119,6 +126,7 @@ fn main() -> ExitCode {
         Command::Generate { spec_dir, out, check } => generate_cmd::run(&spec_dir, &out, check),
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
+        Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, method } => analysis_cmd::run_fit(common, &method),
         Command::Simulate { spec, effect, set, trajectory, seed, laps, out } => {
             effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out })

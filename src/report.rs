@@ -206,3 +206,63 @@ pub fn fit_report(dir: &Path, r: &Runner, runs: &[Run], before: &[Track], after:
     );
     write(dir, &page(&format!("kinegen fit: {}", r.ir.name), &intro, &figs, &param_table(doc), doc))
 }
+
+/// Diagnosis page: before/after trajectories of the calibrated base model and of
+/// the winning effect, the residual signature, and the candidate table.
+pub fn diagnose_report(
+    dir: &Path,
+    base: &Runner,
+    runs: &[Run],
+    d: &kinegen_analysis::diagnose::Diagnosis,
+    augmented: &[(String, String, Runner)],
+    doc: &Value,
+) -> Result<(), String> {
+    use kinegen_analysis::deadreckon::run as dr;
+    let mut figs = Vec::new();
+    let winner = d.verdict.as_ref().and_then(|v| augmented.iter().find(|a| &a.0 == v).map(|a| (a, d.candidates.iter().find(|c| &c.effect == v).unwrap())));
+    for run in runs {
+        let start = run.start_pose();
+        let b = dr(base, &d.base_fit.p, run, start, false);
+        let mut series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("calibrated spec", RED, traj(run, &b))];
+        let mut errs: Vec<Series> = vec![("calibrated spec", RED, pos_err(run, &b))];
+        if let Some(((name, _, aug), cand)) = winner {
+            let a = dr(aug, &cand.fitted, run, start, false);
+            series.push((name.as_str(), GREEN, traj(run, &a)));
+            errs.push((name.as_str(), GREEN, pos_err(run, &a)));
+            // the effect's residual signature: one-step lateral and heading residuals vs v*omega
+            let [_, by_w, _] = residual_scatter(run, &b);
+            let [_, ay_w, _] = residual_scatter(run, &a);
+            figs.push(chart("turn-rate residual vs yaw rate: before and after adding the effect", "yaw rate (rad/s)", "residual (rad/s)", &[("calibrated spec", RED, by_w), (name.as_str(), GREEN, ay_w)], true, false, &[])?);
+        }
+        figs.insert(0, chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &series, false, true, &[])?);
+        figs.insert(1, chart(&format!("{}: position error", run.name), "t (s)", "error (m)", &errs, false, false, &[])?);
+    }
+    let mut t = String::from("<h2>Candidates</h2><table><tr><th>effect</th><th>error</th><th>improvement</th><th>BIC gain</th><th>held-out error</th><th>significant</th></tr>");
+    for c in &d.candidates {
+        t += &format!(
+            "<tr><td>{}</td><td>{:.4}</td><td>{:.0}%</td><td>{:.0}</td><td>{:.4}</td><td>{}</td></tr>",
+            esc(&c.effect),
+            c.rmse,
+            100.0 * c.improvement,
+            c.bic_gain,
+            c.holdout_rmse,
+            if c.significant { "yes" } else { "no" }
+        );
+    }
+    t += "</table><ul>";
+    for c in &d.candidates {
+        t += &format!("<li><b>{}</b>: {}</li>", esc(&c.effect), esc(&c.evidence));
+    }
+    t += "</ul>";
+    for f in &d.structure.findings {
+        t += &format!("<p class=\"warn\">structure left: {}</p>", esc(f));
+    }
+    let intro = format!(
+        "<p>Model <b>{}</b>: error {:.4} with nominal parameters, {:.4} after calibrating the spec as it is. Verdict: <b>{}</b>.</p>",
+        esc(&base.ir.name),
+        d.baseline_rmse,
+        d.calibrated_rmse,
+        esc(d.verdict.as_deref().unwrap_or("no catalogue effect is significant"))
+    );
+    write(dir, &page(&format!("kinegen diagnose: {}", base.ir.name), &intro, &figs, &t, doc))
+}

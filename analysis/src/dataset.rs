@@ -22,6 +22,22 @@ impl Run {
         self.dt.len()
     }
 
+    /// Where dead reckoning starts: the mean ground-truth pose over the rows before
+    /// the inputs first change (the robot at rest), which averages out the motion
+    /// capture noise that would otherwise rotate the whole track; row 0 if the robot
+    /// moves at once. Origin when there is no ground truth.
+    pub fn start_pose(&self) -> [f64; 3] {
+        let Some(g) = &self.gt else { return [0.0; 3] };
+        let rest = self.u.iter().take_while(|u| u.iter().all(|v| *v == 0.0)).count().max(1).min(g.len());
+        let mut m = [0.0; 3];
+        for p in &g[..rest] {
+            for i in 0..3 {
+                m[i] += p[i] / rest as f64;
+            }
+        }
+        m
+    }
+
     /// Columns a model needs from a log.
     pub fn wanted(r: &Runner) -> Vec<String> {
         let mut w: Vec<String> = vec!["t".into(), "gt_x".into(), "gt_y".into(), "gt_theta".into(), "gyro_z".into()];

@@ -6,6 +6,7 @@
 //! (so it may use threads freely).
 pub mod dataset;
 pub mod deadreckon;
+pub mod diagnose;
 pub mod effects;
 pub mod fit;
 pub mod log;

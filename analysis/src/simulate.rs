@@ -168,7 +168,11 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
         let u = command(base, &[0.0, 1.0, 0.0]);
         base.f("twist").eval(&[&u, &base.p])[1] > 0.5
     };
-    let (plan, dur) = planner(o, can_spin(base), lateral, &mut rng);
+    let (plan0, dur0) = planner(o, can_spin(base), lateral, &mut rng);
+    // logs start with the robot at rest for a second, as real ones do
+    const REST: f64 = 1.0;
+    let plan = move |t: f64| if t < REST { [0.0; 3] } else { plan0(t - REST) };
+    let dur = dur0 + REST;
     let total = dur * o.laps as f64;
     let n = (total * o.rate_hz).ceil() as usize + 1;
     let period = 1.0 / o.rate_hz;
@@ -190,8 +194,12 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
     }
     let mut rows = Vec::with_capacity(n);
     let mut last_u = command(base, &plan(0.0));
+    // The gyro reports the mean yaw rate over the sample interval (an integrating
+    // or low-pass-filtered MEMS gyro), which is what a step of the model predicts.
+    let mut gyro_mean = 0.0;
     for k in 0..n {
         if k > 0 {
+            gyro_mean = 0.0;
             let (t0, t1) = (times[k - 1], times[k]);
             let m = 10;
             let h = (t1 - t0) / m as f64;
@@ -205,6 +213,9 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
                 };
                 for (c, ui) in cum.iter_mut().zip(&u) {
                     *c += ui * h;
+                }
+                if let Some(g) = obs_gyro {
+                    gyro_mean += g.eval(&Runner::obs_args(g, &x, &u, &truth.p, &[]))[0] / m as f64;
                 }
                 last_u = u;
             }
@@ -226,7 +237,7 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
         row.push(pose[1] + noise(o.pos_noise, &mut rng));
         row.push(wrap(pose[2] + noise(o.heading_noise, &mut rng)));
         if let Some(g) = obs_gyro {
-            let v = g.eval(&Runner::obs_args(g, &x, &last_u, &truth.p, &[]))[0];
+            let v = if k == 0 { g.eval(&Runner::obs_args(g, &x, &last_u, &truth.p, &[]))[0] } else { gyro_mean };
             row.push(v + noise(o.gyro_noise, &mut rng));
         }
         rows.push(row);

@@ -480,6 +480,7 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
         v
     };
 
+    let mut imposes_vy = !structurally_zero[1] && model.inverse.is_some();
     let (inverse_outs, out_names, doc): (Vec<Atom>, Vec<String>, String) = if let Some((exprs, idoc)) = &model.inverse {
         // Declared inverse: check it numerically against the forward model.
         let mut vars = sym.by_name.clone();
@@ -510,33 +511,56 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
         }
         (outs, model.inputs.iter().map(|i| i.name.clone()).collect(), idoc.clone())
     } else {
-        // Derived inverse: the twist must be linear in the input rates, M(cfg, p) * rates.
-        let rows: Vec<usize> = (0..3).filter(|&r| !structurally_zero[r]).collect();
-        let nonlinear = twist.iter().any(|t| {
+        // Derived inverse: choose twist rows that are linear in the input rates,
+        // M(cfg, p) * rates, as many as there are rates, with M invertible (vx and
+        // omega first, then vy). The other rows follow from the inputs, as y does in
+        // seed 001 eq. 12 (and the lateral slip of an effect-augmented model).
+        let linear = |t: &Atom| {
             let at_zero = rate_syms.iter().fold(t.clone(), |acc, s| substitute(&acc, *s, &Atom::num(0)));
-            !is_zero(&at_zero) || rate_syms.iter().any(|a| rate_syms.iter().any(|b| !is_zero(&t.derivative(*a).derivative(*b))))
-        });
-        if nonlinear || rows.len() != rate_syms.len() || rows.is_empty() || rows.len() > 3 {
+            is_zero(&at_zero) && rate_syms.iter().all(|a| rate_syms.iter().all(|b| is_zero(&t.derivative(*a).derivative(*b))))
+        };
+        let candidates: Vec<usize> = [0usize, 2, 1].into_iter().filter(|&r| !structurally_zero[r] && linear(&twist[r])).collect();
+        let k = rate_syms.len();
+        let mut chosen = None;
+        let mut any_square = false;
+        if k >= 1 && k <= 3 && candidates.len() >= k {
+            let combos: Vec<Vec<usize>> = match (k, candidates.len()) {
+                (1, n) => (0..n).map(|i| vec![candidates[i]]).collect(),
+                (2, 2) => vec![vec![candidates[0], candidates[1]]],
+                (2, 3) => vec![vec![candidates[0], candidates[1]], vec![candidates[0], candidates[2]], vec![candidates[1], candidates[2]]],
+                _ => vec![candidates.clone()],
+            };
+            for mut rows in combos {
+                rows.sort();
+                any_square = true;
+                let m: Vec<Vec<Atom>> = rows.iter().map(|&r| rate_syms.iter().map(|s| twist[r].derivative(*s)).collect()).collect();
+                let (inv, det) = symbolic_inverse(&m);
+                let singular_everywhere = (0..6).all(|k| eval_at(&det, &point(k), fx).map(|d| d.abs() < 1e-12).unwrap_or(true));
+                if !singular_everywhere {
+                    chosen = Some((rows, inv));
+                    break;
+                }
+            }
+        }
+        let Some((rows, inv)) = chosen else {
+            if any_square {
+                return Err(err_at(model, &model.twist[0], "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0)"));
+            }
             return Err(err_at(
                 model,
                 &model.twist[0],
                 format!(
-                    "cannot derive inverse kinematics: the twist is {} in the {} input rate(s) with {} non-zero twist row(s); declare an [inverse] section",
-                    if nonlinear { "not linear" } else { "linear" },
-                    rate_syms.len(),
-                    rows.len()
+                    "cannot derive inverse kinematics: {} twist row(s) are linear in the {} input rate(s), {} needed; declare an [inverse] section",
+                    candidates.len(),
+                    k,
+                    k
                 ),
             ));
-        }
-        let m: Vec<Vec<Atom>> = rows.iter().map(|&r| rate_syms.iter().map(|s| twist[r].derivative(*s)).collect()).collect();
-        let (inv, det) = symbolic_inverse(&m);
-        let singular_everywhere = (0..6).all(|k| eval_at(&det, &point(k), fx).map(|d| d.abs() < 1e-12).unwrap_or(true));
-        if singular_everywhere {
-            return Err(err_at(model, &model.twist[0], "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0)"));
-        }
+        };
         let outs: Vec<Atom> = (0..rows.len())
             .map(|i| rows.iter().enumerate().fold(Atom::num(0), |acc, (j, &r)| acc + &inv[i][j] * &tw_atoms[r]))
             .collect();
+        imposes_vy = rows.contains(&1);
         let names = rates.iter().map(|i| i.name.clone()).collect();
         (outs, names, "Input rates from a body twist: the inverse of the (square, invertible) map from input rates to the twist rows that are not identically zero, derived symbolically (seed 003: W = (V_T_W)^-1 V).".into())
     };
@@ -565,7 +589,8 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
     // (start body frame) in dt, i.e. the SE(2) logarithm. A model whose twist has no
     // lateral component follows seed 001 eq. 12/15: x and theta are imposed, y follows.
     let (dx, dy, d, dt) = (sym.a("dx"), sym.a("dy"), sym.a("dtheta"), sym.a("dt"));
-    let lateral = !structurally_zero[1];
+    // vy imposed only when the inverse uses the vy row (holonomic models)
+    let lateral = imposes_vy;
     let (vx_i, vy_i) = if lateral {
         let half = &d / Atom::num(2);
         let k = &half * d.sin() / (Atom::num(1) - d.cos());
