@@ -66,7 +66,9 @@ impl Run {
                 cols.iter()
                     .map(|(c, kind)| match kind {
                         InputKind::Cumulative => (c[k + 1] - c[k]) / dt[k],
-                        InputKind::Absolute => c[k],
+                        // a sampled continuous angle: its mean over the step is best
+                        // estimated by the mean of the two samples that bound it
+                        InputKind::Absolute => 0.5 * (c[k] + c[k + 1]),
                     })
                     .collect()
             })

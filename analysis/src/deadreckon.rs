@@ -14,14 +14,34 @@ pub struct Track {
     pub twist: Vec<[f64; 3]>,
 }
 
-/// Integrate the model over a run from `start` (the first ground-truth pose).
+/// The body pose whose measurement is `measured`: the identity unless the model
+/// has a `pose` observation (e.g. an off-centre marker), which is inverted by a
+/// fixed-point iteration (it is a small displacement of the identity). Also returns
+/// d start / d p = -dh/dp (3 x P, row-major) for the sensitivities.
+pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64; 3], Vec<f64>) {
+    let Some(h) = r.ir.function("obs_pose") else { return (measured, vec![0.0; 3 * p.len()]) };
+    let mut x = measured;
+    for _ in 0..5 {
+        let m = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
+        for i in 0..3 {
+            x[i] -= m[i] - measured[i];
+        }
+    }
+    let hp = r.f("obs_pose_jac_p");
+    let d = hp.eval(&Runner::obs_args(hp, &x, u, p, &[])).iter().map(|v| -v).collect();
+    (x, d)
+}
+
+/// Integrate the model over a run from the start pose of the run.
 pub fn run(r: &Runner, p: &[f64], data: &Run, start: [f64; 3], with_sens: bool) -> Track {
+    let u0 = data.u.first().cloned().unwrap_or_default();
+    let (start, dstart) = body_start(r, p, start, &u0);
     let (fx, jx, jp, tw) = (r.f("step_exact"), r.f("step_exact_jac_x"), r.f("step_exact_jac_p"), r.f("twist"));
     let np = p.len();
     let zeros = vec![0.0; 16];
     let mut scratch = Vec::new();
     let mut pose = vec![start];
-    let mut sens = with_sens.then(|| vec![DMatrix::zeros(3, np)]);
+    let mut sens = with_sens.then(|| vec![DMatrix::from_row_slice(3, np, &dstart)]);
     let mut omega = Vec::with_capacity(data.steps());
     let mut twist = Vec::with_capacity(data.steps());
     let mut out3 = [0.0; 3];

@@ -140,25 +140,38 @@ fn evidence(aug: &Runner, effect_params: &[usize], runs: &[Run], o: &FitOptions)
 
 /// One-step prediction residuals (from each measured pose) in the body frame, with
 /// the motion features of the step.
-fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 3]>, Vec<[f64; 6]>, Vec<&'static str>) {
+fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 4]>, Vec<[f64; 6]>, Vec<&'static str>) {
     let step = r.f("step_exact");
     let tw = r.f("twist");
     let zeros = [0.0; 16];
     let mut res = Vec::new();
     let mut feat = Vec::new();
     let mut regimes = Vec::new();
+    let gyro = r.ir.function("obs_gyro");
     for run in runs {
         let Some(g) = &run.gt else { continue };
         for k in 0..run.steps() {
             let dt = [run.dt[k]];
-            let pred = step.eval(&Runner::step_args(step, &g[k], &run.u[k], p, &dt, &zeros));
+            // from the body pose behind the measured one, to the predicted measurement
+            let (x0, _) = crate::deadreckon::body_start(r, p, g[k], &run.u[k]);
+            let x1 = step.eval(&Runner::step_args(step, &x0, &run.u[k], p, &dt, &zeros));
+            let pred = match r.ir.function("obs_pose") {
+                Some(h) => h.eval(&Runner::obs_args(h, &x1, &run.u[k], p, &[])),
+                None => x1,
+            };
             let (dx, dy) = (g[k + 1][0] - pred[0], g[k + 1][1] - pred[1]);
             let (c, s) = (g[k][2].cos(), g[k][2].sin());
-            res.push([c * dx + s * dy, -s * dx + c * dy, wrap(g[k + 1][2] - pred[2])]);
+            let gres = match (gyro, &run.gyro) {
+                (Some(h), Some(m)) => m[k + 1] - h.eval(&Runner::obs_args(h, &x0, &run.u[k], p, &[]))[0],
+                _ => 0.0,
+            };
+            res.push([c * dx + s * dy, -s * dx + c * dy, wrap(g[k + 1][2] - pred[2]), gres]);
             let t = tw.eval(&[&run.u[k], p]);
             let (v, w) = ((t[0] * t[0] + t[1] * t[1]).sqrt(), t[2]);
             let d = run.dt[k];
             feat.push([v * d, w * d, v * w * d, w.abs() * d, d, v * v * d]);
+            // (the gyro channel is a rate: its regression uses the same features / dt,
+            // see `whiteness`)
             regimes.push(crate::metrics::regime(&[t[0], t[1], t[2]], 0.2));
         }
     }
@@ -172,7 +185,7 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
     let (res, feat, regimes) = one_step(r, p, runs);
     let n = res.len();
     let names = ["v*dt", "omega*dt", "v*omega*dt", "|omega|*dt", "dt", "v^2*dt"];
-    let chans = ["along-track", "lateral", "heading"];
+    let chans = ["along-track", "lateral", "heading", "gyro"];
     let mut findings = Vec::new();
     let mut worst_r2 = 0.0f64;
     let mut structured = false;
@@ -184,8 +197,13 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
     let norms: Vec<f64> = (0..names.len()).map(|j| x.column(j).norm().max(1e-300)).collect();
     let xs = DMatrix::from_fn(n, names.len(), |i, j| x[(i, j)] / norms[j]);
     let svd = xs.clone().svd(true, true);
+    let dts: Vec<f64> = feat.iter().map(|f| f[4]).collect();
     for (c, cname) in chans.iter().enumerate() {
-        let y = DVector::from_fn(n, |i, _| res[i][c]);
+        // the gyro residual is a rate: compare it with features per unit time
+        let y = DVector::from_fn(n, |i, _| if c == 3 { res[i][c] * dts[i] } else { res[i][c] });
+        if y.iter().all(|v| *v == 0.0) {
+            continue;
+        }
         // residuals are differences of noisy poses: remove the mean level first
         let mean = y.mean();
         let yc = y.map(|v| v - mean);
@@ -270,11 +288,21 @@ pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runne
             let start = seeded(aug, base, &base_fit.p);
             let effect_params: Vec<usize> = start.free.iter().copied().filter(|&i| base.param_index(&start.names[i]).is_none()).collect();
             let ev = evidence(&start, &effect_params, runs, &o);
-            let f = fit(&start, runs, &o).ok()?;
+            // start from the base estimates and from nominal: a structurally wrong
+            // base model can calibrate itself into a corner the effect cannot leave
+            let f = [fit(&start, runs, &o).ok(), fit(aug, runs, &o).ok()]
+                .into_iter()
+                .flatten()
+                .min_by(|a, b| a.cost_after.total_cmp(&b.cost_after))?;
             let rmse = weighted_rms(&start, &f.p, runs, &o);
             let gain = bic0 - bic(f.cost_after, f.n_residuals, f.free.len());
             let tr_start = seeded(aug, base, &base_train.p);
-            let holdout_rmse = fit(&tr_start, &train, &o).map(|ft| weighted_rms(&tr_start, &ft.p, &test, &o)).unwrap_or(f64::INFINITY);
+            let holdout_rmse = [fit(&tr_start, &train, &o).ok(), fit(aug, &train, &o).ok()]
+                .into_iter()
+                .flatten()
+                .min_by(|a, b| a.cost_after.total_cmp(&b.cost_after))
+                .map(|ft| weighted_rms(&tr_start, &ft.p, &test, &o))
+                .unwrap_or(f64::INFINITY);
             let improvement = 1.0 - rmse / calibrated_rmse;
             let significant = gain > 10.0 && improvement > 0.2 && holdout_rmse < 0.8 * base_holdout_rmse;
             let parameters = effect_params
@@ -297,8 +325,8 @@ pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runne
         })
         .collect();
     candidates.sort_by(|a, b| b.significant.cmp(&a.significant).then(b.bic_gain.total_cmp(&a.bic_gain)));
-    let verdict = candidates.first().filter(|c| c.significant).map(|c| c.effect.clone());
-    let structure = match &verdict {
+    let mut verdict = candidates.first().filter(|c| c.significant).map(|c| c.effect.clone());
+    let mut structure = match &verdict {
         Some(v) => {
             let (_, _, aug) = augmented.iter().find(|a| &a.0 == v).unwrap();
             let best = candidates.iter().find(|c| &c.effect == v).unwrap();
@@ -306,6 +334,12 @@ pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runne
         }
         None => whiteness(base, &base_fit.p, runs),
     };
+    // A winner that leaves motion-explained structure behind only explains part of
+    // what is missing: do not name it with confidence.
+    if let (Some(v), true) = (&verdict, structure.structured) {
+        structure.findings.push(format!("`{v}` improves the fit significantly but leaves this structure: the missing effect is probably outside the catalogue (or more than one effect is missing)"));
+        verdict = None;
+    }
     Ok(Diagnosis { baseline_rmse, calibrated_rmse, base_fit, base_holdout_rmse, candidates, verdict, structure, skipped })
 }
 

@@ -150,7 +150,29 @@ fn cost(res: &[f64]) -> f64 {
 }
 
 /// Calibrate the free parameters of `r` (starting from `r.p`).
+///
+/// When the logs have both ground truth and a gyro, a gyro-only stage runs first:
+/// the yaw-rate residual does not accumulate along the track, so it is nearly
+/// convex in the parameters and gives the full dead-reckoning fit a start inside
+/// its basin (a long track with a large structural error otherwise spirals away).
 pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+    let has_gyro = runs.iter().any(|x| x.gyro.is_some()) && r.ir.function("obs_gyro").is_some();
+    let has_pose = runs.iter().any(|x| x.gt.is_some());
+    if o.use_gyro && o.use_pose && has_gyro && has_pose {
+        let gyro_only = FitOptions { use_pose: false, ..o.clone() };
+        if let Ok(first) = fit_from(r, runs, &gyro_only) {
+            let mut start = r.clone();
+            start.p = first.p;
+            let full = fit_from(&start, runs, o)?;
+            // keep the better of the two starts (judged on the full cost)
+            let direct = fit_from(r, runs, o)?;
+            return Ok(if direct.cost_after < full.cost_after { direct } else { FitResult { cost_before: direct.cost_before, ..full } });
+        }
+    }
+    fit_from(r, runs, o)
+}
+
+fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     let free = r.free.clone();
     let bounds: Vec<(f64, f64)> = {
         let rp = r.ir.runtime_params();

@@ -168,7 +168,18 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
         let u = command(base, &[0.0, 1.0, 0.0]);
         base.f("twist").eval(&[&u, &base.p])[1] > 0.5
     };
-    let (plan0, dur0) = planner(o, can_spin(base), lateral, &mut rng);
+    let spin = can_spin(base);
+    let (plan1, dur0) = planner(o, spin, lateral, &mut rng);
+    // a vehicle that cannot turn in place is limited in curvature (|omega| <= 0.8 v,
+    // i.e. radius >= 1.25 m; a 1 m tricycle then steers at most ~39 degrees)
+    let plan0 = move |t: f64| {
+        let mut w = plan1(t);
+        if !spin {
+            let lim = 0.8 * w[0].abs();
+            w[2] = w[2].clamp(-lim, lim);
+        }
+        w
+    };
     // logs start with the robot at rest for a second, as real ones do
     const REST: f64 = 1.0;
     let plan = move |t: f64| if t < REST { [0.0; 3] } else { plan0(t - REST) };
@@ -226,7 +237,8 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
                 InputKind::Cumulative if inp.unit.contains("count") => cum[i].floor(),
                 // wheel-angle encoders: 4096 lines per revolution
                 InputKind::Cumulative => (cum[i] / (2.0 * PI / 4096.0)).floor() * (2.0 * PI / 4096.0),
-                InputKind::Absolute => last_u[i] + noise(0.002, &mut rng),
+                // absolute sensors (steering encoders) sample the value at t_k
+                InputKind::Absolute => command(base, &plan(times[k] % dur))[i] + noise(0.002, &mut rng),
             });
         }
         let pose = match obs_pose {

@@ -480,7 +480,7 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
         v
     };
 
-    let mut imposes_vy = !structurally_zero[1] && model.inverse.is_some();
+    let imposes_vy;
     let (inverse_outs, out_names, doc): (Vec<Atom>, Vec<String>, String) = if let Some((exprs, idoc)) = &model.inverse {
         // Declared inverse: check it numerically against the forward model.
         let mut vars = sym.by_name.clone();
@@ -488,17 +488,21 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
             vars.insert(n.to_string(), a.clone());
         }
         let outs: Vec<Atom> = exprs.iter().map(|e| to_atom(e, &vars, &fx)).collect::<Result<_, _>>().map_err(se)?;
+        // the rows the declared inverse imposes are the twist components it reads;
+        // the others follow from the inputs (like y in seed 001 eq. 12)
+        let imposed: Vec<bool> = ["vx", "vy", "omega"].iter().map(|n| exprs.iter().any(|e| e.variables().iter().any(|(v, _)| v == n))).collect();
+        imposes_vy = imposed[1];
         for k in 0..8 {
             let mut pt = point(k);
             pt.retain(|(s, _)| !model.inputs.iter().any(|i| sym.s(&i.name) == *s));
-            let tw: Vec<f64> = (0..3).map(|r| if structurally_zero[r] { 0.0 } else { 0.2 + 0.5 * sample(k, 200 + r).abs() }).collect();
+            let tw: Vec<f64> = (0..3).map(|r| if structurally_zero[r] || !imposed[r] { 0.0 } else { 0.2 + 0.5 * sample(k, 200 + r).abs() }).collect();
             let mut at = pt.clone();
             at.extend(tw_syms.iter().copied().zip(tw.iter().copied()));
             let mut fwd_at = pt.clone();
             for (i, o) in model.inputs.iter().zip(&outs) {
                 fwd_at.push((sym.s(&i.name), eval_at(o, &at, fx).map_err(se)?));
             }
-            for r in 0..3 {
+            for r in (0..3).filter(|&r| imposed[r]) {
                 let back = eval_at(&twist[r], &fwd_at, fx).map_err(se)?;
                 if (back - tw[r]).abs() > 1e-9 * (1.0 + tw[r].abs()) {
                     return Err(err_at(

@@ -104,7 +104,10 @@ pub fn generate(spec_dir: &Path, out_dir: &Path, check: bool) -> Result<Report, 
 pub fn write_atomic(path: &Path, content: &str) -> Result<(), GenerateError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let tmp = dir.join(format!(".{}.kinegen-tmp", path.file_name().unwrap().to_string_lossy()));
+    // unique per writer, so concurrent writers of the same file never share a temp file
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!(".{}.{}-{n}.kinegen-tmp", path.file_name().unwrap().to_string_lossy(), std::process::id()));
     std::fs::write(&tmp, content).map_err(io(&tmp))?;
     std::fs::rename(&tmp, path).map_err(io(path))
 }
