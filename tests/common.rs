@@ -32,3 +32,29 @@ pub fn copy_dir(from: &Path, to: &Path) {
         }
     }
 }
+
+/// Run kinegen with `--json -` appended and parse stdout.
+pub fn kinegen_json(args: &[&str]) -> serde_json::Value {
+    let mut a = args.to_vec();
+    a.extend(["--json", "-"]);
+    let o = kinegen(&a);
+    assert!(o.status.success(), "kinegen {:?} failed: {}", args, stderr(&o));
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("stdout of {args:?} is not one JSON document ({e}): {}", stdout(&o)))
+}
+
+/// Simulate a log into `dir`; returns its path.
+pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut a = vec!["simulate"];
+    a.extend_from_slice(args);
+    a.extend(["--out", out.to_str().unwrap()]);
+    let o = kinegen(&a);
+    assert!(o.status.success(), "simulate {args:?}: {}", stderr(&o));
+    out
+}
+
+pub fn real_runs() -> Vec<PathBuf> {
+    let dir = root().join("../shared/real/optiodom-diff-square");
+    assert!(dir.exists(), "the real logs are expected at {} (shared/ beside the checkout)", dir.display());
+    (1..=6).map(|i| dir.join(format!("run-0{i}.csv"))).collect()
+}

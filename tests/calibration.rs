@@ -1,0 +1,116 @@
+//! simulate, compare and fit: recovery of parameters, every bundled model, real
+//! data, and bad input.
+mod common;
+use common::*;
+
+#[test]
+fn fit_recovers_wheel_radii_and_wheelbase_within_0_2_percent_and_error_falls_tenfold() {
+    let tmp = tempfile::tempdir().unwrap();
+    let truth = [("r_r", 0.0425), ("r_l", 0.0418), ("b", 0.2050)];
+    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
+    let mut args = vec!["--spec", "spec/diff_drive.toml", "--trajectory", "square", "--seed", "3"];
+    for s in &sets {
+        args.extend(["--set", s.as_str()]);
+    }
+    let log = simulate(tmp.path(), "params.csv", &args);
+    let doc = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
+    for (name, value) in truth {
+        let est = doc["parameters"][name]["estimate"].as_f64().unwrap();
+        assert!(((est - value) / value).abs() < 0.002, "{name}: {est} vs true {value}");
+        assert!(doc["parameters"][name]["std"].as_f64().unwrap() > 0.0);
+    }
+    let (before, after) = (doc["before"]["rmse"].as_f64().unwrap(), doc["after"]["rmse"].as_f64().unwrap());
+    assert!(after * 10.0 < before, "error fell only from {before} to {after}");
+    assert_eq!(doc["model"], "diff_drive");
+}
+
+#[test]
+fn every_bundled_model_can_be_simulated_compared_and_fitted() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (spec, set) in [("diff_drive", "b=0.21"), ("tricycle", "L=1.03"), ("omni3", "L=1.04"), ("unicycle_ekf", "v_scale=1.05")] {
+        let path = format!("spec/{spec}.toml");
+        let log = simulate(tmp.path(), &format!("{spec}.csv"), &["--spec", &path, "--set", set, "--trajectory", "random", "--seed", "2"]);
+        let cmp = kinegen_json(&["compare", "--spec", &path, "--data", log.to_str().unwrap()]);
+        assert!(cmp["rmse"].as_f64().unwrap() > 0.0);
+        assert!(!cmp["regimes"].as_array().unwrap().is_empty(), "{spec}: no regime breakdown");
+        let fit = kinegen_json(&["fit", "--spec", &path, "--data", log.to_str().unwrap()]);
+        let (b, a) = (fit["before"]["rmse"].as_f64().unwrap(), fit["after"]["rmse"].as_f64().unwrap());
+        assert!(a < 0.5 * b, "{spec}: fit did not reduce the error ({b} -> {a})");
+    }
+}
+
+#[test]
+fn real_optiodom_runs_compare_and_fit_with_holdout() {
+    let runs = real_runs();
+    let p = |i: usize| runs[i].to_str().unwrap().to_string();
+    let cmp = kinegen_json(&["compare", "--spec", "spec/diff_drive.toml", "--data", &p(0)]);
+    assert!(cmp["rmse"].as_f64().unwrap() > 0.0);
+    // fit on runs 1, 2 (one direction) and 4, 5 (the other); score on 3 and 6
+    let fit = kinegen_json(&[
+        "fit", "--spec", "spec/diff_drive.toml", "--data", &p(0), "--data", &p(1), "--data", &p(3), "--data", &p(4), "--holdout", &p(2), "--holdout", &p(5),
+    ]);
+    let hb = fit["holdout"]["before"]["rmse"].as_f64().unwrap();
+    let ha = fit["holdout"]["after"]["rmse"].as_f64().unwrap();
+    assert!(ha < hb, "calibration did not help on held-out runs: {hb} -> {ha}");
+    let b = fit["parameters"]["b"]["estimate"].as_f64().unwrap();
+    assert!((b - 0.2).abs() < 0.01, "wheelbase estimate {b} is not physically plausible");
+}
+
+/// (file content, expected "file:row: column `c`" fragment, expected message)
+fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
+    let ok_header = "t,enc_r,enc_l,gt_x,gt_y,gt_theta";
+    vec![
+        ("t,enc_r,gt_x,gt_y,gt_theta\n0,0,0,0,0\n0.05,1,0,0,0\n0.1,2,0,0,0\n", ":1: column `enc_l`".into(), "missing column"),
+        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,x1,0,0,0\n0.1,2,2,0,0,0\n").into_boxed_str()), ":3: column `enc_l`".into(), "not a number"),
+        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,NaN,0,0\n0.1,2,2,0,0,0\n").into_boxed_str()), ":3: column `gt_x`".into(), "not finite"),
+        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,inf,0,0\n0.1,2,2,0,0,0\n").into_boxed_str()), ":3: column `gt_x`".into(), "not finite"),
+        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.05,2,2,0,0,0\n").into_boxed_str()), ":4: column `t`".into(), "increase strictly"),
+        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n9.0,3,3,0,0,0\n").into_boxed_str()), ":5: column `t`".into(), "gap"),
+        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n").into_boxed_str()), "short.csv".into(), "at least 3"),
+    ]
+}
+
+#[test]
+fn bad_logs_are_rejected_with_file_row_and_column() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (i, (content, place, message)) in bad_logs().into_iter().enumerate() {
+        let name = if message == "at least 3" { "short.csv".to_string() } else { format!("bad{i}.csv") };
+        let path = tmp.path().join(&name);
+        std::fs::write(&path, content).unwrap();
+        for cmd in ["compare", "fit", "diagnose"] {
+            let o = kinegen(&[cmd, "--spec", "spec/diff_drive.toml", "--data", path.to_str().unwrap()]);
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(2), "{cmd} {name}: {err}");
+            assert!(err.contains(&name) && err.contains(&place) && err.contains(message), "{cmd} {name}: expected `{place}` and `{message}` in: {err}");
+            assert!(!err.contains("panicked"), "{err}");
+        }
+    }
+}
+
+#[test]
+fn unknown_set_name_and_bad_value_are_usage_errors() {
+    let real = real_runs();
+    let o = kinegen(&["fit", "--spec", "spec/diff_drive.toml", "--data", real[0].to_str().unwrap(), "--set", "wheel=0.1"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("unknown parameter `wheel`") && stderr(&o).contains("r_r"), "{}", stderr(&o));
+    let o = kinegen(&["fit", "--spec", "spec/diff_drive.toml", "--data", real[0].to_str().unwrap(), "--set", "b=abc"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--set b=abc"), "{}", stderr(&o));
+}
+
+#[test]
+fn json_to_a_file_and_a_report_are_written_and_stdout_stays_human() {
+    let tmp = tempfile::tempdir().unwrap();
+    let real = real_runs();
+    let json = tmp.path().join("fit.json");
+    let report = tmp.path().join("report");
+    let o = kinegen(&["fit", "--spec", "spec/diff_drive.toml", "--data", real[0].to_str().unwrap(), "--json", json.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for k in ["model", "metric", "before", "after", "parameters"] {
+        assert!(doc.get(k).is_some(), "fit JSON lacks `{k}`");
+    }
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    assert!(html.contains("<svg") && html.contains("after calibration") && !html.contains("<script src"), "report is not self-contained");
+    assert!(stdout(&o).contains("calibrated"));
+}

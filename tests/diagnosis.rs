@@ -1,0 +1,121 @@
+//! diagnose on logs with a hidden effect (simulated with `kinegen simulate`): the
+//! verdict names it, its parameters land near the hidden values, and adding it
+//! makes the error at least 5x smaller. Plus: parameter errors only -> null;
+//! an effect outside the catalogue -> not blamed with confidence, structure left;
+//! and the whole story through the CLI.
+mod common;
+use common::*;
+
+/// (effect, effect parameter, hidden value)
+fn check_model(model: &str, cases: &[(&str, &str, f64)]) {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = format!("spec/{model}.toml");
+    let mut report = Vec::new();
+    for (effect, param, value) in cases {
+        let eff = format!("{effect}={value}");
+        let log = simulate(tmp.path(), &format!("{effect}.csv"), &["--spec", &spec, "--effect", &eff, "--trajectory", "random", "--seed", "7"]);
+        let d = kinegen_json(&["diagnose", "--spec", &spec, "--data", log.to_str().unwrap()]);
+        let cands = d["candidates"].as_array().unwrap();
+        let rank = cands.iter().position(|c| c["effect"] == *effect).map(|r| r + 1);
+        let c = &cands[rank.expect("true effect among the candidates") - 1];
+        let est = c["parameters"][param]["estimate"].as_f64().unwrap();
+        let ratio = d["calibrated"]["rmse"].as_f64().unwrap() / c["rmse"].as_f64().unwrap();
+        report.push(format!("{model} {effect}: verdict {} rank {rank:?} {param} {est:.4} (hidden {value}) error x{ratio:.1}", d["verdict"]["effect"]));
+        assert_eq!(d["verdict"]["effect"], *effect, "{}", report.last().unwrap());
+        assert!(((est - value) / value).abs() < 0.1, "{}", report.last().unwrap());
+        assert!(ratio >= 5.0, "{}", report.last().unwrap());
+        assert_eq!(d["verdict"]["unexplained_structure"], false, "{}", report.last().unwrap());
+        assert!(c["significant"].as_bool().unwrap() && !c["evidence"].as_str().unwrap().is_empty());
+    }
+    println!("{}", report.join("\n"));
+}
+
+#[test]
+fn diff_drive_hidden_effects_are_found() {
+    check_model(
+        "diff_drive",
+        &[("lateral_slip", "k_slip", 0.2), ("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03)],
+    );
+}
+
+#[test]
+fn tricycle_hidden_effects_are_found() {
+    check_model(
+        "tricycle",
+        &[("steering_offset", "steer_offset", 0.05), ("lateral_slip", "k_slip", 0.2), ("gyro_bias", "gyro_bias", 0.05), ("sensor_offset", "sensor_dx", 0.15)],
+    );
+}
+
+#[test]
+fn omni3_hidden_effects_are_found() {
+    check_model("omni3", &[("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1)]);
+}
+
+#[test]
+fn unicycle_ekf_hidden_effects_are_found() {
+    check_model("unicycle_ekf", &[("lateral_slip", "k_slip", 0.2), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03)]);
+}
+
+#[test]
+fn parameter_errors_only_give_a_null_verdict() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(tmp.path(), "params.csv", &["--spec", "spec/diff_drive.toml", "--set", "b=0.21", "--set", "r_l=0.0415", "--trajectory", "random", "--seed", "4"]);
+    let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
+    assert!(d["verdict"]["effect"].is_null(), "{}", d["verdict"]);
+    assert_eq!(d["verdict"]["unexplained_structure"], false);
+    // redundant effects are recognised and not proposed
+    let skipped: Vec<&str> = d["skipped"].as_array().unwrap().iter().map(|s| s["effect"].as_str().unwrap()).collect();
+    assert!(skipped.contains(&"wheel_radius_asymmetry") && skipped.contains(&"wheelbase_scale"), "{skipped:?}");
+}
+
+#[test]
+fn an_effect_outside_the_catalogue_is_not_blamed_and_structure_is_reported() {
+    // truth: a gyro with a quadratic error, which no catalogue effect describes
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("spec/diff_drive.toml")).unwrap().replace("expr = [\"omega\"]", "expr = [\"omega + 0.3*omega*abs(omega)\"]");
+    let truth = tmp.path().join("diff_drive.toml");
+    std::fs::write(&truth, text).unwrap();
+    let log = simulate(tmp.path(), "ooc.csv", &["--spec", truth.to_str().unwrap(), "--trajectory", "random", "--seed", "4"]);
+    let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
+    assert!(d["verdict"]["effect"].is_null(), "blamed on {}", d["verdict"]["effect"]);
+    assert_eq!(d["verdict"]["unexplained_structure"], true);
+    let where_: Vec<&str> = d["verdict"]["structure"].as_array().unwrap().iter().map(|s| s.as_str().unwrap()).collect();
+    assert!(where_.iter().any(|s| s.contains("gyro") && s.contains("yaw rate")), "{where_:?}");
+}
+
+/// compare -> diagnose -> add-effect -> fit -> generate -> verify, through the CLI.
+#[test]
+fn the_whole_story_through_the_cli() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let log = simulate(t, "slip.csv", &["--spec", "spec/diff_drive.toml", "--effect", "lateral_slip=0.2", "--set", "b=0.205", "--trajectory", "random", "--seed", "11"]);
+    let l = log.to_str().unwrap();
+    let cmp = kinegen_json(&["compare", "--spec", "spec/diff_drive.toml", "--data", l]);
+    assert!(cmp["rmse"].as_f64().unwrap() > 0.05);
+    let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", l]);
+    assert_eq!(d["verdict"]["effect"], "lateral_slip");
+    let k = d["candidates"][0]["parameters"]["k_slip"]["estimate"].as_f64().unwrap();
+    // the human output prints the spec change
+    let o = kinegen(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", l]);
+    assert!(stdout(&o).contains("spec change that adds it") && stdout(&o).contains("k_slip"), "{}", stdout(&o));
+
+    let spec_dir = t.join("spec");
+    std::fs::create_dir(&spec_dir).unwrap();
+    let new_spec = spec_dir.join("diff_drive.toml");
+    let o = kinegen(&["add-effect", "--spec", "spec/diff_drive.toml", "--effect", "lateral_slip", "--value", &format!("k_slip={k}"), "--out", new_spec.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", l]);
+    let after = kinegen_json(&["fit", "--spec", new_spec.to_str().unwrap(), "--data", l]);
+    let (eb, ea) = (before["after"]["rmse"].as_f64().unwrap(), after["after"]["rmse"].as_f64().unwrap());
+    assert!(ea * 3.0 < eb, "adding the effect did not make the error fall: {eb} -> {ea}");
+    assert!((after["parameters"]["k_slip"]["estimate"].as_f64().unwrap() - 0.2).abs() < 0.02);
+
+    // regenerate kernels that include the effect, and verify them like any spec
+    let out = t.join("generated");
+    let o = kinegen(&["generate", "--spec-dir", spec_dir.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let src = std::fs::read_to_string(out.join("src/diff_drive.rs")).unwrap();
+    assert!(src.contains("k_slip"));
+    let o = kinegen(&["verify", "--spec", new_spec.to_str().unwrap(), "--samples", "30"]);
+    assert!(o.status.success(), "verify failed on the augmented spec: {}{}", stdout(&o), stderr(&o));
+}
