@@ -34,7 +34,17 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
             }
         };
         println!("== {} ({}): the IR tapes `kinegen generate` emits, {samples} samples per property", ir.name, path.display());
-        let report = run_all(&ir, &IrKernel, samples, 1);
+        let mut report = run_all(&ir, &IrKernel, samples, 1);
+        match casadi_reference(&path) {
+            Ok(dir) => {
+                match kinegen_verify::casadi::load(&dir, &ir.name) {
+                    Some(fx) => report.findings.extend(kinegen_verify::casadi::compare(&ir, &fx, &IrKernel)),
+                    None => eprintln!("CasADi check skipped: no reference was written"),
+                }
+                let _ = std::fs::remove_dir_all(&dir);
+            }
+            Err(why) => eprintln!("CasADi check skipped: {why}"),
+        }
         print!("{}", report.table());
         for f in report.failures() {
             failed = true;
@@ -48,3 +58,27 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
     }
 }
 
+
+/// Run the independent CasADi reference script for one spec into a temp dir.
+fn casadi_reference(spec: &Path) -> Result<std::path::PathBuf, String> {
+    let script = Path::new("verify/casadi/reference.py");
+    if !script.exists() {
+        return Err("verify/casadi/reference.py not found (run from the kinegen checkout)".into());
+    }
+    let dir = std::env::temp_dir().join(format!("kinegen-casadi-{}", std::process::id()));
+    let o = std::process::Command::new("python3")
+        .arg(script)
+        .args(["--spec"])
+        .arg(spec)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .map_err(|e| format!("cannot run python3: {e}"))?;
+    if !o.status.success() {
+        return Err(format!(
+            "the CasADi script failed (pip install -r verify/casadi/requirements.txt): {}",
+            String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")
+        ));
+    }
+    Ok(dir)
+}

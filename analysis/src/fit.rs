@@ -185,8 +185,20 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
             })
             .collect()
     };
-    // work in scaled variables so radii (cm) and offsets (rad) weigh alike
-    let scale: Vec<f64> = free.iter().map(|&i| r.p[i].abs().max(1e-3)).collect();
+    // Work in scaled variables so radii (cm), gains (s) and offsets (rad) weigh
+    // alike: a parameter's scale is its magnitude, or 1% of its bounded range when
+    // it starts at zero (effect parameters).
+    let rp = r.ir.runtime_params();
+    let scale: Vec<f64> = free
+        .iter()
+        .map(|&i| {
+            let range = match (rp[i].min, rp[i].max) {
+                (Some(a), Some(b)) => 0.01 * (b - a),
+                _ => 1e-3,
+            };
+            r.p[i].abs().max(range).max(1e-9)
+        })
+        .collect();
     let mut p = r.p.clone();
     let (mut res, mut jac) = residuals(r, &p, &free, runs, o, true);
     if res.is_empty() {
@@ -248,7 +260,10 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     }
     // Uncertainty: s^2 (J^T J)^-1 with s^2 from the residuals (assumes independent
     // residuals; dead-reckoning residuals are correlated, so these are optimistic).
-    let j = jac.unwrap();
+    // Identifiability and covariance in the scaled variables (then scaled back), so
+    // that parameters of different units are compared fairly.
+    let d = DMatrix::from_diagonal(&DVector::from_vec(scale.clone()));
+    let j = jac.unwrap() * &d;
     let n = res.len();
     let m = free.len();
     let s2 = 2.0 * c / (n.saturating_sub(m).max(1)) as f64;
@@ -257,11 +272,17 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     let smax = svd.singular_values.max();
     let mut warnings = Vec::new();
     let names: Vec<&str> = free.iter().map(|&i| r.names[i].as_str()).collect();
-    let rank = svd.singular_values.iter().filter(|&&s| s > 1e-10 * smax).count();
+    // A direction is identifiable when the data pin it to better than the
+    // parameters' own scale: standard deviation sqrt(s2 / sigma_i) < 1 in scaled
+    // units (and numerically above round-off). Conditioning alone is no criterion:
+    // long dead-reckoning tracks give condition numbers of 1e11 that noise-level
+    // data still resolve.
+    let cutoff = (s2 / 1.0).max(1e-14 * smax);
+    let rank = svd.singular_values.iter().filter(|&&s| s > cutoff).count();
     if rank < m {
         let v_t = svd.v_t.as_ref().unwrap();
         for (k, &s) in svd.singular_values.iter().enumerate() {
-            if s <= 1e-10 * smax {
+            if s <= cutoff {
                 let row = v_t.row(k);
                 let mut parts: Vec<(f64, &str)> = row.iter().zip(&names).map(|(v, n)| (v.abs(), *n)).filter(|(v, _)| *v > 0.2).collect();
                 parts.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -272,7 +293,7 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
             }
         }
     }
-    let cov = svd.pseudo_inverse(1e-10 * smax).unwrap_or_else(|_| DMatrix::zeros(m, m)) * s2;
+    let cov = &d * svd.pseudo_inverse(cutoff).unwrap_or_else(|_| DMatrix::zeros(m, m)) * &d * s2;
     let std: Vec<f64> = (0..m).map(|k| cov[(k, k)].max(0.0).sqrt()).collect();
     let corr = DMatrix::from_fn(m, m, |a, b| {
         let d = (cov[(a, a)] * cov[(b, b)]).sqrt();

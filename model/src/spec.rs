@@ -50,6 +50,8 @@ struct RawInput {
     column: String,
     kind: InputKind,
     #[serde(default)]
+    range: Option<[f64; 2]>,
+    #[serde(default)]
     unit: String,
     #[serde(default)]
     doc: String,
@@ -146,6 +148,10 @@ pub struct Input {
     pub name: String,
     pub column: String,
     pub kind: InputKind,
+    /// Physical domain of the input's value (rate for cumulative inputs), e.g. a
+    /// steering lock; verification samples inside it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<[f64; 2]>,
     pub unit: String,
     pub doc: String,
 }
@@ -442,6 +448,7 @@ impl Model {
                     name: i.name.get_ref().clone(),
                     column: i.column.clone(),
                     kind: i.kind,
+                    range: i.range,
                     unit: i.unit.clone(),
                     doc: i.doc.clone(),
                 })

@@ -24,6 +24,16 @@ pub struct Finding {
 }
 
 impl Finding {
+    /// An empty finding for `function` under `check` (for checks outside this module).
+    pub fn blank(ir: &ModelIr, function: &str, check: &'static str) -> Self {
+        Finding::new(ir, function, check)
+    }
+
+    /// Record one error measure (see `record`).
+    pub fn note(&mut self, err: f64, ratio: f64, entry: Option<(usize, usize, String)>, args: &[Vec<f64>], f: &Function) {
+        self.record(err, ratio, entry, args, f)
+    }
+
     fn new(ir: &ModelIr, function: &str, check: &'static str) -> Self {
         Finding { model: ir.name.clone(), function: function.into(), check, samples: 0, max_err: 0.0, ratio: 0.0, entry: None, worst_input: String::new() }
     }

@@ -6,6 +6,7 @@
 //! kernel), samples the spec's domain and reports the worst case found: model,
 //! function, matrix entry and input. Nothing here is specific to a bundled model,
 //! so a new spec is verified with no new test code.
+pub mod casadi;
 pub mod checks;
 #[cfg(feature = "compiled")]
 pub mod models;

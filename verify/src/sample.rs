@@ -16,8 +16,11 @@ pub fn twist_rows(ir: &ModelIr) -> [bool; 3] {
     let Some(tw) = ir.function("twist") else { return [true; 3] };
     let mut rows = [false; 3];
     let mut rng = SmallRng::seed_from_u64(7);
-    let p: Vec<f64> = ir.runtime_params().iter().map(|p| p.nominal).collect();
+    // over the sampled parameter domain, not only at nominal values (an effect
+    // parameter is nominally zero, and so is the motion it adds)
+    let mut sampler = Sampler { ir, rng: SmallRng::seed_from_u64(8), twist_rows: [true; 3] };
     for _ in 0..8 {
+        let p = sampler.params();
         let u: Vec<f64> = ir.inputs.iter().map(|_| rng.gen_range(-50.0..50.0)).collect();
         let t = tw.eval(&[&u, &p]);
         for r in 0..3 {
@@ -92,12 +95,21 @@ impl<'a> Sampler<'a> {
         sig.iter().map(|s| self.rng.gen_range(-3.0 * s..3.0 * s)).collect()
     }
 
-    /// A full argument set for `f`, consistent across groups.
+    /// A full argument set for `f`, consistent across groups, with the inputs
+    /// inside the ranges the spec declares (e.g. a steering lock).
     pub fn args(&mut self, f: &Function) -> Vec<Vec<f64>> {
         let p = self.params();
         let pose = self.pose();
-        let tw = self.twist();
-        let u = self.inputs_for(&tw, &p);
+        let mut tw = self.twist();
+        let mut u = self.inputs_for(&tw, &p);
+        for _ in 0..200 {
+            let inside = self.ir.inputs.iter().zip(&u).all(|(i, v)| i.range.is_none_or(|[lo, hi]| (lo..=hi).contains(v)));
+            if inside {
+                break;
+            }
+            tw = self.twist();
+            u = self.inputs_for(&tw, &p);
+        }
         f.args
             .iter()
             .map(|a| match a.name.as_str() {

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The main job on bundled data: compare a model with a log, find the missing
+# physical effect, add it to the spec, watch the error fall, regenerate kernels.
+# Everything lands in report/ (HTML reports, the new spec, its kernels).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=report
+mkdir -p "$out"
+cargo build -q --bin kinegen
+k=target/debug/kinegen
+data=data/mystery_robot.csv
+say() { printf '\n\033[1m$ %s\033[0m\n' "$*"; }
+
+say kinegen compare --spec spec/diff_drive.toml --data $data --report $out/compare
+$k compare --spec spec/diff_drive.toml --data $data --report $out/compare
+
+say kinegen diagnose --spec spec/diff_drive.toml --data $data --report $out/diagnose --json $out/diagnose.json
+$k diagnose --spec spec/diff_drive.toml --data $data --report $out/diagnose --json $out/diagnose.json
+
+# the winning effect, as the diagnosis named it (null if none)
+effect=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["verdict"]["effect"] or "")' $out/diagnose.json 2>/dev/null || echo "$effect")
+if [ -z "$effect" ] || [ "$effect" = "null" ]; then
+  echo "no missing effect found; nothing to add"; exit 0
+fi
+mkdir -p $out/spec
+say kinegen add-effect --spec spec/diff_drive.toml --effect "$effect" --out $out/spec/diff_drive.toml
+$k add-effect --spec spec/diff_drive.toml --effect "$effect" --out $out/spec/diff_drive.toml
+
+say kinegen fit --spec spec/diff_drive.toml --data $data --report $out/fit-before
+$k fit --spec spec/diff_drive.toml --data $data --report $out/fit-before
+say kinegen fit --spec $out/spec/diff_drive.toml --data $data --report $out/fit-after
+$k fit --spec $out/spec/diff_drive.toml --data $data --report $out/fit-after
+
+say kinegen generate --spec-dir $out/spec --out $out/generated
+$k generate --spec-dir $out/spec --out $out/generated
+say kinegen verify --spec $out/spec/diff_drive.toml --samples 50
+$k verify --spec $out/spec/diff_drive.toml --samples 50 | tail -5
+
+echo
+echo "reports: $out/compare/index.html $out/diagnose/index.html $out/fit-before/index.html $out/fit-after/index.html"

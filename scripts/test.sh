@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# The whole test suite, as CI runs it (.ci/run calls this script).
+#  1. install the Python tooling of the CasADi cross-check (pinned versions)
+#  2. regenerate the CasADi reference fixtures from the specs and fail if they
+#     differ from the committed ones (the check is live, not frozen)
+#  3. fail if generated/ is stale (kinegen generate --check)
+#  4. cargo test over the whole workspace. Tests that use symbolica run it only in
+#     child processes that queue on a machine-wide lock, so the default parallel
+#     test runner is safe; do not use cargo-nextest (it runs tests as processes
+#     in parallel, which is also safe here, but is not what this project tests).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt
+python3 verify/casadi/reference.py --check
+cargo build --workspace --all-targets
+cargo run -q --bin kinegen -- generate --check
+cargo test --workspace

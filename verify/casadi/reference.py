@@ -1,0 +1,183 @@
+#!/usr/bin/env python3
+"""Independent CasADi references for kinegen's generated kernels.
+
+Reads each spec under spec/ itself (tomllib), turns its math strings into CasADi
+SX expressions with Python's ast (never looking at kinegen's output), builds the
+Euler and exact SE(2) steps, the observations and their Jacobians with CasADi's
+own algorithmic differentiation, evaluates them at seeded sample points and
+writes verify/casadi/fixtures/<model>.json. The Rust test verify/tests/casadi.rs
+compares the compiled kernels with these fixtures.
+
+    python3 verify/casadi/reference.py            # write the fixtures
+    python3 verify/casadi/reference.py --check    # regenerate in memory, compare with the committed ones
+    python3 verify/casadi/reference.py --spec my.toml --out DIR   # one spec (kinegen verify uses this)
+"""
+import ast
+import json
+import math
+import sys
+import tomllib
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+OUT = Path(__file__).resolve().parent / "fixtures"
+STATE = ["x", "y", "theta"]
+SAMPLES = 40
+
+
+def to_sx(src, env):
+    """A spec math string as a CasADi SX expression (`^` is power)."""
+    tree = ast.parse(src.replace("^", "**"), mode="eval")
+
+    def go(n):
+        if isinstance(n, ast.Expression):
+            return go(n.body)
+        if isinstance(n, ast.Constant):
+            return float(n.value)
+        if isinstance(n, ast.Name):
+            if n.id == "pi":
+                return math.pi
+            return env[n.id]
+        if isinstance(n, ast.UnaryOp):
+            v = go(n.operand)
+            return -v if isinstance(n.op, ast.USub) else v
+        if isinstance(n, ast.BinOp):
+            a, b = go(n.left), go(n.right)
+            return {ast.Add: lambda: a + b, ast.Sub: lambda: a - b, ast.Mult: lambda: a * b,
+                    ast.Div: lambda: a / b, ast.Pow: lambda: a ** b}[type(n.op)]()
+        if isinstance(n, ast.Call):
+            args = [go(a) for a in n.args]
+            f = {"sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "atan": ca.atan, "atan2": ca.atan2,
+                 "sqrt": ca.sqrt, "exp": ca.exp, "ln": ca.log, "abs": ca.fabs}[n.func.id]
+            return f(*args)
+        raise ValueError(f"unsupported syntax in `{src}`")
+
+    return go(tree)
+
+
+def model(spec):
+    inputs = [i["name"] for i in spec.get("input", [])]
+    noise = [n["name"] for n in spec.get("noise", [])]
+    params = [p for p in spec.get("parameter", []) if not p.get("const", False)]
+    consts = {p["name"]: float(p["nominal"]) for p in spec.get("parameter", []) if p.get("const", False)}
+    sym = {n: ca.SX.sym(n) for n in STATE + inputs + noise + [p["name"] for p in params] + ["dt", "xl", "yl"]}
+    env = dict(sym)
+    env.update(consts)
+    # definitions, in dependency order
+    pending = {d["name"]: d["expr"] for d in spec.get("define", [])}
+    while pending:
+        progress = False
+        for name, src in list(pending.items()):
+            try:
+                env[name] = to_sx(src, env)
+                del pending[name]
+                progress = True
+            except KeyError:
+                pass
+        if not progress:
+            raise ValueError(f"unresolvable definitions {list(pending)}")
+    m = spec["motion"]
+    twist_noisy = [to_sx(m[k], env) for k in ("vx", "vy", "omega")]
+    zero_w = {sym[n]: 0 for n in noise}
+    twist = [ca.substitute(t, ca.vertcat(*[sym[n] for n in noise]), ca.DM.zeros(len(noise))) if noise else t for t in twist_noisy]
+    x, y, th, dt = sym["x"], sym["y"], sym["theta"], sym["dt"]
+    vx, vy, om = twist_noisy
+    euler = ca.vertcat(x + (ca.cos(th) * vx - ca.sin(th) * vy) * dt,
+                       y + (ca.sin(th) * vx + ca.cos(th) * vy) * dt,
+                       th + om * dt)
+    # exact constant-twist motion on SE(2), written from the closed form
+    a = om * dt
+    s, c = ca.sin(a) / om, (1 - ca.cos(a)) / om
+    bx, by = s * vx - c * vy, c * vx + s * vy
+    exact = ca.vertcat(x + ca.cos(th) * bx - ca.sin(th) * by, y + ca.sin(th) * bx + ca.cos(th) * by, th + a)
+    groups = {"x": [sym[n] for n in STATE], "u": [sym[n] for n in inputs], "w": [sym[n] for n in noise],
+              "p": [sym[p["name"]] for p in params], "dt": [dt], "lm": [sym["xl"], sym["yl"]]}
+    funcs = {}
+    step_args = ["x", "u"] + (["w"] if noise else []) + ["p", "dt"]
+    for form, f in (("euler", euler), ("exact", exact)):
+        funcs[f"step_{form}"] = (step_args, f)
+        for g in ("x", "u", "w", "p"):
+            if groups[g]:
+                funcs[f"step_{form}_jac_{g}"] = (step_args, ca.jacobian(f, ca.vertcat(*groups[g])))
+    funcs["twist"] = (["u", "p"], ca.vertcat(*twist))
+    obs_env = dict(env)
+    obs_env.update({"vx": twist[0], "vy": twist[1], "omega": twist[2]})
+    for o in spec.get("observation", []):
+        h = ca.vertcat(*[to_sx(e, obs_env) for e in o["expr"]])
+        args = ["x", "u", "p"] + (["lm"] if o.get("landmark", False) else [])
+        funcs[f"obs_{o['name']}"] = (args, h)
+        for g in ("x", "p"):
+            if groups[g]:
+                funcs[f"obs_{o['name']}_jac_{g}"] = (args, ca.jacobian(h, ca.vertcat(*groups[g])))
+    return groups, funcs, params
+
+
+def sample(spec, groups, params, rng):
+    """Sample points; rates scaled by input unit, |omega*dt| >= 0.05: the closed
+    form above loses accuracy to cancellation as omega*dt -> 0 (relative error
+    ~1e-16/(omega*dt)^2 in the Jacobians), which is exactly why kinegen switches
+    to a series there; that branch is checked by the Rust property tests (finite
+    differences, singular limits) instead."""
+    vals = {}
+    vals["x"] = [rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-3, 3)]
+    ranges = {"count/s": 4000.0, "rad/s": 8.0, "rad": 0.6, "m/s": 1.0}
+    vals["u"] = [rng.uniform(-1, 1) * ranges.get(i.get("unit", ""), 1.0) for i in spec.get("input", [])]
+    vals["w"] = [rng.uniform(-0.03, 0.03) for _ in groups["w"]]
+    vals["p"] = [float(p["nominal"]) * rng.uniform(0.9, 1.1) if p["nominal"] != 0 else rng.uniform(-0.05, 0.05) for p in params]
+    vals["dt"] = [rng.uniform(0.01, 0.1)]
+    r, b = rng.uniform(1, 8), rng.uniform(-3, 3)
+    vals["lm"] = [vals["x"][0] + r * math.cos(b), vals["x"][1] + r * math.sin(b)]
+    return vals
+
+
+def fixtures(spec_path):
+    spec = tomllib.loads(spec_path.read_text())
+    groups, funcs, params = model(spec)
+    rng = np.random.default_rng(20261122)
+    twist_fn = ca.Function("tw", [ca.vertcat(*groups["u"]), ca.vertcat(*groups["p"])], [funcs["twist"][1]])
+    points = []
+    for _ in range(SAMPLES):
+        while True:
+            v = sample(spec, groups, params, rng)
+            om = float(twist_fn(v["u"], v["p"])[2])
+            if abs(om * v["dt"][0]) > 0.05:
+                break
+        for name, (args, expr) in funcs.items():
+            inputs = [ca.vertcat(*groups[a]) for a in args]
+            f = ca.Function(name, inputs, [expr])
+            out = np.array(f(*[v[a] for a in args])).reshape(expr.shape, order="F")
+            points.append({"function": name, "args": {a: v[a] for a in args}, "out": out.flatten(order="C").tolist()})
+    return {"model": spec["name"], "casadi": ca.__version__, "points": points}
+
+
+def main():
+    argv = sys.argv[1:]
+    check = "--check" in argv
+    out_dir = Path(argv[argv.index("--out") + 1]) if "--out" in argv else OUT
+    specs = [Path(argv[argv.index("--spec") + 1])] if "--spec" in argv else sorted((ROOT / "spec").glob("*.toml"))
+    bad = 0
+    for spec_path in specs:
+        doc = fixtures(spec_path)
+        target = out_dir / f"{doc['model']}.json"
+        if check:
+            old = json.loads(target.read_text())
+            worst = 0.0
+            for a, b in zip(old["points"], doc["points"]):
+                assert a["function"] == b["function"], "fixture layout changed"
+                for p, q in zip(a["out"], b["out"]):
+                    worst = max(worst, abs(p - q) / max(abs(p), abs(q), 1e-300) if p != q else 0.0)
+            status = "ok" if worst < 1e-12 and len(old["points"]) == len(doc["points"]) else "DIFFERS"
+            bad += status != "ok"
+            print(f"{doc['model']}: {len(doc['points'])} reference values regenerated, worst relative difference to the committed fixtures {worst:.1e}: {status}")
+        else:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            target.write_text(json.dumps(doc, indent=0) + "\n")
+            print(f"wrote {target} ({len(doc['points'])} reference values)")
+    sys.exit(1 if bad else 0)
+
+
+if __name__ == "__main__":
+    main()
