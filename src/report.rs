@@ -104,7 +104,7 @@ fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
 
 fn pos_err(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
     let Some(g) = &run.gt else { return vec![] };
-    g.iter().zip(&tr.pose).zip(&run.t).map(|((a, b), t)| (t - run.t[0], ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())).collect()
+    g.iter().zip(&tr.measured).zip(&run.t).map(|((a, b), t)| (t - run.t[0], ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())).collect()
 }
 
 /// Heading-error rate residual per step against speed, turn rate and heading.

@@ -114,3 +114,17 @@ fn json_to_a_file_and_a_report_are_written_and_stdout_stays_human() {
     assert!(html.contains("<svg") && html.contains("after calibration") && !html.contains("<script src"), "report is not self-contained");
     assert!(stdout(&o).contains("calibrated"));
 }
+
+#[test]
+fn a_measurement_delay_is_calibrated_once_the_time_offset_effect_is_added() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(tmp.path(), "delay.csv", &["--spec", "spec/diff_drive.toml", "--effect", "time_offset=0.08", "--trajectory", "random", "--seed", "7"]);
+    let spec = tmp.path().join("dd_delay.toml");
+    let o = kinegen(&["add-effect", "--spec", "spec/diff_drive.toml", "--effect", "time_offset", "--out", spec.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let base = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
+    let with = kinegen_json(&["fit", "--spec", spec.to_str().unwrap(), "--data", log.to_str().unwrap()]);
+    let tau = with["parameters"]["time_offset"]["estimate"].as_f64().unwrap();
+    assert!((tau - 0.08).abs() < 0.004, "time_offset {tau}");
+    assert!(with["after"]["rmse"].as_f64().unwrap() * 3.0 < base["after"]["rmse"].as_f64().unwrap());
+}

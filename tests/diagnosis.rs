@@ -34,7 +34,7 @@ fn check_model(model: &str, cases: &[(&str, &str, f64)]) {
 fn diff_drive_hidden_effects_are_found() {
     check_model(
         "diff_drive",
-        &[("lateral_slip", "k_slip", 0.2), ("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03)],
+        &[("lateral_slip", "k_slip", 0.2), ("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03), ("time_offset", "time_offset", 0.08)],
     );
 }
 
@@ -43,17 +43,20 @@ fn tricycle_hidden_effects_are_found() {
     check_model(
         "tricycle",
         &[("steering_offset", "steer_offset", 0.05), ("lateral_slip", "k_slip", 0.2), ("gyro_bias", "gyro_bias", 0.05), ("sensor_offset", "sensor_dx", 0.15)],
+        // time_offset is not asserted for the tricycle: its curvature-limited, slow
+        // motion makes the delay's signature weak; measured: correct verdict at
+        // 0.15 s with only a 4.7x error reduction, wrong at 0.2 s (see the notes)
     );
 }
 
 #[test]
 fn omni3_hidden_effects_are_found() {
-    check_model("omni3", &[("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1)]);
+    check_model("omni3", &[("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1), ("time_offset", "time_offset", 0.08)]);
 }
 
 #[test]
 fn unicycle_ekf_hidden_effects_are_found() {
-    check_model("unicycle_ekf", &[("lateral_slip", "k_slip", 0.2), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03)]);
+    check_model("unicycle_ekf", &[("lateral_slip", "k_slip", 0.2), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03), ("time_offset", "time_offset", 0.08)]);
 }
 
 #[test]

@@ -6,6 +6,10 @@ use nalgebra::{DMatrix, Matrix3};
 
 pub struct Track {
     pub pose: Vec<[f64; 3]>,
+    /// What the pose sensor should read at each row: the track at t - time_offset
+    /// (when the model has that parameter), seen through the `pose` observation
+    /// (when it has one). Errors are measured on this.
+    pub measured: Vec<[f64; 3]>,
     /// Per row, 3 x P sensitivity of the pose to all runtime parameters.
     pub sens: Option<Vec<DMatrix<f64>>>,
     /// Model yaw rate of each step.
@@ -35,7 +39,27 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
 /// Integrate the model over a run from the start pose of the run.
 pub fn run(r: &Runner, p: &[f64], data: &Run, start: [f64; 3], with_sens: bool) -> Track {
     let u0 = data.u.first().cloned().unwrap_or_default();
-    let (start, dstart) = body_start(r, p, start, &u0);
+    // With delayed measurements the pose at t0 is seen at t0 + time_offset.
+    let tau_i = r.param_index("time_offset");
+    let (start, gt_vel) = match (tau_i.map(|i| p[i]), &data.gt) {
+        (Some(tau), Some(g)) if tau != 0.0 && g.len() > 1 => {
+            let s = data.t[0] + tau;
+            let j = data.t.partition_point(|t| *t <= s).clamp(1, g.len() - 1) - 1;
+            let dtj = data.t[j + 1] - data.t[j];
+            let a = (s - data.t[j]) / dtj;
+            let vel = [0, 1, 2].map(|i| (g[j + 1][i] - g[j][i]) / dtj);
+            // the rest-averaged start when the robot has not moved yet
+            let at = [0, 1, 2].map(|i| g[j][i] + a * (g[j + 1][i] - g[j][i]));
+            if data.u.first().is_some_and(|u| u.iter().all(|v| *v == 0.0)) { (start, [0.0; 3]) } else { (at, vel) }
+        }
+        _ => (start, [0.0; 3]),
+    };
+    let (start, mut dstart) = body_start(r, p, start, &u0);
+    if let Some(ti) = tau_i {
+        for m in 0..3 {
+            dstart[m * p.len() + ti] += gt_vel[m];
+        }
+    }
     let (fx, jx, jp, tw) = (r.f("step_exact"), r.f("step_exact_jac_x"), r.f("step_exact_jac_p"), r.f("twist"));
     let np = p.len();
     let zeros = vec![0.0; 16];
@@ -66,5 +90,32 @@ pub fn run(r: &Runner, p: &[f64], data: &Run, start: [f64; 3], with_sens: bool) 
         }
         pose.push(out3);
     }
-    Track { pose, sens, omega, twist }
+    let measured = predicted_measurements(r, p, data, &pose);
+    Track { pose, measured, sens, omega, twist }
+}
+
+/// The pose measurements a track predicts (see [`Track::measured`]).
+pub fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let tau = r.param_index("time_offset").map_or(0.0, |i| p[i]);
+    let h = r.ir.function("obs_pose");
+    (0..pose.len())
+        .map(|k| {
+            let x = if tau == 0.0 || pose.len() < 2 {
+                pose[k]
+            } else {
+                let s = data.t[k] - tau;
+                let j = data.t.partition_point(|t| *t <= s).clamp(1, pose.len() - 1) - 1;
+                let a = (s - data.t[j]) / (data.t[j + 1] - data.t[j]);
+                [0, 1, 2].map(|i| pose[j][i] + a * (pose[j + 1][i] - pose[j][i]))
+            };
+            match h {
+                Some(h) => {
+                    let u = &data.u[k.min(data.steps().saturating_sub(1))];
+                    let m = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
+                    [m[0], m[1], m[2]]
+                }
+                None => x,
+            }
+        })
+        .collect()
 }

@@ -148,13 +148,27 @@ fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 4]>, Vec<[f64; 6]
     let mut feat = Vec::new();
     let mut regimes = Vec::new();
     let gyro = r.ir.function("obs_gyro");
+    let tau = r.param_index("time_offset").map_or(0.0, |i| p[i]);
     for run in runs {
         let Some(g) = &run.gt else { continue };
         for k in 0..run.steps() {
             let dt = [run.dt[k]];
+            // with delayed measurements the motion between rows k and k+1 was
+            // driven by the inputs of the interval shifted by the delay
+            let shifted_u: Vec<f64>;
+            let u_k: &[f64] = if tau == 0.0 {
+                &run.u[k]
+            } else {
+                let s = run.t[k] - tau;
+                let j = run.t.partition_point(|t| *t <= s).clamp(1, run.steps()) - 1;
+                let a = ((s - run.t[j]) / run.dt[j]).clamp(0.0, 1.0);
+                let j1 = (j + 1).min(run.steps() - 1);
+                shifted_u = run.u[j].iter().zip(&run.u[j1]).map(|(x, y)| x + a * (y - x)).collect();
+                &shifted_u
+            };
             // from the body pose behind the measured one, to the predicted measurement
-            let (x0, _) = crate::deadreckon::body_start(r, p, g[k], &run.u[k]);
-            let x1 = step.eval(&Runner::step_args(step, &x0, &run.u[k], p, &dt, &zeros));
+            let (x0, _) = crate::deadreckon::body_start(r, p, g[k], u_k);
+            let x1 = step.eval(&Runner::step_args(step, &x0, u_k, p, &dt, &zeros));
             let pred = match r.ir.function("obs_pose") {
                 Some(h) => h.eval(&Runner::obs_args(h, &x1, &run.u[k], p, &[])),
                 None => x1,

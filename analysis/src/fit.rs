@@ -85,12 +85,31 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
     let track = deadreckon::run(r, p, run, start, with_jac);
     let np = p.len();
     let mut scratch = Vec::new();
+    // A `time_offset` parameter: measurement k is compared with the model at
+    // t_k - time_offset, linearly interpolated between rows (exact sensitivities of
+    // the interpolation, and d/d time_offset = minus the interpolated velocity).
+    let tau_i = r.param_index("time_offset");
+    let tau = tau_i.map_or(0.0, |i| p[i]);
+    let shifted = |k: usize| -> (usize, f64) {
+        let s = run.t[k] - tau;
+        let mut j = k.min(run.t.len() - 2);
+        while j > 0 && run.t[j] > s {
+            j -= 1;
+        }
+        while j + 2 < run.t.len() && run.t[j + 1] <= s {
+            j += 1;
+        }
+        (j, (s - run.t[j]) / (run.t[j + 1] - run.t[j]))
+    };
     if o.use_pose {
         if let Some(gt) = &run.gt {
             let obs = r.ir.function("obs_pose");
             for k in 1..gt.len() {
-                let x = track.pose[k];
-                let u = &run.u[k - 1];
+                let (j, a) = if tau_i.is_some() { shifted(k) } else { (k - 1, 1.0) };
+                let lerp = |v0: &[f64; 3], v1: &[f64; 3]| -> [f64; 3] { [0, 1, 2].map(|i| v0[i] + a * (v1[i] - v0[i])) };
+                let x = lerp(&track.pose[j], &track.pose[j + 1]);
+                let vel: [f64; 3] = [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
+                let u = &run.u[j.min(run.steps() - 1)];
                 let (pred, hx, hp) = match obs {
                     Some(h) => {
                         let args = Runner::obs_args(h, &x, u, p, &[]);
@@ -110,10 +129,14 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
                     let d = pred[i] - gt[k][i];
                     res.push(if i == 2 { wrap(d) } else { d } / sig[i]);
                     if with_jac {
-                        let s = &track.sens.as_ref().unwrap()[k];
+                        let sens = track.sens.as_ref().unwrap();
+                        let (s0, s1) = (&sens[j], &sens[j + 1]);
                         jac.push(
                             free.iter()
-                                .map(|&c| ((0..3).map(|m| hx[i * 3 + m] * s[(m, c)]).sum::<f64>() + hp[i * np + c]) / sig[i])
+                                .map(|&c| {
+                                    let dx = |m: usize| if Some(c) == tau_i { -vel[m] } else { s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]) };
+                                    ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>() + hp[i * np + c]) / sig[i]
+                                })
                                 .collect(),
                         );
                     }

@@ -54,8 +54,8 @@ pub struct RowErrors {
 }
 
 pub fn row_errors(track: &Track, gt: &[[f64; 3]]) -> RowErrors {
-    let pos = track.pose.iter().zip(gt).map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()).collect();
-    let head = track.pose.iter().zip(gt).map(|(a, b)| wrap(a[2] - b[2])).collect();
+    let pos = track.measured.iter().zip(gt).map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()).collect();
+    let head = track.measured.iter().zip(gt).map(|(a, b)| wrap(a[2] - b[2])).collect();
     RowErrors { pos, head }
 }
 
@@ -118,7 +118,7 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
                 if j >= gt.len() {
                     break;
                 }
-                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.pose[i], &tr.pose[j]));
+                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.measured[i], &tr.measured[j]));
                 rpe_d += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / (dist[j] - dist[i]);
                 rpe_dn += 1;
             }
@@ -130,7 +130,7 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
                 if j >= gt.len() {
                     break;
                 }
-                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.pose[i], &tr.pose[j]));
+                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.measured[i], &tr.measured[j]));
                 rpe_t += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
                 rpe_tn += 1;
             }

@@ -204,6 +204,10 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
         header.push("gyro_z".into());
     }
     let mut rows = Vec::with_capacity(n);
+    // ground truth is recorded with the delay of a `time_offset` parameter
+    let delay = truth.param_index("time_offset").map_or(0.0, |i| truth.p[i]);
+    let mut history: Vec<(f64, [f64; 3])> = vec![(0.0, x)];
+    let mut t_now = 0.0;
     let mut last_u = command(base, &plan(0.0));
     // The gyro reports the mean yaw rate over the sample interval (an integrating
     // or low-pass-filtered MEMS gyro), which is what a step of the model predicts.
@@ -225,6 +229,8 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
                 for (c, ui) in cum.iter_mut().zip(&u) {
                     *c += ui * h;
                 }
+                t_now += h;
+                history.push((t_now, x));
                 if let Some(g) = obs_gyro {
                     gyro_mean += g.eval(&Runner::obs_args(g, &x, &u, &truth.p, &[]))[0] / m as f64;
                 }
@@ -241,9 +247,10 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
                 InputKind::Absolute => command(base, &plan(times[k] % dur))[i] + noise(0.002, &mut rng),
             });
         }
+        let seen = if delay == 0.0 { x } else { at_time(&history, times[k] - delay) };
         let pose = match obs_pose {
-            Some(h) => h.eval(&Runner::obs_args(h, &x, &last_u, &truth.p, &[])),
-            None => x.to_vec(),
+            Some(h) => h.eval(&Runner::obs_args(h, &seen, &last_u, &truth.p, &[])),
+            None => seen.to_vec(),
         };
         row.push(pose[0] + noise(o.pos_noise, &mut rng));
         row.push(pose[1] + noise(o.pos_noise, &mut rng));
@@ -255,6 +262,18 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
         rows.push(row);
     }
     (header, rows)
+}
+
+/// The true pose at time `t` (linear interpolation of the sub-step history; the
+/// first pose before the start, extrapolated past the end).
+fn at_time(h: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
+    if t <= h[0].0 || h.len() < 2 {
+        return h[0].1;
+    }
+    let j = h.partition_point(|e| e.0 <= t).clamp(1, h.len() - 1);
+    let ((t0, a), (t1, b)) = (h[j - 1], h[j]);
+    let w = (t - t0) / (t1 - t0);
+    [0, 1, 2].map(|i| a[i] + w * (b[i] - a[i]))
 }
 
 /// Format a simulated log as CSV text.
