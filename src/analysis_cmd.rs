@@ -145,15 +145,104 @@ pub fn fit_json(r: &Runner, res: &FitResult, before: &Errors, after: &Errors) ->
     })
 }
 
-pub fn run_fit(c: Common, method: &str) -> ExitCode {
+/// One calibration method's outcome, for the comparison table.
+struct MethodResult {
+    name: &'static str,
+    p: Vec<f64>,
+    std: Vec<f64>,
+    note: String,
+}
+
+fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64) -> Result<(MethodResult, Option<FitResult>), String> {
+    use kinegen_analysis::seed_methods::{ekf, gradient_descent, umbmark};
+    let sigma_omega = r.ir.observations.iter().find(|o| o.name == "gyro").and_then(|o| o.sigma.first().copied()).filter(|s| *s > 0.0).unwrap_or(0.005);
+    Ok(match method {
+        "lm" => {
+            let res = fit(r, runs, &FitOptions::default()).map_err(|e| e.to_string())?;
+            (MethodResult { name: "lm", p: res.p.clone(), std: res.std.clone(), note: format!("{} LM iterations", res.iterations) }, Some(res))
+        }
+        "gd" => {
+            let g = gradient_descent(r, runs, 2000)?;
+            (MethodResult { name: "gd", p: g.p, std: g.std, note: format!("{} iterations, yaw-rate cost {:.3e} -> {:.3e}", g.iterations, g.cost_before, g.cost_after) }, None)
+        }
+        "ekf" => {
+            let e = ekf(r, runs, sigma_omega, mu)?;
+            (MethodResult { name: "ekf", p: e.p, std: e.std, note: format!("{} updates, mu = {mu}, yaw-rate cost {:.3e} -> {:.3e}", e.iterations, e.cost_before, e.cost_after) }, None)
+        }
+        _ => {
+            let u = umbmark(r, runs, side)?;
+            let std = vec![f64::NAN; r.free.len()];
+            (MethodResult { name: "umbmark", p: u.p, std, note: format!("Ed = {:.5}, Eb = {:.5} (alpha {:.3} deg, beta {:.3} deg; {} cw, {} ccw runs)", u.ed, u.eb, u.alpha_deg, u.beta_deg, u.cw_runs, u.ccw_runs) }, None)
+        }
+    })
+}
+
+pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) -> ExitCode {
     let out = Out::new(c.json.as_deref());
     let prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
     let r = &prep.runner;
+    let truth = match parse_sets(truth) {
+        Ok(t) => t,
+        Err(e) => return bad(e),
+    };
     if method != "lm" {
-        return bad(format!("--method {method}: only `lm` is implemented in this version (gd and ekf are not yet)"));
+        let methods: Vec<&str> = if method == "all" { vec!["lm", "gd", "ekf", "umbmark"] } else { vec![method] };
+        let mut rows = Vec::new();
+        for m in methods {
+            match run_method(r, &prep.runs, m, side, mu) {
+                Ok((res, _)) => rows.push(res),
+                Err(e) if method == "all" => out.say(&format!("{m}: not applicable here: {e}")),
+                Err(e) => return bad(e),
+            }
+        }
+        let before = evaluate(r, &r.p, &prep.runs);
+        out.say(&format!("{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m", r.ir.name, rows.len(), prep.runs.len(), before.rmse));
+        let mut methods_json = serde_json::Map::new();
+        let mut best: Option<(f64, &str)> = None;
+        for m in &rows {
+            let after = evaluate(r, &m.p, &prep.runs);
+            let hold = (!prep.holdout.is_empty()).then(|| evaluate(r, &m.p, &prep.holdout));
+            let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
+            let dist = (!truth.is_empty()).then(|| {
+                truth.iter().filter_map(|(n, v)| r.param_index(n).map(|i| ((m.p[i] - v) / v).powi(2))).sum::<f64>().sqrt()
+            });
+            if let Some(d) = dist {
+                if best.is_none_or(|b| d < b.0) {
+                    best = Some((d, m.name));
+                }
+            }
+            out.say(&format!(
+                "  {:<8} position RMSE {:.4} m{}{}  ({})",
+                m.name,
+                after.rmse,
+                hold.as_ref().map(|h| format!(", held-out {:.4} m", h.rmse)).unwrap_or_default(),
+                dist.map(|d| format!(", distance to truth {:.3}%", 100.0 * d)).unwrap_or_default(),
+                m.note
+            ));
+            for &i in &r.free {
+                out.say(&format!("      {:<14} {:.6}", r.names[i], m.p[i]));
+            }
+            methods_json.insert(m.name.into(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": dist}));
+        }
+        if let Some((d, name)) = best {
+            out.say(&format!("closest to the true parameters: {name} ({:.3}% relative distance)", 100.0 * d));
+        }
+        let first = rows.first();
+        let doc = json!({
+            "model": r.ir.name, "metric": "position_rmse_m",
+            "before": {"rmse": before.rmse},
+            "after": {"rmse": first.map(|m| evaluate(r, &m.p, &prep.runs).rmse)},
+            "parameters": first.map(|m| r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect::<serde_json::Map<_, _>>()),
+            "methods": methods_json,
+            "closest_to_truth": best.map(|b| b.1),
+        });
+        return match out.json(c.json.as_deref(), &doc) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => bad(e),
+        };
     }
     let res = match fit(r, &prep.runs, &FitOptions::default()) {
         Ok(x) => x,

@@ -63,9 +63,21 @@ enum Command {
     Fit {
         #[command(flatten)]
         common: analysis_cmd::Common,
-        /// Calibration method.
-        #[arg(long, default_value = "lm", value_parser = ["lm", "gd", "ekf"])]
+        /// Calibration method: lm (Levenberg-Marquardt on pose and gyro residuals),
+        /// gd (seed 000 eq. 19-21), ekf (seed 000 eq. 22-26), umbmark (Borenstein &
+        /// Feng, differential drive, cw and ccw square runs), all (every applicable
+        /// method, compared).
+        #[arg(long, default_value = "lm", value_parser = ["lm", "gd", "ekf", "umbmark", "all"])]
         method: String,
+        /// Square side (m) of the UMBMark runs.
+        #[arg(long, default_value_t = 1.0)]
+        side: f64,
+        /// EKF measurement-noise inflation mu (seed 000 eq. 26), rad/s.
+        #[arg(long, default_value_t = 0.01)]
+        mu: f64,
+        /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
+        #[arg(long)]
+        truth: Vec<String>,
     },
     /// Calibrate, then test each applicable effect of the catalogue (spec/effects),
     /// rank them, say which effect is missing (or that none is, or that unexplained
@@ -127,7 +139,7 @@ fn main() -> ExitCode {
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Diagnose(c) => diagnose_cmd::run(c),
-        Command::Fit { common, method } => analysis_cmd::run_fit(common, &method),
+        Command::Fit { common, method, side, mu, truth } => analysis_cmd::run_fit(common, &method, side, mu, &truth),
         Command::Simulate { spec, effect, set, trajectory, seed, laps, out } => {
             effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out })
         }

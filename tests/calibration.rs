@@ -128,3 +128,36 @@ fn a_measurement_delay_is_calibrated_once_the_time_offset_effect_is_added() {
     assert!((tau - 0.08).abs() < 0.004, "time_offset {tau}");
     assert!(with["after"]["rmse"].as_f64().unwrap() * 3.0 < base["after"]["rmse"].as_f64().unwrap());
 }
+
+#[test]
+fn seed_methods_run_and_are_compared_on_umbmark_squares() {
+    let tmp = tempfile::tempdir().unwrap();
+    let truth = ["r_r=0.0423", "r_l=0.0417", "b=0.206"];
+    let mut data = Vec::new();
+    for dir in ["cw", "ccw"] {
+        let traj = format!("square-{dir}");
+        let log = simulate(tmp.path(), &format!("{dir}.csv"), &["--spec", "spec/diff_drive.toml", "--set", truth[0], "--set", truth[1], "--set", truth[2], "--trajectory", &traj, "--seed", "1"]);
+        data.push(log.to_str().unwrap().to_string());
+    }
+    let mut args = vec!["fit", "--spec", "spec/diff_drive.toml", "--method", "all", "--data", &data[0], "--data", &data[1]];
+    for t in &truth {
+        args.extend(["--truth", t]);
+    }
+    let doc = kinegen_json(&args);
+    let methods = doc["methods"].as_object().unwrap();
+    for m in ["lm", "gd", "ekf", "umbmark"] {
+        assert!(methods.contains_key(m), "{m} did not run");
+    }
+    assert_eq!(doc["closest_to_truth"], "lm");
+    // UMBMark moves every parameter toward the truth
+    let nominal = [0.042, 0.042, 0.2];
+    for ((name, t), n) in ["r_r", "r_l", "b"].iter().zip([0.0423, 0.0417, 0.206]).zip(nominal) {
+        let est = methods["umbmark"]["parameters"][*name]["estimate"].as_f64().unwrap();
+        assert!((est - t).abs() < (n - t).abs(), "umbmark {name}: {est}, truth {t}, nominal {n}");
+    }
+    // the yaw-rate EKF (seed 000) improves the ratio it can see: omega = (r_r w_r - r_l w_l)/b
+    let e = &methods["ekf"]["parameters"];
+    let ratio = |r: f64, b: f64| r / b;
+    let (er, eb) = (e["r_r"]["estimate"].as_f64().unwrap(), e["b"]["estimate"].as_f64().unwrap());
+    assert!((ratio(er, eb) - ratio(0.0423, 0.206)).abs() < (ratio(0.042, 0.2) - ratio(0.0423, 0.206)).abs());
+}

@@ -12,6 +12,7 @@ pub mod fit;
 pub mod log;
 pub mod metrics;
 pub mod model;
+pub mod seed_methods;
 pub mod simulate;
 
 pub use kinegen_model::ir::ModelIr;

@@ -18,6 +18,10 @@ use std::f64::consts::PI;
 pub enum Trajectory {
     /// UMBMark bidirectional square (seed 004): a 1 m square counter-clockwise, then clockwise.
     Square,
+    /// One UMBMark square, clockwise or counter-clockwise (for the UMBMark method,
+    /// which needs separate runs in each direction).
+    SquareCw,
+    SquareCcw,
     FigureEight,
     /// Smooth random driving.
     Random,
@@ -30,10 +34,12 @@ impl std::str::FromStr for Trajectory {
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
             "square" | "umbmark" => Ok(Trajectory::Square),
+            "square-cw" => Ok(Trajectory::SquareCw),
+            "square-ccw" => Ok(Trajectory::SquareCcw),
             "figure8" | "figure-eight" => Ok(Trajectory::FigureEight),
             "random" => Ok(Trajectory::Random),
             "spin" | "turn-in-place" => Ok(Trajectory::Spin),
-            _ => Err(format!("unknown trajectory `{s}` (square, figure8, random, spin)")),
+            _ => Err(format!("unknown trajectory `{s}` (square, square-cw, square-ccw, figure8, random, spin)")),
         }
     }
 }
@@ -74,11 +80,11 @@ fn profile(t: f64, dur: f64) -> f64 {
     smooth(t / ramp) * smooth((dur - t) / ramp)
 }
 
-fn square(can_spin: bool) -> Vec<Seg> {
+fn square(can_spin: bool, dirs: &[f64]) -> Vec<Seg> {
     let (v, w) = (0.3, 0.8);
     let side = 1.0;
     let mut segs = Vec::new();
-    for dir in [1.0, -1.0] {
+    for &dir in dirs {
         for _ in 0..4 {
             segs.push(Seg { dur: side / v * 1.35, twist: [v, 0.0, 0.0] });
             if can_spin {
@@ -97,8 +103,13 @@ fn square(can_spin: bool) -> Vec<Seg> {
 /// The desired body twist at time t, and the total duration.
 fn planner(o: &SimOptions, can_spin: bool, lateral: bool, rng: &mut SmallRng) -> (Box<dyn Fn(f64) -> [f64; 3]>, f64) {
     match o.trajectory {
-        Trajectory::Square => {
-            let segs = square(can_spin);
+        Trajectory::Square | Trajectory::SquareCw | Trajectory::SquareCcw => {
+            let dirs: &[f64] = match o.trajectory {
+                Trajectory::SquareCw => &[-1.0],
+                Trajectory::SquareCcw => &[1.0],
+                _ => &[1.0, -1.0],
+            };
+            let segs = square(can_spin, dirs);
             let total: f64 = segs.iter().map(|s| s.dur).sum();
             (
                 Box::new(move |t| {

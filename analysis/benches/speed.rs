@@ -1,0 +1,109 @@
+//! `cargo bench -p kinegen-analysis --bench speed`
+//!
+//! 1. The IR evaluator against the compiled generated kernel on the same inputs
+//!    (diff_drive step_exact and step_exact_jac_p): ns per call and their ratio.
+//! 2. Calibration of a 1,000,000-sample diff_drive log: samples per second.
+//! 3. Diagnosis of a 10,000-sample log against the catalogue effects whose IR is
+//!    available without symbolica (the committed augmented IRs are not, so this
+//!    measures the base calibration plus each candidate's calibration with the
+//!    candidate models built here from the base IR): seconds per candidate.
+//! Figures are medians of repeated runs in this process; ratios compare numbers
+//! measured in the same run.
+use kinegen_analysis::dataset::Run;
+use kinegen_analysis::fit::{fit, FitOptions};
+use kinegen_analysis::model::Runner;
+use kinegen_model::ir::ModelIr;
+use rand::{Rng, SeedableRng};
+use std::hint::black_box;
+use std::time::Instant;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn ir() -> ModelIr {
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../generated/ir/diff_drive.json");
+    ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+/// A synthetic log: smooth random wheel rates, ground truth from the model with
+/// perturbed parameters plus motion-capture noise.
+fn log(r: &Runner, n: usize, seed: u64) -> Run {
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+    let dt = 0.05;
+    let (mut a, mut b) = (0.0f64, 0.0f64);
+    let u: Vec<Vec<f64>> = (0..n - 1)
+        .map(|k| {
+            let t = k as f64 * dt;
+            a = 3000.0 + 1500.0 * (0.05 * t).sin() + rng.gen_range(-50.0..50.0);
+            b = 3000.0 + 1500.0 * (0.031 * t + 1.0).sin() + rng.gen_range(-50.0..50.0);
+            vec![a, b]
+        })
+        .collect();
+    let mut truth = r.clone();
+    truth.p[0] *= 1.01;
+    truth.p[2] *= 1.02;
+    let mut run = Run { name: "bench".into(), t: (0..n).map(|k| k as f64 * dt).collect(), dt: vec![dt; n - 1], u, gt: None, gyro: None };
+    let track = kinegen_analysis::deadreckon::run(&truth, &truth.p, &run, [0.0; 3], false);
+    run.gt = Some(track.pose.iter().map(|p| [p[0] + rng.gen_range(-1e-3..1e-3), p[1] + rng.gen_range(-1e-3..1e-3), p[2] + rng.gen_range(-2e-3..2e-3)]).collect());
+    run
+}
+
+fn main() {
+    let ir = ir();
+    let r = Runner::new(ir.clone(), &[]).unwrap();
+    let n_calls = 200_000;
+    let inputs: Vec<([f64; 3], [f64; 2])> = {
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(1);
+        (0..n_calls).map(|_| ([rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0)], [rng.gen_range(-4000.0..4000.0), rng.gen_range(-4000.0..4000.0)])).collect()
+    };
+    let p: [f64; 5] = r.p.clone().try_into().unwrap();
+    let w = [0.0, 0.0];
+    for name in ["step_exact", "step_exact_jac_p"] {
+        let f = ir.function(name).unwrap();
+        let mut out = vec![0.0; f.rows * f.cols];
+        let mut scratch = Vec::new();
+        let mut t_ir = Vec::new();
+        let mut t_gen = Vec::new();
+        for _ in 0..7 {
+            let t0 = Instant::now();
+            for (x, u) in &inputs {
+                f.eval_into(&[x, u, &w, &p, &[0.05]], &mut out, &mut scratch);
+                black_box(&out);
+            }
+            t_ir.push(t0.elapsed().as_secs_f64() / n_calls as f64);
+            let t0 = Instant::now();
+            for (x, u) in &inputs {
+                if name == "step_exact" {
+                    black_box(kinegen_generated::diff_drive::step_exact(black_box(x), u, &w, &p, 0.05));
+                } else {
+                    black_box(kinegen_generated::diff_drive::step_exact_jac_p(black_box(x), u, &w, &p, 0.05));
+                }
+            }
+            t_gen.push(t0.elapsed().as_secs_f64() / n_calls as f64);
+        }
+        let (a, b) = (median(t_ir), median(t_gen));
+        println!("{name:<18} IR evaluator {:>8.1} ns/call, generated kernel {:>7.1} ns/call, ratio IR/generated {:.1}x", a * 1e9, b * 1e9, a / b);
+    }
+
+    let n = 1_000_000;
+    let run = log(&r, n, 2);
+    let o = FitOptions::default();
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..3 {
+        let t0 = Instant::now();
+        last = Some(fit(&r, std::slice::from_ref(&run), &o).unwrap());
+        times.push(t0.elapsed().as_secs_f64());
+    }
+    let res = last.unwrap();
+    let t = median(times);
+    println!(
+        "fit on a {n}-sample diff_drive log: {t:.2} s ({:.0} samples/s, {} LM iterations, b = {:.5} for a true {:.5})",
+        n as f64 / t,
+        res.iterations,
+        res.p[2],
+        r.p[2] * 1.02
+    );
+}

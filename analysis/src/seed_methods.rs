@@ -1,0 +1,216 @@
+//! The seeds' own calibration methods, so users can compare them with `fit`'s
+//! Levenberg-Marquardt:
+//!
+//! * [`gradient_descent`]: seed 000 eq. 19-21, gradient descent on the mean squared
+//!   yaw-rate error V(lambda) = 1/(K-1) sum (omega_k - omega_hat_k(lambda))^2.
+//! * [`ekf`]: seed 000 eq. 22-26, an extended Kalman filter over constant
+//!   parameters with the measurement variance inflated by mu^2 (eq. 26).
+//! * [`umbmark`]: Borenstein & Feng's UMBMark (used by seed 004): Ed (wheel diameter
+//!   ratio) and Eb (wheelbase) from the return-position errors of clockwise and
+//!   counter-clockwise square runs (differential drive).
+//!
+//! The yaw-rate methods use the gyro column when the log has one; otherwise the
+//! yaw rate measured by the ground-truth heading, (theta_{k+1} - theta_k)/dt: the
+//! reference heading that seed 000 takes from its laser gyro.
+use crate::dataset::Run;
+use crate::deadreckon;
+use crate::log::wrap;
+use crate::model::Runner;
+use nalgebra::{DMatrix, DVector};
+
+/// Measured yaw rate per step (gyro row k+1, or ground-truth heading rate).
+fn yaw_rates(run: &Run) -> Option<Vec<f64>> {
+    if let Some(g) = &run.gyro {
+        return Some(g[1..].to_vec());
+    }
+    let gt = run.gt.as_ref()?;
+    Some((0..run.steps()).map(|k| wrap(gt[k + 1][2] - gt[k][2]) / run.dt[k]).collect())
+}
+
+/// Model yaw rate per step and its gradient w.r.t. the free parameters.
+fn predicted(r: &Runner, p: &[f64], run: &Run, free: &[usize]) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let h = r.ir.function("obs_gyro").or_else(|| r.ir.function("twist")).unwrap();
+    let jp = r.ir.function("obs_gyro_jac_p");
+    let tw = r.f("twist");
+    let mut w = Vec::new();
+    let mut g = Vec::new();
+    let x = [0.0; 3];
+    for k in 0..run.steps() {
+        let u = &run.u[k];
+        match jp {
+            Some(jp) => {
+                w.push(h.eval(&Runner::obs_args(h, &x, u, p, &[]))[0]);
+                let d = jp.eval(&Runner::obs_args(jp, &x, u, p, &[]));
+                g.push(free.iter().map(|&i| d[i]).collect());
+            }
+            None => {
+                // no gyro model: differentiate the twist's yaw rate numerically
+                let w0 = tw.eval(&[u, p])[2];
+                w.push(w0);
+                g.push(
+                    free.iter()
+                        .map(|&i| {
+                            let mut q = p.to_vec();
+                            let hh = 1e-6 * q[i].abs().max(1e-6);
+                            q[i] += hh;
+                            (tw.eval(&[u, &q])[2] - w0) / hh
+                        })
+                        .collect(),
+                );
+            }
+        }
+    }
+    (w, g)
+}
+
+pub struct SeedFit {
+    pub p: Vec<f64>,
+    pub std: Vec<f64>,
+    pub iterations: usize,
+    pub cost_before: f64,
+    pub cost_after: f64,
+}
+
+fn gyro_cost(r: &Runner, p: &[f64], runs: &[Run], free: &[usize]) -> (f64, DVector<f64>, DMatrix<f64>) {
+    let (mut v, mut n) = (0.0, 0usize);
+    let m = free.len();
+    let mut grad = DVector::zeros(m);
+    let mut gn = DMatrix::zeros(m, m);
+    for run in runs {
+        let Some(meas) = yaw_rates(run) else { continue };
+        let (w, g) = predicted(r, p, run, free);
+        for k in 0..w.len() {
+            let e = w[k] - meas[k];
+            v += e * e;
+            n += 1;
+            let gk = DVector::from_vec(g[k].clone());
+            grad += &gk * (2.0 * e);
+            gn += &gk * gk.transpose() * 2.0;
+        }
+    }
+    let d = (n.max(2) - 1) as f64;
+    (v / d, grad / d, gn / d)
+}
+
+/// Seed 000 eq. 21: lambda_n = lambda_{n-1} - eta dV/dlambda. eta is fixed, set
+/// once to 1/L with L the largest eigenvalue of the Gauss-Newton Hessian of V at
+/// the start (the classical stable step for gradient descent).
+pub fn gradient_descent(r: &Runner, runs: &[Run], max_iter: usize) -> Result<SeedFit, String> {
+    let free = r.free.clone();
+    let mut p = r.p.clone();
+    let (v0, _, h0) = gyro_cost(r, &p, runs, &free);
+    if !v0.is_finite() {
+        return Err("no yaw-rate measurement (gyro_z or ground-truth heading) in the logs".into());
+    }
+    let lmax = h0.symmetric_eigenvalues().max().max(1e-300);
+    let eta = 1.0 / lmax;
+    let mut v = v0;
+    let mut it = 0;
+    for i in 0..max_iter {
+        it = i + 1;
+        let (vc, g, _) = gyro_cost(r, &p, runs, &free);
+        v = vc;
+        if g.norm() * eta < 1e-12 * p.iter().map(|x| x.abs()).fold(0.0, f64::max) {
+            break;
+        }
+        for (k, &j) in free.iter().enumerate() {
+            p[j] -= eta * g[k];
+        }
+    }
+    let (vf, _, h) = gyro_cost(r, &p, runs, &free);
+    let n: usize = runs.iter().map(|x| x.steps()).sum();
+    let cov = h.pseudo_inverse(1e-12).unwrap_or_else(|_| DMatrix::zeros(free.len(), free.len())) * (2.0 * vf / n as f64);
+    let _ = v;
+    Ok(SeedFit { std: (0..free.len()).map(|k| cov[(k, k)].max(0.0).sqrt()).collect(), p, iterations: it, cost_before: v0, cost_after: vf })
+}
+
+/// Seed 000 eq. 22-26: lambda_k = lambda_{k-1}; omega_k = h_k(lambda) + v_k, with
+/// sigma_v^2 = sigma_omega^2 + mu^2. P0 = diag((0.1 * |nominal|)^2) (seed 000 used
+/// (5 cm)^2 for parameters of about 10-30 cm).
+pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFit, String> {
+    let free = r.free.clone();
+    let m = free.len();
+    let mut p = r.p.clone();
+    let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(m, free.iter().map(|&i| (0.1 * r.p[i].abs().max(1e-3)).powi(2))));
+    let sv2 = sigma_omega * sigma_omega + mu * mu;
+    let (v0, _, _) = gyro_cost(r, &p, runs, &free);
+    let mut steps = 0;
+    for run in runs {
+        let Some(meas) = yaw_rates(run) else { continue };
+        for k in 0..run.steps() {
+            let one = Run { name: String::new(), t: vec![0.0, run.dt[k]], dt: vec![run.dt[k]], u: vec![run.u[k].clone()], gt: None, gyro: None };
+            let (w, g) = predicted(r, &p, &one, &free);
+            let hgrad = DVector::from_vec(g[0].clone());
+            let s = (hgrad.transpose() * &cov * &hgrad)[(0, 0)] + sv2;
+            let gain = &cov * &hgrad / s; // eq. 25
+            let innov = meas[k] - w[0];
+            for (a, &i) in free.iter().enumerate() {
+                p[i] += gain[a] * innov; // eq. 24
+            }
+            cov = (DMatrix::identity(m, m) - &gain * hgrad.transpose()) * &cov; // eq. 24
+            steps += 1;
+        }
+    }
+    if steps == 0 {
+        return Err("no yaw-rate measurement (gyro_z or ground-truth heading) in the logs".into());
+    }
+    let (vf, _, _) = gyro_cost(r, &p, runs, &free);
+    Ok(SeedFit { std: (0..m).map(|k| cov[(k, k)].max(0.0).sqrt()).collect(), p, iterations: steps, cost_before: v0, cost_after: vf })
+}
+
+/// Result of UMBMark: corrected parameters and the intermediate quantities.
+pub struct Umbmark {
+    pub p: Vec<f64>,
+    pub ed: f64,
+    pub eb: f64,
+    pub alpha_deg: f64,
+    pub beta_deg: f64,
+    pub cw_runs: usize,
+    pub ccw_runs: usize,
+}
+
+/// UMBMark (Borenstein & Feng): for each run, the return-position error
+/// eps = true end - odometry end in the start frame; x centres of gravity of the
+/// clockwise and counter-clockwise runs give alpha = (x_cw + x_ccw)/(-4L) and
+/// beta = (x_cw - x_ccw)/(-4L); R = (L/2)/sin(beta/2); Ed = (R + b/2)/(R - b/2);
+/// Eb = 90 deg/(90 deg - alpha). Corrections: b' = Eb b, r_l' = 2/(Ed + 1) r_l,
+/// r_r' = 2/(1/Ed + 1) r_r. Needs parameters named r_r, r_l and b.
+pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
+    let (ir_, il, ib) = match (r.param_index("r_r"), r.param_index("r_l"), r.param_index("b")) {
+        (Some(a), Some(b), Some(c)) => (a, b, c),
+        _ => return Err("UMBMark needs a differential drive with parameters r_r, r_l and b".into()),
+    };
+    let (mut cw, mut ccw) = (Vec::new(), Vec::new());
+    for run in runs {
+        let gt = run.gt.as_ref().ok_or_else(|| format!("{}: UMBMark needs ground truth", run.name))?;
+        let start = run.start_pose();
+        let tr = deadreckon::run(r, &r.p, run, start, false);
+        let (e_true, e_odo) = (gt.last().unwrap(), tr.pose.last().unwrap());
+        let (c, s) = (start[2].cos(), start[2].sin());
+        let rot = |v: [f64; 3]| [c * (v[0] - start[0]) + s * (v[1] - start[1]), -s * (v[0] - start[0]) + c * (v[1] - start[1])];
+        let (a, b) = (rot(*e_true), rot(*e_odo));
+        let eps = [a[0] - b[0], a[1] - b[1]];
+        let turn = gt.last().unwrap()[2] - gt[0][2];
+        if turn > 0.0 {
+            ccw.push(eps);
+        } else {
+            cw.push(eps);
+        }
+    }
+    if cw.is_empty() || ccw.is_empty() {
+        return Err(format!("UMBMark needs clockwise and counter-clockwise square runs (got {} cw, {} ccw)", cw.len(), ccw.len()));
+    }
+    let mean = |v: &[[f64; 2]]| v.iter().map(|e| e[0]).sum::<f64>() / v.len() as f64;
+    let (xcw, xccw) = (mean(&cw), mean(&ccw));
+    let alpha = (xcw + xccw) / (-4.0 * side);
+    let beta = (xcw - xccw) / (-4.0 * side);
+    let b = r.p[ib];
+    let radius = (side / 2.0) / (beta / 2.0).sin();
+    let ed = (radius + b / 2.0) / (radius - b / 2.0);
+    let eb = 90.0 / (90.0 - alpha.to_degrees());
+    let mut p = r.p.clone();
+    p[ib] = eb * b;
+    p[il] = 2.0 / (ed + 1.0) * r.p[il];
+    p[ir_] = 2.0 / (1.0 / ed + 1.0) * r.p[ir_];
+    Ok(Umbmark { p, ed, eb, alpha_deg: alpha.to_degrees(), beta_deg: beta.to_degrees(), cw_runs: cw.len(), ccw_runs: ccw.len() })
+}
