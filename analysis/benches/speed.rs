@@ -3,10 +3,8 @@
 //! 1. The IR evaluator against the compiled generated kernel on the same inputs
 //!    (diff_drive step_exact and step_exact_jac_p): ns per call and their ratio.
 //! 2. Calibration of a 1,000,000-sample diff_drive log: samples per second.
-//! 3. Diagnosis of a 10,000-sample log against the catalogue effects whose IR is
-//!    available without symbolica (the committed augmented IRs are not, so this
-//!    measures the base calibration plus each candidate's calibration with the
-//!    candidate models built here from the base IR): seconds per candidate.
+//! (Diagnosis time per candidate is printed by `kinegen diagnose` itself, which
+//! needs the CLI to derive the augmented models.)
 //! Figures are medians of repeated runs in this process; ratios compare numbers
 //! measured in the same run.
 use kinegen_analysis::dataset::Run;

@@ -38,6 +38,39 @@ impl Run {
         m
     }
 
+    /// Rows `a..b` (inclusive of b-1) as a run of their own.
+    pub fn slice(&self, a: usize, b: usize) -> Run {
+        Run {
+            name: format!("{}[{a}..{b}]", self.name),
+            t: self.t[a..b].to_vec(),
+            dt: self.dt[a..b - 1].to_vec(),
+            u: self.u[a..b - 1].to_vec(),
+            gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
+            gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
+        }
+    }
+
+    /// Split a long run into pieces of about `seconds`, each dead-reckoned from its
+    /// own measured start pose (a run shorter than twice that stays whole).
+    pub fn segments(&self, seconds: f64) -> Vec<Run> {
+        let dur = self.t.last().unwrap() - self.t[0];
+        if dur < 2.0 * seconds || self.gt.is_none() {
+            return vec![self.clone()];
+        }
+        let mut out = Vec::new();
+        let mut a = 0;
+        while a + 2 < self.t.len() {
+            let mut b = a + 1;
+            while b < self.t.len() && self.t[b] - self.t[a] < seconds {
+                b += 1;
+            }
+            let b = if self.t.len() - b < 10 { self.t.len() } else { (b + 1).min(self.t.len()) };
+            out.push(self.slice(a, b));
+            a = b - 1;
+        }
+        out
+    }
+
     /// Columns a model needs from a log.
     pub fn wanted(r: &Runner) -> Vec<String> {
         let mut w: Vec<String> = vec!["t".into(), "gt_x".into(), "gt_y".into(), "gt_theta".into(), "gyro_z".into()];

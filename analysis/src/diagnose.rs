@@ -54,7 +54,7 @@ pub struct Diagnosis {
 
 /// Weighted residual RMS of a parameter vector.
 pub fn weighted_rms(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
-    let (res, _) = residuals(r, p, &[], runs, o, false);
+    let (res, _) = residuals(r, p, &[], &crate::fit::segmented(runs), o, false);
     (res.iter().map(|x| x * x).sum::<f64>() / res.len().max(1) as f64).sqrt()
 }
 
@@ -65,16 +65,8 @@ pub fn split(runs: &[Run], frac: f64) -> (Vec<Run>, Vec<Run>) {
     for r in runs {
         let n = r.t.len();
         let cut = ((n as f64 * frac) as usize).clamp(2, n - 2);
-        let part = |a: usize, b: usize| Run {
-            name: format!("{}[{a}..{b}]", r.name),
-            t: r.t[a..b].to_vec(),
-            dt: r.dt[a..b - 1].to_vec(),
-            u: r.u[a..b - 1].to_vec(),
-            gt: r.gt.as_ref().map(|g| g[a..b].to_vec()),
-            gyro: r.gyro.as_ref().map(|g| g[a..b].to_vec()),
-        };
-        tr.push(part(0, cut + 1));
-        te.push(part(cut, n));
+        tr.push(r.slice(0, cut + 1));
+        te.push(r.slice(cut, n));
     }
     (tr, te)
 }

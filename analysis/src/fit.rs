@@ -13,6 +13,15 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
 
+/// Length of the re-anchored segments of long runs (see [`fit`]).
+pub const SEGMENT_S: f64 = 60.0;
+
+/// The runs as calibration and scoring see them: runs longer than 2 min split
+/// into re-anchored segments of about a minute.
+pub fn segmented(runs: &[Run]) -> Vec<Run> {
+    runs.iter().flat_map(|x| x.segments(SEGMENT_S)).collect()
+}
+
 #[derive(Debug, Clone)]
 pub struct FitOptions {
     pub pos_sigma: f64,
@@ -179,6 +188,11 @@ fn cost(res: &[f64]) -> f64 {
 /// convex in the parameters and gives the full dead-reckoning fit a start inside
 /// its basin (a long track with a large structural error otherwise spirals away).
 pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+    // Dead reckoning over hours drifts beyond any basin of attraction: runs longer
+    // than 2 min are calibrated as 60 s segments, each re-anchored on its measured
+    // start pose (relative rather than absolute error).
+    let split = segmented(runs);
+    let runs = &split[..];
     let has_gyro = runs.iter().any(|x| x.gyro.is_some()) && r.ir.function("obs_gyro").is_some();
     let has_pose = runs.iter().any(|x| x.gt.is_some());
     if o.use_gyro && o.use_pose && has_gyro && has_pose {
