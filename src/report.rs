@@ -56,7 +56,8 @@ fn chart(title: &str, xl: &str, yl: &str, series: &[Series], scatter: bool, equa
         }
         for (name, color, pts) in series {
             let color = *color;
-            if scatter {
+            // in a scatter chart, a two-point series is a reference line
+            if scatter && pts.len() > 2 {
                 c.draw_series(pts.iter().map(|p| Circle::new(*p, 1, color.filled())))
                     .map_err(|e| e.to_string())?
                     .label(*name)
@@ -229,10 +230,23 @@ pub fn diagnose_report(
             let a = dr(aug, &cand.fitted, run, start, false);
             series.push((name.as_str(), GREEN, traj(run, &a)));
             errs.push((name.as_str(), GREEN, pos_err(run, &a)));
-            // the effect's residual signature: one-step lateral and heading residuals vs v*omega
-            let [_, by_w, _] = residual_scatter(run, &b);
-            let [_, ay_w, _] = residual_scatter(run, &a);
-            figs.push(chart("turn-rate residual vs yaw rate: before and after adding the effect", "yaw rate (rad/s)", "residual (rad/s)", &[("calibrated spec", RED, by_w), (name.as_str(), GREEN, ay_w)], true, false, &[])?);
+            // the effect's residual signature
+            if let Some(param) = cand.parameters.keys().next() {
+                if let Some((chan, pts)) = kinegen_analysis::diagnose::signature(base, &d.base_fit.p, aug, std::slice::from_ref(run), param) {
+                    let est = cand.parameters[param]["estimate"].as_f64().unwrap_or(0.0);
+                    let (lo, hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, p| (m.0.min(p.0), m.1.max(p.0)));
+                    let line = vec![(lo, lo * est), (hi, hi * est)];
+                    figs.push(chart(
+                        &format!("signature of {name}: {chan} one-step residual of the calibrated spec"),
+                        &format!("change of the prediction per unit {param}"),
+                        "residual",
+                        &[("calibrated spec, per step", RED, pts), (&format!("slope = fitted {param}"), GREEN, line)],
+                        true,
+                        false,
+                        &[],
+                    )?);
+                }
+            }
         }
         figs.insert(0, chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &series, false, true, &[])?);
         figs.insert(1, chart(&format!("{}: position error", run.name), "t (s)", "error (m)", &errs, false, false, &[])?);
@@ -258,7 +272,7 @@ pub fn diagnose_report(
         t += &format!("<p class=\"warn\">structure left: {}</p>", esc(f));
     }
     let intro = format!(
-        "<p>Model <b>{}</b>: error {:.4} with nominal parameters, {:.4} after calibrating the spec as it is. Verdict: <b>{}</b>.</p>",
+        "<p>Model <b>{}</b>: error {:.4} with nominal parameters, {:.4} after calibrating the spec as it is (error: RMS of the residuals in units of their sigma). Verdict: <b>{}</b>.</p>",
         esc(&base.ir.name),
         d.baseline_rmse,
         d.calibrated_rmse,

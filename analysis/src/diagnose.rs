@@ -184,6 +184,34 @@ fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 4]>, Vec<[f64; 6]
     (res, feat, regimes)
 }
 
+/// The effect's residual signature, for plotting: per step, x = how much one unit
+/// of the effect parameter changes the one-step prediction and y = the calibrated
+/// base model's one-step residual, in the channel where the signature is largest.
+/// For the missing effect the points line up along y = x * parameter.
+pub fn signature(base: &Runner, pb: &[f64], aug: &Runner, runs: &[Run], param: &str) -> Option<(String, Vec<(f64, f64)>)> {
+    let i = aug.param_index(param)?;
+    let start = seeded(aug, base, pb);
+    let h = {
+        let rp = aug.ir.runtime_params();
+        match (rp[i].min, rp[i].max) {
+            (Some(a), Some(b)) => 0.01 * (b - a),
+            _ => 1e-3,
+        }
+    };
+    let mut moved = start.p.clone();
+    moved[i] += h;
+    let (r0, _, _) = one_step(&start, &start.p, runs);
+    let (r1, _, _) = one_step(&start, &moved, runs);
+    let (rb, _, _) = one_step(base, pb, runs);
+    let chans = ["along-track", "lateral", "heading", "gyro"];
+    let c = (0..4).max_by(|&a, &b| {
+        let e = |c: usize| r0.iter().zip(&r1).map(|(x, y)| ((x[c] - y[c]) / h).powi(2)).sum::<f64>();
+        e(a).total_cmp(&e(b))
+    })?;
+    let pts = r0.iter().zip(&r1).zip(&rb).map(|((x0, x1), b)| (-(x1[c] - x0[c]) / h, b[c])).collect();
+    Some((chans[c].to_string(), pts))
+}
+
 /// Is anything left in the one-step residuals that the motion explains? For each
 /// channel (along-track, lateral, heading, gyro) and each feature (speed, yaw rate,
 /// v*omega, heading, time) the steps are split into 8 quantile bins of the feature
