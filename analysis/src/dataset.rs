@@ -38,6 +38,16 @@ impl Run {
         m
     }
 
+    /// Where time `s` falls among the rows: (j, a) with t_j <= s < t_{j+1} and
+    /// a = (s - t_j)/(t_{j+1} - t_j), j clamped to the first and last interval (so
+    /// a may fall outside [0, 1] before the start or after the end: linear
+    /// extrapolation).
+    pub fn locate(&self, s: f64) -> (usize, f64) {
+        let n = self.t.len();
+        let j = self.t.partition_point(|t| *t <= s).clamp(1, n - 1) - 1;
+        (j, (s - self.t[j]) / (self.t[j + 1] - self.t[j]))
+    }
+
     /// Rows `a..b` (inclusive of b-1) as a run of their own.
     pub fn slice(&self, a: usize, b: usize) -> Run {
         Run {

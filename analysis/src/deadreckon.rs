@@ -43,10 +43,8 @@ pub fn run(r: &Runner, p: &[f64], data: &Run, start: [f64; 3], with_sens: bool) 
     let tau_i = r.param_index("time_offset");
     let (start, gt_vel) = match (tau_i.map(|i| p[i]), &data.gt) {
         (Some(tau), Some(g)) if tau != 0.0 && g.len() > 1 => {
-            let s = data.t[0] + tau;
-            let j = data.t.partition_point(|t| *t <= s).clamp(1, g.len() - 1) - 1;
+            let (j, a) = data.locate(data.t[0] + tau);
             let dtj = data.t[j + 1] - data.t[j];
-            let a = (s - data.t[j]) / dtj;
             let vel = [0, 1, 2].map(|i| (g[j + 1][i] - g[j][i]) / dtj);
             // the rest-averaged start when the robot has not moved yet
             let at = [0, 1, 2].map(|i| g[j][i] + a * (g[j + 1][i] - g[j][i]));
@@ -103,9 +101,7 @@ pub fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3
             let x = if tau == 0.0 || pose.len() < 2 {
                 pose[k]
             } else {
-                let s = data.t[k] - tau;
-                let j = data.t.partition_point(|t| *t <= s).clamp(1, pose.len() - 1) - 1;
-                let a = (s - data.t[j]) / (data.t[j + 1] - data.t[j]);
+                let (j, a) = data.locate(data.t[k] - tau);
                 [0, 1, 2].map(|i| pose[j][i] + a * (pose[j + 1][i] - pose[j][i]))
             };
             match h {

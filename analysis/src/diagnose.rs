@@ -151,9 +151,8 @@ fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 4]>, Vec<[f64; 6]
             let u_k: &[f64] = if tau == 0.0 {
                 &run.u[k]
             } else {
-                let s = run.t[k] - tau;
-                let j = run.t.partition_point(|t| *t <= s).clamp(1, run.steps()) - 1;
-                let a = ((s - run.t[j]) / run.dt[j]).clamp(0.0, 1.0);
+                let (j, a) = run.locate(run.t[k] - tau);
+                let a = a.clamp(0.0, 1.0);
                 let j1 = (j + 1).min(run.steps() - 1);
                 shifted_u = run.u[j].iter().zip(&run.u[j1]).map(|(x, y)| x + a * (y - x)).collect();
                 &shifted_u

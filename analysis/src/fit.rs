@@ -99,17 +99,7 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
     // the interpolation, and d/d time_offset = minus the interpolated velocity).
     let tau_i = r.param_index("time_offset");
     let tau = tau_i.map_or(0.0, |i| p[i]);
-    let shifted = |k: usize| -> (usize, f64) {
-        let s = run.t[k] - tau;
-        let mut j = k.min(run.t.len() - 2);
-        while j > 0 && run.t[j] > s {
-            j -= 1;
-        }
-        while j + 2 < run.t.len() && run.t[j + 1] <= s {
-            j += 1;
-        }
-        (j, (s - run.t[j]) / (run.t[j + 1] - run.t[j]))
-    };
+    let shifted = |k: usize| run.locate(run.t[k] - tau);
     if o.use_pose {
         if let Some(gt) = &run.gt {
             let obs = r.ir.function("obs_pose");
