@@ -20,10 +20,6 @@ impl Out {
         }
     }
 
-    pub fn quiet(&self) -> bool {
-        self.json_to_stdout
-    }
-
     /// Write the JSON document (atomically when it is a file).
     pub fn json(&self, json: Option<&Path>, value: &serde_json::Value) -> Result<(), String> {
         let Some(path) = json else { return Ok(()) };
