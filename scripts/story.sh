@@ -18,7 +18,7 @@ say kinegen diagnose --spec spec/diff_drive.toml --data $data --report $out/diag
 $k diagnose --spec spec/diff_drive.toml --data $data --report $out/diagnose --json $out/diagnose.json
 
 # the winning effect, as the diagnosis named it (null if none)
-effect=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["verdict"]["effect"] or "")' $out/diagnose.json 2>/dev/null || echo "$effect")
+effect=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["verdict"]["effect"] or "")' $out/diagnose.json 2>/dev/null || echo "")
 if [ -z "$effect" ] || [ "$effect" = "null" ]; then
   echo "no missing effect found; nothing to add"; exit 0
 fi

@@ -55,8 +55,13 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     Ok(Prepared { runner, runs, holdout })
 }
 
+/// Dead-reckoned tracks of every run with parameters `p`.
+fn tracks(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<deadreckon::Track> {
+    runs.iter().map(|run| deadreckon::run(r, p, run, false)).collect()
+}
+
 pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
-    let tracks: Vec<_> = runs.iter().map(|run| deadreckon::run(r, p, run, run.start_pose(), false)).collect();
+    let tracks = tracks(r, p, runs);
     let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
     errors(&pairs)
 }
@@ -86,7 +91,7 @@ pub fn compare(c: Common) -> ExitCode {
     };
     let r = &prep.runner;
     let all: Vec<Run> = prep.runs.iter().chain(&prep.holdout).cloned().collect();
-    let tracks: Vec<_> = all.iter().map(|run| deadreckon::run(r, &r.p, run, run.start_pose(), false)).collect();
+    let tracks = tracks(r, &r.p, &all);
     let pairs: Vec<_> = all.iter().zip(&tracks).collect();
     let e = errors(&pairs);
     let (regimes, segments) = where_it_fails(&pairs);
@@ -268,8 +273,7 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
         doc["holdout"] = json!({"before": {"rmse": hb.rmse, "errors": hb}, "after": {"rmse": ha.rmse, "errors": ha}});
     }
     if let Some(dir) = &c.report {
-        let tracks_b: Vec<_> = prep.runs.iter().map(|run| deadreckon::run(r, &r.p, run, run.start_pose(), false)).collect();
-        let tracks_a: Vec<_> = prep.runs.iter().map(|run| deadreckon::run(r, &res.p, run, run.start_pose(), false)).collect();
+        let (tracks_b, tracks_a) = (tracks(r, &r.p, &prep.runs), tracks(r, &res.p, &prep.runs));
         if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &tracks_b, &tracks_a, &doc) {
             return bad(e);
         }

@@ -222,12 +222,11 @@ pub fn diagnose_report(
     let mut figs = Vec::new();
     let winner = d.verdict.as_ref().and_then(|v| augmented.iter().find(|a| &a.0 == v).map(|a| (a, d.candidates.iter().find(|c| &c.effect == v).unwrap())));
     for run in runs {
-        let start = run.start_pose();
-        let b = dr(base, &d.base_fit.p, run, start, false);
+        let b = dr(base, &d.base_fit.p, run, false);
         let mut series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("calibrated spec", RED, traj(run, &b))];
         let mut errs: Vec<Series> = vec![("calibrated spec", RED, pos_err(run, &b))];
         if let Some(((name, _, aug), cand)) = winner {
-            let a = dr(aug, &cand.fitted, run, start, false);
+            let a = dr(aug, &cand.fitted, run, false);
             series.push((name.as_str(), GREEN, traj(run, &a)));
             errs.push((name.as_str(), GREEN, pos_err(run, &a)));
             // the effect's residual signature

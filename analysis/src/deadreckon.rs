@@ -36,8 +36,9 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
     (x, d)
 }
 
-/// Integrate the model over a run from the start pose of the run.
-pub fn run(r: &Runner, p: &[f64], data: &Run, start: [f64; 3], with_sens: bool) -> Track {
+/// Integrate the model over a run from the run's start pose ([`Run::start_pose`]).
+pub fn run(r: &Runner, p: &[f64], data: &Run, with_sens: bool) -> Track {
+    let start = data.start_pose();
     let u0 = data.u.first().cloned().unwrap_or_default();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
     let tau_i = r.param_index("time_offset");

@@ -90,8 +90,7 @@ pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOpt
 fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOptions, with_jac: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
     let mut res = Vec::new();
     let mut jac = Vec::new();
-    let start = run.start_pose();
-    let track = deadreckon::run(r, p, run, start, with_jac);
+    let track = deadreckon::run(r, p, run, with_jac);
     let np = p.len();
     let mut scratch = Vec::new();
     // A `time_offset` parameter: measurement k is compared with the model at

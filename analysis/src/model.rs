@@ -1,7 +1,6 @@
 //! A model ready to run: its IR, the runtime parameter vector (nominal values with
 //! `--set` overrides) and which parameters are free.
 use kinegen_model::ir::{Function, ModelIr};
-use kinegen_model::spec::InputKind;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
@@ -65,10 +64,6 @@ impl Runner {
 
     pub fn param_index(&self, name: &str) -> Option<usize> {
         self.names.iter().position(|n| n == name)
-    }
-
-    pub fn cumulative(&self) -> Vec<bool> {
-        self.ir.inputs.iter().map(|i| i.kind == InputKind::Cumulative).collect()
     }
 
     /// Build the argument list of a step-shaped function (x, u, [w = 0], p, dt).

@@ -184,7 +184,7 @@ pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
     for run in runs {
         let gt = run.gt.as_ref().ok_or_else(|| format!("{}: UMBMark needs ground truth", run.name))?;
         let start = run.start_pose();
-        let tr = deadreckon::run(r, &r.p, run, start, false);
+        let tr = deadreckon::run(r, &r.p, run, false);
         let (e_true, e_odo) = (gt.last().unwrap(), tr.pose.last().unwrap());
         let (c, s) = (start[2].cos(), start[2].sin());
         let rot = |v: [f64; 3]| [c * (v[0] - start[0]) + s * (v[1] - start[1]), -s * (v[0] - start[0]) + c * (v[1] - start[1])];
