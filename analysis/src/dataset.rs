@@ -100,9 +100,15 @@ impl Run {
         if let Some(k) = dt.iter().position(|&d| d > 20.0 * median) {
             return Err(log.err(Some(k + 3), Some("t"), format!("gap of {:.3} s in the log (median step {:.4} s)", dt[k], median)));
         }
+        // Absolute angles (steering encoders) may be logged wrapped to (-pi, pi]:
+        // unwrap them so held values and rates (a column may feed both, as the
+        // steering angle and its rate of a caster wheel) do not jump by 2 pi.
+        let angle_cols: Vec<&str> = r.ir.inputs.iter().filter(|i| i.kind == InputKind::Absolute && i.unit == "rad").map(|i| i.column.as_str()).collect();
         let mut cols = Vec::new();
         for i in &r.ir.inputs {
-            cols.push((log.col(&i.column)?, i.kind));
+            let c = log.col(&i.column)?;
+            let c = if angle_cols.contains(&i.column.as_str()) { unwrap(c) } else { c.to_vec() };
+            cols.push((c, i.kind));
         }
         let u = (0..dt.len())
             .map(|k| {

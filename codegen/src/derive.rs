@@ -10,11 +10,11 @@
 //! computed by symbolica, and a `NearZero` branch that uses it for |s| < EPS. If the
 //! series still has negative powers the singularity is not removable and derivation
 //! fails instead of emitting code that blows up.
-use crate::symbolic::{check_no_placeholder, number_f64, to_atom, Funcs, SymbolicError};
+use crate::symbolic::{check_no_placeholder, number_f64, pinv_entry, to_atom, Funcs, SymbolicError};
 use crate::tape::TapeBuilder;
 use kinegen_model::expr::Expr;
 use kinegen_model::ir::{ArgSpec, Function, ModelIr, Op};
-use kinegen_model::spec::{InputKind, Model, STATE};
+use kinegen_model::spec::{Constraints, InputKind, Kinematics, Model, STATE};
 use kinegen_model::{SourceError, SourcePos};
 use std::collections::HashMap;
 use symbolica::atom::{Atom, AtomCore, AtomView, Symbol};
@@ -61,6 +61,10 @@ fn strings(v: &[&str]) -> Vec<String> {
 
 fn err_at(model: &Model, e: &Expr, msg: impl Into<String>) -> SourceError {
     SourceError::new(&model.path, Some(SourcePos::from_offset(&model.source, e.span.0)), msg)
+}
+
+fn err_kin(model: &Model, msg: impl Into<String>) -> SourceError {
+    SourceError::new(&model.path, Some(SourcePos::from_offset(&model.source, model.kinematics_at)), msg)
 }
 
 fn sym_err(model: &Model, e: SymbolicError) -> SourceError {
@@ -141,7 +145,7 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
     if !has_vanishing_denominator(a.as_view(), s) {
         return Ok(a.clone());
     }
-    let own_fn = |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs].contains(&f);
+    let own_fn = |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs, fx.pinv].contains(&f);
     if !matches!(a.as_view(), AtomView::Fun(f) if own_fn(f.get_symbol())) {
         if let Ok(series) = a.series(s, Atom::num(0), SeriesDepth::absolute(SERIES_ORDER)) {
             let series = series.to_atom();
@@ -197,8 +201,7 @@ fn has_negative_power(a: AtomView, s: Symbol) -> bool {
 
 fn finish(spec: Spec, fx: Funcs) -> Result<Function, SymbolicError> {
     let (tape, outputs) = lower(&spec, fx, true)?;
-    let (tree, _) = lower(&spec, fx, false)?;
-    let ops_tree = tree.iter().filter(|o| o.is_arithmetic()).count();
+    let ops_tree = tree_size(&tape, &outputs);
     Ok(Function {
         name: spec.name,
         doc: spec.doc,
@@ -211,6 +214,19 @@ fn finish(spec: Spec, fx: Funcs) -> Result<Function, SymbolicError> {
         outputs,
         ops_tree,
     })
+}
+
+/// Arithmetic operations if every output were evaluated as its own expression tree,
+/// with no sharing (the "before CSE" count). Counted on the shared tape: an op's
+/// tree costs itself plus its operands' trees. Equal to lowering without CSE, but
+/// without building a tree that can have millions of nodes.
+fn tree_size(tape: &[Op], outputs: &[u32]) -> usize {
+    let mut size = vec![0usize; tape.len()];
+    for (i, op) in tape.iter().enumerate() {
+        let own = usize::from(op.is_arithmetic());
+        size[i] = op.operands().iter().fold(own, |acc, &o| acc.saturating_add(size[o as usize]));
+    }
+    outputs.iter().fold(0usize, |acc, &o| acc.saturating_add(size[o as usize]))
 }
 
 /// Jacobian of `outs` w.r.t. `vars`, row-major. With `chain = (s, e)` the
@@ -257,12 +273,10 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let adt = arg(&sym, "dt", &strings(&["dt"]));
 
     // Body twist with and without noise.
-    let twist_noisy: Vec<Atom> = model
-        .twist
-        .iter()
-        .map(|e| to_atom(&model.expand(e), &sym.by_name, &fx))
-        .collect::<Result<_, _>>()
-        .map_err(se)?;
+    let twist_noisy: Vec<Atom> = match &model.kinematics {
+        Kinematics::Twist(t) => t.iter().map(|e| to_atom(&model.expand(e), &sym.by_name, &fx)).collect::<Result<_, _>>().map_err(se)?,
+        Kinematics::Constraints(c) => least_squares_twist(model, c, &sym).map_err(se)?,
+    };
     let zero_noise = |a: &Atom| w_names.iter().fold(a.clone(), |acc, n| substitute(&acc, sym.s(n), &Atom::num(0)));
     let twist: Vec<Atom> = twist_noisy.iter().map(zero_noise).collect();
 
@@ -422,6 +436,38 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     })
 }
 
+/// The rows of S (seed 000 eq. 7) as atoms, with their rate symbols.
+fn constraint_rows(model: &Model, c: &Constraints, sym: &Sym) -> Result<Vec<(Symbol, [Atom; 3])>, SymbolicError> {
+    c.rows
+        .iter()
+        .map(|(rate, co)| {
+            let [a, b, d] = co.clone().map(|e| to_atom(&model.expand(&e), &sym.by_name, &sym.fx));
+            Ok((sym.s(rate), [a?, b?, d?]))
+        })
+        .collect()
+}
+
+/// Twist of a constraint model: z = (S^T S)^+ S^T q' (seed 000 eq. 9-10), with the
+/// pseudo-inverse left as `kg_pinv` entries: evaluated numerically with a rank check
+/// in the emitted code, differentiated by its own rule (dP = -P dM P).
+fn least_squares_twist(model: &Model, c: &Constraints, sym: &Sym) -> Result<Vec<Atom>, SymbolicError> {
+    let rows = constraint_rows(model, c, sym)?;
+    let m: Vec<Atom> = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
+        .iter()
+        .map(|&(a, b)| rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]))
+        .collect();
+    let st_rates: Vec<Atom> = (0..3).map(|a| rows.iter().fold(Atom::num(0), |acc, (r, s)| acc + &s[a] * Atom::var(*r))).collect();
+    Ok((0..3)
+        .map(|k| {
+            let solved = (0..3).fold(Atom::num(0), |acc, j| acc + pinv_entry(k, j, &m) * &st_rates[j]);
+            match &c.noise[k] {
+                Some(n) => solved + sym.a(n),
+                None => solved,
+            }
+        })
+        .collect())
+}
+
 /// Evaluate an atom numerically with symbol values (used for rank and
 /// consistency checks at sample points, never for emitted code).
 fn eval_at(a: &Atom, values: &[(Symbol, f64)], fx: Funcs) -> Result<f64, SymbolicError> {
@@ -514,6 +560,27 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
             }
         }
         (outs, model.inputs.iter().map(|i| i.name.clone()).collect(), idoc.clone())
+    } else if let Kinematics::Constraints(c) = &model.kinematics {
+        // The constraints are the inverse kinematics (seed 000 eq. 3): q' = S z'.
+        // Their least-squares inverse exists where S has rank 3; if it never does,
+        // the model cannot be used.
+        let rows = constraint_rows(model, c, sym).map_err(se)?;
+        let full_rank_somewhere = (0..8).any(|k| {
+            let pt = point(k);
+            let m: Option<Vec<f64>> = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
+                .iter()
+                .map(|&(a, b)| eval_at(&rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]), &pt, fx).ok())
+                .collect();
+            m.is_some_and(|m| kinegen_model::linalg::rank_sym3([m[0], m[1], m[2], m[3], m[4], m[5]]) == 3)
+        });
+        if !full_rank_somewhere {
+            return Err(err_kin(model, "inverse kinematics is singular everywhere: the constraint rows have rank < 3, so no twist is determined"));
+        }
+        imposes_vy = true;
+        let by_rate: HashMap<Symbol, &[Atom; 3]> = rows.iter().map(|(r, s)| (*r, s)).collect();
+        let outs = rate_syms.iter().map(|r| (0..3).fold(Atom::num(0), |acc, c| acc + &by_rate[r][c] * &tw_atoms[c])).collect();
+        let names = rates.iter().map(|i| i.name.clone()).collect();
+        (outs, names, "Input rates from a body twist: the kinematic constraints themselves, q' = S(q, lambda) R(theta) z' (seed 000 eq. 3, 6-7), evaluated in the body frame.".into())
     } else {
         // Derived inverse: choose twist rows that are linear in the input rates,
         // M(cfg, p) * rates, as many as there are rates, with M invertible (vx and
@@ -548,11 +615,10 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
         }
         let Some((rows, inv)) = chosen else {
             if any_square {
-                return Err(err_at(model, &model.twist[0], "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0)"));
+                return Err(err_kin(model, "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0)"));
             }
-            return Err(err_at(
+            return Err(err_kin(
                 model,
-                &model.twist[0],
                 format!(
                     "cannot derive inverse kinematics: {} twist row(s) are linear in the {} input rate(s), {} needed; declare an [inverse] section",
                     candidates.len(),

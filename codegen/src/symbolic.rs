@@ -19,6 +19,24 @@ pub struct Funcs {
     /// `kg_near(s, series, closed)`: the series branch of a removable singularity
     /// at s = 0 (lowered to `Op::NearZero`; never differentiated).
     pub near: Symbol,
+    /// `kg_pinv(i, j, m00, m01, m02, m11, m12, m22)`: entry (i, j), i <= j, of the
+    /// pseudo-inverse P of the symmetric matrix M (lowered to `Op::PinvSym3`).
+    /// Derivative: dP = -P dM P, so d P_ij / d m_ab = -(P_ia P_bj + P_ib P_aj)
+    /// for a != b and -P_ia P_aj for a = b; again entries of P.
+    pub pinv: Symbol,
+}
+
+/// (a, b) of the packed argument k (after the two index arguments) of `kg_pinv`.
+const PACKED: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+
+/// `kg_pinv(i, j, m...)` with the indices put in order (P is symmetric).
+pub fn pinv_entry(i: usize, j: usize, m: &[Atom]) -> Atom {
+    let (a, b) = if i <= j { (i, j) } else { (j, i) };
+    let mut fb = symbolica::atom::FunctionBuilder::new(symbol!("kg_pinv")).add_arg(&Atom::num(a as i64)).add_arg(&Atom::num(b as i64));
+    for x in m {
+        fb = fb.add_arg(x);
+    }
+    fb.finish()
 }
 
 impl Funcs {
@@ -61,7 +79,21 @@ impl Funcs {
             }
         });
         let near = symbol!("kg_near");
-        Funcs { tan, atan, atan2, abs, near }
+        let pinv = symbol!("kg_pinv", der = |x, k, out| {
+            let AtomView::Fun(f) = x else { return };
+            let args: Vec<Atom> = f.iter().map(|a| a.to_owned()).collect();
+            if k < 2 || args.len() != 8 {
+                **out = Atom::num(0);
+                return;
+            }
+            let idx = |a: &Atom| as_f64(a.as_view()).map(|v| v as usize).unwrap_or(0);
+            let (i, j) = (idx(&args[0]), idx(&args[1]));
+            let m = &args[2..];
+            let (a, b) = PACKED[k - 2];
+            let p = |r: usize, c: usize| pinv_entry(r, c, m);
+            **out = if a == b { -(p(i, a) * p(a, j)) } else { -(p(i, a) * p(b, j) + p(i, b) * p(a, j)) };
+        });
+        Funcs { tan, atan, atan2, abs, near, pinv }
     }
 }
 

@@ -92,6 +92,13 @@ impl TapeBuilder {
                     Op::Atan(args[0])
                 } else if s == self.fx.atan2 {
                     Op::Atan2(args[0], args[1])
+                } else if s == self.fx.pinv {
+                    let index = |k: usize| as_f64(f.iter().nth(k).unwrap()).map(|v| v as u8).ok_or_else(|| SymbolicError(format!("pseudo-inverse index is not a number in `{a}`")));
+                    if args.len() != 8 {
+                        return Err(SymbolicError(format!("pseudo-inverse with {} arguments", args.len())));
+                    }
+                    let m = [args[2], args[3], args[4], args[5], args[6], args[7]];
+                    Op::PinvSym3 { m, i: index(0)?, j: index(1)? }
                 } else if s == self.fx.near {
                     Op::NearZero { x: args[0], eps: crate::derive::EPS, near: args[1], far: args[2] }
                 } else {
@@ -270,6 +277,7 @@ impl TapeBuilder {
                 Op::Ln(a) => Op::Ln(m(a)),
                 Op::Abs(a) => Op::Abs(m(a)),
                 Op::NearZero { x, eps, near, far } => Op::NearZero { x: m(x), eps, near: m(near), far: m(far) },
+                Op::PinvSym3 { m: mm, i, j } => Op::PinvSym3 { m: mm.map(m), i, j },
                 o @ (Op::Const(_) | Op::Arg(..)) => o,
             };
             new_index[i] = tape.len() as u32;

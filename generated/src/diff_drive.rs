@@ -351,7 +351,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-116 arithmetic operations (465 before common-subexpression elimination).*/
+116 arithmetic operations (843 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[f64; 3usize],
@@ -511,7 +511,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-112 arithmetic operations (447 before common-subexpression elimination).*/
+112 arithmetic operations (825 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[f64; 3usize],
@@ -666,7 +666,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [n_r, n_l]
 
-369 arithmetic operations (1679 before common-subexpression elimination).*/
+369 arithmetic operations (3009 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[f64; 3usize],
@@ -1085,7 +1085,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-200 arithmetic operations (676 before common-subexpression elimination).*/
+200 arithmetic operations (1614 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[f64; 3usize],
@@ -1336,7 +1336,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r_r, r_l, b, counts_per_rev, gear_ratio]
 
-767 arithmetic operations (4898 before common-subexpression elimination).*/
+767 arithmetic operations (8132 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[f64; 3usize],
@@ -2283,7 +2283,7 @@ pub fn obs_gyro_jac_p(
 * `lm`: [xl, yl]
 * returns [range, bearing]
 
-8 arithmetic operations (10 before common-subexpression elimination).*/
+8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
     x: &[f64; 3usize],
@@ -2314,7 +2314,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-13 arithmetic operations (33 before common-subexpression elimination).*/
+13 arithmetic operations (41 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[f64; 3usize],

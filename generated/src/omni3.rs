@@ -314,7 +314,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-146 arithmetic operations (521 before common-subexpression elimination).*/
+146 arithmetic operations (766 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[f64; 3usize],
@@ -503,7 +503,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-142 arithmetic operations (510 before common-subexpression elimination).*/
+142 arithmetic operations (755 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[f64; 3usize],
@@ -687,7 +687,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w1, w2, w3]
 
-484 arithmetic operations (2738 before common-subexpression elimination).*/
+484 arithmetic operations (4271 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[f64; 3usize],
@@ -1234,7 +1234,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dvx, dvy, domega]
 
-242 arithmetic operations (875 before common-subexpression elimination).*/
+242 arithmetic operations (1680 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[f64; 3usize],
@@ -1525,7 +1525,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-461 arithmetic operations (1868 before common-subexpression elimination).*/
+461 arithmetic operations (2813 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[f64; 3usize],
@@ -2115,7 +2115,7 @@ pub fn obs_gyro_jac_p(
 * `lm`: [xl, yl]
 * returns [range, bearing]
 
-8 arithmetic operations (10 before common-subexpression elimination).*/
+8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
     x: &[f64; 3usize],
@@ -2146,7 +2146,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-13 arithmetic operations (33 before common-subexpression elimination).*/
+13 arithmetic operations (41 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[f64; 3usize],

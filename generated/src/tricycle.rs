@@ -123,7 +123,7 @@ pub fn step_euler_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w, alpha]
 
-13 arithmetic operations (17 before common-subexpression elimination).*/
+13 arithmetic operations (18 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_u(
     x: &[f64; 3usize],
@@ -232,7 +232,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-106 arithmetic operations (207 before common-subexpression elimination).*/
+106 arithmetic operations (369 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[f64; 3usize],
@@ -377,7 +377,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-102 arithmetic operations (197 before common-subexpression elimination).*/
+102 arithmetic operations (359 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[f64; 3usize],
@@ -517,7 +517,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w, alpha]
 
-309 arithmetic operations (863 before common-subexpression elimination).*/
+309 arithmetic operations (1406 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[f64; 3usize],
@@ -871,7 +871,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-190 arithmetic operations (382 before common-subexpression elimination).*/
+190 arithmetic operations (784 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[f64; 3usize],
@@ -1107,7 +1107,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-324 arithmetic operations (845 before common-subexpression elimination).*/
+324 arithmetic operations (1367 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[f64; 3usize],
@@ -1544,7 +1544,7 @@ pub fn obs_gyro_jac_p(
 * `lm`: [xl, yl]
 * returns [range, bearing]
 
-8 arithmetic operations (10 before common-subexpression elimination).*/
+8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
     x: &[f64; 3usize],
@@ -1575,7 +1575,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-13 arithmetic operations (33 before common-subexpression elimination).*/
+13 arithmetic operations (41 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[f64; 3usize],
@@ -1650,7 +1650,7 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 2usize] 
 * `p`: [r, L]
 * returns [w, alpha]
 
-75 arithmetic operations (106 before common-subexpression elimination).*/
+75 arithmetic operations (107 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[f64; 3usize],

@@ -200,7 +200,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-103 arithmetic operations (199 before common-subexpression elimination).*/
+103 arithmetic operations (253 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[f64; 3usize],
@@ -341,7 +341,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-99 arithmetic operations (193 before common-subexpression elimination).*/
+99 arithmetic operations (247 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[f64; 3usize],
@@ -477,7 +477,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [v, w]
 
-197 arithmetic operations (400 before common-subexpression elimination).*/
+197 arithmetic operations (534 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[f64; 3usize],
@@ -719,7 +719,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-187 arithmetic operations (378 before common-subexpression elimination).*/
+187 arithmetic operations (512 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[f64; 3usize],
@@ -951,7 +951,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-95 arithmetic operations (148 before common-subexpression elimination).*/
+95 arithmetic operations (202 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[f64; 3usize],
@@ -1080,7 +1080,7 @@ pub fn step_exact_jac_p(
 * `lm`: [xl, yl]
 * returns [range, bearing]
 
-8 arithmetic operations (10 before common-subexpression elimination).*/
+8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
     x: &[f64; 3usize],
@@ -1111,7 +1111,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-13 arithmetic operations (33 before common-subexpression elimination).*/
+13 arithmetic operations (41 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[f64; 3usize],

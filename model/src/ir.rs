@@ -33,6 +33,10 @@ pub enum Op {
     /// `if |x| < eps { near } else { far }`: the series branch that replaces a
     /// removable singularity at x = 0.
     NearZero { x: u32, eps: f64, near: u32, far: u32 },
+    /// Entry (i, j) of the pseudo-inverse of the symmetric positive semi-definite
+    /// 3x3 matrix whose packed upper triangle is in `m` ([`crate::linalg::pinv_sym3`],
+    /// with its rank check). Least-squares kinematics (seed 000 eq. 9-10).
+    PinvSym3 { m: [u32; 6], i: u8, j: u8 },
 }
 
 impl Op {
@@ -44,6 +48,7 @@ impl Op {
             Add(a, b) | Sub(a, b) | Mul(a, b) | Div(a, b) | Pow(a, b) | Atan2(a, b) => vec![a, b],
             Neg(a) | PowI(a, _) | Sqrt(a) | Sin(a) | Cos(a) | Tan(a) | Atan(a) | Exp(a) | Ln(a) | Abs(a) => vec![a],
             NearZero { x, near, far, .. } => vec![x, near, far],
+            PinvSym3 { m, .. } => m.to_vec(),
         }
     }
 
@@ -97,6 +102,8 @@ impl Function {
         debug_assert_eq!(args.len(), self.args.len());
         scratch.clear();
         scratch.reserve(self.tape.len());
+        // the pseudo-inverse of one matrix is read entry by entry: decompose it once
+        let mut pinv_cache: Option<([u32; 6], [f64; 6])> = None;
         for op in &self.tape {
             let s = &*scratch;
             let v = |i: u32| s[i as usize];
@@ -125,6 +132,17 @@ impl Function {
                     } else {
                         v(far)
                     }
+                }
+                Op::PinvSym3 { m, i, j } => {
+                    let p = match pinv_cache {
+                        Some((key, p)) if key == m => p,
+                        _ => {
+                            let p = crate::linalg::pinv_sym3(m.map(v));
+                            pinv_cache = Some((m, p));
+                            p
+                        }
+                    };
+                    p[crate::linalg::packed_index(i as usize, j as usize)]
                 }
             };
             scratch.push(val);

@@ -7,9 +7,12 @@
 //!   which owns symbolica) produces, and a fast evaluator for it. The Rust emitter,
 //!   the verification suite and the analysis commands all consume this IR, so none of
 //!   them ever touches symbolica.
+//! * [`linalg`]: the pseudo-inverse with a rank check used by least-squares
+//!   (constraint) kinematics, shared verbatim with the generated crate.
 pub mod error;
 pub mod expr;
 pub mod ir;
+pub mod linalg;
 pub mod spec;
 
 pub use error::{SourceError, SourcePos};

@@ -34,7 +34,10 @@ struct RawSpec {
     noise: Vec<RawNoise>,
     #[serde(default)]
     define: Vec<RawDefine>,
-    motion: RawMotion,
+    #[serde(default)]
+    motion: Option<Spanned<RawMotion>>,
+    #[serde(default)]
+    constraints: Option<RawConstraints>,
     #[serde(default)]
     observation: Vec<RawObservation>,
     #[serde(default)]
@@ -105,6 +108,28 @@ struct RawMotion {
     vx: Spanned<String>,
     vy: Spanned<String>,
     omega: Spanned<String>,
+}
+
+/// Kinematic constraints q' = S(q, p) R(theta) z' (seed 000 eq. 1, 3, 6-7): one row
+/// per constrained input rate, the twist solved by least squares (eq. 9-10).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConstraints {
+    #[serde(default)]
+    doc: String,
+    /// Noise inputs added to the solved twist [vx, vy, omega] (empty: none).
+    #[serde(default)]
+    noise: Option<Spanned<Vec<String>>>,
+    row: Vec<RawConstraintRow>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConstraintRow {
+    /// The constrained rate: a cumulative input.
+    rate: Spanned<String>,
+    /// The row of S: coefficients of vx, vy, omega.
+    coeffs: Spanned<Vec<Spanned<String>>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -189,6 +214,25 @@ pub struct Observation {
     pub exprs: Vec<Expr>,
 }
 
+/// How the inputs determine the body twist.
+#[derive(Debug, Clone)]
+pub enum Kinematics {
+    /// `[motion]`: the twist [vx, vy, omega] written out in terms of inputs,
+    /// parameters, noise and definitions.
+    Twist([Expr; 3]),
+    /// `[constraints]`: rate_i = S_i . (vx, vy, omega) for every row; the twist is the
+    /// least-squares solution (S^T S)^+ S^T rates, with a rank check (seed 000 eq. 9-10).
+    Constraints(Constraints),
+}
+
+#[derive(Debug, Clone)]
+pub struct Constraints {
+    /// (name of the cumulative input whose rate is constrained, row of S).
+    pub rows: Vec<(String, [Expr; 3])>,
+    /// Noise inputs added to [vx, vy, omega] after the solve (None: no noise).
+    pub noise: [Option<String>; 3],
+}
+
 /// A validated model: every expression parsed, every name resolved, definitions
 /// ordered so each depends only on earlier ones.
 #[derive(Debug, Clone)]
@@ -204,8 +248,10 @@ pub struct Model {
     /// (name, expression, doc), topologically ordered.
     pub defines: Vec<(String, Expr, String)>,
     pub motion_doc: String,
-    /// Body twist [vx, vy, omega] in terms of inputs, parameters, noise, definitions.
-    pub twist: [Expr; 3],
+    /// The forward kinematics: an explicit twist or kinematic constraints.
+    pub kinematics: Kinematics,
+    /// Byte offset of the `[motion]` / `[constraints]` section (for messages).
+    pub kinematics_at: usize,
     pub observations: Vec<Observation>,
     /// Hand-declared inverse (input values from a body twist) for models whose
     /// inputs do not enter the twist linearly; verified by the generator.
@@ -363,10 +409,21 @@ impl Model {
         }
         let defines = order_definitions(&cx, &parsed_defs, &def_names)?;
 
-        let twist_exprs = [&raw.motion.vx, &raw.motion.vy, &raw.motion.omega]
-            .map(|s| cx.parse_expr(s).and_then(|e| check_names(&e, &not_state).map(|_| e)));
-        let [vx, vy, omega] = twist_exprs;
-        let twist = [vx?, vy?, omega?];
+        let (kinematics, kinematics_at, motion_doc) = match (&raw.motion, &raw.constraints) {
+            (Some(m), None) => {
+                let mo = m.get_ref();
+                let twist_exprs = [&mo.vx, &mo.vy, &mo.omega].map(|s| cx.parse_expr(s).and_then(|e| check_names(&e, &not_state).map(|_| e)));
+                let [vx, vy, omega] = twist_exprs;
+                (Kinematics::Twist([vx?, vy?, omega?]), mo.vx.span().start + 1, mo.doc.clone())
+            }
+            (None, Some(c)) => {
+                let k = parse_constraints(&cx, c, &raw.input, &noise_names, &|e: &Expr| check_names(e, &|v: &str| not_state(v) && !noise_names.contains(v)))?;
+                let at = c.row.first().map_or(0, |r| r.rate.span().start);
+                (Kinematics::Constraints(k), at, c.doc.clone())
+            }
+            (Some(m), Some(_)) => return Err(cx.err_span(m, "give either [motion] or [constraints], not both")),
+            (None, None) => return Err(cx.err_at(0, "missing [motion] (the body twist) or [constraints] (rate = S . twist rows)")),
+        };
 
         let mut observations = Vec::new();
         for o in &raw.observation {
@@ -460,8 +517,9 @@ impl Model {
                 .map(|n| Noise { name: n.name.get_ref().clone(), doc: n.doc.clone(), sigma: n.sigma })
                 .collect(),
             defines,
-            motion_doc: raw.motion.doc,
-            twist,
+            motion_doc,
+            kinematics,
+            kinematics_at,
             observations,
             inverse,
             effects: raw.effects,
@@ -498,6 +556,62 @@ pub fn fingerprint(text: &str) -> String {
         h = h.wrapping_mul(0x100000001b3);
     }
     format!("{h:016x}")
+}
+
+/// Validate a `[constraints]` section: every row constrains a distinct cumulative
+/// input and has three coefficients; at least three rows (three twist components).
+fn parse_constraints(
+    cx: &Ctx,
+    raw: &RawConstraints,
+    inputs: &[RawInput],
+    noise_names: &HashSet<&str>,
+    check: &dyn Fn(&Expr) -> Result<(), SourceError>,
+) -> Result<Constraints, SourceError> {
+    let mut rows = Vec::new();
+    let mut seen = HashSet::new();
+    for r in &raw.row {
+        let name = r.rate.get_ref();
+        match inputs.iter().find(|i| i.name.get_ref() == name) {
+            Some(i) if i.kind == InputKind::Cumulative => {}
+            Some(_) => return Err(cx.err_span(&r.rate, format!("`{name}` is an absolute input; a constraint row needs a rate (a cumulative input)"))),
+            None => return Err(cx.err_span(&r.rate, format!("unknown input `{name}`"))),
+        }
+        if !seen.insert(name.clone()) {
+            return Err(cx.err_span(&r.rate, format!("`{name}` is constrained twice")));
+        }
+        let co = r.coeffs.get_ref();
+        if co.len() != 3 {
+            return Err(cx.err_span(&r.coeffs, format!("a constraint row has 3 coefficients (of vx, vy, omega), this one has {}", co.len())));
+        }
+        let mut es = Vec::new();
+        for s in co {
+            let e = cx.parse_expr(s)?;
+            check(&e)?;
+            es.push(e);
+        }
+        let [a, b, d]: [Expr; 3] = es.try_into().expect("three");
+        rows.push((name.clone(), [a, b, d]));
+    }
+    if rows.len() < 3 {
+        let at = raw.row.last().map_or(0, |r| r.rate.span().start);
+        return Err(cx.err_at(at, format!("{} constraint row(s) cannot determine the 3 twist components", rows.len())));
+    }
+    if let Some(i) = inputs.iter().find(|i| i.kind == InputKind::Cumulative && !seen.contains(i.name.get_ref())) {
+        return Err(cx.err_span(&i.name, format!("cumulative input `{}` appears in no constraint row", i.name.get_ref())));
+    }
+    let mut noise = [None, None, None];
+    if let Some(n) = &raw.noise {
+        if n.get_ref().len() != 3 {
+            return Err(cx.err_span(n, "`noise` names one noise input per twist component [vx, vy, omega]"));
+        }
+        for (slot, name) in noise.iter_mut().zip(n.get_ref()) {
+            if !noise_names.contains(name.as_str()) {
+                return Err(cx.err_span(n, format!("`{name}` is not a declared noise input")));
+            }
+            *slot = Some(name.clone());
+        }
+    }
+    Ok(Constraints { rows, noise })
 }
 
 fn declare_free_name(

@@ -79,8 +79,18 @@ def model(spec):
                 pass
         if not progress:
             raise ValueError(f"unresolvable definitions {list(pending)}")
-    m = spec["motion"]
-    twist_noisy = [to_sx(m[k], env) for k in ("vx", "vy", "omega")]
+    if "constraints" in spec:
+        # seed 000 eq. 9-10: the twist solves S z = q' in the least-squares sense;
+        # here with CasADi's own linear solve of the normal equations (kinegen uses
+        # an eigen-decomposition pseudo-inverse: two independent routes)
+        c = spec["constraints"]
+        S = ca.vertcat(*[ca.horzcat(*[to_sx(e, env) for e in row["coeffs"]]) for row in c["row"]])
+        qd = ca.vertcat(*[sym[row["rate"]] for row in c["row"]])
+        z = ca.solve(ca.mtimes(S.T, S), ca.mtimes(S.T, qd))
+        twist_noisy = [z[k] + (sym[c["noise"][k]] if "noise" in c else 0) for k in range(3)]
+    else:
+        m = spec["motion"]
+        twist_noisy = [to_sx(m[k], env) for k in ("vx", "vy", "omega")]
     zero_w = {sym[n]: 0 for n in noise}
     twist = [ca.substitute(t, ca.vertcat(*[sym[n] for n in noise]), ca.DM.zeros(len(noise))) if noise else t for t in twist_noisy]
     x, y, th, dt = sym["x"], sym["y"], sym["theta"], sym["dt"]

@@ -186,11 +186,15 @@ pub fn jacobians_vs_finite_differences(ir: &ModelIr, k: &dyn Kernel, n: usize, s
 
 /// Compare two kernels on every function (generated Rust vs IR evaluator).
 pub fn kernels_agree(ir: &ModelIr, a: &dyn Kernel, b: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
-    const TOL: f64 = 1e-12;
     let mut sampler = Sampler::new(ir, seed);
     ir.functions
         .iter()
         .map(|f| {
+            // Both sides run the same tape; they differ only by the last-ulp
+            // differences of libm and std transcendental functions. A least-squares
+            // pseudo-inverse amplifies those by the condition number of S^T S, so
+            // such kernels get 1e-10 (a wrong emission is off by O(1) anyway).
+            let tol = if f.tape.iter().any(|o| matches!(o, kinegen_model::ir::Op::PinvSym3 { .. })) { 1e-10 } else { 1e-12 };
             let mut fd = Finding::new(ir, &f.name, "generated vs IR");
             for _ in 0..n {
                 let args = sampler.args(f);
@@ -198,7 +202,7 @@ pub fn kernels_agree(ir: &ModelIr, a: &dyn Kernel, b: &dyn Kernel, n: usize, see
                 for (i, (p, q)) in x.iter().zip(&y).enumerate() {
                     let err = (p - q).abs() / p.abs().max(q.abs()).max(1e-300);
                     let err = if p == q { 0.0 } else { err };
-                    fd.record(err, err / TOL, Some((i / f.cols, i % f.cols, String::new())), &args, f);
+                    fd.record(err, err / tol, Some((i / f.cols, i % f.cols, String::new())), &args, f);
                 }
                 fd.samples += 1;
             }
