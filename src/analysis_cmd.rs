@@ -114,14 +114,29 @@ pub fn compare(c: Common) -> ExitCode {
             ));
         }
     }
+    // Gyrodometry (seed 000 eq. 13-18) on the runs that log a gyro.
+    let gyro_tracks: Vec<Option<deadreckon::Track>> = all.iter().map(|run| deadreckon::gyrodometry(r, &r.p, run)).collect();
+    let gyro_pairs: Vec<_> = all.iter().zip(&gyro_tracks).filter_map(|(run, t)| t.as_ref().map(|t| (run, t))).collect();
+    let gyro_errors = (!gyro_pairs.is_empty()).then(|| errors(&gyro_pairs));
+    if let Some(g) = &gyro_errors {
+        out.say(&format!(
+            "gyrodometry (heading from the gyro, seed 000 eq. 13-18), {} run(s):\n  position RMSE {:.4} m, heading RMSE {:.4} rad; final error {:.4} m / {:.4} rad",
+            gyro_pairs.len(),
+            g.rmse,
+            g.heading_rmse_rad,
+            g.final_position_error_m,
+            g.final_heading_error_rad
+        ));
+    }
     let per_run: Vec<Value> = all.iter().zip(&tracks).map(|(run, t)| json!({"run": run.name, "errors": errors(&[(run, t)])})).collect();
     let doc = json!({
         "model": r.ir.name, "metric": "position_rmse_m",
         "errors": e, "rmse": e.rmse, "regimes": regimes, "worst_segments": segments, "runs": per_run,
+        "gyrodometry": gyro_errors.as_ref().map(|g| json!({"rmse": g.rmse, "errors": g})),
         "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
     });
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::compare_report(dir, r, &all, &tracks, &doc) {
+        if let Err(e) = crate::report::compare_report(dir, r, &all, &tracks, &gyro_tracks, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -159,7 +174,19 @@ struct MethodResult {
 }
 
 fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64) -> Result<(MethodResult, Option<FitResult>), String> {
-    use kinegen_analysis::seed_methods::{ekf, gradient_descent, umbmark};
+    use kinegen_analysis::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
+    let blind = |p: &[f64]| {
+        let dirs = yaw_rate_blind_directions(r, p, runs);
+        if dirs.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "\n      WARNING: the yaw rate alone leaves {} parameter direction(s) undetermined (scaled by parameter size), so this method cannot identify them:\n        [{}]",
+                dirs.len(),
+                dirs.join("]\n        [")
+            )
+        }
+    };
     let sigma_omega = r.ir.observations.iter().find(|o| o.name == "gyro").and_then(|o| o.sigma.first().copied()).filter(|s| *s > 0.0).unwrap_or(0.005);
     Ok(match method {
         "lm" => {
@@ -168,11 +195,13 @@ fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64) -> Res
         }
         "gd" => {
             let g = gradient_descent(r, runs, 2000)?;
-            (MethodResult { name: "gd", p: g.p, std: g.std, note: format!("{} iterations, yaw-rate cost {:.3e} -> {:.3e}", g.iterations, g.cost_before, g.cost_after) }, None)
+            let warn = blind(&g.p);
+            (MethodResult { name: "gd", p: g.p, std: g.std, note: format!("{} iterations, yaw-rate cost {:.3e} -> {:.3e}{warn}", g.iterations, g.cost_before, g.cost_after) }, None)
         }
         "ekf" => {
             let e = ekf(r, runs, sigma_omega, mu)?;
-            (MethodResult { name: "ekf", p: e.p, std: e.std, note: format!("{} updates, mu = {mu}, yaw-rate cost {:.3e} -> {:.3e}", e.iterations, e.cost_before, e.cost_after) }, None)
+            let warn = blind(&e.p);
+            (MethodResult { name: "ekf", p: e.p, std: e.std, note: format!("{} updates, mu = {mu}, yaw-rate cost {:.3e} -> {:.3e}{warn}", e.iterations, e.cost_before, e.cost_after) }, None)
         }
         _ => {
             let u = umbmark(r, runs, side)?;
@@ -211,8 +240,15 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
             let after = evaluate(r, &m.p, &prep.runs);
             let hold = (!prep.holdout.is_empty()).then(|| evaluate(r, &m.p, &prep.holdout));
             let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
+            // Distance to the truth, each parameter scaled by its size (so a 2 mm
+            // offset of a 0.3 m axis and of a 0 m axis weigh the same), as a
+            // fraction of where the nominal values started: < 1 moved toward the truth.
+            let scaled = |p: &[f64]| {
+                truth.iter().filter_map(|(n, v)| r.param_index(n).map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))).sum::<f64>().sqrt()
+            };
             let dist = (!truth.is_empty()).then(|| {
-                truth.iter().filter_map(|(n, v)| r.param_index(n).map(|i| ((m.p[i] - v) / v).powi(2))).sum::<f64>().sqrt()
+                let d0 = scaled(&r.p);
+                if d0 > 0.0 { scaled(&m.p) / d0 } else { scaled(&m.p) }
             });
             if let Some(d) = dist {
                 if best.is_none_or(|b| d < b.0) {
@@ -224,7 +260,7 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
                 m.name,
                 after.rmse,
                 hold.as_ref().map(|h| format!(", held-out {:.4} m", h.rmse)).unwrap_or_default(),
-                dist.map(|d| format!(", distance to truth {:.3}%", 100.0 * d)).unwrap_or_default(),
+                dist.map(|d| format!(", {:.1}% of the nominal's distance to truth left", 100.0 * d)).unwrap_or_default(),
                 m.note
             ));
             for &i in &r.free {
@@ -233,7 +269,7 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
             methods_json.insert(m.name.into(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": dist}));
         }
         if let Some((d, name)) = best {
-            out.say(&format!("closest to the true parameters: {name} ({:.3}% relative distance)", 100.0 * d));
+            out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
         }
         let first = rows.first();
         let doc = json!({
@@ -243,7 +279,16 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
             "parameters": first.map(|m| r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect::<serde_json::Map<_, _>>()),
             "methods": methods_json,
             "closest_to_truth": best.map(|b| b.1),
+            "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
         });
+        if let Some(dir) = &c.report {
+            let nominal = tracks(r, &r.p, &prep.runs);
+            let per_method: Vec<(String, Vec<kinegen_analysis::deadreckon::Track>)> = rows.iter().map(|m| (m.name.to_string(), tracks(r, &m.p, &prep.runs))).collect();
+            if let Err(e) = crate::report::methods_report(dir, r, &prep.runs, &nominal, &per_method, &doc) {
+                return bad(e);
+            }
+            out.say(&format!("report: {}", dir.join("index.html").display()));
+        }
         return match out.json(c.json.as_deref(), &doc) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => bad(e),

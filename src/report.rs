@@ -134,10 +134,14 @@ fn worst_marks(doc: &Value, run: &str) -> Vec<(f64, f64)> {
         .unwrap_or_default()
 }
 
-pub fn compare_report(dir: &Path, r: &Runner, runs: &[Run], tracks: &[Track], doc: &Value) -> Result<(), String> {
+pub fn compare_report(dir: &Path, r: &Runner, runs: &[Run], tracks: &[Track], gyro: &[Option<Track>], doc: &Value) -> Result<(), String> {
     let mut figs = Vec::new();
-    for (run, tr) in runs.iter().zip(tracks) {
-        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &[("measured", BLACK, gt_xy(run)), ("model (nominal)", RED, traj(run, tr))], false, true, &[])?);
+    for ((run, tr), g) in runs.iter().zip(tracks).zip(gyro) {
+        let mut series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("model (nominal)", RED, traj(run, tr))];
+        if let Some(g) = g {
+            series.push(("gyrodometry", RGBColor(0, 90, 200), traj(run, g)));
+        }
+        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &series, false, true, &[])?);
         figs.push(chart(&format!("{}: position error, worst 1 s segments shaded", run.name), "t (s)", "error (m)", &[("model (nominal)", RED, pos_err(run, tr))], false, false, &worst_marks(doc, &run.name))?);
         let [a, b, c] = residual_scatter(run, tr);
         figs.push(chart("turn-rate residual vs speed", "speed (m/s)", "model - measured yaw rate (rad/s)", &[("residual", BLUE, a)], true, false, &[])?);
@@ -278,4 +282,72 @@ pub fn diagnose_report(
         esc(d.verdict.as_deref().unwrap_or("no catalogue effect is significant"))
     );
     write(dir, &page(&format!("kinegen diagnose: {}", base.ir.name), &intro, &figs, &t, doc))
+}
+
+/// Colours for the calibration methods, in the order they are listed.
+const METHOD_COLORS: [RGBColor; 4] = [RGBColor(0, 150, 0), RGBColor(0, 90, 200), RGBColor(200, 120, 0), RGBColor(150, 0, 150)];
+
+/// `fit --method all` (or one seed method): every method's trajectory and error
+/// against the nominal model, and a table comparing their errors, their distance
+/// to known true values and their estimates side by side.
+pub fn methods_report(dir: &Path, r: &Runner, runs: &[Run], nominal: &[Track], methods: &[(String, Vec<Track>)], doc: &Value) -> Result<(), String> {
+    let mut figs = Vec::new();
+    for (k, run) in runs.iter().enumerate() {
+        let mut traj_series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("nominal", RED, traj(run, &nominal[k]))];
+        let mut err_series: Vec<Series> = vec![("nominal", RED, pos_err(run, &nominal[k]))];
+        for (m, (name, tracks)) in methods.iter().enumerate() {
+            let color = METHOD_COLORS[m % METHOD_COLORS.len()];
+            traj_series.push((name.as_str(), color, traj(run, &tracks[k])));
+            err_series.push((name.as_str(), color, pos_err(run, &tracks[k])));
+        }
+        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &traj_series, false, true, &[])?);
+        figs.push(chart(&format!("{}: position error", run.name), "t (s)", "error (m)", &err_series, false, false, &[])?);
+    }
+    let ms = doc["methods"].as_object().cloned().unwrap_or_default();
+    let mut t = String::from("<h2>Methods</h2><table><tr><th>method</th><th>position RMSE (m)</th><th>held-out RMSE (m)</th><th>distance to truth left</th><th>notes</th></tr>");
+    let num = |v: &Value, digits: usize| v.as_f64().map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "-".into());
+    for (name, m) in &ms {
+        t += &format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td style=\"text-align:left;white-space:pre-wrap\">{}</td></tr>",
+            esc(name),
+            num(&m["after"]["rmse"], 4),
+            num(&m["holdout"]["rmse"], 4),
+            m["distance_to_truth"].as_f64().map(|d| format!("{:.1}%", 100.0 * d)).unwrap_or_else(|| "-".into()),
+            esc(m["note"].as_str().unwrap_or(""))
+        );
+    }
+    t += "</table>";
+    if let Some(best) = doc["closest_to_truth"].as_str() {
+        t += &format!("<p>Closest to the true parameters: <b>{}</b>.</p>", esc(best));
+    }
+    t += "<h2>Estimates</h2><table><tr><th>parameter</th><th>nominal</th>";
+    let truth = doc["truth"].as_object().cloned().unwrap_or_default();
+    if !truth.is_empty() {
+        t += "<th>truth</th>";
+    }
+    for name in ms.keys() {
+        t += &format!("<th>{}</th>", esc(name));
+    }
+    t += "</tr>";
+    for &i in &r.free {
+        let pname = &r.names[i];
+        t += &format!("<tr><td>{}</td><td>{:.6}</td>", esc(pname), r.p[i]);
+        if !truth.is_empty() {
+            t += &format!("<td>{}</td>", num(&truth.get(pname).cloned().unwrap_or(Value::Null), 6));
+        }
+        for m in ms.values() {
+            let p = &m["parameters"][pname];
+            t += &format!("<td>{} &plusmn; {}</td>", num(&p["estimate"], 6), p["std"].as_f64().map(|s| format!("{s:.1e}")).unwrap_or_else(|| "-".into()));
+        }
+        t += "</tr>";
+    }
+    t += "</table>";
+    let intro = format!(
+        "<p>Model <b>{}</b>, {} run(s): {} calibration method(s) from the same nominal parameters (position RMSE {:.4} m).</p>",
+        esc(&r.ir.name),
+        runs.len(),
+        ms.len(),
+        doc["before"]["rmse"].as_f64().unwrap_or(0.0)
+    );
+    write(dir, &page(&format!("kinegen fit: methods compared on {}", r.ir.name), &intro, &figs, &t, doc))
 }

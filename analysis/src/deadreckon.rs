@@ -116,3 +116,43 @@ pub fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3
         })
         .collect()
 }
+
+/// Gyrodometry (seed 000 eq. 13-18): the heading integrated from the gyro
+/// (eq. 13, theta_k = theta_{k-1} + T omega_k) and the translation from the
+/// inputs given that yaw rate (`twist_gyro`, eq. 17), each step moved along the
+/// arc of that constant twist. None when the run has no gyro column.
+pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
+    let gyro = data.gyro.as_ref()?;
+    let (tg, tw) = (r.ir.function("twist_gyro")?, r.f("twist"));
+    let u0 = data.u.first().cloned().unwrap_or_default();
+    let (start, _) = body_start(r, p, data.start_pose(), &u0);
+    let mut pose = vec![start];
+    let (mut omega, mut twist) = (Vec::with_capacity(data.steps()), Vec::with_capacity(data.steps()));
+    let mut scratch = Vec::new();
+    let mut v = [0.0; 2];
+    let mut full = [0.0; 3];
+    for k in 0..data.steps() {
+        // the gyro row k+1 reports the mean rate over step k (see Run::gyro)
+        let w = gyro[k + 1];
+        tg.eval_into(&[&data.u[k], &[w], p], &mut v, &mut scratch);
+        tw.eval_into(&[&data.u[k], p], &mut full, &mut scratch);
+        let x = *pose.last().unwrap();
+        pose.push(arc_step(x, [v[0], v[1], w], data.dt[k]));
+        omega.push(w);
+        twist.push([v[0], v[1], w]);
+    }
+    let measured = predicted_measurements(r, p, data, &pose);
+    Some(Track { pose, measured, sens: None, omega, twist })
+}
+
+/// Pose after moving with the constant body twist `tw` for `dt` (exact SE(2)
+/// integration). Written out here rather than taken from a generated step because
+/// the generated steps take inputs, and gyrodometry has a twist; below
+/// |omega dt| = 1e-6 the arc is a straight line to within 1e-13 m per metre.
+pub fn arc_step(x: [f64; 3], tw: [f64; 3], dt: f64) -> [f64; 3] {
+    let a = tw[2] * dt;
+    let (s, c) = if a.abs() < 1e-6 { (dt * (1.0 - a * a / 6.0), dt * a / 2.0) } else { (a.sin() / tw[2], (1.0 - a.cos()) / tw[2]) };
+    let (bx, by) = (s * tw[0] - c * tw[1], c * tw[0] + s * tw[1]);
+    let (st, ct) = x[2].sin_cos();
+    [x[0] + ct * bx - st * by, x[1] + st * bx + ct * by, x[2] + a]
+}

@@ -92,6 +92,36 @@ fn gyro_cost(r: &Runner, p: &[f64], runs: &[Run], free: &[usize]) -> (f64, DVect
     (v / d, grad / d, gn / d)
 }
 
+/// Parameter directions the yaw rate cannot see at `p`: eigenvectors of the
+/// Gauss-Newton Hessian of the yaw-rate cost (parameters scaled by their size)
+/// with an eigenvalue below 1e-9 of the largest. For seed 000's robot the yaw rate
+/// is blind to a common scale of every length (the twist's translation scales
+/// with it, omega does not), which is why eq. 19-26 cannot fix that scale and
+/// pose measurements are needed. Each direction is described by its largest
+/// components, e.g. "e1 +0.29, r1 +0.29, ...".
+pub fn yaw_rate_blind_directions(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<String> {
+    let free = r.free.clone();
+    if free.is_empty() {
+        return vec![];
+    }
+    let (_, _, h) = gyro_cost(r, p, runs, &free);
+    let scale = DVector::from_iterator(free.len(), free.iter().map(|&i| prior_std(r, i) * 10.0));
+    let hs = DMatrix::from_fn(free.len(), free.len(), |a, b| h[(a, b)] * scale[a] * scale[b]);
+    let eig = nalgebra::SymmetricEigen::new(hs);
+    let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+    let mut out = Vec::new();
+    for (k, &l) in eig.eigenvalues.iter().enumerate() {
+        if lmax > 0.0 && l < 1e-9 * lmax {
+            let v = eig.eigenvectors.column(k);
+            let mut comps: Vec<(usize, f64)> = v.iter().copied().enumerate().filter(|(_, c)| c.abs() > 0.05).collect();
+            comps.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            let sign = if comps.first().is_some_and(|c| c.1 < 0.0) { -1.0 } else { 1.0 };
+            out.push(comps.iter().take(6).map(|(a, c)| format!("{} {:+.2}", r.names[free[*a]], sign * c)).collect::<Vec<_>>().join(", "));
+        }
+    }
+    out
+}
+
 /// Seed 000 eq. 21: lambda_n = lambda_{n-1} - eta dV/dlambda. eta is fixed, set
 /// once to 1/L with L the largest eigenvalue of the Gauss-Newton Hessian of V at
 /// the start (the classical stable step for gradient descent).
@@ -124,14 +154,29 @@ pub fn gradient_descent(r: &Runner, runs: &[Run], max_iter: usize) -> Result<See
     Ok(SeedFit { std: (0..free.len()).map(|k| cov[(k, k)].max(0.0).sqrt()).collect(), p, iterations: it, cost_before: v0, cost_after: vf })
 }
 
+/// Prior standard deviation of a parameter for the EKF: 10% of its nominal value;
+/// for a parameter whose nominal is 0 (an axis on the centre line), 10% of the
+/// typical size of the parameters with the same unit (seed 000 used 5 cm for all
+/// its lengths of 5-38 cm, eq. 27), so it is not frozen at 0.
+fn prior_std(r: &Runner, i: usize) -> f64 {
+    let own = 0.1 * r.p[i].abs();
+    if own > 0.0 {
+        return own;
+    }
+    let unit = &r.ir.params.iter().find(|p| p.name == r.names[i]).map(|p| p.unit.clone()).unwrap_or_default();
+    let mut same: Vec<f64> = r.ir.params.iter().filter(|p| !p.constant && &p.unit == unit && p.nominal != 0.0).map(|p| p.nominal.abs()).collect();
+    same.sort_by(f64::total_cmp);
+    0.1 * same.get(same.len() / 2).copied().unwrap_or(0.01)
+}
+
 /// Seed 000 eq. 22-26: lambda_k = lambda_{k-1}; omega_k = h_k(lambda) + v_k, with
-/// sigma_v^2 = sigma_omega^2 + mu^2. P0 = diag((0.1 * |nominal|)^2) (seed 000 used
-/// (5 cm)^2 for parameters of about 10-30 cm).
+/// sigma_v^2 = sigma_omega^2 + mu^2. P0 = diag(prior_std^2) (10% of each value;
+/// seed 000 used (5 cm)^2 for parameters of about 5-38 cm).
 pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFit, String> {
     let free = r.free.clone();
     let m = free.len();
     let mut p = r.p.clone();
-    let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(m, free.iter().map(|&i| (0.1 * r.p[i].abs().max(1e-3)).powi(2))));
+    let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(m, free.iter().map(|&i| prior_std(r, i).powi(2))));
     let sv2 = sigma_omega * sigma_omega + mu * mu;
     let (v0, _, _) = gyro_cost(r, &p, runs, &free);
     let mut steps = 0;

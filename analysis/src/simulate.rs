@@ -157,12 +157,53 @@ fn planner(o: &SimOptions, can_spin: bool, lateral: bool, rng: &mut SmallRng) ->
     }
 }
 
-/// Inputs (as the robot's sensors read them) that realise `twist` in `base`.
-pub fn command(base: &Runner, twist: &[f64; 3]) -> Vec<f64> {
+/// Inputs (as the robot's sensors read them) that realise `twist` in `base`, with
+/// the configuration inputs (e.g. caster steering angles, see [`config_inputs`])
+/// at `cfg`, one value per configuration input.
+pub fn command_at(base: &Runner, twist: &[f64; 3], cfg: &[f64]) -> Vec<f64> {
     let inv = base.f("inverse_twist");
-    let args: Vec<&[f64]> = inv.args.iter().map(|a| if a.name == "twist" { &twist[..] } else if a.name == "p" { &base.p[..] } else { &[][..] }).collect();
+    let args: Vec<&[f64]> = inv
+        .args
+        .iter()
+        .map(|a| match a.name.as_str() {
+            "twist" => &twist[..],
+            "p" => &base.p[..],
+            "cfg" => cfg,
+            _ => &[][..],
+        })
+        .collect();
     let out = inv.eval(&args);
-    base.ir.inputs.iter().map(|i| inv.row_names.iter().position(|r| *r == i.name).map_or(0.0, |k| out[k])).collect()
+    let cfg_idx = config_inputs(base);
+    base.ir
+        .inputs
+        .iter()
+        .enumerate()
+        .map(|(i, inp)| match cfg_idx.iter().position(|&c| c == i) {
+            Some(k) => cfg[k],
+            None => inv.row_names.iter().position(|r| *r == inp.name).map_or(0.0, |k| out[k]),
+        })
+        .collect()
+}
+
+/// [`command_at`] with every configuration input at 0.
+pub fn command(base: &Runner, twist: &[f64; 3]) -> Vec<f64> {
+    command_at(base, twist, &vec![0.0; config_inputs(base).len()])
+}
+
+/// Absolute inputs whose column also feeds a cumulative input (a steerable wheel's
+/// angle and its rate): the robot's configuration, which the simulator integrates
+/// from the commanded rates instead of commanding it.
+pub fn config_inputs(base: &Runner) -> Vec<usize> {
+    let inputs = &base.ir.inputs;
+    (0..inputs.len())
+        .filter(|&i| inputs[i].kind == InputKind::Absolute && inputs.iter().any(|o| o.kind == InputKind::Cumulative && o.column == inputs[i].column))
+        .collect()
+}
+
+/// For each configuration input, the cumulative input that is its rate.
+fn config_rates(base: &Runner, cfg: &[usize]) -> Vec<usize> {
+    let inputs = &base.ir.inputs;
+    cfg.iter().map(|&i| inputs.iter().position(|o| o.kind == InputKind::Cumulative && o.column == inputs[i].column).expect("config input has a rate")).collect()
 }
 
 /// Can the base model turn in place (is the pure rotation in the image of its inputs)?
@@ -208,8 +249,15 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
     let noise = |s: f64, rng: &mut SmallRng| if s > 0.0 { Normal::new(0.0, s).unwrap().sample(rng) } else { 0.0 };
     let obs_pose = truth.ir.function("obs_pose");
     let obs_gyro = truth.ir.function("obs_gyro");
+    let cfg_idx = config_inputs(base);
+    let cfg_rate = config_rates(base, &cfg_idx);
     let mut header: Vec<String> = vec!["t".into()];
-    header.extend(inputs.iter().map(|i| i.column.clone()));
+    // one column per log column: a steering angle feeds both an angle and a rate
+    // input, and is written once, from the angle
+    let written: Vec<usize> = (0..inputs.len())
+        .filter(|&i| cfg_idx.contains(&i) || !(cfg_idx.iter().any(|&c| inputs[c].column == inputs[i].column) || inputs[..i].iter().any(|o| o.column == inputs[i].column)))
+        .collect();
+    header.extend(written.iter().map(|&i| inputs[i].column.clone()));
     header.extend(["gt_x", "gt_y", "gt_theta"].map(String::from));
     if obs_gyro.is_some() {
         header.push("gyro_z".into());
@@ -219,7 +267,10 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
     let delay = truth.param_index("time_offset").map_or(0.0, |i| truth.p[i]);
     let mut history: Vec<(f64, [f64; 3])> = vec![(0.0, x)];
     let mut t_now = 0.0;
-    let mut last_u = command(base, &plan(0.0));
+    // configuration (steering angles of caster wheels): starts straight ahead and
+    // follows its commanded rate, integrated with the midpoint rule
+    let mut cfg = vec![0.0; cfg_idx.len()];
+    let mut last_u = command_at(base, &plan(0.0), &cfg);
     // The gyro reports the mean yaw rate over the sample interval (an integrating
     // or low-pass-filtered MEMS gyro), which is what a step of the model predicts.
     let mut gyro_mean = 0.0;
@@ -231,7 +282,17 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
             let h = (t1 - t0) / m as f64;
             for j in 0..m {
                 let tm = (t0 + (j as f64 + 0.5) * h) % dur;
-                let u = command(base, &plan(tm));
+                let u = if cfg.is_empty() {
+                    command(base, &plan(tm))
+                } else {
+                    let u0 = command_at(base, &plan(tm), &cfg);
+                    let mid: Vec<f64> = cfg.iter().zip(&cfg_rate).map(|(c, &r)| c + 0.5 * h * u0[r]).collect();
+                    let u = command_at(base, &plan(tm), &mid);
+                    for (c, &r) in cfg.iter_mut().zip(&cfg_rate) {
+                        *c += h * u[r];
+                    }
+                    u
+                };
                 let dt = [h];
                 x = {
                     let out = step.eval(&Runner::step_args(step, &x, &u, &truth.p, &dt, &zeros));
@@ -249,7 +310,13 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
             }
         }
         let mut row = vec![times[k]];
-        for (i, inp) in inputs.iter().enumerate() {
+        for &i in &written {
+            let inp = &inputs[i];
+            if let Some(k) = cfg_idx.iter().position(|&c| c == i) {
+                // absolute steering encoder: 4096 lines per revolution, wrapped to (-pi, pi]
+                row.push(wrap((cfg[k] / (2.0 * PI / 4096.0)).round() * (2.0 * PI / 4096.0)));
+                continue;
+            }
             row.push(match inp.kind {
                 InputKind::Cumulative if inp.unit.contains("count") => cum[i].floor(),
                 // wheel-angle encoders: 4096 lines per revolution

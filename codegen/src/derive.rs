@@ -296,6 +296,41 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         singular: vec![],
     });
 
+    // Gyrodometry (seed 000 eq. 13-18): the translational velocity when the yaw
+    // rate is measured by a gyro instead of computed from the inputs.
+    let (twist_gyro, gyro_doc) = match &model.kinematics {
+        Kinematics::Constraints(c) => {
+            // eq. 17: xi' = J_xi^+ (q' - S_theta theta'), a 2-column least squares,
+            // solved with the same pseudo-inverse (M embedded as diag(M_xi, 1))
+            let rows = constraint_rows(model, c, &sym).map_err(se)?;
+            let om = sym.a("omega");
+            let m2: Vec<Atom> = [(0, 0), (0, 1)]
+                .iter()
+                .map(|&(a, b)| rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]))
+                .chain([Atom::num(0), rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[1] * &s[1]), Atom::num(0), Atom::num(1)])
+                .collect();
+            let rhs: Vec<Atom> = (0..2).map(|a| rows.iter().fold(Atom::num(0), |acc, (r, s)| acc + &s[a] * (Atom::var(*r) - &s[2] * &om))).collect();
+            let xi = (0..2).map(|k| (0..2).fold(Atom::num(0), |acc, j| acc + pinv_entry(k, j, &m2) * &rhs[j])).collect();
+            (xi, "Gyrodometry, seed 000 eq. 17: body velocity [vx, vy] from the inputs when the yaw rate `omega` is measured (by a gyro, eq. 13): the least-squares solution of the constraints with theta' imposed.")
+        }
+        Kinematics::Twist(_) => (
+            twist[..2].to_vec(),
+            "Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.",
+        ),
+    };
+    fns.push(Spec {
+        name: "twist_gyro".into(),
+        doc: gyro_doc.into(),
+        args: vec![au.clone(), arg(&sym, "omega", &strings(&["omega"])), ap.clone()],
+        lets: vec![],
+        rows: 2,
+        cols: 1,
+        row_names: strings(&["vx", "vy"]),
+        col_names: vec![],
+        outputs: twist_gyro,
+        singular: vec![],
+    });
+
     // Discrete motion models.
     let (x, y, th, dt) = (sym.a("x"), sym.a("y"), sym.a("theta"), sym.a("dt"));
     let (vx, vy, om) = (&twist_noisy[0], &twist_noisy[1], &twist_noisy[2]);

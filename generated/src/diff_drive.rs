@@ -56,6 +56,44 @@ pub fn twist(u: &[f64; 2usize], p: &[f64; 5usize]) -> [f64; 3usize] {
     let t24: f64 = t23 / t4;
     [t21, t22, t24]
 }
+/**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
+
+* `u`: [n_r, n_l]
+* `omega`: [omega]
+* `p`: [r_r, r_l, b, counts_per_rev, gear_ratio]
+* returns [vx, vy]
+
+12 arithmetic operations (12 before common-subexpression elimination).*/
+#[inline]
+pub fn twist_gyro(
+    u: &[f64; 2usize],
+    omega: &[f64; 1usize],
+    p: &[f64; 5usize],
+) -> [f64; 2usize] {
+    let t0: f64 = u[0usize];
+    let t1: f64 = u[1usize];
+    let t2: f64 = p[0usize];
+    let t3: f64 = p[1usize];
+    let t4: f64 = p[3usize];
+    let t5: f64 = p[4usize];
+    let t6: f64 = 3.141592653589793f64;
+    let t7: f64 = t0 * t6;
+    let t8: f64 = t2 * t7;
+    let t9: f64 = t5 * t8;
+    let t10: f64 = 2f64;
+    let t11: f64 = t9 * t10;
+    let t12: f64 = t11 / t4;
+    let t13: f64 = t1 * t6;
+    let t14: f64 = t3 * t13;
+    let t15: f64 = t5 * t14;
+    let t16: f64 = t10 * t15;
+    let t17: f64 = t16 / t4;
+    let t18: f64 = t12 + t17;
+    let t19: f64 = 0.5f64;
+    let t20: f64 = t18 * t19;
+    let t21: f64 = 0f64;
+    [t20, t21]
+}
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
 
 * `x`: [x, y, theta]
@@ -2503,6 +2541,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
                 Err(_) => return false,
             };
             let r = twist(a0, a1);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "twist_gyro" => {
+            if args.len() != 3usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = twist_gyro(a0, a1, a2);
             let r = &r[..];
             out.copy_from_slice(r);
             true

@@ -46,6 +46,37 @@ pub fn twist(u: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 3usize] {
     let t20: f64 = t19 / t4;
     [t9, t15, t20]
 }
+/**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
+
+* `u`: [w1, w2, w3]
+* `omega`: [omega]
+* `p`: [r, L]
+* returns [vx, vy]
+
+9 arithmetic operations (9 before common-subexpression elimination).*/
+#[inline]
+pub fn twist_gyro(
+    u: &[f64; 3usize],
+    omega: &[f64; 1usize],
+    p: &[f64; 2usize],
+) -> [f64; 2usize] {
+    let t0: f64 = u[0usize];
+    let t1: f64 = u[1usize];
+    let t2: f64 = u[2usize];
+    let t3: f64 = p[0usize];
+    let t4: f64 = 0.3333333333333333f64;
+    let t5: f64 = libm::sqrt(t4);
+    let t6: f64 = t1 + t2;
+    let t7: f64 = t3 * t5;
+    let t8: f64 = t6 * t7;
+    let t9: f64 = 2f64;
+    let t10: f64 = t0 * t9;
+    let t11: f64 = t1 - t2;
+    let t12: f64 = t11 - t10;
+    let t13: f64 = t3 * t12;
+    let t14: f64 = t4 * t13;
+    [t8, t14]
+}
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
 
 * `x`: [x, y, theta]
@@ -2415,6 +2446,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
                 Err(_) => return false,
             };
             let r = twist(a0, a1);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "twist_gyro" => {
+            if args.len() != 3usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = twist_gyro(a0, a1, a2);
             let r = &r[..];
             out.copy_from_slice(r);
             true

@@ -289,6 +289,183 @@ pub fn twist(u: &[f64; 9usize], p: &[f64; 12usize]) -> [f64; 3usize] {
     let t216: f64 = t213 + t215;
     [t203, t210, t216]
 }
+/**Gyrodometry, seed 000 eq. 17: body velocity [vx, vy] from the inputs when the yaw rate `omega` is measured (by a gyro, eq. 13): the least-squares solution of the constraints with theta' imposed.
+
+* `u`: [beta1, beta2, beta3, dbeta1, dbeta2, dbeta3, dphi1, dphi2, dphi3]
+* `omega`: [omega]
+* `p`: [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
+* returns [vx, vy]
+
+136 arithmetic operations (726 before common-subexpression elimination).*/
+#[inline]
+pub fn twist_gyro(
+    u: &[f64; 9usize],
+    omega: &[f64; 1usize],
+    p: &[f64; 12usize],
+) -> [f64; 2usize] {
+    let t0: f64 = u[0usize];
+    let t1: f64 = u[1usize];
+    let t2: f64 = u[2usize];
+    let t3: f64 = u[3usize];
+    let t4: f64 = u[4usize];
+    let t5: f64 = u[5usize];
+    let t6: f64 = u[6usize];
+    let t7: f64 = u[7usize];
+    let t8: f64 = u[8usize];
+    let t9: f64 = omega[0usize];
+    let t10: f64 = p[0usize];
+    let t11: f64 = p[1usize];
+    let t12: f64 = p[2usize];
+    let t13: f64 = p[3usize];
+    let t14: f64 = p[4usize];
+    let t15: f64 = p[5usize];
+    let t16: f64 = p[6usize];
+    let t17: f64 = p[7usize];
+    let t18: f64 = p[8usize];
+    let t19: f64 = p[9usize];
+    let t20: f64 = p[10usize];
+    let t21: f64 = p[11usize];
+    let t22: f64 = 1f64;
+    let t23: f64 = libm::cos(t0);
+    let t24: f64 = t16 * t23;
+    let t25: f64 = libm::sin(t0);
+    let t26: f64 = t19 * t25;
+    let t27: f64 = t24 + t26;
+    let t28: f64 = t27 / t10;
+    let t29: f64 = t28 - t22;
+    let t30: f64 = t9 * t29;
+    let t31: f64 = t3 - t30;
+    let t32: f64 = t23 * t31;
+    let t33: f64 = t32 / t10;
+    let t34: f64 = libm::cos(t1);
+    let t35: f64 = t17 * t34;
+    let t36: f64 = libm::sin(t1);
+    let t37: f64 = t20 * t36;
+    let t38: f64 = t35 + t37;
+    let t39: f64 = t38 / t11;
+    let t40: f64 = t39 - t22;
+    let t41: f64 = t9 * t40;
+    let t42: f64 = t4 - t41;
+    let t43: f64 = t34 * t42;
+    let t44: f64 = t43 / t11;
+    let t45: f64 = t33 + t44;
+    let t46: f64 = libm::cos(t2);
+    let t47: f64 = t18 * t46;
+    let t48: f64 = libm::sin(t2);
+    let t49: f64 = t21 * t48;
+    let t50: f64 = t47 + t49;
+    let t51: f64 = t50 / t12;
+    let t52: f64 = t51 - t22;
+    let t53: f64 = t9 * t52;
+    let t54: f64 = t5 - t53;
+    let t55: f64 = t46 * t54;
+    let t56: f64 = t55 / t12;
+    let t57: f64 = t45 + t56;
+    let t58: f64 = t16 * t25;
+    let t59: f64 = t19 * t23;
+    let t60: f64 = t58 - t59;
+    let t61: f64 = t9 * t60;
+    let t62: f64 = t61 / t13;
+    let t63: f64 = t6 - t62;
+    let t64: f64 = t25 * t63;
+    let t65: f64 = t64 / t13;
+    let t66: f64 = t57 + t65;
+    let t67: f64 = t17 * t36;
+    let t68: f64 = t20 * t34;
+    let t69: f64 = t67 - t68;
+    let t70: f64 = t9 * t69;
+    let t71: f64 = t70 / t14;
+    let t72: f64 = t7 - t71;
+    let t73: f64 = t36 * t72;
+    let t74: f64 = t73 / t14;
+    let t75: f64 = t66 + t74;
+    let t76: f64 = t18 * t48;
+    let t77: f64 = t21 * t46;
+    let t78: f64 = t76 - t77;
+    let t79: f64 = t9 * t78;
+    let t80: f64 = t79 / t15;
+    let t81: f64 = t8 - t80;
+    let t82: f64 = t48 * t81;
+    let t83: f64 = t82 / t15;
+    let t84: f64 = t75 + t83;
+    let t85: f64 = 0f64;
+    let t86: f64 = t10 * t10;
+    let t87: f64 = t25 * t25;
+    let t88: f64 = t87 / t86;
+    let t89: f64 = t11 * t11;
+    let t90: f64 = t36 * t36;
+    let t91: f64 = t90 / t89;
+    let t92: f64 = t88 + t91;
+    let t93: f64 = t12 * t12;
+    let t94: f64 = t48 * t48;
+    let t95: f64 = t94 / t93;
+    let t96: f64 = t92 + t95;
+    let t97: f64 = t13 * t13;
+    let t98: f64 = t23 * t23;
+    let t99: f64 = t98 / t97;
+    let t100: f64 = t96 + t99;
+    let t101: f64 = t14 * t14;
+    let t102: f64 = t34 * t34;
+    let t103: f64 = t102 / t101;
+    let t104: f64 = t100 + t103;
+    let t105: f64 = t15 * t15;
+    let t106: f64 = t46 * t46;
+    let t107: f64 = t106 / t105;
+    let t108: f64 = t104 + t107;
+    let t109: f64 = t23 * t25;
+    let t110: f64 = t109 / t86;
+    let t111: f64 = t34 * t36;
+    let t112: f64 = t111 / t89;
+    let t113: f64 = t46 * t48;
+    let t114: f64 = t113 / t93;
+    let t115: f64 = t109 / t97;
+    let t116: f64 = t111 / t101;
+    let t117: f64 = t115 + t116;
+    let t118: f64 = t113 / t105;
+    let t119: f64 = t117 + t118;
+    let t120: f64 = t119 - t110;
+    let t121: f64 = t120 - t112;
+    let t122: f64 = t121 - t114;
+    let t123: f64 = t98 / t86;
+    let t124: f64 = t102 / t89;
+    let t125: f64 = t123 + t124;
+    let t126: f64 = t106 / t93;
+    let t127: f64 = t125 + t126;
+    let t128: f64 = t87 / t97;
+    let t129: f64 = t127 + t128;
+    let t130: f64 = t90 / t101;
+    let t131: f64 = t129 + t130;
+    let t132: f64 = t94 / t105;
+    let t133: f64 = t131 + t132;
+    let pinv0: [f64; 6] = crate::linalg::pinv_sym3([t108, t122, t85, t133, t85, t22]);
+    let t134: f64 = pinv0[1usize];
+    let t135: f64 = t84 * t134;
+    let t136: f64 = t25 * t31;
+    let t137: f64 = t136 / t10;
+    let t138: f64 = t36 * t42;
+    let t139: f64 = t138 / t11;
+    let t140: f64 = t48 * t54;
+    let t141: f64 = t140 / t12;
+    let t142: f64 = t23 * t63;
+    let t143: f64 = t142 / t13;
+    let t144: f64 = t34 * t72;
+    let t145: f64 = t144 / t14;
+    let t146: f64 = t143 + t145;
+    let t147: f64 = t46 * t81;
+    let t148: f64 = t147 / t15;
+    let t149: f64 = t146 + t148;
+    let t150: f64 = t149 - t137;
+    let t151: f64 = t150 - t139;
+    let t152: f64 = t151 - t141;
+    let t153: f64 = pinv0[0usize];
+    let t154: f64 = t152 * t153;
+    let t155: f64 = t135 + t154;
+    let t156: f64 = pinv0[3usize];
+    let t157: f64 = t84 * t156;
+    let t158: f64 = t134 * t152;
+    let t159: f64 = t157 + t158;
+    [t155, t159]
+}
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
 
 * `x`: [x, y, theta]
@@ -13333,6 +13510,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
                 Err(_) => return false,
             };
             let r = twist(a0, a1);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "twist_gyro" => {
+            if args.len() != 3usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 9usize] = match <&[f64; 9usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 12usize] = match <&[f64; 12usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = twist_gyro(a0, a1, a2);
             let r = &r[..];
             out.copy_from_slice(r);
             true

@@ -30,6 +30,26 @@ pub fn twist(u: &[f64; 2usize], p: &[f64; 1usize]) -> [f64; 3usize] {
     let t4: f64 = 0f64;
     [t3, t4, t1]
 }
+/**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
+
+* `u`: [v, w]
+* `omega`: [omega]
+* `p`: [v_scale]
+* returns [vx, vy]
+
+1 arithmetic operations (1 before common-subexpression elimination).*/
+#[inline]
+pub fn twist_gyro(
+    u: &[f64; 2usize],
+    omega: &[f64; 1usize],
+    p: &[f64; 1usize],
+) -> [f64; 2usize] {
+    let t0: f64 = u[0usize];
+    let t1: f64 = p[0usize];
+    let t2: f64 = t0 * t1;
+    let t3: f64 = 0f64;
+    [t2, t3]
+}
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
 
 * `x`: [x, y, theta]
@@ -1244,6 +1264,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
                 Err(_) => return false,
             };
             let r = twist(a0, a1);
+            let r = &r[..];
+            out.copy_from_slice(r);
+            true
+        }
+        "twist_gyro" => {
+            if args.len() != 3usize || out.len() != 2usize {
+                return false;
+            }
+            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+                Ok(v) => v,
+                Err(_) => return false,
+            };
+            let r = twist_gyro(a0, a1, a2);
             let r = &r[..];
             out.copy_from_slice(r);
             true

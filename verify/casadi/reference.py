@@ -79,6 +79,7 @@ def model(spec):
                 pass
         if not progress:
             raise ValueError(f"unresolvable definitions {list(pending)}")
+    omega_meas = ca.SX.sym("omega_meas")
     if "constraints" in spec:
         # seed 000 eq. 9-10: the twist solves S z = q' in the least-squares sense;
         # here with CasADi's own linear solve of the normal equations (kinegen uses
@@ -88,11 +89,17 @@ def model(spec):
         qd = ca.vertcat(*[sym[row["rate"]] for row in c["row"]])
         z = ca.solve(ca.mtimes(S.T, S), ca.mtimes(S.T, qd))
         twist_noisy = [z[k] + (sym[c["noise"][k]] if "noise" in c else 0) for k in range(3)]
+        # gyrodometry, eq. 17: translation by least squares with the yaw rate imposed
+        Sxi = S[:, 0:2]
+        xi = ca.solve(ca.mtimes(Sxi.T, Sxi), ca.mtimes(Sxi.T, qd - S[:, 2] * omega_meas))
+        gyro_twist = ca.vertcat(xi[0], xi[1])
     else:
         m = spec["motion"]
         twist_noisy = [to_sx(m[k], env) for k in ("vx", "vy", "omega")]
     zero_w = {sym[n]: 0 for n in noise}
     twist = [ca.substitute(t, ca.vertcat(*[sym[n] for n in noise]), ca.DM.zeros(len(noise))) if noise else t for t in twist_noisy]
+    if "constraints" not in spec:
+        gyro_twist = ca.vertcat(twist[0], twist[1])
     x, y, th, dt = sym["x"], sym["y"], sym["theta"], sym["dt"]
     vx, vy, om = twist_noisy
     euler = ca.vertcat(x + (ca.cos(th) * vx - ca.sin(th) * vy) * dt,
@@ -104,7 +111,7 @@ def model(spec):
     bx, by = s * vx - c * vy, c * vx + s * vy
     exact = ca.vertcat(x + ca.cos(th) * bx - ca.sin(th) * by, y + ca.sin(th) * bx + ca.cos(th) * by, th + a)
     groups = {"x": [sym[n] for n in STATE], "u": [sym[n] for n in inputs], "w": [sym[n] for n in noise],
-              "p": [sym[p["name"]] for p in params], "dt": [dt], "lm": [sym["xl"], sym["yl"]]}
+              "p": [sym[p["name"]] for p in params], "dt": [dt], "lm": [sym["xl"], sym["yl"]], "omega": [omega_meas]}
     funcs = {}
     step_args = ["x", "u"] + (["w"] if noise else []) + ["p", "dt"]
     for form, f in (("euler", euler), ("exact", exact)):
@@ -113,6 +120,7 @@ def model(spec):
             if groups[g]:
                 funcs[f"step_{form}_jac_{g}"] = (step_args, ca.jacobian(f, ca.vertcat(*groups[g])))
     funcs["twist"] = (["u", "p"], ca.vertcat(*twist))
+    funcs["twist_gyro"] = (["u", "omega", "p"], gyro_twist)
     obs_env = dict(env)
     obs_env.update({"vx": twist[0], "vy": twist[1], "omega": twist[2]})
     for o in spec.get("observation", []):
@@ -138,6 +146,7 @@ def sample(spec, groups, params, rng):
     vals["w"] = [rng.uniform(-0.03, 0.03) for _ in groups["w"]]
     vals["p"] = [float(p["nominal"]) * rng.uniform(0.9, 1.1) if p["nominal"] != 0 else rng.uniform(-0.05, 0.05) for p in params]
     vals["dt"] = [rng.uniform(0.01, 0.1)]
+    vals["omega"] = [rng.uniform(-1.0, 1.0)]
     r, b = rng.uniform(1, 8), rng.uniform(-3, 3)
     vals["lm"] = [vals["x"][0] + r * math.cos(b), vals["x"][1] + r * math.sin(b)]
     return vals

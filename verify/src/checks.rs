@@ -4,6 +4,7 @@ use crate::kernel::{IrKernel, Kernel};
 use crate::sample::Sampler;
 use kinegen_model::ir::{Function, ModelIr};
 use std::f64::consts::PI;
+use rand::{Rng, SeedableRng};
 
 /// Series/closed-form switch of the generator (kinegen-codegen's derive::EPS).
 pub const SWITCH: f64 = 0.05;
@@ -268,7 +269,38 @@ pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<
         }
         ft.samples += 1;
     }
-    vec![fd, ft]
+    vec![fd, ft, gyrodometry_consistency(ir, k, n, seed)]
+}
+
+/// Gyrodometry (seed 000 eq. 17) against odometry: fed the yaw rate the model
+/// itself computes, it must return the model's own translation. For a
+/// least-squares model this holds for inconsistent inputs too (the full
+/// minimiser also minimises with omega fixed at its optimum), so the inputs are
+/// perturbed by a few percent to make the least squares bite.
+pub fn gyrodometry_consistency(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Finding {
+    let mut fd = Finding::new(ir, "twist_gyro", "gyrodometry = odometry at model omega");
+    let (Some(g), Some(tw)) = (ir.function("twist_gyro"), ir.function("twist")) else { return fd };
+    let mut sampler = Sampler::new(ir, seed);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    for _ in 0..n {
+        let mut args = sampler.args(g);
+        let (ui, oi, pi) = (arg_pos(g, "u").unwrap(), arg_pos(g, "omega").unwrap(), arg_pos(g, "p").unwrap());
+        for (v, inp) in args[ui].iter_mut().zip(&ir.inputs) {
+            if inp.kind == kinegen_model::spec::InputKind::Cumulative {
+                *v *= 1.0 + rng.gen_range(-0.05..0.05);
+            }
+        }
+        let t = eval(k, tw, &[args[ui].clone(), args[pi].clone()]);
+        args[oi] = vec![t[2]];
+        let v = eval(k, g, &args);
+        let scale = t[0].abs().max(t[1].abs()).max(1e-9);
+        for r in 0..2 {
+            let err = (v[r] - t[r]).abs() / scale;
+            fd.record(err, err / 1e-10, Some((r, 0, ["vx", "vy"][r].into())), &args, g);
+        }
+        fd.samples += 1;
+    }
+    fd
 }
 
 fn twist_of(ir: &ModelIr, k: &dyn Kernel, u: &[f64], p: &[f64]) -> Vec<f64> {

@@ -123,6 +123,7 @@ impl<'a> Sampler<'a> {
                     vec![pose[0] + r * f64::cos(b), pose[1] + r * f64::sin(b)]
                 }
                 "twist" => tw.clone(),
+                "omega" => vec![tw[2]],
                 "dpose" => {
                     let d: f64 = self.rng.gen_range(-1.0..1.0);
                     let dy = if self.twist_rows[1] { self.rng.gen_range(-0.5..0.5) } else { 0.0 };

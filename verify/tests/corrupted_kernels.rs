@@ -1,6 +1,6 @@
 //! The checks can fail: kernels with one deliberate mistake are caught, and the
 //! report names the model, the function, the entry and the worst input.
-use kinegen_verify::checks::{inverse_round_trips, jacobians_vs_finite_differences, where_};
+use kinegen_verify::checks::{gyrodometry_consistency, inverse_round_trips, jacobians_vs_finite_differences, where_};
 use kinegen_verify::{models, Corrupted, IrKernel};
 
 #[test]
@@ -20,7 +20,7 @@ fn a_sign_flipped_derivative_term_is_reported_with_model_function_entry_and_inpu
 
 #[test]
 fn a_wrong_sign_in_an_inverse_kinematics_row_is_reported() {
-    for model in ["diff_drive", "omni3", "tricycle"] {
+    for model in ["diff_drive", "omni3", "tricycle", "omni_caster"] {
         let ir = models::load(model);
         let bad = Corrupted::flip_term(&ir, "inverse_twist", 0);
         let found = inverse_round_trips(&ir, &bad, 10, 4);
@@ -28,6 +28,24 @@ fn a_wrong_sign_in_an_inverse_kinematics_row_is_reported() {
         assert!(!f.passed(), "{model}: wrong IK sign not detected");
         assert!(where_(f).starts_with(&format!("{model}::inverse_twist entry")), "{}", where_(f));
         assert!(inverse_round_trips(&ir, &IrKernel, 10, 4).iter().all(|f| f.passed()));
+    }
+}
+
+#[test]
+fn a_wrong_term_in_gyrodometry_is_reported() {
+    for model in ["omni_caster", "diff_drive"] {
+        let ir = models::load(model);
+        for entry in 0..2 {
+            let bad = Corrupted::flip_term(&ir, "twist_gyro", entry);
+            let f = gyrodometry_consistency(&ir, &bad, 20, 5);
+            // diff_drive's vy is identically 0: flipping its sign changes nothing
+            if model == "diff_drive" && entry == 1 {
+                assert!(f.passed());
+                continue;
+            }
+            assert!(!f.passed(), "{model}: corrupted twist_gyro entry {entry} not detected");
+        }
+        assert!(gyrodometry_consistency(&ir, &IrKernel, 20, 5).passed());
     }
 }
 
