@@ -26,6 +26,13 @@ pub struct Common {
     #[arg(long = "set")]
     pub set: Vec<String>,
     /// Write a self-contained HTML report to DIR/index.html.
+    /// Range-bearing observations `t,id,range,bearing` (needs --landmarks); the
+    /// k-th file belongs to the k-th --data log. Repeatable.
+    #[arg(long)]
+    pub observations: Vec<PathBuf>,
+    /// Landmark map `id,x,y` for --observations.
+    #[arg(long)]
+    pub landmarks: Option<PathBuf>,
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write one JSON document to PATH (`-`: stdout).
@@ -50,20 +57,87 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
     let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;
     let read = |paths: &[PathBuf]| paths.iter().map(|p| Run::read(p, &runner).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>();
-    let runs = read(&c.data)?;
+    let mut runs = read(&c.data)?;
     let holdout = read(&c.holdout)?;
+    attach_landmarks(c, &runner, &mut runs)?;
     Ok(Prepared { runner, runs, holdout })
 }
 
 /// Dead-reckoned tracks of every run with parameters `p`.
+/// Read --landmarks and --observations and attach the k-th observation file to
+/// the k-th run.
+fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), String> {
+    use kinegen_analysis::landmarks::{read_map, read_observations};
+    match (&c.landmarks, c.observations.is_empty()) {
+        (None, true) => return Ok(()),
+        (None, false) => return Err("--observations needs --landmarks MAP.csv (the landmark positions)".into()),
+        (Some(m), true) => return Err(format!("--landmarks {} given without --observations", m.display())),
+        _ => {}
+    }
+    let map_path = c.landmarks.as_ref().unwrap();
+    if r.ir.function("obs_landmark").is_none() {
+        return Err(format!("{}: the model has no `landmark` observation to predict range-bearing data with", c.spec.display()));
+    }
+    if c.observations.len() > runs.len() {
+        return Err(format!("{} --observations files for {} --data logs (one per log, in order)", c.observations.len(), runs.len()));
+    }
+    let map = read_map(map_path).map_err(|e| e.to_string())?;
+    for (run, path) in runs.iter_mut().zip(&c.observations) {
+        let obs = read_observations(path, &map, map_path).map_err(|e| e.to_string())?;
+        let (t0, t1) = (run.t[0], *run.t.last().unwrap());
+        let inside: Vec<_> = obs.into_iter().filter(|o| o.t >= t0 && o.t <= t1).collect();
+        if inside.is_empty() {
+            return Err(format!("{}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s", path.display()));
+        }
+        run.landmarks = inside;
+    }
+    Ok(())
+}
+
 fn tracks(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<deadreckon::Track> {
     runs.iter().map(|run| deadreckon::run(r, p, run, false)).collect()
 }
 
+/// Error summary; on logs without ground truth but with landmarks, `rmse` is the
+/// landmark range innovation RMSE (see `landmark_stats`).
 pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
     let tracks = tracks(r, p, runs);
     let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
-    errors(&pairs)
+    let mut e = errors(&pairs);
+    if !runs.iter().any(|x| x.gt.is_some()) {
+        if let Some(s) = landmark_stats(r, p, runs, &tracks) {
+            e.rmse = s.range_rmse_m;
+        }
+    }
+    e
+}
+
+/// Landmark innovations (measured minus predicted range and bearing) over runs.
+pub fn landmark_stats(r: &Runner, p: &[f64], runs: &[Run], tracks: &[deadreckon::Track]) -> Option<kinegen_analysis::landmarks::InnovationStats> {
+    let all: Vec<_> = runs.iter().zip(tracks).flat_map(|(run, t)| kinegen_analysis::landmarks::innovations(r, p, run, t)).collect();
+    kinegen_analysis::landmarks::stats(&all)
+}
+
+/// The metric `rmse` reports (CONTRACT section 4 leaves its name to us).
+pub fn metric_name(runs: &[Run]) -> &'static str {
+    if runs.iter().any(|x| x.gt.is_some()) || !runs.iter().any(|x| !x.landmarks.is_empty()) {
+        "position_rmse_m"
+    } else {
+        "landmark_range_rmse_m"
+    }
+}
+
+fn fmt_landmarks(s: &kinegen_analysis::landmarks::InnovationStats) -> String {
+    format!(
+        "landmark innovations: {} observations of {} landmarks; range RMSE {:.4} m (bias {:+.4}), bearing RMSE {:.4} rad (bias {:+.4}){}",
+        s.observations,
+        s.landmarks,
+        s.range_rmse_m,
+        s.range_bias_m,
+        s.bearing_rmse_rad,
+        s.bearing_bias_rad,
+        s.worst_landmark.as_ref().map(|(id, v)| format!("; worst landmark `{id}` ({v:.4} m)")).unwrap_or_default()
+    )
 }
 
 fn fmt_errors(e: &Errors) -> String {
@@ -97,7 +171,16 @@ pub fn compare(c: Common) -> ExitCode {
     let (regimes, segments) = where_it_fails(&pairs);
     let secs: f64 = all.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
     out.say(&format!("{} against {} run(s), {:.1} s of data, nominal parameters", r.ir.name, all.len(), secs));
-    out.say(&format!("  {}", fmt_errors(&e)));
+    if all.iter().any(|x| x.gt.is_some()) {
+        out.say(&format!("  {}", fmt_errors(&e)));
+    } else {
+        out.say("  no ground truth (gt_x, gt_y, gt_theta) in the logs: no trajectory error");
+    }
+    let lm_stats = landmark_stats(r, &r.p, &all, &tracks);
+    let innov: Vec<Vec<kinegen_analysis::landmarks::Innovation>> = all.iter().zip(&tracks).map(|(run, t)| kinegen_analysis::landmarks::innovations(r, &r.p, run, t)).collect();
+    if let Some(s) = &lm_stats {
+        out.say(&format!("  {}", fmt_landmarks(s)));
+    }
     if !regimes.is_empty() {
         out.say("where the error grows (share of position / heading error growth):");
         for g in &regimes {
@@ -130,13 +213,14 @@ pub fn compare(c: Common) -> ExitCode {
     }
     let per_run: Vec<Value> = all.iter().zip(&tracks).map(|(run, t)| json!({"run": run.name, "errors": errors(&[(run, t)])})).collect();
     let doc = json!({
-        "model": r.ir.name, "metric": "position_rmse_m",
-        "errors": e, "rmse": e.rmse, "regimes": regimes, "worst_segments": segments, "runs": per_run,
+        "model": r.ir.name, "metric": metric_name(&all),
+        "errors": e, "rmse": if all.iter().any(|x| x.gt.is_some()) { e.rmse } else { lm_stats.as_ref().map_or(e.rmse, |s| s.range_rmse_m) },
+        "landmarks": lm_stats, "regimes": regimes, "worst_segments": segments, "runs": per_run,
         "gyrodometry": gyro_errors.as_ref().map(|g| json!({"rmse": g.rmse, "errors": g})),
         "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
     });
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::compare_report(dir, r, &all, &tracks, &gyro_tracks, &doc) {
+        if let Err(e) = crate::report::compare_report(dir, r, &all, &tracks, &gyro_tracks, &innov, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -148,7 +232,7 @@ pub fn compare(c: Common) -> ExitCode {
 }
 
 /// JSON for a finished fit (CONTRACT section 4).
-pub fn fit_json(r: &Runner, res: &FitResult, before: &Errors, after: &Errors) -> Value {
+pub fn fit_json(r: &Runner, res: &FitResult, before: &Errors, after: &Errors, metric: &str) -> Value {
     let params: serde_json::Map<String, Value> = res
         .free
         .iter()
@@ -158,7 +242,7 @@ pub fn fit_json(r: &Runner, res: &FitResult, before: &Errors, after: &Errors) ->
     let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
     let corr: Vec<Vec<f64>> = (0..names.len()).map(|a| (0..names.len()).map(|b| res.corr[(a, b)]).collect()).collect();
     json!({
-        "model": r.ir.name, "metric": "position_rmse_m",
+        "model": r.ir.name, "metric": metric,
         "before": {"rmse": before.rmse, "errors": before}, "after": {"rmse": after.rmse, "errors": after},
         "parameters": params, "correlation": {"parameters": names, "matrix": corr},
         "warnings": res.warnings, "iterations": res.iterations, "residuals": res.n_residuals,
@@ -273,7 +357,7 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
         }
         let first = rows.first();
         let doc = json!({
-            "model": r.ir.name, "metric": "position_rmse_m",
+            "model": r.ir.name, "metric": metric_name(&prep.runs),
             "before": {"rmse": before.rmse},
             "after": {"rmse": first.map(|m| evaluate(r, &m.p, &prep.runs).rmse)},
             "parameters": first.map(|m| r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect::<serde_json::Map<_, _>>()),
@@ -301,8 +385,12 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
     let before = evaluate(r, &r.p, &prep.runs);
     let after = evaluate(r, &res.p, &prep.runs);
     out.say(&format!("{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)", r.ir.name, res.free.len(), prep.runs.len(), res.n_residuals, res.iterations));
-    out.say(&format!("  before: {}", fmt_errors(&before)));
-    out.say(&format!("  after:  {}", fmt_errors(&after)));
+    if prep.runs.iter().any(|x| x.gt.is_some()) {
+        out.say(&format!("  before: {}", fmt_errors(&before)));
+        out.say(&format!("  after:  {}", fmt_errors(&after)));
+    } else {
+        out.say("  no ground truth in the logs: calibrated on landmark (and gyro) residuals; the error is the landmark range innovation");
+    }
     out.say(&format!("  {:<16} {:>12} {:>12} {:>10}", "parameter", "nominal", "estimate", "std"));
     for (k, &i) in res.free.iter().enumerate() {
         out.say(&format!("  {:<16} {:>12.6} {:>12.6} {:>10.2e}", r.names[i], r.p[i], res.p[i], res.std[k]));
@@ -310,7 +398,13 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
     for w in &res.warnings {
         out.say(&format!("warning: {w}"));
     }
-    let mut doc = fit_json(r, &res, &before, &after);
+    let mut doc = fit_json(r, &res, &before, &after, metric_name(&prep.runs));
+    let tb = tracks(r, &r.p, &prep.runs);
+    let ta = tracks(r, &res.p, &prep.runs);
+    if let (Some(lb), Some(la)) = (landmark_stats(r, &r.p, &prep.runs, &tb), landmark_stats(r, &res.p, &prep.runs, &ta)) {
+        out.say(&format!("  before: {}\n  after:  {}", fmt_landmarks(&lb), fmt_landmarks(&la)));
+        doc["landmarks"] = json!({"before": lb, "after": la});
+    }
     if !prep.holdout.is_empty() {
         let hb = evaluate(r, &r.p, &prep.holdout);
         let ha = evaluate(r, &res.p, &prep.holdout);

@@ -59,6 +59,8 @@ pub struct SimArgs {
     pub seed: u64,
     pub laps: usize,
     pub out: PathBuf,
+    pub landmarks: Option<PathBuf>,
+    pub observations: Option<PathBuf>,
 }
 
 pub fn run_simulate(a: SimArgs) -> ExitCode {
@@ -72,11 +74,31 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
         let mut all = sets.clone();
         all.extend(values);
         let truth = Runner::new(truth_ir, &all).map_err(|e| e.to_string())?;
-        let o = SimOptions { trajectory: traj, seed: a.seed, laps: a.laps.max(1), ..SimOptions::default() };
-        let (header, rows) = simulate(&base, &truth, &o);
+        let landmarks = match (&a.landmarks, &a.observations) {
+            (Some(m), Some(_)) => {
+                if truth.ir.function("obs_landmark").is_none() {
+                    return Err(format!("{}: the model has no `landmark` observation to simulate range-bearing data with", a.spec.display()));
+                }
+                let map = kinegen_analysis::landmarks::read_map(m).map_err(|e| e.to_string())?;
+                map.ids.iter().map(|id| (id.clone(), map.xy[id])).collect()
+            }
+            (None, None) => Vec::new(),
+            _ => return Err("--landmarks MAP.csv and --observations OBS.csv go together (the map to observe, the file to write)".into()),
+        };
+        let o = SimOptions { trajectory: traj, seed: a.seed, laps: a.laps.max(1), landmarks, ..SimOptions::default() };
+        let sim = simulate(&base, &truth, &o);
         let counts: Vec<bool> = truth.ir.inputs.iter().map(|i| i.kind == InputKind::Cumulative && i.unit.contains("count")).collect();
-        kinegen_codegen::generate::write_atomic(&a.out, &to_csv(&header, &rows, &counts)).map_err(|e| e.to_string())?;
-        Ok(format!("wrote {} rows ({:.1} s) to {}", rows.len(), rows.last().map_or(0.0, |r| r[0]), a.out.display()))
+        kinegen_codegen::generate::write_atomic(&a.out, &to_csv(&sim.header, &sim.rows, &counts)).map_err(|e| e.to_string())?;
+        let mut msg = format!("wrote {} rows ({:.1} s) to {}", sim.rows.len(), sim.rows.last().map_or(0.0, |r| r[0]), a.out.display());
+        if let Some(path) = &a.observations {
+            let mut text = String::from("t,id,range,bearing\n");
+            for (t, id, r, b) in &sim.observations {
+                text += &format!("{t:.9},{id},{r:.9},{b:.9}\n");
+            }
+            kinegen_codegen::generate::write_atomic(path, &text).map_err(|e| e.to_string())?;
+            msg += &format!("\nwrote {} landmark observations to {}", sim.observations.len(), path.display());
+        }
+        Ok(msg)
     };
     match go() {
         Ok(msg) => {

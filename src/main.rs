@@ -88,6 +88,8 @@ enum Command {
     /// Synthetic logs in the real-log format, optionally with hidden effects.
     ///
     /// Example: kinegen simulate --spec spec/diff_drive.toml --effect lateral_slip=0.05 --set b=0.21 --trajectory square --seed 3 --out sim.csv
+    ///
+    /// With landmarks: kinegen simulate --spec spec/unicycle_ekf.toml --trajectory random --landmarks map.csv --observations obs.csv --out sim.csv
     Simulate {
         #[arg(long)]
         spec: PathBuf,
@@ -107,6 +109,13 @@ enum Command {
         laps: usize,
         #[arg(long)]
         out: PathBuf,
+        /// Landmark map `id,x,y` to observe (with --observations).
+        #[arg(long)]
+        landmarks: Option<PathBuf>,
+        /// Write range-bearing observations `t,id,range,bearing` of the --landmarks
+        /// in range (10 m, 5 Hz, the noise of the spec's `landmark` observation) here.
+        #[arg(long)]
+        observations: Option<PathBuf>,
     },
     /// Write a copy of a spec with an effect from the catalogue added.
     ///
@@ -140,8 +149,8 @@ fn main() -> ExitCode {
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, method, side, mu, truth } => analysis_cmd::run_fit(common, &method, side, mu, &truth),
-        Command::Simulate { spec, effect, set, trajectory, seed, laps, out } => {
-            effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out })
+        Command::Simulate { spec, effect, set, trajectory, seed, laps, out, landmarks, observations } => {
+            effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out, landmarks, observations })
         }
         Command::AddEffect { spec, effect, value, out } => effects_cmd::run_add_effect(&spec, &effect, &value, &out),
         Command::Derive { spec, ir_out } => match ir_source::derive_to(&spec, &ir_out) {

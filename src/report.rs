@@ -2,6 +2,7 @@
 //! plotters, no external files or scripts).
 use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon::Track;
+use kinegen_analysis::landmarks::Innovation;
 use kinegen_analysis::log::wrap;
 use kinegen_analysis::metrics::regime;
 use kinegen_analysis::model::Runner;
@@ -134,8 +135,15 @@ fn worst_marks(doc: &Value, run: &str) -> Vec<(f64, f64)> {
         .unwrap_or_default()
 }
 
-pub fn compare_report(dir: &Path, r: &Runner, runs: &[Run], tracks: &[Track], gyro: &[Option<Track>], doc: &Value) -> Result<(), String> {
+pub fn compare_report(dir: &Path, r: &Runner, runs: &[Run], tracks: &[Track], gyro: &[Option<Track>], innov: &[Vec<Innovation>], doc: &Value) -> Result<(), String> {
     let mut figs = Vec::new();
+    for (run, inn) in runs.iter().zip(innov).filter(|(_, i)| !i.is_empty()) {
+        let t0 = run.t[0];
+        let range: Vec<(f64, f64)> = inn.iter().map(|i| (i.t - t0, i.range_m)).collect();
+        let bearing: Vec<(f64, f64)> = inn.iter().map(|i| (i.t - t0, i.bearing_rad)).collect();
+        figs.push(chart(&format!("{}: landmark range innovation", run.name), "t (s)", "measured - predicted (m)", &[("range", RGBColor(0, 90, 200), range)], true, false, &[])?);
+        figs.push(chart(&format!("{}: landmark bearing innovation", run.name), "t (s)", "measured - predicted (rad)", &[("bearing", RGBColor(200, 120, 0), bearing)], true, false, &[])?);
+    }
     for ((run, tr), g) in runs.iter().zip(tracks).zip(gyro) {
         let mut series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("model (nominal)", RED, traj(run, tr))];
         if let Some(g) = g {

@@ -1,5 +1,6 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
+use crate::landmarks::{pose_from_landmarks, LandmarkObs};
 use crate::log::{unwrap, Log, LogError};
 use crate::model::Runner;
 use kinegen_model::spec::InputKind;
@@ -15,6 +16,8 @@ pub struct Run {
     pub gt: Option<Vec<[f64; 3]>>,
     /// Gyro yaw rate per row; row k+1 is compared with the model rate of step k.
     pub gyro: Option<Vec<f64>>,
+    /// Range-bearing observations of mapped landmarks during the run (may be empty).
+    pub landmarks: Vec<LandmarkObs>,
 }
 
 impl Run {
@@ -26,9 +29,16 @@ impl Run {
     /// the inputs first change (the robot at rest), which averages out the motion
     /// capture noise that would otherwise rotate the whole track; row 0 if the robot
     /// moves at once. Origin when there is no ground truth.
+    ///
+    /// Without ground truth, the pose that places the landmarks seen during that
+    /// rest (or the first 0.1 s) on the map, if at least two are seen.
     pub fn start_pose(&self) -> [f64; 3] {
-        let Some(g) = &self.gt else { return [0.0; 3] };
-        let rest = self.u.iter().take_while(|u| u.iter().all(|v| *v == 0.0)).count().max(1).min(g.len());
+        let rest_rows = self.u.iter().take_while(|u| u.iter().all(|v| *v == 0.0)).count();
+        let Some(g) = &self.gt else {
+            let until = if rest_rows > 0 { self.t[rest_rows] } else { self.t[0] + 0.1 };
+            return pose_from_landmarks(&self.landmarks, until).unwrap_or([0.0; 3]);
+        };
+        let rest = rest_rows.max(1).min(g.len());
         let mut m = [0.0; 3];
         for p in &g[..rest] {
             for i in 0..3 {
@@ -57,6 +67,7 @@ impl Run {
             u: self.u[a..b - 1].to_vec(),
             gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
             gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
+            landmarks: self.landmarks.iter().filter(|o| o.t >= self.t[a] && o.t <= self.t[b - 1]).cloned().collect(),
         }
     }
 
@@ -130,7 +141,7 @@ impl Run {
         };
         let gyro = log.columns.get("gyro_z").cloned();
         let name = log.path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-        Ok(Run { name, t, dt, u, gt, gyro })
+        Ok(Run { name, t, dt, u, gt, gyro, landmarks: Vec::new() })
     }
 
     /// Read a log for a model.

@@ -29,12 +29,13 @@ pub struct FitOptions {
     pub gyro_sigma: f64,
     pub use_pose: bool,
     pub use_gyro: bool,
+    pub use_landmarks: bool,
     pub max_iter: usize,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, max_iter: 100 }
+        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, use_landmarks: true, max_iter: 100 }
     }
 }
 
@@ -60,7 +61,7 @@ pub struct FitResult {
 
 #[derive(Debug, thiserror::Error)]
 pub enum FitError {
-    #[error("nothing to fit: the logs have neither ground truth (gt_x, gt_y, gt_theta) nor a gyro (gyro_z) the model can predict")]
+    #[error("nothing to fit: the logs have no ground truth (gt_x, gt_y, gt_theta), no gyro (gyro_z) and no landmark observations the model can predict")]
     NoResiduals,
     #[error("the fit diverged: {0}")]
     Diverged(String),
@@ -142,6 +143,9 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
             }
         }
     }
+    if o.use_landmarks && !run.landmarks.is_empty() {
+        landmark_residuals(r, p, free, run, &track, with_jac, &mut res, &mut jac);
+    }
     if o.use_gyro {
         if let (Some(g), Some(h)) = (&run.gyro, r.ir.function("obs_gyro")) {
             let hp = r.ir.function("obs_gyro_jac_p");
@@ -164,6 +168,39 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
         }
     }
     (res, jac)
+}
+
+/// Range and bearing residuals of every landmark observation (seed 001 eq. 6),
+/// predicted at the track interpolated to the observation time; sigmas from the
+/// spec's `landmark` observation. Jacobian: H_x times the interpolated pose
+/// sensitivity, plus H_p.
+#[allow(clippy::too_many_arguments)]
+fn landmark_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, track: &deadreckon::Track, with_jac: bool, res: &mut Vec<f64>, jac: &mut Vec<Vec<f64>>) {
+    let Some(h) = r.ir.function("obs_landmark") else { return };
+    let sig = r.ir.observations.iter().find(|o| o.name == "landmark").map(|o| o.sigma.clone()).filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0)).unwrap_or(vec![0.05, 0.02]);
+    let np = p.len();
+    for o in &run.landmarks {
+        let (j, a, x) = crate::landmarks::locate_on(run, track, o.t);
+        let u = &run.u[j.min(run.steps() - 1)];
+        let lm = [o.xl, o.yl];
+        let pred = h.eval(&Runner::obs_args(h, &x, u, p, &lm));
+        res.push((pred[0] - o.range) / sig[0]);
+        res.push(wrap(pred[1] - o.bearing) / sig[1]);
+        if with_jac {
+            let (fx, fp) = (r.f("obs_landmark_jac_x"), r.f("obs_landmark_jac_p"));
+            let hx = fx.eval(&Runner::obs_args(fx, &x, u, p, &lm));
+            let hp = fp.eval(&Runner::obs_args(fp, &x, u, p, &lm));
+            let sens = track.sens.as_ref().unwrap();
+            let (s0, s1) = (&sens[j], &sens[j + 1]);
+            for i in 0..2 {
+                jac.push(
+                    free.iter()
+                        .map(|&c| ((0..3).map(|m| hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]))).sum::<f64>() + hp[i * np + c]) / sig[i])
+                        .collect(),
+                );
+            }
+        }
+    }
 }
 
 fn cost(res: &[f64]) -> f64 {

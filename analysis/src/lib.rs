@@ -9,6 +9,7 @@ pub mod deadreckon;
 pub mod diagnose;
 pub mod effects;
 pub mod fit;
+pub mod landmarks;
 pub mod log;
 pub mod metrics;
 pub mod model;

@@ -54,12 +54,36 @@ pub struct SimOptions {
     pub pos_noise: f64,
     pub heading_noise: f64,
     pub gyro_noise: f64,
+    /// Landmarks (id, x, y) to observe with the model's `landmark` observation at
+    /// `landmark_hz`, up to `landmark_range` metres away.
+    pub landmarks: Vec<(String, [f64; 2])>,
+    pub landmark_hz: f64,
+    pub landmark_range: f64,
 }
 
 impl Default for SimOptions {
     fn default() -> Self {
-        SimOptions { trajectory: Trajectory::Square, seed: 1, rate_hz: 20.0, laps: 1, pos_noise: 0.001, heading_noise: 0.002, gyro_noise: 0.005 }
+        SimOptions {
+            trajectory: Trajectory::Square,
+            seed: 1,
+            rate_hz: 20.0,
+            laps: 1,
+            pos_noise: 0.001,
+            heading_noise: 0.002,
+            gyro_noise: 0.005,
+            landmarks: Vec::new(),
+            landmark_hz: 5.0,
+            landmark_range: 10.0,
+        }
     }
+}
+
+/// A simulated log and, when landmarks were given, its range-bearing observations
+/// (t, id, range, bearing).
+pub struct SimLog {
+    pub header: Vec<String>,
+    pub rows: Vec<Vec<f64>>,
+    pub observations: Vec<(f64, String, f64, f64)>,
 }
 
 /// A smooth 0 -> 1 ramp.
@@ -213,8 +237,8 @@ pub fn can_spin(base: &Runner) -> bool {
     (t[2] - 1.0).abs() < 1e-6 && t[0].abs() < 1e-9
 }
 
-/// Simulate a log: returns (header, rows).
-pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, Vec<Vec<f64>>) {
+/// Simulate a log.
+pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     let mut rng = SmallRng::seed_from_u64(o.seed);
     let lateral = {
         let u = command(base, &[0.0, 1.0, 0.0]);
@@ -339,7 +363,38 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> (Vec<String>, 
         }
         rows.push(row);
     }
-    (header, rows)
+    let observations = observe_landmarks(truth, o, &times, &history, &mut rng);
+    SimLog { header, rows, observations }
+}
+
+/// Range-bearing observations of the landmarks in range, through the truth
+/// model's `landmark` observation (seed 001 eq. 6) at the true pose, with the
+/// noise the spec declares for it (bearing wrapped).
+fn observe_landmarks(truth: &Runner, o: &SimOptions, times: &[f64], history: &[(f64, [f64; 3])], rng: &mut SmallRng) -> Vec<(f64, String, f64, f64)> {
+    let Some(h) = truth.ir.function("obs_landmark") else { return vec![] };
+    if o.landmarks.is_empty() {
+        return vec![];
+    }
+    let sig = truth.ir.observations.iter().find(|x| x.name == "landmark").map(|x| x.sigma.clone()).filter(|s| s.len() == 2).unwrap_or(vec![0.05, 0.02]);
+    let noise = |s: f64, rng: &mut SmallRng| if s > 0.0 { Normal::new(0.0, s).unwrap().sample(rng) } else { 0.0 };
+    let u0 = vec![0.0; truth.ir.inputs.len()];
+    let mut out = Vec::new();
+    let mut next = times[0];
+    for &t in times {
+        if t + 1e-9 < next {
+            continue;
+        }
+        next = t + 1.0 / o.landmark_hz;
+        let x = at_time(history, t);
+        for (id, lm) in &o.landmarks {
+            if ((lm[0] - x[0]).powi(2) + (lm[1] - x[1]).powi(2)).sqrt() > o.landmark_range {
+                continue;
+            }
+            let v = h.eval(&Runner::obs_args(h, &x, &u0, &truth.p, lm));
+            out.push((t, id.clone(), v[0] + noise(sig[0], rng), wrap(v[1] + noise(sig[1], rng))));
+        }
+    }
+    out
 }
 
 /// The true pose at time `t` (linear interpolation of the sub-step history; the

@@ -1,0 +1,235 @@
+//! Range-bearing observations of known landmarks (CONTRACT section 2): `OBS.csv`
+//! with `t,id,range,bearing` (bearing relative to the robot heading) and `MAP.csv`
+//! with `id,x,y`. Predicted through the model's `landmark` observation (seed 001
+//! eq. 6) at the dead-reckoned pose interpolated to the observation time, so the
+//! innovations (seed 001's EKF update) measure the model error, and calibration
+//! can use them with the exact sensitivities.
+use crate::dataset::Run;
+use crate::deadreckon::Track;
+use crate::log::{wrap, LogError};
+use crate::model::Runner;
+use serde::Serialize;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// One range-bearing observation, with the mapped landmark it refers to.
+#[derive(Debug, Clone)]
+pub struct LandmarkObs {
+    pub t: f64,
+    pub id: String,
+    pub xl: f64,
+    pub yl: f64,
+    pub range: f64,
+    pub bearing: f64,
+}
+
+/// Landmark positions by id.
+#[derive(Debug, Clone, Default)]
+pub struct Map {
+    pub ids: Vec<String>,
+    pub xy: HashMap<String, [f64; 2]>,
+}
+
+fn err(path: &Path, row: Option<usize>, column: Option<&str>, message: impl Into<String>) -> LogError {
+    LogError { file: path.to_path_buf(), row, column: column.map(str::to_string), message: message.into() }
+}
+
+/// A CSV table as (header -> index, rows with their 1-based line numbers).
+fn read_table(path: &Path, required: &[&str]) -> Result<(HashMap<String, usize>, Vec<(usize, csv::StringRecord)>), LogError> {
+    let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|x| err(path, None, None, format!("cannot read: {x}")))?;
+    let headers = rdr.headers().map_err(|x| err(path, Some(1), None, format!("bad header: {x}")))?.clone();
+    let index: HashMap<String, usize> = headers.iter().enumerate().map(|(i, h)| (h.to_string(), i)).collect();
+    for c in required {
+        if !index.contains_key(*c) {
+            return Err(err(path, Some(1), Some(c), format!("missing column `{c}` (the header has: {})", headers.iter().collect::<Vec<_>>().join(", "))));
+        }
+    }
+    let mut rows = Vec::new();
+    for (n, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|x| err(path, Some(n + 2), None, format!("malformed row: {x}")))?;
+        rows.push((n + 2, rec));
+    }
+    Ok((index, rows))
+}
+
+fn cell<'a>(path: &Path, idx: &HashMap<String, usize>, line: usize, rec: &'a csv::StringRecord, col: &str) -> Result<&'a str, LogError> {
+    rec.get(idx[col]).ok_or_else(|| err(path, Some(line), Some(col), "row is shorter than the header"))
+}
+
+fn number(path: &Path, idx: &HashMap<String, usize>, line: usize, rec: &csv::StringRecord, col: &str) -> Result<f64, LogError> {
+    let s = cell(path, idx, line, rec, col)?;
+    let v: f64 = s.parse().map_err(|_| err(path, Some(line), Some(col), format!("`{s}` is not a number")))?;
+    if !v.is_finite() {
+        return Err(err(path, Some(line), Some(col), format!("`{s}` is not finite")));
+    }
+    Ok(v)
+}
+
+/// Read `MAP.csv` (`id,x,y`); ids are text and must be unique.
+pub fn read_map(path: &Path) -> Result<Map, LogError> {
+    let (idx, rows) = read_table(path, &["id", "x", "y"])?;
+    let mut map = Map::default();
+    for (line, rec) in &rows {
+        let id = cell(path, &idx, *line, rec, "id")?.to_string();
+        if id.is_empty() {
+            return Err(err(path, Some(*line), Some("id"), "empty landmark id"));
+        }
+        let xy = [number(path, &idx, *line, rec, "x")?, number(path, &idx, *line, rec, "y")?];
+        if map.xy.insert(id.clone(), xy).is_some() {
+            return Err(err(path, Some(*line), Some("id"), format!("landmark `{id}` is listed twice")));
+        }
+        map.ids.push(id);
+    }
+    if map.ids.is_empty() {
+        return Err(err(path, None, None, "the map lists no landmarks"));
+    }
+    Ok(map)
+}
+
+/// Read `OBS.csv` (`t,id,range,bearing`): time non-decreasing (several landmarks
+/// may be seen at one instant), range positive, every id in the map.
+pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Vec<LandmarkObs>, LogError> {
+    let (idx, rows) = read_table(path, &["t", "id", "range", "bearing"])?;
+    let mut out: Vec<LandmarkObs> = Vec::with_capacity(rows.len());
+    for (line, rec) in &rows {
+        let t = number(path, &idx, *line, rec, "t")?;
+        if let Some(prev) = out.last() {
+            if t < prev.t {
+                return Err(err(path, Some(*line), Some("t"), format!("time goes backwards: {t} follows {}", prev.t)));
+            }
+        }
+        let id = cell(path, &idx, *line, rec, "id")?.to_string();
+        let Some(&[xl, yl]) = map.xy.get(&id) else {
+            return Err(err(path, Some(*line), Some("id"), format!("landmark `{id}` is not in the map {}", map_path.display())));
+        };
+        let range = number(path, &idx, *line, rec, "range")?;
+        if range <= 0.0 {
+            return Err(err(path, Some(*line), Some("range"), format!("range {range} is not positive")));
+        }
+        let bearing = number(path, &idx, *line, rec, "bearing")?;
+        out.push(LandmarkObs { t, id, xl, yl, range, bearing });
+    }
+    if out.is_empty() {
+        return Err(err(path, None, None, "no observations"));
+    }
+    Ok(out)
+}
+
+/// The robot pose from landmarks seen while it stands still at the start (at
+/// least two distinct landmarks before `t_until`): each observation places a
+/// landmark in the robot frame, and the rigid transform that maps those points
+/// onto the map is the pose (2-D Kabsch / Procrustes, closed form). Used when a
+/// log has no ground truth.
+pub fn pose_from_landmarks(obs: &[LandmarkObs], t_until: f64) -> Option<[f64; 3]> {
+    let seen: Vec<&LandmarkObs> = obs.iter().filter(|o| o.t <= t_until).collect();
+    let distinct: std::collections::HashSet<&str> = seen.iter().map(|o| o.id.as_str()).collect();
+    if distinct.len() < 2 {
+        return None;
+    }
+    let body: Vec<[f64; 2]> = seen.iter().map(|o| [o.range * o.bearing.cos(), o.range * o.bearing.sin()]).collect();
+    let world: Vec<[f64; 2]> = seen.iter().map(|o| [o.xl, o.yl]).collect();
+    let n = seen.len() as f64;
+    let mean = |v: &[[f64; 2]]| [v.iter().map(|p| p[0]).sum::<f64>() / n, v.iter().map(|p| p[1]).sum::<f64>() / n];
+    let (mb, mw) = (mean(&body), mean(&world));
+    let (mut sdot, mut scross) = (0.0, 0.0);
+    for (b, w) in body.iter().zip(&world) {
+        let (bx, by, wx, wy) = (b[0] - mb[0], b[1] - mb[1], w[0] - mw[0], w[1] - mw[1]);
+        sdot += bx * wx + by * wy;
+        scross += bx * wy - by * wx;
+    }
+    let th = scross.atan2(sdot);
+    let (s, c) = th.sin_cos();
+    Some([mw[0] - (c * mb[0] - s * mb[1]), mw[1] - (s * mb[0] + c * mb[1]), th])
+}
+
+/// Where an observation falls on a track: (step j, fraction a, interpolated pose).
+pub fn locate_on(run: &Run, track: &Track, t: f64) -> (usize, f64, [f64; 3]) {
+    let (j, a) = run.locate(t);
+    let a = a.clamp(0.0, 1.0);
+    let (p0, p1) = (track.pose[j], track.pose[j + 1]);
+    (j, a, [0, 1, 2].map(|i| p0[i] + a * (p1[i] - p0[i])))
+}
+
+/// Model prediction (range, bearing) of an observation from a track.
+pub fn predict(r: &Runner, p: &[f64], run: &Run, track: &Track, o: &LandmarkObs) -> Option<[f64; 2]> {
+    let h = r.ir.function("obs_landmark")?;
+    let (j, _, x) = locate_on(run, track, o.t);
+    let u = &run.u[j.min(run.steps() - 1)];
+    let v = h.eval(&Runner::obs_args(h, &x, u, p, &[o.xl, o.yl]));
+    Some([v[0], v[1]])
+}
+
+/// One innovation: measured minus predicted.
+#[derive(Debug, Clone, Serialize)]
+pub struct Innovation {
+    pub t: f64,
+    pub id: String,
+    pub range_m: f64,
+    pub bearing_rad: f64,
+}
+
+/// Innovation summary over runs.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct InnovationStats {
+    pub observations: usize,
+    pub landmarks: usize,
+    pub range_rmse_m: f64,
+    pub bearing_rmse_rad: f64,
+    pub range_bias_m: f64,
+    pub bearing_bias_rad: f64,
+    /// The landmark with the largest RMS range innovation, and that RMS.
+    pub worst_landmark: Option<(String, f64)>,
+}
+
+pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &Track) -> Vec<Innovation> {
+    run.landmarks
+        .iter()
+        .filter_map(|o| predict(r, p, run, track, o).map(|pr| Innovation { t: o.t, id: o.id.clone(), range_m: o.range - pr[0], bearing_rad: wrap(o.bearing - pr[1]) }))
+        .collect()
+}
+
+pub fn stats(all: &[Innovation]) -> Option<InnovationStats> {
+    if all.is_empty() {
+        return None;
+    }
+    let n = all.len() as f64;
+    let mut per: HashMap<&str, (f64, usize)> = HashMap::new();
+    for i in all {
+        let e = per.entry(&i.id).or_default();
+        e.0 += i.range_m * i.range_m;
+        e.1 += 1;
+    }
+    let worst = per.iter().map(|(id, (s, k))| (id.to_string(), (s / *k as f64).sqrt())).max_by(|a, b| a.1.total_cmp(&b.1));
+    Some(InnovationStats {
+        observations: all.len(),
+        landmarks: per.len(),
+        range_rmse_m: (all.iter().map(|i| i.range_m * i.range_m).sum::<f64>() / n).sqrt(),
+        bearing_rmse_rad: (all.iter().map(|i| i.bearing_rad * i.bearing_rad).sum::<f64>() / n).sqrt(),
+        range_bias_m: all.iter().map(|i| i.range_m).sum::<f64>() / n,
+        bearing_bias_rad: all.iter().map(|i| i.bearing_rad).sum::<f64>() / n,
+        worst_landmark: worst,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pose_from_two_landmarks_is_exact() {
+        let pose = [1.0, -2.0, 0.7];
+        let marks = [("a", 4.0, 1.0), ("b", -1.0, 3.0), ("c", 0.0, -5.0)];
+        let obs: Vec<LandmarkObs> = marks
+            .iter()
+            .map(|(id, x, y)| {
+                let (dx, dy) = (x - pose[0], y - pose[1]);
+                LandmarkObs { t: 0.0, id: id.to_string(), xl: *x, yl: *y, range: dx.hypot(dy), bearing: dy.atan2(dx) - pose[2] }
+            })
+            .collect();
+        let got = pose_from_landmarks(&obs, 0.5).unwrap();
+        for i in 0..3 {
+            assert!((got[i] - pose[i]).abs() < 1e-12, "{got:?}");
+        }
+        assert!(pose_from_landmarks(&obs[..1], 0.5).is_none());
+    }
+}
