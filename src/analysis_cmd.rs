@@ -41,6 +41,11 @@ pub struct Common {
 }
 
 /// Exit 2 with a message naming the problem.
+/// Progress bars stay quiet when stdout carries the JSON document.
+pub fn quiet(c: &Common) -> bool {
+    c.json.as_deref() == Some(std::path::Path::new("-"))
+}
+
 pub fn bad(msg: impl std::fmt::Display) -> ExitCode {
     eprintln!("error: {msg}");
     ExitCode::from(2)
@@ -257,7 +262,7 @@ struct MethodResult {
     note: String,
 }
 
-fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64) -> Result<(MethodResult, Option<FitResult>), String> {
+fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64, fo: &FitOptions) -> Result<(MethodResult, Option<FitResult>), String> {
     use kinegen_analysis::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
     let blind = |p: &[f64]| {
         let dirs = yaw_rate_blind_directions(r, p, runs);
@@ -274,7 +279,7 @@ fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64) -> Res
     let sigma_omega = r.ir.observations.iter().find(|o| o.name == "gyro").and_then(|o| o.sigma.first().copied()).filter(|s| *s > 0.0).unwrap_or(0.005);
     Ok(match method {
         "lm" => {
-            let res = fit(r, runs, &FitOptions::default()).map_err(|e| e.to_string())?;
+            let res = fit(r, runs, fo).map_err(|e| e.to_string())?;
             (MethodResult { name: "lm", p: res.p.clone(), std: res.std.clone(), note: format!("{} LM iterations", res.iterations) }, Some(res))
         }
         "gd" => {
@@ -295,8 +300,10 @@ fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64) -> Res
     })
 }
 
-pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) -> ExitCode {
+pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], loss: &str) -> ExitCode {
     let out = Out::new(c.json.as_deref());
+    // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
+    let fo = FitOptions { huber: (loss == "huber").then_some(3.0), ..FitOptions::default() };
     let prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),
@@ -309,8 +316,12 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
     if method != "lm" {
         let methods: Vec<&str> = if method == "all" { vec!["lm", "gd", "ekf", "umbmark"] } else { vec![method] };
         let mut rows = Vec::new();
+        let bar = crate::progress::Progress::bar(methods.len() as u64, "calibration methods", quiet(&c));
         for m in methods {
-            match run_method(r, &prep.runs, m, side, mu) {
+            bar.message(m);
+            let result = run_method(r, &prep.runs, m, side, mu, &fo);
+            bar.inc();
+            match result {
                 Ok((res, _)) => rows.push(res),
                 Err(e) if method == "all" => out.say(&format!("{m}: not applicable here: {e}")),
                 Err(e) => return bad(e),
@@ -378,10 +389,12 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
             Err(e) => bad(e),
         };
     }
-    let res = match fit(r, &prep.runs, &FitOptions::default()) {
+    let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(&c));
+    let res = match fit(r, &prep.runs, &fo) {
         Ok(x) => x,
         Err(e) => return bad(e),
     };
+    drop(spin);
     let before = evaluate(r, &r.p, &prep.runs);
     let after = evaluate(r, &res.p, &prep.runs);
     out.say(&format!("{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)", r.ir.name, res.free.len(), prep.runs.len(), res.n_residuals, res.iterations));
@@ -399,6 +412,7 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String]) ->
         out.say(&format!("warning: {w}"));
     }
     let mut doc = fit_json(r, &res, &before, &after, metric_name(&prep.runs));
+    doc["loss"] = json!(loss);
     let tb = tracks(r, &r.p, &prep.runs);
     let ta = tracks(r, &res.p, &prep.runs);
     if let (Some(lb), Some(la)) = (landmark_stats(r, &r.p, &prep.runs, &tb), landmark_stats(r, &res.p, &prep.runs, &ta)) {

@@ -50,10 +50,15 @@ pub fn run(c: Common) -> ExitCode {
     }
     let t_prep = t0.elapsed();
     let t1 = Instant::now();
-    let d = match diagnose(&prep.runner, &prep.runs, &augmented, skipped) {
+    let bar = crate::progress::Progress::bar(augmented.len() as u64 + 1, "diagnose", c.json.as_deref() == Some(std::path::Path::new("-")));
+    let d = match diagnose(&prep.runner, &prep.runs, &augmented, skipped, &|step| {
+        bar.message(step);
+        bar.inc();
+    }) {
         Ok(d) => d,
         Err(e) => return bad(e),
     };
+    drop(bar);
     let t_diag = t1.elapsed();
     let r = &prep.runner;
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();

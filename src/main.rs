@@ -10,6 +10,7 @@ mod effects_cmd;
 mod generate_cmd;
 mod ir_source;
 mod output;
+mod progress;
 mod report;
 mod verify_cmd;
 
@@ -78,6 +79,10 @@ enum Command {
         /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
         #[arg(long)]
         truth: Vec<String>,
+        /// Loss of the Levenberg-Marquardt fit: l2 (least squares) or huber
+        /// (residuals beyond 3 sigma count linearly: robust to outliers).
+        #[arg(long, default_value = "l2", value_parser = ["l2", "huber"])]
+        loss: String,
     },
     /// Calibrate, then test each applicable effect of the catalogue (spec/effects),
     /// rank them, say which effect is missing (or that none is, or that unexplained
@@ -148,7 +153,7 @@ fn main() -> ExitCode {
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Diagnose(c) => diagnose_cmd::run(c),
-        Command::Fit { common, method, side, mu, truth } => analysis_cmd::run_fit(common, &method, side, mu, &truth),
+        Command::Fit { common, method, side, mu, truth, loss } => analysis_cmd::run_fit(common, &method, side, mu, &truth, &loss),
         Command::Simulate { spec, effect, set, trajectory, seed, laps, out, landmarks, observations } => {
             effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out, landmarks, observations })
         }

@@ -318,7 +318,10 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
 
 /// Run the diagnosis. `augmented` holds, per applicable effect, its name, doc and
 /// the runner of the spec with the effect added (effect parameters at nominal).
-pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runner)], skipped: Vec<(String, String)>) -> Result<Diagnosis, String> {
+///
+/// `progress` is called with a step's name after the base calibration and after
+/// each candidate (from worker threads), for a progress bar.
+pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runner)], skipped: Vec<(String, String)>, progress: &(dyn Fn(&str) + Sync)) -> Result<Diagnosis, String> {
     let o = FitOptions::default();
     let baseline_rmse = weighted_rms(base, &base.p, runs, &o);
     let base_fit = fit(base, runs, &o).map_err(|e| e.to_string())?;
@@ -328,6 +331,7 @@ pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runne
     let (train, test) = split(runs, 0.6);
     let base_train = fit(base, &train, &o).map_err(|e| e.to_string())?;
     let base_holdout_rmse = weighted_rms(base, &base_train.p, &test, &o);
+    progress("base model calibrated");
 
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
@@ -350,6 +354,7 @@ pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runne
                 .min_by(|a, b| a.cost_after.total_cmp(&b.cost_after))
                 .map(|ft| weighted_rms(&tr_start, &ft.p, &test, &o))
                 .unwrap_or(f64::INFINITY);
+            progress(name);
             let improvement = 1.0 - rmse / calibrated_rmse;
             let significant = gain > 10.0 && improvement > 0.2 && holdout_rmse < 0.8 * base_holdout_rmse;
             let parameters = effect_params

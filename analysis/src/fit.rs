@@ -31,11 +31,15 @@ pub struct FitOptions {
     pub use_gyro: bool,
     pub use_landmarks: bool,
     pub max_iter: usize,
+    /// Robust loss: residuals beyond this many sigmas count linearly instead of
+    /// quadratically (Huber), so outliers (a motion-capture glitch, a wrong
+    /// landmark association) do not drag the estimate. None: least squares.
+    pub huber: Option<f64>,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, use_landmarks: true, max_iter: 100 }
+        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, use_landmarks: true, max_iter: 100, huber: None }
     }
 }
 
@@ -85,7 +89,28 @@ pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOpt
         row += rv.len();
         res.extend(rv);
     }
+    if let Some(k) = o.huber {
+        huber_weights(&mut res, jac.as_mut(), k);
+    }
     (res, jac)
+}
+
+/// Huber loss by iteratively reweighted least squares: a residual r beyond k is
+/// scaled by sqrt(k/|r|), so its squared contribution is k|r| (linear growth); its
+/// Jacobian row gets the same weight (the weight's own derivative is neglected, as
+/// IRLS does). Weights are recomputed at every evaluation.
+fn huber_weights(res: &mut [f64], jac: Option<&mut DMatrix<f64>>, k: f64) {
+    let w: Vec<f64> = res.iter().map(|r| if r.abs() > k { (k / r.abs()).sqrt() } else { 1.0 }).collect();
+    for (r, wi) in res.iter_mut().zip(&w) {
+        *r *= wi;
+    }
+    if let Some(j) = jac {
+        for (i, wi) in w.iter().enumerate() {
+            if *wi != 1.0 {
+                j.row_mut(i).scale_mut(*wi);
+            }
+        }
+    }
 }
 
 fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOptions, with_jac: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
