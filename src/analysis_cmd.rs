@@ -300,10 +300,11 @@ fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64, fo: &F
     })
 }
 
-pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], loss: &str) -> ExitCode {
+pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], loss: &str, residuals: &[String]) -> ExitCode {
     let out = Out::new(c.json.as_deref());
+    let uses = |k: &str| residuals.is_empty() || residuals.iter().any(|r| r == k);
     // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
-    let fo = FitOptions { huber: (loss == "huber").then_some(3.0), ..FitOptions::default() };
+    let fo = FitOptions { huber: (loss == "huber").then_some(3.0), use_pose: uses("pose"), use_gyro: uses("gyro"), use_landmarks: uses("landmarks"), ..FitOptions::default() };
     let prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),
@@ -413,6 +414,7 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
     }
     let mut doc = fit_json(r, &res, &before, &after, metric_name(&prep.runs));
     doc["loss"] = json!(loss);
+    doc["residuals"] = json!(["pose", "gyro", "landmarks"].iter().filter(|k| uses(k)).collect::<Vec<_>>());
     let tb = tracks(r, &r.p, &prep.runs);
     let ta = tracks(r, &res.p, &prep.runs);
     if let (Some(lb), Some(la)) = (landmark_stats(r, &r.p, &prep.runs, &tb), landmark_stats(r, &res.p, &prep.runs, &ta)) {

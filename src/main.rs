@@ -83,6 +83,10 @@ enum Command {
         /// (residuals beyond 3 sigma count linearly: robust to outliers).
         #[arg(long, default_value = "l2", value_parser = ["l2", "huber"])]
         loss: String,
+        /// Residuals the Levenberg-Marquardt fit uses (repeatable): pose (ground
+        /// truth), gyro, landmarks. Default: every kind the logs have.
+        #[arg(long, value_parser = ["pose", "gyro", "landmarks"])]
+        residuals: Vec<String>,
     },
     /// Calibrate, then test each applicable effect of the catalogue (spec/effects),
     /// rank them, say which effect is missing (or that none is, or that unexplained
@@ -153,7 +157,7 @@ fn main() -> ExitCode {
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Diagnose(c) => diagnose_cmd::run(c),
-        Command::Fit { common, method, side, mu, truth, loss } => analysis_cmd::run_fit(common, &method, side, mu, &truth, &loss),
+        Command::Fit { common, method, side, mu, truth, loss, residuals } => analysis_cmd::run_fit(common, &method, side, mu, &truth, &loss, &residuals),
         Command::Simulate { spec, effect, set, trajectory, seed, laps, out, landmarks, observations } => {
             effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out, landmarks, observations })
         }
