@@ -36,7 +36,17 @@ pub fn with_effects(spec_text: &str, effects: &[String], dir: &Path) -> Result<(
         let eff = find_effect(dir, name)?;
         let param = match param {
             Some(p) => p.to_string(),
-            None => eff.parameter.first().and_then(|p| p.get("name")).and_then(|n| n.as_str()).unwrap_or("").to_string(),
+            // the first parameter this model gets (a per-wheel effect adds only
+            // the parameters of the wheels the model has)
+            None => {
+                let applied = eff.apply(&text, &BTreeMap::new()).unwrap_or_default();
+                eff.parameter
+                    .iter()
+                    .filter_map(|p| p.get("name").and_then(|n| n.as_str()))
+                    .find(|n| applied.contains(&format!("name = \"{n}\"")))
+                    .unwrap_or("")
+                    .to_string()
+            }
         };
         if !eff.parameter.iter().any(|p| p.get("name").and_then(|n| n.as_str()) == Some(param.as_str())) {
             return Err(format!("--effect {e}: the effect `{name}` has no parameter `{param}`"));

@@ -12,7 +12,7 @@ fn check_model(model: &str, cases: &[(&str, &str, f64)]) {
     let spec = format!("spec/{model}.toml");
     let mut report = Vec::new();
     for (effect, param, value) in cases {
-        let eff = format!("{effect}={value}");
+        let eff = format!("{effect}.{param}={value}");
         let log = simulate(tmp.path(), &format!("{effect}.csv"), &["--spec", &spec, "--effect", &eff, "--trajectory", "random", "--seed", "7"]);
         let d = kinegen_json(&["diagnose", "--spec", &spec, "--data", log.to_str().unwrap()]);
         let cands = d["candidates"].as_array().unwrap();
@@ -52,6 +52,31 @@ fn tricycle_hidden_effects_are_found() {
 #[test]
 fn omni3_hidden_effects_are_found() {
     check_model("omni3", &[("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1), ("time_offset", "time_offset", 0.08)]);
+}
+
+#[test]
+fn omni_caster_hidden_effects_are_found() {
+    check_model(
+        "omni_caster",
+        &[("steering_offset", "steer_offset2", 0.05), ("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("time_offset", "time_offset", 0.08)],
+    );
+}
+
+/// With every steering-axis position free, the omni robot can move its reference
+/// point onto an off-centre sensor: sensor_offset is redundant there and is not
+/// proposed (on a log that has one, calibration absorbs it).
+#[test]
+fn omni_caster_sensor_offset_is_recognised_as_redundant() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(tmp.path(), "so.csv", &["--spec", "spec/omni_caster.toml", "--effect", "sensor_offset.sensor_dx=0.1", "--trajectory", "random", "--seed", "7"]);
+    let d = kinegen_json(&["diagnose", "--spec", "spec/omni_caster.toml", "--data", log.to_str().unwrap()]);
+    let skipped: Vec<&str> = d["skipped"].as_array().unwrap().iter().map(|s| s["effect"].as_str().unwrap()).collect();
+    assert!(skipped.contains(&"sensor_offset"), "{skipped:?}");
+    assert!(d["verdict"]["effect"].is_null(), "{}", d["verdict"]);
+    // the calibrated base model already explains the log: the axes moved by the offset
+    let fit = kinegen_json(&["fit", "--spec", "spec/omni_caster.toml", "--data", log.to_str().unwrap()]);
+    let xa1 = fit["parameters"]["xa1"]["estimate"].as_f64().unwrap();
+    assert!((xa1 - (0.325 - 0.1)).abs() < 0.005, "xa1 = {xa1}: the reference point did not move onto the sensor");
 }
 
 #[test]

@@ -1,7 +1,8 @@
 //! `cargo bench -p kinegen-analysis --bench speed`
 //!
 //! 1. The IR evaluator against the compiled generated kernel on the same inputs
-//!    (diff_drive step_exact and step_exact_jac_p): ns per call and their ratio.
+//!    (diff_drive and omni_caster step_exact and step_exact_jac_p): ns per call
+//!    and their ratio.
 //! 2. Calibration of a 1,000,000-sample diff_drive log: samples per second.
 //! (Diagnosis time per candidate is printed by `kinegen diagnose` itself, which
 //! needs the CLI to derive the augmented models.)
@@ -48,6 +49,45 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
     run
 }
 
+/// The least-squares model: the IR evaluator decomposes each pseudo-inverse once
+/// per call (cache), the generated code once per matrix too.
+fn omni_caster_kernels() {
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../generated/ir/omni_caster.json");
+    let ir = ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap();
+    let pn: [f64; 12] = kinegen_generated::omni_caster::PARAM_NOMINAL;
+    let n_calls = 20_000;
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(3);
+    let inputs: Vec<([f64; 3], [f64; 9])> = (0..n_calls)
+        .map(|_| ([rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0)], std::array::from_fn(|i| if i < 3 { rng.gen_range(-1.0..1.0) } else { rng.gen_range(-5.0..5.0) })))
+        .collect();
+    let w = [0.0; 3];
+    for name in ["step_exact", "step_exact_jac_p"] {
+        let f = ir.function(name).unwrap();
+        let mut out = vec![0.0; f.rows * f.cols];
+        let mut scratch = Vec::new();
+        let (mut t_ir, mut t_gen) = (Vec::new(), Vec::new());
+        for _ in 0..5 {
+            let t0 = Instant::now();
+            for (x, u) in &inputs {
+                f.eval_into(&[x, u, &w, &pn, &[0.05]], &mut out, &mut scratch);
+                black_box(&out);
+            }
+            t_ir.push(t0.elapsed().as_secs_f64() / n_calls as f64);
+            let t0 = Instant::now();
+            for (x, u) in &inputs {
+                if name == "step_exact" {
+                    black_box(kinegen_generated::omni_caster::step_exact(black_box(x), u, &w, &pn, 0.05));
+                } else {
+                    black_box(kinegen_generated::omni_caster::step_exact_jac_p(black_box(x), u, &w, &pn, 0.05));
+                }
+            }
+            t_gen.push(t0.elapsed().as_secs_f64() / n_calls as f64);
+        }
+        let (a, b) = (median(t_ir), median(t_gen));
+        println!("omni_caster {name:<18} IR evaluator {:>9.1} ns/call, generated kernel {:>8.1} ns/call, ratio IR/generated {:.1}x", a * 1e9, b * 1e9, a / b);
+    }
+}
+
 fn main() {
     let ir = ir();
     let r = Runner::new(ir.clone(), &[]).unwrap();
@@ -84,6 +124,8 @@ fn main() {
         let (a, b) = (median(t_ir), median(t_gen));
         println!("{name:<18} IR evaluator {:>8.1} ns/call, generated kernel {:>7.1} ns/call, ratio IR/generated {:.1}x", a * 1e9, b * 1e9, a / b);
     }
+
+    omni_caster_kernels();
 
     let n = 1_000_000;
     let run = log(&r, n, 2);

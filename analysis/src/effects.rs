@@ -90,6 +90,9 @@ fn free_params(t: &Table) -> Vec<String> {
 /// Substitute whole identifiers in an expression string.
 fn subst(src: &str, map: &BTreeMap<String, String>) -> Result<String, String> {
     let e = expr::parse(src).map_err(|e| format!("`{src}`: {}", e.message))?;
+    if !e.variables().iter().any(|(v, _)| map.contains_key(*v)) {
+        return Ok(src.to_string());
+    }
     let parsed: BTreeMap<&str, expr::Expr> = map.iter().map(|(k, v)| Ok((k.as_str(), expr::parse(v).map_err(|e| format!("`{v}`: {}", e.message))?))).collect::<Result<_, String>>()?;
     Ok(e.substitute(&|v| parsed.get(v).cloned()).to_source())
 }
@@ -111,7 +114,16 @@ impl Effect {
                 return Applicability::NotForThisModel;
             }
         }
-        if !self.substitute.is_empty() && !self.substitute.keys().any(|s| spec_text.contains(s.as_str())) {
+        let declared: Vec<String> = ["input", "parameter"]
+            .iter()
+            .flat_map(|s| t.get(*s).and_then(Value::as_array).cloned().unwrap_or_default())
+            .filter_map(|v| v.get("name").and_then(Value::as_str).map(str::to_string))
+            .collect();
+        if !self.substitute.is_empty() && !self.substitute.keys().any(|s| declared.contains(s)) {
+            return Applicability::NotForThisModel;
+        }
+        // a twist template needs an explicit twist ([motion], not [constraints])
+        if !self.motion.is_empty() && !t.contains_key("motion") {
             return Applicability::NotForThisModel;
         }
         let free = free_params(&t);
@@ -130,9 +142,11 @@ impl Effect {
             .filter_map(|v| v.get("name").and_then(Value::as_str).map(str::to_string))
             .collect();
         let sub: BTreeMap<String, String> = self.substitute.iter().filter(|(k, _)| names.contains(k)).map(|(k, v)| (k.clone(), v.clone())).collect();
-        // parameters
+        // parameters: those the applied patches use (an effect may carry one per
+        // steered wheel, of which a model uses the ones its symbols need)
+        let used = self.used_parameters(&sub);
         let params = t.entry("parameter").or_insert(Value::Array(vec![])).as_array_mut().ok_or("`parameter` is not an array")?;
-        for p in &self.parameter {
+        for p in self.parameter.iter().filter(|p| p.get("name").and_then(Value::as_str).is_some_and(|n| used.iter().any(|u| u == n))) {
             let mut p = p.clone();
             let n = p.get("name").and_then(Value::as_str).unwrap_or("").to_string();
             if let Some(v) = values.get(&n) {
@@ -151,18 +165,34 @@ impl Effect {
                 }
             }
         }
-        let motion = t.get_mut("motion").and_then(Value::as_table_mut).ok_or("spec has no [motion]")?;
-        let mut orig: BTreeMap<String, String> = BTreeMap::new();
-        for k in ["vx", "vy", "omega"] {
-            let e = motion.get(k).and_then(Value::as_str).ok_or(format!("motion.{k} missing"))?;
-            orig.insert(k.into(), if sub.is_empty() { e.to_string() } else { subst(e, &sub)? });
-        }
-        for k in ["vx", "vy", "omega"] {
-            let new = match self.motion.get(k) {
-                Some(tpl) => orig.iter().fold(tpl.clone(), |acc, (n, e)| acc.replace(&format!("{{{n}}}"), e)),
-                None => orig[k].clone(),
-            };
-            motion.insert(k.into(), Value::String(new));
+        if let Some(rows) = t.get_mut("constraints").and_then(|c| c.get_mut("row")).and_then(Value::as_array_mut) {
+            // a constraint model: substitutions go into the rows of S
+            if !self.motion.is_empty() {
+                return Err("a twist template cannot be applied to a [constraints] model".into());
+            }
+            for row in rows {
+                if let Some(co) = row.get_mut("coeffs").and_then(Value::as_array_mut) {
+                    for c in co.iter_mut() {
+                        if let Some(e) = c.as_str() {
+                            *c = Value::String(if sub.is_empty() { e.to_string() } else { subst(e, &sub)? });
+                        }
+                    }
+                }
+            }
+        } else {
+            let motion = t.get_mut("motion").and_then(Value::as_table_mut).ok_or("spec has neither [motion] nor [constraints]")?;
+            let mut orig: BTreeMap<String, String> = BTreeMap::new();
+            for k in ["vx", "vy", "omega"] {
+                let e = motion.get(k).and_then(Value::as_str).ok_or(format!("motion.{k} missing"))?;
+                orig.insert(k.into(), if sub.is_empty() { e.to_string() } else { subst(e, &sub)? });
+            }
+            for k in ["vx", "vy", "omega"] {
+                let new = match self.motion.get(k) {
+                    Some(tpl) => orig.iter().fold(tpl.clone(), |acc, (n, e)| acc.replace(&format!("{{{n}}}"), e)),
+                    None => orig[k].clone(),
+                };
+                motion.insert(k.into(), Value::String(new));
+            }
         }
         // observations
         for (oname, patch) in &self.observation {
@@ -191,12 +221,45 @@ impl Effect {
         Ok(header + &toml::to_string(&t).map_err(|e| e.to_string())?)
     }
 
+    /// Names of this effect's parameters that its patches use, given the
+    /// substitutions that apply to the spec.
+    fn used_parameters(&self, sub: &BTreeMap<String, String>) -> Vec<String> {
+        let mut texts: Vec<String> = sub.values().cloned().collect();
+        texts.extend(self.motion.values().cloned());
+        for patch in self.observation.values() {
+            if let Some(a) = patch.get("expr").and_then(Value::as_array) {
+                texts.extend(a.iter().filter_map(|v| v.as_str().map(str::to_string)));
+            }
+        }
+        let mut used = Vec::new();
+        for text in texts {
+            // templates hold {vx}, {0}...: blank them out before parsing
+            let clean: String = text.split('{').enumerate().map(|(i, part)| if i == 0 { part.to_string() } else { format!("0{}", part.split_once('}').map_or("", |x| x.1)) }).collect();
+            if let Ok(e) = expr::parse(&clean) {
+                used.extend(e.variables().into_iter().map(|(v, _)| v.to_string()));
+            }
+        }
+        // an effect with no patch that names its parameters (e.g. time_offset,
+        // read by the analysis itself) keeps them all
+        if !self.parameter.iter().any(|p| p.get("name").and_then(Value::as_str).is_some_and(|n| used.iter().any(|u| u == n))) {
+            return self.parameter.iter().filter_map(|p| p.get("name").and_then(Value::as_str).map(str::to_string)).collect();
+        }
+        used
+    }
+
     /// What adding the effect changes, for people (the lines to add to the spec).
     pub fn spec_change(&self, spec_text: &str, values: &BTreeMap<String, f64>) -> Result<String, String> {
         let before = spec_table(spec_text)?;
         let after = spec_table(&self.apply(spec_text, values)?)?;
         let mut s = String::new();
-        for p in &self.parameter {
+        let names: Vec<String> = ["input", "parameter"]
+            .iter()
+            .flat_map(|k| before.get(*k).and_then(Value::as_array).cloned().unwrap_or_default())
+            .filter_map(|v| v.get("name").and_then(Value::as_str).map(str::to_string))
+            .collect();
+        let sub: BTreeMap<String, String> = self.substitute.iter().filter(|(k, _)| names.contains(k)).map(|(k, v)| (k.clone(), v.clone())).collect();
+        let used = self.used_parameters(&sub);
+        for p in self.parameter.iter().filter(|p| p.get("name").and_then(Value::as_str).is_some_and(|n| used.iter().any(|u| u == n))) {
             let mut p = p.clone();
             let n = p.get("name").and_then(Value::as_str).unwrap_or("").to_string();
             if let Some(v) = values.get(&n) {
@@ -206,10 +269,19 @@ impl Effect {
             s += &toml::to_string(&p).map_err(|e| e.to_string())?;
             s += "\n";
         }
-        for k in ["vx", "vy", "omega"] {
-            let (a, b) = (&before["motion"][k], &after["motion"][k]);
-            if a != b {
-                s += &format!("[motion] {k}: {a} -> {b}\n");
+        if let (Some(bm), Some(am)) = (before.get("motion"), after.get("motion")) {
+            for k in ["vx", "vy", "omega"] {
+                let (a, b) = (&bm[k], &am[k]);
+                if a != b {
+                    s += &format!("[motion] {k}: {a} -> {b}\n");
+                }
+            }
+        }
+        if let (Some(br), Some(ar)) = (before.get("constraints").and_then(|c| c.get("row")).and_then(Value::as_array), after.get("constraints").and_then(|c| c.get("row")).and_then(Value::as_array)) {
+            for (a, b) in br.iter().zip(ar) {
+                if a.get("coeffs") != b.get("coeffs") {
+                    s += &format!("[[constraints.row]] rate = {}: coeffs {} -> {}\n", b["rate"], a["coeffs"], b["coeffs"]);
+                }
             }
         }
         if let Some(defs) = after.get("define").and_then(Value::as_array) {
