@@ -43,7 +43,7 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
     let mut truth = r.clone();
     truth.p[0] *= 1.01;
     truth.p[2] *= 1.02;
-    let mut run = Run { name: "bench".into(), t: (0..n).map(|k| k as f64 * dt).collect(), dt: vec![dt; n - 1], u, gt: None, gyro: None, landmarks: Vec::new() };
+    let mut run = Run { name: "bench".into(), t: (0..n).map(|k| k as f64 * dt).collect(), dt: vec![dt; n - 1], u, gt: None, gyro: None, landmarks: Vec::new(), rate_inputs: Vec::new() };
     let track = kinegen_analysis::deadreckon::run(&truth, &truth.p, &run, false);
     run.gt = Some(track.pose.iter().map(|p| [p[0] + rng.gen_range(-1e-3..1e-3), p[1] + rng.gen_range(-1e-3..1e-3), p[2] + rng.gen_range(-2e-3..2e-3)]).collect());
     run

@@ -18,6 +18,9 @@ pub struct Run {
     pub gyro: Option<Vec<f64>>,
     /// Range-bearing observations of mapped landmarks during the run (may be empty).
     pub landmarks: Vec<LandmarkObs>,
+    /// Which inputs are rates of cumulative columns (the others are absolute
+    /// values, like a steering angle, which say nothing about standing still).
+    pub rate_inputs: Vec<bool>,
 }
 
 impl Run {
@@ -33,7 +36,7 @@ impl Run {
     /// Without ground truth, the pose that places the landmarks seen during that
     /// rest (or the first 0.1 s) on the map, if at least two are seen.
     pub fn start_pose(&self) -> [f64; 3] {
-        let rest_rows = self.u.iter().take_while(|u| u.iter().all(|v| *v == 0.0)).count();
+        let rest_rows = self.rest_steps();
         let Some(g) = &self.gt else {
             let until = if rest_rows > 0 { self.t[rest_rows] } else { self.t[0] + 0.1 };
             return pose_from_landmarks(&self.landmarks, until).unwrap_or([0.0; 3]);
@@ -46,6 +49,17 @@ impl Run {
             }
         }
         m
+    }
+
+    /// Leading steps in which the robot stands still: every rate input is zero
+    /// (a steering angle may read anything while the robot stands).
+    /// A model without rate inputs (speeds given directly) stands when all are zero.
+    pub fn rest_steps(&self) -> usize {
+        let any_rate = self.rate_inputs.iter().any(|r| *r);
+        self.u
+            .iter()
+            .take_while(|u| u.iter().enumerate().all(|(i, v)| *v == 0.0 || (any_rate && !self.rate_inputs.get(i).copied().unwrap_or(true))))
+            .count()
     }
 
     /// Where time `s` falls among the rows: (j, a) with t_j <= s < t_{j+1} and
@@ -68,6 +82,7 @@ impl Run {
             gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
             gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
             landmarks: self.landmarks.iter().filter(|o| o.t >= self.t[a] && o.t <= self.t[b - 1]).cloned().collect(),
+            rate_inputs: self.rate_inputs.clone(),
         }
     }
 
@@ -141,7 +156,8 @@ impl Run {
         };
         let gyro = log.columns.get("gyro_z").cloned();
         let name = log.path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-        Ok(Run { name, t, dt, u, gt, gyro, landmarks: Vec::new() })
+        let rate_inputs = r.ir.inputs.iter().map(|i| i.kind == InputKind::Cumulative).collect();
+        Ok(Run { name, t, dt, u, gt, gyro, landmarks: Vec::new(), rate_inputs })
     }
 
     /// Read a log for a model.

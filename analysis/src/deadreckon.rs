@@ -37,7 +37,16 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
 }
 
 /// Integrate the model over a run from the run's start pose ([`Run::start_pose`]).
+/// Sensitivities (with `with_sens`) have P + 3 columns: the parameters, then the
+/// start pose (x, y, theta), for calibrations that refine the start.
 pub fn run(r: &Runner, p: &[f64], data: &Run, with_sens: bool) -> Track {
+    run_from(r, p, data, with_sens, [0.0; 3])
+}
+
+/// [`run`] with `start_offset` added to the measured start pose: the start pose
+/// as a nuisance parameter of calibration (a single noisy start heading would
+/// otherwise rotate the whole track and masquerade as a physical effect).
+pub fn run_from(r: &Runner, p: &[f64], data: &Run, with_sens: bool, start_offset: [f64; 3]) -> Track {
     let start = data.start_pose();
     let u0 = data.u.first().cloned().unwrap_or_default();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
@@ -49,10 +58,11 @@ pub fn run(r: &Runner, p: &[f64], data: &Run, with_sens: bool) -> Track {
             let vel = [0, 1, 2].map(|i| (g[j + 1][i] - g[j][i]) / dtj);
             // the rest-averaged start when the robot has not moved yet
             let at = [0, 1, 2].map(|i| g[j][i] + a * (g[j + 1][i] - g[j][i]));
-            if data.u.first().is_some_and(|u| u.iter().all(|v| *v == 0.0)) { (start, [0.0; 3]) } else { (at, vel) }
+            if data.rest_steps() > 0 { (start, [0.0; 3]) } else { (at, vel) }
         }
         _ => (start, [0.0; 3]),
     };
+    let start = [0, 1, 2].map(|i| start[i] + start_offset[i]);
     let (start, mut dstart) = body_start(r, p, start, &u0);
     if let Some(ti) = tau_i {
         for m in 0..3 {
@@ -64,7 +74,17 @@ pub fn run(r: &Runner, p: &[f64], data: &Run, with_sens: bool) -> Track {
     let zeros = vec![0.0; 16];
     let mut scratch = Vec::new();
     let mut pose = vec![start];
-    let mut sens = with_sens.then(|| vec![DMatrix::from_row_slice(3, np, &dstart)]);
+    // columns: parameters, then the start pose (identity at the start)
+    let mut sens = with_sens.then(|| {
+        let mut s0 = DMatrix::zeros(3, np + 3);
+        for m in 0..3 {
+            for c in 0..np {
+                s0[(m, c)] = dstart[m * np + c];
+            }
+            s0[(m, np + m)] = 1.0;
+        }
+        vec![s0]
+    });
     let mut omega = Vec::with_capacity(data.steps());
     let mut twist = Vec::with_capacity(data.steps());
     let mut out3 = [0.0; 3];
@@ -82,7 +102,8 @@ pub fn run(r: &Runner, p: &[f64], data: &Run, with_sens: bool) -> Track {
             jx.eval_into(&args, &mut jxo, &mut scratch);
             jp.eval_into(&args, &mut jpo, &mut scratch);
             let fxm = Matrix3::from_row_slice(&jxo);
-            let fpm = DMatrix::from_row_slice(3, np, &jpo);
+            let mut fpm = DMatrix::zeros(3, np + 3);
+            fpm.view_mut((0, 0), (3, np)).copy_from(&DMatrix::from_row_slice(3, np, &jpo));
             let prev = s.last().unwrap();
             let next = DMatrix::from_iterator(3, 3, fxm.iter().copied()) * prev + fpm;
             s.push(next);

@@ -52,10 +52,10 @@ pub struct Diagnosis {
     pub skipped: Vec<(String, String)>,
 }
 
-/// Weighted residual RMS of a parameter vector.
+/// Weighted residual RMS of a parameter vector, each run (segment) anchored at
+/// its best start pose (see `FitOptions::estimate_start`).
 pub fn weighted_rms(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
-    let (res, _) = residuals(r, p, &[], &crate::fit::segmented(runs), o, false);
-    (res.iter().map(|x| x * x).sum::<f64>() / res.len().max(1) as f64).sqrt()
+    crate::fit::rms_with_fitted_starts(r, p, runs, o)
 }
 
 /// Split every run at `frac` of its rows: (train, test).
@@ -105,7 +105,7 @@ fn channel_names(r: &Runner, runs: &[Run], o: &FitOptions) -> Vec<&'static str> 
 /// The effect's signature against the base residual: correlation and the channel
 /// that carries most of the signature.
 fn evidence(aug: &Runner, effect_params: &[usize], runs: &[Run], o: &FitOptions) -> String {
-    let (res, jac) = residuals(aug, &aug.p, effect_params, runs, o, true);
+    let (res, jac) = residuals(aug, &aug.p, effect_params, runs, o, true, &[]);
     let j = jac.unwrap();
     let chans = channel_names(aug, runs, o);
     let r = DVector::from_vec(res);

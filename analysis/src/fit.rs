@@ -35,11 +35,17 @@ pub struct FitOptions {
     /// quadratically (Huber), so outliers (a motion-capture glitch, a wrong
     /// landmark association) do not drag the estimate. None: least squares.
     pub huber: Option<f64>,
+    /// Refine each run's (segment's) start heading as a nuisance parameter: the
+    /// measured start is one noisy sample whose heading error rotates the whole
+    /// track (a position error does not grow, so the position stays measured;
+    /// freeing it would also let a wrong model re-centre its drift). Estimated
+    /// with the parameters, never reported as one.
+    pub estimate_start: bool,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, use_landmarks: true, max_iter: 100, huber: None }
+        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, use_landmarks: true, max_iter: 100, huber: None, estimate_start: true }
     }
 }
 
@@ -61,6 +67,8 @@ pub struct FitResult {
     pub iterations: usize,
     pub n_residuals: usize,
     pub warnings: Vec<String>,
+    /// Fitted start-pose offsets of the (segmented) runs, see [`FitOptions::estimate_start`].
+    pub starts: Vec<[f64; 3]>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -71,18 +79,51 @@ pub enum FitError {
     Diverged(String),
 }
 
-/// Weighted residuals (and their Jacobian w.r.t. the free parameters) over all runs.
-pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOptions, with_jac: bool) -> (Vec<f64>, Option<DMatrix<f64>>) {
-    let parts: Vec<(Vec<f64>, Vec<Vec<f64>>)> = runs.par_iter().map(|run| run_residuals(r, p, free, run, o, with_jac)).collect();
+/// Whether a run's start heading is refined: it has measurements of the absolute
+/// pose, and its start was not averaged over a rest period (a run that starts
+/// moving, or a segment cut from a long run, has only one noisy sample; a rest
+/// of half a second or more averages the noise away, and then the measured start
+/// is kept, because a free start heading would let a wrong model rotate its
+/// track to hide part of a missing effect such as a toe angle).
+fn has_start_nuisance(run: &Run, o: &FitOptions) -> bool {
+    let rested = run.rest_steps() > 0 && run.t[run.rest_steps()] - run.t[0] >= 0.5;
+    o.estimate_start && !rested && ((o.use_pose && run.gt.is_some()) || (o.use_landmarks && !run.landmarks.is_empty()))
+}
+
+/// Column of each run's start-heading offset in the Jacobian (after the parameters).
+fn start_columns(runs: &[Run], o: &FitOptions, m: usize) -> Vec<Option<usize>> {
+    let mut next = m;
+    runs.iter()
+        .map(|run| {
+            has_start_nuisance(run, o).then(|| {
+                next += 1;
+                next - 1
+            })
+        })
+        .collect()
+}
+
+/// Weighted residuals (and their Jacobian w.r.t. the free parameters, then the
+/// start-heading offsets of the runs that have them) over all runs; `starts`
+/// holds one start-pose offset per run (empty: none).
+pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOptions, with_jac: bool, starts: &[[f64; 3]]) -> (Vec<f64>, Option<DMatrix<f64>>) {
+    let cols = start_columns(runs, o, free.len());
+    let ncols = free.len() + cols.iter().flatten().count();
+    let parts: Vec<(Vec<f64>, Vec<Vec<f64>>)> = runs
+        .par_iter()
+        .enumerate()
+        .map(|(i, run)| run_residuals(r, p, free, run, o, with_jac, starts.get(i).copied().unwrap_or([0.0; 3]), cols[i].is_some()))
+        .collect();
     let n: usize = parts.iter().map(|x| x.0.len()).sum();
     let mut res = Vec::with_capacity(n);
-    let mut jac = with_jac.then(|| DMatrix::zeros(n, free.len()));
+    let mut jac = with_jac.then(|| DMatrix::zeros(n, ncols));
     let mut row = 0;
-    for (rv, jv) in parts {
+    for (i, (rv, jv)) in parts.into_iter().enumerate() {
         if let Some(j) = jac.as_mut() {
-            for (i, jr) in jv.iter().enumerate() {
+            for (k, jr) in jv.iter().enumerate() {
                 for (c, v) in jr.iter().enumerate() {
-                    j[(row + i, c)] = *v;
+                    let col = if c < free.len() { c } else { cols[i].unwrap() + c - free.len() };
+                    j[(row + k, col)] = *v;
                 }
             }
         }
@@ -113,11 +154,17 @@ fn huber_weights(res: &mut [f64], jac: Option<&mut DMatrix<f64>>, k: f64) {
     }
 }
 
-fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOptions, with_jac: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
+/// One run's residuals; Jacobian rows have the free parameters' columns, then
+/// (with `nuis`) the start-heading column.
+#[allow(clippy::too_many_arguments)]
+fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOptions, with_jac: bool, start: [f64; 3], nuis: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
     let mut res = Vec::new();
     let mut jac = Vec::new();
-    let track = deadreckon::run(r, p, run, with_jac);
+    let track = deadreckon::run_from(r, p, run, with_jac, start);
     let np = p.len();
+    // sensitivity columns to read: the free parameters, then the start heading
+    let cols: Vec<usize> = free.iter().copied().chain(if nuis { vec![np + 2] } else { vec![] }).collect();
+    let free = &cols[..];
     let mut scratch = Vec::new();
     // A `time_offset` parameter: measurement k is compared with the model at
     // t_k - time_offset, linearly interpolated between rows (exact sensitivities of
@@ -159,7 +206,7 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
                             free.iter()
                                 .map(|&c| {
                                     let dx = |m: usize| if Some(c) == tau_i { -vel[m] } else { s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]) };
-                                    ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>() + hp[i * np + c]) / sig[i]
+                                    ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>() + if c < np { hp[i * np + c] } else { 0.0 }) / sig[i]
                                 })
                                 .collect(),
                         );
@@ -187,7 +234,7 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
                     hp.eval_into(&Runner::obs_args(hp, &x, &run.u[k], p, &[]), &mut jp, &mut scratch);
                     hx.eval_into(&Runner::obs_args(hx, &x, &run.u[k], p, &[]), &mut jx, &mut scratch);
                     let s = &track.sens.as_ref().unwrap()[k];
-                    jac.push(free.iter().map(|&c| (jp[c] + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>()) / o.gyro_sigma).collect());
+                    jac.push(free.iter().map(|&c| (if c < np { jp[c] } else { 0.0 } + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>()) / o.gyro_sigma).collect());
                 }
             }
         }
@@ -220,12 +267,24 @@ fn landmark_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, track: &
             for i in 0..2 {
                 jac.push(
                     free.iter()
-                        .map(|&c| ((0..3).map(|m| hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]))).sum::<f64>() + hp[i * np + c]) / sig[i])
+                        .map(|&c| ((0..3).map(|m| hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]))).sum::<f64>() + if c < np { hp[i * np + c] } else { 0.0 }) / sig[i])
                         .collect(),
                 );
             }
         }
     }
+}
+
+/// Weighted residual RMS of `p` on `runs` (segmented as calibration sees them),
+/// after refining only the start poses.
+pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
+    let seg = segmented(runs);
+    let mut fixed = r.clone();
+    fixed.p = p.to_vec();
+    fixed.free = vec![];
+    let starts = fit_stage(&fixed, &seg, o).map(|f| f.starts).unwrap_or_default();
+    let (res, _) = residuals(&fixed, p, &[], &seg, o, false, &starts);
+    (res.iter().map(|x| x * x).sum::<f64>() / res.len().max(1) as f64).sqrt()
 }
 
 fn cost(res: &[f64]) -> f64 {
@@ -260,24 +319,41 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
     fit_from(r, runs, o)
 }
 
+/// Calibrate from `r.p`. With start-pose refinement the parameters are fitted
+/// first with the measured starts, then jointly with the starts from there: a
+/// free start heading from the outset can rotate a badly scaled track into a
+/// local minimum (seen with a 5% speed-scale error).
 fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+    if !o.estimate_start || r.free.is_empty() || !runs.iter().any(|x| has_start_nuisance(x, o)) {
+        return fit_stage(r, runs, o);
+    }
+    let first = fit_stage(r, runs, &FitOptions { estimate_start: false, ..o.clone() })?;
+    let mut from = r.clone();
+    from.p = first.p.clone();
+    let joint = fit_stage(&from, runs, o)?;
+    Ok(FitResult { cost_before: first.cost_before, iterations: first.iterations + joint.iterations, ..joint })
+}
+
+fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     let free = r.free.clone();
-    let bounds: Vec<(f64, f64)> = {
-        let rp = r.ir.runtime_params();
-        free.iter()
-            .map(|&i| {
-                let p = rp[i];
-                // strict lower bounds such as r > 0: stay a hair inside
-                let lo = p.min.map_or(f64::NEG_INFINITY, |m| m + 1e-9 * p.nominal.abs().max(1e-9));
-                (lo, p.max.unwrap_or(f64::INFINITY))
-            })
-            .collect()
-    };
+    let m = free.len();
+    let rp = r.ir.runtime_params();
+    // the unknowns: the free parameters, then a start-heading offset per run that has one
+    let n_start = start_columns(runs, o, m).iter().flatten().count();
+    let dims = m + n_start;
+    let mut bounds: Vec<(f64, f64)> = free
+        .iter()
+        .map(|&i| {
+            let p = rp[i];
+            // strict lower bounds such as r > 0: stay a hair inside
+            let lo = p.min.map_or(f64::NEG_INFINITY, |m| m + 1e-9 * p.nominal.abs().max(1e-9));
+            (lo, p.max.unwrap_or(f64::INFINITY))
+        })
+        .collect();
     // Work in scaled variables so radii (cm), gains (s) and offsets (rad) weigh
     // alike: a parameter's scale is its magnitude, or 1% of its bounded range when
-    // it starts at zero (effect parameters).
-    let rp = r.ir.runtime_params();
-    let scale: Vec<f64> = free
+    // it starts at zero (effect parameters); start headings scale with 10 mrad.
+    let mut scale: Vec<f64> = free
         .iter()
         .map(|&i| {
             let range = match (rp[i].min, rp[i].max) {
@@ -287,8 +363,18 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
             r.p[i].abs().max(range).max(1e-9)
         })
         .collect();
+    for _ in 0..n_start {
+        scale.push(0.01);
+        bounds.push((-0.5, 0.5));
+    }
+    let starts_of = |x: &[f64]| -> Vec<[f64; 3]> {
+        let cols = start_columns(runs, o, m);
+        cols.iter().map(|c| c.map_or([0.0; 3], |c| [0.0, 0.0, x[c]])).collect()
+    };
     let mut p = r.p.clone();
-    let (mut res, mut jac) = residuals(r, &p, &free, runs, o, true);
+    let mut x = vec![0.0; dims]; // the start headings live in x[m..]
+    let eval = |p: &[f64], x: &[f64], jac: bool| residuals(r, p, &free, runs, o, jac, &starts_of(x));
+    let (mut res, mut jac) = eval(&p, &x, true);
     if res.is_empty() {
         return Err(FitError::NoResiduals);
     }
@@ -300,6 +386,9 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     let mut lambda = 1e-3;
     let mut iterations = 0;
     for it in 0..o.max_iter {
+        if dims == 0 {
+            break;
+        }
         iterations = it + 1;
         let j = jac.as_ref().unwrap() * DMatrix::from_diagonal(&DVector::from_vec(scale.clone()));
         let jtj = j.transpose() * &j;
@@ -318,15 +407,20 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
             for (k, &i) in free.iter().enumerate() {
                 trial[i] = (p[i] + step[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
             }
-            let (tres, _) = residuals(r, &trial, &free, runs, o, false);
+            let mut xt = x.clone();
+            for k in m..dims {
+                xt[k] = (x[k] + step[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
+            }
+            let (tres, _) = eval(&trial, &xt, false);
             let tc = cost(&tres);
             if tc.is_finite() && tc < c {
                 let rel = (c - tc) / c.max(1e-300);
                 p = trial;
+                x = xt;
                 c = tc;
                 lambda = (lambda / 3.0).max(1e-12);
                 improved = true;
-                let (r2, j2) = residuals(r, &p, &free, runs, o, true);
+                let (r2, j2) = eval(&p, &x, true);
                 res = r2;
                 jac = j2;
                 if rel < 1e-12 {
@@ -346,16 +440,30 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     if !c.is_finite() {
         return Err(FitError::Diverged("cost became non-finite".into()));
     }
+    let starts = starts_of(&x);
     // Uncertainty: s^2 (J^T J)^-1 with s^2 from the residuals (assumes independent
     // residuals; dead-reckoning residuals are correlated, so these are optimistic).
     // Identifiability and covariance in the scaled variables (then scaled back), so
     // that parameters of different units are compared fairly.
-    let d = DMatrix::from_diagonal(&DVector::from_vec(scale.clone()));
-    let j = jac.unwrap() * &d;
+    let d_all = DMatrix::from_diagonal(&DVector::from_vec(scale.clone()));
+    let j = jac.unwrap() * &d_all;
     let n = res.len();
-    let m = free.len();
-    let s2 = 2.0 * c / (n.saturating_sub(m).max(1)) as f64;
-    let jtj = j.transpose() * &j;
+    let s2 = 2.0 * c / (n.saturating_sub(dims).max(1)) as f64;
+    let full = j.transpose() * &j;
+    // information about the parameters with the start offsets marginalised out
+    // (Schur complement), so the nuisance never shows up as a parameter
+    let jtj = if dims > m {
+        let (a, b, cc) = (full.view((0, 0), (m, m)).into_owned(), full.view((0, m), (m, dims - m)).into_owned(), full.view((m, m), (dims - m, dims - m)).into_owned());
+        let cinv = cc.clone().pseudo_inverse(1e-12 * cc.norm().max(1e-300)).unwrap_or_else(|_| DMatrix::zeros(dims - m, dims - m));
+        &a - &b * cinv * b.transpose()
+    } else {
+        full
+    };
+    if m == 0 {
+        // only start poses were refined: no parameter to report on
+        return Ok(FitResult { p, free, std: vec![], corr: DMatrix::zeros(0, 0), cost_before, cost_after: c, iterations, n_residuals: n, warnings: vec![], starts });
+    }
+    let d = DMatrix::from_diagonal(&DVector::from_vec(scale[..m].to_vec()));
     let svd = jtj.clone().svd(true, true);
     let smax = svd.singular_values.max();
     let mut warnings = Vec::new();
@@ -400,5 +508,5 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
             warnings.push(format!("{} ended on its physical bound ({}): the estimate is not meaningful", names[k], p[i]));
         }
     }
-    Ok(FitResult { p, free, std, corr, cost_before, cost_after: c, iterations, n_residuals: n, warnings })
+    Ok(FitResult { p, free, std, corr, cost_before, cost_after: c, iterations, n_residuals: n, warnings, starts })
 }

@@ -183,7 +183,7 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
     for run in runs {
         let Some(meas) = yaw_rates(run) else { continue };
         for k in 0..run.steps() {
-            let one = Run { name: String::new(), t: vec![0.0, run.dt[k]], dt: vec![run.dt[k]], u: vec![run.u[k].clone()], gt: None, gyro: None, landmarks: Vec::new() };
+            let one = Run { name: String::new(), t: vec![0.0, run.dt[k]], dt: vec![run.dt[k]], u: vec![run.u[k].clone()], gt: None, gyro: None, landmarks: Vec::new(), rate_inputs: Vec::new() };
             let (w, g) = predicted(r, &p, &one, &free);
             let hgrad = DVector::from_vec(g[0].clone());
             let s = (hgrad.transpose() * &cov * &hgrad)[(0, 0)] + sv2;

@@ -345,7 +345,13 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
                 InputKind::Cumulative if inp.unit.contains("count") => cum[i].floor(),
                 // wheel-angle encoders: 4096 lines per revolution
                 InputKind::Cumulative => (cum[i] / (2.0 * PI / 4096.0)).floor() * (2.0 * PI / 4096.0),
-                // absolute sensors (steering encoders) sample the value at t_k
+                // absolute angle sensors (steering encoders, 12 bit like the caster
+                // wheels' above) sample the value at t_k; other absolute inputs get
+                // Gaussian noise
+                InputKind::Absolute if inp.unit == "rad" => {
+                    let q = 2.0 * PI / 4096.0;
+                    (command(base, &plan(times[k] % dur))[i] / q).round() * q
+                }
                 InputKind::Absolute => command(base, &plan(times[k] % dur))[i] + noise(0.002, &mut rng),
             });
         }
