@@ -105,6 +105,8 @@ fn channel_names(r: &Runner, runs: &[Run], o: &FitOptions) -> Vec<&'static str> 
 /// The effect's signature against the base residual: correlation and the channel
 /// that carries most of the signature.
 fn evidence(aug: &Runner, effect_params: &[usize], runs: &[Run], o: &FitOptions) -> String {
+    // the measured starts: no start-heading columns in this (dense) Jacobian
+    let o = &FitOptions { estimate_start: false, ..o.clone() };
     let (res, jac) = residuals(aug, &aug.p, effect_params, runs, o, true, &[]);
     let j = jac.unwrap();
     let chans = channel_names(aug, runs, o);

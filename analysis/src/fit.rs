@@ -136,6 +136,62 @@ pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOpt
     (res, jac)
 }
 
+/// The Gauss-Newton normal equations J^T J and J^T r over all runs, without
+/// forming J: each run's start-heading column touches only its own rows, so J is
+/// block-sparse and can be huge (a 1,000,000-sample log cut into 833 segments
+/// would need a 3e6 x 836 dense matrix), while J^T J is small. Columns as in
+/// [`residuals`]. Returns (weighted residuals, J^T J, J^T r).
+pub fn normal_equations(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOptions, starts: &[[f64; 3]]) -> (Vec<f64>, DMatrix<f64>, DVector<f64>) {
+    let m = free.len();
+    let cols = start_columns(runs, o, m);
+    let n = m + cols.iter().flatten().count();
+    // per run: residuals, A^T A, A^T b, b^T b, A^T r, b^T r (A: parameter columns, b: start heading)
+    type Part = (Vec<f64>, DMatrix<f64>, DVector<f64>, f64, DVector<f64>, f64);
+    let parts: Vec<Part> = runs
+        .par_iter()
+        .enumerate()
+        .map(|(i, run)| {
+            let nuis = cols[i].is_some();
+            let (mut rv, jv) = run_residuals(r, p, free, run, o, true, starts.get(i).copied().unwrap_or([0.0; 3]), nuis);
+            let (mut ata, mut atb, mut btb, mut atr, mut btr) = (DMatrix::zeros(m, m), DVector::zeros(m), 0.0, DVector::zeros(m), 0.0);
+            for (res, row) in rv.iter_mut().zip(&jv) {
+                let w = match o.huber {
+                    Some(k) if res.abs() > k => (k / res.abs()).sqrt(),
+                    _ => 1.0,
+                };
+                *res *= w;
+                let a = DVector::from_iterator(m, row[..m].iter().map(|v| v * w));
+                let b = if nuis { row[m] * w } else { 0.0 };
+                ata.ger(1.0, &a, &a, 1.0);
+                atb.axpy(b, &a, 1.0);
+                btb += b * b;
+                atr.axpy(*res, &a, 1.0);
+                btr += b * *res;
+            }
+            (rv, ata, atb, btb, atr, btr)
+        })
+        .collect();
+    let mut res = Vec::new();
+    let mut jtj = DMatrix::zeros(n, n);
+    let mut jtr = DVector::zeros(n);
+    for (i, (rv, ata, atb, btb, atr, btr)) in parts.into_iter().enumerate() {
+        res.extend(rv);
+        let mut top = jtj.view_mut((0, 0), (m, m));
+        top += &ata;
+        let mut g = jtr.rows_mut(0, m);
+        g += &atr;
+        if let Some(c) = cols[i] {
+            for k in 0..m {
+                jtj[(k, c)] += atb[k];
+                jtj[(c, k)] += atb[k];
+            }
+            jtj[(c, c)] += btb;
+            jtr[c] += btr;
+        }
+    }
+    (res, jtj, jtr)
+}
+
 /// Huber loss by iteratively reweighted least squares: a residual r beyond k is
 /// scaled by sqrt(k/|r|), so its squared contribution is k|r| (linear growth); its
 /// Jacobian row gets the same weight (the weight's own derivative is neglected, as
@@ -373,8 +429,9 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     };
     let mut p = r.p.clone();
     let mut x = vec![0.0; dims]; // the start headings live in x[m..]
-    let eval = |p: &[f64], x: &[f64], jac: bool| residuals(r, p, &free, runs, o, jac, &starts_of(x));
-    let (mut res, mut jac) = eval(&p, &x, true);
+    let eval = |p: &[f64], x: &[f64]| residuals(r, p, &free, runs, o, false, &starts_of(x)).0;
+    let normal = |p: &[f64], x: &[f64]| normal_equations(r, p, &free, runs, o, &starts_of(x));
+    let (mut res, mut jtj_raw, mut jtr_raw) = normal(&p, &x);
     if res.is_empty() {
         return Err(FitError::NoResiduals);
     }
@@ -390,9 +447,10 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             break;
         }
         iterations = it + 1;
-        let j = jac.as_ref().unwrap() * DMatrix::from_diagonal(&DVector::from_vec(scale.clone()));
-        let jtj = j.transpose() * &j;
-        let g = j.transpose() * DVector::from_vec(res.clone());
+        // in scaled variables: J D, so J^T J -> D J^T J D and J^T r -> D J^T r
+        let dsc = DVector::from_vec(scale.clone());
+        let jtj = DMatrix::from_fn(dims, dims, |a, b| jtj_raw[(a, b)] * dsc[a] * dsc[b]);
+        let g = jtr_raw.component_mul(&dsc);
         let mut improved = false;
         for _ in 0..30 {
             let mut a = jtj.clone();
@@ -411,7 +469,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             for k in m..dims {
                 xt[k] = (x[k] + step[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
             }
-            let (tres, _) = eval(&trial, &xt, false);
+            let tres = eval(&trial, &xt);
             let tc = cost(&tres);
             if tc.is_finite() && tc < c {
                 let rel = (c - tc) / c.max(1e-300);
@@ -420,9 +478,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
                 c = tc;
                 lambda = (lambda / 3.0).max(1e-12);
                 improved = true;
-                let (r2, j2) = eval(&p, &x, true);
-                res = r2;
-                jac = j2;
+                (res, jtj_raw, jtr_raw) = normal(&p, &x);
                 if rel < 1e-12 {
                     improved = false;
                 }
@@ -445,11 +501,9 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     // residuals; dead-reckoning residuals are correlated, so these are optimistic).
     // Identifiability and covariance in the scaled variables (then scaled back), so
     // that parameters of different units are compared fairly.
-    let d_all = DMatrix::from_diagonal(&DVector::from_vec(scale.clone()));
-    let j = jac.unwrap() * &d_all;
     let n = res.len();
     let s2 = 2.0 * c / (n.saturating_sub(dims).max(1)) as f64;
-    let full = j.transpose() * &j;
+    let full = DMatrix::from_fn(dims, dims, |a, b| jtj_raw[(a, b)] * scale[a] * scale[b]);
     // information about the parameters with the start offsets marginalised out
     // (Schur complement), so the nuisance never shows up as a parameter
     let jtj = if dims > m {
