@@ -94,7 +94,7 @@ fn parameter_errors_only_give_a_null_verdict() {
     assert_eq!(d["verdict"]["unexplained_structure"], false);
     // redundant effects are recognised and not proposed
     let skipped: Vec<&str> = d["skipped"].as_array().unwrap().iter().map(|s| s["effect"].as_str().unwrap()).collect();
-    assert!(skipped.contains(&"wheel_radius_asymmetry") && skipped.contains(&"wheelbase_scale"), "{skipped:?}");
+    assert!(skipped.contains(&"wheel_radius_asymmetry") && skipped.contains(&"wheelbase_scale") && skipped.contains(&"longitudinal_slip"), "{skipped:?}");
 }
 
 #[test]
@@ -147,4 +147,21 @@ fn the_whole_story_through_the_cli() {
     assert!(src.contains("k_slip"));
     let o = kinegen(&["verify", "--spec", new_spec.to_str().unwrap(), "--samples", "30"]);
     assert!(o.status.success(), "verify failed on the augmented spec: {}{}", stdout(&o), stderr(&o));
+}
+
+/// Longitudinal slip scales every wheel's travel alike: redundant while the radii
+/// are calibrated (see `parameter_errors_only_give_a_null_verdict`), found when the
+/// spec fixes them as measured values.
+#[test]
+fn longitudinal_slip_is_found_when_the_radii_are_measured() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("spec/diff_drive.toml")).unwrap().replace("name = \"r_r\"\n", "name = \"r_r\"\nfree = false\n").replace("name = \"r_l\"\n", "name = \"r_l\"\nfree = false\n");
+    let spec = tmp.path().join("diff_drive.toml");
+    std::fs::write(&spec, text).unwrap();
+    let spec = spec.to_str().unwrap();
+    let log = simulate(tmp.path(), "long.csv", &["--spec", spec, "--effect", "longitudinal_slip=0.05", "--trajectory", "random", "--seed", "7"]);
+    let d = kinegen_json(&["diagnose", "--spec", spec, "--data", log.to_str().unwrap()]);
+    assert_eq!(d["verdict"]["effect"], "longitudinal_slip", "{}", d["verdict"]);
+    let k = d["candidates"][0]["parameters"]["k_long"]["estimate"].as_f64().unwrap();
+    assert!((k - 0.05).abs() < 0.005, "k_long = {k}");
 }
