@@ -21,6 +21,22 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// Median ns per call of `ir` and `generated` over `n` inputs (repeated `reps`
+/// times, interleaved so both see the same machine state); prints the ratio.
+fn time_pair(label: &str, n: usize, reps: usize, mut ir: impl FnMut(usize), mut generated: impl FnMut(usize)) {
+    let (mut t_ir, mut t_gen) = (Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let t0 = Instant::now();
+        (0..n).for_each(&mut ir);
+        t_ir.push(t0.elapsed().as_secs_f64() / n as f64);
+        let t0 = Instant::now();
+        (0..n).for_each(&mut generated);
+        t_gen.push(t0.elapsed().as_secs_f64() / n as f64);
+    }
+    let (a, b) = (median(t_ir), median(t_gen));
+    println!("{label:<30} IR evaluator {:>9.1} ns/call, generated kernel {:>8.1} ns/call, ratio IR/generated {:.1}x", a * 1e9, b * 1e9, a / b);
+}
+
 fn ir() -> ModelIr {
     let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../generated/ir/diff_drive.json");
     ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap()
@@ -65,26 +81,24 @@ fn omni_caster_kernels() {
         let f = ir.function(name).unwrap();
         let mut out = vec![0.0; f.rows * f.cols];
         let mut scratch = Vec::new();
-        let (mut t_ir, mut t_gen) = (Vec::new(), Vec::new());
-        for _ in 0..5 {
-            let t0 = Instant::now();
-            for (x, u) in &inputs {
+        time_pair(
+            &format!("omni_caster {name}"),
+            n_calls,
+            5,
+            |k| {
+                let (x, u) = &inputs[k];
                 f.eval_into(&[x, u, &w, &pn, &[0.05]], &mut out, &mut scratch);
                 black_box(&out);
-            }
-            t_ir.push(t0.elapsed().as_secs_f64() / n_calls as f64);
-            let t0 = Instant::now();
-            for (x, u) in &inputs {
+            },
+            |k| {
+                let (x, u) = &inputs[k];
                 if name == "step_exact" {
                     black_box(kinegen_generated::omni_caster::step_exact(black_box(x), u, &w, &pn, 0.05));
                 } else {
                     black_box(kinegen_generated::omni_caster::step_exact_jac_p(black_box(x), u, &w, &pn, 0.05));
                 }
-            }
-            t_gen.push(t0.elapsed().as_secs_f64() / n_calls as f64);
-        }
-        let (a, b) = (median(t_ir), median(t_gen));
-        println!("omni_caster {name:<18} IR evaluator {:>9.1} ns/call, generated kernel {:>8.1} ns/call, ratio IR/generated {:.1}x", a * 1e9, b * 1e9, a / b);
+            },
+        );
     }
 }
 
@@ -102,27 +116,24 @@ fn main() {
         let f = ir.function(name).unwrap();
         let mut out = vec![0.0; f.rows * f.cols];
         let mut scratch = Vec::new();
-        let mut t_ir = Vec::new();
-        let mut t_gen = Vec::new();
-        for _ in 0..7 {
-            let t0 = Instant::now();
-            for (x, u) in &inputs {
+        time_pair(
+            &format!("diff_drive {name}"),
+            n_calls,
+            7,
+            |k| {
+                let (x, u) = &inputs[k];
                 f.eval_into(&[x, u, &w, &p, &[0.05]], &mut out, &mut scratch);
                 black_box(&out);
-            }
-            t_ir.push(t0.elapsed().as_secs_f64() / n_calls as f64);
-            let t0 = Instant::now();
-            for (x, u) in &inputs {
+            },
+            |k| {
+                let (x, u) = &inputs[k];
                 if name == "step_exact" {
                     black_box(kinegen_generated::diff_drive::step_exact(black_box(x), u, &w, &p, 0.05));
                 } else {
                     black_box(kinegen_generated::diff_drive::step_exact_jac_p(black_box(x), u, &w, &p, 0.05));
                 }
-            }
-            t_gen.push(t0.elapsed().as_secs_f64() / n_calls as f64);
-        }
-        let (a, b) = (median(t_ir), median(t_gen));
-        println!("{name:<18} IR evaluator {:>8.1} ns/call, generated kernel {:>7.1} ns/call, ratio IR/generated {:.1}x", a * 1e9, b * 1e9, a / b);
+            },
+        );
     }
 
     omni_caster_kernels();

@@ -87,6 +87,15 @@ fn free_params(t: &Table) -> Vec<String> {
         .unwrap_or_default()
 }
 
+/// Names of the spec's inputs and parameters.
+fn declared_names(t: &Table) -> Vec<String> {
+    ["input", "parameter"]
+        .iter()
+        .flat_map(|s| t.get(*s).and_then(Value::as_array).cloned().unwrap_or_default())
+        .filter_map(|v| v.get("name").and_then(Value::as_str).map(str::to_string))
+        .collect()
+}
+
 /// Substitute whole identifiers in an expression string.
 fn subst(src: &str, map: &BTreeMap<String, String>) -> Result<String, String> {
     let e = expr::parse(src).map_err(|e| format!("`{src}`: {}", e.message))?;
@@ -114,11 +123,7 @@ impl Effect {
                 return Applicability::NotForThisModel;
             }
         }
-        let declared: Vec<String> = ["input", "parameter"]
-            .iter()
-            .flat_map(|s| t.get(*s).and_then(Value::as_array).cloned().unwrap_or_default())
-            .filter_map(|v| v.get("name").and_then(Value::as_str).map(str::to_string))
-            .collect();
+        let declared = declared_names(&t);
         if !self.substitute.is_empty() && !self.substitute.keys().any(|s| declared.contains(s)) {
             return Applicability::NotForThisModel;
         }
@@ -136,17 +141,11 @@ impl Effect {
     /// The spec with this effect added; `values` set the effect parameters' nominal values.
     pub fn apply(&self, spec_text: &str, values: &BTreeMap<String, f64>) -> Result<String, String> {
         let mut t = spec_table(spec_text)?;
-        let names: Vec<String> = ["input", "parameter"]
-            .iter()
-            .flat_map(|s| t.get(*s).and_then(Value::as_array).cloned().unwrap_or_default())
-            .filter_map(|v| v.get("name").and_then(Value::as_str).map(str::to_string))
-            .collect();
-        let sub: BTreeMap<String, String> = self.substitute.iter().filter(|(k, _)| names.contains(k)).map(|(k, v)| (k.clone(), v.clone())).collect();
+        let sub = self.applicable_substitutions(&t);
         // parameters: those the applied patches use (an effect may carry one per
         // steered wheel, of which a model uses the ones its symbols need)
-        let used = self.used_parameters(&sub);
         let params = t.entry("parameter").or_insert(Value::Array(vec![])).as_array_mut().ok_or("`parameter` is not an array")?;
-        for p in self.parameter.iter().filter(|p| p.get("name").and_then(Value::as_str).is_some_and(|n| used.iter().any(|u| u == n))) {
+        for p in self.used_parameter_tables(&sub) {
             let mut p = p.clone();
             let n = p.get("name").and_then(Value::as_str).unwrap_or("").to_string();
             if let Some(v) = values.get(&n) {
@@ -221,6 +220,18 @@ impl Effect {
         Ok(header + &toml::to_string(&t).map_err(|e| e.to_string())?)
     }
 
+    /// The substitutions whose symbol the spec declares.
+    fn applicable_substitutions(&self, t: &Table) -> BTreeMap<String, String> {
+        let names = declared_names(t);
+        self.substitute.iter().filter(|(k, _)| names.contains(k)).map(|(k, v)| (k.clone(), v.clone())).collect()
+    }
+
+    /// The `[[parameter]]` tables of the parameters the applied patches use.
+    fn used_parameter_tables(&self, sub: &BTreeMap<String, String>) -> Vec<&Table> {
+        let used = self.used_parameters(sub);
+        self.parameter.iter().filter(|p| p.get("name").and_then(Value::as_str).is_some_and(|n| used.iter().any(|u| u == n))).collect()
+    }
+
     /// Names of this effect's parameters that its patches use, given the
     /// substitutions that apply to the spec.
     fn used_parameters(&self, sub: &BTreeMap<String, String>) -> Vec<String> {
@@ -252,14 +263,7 @@ impl Effect {
         let before = spec_table(spec_text)?;
         let after = spec_table(&self.apply(spec_text, values)?)?;
         let mut s = String::new();
-        let names: Vec<String> = ["input", "parameter"]
-            .iter()
-            .flat_map(|k| before.get(*k).and_then(Value::as_array).cloned().unwrap_or_default())
-            .filter_map(|v| v.get("name").and_then(Value::as_str).map(str::to_string))
-            .collect();
-        let sub: BTreeMap<String, String> = self.substitute.iter().filter(|(k, _)| names.contains(k)).map(|(k, v)| (k.clone(), v.clone())).collect();
-        let used = self.used_parameters(&sub);
-        for p in self.parameter.iter().filter(|p| p.get("name").and_then(Value::as_str).is_some_and(|n| used.iter().any(|u| u == n))) {
+        for p in self.used_parameter_tables(&self.applicable_substitutions(&before)) {
             let mut p = p.clone();
             let n = p.get("name").and_then(Value::as_str).unwrap_or("").to_string();
             if let Some(v) = values.get(&n) {
