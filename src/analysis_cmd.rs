@@ -405,9 +405,9 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
     } else {
         out.say("  no ground truth in the logs: calibrated on landmark (and gyro) residuals; the error is the landmark range innovation");
     }
-    out.say(&format!("  {:<16} {:>12} {:>12} {:>10}", "parameter", "nominal", "estimate", "std"));
+    out.say(&format!("  {:<16} {:>12} {:>12} {:>12}", "parameter", "nominal", "estimate", "std"));
     for (k, &i) in res.free.iter().enumerate() {
-        out.say(&format!("  {:<16} {:>12.6} {:>12.6} {:>10.2e}", r.names[i], r.p[i], res.p[i], res.std[k]));
+        out.say(&format!("  {:<16} {:>12.6} {:>12.6} {:>12}", r.names[i], r.p[i], res.p[i], crate::output::fmt_std(Some(res.std[k]))));
     }
     for w in &res.warnings {
         out.say(&format!("warning: {w}"));

@@ -3,6 +3,7 @@ use crate::analysis_cmd::{bad, prepare, Common};
 use crate::effects_cmd::materialise;
 use crate::ir_source;
 use crate::output::Out;
+use kinegen_analysis::dataset::channel_missing;
 use kinegen_analysis::diagnose::diagnose;
 use kinegen_analysis::effects::{default_dir, load_catalogue, Applicability};
 use kinegen_analysis::model::{parse_sets, Runner};
@@ -42,6 +43,13 @@ pub fn run(c: Common) -> ExitCode {
             }
             Applicability::NotForThisModel => continue,
         }
+        if let Some(channels) = eff.observation_only_channels() {
+            let missing: Vec<String> = channels.iter().filter_map(|ch| channel_missing(&prep.runs, ch).map(|need| format!("the `{ch}` observation, and the logs have no {need}"))).collect();
+            if missing.len() == channels.len() {
+                skipped.push((eff.name.clone(), format!("not observable: it changes only {}", missing.join(" and "))));
+                continue;
+            }
+        }
         let aug = eff.apply(&text, &BTreeMap::new()).and_then(|t| materialise(&t, &prep.runner.ir.name)).and_then(|p| ir_source::load(&p));
         match aug.and_then(|ir| Runner::new(ir, &sets).map_err(|e| e.to_string())) {
             Ok(r) => augmented.push((eff.name.clone(), eff.doc.clone(), r)),
@@ -68,7 +76,7 @@ pub fn run(c: Common) -> ExitCode {
     out.say("  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)");
     out.say("candidates, most likely first:");
     for (i, cand) in d.candidates.iter().enumerate() {
-        let params: Vec<String> = cand.parameters.iter().map(|(k, v)| format!("{k} = {:.5} ± {:.1e}", v["estimate"].as_f64().unwrap_or(f64::NAN), v["std"].as_f64().unwrap_or(f64::NAN))).collect();
+        let params: Vec<String> = cand.parameters.iter().map(|(k, v)| format!("{k} = {:.5} ± {}", v["estimate"].as_f64().unwrap_or(f64::NAN), crate::output::fmt_std(v["std"].as_f64()))).collect();
         out.say(&format!(
             "  {}. {:<24} error {:.4} ({:+.0}%), {}  [{}]",
             i + 1,

@@ -31,3 +31,12 @@ impl Out {
         }
     }
 }
+
+/// A standard deviation for people: "unidentified" when the data do not
+/// determine the parameter (infinite or missing std, null in JSON).
+pub fn fmt_std(std: Option<f64>) -> String {
+    match std {
+        Some(s) if s.is_finite() => format!("{s:.1e}"),
+        _ => "unidentified".into(),
+    }
+}

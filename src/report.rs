@@ -185,11 +185,11 @@ pub fn param_table(doc: &Value) -> String {
     if let Some(ps) = doc["parameters"].as_object() {
         for (n, p) in ps {
             t += &format!(
-                "<tr><td>{}</td><td>{:.6}</td><td>{:.6}</td><td>{:.2e}</td></tr>",
+                "<tr><td>{}</td><td>{:.6}</td><td>{:.6}</td><td>{}</td></tr>",
                 esc(n),
                 p["nominal"].as_f64().unwrap_or(f64::NAN),
                 p["estimate"].as_f64().unwrap_or(f64::NAN),
-                p["std"].as_f64().unwrap_or(f64::NAN)
+                crate::output::fmt_std(p["std"].as_f64())
             );
         }
     }
@@ -345,7 +345,7 @@ pub fn methods_report(dir: &Path, r: &Runner, runs: &[Run], nominal: &[Track], m
         }
         for m in ms.values() {
             let p = &m["parameters"][pname];
-            t += &format!("<td>{} &plusmn; {}</td>", num(&p["estimate"], 6), p["std"].as_f64().map(|s| format!("{s:.1e}")).unwrap_or_else(|| "-".into()));
+            t += &format!("<td>{} &plusmn; {}</td>", num(&p["estimate"], 6), crate::output::fmt_std(p["std"].as_f64()));
         }
         t += "</tr>";
     }

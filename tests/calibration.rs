@@ -228,3 +228,23 @@ fn huber_loss_resists_ground_truth_outliers() {
     let worst = |v: [f64; 3]| v.iter().cloned().fold(0.0, f64::max);
     assert!(worst(huber) < worst(l2), "huber {huber:?} is not better than l2 {l2:?}");
 }
+
+/// Turning in place shows only the ratios r/b: the fit warns by name that the
+/// common scale of r_r, r_l and b is not identifiable, reports their standard
+/// deviations as null (not as a small number), keeps them near nominal instead
+/// of wandering along the null direction, and still fits the ratio it can see.
+#[test]
+fn turning_in_place_leaves_the_common_scale_unidentified_and_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(tmp.path(), "spin.csv", &["--spec", "spec/diff_drive.toml", "--set", "b=0.21", "--trajectory", "spin", "--seed", "1"]);
+    let fit = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
+    let warnings: Vec<&str> = fit["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    assert!(warnings.iter().any(|w| w.contains("not identifiable") && ["r_r", "r_l", "b"].iter().all(|n| w.contains(n))), "{warnings:?}");
+    let est = |n: &str| fit["parameters"][n]["estimate"].as_f64().unwrap();
+    for n in ["r_r", "r_l", "b"] {
+        assert!(fit["parameters"][n]["std"].is_null(), "{n}: std {}", fit["parameters"][n]["std"]);
+    }
+    assert!((est("b") / 0.2 - 1.0).abs() < 0.1, "b wandered to {}", est("b"));
+    let ratio = (est("r_r") + est("r_l")) / est("b");
+    assert!((ratio / (0.084 / 0.21) - 1.0).abs() < 0.005, "(r_r + r_l)/b = {ratio}, truth {}", 0.084 / 0.21);
+}

@@ -165,3 +165,23 @@ fn longitudinal_slip_is_found_when_the_radii_are_measured() {
     let k = d["candidates"][0]["parameters"]["k_long"]["estimate"].as_f64().unwrap();
     assert!((k - 0.05).abs() < 0.005, "k_long = {k}");
 }
+
+/// The real OptiOdom squares have no gyro: gyro effects cannot be tested and are
+/// listed as not observable instead of ranked with a meaningless zero. In-place
+/// turns give v*omega = 0, so a lateral-slip gain is undetermined there: its
+/// standard deviation is null (unidentified), not a tiny number.
+#[test]
+fn real_runs_without_a_gyro_skip_gyro_effects_and_flag_undetermined_parameters() {
+    let runs = real_runs();
+    let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", runs[0].to_str().unwrap(), "--data", runs[1].to_str().unwrap()]);
+    let cands = d["candidates"].as_array().unwrap();
+    for gyro_effect in ["gyro_bias", "gyro_scale"] {
+        assert!(!cands.iter().any(|c| c["effect"] == gyro_effect), "{gyro_effect} ranked on a log without a gyro");
+        let why = d["skipped"].as_array().unwrap().iter().find(|s| s["effect"] == gyro_effect).expect("listed as skipped")["reason"].as_str().unwrap().to_string();
+        assert!(why.contains("not observable") && why.contains("gyro_z"), "{why}");
+    }
+    let slip = cands.iter().find(|c| c["effect"] == "lateral_slip").expect("lateral_slip tested");
+    assert!(slip["parameters"]["k_slip"]["std"].is_null(), "k_slip std {} on in-place turns", slip["parameters"]["k_slip"]["std"]);
+    // a physically plausible structure is not promoted to a verdict without evidence
+    assert!(d["verdict"]["effect"].is_null() || cands[0]["significant"].as_bool().unwrap());
+}

@@ -23,6 +23,19 @@ pub struct Run {
     pub rate_inputs: Vec<bool>,
 }
 
+/// Whether any run measures the observation channel `name` (`pose`: ground
+/// truth, `gyro`: a gyro, `landmark`: landmark observations), and if not, the
+/// data it would need. Channels kinegen does not read from logs count as measured.
+pub fn channel_missing(runs: &[Run], name: &str) -> Option<&'static str> {
+    let (measured, need) = match name {
+        "pose" => (runs.iter().any(|r| r.gt.is_some()), "gt_x, gt_y, gt_theta columns"),
+        "gyro" => (runs.iter().any(|r| r.gyro.is_some()), "gyro_z column"),
+        "landmark" => (runs.iter().any(|r| !r.landmarks.is_empty()), "landmark observations (--observations)"),
+        _ => (true, ""),
+    };
+    (!measured).then_some(need)
+}
+
 impl Run {
     pub fn steps(&self) -> usize {
         self.dt.len()

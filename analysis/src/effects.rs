@@ -220,6 +220,15 @@ impl Effect {
         Ok(header + &toml::to_string(&t).map_err(|e| e.to_string())?)
     }
 
+    /// The observation channels this effect changes when it changes nothing
+    /// else (no motion, substitution or timing): a gyro bias is visible in gyro
+    /// readings only, so a log without a gyro cannot test it. None for effects
+    /// that change the motion or the timing (seen by every measurement).
+    pub fn observation_only_channels(&self) -> Option<Vec<&str>> {
+        let times = self.parameter.iter().any(|p| p.get("name").and_then(Value::as_str) == Some("time_offset"));
+        (self.motion.is_empty() && self.substitute.is_empty() && !times && !self.observation.is_empty()).then(|| self.observation.keys().map(String::as_str).collect())
+    }
+
     /// The substitutions whose symbol the spec declares.
     fn applicable_substitutions(&self, t: &Table) -> BTreeMap<String, String> {
         let names = declared_names(t);

@@ -390,6 +390,10 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     Ok(FitResult { cost_before: first.cost_before, iterations: first.iterations + joint.iterations, ..joint })
 }
 
+/// Information (in scaled units, residuals weighted by their sigmas) below which
+/// a parameter direction counts as undetermined by the data during the fit.
+const UNDETERMINED_INFORMATION: f64 = 1.0;
+
 fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     let free = r.free.clone();
     let m = free.len();
@@ -451,16 +455,27 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         let dsc = DVector::from_vec(scale.clone());
         let jtj = DMatrix::from_fn(dims, dims, |a, b| jtj_raw[(a, b)] * dsc[a] * dsc[b]);
         let g = jtr_raw.component_mul(&dsc);
+        // Directions the data do not determine (information below 1 in scaled
+        // units: a standard deviation above the parameter's own size at the
+        // nominal noise) get no step, so they stay at their nominal values
+        // instead of wandering along a null space (a turn-in-place log moves
+        // r_r, r_l and b together to 9x their size otherwise).
+        let eig = jtj.clone().symmetric_eigen();
+        let emax = eig.eigenvalues.max();
+        let undetermined: Vec<DVector<f64>> = (0..dims).filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax)).map(|k| eig.eigenvectors.column(k).into_owned()).collect();
         let mut improved = false;
         for _ in 0..30 {
             let mut a = jtj.clone();
             for d in 0..a.nrows() {
                 a[(d, d)] += lambda * jtj[(d, d)].max(1e-12);
             }
-            let Some(step) = a.clone().cholesky().map(|ch| ch.solve(&(-&g))).or_else(|| a.svd(true, true).solve(&(-&g), 1e-14).ok()) else {
+            let Some(mut step) = a.clone().cholesky().map(|ch| ch.solve(&(-&g))).or_else(|| a.svd(true, true).solve(&(-&g), 1e-14).ok()) else {
                 lambda *= 10.0;
                 continue;
             };
+            for v in &undetermined {
+                step -= v * v.dot(&step);
+            }
             let mut trial = p.clone();
             for (k, &i) in free.iter().enumerate() {
                 trial[i] = (p[i] + step[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
@@ -529,11 +544,16 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     // data still resolve.
     let cutoff = (s2 / 1.0).max(1e-14 * smax);
     let rank = svd.singular_values.iter().filter(|&&s| s > cutoff).count();
+    // parameters taking part in a direction the data do not determine
+    let mut undetermined = vec![false; m];
     if rank < m {
         let v_t = svd.v_t.as_ref().unwrap();
         for (k, &s) in svd.singular_values.iter().enumerate() {
             if s <= cutoff {
                 let row = v_t.row(k);
+                for (j, v) in row.iter().enumerate() {
+                    undetermined[j] |= v.abs() > 0.2;
+                }
                 let mut parts: Vec<(f64, &str)> = row.iter().zip(&names).map(|(v, n)| (v.abs(), *n)).filter(|(v, _)| *v > 0.2).collect();
                 parts.sort_by(|a, b| b.0.total_cmp(&a.0));
                 warnings.push(format!(
@@ -544,14 +564,18 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         }
     }
     let cov = &d * svd.pseudo_inverse(cutoff).unwrap_or_else(|_| DMatrix::zeros(m, m)) * &d * s2;
-    let std: Vec<f64> = (0..m).map(|k| cov[(k, k)].max(0.0).sqrt()).collect();
+    // The pseudo-inverse gives an undetermined direction zero variance, which would
+    // read as "known exactly": such parameters get an infinite standard deviation
+    // (reported as unidentified, null in JSON).
+    let std: Vec<f64> = (0..m).map(|k| if undetermined[k] { f64::INFINITY } else { cov[(k, k)].max(0.0).sqrt() }).collect();
     let corr = DMatrix::from_fn(m, m, |a, b| {
         let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
         if d > 0.0 { cov[(a, b)] / d } else if a == b { 1.0 } else { 0.0 }
     });
     for a in 0..m {
         for b in a + 1..m {
-            if corr[(a, b)].abs() > 0.98 {
+            // (pairs inside an undetermined direction are already warned about)
+            if corr[(a, b)].abs() > 0.98 && !(undetermined[a] && undetermined[b]) {
                 warnings.push(format!("{} and {} are strongly correlated (r = {:.3}): this log barely tells them apart", names[a], names[b], corr[(a, b)]));
             }
         }
