@@ -4,6 +4,7 @@
 //!    (diff_drive and omni_caster step_exact and step_exact_jac_p): ns per call
 //!    and their ratio.
 //! 2. Calibration of a 1,000,000-sample diff_drive log: samples per second.
+//!
 //! (Diagnosis time per candidate is printed by `kinegen diagnose` itself, which
 //! needs the CLI to derive the augmented models.)
 //! Figures are medians of repeated runs in this process; ratios compare numbers

@@ -221,6 +221,7 @@ pub fn signature(base: &Runner, pb: &[f64], aug: &Runner, runs: &[Run], param: &
 /// variance explained (eta^2) above 5% with an F statistic far beyond chance
 /// (> 20), so noise, however large, is not called structure. Feature-agnostic:
 /// any function of the binned feature is caught, not only the ones we thought of.
+#[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
 pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
     let (res, feat, regimes) = one_step(r, p, runs);
     let n = res.len();

@@ -213,6 +213,7 @@ fn huber_weights(res: &mut [f64], jac: Option<&mut DMatrix<f64>>, k: f64) {
 /// One run's residuals; Jacobian rows have the free parameters' columns, then
 /// (with `nuis`) the start-heading column.
 #[allow(clippy::too_many_arguments)]
+#[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
 fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOptions, with_jac: bool, start: [f64; 3], nuis: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
     let mut res = Vec::new();
     let mut jac = Vec::new();

@@ -34,8 +34,10 @@ fn err(path: &Path, row: Option<usize>, column: Option<&str>, message: impl Into
     LogError { file: path.to_path_buf(), row, column: column.map(str::to_string), message: message.into() }
 }
 
-/// A CSV table as (header -> index, rows with their 1-based line numbers).
-fn read_table(path: &Path, required: &[&str]) -> Result<(HashMap<String, usize>, Vec<(usize, csv::StringRecord)>), LogError> {
+/// A CSV table: header -> column index, and the rows with their 1-based line numbers.
+type Table = (HashMap<String, usize>, Vec<(usize, csv::StringRecord)>);
+
+fn read_table(path: &Path, required: &[&str]) -> Result<Table, LogError> {
     let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|x| err(path, None, None, format!("cannot read: {x}")))?;
     let headers = rdr.headers().map_err(|x| err(path, Some(1), None, format!("bad header: {x}")))?.clone();
     let index: HashMap<String, usize> = headers.iter().enumerate().map(|(i, h)| (h.to_string(), i)).collect();

@@ -172,6 +172,7 @@ fn prior_std(r: &Runner, i: usize) -> f64 {
 /// Seed 000 eq. 22-26: lambda_k = lambda_{k-1}; omega_k = h_k(lambda) + v_k, with
 /// sigma_v^2 = sigma_omega^2 + mu^2. P0 = diag(prior_std^2) (10% of each value;
 /// seed 000 used (5 cm)^2 for parameters of about 5-38 cm).
+#[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
 pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFit, String> {
     let free = r.free.clone();
     let m = free.len();

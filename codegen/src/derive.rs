@@ -238,7 +238,7 @@ fn jacobian(outs: &[Atom], vars: &[Symbol], chain: Option<(Symbol, &Atom)>) -> V
         for &v in vars {
             let mut d = o.derivative(v);
             if let (Some((_, e)), Some(dc)) = (chain, &d_chain) {
-                d = d + dc * e.derivative(v);
+                d += dc * e.derivative(v);
             }
             j.push(d);
         }
@@ -629,7 +629,7 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
         let k = rate_syms.len();
         let mut chosen = None;
         let mut any_square = false;
-        if k >= 1 && k <= 3 && candidates.len() >= k {
+        if (1..=3).contains(&k) && candidates.len() >= k {
             let combos: Vec<Vec<usize>> = match (k, candidates.len()) {
                 (1, n) => (0..n).map(|i| vec![candidates[i]]).collect(),
                 (2, 2) => vec![vec![candidates[0], candidates[1]]],

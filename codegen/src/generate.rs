@@ -39,8 +39,11 @@ pub fn spec_files(spec_dir: &Path) -> Result<Vec<PathBuf>, GenerateError> {
     Ok(v)
 }
 
+/// Files to write (path, content) and the derived models with their derivation times.
+pub type Rendered = (Vec<(PathBuf, String)>, Vec<(ModelIr, Duration)>);
+
 /// Every file the generated crate should contain, with its content.
-pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<(Vec<(PathBuf, String)>, Vec<(ModelIr, Duration)>), GenerateError> {
+pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError> {
     let mut files = Vec::new();
     let mut models = Vec::new();
     let dir_name = spec_dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_else(|| "spec".into());

@@ -32,7 +32,7 @@ const PACKED: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2,
 /// `kg_pinv(i, j, m...)` with the indices put in order (P is symmetric).
 pub fn pinv_entry(i: usize, j: usize, m: &[Atom]) -> Atom {
     let (a, b) = if i <= j { (i, j) } else { (j, i) };
-    let mut fb = symbolica::atom::FunctionBuilder::new(symbol!("kg_pinv")).add_arg(&Atom::num(a as i64)).add_arg(&Atom::num(b as i64));
+    let mut fb = symbolica::atom::FunctionBuilder::new(symbol!("kg_pinv")).add_arg(Atom::num(a as i64)).add_arg(Atom::num(b as i64));
     for x in m {
         fb = fb.add_arg(x);
     }
@@ -187,7 +187,7 @@ pub fn as_f64(a: AtomView) -> Option<f64> {
     use symbolica::coefficient::CoefficientView;
     let AtomView::Num(n) = a else { return None };
     match n.get_coeff_view() {
-        CoefficientView::Natural(nr, dr, ni, _) if ni == 0 => Some(nr as f64 / dr as f64),
+        CoefficientView::Natural(nr, dr, 0, _) => Some(nr as f64 / dr as f64),
         CoefficientView::Large(r, i) if i.to_rat().is_zero() => Some(r.to_rat().to_f64()),
         CoefficientView::Float(r, i) if i.is_zero() => Some(symbolica::domains::float::RealLike::to_f64(&r.to_float())),
         _ => None,

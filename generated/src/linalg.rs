@@ -33,6 +33,8 @@ pub const fn packed_index(i: usize, j: usize) -> usize {
 
 /// Eigen-decomposition of a symmetric 3x3 matrix (packed upper triangle) by cyclic
 /// Jacobi rotations: returns (eigenvalues, eigenvectors as columns of V).
+// Index loops: each rotation updates two rows (p and q) of `a` together.
+#[allow(clippy::needless_range_loop)]
 pub fn eigen_sym3(m: [f64; 6]) -> ([f64; 3], [[f64; 3]; 3]) {
     let mut a = [[m[0], m[1], m[2]], [m[1], m[3], m[4]], [m[2], m[4], m[5]]];
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
@@ -41,8 +43,8 @@ pub fn eigen_sym3(m: [f64; 6]) -> ([f64; 3], [[f64; 3]; 3]) {
     for _ in 0..32 {
         let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
         let diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
-        // also stops on NaN (the comparison is false)
-        if !(off > 1e-36 * diag) {
+        // also stops on NaN input, which would otherwise never converge
+        if off <= 1e-36 * diag || off.is_nan() || diag.is_nan() {
             break;
         }
         for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
