@@ -344,19 +344,18 @@ pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runne
             let ev = evidence(&start, &effect_params, runs, &o);
             // start from the base estimates and from nominal: a structurally wrong
             // base model can calibrate itself into a corner the effect cannot leave
-            let f = [fit(&start, runs, &o).ok(), fit(aug, runs, &o).ok()]
-                .into_iter()
-                .flatten()
-                .min_by(|a, b| a.cost_after.total_cmp(&b.cost_after))?;
+            let (from_base, from_nominal) = (fit(&start, runs, &o).ok(), fit(aug, runs, &o).ok());
+            let base_start_wins = match (&from_base, &from_nominal) {
+                (Some(a), Some(b)) => a.cost_after <= b.cost_after,
+                (a, _) => a.is_some(),
+            };
+            let f = if base_start_wins { from_base } else { from_nominal }?;
             let rmse = weighted_rms(&start, &f.p, runs, &o);
             let gain = bic0 - bic(f.cost_after, f.n_residuals, f.free.len());
-            let tr_start = seeded(aug, base, &base_train.p);
-            let holdout_rmse = [fit(&tr_start, &train, &o).ok(), fit(aug, &train, &o).ok()]
-                .into_iter()
-                .flatten()
-                .min_by(|a, b| a.cost_after.total_cmp(&b.cost_after))
-                .map(|ft| weighted_rms(&tr_start, &ft.p, &test, &o))
-                .unwrap_or(f64::INFINITY);
+            // the held-out fit starts where the full-data fit did best (the base
+            // model's estimates on the training part, or nominal)
+            let tr_start = if base_start_wins { seeded(aug, base, &base_train.p) } else { aug.clone() };
+            let holdout_rmse = fit(&tr_start, &train, &o).map(|ft| weighted_rms(&tr_start, &ft.p, &test, &o)).unwrap_or(f64::INFINITY);
             progress(name);
             let improvement = 1.0 - rmse / calibrated_rmse;
             let significant = gain > 10.0 && improvement > 0.2 && holdout_rmse < 0.8 * base_holdout_rmse;
