@@ -5,6 +5,7 @@ use clap::Args;
 use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon;
 use kinegen_analysis::fit::{fit, FitOptions, FitResult};
+use kinegen_analysis::landmarks::{self, Innovation, InnovationStats};
 use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
 use kinegen_analysis::model::{parse_sets, Runner};
 use serde_json::{json, Value};
@@ -25,7 +26,6 @@ pub struct Common {
     /// Override a parameter's nominal value: NAME=VALUE; repeatable.
     #[arg(long = "set")]
     pub set: Vec<String>,
-    /// Write a self-contained HTML report to DIR/index.html.
     /// Range-bearing observations `t,id,range,bearing` (needs --landmarks); the
     /// k-th file belongs to the k-th --data log. Repeatable.
     #[arg(long)]
@@ -33,6 +33,7 @@ pub struct Common {
     /// Landmark map `id,x,y` for --observations.
     #[arg(long)]
     pub landmarks: Option<PathBuf>,
+    /// Write a self-contained HTML report to DIR/index.html.
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write one JSON document to PATH (`-`: stdout).
@@ -40,12 +41,12 @@ pub struct Common {
     pub json: Option<PathBuf>,
 }
 
-/// Exit 2 with a message naming the problem.
 /// Progress bars stay quiet when stdout carries the JSON document.
 pub fn quiet(c: &Common) -> bool {
     c.json.as_deref() == Some(std::path::Path::new("-"))
 }
 
+/// Exit 2 with a message naming the problem.
 pub fn bad(msg: impl std::fmt::Display) -> ExitCode {
     eprintln!("error: {msg}");
     ExitCode::from(2)
@@ -68,11 +69,10 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     Ok(Prepared { runner, runs, holdout })
 }
 
-/// Dead-reckoned tracks of every run with parameters `p`.
 /// Read --landmarks and --observations and attach the k-th observation file to
 /// the k-th run.
 fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), String> {
-    use kinegen_analysis::landmarks::{read_map, read_observations};
+    use landmarks::{read_map, read_observations};
     match (&c.landmarks, c.observations.is_empty()) {
         (None, true) => return Ok(()),
         (None, false) => return Err("--observations needs --landmarks MAP.csv (the landmark positions)".into()),
@@ -99,28 +99,38 @@ fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), Stri
     Ok(())
 }
 
+/// Dead-reckoned tracks of every run with parameters `p`.
 fn tracks(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<deadreckon::Track> {
     runs.iter().map(|run| deadreckon::run(r, p, run, false)).collect()
 }
 
-/// Error summary; on logs without ground truth but with landmarks, `rmse` is the
-/// landmark range innovation RMSE (see `landmark_stats`).
-pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
-    let tracks = tracks(r, p, runs);
-    let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
-    let mut e = errors(&pairs);
-    if !runs.iter().any(|x| x.gt.is_some()) {
-        if let Some(s) = landmark_stats(r, p, runs, &tracks) {
-            e.rmse = s.range_rmse_m;
-        }
-    }
-    e
+/// Parameters `p` on `runs`: the dead-reckoned tracks, the errors they make and
+/// the landmark innovations, from one dead-reckoning pass.
+pub struct Evaluation {
+    pub tracks: Vec<deadreckon::Track>,
+    /// Error summary; on logs without ground truth but with landmarks, `rmse` is
+    /// the landmark range innovation RMSE.
+    pub errors: Errors,
+    pub landmarks: Option<InnovationStats>,
 }
 
-/// Landmark innovations (measured minus predicted range and bearing) over runs.
-pub fn landmark_stats(r: &Runner, p: &[f64], runs: &[Run], tracks: &[deadreckon::Track]) -> Option<kinegen_analysis::landmarks::InnovationStats> {
-    let all: Vec<_> = runs.iter().zip(tracks).flat_map(|(run, t)| kinegen_analysis::landmarks::innovations(r, p, run, t)).collect();
-    kinegen_analysis::landmarks::stats(&all)
+pub fn evaluation(r: &Runner, p: &[f64], runs: &[Run]) -> Evaluation {
+    let tracks = tracks(r, p, runs);
+    let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
+    let mut errors = errors(&pairs);
+    let all: Vec<Innovation> = runs.iter().zip(&tracks).flat_map(|(run, t)| landmarks::innovations(r, p, run, t)).collect();
+    let landmarks = landmarks::stats(&all);
+    if !runs.iter().any(|x| x.gt.is_some()) {
+        if let Some(s) = &landmarks {
+            errors.rmse = s.range_rmse_m;
+        }
+    }
+    Evaluation { tracks, errors, landmarks }
+}
+
+/// The error summary of [`evaluation`].
+pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
+    evaluation(r, p, runs).errors
 }
 
 /// The metric `rmse` reports (CONTRACT section 4 leaves its name to us).
@@ -132,7 +142,7 @@ pub fn metric_name(runs: &[Run]) -> &'static str {
     }
 }
 
-fn fmt_landmarks(s: &kinegen_analysis::landmarks::InnovationStats) -> String {
+fn fmt_landmarks(s: &InnovationStats) -> String {
     format!(
         "landmark innovations: {} observations of {} landmarks; range RMSE {:.4} m (bias {:+.4}), bearing RMSE {:.4} rad (bias {:+.4}){}",
         s.observations,
@@ -181,8 +191,8 @@ pub fn compare(c: Common) -> ExitCode {
     } else {
         out.say("  no ground truth (gt_x, gt_y, gt_theta) in the logs: no trajectory error");
     }
-    let lm_stats = landmark_stats(r, &r.p, &all, &tracks);
-    let innov: Vec<Vec<kinegen_analysis::landmarks::Innovation>> = all.iter().zip(&tracks).map(|(run, t)| kinegen_analysis::landmarks::innovations(r, &r.p, run, t)).collect();
+    let innov: Vec<Vec<Innovation>> = all.iter().zip(&tracks).map(|(run, t)| landmarks::innovations(r, &r.p, run, t)).collect();
+    let lm_stats = landmarks::stats(&innov.concat());
     if let Some(s) = &lm_stats {
         out.say(&format!("  {}", fmt_landmarks(s)));
     }
@@ -328,24 +338,21 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
                 Err(e) => return bad(e),
             }
         }
-        let before = evaluate(r, &r.p, &prep.runs);
-        out.say(&format!("{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m", r.ir.name, rows.len(), prep.runs.len(), before.rmse));
+        let before = evaluation(r, &r.p, &prep.runs);
+        out.say(&format!("{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m", r.ir.name, rows.len(), prep.runs.len(), before.errors.rmse));
         let mut methods_json = serde_json::Map::new();
+        let mut per_method: Vec<(String, Vec<deadreckon::Track>)> = Vec::new();
         let mut best: Option<(f64, &str)> = None;
+        // Distance to the truth, each parameter scaled by its size (so a 2 mm
+        // offset of a 0.3 m axis and of a 0 m axis weigh the same), as a
+        // fraction of where the nominal values started: < 1 moved toward the truth.
+        let scaled = |p: &[f64]| truth.iter().filter_map(|(n, v)| r.param_index(n).map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))).sum::<f64>().sqrt();
+        let d0 = scaled(&r.p);
         for m in &rows {
-            let after = evaluate(r, &m.p, &prep.runs);
+            let Evaluation { tracks: after_tracks, errors: after, .. } = evaluation(r, &m.p, &prep.runs);
             let hold = (!prep.holdout.is_empty()).then(|| evaluate(r, &m.p, &prep.holdout));
             let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
-            // Distance to the truth, each parameter scaled by its size (so a 2 mm
-            // offset of a 0.3 m axis and of a 0 m axis weigh the same), as a
-            // fraction of where the nominal values started: < 1 moved toward the truth.
-            let scaled = |p: &[f64]| {
-                truth.iter().filter_map(|(n, v)| r.param_index(n).map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))).sum::<f64>().sqrt()
-            };
-            let dist = (!truth.is_empty()).then(|| {
-                let d0 = scaled(&r.p);
-                if d0 > 0.0 { scaled(&m.p) / d0 } else { scaled(&m.p) }
-            });
+            let dist = (!truth.is_empty()).then(|| if d0 > 0.0 { scaled(&m.p) / d0 } else { scaled(&m.p) });
             if let Some(d) = dist {
                 if best.is_none_or(|b| d < b.0) {
                     best = Some((d, m.name));
@@ -363,24 +370,24 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
                 out.say(&format!("      {:<14} {:.6}", r.names[i], m.p[i]));
             }
             methods_json.insert(m.name.into(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": dist}));
+            per_method.push((m.name.to_string(), after_tracks));
         }
         if let Some((d, name)) = best {
             out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
         }
-        let first = rows.first();
+        // the top-level result is the first method's
+        let first = rows.first().map(|m| &methods_json[m.name]);
         let doc = json!({
             "model": r.ir.name, "metric": metric_name(&prep.runs),
-            "before": {"rmse": before.rmse},
-            "after": {"rmse": first.map(|m| evaluate(r, &m.p, &prep.runs).rmse)},
-            "parameters": first.map(|m| r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect::<serde_json::Map<_, _>>()),
+            "before": {"rmse": before.errors.rmse},
+            "after": {"rmse": first.map(|m| m["after"]["rmse"].clone())},
+            "parameters": first.map(|m| m["parameters"].clone()),
             "methods": methods_json,
             "closest_to_truth": best.map(|b| b.1),
             "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
         });
         if let Some(dir) = &c.report {
-            let nominal = tracks(r, &r.p, &prep.runs);
-            let per_method: Vec<(String, Vec<kinegen_analysis::deadreckon::Track>)> = rows.iter().map(|m| (m.name.to_string(), tracks(r, &m.p, &prep.runs))).collect();
-            if let Err(e) = crate::report::methods_report(dir, r, &prep.runs, &nominal, &per_method, &doc) {
+            if let Err(e) = crate::report::methods_report(dir, r, &prep.runs, &before.tracks, &per_method, &doc) {
                 return bad(e);
             }
             out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -396,12 +403,12 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
         Err(e) => return bad(e),
     };
     drop(spin);
-    let before = evaluate(r, &r.p, &prep.runs);
-    let after = evaluate(r, &res.p, &prep.runs);
+    let (eval_before, eval_after) = (evaluation(r, &r.p, &prep.runs), evaluation(r, &res.p, &prep.runs));
+    let (before, after) = (&eval_before.errors, &eval_after.errors);
     out.say(&format!("{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)", r.ir.name, res.free.len(), prep.runs.len(), res.n_residuals, res.iterations));
     if prep.runs.iter().any(|x| x.gt.is_some()) {
-        out.say(&format!("  before: {}", fmt_errors(&before)));
-        out.say(&format!("  after:  {}", fmt_errors(&after)));
+        out.say(&format!("  before: {}", fmt_errors(before)));
+        out.say(&format!("  after:  {}", fmt_errors(after)));
     } else {
         out.say("  no ground truth in the logs: calibrated on landmark (and gyro) residuals; the error is the landmark range innovation");
     }
@@ -412,13 +419,11 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
     for w in &res.warnings {
         out.say(&format!("warning: {w}"));
     }
-    let mut doc = fit_json(r, &res, &before, &after, metric_name(&prep.runs));
+    let mut doc = fit_json(r, &res, before, after, metric_name(&prep.runs));
     doc["loss"] = json!(loss);
     doc["residuals"] = json!(["pose", "gyro", "landmarks"].iter().filter(|k| uses(k)).collect::<Vec<_>>());
-    let tb = tracks(r, &r.p, &prep.runs);
-    let ta = tracks(r, &res.p, &prep.runs);
-    if let (Some(lb), Some(la)) = (landmark_stats(r, &r.p, &prep.runs, &tb), landmark_stats(r, &res.p, &prep.runs, &ta)) {
-        out.say(&format!("  before: {}\n  after:  {}", fmt_landmarks(&lb), fmt_landmarks(&la)));
+    if let (Some(lb), Some(la)) = (&eval_before.landmarks, &eval_after.landmarks) {
+        out.say(&format!("  before: {}\n  after:  {}", fmt_landmarks(lb), fmt_landmarks(la)));
         doc["landmarks"] = json!({"before": lb, "after": la});
     }
     if !prep.holdout.is_empty() {
@@ -428,8 +433,7 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
         doc["holdout"] = json!({"before": {"rmse": hb.rmse, "errors": hb}, "after": {"rmse": ha.rmse, "errors": ha}});
     }
     if let Some(dir) = &c.report {
-        let (tracks_b, tracks_a) = (tracks(r, &r.p, &prep.runs), tracks(r, &res.p, &prep.runs));
-        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &tracks_b, &tracks_a, &doc) {
+        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &eval_before.tracks, &eval_after.tracks, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

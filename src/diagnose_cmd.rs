@@ -1,5 +1,5 @@
 //! `kinegen diagnose`.
-use crate::analysis_cmd::{bad, prepare, Common};
+use crate::analysis_cmd::{bad, prepare, quiet, Common};
 use crate::effects_cmd::materialise;
 use crate::ir_source;
 use crate::output::Out;
@@ -58,7 +58,7 @@ pub fn run(c: Common) -> ExitCode {
     }
     let t_prep = t0.elapsed();
     let t1 = Instant::now();
-    let bar = crate::progress::Progress::bar(augmented.len() as u64 + 1, "diagnose", c.json.as_deref() == Some(std::path::Path::new("-")));
+    let bar = crate::progress::Progress::bar(augmented.len() as u64 + 1, "diagnose", quiet(&c));
     let d = match diagnose(&prep.runner, &prep.runs, &augmented, skipped, &|step| {
         bar.message(step);
         bar.inc();
