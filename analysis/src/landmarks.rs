@@ -6,7 +6,7 @@
 //! can use them with the exact sensitivities.
 use crate::dataset::Run;
 use crate::deadreckon::Track;
-use crate::log::{wrap, LogError};
+use crate::log::{read_csv, wrap, LogError};
 use crate::model::Runner;
 use serde::Serialize;
 use std::collections::HashMap;
@@ -30,60 +30,26 @@ pub struct Map {
     pub xy: HashMap<String, [f64; 2]>,
 }
 
-fn err(path: &Path, row: Option<usize>, column: Option<&str>, message: impl Into<String>) -> LogError {
-    LogError { file: path.to_path_buf(), row, column: column.map(str::to_string), message: message.into() }
-}
-
-/// A CSV table: header -> column index, and the rows with their 1-based line numbers.
-type Table = (HashMap<String, usize>, Vec<(usize, csv::StringRecord)>);
-
-fn read_table(path: &Path, required: &[&str]) -> Result<Table, LogError> {
-    let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|x| err(path, None, None, format!("cannot read: {x}")))?;
-    let headers = rdr.headers().map_err(|x| err(path, Some(1), None, format!("bad header: {x}")))?.clone();
-    let index: HashMap<String, usize> = headers.iter().enumerate().map(|(i, h)| (h.to_string(), i)).collect();
-    for c in required {
-        if !index.contains_key(*c) {
-            return Err(err(path, Some(1), Some(c), format!("missing column `{c}` (the header has: {})", headers.iter().collect::<Vec<_>>().join(", "))));
-        }
-    }
-    let mut rows = Vec::new();
-    for (n, rec) in rdr.records().enumerate() {
-        let rec = rec.map_err(|x| err(path, Some(n + 2), None, format!("malformed row: {x}")))?;
-        rows.push((n + 2, rec));
-    }
-    Ok((index, rows))
-}
-
-fn cell<'a>(path: &Path, idx: &HashMap<String, usize>, line: usize, rec: &'a csv::StringRecord, col: &str) -> Result<&'a str, LogError> {
-    rec.get(idx[col]).ok_or_else(|| err(path, Some(line), Some(col), "row is shorter than the header"))
-}
-
-fn number(path: &Path, idx: &HashMap<String, usize>, line: usize, rec: &csv::StringRecord, col: &str) -> Result<f64, LogError> {
-    let s = cell(path, idx, line, rec, col)?;
-    let v: f64 = s.parse().map_err(|_| err(path, Some(line), Some(col), format!("`{s}` is not a number")))?;
-    if !v.is_finite() {
-        return Err(err(path, Some(line), Some(col), format!("`{s}` is not finite")));
-    }
-    Ok(v)
-}
-
 /// Read `MAP.csv` (`id,x,y`); ids are text and must be unique.
 pub fn read_map(path: &Path) -> Result<Map, LogError> {
-    let (idx, rows) = read_table(path, &["id", "x", "y"])?;
+    let (h, mut rdr) = read_csv(path, "landmark map")?;
+    let cols = h.require(&["id", "x", "y"])?;
+    let (id_i, x_i, y_i) = (cols[0], cols[1], cols[2]);
     let mut map = Map::default();
-    for (line, rec) in &rows {
-        let id = cell(path, &idx, *line, rec, "id")?.to_string();
+    for (n, rec) in rdr.records().enumerate() {
+        let (line, rec) = h.record(n, rec)?;
+        let id = h.text(line, &rec, id_i)?.to_string();
         if id.is_empty() {
-            return Err(err(path, Some(*line), Some("id"), "empty landmark id"));
+            return Err(h.err(Some(line), Some("id"), "empty landmark id"));
         }
-        let xy = [number(path, &idx, *line, rec, "x")?, number(path, &idx, *line, rec, "y")?];
+        let xy = [h.number(line, &rec, x_i)?, h.number(line, &rec, y_i)?];
         if map.xy.insert(id.clone(), xy).is_some() {
-            return Err(err(path, Some(*line), Some("id"), format!("landmark `{id}` is listed twice")));
+            return Err(h.err(Some(line), Some("id"), format!("landmark `{id}` is listed twice")));
         }
         map.ids.push(id);
     }
     if map.ids.is_empty() {
-        return Err(err(path, None, None, "the map lists no landmarks"));
+        return Err(h.err(None, None, "the map lists no landmarks"));
     }
     Ok(map)
 }
@@ -91,28 +57,31 @@ pub fn read_map(path: &Path) -> Result<Map, LogError> {
 /// Read `OBS.csv` (`t,id,range,bearing`): time non-decreasing (several landmarks
 /// may be seen at one instant), range positive, every id in the map.
 pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Vec<LandmarkObs>, LogError> {
-    let (idx, rows) = read_table(path, &["t", "id", "range", "bearing"])?;
-    let mut out: Vec<LandmarkObs> = Vec::with_capacity(rows.len());
-    for (line, rec) in &rows {
-        let t = number(path, &idx, *line, rec, "t")?;
+    let (h, mut rdr) = read_csv(path, "landmark observations")?;
+    let cols = h.require(&["t", "id", "range", "bearing"])?;
+    let (t_i, id_i, range_i, bearing_i) = (cols[0], cols[1], cols[2], cols[3]);
+    let mut out: Vec<LandmarkObs> = Vec::new();
+    for (n, rec) in rdr.records().enumerate() {
+        let (line, rec) = h.record(n, rec)?;
+        let t = h.number(line, &rec, t_i)?;
         if let Some(prev) = out.last() {
             if t < prev.t {
-                return Err(err(path, Some(*line), Some("t"), format!("time goes backwards: {t} follows {}", prev.t)));
+                return Err(h.err(Some(line), Some("t"), format!("time goes backwards: {t} follows {}", prev.t)));
             }
         }
-        let id = cell(path, &idx, *line, rec, "id")?.to_string();
+        let id = h.text(line, &rec, id_i)?.to_string();
         let Some(&[xl, yl]) = map.xy.get(&id) else {
-            return Err(err(path, Some(*line), Some("id"), format!("landmark `{id}` is not in the map {}", map_path.display())));
+            return Err(h.err(Some(line), Some("id"), format!("landmark `{id}` is not in the map {}", map_path.display())));
         };
-        let range = number(path, &idx, *line, rec, "range")?;
+        let range = h.number(line, &rec, range_i)?;
         if range <= 0.0 {
-            return Err(err(path, Some(*line), Some("range"), format!("range {range} is not positive")));
+            return Err(h.err(Some(line), Some("range"), format!("range {range} is not positive")));
         }
-        let bearing = number(path, &idx, *line, rec, "bearing")?;
+        let bearing = h.number(line, &rec, bearing_i)?;
         out.push(LandmarkObs { t, id, xl, yl, range, bearing });
     }
     if out.is_empty() {
-        return Err(err(path, None, None, "no observations"));
+        return Err(h.err(None, None, "no observations"));
     }
     Ok(out)
 }

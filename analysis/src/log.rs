@@ -22,6 +22,62 @@ fn location(row: &Option<usize>, column: &Option<String>) -> String {
     }
 }
 
+/// The header of a CSV file being read, and the rules every CSV input follows
+/// (logs, landmark maps, landmark observations): trimmed cells, 1-based line
+/// numbers (the header is line 1), finite numbers, errors naming file, line and
+/// column.
+pub struct CsvHeader {
+    pub path: PathBuf,
+    pub names: Vec<String>,
+}
+
+/// Open a CSV file (`what` names it in the error) and read its header.
+pub fn read_csv(path: &Path, what: &str) -> Result<(CsvHeader, csv::Reader<std::fs::File>), LogError> {
+    let e = |row: Option<usize>, m: String| LogError { file: path.to_path_buf(), row, column: None, message: m };
+    let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|x| e(None, format!("cannot read {what}: {x}")))?;
+    let names = rdr.headers().map_err(|x| e(Some(1), format!("bad header: {x}")))?.iter().map(str::to_string).collect();
+    Ok((CsvHeader { path: path.to_path_buf(), names }, rdr))
+}
+
+impl CsvHeader {
+    pub fn err(&self, row: Option<usize>, column: Option<&str>, message: impl Into<String>) -> LogError {
+        LogError { file: self.path.clone(), row, column: column.map(str::to_string), message: message.into() }
+    }
+
+    pub fn position(&self, column: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == column)
+    }
+
+    /// Positions of `columns`, all of which must be present.
+    pub fn require(&self, columns: &[&str]) -> Result<Vec<usize>, LogError> {
+        columns
+            .iter()
+            .map(|c| self.position(c).ok_or_else(|| self.err(Some(1), Some(c), format!("missing column `{c}` (the header has: {})", self.names.join(", ")))))
+            .collect()
+    }
+
+    /// The `n`-th record (0-based, as `csv::Reader::records` counts) with its line number.
+    pub fn record(&self, n: usize, rec: csv::Result<csv::StringRecord>) -> Result<(usize, csv::StringRecord), LogError> {
+        let line = n + 2;
+        rec.map(|r| (line, r)).map_err(|x| self.err(Some(line), None, format!("malformed row: {x}")))
+    }
+
+    /// Cell `i` of a record as text.
+    pub fn text<'a>(&self, line: usize, rec: &'a csv::StringRecord, i: usize) -> Result<&'a str, LogError> {
+        rec.get(i).ok_or_else(|| self.err(Some(line), Some(&self.names[i]), "row is shorter than the header"))
+    }
+
+    /// Cell `i` of a record as a finite number.
+    pub fn number(&self, line: usize, rec: &csv::StringRecord, i: usize) -> Result<f64, LogError> {
+        let cell = self.text(line, rec, i)?;
+        let v: f64 = cell.parse().map_err(|_| self.err(Some(line), Some(&self.names[i]), format!("`{cell}` is not a number")))?;
+        if !v.is_finite() {
+            return Err(self.err(Some(line), Some(&self.names[i]), format!("`{cell}` is not finite")));
+        }
+        Ok(v)
+    }
+}
+
 /// A log: named numeric columns of equal length.
 #[derive(Debug, Clone)]
 pub struct Log {
@@ -54,24 +110,14 @@ impl Log {
 
     /// Read a log, keeping only `wanted` columns (others are ignored, as the contract says).
     pub fn read(path: &Path, wanted: &[&str]) -> Result<Log, LogError> {
-        let e = |row: Option<usize>, col: Option<&str>, m: String| LogError { file: path.to_path_buf(), row, column: col.map(str::to_string), message: m };
-        let mut rdr = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
-            .from_path(path)
-            .map_err(|x| e(None, None, format!("cannot read log: {x}")))?;
-        let headers = rdr.headers().map_err(|x| e(Some(1), None, format!("bad header: {x}")))?.clone();
-        let idx: Vec<(usize, String)> = headers.iter().enumerate().filter(|(_, h)| wanted.contains(h)).map(|(i, h)| (i, h.to_string())).collect();
+        let (header, mut rdr) = read_csv(path, "log")?;
+        let idx: Vec<(usize, String)> = header.names.iter().enumerate().filter(|(_, h)| wanted.contains(&h.as_str())).map(|(i, h)| (i, h.clone())).collect();
         let mut columns: HashMap<String, Vec<f64>> = idx.iter().map(|(_, h)| (h.clone(), Vec::new())).collect();
         let mut len = 0;
         for (n, rec) in rdr.records().enumerate() {
-            let line = n + 2;
-            let rec = rec.map_err(|x| e(Some(line), None, format!("malformed row: {x}")))?;
+            let (line, rec) = header.record(n, rec)?;
             for (i, h) in &idx {
-                let cell = rec.get(*i).ok_or_else(|| e(Some(line), Some(h), "row is shorter than the header".into()))?;
-                let v: f64 = cell.parse().map_err(|_| e(Some(line), Some(h), format!("`{cell}` is not a number")))?;
-                if !v.is_finite() {
-                    return Err(e(Some(line), Some(h), format!("`{cell}` is not finite")));
-                }
+                let v = header.number(line, &rec, *i)?;
                 columns.get_mut(h).unwrap().push(v);
             }
             len += 1;
