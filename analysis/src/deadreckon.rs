@@ -2,7 +2,7 @@
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
 use crate::dataset::Run;
 use crate::model::Runner;
-use nalgebra::{DMatrix, Matrix3};
+use nalgebra::DMatrix;
 
 pub struct Track {
     pub pose: Vec<[f64; 3]>,
@@ -76,11 +76,8 @@ pub fn run_from(r: &Runner, p: &[f64], data: &Run, with_sens: bool, start_offset
     let mut pose = vec![start];
     // columns: parameters, then the start pose (identity at the start)
     let mut sens = with_sens.then(|| {
-        let mut s0 = DMatrix::zeros(3, np + 3);
+        let mut s0 = with_start_columns(&dstart, np);
         for m in 0..3 {
-            for c in 0..np {
-                s0[(m, c)] = dstart[m * np + c];
-            }
             s0[(m, np + m)] = 1.0;
         }
         vec![s0]
@@ -101,17 +98,20 @@ pub fn run_from(r: &Runner, p: &[f64], data: &Run, with_sens: bool, start_offset
         if let Some(s) = sens.as_mut() {
             jx.eval_into(&args, &mut jxo, &mut scratch);
             jp.eval_into(&args, &mut jpo, &mut scratch);
-            let fxm = Matrix3::from_row_slice(&jxo);
-            let mut fpm = DMatrix::zeros(3, np + 3);
-            fpm.view_mut((0, 0), (3, np)).copy_from(&DMatrix::from_row_slice(3, np, &jpo));
             let prev = s.last().unwrap();
-            let next = DMatrix::from_iterator(3, 3, fxm.iter().copied()) * prev + fpm;
+            let next = DMatrix::from_row_slice(3, 3, &jxo) * prev + with_start_columns(&jpo, np);
             s.push(next);
         }
         pose.push(out3);
     }
     let measured = predicted_measurements(r, p, data, &pose);
     Track { pose, measured, sens, omega, twist }
+}
+
+/// A 3 x P row-major parameter Jacobian as the first P columns of a sensitivity
+/// matrix whose last 3 columns (the start pose) are zero.
+fn with_start_columns(jac_p: &[f64], np: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(3, np + 3, |m, c| if c < np { jac_p[m * np + c] } else { 0.0 })
 }
 
 /// The pose measurements a track predicts (see [`Track::measured`]).
@@ -144,19 +144,17 @@ pub fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3
 /// arc of that constant twist. None when the run has no gyro column.
 pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
     let gyro = data.gyro.as_ref()?;
-    let (tg, tw) = (r.ir.function("twist_gyro")?, r.f("twist"));
+    let tg = r.ir.function("twist_gyro")?;
     let u0 = data.u.first().cloned().unwrap_or_default();
     let (start, _) = body_start(r, p, data.start_pose(), &u0);
     let mut pose = vec![start];
     let (mut omega, mut twist) = (Vec::with_capacity(data.steps()), Vec::with_capacity(data.steps()));
     let mut scratch = Vec::new();
     let mut v = [0.0; 2];
-    let mut full = [0.0; 3];
     for k in 0..data.steps() {
         // the gyro row k+1 reports the mean rate over step k (see Run::gyro)
         let w = gyro[k + 1];
         tg.eval_into(&[&data.u[k], &[w], p], &mut v, &mut scratch);
-        tw.eval_into(&[&data.u[k], p], &mut full, &mut scratch);
         let x = *pose.last().unwrap();
         pose.push(arc_step(x, [v[0], v[1], w], data.dt[k]));
         omega.push(w);
