@@ -155,10 +155,7 @@ pub fn normal_equations(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: 
             let (mut rv, jv) = run_residuals(r, p, free, run, o, true, starts.get(i).copied().unwrap_or([0.0; 3]), nuis);
             let (mut ata, mut atb, mut btb, mut atr, mut btr) = (DMatrix::zeros(m, m), DVector::zeros(m), 0.0, DVector::zeros(m), 0.0);
             for (res, row) in rv.iter_mut().zip(&jv) {
-                let w = match o.huber {
-                    Some(k) if res.abs() > k => (k / res.abs()).sqrt(),
-                    _ => 1.0,
-                };
+                let w = o.huber.map_or(1.0, |k| huber_weight(*res, k));
                 *res *= w;
                 let a = DVector::from_iterator(m, row[..m].iter().map(|v| v * w));
                 let b = if nuis { row[m] * w } else { 0.0 };
@@ -196,8 +193,17 @@ pub fn normal_equations(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: 
 /// scaled by sqrt(k/|r|), so its squared contribution is k|r| (linear growth); its
 /// Jacobian row gets the same weight (the weight's own derivative is neglected, as
 /// IRLS does). Weights are recomputed at every evaluation.
+fn huber_weight(r: f64, k: f64) -> f64 {
+    if r.abs() > k {
+        (k / r.abs()).sqrt()
+    } else {
+        1.0
+    }
+}
+
+/// [`huber_weight`] applied to residuals and their Jacobian rows.
 fn huber_weights(res: &mut [f64], jac: Option<&mut DMatrix<f64>>, k: f64) {
-    let w: Vec<f64> = res.iter().map(|r| if r.abs() > k { (k / r.abs()).sqrt() } else { 1.0 }).collect();
+    let w: Vec<f64> = res.iter().map(|&r| huber_weight(r, k)).collect();
     for (r, wi) in res.iter_mut().zip(&w) {
         *r *= wi;
     }
