@@ -38,15 +38,7 @@ pub fn with_effects(spec_text: &str, effects: &[String], dir: &Path) -> Result<(
             Some(p) => p.to_string(),
             // the first parameter this model gets (a per-wheel effect adds only
             // the parameters of the wheels the model has)
-            None => {
-                let applied = eff.apply(&text, &BTreeMap::new()).unwrap_or_default();
-                eff.parameter
-                    .iter()
-                    .filter_map(|p| p.get("name").and_then(|n| n.as_str()))
-                    .find(|n| applied.contains(&format!("name = \"{n}\"")))
-                    .unwrap_or("")
-                    .to_string()
-            }
+            None => eff.parameters_for(&text)?.into_iter().next().unwrap_or_default(),
         };
         if !eff.parameter.iter().any(|p| p.get("name").and_then(|n| n.as_str()) == Some(param.as_str())) {
             return Err(format!("--effect {e}: the effect `{name}` has no parameter `{param}`"));

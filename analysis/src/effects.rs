@@ -229,6 +229,13 @@ impl Effect {
         (self.motion.is_empty() && self.substitute.is_empty() && !times && !self.observation.is_empty()).then(|| self.observation.keys().map(String::as_str).collect())
     }
 
+    /// Names of the parameters this effect adds to `spec_text`, in catalogue
+    /// order: a per-wheel effect adds only those of the wheels the spec has.
+    pub fn parameters_for(&self, spec_text: &str) -> Result<Vec<String>, String> {
+        let t = spec_table(spec_text)?;
+        Ok(self.used_parameter_tables(&self.applicable_substitutions(&t)).iter().filter_map(|p| p.get("name").and_then(Value::as_str).map(str::to_string)).collect())
+    }
+
     /// The substitutions whose symbol the spec declares.
     fn applicable_substitutions(&self, t: &Table) -> BTreeMap<String, String> {
         let names = declared_names(t);
