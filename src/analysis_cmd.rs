@@ -286,7 +286,7 @@ fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64, fo: &F
             )
         }
     };
-    let sigma_omega = r.ir.observations.iter().find(|o| o.name == "gyro").and_then(|o| o.sigma.first().copied()).filter(|s| *s > 0.0).unwrap_or(0.005);
+    let sigma_omega = r.obs_sigma("gyro").and_then(|s| s.first().copied()).filter(|s| *s > 0.0).unwrap_or(0.005);
     Ok(match method {
         "lm" => {
             let res = fit(r, runs, fo).map_err(|e| e.to_string())?;

@@ -312,7 +312,7 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
 #[allow(clippy::too_many_arguments)]
 fn landmark_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, track: &deadreckon::Track, with_jac: bool, res: &mut Vec<f64>, jac: &mut Vec<Vec<f64>>) {
     let Some(h) = r.ir.function("obs_landmark") else { return };
-    let sig = r.ir.observations.iter().find(|o| o.name == "landmark").map(|o| o.sigma.clone()).filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0)).unwrap_or(vec![0.05, 0.02]);
+    let sig = r.obs_sigma("landmark").filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0)).unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
     let np = p.len();
     for o in &run.landmarks {
         let (j, a, x) = crate::landmarks::locate_on(run, track, o.t);

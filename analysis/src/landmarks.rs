@@ -12,6 +12,10 @@ use serde::Serialize;
 use std::collections::HashMap;
 use std::path::Path;
 
+/// Range and bearing noise (m, rad) when the spec's `landmark` observation
+/// declares none.
+pub const DEFAULT_SIGMA: [f64; 2] = [0.05, 0.02];
+
 /// One range-bearing observation, with the mapped landmark it refers to.
 #[derive(Debug, Clone)]
 pub struct LandmarkObs {

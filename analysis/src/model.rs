@@ -62,6 +62,11 @@ impl Runner {
         self.ir.function(name).expect("checked in Runner::new")
     }
 
+    /// The noise standard deviations the spec declares for observation `name`.
+    pub fn obs_sigma(&self, name: &str) -> Option<&[f64]> {
+        self.ir.observations.iter().find(|o| o.name == name).map(|o| &o.sigma[..])
+    }
+
     pub fn param_index(&self, name: &str) -> Option<usize> {
         self.names.iter().position(|n| n == name)
     }

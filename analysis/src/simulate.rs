@@ -86,6 +86,19 @@ pub struct SimLog {
     pub observations: Vec<(f64, String, f64, f64)>,
 }
 
+/// One line of a 12-bit angle encoder (4096 lines per revolution): wheel angles
+/// and steering angles are quantised to it.
+const ENCODER_LINE: f64 = 2.0 * PI / 4096.0;
+
+/// A zero-mean Gaussian sample with standard deviation `s` (0 when `s` is not positive).
+fn gaussian(s: f64, rng: &mut SmallRng) -> f64 {
+    if s > 0.0 {
+        Normal::new(0.0, s).unwrap().sample(rng)
+    } else {
+        0.0
+    }
+}
+
 /// A smooth 0 -> 1 ramp.
 fn smooth(x: f64) -> f64 {
     let x = x.clamp(0.0, 1.0);
@@ -270,7 +283,6 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     let inputs = &truth.ir.inputs;
     let mut cum = vec![0.0; inputs.len()];
     let mut x = [0.0, 0.0, 0.0];
-    let noise = |s: f64, rng: &mut SmallRng| if s > 0.0 { Normal::new(0.0, s).unwrap().sample(rng) } else { 0.0 };
     let obs_pose = truth.ir.function("obs_pose");
     let obs_gyro = truth.ir.function("obs_gyro");
     let cfg_idx = config_inputs(base);
@@ -334,25 +346,24 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
             }
         }
         let mut row = vec![times[k]];
+        // the inputs commanded at t_k, which absolute sensors sample (computed once per row)
+        let mut commanded: Option<Vec<f64>> = None;
         for &i in &written {
             let inp = &inputs[i];
-            if let Some(k) = cfg_idx.iter().position(|&c| c == i) {
-                // absolute steering encoder: 4096 lines per revolution, wrapped to (-pi, pi]
-                row.push(wrap((cfg[k] / (2.0 * PI / 4096.0)).round() * (2.0 * PI / 4096.0)));
+            if let Some(c) = cfg_idx.iter().position(|&c| c == i) {
+                // absolute steering encoder, wrapped to (-pi, pi]
+                row.push(wrap((cfg[c] / ENCODER_LINE).round() * ENCODER_LINE));
                 continue;
             }
             row.push(match inp.kind {
                 InputKind::Cumulative if inp.unit.contains("count") => cum[i].floor(),
-                // wheel-angle encoders: 4096 lines per revolution
-                InputKind::Cumulative => (cum[i] / (2.0 * PI / 4096.0)).floor() * (2.0 * PI / 4096.0),
+                // wheel-angle encoders
+                InputKind::Cumulative => (cum[i] / ENCODER_LINE).floor() * ENCODER_LINE,
                 // absolute angle sensors (steering encoders, 12 bit like the caster
                 // wheels' above) sample the value at t_k; other absolute inputs get
                 // Gaussian noise
-                InputKind::Absolute if inp.unit == "rad" => {
-                    let q = 2.0 * PI / 4096.0;
-                    (command(base, &plan(times[k] % dur))[i] / q).round() * q
-                }
-                InputKind::Absolute => command(base, &plan(times[k] % dur))[i] + noise(0.002, &mut rng),
+                InputKind::Absolute if inp.unit == "rad" => (commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i] / ENCODER_LINE).round() * ENCODER_LINE,
+                InputKind::Absolute => commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i] + gaussian(0.002, &mut rng),
             });
         }
         let seen = if delay == 0.0 { x } else { at_time(&history, times[k] - delay) };
@@ -360,12 +371,12 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
             Some(h) => h.eval(&Runner::obs_args(h, &seen, &last_u, &truth.p, &[])),
             None => seen.to_vec(),
         };
-        row.push(pose[0] + noise(o.pos_noise, &mut rng));
-        row.push(pose[1] + noise(o.pos_noise, &mut rng));
-        row.push(wrap(pose[2] + noise(o.heading_noise, &mut rng)));
+        row.push(pose[0] + gaussian(o.pos_noise, &mut rng));
+        row.push(pose[1] + gaussian(o.pos_noise, &mut rng));
+        row.push(wrap(pose[2] + gaussian(o.heading_noise, &mut rng)));
         if let Some(g) = obs_gyro {
             let v = if k == 0 { g.eval(&Runner::obs_args(g, &x, &last_u, &truth.p, &[]))[0] } else { gyro_mean };
-            row.push(v + noise(o.gyro_noise, &mut rng));
+            row.push(v + gaussian(o.gyro_noise, &mut rng));
         }
         rows.push(row);
     }
@@ -381,8 +392,7 @@ fn observe_landmarks(truth: &Runner, o: &SimOptions, times: &[f64], history: &[(
     if o.landmarks.is_empty() {
         return vec![];
     }
-    let sig = truth.ir.observations.iter().find(|x| x.name == "landmark").map(|x| x.sigma.clone()).filter(|s| s.len() == 2).unwrap_or(vec![0.05, 0.02]);
-    let noise = |s: f64, rng: &mut SmallRng| if s > 0.0 { Normal::new(0.0, s).unwrap().sample(rng) } else { 0.0 };
+    let sig = truth.obs_sigma("landmark").filter(|s| s.len() == 2).unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
     let u0 = vec![0.0; truth.ir.inputs.len()];
     let mut out = Vec::new();
     let mut next = times[0];
@@ -397,7 +407,7 @@ fn observe_landmarks(truth: &Runner, o: &SimOptions, times: &[f64], history: &[(
                 continue;
             }
             let v = h.eval(&Runner::obs_args(h, &x, &u0, &truth.p, lm));
-            out.push((t, id.clone(), v[0] + noise(sig[0], rng), wrap(v[1] + noise(sig[1], rng))));
+            out.push((t, id.clone(), v[0] + gaussian(sig[0], rng), wrap(v[1] + gaussian(sig[1], rng))));
         }
     }
     out
