@@ -66,41 +66,57 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
     run
 }
 
-/// The least-squares model: the IR evaluator decomposes each pseudo-inverse once
-/// per call (cache), the generated code once per matrix too.
-fn omni_caster_kernels() {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../generated/ir/omni_caster.json");
-    let ir = ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap();
-    let pn: [f64; 12] = kinegen_generated::omni_caster::PARAM_NOMINAL;
-    let n_calls = 20_000;
-    let mut rng = rand::rngs::SmallRng::seed_from_u64(3);
-    let inputs: Vec<([f64; 3], [f64; 9])> = (0..n_calls)
-        .map(|_| ([rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0)], std::array::from_fn(|i| if i < 3 { rng.gen_range(-1.0..1.0) } else { rng.gen_range(-5.0..5.0) })))
-        .collect();
-    let w = [0.0; 3];
+/// A generated step kernel: (x, u, w, p, dt) -> R.
+type Kernel<const U: usize, const W: usize, const P: usize, R> = fn(&[f64; 3], &[f64; U], &[f64; W], &[f64; P], f64) -> R;
+
+/// The IR evaluator against the generated `step_exact` and `step_exact_jac_p` of
+/// one model, on the same (x, u) inputs. For the least-squares model the IR
+/// evaluator decomposes each pseudo-inverse once per call (cache), the generated
+/// code once per matrix too.
+fn ir_vs_generated<const U: usize, const W: usize, const P: usize>(
+    model: &str,
+    ir: &ModelIr,
+    p: &[f64; P],
+    inputs: &[([f64; 3], [f64; U])],
+    reps: usize,
+    step: Kernel<U, W, P, [f64; 3]>,
+    jac_p: Kernel<U, W, P, [[f64; P]; 3]>,
+) {
+    let w = [0.0; W];
     for name in ["step_exact", "step_exact_jac_p"] {
         let f = ir.function(name).unwrap();
         let mut out = vec![0.0; f.rows * f.cols];
         let mut scratch = Vec::new();
         time_pair(
-            &format!("omni_caster {name}"),
-            n_calls,
-            5,
+            &format!("{model} {name}"),
+            inputs.len(),
+            reps,
             |k| {
                 let (x, u) = &inputs[k];
-                f.eval_into(&[x, u, &w, &pn, &[0.05]], &mut out, &mut scratch);
+                f.eval_into(&[x, u, &w, p, &[0.05]], &mut out, &mut scratch);
                 black_box(&out);
             },
             |k| {
                 let (x, u) = &inputs[k];
                 if name == "step_exact" {
-                    black_box(kinegen_generated::omni_caster::step_exact(black_box(x), u, &w, &pn, 0.05));
+                    black_box(step(black_box(x), u, &w, p, 0.05));
                 } else {
-                    black_box(kinegen_generated::omni_caster::step_exact_jac_p(black_box(x), u, &w, &pn, 0.05));
+                    black_box(jac_p(black_box(x), u, &w, p, 0.05));
                 }
             },
         );
     }
+}
+
+fn omni_caster_kernels() {
+    use kinegen_generated::omni_caster;
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../generated/ir/omni_caster.json");
+    let ir = ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap();
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(3);
+    let inputs: Vec<([f64; 3], [f64; 9])> = (0..20_000)
+        .map(|_| ([rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0)], std::array::from_fn(|i| if i < 3 { rng.gen_range(-1.0..1.0) } else { rng.gen_range(-5.0..5.0) })))
+        .collect();
+    ir_vs_generated::<9, 3, 12>("omni_caster", &ir, &omni_caster::PARAM_NOMINAL, &inputs, 5, omni_caster::step_exact, omni_caster::step_exact_jac_p);
 }
 
 fn main() {
@@ -112,30 +128,7 @@ fn main() {
         (0..n_calls).map(|_| ([rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0)], [rng.gen_range(-4000.0..4000.0), rng.gen_range(-4000.0..4000.0)])).collect()
     };
     let p: [f64; 5] = r.p.clone().try_into().unwrap();
-    let w = [0.0, 0.0];
-    for name in ["step_exact", "step_exact_jac_p"] {
-        let f = ir.function(name).unwrap();
-        let mut out = vec![0.0; f.rows * f.cols];
-        let mut scratch = Vec::new();
-        time_pair(
-            &format!("diff_drive {name}"),
-            n_calls,
-            7,
-            |k| {
-                let (x, u) = &inputs[k];
-                f.eval_into(&[x, u, &w, &p, &[0.05]], &mut out, &mut scratch);
-                black_box(&out);
-            },
-            |k| {
-                let (x, u) = &inputs[k];
-                if name == "step_exact" {
-                    black_box(kinegen_generated::diff_drive::step_exact(black_box(x), u, &w, &p, 0.05));
-                } else {
-                    black_box(kinegen_generated::diff_drive::step_exact_jac_p(black_box(x), u, &w, &p, 0.05));
-                }
-            },
-        );
-    }
+    ir_vs_generated::<2, 2, 5>("diff_drive", &ir, &p, &inputs, 7, kinegen_generated::diff_drive::step_exact, kinegen_generated::diff_drive::step_exact_jac_p);
 
     omni_caster_kernels();
 
