@@ -406,7 +406,8 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     let m = free.len();
     let rp = r.ir.runtime_params();
     // the unknowns: the free parameters, then a start-heading offset per run that has one
-    let n_start = start_columns(runs, o, m).iter().flatten().count();
+    let start_cols = start_columns(runs, o, m);
+    let n_start = start_cols.iter().flatten().count();
     let dims = m + n_start;
     let mut bounds: Vec<(f64, f64)> = free
         .iter()
@@ -434,10 +435,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         scale.push(0.01);
         bounds.push((-0.5, 0.5));
     }
-    let starts_of = |x: &[f64]| -> Vec<[f64; 3]> {
-        let cols = start_columns(runs, o, m);
-        cols.iter().map(|c| c.map_or([0.0; 3], |c| [0.0, 0.0, x[c]])).collect()
-    };
+    let starts_of = |x: &[f64]| -> Vec<[f64; 3]> { start_cols.iter().map(|c| c.map_or([0.0; 3], |c| [0.0, 0.0, x[c]])).collect() };
     let mut p = r.p.clone();
     let mut x = vec![0.0; dims]; // the start headings live in x[m..]
     let eval = |p: &[f64], x: &[f64]| residuals(r, p, &free, runs, o, false, &starts_of(x)).0;
