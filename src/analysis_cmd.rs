@@ -8,6 +8,8 @@ use kinegen_analysis::fit::{fit, FitOptions, FitResult};
 use kinegen_analysis::landmarks::{self, Innovation, InnovationStats};
 use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
 use kinegen_analysis::model::{parse_sets, Runner};
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::{RangeBearing, YawRate};
 use serde_json::{json, Value};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -39,6 +41,11 @@ pub struct Common {
     /// Write one JSON document to PATH (`-`: stdout).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// A directory of your own effect files (same format as the bundled
+    /// catalogue, which is built in); repeatable. A file with a bundled effect's
+    /// name replaces it.
+    #[arg(long = "effects", value_name = "DIR")]
+    pub effects: Vec<PathBuf>,
 }
 
 /// Progress bars stay quiet when stdout carries the JSON document.
@@ -62,11 +69,20 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     let ir = ir_source::load(&c.spec)?;
     let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
     let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;
-    let read = |paths: &[PathBuf]| paths.iter().map(|p| Run::read(p, &runner).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>();
+    let read = |paths: &[PathBuf]| {
+        paths
+            .iter()
+            .map(|p| Run::read(p, &runner).map_err(|e| e.to_string()))
+            .collect::<Result<Vec<_>, _>>()
+    };
     let mut runs = read(&c.data)?;
     let holdout = read(&c.holdout)?;
     attach_landmarks(c, &runner, &mut runs)?;
-    Ok(Prepared { runner, runs, holdout })
+    Ok(Prepared {
+        runner,
+        runs,
+        holdout,
+    })
 }
 
 /// Read --landmarks and --observations and attach the k-th observation file to
@@ -75,16 +91,30 @@ fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), Stri
     use landmarks::{read_map, read_observations};
     match (&c.landmarks, c.observations.is_empty()) {
         (None, true) => return Ok(()),
-        (None, false) => return Err("--observations needs --landmarks MAP.csv (the landmark positions)".into()),
-        (Some(m), true) => return Err(format!("--landmarks {} given without --observations", m.display())),
+        (None, false) => {
+            return Err("--observations needs --landmarks MAP.csv (the landmark positions)".into())
+        }
+        (Some(m), true) => {
+            return Err(format!(
+                "--landmarks {} given without --observations",
+                m.display()
+            ))
+        }
         _ => {}
     }
     let map_path = c.landmarks.as_ref().unwrap();
-    if r.ir.function("obs_landmark").is_none() {
-        return Err(format!("{}: the model has no `landmark` observation to predict range-bearing data with", c.spec.display()));
+    if r.ir.observation_fn(RangeBearing, "").is_none() {
+        return Err(format!(
+            "{}: the model has no `landmark` observation to predict range-bearing data with",
+            c.spec.display()
+        ));
     }
     if c.observations.len() > runs.len() {
-        return Err(format!("{} --observations files for {} --data logs (one per log, in order)", c.observations.len(), runs.len()));
+        return Err(format!(
+            "{} --observations files for {} --data logs (one per log, in order)",
+            c.observations.len(),
+            runs.len()
+        ));
     }
     let map = read_map(map_path).map_err(|e| e.to_string())?;
     for (run, path) in runs.iter_mut().zip(&c.observations) {
@@ -92,7 +122,10 @@ fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), Stri
         let (t0, t1) = (run.t[0], *run.t.last().unwrap());
         let inside: Vec<_> = obs.into_iter().filter(|o| o.t >= t0 && o.t <= t1).collect();
         if inside.is_empty() {
-            return Err(format!("{}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s", path.display()));
+            return Err(format!(
+                "{}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s",
+                path.display()
+            ));
         }
         run.landmarks = inside;
     }
@@ -101,7 +134,9 @@ fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), Stri
 
 /// Dead-reckoned tracks of every run with parameters `p`.
 fn tracks(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<deadreckon::Track> {
-    runs.iter().map(|run| deadreckon::run(r, p, run, false)).collect()
+    runs.iter()
+        .map(|run| deadreckon::run(r, p, run, false))
+        .collect()
 }
 
 /// Parameters `p` on `runs`: the dead-reckoned tracks, the errors they make and
@@ -118,14 +153,22 @@ pub fn evaluation(r: &Runner, p: &[f64], runs: &[Run]) -> Evaluation {
     let tracks = tracks(r, p, runs);
     let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
     let mut errors = errors(&pairs);
-    let all: Vec<Innovation> = runs.iter().zip(&tracks).flat_map(|(run, t)| landmarks::innovations(r, p, run, t)).collect();
+    let all: Vec<Innovation> = runs
+        .iter()
+        .zip(&tracks)
+        .flat_map(|(run, t)| landmarks::innovations(r, p, run, t))
+        .collect();
     let landmarks = landmarks::stats(&all);
     if !runs.iter().any(|x| x.gt.is_some()) {
         if let Some(s) = &landmarks {
             errors.rmse = s.range_rmse_m;
         }
     }
-    Evaluation { tracks, errors, landmarks }
+    Evaluation {
+        tracks,
+        errors,
+        landmarks,
+    }
 }
 
 /// The error summary of [`evaluation`].
@@ -161,7 +204,10 @@ fn fmt_errors(e: &Errors) -> String {
         e.rmse, e.heading_rmse_rad, e.final_position_error_m, e.final_heading_error_rad, e.max_position_error_m, e.max_error_at_s
     );
     if let Some(d) = e.rpe_per_m {
-        s += &format!("\n  drift {:.2}% of distance (relative pose error over 1 m)", 100.0 * d);
+        s += &format!(
+            "\n  drift {:.2}% of distance (relative pose error over 1 m)",
+            100.0 * d
+        );
     }
     if let Some(d) = e.rpe_5s_m {
         s += &format!(", {:.4} m per 5 s", d);
@@ -185,13 +231,30 @@ pub fn compare(c: Common) -> ExitCode {
     let e = errors(&pairs);
     let (regimes, segments) = where_it_fails(&pairs);
     let secs: f64 = all.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
-    out.say(&format!("{} against {} run(s), {:.1} s of data, nominal parameters", r.ir.name, all.len(), secs));
+    let which = if c.set.is_empty() {
+        "nominal parameters".to_string()
+    } else {
+        format!("nominal parameters with --set {}", c.set.join(" --set "))
+    };
+    out.say(&format!(
+        "{} against {} run(s), {:.1} s of data, {which}",
+        r.ir.name,
+        all.len(),
+        secs
+    ));
     if all.iter().any(|x| x.gt.is_some()) {
         out.say(&format!("  {}", fmt_errors(&e)));
     } else {
-        out.say("  no ground truth (gt_x, gt_y, gt_theta) in the logs: no trajectory error");
+        out.say(&format!(
+            "  no ground truth ({}) in the logs: no trajectory error",
+            r.ir.pose_columns().join(", ")
+        ));
     }
-    let innov: Vec<Vec<Innovation>> = all.iter().zip(&tracks).map(|(run, t)| landmarks::innovations(r, &r.p, run, t)).collect();
+    let innov: Vec<Vec<Innovation>> = all
+        .iter()
+        .zip(&tracks)
+        .map(|(run, t)| landmarks::innovations(r, &r.p, run, t))
+        .collect();
     let lm_stats = landmarks::stats(&innov.concat());
     if let Some(s) = &lm_stats {
         out.say(&format!("  {}", fmt_landmarks(s)));
@@ -201,20 +264,36 @@ pub fn compare(c: Common) -> ExitCode {
         for g in &regimes {
             out.say(&format!(
                 "  {:<14} {:>7.1} s {:>7.2} m   {:>5.1}% / {:>5.1}%",
-                g.regime, g.time_s, g.distance_m, 100.0 * g.position_share, 100.0 * g.heading_share
+                g.regime,
+                g.time_s,
+                g.distance_m,
+                100.0 * g.position_share,
+                100.0 * g.heading_share
             ));
         }
         out.say("worst 1 s segments:");
         for s in &segments {
             out.say(&format!(
                 "  {} {:.1}-{:.1} s ({}): position error +{:.4} m, heading error {:+.4} rad",
-                s.run, s.t_start, s.t_end, s.regime, s.position_error_growth_m, s.heading_error_growth_rad
+                s.run,
+                s.t_start,
+                s.t_end,
+                s.regime,
+                s.position_error_growth_m,
+                s.heading_error_growth_rad
             ));
         }
     }
     // Gyrodometry (seed 000 eq. 13-18) on the runs that log a gyro.
-    let gyro_tracks: Vec<Option<deadreckon::Track>> = all.iter().map(|run| deadreckon::gyrodometry(r, &r.p, run)).collect();
-    let gyro_pairs: Vec<_> = all.iter().zip(&gyro_tracks).filter_map(|(run, t)| t.as_ref().map(|t| (run, t))).collect();
+    let gyro_tracks: Vec<Option<deadreckon::Track>> = all
+        .iter()
+        .map(|run| deadreckon::gyrodometry(r, &r.p, run))
+        .collect();
+    let gyro_pairs: Vec<_> = all
+        .iter()
+        .zip(&gyro_tracks)
+        .filter_map(|(run, t)| t.as_ref().map(|t| (run, t)))
+        .collect();
     let gyro_errors = (!gyro_pairs.is_empty()).then(|| errors(&gyro_pairs));
     if let Some(g) = &gyro_errors {
         out.say(&format!(
@@ -226,7 +305,11 @@ pub fn compare(c: Common) -> ExitCode {
             g.final_heading_error_rad
         ));
     }
-    let per_run: Vec<Value> = all.iter().zip(&tracks).map(|(run, t)| json!({"run": run.name, "errors": errors(&[(run, t)])})).collect();
+    let per_run: Vec<Value> = all
+        .iter()
+        .zip(&tracks)
+        .map(|(run, t)| json!({"run": run.name, "errors": errors(&[(run, t)])}))
+        .collect();
     let doc = json!({
         "model": r.ir.name, "metric": metric_name(&all),
         "errors": e, "rmse": if all.iter().any(|x| x.gt.is_some()) { e.rmse } else { lm_stats.as_ref().map_or(e.rmse, |s| s.range_rmse_m) },
@@ -235,7 +318,9 @@ pub fn compare(c: Common) -> ExitCode {
         "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
     });
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::compare_report(dir, r, &all, &tracks, &gyro_tracks, &innov, &doc) {
+        if let Err(e) =
+            crate::report::compare_report(dir, r, &all, &tracks, &gyro_tracks, &innov, &doc)
+        {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -247,15 +332,28 @@ pub fn compare(c: Common) -> ExitCode {
 }
 
 /// JSON for a finished fit (CONTRACT section 4).
-pub fn fit_json(r: &Runner, res: &FitResult, before: &Errors, after: &Errors, metric: &str) -> Value {
+pub fn fit_json(
+    r: &Runner,
+    res: &FitResult,
+    before: &Errors,
+    after: &Errors,
+    metric: &str,
+) -> Value {
     let params: serde_json::Map<String, Value> = res
         .free
         .iter()
         .enumerate()
-        .map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k]})))
+        .map(|(k, &i)| {
+            (
+                r.names[i].clone(),
+                json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k]}),
+            )
+        })
         .collect();
     let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
-    let corr: Vec<Vec<f64>> = (0..names.len()).map(|a| (0..names.len()).map(|b| res.corr[(a, b)]).collect()).collect();
+    let corr: Vec<Vec<f64>> = (0..names.len())
+        .map(|a| (0..names.len()).map(|b| res.corr[(a, b)]).collect())
+        .collect();
     json!({
         "model": r.ir.name, "metric": metric,
         "before": {"rmse": before.rmse, "errors": before}, "after": {"rmse": after.rmse, "errors": after},
@@ -272,8 +370,17 @@ struct MethodResult {
     note: String,
 }
 
-fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64, fo: &FitOptions) -> Result<(MethodResult, Option<FitResult>), String> {
-    use kinegen_analysis::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
+fn run_method(
+    r: &Runner,
+    runs: &[Run],
+    method: &str,
+    side: f64,
+    mu: f64,
+    fo: &FitOptions,
+) -> Result<(MethodResult, Option<FitResult>), String> {
+    use kinegen_analysis::seed_methods::{
+        ekf, gradient_descent, umbmark, yaw_rate_blind_directions,
+    };
     let blind = |p: &[f64]| {
         let dirs = yaw_rate_blind_directions(r, p, runs);
         if dirs.is_empty() {
@@ -286,21 +393,55 @@ fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64, fo: &F
             )
         }
     };
-    let sigma_omega = r.obs_sigma("gyro").and_then(|s| s.first().copied()).filter(|s| *s > 0.0).unwrap_or(0.005);
+    let sigma_omega = r
+        .obs_sigma(YawRate)
+        .and_then(|s| s.first().copied())
+        .filter(|s| *s > 0.0)
+        .unwrap_or(0.005);
     Ok(match method {
         "lm" => {
             let res = fit(r, runs, fo).map_err(|e| e.to_string())?;
-            (MethodResult { name: "lm", p: res.p.clone(), std: res.std.clone(), note: format!("{} LM iterations", res.iterations) }, Some(res))
+            (
+                MethodResult {
+                    name: "lm",
+                    p: res.p.clone(),
+                    std: res.std.clone(),
+                    note: format!("{} LM iterations", res.iterations),
+                },
+                Some(res),
+            )
         }
         "gd" => {
             let g = gradient_descent(r, runs, 2000)?;
             let warn = blind(&g.p);
-            (MethodResult { name: "gd", p: g.p, std: g.std, note: format!("{} iterations, yaw-rate cost {:.3e} -> {:.3e}{warn}", g.iterations, g.cost_before, g.cost_after) }, None)
+            (
+                MethodResult {
+                    name: "gd",
+                    p: g.p,
+                    std: g.std,
+                    note: format!(
+                        "{} iterations, yaw-rate cost {:.3e} -> {:.3e}{warn}",
+                        g.iterations, g.cost_before, g.cost_after
+                    ),
+                },
+                None,
+            )
         }
         "ekf" => {
             let e = ekf(r, runs, sigma_omega, mu)?;
             let warn = blind(&e.p);
-            (MethodResult { name: "ekf", p: e.p, std: e.std, note: format!("{} updates, mu = {mu}, yaw-rate cost {:.3e} -> {:.3e}{warn}", e.iterations, e.cost_before, e.cost_after) }, None)
+            (
+                MethodResult {
+                    name: "ekf",
+                    p: e.p,
+                    std: e.std,
+                    note: format!(
+                        "{} updates, mu = {mu}, yaw-rate cost {:.3e} -> {:.3e}{warn}",
+                        e.iterations, e.cost_before, e.cost_after
+                    ),
+                },
+                None,
+            )
         }
         _ => {
             let u = umbmark(r, runs, side)?;
@@ -310,11 +451,25 @@ fn run_method(r: &Runner, runs: &[Run], method: &str, side: f64, mu: f64, fo: &F
     })
 }
 
-pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], loss: &str, residuals: &[String]) -> ExitCode {
+pub fn run_fit(
+    c: Common,
+    method: &str,
+    side: f64,
+    mu: f64,
+    truth: &[String],
+    loss: &str,
+    residuals: &[String],
+) -> ExitCode {
     let out = Out::new(c.json.as_deref());
     let uses = |k: &str| residuals.is_empty() || residuals.iter().any(|r| r == k);
     // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
-    let fo = FitOptions { huber: (loss == "huber").then_some(3.0), use_pose: uses("pose"), use_gyro: uses("gyro"), use_landmarks: uses("landmarks"), ..FitOptions::default() };
+    let fo = FitOptions {
+        huber: (loss == "huber").then_some(3.0),
+        use_pose: uses("pose"),
+        use_gyro: uses("gyro"),
+        use_landmarks: uses("landmarks"),
+        ..FitOptions::default()
+    };
     let prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),
@@ -325,9 +480,14 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
         Err(e) => return bad(e),
     };
     if method != "lm" {
-        let methods: Vec<&str> = if method == "all" { vec!["lm", "gd", "ekf", "umbmark"] } else { vec![method] };
+        let methods: Vec<&str> = if method == "all" {
+            vec!["lm", "gd", "ekf", "umbmark"]
+        } else {
+            vec![method]
+        };
         let mut rows = Vec::new();
-        let bar = crate::progress::Progress::bar(methods.len() as u64, "calibration methods", quiet(&c));
+        let bar =
+            crate::progress::Progress::bar(methods.len() as u64, "calibration methods", quiet(&c));
         for m in methods {
             bar.message(m);
             let result = run_method(r, &prep.runs, m, side, mu, &fo);
@@ -346,13 +506,32 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
         // Distance to the truth, each parameter scaled by its size (so a 2 mm
         // offset of a 0.3 m axis and of a 0 m axis weigh the same), as a
         // fraction of where the nominal values started: < 1 moved toward the truth.
-        let scaled = |p: &[f64]| truth.iter().filter_map(|(n, v)| r.param_index(n).map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))).sum::<f64>().sqrt();
+        let scaled = |p: &[f64]| {
+            truth
+                .iter()
+                .filter_map(|(n, v)| {
+                    r.param_index(n)
+                        .map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))
+                })
+                .sum::<f64>()
+                .sqrt()
+        };
         let d0 = scaled(&r.p);
         for m in &rows {
-            let Evaluation { tracks: after_tracks, errors: after, .. } = evaluation(r, &m.p, &prep.runs);
+            let Evaluation {
+                tracks: after_tracks,
+                errors: after,
+                ..
+            } = evaluation(r, &m.p, &prep.runs);
             let hold = (!prep.holdout.is_empty()).then(|| evaluate(r, &m.p, &prep.holdout));
             let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
-            let dist = (!truth.is_empty()).then(|| if d0 > 0.0 { scaled(&m.p) / d0 } else { scaled(&m.p) });
+            let dist = (!truth.is_empty()).then(|| {
+                if d0 > 0.0 {
+                    scaled(&m.p) / d0
+                } else {
+                    scaled(&m.p)
+                }
+            });
             if let Some(d) = dist {
                 if best.is_none_or(|b| d < b.0) {
                     best = Some((d, m.name));
@@ -362,8 +541,14 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
                 "  {:<8} position RMSE {:.4} m{}{}  ({})",
                 m.name,
                 after.rmse,
-                hold.as_ref().map(|h| format!(", held-out {:.4} m", h.rmse)).unwrap_or_default(),
-                dist.map(|d| format!(", {:.1}% of the nominal's distance to truth left", 100.0 * d)).unwrap_or_default(),
+                hold.as_ref()
+                    .map(|h| format!(", held-out {:.4} m", h.rmse))
+                    .unwrap_or_default(),
+                dist.map(|d| format!(
+                    ", {:.1}% of the nominal's distance to truth left",
+                    100.0 * d
+                ))
+                .unwrap_or_default(),
                 m.note
             ));
             for &i in &r.free {
@@ -387,7 +572,9 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
             "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
         });
         if let Some(dir) = &c.report {
-            if let Err(e) = crate::report::methods_report(dir, r, &prep.runs, &before.tracks, &per_method, &doc) {
+            if let Err(e) =
+                crate::report::methods_report(dir, r, &prep.runs, &before.tracks, &per_method, &doc)
+            {
                 return bad(e);
             }
             out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -403,37 +590,74 @@ pub fn run_fit(c: Common, method: &str, side: f64, mu: f64, truth: &[String], lo
         Err(e) => return bad(e),
     };
     drop(spin);
-    let (eval_before, eval_after) = (evaluation(r, &r.p, &prep.runs), evaluation(r, &res.p, &prep.runs));
+    let (eval_before, eval_after) = (
+        evaluation(r, &r.p, &prep.runs),
+        evaluation(r, &res.p, &prep.runs),
+    );
     let (before, after) = (&eval_before.errors, &eval_after.errors);
-    out.say(&format!("{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)", r.ir.name, res.free.len(), prep.runs.len(), res.n_residuals, res.iterations));
+    out.say(&format!(
+        "{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)",
+        r.ir.name,
+        res.free.len(),
+        prep.runs.len(),
+        res.n_residuals,
+        res.iterations
+    ));
     if prep.runs.iter().any(|x| x.gt.is_some()) {
         out.say(&format!("  before: {}", fmt_errors(before)));
         out.say(&format!("  after:  {}", fmt_errors(after)));
     } else {
         out.say("  no ground truth in the logs: calibrated on landmark (and gyro) residuals; the error is the landmark range innovation");
     }
-    out.say(&format!("  {:<16} {:>12} {:>12} {:>12}", "parameter", "nominal", "estimate", "std"));
+    out.say(&format!(
+        "  {:<16} {:>12} {:>12} {:>12}",
+        "parameter", "nominal", "estimate", "std"
+    ));
     for (k, &i) in res.free.iter().enumerate() {
-        out.say(&format!("  {:<16} {:>12.6} {:>12.6} {:>12}", r.names[i], r.p[i], res.p[i], crate::output::fmt_std(Some(res.std[k]))));
+        out.say(&format!(
+            "  {:<16} {:>12.6} {:>12.6} {:>12}",
+            r.names[i],
+            r.p[i],
+            res.p[i],
+            crate::output::fmt_std(Some(res.std[k]))
+        ));
     }
     for w in &res.warnings {
         out.say(&format!("warning: {w}"));
     }
     let mut doc = fit_json(r, &res, before, after, metric_name(&prep.runs));
     doc["loss"] = json!(loss);
-    doc["residuals"] = json!(["pose", "gyro", "landmarks"].iter().filter(|k| uses(k)).collect::<Vec<_>>());
+    doc["residuals"] = json!(["pose", "gyro", "landmarks"]
+        .iter()
+        .filter(|k| uses(k))
+        .collect::<Vec<_>>());
     if let (Some(lb), Some(la)) = (&eval_before.landmarks, &eval_after.landmarks) {
-        out.say(&format!("  before: {}\n  after:  {}", fmt_landmarks(lb), fmt_landmarks(la)));
+        out.say(&format!(
+            "  before: {}\n  after:  {}",
+            fmt_landmarks(lb),
+            fmt_landmarks(la)
+        ));
         doc["landmarks"] = json!({"before": lb, "after": la});
     }
     if !prep.holdout.is_empty() {
         let hb = evaluate(r, &r.p, &prep.holdout);
         let ha = evaluate(r, &res.p, &prep.holdout);
-        out.say(&format!("  holdout before: {}\n  holdout after:  {}", fmt_errors(&hb), fmt_errors(&ha)));
+        out.say(&format!(
+            "  holdout before: {}\n  holdout after:  {}",
+            fmt_errors(&hb),
+            fmt_errors(&ha)
+        ));
         doc["holdout"] = json!({"before": {"rmse": hb.rmse, "errors": hb}, "after": {"rmse": ha.rmse, "errors": ha}});
     }
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &eval_before.tracks, &eval_after.tracks, &doc) {
+        if let Err(e) = crate::report::fit_report(
+            dir,
+            r,
+            &prep.runs,
+            &eval_before.tracks,
+            &eval_after.tracks,
+            &doc,
+        ) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

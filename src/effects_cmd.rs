@@ -1,56 +1,89 @@
 //! `kinegen simulate` and `kinegen add-effect`.
 use crate::analysis_cmd::bad;
 use crate::ir_source;
-use kinegen_analysis::effects::{default_dir, load_catalogue, Applicability, Effect};
+use kinegen_analysis::effects::{catalogue, find, Applicability};
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
 use kinegen_model::spec::InputKind;
+use kinegen_model::spec::Model;
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::RangeBearing;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-pub fn find_effect(dir: &Path, name: &str) -> Result<Effect, String> {
-    let cat = load_catalogue(dir).map_err(|e| e.to_string())?;
-    let names: Vec<String> = cat.iter().map(|e| e.name.clone()).collect();
-    cat.into_iter().find(|e| e.name == name).ok_or_else(|| format!("unknown effect `{name}` (the catalogue {} has: {})", dir.display(), names.join(", ")))
-}
-
 /// Write an augmented spec where `ir_source` can derive it; returns its path.
 pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> {
     let dir = ir_source::cache_dir().join("specs");
-    let path = dir.join(format!("{name_hint}-{}.toml", kinegen_model::spec::fingerprint(spec_text)));
+    let path = dir.join(format!(
+        "{name_hint}-{}.toml",
+        kinegen_model::spec::fingerprint(spec_text)
+    ));
     if !path.exists() {
         kinegen_codegen::generate::write_atomic(&path, spec_text).map_err(|e| e.to_string())?;
     }
     Ok(path)
 }
 
-/// Apply `--effect NAME=VALUE` / `NAME.PARAM=VALUE` to a spec text.
-pub fn with_effects(spec_text: &str, effects: &[String], dir: &Path) -> Result<(String, Vec<(String, f64)>), String> {
-    let mut text = spec_text.to_string();
+/// Apply `--effect NAME=VALUE` / `NAME.PARAM=VALUE` to a spec; returns the new
+/// spec text and the effect parameter values.
+pub fn with_effects(
+    spec: &Model,
+    effects: &[String],
+    extra: &[PathBuf],
+) -> Result<(String, Vec<(String, f64)>), String> {
+    let cat = catalogue(extra).map_err(|e| e.to_string())?;
+    let mut model = spec.clone();
     let mut values = Vec::new();
     for e in effects {
-        let (key, v) = e.split_once('=').ok_or_else(|| format!("--effect {e}: expected NAME=VALUE or NAME.PARAM=VALUE"))?;
-        let v: f64 = v.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| format!("--effect {e}: `{v}` is not a finite number"))?;
-        let (name, param) = key.split_once('.').map_or((key, None), |(a, b)| (a, Some(b)));
-        let eff = find_effect(dir, name)?;
+        let (key, v) = e
+            .split_once('=')
+            .ok_or_else(|| format!("--effect {e}: expected NAME=VALUE or NAME.PARAM=VALUE"))?;
+        let v: f64 = v
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite())
+            .ok_or_else(|| format!("--effect {e}: `{v}` is not a finite number"))?;
+        let (name, param) = key
+            .split_once('.')
+            .map_or((key, None), |(a, b)| (a, Some(b)));
+        let eff = find(&cat, name).map_err(|m| format!("--effect {e}: {m}"))?;
+        let added: Vec<String> = eff
+            .parameters_for(&model)
+            .into_iter()
+            .map(|p| p.name)
+            .collect();
         let param = match param {
             Some(p) => p.to_string(),
             // the first parameter this model gets (a per-wheel effect adds only
             // the parameters of the wheels the model has)
-            None => eff.parameters_for(&text)?.into_iter().next().unwrap_or_default(),
+            None => added.first().cloned().unwrap_or_default(),
         };
-        if !eff.parameter.iter().any(|p| p.get("name").and_then(|n| n.as_str()) == Some(param.as_str())) {
-            return Err(format!("--effect {e}: the effect `{name}` has no parameter `{param}`"));
-        }
-        match eff.applicability(&text) {
-            Applicability::Applies | Applicability::Redundant(_) => text = eff.apply(&text, &BTreeMap::new())?,
+        match eff.applicability(&model) {
+            Applicability::Applies => {
+                if !added.contains(&param) {
+                    return Err(format!("--effect {e}: the effect `{name}` adds no parameter `{param}` to this model (it adds: {})", added.join(", ")));
+                }
+                let text = eff.apply(&model, &BTreeMap::new())?;
+                model = Model::parse(&spec.path, &text).map_err(|x| {
+                    format!(
+                        "--effect {e}: applying it to {} gives an invalid spec: {}",
+                        spec.path.display(),
+                        x.message
+                    )
+                })?;
+            }
             Applicability::AlreadyIn => {}
-            Applicability::NotForThisModel => return Err(format!("the effect `{name}` does not apply to this model")),
+            Applicability::NotApplicable(why) => {
+                return Err(format!(
+                    "--effect {e}: `{name}` does not apply to {}: {why}",
+                    spec.path.display()
+                ))
+            }
         }
         values.push((param, v));
     }
-    Ok((text, values))
+    Ok((model.source, values))
 }
 
 pub struct SimArgs {
@@ -63,22 +96,27 @@ pub struct SimArgs {
     pub out: PathBuf,
     pub landmarks: Option<PathBuf>,
     pub observations: Option<PathBuf>,
+    pub effects: Vec<PathBuf>,
 }
 
 pub fn run_simulate(a: SimArgs) -> ExitCode {
     let go = || -> Result<String, String> {
-        let text = std::fs::read_to_string(&a.spec).map_err(|e| format!("{}: {e}", a.spec.display()))?;
+        let spec = Model::load(&a.spec).map_err(|e| e.to_string())?;
         let traj: Trajectory = a.trajectory.parse()?;
         let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
         let base = Runner::new(ir_source::load(&a.spec)?, &sets).map_err(|e| e.to_string())?;
-        let (truth_text, values) = with_effects(&text, &a.effect, &default_dir())?;
-        let truth_ir = if a.effect.is_empty() { base.ir.clone() } else { ir_source::load(&materialise(&truth_text, &base.ir.name)?)? };
+        let (truth_text, values) = with_effects(&spec, &a.effect, &a.effects)?;
+        let truth_ir = if a.effect.is_empty() {
+            base.ir.clone()
+        } else {
+            ir_source::load(&materialise(&truth_text, &base.ir.name)?)?
+        };
         let mut all = sets.clone();
         all.extend(values);
         let truth = Runner::new(truth_ir, &all).map_err(|e| e.to_string())?;
         let landmarks = match (&a.landmarks, &a.observations) {
             (Some(m), Some(_)) => {
-                if truth.ir.function("obs_landmark").is_none() {
+                if truth.ir.observation_fn(RangeBearing, "").is_none() {
                     return Err(format!("{}: the model has no `landmark` observation to simulate range-bearing data with", a.spec.display()));
                 }
                 let map = kinegen_analysis::landmarks::read_map(m).map_err(|e| e.to_string())?;
@@ -87,18 +125,39 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
             (None, None) => Vec::new(),
             _ => return Err("--landmarks MAP.csv and --observations OBS.csv go together (the map to observe, the file to write)".into()),
         };
-        let o = SimOptions { trajectory: traj, seed: a.seed, laps: a.laps.max(1), landmarks, ..SimOptions::default() };
+        let o = SimOptions {
+            trajectory: traj,
+            seed: a.seed,
+            laps: a.laps.max(1),
+            landmarks,
+            ..SimOptions::default()
+        };
         let sim = simulate(&base, &truth, &o);
-        let counts: Vec<bool> = truth.ir.inputs.iter().map(|i| i.kind == InputKind::Cumulative && i.unit.contains("count")).collect();
-        kinegen_codegen::generate::write_atomic(&a.out, &to_csv(&sim.header, &sim.rows, &counts)).map_err(|e| e.to_string())?;
-        let mut msg = format!("wrote {} rows ({:.1} s) to {}", sim.rows.len(), sim.rows.last().map_or(0.0, |r| r[0]), a.out.display());
+        let counts: Vec<bool> = truth
+            .ir
+            .inputs
+            .iter()
+            .map(|i| i.kind == InputKind::Cumulative && i.unit.contains("count"))
+            .collect();
+        kinegen_codegen::generate::write_atomic(&a.out, &to_csv(&sim.header, &sim.rows, &counts))
+            .map_err(|e| e.to_string())?;
+        let mut msg = format!(
+            "wrote {} rows ({:.1} s) to {}",
+            sim.rows.len(),
+            sim.rows.last().map_or(0.0, |r| r[0]),
+            a.out.display()
+        );
         if let Some(path) = &a.observations {
             let mut text = String::from("t,id,range,bearing\n");
             for (t, id, r, b) in &sim.observations {
                 text += &format!("{t:.9},{id},{r:.9},{b:.9}\n");
             }
             kinegen_codegen::generate::write_atomic(path, &text).map_err(|e| e.to_string())?;
-            msg += &format!("\nwrote {} landmark observations to {}", sim.observations.len(), path.display());
+            msg += &format!(
+                "\nwrote {} landmark observations to {}",
+                sim.observations.len(),
+                path.display()
+            );
         }
         Ok(msg)
     };
@@ -111,22 +170,64 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
     }
 }
 
-pub fn run_add_effect(spec: &Path, effect: &str, values: &[String], out: &Path) -> ExitCode {
+pub fn run_add_effect(
+    spec: &Path,
+    effect: &str,
+    values: &[String],
+    out: &Path,
+    extra: &[PathBuf],
+) -> ExitCode {
     let go = || -> Result<String, String> {
-        let text = std::fs::read_to_string(spec).map_err(|e| format!("{}: {e}", spec.display()))?;
-        let eff = find_effect(&default_dir(), effect)?;
-        match eff.applicability(&text) {
+        let model = Model::load(spec).map_err(|e| e.to_string())?;
+        let cat = catalogue(extra).map_err(|e| e.to_string())?;
+        let eff = find(&cat, effect).map_err(|e| format!("--effect: {e}"))?;
+        match eff.applicability(&model) {
             Applicability::Applies => {}
-            Applicability::Redundant(why) => return Err(format!("`{effect}` is redundant for this spec: {why}")),
-            Applicability::AlreadyIn => return Err(format!("the spec already has `{effect}`")),
-            Applicability::NotForThisModel => return Err(format!("`{effect}` does not apply to this model")),
+            Applicability::AlreadyIn => {
+                return Err(format!(
+                    "{}: the spec already has `{effect}`",
+                    spec.display()
+                ))
+            }
+            Applicability::NotApplicable(why) => {
+                return Err(format!(
+                    "{}: `{effect}` does not apply to this model: {why}",
+                    spec.display()
+                ))
+            }
         }
-        let vals: BTreeMap<String, f64> = parse_sets(values).map_err(|e| e.to_string())?.into_iter().collect();
-        let new = eff.apply(&text, &vals)?;
-        // validate before writing
-        kinegen_model::spec::Model::parse(out, &new).map_err(|e| format!("the augmented spec is invalid: {e}"))?;
+        let vals: BTreeMap<String, f64> = parse_sets(values)
+            .map_err(|e| format!("--value: {e}"))?
+            .into_iter()
+            .collect();
+        let new = eff
+            .apply(&model, &vals)
+            .map_err(|e| format!("--value: {e}"))?;
+        // validate before writing; a problem is the combination of the user's
+        // spec and the effect, so name the user's file
+        let checked = Model::parse(spec, &new).map_err(|e| {
+            format!(
+                "adding `{effect}` to {} gives an invalid spec: {}",
+                spec.display(),
+                e.message
+            )
+        })?;
+        if let Some(p) = checked.params.iter().find(|p| {
+            vals.contains_key(&p.name)
+                && (p.min.is_some_and(|m| p.nominal < m) || p.max.is_some_and(|m| p.nominal > m))
+        }) {
+            return Err(format!(
+                "--value {}={}: outside the effect's bounds [{:?}, {:?}]",
+                p.name, p.nominal, p.min, p.max
+            ));
+        }
         kinegen_codegen::generate::write_atomic(out, &new).map_err(|e| e.to_string())?;
-        Ok(format!("added `{effect}` to {} -> {}:\n{}", spec.display(), out.display(), eff.spec_change(&text, &vals)?))
+        Ok(format!(
+            "added `{effect}` to {} -> {}:\n{}",
+            spec.display(),
+            out.display(),
+            eff.spec_change(&model, &vals)?
+        ))
     };
     match go() {
         Ok(msg) => {

@@ -39,7 +39,11 @@ pub fn run(spec_dir: &Path, out: &Path, check: bool) -> ExitCode {
                     ExitCode::from(1)
                 }
             } else {
-                eprintln!("wrote {} file(s) under {}", report.stale.len(), out.display());
+                eprintln!(
+                    "wrote {} file(s) under {}",
+                    report.stale.len(),
+                    out.display()
+                );
                 ExitCode::SUCCESS
             }
         }

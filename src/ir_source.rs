@@ -41,7 +41,8 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
             return Ok(ir);
         }
     }
-    let exe = std::env::current_exe().map_err(|e| format!("cannot find the kinegen binary: {e}"))?;
+    let exe =
+        std::env::current_exe().map_err(|e| format!("cannot find the kinegen binary: {e}"))?;
     let status = Command::new(exe)
         .args(["derive", "--spec"])
         .arg(spec)
@@ -54,7 +55,8 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
     if !status.success() {
         return Err(format!("{}: derivation failed", spec.display()));
     }
-    let text = std::fs::read_to_string(&cached).map_err(|e| format!("{}: {e}", cached.display()))?;
+    let text =
+        std::fs::read_to_string(&cached).map_err(|e| format!("{}: {e}", cached.display()))?;
     ModelIr::from_json(&text).map_err(|e| format!("{}: {e}", cached.display()))
 }
 

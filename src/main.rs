@@ -15,7 +15,11 @@ mod report;
 mod verify_cmd;
 
 #[derive(Parser)]
-#[command(name = "kinegen", version, about = "Kinematic model generator and calibration toolkit for wheeled mobile robots")]
+#[command(
+    name = "kinegen",
+    version,
+    about = "Kinematic model generator and calibration toolkit for wheeled mobile robots"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -88,7 +92,7 @@ enum Command {
         #[arg(long, value_parser = ["pose", "gyro", "landmarks"])]
         residuals: Vec<String>,
     },
-    /// Calibrate, then test each applicable effect of the catalogue (spec/effects),
+    /// Calibrate, then test each applicable effect of the catalogue (built in, plus --effects DIR),
     /// rank them, say which effect is missing (or that none is, or that unexplained
     /// structure remains) and print the spec change that adds the winner.
     ///
@@ -102,7 +106,7 @@ enum Command {
     Simulate {
         #[arg(long)]
         spec: PathBuf,
-        /// Hidden effect from spec/effects: NAME=VALUE (its first parameter) or NAME.PARAM=VALUE; repeatable.
+        /// Hidden effect from the catalogue: NAME=VALUE (its first parameter) or NAME.PARAM=VALUE; repeatable.
         #[arg(long)]
         effect: Vec<String>,
         /// True parameter value NAME=VALUE (default: nominal); repeatable.
@@ -125,6 +129,9 @@ enum Command {
         /// in range (10 m, 5 Hz, the noise of the spec's `landmark` observation) here.
         #[arg(long)]
         observations: Option<PathBuf>,
+        /// A directory of your own effect files, added to the built-in catalogue; repeatable.
+        #[arg(long = "effects", value_name = "DIR")]
+        effects: Vec<PathBuf>,
     },
     /// Write a copy of a spec with an effect from the catalogue added.
     ///
@@ -139,6 +146,9 @@ enum Command {
         value: Vec<String>,
         #[arg(long)]
         out: PathBuf,
+        /// A directory of your own effect files, added to the built-in catalogue; repeatable.
+        #[arg(long = "effects", value_name = "DIR")]
+        effects: Vec<PathBuf>,
     },
     /// Derive one spec's IR into a file (used internally by the analysis commands).
     #[command(hide = true)]
@@ -153,15 +163,53 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Generate { spec_dir, out, check } => generate_cmd::run(&spec_dir, &out, check),
+        Command::Generate {
+            spec_dir,
+            out,
+            check,
+        } => generate_cmd::run(&spec_dir, &out, check),
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Diagnose(c) => diagnose_cmd::run(c),
-        Command::Fit { common, method, side, mu, truth, loss, residuals } => analysis_cmd::run_fit(common, &method, side, mu, &truth, &loss, &residuals),
-        Command::Simulate { spec, effect, set, trajectory, seed, laps, out, landmarks, observations } => {
-            effects_cmd::run_simulate(effects_cmd::SimArgs { spec, effect, set, trajectory, seed, laps, out, landmarks, observations })
-        }
-        Command::AddEffect { spec, effect, value, out } => effects_cmd::run_add_effect(&spec, &effect, &value, &out),
+        Command::Fit {
+            common,
+            method,
+            side,
+            mu,
+            truth,
+            loss,
+            residuals,
+        } => analysis_cmd::run_fit(common, &method, side, mu, &truth, &loss, &residuals),
+        Command::Simulate {
+            spec,
+            effect,
+            set,
+            trajectory,
+            seed,
+            laps,
+            out,
+            landmarks,
+            observations,
+            effects,
+        } => effects_cmd::run_simulate(effects_cmd::SimArgs {
+            spec,
+            effect,
+            set,
+            trajectory,
+            seed,
+            laps,
+            out,
+            landmarks,
+            observations,
+            effects,
+        }),
+        Command::AddEffect {
+            spec,
+            effect,
+            value,
+            out,
+            effects,
+        } => effects_cmd::run_add_effect(&spec, &effect, &value, &out, &effects),
         Command::Derive { spec, ir_out } => match ir_source::derive_to(&spec, &ir_out) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => analysis_cmd::bad(e),

@@ -9,7 +9,9 @@ pub struct Out {
 
 impl Out {
     pub fn new(json: Option<&Path>) -> Out {
-        Out { json_to_stdout: json.is_some_and(|p| p == Path::new("-")) }
+        Out {
+            json_to_stdout: json.is_some_and(|p| p == Path::new("-")),
+        }
     }
 
     pub fn say(&self, text: &str) {
@@ -25,7 +27,9 @@ impl Out {
         let Some(path) = json else { return Ok(()) };
         let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())? + "\n";
         if path == Path::new("-") {
-            std::io::stdout().write_all(text.as_bytes()).map_err(|e| e.to_string())
+            std::io::stdout()
+                .write_all(text.as_bytes())
+                .map_err(|e| e.to_string())
         } else {
             kinegen_codegen::generate::write_atomic(path, &text).map_err(|e| e.to_string())
         }

@@ -14,7 +14,11 @@ impl Progress {
             return Progress(None);
         }
         let pb = ProgressBar::new(len);
-        pb.set_style(ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {elapsed_precise} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()).progress_chars("=> "));
+        pb.set_style(
+            ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {elapsed_precise} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
         pb.set_prefix(what.to_string());
         pb.enable_steady_tick(Duration::from_millis(200));
         Progress(Some(pb))
@@ -26,7 +30,10 @@ impl Progress {
             return Progress(None);
         }
         let pb = ProgressBar::new_spinner();
-        pb.set_style(ProgressStyle::with_template("{spinner} {prefix} {elapsed_precise} {msg}").unwrap_or_else(|_| ProgressStyle::default_spinner()));
+        pb.set_style(
+            ProgressStyle::with_template("{spinner} {prefix} {elapsed_precise} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
         pb.set_prefix(what.to_string());
         pb.enable_steady_tick(Duration::from_millis(120));
         Progress(Some(pb))

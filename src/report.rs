@@ -17,7 +17,12 @@ type Series<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
 
 fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
     let pts = series.iter().flat_map(|s| s.2.iter());
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for &(x, y) in pts {
         if x.is_finite() && y.is_finite() {
             x0 = x0.min(x);
@@ -34,14 +39,26 @@ fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
 }
 
 /// A line (or scatter) chart as an SVG string.
-fn chart(title: &str, xl: &str, yl: &str, series: &[Series], scatter: bool, equal: bool, marks: &[(f64, f64)]) -> Result<String, String> {
+fn chart(
+    title: &str,
+    xl: &str,
+    yl: &str,
+    series: &[Series],
+    scatter: bool,
+    equal: bool,
+    marks: &[(f64, f64)],
+) -> Result<String, String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (W, H)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let ((mut x0, mut x1), (mut y0, mut y1)) = bounds(series);
         if equal {
-            let (cx, cy, half) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0, (x1 - x0).max(y1 - y0) / 2.0);
+            let (cx, cy, half) = (
+                (x0 + x1) / 2.0,
+                (y0 + y1) / 2.0,
+                (x1 - x0).max(y1 - y0) / 2.0,
+            );
             (x0, x1, y0, y1) = (cx - half, cx + half, cy - half, cy + half);
         }
         let mut c = ChartBuilder::on(&root)
@@ -51,9 +68,18 @@ fn chart(title: &str, xl: &str, yl: &str, series: &[Series], scatter: bool, equa
             .y_label_area_size(56)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(|e| e.to_string())?;
-        c.configure_mesh().x_desc(xl).y_desc(yl).light_line_style(WHITE.mix(0.0)).draw().map_err(|e| e.to_string())?;
+        c.configure_mesh()
+            .x_desc(xl)
+            .y_desc(yl)
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(|e| e.to_string())?;
         for (a, b) in marks {
-            c.draw_series(std::iter::once(Rectangle::new([(*a, y0), (*b, y1)], RGBColor(255, 200, 200).mix(0.5).filled()))).map_err(|e| e.to_string())?;
+            c.draw_series(std::iter::once(Rectangle::new(
+                [(*a, y0), (*b, y1)],
+                RGBColor(255, 200, 200).mix(0.5).filled(),
+            )))
+            .map_err(|e| e.to_string())?;
         }
         for (name, color, pts) in series {
             let color = *color;
@@ -67,21 +93,32 @@ fn chart(title: &str, xl: &str, yl: &str, series: &[Series], scatter: bool, equa
                 c.draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
                     .map_err(|e| e.to_string())?
                     .label(*name)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2)));
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                    });
             }
         }
-        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| e.to_string())?;
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
 }
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 fn page(title: &str, intro: &str, figures: &[String], tables: &str, doc: &Value) -> String {
-    let figs: String = figures.iter().map(|f| format!("<figure>{f}</figure>")).collect();
+    let figs: String = figures
+        .iter()
+        .map(|f| format!("<figure>{f}</figure>"))
+        .collect();
     format!(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
 body{{font-family:sans-serif;margin:24px;color:#222;max-width:1200px}}\
@@ -101,12 +138,24 @@ fn traj(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
 }
 
 fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
-    run.gt.as_ref().map(|g| g.iter().map(|p| (p[0], p[1])).collect()).unwrap_or_default()
+    run.gt
+        .as_ref()
+        .map(|g| g.iter().map(|p| (p[0], p[1])).collect())
+        .unwrap_or_default()
 }
 
 fn pos_err(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
     let Some(g) = &run.gt else { return vec![] };
-    g.iter().zip(&tr.measured).zip(&run.t).map(|((a, b), t)| (t - run.t[0], ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())).collect()
+    g.iter()
+        .zip(&tr.measured)
+        .zip(&run.t)
+        .map(|((a, b), t)| {
+            (
+                t - run.t[0],
+                ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
+            )
+        })
+        .collect()
 }
 
 /// Heading-error rate residual per step against speed, turn rate and heading.
@@ -125,36 +174,114 @@ fn residual_scatter(run: &Run, tr: &Track) -> [Vec<(f64, f64)>; 3] {
 }
 
 fn write(dir: &Path, html: &str) -> Result<(), String> {
-    kinegen_codegen::generate::write_atomic(&dir.join("index.html"), html).map_err(|e| e.to_string())
+    kinegen_codegen::generate::write_atomic(&dir.join("index.html"), html)
+        .map_err(|e| e.to_string())
 }
 
 fn worst_marks(doc: &Value, run: &str) -> Vec<(f64, f64)> {
     doc["worst_segments"]
         .as_array()
-        .map(|a| a.iter().filter(|s| s["run"] == run).map(|s| (s["t_start"].as_f64().unwrap_or(0.0), s["t_end"].as_f64().unwrap_or(0.0))).collect())
+        .map(|a| {
+            a.iter()
+                .filter(|s| s["run"] == run)
+                .map(|s| {
+                    (
+                        s["t_start"].as_f64().unwrap_or(0.0),
+                        s["t_end"].as_f64().unwrap_or(0.0),
+                    )
+                })
+                .collect()
+        })
         .unwrap_or_default()
 }
 
-pub fn compare_report(dir: &Path, r: &Runner, runs: &[Run], tracks: &[Track], gyro: &[Option<Track>], innov: &[Vec<Innovation>], doc: &Value) -> Result<(), String> {
+pub fn compare_report(
+    dir: &Path,
+    r: &Runner,
+    runs: &[Run],
+    tracks: &[Track],
+    gyro: &[Option<Track>],
+    innov: &[Vec<Innovation>],
+    doc: &Value,
+) -> Result<(), String> {
     let mut figs = Vec::new();
     for (run, inn) in runs.iter().zip(innov).filter(|(_, i)| !i.is_empty()) {
         let t0 = run.t[0];
         let range: Vec<(f64, f64)> = inn.iter().map(|i| (i.t - t0, i.range_m)).collect();
         let bearing: Vec<(f64, f64)> = inn.iter().map(|i| (i.t - t0, i.bearing_rad)).collect();
-        figs.push(chart(&format!("{}: landmark range innovation", run.name), "t (s)", "measured - predicted (m)", &[("range", RGBColor(0, 90, 200), range)], true, false, &[])?);
-        figs.push(chart(&format!("{}: landmark bearing innovation", run.name), "t (s)", "measured - predicted (rad)", &[("bearing", RGBColor(200, 120, 0), bearing)], true, false, &[])?);
+        figs.push(chart(
+            &format!("{}: landmark range innovation", run.name),
+            "t (s)",
+            "measured - predicted (m)",
+            &[("range", RGBColor(0, 90, 200), range)],
+            true,
+            false,
+            &[],
+        )?);
+        figs.push(chart(
+            &format!("{}: landmark bearing innovation", run.name),
+            "t (s)",
+            "measured - predicted (rad)",
+            &[("bearing", RGBColor(200, 120, 0), bearing)],
+            true,
+            false,
+            &[],
+        )?);
     }
     for ((run, tr), g) in runs.iter().zip(tracks).zip(gyro) {
-        let mut series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("model (nominal)", RED, traj(run, tr))];
+        let mut series: Vec<Series> = vec![
+            ("measured", BLACK, gt_xy(run)),
+            ("model (nominal)", RED, traj(run, tr)),
+        ];
         if let Some(g) = g {
             series.push(("gyrodometry", RGBColor(0, 90, 200), traj(run, g)));
         }
-        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &series, false, true, &[])?);
-        figs.push(chart(&format!("{}: position error, worst 1 s segments shaded", run.name), "t (s)", "error (m)", &[("model (nominal)", RED, pos_err(run, tr))], false, false, &worst_marks(doc, &run.name))?);
+        figs.push(chart(
+            &format!("{}: trajectory", run.name),
+            "x (m)",
+            "y (m)",
+            &series,
+            false,
+            true,
+            &[],
+        )?);
+        figs.push(chart(
+            &format!("{}: position error, worst 1 s segments shaded", run.name),
+            "t (s)",
+            "error (m)",
+            &[("model (nominal)", RED, pos_err(run, tr))],
+            false,
+            false,
+            &worst_marks(doc, &run.name),
+        )?);
         let [a, b, c] = residual_scatter(run, tr);
-        figs.push(chart("turn-rate residual vs speed", "speed (m/s)", "model - measured yaw rate (rad/s)", &[("residual", BLUE, a)], true, false, &[])?);
-        figs.push(chart("turn-rate residual vs turn rate", "yaw rate (rad/s)", "residual (rad/s)", &[("residual", BLUE, b)], true, false, &[])?);
-        figs.push(chart("turn-rate residual vs heading", "heading (rad)", "residual (rad/s)", &[("residual", BLUE, c)], true, false, &[])?);
+        figs.push(chart(
+            "turn-rate residual vs speed",
+            "speed (m/s)",
+            "model - measured yaw rate (rad/s)",
+            &[("residual", BLUE, a)],
+            true,
+            false,
+            &[],
+        )?);
+        figs.push(chart(
+            "turn-rate residual vs turn rate",
+            "yaw rate (rad/s)",
+            "residual (rad/s)",
+            &[("residual", BLUE, b)],
+            true,
+            false,
+            &[],
+        )?);
+        figs.push(chart(
+            "turn-rate residual vs heading",
+            "heading (rad)",
+            "residual (rad/s)",
+            &[("residual", BLUE, c)],
+            true,
+            false,
+            &[],
+        )?);
     }
     let mut t = String::from("<h2>Where the error grows</h2><table><tr><th>regime</th><th>time (s)</th><th>distance (m)</th><th>position error share</th><th>heading error share</th></tr>");
     for g in doc["regimes"].as_array().into_iter().flatten() {
@@ -177,7 +304,16 @@ pub fn compare_report(dir: &Path, r: &Runner, runs: &[Run], tracks: &[Track], gy
         e["heading_rmse_rad"].as_f64().unwrap_or(0.0),
         e["final_position_error_m"].as_f64().unwrap_or(0.0)
     );
-    write(dir, &page(&format!("kinegen compare: {}", r.ir.name), &intro, &figs, &t, doc))
+    write(
+        dir,
+        &page(
+            &format!("kinegen compare: {}", r.ir.name),
+            &intro,
+            &figs,
+            &t,
+            doc,
+        ),
+    )
 }
 
 pub fn param_table(doc: &Value) -> String {
@@ -195,19 +331,60 @@ pub fn param_table(doc: &Value) -> String {
     }
     t += "</table>";
     for w in doc["warnings"].as_array().into_iter().flatten() {
-        t += &format!("<p class=\"warn\">warning: {}</p>", esc(w.as_str().unwrap_or("")));
+        t += &format!(
+            "<p class=\"warn\">warning: {}</p>",
+            esc(w.as_str().unwrap_or(""))
+        );
     }
     t
 }
 
-pub fn fit_report(dir: &Path, r: &Runner, runs: &[Run], before: &[Track], after: &[Track], doc: &Value) -> Result<(), String> {
+pub fn fit_report(
+    dir: &Path,
+    r: &Runner,
+    runs: &[Run],
+    before: &[Track],
+    after: &[Track],
+    doc: &Value,
+) -> Result<(), String> {
     let mut figs = Vec::new();
     for ((run, b), a) in runs.iter().zip(before).zip(after) {
-        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &[("measured", BLACK, gt_xy(run)), ("before calibration", RED, traj(run, b)), ("after calibration", GREEN, traj(run, a))], false, true, &[])?);
-        figs.push(chart(&format!("{}: position error", run.name), "t (s)", "error (m)", &[("before", RED, pos_err(run, b)), ("after", GREEN, pos_err(run, a))], false, false, &[])?);
+        figs.push(chart(
+            &format!("{}: trajectory", run.name),
+            "x (m)",
+            "y (m)",
+            &[
+                ("measured", BLACK, gt_xy(run)),
+                ("before calibration", RED, traj(run, b)),
+                ("after calibration", GREEN, traj(run, a)),
+            ],
+            false,
+            true,
+            &[],
+        )?);
+        figs.push(chart(
+            &format!("{}: position error", run.name),
+            "t (s)",
+            "error (m)",
+            &[
+                ("before", RED, pos_err(run, b)),
+                ("after", GREEN, pos_err(run, a)),
+            ],
+            false,
+            false,
+            &[],
+        )?);
         let [sb, _, _] = residual_scatter(run, b);
         let [sa, _, _] = residual_scatter(run, a);
-        figs.push(chart("turn-rate residual vs speed", "speed (m/s)", "residual (rad/s)", &[("before", RED, sb), ("after", GREEN, sa)], true, false, &[])?);
+        figs.push(chart(
+            "turn-rate residual vs speed",
+            "speed (m/s)",
+            "residual (rad/s)",
+            &[("before", RED, sb), ("after", GREEN, sa)],
+            true,
+            false,
+            &[],
+        )?);
         let _ = regime;
     }
     let intro = format!(
@@ -217,7 +394,16 @@ pub fn fit_report(dir: &Path, r: &Runner, runs: &[Run], before: &[Track], after:
         doc["before"]["rmse"].as_f64().unwrap_or(0.0),
         doc["after"]["rmse"].as_f64().unwrap_or(0.0)
     );
-    write(dir, &page(&format!("kinegen fit: {}", r.ir.name), &intro, &figs, &param_table(doc), doc))
+    write(
+        dir,
+        &page(
+            &format!("kinegen fit: {}", r.ir.name),
+            &intro,
+            &figs,
+            &param_table(doc),
+            doc,
+        ),
+    )
 }
 
 /// Diagnosis page: before/after trajectories of the calibrated base model and of
@@ -227,31 +413,65 @@ pub fn diagnose_report(
     base: &Runner,
     runs: &[Run],
     d: &kinegen_analysis::diagnose::Diagnosis,
-    augmented: &[(String, String, Runner)],
+    derive: &dyn Fn(&[String]) -> Result<Runner, String>,
     doc: &Value,
 ) -> Result<(), String> {
     use kinegen_analysis::deadreckon::run as dr;
     let mut figs = Vec::new();
-    let winner = d.verdict.as_ref().and_then(|v| augmented.iter().find(|a| &a.0 == v).map(|a| (a, d.candidates.iter().find(|c| &c.effect == v).unwrap())));
+    // the first effect of the chain alone (for its signature), and the final model
+    let first = d.verdict.as_ref().and_then(|v| {
+        Some((
+            v,
+            derive(std::slice::from_ref(v)).ok()?,
+            d.candidates.iter().find(|c| &c.effect == v)?,
+        ))
+    });
+    let chain_label = format!(
+        "with {}",
+        d.chain
+            .iter()
+            .map(|c| c.effect.as_str())
+            .collect::<Vec<_>>()
+            .join(" + ")
+    );
     for run in runs {
         let b = dr(base, &d.base_fit.p, run, false);
-        let mut series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("calibrated spec", RED, traj(run, &b))];
+        let mut series: Vec<Series> = vec![
+            ("measured", BLACK, gt_xy(run)),
+            ("calibrated spec", RED, traj(run, &b)),
+        ];
         let mut errs: Vec<Series> = vec![("calibrated spec", RED, pos_err(run, &b))];
-        if let Some(((name, _, aug), cand)) = winner {
-            let a = dr(aug, &cand.fitted, run, false);
-            series.push((name.as_str(), GREEN, traj(run, &a)));
-            errs.push((name.as_str(), GREEN, pos_err(run, &a)));
-            // the effect's residual signature
+        if !d.chain.is_empty() {
+            let a = dr(&d.final_runner, &d.final_p, run, false);
+            series.push((chain_label.as_str(), GREEN, traj(run, &a)));
+            errs.push((chain_label.as_str(), GREEN, pos_err(run, &a)));
+        }
+        if let Some((name, aug, cand)) = &first {
+            let aug = aug;
+            // the first effect's residual signature
             if let Some(param) = cand.parameters.keys().next() {
-                if let Some((chan, pts)) = kinegen_analysis::diagnose::signature(base, &d.base_fit.p, aug, std::slice::from_ref(run), param) {
+                if let Some((chan, pts)) = kinegen_analysis::diagnose::signature(
+                    base,
+                    &d.base_fit.p,
+                    aug,
+                    std::slice::from_ref(run),
+                    param,
+                ) {
                     let est = cand.parameters[param]["estimate"].as_f64().unwrap_or(0.0);
-                    let (lo, hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, p| (m.0.min(p.0), m.1.max(p.0)));
+                    let (lo, hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, p| {
+                        (m.0.min(p.0), m.1.max(p.0))
+                    });
                     let line = vec![(lo, lo * est), (hi, hi * est)];
                     figs.push(chart(
-                        &format!("signature of {name}: {chan} one-step residual of the calibrated spec"),
+                        &format!(
+                            "signature of {name}: {chan} one-step residual of the calibrated spec"
+                        ),
                         &format!("change of the prediction per unit {param}"),
                         "residual",
-                        &[("calibrated spec, per step", RED, pts), (&format!("slope = fitted {param}"), GREEN, line)],
+                        &[
+                            ("calibrated spec, per step", RED, pts),
+                            (&format!("slope = fitted {param}"), GREEN, line),
+                        ],
                         true,
                         false,
                         &[],
@@ -259,8 +479,30 @@ pub fn diagnose_report(
                 }
             }
         }
-        figs.insert(0, chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &series, false, true, &[])?);
-        figs.insert(1, chart(&format!("{}: position error", run.name), "t (s)", "error (m)", &errs, false, false, &[])?);
+        figs.insert(
+            0,
+            chart(
+                &format!("{}: trajectory", run.name),
+                "x (m)",
+                "y (m)",
+                &series,
+                false,
+                true,
+                &[],
+            )?,
+        );
+        figs.insert(
+            1,
+            chart(
+                &format!("{}: position error", run.name),
+                "t (s)",
+                "error (m)",
+                &errs,
+                false,
+                false,
+                &[],
+            )?,
+        );
     }
     let mut t = String::from("<h2>Candidates</h2><table><tr><th>effect</th><th>error</th><th>improvement</th><th>BIC gain</th><th>held-out error</th><th>significant</th></tr>");
     for c in &d.candidates {
@@ -282,38 +524,89 @@ pub fn diagnose_report(
     for f in &d.structure.findings {
         t += &format!("<p class=\"warn\">structure left: {}</p>", esc(f));
     }
+    if !d.skipped.is_empty() {
+        t += "<h2>Not tested</h2><ul>";
+        for (n, why) in &d.skipped {
+            t += &format!("<li><b>{}</b>: {}</li>", esc(n), esc(why));
+        }
+        t += "</ul>";
+    }
     let intro = format!(
         "<p>Model <b>{}</b>: error {:.4} with nominal parameters, {:.4} after calibrating the spec as it is (error: RMS of the residuals in units of their sigma). Verdict: <b>{}</b>.</p>",
         esc(&base.ir.name),
         d.baseline_rmse,
         d.calibrated_rmse,
-        esc(d.verdict.as_deref().unwrap_or("no catalogue effect is significant"))
+        esc(&if d.chain.is_empty() { "no catalogue effect is significant".to_string() } else { d.chain.iter().map(|c| format!("{} (error after: {:.4})", c.effect, c.rmse_after)).collect::<Vec<_>>().join(", then ") })
     );
-    write(dir, &page(&format!("kinegen diagnose: {}", base.ir.name), &intro, &figs, &t, doc))
+    write(
+        dir,
+        &page(
+            &format!("kinegen diagnose: {}", base.ir.name),
+            &intro,
+            &figs,
+            &t,
+            doc,
+        ),
+    )
 }
 
 /// Colours for the calibration methods, in the order they are listed.
-const METHOD_COLORS: [RGBColor; 4] = [RGBColor(0, 150, 0), RGBColor(0, 90, 200), RGBColor(200, 120, 0), RGBColor(150, 0, 150)];
+const METHOD_COLORS: [RGBColor; 4] = [
+    RGBColor(0, 150, 0),
+    RGBColor(0, 90, 200),
+    RGBColor(200, 120, 0),
+    RGBColor(150, 0, 150),
+];
 
 /// `fit --method all` (or one seed method): every method's trajectory and error
 /// against the nominal model, and a table comparing their errors, their distance
 /// to known true values and their estimates side by side.
-pub fn methods_report(dir: &Path, r: &Runner, runs: &[Run], nominal: &[Track], methods: &[(String, Vec<Track>)], doc: &Value) -> Result<(), String> {
+pub fn methods_report(
+    dir: &Path,
+    r: &Runner,
+    runs: &[Run],
+    nominal: &[Track],
+    methods: &[(String, Vec<Track>)],
+    doc: &Value,
+) -> Result<(), String> {
     let mut figs = Vec::new();
     for (k, run) in runs.iter().enumerate() {
-        let mut traj_series: Vec<Series> = vec![("measured", BLACK, gt_xy(run)), ("nominal", RED, traj(run, &nominal[k]))];
+        let mut traj_series: Vec<Series> = vec![
+            ("measured", BLACK, gt_xy(run)),
+            ("nominal", RED, traj(run, &nominal[k])),
+        ];
         let mut err_series: Vec<Series> = vec![("nominal", RED, pos_err(run, &nominal[k]))];
         for (m, (name, tracks)) in methods.iter().enumerate() {
             let color = METHOD_COLORS[m % METHOD_COLORS.len()];
             traj_series.push((name.as_str(), color, traj(run, &tracks[k])));
             err_series.push((name.as_str(), color, pos_err(run, &tracks[k])));
         }
-        figs.push(chart(&format!("{}: trajectory", run.name), "x (m)", "y (m)", &traj_series, false, true, &[])?);
-        figs.push(chart(&format!("{}: position error", run.name), "t (s)", "error (m)", &err_series, false, false, &[])?);
+        figs.push(chart(
+            &format!("{}: trajectory", run.name),
+            "x (m)",
+            "y (m)",
+            &traj_series,
+            false,
+            true,
+            &[],
+        )?);
+        figs.push(chart(
+            &format!("{}: position error", run.name),
+            "t (s)",
+            "error (m)",
+            &err_series,
+            false,
+            false,
+            &[],
+        )?);
     }
     let ms = doc["methods"].as_object().cloned().unwrap_or_default();
     let mut t = String::from("<h2>Methods</h2><table><tr><th>method</th><th>position RMSE (m)</th><th>held-out RMSE (m)</th><th>distance to truth left</th><th>notes</th></tr>");
-    let num = |v: &Value, digits: usize| v.as_f64().map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "-".into());
+    let num = |v: &Value, digits: usize| {
+        v.as_f64()
+            .map(|x| format!("{x:.digits$}"))
+            .unwrap_or_else(|| "-".into())
+    };
     for (name, m) in &ms {
         t += &format!(
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td style=\"text-align:left;white-space:pre-wrap\">{}</td></tr>",
@@ -326,7 +619,10 @@ pub fn methods_report(dir: &Path, r: &Runner, runs: &[Run], nominal: &[Track], m
     }
     t += "</table>";
     if let Some(best) = doc["closest_to_truth"].as_str() {
-        t += &format!("<p>Closest to the true parameters: <b>{}</b>.</p>", esc(best));
+        t += &format!(
+            "<p>Closest to the true parameters: <b>{}</b>.</p>",
+            esc(best)
+        );
     }
     t += "<h2>Estimates</h2><table><tr><th>parameter</th><th>nominal</th>";
     let truth = doc["truth"].as_object().cloned().unwrap_or_default();
@@ -341,11 +637,18 @@ pub fn methods_report(dir: &Path, r: &Runner, runs: &[Run], nominal: &[Track], m
         let pname = &r.names[i];
         t += &format!("<tr><td>{}</td><td>{:.6}</td>", esc(pname), r.p[i]);
         if !truth.is_empty() {
-            t += &format!("<td>{}</td>", num(&truth.get(pname).cloned().unwrap_or(Value::Null), 6));
+            t += &format!(
+                "<td>{}</td>",
+                num(&truth.get(pname).cloned().unwrap_or(Value::Null), 6)
+            );
         }
         for m in ms.values() {
             let p = &m["parameters"][pname];
-            t += &format!("<td>{} &plusmn; {}</td>", num(&p["estimate"], 6), crate::output::fmt_std(p["std"].as_f64()));
+            t += &format!(
+                "<td>{} &plusmn; {}</td>",
+                num(&p["estimate"], 6),
+                crate::output::fmt_std(p["std"].as_f64())
+            );
         }
         t += "</tr>";
     }
@@ -357,5 +660,14 @@ pub fn methods_report(dir: &Path, r: &Runner, runs: &[Run], nominal: &[Track], m
         ms.len(),
         doc["before"]["rmse"].as_f64().unwrap_or(0.0)
     );
-    write(dir, &page(&format!("kinegen fit: methods compared on {}", r.ir.name), &intro, &figs, &t, doc))
+    write(
+        dir,
+        &page(
+            &format!("kinegen fit: methods compared on {}", r.ir.name),
+            &intro,
+            &figs,
+            &t,
+            doc,
+        ),
+    )
 }

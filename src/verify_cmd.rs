@@ -33,12 +33,18 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
                 return ExitCode::from(2);
             }
         };
-        println!("== {} ({}): the IR tapes `kinegen generate` emits, {samples} samples per property", ir.name, path.display());
+        println!(
+            "== {} ({}): the IR tapes `kinegen generate` emits, {samples} samples per property",
+            ir.name,
+            path.display()
+        );
         let mut report = run_all(&ir, &IrKernel, samples, 1);
         match casadi_reference(&path) {
             Ok(dir) => {
                 match kinegen_verify::casadi::load(&dir, &ir.name) {
-                    Some(fx) => report.findings.extend(kinegen_verify::casadi::compare(&ir, &fx, &IrKernel)),
+                    Some(fx) => report
+                        .findings
+                        .extend(kinegen_verify::casadi::compare(&ir, &fx, &IrKernel)),
                     None => eprintln!("CasADi check skipped: no reference was written"),
                 }
                 let _ = std::fs::remove_dir_all(&dir);
@@ -58,7 +64,6 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
     }
 }
 
-
 /// Run the independent CasADi reference script for one spec into a temp dir.
 fn casadi_reference(spec: &Path) -> Result<std::path::PathBuf, String> {
     let script = Path::new("verify/casadi/reference.py");
@@ -77,7 +82,10 @@ fn casadi_reference(spec: &Path) -> Result<std::path::PathBuf, String> {
     if !o.status.success() {
         return Err(format!(
             "the CasADi script failed (pip install -r verify/casadi/requirements.txt): {}",
-            String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")
+            String::from_utf8_lossy(&o.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
         ));
     }
     Ok(dir)

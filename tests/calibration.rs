@@ -8,34 +8,84 @@ fn fit_recovers_wheel_radii_and_wheelbase_within_0_2_percent_and_error_falls_ten
     let tmp = tempfile::tempdir().unwrap();
     let truth = [("r_r", 0.0425), ("r_l", 0.0418), ("b", 0.2050)];
     let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
-    let mut args = vec!["--spec", "spec/diff_drive.toml", "--trajectory", "square", "--seed", "3"];
+    let mut args = vec![
+        "--spec",
+        "spec/diff_drive.toml",
+        "--trajectory",
+        "square",
+        "--seed",
+        "3",
+    ];
     for s in &sets {
         args.extend(["--set", s.as_str()]);
     }
     let log = simulate(tmp.path(), "params.csv", &args);
-    let doc = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
+    let doc = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
     for (name, value) in truth {
         let est = doc["parameters"][name]["estimate"].as_f64().unwrap();
-        assert!(((est - value) / value).abs() < 0.002, "{name}: {est} vs true {value}");
+        assert!(
+            ((est - value) / value).abs() < 0.002,
+            "{name}: {est} vs true {value}"
+        );
         assert!(doc["parameters"][name]["std"].as_f64().unwrap() > 0.0);
     }
-    let (before, after) = (doc["before"]["rmse"].as_f64().unwrap(), doc["after"]["rmse"].as_f64().unwrap());
-    assert!(after * 10.0 < before, "error fell only from {before} to {after}");
+    let (before, after) = (
+        doc["before"]["rmse"].as_f64().unwrap(),
+        doc["after"]["rmse"].as_f64().unwrap(),
+    );
+    assert!(
+        after * 10.0 < before,
+        "error fell only from {before} to {after}"
+    );
     assert_eq!(doc["model"], "diff_drive");
 }
 
 #[test]
 fn every_bundled_model_can_be_simulated_compared_and_fitted() {
     let tmp = tempfile::tempdir().unwrap();
-    for (spec, set) in [("diff_drive", "b=0.21"), ("tricycle", "L=1.03"), ("omni3", "L=1.04"), ("omni_caster", "r2=0.103"), ("unicycle_ekf", "v_scale=1.05")] {
+    for (spec, set) in [
+        ("diff_drive", "b=0.21"),
+        ("tricycle", "L=1.03"),
+        ("omni3", "L=1.04"),
+        ("omni_caster", "r2=0.103"),
+        ("unicycle_ekf", "v_scale=1.05"),
+    ] {
         let path = format!("spec/{spec}.toml");
-        let log = simulate(tmp.path(), &format!("{spec}.csv"), &["--spec", &path, "--set", set, "--trajectory", "random", "--seed", "2"]);
+        let log = simulate(
+            tmp.path(),
+            &format!("{spec}.csv"),
+            &[
+                "--spec",
+                &path,
+                "--set",
+                set,
+                "--trajectory",
+                "random",
+                "--seed",
+                "2",
+            ],
+        );
         let cmp = kinegen_json(&["compare", "--spec", &path, "--data", log.to_str().unwrap()]);
         assert!(cmp["rmse"].as_f64().unwrap() > 0.0);
-        assert!(!cmp["regimes"].as_array().unwrap().is_empty(), "{spec}: no regime breakdown");
+        assert!(
+            !cmp["regimes"].as_array().unwrap().is_empty(),
+            "{spec}: no regime breakdown"
+        );
         let fit = kinegen_json(&["fit", "--spec", &path, "--data", log.to_str().unwrap()]);
-        let (b, a) = (fit["before"]["rmse"].as_f64().unwrap(), fit["after"]["rmse"].as_f64().unwrap());
-        assert!(a < 0.5 * b, "{spec}: fit did not reduce the error ({b} -> {a})");
+        let (b, a) = (
+            fit["before"]["rmse"].as_f64().unwrap(),
+            fit["after"]["rmse"].as_f64().unwrap(),
+        );
+        assert!(
+            a < 0.5 * b,
+            "{spec}: fit did not reduce the error ({b} -> {a})"
+        );
     }
 }
 
@@ -47,26 +97,89 @@ fn real_optiodom_runs_compare_and_fit_with_holdout() {
     assert!(cmp["rmse"].as_f64().unwrap() > 0.0);
     // fit on runs 1, 2 (one direction) and 4, 5 (the other); score on 3 and 6
     let fit = kinegen_json(&[
-        "fit", "--spec", "spec/diff_drive.toml", "--data", &p(0), "--data", &p(1), "--data", &p(3), "--data", &p(4), "--holdout", &p(2), "--holdout", &p(5),
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        &p(0),
+        "--data",
+        &p(1),
+        "--data",
+        &p(3),
+        "--data",
+        &p(4),
+        "--holdout",
+        &p(2),
+        "--holdout",
+        &p(5),
     ]);
     let hb = fit["holdout"]["before"]["rmse"].as_f64().unwrap();
     let ha = fit["holdout"]["after"]["rmse"].as_f64().unwrap();
-    assert!(ha < hb, "calibration did not help on held-out runs: {hb} -> {ha}");
+    assert!(
+        ha < hb,
+        "calibration did not help on held-out runs: {hb} -> {ha}"
+    );
     let b = fit["parameters"]["b"]["estimate"].as_f64().unwrap();
-    assert!((b - 0.2).abs() < 0.01, "wheelbase estimate {b} is not physically plausible");
+    assert!(
+        (b - 0.2).abs() < 0.01,
+        "wheelbase estimate {b} is not physically plausible"
+    );
 }
 
 /// (file content, expected "file:row: column `c`" fragment, expected message)
 fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
     let ok_header = "t,enc_r,enc_l,gt_x,gt_y,gt_theta";
     vec![
-        ("t,enc_r,gt_x,gt_y,gt_theta\n0,0,0,0,0\n0.05,1,0,0,0\n0.1,2,0,0,0\n", ":1: column `enc_l`".into(), "missing column"),
-        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,x1,0,0,0\n0.1,2,2,0,0,0\n").into_boxed_str()), ":3: column `enc_l`".into(), "not a number"),
-        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,NaN,0,0\n0.1,2,2,0,0,0\n").into_boxed_str()), ":3: column `gt_x`".into(), "not finite"),
-        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,inf,0,0\n0.1,2,2,0,0,0\n").into_boxed_str()), ":3: column `gt_x`".into(), "not finite"),
-        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.05,2,2,0,0,0\n").into_boxed_str()), ":4: column `t`".into(), "increase strictly"),
-        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n9.0,3,3,0,0,0\n").into_boxed_str()), ":5: column `t`".into(), "gap"),
-        (Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n").into_boxed_str()), "short.csv".into(), "at least 3"),
+        (
+            "t,enc_r,gt_x,gt_y,gt_theta\n0,0,0,0,0\n0.05,1,0,0,0\n0.1,2,0,0,0\n",
+            ":1: column `enc_l`".into(),
+            "missing column",
+        ),
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,x1,0,0,0\n0.1,2,2,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":3: column `enc_l`".into(),
+            "not a number",
+        ),
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,NaN,0,0\n0.1,2,2,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":3: column `gt_x`".into(),
+            "not finite",
+        ),
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,inf,0,0\n0.1,2,2,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":3: column `gt_x`".into(),
+            "not finite",
+        ),
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.05,2,2,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":4: column `t`".into(),
+            "increase strictly",
+        ),
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n9.0,3,3,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":5: column `t`".into(),
+            "gap",
+        ),
+        (
+            Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n").into_boxed_str()),
+            "short.csv".into(),
+            "at least 3",
+        ),
     ]
 }
 
@@ -74,14 +187,27 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
 fn bad_logs_are_rejected_with_file_row_and_column() {
     let tmp = tempfile::tempdir().unwrap();
     for (i, (content, place, message)) in bad_logs().into_iter().enumerate() {
-        let name = if message == "at least 3" { "short.csv".to_string() } else { format!("bad{i}.csv") };
+        let name = if message == "at least 3" {
+            "short.csv".to_string()
+        } else {
+            format!("bad{i}.csv")
+        };
         let path = tmp.path().join(&name);
         std::fs::write(&path, content).unwrap();
         for cmd in ["compare", "fit", "diagnose"] {
-            let o = kinegen(&[cmd, "--spec", "spec/diff_drive.toml", "--data", path.to_str().unwrap()]);
+            let o = kinegen(&[
+                cmd,
+                "--spec",
+                "spec/diff_drive.toml",
+                "--data",
+                path.to_str().unwrap(),
+            ]);
             let err = stderr(&o);
             assert_eq!(o.status.code(), Some(2), "{cmd} {name}: {err}");
-            assert!(err.contains(&name) && err.contains(&place) && err.contains(message), "{cmd} {name}: expected `{place}` and `{message}` in: {err}");
+            assert!(
+                err.contains(&name) && err.contains(&place) && err.contains(message),
+                "{cmd} {name}: expected `{place}` and `{message}` in: {err}"
+            );
             assert!(!err.contains("panicked"), "{err}");
         }
     }
@@ -90,10 +216,30 @@ fn bad_logs_are_rejected_with_file_row_and_column() {
 #[test]
 fn unknown_set_name_and_bad_value_are_usage_errors() {
     let real = real_runs();
-    let o = kinegen(&["fit", "--spec", "spec/diff_drive.toml", "--data", real[0].to_str().unwrap(), "--set", "wheel=0.1"]);
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        real[0].to_str().unwrap(),
+        "--set",
+        "wheel=0.1",
+    ]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("unknown parameter `wheel`") && stderr(&o).contains("r_r"), "{}", stderr(&o));
-    let o = kinegen(&["fit", "--spec", "spec/diff_drive.toml", "--data", real[0].to_str().unwrap(), "--set", "b=abc"]);
+    assert!(
+        stderr(&o).contains("unknown parameter `wheel`") && stderr(&o).contains("r_r"),
+        "{}",
+        stderr(&o)
+    );
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        real[0].to_str().unwrap(),
+        "--set",
+        "b=abc",
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--set b=abc"), "{}", stderr(&o));
 }
@@ -104,29 +250,82 @@ fn json_to_a_file_and_a_report_are_written_and_stdout_stays_human() {
     let real = real_runs();
     let json = tmp.path().join("fit.json");
     let report = tmp.path().join("report");
-    let o = kinegen(&["fit", "--spec", "spec/diff_drive.toml", "--data", real[0].to_str().unwrap(), "--json", json.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        real[0].to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     for k in ["model", "metric", "before", "after", "parameters"] {
         assert!(doc.get(k).is_some(), "fit JSON lacks `{k}`");
     }
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
-    assert!(html.contains("<svg") && html.contains("after calibration") && !html.contains("<script src"), "report is not self-contained");
+    assert!(
+        html.contains("<svg")
+            && html.contains("after calibration")
+            && !html.contains("<script src"),
+        "report is not self-contained"
+    );
     assert!(stdout(&o).contains("calibrated"));
 }
 
 #[test]
 fn a_measurement_delay_is_calibrated_once_the_time_offset_effect_is_added() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(tmp.path(), "delay.csv", &["--spec", "spec/diff_drive.toml", "--effect", "time_offset=0.08", "--trajectory", "random", "--seed", "7"]);
+    let log = simulate(
+        tmp.path(),
+        "delay.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--effect",
+            "time_offset=0.08",
+            "--trajectory",
+            "random",
+            "--seed",
+            "7",
+        ],
+    );
     let spec = tmp.path().join("dd_delay.toml");
-    let o = kinegen(&["add-effect", "--spec", "spec/diff_drive.toml", "--effect", "time_offset", "--out", spec.to_str().unwrap()]);
+    let o = kinegen(&[
+        "add-effect",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--effect",
+        "time_offset",
+        "--out",
+        spec.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let base = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
-    let with = kinegen_json(&["fit", "--spec", spec.to_str().unwrap(), "--data", log.to_str().unwrap()]);
-    let tau = with["parameters"]["time_offset"]["estimate"].as_f64().unwrap();
+    let base = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    let with = kinegen_json(&[
+        "fit",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    let tau = with["parameters"]["time_offset"]["estimate"]
+        .as_f64()
+        .unwrap();
     assert!((tau - 0.08).abs() < 0.004, "time_offset {tau}");
-    assert!(with["after"]["rmse"].as_f64().unwrap() * 3.0 < base["after"]["rmse"].as_f64().unwrap());
+    assert!(
+        with["after"]["rmse"].as_f64().unwrap() * 3.0 < base["after"]["rmse"].as_f64().unwrap()
+    );
 }
 
 #[test]
@@ -136,10 +335,37 @@ fn seed_methods_run_and_are_compared_on_umbmark_squares() {
     let mut data = Vec::new();
     for dir in ["cw", "ccw"] {
         let traj = format!("square-{dir}");
-        let log = simulate(tmp.path(), &format!("{dir}.csv"), &["--spec", "spec/diff_drive.toml", "--set", truth[0], "--set", truth[1], "--set", truth[2], "--trajectory", &traj, "--seed", "1"]);
+        let log = simulate(
+            tmp.path(),
+            &format!("{dir}.csv"),
+            &[
+                "--spec",
+                "spec/diff_drive.toml",
+                "--set",
+                truth[0],
+                "--set",
+                truth[1],
+                "--set",
+                truth[2],
+                "--trajectory",
+                &traj,
+                "--seed",
+                "1",
+            ],
+        );
         data.push(log.to_str().unwrap().to_string());
     }
-    let mut args = vec!["fit", "--spec", "spec/diff_drive.toml", "--method", "all", "--data", &data[0], "--data", &data[1]];
+    let mut args = vec![
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--method",
+        "all",
+        "--data",
+        &data[0],
+        "--data",
+        &data[1],
+    ];
     for t in &truth {
         args.extend(["--truth", t]);
     }
@@ -151,15 +377,30 @@ fn seed_methods_run_and_are_compared_on_umbmark_squares() {
     assert_eq!(doc["closest_to_truth"], "lm");
     // UMBMark moves every parameter toward the truth
     let nominal = [0.042, 0.042, 0.2];
-    for ((name, t), n) in ["r_r", "r_l", "b"].iter().zip([0.0423, 0.0417, 0.206]).zip(nominal) {
-        let est = methods["umbmark"]["parameters"][*name]["estimate"].as_f64().unwrap();
-        assert!((est - t).abs() < (n - t).abs(), "umbmark {name}: {est}, truth {t}, nominal {n}");
+    for ((name, t), n) in ["r_r", "r_l", "b"]
+        .iter()
+        .zip([0.0423, 0.0417, 0.206])
+        .zip(nominal)
+    {
+        let est = methods["umbmark"]["parameters"][*name]["estimate"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (est - t).abs() < (n - t).abs(),
+            "umbmark {name}: {est}, truth {t}, nominal {n}"
+        );
     }
     // the yaw-rate EKF (seed 000) improves the ratio it can see: omega = (r_r w_r - r_l w_l)/b
     let e = &methods["ekf"]["parameters"];
     let ratio = |r: f64, b: f64| r / b;
-    let (er, eb) = (e["r_r"]["estimate"].as_f64().unwrap(), e["b"]["estimate"].as_f64().unwrap());
-    assert!((ratio(er, eb) - ratio(0.0423, 0.206)).abs() < (ratio(0.042, 0.2) - ratio(0.0423, 0.206)).abs());
+    let (er, eb) = (
+        e["r_r"]["estimate"].as_f64().unwrap(),
+        e["b"]["estimate"].as_f64().unwrap(),
+    );
+    assert!(
+        (ratio(er, eb) - ratio(0.0423, 0.206)).abs()
+            < (ratio(0.042, 0.2) - ratio(0.0423, 0.206)).abs()
+    );
 }
 
 /// Seed 000's setting: the Omni robot with the nominal parameters of eq. 27, the
@@ -169,15 +410,43 @@ fn seed_methods_run_and_are_compared_on_umbmark_squares() {
 fn seed_000_setting_every_method_moves_toward_the_truth() {
     let tmp = tempfile::tempdir().unwrap();
     let truth = [
-        "e1=0.042", "e2=0.044", "e3=0.043", "r1=0.101", "r2=0.1", "r3=0.101", "xa1=0.327", "xa2=-0.329", "xa3=0.002", "ya1=0.188", "ya2=0.186", "ya3=-0.374",
+        "e1=0.042",
+        "e2=0.044",
+        "e3=0.043",
+        "r1=0.101",
+        "r2=0.1",
+        "r3=0.101",
+        "xa1=0.327",
+        "xa2=-0.329",
+        "xa3=0.002",
+        "ya1=0.188",
+        "ya2=0.186",
+        "ya3=-0.374",
     ];
-    let mut args = vec!["--spec", "spec/omni_caster.toml", "--trajectory", "random", "--seed", "3"];
+    let mut args = vec![
+        "--spec",
+        "spec/omni_caster.toml",
+        "--trajectory",
+        "random",
+        "--seed",
+        "3",
+    ];
     for t in &truth {
         args.extend(["--set", t]);
     }
     let log = simulate(tmp.path(), "omni.csv", &args);
     let report = tmp.path().join("report");
-    let mut args = vec!["fit", "--spec", "spec/omni_caster.toml", "--method", "all", "--data", log.to_str().unwrap(), "--report", report.to_str().unwrap()];
+    let mut args = vec![
+        "fit",
+        "--spec",
+        "spec/omni_caster.toml",
+        "--method",
+        "all",
+        "--data",
+        log.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ];
     for t in &truth {
         args.extend(["--truth", t]);
     }
@@ -185,13 +454,20 @@ fn seed_000_setting_every_method_moves_toward_the_truth() {
     let methods = doc["methods"].as_object().unwrap();
     for m in ["lm", "gd", "ekf"] {
         let d = methods[m]["distance_to_truth"].as_f64().unwrap();
-        assert!(d < 1.0, "{m} did not move toward the truth: {:.1}% of the nominal's distance left", 100.0 * d);
+        assert!(
+            d < 1.0,
+            "{m} did not move toward the truth: {:.1}% of the nominal's distance left",
+            100.0 * d
+        );
     }
     assert_eq!(doc["closest_to_truth"], "lm");
     // pose residuals pin what the yaw rate cannot see: LM leaves < 5% of the initial distance
     assert!(methods["lm"]["distance_to_truth"].as_f64().unwrap() < 0.05);
     // the seed's gyro-only methods are warned about the directions they cannot see
-    assert!(methods["ekf"]["note"].as_str().unwrap().contains("undetermined"));
+    assert!(methods["ekf"]["note"]
+        .as_str()
+        .unwrap()
+        .contains("undetermined"));
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
     assert!(html.contains("Closest to the true parameters: <b>lm</b>"));
 }
@@ -201,11 +477,31 @@ fn seed_000_setting_every_method_moves_toward_the_truth() {
 #[test]
 fn huber_loss_resists_ground_truth_outliers() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(tmp.path(), "sq.csv", &["--spec", "spec/diff_drive.toml", "--set", "r_r=0.0425", "--set", "r_l=0.0418", "--set", "b=0.205", "--trajectory", "square", "--seed", "3"]);
+    let log = simulate(
+        tmp.path(),
+        "sq.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--set",
+            "r_r=0.0425",
+            "--set",
+            "r_l=0.0418",
+            "--set",
+            "b=0.205",
+            "--trajectory",
+            "square",
+            "--seed",
+            "3",
+        ],
+    );
     let text = std::fs::read_to_string(&log).unwrap();
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
     let header: Vec<&str> = lines[0].split(',').collect();
-    let (ix, iy) = (header.iter().position(|h| *h == "gt_x").unwrap(), header.iter().position(|h| *h == "gt_y").unwrap());
+    let (ix, iy) = (
+        header.iter().position(|h| *h == "gt_x").unwrap(),
+        header.iter().position(|h| *h == "gt_y").unwrap(),
+    );
     // deterministic glitches: every 33rd row
     for (k, line) in lines.iter_mut().enumerate().skip(1) {
         if k % 33 == 0 {
@@ -219,14 +515,26 @@ fn huber_loss_resists_ground_truth_outliers() {
     let bad = tmp.path().join("glitches.csv");
     std::fs::write(&bad, lines.join("\n") + "\n").unwrap();
     let est = |loss: &str| {
-        let d = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", bad.to_str().unwrap(), "--loss", loss]);
+        let d = kinegen_json(&[
+            "fit",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            bad.to_str().unwrap(),
+            "--loss",
+            loss,
+        ]);
         assert_eq!(d["loss"], loss);
-        [("r_r", 0.0425), ("r_l", 0.0418), ("b", 0.205)].map(|(n, t)| (d["parameters"][n]["estimate"].as_f64().unwrap() - t).abs() / t)
+        [("r_r", 0.0425), ("r_l", 0.0418), ("b", 0.205)]
+            .map(|(n, t)| (d["parameters"][n]["estimate"].as_f64().unwrap() - t).abs() / t)
     };
     let (l2, huber) = (est("l2"), est("huber"));
     assert!(huber.iter().all(|e| *e < 0.004), "huber errors {huber:?}");
     let worst = |v: [f64; 3]| v.iter().cloned().fold(0.0, f64::max);
-    assert!(worst(huber) < worst(l2), "huber {huber:?} is not better than l2 {l2:?}");
+    assert!(
+        worst(huber) < worst(l2),
+        "huber {huber:?} is not better than l2 {l2:?}"
+    );
 }
 
 /// Turning in place shows only the ratios r/b: the fit warns by name that the
@@ -236,15 +544,57 @@ fn huber_loss_resists_ground_truth_outliers() {
 #[test]
 fn turning_in_place_leaves_the_common_scale_unidentified_and_says_so() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(tmp.path(), "spin.csv", &["--spec", "spec/diff_drive.toml", "--set", "b=0.21", "--trajectory", "spin", "--seed", "1"]);
-    let fit = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
-    let warnings: Vec<&str> = fit["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
-    assert!(warnings.iter().any(|w| w.contains("not identifiable") && ["r_r", "r_l", "b"].iter().all(|n| w.contains(n))), "{warnings:?}");
+    let log = simulate(
+        tmp.path(),
+        "spin.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--set",
+            "b=0.21",
+            "--trajectory",
+            "spin",
+            "--seed",
+            "1",
+        ],
+    );
+    let fit = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    let warnings: Vec<&str> = fit["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("not identifiable")
+                && ["r_r", "r_l", "b"].iter().all(|n| w.contains(n))),
+        "{warnings:?}"
+    );
     let est = |n: &str| fit["parameters"][n]["estimate"].as_f64().unwrap();
     for n in ["r_r", "r_l", "b"] {
-        assert!(fit["parameters"][n]["std"].is_null(), "{n}: std {}", fit["parameters"][n]["std"]);
+        assert!(
+            fit["parameters"][n]["std"].is_null(),
+            "{n}: std {}",
+            fit["parameters"][n]["std"]
+        );
     }
-    assert!((est("b") / 0.2 - 1.0).abs() < 0.1, "b wandered to {}", est("b"));
+    assert!(
+        (est("b") / 0.2 - 1.0).abs() < 0.1,
+        "b wandered to {}",
+        est("b")
+    );
     let ratio = (est("r_r") + est("r_l")) / est("b");
-    assert!((ratio / (0.084 / 0.21) - 1.0).abs() < 0.005, "(r_r + r_l)/b = {ratio}, truth {}", 0.084 / 0.21);
+    assert!(
+        (ratio / (0.084 / 0.21) - 1.0).abs() < 0.005,
+        "(r_r + r_l)/b = {ratio}, truth {}",
+        0.084 / 0.21
+    );
 }

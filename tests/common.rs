@@ -8,11 +8,19 @@ pub fn root() -> PathBuf {
 }
 
 pub fn kinegen(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_kinegen")).args(args).current_dir(root()).output().expect("run kinegen")
+    Command::new(env!("CARGO_BIN_EXE_kinegen"))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("run kinegen")
 }
 
 pub fn kinegen_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_kinegen")).args(args).current_dir(dir).output().expect("run kinegen")
+    Command::new(env!("CARGO_BIN_EXE_kinegen"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run kinegen")
 }
 
 pub fn stderr(o: &Output) -> String {
@@ -38,8 +46,18 @@ pub fn kinegen_json(args: &[&str]) -> serde_json::Value {
     let mut a = args.to_vec();
     a.extend(["--json", "-"]);
     let o = kinegen(&a);
-    assert!(o.status.success(), "kinegen {:?} failed: {}", args, stderr(&o));
-    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("stdout of {args:?} is not one JSON document ({e}): {}", stdout(&o)))
+    assert!(
+        o.status.success(),
+        "kinegen {:?} failed: {}",
+        args,
+        stderr(&o)
+    );
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout of {args:?} is not one JSON document ({e}): {}",
+            stdout(&o)
+        )
+    })
 }
 
 /// Simulate a log into `dir`; returns its path.
@@ -55,6 +73,10 @@ pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
 
 pub fn real_runs() -> Vec<PathBuf> {
     let dir = root().join("../shared/real/optiodom-diff-square");
-    assert!(dir.exists(), "the real logs are expected at {} (shared/ beside the checkout)", dir.display());
+    assert!(
+        dir.exists(),
+        "the real logs are expected at {} (shared/ beside the checkout)",
+        dir.display()
+    );
     (1..=6).map(|i| dir.join(format!("run-0{i}.csv"))).collect()
 }

@@ -13,18 +13,48 @@ fn check_model(model: &str, cases: &[(&str, &str, f64)]) {
     let mut report = Vec::new();
     for (effect, param, value) in cases {
         let eff = format!("{effect}.{param}={value}");
-        let log = simulate(tmp.path(), &format!("{effect}.csv"), &["--spec", &spec, "--effect", &eff, "--trajectory", "random", "--seed", "7"]);
+        let log = simulate(
+            tmp.path(),
+            &format!("{effect}.csv"),
+            &[
+                "--spec",
+                &spec,
+                "--effect",
+                &eff,
+                "--trajectory",
+                "random",
+                "--seed",
+                "7",
+            ],
+        );
         let d = kinegen_json(&["diagnose", "--spec", &spec, "--data", log.to_str().unwrap()]);
         let cands = d["candidates"].as_array().unwrap();
-        let rank = cands.iter().position(|c| c["effect"] == *effect).map(|r| r + 1);
+        let rank = cands
+            .iter()
+            .position(|c| c["effect"] == *effect)
+            .map(|r| r + 1);
         let c = &cands[rank.expect("true effect among the candidates") - 1];
         let est = c["parameters"][param]["estimate"].as_f64().unwrap();
         let ratio = d["calibrated"]["rmse"].as_f64().unwrap() / c["rmse"].as_f64().unwrap();
         report.push(format!("{model} {effect}: verdict {} rank {rank:?} {param} {est:.4} (hidden {value}) error x{ratio:.1}", d["verdict"]["effect"]));
-        assert_eq!(d["verdict"]["effect"], *effect, "{}", report.last().unwrap());
-        assert!(((est - value) / value).abs() < 0.1, "{}", report.last().unwrap());
+        assert_eq!(
+            d["verdict"]["effect"],
+            *effect,
+            "{}",
+            report.last().unwrap()
+        );
+        assert!(
+            ((est - value) / value).abs() < 0.1,
+            "{}",
+            report.last().unwrap()
+        );
         assert!(ratio >= 5.0, "{}", report.last().unwrap());
-        assert_eq!(d["verdict"]["unexplained_structure"], false, "{}", report.last().unwrap());
+        assert_eq!(
+            d["verdict"]["unexplained_structure"],
+            false,
+            "{}",
+            report.last().unwrap()
+        );
         assert!(c["significant"].as_bool().unwrap() && !c["evidence"].as_str().unwrap().is_empty());
     }
     println!("{}", report.join("\n"));
@@ -34,7 +64,14 @@ fn check_model(model: &str, cases: &[(&str, &str, f64)]) {
 fn diff_drive_hidden_effects_are_found() {
     check_model(
         "diff_drive",
-        &[("lateral_slip", "k_slip", 0.2), ("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03), ("time_offset", "time_offset", 0.08)],
+        &[
+            ("lateral_slip", "k_slip", 0.2),
+            ("gyro_bias", "gyro_bias", 0.05),
+            ("gyro_scale", "gyro_scale", 0.1),
+            ("sensor_offset", "sensor_dx", 0.1),
+            ("wheel_misalignment", "toe", 0.03),
+            ("time_offset", "time_offset", 0.08),
+        ],
     );
 }
 
@@ -46,20 +83,39 @@ fn tricycle_hidden_effects_are_found() {
         // delay a weaker signature than a base that turns in place; the verdict is
         // right from 0.08 s on (0.0786 s found), a 5x error reduction needs about
         // 0.12 s (0.08 s -> 3.2x, 0.12 s -> 4.7x, 0.15 s -> 5.9x)
-        &[("steering_offset", "steer_offset", 0.05), ("lateral_slip", "k_slip", 0.2), ("gyro_bias", "gyro_bias", 0.05), ("sensor_offset", "sensor_dx", 0.15), ("time_offset", "time_offset", 0.15)],
+        &[
+            ("steering_offset", "steer_offset", 0.05),
+            ("lateral_slip", "k_slip", 0.2),
+            ("gyro_bias", "gyro_bias", 0.05),
+            ("sensor_offset", "sensor_dx", 0.15),
+            ("time_offset", "time_offset", 0.15),
+        ],
     );
 }
 
 #[test]
 fn omni3_hidden_effects_are_found() {
-    check_model("omni3", &[("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("sensor_offset", "sensor_dx", 0.1), ("time_offset", "time_offset", 0.08)]);
+    check_model(
+        "omni3",
+        &[
+            ("gyro_bias", "gyro_bias", 0.05),
+            ("gyro_scale", "gyro_scale", 0.1),
+            ("sensor_offset", "sensor_dx", 0.1),
+            ("time_offset", "time_offset", 0.08),
+        ],
+    );
 }
 
 #[test]
 fn omni_caster_hidden_effects_are_found() {
     check_model(
         "omni_caster",
-        &[("steering_offset", "steer_offset2", 0.05), ("gyro_bias", "gyro_bias", 0.05), ("gyro_scale", "gyro_scale", 0.1), ("time_offset", "time_offset", 0.08)],
+        &[
+            ("steering_offset", "steer_offset2", 0.05),
+            ("gyro_bias", "gyro_bias", 0.05),
+            ("gyro_scale", "gyro_scale", 0.1),
+            ("time_offset", "time_offset", 0.08),
+        ],
     );
 }
 
@@ -69,47 +125,155 @@ fn omni_caster_hidden_effects_are_found() {
 #[test]
 fn omni_caster_sensor_offset_is_recognised_as_redundant() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(tmp.path(), "so.csv", &["--spec", "spec/omni_caster.toml", "--effect", "sensor_offset.sensor_dx=0.1", "--trajectory", "random", "--seed", "7"]);
-    let d = kinegen_json(&["diagnose", "--spec", "spec/omni_caster.toml", "--data", log.to_str().unwrap()]);
-    let skipped: Vec<&str> = d["skipped"].as_array().unwrap().iter().map(|s| s["effect"].as_str().unwrap()).collect();
+    let log = simulate(
+        tmp.path(),
+        "so.csv",
+        &[
+            "--spec",
+            "spec/omni_caster.toml",
+            "--effect",
+            "sensor_offset.sensor_dx=0.1",
+            "--trajectory",
+            "random",
+            "--seed",
+            "7",
+        ],
+    );
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        "spec/omni_caster.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    let skipped: Vec<&str> = d["skipped"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["effect"].as_str().unwrap())
+        .collect();
     assert!(skipped.contains(&"sensor_offset"), "{skipped:?}");
     assert!(d["verdict"]["effect"].is_null(), "{}", d["verdict"]);
     // the calibrated base model already explains the log: the axes moved by the offset
-    let fit = kinegen_json(&["fit", "--spec", "spec/omni_caster.toml", "--data", log.to_str().unwrap()]);
+    let fit = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/omni_caster.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
     let xa1 = fit["parameters"]["xa1"]["estimate"].as_f64().unwrap();
-    assert!((xa1 - (0.325 - 0.1)).abs() < 0.005, "xa1 = {xa1}: the reference point did not move onto the sensor");
+    assert!(
+        (xa1 - (0.325 - 0.1)).abs() < 0.005,
+        "xa1 = {xa1}: the reference point did not move onto the sensor"
+    );
 }
 
 #[test]
 fn unicycle_ekf_hidden_effects_are_found() {
-    check_model("unicycle_ekf", &[("lateral_slip", "k_slip", 0.2), ("sensor_offset", "sensor_dx", 0.1), ("wheel_misalignment", "toe", 0.03), ("time_offset", "time_offset", 0.08)]);
+    check_model(
+        "unicycle_ekf",
+        &[
+            ("lateral_slip", "k_slip", 0.2),
+            ("sensor_offset", "sensor_dx", 0.1),
+            ("wheel_misalignment", "toe", 0.03),
+            ("time_offset", "time_offset", 0.08),
+        ],
+    );
 }
 
 #[test]
 fn parameter_errors_only_give_a_null_verdict() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(tmp.path(), "params.csv", &["--spec", "spec/diff_drive.toml", "--set", "b=0.21", "--set", "r_l=0.0415", "--trajectory", "random", "--seed", "4"]);
-    let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
+    let log = simulate(
+        tmp.path(),
+        "params.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--set",
+            "b=0.21",
+            "--set",
+            "r_l=0.0415",
+            "--trajectory",
+            "random",
+            "--seed",
+            "4",
+        ],
+    );
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
     assert!(d["verdict"]["effect"].is_null(), "{}", d["verdict"]);
     assert_eq!(d["verdict"]["unexplained_structure"], false);
     // redundant effects are recognised and not proposed
-    let skipped: Vec<&str> = d["skipped"].as_array().unwrap().iter().map(|s| s["effect"].as_str().unwrap()).collect();
-    assert!(skipped.contains(&"wheel_radius_asymmetry") && skipped.contains(&"wheelbase_scale") && skipped.contains(&"longitudinal_slip"), "{skipped:?}");
+    let skipped: Vec<&str> = d["skipped"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["effect"].as_str().unwrap())
+        .collect();
+    assert!(
+        skipped.contains(&"wheel_radius_asymmetry")
+            && skipped.contains(&"wheelbase_scale")
+            && skipped.contains(&"longitudinal_slip"),
+        "{skipped:?}"
+    );
 }
 
 #[test]
 fn an_effect_outside_the_catalogue_is_not_blamed_and_structure_is_reported() {
     // truth: a gyro with a quadratic error, which no catalogue effect describes
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("spec/diff_drive.toml")).unwrap().replace("expr = [\"omega\"]", "expr = [\"omega + 0.3*omega*abs(omega)\"]");
+    let text = std::fs::read_to_string(root().join("spec/diff_drive.toml"))
+        .unwrap()
+        .replace(
+            "expr = [\"omega\"]",
+            "expr = [\"omega + 0.3*omega*abs(omega)\"]",
+        );
     let truth = tmp.path().join("diff_drive.toml");
     std::fs::write(&truth, text).unwrap();
-    let log = simulate(tmp.path(), "ooc.csv", &["--spec", truth.to_str().unwrap(), "--trajectory", "random", "--seed", "4"]);
-    let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap()]);
-    assert!(d["verdict"]["effect"].is_null(), "blamed on {}", d["verdict"]["effect"]);
+    let log = simulate(
+        tmp.path(),
+        "ooc.csv",
+        &[
+            "--spec",
+            truth.to_str().unwrap(),
+            "--trajectory",
+            "random",
+            "--seed",
+            "4",
+        ],
+    );
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    assert!(
+        d["verdict"]["effect"].is_null(),
+        "blamed on {}",
+        d["verdict"]["effect"]
+    );
     assert_eq!(d["verdict"]["unexplained_structure"], true);
-    let where_: Vec<&str> = d["verdict"]["structure"].as_array().unwrap().iter().map(|s| s.as_str().unwrap()).collect();
-    assert!(where_.iter().any(|s| s.contains("gyro") && s.contains("yaw rate")), "{where_:?}");
+    let where_: Vec<&str> = d["verdict"]["structure"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap())
+        .collect();
+    assert!(
+        where_
+            .iter()
+            .any(|s| s.contains("gyro") && s.contains("yaw rate")),
+        "{where_:?}"
+    );
 }
 
 /// compare -> diagnose -> add-effect -> fit -> generate -> verify, through the CLI.
@@ -117,36 +281,90 @@ fn an_effect_outside_the_catalogue_is_not_blamed_and_structure_is_reported() {
 fn the_whole_story_through_the_cli() {
     let tmp = tempfile::tempdir().unwrap();
     let t = tmp.path();
-    let log = simulate(t, "slip.csv", &["--spec", "spec/diff_drive.toml", "--effect", "lateral_slip=0.2", "--set", "b=0.205", "--trajectory", "random", "--seed", "11"]);
+    let log = simulate(
+        t,
+        "slip.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--effect",
+            "lateral_slip=0.2",
+            "--set",
+            "b=0.205",
+            "--trajectory",
+            "random",
+            "--seed",
+            "11",
+        ],
+    );
     let l = log.to_str().unwrap();
     let cmp = kinegen_json(&["compare", "--spec", "spec/diff_drive.toml", "--data", l]);
     assert!(cmp["rmse"].as_f64().unwrap() > 0.05);
     let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", l]);
     assert_eq!(d["verdict"]["effect"], "lateral_slip");
-    let k = d["candidates"][0]["parameters"]["k_slip"]["estimate"].as_f64().unwrap();
+    let k = d["candidates"][0]["parameters"]["k_slip"]["estimate"]
+        .as_f64()
+        .unwrap();
     // the human output prints the spec change
     let o = kinegen(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", l]);
-    assert!(stdout(&o).contains("spec change that adds it") && stdout(&o).contains("k_slip"), "{}", stdout(&o));
+    assert!(
+        stdout(&o).contains("spec change that adds it") && stdout(&o).contains("k_slip"),
+        "{}",
+        stdout(&o)
+    );
 
     let spec_dir = t.join("spec");
     std::fs::create_dir(&spec_dir).unwrap();
     let new_spec = spec_dir.join("diff_drive.toml");
-    let o = kinegen(&["add-effect", "--spec", "spec/diff_drive.toml", "--effect", "lateral_slip", "--value", &format!("k_slip={k}"), "--out", new_spec.to_str().unwrap()]);
+    let o = kinegen(&[
+        "add-effect",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--effect",
+        "lateral_slip",
+        "--value",
+        &format!("k_slip={k}"),
+        "--out",
+        new_spec.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let before = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", l]);
     let after = kinegen_json(&["fit", "--spec", new_spec.to_str().unwrap(), "--data", l]);
-    let (eb, ea) = (before["after"]["rmse"].as_f64().unwrap(), after["after"]["rmse"].as_f64().unwrap());
-    assert!(ea * 3.0 < eb, "adding the effect did not make the error fall: {eb} -> {ea}");
+    let (eb, ea) = (
+        before["after"]["rmse"].as_f64().unwrap(),
+        after["after"]["rmse"].as_f64().unwrap(),
+    );
+    assert!(
+        ea * 3.0 < eb,
+        "adding the effect did not make the error fall: {eb} -> {ea}"
+    );
     assert!((after["parameters"]["k_slip"]["estimate"].as_f64().unwrap() - 0.2).abs() < 0.02);
 
     // regenerate kernels that include the effect, and verify them like any spec
     let out = t.join("generated");
-    let o = kinegen(&["generate", "--spec-dir", spec_dir.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = kinegen(&[
+        "generate",
+        "--spec-dir",
+        spec_dir.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let src = std::fs::read_to_string(out.join("src/diff_drive.rs")).unwrap();
     assert!(src.contains("k_slip"));
-    let o = kinegen(&["verify", "--spec", new_spec.to_str().unwrap(), "--samples", "30"]);
-    assert!(o.status.success(), "verify failed on the augmented spec: {}{}", stdout(&o), stderr(&o));
+    let o = kinegen(&[
+        "verify",
+        "--spec",
+        new_spec.to_str().unwrap(),
+        "--samples",
+        "30",
+    ]);
+    assert!(
+        o.status.success(),
+        "verify failed on the augmented spec: {}{}",
+        stdout(&o),
+        stderr(&o)
+    );
 }
 
 /// Longitudinal slip scales every wheel's travel alike: redundant while the radii
@@ -155,14 +373,36 @@ fn the_whole_story_through_the_cli() {
 #[test]
 fn longitudinal_slip_is_found_when_the_radii_are_measured() {
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("spec/diff_drive.toml")).unwrap().replace("name = \"r_r\"\n", "name = \"r_r\"\nfree = false\n").replace("name = \"r_l\"\n", "name = \"r_l\"\nfree = false\n");
+    let text = std::fs::read_to_string(root().join("spec/diff_drive.toml"))
+        .unwrap()
+        .replace("name = \"r_r\"\n", "name = \"r_r\"\nfree = false\n")
+        .replace("name = \"r_l\"\n", "name = \"r_l\"\nfree = false\n");
     let spec = tmp.path().join("diff_drive.toml");
     std::fs::write(&spec, text).unwrap();
     let spec = spec.to_str().unwrap();
-    let log = simulate(tmp.path(), "long.csv", &["--spec", spec, "--effect", "longitudinal_slip=0.05", "--trajectory", "random", "--seed", "7"]);
+    let log = simulate(
+        tmp.path(),
+        "long.csv",
+        &[
+            "--spec",
+            spec,
+            "--effect",
+            "longitudinal_slip=0.05",
+            "--trajectory",
+            "random",
+            "--seed",
+            "7",
+        ],
+    );
     let d = kinegen_json(&["diagnose", "--spec", spec, "--data", log.to_str().unwrap()]);
-    assert_eq!(d["verdict"]["effect"], "longitudinal_slip", "{}", d["verdict"]);
-    let k = d["candidates"][0]["parameters"]["k_long"]["estimate"].as_f64().unwrap();
+    assert_eq!(
+        d["verdict"]["effect"], "longitudinal_slip",
+        "{}",
+        d["verdict"]
+    );
+    let k = d["candidates"][0]["parameters"]["k_long"]["estimate"]
+        .as_f64()
+        .unwrap();
     assert!((k - 0.05).abs() < 0.005, "k_long = {k}");
 }
 
@@ -173,15 +413,44 @@ fn longitudinal_slip_is_found_when_the_radii_are_measured() {
 #[test]
 fn real_runs_without_a_gyro_skip_gyro_effects_and_flag_undetermined_parameters() {
     let runs = real_runs();
-    let d = kinegen_json(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", runs[0].to_str().unwrap(), "--data", runs[1].to_str().unwrap()]);
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        runs[0].to_str().unwrap(),
+        "--data",
+        runs[1].to_str().unwrap(),
+    ]);
     let cands = d["candidates"].as_array().unwrap();
     for gyro_effect in ["gyro_bias", "gyro_scale"] {
-        assert!(!cands.iter().any(|c| c["effect"] == gyro_effect), "{gyro_effect} ranked on a log without a gyro");
-        let why = d["skipped"].as_array().unwrap().iter().find(|s| s["effect"] == gyro_effect).expect("listed as skipped")["reason"].as_str().unwrap().to_string();
-        assert!(why.contains("not observable") && why.contains("gyro_z"), "{why}");
+        assert!(
+            !cands.iter().any(|c| c["effect"] == gyro_effect),
+            "{gyro_effect} ranked on a log without a gyro"
+        );
+        let why = d["skipped"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["effect"] == gyro_effect)
+            .expect("listed as skipped")["reason"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        assert!(
+            why.contains("not observable") && why.contains("gyro_z"),
+            "{why}"
+        );
     }
-    let slip = cands.iter().find(|c| c["effect"] == "lateral_slip").expect("lateral_slip tested");
-    assert!(slip["parameters"]["k_slip"]["std"].is_null(), "k_slip std {} on in-place turns", slip["parameters"]["k_slip"]["std"]);
+    let slip = cands
+        .iter()
+        .find(|c| c["effect"] == "lateral_slip")
+        .expect("lateral_slip tested");
+    assert!(
+        slip["parameters"]["k_slip"]["std"].is_null(),
+        "k_slip std {} on in-place turns",
+        slip["parameters"]["k_slip"]["std"]
+    );
     // a physically plausible structure is not promoted to a verdict without evidence
     assert!(d["verdict"]["effect"].is_null() || cands[0]["significant"].as_bool().unwrap());
 }

@@ -15,7 +15,22 @@ fn landmark_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     let log = simulate(
         dir,
         "lm.csv",
-        &["--spec", "spec/diff_drive.toml", "--set", "b=0.205", "--set", "r_l=0.0418", "--trajectory", "random", "--seed", "4", "--landmarks", map.to_str().unwrap(), "--observations", obs.to_str().unwrap()],
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--set",
+            "b=0.205",
+            "--set",
+            "r_l=0.0418",
+            "--trajectory",
+            "random",
+            "--seed",
+            "4",
+            "--landmarks",
+            map.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+        ],
     );
     (log, obs, map)
 }
@@ -25,7 +40,9 @@ fn strip_ground_truth(log: &Path, out: &Path) {
     let text = std::fs::read_to_string(log).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let keep: Vec<usize> = (0..header.len()).filter(|&i| !header[i].starts_with("gt_")).collect();
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|&i| !header[i].starts_with("gt_"))
+        .collect();
     let pick = |l: &str| {
         let cells: Vec<&str> = l.split(',').collect();
         keep.iter().map(|&i| cells[i]).collect::<Vec<_>>().join(",")
@@ -41,7 +58,17 @@ fn strip_ground_truth(log: &Path, out: &Path) {
 fn compare_reports_landmark_innovations() {
     let tmp = tempfile::tempdir().unwrap();
     let (log, obs, map) = landmark_log(tmp.path());
-    let doc = kinegen_json(&["compare", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap(), "--observations", obs.to_str().unwrap(), "--landmarks", map.to_str().unwrap()]);
+    let doc = kinegen_json(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ]);
     let lm = &doc["landmarks"];
     assert!(lm["observations"].as_u64().unwrap() > 500, "{lm}");
     assert_eq!(lm["landmarks"].as_u64().unwrap(), 5);
@@ -55,12 +82,28 @@ fn landmarks_alone_calibrate_the_wheelbase() {
     let (log, obs, map) = landmark_log(tmp.path());
     let nogt = tmp.path().join("nogt.csv");
     strip_ground_truth(&log, &nogt);
-    let doc = kinegen_json(&["fit", "--spec", "spec/diff_drive.toml", "--data", nogt.to_str().unwrap(), "--observations", obs.to_str().unwrap(), "--landmarks", map.to_str().unwrap()]);
+    let doc = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        nogt.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ]);
     assert_eq!(doc["metric"], "landmark_range_rmse_m");
     let b = doc["parameters"]["b"]["estimate"].as_f64().unwrap();
     assert!((b - 0.205).abs() / 0.205 < 0.005, "b = {b}");
-    let (before, after) = (doc["landmarks"]["before"]["range_rmse_m"].as_f64().unwrap(), doc["landmarks"]["after"]["range_rmse_m"].as_f64().unwrap());
-    assert!(after * 5.0 < before, "range innovations fell only from {before} to {after}");
+    let (before, after) = (
+        doc["landmarks"]["before"]["range_rmse_m"].as_f64().unwrap(),
+        doc["landmarks"]["after"]["range_rmse_m"].as_f64().unwrap(),
+    );
+    assert!(
+        after * 5.0 < before,
+        "range innovations fell only from {before} to {after}"
+    );
     // after calibration the innovations are at the sensor noise of the spec (0.05 m)
     assert!(after < 0.07, "{after}");
 }
@@ -70,27 +113,82 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
     let tmp = tempfile::tempdir().unwrap();
     let (log, _, map) = landmark_log(tmp.path());
     let cases = [
-        ("t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,L9,2.0,0.2\n", "obs.csv:3: column `id`", "not in the map"),
-        ("t,id,range,bearing\n0.5,L1,abc,0.1\n", "obs.csv:2: column `range`", "not a number"),
-        ("t,id,range,bearing\n0.5,L1,-1,0.1\n", "obs.csv:2: column `range`", "not positive"),
-        ("t,id,range,bearing\n0.5,L1,2,0.1\n0.4,L2,2,0.1\n", "obs.csv:3: column `t`", "backwards"),
-        ("t,id,range\n0.5,L1,2\n", "obs.csv:1: column `bearing`", "missing column"),
+        (
+            "t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,L9,2.0,0.2\n",
+            "obs.csv:3: column `id`",
+            "not in the map",
+        ),
+        (
+            "t,id,range,bearing\n0.5,L1,abc,0.1\n",
+            "obs.csv:2: column `range`",
+            "not a number",
+        ),
+        (
+            "t,id,range,bearing\n0.5,L1,-1,0.1\n",
+            "obs.csv:2: column `range`",
+            "not positive",
+        ),
+        (
+            "t,id,range,bearing\n0.5,L1,2,0.1\n0.4,L2,2,0.1\n",
+            "obs.csv:3: column `t`",
+            "backwards",
+        ),
+        (
+            "t,id,range\n0.5,L1,2\n",
+            "obs.csv:1: column `bearing`",
+            "missing column",
+        ),
     ];
     for (text, place, msg) in cases {
         let obs = tmp.path().join("obs.csv");
         std::fs::write(&obs, text).unwrap();
-        let o = kinegen(&["compare", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap(), "--observations", obs.to_str().unwrap(), "--landmarks", map.to_str().unwrap()]);
+        let o = kinegen(&[
+            "compare",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            log.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+            "--landmarks",
+            map.to_str().unwrap(),
+        ]);
         let err = stderr(&o);
         assert_eq!(o.status.code(), Some(2), "{err}");
-        assert!(err.contains(place) && err.contains(msg), "expected `{place}` and `{msg}` in: {err}");
+        assert!(
+            err.contains(place) && err.contains(msg),
+            "expected `{place}` and `{msg}` in: {err}"
+        );
     }
     let dup = tmp.path().join("dup.csv");
     std::fs::write(&dup, "id,x,y\nA,1,2\nA,3,4\n").unwrap();
     let obs = tmp.path().join("obs.csv");
     std::fs::write(&obs, "t,id,range,bearing\n0.5,A,3.0,0.1\n").unwrap();
-    let o = kinegen(&["compare", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap(), "--observations", obs.to_str().unwrap(), "--landmarks", dup.to_str().unwrap()]);
-    assert!(stderr(&o).contains("dup.csv:3: column `id`: landmark `A` is listed twice"), "{}", stderr(&o));
-    let o = kinegen(&["compare", "--spec", "spec/diff_drive.toml", "--data", log.to_str().unwrap(), "--observations", obs.to_str().unwrap()]);
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        dup.to_str().unwrap(),
+    ]);
+    assert!(
+        stderr(&o).contains("dup.csv:3: column `id`: landmark `A` is listed twice"),
+        "{}",
+        stderr(&o)
+    );
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--observations needs --landmarks"));
 }

@@ -24,7 +24,13 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Median ns per call of `ir` and `generated` over `n` inputs (repeated `reps`
 /// times, interleaved so both see the same machine state); prints the ratio.
-fn time_pair(label: &str, n: usize, reps: usize, mut ir: impl FnMut(usize), mut generated: impl FnMut(usize)) {
+fn time_pair(
+    label: &str,
+    n: usize,
+    reps: usize,
+    mut ir: impl FnMut(usize),
+    mut generated: impl FnMut(usize),
+) {
     let (mut t_ir, mut t_gen) = (Vec::new(), Vec::new());
     for _ in 0..reps {
         let t0 = Instant::now();
@@ -39,7 +45,10 @@ fn time_pair(label: &str, n: usize, reps: usize, mut ir: impl FnMut(usize), mut 
 }
 
 fn ir() -> ModelIr {
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../generated/ir/diff_drive.json");
+    let p = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../generated/ir/diff_drive.json"
+    );
     ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap()
 }
 
@@ -60,14 +69,36 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
     let mut truth = r.clone();
     truth.p[0] *= 1.01;
     truth.p[2] *= 1.02;
-    let mut run = Run { name: "bench".into(), t: (0..n).map(|k| k as f64 * dt).collect(), dt: vec![dt; n - 1], u, gt: None, gyro: None, landmarks: Vec::new(), rate_inputs: Vec::new() };
+    let mut run = Run {
+        name: "bench".into(),
+        t: (0..n).map(|k| k as f64 * dt).collect(),
+        dt: vec![dt; n - 1],
+        u,
+        gt: None,
+        gyro: None,
+        landmarks: Vec::new(),
+        rate_inputs: Vec::new(),
+    };
     let track = kinegen_analysis::deadreckon::run(&truth, &truth.p, &run, false);
-    run.gt = Some(track.pose.iter().map(|p| [p[0] + rng.gen_range(-1e-3..1e-3), p[1] + rng.gen_range(-1e-3..1e-3), p[2] + rng.gen_range(-2e-3..2e-3)]).collect());
+    run.gt = Some(
+        track
+            .pose
+            .iter()
+            .map(|p| {
+                [
+                    p[0] + rng.gen_range(-1e-3..1e-3),
+                    p[1] + rng.gen_range(-1e-3..1e-3),
+                    p[2] + rng.gen_range(-2e-3..2e-3),
+                ]
+            })
+            .collect(),
+    );
     run
 }
 
 /// A generated step kernel: (x, u, w, p, dt) -> R.
-type Kernel<const U: usize, const W: usize, const P: usize, R> = fn(&[f64; 3], &[f64; U], &[f64; W], &[f64; P], f64) -> R;
+type Kernel<const U: usize, const W: usize, const P: usize, R> =
+    fn(&[f64; 3], &[f64; U], &[f64; W], &[f64; P], f64) -> R;
 
 /// The IR evaluator against the generated `step_exact` and `step_exact_jac_p` of
 /// one model, on the same (x, u) inputs. For the least-squares model the IR
@@ -110,13 +141,39 @@ fn ir_vs_generated<const U: usize, const W: usize, const P: usize>(
 
 fn omni_caster_kernels() {
     use kinegen_generated::omni_caster;
-    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/../generated/ir/omni_caster.json");
+    let p = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../generated/ir/omni_caster.json"
+    );
     let ir = ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap();
     let mut rng = rand::rngs::SmallRng::seed_from_u64(3);
     let inputs: Vec<([f64; 3], [f64; 9])> = (0..20_000)
-        .map(|_| ([rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0)], std::array::from_fn(|i| if i < 3 { rng.gen_range(-1.0..1.0) } else { rng.gen_range(-5.0..5.0) })))
+        .map(|_| {
+            (
+                [
+                    rng.gen_range(-5.0..5.0),
+                    rng.gen_range(-5.0..5.0),
+                    rng.gen_range(-3.0..3.0),
+                ],
+                std::array::from_fn(|i| {
+                    if i < 3 {
+                        rng.gen_range(-1.0..1.0)
+                    } else {
+                        rng.gen_range(-5.0..5.0)
+                    }
+                }),
+            )
+        })
         .collect();
-    ir_vs_generated::<9, 3, 12>("omni_caster", &ir, &omni_caster::PARAM_NOMINAL, &inputs, 5, omni_caster::step_exact, omni_caster::step_exact_jac_p);
+    ir_vs_generated::<9, 3, 12>(
+        "omni_caster",
+        &ir,
+        &omni_caster::PARAM_NOMINAL,
+        &inputs,
+        5,
+        omni_caster::step_exact,
+        omni_caster::step_exact_jac_p,
+    );
 }
 
 fn main() {
@@ -125,10 +182,32 @@ fn main() {
     let n_calls = 200_000;
     let inputs: Vec<([f64; 3], [f64; 2])> = {
         let mut rng = rand::rngs::SmallRng::seed_from_u64(1);
-        (0..n_calls).map(|_| ([rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0)], [rng.gen_range(-4000.0..4000.0), rng.gen_range(-4000.0..4000.0)])).collect()
+        (0..n_calls)
+            .map(|_| {
+                (
+                    [
+                        rng.gen_range(-5.0..5.0),
+                        rng.gen_range(-5.0..5.0),
+                        rng.gen_range(-3.0..3.0),
+                    ],
+                    [
+                        rng.gen_range(-4000.0..4000.0),
+                        rng.gen_range(-4000.0..4000.0),
+                    ],
+                )
+            })
+            .collect()
     };
     let p: [f64; 5] = r.p.clone().try_into().unwrap();
-    ir_vs_generated::<2, 2, 5>("diff_drive", &ir, &p, &inputs, 7, kinegen_generated::diff_drive::step_exact, kinegen_generated::diff_drive::step_exact_jac_p);
+    ir_vs_generated::<2, 2, 5>(
+        "diff_drive",
+        &ir,
+        &p,
+        &inputs,
+        7,
+        kinegen_generated::diff_drive::step_exact,
+        kinegen_generated::diff_drive::step_exact_jac_p,
+    );
 
     omni_caster_kernels();
 

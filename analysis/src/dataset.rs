@@ -3,7 +3,7 @@
 use crate::landmarks::{pose_from_landmarks, LandmarkObs};
 use crate::log::{unwrap, Log, LogError};
 use crate::model::Runner;
-use kinegen_model::spec::InputKind;
+use kinegen_model::spec::{InputKind, ObservationRole};
 
 #[derive(Debug, Clone)]
 pub struct Run {
@@ -23,15 +23,23 @@ pub struct Run {
     pub rate_inputs: Vec<bool>,
 }
 
-/// Whether any run measures the observation channel `name` (`pose`: ground
-/// truth, `gyro`: a gyro, `landmark`: landmark observations), and if not, the
-/// data it would need. Channels kinegen does not read from logs count as measured.
-pub fn channel_missing(runs: &[Run], name: &str) -> Option<&'static str> {
-    let (measured, need) = match name {
-        "pose" => (runs.iter().any(|r| r.gt.is_some()), "gt_x, gt_y, gt_theta columns"),
-        "gyro" => (runs.iter().any(|r| r.gyro.is_some()), "gyro_z column"),
-        "landmark" => (runs.iter().any(|r| !r.landmarks.is_empty()), "landmark observations (--observations)"),
-        _ => (true, ""),
+/// Whether any run measures the observation that plays `role`, and if not, the
+/// data it would need. Roles kinegen does not read from logs count as measured.
+pub fn channel_missing(runs: &[Run], r: &Runner, role: ObservationRole) -> Option<String> {
+    let (measured, need) = match role {
+        ObservationRole::Pose => (
+            runs.iter().any(|x| x.gt.is_some()),
+            format!("{} columns", r.ir.pose_columns().join(", ")),
+        ),
+        ObservationRole::YawRate => (
+            runs.iter().any(|x| x.gyro.is_some()),
+            format!("{} column", r.ir.gyro_column()),
+        ),
+        ObservationRole::RangeBearing => (
+            runs.iter().any(|x| !x.landmarks.is_empty()),
+            "landmark observations (--observations)".into(),
+        ),
+        ObservationRole::Other => (true, String::new()),
     };
     (!measured).then_some(need)
 }
@@ -51,7 +59,11 @@ impl Run {
     pub fn start_pose(&self) -> [f64; 3] {
         let rest_rows = self.rest_steps();
         let Some(g) = &self.gt else {
-            let until = if rest_rows > 0 { self.t[rest_rows] } else { self.t[0] + 0.1 };
+            let until = if rest_rows > 0 {
+                self.t[rest_rows]
+            } else {
+                self.t[0] + 0.1
+            };
             return pose_from_landmarks(&self.landmarks, until).unwrap_or([0.0; 3]);
         };
         let rest = rest_rows.max(1).min(g.len());
@@ -71,7 +83,11 @@ impl Run {
         let any_rate = self.rate_inputs.iter().any(|r| *r);
         self.u
             .iter()
-            .take_while(|u| u.iter().enumerate().all(|(i, v)| *v == 0.0 || (any_rate && !self.rate_inputs.get(i).copied().unwrap_or(true))))
+            .take_while(|u| {
+                u.iter().enumerate().all(|(i, v)| {
+                    *v == 0.0 || (any_rate && !self.rate_inputs.get(i).copied().unwrap_or(true))
+                })
+            })
             .count()
     }
 
@@ -94,7 +110,12 @@ impl Run {
             u: self.u[a..b - 1].to_vec(),
             gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
             gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
-            landmarks: self.landmarks.iter().filter(|o| o.t >= self.t[a] && o.t <= self.t[b - 1]).cloned().collect(),
+            landmarks: self
+                .landmarks
+                .iter()
+                .filter(|o| o.t >= self.t[a] && o.t <= self.t[b - 1])
+                .cloned()
+                .collect(),
             rate_inputs: self.rate_inputs.clone(),
         }
     }
@@ -113,7 +134,11 @@ impl Run {
             while b < self.t.len() && self.t[b] - self.t[a] < seconds {
                 b += 1;
             }
-            let b = if self.t.len() - b < 10 { self.t.len() } else { (b + 1).min(self.t.len()) };
+            let b = if self.t.len() - b < 10 {
+                self.t.len()
+            } else {
+                (b + 1).min(self.t.len())
+            };
             out.push(self.slice(a, b));
             a = b - 1;
         }
@@ -122,14 +147,20 @@ impl Run {
 
     /// Columns a model needs from a log.
     pub fn wanted(r: &Runner) -> Vec<String> {
-        let mut w: Vec<String> = vec!["t".into(), "gt_x".into(), "gt_y".into(), "gt_theta".into(), "gyro_z".into()];
+        let mut w: Vec<String> = vec!["t".into()];
+        w.extend(r.ir.pose_columns());
+        w.push(r.ir.gyro_column());
         w.extend(r.ir.inputs.iter().map(|i| i.column.clone()));
         w
     }
 
     pub fn from_log(log: &Log, r: &Runner) -> Result<Run, LogError> {
         if log.len < 3 {
-            return Err(log.err(None, None, format!("the log has {} row(s); the model needs at least 3", log.len)));
+            return Err(log.err(
+                None,
+                None,
+                format!("the log has {} row(s); the model needs at least 3", log.len),
+            ));
         }
         let t = log.col("t")?.to_vec();
         let dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
@@ -137,16 +168,32 @@ impl Run {
         sorted.sort_by(f64::total_cmp);
         let median = sorted[sorted.len() / 2];
         if let Some(k) = dt.iter().position(|&d| d > 20.0 * median) {
-            return Err(log.err(Some(k + 3), Some("t"), format!("gap of {:.3} s in the log (median step {:.4} s)", dt[k], median)));
+            return Err(log.err(
+                Some(k + 3),
+                Some("t"),
+                format!(
+                    "gap of {:.3} s in the log (median step {:.4} s)",
+                    dt[k], median
+                ),
+            ));
         }
         // Absolute angles (steering encoders) may be logged wrapped to (-pi, pi]:
         // unwrap them so held values and rates (a column may feed both, as the
         // steering angle and its rate of a caster wheel) do not jump by 2 pi.
-        let angle_cols: Vec<&str> = r.ir.inputs.iter().filter(|i| i.kind == InputKind::Absolute && i.unit == "rad").map(|i| i.column.as_str()).collect();
+        let angle_cols: Vec<&str> =
+            r.ir.inputs
+                .iter()
+                .filter(|i| i.kind == InputKind::Absolute && i.unit == "rad")
+                .map(|i| i.column.as_str())
+                .collect();
         let mut cols = Vec::new();
         for i in &r.ir.inputs {
             let c = log.col(&i.column)?;
-            let c = if angle_cols.contains(&i.column.as_str()) { unwrap(c) } else { c.to_vec() };
+            let c = if angle_cols.contains(&i.column.as_str()) {
+                unwrap(c)
+            } else {
+                c.to_vec()
+            };
             cols.push((c, i.kind));
         }
         let u = (0..dt.len())
@@ -161,16 +208,34 @@ impl Run {
                     .collect()
             })
             .collect();
-        let gt = if log.has("gt_x") && log.has("gt_y") && log.has("gt_theta") {
-            let (x, y, th) = (log.col("gt_x")?, log.col("gt_y")?, unwrap(log.col("gt_theta")?));
+        let [cx, cy, cth] = r.ir.pose_columns();
+        let gt = if log.has(&cx) && log.has(&cy) && log.has(&cth) {
+            let (x, y, th) = (log.col(&cx)?, log.col(&cy)?, unwrap(log.col(&cth)?));
             Some((0..log.len).map(|k| [x[k], y[k], th[k]]).collect())
         } else {
             None
         };
-        let gyro = log.columns.get("gyro_z").cloned();
-        let name = log.path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-        let rate_inputs = r.ir.inputs.iter().map(|i| i.kind == InputKind::Cumulative).collect();
-        Ok(Run { name, t, dt, u, gt, gyro, landmarks: Vec::new(), rate_inputs })
+        let gyro = log.columns.get(&r.ir.gyro_column()).cloned();
+        let name = log
+            .path
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
+        let rate_inputs =
+            r.ir.inputs
+                .iter()
+                .map(|i| i.kind == InputKind::Cumulative)
+                .collect();
+        Ok(Run {
+            name,
+            t,
+            dt,
+            u,
+            gt,
+            gyro,
+            landmarks: Vec::new(),
+            rate_inputs,
+        })
     }
 
     /// Read a log for a model.

@@ -2,6 +2,8 @@
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
 use crate::dataset::Run;
 use crate::model::Runner;
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::Pose;
 use nalgebra::DMatrix;
 
 pub struct Track {
@@ -23,7 +25,9 @@ pub struct Track {
 /// fixed-point iteration (it is a small displacement of the identity). Also returns
 /// d start / d p = -dh/dp (3 x P, row-major) for the sensitivities.
 pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64; 3], Vec<f64>) {
-    let Some(h) = r.ir.function("obs_pose") else { return (measured, vec![0.0; 3 * p.len()]) };
+    let Some(h) = r.ir.observation_fn(Pose, "") else {
+        return (measured, vec![0.0; 3 * p.len()]);
+    };
     let mut x = measured;
     for _ in 0..5 {
         let m = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
@@ -31,8 +35,14 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
             x[i] -= m[i] - measured[i];
         }
     }
-    let hp = r.f("obs_pose_jac_p");
-    let d = hp.eval(&Runner::obs_args(hp, &x, u, p, &[])).iter().map(|v| -v).collect();
+    let hp =
+        r.ir.observation_fn(Pose, "_jac_p")
+            .expect("derived with the pose observation");
+    let d = hp
+        .eval(&Runner::obs_args(hp, &x, u, p, &[]))
+        .iter()
+        .map(|v| -v)
+        .collect();
     (x, d)
 }
 
@@ -46,7 +56,13 @@ pub fn run(r: &Runner, p: &[f64], data: &Run, with_sens: bool) -> Track {
 /// [`run`] with `start_offset` added to the measured start pose: the start pose
 /// as a nuisance parameter of calibration (a single noisy start heading would
 /// otherwise rotate the whole track and masquerade as a physical effect).
-pub fn run_from(r: &Runner, p: &[f64], data: &Run, with_sens: bool, start_offset: [f64; 3]) -> Track {
+pub fn run_from(
+    r: &Runner,
+    p: &[f64],
+    data: &Run,
+    with_sens: bool,
+    start_offset: [f64; 3],
+) -> Track {
     let start = data.start_pose();
     let u0 = data.u.first().cloned().unwrap_or_default();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
@@ -58,7 +74,11 @@ pub fn run_from(r: &Runner, p: &[f64], data: &Run, with_sens: bool, start_offset
             let vel = [0, 1, 2].map(|i| (g[j + 1][i] - g[j][i]) / dtj);
             // the rest-averaged start when the robot has not moved yet
             let at = [0, 1, 2].map(|i| g[j][i] + a * (g[j + 1][i] - g[j][i]));
-            if data.rest_steps() > 0 { (start, [0.0; 3]) } else { (at, vel) }
+            if data.rest_steps() > 0 {
+                (start, [0.0; 3])
+            } else {
+                (at, vel)
+            }
         }
         _ => (start, [0.0; 3]),
     };
@@ -69,7 +89,12 @@ pub fn run_from(r: &Runner, p: &[f64], data: &Run, with_sens: bool, start_offset
             dstart[m * p.len() + ti] += gt_vel[m];
         }
     }
-    let (fx, jx, jp, tw) = (r.f("step_exact"), r.f("step_exact_jac_x"), r.f("step_exact_jac_p"), r.f("twist"));
+    let (fx, jx, jp, tw) = (
+        r.f("step_exact"),
+        r.f("step_exact_jac_x"),
+        r.f("step_exact_jac_p"),
+        r.f("twist"),
+    );
     let np = p.len();
     let zeros = vec![0.0; 16];
     let mut scratch = Vec::new();
@@ -105,19 +130,34 @@ pub fn run_from(r: &Runner, p: &[f64], data: &Run, with_sens: bool, start_offset
         pose.push(out3);
     }
     let measured = predicted_measurements(r, p, data, &pose);
-    Track { pose, measured, sens, omega, twist }
+    Track {
+        pose,
+        measured,
+        sens,
+        omega,
+        twist,
+    }
 }
 
 /// A 3 x P row-major parameter Jacobian as the first P columns of a sensitivity
 /// matrix whose last 3 columns (the start pose) are zero.
 fn with_start_columns(jac_p: &[f64], np: usize) -> DMatrix<f64> {
-    DMatrix::from_fn(3, np + 3, |m, c| if c < np { jac_p[m * np + c] } else { 0.0 })
+    DMatrix::from_fn(
+        3,
+        np + 3,
+        |m, c| if c < np { jac_p[m * np + c] } else { 0.0 },
+    )
 }
 
 /// The pose measurements a track predicts (see [`Track::measured`]).
-pub fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) -> Vec<[f64; 3]> {
+pub fn predicted_measurements(
+    r: &Runner,
+    p: &[f64],
+    data: &Run,
+    pose: &[[f64; 3]],
+) -> Vec<[f64; 3]> {
     let tau = r.param_index("time_offset").map_or(0.0, |i| p[i]);
-    let h = r.ir.function("obs_pose");
+    let h = r.ir.observation_fn(Pose, "");
     (0..pose.len())
         .map(|k| {
             let x = if tau == 0.0 || pose.len() < 2 {
@@ -148,7 +188,10 @@ pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
     let u0 = data.u.first().cloned().unwrap_or_default();
     let (start, _) = body_start(r, p, data.start_pose(), &u0);
     let mut pose = vec![start];
-    let (mut omega, mut twist) = (Vec::with_capacity(data.steps()), Vec::with_capacity(data.steps()));
+    let (mut omega, mut twist) = (
+        Vec::with_capacity(data.steps()),
+        Vec::with_capacity(data.steps()),
+    );
     let mut scratch = Vec::new();
     let mut v = [0.0; 2];
     for k in 0..data.steps() {
@@ -161,7 +204,13 @@ pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
         twist.push([v[0], v[1], w]);
     }
     let measured = predicted_measurements(r, p, data, &pose);
-    Some(Track { pose, measured, sens: None, omega, twist })
+    Some(Track {
+        pose,
+        measured,
+        sens: None,
+        omega,
+        twist,
+    })
 }
 
 /// Pose after moving with the constant body twist `tw` for `dt` (exact SE(2)
@@ -170,7 +219,11 @@ pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
 /// |omega dt| = 1e-6 the arc is a straight line to within 1e-13 m per metre.
 pub fn arc_step(x: [f64; 3], tw: [f64; 3], dt: f64) -> [f64; 3] {
     let a = tw[2] * dt;
-    let (s, c) = if a.abs() < 1e-6 { (dt * (1.0 - a * a / 6.0), dt * a / 2.0) } else { (a.sin() / tw[2], (1.0 - a.cos()) / tw[2]) };
+    let (s, c) = if a.abs() < 1e-6 {
+        (dt * (1.0 - a * a / 6.0), dt * a / 2.0)
+    } else {
+        (a.sin() / tw[2], (1.0 - a.cos()) / tw[2])
+    };
     let (bx, by) = (s * tw[0] - c * tw[1], c * tw[0] + s * tw[1]);
     let (st, ct) = x[2].sin_cos();
     [x[0] + ct * bx - st * by, x[1] + st * bx + ct * by, x[2] + a]

@@ -14,6 +14,8 @@ use crate::dataset::Run;
 use crate::fit::{fit, residuals, FitOptions, FitResult};
 use crate::log::wrap;
 use crate::model::Runner;
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::{Pose, YawRate};
 use nalgebra::DVector;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -47,9 +49,16 @@ pub struct Diagnosis {
     pub base_fit: FitResult,
     pub base_holdout_rmse: f64,
     pub candidates: Vec<Candidate>,
+    /// The first effect of the chain (None: no catalogue effect is significant).
     pub verdict: Option<String>,
+    /// Every effect found, in the order sequential diagnosis added them.
+    pub chain: Vec<ChainStep>,
+    /// What remains in the residuals of the final model (base plus chain).
     pub structure: Structure,
     pub skipped: Vec<(String, String)>,
+    /// The final model and its calibrated parameters.
+    pub final_runner: Runner,
+    pub final_p: Vec<f64>,
 }
 
 /// Weighted residual RMS of a parameter vector, each run (segment) anchored at
@@ -95,7 +104,7 @@ fn channel_names(r: &Runner, runs: &[Run], o: &FitOptions) -> Vec<&'static str> 
                 v.extend(["x position", "y position", "heading"]);
             }
         }
-        if o.use_gyro && run.gyro.is_some() && r.ir.function("obs_gyro").is_some() {
+        if o.use_gyro && run.gyro.is_some() && r.ir.observation_fn(YawRate, "").is_some() {
             v.extend(std::iter::repeat_n("gyro", run.steps()));
         }
     }
@@ -106,7 +115,10 @@ fn channel_names(r: &Runner, runs: &[Run], o: &FitOptions) -> Vec<&'static str> 
 /// that carries most of the signature.
 fn evidence(aug: &Runner, effect_params: &[usize], runs: &[Run], o: &FitOptions) -> String {
     // the measured starts: no start-heading columns in this (dense) Jacobian
-    let o = &FitOptions { estimate_start: false, ..o.clone() };
+    let o = &FitOptions {
+        estimate_start: false,
+        ..o.clone()
+    };
     let (res, jac) = residuals(aug, &aug.p, effect_params, runs, o, true, &[]);
     let j = jac.unwrap();
     let chans = channel_names(aug, runs, o);
@@ -115,7 +127,11 @@ fn evidence(aug: &Runner, effect_params: &[usize], runs: &[Run], o: &FitOptions)
     for (c, &pi) in effect_params.iter().enumerate() {
         let col = j.column(c);
         let denom = r.norm() * col.norm();
-        let corr = if denom > 0.0 { r.dot(&col) / denom } else { 0.0 };
+        let corr = if denom > 0.0 {
+            r.dot(&col) / denom
+        } else {
+            0.0
+        };
         let mut energy: Vec<(&str, f64)> = Vec::new();
         for (k, v) in col.iter().enumerate() {
             let ch = chans.get(k).copied().unwrap_or("?");
@@ -126,22 +142,39 @@ fn evidence(aug: &Runner, effect_params: &[usize], runs: &[Run], o: &FitOptions)
         }
         let total: f64 = energy.iter().map(|e| e.1).sum();
         energy.sort_by(|a, b| b.1.total_cmp(&a.1));
-        let main = energy.first().map(|e| format!("{} ({:.0}% of its signature)", e.0, 100.0 * e.1 / total.max(1e-300))).unwrap_or_default();
-        parts.push(format!("base residual follows the signature of {} with |r| = {:.2}, mostly in {main}", aug.names[pi], corr.abs()));
+        let main = energy
+            .first()
+            .map(|e| {
+                format!(
+                    "{} ({:.0}% of its signature)",
+                    e.0,
+                    100.0 * e.1 / total.max(1e-300)
+                )
+            })
+            .unwrap_or_default();
+        parts.push(format!(
+            "base residual follows the signature of {} with |r| = {:.2}, mostly in {main}",
+            aug.names[pi],
+            corr.abs()
+        ));
     }
     parts.join("; ")
 }
 
 /// One-step prediction residuals (from each measured pose) in the body frame, with
 /// the motion features of the step.
-fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 4]>, Vec<[f64; 6]>, Vec<&'static str>) {
+fn one_step(
+    r: &Runner,
+    p: &[f64],
+    runs: &[Run],
+) -> (Vec<[f64; 4]>, Vec<[f64; 6]>, Vec<&'static str>) {
     let step = r.f("step_exact");
     let tw = r.f("twist");
     let zeros = [0.0; 16];
     let mut res = Vec::new();
     let mut feat = Vec::new();
     let mut regimes = Vec::new();
-    let gyro = r.ir.function("obs_gyro");
+    let gyro = r.ir.observation_fn(YawRate, "");
     let tau = r.param_index("time_offset").map_or(0.0, |i| p[i]);
     for run in runs {
         let Some(g) = &run.gt else { continue };
@@ -156,23 +189,34 @@ fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 4]>, Vec<[f64; 6]
                 let (j, a) = run.locate(run.t[k] - tau);
                 let a = a.clamp(0.0, 1.0);
                 let j1 = (j + 1).min(run.steps() - 1);
-                shifted_u = run.u[j].iter().zip(&run.u[j1]).map(|(x, y)| x + a * (y - x)).collect();
+                shifted_u = run.u[j]
+                    .iter()
+                    .zip(&run.u[j1])
+                    .map(|(x, y)| x + a * (y - x))
+                    .collect();
                 &shifted_u
             };
             // from the body pose behind the measured one, to the predicted measurement
             let (x0, _) = crate::deadreckon::body_start(r, p, g[k], u_k);
             let x1 = step.eval(&Runner::step_args(step, &x0, u_k, p, &dt, &zeros));
-            let pred = match r.ir.function("obs_pose") {
+            let pred = match r.ir.observation_fn(Pose, "") {
                 Some(h) => h.eval(&Runner::obs_args(h, &x1, &run.u[k], p, &[])),
                 None => x1,
             };
             let (dx, dy) = (g[k + 1][0] - pred[0], g[k + 1][1] - pred[1]);
             let (c, s) = (g[k][2].cos(), g[k][2].sin());
             let gres = match (gyro, &run.gyro) {
-                (Some(h), Some(m)) => m[k + 1] - h.eval(&Runner::obs_args(h, &x0, &run.u[k], p, &[]))[0],
+                (Some(h), Some(m)) => {
+                    m[k + 1] - h.eval(&Runner::obs_args(h, &x0, &run.u[k], p, &[]))[0]
+                }
                 _ => 0.0,
             };
-            res.push([c * dx + s * dy, -s * dx + c * dy, wrap(g[k + 1][2] - pred[2]), gres]);
+            res.push([
+                c * dx + s * dy,
+                -s * dx + c * dy,
+                wrap(g[k + 1][2] - pred[2]),
+                gres,
+            ]);
             let t = tw.eval(&[&run.u[k], p]);
             let (v, w) = ((t[0] * t[0] + t[1] * t[1]).sqrt(), t[2]);
             let d = run.dt[k];
@@ -189,7 +233,13 @@ fn one_step(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<[f64; 4]>, Vec<[f64; 6]
 /// of the effect parameter changes the one-step prediction and y = the calibrated
 /// base model's one-step residual, in the channel where the signature is largest.
 /// For the missing effect the points line up along y = x * parameter.
-pub fn signature(base: &Runner, pb: &[f64], aug: &Runner, runs: &[Run], param: &str) -> Option<(String, Vec<(f64, f64)>)> {
+pub fn signature(
+    base: &Runner,
+    pb: &[f64],
+    aug: &Runner,
+    runs: &[Run],
+    param: &str,
+) -> Option<(String, Vec<(f64, f64)>)> {
     let i = aug.param_index(param)?;
     let start = seeded(aug, base, pb);
     let h = {
@@ -206,10 +256,20 @@ pub fn signature(base: &Runner, pb: &[f64], aug: &Runner, runs: &[Run], param: &
     let (rb, _, _) = one_step(base, pb, runs);
     let chans = ["along-track", "lateral", "heading", "gyro"];
     let c = (0..4).max_by(|&a, &b| {
-        let e = |c: usize| r0.iter().zip(&r1).map(|(x, y)| ((x[c] - y[c]) / h).powi(2)).sum::<f64>();
+        let e = |c: usize| {
+            r0.iter()
+                .zip(&r1)
+                .map(|(x, y)| ((x[c] - y[c]) / h).powi(2))
+                .sum::<f64>()
+        };
         e(a).total_cmp(&e(b))
     })?;
-    let pts = r0.iter().zip(&r1).zip(&rb).map(|((x0, x1), b)| (-(x1[c] - x0[c]) / h, b[c])).collect();
+    let pts = r0
+        .iter()
+        .zip(&r1)
+        .zip(&rb)
+        .map(|((x0, x1), b)| (-(x1[c] - x0[c]) / h, b[c]))
+        .collect();
     Some((chans[c].to_string(), pts))
 }
 
@@ -228,7 +288,11 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
     let chans = ["along-track", "lateral", "heading", "gyro"];
     let fnames = ["speed", "yaw rate", "v*omega", "heading", "time"];
     if n < 40 {
-        return Structure { structured: false, findings: vec!["too few steps with ground truth to test".into()], r2: 0.0 };
+        return Structure {
+            structured: false,
+            findings: vec!["too few steps with ground truth to test".into()],
+            r2: 0.0,
+        };
     }
     // features per step: v, omega, v*omega (from feat = [v dt, w dt, v w dt, ...]), heading, time
     let mut heading = Vec::with_capacity(n);
@@ -286,7 +350,13 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             let eta2 = ss_b / ss_tot;
             let f = (ss_b / (bins - 1) as f64) / ((ss_tot - ss_b).max(1e-300) / (n - bins) as f64);
             worst = worst.max(eta2);
-            let (bin, bm) = means.iter().enumerate().fold((0, 0.0f64), |acc, (b, m)| if (m - mean).abs() > acc.1.abs() { (b, m - mean) } else { acc });
+            let (bin, bm) = means.iter().enumerate().fold((0, 0.0f64), |acc, (b, m)| {
+                if (m - mean).abs() > acc.1.abs() {
+                    (b, m - mean)
+                } else {
+                    acc
+                }
+            });
             if best.as_ref().is_none_or(|x| eta2 > x.0) {
                 best = Some((eta2, f, j, bin, bm));
             }
@@ -316,49 +386,185 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             }
         }
     }
-    Structure { structured, findings, r2: worst }
+    Structure {
+        structured,
+        findings,
+        r2: worst,
+    }
 }
 
-/// Run the diagnosis. `augmented` holds, per applicable effect, its name, doc and
-/// the runner of the spec with the effect added (effect parameters at nominal).
-///
-/// `progress` is called with a step's name after the base calibration and after
-/// each candidate (from worker threads), for a progress bar.
-pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runner)], skipped: Vec<(String, String)>, progress: &(dyn Fn(&str) + Sync)) -> Result<Diagnosis, String> {
-    let o = FitOptions::default();
-    let baseline_rmse = weighted_rms(base, &base.p, runs, &o);
-    let base_fit = fit(base, runs, &o).map_err(|e| e.to_string())?;
-    let calibrated_rmse = weighted_rms(base, &base_fit.p, runs, &o);
-    let n = base_fit.n_residuals;
-    let bic0 = bic(base_fit.cost_after, n, base_fit.free.len());
-    let (train, test) = split(runs, 0.6);
-    let base_train = fit(base, &train, &o).map_err(|e| e.to_string())?;
-    let base_holdout_rmse = weighted_rms(base, &base_train.p, &test, &o);
-    progress("base model calibrated");
+/// The current model of a diagnosis step: its runner, calibration and scores.
+struct Stage {
+    runner: Runner,
+    fit: FitResult,
+    rmse: f64,
+    bic: f64,
+    train_p: Vec<f64>,
+    holdout_rmse: f64,
+}
 
+fn stage(
+    runner: Runner,
+    runs: &[Run],
+    train: &[Run],
+    test: &[Run],
+    o: &FitOptions,
+) -> Result<Stage, String> {
+    let fit = fit(&runner, runs, o).map_err(|e| e.to_string())?;
+    let rmse = weighted_rms(&runner, &fit.p, runs, o);
+    let bic = bic(fit.cost_after, fit.n_residuals, fit.free.len());
+    let train_p = crate::fit::fit(&runner, train, o)
+        .map_err(|e| e.to_string())?
+        .p;
+    let holdout_rmse = weighted_rms(&runner, &train_p, test, o);
+    Ok(Stage {
+        runner,
+        fit,
+        rmse,
+        bic,
+        train_p,
+        holdout_rmse,
+    })
+}
+
+/// One step of the chain found by sequential diagnosis.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChainStep {
+    pub effect: String,
+    pub parameters: serde_json::Map<String, serde_json::Value>,
+    /// Error (weighted residual RMS) after adding this effect and recalibrating.
+    pub rmse_after: f64,
+    pub doc: String,
+}
+
+/// Everything diagnosis needs from the outside: which effects to try, and the
+/// runner of the spec with a list of effects added (derivation lives with the
+/// caller, which owns symbolica's process).
+pub struct Catalogue<'a> {
+    /// (name, doc) of every applicable effect, in catalogue order.
+    pub effects: Vec<(String, String)>,
+    /// Runner of the base spec with these effects added (in order); Err(reason)
+    /// when the combination cannot be built (the effect no longer applies...).
+    pub derive: &'a dyn Fn(&[String]) -> Result<Runner, String>,
+}
+
+/// Whether an effect adds nothing the calibrated model cannot already do on
+/// these logs: the residual Jacobian columns of its parameters lie in the span of
+/// the free parameters' columns (checked on the data, at the current estimates).
+/// Returns the reason when it is redundant.
+pub fn redundancy(
+    start: &Runner,
+    effect_params: &[usize],
+    runs: &[Run],
+    o: &FitOptions,
+) -> Option<String> {
+    let o = &FitOptions {
+        estimate_start: false,
+        huber: None,
+        ..o.clone()
+    };
+    // a bounded sample of the data is enough to see the span
+    let mut sample = Vec::new();
+    let mut steps = 0;
+    for run in runs {
+        if steps >= 4000 {
+            break;
+        }
+        let end = (run.t.len()).min(4000 - steps + 1).max(3);
+        sample.push(run.slice(0, end));
+        steps += end;
+    }
+    let (_, jac) = residuals(start, &start.p, &start.free, &sample, o, true, &[]);
+    let j = jac?;
+    let base: Vec<usize> = (0..start.free.len())
+        .filter(|c| !effect_params.contains(&start.free[*c]))
+        .collect();
+    let unit = |c: usize| {
+        let col = j.column(c).into_owned();
+        let n = col.norm();
+        (n > 0.0).then(|| col / n)
+    };
+    let cols: Vec<(usize, DVector<f64>)> = base
+        .iter()
+        .filter_map(|&c| unit(c).map(|v| (c, v)))
+        .collect();
+    if cols.is_empty() {
+        return None;
+    }
+    let b = nalgebra::DMatrix::from_columns(&cols.iter().map(|x| x.1.clone()).collect::<Vec<_>>());
+    let svd = b.clone().svd(true, true);
+    let mut reasons = Vec::new();
+    for &pi in effect_params {
+        let c = start.free.iter().position(|&f| f == pi)?;
+        let Some(e) = unit(c) else {
+            reasons.push(format!(
+                "{} changes nothing these logs measure",
+                start.names[pi]
+            ));
+            continue;
+        };
+        let x = svd.solve(&e, 1e-10).ok()?;
+        let left = (&b * &x - &e).norm();
+        if left > 1e-3 {
+            return None;
+        }
+        let big = x.amax();
+        let by: Vec<&str> = cols
+            .iter()
+            .zip(x.iter())
+            .filter(|(_, v)| v.abs() > 0.1 * big)
+            .map(|((c, _), _)| start.names[start.free[*c]].as_str())
+            .collect();
+        reasons.push(format!(
+            "{} is a combination of the calibrated {}",
+            start.names[pi],
+            by.join(", ")
+        ));
+    }
+    let kind = if reasons.iter().all(|r| r.contains("changes nothing")) {
+        "not observable in these logs"
+    } else {
+        "redundant"
+    };
+    Some(format!(
+        "{kind}: {} (residual Jacobian columns, {} samples)",
+        reasons.join("; "),
+        steps
+    ))
+}
+
+/// Calibrate every candidate on top of `cur` and score it against it.
+fn rank(
+    cur: &Stage,
+    augmented: &[(String, String, Runner)],
+    runs: &[Run],
+    train: &[Run],
+    test: &[Run],
+    o: &FitOptions,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Vec<Candidate> {
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
         .filter_map(|(name, doc, aug)| {
-            let start = seeded(aug, base, &base_fit.p);
-            let effect_params: Vec<usize> = start.free.iter().copied().filter(|&i| base.param_index(&start.names[i]).is_none()).collect();
-            let ev = evidence(&start, &effect_params, runs, &o);
-            // start from the base estimates and from nominal: a structurally wrong
-            // base model can calibrate itself into a corner the effect cannot leave
-            let (from_base, from_nominal) = (fit(&start, runs, &o).ok(), fit(aug, runs, &o).ok());
-            let base_start_wins = match (&from_base, &from_nominal) {
+            let start = seeded(aug, &cur.runner, &cur.fit.p);
+            let effect_params: Vec<usize> = start.free.iter().copied().filter(|&i| cur.runner.param_index(&start.names[i]).is_none()).collect();
+            let ev = evidence(&start, &effect_params, runs, o);
+            // start from the current estimates and from nominal: a structurally wrong
+            // model can calibrate itself into a corner the effect cannot leave
+            let (from_cur, from_nominal) = (fit(&start, runs, o).ok(), fit(aug, runs, o).ok());
+            let cur_start_wins = match (&from_cur, &from_nominal) {
                 (Some(a), Some(b)) => a.cost_after <= b.cost_after,
                 (a, _) => a.is_some(),
             };
-            let f = if base_start_wins { from_base } else { from_nominal }?;
-            let rmse = weighted_rms(&start, &f.p, runs, &o);
-            let gain = bic0 - bic(f.cost_after, f.n_residuals, f.free.len());
-            // the held-out fit starts where the full-data fit did best (the base
-            // model's estimates on the training part, or nominal)
-            let tr_start = if base_start_wins { seeded(aug, base, &base_train.p) } else { aug.clone() };
-            let holdout_rmse = fit(&tr_start, &train, &o).map(|ft| weighted_rms(&tr_start, &ft.p, &test, &o)).unwrap_or(f64::INFINITY);
+            let f = if cur_start_wins { from_cur } else { from_nominal }?;
+            let rmse = weighted_rms(&start, &f.p, runs, o);
+            let gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
+            // the held-out fit starts where the full-data fit did best
+            let tr_start = if cur_start_wins { seeded(aug, &cur.runner, &cur.train_p) } else { aug.clone() };
+            let holdout_rmse = fit(&tr_start, train, o).map(|ft| weighted_rms(&tr_start, &ft.p, test, o)).unwrap_or(f64::INFINITY);
             progress(name);
-            let improvement = 1.0 - rmse / calibrated_rmse;
-            let significant = gain > 10.0 && improvement > 0.2 && holdout_rmse < 0.8 * base_holdout_rmse;
+            let improvement = 1.0 - rmse / cur.rmse;
+            let significant = gain > 10.0 && improvement > 0.2 && holdout_rmse < 0.8 * cur.holdout_rmse && rmse.is_finite();
             let parameters = effect_params
                 .iter()
                 .map(|&i| {
@@ -368,32 +574,121 @@ pub fn diagnose(base: &Runner, runs: &[Run], augmented: &[(String, String, Runne
                 .collect();
             let evidence = format!(
                 "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}",
-                calibrated_rmse,
+                cur.rmse,
                 rmse,
-                calibrated_rmse / rmse.max(1e-300),
+                cur.rmse / rmse.max(1e-300),
                 gain,
-                base_holdout_rmse,
+                cur.holdout_rmse,
                 holdout_rmse
             );
             Some(Candidate { effect: name.clone(), rmse, improvement, significant, parameters, evidence, bic_gain: gain, holdout_rmse, doc: doc.clone(), fitted: f.p })
         })
         .collect();
-    candidates.sort_by(|a, b| b.significant.cmp(&a.significant).then(b.bic_gain.total_cmp(&a.bic_gain)));
-    let mut verdict = candidates.first().filter(|c| c.significant).map(|c| c.effect.clone());
-    let mut structure = match &verdict {
-        Some(v) => {
-            let (_, _, aug) = augmented.iter().find(|a| &a.0 == v).unwrap();
-            let best = candidates.iter().find(|c| &c.effect == v).unwrap();
-            whiteness(aug, &best.fitted, runs)
-        }
-        None => whiteness(base, &base_fit.p, runs),
-    };
-    // A winner that leaves motion-explained structure behind only explains part of
-    // what is missing: do not name it with confidence.
-    if let (Some(v), true) = (&verdict, structure.structured) {
-        structure.findings.push(format!("`{v}` improves the fit significantly but leaves this structure: the missing effect is probably outside the catalogue (or more than one effect is missing)"));
-        verdict = None;
-    }
-    Ok(Diagnosis { baseline_rmse, calibrated_rmse, base_fit, base_holdout_rmse, candidates, verdict, structure, skipped })
+    candidates.sort_by(|a, b| {
+        b.significant
+            .cmp(&a.significant)
+            .then(b.bic_gain.total_cmp(&a.bic_gain))
+    });
+    candidates
 }
 
+/// Fewest rows per run diagnosis accepts.
+pub const MIN_ROWS: usize = 20;
+
+/// Longest chain sequential diagnosis builds: more effects than this at once
+/// are not told apart reliably by a log of ordinary length.
+pub const MAX_CHAIN: usize = 3;
+
+/// Run the diagnosis: calibrate the base model, rank every applicable effect,
+/// add the best significant one, re-test the rest on the augmented model, and
+/// repeat until nothing is significant. `skipped` collects effects not tested,
+/// with the reason (redundant on these logs, not derivable...).
+///
+/// `progress` is called with a step's name after each calibration (from worker
+/// threads), for a progress bar.
+pub fn diagnose(
+    base: &Runner,
+    runs: &[Run],
+    cat: &Catalogue,
+    mut skipped: Vec<(String, String)>,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Diagnosis, String> {
+    let o = FitOptions::default();
+    if let Some(r) = runs.iter().find(|r| r.t.len() < MIN_ROWS) {
+        return Err(format!("{}: {} rows; diagnosis needs at least {MIN_ROWS} per run (it holds out the last 40% of each)", r.name, r.t.len()));
+    }
+    let baseline_rmse = weighted_rms(base, &base.p, runs, &o);
+    let (train, test) = split(runs, 0.6);
+    let first = stage(base.clone(), runs, &train, &test, &o)?;
+    progress("base model calibrated");
+    let (calibrated_rmse, base_fit, base_holdout_rmse) =
+        (first.rmse, first.fit.clone(), first.holdout_rmse);
+
+    let mut cur = first;
+    let mut chain: Vec<ChainStep> = Vec::new();
+    let mut first_candidates: Option<Vec<Candidate>> = None;
+    let mut remaining: Vec<(String, String)> = cat.effects.clone();
+    while chain.len() < MAX_CHAIN && !remaining.is_empty() {
+        let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
+        let mut augmented = Vec::new();
+        for (name, doc) in &remaining {
+            let mut list = names.clone();
+            list.push(name.clone());
+            match (cat.derive)(&list) {
+                Ok(aug) => {
+                    let start = seeded(&aug, &cur.runner, &cur.fit.p);
+                    let effect_params: Vec<usize> = start
+                        .free
+                        .iter()
+                        .copied()
+                        .filter(|&i| cur.runner.param_index(&start.names[i]).is_none())
+                        .collect();
+                    match redundancy(&start, &effect_params, runs, &o) {
+                        Some(why) if chain.is_empty() => skipped.push((name.clone(), why)),
+                        Some(_) => {}
+                        None => augmented.push((name.clone(), doc.clone(), aug)),
+                    }
+                }
+                Err(why) if chain.is_empty() => skipped.push((name.clone(), why)),
+                Err(_) => {}
+            }
+        }
+        let ranked = rank(&cur, &augmented, runs, &train, &test, &o, progress);
+        let winner = ranked.first().filter(|c| c.significant).cloned();
+        if first_candidates.is_none() {
+            first_candidates = Some(ranked);
+        }
+        let Some(w) = winner else { break };
+        let (_, _, aug) = augmented
+            .iter()
+            .find(|a| a.0 == w.effect)
+            .expect("ranked from augmented");
+        let mut runner = aug.clone();
+        runner.p = w.fitted.clone();
+        let next = stage(runner, runs, &train, &test, &o)?;
+        let parameters = w.parameters.clone();
+        chain.push(ChainStep {
+            effect: w.effect.clone(),
+            parameters,
+            rmse_after: w.rmse,
+            doc: w.doc.clone(),
+        });
+        remaining.retain(|(n, _)| n != &w.effect);
+        cur = next;
+    }
+    let structure = whiteness(&cur.runner, &cur.fit.p, runs);
+    let verdict = chain.first().map(|c| c.effect.clone());
+    Ok(Diagnosis {
+        baseline_rmse,
+        calibrated_rmse,
+        base_fit,
+        base_holdout_rmse,
+        candidates: first_candidates.unwrap_or_default(),
+        verdict,
+        chain,
+        structure,
+        skipped,
+        final_runner: cur.runner,
+        final_p: cur.fit.p,
+    })
+}

@@ -9,6 +9,8 @@ use crate::dataset::Run;
 use crate::deadreckon;
 use crate::log::wrap;
 use crate::model::Runner;
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::{Pose, RangeBearing, YawRate};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -45,7 +47,17 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        FitOptions { pos_sigma: 0.01, heading_sigma: 0.01, gyro_sigma: 0.01, use_pose: true, use_gyro: true, use_landmarks: true, max_iter: 100, huber: None, estimate_start: true }
+        FitOptions {
+            pos_sigma: 0.01,
+            heading_sigma: 0.01,
+            gyro_sigma: 0.01,
+            use_pose: true,
+            use_gyro: true,
+            use_landmarks: true,
+            max_iter: 100,
+            huber: None,
+            estimate_start: true,
+        }
     }
 }
 
@@ -73,8 +85,8 @@ pub struct FitResult {
 
 #[derive(Debug, thiserror::Error)]
 pub enum FitError {
-    #[error("nothing to fit: the logs have no ground truth (gt_x, gt_y, gt_theta), no gyro (gyro_z) and no landmark observations the model can predict")]
-    NoResiduals,
+    #[error("nothing to fit: the logs have no ground truth ({pose}), no gyro ({gyro}) and no landmark observations the model can predict")]
+    NoResiduals { pose: String, gyro: String },
     #[error("the fit diverged: {0}")]
     Diverged(String),
 }
@@ -87,7 +99,9 @@ pub enum FitError {
 /// track to hide part of a missing effect such as a toe angle).
 fn has_start_nuisance(run: &Run, o: &FitOptions) -> bool {
     let rested = run.rest_steps() > 0 && run.t[run.rest_steps()] - run.t[0] >= 0.5;
-    o.estimate_start && !rested && ((o.use_pose && run.gt.is_some()) || (o.use_landmarks && !run.landmarks.is_empty()))
+    o.estimate_start
+        && !rested
+        && ((o.use_pose && run.gt.is_some()) || (o.use_landmarks && !run.landmarks.is_empty()))
 }
 
 /// Column of each run's start-heading offset in the Jacobian (after the parameters).
@@ -106,13 +120,32 @@ fn start_columns(runs: &[Run], o: &FitOptions, m: usize) -> Vec<Option<usize>> {
 /// Weighted residuals (and their Jacobian w.r.t. the free parameters, then the
 /// start-heading offsets of the runs that have them) over all runs; `starts`
 /// holds one start-pose offset per run (empty: none).
-pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOptions, with_jac: bool, starts: &[[f64; 3]]) -> (Vec<f64>, Option<DMatrix<f64>>) {
+pub fn residuals(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    runs: &[Run],
+    o: &FitOptions,
+    with_jac: bool,
+    starts: &[[f64; 3]],
+) -> (Vec<f64>, Option<DMatrix<f64>>) {
     let cols = start_columns(runs, o, free.len());
     let ncols = free.len() + cols.iter().flatten().count();
     let parts: Vec<(Vec<f64>, Vec<Vec<f64>>)> = runs
         .par_iter()
         .enumerate()
-        .map(|(i, run)| run_residuals(r, p, free, run, o, with_jac, starts.get(i).copied().unwrap_or([0.0; 3]), cols[i].is_some()))
+        .map(|(i, run)| {
+            run_residuals(
+                r,
+                p,
+                free,
+                run,
+                o,
+                with_jac,
+                starts.get(i).copied().unwrap_or([0.0; 3]),
+                cols[i].is_some(),
+            )
+        })
         .collect();
     let n: usize = parts.iter().map(|x| x.0.len()).sum();
     let mut res = Vec::with_capacity(n);
@@ -122,7 +155,11 @@ pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOpt
         if let Some(j) = jac.as_mut() {
             for (k, jr) in jv.iter().enumerate() {
                 for (c, v) in jr.iter().enumerate() {
-                    let col = if c < free.len() { c } else { cols[i].unwrap() + c - free.len() };
+                    let col = if c < free.len() {
+                        c
+                    } else {
+                        cols[i].unwrap() + c - free.len()
+                    };
                     j[(row + k, col)] = *v;
                 }
             }
@@ -141,7 +178,14 @@ pub fn residuals(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOpt
 /// block-sparse and can be huge (a 1,000,000-sample log cut into 833 segments
 /// would need a 3e6 x 836 dense matrix), while J^T J is small. Columns as in
 /// [`residuals`]. Returns (weighted residuals, J^T J, J^T r).
-pub fn normal_equations(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: &FitOptions, starts: &[[f64; 3]]) -> (Vec<f64>, DMatrix<f64>, DVector<f64>) {
+pub fn normal_equations(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    runs: &[Run],
+    o: &FitOptions,
+    starts: &[[f64; 3]],
+) -> (Vec<f64>, DMatrix<f64>, DVector<f64>) {
     let m = free.len();
     let cols = start_columns(runs, o, m);
     let n = m + cols.iter().flatten().count();
@@ -152,8 +196,23 @@ pub fn normal_equations(r: &Runner, p: &[f64], free: &[usize], runs: &[Run], o: 
         .enumerate()
         .map(|(i, run)| {
             let nuis = cols[i].is_some();
-            let (mut rv, jv) = run_residuals(r, p, free, run, o, true, starts.get(i).copied().unwrap_or([0.0; 3]), nuis);
-            let (mut ata, mut atb, mut btb, mut atr, mut btr) = (DMatrix::zeros(m, m), DVector::zeros(m), 0.0, DVector::zeros(m), 0.0);
+            let (mut rv, jv) = run_residuals(
+                r,
+                p,
+                free,
+                run,
+                o,
+                true,
+                starts.get(i).copied().unwrap_or([0.0; 3]),
+                nuis,
+            );
+            let (mut ata, mut atb, mut btb, mut atr, mut btr) = (
+                DMatrix::zeros(m, m),
+                DVector::zeros(m),
+                0.0,
+                DVector::zeros(m),
+                0.0,
+            );
             for (res, row) in rv.iter_mut().zip(&jv) {
                 let w = o.huber.map_or(1.0, |k| huber_weight(*res, k));
                 *res *= w;
@@ -220,13 +279,26 @@ fn huber_weights(res: &mut [f64], jac: Option<&mut DMatrix<f64>>, k: f64) {
 /// (with `nuis`) the start-heading column.
 #[allow(clippy::too_many_arguments)]
 #[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
-fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOptions, with_jac: bool, start: [f64; 3], nuis: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
+fn run_residuals(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    run: &Run,
+    o: &FitOptions,
+    with_jac: bool,
+    start: [f64; 3],
+    nuis: bool,
+) -> (Vec<f64>, Vec<Vec<f64>>) {
     let mut res = Vec::new();
     let mut jac = Vec::new();
     let track = deadreckon::run_from(r, p, run, with_jac, start);
     let np = p.len();
     // sensitivity columns to read: the free parameters, then the start heading
-    let cols: Vec<usize> = free.iter().copied().chain(if nuis { vec![np + 2] } else { vec![] }).collect();
+    let cols: Vec<usize> = free
+        .iter()
+        .copied()
+        .chain(if nuis { vec![np + 2] } else { vec![] })
+        .collect();
     let free = &cols[..];
     let mut scratch = Vec::new();
     // A `time_offset` parameter: measurement k is compared with the model at
@@ -237,26 +309,45 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
     let shifted = |k: usize| run.locate(run.t[k] - tau);
     if o.use_pose {
         if let Some(gt) = &run.gt {
-            let obs = r.ir.function("obs_pose");
+            let obs = r.ir.observation_fn(Pose, "");
             for k in 1..gt.len() {
-                let (j, a) = if tau_i.is_some() { shifted(k) } else { (k - 1, 1.0) };
-                let lerp = |v0: &[f64; 3], v1: &[f64; 3]| -> [f64; 3] { [0, 1, 2].map(|i| v0[i] + a * (v1[i] - v0[i])) };
+                let (j, a) = if tau_i.is_some() {
+                    shifted(k)
+                } else {
+                    (k - 1, 1.0)
+                };
+                let lerp = |v0: &[f64; 3], v1: &[f64; 3]| -> [f64; 3] {
+                    [0, 1, 2].map(|i| v0[i] + a * (v1[i] - v0[i]))
+                };
                 let x = lerp(&track.pose[j], &track.pose[j + 1]);
-                let vel: [f64; 3] = [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
+                let vel: [f64; 3] =
+                    [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
                 let u = &run.u[j.min(run.steps() - 1)];
                 let (pred, hx, hp) = match obs {
                     Some(h) => {
                         let args = Runner::obs_args(h, &x, u, p, &[]);
                         let pred = h.eval(&args);
                         let (hx, hp) = if with_jac {
-                            let (fx, fp) = (r.f("obs_pose_jac_x"), r.f("obs_pose_jac_p"));
-                            (fx.eval(&Runner::obs_args(fx, &x, u, p, &[])), fp.eval(&Runner::obs_args(fp, &x, u, p, &[])))
+                            let (fx, fp) = (
+                                r.ir.observation_fn(Pose, "_jac_x")
+                                    .expect("derived with the pose observation"),
+                                r.ir.observation_fn(Pose, "_jac_p")
+                                    .expect("derived with the pose observation"),
+                            );
+                            (
+                                fx.eval(&Runner::obs_args(fx, &x, u, p, &[])),
+                                fp.eval(&Runner::obs_args(fp, &x, u, p, &[])),
+                            )
                         } else {
                             (vec![], vec![])
                         };
                         (pred, hx, hp)
                     }
-                    None => (x.to_vec(), vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], vec![0.0; 3 * np]),
+                    None => (
+                        x.to_vec(),
+                        vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                        vec![0.0; 3 * np],
+                    ),
                 };
                 let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
                 for i in 0..3 {
@@ -268,8 +359,16 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
                         jac.push(
                             free.iter()
                                 .map(|&c| {
-                                    let dx = |m: usize| if Some(c) == tau_i { -vel[m] } else { s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]) };
-                                    ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>() + if c < np { hp[i * np + c] } else { 0.0 }) / sig[i]
+                                    let dx = |m: usize| {
+                                        if Some(c) == tau_i {
+                                            -vel[m]
+                                        } else {
+                                            s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
+                                        }
+                                    };
+                                    ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>()
+                                        + if c < np { hp[i * np + c] } else { 0.0 })
+                                        / sig[i]
                                 })
                                 .collect(),
                         );
@@ -282,22 +381,42 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
         landmark_residuals(r, p, free, run, &track, with_jac, &mut res, &mut jac);
     }
     if o.use_gyro {
-        if let (Some(g), Some(h)) = (&run.gyro, r.ir.function("obs_gyro")) {
-            let hp = r.ir.function("obs_gyro_jac_p");
-            let hx = r.ir.function("obs_gyro_jac_x");
+        if let (Some(g), Some(h)) = (&run.gyro, r.ir.observation_fn(YawRate, "")) {
+            let hp = r.ir.observation_fn(YawRate, "_jac_p");
+            let hx = r.ir.observation_fn(YawRate, "_jac_x");
             let mut out = [0.0];
             let mut jp = vec![0.0; np];
             let mut jx = [0.0; 3];
             for k in 0..run.steps() {
                 let x = track.pose[k];
-                h.eval_into(&Runner::obs_args(h, &x, &run.u[k], p, &[]), &mut out, &mut scratch);
+                h.eval_into(
+                    &Runner::obs_args(h, &x, &run.u[k], p, &[]),
+                    &mut out,
+                    &mut scratch,
+                );
                 res.push((out[0] - g[k + 1]) / o.gyro_sigma);
                 if with_jac {
                     let (hp, hx) = (hp.unwrap(), hx.unwrap());
-                    hp.eval_into(&Runner::obs_args(hp, &x, &run.u[k], p, &[]), &mut jp, &mut scratch);
-                    hx.eval_into(&Runner::obs_args(hx, &x, &run.u[k], p, &[]), &mut jx, &mut scratch);
+                    hp.eval_into(
+                        &Runner::obs_args(hp, &x, &run.u[k], p, &[]),
+                        &mut jp,
+                        &mut scratch,
+                    );
+                    hx.eval_into(
+                        &Runner::obs_args(hx, &x, &run.u[k], p, &[]),
+                        &mut jx,
+                        &mut scratch,
+                    );
                     let s = &track.sens.as_ref().unwrap()[k];
-                    jac.push(free.iter().map(|&c| (if c < np { jp[c] } else { 0.0 } + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>()) / o.gyro_sigma).collect());
+                    jac.push(
+                        free.iter()
+                            .map(|&c| {
+                                (if c < np { jp[c] } else { 0.0 }
+                                    + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>())
+                                    / o.gyro_sigma
+                            })
+                            .collect(),
+                    );
                 }
             }
         }
@@ -310,9 +429,23 @@ fn run_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, o: &FitOption
 /// spec's `landmark` observation. Jacobian: H_x times the interpolated pose
 /// sensitivity, plus H_p.
 #[allow(clippy::too_many_arguments)]
-fn landmark_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, track: &deadreckon::Track, with_jac: bool, res: &mut Vec<f64>, jac: &mut Vec<Vec<f64>>) {
-    let Some(h) = r.ir.function("obs_landmark") else { return };
-    let sig = r.obs_sigma("landmark").filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0)).unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
+fn landmark_residuals(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    run: &Run,
+    track: &deadreckon::Track,
+    with_jac: bool,
+    res: &mut Vec<f64>,
+    jac: &mut Vec<Vec<f64>>,
+) {
+    let Some(h) = r.ir.observation_fn(RangeBearing, "") else {
+        return;
+    };
+    let sig = r
+        .obs_sigma(RangeBearing)
+        .filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0))
+        .unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
     let np = p.len();
     for o in &run.landmarks {
         let (j, a, x) = crate::landmarks::locate_on(run, track, o.t);
@@ -322,7 +455,12 @@ fn landmark_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, track: &
         res.push((pred[0] - o.range) / sig[0]);
         res.push(wrap(pred[1] - o.bearing) / sig[1]);
         if with_jac {
-            let (fx, fp) = (r.f("obs_landmark_jac_x"), r.f("obs_landmark_jac_p"));
+            let (fx, fp) = (
+                r.ir.observation_fn(RangeBearing, "_jac_x")
+                    .expect("derived with the observation"),
+                r.ir.observation_fn(RangeBearing, "_jac_p")
+                    .expect("derived with the observation"),
+            );
             let hx = fx.eval(&Runner::obs_args(fx, &x, u, p, &lm));
             let hp = fp.eval(&Runner::obs_args(fp, &x, u, p, &lm));
             let sens = track.sens.as_ref().unwrap();
@@ -330,7 +468,15 @@ fn landmark_residuals(r: &Runner, p: &[f64], free: &[usize], run: &Run, track: &
             for i in 0..2 {
                 jac.push(
                     free.iter()
-                        .map(|&c| ((0..3).map(|m| hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]))).sum::<f64>() + if c < np { hp[i * np + c] } else { 0.0 }) / sig[i])
+                        .map(|&c| {
+                            ((0..3)
+                                .map(|m| {
+                                    hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]))
+                                })
+                                .sum::<f64>()
+                                + if c < np { hp[i * np + c] } else { 0.0 })
+                                / sig[i]
+                        })
                         .collect(),
                 );
             }
@@ -345,7 +491,9 @@ pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOption
     let mut fixed = r.clone();
     fixed.p = p.to_vec();
     fixed.free = vec![];
-    let starts = fit_stage(&fixed, &seg, o).map(|f| f.starts).unwrap_or_default();
+    let starts = fit_stage(&fixed, &seg, o)
+        .map(|f| f.starts)
+        .unwrap_or_default();
     let (res, _) = residuals(&fixed, p, &[], &seg, o, false, &starts);
     (res.iter().map(|x| x * x).sum::<f64>() / res.len().max(1) as f64).sqrt()
 }
@@ -366,17 +514,28 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
     // start pose (relative rather than absolute error).
     let split = segmented(runs);
     let runs = &split[..];
-    let has_gyro = runs.iter().any(|x| x.gyro.is_some()) && r.ir.function("obs_gyro").is_some();
+    let has_gyro =
+        runs.iter().any(|x| x.gyro.is_some()) && r.ir.observation_fn(YawRate, "").is_some();
     let has_pose = runs.iter().any(|x| x.gt.is_some());
     if o.use_gyro && o.use_pose && has_gyro && has_pose {
-        let gyro_only = FitOptions { use_pose: false, ..o.clone() };
+        let gyro_only = FitOptions {
+            use_pose: false,
+            ..o.clone()
+        };
         if let Ok(first) = fit_from(r, runs, &gyro_only) {
             let mut start = r.clone();
             start.p = first.p;
             let full = fit_from(&start, runs, o)?;
             // keep the better of the two starts (judged on the full cost)
             let direct = fit_from(r, runs, o)?;
-            return Ok(if direct.cost_after < full.cost_after { direct } else { FitResult { cost_before: direct.cost_before, ..full } });
+            return Ok(if direct.cost_after < full.cost_after {
+                direct
+            } else {
+                FitResult {
+                    cost_before: direct.cost_before,
+                    ..full
+                }
+            });
         }
     }
     fit_from(r, runs, o)
@@ -390,11 +549,22 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     if !o.estimate_start || r.free.is_empty() || !runs.iter().any(|x| has_start_nuisance(x, o)) {
         return fit_stage(r, runs, o);
     }
-    let first = fit_stage(r, runs, &FitOptions { estimate_start: false, ..o.clone() })?;
+    let first = fit_stage(
+        r,
+        runs,
+        &FitOptions {
+            estimate_start: false,
+            ..o.clone()
+        },
+    )?;
     let mut from = r.clone();
     from.p = first.p.clone();
     let joint = fit_stage(&from, runs, o)?;
-    Ok(FitResult { cost_before: first.cost_before, iterations: first.iterations + joint.iterations, ..joint })
+    Ok(FitResult {
+        cost_before: first.cost_before,
+        iterations: first.iterations + joint.iterations,
+        ..joint
+    })
 }
 
 /// Information (in scaled units, residuals weighted by their sigmas) below which
@@ -414,7 +584,9 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         .map(|&i| {
             let p = rp[i];
             // strict lower bounds such as r > 0: stay a hair inside
-            let lo = p.min.map_or(f64::NEG_INFINITY, |m| m + 1e-9 * p.nominal.abs().max(1e-9));
+            let lo = p
+                .min
+                .map_or(f64::NEG_INFINITY, |m| m + 1e-9 * p.nominal.abs().max(1e-9));
             (lo, p.max.unwrap_or(f64::INFINITY))
         })
         .collect();
@@ -435,18 +607,28 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         scale.push(0.01);
         bounds.push((-0.5, 0.5));
     }
-    let starts_of = |x: &[f64]| -> Vec<[f64; 3]> { start_cols.iter().map(|c| c.map_or([0.0; 3], |c| [0.0, 0.0, x[c]])).collect() };
+    let starts_of = |x: &[f64]| -> Vec<[f64; 3]> {
+        start_cols
+            .iter()
+            .map(|c| c.map_or([0.0; 3], |c| [0.0, 0.0, x[c]]))
+            .collect()
+    };
     let mut p = r.p.clone();
     let mut x = vec![0.0; dims]; // the start headings live in x[m..]
     let eval = |p: &[f64], x: &[f64]| residuals(r, p, &free, runs, o, false, &starts_of(x)).0;
     let normal = |p: &[f64], x: &[f64]| normal_equations(r, p, &free, runs, o, &starts_of(x));
     let (mut res, mut jtj_raw, mut jtr_raw) = normal(&p, &x);
     if res.is_empty() {
-        return Err(FitError::NoResiduals);
+        return Err(FitError::NoResiduals {
+            pose: r.ir.pose_columns().join(", "),
+            gyro: r.ir.gyro_column(),
+        });
     }
     let cost_before = cost(&res);
     if !cost_before.is_finite() {
-        return Err(FitError::Diverged("the residuals at the starting point are not finite".into()));
+        return Err(FitError::Diverged(
+            "the residuals at the starting point are not finite".into(),
+        ));
     }
     let mut c = cost_before;
     let mut lambda = 1e-3;
@@ -467,14 +649,22 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         // r_r, r_l and b together to 9x their size otherwise).
         let eig = jtj.clone().symmetric_eigen();
         let emax = eig.eigenvalues.max();
-        let undetermined: Vec<DVector<f64>> = (0..dims).filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax)).map(|k| eig.eigenvectors.column(k).into_owned()).collect();
+        let undetermined: Vec<DVector<f64>> = (0..dims)
+            .filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax))
+            .map(|k| eig.eigenvectors.column(k).into_owned())
+            .collect();
         let mut improved = false;
         for _ in 0..30 {
             let mut a = jtj.clone();
             for d in 0..a.nrows() {
                 a[(d, d)] += lambda * jtj[(d, d)].max(1e-12);
             }
-            let Some(mut step) = a.clone().cholesky().map(|ch| ch.solve(&(-&g))).or_else(|| a.svd(true, true).solve(&(-&g), 1e-14).ok()) else {
+            let Some(mut step) = a
+                .clone()
+                .cholesky()
+                .map(|ch| ch.solve(&(-&g)))
+                .or_else(|| a.svd(true, true).solve(&(-&g), 1e-14).ok())
+            else {
                 lambda *= 10.0;
                 continue;
             };
@@ -527,15 +717,33 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     // information about the parameters with the start offsets marginalised out
     // (Schur complement), so the nuisance never shows up as a parameter
     let jtj = if dims > m {
-        let (a, b, cc) = (full.view((0, 0), (m, m)).into_owned(), full.view((0, m), (m, dims - m)).into_owned(), full.view((m, m), (dims - m, dims - m)).into_owned());
-        let cinv = cc.clone().pseudo_inverse(1e-12 * cc.norm().max(1e-300)).unwrap_or_else(|_| DMatrix::zeros(dims - m, dims - m));
+        let (a, b, cc) = (
+            full.view((0, 0), (m, m)).into_owned(),
+            full.view((0, m), (m, dims - m)).into_owned(),
+            full.view((m, m), (dims - m, dims - m)).into_owned(),
+        );
+        let cinv = cc
+            .clone()
+            .pseudo_inverse(1e-12 * cc.norm().max(1e-300))
+            .unwrap_or_else(|_| DMatrix::zeros(dims - m, dims - m));
         &a - &b * cinv * b.transpose()
     } else {
         full
     };
     if m == 0 {
         // only start poses were refined: no parameter to report on
-        return Ok(FitResult { p, free, std: vec![], corr: DMatrix::zeros(0, 0), cost_before, cost_after: c, iterations, n_residuals: n, warnings: vec![], starts });
+        return Ok(FitResult {
+            p,
+            free,
+            std: vec![],
+            corr: DMatrix::zeros(0, 0),
+            cost_before,
+            cost_after: c,
+            iterations,
+            n_residuals: n,
+            warnings: vec![],
+            starts,
+        });
     }
     let d = DMatrix::from_diagonal(&DVector::from_vec(scale[..m].to_vec()));
     let svd = jtj.clone().svd(true, true);
@@ -559,7 +767,12 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
                 for (j, v) in row.iter().enumerate() {
                     undetermined[j] |= v.abs() > 0.2;
                 }
-                let mut parts: Vec<(f64, &str)> = row.iter().zip(&names).map(|(v, n)| (v.abs(), *n)).filter(|(v, _)| *v > 0.2).collect();
+                let mut parts: Vec<(f64, &str)> = row
+                    .iter()
+                    .zip(&names)
+                    .map(|(v, n)| (v.abs(), *n))
+                    .filter(|(v, _)| *v > 0.2)
+                    .collect();
                 parts.sort_by(|a, b| b.0.total_cmp(&a.0));
                 warnings.push(format!(
                     "not identifiable from these logs: the combination of {} cannot be separated (rank {rank} of {m})",
@@ -568,14 +781,33 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             }
         }
     }
-    let cov = &d * svd.pseudo_inverse(cutoff).unwrap_or_else(|_| DMatrix::zeros(m, m)) * &d * s2;
+    let cov = &d
+        * svd
+            .pseudo_inverse(cutoff)
+            .unwrap_or_else(|_| DMatrix::zeros(m, m))
+        * &d
+        * s2;
     // The pseudo-inverse gives an undetermined direction zero variance, which would
     // read as "known exactly": such parameters get an infinite standard deviation
     // (reported as unidentified, null in JSON).
-    let std: Vec<f64> = (0..m).map(|k| if undetermined[k] { f64::INFINITY } else { cov[(k, k)].max(0.0).sqrt() }).collect();
+    let std: Vec<f64> = (0..m)
+        .map(|k| {
+            if undetermined[k] {
+                f64::INFINITY
+            } else {
+                cov[(k, k)].max(0.0).sqrt()
+            }
+        })
+        .collect();
     let corr = DMatrix::from_fn(m, m, |a, b| {
         let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
-        if d > 0.0 { cov[(a, b)] / d } else if a == b { 1.0 } else { 0.0 }
+        if d > 0.0 {
+            cov[(a, b)] / d
+        } else if a == b {
+            1.0
+        } else {
+            0.0
+        }
     });
     for a in 0..m {
         for b in a + 1..m {
@@ -588,8 +820,22 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     for (k, &i) in free.iter().enumerate() {
         let (lo, hi) = bounds[k];
         if (p[i] - lo).abs() < 1e-6 * scale[k] || (p[i] - hi).abs() < 1e-6 * scale[k] {
-            warnings.push(format!("{} ended on its physical bound ({}): the estimate is not meaningful", names[k], p[i]));
+            warnings.push(format!(
+                "{} ended on its physical bound ({}): the estimate is not meaningful",
+                names[k], p[i]
+            ));
         }
     }
-    Ok(FitResult { p, free, std, corr, cost_before, cost_after: c, iterations, n_residuals: n, warnings, starts })
+    Ok(FitResult {
+        p,
+        free,
+        std,
+        corr,
+        cost_before,
+        cost_after: c,
+        iterations,
+        n_residuals: n,
+        warnings,
+        starts,
+    })
 }

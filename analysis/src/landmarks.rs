@@ -8,6 +8,8 @@ use crate::dataset::Run;
 use crate::deadreckon::Track;
 use crate::log::{read_csv, wrap, LogError};
 use crate::model::Runner;
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::RangeBearing;
 use serde::Serialize;
 use std::collections::HashMap;
 use std::path::Path;
@@ -48,7 +50,11 @@ pub fn read_map(path: &Path) -> Result<Map, LogError> {
         }
         let xy = [h.number(line, &rec, x_i)?, h.number(line, &rec, y_i)?];
         if map.xy.insert(id.clone(), xy).is_some() {
-            return Err(h.err(Some(line), Some("id"), format!("landmark `{id}` is listed twice")));
+            return Err(h.err(
+                Some(line),
+                Some("id"),
+                format!("landmark `{id}` is listed twice"),
+            ));
         }
         map.ids.push(id);
     }
@@ -60,7 +66,11 @@ pub fn read_map(path: &Path) -> Result<Map, LogError> {
 
 /// Read `OBS.csv` (`t,id,range,bearing`): time non-decreasing (several landmarks
 /// may be seen at one instant), range positive, every id in the map.
-pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Vec<LandmarkObs>, LogError> {
+pub fn read_observations(
+    path: &Path,
+    map: &Map,
+    map_path: &Path,
+) -> Result<Vec<LandmarkObs>, LogError> {
     let (h, mut rdr) = read_csv(path, "landmark observations")?;
     let cols = h.require(&["t", "id", "range", "bearing"])?;
     let (t_i, id_i, range_i, bearing_i) = (cols[0], cols[1], cols[2], cols[3]);
@@ -70,19 +80,38 @@ pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Vec<
         let t = h.number(line, &rec, t_i)?;
         if let Some(prev) = out.last() {
             if t < prev.t {
-                return Err(h.err(Some(line), Some("t"), format!("time goes backwards: {t} follows {}", prev.t)));
+                return Err(h.err(
+                    Some(line),
+                    Some("t"),
+                    format!("time goes backwards: {t} follows {}", prev.t),
+                ));
             }
         }
         let id = h.text(line, &rec, id_i)?.to_string();
         let Some(&[xl, yl]) = map.xy.get(&id) else {
-            return Err(h.err(Some(line), Some("id"), format!("landmark `{id}` is not in the map {}", map_path.display())));
+            return Err(h.err(
+                Some(line),
+                Some("id"),
+                format!("landmark `{id}` is not in the map {}", map_path.display()),
+            ));
         };
         let range = h.number(line, &rec, range_i)?;
         if range <= 0.0 {
-            return Err(h.err(Some(line), Some("range"), format!("range {range} is not positive")));
+            return Err(h.err(
+                Some(line),
+                Some("range"),
+                format!("range {range} is not positive"),
+            ));
         }
         let bearing = h.number(line, &rec, bearing_i)?;
-        out.push(LandmarkObs { t, id, xl, yl, range, bearing });
+        out.push(LandmarkObs {
+            t,
+            id,
+            xl,
+            yl,
+            range,
+            bearing,
+        });
     }
     if out.is_empty() {
         return Err(h.err(None, None, "no observations"));
@@ -101,10 +130,18 @@ pub fn pose_from_landmarks(obs: &[LandmarkObs], t_until: f64) -> Option<[f64; 3]
     if distinct.len() < 2 {
         return None;
     }
-    let body: Vec<[f64; 2]> = seen.iter().map(|o| [o.range * o.bearing.cos(), o.range * o.bearing.sin()]).collect();
+    let body: Vec<[f64; 2]> = seen
+        .iter()
+        .map(|o| [o.range * o.bearing.cos(), o.range * o.bearing.sin()])
+        .collect();
     let world: Vec<[f64; 2]> = seen.iter().map(|o| [o.xl, o.yl]).collect();
     let n = seen.len() as f64;
-    let mean = |v: &[[f64; 2]]| [v.iter().map(|p| p[0]).sum::<f64>() / n, v.iter().map(|p| p[1]).sum::<f64>() / n];
+    let mean = |v: &[[f64; 2]]| {
+        [
+            v.iter().map(|p| p[0]).sum::<f64>() / n,
+            v.iter().map(|p| p[1]).sum::<f64>() / n,
+        ]
+    };
     let (mb, mw) = (mean(&body), mean(&world));
     let (mut sdot, mut scross) = (0.0, 0.0);
     for (b, w) in body.iter().zip(&world) {
@@ -114,7 +151,11 @@ pub fn pose_from_landmarks(obs: &[LandmarkObs], t_until: f64) -> Option<[f64; 3]
     }
     let th = scross.atan2(sdot);
     let (s, c) = th.sin_cos();
-    Some([mw[0] - (c * mb[0] - s * mb[1]), mw[1] - (s * mb[0] + c * mb[1]), th])
+    Some([
+        mw[0] - (c * mb[0] - s * mb[1]),
+        mw[1] - (s * mb[0] + c * mb[1]),
+        th,
+    ])
 }
 
 /// Where an observation falls on a track: (step j, fraction a, interpolated pose).
@@ -126,8 +167,14 @@ pub fn locate_on(run: &Run, track: &Track, t: f64) -> (usize, f64, [f64; 3]) {
 }
 
 /// Model prediction (range, bearing) of an observation from a track.
-pub fn predict(r: &Runner, p: &[f64], run: &Run, track: &Track, o: &LandmarkObs) -> Option<[f64; 2]> {
-    let h = r.ir.function("obs_landmark")?;
+pub fn predict(
+    r: &Runner,
+    p: &[f64],
+    run: &Run,
+    track: &Track,
+    o: &LandmarkObs,
+) -> Option<[f64; 2]> {
+    let h = r.ir.observation_fn(RangeBearing, "")?;
     let (j, _, x) = locate_on(run, track, o.t);
     let u = &run.u[j.min(run.steps() - 1)];
     let v = h.eval(&Runner::obs_args(h, &x, u, p, &[o.xl, o.yl]));
@@ -159,7 +206,14 @@ pub struct InnovationStats {
 pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &Track) -> Vec<Innovation> {
     run.landmarks
         .iter()
-        .filter_map(|o| predict(r, p, run, track, o).map(|pr| Innovation { t: o.t, id: o.id.clone(), range_m: o.range - pr[0], bearing_rad: wrap(o.bearing - pr[1]) }))
+        .filter_map(|o| {
+            predict(r, p, run, track, o).map(|pr| Innovation {
+                t: o.t,
+                id: o.id.clone(),
+                range_m: o.range - pr[0],
+                bearing_rad: wrap(o.bearing - pr[1]),
+            })
+        })
         .collect()
 }
 
@@ -174,12 +228,20 @@ pub fn stats(all: &[Innovation]) -> Option<InnovationStats> {
         e.0 += i.range_m * i.range_m;
         e.1 += 1;
     }
-    let worst = per.iter().map(|(id, (s, k))| (id.to_string(), (s / *k as f64).sqrt())).max_by(|a, b| a.1.total_cmp(&b.1));
+    let worst = per
+        .iter()
+        .map(|(id, (s, k))| (id.to_string(), (s / *k as f64).sqrt()))
+        .max_by(|a, b| a.1.total_cmp(&b.1));
     Some(InnovationStats {
         observations: all.len(),
         landmarks: per.len(),
         range_rmse_m: (all.iter().map(|i| i.range_m * i.range_m).sum::<f64>() / n).sqrt(),
-        bearing_rmse_rad: (all.iter().map(|i| i.bearing_rad * i.bearing_rad).sum::<f64>() / n).sqrt(),
+        bearing_rmse_rad: (all
+            .iter()
+            .map(|i| i.bearing_rad * i.bearing_rad)
+            .sum::<f64>()
+            / n)
+            .sqrt(),
         range_bias_m: all.iter().map(|i| i.range_m).sum::<f64>() / n,
         bearing_bias_rad: all.iter().map(|i| i.bearing_rad).sum::<f64>() / n,
         worst_landmark: worst,
@@ -198,7 +260,14 @@ mod tests {
             .iter()
             .map(|(id, x, y)| {
                 let (dx, dy) = (x - pose[0], y - pose[1]);
-                LandmarkObs { t: 0.0, id: id.to_string(), xl: *x, yl: *y, range: dx.hypot(dy), bearing: dy.atan2(dx) - pose[2] }
+                LandmarkObs {
+                    t: 0.0,
+                    id: id.to_string(),
+                    xl: *x,
+                    yl: *y,
+                    range: dx.hypot(dy),
+                    bearing: dy.atan2(dx) - pose[2],
+                }
             })
             .collect();
         let got = pose_from_landmarks(&obs, 0.5).unwrap();

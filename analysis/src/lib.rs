@@ -7,7 +7,6 @@
 pub mod dataset;
 pub mod deadreckon;
 pub mod diagnose;
-pub mod effects;
 pub mod fit;
 pub mod landmarks;
 pub mod log;
@@ -16,4 +15,5 @@ pub mod model;
 pub mod seed_methods;
 pub mod simulate;
 
+pub use kinegen_model::effects;
 pub use kinegen_model::ir::ModelIr;

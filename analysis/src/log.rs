@@ -32,16 +32,48 @@ pub struct CsvHeader {
 }
 
 /// Open a CSV file (`what` names it in the error) and read its header.
-pub fn read_csv(path: &Path, what: &str) -> Result<(CsvHeader, csv::Reader<std::fs::File>), LogError> {
-    let e = |row: Option<usize>, m: String| LogError { file: path.to_path_buf(), row, column: None, message: m };
-    let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|x| e(None, format!("cannot read {what}: {x}")))?;
-    let names = rdr.headers().map_err(|x| e(Some(1), format!("bad header: {x}")))?.iter().map(str::to_string).collect();
-    Ok((CsvHeader { path: path.to_path_buf(), names }, rdr))
+pub fn read_csv(
+    path: &Path,
+    what: &str,
+) -> Result<(CsvHeader, csv::Reader<std::fs::File>), LogError> {
+    let e = |row: Option<usize>, m: String| LogError {
+        file: path.to_path_buf(),
+        row,
+        column: None,
+        message: m,
+    };
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|x| e(None, format!("cannot read {what}: {x}")))?;
+    let names = rdr
+        .headers()
+        .map_err(|x| e(Some(1), format!("bad header: {x}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    Ok((
+        CsvHeader {
+            path: path.to_path_buf(),
+            names,
+        },
+        rdr,
+    ))
 }
 
 impl CsvHeader {
-    pub fn err(&self, row: Option<usize>, column: Option<&str>, message: impl Into<String>) -> LogError {
-        LogError { file: self.path.clone(), row, column: column.map(str::to_string), message: message.into() }
+    pub fn err(
+        &self,
+        row: Option<usize>,
+        column: Option<&str>,
+        message: impl Into<String>,
+    ) -> LogError {
+        LogError {
+            file: self.path.clone(),
+            row,
+            column: column.map(str::to_string),
+            message: message.into(),
+        }
     }
 
     pub fn position(&self, column: &str) -> Option<usize> {
@@ -52,27 +84,64 @@ impl CsvHeader {
     pub fn require(&self, columns: &[&str]) -> Result<Vec<usize>, LogError> {
         columns
             .iter()
-            .map(|c| self.position(c).ok_or_else(|| self.err(Some(1), Some(c), format!("missing column `{c}` (the header has: {})", self.names.join(", ")))))
+            .map(|c| {
+                self.position(c).ok_or_else(|| {
+                    self.err(
+                        Some(1),
+                        Some(c),
+                        format!(
+                            "missing column `{c}` (the header has: {})",
+                            self.names.join(", ")
+                        ),
+                    )
+                })
+            })
             .collect()
     }
 
     /// The `n`-th record (0-based, as `csv::Reader::records` counts) with its line number.
-    pub fn record(&self, n: usize, rec: csv::Result<csv::StringRecord>) -> Result<(usize, csv::StringRecord), LogError> {
+    pub fn record(
+        &self,
+        n: usize,
+        rec: csv::Result<csv::StringRecord>,
+    ) -> Result<(usize, csv::StringRecord), LogError> {
         let line = n + 2;
-        rec.map(|r| (line, r)).map_err(|x| self.err(Some(line), None, format!("malformed row: {x}")))
+        rec.map(|r| (line, r))
+            .map_err(|x| self.err(Some(line), None, format!("malformed row: {x}")))
     }
 
     /// Cell `i` of a record as text.
-    pub fn text<'a>(&self, line: usize, rec: &'a csv::StringRecord, i: usize) -> Result<&'a str, LogError> {
-        rec.get(i).ok_or_else(|| self.err(Some(line), Some(&self.names[i]), "row is shorter than the header"))
+    pub fn text<'a>(
+        &self,
+        line: usize,
+        rec: &'a csv::StringRecord,
+        i: usize,
+    ) -> Result<&'a str, LogError> {
+        rec.get(i).ok_or_else(|| {
+            self.err(
+                Some(line),
+                Some(&self.names[i]),
+                "row is shorter than the header",
+            )
+        })
     }
 
     /// Cell `i` of a record as a finite number.
     pub fn number(&self, line: usize, rec: &csv::StringRecord, i: usize) -> Result<f64, LogError> {
         let cell = self.text(line, rec, i)?;
-        let v: f64 = cell.parse().map_err(|_| self.err(Some(line), Some(&self.names[i]), format!("`{cell}` is not a number")))?;
+        let v: f64 = cell.parse().map_err(|_| {
+            self.err(
+                Some(line),
+                Some(&self.names[i]),
+                format!("`{cell}` is not a number"),
+            )
+        })?;
         if !v.is_finite() {
-            return Err(self.err(Some(line), Some(&self.names[i]), format!("`{cell}` is not finite")));
+            return Err(self.err(
+                Some(line),
+                Some(&self.names[i]),
+                format!("`{cell}` is not finite"),
+            ));
         }
         Ok(v)
     }
@@ -87,8 +156,18 @@ pub struct Log {
 }
 
 impl Log {
-    pub fn err(&self, row: Option<usize>, column: Option<&str>, message: impl Into<String>) -> LogError {
-        LogError { file: self.path.clone(), row, column: column.map(str::to_string), message: message.into() }
+    pub fn err(
+        &self,
+        row: Option<usize>,
+        column: Option<&str>,
+        message: impl Into<String>,
+    ) -> LogError {
+        LogError {
+            file: self.path.clone(),
+            row,
+            column: column.map(str::to_string),
+            message: message.into(),
+        }
     }
 
     pub fn has(&self, c: &str) -> bool {
@@ -96,10 +175,13 @@ impl Log {
     }
 
     pub fn col(&self, c: &str) -> Result<&[f64], LogError> {
-        self.columns
-            .get(c)
-            .map(|v| &v[..])
-            .ok_or_else(|| self.err(Some(1), Some(c), format!("missing column `{c}` (the header has: {})", self.header())))
+        self.columns.get(c).map(|v| &v[..]).ok_or_else(|| {
+            self.err(
+                Some(1),
+                Some(c),
+                format!("missing column `{c}` (the header has: {})", self.header()),
+            )
+        })
     }
 
     fn header(&self) -> String {
@@ -111,8 +193,15 @@ impl Log {
     /// Read a log, keeping only `wanted` columns (others are ignored, as the contract says).
     pub fn read(path: &Path, wanted: &[&str]) -> Result<Log, LogError> {
         let (header, mut rdr) = read_csv(path, "log")?;
-        let idx: Vec<(usize, String)> = header.names.iter().enumerate().filter(|(_, h)| wanted.contains(&h.as_str())).map(|(i, h)| (i, h.clone())).collect();
-        let mut columns: HashMap<String, Vec<f64>> = idx.iter().map(|(_, h)| (h.clone(), Vec::new())).collect();
+        let idx: Vec<(usize, String)> = header
+            .names
+            .iter()
+            .enumerate()
+            .filter(|(_, h)| wanted.contains(&h.as_str()))
+            .map(|(i, h)| (i, h.clone()))
+            .collect();
+        let mut columns: HashMap<String, Vec<f64>> =
+            idx.iter().map(|(_, h)| (h.clone(), Vec::new())).collect();
         let mut len = 0;
         for (n, rec) in rdr.records().enumerate() {
             let (line, rec) = header.record(n, rec)?;
@@ -122,11 +211,19 @@ impl Log {
             }
             len += 1;
         }
-        let log = Log { path: path.to_path_buf(), columns, len };
+        let log = Log {
+            path: path.to_path_buf(),
+            columns,
+            len,
+        };
         let t = log.col("t")?;
         for k in 1..t.len() {
             if t[k] <= t[k - 1] {
-                return Err(log.err(Some(k + 2), Some("t"), format!("time must increase strictly: {} follows {}", t[k], t[k - 1])));
+                return Err(log.err(
+                    Some(k + 2),
+                    Some("t"),
+                    format!("time must increase strictly: {} follows {}", t[k], t[k - 1]),
+                ));
             }
         }
         Ok(log)
@@ -153,7 +250,8 @@ pub fn unwrap(a: &[f64]) -> Vec<f64> {
 
 /// Wrap an angle to (-pi, pi].
 pub fn wrap(a: f64) -> f64 {
-    let r = (a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
+    let r =
+        (a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
     if r <= -std::f64::consts::PI {
         r + 2.0 * std::f64::consts::PI
     } else {

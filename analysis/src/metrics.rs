@@ -54,8 +54,18 @@ pub struct RowErrors {
 }
 
 pub fn row_errors(track: &Track, gt: &[[f64; 3]]) -> RowErrors {
-    let pos = track.measured.iter().zip(gt).map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()).collect();
-    let head = track.measured.iter().zip(gt).map(|(a, b)| wrap(a[2] - b[2])).collect();
+    let pos = track
+        .measured
+        .iter()
+        .zip(gt)
+        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+        .collect();
+    let head = track
+        .measured
+        .iter()
+        .zip(gt)
+        .map(|(a, b)| wrap(a[2] - b[2]))
+        .collect();
     RowErrors { pos, head }
 }
 
@@ -69,7 +79,11 @@ pub fn regime(tw: &[f64; 3], fast: f64) -> &'static str {
     } else if tw[1].abs() > 0.5 * v {
         "sideways"
     } else if tw[2].abs() < 0.1 {
-        if v > fast { "straight fast" } else { "straight slow" }
+        if v > fast {
+            "straight fast"
+        } else {
+            "straight slow"
+        }
     } else if tw[2] > 0.0 {
         "turn left"
     } else {
@@ -107,7 +121,8 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
             // RPE: windows of 1 m travelled and of 5 s
             let mut dist = vec![0.0];
             for k in 1..gt.len() {
-                let d = ((gt[k][0] - gt[k - 1][0]).powi(2) + (gt[k][1] - gt[k - 1][1]).powi(2)).sqrt();
+                let d =
+                    ((gt[k][0] - gt[k - 1][0]).powi(2) + (gt[k][1] - gt[k - 1][1]).powi(2)).sqrt();
                 dist.push(dist[k - 1] + d);
             }
             let mut j = 0;
@@ -119,7 +134,8 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
                     break;
                 }
                 let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.measured[i], &tr.measured[j]));
-                rpe_d += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / (dist[j] - dist[i]);
+                rpe_d +=
+                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / (dist[j] - dist[i]);
                 rpe_dn += 1;
             }
             let mut j = 0;
@@ -155,7 +171,11 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
 
 /// Which regimes carry the error growth, and the worst 1 s segments.
 pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment>) {
-    let mut speeds: Vec<f64> = runs.iter().flat_map(|(_, t)| t.twist.iter().map(|w| (w[0] * w[0] + w[1] * w[1]).sqrt())).filter(|v| *v > 0.02).collect();
+    let mut speeds: Vec<f64> = runs
+        .iter()
+        .flat_map(|(_, t)| t.twist.iter().map(|w| (w[0] * w[0] + w[1] * w[1]).sqrt()))
+        .filter(|v| *v > 0.02)
+        .collect();
     speeds.sort_by(f64::total_cmp);
     let fast = speeds.get(speeds.len() / 2).copied().unwrap_or(0.0);
     let mut shares: Vec<RegimeShare> = Vec::new();
@@ -169,7 +189,15 @@ pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment
             let s = match shares.iter_mut().find(|s| s.regime == reg) {
                 Some(s) => s,
                 None => {
-                    shares.push(RegimeShare { regime: reg.into(), time_s: 0.0, distance_m: 0.0, position_error_growth_m: 0.0, position_share: 0.0, heading_error_growth_rad: 0.0, heading_share: 0.0 });
+                    shares.push(RegimeShare {
+                        regime: reg.into(),
+                        time_s: 0.0,
+                        distance_m: 0.0,
+                        position_error_growth_m: 0.0,
+                        position_share: 0.0,
+                        heading_error_growth_rad: 0.0,
+                        heading_share: 0.0,
+                    });
                     shares.last_mut().unwrap()
                 }
             };
@@ -192,13 +220,29 @@ pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment
             }
         }
     }
-    let (tp, th): (f64, f64) = shares.iter().fold((0.0, 0.0), |a, s| (a.0 + s.position_error_growth_m, a.1 + s.heading_error_growth_rad));
+    let (tp, th): (f64, f64) = shares.iter().fold((0.0, 0.0), |a, s| {
+        (
+            a.0 + s.position_error_growth_m,
+            a.1 + s.heading_error_growth_rad,
+        )
+    });
     for s in &mut shares {
-        s.position_share = if tp > 0.0 { s.position_error_growth_m / tp } else { 0.0 };
-        s.heading_share = if th > 0.0 { s.heading_error_growth_rad / th } else { 0.0 };
+        s.position_share = if tp > 0.0 {
+            s.position_error_growth_m / tp
+        } else {
+            0.0
+        };
+        s.heading_share = if th > 0.0 {
+            s.heading_error_growth_rad / th
+        } else {
+            0.0
+        };
     }
     shares.sort_by(|a, b| b.position_share.total_cmp(&a.position_share));
-    segments.sort_by(|a, b| b.position_error_growth_m.total_cmp(&a.position_error_growth_m));
+    segments.sort_by(|a, b| {
+        b.position_error_growth_m
+            .total_cmp(&a.position_error_growth_m)
+    });
     segments.truncate(5);
     (shares, segments)
 }

@@ -1,11 +1,16 @@
 //! A model ready to run: its IR, the runtime parameter vector (nominal values with
 //! `--set` overrides) and which parameters are free.
 use kinegen_model::ir::{Function, ModelIr};
+use kinegen_model::spec::ObservationRole;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
     #[error("unknown parameter `{name}` in --set (the model `{model}` has: {known})")]
-    UnknownParam { name: String, model: String, known: String },
+    UnknownParam {
+        name: String,
+        model: String,
+        known: String,
+    },
     #[error("--set {0}: expected NAME=VALUE with a finite number")]
     BadSet(String),
     #[error("model `{0}` lacks the function `{1}` (regenerate its IR)")]
@@ -26,8 +31,13 @@ pub struct Runner {
 pub fn parse_sets(sets: &[String]) -> Result<Vec<(String, f64)>, ModelError> {
     sets.iter()
         .map(|s| {
-            let (n, v) = s.split_once('=').ok_or_else(|| ModelError::BadSet(s.clone()))?;
-            let v: f64 = v.trim().parse().map_err(|_| ModelError::BadSet(s.clone()))?;
+            let (n, v) = s
+                .split_once('=')
+                .ok_or_else(|| ModelError::BadSet(s.clone()))?;
+            let v: f64 = v
+                .trim()
+                .parse()
+                .map_err(|_| ModelError::BadSet(s.clone()))?;
             if !v.is_finite() {
                 return Err(ModelError::BadSet(s.clone()));
             }
@@ -41,16 +51,29 @@ impl Runner {
         let rp = ir.runtime_params();
         let names: Vec<String> = rp.iter().map(|p| p.name.clone()).collect();
         let mut p: Vec<f64> = rp.iter().map(|p| p.nominal).collect();
-        let free = rp.iter().enumerate().filter(|(_, p)| p.free).map(|(i, _)| i).collect();
+        let free = rp
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.free)
+            .map(|(i, _)| i)
+            .collect();
         for (n, v) in sets {
-            let i = names.iter().position(|x| x == n).ok_or_else(|| ModelError::UnknownParam {
-                name: n.clone(),
-                model: ir.name.clone(),
-                known: names.join(", "),
-            })?;
+            let i = names
+                .iter()
+                .position(|x| x == n)
+                .ok_or_else(|| ModelError::UnknownParam {
+                    name: n.clone(),
+                    model: ir.name.clone(),
+                    known: names.join(", "),
+                })?;
             p[i] = *v;
         }
-        for f in ["step_exact", "step_exact_jac_x", "step_exact_jac_p", "twist"] {
+        for f in [
+            "step_exact",
+            "step_exact_jac_x",
+            "step_exact_jac_p",
+            "twist",
+        ] {
             if ir.function(f).is_none() {
                 return Err(ModelError::Missing(ir.name.clone(), f.into()));
             }
@@ -62,9 +85,9 @@ impl Runner {
         self.ir.function(name).expect("checked in Runner::new")
     }
 
-    /// The noise standard deviations the spec declares for observation `name`.
-    pub fn obs_sigma(&self, name: &str) -> Option<&[f64]> {
-        self.ir.observations.iter().find(|o| o.name == name).map(|o| &o.sigma[..])
+    /// The noise standard deviations the spec declares for the observation playing `role`.
+    pub fn obs_sigma(&self, role: ObservationRole) -> Option<&[f64]> {
+        self.ir.observation(role).map(|o| &o.sigma[..])
     }
 
     pub fn param_index(&self, name: &str) -> Option<usize> {
@@ -72,7 +95,14 @@ impl Runner {
     }
 
     /// Build the argument list of a step-shaped function (x, u, [w = 0], p, dt).
-    pub fn step_args<'a>(f: &Function, x: &'a [f64], u: &'a [f64], p: &'a [f64], dt: &'a [f64], zeros: &'a [f64]) -> Vec<&'a [f64]> {
+    pub fn step_args<'a>(
+        f: &Function,
+        x: &'a [f64],
+        u: &'a [f64],
+        p: &'a [f64],
+        dt: &'a [f64],
+        zeros: &'a [f64],
+    ) -> Vec<&'a [f64]> {
         f.args
             .iter()
             .map(|a| match a.name.as_str() {
@@ -86,7 +116,13 @@ impl Runner {
     }
 
     /// Observation-shaped arguments (x, u, p, [lm]).
-    pub fn obs_args<'a>(f: &Function, x: &'a [f64], u: &'a [f64], p: &'a [f64], lm: &'a [f64]) -> Vec<&'a [f64]> {
+    pub fn obs_args<'a>(
+        f: &Function,
+        x: &'a [f64],
+        u: &'a [f64],
+        p: &'a [f64],
+        lm: &'a [f64],
+    ) -> Vec<&'a [f64]> {
         f.args
             .iter()
             .map(|a| match a.name.as_str() {

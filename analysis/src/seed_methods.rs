@@ -16,6 +16,8 @@ use crate::dataset::Run;
 use crate::deadreckon;
 use crate::log::wrap;
 use crate::model::Runner;
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::YawRate;
 use nalgebra::{DMatrix, DVector};
 
 /// Measured yaw rate per step (gyro row k+1, or ground-truth heading rate).
@@ -24,13 +26,20 @@ fn yaw_rates(run: &Run) -> Option<Vec<f64>> {
         return Some(g[1..].to_vec());
     }
     let gt = run.gt.as_ref()?;
-    Some((0..run.steps()).map(|k| wrap(gt[k + 1][2] - gt[k][2]) / run.dt[k]).collect())
+    Some(
+        (0..run.steps())
+            .map(|k| wrap(gt[k + 1][2] - gt[k][2]) / run.dt[k])
+            .collect(),
+    )
 }
 
 /// Model yaw rate per step and its gradient w.r.t. the free parameters.
 fn predicted(r: &Runner, p: &[f64], run: &Run, free: &[usize]) -> (Vec<f64>, Vec<Vec<f64>>) {
-    let h = r.ir.function("obs_gyro").or_else(|| r.ir.function("twist")).unwrap();
-    let jp = r.ir.function("obs_gyro_jac_p");
+    let h =
+        r.ir.observation_fn(YawRate, "")
+            .or_else(|| r.ir.function("twist"))
+            .unwrap();
+    let jp = r.ir.observation_fn(YawRate, "_jac_p");
     let tw = r.f("twist");
     let mut w = Vec::new();
     let mut g = Vec::new();
@@ -71,7 +80,12 @@ pub struct SeedFit {
     pub cost_after: f64,
 }
 
-fn gyro_cost(r: &Runner, p: &[f64], runs: &[Run], free: &[usize]) -> (f64, DVector<f64>, DMatrix<f64>) {
+fn gyro_cost(
+    r: &Runner,
+    p: &[f64],
+    runs: &[Run],
+    free: &[usize],
+) -> (f64, DVector<f64>, DMatrix<f64>) {
     let (mut v, mut n) = (0.0, 0usize);
     let m = free.len();
     let mut grad = DVector::zeros(m);
@@ -106,17 +120,35 @@ pub fn yaw_rate_blind_directions(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<Str
     }
     let (_, _, h) = gyro_cost(r, p, runs, &free);
     let scale = DVector::from_iterator(free.len(), free.iter().map(|&i| prior_std(r, i) * 10.0));
-    let hs = DMatrix::from_fn(free.len(), free.len(), |a, b| h[(a, b)] * scale[a] * scale[b]);
+    let hs = DMatrix::from_fn(free.len(), free.len(), |a, b| {
+        h[(a, b)] * scale[a] * scale[b]
+    });
     let eig = nalgebra::SymmetricEigen::new(hs);
     let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
     let mut out = Vec::new();
     for (k, &l) in eig.eigenvalues.iter().enumerate() {
         if lmax > 0.0 && l < 1e-9 * lmax {
             let v = eig.eigenvectors.column(k);
-            let mut comps: Vec<(usize, f64)> = v.iter().copied().enumerate().filter(|(_, c)| c.abs() > 0.05).collect();
+            let mut comps: Vec<(usize, f64)> = v
+                .iter()
+                .copied()
+                .enumerate()
+                .filter(|(_, c)| c.abs() > 0.05)
+                .collect();
             comps.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-            let sign = if comps.first().is_some_and(|c| c.1 < 0.0) { -1.0 } else { 1.0 };
-            out.push(comps.iter().take(6).map(|(a, c)| format!("{} {:+.2}", r.names[free[*a]], sign * c)).collect::<Vec<_>>().join(", "));
+            let sign = if comps.first().is_some_and(|c| c.1 < 0.0) {
+                -1.0
+            } else {
+                1.0
+            };
+            out.push(
+                comps
+                    .iter()
+                    .take(6)
+                    .map(|(a, c)| format!("{} {:+.2}", r.names[free[*a]], sign * c))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            );
         }
     }
     out
@@ -149,9 +181,20 @@ pub fn gradient_descent(r: &Runner, runs: &[Run], max_iter: usize) -> Result<See
     }
     let (vf, _, h) = gyro_cost(r, &p, runs, &free);
     let n: usize = runs.iter().map(|x| x.steps()).sum();
-    let cov = h.pseudo_inverse(1e-12).unwrap_or_else(|_| DMatrix::zeros(free.len(), free.len())) * (2.0 * vf / n as f64);
+    let cov = h
+        .pseudo_inverse(1e-12)
+        .unwrap_or_else(|_| DMatrix::zeros(free.len(), free.len()))
+        * (2.0 * vf / n as f64);
     let _ = v;
-    Ok(SeedFit { std: (0..free.len()).map(|k| cov[(k, k)].max(0.0).sqrt()).collect(), p, iterations: it, cost_before: v0, cost_after: vf })
+    Ok(SeedFit {
+        std: (0..free.len())
+            .map(|k| cov[(k, k)].max(0.0).sqrt())
+            .collect(),
+        p,
+        iterations: it,
+        cost_before: v0,
+        cost_after: vf,
+    })
 }
 
 /// Prior standard deviation of a parameter for the EKF: 10% of its nominal value;
@@ -163,8 +206,19 @@ fn prior_std(r: &Runner, i: usize) -> f64 {
     if own > 0.0 {
         return own;
     }
-    let unit = &r.ir.params.iter().find(|p| p.name == r.names[i]).map(|p| p.unit.clone()).unwrap_or_default();
-    let mut same: Vec<f64> = r.ir.params.iter().filter(|p| !p.constant && &p.unit == unit && p.nominal != 0.0).map(|p| p.nominal.abs()).collect();
+    let unit = &r
+        .ir
+        .params
+        .iter()
+        .find(|p| p.name == r.names[i])
+        .map(|p| p.unit.clone())
+        .unwrap_or_default();
+    let mut same: Vec<f64> =
+        r.ir.params
+            .iter()
+            .filter(|p| !p.constant && &p.unit == unit && p.nominal != 0.0)
+            .map(|p| p.nominal.abs())
+            .collect();
     same.sort_by(f64::total_cmp);
     0.1 * same.get(same.len() / 2).copied().unwrap_or(0.01)
 }
@@ -177,14 +231,26 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
     let free = r.free.clone();
     let m = free.len();
     let mut p = r.p.clone();
-    let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(m, free.iter().map(|&i| prior_std(r, i).powi(2))));
+    let mut cov = DMatrix::from_diagonal(&DVector::from_iterator(
+        m,
+        free.iter().map(|&i| prior_std(r, i).powi(2)),
+    ));
     let sv2 = sigma_omega * sigma_omega + mu * mu;
     let (v0, _, _) = gyro_cost(r, &p, runs, &free);
     let mut steps = 0;
     for run in runs {
         let Some(meas) = yaw_rates(run) else { continue };
         for k in 0..run.steps() {
-            let one = Run { name: String::new(), t: vec![0.0, run.dt[k]], dt: vec![run.dt[k]], u: vec![run.u[k].clone()], gt: None, gyro: None, landmarks: Vec::new(), rate_inputs: Vec::new() };
+            let one = Run {
+                name: String::new(),
+                t: vec![0.0, run.dt[k]],
+                dt: vec![run.dt[k]],
+                u: vec![run.u[k].clone()],
+                gt: None,
+                gyro: None,
+                landmarks: Vec::new(),
+                rate_inputs: Vec::new(),
+            };
             let (w, g) = predicted(r, &p, &one, &free);
             let hgrad = DVector::from_vec(g[0].clone());
             let s = (hgrad.transpose() * &cov * &hgrad)[(0, 0)] + sv2;
@@ -201,7 +267,13 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
         return Err("no yaw-rate measurement (gyro_z or ground-truth heading) in the logs".into());
     }
     let (vf, _, _) = gyro_cost(r, &p, runs, &free);
-    Ok(SeedFit { std: (0..m).map(|k| cov[(k, k)].max(0.0).sqrt()).collect(), p, iterations: steps, cost_before: v0, cost_after: vf })
+    Ok(SeedFit {
+        std: (0..m).map(|k| cov[(k, k)].max(0.0).sqrt()).collect(),
+        p,
+        iterations: steps,
+        cost_before: v0,
+        cost_after: vf,
+    })
 }
 
 /// Result of UMBMark: corrected parameters and the intermediate quantities.
@@ -222,18 +294,32 @@ pub struct Umbmark {
 /// Eb = 90 deg/(90 deg - alpha). Corrections: b' = Eb b, r_l' = 2/(Ed + 1) r_l,
 /// r_r' = 2/(1/Ed + 1) r_r. Needs parameters named r_r, r_l and b.
 pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
-    let (ir_, il, ib) = match (r.param_index("r_r"), r.param_index("r_l"), r.param_index("b")) {
+    let (ir_, il, ib) = match (
+        r.param_index("r_r"),
+        r.param_index("r_l"),
+        r.param_index("b"),
+    ) {
         (Some(a), Some(b), Some(c)) => (a, b, c),
-        _ => return Err("UMBMark needs a differential drive with parameters r_r, r_l and b".into()),
+        _ => {
+            return Err("UMBMark needs a differential drive with parameters r_r, r_l and b".into())
+        }
     };
     let (mut cw, mut ccw) = (Vec::new(), Vec::new());
     for run in runs {
-        let gt = run.gt.as_ref().ok_or_else(|| format!("{}: UMBMark needs ground truth", run.name))?;
+        let gt = run
+            .gt
+            .as_ref()
+            .ok_or_else(|| format!("{}: UMBMark needs ground truth", run.name))?;
         let start = run.start_pose();
         let tr = deadreckon::run(r, &r.p, run, false);
         let (e_true, e_odo) = (gt.last().unwrap(), tr.pose.last().unwrap());
         let (c, s) = (start[2].cos(), start[2].sin());
-        let rot = |v: [f64; 3]| [c * (v[0] - start[0]) + s * (v[1] - start[1]), -s * (v[0] - start[0]) + c * (v[1] - start[1])];
+        let rot = |v: [f64; 3]| {
+            [
+                c * (v[0] - start[0]) + s * (v[1] - start[1]),
+                -s * (v[0] - start[0]) + c * (v[1] - start[1]),
+            ]
+        };
         let (a, b) = (rot(*e_true), rot(*e_odo));
         let eps = [a[0] - b[0], a[1] - b[1]];
         let turn = gt.last().unwrap()[2] - gt[0][2];
@@ -244,7 +330,11 @@ pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
         }
     }
     if cw.is_empty() || ccw.is_empty() {
-        return Err(format!("UMBMark needs clockwise and counter-clockwise square runs (got {} cw, {} ccw)", cw.len(), ccw.len()));
+        return Err(format!(
+            "UMBMark needs clockwise and counter-clockwise square runs (got {} cw, {} ccw)",
+            cw.len(),
+            ccw.len()
+        ));
     }
     let mean = |v: &[[f64; 2]]| v.iter().map(|e| e[0]).sum::<f64>() / v.len() as f64;
     let (xcw, xccw) = (mean(&cw), mean(&ccw));
@@ -258,5 +348,13 @@ pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
     p[ib] = eb * b;
     p[il] = 2.0 / (ed + 1.0) * r.p[il];
     p[ir_] = 2.0 / (1.0 / ed + 1.0) * r.p[ir_];
-    Ok(Umbmark { p, ed, eb, alpha_deg: alpha.to_degrees(), beta_deg: beta.to_degrees(), cw_runs: cw.len(), ccw_runs: ccw.len() })
+    Ok(Umbmark {
+        p,
+        ed,
+        eb,
+        alpha_deg: alpha.to_degrees(),
+        beta_deg: beta.to_degrees(),
+        cw_runs: cw.len(),
+        ccw_runs: ccw.len(),
+    })
 }

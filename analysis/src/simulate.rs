@@ -9,6 +9,8 @@
 use crate::log::wrap;
 use crate::model::Runner;
 use kinegen_model::spec::InputKind;
+#[allow(unused_imports)]
+use kinegen_model::spec::ObservationRole::{Pose, RangeBearing, YawRate};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -39,7 +41,9 @@ impl std::str::FromStr for Trajectory {
             "figure8" | "figure-eight" => Ok(Trajectory::FigureEight),
             "random" => Ok(Trajectory::Random),
             "spin" | "turn-in-place" => Ok(Trajectory::Spin),
-            _ => Err(format!("unknown trajectory `{s}` (square, square-cw, square-ccw, figure8, random, spin)")),
+            _ => Err(format!(
+                "unknown trajectory `{s}` (square, square-cw, square-ccw, figure8, random, spin)"
+            )),
         }
     }
 }
@@ -123,22 +127,39 @@ fn square(can_spin: bool, dirs: &[f64]) -> Vec<Seg> {
     let mut segs = Vec::new();
     for &dir in dirs {
         for _ in 0..4 {
-            segs.push(Seg { dur: side / v * 1.35, twist: [v, 0.0, 0.0] });
+            segs.push(Seg {
+                dur: side / v * 1.35,
+                twist: [v, 0.0, 0.0],
+            });
             if can_spin {
-                segs.push(Seg { dur: (PI / 2.0) / w * 1.35, twist: [0.0, 0.0, dir * w] });
+                segs.push(Seg {
+                    dur: (PI / 2.0) / w * 1.35,
+                    twist: [0.0, 0.0, dir * w],
+                });
             } else {
                 // quarter arc of radius 0.5 m
                 let r = 0.5;
-                segs.push(Seg { dur: (PI / 2.0 * r) / 0.2 * 1.35, twist: [0.2, 0.0, dir * 0.2 / r] });
+                segs.push(Seg {
+                    dur: (PI / 2.0 * r) / 0.2 * 1.35,
+                    twist: [0.2, 0.0, dir * 0.2 / r],
+                });
             }
-            segs.push(Seg { dur: 0.5, twist: [0.0; 3] });
+            segs.push(Seg {
+                dur: 0.5,
+                twist: [0.0; 3],
+            });
         }
     }
     segs
 }
 
 /// The desired body twist at time t, and the total duration.
-fn planner(o: &SimOptions, can_spin: bool, lateral: bool, rng: &mut SmallRng) -> (Box<dyn Fn(f64) -> [f64; 3]>, f64) {
+fn planner(
+    o: &SimOptions,
+    can_spin: bool,
+    lateral: bool,
+    rng: &mut SmallRng,
+) -> (Box<dyn Fn(f64) -> [f64; 3]>, f64) {
     match o.trajectory {
         Trajectory::Square | Trajectory::SquareCw | Trajectory::SquareCcw => {
             let dirs: &[f64] = match o.trajectory {
@@ -178,7 +199,11 @@ fn planner(o: &SimOptions, can_spin: bool, lateral: bool, rng: &mut SmallRng) ->
                     let k = smooth(t / 2.0);
                     let s = |i: usize| (2.0 * PI * fr[i] * t + ph[i]).sin();
                     let v = 0.3 + 0.1 * s(0) + 0.05 * s(1);
-                    let vy = if lateral { 0.15 * s(6) + 0.05 * s(7) } else { 0.0 };
+                    let vy = if lateral {
+                        0.15 * s(6) + 0.05 * s(7)
+                    } else {
+                        0.0
+                    };
                     [v * k, vy * k, (0.6 * s(2) + 0.3 * s(3) + 0.2 * s(4)) * k]
                 }),
                 90.0,
@@ -187,7 +212,14 @@ fn planner(o: &SimOptions, can_spin: bool, lateral: bool, rng: &mut SmallRng) ->
         Trajectory::Spin => (
             Box::new(|t| {
                 let k = smooth(t / 1.0);
-                [0.0, 0.0, 1.0 * (2.0 * PI * t / 12.0).sin().signum() * k * smooth((t % 6.0) / 1.0) * smooth((6.0 - t % 6.0) / 1.0)]
+                [
+                    0.0,
+                    0.0,
+                    1.0 * (2.0 * PI * t / 12.0).sin().signum()
+                        * k
+                        * smooth((t % 6.0) / 1.0)
+                        * smooth((6.0 - t % 6.0) / 1.0),
+                ]
             }),
             36.0,
         ),
@@ -217,7 +249,11 @@ pub fn command_at(base: &Runner, twist: &[f64; 3], cfg: &[f64]) -> Vec<f64> {
         .enumerate()
         .map(|(i, inp)| match cfg_idx.iter().position(|&c| c == i) {
             Some(k) => cfg[k],
-            None => inv.row_names.iter().position(|r| *r == inp.name).map_or(0.0, |k| out[k]),
+            None => inv
+                .row_names
+                .iter()
+                .position(|r| *r == inp.name)
+                .map_or(0.0, |k| out[k]),
         })
         .collect()
 }
@@ -233,14 +269,26 @@ pub fn command(base: &Runner, twist: &[f64; 3]) -> Vec<f64> {
 pub fn config_inputs(base: &Runner) -> Vec<usize> {
     let inputs = &base.ir.inputs;
     (0..inputs.len())
-        .filter(|&i| inputs[i].kind == InputKind::Absolute && inputs.iter().any(|o| o.kind == InputKind::Cumulative && o.column == inputs[i].column))
+        .filter(|&i| {
+            inputs[i].kind == InputKind::Absolute
+                && inputs
+                    .iter()
+                    .any(|o| o.kind == InputKind::Cumulative && o.column == inputs[i].column)
+        })
         .collect()
 }
 
 /// For each configuration input, the cumulative input that is its rate.
 fn config_rates(base: &Runner, cfg: &[usize]) -> Vec<usize> {
     let inputs = &base.ir.inputs;
-    cfg.iter().map(|&i| inputs.iter().position(|o| o.kind == InputKind::Cumulative && o.column == inputs[i].column).expect("config input has a rate")).collect()
+    cfg.iter()
+        .map(|&i| {
+            inputs
+                .iter()
+                .position(|o| o.kind == InputKind::Cumulative && o.column == inputs[i].column)
+                .expect("config input has a rate")
+        })
+        .collect()
 }
 
 /// Can the base model turn in place (is the pure rotation in the image of its inputs)?
@@ -277,26 +325,41 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     let n = (total * o.rate_hz).ceil() as usize + 1;
     let period = 1.0 / o.rate_hz;
     let jitter = 0.1 * period;
-    let times: Vec<f64> = (0..n).map(|k| if k == 0 { 0.0 } else { k as f64 * period + rng.gen_range(-jitter..jitter) }).collect();
+    let times: Vec<f64> = (0..n)
+        .map(|k| {
+            if k == 0 {
+                0.0
+            } else {
+                k as f64 * period + rng.gen_range(-jitter..jitter)
+            }
+        })
+        .collect();
     let step = truth.f("step_exact");
     let zeros = [0.0; 16];
     let inputs = &truth.ir.inputs;
     let mut cum = vec![0.0; inputs.len()];
     let mut x = [0.0, 0.0, 0.0];
-    let obs_pose = truth.ir.function("obs_pose");
-    let obs_gyro = truth.ir.function("obs_gyro");
+    let obs_pose = truth.ir.observation_fn(Pose, "");
+    let obs_gyro = truth.ir.observation_fn(YawRate, "");
     let cfg_idx = config_inputs(base);
     let cfg_rate = config_rates(base, &cfg_idx);
     let mut header: Vec<String> = vec!["t".into()];
     // one column per log column: a steering angle feeds both an angle and a rate
     // input, and is written once, from the angle
     let written: Vec<usize> = (0..inputs.len())
-        .filter(|&i| cfg_idx.contains(&i) || !(cfg_idx.iter().any(|&c| inputs[c].column == inputs[i].column) || inputs[..i].iter().any(|o| o.column == inputs[i].column)))
+        .filter(|&i| {
+            cfg_idx.contains(&i)
+                || !(cfg_idx
+                    .iter()
+                    .any(|&c| inputs[c].column == inputs[i].column)
+                    || inputs[..i].iter().any(|o| o.column == inputs[i].column))
+        })
         .collect();
     header.extend(written.iter().map(|&i| inputs[i].column.clone()));
-    header.extend(["gt_x", "gt_y", "gt_theta"].map(String::from));
+    // the columns the spec reads measurements from (its pose and yaw-rate observations)
+    header.extend(base.ir.pose_columns());
     if obs_gyro.is_some() {
-        header.push("gyro_z".into());
+        header.push(base.ir.gyro_column());
     }
     let mut rows = Vec::with_capacity(n);
     // ground truth is recorded with the delay of a `time_offset` parameter
@@ -322,7 +385,11 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
                     command(base, &plan(tm))
                 } else {
                     let u0 = command_at(base, &plan(tm), &cfg);
-                    let mid: Vec<f64> = cfg.iter().zip(&cfg_rate).map(|(c, &r)| c + 0.5 * h * u0[r]).collect();
+                    let mid: Vec<f64> = cfg
+                        .iter()
+                        .zip(&cfg_rate)
+                        .map(|(c, &r)| c + 0.5 * h * u0[r])
+                        .collect();
                     let u = command_at(base, &plan(tm), &mid);
                     for (c, &r) in cfg.iter_mut().zip(&cfg_rate) {
                         *c += h * u[r];
@@ -362,11 +429,23 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
                 // absolute angle sensors (steering encoders, 12 bit like the caster
                 // wheels' above) sample the value at t_k; other absolute inputs get
                 // Gaussian noise
-                InputKind::Absolute if inp.unit == "rad" => (commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i] / ENCODER_LINE).round() * ENCODER_LINE,
-                InputKind::Absolute => commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i] + gaussian(0.002, &mut rng),
+                InputKind::Absolute if inp.unit == "rad" => {
+                    (commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i]
+                        / ENCODER_LINE)
+                        .round()
+                        * ENCODER_LINE
+                }
+                InputKind::Absolute => {
+                    commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i]
+                        + gaussian(0.002, &mut rng)
+                }
             });
         }
-        let seen = if delay == 0.0 { x } else { at_time(&history, times[k] - delay) };
+        let seen = if delay == 0.0 {
+            x
+        } else {
+            at_time(&history, times[k] - delay)
+        };
         let pose = match obs_pose {
             Some(h) => h.eval(&Runner::obs_args(h, &seen, &last_u, &truth.p, &[])),
             None => seen.to_vec(),
@@ -375,24 +454,43 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
         row.push(pose[1] + gaussian(o.pos_noise, &mut rng));
         row.push(wrap(pose[2] + gaussian(o.heading_noise, &mut rng)));
         if let Some(g) = obs_gyro {
-            let v = if k == 0 { g.eval(&Runner::obs_args(g, &x, &last_u, &truth.p, &[]))[0] } else { gyro_mean };
+            let v = if k == 0 {
+                g.eval(&Runner::obs_args(g, &x, &last_u, &truth.p, &[]))[0]
+            } else {
+                gyro_mean
+            };
             row.push(v + gaussian(o.gyro_noise, &mut rng));
         }
         rows.push(row);
     }
     let observations = observe_landmarks(truth, o, &times, &history, &mut rng);
-    SimLog { header, rows, observations }
+    SimLog {
+        header,
+        rows,
+        observations,
+    }
 }
 
 /// Range-bearing observations of the landmarks in range, through the truth
 /// model's `landmark` observation (seed 001 eq. 6) at the true pose, with the
 /// noise the spec declares for it (bearing wrapped).
-fn observe_landmarks(truth: &Runner, o: &SimOptions, times: &[f64], history: &[(f64, [f64; 3])], rng: &mut SmallRng) -> Vec<(f64, String, f64, f64)> {
-    let Some(h) = truth.ir.function("obs_landmark") else { return vec![] };
+fn observe_landmarks(
+    truth: &Runner,
+    o: &SimOptions,
+    times: &[f64],
+    history: &[(f64, [f64; 3])],
+    rng: &mut SmallRng,
+) -> Vec<(f64, String, f64, f64)> {
+    let Some(h) = truth.ir.observation_fn(RangeBearing, "") else {
+        return vec![];
+    };
     if o.landmarks.is_empty() {
         return vec![];
     }
-    let sig = truth.obs_sigma("landmark").filter(|s| s.len() == 2).unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
+    let sig = truth
+        .obs_sigma(RangeBearing)
+        .filter(|s| s.len() == 2)
+        .unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
     let u0 = vec![0.0; truth.ir.inputs.len()];
     let mut out = Vec::new();
     let mut next = times[0];
@@ -407,7 +505,12 @@ fn observe_landmarks(truth: &Runner, o: &SimOptions, times: &[f64], history: &[(
                 continue;
             }
             let v = h.eval(&Runner::obs_args(h, &x, &u0, &truth.p, lm));
-            out.push((t, id.clone(), v[0] + gaussian(sig[0], rng), wrap(v[1] + gaussian(sig[1], rng))));
+            out.push((
+                t,
+                id.clone(),
+                v[0] + gaussian(sig[0], rng),
+                wrap(v[1] + gaussian(sig[1], rng)),
+            ));
         }
     }
     out
@@ -432,7 +535,13 @@ pub fn to_csv(header: &[String], rows: &[Vec<f64>], cumulative_counts: &[bool]) 
         let cells: Vec<String> = r
             .iter()
             .enumerate()
-            .map(|(i, v)| if i > 0 && cumulative_counts.get(i - 1).copied().unwrap_or(false) { format!("{}", *v as i64) } else { format!("{v:.9}") })
+            .map(|(i, v)| {
+                if i > 0 && cumulative_counts.get(i - 1).copied().unwrap_or(false) {
+                    format!("{}", *v as i64)
+                } else {
+                    format!("{v:.9}")
+                }
+            })
             .collect();
         s += &cells.join(",");
         s.push('\n');

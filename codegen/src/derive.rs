@@ -10,7 +10,9 @@
 //! computed by symbolica, and a `NearZero` branch that uses it for |s| < EPS. If the
 //! series still has negative powers the singularity is not removable and derivation
 //! fails instead of emitting code that blows up.
-use crate::symbolic::{check_no_placeholder, number_f64, pinv_entry, to_atom, Funcs, SymbolicError};
+use crate::symbolic::{
+    check_no_placeholder, number_f64, pinv_entry, to_atom, Funcs, SymbolicError,
+};
 use crate::tape::TapeBuilder;
 use kinegen_model::expr::Expr;
 use kinegen_model::ir::{ArgSpec, Function, ModelIr, Op};
@@ -50,7 +52,10 @@ struct Arg {
 
 fn arg(sym: &Sym, name: &str, names: &[String]) -> Arg {
     Arg {
-        spec: ArgSpec { name: name.to_string(), names: names.to_vec() },
+        spec: ArgSpec {
+            name: name.to_string(),
+            names: names.to_vec(),
+        },
         syms: names.iter().map(|n| sym.s(n)).collect(),
     }
 }
@@ -60,11 +65,19 @@ fn strings(v: &[&str]) -> Vec<String> {
 }
 
 fn err_at(model: &Model, e: &Expr, msg: impl Into<String>) -> SourceError {
-    SourceError::new(&model.path, Some(SourcePos::from_offset(&model.source, e.span.0)), msg)
+    SourceError::new(
+        &model.path,
+        Some(SourcePos::from_offset(&model.source, e.span.0)),
+        msg,
+    )
 }
 
 fn err_kin(model: &Model, msg: impl Into<String>) -> SourceError {
-    SourceError::new(&model.path, Some(SourcePos::from_offset(&model.source, model.kinematics_at)), msg)
+    SourceError::new(
+        &model.path,
+        Some(SourcePos::from_offset(&model.source, model.kinematics_at)),
+        msg,
+    )
 }
 
 fn sym_err(model: &Model, e: SymbolicError) -> SourceError {
@@ -85,7 +98,10 @@ fn has_vanishing_denominator(a: AtomView, s: Symbol) -> bool {
         AtomView::Pow(p) => {
             let (base, exp) = p.get_base_exp();
             let negative = crate::symbolic::as_f64(exp).is_some_and(|n| n < 0.0);
-            if negative && base.contains_symbol(s) && is_zero(&substitute(&base.to_owned(), s, &Atom::num(0))) {
+            if negative
+                && base.contains_symbol(s)
+                && is_zero(&substitute(&base.to_owned(), s, &Atom::num(0)))
+            {
                 return true;
             }
             has_vanishing_denominator(base, s) || has_vanishing_denominator(exp, s)
@@ -130,7 +146,8 @@ fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), Symbo
         check_no_placeholder(o, &format!("{} output {k}", spec.name))?;
         let mut o = o.clone();
         for &s in &spec.singular {
-            o = regularize(&o, s, fx).map_err(|e| SymbolicError(format!("{} output {k}: {}", spec.name, e.0)))?;
+            o = regularize(&o, s, fx)
+                .map_err(|e| SymbolicError(format!("{} output {k}: {}", spec.name, e.0)))?;
         }
         outs.push(tb.atom(o.as_view())?);
     }
@@ -150,23 +167,42 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
         if let Ok(series) = a.series(s, Atom::num(0), SeriesDepth::absolute(SERIES_ORDER)) {
             let series = series.to_atom();
             if has_negative_power(series.as_view(), s) {
-                return Err(SymbolicError(format!("singular at {} = 0 and the singularity is not removable", Atom::var(s))));
+                return Err(SymbolicError(format!(
+                    "singular at {} = 0 and the singularity is not removable",
+                    Atom::var(s)
+                )));
             }
             if !has_vanishing_denominator(series.as_view(), s) {
                 check_no_placeholder(&series, "series")?;
-                return Ok(symbolica::function!(fx.near, Atom::var(s), series, a.clone()));
+                return Ok(symbolica::function!(
+                    fx.near,
+                    Atom::var(s),
+                    series,
+                    a.clone()
+                ));
             }
         }
     }
     // Rebuild from regularised parts.
     Ok(match a.as_view() {
-        AtomView::Add(add) => add.iter().try_fold(Atom::num(0), |acc, t| Ok::<_, SymbolicError>(acc + regularize(&t.to_owned(), s, fx)?))?,
-        AtomView::Mul(m) => m.iter().try_fold(Atom::num(1), |acc, t| Ok::<_, SymbolicError>(acc * regularize(&t.to_owned(), s, fx)?))?,
+        AtomView::Add(add) => add.iter().try_fold(Atom::num(0), |acc, t| {
+            Ok::<_, SymbolicError>(acc + regularize(&t.to_owned(), s, fx)?)
+        })?,
+        AtomView::Mul(m) => m.iter().try_fold(Atom::num(1), |acc, t| {
+            Ok::<_, SymbolicError>(acc * regularize(&t.to_owned(), s, fx)?)
+        })?,
         AtomView::Pow(p) => {
             let (b, e) = p.get_base_exp();
             let b2 = regularize(&b.to_owned(), s, fx)?;
-            if has_vanishing_denominator(b2.as_view(), s) || (crate::symbolic::as_f64(e).is_some_and(|n| n < 0.0) && is_zero(&substitute(&b.to_owned(), s, &Atom::num(0)))) {
-                return Err(SymbolicError(format!("singular at {} = 0 in `{}` and symbolica found no series for it", Atom::var(s), a)));
+            if has_vanishing_denominator(b2.as_view(), s)
+                || (crate::symbolic::as_f64(e).is_some_and(|n| n < 0.0)
+                    && is_zero(&substitute(&b.to_owned(), s, &Atom::num(0))))
+            {
+                return Err(SymbolicError(format!(
+                    "singular at {} = 0 in `{}` and symbolica found no series for it",
+                    Atom::var(s),
+                    a
+                )));
             }
             b2.pow(e.to_owned())
         }
@@ -189,7 +225,8 @@ fn has_negative_power(a: AtomView, s: Symbol) -> bool {
     match a {
         AtomView::Pow(p) => {
             let (base, exp) = p.get_base_exp();
-            (matches!(base, AtomView::Var(v) if v.get_symbol() == s) && crate::symbolic::as_f64(exp).is_some_and(|n| n < 0.0))
+            (matches!(base, AtomView::Var(v) if v.get_symbol() == s)
+                && crate::symbolic::as_f64(exp).is_some_and(|n| n < 0.0))
                 || has_negative_power(base, s)
         }
         AtomView::Mul(m) => m.iter().any(|x| has_negative_power(x, s)),
@@ -224,9 +261,14 @@ fn tree_size(tape: &[Op], outputs: &[u32]) -> usize {
     let mut size = vec![0usize; tape.len()];
     for (i, op) in tape.iter().enumerate() {
         let own = usize::from(op.is_arithmetic());
-        size[i] = op.operands().iter().fold(own, |acc, &o| acc.saturating_add(size[o as usize]));
+        size[i] = op
+            .operands()
+            .iter()
+            .fold(own, |acc, &o| acc.saturating_add(size[o as usize]));
     }
-    outputs.iter().fold(0usize, |acc, &o| acc.saturating_add(size[o as usize]))
+    outputs
+        .iter()
+        .fold(0usize, |acc, &o| acc.saturating_add(size[o as usize]))
 }
 
 /// Jacobian of `outs` w.r.t. `vars`, row-major. With `chain = (s, e)` the
@@ -254,7 +296,9 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     names.extend(model.inputs.iter().map(|i| i.name.clone()));
     names.extend(model.noise.iter().map(|n| n.name.clone()));
     names.extend(model.runtime_params().map(|p| p.name.clone()));
-    names.extend(strings(&["dt", "xl", "yl", "vx", "vy", "omega", "dx", "dy", "dtheta", "kg_dth"]));
+    names.extend(strings(&[
+        "dt", "xl", "yl", "vx", "vy", "omega", "dx", "dy", "dtheta", "kg_dth",
+    ]));
     for n in &names {
         by_name.insert(n.clone(), Atom::var(symbol!(&format!("kg_v_{n}"))));
     }
@@ -269,15 +313,28 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let u_names: Vec<String> = model.inputs.iter().map(|i| i.name.clone()).collect();
     let w_names: Vec<String> = model.noise.iter().map(|n| n.name.clone()).collect();
     let p_names: Vec<String> = model.runtime_params().map(|p| p.name.clone()).collect();
-    let (ax, au, aw, ap) = (arg(&sym, "x", &state), arg(&sym, "u", &u_names), arg(&sym, "w", &w_names), arg(&sym, "p", &p_names));
+    let (ax, au, aw, ap) = (
+        arg(&sym, "x", &state),
+        arg(&sym, "u", &u_names),
+        arg(&sym, "w", &w_names),
+        arg(&sym, "p", &p_names),
+    );
     let adt = arg(&sym, "dt", &strings(&["dt"]));
 
     // Body twist with and without noise.
     let twist_noisy: Vec<Atom> = match &model.kinematics {
-        Kinematics::Twist(t) => t.iter().map(|e| to_atom(&model.expand(e), &sym.by_name, &fx)).collect::<Result<_, _>>().map_err(se)?,
+        Kinematics::Twist(t) => t
+            .iter()
+            .map(|e| to_atom(&model.expand(e), &sym.by_name, &fx))
+            .collect::<Result<_, _>>()
+            .map_err(se)?,
         Kinematics::Constraints(c) => least_squares_twist(model, c, &sym).map_err(se)?,
     };
-    let zero_noise = |a: &Atom| w_names.iter().fold(a.clone(), |acc, n| substitute(&acc, sym.s(n), &Atom::num(0)));
+    let zero_noise = |a: &Atom| {
+        w_names.iter().fold(a.clone(), |acc, n| {
+            substitute(&acc, sym.s(n), &Atom::num(0))
+        })
+    };
     let twist: Vec<Atom> = twist_noisy.iter().map(zero_noise).collect();
 
     let mut fns = Vec::new();
@@ -321,7 +378,11 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     fns.push(Spec {
         name: "twist_gyro".into(),
         doc: gyro_doc.into(),
-        args: vec![au.clone(), arg(&sym, "omega", &strings(&["omega"])), ap.clone()],
+        args: vec![
+            au.clone(),
+            arg(&sym, "omega", &strings(&["omega"])),
+            ap.clone(),
+        ],
         lets: vec![],
         rows: 2,
         cols: 1,
@@ -347,7 +408,11 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let (a, b) = (vx * &dt, vy * &dt);
     let bx = &s_fun * &a - &c_fun * &b;
     let by = &c_fun * &a + &s_fun * &b;
-    let exact = vec![&x + th.cos() * &bx - th.sin() * &by, &y + th.sin() * &bx + th.cos() * &by, &th + &dth_expr];
+    let exact = vec![
+        &x + th.cos() * &bx - th.sin() * &by,
+        &y + th.sin() * &bx + th.cos() * &by,
+        &th + &dth_expr,
+    ];
 
     let step_args = |with_w: bool| {
         let mut v = vec![ax.clone(), au.clone()];
@@ -418,7 +483,11 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         if o.landmark {
             args.push(arg(&sym, "lm", &strings(&["xl", "yl"])));
         }
-        let doc = if o.doc.is_empty() { format!("Observation `{}`", o.name) } else { o.doc.clone() };
+        let doc = if o.doc.is_empty() {
+            format!("Observation `{}`", o.name)
+        } else {
+            o.doc.clone()
+        };
         fns.push(Spec {
             name: format!("obs_{}", o.name),
             doc: format!("{doc} Predicted columns: {}.", o.columns.join(", ")),
@@ -472,11 +541,17 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
 }
 
 /// The rows of S (seed 000 eq. 7) as atoms, with their rate symbols.
-fn constraint_rows(model: &Model, c: &Constraints, sym: &Sym) -> Result<Vec<(Symbol, [Atom; 3])>, SymbolicError> {
+fn constraint_rows(
+    model: &Model,
+    c: &Constraints,
+    sym: &Sym,
+) -> Result<Vec<(Symbol, [Atom; 3])>, SymbolicError> {
     c.rows
         .iter()
         .map(|(rate, co)| {
-            let [a, b, d] = co.clone().map(|e| to_atom(&model.expand(&e), &sym.by_name, &sym.fx));
+            let [a, b, d] = co
+                .clone()
+                .map(|e| to_atom(&model.expand(&e), &sym.by_name, &sym.fx));
             Ok((sym.s(rate), [a?, b?, d?]))
         })
         .collect()
@@ -485,16 +560,30 @@ fn constraint_rows(model: &Model, c: &Constraints, sym: &Sym) -> Result<Vec<(Sym
 /// Twist of a constraint model: z = (S^T S)^+ S^T q' (seed 000 eq. 9-10), with the
 /// pseudo-inverse left as `kg_pinv` entries: evaluated numerically with a rank check
 /// in the emitted code, differentiated by its own rule (dP = -P dM P).
-fn least_squares_twist(model: &Model, c: &Constraints, sym: &Sym) -> Result<Vec<Atom>, SymbolicError> {
+fn least_squares_twist(
+    model: &Model,
+    c: &Constraints,
+    sym: &Sym,
+) -> Result<Vec<Atom>, SymbolicError> {
     let rows = constraint_rows(model, c, sym)?;
     let m: Vec<Atom> = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
         .iter()
-        .map(|&(a, b)| rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]))
+        .map(|&(a, b)| {
+            rows.iter()
+                .fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b])
+        })
         .collect();
-    let st_rates: Vec<Atom> = (0..3).map(|a| rows.iter().fold(Atom::num(0), |acc, (r, s)| acc + &s[a] * Atom::var(*r))).collect();
+    let st_rates: Vec<Atom> = (0..3)
+        .map(|a| {
+            rows.iter()
+                .fold(Atom::num(0), |acc, (r, s)| acc + &s[a] * Atom::var(*r))
+        })
+        .collect();
     Ok((0..3)
         .map(|k| {
-            let solved = (0..3).fold(Atom::num(0), |acc, j| acc + pinv_entry(k, j, &m) * &st_rates[j]);
+            let solved = (0..3).fold(Atom::num(0), |acc, j| {
+                acc + pinv_entry(k, j, &m) * &st_rates[j]
+            });
             match &c.noise[k] {
                 Some(n) => solved + sym.a(n),
                 None => solved,
@@ -517,7 +606,10 @@ fn eval_at(a: &Atom, values: &[(Symbol, f64)], fx: Funcs) -> Result<f64, Symboli
     let f = Function {
         name: String::new(),
         doc: String::new(),
-        args: vec![ArgSpec { name: "v".into(), names: vec![String::new(); vals.len()] }],
+        args: vec![ArgSpec {
+            name: "v".into(),
+            names: vec![String::new(); vals.len()],
+        }],
         rows: 1,
         cols: 1,
         row_names: vec![],
@@ -531,17 +623,34 @@ fn eval_at(a: &Atom, values: &[(Symbol, f64)], fx: Funcs) -> Result<f64, Symboli
 
 /// Deterministic pseudo-random sample points (no RNG dependency in the derive stage).
 fn sample(k: usize, i: usize) -> f64 {
-    let h = ((k as u64 + 1).wrapping_mul(0x9E3779B97F4A7C15) ^ (i as u64 + 7).wrapping_mul(0xBF58476D1CE4E5B9)) >> 11;
+    let h = ((k as u64 + 1).wrapping_mul(0x9E3779B97F4A7C15)
+        ^ (i as u64 + 7).wrapping_mul(0xBF58476D1CE4E5B9))
+        >> 11;
     (h as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
 }
 
 /// Inverse kinematics: inputs from a body twist, and the integrated form (seed 001
 /// eq. 12-18): inputs that produce a given pose increment over dt.
-fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &Arg) -> Result<Vec<Spec>, SourceError> {
+fn inverse_kinematics(
+    model: &Model,
+    sym: &Sym,
+    twist: &[Atom],
+    ap: &Arg,
+    adt: &Arg,
+) -> Result<Vec<Spec>, SourceError> {
     let fx = sym.fx;
     let se = |e| sym_err(model, e);
-    let rates: Vec<&kinegen_model::spec::Input> = model.inputs.iter().filter(|i| i.kind == InputKind::Cumulative).collect();
-    let cfg_names: Vec<String> = model.inputs.iter().filter(|i| i.kind == InputKind::Absolute).map(|i| i.name.clone()).collect();
+    let rates: Vec<&kinegen_model::spec::Input> = model
+        .inputs
+        .iter()
+        .filter(|i| i.kind == InputKind::Cumulative)
+        .collect();
+    let cfg_names: Vec<String> = model
+        .inputs
+        .iter()
+        .filter(|i| i.kind == InputKind::Absolute)
+        .map(|i| i.name.clone())
+        .collect();
     let rate_syms: Vec<Symbol> = rates.iter().map(|i| sym.s(&i.name)).collect();
     let tw_syms = [sym.s("vx"), sym.s("vy"), sym.s("omega")];
     let tw_atoms = [sym.a("vx"), sym.a("vy"), sym.a("omega")];
@@ -562,21 +671,44 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
     };
 
     let imposes_vy;
-    let (inverse_outs, out_names, doc): (Vec<Atom>, Vec<String>, String) = if let Some((exprs, idoc)) = &model.inverse {
+    let (inverse_outs, out_names, doc): (Vec<Atom>, Vec<String>, String) = if let Some((
+        exprs,
+        idoc,
+    )) = &model.inverse
+    {
         // Declared inverse: check it numerically against the forward model.
         let mut vars = sym.by_name.clone();
         for (n, a) in ["vx", "vy", "omega"].iter().zip(&tw_atoms) {
             vars.insert(n.to_string(), a.clone());
         }
-        let outs: Vec<Atom> = exprs.iter().map(|e| to_atom(e, &vars, &fx)).collect::<Result<_, _>>().map_err(se)?;
+        let outs: Vec<Atom> = exprs
+            .iter()
+            .map(|e| to_atom(e, &vars, &fx))
+            .collect::<Result<_, _>>()
+            .map_err(se)?;
         // the rows the declared inverse imposes are the twist components it reads;
         // the others follow from the inputs (like y in seed 001 eq. 12)
-        let imposed: Vec<bool> = ["vx", "vy", "omega"].iter().map(|n| exprs.iter().any(|e| e.variables().iter().any(|(v, _)| v == n))).collect();
+        let imposed: Vec<bool> = ["vx", "vy", "omega"]
+            .iter()
+            .map(|n| {
+                exprs
+                    .iter()
+                    .any(|e| e.variables().iter().any(|(v, _)| v == n))
+            })
+            .collect();
         imposes_vy = imposed[1];
         for k in 0..8 {
             let mut pt = point(k);
             pt.retain(|(s, _)| !model.inputs.iter().any(|i| sym.s(&i.name) == *s));
-            let tw: Vec<f64> = (0..3).map(|r| if structurally_zero[r] || !imposed[r] { 0.0 } else { 0.2 + 0.5 * sample(k, 200 + r).abs() }).collect();
+            let tw: Vec<f64> = (0..3)
+                .map(|r| {
+                    if structurally_zero[r] || !imposed[r] {
+                        0.0
+                    } else {
+                        0.2 + 0.5 * sample(k, 200 + r).abs()
+                    }
+                })
+                .collect();
             let mut at = pt.clone();
             at.extend(tw_syms.iter().copied().zip(tw.iter().copied()));
             let mut fwd_at = pt.clone();
@@ -594,7 +726,11 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
                 }
             }
         }
-        (outs, model.inputs.iter().map(|i| i.name.clone()).collect(), idoc.clone())
+        (
+            outs,
+            model.inputs.iter().map(|i| i.name.clone()).collect(),
+            idoc.clone(),
+        )
     } else if let Kinematics::Constraints(c) = &model.kinematics {
         // The constraints are the inverse kinematics (seed 000 eq. 3): q' = S z'.
         // Their least-squares inverse exists where S has rank 3; if it never does,
@@ -604,16 +740,30 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
             let pt = point(k);
             let m: Option<Vec<f64>> = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
                 .iter()
-                .map(|&(a, b)| eval_at(&rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]), &pt, fx).ok())
+                .map(|&(a, b)| {
+                    eval_at(
+                        &rows
+                            .iter()
+                            .fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]),
+                        &pt,
+                        fx,
+                    )
+                    .ok()
+                })
                 .collect();
-            m.is_some_and(|m| kinegen_model::linalg::rank_sym3([m[0], m[1], m[2], m[3], m[4], m[5]]) == 3)
+            m.is_some_and(|m| {
+                kinegen_model::linalg::rank_sym3([m[0], m[1], m[2], m[3], m[4], m[5]]) == 3
+            })
         });
         if !full_rank_somewhere {
             return Err(err_kin(model, "inverse kinematics is singular everywhere: the constraint rows have rank < 3, so no twist is determined"));
         }
         imposes_vy = true;
         let by_rate: HashMap<Symbol, &[Atom; 3]> = rows.iter().map(|(r, s)| (*r, s)).collect();
-        let outs = rate_syms.iter().map(|r| (0..3).fold(Atom::num(0), |acc, c| acc + &by_rate[r][c] * &tw_atoms[c])).collect();
+        let outs = rate_syms
+            .iter()
+            .map(|r| (0..3).fold(Atom::num(0), |acc, c| acc + &by_rate[r][c] * &tw_atoms[c]))
+            .collect();
         let names = rates.iter().map(|i| i.name.clone()).collect();
         (outs, names, "Input rates from a body twist: the kinematic constraints themselves, q' = S(q, lambda) R(theta) z' (seed 000 eq. 3, 6-7), evaluated in the body frame.".into())
     } else {
@@ -622,10 +772,20 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
         // omega first, then vy). The other rows follow from the inputs, as y does in
         // seed 001 eq. 12 (and the lateral slip of an effect-augmented model).
         let linear = |t: &Atom| {
-            let at_zero = rate_syms.iter().fold(t.clone(), |acc, s| substitute(&acc, *s, &Atom::num(0)));
-            is_zero(&at_zero) && rate_syms.iter().all(|a| rate_syms.iter().all(|b| is_zero(&t.derivative(*a).derivative(*b))))
+            let at_zero = rate_syms
+                .iter()
+                .fold(t.clone(), |acc, s| substitute(&acc, *s, &Atom::num(0)));
+            is_zero(&at_zero)
+                && rate_syms.iter().all(|a| {
+                    rate_syms
+                        .iter()
+                        .all(|b| is_zero(&t.derivative(*a).derivative(*b)))
+                })
         };
-        let candidates: Vec<usize> = [0usize, 2, 1].into_iter().filter(|&r| !structurally_zero[r] && linear(&twist[r])).collect();
+        let candidates: Vec<usize> = [0usize, 2, 1]
+            .into_iter()
+            .filter(|&r| !structurally_zero[r] && linear(&twist[r]))
+            .collect();
         let k = rate_syms.len();
         let mut chosen = None;
         let mut any_square = false;
@@ -633,15 +793,26 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
             let combos: Vec<Vec<usize>> = match (k, candidates.len()) {
                 (1, n) => (0..n).map(|i| vec![candidates[i]]).collect(),
                 (2, 2) => vec![vec![candidates[0], candidates[1]]],
-                (2, 3) => vec![vec![candidates[0], candidates[1]], vec![candidates[0], candidates[2]], vec![candidates[1], candidates[2]]],
+                (2, 3) => vec![
+                    vec![candidates[0], candidates[1]],
+                    vec![candidates[0], candidates[2]],
+                    vec![candidates[1], candidates[2]],
+                ],
                 _ => vec![candidates.clone()],
             };
             for mut rows in combos {
                 rows.sort();
                 any_square = true;
-                let m: Vec<Vec<Atom>> = rows.iter().map(|&r| rate_syms.iter().map(|s| twist[r].derivative(*s)).collect()).collect();
+                let m: Vec<Vec<Atom>> = rows
+                    .iter()
+                    .map(|&r| rate_syms.iter().map(|s| twist[r].derivative(*s)).collect())
+                    .collect();
                 let (inv, det) = symbolic_inverse(&m);
-                let singular_everywhere = (0..6).all(|k| eval_at(&det, &point(k), fx).map(|d| d.abs() < 1e-12).unwrap_or(true));
+                let singular_everywhere = (0..6).all(|k| {
+                    eval_at(&det, &point(k), fx)
+                        .map(|d| d.abs() < 1e-12)
+                        .unwrap_or(true)
+                });
                 if !singular_everywhere {
                     chosen = Some((rows, inv));
                     break;
@@ -663,7 +834,11 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
             ));
         };
         let outs: Vec<Atom> = (0..rows.len())
-            .map(|i| rows.iter().enumerate().fold(Atom::num(0), |acc, (j, &r)| acc + &inv[i][j] * &tw_atoms[r]))
+            .map(|i| {
+                rows.iter()
+                    .enumerate()
+                    .fold(Atom::num(0), |acc, (j, &r)| acc + &inv[i][j] * &tw_atoms[r])
+            })
             .collect();
         imposes_vy = rows.contains(&1);
         let names = rates.iter().map(|i| i.name.clone()).collect();
@@ -699,7 +874,10 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
     let (vx_i, vy_i) = if lateral {
         let half = &d / Atom::num(2);
         let k = &half * d.sin() / (Atom::num(1) - d.cos());
-        (( &k * &dx + &half * &dy) / &dt, (&k * &dy - &half * &dx) / &dt)
+        (
+            (&k * &dx + &half * &dy) / &dt,
+            (&k * &dy - &half * &dx) / &dt,
+        )
     } else {
         (&dx * &d / (d.sin() * &dt), Atom::num(0))
     };
@@ -709,7 +887,10 @@ fn inverse_kinematics(model: &Model, sym: &Sym, twist: &[Atom], ap: &Arg, adt: &
         let a = substitute(&a, tw_syms[1], &vy_i);
         substitute(&a, tw_syms[2], &om_i)
     };
-    let mut args = vec![arg(sym, "dpose", &strings(&["dx", "dy", "dtheta"])), adt.clone()];
+    let mut args = vec![
+        arg(sym, "dpose", &strings(&["dx", "dy", "dtheta"])),
+        adt.clone(),
+    ];
     if model.inverse.is_none() && !cfg_names.is_empty() {
         args.push(cfg_arg);
     }
@@ -740,14 +921,21 @@ fn symbolic_inverse(m: &[Vec<Atom>]) -> (Vec<Vec<Atom>>, Atom) {
         let cols: Vec<usize> = (0..n).filter(|&j| j != c).collect();
         match n {
             2 => m[rows[0]][cols[0]].clone(),
-            3 => &m[rows[0]][cols[0]] * &m[rows[1]][cols[1]] - &m[rows[0]][cols[1]] * &m[rows[1]][cols[0]],
+            3 => {
+                &m[rows[0]][cols[0]] * &m[rows[1]][cols[1]]
+                    - &m[rows[0]][cols[1]] * &m[rows[1]][cols[0]]
+            }
             _ => Atom::num(1),
         }
     };
     let det = match n {
         1 => m[0][0].clone(),
         _ => (0..n).fold(Atom::num(0), |acc, c| {
-            let sign = if c % 2 == 0 { Atom::num(1) } else { Atom::num(-1) };
+            let sign = if c % 2 == 0 {
+                Atom::num(1)
+            } else {
+                Atom::num(-1)
+            };
             acc + sign * &m[0][c] * minor(0, c)
         }),
     };
@@ -756,7 +944,11 @@ fn symbolic_inverse(m: &[Vec<Atom>]) -> (Vec<Vec<Atom>>, Atom) {
         .map(|i| {
             (0..n)
                 .map(|j| {
-                    let sign = if (i + j) % 2 == 0 { Atom::num(1) } else { Atom::num(-1) };
+                    let sign = if (i + j) % 2 == 0 {
+                        Atom::num(1)
+                    } else {
+                        Atom::num(-1)
+                    };
                     // adj[i][j] = cofactor[j][i]
                     (sign * minor(j, i) / &det).cancel()
                 })

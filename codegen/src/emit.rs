@@ -88,27 +88,76 @@ fn emit_function(f: &Function) -> TokenStream {
                     quote!(#id[#k])
                 }
             }
-            Op::Add(a, b) => { let (a, b) = (t(a), t(b)); quote!(#a + #b) }
-            Op::Sub(a, b) => { let (a, b) = (t(a), t(b)); quote!(#a - #b) }
-            Op::Mul(a, b) => { let (a, b) = (t(a), t(b)); quote!(#a * #b) }
-            Op::Div(a, b) => { let (a, b) = (t(a), t(b)); quote!(#a / #b) }
-            Op::Neg(a) => { let a = t(a); quote!(-#a) }
+            Op::Add(a, b) => {
+                let (a, b) = (t(a), t(b));
+                quote!(#a + #b)
+            }
+            Op::Sub(a, b) => {
+                let (a, b) = (t(a), t(b));
+                quote!(#a - #b)
+            }
+            Op::Mul(a, b) => {
+                let (a, b) = (t(a), t(b));
+                quote!(#a * #b)
+            }
+            Op::Div(a, b) => {
+                let (a, b) = (t(a), t(b));
+                quote!(#a / #b)
+            }
+            Op::Neg(a) => {
+                let a = t(a);
+                quote!(-#a)
+            }
             // small integer powers as products: cheaper than pow and exact
             Op::PowI(a, n) if (1..=4).contains(&n) => {
                 let a = t(a);
                 (1..n).fold(quote!(#a), |e, _| quote!(#e * #a))
             }
-            Op::PowI(a, n) => { let a = t(a); let n = lit(n as f64); quote!(libm::pow(#a, #n)) }
-            Op::Pow(a, b) => { let (a, b) = (t(a), t(b)); quote!(libm::pow(#a, #b)) }
-            Op::Sqrt(a) => { let a = t(a); quote!(libm::sqrt(#a)) }
-            Op::Sin(a) => { let a = t(a); quote!(libm::sin(#a)) }
-            Op::Cos(a) => { let a = t(a); quote!(libm::cos(#a)) }
-            Op::Tan(a) => { let a = t(a); quote!(libm::tan(#a)) }
-            Op::Atan(a) => { let a = t(a); quote!(libm::atan(#a)) }
-            Op::Atan2(a, b) => { let (a, b) = (t(a), t(b)); quote!(libm::atan2(#a, #b)) }
-            Op::Exp(a) => { let a = t(a); quote!(libm::exp(#a)) }
-            Op::Ln(a) => { let a = t(a); quote!(libm::log(#a)) }
-            Op::Abs(a) => { let a = t(a); quote!(libm::fabs(#a)) }
+            Op::PowI(a, n) => {
+                let a = t(a);
+                let n = lit(n as f64);
+                quote!(libm::pow(#a, #n))
+            }
+            Op::Pow(a, b) => {
+                let (a, b) = (t(a), t(b));
+                quote!(libm::pow(#a, #b))
+            }
+            Op::Sqrt(a) => {
+                let a = t(a);
+                quote!(libm::sqrt(#a))
+            }
+            Op::Sin(a) => {
+                let a = t(a);
+                quote!(libm::sin(#a))
+            }
+            Op::Cos(a) => {
+                let a = t(a);
+                quote!(libm::cos(#a))
+            }
+            Op::Tan(a) => {
+                let a = t(a);
+                quote!(libm::tan(#a))
+            }
+            Op::Atan(a) => {
+                let a = t(a);
+                quote!(libm::atan(#a))
+            }
+            Op::Atan2(a, b) => {
+                let (a, b) = (t(a), t(b));
+                quote!(libm::atan2(#a, #b))
+            }
+            Op::Exp(a) => {
+                let a = t(a);
+                quote!(libm::exp(#a))
+            }
+            Op::Ln(a) => {
+                let a = t(a);
+                quote!(libm::log(#a))
+            }
+            Op::Abs(a) => {
+                let a = t(a);
+                quote!(libm::fabs(#a))
+            }
             Op::NearZero { x, eps, near, far } => {
                 let (x, near, far, eps) = (t(x), t(near), t(far), lit(eps));
                 quote!(if libm::fabs(#x) < #eps { #near } else { #far })
@@ -134,11 +183,19 @@ fn emit_function(f: &Function) -> TokenStream {
         doc.push(format!("* `{}`: [{}]", a.name, a.names.join(", ")));
     }
     if f.is_matrix() {
-        doc.push(format!("* returns rows [{}], columns [{}]", f.row_names.join(", "), f.col_names.join(", ")));
+        doc.push(format!(
+            "* returns rows [{}], columns [{}]",
+            f.row_names.join(", "),
+            f.col_names.join(", ")
+        ));
     } else {
         doc.push(format!("* returns [{}]", f.row_names.join(", ")));
     }
-    doc.push(format!("\n{} arithmetic operations ({} before common-subexpression elimination).", f.ops_tape(), f.ops_tree));
+    doc.push(format!(
+        "\n{} arithmetic operations ({} before common-subexpression elimination).",
+        f.ops_tape(),
+        f.ops_tree
+    ));
     let doc = doc.join("\n");
     quote! {
         #[doc = #doc]
@@ -159,7 +216,11 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
         if ir.seed.is_empty() { String::new() } else { format!("\n\nReference: seed {}.", ir.seed) }
     );
     let fp = &ir.spec_fingerprint;
-    let pnames: Vec<&str> = ir.runtime_params().iter().map(|p| p.name.as_str()).collect();
+    let pnames: Vec<&str> = ir
+        .runtime_params()
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
     let pnom: Vec<TokenStream> = ir.runtime_params().iter().map(|p| lit(p.nominal)).collect();
     let np = pnames.len();
     let inames: Vec<&str> = ir.inputs.iter().map(|i| i.name.as_str()).collect();

@@ -21,11 +21,17 @@ pub enum GenerateError {
     #[error("{0}")]
     Spec(#[from] SourceError),
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> GenerateError + '_ {
-    move |source| GenerateError::Io { path: path.to_path_buf(), source }
+    move |source| GenerateError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 /// Spec files (`*.toml`) directly in `spec_dir`, sorted.
@@ -46,15 +52,24 @@ pub type Rendered = (Vec<(PathBuf, String)>, Vec<(ModelIr, Duration)>);
 pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError> {
     let mut files = Vec::new();
     let mut models = Vec::new();
-    let dir_name = spec_dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_else(|| "spec".into());
+    let dir_name = spec_dir
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_else(|| "spec".into());
     for path in spec_files(spec_dir)? {
         let model = Model::load(&path)?;
         let t0 = Instant::now();
         let ir = crate::derive_model(&model)?;
         let took = t0.elapsed();
         let rel = format!("{dir_name}/{}", path.file_name().unwrap().to_string_lossy());
-        files.push((out_dir.join("src").join(format!("{}.rs", ir.name)), emit_module(&ir, &rel)));
-        files.push((out_dir.join("ir").join(format!("{}.json", ir.name)), ir.to_json() + "\n"));
+        files.push((
+            out_dir.join("src").join(format!("{}.rs", ir.name)),
+            emit_module(&ir, &rel),
+        ));
+        files.push((
+            out_dir.join("ir").join(format!("{}.json", ir.name)),
+            ir.to_json() + "\n",
+        ));
         models.push((ir, took));
     }
     let names: Vec<String> = models.iter().map(|(m, _)| m.name.clone()).collect();
@@ -100,7 +115,11 @@ pub fn generate(spec_dir: &Path, out_dir: &Path, check: bool) -> Result<Report, 
             std::fs::remove_file(p).map_err(io(p))?;
         }
     }
-    Ok(Report { models, stale, total: t0.elapsed() })
+    Ok(Report {
+        models,
+        stale,
+        total: t0.elapsed(),
+    })
 }
 
 /// Write via a temporary file in the same directory and rename, so a reader never
@@ -111,7 +130,11 @@ pub fn write_atomic(path: &Path, content: &str) -> Result<(), GenerateError> {
     // unique per writer, so concurrent writers of the same file never share a temp file
     static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = dir.join(format!(".{}.{}-{n}.kinegen-tmp", path.file_name().unwrap().to_string_lossy(), std::process::id()));
+    let tmp = dir.join(format!(
+        ".{}.{}-{n}.kinegen-tmp",
+        path.file_name().unwrap().to_string_lossy(),
+        std::process::id()
+    ));
     std::fs::write(&tmp, content).map_err(io(&tmp))?;
     std::fs::rename(&tmp, path).map_err(io(path))
 }

@@ -42,8 +42,14 @@ fn machine_lock() -> Option<fd_lock::RwLockWriteGuard<'static, std::fs::File>> {
     // Keep symbolica's licence banner off stdout: machine-readable output goes there.
     std::env::set_var("SYMBOLICA_HIDE_BANNER", "1");
     let path = std::env::temp_dir().join("kinegen-symbolica.lock");
-    let file = std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&path).ok()?;
-    let lock: &'static mut fd_lock::RwLock<std::fs::File> = Box::leak(Box::new(fd_lock::RwLock::new(file)));
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .ok()?;
+    let lock: &'static mut fd_lock::RwLock<std::fs::File> =
+        Box::leak(Box::new(fd_lock::RwLock::new(file)));
     let guard = lock.write().ok();
     wait_for_symbolica_permit();
     guard
@@ -55,12 +61,21 @@ fn machine_lock() -> Option<fd_lock::RwLockWriteGuard<'static, std::fs::File>> {
 /// symbolica's: same directory rule (SYMBOLICA_LOCK_DIR, else the per-user runtime
 /// or cache directory), same name, same flock.
 fn wait_for_symbolica_permit() {
-    let dir = std::env::var_os("SYMBOLICA_LOCK_DIR").map(std::path::PathBuf::from).or_else(|| {
-        directories::ProjectDirs::from("io", "symbolica", "symbolica")
-            .map(|d| d.runtime_dir().unwrap_or_else(|| d.cache_dir()).join("locks"))
-    });
+    let dir = std::env::var_os("SYMBOLICA_LOCK_DIR")
+        .map(std::path::PathBuf::from)
+        .or_else(|| {
+            directories::ProjectDirs::from("io", "symbolica", "symbolica").map(|d| {
+                d.runtime_dir()
+                    .unwrap_or_else(|| d.cache_dir())
+                    .join("locks")
+            })
+        });
     let Some(dir) = dir else { return };
-    if let Ok(f) = std::fs::OpenOptions::new().read(true).write(true).open(dir.join("symbolica-restricted-thread-0.lock")) {
+    if let Ok(f) = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(dir.join("symbolica-restricted-thread-0.lock"))
+    {
         if f.lock().is_ok() {
             let _ = f.unlock();
         }
@@ -69,21 +84,35 @@ fn wait_for_symbolica_permit() {
 
 /// Run `f` on the process's symbolica thread and wait for its result. A panic in
 /// `f` is caught there (the thread survives for the next job) and returned as Err.
-pub fn on_symbolica_thread<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> Result<T, String> {
+pub fn on_symbolica_thread<T: Send + 'static>(
+    f: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, String> {
     let (tx, rx) = channel();
     let job: Job = Box::new(move || {
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
-            p.downcast_ref::<String>().cloned().or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string())).unwrap_or_default()
+            p.downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default()
         });
         let _ = tx.send(r);
     });
-    worker().lock().map_err(|e| e.to_string())?.send(job).map_err(|e| e.to_string())?;
+    worker()
+        .lock()
+        .map_err(|e| e.to_string())?
+        .send(job)
+        .map_err(|e| e.to_string())?;
     rx.recv().map_err(|e| e.to_string())?
 }
 
 /// Derive the IR of a validated model (symbolica, on the dedicated thread).
 pub fn derive_model(model: &Model) -> Result<ModelIr, SourceError> {
     let m = model.clone();
-    on_symbolica_thread(move || derive::derive(&m))
-        .unwrap_or_else(|panic| Err(SourceError::new(&model.path, None, format!("internal error while deriving: {panic}"))))
+    on_symbolica_thread(move || derive::derive(&m)).unwrap_or_else(|panic| {
+        Err(SourceError::new(
+            &model.path,
+            None,
+            format!("internal error while deriving: {panic}"),
+        ))
+    })
 }

@@ -32,7 +32,9 @@ const PACKED: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2,
 /// `kg_pinv(i, j, m...)` with the indices put in order (P is symmetric).
 pub fn pinv_entry(i: usize, j: usize, m: &[Atom]) -> Atom {
     let (a, b) = if i <= j { (i, j) } else { (j, i) };
-    let mut fb = symbolica::atom::FunctionBuilder::new(symbol!("kg_pinv")).add_arg(Atom::num(a as i64)).add_arg(Atom::num(b as i64));
+    let mut fb = symbolica::atom::FunctionBuilder::new(symbol!("kg_pinv"))
+        .add_arg(Atom::num(a as i64))
+        .add_arg(Atom::num(b as i64));
     for x in m {
         fb = fb.add_arg(x);
     }
@@ -47,53 +49,79 @@ impl Funcs {
     }
 
     fn define() -> Funcs {
-        let tan = symbol!("kg_tan", der = |x, i, out| {
-            // d tan(a)/da = 1 + tan(a)^2
-            if let (0, AtomView::Fun(f)) = (i, x) {
-                let a = f.iter().next().unwrap().to_owned();
-                let t = function!(symbol!("kg_tan"), a);
-                **out = Atom::num(1) + &t * &t;
+        let tan = symbol!(
+            "kg_tan",
+            der = |x, i, out| {
+                // d tan(a)/da = 1 + tan(a)^2
+                if let (0, AtomView::Fun(f)) = (i, x) {
+                    let a = f.iter().next().unwrap().to_owned();
+                    let t = function!(symbol!("kg_tan"), a);
+                    **out = Atom::num(1) + &t * &t;
+                }
             }
-        });
-        let atan = symbol!("kg_atan", der = |x, i, out| {
-            // d atan(a)/da = 1 / (1 + a^2)
-            if let (0, AtomView::Fun(f)) = (i, x) {
-                let a = f.iter().next().unwrap().to_owned();
-                **out = (Atom::num(1) + &a * &a).pow(Atom::num(-1));
+        );
+        let atan = symbol!(
+            "kg_atan",
+            der = |x, i, out| {
+                // d atan(a)/da = 1 / (1 + a^2)
+                if let (0, AtomView::Fun(f)) = (i, x) {
+                    let a = f.iter().next().unwrap().to_owned();
+                    **out = (Atom::num(1) + &a * &a).pow(Atom::num(-1));
+                }
             }
-        });
-        let atan2 = symbol!("kg_atan2", der = |x, i, out| {
-            // atan2(y, x): d/dy = x/(x^2+y^2), d/dx = -y/(x^2+y^2)
-            if let AtomView::Fun(f) = x {
-                let mut it = f.iter();
-                let (y, xx) = (it.next().unwrap().to_owned(), it.next().unwrap().to_owned());
-                let r2inv = (&xx * &xx + &y * &y).pow(Atom::num(-1));
-                **out = if i == 0 { &xx * &r2inv } else { -(&y * &r2inv) };
+        );
+        let atan2 = symbol!(
+            "kg_atan2",
+            der = |x, i, out| {
+                // atan2(y, x): d/dy = x/(x^2+y^2), d/dx = -y/(x^2+y^2)
+                if let AtomView::Fun(f) = x {
+                    let mut it = f.iter();
+                    let (y, xx) = (it.next().unwrap().to_owned(), it.next().unwrap().to_owned());
+                    let r2inv = (&xx * &xx + &y * &y).pow(Atom::num(-1));
+                    **out = if i == 0 { &xx * &r2inv } else { -(&y * &r2inv) };
+                }
             }
-        });
-        let abs = symbol!("kg_abs", der = |x, i, out| {
-            // d|a|/da = a/|a| (undefined at a = 0, like the function's kink)
-            if let (0, AtomView::Fun(f)) = (i, x) {
-                let a = f.iter().next().unwrap().to_owned();
-                **out = &a * function!(symbol!("kg_abs"), a.clone()).pow(Atom::num(-1));
+        );
+        let abs = symbol!(
+            "kg_abs",
+            der = |x, i, out| {
+                // d|a|/da = a/|a| (undefined at a = 0, like the function's kink)
+                if let (0, AtomView::Fun(f)) = (i, x) {
+                    let a = f.iter().next().unwrap().to_owned();
+                    **out = &a * function!(symbol!("kg_abs"), a.clone()).pow(Atom::num(-1));
+                }
             }
-        });
+        );
         let near = symbol!("kg_near");
-        let pinv = symbol!("kg_pinv", der = |x, k, out| {
-            let AtomView::Fun(f) = x else { return };
-            let args: Vec<Atom> = f.iter().map(|a| a.to_owned()).collect();
-            if k < 2 || args.len() != 8 {
-                **out = Atom::num(0);
-                return;
+        let pinv = symbol!(
+            "kg_pinv",
+            der = |x, k, out| {
+                let AtomView::Fun(f) = x else { return };
+                let args: Vec<Atom> = f.iter().map(|a| a.to_owned()).collect();
+                if k < 2 || args.len() != 8 {
+                    **out = Atom::num(0);
+                    return;
+                }
+                let idx = |a: &Atom| as_f64(a.as_view()).map(|v| v as usize).unwrap_or(0);
+                let (i, j) = (idx(&args[0]), idx(&args[1]));
+                let m = &args[2..];
+                let (a, b) = PACKED[k - 2];
+                let p = |r: usize, c: usize| pinv_entry(r, c, m);
+                **out = if a == b {
+                    -(p(i, a) * p(a, j))
+                } else {
+                    -(p(i, a) * p(b, j) + p(i, b) * p(a, j))
+                };
             }
-            let idx = |a: &Atom| as_f64(a.as_view()).map(|v| v as usize).unwrap_or(0);
-            let (i, j) = (idx(&args[0]), idx(&args[1]));
-            let m = &args[2..];
-            let (a, b) = PACKED[k - 2];
-            let p = |r: usize, c: usize| pinv_entry(r, c, m);
-            **out = if a == b { -(p(i, a) * p(a, j)) } else { -(p(i, a) * p(b, j) + p(i, b) * p(a, j)) };
-        });
-        Funcs { tan, atan, atan2, abs, near, pinv }
+        );
+        Funcs {
+            tan,
+            atan,
+            atan2,
+            abs,
+            near,
+            pinv,
+        }
     }
 }
 
@@ -113,11 +141,19 @@ pub fn number(text: &str) -> Atom {
     let (int_part, frac_part) = mantissa.split_once('.').unwrap_or((&mantissa, ""));
     let digits = format!("{int_part}{frac_part}");
     let scale = exp10 - frac_part.len() as i32;
-    if let Ok(n) = digits.trim_start_matches('0').parse::<i64>().or_else(|_| if digits.chars().all(|c| c == '0') { Ok(0) } else { Err(()) }) {
+    if let Ok(n) = digits.trim_start_matches('0').parse::<i64>().or_else(|_| {
+        if digits.chars().all(|c| c == '0') {
+            Ok(0)
+        } else {
+            Err(())
+        }
+    }) {
         if scale.unsigned_abs() <= 18 {
             let p = 10i64.pow(scale.unsigned_abs());
             return if scale >= 0 {
-                n.checked_mul(p).map(Atom::num).unwrap_or_else(|| Atom::num(text.parse::<f64>().unwrap()))
+                n.checked_mul(p)
+                    .map(Atom::num)
+                    .unwrap_or_else(|| Atom::num(text.parse::<f64>().unwrap()))
             } else {
                 Atom::num((n, p))
             };
@@ -143,7 +179,10 @@ pub fn to_atom(e: &Expr, vars: &HashMap<String, Atom>, fx: &Funcs) -> Result<Ato
     Ok(match &e.kind {
         ExprKind::Num(n) => number(n),
         ExprKind::Var(v) if v == "pi" => Atom::var(Symbol::PI),
-        ExprKind::Var(v) => vars.get(v).cloned().ok_or_else(|| SymbolicError(format!("unbound symbol `{v}`")))?,
+        ExprKind::Var(v) => vars
+            .get(v)
+            .cloned()
+            .ok_or_else(|| SymbolicError(format!("unbound symbol `{v}`")))?,
         ExprKind::Neg(a) => -to_atom(a, vars, fx)?,
         ExprKind::Bin(op, a, b) => {
             let (a, b) = (to_atom(a, vars, fx)?, to_atom(b, vars, fx)?);
@@ -156,7 +195,10 @@ pub fn to_atom(e: &Expr, vars: &HashMap<String, Atom>, fx: &Funcs) -> Result<Ato
             }
         }
         ExprKind::Call(f, args) => {
-            let a: Vec<Atom> = args.iter().map(|x| to_atom(x, vars, fx)).collect::<Result<_, _>>()?;
+            let a: Vec<Atom> = args
+                .iter()
+                .map(|x| to_atom(x, vars, fx))
+                .collect::<Result<_, _>>()?;
             match f.as_str() {
                 "sin" => a[0].sin(),
                 "cos" => a[0].cos(),
@@ -167,7 +209,11 @@ pub fn to_atom(e: &Expr, vars: &HashMap<String, Atom>, fx: &Funcs) -> Result<Ato
                 "atan" => function!(fx.atan, a[0]),
                 "atan2" => function!(fx.atan2, a[0], a[1]),
                 "abs" => function!(fx.abs, a[0]),
-                other => return Err(SymbolicError(format!("function `{other}` has no symbolic form"))),
+                other => {
+                    return Err(SymbolicError(format!(
+                        "function `{other}` has no symbolic form"
+                    )))
+                }
             }
         }
     })
@@ -177,7 +223,9 @@ pub fn to_atom(e: &Expr, vars: &HashMap<String, Atom>, fx: &Funcs) -> Result<Ato
 pub fn check_no_placeholder(a: &Atom, what: &str) -> Result<(), SymbolicError> {
     let s = a.to_string();
     if a.contains_symbol(Symbol::DERIVATIVE) || s.contains("der(") {
-        return Err(SymbolicError(format!("{what}: symbolica left a derivative placeholder in `{s}`")));
+        return Err(SymbolicError(format!(
+            "{what}: symbolica left a derivative placeholder in `{s}`"
+        )));
     }
     Ok(())
 }
@@ -189,7 +237,9 @@ pub fn as_f64(a: AtomView) -> Option<f64> {
     match n.get_coeff_view() {
         CoefficientView::Natural(nr, dr, 0, _) => Some(nr as f64 / dr as f64),
         CoefficientView::Large(r, i) if i.to_rat().is_zero() => Some(r.to_rat().to_f64()),
-        CoefficientView::Float(r, i) if i.is_zero() => Some(symbolica::domains::float::RealLike::to_f64(&r.to_float())),
+        CoefficientView::Float(r, i) if i.is_zero() => {
+            Some(symbolica::domains::float::RealLike::to_f64(&r.to_float()))
+        }
         _ => None,
     }
 }

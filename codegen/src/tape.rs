@@ -20,7 +20,13 @@ pub struct TapeBuilder {
 
 impl TapeBuilder {
     pub fn new(fx: Funcs, cse: bool) -> Self {
-        TapeBuilder { tape: Vec::new(), dedup: HashMap::new(), leaves: HashMap::new(), fx, cse }
+        TapeBuilder {
+            tape: Vec::new(),
+            dedup: HashMap::new(),
+            leaves: HashMap::new(),
+            fx,
+            cse,
+        }
     }
 
     /// Push an op, reusing an identical earlier one when CSE is on.
@@ -58,7 +64,8 @@ impl TapeBuilder {
     pub fn atom(&mut self, a: AtomView) -> Result<u32, SymbolicError> {
         match a {
             AtomView::Num(_) => {
-                let v = as_f64(a).ok_or_else(|| SymbolicError(format!("non-real constant `{a}`")))?;
+                let v =
+                    as_f64(a).ok_or_else(|| SymbolicError(format!("non-real constant `{a}`")))?;
                 Ok(self.constant(v))
             }
             AtomView::Var(v) => {
@@ -68,7 +75,9 @@ impl TapeBuilder {
                 } else if s == Symbol::E {
                     Ok(self.constant(std::f64::consts::E))
                 } else {
-                    self.leaves.get(&s).copied().ok_or_else(|| SymbolicError(format!("unbound symbol `{a}` in derived code")))
+                    self.leaves.get(&s).copied().ok_or_else(|| {
+                        SymbolicError(format!("unbound symbol `{a}` in derived code"))
+                    })
                 }
             }
             AtomView::Fun(f) => {
@@ -93,16 +102,38 @@ impl TapeBuilder {
                 } else if s == self.fx.atan2 {
                     Op::Atan2(args[0], args[1])
                 } else if s == self.fx.pinv {
-                    let index = |k: usize| as_f64(f.iter().nth(k).unwrap()).map(|v| v as u8).ok_or_else(|| SymbolicError(format!("pseudo-inverse index is not a number in `{a}`")));
+                    let index = |k: usize| {
+                        as_f64(f.iter().nth(k).unwrap())
+                            .map(|v| v as u8)
+                            .ok_or_else(|| {
+                                SymbolicError(format!(
+                                    "pseudo-inverse index is not a number in `{a}`"
+                                ))
+                            })
+                    };
                     if args.len() != 8 {
-                        return Err(SymbolicError(format!("pseudo-inverse with {} arguments", args.len())));
+                        return Err(SymbolicError(format!(
+                            "pseudo-inverse with {} arguments",
+                            args.len()
+                        )));
                     }
                     let m = [args[2], args[3], args[4], args[5], args[6], args[7]];
-                    Op::PinvSym3 { m, i: index(0)?, j: index(1)? }
+                    Op::PinvSym3 {
+                        m,
+                        i: index(0)?,
+                        j: index(1)?,
+                    }
                 } else if s == self.fx.near {
-                    Op::NearZero { x: args[0], eps: crate::derive::EPS, near: args[1], far: args[2] }
+                    Op::NearZero {
+                        x: args[0],
+                        eps: crate::derive::EPS,
+                        near: args[1],
+                        far: args[2],
+                    }
                 } else {
-                    return Err(SymbolicError(format!("no code for function `{a}` (a derivative placeholder?)")));
+                    return Err(SymbolicError(format!(
+                        "no code for function `{a}` (a derivative placeholder?)"
+                    )));
                 };
                 Ok(self.push(op))
             }
@@ -276,13 +307,21 @@ impl TapeBuilder {
                 Op::Exp(a) => Op::Exp(m(a)),
                 Op::Ln(a) => Op::Ln(m(a)),
                 Op::Abs(a) => Op::Abs(m(a)),
-                Op::NearZero { x, eps, near, far } => Op::NearZero { x: m(x), eps, near: m(near), far: m(far) },
+                Op::NearZero { x, eps, near, far } => Op::NearZero {
+                    x: m(x),
+                    eps,
+                    near: m(near),
+                    far: m(far),
+                },
                 Op::PinvSym3 { m: mm, i, j } => Op::PinvSym3 { m: mm.map(m), i, j },
                 o @ (Op::Const(_) | Op::Arg(..)) => o,
             };
             new_index[i] = tape.len() as u32;
             tape.push(op);
         }
-        (tape, outputs.iter().map(|&o| new_index[o as usize]).collect())
+        (
+            tape,
+            outputs.iter().map(|&o| new_index[o as usize]).collect(),
+        )
     }
 }

@@ -30,14 +30,25 @@ pub struct SourceError {
 
 impl SourceError {
     pub fn new(file: &Path, pos: Option<SourcePos>, message: impl Into<String>) -> Self {
-        SourceError { file: file.to_path_buf(), pos, message: message.into() }
+        SourceError {
+            file: file.to_path_buf(),
+            pos,
+            message: message.into(),
+        }
     }
 }
 
 impl fmt::Display for SourceError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self.pos {
-            Some(p) => write!(f, "{}:{}:{}: {}", self.file.display(), p.line, p.column, self.message),
+            Some(p) => write!(
+                f,
+                "{}:{}:{}: {}",
+                self.file.display(),
+                p.line,
+                p.column,
+                self.message
+            ),
             None => write!(f, "{}: {}", self.file.display(), self.message),
         }
     }

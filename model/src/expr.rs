@@ -22,6 +22,17 @@ pub const FUNCTIONS: &[(&str, usize)] = &[
 /// Named constants of the language.
 pub const CONSTANTS: &[&str] = &["pi"];
 
+/// Longest expression accepted, in tokens. Kinematic expressions are a few dozen
+/// tokens; the limit keeps every recursive pass over the tree (ours and symbolica's)
+/// far from the stack's end, so a pathological spec gets a located error instead of
+/// an abort.
+pub const MAX_TOKENS: usize = 4000;
+/// Deepest nesting of parentheses, unary signs and calls accepted.
+pub const MAX_DEPTH: usize = 64;
+/// Largest |exponent| of a power with a constant exponent: a kinematic model has
+/// small powers; `x^1000000000` would make the derivation expand without end.
+pub const MAX_EXPONENT: f64 = 64.0;
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum BinOp {
     Add,
@@ -70,7 +81,9 @@ fn tokenize(src: &str) -> Result<Vec<(Tok, usize, usize)>, ParseError> {
         let c = bytes[i] as char;
         if c.is_ascii_whitespace() {
             i += 1;
-        } else if c.is_ascii_digit() || (c == '.' && i + 1 < bytes.len() && bytes[i + 1].is_ascii_digit()) {
+        } else if c.is_ascii_digit()
+            || (c == '.' && i + 1 < bytes.len() && bytes[i + 1].is_ascii_digit())
+        {
             let start = i;
             while i < bytes.len() && (bytes[i].is_ascii_digit() || bytes[i] == b'.') {
                 i += 1;
@@ -88,8 +101,20 @@ fn tokenize(src: &str) -> Result<Vec<(Tok, usize, usize)>, ParseError> {
                 }
             }
             let text = &src[start..i];
-            if text.parse::<f64>().is_err() {
-                return Err(ParseError { offset: start, message: format!("malformed number `{text}`") });
+            match text.parse::<f64>() {
+                Err(_) => {
+                    return Err(ParseError {
+                        offset: start,
+                        message: format!("malformed number `{text}`"),
+                    })
+                }
+                Ok(v) if !v.is_finite() => {
+                    return Err(ParseError {
+                        offset: start,
+                        message: format!("number `{text}` is out of the range of a 64-bit float"),
+                    })
+                }
+                Ok(_) => {}
             }
             out.push((Tok::Num(text.to_string()), start, i));
         } else if c.is_ascii_alphabetic() || c == '_' {
@@ -102,7 +127,12 @@ fn tokenize(src: &str) -> Result<Vec<(Tok, usize, usize)>, ParseError> {
             out.push((Tok::Op(c), i, i + 1));
             i += 1;
         } else {
-            return Err(ParseError { offset: i, message: format!("unexpected character `{c}`") });
+            // report the whole character (an omega, a non-breaking space), not a byte of it
+            let ch = src[i..].chars().next().unwrap_or('?');
+            return Err(ParseError {
+                offset: i,
+                message: format!("unexpected character `{ch}` (U+{:04X})", ch as u32),
+            });
         }
     }
     Ok(out)
@@ -112,6 +142,8 @@ struct Parser<'a> {
     toks: Vec<(Tok, usize, usize)>,
     pos: usize,
     src: &'a str,
+    /// Current nesting depth of `prefix` (parentheses, unary signs, calls).
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -122,7 +154,10 @@ impl Parser<'_> {
         self.toks.get(self.pos).map_or(self.src.len(), |t| t.1)
     }
     fn err<T>(&self, message: impl Into<String>) -> Result<T, ParseError> {
-        Err(ParseError { offset: self.offset(), message: message.into() })
+        Err(ParseError {
+            offset: self.offset(),
+            message: message.into(),
+        })
     }
     fn expect(&mut self, c: char) -> Result<usize, ParseError> {
         match self.toks.get(self.pos) {
@@ -153,28 +188,50 @@ impl Parser<'_> {
             self.pos += 1;
             let rhs = self.expr(rbp)?;
             let span = (lhs.span.0, rhs.span.1);
-            lhs = Expr { kind: ExprKind::Bin(op, Box::new(lhs), Box::new(rhs)), span };
+            lhs = Expr {
+                kind: ExprKind::Bin(op, Box::new(lhs), Box::new(rhs)),
+                span,
+            };
         }
         Ok(lhs)
     }
 
     fn prefix(&mut self) -> Result<Expr, ParseError> {
+        if self.depth >= MAX_DEPTH {
+            return self.err(format!("expression nested too deeply (more than {MAX_DEPTH} levels of parentheses, signs or calls)"));
+        }
+        self.depth += 1;
+        let e = self.prefix_inner();
+        self.depth -= 1;
+        e
+    }
+
+    fn prefix_inner(&mut self) -> Result<Expr, ParseError> {
         let Some((tok, start, end)) = self.toks.get(self.pos).cloned() else {
             return self.err("expression ends too early");
         };
         self.pos += 1;
         match tok {
-            Tok::Num(n) => Ok(Expr { kind: ExprKind::Num(n), span: (start, end) }),
+            Tok::Num(n) => Ok(Expr {
+                kind: ExprKind::Num(n),
+                span: (start, end),
+            }),
             Tok::Op('-') => {
                 let inner = self.expr(6)?;
                 let span = (start, inner.span.1);
-                Ok(Expr { kind: ExprKind::Neg(Box::new(inner)), span })
+                Ok(Expr {
+                    kind: ExprKind::Neg(Box::new(inner)),
+                    span,
+                })
             }
             Tok::Op('+') => self.expr(6),
             Tok::Op('(') => {
                 let inner = self.expr(0)?;
                 let close = self.expect(')')?;
-                Ok(Expr { kind: inner.kind, span: (start, close) })
+                Ok(Expr {
+                    kind: inner.kind,
+                    span: (start, close),
+                })
             }
             Tok::Ident(name) => {
                 if self.peek() == Some(&Tok::Op('(')) {
@@ -192,33 +249,142 @@ impl Parser<'_> {
                     }
                     let close = self.expect(')')?;
                     let Some(&(_, arity)) = FUNCTIONS.iter().find(|(f, _)| *f == name) else {
-                        return Err(ParseError { offset: start, message: format!("unknown function `{name}`") });
+                        return Err(ParseError {
+                            offset: start,
+                            message: format!("unknown function `{name}`"),
+                        });
                     };
                     if args.len() != arity {
                         return Err(ParseError {
                             offset: start,
-                            message: format!("`{name}` takes {arity} argument(s), got {}", args.len()),
+                            message: format!(
+                                "`{name}` takes {arity} argument(s), got {}",
+                                args.len()
+                            ),
                         });
                     }
-                    Ok(Expr { kind: ExprKind::Call(name, args), span: (start, close) })
+                    Ok(Expr {
+                        kind: ExprKind::Call(name, args),
+                        span: (start, close),
+                    })
                 } else {
-                    Ok(Expr { kind: ExprKind::Var(name), span: (start, end) })
+                    Ok(Expr {
+                        kind: ExprKind::Var(name),
+                        span: (start, end),
+                    })
                 }
             }
-            Tok::Op(c) => Err(ParseError { offset: start, message: format!("unexpected `{c}`") }),
+            Tok::Op(c) => Err(ParseError {
+                offset: start,
+                message: format!("unexpected `{c}`"),
+            }),
         }
     }
 }
 
-/// Parse one expression string.
+/// Parse one expression string. Besides syntax, it rejects what no kinematic
+/// model needs and what would break later stages: more than [`MAX_TOKENS`]
+/// tokens, nesting deeper than [`MAX_DEPTH`], constant sub-expressions that are
+/// not finite reals (`0/0`, `sqrt(-1)`, `ln(0)`, `10^400`) and constant exponents
+/// beyond [`MAX_EXPONENT`].
 pub fn parse(src: &str) -> Result<Expr, ParseError> {
     let toks = tokenize(src)?;
-    let mut p = Parser { toks, pos: 0, src };
+    if toks.len() > MAX_TOKENS {
+        return Err(ParseError {
+            offset: 0,
+            message: format!(
+                "expression too long: {} tokens (at most {MAX_TOKENS})",
+                toks.len()
+            ),
+        });
+    }
+    let mut p = Parser {
+        toks,
+        pos: 0,
+        src,
+        depth: 0,
+    };
     let e = p.expr(0)?;
     if p.pos != p.toks.len() {
         return p.err("unexpected text after the expression");
     }
+    check_constants(&e)?;
     Ok(e)
+}
+
+/// Every constant sub-expression must be a finite real, and constant exponents
+/// small. Returns the value of `e` when it is constant.
+fn check_constants(e: &Expr) -> Result<Option<f64>, ParseError> {
+    let bad = |msg: String| ParseError {
+        offset: e.span.0,
+        message: msg,
+    };
+    let value = match &e.kind {
+        ExprKind::Num(n) => n.parse::<f64>().ok(),
+        ExprKind::Var(v) => CONSTANTS
+            .contains(&v.as_str())
+            .then_some(std::f64::consts::PI),
+        ExprKind::Neg(a) => check_constants(a)?.map(|v| -v),
+        ExprKind::Bin(op, a, b) => {
+            let (va, vb) = (check_constants(a)?, check_constants(b)?);
+            if let (BinOp::Pow, Some(x)) = (op, vb) {
+                if x.abs() > MAX_EXPONENT {
+                    return Err(ParseError {
+                        offset: b.span.0,
+                        message: format!(
+                            "exponent {x} is too large (|exponent| <= {MAX_EXPONENT})"
+                        ),
+                    });
+                }
+            }
+            match (va, vb) {
+                (Some(x), Some(y)) => Some(apply_bin(op, x, y)),
+                _ => None,
+            }
+        }
+        ExprKind::Call(f, args) => {
+            let vals = args
+                .iter()
+                .map(check_constants)
+                .collect::<Result<Vec<_>, _>>()?;
+            vals.iter()
+                .copied()
+                .collect::<Option<Vec<f64>>>()
+                .map(|v| apply_call(f, &v))
+        }
+    };
+    match value {
+        Some(v) if !v.is_finite() => Err(bad(format!(
+            "`{}` is not a finite real number (it evaluates to {v})",
+            e.to_source()
+        ))),
+        v => Ok(v),
+    }
+}
+
+fn apply_bin(op: &BinOp, x: f64, y: f64) -> f64 {
+    match op {
+        BinOp::Add => x + y,
+        BinOp::Sub => x - y,
+        BinOp::Mul => x * y,
+        BinOp::Div => x / y,
+        BinOp::Pow => x.powf(y),
+    }
+}
+
+fn apply_call(f: &str, a: &[f64]) -> f64 {
+    match f {
+        "sin" => a[0].sin(),
+        "cos" => a[0].cos(),
+        "tan" => a[0].tan(),
+        "atan" => a[0].atan(),
+        "atan2" => a[0].atan2(a[1]),
+        "sqrt" => a[0].sqrt(),
+        "exp" => a[0].exp(),
+        "ln" => a[0].ln(),
+        "abs" => a[0].abs(),
+        _ => f64::NAN,
+    }
 }
 
 impl Expr {
@@ -255,10 +421,44 @@ impl Expr {
             },
             ExprKind::Num(n) => ExprKind::Num(n.clone()),
             ExprKind::Neg(a) => ExprKind::Neg(Box::new(a.substitute(map))),
-            ExprKind::Bin(op, a, b) => ExprKind::Bin(op.clone(), Box::new(a.substitute(map)), Box::new(b.substitute(map))),
-            ExprKind::Call(f, args) => ExprKind::Call(f.clone(), args.iter().map(|a| a.substitute(map)).collect()),
+            ExprKind::Bin(op, a, b) => ExprKind::Bin(
+                op.clone(),
+                Box::new(a.substitute(map)),
+                Box::new(b.substitute(map)),
+            ),
+            ExprKind::Call(f, args) => {
+                ExprKind::Call(f.clone(), args.iter().map(|a| a.substitute(map)).collect())
+            }
         };
-        Expr { kind, span: self.span }
+        Expr {
+            kind,
+            span: self.span,
+        }
+    }
+
+    /// Numeric value with variables from `var` (None: unknown variable). Used to
+    /// inspect a model's structure without symbolic algebra (which wheel turns
+    /// the body which way), never for the kernels themselves.
+    pub fn eval(&self, var: &dyn Fn(&str) -> Option<f64>) -> Option<f64> {
+        Some(match &self.kind {
+            ExprKind::Num(n) => n.parse().ok()?,
+            ExprKind::Var(v) if v == "pi" => std::f64::consts::PI,
+            ExprKind::Var(v) => var(v)?,
+            ExprKind::Neg(a) => -a.eval(var)?,
+            ExprKind::Bin(op, a, b) => apply_bin(op, a.eval(var)?, b.eval(var)?),
+            ExprKind::Call(f, args) => apply_call(
+                f,
+                &args
+                    .iter()
+                    .map(|a| a.eval(var))
+                    .collect::<Option<Vec<_>>>()?,
+            ),
+        })
+    }
+
+    /// Is this the constant zero (as a spec writes `vy = "0"`)?
+    pub fn is_zero(&self) -> bool {
+        self.variables().is_empty() && self.eval(&|_| None) == Some(0.0)
     }
 
     /// Render back to the spec language (fully parenthesised where needed).
@@ -278,7 +478,13 @@ impl Expr {
                 format!("({} {o} {})", a.to_source(), b.to_source())
             }
             ExprKind::Call(f, args) => {
-                format!("{f}({})", args.iter().map(|a| a.to_source()).collect::<Vec<_>>().join(", "))
+                format!(
+                    "{f}({})",
+                    args.iter()
+                        .map(|a| a.to_source())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
             }
         }
     }
@@ -303,8 +509,57 @@ mod tests {
     fn errors_point_at_offset() {
         assert_eq!(parse("a + * b").unwrap_err().offset, 4);
         assert_eq!(parse("foo(x)").unwrap_err().offset, 0);
-        assert!(parse("atan2(x)").unwrap_err().message.contains("2 argument"));
+        assert!(parse("atan2(x)")
+            .unwrap_err()
+            .message
+            .contains("2 argument"));
         assert_eq!(parse("(a + b").unwrap_err().offset, 6);
         assert_eq!(parse("a $ b").unwrap_err().offset, 2);
+    }
+
+    #[test]
+    fn pathological_expressions_are_rejected_with_an_offset() {
+        let deep = format!("{}x{}", "(".repeat(1_000), ")".repeat(1_000));
+        assert!(parse(&format!("{}x{}", "(".repeat(10_000), ")".repeat(10_000))).is_err());
+        assert!(parse(&deep)
+            .unwrap_err()
+            .message
+            .contains("nested too deeply"));
+        assert!(parse(&format!("{}x", "-".repeat(1_000)))
+            .unwrap_err()
+            .message
+            .contains("nested too deeply"));
+        let long = vec!["x"; 48_000].join(" + ");
+        assert!(parse(&long).unwrap_err().message.contains("too long"));
+        assert!(parse("x*1e400")
+            .unwrap_err()
+            .message
+            .contains("out of the range"));
+        let e = parse("n_r*10^400").unwrap_err();
+        assert!(e.offset == 7 && e.message.contains("exponent 400"), "{e:?}");
+        assert!(parse("2^2^2^2^2^2").is_err());
+        assert!(parse("x*10^60^2").unwrap_err().message.contains("exponent"));
+        assert!(parse("x*(1e300*1e300)")
+            .unwrap_err()
+            .message
+            .contains("finite real"));
+        assert!(parse("x + 0/0")
+            .unwrap_err()
+            .message
+            .contains("finite real"));
+        assert_eq!(parse("y + sqrt(-1)").unwrap_err().offset, 4);
+        assert!(parse("ln(0)*x").is_err());
+        assert!(parse("n_r^1000000000")
+            .unwrap_err()
+            .message
+            .contains("exponent"));
+        assert!(parse("x ω").unwrap_err().message.contains("`ω`"));
+        // ordinary models still parse, with their values
+        let e = parse("2*pi*x^2 - sqrt(4)").unwrap();
+        assert_eq!(
+            e.eval(&|v| (v == "x").then_some(1.0)),
+            Some(2.0 * std::f64::consts::PI - 2.0)
+        );
+        assert!(parse("0").unwrap().is_zero() && !parse("x").unwrap().is_zero());
     }
 }

@@ -5,7 +5,9 @@
 //! subexpressions shared. The same tape is emitted as Rust by kinegen-codegen and
 //! interpreted here by [`Function::eval`], so a freshly edited spec can be fitted
 //! without compiling anything.
-use crate::spec::{Input, Noise, Observation, Param};
+use crate::spec::{
+    Input, Noise, Observation, ObservationRole, Param, DEFAULT_GYRO_COLUMN, DEFAULT_POSE_COLUMNS,
+};
 use serde::{Deserialize, Serialize};
 
 /// One tape instruction. Operands are indices of earlier slots.
@@ -32,11 +34,20 @@ pub enum Op {
     Abs(u32),
     /// `if |x| < eps { near } else { far }`: the series branch that replaces a
     /// removable singularity at x = 0.
-    NearZero { x: u32, eps: f64, near: u32, far: u32 },
+    NearZero {
+        x: u32,
+        eps: f64,
+        near: u32,
+        far: u32,
+    },
     /// Entry (i, j) of the pseudo-inverse of the symmetric positive semi-definite
     /// 3x3 matrix whose packed upper triangle is in `m` ([`crate::linalg::pinv_sym3`],
     /// with its rank check). Least-squares kinematics (seed 000 eq. 9-10).
-    PinvSym3 { m: [u32; 6], i: u8, j: u8 },
+    PinvSym3 {
+        m: [u32; 6],
+        i: u8,
+        j: u8,
+    },
 }
 
 impl Op {
@@ -46,7 +57,16 @@ impl Op {
         match *self {
             Const(_) | Arg(..) => vec![],
             Add(a, b) | Sub(a, b) | Mul(a, b) | Div(a, b) | Pow(a, b) | Atan2(a, b) => vec![a, b],
-            Neg(a) | PowI(a, _) | Sqrt(a) | Sin(a) | Cos(a) | Tan(a) | Atan(a) | Exp(a) | Ln(a) | Abs(a) => vec![a],
+            Neg(a)
+            | PowI(a, _)
+            | Sqrt(a)
+            | Sin(a)
+            | Cos(a)
+            | Tan(a)
+            | Atan(a)
+            | Exp(a)
+            | Ln(a)
+            | Abs(a) => vec![a],
             NearZero { x, near, far, .. } => vec![x, near, far],
             PinvSym3 { m, .. } => m.to_vec(),
         }
@@ -182,6 +202,33 @@ impl ModelIr {
         self.functions.iter().find(|f| f.name == name)
     }
 
+    /// The observation that plays `role`, if the model has one.
+    pub fn observation(&self, role: ObservationRole) -> Option<&Observation> {
+        self.observations.iter().find(|o| o.role == role)
+    }
+
+    /// The derived function of the observation that plays `role`: `part` is ""
+    /// for the prediction, "_jac_x" or "_jac_p" for its Jacobians.
+    pub fn observation_fn(&self, role: ObservationRole, part: &str) -> Option<&Function> {
+        self.observation(role)
+            .and_then(|o| self.function(&format!("obs_{}{part}", o.name)))
+    }
+
+    /// Log columns of the measured pose: the pose observation's, or the contract's
+    /// default `gt_x, gt_y, gt_theta` when the model measures the body origin.
+    pub fn pose_columns(&self) -> [String; 3] {
+        match self.observation(ObservationRole::Pose) {
+            Some(o) => [0, 1, 2].map(|i| o.columns[i].clone()),
+            None => DEFAULT_POSE_COLUMNS.map(String::from),
+        }
+    }
+
+    /// Log column of the measured yaw rate (the yaw-rate observation's, or `gyro_z`).
+    pub fn gyro_column(&self) -> String {
+        self.observation(ObservationRole::YawRate)
+            .map_or(DEFAULT_GYRO_COLUMN.to_string(), |o| o.columns[0].clone())
+    }
+
     /// Parameters passed at run time (non-const), in argument order.
     pub fn runtime_params(&self) -> Vec<&Param> {
         self.params.iter().filter(|p| !p.constant).collect()
@@ -212,12 +259,20 @@ mod tests {
             Op::Mul(3, 4),
             Op::Const(1.0),
             Op::Add(5, 6),
-            Op::NearZero { x: 0, eps: 1e-3, near: 7, far: 2 },
+            Op::NearZero {
+                x: 0,
+                eps: 1e-3,
+                near: 7,
+                far: 2,
+            },
         ];
         let f = Function {
             name: "sinc".into(),
             doc: String::new(),
-            args: vec![ArgSpec { name: "a".into(), names: vec!["a".into()] }],
+            args: vec![ArgSpec {
+                name: "a".into(),
+                names: vec!["a".into()],
+            }],
             rows: 1,
             cols: 1,
             row_names: vec![],

@@ -9,6 +9,7 @@
 //!   them ever touches symbolica.
 //! * [`linalg`]: the pseudo-inverse with a rank check used by least-squares
 //!   (constraint) kinematics, shared verbatim with the generated crate.
+pub mod effects;
 pub mod error;
 pub mod expr;
 pub mod ir;

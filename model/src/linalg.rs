@@ -85,7 +85,9 @@ pub fn eigen_sym3(m: [f64; 6]) -> ([f64; 3], [[f64; 3]; 3]) {
 pub fn rank_sym3(m: [f64; 6]) -> usize {
     let (l, _) = eigen_sym3(m);
     let lmax = l.iter().fold(0.0f64, |a, &b| if b > a { b } else { a });
-    l.iter().filter(|&&x| lmax > 0.0 && x > RANK_TOL * lmax).count()
+    l.iter()
+        .filter(|&&x| lmax > 0.0 && x > RANK_TOL * lmax)
+        .count()
 }
 
 /// Pseudo-inverse of a symmetric positive semi-definite 3x3 matrix, packed upper
@@ -103,7 +105,14 @@ pub fn pinv_sym3(m: [f64; 6]) -> [f64; 6] {
             continue;
         }
         let inv = 1.0 / l[k];
-        for (i, j, slot) in [(0, 0, 0), (0, 1, 1), (0, 2, 2), (1, 1, 3), (1, 2, 4), (2, 2, 5)] {
+        for (i, j, slot) in [
+            (0, 0, 0),
+            (0, 1, 1),
+            (0, 2, 2),
+            (1, 1, 3),
+            (1, 2, 4),
+            (2, 2, 5),
+        ] {
             out[slot] += v[i][k] * v[j][k] * inv;
         }
     }
@@ -149,7 +158,14 @@ mod tests {
         // M = a a^T + b b^T has rank 2
         let (a, b) = ([1.0, 2.0, -1.0], [0.5, -1.0, 3.0]);
         let mut m = [0.0; 6];
-        for (i, j, s) in [(0, 0, 0), (0, 1, 1), (0, 2, 2), (1, 1, 3), (1, 2, 4), (2, 2, 5)] {
+        for (i, j, s) in [
+            (0, 0, 0),
+            (0, 1, 1),
+            (0, 2, 2),
+            (1, 1, 3),
+            (1, 2, 4),
+            (2, 2, 5),
+        ] {
             m[s] = a[i] * a[j] + b[i] * b[j];
         }
         assert_eq!(rank_sym3(m), 2);
@@ -177,6 +193,8 @@ mod tests {
     fn ill_conditioned_still_inverts_accurately() {
         let m = [1e4, 0.0, 0.0, 1.0, 0.0, 1e-4];
         let p = pinv_sym3(m);
-        assert!((p[0] - 1e-4).abs() < 1e-18 && (p[3] - 1.0).abs() < 1e-14 && (p[5] - 1e4).abs() < 1e-8);
+        assert!(
+            (p[0] - 1e-4).abs() < 1e-18 && (p[3] - 1.0).abs() < 1e-14 && (p[5] - 1e4).abs() < 1e-8
+        );
     }
 }

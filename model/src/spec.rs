@@ -146,6 +146,9 @@ struct RawObservation {
     sigma: Vec<f64>,
     #[serde(default)]
     landmark: bool,
+    /// What the observation measures; inferred from its expressions when absent.
+    #[serde(default)]
+    role: Option<ObservationRole>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -202,6 +205,52 @@ pub struct Noise {
     pub sigma: f64,
 }
 
+/// What an observation measures. The analysis finds the pose tracker, the gyro
+/// and the range-bearing sensor by role, never by observation name, and effects
+/// patch observations by role.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObservationRole {
+    /// The pose (x, y, heading) of a body-fixed point, in the world frame: a
+    /// motion-capture marker, a tracker. Three columns.
+    Pose,
+    /// The body yaw rate: a gyro. One column.
+    YawRate,
+    /// Range and bearing to a mapped landmark (`landmark = true`).
+    RangeBearing,
+    /// Anything else: derived and verified, not used by the analysis.
+    Other,
+}
+
+impl ObservationRole {
+    /// Exteroceptive observations see the robot from outside (or the world from
+    /// the robot): where the sensor is mounted matters.
+    pub fn is_exteroceptive(self) -> bool {
+        matches!(self, ObservationRole::Pose | ObservationRole::RangeBearing)
+    }
+
+    /// The role an undeclared observation plays, from its structure: a landmark
+    /// observation is range-bearing; a single expression that is the yaw rate is a
+    /// gyro; three expressions whose last is the heading (an angle) are a pose.
+    fn infer(landmark: bool, exprs: &[Expr], angle: &[bool]) -> ObservationRole {
+        let is_var = |e: &Expr, name: &str| matches!(&e.kind, ExprKind::Var(v) if v == name);
+        if landmark {
+            ObservationRole::RangeBearing
+        } else if exprs.len() == 1 && is_var(&exprs[0], "omega") {
+            ObservationRole::YawRate
+        } else if exprs.len() == 3 && angle.get(2) == Some(&true) && is_var(&exprs[2], "theta") {
+            ObservationRole::Pose
+        } else {
+            ObservationRole::Other
+        }
+    }
+}
+
+/// The log columns of a ground-truth pose when a spec declares no pose observation.
+pub const DEFAULT_POSE_COLUMNS: [&str; 3] = ["gt_x", "gt_y", "gt_theta"];
+/// The log column of the yaw rate when a spec declares no yaw-rate observation.
+pub const DEFAULT_GYRO_COLUMN: &str = "gyro_z";
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Observation {
     pub name: String,
@@ -210,6 +259,7 @@ pub struct Observation {
     pub angle: Vec<bool>,
     pub sigma: Vec<f64>,
     pub landmark: bool,
+    pub role: ObservationRole,
     #[serde(skip)]
     pub exprs: Vec<Expr>,
 }
@@ -266,7 +316,11 @@ struct Ctx<'a> {
 
 impl Ctx<'_> {
     fn err_at(&self, offset: usize, msg: impl Into<String>) -> SourceError {
-        SourceError::new(self.path, Some(SourcePos::from_offset(self.text, offset)), msg)
+        SourceError::new(
+            self.path,
+            Some(SourcePos::from_offset(self.text, offset)),
+            msg,
+        )
     }
     fn err_span<T>(&self, s: &Spanned<T>, msg: impl Into<String>) -> SourceError {
         self.err_at(s.span().start, msg)
@@ -275,7 +329,8 @@ impl Ctx<'_> {
     /// the file (the +1 skips the opening quote).
     fn parse_expr(&self, s: &Spanned<String>) -> Result<Expr, SourceError> {
         let base = s.span().start + 1;
-        let mut e = expr::parse(s.get_ref()).map_err(|pe| self.err_at(base + pe.offset, pe.message))?;
+        let mut e =
+            expr::parse(s.get_ref()).map_err(|pe| self.err_at(base + pe.offset, pe.message))?;
         shift_spans(&mut e, base);
         Ok(e)
     }
@@ -294,6 +349,26 @@ fn shift_spans(e: &mut Expr, by: usize) {
     }
 }
 
+/// Rust keywords (all editions), which cannot name a generated module or function.
+const RUST_KEYWORDS: &[&str] = &[
+    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum", "extern",
+    "false", "fn", "for", "gen", "if", "impl", "in", "let", "loop", "match", "mod", "move", "mut",
+    "pub", "ref", "return", "self", "Self", "static", "struct", "super", "trait", "true", "type",
+    "unsafe", "use", "where", "while", "abstract", "become", "box", "do", "final", "macro",
+    "override", "priv", "try", "typeof", "unsized", "virtual", "yield",
+];
+
+/// Why a model name cannot be a module of the generated crate (None: it can).
+fn reserved_module_name(name: &str) -> Option<&'static str> {
+    if RUST_KEYWORDS.contains(&name) {
+        Some("it is a Rust keyword")
+    } else if ["lib", "linalg", "main", "std", "core", "alloc", "libm"].contains(&name) {
+        Some("the generated crate uses that module or crate name itself")
+    } else {
+        None
+    }
+}
+
 fn is_identifier(s: &str) -> bool {
     let mut c = s.chars();
     matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
@@ -303,9 +378,17 @@ fn is_identifier(s: &str) -> bool {
 impl Model {
     /// Read and validate a spec file.
     pub fn load(path: &Path) -> Result<Model, SourceError> {
-        let text = std::fs::read_to_string(path)
+        let bytes = std::fs::read(path)
             .map_err(|e| SourceError::new(path, None, format!("cannot read spec: {e}")))?;
-        Model::parse(path, &text)
+        let text = std::str::from_utf8(&bytes).map_err(|e| {
+            let ok = std::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or_default();
+            SourceError::new(
+                path,
+                Some(SourcePos::from_offset(ok, ok.len())),
+                "the spec is not UTF-8 text",
+            )
+        })?;
+        Model::parse(path, text)
     }
 
     /// Validate spec text (`path` is used in messages only).
@@ -317,10 +400,22 @@ impl Model {
         })?;
 
         if raw.state.get_ref().iter().map(String::as_str).ne(STATE) {
-            return Err(cx.err_span(&raw.state, "state must be [\"x\", \"y\", \"theta\"] (the planar pose)"));
+            return Err(cx.err_span(
+                &raw.state,
+                "state must be [\"x\", \"y\", \"theta\"] (the planar pose)",
+            ));
         }
         if !is_identifier(raw.name.get_ref()) {
-            return Err(cx.err_span(&raw.name, "model name must be an identifier (letters, digits, _)"));
+            return Err(cx.err_span(
+                &raw.name,
+                "model name must be an identifier (letters, digits, _)",
+            ));
+        }
+        if let Some(why) = reserved_module_name(raw.name.get_ref()) {
+            return Err(cx.err_span(
+                &raw.name,
+                format!("model name `{}` cannot be used: {why}", raw.name.get_ref()),
+            ));
         }
 
         // Every declared name, where it was declared, and what it is.
@@ -333,14 +428,20 @@ impl Model {
             if !is_identifier(n) {
                 return Err(cx.err_span(name, format!("`{n}` is not a valid name")));
             }
-            if RESERVED.contains(&n.as_str()) || CONSTANTS.contains(&n.as_str()) || FUNCTIONS.iter().any(|f| f.0 == n) {
+            if RESERVED.contains(&n.as_str())
+                || CONSTANTS.contains(&n.as_str())
+                || FUNCTIONS.iter().any(|f| f.0 == n)
+            {
                 return Err(cx.err_span(name, format!("`{n}` is a reserved name")));
             }
             if let Some((at, other)) = declared.get(n) {
                 let p = SourcePos::from_offset(text, *at);
                 return Err(cx.err_span(
                     name,
-                    format!("duplicate name `{n}`: already declared as {other} at line {}", p.line),
+                    format!(
+                        "duplicate name `{n}`: already declared as {other} at line {}",
+                        p.line
+                    ),
                 ));
             }
             declared.insert(n.clone(), (name.span().start, what));
@@ -367,8 +468,24 @@ impl Model {
                 if !nominal.is_finite() {
                     return Err(cx.err_span(&p.nominal, "nominal value must be finite"));
                 }
+                if p.min.is_some_and(|m| !m.is_finite()) || p.max.is_some_and(|m| !m.is_finite()) {
+                    return Err(cx.err_span(
+                        &p.name,
+                        "`min` and `max` must be finite numbers (leave one out for no bound)",
+                    ));
+                }
+                if let (Some(a), Some(b)) = (p.min, p.max) {
+                    if a >= b {
+                        return Err(
+                            cx.err_span(&p.name, format!("`min` ({a}) must be below `max` ({b})"))
+                        );
+                    }
+                }
                 if p.min.is_some_and(|m| nominal < m) || p.max.is_some_and(|m| nominal > m) {
-                    return Err(cx.err_span(&p.nominal, format!("nominal {nominal} is outside the declared bounds")));
+                    return Err(cx.err_span(
+                        &p.nominal,
+                        format!("nominal {nominal} is outside the declared bounds"),
+                    ));
                 }
                 Ok(Param {
                     name: p.name.get_ref().clone(),
@@ -384,7 +501,11 @@ impl Model {
             .collect::<Result<_, _>>()?;
 
         // Parse definitions, check names, then order them (and reject cycles).
-        let def_names: HashSet<&str> = raw.define.iter().map(|d| d.name.get_ref().as_str()).collect();
+        let def_names: HashSet<&str> = raw
+            .define
+            .iter()
+            .map(|d| d.name.get_ref().as_str())
+            .collect();
         let check_names = |e: &Expr, allow: &dyn Fn(&str) -> bool| -> Result<(), SourceError> {
             for (v, span) in e.variables() {
                 if CONSTANTS.contains(&v) || declared.contains_key(v) && allow(v) {
@@ -399,7 +520,11 @@ impl Model {
             }
             Ok(())
         };
-        let noise_names: HashSet<&str> = raw.noise.iter().map(|n| n.name.get_ref().as_str()).collect();
+        let noise_names: HashSet<&str> = raw
+            .noise
+            .iter()
+            .map(|n| n.name.get_ref().as_str())
+            .collect();
         let not_state = |v: &str| !STATE.contains(&v);
         let mut parsed_defs = Vec::new();
         for d in &raw.define {
@@ -409,34 +534,64 @@ impl Model {
         }
         let defines = order_definitions(&cx, &parsed_defs, &def_names)?;
 
-        let (kinematics, kinematics_at, motion_doc) = match (&raw.motion, &raw.constraints) {
-            (Some(m), None) => {
-                let mo = m.get_ref();
-                let twist_exprs = [&mo.vx, &mo.vy, &mo.omega].map(|s| cx.parse_expr(s).and_then(|e| check_names(&e, &not_state).map(|_| e)));
-                let [vx, vy, omega] = twist_exprs;
-                (Kinematics::Twist([vx?, vy?, omega?]), mo.vx.span().start + 1, mo.doc.clone())
-            }
-            (None, Some(c)) => {
-                let k = parse_constraints(&cx, c, &raw.input, &noise_names, &|e: &Expr| check_names(e, &|v: &str| not_state(v) && !noise_names.contains(v)))?;
-                let at = c.row.first().map_or(0, |r| r.rate.span().start);
-                (Kinematics::Constraints(k), at, c.doc.clone())
-            }
-            (Some(m), Some(_)) => return Err(cx.err_span(m, "give either [motion] or [constraints], not both")),
-            (None, None) => return Err(cx.err_at(0, "missing [motion] (the body twist) or [constraints] (rate = S . twist rows)")),
-        };
+        let (kinematics, kinematics_at, motion_doc) =
+            match (&raw.motion, &raw.constraints) {
+                (Some(m), None) => {
+                    let mo = m.get_ref();
+                    let twist_exprs = [&mo.vx, &mo.vy, &mo.omega].map(|s| {
+                        cx.parse_expr(s)
+                            .and_then(|e| check_names(&e, &not_state).map(|_| e))
+                    });
+                    let [vx, vy, omega] = twist_exprs;
+                    (
+                        Kinematics::Twist([vx?, vy?, omega?]),
+                        mo.vx.span().start + 1,
+                        mo.doc.clone(),
+                    )
+                }
+                (None, Some(c)) => {
+                    let k = parse_constraints(&cx, c, &raw.input, &noise_names, &|e: &Expr| {
+                        check_names(e, &|v: &str| not_state(v) && !noise_names.contains(v))
+                    })?;
+                    let at = c.row.first().map_or(0, |r| r.rate.span().start);
+                    (Kinematics::Constraints(k), at, c.doc.clone())
+                }
+                (Some(m), Some(_)) => {
+                    return Err(cx.err_span(m, "give either [motion] or [constraints], not both"))
+                }
+                (None, None) => return Err(cx.err_at(
+                    0,
+                    "missing [motion] (the body twist) or [constraints] (rate = S . twist rows)",
+                )),
+            };
 
-        let mut observations = Vec::new();
+        let mut observations: Vec<Observation> = Vec::new();
         for o in &raw.observation {
             declare_free_name(&cx, &o.name, &declared)?;
+            if observations.iter().any(|x| &x.name == o.name.get_ref()) {
+                return Err(cx.err_span(
+                    &o.name,
+                    format!("duplicate observation name `{}`", o.name.get_ref()),
+                ));
+            }
             let ncols = o.columns.get_ref().len();
             if o.expr.len() != ncols {
                 return Err(cx.err_span(
                     &o.columns,
-                    format!("observation `{}` has {ncols} column(s) but {} expression(s)", o.name.get_ref(), o.expr.len()),
+                    format!(
+                        "observation `{}` has {ncols} column(s) but {} expression(s)",
+                        o.name.get_ref(),
+                        o.expr.len()
+                    ),
                 ));
             }
-            if !o.angle.is_empty() && o.angle.len() != ncols || !o.sigma.is_empty() && o.sigma.len() != ncols {
-                return Err(cx.err_span(&o.columns, "`angle` and `sigma` must have one entry per column"));
+            if !o.angle.is_empty() && o.angle.len() != ncols
+                || !o.sigma.is_empty() && o.sigma.len() != ncols
+            {
+                return Err(cx.err_span(
+                    &o.columns,
+                    "`angle` and `sigma` must have one entry per column",
+                ));
             }
             let mut exprs = Vec::new();
             for s in &o.expr {
@@ -457,13 +612,55 @@ impl Model {
                 }
                 exprs.push(e);
             }
+            if let Some(s) = o.sigma.iter().find(|s| !s.is_finite() || **s < 0.0) {
+                return Err(cx.err_span(
+                    &o.columns,
+                    format!(
+                        "observation `{}`: sigma {s} must be a finite number >= 0",
+                        o.name.get_ref()
+                    ),
+                ));
+            }
+            let angle = if o.angle.is_empty() {
+                vec![false; ncols]
+            } else {
+                o.angle.clone()
+            };
+            let role = o
+                .role
+                .unwrap_or_else(|| ObservationRole::infer(o.landmark, &exprs, &angle));
+            let (want, what) = match role {
+                ObservationRole::Pose => (3, "a pose observation has 3 columns (x, y, heading)"),
+                ObservationRole::YawRate => (1, "a yaw-rate observation has 1 column"),
+                ObservationRole::RangeBearing => (2, "a range-bearing observation has 2 columns (range, bearing) and `landmark = true`"),
+                ObservationRole::Other => (ncols, ""),
+            };
+            if ncols != want
+                || (role == ObservationRole::RangeBearing) != o.landmark
+                    && role != ObservationRole::Other
+            {
+                return Err(cx.err_span(
+                    &o.columns,
+                    format!("observation `{}`: {what}", o.name.get_ref()),
+                ));
+            }
+            if role != ObservationRole::Other {
+                if let Some(other) = observations.iter().find(|x| x.role == role) {
+                    return Err(cx.err_span(&o.name, format!("observation `{}` has the role {role:?} of `{}` already: one observation per role", o.name.get_ref(), other.name)));
+                }
+            }
             observations.push(Observation {
                 name: o.name.get_ref().clone(),
                 doc: o.doc.clone(),
                 columns: o.columns.get_ref().clone(),
-                angle: if o.angle.is_empty() { vec![false; ncols] } else { o.angle.clone() },
-                sigma: if o.sigma.is_empty() { vec![0.0; ncols] } else { o.sigma.clone() },
+                angle,
+                sigma: if o.sigma.is_empty() {
+                    vec![0.0; ncols]
+                } else {
+                    o.sigma.clone()
+                },
                 landmark: o.landmark,
+                role,
                 exprs,
             });
         }
@@ -474,7 +671,11 @@ impl Model {
                 if inv.inputs.get_ref().len() != raw.input.len() {
                     return Err(cx.err_span(
                         &inv.inputs,
-                        format!("inverse gives {} expression(s) for {} input(s)", inv.inputs.get_ref().len(), raw.input.len()),
+                        format!(
+                            "inverse gives {} expression(s) for {} input(s)",
+                            inv.inputs.get_ref().len(),
+                            raw.input.len()
+                        ),
                     ));
                 }
                 let mut es = Vec::new();
@@ -482,8 +683,16 @@ impl Model {
                     let e = cx.parse_expr(s)?;
                     for (v, span) in e.variables() {
                         let is_param = raw.parameter.iter().any(|p| p.name.get_ref() == v);
-                        if !(CONSTANTS.contains(&v) || ["vx", "vy", "omega"].contains(&v) || is_param) {
-                            return Err(cx.err_at(span.0, format!("inverse may use vx, vy, omega and parameters only, not `{v}`")));
+                        if !(CONSTANTS.contains(&v)
+                            || ["vx", "vy", "omega"].contains(&v)
+                            || is_param)
+                        {
+                            return Err(cx.err_at(
+                                span.0,
+                                format!(
+                                    "inverse may use vx, vy, omega and parameters only, not `{v}`"
+                                ),
+                            ));
                         }
                     }
                     es.push(e);
@@ -514,8 +723,25 @@ impl Model {
             noise: raw
                 .noise
                 .iter()
-                .map(|n| Noise { name: n.name.get_ref().clone(), doc: n.doc.clone(), sigma: n.sigma })
-                .collect(),
+                .map(|n| {
+                    if n.sigma.is_finite() && n.sigma >= 0.0 {
+                        Ok(Noise {
+                            name: n.name.get_ref().clone(),
+                            doc: n.doc.clone(),
+                            sigma: n.sigma,
+                        })
+                    } else {
+                        Err(cx.err_span(
+                            &n.name,
+                            format!(
+                                "noise `{}`: sigma {} must be a finite number >= 0",
+                                n.name.get_ref(),
+                                n.sigma
+                            ),
+                        ))
+                    }
+                })
+                .collect::<Result<_, _>>()?,
             defines,
             motion_doc,
             kinematics,
@@ -529,7 +755,11 @@ impl Model {
     /// Substitute definitions (recursively) so only inputs, parameters, noise, state
     /// and reserved names remain.
     pub fn expand(&self, e: &Expr) -> Expr {
-        let map: HashMap<&str, &Expr> = self.defines.iter().map(|(n, e, _)| (n.as_str(), e)).collect();
+        let map: HashMap<&str, &Expr> = self
+            .defines
+            .iter()
+            .map(|(n, e, _)| (n.as_str(), e))
+            .collect();
         fn go(e: &Expr, map: &HashMap<&str, &Expr>) -> Expr {
             e.substitute(&|v| map.get(v).map(|d| go(d, map)))
         }
@@ -581,7 +811,13 @@ fn parse_constraints(
         }
         let co = r.coeffs.get_ref();
         if co.len() != 3 {
-            return Err(cx.err_span(&r.coeffs, format!("a constraint row has 3 coefficients (of vx, vy, omega), this one has {}", co.len())));
+            return Err(cx.err_span(
+                &r.coeffs,
+                format!(
+                    "a constraint row has 3 coefficients (of vx, vy, omega), this one has {}",
+                    co.len()
+                ),
+            ));
         }
         let mut es = Vec::new();
         for s in co {
@@ -594,15 +830,33 @@ fn parse_constraints(
     }
     if rows.len() < 3 {
         let at = raw.row.last().map_or(0, |r| r.rate.span().start);
-        return Err(cx.err_at(at, format!("{} constraint row(s) cannot determine the 3 twist components", rows.len())));
+        return Err(cx.err_at(
+            at,
+            format!(
+                "{} constraint row(s) cannot determine the 3 twist components",
+                rows.len()
+            ),
+        ));
     }
-    if let Some(i) = inputs.iter().find(|i| i.kind == InputKind::Cumulative && !seen.contains(i.name.get_ref())) {
-        return Err(cx.err_span(&i.name, format!("cumulative input `{}` appears in no constraint row", i.name.get_ref())));
+    if let Some(i) = inputs
+        .iter()
+        .find(|i| i.kind == InputKind::Cumulative && !seen.contains(i.name.get_ref()))
+    {
+        return Err(cx.err_span(
+            &i.name,
+            format!(
+                "cumulative input `{}` appears in no constraint row",
+                i.name.get_ref()
+            ),
+        ));
     }
     let mut noise = [None, None, None];
     if let Some(n) = &raw.noise {
         if n.get_ref().len() != 3 {
-            return Err(cx.err_span(n, "`noise` names one noise input per twist component [vx, vy, omega]"));
+            return Err(cx.err_span(
+                n,
+                "`noise` names one noise input per twist component [vx, vy, omega]",
+            ));
         }
         for (slot, name) in noise.iter_mut().zip(n.get_ref()) {
             if !noise_names.contains(name.as_str()) {
@@ -635,7 +889,11 @@ fn order_definitions(
     defs: &[(&RawDefine, Expr)],
     def_names: &HashSet<&str>,
 ) -> Result<Vec<(String, Expr, String)>, SourceError> {
-    let index: HashMap<&str, usize> = defs.iter().enumerate().map(|(i, (d, _))| (d.name.get_ref().as_str(), i)).collect();
+    let index: HashMap<&str, usize> = defs
+        .iter()
+        .enumerate()
+        .map(|(i, (d, _))| (d.name.get_ref().as_str(), i))
+        .collect();
     // 0 = unvisited, 1 = on the stack, 2 = done
     let mut mark = vec![0u8; defs.len()];
     let mut order = Vec::new();
@@ -668,12 +926,29 @@ fn order_definitions(
     }
     for i in 0..defs.len() {
         let mut chain = Vec::new();
-        if let Err(at) = visit(i, defs, &index, def_names, &mut mark, &mut order, &mut chain) {
-            let start = chain.iter().position(|n| n == defs[at].0.name.get_ref()).unwrap_or(0);
+        if let Err(at) = visit(
+            i, defs, &index, def_names, &mut mark, &mut order, &mut chain,
+        ) {
+            let start = chain
+                .iter()
+                .position(|n| n == defs[at].0.name.get_ref())
+                .unwrap_or(0);
             let mut cycle = chain[start..].to_vec();
             cycle.push(defs[at].0.name.get_ref().clone());
-            return Err(cx.err_span(&defs[at].0.name, format!("cyclic definition: {}", cycle.join(" -> "))));
+            return Err(cx.err_span(
+                &defs[at].0.name,
+                format!("cyclic definition: {}", cycle.join(" -> ")),
+            ));
         }
     }
-    Ok(order.into_iter().map(|i| (defs[i].0.name.get_ref().clone(), defs[i].1.clone(), defs[i].0.doc.clone())).collect())
+    Ok(order
+        .into_iter()
+        .map(|i| {
+            (
+                defs[i].0.name.get_ref().clone(),
+                defs[i].1.clone(),
+                defs[i].0.doc.clone(),
+            )
+        })
+        .collect())
 }

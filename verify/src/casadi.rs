@@ -34,8 +34,14 @@ pub fn compare(ir: &ModelIr, fx: &Fixture, k: &dyn Kernel) -> Vec<Finding> {
     const TOL: f64 = 1e-10;
     let mut out: Vec<Finding> = Vec::new();
     for p in &fx.points {
-        let Some(f) = ir.function(&p.function) else { continue };
-        let args: Vec<Vec<f64>> = f.args.iter().map(|a| p.args.get(&a.name).cloned().unwrap_or_default()).collect();
+        let Some(f) = ir.function(&p.function) else {
+            continue;
+        };
+        let args: Vec<Vec<f64>> = f
+            .args
+            .iter()
+            .map(|a| p.args.get(&a.name).cloned().unwrap_or_default())
+            .collect();
         let refs: Vec<&[f64]> = args.iter().map(|a| &a[..]).collect();
         let mut got = vec![f64::NAN; f.rows * f.cols];
         if !k.eval(f, &refs, &mut got) {
@@ -51,9 +57,27 @@ pub fn compare(ir: &ModelIr, fx: &Fixture, k: &dyn Kernel) -> Vec<Finding> {
         };
         let fd = &mut out[idx];
         for (i, (g, r)) in got.iter().zip(&p.out).enumerate() {
-            let err = if g == r { 0.0 } else { (g - r).abs() / r.abs().max(1e-12 * scale).max(1e-300) };
-            let name = if f.is_matrix() { format!("d {} / d {}", f.row_names[i / f.cols], f.col_names[i % f.cols]) } else { f.row_names[i].clone() };
-            fd.note(err, err / TOL, Some((i / f.cols, i % f.cols, name)), &args, f);
+            let err = if g == r {
+                0.0
+            } else {
+                (g - r).abs() / r.abs().max(1e-12 * scale).max(1e-300)
+            };
+            let name = if f.is_matrix() {
+                format!(
+                    "d {} / d {}",
+                    f.row_names[i / f.cols],
+                    f.col_names[i % f.cols]
+                )
+            } else {
+                f.row_names[i].clone()
+            };
+            fd.note(
+                err,
+                err / TOL,
+                Some((i / f.cols, i % f.cols, name)),
+                &args,
+                f,
+            );
         }
         fd.samples += 1;
     }

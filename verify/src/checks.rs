@@ -3,8 +3,8 @@
 use crate::kernel::{IrKernel, Kernel};
 use crate::sample::Sampler;
 use kinegen_model::ir::{Function, ModelIr};
-use std::f64::consts::PI;
 use rand::{Rng, SeedableRng};
+use std::f64::consts::PI;
 
 /// Series/closed-form switch of the generator (kinegen-codegen's derive::EPS).
 pub const SWITCH: f64 = 0.05;
@@ -31,17 +31,40 @@ impl Finding {
     }
 
     /// Record one error measure (see `record`).
-    pub fn note(&mut self, err: f64, ratio: f64, entry: Option<(usize, usize, String)>, args: &[Vec<f64>], f: &Function) {
+    pub fn note(
+        &mut self,
+        err: f64,
+        ratio: f64,
+        entry: Option<(usize, usize, String)>,
+        args: &[Vec<f64>],
+        f: &Function,
+    ) {
         self.record(err, ratio, entry, args, f)
     }
 
     fn new(ir: &ModelIr, function: &str, check: &'static str) -> Self {
-        Finding { model: ir.name.clone(), function: function.into(), check, samples: 0, max_err: 0.0, ratio: 0.0, entry: None, worst_input: String::new() }
+        Finding {
+            model: ir.name.clone(),
+            function: function.into(),
+            check,
+            samples: 0,
+            max_err: 0.0,
+            ratio: 0.0,
+            entry: None,
+            worst_input: String::new(),
+        }
     }
     pub fn passed(&self) -> bool {
         self.ratio <= 1.0 && self.ratio.is_finite()
     }
-    fn record(&mut self, err: f64, ratio: f64, entry: Option<(usize, usize, String)>, args: &[Vec<f64>], f: &Function) {
+    fn record(
+        &mut self,
+        err: f64,
+        ratio: f64,
+        entry: Option<(usize, usize, String)>,
+        args: &[Vec<f64>],
+        f: &Function,
+    ) {
         let ratio = if ratio.is_nan() { f64::INFINITY } else { ratio };
         if ratio > self.ratio || self.samples == 0 && self.worst_input.is_empty() {
             self.ratio = ratio.max(self.ratio);
@@ -49,7 +72,9 @@ impl Finding {
             self.entry = entry;
             self.worst_input = describe(f, args);
         }
-        self.max_err = self.max_err.max(if err.is_nan() { f64::INFINITY } else { err });
+        self.max_err = self
+            .max_err
+            .max(if err.is_nan() { f64::INFINITY } else { err });
     }
 }
 
@@ -58,7 +83,12 @@ fn describe(f: &Function, args: &[Vec<f64>]) -> String {
         .iter()
         .zip(args)
         .map(|(a, v)| {
-            let vals: Vec<String> = a.names.iter().zip(v).map(|(n, x)| format!("{n}={x:.6e}")).collect();
+            let vals: Vec<String> = a
+                .names
+                .iter()
+                .zip(v)
+                .map(|(n, x)| format!("{n}={x:.6e}"))
+                .collect();
             format!("{}: [{}]", a.name, vals.join(", "))
         })
         .collect::<Vec<_>>()
@@ -90,7 +120,10 @@ impl Report {
 
     /// A per-function table for people.
     pub fn table(&self) -> String {
-        let mut s = format!("{:<26} {:<22} {:>7} {:>10} {:>8}  {}\n", "function", "check", "samples", "max err", "err/tol", "status");
+        let mut s = format!(
+            "{:<26} {:<22} {:>7} {:>10} {:>8}  {}\n",
+            "function", "check", "samples", "max err", "err/tol", "status"
+        );
         for f in &self.findings {
             s += &format!(
                 "{:<26} {:<22} {:>7} {:>10.2e} {:>8.3}  {}\n",
@@ -99,7 +132,11 @@ impl Report {
                 f.samples,
                 f.max_err,
                 f.ratio,
-                if f.passed() { "ok".to_string() } else { format!("FAIL at {}", where_(f)) }
+                if f.passed() {
+                    "ok".to_string()
+                } else {
+                    format!("FAIL at {}", where_(f))
+                }
             );
         }
         s
@@ -108,14 +145,22 @@ impl Report {
 
 /// "model::function entry (r, c) [names] at input ..." for failure messages.
 pub fn where_(f: &Finding) -> String {
-    let e = f.entry.as_ref().map(|(r, c, n)| format!(" entry ({r}, {c}) {n}")).unwrap_or_default();
-    format!("{}::{}{e}, worst input {}", f.model, f.function, f.worst_input)
+    let e = f
+        .entry
+        .as_ref()
+        .map(|(r, c, n)| format!(" entry ({r}, {c}) {n}"))
+        .unwrap_or_default();
+    format!(
+        "{}::{}{e}, worst input {}",
+        f.model, f.function, f.worst_input
+    )
 }
 
 /// Run every check with `n` samples per property.
 pub fn run_all(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Report {
     let mut r = Report::default();
-    r.findings.extend(jacobians_vs_finite_differences(ir, k, n, seed));
+    r.findings
+        .extend(jacobians_vs_finite_differences(ir, k, n, seed));
     r.findings.extend(exact_vs_euler(ir, k, n, seed + 1));
     r.findings.extend(inverse_round_trips(ir, k, n, seed + 2));
     r.findings.extend(singularities(ir, k, n.min(16), seed + 3));
@@ -127,14 +172,23 @@ pub fn run_all(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Report {
 /// the function it differentiates. An entry passes when |J - D| <= 1e-6 |J| + the
 /// difference quotient's own round-off bound, so entries are judged relative to
 /// their size, never by a fixed absolute margin.
-pub fn jacobians_vs_finite_differences(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+pub fn jacobians_vs_finite_differences(
+    ir: &ModelIr,
+    k: &dyn Kernel,
+    n: usize,
+    seed: u64,
+) -> Vec<Finding> {
     const TOL: f64 = 1e-6;
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
     for jf in ir.functions.iter().filter(|f| f.name.contains("_jac_")) {
         let (base_name, group) = jf.name.rsplit_once("_jac_").unwrap();
-        let Some(base) = ir.function(base_name) else { continue };
-        let Some(gi) = base.args.iter().position(|a| a.name == group) else { continue };
+        let Some(base) = ir.function(base_name) else {
+            continue;
+        };
+        let Some(gi) = base.args.iter().position(|a| a.name == group) else {
+            continue;
+        };
         let mut fd = Finding::new(ir, &jf.name, "jacobian vs FD");
         for _ in 0..n {
             let args = sampler.args(base);
@@ -142,13 +196,19 @@ pub fn jacobians_vs_finite_differences(ir: &ModelIr, k: &dyn Kernel, n: usize, s
             let f0 = eval(k, base, &args);
             for c in 0..jf.cols {
                 let v = args[gi][c];
-                let scale = v.abs().max(if group == "p" { v.abs() } else { 1.0 }).max(1e-6);
+                let scale = v
+                    .abs()
+                    .max(if group == "p" { v.abs() } else { 1.0 })
+                    .max(1e-6);
                 let diff = |h: f64| {
                     let (mut a, mut b) = (args.clone(), args.clone());
                     a[gi][c] = v + h;
                     b[gi][c] = v - h;
                     let (fa, fb) = (eval(k, base, &a), eval(k, base, &b));
-                    fa.iter().zip(&fb).map(|(x, y)| (x - y) / (2.0 * h)).collect::<Vec<_>>()
+                    fa.iter()
+                        .zip(&fb)
+                        .map(|(x, y)| (x - y) / (2.0 * h))
+                        .collect::<Vec<_>>()
                 };
                 // Steps 1e-2 .. 1e-6 of the value's scale; each estimate is Richardson-
                 // extrapolated (error O(h^4)). The best-agreeing step is kept: near a
@@ -158,7 +218,13 @@ pub fn jacobians_vs_finite_differences(ir: &ModelIr, k: &dyn Kernel, n: usize, s
                     .map(|e| {
                         let h = scale * 1e-2 * 10f64.powi(-e);
                         let (d1, d2) = (diff(h), diff(h / 2.0));
-                        (h, d1.iter().zip(&d2).map(|(a, b)| (4.0 * b - a) / 3.0).collect())
+                        (
+                            h,
+                            d1.iter()
+                                .zip(&d2)
+                                .map(|(a, b)| (4.0 * b - a) / 3.0)
+                                .collect(),
+                        )
                     })
                     .collect();
                 for r in 0..jf.rows {
@@ -173,7 +239,13 @@ pub fn jacobians_vs_finite_differences(ir: &ModelIr, k: &dyn Kernel, n: usize, s
                             let e = (jv - d[r]).abs();
                             (e / jv.abs().max(roundoff), e / (TOL * jv.abs() + roundoff))
                         })
-                        .fold((f64::INFINITY, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+                        .fold((f64::INFINITY, f64::INFINITY), |a, b| {
+                            if b.1 < a.1 {
+                                b
+                            } else {
+                                a
+                            }
+                        });
                     let name = format!("d {} / d {}", jf.row_names[r], jf.col_names[c]);
                     fd.record(err, ratio, Some((r, c, name)), &args, base);
                 }
@@ -186,7 +258,13 @@ pub fn jacobians_vs_finite_differences(ir: &ModelIr, k: &dyn Kernel, n: usize, s
 }
 
 /// Compare two kernels on every function (generated Rust vs IR evaluator).
-pub fn kernels_agree(ir: &ModelIr, a: &dyn Kernel, b: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
+pub fn kernels_agree(
+    ir: &ModelIr,
+    a: &dyn Kernel,
+    b: &dyn Kernel,
+    n: usize,
+    seed: u64,
+) -> Vec<Finding> {
     let mut sampler = Sampler::new(ir, seed);
     ir.functions
         .iter()
@@ -195,7 +273,15 @@ pub fn kernels_agree(ir: &ModelIr, a: &dyn Kernel, b: &dyn Kernel, n: usize, see
             // differences of libm and std transcendental functions. A least-squares
             // pseudo-inverse amplifies those by the condition number of S^T S, so
             // such kernels get 1e-10 (a wrong emission is off by O(1) anyway).
-            let tol = if f.tape.iter().any(|o| matches!(o, kinegen_model::ir::Op::PinvSym3 { .. })) { 1e-10 } else { 1e-12 };
+            let tol = if f
+                .tape
+                .iter()
+                .any(|o| matches!(o, kinegen_model::ir::Op::PinvSym3 { .. }))
+            {
+                1e-10
+            } else {
+                1e-12
+            };
             let mut fd = Finding::new(ir, &f.name, "generated vs IR");
             for _ in 0..n {
                 let args = sampler.args(f);
@@ -203,7 +289,13 @@ pub fn kernels_agree(ir: &ModelIr, a: &dyn Kernel, b: &dyn Kernel, n: usize, see
                 for (i, (p, q)) in x.iter().zip(&y).enumerate() {
                     let err = (p - q).abs() / p.abs().max(q.abs()).max(1e-300);
                     let err = if p == q { 0.0 } else { err };
-                    fd.record(err, err / tol, Some((i / f.cols, i % f.cols, String::new())), &args, f);
+                    fd.record(
+                        err,
+                        err / tol,
+                        Some((i / f.cols, i % f.cols, String::new())),
+                        &args,
+                        f,
+                    );
                 }
                 fd.samples += 1;
             }
@@ -220,14 +312,22 @@ fn arg_pos(f: &Function, name: &str) -> Option<usize> {
 /// on an arc of length s turning by a = omega*dt is about s*|a|/(2N); we require
 /// err <= 0.55*s*|a|/N + 1e-12*(s+1). This also checks Euler -> exact as dt -> 0.
 pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
-    let (Some(ex), Some(eu), Some(tw)) = (ir.function("step_exact"), ir.function("step_euler"), ir.function("twist")) else {
+    let (Some(ex), Some(eu), Some(tw)) = (
+        ir.function("step_exact"),
+        ir.function("step_euler"),
+        ir.function("twist"),
+    ) else {
         return vec![];
     };
     let mut sampler = Sampler::new(ir, seed);
     let mut fd = Finding::new(ir, "step_exact", "exact vs Euler substeps");
     for _ in 0..n {
         let args = sampler.args(ex);
-        let (pi, ui, dti) = (arg_pos(ex, "p").unwrap(), arg_pos(ex, "u").unwrap(), arg_pos(ex, "dt").unwrap());
+        let (pi, ui, dti) = (
+            arg_pos(ex, "p").unwrap(),
+            arg_pos(ex, "u").unwrap(),
+            arg_pos(ex, "dt").unwrap(),
+        );
         let mut args = args;
         if let Some(wi) = arg_pos(ex, "w") {
             args[wi].iter_mut().for_each(|w| *w = 0.0);
@@ -247,7 +347,13 @@ pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<
             let err = ((a2[0][0] - exact[0]).powi(2) + (a2[0][1] - exact[1]).powi(2)).sqrt();
             let bound = 0.55 * s * a / nsub as f64 + 1e-12 * (s + 1.0);
             let th_err = (a2[0][2] - exact[2]).abs();
-            fd.record(err, (err / bound).max(th_err / (1e-12 * (exact[2].abs() + 1.0))), Some((0, nsub, format!("{nsub} Euler sub-steps"))), &args, ex);
+            fd.record(
+                err,
+                (err / bound).max(th_err / (1e-12 * (exact[2].abs() + 1.0))),
+                Some((0, nsub, format!("{nsub} Euler sub-steps"))),
+                &args,
+                ex,
+            );
         }
         fd.samples += 1;
     }
@@ -259,13 +365,23 @@ pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<
         if let Some(wi) = arg_pos(eu, "w") {
             args[wi].iter_mut().for_each(|w| *w = 0.0);
         }
-        let (ui, pi, dti) = (arg_pos(eu, "u").unwrap(), arg_pos(eu, "p").unwrap(), arg_pos(eu, "dt").unwrap());
+        let (ui, pi, dti) = (
+            arg_pos(eu, "u").unwrap(),
+            arg_pos(eu, "p").unwrap(),
+            arg_pos(eu, "dt").unwrap(),
+        );
         let t = eval(k, tw, &[args[ui].clone(), args[pi].clone()]);
         let step = eval(k, eu, &args);
         for r in 0..3 {
             let v = step[r] / args[dti][0];
             let err = (v - t[r]).abs() / (t[r].abs() + 1e-12);
-            ft.record(err, err / 1e-12, Some((r, 0, ["vx", "vy", "omega"][r].into())), &[args[ui].clone(), args[pi].clone()], tw);
+            ft.record(
+                err,
+                err / 1e-12,
+                Some((r, 0, ["vx", "vy", "omega"][r].into())),
+                &[args[ui].clone(), args[pi].clone()],
+                tw,
+            );
         }
         ft.samples += 1;
     }
@@ -279,12 +395,18 @@ pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<
 /// perturbed by a few percent to make the least squares bite.
 pub fn gyrodometry_consistency(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Finding {
     let mut fd = Finding::new(ir, "twist_gyro", "gyrodometry = odometry at model omega");
-    let (Some(g), Some(tw)) = (ir.function("twist_gyro"), ir.function("twist")) else { return fd };
+    let (Some(g), Some(tw)) = (ir.function("twist_gyro"), ir.function("twist")) else {
+        return fd;
+    };
     let mut sampler = Sampler::new(ir, seed);
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     for _ in 0..n {
         let mut args = sampler.args(g);
-        let (ui, oi, pi) = (arg_pos(g, "u").unwrap(), arg_pos(g, "omega").unwrap(), arg_pos(g, "p").unwrap());
+        let (ui, oi, pi) = (
+            arg_pos(g, "u").unwrap(),
+            arg_pos(g, "omega").unwrap(),
+            arg_pos(g, "p").unwrap(),
+        );
         for (v, inp) in args[ui].iter_mut().zip(&ir.inputs) {
             if inp.kind == kinegen_model::spec::InputKind::Cumulative {
                 *v *= 1.0 + rng.gen_range(-0.05..0.05);
@@ -296,7 +418,13 @@ pub fn gyrodometry_consistency(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64
         let scale = t[0].abs().max(t[1].abs()).max(1e-9);
         for r in 0..2 {
             let err = (v[r] - t[r]).abs() / scale;
-            fd.record(err, err / 1e-10, Some((r, 0, ["vx", "vy"][r].into())), &args, g);
+            fd.record(
+                err,
+                err / 1e-10,
+                Some((r, 0, ["vx", "vy"][r].into())),
+                &args,
+                g,
+            );
         }
         fd.samples += 1;
     }
@@ -310,7 +438,9 @@ fn twist_of(ir: &ModelIr, k: &dyn Kernel, u: &[f64], p: &[f64]) -> Vec<f64> {
 /// Assemble the model's input vector from an inverse-kinematics output (rates or
 /// all inputs) plus configuration inputs.
 fn inputs_from(ir: &ModelIr, inv: &Function, out: &[f64], cfg: &[f64]) -> Vec<f64> {
-    let cfg_names: Vec<String> = arg_pos(inv, "cfg").map(|i| inv.args[i].names.clone()).unwrap_or_default();
+    let cfg_names: Vec<String> = arg_pos(inv, "cfg")
+        .map(|i| inv.args[i].names.clone())
+        .unwrap_or_default();
     ir.inputs
         .iter()
         .map(|i| {
@@ -330,7 +460,10 @@ fn depends_on(k: &dyn Kernel, f: &Function, args: &[Vec<f64>], a: usize, e: usiz
     let base = eval(k, f, args);
     let mut moved = args.to_vec();
     moved[a][e] += 0.1 + 0.1 * moved[a][e].abs();
-    eval(k, f, &moved).iter().zip(&base).any(|(x, y)| (x - y).abs() > 1e-12 * (1.0 + y.abs()))
+    eval(k, f, &moved)
+        .iter()
+        .zip(&base)
+        .any(|(x, y)| (x - y).abs() > 1e-12 * (1.0 + y.abs()))
 }
 
 /// forward(inverse(twist)) = twist on the rows the inverse imposes; and the integrated inverse (seed 001 eq. 12-18)
@@ -344,14 +477,22 @@ pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) ->
         for _ in 0..n {
             let args = sampler.args(inv);
             let o = eval(k, inv, &args);
-            let cfg = arg_pos(inv, "cfg").map(|i| args[i].clone()).unwrap_or_default();
+            let cfg = arg_pos(inv, "cfg")
+                .map(|i| args[i].clone())
+                .unwrap_or_default();
             let p = args[arg_pos(inv, "p").unwrap()].clone();
             let u = inputs_from(ir, inv, &o, &cfg);
             let back = twist_of(ir, k, &u, &p);
             let t = &args[0];
             for r in (0..3).filter(|&r| depends_on(k, inv, &args, 0, r)) {
                 let err = (back[r] - t[r]).abs() / (t[r].abs() + 1e-12);
-                fd.record(err, err / 1e-9, Some((r, 0, ["vx", "vy", "omega"][r].into())), &args, inv);
+                fd.record(
+                    err,
+                    err / 1e-9,
+                    Some((r, 0, ["vx", "vy", "omega"][r].into())),
+                    &args,
+                    inv,
+                );
             }
             fd.samples += 1;
         }
@@ -362,7 +503,9 @@ pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) ->
         for _ in 0..n {
             let args = sampler.args(inv);
             let o = eval(k, inv, &args);
-            let cfg = arg_pos(inv, "cfg").map(|i| args[i].clone()).unwrap_or_default();
+            let cfg = arg_pos(inv, "cfg")
+                .map(|i| args[i].clone())
+                .unwrap_or_default();
             let p = args[arg_pos(inv, "p").unwrap()].clone();
             let dt = args[arg_pos(inv, "dt").unwrap()].clone();
             let u = inputs_from(ir, inv, &o, &cfg);
@@ -384,11 +527,19 @@ pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) ->
             // with lateral motion that follows from the inputs (slip), x picks up
             // part of it.
             for r in [0usize, 1, 2] {
-                if !depends_on(k, inv, &args, 0, r) || (r == 0 && rows[1] && !depends_on(k, inv, &args, 0, 1)) {
+                if !depends_on(k, inv, &args, 0, r)
+                    || (r == 0 && rows[1] && !depends_on(k, inv, &args, 0, 1))
+                {
                     continue;
                 }
                 let err = (pose[r] - d[r]).abs() / (d[r].abs() + 1e-9);
-                fd.record(err, err / 1e-8, Some((r, 0, ["dx", "dy", "dtheta"][r].into())), &args, inv);
+                fd.record(
+                    err,
+                    err / 1e-8,
+                    Some((r, 0, ["dx", "dy", "dtheta"][r].into())),
+                    &args,
+                    inv,
+                );
             }
             fd.samples += 1;
         }
@@ -405,7 +556,12 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
     let small = [1e-12, -1e-12, 1e-8, -1e-8, 1e-4, -1e-4];
-    let names: Vec<String> = ir.functions.iter().filter(|f| f.name.starts_with("step_exact") || f.name == "inverse_increment").map(|f| f.name.clone()).collect();
+    let names: Vec<String> = ir
+        .functions
+        .iter()
+        .filter(|f| f.name.starts_with("step_exact") || f.name == "inverse_increment")
+        .map(|f| f.name.clone())
+        .collect();
     for name in names {
         let f = ir.function(&name).unwrap();
         let mut fd = Finding::new(ir, &name, "singular limit");
@@ -420,7 +576,11 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
                 if name == "inverse_increment" {
                     a[0][2] = s;
                 } else {
-                    let (ui, pi, dti) = (arg_pos(f, "u").unwrap(), arg_pos(f, "p").unwrap(), arg_pos(f, "dt").unwrap());
+                    let (ui, pi, dti) = (
+                        arg_pos(f, "u").unwrap(),
+                        arg_pos(f, "p").unwrap(),
+                        arg_pos(f, "dt").unwrap(),
+                    );
                     let mut tw = tw0.clone();
                     tw[2] = s / a[dti][0];
                     sampler.rng = rng0.clone();
@@ -434,14 +594,27 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
             let (f0, _) = eval_at(0.0);
             let scale = f0.iter().fold(1.0f64, |m, v| m.max(v.abs()));
             let (f_small, _) = eval_at(1e-6);
-            let slope = f_small.iter().zip(&f0).fold(0.0f64, |m, (a, b)| m.max((a - b).abs() / 1e-6));
+            let slope = f_small
+                .iter()
+                .zip(&f0)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs() / 1e-6));
             for s in small {
                 let (fs, a) = eval_at(s);
                 for (i, (x, y)) in fs.iter().zip(&f0).enumerate() {
                     let allowed = 2.0 * slope * s.abs() + 1e-9 * scale;
                     let err = (x - y).abs();
-                    let ratio = if x.is_finite() { err / allowed } else { f64::INFINITY };
-                    fd.record(err / scale, ratio, Some((i / f.cols, i % f.cols, format!("s = {s:e}"))), &a, f);
+                    let ratio = if x.is_finite() {
+                        err / allowed
+                    } else {
+                        f64::INFINITY
+                    };
+                    fd.record(
+                        err / scale,
+                        ratio,
+                        Some((i / f.cols, i % f.cols, format!("s = {s:e}"))),
+                        &a,
+                        f,
+                    );
                 }
             }
             for sign in [1.0, -1.0] {
@@ -454,7 +627,13 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
                     let err = (x - y).abs();
                     let local = (f1[i] - f2[i]).abs() / (SWITCH * 0.009);
                     let allowed = 1e-9 * scale + 10.0 * local * SWITCH * 2e-9;
-                    fd.record(err / scale, err / allowed, Some((i / f.cols, i % f.cols, "across the series switch".into())), &a, f);
+                    fd.record(
+                        err / scale,
+                        err / allowed,
+                        Some((i / f.cols, i % f.cols, "across the series switch".into())),
+                        &a,
+                        f,
+                    );
                 }
             }
             fd.samples += 1;
@@ -466,7 +645,11 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
 
 fn wrap(a: f64) -> f64 {
     let r = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if r <= -PI { r + 2.0 * PI } else { r }
+    if r <= -PI {
+        r + 2.0 * PI
+    } else {
+        r
+    }
 }
 
 /// SE(2) equivariance: moving the world by g moves the next pose by g; landmark
@@ -474,12 +657,25 @@ fn wrap(a: f64) -> f64 {
 pub fn se2_equivariance(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
-    for f in ir.functions.iter().filter(|f| f.name == "step_euler" || f.name == "step_exact" || (f.name.starts_with("obs_") && !f.name.contains("_jac_"))) {
+    for f in ir.functions.iter().filter(|f| {
+        f.name == "step_euler"
+            || f.name == "step_exact"
+            || (f.name.starts_with("obs_") && !f.name.contains("_jac_"))
+    }) {
         let mut fd = Finding::new(ir, &f.name, "SE(2) equivariance");
         for _ in 0..n {
             let args = sampler.args(f);
-            let (tx, ty, phi): (f64, f64, f64) = (sampler_range(&mut sampler, 5.0), sampler_range(&mut sampler, 5.0), sampler_range(&mut sampler, 3.0));
-            let g = |p: &[f64]| [phi.cos() * p[0] - phi.sin() * p[1] + tx, phi.sin() * p[0] + phi.cos() * p[1] + ty];
+            let (tx, ty, phi): (f64, f64, f64) = (
+                sampler_range(&mut sampler, 5.0),
+                sampler_range(&mut sampler, 5.0),
+                sampler_range(&mut sampler, 3.0),
+            );
+            let g = |p: &[f64]| {
+                [
+                    phi.cos() * p[0] - phi.sin() * p[1] + tx,
+                    phi.sin() * p[0] + phi.cos() * p[1] + ty,
+                ]
+            };
             let mut moved = args.clone();
             let [gx, gy] = g(&args[0]);
             moved[0] = vec![gx, gy, args[0][2] + phi];
@@ -496,10 +692,20 @@ pub fn se2_equivariance(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Ve
             };
             let scale = 1.0 + args[0][0].abs() + args[0][1].abs() + tx.abs() + ty.abs();
             for (i, (x, y)) in b.iter().zip(&expect).enumerate() {
-                let angle = f.name.starts_with("step") && i == 2 || ir.observations.iter().any(|o| format!("obs_{}", o.name) == f.name && o.angle[i]);
+                let angle = f.name.starts_with("step") && i == 2
+                    || ir
+                        .observations
+                        .iter()
+                        .any(|o| format!("obs_{}", o.name) == f.name && o.angle[i]);
                 let d = if angle { wrap(x - y) } else { x - y };
                 let err = d.abs() / scale;
-                fd.record(err, err / 1e-12, Some((i, 0, f.row_names[i].clone())), &args, f);
+                fd.record(
+                    err,
+                    err / 1e-12,
+                    Some((i, 0, f.row_names[i].clone())),
+                    &args,
+                    f,
+                );
             }
             fd.samples += 1;
         }

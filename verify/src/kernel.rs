@@ -58,14 +58,22 @@ impl Corrupted {
                 outputs[entry] = (tape.len() - 1) as u32;
             }
         }
-        Corrupted { function: function.to_string(), tape, outputs }
+        Corrupted {
+            function: function.to_string(),
+            tape,
+            outputs,
+        }
     }
 }
 
 impl Kernel for Corrupted {
     fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool {
         if f.name == self.function {
-            let g = Function { tape: self.tape.clone(), outputs: self.outputs.clone(), ..f.clone() };
+            let g = Function {
+                tape: self.tape.clone(),
+                outputs: self.outputs.clone(),
+                ..f.clone()
+            };
             g.eval_into(args, out, &mut Vec::new());
         } else {
             f.eval_into(args, out, &mut Vec::new());

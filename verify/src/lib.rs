@@ -8,12 +8,12 @@
 //! so a new spec is verified with no new test code.
 pub mod casadi;
 pub mod checks;
+pub mod kernel;
 #[cfg(feature = "compiled")]
 pub mod models;
-pub mod kernel;
 pub mod sample;
 
 pub use checks::{run_all, Finding, Report};
-pub use kernel::{Corrupted, IrKernel, Kernel};
 #[cfg(feature = "compiled")]
 pub use kernel::Generated;
+pub use kernel::{Corrupted, IrKernel, Kernel};

@@ -13,15 +13,25 @@ pub struct Sampler<'a> {
 }
 
 pub fn twist_rows(ir: &ModelIr) -> [bool; 3] {
-    let Some(tw) = ir.function("twist") else { return [true; 3] };
+    let Some(tw) = ir.function("twist") else {
+        return [true; 3];
+    };
     let mut rows = [false; 3];
     let mut rng = SmallRng::seed_from_u64(7);
     // over the sampled parameter domain, not only at nominal values (an effect
     // parameter is nominally zero, and so is the motion it adds)
-    let mut sampler = Sampler { ir, rng: SmallRng::seed_from_u64(8), twist_rows: [true; 3] };
+    let mut sampler = Sampler {
+        ir,
+        rng: SmallRng::seed_from_u64(8),
+        twist_rows: [true; 3],
+    };
     for _ in 0..8 {
         let p = sampler.params();
-        let u: Vec<f64> = ir.inputs.iter().map(|_| rng.gen_range(-50.0..50.0)).collect();
+        let u: Vec<f64> = ir
+            .inputs
+            .iter()
+            .map(|_| rng.gen_range(-50.0..50.0))
+            .collect();
         let t = tw.eval(&[&u, &p]);
         for r in 0..3 {
             rows[r] |= t[r].abs() > 1e-12;
@@ -32,28 +42,56 @@ pub fn twist_rows(ir: &ModelIr) -> [bool; 3] {
 
 impl<'a> Sampler<'a> {
     pub fn new(ir: &'a ModelIr, seed: u64) -> Self {
-        Sampler { ir, rng: SmallRng::seed_from_u64(seed), twist_rows: twist_rows(ir) }
+        Sampler {
+            ir,
+            rng: SmallRng::seed_from_u64(seed),
+            twist_rows: twist_rows(ir),
+        }
     }
 
     pub fn params(&mut self) -> Vec<f64> {
         let ps: Vec<_> = self.ir.runtime_params().into_iter().cloned().collect();
         ps.iter()
             .map(|p| {
-                let spread = if p.nominal == 0.0 { 0.05 } else { 0.2 * p.nominal.abs() };
-                let lo = p.min.map_or(p.nominal - spread, |m| (p.nominal - spread).max(m + 1e-9));
-                let hi = p.max.map_or(p.nominal + spread, |m| (p.nominal + spread).min(m));
-                if hi > lo { self.rng.gen_range(lo..hi) } else { p.nominal }
+                let spread = if p.nominal == 0.0 {
+                    0.05
+                } else {
+                    0.2 * p.nominal.abs()
+                };
+                let lo = p
+                    .min
+                    .map_or(p.nominal - spread, |m| (p.nominal - spread).max(m + 1e-9));
+                let hi = p
+                    .max
+                    .map_or(p.nominal + spread, |m| (p.nominal + spread).min(m));
+                if hi > lo {
+                    self.rng.gen_range(lo..hi)
+                } else {
+                    p.nominal
+                }
             })
             .collect()
     }
 
     pub fn pose(&mut self) -> Vec<f64> {
-        vec![self.rng.gen_range(-10.0..10.0), self.rng.gen_range(-10.0..10.0), self.rng.gen_range(-3.1..3.1)]
+        vec![
+            self.rng.gen_range(-10.0..10.0),
+            self.rng.gen_range(-10.0..10.0),
+            self.rng.gen_range(-3.1..3.1),
+        ]
     }
 
     pub fn twist(&mut self) -> Vec<f64> {
         let ranges = [1.0, 1.0, 2.0];
-        (0..3).map(|r| if self.twist_rows[r] { self.rng.gen_range(-ranges[r]..ranges[r]) } else { 0.0 }).collect()
+        (0..3)
+            .map(|r| {
+                if self.twist_rows[r] {
+                    self.rng.gen_range(-ranges[r]..ranges[r])
+                } else {
+                    0.0
+                }
+            })
+            .collect()
     }
 
     /// Inputs that produce `twist` with parameters `p` (through inverse_twist).
@@ -66,7 +104,12 @@ impl<'a> Sampler<'a> {
             .args
             .iter()
             .find(|a| a.name == "cfg")
-            .map(|a| a.names.iter().map(|_| self.rng.gen_range(-1.0..1.0)).collect())
+            .map(|a| {
+                a.names
+                    .iter()
+                    .map(|_| self.rng.gen_range(-1.0..1.0))
+                    .collect()
+            })
             .unwrap_or_default();
         let args: Vec<&[f64]> = inv
             .args
@@ -82,17 +125,32 @@ impl<'a> Sampler<'a> {
             .inputs
             .iter()
             .map(|i| {
-                inv.row_names.iter().position(|r| *r == i.name).map(|k| out[k]).unwrap_or_else(|| {
-                    let k = inv.args.iter().find(|a| a.name == "cfg").and_then(|a| a.names.iter().position(|c| *c == i.name));
-                    k.map(|k| cfg[k]).unwrap_or(0.0)
-                })
+                inv.row_names
+                    .iter()
+                    .position(|r| *r == i.name)
+                    .map(|k| out[k])
+                    .unwrap_or_else(|| {
+                        let k = inv
+                            .args
+                            .iter()
+                            .find(|a| a.name == "cfg")
+                            .and_then(|a| a.names.iter().position(|c| *c == i.name));
+                        k.map(|k| cfg[k]).unwrap_or(0.0)
+                    })
             })
             .collect()
     }
 
     pub fn noise(&mut self) -> Vec<f64> {
-        let sig: Vec<f64> = self.ir.noise.iter().map(|n| if n.sigma > 0.0 { n.sigma } else { 0.01 }).collect();
-        sig.iter().map(|s| self.rng.gen_range(-3.0 * s..3.0 * s)).collect()
+        let sig: Vec<f64> = self
+            .ir
+            .noise
+            .iter()
+            .map(|n| if n.sigma > 0.0 { n.sigma } else { 0.01 })
+            .collect();
+        sig.iter()
+            .map(|s| self.rng.gen_range(-3.0 * s..3.0 * s))
+            .collect()
     }
 
     /// A full argument set for `f`, consistent across groups, with the inputs
@@ -103,7 +161,12 @@ impl<'a> Sampler<'a> {
         let mut tw = self.twist();
         let mut u = self.inputs_for(&tw, &p);
         for _ in 0..200 {
-            let inside = self.ir.inputs.iter().zip(&u).all(|(i, v)| i.range.is_none_or(|[lo, hi]| (lo..=hi).contains(v)));
+            let inside = self
+                .ir
+                .inputs
+                .iter()
+                .zip(&u)
+                .all(|(i, v)| i.range.is_none_or(|[lo, hi]| (lo..=hi).contains(v)));
             if inside {
                 break;
             }
@@ -126,10 +189,18 @@ impl<'a> Sampler<'a> {
                 "omega" => vec![tw[2]],
                 "dpose" => {
                     let d: f64 = self.rng.gen_range(-1.0..1.0);
-                    let dy = if self.twist_rows[1] { self.rng.gen_range(-0.5..0.5) } else { 0.0 };
+                    let dy = if self.twist_rows[1] {
+                        self.rng.gen_range(-0.5..0.5)
+                    } else {
+                        0.0
+                    };
                     vec![self.rng.gen_range(-1.0..1.0), dy, d]
                 }
-                _ => a.names.iter().map(|_| self.rng.gen_range(-1.0..1.0)).collect(),
+                _ => a
+                    .names
+                    .iter()
+                    .map(|_| self.rng.gen_range(-1.0..1.0))
+                    .collect(),
             })
             .collect()
     }

@@ -7,14 +7,32 @@ use kinegen_verify::{models, Corrupted, Generated};
 #[test]
 fn generated_kernels_match_casadi() {
     for ir in models::all() {
-        let fx = load(&fixture_dir(), &ir.name).unwrap_or_else(|| panic!("no CasADi fixture for {}: run verify/casadi/reference.py", ir.name));
+        let fx = load(&fixture_dir(), &ir.name).unwrap_or_else(|| {
+            panic!(
+                "no CasADi fixture for {}: run verify/casadi/reference.py",
+                ir.name
+            )
+        });
         let found = compare(&ir, &fx, &Generated(ir.name.clone()));
         // every function except the inverse kinematics has a reference
-        for f in ir.functions.iter().filter(|f| !f.name.starts_with("inverse_")) {
-            assert!(found.iter().any(|x| x.function == f.name), "{}::{} has no CasADi reference", ir.name, f.name);
+        for f in ir
+            .functions
+            .iter()
+            .filter(|f| !f.name.starts_with("inverse_"))
+        {
+            assert!(
+                found.iter().any(|x| x.function == f.name),
+                "{}::{} has no CasADi reference",
+                ir.name,
+                f.name
+            );
         }
         let worst = found.iter().map(|f| f.max_err).fold(0.0, f64::max);
-        println!("{}: {} functions, worst relative error vs CasADi {worst:.1e}", ir.name, found.len());
+        println!(
+            "{}: {} functions, worst relative error vs CasADi {worst:.1e}",
+            ir.name,
+            found.len()
+        );
         for f in &found {
             assert!(f.passed(), "{}", where_(f));
         }
@@ -27,7 +45,14 @@ fn the_casadi_check_fails_a_corrupted_kernel() {
     let fx = load(&fixture_dir(), "tricycle").unwrap();
     let bad = Corrupted::flip_term(&ir, "step_exact_jac_u", 3 * 2 - 1);
     let found = compare(&ir, &fx, &bad);
-    let f = found.iter().find(|f| f.function == "step_exact_jac_u").unwrap();
+    let f = found
+        .iter()
+        .find(|f| f.function == "step_exact_jac_u")
+        .unwrap();
     assert!(!f.passed());
-    assert!(where_(f).contains("tricycle::step_exact_jac_u entry (2, 1) d theta / d alpha"), "{}", where_(f));
+    assert!(
+        where_(f).contains("tricycle::step_exact_jac_u entry (2, 1) d theta / d alpha"),
+        "{}",
+        where_(f)
+    );
 }

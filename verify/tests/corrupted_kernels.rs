@@ -1,6 +1,8 @@
 //! The checks can fail: kernels with one deliberate mistake are caught, and the
 //! report names the model, the function, the entry and the worst input.
-use kinegen_verify::checks::{gyrodometry_consistency, inverse_round_trips, jacobians_vs_finite_differences, where_};
+use kinegen_verify::checks::{
+    gyrodometry_consistency, inverse_round_trips, jacobians_vs_finite_differences, where_,
+};
 use kinegen_verify::{models, Corrupted, IrKernel};
 
 #[test]
@@ -9,13 +11,22 @@ fn a_sign_flipped_derivative_term_is_reported_with_model_function_entry_and_inpu
     // d theta_next / d b of the exact step, entry (2, 2)
     let bad = Corrupted::flip_term(&ir, "step_exact_jac_p", 2 * 5 + 2);
     let found = jacobians_vs_finite_differences(&ir, &bad, 5, 3);
-    let f = found.iter().find(|f| f.function == "step_exact_jac_p").unwrap();
+    let f = found
+        .iter()
+        .find(|f| f.function == "step_exact_jac_p")
+        .unwrap();
     assert!(!f.passed(), "corruption not detected");
     let msg = where_(f);
-    assert!(msg.contains("diff_drive::step_exact_jac_p entry (2, 2) d theta / d b"), "{msg}");
+    assert!(
+        msg.contains("diff_drive::step_exact_jac_p entry (2, 2) d theta / d b"),
+        "{msg}"
+    );
     assert!(msg.contains("worst input x: [x="), "{msg}");
     // the uncorrupted functions still pass
-    assert!(found.iter().filter(|f| f.function != "step_exact_jac_p").all(|f| f.passed()));
+    assert!(found
+        .iter()
+        .filter(|f| f.function != "step_exact_jac_p")
+        .all(|f| f.passed()));
 }
 
 #[test]
@@ -24,10 +35,19 @@ fn a_wrong_sign_in_an_inverse_kinematics_row_is_reported() {
         let ir = models::load(model);
         let bad = Corrupted::flip_term(&ir, "inverse_twist", 0);
         let found = inverse_round_trips(&ir, &bad, 10, 4);
-        let f = found.iter().find(|f| f.function == "inverse_twist").unwrap();
+        let f = found
+            .iter()
+            .find(|f| f.function == "inverse_twist")
+            .unwrap();
         assert!(!f.passed(), "{model}: wrong IK sign not detected");
-        assert!(where_(f).starts_with(&format!("{model}::inverse_twist entry")), "{}", where_(f));
-        assert!(inverse_round_trips(&ir, &IrKernel, 10, 4).iter().all(|f| f.passed()));
+        assert!(
+            where_(f).starts_with(&format!("{model}::inverse_twist entry")),
+            "{}",
+            where_(f)
+        );
+        assert!(inverse_round_trips(&ir, &IrKernel, 10, 4)
+            .iter()
+            .all(|f| f.passed()));
     }
 }
 
@@ -43,7 +63,10 @@ fn a_wrong_term_in_gyrodometry_is_reported() {
                 assert!(f.passed());
                 continue;
             }
-            assert!(!f.passed(), "{model}: corrupted twist_gyro entry {entry} not detected");
+            assert!(
+                !f.passed(),
+                "{model}: corrupted twist_gyro entry {entry} not detected"
+            );
         }
         assert!(gyrodometry_consistency(&ir, &IrKernel, 20, 5).passed());
     }
@@ -58,13 +81,19 @@ fn every_nonzero_jacobian_entry_is_guarded() {
     for ir in models::all() {
         for f in ir.functions.iter().filter(|f| f.name.contains("_jac_")) {
             for entry in 0..f.outputs.len() {
-                if matches!(f.tape[f.outputs[entry] as usize], kinegen_model::ir::Op::Const(c) if c == 0.0) {
+                if matches!(f.tape[f.outputs[entry] as usize], kinegen_model::ir::Op::Const(c) if c == 0.0)
+                {
                     continue; // structurally zero: nothing to corrupt
                 }
                 tried += 1;
                 let bad = Corrupted::flip_term(&ir, &f.name, entry);
                 let found = jacobians_vs_finite_differences(&ir, &bad, 3, 8);
-                if found.iter().find(|x| x.function == f.name).unwrap().passed() {
+                if found
+                    .iter()
+                    .find(|x| x.function == f.name)
+                    .unwrap()
+                    .passed()
+                {
                     missed.push(format!("{}::{} entry {entry}", ir.name, f.name));
                 }
             }
@@ -72,5 +101,9 @@ fn every_nonzero_jacobian_entry_is_guarded() {
     }
     println!("{tried} corrupted entries tried, {} missed", missed.len());
     assert!(tried > 100);
-    assert!(missed.is_empty(), "corruptions not caught:\n{}", missed.join("\n"));
+    assert!(
+        missed.is_empty(),
+        "corruptions not caught:\n{}",
+        missed.join("\n")
+    );
 }

@@ -13,10 +13,21 @@ fn every_generated_kernel_passes_every_check() {
         println!("== {}\n{}", ir.name, report.table());
         // every function is covered by at least one check
         for f in &ir.functions {
-            let covered = report.findings.iter().any(|x| x.function == f.name || x.function == f.name.split("_jac_").next().unwrap());
-            assert!(covered, "{}::{} is not covered by any check", ir.name, f.name);
+            let covered = report.findings.iter().any(|x| {
+                x.function == f.name || x.function == f.name.split("_jac_").next().unwrap()
+            });
+            assert!(
+                covered,
+                "{}::{} is not covered by any check",
+                ir.name, f.name
+            );
         }
-        failures.extend(report.failures().into_iter().map(|f| format!("{}: {}", f.check, where_(f))));
+        failures.extend(
+            report
+                .failures()
+                .into_iter()
+                .map(|f| format!("{}: {}", f.check, where_(f))),
+        );
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -1,6 +1,8 @@
 //! Property tests: proptest draws the seeds of the domain samplers, so every run
 //! explores new states, inputs, parameters and step lengths.
-use kinegen_verify::checks::{exact_vs_euler, inverse_round_trips, jacobians_vs_finite_differences, se2_equivariance, where_};
+use kinegen_verify::checks::{
+    exact_vs_euler, inverse_round_trips, jacobians_vs_finite_differences, se2_equivariance, where_,
+};
 use kinegen_verify::{models, Generated};
 use proptest::prelude::*;
 

@@ -8,15 +8,26 @@ fn main() {
     let dt = 0.05;
     let mut pose = [0.0, 0.0, 0.0];
     // One second straight at ~0.3 m/s, then one second turning left in place.
-    let counts_per_s = 0.3 / (diff_drive::PARAM_NOMINAL[0] * 2.0 * core::f64::consts::PI / (64.0 * 43.7));
+    let counts_per_s =
+        0.3 / (diff_drive::PARAM_NOMINAL[0] * 2.0 * core::f64::consts::PI / (64.0 * 43.7));
     for k in 0..40 {
-        let u = if k < 20 { [counts_per_s, counts_per_s] } else { [counts_per_s, -counts_per_s] };
+        let u = if k < 20 {
+            [counts_per_s, counts_per_s]
+        } else {
+            [counts_per_s, -counts_per_s]
+        };
         pose = diff_drive::step_exact(&pose, &u, &w, &p, dt);
     }
     let jac = diff_drive::step_exact_jac_p(&pose, &[counts_per_s, counts_per_s], &w, &p, dt);
     // The wheel rates that drive 0.3 m straight ahead in one second:
     let rates = diff_drive::inverse_increment(&[0.3, 0.0, 0.0], 1.0, &p);
-    println!("pose after 2 s: x = {:.4} m, y = {:.4} m, theta = {:.4} rad", pose[0], pose[1], pose[2]);
+    println!(
+        "pose after 2 s: x = {:.4} m, y = {:.4} m, theta = {:.4} rad",
+        pose[0], pose[1], pose[2]
+    );
     println!("d(x_next)/d(r_r) = {:.6}", jac[0][0]);
-    println!("encoder rates for 0.3 m in 1 s: right {:.1}, left {:.1} counts/s", rates[0], rates[1]);
+    println!(
+        "encoder rates for 0.3 m in 1 s: right {:.1}, left {:.1} counts/s",
+        rates[0], rates[1]
+    );
 }
