@@ -625,9 +625,24 @@ pub fn run_fit(
     for w in &res.warnings {
         out.say(&format!("warning: {w}"));
     }
+    // a fit that cannot be used is said plainly, never shown as a success
+    let mut unusable = kinegen_analysis::metrics::degenerate(&prep.runs, &eval_after.tracks);
+    if after.rmse.is_finite() && after.rmse > 1.001 * before.rmse {
+        unusable.push(format!(
+            "calibration made the position error worse ({:.4} m -> {:.4} m)",
+            before.rmse, after.rmse
+        ));
+    }
+    if !after.rmse.is_finite() || res.p.iter().any(|v| !v.is_finite()) {
+        unusable.push("the calibrated model gives non-finite results".into());
+    }
+    for u in &unusable {
+        out.say(&format!("FIT UNUSABLE: {u}"));
+    }
     let mut doc = fit_json(r, &res, before, after, metric_name(&prep.runs));
+    doc["unusable"] = json!(unusable);
     doc["loss"] = json!(loss);
-    doc["residuals"] = json!(["pose", "gyro", "landmarks"]
+    doc["residual_kinds"] = json!(["pose", "gyro", "landmarks"]
         .iter()
         .filter(|k| uses(k))
         .collect::<Vec<_>>());
@@ -663,7 +678,8 @@ pub fn run_fit(
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
     match out.json(c.json.as_deref(), &doc) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) if unusable.is_empty() => ExitCode::SUCCESS,
+        Ok(()) => ExitCode::from(1),
         Err(e) => bad(e),
     }
 }

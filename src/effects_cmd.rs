@@ -101,6 +101,9 @@ pub struct SimArgs {
 
 pub fn run_simulate(a: SimArgs) -> ExitCode {
     let go = || -> Result<String, String> {
+        if a.laps == 0 {
+            return Err("--laps 0: at least one lap".into());
+        }
         let spec = Model::load(&a.spec).map_err(|e| e.to_string())?;
         let traj: Trajectory = a.trajectory.parse()?;
         let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
@@ -128,7 +131,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
         let o = SimOptions {
             trajectory: traj,
             seed: a.seed,
-            laps: a.laps.max(1),
+            laps: a.laps,
             landmarks,
             ..SimOptions::default()
         };

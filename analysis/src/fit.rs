@@ -781,12 +781,19 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             }
         }
     }
-    let cov = &d
-        * svd
-            .pseudo_inverse(cutoff)
-            .unwrap_or_else(|_| DMatrix::zeros(m, m))
-        * &d
-        * s2;
+    // The covariance is the inverse of the (marginal) information on its
+    // determined subspace. A symmetric eigen-decomposition keeps it positive
+    // semi-definite: the Schur complement can carry tiny negative eigenvalues from
+    // round-off, which an SVD pseudo-inverse would turn into correlations |r| > 1.
+    let eig = nalgebra::SymmetricEigen::new((&jtj + jtj.transpose()) * 0.5);
+    let mut info_inv = DMatrix::zeros(m, m);
+    for (k, &l) in eig.eigenvalues.iter().enumerate() {
+        if l > cutoff {
+            let v = eig.eigenvectors.column(k);
+            info_inv += &v * v.transpose() / l;
+        }
+    }
+    let cov = &d * info_inv * &d * s2;
     // The pseudo-inverse gives an undetermined direction zero variance, which would
     // read as "known exactly": such parameters get an infinite standard deviation
     // (reported as unidentified, null in JSON).
@@ -802,7 +809,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     let corr = DMatrix::from_fn(m, m, |a, b| {
         let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
         if d > 0.0 {
-            cov[(a, b)] / d
+            (cov[(a, b)] / d).clamp(-1.0, 1.0)
         } else if a == b {
             1.0
         } else {

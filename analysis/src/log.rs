@@ -46,12 +46,32 @@ pub fn read_csv(
         .trim(csv::Trim::All)
         .from_path(path)
         .map_err(|x| e(None, format!("cannot read {what}: {x}")))?;
-    let names = rdr
+    let names: Vec<String> = rdr
         .headers()
         .map_err(|x| e(Some(1), format!("bad header: {x}")))?
         .iter()
         .map(str::to_string)
         .collect();
+    if names.len() == 1 {
+        if let Some(sep) = [';', '\t', '|'].into_iter().find(|c| names[0].contains(*c)) {
+            return Err(e(Some(1), format!("the header is one column `{}`: {what} files are comma-separated, this one looks {sep:?}-separated", names[0])));
+        }
+    }
+    // a repeated name would make every reader pick one of them silently
+    for (i, n) in names.iter().enumerate() {
+        if let Some(first) = names[..i].iter().position(|x| x == n) {
+            return Err(LogError {
+                file: path.to_path_buf(),
+                row: Some(1),
+                column: Some(n.clone()),
+                message: format!(
+                    "column `{n}` appears twice in the header (columns {} and {})",
+                    first + 1,
+                    i + 1
+                ),
+            });
+        }
+    }
     Ok((
         CsvHeader {
             path: path.to_path_buf(),

@@ -246,3 +246,28 @@ pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment
     segments.truncate(5);
     (shares, segments)
 }
+
+/// Path length of a planar track, sampled every `every` rows (so measurement
+/// noise does not add length).
+fn path_length(xy: impl Iterator<Item = (f64, f64)>, every: usize) -> f64 {
+    let pts: Vec<(f64, f64)> = xy.step_by(every.max(1)).collect();
+    pts.windows(2)
+        .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+        .sum()
+}
+
+/// A calibration that cannot be used: on some run the model's track barely moves
+/// (or runs away) while the measured one moves. Returns what happened, per run.
+pub fn degenerate(runs: &[Run], tracks: &[crate::deadreckon::Track]) -> Vec<String> {
+    let mut out = Vec::new();
+    for (run, tr) in runs.iter().zip(tracks) {
+        let Some(g) = &run.gt else { continue };
+        let every = (run.t.len() / 200).max(1);
+        let measured = path_length(g.iter().map(|p| (p[0], p[1])), every);
+        let model = path_length(tr.measured.iter().map(|p| (p[0], p[1])), every);
+        if measured > 0.5 && !(model > 0.2 * measured && model < 5.0 * measured) {
+            out.push(format!("on {} the calibrated model travels {model:.2} m while the measurements travel {measured:.2} m", run.name));
+        }
+    }
+    out
+}

@@ -13,6 +13,13 @@ pub enum ModelError {
     },
     #[error("--set {0}: expected NAME=VALUE with a finite number")]
     BadSet(String),
+    #[error("--set {name}={value}: outside the declared bounds of `{name}` (min {min:?} exclusive, max {max:?})")]
+    OutOfBounds {
+        name: String,
+        value: f64,
+        min: Option<f64>,
+        max: Option<f64>,
+    },
     #[error("model `{0}` lacks the function `{1}` (regenerate its IR)")]
     Missing(String, String),
 }
@@ -66,6 +73,16 @@ impl Runner {
                     model: ir.name.clone(),
                     known: names.join(", "),
                 })?;
+            let decl = rp[i];
+            // strict at min (a radius of 0 divides by zero), inclusive at max
+            if decl.min.is_some_and(|m| *v <= m) || decl.max.is_some_and(|m| *v > m) {
+                return Err(ModelError::OutOfBounds {
+                    name: n.clone(),
+                    value: *v,
+                    min: decl.min,
+                    max: decl.max,
+                });
+            }
             p[i] = *v;
         }
         for f in [

@@ -56,8 +56,23 @@ pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError
         .file_name()
         .map(|n| n.to_string_lossy().to_string())
         .unwrap_or_else(|| "spec".into());
-    for path in spec_files(spec_dir)? {
+    let paths = spec_files(spec_dir)?;
+    if paths.is_empty() {
+        // writing would delete every model of an existing crate
+        return Err(SourceError::new(
+            spec_dir,
+            None,
+            "no spec files (*.toml) in this directory: nothing to generate",
+        )
+        .into());
+    }
+    let mut seen: Vec<(String, PathBuf)> = Vec::new();
+    for path in paths {
         let model = Model::load(&path)?;
+        if let Some((_, other)) = seen.iter().find(|(n, _)| n == &model.name) {
+            return Err(SourceError::new(&path, None, format!("model name `{}` is also the name of {}: each spec needs its own name (it names the generated module)", model.name, other.display())).into());
+        }
+        seen.push((model.name.clone(), path.clone()));
         let t0 = Instant::now();
         let ir = crate::derive_model(&model)?;
         let took = t0.elapsed();

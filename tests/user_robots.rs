@@ -1,0 +1,287 @@
+//! Robots that are not bundled, as a user brings them (`tests/user_specs/`):
+//! their own model names, their own column names, run from a working directory
+//! outside the checkout. Each goes through simulate (with a hidden effect) ->
+//! compare -> fit -> diagnose (which must name the hidden effect) -> add-effect
+//! (which must keep the user's comments).
+mod common;
+use common::*;
+use std::path::Path;
+
+/// Run kinegen in `dir`, expecting success; returns stdout as JSON when `--json -` is given.
+fn run_in(dir: &Path, args: &[&str]) -> std::process::Output {
+    let o = kinegen_in(dir, args);
+    assert!(
+        o.status.success(),
+        "kinegen {args:?} in {}: {}",
+        dir.display(),
+        stderr(&o)
+    );
+    o
+}
+
+fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str, value: f64) {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // the user's spec lives in their own directory, not in the checkout
+    let spec_path = dir.join(format!("{spec}.toml"));
+    std::fs::copy(
+        root().join("tests/user_specs").join(format!("{spec}.toml")),
+        &spec_path,
+    )
+    .unwrap();
+    let s = spec_path.file_name().unwrap().to_str().unwrap();
+    let mut sim = vec![
+        "simulate",
+        "--spec",
+        s,
+        "--effect",
+        hidden,
+        "--trajectory",
+        "random",
+        "--seed",
+        "3",
+        "--out",
+        "log.csv",
+    ];
+    for set in sets {
+        sim.extend(["--set", set]);
+    }
+    run_in(dir, &sim);
+    run_in(dir, &["compare", "--spec", s, "--data", "log.csv"]);
+    let fit: serde_json::Value = serde_json::from_slice(
+        &run_in(
+            dir,
+            &["fit", "--spec", s, "--data", "log.csv", "--json", "-"],
+        )
+        .stdout,
+    )
+    .unwrap();
+    assert!(
+        fit["after"]["rmse"].as_f64().unwrap() < fit["before"]["rmse"].as_f64().unwrap(),
+        "{spec}: {}",
+        fit["after"]
+    );
+    let d: serde_json::Value = serde_json::from_slice(
+        &run_in(
+            dir,
+            &["diagnose", "--spec", s, "--data", "log.csv", "--json", "-"],
+        )
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(d["verdict"]["effect"], effect, "{spec}: {}", d["verdict"]);
+    let est = d["verdict"]["effects"][0]["parameters"][param]["estimate"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        ((est - value) / value).abs() < 0.1,
+        "{spec}: {param} = {est}, hidden {value}"
+    );
+    // every catalogue effect is either a candidate or skipped with a reason
+    let tested = d["candidates"].as_array().unwrap().len() + d["skipped"].as_array().unwrap().len();
+    assert_eq!(tested, 10, "{spec}: {d}");
+    let v = format!("{param}={est}");
+    run_in(
+        dir,
+        &[
+            "add-effect",
+            "--spec",
+            s,
+            "--effect",
+            effect,
+            "--value",
+            &v,
+            "--out",
+            "fixed.toml",
+        ],
+    );
+    let before = std::fs::read_to_string(&spec_path).unwrap();
+    let after = std::fs::read_to_string(dir.join("fixed.toml")).unwrap();
+    let comments = |t: &str| {
+        t.lines()
+            .filter(|l| l.contains('#'))
+            .map(str::to_string)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        comments(&before),
+        comments(&after),
+        "{spec}: add-effect must keep the user's comments"
+    );
+    // the augmented spec fits better than the spec as it was
+    let fixed: serde_json::Value = serde_json::from_slice(
+        &run_in(
+            dir,
+            &[
+                "fit",
+                "--spec",
+                "fixed.toml",
+                "--data",
+                "log.csv",
+                "--json",
+                "-",
+            ],
+        )
+        .stdout,
+    )
+    .unwrap();
+    // the augmented spec calibrates the effect too (a gyro effect shows in the
+    // gyro only, which the position error does not see)
+    let fitted = fixed["parameters"][param]["estimate"].as_f64().unwrap();
+    assert!(
+        ((fitted - value) / value).abs() < 0.1,
+        "{spec}: refit {param} = {fitted}"
+    );
+    if !effect.starts_with("gyro") {
+        let (a, b) = (
+            fixed["after"]["rmse"].as_f64().unwrap(),
+            fit["after"]["rmse"].as_f64().unwrap(),
+        );
+        assert!(a < 0.5 * b, "{spec}: {a} vs {b}");
+    }
+}
+
+#[test]
+fn skid_steer_with_four_encoders() {
+    user_robot(
+        "skid4",
+        "lateral_slip=0.1",
+        &["track=0.58"],
+        "lateral_slip",
+        "k_slip",
+        0.1,
+    );
+}
+
+#[test]
+fn mecanum_base() {
+    user_robot(
+        "mecanum4",
+        "gyro_bias=0.05",
+        &["r=0.051"],
+        "gyro_bias",
+        "gyro_bias",
+        0.05,
+    );
+}
+
+#[test]
+fn differential_drive_with_a_tracker_far_ahead() {
+    user_robot(
+        "offset_diff",
+        "wheel_misalignment=0.03",
+        &["axle=0.62"],
+        "wheel_misalignment",
+        "toe",
+        0.03,
+    );
+}
+
+#[test]
+fn bad_user_input_is_located() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let spec = dir.join("skid4.toml");
+    std::fs::copy(root().join("tests/user_specs/skid4.toml"), &spec).unwrap();
+    // a duplicated header column is refused, not interleaved
+    std::fs::write(dir.join("dup.csv"), "t,enc_front_right,enc_rear_right,enc_front_left,enc_rear_left,enc_front_right\n0,0,0,0,0,0\n").unwrap();
+    let o = kinegen_in(
+        dir,
+        &["compare", "--spec", "skid4.toml", "--data", "dup.csv"],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("dup.csv:1: column `enc_front_right`") && stderr(&o).contains("twice"),
+        "{}",
+        stderr(&o)
+    );
+    // a semicolon-separated log says so
+    std::fs::write(dir.join("semi.csv"), "t;enc_front_right\n0;0\n").unwrap();
+    let o = kinegen_in(
+        dir,
+        &["compare", "--spec", "skid4.toml", "--data", "semi.csv"],
+    );
+    assert!(
+        o.status.code() == Some(2) && stderr(&o).contains("';'"),
+        "{}",
+        stderr(&o)
+    );
+    // --set below a strict lower bound
+    let o = kinegen_in(
+        dir,
+        &[
+            "compare",
+            "--spec",
+            "skid4.toml",
+            "--data",
+            "dup.csv",
+            "--set",
+            "radius=0",
+        ],
+    );
+    assert!(
+        o.status.code() == Some(2) && stderr(&o).contains("--set radius=0"),
+        "{}",
+        stderr(&o)
+    );
+    // an unknown effect parameter in add-effect
+    let o = kinegen_in(
+        dir,
+        &[
+            "add-effect",
+            "--spec",
+            "skid4.toml",
+            "--effect",
+            "lateral_slip",
+            "--value",
+            "zz=1",
+            "--out",
+            "x.toml",
+        ],
+    );
+    assert!(
+        o.status.code() == Some(2) && stderr(&o).contains("no parameter `zz`"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.join("x.toml").exists());
+    // a model named like a Rust keyword, and a non-real constant, are located
+    std::fs::write(
+        dir.join("kw.toml"),
+        std::fs::read_to_string(&spec)
+            .unwrap()
+            .replace("name = \"skid4\"", "name = \"fn\""),
+    )
+    .unwrap();
+    let o = kinegen_in(dir, &["compare", "--spec", "kw.toml", "--data", "dup.csv"]);
+    assert!(
+        o.status.code() == Some(2)
+            && stderr(&o).contains("kw.toml:4:8")
+            && stderr(&o).contains("keyword"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::write(
+        dir.join("nan.toml"),
+        std::fs::read_to_string(&spec)
+            .unwrap()
+            .replace("vy = \"0\"", "vy = \"0/0\""),
+    )
+    .unwrap();
+    let o = kinegen_in(dir, &["compare", "--spec", "nan.toml", "--data", "dup.csv"]);
+    assert!(
+        o.status.code() == Some(2)
+            && stderr(&o).contains("nan.toml:")
+            && stderr(&o).contains("finite real"),
+        "{}",
+        stderr(&o)
+    );
+    // generate refuses an empty spec directory instead of deleting a crate
+    std::fs::create_dir(dir.join("empty")).unwrap();
+    let o = kinegen_in(dir, &["generate", "--spec-dir", "empty", "--out", "out"]);
+    assert!(
+        o.status.code() == Some(2) && stderr(&o).contains("no spec files"),
+        "{}",
+        stderr(&o)
+    );
+}
