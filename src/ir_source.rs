@@ -10,6 +10,10 @@ use kinegen_model::spec::Model;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
+/// Version of the IR's JSON layout: part of the cache key, so an IR derived by
+/// an older kinegen (without observation roles, say) is never reused.
+const IR_FORMAT: u32 = 2;
+
 pub fn cache_dir() -> PathBuf {
     std::env::temp_dir().join("kinegen-ir-cache")
 }
@@ -35,7 +39,7 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
             }
         }
     }
-    let cached = cache_dir().join(format!("{}-{fp}.json", model.name));
+    let cached = cache_dir().join(format!("{}-{fp}-ir{IR_FORMAT}.json", model.name));
     if let Ok(text) = std::fs::read_to_string(&cached) {
         if let Ok(ir) = ModelIr::from_json(&text) {
             return Ok(ir);

@@ -230,13 +230,20 @@ impl ObservationRole {
     }
 
     /// The role an undeclared observation plays, from its structure: a landmark
-    /// observation is range-bearing; a single expression that is the yaw rate is a
-    /// gyro; three expressions whose last is the heading (an angle) are a pose.
+    /// observation is range-bearing; a single expression of the yaw rate is a
+    /// gyro (also with a scale or bias written in); three expressions whose last
+    /// is the heading (an angle) are a pose.
     fn infer(landmark: bool, exprs: &[Expr], angle: &[bool]) -> ObservationRole {
         let is_var = |e: &Expr, name: &str| matches!(&e.kind, ExprKind::Var(v) if v == name);
         if landmark {
             ObservationRole::RangeBearing
-        } else if exprs.len() == 1 && is_var(&exprs[0], "omega") {
+        } else if exprs.len() == 1
+            && exprs[0].variables().iter().any(|(v, _)| *v == "omega")
+            && !exprs[0]
+                .variables()
+                .iter()
+                .any(|(v, _)| ["x", "y", "theta", "vx", "vy"].contains(v))
+        {
             ObservationRole::YawRate
         } else if exprs.len() == 3 && angle.get(2) == Some(&true) && is_var(&exprs[2], "theta") {
             ObservationRole::Pose
