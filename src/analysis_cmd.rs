@@ -8,7 +8,6 @@ use kinegen_analysis::fit::{fit, FitOptions, FitResult};
 use kinegen_analysis::landmarks::{self, Innovation, InnovationStats};
 use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
 use kinegen_analysis::model::{parse_sets, Runner};
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::{RangeBearing, YawRate};
 use serde_json::{json, Value};
 use std::path::PathBuf;
@@ -41,6 +40,13 @@ pub struct Common {
     /// Write one JSON document to PATH (`-`: stdout).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    #[command(flatten)]
+    pub catalogue: EffectDirs,
+}
+
+/// `--effects DIR`: the user's own effect catalogues (commands that use effects).
+#[derive(Args, Debug, Clone, Default)]
+pub struct EffectDirs {
     /// A directory of your own effect files (same format as the bundled
     /// catalogue, which is built in); repeatable. A file with a bundled effect's
     /// name replaces it.

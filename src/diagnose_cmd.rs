@@ -15,20 +15,14 @@ use std::time::Instant;
 
 /// The spec with `effects` added in order (each at its nominal values).
 fn with_chain(spec: &Model, cat: &[Effect], effects: &[String]) -> Result<Model, String> {
-    let mut m = spec.clone();
-    for name in effects {
+    effects.iter().try_fold(spec.clone(), |m, name| {
         let eff = cat
             .iter()
             .find(|e| &e.name == name)
             .ok_or_else(|| format!("unknown effect `{name}`"))?;
-        if let Applicability::NotApplicable(why) = eff.applicability(&m) {
-            return Err(format!("not applicable after the effects before it: {why}"));
-        }
-        let text = eff.apply(&m, &BTreeMap::new())?;
-        m = Model::parse(&spec.path, &text)
-            .map_err(|e| format!("adding it gives an invalid spec: {}", e.message))?;
-    }
-    Ok(m)
+        eff.added_to(&m)
+            .map_err(|why| format!("after the effects before it, it {why}"))
+    })
 }
 
 pub fn run(c: Common) -> ExitCode {
@@ -42,7 +36,7 @@ pub fn run(c: Common) -> ExitCode {
         Ok(m) => m,
         Err(e) => return bad(e),
     };
-    let cat = match catalogue(&c.effects) {
+    let cat = match catalogue(&c.catalogue.effects) {
         Ok(x) => x,
         Err(e) => return bad(e),
     };
@@ -252,7 +246,7 @@ pub fn run(c: Common) -> ExitCode {
         "calibrated": {"rmse": d.calibrated_rmse, "holdout_rmse": d.base_holdout_rmse,
             "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
         "candidates": d.candidates,
-        "verdict": {"effect": d.verdict, "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
+        "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
         "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
     });

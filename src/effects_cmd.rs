@@ -6,7 +6,6 @@ use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
 use kinegen_model::spec::InputKind;
 use kinegen_model::spec::Model;
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::RangeBearing;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -59,28 +58,12 @@ pub fn with_effects(
             // the parameters of the wheels the model has)
             None => added.first().cloned().unwrap_or_default(),
         };
-        match eff.applicability(&model) {
-            Applicability::Applies => {
-                if !added.contains(&param) {
-                    return Err(format!("--effect {e}: the effect `{name}` adds no parameter `{param}` to this model (it adds: {})", added.join(", ")));
-                }
-                let text = eff.apply(&model, &BTreeMap::new())?;
-                model = Model::parse(&spec.path, &text).map_err(|x| {
-                    format!(
-                        "--effect {e}: applying it to {} gives an invalid spec: {}",
-                        spec.path.display(),
-                        x.message
-                    )
-                })?;
-            }
-            Applicability::AlreadyIn => {}
-            Applicability::NotApplicable(why) => {
-                return Err(format!(
-                    "--effect {e}: `{name}` does not apply to {}: {why}",
-                    spec.path.display()
-                ))
-            }
+        if eff.applicability(&model) == Applicability::Applies && !added.contains(&param) {
+            return Err(format!("--effect {e}: the effect `{name}` adds no parameter `{param}` to this model (it adds: {})", added.join(", ")));
         }
+        model = eff
+            .added_to(&model)
+            .map_err(|why| format!("--effect {e}: on {}, `{name}` {why}", spec.path.display()))?;
         values.push((param, v));
     }
     Ok((model.source, values))
@@ -96,7 +79,7 @@ pub struct SimArgs {
     pub out: PathBuf,
     pub landmarks: Option<PathBuf>,
     pub observations: Option<PathBuf>,
-    pub effects: Vec<PathBuf>,
+    pub catalogue: crate::analysis_cmd::EffectDirs,
 }
 
 pub fn run_simulate(a: SimArgs) -> ExitCode {
@@ -108,7 +91,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
         let traj: Trajectory = a.trajectory.parse()?;
         let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
         let base = Runner::new(ir_source::load(&a.spec)?, &sets).map_err(|e| e.to_string())?;
-        let (truth_text, values) = with_effects(&spec, &a.effect, &a.effects)?;
+        let (truth_text, values) = with_effects(&spec, &a.effect, &a.catalogue.effects)?;
         let truth_ir = if a.effect.is_empty() {
             base.ir.clone()
         } else {

@@ -129,9 +129,8 @@ enum Command {
         /// in range (10 m, 5 Hz, the noise of the spec's `landmark` observation) here.
         #[arg(long)]
         observations: Option<PathBuf>,
-        /// A directory of your own effect files, added to the built-in catalogue; repeatable.
-        #[arg(long = "effects", value_name = "DIR")]
-        effects: Vec<PathBuf>,
+        #[command(flatten)]
+        catalogue: analysis_cmd::EffectDirs,
     },
     /// Write a copy of a spec with an effect from the catalogue added.
     ///
@@ -146,9 +145,8 @@ enum Command {
         value: Vec<String>,
         #[arg(long)]
         out: PathBuf,
-        /// A directory of your own effect files, added to the built-in catalogue; repeatable.
-        #[arg(long = "effects", value_name = "DIR")]
-        effects: Vec<PathBuf>,
+        #[command(flatten)]
+        catalogue: analysis_cmd::EffectDirs,
     },
     /// Derive one spec's IR into a file (used internally by the analysis commands).
     #[command(hide = true)]
@@ -190,7 +188,7 @@ fn main() -> ExitCode {
             out,
             landmarks,
             observations,
-            effects,
+            catalogue,
         } => effects_cmd::run_simulate(effects_cmd::SimArgs {
             spec,
             effect,
@@ -201,15 +199,15 @@ fn main() -> ExitCode {
             out,
             landmarks,
             observations,
-            effects,
+            catalogue,
         }),
         Command::AddEffect {
             spec,
             effect,
             value,
             out,
-            effects,
-        } => effects_cmd::run_add_effect(&spec, &effect, &value, &out, &effects),
+            catalogue,
+        } => effects_cmd::run_add_effect(&spec, &effect, &value, &out, &catalogue.effects),
         Command::Derive { spec, ir_out } => match ir_source::derive_to(&spec, &ir_out) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => analysis_cmd::bad(e),

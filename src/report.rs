@@ -419,11 +419,11 @@ pub fn diagnose_report(
     use kinegen_analysis::deadreckon::run as dr;
     let mut figs = Vec::new();
     // the first effect of the chain alone (for its signature), and the final model
-    let first = d.verdict.as_ref().and_then(|v| {
+    let first = d.verdict().and_then(|v| {
         Some((
             v,
-            derive(std::slice::from_ref(v)).ok()?,
-            d.candidates.iter().find(|c| &c.effect == v)?,
+            derive(&[v.to_string()]).ok()?,
+            d.candidates.iter().find(|c| c.effect == v)?,
         ))
     });
     let chain_label = format!(
@@ -447,7 +447,6 @@ pub fn diagnose_report(
             errs.push((chain_label.as_str(), GREEN, pos_err(run, &a)));
         }
         if let Some((name, aug, cand)) = &first {
-            let aug = aug;
             // the first effect's residual signature
             if let Some(param) = cand.parameters.keys().next() {
                 if let Some((chan, pts)) = kinegen_analysis::diagnose::signature(

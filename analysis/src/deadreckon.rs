@@ -2,7 +2,6 @@
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
 use crate::dataset::Run;
 use crate::model::Runner;
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::Pose;
 use nalgebra::DMatrix;
 

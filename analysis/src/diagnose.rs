@@ -14,7 +14,6 @@ use crate::dataset::Run;
 use crate::fit::{fit, residuals, FitOptions, FitResult};
 use crate::log::wrap;
 use crate::model::Runner;
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::{Pose, YawRate};
 use nalgebra::DVector;
 use rayon::prelude::*;
@@ -49,8 +48,6 @@ pub struct Diagnosis {
     pub base_fit: FitResult,
     pub base_holdout_rmse: f64,
     pub candidates: Vec<Candidate>,
-    /// The first effect of the chain (None: no catalogue effect is significant).
-    pub verdict: Option<String>,
     /// Every effect found, in the order sequential diagnosis added them.
     pub chain: Vec<ChainStep>,
     /// What remains in the residuals of the final model (base plus chain).
@@ -59,6 +56,13 @@ pub struct Diagnosis {
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
     pub final_p: Vec<f64>,
+}
+
+impl Diagnosis {
+    /// The verdict: the first effect of the chain (None: no catalogue effect is significant).
+    pub fn verdict(&self) -> Option<&str> {
+        self.chain.first().map(|c| c.effect.as_str())
+    }
 }
 
 /// Weighted residual RMS of a parameter vector, each run (segment) anchored at
@@ -533,6 +537,16 @@ pub fn redundancy(
     ))
 }
 
+/// The free parameters of an augmented runner that the current model lacks: the
+/// ones its effect adds (indices into `aug`'s parameters).
+fn effect_params(aug: &Runner, cur: &Runner) -> Vec<usize> {
+    aug.free
+        .iter()
+        .copied()
+        .filter(|&i| cur.param_index(&aug.names[i]).is_none())
+        .collect()
+}
+
 /// Calibrate every candidate on top of `cur` and score it against it.
 fn rank(
     cur: &Stage,
@@ -547,7 +561,7 @@ fn rank(
         .par_iter()
         .filter_map(|(name, doc, aug)| {
             let start = seeded(aug, &cur.runner, &cur.fit.p);
-            let effect_params: Vec<usize> = start.free.iter().copied().filter(|&i| cur.runner.param_index(&start.names[i]).is_none()).collect();
+            let effect_params = effect_params(&start, &cur.runner);
             let ev = evidence(&start, &effect_params, runs, o);
             // start from the current estimates and from nominal: a structurally wrong
             // model can calibrate itself into a corner the effect cannot leave
@@ -637,12 +651,7 @@ pub fn diagnose(
             match (cat.derive)(&list) {
                 Ok(aug) => {
                     let start = seeded(&aug, &cur.runner, &cur.fit.p);
-                    let effect_params: Vec<usize> = start
-                        .free
-                        .iter()
-                        .copied()
-                        .filter(|&i| cur.runner.param_index(&start.names[i]).is_none())
-                        .collect();
+                    let effect_params = effect_params(&start, &cur.runner);
                     match redundancy(&start, &effect_params, runs, &o) {
                         Some(why) if chain.is_empty() => skipped.push((name.clone(), why)),
                         Some(_) => {}
@@ -677,14 +686,12 @@ pub fn diagnose(
         cur = next;
     }
     let structure = whiteness(&cur.runner, &cur.fit.p, runs);
-    let verdict = chain.first().map(|c| c.effect.clone());
     Ok(Diagnosis {
         baseline_rmse,
         calibrated_rmse,
         base_fit,
         base_holdout_rmse,
         candidates: first_candidates.unwrap_or_default(),
-        verdict,
         chain,
         structure,
         skipped,

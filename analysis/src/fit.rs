@@ -9,7 +9,6 @@ use crate::dataset::Run;
 use crate::deadreckon;
 use crate::log::wrap;
 use crate::model::Runner;
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::{Pose, RangeBearing, YawRate};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -790,7 +789,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     for (k, &l) in eig.eigenvalues.iter().enumerate() {
         if l > cutoff {
             let v = eig.eigenvectors.column(k);
-            info_inv += &v * v.transpose() / l;
+            info_inv += v * v.transpose() / l;
         }
     }
     let cov = &d * info_inv * &d * s2;

@@ -8,7 +8,6 @@ use crate::dataset::Run;
 use crate::deadreckon::Track;
 use crate::log::{read_csv, wrap, LogError};
 use crate::model::Runner;
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::RangeBearing;
 use serde::Serialize;
 use std::collections::HashMap;

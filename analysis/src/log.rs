@@ -13,6 +13,22 @@ pub struct LogError {
     pub message: String,
 }
 
+impl LogError {
+    pub fn new(
+        file: &Path,
+        row: Option<usize>,
+        column: Option<&str>,
+        message: impl Into<String>,
+    ) -> LogError {
+        LogError {
+            file: file.to_path_buf(),
+            row,
+            column: column.map(str::to_string),
+            message: message.into(),
+        }
+    }
+}
+
 fn location(row: &Option<usize>, column: &Option<String>) -> String {
     match (row, column) {
         (Some(r), Some(c)) => format!(":{r}: column `{c}`"),
@@ -36,12 +52,7 @@ pub fn read_csv(
     path: &Path,
     what: &str,
 ) -> Result<(CsvHeader, csv::Reader<std::fs::File>), LogError> {
-    let e = |row: Option<usize>, m: String| LogError {
-        file: path.to_path_buf(),
-        row,
-        column: None,
-        message: m,
-    };
+    let e = |row: Option<usize>, m: String| LogError::new(path, row, None, m);
     let mut rdr = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_path(path)
@@ -60,16 +71,16 @@ pub fn read_csv(
     // a repeated name would make every reader pick one of them silently
     for (i, n) in names.iter().enumerate() {
         if let Some(first) = names[..i].iter().position(|x| x == n) {
-            return Err(LogError {
-                file: path.to_path_buf(),
-                row: Some(1),
-                column: Some(n.clone()),
-                message: format!(
+            return Err(LogError::new(
+                path,
+                Some(1),
+                Some(n),
+                format!(
                     "column `{n}` appears twice in the header (columns {} and {})",
                     first + 1,
                     i + 1
                 ),
-            });
+            ));
         }
     }
     Ok((
@@ -88,12 +99,7 @@ impl CsvHeader {
         column: Option<&str>,
         message: impl Into<String>,
     ) -> LogError {
-        LogError {
-            file: self.path.clone(),
-            row,
-            column: column.map(str::to_string),
-            message: message.into(),
-        }
+        LogError::new(&self.path, row, column, message)
     }
 
     pub fn position(&self, column: &str) -> Option<usize> {
@@ -182,12 +188,7 @@ impl Log {
         column: Option<&str>,
         message: impl Into<String>,
     ) -> LogError {
-        LogError {
-            file: self.path.clone(),
-            row,
-            column: column.map(str::to_string),
-            message: message.into(),
-        }
+        LogError::new(&self.path, row, column, message)
     }
 
     pub fn has(&self, c: &str) -> bool {

@@ -16,7 +16,6 @@ use crate::dataset::Run;
 use crate::deadreckon;
 use crate::log::wrap;
 use crate::model::Runner;
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::YawRate;
 use nalgebra::{DMatrix, DVector};
 

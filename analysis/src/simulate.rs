@@ -9,7 +9,6 @@
 use crate::log::wrap;
 use crate::model::Runner;
 use kinegen_model::spec::InputKind;
-#[allow(unused_imports)]
 use kinegen_model::spec::ObservationRole::{Pose, RangeBearing, YawRate};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};

@@ -343,8 +343,10 @@ impl Effect {
                 return Applicability::NotApplicable(why.into());
             }
         }
-        if !self.motion.is_empty() && !matches!(m.kinematics, Kinematics::Twist(_)) {
-            return Applicability::NotApplicable(has(m, Capability::Twist).unwrap_err().into());
+        if !self.motion.is_empty() {
+            if let Err(why) = has(m, Capability::Twist) {
+                return Applicability::NotApplicable(why.into());
+            }
         }
         let patches = self.substitutions(m).len()
             + self.motion.len()
@@ -662,6 +664,20 @@ impl Effect {
             }
         }
         Ok(doc.to_string())
+    }
+
+    /// The model with this effect added at its nominal values (unchanged when
+    /// it is already in); Err says why it does not apply or what went wrong.
+    pub fn added_to(&self, m: &Model) -> Result<Model, String> {
+        match self.applicability(m) {
+            Applicability::AlreadyIn => Ok(m.clone()),
+            Applicability::NotApplicable(why) => Err(format!("does not apply: {why}")),
+            Applicability::Applies => {
+                let text = self.apply(m, &BTreeMap::new())?;
+                Model::parse(&m.path, &text)
+                    .map_err(|e| format!("adding it gives an invalid spec: {}", e.message))
+            }
+        }
     }
 
     /// What adding the effect changes, for people: the lines that differ.
