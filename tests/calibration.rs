@@ -598,3 +598,60 @@ fn turning_in_place_leaves_the_common_scale_unidentified_and_says_so() {
         0.084 / 0.21
     );
 }
+
+/// Issue #11: a front-wheel-drive tricycle (tests/user_specs) whose steering gain
+/// is 5x off its nominal value and whose tracker sits 1.8 m ahead of the rear
+/// axle. From the nominal values a whole-track fit falls into the "robot that
+/// does not move" minimum; the continuation ladder (short re-anchored segments
+/// first) must reach the optimum a fit started at the truth reaches, on a short
+/// (83 s) and a long (546 s) log. Also checks the per-run JSON (CONTRACT section 4).
+#[test]
+fn fit_from_rough_nominal_values_reaches_the_optimum_of_a_fit_started_at_the_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = root().join("tests/user_specs/fwd_tricycle.toml");
+    let spec = spec.to_str().unwrap();
+    let truth = ["steer_gain=0.005", "r=0.23"];
+    for (traj, laps, name) in [("square", "1", "square.csv"), ("random", "6", "long.csv")] {
+        let mut args = vec![
+            "--spec",
+            spec,
+            "--trajectory",
+            traj,
+            "--laps",
+            laps,
+            "--seed",
+            "7",
+        ];
+        for s in truth {
+            args.extend(["--set", s]);
+        }
+        let log = simulate(tmp.path(), name, &args);
+        let log = log.to_str().unwrap();
+        let from_nominal = kinegen_json(&["fit", "--spec", spec, "--data", log]);
+        let mut at_truth = vec!["fit", "--spec", spec, "--data", log];
+        for s in truth {
+            at_truth.extend(["--set", s]);
+        }
+        let from_truth = kinegen_json(&at_truth);
+        for p in ["r", "L", "steer_gain"] {
+            let (a, b) = (&from_nominal["parameters"][p], &from_truth["parameters"][p]);
+            let (ea, eb, std) = (
+                a["estimate"].as_f64().unwrap(),
+                b["estimate"].as_f64().unwrap(),
+                b["std"].as_f64().unwrap(),
+            );
+            assert!(
+                (ea - eb).abs() <= 2.0 * std,
+                "{traj}: {p} from nominal {ea}, from the truth {eb} (std {std})"
+            );
+        }
+        assert_eq!(from_nominal["unusable"], serde_json::json!([]), "{traj}");
+        let runs = from_nominal["runs"].as_array().unwrap();
+        assert_eq!(runs.len(), 1);
+        assert!(runs[0]["path"].as_str().unwrap().ends_with(name));
+        assert!(
+            runs[0]["rmse"].as_f64().unwrap() < 0.1 * runs[0]["before"]["rmse"].as_f64().unwrap()
+        );
+        assert_eq!(runs[0]["start_pose"].as_array().unwrap().len(), 3);
+    }
+}

@@ -8,6 +8,9 @@ use kinegen_model::spec::{InputKind, ObservationRole};
 #[derive(Debug, Clone)]
 pub struct Run {
     pub name: String,
+    /// The log file as the user named it (runs are reported by path: two runs
+    /// called `run1.csv` in different directories are different runs).
+    pub path: String,
     pub t: Vec<f64>,
     /// Step k goes from row k to row k+1.
     pub dt: Vec<f64>,
@@ -105,6 +108,7 @@ impl Run {
     pub fn slice(&self, a: usize, b: usize) -> Run {
         Run {
             name: format!("{}[{a}..{b}]", self.name),
+            path: self.path.clone(),
             t: self.t[a..b].to_vec(),
             dt: self.dt[a..b - 1].to_vec(),
             u: self.u[a..b - 1].to_vec(),
@@ -228,6 +232,7 @@ impl Run {
                 .collect();
         Ok(Run {
             name,
+            path: log.path.display().to_string(),
             t,
             dt,
             u,

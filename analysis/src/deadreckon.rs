@@ -2,7 +2,7 @@
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
 use crate::dataset::Run;
 use crate::model::Runner;
-use kinegen_model::spec::ObservationRole::Pose;
+use kinegen_model::spec::ObservationRole::{Pose, YawRate};
 use nalgebra::DMatrix;
 
 pub struct Track {
@@ -17,6 +17,11 @@ pub struct Track {
     pub omega: Vec<f64>,
     /// Model body twist of each step.
     pub twist: Vec<[f64; 3]>,
+    /// What the gyro should read over each step: the model's yaw-rate
+    /// observation (a gyro scale or bias written into it counts), or the yaw rate
+    /// of the twist when the model has no such observation. Empty when the run
+    /// has no gyro.
+    pub gyro: Vec<f64>,
 }
 
 /// The body pose whose measurement is `measured`: the identity unless the model
@@ -129,13 +134,36 @@ pub fn run_from(
         pose.push(out3);
     }
     let measured = predicted_measurements(r, p, data, &pose);
+    let gyro = predicted_gyro(r, p, data, &pose, &omega);
     Track {
         pose,
         measured,
         sens,
         omega,
         twist,
+        gyro,
     }
+}
+
+/// The gyro readings a track predicts (see [`Track::gyro`]).
+fn predicted_gyro(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]], omega: &[f64]) -> Vec<f64> {
+    if data.gyro.is_none() {
+        return Vec::new();
+    }
+    let Some(h) = r.ir.observation_fn(YawRate, "") else {
+        return omega.to_vec();
+    };
+    let (mut out, mut scratch) = ([0.0], Vec::new());
+    (0..data.steps())
+        .map(|k| {
+            h.eval_into(
+                &Runner::obs_args(h, &pose[k], &data.u[k], p, &[]),
+                &mut out,
+                &mut scratch,
+            );
+            out[0]
+        })
+        .collect()
 }
 
 /// A 3 x P row-major parameter Jacobian as the first P columns of a sensitivity
@@ -207,6 +235,7 @@ pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
         pose,
         measured,
         sens: None,
+        gyro: omega.clone(),
         omega,
         twist,
     })

@@ -483,6 +483,22 @@ fn landmark_residuals(
     }
 }
 
+/// The start pose each run's dead reckoning used in the fit: its measured start
+/// plus the refinement of its first segment (`starts` is per segment of
+/// [`segmented`] runs, as in [`FitResult::starts`]).
+pub fn run_starts(r: &Runner, p: &[f64], runs: &[Run], starts: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mut seg = 0;
+    runs.iter()
+        .map(|run| {
+            let off = starts.get(seg).copied().unwrap_or([0.0; 3]);
+            seg += run.segments(SEGMENT_S).len();
+            let measured = run.start_pose();
+            let u0 = run.u.first().cloned().unwrap_or_default();
+            deadreckon::body_start(r, p, [0, 1, 2].map(|i| measured[i] + off[i]), &u0).0
+        })
+        .collect()
+}
+
 /// Weighted residual RMS of `p` on `runs` (segmented as calibration sees them),
 /// after refining only the start poses.
 pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
@@ -501,43 +517,103 @@ fn cost(res: &[f64]) -> f64 {
     0.5 * res.iter().map(|r| r * r).sum::<f64>()
 }
 
+/// Continuation ladder (segment lengths in seconds, shortest first): from rough
+/// nominal values a long track is far outside the basin of the right optimum (a
+/// steering gain 5x off turns a square into a spiral, and the nearest minimum is a
+/// robot that does not move at all). Short re-anchored segments keep every
+/// residual small and nearly linear in the parameters, so the short-segment fit
+/// lands near the optimum; each longer stage refines from there.
+const LADDER_S: [f64; 2] = [4.0, 15.0];
+
+/// Rows a continuation stage reads at most (evenly spaced segments beyond this):
+/// it only has to find the basin, so a million-row log need not be read in full.
+const LADDER_ROWS: usize = 20_000;
+
+/// Weighted residual RMS at which a fit is taken to have reached the noise, so no
+/// further starting point is tried.
+const AT_NOISE: f64 = 1.5;
+
 /// Calibrate the free parameters of `r` (starting from `r.p`).
 ///
-/// When the logs have both ground truth and a gyro, a gyro-only stage runs first:
-/// the yaw-rate residual does not accumulate along the track, so it is nearly
-/// convex in the parameters and gives the full dead-reckoning fit a start inside
-/// its basin (a long track with a large structural error otherwise spirals away).
+/// The fit from the nominal values is tried first. Unless it already explains
+/// the data down to the noise, it is also restarted from (a) the end of the
+/// continuation ladder [`LADDER_S`] and (b) a gyro-only fit (the yaw-rate residual
+/// does not accumulate along the track, so it is nearly convex in the
+/// parameters); the candidate with the lowest full cost wins.
 pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     // Dead reckoning over hours drifts beyond any basin of attraction: runs longer
     // than 2 min are calibrated as 60 s segments, each re-anchored on its measured
     // start pose (relative rather than absolute error).
     let split = segmented(runs);
-    let runs = &split[..];
+    let direct = fit_from(r, &split, o)?;
+    let at_noise = (2.0 * direct.cost_after / direct.n_residuals.max(1) as f64).sqrt() < AT_NOISE;
+    if r.free.is_empty() || at_noise {
+        return Ok(direct);
+    }
+    let mut best = direct;
+    for start in [continuation(r, runs, o), gyro_start(r, &split, o)]
+        .into_iter()
+        .flatten()
+    {
+        let mut from = r.clone();
+        from.p = start;
+        if let Ok(cand) = fit_from(&from, &split, o) {
+            if cand.cost_after < best.cost_after {
+                best = FitResult {
+                    cost_before: best.cost_before,
+                    iterations: best.iterations + cand.iterations,
+                    ..cand
+                };
+            }
+        }
+    }
+    Ok(best)
+}
+
+/// The parameters at the end of the continuation ladder, or None when no run is
+/// long enough to be cut. Start headings stay measured here: the stages only have
+/// to reach the basin; the final fit refines them.
+fn continuation(r: &Runner, runs: &[Run], o: &FitOptions) -> Option<Vec<f64>> {
+    let stage = FitOptions {
+        estimate_start: false,
+        ..o.clone()
+    };
+    let mut at = r.clone();
+    let mut moved = false;
+    for len in LADDER_S {
+        let pieces: Vec<Run> = runs.iter().flat_map(|x| x.segments(len)).collect();
+        if pieces.len() <= runs.len() {
+            continue;
+        }
+        if let Ok(f) = fit_stage(&at, &thinned(pieces, LADDER_ROWS), &stage) {
+            at.p = f.p;
+            moved = true;
+        }
+    }
+    moved.then_some(at.p)
+}
+
+/// Evenly spaced pieces holding about `rows` rows in all (all of them when fewer).
+fn thinned(pieces: Vec<Run>, rows: usize) -> Vec<Run> {
+    let total: usize = pieces.iter().map(|x| x.t.len()).sum();
+    let every = total.div_ceil(rows.max(1)).max(1);
+    pieces.into_iter().step_by(every).collect()
+}
+
+/// The parameters of a gyro-only fit, when the logs have both a gyro the model
+/// predicts and ground truth (with only one of them the direct fit is the same).
+fn gyro_start(r: &Runner, runs: &[Run], o: &FitOptions) -> Option<Vec<f64>> {
     let has_gyro =
         runs.iter().any(|x| x.gyro.is_some()) && r.ir.observation_fn(YawRate, "").is_some();
     let has_pose = runs.iter().any(|x| x.gt.is_some());
-    if o.use_gyro && o.use_pose && has_gyro && has_pose {
-        let gyro_only = FitOptions {
-            use_pose: false,
-            ..o.clone()
-        };
-        if let Ok(first) = fit_from(r, runs, &gyro_only) {
-            let mut start = r.clone();
-            start.p = first.p;
-            let full = fit_from(&start, runs, o)?;
-            // keep the better of the two starts (judged on the full cost)
-            let direct = fit_from(r, runs, o)?;
-            return Ok(if direct.cost_after < full.cost_after {
-                direct
-            } else {
-                FitResult {
-                    cost_before: direct.cost_before,
-                    ..full
-                }
-            });
-        }
+    if !(o.use_gyro && o.use_pose && has_gyro && has_pose) {
+        return None;
     }
-    fit_from(r, runs, o)
+    let gyro_only = FitOptions {
+        use_pose: false,
+        ..o.clone()
+    };
+    fit_from(r, runs, &gyro_only).ok().map(|f| f.p)
 }
 
 /// Calibrate from `r.p`. With start-pose refinement the parameters are fitted

@@ -35,8 +35,14 @@ pub struct Errors {
     /// Position RMSE over all rows (absolute trajectory error), m.
     pub rmse: f64,
     pub heading_rmse_rad: f64,
+    /// Position error at the end of the run; over several runs, the root mean
+    /// square of the runs' final errors (see `worst_final_position_error_m`).
     pub final_position_error_m: f64,
+    /// Heading error at the end of the run (signed); over several runs, the root
+    /// mean square of the runs' final heading errors.
     pub final_heading_error_rad: f64,
+    /// The largest final position error over the runs.
+    pub worst_final_position_error_m: f64,
     pub max_position_error_m: f64,
     pub max_error_at_s: f64,
     /// Relative pose error: translation drift per metre travelled, over 1 m windows.
@@ -104,6 +110,7 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
     let (mut sp, mut sh, mut n) = (0.0, 0.0, 0usize);
     let (mut gsum, mut gn) = (0.0, 0usize);
     let (mut rpe_d, mut rpe_dn, mut rpe_t, mut rpe_tn) = (0.0, 0usize, 0.0, 0usize);
+    let mut finals: Vec<(f64, f64)> = Vec::new();
     for (run, tr) in runs {
         if let Some(gt) = &run.gt {
             let re = row_errors(tr, gt);
@@ -116,8 +123,7 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
                     e.max_error_at_s = run.t[k] - run.t[0];
                 }
             }
-            e.final_position_error_m = *re.pos.last().unwrap();
-            e.final_heading_error_rad = *re.head.last().unwrap();
+            finals.push((*re.pos.last().unwrap(), *re.head.last().unwrap()));
             // RPE: windows of 1 m travelled and of 5 s
             let mut dist = vec![0.0];
             for k in 1..gt.len() {
@@ -152,12 +158,24 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
             }
         }
         if let Some(g) = &run.gyro {
-            for k in 0..tr.omega.len() {
-                gsum += (tr.omega[k] - g[k + 1]).powi(2);
+            for k in 0..tr.gyro.len() {
+                gsum += (tr.gyro[k] - g[k + 1]).powi(2);
                 gn += 1;
             }
         }
     }
+    match finals[..] {
+        [] => {}
+        [(pos, head)] => (e.final_position_error_m, e.final_heading_error_rad) = (pos, head),
+        _ => {
+            let rms = |f: fn(&(f64, f64)) -> f64| {
+                (finals.iter().map(|x| f(x).powi(2)).sum::<f64>() / finals.len() as f64).sqrt()
+            };
+            e.final_position_error_m = rms(|x| x.0);
+            e.final_heading_error_rad = rms(|x| x.1);
+        }
+    }
+    e.worst_final_position_error_m = finals.iter().map(|x| x.0).fold(0.0, f64::max);
     if n > 0 {
         e.rmse = (sp / n as f64).sqrt();
         e.heading_rmse_rad = (sh / n as f64).sqrt();

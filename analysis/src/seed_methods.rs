@@ -114,41 +114,73 @@ fn gyro_cost(
 /// components, e.g. "e1 +0.29, r1 +0.29, ...".
 pub fn yaw_rate_blind_directions(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<String> {
     let free = r.free.clone();
-    if free.is_empty() {
-        return vec![];
+    let mut out = Vec::new();
+    for v in blind_basis(r, p, runs).0 {
+        let mut comps: Vec<(usize, f64)> = v
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|(_, c)| c.abs() > 0.05)
+            .collect();
+        comps.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+        let sign = if comps.first().is_some_and(|c| c.1 < 0.0) {
+            -1.0
+        } else {
+            1.0
+        };
+        out.push(
+            comps
+                .iter()
+                .take(6)
+                .map(|(a, c)| format!("{} {:+.2}", r.names[free[*a]], sign * c))
+                .collect::<Vec<_>>()
+                .join(", "),
+        );
     }
-    let (_, _, h) = gyro_cost(r, p, runs, &free);
+    out
+}
+
+/// Unit vectors (in parameters scaled by [`prior_std`], over the free
+/// parameters) spanning what the yaw rate cannot see at `p`, and the scales.
+fn blind_basis(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<DVector<f64>>, DVector<f64>) {
+    let free = &r.free;
     let scale = DVector::from_iterator(free.len(), free.iter().map(|&i| prior_std(r, i) * 10.0));
+    if free.is_empty() {
+        return (vec![], scale);
+    }
+    let (_, _, h) = gyro_cost(r, p, runs, free);
     let hs = DMatrix::from_fn(free.len(), free.len(), |a, b| {
         h[(a, b)] * scale[a] * scale[b]
     });
     let eig = nalgebra::SymmetricEigen::new(hs);
     let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
-    let mut out = Vec::new();
-    for (k, &l) in eig.eigenvalues.iter().enumerate() {
-        if lmax > 0.0 && l < 1e-9 * lmax {
-            let v = eig.eigenvectors.column(k);
-            let mut comps: Vec<(usize, f64)> = v
-                .iter()
-                .copied()
-                .enumerate()
-                .filter(|(_, c)| c.abs() > 0.05)
-                .collect();
-            comps.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-            let sign = if comps.first().is_some_and(|c| c.1 < 0.0) {
-                -1.0
-            } else {
-                1.0
-            };
-            out.push(
-                comps
-                    .iter()
-                    .take(6)
-                    .map(|(a, c)| format!("{} {:+.2}", r.names[free[*a]], sign * c))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            );
-        }
+    let basis = (0..free.len())
+        .filter(|&k| lmax > 0.0 && eig.eigenvalues[k] < 1e-9 * lmax)
+        .map(|k| eig.eigenvectors.column(k).into_owned())
+        .collect();
+    (basis, scale)
+}
+
+/// `p` with its move away from `from` taken out of the directions the yaw rate
+/// cannot see (at `from`): gradient descent and the EKF would otherwise drift
+/// along them (round-off, nonlinearity, prior correlations), which no data
+/// supports and which makes held-out runs worse. Like LM, they keep such
+/// directions at their starting values.
+fn without_blind_moves(r: &Runner, from: &[f64], p: Vec<f64>, runs: &[Run]) -> Vec<f64> {
+    let (basis, scale) = blind_basis(r, from, runs);
+    let mut d = DVector::from_iterator(
+        r.free.len(),
+        r.free
+            .iter()
+            .enumerate()
+            .map(|(k, &i)| (p[i] - from[i]) / scale[k]),
+    );
+    for v in &basis {
+        d -= v * v.dot(&d);
+    }
+    let mut out = p;
+    for (k, &i) in r.free.iter().enumerate() {
+        out[i] = from[i] + d[k] * scale[k];
     }
     out
 }
@@ -178,6 +210,7 @@ pub fn gradient_descent(r: &Runner, runs: &[Run], max_iter: usize) -> Result<See
             p[j] -= eta * g[k];
         }
     }
+    let p = without_blind_moves(r, &r.p, p, runs);
     let (vf, _, h) = gyro_cost(r, &p, runs, &free);
     let n: usize = runs.iter().map(|x| x.steps()).sum();
     let cov = h
@@ -242,6 +275,7 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
         for k in 0..run.steps() {
             let one = Run {
                 name: String::new(),
+                path: String::new(),
                 t: vec![0.0, run.dt[k]],
                 dt: vec![run.dt[k]],
                 u: vec![run.u[k].clone()],
@@ -265,6 +299,7 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
     if steps == 0 {
         return Err("no yaw-rate measurement (gyro_z or ground-truth heading) in the logs".into());
     }
+    let p = without_blind_moves(r, &r.p, p, runs);
     let (vf, _, _) = gyro_cost(r, &p, runs, &free);
     Ok(SeedFit {
         std: (0..m).map(|k| cov[(k, k)].max(0.0).sqrt()).collect(),
