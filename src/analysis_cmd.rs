@@ -6,9 +6,10 @@ use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon;
 use kinegen_analysis::fit::{fit, FitOptions, FitResult};
 use kinegen_analysis::landmarks::{self, Innovation, InnovationStats};
+use kinegen_analysis::methods::{by_name, Method, Settings, METHODS};
 use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
 use kinegen_analysis::model::{parse_sets, Runner};
-use kinegen_model::spec::ObservationRole::{RangeBearing, YawRate};
+use kinegen_model::spec::ObservationRole::RangeBearing;
 use serde_json::{json, Value};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -392,95 +393,6 @@ fn per_run(
         .collect()
 }
 
-/// One calibration method's outcome, for the comparison table.
-struct MethodResult {
-    name: &'static str,
-    p: Vec<f64>,
-    std: Vec<f64>,
-    note: String,
-}
-
-fn run_method(
-    r: &Runner,
-    runs: &[Run],
-    method: &str,
-    side: f64,
-    mu: f64,
-    fo: &FitOptions,
-) -> Result<(MethodResult, Option<FitResult>), String> {
-    use kinegen_analysis::seed_methods::{
-        ekf, gradient_descent, umbmark, yaw_rate_blind_directions,
-    };
-    let blind = |p: &[f64]| {
-        let dirs = yaw_rate_blind_directions(r, p, runs);
-        if dirs.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "\n      WARNING: the yaw rate alone leaves {} parameter direction(s) undetermined (scaled by parameter size), so this method cannot identify them:\n        [{}]",
-                dirs.len(),
-                dirs.join("]\n        [")
-            )
-        }
-    };
-    let sigma_omega = r
-        .obs_sigma(YawRate)
-        .and_then(|s| s.first().copied())
-        .filter(|s| *s > 0.0)
-        .unwrap_or(0.005);
-    Ok(match method {
-        "lm" => {
-            let res = fit(r, runs, fo).map_err(|e| e.to_string())?;
-            (
-                MethodResult {
-                    name: "lm",
-                    p: res.p.clone(),
-                    std: res.std.clone(),
-                    note: format!("{} LM iterations", res.iterations),
-                },
-                Some(res),
-            )
-        }
-        "gd" => {
-            let g = gradient_descent(r, runs, 2000)?;
-            let warn = blind(&g.p);
-            (
-                MethodResult {
-                    name: "gd",
-                    p: g.p,
-                    std: g.std,
-                    note: format!(
-                        "{} iterations, yaw-rate cost {:.3e} -> {:.3e}{warn}",
-                        g.iterations, g.cost_before, g.cost_after
-                    ),
-                },
-                None,
-            )
-        }
-        "ekf" => {
-            let e = ekf(r, runs, sigma_omega, mu)?;
-            let warn = blind(&e.p);
-            (
-                MethodResult {
-                    name: "ekf",
-                    p: e.p,
-                    std: e.std,
-                    note: format!(
-                        "{} updates, mu = {mu}, yaw-rate cost {:.3e} -> {:.3e}{warn}",
-                        e.iterations, e.cost_before, e.cost_after
-                    ),
-                },
-                None,
-            )
-        }
-        _ => {
-            let u = umbmark(r, runs, side)?;
-            let std = vec![f64::NAN; r.free.len()];
-            (MethodResult { name: "umbmark", p: u.p, std, note: format!("Ed = {:.5}, Eb = {:.5} (alpha {:.3} deg, beta {:.3} deg; {} cw, {} ccw runs)", u.ed, u.eb, u.alpha_deg, u.beta_deg, u.cw_runs, u.ccw_runs) }, None)
-        }
-    })
-}
-
 pub fn run_fit(
     c: Common,
     method: &str,
@@ -510,21 +422,27 @@ pub fn run_fit(
         Err(e) => return bad(e),
     };
     if method != "lm" {
-        let methods: Vec<&str> = if method == "all" {
-            vec!["lm", "gd", "ekf", "umbmark"]
+        let methods: Vec<&dyn Method> = if method == "all" {
+            METHODS.to_vec()
         } else {
-            vec![method]
+            match by_name(method) {
+                Some(m) => vec![m],
+                None => return bad(format!("--method: unknown method `{method}`")),
+            }
         };
+        let settings = Settings { side, mu, fit: &fo };
         let mut rows = Vec::new();
         let bar =
             crate::progress::Progress::bar(methods.len() as u64, "calibration methods", quiet(&c));
         for m in methods {
-            bar.message(m);
-            let result = run_method(r, &prep.runs, m, side, mu, &fo);
+            bar.message(m.name());
+            let result = m.calibrate(r, &prep.runs, &settings);
             bar.inc();
             match result {
-                Ok((res, _)) => rows.push(res),
-                Err(e) if method == "all" => out.say(&format!("{m}: not applicable here: {e}")),
+                Ok(res) => rows.push((m.name(), res)),
+                Err(e) if method == "all" => {
+                    out.say(&format!("{}: not applicable here: {e}", m.name()))
+                }
                 Err(e) => return bad(e),
             }
         }
@@ -547,7 +465,21 @@ pub fn run_fit(
                 .sqrt()
         };
         let d0 = scaled(&r.p);
-        for m in &rows {
+        let hold_nominal =
+            (!prep.holdout.is_empty()).then(|| evaluate(r, &r.p, &prep.holdout).rmse);
+        for (_, m) in &mut rows {
+            // a method that ends worse than the nominal values says so
+            let worse = |what: &str, a: f64, b: f64| {
+                (a > 1.001 * b).then(|| format!("\n      WARNING: worse than the nominal parameters on the {what} ({b:.4} m -> {a:.4} m): do not use these values"))
+            };
+            let in_sample = evaluate(r, &m.p, &prep.runs).rmse;
+            let warn = match hold_nominal {
+                Some(b) => worse("held-out runs", evaluate(r, &m.p, &prep.holdout).rmse, b),
+                None => worse("fitted runs", in_sample, before.errors.rmse),
+            };
+            m.note += &warn.unwrap_or_default();
+        }
+        for (name, m) in &rows {
             let Evaluation {
                 tracks: after_tracks,
                 errors: after,
@@ -564,12 +496,12 @@ pub fn run_fit(
             });
             if let Some(d) = dist {
                 if best.is_none_or(|b| d < b.0) {
-                    best = Some((d, m.name));
+                    best = Some((d, name));
                 }
             }
             out.say(&format!(
                 "  {:<8} position RMSE {:.4} m{}{}  ({})",
-                m.name,
+                name,
                 after.rmse,
                 hold.as_ref()
                     .map(|h| format!(", held-out {:.4} m", h.rmse))
@@ -584,17 +516,18 @@ pub fn run_fit(
             for &i in &r.free {
                 out.say(&format!("      {:<14} {:.6}", r.names[i], m.p[i]));
             }
-            methods_json.insert(m.name.into(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": dist}));
-            per_method.push((m.name.to_string(), after_tracks));
+            methods_json.insert(name.to_string(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": dist}));
+            per_method.push((name.to_string(), after_tracks));
         }
         if let Some((d, name)) = best {
             out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
         }
         // the top-level result is the first method's
-        let first = rows.first().map(|m| &methods_json[m.name]);
+        let first = rows.first().map(|(name, _)| &methods_json[*name]);
         let doc = json!({
             "model": r.ir.name, "metric": metric_name(&prep.runs),
             "before": {"rmse": before.errors.rmse},
+            "holdout_before": hold_nominal.map(|h| json!({"rmse": h})),
             "after": {"rmse": first.map(|m| m["after"]["rmse"].clone())},
             "parameters": first.map(|m| m["parameters"].clone()),
             "methods": methods_json,

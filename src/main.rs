@@ -68,11 +68,9 @@ enum Command {
     Fit {
         #[command(flatten)]
         common: analysis_cmd::Common,
-        /// Calibration method: lm (Levenberg-Marquardt on pose and gyro residuals),
-        /// gd (seed 000 eq. 19-21), ekf (seed 000 eq. 22-26), umbmark (Borenstein &
-        /// Feng, differential drive, cw and ccw square runs), all (every applicable
-        /// method, compared).
-        #[arg(long, default_value = "lm", value_parser = ["lm", "gd", "ekf", "umbmark", "all"])]
+        /// Calibration method (the registry in kinegen_analysis::methods), or all
+        /// (every applicable method, compared).
+        #[arg(long, default_value = "lm", value_parser = method_names())]
         method: String,
         /// Square side (m) of the UMBMark runs.
         #[arg(long, default_value_t = 1.0)]
@@ -213,4 +211,16 @@ fn main() -> ExitCode {
             Err(e) => analysis_cmd::bad(e),
         },
     }
+}
+
+/// `--method` values with their one-line descriptions, from the method registry.
+fn method_names() -> clap::builder::PossibleValuesParser {
+    use clap::builder::PossibleValue;
+    use kinegen_analysis::methods::METHODS;
+    clap::builder::PossibleValuesParser::new(
+        METHODS
+            .iter()
+            .map(|m| PossibleValue::new(m.name()).help(m.about()))
+            .chain([PossibleValue::new("all").help("every applicable method, compared")]),
+    )
 }

@@ -71,6 +71,7 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
     truth.p[2] *= 1.02;
     let mut run = Run {
         name: "bench".into(),
+        path: "bench".into(),
         t: (0..n).map(|k| k as f64 * dt).collect(),
         dt: vec![dt; n - 1],
         u,

@@ -10,6 +10,7 @@ pub mod diagnose;
 pub mod fit;
 pub mod landmarks;
 pub mod log;
+pub mod methods;
 pub mod metrics;
 pub mod model;
 pub mod seed_methods;

@@ -310,6 +310,56 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
     })
 }
 
+/// UMBMark's formulas hold only for a closed square of the given side driven
+/// once in one direction: four 90 degree turns (a full turn in all), a path of
+/// four sides, and a return to the start. Anything else (a circle, a free path,
+/// a wrong `--side`) would give corrections that look precise and mean nothing.
+fn square_check(run: &Run, gt: &[[f64; 3]], side: f64) -> Result<(), String> {
+    let turn = (gt.last().unwrap()[2] - gt[0][2]).abs().to_degrees();
+    // every n/200-th row, so measurement noise does not add length
+    let pts: Vec<&[f64; 3]> = gt.iter().step_by((gt.len() / 200).max(1)).collect();
+    let length: f64 = pts
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    // a square's sides are driven at four headings 90 degrees apart; a circle
+    // or a free path spreads its heading evenly (20 degrees each side of the
+    // four: 44% of a circle's length)
+    let on_a_side: f64 = pts
+        .windows(2)
+        .filter(|w| {
+            let off = (w[0][2] - gt[0][2]).to_degrees().rem_euclid(90.0);
+            off.min(90.0 - off) < 20.0
+        })
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    let (a, b) = (gt[0], gt.last().unwrap());
+    let gap = (b[0] - a[0]).hypot(b[1] - a[1]);
+    let problem = if (turn - 360.0).abs() > 45.0 {
+        Some(format!("it turns {turn:.0} degrees in all, not 360"))
+    } else if (length - 4.0 * side).abs() > 0.3 * 4.0 * side {
+        Some(format!(
+            "its path is {length:.2} m long, not about 4 x --side {side} m"
+        ))
+    } else if on_a_side < 0.7 * length {
+        Some(format!(
+            "only {:.0}% of its path runs along the four sides of a square",
+            100.0 * on_a_side / length.max(1e-12)
+        ))
+    } else if gap > side {
+        Some(format!("it ends {gap:.2} m from where it started"))
+    } else {
+        None
+    };
+    match problem {
+        Some(why) => Err(format!(
+            "{}: UMBMark needs a bidirectional square test (one square of side --side per run, cw and ccw runs); {why}",
+            run.path
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Result of UMBMark: corrected parameters and the intermediate quantities.
 pub struct Umbmark {
     pub p: Vec<f64>,
@@ -344,6 +394,7 @@ pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
             .gt
             .as_ref()
             .ok_or_else(|| format!("{}: UMBMark needs ground truth", run.name))?;
+        square_check(run, gt, side)?;
         let start = run.start_pose();
         let tr = deadreckon::run(r, &r.p, run, false);
         let (e_true, e_odo) = (gt.last().unwrap(), tr.pose.last().unwrap());

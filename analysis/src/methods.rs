@@ -1,0 +1,162 @@
+//! Calibration methods behind one interface, registered in one place
+//! ([`METHODS`]): the CLI's `--method` choices, `--method all` and the dispatch
+//! all read the registry, so a new method (issue #15's neural gyrodometry, say)
+//! is one `impl` and one line here.
+use crate::dataset::Run;
+use crate::fit::{fit, FitOptions, FitResult};
+use crate::model::Runner;
+use crate::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
+use kinegen_model::spec::ObservationRole::YawRate;
+
+/// What every method may read besides the model and the logs.
+pub struct Settings<'a> {
+    /// Side of the UMBMark squares, m.
+    pub side: f64,
+    /// EKF measurement-noise inflation (seed 000 eq. 26), rad/s.
+    pub mu: f64,
+    /// Options of the Levenberg-Marquardt fit.
+    pub fit: &'a FitOptions,
+}
+
+/// One method's outcome.
+pub struct Calibration {
+    pub p: Vec<f64>,
+    /// Standard deviation per free parameter (NaN where the method has none,
+    /// infinite where it is unidentified).
+    pub std: Vec<f64>,
+    /// How it went, in words (iterations, costs, warnings).
+    pub note: String,
+    /// The full result, for the method that produces one (LM).
+    pub fit: Option<FitResult>,
+}
+
+pub trait Method: Sync {
+    /// The `--method` value.
+    fn name(&self) -> &'static str;
+    /// One line for `--help`.
+    fn about(&self) -> &'static str;
+    /// Calibrate `r`'s free parameters from `r.p`; Err says why the method does
+    /// not apply to these logs or this model.
+    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String>;
+}
+
+/// Every calibration method, in the order `--method all` runs and reports them.
+pub static METHODS: &[&dyn Method] = &[&Lm, &Gd, &Ekf, &UmbMark];
+
+/// The method called `name`.
+pub fn by_name(name: &str) -> Option<&'static dyn Method> {
+    METHODS.iter().copied().find(|m| m.name() == name)
+}
+
+struct Lm;
+struct Gd;
+struct Ekf;
+struct UmbMark;
+
+impl Method for Lm {
+    fn name(&self) -> &'static str {
+        "lm"
+    }
+    fn about(&self) -> &'static str {
+        "Levenberg-Marquardt on pose, gyro and landmark residuals"
+    }
+    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
+        let res = fit(r, runs, s.fit).map_err(|e| e.to_string())?;
+        Ok(Calibration {
+            p: res.p.clone(),
+            std: res.std.clone(),
+            note: format!("{} LM iterations", res.iterations),
+            fit: Some(res),
+        })
+    }
+}
+
+impl Method for Gd {
+    fn name(&self) -> &'static str {
+        "gd"
+    }
+    fn about(&self) -> &'static str {
+        "gradient descent on the yaw-rate error, seed 000 eq. 19-21"
+    }
+    fn calibrate(&self, r: &Runner, runs: &[Run], _: &Settings) -> Result<Calibration, String> {
+        let g = gradient_descent(r, runs, 2000)?;
+        let note = format!(
+            "{} iterations, yaw-rate cost {:.3e} -> {:.3e}{}",
+            g.iterations,
+            g.cost_before,
+            g.cost_after,
+            blind_warning(r, &g.p, runs)
+        );
+        Ok(Calibration {
+            p: g.p,
+            std: g.std,
+            note,
+            fit: None,
+        })
+    }
+}
+
+impl Method for Ekf {
+    fn name(&self) -> &'static str {
+        "ekf"
+    }
+    fn about(&self) -> &'static str {
+        "parameter EKF on the yaw rate, seed 000 eq. 22-26"
+    }
+    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
+        let sigma_omega = r
+            .obs_sigma(YawRate)
+            .and_then(|s| s.first().copied())
+            .filter(|s| *s > 0.0)
+            .unwrap_or(0.005);
+        let e = ekf(r, runs, sigma_omega, s.mu)?;
+        let note = format!(
+            "{} updates, mu = {}, yaw-rate cost {:.3e} -> {:.3e}{}",
+            e.iterations,
+            s.mu,
+            e.cost_before,
+            e.cost_after,
+            blind_warning(r, &e.p, runs)
+        );
+        Ok(Calibration {
+            p: e.p,
+            std: e.std,
+            note,
+            fit: None,
+        })
+    }
+}
+
+impl Method for UmbMark {
+    fn name(&self) -> &'static str {
+        "umbmark"
+    }
+    fn about(&self) -> &'static str {
+        "Borenstein & Feng, differential drive, cw and ccw square runs of side --side"
+    }
+    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
+        let u = umbmark(r, runs, s.side)?;
+        Ok(Calibration {
+            p: u.p,
+            std: vec![f64::NAN; r.free.len()],
+            note: format!(
+                "Ed = {:.5}, Eb = {:.5} (alpha {:.3} deg, beta {:.3} deg; {} cw, {} ccw runs)",
+                u.ed, u.eb, u.alpha_deg, u.beta_deg, u.cw_runs, u.ccw_runs
+            ),
+            fit: None,
+        })
+    }
+}
+
+/// The yaw-rate methods' warning about the directions they cannot see.
+fn blind_warning(r: &Runner, p: &[f64], runs: &[Run]) -> String {
+    let dirs = yaw_rate_blind_directions(r, p, runs);
+    if dirs.is_empty() {
+        return String::new();
+    }
+    format!(
+        "\n      WARNING: the yaw rate alone leaves {} parameter direction(s) undetermined (scaled by parameter size), so this method cannot identify them; they stay at their starting values:\n        [{}]",
+        dirs.len(),
+        dirs.join("]\n        [")
+    )
+}
