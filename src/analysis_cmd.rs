@@ -401,6 +401,7 @@ pub fn run_fit(
     truth: &[String],
     loss: &str,
     residuals: &[String],
+    likelihood: &str,
 ) -> ExitCode {
     let out = Out::new(c.json.as_deref());
     let uses = |k: &str| residuals.is_empty() || residuals.iter().any(|r| r == k);
@@ -410,6 +411,7 @@ pub fn run_fit(
         use_pose: uses("pose"),
         use_gyro: uses("gyro"),
         use_landmarks: uses("landmarks"),
+        increments: (likelihood == "increments").then_some(kinegen_analysis::fit::WINDOW_S),
         ..FitOptions::default()
     };
     let prep = match prepare(&c) {

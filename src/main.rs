@@ -89,6 +89,15 @@ enum Command {
         /// truth), gyro, landmarks. Default: every kind the logs have.
         #[arg(long, value_parser = ["pose", "gyro", "landmarks"])]
         residuals: Vec<String>,
+        /// What the Levenberg-Marquardt fit compares: track (the absolute track,
+        /// re-anchored every 60 s: the most accurate estimates, but standard
+        /// deviations several times too small, because dead-reckoning error is a
+        /// random walk) or increments (pose increments over 5 s windows, each
+        /// dead-reckoned from its measured start: nearly independent residuals and
+        /// a sandwich covariance, so honest standard deviations, but less
+        /// accurate estimates; needs ground truth in every run).
+        #[arg(long, default_value = "track", value_parser = ["track", "increments"])]
+        likelihood: String,
     },
     /// Calibrate, then test each applicable effect of the catalogue (built in, plus --effects DIR),
     /// rank them, say which effect is missing (or that none is, or that unexplained
@@ -175,7 +184,17 @@ fn main() -> ExitCode {
             truth,
             loss,
             residuals,
-        } => analysis_cmd::run_fit(common, &method, side, mu, &truth, &loss, &residuals),
+            likelihood,
+        } => analysis_cmd::run_fit(
+            common,
+            &method,
+            side,
+            mu,
+            &truth,
+            &loss,
+            &residuals,
+            &likelihood,
+        ),
         Command::Simulate {
             spec,
             effect,

@@ -749,3 +749,75 @@ fn a_method_worse_than_nominal_on_held_out_runs_says_so() {
         "expected gd or ekf to end worse than nominal on these runs"
     );
 }
+
+/// Issue #11.2: reported standard deviations are honest. Over 50 simulated seeds
+/// of a differential drive (random driving, 91 s, parameter errors), the spread
+/// of each estimate matches the mean reported standard deviation within 30% with
+/// the increments likelihood; the default absolute-track likelihood, whose
+/// residuals are a random walk, is overconfident on the same logs (so the check
+/// can fail; that is the open part of the issue).
+#[test]
+fn fifty_seeds_spread_matches_the_reported_standard_deviation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = "spec/diff_drive.toml";
+    let names = ["r_r", "r_l", "b"];
+    let mut est = vec![vec![]; 3];
+    let mut std = vec![vec![]; 3];
+    let mut track_std = vec![vec![]; 3];
+    let mut track_est = vec![vec![]; 3];
+    for seed in 1..=50 {
+        let s = seed.to_string();
+        let log = simulate(
+            tmp.path(),
+            &format!("s{seed}.csv"),
+            &[
+                "--spec",
+                spec,
+                "--trajectory",
+                "random",
+                "--seed",
+                &s,
+                "--set",
+                "r_r=0.0425",
+                "--set",
+                "b=0.205",
+            ],
+        );
+        let log = log.to_str().unwrap();
+        let doc = kinegen_json(&[
+            "fit",
+            "--spec",
+            spec,
+            "--data",
+            log,
+            "--likelihood",
+            "increments",
+        ]);
+        let track = kinegen_json(&["fit", "--spec", spec, "--data", log]);
+        for (k, n) in names.iter().enumerate() {
+            est[k].push(doc["parameters"][n]["estimate"].as_f64().unwrap());
+            std[k].push(doc["parameters"][n]["std"].as_f64().unwrap());
+            track_std[k].push(track["parameters"][n]["std"].as_f64().unwrap());
+            track_est[k].push(track["parameters"][n]["estimate"].as_f64().unwrap());
+        }
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let spread_of = |v: &[f64]| {
+        let m = mean(v);
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+    };
+    for (k, n) in names.iter().enumerate() {
+        let spread = spread_of(&est[k]);
+        let ratio = spread / mean(&std[k]);
+        assert!(
+            (0.7..=1.3).contains(&ratio),
+            "{n}: spread {spread:.3e} against reported {:.3e} (ratio {ratio:.2})",
+            mean(&std[k])
+        );
+        let track_ratio = spread_of(&track_est[k]) / mean(&track_std[k]);
+        assert!(
+            track_ratio > 3.0,
+            "{n}: the track likelihood's ratio is only {track_ratio:.2}"
+        );
+    }
+}
