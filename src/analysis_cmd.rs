@@ -393,16 +393,64 @@ fn per_run(
         .collect()
 }
 
-pub fn run_fit(
-    c: Common,
-    method: &str,
-    side: f64,
-    mu: f64,
-    truth: &[String],
-    loss: &str,
-    residuals: &[String],
-    likelihood: &str,
-) -> ExitCode {
+/// The options of `fit` besides the common ones.
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// Calibration method (the registry in kinegen_analysis::methods), or all
+    /// (every applicable method, compared).
+    #[arg(long, default_value = "lm", value_parser = method_names())]
+    pub method: String,
+    /// Square side (m) of the UMBMark runs.
+    #[arg(long, default_value_t = 1.0)]
+    pub side: f64,
+    /// EKF measurement-noise inflation mu (seed 000 eq. 26), rad/s.
+    #[arg(long, default_value_t = 0.01)]
+    pub mu: f64,
+    /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
+    #[arg(long)]
+    pub truth: Vec<String>,
+    /// Loss of the Levenberg-Marquardt fit: l2 (least squares) or huber
+    /// (residuals beyond 3 sigma count linearly: robust to outliers).
+    #[arg(long, default_value = "l2", value_parser = ["l2", "huber"])]
+    pub loss: String,
+    /// Residuals the Levenberg-Marquardt fit uses (repeatable): pose (ground
+    /// truth), gyro, landmarks. Default: every kind the logs have.
+    #[arg(long, value_parser = ["pose", "gyro", "landmarks"])]
+    pub residuals: Vec<String>,
+    /// What the Levenberg-Marquardt fit compares: track (the absolute track,
+    /// re-anchored every 60 s: the most accurate estimates, but standard
+    /// deviations several times too small, because dead-reckoning error is a
+    /// random walk) or increments (pose increments over 5 s windows, each
+    /// dead-reckoned from its measured start: nearly independent residuals and
+    /// a sandwich covariance, so honest standard deviations, but less
+    /// accurate estimates; needs ground truth in every run).
+    #[arg(long, default_value = "track", value_parser = ["track", "increments"])]
+    pub likelihood: String,
+}
+
+/// `--method` values with their one-line descriptions, from the method registry.
+fn method_names() -> clap::builder::PossibleValuesParser {
+    use clap::builder::PossibleValue;
+    use kinegen_analysis::methods::METHODS;
+    clap::builder::PossibleValuesParser::new(
+        METHODS
+            .iter()
+            .map(|m| PossibleValue::new(m.name()).help(m.about()))
+            .chain([PossibleValue::new("all").help("every applicable method, compared")]),
+    )
+}
+
+pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
+    let FitArgs {
+        method,
+        side,
+        mu,
+        truth,
+        loss,
+        residuals,
+        likelihood,
+    } = a;
+    let (side, mu) = (*side, *mu);
     let out = Out::new(c.json.as_deref());
     let uses = |k: &str| residuals.is_empty() || residuals.iter().any(|r| r == k);
     // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched

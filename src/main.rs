@@ -68,36 +68,8 @@ enum Command {
     Fit {
         #[command(flatten)]
         common: analysis_cmd::Common,
-        /// Calibration method (the registry in kinegen_analysis::methods), or all
-        /// (every applicable method, compared).
-        #[arg(long, default_value = "lm", value_parser = method_names())]
-        method: String,
-        /// Square side (m) of the UMBMark runs.
-        #[arg(long, default_value_t = 1.0)]
-        side: f64,
-        /// EKF measurement-noise inflation mu (seed 000 eq. 26), rad/s.
-        #[arg(long, default_value_t = 0.01)]
-        mu: f64,
-        /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
-        #[arg(long)]
-        truth: Vec<String>,
-        /// Loss of the Levenberg-Marquardt fit: l2 (least squares) or huber
-        /// (residuals beyond 3 sigma count linearly: robust to outliers).
-        #[arg(long, default_value = "l2", value_parser = ["l2", "huber"])]
-        loss: String,
-        /// Residuals the Levenberg-Marquardt fit uses (repeatable): pose (ground
-        /// truth), gyro, landmarks. Default: every kind the logs have.
-        #[arg(long, value_parser = ["pose", "gyro", "landmarks"])]
-        residuals: Vec<String>,
-        /// What the Levenberg-Marquardt fit compares: track (the absolute track,
-        /// re-anchored every 60 s: the most accurate estimates, but standard
-        /// deviations several times too small, because dead-reckoning error is a
-        /// random walk) or increments (pose increments over 5 s windows, each
-        /// dead-reckoned from its measured start: nearly independent residuals and
-        /// a sandwich covariance, so honest standard deviations, but less
-        /// accurate estimates; needs ground truth in every run).
-        #[arg(long, default_value = "track", value_parser = ["track", "increments"])]
-        likelihood: String,
+        #[command(flatten)]
+        options: analysis_cmd::FitArgs,
     },
     /// Calibrate, then test each applicable effect of the catalogue (built in, plus --effects DIR),
     /// rank them, say which effect is missing (or that none is, or that unexplained
@@ -176,25 +148,7 @@ fn main() -> ExitCode {
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Diagnose(c) => diagnose_cmd::run(c),
-        Command::Fit {
-            common,
-            method,
-            side,
-            mu,
-            truth,
-            loss,
-            residuals,
-            likelihood,
-        } => analysis_cmd::run_fit(
-            common,
-            &method,
-            side,
-            mu,
-            &truth,
-            &loss,
-            &residuals,
-            &likelihood,
-        ),
+        Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
         Command::Simulate {
             spec,
             effect,
@@ -230,16 +184,4 @@ fn main() -> ExitCode {
             Err(e) => analysis_cmd::bad(e),
         },
     }
-}
-
-/// `--method` values with their one-line descriptions, from the method registry.
-fn method_names() -> clap::builder::PossibleValuesParser {
-    use clap::builder::PossibleValue;
-    use kinegen_analysis::methods::METHODS;
-    clap::builder::PossibleValuesParser::new(
-        METHODS
-            .iter()
-            .map(|m| PossibleValue::new(m.name()).help(m.about()))
-            .chain([PossibleValue::new("all").help("every applicable method, compared")]),
-    )
 }
