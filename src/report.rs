@@ -38,6 +38,48 @@ fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
     ((x0 - px, x1 + px), (y0 - py, y1 + py))
 }
 
+/// Index buckets a drawn series is cut into at most (see [`decimated`]).
+const BUCKETS: usize = 1000;
+
+/// At most about 4 x [`BUCKETS`] points of `pts`: in each bucket of consecutive
+/// points, the ones with the smallest and largest x and y, in their order. A
+/// million-row log would otherwise put millions of SVG elements in the page
+/// (223 MB seen); this keeps every extreme, so a spike or a collapse stays
+/// visible.
+fn decimated(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    if pts.len() <= 4 * BUCKETS {
+        return pts.to_vec();
+    }
+    let size = pts.len().div_ceil(BUCKETS);
+    let mut out = Vec::with_capacity(4 * BUCKETS + 1);
+    for chunk in pts.chunks(size) {
+        let pick = |key: &dyn Fn(&(f64, f64)) -> f64, max: bool| {
+            let cmp =
+                |a: &(usize, &(f64, f64)), c: &(usize, &(f64, f64))| key(a.1).total_cmp(&key(c.1));
+            let it = chunk.iter().enumerate();
+            if max { it.max_by(cmp) } else { it.min_by(cmp) }.map_or(0, |x| x.0)
+        };
+        let mut keep = [
+            pick(&|p| p.0, false),
+            pick(&|p| p.0, true),
+            pick(&|p| p.1, false),
+            pick(&|p| p.1, true),
+        ];
+        keep.sort_unstable();
+        let mut last = usize::MAX;
+        for k in keep {
+            if k != last {
+                out.push(chunk[k]);
+                last = k;
+            }
+        }
+    }
+    if out.last() != pts.last() {
+        out.push(*pts.last().unwrap());
+    }
+    out
+}
+
 /// A line (or scatter) chart as an SVG string.
 fn chart(
     title: &str,
@@ -83,6 +125,7 @@ fn chart(
         }
         for (name, color, pts) in series {
             let color = *color;
+            let pts = &decimated(pts);
             // in a scatter chart, a two-point series is a reference line
             if scatter && pts.len() > 2 {
                 c.draw_series(pts.iter().map(|p| Circle::new(*p, 1, color.filled())))
@@ -132,9 +175,11 @@ th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{
     )
 }
 
+/// The model's track where the pose sensor sees it (an off-centre tracker's
+/// point, not the body origin), so it is drawn against what was measured.
 fn traj(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
     let _ = run;
-    tr.pose.iter().map(|p| (p[0], p[1])).collect()
+    tr.measured.iter().map(|p| (p[0], p[1])).collect()
 }
 
 fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
@@ -669,4 +714,28 @@ pub fn methods_report(
             doc,
         ),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A million-point series is drawn from at most ~4000 points, and a single
+    /// spike in it survives.
+    #[test]
+    fn decimation_bounds_the_points_and_keeps_the_extremes() {
+        let mut pts: Vec<(f64, f64)> = (0..1_000_000)
+            .map(|k| (k as f64, (k as f64 * 1e-3).sin()))
+            .collect();
+        pts[654_321].1 = 50.0;
+        pts[123_456].1 = -7.0;
+        let d = decimated(&pts);
+        assert!(d.len() <= 4 * BUCKETS + 1, "{} points", d.len());
+        assert!(d.contains(&pts[654_321]) && d.contains(&pts[123_456]));
+        assert_eq!(d.first(), pts.first());
+        assert_eq!(d.last(), pts.last());
+        assert!(d.windows(2).all(|w| w[0].0 < w[1].0), "order kept");
+        let short = vec![(0.0, 1.0), (1.0, 2.0)];
+        assert_eq!(decimated(&short), short);
+    }
 }
