@@ -73,6 +73,17 @@ pub struct Prepared {
 }
 
 pub fn prepare(c: &Common) -> Result<Prepared, String> {
+    // outputs are checked before the work, not found unwritable after it
+    if let Some(j) = c
+        .json
+        .as_deref()
+        .filter(|j| *j != std::path::Path::new("-"))
+    {
+        crate::output::check_writable("--json", j)?;
+    }
+    if let Some(r) = &c.report {
+        crate::output::check_writable("--report", &r.join("index.html"))?;
+    }
     let ir = ir_source::load(&c.spec)?;
     let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
     let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;
@@ -471,6 +482,12 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         Ok(t) => t,
         Err(e) => return bad(e),
     };
+    if let Some((n, _)) = truth.iter().find(|(n, _)| r.param_index(n).is_none()) {
+        return bad(format!(
+            "--truth {n}: the spec has no parameter `{n}` (it has: {})",
+            r.names.join(", ")
+        ));
+    }
     if method != "lm" {
         let methods: Vec<&dyn Method> = if method == "all" {
             METHODS.to_vec()

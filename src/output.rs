@@ -36,6 +36,44 @@ impl Out {
     }
 }
 
+/// Whether `path` can be written later (its directory, or the nearest existing
+/// ancestor that would hold it, is a writable directory; `path` itself is not a
+/// directory), checked without creating anything, so a long computation does
+/// not end in a write error and a refused run leaves nothing behind.
+pub fn check_writable(option: &str, path: &Path) -> Result<(), String> {
+    let fail = |why: String| Err(format!("{option} {}: {why}", path.display()));
+    if path.is_dir() {
+        return fail("is a directory".into());
+    }
+    let mut dir = path.parent().unwrap_or(Path::new("."));
+    if dir.as_os_str().is_empty() {
+        dir = Path::new(".");
+    }
+    while !dir.exists() {
+        match dir.parent() {
+            Some(p) if !p.as_os_str().is_empty() => dir = p,
+            _ => {
+                dir = Path::new(".");
+                break;
+            }
+        }
+    }
+    match std::fs::metadata(dir) {
+        Ok(m) if !m.is_dir() => fail(format!("{} is not a directory", dir.display())),
+        Ok(m) if m.permissions().readonly() => fail(format!("{} is read-only", dir.display())),
+        Ok(_) => probe(dir).or_else(|e| fail(format!("cannot write in {}: {e}", dir.display()))),
+        Err(e) => fail(e.to_string()),
+    }
+}
+
+/// Create and remove a hidden file in `dir` (permission bits do not tell the
+/// whole story: read-only mounts, /proc, ACLs).
+fn probe(dir: &Path) -> std::io::Result<()> {
+    let p = dir.join(format!(".kinegen-probe-{}", std::process::id()));
+    std::fs::write(&p, b"")?;
+    std::fs::remove_file(&p)
+}
+
 /// A standard deviation for people: "unidentified" when the data do not
 /// determine the parameter (infinite or missing std, null in JSON).
 pub fn fmt_std(std: Option<f64>) -> String {

@@ -821,3 +821,43 @@ fn fifty_seeds_spread_matches_the_reported_standard_deviation() {
         );
     }
 }
+
+/// Issue #16: output paths are checked before the work (nothing is created for
+/// a refused run), and --truth names must be parameters of the spec.
+#[test]
+fn unwritable_outputs_and_unknown_truth_names_are_refused_up_front() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "cw.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--trajectory",
+            "square-cw",
+        ],
+    );
+    let log = log.to_str().unwrap();
+    let dir = tmp.path().to_str().unwrap();
+    let file_as_dir = format!("{log}/x.json");
+    for (args, needle) in [
+        (vec!["--json", dir], "--json"),
+        (vec!["--json", file_as_dir.as_str()], "is not a directory"),
+        (vec!["--report", "/proc/kinegen"], "--report"),
+        (
+            vec!["--method", "all", "--truth", "wheel=1"],
+            "--truth wheel",
+        ),
+    ] {
+        let mut a = vec!["fit", "--spec", "spec/diff_drive.toml", "--data", log];
+        a.extend(args);
+        let o = kinegen(&a);
+        assert_eq!(o.status.code(), Some(2), "{a:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "{a:?}: {}", stderr(&o));
+    }
+    let names: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names.len(), 1, "stray files: {names:?}");
+}

@@ -150,6 +150,10 @@ pub fn write_atomic(path: &Path, content: &str) -> Result<(), GenerateError> {
         path.file_name().unwrap().to_string_lossy(),
         std::process::id()
     ));
-    std::fs::write(&tmp, content).map_err(io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(io(path))
+    // errors name the file the user asked for, not the temporary one
+    let done = std::fs::write(&tmp, content).and_then(|()| std::fs::rename(&tmp, path));
+    if done.is_err() {
+        let _ = std::fs::remove_file(&tmp); // never leave a half-written temporary
+    }
+    done.map_err(io(path))
 }
