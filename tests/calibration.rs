@@ -861,3 +861,112 @@ fn unwritable_outputs_and_unknown_truth_names_are_refused_up_front() {
         .collect();
     assert_eq!(names.len(), 1, "stray files: {names:?}");
 }
+
+/// Issue #16: a 12-bit encoder counter that wraps (4096 -> 0) is read as the
+/// continuous count once the spec says `wrap = 12`; without it, the wrap reads
+/// as a huge backwards jump and the fit is far off. A `wrap` on an absolute
+/// input is refused at its line.
+#[test]
+fn wrapping_encoder_counters_are_unwrapped_when_declared() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = std::fs::read_to_string(root().join("spec/diff_drive.toml")).unwrap();
+    let wrapped_spec = spec.replace("kind = \"cumulative\"", "kind = \"cumulative\"\nwrap = 12");
+    assert_eq!(wrapped_spec.matches("wrap = 12").count(), 2);
+    let (plain, wrapped) = (tmp.path().join("dd.toml"), tmp.path().join("dd_wrap.toml"));
+    std::fs::write(&plain, &spec).unwrap();
+    std::fs::write(&wrapped, &wrapped_spec).unwrap();
+    let log = simulate(
+        tmp.path(),
+        "log.csv",
+        &[
+            "--spec",
+            plain.to_str().unwrap(),
+            "--trajectory",
+            "random",
+            "--set",
+            "b=0.21",
+        ],
+    );
+    // the counters as a 12-bit register would hold them
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let cols: Vec<&str> = header.split(',').collect();
+    let enc: Vec<usize> = cols
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.starts_with("enc_"))
+        .map(|(i, _)| i)
+        .collect();
+    let mut out = vec![header.to_string()];
+    let mut wraps = 0;
+    for l in lines {
+        let mut f: Vec<String> = l.split(',').map(String::from).collect();
+        for &i in &enc {
+            let v: f64 = f[i].parse().unwrap();
+            wraps += (v >= 4096.0) as usize;
+            f[i] = format!("{}", v.rem_euclid(4096.0));
+        }
+        out.push(f.join(","));
+    }
+    assert!(wraps > 0, "the simulated counters never pass 4096");
+    let wlog = tmp.path().join("wrapped.csv");
+    std::fs::write(&wlog, out.join("\n") + "\n").unwrap();
+    let fit = |s: &std::path::Path, l: &std::path::Path| {
+        kinegen_json(&[
+            "fit",
+            "--spec",
+            s.to_str().unwrap(),
+            "--data",
+            l.to_str().unwrap(),
+        ])["parameters"]["b"]["estimate"]
+            .as_f64()
+            .unwrap()
+    };
+    let (reference, unwrapped) = (fit(&plain, &log), fit(&wrapped, &wlog));
+    assert!(
+        (reference - unwrapped).abs() < 1e-9,
+        "{reference} vs {unwrapped}"
+    );
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        plain.to_str().unwrap(),
+        "--data",
+        wlog.to_str().unwrap(),
+        "--json",
+        "-",
+    ]);
+    let naive = serde_json::from_slice::<serde_json::Value>(&o.stdout).ok();
+    let b = naive
+        .as_ref()
+        .and_then(|d| d["parameters"]["b"]["estimate"].as_f64());
+    assert!(
+        b.is_none_or(|b| (b - 0.21).abs() > 1e-3),
+        "an undeclared wrap went unnoticed: b = {b:?}"
+    );
+    // `wrap` on an absolute input is refused where it is written
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        wrapped_spec.replacen(
+            "kind = \"cumulative\"\nwrap = 12",
+            "kind = \"absolute\"\nwrap = 12",
+            1,
+        ),
+    )
+    .unwrap();
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        bad.to_str().unwrap(),
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("bad.toml:") && stderr(&o).contains("wrap"),
+        "{}",
+        stderr(&o)
+    );
+}

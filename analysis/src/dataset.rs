@@ -26,6 +26,23 @@ pub struct Run {
     pub rate_inputs: Vec<bool>,
 }
 
+/// A wrapping counter (`wrap` bits) made continuous: each step's difference is
+/// taken modulo 2^bits into [-2^(bits-1), 2^(bits-1)), then accumulated.
+fn unwrap_counter(c: Vec<f64>, bits: Option<u32>) -> Vec<f64> {
+    let Some(bits) = bits else { return c };
+    let m = 2f64.powi(bits as i32);
+    let mut out = Vec::with_capacity(c.len());
+    let mut acc = c.first().copied().unwrap_or(0.0);
+    for (k, v) in c.iter().enumerate() {
+        if k > 0 {
+            let d = v - c[k - 1];
+            acc += d - m * (d / m).round();
+        }
+        out.push(acc);
+    }
+    out
+}
+
 /// Whether any run measures the observation that plays `role`, and if not, the
 /// data it would need. Roles kinegen does not read from logs count as measured.
 pub fn channel_missing(runs: &[Run], r: &Runner, role: ObservationRole) -> Option<String> {
@@ -198,7 +215,7 @@ impl Run {
             } else {
                 c.to_vec()
             };
-            cols.push((c, i.kind));
+            cols.push((unwrap_counter(c, i.wrap), i.kind));
         }
         let u = (0..dt.len())
             .map(|k| {

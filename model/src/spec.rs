@@ -55,6 +55,8 @@ struct RawInput {
     #[serde(default)]
     range: Option<[f64; 2]>,
     #[serde(default)]
+    wrap: Option<Spanned<u32>>,
+    #[serde(default)]
     unit: String,
     #[serde(default)]
     doc: String,
@@ -180,6 +182,12 @@ pub struct Input {
     /// steering lock; verification samples inside it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub range: Option<[f64; 2]>,
+    /// Bits of a cumulative counter that wraps around (e.g. 16 or 32: a count
+    /// that passes 2^bits starts again at 0, or at -2^(bits-1) for a signed
+    /// one): steps are differenced modulo 2^bits, so a wrap is not read as a
+    /// huge backwards jump.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wrap: Option<u32>,
     pub unit: String,
     pub doc: String,
 }
@@ -456,6 +464,14 @@ impl Model {
         };
         for i in &raw.input {
             declare(&i.name, "input")?;
+            if let Some(w) = &i.wrap {
+                if i.kind != InputKind::Cumulative {
+                    return Err(cx.err_span(w, "`wrap` is for cumulative counters only"));
+                }
+                if !(2..=64).contains(w.get_ref()) {
+                    return Err(cx.err_span(w, "`wrap` is the counter's width in bits (2 to 64)"));
+                }
+            }
         }
         for p in &raw.parameter {
             declare(&p.name, "parameter")?;
@@ -722,6 +738,7 @@ impl Model {
                     column: i.column.clone(),
                     kind: i.kind,
                     range: i.range,
+                    wrap: i.wrap.as_ref().map(|w| *w.get_ref()),
                     unit: i.unit.clone(),
                     doc: i.doc.clone(),
                 })
