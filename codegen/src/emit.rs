@@ -1,6 +1,7 @@
 //! Rust emission: one `#![no_std]`-compatible module per model, built with quote
 //! and formatted with prettyplease. Kernels take and return plain arrays, use libm
 //! for transcendental functions, never allocate and never panic.
+use crate::schedule::{Group, Item};
 use kinegen_model::ir::{Function, ModelIr, Op};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
@@ -167,40 +168,10 @@ fn emit_function(f: &Function) -> TokenStream {
         };
         stmts.push(bind(i, expr));
     }
-    // Each NearZero evaluates only the branch its guard selects: the slots only
-    // that branch needs are emitted inside it (the series of the exact step is
-    // not computed when omega dt is large, and the closed form, with its
-    // divisions by omega, not when it is small).
-    let owner = branch_owners(&f.tape, &f.outputs);
-    let mut blocks: Vec<Option<TokenStream>> = vec![None; f.tape.len()];
-    for (i, op) in f.tape.iter().enumerate() {
-        if let Op::NearZero { x, eps, near, far } = *op {
-            let mut inside = |branch: bool| -> Vec<TokenStream> {
-                (0..i)
-                    .filter(|&s| owner[s] == Some((i, branch)))
-                    .flat_map(|s| {
-                        blocks[s]
-                            .take()
-                            .map_or_else(|| slot_stmts[s].clone(), |b| vec![b])
-                    })
-                    .collect()
-            };
-            let (near_stmts, far_stmts) = (inside(true), inside(false));
-            let (x, near, far, eps) = (t(x), t(near), t(far), lit(eps));
-            blocks[i] = Some(bind(
-                i,
-                quote!(if libm::fabs(#x) < #eps { #(#near_stmts)* #near } else { #(#far_stmts)* #far }),
-            ));
-        }
-    }
-    for i in 0..f.tape.len() {
-        if owner[i].is_none() {
-            match blocks[i].take() {
-                Some(b) => stmts.push(b),
-                None => stmts.append(&mut slot_stmts[i]),
-            }
-        }
-    }
+    // Each guard evaluates only the side its condition selects, and guards on one
+    // condition share one `if` (crate::schedule).
+    let (items, groups) = crate::schedule::schedule(&f.tape, &f.outputs);
+    stmts.extend(emit_items(&items, &groups, f, &mut slot_stmts, &t, &bind));
     let (ret_ty, ret) = if f.is_matrix() {
         let (r, c) = (f.rows, f.cols);
         let rows = f.outputs.chunks(c).map(|row| {
@@ -242,59 +213,50 @@ fn emit_function(f: &Function) -> TokenStream {
     }
 }
 
-/// For every slot, the branch of a NearZero it is emitted in, as (slot of the
-/// NearZero, near?), or None for the function body. A slot belongs to a branch
-/// when the branch needs it and nothing outside that branch does (not an output,
-/// not the guard, every reader inside the branch). Nested guards own their own
-/// branches inside their parent's. The 3x3 pseudo-inverse stays in the body (one
-/// shared decomposition per matrix).
-fn branch_owners(tape: &[Op], outputs: &[u32]) -> Vec<Option<(usize, bool)>> {
-    let n = tape.len();
-    let mut readers: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for (i, op) in tape.iter().enumerate() {
-        for r in op.operands() {
-            readers[r as usize].push(i);
-        }
-    }
-    let mut pinned = vec![false; n];
-    for &o in outputs {
-        pinned[o as usize] = true;
-    }
-    for (i, op) in tape.iter().enumerate() {
-        match *op {
-            Op::NearZero { x, .. } => pinned[x as usize] = true,
-            Op::PinvSym3 { .. } => pinned[i] = true,
-            _ => {}
-        }
-    }
-    let mut owner: Vec<Option<(usize, bool)>> = vec![None; n];
-    // outer guards first, so an inner guard's claim (made later) is the innermost
-    for k in (0..n).rev() {
-        let Op::NearZero { near, far, .. } = tape[k] else {
-            continue;
-        };
-        for (root, branch) in [(near as usize, true), (far as usize, false)] {
-            if root == near as usize && root == far as usize {
-                continue;
-            }
-            let mut inside = vec![false; n];
-            // readers come after what they read, so one pass from the top decides
-            for s in (0..=root).rev() {
-                let reachable = s == root || readers[s].iter().any(|&c| c <= root && inside[c]);
-                inside[s] = reachable
-                    && !pinned[s]
-                    && readers[s]
+/// The statements of `items` (see [`crate::schedule`]): a guard group binds its
+/// members from one array-valued `if` whose sides emit their own statements first.
+fn emit_items(
+    items: &[Item],
+    groups: &[Group],
+    f: &Function,
+    slot_stmts: &mut [Vec<TokenStream>],
+    t: &dyn Fn(u32) -> TokenStream,
+    bind: &dyn Fn(usize, TokenStream) -> TokenStream,
+) -> Vec<TokenStream> {
+    let mut out = Vec::new();
+    for item in items {
+        match item {
+            Item::Slot(s) => out.append(&mut slot_stmts[*s]),
+            Item::Guard { group, near, far } => {
+                let g = &groups[*group];
+                let sides = |near_side: bool| -> Vec<TokenStream> {
+                    g.members
                         .iter()
-                        .all(|&c| (c == k && s == root) || (c <= root && inside[c]));
-            }
-            for s in 0..=root {
-                if inside[s] {
-                    owner[s] = Some((k, branch));
+                        .map(|&m| match f.tape[m] {
+                            Op::NearZero { near, far, .. } => t(if near_side { near } else { far }),
+                            _ => unreachable!("a guard group holds NearZero slots"),
+                        })
+                        .collect()
+                };
+                let (near_vals, far_vals) = (sides(true), sides(false));
+                let near_stmts = emit_items(near, groups, f, slot_stmts, t, bind);
+                let far_stmts = emit_items(far, groups, f, slot_stmts, t, bind);
+                let (x, eps, k) = (t(g.x), lit(g.eps), g.members.len());
+                let id = format_ident!("g{}", group);
+                out.push(quote! {
+                    let #id: [f64; #k] = if libm::fabs(#x) < #eps {
+                        #(#near_stmts)* [#(#near_vals),*]
+                    } else {
+                        #(#far_stmts)* [#(#far_vals),*]
+                    };
+                });
+                for (j, &m) in g.members.iter().enumerate() {
+                    out.push(bind(m, quote!(#id[#j])));
                 }
             }
         }
     }
-    owner
+    out
 }
 
 /// The source of one model's module.
@@ -446,43 +408,4 @@ pub fn emit_lib(models: &[String]) -> String {
     };
     let parsed: syn::File = syn::parse2(file).expect("lib parses");
     prettyplease::unparse(&parsed)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// out = guard(x: x*x + 1 | sin(x)/x) + x*x: the sine and the division are the
-    /// far branch's alone, the 1 and the sum the near branch's; x*x is also read
-    /// outside, so it stays in the body.
-    #[test]
-    fn only_what_one_branch_alone_needs_goes_inside_it() {
-        let tape = vec![
-            Op::Arg(0, 0),
-            Op::Mul(0, 0),
-            Op::Sin(0),
-            Op::Div(2, 0),
-            Op::Const(1.0),
-            Op::Add(1, 4), // near = x*x + 1
-            Op::NearZero {
-                x: 0,
-                eps: 1e-3,
-                near: 5,
-                far: 3,
-            },
-            Op::Add(6, 1),
-        ];
-        let owner = branch_owners(&tape, &[7]);
-        assert_eq!(owner[2], Some((6, false)));
-        assert_eq!(owner[3], Some((6, false)));
-        assert_eq!(owner[4], Some((6, true)));
-        assert_eq!(owner[5], Some((6, true)));
-        for shared in [0, 1, 6, 7] {
-            assert_eq!(owner[shared], None, "slot {shared}");
-        }
-        // the guard's own input and an output never move
-        let owner = branch_owners(&tape, &[7, 3]);
-        assert_eq!(owner[3], None);
-        assert_eq!(owner[2], None);
-    }
 }

@@ -8,6 +8,7 @@
 pub mod derive;
 pub mod emit;
 pub mod generate;
+pub mod schedule;
 mod symbolic;
 mod tape;
 
