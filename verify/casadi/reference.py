@@ -11,6 +11,7 @@ compares the compiled kernels with these fixtures.
     python3 verify/casadi/reference.py            # write the fixtures
     python3 verify/casadi/reference.py --check    # regenerate in memory, compare with the committed ones
     python3 verify/casadi/reference.py --spec my.toml --out DIR   # one spec (kinegen verify uses this)
+    python3 verify/casadi/reference.py --emit-c verify/peers/casadi   # C code of the peer benchmark
 """
 import ast
 import json
@@ -172,8 +173,38 @@ def fixtures(spec_path):
     return {"model": spec["name"], "casadi": ca.__version__, "points": points}
 
 
+# The kernels of issue #13's table, fused as a C caller would want them (one
+# CasADi Function per row, all outputs sharing its expression graph).
+PEER_KERNELS = [
+    ("dd_step", "diff_drive", ["step_exact", "step_exact_jac_x", "step_exact_jac_p"]),
+    ("uc_landmark", "unicycle_ekf", ["obs_landmark", "obs_landmark_jac_x"]),
+    ("oc_twist", "omni_caster", ["twist"]),
+    ("oc_step", "omni_caster", ["step_exact", "step_exact_jac_p"]),
+]
+
+
+def emit_c(out_dir):
+    """CasADi's C code for the peer benchmark (verify/peers): one file, written
+    by CasADi's own code generator from the same specs, never edited by hand."""
+    cg = ca.CodeGenerator("casadi_kernels.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long"})
+    models = {}
+    for name, model_name, outs in PEER_KERNELS:
+        if model_name not in models:
+            spec = tomllib.loads((ROOT / "spec" / f"{model_name}.toml").read_text())
+            models[model_name] = model(spec)
+        groups, funcs, _ = models[model_name]
+        args = funcs[outs[0]][0]
+        cg.add(ca.Function(name, [ca.vertcat(*groups[a]) for a in args], [funcs[o][1] for o in outs]))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cg.generate(str(out_dir) + "/")
+    print(f"wrote {out_dir}/casadi_kernels.c and .h (CasADi {ca.__version__})")
+
+
 def main():
     argv = sys.argv[1:]
+    if "--emit-c" in argv:
+        emit_c(Path(argv[argv.index("--emit-c") + 1]))
+        return
     check = "--check" in argv
     out_dir = Path(argv[argv.index("--out") + 1]) if "--out" in argv else OUT
     specs = [Path(argv[argv.index("--spec") + 1])] if "--spec" in argv else sorted((ROOT / "spec").glob("*.toml"))
