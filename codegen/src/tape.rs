@@ -303,39 +303,52 @@ impl TapeBuilder {
             if !live[i] {
                 continue;
             }
-            let m = |r: u32| new_index[r as usize];
-            let op = match op {
-                Op::Add(a, b) => Op::Add(m(a), m(b)),
-                Op::Sub(a, b) => Op::Sub(m(a), m(b)),
-                Op::Mul(a, b) => Op::Mul(m(a), m(b)),
-                Op::Div(a, b) => Op::Div(m(a), m(b)),
-                Op::Pow(a, b) => Op::Pow(m(a), m(b)),
-                Op::Atan2(a, b) => Op::Atan2(m(a), m(b)),
-                Op::Neg(a) => Op::Neg(m(a)),
-                Op::PowI(a, n) => Op::PowI(m(a), n),
-                Op::Sqrt(a) => Op::Sqrt(m(a)),
-                Op::Sin(a) => Op::Sin(m(a)),
-                Op::Cos(a) => Op::Cos(m(a)),
-                Op::Tan(a) => Op::Tan(m(a)),
-                Op::Atan(a) => Op::Atan(m(a)),
-                Op::Exp(a) => Op::Exp(m(a)),
-                Op::Ln(a) => Op::Ln(m(a)),
-                Op::Abs(a) => Op::Abs(m(a)),
-                Op::NearZero { x, eps, near, far } => Op::NearZero {
-                    x: m(x),
-                    eps,
-                    near: m(near),
-                    far: m(far),
-                },
-                Op::PinvSym3 { m: mm, i, j } => Op::PinvSym3 { m: mm.map(m), i, j },
-                o @ (Op::Const(_) | Op::Arg(..)) => o,
-            };
+            let op = op.remap(|r| new_index[r as usize]);
             new_index[i] = tape.len() as u32;
             tape.push(op);
         }
-        (
-            tape,
-            outputs.iter().map(|&o| new_index[o as usize]).collect(),
-        )
+        let outputs: Vec<u32> = outputs.iter().map(|&o| new_index[o as usize]).collect();
+        share_reciprocals(tape, &outputs)
     }
+}
+
+/// Divisions by one denominator share its reciprocal: a/d and b/d become
+/// r = 1/d, a*r and b*r (a division costs about ten multiplications; the
+/// parameter Jacobian of seed 000's omni step divides 52 times by one slot).
+/// Each result moves by at most an ulp or so. The reciprocal is placed right
+/// before its first use, so the tape stays in dependency order.
+fn share_reciprocals(tape: Vec<Op>, outputs: &[u32]) -> (Vec<Op>, Vec<u32>) {
+    let mut uses = vec![0usize; tape.len()];
+    for op in &tape {
+        if let Op::Div(_, d) = *op {
+            uses[d as usize] += 1;
+        }
+    }
+    let mut new_index = vec![u32::MAX; tape.len()];
+    let mut recip = vec![u32::MAX; tape.len()];
+    let mut one = u32::MAX;
+    let mut out: Vec<Op> = Vec::with_capacity(tape.len());
+    for (i, op) in tape.into_iter().enumerate() {
+        let op = match op {
+            Op::Div(a, d) if uses[d as usize] >= 2 => {
+                let d = d as usize;
+                if recip[d] == u32::MAX {
+                    if one == u32::MAX {
+                        out.push(Op::Const(1.0));
+                        one = out.len() as u32 - 1;
+                    }
+                    out.push(Op::Div(one, new_index[d]));
+                    recip[d] = out.len() as u32 - 1;
+                }
+                Op::Mul(new_index[a as usize], recip[d])
+            }
+            o => o.remap(|r| new_index[r as usize]),
+        };
+        new_index[i] = out.len() as u32;
+        out.push(op);
+    }
+    (
+        out,
+        outputs.iter().map(|&o| new_index[o as usize]).collect(),
+    )
 }

@@ -220,7 +220,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-103 arithmetic operations (403 before common-subexpression elimination).*/
+104 arithmetic operations (407 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[f64; 3usize],
@@ -245,7 +245,7 @@ pub fn step_exact(
     let t13: f64 = libm::sin(t2);
     let t20: f64 = libm::cos(t2);
     let t21: f64 = t8 * t12;
-    let t90: f64 = t13 * t21;
+    let t92: f64 = t13 * t21;
     let g0: [f64; 2usize] = if libm::fabs(t10) < 0.05f64 {
         let t14: f64 = t8 * t10;
         let t15: f64 = t12 * t14;
@@ -304,58 +304,60 @@ pub fn step_exact(
         let t70: f64 = 0.0000027557319223985893f64;
         let t71: f64 = t69 * t70;
         let t72: f64 = t65 + t71;
-        let t87: f64 = t15 * t20;
-        let t88: f64 = t17 * t87;
-        let t89: f64 = t1 + t88;
-        let t91: f64 = t89 + t90;
-        let t92: f64 = t13 * t26;
-        let t93: f64 = t28 * t92;
-        let t94: f64 = t91 - t93;
-        let t95: f64 = t20 * t33;
-        let t96: f64 = t35 * t95;
-        let t97: f64 = t94 - t96;
-        let t98: f64 = t13 * t40;
-        let t99: f64 = t42 * t98;
-        let t100: f64 = t97 + t99;
-        let t101: f64 = t20 * t47;
-        let t102: f64 = t49 * t101;
-        let t103: f64 = t100 + t102;
-        let t104: f64 = t13 * t54;
-        let t105: f64 = t56 * t104;
-        let t106: f64 = t103 - t105;
-        let t107: f64 = t20 * t61;
-        let t108: f64 = t63 * t107;
-        let t109: f64 = t106 - t108;
-        let t110: f64 = t13 * t68;
-        let t111: f64 = t70 * t110;
-        let t112: f64 = t109 + t111;
-        [t72, t112]
+        let t89: f64 = t15 * t20;
+        let t90: f64 = t17 * t89;
+        let t91: f64 = t1 + t90;
+        let t93: f64 = t91 + t92;
+        let t94: f64 = t13 * t26;
+        let t95: f64 = t28 * t94;
+        let t96: f64 = t93 - t95;
+        let t97: f64 = t20 * t33;
+        let t98: f64 = t35 * t97;
+        let t99: f64 = t96 - t98;
+        let t100: f64 = t13 * t40;
+        let t101: f64 = t42 * t100;
+        let t102: f64 = t99 + t101;
+        let t103: f64 = t20 * t47;
+        let t104: f64 = t49 * t103;
+        let t105: f64 = t102 + t104;
+        let t106: f64 = t13 * t54;
+        let t107: f64 = t56 * t106;
+        let t108: f64 = t105 - t107;
+        let t109: f64 = t20 * t61;
+        let t110: f64 = t63 * t109;
+        let t111: f64 = t108 - t110;
+        let t112: f64 = t13 * t68;
+        let t113: f64 = t70 * t112;
+        let t114: f64 = t111 + t113;
+        [t72, t114]
     } else {
         let t73: f64 = libm::sin(t10);
         let t74: f64 = t21 * t73;
         let t75: f64 = t20 * t74;
-        let t76: f64 = t75 / t10;
-        let t77: f64 = t0 + t76;
-        let t78: f64 = 1f64;
-        let t79: f64 = libm::cos(t10);
-        let t80: f64 = t78 - t79;
-        let t81: f64 = t8 * t80;
-        let t82: f64 = t12 * t81;
-        let t83: f64 = t13 * t82;
-        let t84: f64 = t83 / t10;
-        let t85: f64 = t77 - t84;
-        let t113: f64 = t73 * t90;
-        let t114: f64 = t113 / t10;
-        let t115: f64 = t1 + t114;
-        let t116: f64 = t20 * t82;
-        let t117: f64 = t116 / t10;
-        let t118: f64 = t115 + t117;
-        [t85, t118]
+        let t76: f64 = 1f64;
+        let t77: f64 = t76 / t10;
+        let t78: f64 = t75 * t77;
+        let t79: f64 = t0 + t78;
+        let t80: f64 = 1f64;
+        let t81: f64 = libm::cos(t10);
+        let t82: f64 = t80 - t81;
+        let t83: f64 = t8 * t82;
+        let t84: f64 = t12 * t83;
+        let t85: f64 = t13 * t84;
+        let t86: f64 = t85 * t77;
+        let t87: f64 = t79 - t86;
+        let t115: f64 = t73 * t92;
+        let t116: f64 = t115 * t77;
+        let t117: f64 = t1 + t116;
+        let t118: f64 = t20 * t84;
+        let t119: f64 = t118 * t77;
+        let t120: f64 = t117 + t119;
+        [t87, t120]
     };
-    let t86: f64 = g0[0usize];
-    let t119: f64 = g0[1usize];
-    let t120: f64 = t2 + t10;
-    [t86, t119, t120]
+    let t88: f64 = g0[0usize];
+    let t121: f64 = g0[1usize];
+    let t122: f64 = t2 + t10;
+    [t88, t121, t122]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
 
@@ -366,7 +368,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-99 arithmetic operations (397 before common-subexpression elimination).*/
+100 arithmetic operations (401 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[f64; 3usize],
@@ -448,55 +450,57 @@ pub fn step_exact_jac_x(
         let t69: f64 = t62 - t68;
         let t70: f64 = t69 - t18;
         let t71: f64 = t70 - t21;
-        let t84: f64 = t15 * t19;
-        let t85: f64 = t17 * t84;
-        let t86: f64 = t13 * t20;
-        let t87: f64 = t13 * t24;
-        let t88: f64 = t26 * t87;
-        let t89: f64 = t86 - t88;
-        let t90: f64 = t19 * t30;
-        let t91: f64 = t32 * t90;
-        let t92: f64 = t89 + t91;
-        let t93: f64 = t13 * t37;
-        let t94: f64 = t39 * t93;
-        let t95: f64 = t92 + t94;
-        let t96: f64 = t19 * t44;
-        let t97: f64 = t46 * t96;
-        let t98: f64 = t95 - t97;
-        let t99: f64 = t13 * t51;
-        let t100: f64 = t53 * t99;
-        let t101: f64 = t98 - t100;
-        let t102: f64 = t19 * t58;
-        let t103: f64 = t60 * t102;
-        let t104: f64 = t101 + t103;
-        let t105: f64 = t13 * t65;
-        let t106: f64 = t67 * t105;
-        let t107: f64 = t104 + t106;
-        let t108: f64 = t107 - t85;
-        [t71, t108]
+        let t86: f64 = t15 * t19;
+        let t87: f64 = t17 * t86;
+        let t88: f64 = t13 * t20;
+        let t89: f64 = t13 * t24;
+        let t90: f64 = t26 * t89;
+        let t91: f64 = t88 - t90;
+        let t92: f64 = t19 * t30;
+        let t93: f64 = t32 * t92;
+        let t94: f64 = t91 + t93;
+        let t95: f64 = t13 * t37;
+        let t96: f64 = t39 * t95;
+        let t97: f64 = t94 + t96;
+        let t98: f64 = t19 * t44;
+        let t99: f64 = t46 * t98;
+        let t100: f64 = t97 - t99;
+        let t101: f64 = t13 * t51;
+        let t102: f64 = t53 * t101;
+        let t103: f64 = t100 - t102;
+        let t104: f64 = t19 * t58;
+        let t105: f64 = t60 * t104;
+        let t106: f64 = t103 + t105;
+        let t107: f64 = t13 * t65;
+        let t108: f64 = t67 * t107;
+        let t109: f64 = t106 + t108;
+        let t110: f64 = t109 - t87;
+        [t71, t110]
     } else {
         let t72: f64 = libm::sin(t8);
         let t73: f64 = t21 * t72;
-        let t74: f64 = t73 / t8;
-        let t75: f64 = -t74;
-        let t76: f64 = libm::cos(t8);
-        let t77: f64 = t9 - t76;
-        let t78: f64 = t6 * t77;
-        let t79: f64 = t12 * t78;
-        let t80: f64 = t13 * t79;
-        let t81: f64 = t80 / t8;
-        let t82: f64 = t75 - t81;
-        let t109: f64 = t20 * t72;
-        let t110: f64 = t13 * t109;
-        let t111: f64 = t110 / t8;
-        let t112: f64 = t19 * t79;
-        let t113: f64 = t112 / t8;
-        let t114: f64 = t111 - t113;
-        [t82, t114]
+        let t74: f64 = 1f64;
+        let t75: f64 = t74 / t8;
+        let t76: f64 = t73 * t75;
+        let t77: f64 = -t76;
+        let t78: f64 = libm::cos(t8);
+        let t79: f64 = t9 - t78;
+        let t80: f64 = t6 * t79;
+        let t81: f64 = t12 * t80;
+        let t82: f64 = t13 * t81;
+        let t83: f64 = t82 * t75;
+        let t84: f64 = t77 - t83;
+        let t111: f64 = t20 * t72;
+        let t112: f64 = t13 * t111;
+        let t113: f64 = t112 * t75;
+        let t114: f64 = t19 * t81;
+        let t115: f64 = t114 * t75;
+        let t116: f64 = t113 - t115;
+        [t84, t116]
     };
-    let t83: f64 = g0[0usize];
-    let t115: f64 = g0[1usize];
-    [[t9, t10, t83], [t10, t9, t115], [t10, t10, t9]]
+    let t85: f64 = g0[0usize];
+    let t117: f64 = g0[1usize];
+    [[t9, t10, t85], [t10, t9, t117], [t10, t10, t9]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
 
@@ -507,7 +511,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [v, w]
 
-197 arithmetic operations (834 before common-subexpression elimination).*/
+199 arithmetic operations (846 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[f64; 3usize],
@@ -529,9 +533,9 @@ pub fn step_exact_jac_u(
     let t15: f64 = libm::cos(t0);
     let t16: f64 = t5 * t6;
     let t18: f64 = t8 * t8;
-    let t81: f64 = t1 * t5;
-    let t82: f64 = t3 + t81;
-    let t155: f64 = t9 * t16;
+    let t83: f64 = t1 * t5;
+    let t84: f64 = t3 + t83;
+    let t158: f64 = t9 * t16;
     let g0: [f64; 4usize] = if libm::fabs(t8) < 0.05f64 {
         let t10: f64 = t6 * t8;
         let t11: f64 = t5 * t10;
@@ -588,162 +592,165 @@ pub fn step_exact_jac_u(
         let t65: f64 = t63 * t64;
         let t66: f64 = t59 + t65;
         let t67: f64 = t66 - t14;
-        let t80: f64 = t6 * t6;
-        let t83: f64 = t8 * t80;
-        let t84: f64 = t82 * t83;
-        let t85: f64 = t15 * t84;
-        let t86: f64 = 0.3333333333333333f64;
-        let t87: f64 = t85 * t86;
-        let t88: f64 = t80 * t82;
-        let t89: f64 = t9 * t88;
-        let t90: f64 = t13 * t89;
-        let t91: f64 = t18 * t80;
-        let t92: f64 = t82 * t91;
-        let t93: f64 = t9 * t92;
-        let t94: f64 = 0.125f64;
-        let t95: f64 = t93 * t94;
-        let t96: f64 = t25 * t80;
-        let t97: f64 = t82 * t96;
-        let t98: f64 = t15 * t97;
-        let t99: f64 = 0.03333333333333333f64;
-        let t100: f64 = t98 * t99;
-        let t101: f64 = t95 + t100;
-        let t102: f64 = t32 * t80;
-        let t103: f64 = t82 * t102;
-        let t104: f64 = t9 * t103;
-        let t105: f64 = 0.006944444444444444f64;
-        let t106: f64 = t104 * t105;
-        let t107: f64 = t101 - t106;
-        let t108: f64 = t39 * t80;
-        let t109: f64 = t82 * t108;
-        let t110: f64 = t15 * t109;
-        let t111: f64 = 0.0011904761904761906f64;
-        let t112: f64 = t110 * t111;
-        let t113: f64 = t107 - t112;
-        let t114: f64 = t46 * t80;
-        let t115: f64 = t82 * t114;
-        let t116: f64 = t9 * t115;
-        let t117: f64 = 0.00017361111111111112f64;
-        let t118: f64 = t116 * t117;
-        let t119: f64 = t113 + t118;
-        let t120: f64 = t53 * t80;
-        let t121: f64 = t82 * t120;
-        let t122: f64 = t15 * t121;
-        let t123: f64 = 0.000022045855379188714f64;
-        let t124: f64 = t122 * t123;
-        let t125: f64 = t119 + t124;
-        let t126: f64 = t60 * t80;
-        let t127: f64 = t82 * t126;
-        let t128: f64 = t9 * t127;
-        let t129: f64 = 0.00000248015873015873f64;
-        let t130: f64 = t128 * t129;
-        let t131: f64 = t125 - t130;
-        let t132: f64 = t131 - t87;
-        let t133: f64 = t132 - t90;
-        let t153: f64 = t11 * t15;
-        let t154: f64 = t13 * t153;
-        let t156: f64 = t154 + t155;
-        let t157: f64 = t9 * t20;
-        let t158: f64 = t22 * t157;
-        let t159: f64 = t156 - t158;
-        let t160: f64 = t15 * t27;
-        let t161: f64 = t29 * t160;
+        let t82: f64 = t6 * t6;
+        let t85: f64 = t8 * t82;
+        let t86: f64 = t84 * t85;
+        let t87: f64 = t15 * t86;
+        let t88: f64 = 0.3333333333333333f64;
+        let t89: f64 = t87 * t88;
+        let t90: f64 = t82 * t84;
+        let t91: f64 = t9 * t90;
+        let t92: f64 = t13 * t91;
+        let t93: f64 = t18 * t82;
+        let t94: f64 = t84 * t93;
+        let t95: f64 = t9 * t94;
+        let t96: f64 = 0.125f64;
+        let t97: f64 = t95 * t96;
+        let t98: f64 = t25 * t82;
+        let t99: f64 = t84 * t98;
+        let t100: f64 = t15 * t99;
+        let t101: f64 = 0.03333333333333333f64;
+        let t102: f64 = t100 * t101;
+        let t103: f64 = t97 + t102;
+        let t104: f64 = t32 * t82;
+        let t105: f64 = t84 * t104;
+        let t106: f64 = t9 * t105;
+        let t107: f64 = 0.006944444444444444f64;
+        let t108: f64 = t106 * t107;
+        let t109: f64 = t103 - t108;
+        let t110: f64 = t39 * t82;
+        let t111: f64 = t84 * t110;
+        let t112: f64 = t15 * t111;
+        let t113: f64 = 0.0011904761904761906f64;
+        let t114: f64 = t112 * t113;
+        let t115: f64 = t109 - t114;
+        let t116: f64 = t46 * t82;
+        let t117: f64 = t84 * t116;
+        let t118: f64 = t9 * t117;
+        let t119: f64 = 0.00017361111111111112f64;
+        let t120: f64 = t118 * t119;
+        let t121: f64 = t115 + t120;
+        let t122: f64 = t53 * t82;
+        let t123: f64 = t84 * t122;
+        let t124: f64 = t15 * t123;
+        let t125: f64 = 0.000022045855379188714f64;
+        let t126: f64 = t124 * t125;
+        let t127: f64 = t121 + t126;
+        let t128: f64 = t60 * t82;
+        let t129: f64 = t84 * t128;
+        let t130: f64 = t9 * t129;
+        let t131: f64 = 0.00000248015873015873f64;
+        let t132: f64 = t130 * t131;
+        let t133: f64 = t127 - t132;
+        let t134: f64 = t133 - t89;
+        let t135: f64 = t134 - t92;
+        let t156: f64 = t11 * t15;
+        let t157: f64 = t13 * t156;
+        let t159: f64 = t157 + t158;
+        let t160: f64 = t9 * t20;
+        let t161: f64 = t22 * t160;
         let t162: f64 = t159 - t161;
-        let t163: f64 = t9 * t34;
-        let t164: f64 = t36 * t163;
-        let t165: f64 = t162 + t164;
-        let t166: f64 = t15 * t41;
-        let t167: f64 = t43 * t166;
+        let t163: f64 = t15 * t27;
+        let t164: f64 = t29 * t163;
+        let t165: f64 = t162 - t164;
+        let t166: f64 = t9 * t34;
+        let t167: f64 = t36 * t166;
         let t168: f64 = t165 + t167;
-        let t169: f64 = t9 * t48;
-        let t170: f64 = t50 * t169;
-        let t171: f64 = t168 - t170;
-        let t172: f64 = t15 * t55;
-        let t173: f64 = t57 * t172;
+        let t169: f64 = t15 * t41;
+        let t170: f64 = t43 * t169;
+        let t171: f64 = t168 + t170;
+        let t172: f64 = t9 * t48;
+        let t173: f64 = t50 * t172;
         let t174: f64 = t171 - t173;
-        let t175: f64 = t9 * t62;
-        let t176: f64 = t64 * t175;
-        let t177: f64 = t174 + t176;
-        let t184: f64 = t9 * t84;
-        let t185: f64 = t86 * t184;
-        let t186: f64 = t15 * t88;
-        let t187: f64 = t13 * t186;
-        let t188: f64 = t15 * t92;
-        let t189: f64 = t94 * t188;
-        let t190: f64 = t187 - t189;
-        let t191: f64 = t9 * t97;
-        let t192: f64 = t99 * t191;
-        let t193: f64 = t190 + t192;
-        let t194: f64 = t15 * t103;
-        let t195: f64 = t105 * t194;
+        let t175: f64 = t15 * t55;
+        let t176: f64 = t57 * t175;
+        let t177: f64 = t174 - t176;
+        let t178: f64 = t9 * t62;
+        let t179: f64 = t64 * t178;
+        let t180: f64 = t177 + t179;
+        let t187: f64 = t9 * t86;
+        let t188: f64 = t88 * t187;
+        let t189: f64 = t15 * t90;
+        let t190: f64 = t13 * t189;
+        let t191: f64 = t15 * t94;
+        let t192: f64 = t96 * t191;
+        let t193: f64 = t190 - t192;
+        let t194: f64 = t9 * t99;
+        let t195: f64 = t101 * t194;
         let t196: f64 = t193 + t195;
-        let t197: f64 = t9 * t109;
-        let t198: f64 = t111 * t197;
-        let t199: f64 = t196 - t198;
-        let t200: f64 = t15 * t115;
-        let t201: f64 = t117 * t200;
+        let t197: f64 = t15 * t105;
+        let t198: f64 = t107 * t197;
+        let t199: f64 = t196 + t198;
+        let t200: f64 = t9 * t111;
+        let t201: f64 = t113 * t200;
         let t202: f64 = t199 - t201;
-        let t203: f64 = t9 * t121;
-        let t204: f64 = t123 * t203;
-        let t205: f64 = t202 + t204;
-        let t206: f64 = t15 * t127;
-        let t207: f64 = t129 * t206;
+        let t203: f64 = t15 * t117;
+        let t204: f64 = t119 * t203;
+        let t205: f64 = t202 - t204;
+        let t206: f64 = t9 * t123;
+        let t207: f64 = t125 * t206;
         let t208: f64 = t205 + t207;
-        let t209: f64 = t208 - t185;
-        [t67, t133, t177, t209]
+        let t209: f64 = t15 * t129;
+        let t210: f64 = t131 * t209;
+        let t211: f64 = t208 + t210;
+        let t212: f64 = t211 - t188;
+        [t67, t135, t180, t212]
     } else {
         let t68: f64 = libm::sin(t8);
         let t69: f64 = t16 * t68;
         let t70: f64 = t15 * t69;
-        let t71: f64 = t70 / t8;
-        let t72: f64 = 1f64;
-        let t73: f64 = libm::cos(t8);
-        let t74: f64 = t72 - t73;
-        let t75: f64 = t16 * t74;
-        let t76: f64 = t9 * t75;
-        let t77: f64 = t76 / t8;
-        let t78: f64 = t71 - t77;
-        let t134: f64 = t6 * t82;
-        let t135: f64 = t9 * t134;
-        let t136: f64 = t68 * t135;
-        let t137: f64 = t136 / t8;
-        let t138: f64 = t15 * t134;
-        let t139: f64 = t73 * t138;
-        let t140: f64 = t139 / t8;
-        let t141: f64 = t68 * t134;
-        let t142: f64 = t15 * t141;
-        let t143: f64 = t142 / t18;
-        let t144: f64 = t140 - t143;
-        let t145: f64 = t6 * t74;
-        let t146: f64 = t82 * t145;
-        let t147: f64 = t9 * t146;
-        let t148: f64 = t147 / t18;
-        let t149: f64 = t144 + t148;
-        let t150: f64 = t149 - t137;
-        let t151: f64 = t6 * t150;
-        let t178: f64 = t68 * t155;
-        let t179: f64 = t178 / t8;
-        let t180: f64 = t15 * t75;
-        let t181: f64 = t180 / t8;
-        let t182: f64 = t179 + t181;
-        let t210: f64 = t73 * t135;
-        let t211: f64 = t210 / t8;
-        let t212: f64 = t142 / t8;
-        let t213: f64 = t211 + t212;
-        let t214: f64 = t136 / t18;
-        let t215: f64 = t213 - t214;
-        let t216: f64 = t15 * t146;
-        let t217: f64 = t216 / t18;
-        let t218: f64 = t215 - t217;
-        let t219: f64 = t6 * t218;
-        [t78, t151, t182, t219]
+        let t71: f64 = 1f64;
+        let t72: f64 = t71 / t8;
+        let t73: f64 = t70 * t72;
+        let t74: f64 = 1f64;
+        let t75: f64 = libm::cos(t8);
+        let t76: f64 = t74 - t75;
+        let t77: f64 = t16 * t76;
+        let t78: f64 = t9 * t77;
+        let t79: f64 = t78 * t72;
+        let t80: f64 = t73 - t79;
+        let t136: f64 = t6 * t84;
+        let t137: f64 = t9 * t136;
+        let t138: f64 = t68 * t137;
+        let t139: f64 = t138 * t72;
+        let t140: f64 = t15 * t136;
+        let t141: f64 = t75 * t140;
+        let t142: f64 = t141 * t72;
+        let t143: f64 = t68 * t136;
+        let t144: f64 = t15 * t143;
+        let t145: f64 = t71 / t18;
+        let t146: f64 = t144 * t145;
+        let t147: f64 = t142 - t146;
+        let t148: f64 = t6 * t76;
+        let t149: f64 = t84 * t148;
+        let t150: f64 = t9 * t149;
+        let t151: f64 = t150 * t145;
+        let t152: f64 = t147 + t151;
+        let t153: f64 = t152 - t139;
+        let t154: f64 = t6 * t153;
+        let t181: f64 = t68 * t158;
+        let t182: f64 = t181 * t72;
+        let t183: f64 = t15 * t77;
+        let t184: f64 = t183 * t72;
+        let t185: f64 = t182 + t184;
+        let t213: f64 = t75 * t137;
+        let t214: f64 = t213 * t72;
+        let t215: f64 = t144 * t72;
+        let t216: f64 = t214 + t215;
+        let t217: f64 = t138 * t145;
+        let t218: f64 = t216 - t217;
+        let t219: f64 = t15 * t149;
+        let t220: f64 = t219 * t145;
+        let t221: f64 = t218 - t220;
+        let t222: f64 = t6 * t221;
+        [t80, t154, t185, t222]
     };
-    let t79: f64 = g0[0usize];
-    let t152: f64 = g0[1usize];
-    let t183: f64 = g0[2usize];
-    let t220: f64 = g0[3usize];
-    let t221: f64 = 0f64;
-    [[t79, t152], [t183, t220], [t221, t6]]
+    let t81: f64 = g0[0usize];
+    let t155: f64 = g0[1usize];
+    let t186: f64 = g0[2usize];
+    let t223: f64 = g0[3usize];
+    let t224: f64 = 0f64;
+    [[t81, t155], [t186, t223], [t224, t6]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
 
@@ -754,7 +761,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-187 arithmetic operations (812 before common-subexpression elimination).*/
+189 arithmetic operations (824 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[f64; 3usize],
@@ -775,9 +782,9 @@ pub fn step_exact_jac_w(
     let t9: f64 = libm::sin(t0);
     let t14: f64 = libm::cos(t0);
     let t16: f64 = t8 * t8;
-    let t72: f64 = t1 * t5;
-    let t73: f64 = t3 + t72;
-    let t145: f64 = t6 * t9;
+    let t74: f64 = t1 * t5;
+    let t75: f64 = t3 + t74;
+    let t148: f64 = t6 * t9;
     let g0: [f64; 4usize] = if libm::fabs(t8) < 0.05f64 {
         let t10: f64 = t6 * t8;
         let t11: f64 = t9 * t10;
@@ -826,161 +833,164 @@ pub fn step_exact_jac_w(
         let t56: f64 = t54 * t55;
         let t57: f64 = t51 + t56;
         let t58: f64 = t57 - t13;
-        let t71: f64 = t6 * t6;
-        let t74: f64 = t8 * t71;
-        let t75: f64 = t73 * t74;
-        let t76: f64 = t14 * t75;
-        let t77: f64 = 0.3333333333333333f64;
-        let t78: f64 = t76 * t77;
-        let t79: f64 = t71 * t73;
-        let t80: f64 = t9 * t79;
-        let t81: f64 = t12 * t80;
-        let t82: f64 = t16 * t71;
-        let t83: f64 = t73 * t82;
-        let t84: f64 = t9 * t83;
-        let t85: f64 = 0.125f64;
-        let t86: f64 = t84 * t85;
-        let t87: f64 = t22 * t71;
-        let t88: f64 = t73 * t87;
-        let t89: f64 = t14 * t88;
-        let t90: f64 = 0.03333333333333333f64;
-        let t91: f64 = t89 * t90;
-        let t92: f64 = t86 + t91;
-        let t93: f64 = t28 * t71;
-        let t94: f64 = t73 * t93;
-        let t95: f64 = t9 * t94;
-        let t96: f64 = 0.006944444444444444f64;
-        let t97: f64 = t95 * t96;
-        let t98: f64 = t92 - t97;
-        let t99: f64 = t34 * t71;
-        let t100: f64 = t73 * t99;
-        let t101: f64 = t14 * t100;
-        let t102: f64 = 0.0011904761904761906f64;
-        let t103: f64 = t101 * t102;
-        let t104: f64 = t98 - t103;
-        let t105: f64 = t40 * t71;
-        let t106: f64 = t73 * t105;
-        let t107: f64 = t9 * t106;
-        let t108: f64 = 0.00017361111111111112f64;
-        let t109: f64 = t107 * t108;
-        let t110: f64 = t104 + t109;
-        let t111: f64 = t46 * t71;
-        let t112: f64 = t73 * t111;
-        let t113: f64 = t14 * t112;
-        let t114: f64 = 0.000022045855379188714f64;
-        let t115: f64 = t113 * t114;
-        let t116: f64 = t110 + t115;
-        let t117: f64 = t52 * t71;
-        let t118: f64 = t73 * t117;
-        let t119: f64 = t9 * t118;
-        let t120: f64 = 0.00000248015873015873f64;
-        let t121: f64 = t119 * t120;
-        let t122: f64 = t116 - t121;
-        let t123: f64 = t122 - t78;
-        let t124: f64 = t123 - t81;
-        let t143: f64 = t10 * t14;
-        let t144: f64 = t12 * t143;
-        let t146: f64 = t144 + t145;
-        let t147: f64 = t9 * t17;
-        let t148: f64 = t19 * t147;
-        let t149: f64 = t146 - t148;
-        let t150: f64 = t14 * t23;
-        let t151: f64 = t25 * t150;
+        let t73: f64 = t6 * t6;
+        let t76: f64 = t8 * t73;
+        let t77: f64 = t75 * t76;
+        let t78: f64 = t14 * t77;
+        let t79: f64 = 0.3333333333333333f64;
+        let t80: f64 = t78 * t79;
+        let t81: f64 = t73 * t75;
+        let t82: f64 = t9 * t81;
+        let t83: f64 = t12 * t82;
+        let t84: f64 = t16 * t73;
+        let t85: f64 = t75 * t84;
+        let t86: f64 = t9 * t85;
+        let t87: f64 = 0.125f64;
+        let t88: f64 = t86 * t87;
+        let t89: f64 = t22 * t73;
+        let t90: f64 = t75 * t89;
+        let t91: f64 = t14 * t90;
+        let t92: f64 = 0.03333333333333333f64;
+        let t93: f64 = t91 * t92;
+        let t94: f64 = t88 + t93;
+        let t95: f64 = t28 * t73;
+        let t96: f64 = t75 * t95;
+        let t97: f64 = t9 * t96;
+        let t98: f64 = 0.006944444444444444f64;
+        let t99: f64 = t97 * t98;
+        let t100: f64 = t94 - t99;
+        let t101: f64 = t34 * t73;
+        let t102: f64 = t75 * t101;
+        let t103: f64 = t14 * t102;
+        let t104: f64 = 0.0011904761904761906f64;
+        let t105: f64 = t103 * t104;
+        let t106: f64 = t100 - t105;
+        let t107: f64 = t40 * t73;
+        let t108: f64 = t75 * t107;
+        let t109: f64 = t9 * t108;
+        let t110: f64 = 0.00017361111111111112f64;
+        let t111: f64 = t109 * t110;
+        let t112: f64 = t106 + t111;
+        let t113: f64 = t46 * t73;
+        let t114: f64 = t75 * t113;
+        let t115: f64 = t14 * t114;
+        let t116: f64 = 0.000022045855379188714f64;
+        let t117: f64 = t115 * t116;
+        let t118: f64 = t112 + t117;
+        let t119: f64 = t52 * t73;
+        let t120: f64 = t75 * t119;
+        let t121: f64 = t9 * t120;
+        let t122: f64 = 0.00000248015873015873f64;
+        let t123: f64 = t121 * t122;
+        let t124: f64 = t118 - t123;
+        let t125: f64 = t124 - t80;
+        let t126: f64 = t125 - t83;
+        let t146: f64 = t10 * t14;
+        let t147: f64 = t12 * t146;
+        let t149: f64 = t147 + t148;
+        let t150: f64 = t9 * t17;
+        let t151: f64 = t19 * t150;
         let t152: f64 = t149 - t151;
-        let t153: f64 = t9 * t29;
-        let t154: f64 = t31 * t153;
-        let t155: f64 = t152 + t154;
-        let t156: f64 = t14 * t35;
-        let t157: f64 = t37 * t156;
+        let t153: f64 = t14 * t23;
+        let t154: f64 = t25 * t153;
+        let t155: f64 = t152 - t154;
+        let t156: f64 = t9 * t29;
+        let t157: f64 = t31 * t156;
         let t158: f64 = t155 + t157;
-        let t159: f64 = t9 * t41;
-        let t160: f64 = t43 * t159;
-        let t161: f64 = t158 - t160;
-        let t162: f64 = t14 * t47;
-        let t163: f64 = t49 * t162;
+        let t159: f64 = t14 * t35;
+        let t160: f64 = t37 * t159;
+        let t161: f64 = t158 + t160;
+        let t162: f64 = t9 * t41;
+        let t163: f64 = t43 * t162;
         let t164: f64 = t161 - t163;
-        let t165: f64 = t9 * t53;
-        let t166: f64 = t55 * t165;
-        let t167: f64 = t164 + t166;
-        let t174: f64 = t9 * t75;
-        let t175: f64 = t77 * t174;
-        let t176: f64 = t14 * t79;
-        let t177: f64 = t12 * t176;
-        let t178: f64 = t14 * t83;
-        let t179: f64 = t85 * t178;
-        let t180: f64 = t177 - t179;
-        let t181: f64 = t9 * t88;
-        let t182: f64 = t90 * t181;
-        let t183: f64 = t180 + t182;
-        let t184: f64 = t14 * t94;
-        let t185: f64 = t96 * t184;
+        let t165: f64 = t14 * t47;
+        let t166: f64 = t49 * t165;
+        let t167: f64 = t164 - t166;
+        let t168: f64 = t9 * t53;
+        let t169: f64 = t55 * t168;
+        let t170: f64 = t167 + t169;
+        let t177: f64 = t9 * t77;
+        let t178: f64 = t79 * t177;
+        let t179: f64 = t14 * t81;
+        let t180: f64 = t12 * t179;
+        let t181: f64 = t14 * t85;
+        let t182: f64 = t87 * t181;
+        let t183: f64 = t180 - t182;
+        let t184: f64 = t9 * t90;
+        let t185: f64 = t92 * t184;
         let t186: f64 = t183 + t185;
-        let t187: f64 = t9 * t100;
-        let t188: f64 = t102 * t187;
-        let t189: f64 = t186 - t188;
-        let t190: f64 = t14 * t106;
-        let t191: f64 = t108 * t190;
+        let t187: f64 = t14 * t96;
+        let t188: f64 = t98 * t187;
+        let t189: f64 = t186 + t188;
+        let t190: f64 = t9 * t102;
+        let t191: f64 = t104 * t190;
         let t192: f64 = t189 - t191;
-        let t193: f64 = t9 * t112;
-        let t194: f64 = t114 * t193;
-        let t195: f64 = t192 + t194;
-        let t196: f64 = t14 * t118;
-        let t197: f64 = t120 * t196;
+        let t193: f64 = t14 * t108;
+        let t194: f64 = t110 * t193;
+        let t195: f64 = t192 - t194;
+        let t196: f64 = t9 * t114;
+        let t197: f64 = t116 * t196;
         let t198: f64 = t195 + t197;
-        let t199: f64 = t198 - t175;
-        [t58, t124, t167, t199]
+        let t199: f64 = t14 * t120;
+        let t200: f64 = t122 * t199;
+        let t201: f64 = t198 + t200;
+        let t202: f64 = t201 - t178;
+        [t58, t126, t170, t202]
     } else {
         let t59: f64 = libm::sin(t8);
         let t60: f64 = t6 * t59;
         let t61: f64 = t14 * t60;
-        let t62: f64 = t61 / t8;
-        let t63: f64 = 1f64;
-        let t64: f64 = libm::cos(t8);
-        let t65: f64 = t63 - t64;
-        let t66: f64 = t6 * t65;
-        let t67: f64 = t9 * t66;
-        let t68: f64 = t67 / t8;
-        let t69: f64 = t62 - t68;
-        let t125: f64 = t6 * t73;
-        let t126: f64 = t9 * t125;
-        let t127: f64 = t59 * t126;
-        let t128: f64 = t127 / t8;
-        let t129: f64 = t14 * t125;
-        let t130: f64 = t64 * t129;
-        let t131: f64 = t130 / t8;
-        let t132: f64 = t59 * t125;
-        let t133: f64 = t14 * t132;
-        let t134: f64 = t133 / t16;
-        let t135: f64 = t131 - t134;
-        let t136: f64 = t66 * t73;
-        let t137: f64 = t9 * t136;
-        let t138: f64 = t137 / t16;
-        let t139: f64 = t135 + t138;
-        let t140: f64 = t139 - t128;
-        let t141: f64 = t6 * t140;
-        let t168: f64 = t59 * t145;
-        let t169: f64 = t168 / t8;
-        let t170: f64 = t14 * t66;
-        let t171: f64 = t170 / t8;
-        let t172: f64 = t169 + t171;
-        let t200: f64 = t64 * t126;
-        let t201: f64 = t200 / t8;
-        let t202: f64 = t133 / t8;
-        let t203: f64 = t201 + t202;
-        let t204: f64 = t127 / t16;
-        let t205: f64 = t203 - t204;
-        let t206: f64 = t14 * t136;
-        let t207: f64 = t206 / t16;
-        let t208: f64 = t205 - t207;
-        let t209: f64 = t6 * t208;
-        [t69, t141, t172, t209]
+        let t62: f64 = 1f64;
+        let t63: f64 = t62 / t8;
+        let t64: f64 = t61 * t63;
+        let t65: f64 = 1f64;
+        let t66: f64 = libm::cos(t8);
+        let t67: f64 = t65 - t66;
+        let t68: f64 = t6 * t67;
+        let t69: f64 = t9 * t68;
+        let t70: f64 = t69 * t63;
+        let t71: f64 = t64 - t70;
+        let t127: f64 = t6 * t75;
+        let t128: f64 = t9 * t127;
+        let t129: f64 = t59 * t128;
+        let t130: f64 = t129 * t63;
+        let t131: f64 = t14 * t127;
+        let t132: f64 = t66 * t131;
+        let t133: f64 = t132 * t63;
+        let t134: f64 = t59 * t127;
+        let t135: f64 = t14 * t134;
+        let t136: f64 = t62 / t16;
+        let t137: f64 = t135 * t136;
+        let t138: f64 = t133 - t137;
+        let t139: f64 = t68 * t75;
+        let t140: f64 = t9 * t139;
+        let t141: f64 = t140 * t136;
+        let t142: f64 = t138 + t141;
+        let t143: f64 = t142 - t130;
+        let t144: f64 = t6 * t143;
+        let t171: f64 = t59 * t148;
+        let t172: f64 = t171 * t63;
+        let t173: f64 = t14 * t68;
+        let t174: f64 = t173 * t63;
+        let t175: f64 = t172 + t174;
+        let t203: f64 = t66 * t128;
+        let t204: f64 = t203 * t63;
+        let t205: f64 = t135 * t63;
+        let t206: f64 = t204 + t205;
+        let t207: f64 = t129 * t136;
+        let t208: f64 = t206 - t207;
+        let t209: f64 = t14 * t139;
+        let t210: f64 = t209 * t136;
+        let t211: f64 = t208 - t210;
+        let t212: f64 = t6 * t211;
+        [t71, t144, t175, t212]
     };
-    let t70: f64 = g0[0usize];
-    let t142: f64 = g0[1usize];
-    let t173: f64 = g0[2usize];
-    let t210: f64 = g0[3usize];
-    let t211: f64 = 0f64;
-    [[t70, t142], [t173, t210], [t211, t6]]
+    let t72: f64 = g0[0usize];
+    let t145: f64 = g0[1usize];
+    let t176: f64 = g0[2usize];
+    let t213: f64 = g0[3usize];
+    let t214: f64 = 0f64;
+    [[t72, t145], [t176, t213], [t214, t6]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
 
@@ -991,7 +1001,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-95 arithmetic operations (352 before common-subexpression elimination).*/
+96 arithmetic operations (356 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[f64; 3usize],
@@ -1010,7 +1020,7 @@ pub fn step_exact_jac_p(
     let t7: f64 = libm::sin(t0);
     let t13: f64 = libm::cos(t0);
     let t14: f64 = t1 * t4;
-    let t80: f64 = t7 * t14;
+    let t82: f64 = t7 * t14;
     let g0: [f64; 2usize] = if libm::fabs(t6) < 0.05f64 {
         let t8: f64 = t4 * t6;
         let t9: f64 = t1 * t8;
@@ -1068,54 +1078,56 @@ pub fn step_exact_jac_p(
         let t63: f64 = t61 * t62;
         let t64: f64 = t57 + t63;
         let t65: f64 = t64 - t12;
-        let t78: f64 = t9 * t13;
-        let t79: f64 = t11 * t78;
-        let t81: f64 = t79 + t80;
-        let t82: f64 = t7 * t18;
-        let t83: f64 = t20 * t82;
-        let t84: f64 = t81 - t83;
-        let t85: f64 = t13 * t25;
-        let t86: f64 = t27 * t85;
-        let t87: f64 = t84 - t86;
-        let t88: f64 = t7 * t32;
-        let t89: f64 = t34 * t88;
-        let t90: f64 = t87 + t89;
-        let t91: f64 = t13 * t39;
-        let t92: f64 = t41 * t91;
-        let t93: f64 = t90 + t92;
-        let t94: f64 = t7 * t46;
-        let t95: f64 = t48 * t94;
-        let t96: f64 = t93 - t95;
-        let t97: f64 = t13 * t53;
-        let t98: f64 = t55 * t97;
-        let t99: f64 = t96 - t98;
-        let t100: f64 = t7 * t60;
-        let t101: f64 = t62 * t100;
-        let t102: f64 = t99 + t101;
-        [t65, t102]
+        let t80: f64 = t9 * t13;
+        let t81: f64 = t11 * t80;
+        let t83: f64 = t81 + t82;
+        let t84: f64 = t7 * t18;
+        let t85: f64 = t20 * t84;
+        let t86: f64 = t83 - t85;
+        let t87: f64 = t13 * t25;
+        let t88: f64 = t27 * t87;
+        let t89: f64 = t86 - t88;
+        let t90: f64 = t7 * t32;
+        let t91: f64 = t34 * t90;
+        let t92: f64 = t89 + t91;
+        let t93: f64 = t13 * t39;
+        let t94: f64 = t41 * t93;
+        let t95: f64 = t92 + t94;
+        let t96: f64 = t7 * t46;
+        let t97: f64 = t48 * t96;
+        let t98: f64 = t95 - t97;
+        let t99: f64 = t13 * t53;
+        let t100: f64 = t55 * t99;
+        let t101: f64 = t98 - t100;
+        let t102: f64 = t7 * t60;
+        let t103: f64 = t62 * t102;
+        let t104: f64 = t101 + t103;
+        [t65, t104]
     } else {
         let t66: f64 = libm::sin(t6);
         let t67: f64 = t14 * t66;
         let t68: f64 = t13 * t67;
-        let t69: f64 = t68 / t6;
-        let t70: f64 = 1f64;
-        let t71: f64 = libm::cos(t6);
-        let t72: f64 = t70 - t71;
-        let t73: f64 = t14 * t72;
-        let t74: f64 = t7 * t73;
-        let t75: f64 = t74 / t6;
-        let t76: f64 = t69 - t75;
-        let t103: f64 = t66 * t80;
-        let t104: f64 = t103 / t6;
-        let t105: f64 = t13 * t73;
-        let t106: f64 = t105 / t6;
-        let t107: f64 = t104 + t106;
-        [t76, t107]
+        let t69: f64 = 1f64;
+        let t70: f64 = t69 / t6;
+        let t71: f64 = t68 * t70;
+        let t72: f64 = 1f64;
+        let t73: f64 = libm::cos(t6);
+        let t74: f64 = t72 - t73;
+        let t75: f64 = t14 * t74;
+        let t76: f64 = t7 * t75;
+        let t77: f64 = t76 * t70;
+        let t78: f64 = t71 - t77;
+        let t105: f64 = t66 * t82;
+        let t106: f64 = t105 * t70;
+        let t107: f64 = t13 * t75;
+        let t108: f64 = t107 * t70;
+        let t109: f64 = t106 + t108;
+        [t78, t109]
     };
-    let t77: f64 = g0[0usize];
-    let t108: f64 = g0[1usize];
-    let t109: f64 = 0f64;
-    [t77, t108, t109]
+    let t79: f64 = g0[0usize];
+    let t110: f64 = g0[1usize];
+    let t111: f64 = 0f64;
+    [t79, t110, t111]
 }
 /**Range and bearing to beacon i (seed 001 eq. 6, with atan2 for the full circle); Jacobian eq. 7. Predicted columns: range, bearing.
 
@@ -1156,7 +1168,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-13 arithmetic operations (41 before common-subexpression elimination).*/
+15 arithmetic operations (45 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[f64; 3usize],
@@ -1174,16 +1186,19 @@ pub fn obs_landmark_jac_x(
     let t7: f64 = t6 * t6;
     let t8: f64 = t5 + t7;
     let t9: f64 = libm::sqrt(t8);
-    let t10: f64 = t4 / t9;
-    let t11: f64 = -t10;
-    let t12: f64 = t6 / t9;
+    let t10: f64 = 1f64;
+    let t11: f64 = t10 / t9;
+    let t12: f64 = t4 * t11;
     let t13: f64 = -t12;
-    let t14: f64 = 0f64;
-    let t15: f64 = t6 / t8;
-    let t16: f64 = t4 / t8;
-    let t17: f64 = -t16;
-    let t18: f64 = (-1f64);
-    [[t11, t13, t14], [t15, t17, t18]]
+    let t14: f64 = t6 * t11;
+    let t15: f64 = -t14;
+    let t16: f64 = 0f64;
+    let t17: f64 = t10 / t8;
+    let t18: f64 = t6 * t17;
+    let t19: f64 = t4 * t17;
+    let t20: f64 = -t19;
+    let t21: f64 = (-1f64);
+    [[t13, t15, t16], [t18, t20, t21]]
 }
 /**Jacobian of `obs_landmark` with respect to the parameters (seed 001 eq. 7 for range-bearing).
 
@@ -1226,7 +1241,7 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 1usize]) -> [f64; 2usize] 
 * `p`: [v_scale]
 * returns [v, w]
 
-29 arithmetic operations (45 before common-subexpression elimination).*/
+30 arithmetic operations (50 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[f64; 3usize],
@@ -1243,39 +1258,41 @@ pub fn inverse_increment(
         let t5: f64 = t0 * t4;
         let t6: f64 = 0.16666666666666666f64;
         let t7: f64 = t5 * t6;
-        let t9: f64 = t7 / t8;
-        let t10: f64 = t4 * t4;
-        let t11: f64 = t0 * t10;
-        let t12: f64 = 0.019444444444444445f64;
-        let t13: f64 = t11 * t12;
-        let t14: f64 = t13 / t8;
-        let t15: f64 = t9 + t14;
-        let t16: f64 = t1 * t4;
-        let t17: f64 = t16 * t16;
-        let t18: f64 = t0 * t17;
-        let t19: f64 = 0.00205026455026455f64;
-        let t20: f64 = t18 * t19;
-        let t21: f64 = t20 / t8;
-        let t22: f64 = t15 + t21;
-        let t23: f64 = t10 * t10;
-        let t24: f64 = t0 * t23;
-        let t25: f64 = 0.0002099867724867725f64;
-        let t26: f64 = t24 * t25;
-        let t27: f64 = t26 / t8;
-        let t28: f64 = t22 + t27;
-        let t29: f64 = t0 / t8;
-        let t30: f64 = t28 + t29;
-        [t30]
+        let t9: f64 = 1f64;
+        let t10: f64 = t9 / t8;
+        let t11: f64 = t7 * t10;
+        let t12: f64 = t4 * t4;
+        let t13: f64 = t0 * t12;
+        let t14: f64 = 0.019444444444444445f64;
+        let t15: f64 = t13 * t14;
+        let t16: f64 = t15 * t10;
+        let t17: f64 = t11 + t16;
+        let t18: f64 = t1 * t4;
+        let t19: f64 = t18 * t18;
+        let t20: f64 = t0 * t19;
+        let t21: f64 = 0.00205026455026455f64;
+        let t22: f64 = t20 * t21;
+        let t23: f64 = t22 * t10;
+        let t24: f64 = t17 + t23;
+        let t25: f64 = t12 * t12;
+        let t26: f64 = t0 * t25;
+        let t27: f64 = 0.0002099867724867725f64;
+        let t28: f64 = t26 * t27;
+        let t29: f64 = t28 * t10;
+        let t30: f64 = t24 + t29;
+        let t31: f64 = t0 * t10;
+        let t32: f64 = t30 + t31;
+        [t32]
     } else {
-        let t31: f64 = libm::sin(t1);
-        let t32: f64 = t0 * t1;
-        let t33: f64 = t8 * t31;
-        let t34: f64 = t32 / t33;
-        [t34]
+        let t33: f64 = libm::sin(t1);
+        let t34: f64 = t0 * t1;
+        let t35: f64 = t8 * t33;
+        let t36: f64 = t34 / t35;
+        [t36]
     };
-    let t35: f64 = g0[0usize];
-    let t36: f64 = t1 / t2;
-    [t35, t36]
+    let t37: f64 = g0[0usize];
+    let t38: f64 = t1 / t2;
+    [t37, t38]
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
 /// row-major), for verification tools. Returns false for an unknown name or

@@ -72,6 +72,38 @@ impl Op {
         }
     }
 
+    /// The same op reading slot `m(r)` wherever it read `r`.
+    pub fn remap(&self, m: impl Fn(u32) -> u32) -> Op {
+        use Op::*;
+        match *self {
+            Add(a, b) => Add(m(a), m(b)),
+            Sub(a, b) => Sub(m(a), m(b)),
+            Mul(a, b) => Mul(m(a), m(b)),
+            Div(a, b) => Div(m(a), m(b)),
+            Pow(a, b) => Pow(m(a), m(b)),
+            Atan2(a, b) => Atan2(m(a), m(b)),
+            Neg(a) => Neg(m(a)),
+            PowI(a, n) => PowI(m(a), n),
+            Sqrt(a) => Sqrt(m(a)),
+            Sin(a) => Sin(m(a)),
+            Cos(a) => Cos(m(a)),
+            Tan(a) => Tan(m(a)),
+            Atan(a) => Atan(m(a)),
+            Exp(a) => Exp(m(a)),
+            Ln(a) => Ln(m(a)),
+            Abs(a) => Abs(m(a)),
+            NearZero { x, eps, near, far } => NearZero {
+                x: m(x),
+                eps,
+                near: m(near),
+                far: m(far),
+            },
+            PinvSym3 { m: mm, i, j } => PinvSym3 { m: mm.map(m), i, j },
+            Const(c) => Const(c),
+            Arg(a, k) => Arg(a, k),
+        }
+    }
+
     /// Whether the op costs a floating-point operation (constants and argument
     /// reads do not).
     pub fn is_arithmetic(&self) -> bool {
