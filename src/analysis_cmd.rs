@@ -437,6 +437,11 @@ pub struct FitArgs {
     /// accurate estimates; needs ground truth in every run).
     #[arg(long, default_value = "track", value_parser = ["track", "increments"])]
     pub likelihood: String,
+    /// Write the calibrated values for the robot's configuration: `--export
+    /// ros2-yaml PATH` (ROS 2 diff_drive_controller parameters for a differential
+    /// drive, every calibrated parameter with its standard deviation otherwise).
+    #[arg(long, num_args = 2, value_names = ["FORMAT", "PATH"])]
+    pub export: Vec<String>,
 }
 
 /// `--method` values with their one-line descriptions, from the method registry.
@@ -460,8 +465,24 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         loss,
         residuals,
         likelihood,
+        export,
     } = a;
     let (side, mu) = (*side, *mu);
+    let export = match export.as_slice() {
+        [] => None,
+        [f, p] if f == "ros2-yaml" => {
+            let p = PathBuf::from(p);
+            if let Err(e) = crate::output::check_writable("--export ros2-yaml", &p) {
+                return bad(e);
+            }
+            Some(p)
+        }
+        [f, _] => return bad(format!("--export {f}: unknown format (known: ros2-yaml)")),
+        _ => return bad("--export takes a format and a path: --export ros2-yaml PATH"),
+    };
+    if export.is_some() && method != "lm" {
+        return bad("--export writes the Levenberg-Marquardt calibration: use it with --method lm");
+    }
     let out = Out::new(c.json.as_deref());
     let uses = |k: &str| residuals.is_empty() || residuals.iter().any(|r| r == k);
     // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
@@ -756,6 +777,22 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    if let Some(path) = &export {
+        if !unusable.is_empty() {
+            out.say(&format!(
+                "not exported to {}: the fit is unusable",
+                path.display()
+            ));
+        } else {
+            let written = crate::export::ros2_yaml(&c.spec, r, &res).and_then(|y| {
+                kinegen_codegen::generate::write_atomic(path, &y).map_err(|e| e.to_string())
+            });
+            match written {
+                Ok(()) => out.say(&format!("exported: {}", path.display())),
+                Err(e) => return bad(e),
+            }
+        }
     }
     match out.json(c.json.as_deref(), &doc) {
         Ok(()) if unusable.is_empty() => ExitCode::SUCCESS,

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 mod analysis_cmd;
 mod diagnose_cmd;
 mod effects_cmd;
+mod export;
 mod generate_cmd;
 mod ir_source;
 mod output;

@@ -970,3 +970,100 @@ fn wrapping_encoder_counters_are_unwrapped_when_declared() {
         stderr(&o)
     );
 }
+
+/// Issue #17.3: `fit --export ros2-yaml PATH` writes diff_drive_controller
+/// parameters for a differential drive (the simulated wheel separation 5% wide
+/// shows as a 1.05 multiplier) and every calibrated parameter with its standard
+/// deviation for any other model; a bad format or path is refused before the fit.
+#[test]
+fn calibrated_values_export_as_ros2_yaml() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = "spec/diff_drive.toml";
+    let log = simulate(
+        tmp.path(),
+        "cw.csv",
+        &["--spec", spec, "--trajectory", "random", "--set", "b=0.21"],
+    );
+    let log = log.to_str().unwrap();
+    let yaml = tmp.path().join("robot/controller.yaml");
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        spec,
+        "--data",
+        log,
+        "--export",
+        "ros2-yaml",
+        yaml.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&yaml).unwrap();
+    let value = |key: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{key}:")))
+            .unwrap_or_else(|| panic!("no {key} in\n{text}"));
+        line.split(':').nth(1).unwrap().trim().parse().unwrap()
+    };
+    assert!(
+        text.contains("diff_drive_controller:\n  ros__parameters:"),
+        "{text}"
+    );
+    assert!((value("wheel_separation") - 0.2).abs() < 1e-9);
+    assert!(
+        (value("wheel_separation_multiplier") - 1.05).abs() < 0.005,
+        "{text}"
+    );
+    for side in ["left", "right"] {
+        assert!(
+            (value(&format!("{side}_wheel_radius_multiplier")) - 1.0).abs() < 0.005,
+            "{text}"
+        );
+    }
+    // any other model: the generic list
+    let trike = root().join("tests/user_specs/fwd_tricycle.toml");
+    let trike = trike.to_str().unwrap();
+    let tlog = simulate(
+        tmp.path(),
+        "trike.csv",
+        &["--spec", trike, "--trajectory", "random"],
+    );
+    let generic = tmp.path().join("trike.yaml");
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        trike,
+        "--data",
+        tlog.to_str().unwrap(),
+        "--export",
+        "ros2-yaml",
+        generic.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&generic).unwrap();
+    assert!(
+        text.contains("kinegen_calibration:") && text.contains("    steer_gain:\n      value: "),
+        "{text}"
+    );
+    assert!(
+        text.lines()
+            .filter(|l| l.trim_start().starts_with("std:"))
+            .count()
+            == 3,
+        "{text}"
+    );
+    // refused before the work
+    for (args, needle) in [
+        (vec!["--export", "xml", "x.xml"], "unknown format"),
+        (
+            vec!["--export", "ros2-yaml", "/proc/kinegen.yaml"],
+            "--export",
+        ),
+    ] {
+        let mut a = vec!["fit", "--spec", spec, "--data", log];
+        a.extend(args);
+        let o = kinegen(&a);
+        assert_eq!(o.status.code(), Some(2), "{a:?}");
+        assert!(stderr(&o).contains(needle), "{}", stderr(&o));
+    }
+}

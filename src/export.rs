@@ -1,0 +1,130 @@
+//! `fit --export ros2-yaml PATH`: the calibrated values where a robot's
+//! configuration wants them. A differential drive gets the parameters of the
+//! standard ROS 2 `diff_drive_controller`; any other model a generic list of
+//! every calibrated parameter with its standard deviation.
+//!
+//! The YAML is written with `format!`: two flat, fixed layouts of numbers and
+//! identifiers, which a YAML library (serde_yaml is unmaintained) would not make
+//! safer.
+use kinegen_analysis::fit::FitResult;
+use kinegen_analysis::model::Runner;
+use kinegen_model::effects::{has, inputs_of, Capability, InputClass};
+use kinegen_model::spec::Model;
+use std::path::Path;
+
+/// The body twist's derivatives with respect to each input at `p` (the twist of
+/// a wheeled base is linear in its wheel rates): (dvx/du, domega/du) per input.
+fn twist_gains(r: &Runner, p: &[f64]) -> Vec<(f64, f64)> {
+    let tw = r.f("twist");
+    let n = r.ir.inputs.len();
+    let (mut out, mut scratch) = ([0.0; 3], Vec::new());
+    let mut at = |u: &[f64]| {
+        tw.eval_into(&[u, p], &mut out, &mut scratch);
+        out
+    };
+    let zero = at(&vec![0.0; n]);
+    (0..n)
+        .map(|k| {
+            let mut u = vec![0.0; n];
+            u[k] = 1.0;
+            let t = at(&u);
+            (t[0] - zero[0], t[2] - zero[2])
+        })
+        .collect()
+}
+
+/// Wheel separation and the right and left effective radii (m per input unit)
+/// of a differential drive at `p`, averaged over the wheels of each side.
+fn geometry(r: &Runner, p: &[f64], right: &[usize], left: &[usize]) -> (f64, f64, f64) {
+    let g = twist_gains(r, p);
+    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    // vx = (k_r u_r + k_l u_l)/2 and omega = (k_r u_r - k_l u_l)/b per side
+    let k_r = mean(
+        right
+            .iter()
+            .map(|&i| 2.0 * g[i].0 * right.len() as f64)
+            .collect(),
+    );
+    let k_l = mean(
+        left.iter()
+            .map(|&i| 2.0 * g[i].0 * left.len() as f64)
+            .collect(),
+    );
+    let b = mean(
+        right
+            .iter()
+            .map(|&i| 2.0 * g[i].0 / g[i].1)
+            .chain(left.iter().map(|&i| -2.0 * g[i].0 / g[i].1))
+            .collect(),
+    );
+    (b, k_r, k_l)
+}
+
+/// The YAML text for `res`, calibrated from `r` (nominal values in `r.p`).
+pub fn ros2_yaml(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, String> {
+    let model = Model::load(spec).map_err(|e| e.to_string())?;
+    let index = |names: Vec<String>| -> Vec<usize> {
+        names
+            .iter()
+            .filter_map(|n| r.ir.inputs.iter().position(|i| &i.name == n))
+            .collect()
+    };
+    let (right, left) = (
+        index(inputs_of(&model, InputClass::RightWheel)),
+        index(inputs_of(&model, InputClass::LeftWheel)),
+    );
+    let differential = has(&model, Capability::Differential).is_ok()
+        && has(&model, Capability::Nonholonomic).is_ok()
+        && has(&model, Capability::Steering).is_err()
+        && right.len() + left.len() == r.ir.inputs.len();
+    let head = format!(
+        "# kinegen fit: model `{}` from {}\n",
+        r.ir.name,
+        spec.display()
+    );
+    if differential {
+        let (b0, kr0, kl0) = geometry(r, &r.p, &right, &left);
+        let (b, kr, kl) = geometry(r, &res.p, &right, &left);
+        let in_rad = r.ir.inputs.iter().all(|i| i.unit == "rad/s");
+        let radius = 0.5 * (kr0 + kl0);
+        let (radius_line, rr, rl) = if in_rad {
+            (
+                format!("    wheel_radius: {radius:.9}\n"),
+                kr / radius,
+                kl / radius,
+            )
+        } else {
+            (
+                format!(
+                    "    # wheel_radius: keep your controller's value (the spec's inputs are in {}, not rad/s);\n    # the multipliers below are relative to the spec's nominal radii\n",
+                    r.ir.inputs[right[0]].unit
+                ),
+                kr / kr0,
+                kl / kl0,
+            )
+        };
+        return Ok(format!(
+            "{head}# ROS 2 diff_drive_controller parameters: separation and radii from the calibrated\n# kinematics (multipliers: calibrated over nominal)\ndiff_drive_controller:\n  ros__parameters:\n    wheel_separation: {b0:.9}\n{radius_line}    wheel_separation_multiplier: {:.9}\n    left_wheel_radius_multiplier: {rl:.9}\n    right_wheel_radius_multiplier: {rr:.9}\n",
+            b / b0
+        ));
+    }
+    let mut out = format!(
+        "{head}kinegen_calibration:\n  model: {}\n  parameters:\n",
+        r.ir.name
+    );
+    let rp = r.ir.runtime_params();
+    for (k, &i) in res.free.iter().enumerate() {
+        let std = res.std.get(k).copied().filter(|s| s.is_finite());
+        out += &format!(
+            "    {}:\n      value: {}\n      std: {}\n      nominal: {}\n      unit: \"{}\"\n",
+            r.names[i],
+            res.p[i],
+            std.map_or("null # not identified by these logs".into(), |s| format!(
+                "{s}"
+            )),
+            r.p[i],
+            rp[i].unit.replace('"', "'"),
+        );
+    }
+    Ok(out)
+}
