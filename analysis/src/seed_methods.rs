@@ -337,9 +337,10 @@ fn square_check(run: &Run, gt: &[[f64; 3]], side: f64) -> Result<(), String> {
     let gap = (b[0] - a[0]).hypot(b[1] - a[1]);
     let problem = if (turn - 360.0).abs() > 45.0 {
         Some(format!("it turns {turn:.0} degrees in all, not 360"))
-    } else if (length - 4.0 * side).abs() > 0.3 * 4.0 * side {
+    } else if (length - 4.0 * side).abs() > 0.2 * 4.0 * side {
         Some(format!(
-            "its path is {length:.2} m long, not about 4 x --side {side} m"
+            "its path is {length:.2} m long, not about 4 x --side {side} m (a square of side {:.2} m? say so with --side)",
+            length / 4.0
         ))
     } else if on_a_side < 0.7 * length {
         Some(format!(
