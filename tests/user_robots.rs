@@ -165,6 +165,21 @@ fn mecanum_base() {
     );
 }
 
+/// Front-wheel-drive tricycle, steering encoder in ticks, tracker 1.8 m ahead,
+/// steering gain 5x off nominal: the offset is found in ticks (the encoder's
+/// own units, bounded by an eighth of its declared range).
+#[test]
+fn front_wheel_drive_tricycle_with_a_tick_steering_encoder() {
+    user_robot(
+        "fwd_tricycle",
+        "steering_offset=40",
+        &["steer_gain=0.005"],
+        "steering_offset",
+        "steer_offset_steer",
+        40.0,
+    );
+}
+
 #[test]
 fn differential_drive_with_a_tracker_far_ahead() {
     user_robot(

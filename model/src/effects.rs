@@ -102,6 +102,13 @@ pub struct EachInput {
     /// Template over `{input}` (the input's name); the parameters it names may
     /// contain `{input}` too (one parameter per input).
     pub expr: String,
+    /// How the spec's declared `[inverse]` expression of such an input changes:
+    /// a template over `{inverse}` (the old expression) and `{input}`; the
+    /// inverse of `expr` applied to it (an offset u - c needs {inverse} + c).
+    /// Without it a declared inverse is dropped when the effect is added (it
+    /// would no longer invert the motion).
+    #[serde(default)]
+    pub inverse: Option<String>,
 }
 
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -410,6 +417,41 @@ impl Effect {
         .then(|| self.observation.keys().filter_map(|k| role_of(k)).collect())
     }
 
+    /// The declared `[inverse]` after this effect's input substitutions: each
+    /// substituted input's expression rewritten by its `inverse` template, or
+    /// the whole table removed when a substituted input has none.
+    fn patch_inverse(&self, m: &Model, doc: &mut DocumentMut) {
+        let Some(inputs) = doc
+            .get_mut("inverse")
+            .and_then(|i| i.get_mut("inputs"))
+            .and_then(Item::as_array_mut)
+        else {
+            return;
+        };
+        let mut keep = true;
+        for e in &self.each_input {
+            for name in inputs_of(m, e.class) {
+                let Some(k) = m.inputs.iter().position(|i| i.name == name) else {
+                    continue;
+                };
+                match (&e.inverse, inputs.get_mut(k)) {
+                    (Some(tpl), Some(v)) => {
+                        if let Some(old) = v.as_str() {
+                            let new = tpl
+                                .replace("{inverse}", &format!("({old})"))
+                                .replace("{input}", &name);
+                            *v = new.into();
+                        }
+                    }
+                    _ => keep = false,
+                }
+            }
+        }
+        if !keep {
+            doc.remove("inverse");
+        }
+    }
+
     /// Input substitutions for this model: input name -> replacement text.
     fn substitutions(&self, m: &Model) -> BTreeMap<String, String> {
         let mut out = BTreeMap::new();
@@ -469,24 +511,36 @@ impl Effect {
                 continue;
             };
             // one parameter per input when its name is a template
-            let names: Vec<String> = if name.contains("{input}") {
+            let names: Vec<(String, Option<&crate::spec::Input>)> = if name.contains("{input}") {
                 m.inputs
                     .iter()
-                    .map(|i| name.replace("{input}", &i.name))
+                    .map(|i| (name.replace("{input}", &i.name), Some(i)))
                     .collect()
             } else {
-                vec![name.to_string()]
+                vec![(name.to_string(), None)]
             };
-            for n in names {
+            for (n, input) in names {
                 if used.contains(&n) || self.measurement_delay() == Some(n.as_str()) {
                     let mut t = p.clone();
                     t.insert("name".into(), toml::Value::String(n.clone()));
-                    if t.remove("bounds")
-                        .and_then(|b| b.as_str().map(str::to_string))
-                        .as_deref()
-                        == Some("robot_size")
+                    // `unit = "{input_unit}"`: the parameter is in its input's units
+                    // (a steering encoder in ticks gets an offset in ticks)
+                    if let (Some(i), Some("{input_unit}")) =
+                        (input, t.get("unit").and_then(|u| u.as_str()))
                     {
-                        let r = robot_size(m);
+                        t.insert("unit".into(), toml::Value::String(i.unit.clone()));
+                    }
+                    let bounds = t.remove("bounds");
+                    let half = match bounds.as_ref().and_then(|b| b.as_str()) {
+                        Some("robot_size") => Some(robot_size(m)),
+                        // an eighth of the input's declared range (a steering lock),
+                        // else the template's own min and max
+                        Some("input_range") => input
+                            .and_then(|i| i.range)
+                            .map(|[lo, hi]| (hi - lo).abs() / 8.0),
+                        _ => None,
+                    };
+                    if let Some(r) = half.filter(|r| r.is_finite() && *r > 0.0) {
                         t.insert("min".into(), toml::Value::Float(-r));
                         t.insert("max".into(), toml::Value::Float(r));
                     }
@@ -568,6 +622,7 @@ impl Effect {
                 }
             }
         }
+        self.patch_inverse(m, &mut doc);
         // twist templates over the (substituted) original twist
         if !self.motion.is_empty() {
             let motion = doc
@@ -904,6 +959,53 @@ omega = "radius*(fr + rr - fl - rl)/(2*track)"   # effective track
             .unwrap_err()
             .contains("no parameter `zz`"));
         assert_eq!(eff.applicability(&after), Applicability::AlreadyIn);
+    }
+
+    /// A steering encoder in ticks: the offset is in ticks, bounded by an eighth
+    /// of the declared range, and the declared inverse adds it back.
+    #[test]
+    fn steering_offset_is_in_the_encoders_units_and_keeps_the_inverse() {
+        let cat = catalogue(&[]).unwrap();
+        let m = model(include_str!("../../tests/user_specs/fwd_tricycle.toml"));
+        let eff = find(&cat, "steering_offset").unwrap();
+        let params = eff.parameters_for(&m);
+        assert_eq!(params.len(), 1);
+        let t = &params[0].table;
+        assert_eq!(t["unit"].as_str(), Some("tick"));
+        assert_eq!(t["max"].as_float(), Some(225.0)); // range [-900, 900] / 8
+        let text = eff
+            .apply(&m, &BTreeMap::from([("steer_offset_steer".into(), 40.0)]))
+            .unwrap();
+        let after = Model::parse(Path::new("robot.toml"), &text).unwrap();
+        assert!(
+            text.contains("/steer_gain) + steer_offset_steer)"),
+            "inverse not patched:\n{text}"
+        );
+        assert_eq!(
+            after
+                .params
+                .iter()
+                .find(|p| p.name == "steer_offset_steer")
+                .unwrap()
+                .unit,
+            "tick"
+        );
+        // an effect that substitutes the wheels without an inverse template drops it
+        let mut bare = find(&cat, "wheel_radius_asymmetry").unwrap().clone();
+        for e in &mut bare.each_input {
+            e.inverse = None;
+        }
+        let skid = model(include_str!("../../tests/user_specs/skid4.toml"));
+        assert!(skid.source.contains("[inverse]"));
+        let text = bare.apply(&skid, &BTreeMap::new()).unwrap();
+        assert!(!text.contains("[inverse]"), "{text}");
+        // with the bundled templates it is kept, divided by the asymmetry
+        let wra = find(&cat, "wheel_radius_asymmetry").unwrap();
+        let text = wra.apply(&skid, &BTreeMap::new()).unwrap();
+        assert!(
+            text.contains("[inverse]") && text.contains("/(1 + radius_asym))"),
+            "{text}"
+        );
     }
 
     #[test]
