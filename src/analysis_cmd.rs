@@ -412,10 +412,10 @@ pub struct FitArgs {
     #[arg(long, default_value = "lm", value_parser = method_names())]
     pub method: String,
     /// Square side (m) of the UMBMark runs.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = positive)]
     pub side: f64,
     /// EKF measurement-noise inflation mu (seed 000 eq. 26), rad/s.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.01, value_parser = non_negative)]
     pub mu: f64,
     /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
     #[arg(long)]
@@ -442,6 +442,22 @@ pub struct FitArgs {
     /// drive, every calibrated parameter with its standard deviation otherwise).
     #[arg(long, num_args = 2, value_names = ["FORMAT", "PATH"])]
     pub export: Vec<String>,
+}
+
+/// A finite number above zero (clap reports the option on error).
+fn positive(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a finite number above 0")),
+    }
+}
+
+/// A finite number, zero or above.
+fn non_negative(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a finite number of 0 or more")),
+    }
 }
 
 /// `--method` values with their one-line descriptions, from the method registry.

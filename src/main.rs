@@ -52,8 +52,8 @@ enum Command {
         /// The spec to verify (default: every spec in spec/).
         #[arg(long)]
         spec: Option<PathBuf>,
-        /// Samples per property.
-        #[arg(long, default_value_t = 200)]
+        /// Samples per property (at least 1: a check on no samples proves nothing).
+        #[arg(long, default_value_t = 200, value_parser = at_least_one)]
         samples: usize,
     },
     /// Run the model against logs with nominal parameters: how large the error is,
@@ -184,5 +184,13 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => analysis_cmd::bad(e),
         },
+    }
+}
+
+/// A whole number of 1 or more.
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("`{s}` is not a whole number of 1 or more")),
     }
 }

@@ -1080,3 +1080,44 @@ fn calibrated_values_export_as_ros2_yaml() {
         assert!(stderr(&o).contains(needle), "{}", stderr(&o));
     }
 }
+
+/// Issue #16: numeric options that would give NaN results or empty checks are
+/// refused by name (exit 2), and bounds read as numbers, not as `Some(0.0)`.
+#[test]
+fn nonsensical_numeric_options_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = "spec/diff_drive.toml";
+    let log = simulate(
+        tmp.path(),
+        "cw.csv",
+        &["--spec", spec, "--trajectory", "square-cw"],
+    );
+    let log = log.to_str().unwrap();
+    for (args, needle) in [
+        (
+            vec![
+                "fit", "--spec", spec, "--data", log, "--method", "ekf", "--mu", "nan",
+            ],
+            "--mu",
+        ),
+        (
+            vec![
+                "fit", "--spec", spec, "--data", log, "--method", "umbmark", "--side", "0",
+            ],
+            "--side",
+        ),
+        (
+            vec!["verify", "--spec", spec, "--samples", "0"],
+            "--samples",
+        ),
+        (
+            vec!["compare", "--spec", spec, "--data", log, "--set", "b=0"],
+            "(above 0)",
+        ),
+    ] {
+        let o = kinegen(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
+        assert!(!stderr(&o).contains("Some("), "{}", stderr(&o));
+    }
+}

@@ -13,7 +13,7 @@ pub enum ModelError {
     },
     #[error("--set {0}: expected NAME=VALUE with a finite number")]
     BadSet(String),
-    #[error("--set {name}={value}: outside the declared bounds of `{name}` (min {min:?} exclusive, max {max:?})")]
+    #[error("--set {name}={value}: outside the declared bounds of `{name}` ({})", bounds_text(*.min, *.max))]
     OutOfBounds {
         name: String,
         value: f64,
@@ -22,6 +22,16 @@ pub enum ModelError {
     },
     #[error("model `{0}` lacks the function `{1}` (regenerate its IR)")]
     Missing(String, String),
+}
+
+/// Declared bounds for people: "above 0", "above 0 and at most 1", "at most 2".
+fn bounds_text(min: Option<f64>, max: Option<f64>) -> String {
+    match (min, max) {
+        (Some(a), Some(b)) => format!("above {a} and at most {b}"),
+        (Some(a), None) => format!("above {a}"),
+        (None, Some(b)) => format!("at most {b}"),
+        (None, None) => "none".into(),
+    }
 }
 
 #[derive(Debug, Clone)]
