@@ -10,6 +10,7 @@ mod effects_cmd;
 mod export;
 mod generate_cmd;
 mod ir_source;
+mod localize_cmd;
 mod output;
 mod progress;
 mod report;
@@ -61,6 +62,17 @@ enum Command {
     ///
     /// Example: kinegen compare --spec spec/diff_drive.toml --data ../shared/real/optiodom-diff-square/run-01.csv --report report
     Compare(analysis_cmd::Common),
+    /// EKF localisation with mapped landmarks (seed 001 eq. 1-9) on the model's
+    /// step and observation Jacobians: the track with its covariance, gating of
+    /// outliers, NIS and NEES against their chi-square bounds.
+    ///
+    /// Example: kinegen localize --spec spec/unicycle_ekf.toml --data run.csv --observations obs.csv --landmarks map.csv --track track.csv
+    Localize {
+        #[command(flatten)]
+        common: analysis_cmd::Common,
+        #[command(flatten)]
+        options: localize_cmd::LocalizeArgs,
+    },
     /// Calibrate the spec's free parameters (bounded Levenberg-Marquardt on the
     /// generated parameter Jacobians): before/after error, estimates with standard
     /// deviations, correlations and identifiability warnings.
@@ -148,6 +160,7 @@ fn main() -> ExitCode {
         } => generate_cmd::run(&spec_dir, &out, check),
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
+        Command::Localize { common, options } => localize_cmd::run(common, &options),
         Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
         Command::Simulate {

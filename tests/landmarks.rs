@@ -192,3 +192,133 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--observations needs --landmarks"));
 }
+
+/// Issue #14.1: `kinegen localize` (seed 001's EKF) on the generated model: with a
+/// 5% speed-scale error, dead reckoning drifts, the filter stays near the truth
+/// with its landmarks, rejects injected outliers at the gate, and reports NIS
+/// and NEES with their bounds; the track CSV has a row per log row. Unknown
+/// noise names are refused.
+#[test]
+fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let spec = "spec/unicycle_ekf.toml";
+    let mut map = String::from("id,x,y\n");
+    for (i, (x, y)) in [
+        (-8.0, -6.0),
+        (9.0, -7.0),
+        (10.0, 8.0),
+        (-9.0, 9.0),
+        (0.0, 12.0),
+        (1.0, -11.0),
+        (-13.0, 0.5),
+        (13.0, 0.0),
+    ]
+    .iter()
+    .enumerate()
+    {
+        map += &format!("L{i},{x},{y}\n");
+    }
+    std::fs::write(dir.join("map.csv"), map).unwrap();
+    let (m, obs) = (dir.join("map.csv"), dir.join("obs.csv"));
+    let log = simulate(
+        dir,
+        "run.csv",
+        &[
+            "--spec",
+            spec,
+            "--trajectory",
+            "random",
+            "--laps",
+            "2",
+            "--set",
+            "v_scale=1.05",
+            "--landmarks",
+            m.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+        ],
+    );
+    // every 40th range 5 m off: outliers
+    let text = std::fs::read_to_string(&obs).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let mut injected = 0;
+    for (i, l) in lines.iter_mut().enumerate().skip(1) {
+        if i % 40 == 0 {
+            let mut f: Vec<String> = l.split(',').map(String::from).collect();
+            f[2] = format!("{}", f[2].parse::<f64>().unwrap() + 5.0);
+            *l = f.join(",");
+            injected += 1;
+        }
+    }
+    std::fs::write(&obs, lines.join("\n") + "\n").unwrap();
+    let track = dir.join("track.csv");
+    let doc = kinegen_json(&[
+        "localize",
+        "--spec",
+        spec,
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        m.to_str().unwrap(),
+        "--noise",
+        "dv=0.05",
+        "--noise",
+        "domega=0.01",
+        "--track",
+        track.to_str().unwrap(),
+    ]);
+    let run = &doc["runs"][0];
+    let (ekf, dr) = (
+        run["position_rmse_m"].as_f64().unwrap(),
+        run["dead_reckoning_rmse_m"].as_f64().unwrap(),
+    );
+    assert!(ekf < 0.5 * dr, "EKF {ekf} m against dead reckoning {dr} m");
+    let rejected = run["observations_rejected"].as_u64().unwrap() as usize;
+    assert!(
+        rejected >= injected * 8 / 10,
+        "{rejected} rejected, {injected} injected"
+    );
+    let (nis, b) = (run["nis_mean"].as_f64().unwrap(), &run["nis_bounds"]);
+    assert!(
+        nis > 0.5 * b[0].as_f64().unwrap() && nis < 2.0 * b[1].as_f64().unwrap(),
+        "NIS {nis} {b}"
+    );
+    assert!(run["nees_mean"].as_f64().is_some());
+    let rows = std::fs::read_to_string(&track).unwrap().lines().count();
+    let log_rows = std::fs::read_to_string(&log).unwrap().lines().count();
+    assert_eq!(
+        rows, log_rows,
+        "one track row per log row (plus the header each)"
+    );
+    // with the spec's own, much smaller process noise the filter is overconfident and says so
+    let o = kinegen(&[
+        "localize",
+        "--spec",
+        spec,
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        m.to_str().unwrap(),
+    ]);
+    assert!(stdout(&o).contains("overconfident"), "{}", stdout(&o));
+    let o = kinegen(&[
+        "localize",
+        "--spec",
+        spec,
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        m.to_str().unwrap(),
+        "--noise",
+        "wheel=1",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--noise wheel"), "{}", stderr(&o));
+}

@@ -9,6 +9,7 @@ pub mod deadreckon;
 pub mod diagnose;
 pub mod fit;
 pub mod landmarks;
+pub mod localize;
 pub mod log;
 pub mod methods;
 pub mod metrics;
