@@ -13,5 +13,7 @@ cd "$(dirname "$0")/.."
 python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt
 python3 verify/casadi/reference.py --check
 cargo build --workspace --all-targets
-cargo run -q --bin kinegen -- generate --check
+# the binary the workspace build just made: `cargo run --bin kinegen` resolves
+# features for the one package and would compile symbolica a second time (~10 min)
+"${CARGO_TARGET_DIR:-target}/debug/kinegen" generate --check
 cargo test --workspace
