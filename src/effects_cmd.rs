@@ -111,6 +111,9 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
             (None, None) => Vec::new(),
             _ => return Err("--landmarks MAP.csv and --observations OBS.csv go together (the map to observe, the file to write)".into()),
         };
+        if traj == Trajectory::Beacons && landmarks.is_empty() {
+            return Err("--trajectory beacons tours the landmarks of --landmarks MAP.csv (with --observations OBS.csv)".into());
+        }
         let o = SimOptions {
             trajectory: traj,
             seed: a.seed,

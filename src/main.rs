@@ -104,7 +104,7 @@ enum Command {
         /// True parameter value NAME=VALUE (default: nominal); repeatable.
         #[arg(long = "set")]
         set: Vec<String>,
-        /// square (UMBMark, both directions), figure8, random, spin.
+        /// square (UMBMark, both directions), figure8, random, spin, beacons (a tour of the --landmarks in order, stopping at the last).
         #[arg(long, default_value = "square")]
         trajectory: String,
         #[arg(long, default_value_t = 1)]

@@ -322,3 +322,77 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--noise wheel"), "{}", stderr(&o));
 }
+
+/// Issue #14.2: `simulate --trajectory beacons` tours the map's landmarks in order
+/// and stops at the last, for a robot that turns in place (unicycle) and one
+/// that cannot (tricycle); without a map it is refused.
+#[test]
+fn the_beacon_tour_visits_every_landmark_and_stops_at_the_last() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let lms = [(4.0, 3.0), (-3.0, 6.0), (-6.0, -2.0), (5.0, -5.0)];
+    let mut map = String::from("id,x,y\n");
+    for (i, (x, y)) in lms.iter().enumerate() {
+        map += &format!("B{i},{x},{y}\n");
+    }
+    let m = dir.join("map.csv");
+    std::fs::write(&m, map).unwrap();
+    for spec in ["spec/unicycle_ekf.toml", "spec/tricycle.toml"] {
+        let obs = dir.join("obs.csv");
+        let log = simulate(
+            dir,
+            "tour.csv",
+            &[
+                "--spec",
+                spec,
+                "--trajectory",
+                "beacons",
+                "--landmarks",
+                m.to_str().unwrap(),
+                "--observations",
+                obs.to_str().unwrap(),
+            ],
+        );
+        let text = std::fs::read_to_string(&log).unwrap();
+        let mut lines = text.lines();
+        let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let (ix, iy) = (
+            head.iter().position(|c| *c == "gt_x").unwrap(),
+            head.iter().position(|c| *c == "gt_y").unwrap(),
+        );
+        let xy: Vec<(f64, f64)> = lines
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[ix].parse().unwrap(), f[iy].parse().unwrap())
+            })
+            .collect();
+        for (x, y) in lms {
+            let closest = xy
+                .iter()
+                .map(|p| (p.0 - x).hypot(p.1 - y))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                closest < 1.2,
+                "{spec}: passes {closest:.2} m from ({x}, {y})"
+            );
+        }
+        let end = xy.last().unwrap();
+        let (lx, ly) = lms[3];
+        assert!(
+            (end.0 - lx).hypot(end.1 - ly) < 0.3,
+            "{spec}: ends at {end:?}"
+        );
+    }
+    let o = kinegen(&[
+        "simulate",
+        "--spec",
+        "spec/unicycle_ekf.toml",
+        "--trajectory",
+        "beacons",
+        "--out",
+        dir.join("x.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--landmarks"), "{}", stderr(&o));
+    assert!(!dir.join("x.csv").exists());
+}

@@ -28,6 +28,9 @@ pub enum Trajectory {
     Random,
     /// Turning in place, both ways (models that can).
     Spin,
+    /// A smooth tour through the mapped landmarks in the map's order, stopping
+    /// at the last (seed 001 sec. 3: the robot visits 12 beacons).
+    Beacons,
 }
 
 impl std::str::FromStr for Trajectory {
@@ -40,8 +43,9 @@ impl std::str::FromStr for Trajectory {
             "figure8" | "figure-eight" => Ok(Trajectory::FigureEight),
             "random" => Ok(Trajectory::Random),
             "spin" | "turn-in-place" => Ok(Trajectory::Spin),
+            "beacons" => Ok(Trajectory::Beacons),
             _ => Err(format!(
-                "unknown trajectory `{s}` (square, square-cw, square-ccw, figure8, random, spin)"
+                "unknown trajectory `{s}` (square, square-cw, square-ccw, figure8, random, spin, beacons)"
             )),
         }
     }
@@ -152,6 +156,55 @@ fn square(can_spin: bool, dirs: &[f64]) -> Vec<Seg> {
     segs
 }
 
+/// Pure pursuit of the landmarks in order from the start pose (0, 0, 0),
+/// planned once on an ideal unicycle at 100 Hz: cruise at 0.5 m/s, turn toward
+/// the next landmark at up to 1 rad/s (and within the curvature limit of a robot
+/// that cannot turn in place), take the next one within 1 m, slow down into the
+/// last. The twist is then replayed open-loop, like the other trajectories.
+fn beacon_tour(
+    landmarks: &[(String, [f64; 2])],
+    can_spin: bool,
+) -> (Box<dyn Fn(f64) -> [f64; 3]>, f64) {
+    const DT: f64 = 0.01;
+    let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 0.0f64);
+    let mut twists: Vec<[f64; 3]> = Vec::new();
+    let mut next = 0;
+    // a bound, so a landmark the robot cannot reach never loops forever
+    while next < landmarks.len() && twists.len() < 200_000 {
+        let [lx, ly] = landmarks[next].1;
+        let d = (lx - x).hypot(ly - y);
+        let last = next + 1 == landmarks.len();
+        if d < if last { 0.05 } else { 1.0 } {
+            next += 1;
+            continue;
+        }
+        let err = crate::log::wrap((ly - y).atan2(lx - x) - th);
+        let t = twists.len() as f64 * DT;
+        // smooth start, slow down into the last landmark, slow in sharp turns
+        let mut v = 0.5 * smooth(t / 2.0) * (1.0 - 0.8 * err.abs() / PI);
+        if last {
+            v = v.min(0.5 * d);
+        }
+        let mut w = (2.0 * err).clamp(-1.0, 1.0);
+        if !can_spin {
+            w = w.clamp(-0.8 * v, 0.8 * v);
+        }
+        twists.push([v, 0.0, w]);
+        let a = w * DT;
+        x += v * DT * (th + 0.5 * a).cos();
+        y += v * DT * (th + 0.5 * a).sin();
+        th += a;
+    }
+    let total = twists.len() as f64 * DT + 1.0;
+    (
+        Box::new(move |t| {
+            let k = (t / DT) as usize;
+            twists.get(k).copied().unwrap_or([0.0; 3])
+        }),
+        total,
+    )
+}
+
 /// The desired body twist at time t, and the total duration.
 fn planner(
     o: &SimOptions,
@@ -208,6 +261,7 @@ fn planner(
                 90.0,
             )
         }
+        Trajectory::Beacons => beacon_tour(&o.landmarks, can_spin),
         Trajectory::Spin => (
             Box::new(|t| {
                 let k = smooth(t / 1.0);
