@@ -33,6 +33,9 @@ $k fit --spec $out/spec/diff_drive.toml --data $data --report $out/fit-after
 
 say kinegen generate --spec-dir $out/spec --out $out/generated
 $k generate --spec-dir $out/spec --out $out/generated
+# the CasADi cross-check needs its pinned Python tooling (PyPI)
+python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt 2>/dev/null \
+  || echo "(could not install the CasADi tooling: verify will skip its CasADi cross-check)"
 say kinegen verify --spec $out/spec/diff_drive.toml --samples 50
 $k verify --spec $out/spec/diff_drive.toml --samples 50 | tail -5
 
