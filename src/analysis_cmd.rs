@@ -445,7 +445,7 @@ pub struct FitArgs {
 }
 
 /// A finite number above zero (clap reports the option on error).
-fn positive(s: &str) -> Result<f64, String> {
+pub fn positive(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
         _ => Err(format!("`{s}` is not a finite number above 0")),
@@ -571,18 +571,6 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         let d0 = scaled(&r.p);
         let hold_nominal =
             (!prep.holdout.is_empty()).then(|| evaluate(r, &r.p, &prep.holdout).rmse);
-        for (_, m) in &mut rows {
-            // a method that ends worse than the nominal values says so
-            let worse = |what: &str, a: f64, b: f64| {
-                (a > 1.001 * b).then(|| format!("\n      WARNING: worse than the nominal parameters on the {what} ({b:.4} m -> {a:.4} m): do not use these values"))
-            };
-            let in_sample = evaluate(r, &m.p, &prep.runs).rmse;
-            let warn = match hold_nominal {
-                Some(b) => worse("held-out runs", evaluate(r, &m.p, &prep.holdout).rmse, b),
-                None => worse("fitted runs", in_sample, before.errors.rmse),
-            };
-            m.note += &warn.unwrap_or_default();
-        }
         for (name, m) in &rows {
             let Evaluation {
                 tracks: after_tracks,
@@ -590,6 +578,16 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
                 ..
             } = evaluation(r, &m.p, &prep.runs);
             let hold = (!prep.holdout.is_empty()).then(|| evaluate(r, &m.p, &prep.holdout));
+            // a method that ends worse than the nominal values says so (on the
+            // held-out runs when there are some)
+            let (what, now, nominal) = match (&hold, hold_nominal) {
+                (Some(h), Some(b)) => ("held-out runs", h.rmse, b),
+                _ => ("fitted runs", after.rmse, before.errors.rmse),
+            };
+            let mut note = m.note.clone();
+            if now > 1.001 * nominal {
+                note += &format!("\n      WARNING: worse than the nominal parameters on the {what} ({nominal:.4} m -> {now:.4} m): do not use these values");
+            }
             let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
             let dist = (!truth.is_empty()).then(|| {
                 if d0 > 0.0 {
@@ -615,12 +613,12 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
                     100.0 * d
                 ))
                 .unwrap_or_default(),
-                m.note
+                note
             ));
             for &i in &r.free {
                 out.say(&format!("      {:<14} {:.6}", r.names[i], m.p[i]));
             }
-            methods_json.insert(name.to_string(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": dist}));
+            methods_json.insert(name.to_string(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": note, "distance_to_truth": dist}));
             per_method.push((name.to_string(), after_tracks));
         }
         if let Some((d, name)) = best {

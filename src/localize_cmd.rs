@@ -12,7 +12,7 @@ use std::process::ExitCode;
 pub struct LocalizeArgs {
     /// Reject an observation whose normalised innovation squared exceeds this
     /// (chi-square with 2 degrees of freedom: 9.21 is its 99% point).
-    #[arg(long, default_value_t = 9.21)]
+    #[arg(long, default_value_t = 9.21, value_parser = crate::analysis_cmd::positive)]
     pub gate: f64,
     /// Write the estimated track with its covariance (t, x, y, theta, var_x,
     /// cov_xy, var_y, var_theta) to this CSV (several runs: one after another,
@@ -28,9 +28,6 @@ pub struct LocalizeArgs {
 
 pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     let out = Out::new(c.json.as_deref());
-    if !(a.gate.is_finite() && a.gate > 0.0) {
-        return bad(format!("--gate {}: a finite number above 0", a.gate));
-    }
     if let Some(t) = &a.track {
         if let Err(e) = crate::output::check_writable("--track", t) {
             return bad(e);

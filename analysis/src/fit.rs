@@ -400,20 +400,15 @@ fn run_residuals(
         landmark_residuals(r, p, free, run, &track, with_jac, &mut res, &mut jac);
     }
     if o.use_gyro {
-        if let (Some(g), Some(h)) = (&run.gyro, r.ir.observation_fn(YawRate, "")) {
+        if let (Some(g), Some(_)) = (&run.gyro, r.ir.observation_fn(YawRate, "")) {
             let hp = r.ir.observation_fn(YawRate, "_jac_p");
             let hx = r.ir.observation_fn(YawRate, "_jac_x");
-            let mut out = [0.0];
             let mut jp = vec![0.0; np];
             let mut jx = [0.0; 3];
             for k in 0..run.steps() {
                 let x = track.pose[k];
-                h.eval_into(
-                    &Runner::obs_args(h, &x, &run.u[k], p, &[]),
-                    &mut out,
-                    &mut scratch,
-                );
-                res.push((out[0] - g[k + 1]) / o.gyro_sigma);
+                // the track already predicted the reading (Track::gyro)
+                res.push((track.gyro[k] - g[k + 1]) / o.gyro_sigma);
                 if with_jac {
                     let (hp, hx) = (hp.unwrap(), hx.unwrap());
                     hp.eval_into(
@@ -639,20 +634,21 @@ fn sandwich(r: &Runner, windows: &[Run], o: &FitOptions, res: &mut FitResult) {
     if m == 0 || windows.len() < 4 * m {
         return; // too few windows to estimate S: keep least squares
     }
-    let scores: Vec<DVector<f64>> = windows
+    // each window's score J_i^T r_i and information J_i^T J_i, from one pass
+    let (scores, infos): (Vec<DVector<f64>>, Vec<DMatrix<f64>>) = windows
         .par_iter()
         .map(|w| {
             let (rv, jv) = run_residuals(r, &r.p, free, w, o, true, [0.0; 3], false);
-            let mut g = DVector::zeros(m);
+            let (mut g, mut info) = (DVector::zeros(m), DMatrix::zeros(m, m));
             for (res, row) in rv.iter().zip(&jv) {
-                for k in 0..m {
-                    g[k] += row[k] * res;
-                }
+                let row = DVector::from_column_slice(&row[..m]);
+                g.axpy(*res, &row, 1.0);
+                info.ger(1.0, &row, &row, 1.0);
             }
-            g
+            (g, info)
         })
-        .collect();
-    let (_, h, _) = normal_equations(r, &r.p, free, windows, o, &[]);
+        .unzip();
+    let h: DMatrix<f64> = infos.iter().fold(DMatrix::zeros(m, m), |a, b| a + b);
     let mut s = DMatrix::zeros(m, m);
     for (i, g) in scores.iter().enumerate() {
         s += g * g.transpose();
@@ -669,22 +665,40 @@ fn sandwich(r: &Runner, windows: &[Run], o: &FitOptions, res: &mut FitResult) {
     // small-sample correction of a cluster-robust S (CR1): G clusters, K parameters
     let g = windows.len() as f64;
     s *= g / (g - m as f64);
-    let eig = nalgebra::SymmetricEigen::new((&h + h.transpose()) * 0.5);
-    let lmax = eig.eigenvalues.max();
-    let mut hinv = DMatrix::zeros(m, m);
-    for (k, &l) in eig.eigenvalues.iter().enumerate() {
-        if l > 1e-12 * lmax {
-            let v = eig.eigenvectors.column(k);
-            hinv += v * v.transpose() / l;
-        }
-    }
+    let hinv = psd_inverse(&h, |l, lmax| l > 1e-12 * lmax);
     let cov = &hinv * s * &hinv;
     for k in 0..m {
         if res.std[k].is_finite() {
             res.std[k] = cov[(k, k)].max(0.0).sqrt();
         }
     }
-    res.corr = DMatrix::from_fn(m, m, |a, b| {
+    res.corr = correlation(&cov);
+}
+
+/// The inverse of a symmetric positive semi-definite matrix on the subspace of
+/// the eigenvalues `keep` accepts (given the largest). A symmetric
+/// eigen-decomposition keeps it positive semi-definite: round-off can leave tiny
+/// negative eigenvalues (in a Schur complement, say), which an SVD
+/// pseudo-inverse would turn into correlations |r| > 1.
+fn psd_inverse(a: &DMatrix<f64>, keep: impl Fn(f64, f64) -> bool) -> DMatrix<f64> {
+    let n = a.nrows();
+    let eig = nalgebra::SymmetricEigen::new((a + a.transpose()) * 0.5);
+    let lmax = eig.eigenvalues.max();
+    let mut inv = DMatrix::zeros(n, n);
+    for (k, &l) in eig.eigenvalues.iter().enumerate() {
+        if keep(l, lmax) {
+            let v = eig.eigenvectors.column(k);
+            inv += v * v.transpose() / l;
+        }
+    }
+    inv
+}
+
+/// Correlations of a covariance matrix, within [-1, 1]; a parameter without
+/// variance is uncorrelated with the others.
+fn correlation(cov: &DMatrix<f64>) -> DMatrix<f64> {
+    let m = cov.nrows();
+    DMatrix::from_fn(m, m, |a, b| {
         let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
         if a == b {
             1.0
@@ -693,7 +707,7 @@ fn sandwich(r: &Runner, windows: &[Run], o: &FitOptions, res: &mut FitResult) {
         } else {
             0.0
         }
-    });
+    })
 }
 
 /// `o` with each residual kind's sigma (position, heading, gyro) scaled by the
@@ -1020,17 +1034,8 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         }
     }
     // The covariance is the inverse of the (marginal) information on its
-    // determined subspace. A symmetric eigen-decomposition keeps it positive
-    // semi-definite: the Schur complement can carry tiny negative eigenvalues from
-    // round-off, which an SVD pseudo-inverse would turn into correlations |r| > 1.
-    let eig = nalgebra::SymmetricEigen::new((&jtj + jtj.transpose()) * 0.5);
-    let mut info_inv = DMatrix::zeros(m, m);
-    for (k, &l) in eig.eigenvalues.iter().enumerate() {
-        if l > cutoff {
-            let v = eig.eigenvectors.column(k);
-            info_inv += v * v.transpose() / l;
-        }
-    }
+    // determined subspace.
+    let info_inv = psd_inverse(&jtj, |l, _| l > cutoff);
     let cov = &d * info_inv * &d * s2;
     // The pseudo-inverse gives an undetermined direction zero variance, which would
     // read as "known exactly": such parameters get an infinite standard deviation
@@ -1044,16 +1049,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             }
         })
         .collect();
-    let corr = DMatrix::from_fn(m, m, |a, b| {
-        let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
-        if d > 0.0 {
-            (cov[(a, b)] / d).clamp(-1.0, 1.0)
-        } else if a == b {
-            1.0
-        } else {
-            0.0
-        }
-    });
+    let corr = correlation(&cov);
     for a in 0..m {
         for b in a + 1..m {
             // (pairs inside an undetermined direction are already warned about)

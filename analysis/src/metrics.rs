@@ -267,7 +267,7 @@ pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment
 
 /// Path length of a planar track, sampled every `every` rows (so measurement
 /// noise does not add length).
-fn path_length(xy: impl Iterator<Item = (f64, f64)>, every: usize) -> f64 {
+pub fn path_length(xy: impl Iterator<Item = (f64, f64)>, every: usize) -> f64 {
     let pts: Vec<(f64, f64)> = xy.step_by(every.max(1)).collect();
     pts.windows(2)
         .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))

@@ -317,11 +317,9 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
 fn square_check(run: &Run, gt: &[[f64; 3]], side: f64) -> Result<(), String> {
     let turn = (gt.last().unwrap()[2] - gt[0][2]).abs().to_degrees();
     // every n/200-th row, so measurement noise does not add length
-    let pts: Vec<&[f64; 3]> = gt.iter().step_by((gt.len() / 200).max(1)).collect();
-    let length: f64 = pts
-        .windows(2)
-        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
-        .sum();
+    let every = (gt.len() / 200).max(1);
+    let length = crate::metrics::path_length(gt.iter().map(|p| (p[0], p[1])), every);
+    let pts: Vec<&[f64; 3]> = gt.iter().step_by(every).collect();
     // a square's sides are driven at four headings 90 degrees apart; a circle
     // or a free path spreads its heading evenly (20 degrees each side of the
     // four: 44% of a circle's length)
