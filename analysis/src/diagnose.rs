@@ -182,6 +182,7 @@ fn one_step(
     let tau = r.param_index("time_offset").map_or(0.0, |i| p[i]);
     for run in runs {
         let Some(g) = &run.gt else { continue };
+        let twists: Vec<Vec<f64>> = (0..run.steps()).map(|k| tw.eval(&[&run.u[k], p])).collect();
         for k in 0..run.steps() {
             let dt = [run.dt[k]];
             // with delayed measurements the motion between rows k and k+1 was
@@ -221,7 +222,7 @@ fn one_step(
                 wrap(g[k + 1][2] - pred[2]),
                 gres,
             ]);
-            let t = tw.eval(&[&run.u[k], p]);
+            let t = motion_around(&twists, k);
             let (v, w) = ((t[0] * t[0] + t[1] * t[1]).sqrt(), t[2]);
             let d = run.dt[k];
             feat.push([v * d, w * d, v * w * d, w.abs() * d, d, v * v * d]);
@@ -231,6 +232,32 @@ fn one_step(
         }
     }
     (res, feat, regimes)
+}
+
+/// The motion of step k for binning its residual, from its neighbours k-2 and
+/// k+2: the step's own inputs carry its own encoder quantisation, which is also
+/// in its residual, so binning by them finds structure that is only that noise
+/// (a straight run whose counts differ by one between the wheels both turns the
+/// model and errs by the turn). Neighbours two steps away share no count with
+/// step k, and the motion is smooth over five steps.
+fn motion_around(twists: &[Vec<f64>], k: usize) -> [f64; 3] {
+    let near: Vec<&Vec<f64>> = [k.checked_sub(2), Some(k + 2)]
+        .into_iter()
+        .flatten()
+        .filter_map(|j| twists.get(j))
+        .collect();
+    let near = if near.is_empty() {
+        vec![&twists[k]]
+    } else {
+        near
+    };
+    let mut m = [0.0; 3];
+    for t in &near {
+        for (a, b) in m.iter_mut().zip(t.iter()) {
+            *a += b / near.len() as f64;
+        }
+    }
+    m
 }
 
 /// The effect's residual signature, for plotting: per step, x = how much one unit
@@ -290,7 +317,6 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
     let (res, feat, regimes) = one_step(r, p, runs);
     let n = res.len();
     let chans = ["along-track", "lateral", "heading", "gyro"];
-    let fnames = ["speed", "yaw rate", "v*omega", "heading", "time"];
     if n < 40 {
         return Structure {
             structured: false,
@@ -309,16 +335,35 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             }
         }
     }
-    let feature = |j: usize, i: usize| -> f64 {
-        let d = feat[i][4].max(1e-12);
-        match j {
-            0 => feat[i][0] / d,
-            1 => feat[i][1] / d,
-            2 => feat[i][2] / d,
-            3 => heading[i],
-            _ => time[i],
+    let per_dt = |j: usize| -> Vec<f64> { feat.iter().map(|f| f[j] / f[4].max(1e-12)).collect() };
+    let mut features: Vec<(String, Vec<f64>)> = vec![
+        ("speed".into(), per_dt(0)),
+        ("yaw rate".into(), per_dt(1)),
+        ("v*omega".into(), per_dt(2)),
+        ("heading".into(), heading),
+        ("time".into(), time),
+    ];
+    // absolute inputs (a steering angle) act through their value
+    for (i, inp) in r.ir.inputs.iter().enumerate() {
+        if inp.kind == kinegen_model::spec::InputKind::Absolute {
+            let v = runs
+                .iter()
+                .filter(|run| run.gt.is_some())
+                .flat_map(|run| (0..run.steps()).map(move |k| run.u[k][i]))
+                .collect();
+            features.push((format!("`{}` value", inp.name), v));
         }
-    };
+    }
+    let coords = crate::periodic::coordinates(r, runs);
+    // wheel angles within the revolution, where a revolution is known exactly
+    for c in &coords {
+        if let [(_, rev)] = c.revolution_candidates.as_slice() {
+            if c.unit == "rad" {
+                let v = c.values.iter().map(|v| v.rem_euclid(*rev)).collect();
+                features.push((format!("`{}` wheel angle within a revolution", c.name), v));
+            }
+        }
+    }
     let mut findings = Vec::new();
     let mut worst = 0.0f64;
     let mut structured = false;
@@ -339,9 +384,9 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             findings.push(format!("{cname} residual has a constant offset of {mean:.3e} ({:.1} sigma of its noise, t = {t:.0})", mean / sd));
         }
         let mut best: Option<(f64, f64, usize, usize, f64)> = None; // (eta2, F, feature, bin, bin mean)
-        for j in 0..fnames.len() {
+        for (j, (_, fv)) in features.iter().enumerate() {
             let mut idx: Vec<usize> = (0..n).collect();
-            idx.sort_by(|a, b| feature(j, *a).total_cmp(&feature(j, *b)));
+            idx.sort_by(|a, b| fv[*a].total_cmp(&fv[*b]));
             let bins = 8;
             let mut ss_b = 0.0;
             let mut means = Vec::new();
@@ -382,7 +427,7 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
                 per.sort_by(|a, b| (b.1 / b.2 as f64).total_cmp(&(a.1 / a.2 as f64)));
                 findings.push(format!(
                     "{cname} residual depends on the {} (explains {:.0}% of its variance, F = {f:.0}; strongest in the {} octile, mean {bm:+.2e}); largest in `{}`",
-                    fnames[j],
+                    features[j].0,
                     100.0 * eta2,
                     ["lowest", "2nd", "3rd", "4th", "5th", "6th", "7th", "highest"][bin],
                     per[0].0
@@ -390,11 +435,107 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             }
         }
     }
+    for (finding, eta2) in periodic_findings(&coords, &res, &chans) {
+        structured = true;
+        worst = worst.max(eta2);
+        findings.push(finding);
+    }
     Structure {
         structured,
         findings,
         r2: worst,
     }
+}
+
+/// Explained over residual variance a sinusoid must reach to count: chi-square
+/// with 2 degrees of freedom beyond about 1e-7 under white noise, after the
+/// thousands of frequencies x channels x coordinates tried, with a factor 2 of
+/// margin because one-step residuals from measured poses are not white (each
+/// measurement's noise enters two neighbouring steps).
+const PERIODIC_STAT: f64 = 80.0;
+/// Smallest share of a channel's variance a periodic finding must explain (on
+/// very long logs a negligible ripple is significant but not worth acting on).
+const PERIODIC_ETA2: f64 = 0.002;
+
+/// Most periodic findings reported (each found after removing the ones before).
+const MAX_PERIODIC: usize = 3;
+
+/// Sinusoids of a wheel's cumulative angle or of time in the one-step residuals,
+/// for people, each with its share of its channel's variance. Greedy: the
+/// strongest (coordinate, channel) is reported and its sinusoid removed before
+/// looking again, so one out-of-round wheel is not reported a second time as a
+/// weaker echo in the other wheel or in time (they move together).
+fn periodic_findings(
+    coords: &[crate::periodic::Coordinate],
+    res: &[[f64; 4]],
+    chans: &[&str; 4],
+) -> Vec<(String, f64)> {
+    let mut channels: Vec<Vec<f64>> = (0..4)
+        .map(|ch| res.iter().map(|r| r[ch]).collect())
+        .collect();
+    let moving: Vec<Vec<usize>> = coords
+        .iter()
+        .map(|c| (0..res.len()).filter(|&i| c.moving[i]).collect())
+        .collect();
+    // (coordinate, period, channels, strongest peak) per finding
+    let mut found: Vec<(usize, f64, Vec<usize>, crate::periodic::Peak)> = Vec::new();
+    for _ in 0..MAX_PERIODIC {
+        let best = coords
+            .par_iter()
+            .zip(&moving)
+            .enumerate()
+            .filter_map(|(ci, (c, idx))| {
+                let coord: Vec<f64> = idx.iter().map(|&i| c.values[i]).collect();
+                let ys: Vec<Vec<f64>> = channels
+                    .iter()
+                    .map(|y| idx.iter().map(|&i| y[i]).collect())
+                    .collect();
+                crate::periodic::scan(&coord, &ys)
+                    .into_iter()
+                    .enumerate()
+                    .filter_map(|(ch, p)| p.map(|p| (ci, ch, p)))
+                    .filter(|(_, _, p)| p.stat > PERIODIC_STAT && p.eta2 > PERIODIC_ETA2)
+                    .max_by(|a, b| a.2.stat.total_cmp(&b.2.stat))
+            })
+            .max_by(|a, b| a.2.stat.total_cmp(&b.2.stat));
+        let Some((ci, ch, p)) = best else { break };
+        let c = &coords[ci];
+        // the same cycle seen again (another channel, or what is left of it in
+        // the same one) is one finding
+        match found
+            .iter_mut()
+            .find(|f| f.0 == ci && (f.1 / p.period - 1.0).abs() < 0.05)
+        {
+            Some(f) if !f.2.contains(&ch) => f.2.push(ch),
+            Some(_) => {}
+            None => found.push((ci, p.period, vec![ch], p)),
+        }
+        let coord: Vec<f64> = moving[ci].iter().map(|&i| c.values[i]).collect();
+        let mut y: Vec<f64> = moving[ci].iter().map(|&i| channels[ch][i]).collect();
+        p.remove(&coord, &mut y);
+        for (&i, v) in moving[ci].iter().zip(y) {
+            channels[ch][i] = v;
+        }
+    }
+    found
+        .into_iter()
+        .map(|(ci, _, chs, p)| {
+            let names: Vec<&str> = chs.iter().map(|&c| chans[c]).collect();
+            (
+                format!(
+                    "{} {} periodic: {} (amplitude {:.2e} in {}, {:.1}% of its variance, chi2 = {:.0})",
+                    names.join(" and "),
+                    if names.len() > 1 { "residuals are" } else { "residual is" },
+                    crate::periodic::describe(&coords[ci], p.period),
+                    p.amplitude,
+                    names[0],
+                    100.0 * p.eta2,
+                    p.stat
+                ),
+                p.eta2,
+            )
+        })
+        .collect()
 }
 
 /// The current model of a diagnosis step: its runner, calibration and scores.

@@ -14,6 +14,7 @@ pub mod log;
 pub mod methods;
 pub mod metrics;
 pub mod model;
+pub mod periodic;
 pub mod seed_methods;
 pub mod simulate;
 
