@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it (.ci/run calls this script).
-#  1. install the Python tooling of the CasADi cross-check (pinned versions)
+#  1. install the Python tooling of the CasADi cross-check and of the bag tests
+#     (pinned versions)
 #  2. regenerate the CasADi reference fixtures from the specs and fail if they
 #     differ from the committed ones (the check is live, not frozen)
 #  3. fail if generated/ is stale (kinegen generate --check)
@@ -10,7 +11,7 @@
 #     in parallel, which is also safe here, but is not what this project tests).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt
+python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt
 python3 verify/casadi/reference.py --check
 cargo build --workspace --all-targets
 # the binary the workspace build just made: `cargo run --bin kinegen` resolves

@@ -2,6 +2,7 @@
 use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
+use kinegen_analysis::bag::{is_bag, TopicMap};
 use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon;
 use kinegen_analysis::fit::{fit, FitOptions, FitResult};
@@ -22,6 +23,12 @@ pub struct Common {
     /// Measurement log (CSV, CONTRACT section 2); repeat for several runs.
     #[arg(long, required = true)]
     pub data: Vec<PathBuf>,
+    /// Topic mapping for ROS 2 bags given as --data (TOML: `stamps`, `[inputs]`,
+    /// `[pose]`, `[gyro]`; see the README). Without it: the bag's only
+    /// JointState, PoseStamped/Odometry and Imu topics, joints named as the
+    /// spec's input columns.
+    #[arg(long, value_name = "FILE.toml")]
+    pub topics: Option<PathBuf>,
     /// Runs scored but not fitted; repeatable.
     #[arg(long)]
     pub holdout: Vec<PathBuf>,
@@ -87,10 +94,27 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     let ir = ir_source::load(&c.spec)?;
     let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
     let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;
+    let topics = match &c.topics {
+        Some(p) => TopicMap::read(p).map_err(|e| e.to_string())?,
+        None => TopicMap::default(),
+    };
     let read = |paths: &[PathBuf]| {
         paths
             .iter()
-            .map(|p| Run::read(p, &runner).map_err(|e| e.to_string()))
+            .map(|p| {
+                let bar = is_bag(p).then(|| {
+                    crate::progress::Progress::spinner(
+                        &format!("reading {}", p.display()),
+                        quiet(c),
+                    )
+                });
+                let progress = |done: usize, total: usize| {
+                    if let Some(b) = &bar {
+                        b.message(&format!("{done}/{total} messages"));
+                    }
+                };
+                Run::read_with(p, &runner, &topics, &progress).map_err(|e| e.to_string())
+            })
             .collect::<Result<Vec<_>, _>>()
     };
     let mut runs = read(&c.data)?;
@@ -311,6 +335,8 @@ pub fn compare(c: Common) -> ExitCode {
         .iter()
         .zip(&gyro_tracks)
         .filter_map(|(run, t)| t.as_ref().map(|t| (run, t)))
+        // errors need the ground truth to compare with
+        .filter(|(run, _)| run.gt.is_some())
         .collect();
     let gyro_errors = (!gyro_pairs.is_empty()).then(|| errors(&gyro_pairs));
     if let Some(g) = &gyro_errors {

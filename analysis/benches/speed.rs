@@ -4,6 +4,8 @@
 //!    (diff_drive and omni_caster step_exact and step_exact_jac_p): ns per call
 //!    and their ratio.
 //! 2. Calibration of a 1,000,000-sample diff_drive log: samples per second.
+//! 3. Reading a 10-minute ROS 2 bag at 100 Hz (JointState, PoseStamped, Imu:
+//!    180,000 messages) against the same log as CSV.
 //!
 //! (Diagnosis time per candidate is printed by `kinegen diagnose` itself, which
 //! needs the CLI to derive the augmented models.)
@@ -177,6 +179,175 @@ fn omni_caster_kernels() {
     );
 }
 
+/// The ROS 2 messages of the bag benchmark, for writing (CDR is positional:
+/// these mirror `sensor_msgs/msg/JointState`, `geometry_msgs/msg/PoseStamped`
+/// and `sensor_msgs/msg/Imu`; the tests check the reader against bags that
+/// `rosbags` writes).
+mod ros {
+    use serde::Serialize;
+    #[derive(Serialize)]
+    pub struct Header {
+        pub sec: i32,
+        pub nanosec: u32,
+        pub frame_id: String,
+    }
+    #[derive(Serialize)]
+    pub struct JointState {
+        pub header: Header,
+        pub name: Vec<String>,
+        pub position: Vec<f64>,
+        pub velocity: Vec<f64>,
+        pub effort: Vec<f64>,
+    }
+    #[derive(Serialize)]
+    pub struct PoseStamped {
+        pub header: Header,
+        pub pose: [f64; 7],
+    }
+    #[derive(Serialize)]
+    pub struct Imu {
+        pub header: Header,
+        pub orientation: [f64; 4],
+        pub orientation_covariance: [f64; 9],
+        pub angular_velocity: [f64; 3],
+        pub angular_velocity_covariance: [f64; 9],
+        pub linear_acceleration: [f64; 3],
+        pub linear_acceleration_covariance: [f64; 9],
+    }
+}
+
+/// Write `run` as a bag and as a CSV in `dir`; time reading each back.
+fn bag_reading(r: &Runner, run: &Run, dir: &std::path::Path) {
+    use mcap::records::MessageHeader;
+    use std::collections::BTreeMap;
+    let bag = dir.join("bench.mcap");
+    let csv_path = dir.join("bench.csv");
+    let gt = run.gt.as_ref().unwrap();
+    let mut w = mcap::Writer::new(std::io::BufWriter::new(
+        std::fs::File::create(&bag).unwrap(),
+    ))
+    .unwrap();
+    let mut channel = |topic: &str, ty: &str| {
+        let schema = w.add_schema(ty, "ros2msg", b"").unwrap();
+        w.add_channel(schema, topic, "cdr", &BTreeMap::new())
+            .unwrap()
+    };
+    let (js, ps, imu) = (
+        channel("/joint_states", "sensor_msgs/msg/JointState"),
+        channel("/mocap/pose", "geometry_msgs/msg/PoseStamped"),
+        channel("/imu/data", "sensor_msgs/msg/Imu"),
+    );
+    let mut csv = String::from("t,enc_r,enc_l,gt_x,gt_y,gt_theta,gyro_z\n");
+    let (mut cr, mut cl) = (0.0, 0.0);
+    for k in 0..run.t.len() {
+        let ns = (run.t[k] * 1e9).round() as u64 + 1_700_000_000_000_000_000;
+        let header = || ros::Header {
+            sec: (ns / 1_000_000_000) as i32,
+            nanosec: (ns % 1_000_000_000) as u32,
+            frame_id: "base_link".into(),
+        };
+        if k > 0 {
+            cr += run.u[k - 1][0] * run.dt[k - 1];
+            cl += run.u[k - 1][1] * run.dt[k - 1];
+        }
+        let g = gt[k];
+        let yaw = g[2];
+        let gyro = run.gyro.as_ref().map_or(0.0, |v| v[k]);
+        let mut write = |channel_id: u16, data: Vec<u8>| {
+            w.write_to_known_channel(
+                &MessageHeader {
+                    channel_id,
+                    sequence: k as u32,
+                    log_time: ns,
+                    publish_time: ns,
+                },
+                &data,
+            )
+            .unwrap()
+        };
+        let cdr = |m: &dyn erased::Cdr| m.bytes();
+        write(
+            js,
+            cdr(&ros::JointState {
+                header: header(),
+                name: vec!["enc_r".into(), "enc_l".into()],
+                position: vec![cr, cl],
+                velocity: vec![],
+                effort: vec![],
+            }),
+        );
+        write(
+            ps,
+            cdr(&ros::PoseStamped {
+                header: header(),
+                pose: [
+                    g[0],
+                    g[1],
+                    0.0,
+                    0.0,
+                    0.0,
+                    (yaw / 2.0).sin(),
+                    (yaw / 2.0).cos(),
+                ],
+            }),
+        );
+        write(
+            imu,
+            cdr(&ros::Imu {
+                header: header(),
+                orientation: [0.0, 0.0, 0.0, 1.0],
+                orientation_covariance: [0.0; 9],
+                angular_velocity: [0.0, 0.0, gyro],
+                angular_velocity_covariance: [0.0; 9],
+                linear_acceleration: [0.0, 0.0, 9.81],
+                linear_acceleration_covariance: [0.0; 9],
+            }),
+        );
+        csv.push_str(&format!(
+            "{:.9},{cr},{cl},{},{},{},{gyro}\n",
+            run.t[k],
+            g[0],
+            g[1],
+            kinegen_analysis::log::wrap(yaw)
+        ));
+    }
+    w.finish().unwrap();
+    drop(w);
+    std::fs::write(&csv_path, csv).unwrap();
+    let time = |p: &std::path::Path| {
+        median(
+            (0..5)
+                .map(|_| {
+                    let t0 = Instant::now();
+                    let read = Run::read(p, r).unwrap();
+                    black_box(read);
+                    t0.elapsed().as_secs_f64()
+                })
+                .collect(),
+        )
+    };
+    let (tb, tc) = (time(&bag), time(&csv_path));
+    let mb = std::fs::metadata(&bag).unwrap().len() as f64 / 1e6;
+    println!(
+        "reading a {:.0}-minute bag at 100 Hz ({} messages, {mb:.0} MB): {tb:.3} s; the same log as CSV: {tc:.3} s (ratio bag/CSV {:.2})",
+        run.t.last().unwrap() / 60.0,
+        3 * run.t.len(),
+        tb / tc
+    );
+}
+
+/// CDR bytes (little-endian, with the encapsulation header) of any message.
+mod erased {
+    pub trait Cdr {
+        fn bytes(&self) -> Vec<u8>;
+    }
+    impl<T: serde::Serialize> Cdr for T {
+        fn bytes(&self) -> Vec<u8> {
+            cdr::serialize::<_, _, cdr::CdrLe>(self, cdr::Infinite).unwrap()
+        }
+    }
+}
+
 fn main() {
     let ir = ir();
     let r = Runner::new(ir.clone(), &[]).unwrap();
@@ -211,6 +382,18 @@ fn main() {
     );
 
     omni_caster_kernels();
+
+    {
+        // 10 minutes at 100 Hz
+        let mut bag_run = log(&r, 60_000, 3);
+        let t: Vec<f64> = (0..bag_run.t.len()).map(|k| k as f64 * 0.01).collect();
+        bag_run.dt = t.windows(2).map(|w| w[1] - w[0]).collect();
+        bag_run.t = t;
+        let dir = std::env::temp_dir().join(format!("kinegen-bag-bench-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        bag_reading(&r, &bag_run, &dir);
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     let n = 1_000_000;
     let run = log(&r, n, 2);

@@ -1,5 +1,6 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
+use crate::bag::TopicMap;
 use crate::landmarks::{pose_from_landmarks, LandmarkObs};
 use crate::log::{unwrap, Log, LogError};
 use crate::model::Runner;
@@ -260,11 +261,32 @@ impl Run {
         })
     }
 
-    /// Read a log for a model.
+    /// Read a log for a model: a CSV file, or a ROS 2 bag (MCAP) with the
+    /// default topic mapping.
     pub fn read(path: &std::path::Path, r: &Runner) -> Result<Run, LogError> {
-        let wanted = Run::wanted(r);
-        let w: Vec<&str> = wanted.iter().map(String::as_str).collect();
-        let log = Log::read(path, &w)?;
+        Run::read_with(path, r, &TopicMap::default(), &|_, _| {})
+    }
+
+    /// Read a log for a model; a bag through `topics`, reporting
+    /// `progress(messages read, total)`.
+    pub fn read_with(
+        path: &std::path::Path,
+        r: &Runner,
+        topics: &TopicMap,
+        progress: &dyn Fn(usize, usize),
+    ) -> Result<Run, LogError> {
+        let log = if crate::bag::is_bag(path) {
+            let wanted = crate::bag::Wanted {
+                inputs: r.ir.inputs.iter().map(|i| i.column.clone()).collect(),
+                pose: r.ir.pose_columns(),
+                gyro: r.ir.gyro_column(),
+            };
+            crate::bag::read(path, &wanted, topics, progress)?
+        } else {
+            let wanted = Run::wanted(r);
+            let w: Vec<&str> = wanted.iter().map(String::as_str).collect();
+            Log::read(path, &w)?
+        };
         Run::from_log(&log, r)
     }
 }

@@ -4,6 +4,7 @@
 //! its evaluator, so a freshly edited spec can be simulated, compared, calibrated
 //! and diagnosed without compiling anything, and nothing here touches symbolica
 //! (so it may use threads freely).
+pub mod bag;
 pub mod dataset;
 pub mod deadreckon;
 pub mod diagnose;
@@ -15,6 +16,7 @@ pub mod methods;
 pub mod metrics;
 pub mod model;
 pub mod periodic;
+pub mod rosmsg;
 pub mod seed_methods;
 pub mod simulate;
 

@@ -72,7 +72,10 @@ pub fn scan(coord: &[f64], ys: &[Vec<f64>]) -> Vec<Option<Peak>> {
     let typical_step = steps[steps.len() / 2];
     // (NaN-safe: a NaN range or step is not positive either)
     if !matches!(range.partial_cmp(&0.0), Some(std::cmp::Ordering::Greater))
-        || !matches!(typical_step.partial_cmp(&0.0), Some(std::cmp::Ordering::Greater))
+        || !matches!(
+            typical_step.partial_cmp(&0.0),
+            Some(std::cmp::Ordering::Greater)
+        )
     {
         return none;
     }

@@ -1,0 +1,596 @@
+//! ROS 2 bags (MCAP) read as logs: the topics a mapping names become the
+//! columns of a CSV log (CONTRACT section 2) on one time base, so everything
+//! after reading (checks, runs, fits) is the same for a bag and a CSV.
+//!
+//! Rows are the messages of the first input's `JointState` topic; the other
+//! streams (more joint topics, the pose, the gyro) are interpolated linearly to
+//! their stamps, and rows outside any stream's span are dropped. Time is the
+//! messages' header stamps (or the bag's receive time, if asked), minus the first
+//! row's.
+use crate::log::{wrap, Log, LogError};
+use crate::rosmsg::{self, decode};
+use serde::Deserialize;
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+const JOINT_STATE: &str = "sensor_msgs/msg/JointState";
+const IMU: &str = "sensor_msgs/msg/Imu";
+const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
+const ODOMETRY: &str = "nav_msgs/msg/Odometry";
+const TF: &str = "tf2_msgs/msg/TFMessage";
+const POSE_TYPES: [&str; 3] = [POSE_STAMPED, ODOMETRY, TF];
+
+/// Is this path a bag (an `.mcap` file, or a rosbag2 directory holding one)?
+pub fn is_bag(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e == "mcap") || path.is_dir()
+}
+
+/// Which stamps order the messages.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Stamps {
+    /// The `header.stamp` of each message (when the data was measured).
+    #[default]
+    Header,
+    /// The bag's log time (when the recorder received the message).
+    Receive,
+}
+
+/// A joint of a `JointState` topic that feeds an input column.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointSource {
+    /// Default: the bag's only `JointState` topic.
+    pub topic: Option<String>,
+    /// Default: the log column's name.
+    pub joint: Option<String>,
+}
+
+/// Where the ground-truth pose comes from.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSource {
+    /// A `PoseStamped`, `Odometry` or `TFMessage` topic.
+    pub topic: String,
+    /// For `TFMessage`: the child frame whose pose is the robot's (e.g. `base_link`).
+    pub frame: Option<String>,
+}
+
+/// Where the gyro's yaw rate comes from (`angular_velocity.z` of an `Imu` topic).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuSource {
+    pub topic: String,
+}
+
+/// The `--topics FILE.toml` mapping from a bag's topics to a log's columns.
+/// Everything is optional: an input column defaults to the joint of the same
+/// name in the bag's only `JointState` topic, the pose to its only `PoseStamped`
+/// or `Odometry` topic, the gyro to its only `Imu` topic.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TopicMap {
+    #[serde(default)]
+    pub stamps: Stamps,
+    /// Log column (a spec input's `column`) -> joint.
+    #[serde(default)]
+    pub inputs: BTreeMap<String, JointSource>,
+    pub pose: Option<PoseSource>,
+    pub gyro: Option<ImuSource>,
+}
+
+impl TopicMap {
+    pub fn read(path: &Path) -> Result<TopicMap, LogError> {
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            LogError::new(
+                path,
+                None,
+                None,
+                format!("cannot read the topic mapping: {e}"),
+            )
+        })?;
+        toml::from_str(&text).map_err(|e| {
+            let line = e
+                .span()
+                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+            LogError::new(path, line, None, e.message().to_string())
+        })
+    }
+}
+
+/// The columns a model wants from a bag, by role.
+pub struct Wanted {
+    /// Input columns, in the spec's order.
+    pub inputs: Vec<String>,
+    /// Pose columns (x, y, heading).
+    pub pose: [String; 3],
+    pub gyro: String,
+}
+
+/// One message of a topic kinegen can decode: index in the topic (0-based),
+/// receive time (ns) and CDR bytes.
+struct Raw {
+    index: usize,
+    log_time: u64,
+    data: Vec<u8>,
+}
+
+struct Topic {
+    schema: String,
+    encoding: String,
+    messages: Vec<Raw>,
+}
+
+/// A time series read from one topic.
+struct Series {
+    topic: String,
+    /// Index of each value's message in its topic (counting from 0).
+    index: Vec<usize>,
+    t: Vec<f64>,
+    values: Vec<Vec<f64>>,
+}
+
+/// Read a bag as a log with the `wanted` columns. `progress(done, total)` is
+/// called as messages are read (total 0 when the bag has no summary).
+pub fn read(
+    path: &Path,
+    wanted: &Wanted,
+    map: &TopicMap,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Log, LogError> {
+    let file = resolve(path)?;
+    let err = |m: String| LogError::new(&file, None, None, m);
+    let buf = std::fs::read(&file).map_err(|e| err(format!("cannot read the bag: {e}")))?;
+    let (topics, all) = collect(&file, &buf, progress)?;
+    let listing = || {
+        if all.is_empty() {
+            "the bag has no messages".to_string()
+        } else {
+            format!(
+                "the bag has: {}",
+                all.iter()
+                    .map(|(t, s)| format!("{t} ({s})"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
+    };
+    let only = |types: &[&str], what: &str| -> Result<Option<String>, LogError> {
+        let found: Vec<&String> = all
+            .iter()
+            .filter(|(_, s)| types.contains(&s.as_str()))
+            .map(|(t, _)| t)
+            .collect();
+        match found.as_slice() {
+            [] => Ok(None),
+            [one] => Ok(Some((*one).clone())),
+            many => Err(err(format!(
+                "{} topics could be the {what} ({}): name one in --topics",
+                many.len(),
+                many.iter()
+                    .map(|t| t.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))),
+        }
+    };
+    let typed = |topic: &str, types: &[&str], what: &str| -> Result<&Topic, LogError> {
+        let t = topics
+            .get(topic)
+            .ok_or_else(|| match all.iter().find(|(t, _)| t == topic) {
+                Some((_, s)) => err(format!(
+                    "topic `{topic}` carries {s}; the {what} needs {}",
+                    types.join(" or ")
+                )),
+                None => err(format!("no topic `{topic}` for the {what}; {}", listing())),
+            })?;
+        if !types.contains(&t.schema.as_str()) {
+            return Err(err(format!(
+                "topic `{topic}` carries {}; the {what} needs {}",
+                t.schema,
+                types.join(" or ")
+            )));
+        }
+        if t.encoding != "cdr" {
+            return Err(err(format!(
+                "topic `{topic}` is encoded as `{}`; kinegen reads ROS 2 CDR messages",
+                t.encoding
+            )));
+        }
+        Ok(t)
+    };
+
+    // inputs: one series per JointState topic, with the joints each column needs
+    let mut joints: Vec<(String, String, String)> = Vec::new(); // (column, topic, joint)
+    for col in &wanted.inputs {
+        let src = map.inputs.get(col);
+        let topic = match src.and_then(|s| s.topic.clone()) {
+            Some(t) => t,
+            None => only(&[JOINT_STATE], "wheel and steering joints")?.ok_or_else(|| {
+                err(format!(
+                    "no {JOINT_STATE} topic for the input column `{col}`; {}",
+                    listing()
+                ))
+            })?,
+        };
+        let joint = src
+            .and_then(|s| s.joint.clone())
+            .unwrap_or_else(|| col.clone());
+        joints.push((col.clone(), topic, joint));
+    }
+    let mut columns: HashMap<String, (usize, usize)> = HashMap::new(); // column -> (series, value)
+    let mut series: Vec<Series> = Vec::new();
+    for (col, topic, _) in &joints {
+        if series.iter().all(|s| &s.topic != topic) {
+            let names: Vec<&str> = joints
+                .iter()
+                .filter(|j| &j.1 == topic)
+                .map(|j| j.2.as_str())
+                .collect();
+            let t = typed(topic, &[JOINT_STATE], &format!("input column `{col}`"))?;
+            series.push(joint_series(&file, topic, t, &names, map.stamps)?);
+        }
+        let s = series.iter().position(|s| &s.topic == topic).unwrap();
+        let v = joints
+            .iter()
+            .filter(|j| &j.1 == topic)
+            .position(|j| &j.0 == col)
+            .unwrap();
+        columns.insert(col.clone(), (s, v));
+    }
+    let pose = match &map.pose {
+        Some(p) => Some(p.clone()),
+        None => only(&[POSE_STAMPED, ODOMETRY], "ground-truth pose")?
+            .map(|topic| PoseSource { topic, frame: None }),
+    };
+    if let Some(p) = pose {
+        let t = typed(&p.topic, &POSE_TYPES, "ground-truth pose")?;
+        series.push(pose_series(&file, &p, t, map.stamps)?);
+        for (i, c) in wanted.pose.iter().enumerate() {
+            columns.insert(c.clone(), (series.len() - 1, i));
+        }
+    }
+    let gyro = match &map.gyro {
+        Some(g) => Some(g.topic.clone()),
+        None => only(&[IMU], "gyro")?,
+    };
+    if let Some(topic) = gyro {
+        let t = typed(&topic, &[IMU], "gyro")?;
+        series.push(imu_series(&file, &topic, t, map.stamps)?);
+        columns.insert(wanted.gyro.clone(), (series.len() - 1, 0));
+    }
+    align(&file, &series, &columns, &wanted.pose[2])
+}
+
+/// The `.mcap` file of a path: the file itself, or the only one in a rosbag2
+/// directory.
+fn resolve(path: &Path) -> Result<PathBuf, LogError> {
+    if !path.is_dir() {
+        return Ok(path.to_path_buf());
+    }
+    let err = |m: String| LogError::new(path, None, None, m);
+    let mut found: Vec<PathBuf> = std::fs::read_dir(path)
+        .map_err(|e| err(format!("cannot read the bag directory: {e}")))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .collect();
+    found.sort();
+    match found.len() {
+        1 => Ok(found.remove(0)),
+        0 => Err(err(
+            "no .mcap file in this directory (kinegen reads ROS 2 bags stored as MCAP)".into(),
+        )),
+        n => Err(err(format!(
+            "{n} .mcap files in this directory: give one of them as --data"
+        ))),
+    }
+}
+
+/// Every message of the topics kinegen can decode, by topic, and every topic
+/// of the bag with its type (for messages that list them).
+#[allow(clippy::type_complexity)]
+fn collect(
+    file: &Path,
+    buf: &[u8],
+    progress: &dyn Fn(usize, usize),
+) -> Result<(HashMap<String, Topic>, Vec<(String, String)>), LogError> {
+    let err = |m: String| LogError::new(file, None, None, m);
+    let total = mcap::Summary::read(buf)
+        .ok()
+        .flatten()
+        .and_then(|s| s.stats.map(|s| s.message_count as usize))
+        .unwrap_or(0);
+    let stream =
+        mcap::MessageStream::new(buf).map_err(|e| err(format!("not a readable MCAP file: {e}")))?;
+    let mut topics: HashMap<String, Topic> = HashMap::new();
+    let mut all: Vec<(String, String)> = Vec::new();
+    let mut counts: HashMap<String, usize> = HashMap::new();
+    for (n, m) in stream.enumerate() {
+        let m = m.map_err(|e| {
+            err(format!(
+                "truncated or corrupt MCAP file after {n} messages: {e}"
+            ))
+        })?;
+        let ch = &m.channel;
+        let schema = ch
+            .schema
+            .as_ref()
+            .map_or("(no schema)".to_string(), |s| s.name.clone());
+        if !all.iter().any(|(t, _)| t == &ch.topic) {
+            all.push((ch.topic.clone(), schema.clone()));
+        }
+        let index = counts.entry(ch.topic.clone()).or_default();
+        if [JOINT_STATE, IMU].contains(&schema.as_str()) || POSE_TYPES.contains(&schema.as_str()) {
+            topics
+                .entry(ch.topic.clone())
+                .or_insert_with(|| Topic {
+                    schema: schema.clone(),
+                    encoding: ch.message_encoding.clone(),
+                    messages: Vec::new(),
+                })
+                .messages
+                .push(Raw {
+                    index: *index,
+                    log_time: m.log_time,
+                    data: m.data.into_owned(),
+                });
+        }
+        *index += 1;
+        if n % 4096 == 0 {
+            progress(n, total);
+        }
+    }
+    all.sort();
+    Ok((topics, all))
+}
+
+/// "file: topic `/x` message 17": where a message problem is.
+fn at(file: &Path, topic: &str, index: usize, m: impl std::fmt::Display) -> LogError {
+    LogError::new(
+        file,
+        None,
+        None,
+        format!("topic `{topic}` message {index} (counting from 0): {m}"),
+    )
+}
+
+fn stamp(raw: &Raw, header: &rosmsg::Header, stamps: Stamps) -> f64 {
+    match stamps {
+        Stamps::Header => header.stamp.seconds(),
+        Stamps::Receive => raw.log_time as f64 * 1e-9,
+    }
+}
+
+fn decoded<'a, T: Deserialize<'a>>(
+    file: &Path,
+    topic: &str,
+    t: &Topic,
+    raw: &'a Raw,
+) -> Result<T, LogError> {
+    decode(&raw.data).map_err(|e| {
+        at(
+            file,
+            topic,
+            raw.index,
+            format!("cannot decode {}: {e}", t.schema),
+        )
+    })
+}
+
+fn joint_series(
+    file: &Path,
+    topic: &str,
+    t: &Topic,
+    joints: &[&str],
+    stamps: Stamps,
+) -> Result<Series, LogError> {
+    let mut s = Series {
+        topic: topic.to_string(),
+        index: Vec::new(),
+        t: Vec::new(),
+        values: Vec::new(),
+    };
+    for raw in &t.messages {
+        let m: rosmsg::JointState = decoded(file, topic, t, raw)?;
+        let mut row = Vec::with_capacity(joints.len());
+        for j in joints {
+            let i = m.name.iter().position(|n| n == j).ok_or_else(|| {
+                at(
+                    file,
+                    topic,
+                    raw.index,
+                    format!(
+                        "field `name` has no joint `{j}` (it has: {}); map the input column to a joint in --topics",
+                        m.name.join(", ")
+                    ),
+                )
+            })?;
+            let v = *m.position.get(i).ok_or_else(|| {
+                at(
+                    file,
+                    topic,
+                    raw.index,
+                    format!(
+                        "field `position` has {} values for {} joints",
+                        m.position.len(),
+                        m.name.len()
+                    ),
+                )
+            })?;
+            row.push(v);
+        }
+        s.index.push(raw.index);
+        s.t.push(stamp(raw, &m.header, stamps));
+        s.values.push(row);
+    }
+    Ok(s)
+}
+
+fn pose_series(file: &Path, p: &PoseSource, t: &Topic, stamps: Stamps) -> Result<Series, LogError> {
+    let topic = p.topic.as_str();
+    let mut s = Series {
+        topic: topic.to_string(),
+        index: Vec::new(),
+        t: Vec::new(),
+        values: Vec::new(),
+    };
+    let mut children: Vec<String> = Vec::new();
+    for raw in &t.messages {
+        let (header, pose) = match t.schema.as_str() {
+            POSE_STAMPED => {
+                let m: rosmsg::PoseStamped = decoded(file, topic, t, raw)?;
+                (m.header, (m.pose.position, m.pose.orientation))
+            }
+            ODOMETRY => {
+                let m: rosmsg::Odometry = decoded(file, topic, t, raw)?;
+                (m.header, (m.pose.pose.position, m.pose.pose.orientation))
+            }
+            _ => {
+                let frame = p.frame.as_deref().ok_or_else(|| {
+                    LogError::new(file, None, None, format!("topic `{topic}` is a {TF}: say which child frame is the robot with `frame = \"...\"` under [pose] in --topics"))
+                })?;
+                let m: rosmsg::TfMessage = decoded(file, topic, t, raw)?;
+                let Some(tr) = m.transforms.into_iter().find(|tr| {
+                    if !children.contains(&tr.child_frame_id) {
+                        children.push(tr.child_frame_id.clone());
+                    }
+                    tr.child_frame_id == frame
+                }) else {
+                    continue;
+                };
+                (tr.header, (tr.transform.translation, tr.transform.rotation))
+            }
+        };
+        s.index.push(raw.index);
+        s.t.push(stamp(raw, &header, stamps));
+        s.values.push(vec![pose.0.x, pose.0.y, pose.1.yaw()]);
+    }
+    if s.t.is_empty() && t.schema == TF {
+        return Err(LogError::new(
+            file,
+            None,
+            None,
+            format!(
+                "topic `{topic}` never has the frame `{}` (its child frames: {})",
+                p.frame.as_deref().unwrap_or(""),
+                children.join(", ")
+            ),
+        ));
+    }
+    // headings are interpolated unwrapped (and wrapped again in the log)
+    let yaw: Vec<f64> = s.values.iter().map(|v| v[2]).collect();
+    for (v, y) in s.values.iter_mut().zip(crate::log::unwrap(&yaw)) {
+        v[2] = y;
+    }
+    Ok(s)
+}
+
+fn imu_series(file: &Path, topic: &str, t: &Topic, stamps: Stamps) -> Result<Series, LogError> {
+    let mut s = Series {
+        topic: topic.to_string(),
+        index: Vec::new(),
+        t: Vec::new(),
+        values: Vec::new(),
+    };
+    for raw in &t.messages {
+        let m: rosmsg::Imu = decoded(file, topic, t, raw)?;
+        s.index.push(raw.index);
+        s.t.push(stamp(raw, &m.header, stamps));
+        s.values.push(vec![m.angular_velocity.z]);
+    }
+    Ok(s)
+}
+
+/// Put every series on the time base of the first (the input joints), check
+/// the stamps, and build the log.
+fn align(
+    file: &Path,
+    series: &[Series],
+    columns: &HashMap<String, (usize, usize)>,
+    heading: &str,
+) -> Result<Log, LogError> {
+    let err = |m: String| LogError::new(file, None, None, m);
+    for s in series {
+        if s.t.len() < 2 {
+            return Err(err(format!(
+                "topic `{}` has {} message(s) to read",
+                s.topic,
+                s.t.len()
+            )));
+        }
+        if let Some(k) = s
+            .values
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            return Err(at(
+                file,
+                &s.topic,
+                s.index[k],
+                "a value kinegen reads is NaN or infinite",
+            ));
+        }
+        for k in 1..s.t.len() {
+            if s.t[k] <= s.t[k - 1] || !s.t[k].is_finite() {
+                return Err(at(file, &s.topic, s.index[k], format!(
+                    "stamp {:.9} s does not follow {:.9} s (unsorted or duplicated stamps; `stamps = \"receive\"` in --topics orders by the bag's receive time)",
+                    s.t[k], s.t[k - 1]
+                )));
+            }
+        }
+    }
+    let clock = &series[0];
+    let (lo, hi) = series
+        .iter()
+        .fold((f64::NEG_INFINITY, f64::INFINITY), |(a, b), s| {
+            (a.max(s.t[0]), b.min(*s.t.last().unwrap()))
+        });
+    let rows: Vec<usize> = (0..clock.t.len())
+        .filter(|&k| clock.t[k] >= lo && clock.t[k] <= hi)
+        .collect();
+    if rows.len() < 3 {
+        return Err(err(format!(
+            "the topics overlap in time for {} message(s) of `{}` ({:.3} s to {:.3} s): they must be recorded together",
+            rows.len(),
+            clock.topic,
+            lo,
+            hi
+        )));
+    }
+    let t0 = clock.t[rows[0]];
+    let mut out: HashMap<String, Vec<f64>> = HashMap::new();
+    out.insert("t".into(), rows.iter().map(|&k| clock.t[k] - t0).collect());
+    for (col, &(si, vi)) in columns {
+        let s = &series[si];
+        let mut j = 0;
+        let v: Vec<f64> = rows
+            .iter()
+            .map(|&k| {
+                let t = clock.t[k];
+                while j + 2 < s.t.len() && s.t[j + 1] < t {
+                    j += 1;
+                }
+                let a = ((t - s.t[j]) / (s.t[j + 1] - s.t[j])).clamp(0.0, 1.0);
+                let v = s.values[j][vi] + a * (s.values[j + 1][vi] - s.values[j][vi]);
+                if col == heading {
+                    wrap(v)
+                } else {
+                    v
+                }
+            })
+            .collect();
+        if let Some(k) = v.iter().position(|x| !x.is_finite()) {
+            return Err(err(format!(
+                "column `{col}` from topic `{}` is not a finite number near {:.3} s",
+                s.topic,
+                clock.t[rows[k]] - t0
+            )));
+        }
+        out.insert(col.clone(), v);
+    }
+    Ok(Log {
+        path: file.to_path_buf(),
+        len: rows.len(),
+        columns: out,
+    })
+}

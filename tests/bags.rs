@@ -1,0 +1,267 @@
+//! ROS 2 bags (MCAP) as --data (issue 17). The bags are written by the test
+//! tooling (`verify/bags/csv_to_bag.py`, which serialises with the `rosbags`
+//! package's own ROS 2 type store, independently of kinegen's decoder) from a
+//! simulated CSV log; kinegen must give the same answers from the bag as from
+//! the CSV, and locate every problem in a bad bag (file, topic, message).
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Write `log` as a rosbag2 directory `dir/name` (extra arguments for the writer).
+fn bag(dir: &Path, log: &Path, name: &str, extra: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let o = Command::new("python3")
+        .arg(root().join("verify/bags/csv_to_bag.py"))
+        .arg(log)
+        .arg(&out)
+        .args(["--joints", "enc_r,enc_l"])
+        .args(extra)
+        .output()
+        .expect("python3");
+    assert!(
+        o.status.success(),
+        "writing the test bag failed (pip install -r verify/bags/requirements.txt): {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
+
+fn hidden_slip_log(dir: &Path) -> PathBuf {
+    simulate(
+        dir,
+        "slip.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--effect",
+            "lateral_slip=0.2",
+            "--set",
+            "b=0.205",
+            "--trajectory",
+            "random",
+            "--seed",
+            "3",
+        ],
+    )
+}
+
+fn estimates(d: &serde_json::Value) -> Vec<(String, f64)> {
+    let mut v: Vec<(String, f64)> = d["parameters"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, p)| (k.clone(), p["estimate"].as_f64().unwrap()))
+        .collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+#[test]
+fn fit_and_diagnose_answer_the_same_from_the_bag_as_from_the_csv() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = hidden_slip_log(tmp.path());
+    let b = bag(tmp.path(), &csv, "run", &[]);
+    let spec = "spec/diff_drive.toml";
+    let (fc, fb) = (
+        kinegen_json(&["fit", "--spec", spec, "--data", csv.to_str().unwrap()]),
+        kinegen_json(&["fit", "--spec", spec, "--data", b.to_str().unwrap()]),
+    );
+    let (ec, eb) = (estimates(&fc), estimates(&fb));
+    assert_eq!(ec.len(), eb.len());
+    for ((n, c), (_, b)) in ec.iter().zip(&eb) {
+        // stamps are whole nanoseconds in a bag, the CSV's t has 9 decimals
+        assert!(((c - b) / c).abs() < 1e-6, "{n}: CSV {c} bag {b}");
+    }
+    let (dc, db) = (
+        kinegen_json(&["diagnose", "--spec", spec, "--data", csv.to_str().unwrap()]),
+        kinegen_json(&["diagnose", "--spec", spec, "--data", b.to_str().unwrap()]),
+    );
+    assert_eq!(dc["verdict"]["effect"], "lateral_slip", "{}", dc["verdict"]);
+    assert_eq!(db["verdict"]["effect"], dc["verdict"]["effect"]);
+    let k = |d: &serde_json::Value| {
+        d["verdict"]["effects"][0]["parameters"]["k_slip"]["estimate"]
+            .as_f64()
+            .unwrap()
+    };
+    assert!(
+        (k(&dc) - k(&db)).abs() < 1e-6 * k(&dc).abs(),
+        "{} {}",
+        k(&dc),
+        k(&db)
+    );
+    // the .mcap file itself reads as the directory does
+    let file = b.join("run.mcap");
+    let ff = kinegen_json(&["fit", "--spec", spec, "--data", file.to_str().unwrap()]);
+    assert_eq!(estimates(&ff), eb);
+}
+
+/// The README's command: calibrate from a bag, write diff_drive_controller parameters.
+#[test]
+fn fit_from_a_bag_exports_controller_parameters() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = hidden_slip_log(tmp.path());
+    let b = bag(tmp.path(), &csv, "run", &[]);
+    let yaml = tmp.path().join("diff_drive_controller.yaml");
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        b.join("run.mcap").to_str().unwrap(),
+        "--export",
+        "ros2-yaml",
+        yaml.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&yaml).unwrap();
+    assert!(
+        text.contains("wheel_separation:") && text.contains("left_wheel_radius_multiplier:"),
+        "{text}"
+    );
+}
+
+/// Odometry and TF ground truth give the same trajectory errors as the CSV's.
+#[test]
+fn odometry_and_tf_poses_are_read_as_ground_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = hidden_slip_log(tmp.path());
+    let rmse = |data: &Path, topics: Option<&Path>| {
+        let mut a = vec![
+            "compare",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            data.to_str().unwrap(),
+        ];
+        if let Some(t) = topics {
+            a.extend(["--topics", t.to_str().unwrap()]);
+        }
+        kinegen_json(&a)["errors"]["rmse"].as_f64().unwrap()
+    };
+    let want = rmse(&csv, None);
+    assert!(want > 0.01, "{want}");
+    let odom = bag(tmp.path(), &csv, "odom", &["--pose", "odometry"]);
+    assert!((rmse(&odom, None) / want - 1.0).abs() < 1e-6);
+    let tf = bag(tmp.path(), &csv, "tf", &["--pose", "tf"]);
+    let map = tmp.path().join("topics.toml");
+    std::fs::write(&map, "[pose]\ntopic = \"/tf\"\nframe = \"base_link\"\n").unwrap();
+    assert!((rmse(&tf, Some(&map)) / want - 1.0).abs() < 1e-6);
+    // a TF topic needs its frame
+    std::fs::write(&map, "[pose]\ntopic = \"/tf\"\n").unwrap();
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        tf.to_str().unwrap(),
+        "--topics",
+        map.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("which child frame"), "{}", stderr(&o));
+}
+
+/// Bad bags: exit 2 and a message that names the file, the topic and the message.
+#[test]
+fn bad_bags_are_located() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let csv = hidden_slip_log(t);
+    let good = bag(t, &csv, "good", &[]);
+    let run = |data: &Path, topics: Option<&str>| {
+        let mut a = vec![
+            "fit".to_string(),
+            "--spec".into(),
+            "spec/diff_drive.toml".into(),
+            "--data".into(),
+            data.display().to_string(),
+        ];
+        if let Some(text) = topics {
+            let p = t.join("map.toml");
+            std::fs::write(&p, text).unwrap();
+            a.extend(["--topics".into(), p.display().to_string()]);
+        }
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let o = kinegen(&a);
+        assert_eq!(o.status.code(), Some(2), "{a:?}: {}", stderr(&o));
+        stderr(&o)
+    };
+    // the mapped topic is not in the bag: the topics it has are listed
+    let e = run(&good, Some("[gyro]\ntopic = \"/imu\"\n"));
+    assert!(
+        e.contains("good.mcap")
+            && e.contains("no topic `/imu`")
+            && e.contains("/imu/data (sensor_msgs/msg/Imu)")
+            && e.contains("/joint_states (sensor_msgs/msg/JointState)"),
+        "{e}"
+    );
+    // a topic of the wrong type
+    let e = run(&good, Some("[pose]\ntopic = \"/imu/data\"\n"));
+    assert!(
+        e.contains("topic `/imu/data` carries sensor_msgs/msg/Imu") && e.contains("PoseStamped"),
+        "{e}"
+    );
+    // a joint the messages do not have
+    let e = run(
+        &good,
+        Some("[inputs]\nenc_r = { joint = \"right_wheel_joint\" }\n"),
+    );
+    assert!(
+        e.contains("topic `/joint_states` message 0")
+            && e.contains("no joint `right_wheel_joint` (it has: enc_r, enc_l)"),
+        "{e}"
+    );
+    // a mapping file with a typo is located
+    let e = run(&good, Some("[pose]\ntopc = \"/x\"\n"));
+    assert!(
+        e.contains("map.toml:2") && e.contains("unknown field `topc`"),
+        "{e}"
+    );
+    // unsorted stamps: the message is named, and the way out
+    let swapped = bag(t, &csv, "swapped", &["--swap-stamps", "/imu/data:7"]);
+    let e = run(&swapped, None);
+    assert!(
+        e.contains("topic `/imu/data` message 8") && e.contains("unsorted or duplicated stamps"),
+        "{e}"
+    );
+    // ... which the bag's receive times order
+    let map = t.join("receive.toml");
+    std::fs::write(&map, "stamps = \"receive\"\n").unwrap();
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        swapped.to_str().unwrap(),
+        "--topics",
+        map.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // two candidate topics: name one
+    let two = bag(t, &csv, "two", &["--extra-topic"]);
+    let e = run(&two, None);
+    assert!(
+        e.contains("/joint_states, /other/joint_states") && e.contains("--topics"),
+        "{e}"
+    );
+    // truncated
+    let bytes = std::fs::read(good.join("good.mcap")).unwrap();
+    let cut = t.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let e = run(&cut, None);
+    assert!(
+        e.contains("cut.mcap") && e.contains("truncated or corrupt MCAP file after"),
+        "{e}"
+    );
+    // not a bag at all
+    let junk = t.join("junk.mcap");
+    std::fs::write(&junk, "t,enc_r\n0,1\n").unwrap();
+    let e = run(&junk, None);
+    assert!(e.contains("junk.mcap") && e.contains("MCAP"), "{e}");
+    // a directory without a bag
+    let empty = t.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let e = run(&empty, None);
+    assert!(e.contains("no .mcap file"), "{e}");
+}
