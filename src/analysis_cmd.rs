@@ -120,6 +120,10 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     let mut runs = read(&c.data)?;
     let holdout = read(&c.holdout)?;
     attach_landmarks(c, &runner, &mut runs)?;
+    // results that would be NaN or infinite are refused here, with the row
+    for set in [&runs, &holdout] {
+        check_finite(set, &tracks(&runner, &runner.p, set), &c.set)?;
+    }
     Ok(Prepared {
         runner,
         runs,
@@ -211,6 +215,26 @@ pub fn evaluation(r: &Runner, p: &[f64], runs: &[Run]) -> Evaluation {
         errors,
         landmarks,
     }
+}
+
+/// Refuse tracks that stop being numbers (see `Track::first_non_finite`),
+/// naming the log and its line; `sets` are the --set values, named as suspects.
+pub fn check_finite(
+    runs: &[Run],
+    tracks: &[deadreckon::Track],
+    sets: &[String],
+) -> Result<(), String> {
+    for (run, t) in runs.iter().zip(tracks) {
+        if let Some((k, what)) = t.first_non_finite(run) {
+            let suspects = if sets.is_empty() {
+                String::new()
+            } else {
+                format!(" (with --set {})", sets.join(" --set "))
+            };
+            return Err(format!("{}:{}: {what}{suspects}", run.path, k + 2));
+        }
+    }
+    Ok(())
 }
 
 /// The error summary of [`evaluation`].

@@ -32,6 +32,21 @@ pub fn run(c: Common) -> ExitCode {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
+    // a robot that never moves shows no effect; every ratio would be 0/0
+    if prep.runs.iter().all(|r| r.rest_steps() == r.steps()) {
+        let cols: Vec<&str> = prep
+            .runner
+            .ir
+            .inputs
+            .iter()
+            .map(|i| i.column.as_str())
+            .collect();
+        return bad(format!(
+            "{}: the inputs ({}) never change: the model robot never moves, so there is nothing to diagnose",
+            prep.runs.iter().map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
+            cols.join(", ")
+        ));
+    }
     let spec = match Model::load(&c.spec) {
         Ok(m) => m,
         Err(e) => return bad(e),

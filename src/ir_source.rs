@@ -48,15 +48,19 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
     }
     let exe =
         std::env::current_exe().map_err(|e| format!("cannot find the kinegen binary: {e}"))?;
-    let status = Command::new(exe)
+    let mut child = Command::new(exe)
         .args(["derive", "--spec"])
         .arg(spec)
         .arg("--ir-out")
         .arg(&cached)
         .stdout(Stdio::null())
         .stderr(Stdio::inherit())
-        .status()
+        .spawn()
         .map_err(|e| format!("cannot run `kinegen derive`: {e}"))?;
+    crate::signals::child_started(child.id());
+    let status = child.wait();
+    crate::signals::child_finished(child.id());
+    let status = status.map_err(|e| format!("`kinegen derive` did not finish: {e}"))?;
     if !status.success() {
         return Err(format!("{}: derivation failed", spec.display()));
     }

@@ -14,6 +14,7 @@ mod localize_cmd;
 mod output;
 mod progress;
 mod report;
+mod signals;
 mod verify_cmd;
 
 #[derive(Parser)]
@@ -151,6 +152,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    signals::install();
     let cli = Cli::parse();
     match cli.command {
         Command::Generate {

@@ -176,11 +176,92 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
             "gap",
         ),
         (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n1e-300,1,1,0,0,0\n2e-300,2,2,0,0,0\n3e-300,3,3,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":3: column `t`".into(),
+            "t must be in seconds",
+        ),
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,1e308,0,0\n0.15,3,3,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":4".into(),
+            "out of any physical range",
+        ),
+        (
             Box::leak(format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n").into_boxed_str()),
             "short.csv".into(),
             "at least 3",
         ),
     ]
+}
+
+/// Issue 16: parameter values inside their declared bounds that make the model
+/// divide by almost zero, or overflow, give no NaN or infinite result: the
+/// first row where the prediction stops being a number is named, with the
+/// --set values as suspects. A log whose inputs never change is refused by
+/// diagnose (every ratio would be 0/0).
+#[test]
+fn results_that_would_not_be_finite_are_refused_with_the_row() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "log.csv",
+        &["--spec", "spec/diff_drive.toml", "--trajectory", "random"],
+    );
+    for set in ["b=1e-300", "r_r=1e300"] {
+        for cmd in ["compare", "fit", "diagnose"] {
+            let o = kinegen(&[
+                cmd,
+                "--spec",
+                "spec/diff_drive.toml",
+                "--data",
+                log.to_str().unwrap(),
+                "--set",
+                set,
+                "--json",
+                "-",
+            ]);
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(2), "{cmd} --set {set}: {err}");
+            assert!(
+                err.contains("log.csv:") && err.contains("not finite")
+                    || err.contains("gyro reading is"),
+                "{cmd} {set}: {err}"
+            );
+            assert!(
+                err.contains(set) && o.stdout.is_empty(),
+                "{cmd} {set}: {err}"
+            );
+        }
+    }
+    let text = std::fs::read_to_string(&log).unwrap();
+    let still: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                return l.to_string();
+            }
+            let mut c: Vec<&str> = l.split(',').collect();
+            c[1] = "5";
+            c[2] = "7";
+            c.join(",")
+        })
+        .collect();
+    std::fs::write(&log, still.join("\n")).unwrap();
+    let o = kinegen(&[
+        "diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("never change"), "{}", stderr(&o));
 }
 
 #[test]
@@ -1120,4 +1201,56 @@ fn nonsensical_numeric_options_are_refused() {
         assert!(stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
         assert!(!stderr(&o).contains("Some("), "{}", stderr(&o));
     }
+}
+
+/// Issue 16: a run stopped by SIGTERM or SIGINT while it writes its output
+/// leaves no temporary file and no half-written output, and exits 130.
+#[test]
+fn an_interrupted_write_leaves_nothing_behind() {
+    let tmp = tempfile::tempdir().unwrap();
+    for signal in [libc_sig::TERM, libc_sig::INT] {
+        let out = tmp.path().join(format!("out{signal}"));
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_kinegen"))
+            .args(["simulate", "--spec", "spec/diff_drive.toml", "--out"])
+            .arg(out.join("sim.csv"))
+            .current_dir(root())
+            .env("KINEGEN_TEST_WRITE_PAUSE_MS", "3000")
+            .spawn()
+            .unwrap();
+        // wait until the temporary file exists (half written), then signal
+        let t0 = std::time::Instant::now();
+        while std::fs::read_dir(&out).map_or(0, |d| d.count()) == 0 {
+            assert!(t0.elapsed().as_secs() < 60, "the write never started");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let names = |d: &std::path::Path| -> Vec<String> {
+            std::fs::read_dir(d)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+                .collect()
+        };
+        assert!(
+            names(&out).iter().all(|n| n.ends_with(".kinegen-tmp")),
+            "{:?}",
+            names(&out)
+        );
+        let kill = std::process::Command::new("kill")
+            .args([format!("-{signal}"), child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(kill.success());
+        let status = child.wait().unwrap();
+        assert_eq!(status.code(), Some(130), "signal {signal}");
+        assert!(
+            names(&out).is_empty(),
+            "left behind after signal {signal}: {:?}",
+            names(&out)
+        );
+    }
+}
+
+/// Signal numbers for `kill -N` (POSIX values on Linux).
+mod libc_sig {
+    pub const INT: i32 = 2;
+    pub const TERM: i32 = 15;
 }

@@ -27,6 +27,9 @@ pub struct Run {
     pub rate_inputs: Vec<bool>,
 }
 
+/// Shortest time step a log may have, s.
+pub const MIN_STEP_S: f64 = 1e-6;
+
 /// A wrapping counter (`wrap` bits) made continuous: each step's difference is
 /// taken modulo 2^bits into [-2^(bits-1), 2^(bits-1)), then accumulated.
 fn unwrap_counter(c: Vec<f64>, bits: Option<u32>) -> Vec<f64> {
@@ -189,6 +192,18 @@ impl Run {
         let mut sorted = dt.clone();
         sorted.sort_by(f64::total_cmp);
         let median = sorted[sorted.len() / 2];
+        // a step under a microsecond is no sampling interval of a robot: t is in
+        // the wrong unit, or rows are duplicated with rounding noise
+        if let Some(k) = dt.iter().position(|&d| d < MIN_STEP_S) {
+            return Err(log.err(
+                Some(k + 3),
+                Some("t"),
+                format!(
+                    "time step of {:.3e} s (under {MIN_STEP_S} s): t must be in seconds",
+                    dt[k]
+                ),
+            ));
+        }
         if let Some(k) = dt.iter().position(|&d| d > 20.0 * median) {
             return Err(log.err(
                 Some(k + 3),

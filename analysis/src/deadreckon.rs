@@ -24,6 +24,57 @@ pub struct Track {
     pub gyro: Vec<f64>,
 }
 
+impl Track {
+    /// The first row where the track stops being a number, with what did: a
+    /// predicted pose or gyro reading that is not finite (parameters that
+    /// divide by almost zero, an input that overflows), or a pose error against
+    /// the log that overflows (a cell like 1e308). Results past such a row
+    /// would be NaN or infinite, so commands refuse instead.
+    pub fn first_non_finite(&self, run: &Run) -> Option<(usize, String)> {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        // a logged pose so large its square overflows is no position at all
+        // (and the start pose, estimated from the first rows, inherits it)
+        if let Some(g) = &run.gt {
+            if let Some(k) = g
+                .iter()
+                .position(|p| p.iter().any(|v| !(v * v).is_finite()))
+            {
+                return Some((
+                    k,
+                    format!("the measured pose {:?} is out of any physical range", g[k]),
+                ));
+            }
+        }
+        for k in 0..self.measured.len() {
+            if !finite(&self.measured[k]) {
+                return Some((k, format!("the model's predicted pose is not finite ({:?}): check the parameter values and the inputs up to this row", self.measured[k])));
+            }
+            if let Some(g) = &run.gt {
+                let e = [g[k][0] - self.measured[k][0], g[k][1] - self.measured[k][1]];
+                if !(e[0].hypot(e[1])).is_finite() || !(e[0] * e[0] + e[1] * e[1]).is_finite() {
+                    return Some((
+                        k,
+                        format!(
+                            "the pose error against the log overflows (measured pose {:?})",
+                            g[k]
+                        ),
+                    ));
+                }
+            }
+            if k > 0 {
+                if let Some(w) = self
+                    .gyro
+                    .get(k - 1)
+                    .filter(|w| !w.is_finite() || w.abs() > 1e150)
+                {
+                    return Some((k, format!("the model's predicted gyro reading is {w:.3e}: check the parameter values and the inputs")));
+                }
+            }
+        }
+        None
+    }
+}
+
 /// The body pose whose measurement is `measured`: the identity unless the model
 /// has a `pose` observation (e.g. an off-centre marker), which is inverted by a
 /// fixed-point iteration (it is a small displacement of the identity). Also returns
