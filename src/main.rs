@@ -9,6 +9,7 @@ mod diagnose_cmd;
 mod effects_cmd;
 mod export;
 mod generate_cmd;
+mod inverse_cmd;
 mod ir_source;
 mod localize_cmd;
 mod output;
@@ -74,6 +75,12 @@ enum Command {
         #[command(flatten)]
         options: localize_cmd::LocalizeArgs,
     },
+    /// Integrated inverse kinematics along a planned path (seed 001 eq. 12-18):
+    /// each robot's input profile, checked against its inputs' `max_rate` and
+    /// `range`; exit 1 when a robot cannot drive the path as planned.
+    ///
+    /// Example: kinegen inverse --spec spec/diff_drive.toml --spec spec/tricycle.toml --spec spec/omni3.toml --path tour.csv --report report/inverse
+    Inverse(inverse_cmd::InverseArgs),
     /// Calibrate the spec's free parameters (bounded Levenberg-Marquardt on the
     /// generated parameter Jacobians): before/after error, estimates with standard
     /// deviations, correlations and identifiability warnings.
@@ -163,6 +170,7 @@ fn main() -> ExitCode {
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Localize { common, options } => localize_cmd::run(common, &options),
+        Command::Inverse(a) => inverse_cmd::run(&a),
         Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
         Command::Simulate {

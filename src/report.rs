@@ -716,6 +716,113 @@ pub fn methods_report(
     )
 }
 
+/// `kinegen inverse --report`: the planned path, then per spec each input's
+/// profile along it (seed 001 Figs 8-10), with the actuator limits as lines and
+/// the stretches the robot cannot drive shaded.
+pub fn inverse_report(
+    dir: &Path,
+    path: &kinegen_analysis::inverse::PlannedPath,
+    profiles: &[(String, kinegen_analysis::inverse::Profile)],
+    doc: &Value,
+) -> Result<(), String> {
+    const COLORS: [RGBColor; 6] = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+    let mut figs = vec![chart(
+        "planned path",
+        "x (m)",
+        "y (m)",
+        &[(
+            "path",
+            BLACK,
+            path.pose.iter().map(|p| (p[0], p[1])).collect(),
+        )],
+        false,
+        true,
+        &[],
+    )?];
+    let mut table = String::from("<table><tr><th>model</th><th>input</th><th>peak rate</th><th>max_rate</th><th>infeasible stretches</th></tr>");
+    for (model, prof) in profiles {
+        // one figure per unit, so counts/s and rad do not share an axis
+        let mut units: Vec<&str> = prof.inputs.iter().map(|i| i.unit.as_str()).collect();
+        units.dedup();
+        for unit in units {
+            let mut series: Vec<Series> = Vec::new();
+            for (k, inp) in prof.inputs.iter().filter(|i| i.unit == unit).enumerate() {
+                let c = COLORS[k % COLORS.len()];
+                series.push((
+                    inp.name.as_str(),
+                    c,
+                    prof.t
+                        .iter()
+                        .copied()
+                        .zip(inp.value.iter().copied())
+                        .collect(),
+                ));
+                if let (Some(m), kinegen_model::spec::InputKind::Cumulative) =
+                    (inp.max_rate, inp.kind)
+                {
+                    let (a, b) = (prof.t[0], *prof.t.last().unwrap());
+                    series.push(("max_rate", RED, vec![(a, m), (b, m)]));
+                    series.push(("-max_rate", RED, vec![(a, -m), (b, -m)]));
+                }
+            }
+            let names: Vec<&str> = prof
+                .inputs
+                .iter()
+                .filter(|i| i.unit == unit)
+                .map(|i| i.name.as_str())
+                .collect();
+            let marks: Vec<(f64, f64)> = prof
+                .infeasible
+                .iter()
+                .filter(|s| s.input == "path" || names.contains(&s.input.as_str()))
+                .map(|s| (s.t_start, s.t_end))
+                .collect();
+            figs.push(chart(
+                &format!("{model}: inputs in {unit}"),
+                "t (s)",
+                unit,
+                &series,
+                false,
+                false,
+                &marks,
+            )?);
+        }
+        for inp in &prof.inputs {
+            let where_: Vec<String> = prof
+                .infeasible
+                .iter()
+                .filter(|s| s.input == inp.name)
+                .map(|s| format!("{:.2}-{:.2} s", s.t_start, s.t_end))
+                .collect();
+            table += &format!(
+                "<tr><td>{}</td><td>{}</td><td>{:.4} {}</td><td>{}</td><td>{}</td></tr>",
+                esc(model),
+                esc(&inp.name),
+                inp.peak_rate,
+                esc(&inp.unit),
+                inp.max_rate.map_or("-".into(), |m| m.to_string()),
+                if where_.is_empty() {
+                    "none".into()
+                } else {
+                    where_.join(", ")
+                }
+            );
+        }
+    }
+    table += "</table>";
+    let html = page(
+        "Inverse kinematics along a planned path",
+        &format!(
+            "<p>{} (seed 001 eq. 12-18). Shaded: stretches the robot cannot drive as planned.</p>",
+            esc(&path.file.display().to_string())
+        ),
+        &figs,
+        &table,
+        doc,
+    );
+    write(dir, &html)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -9,6 +9,7 @@ pub mod dataset;
 pub mod deadreckon;
 pub mod diagnose;
 pub mod fit;
+pub mod inverse;
 pub mod landmarks;
 pub mod localize;
 pub mod log;

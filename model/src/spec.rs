@@ -57,6 +57,8 @@ struct RawInput {
     #[serde(default)]
     wrap: Option<Spanned<u32>>,
     #[serde(default)]
+    max_rate: Option<Spanned<f64>>,
+    #[serde(default)]
     unit: String,
     #[serde(default)]
     doc: String,
@@ -188,6 +190,13 @@ pub struct Input {
     /// huge backwards jump.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wrap: Option<u32>,
+    /// Actuator limit: the largest |rate| the input can deliver (a cumulative
+    /// input's value is its rate; an absolute input's rate is how fast it can
+    /// change, e.g. a steering servo's slew rate), in the input's unit (per
+    /// second for an absolute input). `kinegen inverse` marks where a path
+    /// needs more.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_rate: Option<f64>,
     pub unit: String,
     pub doc: String,
 }
@@ -472,6 +481,14 @@ impl Model {
                     return Err(cx.err_span(w, "`wrap` is the counter's width in bits (2 to 64)"));
                 }
             }
+            if let Some(m) = &i.max_rate {
+                if !(m.get_ref().is_finite() && *m.get_ref() > 0.0) {
+                    return Err(cx.err_span(
+                        m,
+                        "`max_rate` is the actuator's largest |rate|: a finite number above 0",
+                    ));
+                }
+            }
         }
         for p in &raw.parameter {
             declare(&p.name, "parameter")?;
@@ -739,6 +756,7 @@ impl Model {
                     kind: i.kind,
                     range: i.range,
                     wrap: i.wrap.as_ref().map(|w| *w.get_ref()),
+                    max_rate: i.max_rate.as_ref().map(|m| *m.get_ref()),
                     unit: i.unit.clone(),
                     doc: i.doc.clone(),
                 })

@@ -1,0 +1,138 @@
+//! `kinegen inverse`: the input profiles of one or more robots along a planned
+//! path (kinegen_analysis::inverse), with the stretches their actuators cannot
+//! deliver. Exit 1 when any robot cannot drive the path as planned.
+use crate::analysis_cmd::bad;
+use crate::ir_source;
+use crate::output::Out;
+use clap::Args;
+use kinegen_analysis::inverse::{profile, read_path};
+use kinegen_analysis::model::Runner;
+use serde_json::json;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Args, Debug)]
+pub struct InverseArgs {
+    /// A model spec; repeat to compare several robots on the same path.
+    #[arg(long, required = true)]
+    pub spec: Vec<PathBuf>,
+    /// The planned path: CSV `t,x,y,theta` (world frame, t strictly increasing).
+    #[arg(long)]
+    pub path: PathBuf,
+    /// Write a self-contained HTML report to DIR/index.html.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write one JSON document to PATH (`-`: stdout).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+pub fn run(a: &InverseArgs) -> ExitCode {
+    if let Some(j) = a
+        .json
+        .as_deref()
+        .filter(|j| *j != std::path::Path::new("-"))
+    {
+        if let Err(e) = crate::output::check_writable("--json", j) {
+            return bad(e);
+        }
+    }
+    if let Some(r) = &a.report {
+        if let Err(e) = crate::output::check_writable("--report", &r.join("index.html")) {
+            return bad(e);
+        }
+    }
+    let out = Out::new(a.json.as_deref());
+    let path = match read_path(&a.path) {
+        Ok(p) => p,
+        Err(e) => return bad(e),
+    };
+    let mut profiles = Vec::new();
+    let mut specs_json = Vec::new();
+    let mut feasible = true;
+    for spec in &a.spec {
+        let runner = match ir_source::load(spec)
+            .and_then(|ir| Runner::new(ir, &[]).map_err(|e| e.to_string()))
+        {
+            Ok(r) => r,
+            Err(e) => return bad(e),
+        };
+        let prof = match profile(&runner, &path) {
+            Ok(p) => p,
+            Err(e) => return bad(e),
+        };
+        let name = runner.ir.name.clone();
+        out.say(&format!(
+            "{name} ({}): {} steps over {:.1} s",
+            spec.display(),
+            prof.t.len(),
+            path.t.last().unwrap() - path.t[0]
+        ));
+        for i in &prof.inputs {
+            let per = if i.kind == kinegen_model::spec::InputKind::Absolute {
+                "/s"
+            } else {
+                ""
+            };
+            out.say(&format!(
+                "  {:<8} peak rate {:.4} {}{per}{}",
+                i.name,
+                i.peak_rate,
+                i.unit,
+                i.max_rate
+                    .map(|m| format!(" (max_rate {m})"))
+                    .unwrap_or_default()
+            ));
+        }
+        if prof.infeasible.is_empty() {
+            out.say("  every input within its limits along the whole path");
+        } else {
+            feasible = false;
+            out.say(&format!(
+                "  INFEASIBLE in {} stretch(es):",
+                prof.infeasible.len()
+            ));
+            const SHOWN: usize = 12;
+            for s in prof.infeasible.iter().take(SHOWN) {
+                out.say(&format!(
+                    "    {:.2}-{:.2} s  {}: {}",
+                    s.t_start, s.t_end, s.input, s.why
+                ));
+            }
+            if prof.infeasible.len() > SHOWN {
+                out.say(&format!(
+                    "    ... and {} more (all in --json and --report)",
+                    prof.infeasible.len() - SHOWN
+                ));
+            }
+        }
+        specs_json.push(json!({
+            "spec": spec.display().to_string(),
+            "model": name,
+            "feasible": prof.infeasible.is_empty(),
+            "inputs": prof.inputs.iter().map(|i| json!({"name": i.name, "unit": i.unit, "kind": i.kind, "peak_rate": i.peak_rate, "max_rate": i.max_rate, "range": i.range})).collect::<Vec<_>>(),
+            "infeasible": prof.infeasible,
+            "max_step_miss_m": prof.max_step_miss_m,
+            "profile": {
+                "t": prof.t,
+                "inputs": prof.inputs.iter().map(|i| (i.name.clone(), json!(i.value))).collect::<serde_json::Map<_, _>>(),
+            },
+        }));
+        profiles.push((name, prof));
+    }
+    let doc = json!({"command": "inverse", "path": a.path.display().to_string(), "feasible": feasible, "specs": specs_json});
+    if let Some(dir) = &a.report {
+        if let Err(e) = crate::report::inverse_report(dir, &path, &profiles, &doc) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    if let Err(e) = out.json(a.json.as_deref(), &doc) {
+        return bad(e);
+    }
+    if feasible {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    }
+}

@@ -1,0 +1,194 @@
+//! `kinegen inverse` (issue 14, seed 001 eq. 12-18, Figs 8-10): wheel-rate
+//! profiles of several robots along the bundled beacon tour, from the generated
+//! integrated inverse, checked against the inputs' `max_rate` and `range`.
+mod common;
+use common::*;
+
+fn inverse(args: &[&str]) -> (Option<i32>, serde_json::Value, String) {
+    let mut a = vec!["inverse"];
+    a.extend_from_slice(args);
+    a.extend(["--json", "-"]);
+    let o = kinegen(&a);
+    let doc = serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null);
+    (o.status.code(), doc, stderr(&o))
+}
+
+fn model<'a>(doc: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    doc["specs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["model"] == name)
+        .unwrap()
+}
+
+#[test]
+fn three_robots_on_the_beacon_tour() {
+    let tmp = tempfile::tempdir().unwrap();
+    let report = tmp.path().join("report");
+    let (code, doc, err) = inverse(&[
+        "--spec",
+        "spec/diff_drive.toml",
+        "--spec",
+        "spec/tricycle.toml",
+        "--spec",
+        "spec/omni3.toml",
+        "--path",
+        "data/beacon_tour.csv",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    // the tricycle's steering servo (max_rate 0.5 rad/s) cannot follow the
+    // sharpest turn: exit 1, the stretch named
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(doc["feasible"], false);
+    let tri = model(&doc, "tricycle");
+    let stretches = tri["infeasible"].as_array().unwrap();
+    assert!(
+        !stretches.is_empty() && stretches.iter().all(|s| s["input"] == "alpha"),
+        "{stretches:?}"
+    );
+    assert!(stretches[0]["why"]
+        .as_str()
+        .unwrap()
+        .contains("above max_rate 0.5"));
+    for m in ["diff_drive", "omni3"] {
+        assert_eq!(model(&doc, m)["feasible"], true, "{m}");
+    }
+    // the inputs drive the model along the path: the model's step with them
+    // lands on the next planned pose (exactly for the holonomic omni; the
+    // differential drive follows a path planned along its heading closely)
+    assert!(model(&doc, "omni3")["max_step_miss_m"].as_f64().unwrap() < 1e-9);
+    assert!(
+        model(&doc, "diff_drive")["max_step_miss_m"]
+            .as_f64()
+            .unwrap()
+            < 2e-3
+    );
+    // Figs 8-10: the differential drive's wheels turn forward all along the
+    // tour; only the omni's wheels turn backwards
+    let rates = |m: &str, i: &str| -> Vec<f64> {
+        model(&doc, m)["profile"]["inputs"][i]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    assert!(rates("diff_drive", "n_r")
+        .iter()
+        .chain(&rates("diff_drive", "n_l"))
+        .all(|v| *v > 0.0));
+    assert!(["w1", "w2", "w3"]
+        .iter()
+        .any(|w| rates("omni3", w).iter().any(|v| *v < -0.1)));
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    assert!(
+        html.contains("tricycle: inputs in rad") && html.contains("<svg"),
+        "report"
+    );
+}
+
+#[test]
+fn a_low_max_rate_and_sideways_motion_are_marked() {
+    let tmp = tempfile::tempdir().unwrap();
+    // a user's omni with weaker motors
+    let spec = std::fs::read_to_string(root().join("spec/omni3.toml"))
+        .unwrap()
+        .replace("max_rate = 10.0", "max_rate = 5.0");
+    let weak = tmp.path().join("weak_omni.toml");
+    std::fs::write(&weak, spec).unwrap();
+    let (code, doc, err) = inverse(&[
+        "--spec",
+        weak.to_str().unwrap(),
+        "--path",
+        "data/beacon_tour.csv",
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    let s = doc["specs"][0]["infeasible"].as_array().unwrap();
+    assert!(
+        s.iter()
+            .any(|s| s["input"] == "w2" && s["why"].as_str().unwrap().contains("above max_rate 5")),
+        "{s:?}"
+    );
+    // a path that strafes: the omni drives it, the differential drive cannot
+    let path = tmp.path().join("strafe.csv");
+    let rows: Vec<String> = (0..50)
+        .map(|k| format!("{},0,{},0", k as f64 * 0.1, k as f64 * 0.05))
+        .collect();
+    std::fs::write(&path, format!("t,x,y,theta\n{}\n", rows.join("\n"))).unwrap();
+    let (code, doc, err) = inverse(&[
+        "--spec",
+        "spec/omni3.toml",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--path",
+        path.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(model(&doc, "omni3")["feasible"], true);
+    let dd = model(&doc, "diff_drive")["infeasible"].as_array().unwrap();
+    assert!(
+        dd.iter()
+            .any(|s| s["input"] == "path" && s["why"].as_str().unwrap().contains("sideways")),
+        "{dd:?}"
+    );
+}
+
+#[test]
+fn bad_paths_are_located() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "t,x,y,theta\n0,0,0,0\n0.1,0.1,0,0\n0.1,0.2,0,0\n",
+            ":4: column `t`",
+            "a time step of zero",
+        ),
+        (
+            "t,x,y\n0,0,0\n0.1,0.1,0\n",
+            ":1: column `theta`",
+            "missing column",
+        ),
+        (
+            "t,x,y,theta\n0,0,0,0\n0.1,abc,0,0\n",
+            ":3: column `x`",
+            "not a number",
+        ),
+        ("t,x,y,theta\n0,0,0,0\n", "path.csv", "at least 2"),
+    ];
+    for (text, place, what) in cases {
+        let p = tmp.path().join("path.csv");
+        std::fs::write(&p, text).unwrap();
+        let (code, _, err) = inverse(&[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--path",
+            p.to_str().unwrap(),
+        ]);
+        assert_eq!(code, Some(2), "{err}");
+        assert!(
+            err.contains("path.csv") && err.contains(place) && err.contains(what),
+            "{place} {what}: {err}"
+        );
+    }
+    // a spec error is located in the spec
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(root().join("spec/omni3.toml"))
+            .unwrap()
+            .replacen("max_rate = 10.0", "max_rate = -1.0", 1),
+    )
+    .unwrap();
+    let (code, _, err) = inverse(&[
+        "--spec",
+        bad.to_str().unwrap(),
+        "--path",
+        "data/beacon_tour.csv",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("bad.toml:") && err.contains("max_rate"),
+        "{err}"
+    );
+}
