@@ -69,16 +69,44 @@ pub fn with_effects(
     Ok((model.source, values))
 }
 
+#[derive(clap::Args, Debug)]
 pub struct SimArgs {
+    #[arg(long)]
     pub spec: PathBuf,
+    /// Hidden effect from the catalogue: NAME=VALUE (its first parameter) or NAME.PARAM=VALUE; repeatable.
+    #[arg(long)]
     pub effect: Vec<String>,
+    /// True parameter value NAME=VALUE (default: nominal); repeatable.
+    #[arg(long = "set")]
     pub set: Vec<String>,
+    /// square (UMBMark, both directions), figure8, random, spin, beacons (a tour of the --landmarks in order, stopping at the last).
+    #[arg(long, default_value = "square")]
     pub trajectory: String,
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Repetitions of the trajectory.
+    #[arg(long, default_value_t = 1)]
     pub laps: usize,
+    #[arg(long)]
     pub out: PathBuf,
+    /// Landmark map `id,x,y` to observe (with --observations).
+    #[arg(long)]
     pub landmarks: Option<PathBuf>,
+    /// Write range-bearing observations `t,id,range,bearing` of the --landmarks
+    /// in range (--landmark-range, at --landmark-hz, the noise of the spec's
+    /// `landmark` observation) here.
+    #[arg(long)]
     pub observations: Option<PathBuf>,
+    /// Observations per second of each landmark in range.
+    #[arg(long, default_value_t = 5.0, value_parser = crate::analysis_cmd::positive)]
+    pub landmark_hz: f64,
+    /// Farthest landmark observed, m.
+    #[arg(long, default_value_t = 10.0, value_parser = crate::analysis_cmd::positive)]
+    pub landmark_range: f64,
+    /// Cruise speed of the beacons tour, m/s (seed 001: 5).
+    #[arg(long, default_value_t = 0.5, value_parser = crate::analysis_cmd::positive)]
+    pub speed: f64,
+    #[command(flatten)]
     pub catalogue: crate::analysis_cmd::EffectDirs,
 }
 
@@ -119,6 +147,9 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
             seed: a.seed,
             laps: a.laps,
             landmarks,
+            landmark_hz: a.landmark_hz,
+            landmark_range: a.landmark_range,
+            cruise_speed: a.speed,
             ..SimOptions::default()
         };
         let sim = simulate(&base, &truth, &o);

@@ -24,6 +24,11 @@ pub struct LocalizeArgs {
     /// bounds is overconfident and needs more.
     #[arg(long)]
     pub noise: Vec<String>,
+    /// Noise sweep (seed 001 Figs 6-7): drive the first log's robot again with
+    /// each [[noise]] sigma in turn raised from 0.001 to 0.1, re-observe its
+    /// landmarks, and report the EKF's position error for each.
+    #[arg(long)]
+    pub sweep: bool,
 }
 
 pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
@@ -61,7 +66,13 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         noise_sigma,
         ..EkfOptions::default()
     };
+    if let Some(r) = &c.report {
+        if let Err(e) = crate::output::check_writable("--report", &r.join("index.html")) {
+            return bad(e);
+        }
+    }
     let mut runs_json = Vec::new();
+    let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
     for run in prep.runs.iter().chain(&prep.holdout) {
         if run.landmarks.is_empty() {
@@ -144,6 +155,65 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             "final_pose": loc.track.last(),
             "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
         }));
+        locs.push((run, loc));
+    }
+    let sweep = if a.sweep {
+        match kinegen_analysis::sweep::sweep(r, locs[0].0, &kinegen_analysis::sweep::LEVELS, &o) {
+            Ok(s) => s,
+            Err(e) => return bad(e),
+        }
+    } else {
+        Vec::new()
+    };
+    if !sweep.is_empty() {
+        out.say(&format!(
+            "noise sweep on {} ({} simulated repetitions per level): EKF position RMSE (m)",
+            locs[0].0.path,
+            kinegen_analysis::sweep::SEEDS
+        ));
+        let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
+        names.dedup();
+        out.say(&format!(
+            "  {:<10}{}",
+            "sigma",
+            names.iter().map(|n| format!("{n:>12}")).collect::<String>()
+        ));
+        for level in kinegen_analysis::sweep::LEVELS {
+            let row: String = names
+                .iter()
+                .map(|n| {
+                    let p = sweep
+                        .iter()
+                        .find(|p| p.noise == *n && p.sigma == level)
+                        .unwrap();
+                    format!("{:>12.4}", p.position_rmse_m)
+                })
+                .collect();
+            out.say(&format!("  {level:<10}{row}"));
+        }
+        let top = |n: &str| {
+            sweep
+                .iter()
+                .filter(|p| p.noise == n)
+                .map(|p| p.position_rmse_m)
+                .fold(0.0, f64::max)
+        };
+        let mut ranked: Vec<(&str, f64)> = names.iter().map(|n| (*n, top(n))).collect();
+        ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+        if let [(worst, w), .., (least, l)] = ranked.as_slice() {
+            out.say(&format!(
+                "  at the largest sigma, uncertainty in `{worst}` costs {:.1}x the position error of uncertainty in `{least}`",
+                w / l.max(1e-12)
+            ));
+        }
+    }
+    if let Some(dir) = &c.report {
+        let pairs: Vec<_> = locs.iter().map(|(r, l)| (*r, l)).collect();
+        let doc = json!({"model": r.ir.name, "runs": runs_json, "sweep": sweep});
+        if let Err(e) = crate::report::localize_report(dir, &pairs, &sweep, &doc) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
     }
     if let Some(t) = &a.track {
         if let Err(e) = kinegen_codegen::generate::write_atomic(t, &csv) {
@@ -151,7 +221,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         }
         out.say(&format!("track: {}", t.display()));
     }
-    let doc = json!({"model": r.ir.name, "gate": a.gate, "runs": runs_json});
+    let doc = json!({"model": r.ir.name, "gate": a.gate, "runs": runs_json, "sweep": sweep});
     match out.json(c.json.as_deref(), &doc) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => bad(e),

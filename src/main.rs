@@ -103,35 +103,7 @@ enum Command {
     /// Example: kinegen simulate --spec spec/diff_drive.toml --effect lateral_slip=0.05 --set b=0.21 --trajectory square --seed 3 --out sim.csv
     ///
     /// With landmarks: kinegen simulate --spec spec/unicycle_ekf.toml --trajectory random --landmarks map.csv --observations obs.csv --out sim.csv
-    Simulate {
-        #[arg(long)]
-        spec: PathBuf,
-        /// Hidden effect from the catalogue: NAME=VALUE (its first parameter) or NAME.PARAM=VALUE; repeatable.
-        #[arg(long)]
-        effect: Vec<String>,
-        /// True parameter value NAME=VALUE (default: nominal); repeatable.
-        #[arg(long = "set")]
-        set: Vec<String>,
-        /// square (UMBMark, both directions), figure8, random, spin, beacons (a tour of the --landmarks in order, stopping at the last).
-        #[arg(long, default_value = "square")]
-        trajectory: String,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Repetitions of the trajectory.
-        #[arg(long, default_value_t = 1)]
-        laps: usize,
-        #[arg(long)]
-        out: PathBuf,
-        /// Landmark map `id,x,y` to observe (with --observations).
-        #[arg(long)]
-        landmarks: Option<PathBuf>,
-        /// Write range-bearing observations `t,id,range,bearing` of the --landmarks
-        /// in range (10 m, 5 Hz, the noise of the spec's `landmark` observation) here.
-        #[arg(long)]
-        observations: Option<PathBuf>,
-        #[command(flatten)]
-        catalogue: analysis_cmd::EffectDirs,
-    },
+    Simulate(effects_cmd::SimArgs),
     /// Write a copy of a spec with an effect from the catalogue added.
     ///
     /// Example: kinegen add-effect --spec spec/diff_drive.toml --effect lateral_slip --value k_slip=0.05 --out my_robot.toml
@@ -173,29 +145,7 @@ fn main() -> ExitCode {
         Command::Inverse(a) => inverse_cmd::run(&a),
         Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
-        Command::Simulate {
-            spec,
-            effect,
-            set,
-            trajectory,
-            seed,
-            laps,
-            out,
-            landmarks,
-            observations,
-            catalogue,
-        } => effects_cmd::run_simulate(effects_cmd::SimArgs {
-            spec,
-            effect,
-            set,
-            trajectory,
-            seed,
-            laps,
-            out,
-            landmarks,
-            observations,
-            catalogue,
-        }),
+        Command::Simulate(a) => effects_cmd::run_simulate(a),
         Command::AddEffect {
             spec,
             effect,

@@ -127,18 +127,29 @@ fn chart(
             let color = *color;
             let pts = &decimated(pts);
             // in a scatter chart, a two-point series is a reference line
+            // a series named "" is drawn without a legend entry (one of many
+            // covariance ellipses)
             if scatter && pts.len() > 2 {
-                c.draw_series(pts.iter().map(|p| Circle::new(*p, 1, color.filled())))
-                    .map_err(|e| e.to_string())?
-                    .label(*name)
-                    .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
+                let d = c
+                    .draw_series(pts.iter().map(|p| Circle::new(*p, 1, color.filled())))
+                    .map_err(|e| e.to_string())?;
+                if !name.is_empty() {
+                    d.label(*name)
+                        .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
+                }
             } else {
-                c.draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
-                    .map_err(|e| e.to_string())?
-                    .label(*name)
-                    .legend(move |(x, y)| {
+                let width = if name.is_empty() { 1 } else { 2 };
+                let d = c
+                    .draw_series(LineSeries::new(
+                        pts.iter().copied(),
+                        color.stroke_width(width),
+                    ))
+                    .map_err(|e| e.to_string())?;
+                if !name.is_empty() {
+                    d.label(*name).legend(move |(x, y)| {
                         PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
                     });
+                }
             }
         }
         c.configure_series_labels()
@@ -818,6 +829,93 @@ pub fn inverse_report(
         ),
         &figs,
         &table,
+        doc,
+    );
+    write(dir, &html)
+}
+
+/// `kinegen localize --report`: per run the estimated track against the truth
+/// with 3-sigma position ellipses (seed 001 Figs 3-5), and the noise sweep
+/// (Figs 6-7) when it was run.
+pub fn localize_report(
+    dir: &Path,
+    runs: &[(&Run, &kinegen_analysis::localize::Localization)],
+    sweep: &[kinegen_analysis::sweep::SweepPoint],
+    doc: &Value,
+) -> Result<(), String> {
+    const ELLIPSES: usize = 40;
+    let mut figs = Vec::new();
+    for (run, loc) in runs {
+        let mut series: Vec<Series> = vec![(
+            "EKF estimate",
+            BLUE,
+            loc.track.iter().map(|p| (p[0], p[1])).collect(),
+        )];
+        if run.gt.is_some() {
+            series.push(("ground truth", BLACK, gt_xy(run)));
+        }
+        let every = (loc.track.len() / ELLIPSES).max(1);
+        for (k, (x, p)) in loc.track.iter().zip(&loc.cov).enumerate().step_by(every) {
+            // principal axes of the 2x2 position covariance (closed form)
+            let (a, b, c) = (p[(0, 0)], p[(0, 1)], p[(1, 1)]);
+            let mid = (a + c) / 2.0;
+            let rad = (((a - c) / 2.0).powi(2) + b * b).sqrt();
+            let (l1, l2) = ((mid + rad).max(0.0), (mid - rad).max(0.0));
+            let phi = 0.5 * (2.0 * b).atan2(a - c);
+            let (cp, sp) = (phi.cos(), phi.sin());
+            let pts = (0..=24)
+                .map(|i| {
+                    let t = i as f64 / 24.0 * std::f64::consts::TAU;
+                    let (u, v) = (3.0 * l1.sqrt() * t.cos(), 3.0 * l2.sqrt() * t.sin());
+                    (x[0] + cp * u - sp * v, x[1] + sp * u + cp * v)
+                })
+                .collect();
+            series.push((if k == 0 { "3-sigma ellipse" } else { "" }, RED, pts));
+        }
+        figs.push(chart(
+            &format!("{}: EKF track", run.name),
+            "x (m)",
+            "y (m)",
+            &series,
+            false,
+            true,
+            &[],
+        )?);
+    }
+    if !sweep.is_empty() {
+        const COLORS: [RGBColor; 4] = [BLUE, RED, GREEN, MAGENTA];
+        let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
+        names.dedup();
+        let series: Vec<Series> = names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                (
+                    *n,
+                    COLORS[i % COLORS.len()],
+                    sweep
+                        .iter()
+                        .filter(|p| p.noise == *n)
+                        .map(|p| (p.sigma.log10(), p.position_rmse_m))
+                        .collect(),
+                )
+            })
+            .collect();
+        figs.push(chart(
+            "noise sweep: position RMSE against each process-noise sigma",
+            "log10(sigma)",
+            "position RMSE (m)",
+            &series,
+            false,
+            false,
+            &[],
+        )?);
+    }
+    let html = page(
+        "EKF localisation",
+        "<p>seed 001 eq. 1-9; the sweep reproduces Figs 6-7.</p>",
+        &figs,
+        "",
         doc,
     );
     write(dir, &html)

@@ -396,3 +396,78 @@ fn the_beacon_tour_visits_every_landmark_and_stops_at_the_last() {
     assert!(stderr(&o).contains("--landmarks"), "{}", stderr(&o));
     assert!(!dir.join("x.csv").exists());
 }
+
+/// Issue 14, seed 001 Figs 6-7: in the seed's scenario (a tour of 12 beacons
+/// at 5 m/s, range-bearing sensing at 1 Hz), raising the angular actuator
+/// uncertainty hurts localisation much more than raising the linear one. The
+/// bundled map is scaled 5x (beacons 20-50 m apart, as in the seed's figures).
+#[test]
+fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let map = t.join("map.csv");
+    let bundled = std::fs::read_to_string(root().join("data/beacons.csv")).unwrap();
+    let mut scaled = String::from("id,x,y\n");
+    for line in bundled.lines().skip(1) {
+        let c: Vec<&str> = line.split(',').collect();
+        let (x, y): (f64, f64) = (c[1].parse().unwrap(), c[2].parse().unwrap());
+        scaled += &format!("{},{},{}\n", c[0], 5.0 * x, 5.0 * y);
+    }
+    std::fs::write(&map, scaled).unwrap();
+    let obs = t.join("obs.csv");
+    let log = simulate(
+        t,
+        "tour.csv",
+        &[
+            "--spec",
+            "spec/unicycle_ekf.toml",
+            "--trajectory",
+            "beacons",
+            "--speed",
+            "5",
+            "--landmark-hz",
+            "1",
+            "--landmark-range",
+            "30",
+            "--landmarks",
+            map.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+        ],
+    );
+    let report = t.join("report");
+    let d = kinegen_json(&[
+        "localize",
+        "--spec",
+        "spec/unicycle_ekf.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+        "--sweep",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    let at = |noise: &str, sigma: f64| {
+        d["sweep"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["noise"] == noise && (p["sigma"].as_f64().unwrap() - sigma).abs() < 1e-12)
+            .unwrap()["position_rmse_m"]
+            .as_f64()
+            .unwrap()
+    };
+    let (dv, dw) = (at("dv", 0.1), at("domega", 0.1));
+    println!(
+        "position RMSE at sigma 0.1: linear {dv:.4} m, angular {dw:.4} m; at 0.001: {:.4} / {:.4}",
+        at("dv", 0.001),
+        at("domega", 0.001)
+    );
+    assert!(dw > 1.4 * dv, "angular {dw} vs linear {dv}");
+    assert!(dw > 2.0 * at("domega", 0.001), "{dw}");
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    assert!(html.contains("noise sweep") && html.contains("3-sigma ellipse"));
+}

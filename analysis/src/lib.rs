@@ -20,6 +20,7 @@ pub mod periodic;
 pub mod rosmsg;
 pub mod seed_methods;
 pub mod simulate;
+pub mod sweep;
 
 pub use kinegen_model::effects;
 pub use kinegen_model::ir::ModelIr;

@@ -66,6 +66,8 @@ pub struct SimOptions {
     pub landmarks: Vec<(String, [f64; 2])>,
     pub landmark_hz: f64,
     pub landmark_range: f64,
+    /// Cruise speed of the beacons tour, m/s.
+    pub cruise_speed: f64,
 }
 
 impl Default for SimOptions {
@@ -81,6 +83,7 @@ impl Default for SimOptions {
             landmarks: Vec::new(),
             landmark_hz: 5.0,
             landmark_range: 10.0,
+            cruise_speed: 0.5,
         }
     }
 }
@@ -157,13 +160,14 @@ fn square(can_spin: bool, dirs: &[f64]) -> Vec<Seg> {
 }
 
 /// Pure pursuit of the landmarks in order from the start pose (0, 0, 0),
-/// planned once on an ideal unicycle at 100 Hz: cruise at 0.5 m/s, turn toward
+/// planned once on an ideal unicycle at 100 Hz: cruise at `speed` (m/s), turn toward
 /// the next landmark at up to 1 rad/s (and within the curvature limit of a robot
 /// that cannot turn in place), take the next one within 1 m, slow down into the
 /// last. The twist is then replayed open-loop, like the other trajectories.
 fn beacon_tour(
     landmarks: &[(String, [f64; 2])],
     can_spin: bool,
+    speed: f64,
 ) -> (Box<dyn Fn(f64) -> [f64; 3]>, f64) {
     const DT: f64 = 0.01;
     let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 0.0f64);
@@ -181,9 +185,9 @@ fn beacon_tour(
         let err = crate::log::wrap((ly - y).atan2(lx - x) - th);
         let t = twists.len() as f64 * DT;
         // smooth start, slow down into the last landmark, slow in sharp turns
-        let mut v = 0.5 * smooth(t / 2.0) * (1.0 - 0.8 * err.abs() / PI);
+        let mut v = speed * smooth(t / 2.0) * (1.0 - 0.8 * err.abs() / PI);
         if last {
-            v = v.min(0.5 * d);
+            v = v.min(speed * d);
         }
         let mut w = (2.0 * err).clamp(-1.0, 1.0);
         if !can_spin {
@@ -261,7 +265,7 @@ fn planner(
                 90.0,
             )
         }
-        Trajectory::Beacons => beacon_tour(&o.landmarks, can_spin),
+        Trajectory::Beacons => beacon_tour(&o.landmarks, can_spin, o.cruise_speed),
         Trajectory::Spin => (
             Box::new(|t| {
                 let k = smooth(t / 1.0);
