@@ -71,6 +71,22 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             return bad(e);
         }
     }
+    // mapped landmarks no log ever observes are probably a mapping mistake (an id
+    // spelled differently in the map and the observations)
+    if let Some(m) = &c.landmarks {
+        if let Ok(map) = kinegen_analysis::landmarks::read_map(m) {
+            for (i, id) in map.ids.iter().enumerate() {
+                let seen = prep
+                    .runs
+                    .iter()
+                    .chain(&prep.holdout)
+                    .any(|r| r.landmarks.iter().any(|z| &z.id == id));
+                if !seen {
+                    eprintln!("warning: {}:{}: landmark `{id}` is never observed in the --observations files", m.display(), i + 2);
+                }
+            }
+        }
+    }
     let mut runs_json = Vec::new();
     let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
