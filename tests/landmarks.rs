@@ -460,6 +460,12 @@ fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
             .as_f64()
             .unwrap()
     };
+    // the filter told the true noise is consistent on every simulated tour:
+    // its mean NEES (3 degrees of freedom) stays near 3
+    for p in d["sweep"].as_array().unwrap() {
+        let nees = p["nees_mean"].as_f64().unwrap();
+        assert!((2.0..4.5).contains(&nees), "NEES {nees} at {p}");
+    }
     let (dv, dw) = (at("dv", 0.1), at("domega", 0.1));
     println!(
         "position RMSE at sigma 0.1: linear {dv:.4} m, angular {dw:.4} m; at 0.001: {:.4} / {:.4}",
