@@ -237,6 +237,32 @@ pub fn check_finite(
     Ok(())
 }
 
+/// A method's evaluation: dead reckoning with its parameters, or, for a method
+/// that learned the yaw rate (neural gyrodometry), gyrodometry with its virtual
+/// gyro.
+fn method_evaluation(
+    r: &Runner,
+    m: &kinegen_analysis::methods::Calibration,
+    runs: &[Run],
+) -> Evaluation {
+    let Some(f) = &m.yaw_rate else {
+        return evaluation(r, &m.p, runs);
+    };
+    let tracks: Vec<deadreckon::Track> = runs
+        .iter()
+        .map(|run| {
+            deadreckon::gyrodometry_with(r, &m.p, run, &|k| f(&run.u[k]))
+                .expect("the method checked that the model has twist_gyro")
+        })
+        .collect();
+    let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
+    Evaluation {
+        errors: errors(&pairs),
+        tracks,
+        landmarks: None,
+    }
+}
+
 /// The error summary of [`evaluation`].
 pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
     evaluation(r, p, runs).errors
@@ -492,6 +518,10 @@ pub struct FitArgs {
     /// drive, every calibrated parameter with its standard deviation otherwise).
     #[arg(long, num_args = 2, value_names = ["FORMAT", "PATH"])]
     pub export: Vec<String>,
+    /// Hidden tanh units of the neural gyrodometry network (--method neural or
+    /// all); repeatable: one network per size (seed 000 compares 9 and 50).
+    #[arg(long, default_values_t = [50], value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub hidden: Vec<u32>,
 }
 
 /// A finite number above zero (clap reports the option on error).
@@ -532,7 +562,9 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         residuals,
         likelihood,
         export,
+        hidden,
     } = a;
+    let hidden: Vec<usize> = hidden.iter().map(|h| *h as usize).collect();
     let (side, mu) = (*side, *mu);
     let export = match export.as_slice() {
         [] => None,
@@ -584,19 +616,36 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
                 None => return bad(format!("--method: unknown method `{method}`")),
             }
         };
-        let settings = Settings { side, mu, fit: &fo };
+        // a method with a size (neural gyrodometry) runs once per --hidden size
+        let jobs: Vec<(String, &dyn Method, usize)> = methods
+            .iter()
+            .flat_map(|m| {
+                if m.per_hidden_size() {
+                    hidden
+                        .iter()
+                        .map(|&h| (format!("{}-{h}", m.name()), *m, h))
+                        .collect::<Vec<_>>()
+                } else {
+                    vec![(m.name().to_string(), *m, 0)]
+                }
+            })
+            .collect();
         let mut rows = Vec::new();
         let bar =
-            crate::progress::Progress::bar(methods.len() as u64, "calibration methods", quiet(&c));
-        for m in methods {
-            bar.message(m.name());
+            crate::progress::Progress::bar(jobs.len() as u64, "calibration methods", quiet(&c));
+        for (name, m, h) in jobs {
+            bar.message(&name);
+            let settings = Settings {
+                side,
+                mu,
+                fit: &fo,
+                hidden: h,
+            };
             let result = m.calibrate(r, &prep.runs, &settings);
             bar.inc();
             match result {
-                Ok(res) => rows.push((m.name(), res)),
-                Err(e) if method == "all" => {
-                    out.say(&format!("{}: not applicable here: {e}", m.name()))
-                }
+                Ok(res) => rows.push((name, res)),
+                Err(e) if method == "all" => out.say(&format!("{name}: not applicable here: {e}")),
                 Err(e) => return bad(e),
             }
         }
@@ -626,8 +675,9 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
                 tracks: after_tracks,
                 errors: after,
                 ..
-            } = evaluation(r, &m.p, &prep.runs);
-            let hold = (!prep.holdout.is_empty()).then(|| evaluate(r, &m.p, &prep.holdout));
+            } = method_evaluation(r, m, &prep.runs);
+            let hold =
+                (!prep.holdout.is_empty()).then(|| method_evaluation(r, m, &prep.holdout).errors);
             // a method that ends worse than the nominal values says so (on the
             // held-out runs when there are some)
             let (what, now, nominal) = match (&hold, hold_nominal) {
@@ -648,7 +698,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             });
             if let Some(d) = dist {
                 if best.is_none_or(|b| d < b.0) {
-                    best = Some((d, name));
+                    best = Some((d, name.as_str()));
                 }
             }
             out.say(&format!(
@@ -675,7 +725,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
         }
         // the top-level result is the first method's
-        let first = rows.first().map(|(name, _)| &methods_json[*name]);
+        let first = rows.first().map(|(name, _)| &methods_json[name.as_str()]);
         let doc = json!({
             "model": r.ir.name, "metric": metric_name(&prep.runs),
             "before": {"rmse": before.errors.rmse},

@@ -262,6 +262,18 @@ pub fn predicted_measurements(
 /// arc of that constant twist. None when the run has no gyro column.
 pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
     let gyro = data.gyro.as_ref()?;
+    gyrodometry_with(r, p, data, &|k| gyro[k + 1])
+}
+
+/// Gyrodometry with the yaw rate of step k from `omega(k)`: the gyro's, or a
+/// virtual gyro's (seed 000 sec. 3.2's neural network). None when the model
+/// has no `twist_gyro`.
+pub fn gyrodometry_with(
+    r: &Runner,
+    p: &[f64],
+    data: &Run,
+    omega_of: &dyn Fn(usize) -> f64,
+) -> Option<Track> {
     let tg = r.ir.function("twist_gyro")?;
     let u0 = data.u.first().cloned().unwrap_or_default();
     let (start, _) = body_start(r, p, data.start_pose(), &u0);
@@ -273,8 +285,7 @@ pub fn gyrodometry(r: &Runner, p: &[f64], data: &Run) -> Option<Track> {
     let mut scratch = Vec::new();
     let mut v = [0.0; 2];
     for k in 0..data.steps() {
-        // the gyro row k+1 reports the mean rate over step k (see Run::gyro)
-        let w = gyro[k + 1];
+        let w = omega_of(k);
         tg.eval_into(&[&data.u[k], &[w], p], &mut v, &mut scratch);
         let x = *pose.last().unwrap();
         pose.push(arc_step(x, [v[0], v[1], w], data.dt[k]));

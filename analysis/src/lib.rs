@@ -16,6 +16,7 @@ pub mod log;
 pub mod methods;
 pub mod metrics;
 pub mod model;
+pub mod neural;
 pub mod periodic;
 pub mod rosmsg;
 pub mod seed_methods;

@@ -16,7 +16,12 @@ pub struct Settings<'a> {
     pub mu: f64,
     /// Options of the Levenberg-Marquardt fit.
     pub fit: &'a FitOptions,
+    /// Hidden units of the neural gyrodometry network.
+    pub hidden: usize,
 }
+
+/// A learned yaw rate (rad/s) from one step's inputs: a virtual gyro.
+pub type YawRateModel = std::sync::Arc<dyn Fn(&[f64]) -> f64 + Send + Sync>;
 
 /// One method's outcome.
 pub struct Calibration {
@@ -28,6 +33,10 @@ pub struct Calibration {
     pub note: String,
     /// The full result, for the method that produces one (LM).
     pub fit: Option<FitResult>,
+    /// For a method that learns the yaw rate instead of calibrating the model
+    /// (neural gyrodometry): its tracks are gyrodometry with this virtual gyro
+    /// (and `p` left at the nominal values).
+    pub yaw_rate: Option<YawRateModel>,
 }
 
 pub trait Method: Sync {
@@ -38,10 +47,14 @@ pub trait Method: Sync {
     /// Calibrate `r`'s free parameters from `r.p`; Err says why the method does
     /// not apply to these logs or this model.
     fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String>;
+    /// Run once per `--hidden` size (named `NAME-SIZE`).
+    fn per_hidden_size(&self) -> bool {
+        false
+    }
 }
 
 /// Every calibration method, in the order `--method all` runs and reports them.
-pub static METHODS: &[&dyn Method] = &[&Lm, &Gd, &Ekf, &UmbMark];
+pub static METHODS: &[&dyn Method] = &[&Lm, &Gd, &Ekf, &UmbMark, &Neural];
 
 /// The method called `name`.
 pub fn by_name(name: &str) -> Option<&'static dyn Method> {
@@ -52,6 +65,7 @@ struct Lm;
 struct Gd;
 struct Ekf;
 struct UmbMark;
+struct Neural;
 
 impl Method for Lm {
     fn name(&self) -> &'static str {
@@ -67,6 +81,7 @@ impl Method for Lm {
             std: res.std.clone(),
             note: format!("{} LM iterations", res.iterations),
             fit: Some(res),
+            yaw_rate: None,
         })
     }
 }
@@ -92,6 +107,7 @@ impl Method for Gd {
             std: g.std,
             note,
             fit: None,
+            yaw_rate: None,
         })
     }
 }
@@ -123,6 +139,7 @@ impl Method for Ekf {
             std: e.std,
             note,
             fit: None,
+            yaw_rate: None,
         })
     }
 }
@@ -144,6 +161,49 @@ impl Method for UmbMark {
                 u.ed, u.eb, u.alpha_deg, u.beta_deg, u.cw_runs, u.ccw_runs
             ),
             fit: None,
+            yaw_rate: None,
+        })
+    }
+}
+
+impl Method for Neural {
+    fn name(&self) -> &'static str {
+        "neural"
+    }
+    fn about(&self) -> &'static str {
+        "neural gyrodometry, seed 000 sec. 3.2: a tanh MLP (--hidden N units) trained by LM maps the joint rates to the yaw rate and replaces the gyro; the model's parameters stay nominal"
+    }
+    fn per_hidden_size(&self) -> bool {
+        true
+    }
+    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
+        if r.ir.function("twist_gyro").is_none() {
+            return Err(format!(
+                "model `{}` has no twist_gyro to drive with a learned yaw rate",
+                r.ir.name
+            ));
+        }
+        let angles: Vec<bool> =
+            r.ir.inputs
+                .iter()
+                .map(|i| i.kind == kinegen_model::spec::InputKind::Absolute && i.unit == "rad")
+                .collect();
+        let (net, t) = crate::neural::train(runs, &angles, s.hidden, 0)?;
+        let note = format!(
+            "{} hidden units, {} LM iterations (weights of iteration {} kept: best on the validation split), yaw-rate RMSE {:.4} rad/s on the training steps, {:.4} on the validation steps ({} training samples)",
+            net.hidden(),
+            t.iterations,
+            t.best_iteration,
+            t.train_rmse,
+            t.validation_rmse,
+            t.samples
+        );
+        Ok(Calibration {
+            p: r.p.clone(),
+            std: vec![f64::NAN; r.free.len()],
+            note,
+            fit: None,
+            yaw_rate: Some(std::sync::Arc::new(move |u: &[f64]| net.predict(u))),
         })
     }
 }
