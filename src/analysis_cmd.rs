@@ -533,7 +533,7 @@ pub fn positive(s: &str) -> Result<f64, String> {
 }
 
 /// A finite number, zero or above.
-fn non_negative(s: &str) -> Result<f64, String> {
+pub fn non_negative(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         _ => Err(format!("`{s}` is not a finite number of 0 or more")),

@@ -12,6 +12,7 @@ mod generate_cmd;
 mod inverse_cmd;
 mod ir_source;
 mod localize_cmd;
+mod navigate_cmd;
 mod output;
 mod progress;
 mod report;
@@ -81,6 +82,13 @@ enum Command {
     ///
     /// Example: kinegen inverse --spec spec/diff_drive.toml --spec spec/tricycle.toml --spec spec/omni3.toml --path tour.csv --report report/inverse
     Inverse(inverse_cmd::InverseArgs),
+    /// Cellular-automaton navigation on a grid (seed 004), driven on odometry
+    /// by a real robot with hidden geometry errors: collisions, safety-zone
+    /// intrusions and the final distance to the goal, before and after
+    /// calibrating the odometry (--calibrate umbmark|lm).
+    ///
+    /// Example: kinegen navigate --spec data/seed004/epuck.toml --grid data/seed004/arena.txt --set r_l=0.0201 --set b=0.056 --calibrate umbmark --report report/navigate
+    Navigate(navigate_cmd::NavigateArgs),
     /// Calibrate the spec's free parameters (bounded Levenberg-Marquardt on the
     /// generated parameter Jacobians): before/after error, estimates with standard
     /// deviations, correlations and identifiability warnings.
@@ -143,6 +151,7 @@ fn main() -> ExitCode {
         Command::Compare(c) => analysis_cmd::compare(c),
         Command::Localize { common, options } => localize_cmd::run(common, &options),
         Command::Inverse(a) => inverse_cmd::run(&a),
+        Command::Navigate(a) => navigate_cmd::run(&a),
         Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
         Command::Simulate(a) => effects_cmd::run_simulate(a),

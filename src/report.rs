@@ -921,6 +921,132 @@ pub fn localize_report(
     write(dir, &html)
 }
 
+/// `kinegen navigate --report`: the grid (obstacles dark, safety zone light),
+/// the planned cells, and for each drive the true path (where the robot went)
+/// and the odometry (where it believed it was), collisions marked.
+pub fn navigate_report(
+    dir: &Path,
+    grid: &kinegen_analysis::grid::Grid,
+    drives: &[(&str, &kinegen_analysis::navigate::Drive)],
+    doc: &Value,
+) -> Result<(), String> {
+    use kinegen_analysis::grid::Cell;
+    let (rows, cols) = grid.size();
+    let (w, h) = (cols as f64 * grid.cell, rows as f64 * grid.cell);
+    let mut figs = Vec::new();
+    for (name, d) in drives {
+        let mut svg = String::new();
+        {
+            let px = (W as f64 * 1.4) as u32;
+            let root = SVGBackend::with_string(&mut svg, (px, (px as f64 * h / w) as u32 + 60))
+                .into_drawing_area();
+            root.fill(&WHITE).map_err(|e| e.to_string())?;
+            let mut c = ChartBuilder::on(&root)
+                .caption(
+                    format!(
+                        "{name}: {} collision(s), {:.1} cm from the goal",
+                        d.collisions,
+                        100.0 * d.final_error_m
+                    ),
+                    ("sans-serif", 16),
+                )
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(40)
+                .build_cartesian_2d(0.0..w, 0.0..h)
+                .map_err(|e| e.to_string())?;
+            c.configure_mesh()
+                .disable_mesh()
+                .x_desc("x (m)")
+                .y_desc("y (m)")
+                .draw()
+                .map_err(|e| e.to_string())?;
+            for r in 0..rows {
+                for col in 0..cols {
+                    let color = match grid.cell(r, col) {
+                        Cell::Obstacle => RGBColor(60, 60, 60),
+                        Cell::Safety => RGBColor(255, 220, 160),
+                        Cell::Free => continue,
+                    };
+                    let [cx, cy] = grid.centre((r, col));
+                    let half = grid.cell / 2.0;
+                    c.draw_series(std::iter::once(Rectangle::new(
+                        [(cx - half, cy - half), (cx + half, cy + half)],
+                        color.filled(),
+                    )))
+                    .map_err(|e| e.to_string())?;
+                }
+            }
+            let line = |pts: Vec<(f64, f64)>,
+                        color: RGBColor,
+                        label: &str,
+                        c: &mut ChartContext<_, _>|
+             -> Result<(), String> {
+                c.draw_series(LineSeries::new(pts, color.stroke_width(2)))
+                    .map_err(|e| e.to_string())?
+                    .label(label.to_string())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                    });
+                Ok(())
+            };
+            line(
+                d.planned.iter().map(|p| (p[0], p[1])).collect(),
+                GREEN,
+                "planned cells",
+                &mut c,
+            )?;
+            line(
+                decimated(&d.odometry.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>()),
+                BLUE,
+                "odometry (believed)",
+                &mut c,
+            )?;
+            line(
+                decimated(&d.truth.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>()),
+                RED,
+                "true path",
+                &mut c,
+            )?;
+            let touching: Vec<(f64, f64)> = d
+                .truth
+                .iter()
+                .filter(|p| grid.collides(p[0], p[1], 0.035))
+                .map(|p| (p[0], p[1]))
+                .collect();
+            c.draw_series(
+                touching
+                    .iter()
+                    .step_by(5)
+                    .map(|p| Cross::new(*p, 4, BLACK.stroke_width(2))),
+            )
+            .map_err(|e| e.to_string())?;
+            let g = grid.centre(grid.goal);
+            c.draw_series(std::iter::once(Circle::new(
+                (g[0], g[1]),
+                6,
+                MAGENTA.filled(),
+            )))
+            .map_err(|e| e.to_string())?;
+            c.configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| e.to_string())?;
+            root.present().map_err(|e| e.to_string())?;
+        }
+        figs.push(svg);
+    }
+    let html = page(
+        "Cellular-automaton navigation on odometry (seed 004)",
+        "<p>Dark: obstacles; light: safety zone (obstacles enlarged by one cell); crosses: the robot touching an obstacle; magenta: the goal.</p>",
+        &figs,
+        "",
+        doc,
+    );
+    write(dir, &html)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

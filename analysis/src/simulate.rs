@@ -96,6 +96,29 @@ pub struct SimLog {
     pub observations: Vec<(f64, String, f64, f64)>,
 }
 
+impl SimLog {
+    /// The log as a run of `r`'s model, read as its CSV would be (`name` names
+    /// it in messages), without writing a file.
+    pub fn to_run(
+        &self,
+        r: &Runner,
+        name: &str,
+    ) -> Result<crate::dataset::Run, crate::log::LogError> {
+        let columns = self
+            .header
+            .iter()
+            .enumerate()
+            .map(|(j, h)| (h.clone(), self.rows.iter().map(|row| row[j]).collect()))
+            .collect();
+        let log = crate::log::Log {
+            path: std::path::PathBuf::from(name),
+            columns,
+            len: self.rows.len(),
+        };
+        crate::dataset::Run::from_log(&log, r)
+    }
+}
+
 /// One line of a 12-bit angle encoder (4096 lines per revolution): wheel angles
 /// and steering angles are quantised to it.
 const ENCODER_LINE: f64 = 2.0 * PI / 4096.0;

@@ -1,0 +1,223 @@
+//! Seed 004's navigation on odometry: the robot follows the cellular
+//! automaton's path cell by cell with the e-puck's discrete moves (turn in
+//! place toward the next cell, then drive straight to it), its wheel commands
+//! computed by the generated inverse kinematics with the parameters it
+//! believes, while the real robot (hidden true parameters, and motors that do
+//! not quite do what they are told) moves on. Planned once (Behring et al.),
+//! the move sequence is fixed at the start; recalculated every n moves (Oliveira
+//! et al.), the robot re-plans from the cell its odometry puts it in and aims
+//! each move from its odometry pose.
+use crate::grid::Grid;
+use crate::model::Runner;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use serde::Serialize;
+
+#[derive(Debug, Clone)]
+pub struct NavOptions {
+    /// Re-plan every this many moves (None: planned once).
+    pub recalc: Option<usize>,
+    /// Relative standard deviation of each wheel's executed motion per move
+    /// (motors that do not quite follow their commands; the encoders see it).
+    pub actuation: f64,
+    /// Robot radius for collisions, m (e-puck: 3.5 cm).
+    pub radius: f64,
+    /// Forward speed and turn rate of the moves.
+    pub speed: f64,
+    pub turn_rate: f64,
+    /// Integration step, s.
+    pub dt: f64,
+    pub seed: u64,
+}
+
+impl Default for NavOptions {
+    fn default() -> Self {
+        NavOptions {
+            recalc: None,
+            actuation: 0.01,
+            radius: 0.035,
+            speed: 0.05,
+            turn_rate: 1.0,
+            dt: 0.02,
+            seed: 1,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Drive {
+    /// True and odometry poses at every integration step.
+    #[serde(skip)]
+    pub truth: Vec<[f64; 3]>,
+    #[serde(skip)]
+    pub odometry: Vec<[f64; 3]>,
+    /// The planned cells (the first plan), as cell centres.
+    pub planned: Vec<[f64; 2]>,
+    pub moves: usize,
+    /// Times the robot's disc newly touched an obstacle or the grid's border.
+    pub collisions: usize,
+    /// Times its centre newly entered a safety-zone cell.
+    pub safety_intrusions: usize,
+    /// True distance from the final pose to the goal cell's centre, m.
+    pub final_error_m: f64,
+    /// Whether the robot believes it reached the goal cell.
+    pub reached: bool,
+}
+
+fn wrap(a: f64) -> f64 {
+    crate::log::wrap(a)
+}
+
+/// Drive `grid`'s path with the believed model `belief` on the real robot
+/// `truth` (same spec, true parameter values).
+pub fn drive(
+    grid: &Grid,
+    belief: &Runner,
+    truth: &Runner,
+    o: &NavOptions,
+) -> Result<Drive, String> {
+    if !crate::simulate::can_spin(belief) {
+        return Err(format!(
+            "model `{}` cannot turn in place: seed 004's moves turn toward the next cell first",
+            belief.ir.name
+        ));
+    }
+    let inv = belief.f("inverse_increment");
+    let (step_b, step_t) = (belief.f("step_exact"), truth.f("step_exact"));
+    let zeros = [0.0; 16];
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(o.seed);
+    let noise = Normal::new(0.0, o.actuation.max(0.0)).map_err(|e| e.to_string())?;
+    let dist = grid.distances();
+    let s = grid.centre(grid.start);
+    // start facing the first move
+    let first = grid.path(&dist, grid.start);
+    let h0 = first.get(1).map_or(0.0, |&c| {
+        let n = grid.centre(c);
+        (n[1] - s[1]).atan2(n[0] - s[0])
+    });
+    let mut truth_pose = [s[0], s[1], h0];
+    let mut odo = truth_pose;
+    let mut out = Drive {
+        truth: vec![truth_pose],
+        odometry: vec![odo],
+        planned: first.iter().map(|&c| grid.centre(c)).collect(),
+        moves: 0,
+        collisions: 0,
+        safety_intrusions: 0,
+        final_error_m: 0.0,
+        reached: false,
+    };
+    let (mut touching, mut in_safety) = (false, false);
+    // one discrete motion (dpose in the start-of-move body frame) over `dur`
+    let mut execute = |dpose: [f64; 3],
+                       dur: f64,
+                       truth_pose: &mut [f64; 3],
+                       odo: &mut [f64; 3],
+                       out: &mut Drive| {
+        let n = (dur / o.dt).ceil().max(1.0) as usize;
+        let dt = dur / n as f64;
+        let per = [
+            dpose[0] / n as f64,
+            dpose[1] / n as f64,
+            dpose[2] / n as f64,
+        ];
+        let args: Vec<&[f64]> = inv
+            .args
+            .iter()
+            .map(|a| match a.name.as_str() {
+                "dpose" => &per[..],
+                "dt" => std::slice::from_ref(&dt),
+                _ => &belief.p[..],
+            })
+            .collect();
+        let cmd = inv.eval(&args);
+        // what the motors really do this move (the encoders measure it)
+        let done: Vec<f64> = cmd
+            .iter()
+            .map(|c| c * (1.0 + noise.sample(&mut rng)))
+            .collect();
+        for _ in 0..n {
+            let t = step_t.eval(&Runner::step_args(
+                step_t,
+                truth_pose,
+                &done,
+                &truth.p,
+                &[dt],
+                &zeros,
+            ));
+            *truth_pose = [t[0], t[1], t[2]];
+            let b = step_b.eval(&Runner::step_args(
+                step_b,
+                odo,
+                &done,
+                &belief.p,
+                &[dt],
+                &zeros,
+            ));
+            *odo = [b[0], b[1], b[2]];
+            out.truth.push(*truth_pose);
+            out.odometry.push(*odo);
+            let hit = grid.collides(truth_pose[0], truth_pose[1], o.radius);
+            if hit && !touching {
+                out.collisions += 1;
+            }
+            touching = hit;
+            let safe = grid.in_safety_zone(truth_pose[0], truth_pose[1]);
+            if safe && !in_safety {
+                out.safety_intrusions += 1;
+            }
+            in_safety = safe;
+        }
+    };
+    let max_moves = 4 * grid.size().0 * grid.size().1;
+    let mut plan = first;
+    let mut k = 1; // index of the next cell in the plan
+                   // the pose the robot believes it has: its odometry when it recalculates,
+                   // else the planned pose (open loop)
+    let mut planned_pose = truth_pose;
+    while out.moves < max_moves {
+        if let Some(n) = o.recalc {
+            if out.moves > 0 && out.moves.is_multiple_of(n) {
+                if let Some(cell) = grid.cell_at(odo[0], odo[1]) {
+                    plan = grid.path(&dist, cell);
+                    k = 1;
+                }
+            }
+        }
+        let Some(&next) = plan.get(k) else { break };
+        let target = grid.centre(next);
+        let from = if o.recalc.is_some() {
+            odo
+        } else {
+            planned_pose
+        };
+        let (dx, dy) = (target[0] - from[0], target[1] - from[1]);
+        let heading = dy.atan2(dx);
+        let turn = wrap(heading - from[2]);
+        let length = dx.hypot(dy);
+        execute(
+            [0.0, 0.0, turn],
+            turn.abs() / o.turn_rate + o.dt,
+            &mut truth_pose,
+            &mut odo,
+            &mut out,
+        );
+        execute(
+            [length, 0.0, 0.0],
+            length / o.speed + o.dt,
+            &mut truth_pose,
+            &mut odo,
+            &mut out,
+        );
+        planned_pose = [target[0], target[1], heading];
+        out.moves += 1;
+        k += 1;
+        if next == grid.goal {
+            out.reached = true;
+            break;
+        }
+    }
+    let g = grid.centre(grid.goal);
+    out.final_error_m = (truth_pose[0] - g[0]).hypot(truth_pose[1] - g[1]);
+    Ok(out)
+}

@@ -1,0 +1,221 @@
+//! `kinegen navigate`: seed 004's cellular-automaton navigation driven on
+//! odometry (kinegen_analysis::navigate), before and after calibrating the
+//! odometry with UMBMark (or LM) squares run in simulation on the same robot.
+use crate::analysis_cmd::bad;
+use crate::ir_source;
+use crate::output::Out;
+use clap::Args;
+use kinegen_analysis::grid::Grid;
+use kinegen_analysis::methods::{by_name, Settings};
+use kinegen_analysis::model::{parse_sets, Runner};
+use kinegen_analysis::navigate::{drive, Drive, NavOptions};
+use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+use serde_json::json;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Args, Debug)]
+pub struct NavigateArgs {
+    /// The robot's spec (a differential drive that turns in place; the seed's
+    /// e-puck is data/seed004/epuck.toml).
+    #[arg(long)]
+    pub spec: PathBuf,
+    /// The grid: rows of `.` free, `#` obstacle, `S` start, `G` goal.
+    #[arg(long)]
+    pub grid: PathBuf,
+    /// Cell side, m (seed 004: 7 cm, the e-puck's diameter).
+    #[arg(long, default_value_t = 0.07, value_parser = crate::analysis_cmd::positive)]
+    pub cell: f64,
+    /// Re-plan from the odometry pose every N moves (default: planned once).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub recalc: Option<u32>,
+    /// The real robot's true parameter NAME=VALUE (hidden geometry errors the
+    /// odometry does not know); repeatable.
+    #[arg(long = "set")]
+    pub set: Vec<String>,
+    /// Also drive after calibrating the odometry on simulated square runs of
+    /// the real robot: umbmark (seed 004) or lm.
+    #[arg(long, value_parser = ["umbmark", "lm"])]
+    pub calibrate: Option<String>,
+    /// Motors' relative error per move (what the encoders see and an open-loop
+    /// plan does not correct).
+    #[arg(long, default_value_t = 0.01, value_parser = crate::analysis_cmd::non_negative)]
+    pub actuation: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write a self-contained HTML report to DIR/index.html.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Write one JSON document to PATH (`-`: stdout).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Calibrate the believed parameters on 3 clockwise and 3 counter-clockwise
+/// simulated 1 m squares of the real robot.
+fn calibrate(method: &str, belief: &Runner, truth: &Runner) -> Result<(Vec<f64>, String), String> {
+    let mut runs = Vec::new();
+    for (k, traj) in [Trajectory::SquareCw, Trajectory::SquareCcw]
+        .into_iter()
+        .cycle()
+        .take(6)
+        .enumerate()
+    {
+        let o = SimOptions {
+            trajectory: traj,
+            seed: 100 + k as u64,
+            ..SimOptions::default()
+        };
+        // the real robot drives the squares (its commands from its true
+        // geometry, as a robot's own controller would close them); the log is
+        // its encoders and the tracker, read with the believed model
+        let sim = simulate(truth, truth, &o);
+        runs.push(
+            sim.to_run(belief, &format!("square-{k}"))
+                .map_err(|e| e.to_string())?,
+        );
+    }
+    let fo = kinegen_analysis::fit::FitOptions::default();
+    let m = by_name(method).expect("clap checked the name");
+    let c = m.calibrate(
+        belief,
+        &runs,
+        &Settings {
+            side: 1.0,
+            mu: 0.01,
+            fit: &fo,
+            hidden: 0,
+        },
+    )?;
+    Ok((c.p, c.note))
+}
+
+fn summary(d: &Drive) -> String {
+    format!(
+        "{} moves, {} collision(s), {} safety-zone intrusion(s), final distance to the goal {:.1} cm{}",
+        d.moves,
+        d.collisions,
+        d.safety_intrusions,
+        100.0 * d.final_error_m,
+        if d.reached { "" } else { " (never believed it reached the goal)" }
+    )
+}
+
+pub fn run(a: &NavigateArgs) -> ExitCode {
+    for (opt, p) in [
+        ("--json", a.json.as_deref()),
+        ("--report", a.report.as_deref()),
+    ] {
+        let Some(p) = p.filter(|p| *p != std::path::Path::new("-")) else {
+            continue;
+        };
+        let target = if opt == "--report" {
+            p.join("index.html")
+        } else {
+            p.to_path_buf()
+        };
+        if let Err(e) = crate::output::check_writable(opt, &target) {
+            return bad(e);
+        }
+    }
+    let out = Out::new(a.json.as_deref());
+    let grid = match Grid::read(&a.grid, a.cell) {
+        Ok(g) => g,
+        Err(e) => return bad(e),
+    };
+    let ir = match ir_source::load(&a.spec) {
+        Ok(ir) => ir,
+        Err(e) => return bad(e),
+    };
+    let sets = match parse_sets(&a.set) {
+        Ok(s) => s,
+        Err(e) => return bad(e),
+    };
+    let (belief, truth) = match (Runner::new(ir.clone(), &[]), Runner::new(ir, &sets)) {
+        (Ok(b), Ok(t)) => (b, t),
+        (Err(e), _) | (_, Err(e)) => return bad(e),
+    };
+    let o = NavOptions {
+        recalc: a.recalc.map(|n| n as usize),
+        actuation: a.actuation,
+        seed: a.seed,
+        ..NavOptions::default()
+    };
+    let how = match a.recalc {
+        Some(n) => format!("recalculated every {n} move(s) from the odometry pose"),
+        None => "planned once".into(),
+    };
+    let (rows, cols) = grid.size();
+    out.say(&format!(
+        "{}: {rows} x {cols} cells of {} m, path {how}",
+        a.grid.display(),
+        a.cell
+    ));
+    let before = match drive(&grid, &belief, &truth, &o) {
+        Ok(d) => d,
+        Err(e) => return bad(e),
+    };
+    out.say(&format!(
+        "  odometry with the nominal parameters: {}",
+        summary(&before)
+    ));
+    let mut after = None;
+    let mut calibration = None;
+    if let Some(m) = &a.calibrate {
+        let (p, note) = match calibrate(m, &belief, &truth) {
+            Ok(x) => x,
+            Err(e) => return bad(e),
+        };
+        let mut cal = belief.clone();
+        cal.p = p;
+        let d = match drive(&grid, &cal, &truth, &o) {
+            Ok(d) => d,
+            Err(e) => return bad(e),
+        };
+        out.say(&format!(
+            "  odometry calibrated by {m} ({note}): {}",
+            summary(&d)
+        ));
+        let params: serde_json::Map<String, serde_json::Value> = cal
+            .free
+            .iter()
+            .map(|&i| {
+                (
+                    cal.names[i].clone(),
+                    json!({"nominal": belief.p[i], "estimate": cal.p[i], "true": truth.p[i]}),
+                )
+            })
+            .collect();
+        for (n, v) in &params {
+            out.say(&format!(
+                "      {n:<14} {:.6} (true {:.6})",
+                v["estimate"].as_f64().unwrap_or(0.0),
+                v["true"].as_f64().unwrap_or(0.0)
+            ));
+        }
+        calibration = Some(json!({"method": m, "note": note, "parameters": params}));
+        after = Some(d);
+    }
+    let doc = json!({
+        "command": "navigate",
+        "grid": a.grid.display().to_string(),
+        "recalc": a.recalc,
+        "uncalibrated": before,
+        "calibrated": after,
+        "calibration": calibration,
+    });
+    if let Some(dir) = &a.report {
+        let mut drives = vec![("nominal odometry", &before)];
+        if let Some(d) = &after {
+            drives.push(("calibrated odometry", d));
+        }
+        if let Err(e) = crate::report::navigate_report(dir, &grid, &drives, &doc) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    match out.json(a.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
