@@ -25,6 +25,87 @@ fn with_chain(spec: &Model, cat: &[Effect], effects: &[String]) -> Result<Model,
     })
 }
 
+/// The runner of `spec` with a chain of catalogue effects added. Derivations
+/// run in `kinegen derive` children, one at a time (symbolica's one-thread
+/// licence), and are cached by spec fingerprint.
+fn deriver<'a>(
+    spec: &'a Model,
+    cat: &'a [Effect],
+    name: &'a str,
+    sets: &'a [(String, f64)],
+) -> impl Fn(&[String]) -> Result<Runner, String> + Sync + 'a {
+    move |effects: &[String]| {
+        let m = with_chain(spec, cat, effects)?;
+        let ir = ir_source::load(&materialise(&m.source, name)?)
+            .map_err(|e| format!("could not be derived: {e}"))?;
+        Runner::new(ir, sets).map_err(|e| e.to_string())
+    }
+}
+
+/// Diagnose `runs` against every applicable effect of the bundled catalogue and
+/// `dirs`: the effects that apply to `spec` and are observable in these logs
+/// are ranked and chained (kinegen_analysis::diagnose); the others are listed as
+/// skipped with the reason. `candidates(n)` is told how many effects are tried,
+/// `progress` each step. Returns the diagnosis and the number of candidates.
+pub fn run_diagnosis(
+    spec: &Model,
+    runner: &Runner,
+    runs: &[kinegen_analysis::dataset::Run],
+    dirs: &[std::path::PathBuf],
+    sets: &[(String, f64)],
+    candidates: &dyn Fn(usize),
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<(kinegen_analysis::diagnose::Diagnosis, usize), String> {
+    let cat = catalogue(dirs).map_err(|e| e.to_string())?;
+    let mut applicable = Vec::new();
+    let mut skipped = Vec::new();
+    for eff in &cat {
+        match eff.applicability(spec) {
+            Applicability::Applies => {}
+            Applicability::AlreadyIn => {
+                skipped.push((eff.name.clone(), "already in the spec".into()));
+                continue;
+            }
+            Applicability::NotApplicable(why) => {
+                skipped.push((eff.name.clone(), format!("does not apply: {why}")));
+                continue;
+            }
+        }
+        if let Some(roles) = eff.observation_only_roles() {
+            let missing: Vec<String> = roles
+                .iter()
+                .filter_map(|role| {
+                    channel_missing(runs, runner, *role).map(|need| {
+                        format!("the {role:?} observation, and the logs have no {need}")
+                    })
+                })
+                .collect();
+            if missing.len() == roles.len() {
+                skipped.push((
+                    eff.name.clone(),
+                    format!("not observable: it changes only {}", missing.join(" and ")),
+                ));
+                continue;
+            }
+        }
+        applicable.push((eff.name.clone(), eff.doc.clone()));
+    }
+    let derive = deriver(spec, &cat, &runner.ir.name, sets);
+    let n = applicable.len();
+    candidates(n);
+    let d = diagnose(
+        runner,
+        runs,
+        &Catalogue {
+            effects: applicable,
+            derive: &derive,
+        },
+        skipped,
+        progress,
+    )?;
+    Ok((d, n))
+}
+
 pub fn run(c: Common) -> ExitCode {
     let out = Out::new(c.json.as_deref());
     let t0 = Instant::now();
@@ -51,64 +132,17 @@ pub fn run(c: Common) -> ExitCode {
         Ok(m) => m,
         Err(e) => return bad(e),
     };
-    let cat = match catalogue(&c.catalogue.effects) {
-        Ok(x) => x,
-        Err(e) => return bad(e),
-    };
     let sets = parse_sets(&c.set).unwrap_or_default();
-    let mut applicable = Vec::new();
-    let mut skipped = Vec::new();
-    for eff in &cat {
-        match eff.applicability(&spec) {
-            Applicability::Applies => {}
-            Applicability::AlreadyIn => {
-                skipped.push((eff.name.clone(), "already in the spec".into()));
-                continue;
-            }
-            Applicability::NotApplicable(why) => {
-                skipped.push((eff.name.clone(), format!("does not apply: {why}")));
-                continue;
-            }
-        }
-        if let Some(roles) = eff.observation_only_roles() {
-            let missing: Vec<String> = roles
-                .iter()
-                .filter_map(|role| {
-                    channel_missing(&prep.runs, &prep.runner, *role).map(|need| {
-                        format!("the {role:?} observation, and the logs have no {need}")
-                    })
-                })
-                .collect();
-            if missing.len() == roles.len() {
-                skipped.push((
-                    eff.name.clone(),
-                    format!("not observable: it changes only {}", missing.join(" and ")),
-                ));
-                continue;
-            }
-        }
-        applicable.push((eff.name.clone(), eff.doc.clone()));
-    }
-    // derivations run in `kinegen derive` children, one at a time (symbolica's
-    // one-thread licence), and are cached by spec fingerprint
-    let derive = |effects: &[String]| -> Result<Runner, String> {
-        let m = with_chain(&spec, &cat, effects)?;
-        let ir = ir_source::load(&materialise(&m.source, &prep.runner.ir.name)?)
-            .map_err(|e| format!("could not be derived: {e}"))?;
-        Runner::new(ir, &sets).map_err(|e| e.to_string())
-    };
     let t_prep = t0.elapsed();
     let t1 = Instant::now();
-    let bar = crate::progress::Progress::bar(applicable.len() as u64 + 1, "diagnose", quiet(&c));
-    let n_candidates = applicable.len();
-    let d = match diagnose(
+    let bar = crate::progress::Progress::bar(1, "diagnose", quiet(&c));
+    let (d, n_candidates) = match run_diagnosis(
+        &spec,
         &prep.runner,
         &prep.runs,
-        &Catalogue {
-            effects: applicable,
-            derive: &derive,
-        },
-        skipped,
+        &c.catalogue.effects,
+        &sets,
+        &|n| bar.set_length(n as u64 + 1),
         &|step| {
             bar.message(step);
             bar.inc();
@@ -118,6 +152,12 @@ pub fn run(c: Common) -> ExitCode {
         Err(e) => return bad(e),
     };
     drop(bar);
+    // the catalogue and derivation again, for the spec changes and the report
+    let cat = match catalogue(&c.catalogue.effects) {
+        Ok(x) => x,
+        Err(e) => return bad(e),
+    };
+    let derive = deriver(&spec, &cat, &prep.runner.ir.name, &sets);
     let t_diag = t1.elapsed();
     let r = &prep.runner;
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();

@@ -110,24 +110,37 @@ pub struct SimArgs {
     pub catalogue: crate::analysis_cmd::EffectDirs,
 }
 
+/// The model of `spec` with `sets` (what commands the simulated robot) and the
+/// real robot: the same with the hidden `effects` (`NAME=VALUE` or
+/// `NAME.PARAM=VALUE`, from the bundled catalogue and `dirs`) added.
+pub fn base_and_truth(
+    spec_path: &Path,
+    effects: &[String],
+    sets: &[(String, f64)],
+    dirs: &[PathBuf],
+) -> Result<(Runner, Runner), String> {
+    let spec = Model::load(spec_path).map_err(|e| e.to_string())?;
+    let base = Runner::new(ir_source::load(spec_path)?, sets).map_err(|e| e.to_string())?;
+    let (truth_text, values) = with_effects(&spec, effects, dirs)?;
+    let truth_ir = if effects.is_empty() {
+        base.ir.clone()
+    } else {
+        ir_source::load(&materialise(&truth_text, &base.ir.name)?)?
+    };
+    let mut all = sets.to_vec();
+    all.extend(values);
+    let truth = Runner::new(truth_ir, &all).map_err(|e| e.to_string())?;
+    Ok((base, truth))
+}
+
 pub fn run_simulate(a: SimArgs) -> ExitCode {
     let go = || -> Result<String, String> {
         if a.laps == 0 {
             return Err("--laps 0: at least one lap".into());
         }
-        let spec = Model::load(&a.spec).map_err(|e| e.to_string())?;
         let traj: Trajectory = a.trajectory.parse()?;
         let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
-        let base = Runner::new(ir_source::load(&a.spec)?, &sets).map_err(|e| e.to_string())?;
-        let (truth_text, values) = with_effects(&spec, &a.effect, &a.catalogue.effects)?;
-        let truth_ir = if a.effect.is_empty() {
-            base.ir.clone()
-        } else {
-            ir_source::load(&materialise(&truth_text, &base.ir.name)?)?
-        };
-        let mut all = sets.clone();
-        all.extend(values);
-        let truth = Runner::new(truth_ir, &all).map_err(|e| e.to_string())?;
+        let (base, truth) = base_and_truth(&a.spec, &a.effect, &sets, &a.catalogue.effects)?;
         let landmarks = match (&a.landmarks, &a.observations) {
             (Some(m), Some(_)) => {
                 if truth.ir.observation_fn(RangeBearing, "").is_none() {

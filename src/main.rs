@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 mod analysis_cmd;
+mod bench_diagnose_cmd;
 mod diagnose_cmd;
 mod effects_cmd;
 mod export;
@@ -89,6 +90,12 @@ enum Command {
     ///
     /// Example: kinegen navigate --spec data/seed004/epuck.toml --grid data/seed004/arena.txt --set r_l=0.0201 --set b=0.056 --calibrate umbmark --report report/navigate
     Navigate(navigate_cmd::NavigateArgs),
+    /// Recovery benchmark of the diagnosis: every spec x applicable effect x 3
+    /// magnitudes x 2 noise levels x seeds simulated and diagnosed, plus clean
+    /// and two-effect logs: top-1, full-chain and false-alarm rates per model.
+    ///
+    /// Example: kinegen bench-diagnose --seeds 5 --json bench.json
+    BenchDiagnose(bench_diagnose_cmd::BenchDiagnoseArgs),
     /// Calibrate the spec's free parameters (bounded Levenberg-Marquardt on the
     /// generated parameter Jacobians): before/after error, estimates with standard
     /// deviations, correlations and identifiability warnings.
@@ -152,6 +159,7 @@ fn main() -> ExitCode {
         Command::Localize { common, options } => localize_cmd::run(common, &options),
         Command::Inverse(a) => inverse_cmd::run(&a),
         Command::Navigate(a) => navigate_cmd::run(&a),
+        Command::BenchDiagnose(a) => bench_diagnose_cmd::run(&a),
         Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
         Command::Simulate(a) => effects_cmd::run_simulate(a),

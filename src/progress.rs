@@ -46,6 +46,13 @@ impl Progress {
         }
     }
 
+    /// The number of steps, once known.
+    pub fn set_length(&self, len: u64) {
+        if let Some(pb) = &self.0 {
+            pb.set_length(len);
+        }
+    }
+
     pub fn inc(&self) {
         if let Some(pb) = &self.0 {
             pb.inc(1);

@@ -1,0 +1,271 @@
+//! `kinegen bench-diagnose`: how often diagnosis names what was hidden. Every
+//! spec x every applicable catalogue effect x 3 magnitudes x 2 noise levels x
+//! seeds is simulated (smooth random driving, 91 s at 20 Hz) and diagnosed, plus
+//! clean logs (a named effect there is a false alarm) and logs with two effects
+//! at once (both must be named). Effects the diagnosis finds redundant with the
+//! spec's own parameters on these logs cannot be told apart from them and are
+//! counted separately, not as misses.
+use crate::analysis_cmd::bad;
+use crate::diagnose_cmd::run_diagnosis;
+use crate::effects_cmd::base_and_truth;
+use crate::output::Out;
+use clap::Args;
+use kinegen_analysis::effects::{catalogue, Applicability};
+use kinegen_analysis::model::Runner;
+use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_model::spec::Model;
+use serde_json::json;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct BenchDiagnoseArgs {
+    /// Specs to benchmark (repeatable). Default: spec/*.toml and
+    /// tests/user_specs/*.toml under the working directory.
+    #[arg(long)]
+    pub spec: Vec<PathBuf>,
+    /// Seeds per case (the full benchmark: 5).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=50))]
+    pub seeds: u64,
+    /// Write one JSON document to PATH (`-`: stdout).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Hidden magnitudes, as fractions of each effect parameter's largest bound.
+const MAGNITUDES: [f64; 3] = [0.1, 0.2, 0.4];
+/// Noise levels: the simulator's default sensor noise, and 3x.
+const NOISE: [f64; 2] = [1.0, 3.0];
+
+#[derive(Debug, Clone)]
+struct Case {
+    spec: String,
+    hidden: Vec<String>,
+    noise: f64,
+    seed: u64,
+    found: Vec<String>,
+    /// Hidden effects the diagnosis set aside as redundant on this log.
+    redundant: Vec<String>,
+    seconds: f64,
+}
+
+#[derive(Default)]
+struct Rates {
+    top1: (usize, usize),
+    chains: (usize, usize),
+    false_alarms: (usize, usize),
+    redundant: usize,
+    seconds: Vec<f64>,
+}
+
+fn default_specs() -> Vec<PathBuf> {
+    let mut v = Vec::new();
+    for dir in ["spec", "tests/user_specs"] {
+        if let Ok(rd) = std::fs::read_dir(dir) {
+            let mut files: Vec<PathBuf> = rd
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+                .collect();
+            files.sort();
+            v.extend(files);
+        }
+    }
+    v
+}
+
+/// The applicable effects of a spec, each with its first parameter and that
+/// parameter's largest bound.
+fn effects_of(spec: &Model) -> Result<Vec<(String, String, f64)>, String> {
+    let cat = catalogue(&[]).map_err(|e| e.to_string())?;
+    let mut out = Vec::new();
+    for eff in &cat {
+        if eff.applicability(spec) != Applicability::Applies {
+            continue;
+        }
+        let Some(p) = eff.parameters_for(spec).into_iter().next() else {
+            continue;
+        };
+        let num = |k: &str| {
+            p.table
+                .get(k)
+                .and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64)))
+        };
+        let bound = [num("min"), num("max")]
+            .into_iter()
+            .flatten()
+            .map(f64::abs)
+            .fold(0.0, f64::max);
+        let bound = if bound > 0.0 { bound } else { 0.5 };
+        out.push((eff.name.clone(), p.name, bound));
+    }
+    Ok(out)
+}
+
+fn run_case(
+    spec_path: &std::path::Path,
+    hidden: &[(String, String, f64)],
+    noise: f64,
+    seed: u64,
+) -> Result<Case, String> {
+    let effects: Vec<String> = hidden
+        .iter()
+        .map(|(e, p, v)| format!("{e}.{p}={v}"))
+        .collect();
+    let (base, truth) = base_and_truth(spec_path, &effects, &[], &[])?;
+    let o = SimOptions {
+        trajectory: Trajectory::Random,
+        seed,
+        pos_noise: 0.001 * noise,
+        heading_noise: 0.002 * noise,
+        gyro_noise: 0.005 * noise,
+        ..SimOptions::default()
+    };
+    let run = simulate(&base, &truth, &o)
+        .to_run(&base, "bench")
+        .map_err(|e| e.to_string())?;
+    let spec = Model::load(spec_path).map_err(|e| e.to_string())?;
+    let t0 = Instant::now();
+    let (d, _) = run_diagnosis(
+        &spec,
+        &base,
+        std::slice::from_ref(&run),
+        &[],
+        &[],
+        &|_| {},
+        &|_| {},
+    )?;
+    let names: Vec<String> = hidden.iter().map(|h| h.0.clone()).collect();
+    Ok(Case {
+        spec: spec_path.display().to_string(),
+        redundant: d
+            .skipped
+            .iter()
+            .filter(|(e, why)| names.contains(e) && why.starts_with("redundant"))
+            .map(|(e, _)| e.clone())
+            .collect(),
+        hidden: names,
+        noise,
+        seed,
+        found: d.chain.iter().map(|c| c.effect.clone()).collect(),
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
+    let out = Out::new(a.json.as_deref());
+    let specs = if a.spec.is_empty() {
+        default_specs()
+    } else {
+        a.spec.clone()
+    };
+    if specs.is_empty() {
+        return bad("--spec: no specs given and none under spec/ or tests/user_specs/ here");
+    }
+    let mut cases = Vec::new();
+    let mut table = Vec::new();
+    for spec_path in &specs {
+        let spec = match Model::load(spec_path) {
+            Ok(m) => m,
+            Err(e) => return bad(e),
+        };
+        if let Err(e) = crate::ir_source::load(spec_path)
+            .and_then(|ir| Runner::new(ir, &[]).map_err(|e| e.to_string()))
+        {
+            return bad(e);
+        }
+        let effects = match effects_of(&spec) {
+            Ok(e) => e,
+            Err(e) => return bad(e),
+        };
+        let mut rates = Rates::default();
+        let mut jobs: Vec<Vec<(String, String, f64)>> = Vec::new();
+        for (e, p, bound) in &effects {
+            for m in MAGNITUDES {
+                jobs.push(vec![(e.clone(), p.clone(), m * bound)]);
+            }
+        }
+        // two effects at once: consecutive pairs of the catalogue, at the middle magnitude
+        for w in effects.windows(2) {
+            jobs.push(
+                w.iter()
+                    .map(|(e, p, b)| (e.clone(), p.clone(), MAGNITUDES[1] * b))
+                    .collect(),
+            );
+        }
+        jobs.push(Vec::new()); // clean
+        jobs.push(Vec::new());
+        for (j, hidden) in jobs.iter().enumerate() {
+            for &noise in &NOISE {
+                for seed in 1..=a.seeds {
+                    // every case its own trajectory
+                    let c = match run_case(spec_path, hidden, noise, 1000 * j as u64 + seed) {
+                        Ok(c) => c,
+                        Err(e) => {
+                            out.say(&format!(
+                                "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",
+                                spec.name
+                            ));
+                            continue;
+                        }
+                    };
+                    rates.seconds.push(c.seconds);
+                    match c.hidden.len() {
+                        0 => {
+                            rates.false_alarms.1 += 1;
+                            rates.false_alarms.0 += usize::from(!c.found.is_empty());
+                        }
+                        _ if !c.redundant.is_empty() => rates.redundant += 1,
+                        1 => {
+                            rates.top1.1 += 1;
+                            rates.top1.0 += usize::from(c.found.first() == c.hidden.first());
+                            rates.chains.1 += 1;
+                            rates.chains.0 += usize::from(c.found == c.hidden);
+                        }
+                        _ => {
+                            let (mut f, mut h) = (c.found.clone(), c.hidden.clone());
+                            f.sort();
+                            h.sort();
+                            rates.chains.1 += 1;
+                            rates.chains.0 += usize::from(f == h);
+                        }
+                    }
+                    cases.push(json!({
+                        "spec": c.spec, "hidden": c.hidden, "noise": c.noise, "seed": c.seed,
+                        "found": c.found, "redundant": c.redundant, "seconds": c.seconds,
+                    }));
+                }
+            }
+        }
+        let pct = |(k, n): (usize, usize)| {
+            if n == 0 {
+                "-".to_string()
+            } else {
+                format!("{:.0}% ({k}/{n})", 100.0 * k as f64 / n as f64)
+            }
+        };
+        let mut secs = rates.seconds.clone();
+        secs.sort_by(f64::total_cmp);
+        let median = secs.get(secs.len() / 2).copied().unwrap_or(0.0);
+        out.say(&format!(
+            "{:<14} top-1 {:<14} full chain {:<14} false alarms {:<12} redundant {:<3} median {:.1} s per diagnosis",
+            spec.name,
+            pct(rates.top1),
+            pct(rates.chains),
+            pct(rates.false_alarms),
+            rates.redundant,
+            median
+        ));
+        let rate = |(k, n): (usize, usize)| json!({"found": k, "of": n});
+        table.push(json!({
+            "model": spec.name, "spec": spec_path.display().to_string(),
+            "top1": rate(rates.top1), "full_chain": rate(rates.chains), "false_alarms": rate(rates.false_alarms),
+            "redundant_cases": rates.redundant, "median_seconds": median,
+        }));
+    }
+    let doc = json!({"command": "bench-diagnose", "seeds": a.seeds, "magnitudes_of_bound": MAGNITUDES, "noise_levels": NOISE, "models": table, "cases": cases});
+    match out.json(a.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
