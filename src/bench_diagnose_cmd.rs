@@ -25,6 +25,9 @@ pub struct BenchDiagnoseArgs {
     /// tests/user_specs/*.toml under the working directory.
     #[arg(long)]
     pub spec: Vec<PathBuf>,
+    /// Only these catalogue effects (repeatable; default: every applicable one).
+    #[arg(long)]
+    pub effect: Vec<String>,
     /// Seeds per case (the full benchmark: 5).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=50))]
     pub seeds: u64,
@@ -174,10 +177,13 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
         {
             return bad(e);
         }
-        let effects = match effects_of(&spec) {
+        let mut effects = match effects_of(&spec) {
             Ok(e) => e,
             Err(e) => return bad(e),
         };
+        if !a.effect.is_empty() {
+            effects.retain(|(e, _, _)| a.effect.contains(e));
+        }
         let mut rates = Rates::default();
         let mut jobs: Vec<Vec<(String, String, f64)>> = Vec::new();
         for (e, p, bound) in &effects {

@@ -618,3 +618,27 @@ fn clean_squares_give_no_false_structure() {
         );
     }
 }
+
+/// Issue 12: the recovery benchmark runs and scores. Lateral slip on the
+/// differential drive at 3 magnitudes x 2 noise levels is named every time,
+/// and clean logs raise no alarm.
+#[test]
+fn bench_diagnose_scores_recovery_and_false_alarms() {
+    let d = kinegen_json(&[
+        "bench-diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--effect",
+        "lateral_slip",
+    ]);
+    let m = &d["models"][0];
+    assert_eq!(m["model"], "diff_drive");
+    assert_eq!(m["top1"]["of"], 6, "{m}");
+    assert_eq!(m["top1"]["found"], 6, "{m}");
+    assert_eq!(m["false_alarms"]["of"], 4, "{m}");
+    assert_eq!(m["false_alarms"]["found"], 0, "{m}");
+    let cases = d["cases"].as_array().unwrap();
+    assert!(cases
+        .iter()
+        .any(|c| c["hidden"][0] == "lateral_slip" && c["found"][0] == "lateral_slip"));
+}
