@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Seed 001's scenario as bundled data: 12 beacons (data/beacons.csv) and a
+"""Seed 001's scenario as bundled data: 12 beacons (data/beacons.csv; 5x
+larger in data/seed001_beacons.csv, the EKF scenario's scale) and a
 smooth planned tour through them in order (data/beacon_tour.csv, `t,x,y,theta`
 at 10 Hz), for `kinegen inverse` and `kinegen simulate --trajectory beacons`.
 
@@ -67,6 +68,11 @@ def main():
         f.write('id,x,y\n')
         for i, (x, y) in enumerate(BEACONS):
             f.write(f'B{i + 1},{x},{y}\n')
+    # the seed's scale for the EKF scenario (a 5 m/s tour, beacons 20-50 m apart)
+    with open('data/seed001_beacons.csv', 'w') as f:
+        f.write('id,x,y\n')
+        for i, (x, y) in enumerate(BEACONS):
+            f.write(f'B{i + 1},{5 * x},{5 * y}\n')
 
 
 if __name__ == '__main__':

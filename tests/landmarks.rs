@@ -399,21 +399,13 @@ fn the_beacon_tour_visits_every_landmark_and_stops_at_the_last() {
 
 /// Issue 14, seed 001 Figs 6-7: in the seed's scenario (a tour of 12 beacons
 /// at 5 m/s, range-bearing sensing at 1 Hz), raising the angular actuator
-/// uncertainty hurts localisation much more than raising the linear one. The
-/// bundled map is scaled 5x (beacons 20-50 m apart, as in the seed's figures).
+/// uncertainty hurts localisation much more than raising the linear one
+/// (data/seed001_beacons.csv: beacons 20-50 m apart, as in the seed's figures).
 #[test]
 fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
     let tmp = tempfile::tempdir().unwrap();
     let t = tmp.path();
-    let map = t.join("map.csv");
-    let bundled = std::fs::read_to_string(root().join("data/beacons.csv")).unwrap();
-    let mut scaled = String::from("id,x,y\n");
-    for line in bundled.lines().skip(1) {
-        let c: Vec<&str> = line.split(',').collect();
-        let (x, y): (f64, f64) = (c[1].parse().unwrap(), c[2].parse().unwrap());
-        scaled += &format!("{},{},{}\n", c[0], 5.0 * x, 5.0 * y);
-    }
-    std::fs::write(&map, scaled).unwrap();
+    let map = root().join("data/seed001_beacons.csv");
     let obs = t.join("obs.csv");
     let log = simulate(
         t,
