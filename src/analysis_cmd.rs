@@ -597,7 +597,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         Err(e) => return bad(e),
     };
     let r = &prep.runner;
-    let truth = match parse_sets(truth) {
+    let truth = match kinegen_analysis::model::parse_pairs("--truth", truth) {
         Ok(t) => t,
         Err(e) => return bad(e),
     };

@@ -229,8 +229,8 @@ pub fn run_add_effect(
                 ))
             }
         }
-        let vals: BTreeMap<String, f64> = parse_sets(values)
-            .map_err(|e| format!("--value: {e}"))?
+        let vals: BTreeMap<String, f64> = kinegen_analysis::model::parse_pairs("--value", values)
+            .map_err(|e| e.to_string())?
             .into_iter()
             .collect();
         let new = eff

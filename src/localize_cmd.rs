@@ -43,9 +43,9 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         Err(e) => return bad(e),
     };
     let r = &prep.runner;
-    let noise_sigma = match kinegen_analysis::model::parse_sets(&a.noise) {
+    let noise_sigma = match kinegen_analysis::model::parse_pairs("--noise", &a.noise) {
         Ok(v) => v,
-        Err(e) => return bad(e.to_string().replace("--set", "--noise")),
+        Err(e) => return bad(e),
     };
     for (n, s) in &noise_sigma {
         if !r.ir.noise.iter().any(|x| &x.name == n) {

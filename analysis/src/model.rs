@@ -11,8 +11,8 @@ pub enum ModelError {
         model: String,
         known: String,
     },
-    #[error("--set {0}: expected NAME=VALUE with a finite number")]
-    BadSet(String),
+    #[error("{0} {1}: expected NAME=VALUE with a finite number")]
+    BadSet(&'static str, String),
     #[error("--set {name}={value}: outside the declared bounds of `{name}` ({})", bounds_text(*.min, *.max))]
     OutOfBounds {
         name: String,
@@ -44,19 +44,27 @@ pub struct Runner {
     pub free: Vec<usize>,
 }
 
-/// Parse `NAME=VALUE` pairs.
+/// Parse the `NAME=VALUE` pairs of `--set` (or of `option`, see [`parse_pairs`]).
 pub fn parse_sets(sets: &[String]) -> Result<Vec<(String, f64)>, ModelError> {
+    parse_pairs("--set", sets)
+}
+
+/// Parse `NAME=VALUE` pairs given to `option` (named in the error).
+pub fn parse_pairs(
+    option: &'static str,
+    sets: &[String],
+) -> Result<Vec<(String, f64)>, ModelError> {
     sets.iter()
         .map(|s| {
             let (n, v) = s
                 .split_once('=')
-                .ok_or_else(|| ModelError::BadSet(s.clone()))?;
+                .ok_or_else(|| ModelError::BadSet(option, s.clone()))?;
             let v: f64 = v
                 .trim()
                 .parse()
-                .map_err(|_| ModelError::BadSet(s.clone()))?;
+                .map_err(|_| ModelError::BadSet(option, s.clone()))?;
             if !v.is_finite() {
-                return Err(ModelError::BadSet(s.clone()));
+                return Err(ModelError::BadSet(option, s.clone()));
             }
             Ok((n.trim().to_string(), v))
         })
