@@ -642,3 +642,58 @@ fn bench_diagnose_scores_recovery_and_false_alarms() {
         .iter()
         .any(|c| c["hidden"][0] == "lateral_slip" && c["found"][0] == "lateral_slip"));
 }
+
+/// Issue 12: two hidden effects at once (lateral slip and a gyro bias on the
+/// differential drive) are both named, one after the other, each with its
+/// parameter near the hidden value, and nothing is left unexplained.
+#[test]
+fn two_hidden_effects_are_found_one_after_the_other() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "two.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--effect",
+            "lateral_slip=0.2",
+            "--effect",
+            "gyro_bias=0.05",
+            "--trajectory",
+            "random",
+            "--seed",
+            "5",
+        ],
+    );
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    let chain = d["verdict"]["effects"].as_array().unwrap();
+    let mut names: Vec<&str> = chain
+        .iter()
+        .map(|c| c["effect"].as_str().unwrap())
+        .collect();
+    assert_eq!(d["verdict"]["effect"], chain[0]["effect"]);
+    names.sort();
+    assert_eq!(names, ["gyro_bias", "lateral_slip"], "{}", d["verdict"]);
+    for (effect, param, hidden) in [
+        ("lateral_slip", "k_slip", 0.2),
+        ("gyro_bias", "gyro_bias", 0.05),
+    ] {
+        let step = chain.iter().find(|c| c["effect"] == effect).unwrap();
+        let est = step["parameters"][param]["estimate"].as_f64().unwrap();
+        assert!(
+            ((est - hidden) / hidden).abs() < 0.15,
+            "{effect}: {est} for {hidden}"
+        );
+    }
+    assert_eq!(
+        d["verdict"]["unexplained_structure"], false,
+        "{}",
+        d["verdict"]
+    );
+}
