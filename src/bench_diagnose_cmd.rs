@@ -22,7 +22,8 @@ use std::time::Instant;
 #[derive(Args, Debug)]
 pub struct BenchDiagnoseArgs {
     /// Specs to benchmark (repeatable). Default: spec/*.toml and
-    /// tests/user_specs/*.toml under the working directory.
+    /// tests/user_specs/*.toml under the working directory, or the bundled
+    /// specs (built in) elsewhere.
     #[arg(long)]
     pub spec: Vec<PathBuf>,
     /// Only these catalogue effects (repeatable; default: every applicable one).
@@ -62,7 +63,28 @@ struct Rates {
     seconds: Vec<f64>,
 }
 
-fn default_specs() -> Vec<PathBuf> {
+/// The bundled specs, built in so that the benchmark runs from any directory.
+const BUNDLED: [(&str, &str); 5] = [
+    ("diff_drive", include_str!("../spec/diff_drive.toml")),
+    ("tricycle", include_str!("../spec/tricycle.toml")),
+    ("omni3", include_str!("../spec/omni3.toml")),
+    ("omni_caster", include_str!("../spec/omni_caster.toml")),
+    ("unicycle_ekf", include_str!("../spec/unicycle_ekf.toml")),
+];
+
+/// spec/*.toml and tests/user_specs/*.toml under the working directory (a
+/// checkout), else the built-in bundled specs (written to the cache).
+fn default_specs() -> Result<Vec<PathBuf>, String> {
+    let mut v = local_specs();
+    if v.is_empty() {
+        for (name, text) in BUNDLED {
+            v.push(crate::effects_cmd::materialise(text, name)?);
+        }
+    }
+    Ok(v)
+}
+
+fn local_specs() -> Vec<PathBuf> {
     let mut v = Vec::new();
     for dir in ["spec", "tests/user_specs"] {
         if let Ok(rd) = std::fs::read_dir(dir) {
@@ -158,13 +180,13 @@ fn run_case(
 pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
     let out = Out::new(a.json.as_deref());
     let specs = if a.spec.is_empty() {
-        default_specs()
+        match default_specs() {
+            Ok(s) => s,
+            Err(e) => return bad(e),
+        }
     } else {
         a.spec.clone()
     };
-    if specs.is_empty() {
-        return bad("--spec: no specs given and none under spec/ or tests/user_specs/ here");
-    }
     let mut cases = Vec::new();
     let mut table = Vec::new();
     for spec_path in &specs {
