@@ -80,17 +80,7 @@ pub struct Prepared {
 }
 
 pub fn prepare(c: &Common) -> Result<Prepared, String> {
-    // outputs are checked before the work, not found unwritable after it
-    if let Some(j) = c
-        .json
-        .as_deref()
-        .filter(|j| *j != std::path::Path::new("-"))
-    {
-        crate::output::check_writable("--json", j)?;
-    }
-    if let Some(r) = &c.report {
-        crate::output::check_writable("--report", &r.join("index.html"))?;
-    }
+    crate::output::check_outputs(c.json.as_deref(), c.report.as_deref())?;
     let ir = ir_source::load(&c.spec)?;
     let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
     let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;

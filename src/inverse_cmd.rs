@@ -28,19 +28,8 @@ pub struct InverseArgs {
 }
 
 pub fn run(a: &InverseArgs) -> ExitCode {
-    if let Some(j) = a
-        .json
-        .as_deref()
-        .filter(|j| *j != std::path::Path::new("-"))
-    {
-        if let Err(e) = crate::output::check_writable("--json", j) {
-            return bad(e);
-        }
-    }
-    if let Some(r) = &a.report {
-        if let Err(e) = crate::output::check_writable("--report", &r.join("index.html")) {
-            return bad(e);
-        }
+    if let Err(e) = crate::output::check_outputs(a.json.as_deref(), a.report.as_deref()) {
+        return bad(e);
     }
     let out = Out::new(a.json.as_deref());
     let path = match read_path(&a.path) {

@@ -66,11 +66,6 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         noise_sigma,
         ..EkfOptions::default()
     };
-    if let Some(r) = &c.report {
-        if let Err(e) = crate::output::check_writable("--report", &r.join("index.html")) {
-            return bad(e);
-        }
-    }
     // mapped landmarks no log ever observes are probably a mapping mistake (an id
     // spelled differently in the map and the observations)
     if let Some(m) = &c.landmarks {

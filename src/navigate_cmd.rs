@@ -102,21 +102,8 @@ fn summary(d: &Drive) -> String {
 }
 
 pub fn run(a: &NavigateArgs) -> ExitCode {
-    for (opt, p) in [
-        ("--json", a.json.as_deref()),
-        ("--report", a.report.as_deref()),
-    ] {
-        let Some(p) = p.filter(|p| *p != std::path::Path::new("-")) else {
-            continue;
-        };
-        let target = if opt == "--report" {
-            p.join("index.html")
-        } else {
-            p.to_path_buf()
-        };
-        if let Err(e) = crate::output::check_writable(opt, &target) {
-            return bad(e);
-        }
+    if let Err(e) = crate::output::check_outputs(a.json.as_deref(), a.report.as_deref()) {
+        return bad(e);
     }
     let out = Out::new(a.json.as_deref());
     let grid = match Grid::read(&a.grid, a.cell) {

@@ -40,6 +40,18 @@ impl Out {
 /// ancestor that would hold it, is a writable directory; `path` itself is not a
 /// directory), checked without creating anything, so a long computation does
 /// not end in a write error and a refused run leaves nothing behind.
+/// Check a command's `--json PATH` (not `-`) and `--report DIR` before any
+/// work starts, so an unwritable output is not found after it.
+pub fn check_outputs(json: Option<&Path>, report: Option<&Path>) -> Result<(), String> {
+    if let Some(j) = json.filter(|j| *j != Path::new("-")) {
+        check_writable("--json", j)?;
+    }
+    if let Some(r) = report {
+        check_writable("--report", &r.join("index.html"))?;
+    }
+    Ok(())
+}
+
 pub fn check_writable(option: &str, path: &Path) -> Result<(), String> {
     let fail = |why: String| Err(format!("{option} {}: {why}", path.display()));
     if path.is_dir() {

@@ -384,12 +384,7 @@ fn joint_series(
     joints: &[&str],
     stamps: Stamps,
 ) -> Result<Series, LogError> {
-    let mut s = Series {
-        topic: topic.to_string(),
-        index: Vec::new(),
-        t: Vec::new(),
-        values: Vec::new(),
-    };
+    let mut s = Series::new(topic);
     for raw in &t.messages {
         let m: rosmsg::JointState = decoded(file, topic, t, raw)?;
         let mut row = Vec::with_capacity(joints.len());
@@ -428,12 +423,7 @@ fn joint_series(
 
 fn pose_series(file: &Path, p: &PoseSource, t: &Topic, stamps: Stamps) -> Result<Series, LogError> {
     let topic = p.topic.as_str();
-    let mut s = Series {
-        topic: topic.to_string(),
-        index: Vec::new(),
-        t: Vec::new(),
-        values: Vec::new(),
-    };
+    let mut s = Series::new(topic);
     let mut children: Vec<String> = Vec::new();
     for raw in &t.messages {
         let (header, pose) = match t.schema.as_str() {
@@ -486,12 +476,7 @@ fn pose_series(file: &Path, p: &PoseSource, t: &Topic, stamps: Stamps) -> Result
 }
 
 fn imu_series(file: &Path, topic: &str, t: &Topic, stamps: Stamps) -> Result<Series, LogError> {
-    let mut s = Series {
-        topic: topic.to_string(),
-        index: Vec::new(),
-        t: Vec::new(),
-        values: Vec::new(),
-    };
+    let mut s = Series::new(topic);
     for raw in &t.messages {
         let m: rosmsg::Imu = decoded(file, topic, t, raw)?;
         s.index.push(raw.index);
@@ -499,6 +484,17 @@ fn imu_series(file: &Path, topic: &str, t: &Topic, stamps: Stamps) -> Result<Ser
         s.values.push(vec![m.angular_velocity.z]);
     }
     Ok(s)
+}
+
+impl Series {
+    fn new(topic: &str) -> Series {
+        Series {
+            topic: topic.to_string(),
+            index: Vec::new(),
+            t: Vec::new(),
+            values: Vec::new(),
+        }
+    }
 }
 
 /// Put every series on the time base of the first (the input joints), check
