@@ -6,6 +6,7 @@ use kinegen_analysis::bag::{is_bag, TopicMap};
 use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon;
 use kinegen_analysis::fit::{fit, FitOptions, FitResult};
+use kinegen_analysis::input_range;
 use kinegen_analysis::landmarks::{self, Innovation, InnovationStats};
 use kinegen_analysis::methods::{by_name, Method, Settings, METHODS};
 use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
@@ -68,6 +69,13 @@ pub fn quiet(c: &Common) -> bool {
 }
 
 /// Exit 2 with a message naming the problem.
+/// Say each of the warnings `prepare` found.
+pub fn say_warnings(out: &Out, warnings: &[String]) {
+    for w in warnings {
+        out.say(&format!("warning: {w}"));
+    }
+}
+
 pub fn bad(msg: impl std::fmt::Display) -> ExitCode {
     eprintln!("error: {msg}");
     ExitCode::from(2)
@@ -77,6 +85,9 @@ pub struct Prepared {
     pub runner: Runner,
     pub runs: Vec<Run>,
     pub holdout: Vec<Run>,
+    /// Things the user should know before reading any result (inputs outside
+    /// their declared range), said by every command and kept in its JSON.
+    pub warnings: Vec<String>,
 }
 
 pub fn prepare(c: &Common) -> Result<Prepared, String> {
@@ -114,10 +125,17 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     for set in [&runs, &holdout] {
         check_finite(set, &tracks(&runner, &runner.p, set), &c.set)?;
     }
+    let warnings = runs
+        .iter()
+        .chain(&holdout)
+        .flat_map(|run| input_range::excursions(run, &runner.ir.inputs))
+        .map(|e| e.to_string())
+        .collect();
     Ok(Prepared {
         runner,
         runs,
         holdout,
+        warnings,
     })
 }
 
@@ -324,6 +342,7 @@ pub fn compare(c: Common) -> ExitCode {
         all.len(),
         secs
     ));
+    say_warnings(&out, &prep.warnings);
     if all.iter().any(|x| x.gt.is_some()) {
         out.say(&format!("  {}", fmt_errors(&e)));
     } else {
@@ -400,6 +419,7 @@ pub fn compare(c: Common) -> ExitCode {
         "landmarks": lm_stats, "regimes": regimes, "worst_segments": segments, "runs": per_run,
         "gyrodometry": gyro_errors.as_ref().map(|g| json!({"rmse": g.rmse, "errors": g})),
         "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
+        "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
         if let Err(e) =
@@ -598,6 +618,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         ));
     }
     if method != "lm" {
+        say_warnings(&out, &prep.warnings);
         let methods: Vec<&dyn Method> = if method == "all" {
             METHODS.to_vec()
         } else {
@@ -725,6 +746,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             "methods": methods_json,
             "closest_to_truth": best.map(|b| b.1),
             "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
+            "warnings": prep.warnings,
         });
         if let Some(dir) = &c.report {
             if let Err(e) =
@@ -740,10 +762,11 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         };
     }
     let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(&c));
-    let res = match fit(r, &prep.runs, &fo) {
+    let mut res = match fit(r, &prep.runs, &fo) {
         Ok(x) => x,
         Err(e) => return bad(e),
     };
+    res.warnings.splice(0..0, prep.warnings.iter().cloned());
     drop(spin);
     let (eval_before, eval_after) = (
         evaluation(r, &r.p, &prep.runs),

@@ -113,6 +113,7 @@ pub fn run(c: Common) -> ExitCode {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
+    crate::analysis_cmd::say_warnings(&out, &prep.warnings);
     // a robot that never moves shows no effect; every ratio would be 0/0
     if prep.runs.iter().all(|r| r.rest_steps() == r.steps()) {
         let cols: Vec<&str> = prep
@@ -302,6 +303,7 @@ pub fn run(c: Common) -> ExitCode {
             "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
         "candidates": d.candidates,
         "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
+        "warnings": prep.warnings,
         "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
     });

@@ -173,13 +173,26 @@ fn page(title: &str, intro: &str, figures: &[String], tables: &str, doc: &Value)
         .iter()
         .map(|f| format!("<figure>{f}</figure>"))
         .collect();
+    // every command's warnings (fit's identifiability, inputs out of range...)
+    // stand above its results
+    let warnings: String = doc["warnings"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|w| {
+            format!(
+                "<p class=\"warn\">warning: {}</p>",
+                esc(w.as_str().unwrap_or(""))
+            )
+        })
+        .collect();
     format!(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
 body{{font-family:sans-serif;margin:24px;color:#222;max-width:1200px}}\
 figure{{display:inline-block;margin:6px;border:1px solid #ddd}}\
 table{{border-collapse:collapse;margin:12px 0}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
 th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{{background:#f7f7f7;padding:8px;overflow:auto;max-height:300px}}\
-</style></head><body><h1>{t}</h1>{intro}{tables}<div>{figs}</div>\
+</style></head><body><h1>{t}</h1>{intro}{warnings}{tables}<div>{figs}</div>\
 <details><summary>JSON</summary><pre>{json}</pre></details></body></html>\n",
         t = esc(title),
         json = esc(&serde_json::to_string_pretty(doc).unwrap_or_default())
@@ -386,12 +399,6 @@ pub fn param_table(doc: &Value) -> String {
         }
     }
     t += "</table>";
-    for w in doc["warnings"].as_array().into_iter().flatten() {
-        t += &format!(
-            "<p class=\"warn\">warning: {}</p>",
-            esc(w.as_str().unwrap_or(""))
-        );
-    }
     t
 }
 

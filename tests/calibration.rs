@@ -89,6 +89,51 @@ fn every_bundled_model_can_be_simulated_compared_and_fitted() {
     }
 }
 
+/// A steering log that leaves the spec's declared range (seed 001's tricycle,
+/// `range = [-1.2, 1.2]`) is flagged by compare and fit with the lines, so a poor
+/// fit there is not blamed on identifiability; the same log inside it is not.
+#[test]
+fn inputs_outside_their_declared_range_are_reported_with_their_lines() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = "spec/tricycle.toml";
+    let log = simulate(
+        tmp.path(),
+        "inside.csv",
+        &["--spec", spec, "--trajectory", "random", "--seed", "2"],
+    );
+    let inside = kinegen_json(&["compare", "--spec", spec, "--data", log.to_str().unwrap()]);
+    assert_eq!(inside["warnings"], serde_json::json!([]));
+    // data rows 99..=119 (CSV lines 101-121) steer to 1.5 rad
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let col = lines[0].split(',').position(|c| c == "alpha").unwrap();
+    for line in &mut lines[100..=120] {
+        let mut cells: Vec<&str> = line.split(',').collect();
+        cells[col] = "1.5";
+        *line = cells.join(",");
+    }
+    let wide = tmp.path().join("wide.csv");
+    std::fs::write(&wide, lines.join("\n") + "\n").unwrap();
+    for cmd in ["compare", "fit"] {
+        let doc = kinegen_json(&[cmd, "--spec", spec, "--data", wide.to_str().unwrap()]);
+        let w = doc["warnings"].as_array().unwrap();
+        let hit: Vec<&str> = w
+            .iter()
+            .filter_map(|x| x.as_str())
+            .filter(|x| x.contains("declared range"))
+            .collect();
+        assert_eq!(hit.len(), 1, "{cmd}: {w:?}");
+        assert!(
+            hit[0].contains("input `alpha` (column `alpha`)")
+                && hit[0].contains("[-1.2, 1.2] rad")
+                && hit[0].contains("lines 101-121")
+                && hit[0].contains("up to 1.5000 rad"),
+            "{cmd}: {}",
+            hit[0]
+        );
+    }
+}
+
 #[test]
 fn real_optiodom_runs_compare_and_fit_with_holdout() {
     let runs = real_runs();

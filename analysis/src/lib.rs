@@ -10,6 +10,7 @@ pub mod deadreckon;
 pub mod diagnose;
 pub mod fit;
 pub mod grid;
+pub mod input_range;
 pub mod inverse;
 pub mod landmarks;
 pub mod localize;
