@@ -250,6 +250,7 @@ fn finish(spec: Spec, fx: Funcs) -> Result<Function, SymbolicError> {
         tape,
         outputs,
         ops_tree,
+        native: Default::default(),
     })
 }
 
@@ -617,6 +618,7 @@ fn eval_at(a: &Atom, values: &[(Symbol, f64)], fx: Funcs) -> Result<f64, Symboli
         tape,
         outputs,
         ops_tree: 0,
+        native: Default::default(),
     };
     Ok(f.eval(&[&vals])[0])
 }

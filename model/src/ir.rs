@@ -5,6 +5,7 @@
 //! subexpressions shared. The same tape is emitted as Rust by kinegen-codegen and
 //! interpreted here by [`Function::eval`], so a freshly edited spec can be fitted
 //! without compiling anything.
+use crate::jit::NativeCache;
 use crate::spec::{
     Input, Noise, Observation, ObservationRole, Param, DEFAULT_GYRO_COLUMN, DEFAULT_POSE_COLUMNS,
 };
@@ -135,6 +136,10 @@ pub struct Function {
     /// Arithmetic operations if every output were evaluated as its own tree
     /// (before common-subexpression elimination).
     pub ops_tree: usize,
+    /// The tape compiled to machine code once it is hot (see [`crate::jit`]);
+    /// derived from `tape`, so never serialised.
+    #[serde(skip)]
+    pub native: NativeCache,
 }
 
 impl Function {
@@ -149,8 +154,20 @@ impl Function {
     }
 
     /// Evaluate into `out` (length rows*cols, row-major). `scratch` is reused
-    /// between calls to avoid allocation in loops.
+    /// between calls to avoid allocation in loops. A hot tape runs as machine
+    /// code ([`crate::jit`]), with the interpreter's results to the last bit.
     pub fn eval_into(&self, args: &[&[f64]], out: &mut [f64], scratch: &mut Vec<f64>) {
+        if let Some(native) = self.native.get(self) {
+            if native.eval_into(args, out).is_some() {
+                return;
+            }
+        }
+        self.interpret_into(args, out, scratch)
+    }
+
+    /// Evaluate by interpreting the tape (the reference [`Function::eval_into`]
+    /// compiles).
+    pub fn interpret_into(&self, args: &[&[f64]], out: &mut [f64], scratch: &mut Vec<f64>) {
         debug_assert_eq!(args.len(), self.args.len());
         scratch.clear();
         scratch.reserve(self.tape.len());
@@ -312,6 +329,7 @@ mod tests {
             tape,
             outputs: vec![8],
             ops_tree: 0,
+            native: Default::default(),
         };
         assert_eq!(f.eval(&[&[0.0]])[0], 1.0);
         assert!((f.eval(&[&[0.5]])[0] - 0.5f64.sin() / 0.5).abs() < 1e-15);

@@ -13,6 +13,7 @@ pub mod effects;
 pub mod error;
 pub mod expr;
 pub mod ir;
+pub mod jit;
 pub mod linalg;
 pub mod spec;
 
