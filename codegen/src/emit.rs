@@ -1,8 +1,8 @@
 //! Rust emission: one `#![no_std]`-compatible module per model, built with quote
 //! and formatted with prettyplease. Kernels take and return plain arrays, use libm
 //! for transcendental functions, never allocate and never panic.
-use crate::schedule::{Group, Item};
 use kinegen_model::ir::{Function, ModelIr, Op};
+use kinegen_model::schedule::{Group, Item};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
@@ -169,8 +169,8 @@ fn emit_function(f: &Function) -> TokenStream {
         stmts.push(bind(i, expr));
     }
     // Each guard evaluates only the side its condition selects, and guards on one
-    // condition share one `if` (crate::schedule).
-    let (items, groups) = crate::schedule::schedule(&f.tape, &f.outputs);
+    // condition share one `if` (kinegen_model::schedule).
+    let (items, groups) = kinegen_model::schedule::schedule(&f.tape, &f.outputs);
     stmts.extend(emit_items(&items, &groups, f, &mut slot_stmts, &t, &bind));
     let (ret_ty, ret) = if f.is_matrix() {
         let (r, c) = (f.rows, f.cols);
@@ -213,7 +213,7 @@ fn emit_function(f: &Function) -> TokenStream {
     }
 }
 
-/// The statements of `items` (see [`crate::schedule`]): a guard group binds its
+/// The statements of `items` (see [`kinegen_model::schedule`]): a guard group binds its
 /// members from one array-valued `if` whose sides emit their own statements first.
 fn emit_items(
     items: &[Item],

@@ -8,7 +8,6 @@
 pub mod derive;
 pub mod emit;
 pub mod generate;
-pub mod schedule;
 mod symbolic;
 mod tape;
 

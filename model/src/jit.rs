@@ -16,9 +16,11 @@
 //! (`KINEGEN_JIT=0`).
 
 use crate::ir::{Function, Op};
+use crate::schedule::{schedule, Group, Item};
 use cranelift_codegen::ir::condcodes::FloatCC;
 use cranelift_codegen::ir::{
-    types, AbiParam, InstBuilder, MemFlagsData, StackSlotData, StackSlotKind, Value,
+    types, AbiParam, BlockArg, FuncRef, InstBuilder, MemFlagsData, StackSlot, StackSlotData,
+    StackSlotKind, Value,
 };
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
@@ -216,29 +218,32 @@ fn host_functions() -> [(&'static str, *const u8); 9] {
 
 type CompileError = Box<cranelift_module::ModuleError>;
 
-/// Translate the tape into the module as the exported entry point.
+/// Host functions the code calls: name, f64 operands (each returns one f64).
+const HOST_MATH: [(&str, usize); 8] = [
+    ("kg_sin", 1),
+    ("kg_cos", 1),
+    ("kg_tan", 1),
+    ("kg_atan", 1),
+    ("kg_exp", 1),
+    ("kg_ln", 1),
+    ("kg_atan2", 2),
+    ("kg_pow", 2),
+];
+
+/// Translate the tape into the module as the exported entry point, in the order
+/// and branches of [`schedule`]: the two sides of a series guard are real
+/// branches, so only the side taken is computed (as in the generated kernels).
 fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncId, CompileError> {
     let ptr = module.target_config().pointer_type();
-    let f64t = types::F64;
     let mut ctx = module.make_context();
     ctx.func.signature.params.push(AbiParam::new(ptr));
     ctx.func.signature.params.push(AbiParam::new(ptr));
-    // host functions: name -> (f64 operands, returns)
     let mut imports = HashMap::new();
-    for (name, params, returns) in [
-        ("kg_sin", 1, 1),
-        ("kg_cos", 1, 1),
-        ("kg_tan", 1, 1),
-        ("kg_atan", 1, 1),
-        ("kg_exp", 1, 1),
-        ("kg_ln", 1, 1),
-        ("kg_atan2", 2, 1),
-        ("kg_pow", 2, 1),
-    ] {
+    for (name, params) in HOST_MATH {
         let mut sig = module.make_signature();
-        sig.params.extend((0..params).map(|_| AbiParam::new(f64t)));
-        sig.returns
-            .extend((0..returns).map(|_| AbiParam::new(f64t)));
+        sig.params
+            .extend((0..params).map(|_| AbiParam::new(types::F64)));
+        sig.returns.push(AbiParam::new(types::F64));
         imports.insert(name, module.declare_function(name, Linkage::Import, &sig)?);
     }
     let mut pinv_sig = module.make_signature();
@@ -254,91 +259,184 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
     b.switch_to_block(block);
     b.seal_block(block);
     let (args_ptr, out_ptr) = (b.block_params(block)[0], b.block_params(block)[1]);
-    // the tape reads and writes memory only through these: nothing aliases
-    let mem = MemFlagsData::trusted();
     let arg_bases: Vec<Value> = (0..f.args.len())
-        .map(|a| b.ins().load(ptr, mem, args_ptr, (a * 8) as i32))
+        .map(|a| b.ins().load(ptr, MEM, args_ptr, (a * 8) as i32))
         .collect();
-    let mut refs = HashMap::new();
-    for (name, id) in &imports {
-        refs.insert(*name, module.declare_func_in_func(*id, b.func));
+    let host = imports
+        .iter()
+        .map(|(name, id)| (*name, module.declare_func_in_func(*id, b.func)))
+        .collect();
+    let pinv = module.declare_func_in_func(pinv_id, b.func);
+    let (items, groups) = schedule(&f.tape, &f.outputs);
+    let mut t = Translator {
+        b,
+        tape: &f.tape,
+        groups: &groups,
+        ptr,
+        arg_bases,
+        host,
+        pinv,
+        pinv_out: HashMap::new(),
+        slots: vec![None; f.tape.len()],
+    };
+    t.items(&items);
+    for (k, &s) in f.outputs.iter().enumerate() {
+        let v = t.v(s);
+        t.b.ins().store(MEM, v, out_ptr, k as i32 * 8);
     }
-    let pinv_ref = module.declare_func_in_func(pinv_id, b.func);
-    // one decomposition per distinct matrix, read entry by entry (as the interpreter's cache)
-    let mut pinv_out: HashMap<[u32; 6], cranelift_codegen::ir::StackSlot> = HashMap::new();
+    t.b.ins().return_(&[]);
+    t.b.finalize(module.target_config());
+    let id = module.declare_function("tape", Linkage::Export, &ctx.func.signature)?;
+    module.define_function(id, &mut ctx)?;
+    module.clear_context(&mut ctx);
+    Ok(id)
+}
 
-    let mut slots: Vec<Value> = Vec::with_capacity(f.tape.len());
-    for op in &f.tape {
-        let v = |i: u32| slots[i as usize];
-        let call = |b: &mut FunctionBuilder, name: &str, xs: &[Value]| {
-            let inst = b.ins().call(refs[name], xs);
+/// The tape reads its arguments and writes its outputs only through the entry
+/// point's pointers, aligned and valid (checked by [`Native::eval_into`]).
+const MEM: MemFlagsData = MemFlagsData::trusted();
+
+/// One tape being translated: the value of every slot emitted so far.
+struct Translator<'a, 'f> {
+    b: FunctionBuilder<'f>,
+    tape: &'a [Op],
+    groups: &'a [Group],
+    ptr: types::Type,
+    arg_bases: Vec<Value>,
+    host: HashMap<&'static str, FuncRef>,
+    pinv: FuncRef,
+    /// One decomposition per distinct matrix, read entry by entry (as the
+    /// interpreter's cache does).
+    pinv_out: HashMap<[u32; 6], StackSlot>,
+    slots: Vec<Option<Value>>,
+}
+
+impl Translator<'_, '_> {
+    fn v(&self, s: u32) -> Value {
+        self.slots[s as usize].expect("the schedule emits every operand before its reader")
+    }
+
+    fn items(&mut self, items: &[Item]) {
+        for item in items {
+            match item {
+                Item::Slot(s) => {
+                    let v = self.op(*s);
+                    self.slots[*s] = Some(v);
+                }
+                Item::Guard { group, near, far } => self.guard(*group, near, far),
+            }
+        }
+    }
+
+    /// `if |x| < eps { near side } else { far side }`, binding every member of the
+    /// group from the side taken. |x| < eps is false for NaN: the far side, as
+    /// the interpreter's `NearZero`.
+    fn guard(&mut self, group: usize, near: &[Item], far: &[Item]) {
+        let g = &self.groups[group];
+        let x = self.v(g.x);
+        let ax = self.b.ins().fabs(x);
+        let eps = self.b.ins().f64const(g.eps);
+        let is_near = self.b.ins().fcmp(FloatCC::LessThan, ax, eps);
+        let (near_block, far_block, merge) = (
+            self.b.create_block(),
+            self.b.create_block(),
+            self.b.create_block(),
+        );
+        for _ in &g.members {
+            self.b.append_block_param(merge, types::F64);
+        }
+        self.b.ins().brif(is_near, near_block, &[], far_block, &[]);
+        for (block, side, is_near_side) in [(near_block, near, true), (far_block, far, false)] {
+            self.b.switch_to_block(block);
+            self.b.seal_block(block);
+            self.items(side);
+            let values: Vec<BlockArg> = self.groups[group]
+                .members
+                .iter()
+                .map(|&m| match self.tape[m] {
+                    Op::NearZero { near, far, .. } => {
+                        BlockArg::Value(self.v(if is_near_side { near } else { far }))
+                    }
+                    _ => unreachable!("a guard group holds NearZero slots"),
+                })
+                .collect();
+            self.b.ins().jump(merge, &values);
+        }
+        self.b.switch_to_block(merge);
+        self.b.seal_block(merge);
+        for (k, &m) in self.groups[group].members.iter().enumerate() {
+            self.slots[m] = Some(self.b.block_params(merge)[k]);
+        }
+    }
+
+    /// The value of slot `s`, computed from its operands.
+    fn op(&mut self, s: usize) -> Value {
+        if let Op::PinvSym3 { m, i, j } = self.tape[s] {
+            let out = match self.pinv_out.get(&m) {
+                Some(slot) => *slot,
+                None => self.decompose(m),
+            };
+            let k = crate::linalg::packed_index(i as usize, j as usize);
+            return self
+                .b
+                .ins()
+                .stack_load(self.ptr, types::F64, out, k as i32 * 8);
+        }
+        let (slots, host, b) = (&self.slots, &self.host, &mut self.b);
+        let v =
+            |i: u32| slots[i as usize].expect("the schedule emits every operand before its reader");
+        let mut call = |name: &str, xs: &[Value]| {
+            let inst = b.ins().call(host[name], xs);
             b.inst_results(inst)[0]
         };
-        let val = match *op {
+        match self.tape[s] {
+            Op::Pow(x, y) => return call("kg_pow", &[v(x), v(y)]),
+            Op::Sin(x) => return call("kg_sin", &[v(x)]),
+            Op::Cos(x) => return call("kg_cos", &[v(x)]),
+            Op::Tan(x) => return call("kg_tan", &[v(x)]),
+            Op::Atan(x) => return call("kg_atan", &[v(x)]),
+            Op::Atan2(y, x) => return call("kg_atan2", &[v(y), v(x)]),
+            Op::Exp(x) => return call("kg_exp", &[v(x)]),
+            Op::Ln(x) => return call("kg_ln", &[v(x)]),
+            _ => {}
+        }
+        match self.tape[s] {
             Op::Const(c) => b.ins().f64const(c),
-            Op::Arg(a, i) => b.ins().load(f64t, mem, arg_bases[a as usize], i as i32 * 8),
+            Op::Arg(a, i) => {
+                b.ins()
+                    .load(types::F64, MEM, self.arg_bases[a as usize], i as i32 * 8)
+            }
             Op::Add(x, y) => b.ins().fadd(v(x), v(y)),
             Op::Sub(x, y) => b.ins().fsub(v(x), v(y)),
             Op::Mul(x, y) => b.ins().fmul(v(x), v(y)),
             Op::Div(x, y) => b.ins().fdiv(v(x), v(y)),
             Op::Neg(x) => b.ins().fneg(v(x)),
-            Op::PowI(x, n) => powi(&mut b, v(x), n),
-            Op::Pow(x, y) => call(&mut b, "kg_pow", &[v(x), v(y)]),
+            Op::PowI(x, n) => powi(b, v(x), n),
             Op::Sqrt(x) => b.ins().sqrt(v(x)),
-            Op::Sin(x) => call(&mut b, "kg_sin", &[v(x)]),
-            Op::Cos(x) => call(&mut b, "kg_cos", &[v(x)]),
-            Op::Tan(x) => call(&mut b, "kg_tan", &[v(x)]),
-            Op::Atan(x) => call(&mut b, "kg_atan", &[v(x)]),
-            Op::Atan2(y, x) => call(&mut b, "kg_atan2", &[v(y), v(x)]),
-            Op::Exp(x) => call(&mut b, "kg_exp", &[v(x)]),
-            Op::Ln(x) => call(&mut b, "kg_ln", &[v(x)]),
             Op::Abs(x) => b.ins().fabs(v(x)),
-            Op::NearZero { x, eps, near, far } => {
-                // |x| < eps is false for NaN: the far branch, as interpreted
-                let ax = b.ins().fabs(v(x));
-                let e = b.ins().f64const(eps);
-                let is_near = b.ins().fcmp(FloatCC::LessThan, ax, e);
-                b.ins().select(is_near, v(near), v(far))
-            }
-            Op::PinvSym3 { m, i, j } => {
-                let out = match pinv_out.get(&m) {
-                    Some(s) => *s,
-                    None => {
-                        let slot_data = |b: &mut FunctionBuilder| {
-                            b.create_sized_stack_slot(StackSlotData::new(
-                                StackSlotKind::ExplicitSlot,
-                                48,
-                                3,
-                            ))
-                        };
-                        let (input, out) = (slot_data(&mut b), slot_data(&mut b));
-                        for (k, s) in m.iter().enumerate() {
-                            b.ins().stack_store(ptr, v(*s), input, k as i32 * 8);
-                        }
-                        let (pi, po) = (
-                            b.ins().stack_addr(ptr, input, 0),
-                            b.ins().stack_addr(ptr, out, 0),
-                        );
-                        b.ins().call(pinv_ref, &[pi, po]);
-                        pinv_out.insert(m, out);
-                        out
-                    }
-                };
-                let k = crate::linalg::packed_index(i as usize, j as usize);
-                b.ins().stack_load(ptr, f64t, out, k as i32 * 8)
-            }
-        };
-        slots.push(val);
+            Op::NearZero { .. } => unreachable!("guards are emitted as groups"),
+            _ => unreachable!("host calls and the pseudo-inverse are handled above"),
+        }
     }
-    for (k, &s) in f.outputs.iter().enumerate() {
-        b.ins().store(mem, slots[s as usize], out_ptr, k as i32 * 8);
+
+    /// Call the host pseudo-inverse on the packed matrix in slots `m`; returns the
+    /// stack slot holding its 6 packed entries.
+    fn decompose(&mut self, m: [u32; 6]) -> StackSlot {
+        let packed6 = StackSlotData::new(StackSlotKind::ExplicitSlot, 48, 3);
+        let (input, out) = (
+            self.b.create_sized_stack_slot(packed6.clone()),
+            self.b.create_sized_stack_slot(packed6),
+        );
+        for (k, s) in m.iter().enumerate() {
+            let x = self.v(*s);
+            self.b.ins().stack_store(self.ptr, x, input, k as i32 * 8);
+        }
+        let pi = self.b.ins().stack_addr(self.ptr, input, 0);
+        let po = self.b.ins().stack_addr(self.ptr, out, 0);
+        self.b.ins().call(self.pinv, &[pi, po]);
+        self.pinv_out.insert(m, out);
+        out
     }
-    b.ins().return_(&[]);
-    b.finalize(module.target_config());
-    let id = module.declare_function("tape", Linkage::Export, &ctx.func.signature)?;
-    module.define_function(id, &mut ctx)?;
-    module.clear_context(&mut ctx);
-    Ok(id)
 }
 
 /// `x^n` by the multiplication chain `f64::powi` uses (compiler-rt's `__powidf2`:

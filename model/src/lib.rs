@@ -15,6 +15,7 @@ pub mod expr;
 pub mod ir;
 pub mod jit;
 pub mod linalg;
+pub mod schedule;
 pub mod spec;
 
 pub use error::{SourceError, SourcePos};

@@ -1,4 +1,5 @@
-//! In what order, and inside which branch, a tape's operations are emitted.
+//! In what order, and inside which branch, a tape's operations are emitted as
+//! code (by the Rust emitter of kinegen-codegen and by the evaluator's JIT).
 //!
 //! A removable singularity is a guard, `if |x| < eps { series } else { closed
 //! form }` (`Op::NearZero`). Evaluating both sides and selecting one wastes the
@@ -7,7 +8,7 @@
 //! omega dt) become one `if` whose sides compute all their values, so the shared
 //! series powers, or the sine and cosine of omega dt, are computed only on the
 //! side that needs them.
-use kinegen_model::ir::Op;
+use crate::ir::Op;
 
 /// Guards emitted as one `if`: the same condition, branches independent of each
 /// other (no member reads another's value).
