@@ -144,14 +144,8 @@ pub fn run_from(
             dstart[m * p.len() + ti] += gt_vel[m];
         }
     }
-    let (fx, jx, jp, tw) = (
-        r.f("step_exact"),
-        r.f("step_exact_jac_x"),
-        r.f("step_exact_jac_p"),
-        r.f("twist"),
-    );
     let np = p.len();
-    let zeros = vec![0.0; 16];
+    let zeros = [0.0; 16];
     let mut scratch = Vec::new();
     let mut pose = vec![start];
     // columns: parameters, then the start pose (identity at the start)
@@ -164,25 +158,40 @@ pub fn run_from(
     });
     let mut omega = Vec::with_capacity(data.steps());
     let mut twist = Vec::with_capacity(data.steps());
-    let mut out3 = [0.0; 3];
-    let mut jxo = [0.0; 9];
-    let mut jpo = vec![0.0; 3 * np];
+    // pose and twist, then (with sensitivities) F_x and F_p, from one fused tape
+    let f = if with_sens {
+        &r.step_linearized
+    } else {
+        &r.step_twist
+    };
+    let mut out = vec![0.0; f.rows];
     for k in 0..data.steps() {
         let x = *pose.last().unwrap();
         let dt = [data.dt[k]];
-        let args = Runner::step_args(fx, &x, &data.u[k], p, &dt, &zeros);
-        fx.eval_into(&args, &mut out3, &mut scratch);
-        tw.eval_into(&[&data.u[k], p], &mut jxo[..3], &mut scratch);
-        twist.push([jxo[0], jxo[1], jxo[2]]);
-        omega.push(jxo[2]);
+        let mut args: [&[f64]; 8] = [&[]; 8];
+        for (slot, a) in args.iter_mut().zip(&f.args) {
+            *slot = match a.name.as_str() {
+                "x" => &x,
+                "u" => &data.u[k],
+                "p" => p,
+                "dt" => &dt,
+                _ => &zeros[..a.names.len()],
+            };
+        }
+        f.eval_into(&args[..f.args.len()], &mut out, &mut scratch);
+        twist.push([out[3], out[4], out[5]]);
+        omega.push(out[5]);
         if let Some(s) = sens.as_mut() {
-            jx.eval_into(&args, &mut jxo, &mut scratch);
-            jp.eval_into(&args, &mut jpo, &mut scratch);
+            // S_{k+1} = F_x S_k + [F_p | 0], written out: one allocation per step
+            let (jx, jp) = (&out[6..15], &out[15..]);
             let prev = s.last().unwrap();
-            let next = DMatrix::from_row_slice(3, 3, &jxo) * prev + with_start_columns(&jpo, np);
+            let next = DMatrix::from_fn(3, np + 3, |m, c| {
+                let carried: f64 = (0..3).map(|i| jx[m * 3 + i] * prev[(i, c)]).sum();
+                carried + if c < np { jp[m * np + c] } else { 0.0 }
+            });
             s.push(next);
         }
-        pose.push(out3);
+        pose.push([out[0], out[1], out[2]]);
     }
     let measured = predicted_measurements(r, p, data, &pose);
     let gyro = predicted_gyro(r, p, data, &pose, &omega);

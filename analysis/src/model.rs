@@ -42,6 +42,11 @@ pub struct Runner {
     pub names: Vec<String>,
     /// Indices (into `p`) of the parameters `fit` calibrates.
     pub free: Vec<usize>,
+    /// One step's pose and twist in one tape (dead reckoning).
+    pub step_twist: Function,
+    /// One step's pose, twist, state and parameter Jacobians in one tape
+    /// (dead reckoning with sensitivities): [3 pose, 3 twist, 9 F_x, 3 x P F_p].
+    pub step_linearized: Function,
 }
 
 /// Parse the `NAME=VALUE` pairs of `--set` (or of `option`, see [`parse_pairs`]).
@@ -113,7 +118,30 @@ impl Runner {
                 return Err(ModelError::Missing(ir.name.clone(), f.into()));
             }
         }
-        Ok(Runner { ir, p, names, free })
+        let part = |n: &str| ir.function(n).expect("checked above");
+        let fused = |name: &str, parts: &[&str]| {
+            let parts: Vec<&Function> = parts.iter().map(|n| part(n)).collect();
+            kinegen_model::fuse::fuse(name, &parts)
+                .map_err(|e| ModelError::Missing(ir.name.clone(), format!("{name} ({e})")))
+        };
+        let step_twist = fused("step_twist", &["step_exact", "twist"])?;
+        let step_linearized = fused(
+            "step_linearized",
+            &[
+                "step_exact",
+                "twist",
+                "step_exact_jac_x",
+                "step_exact_jac_p",
+            ],
+        )?;
+        Ok(Runner {
+            ir,
+            p,
+            names,
+            free,
+            step_twist,
+            step_linearized,
+        })
     }
 
     pub fn f(&self, name: &str) -> &Function {

@@ -12,6 +12,7 @@
 pub mod effects;
 pub mod error;
 pub mod expr;
+pub mod fuse;
 pub mod ir;
 pub mod jit;
 pub mod linalg;
