@@ -652,16 +652,44 @@ fn wrap(a: f64) -> f64 {
     }
 }
 
-/// SE(2) equivariance: moving the world by g moves the next pose by g; landmark
-/// range and bearing do not change when robot and landmark move together.
+/// How a function's output moves when the world frame moves by g, by what it
+/// is (its role, from the spec), never by its name.
+#[derive(Clone, Copy, PartialEq)]
+enum Frame {
+    /// A pose in the world frame (the next pose of a step, the measured pose of
+    /// a body-fixed point, wherever on the body it is mounted): moved by g.
+    Pose,
+    /// Seen from the robot (a yaw rate; range and bearing to a landmark that
+    /// moves with the world): unchanged.
+    Invariant,
+}
+
+/// The functions SE(2) equivariance applies to, with how each moves. An
+/// observation of role `other` states no frame behaviour and is not checked.
+fn frames(ir: &ModelIr) -> Vec<(&kinegen_model::ir::Function, Frame)> {
+    use kinegen_model::spec::ObservationRole as Role;
+    let mut out = Vec::new();
+    for name in ["step_euler", "step_exact"] {
+        out.extend(ir.function(name).map(|f| (f, Frame::Pose)));
+    }
+    for o in &ir.observations {
+        let frame = match o.role {
+            Role::Pose => Frame::Pose,
+            Role::YawRate | Role::RangeBearing => Frame::Invariant,
+            Role::Other => continue,
+        };
+        out.extend(ir.function(&format!("obs_{}", o.name)).map(|f| (f, frame)));
+    }
+    out
+}
+
+/// SE(2) equivariance: moving the world by g moves the next pose, and the
+/// measured pose of any body-fixed point, by g; a yaw rate, and the range and
+/// bearing of a landmark that moves with the world, do not change.
 pub fn se2_equivariance(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
-    for f in ir.functions.iter().filter(|f| {
-        f.name == "step_euler"
-            || f.name == "step_exact"
-            || (f.name.starts_with("obs_") && !f.name.contains("_jac_"))
-    }) {
+    for (f, frame) in frames(ir) {
         let mut fd = Finding::new(ir, &f.name, "SE(2) equivariance");
         for _ in 0..n {
             let args = sampler.args(f);
@@ -684,15 +712,16 @@ pub fn se2_equivariance(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Ve
                 moved[li] = vec![lx, ly];
             }
             let (a, b) = (eval(k, f, &args), eval(k, f, &moved));
-            let expect: Vec<f64> = if f.name.starts_with("step") {
-                let [ex, ey] = g(&a);
-                vec![ex, ey, a[2] + phi]
-            } else {
-                a.clone()
+            let expect: Vec<f64> = match frame {
+                Frame::Pose => {
+                    let [ex, ey] = g(&a);
+                    vec![ex, ey, a[2] + phi]
+                }
+                Frame::Invariant => a.clone(),
             };
             let scale = 1.0 + args[0][0].abs() + args[0][1].abs() + tx.abs() + ty.abs();
             for (i, (x, y)) in b.iter().zip(&expect).enumerate() {
-                let angle = f.name.starts_with("step") && i == 2
+                let angle = frame == Frame::Pose && i == 2
                     || ir
                         .observations
                         .iter()
