@@ -454,6 +454,41 @@ fn a_measurement_delay_is_calibrated_once_the_time_offset_effect_is_added() {
     );
 }
 
+/// A delay the user declares under a name of their own (`measurement_delay =
+/// true`): simulated with it, then calibrated by it. Nothing looks for the name
+/// `time_offset`.
+#[test]
+fn a_delay_declared_under_any_name_is_simulated_and_calibrated() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = tmp.path().join("lagged.toml");
+    let text = std::fs::read_to_string(root().join("spec/diff_drive.toml")).unwrap();
+    let lag = "\n[[parameter]]\nname = \"mocap_lag\"\nnominal = 0.0\nunit = \"s\"\nmin = -0.3\nmax = 0.3\nmeasurement_delay = true\n";
+    // the new parameter goes after the last declared one (order = `p` order)
+    let at = text
+        .find("[[noise]]")
+        .or_else(|| text.find("[[define]]"))
+        .unwrap();
+    std::fs::write(&spec, format!("{}{lag}\n{}", &text[..at], &text[at..])).unwrap();
+    let spec = spec.to_str().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "lagged.csv",
+        &[
+            "--spec",
+            spec,
+            "--set",
+            "mocap_lag=0.06",
+            "--trajectory",
+            "random",
+            "--seed",
+            "7",
+        ],
+    );
+    let fit = kinegen_json(&["fit", "--spec", spec, "--data", log.to_str().unwrap()]);
+    let tau = fit["parameters"]["mocap_lag"]["estimate"].as_f64().unwrap();
+    assert!((tau - 0.06).abs() < 0.004, "mocap_lag {tau}");
+}
+
 #[test]
 fn seed_methods_run_and_are_compared_on_umbmark_squares() {
     let tmp = tempfile::tempdir().unwrap();

@@ -121,7 +121,7 @@ pub fn run_from(
     let start = data.start_pose();
     let u0 = data.u.first().cloned().unwrap_or_default();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
-    let tau_i = r.param_index("time_offset");
+    let tau_i = r.delay;
     let (start, gt_vel) = match (tau_i.map(|i| p[i]), &data.gt) {
         (Some(tau), Some(g)) if tau != 0.0 && g.len() > 1 => {
             let (j, a) = data.locate(data.t[0] + tau);
@@ -243,14 +243,14 @@ pub fn predicted_measurements(
     data: &Run,
     pose: &[[f64; 3]],
 ) -> Vec<[f64; 3]> {
-    let tau = r.param_index("time_offset").map_or(0.0, |i| p[i]);
+    let tau = crate::timeline::delay(r, p);
     let h = r.ir.observation_fn(Pose, "");
     (0..pose.len())
         .map(|k| {
             let x = if tau == 0.0 || pose.len() < 2 {
                 pose[k]
             } else {
-                let (j, a) = data.locate(data.t[k] - tau);
+                let (j, a) = crate::timeline::model_instant(data, k, tau);
                 [0, 1, 2].map(|i| pose[j][i] + a * (pose[j + 1][i] - pose[j][i]))
             };
             match h {

@@ -179,7 +179,7 @@ fn one_step(
     let mut feat = Vec::new();
     let mut regimes = Vec::new();
     let gyro = r.ir.observation_fn(YawRate, "");
-    let tau = r.param_index("time_offset").map_or(0.0, |i| p[i]);
+    let tau = crate::timeline::delay(r, p);
     for run in runs {
         let Some(g) = &run.gt else { continue };
         let twists: Vec<Vec<f64>> = (0..run.steps()).map(|k| tw.eval(&[&run.u[k], p])).collect();
@@ -191,7 +191,7 @@ fn one_step(
             let u_k: &[f64] = if tau == 0.0 {
                 &run.u[k]
             } else {
-                let (j, a) = run.locate(run.t[k] - tau);
+                let (j, a) = crate::timeline::model_instant(run, k, tau);
                 let a = a.clamp(0.0, 1.0);
                 let j1 = (j + 1).min(run.steps() - 1);
                 shifted_u = run.u[j]

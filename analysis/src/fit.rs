@@ -319,12 +319,12 @@ fn run_residuals(
         .collect();
     let free = &cols[..];
     let mut scratch = Vec::new();
-    // A `time_offset` parameter: measurement k is compared with the model at
-    // t_k - time_offset, linearly interpolated between rows (exact sensitivities of
-    // the interpolation, and d/d time_offset = minus the interpolated velocity).
-    let tau_i = r.param_index("time_offset");
-    let tau = tau_i.map_or(0.0, |i| p[i]);
-    let shifted = |k: usize| run.locate(run.t[k] - tau);
+    // A measurement delay (crate::timeline): measurement k is compared with the
+    // model at t_k - delay, linearly interpolated between rows (exact sensitivities
+    // of the interpolation, and d/d delay = minus the interpolated velocity).
+    let tau_i = r.delay;
+    let tau = crate::timeline::delay(r, p);
+    let shifted = |k: usize| crate::timeline::model_instant(run, k, tau);
     if o.use_pose {
         if let Some(gt) = &run.gt {
             let obs = r.ir.observation_fn(Pose, "");

@@ -25,6 +25,7 @@ pub mod rosmsg;
 pub mod seed_methods;
 pub mod simulate;
 pub mod sweep;
+pub mod timeline;
 
 pub use kinegen_model::effects;
 pub use kinegen_model::ir::ModelIr;

@@ -42,6 +42,9 @@ pub struct Runner {
     pub names: Vec<String>,
     /// Indices (into `p`) of the parameters `fit` calibrates.
     pub free: Vec<usize>,
+    /// Index (into `p`) of the spec's measurement delay, if it declares one
+    /// (see [`crate::timeline`]).
+    pub delay: Option<usize>,
     /// One step's pose and twist in one tape (dead reckoning).
     pub step_twist: Function,
     /// One step's pose, twist, state and parameter Jacobians in one tape
@@ -134,11 +137,13 @@ impl Runner {
                 "step_exact_jac_p",
             ],
         )?;
+        let delay = rp.iter().position(|q| q.measurement_delay);
         Ok(Runner {
             ir,
             p,
             names,
             free,
+            delay,
             step_twist,
             step_linearized,
         })

@@ -443,7 +443,7 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     }
     let mut rows = Vec::with_capacity(n);
     // ground truth is recorded with the delay of a `time_offset` parameter
-    let delay = truth.param_index("time_offset").map_or(0.0, |i| truth.p[i]);
+    let delay = crate::timeline::delay(truth, &truth.p);
     let mut history: Vec<(f64, [f64; 3])> = vec![(0.0, x)];
     let mut t_now = 0.0;
     // configuration (steering angles of caster wheels): starts straight ahead and

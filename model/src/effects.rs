@@ -402,8 +402,8 @@ impl Effect {
         }
         self.parameter
             .iter()
+            .filter(|p| p.get("measurement_delay").and_then(|d| d.as_bool()) == Some(true))
             .find_map(|p| p.get("name").and_then(|n| n.as_str()))
-            .filter(|n| *n == "time_offset")
     }
 
     /// Observation roles this effect changes when it changes nothing else (a gyro

@@ -79,6 +79,8 @@ struct RawParam {
     free: bool,
     #[serde(default, rename = "const")]
     constant: bool,
+    #[serde(default)]
+    measurement_delay: bool,
 }
 
 fn yes() -> bool {
@@ -213,6 +215,12 @@ pub struct Param {
     pub free: bool,
     /// Folded into generated code; not a runtime argument.
     pub constant: bool,
+    /// The delay, in s, of every measurement (poses, gyro) relative to the
+    /// inputs: measurement k, logged at t_k, is compared with the model at
+    /// t_k - delay. At most one parameter of a spec; the analysis handles it in
+    /// one place (kinegen_analysis::timeline).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub measurement_delay: bool,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -536,9 +544,41 @@ impl Model {
                     max: p.max,
                     free: p.free && !p.constant,
                     constant: p.constant,
+                    measurement_delay: p.measurement_delay,
                 })
             })
             .collect::<Result<_, _>>()?;
+        let delays: Vec<&RawParam> = raw
+            .parameter
+            .iter()
+            .filter(|p| p.measurement_delay)
+            .collect();
+        if let Some(second) = delays.get(1) {
+            return Err(cx.err_span(
+                &second.name,
+                format!(
+                    "a second `measurement_delay` parameter (`{}` is one already): the measurements have one delay",
+                    delays[0].name.get_ref()
+                ),
+            ));
+        }
+        if let Some(d) = delays.first() {
+            if d.constant {
+                return Err(cx.err_span(
+                    &d.name,
+                    "a `measurement_delay` parameter cannot be `const`: the analysis shifts the measurements by its value at run time",
+                ));
+            }
+            if !matches!(d.unit.as_str(), "s" | "") {
+                return Err(cx.err_span(
+                    &d.name,
+                    format!(
+                        "a `measurement_delay` is in seconds (unit \"s\"), not \"{}\"",
+                        d.unit
+                    ),
+                ));
+            }
+        }
 
         // Parse definitions, check names, then order them (and reject cycles).
         let def_names: HashSet<&str> = raw
