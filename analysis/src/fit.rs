@@ -231,16 +231,32 @@ pub fn normal_equations(
                 DVector::zeros(m),
                 0.0,
             );
-            for (res, row) in rv.iter_mut().zip(&jv) {
-                let w = o.huber.map_or(1.0, |k| huber_weight(*res, k));
-                *res *= w;
-                let a = DVector::from_iterator(m, row[..m].iter().map(|v| v * w));
-                let b = if nuis { row[m] * w } else { 0.0 };
-                ata.ger(1.0, &a, &a, 1.0);
-                atb.axpy(b, &a, 1.0);
-                btb += b * b;
-                atr.axpy(*res, &a, 1.0);
-                btr += b * *res;
+            // Rows are gathered in blocks and each block enters A^T A as one
+            // matrix product (blocked and vectorised by nalgebra), not as one
+            // rank-1 update and one allocation per residual.
+            const BLOCK: usize = 256;
+            let (mut a, mut b, mut rb) = (
+                DMatrix::zeros(BLOCK, m),
+                DVector::zeros(BLOCK),
+                DVector::zeros(BLOCK),
+            );
+            for (chunk_res, chunk_rows) in rv.chunks_mut(BLOCK).zip(jv.chunks(BLOCK)) {
+                let n = chunk_res.len();
+                for (i, (res, row)) in chunk_res.iter_mut().zip(chunk_rows).enumerate() {
+                    let w = o.huber.map_or(1.0, |k| huber_weight(*res, k));
+                    *res *= w;
+                    for (c, v) in row[..m].iter().enumerate() {
+                        a[(i, c)] = v * w;
+                    }
+                    b[i] = if nuis { row[m] * w } else { 0.0 };
+                    rb[i] = *res;
+                }
+                let (a, b, rb) = (a.rows(0, n), b.rows(0, n), rb.rows(0, n));
+                ata.gemm_tr(1.0, &a, &a, 1.0);
+                atb.gemv_tr(1.0, &a, &b, 1.0);
+                btb += b.dot(&b);
+                atr.gemv_tr(1.0, &a, &rb, 1.0);
+                btr += b.dot(&rb);
             }
             (rv, ata, atb, btb, atr, btr)
         })

@@ -25,7 +25,7 @@ use cranelift_codegen::ir::{
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, Linkage, Module};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, OnceLock};
 
@@ -192,6 +192,14 @@ extern "C" fn host_atan2(y: f64, x: f64) -> f64 {
 extern "C" fn host_pow(x: f64, y: f64) -> f64 {
     x.powf(y)
 }
+/// Both `sin x` and `cos x` in one call (the same two libm calls as apart, but
+/// one call's register spills instead of two), into the 2 values at `out`.
+///
+/// # Safety
+/// `out` points at 2 values (a stack slot of the compiled code).
+unsafe extern "C" fn host_sincos(x: f64, out: *mut f64) {
+    unsafe { std::slice::from_raw_parts_mut(out, 2) }.copy_from_slice(&[x.sin(), x.cos()]);
+}
 /// The packed pseudo-inverse of the packed symmetric 3x3 matrix at `m`.
 ///
 /// # Safety
@@ -202,8 +210,9 @@ unsafe extern "C" fn host_pinv_sym3(m: *const f64, out: *mut f64) {
     unsafe { std::slice::from_raw_parts_mut(out, 6) }.copy_from_slice(&p);
 }
 
-fn host_functions() -> [(&'static str, *const u8); 9] {
+fn host_functions() -> [(&'static str, *const u8); 10] {
     [
+        ("kg_sincos", host_sincos as *const u8),
         ("kg_sin", host_sin as *const u8),
         ("kg_cos", host_cos as *const u8),
         ("kg_tan", host_tan as *const u8),
@@ -251,6 +260,11 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
         .params
         .extend([AbiParam::new(ptr), AbiParam::new(ptr)]);
     let pinv_id = module.declare_function("kg_pinv_sym3", Linkage::Import, &pinv_sig)?;
+    let mut sincos_sig = module.make_signature();
+    sincos_sig
+        .params
+        .extend([AbiParam::new(types::F64), AbiParam::new(ptr)]);
+    let sincos_id = module.declare_function("kg_sincos", Linkage::Import, &sincos_sig)?;
 
     let mut fctx = FunctionBuilderContext::new();
     let mut b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
@@ -267,7 +281,9 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
         .map(|(name, id)| (*name, module.declare_func_in_func(*id, b.func)))
         .collect();
     let pinv = module.declare_func_in_func(pinv_id, b.func);
+    let sincos = module.declare_func_in_func(sincos_id, b.func);
     let (items, groups) = schedule(&f.tape, &f.outputs);
+    let both = sin_cos_pairs(&f.tape, &items);
     let mut t = Translator {
         b,
         tape: &f.tape,
@@ -277,6 +293,9 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
         host,
         pinv,
         pinv_out: HashMap::new(),
+        sincos,
+        both,
+        sincos_of: HashMap::new(),
         slots: vec![None; f.tape.len()],
     };
     t.items(&items);
@@ -308,7 +327,52 @@ struct Translator<'a, 'f> {
     /// One decomposition per distinct matrix, read entry by entry (as the
     /// interpreter's cache does).
     pinv_out: HashMap<[u32; 6], StackSlot>,
+    sincos: FuncRef,
+    /// Slots whose sine and cosine are both taken in one scope: one host call.
+    both: HashSet<u32>,
+    /// (sin, cos) of such a slot, once the first of the two is emitted.
+    sincos_of: HashMap<u32, (Value, Value)>,
     slots: Vec<Option<Value>>,
+}
+
+/// The slots whose sine and cosine the tape takes in the same scope of the
+/// schedule (the body, or one side of one guard): computed together there, the
+/// first of the two dominates the second. A pair split across scopes stays two
+/// calls, so no side computes a value it does not need.
+fn sin_cos_pairs(tape: &[Op], items: &[Item]) -> HashSet<u32> {
+    fn walk(
+        tape: &[Op],
+        items: &[Item],
+        scope: usize,
+        next: &mut usize,
+        seen: &mut HashMap<(u32, bool), usize>,
+    ) {
+        for item in items {
+            match item {
+                Item::Slot(s) => match tape[*s] {
+                    Op::Sin(x) => {
+                        seen.insert((x, true), scope);
+                    }
+                    Op::Cos(x) => {
+                        seen.insert((x, false), scope);
+                    }
+                    _ => {}
+                },
+                Item::Guard { near, far, .. } => {
+                    for side in [near, far] {
+                        *next += 1;
+                        walk(tape, side, *next, next, seen);
+                    }
+                }
+            }
+        }
+    }
+    let mut seen = HashMap::new();
+    walk(tape, items, 0, &mut 0, &mut seen);
+    seen.iter()
+        .filter(|((x, is_sin), scope)| *is_sin && seen.get(&(*x, false)) == Some(scope))
+        .map(|((x, _), _)| *x)
+        .collect()
 }
 
 impl Translator<'_, '_> {
@@ -382,6 +446,11 @@ impl Translator<'_, '_> {
                 .ins()
                 .stack_load(self.ptr, types::F64, out, k as i32 * 8);
         }
+        match self.tape[s] {
+            Op::Sin(x) if self.both.contains(&x) => return self.sin_cos(x).0,
+            Op::Cos(x) if self.both.contains(&x) => return self.sin_cos(x).1,
+            _ => {}
+        }
         let (slots, host, b) = (&self.slots, &self.host, &mut self.b);
         let v =
             |i: u32| slots[i as usize].expect("the schedule emits every operand before its reader");
@@ -417,6 +486,22 @@ impl Translator<'_, '_> {
             Op::NearZero { .. } => unreachable!("guards are emitted as groups"),
             _ => unreachable!("host calls and the pseudo-inverse are handled above"),
         }
+    }
+
+    /// The sine and cosine of slot `x`, from one host call.
+    fn sin_cos(&mut self, x: u32) -> (Value, Value) {
+        if let Some(&pair) = self.sincos_of.get(&x) {
+            return pair;
+        }
+        let out =
+            self.b
+                .create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, 16, 3));
+        let (arg, addr) = (self.v(x), self.b.ins().stack_addr(self.ptr, out, 0));
+        self.b.ins().call(self.sincos, &[arg, addr]);
+        let sin = self.b.ins().stack_load(self.ptr, types::F64, out, 0);
+        let cos = self.b.ins().stack_load(self.ptr, types::F64, out, 8);
+        self.sincos_of.insert(x, (sin, cos));
+        (sin, cos)
     }
 
     /// Call the host pseudo-inverse on the packed matrix in slots `m`; returns the
