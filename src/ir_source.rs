@@ -12,8 +12,10 @@ use std::process::{Command, Stdio};
 
 /// Version of the IR's JSON layout: part of the cache key, so an IR derived by
 /// an older kinegen (without observation roles, or with libm::pow powers
-/// instead of products: format 3; unshared reciprocals: 4) is never reused.
-const IR_FORMAT: u32 = 4;
+/// instead of products: format 3; unshared reciprocals: 4; an integrated
+/// inverse whose whole expression got the series branch: 5; measurement delays
+/// found by name: 6) is never reused.
+const IR_FORMAT: u32 = 6;
 
 pub fn cache_dir() -> PathBuf {
     std::env::temp_dir().join("kinegen-ir-cache")

@@ -298,7 +298,18 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     names.extend(model.noise.iter().map(|n| n.name.clone()));
     names.extend(model.runtime_params().map(|p| p.name.clone()));
     names.extend(strings(&[
-        "dt", "xl", "yl", "vx", "vy", "omega", "dx", "dy", "dtheta", "kg_dth",
+        "dt",
+        "xl",
+        "yl",
+        "vx",
+        "vy",
+        "omega",
+        "dx",
+        "dy",
+        "dtheta",
+        "kg_dth",
+        "kg_inc_vx",
+        "kg_inc_vy",
     ]));
     for n in &names {
         by_name.insert(n.clone(), Atom::var(symbol!(&format!("kg_v_{n}"))));
@@ -884,9 +895,24 @@ fn inverse_kinematics(
         (&dx * &d / (d.sin() * &dt), Atom::num(0))
     };
     let om_i = &d / &dt;
+    // The removable singularity at dtheta = 0 lives in the twist alone (dtheta /
+    // sin dtheta): the twist gets its series branch, and the inverse kinematics
+    // is applied to that twist. A series of the whole composed inverse (an
+    // atan2 of a curvature, say) would converge slowly or not at all.
+    let dtheta = sym.s("dtheta");
+    let lets = vec![
+        (
+            sym.s("kg_inc_vx"),
+            regularize(&vx_i, dtheta, fx).map_err(se)?,
+        ),
+        (
+            sym.s("kg_inc_vy"),
+            regularize(&vy_i, dtheta, fx).map_err(se)?,
+        ),
+    ];
     let subst = |a: &Atom| {
-        let a = substitute(a, tw_syms[0], &vx_i);
-        let a = substitute(&a, tw_syms[1], &vy_i);
+        let a = substitute(a, tw_syms[0], &sym.a("kg_inc_vx"));
+        let a = substitute(&a, tw_syms[1], &sym.a("kg_inc_vy"));
         substitute(&a, tw_syms[2], &om_i)
     };
     let mut args = vec![
@@ -904,7 +930,7 @@ fn inverse_kinematics(
             if lateral { "Holonomic: dx, dy and dtheta are all imposed (exact SE(2) logarithm)." } else { "Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15)." }
         ),
         args,
-        lets: vec![],
+        lets,
         rows: inverse_outs.len(),
         cols: 1,
         row_names: out_names,

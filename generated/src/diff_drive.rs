@@ -2522,7 +2522,7 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 5usize]) -> [f64; 2usize] 
 * `p`: [r_r, r_l, b, counts_per_rev, gear_ratio]
 * returns [n_r, n_l]
 
-59 arithmetic operations (174 before common-subexpression elimination).*/
+45 arithmetic operations (112 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[f64; 3usize],
@@ -2537,79 +2537,65 @@ pub fn inverse_increment(
     let t5: f64 = p[2usize];
     let t6: f64 = p[3usize];
     let t7: f64 = p[4usize];
-    let t8: f64 = 3.141592653589793f64;
-    let t9: f64 = t5 * t6;
-    let t10: f64 = t1 * t9;
-    let t11: f64 = 0.25f64;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t3 * t8;
-    let t14: f64 = t7 * t13;
-    let t15: f64 = t2 * t14;
-    let t16: f64 = 1f64;
-    let t17: f64 = t16 / t15;
-    let t18: f64 = t12 * t17;
-    let t19: f64 = t0 * t6;
-    let t20: f64 = 0.5f64;
-    let t56: f64 = t4 * t8;
-    let t57: f64 = t7 * t56;
-    let t58: f64 = t2 * t57;
-    let t59: f64 = t16 / t58;
-    let t60: f64 = t12 * t59;
-    let g0: [f64; 2usize] = if libm::fabs(t1) < 0.05f64 {
-        let t21: f64 = t19 * t20;
-        let t22: f64 = t21 * t17;
-        let t23: f64 = t18 + t22;
-        let t24: f64 = t1 * t1;
-        let t25: f64 = t19 * t24;
-        let t26: f64 = 0.08333333333333333f64;
+    let g0: [f64; 1usize] = if libm::fabs(t1) < 0.05f64 {
+        let t8: f64 = 1f64;
+        let t9: f64 = t8 / t2;
+        let t10: f64 = t0 * t9;
+        let t11: f64 = t1 * t1;
+        let t12: f64 = t0 * t11;
+        let t13: f64 = 0.16666666666666666f64;
+        let t14: f64 = t12 * t13;
+        let t15: f64 = t14 * t9;
+        let t16: f64 = t10 + t15;
+        let t17: f64 = t11 * t11;
+        let t18: f64 = t0 * t17;
+        let t19: f64 = 0.019444444444444445f64;
+        let t20: f64 = t18 * t19;
+        let t21: f64 = t20 * t9;
+        let t22: f64 = t16 + t21;
+        let t23: f64 = t1 * t11;
+        let t24: f64 = t23 * t23;
+        let t25: f64 = t0 * t24;
+        let t26: f64 = 0.00205026455026455f64;
         let t27: f64 = t25 * t26;
-        let t28: f64 = t27 * t17;
-        let t29: f64 = t23 + t28;
-        let t30: f64 = t24 * t24;
-        let t31: f64 = t19 * t30;
-        let t32: f64 = 0.009722222222222222f64;
+        let t28: f64 = t27 * t9;
+        let t29: f64 = t22 + t28;
+        let t30: f64 = t17 * t17;
+        let t31: f64 = t0 * t30;
+        let t32: f64 = 0.0002099867724867725f64;
         let t33: f64 = t31 * t32;
-        let t34: f64 = t33 * t17;
+        let t34: f64 = t33 * t9;
         let t35: f64 = t29 + t34;
-        let t36: f64 = t1 * t24;
-        let t37: f64 = t36 * t36;
-        let t38: f64 = t19 * t37;
-        let t39: f64 = 0.001025132275132275f64;
-        let t40: f64 = t38 * t39;
-        let t41: f64 = t40 * t17;
-        let t42: f64 = t35 + t41;
-        let t43: f64 = t30 * t30;
-        let t44: f64 = t19 * t43;
-        let t45: f64 = 0.00010499338624338625f64;
-        let t46: f64 = t44 * t45;
-        let t47: f64 = t46 * t17;
-        let t48: f64 = t42 + t47;
-        let t61: f64 = t21 * t59;
-        let t62: f64 = t27 * t59;
-        let t63: f64 = t61 + t62;
-        let t64: f64 = t33 * t59;
-        let t65: f64 = t63 + t64;
-        let t66: f64 = t40 * t59;
-        let t67: f64 = t65 + t66;
-        let t68: f64 = t46 * t59;
-        let t69: f64 = t67 + t68;
-        let t70: f64 = t69 - t60;
-        [t48, t70]
+        [t35]
     } else {
-        let t49: f64 = libm::sin(t1);
-        let t50: f64 = t1 * t19;
-        let t51: f64 = t20 * t50;
-        let t52: f64 = t15 * t49;
-        let t53: f64 = t51 / t52;
-        let t54: f64 = t18 + t53;
-        let t71: f64 = t49 * t58;
-        let t72: f64 = t51 / t71;
-        let t73: f64 = t72 - t60;
-        [t54, t73]
+        let t36: f64 = libm::sin(t1);
+        let t37: f64 = t0 * t1;
+        let t38: f64 = t2 * t36;
+        let t39: f64 = t37 / t38;
+        [t39]
     };
-    let t55: f64 = g0[0usize];
-    let t74: f64 = g0[1usize];
-    [t55, t74]
+    let t40: f64 = g0[0usize];
+    let t41: f64 = 3.141592653589793f64;
+    let t42: f64 = t5 * t6;
+    let t43: f64 = t1 * t42;
+    let t44: f64 = 0.25f64;
+    let t45: f64 = t43 * t44;
+    let t46: f64 = t3 * t41;
+    let t47: f64 = t7 * t46;
+    let t48: f64 = t2 * t47;
+    let t49: f64 = t45 / t48;
+    let t50: f64 = t6 * t40;
+    let t51: f64 = 0.5f64;
+    let t52: f64 = t50 * t51;
+    let t53: f64 = t52 / t47;
+    let t54: f64 = t49 + t53;
+    let t55: f64 = t4 * t41;
+    let t56: f64 = t7 * t55;
+    let t57: f64 = t2 * t56;
+    let t58: f64 = t45 / t57;
+    let t59: f64 = t52 / t56;
+    let t60: f64 = t59 - t58;
+    [t54, t60]
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
 /// row-major), for verification tools. Returns false for an unknown name or

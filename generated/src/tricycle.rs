@@ -1716,7 +1716,7 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 2usize] 
 * `p`: [r, L]
 * returns [w, alpha]
 
-77 arithmetic operations (154 before common-subexpression elimination).*/
+34 arithmetic operations (179 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[f64; 3usize],
@@ -1728,98 +1728,51 @@ pub fn inverse_increment(
     let t2: f64 = dt;
     let t3: f64 = p[0usize];
     let t4: f64 = p[1usize];
-    let t5: f64 = t1 * t1;
-    let t6: f64 = t0 * t5;
-    let t9: f64 = t2 * t3;
-    let t35: f64 = t0 * t1;
-    let t39: f64 = t2 * t2;
-    let t64: f64 = t0 * t0;
-    let t66: f64 = t5 * t64;
-    let g0: [f64; 3usize] = if libm::fabs(t1) < 0.05f64 {
-        let t7: f64 = 0.16666666666666666f64;
-        let t8: f64 = t6 * t7;
-        let t10: f64 = 1f64;
-        let t11: f64 = t10 / t9;
-        let t12: f64 = t8 * t11;
-        let t13: f64 = t5 * t5;
-        let t14: f64 = t0 * t13;
-        let t15: f64 = 0.019444444444444445f64;
-        let t16: f64 = t14 * t15;
-        let t17: f64 = t16 * t11;
-        let t18: f64 = t12 + t17;
-        let t19: f64 = t1 * t5;
-        let t20: f64 = t19 * t19;
-        let t21: f64 = t0 * t20;
-        let t22: f64 = 0.00205026455026455f64;
-        let t23: f64 = t21 * t22;
-        let t24: f64 = t23 * t11;
-        let t25: f64 = t18 + t24;
-        let t26: f64 = t13 * t13;
-        let t27: f64 = t0 * t26;
-        let t28: f64 = 0.0002099867724867725f64;
-        let t29: f64 = t27 * t28;
-        let t30: f64 = t29 * t11;
-        let t31: f64 = t25 + t30;
-        let t32: f64 = t0 * t11;
-        let t33: f64 = t31 + t32;
-        let t40: f64 = t4 * t35;
-        let t41: f64 = t10 / t39;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = t0 * t19;
-        let t44: f64 = t4 * t43;
-        let t45: f64 = t7 * t44;
-        let t46: f64 = t45 * t41;
-        let t47: f64 = t42 + t46;
-        let t48: f64 = t1 * t13;
-        let t49: f64 = t0 * t48;
-        let t50: f64 = t4 * t49;
-        let t51: f64 = t15 * t50;
-        let t52: f64 = t51 * t41;
-        let t53: f64 = t47 + t52;
-        let t54: f64 = t1 * t20;
-        let t55: f64 = t0 * t54;
-        let t56: f64 = t4 * t55;
-        let t57: f64 = t22 * t56;
-        let t58: f64 = t57 * t41;
-        let t59: f64 = t53 + t58;
-        let t65: f64 = t64 * t41;
-        let t67: f64 = 0.3333333333333333f64;
-        let t68: f64 = t66 * t67;
-        let t69: f64 = t68 * t41;
-        let t70: f64 = t65 + t69;
-        let t71: f64 = t13 * t64;
-        let t72: f64 = 0.06666666666666667f64;
-        let t73: f64 = t71 * t72;
-        let t74: f64 = t73 * t41;
-        let t75: f64 = t70 + t74;
-        let t76: f64 = t20 * t64;
-        let t77: f64 = 0.010582010582010581f64;
-        let t78: f64 = t76 * t77;
-        let t79: f64 = t78 * t41;
-        let t80: f64 = t75 + t79;
-        let t81: f64 = t26 * t64;
-        let t82: f64 = 0.0014814814814814814f64;
-        let t83: f64 = t81 * t82;
-        let t84: f64 = t83 * t41;
-        let t85: f64 = t80 + t84;
-        [t33, t59, t85]
+    let t5: f64 = 1f64;
+    let t6: f64 = t5 / t2;
+    let g0: [f64; 1usize] = if libm::fabs(t1) < 0.05f64 {
+        let t7: f64 = t0 * t6;
+        let t8: f64 = t1 * t1;
+        let t9: f64 = t0 * t8;
+        let t10: f64 = 0.16666666666666666f64;
+        let t11: f64 = t9 * t10;
+        let t12: f64 = t11 * t6;
+        let t13: f64 = t7 + t12;
+        let t14: f64 = t8 * t8;
+        let t15: f64 = t0 * t14;
+        let t16: f64 = 0.019444444444444445f64;
+        let t17: f64 = t15 * t16;
+        let t18: f64 = t17 * t6;
+        let t19: f64 = t13 + t18;
+        let t20: f64 = t1 * t8;
+        let t21: f64 = t20 * t20;
+        let t22: f64 = t0 * t21;
+        let t23: f64 = 0.00205026455026455f64;
+        let t24: f64 = t22 * t23;
+        let t25: f64 = t24 * t6;
+        let t26: f64 = t19 + t25;
+        let t27: f64 = t14 * t14;
+        let t28: f64 = t0 * t27;
+        let t29: f64 = 0.0002099867724867725f64;
+        let t30: f64 = t28 * t29;
+        let t31: f64 = t30 * t6;
+        let t32: f64 = t26 + t31;
+        [t32]
     } else {
-        let t34: f64 = libm::sin(t1);
-        let t36: f64 = t9 * t34;
-        let t37: f64 = t35 / t36;
-        let t60: f64 = t4 * t6;
-        let t61: f64 = t34 * t39;
-        let t62: f64 = t60 / t61;
-        let t86: f64 = t34 * t34;
-        let t87: f64 = t39 * t86;
-        let t88: f64 = t66 / t87;
-        [t37, t62, t88]
+        let t33: f64 = libm::sin(t1);
+        let t34: f64 = t0 * t1;
+        let t35: f64 = t2 * t33;
+        let t36: f64 = t34 / t35;
+        [t36]
     };
-    let t38: f64 = g0[0usize];
-    let t63: f64 = g0[1usize];
-    let t89: f64 = g0[2usize];
-    let t90: f64 = libm::atan2(t63, t89);
-    [t38, t90]
+    let t37: f64 = g0[0usize];
+    let t38: f64 = t37 / t3;
+    let t39: f64 = t1 * t37;
+    let t40: f64 = t4 * t39;
+    let t41: f64 = t40 * t6;
+    let t42: f64 = t37 * t37;
+    let t43: f64 = libm::atan2(t41, t42);
+    [t38, t43]
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
 /// row-major), for verification tools. Returns false for an unknown name or

@@ -1241,7 +1241,7 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 1usize]) -> [f64; 2usize] 
 * `p`: [v_scale]
 * returns [v, w]
 
-30 arithmetic operations (50 before common-subexpression elimination).*/
+30 arithmetic operations (46 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[f64; 3usize],
@@ -1252,46 +1252,46 @@ pub fn inverse_increment(
     let t1: f64 = dpose[2usize];
     let t2: f64 = dt;
     let t3: f64 = p[0usize];
-    let t8: f64 = t2 * t3;
+    let t4: f64 = 1f64;
+    let t5: f64 = t4 / t2;
     let g0: [f64; 1usize] = if libm::fabs(t1) < 0.05f64 {
-        let t4: f64 = t1 * t1;
-        let t5: f64 = t0 * t4;
-        let t6: f64 = 0.16666666666666666f64;
-        let t7: f64 = t5 * t6;
-        let t9: f64 = 1f64;
-        let t10: f64 = t9 / t8;
-        let t11: f64 = t7 * t10;
-        let t12: f64 = t4 * t4;
-        let t13: f64 = t0 * t12;
-        let t14: f64 = 0.019444444444444445f64;
-        let t15: f64 = t13 * t14;
-        let t16: f64 = t15 * t10;
-        let t17: f64 = t11 + t16;
-        let t18: f64 = t1 * t4;
-        let t19: f64 = t18 * t18;
-        let t20: f64 = t0 * t19;
-        let t21: f64 = 0.00205026455026455f64;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = t22 * t10;
-        let t24: f64 = t17 + t23;
-        let t25: f64 = t12 * t12;
-        let t26: f64 = t0 * t25;
-        let t27: f64 = 0.0002099867724867725f64;
-        let t28: f64 = t26 * t27;
-        let t29: f64 = t28 * t10;
-        let t30: f64 = t24 + t29;
-        let t31: f64 = t0 * t10;
-        let t32: f64 = t30 + t31;
-        [t32]
+        let t6: f64 = t0 * t5;
+        let t7: f64 = t1 * t1;
+        let t8: f64 = t0 * t7;
+        let t9: f64 = 0.16666666666666666f64;
+        let t10: f64 = t8 * t9;
+        let t11: f64 = t10 * t5;
+        let t12: f64 = t6 + t11;
+        let t13: f64 = t7 * t7;
+        let t14: f64 = t0 * t13;
+        let t15: f64 = 0.019444444444444445f64;
+        let t16: f64 = t14 * t15;
+        let t17: f64 = t16 * t5;
+        let t18: f64 = t12 + t17;
+        let t19: f64 = t1 * t7;
+        let t20: f64 = t19 * t19;
+        let t21: f64 = t0 * t20;
+        let t22: f64 = 0.00205026455026455f64;
+        let t23: f64 = t21 * t22;
+        let t24: f64 = t23 * t5;
+        let t25: f64 = t18 + t24;
+        let t26: f64 = t13 * t13;
+        let t27: f64 = t0 * t26;
+        let t28: f64 = 0.0002099867724867725f64;
+        let t29: f64 = t27 * t28;
+        let t30: f64 = t29 * t5;
+        let t31: f64 = t25 + t30;
+        [t31]
     } else {
-        let t33: f64 = libm::sin(t1);
-        let t34: f64 = t0 * t1;
-        let t35: f64 = t8 * t33;
-        let t36: f64 = t34 / t35;
-        [t36]
+        let t32: f64 = libm::sin(t1);
+        let t33: f64 = t0 * t1;
+        let t34: f64 = t2 * t32;
+        let t35: f64 = t33 / t34;
+        [t35]
     };
-    let t37: f64 = g0[0usize];
-    let t38: f64 = t1 / t2;
+    let t36: f64 = g0[0usize];
+    let t37: f64 = t36 / t3;
+    let t38: f64 = t1 * t5;
     [t37, t38]
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
