@@ -21,7 +21,7 @@ fn with_chain(spec: &Model, cat: &[Effect], effects: &[String]) -> Result<Model,
             .find(|e| &e.name == name)
             .ok_or_else(|| format!("unknown effect `{name}`"))?;
         eff.added_to(&m)
-            .map_err(|why| format!("after the effects before it, it {why}"))
+            .map_err(|why| format!("{why} (on the model with the effects found before it)"))
     })
 }
 

@@ -365,6 +365,14 @@ impl Effect {
                 })
                 .count();
         let times = self.measurement_delay().is_some();
+        if times {
+            if let Some(d) = m.params.iter().find(|p| p.measurement_delay) {
+                return Applicability::NotApplicable(format!(
+                    "the model already declares a measurement delay (`{}`)",
+                    d.name
+                ));
+            }
+        }
         if patches == 0 && !times {
             return Applicability::NotApplicable(format!(
                 "nothing to patch: {}",
@@ -896,6 +904,24 @@ vx = "radius*(fr + rr + fl + rl)/4"
 vy = "0"
 omega = "radius*(fr + rr - fl - rl)/(2*track)"   # effective track
 "#;
+
+    /// A spec that declares its own measurement delay (any name) is not offered
+    /// a second one: the catalogue's time_offset says why, and a spec with a
+    /// second delay is refused.
+    #[test]
+    fn a_declared_delay_rules_out_time_offset() {
+        let cat = catalogue(&[]).unwrap();
+        let delayed = SKID.replace(
+            "[motion]",
+            "[[parameter]]\nname = \"lag\"\nnominal = 0.0\nunit = \"s\"\nmeasurement_delay = true\n\n[motion]",
+        );
+        let m = model(&delayed);
+        let eff = find(&cat, "time_offset").unwrap();
+        assert!(
+            matches!(eff.applicability(&m), Applicability::NotApplicable(w) if w.contains("already declares a measurement delay (`lag`)"))
+        );
+        assert_eq!(eff.applicability(&model(SKID)), Applicability::Applies);
+    }
 
     #[test]
     fn applicability_follows_structure_not_names() {
