@@ -122,43 +122,38 @@ fn ir_vs_generated<const U: usize, const W: usize, const P: usize>(
         let f = ir.function(name).unwrap();
         let mut out = vec![0.0; f.rows * f.cols];
         let mut scratch = Vec::new();
-        // the tape interpreted, the reference the compiled evaluator replaces
-        time_pair(
-            &format!("{model} {name} (interpreted)"),
-            inputs.len(),
-            reps,
-            |k| {
-                let (x, u) = &inputs[k];
-                f.interpret_into(&[x, u, &w, p, &[0.05]], &mut out, &mut scratch);
-                black_box(&out);
-            },
-            |k| {
-                let (x, u) = &inputs[k];
-                if name == "step_exact" {
-                    black_box(step(black_box(x), u, &w, p, 0.05));
-                } else {
-                    black_box(jac_p(black_box(x), u, &w, p, 0.05));
-                }
-            },
-        );
-        time_pair(
-            &format!("{model} {name} (compiled, jit)"),
-            inputs.len(),
-            reps,
-            |k| {
-                let (x, u) = &inputs[k];
-                f.eval_into(&[x, u, &w, p, &[0.05]], &mut out, &mut scratch);
-                black_box(&out);
-            },
-            |k| {
-                let (x, u) = &inputs[k];
-                if name == "step_exact" {
-                    black_box(step(black_box(x), u, &w, p, 0.05));
-                } else {
-                    black_box(jac_p(black_box(x), u, &w, p, 0.05));
-                }
-            },
-        );
+        // the tape interpreted (the reference), then as the evaluator runs it
+        // (compiled by the JIT once hot)
+        for compiled in [false, true] {
+            let how = if compiled {
+                "compiled, jit"
+            } else {
+                "interpreted"
+            };
+            time_pair(
+                &format!("{model} {name} ({how})"),
+                inputs.len(),
+                reps,
+                |k| {
+                    let (x, u) = &inputs[k];
+                    let args: [&[f64]; 5] = [x, u, &w, p, &[0.05]];
+                    if compiled {
+                        f.eval_into(&args, &mut out, &mut scratch);
+                    } else {
+                        f.interpret_into(&args, &mut out, &mut scratch);
+                    }
+                    black_box(&out);
+                },
+                |k| {
+                    let (x, u) = &inputs[k];
+                    if name == "step_exact" {
+                        black_box(step(black_box(x), u, &w, p, 0.05));
+                    } else {
+                        black_box(jac_p(black_box(x), u, &w, p, 0.05));
+                    }
+                },
+            );
+        }
     }
 }
 

@@ -27,7 +27,7 @@ use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, Linkage, Module};
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Mutex, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Interpreted calls before a tape is compiled: compiling costs about as much as
 /// a few thousand interpreted calls, so one-off evaluations (a verification
@@ -118,24 +118,81 @@ impl Native {
 
 /// The compiled form of a tape, filled on demand. Cloning gives an empty cache:
 /// a clone may be edited (the mutation sweep corrupts tapes), and must never run
-/// the original's code.
+/// the original's code. An unedited clone finds its code again in [`compiled`].
 #[derive(Default)]
 pub struct NativeCache {
     calls: AtomicU32,
-    native: OnceLock<Option<Native>>,
+    native: OnceLock<Option<Arc<Native>>>,
 }
 
 impl NativeCache {
     /// The compiled tape once `f` is hot, compiling it on the call that makes it so.
     pub fn get(&self, f: &Function) -> Option<&Native> {
         if let Some(n) = self.native.get() {
-            return n.as_ref();
+            return n.as_deref();
         }
         if !enabled() || self.calls.fetch_add(1, Ordering::Relaxed) < HOT_CALLS {
             return None;
         }
-        self.native.get_or_init(|| Native::compile(f)).as_ref()
+        self.native.get_or_init(|| compiled(f)).as_deref()
     }
+}
+
+/// A compiled tape with what it was compiled from.
+struct Compiled {
+    tape: Vec<Op>,
+    outputs: Vec<u32>,
+    args: usize,
+    native: Option<Arc<Native>>,
+}
+
+/// `f` compiled, once per distinct tape in this process: diagnosis clones a
+/// runner for every candidate fit, and each clone's tapes are the same code.
+/// Entries are found by a hash of the tape and confirmed by comparing it whole,
+/// so an edited tape never runs another's code.
+fn compiled(f: &Function) -> Option<Arc<Native>> {
+    static ALL: OnceLock<Mutex<HashMap<u64, Vec<Compiled>>>> = OnceLock::new();
+    let key = tape_hash(f);
+    let same = |e: &Compiled| e.tape == f.tape && e.outputs == f.outputs && e.args == f.args.len();
+    let all = ALL.get_or_init(Default::default);
+    if let Some(e) = all
+        .lock()
+        .ok()?
+        .get(&key)
+        .and_then(|v| v.iter().find(|e| same(e)))
+    {
+        return e.native.clone();
+    }
+    // compiled outside the lock: another thread compiling the same tape at once
+    // costs one redundant compilation, not a wait
+    let native = Native::compile(f).map(Arc::new);
+    all.lock().ok()?.entry(key).or_default().push(Compiled {
+        tape: f.tape.clone(),
+        outputs: f.outputs.clone(),
+        args: f.args.len(),
+        native: native.clone(),
+    });
+    native
+}
+
+/// A hash of the tape, outputs and argument count (the Debug text of each op
+/// is exact: floats print in their shortest round-trip form).
+fn tape_hash(f: &Function) -> u64 {
+    use std::fmt::Write;
+    use std::hash::Hasher;
+    struct Feed(std::collections::hash_map::DefaultHasher);
+    impl Write for Feed {
+        fn write_str(&mut self, s: &str) -> std::fmt::Result {
+            self.0.write(s.as_bytes());
+            Ok(())
+        }
+    }
+    let mut h = Feed(Default::default());
+    for op in &f.tape {
+        let _ = write!(h, "{op:?};");
+    }
+    let _ = write!(h, "{:?}/{}", f.outputs, f.args.len());
+    h.0.finish()
 }
 
 impl Clone for NativeCache {
@@ -659,6 +716,24 @@ mod tests {
             .eval_into(&[&[1.0, 2.0, 3.0], &[4.0]], &mut out)
             .is_some());
         assert_eq!(out, [3.0, 4.0]);
+    }
+
+    /// Clones share one compilation through the process-wide table, but an
+    /// edited clone (as the mutation sweep makes) gets its own code.
+    #[test]
+    fn an_edited_clone_never_runs_the_originals_code() {
+        let f = function(vec![Op::Arg(0, 0), Op::Sin(0)], vec![1], 1);
+        let hot =
+            |g: &Function, x: f64| (0..=HOT_CALLS).map(|_| g.eval(&[&[x]])[0]).last().unwrap();
+        assert_eq!(hot(&f, 0.3), 0.3f64.sin());
+        let same = f.clone();
+        assert_eq!(hot(&same, 0.3), 0.3f64.sin());
+        let edited = Function {
+            tape: vec![Op::Arg(0, 0), Op::Cos(0)],
+            ..f.clone()
+        };
+        assert_eq!(hot(&edited, 0.3), 0.3f64.cos());
+        assert_eq!(format!("{:?}", edited.native), "NativeCache(compiled)");
     }
 
     #[test]
