@@ -64,9 +64,10 @@ struct Rates {
 }
 
 /// The bundled specs, built in so that the benchmark runs from any directory.
-const BUNDLED: [(&str, &str); 5] = [
+const BUNDLED: [(&str, &str); 6] = [
     ("diff_drive", include_str!("../spec/diff_drive.toml")),
     ("tricycle", include_str!("../spec/tricycle.toml")),
+    ("tricycle_fwd", include_str!("../spec/tricycle_fwd.toml")),
     ("omni3", include_str!("../spec/omni3.toml")),
     ("omni_caster", include_str!("../spec/omni_caster.toml")),
     ("unicycle_ekf", include_str!("../spec/unicycle_ekf.toml")),

@@ -52,6 +52,7 @@ fn every_bundled_model_can_be_simulated_compared_and_fitted() {
     for (spec, set) in [
         ("diff_drive", "b=0.21"),
         ("tricycle", "L=1.03"),
+        ("tricycle_fwd", "L=1.03"),
         ("omni3", "L=1.04"),
         ("omni_caster", "r2=0.103"),
         ("unicycle_ekf", "v_scale=1.05"),
@@ -1413,4 +1414,31 @@ fn seed_000_neural_gyrodometry_loses_to_the_calibrated_model() {
     );
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
     assert!(html.contains("neural-50") && html.contains("neural-9"));
+}
+
+/// `kinegen compare ... | head -1`: the reader leaves before kinegen has
+/// printed; kinegen stops quietly (exit 141, as a Unix filter killed by
+/// SIGPIPE), with no panic message.
+#[test]
+fn a_reader_that_stops_reading_ends_the_run_quietly() {
+    use std::process::{Command, Stdio};
+    let real = real_runs();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kinegen"))
+        .args([
+            "compare",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            real[0].to_str().unwrap(),
+        ])
+        .current_dir(root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(o.status.code(), Some(141), "{err}");
 }

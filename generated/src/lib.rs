@@ -15,6 +15,8 @@ pub mod omni_caster;
 #[rustfmt::skip]
 pub mod tricycle;
 #[rustfmt::skip]
+pub mod tricycle_fwd;
+#[rustfmt::skip]
 pub mod unicycle_ekf;
 /// The models in this crate.
 pub const MODELS: &[&str] = &[
@@ -22,6 +24,7 @@ pub const MODELS: &[&str] = &[
     "omni3",
     "omni_caster",
     "tricycle",
+    "tricycle_fwd",
     "unicycle_ekf",
 ];
 /// The fingerprint of the spec a model was generated from.
@@ -31,6 +34,7 @@ pub fn spec_fingerprint(model: &str) -> Option<&'static str> {
         "omni3" => Some(omni3::SPEC_FINGERPRINT),
         "omni_caster" => Some(omni_caster::SPEC_FINGERPRINT),
         "tricycle" => Some(tricycle::SPEC_FINGERPRINT),
+        "tricycle_fwd" => Some(tricycle_fwd::SPEC_FINGERPRINT),
         "unicycle_ekf" => Some(unicycle_ekf::SPEC_FINGERPRINT),
         _ => None,
     }
@@ -42,6 +46,7 @@ pub fn call(model: &str, function: &str, args: &[&[f64]], out: &mut [f64]) -> bo
         "omni3" => omni3::call(function, args, out),
         "omni_caster" => omni_caster::call(function, args, out),
         "tricycle" => tricycle::call(function, args, out),
+        "tricycle_fwd" => tricycle_fwd::call(function, args, out),
         "unicycle_ekf" => unicycle_ekf::call(function, args, out),
         _ => false,
     }
