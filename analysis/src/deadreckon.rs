@@ -170,13 +170,7 @@ pub fn run_from(
         let dt = [data.dt[k]];
         let mut args: [&[f64]; 8] = [&[]; 8];
         for (slot, a) in args.iter_mut().zip(&f.args) {
-            *slot = match a.name.as_str() {
-                "x" => &x,
-                "u" => &data.u[k],
-                "p" => p,
-                "dt" => &dt,
-                _ => &zeros[..a.names.len()],
-            };
+            *slot = Runner::step_arg(a, &x, &data.u[k], p, &dt, &zeros);
         }
         f.eval_into(&args[..f.args.len()], &mut out, &mut scratch);
         twist.push([out[3], out[4], out[5]]);

@@ -1,6 +1,6 @@
 //! A model ready to run: its IR, the runtime parameter vector (nominal values with
 //! `--set` overrides) and which parameters are free.
-use kinegen_model::ir::{Function, ModelIr};
+use kinegen_model::ir::{ArgSpec, Function, ModelIr};
 use kinegen_model::spec::ObservationRole;
 
 #[derive(Debug, thiserror::Error)]
@@ -173,14 +173,27 @@ impl Runner {
     ) -> Vec<&'a [f64]> {
         f.args
             .iter()
-            .map(|a| match a.name.as_str() {
-                "x" => x,
-                "u" => u,
-                "p" => p,
-                "dt" => dt,
-                _ => &zeros[..a.names.len()],
-            })
+            .map(|a| Runner::step_arg(a, x, u, p, dt, zeros))
             .collect()
+    }
+
+    /// The value of one argument of a step-shaped function: x, u, p, dt, or
+    /// zeros for the noise (for callers that fill a fixed array in a hot loop).
+    pub fn step_arg<'a>(
+        a: &ArgSpec,
+        x: &'a [f64],
+        u: &'a [f64],
+        p: &'a [f64],
+        dt: &'a [f64],
+        zeros: &'a [f64],
+    ) -> &'a [f64] {
+        match a.name.as_str() {
+            "x" => x,
+            "u" => u,
+            "p" => p,
+            "dt" => dt,
+            _ => &zeros[..a.names.len()],
+        }
     }
 
     /// Observation-shaped arguments (x, u, p, [lm]).

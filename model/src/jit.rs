@@ -93,7 +93,7 @@ impl Native {
         }
         let mut jb =
             JITBuilder::with_flags(&[("opt_level", "speed")], default_libcall_names()).ok()?;
-        for (name, ptr) in host_functions() {
+        for (name, ptr, _) in host_functions() {
             jb.symbol(name, ptr);
         }
         let mut module = JITModule::new(jb);
@@ -267,34 +267,36 @@ unsafe extern "C" fn host_pinv_sym3(m: *const f64, out: *mut f64) {
     unsafe { std::slice::from_raw_parts_mut(out, 6) }.copy_from_slice(&p);
 }
 
-fn host_functions() -> [(&'static str, *const u8); 10] {
+/// How a host function is called from compiled code.
+#[derive(Clone, Copy)]
+enum HostSig {
+    /// n f64 operands, one f64 result.
+    Math(usize),
+    /// (f64, pointer to the 2 results): sin and cos together.
+    SinCos,
+    /// (pointer to the 6 packed inputs, pointer to the 6 packed results).
+    PinvSym3,
+}
+
+/// Every host function the compiled code may call: its symbol, address and
+/// signature (one table serves the JIT's symbol table and the declarations).
+fn host_functions() -> [(&'static str, *const u8, HostSig); 10] {
+    use HostSig::*;
     [
-        ("kg_sincos", host_sincos as *const u8),
-        ("kg_sin", host_sin as *const u8),
-        ("kg_cos", host_cos as *const u8),
-        ("kg_tan", host_tan as *const u8),
-        ("kg_atan", host_atan as *const u8),
-        ("kg_exp", host_exp as *const u8),
-        ("kg_ln", host_ln as *const u8),
-        ("kg_atan2", host_atan2 as *const u8),
-        ("kg_pow", host_pow as *const u8),
-        ("kg_pinv_sym3", host_pinv_sym3 as *const u8),
+        ("kg_sincos", host_sincos as *const u8, SinCos),
+        ("kg_sin", host_sin as *const u8, Math(1)),
+        ("kg_cos", host_cos as *const u8, Math(1)),
+        ("kg_tan", host_tan as *const u8, Math(1)),
+        ("kg_atan", host_atan as *const u8, Math(1)),
+        ("kg_exp", host_exp as *const u8, Math(1)),
+        ("kg_ln", host_ln as *const u8, Math(1)),
+        ("kg_atan2", host_atan2 as *const u8, Math(2)),
+        ("kg_pow", host_pow as *const u8, Math(2)),
+        ("kg_pinv_sym3", host_pinv_sym3 as *const u8, PinvSym3),
     ]
 }
 
 type CompileError = Box<cranelift_module::ModuleError>;
-
-/// Host functions the code calls: name, f64 operands (each returns one f64).
-const HOST_MATH: [(&str, usize); 8] = [
-    ("kg_sin", 1),
-    ("kg_cos", 1),
-    ("kg_tan", 1),
-    ("kg_atan", 1),
-    ("kg_exp", 1),
-    ("kg_ln", 1),
-    ("kg_atan2", 2),
-    ("kg_pow", 2),
-];
 
 /// Translate the tape into the module as the exported entry point, in the order
 /// and branches of [`schedule`]: the two sides of a series guard are real
@@ -305,23 +307,19 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
     ctx.func.signature.params.push(AbiParam::new(ptr));
     ctx.func.signature.params.push(AbiParam::new(ptr));
     let mut imports = HashMap::new();
-    for (name, params) in HOST_MATH {
+    for (name, _, host_sig) in host_functions() {
         let mut sig = module.make_signature();
-        sig.params
-            .extend((0..params).map(|_| AbiParam::new(types::F64)));
-        sig.returns.push(AbiParam::new(types::F64));
+        let (f64p, ptrp) = (AbiParam::new(types::F64), AbiParam::new(ptr));
+        match host_sig {
+            HostSig::Math(n) => {
+                sig.params.extend((0..n).map(|_| f64p));
+                sig.returns.push(f64p);
+            }
+            HostSig::SinCos => sig.params.extend([f64p, ptrp]),
+            HostSig::PinvSym3 => sig.params.extend([ptrp, ptrp]),
+        }
         imports.insert(name, module.declare_function(name, Linkage::Import, &sig)?);
     }
-    let mut pinv_sig = module.make_signature();
-    pinv_sig
-        .params
-        .extend([AbiParam::new(ptr), AbiParam::new(ptr)]);
-    let pinv_id = module.declare_function("kg_pinv_sym3", Linkage::Import, &pinv_sig)?;
-    let mut sincos_sig = module.make_signature();
-    sincos_sig
-        .params
-        .extend([AbiParam::new(types::F64), AbiParam::new(ptr)]);
-    let sincos_id = module.declare_function("kg_sincos", Linkage::Import, &sincos_sig)?;
 
     let mut fctx = FunctionBuilderContext::new();
     let mut b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
@@ -333,12 +331,11 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
     let arg_bases: Vec<Value> = (0..f.args.len())
         .map(|a| b.ins().load(ptr, MEM, args_ptr, (a * 8) as i32))
         .collect();
-    let host = imports
+    let host: HashMap<&str, FuncRef> = imports
         .iter()
         .map(|(name, id)| (*name, module.declare_func_in_func(*id, b.func)))
         .collect();
-    let pinv = module.declare_func_in_func(pinv_id, b.func);
-    let sincos = module.declare_func_in_func(sincos_id, b.func);
+    let (pinv, sincos) = (host["kg_pinv_sym3"], host["kg_sincos"]);
     let (items, groups) = schedule(&f.tape, &f.outputs);
     let both = sin_cos_pairs(&f.tape, &items);
     let mut t = Translator {
