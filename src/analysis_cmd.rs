@@ -320,12 +320,14 @@ fn fmt_errors(e: &Errors) -> String {
 
 pub fn compare(c: Common) -> ExitCode {
     let out = Out::new(c.json.as_deref());
-    let prep = match prepare(&c) {
+    let mut prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
+    // moved, not cloned: a long log's runs are most of the memory
+    let mut all: Vec<Run> = std::mem::take(&mut prep.runs);
+    all.append(&mut prep.holdout);
     let r = &prep.runner;
-    let all: Vec<Run> = prep.runs.iter().chain(&prep.holdout).cloned().collect();
     let tracks = tracks(r, &r.p, &all);
     let pairs: Vec<_> = all.iter().zip(&tracks).collect();
     let e = errors(&pairs);

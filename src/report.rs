@@ -47,12 +47,56 @@ const BUCKETS: usize = 1000;
 /// (223 MB seen); this keeps every extreme, so a spike or a collapse stays
 /// visible.
 fn decimated(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
-    if pts.len() <= 4 * BUCKETS {
-        return pts.to_vec();
+    let mut d = Decimator::new(pts.len());
+    pts.iter().for_each(|p| d.push(*p));
+    d.finish()
+}
+
+/// [`decimated`] fed one point at a time, for series computed on the fly: a
+/// long log's plotted series are never held whole (a 200 MB log would need
+/// hundreds of MB for them).
+struct Decimator {
+    /// Points per bucket (usize::MAX: keep every point).
+    size: usize,
+    chunk: Vec<(f64, f64)>,
+    out: Vec<(f64, f64)>,
+    last: Option<(f64, f64)>,
+}
+
+impl Decimator {
+    /// For a series of `len` points.
+    fn new(len: usize) -> Decimator {
+        let size = if len <= 4 * BUCKETS {
+            usize::MAX
+        } else {
+            len.div_ceil(BUCKETS)
+        };
+        Decimator {
+            size,
+            chunk: Vec::new(),
+            out: Vec::with_capacity(len.min(4 * BUCKETS + 1)),
+            last: None,
+        }
     }
-    let size = pts.len().div_ceil(BUCKETS);
-    let mut out = Vec::with_capacity(4 * BUCKETS + 1);
-    for chunk in pts.chunks(size) {
+
+    fn push(&mut self, p: (f64, f64)) {
+        self.last = Some(p);
+        if self.size == usize::MAX {
+            self.out.push(p);
+            return;
+        }
+        self.chunk.push(p);
+        if self.chunk.len() == self.size {
+            self.flush();
+        }
+    }
+
+    /// Keep the bucket's points with the smallest and largest x and y, in order.
+    fn flush(&mut self) {
+        let chunk = &self.chunk;
+        if chunk.is_empty() {
+            return;
+        }
         let pick = |key: &dyn Fn(&(f64, f64)) -> f64, max: bool| {
             let cmp =
                 |a: &(usize, &(f64, f64)), c: &(usize, &(f64, f64))| key(a.1).total_cmp(&key(c.1));
@@ -69,15 +113,20 @@ fn decimated(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
         let mut last = usize::MAX;
         for k in keep {
             if k != last {
-                out.push(chunk[k]);
+                self.out.push(chunk[k]);
                 last = k;
             }
         }
+        self.chunk.clear();
     }
-    if out.last() != pts.last() {
-        out.push(*pts.last().unwrap());
+
+    fn finish(mut self) -> Vec<(f64, f64)> {
+        self.flush();
+        if self.out.last() != self.last.as_ref() {
+            self.out.extend(self.last);
+        }
+        self.out
     }
-    out
 }
 
 /// A line (or scatter) chart as an SVG string.
@@ -201,36 +250,45 @@ th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{
 
 /// The model's track where the pose sensor sees it (an off-centre tracker's
 /// point, not the body origin), so it is drawn against what was measured.
+/// The points of a series, decimated as they are computed.
+fn series_of(len: usize, pts: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
+    let mut d = Decimator::new(len);
+    pts.for_each(|p| d.push(p));
+    d.finish()
+}
+
 fn traj(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
     let _ = run;
-    tr.measured.iter().map(|p| (p[0], p[1])).collect()
+    series_of(
+        tr.measured().len(),
+        tr.measured().iter().map(|p| (p[0], p[1])),
+    )
 }
 
 fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
     run.gt
         .as_ref()
-        .map(|g| g.iter().map(|p| (p[0], p[1])).collect())
+        .map(|g| series_of(g.len(), g.iter().map(|p| (p[0], p[1]))))
         .unwrap_or_default()
 }
 
 fn pos_err(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
     let Some(g) = &run.gt else { return vec![] };
-    g.iter()
-        .zip(&tr.measured)
-        .zip(&run.t)
-        .map(|((a, b), t)| {
-            (
-                t - run.t[0],
-                ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
-            )
-        })
-        .collect()
+    let pts = g.iter().zip(tr.measured()).zip(&run.t).map(|((a, b), t)| {
+        (
+            t - run.t[0],
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
+        )
+    });
+    series_of(g.len().min(tr.measured().len()), pts)
 }
 
 /// Heading-error rate residual per step against speed, turn rate and heading.
 fn residual_scatter(run: &Run, tr: &Track) -> [Vec<(f64, f64)>; 3] {
-    let mut out = [vec![], vec![], vec![]];
-    let Some(g) = &run.gt else { return out };
+    let Some(g) = &run.gt else {
+        return [vec![], vec![], vec![]];
+    };
+    let mut out = [0, 1, 2].map(|_| Decimator::new(run.steps()));
     for k in 0..run.steps() {
         let meas = wrap(g[k + 1][2] - g[k][2]) / run.dt[k];
         let res = tr.twist[k][2] - meas;
@@ -239,7 +297,7 @@ fn residual_scatter(run: &Run, tr: &Track) -> [Vec<(f64, f64)>; 3] {
         out[1].push((tr.twist[k][2], res));
         out[2].push((wrap(g[k][2]), res));
     }
-    out
+    out.map(Decimator::finish)
 }
 
 fn write(dir: &Path, html: &str) -> Result<(), String> {
@@ -1004,13 +1062,13 @@ pub fn navigate_report(
                 &mut c,
             )?;
             line(
-                decimated(&d.odometry.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>()),
+                series_of(d.odometry.len(), d.odometry.iter().map(|p| (p[0], p[1]))),
                 BLUE,
                 "odometry (believed)",
                 &mut c,
             )?;
             line(
-                decimated(&d.truth.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>()),
+                series_of(d.truth.len(), d.truth.iter().map(|p| (p[0], p[1]))),
                 RED,
                 "true path",
                 &mut c,

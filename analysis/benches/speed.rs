@@ -77,7 +77,7 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
         path: "bench".into(),
         t: (0..n).map(|k| k as f64 * dt).collect(),
         dt: vec![dt; n - 1],
-        u,
+        u: u.into_iter().collect(),
         gt: None,
         gyro: None,
         landmarks: Vec::new(),

@@ -1,6 +1,7 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
 use crate::bag::TopicMap;
+use crate::inputs::Inputs;
 use crate::landmarks::{pose_from_landmarks, LandmarkObs};
 use crate::log::{unwrap, Log, LogError};
 use crate::model::Runner;
@@ -15,7 +16,7 @@ pub struct Run {
     pub t: Vec<f64>,
     /// Step k goes from row k to row k+1.
     pub dt: Vec<f64>,
-    pub u: Vec<Vec<f64>>,
+    pub u: Inputs,
     /// Ground-truth pose per row, heading unwrapped.
     pub gt: Option<Vec<[f64; 3]>>,
     /// Gyro yaw rate per row; row k+1 is compared with the model rate of step k.
@@ -132,7 +133,7 @@ impl Run {
             path: self.path.clone(),
             t: self.t[a..b].to_vec(),
             dt: self.dt[a..b - 1].to_vec(),
-            u: self.u[a..b - 1].to_vec(),
+            u: self.u.slice(a, b - 1),
             gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
             gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
             landmarks: self
@@ -233,18 +234,16 @@ impl Run {
             };
             cols.push((unwrap_counter(c, i.wrap), i.kind));
         }
-        let u = (0..dt.len())
-            .map(|k| {
-                cols.iter()
-                    .map(|(c, kind)| match kind {
-                        InputKind::Cumulative => (c[k + 1] - c[k]) / dt[k],
-                        // a sampled continuous angle: its mean over the step is best
-                        // estimated by the mean of the two samples that bound it
-                        InputKind::Absolute => 0.5 * (c[k] + c[k + 1]),
-                    })
-                    .collect()
-            })
-            .collect();
+        let mut u = Vec::with_capacity(dt.len() * cols.len());
+        for k in 0..dt.len() {
+            u.extend(cols.iter().map(|(c, kind)| match kind {
+                InputKind::Cumulative => (c[k + 1] - c[k]) / dt[k],
+                // a sampled continuous angle: its mean over the step is best
+                // estimated by the mean of the two samples that bound it
+                InputKind::Absolute => 0.5 * (c[k] + c[k + 1]),
+            }));
+        }
+        let u = Inputs::from_flat(dt.len(), cols.len(), u);
         let [cx, cy, cth] = r.ir.pose_columns();
         let gt = if log.has(&cx) && log.has(&cy) && log.has(&cth) {
             let (x, y, th) = (log.col(&cx)?, log.col(&cy)?, unwrap(log.col(&cth)?));

@@ -7,14 +7,11 @@ use nalgebra::DMatrix;
 
 pub struct Track {
     pub pose: Vec<[f64; 3]>,
-    /// What the pose sensor should read at each row: the track at t - time_offset
-    /// (when the model has that parameter), seen through the `pose` observation
-    /// (when it has one). Errors are measured on this.
-    pub measured: Vec<[f64; 3]>,
+    /// What the pose sensor reads (see [`Track::measured`]); empty when that
+    /// is the pose itself, so a long log does not hold it twice.
+    sensed: Vec<[f64; 3]>,
     /// Per row, 3 x P sensitivity of the pose to all runtime parameters.
     pub sens: Option<Vec<DMatrix<f64>>>,
-    /// Model yaw rate of each step.
-    pub omega: Vec<f64>,
     /// Model body twist of each step.
     pub twist: Vec<[f64; 3]>,
     /// What the gyro should read over each step: the model's yaw-rate
@@ -25,6 +22,17 @@ pub struct Track {
 }
 
 impl Track {
+    /// What the pose sensor should read at each row: the track at t - time_offset
+    /// (when the model has a measurement delay), seen through the `pose`
+    /// observation (when it has one). Errors are measured on this.
+    pub fn measured(&self) -> &[[f64; 3]] {
+        if self.sensed.is_empty() {
+            &self.pose
+        } else {
+            &self.sensed
+        }
+    }
+
     /// The first row where the track stops being a number, with what did: a
     /// predicted pose or gyro reading that is not finite (parameters that
     /// divide by almost zero, an input that overflows), or a pose error against
@@ -45,12 +53,15 @@ impl Track {
                 ));
             }
         }
-        for k in 0..self.measured.len() {
-            if !finite(&self.measured[k]) {
-                return Some((k, format!("the model's predicted pose is not finite ({:?}): check the parameter values and the inputs up to this row", self.measured[k])));
+        for k in 0..self.measured().len() {
+            if !finite(&self.measured()[k]) {
+                return Some((k, format!("the model's predicted pose is not finite ({:?}): check the parameter values and the inputs up to this row", self.measured()[k])));
             }
             if let Some(g) = &run.gt {
-                let e = [g[k][0] - self.measured[k][0], g[k][1] - self.measured[k][1]];
+                let e = [
+                    g[k][0] - self.measured()[k][0],
+                    g[k][1] - self.measured()[k][1],
+                ];
                 if !(e[0].hypot(e[1])).is_finite() || !(e[0] * e[0] + e[1] * e[1]).is_finite() {
                     return Some((
                         k,
@@ -119,7 +130,7 @@ pub fn run_from(
     start_offset: [f64; 3],
 ) -> Track {
     let start = data.start_pose();
-    let u0 = data.u.first().cloned().unwrap_or_default();
+    let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
     let tau_i = r.delay;
     let (start, gt_vel) = match (tau_i.map(|i| p[i]), &data.gt) {
@@ -147,7 +158,8 @@ pub fn run_from(
     let np = p.len();
     let zeros = [0.0; 16];
     let mut scratch = Vec::new();
-    let mut pose = vec![start];
+    let mut pose = Vec::with_capacity(data.steps() + 1);
+    pose.push(start);
     // columns: parameters, then the start pose (identity at the start)
     let mut sens = with_sens.then(|| {
         let mut s0 = with_start_columns(&dstart, np);
@@ -156,7 +168,6 @@ pub fn run_from(
         }
         vec![s0]
     });
-    let mut omega = Vec::with_capacity(data.steps());
     let mut twist = Vec::with_capacity(data.steps());
     // pose and twist, then (with sensitivities) F_x and F_p, from one fused tape
     let f = if with_sens {
@@ -174,7 +185,6 @@ pub fn run_from(
         }
         f.eval_into(&args[..f.args.len()], &mut out, &mut scratch);
         twist.push([out[3], out[4], out[5]]);
-        omega.push(out[5]);
         if let Some(s) = sens.as_mut() {
             // S_{k+1} = F_x S_k + [F_p | 0], written out: one allocation per step
             let (jx, jp) = (&out[6..15], &out[15..]);
@@ -187,25 +197,30 @@ pub fn run_from(
         }
         pose.push([out[0], out[1], out[2]]);
     }
-    let measured = predicted_measurements(r, p, data, &pose);
-    let gyro = predicted_gyro(r, p, data, &pose, &omega);
+    let sensed = predicted_measurements(r, p, data, &pose);
+    let gyro = predicted_gyro(r, p, data, &pose, &twist);
     Track {
         pose,
-        measured,
+        sensed,
         sens,
-        omega,
         twist,
         gyro,
     }
 }
 
 /// The gyro readings a track predicts (see [`Track::gyro`]).
-fn predicted_gyro(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]], omega: &[f64]) -> Vec<f64> {
+fn predicted_gyro(
+    r: &Runner,
+    p: &[f64],
+    data: &Run,
+    pose: &[[f64; 3]],
+    twist: &[[f64; 3]],
+) -> Vec<f64> {
     if data.gyro.is_none() {
         return Vec::new();
     }
     let Some(h) = r.ir.observation_fn(YawRate, "") else {
-        return omega.to_vec();
+        return twist.iter().map(|w| w[2]).collect();
     };
     let (mut out, mut scratch) = ([0.0], Vec::new());
     (0..data.steps())
@@ -230,15 +245,14 @@ fn with_start_columns(jac_p: &[f64], np: usize) -> DMatrix<f64> {
     )
 }
 
-/// The pose measurements a track predicts (see [`Track::measured`]).
-pub fn predicted_measurements(
-    r: &Runner,
-    p: &[f64],
-    data: &Run,
-    pose: &[[f64; 3]],
-) -> Vec<[f64; 3]> {
+/// The pose measurements a track predicts (see [`Track::measured`]); empty
+/// when they are the track's poses themselves (no delay, no pose observation).
+fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) -> Vec<[f64; 3]> {
     let tau = crate::timeline::delay(r, p);
     let h = r.ir.observation_fn(Pose, "");
+    if h.is_none() && (tau == 0.0 || pose.len() < 2) {
+        return Vec::new();
+    }
     (0..pose.len())
         .map(|k| {
             let x = if tau == 0.0 || pose.len() < 2 {
@@ -278,9 +292,10 @@ pub fn gyrodometry_with(
     omega_of: &dyn Fn(usize) -> f64,
 ) -> Option<Track> {
     let tg = r.ir.function("twist_gyro")?;
-    let u0 = data.u.first().cloned().unwrap_or_default();
+    let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
     let (start, _) = body_start(r, p, data.start_pose(), &u0);
-    let mut pose = vec![start];
+    let mut pose = Vec::with_capacity(data.steps() + 1);
+    pose.push(start);
     let (mut omega, mut twist) = (
         Vec::with_capacity(data.steps()),
         Vec::with_capacity(data.steps()),
@@ -295,13 +310,12 @@ pub fn gyrodometry_with(
         omega.push(w);
         twist.push([v[0], v[1], w]);
     }
-    let measured = predicted_measurements(r, p, data, &pose);
+    let sensed = predicted_measurements(r, p, data, &pose);
     Some(Track {
         pose,
-        measured,
+        sensed,
         sens: None,
-        gyro: omega.clone(),
-        omega,
+        gyro: omega,
         twist,
     })
 }

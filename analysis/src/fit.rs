@@ -524,7 +524,7 @@ pub fn run_starts(r: &Runner, p: &[f64], runs: &[Run], starts: &[[f64; 3]]) -> V
             let off = starts.get(seg).copied().unwrap_or([0.0; 3]);
             seg += run.segments(SEGMENT_S).len();
             let measured = run.start_pose();
-            let u0 = run.u.first().cloned().unwrap_or_default();
+            let u0 = run.u.first().map(<[f64]>::to_vec).unwrap_or_default();
             deadreckon::body_start(r, p, [0, 1, 2].map(|i| measured[i] + off[i]), &u0).0
         })
         .collect()

@@ -149,7 +149,7 @@ mod tests {
             path: "logs/r.csv".into(),
             t: (0..=values.len()).map(|k| 0.1 * k as f64).collect(),
             dt: vec![0.1; values.len()],
-            u: values.iter().map(|v| vec![*v]).collect(),
+            u: values.iter().map(|v| [*v]).collect(),
             gt: None,
             gyro: None,
             landmarks: vec![],

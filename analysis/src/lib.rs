@@ -11,6 +11,7 @@ pub mod diagnose;
 pub mod fit;
 pub mod grid;
 pub mod input_range;
+pub mod inputs;
 pub mod inverse;
 pub mod landmarks;
 pub mod localize;

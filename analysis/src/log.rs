@@ -232,6 +232,9 @@ impl Log {
             }
             len += 1;
         }
+        // growth by doubling leaves up to half of each column unused: give it
+        // back (a long log is most of the memory a command uses)
+        columns.values_mut().for_each(Vec::shrink_to_fit);
         let log = Log {
             path: path.to_path_buf(),
             columns,

@@ -60,19 +60,21 @@ pub struct RowErrors {
 }
 
 pub fn row_errors(track: &Track, gt: &[[f64; 3]]) -> RowErrors {
-    let pos = track
-        .measured
-        .iter()
-        .zip(gt)
-        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
-        .collect();
-    let head = track
-        .measured
-        .iter()
-        .zip(gt)
-        .map(|(a, b)| wrap(a[2] - b[2]))
-        .collect();
+    let (pos, head) = row_error_iter(track, gt).unzip();
     RowErrors { pos, head }
+}
+
+/// (position error, heading error) per row, computed as they are read.
+fn row_error_iter<'a>(
+    track: &'a Track,
+    gt: &'a [[f64; 3]],
+) -> impl Iterator<Item = (f64, f64)> + 'a {
+    track.measured().iter().zip(gt).map(|(a, b)| {
+        (
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
+            wrap(a[2] - b[2]),
+        )
+    })
 }
 
 /// Motion regime of a step from its body twist.
@@ -113,35 +115,43 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
     let mut finals: Vec<(f64, f64)> = Vec::new();
     for (run, tr) in runs {
         if let Some(gt) = &run.gt {
-            let re = row_errors(tr, gt);
-            for k in 0..re.pos.len() {
-                sp += re.pos[k].powi(2);
-                sh += re.head[k].powi(2);
+            // per-row errors are summed as they are computed: a long log is
+            // not held a second time
+            let mut last = (0.0, 0.0);
+            for (k, (pos, head)) in row_error_iter(tr, gt).enumerate() {
+                sp += pos * pos;
+                sh += head * head;
                 n += 1;
-                if re.pos[k] > e.max_position_error_m {
-                    e.max_position_error_m = re.pos[k];
+                if pos > e.max_position_error_m {
+                    e.max_position_error_m = pos;
                     e.max_error_at_s = run.t[k] - run.t[0];
                 }
+                last = (pos, head);
             }
-            finals.push((*re.pos.last().unwrap(), *re.head.last().unwrap()));
-            // RPE: windows of 1 m travelled and of 5 s
-            let mut dist = vec![0.0];
-            for k in 1..gt.len() {
-                let d =
-                    ((gt[k][0] - gt[k - 1][0]).powi(2) + (gt[k][1] - gt[k - 1][1]).powi(2)).sqrt();
-                dist.push(dist[k - 1] + d);
-            }
-            let mut j = 0;
+            finals.push(last);
+            // RPE: windows of 1 m travelled (the distance between rows i and j
+            // kept as a running sum) and of 5 s
+            let step = |k: usize| (gt[k][0] - gt[k - 1][0]).hypot(gt[k][1] - gt[k - 1][1]);
+            let measured = tr.measured();
+            let (mut j, mut travelled) = (0, 0.0);
             for i in 0..gt.len() {
-                while j < gt.len() && dist[j] - dist[i] < 1.0 {
+                if i > 0 {
+                    travelled -= step(i);
+                }
+                if j < i {
+                    (j, travelled) = (i, 0.0);
+                }
+                while j < gt.len() && travelled < 1.0 {
                     j += 1;
+                    if j < gt.len() {
+                        travelled += step(j);
+                    }
                 }
                 if j >= gt.len() {
                     break;
                 }
-                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.measured[i], &tr.measured[j]));
-                rpe_d +=
-                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / (dist[j] - dist[i]);
+                let (a, b) = (rel(&gt[i], &gt[j]), rel(&measured[i], &measured[j]));
+                rpe_d += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / travelled;
                 rpe_dn += 1;
             }
             let mut j = 0;
@@ -152,7 +162,10 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
                 if j >= gt.len() {
                     break;
                 }
-                let (a, b) = (rel(&gt[i], &gt[j]), rel(&tr.measured[i], &tr.measured[j]));
+                let (a, b) = (
+                    rel(&gt[i], &gt[j]),
+                    rel(&tr.measured()[i], &tr.measured()[j]),
+                );
                 rpe_t += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
                 rpe_tn += 1;
             }
@@ -282,7 +295,7 @@ pub fn degenerate(runs: &[Run], tracks: &[crate::deadreckon::Track]) -> Vec<Stri
         let Some(g) = &run.gt else { continue };
         let every = (run.t.len() / 200).max(1);
         let measured = path_length(g.iter().map(|p| (p[0], p[1])), every);
-        let model = path_length(tr.measured.iter().map(|p| (p[0], p[1])), every);
+        let model = path_length(tr.measured().iter().map(|p| (p[0], p[1])), every);
         if measured > 0.5 && !(model > 0.2 * measured && model < 5.0 * measured) {
             out.push(format!("on {} the calibrated model travels {model:.2} m while the measurements travel {measured:.2} m", run.name));
         }

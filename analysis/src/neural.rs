@@ -307,7 +307,7 @@ mod tests {
             path: "r".into(),
             dt: t.windows(2).map(|w| w[1] - w[0]).collect(),
             t,
-            u,
+            u: u.into_iter().collect(),
             gt: None,
             gyro: Some(gyro),
             landmarks: Vec::new(),

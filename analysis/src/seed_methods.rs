@@ -278,7 +278,7 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
                 path: String::new(),
                 t: vec![0.0, run.dt[k]],
                 dt: vec![run.dt[k]],
-                u: vec![run.u[k].clone()],
+                u: std::iter::once(&run.u[k]).collect(),
                 gt: None,
                 gyro: None,
                 landmarks: Vec::new(),
