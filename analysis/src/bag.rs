@@ -517,13 +517,16 @@ fn align(
         if let Some(k) = s
             .values
             .iter()
-            .position(|v| v.iter().any(|x| !x.is_finite()))
+            .position(|v| v.iter().any(|x| !(x.abs() <= crate::log::MAX_MAGNITUDE)))
         {
             return Err(at(
                 file,
                 &s.topic,
                 s.index[k],
-                "a value kinegen reads is NaN or infinite",
+                format!(
+                    "a value kinegen reads is NaN, infinite or out of any physical range ({:?})",
+                    s.values[k]
+                ),
             ));
         }
         for k in 1..s.t.len() {

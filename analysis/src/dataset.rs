@@ -182,10 +182,14 @@ impl Run {
 
     pub fn from_log(log: &Log, r: &Runner) -> Result<Run, LogError> {
         if log.len < 3 {
+            // located at the log's last line, where more rows were expected
             return Err(log.err(
+                Some(log.len + 1),
                 None,
-                None,
-                format!("the log has {} row(s); the model needs at least 3", log.len),
+                format!(
+                    "the log ends after {} data row(s); the model needs at least 3",
+                    log.len
+                ),
             ));
         }
         let t = log.col("t")?.to_vec();

@@ -169,9 +169,23 @@ impl CsvHeader {
                 format!("`{cell}` is not finite"),
             ));
         }
+        // no measured quantity comes near this; its square (a squared error,
+        // a variance) would overflow to infinity and poison every result
+        if v.abs() > MAX_MAGNITUDE {
+            return Err(self.err(
+                Some(line),
+                Some(&self.names[i]),
+                format!(
+                    "`{cell}` is out of any physical range (magnitude above {MAX_MAGNITUDE:e})"
+                ),
+            ));
+        }
         Ok(v)
     }
 }
+
+/// The largest magnitude a CSV number may have.
+pub const MAX_MAGNITUDE: f64 = 1e150;
 
 /// A log: named numeric columns of equal length.
 #[derive(Debug, Clone)]
