@@ -514,11 +514,10 @@ fn align(
                 s.t.len()
             )));
         }
-        if let Some(k) = s
-            .values
-            .iter()
-            .position(|v| v.iter().any(|x| !(x.abs() <= crate::log::MAX_MAGNITUDE)))
-        {
+        if let Some(k) = s.values.iter().position(|v| {
+            v.iter()
+                .any(|x| !x.is_finite() || x.abs() > crate::log::MAX_MAGNITUDE)
+        }) {
             return Err(at(
                 file,
                 &s.topic,
