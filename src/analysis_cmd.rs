@@ -2,7 +2,7 @@
 use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::bag::{is_bag, TopicMap};
+use kinegen_analysis::bag::{is_bag, Detection, TopicMap};
 use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon;
 use kinegen_analysis::fit::{fit, FitOptions, FitResult};
@@ -13,7 +13,7 @@ use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_model::spec::ObservationRole::RangeBearing;
 use serde_json::{json, Value};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Args, Debug, Clone)]
@@ -118,9 +118,9 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
             })
             .collect::<Result<Vec<_>, _>>()
     };
-    let mut runs = read(&c.data)?;
-    let holdout = read(&c.holdout)?;
-    attach_landmarks(c, &runner, &mut runs)?;
+    let (mut runs, found): (Vec<Run>, Vec<_>) = read(&c.data)?.into_iter().unzip();
+    let (mut holdout, found_holdout): (Vec<Run>, Vec<_>) = read(&c.holdout)?.into_iter().unzip();
+    attach_landmarks(c, &runner, &mut runs, &found, &mut holdout, &found_holdout)?;
     // results that would be NaN or infinite are refused here, with the row
     for set in [&runs, &holdout] {
         check_finite(set, &tracks(&runner, &runner.p, set), &c.set)?;
@@ -139,18 +139,30 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     })
 }
 
-/// Read --landmarks and --observations and attach the k-th observation file to
-/// the k-th run.
-fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), String> {
-    use landmarks::{read_map, read_observations};
-    match (&c.landmarks, c.observations.is_empty()) {
-        (None, true) => return Ok(()),
-        (None, false) => {
+/// Read --landmarks and attach range-bearing observations to the runs: the
+/// k-th --observations file to the k-th run, or the detections of a bag's
+/// landmark topic (--topics `[landmarks]`) to its run.
+fn attach_landmarks(
+    c: &Common,
+    r: &Runner,
+    runs: &mut [Run],
+    found: &[Vec<Detection>],
+    holdout: &mut [Run],
+    found_holdout: &[Vec<Detection>],
+) -> Result<(), String> {
+    use landmarks::{from_detections, read_map, read_observations};
+    let from_bags = found.iter().chain(found_holdout).any(|d| !d.is_empty());
+    match (&c.landmarks, c.observations.is_empty(), from_bags) {
+        (None, true, false) => return Ok(()),
+        (None, _, true) => {
+            return Err("the bag's landmark topic (--topics [landmarks]) needs --landmarks MAP.csv (the landmark positions)".into())
+        }
+        (None, false, false) => {
             return Err("--observations needs --landmarks MAP.csv (the landmark positions)".into())
         }
-        (Some(m), true) => {
+        (Some(m), true, false) => {
             return Err(format!(
-                "--landmarks {} given without --observations",
+                "--landmarks {} given without --observations (or a bag with a [landmarks] topic in --topics)",
                 m.display()
             ))
         }
@@ -171,14 +183,43 @@ fn attach_landmarks(c: &Common, r: &Runner, runs: &mut [Run]) -> Result<(), Stri
         ));
     }
     let map = read_map(map_path).map_err(|e| e.to_string())?;
-    for (run, path) in runs.iter_mut().zip(&c.observations) {
-        let obs = read_observations(path, &map, map_path).map_err(|e| e.to_string())?;
+    let files = c
+        .observations
+        .iter()
+        .map(Some)
+        .chain(std::iter::repeat(None));
+    let all = runs.iter_mut().zip(found).zip(files).chain(
+        holdout
+            .iter_mut()
+            .zip(found_holdout)
+            .zip(std::iter::repeat(None)),
+    );
+    for ((run, found), file) in all {
+        let (obs, source) = match (file, found.is_empty()) {
+            (Some(path), false) => {
+                return Err(format!(
+                    "{}: the run has landmark observations from its bag's topic `{}` and from --observations {}: give one",
+                    run.path,
+                    found[0].topic,
+                    path.display()
+                ))
+            }
+            (Some(path), true) => (
+                read_observations(path, &map, map_path),
+                path.display().to_string(),
+            ),
+            (None, false) => (
+                from_detections(Path::new(&run.path), found, &map, map_path),
+                format!("{} (topic `{}`)", run.path, found[0].topic),
+            ),
+            (None, true) => continue,
+        };
+        let obs = obs.map_err(|e| e.to_string())?;
         let (t0, t1) = (run.t[0], *run.t.last().unwrap());
         let inside: Vec<_> = obs.into_iter().filter(|o| o.t >= t0 && o.t <= t1).collect();
         if inside.is_empty() {
             return Err(format!(
-                "{}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s",
-                path.display()
+                "{source}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s"
             ));
         }
         run.landmarks = inside;

@@ -265,3 +265,149 @@ fn bad_bags_are_located() {
     let e = run(&empty, None);
     assert!(e.contains("no .mcap file"), "{e}");
 }
+
+/// Range-bearing observations from a topic of the robot's own message type
+/// (its definition read from the bag): calibration from landmarks alone (no
+/// ground truth) gives the same estimates from the bag as from the CSV files,
+/// in both shapes a robot publishes (an array of detections per message, or
+/// one detection per message as a point in the robot frame); and every
+/// mistake in the mapping is located at the topic, message and field.
+#[test]
+fn landmark_topics_of_a_user_message_type() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let map = t.join("map.csv");
+    std::fs::write(&map, "id,x,y\nL1,3,2\nL2,-1,4\nL3,5,-2\nL4,0,-3\nL5,2,6\n").unwrap();
+    let obs = t.join("obs.csv");
+    let csv = simulate(
+        t,
+        "lm.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--set",
+            "b=0.205",
+            "--trajectory",
+            "random",
+            "--seed",
+            "4",
+            "--landmarks",
+            map.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+        ],
+    );
+    // the CSV log without ground truth, so the landmarks alone calibrate
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let no_gt: String = text
+        .lines()
+        .map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            format!("{},{},{},{}\n", c[0], c[1], c[2], c[6])
+        })
+        .collect();
+    let csv_no_gt = t.join("no_gt.csv");
+    std::fs::write(&csv_no_gt, no_gt).unwrap();
+    let fit = |data: &Path, more: &[&str]| {
+        let mut a = vec![
+            "fit",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            data.to_str().unwrap(),
+            "--landmarks",
+            map.to_str().unwrap(),
+        ];
+        a.extend(more);
+        kinegen_json(&a)
+    };
+    let want = fit(&csv_no_gt, &["--observations", obs.to_str().unwrap()]);
+    assert_eq!(want["metric"], "landmark_range_rmse_m", "{want}");
+    let (obs_s, pose_none) = (obs.to_str().unwrap(), ["--pose", "none"]);
+    let array = bag(
+        t,
+        &csv,
+        "array",
+        &[&pose_none[..], &["--observations", obs_s]].concat(),
+    );
+    let point = bag(
+        t,
+        &csv,
+        "point",
+        &[
+            &pose_none[..],
+            &["--observations", obs_s, "--observation-form", "point"],
+        ]
+        .concat(),
+    );
+    let topics = |name: &str, text: &str| {
+        let p = t.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let ta = topics(
+        "array.toml",
+        "[landmarks]\ntopic = \"/landmarks\"\nid = \"landmarks[].id\"\nrange = \"landmarks[].range\"\nbearing = \"landmarks[].bearing\"\n",
+    );
+    let tp = topics(
+        "point.toml",
+        "[landmarks]\ntopic = \"/landmarks\"\nid = \"id\"\nx = \"position.x\"\ny = \"position.y\"\n",
+    );
+    for (b, tm) in [(&array, &ta), (&point, &tp)] {
+        let got = fit(b, &["--topics", tm.to_str().unwrap()]);
+        assert_eq!(got["metric"], "landmark_range_rmse_m", "{got}");
+        for ((n, a), (m, e)) in estimates(&got).iter().zip(estimates(&want)) {
+            assert_eq!(n, &m);
+            assert!(
+                (a - e).abs() <= 1e-9 * e.abs().max(1.0),
+                "{n}: {a} from the bag, {e} from the CSV"
+            );
+        }
+    }
+    // mistakes, each located
+    let fails = |data: &Path, topics_text: &str, with_map: bool| {
+        let tm = topics("bad.toml", topics_text);
+        let mut a = vec![
+            "compare",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            data.to_str().unwrap(),
+            "--topics",
+            tm.to_str().unwrap(),
+        ];
+        if with_map {
+            a.extend(["--landmarks", map.to_str().unwrap()]);
+        }
+        let o = kinegen(&a);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        stderr(&o)
+    };
+    let e = fails(
+        &array,
+        "[landmarks]\ntopic = \"/marks\"\nid = \"id\"\nrange = \"r\"\nbearing = \"b\"\n",
+        true,
+    );
+    assert!(
+        e.contains("no topic `/marks`") && e.contains("/landmarks (test_msgs/msg/LandmarkArray)"),
+        "{e}"
+    );
+    let e = fails(
+        &array,
+        "[landmarks]\ntopic = \"/landmarks\"\nid = \"landmarks[].id\"\nrange = \"landmarks[].rng\"\nbearing = \"landmarks[].bearing\"\n",
+        true,
+    );
+    assert!(
+        e.contains("topic `/landmarks` message 0")
+            && e.contains("no field `rng` (it has: id, range, bearing)"),
+        "{e}"
+    );
+    let e = fails(&array, &std::fs::read_to_string(&ta).unwrap(), false);
+    assert!(e.contains("needs --landmarks MAP.csv"), "{e}");
+    std::fs::write(&map, "id,x,y\nL1,3,2\nL2,-1,4\n").unwrap();
+    let e = fails(&array, &std::fs::read_to_string(&ta).unwrap(), true);
+    assert!(
+        e.contains("topic `/landmarks` message") && e.contains("is not in the map"),
+        "{e}"
+    );
+}

@@ -35,13 +35,14 @@ fn landmark_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     (log, obs, map)
 }
 
-/// The same log without its ground-truth columns.
+/// The same log without its ground-truth columns (`gt_*`, or the skid-steer
+/// spec's `body_*`).
 fn strip_ground_truth(log: &Path, out: &Path) {
     let text = std::fs::read_to_string(log).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let keep: Vec<usize> = (0..header.len())
-        .filter(|&i| !header[i].starts_with("gt_"))
+        .filter(|&i| !header[i].starts_with("gt_") && !header[i].starts_with("body_"))
         .collect();
     let pick = |l: &str| {
         let cells: Vec<&str> = l.split(',').collect();
@@ -106,6 +107,83 @@ fn landmarks_alone_calibrate_the_wheelbase() {
     );
     // after calibration the innovations are at the sensor noise of the spec (0.05 m)
     assert!(after < 0.07, "{after}");
+}
+
+/// A user's robot whose lidar sits 0.35 m ahead of the body origin, and no
+/// ground truth: the start pose comes from the landmarks seen at the start
+/// through the spec's own observation (offset included), so calibration from
+/// landmarks alone finds the wheel radius, the track and the offset, and the
+/// innovations fall to the sensor noise (0.03 m). With the start pose of a
+/// sensor at the origin, the fit stopped at 0.20 m with the radius 7% off.
+#[test]
+fn an_offset_sensor_calibrates_from_landmarks_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let spec = t.join("my_skid.toml");
+    let mut text = std::fs::read_to_string(root().join("tests/user_specs/skid4.toml")).unwrap();
+    text += r#"
+[[parameter]]
+name = "lidar_dx"
+nominal = 0.0
+unit = "m"
+min = -1.0
+max = 1.0
+
+[[observation]]
+name = "reflectors"
+landmark = true
+columns = ["range", "bearing"]
+expr = ["sqrt((xl - x - lidar_dx*cos(theta))^2 + (yl - y - lidar_dx*sin(theta))^2)", "atan2(yl - y - lidar_dx*sin(theta), xl - x - lidar_dx*cos(theta)) - theta"]
+angle = [false, true]
+sigma = [0.03, 0.01]
+"#;
+    std::fs::write(&spec, text).unwrap();
+    let map = t.join("reflectors.csv");
+    std::fs::write(&map, "id,x,y\nR1,4,3\nR2,-2,5\nR3,6,-3\nR4,0,-4\nR5,3,7\n").unwrap();
+    let obs = t.join("seen.csv");
+    let spec_s = spec.to_str().unwrap();
+    let log = simulate(
+        t,
+        "drive.csv",
+        &[
+            "--spec",
+            spec_s,
+            "--set",
+            "lidar_dx=0.35",
+            "--set",
+            "track=0.6",
+            "--trajectory",
+            "random",
+            "--seed",
+            "2",
+            "--landmarks",
+            map.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+        ],
+    );
+    let nogt = t.join("nogt.csv");
+    strip_ground_truth(&log, &nogt);
+    let doc = kinegen_json(&[
+        "fit",
+        "--spec",
+        spec_s,
+        "--data",
+        nogt.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ]);
+    let est = |n: &str| doc["parameters"][n]["estimate"].as_f64().unwrap();
+    assert!((est("radius") / 0.08 - 1.0).abs() < 0.005, "{doc}");
+    assert!((est("track") / 0.6 - 1.0).abs() < 0.005, "{doc}");
+    assert!((est("lidar_dx") - 0.35).abs() < 0.01, "{doc}");
+    let after = doc["landmarks"]["after"]["range_rmse_m"].as_f64().unwrap();
+    assert!(
+        after < 0.035,
+        "range innovations {after} m for 0.03 m of noise"
+    );
 }
 
 #[test]

@@ -63,6 +63,38 @@ pub struct ImuSource {
     pub topic: String,
 }
 
+/// Where range-bearing observations of mapped landmarks come from: a topic of
+/// any message type (its definition is read from the bag), and the paths of
+/// the fields in each message. A path with `[]` gives one detection per
+/// element (`detections[].range`); paths without one give one per message.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LandmarkSource {
+    pub topic: String,
+    /// The landmark's id (text or integer), as in the `--landmarks` map.
+    pub id: String,
+    /// Range (m) and bearing (rad, relative to the robot heading)...
+    pub range: Option<String>,
+    pub bearing: Option<String>,
+    /// ...or the landmark's position in the robot frame (m).
+    pub x: Option<String>,
+    pub y: Option<String>,
+    /// The stamp (`builtin_interfaces/Time`); default `header.stamp`.
+    pub stamp: Option<String>,
+}
+
+/// One range-bearing detection read from a bag: time on the log's time base,
+/// and where it came from (topic, message index) for errors.
+#[derive(Debug, Clone)]
+pub struct Detection {
+    pub t: f64,
+    pub id: String,
+    pub range: f64,
+    pub bearing: f64,
+    pub topic: String,
+    pub index: usize,
+}
+
 /// The `--topics FILE.toml` mapping from a bag's topics to a log's columns.
 /// Everything is optional: an input column defaults to the joint of the same
 /// name in the bag's only `JointState` topic, the pose to its only `PoseStamped`
@@ -77,6 +109,7 @@ pub struct TopicMap {
     pub inputs: BTreeMap<String, JointSource>,
     pub pose: Option<PoseSource>,
     pub gyro: Option<ImuSource>,
+    pub landmarks: Option<LandmarkSource>,
 }
 
 impl TopicMap {
@@ -117,6 +150,8 @@ struct Raw {
 
 struct Topic {
     schema: String,
+    /// The message definition and its encoding (`ros2msg`), as the bag stores it.
+    definition: Option<(String, String)>,
     encoding: String,
     messages: Vec<Raw>,
 }
@@ -132,16 +167,19 @@ struct Series {
 
 /// Read a bag as a log with the `wanted` columns. `progress(done, total)` is
 /// called as messages are read (total 0 when the bag has no summary).
+/// Range-bearing detections come with it when the mapping names a landmark
+/// topic.
 pub fn read(
     path: &Path,
     wanted: &Wanted,
     map: &TopicMap,
     progress: &dyn Fn(usize, usize),
-) -> Result<Log, LogError> {
+) -> Result<(Log, Vec<Detection>), LogError> {
     let file = resolve(path)?;
     let err = |m: String| LogError::new(&file, None, None, m);
     let buf = std::fs::read(&file).map_err(|e| err(format!("cannot read the bag: {e}")))?;
-    let (topics, all) = collect(&file, &buf, progress)?;
+    let keep = map.landmarks.as_ref().map(|l| l.topic.as_str());
+    let (topics, all) = collect(&file, &buf, keep, progress)?;
     let listing = || {
         if all.is_empty() {
             "the bag has no messages".to_string()
@@ -259,7 +297,145 @@ pub fn read(
         series.push(imu_series(&file, &topic, t, map.stamps)?);
         columns.insert(wanted.gyro.clone(), (series.len() - 1, 0));
     }
-    align(&file, &series, &columns, &wanted.pose[2])
+    let (log, t0) = align(&file, &series, &columns, &wanted.pose[2])?;
+    let detections = match &map.landmarks {
+        None => Vec::new(),
+        Some(l) => {
+            let t = topics.get(&l.topic).ok_or_else(|| {
+                err(format!(
+                    "no topic `{}` for the landmark observations; {}",
+                    l.topic,
+                    listing()
+                ))
+            })?;
+            landmark_detections(&file, l, t, map.stamps, t0)?
+        }
+    };
+    Ok((log, detections))
+}
+
+/// The detections of a landmark topic, decoded with the definition the bag
+/// carries, in the log's time (`t0` is its first row's stamp).
+fn landmark_detections(
+    file: &Path,
+    l: &LandmarkSource,
+    t: &Topic,
+    stamps: Stamps,
+    t0: f64,
+) -> Result<Vec<Detection>, LogError> {
+    let topic = l.topic.as_str();
+    let err = |m: String| LogError::new(file, None, None, format!("topic `{topic}`: {m}"));
+    if t.encoding != "cdr" {
+        return Err(err(format!(
+            "encoded as `{}`; kinegen reads ROS 2 CDR messages",
+            t.encoding
+        )));
+    }
+    let schema = match &t.definition {
+        Some((enc, text)) if enc == "ros2msg" => crate::rosdyn::Schema::parse(&t.schema, text)
+            .map_err(|e| err(format!("its message definition ({}): {e}", t.schema)))?,
+        Some((enc, _)) => {
+            return Err(err(format!(
+                "its message definition is `{enc}`; kinegen reads `ros2msg` definitions"
+            )))
+        }
+        None => return Err(err("the bag stores no message definition for it".into())),
+    };
+    let path =
+        |field: &str, p: &Option<String>| -> Result<Option<crate::rosdyn::FieldPath>, LogError> {
+            p.as_deref()
+                .map(|p| {
+                    crate::rosdyn::FieldPath::parse(p)
+                        .map_err(|e| err(format!("[landmarks] {field}: {e}")))
+                })
+                .transpose()
+        };
+    let (range, bearing, x, y) = (
+        path("range", &l.range)?,
+        path("bearing", &l.bearing)?,
+        path("x", &l.x)?,
+        path("y", &l.y)?,
+    );
+    let polar = match (range, bearing, x, y) {
+        (Some(r), Some(b), None, None) => (r, b, true),
+        (None, None, Some(x), Some(y)) => (x, y, false),
+        _ => {
+            return Err(err(
+                "[landmarks] needs `range` and `bearing`, or `x` and `y` (the landmark in the robot frame), field paths in the message".into(),
+            ))
+        }
+    };
+    let id = path("id", &Some(l.id.clone()))?.unwrap();
+    let stamp = path(
+        "stamp",
+        &Some(l.stamp.clone().unwrap_or("header.stamp".into())),
+    )?
+    .unwrap();
+    let mut out = Vec::new();
+    for raw in &t.messages {
+        let here = |m: String| at(file, topic, raw.index, m);
+        let v = schema
+            .decode(&raw.data)
+            .map_err(|e| here(format!("cannot decode {}: {e}", t.schema)))?;
+        let time = match stamps {
+            Stamps::Receive => raw.log_time as f64 * 1e-9,
+            Stamps::Header => stamp
+                .values(&v)
+                .map_err(&here)?
+                .first()
+                .and_then(|s| s.as_time())
+                .ok_or_else(|| {
+                    here(format!(
+                        "`{}` is not a builtin_interfaces/Time stamp",
+                        stamp.text()
+                    ))
+                })?,
+        };
+        let get = |p: &crate::rosdyn::FieldPath| p.values(&v).map_err(&here);
+        let (ids, a, b) = (get(&id)?, get(&polar.0)?, get(&polar.1)?);
+        let n = ids.len().max(a.len()).max(b.len());
+        for (what, vals) in [(&id, &ids), (&polar.0, &a), (&polar.1, &b)] {
+            if vals.len() != n && vals.len() != 1 {
+                return Err(here(format!(
+                    "`{}` has {} values where another field has {n}",
+                    what.text(),
+                    vals.len()
+                )));
+            }
+        }
+        let pick = |vals: &[&crate::rosdyn::Value], k: usize| {
+            vals[if vals.len() == 1 { 0 } else { k }].clone()
+        };
+        for k in 0..n {
+            let ident = pick(&ids, k)
+                .as_id()
+                .ok_or_else(|| here(format!("`{}` is neither text nor an integer", id.text())))?;
+            let num = |vals: &[&crate::rosdyn::Value], p: &crate::rosdyn::FieldPath| {
+                pick(vals, k)
+                    .as_f64()
+                    .filter(|x| x.is_finite() && x.abs() <= crate::log::MAX_MAGNITUDE)
+                    .ok_or_else(|| here(format!("`{}` is not a finite number", p.text())))
+            };
+            let (p, q) = (num(&a, &polar.0)?, num(&b, &polar.1)?);
+            let (range, bearing) = if polar.2 {
+                (p, q)
+            } else {
+                (p.hypot(q), q.atan2(p))
+            };
+            if range.is_nan() || range <= 0.0 {
+                return Err(here(format!("range {range} is not positive")));
+            }
+            out.push(Detection {
+                t: time - t0,
+                id: ident,
+                range,
+                bearing,
+                topic: topic.to_string(),
+                index: raw.index,
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// The `.mcap` file of a path: the file itself, or the only one in a rosbag2
@@ -292,6 +468,7 @@ fn resolve(path: &Path) -> Result<PathBuf, LogError> {
 fn collect(
     file: &Path,
     buf: &[u8],
+    keep: Option<&str>,
     progress: &dyn Fn(usize, usize),
 ) -> Result<(HashMap<String, Topic>, Vec<(String, String)>), LogError> {
     let err = |m: String| LogError::new(file, None, None, m);
@@ -320,11 +497,20 @@ fn collect(
             all.push((ch.topic.clone(), schema.clone()));
         }
         let index = counts.entry(ch.topic.clone()).or_default();
-        if [JOINT_STATE, IMU].contains(&schema.as_str()) || POSE_TYPES.contains(&schema.as_str()) {
+        if [JOINT_STATE, IMU].contains(&schema.as_str())
+            || POSE_TYPES.contains(&schema.as_str())
+            || keep == Some(ch.topic.as_str())
+        {
             topics
                 .entry(ch.topic.clone())
                 .or_insert_with(|| Topic {
                     schema: schema.clone(),
+                    definition: ch.schema.as_ref().map(|s| {
+                        (
+                            s.encoding.clone(),
+                            String::from_utf8_lossy(&s.data).into_owned(),
+                        )
+                    }),
                     encoding: ch.message_encoding.clone(),
                     messages: Vec::new(),
                 })
@@ -498,13 +684,13 @@ impl Series {
 }
 
 /// Put every series on the time base of the first (the input joints), check
-/// the stamps, and build the log.
+/// the stamps, and build the log; with the stamp of its first row (its time 0).
 fn align(
     file: &Path,
     series: &[Series],
     columns: &HashMap<String, (usize, usize)>,
     heading: &str,
-) -> Result<Log, LogError> {
+) -> Result<(Log, f64), LogError> {
     let err = |m: String| LogError::new(file, None, None, m);
     for s in series {
         if s.t.len() < 2 {
@@ -586,9 +772,12 @@ fn align(
         }
         out.insert(col.clone(), v);
     }
-    Ok(Log {
-        path: file.to_path_buf(),
-        len: rows.len(),
-        columns: out,
-    })
+    Ok((
+        Log {
+            path: file.to_path_buf(),
+            len: rows.len(),
+            columns: out,
+        },
+        t0,
+    ))
 }

@@ -1,6 +1,6 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
-use crate::bag::TopicMap;
+use crate::bag::{Detection, TopicMap};
 use crate::inputs::Inputs;
 use crate::landmarks::{pose_from_landmarks, LandmarkObs};
 use crate::log::{unwrap, Log, LogError};
@@ -84,12 +84,8 @@ impl Run {
     pub fn start_pose(&self) -> [f64; 3] {
         let rest_rows = self.rest_steps();
         let Some(g) = &self.gt else {
-            let until = if rest_rows > 0 {
-                self.t[rest_rows]
-            } else {
-                self.t[0] + 0.1
-            };
-            return pose_from_landmarks(&self.landmarks, until).unwrap_or([0.0; 3]);
+            return pose_from_landmarks(&self.landmarks, self.start_window_end())
+                .unwrap_or([0.0; 3]);
         };
         let rest = rest_rows.max(1).min(g.len());
         let mut m = [0.0; 3];
@@ -99,6 +95,17 @@ impl Run {
             }
         }
         m
+    }
+
+    /// Until when observations still see the start pose: the end of the rest
+    /// at the start, or the first 0.1 s when the robot moves at once.
+    pub fn start_window_end(&self) -> f64 {
+        let rest_rows = self.rest_steps();
+        if rest_rows > 0 {
+            self.t[rest_rows]
+        } else {
+            self.t[0] + 0.1
+        }
     }
 
     /// Leading steps in which the robot stands still: every rate input is zero
@@ -282,18 +289,20 @@ impl Run {
     /// Read a log for a model: a CSV file, or a ROS 2 bag (MCAP) with the
     /// default topic mapping.
     pub fn read(path: &std::path::Path, r: &Runner) -> Result<Run, LogError> {
-        Run::read_with(path, r, &TopicMap::default(), &|_, _| {})
+        Run::read_with(path, r, &TopicMap::default(), &|_, _| {}).map(|(run, _)| run)
     }
 
     /// Read a log for a model; a bag through `topics`, reporting
-    /// `progress(messages read, total)`.
+    /// `progress(messages read, total)`, with the range-bearing detections of
+    /// its landmark topic (none for a CSV log, whose observations are a file
+    /// of their own).
     pub fn read_with(
         path: &std::path::Path,
         r: &Runner,
         topics: &TopicMap,
         progress: &dyn Fn(usize, usize),
-    ) -> Result<Run, LogError> {
-        let log = if crate::bag::is_bag(path) {
+    ) -> Result<(Run, Vec<Detection>), LogError> {
+        let (log, detections) = if crate::bag::is_bag(path) {
             let wanted = crate::bag::Wanted {
                 inputs: r.ir.inputs.iter().map(|i| i.column.clone()).collect(),
                 pose: r.ir.pose_columns(),
@@ -303,8 +312,8 @@ impl Run {
         } else {
             let wanted = Run::wanted(r);
             let w: Vec<&str> = wanted.iter().map(String::as_str).collect();
-            Log::read(path, &w)?
+            (Log::read(path, &w)?, Vec::new())
         };
-        Run::from_log(&log, r)
+        Ok((Run::from_log(&log, r)?, detections))
     }
 }

@@ -112,6 +112,30 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
     (x, d)
 }
 
+/// Without ground truth, the start pose is where the landmarks seen at the
+/// start place the robot through the model's own observation (a sensor off the
+/// body origin included): see [`crate::landmarks::start_from_landmarks`].
+fn landmark_start(
+    r: &Runner,
+    p: &[f64],
+    data: &Run,
+    guess: [f64; 3],
+) -> Option<([f64; 3], Vec<f64>)> {
+    if data.gt.is_some() || data.landmarks.is_empty() {
+        return None;
+    }
+    crate::landmarks::start_from_landmarks(r, p, data, guess)
+}
+
+/// The body pose dead reckoning starts from: the measured start seen through
+/// the model's pose observation, or placed by the start's landmarks.
+pub fn model_start(r: &Runner, p: &[f64], data: &Run) -> [f64; 3] {
+    let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
+    landmark_start(r, p, data, data.start_pose())
+        .unwrap_or_else(|| body_start(r, p, data.start_pose(), &u0))
+        .0
+}
+
 /// Integrate the model over a run from the run's start pose ([`Run::start_pose`]).
 /// Sensitivities (with `with_sens`) have P + 3 columns: the parameters, then the
 /// start pose (x, y, theta), for calibrations that refine the start.
@@ -148,8 +172,10 @@ pub fn run_from(
         }
         _ => (start, [0.0; 3]),
     };
-    let start = [0, 1, 2].map(|i| start[i] + start_offset[i]);
-    let (start, mut dstart) = body_start(r, p, start, &u0);
+    let (start, mut dstart) = match landmark_start(r, p, data, start) {
+        Some((x, d)) => ([0, 1, 2].map(|i| x[i] + start_offset[i]), d),
+        None => body_start(r, p, [0, 1, 2].map(|i| start[i] + start_offset[i]), &u0),
+    };
     if let Some(ti) = tau_i {
         for m in 0..3 {
             dstart[m * p.len() + ti] += gt_vel[m];
@@ -292,8 +318,7 @@ pub fn gyrodometry_with(
     omega_of: &dyn Fn(usize) -> f64,
 ) -> Option<Track> {
     let tg = r.ir.function("twist_gyro")?;
-    let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
-    let (start, _) = body_start(r, p, data.start_pose(), &u0);
+    let start = model_start(r, p, data);
     let mut pose = Vec::with_capacity(data.steps() + 1);
     pose.push(start);
     let (mut omega, mut twist) = (

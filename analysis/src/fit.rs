@@ -472,10 +472,7 @@ fn landmark_residuals(
     let Some(h) = r.ir.observation_fn(RangeBearing, "") else {
         return;
     };
-    let sig = r
-        .obs_sigma(RangeBearing)
-        .filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0))
-        .unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
+    let sig = crate::landmarks::sigma(r);
     let np = p.len();
     for o in &run.landmarks {
         let (j, a, x) = crate::landmarks::locate_on(run, track, o.t);

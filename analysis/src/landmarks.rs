@@ -118,6 +118,43 @@ pub fn read_observations(
     Ok(out)
 }
 
+/// Range-bearing observations from a bag's landmark topic (see
+/// [`crate::bag::LandmarkSource`]), every id in the map, ordered by time.
+pub fn from_detections(
+    bag: &Path,
+    found: &[crate::bag::Detection],
+    map: &Map,
+    map_path: &Path,
+) -> Result<Vec<LandmarkObs>, LogError> {
+    let mut out = Vec::with_capacity(found.len());
+    for d in found {
+        let Some(&[xl, yl]) = map.xy.get(&d.id) else {
+            return Err(LogError::new(
+                bag,
+                None,
+                None,
+                format!(
+                    "topic `{}` message {} (counting from 0): landmark `{}` is not in the map {}",
+                    d.topic,
+                    d.index,
+                    d.id,
+                    map_path.display()
+                ),
+            ));
+        };
+        out.push(LandmarkObs {
+            t: d.t,
+            id: d.id.clone(),
+            xl,
+            yl,
+            range: d.range,
+            bearing: d.bearing,
+        });
+    }
+    out.sort_by(|a, b| a.t.total_cmp(&b.t));
+    Ok(out)
+}
+
 /// The robot pose from landmarks seen while it stands still at the start (at
 /// least two distinct landmarks before `t_until`): each observation places a
 /// landmark in the robot frame, and the rigid transform that maps those points
@@ -155,6 +192,91 @@ pub fn pose_from_landmarks(obs: &[LandmarkObs], t_until: f64) -> Option<[f64; 3]
         mw[1] - (s * mb[0] + c * mb[1]),
         th,
     ])
+}
+
+/// The start pose that explains the range-bearing observations of the start
+/// window through the model's own `landmark` observation (a sensor mounted off
+/// the body origin included), by Gauss-Newton from `guess` (the closed-form
+/// pose of a sensor at the origin, [`pose_from_landmarks`]); with its
+/// derivative with respect to the parameters (3 x P, row-major), from the
+/// implicit function theorem: d x0 / d p = -(Hx' W Hx)^-1 Hx' W Hp.
+/// None when the model has no such observation or too few are seen.
+pub fn start_from_landmarks(
+    r: &Runner,
+    p: &[f64],
+    run: &Run,
+    guess: [f64; 3],
+) -> Option<([f64; 3], Vec<f64>)> {
+    use nalgebra::{DMatrix, Matrix3, Vector3};
+    let h = r.ir.observation_fn(RangeBearing, "")?;
+    let hx = r.ir.observation_fn(RangeBearing, "_jac_x")?;
+    let hp = r.ir.observation_fn(RangeBearing, "_jac_p")?;
+    let until = run.start_window_end();
+    let seen: Vec<&LandmarkObs> = run.landmarks.iter().filter(|o| o.t <= until).collect();
+    let distinct: std::collections::HashSet<&str> = seen.iter().map(|o| o.id.as_str()).collect();
+    if distinct.len() < 2 {
+        return None;
+    }
+    let sigma = sigma(r);
+    let w = [1.0 / (sigma[0] * sigma[0]), 1.0 / (sigma[1] * sigma[1])];
+    let u = run.u.first()?;
+    let np = p.len();
+    let mut x = guess;
+    // normal equations of the weighted observations at x: (Hx' W Hx, Hx' W r, Hx' W Hp)
+    let normal = |x: &[f64; 3], with_p: bool| {
+        let (mut a, mut b) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+        let mut c = DMatrix::zeros(3, if with_p { np } else { 0 });
+        for o in &seen {
+            let lm = [o.xl, o.yl];
+            let pred = h.eval(&Runner::obs_args(h, x, u, p, &lm));
+            let res = [o.range - pred[0], wrap(o.bearing - pred[1])];
+            let jx = hx.eval(&Runner::obs_args(hx, x, u, p, &lm));
+            let jp = with_p.then(|| hp.eval(&Runner::obs_args(hp, x, u, p, &lm)));
+            for k in 0..2 {
+                for i in 0..3 {
+                    b[i] += jx[k * 3 + i] * w[k] * res[k];
+                    for j in 0..3 {
+                        a[(i, j)] += jx[k * 3 + i] * w[k] * jx[k * 3 + j];
+                    }
+                    if let Some(jp) = &jp {
+                        for j in 0..np {
+                            c[(i, j)] += jx[k * 3 + i] * w[k] * jp[k * np + j];
+                        }
+                    }
+                }
+            }
+        }
+        (a, b, c)
+    };
+    for _ in 0..20 {
+        let (a, b, _) = normal(&x, false);
+        let step: Vector3<f64> = a.try_inverse()? * b;
+        if !step.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        for i in 0..3 {
+            x[i] += step[i];
+        }
+        if step.norm() < 1e-12 {
+            break;
+        }
+    }
+    let (a, _, c) = normal(&x, true);
+    let d = -(a.try_inverse()? * c);
+    // row-major 3 x P, as body_start gives it
+    let d: Vec<f64> = (0..3)
+        .flat_map(|i| (0..np).map(move |j| (i, j)))
+        .map(|(i, j)| d[(i, j)])
+        .collect();
+    Some((x, d))
+}
+
+/// Range and bearing noise of the model's `landmark` observation (or the
+/// defaults when it declares none).
+pub fn sigma(r: &Runner) -> [f64; 2] {
+    r.obs_sigma(RangeBearing)
+        .filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0))
+        .map_or(DEFAULT_SIGMA, |s| [s[0], s[1]])
 }
 
 /// Where an observation falls on a track: (step j, fraction a, interpolated pose).

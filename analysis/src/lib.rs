@@ -22,6 +22,7 @@ pub mod model;
 pub mod navigate;
 pub mod neural;
 pub mod periodic;
+pub mod rosdyn;
 pub mod rosmsg;
 pub mod seed_methods;
 pub mod simulate;

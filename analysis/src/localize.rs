@@ -85,14 +85,11 @@ pub fn localize(r: &Runner, run: &Run, o: &EkfOptions) -> Result<Localization, S
             s * s
         }),
     ));
-    let sig = r
-        .obs_sigma(RangeBearing)
-        .filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0))
-        .unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
+    let sig = crate::landmarks::sigma(r);
     let rm = nalgebra::Matrix2::new(sig[0] * sig[0], 0.0, 0.0, sig[1] * sig[1]);
     let p = &r.p;
     let zeros = vec![0.0; nw.max(1)];
-    let mut x = Vector3::from(run.start_pose());
+    let mut x = Vector3::from(crate::deadreckon::model_start(r, p, run));
     let mut cov = Matrix3::from_diagonal(&Vector3::from(o.start_sigma.map(|s| s * s)));
     let mut out = Localization {
         track: vec![x.into()],

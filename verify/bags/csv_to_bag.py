@@ -7,6 +7,14 @@ against ROS 2's. Test tooling only (pip: verify/bags/requirements.txt).
 
   csv_to_bag.py LOG.csv OUT_DIR --joints enc_r,enc_l [--pose posestamped|odometry|tf|none]
                 [--imu gyro_z|none] [--swap-stamps TOPIC:K] [--extra-topic]
+                [--observations OBS.csv [--observation-form array|point]]
+
+Range-bearing observations (`t,id,range,bearing`) go on `/landmarks` in a
+user's own message type, as a robot would publish them, registered from its
+`.msg` text: `array` writes one `test_msgs/msg/LandmarkArray` (header, then
+`Landmark[] landmarks` of `string id, float64 range, float64 bearing`) per
+instant; `point` writes one `test_msgs/msg/Sighting` (header, `string id`,
+`geometry_msgs/Point position` in the robot frame) per observation.
 
 Header stamps are the log's t plus an epoch; receive times lag them by a few
 milliseconds, and the topics are written interleaved by receive time.
@@ -18,7 +26,7 @@ import random
 
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 EPOCH = 1_700_000_000
 
@@ -39,9 +47,18 @@ def main():
     ap.add_argument('--imu', default='gyro_z', help="CSV column of the yaw rate, or 'none'")
     ap.add_argument('--swap-stamps', default=None, help='TOPIC:K swaps the header stamps of messages K and K+1')
     ap.add_argument('--extra-topic', action='store_true', help='also write a second JointState topic')
+    ap.add_argument('--observations', default=None, help='range-bearing observations t,id,range,bearing')
+    ap.add_argument('--observation-form', default='array', choices=['array', 'point'])
     a = ap.parse_args()
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
+    user = {}
+    user.update(get_types_from_msg('string id\nfloat64 range\nfloat64 bearing\n', 'test_msgs/msg/Landmark'))
+    user.update(get_types_from_msg('std_msgs/Header header\ntest_msgs/Landmark[] landmarks\n',
+                                   'test_msgs/msg/LandmarkArray'))
+    user.update(get_types_from_msg('std_msgs/Header header\nstring id\ngeometry_msgs/Point position\n',
+                                   'test_msgs/msg/Sighting'))
+    ts.register(user)
     T = ts.types
     Header = T['std_msgs/msg/Header']
     rows = list(csv.DictReader(open(a.log)))
@@ -94,6 +111,26 @@ def main():
                 angular_velocity_covariance=np.zeros(9),
                 linear_acceleration=v3(x=0.0, y=0.0, z=9.81),
                 linear_acceleration_covariance=np.zeros(9))))
+    if a.observations:
+        obs = list(csv.DictReader(open(a.observations)))
+        by_t = {}
+        for o in obs:
+            by_t.setdefault(o['t'], []).append(o)
+        for t_text, group in by_t.items():
+            t = float(t_text)
+            hdr = Header(stamp=stamp_of(ts, t), frame_id='base_link')
+            recv = int(round((EPOCH + t) * 1e9)) + rng.randint(1_000_000, 5_000_000)
+            if a.observation_form == 'array':
+                marks = [T['test_msgs/msg/Landmark'](id=o['id'], range=float(o['range']), bearing=float(o['bearing']))
+                         for o in group]
+                msgs.append((recv, '/landmarks', 'test_msgs/msg/LandmarkArray',
+                             T['test_msgs/msg/LandmarkArray'](header=hdr, landmarks=marks)))
+            else:
+                for o in group:
+                    r, b = float(o['range']), float(o['bearing'])
+                    p = T['geometry_msgs/msg/Point'](x=r * math.cos(b), y=r * math.sin(b), z=0.0)
+                    msgs.append((recv, '/landmarks', 'test_msgs/msg/Sighting',
+                                 T['test_msgs/msg/Sighting'](header=hdr, id=o['id'], position=p)))
     if a.swap_stamps:
         topic, k = a.swap_stamps.rsplit(':', 1)
         k = int(k)

@@ -1,0 +1,601 @@
+//! ROS 2 messages of any type, decoded at run time from the definition an MCAP
+//! channel carries (schema encoding `ros2msg`): for the topics whose type
+//! kinegen cannot know in advance, such as a robot's own range-bearing
+//! detections. Fields are then picked by path (`detections[].range`).
+//!
+//! The definition text is parsed here: a line format (`type name`, constants,
+//! `MSG: pkg/Type` sections). The bytes are read by the `cdr` crate's
+//! deserializer (alignment, byte order, sizes), driven by the definition
+//! through serde's `DeserializeSeed`, so no byte reading is written by hand.
+//! (`ros2_message` 0.0.5, the crate for this, panics on valid definitions with
+//! a `builtin_interfaces/Duration` field and calls itself untested.)
+use serde::de::{self, DeserializeSeed, SeqAccess, Visitor};
+use serde::Deserialize;
+use std::collections::HashMap;
+use std::fmt;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Prim {
+    Bool,
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    I64,
+    U64,
+    F32,
+    F64,
+    Str,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Ty {
+    Prim(Prim),
+    /// A nested message, by full name (`pkg/msg/Name`).
+    Msg(String),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Arity {
+    One,
+    Fixed(usize),
+    Seq,
+}
+
+#[derive(Debug, Clone)]
+struct Field {
+    name: String,
+    ty: Ty,
+    arity: Arity,
+}
+
+/// A message type and every type it uses, from a `ros2msg` definition.
+#[derive(Debug, Clone)]
+pub struct Schema {
+    root: String,
+    types: HashMap<String, Vec<Field>>,
+}
+
+/// A decoded value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    Bool(bool),
+    Int(i128),
+    Float(f64),
+    Text(String),
+    List(Vec<Value>),
+    Msg(Vec<(String, Value)>),
+}
+
+/// `pkg/Name` or `pkg/msg/Name` as `pkg/msg/Name`; a bare `Name` belongs to
+/// `package` (`Header` is `std_msgs`'s, as in ROS 1 definitions).
+fn full_name(name: &str, package: &str) -> String {
+    let parts: Vec<&str> = name.split('/').collect();
+    match parts.as_slice() {
+        ["Header"] => "std_msgs/msg/Header".into(),
+        [n] => format!("{package}/msg/{n}"),
+        [p, n] => format!("{p}/msg/{n}"),
+        _ => name.to_string(),
+    }
+}
+
+fn prim(name: &str) -> Option<Prim> {
+    // bounded strings (`string<=10`) are strings
+    let base = name.split("<=").next().unwrap_or(name);
+    Some(match base {
+        "bool" => Prim::Bool,
+        "int8" => Prim::I8,
+        "byte" | "char" | "uint8" => Prim::U8,
+        "int16" => Prim::I16,
+        "uint16" => Prim::U16,
+        "int32" => Prim::I32,
+        "uint32" => Prim::U32,
+        "int64" => Prim::I64,
+        "uint64" => Prim::U64,
+        "float32" => Prim::F32,
+        "float64" => Prim::F64,
+        "string" => Prim::Str,
+        _ => return None,
+    })
+}
+
+/// The fields of one message definition (`package` resolves bare type names).
+fn parse_fields(text: &str, package: &str) -> Result<Vec<Field>, String> {
+    let mut fields = Vec::new();
+    for (n, raw) in text.lines().enumerate() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let mut words = line.split_whitespace();
+        let (Some(ty), Some(rest)) = (words.next(), words.next()) else {
+            return Err(format!(
+                "definition line {}: `{raw}` is not `type name`",
+                n + 1
+            ));
+        };
+        // a constant (`int32 MAX=5`, `int32 MAX = 5`) is not in the message's bytes
+        if rest.contains('=') || words.next() == Some("=") {
+            continue;
+        }
+        let (base, arity) = match ty.find('[') {
+            None => (ty, Arity::One),
+            Some(i) => {
+                let inside = ty[i + 1..].trim_end_matches(']');
+                let arity =
+                    if inside.is_empty() || inside.starts_with("<=") {
+                        Arity::Seq
+                    } else {
+                        Arity::Fixed(inside.parse().map_err(|_| {
+                            format!("definition line {}: array size in `{ty}`", n + 1)
+                        })?)
+                    };
+                (&ty[..i], arity)
+            }
+        };
+        if base.starts_with("wstring") {
+            return Err(format!(
+                "definition line {}: `wstring` fields are not supported",
+                n + 1
+            ));
+        }
+        let ty = match prim(base) {
+            Some(p) => Ty::Prim(p),
+            None if base == "time" || base == "duration" => {
+                Ty::Msg(format!("builtin_interfaces/msg/{}", capitalise(base)))
+            }
+            None => Ty::Msg(full_name(base, package)),
+        };
+        fields.push(Field {
+            name: rest.to_string(),
+            ty,
+            arity,
+        });
+    }
+    Ok(fields)
+}
+
+fn capitalise(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map(|f| f.to_uppercase().chain(c).collect())
+        .unwrap_or_default()
+}
+
+impl Schema {
+    /// Parse the definition of `name` (`pkg/msg/Name`) with the definitions of
+    /// the types it uses, in sections after `====` lines headed `MSG: pkg/Type`.
+    pub fn parse(name: &str, text: &str) -> Result<Schema, String> {
+        let root = full_name(name, "");
+        let package = |n: &str| n.split('/').next().unwrap_or("").to_string();
+        let mut types = HashMap::new();
+        let mut sections = text
+            .split('\n')
+            .fold(vec![String::new()], |mut acc, line| {
+                if line.trim_start().starts_with("==") && line.trim().chars().all(|c| c == '=') {
+                    acc.push(String::new());
+                } else {
+                    let s = acc.last_mut().unwrap();
+                    s.push_str(line);
+                    s.push('\n');
+                }
+                acc
+            })
+            .into_iter();
+        let main = sections.next().unwrap_or_default();
+        types.insert(root.clone(), parse_fields(&main, &package(&root))?);
+        for s in sections {
+            let s = s.trim_start();
+            let Some(head) = s.lines().next() else {
+                continue;
+            };
+            let Some(n) = head.trim().strip_prefix("MSG:") else {
+                return Err(format!(
+                    "a section of the definition starts with `{head}`, not `MSG: pkg/Type`"
+                ));
+            };
+            let n = full_name(n.trim(), "");
+            let body = &s[head.len()..];
+            types.insert(n.clone(), parse_fields(body, &package(&n))?);
+        }
+        for (n, def) in [
+            ("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec"),
+            (
+                "builtin_interfaces/msg/Duration",
+                "int32 sec\nuint32 nanosec",
+            ),
+        ] {
+            types
+                .entry(n.to_string())
+                .or_insert_with(|| parse_fields(def, "builtin_interfaces").unwrap());
+        }
+        let schema = Schema { root, types };
+        schema.check(&schema.root, 0)?;
+        Ok(schema)
+    }
+
+    /// Every nested type is defined, and none contains itself.
+    fn check(&self, name: &str, depth: usize) -> Result<(), String> {
+        if depth > 32 {
+            return Err(format!(
+                "`{name}` nests deeper than 32 levels (a type that contains itself?)"
+            ));
+        }
+        let fields = self
+            .types
+            .get(name)
+            .ok_or_else(|| format!("the definition does not define `{name}`"))?;
+        for f in fields {
+            if let Ty::Msg(m) = &f.ty {
+                self.check(m, depth + 1)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Decode one CDR message (4-byte encapsulation header, then the body).
+    pub fn decode(&self, data: &[u8]) -> Result<Value, String> {
+        let Some((head, body)) = data.split_at_checked(4) else {
+            return Err(format!("{} bytes: not a CDR message", data.len()));
+        };
+        let seed = Elem {
+            schema: self,
+            ty: &Ty::Msg(self.root.clone()),
+        };
+        let limit = cdr::Bounded(body.len() as u64);
+        let value = match head[1] {
+            0 | 2 => seed.deserialize(&mut cdr::Deserializer::<_, _, cdr::BigEndian>::new(
+                body, limit,
+            )),
+            1 | 3 => seed.deserialize(&mut cdr::Deserializer::<_, _, cdr::LittleEndian>::new(
+                body, limit,
+            )),
+            k => return Err(format!("unknown CDR encapsulation {k}")),
+        };
+        value.map_err(|e| e.to_string())
+    }
+}
+
+/// One value of type `ty`.
+struct Elem<'a> {
+    schema: &'a Schema,
+    ty: &'a Ty,
+}
+
+/// A field: one value, a fixed array or a sequence.
+struct Slot<'a> {
+    schema: &'a Schema,
+    field: &'a Field,
+}
+
+struct Fields<'a> {
+    schema: &'a Schema,
+    fields: &'a [Field],
+}
+
+struct List<'a> {
+    elem: Elem<'a>,
+}
+
+impl<'de> DeserializeSeed<'de> for Elem<'_> {
+    type Value = Value;
+    fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+        use Prim::*;
+        Ok(match self.ty {
+            Ty::Prim(Bool) => Value::Bool(bool::deserialize(d)?),
+            Ty::Prim(I8) => Value::Int(i8::deserialize(d)?.into()),
+            Ty::Prim(U8) => Value::Int(u8::deserialize(d)?.into()),
+            Ty::Prim(I16) => Value::Int(i16::deserialize(d)?.into()),
+            Ty::Prim(U16) => Value::Int(u16::deserialize(d)?.into()),
+            Ty::Prim(I32) => Value::Int(i32::deserialize(d)?.into()),
+            Ty::Prim(U32) => Value::Int(u32::deserialize(d)?.into()),
+            Ty::Prim(I64) => Value::Int(i64::deserialize(d)?.into()),
+            Ty::Prim(U64) => Value::Int(u64::deserialize(d)?.into()),
+            Ty::Prim(F32) => Value::Float(f32::deserialize(d)?.into()),
+            Ty::Prim(F64) => Value::Float(f64::deserialize(d)?),
+            Ty::Prim(Str) => Value::Text(String::deserialize(d)?),
+            Ty::Msg(name) => {
+                let fields = &self.schema.types[name];
+                if fields.is_empty() {
+                    // ROS 2 gives an empty message one byte
+                    u8::deserialize(d)?;
+                    Value::Msg(Vec::new())
+                } else {
+                    d.deserialize_tuple(
+                        fields.len(),
+                        Fields {
+                            schema: self.schema,
+                            fields,
+                        },
+                    )?
+                }
+            }
+        })
+    }
+}
+
+impl<'de> DeserializeSeed<'de> for Slot<'_> {
+    type Value = Value;
+    fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+        let elem = Elem {
+            schema: self.schema,
+            ty: &self.field.ty,
+        };
+        match self.field.arity {
+            Arity::One => elem.deserialize(d),
+            Arity::Fixed(n) => d.deserialize_tuple(n, List { elem }),
+            Arity::Seq => d.deserialize_seq(List { elem }),
+        }
+    }
+}
+
+impl<'de> Visitor<'de> for Fields<'_> {
+    type Value = Value;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "a message of {} fields", self.fields.len())
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+        let mut out = Vec::with_capacity(self.fields.len());
+        for field in self.fields {
+            let v = seq
+                .next_element_seed(Slot {
+                    schema: self.schema,
+                    field,
+                })?
+                .ok_or_else(|| de::Error::custom(format!("field `{}` missing", field.name)))?;
+            out.push((field.name.clone(), v));
+        }
+        Ok(Value::Msg(out))
+    }
+}
+
+impl<'de> Visitor<'de> for List<'_> {
+    type Value = Value;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "an array")
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+        // no capacity from the length prefix: a corrupt one would reserve
+        // gigabytes; the size limit stops reading at the end of the message
+        let mut out = Vec::new();
+        while let Some(v) = seq.next_element_seed(Elem {
+            schema: self.elem.schema,
+            ty: self.elem.ty,
+        })? {
+            out.push(v);
+        }
+        Ok(Value::List(out))
+    }
+}
+
+/// One step of a field path: a field, optionally every element (`[]`) or one
+/// element (`[k]`) of it.
+#[derive(Debug, Clone, PartialEq)]
+enum Step {
+    Field(String),
+    Each,
+    At(usize),
+}
+
+/// A field path such as `header.stamp.sec`, `ranges[]` or
+/// `detections[].pose.position.x`, with at most one `[]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldPath {
+    text: String,
+    steps: Vec<Step>,
+}
+
+impl FieldPath {
+    pub fn parse(text: &str) -> Result<FieldPath, String> {
+        let mut steps = Vec::new();
+        for part in text.split('.') {
+            let (name, mut rest) = part.split_at(part.find('[').unwrap_or(part.len()));
+            if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+                return Err(format!("`{text}`: `{part}` is not a field name"));
+            }
+            steps.push(Step::Field(name.to_string()));
+            while !rest.is_empty() {
+                let Some(end) = rest.find(']').filter(|_| rest.starts_with('[')) else {
+                    return Err(format!("`{text}`: `{rest}` is not `[]` or `[index]`"));
+                };
+                let inside = &rest[1..end];
+                steps.push(if inside.is_empty() {
+                    Step::Each
+                } else {
+                    Step::At(
+                        inside
+                            .parse()
+                            .map_err(|_| format!("`{text}`: `[{inside}]` is not an index"))?,
+                    )
+                });
+                rest = &rest[end + 1..];
+            }
+        }
+        if steps.iter().filter(|s| **s == Step::Each).count() > 1 {
+            return Err(format!("`{text}`: at most one `[]` per path"));
+        }
+        Ok(FieldPath {
+            text: text.to_string(),
+            steps,
+        })
+    }
+
+    pub fn has_each(&self) -> bool {
+        self.steps.contains(&Step::Each)
+    }
+
+    /// The values at this path (several with `[]`).
+    pub fn values<'v>(&self, v: &'v Value) -> Result<Vec<&'v Value>, String> {
+        let mut cur = vec![v];
+        for (i, step) in self.steps.iter().enumerate() {
+            let shown = || {
+                let done: Vec<String> = self.steps[..i]
+                    .iter()
+                    .map(|s| match s {
+                        Step::Field(f) => format!(".{f}"),
+                        Step::Each => "[]".into(),
+                        Step::At(k) => format!("[{k}]"),
+                    })
+                    .collect();
+                let s = done.concat();
+                s.trim_start_matches('.').to_string()
+            };
+            let mut next = Vec::with_capacity(cur.len());
+            for v in cur {
+                match (step, v) {
+                    (Step::Field(f), Value::Msg(fields)) => {
+                        match fields.iter().find(|(n, _)| n == f) {
+                            Some((_, x)) => next.push(x),
+                            None => {
+                                let names: Vec<&str> =
+                                    fields.iter().map(|(n, _)| n.as_str()).collect();
+                                let at = shown();
+                                return Err(format!(
+                                    "`{}`: {} has no field `{f}` (it has: {})",
+                                    self.text,
+                                    if at.is_empty() {
+                                        "the message".to_string()
+                                    } else {
+                                        format!("`{at}`")
+                                    },
+                                    names.join(", ")
+                                ));
+                            }
+                        }
+                    }
+                    (Step::Each, Value::List(items)) => next.extend(items.iter()),
+                    (Step::At(k), Value::List(items)) => {
+                        next.push(items.get(*k).ok_or_else(|| {
+                            format!(
+                                "`{}`: `{}` has {} elements, no [{k}]",
+                                self.text,
+                                shown(),
+                                items.len()
+                            )
+                        })?)
+                    }
+                    (Step::Field(f), _) => {
+                        return Err(format!(
+                            "`{}`: `{}` is not a message, so it has no field `{f}`",
+                            self.text,
+                            shown()
+                        ))
+                    }
+                    (_, _) => {
+                        return Err(format!("`{}`: `{}` is not an array", self.text, shown()))
+                    }
+                }
+            }
+            cur = next;
+        }
+        Ok(cur)
+    }
+
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+}
+
+impl Value {
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            Value::Float(x) => Some(*x),
+            Value::Int(i) => Some(*i as f64),
+            _ => None,
+        }
+    }
+
+    /// An identifier: text as it is, an integer in decimal.
+    pub fn as_id(&self) -> Option<String> {
+        match self {
+            Value::Text(s) => Some(s.clone()),
+            Value::Int(i) => Some(i.to_string()),
+            _ => None,
+        }
+    }
+
+    /// `builtin_interfaces/Time` in seconds.
+    pub fn as_time(&self) -> Option<f64> {
+        let Value::Msg(f) = self else { return None };
+        let get = |n: &str| f.iter().find(|(k, _)| k == n).and_then(|(_, v)| v.as_f64());
+        Some(get("sec")? + get("nanosec")? * 1e-9)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DEF: &str =
+        "std_msgs/Header header\nDetection[] detections\nfloat32[3] extra\nint32 MAX=3\n\
+================================================================================\n\
+MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n\
+================================================================================\n\
+MSG: my_msgs/Detection\nuint16 id # the tag\nfloat64 range\nfloat64 bearing\n";
+
+    /// CDR little-endian bytes of the message above, written by the `cdr`
+    /// crate's serializer from plain Rust types with the same layout.
+    fn bytes() -> Vec<u8> {
+        #[derive(serde::Serialize)]
+        struct Time(i32, u32);
+        #[derive(serde::Serialize)]
+        struct Header(Time, String);
+        #[derive(serde::Serialize)]
+        struct Det(u16, f64, f64);
+        #[derive(serde::Serialize)]
+        struct Msg(Header, Vec<Det>, [f32; 3]);
+        let m = Msg(
+            Header(Time(12, 500_000_000), "base".into()),
+            vec![Det(7, 2.5, 0.25), Det(9, 4.0, -1.0)],
+            [1.0, 2.0, 3.0],
+        );
+        cdr::serialize::<_, _, cdr::CdrLe>(&m, cdr::Infinite).unwrap()
+    }
+
+    #[test]
+    fn decodes_a_user_message_and_picks_fields_by_path() {
+        let s = Schema::parse("my_msgs/msg/Detections", DEF).unwrap();
+        let v = s.decode(&bytes()).unwrap();
+        let p = |t: &str| FieldPath::parse(t).unwrap();
+        let stamp = p("header.stamp").values(&v).unwrap()[0].as_time().unwrap();
+        assert_eq!(stamp, 12.5);
+        let ids: Vec<String> = p("detections[].id")
+            .values(&v)
+            .unwrap()
+            .iter()
+            .map(|x| x.as_id().unwrap())
+            .collect();
+        assert_eq!(ids, ["7", "9"]);
+        let r: Vec<f64> = p("detections[].range")
+            .values(&v)
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert_eq!(r, [2.5, 4.0]);
+        assert_eq!(p("extra[2]").values(&v).unwrap()[0].as_f64(), Some(3.0));
+        let e = p("detections[].rng").values(&v).unwrap_err();
+        assert!(
+            e.contains("no field `rng` (it has: id, range, bearing)"),
+            "{e}"
+        );
+        // a truncated message is an error, not a panic or a short answer
+        let b = bytes();
+        assert!(s.decode(&b[..b.len() - 5]).is_err());
+    }
+
+    #[test]
+    fn bad_definitions_and_paths_are_refused() {
+        assert!(Schema::parse("a/msg/B", "Missing m\n")
+            .unwrap_err()
+            .contains("does not define `a/msg/Missing`"));
+        assert!(Schema::parse("a/msg/B", "B b\n")
+            .unwrap_err()
+            .contains("deeper"));
+        assert!(FieldPath::parse("a[].b[]").is_err());
+        assert!(FieldPath::parse("a[x]").is_err());
+        assert!(FieldPath::parse("").is_err());
+    }
+}
