@@ -82,7 +82,29 @@ pub fn ros2_yaml(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, Str
         r.ir.name,
         spec.display()
     );
+    // every calibrated parameter with its uncertainty, for any spec (after the
+    // controller's parameters for a differential drive, which name only a few)
+    let mut calibration = format!(
+        "kinegen_calibration:\n  model: {}\n  parameters:\n",
+        r.ir.name
+    );
+    let rp = r.ir.runtime_params();
+    for (k, &i) in res.free.iter().enumerate() {
+        let std = res.std.get(k).copied().filter(|s| s.is_finite());
+        calibration += &format!(
+            "    {}:\n      value: {}\n      std: {}\n      nominal: {}\n      unit: \"{}\"\n",
+            r.names[i],
+            res.p[i],
+            std.map_or("null # not identified by these logs".into(), |s| format!(
+                "{s}"
+            )),
+            r.p[i],
+            rp[i].unit.replace('"', "'"),
+        );
+    }
     if differential {
+        // as comments: a ROS 2 parameter file holds `ros__parameters` of nodes only
+        let calibration: String = calibration.lines().map(|l| format!("# {l}\n")).collect();
         let (b0, kr0, kl0) = geometry(r, &r.p, &right, &left);
         let (b, kr, kl) = geometry(r, &res.p, &right, &left);
         let in_rad = r.ir.inputs.iter().all(|i| i.unit == "rad/s");
@@ -104,27 +126,9 @@ pub fn ros2_yaml(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, Str
             )
         };
         return Ok(format!(
-            "{head}# ROS 2 diff_drive_controller parameters: separation and radii from the calibrated\n# kinematics (multipliers: calibrated over nominal)\ndiff_drive_controller:\n  ros__parameters:\n    wheel_separation: {b0:.9}\n{radius_line}    wheel_separation_multiplier: {:.9}\n    left_wheel_radius_multiplier: {rl:.9}\n    right_wheel_radius_multiplier: {rr:.9}\n",
+            "{head}# ROS 2 diff_drive_controller parameters: separation and radii from the calibrated\n# kinematics (multipliers: calibrated over nominal)\ndiff_drive_controller:\n  ros__parameters:\n    wheel_separation: {b0:.9}\n{radius_line}    wheel_separation_multiplier: {:.9}\n    left_wheel_radius_multiplier: {rl:.9}\n    right_wheel_radius_multiplier: {rr:.9}\n{calibration}",
             b / b0
         ));
     }
-    let mut out = format!(
-        "{head}kinegen_calibration:\n  model: {}\n  parameters:\n",
-        r.ir.name
-    );
-    let rp = r.ir.runtime_params();
-    for (k, &i) in res.free.iter().enumerate() {
-        let std = res.std.get(k).copied().filter(|s| s.is_finite());
-        out += &format!(
-            "    {}:\n      value: {}\n      std: {}\n      nominal: {}\n      unit: \"{}\"\n",
-            r.names[i],
-            res.p[i],
-            std.map_or("null # not identified by these logs".into(), |s| format!(
-                "{s}"
-            )),
-            r.p[i],
-            rp[i].unit.replace('"', "'"),
-        );
-    }
-    Ok(out)
+    Ok(format!("{head}{calibration}"))
 }
