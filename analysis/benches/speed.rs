@@ -422,8 +422,22 @@ fn main() {
     }
     let res = last.unwrap();
     let t = median(times);
+    // the baseline of the same run: one evaluation pass over the same log (dead
+    // reckoning of every row and its residuals, no Jacobian), as the fit cuts it
+    let pieces = kinegen_analysis::fit::segmented(std::slice::from_ref(&run));
+    let starts = vec![[0.0; 3]; pieces.len()];
+    let mut passes = Vec::new();
+    for _ in 0..3 {
+        let t0 = Instant::now();
+        black_box(kinegen_analysis::fit::residuals(
+            &r, &r.p, &r.free, &pieces, &o, false, &starts,
+        ));
+        passes.push(t0.elapsed().as_secs_f64());
+    }
+    let pass = median(passes);
     println!(
-        "fit on a {n}-sample diff_drive log: {t:.2} s ({:.0} samples/s, {} LM iterations, b = {:.5} for a true {:.5})",
+        "fit on a {n}-sample diff_drive log: {t:.2} s = {:.1} evaluation passes of {pass:.3} s ({:.0} samples/s, {} LM iterations, b = {:.5} for a true {:.5})",
+        t / pass,
         n as f64 / t,
         res.iterations,
         res.p[2],

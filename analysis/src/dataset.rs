@@ -1,10 +1,10 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
 use crate::bag::{Detection, TopicMap};
-use crate::inputs::Inputs;
 use crate::landmarks::{pose_from_landmarks, LandmarkObs};
 use crate::log::{unwrap, Log, LogError};
 use crate::model::Runner;
+use crate::rows::Inputs;
 use kinegen_model::spec::{InputKind, ObservationRole};
 
 #[derive(Debug, Clone)]

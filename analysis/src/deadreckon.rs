@@ -3,15 +3,15 @@
 use crate::dataset::Run;
 use crate::model::Runner;
 use kinegen_model::spec::ObservationRole::{Pose, YawRate};
-use nalgebra::DMatrix;
 
 pub struct Track {
     pub pose: Vec<[f64; 3]>,
     /// What the pose sensor reads (see [`Track::measured`]); empty when that
     /// is the pose itself, so a long log does not hold it twice.
     sensed: Vec<[f64; 3]>,
-    /// Per row, 3 x P sensitivity of the pose to all runtime parameters.
-    pub sens: Option<Vec<DMatrix<f64>>>,
+    /// Per row, the sensitivity of the pose to all runtime parameters and the
+    /// start pose.
+    pub sens: Option<Sens>,
     /// Model body twist of each step.
     pub twist: Vec<[f64; 3]>,
     /// What the gyro should read over each step: the model's yaw-rate
@@ -19,6 +19,37 @@ pub struct Track {
     /// of the twist when the model has no such observation. Empty when the run
     /// has no gyro.
     pub gyro: Vec<f64>,
+}
+
+/// Pose sensitivities along a track: per row, a 3 x `cols` matrix (the
+/// parameters, then the start pose), row-major in one flat vector (a
+/// million-row fit would otherwise allocate a matrix per row and pass).
+pub struct Sens {
+    cols: usize,
+    data: Vec<f64>,
+}
+
+/// The sensitivity matrix of one row: `s[(m, c)]`, pose component m, column c.
+pub struct SensAt<'a> {
+    cols: usize,
+    d: &'a [f64],
+}
+
+impl Sens {
+    pub fn at(&self, k: usize) -> SensAt<'_> {
+        let n = 3 * self.cols;
+        SensAt {
+            cols: self.cols,
+            d: &self.data[k * n..(k + 1) * n],
+        }
+    }
+}
+
+impl std::ops::Index<(usize, usize)> for SensAt<'_> {
+    type Output = f64;
+    fn index(&self, (m, c): (usize, usize)) -> &f64 {
+        &self.d[m * self.cols + c]
+    }
 }
 
 impl Track {
@@ -130,10 +161,26 @@ fn landmark_start(
 /// The body pose dead reckoning starts from: the measured start seen through
 /// the model's pose observation, or placed by the start's landmarks.
 pub fn model_start(r: &Runner, p: &[f64], data: &Run) -> [f64; 3] {
-    let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
-    landmark_start(r, p, data, data.start_pose())
-        .unwrap_or_else(|| body_start(r, p, data.start_pose(), &u0))
-        .0
+    placed_start(r, p, data, data.start_pose(), [0.0; 3]).0
+}
+
+/// The body start pose from the `measured` one (see [`model_start`]) plus a
+/// calibration's `offset`, with its derivative with respect to the parameters
+/// (3 x P, row-major).
+pub fn placed_start(
+    r: &Runner,
+    p: &[f64],
+    data: &Run,
+    measured: [f64; 3],
+    offset: [f64; 3],
+) -> ([f64; 3], Vec<f64>) {
+    match landmark_start(r, p, data, measured) {
+        Some((x, d)) => ([0, 1, 2].map(|i| x[i] + offset[i]), d),
+        None => {
+            let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
+            body_start(r, p, [0, 1, 2].map(|i| measured[i] + offset[i]), &u0)
+        }
+    }
 }
 
 /// Integrate the model over a run from the run's start pose ([`Run::start_pose`]).
@@ -154,7 +201,6 @@ pub fn run_from(
     start_offset: [f64; 3],
 ) -> Track {
     let start = data.start_pose();
-    let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
     let tau_i = r.delay;
     let (start, gt_vel) = match (tau_i.map(|i| p[i]), &data.gt) {
@@ -172,10 +218,7 @@ pub fn run_from(
         }
         _ => (start, [0.0; 3]),
     };
-    let (start, mut dstart) = match landmark_start(r, p, data, start) {
-        Some((x, d)) => ([0, 1, 2].map(|i| x[i] + start_offset[i]), d),
-        None => body_start(r, p, [0, 1, 2].map(|i| start[i] + start_offset[i]), &u0),
-    };
+    let (start, mut dstart) = placed_start(r, p, data, start, start_offset);
     if let Some(ti) = tau_i {
         for m in 0..3 {
             dstart[m * p.len() + ti] += gt_vel[m];
@@ -187,12 +230,16 @@ pub fn run_from(
     let mut pose = Vec::with_capacity(data.steps() + 1);
     pose.push(start);
     // columns: parameters, then the start pose (identity at the start)
+    let cols = np + 3;
     let mut sens = with_sens.then(|| {
-        let mut s0 = with_start_columns(&dstart, np);
+        let mut data = Vec::with_capacity(3 * cols * (data.steps() + 1));
         for m in 0..3 {
-            s0[(m, np + m)] = 1.0;
+            data.extend((0..cols).map(|c| match c {
+                c if c < np => dstart[m * np + c],
+                c => f64::from(u8::from(c == np + m)),
+            }));
         }
-        vec![s0]
+        Sens { cols, data }
     });
     let mut twist = Vec::with_capacity(data.steps());
     // pose and twist, then (with sensitivities) F_x and F_p, from one fused tape
@@ -212,14 +259,18 @@ pub fn run_from(
         f.eval_into(&args[..f.args.len()], &mut out, &mut scratch);
         twist.push([out[3], out[4], out[5]]);
         if let Some(s) = sens.as_mut() {
-            // S_{k+1} = F_x S_k + [F_p | 0], written out: one allocation per step
+            // S_{k+1} = F_x S_k + [F_p | 0], written out
             let (jx, jp) = (&out[6..15], &out[15..]);
-            let prev = s.last().unwrap();
-            let next = DMatrix::from_fn(3, np + 3, |m, c| {
-                let carried: f64 = (0..3).map(|i| jx[m * 3 + i] * prev[(i, c)]).sum();
-                carried + if c < np { jp[m * np + c] } else { 0.0 }
-            });
-            s.push(next);
+            let start = s.data.len() - 3 * cols;
+            for m in 0..3 {
+                for c in 0..cols {
+                    let prev = |i: usize| s.data[start + i * cols + c];
+                    let carried =
+                        jx[m * 3] * prev(0) + jx[m * 3 + 1] * prev(1) + jx[m * 3 + 2] * prev(2);
+                    s.data
+                        .push(carried + if c < np { jp[m * np + c] } else { 0.0 });
+                }
+            }
         }
         pose.push([out[0], out[1], out[2]]);
     }
@@ -259,16 +310,6 @@ fn predicted_gyro(
             out[0]
         })
         .collect()
-}
-
-/// A 3 x P row-major parameter Jacobian as the first P columns of a sensitivity
-/// matrix whose last 3 columns (the start pose) are zero.
-fn with_start_columns(jac_p: &[f64], np: usize) -> DMatrix<f64> {
-    DMatrix::from_fn(
-        3,
-        np + 3,
-        |m, c| if c < np { jac_p[m * np + c] } else { 0.0 },
-    )
 }
 
 /// The pose measurements a track predicts (see [`Track::measured`]); empty

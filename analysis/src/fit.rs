@@ -5,10 +5,13 @@
 //! off-centre marker), and model minus measured gyro yaw rate at every step
 //! (through `obs_gyro`, so gyro effects enter naturally). The Jacobian comes from
 //! the forward sensitivities of the exact step, so it is exact, not numerical.
+mod arrow;
+
 use crate::dataset::Run;
 use crate::deadreckon;
 use crate::log::wrap;
 use crate::model::Runner;
+use crate::rows::Rows;
 use kinegen_model::spec::ObservationRole::{Pose, RangeBearing, YawRate};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -149,7 +152,7 @@ pub fn residuals(
 ) -> (Vec<f64>, Option<DMatrix<f64>>) {
     let cols = start_columns(runs, o, free.len());
     let ncols = free.len() + cols.iter().flatten().count();
-    let parts: Vec<(Vec<f64>, Vec<Vec<f64>>)> = runs
+    let parts: Vec<(Vec<f64>, Rows)> = runs
         .par_iter()
         .enumerate()
         .map(|(i, run)| {
@@ -240,9 +243,10 @@ pub fn normal_equations(
                 DVector::zeros(BLOCK),
                 DVector::zeros(BLOCK),
             );
-            for (chunk_res, chunk_rows) in rv.chunks_mut(BLOCK).zip(jv.chunks(BLOCK)) {
+            for (block, chunk_res) in rv.chunks_mut(BLOCK).enumerate() {
                 let n = chunk_res.len();
-                for (i, (res, row)) in chunk_res.iter_mut().zip(chunk_rows).enumerate() {
+                for (i, res) in chunk_res.iter_mut().enumerate() {
+                    let row = &jv[block * BLOCK + i];
                     let w = o.huber.map_or(1.0, |k| huber_weight(*res, k));
                     *res *= w;
                     for (c, v) in row[..m].iter().enumerate() {
@@ -322,9 +326,9 @@ fn run_residuals(
     with_jac: bool,
     start: [f64; 3],
     nuis: bool,
-) -> (Vec<f64>, Vec<Vec<f64>>) {
+) -> (Vec<f64>, Rows) {
     let mut res = Vec::new();
-    let mut jac = Vec::new();
+    let mut jac = Rows::new(free.len() + usize::from(nuis));
     let track = deadreckon::run_from(r, p, run, with_jac, start);
     let np = p.len();
     // sensitivity columns to read: the free parameters, then the start heading
@@ -390,23 +394,19 @@ fn run_residuals(
                     res.push(if i == 2 { wrap(d) } else { d } / sig[i]);
                     if with_jac {
                         let sens = track.sens.as_ref().unwrap();
-                        let (s0, s1) = (&sens[j], &sens[j + 1]);
-                        jac.push(
-                            free.iter()
-                                .map(|&c| {
-                                    let dx = |m: usize| {
-                                        if Some(c) == tau_i {
-                                            -vel[m]
-                                        } else {
-                                            s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
-                                        }
-                                    };
-                                    ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>()
-                                        + if c < np { hp[i * np + c] } else { 0.0 })
-                                        / sig[i]
-                                })
-                                .collect(),
-                        );
+                        let (s0, s1) = (sens.at(j), sens.at(j + 1));
+                        jac.push(free.iter().map(|&c| {
+                            let dx = |m: usize| {
+                                if Some(c) == tau_i {
+                                    -vel[m]
+                                } else {
+                                    s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
+                                }
+                            };
+                            ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>()
+                                + if c < np { hp[i * np + c] } else { 0.0 })
+                                / sig[i]
+                        }));
                     }
                 }
             }
@@ -437,16 +437,12 @@ fn run_residuals(
                         &mut jx,
                         &mut scratch,
                     );
-                    let s = &track.sens.as_ref().unwrap()[k];
-                    jac.push(
-                        free.iter()
-                            .map(|&c| {
-                                (if c < np { jp[c] } else { 0.0 }
-                                    + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>())
-                                    / o.gyro_sigma
-                            })
-                            .collect(),
-                    );
+                    let s = track.sens.as_ref().unwrap().at(k);
+                    jac.push(free.iter().map(|&c| {
+                        (if c < np { jp[c] } else { 0.0 }
+                            + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>())
+                            / o.gyro_sigma
+                    }));
                 }
             }
         }
@@ -467,7 +463,7 @@ fn landmark_residuals(
     track: &deadreckon::Track,
     with_jac: bool,
     res: &mut Vec<f64>,
-    jac: &mut Vec<Vec<f64>>,
+    jac: &mut Rows,
 ) {
     let Some(h) = r.ir.observation_fn(RangeBearing, "") else {
         return;
@@ -491,21 +487,15 @@ fn landmark_residuals(
             let hx = fx.eval(&Runner::obs_args(fx, &x, u, p, &lm));
             let hp = fp.eval(&Runner::obs_args(fp, &x, u, p, &lm));
             let sens = track.sens.as_ref().unwrap();
-            let (s0, s1) = (&sens[j], &sens[j + 1]);
+            let (s0, s1) = (sens.at(j), sens.at(j + 1));
             for i in 0..2 {
-                jac.push(
-                    free.iter()
-                        .map(|&c| {
-                            ((0..3)
-                                .map(|m| {
-                                    hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]))
-                                })
-                                .sum::<f64>()
-                                + if c < np { hp[i * np + c] } else { 0.0 })
-                                / sig[i]
-                        })
-                        .collect(),
-                );
+                jac.push(free.iter().map(|&c| {
+                    ((0..3)
+                        .map(|m| hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])))
+                        .sum::<f64>()
+                        + if c < np { hp[i * np + c] } else { 0.0 })
+                        / sig[i]
+                }));
             }
         }
     }
@@ -520,9 +510,7 @@ pub fn run_starts(r: &Runner, p: &[f64], runs: &[Run], starts: &[[f64; 3]]) -> V
         .map(|run| {
             let off = starts.get(seg).copied().unwrap_or([0.0; 3]);
             seg += run.segments(SEGMENT_S).len();
-            let measured = run.start_pose();
-            let u0 = run.u.first().map(<[f64]>::to_vec).unwrap_or_default();
-            deadreckon::body_start(r, p, [0, 1, 2].map(|i| measured[i] + off[i]), &u0).0
+            deadreckon::placed_start(r, p, run, run.start_pose(), off).0
         })
         .collect()
 }
@@ -556,6 +544,10 @@ const LADDER_S: [f64; 2] = [4.0, 15.0];
 /// Rows a continuation stage reads at most (evenly spaced segments beyond this):
 /// it only has to find the basin, so a million-row log need not be read in full.
 const LADDER_ROWS: usize = 20_000;
+
+/// Rows on which other starting points are screened before a whole long log is
+/// fitted from them (see [`fit`]).
+const SCREEN_ROWS: usize = 50_000;
 
 /// Weighted residual RMS at which a fit is taken to have reached the noise, so no
 /// further starting point is tried.
@@ -609,20 +601,43 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
         return Ok(res);
     }
     let split = segmented(runs);
-    let direct = fit_from(r, &split, o)?;
+    let direct = coarse_to_fine(r, &split, o)?;
     let at_noise = (2.0 * direct.cost_after / direct.n_residuals.max(1) as f64).sqrt() < AT_NOISE;
     if r.free.is_empty() || at_noise {
         return Ok(direct);
     }
+    // On a long log the other starting points are screened on evenly spaced
+    // segments (SCREEN_ROWS rows): a candidate is refined on the whole log only
+    // when, refined on those segments, it ends below the direct fit refined on
+    // the same segments. A short log is its own screen (nothing changes), and a
+    // million-row log is not fitted in full three times over.
+    let screen = thinned(split.clone(), SCREEN_ROWS);
+    let whole = screen.len() == split.len();
     let mut best = direct;
-    for start in [continuation(r, runs, o), gyro_start(r, &split, o)]
+    let mut best_on_screen: Option<f64> = None;
+    for start in [continuation(r, runs, o), gyro_start(r, &screen, o)]
         .into_iter()
         .flatten()
     {
         let mut from = r.clone();
         from.p = start;
+        if !whole {
+            let Ok(c) = fit_from(&from, &screen, o) else {
+                continue;
+            };
+            let reference = *best_on_screen.get_or_insert_with(|| {
+                let mut at = r.clone();
+                at.p = best.p.clone();
+                fit_from(&at, &screen, o).map_or(f64::INFINITY, |b| b.cost_after)
+            });
+            if c.cost_after >= reference * (1.0 - 1e-9) {
+                continue;
+            }
+            from.p = c.p;
+        }
         if let Ok(cand) = fit_from(&from, &split, o) {
             if cand.cost_after < best.cost_after {
+                best_on_screen = None;
                 best = FitResult {
                     cost_before: best.cost_before,
                     iterations: best.iterations + cand.iterations,
@@ -632,6 +647,32 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
         }
     }
     Ok(best)
+}
+
+/// [`fit_from`] on a long log: converged first on evenly spaced segments of
+/// about [`SCREEN_ROWS`] rows, then refined on all of them from there, where
+/// a few passes over the whole log suffice (each costs a dead reckoning of
+/// every row with its sensitivities). A log of up to four times that many rows
+/// is fitted whole from the start.
+fn coarse_to_fine(r: &Runner, split: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+    let rows: usize = split.iter().map(|x| x.t.len()).sum();
+    if rows <= 4 * SCREEN_ROWS || r.free.is_empty() {
+        return fit_from(r, split, o);
+    }
+    let coarse = fit_from(r, &thinned(split.to_vec(), SCREEN_ROWS), o)?;
+    let mut from = r.clone();
+    from.p = coarse.p;
+    // from the coarse optimum, the start headings are refined with the
+    // parameters at once (fit_from's first stage guards against a far start)
+    let fine = fit_stage(&from, split, o)?;
+    // the cost at the starting values, on the whole log, as a direct fit reports it
+    let starts = vec![[0.0; 3]; split.len()];
+    let before = cost(&residuals(r, &r.p, &r.free, split, o, false, &starts).0);
+    Ok(FitResult {
+        cost_before: before,
+        iterations: coarse.iterations + fine.iterations,
+        ..fine
+    })
 }
 
 /// Replace a window fit's standard deviations and correlations by the sandwich
@@ -653,7 +694,7 @@ fn sandwich(r: &Runner, windows: &[Run], o: &FitOptions, res: &mut FitResult) {
         .map(|w| {
             let (rv, jv) = run_residuals(r, &r.p, free, w, o, true, [0.0; 3], false);
             let (mut g, mut info) = (DVector::zeros(m), DMatrix::zeros(m, m));
-            for (res, row) in rv.iter().zip(&jv) {
+            for (res, row) in rv.iter().zip(jv.iter()) {
                 let row = DVector::from_column_slice(&row[..m]);
                 g.axpy(*res, &row, 1.0);
                 info.ger(1.0, &row, &row, 1.0);
@@ -912,30 +953,23 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         // nominal noise) get no step, so they stay at their nominal values
         // instead of wandering along a null space (a turn-in-place log moves
         // r_r, r_l and b together to 9x their size otherwise).
-        let eig = jtj.clone().symmetric_eigen();
-        let emax = eig.eigenvalues.max();
-        let undetermined: Vec<DVector<f64>> = (0..dims)
-            .filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax))
-            .map(|k| eig.eigenvectors.column(k).into_owned())
-            .collect();
+        // the parameters' information with the start headings marginalised out
+        let undetermined: Vec<DVector<f64>> = if m == 0 {
+            Vec::new() // only start headings are refined
+        } else {
+            let eig = arrow::marginal(&jtj, m).symmetric_eigen();
+            let emax = eig.eigenvalues.max();
+            (0..m)
+                .filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax))
+                .map(|k| eig.eigenvectors.column(k).into_owned())
+                .collect()
+        };
         let mut improved = false;
         for _ in 0..30 {
-            let mut a = jtj.clone();
-            for d in 0..a.nrows() {
-                a[(d, d)] += lambda * jtj[(d, d)].max(1e-12);
-            }
-            let Some(mut step) = a
-                .clone()
-                .cholesky()
-                .map(|ch| ch.solve(&(-&g)))
-                .or_else(|| a.svd(true, true).solve(&(-&g), 1e-14).ok())
-            else {
+            let Some(step) = arrow::damped_step(&jtj, &g, m, lambda, &undetermined) else {
                 lambda *= 10.0;
                 continue;
             };
-            for v in &undetermined {
-                step -= v * v.dot(&step);
-            }
             let mut trial = p.clone();
             for (k, &i) in free.iter().enumerate() {
                 trial[i] = (p[i] + step[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
@@ -948,13 +982,23 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             let tc = cost(&tres);
             if tc.is_finite() && tc < c {
                 let rel = (c - tc) / c.max(1e-300);
+                // The step's length in standard deviations of the estimate:
+                // near the optimum a Gauss-Newton step of d (in the metric of
+                // J^T J) lowers the cost by d^2 / 2, and one standard
+                // deviation is s^2 = 2 cost / (n - dims) of it. Steps below a
+                // hundredth of a standard deviation change nothing a user
+                // could see; on a million residuals LM would otherwise go on
+                // for a dozen passes over the log. Exact (noise-free) data
+                // have s^2 near zero and still converge to round-off.
+                let s2 = 2.0 * tc / (res.len().saturating_sub(dims).max(1)) as f64;
+                let negligible = 2.0 * (c - tc) < 1e-4 * s2;
                 p = trial;
                 x = xt;
                 c = tc;
                 lambda = (lambda / 3.0).max(1e-12);
                 improved = true;
                 (res, jtj_raw, jtr_raw) = normal(&p, &x);
-                if rel < 1e-12 {
+                if rel < 1e-12 || negligible {
                     improved = false;
                 }
                 break;
@@ -981,20 +1025,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     let full = DMatrix::from_fn(dims, dims, |a, b| jtj_raw[(a, b)] * scale[a] * scale[b]);
     // information about the parameters with the start offsets marginalised out
     // (Schur complement), so the nuisance never shows up as a parameter
-    let jtj = if dims > m {
-        let (a, b, cc) = (
-            full.view((0, 0), (m, m)).into_owned(),
-            full.view((0, m), (m, dims - m)).into_owned(),
-            full.view((m, m), (dims - m, dims - m)).into_owned(),
-        );
-        let cinv = cc
-            .clone()
-            .pseudo_inverse(1e-12 * cc.norm().max(1e-300))
-            .unwrap_or_else(|_| DMatrix::zeros(dims - m, dims - m));
-        &a - &b * cinv * b.transpose()
-    } else {
-        full
-    };
+    let jtj = arrow::marginal(&full, m);
     if m == 0 {
         // only start poses were refined: no parameter to report on
         return Ok(FitResult {

@@ -1,21 +1,34 @@
-//! Per-step model inputs of a run, one row per step, stored in one flat
-//! vector: a long log has millions of steps, and a `Vec` per step would cost
-//! an allocation (and its bookkeeping, more than the values) each.
+//! Rows of equal width stored in one flat vector: the per-step inputs of a
+//! run ([`Inputs`]), the Jacobian rows of a fit's residuals. A long log has
+//! millions of steps, and a `Vec` per row would cost an allocation (and its
+//! bookkeeping, more than the values) each.
 use std::ops::Index;
 
+/// Per-step model inputs of a run, in the spec's order.
+pub type Inputs = Rows;
+
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Inputs {
-    /// Values per step (the model's inputs, in the spec's order).
+pub struct Rows {
+    /// Values per row.
     width: usize,
     steps: usize,
     values: Vec<f64>,
 }
 
-impl Inputs {
+impl Rows {
+    /// No rows yet, `width` values each.
+    pub fn new(width: usize) -> Rows {
+        Rows {
+            width,
+            steps: 0,
+            values: Vec::new(),
+        }
+    }
+
     /// `steps` rows of `width` values, row-major.
-    pub fn from_flat(steps: usize, width: usize, values: Vec<f64>) -> Inputs {
-        assert_eq!(steps * width, values.len(), "{steps} x {width} inputs");
-        Inputs {
+    pub fn from_flat(steps: usize, width: usize, values: Vec<f64>) -> Rows {
+        assert_eq!(steps * width, values.len(), "{steps} x {width} rows");
+        Rows {
             width,
             steps,
             values,
@@ -42,9 +55,17 @@ impl Inputs {
         (0..self.steps).map(move |k| &self[k])
     }
 
-    /// Steps `a..b` as inputs of their own.
-    pub fn slice(&self, a: usize, b: usize) -> Inputs {
-        Inputs {
+    /// Append a row of `width` values.
+    pub fn push(&mut self, row: impl IntoIterator<Item = f64>) {
+        let before = self.values.len();
+        self.values.extend(row);
+        assert_eq!(self.values.len() - before, self.width, "row width");
+        self.steps += 1;
+    }
+
+    /// Rows `a..b` as rows of their own.
+    pub fn slice(&self, a: usize, b: usize) -> Rows {
+        Rows {
             width: self.width,
             steps: b - a,
             values: self.values[a * self.width..b * self.width].to_vec(),
@@ -52,7 +73,7 @@ impl Inputs {
     }
 }
 
-impl Index<usize> for Inputs {
+impl Index<usize> for Rows {
     type Output = [f64];
     fn index(&self, k: usize) -> &[f64] {
         assert!(k < self.steps, "step {k} of {}", self.steps);
@@ -61,8 +82,8 @@ impl Index<usize> for Inputs {
 }
 
 /// Rows of equal width (tests and benches build inputs this way).
-impl<R: AsRef<[f64]>> FromIterator<R> for Inputs {
-    fn from_iter<I: IntoIterator<Item = R>>(rows: I) -> Inputs {
+impl<R: AsRef<[f64]>> FromIterator<R> for Rows {
+    fn from_iter<I: IntoIterator<Item = R>>(rows: I) -> Rows {
         let (mut width, mut steps, mut values) = (None, 0, Vec::new());
         for r in rows {
             let r = r.as_ref();
@@ -70,7 +91,7 @@ impl<R: AsRef<[f64]>> FromIterator<R> for Inputs {
             values.extend_from_slice(r);
             steps += 1;
         }
-        Inputs {
+        Rows {
             width: width.unwrap_or(0),
             steps,
             values,
@@ -84,7 +105,7 @@ mod tests {
 
     #[test]
     fn rows_round_trip_and_slice() {
-        let u: Inputs = [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]].into_iter().collect();
+        let u: Rows = [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]].into_iter().collect();
         assert_eq!((u.len(), u.width()), (3, 2));
         assert_eq!(&u[1], &[3.0, 4.0]);
         assert_eq!(u.first(), Some(&[1.0, 2.0][..]));
@@ -93,7 +114,7 @@ mod tests {
             s.iter().collect::<Vec<_>>(),
             vec![&[3.0, 4.0][..], &[5.0, 6.0]]
         );
-        let empty: Inputs = Vec::<Vec<f64>>::new().into_iter().collect();
+        let empty: Rows = Vec::<Vec<f64>>::new().into_iter().collect();
         assert!(empty.is_empty() && empty.first().is_none());
     }
 }
