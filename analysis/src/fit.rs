@@ -5,6 +5,16 @@
 //! off-centre marker), and model minus measured gyro yaw rate at every step
 //! (through `obs_gyro`, so gyro effects enter naturally). The Jacobian comes from
 //! the forward sensitivities of the exact step, so it is exact, not numerical.
+//!
+//! Why not a solver crate (`levenberg-marquardt`, a MINPACK port, or argmin):
+//! both take the Jacobian as one matrix, and a million-sample log cut into 833
+//! segments with a start-heading nuisance each has a 4e6 x 836 Jacobian (27 GB);
+//! here J^T J is summed block by block without forming J ([`normal_equations`])
+//! and solved through its arrow shape ([`arrow`]). The loop also does what
+//! those crates do not: directions the data do not determine take no step
+//! (they stay at their nominal values instead of wandering along a null space),
+//! bounds clamp the step, and it stops when a step is below a hundredth of a
+//! standard deviation of the estimate.
 mod arrow;
 
 use crate::dataset::Run;

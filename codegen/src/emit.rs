@@ -259,6 +259,18 @@ fn emit_items(
     out
 }
 
+/// A parameter's name as a struct field: a Rust keyword becomes a raw
+/// identifier (`r#type`), and the four that cannot be raw get a trailing `_`.
+fn field_ident(name: &str) -> proc_macro2::Ident {
+    match name {
+        "self" | "Self" | "super" | "crate" => format_ident!("{}_", name),
+        _ if syn::parse_str::<syn::Ident>(name).is_err() => {
+            proc_macro2::Ident::new_raw(name, proc_macro2::Span::call_site())
+        }
+        _ => format_ident!("{}", name),
+    }
+}
+
 /// The source of one model's module.
 pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
     let header = format!(
@@ -275,6 +287,25 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
         .collect();
     let pnom: Vec<TokenStream> = ir.runtime_params().iter().map(|p| lit(p.nominal)).collect();
     let np = pnames.len();
+    let fields: Vec<proc_macro2::Ident> = pnames.iter().map(|n| field_ident(n)).collect();
+    let field_docs: Vec<String> = ir
+        .runtime_params()
+        .iter()
+        .map(|p| {
+            let unit = if p.unit.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", p.unit)
+            };
+            let doc = if p.doc.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", p.doc)
+            };
+            format!(" `{}`{unit}{doc}", p.name)
+        })
+        .collect();
+    let idx: Vec<usize> = (0..np).collect();
     let inames: Vec<&str> = ir.inputs.iter().map(|i| i.name.as_str()).collect();
     let icols: Vec<&str> = ir.inputs.iter().map(|i| i.column.as_str()).collect();
     let ni = inames.len();
@@ -316,6 +347,28 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
         pub const PARAMS: [&str; #np] = [#(#pnames),*];
         /// Nominal values of [`PARAMS`].
         pub const PARAM_NOMINAL: [f64; #np] = [#(#pnom),*];
+
+        /// The runtime parameters by name; [`Params::to_array`] gives the `p`
+        /// argument of every kernel.
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub struct Params {
+            #(#[doc = #field_docs] pub #fields: f64,)*
+        }
+
+        impl Params {
+            /// The spec's nominal values.
+            pub const NOMINAL: Params = Params { #(#fields: PARAM_NOMINAL[#idx]),* };
+
+            /// The `p` argument of the kernels, in the order of [`PARAMS`].
+            pub const fn to_array(&self) -> [f64; #np] {
+                [#(self.#fields),*]
+            }
+
+            /// From a `p` array in the order of [`PARAMS`].
+            pub const fn from_array(p: &[f64; #np]) -> Params {
+                Params { #(#fields: p[#idx]),* }
+            }
+        }
         /// Inputs, in the order of the `u` argument.
         pub const INPUTS: [&str; #ni] = [#(#inames),*];
         /// Log column feeding each input.
@@ -325,7 +378,9 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
 
         /// Call a kernel by name with slices (arguments in declaration order, output
         /// row-major), for verification tools. Returns false for an unknown name or
-        /// wrong lengths.
+        /// wrong lengths. Behind the `dispatch` feature: firmware calls the
+        /// kernels themselves and need not carry every kernel and its name.
+        #[cfg(feature = "dispatch")]
         pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             match name {
                 #(#arms)*
@@ -381,7 +436,9 @@ pub fn emit_lib(models: &[String]) -> String {
             }
         }
 
-        /// Call `model::function` by name (see each module's `call`).
+        /// Call `model::function` by name (see each module's `call`; `dispatch`
+        /// feature).
+        #[cfg(feature = "dispatch")]
         pub fn call(model: &str, function: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             match model {
                 #(#calls)*
@@ -408,4 +465,26 @@ pub fn emit_lib(models: &[String]) -> String {
     };
     let parsed: syn::File = syn::parse2(file).expect("lib parses");
     prettyplease::unparse(&parsed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Parameter names that are Rust keywords still make struct fields.
+    #[test]
+    fn keyword_parameters_become_valid_fields() {
+        for (name, want) in [
+            ("b", "b"),
+            ("type", "r#type"),
+            ("fn", "r#fn"),
+            ("self", "self_"),
+            ("crate", "crate_"),
+        ] {
+            let f = field_ident(name);
+            assert_eq!(f.to_string(), want);
+            let item = quote!(pub struct P { pub #f: f64 });
+            syn::parse2::<syn::ItemStruct>(item).unwrap_or_else(|e| panic!("{name}: {e}"));
+        }
+    }
 }

@@ -16,6 +16,45 @@ pub const PARAM_NOMINAL: [f64; 5usize] = [
     64f64,
     0.02288329519450801f64,
 ];
+/// The runtime parameters by name; [`Params::to_array`] gives the `p`
+/// argument of every kernel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// `r_r` (m): Right wheel radius r_D.
+    pub r_r: f64,
+    /// `r_l` (m): Left wheel radius r_E.
+    pub r_l: f64,
+    /// `b` (m): Wheelbase (distance between the wheel contact points).
+    pub b: f64,
+    /// `counts_per_rev` (count): Encoder resolution C_e, counts per motor revolution.
+    pub counts_per_rev: f64,
+    /// `gear_ratio` (1): Gear reduction C_g (wheel revolutions per motor revolution, 1/43.7).
+    pub gear_ratio: f64,
+}
+impl Params {
+    /// The spec's nominal values.
+    pub const NOMINAL: Params = Params {
+        r_r: PARAM_NOMINAL[0usize],
+        r_l: PARAM_NOMINAL[1usize],
+        b: PARAM_NOMINAL[2usize],
+        counts_per_rev: PARAM_NOMINAL[3usize],
+        gear_ratio: PARAM_NOMINAL[4usize],
+    };
+    /// The `p` argument of the kernels, in the order of [`PARAMS`].
+    pub const fn to_array(&self) -> [f64; 5usize] {
+        [self.r_r, self.r_l, self.b, self.counts_per_rev, self.gear_ratio]
+    }
+    /// From a `p` array in the order of [`PARAMS`].
+    pub const fn from_array(p: &[f64; 5usize]) -> Params {
+        Params {
+            r_r: p[0usize],
+            r_l: p[1usize],
+            b: p[2usize],
+            counts_per_rev: p[3usize],
+            gear_ratio: p[4usize],
+        }
+    }
+}
 /// Inputs, in the order of the `u` argument.
 pub const INPUTS: [&str; 2usize] = ["n_r", "n_l"];
 /// Log column feeding each input.
@@ -2599,7 +2638,9 @@ pub fn inverse_increment(
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
 /// row-major), for verification tools. Returns false for an unknown name or
-/// wrong lengths.
+/// wrong lengths. Behind the `dispatch` feature: firmware calls the
+/// kernels themselves and need not carry every kernel and its name.
+#[cfg(feature = "dispatch")]
 pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
     match name {
         "twist" => {

@@ -39,7 +39,9 @@ pub fn spec_fingerprint(model: &str) -> Option<&'static str> {
         _ => None,
     }
 }
-/// Call `model::function` by name (see each module's `call`).
+/// Call `model::function` by name (see each module's `call`; `dispatch`
+/// feature).
+#[cfg(feature = "dispatch")]
 pub fn call(model: &str, function: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
     match model {
         "diff_drive" => diff_drive::call(function, args, out),

@@ -10,6 +10,33 @@ pub const SPEC_FINGERPRINT: &str = "49fbd1d849272a03";
 pub const PARAMS: [&str; 2usize] = ["r", "L"];
 /// Nominal values of [`PARAMS`].
 pub const PARAM_NOMINAL: [f64; 2usize] = [0.15f64, 1f64];
+/// The runtime parameters by name; [`Params::to_array`] gives the `p`
+/// argument of every kernel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// `r` (m): Wheel radius.
+    pub r: f64,
+    /// `L` (m): Distance from the robot centre to the wheels.
+    pub L: f64,
+}
+impl Params {
+    /// The spec's nominal values.
+    pub const NOMINAL: Params = Params {
+        r: PARAM_NOMINAL[0usize],
+        L: PARAM_NOMINAL[1usize],
+    };
+    /// The `p` argument of the kernels, in the order of [`PARAMS`].
+    pub const fn to_array(&self) -> [f64; 2usize] {
+        [self.r, self.L]
+    }
+    /// From a `p` array in the order of [`PARAMS`].
+    pub const fn from_array(p: &[f64; 2usize]) -> Params {
+        Params {
+            r: p[0usize],
+            L: p[1usize],
+        }
+    }
+}
 /// Inputs, in the order of the `u` argument.
 pub const INPUTS: [&str; 3usize] = ["w1", "w2", "w3"];
 /// Log column feeding each input.
@@ -2430,7 +2457,9 @@ pub fn inverse_increment(
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
 /// row-major), for verification tools. Returns false for an unknown name or
-/// wrong lengths.
+/// wrong lengths. Behind the `dispatch` feature: firmware calls the
+/// kernels themselves and need not carry every kernel and its name.
+#[cfg(feature = "dispatch")]
 pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
     match name {
         "twist" => {

@@ -36,6 +36,86 @@ pub const PARAM_NOMINAL: [f64; 12usize] = [
     0.188f64,
     (-0.376f64),
 ];
+/// The runtime parameters by name; [`Params::to_array`] gives the `p`
+/// argument of every kernel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// `e1` (m): Off-centring of wheel 1: steering axis to wheel centre (seed 000 eq. 27).
+    pub e1: f64,
+    /// `e2` (m): Off-centring of wheel 2: steering axis to wheel centre (seed 000 eq. 27).
+    pub e2: f64,
+    /// `e3` (m): Off-centring of wheel 3: steering axis to wheel centre (seed 000 eq. 27).
+    pub e3: f64,
+    /// `r1` (m): Radius of wheel 1 (seed 000 eq. 27; negative radii are meaningless, sec. 3).
+    pub r1: f64,
+    /// `r2` (m): Radius of wheel 2 (seed 000 eq. 27; negative radii are meaningless, sec. 3).
+    pub r2: f64,
+    /// `r3` (m): Radius of wheel 3 (seed 000 eq. 27; negative radii are meaningless, sec. 3).
+    pub r3: f64,
+    /// `xa1` (m): x of the steering axis A1 in the body frame (seed 000 eq. 27).
+    pub xa1: f64,
+    /// `xa2` (m): x of the steering axis A2 in the body frame (seed 000 eq. 27).
+    pub xa2: f64,
+    /// `xa3` (m): x of the steering axis A3 in the body frame (seed 000 eq. 27).
+    pub xa3: f64,
+    /// `ya1` (m): y of the steering axis A1 in the body frame (seed 000 eq. 27).
+    pub ya1: f64,
+    /// `ya2` (m): y of the steering axis A2 in the body frame (seed 000 eq. 27).
+    pub ya2: f64,
+    /// `ya3` (m): y of the steering axis A3 in the body frame (seed 000 eq. 27).
+    pub ya3: f64,
+}
+impl Params {
+    /// The spec's nominal values.
+    pub const NOMINAL: Params = Params {
+        e1: PARAM_NOMINAL[0usize],
+        e2: PARAM_NOMINAL[1usize],
+        e3: PARAM_NOMINAL[2usize],
+        r1: PARAM_NOMINAL[3usize],
+        r2: PARAM_NOMINAL[4usize],
+        r3: PARAM_NOMINAL[5usize],
+        xa1: PARAM_NOMINAL[6usize],
+        xa2: PARAM_NOMINAL[7usize],
+        xa3: PARAM_NOMINAL[8usize],
+        ya1: PARAM_NOMINAL[9usize],
+        ya2: PARAM_NOMINAL[10usize],
+        ya3: PARAM_NOMINAL[11usize],
+    };
+    /// The `p` argument of the kernels, in the order of [`PARAMS`].
+    pub const fn to_array(&self) -> [f64; 12usize] {
+        [
+            self.e1,
+            self.e2,
+            self.e3,
+            self.r1,
+            self.r2,
+            self.r3,
+            self.xa1,
+            self.xa2,
+            self.xa3,
+            self.ya1,
+            self.ya2,
+            self.ya3,
+        ]
+    }
+    /// From a `p` array in the order of [`PARAMS`].
+    pub const fn from_array(p: &[f64; 12usize]) -> Params {
+        Params {
+            e1: p[0usize],
+            e2: p[1usize],
+            e3: p[2usize],
+            r1: p[3usize],
+            r2: p[4usize],
+            r3: p[5usize],
+            xa1: p[6usize],
+            xa2: p[7usize],
+            xa3: p[8usize],
+            ya1: p[9usize],
+            ya2: p[10usize],
+            ya3: p[11usize],
+        }
+    }
+}
 /// Inputs, in the order of the `u` argument.
 pub const INPUTS: [&str; 9usize] = [
     "beta1",
@@ -13428,7 +13508,9 @@ pub fn inverse_increment(
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
 /// row-major), for verification tools. Returns false for an unknown name or
-/// wrong lengths.
+/// wrong lengths. Behind the `dispatch` feature: firmware calls the
+/// kernels themselves and need not carry every kernel and its name.
+#[cfg(feature = "dispatch")]
 pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
     match name {
         "twist" => {

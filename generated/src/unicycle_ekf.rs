@@ -10,6 +10,27 @@ pub const SPEC_FINGERPRINT: &str = "9f98113660086834";
 pub const PARAMS: [&str; 1usize] = ["v_scale"];
 /// Nominal values of [`PARAMS`].
 pub const PARAM_NOMINAL: [f64; 1usize] = [1f64];
+/// The runtime parameters by name; [`Params::to_array`] gives the `p`
+/// argument of every kernel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// `v_scale` (1): Actuator speed scale (1 = the commanded speed is achieved).
+    pub v_scale: f64,
+}
+impl Params {
+    /// The spec's nominal values.
+    pub const NOMINAL: Params = Params {
+        v_scale: PARAM_NOMINAL[0usize],
+    };
+    /// The `p` argument of the kernels, in the order of [`PARAMS`].
+    pub const fn to_array(&self) -> [f64; 1usize] {
+        [self.v_scale]
+    }
+    /// From a `p` array in the order of [`PARAMS`].
+    pub const fn from_array(p: &[f64; 1usize]) -> Params {
+        Params { v_scale: p[0usize] }
+    }
+}
 /// Inputs, in the order of the `u` argument.
 pub const INPUTS: [&str; 2usize] = ["v", "w"];
 /// Log column feeding each input.
@@ -1296,7 +1317,9 @@ pub fn inverse_increment(
 }
 /// Call a kernel by name with slices (arguments in declaration order, output
 /// row-major), for verification tools. Returns false for an unknown name or
-/// wrong lengths.
+/// wrong lengths. Behind the `dispatch` feature: firmware calls the
+/// kernels themselves and need not carry every kernel and its name.
+#[cfg(feature = "dispatch")]
 pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
     match name {
         "twist" => {

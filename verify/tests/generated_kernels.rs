@@ -42,3 +42,34 @@ fn generated_rust_matches_the_ir_evaluator() {
         }
     }
 }
+
+/// The firmware API of every module: `Params` names the runtime parameters in
+/// the order of `PARAMS`, `Params::NOMINAL` is `PARAM_NOMINAL`, and the array
+/// round trip is exact (a field emitted out of order fails this).
+#[test]
+fn params_structs_match_the_parameter_arrays() {
+    macro_rules! check {
+        ($($m:ident),*) => {$({
+            use kinegen_generated::$m as m;
+            assert_eq!(m::Params::NOMINAL.to_array(), m::PARAM_NOMINAL, stringify!($m));
+            let p: [f64; m::PARAMS.len()] = core::array::from_fn(|i| 1.0 + i as f64);
+            assert_eq!(m::Params::from_array(&p).to_array(), p, stringify!($m));
+            let dbg = format!("{:?}", m::Params::from_array(&p));
+            // fields in the order of PARAMS, each with its value
+            let mut at = 0;
+            for (i, name) in m::PARAMS.iter().enumerate() {
+                let field = format!("{name}: {:?}", p[i]);
+                let found = dbg[at..].find(&field).unwrap_or_else(|| panic!("{}: {field} in {dbg}", stringify!($m)));
+                at += found + field.len();
+            }
+        })*};
+    }
+    check!(
+        diff_drive,
+        tricycle,
+        tricycle_fwd,
+        omni3,
+        omni_caster,
+        unicycle_ekf
+    );
+}

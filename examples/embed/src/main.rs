@@ -3,13 +3,18 @@
 use kinegen_generated::diff_drive;
 
 fn main() {
-    let p = diff_drive::PARAM_NOMINAL;
+    // the calibrated values, by name (here the nominal ones with a measured
+    // wheelbase), as the kernels' `p` array
+    let params = diff_drive::Params {
+        b: 0.205,
+        ..diff_drive::Params::NOMINAL
+    };
+    let p = params.to_array();
     let w = [0.0, 0.0]; // no process noise when dead-reckoning
     let dt = 0.05;
     let mut pose = [0.0, 0.0, 0.0];
     // One second straight at ~0.3 m/s, then one second turning left in place.
-    let counts_per_s =
-        0.3 / (diff_drive::PARAM_NOMINAL[0] * 2.0 * core::f64::consts::PI / (64.0 * 43.7));
+    let counts_per_s = 0.3 / (params.r_r * 2.0 * core::f64::consts::PI / (64.0 * 43.7));
     for k in 0..40 {
         let u = if k < 20 {
             [counts_per_s, counts_per_s]
