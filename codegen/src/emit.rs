@@ -259,6 +259,97 @@ fn emit_items(
     out
 }
 
+/// Fused kernels that share work, as SymForce's `with_jacobians` functions do:
+/// (name, doc, parts). An EKF predict takes the pose with its Jacobians wrt the
+/// state and the noise; a calibration step the pose with its Jacobians wrt the
+/// state and the parameters; an update each observation with its Jacobians.
+fn fused_kernels(ir: &ModelIr) -> Vec<(String, String, Vec<&Function>)> {
+    let mut want: Vec<(String, String, Vec<String>)> = vec![
+        (
+            "step_exact_linearized".into(),
+            "The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3).".into(),
+            vec!["step_exact".into(), "step_exact_jac_x".into(), "step_exact_jac_w".into()],
+        ),
+        (
+            "step_exact_with_jac_p".into(),
+            "The exact step with its Jacobians wrt the state and the parameters, from one shared computation: one step of calibration's forward sensitivities.".into(),
+            vec!["step_exact".into(), "step_exact_jac_x".into(), "step_exact_jac_p".into()],
+        ),
+    ];
+    for o in &ir.observations {
+        want.push((
+            format!("obs_{}_linearized", o.name),
+            format!("Observation `{}` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.", o.name),
+            ["", "_jac_x", "_jac_p"].iter().map(|s| format!("obs_{}{s}", o.name)).collect(),
+        ));
+    }
+    want.into_iter()
+        .filter_map(|(name, doc, parts)| {
+            let parts: Option<Vec<&Function>> = parts.iter().map(|n| ir.function(n)).collect();
+            parts.map(|p| (name, doc, p))
+        })
+        .collect()
+}
+
+/// A fused kernel: the flat function (every part's outputs one after another)
+/// and a wrapper returning each part in its own shape.
+fn emit_fused(name: &str, doc: &str, parts: &[&Function]) -> TokenStream {
+    let flat_name = format!("{name}_flat");
+    let mut flat = kinegen_model::fuse::fuse(&flat_name, parts).expect("parts of one model fuse");
+    flat.doc = format!(
+        "{doc} Outputs one after another: {} (row-major); see `{name}`.",
+        parts
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let flat_fn = emit_function(&flat);
+    let id = format_ident!("{}", name);
+    let flat_id = format_ident!("{}", flat_name);
+    let params = flat.args.iter().map(|a| {
+        let id = format_ident!("{}", a.name);
+        let ty = arg_type(&a.name, a.names.len());
+        quote!(#id: #ty)
+    });
+    let vars = flat.args.iter().map(|a| format_ident!("{}", a.name));
+    let mut at = 0usize;
+    let (mut tys, mut vals) = (Vec::new(), Vec::new());
+    for p in parts {
+        let (r, c) = (p.rows, p.cols);
+        if p.is_matrix() {
+            let rows = (0..r).map(|i| {
+                let row = (0..c).map(|j| at + i * c + j);
+                quote!([#(o[#row]),*])
+            });
+            tys.push(quote!([[f64; #c]; #r]));
+            vals.push(quote!([#(#rows),*]));
+        } else {
+            let row = (0..r).map(|i| at + i);
+            tys.push(quote!([f64; #r]));
+            vals.push(quote!([#(o[#row]),*]));
+        }
+        at += r * c;
+    }
+    let doc = format!(
+        "{doc}\n\nReturns ({}), each exactly as that kernel alone returns it.",
+        parts
+            .iter()
+            .map(|p| format!("`{}`", p.name))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    quote! {
+        #flat_fn
+        #[doc = #doc]
+        #[inline]
+        pub fn #id(#(#params),*) -> (#(#tys),*) {
+            let o = #flat_id(#(#vars),*);
+            (#(#vals),*)
+        }
+    }
+}
+
 /// A parameter's name as a struct field: a Rust keyword becomes a raw
 /// identifier (`r#type`), and the four that cannot be raw get a trailing `_`.
 fn field_ident(name: &str) -> proc_macro2::Ident {
@@ -310,6 +401,8 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
     let icols: Vec<&str> = ir.inputs.iter().map(|i| i.column.as_str()).collect();
     let ni = inames.len();
     let fns = ir.functions.iter().map(emit_function);
+    let fused = fused_kernels(ir);
+    let fused = fused.iter().map(|(n, d, parts)| emit_fused(n, d, parts));
     let arms = ir.functions.iter().map(|f| {
         let name = &f.name;
         let id = format_ident!("{}", f.name);
@@ -339,7 +432,8 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
     });
     let file = quote! {
         #![doc = #header]
-        #![allow(clippy::all, unused_parens, unused_variables, clippy::excessive_precision)]
+        // parameter fields keep the spec's names (`L`, as the papers write it)
+        #![allow(clippy::all, unused_parens, unused_variables, clippy::excessive_precision, non_snake_case)]
 
         /// Fingerprint of the spec this module was generated from.
         pub const SPEC_FINGERPRINT: &str = #fp;
@@ -375,6 +469,8 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
         pub const INPUT_COLUMNS: [&str; #ni] = [#(#icols),*];
 
         #(#fns)*
+
+        #(#fused)*
 
         /// Call a kernel by name with slices (arguments in declaration order, output
         /// row-major), for verification tools. Returns false for an unknown name or

@@ -73,3 +73,65 @@ fn params_structs_match_the_parameter_arrays() {
         unicycle_ekf
     );
 }
+
+/// The fused kernels (`step_exact_linearized`, `step_exact_with_jac_p`,
+/// `obs_*_linearized`) return every part exactly, to the last bit, as the part
+/// alone does, on random inputs and on a zero input (the series branch of the
+/// removable singularity).
+#[test]
+fn fused_kernels_equal_their_parts_bit_for_bit() {
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rnd = move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    // Debug prints a float's shortest round-trip form: equal text, equal bits
+    fn bits(v: &impl std::fmt::Debug) -> String {
+        format!("{v:?}")
+    }
+    fn arr<const N: usize>(f: &mut impl FnMut() -> f64, zero: bool) -> [f64; N] {
+        core::array::from_fn(|_| if zero { 0.0 } else { f() })
+    }
+    macro_rules! steps {
+        ($($m:ident),*) => {$({
+            use kinegen_generated::$m as m;
+            for k in 0..50 {
+                let zero = k % 5 == 0;
+                let x = arr(&mut rnd, false);
+                let u = arr(&mut rnd, zero);
+                let w = arr(&mut rnd, zero);
+                let p = m::Params::NOMINAL.to_array();
+                let dt = 0.05;
+                let (a, b, c) = m::step_exact_linearized(&x, &u, &w, &p, dt);
+                assert_eq!(bits(&a), bits(&m::step_exact(&x, &u, &w, &p, dt)), stringify!($m));
+                assert_eq!(bits(&b), bits(&m::step_exact_jac_x(&x, &u, &w, &p, dt)));
+                assert_eq!(bits(&c), bits(&m::step_exact_jac_w(&x, &u, &w, &p, dt)));
+                let (a, b, c) = m::step_exact_with_jac_p(&x, &u, &w, &p, dt);
+                assert_eq!(bits(&a), bits(&m::step_exact(&x, &u, &w, &p, dt)));
+                assert_eq!(bits(&b), bits(&m::step_exact_jac_x(&x, &u, &w, &p, dt)));
+                assert_eq!(bits(&c), bits(&m::step_exact_jac_p(&x, &u, &w, &p, dt)));
+            }
+        })*};
+    }
+    steps!(
+        diff_drive,
+        tricycle,
+        tricycle_fwd,
+        omni3,
+        omni_caster,
+        unicycle_ekf
+    );
+    use kinegen_generated::diff_drive as m;
+    for _ in 0..50 {
+        let x = arr(&mut rnd, false);
+        let u = arr(&mut rnd, false);
+        let lm = arr(&mut rnd, false);
+        let p = m::Params::NOMINAL.to_array();
+        let (h, hx, hp) = m::obs_landmark_linearized(&x, &u, &p, &lm);
+        assert_eq!(bits(&h), bits(&m::obs_landmark(&x, &u, &p, &lm)));
+        assert_eq!(bits(&hx), bits(&m::obs_landmark_jac_x(&x, &u, &p, &lm)));
+        assert_eq!(bits(&hp), bits(&m::obs_landmark_jac_p(&x, &u, &p, &lm)));
+    }
+}

@@ -117,6 +117,18 @@ fn main() {
             .sum()
     });
     row("diff_drive step_exact + jac_x + jac_p", ours, theirs);
+    // the same three outputs from the fused kernel, which shares their work
+    let fused = median_ns(N, || {
+        inputs
+            .iter()
+            .map(|(x, u, w, p, dt)| {
+                let (x, u, w, p, dt) = black_box((x, u, w, p, *dt));
+                let (a, b, c) = dd::step_exact_with_jac_p(x, u, w, p, dt);
+                a[0] + b[0][2] + c[1][0]
+            })
+            .sum()
+    });
+    row("diff_drive step_exact_with_jac_p (fused)", fused, theirs);
 
     // unicycle_ekf: landmark range-bearing + jacobian wrt pose
     type UcIn = ([f64; 3], [f64; 2], [f64; 1], [f64; 2]);
