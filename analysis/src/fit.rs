@@ -975,6 +975,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
                 .collect()
         };
         let mut improved = false;
+        let mut first_trial = true;
         for _ in 0..30 {
             let Some(step) = arrow::damped_step(&jtj, &g, m, lambda, &undetermined) else {
                 lambda *= 10.0;
@@ -988,7 +989,18 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             for k in m..dims {
                 xt[k] = (x[k] + step[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
             }
-            let tres = eval(&trial, &xt);
+            // The first trial of an iteration is usually accepted (lambda
+            // shrinks as the fit converges), so it is evaluated with its
+            // normal equations at once: the accepted point needs them next,
+            // and one pass with sensitivities replaces a pass without them
+            // followed by one with. Retries after a rejection evaluate only.
+            let (tres, tnormal) = if first_trial {
+                let (r, a, b) = normal(&trial, &xt);
+                (r, Some((a, b)))
+            } else {
+                (eval(&trial, &xt), None)
+            };
+            first_trial = false;
             let tc = cost(&tres);
             if tc.is_finite() && tc < c {
                 let rel = (c - tc) / c.max(1e-300);
@@ -1007,7 +1019,10 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
                 c = tc;
                 lambda = (lambda / 3.0).max(1e-12);
                 improved = true;
-                (res, jtj_raw, jtr_raw) = normal(&p, &x);
+                (res, jtj_raw, jtr_raw) = match tnormal {
+                    Some((a, b)) => (tres, a, b),
+                    None => normal(&p, &x),
+                };
                 if rel < 1e-12 || negligible {
                     improved = false;
                 }
