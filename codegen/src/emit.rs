@@ -6,8 +6,10 @@ use kinegen_model::schedule::{Group, Item};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
+/// A float literal without suffix: its type is the kernels' `Real` (f64, or
+/// f32 with the generated crate's `f32` feature), inferred from the context.
 fn lit(c: f64) -> TokenStream {
-    let l = Literal::f64_suffixed(c.abs());
+    let l = Literal::f64_unsuffixed(c.abs());
     if c.is_sign_negative() {
         quote!((-#l))
     } else {
@@ -17,9 +19,9 @@ fn lit(c: f64) -> TokenStream {
 
 fn arg_type(name: &str, len: usize) -> TokenStream {
     if name == "dt" {
-        quote!(f64)
+        quote!(crate::Real)
     } else {
-        quote!(&[f64; #len])
+        quote!(&[crate::Real; #len])
     }
 }
 
@@ -53,7 +55,7 @@ fn emit_function(f: &Function) -> TokenStream {
             quote!(t[#i] = #e;)
         } else {
             let id = format_ident!("t{}", i);
-            quote!(let #id: f64 = #e;)
+            quote!(let #id: crate::Real = #e;)
         }
     };
     // one pseudo-inverse per distinct matrix; its entries are then read from it
@@ -61,7 +63,7 @@ fn emit_function(f: &Function) -> TokenStream {
     let mut stmts = Vec::new();
     if big {
         let n = f.tape.len();
-        stmts.push(quote!(let mut t = [0.0f64; #n];));
+        stmts.push(quote!(let mut t: [crate::Real; #n] = [0.0; #n];));
     }
     // one statement per slot, in tape order; a NearZero slot's statement is
     // assembled afterwards (its branches hold statements of other slots)
@@ -73,7 +75,9 @@ fn emit_function(f: &Function) -> TokenStream {
                 pinvs.push(m);
                 let id = format_ident!("pinv{}", pinvs.len() - 1);
                 let args = m.map(t);
-                stmts.push(quote!(let #id: [f64; 6] = crate::linalg::pinv_sym3([#(#args),*]);));
+                stmts.push(
+                    quote!(let #id: [crate::Real; 6] = crate::linalg::pinv_sym3([#(#args),*]);),
+                );
                 pinvs.len() - 1
             });
             let id = format_ident!("pinv{}", k);
@@ -121,47 +125,47 @@ fn emit_function(f: &Function) -> TokenStream {
             Op::PowI(a, n) => {
                 let a = t(a);
                 let n = lit(n as f64);
-                quote!(libm::pow(#a, #n))
+                quote!(crate::math::pow(#a, #n))
             }
             Op::Pow(a, b) => {
                 let (a, b) = (t(a), t(b));
-                quote!(libm::pow(#a, #b))
+                quote!(crate::math::pow(#a, #b))
             }
             Op::Sqrt(a) => {
                 let a = t(a);
-                quote!(libm::sqrt(#a))
+                quote!(crate::math::sqrt(#a))
             }
             Op::Sin(a) => {
                 let a = t(a);
-                quote!(libm::sin(#a))
+                quote!(crate::math::sin(#a))
             }
             Op::Cos(a) => {
                 let a = t(a);
-                quote!(libm::cos(#a))
+                quote!(crate::math::cos(#a))
             }
             Op::Tan(a) => {
                 let a = t(a);
-                quote!(libm::tan(#a))
+                quote!(crate::math::tan(#a))
             }
             Op::Atan(a) => {
                 let a = t(a);
-                quote!(libm::atan(#a))
+                quote!(crate::math::atan(#a))
             }
             Op::Atan2(a, b) => {
                 let (a, b) = (t(a), t(b));
-                quote!(libm::atan2(#a, #b))
+                quote!(crate::math::atan2(#a, #b))
             }
             Op::Exp(a) => {
                 let a = t(a);
-                quote!(libm::exp(#a))
+                quote!(crate::math::exp(#a))
             }
             Op::Ln(a) => {
                 let a = t(a);
-                quote!(libm::log(#a))
+                quote!(crate::math::log(#a))
             }
             Op::Abs(a) => {
                 let a = t(a);
-                quote!(libm::fabs(#a))
+                quote!(crate::math::fabs(#a))
             }
             Op::NearZero { .. } => continue, // see below
             Op::PinvSym3 { .. } => unreachable!("handled above"),
@@ -178,11 +182,11 @@ fn emit_function(f: &Function) -> TokenStream {
             let row = row.iter().map(|&o| t(o));
             quote!([#(#row),*])
         });
-        (quote!([[f64; #c]; #r]), quote!([#(#rows),*]))
+        (quote!([[crate::Real; #c]; #r]), quote!([#(#rows),*]))
     } else {
         let r = f.rows;
         let outs = f.outputs.iter().map(|&o| t(o));
-        (quote!([f64; #r]), quote!([#(#outs),*]))
+        (quote!([crate::Real; #r]), quote!([#(#outs),*]))
     };
     let mut doc = vec![f.doc.clone(), String::new()];
     for a in &f.args {
@@ -244,7 +248,7 @@ fn emit_items(
                 let (x, eps, k) = (t(g.x), lit(g.eps), g.members.len());
                 let id = format_ident!("g{}", group);
                 out.push(quote! {
-                    let #id: [f64; #k] = if libm::fabs(#x) < #eps {
+                    let #id: [crate::Real; #k] = if crate::math::fabs(#x) < crate::math::series_switch(#eps) {
                         #(#near_stmts)* [#(#near_vals),*]
                     } else {
                         #(#far_stmts)* [#(#far_vals),*]
@@ -322,11 +326,11 @@ fn emit_fused(name: &str, doc: &str, parts: &[&Function]) -> TokenStream {
                 let row = (0..c).map(|j| at + i * c + j);
                 quote!([#(o[#row]),*])
             });
-            tys.push(quote!([[f64; #c]; #r]));
+            tys.push(quote!([[crate::Real; #c]; #r]));
             vals.push(quote!([#(#rows),*]));
         } else {
             let row = (0..r).map(|i| at + i);
-            tys.push(quote!([f64; #r]));
+            tys.push(quote!([crate::Real; #r]));
             vals.push(quote!([#(o[#row]),*]));
         }
         at += r * c;
@@ -410,9 +414,9 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
             let v = format_ident!("a{}", i);
             let n = a.names.len();
             if a.name == "dt" {
-                quote!(let #v: f64 = match args[#i] { [v] => *v, _ => return false };)
+                quote!(let #v: crate::Real = match args[#i] { [v] => *v, _ => return false };)
             } else {
-                quote!(let #v: &[f64; #n] = match <&[f64; #n]>::try_from(args[#i]) { Ok(v) => v, Err(_) => return false };)
+                quote!(let #v: &[crate::Real; #n] = match <&[crate::Real; #n]>::try_from(args[#i]) { Ok(v) => v, Err(_) => return false };)
             }
         });
         let vars = (0..f.args.len()).map(|i| format_ident!("a{}", i));
@@ -440,13 +444,13 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
         /// Runtime parameters, in the order of the `p` argument.
         pub const PARAMS: [&str; #np] = [#(#pnames),*];
         /// Nominal values of [`PARAMS`].
-        pub const PARAM_NOMINAL: [f64; #np] = [#(#pnom),*];
+        pub const PARAM_NOMINAL: [crate::Real; #np] = [#(#pnom),*];
 
         /// The runtime parameters by name; [`Params::to_array`] gives the `p`
         /// argument of every kernel.
         #[derive(Debug, Clone, Copy, PartialEq)]
         pub struct Params {
-            #(#[doc = #field_docs] pub #fields: f64,)*
+            #(#[doc = #field_docs] pub #fields: crate::Real,)*
         }
 
         impl Params {
@@ -454,12 +458,12 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
             pub const NOMINAL: Params = Params { #(#fields: PARAM_NOMINAL[#idx]),* };
 
             /// The `p` argument of the kernels, in the order of [`PARAMS`].
-            pub const fn to_array(&self) -> [f64; #np] {
+            pub const fn to_array(&self) -> [crate::Real; #np] {
                 [#(self.#fields),*]
             }
 
             /// From a `p` array in the order of [`PARAMS`].
-            pub const fn from_array(p: &[f64; #np]) -> Params {
+            pub const fn from_array(p: &[crate::Real; #np]) -> Params {
                 Params { #(#fields: p[#idx]),* }
             }
         }
@@ -477,7 +481,7 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
         /// wrong lengths. Behind the `dispatch` feature: firmware calls the
         /// kernels themselves and need not carry every kernel and its name.
         #[cfg(feature = "dispatch")]
-        pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+        pub fn call(name: &str, args: &[&[crate::Real]], out: &mut [crate::Real]) -> bool {
             match name {
                 #(#arms)*
                 _ => false,
@@ -491,10 +495,48 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
 /// The generated crate's `linalg.rs`: a verbatim copy of the routine the IR
 /// evaluator uses, so compiled and interpreted kernels share one implementation.
 pub fn emit_linalg() -> String {
+    // The same text, for the crate's `Real` and its `math` functions: the local
+    // tolerance function gives way to the one that knows the float type.
+    let source = include_str!("../../model/src/linalg.rs");
+    let local = source
+        .find("const fn tolerance(")
+        .and_then(|a| source[a..].find("\n}\n").map(|b| (a, a + b + 3)))
+        .expect("model/src/linalg.rs defines `tolerance`");
+    let text = format!(
+        "{}use crate::math::tolerance;\n{}",
+        &source[..local.0],
+        &source[local.1..]
+    );
+    let text = text.replace("libm::", "crate::math::");
+    let text = f64_as_real(&text);
     format!(
-        "// Generated by `kinegen generate`: a verbatim copy of model/src/linalg.rs. Do not edit.\n{}",
-        include_str!("../../model/src/linalg.rs")
+        "// Generated by `kinegen generate`: a copy of model/src/linalg.rs for the crate's Real type. Do not edit.\n{text}"
     )
+}
+
+/// Every `f64` type of a Rust text as `crate::Real` (whole words only).
+fn f64_as_real(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(i) = rest.find("f64") {
+        let before = rest[..i].chars().last();
+        let after = rest[i + 3..].chars().next();
+        let word = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || c == '_');
+        out.push_str(&rest[..i]);
+        out.push_str(if word(before) || word(after) {
+            "f64"
+        } else {
+            "crate::Real"
+        });
+        rest = &rest[i + 3..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The generated crate's `math.rs`: the float functions for its `Real`.
+pub fn emit_math() -> String {
+    include_str!("math.rs.in").to_string()
 }
 
 /// The generated crate's lib.rs listing every model module.
@@ -514,11 +556,21 @@ pub fn emit_lib(models: &[String]) -> String {
         quote!(#m => Some(#id::SPEC_FINGERPRINT),)
     });
     let file = quote! {
-        #![doc = "Kinematic and observation kernels generated by kinegen from the specs in `spec/`.\n\nOne module per model. Every function takes and returns plain `f64` arrays, does not allocate and does not panic; the crate is `no_std` (libm supplies the transcendental functions) so the kernels can run on a robot's microcontroller. Enable the `nalgebra` feature for conversions to nalgebra types.\n\nGenerated by `kinegen generate`; do not edit."]
+        #![doc = "Kinematic and observation kernels generated by kinegen from the specs in `spec/`.\n\nOne module per model. Every function takes and returns plain arrays of `Real` (`f64`; `f32` with the `f32` feature), does not allocate and does not panic; the crate is `no_std` (libm supplies the transcendental functions) so the kernels can run on a robot's microcontroller. Enable the `nalgebra` feature for conversions to nalgebra types.\n\nGenerated by `kinegen generate`; do not edit."]
         #![no_std]
+
+        /// The kernels' float type: `f64`, or `f32` with the `f32` feature (a
+        /// microcontroller with a single-precision FPU).
+        #[cfg(not(feature = "f32"))]
+        pub type Real = f64;
+        /// The kernels' float type: `f32` (the `f32` feature).
+        #[cfg(feature = "f32")]
+        pub type Real = f32;
 
         #[rustfmt::skip]
         pub mod linalg;
+        #[rustfmt::skip]
+        pub mod math;
         #(#mods)*
 
         /// The models in this crate.
@@ -535,7 +587,7 @@ pub fn emit_lib(models: &[String]) -> String {
         /// Call `model::function` by name (see each module's `call`; `dispatch`
         /// feature).
         #[cfg(feature = "dispatch")]
-        pub fn call(model: &str, function: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+        pub fn call(model: &str, function: &str, args: &[&[Real]], out: &mut [Real]) -> bool {
             match model {
                 #(#calls)*
                 _ => false,
@@ -545,16 +597,18 @@ pub fn emit_lib(models: &[String]) -> String {
         /// Conversions between the kernels' plain arrays and nalgebra types.
         #[cfg(feature = "nalgebra")]
         pub mod na {
+            use super::Real;
+
             /// A kernel's vector output as a nalgebra vector.
-            pub fn vector<const N: usize>(a: [f64; N]) -> nalgebra::SVector<f64, N> {
+            pub fn vector<const N: usize>(a: [Real; N]) -> nalgebra::SVector<Real, N> {
                 nalgebra::SVector::from(a)
             }
             /// A kernel's row-major matrix output as a nalgebra matrix.
-            pub fn matrix<const R: usize, const C: usize>(a: [[f64; C]; R]) -> nalgebra::SMatrix<f64, R, C> {
+            pub fn matrix<const R: usize, const C: usize>(a: [[Real; C]; R]) -> nalgebra::SMatrix<Real, R, C> {
                 nalgebra::SMatrix::from_fn(|r, c| a[r][c])
             }
             /// A nalgebra vector as a kernel argument.
-            pub fn array<const N: usize>(v: &nalgebra::SVector<f64, N>) -> [f64; N] {
+            pub fn array<const N: usize>(v: &nalgebra::SVector<Real, N>) -> [Real; N] {
                 core::array::from_fn(|i| v[i])
             }
         }

@@ -1,5 +1,5 @@
 //! `kinegen generate`: derive every spec and write (or check) the generated crate.
-use crate::emit::{emit_lib, emit_linalg, emit_module};
+use crate::emit::{emit_lib, emit_linalg, emit_math, emit_module};
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use kinegen_model::SourceError;
@@ -90,6 +90,7 @@ pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError
     let names: Vec<String> = models.iter().map(|(m, _)| m.name.clone()).collect();
     files.push((out_dir.join("src").join("lib.rs"), emit_lib(&names)));
     files.push((out_dir.join("src").join("linalg.rs"), emit_linalg()));
+    files.push((out_dir.join("src").join("math.rs"), emit_math()));
     Ok((files, models))
 }
 

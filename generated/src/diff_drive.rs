@@ -15,27 +15,27 @@ pub const SPEC_FINGERPRINT: &str = "6562554cdbffa0d9";
 /// Runtime parameters, in the order of the `p` argument.
 pub const PARAMS: [&str; 5usize] = ["r_r", "r_l", "b", "counts_per_rev", "gear_ratio"];
 /// Nominal values of [`PARAMS`].
-pub const PARAM_NOMINAL: [f64; 5usize] = [
-    0.042f64,
-    0.042f64,
-    0.2f64,
-    64f64,
-    0.02288329519450801f64,
+pub const PARAM_NOMINAL: [crate::Real; 5usize] = [
+    0.042,
+    0.042,
+    0.2,
+    64.0,
+    0.02288329519450801,
 ];
 /// The runtime parameters by name; [`Params::to_array`] gives the `p`
 /// argument of every kernel.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
     /// `r_r` (m): Right wheel radius r_D.
-    pub r_r: f64,
+    pub r_r: crate::Real,
     /// `r_l` (m): Left wheel radius r_E.
-    pub r_l: f64,
+    pub r_l: crate::Real,
     /// `b` (m): Wheelbase (distance between the wheel contact points).
-    pub b: f64,
+    pub b: crate::Real,
     /// `counts_per_rev` (count): Encoder resolution C_e, counts per motor revolution.
-    pub counts_per_rev: f64,
+    pub counts_per_rev: crate::Real,
     /// `gear_ratio` (1): Gear reduction C_g (wheel revolutions per motor revolution, 1/43.7).
-    pub gear_ratio: f64,
+    pub gear_ratio: crate::Real,
 }
 impl Params {
     /// The spec's nominal values.
@@ -47,11 +47,11 @@ impl Params {
         gear_ratio: PARAM_NOMINAL[4usize],
     };
     /// The `p` argument of the kernels, in the order of [`PARAMS`].
-    pub const fn to_array(&self) -> [f64; 5usize] {
+    pub const fn to_array(&self) -> [crate::Real; 5usize] {
         [self.r_r, self.r_l, self.b, self.counts_per_rev, self.gear_ratio]
     }
     /// From a `p` array in the order of [`PARAMS`].
-    pub const fn from_array(p: &[f64; 5usize]) -> Params {
+    pub const fn from_array(p: &[crate::Real; 5usize]) -> Params {
         Params {
             r_r: p[0usize],
             r_l: p[1usize],
@@ -73,34 +73,37 @@ pub const INPUT_COLUMNS: [&str; 2usize] = ["enc_r", "enc_l"];
 
 15 arithmetic operations (28 before common-subexpression elimination).*/
 #[inline]
-pub fn twist(u: &[f64; 2usize], p: &[f64; 5usize]) -> [f64; 3usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = p[2usize];
-    let t5: f64 = p[3usize];
-    let t6: f64 = p[4usize];
-    let t7: f64 = 3.141592653589793f64;
-    let t8: f64 = t0 * t7;
-    let t9: f64 = t2 * t8;
-    let t10: f64 = t6 * t9;
-    let t11: f64 = 2f64;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t5;
-    let t15: f64 = t12 * t14;
-    let t16: f64 = t1 * t7;
-    let t17: f64 = t3 * t16;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t11 * t18;
-    let t20: f64 = t19 * t14;
-    let t21: f64 = t15 + t20;
-    let t22: f64 = 0.5f64;
-    let t23: f64 = t21 * t22;
-    let t24: f64 = 0f64;
-    let t25: f64 = t15 - t20;
-    let t26: f64 = t25 / t4;
+pub fn twist(
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = p[2usize];
+    let t5: crate::Real = p[3usize];
+    let t6: crate::Real = p[4usize];
+    let t7: crate::Real = 3.141592653589793;
+    let t8: crate::Real = t0 * t7;
+    let t9: crate::Real = t2 * t8;
+    let t10: crate::Real = t6 * t9;
+    let t11: crate::Real = 2.0;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t5;
+    let t15: crate::Real = t12 * t14;
+    let t16: crate::Real = t1 * t7;
+    let t17: crate::Real = t3 * t16;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t11 * t18;
+    let t20: crate::Real = t19 * t14;
+    let t21: crate::Real = t15 + t20;
+    let t22: crate::Real = 0.5;
+    let t23: crate::Real = t21 * t22;
+    let t24: crate::Real = 0.0;
+    let t25: crate::Real = t15 - t20;
+    let t26: crate::Real = t25 / t4;
     [t23, t24, t26]
 }
 /**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
@@ -113,34 +116,34 @@ pub fn twist(u: &[f64; 2usize], p: &[f64; 5usize]) -> [f64; 3usize] {
 13 arithmetic operations (14 before common-subexpression elimination).*/
 #[inline]
 pub fn twist_gyro(
-    u: &[f64; 2usize],
-    omega: &[f64; 1usize],
-    p: &[f64; 5usize],
-) -> [f64; 2usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = p[3usize];
-    let t5: f64 = p[4usize];
-    let t6: f64 = 3.141592653589793f64;
-    let t7: f64 = t0 * t6;
-    let t8: f64 = t2 * t7;
-    let t9: f64 = t5 * t8;
-    let t10: f64 = 2f64;
-    let t11: f64 = t9 * t10;
-    let t12: f64 = 1f64;
-    let t13: f64 = t12 / t4;
-    let t14: f64 = t11 * t13;
-    let t15: f64 = t1 * t6;
-    let t16: f64 = t3 * t15;
-    let t17: f64 = t5 * t16;
-    let t18: f64 = t10 * t17;
-    let t19: f64 = t18 * t13;
-    let t20: f64 = t14 + t19;
-    let t21: f64 = 0.5f64;
-    let t22: f64 = t20 * t21;
-    let t23: f64 = 0f64;
+    u: &[crate::Real; 2usize],
+    omega: &[crate::Real; 1usize],
+    p: &[crate::Real; 5usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = p[3usize];
+    let t5: crate::Real = p[4usize];
+    let t6: crate::Real = 3.141592653589793;
+    let t7: crate::Real = t0 * t6;
+    let t8: crate::Real = t2 * t7;
+    let t9: crate::Real = t5 * t8;
+    let t10: crate::Real = 2.0;
+    let t11: crate::Real = t9 * t10;
+    let t12: crate::Real = 1.0;
+    let t13: crate::Real = t12 / t4;
+    let t14: crate::Real = t11 * t13;
+    let t15: crate::Real = t1 * t6;
+    let t16: crate::Real = t3 * t15;
+    let t17: crate::Real = t5 * t16;
+    let t18: crate::Real = t10 * t17;
+    let t19: crate::Real = t18 * t13;
+    let t20: crate::Real = t14 + t19;
+    let t21: crate::Real = 0.5;
+    let t22: crate::Real = t20 * t21;
+    let t23: crate::Real = 0.0;
     [t22, t23]
 }
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
@@ -155,55 +158,55 @@ pub fn twist_gyro(
 26 arithmetic operations (55 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = p[2usize];
-    let t10: f64 = p[3usize];
-    let t11: f64 = p[4usize];
-    let t12: f64 = dt;
-    let t13: f64 = 3.141592653589793f64;
-    let t14: f64 = t3 * t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = t11 * t15;
-    let t17: f64 = 2f64;
-    let t18: f64 = t16 * t17;
-    let t19: f64 = 1f64;
-    let t20: f64 = t19 / t10;
-    let t21: f64 = t18 * t20;
-    let t22: f64 = t4 * t13;
-    let t23: f64 = t8 * t22;
-    let t24: f64 = t11 * t23;
-    let t25: f64 = t17 * t24;
-    let t26: f64 = t25 * t20;
-    let t27: f64 = t21 + t26;
-    let t28: f64 = 0.5f64;
-    let t29: f64 = t27 * t28;
-    let t30: f64 = t5 + t29;
-    let t31: f64 = libm::cos(t2);
-    let t32: f64 = t12 * t30;
-    let t33: f64 = t31 * t32;
-    let t34: f64 = t0 + t33;
-    let t35: f64 = libm::sin(t2);
-    let t36: f64 = t32 * t35;
-    let t37: f64 = t1 + t36;
-    let t38: f64 = t21 - t26;
-    let t39: f64 = t38 / t9;
-    let t40: f64 = t6 + t39;
-    let t41: f64 = t12 * t40;
-    let t42: f64 = t2 + t41;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = p[2usize];
+    let t10: crate::Real = p[3usize];
+    let t11: crate::Real = p[4usize];
+    let t12: crate::Real = dt;
+    let t13: crate::Real = 3.141592653589793;
+    let t14: crate::Real = t3 * t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = t11 * t15;
+    let t17: crate::Real = 2.0;
+    let t18: crate::Real = t16 * t17;
+    let t19: crate::Real = 1.0;
+    let t20: crate::Real = t19 / t10;
+    let t21: crate::Real = t18 * t20;
+    let t22: crate::Real = t4 * t13;
+    let t23: crate::Real = t8 * t22;
+    let t24: crate::Real = t11 * t23;
+    let t25: crate::Real = t17 * t24;
+    let t26: crate::Real = t25 * t20;
+    let t27: crate::Real = t21 + t26;
+    let t28: crate::Real = 0.5;
+    let t29: crate::Real = t27 * t28;
+    let t30: crate::Real = t5 + t29;
+    let t31: crate::Real = crate::math::cos(t2);
+    let t32: crate::Real = t12 * t30;
+    let t33: crate::Real = t31 * t32;
+    let t34: crate::Real = t0 + t33;
+    let t35: crate::Real = crate::math::sin(t2);
+    let t36: crate::Real = t32 * t35;
+    let t37: crate::Real = t1 + t36;
+    let t38: crate::Real = t21 - t26;
+    let t39: crate::Real = t38 / t9;
+    let t40: crate::Real = t6 + t39;
+    let t41: crate::Real = t12 * t40;
+    let t42: crate::Real = t2 + t41;
     [t34, t37, t42]
 }
 /**Jacobian of `step_euler` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -218,47 +221,47 @@ pub fn step_euler(
 20 arithmetic operations (37 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = p[0usize];
-    let t5: f64 = p[1usize];
-    let t6: f64 = p[3usize];
-    let t7: f64 = p[4usize];
-    let t8: f64 = dt;
-    let t9: f64 = 1f64;
-    let t10: f64 = 0f64;
-    let t11: f64 = 3.141592653589793f64;
-    let t12: f64 = t1 * t11;
-    let t13: f64 = t4 * t12;
-    let t14: f64 = t7 * t13;
-    let t15: f64 = 2f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = 1f64;
-    let t18: f64 = t17 / t6;
-    let t19: f64 = t16 * t18;
-    let t20: f64 = t2 * t11;
-    let t21: f64 = t5 * t20;
-    let t22: f64 = t7 * t21;
-    let t23: f64 = t15 * t22;
-    let t24: f64 = t23 * t18;
-    let t25: f64 = t19 + t24;
-    let t26: f64 = 0.5f64;
-    let t27: f64 = t25 * t26;
-    let t28: f64 = t3 + t27;
-    let t29: f64 = libm::sin(t0);
-    let t30: f64 = t8 * t28;
-    let t31: f64 = t29 * t30;
-    let t32: f64 = -t31;
-    let t33: f64 = libm::cos(t0);
-    let t34: f64 = t30 * t33;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = p[0usize];
+    let t5: crate::Real = p[1usize];
+    let t6: crate::Real = p[3usize];
+    let t7: crate::Real = p[4usize];
+    let t8: crate::Real = dt;
+    let t9: crate::Real = 1.0;
+    let t10: crate::Real = 0.0;
+    let t11: crate::Real = 3.141592653589793;
+    let t12: crate::Real = t1 * t11;
+    let t13: crate::Real = t4 * t12;
+    let t14: crate::Real = t7 * t13;
+    let t15: crate::Real = 2.0;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t17 / t6;
+    let t19: crate::Real = t16 * t18;
+    let t20: crate::Real = t2 * t11;
+    let t21: crate::Real = t5 * t20;
+    let t22: crate::Real = t7 * t21;
+    let t23: crate::Real = t15 * t22;
+    let t24: crate::Real = t23 * t18;
+    let t25: crate::Real = t19 + t24;
+    let t26: crate::Real = 0.5;
+    let t27: crate::Real = t25 * t26;
+    let t28: crate::Real = t3 + t27;
+    let t29: crate::Real = crate::math::sin(t0);
+    let t30: crate::Real = t8 * t28;
+    let t31: crate::Real = t29 * t30;
+    let t32: crate::Real = -t31;
+    let t33: crate::Real = crate::math::cos(t0);
+    let t34: crate::Real = t30 * t33;
     [[t9, t10, t32], [t10, t9, t34], [t10, t10, t9]]
 }
 /**Jacobian of `step_euler` with respect to the inputs; rows x, y, theta.
@@ -273,46 +276,46 @@ pub fn step_euler_jac_x(
 24 arithmetic operations (43 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = p[0usize];
-    let t2: f64 = p[1usize];
-    let t3: f64 = p[2usize];
-    let t4: f64 = p[3usize];
-    let t5: f64 = p[4usize];
-    let t6: f64 = dt;
-    let t7: f64 = 3.141592653589793f64;
-    let t8: f64 = libm::cos(t0);
-    let t9: f64 = t1 * t7;
-    let t10: f64 = t5 * t9;
-    let t11: f64 = t6 * t10;
-    let t12: f64 = t8 * t11;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t4;
-    let t15: f64 = t12 * t14;
-    let t16: f64 = t2 * t7;
-    let t17: f64 = t5 * t16;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t8 * t18;
-    let t20: f64 = t19 * t14;
-    let t21: f64 = libm::sin(t0);
-    let t22: f64 = t11 * t21;
-    let t23: f64 = t22 * t14;
-    let t24: f64 = t18 * t21;
-    let t25: f64 = t24 * t14;
-    let t26: f64 = 2f64;
-    let t27: f64 = t11 * t26;
-    let t28: f64 = t3 * t4;
-    let t29: f64 = t13 / t28;
-    let t30: f64 = t27 * t29;
-    let t31: f64 = t18 * t26;
-    let t32: f64 = t31 * t29;
-    let t33: f64 = -t32;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = p[0usize];
+    let t2: crate::Real = p[1usize];
+    let t3: crate::Real = p[2usize];
+    let t4: crate::Real = p[3usize];
+    let t5: crate::Real = p[4usize];
+    let t6: crate::Real = dt;
+    let t7: crate::Real = 3.141592653589793;
+    let t8: crate::Real = crate::math::cos(t0);
+    let t9: crate::Real = t1 * t7;
+    let t10: crate::Real = t5 * t9;
+    let t11: crate::Real = t6 * t10;
+    let t12: crate::Real = t8 * t11;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t4;
+    let t15: crate::Real = t12 * t14;
+    let t16: crate::Real = t2 * t7;
+    let t17: crate::Real = t5 * t16;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t8 * t18;
+    let t20: crate::Real = t19 * t14;
+    let t21: crate::Real = crate::math::sin(t0);
+    let t22: crate::Real = t11 * t21;
+    let t23: crate::Real = t22 * t14;
+    let t24: crate::Real = t18 * t21;
+    let t25: crate::Real = t24 * t14;
+    let t26: crate::Real = 2.0;
+    let t27: crate::Real = t11 * t26;
+    let t28: crate::Real = t3 * t4;
+    let t29: crate::Real = t13 / t28;
+    let t30: crate::Real = t27 * t29;
+    let t31: crate::Real = t18 * t26;
+    let t32: crate::Real = t31 * t29;
+    let t33: crate::Real = -t32;
     [[t15, t20], [t23, t25], [t30, t33]]
 }
 /**Jacobian of `step_euler` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -327,19 +330,19 @@ pub fn step_euler_jac_u(
 4 arithmetic operations (4 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = dt;
-    let t2: f64 = libm::cos(t0);
-    let t3: f64 = t1 * t2;
-    let t4: f64 = 0f64;
-    let t5: f64 = libm::sin(t0);
-    let t6: f64 = t1 * t5;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = dt;
+    let t2: crate::Real = crate::math::cos(t0);
+    let t3: crate::Real = t1 * t2;
+    let t4: crate::Real = 0.0;
+    let t5: crate::Real = crate::math::sin(t0);
+    let t6: crate::Real = t1 * t5;
     [[t3, t4], [t6, t4], [t4, t1]]
 }
 /**Jacobian of `step_euler` with respect to the parameters; rows x, y, theta.
@@ -354,91 +357,91 @@ pub fn step_euler_jac_w(
 65 arithmetic operations (162 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 5usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = p[2usize];
-    let t6: f64 = p[3usize];
-    let t7: f64 = p[4usize];
-    let t8: f64 = dt;
-    let t9: f64 = 3.141592653589793f64;
-    let t10: f64 = libm::cos(t0);
-    let t11: f64 = t1 * t9;
-    let t12: f64 = t7 * t11;
-    let t13: f64 = t8 * t12;
-    let t14: f64 = t10 * t13;
-    let t15: f64 = 1f64;
-    let t16: f64 = t15 / t6;
-    let t17: f64 = t14 * t16;
-    let t18: f64 = t2 * t9;
-    let t19: f64 = t7 * t18;
-    let t20: f64 = t8 * t19;
-    let t21: f64 = t10 * t20;
-    let t22: f64 = t21 * t16;
-    let t23: f64 = 0f64;
-    let t24: f64 = t6 * t6;
-    let t25: f64 = t3 * t11;
-    let t26: f64 = t7 * t25;
-    let t27: f64 = 2f64;
-    let t28: f64 = t26 * t27;
-    let t29: f64 = t15 / t24;
-    let t30: f64 = t28 * t29;
-    let t31: f64 = -t30;
-    let t32: f64 = t4 * t18;
-    let t33: f64 = t7 * t32;
-    let t34: f64 = t27 * t33;
-    let t35: f64 = t34 * t29;
-    let t36: f64 = t31 - t35;
-    let t37: f64 = t8 * t36;
-    let t38: f64 = t10 * t37;
-    let t39: f64 = 0.5f64;
-    let t40: f64 = t38 * t39;
-    let t41: f64 = t25 * t27;
-    let t42: f64 = t41 * t16;
-    let t43: f64 = t27 * t32;
-    let t44: f64 = t43 * t16;
-    let t45: f64 = t42 + t44;
-    let t46: f64 = t8 * t45;
-    let t47: f64 = t10 * t46;
-    let t48: f64 = t39 * t47;
-    let t49: f64 = libm::sin(t0);
-    let t50: f64 = t13 * t49;
-    let t51: f64 = t50 * t16;
-    let t52: f64 = t20 * t49;
-    let t53: f64 = t52 * t16;
-    let t54: f64 = t37 * t49;
-    let t55: f64 = t39 * t54;
-    let t56: f64 = t46 * t49;
-    let t57: f64 = t39 * t56;
-    let t58: f64 = t13 * t27;
-    let t59: f64 = t5 * t6;
-    let t60: f64 = t15 / t59;
-    let t61: f64 = t58 * t60;
-    let t62: f64 = t20 * t27;
-    let t63: f64 = t62 * t60;
-    let t64: f64 = -t63;
-    let t65: f64 = t5 * t5;
-    let t66: f64 = t28 * t16;
-    let t67: f64 = t34 * t16;
-    let t68: f64 = t66 - t67;
-    let t69: f64 = t8 * t68;
-    let t70: f64 = t69 / t65;
-    let t71: f64 = -t70;
-    let t72: f64 = t35 - t30;
-    let t73: f64 = t8 * t72;
-    let t74: f64 = t15 / t5;
-    let t75: f64 = t73 * t74;
-    let t76: f64 = t42 - t44;
-    let t77: f64 = t8 * t76;
-    let t78: f64 = t77 * t74;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 5usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = p[2usize];
+    let t6: crate::Real = p[3usize];
+    let t7: crate::Real = p[4usize];
+    let t8: crate::Real = dt;
+    let t9: crate::Real = 3.141592653589793;
+    let t10: crate::Real = crate::math::cos(t0);
+    let t11: crate::Real = t1 * t9;
+    let t12: crate::Real = t7 * t11;
+    let t13: crate::Real = t8 * t12;
+    let t14: crate::Real = t10 * t13;
+    let t15: crate::Real = 1.0;
+    let t16: crate::Real = t15 / t6;
+    let t17: crate::Real = t14 * t16;
+    let t18: crate::Real = t2 * t9;
+    let t19: crate::Real = t7 * t18;
+    let t20: crate::Real = t8 * t19;
+    let t21: crate::Real = t10 * t20;
+    let t22: crate::Real = t21 * t16;
+    let t23: crate::Real = 0.0;
+    let t24: crate::Real = t6 * t6;
+    let t25: crate::Real = t3 * t11;
+    let t26: crate::Real = t7 * t25;
+    let t27: crate::Real = 2.0;
+    let t28: crate::Real = t26 * t27;
+    let t29: crate::Real = t15 / t24;
+    let t30: crate::Real = t28 * t29;
+    let t31: crate::Real = -t30;
+    let t32: crate::Real = t4 * t18;
+    let t33: crate::Real = t7 * t32;
+    let t34: crate::Real = t27 * t33;
+    let t35: crate::Real = t34 * t29;
+    let t36: crate::Real = t31 - t35;
+    let t37: crate::Real = t8 * t36;
+    let t38: crate::Real = t10 * t37;
+    let t39: crate::Real = 0.5;
+    let t40: crate::Real = t38 * t39;
+    let t41: crate::Real = t25 * t27;
+    let t42: crate::Real = t41 * t16;
+    let t43: crate::Real = t27 * t32;
+    let t44: crate::Real = t43 * t16;
+    let t45: crate::Real = t42 + t44;
+    let t46: crate::Real = t8 * t45;
+    let t47: crate::Real = t10 * t46;
+    let t48: crate::Real = t39 * t47;
+    let t49: crate::Real = crate::math::sin(t0);
+    let t50: crate::Real = t13 * t49;
+    let t51: crate::Real = t50 * t16;
+    let t52: crate::Real = t20 * t49;
+    let t53: crate::Real = t52 * t16;
+    let t54: crate::Real = t37 * t49;
+    let t55: crate::Real = t39 * t54;
+    let t56: crate::Real = t46 * t49;
+    let t57: crate::Real = t39 * t56;
+    let t58: crate::Real = t13 * t27;
+    let t59: crate::Real = t5 * t6;
+    let t60: crate::Real = t15 / t59;
+    let t61: crate::Real = t58 * t60;
+    let t62: crate::Real = t20 * t27;
+    let t63: crate::Real = t62 * t60;
+    let t64: crate::Real = -t63;
+    let t65: crate::Real = t5 * t5;
+    let t66: crate::Real = t28 * t16;
+    let t67: crate::Real = t34 * t16;
+    let t68: crate::Real = t66 - t67;
+    let t69: crate::Real = t8 * t68;
+    let t70: crate::Real = t69 / t65;
+    let t71: crate::Real = -t70;
+    let t72: crate::Real = t35 - t30;
+    let t73: crate::Real = t8 * t72;
+    let t74: crate::Real = t15 / t5;
+    let t75: crate::Real = t73 * t74;
+    let t76: crate::Real = t42 - t44;
+    let t77: crate::Real = t8 * t76;
+    let t78: crate::Real = t77 * t74;
     [[t17, t22, t23, t40, t48], [t51, t53, t23, t55, t57], [t61, t64, t71, t75, t78]]
 }
 /**Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).
@@ -453,160 +456,162 @@ pub fn step_euler_jac_p(
 118 arithmetic operations (1855 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = p[2usize];
-    let t10: f64 = p[3usize];
-    let t11: f64 = p[4usize];
-    let t12: f64 = dt;
-    let t13: f64 = 3.141592653589793f64;
-    let t14: f64 = t3 * t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = t11 * t15;
-    let t17: f64 = 2f64;
-    let t18: f64 = t16 * t17;
-    let t19: f64 = 1f64;
-    let t20: f64 = t19 / t10;
-    let t21: f64 = t18 * t20;
-    let t22: f64 = t4 * t13;
-    let t23: f64 = t8 * t22;
-    let t24: f64 = t11 * t23;
-    let t25: f64 = t17 * t24;
-    let t26: f64 = t25 * t20;
-    let t27: f64 = t21 - t26;
-    let t28: f64 = t27 / t9;
-    let t29: f64 = t6 + t28;
-    let t30: f64 = t12 * t29;
-    let t31: f64 = t21 + t26;
-    let t32: f64 = 0.5f64;
-    let t33: f64 = t31 * t32;
-    let t34: f64 = t5 + t33;
-    let t35: f64 = libm::sin(t2);
-    let t41: f64 = libm::cos(t2);
-    let t42: f64 = t12 * t34;
-    let t112: f64 = t35 * t42;
-    let g0: [f64; 2usize] = if libm::fabs(t30) < 0.05f64 {
-        let t36: f64 = t12 * t30;
-        let t37: f64 = t34 * t36;
-        let t38: f64 = t35 * t37;
-        let t39: f64 = t32 * t38;
-        let t40: f64 = t0 - t39;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t40 + t43;
-        let t45: f64 = t30 * t30;
-        let t46: f64 = t12 * t45;
-        let t47: f64 = t34 * t46;
-        let t48: f64 = t41 * t47;
-        let t49: f64 = 0.16666666666666666f64;
-        let t50: f64 = t48 * t49;
-        let t51: f64 = t44 - t50;
-        let t52: f64 = t30 * t45;
-        let t53: f64 = t12 * t52;
-        let t54: f64 = t34 * t53;
-        let t55: f64 = t35 * t54;
-        let t56: f64 = 0.041666666666666664f64;
-        let t57: f64 = t55 * t56;
-        let t58: f64 = t51 + t57;
-        let t59: f64 = t45 * t45;
-        let t60: f64 = t12 * t59;
-        let t61: f64 = t34 * t60;
-        let t62: f64 = t41 * t61;
-        let t63: f64 = 0.008333333333333333f64;
-        let t64: f64 = t62 * t63;
-        let t65: f64 = t58 + t64;
-        let t66: f64 = t30 * t59;
-        let t67: f64 = t12 * t66;
-        let t68: f64 = t34 * t67;
-        let t69: f64 = t35 * t68;
-        let t70: f64 = 0.001388888888888889f64;
-        let t71: f64 = t69 * t70;
-        let t72: f64 = t65 - t71;
-        let t73: f64 = t52 * t52;
-        let t74: f64 = t12 * t73;
-        let t75: f64 = t34 * t74;
-        let t76: f64 = t41 * t75;
-        let t77: f64 = 0.0001984126984126984f64;
-        let t78: f64 = t76 * t77;
-        let t79: f64 = t72 - t78;
-        let t80: f64 = t30 * t73;
-        let t81: f64 = t12 * t80;
-        let t82: f64 = t34 * t81;
-        let t83: f64 = t35 * t82;
-        let t84: f64 = 0.0000248015873015873f64;
-        let t85: f64 = t83 * t84;
-        let t86: f64 = t79 + t85;
-        let t87: f64 = t59 * t59;
-        let t88: f64 = t12 * t87;
-        let t89: f64 = t34 * t88;
-        let t90: f64 = t41 * t89;
-        let t91: f64 = 0.0000027557319223985893f64;
-        let t92: f64 = t90 * t91;
-        let t93: f64 = t86 + t92;
-        let t109: f64 = t37 * t41;
-        let t110: f64 = t32 * t109;
-        let t111: f64 = t1 + t110;
-        let t113: f64 = t111 + t112;
-        let t114: f64 = t35 * t47;
-        let t115: f64 = t49 * t114;
-        let t116: f64 = t113 - t115;
-        let t117: f64 = t41 * t54;
-        let t118: f64 = t56 * t117;
-        let t119: f64 = t116 - t118;
-        let t120: f64 = t35 * t61;
-        let t121: f64 = t63 * t120;
-        let t122: f64 = t119 + t121;
-        let t123: f64 = t41 * t68;
-        let t124: f64 = t70 * t123;
-        let t125: f64 = t122 + t124;
-        let t126: f64 = t35 * t75;
-        let t127: f64 = t77 * t126;
-        let t128: f64 = t125 - t127;
-        let t129: f64 = t41 * t82;
-        let t130: f64 = t84 * t129;
-        let t131: f64 = t128 - t130;
-        let t132: f64 = t35 * t89;
-        let t133: f64 = t91 * t132;
-        let t134: f64 = t131 + t133;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = p[2usize];
+    let t10: crate::Real = p[3usize];
+    let t11: crate::Real = p[4usize];
+    let t12: crate::Real = dt;
+    let t13: crate::Real = 3.141592653589793;
+    let t14: crate::Real = t3 * t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = t11 * t15;
+    let t17: crate::Real = 2.0;
+    let t18: crate::Real = t16 * t17;
+    let t19: crate::Real = 1.0;
+    let t20: crate::Real = t19 / t10;
+    let t21: crate::Real = t18 * t20;
+    let t22: crate::Real = t4 * t13;
+    let t23: crate::Real = t8 * t22;
+    let t24: crate::Real = t11 * t23;
+    let t25: crate::Real = t17 * t24;
+    let t26: crate::Real = t25 * t20;
+    let t27: crate::Real = t21 - t26;
+    let t28: crate::Real = t27 / t9;
+    let t29: crate::Real = t6 + t28;
+    let t30: crate::Real = t12 * t29;
+    let t31: crate::Real = t21 + t26;
+    let t32: crate::Real = 0.5;
+    let t33: crate::Real = t31 * t32;
+    let t34: crate::Real = t5 + t33;
+    let t35: crate::Real = crate::math::sin(t2);
+    let t41: crate::Real = crate::math::cos(t2);
+    let t42: crate::Real = t12 * t34;
+    let t112: crate::Real = t35 * t42;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t30)
+        < crate::math::series_switch(0.05)
+    {
+        let t36: crate::Real = t12 * t30;
+        let t37: crate::Real = t34 * t36;
+        let t38: crate::Real = t35 * t37;
+        let t39: crate::Real = t32 * t38;
+        let t40: crate::Real = t0 - t39;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t40 + t43;
+        let t45: crate::Real = t30 * t30;
+        let t46: crate::Real = t12 * t45;
+        let t47: crate::Real = t34 * t46;
+        let t48: crate::Real = t41 * t47;
+        let t49: crate::Real = 0.16666666666666666;
+        let t50: crate::Real = t48 * t49;
+        let t51: crate::Real = t44 - t50;
+        let t52: crate::Real = t30 * t45;
+        let t53: crate::Real = t12 * t52;
+        let t54: crate::Real = t34 * t53;
+        let t55: crate::Real = t35 * t54;
+        let t56: crate::Real = 0.041666666666666664;
+        let t57: crate::Real = t55 * t56;
+        let t58: crate::Real = t51 + t57;
+        let t59: crate::Real = t45 * t45;
+        let t60: crate::Real = t12 * t59;
+        let t61: crate::Real = t34 * t60;
+        let t62: crate::Real = t41 * t61;
+        let t63: crate::Real = 0.008333333333333333;
+        let t64: crate::Real = t62 * t63;
+        let t65: crate::Real = t58 + t64;
+        let t66: crate::Real = t30 * t59;
+        let t67: crate::Real = t12 * t66;
+        let t68: crate::Real = t34 * t67;
+        let t69: crate::Real = t35 * t68;
+        let t70: crate::Real = 0.001388888888888889;
+        let t71: crate::Real = t69 * t70;
+        let t72: crate::Real = t65 - t71;
+        let t73: crate::Real = t52 * t52;
+        let t74: crate::Real = t12 * t73;
+        let t75: crate::Real = t34 * t74;
+        let t76: crate::Real = t41 * t75;
+        let t77: crate::Real = 0.0001984126984126984;
+        let t78: crate::Real = t76 * t77;
+        let t79: crate::Real = t72 - t78;
+        let t80: crate::Real = t30 * t73;
+        let t81: crate::Real = t12 * t80;
+        let t82: crate::Real = t34 * t81;
+        let t83: crate::Real = t35 * t82;
+        let t84: crate::Real = 0.0000248015873015873;
+        let t85: crate::Real = t83 * t84;
+        let t86: crate::Real = t79 + t85;
+        let t87: crate::Real = t59 * t59;
+        let t88: crate::Real = t12 * t87;
+        let t89: crate::Real = t34 * t88;
+        let t90: crate::Real = t41 * t89;
+        let t91: crate::Real = 0.0000027557319223985893;
+        let t92: crate::Real = t90 * t91;
+        let t93: crate::Real = t86 + t92;
+        let t109: crate::Real = t37 * t41;
+        let t110: crate::Real = t32 * t109;
+        let t111: crate::Real = t1 + t110;
+        let t113: crate::Real = t111 + t112;
+        let t114: crate::Real = t35 * t47;
+        let t115: crate::Real = t49 * t114;
+        let t116: crate::Real = t113 - t115;
+        let t117: crate::Real = t41 * t54;
+        let t118: crate::Real = t56 * t117;
+        let t119: crate::Real = t116 - t118;
+        let t120: crate::Real = t35 * t61;
+        let t121: crate::Real = t63 * t120;
+        let t122: crate::Real = t119 + t121;
+        let t123: crate::Real = t41 * t68;
+        let t124: crate::Real = t70 * t123;
+        let t125: crate::Real = t122 + t124;
+        let t126: crate::Real = t35 * t75;
+        let t127: crate::Real = t77 * t126;
+        let t128: crate::Real = t125 - t127;
+        let t129: crate::Real = t41 * t82;
+        let t130: crate::Real = t84 * t129;
+        let t131: crate::Real = t128 - t130;
+        let t132: crate::Real = t35 * t89;
+        let t133: crate::Real = t91 * t132;
+        let t134: crate::Real = t131 + t133;
         [t93, t134]
     } else {
-        let t94: f64 = 1f64;
-        let t95: f64 = libm::cos(t30);
-        let t96: f64 = t94 - t95;
-        let t97: f64 = t12 * t96;
-        let t98: f64 = t34 * t97;
-        let t99: f64 = t35 * t98;
-        let t100: f64 = t19 / t30;
-        let t101: f64 = t99 * t100;
-        let t102: f64 = t0 - t101;
-        let t103: f64 = libm::sin(t30);
-        let t104: f64 = t42 * t103;
-        let t105: f64 = t41 * t104;
-        let t106: f64 = t105 * t100;
-        let t107: f64 = t102 + t106;
-        let t135: f64 = t41 * t98;
-        let t136: f64 = t135 * t100;
-        let t137: f64 = t1 + t136;
-        let t138: f64 = t103 * t112;
-        let t139: f64 = t138 * t100;
-        let t140: f64 = t137 + t139;
+        let t94: crate::Real = 1.0;
+        let t95: crate::Real = crate::math::cos(t30);
+        let t96: crate::Real = t94 - t95;
+        let t97: crate::Real = t12 * t96;
+        let t98: crate::Real = t34 * t97;
+        let t99: crate::Real = t35 * t98;
+        let t100: crate::Real = t19 / t30;
+        let t101: crate::Real = t99 * t100;
+        let t102: crate::Real = t0 - t101;
+        let t103: crate::Real = crate::math::sin(t30);
+        let t104: crate::Real = t42 * t103;
+        let t105: crate::Real = t41 * t104;
+        let t106: crate::Real = t105 * t100;
+        let t107: crate::Real = t102 + t106;
+        let t135: crate::Real = t41 * t98;
+        let t136: crate::Real = t135 * t100;
+        let t137: crate::Real = t1 + t136;
+        let t138: crate::Real = t103 * t112;
+        let t139: crate::Real = t138 * t100;
+        let t140: crate::Real = t137 + t139;
         [t107, t140]
     };
-    let t108: f64 = g0[0usize];
-    let t141: f64 = g0[1usize];
-    let t142: f64 = t2 + t30;
+    let t108: crate::Real = g0[0usize];
+    let t141: crate::Real = g0[1usize];
+    let t142: crate::Real = t2 + t30;
     [t108, t141, t142]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -621,155 +626,157 @@ pub fn step_exact(
 114 arithmetic operations (1835 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = p[2usize];
-    let t8: f64 = p[3usize];
-    let t9: f64 = p[4usize];
-    let t10: f64 = dt;
-    let t11: f64 = 3.141592653589793f64;
-    let t12: f64 = t1 * t11;
-    let t13: f64 = t5 * t12;
-    let t14: f64 = t9 * t13;
-    let t15: f64 = 2f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = 1f64;
-    let t18: f64 = t17 / t8;
-    let t19: f64 = t16 * t18;
-    let t20: f64 = t2 * t11;
-    let t21: f64 = t6 * t20;
-    let t22: f64 = t9 * t21;
-    let t23: f64 = t15 * t22;
-    let t24: f64 = t23 * t18;
-    let t25: f64 = t19 - t24;
-    let t26: f64 = t25 / t7;
-    let t27: f64 = t4 + t26;
-    let t28: f64 = t10 * t27;
-    let t29: f64 = 1f64;
-    let t30: f64 = 0f64;
-    let t31: f64 = t19 + t24;
-    let t32: f64 = 0.5f64;
-    let t33: f64 = t31 * t32;
-    let t34: f64 = t3 + t33;
-    let t35: f64 = libm::cos(t0);
-    let t40: f64 = libm::sin(t0);
-    let t41: f64 = t10 * t34;
-    let t42: f64 = t40 * t41;
-    let g0: [f64; 2usize] = if libm::fabs(t28) < 0.05f64 {
-        let t36: f64 = t10 * t28;
-        let t37: f64 = t34 * t36;
-        let t38: f64 = t35 * t37;
-        let t39: f64 = t32 * t38;
-        let t43: f64 = t28 * t28;
-        let t44: f64 = t10 * t43;
-        let t45: f64 = t34 * t44;
-        let t46: f64 = t40 * t45;
-        let t47: f64 = 0.16666666666666666f64;
-        let t48: f64 = t46 * t47;
-        let t49: f64 = t28 * t43;
-        let t50: f64 = t10 * t49;
-        let t51: f64 = t34 * t50;
-        let t52: f64 = t35 * t51;
-        let t53: f64 = 0.041666666666666664f64;
-        let t54: f64 = t52 * t53;
-        let t55: f64 = t48 + t54;
-        let t56: f64 = t43 * t43;
-        let t57: f64 = t10 * t56;
-        let t58: f64 = t34 * t57;
-        let t59: f64 = t40 * t58;
-        let t60: f64 = 0.008333333333333333f64;
-        let t61: f64 = t59 * t60;
-        let t62: f64 = t55 - t61;
-        let t63: f64 = t28 * t56;
-        let t64: f64 = t10 * t63;
-        let t65: f64 = t34 * t64;
-        let t66: f64 = t35 * t65;
-        let t67: f64 = 0.001388888888888889f64;
-        let t68: f64 = t66 * t67;
-        let t69: f64 = t62 - t68;
-        let t70: f64 = t49 * t49;
-        let t71: f64 = t10 * t70;
-        let t72: f64 = t34 * t71;
-        let t73: f64 = t40 * t72;
-        let t74: f64 = 0.0001984126984126984f64;
-        let t75: f64 = t73 * t74;
-        let t76: f64 = t69 + t75;
-        let t77: f64 = t28 * t70;
-        let t78: f64 = t10 * t77;
-        let t79: f64 = t34 * t78;
-        let t80: f64 = t35 * t79;
-        let t81: f64 = 0.0000248015873015873f64;
-        let t82: f64 = t80 * t81;
-        let t83: f64 = t76 + t82;
-        let t84: f64 = t56 * t56;
-        let t85: f64 = t10 * t84;
-        let t86: f64 = t34 * t85;
-        let t87: f64 = t40 * t86;
-        let t88: f64 = 0.0000027557319223985893f64;
-        let t89: f64 = t87 * t88;
-        let t90: f64 = t83 - t89;
-        let t91: f64 = t90 - t39;
-        let t92: f64 = t91 - t42;
-        let t106: f64 = t37 * t40;
-        let t107: f64 = t32 * t106;
-        let t108: f64 = t35 * t41;
-        let t109: f64 = t35 * t45;
-        let t110: f64 = t47 * t109;
-        let t111: f64 = t108 - t110;
-        let t112: f64 = t40 * t51;
-        let t113: f64 = t53 * t112;
-        let t114: f64 = t111 + t113;
-        let t115: f64 = t35 * t58;
-        let t116: f64 = t60 * t115;
-        let t117: f64 = t114 + t116;
-        let t118: f64 = t40 * t65;
-        let t119: f64 = t67 * t118;
-        let t120: f64 = t117 - t119;
-        let t121: f64 = t35 * t72;
-        let t122: f64 = t74 * t121;
-        let t123: f64 = t120 - t122;
-        let t124: f64 = t40 * t79;
-        let t125: f64 = t81 * t124;
-        let t126: f64 = t123 + t125;
-        let t127: f64 = t35 * t86;
-        let t128: f64 = t88 * t127;
-        let t129: f64 = t126 + t128;
-        let t130: f64 = t129 - t107;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = p[2usize];
+    let t8: crate::Real = p[3usize];
+    let t9: crate::Real = p[4usize];
+    let t10: crate::Real = dt;
+    let t11: crate::Real = 3.141592653589793;
+    let t12: crate::Real = t1 * t11;
+    let t13: crate::Real = t5 * t12;
+    let t14: crate::Real = t9 * t13;
+    let t15: crate::Real = 2.0;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t17 / t8;
+    let t19: crate::Real = t16 * t18;
+    let t20: crate::Real = t2 * t11;
+    let t21: crate::Real = t6 * t20;
+    let t22: crate::Real = t9 * t21;
+    let t23: crate::Real = t15 * t22;
+    let t24: crate::Real = t23 * t18;
+    let t25: crate::Real = t19 - t24;
+    let t26: crate::Real = t25 / t7;
+    let t27: crate::Real = t4 + t26;
+    let t28: crate::Real = t10 * t27;
+    let t29: crate::Real = 1.0;
+    let t30: crate::Real = 0.0;
+    let t31: crate::Real = t19 + t24;
+    let t32: crate::Real = 0.5;
+    let t33: crate::Real = t31 * t32;
+    let t34: crate::Real = t3 + t33;
+    let t35: crate::Real = crate::math::cos(t0);
+    let t40: crate::Real = crate::math::sin(t0);
+    let t41: crate::Real = t10 * t34;
+    let t42: crate::Real = t40 * t41;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t28)
+        < crate::math::series_switch(0.05)
+    {
+        let t36: crate::Real = t10 * t28;
+        let t37: crate::Real = t34 * t36;
+        let t38: crate::Real = t35 * t37;
+        let t39: crate::Real = t32 * t38;
+        let t43: crate::Real = t28 * t28;
+        let t44: crate::Real = t10 * t43;
+        let t45: crate::Real = t34 * t44;
+        let t46: crate::Real = t40 * t45;
+        let t47: crate::Real = 0.16666666666666666;
+        let t48: crate::Real = t46 * t47;
+        let t49: crate::Real = t28 * t43;
+        let t50: crate::Real = t10 * t49;
+        let t51: crate::Real = t34 * t50;
+        let t52: crate::Real = t35 * t51;
+        let t53: crate::Real = 0.041666666666666664;
+        let t54: crate::Real = t52 * t53;
+        let t55: crate::Real = t48 + t54;
+        let t56: crate::Real = t43 * t43;
+        let t57: crate::Real = t10 * t56;
+        let t58: crate::Real = t34 * t57;
+        let t59: crate::Real = t40 * t58;
+        let t60: crate::Real = 0.008333333333333333;
+        let t61: crate::Real = t59 * t60;
+        let t62: crate::Real = t55 - t61;
+        let t63: crate::Real = t28 * t56;
+        let t64: crate::Real = t10 * t63;
+        let t65: crate::Real = t34 * t64;
+        let t66: crate::Real = t35 * t65;
+        let t67: crate::Real = 0.001388888888888889;
+        let t68: crate::Real = t66 * t67;
+        let t69: crate::Real = t62 - t68;
+        let t70: crate::Real = t49 * t49;
+        let t71: crate::Real = t10 * t70;
+        let t72: crate::Real = t34 * t71;
+        let t73: crate::Real = t40 * t72;
+        let t74: crate::Real = 0.0001984126984126984;
+        let t75: crate::Real = t73 * t74;
+        let t76: crate::Real = t69 + t75;
+        let t77: crate::Real = t28 * t70;
+        let t78: crate::Real = t10 * t77;
+        let t79: crate::Real = t34 * t78;
+        let t80: crate::Real = t35 * t79;
+        let t81: crate::Real = 0.0000248015873015873;
+        let t82: crate::Real = t80 * t81;
+        let t83: crate::Real = t76 + t82;
+        let t84: crate::Real = t56 * t56;
+        let t85: crate::Real = t10 * t84;
+        let t86: crate::Real = t34 * t85;
+        let t87: crate::Real = t40 * t86;
+        let t88: crate::Real = 0.0000027557319223985893;
+        let t89: crate::Real = t87 * t88;
+        let t90: crate::Real = t83 - t89;
+        let t91: crate::Real = t90 - t39;
+        let t92: crate::Real = t91 - t42;
+        let t106: crate::Real = t37 * t40;
+        let t107: crate::Real = t32 * t106;
+        let t108: crate::Real = t35 * t41;
+        let t109: crate::Real = t35 * t45;
+        let t110: crate::Real = t47 * t109;
+        let t111: crate::Real = t108 - t110;
+        let t112: crate::Real = t40 * t51;
+        let t113: crate::Real = t53 * t112;
+        let t114: crate::Real = t111 + t113;
+        let t115: crate::Real = t35 * t58;
+        let t116: crate::Real = t60 * t115;
+        let t117: crate::Real = t114 + t116;
+        let t118: crate::Real = t40 * t65;
+        let t119: crate::Real = t67 * t118;
+        let t120: crate::Real = t117 - t119;
+        let t121: crate::Real = t35 * t72;
+        let t122: crate::Real = t74 * t121;
+        let t123: crate::Real = t120 - t122;
+        let t124: crate::Real = t40 * t79;
+        let t125: crate::Real = t81 * t124;
+        let t126: crate::Real = t123 + t125;
+        let t127: crate::Real = t35 * t86;
+        let t128: crate::Real = t88 * t127;
+        let t129: crate::Real = t126 + t128;
+        let t130: crate::Real = t129 - t107;
         [t92, t130]
     } else {
-        let t93: f64 = libm::cos(t28);
-        let t94: f64 = t29 - t93;
-        let t95: f64 = t10 * t94;
-        let t96: f64 = t34 * t95;
-        let t97: f64 = t35 * t96;
-        let t98: f64 = t17 / t28;
-        let t99: f64 = t97 * t98;
-        let t100: f64 = -t99;
-        let t101: f64 = libm::sin(t28);
-        let t102: f64 = t42 * t101;
-        let t103: f64 = t102 * t98;
-        let t104: f64 = t100 - t103;
-        let t131: f64 = t40 * t96;
-        let t132: f64 = t131 * t98;
-        let t133: f64 = t41 * t101;
-        let t134: f64 = t35 * t133;
-        let t135: f64 = t134 * t98;
-        let t136: f64 = t135 - t132;
+        let t93: crate::Real = crate::math::cos(t28);
+        let t94: crate::Real = t29 - t93;
+        let t95: crate::Real = t10 * t94;
+        let t96: crate::Real = t34 * t95;
+        let t97: crate::Real = t35 * t96;
+        let t98: crate::Real = t17 / t28;
+        let t99: crate::Real = t97 * t98;
+        let t100: crate::Real = -t99;
+        let t101: crate::Real = crate::math::sin(t28);
+        let t102: crate::Real = t42 * t101;
+        let t103: crate::Real = t102 * t98;
+        let t104: crate::Real = t100 - t103;
+        let t131: crate::Real = t40 * t96;
+        let t132: crate::Real = t131 * t98;
+        let t133: crate::Real = t41 * t101;
+        let t134: crate::Real = t35 * t133;
+        let t135: crate::Real = t134 * t98;
+        let t136: crate::Real = t135 - t132;
         [t104, t136]
     };
-    let t105: f64 = g0[0usize];
-    let t137: f64 = g0[1usize];
+    let t105: crate::Real = g0[0usize];
+    let t137: crate::Real = g0[1usize];
     [[t29, t30, t105], [t30, t29, t137], [t30, t30, t29]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
@@ -784,422 +791,424 @@ pub fn step_exact_jac_x(
 374 arithmetic operations (5219 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = p[2usize];
-    let t8: f64 = p[3usize];
-    let t9: f64 = p[4usize];
-    let t10: f64 = dt;
-    let t11: f64 = 3.141592653589793f64;
-    let t12: f64 = t1 * t11;
-    let t13: f64 = t5 * t12;
-    let t14: f64 = t9 * t13;
-    let t15: f64 = 2f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = 1f64;
-    let t18: f64 = t17 / t8;
-    let t19: f64 = t16 * t18;
-    let t20: f64 = t2 * t11;
-    let t21: f64 = t6 * t20;
-    let t22: f64 = t9 * t21;
-    let t23: f64 = t15 * t22;
-    let t24: f64 = t23 * t18;
-    let t25: f64 = t19 - t24;
-    let t26: f64 = t25 / t7;
-    let t27: f64 = t4 + t26;
-    let t28: f64 = t10 * t27;
-    let t30: f64 = t19 + t24;
-    let t31: f64 = 0.5f64;
-    let t32: f64 = t30 * t31;
-    let t33: f64 = t3 + t32;
-    let t34: f64 = libm::cos(t0);
-    let t35: f64 = t5 * t11;
-    let t36: f64 = t9 * t35;
-    let t42: f64 = t7 * t8;
-    let t43: f64 = t17 / t42;
-    let t46: f64 = libm::sin(t0);
-    let t47: f64 = t10 * t36;
-    let t48: f64 = t46 * t47;
-    let t53: f64 = t28 * t28;
-    let t167: f64 = t6 * t11;
-    let t168: f64 = t9 * t167;
-    let t174: f64 = t10 * t168;
-    let t175: f64 = t46 * t174;
-    let g0: [f64; 4usize] = if libm::fabs(t28) < 0.05f64 {
-        let t29: f64 = t10 * t10;
-        let t37: f64 = t29 * t36;
-        let t38: f64 = t33 * t37;
-        let t39: f64 = t34 * t38;
-        let t40: f64 = 0.6666666666666666f64;
-        let t41: f64 = t39 * t40;
-        let t44: f64 = t41 * t43;
-        let t45: f64 = -t44;
-        let t49: f64 = t31 * t48;
-        let t50: f64 = t49 * t18;
-        let t51: f64 = t45 - t50;
-        let t52: f64 = t28 * t51;
-        let t54: f64 = t38 * t46;
-        let t55: f64 = 0.25f64;
-        let t56: f64 = t54 * t55;
-        let t57: f64 = t56 * t43;
-        let t58: f64 = t34 * t47;
-        let t59: f64 = 0.16666666666666666f64;
-        let t60: f64 = t58 * t59;
-        let t61: f64 = t60 * t18;
-        let t62: f64 = t57 - t61;
-        let t63: f64 = t53 * t62;
-        let t64: f64 = t52 + t63;
-        let t65: f64 = t28 * t53;
-        let t66: f64 = 0.06666666666666667f64;
-        let t67: f64 = t39 * t66;
-        let t68: f64 = t67 * t43;
-        let t69: f64 = 0.041666666666666664f64;
-        let t70: f64 = t48 * t69;
-        let t71: f64 = t70 * t18;
-        let t72: f64 = t68 + t71;
-        let t73: f64 = t65 * t72;
-        let t74: f64 = t64 + t73;
-        let t75: f64 = t53 * t53;
-        let t76: f64 = 0.013888888888888888f64;
-        let t77: f64 = t54 * t76;
-        let t78: f64 = t77 * t43;
-        let t79: f64 = 0.008333333333333333f64;
-        let t80: f64 = t58 * t79;
-        let t81: f64 = t80 * t18;
-        let t82: f64 = t81 - t78;
-        let t83: f64 = t75 * t82;
-        let t84: f64 = t74 + t83;
-        let t85: f64 = t28 * t75;
-        let t86: f64 = 0.002380952380952381f64;
-        let t87: f64 = t39 * t86;
-        let t88: f64 = t87 * t43;
-        let t89: f64 = -t88;
-        let t90: f64 = 0.001388888888888889f64;
-        let t91: f64 = t48 * t90;
-        let t92: f64 = t91 * t18;
-        let t93: f64 = t89 - t92;
-        let t94: f64 = t85 * t93;
-        let t95: f64 = t84 + t94;
-        let t96: f64 = t65 * t65;
-        let t97: f64 = 0.00034722222222222224f64;
-        let t98: f64 = t54 * t97;
-        let t99: f64 = t98 * t43;
-        let t100: f64 = 0.0001984126984126984f64;
-        let t101: f64 = t58 * t100;
-        let t102: f64 = t101 * t18;
-        let t103: f64 = t99 - t102;
-        let t104: f64 = t96 * t103;
-        let t105: f64 = t95 + t104;
-        let t106: f64 = t28 * t96;
-        let t107: f64 = 0.00004409171075837743f64;
-        let t108: f64 = t39 * t107;
-        let t109: f64 = t108 * t43;
-        let t110: f64 = 0.0000248015873015873f64;
-        let t111: f64 = t48 * t110;
-        let t112: f64 = t111 * t18;
-        let t113: f64 = t109 + t112;
-        let t114: f64 = t106 * t113;
-        let t115: f64 = t105 + t114;
-        let t116: f64 = t75 * t75;
-        let t117: f64 = 0.00000496031746031746f64;
-        let t118: f64 = t54 * t117;
-        let t119: f64 = t118 * t43;
-        let t120: f64 = 0.0000027557319223985893f64;
-        let t121: f64 = t58 * t120;
-        let t122: f64 = t121 * t18;
-        let t123: f64 = t122 - t119;
-        let t124: f64 = t116 * t123;
-        let t125: f64 = t115 + t124;
-        let t126: f64 = t54 * t43;
-        let t127: f64 = t125 - t126;
-        let t128: f64 = t58 * t18;
-        let t129: f64 = t127 + t128;
-        let t169: f64 = t29 * t168;
-        let t170: f64 = t33 * t169;
-        let t171: f64 = t34 * t170;
-        let t172: f64 = t40 * t171;
-        let t173: f64 = t172 * t43;
-        let t176: f64 = t31 * t175;
-        let t177: f64 = t176 * t18;
-        let t178: f64 = t173 - t177;
-        let t179: f64 = t28 * t178;
-        let t180: f64 = t46 * t170;
-        let t181: f64 = t55 * t180;
-        let t182: f64 = t181 * t43;
-        let t183: f64 = -t182;
-        let t184: f64 = t34 * t174;
-        let t185: f64 = t59 * t184;
-        let t186: f64 = t185 * t18;
-        let t187: f64 = t183 - t186;
-        let t188: f64 = t53 * t187;
-        let t189: f64 = t179 + t188;
-        let t190: f64 = t66 * t171;
-        let t191: f64 = t190 * t43;
-        let t192: f64 = t69 * t175;
-        let t193: f64 = t192 * t18;
-        let t194: f64 = t193 - t191;
-        let t195: f64 = t65 * t194;
-        let t196: f64 = t189 + t195;
-        let t197: f64 = t76 * t180;
-        let t198: f64 = t197 * t43;
-        let t199: f64 = t79 * t184;
-        let t200: f64 = t199 * t18;
-        let t201: f64 = t198 + t200;
-        let t202: f64 = t75 * t201;
-        let t203: f64 = t196 + t202;
-        let t204: f64 = t86 * t171;
-        let t205: f64 = t204 * t43;
-        let t206: f64 = t90 * t175;
-        let t207: f64 = t206 * t18;
-        let t208: f64 = t205 - t207;
-        let t209: f64 = t85 * t208;
-        let t210: f64 = t203 + t209;
-        let t211: f64 = t97 * t180;
-        let t212: f64 = t211 * t43;
-        let t213: f64 = -t212;
-        let t214: f64 = t100 * t184;
-        let t215: f64 = t214 * t18;
-        let t216: f64 = t213 - t215;
-        let t217: f64 = t96 * t216;
-        let t218: f64 = t210 + t217;
-        let t219: f64 = t107 * t171;
-        let t220: f64 = t219 * t43;
-        let t221: f64 = t110 * t175;
-        let t222: f64 = t221 * t18;
-        let t223: f64 = t222 - t220;
-        let t224: f64 = t106 * t223;
-        let t225: f64 = t218 + t224;
-        let t226: f64 = t117 * t180;
-        let t227: f64 = t226 * t43;
-        let t228: f64 = t120 * t184;
-        let t229: f64 = t228 * t18;
-        let t230: f64 = t227 + t229;
-        let t231: f64 = t116 * t230;
-        let t232: f64 = t225 + t231;
-        let t233: f64 = t180 * t43;
-        let t234: f64 = t232 + t233;
-        let t235: f64 = t184 * t18;
-        let t236: f64 = t234 + t235;
-        let t249: f64 = t40 * t54;
-        let t250: f64 = t249 * t43;
-        let t251: f64 = t31 * t58;
-        let t252: f64 = t251 * t18;
-        let t253: f64 = t252 - t250;
-        let t254: f64 = t28 * t253;
-        let t255: f64 = t39 * t55;
-        let t256: f64 = t255 * t43;
-        let t257: f64 = -t256;
-        let t258: f64 = t48 * t59;
-        let t259: f64 = t258 * t18;
-        let t260: f64 = t257 - t259;
-        let t261: f64 = t53 * t260;
-        let t262: f64 = t254 + t261;
-        let t263: f64 = t54 * t66;
-        let t264: f64 = t263 * t43;
-        let t265: f64 = t58 * t69;
-        let t266: f64 = t265 * t18;
-        let t267: f64 = t264 - t266;
-        let t268: f64 = t65 * t267;
-        let t269: f64 = t262 + t268;
-        let t270: f64 = t39 * t76;
-        let t271: f64 = t270 * t43;
-        let t272: f64 = t48 * t79;
-        let t273: f64 = t272 * t18;
-        let t274: f64 = t271 + t273;
-        let t275: f64 = t75 * t274;
-        let t276: f64 = t269 + t275;
-        let t277: f64 = t54 * t86;
-        let t278: f64 = t277 * t43;
-        let t279: f64 = t58 * t90;
-        let t280: f64 = t279 * t18;
-        let t281: f64 = t280 - t278;
-        let t282: f64 = t85 * t281;
-        let t283: f64 = t276 + t282;
-        let t284: f64 = t39 * t97;
-        let t285: f64 = t284 * t43;
-        let t286: f64 = -t285;
-        let t287: f64 = t48 * t100;
-        let t288: f64 = t287 * t18;
-        let t289: f64 = t286 - t288;
-        let t290: f64 = t96 * t289;
-        let t291: f64 = t283 + t290;
-        let t292: f64 = t54 * t107;
-        let t293: f64 = t292 * t43;
-        let t294: f64 = t58 * t110;
-        let t295: f64 = t294 * t18;
-        let t296: f64 = t293 - t295;
-        let t297: f64 = t106 * t296;
-        let t298: f64 = t291 + t297;
-        let t299: f64 = t39 * t117;
-        let t300: f64 = t299 * t43;
-        let t301: f64 = t48 * t120;
-        let t302: f64 = t301 * t18;
-        let t303: f64 = t300 + t302;
-        let t304: f64 = t116 * t303;
-        let t305: f64 = t298 + t304;
-        let t306: f64 = t39 * t43;
-        let t307: f64 = t305 + t306;
-        let t308: f64 = t48 * t18;
-        let t309: f64 = t307 + t308;
-        let t329: f64 = t40 * t180;
-        let t330: f64 = t329 * t43;
-        let t331: f64 = t31 * t184;
-        let t332: f64 = t331 * t18;
-        let t333: f64 = t330 + t332;
-        let t334: f64 = t28 * t333;
-        let t335: f64 = t55 * t171;
-        let t336: f64 = t335 * t43;
-        let t337: f64 = t59 * t175;
-        let t338: f64 = t337 * t18;
-        let t339: f64 = t336 - t338;
-        let t340: f64 = t53 * t339;
-        let t341: f64 = t334 + t340;
-        let t342: f64 = t66 * t180;
-        let t343: f64 = t342 * t43;
-        let t344: f64 = -t343;
-        let t345: f64 = t69 * t184;
-        let t346: f64 = t345 * t18;
-        let t347: f64 = t344 - t346;
-        let t348: f64 = t65 * t347;
-        let t349: f64 = t341 + t348;
-        let t350: f64 = t76 * t171;
-        let t351: f64 = t350 * t43;
-        let t352: f64 = t79 * t175;
-        let t353: f64 = t352 * t18;
-        let t354: f64 = t353 - t351;
-        let t355: f64 = t75 * t354;
-        let t356: f64 = t349 + t355;
-        let t357: f64 = t86 * t180;
-        let t358: f64 = t357 * t43;
-        let t359: f64 = t90 * t184;
-        let t360: f64 = t359 * t18;
-        let t361: f64 = t358 + t360;
-        let t362: f64 = t85 * t361;
-        let t363: f64 = t356 + t362;
-        let t364: f64 = t97 * t171;
-        let t365: f64 = t364 * t43;
-        let t366: f64 = t100 * t175;
-        let t367: f64 = t366 * t18;
-        let t368: f64 = t365 - t367;
-        let t369: f64 = t96 * t368;
-        let t370: f64 = t363 + t369;
-        let t371: f64 = t107 * t180;
-        let t372: f64 = t371 * t43;
-        let t373: f64 = -t372;
-        let t374: f64 = t110 * t184;
-        let t375: f64 = t374 * t18;
-        let t376: f64 = t373 - t375;
-        let t377: f64 = t106 * t376;
-        let t378: f64 = t370 + t377;
-        let t379: f64 = t117 * t171;
-        let t380: f64 = t379 * t43;
-        let t381: f64 = t120 * t175;
-        let t382: f64 = t381 * t18;
-        let t383: f64 = t382 - t380;
-        let t384: f64 = t116 * t383;
-        let t385: f64 = t378 + t384;
-        let t386: f64 = t171 * t43;
-        let t387: f64 = t385 - t386;
-        let t388: f64 = t175 * t18;
-        let t389: f64 = t387 + t388;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = p[2usize];
+    let t8: crate::Real = p[3usize];
+    let t9: crate::Real = p[4usize];
+    let t10: crate::Real = dt;
+    let t11: crate::Real = 3.141592653589793;
+    let t12: crate::Real = t1 * t11;
+    let t13: crate::Real = t5 * t12;
+    let t14: crate::Real = t9 * t13;
+    let t15: crate::Real = 2.0;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t17 / t8;
+    let t19: crate::Real = t16 * t18;
+    let t20: crate::Real = t2 * t11;
+    let t21: crate::Real = t6 * t20;
+    let t22: crate::Real = t9 * t21;
+    let t23: crate::Real = t15 * t22;
+    let t24: crate::Real = t23 * t18;
+    let t25: crate::Real = t19 - t24;
+    let t26: crate::Real = t25 / t7;
+    let t27: crate::Real = t4 + t26;
+    let t28: crate::Real = t10 * t27;
+    let t30: crate::Real = t19 + t24;
+    let t31: crate::Real = 0.5;
+    let t32: crate::Real = t30 * t31;
+    let t33: crate::Real = t3 + t32;
+    let t34: crate::Real = crate::math::cos(t0);
+    let t35: crate::Real = t5 * t11;
+    let t36: crate::Real = t9 * t35;
+    let t42: crate::Real = t7 * t8;
+    let t43: crate::Real = t17 / t42;
+    let t46: crate::Real = crate::math::sin(t0);
+    let t47: crate::Real = t10 * t36;
+    let t48: crate::Real = t46 * t47;
+    let t53: crate::Real = t28 * t28;
+    let t167: crate::Real = t6 * t11;
+    let t168: crate::Real = t9 * t167;
+    let t174: crate::Real = t10 * t168;
+    let t175: crate::Real = t46 * t174;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t28)
+        < crate::math::series_switch(0.05)
+    {
+        let t29: crate::Real = t10 * t10;
+        let t37: crate::Real = t29 * t36;
+        let t38: crate::Real = t33 * t37;
+        let t39: crate::Real = t34 * t38;
+        let t40: crate::Real = 0.6666666666666666;
+        let t41: crate::Real = t39 * t40;
+        let t44: crate::Real = t41 * t43;
+        let t45: crate::Real = -t44;
+        let t49: crate::Real = t31 * t48;
+        let t50: crate::Real = t49 * t18;
+        let t51: crate::Real = t45 - t50;
+        let t52: crate::Real = t28 * t51;
+        let t54: crate::Real = t38 * t46;
+        let t55: crate::Real = 0.25;
+        let t56: crate::Real = t54 * t55;
+        let t57: crate::Real = t56 * t43;
+        let t58: crate::Real = t34 * t47;
+        let t59: crate::Real = 0.16666666666666666;
+        let t60: crate::Real = t58 * t59;
+        let t61: crate::Real = t60 * t18;
+        let t62: crate::Real = t57 - t61;
+        let t63: crate::Real = t53 * t62;
+        let t64: crate::Real = t52 + t63;
+        let t65: crate::Real = t28 * t53;
+        let t66: crate::Real = 0.06666666666666667;
+        let t67: crate::Real = t39 * t66;
+        let t68: crate::Real = t67 * t43;
+        let t69: crate::Real = 0.041666666666666664;
+        let t70: crate::Real = t48 * t69;
+        let t71: crate::Real = t70 * t18;
+        let t72: crate::Real = t68 + t71;
+        let t73: crate::Real = t65 * t72;
+        let t74: crate::Real = t64 + t73;
+        let t75: crate::Real = t53 * t53;
+        let t76: crate::Real = 0.013888888888888888;
+        let t77: crate::Real = t54 * t76;
+        let t78: crate::Real = t77 * t43;
+        let t79: crate::Real = 0.008333333333333333;
+        let t80: crate::Real = t58 * t79;
+        let t81: crate::Real = t80 * t18;
+        let t82: crate::Real = t81 - t78;
+        let t83: crate::Real = t75 * t82;
+        let t84: crate::Real = t74 + t83;
+        let t85: crate::Real = t28 * t75;
+        let t86: crate::Real = 0.002380952380952381;
+        let t87: crate::Real = t39 * t86;
+        let t88: crate::Real = t87 * t43;
+        let t89: crate::Real = -t88;
+        let t90: crate::Real = 0.001388888888888889;
+        let t91: crate::Real = t48 * t90;
+        let t92: crate::Real = t91 * t18;
+        let t93: crate::Real = t89 - t92;
+        let t94: crate::Real = t85 * t93;
+        let t95: crate::Real = t84 + t94;
+        let t96: crate::Real = t65 * t65;
+        let t97: crate::Real = 0.00034722222222222224;
+        let t98: crate::Real = t54 * t97;
+        let t99: crate::Real = t98 * t43;
+        let t100: crate::Real = 0.0001984126984126984;
+        let t101: crate::Real = t58 * t100;
+        let t102: crate::Real = t101 * t18;
+        let t103: crate::Real = t99 - t102;
+        let t104: crate::Real = t96 * t103;
+        let t105: crate::Real = t95 + t104;
+        let t106: crate::Real = t28 * t96;
+        let t107: crate::Real = 0.00004409171075837743;
+        let t108: crate::Real = t39 * t107;
+        let t109: crate::Real = t108 * t43;
+        let t110: crate::Real = 0.0000248015873015873;
+        let t111: crate::Real = t48 * t110;
+        let t112: crate::Real = t111 * t18;
+        let t113: crate::Real = t109 + t112;
+        let t114: crate::Real = t106 * t113;
+        let t115: crate::Real = t105 + t114;
+        let t116: crate::Real = t75 * t75;
+        let t117: crate::Real = 0.00000496031746031746;
+        let t118: crate::Real = t54 * t117;
+        let t119: crate::Real = t118 * t43;
+        let t120: crate::Real = 0.0000027557319223985893;
+        let t121: crate::Real = t58 * t120;
+        let t122: crate::Real = t121 * t18;
+        let t123: crate::Real = t122 - t119;
+        let t124: crate::Real = t116 * t123;
+        let t125: crate::Real = t115 + t124;
+        let t126: crate::Real = t54 * t43;
+        let t127: crate::Real = t125 - t126;
+        let t128: crate::Real = t58 * t18;
+        let t129: crate::Real = t127 + t128;
+        let t169: crate::Real = t29 * t168;
+        let t170: crate::Real = t33 * t169;
+        let t171: crate::Real = t34 * t170;
+        let t172: crate::Real = t40 * t171;
+        let t173: crate::Real = t172 * t43;
+        let t176: crate::Real = t31 * t175;
+        let t177: crate::Real = t176 * t18;
+        let t178: crate::Real = t173 - t177;
+        let t179: crate::Real = t28 * t178;
+        let t180: crate::Real = t46 * t170;
+        let t181: crate::Real = t55 * t180;
+        let t182: crate::Real = t181 * t43;
+        let t183: crate::Real = -t182;
+        let t184: crate::Real = t34 * t174;
+        let t185: crate::Real = t59 * t184;
+        let t186: crate::Real = t185 * t18;
+        let t187: crate::Real = t183 - t186;
+        let t188: crate::Real = t53 * t187;
+        let t189: crate::Real = t179 + t188;
+        let t190: crate::Real = t66 * t171;
+        let t191: crate::Real = t190 * t43;
+        let t192: crate::Real = t69 * t175;
+        let t193: crate::Real = t192 * t18;
+        let t194: crate::Real = t193 - t191;
+        let t195: crate::Real = t65 * t194;
+        let t196: crate::Real = t189 + t195;
+        let t197: crate::Real = t76 * t180;
+        let t198: crate::Real = t197 * t43;
+        let t199: crate::Real = t79 * t184;
+        let t200: crate::Real = t199 * t18;
+        let t201: crate::Real = t198 + t200;
+        let t202: crate::Real = t75 * t201;
+        let t203: crate::Real = t196 + t202;
+        let t204: crate::Real = t86 * t171;
+        let t205: crate::Real = t204 * t43;
+        let t206: crate::Real = t90 * t175;
+        let t207: crate::Real = t206 * t18;
+        let t208: crate::Real = t205 - t207;
+        let t209: crate::Real = t85 * t208;
+        let t210: crate::Real = t203 + t209;
+        let t211: crate::Real = t97 * t180;
+        let t212: crate::Real = t211 * t43;
+        let t213: crate::Real = -t212;
+        let t214: crate::Real = t100 * t184;
+        let t215: crate::Real = t214 * t18;
+        let t216: crate::Real = t213 - t215;
+        let t217: crate::Real = t96 * t216;
+        let t218: crate::Real = t210 + t217;
+        let t219: crate::Real = t107 * t171;
+        let t220: crate::Real = t219 * t43;
+        let t221: crate::Real = t110 * t175;
+        let t222: crate::Real = t221 * t18;
+        let t223: crate::Real = t222 - t220;
+        let t224: crate::Real = t106 * t223;
+        let t225: crate::Real = t218 + t224;
+        let t226: crate::Real = t117 * t180;
+        let t227: crate::Real = t226 * t43;
+        let t228: crate::Real = t120 * t184;
+        let t229: crate::Real = t228 * t18;
+        let t230: crate::Real = t227 + t229;
+        let t231: crate::Real = t116 * t230;
+        let t232: crate::Real = t225 + t231;
+        let t233: crate::Real = t180 * t43;
+        let t234: crate::Real = t232 + t233;
+        let t235: crate::Real = t184 * t18;
+        let t236: crate::Real = t234 + t235;
+        let t249: crate::Real = t40 * t54;
+        let t250: crate::Real = t249 * t43;
+        let t251: crate::Real = t31 * t58;
+        let t252: crate::Real = t251 * t18;
+        let t253: crate::Real = t252 - t250;
+        let t254: crate::Real = t28 * t253;
+        let t255: crate::Real = t39 * t55;
+        let t256: crate::Real = t255 * t43;
+        let t257: crate::Real = -t256;
+        let t258: crate::Real = t48 * t59;
+        let t259: crate::Real = t258 * t18;
+        let t260: crate::Real = t257 - t259;
+        let t261: crate::Real = t53 * t260;
+        let t262: crate::Real = t254 + t261;
+        let t263: crate::Real = t54 * t66;
+        let t264: crate::Real = t263 * t43;
+        let t265: crate::Real = t58 * t69;
+        let t266: crate::Real = t265 * t18;
+        let t267: crate::Real = t264 - t266;
+        let t268: crate::Real = t65 * t267;
+        let t269: crate::Real = t262 + t268;
+        let t270: crate::Real = t39 * t76;
+        let t271: crate::Real = t270 * t43;
+        let t272: crate::Real = t48 * t79;
+        let t273: crate::Real = t272 * t18;
+        let t274: crate::Real = t271 + t273;
+        let t275: crate::Real = t75 * t274;
+        let t276: crate::Real = t269 + t275;
+        let t277: crate::Real = t54 * t86;
+        let t278: crate::Real = t277 * t43;
+        let t279: crate::Real = t58 * t90;
+        let t280: crate::Real = t279 * t18;
+        let t281: crate::Real = t280 - t278;
+        let t282: crate::Real = t85 * t281;
+        let t283: crate::Real = t276 + t282;
+        let t284: crate::Real = t39 * t97;
+        let t285: crate::Real = t284 * t43;
+        let t286: crate::Real = -t285;
+        let t287: crate::Real = t48 * t100;
+        let t288: crate::Real = t287 * t18;
+        let t289: crate::Real = t286 - t288;
+        let t290: crate::Real = t96 * t289;
+        let t291: crate::Real = t283 + t290;
+        let t292: crate::Real = t54 * t107;
+        let t293: crate::Real = t292 * t43;
+        let t294: crate::Real = t58 * t110;
+        let t295: crate::Real = t294 * t18;
+        let t296: crate::Real = t293 - t295;
+        let t297: crate::Real = t106 * t296;
+        let t298: crate::Real = t291 + t297;
+        let t299: crate::Real = t39 * t117;
+        let t300: crate::Real = t299 * t43;
+        let t301: crate::Real = t48 * t120;
+        let t302: crate::Real = t301 * t18;
+        let t303: crate::Real = t300 + t302;
+        let t304: crate::Real = t116 * t303;
+        let t305: crate::Real = t298 + t304;
+        let t306: crate::Real = t39 * t43;
+        let t307: crate::Real = t305 + t306;
+        let t308: crate::Real = t48 * t18;
+        let t309: crate::Real = t307 + t308;
+        let t329: crate::Real = t40 * t180;
+        let t330: crate::Real = t329 * t43;
+        let t331: crate::Real = t31 * t184;
+        let t332: crate::Real = t331 * t18;
+        let t333: crate::Real = t330 + t332;
+        let t334: crate::Real = t28 * t333;
+        let t335: crate::Real = t55 * t171;
+        let t336: crate::Real = t335 * t43;
+        let t337: crate::Real = t59 * t175;
+        let t338: crate::Real = t337 * t18;
+        let t339: crate::Real = t336 - t338;
+        let t340: crate::Real = t53 * t339;
+        let t341: crate::Real = t334 + t340;
+        let t342: crate::Real = t66 * t180;
+        let t343: crate::Real = t342 * t43;
+        let t344: crate::Real = -t343;
+        let t345: crate::Real = t69 * t184;
+        let t346: crate::Real = t345 * t18;
+        let t347: crate::Real = t344 - t346;
+        let t348: crate::Real = t65 * t347;
+        let t349: crate::Real = t341 + t348;
+        let t350: crate::Real = t76 * t171;
+        let t351: crate::Real = t350 * t43;
+        let t352: crate::Real = t79 * t175;
+        let t353: crate::Real = t352 * t18;
+        let t354: crate::Real = t353 - t351;
+        let t355: crate::Real = t75 * t354;
+        let t356: crate::Real = t349 + t355;
+        let t357: crate::Real = t86 * t180;
+        let t358: crate::Real = t357 * t43;
+        let t359: crate::Real = t90 * t184;
+        let t360: crate::Real = t359 * t18;
+        let t361: crate::Real = t358 + t360;
+        let t362: crate::Real = t85 * t361;
+        let t363: crate::Real = t356 + t362;
+        let t364: crate::Real = t97 * t171;
+        let t365: crate::Real = t364 * t43;
+        let t366: crate::Real = t100 * t175;
+        let t367: crate::Real = t366 * t18;
+        let t368: crate::Real = t365 - t367;
+        let t369: crate::Real = t96 * t368;
+        let t370: crate::Real = t363 + t369;
+        let t371: crate::Real = t107 * t180;
+        let t372: crate::Real = t371 * t43;
+        let t373: crate::Real = -t372;
+        let t374: crate::Real = t110 * t184;
+        let t375: crate::Real = t374 * t18;
+        let t376: crate::Real = t373 - t375;
+        let t377: crate::Real = t106 * t376;
+        let t378: crate::Real = t370 + t377;
+        let t379: crate::Real = t117 * t171;
+        let t380: crate::Real = t379 * t43;
+        let t381: crate::Real = t120 * t175;
+        let t382: crate::Real = t381 * t18;
+        let t383: crate::Real = t382 - t380;
+        let t384: crate::Real = t116 * t383;
+        let t385: crate::Real = t378 + t384;
+        let t386: crate::Real = t171 * t43;
+        let t387: crate::Real = t385 - t386;
+        let t388: crate::Real = t175 * t18;
+        let t389: crate::Real = t387 + t388;
         [t129, t236, t309, t389]
     } else {
-        let t130: f64 = libm::sin(t28);
-        let t131: f64 = t10 * t33;
-        let t132: f64 = t46 * t131;
-        let t133: f64 = t130 * t132;
-        let t134: f64 = t17 / t28;
-        let t135: f64 = t133 * t134;
-        let t136: f64 = libm::cos(t28);
-        let t137: f64 = t34 * t131;
-        let t138: f64 = t136 * t137;
-        let t139: f64 = t138 * t134;
-        let t140: f64 = 1f64;
-        let t141: f64 = t140 - t136;
-        let t142: f64 = t10 * t141;
-        let t143: f64 = t33 * t142;
-        let t144: f64 = t46 * t143;
-        let t145: f64 = t17 / t53;
-        let t146: f64 = t144 * t145;
-        let t147: f64 = t139 + t146;
-        let t148: f64 = t130 * t131;
-        let t149: f64 = t34 * t148;
-        let t150: f64 = t149 * t145;
-        let t151: f64 = t147 - t150;
-        let t152: f64 = t151 - t135;
-        let t153: f64 = t47 * t152;
-        let t154: f64 = t15 * t153;
-        let t155: f64 = t154 * t43;
-        let t156: f64 = t47 * t130;
-        let t157: f64 = t34 * t156;
-        let t158: f64 = t8 * t28;
-        let t159: f64 = t17 / t158;
-        let t160: f64 = t157 * t159;
-        let t161: f64 = t155 + t160;
-        let t162: f64 = t47 * t141;
-        let t163: f64 = t46 * t162;
-        let t164: f64 = t163 * t159;
-        let t165: f64 = t161 - t164;
-        let t237: f64 = t152 * t174;
-        let t238: f64 = t15 * t237;
-        let t239: f64 = t238 * t43;
-        let t240: f64 = t130 * t174;
-        let t241: f64 = t34 * t240;
-        let t242: f64 = t241 * t159;
-        let t243: f64 = t141 * t174;
-        let t244: f64 = t46 * t243;
-        let t245: f64 = t244 * t159;
-        let t246: f64 = t242 - t245;
-        let t247: f64 = t246 - t239;
-        let t310: f64 = t132 * t136;
-        let t311: f64 = t310 * t134;
-        let t312: f64 = t149 * t134;
-        let t313: f64 = t311 + t312;
-        let t314: f64 = t34 * t143;
-        let t315: f64 = t314 * t145;
-        let t316: f64 = t313 - t315;
-        let t317: f64 = t133 * t145;
-        let t318: f64 = t316 - t317;
-        let t319: f64 = t47 * t318;
-        let t320: f64 = t15 * t319;
-        let t321: f64 = t320 * t43;
-        let t322: f64 = t48 * t130;
-        let t323: f64 = t322 * t159;
-        let t324: f64 = t321 + t323;
-        let t325: f64 = t34 * t162;
-        let t326: f64 = t325 * t159;
-        let t327: f64 = t324 + t326;
-        let t390: f64 = t174 * t318;
-        let t391: f64 = t15 * t390;
-        let t392: f64 = t391 * t43;
-        let t393: f64 = t130 * t175;
-        let t394: f64 = t393 * t159;
-        let t395: f64 = t34 * t243;
-        let t396: f64 = t395 * t159;
-        let t397: f64 = t394 + t396;
-        let t398: f64 = t397 - t392;
+        let t130: crate::Real = crate::math::sin(t28);
+        let t131: crate::Real = t10 * t33;
+        let t132: crate::Real = t46 * t131;
+        let t133: crate::Real = t130 * t132;
+        let t134: crate::Real = t17 / t28;
+        let t135: crate::Real = t133 * t134;
+        let t136: crate::Real = crate::math::cos(t28);
+        let t137: crate::Real = t34 * t131;
+        let t138: crate::Real = t136 * t137;
+        let t139: crate::Real = t138 * t134;
+        let t140: crate::Real = 1.0;
+        let t141: crate::Real = t140 - t136;
+        let t142: crate::Real = t10 * t141;
+        let t143: crate::Real = t33 * t142;
+        let t144: crate::Real = t46 * t143;
+        let t145: crate::Real = t17 / t53;
+        let t146: crate::Real = t144 * t145;
+        let t147: crate::Real = t139 + t146;
+        let t148: crate::Real = t130 * t131;
+        let t149: crate::Real = t34 * t148;
+        let t150: crate::Real = t149 * t145;
+        let t151: crate::Real = t147 - t150;
+        let t152: crate::Real = t151 - t135;
+        let t153: crate::Real = t47 * t152;
+        let t154: crate::Real = t15 * t153;
+        let t155: crate::Real = t154 * t43;
+        let t156: crate::Real = t47 * t130;
+        let t157: crate::Real = t34 * t156;
+        let t158: crate::Real = t8 * t28;
+        let t159: crate::Real = t17 / t158;
+        let t160: crate::Real = t157 * t159;
+        let t161: crate::Real = t155 + t160;
+        let t162: crate::Real = t47 * t141;
+        let t163: crate::Real = t46 * t162;
+        let t164: crate::Real = t163 * t159;
+        let t165: crate::Real = t161 - t164;
+        let t237: crate::Real = t152 * t174;
+        let t238: crate::Real = t15 * t237;
+        let t239: crate::Real = t238 * t43;
+        let t240: crate::Real = t130 * t174;
+        let t241: crate::Real = t34 * t240;
+        let t242: crate::Real = t241 * t159;
+        let t243: crate::Real = t141 * t174;
+        let t244: crate::Real = t46 * t243;
+        let t245: crate::Real = t244 * t159;
+        let t246: crate::Real = t242 - t245;
+        let t247: crate::Real = t246 - t239;
+        let t310: crate::Real = t132 * t136;
+        let t311: crate::Real = t310 * t134;
+        let t312: crate::Real = t149 * t134;
+        let t313: crate::Real = t311 + t312;
+        let t314: crate::Real = t34 * t143;
+        let t315: crate::Real = t314 * t145;
+        let t316: crate::Real = t313 - t315;
+        let t317: crate::Real = t133 * t145;
+        let t318: crate::Real = t316 - t317;
+        let t319: crate::Real = t47 * t318;
+        let t320: crate::Real = t15 * t319;
+        let t321: crate::Real = t320 * t43;
+        let t322: crate::Real = t48 * t130;
+        let t323: crate::Real = t322 * t159;
+        let t324: crate::Real = t321 + t323;
+        let t325: crate::Real = t34 * t162;
+        let t326: crate::Real = t325 * t159;
+        let t327: crate::Real = t324 + t326;
+        let t390: crate::Real = t174 * t318;
+        let t391: crate::Real = t15 * t390;
+        let t392: crate::Real = t391 * t43;
+        let t393: crate::Real = t130 * t175;
+        let t394: crate::Real = t393 * t159;
+        let t395: crate::Real = t34 * t243;
+        let t396: crate::Real = t395 * t159;
+        let t397: crate::Real = t394 + t396;
+        let t398: crate::Real = t397 - t392;
         [t165, t247, t327, t398]
     };
-    let t166: f64 = g0[0usize];
-    let t248: f64 = g0[1usize];
-    let t328: f64 = g0[2usize];
-    let t399: f64 = g0[3usize];
-    let t400: f64 = t15 * t47;
-    let t401: f64 = t400 * t43;
-    let t402: f64 = t15 * t174;
-    let t403: f64 = t402 * t43;
-    let t404: f64 = -t403;
+    let t166: crate::Real = g0[0usize];
+    let t248: crate::Real = g0[1usize];
+    let t328: crate::Real = g0[2usize];
+    let t399: crate::Real = g0[3usize];
+    let t400: crate::Real = t15 * t47;
+    let t401: crate::Real = t400 * t43;
+    let t402: crate::Real = t15 * t174;
+    let t403: crate::Real = t402 * t43;
+    let t404: crate::Real = -t403;
     [[t166, t248], [t328, t399], [t401, t404]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -1214,252 +1223,254 @@ pub fn step_exact_jac_u(
 203 arithmetic operations (3626 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = p[2usize];
-    let t8: f64 = p[3usize];
-    let t9: f64 = p[4usize];
-    let t10: f64 = dt;
-    let t11: f64 = 3.141592653589793f64;
-    let t12: f64 = t1 * t11;
-    let t13: f64 = t5 * t12;
-    let t14: f64 = t9 * t13;
-    let t15: f64 = 2f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = 1f64;
-    let t18: f64 = t17 / t8;
-    let t19: f64 = t16 * t18;
-    let t20: f64 = t2 * t11;
-    let t21: f64 = t6 * t20;
-    let t22: f64 = t9 * t21;
-    let t23: f64 = t15 * t22;
-    let t24: f64 = t23 * t18;
-    let t25: f64 = t19 - t24;
-    let t26: f64 = t25 / t7;
-    let t27: f64 = t4 + t26;
-    let t28: f64 = t10 * t27;
-    let t29: f64 = libm::sin(t0);
-    let t32: f64 = 0.5f64;
-    let t34: f64 = libm::cos(t0);
-    let t36: f64 = t28 * t28;
-    let t93: f64 = t19 + t24;
-    let t94: f64 = t32 * t93;
-    let t95: f64 = t3 + t94;
-    let t168: f64 = t10 * t29;
-    let g0: [f64; 4usize] = if libm::fabs(t28) < 0.05f64 {
-        let t30: f64 = t10 * t28;
-        let t31: f64 = t29 * t30;
-        let t33: f64 = t31 * t32;
-        let t35: f64 = t10 * t34;
-        let t37: f64 = t10 * t36;
-        let t38: f64 = t34 * t37;
-        let t39: f64 = 0.16666666666666666f64;
-        let t40: f64 = t38 * t39;
-        let t41: f64 = t35 - t40;
-        let t42: f64 = t28 * t36;
-        let t43: f64 = t10 * t42;
-        let t44: f64 = t29 * t43;
-        let t45: f64 = 0.041666666666666664f64;
-        let t46: f64 = t44 * t45;
-        let t47: f64 = t41 + t46;
-        let t48: f64 = t36 * t36;
-        let t49: f64 = t10 * t48;
-        let t50: f64 = t34 * t49;
-        let t51: f64 = 0.008333333333333333f64;
-        let t52: f64 = t50 * t51;
-        let t53: f64 = t47 + t52;
-        let t54: f64 = t28 * t48;
-        let t55: f64 = t10 * t54;
-        let t56: f64 = t29 * t55;
-        let t57: f64 = 0.001388888888888889f64;
-        let t58: f64 = t56 * t57;
-        let t59: f64 = t53 - t58;
-        let t60: f64 = t42 * t42;
-        let t61: f64 = t10 * t60;
-        let t62: f64 = t34 * t61;
-        let t63: f64 = 0.0001984126984126984f64;
-        let t64: f64 = t62 * t63;
-        let t65: f64 = t59 - t64;
-        let t66: f64 = t28 * t60;
-        let t67: f64 = t10 * t66;
-        let t68: f64 = t29 * t67;
-        let t69: f64 = 0.0000248015873015873f64;
-        let t70: f64 = t68 * t69;
-        let t71: f64 = t65 + t70;
-        let t72: f64 = t48 * t48;
-        let t73: f64 = t10 * t72;
-        let t74: f64 = t34 * t73;
-        let t75: f64 = 0.0000027557319223985893f64;
-        let t76: f64 = t74 * t75;
-        let t77: f64 = t71 + t76;
-        let t78: f64 = t77 - t33;
-        let t92: f64 = t10 * t10;
-        let t96: f64 = t28 * t92;
-        let t97: f64 = t95 * t96;
-        let t98: f64 = t34 * t97;
-        let t99: f64 = 0.3333333333333333f64;
-        let t100: f64 = t98 * t99;
-        let t101: f64 = t92 * t95;
-        let t102: f64 = t29 * t101;
-        let t103: f64 = t32 * t102;
-        let t104: f64 = t36 * t92;
-        let t105: f64 = t95 * t104;
-        let t106: f64 = t29 * t105;
-        let t107: f64 = 0.125f64;
-        let t108: f64 = t106 * t107;
-        let t109: f64 = t42 * t92;
-        let t110: f64 = t95 * t109;
-        let t111: f64 = t34 * t110;
-        let t112: f64 = 0.03333333333333333f64;
-        let t113: f64 = t111 * t112;
-        let t114: f64 = t108 + t113;
-        let t115: f64 = t48 * t92;
-        let t116: f64 = t95 * t115;
-        let t117: f64 = t29 * t116;
-        let t118: f64 = 0.006944444444444444f64;
-        let t119: f64 = t117 * t118;
-        let t120: f64 = t114 - t119;
-        let t121: f64 = t54 * t92;
-        let t122: f64 = t95 * t121;
-        let t123: f64 = t34 * t122;
-        let t124: f64 = 0.0011904761904761906f64;
-        let t125: f64 = t123 * t124;
-        let t126: f64 = t120 - t125;
-        let t127: f64 = t60 * t92;
-        let t128: f64 = t95 * t127;
-        let t129: f64 = t29 * t128;
-        let t130: f64 = 0.00017361111111111112f64;
-        let t131: f64 = t129 * t130;
-        let t132: f64 = t126 + t131;
-        let t133: f64 = t66 * t92;
-        let t134: f64 = t95 * t133;
-        let t135: f64 = t34 * t134;
-        let t136: f64 = 0.000022045855379188714f64;
-        let t137: f64 = t135 * t136;
-        let t138: f64 = t132 + t137;
-        let t139: f64 = t72 * t92;
-        let t140: f64 = t95 * t139;
-        let t141: f64 = t29 * t140;
-        let t142: f64 = 0.00000248015873015873f64;
-        let t143: f64 = t141 * t142;
-        let t144: f64 = t138 - t143;
-        let t145: f64 = t144 - t100;
-        let t146: f64 = t145 - t103;
-        let t166: f64 = t30 * t34;
-        let t167: f64 = t32 * t166;
-        let t169: f64 = t167 + t168;
-        let t170: f64 = t29 * t37;
-        let t171: f64 = t39 * t170;
-        let t172: f64 = t169 - t171;
-        let t173: f64 = t34 * t43;
-        let t174: f64 = t45 * t173;
-        let t175: f64 = t172 - t174;
-        let t176: f64 = t29 * t49;
-        let t177: f64 = t51 * t176;
-        let t178: f64 = t175 + t177;
-        let t179: f64 = t34 * t55;
-        let t180: f64 = t57 * t179;
-        let t181: f64 = t178 + t180;
-        let t182: f64 = t29 * t61;
-        let t183: f64 = t63 * t182;
-        let t184: f64 = t181 - t183;
-        let t185: f64 = t34 * t67;
-        let t186: f64 = t69 * t185;
-        let t187: f64 = t184 - t186;
-        let t188: f64 = t29 * t73;
-        let t189: f64 = t75 * t188;
-        let t190: f64 = t187 + t189;
-        let t197: f64 = t29 * t97;
-        let t198: f64 = t99 * t197;
-        let t199: f64 = t34 * t101;
-        let t200: f64 = t32 * t199;
-        let t201: f64 = t34 * t105;
-        let t202: f64 = t107 * t201;
-        let t203: f64 = t200 - t202;
-        let t204: f64 = t29 * t110;
-        let t205: f64 = t112 * t204;
-        let t206: f64 = t203 + t205;
-        let t207: f64 = t34 * t116;
-        let t208: f64 = t118 * t207;
-        let t209: f64 = t206 + t208;
-        let t210: f64 = t29 * t122;
-        let t211: f64 = t124 * t210;
-        let t212: f64 = t209 - t211;
-        let t213: f64 = t34 * t128;
-        let t214: f64 = t130 * t213;
-        let t215: f64 = t212 - t214;
-        let t216: f64 = t29 * t134;
-        let t217: f64 = t136 * t216;
-        let t218: f64 = t215 + t217;
-        let t219: f64 = t34 * t140;
-        let t220: f64 = t142 * t219;
-        let t221: f64 = t218 + t220;
-        let t222: f64 = t221 - t198;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = p[2usize];
+    let t8: crate::Real = p[3usize];
+    let t9: crate::Real = p[4usize];
+    let t10: crate::Real = dt;
+    let t11: crate::Real = 3.141592653589793;
+    let t12: crate::Real = t1 * t11;
+    let t13: crate::Real = t5 * t12;
+    let t14: crate::Real = t9 * t13;
+    let t15: crate::Real = 2.0;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t17 / t8;
+    let t19: crate::Real = t16 * t18;
+    let t20: crate::Real = t2 * t11;
+    let t21: crate::Real = t6 * t20;
+    let t22: crate::Real = t9 * t21;
+    let t23: crate::Real = t15 * t22;
+    let t24: crate::Real = t23 * t18;
+    let t25: crate::Real = t19 - t24;
+    let t26: crate::Real = t25 / t7;
+    let t27: crate::Real = t4 + t26;
+    let t28: crate::Real = t10 * t27;
+    let t29: crate::Real = crate::math::sin(t0);
+    let t32: crate::Real = 0.5;
+    let t34: crate::Real = crate::math::cos(t0);
+    let t36: crate::Real = t28 * t28;
+    let t93: crate::Real = t19 + t24;
+    let t94: crate::Real = t32 * t93;
+    let t95: crate::Real = t3 + t94;
+    let t168: crate::Real = t10 * t29;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t28)
+        < crate::math::series_switch(0.05)
+    {
+        let t30: crate::Real = t10 * t28;
+        let t31: crate::Real = t29 * t30;
+        let t33: crate::Real = t31 * t32;
+        let t35: crate::Real = t10 * t34;
+        let t37: crate::Real = t10 * t36;
+        let t38: crate::Real = t34 * t37;
+        let t39: crate::Real = 0.16666666666666666;
+        let t40: crate::Real = t38 * t39;
+        let t41: crate::Real = t35 - t40;
+        let t42: crate::Real = t28 * t36;
+        let t43: crate::Real = t10 * t42;
+        let t44: crate::Real = t29 * t43;
+        let t45: crate::Real = 0.041666666666666664;
+        let t46: crate::Real = t44 * t45;
+        let t47: crate::Real = t41 + t46;
+        let t48: crate::Real = t36 * t36;
+        let t49: crate::Real = t10 * t48;
+        let t50: crate::Real = t34 * t49;
+        let t51: crate::Real = 0.008333333333333333;
+        let t52: crate::Real = t50 * t51;
+        let t53: crate::Real = t47 + t52;
+        let t54: crate::Real = t28 * t48;
+        let t55: crate::Real = t10 * t54;
+        let t56: crate::Real = t29 * t55;
+        let t57: crate::Real = 0.001388888888888889;
+        let t58: crate::Real = t56 * t57;
+        let t59: crate::Real = t53 - t58;
+        let t60: crate::Real = t42 * t42;
+        let t61: crate::Real = t10 * t60;
+        let t62: crate::Real = t34 * t61;
+        let t63: crate::Real = 0.0001984126984126984;
+        let t64: crate::Real = t62 * t63;
+        let t65: crate::Real = t59 - t64;
+        let t66: crate::Real = t28 * t60;
+        let t67: crate::Real = t10 * t66;
+        let t68: crate::Real = t29 * t67;
+        let t69: crate::Real = 0.0000248015873015873;
+        let t70: crate::Real = t68 * t69;
+        let t71: crate::Real = t65 + t70;
+        let t72: crate::Real = t48 * t48;
+        let t73: crate::Real = t10 * t72;
+        let t74: crate::Real = t34 * t73;
+        let t75: crate::Real = 0.0000027557319223985893;
+        let t76: crate::Real = t74 * t75;
+        let t77: crate::Real = t71 + t76;
+        let t78: crate::Real = t77 - t33;
+        let t92: crate::Real = t10 * t10;
+        let t96: crate::Real = t28 * t92;
+        let t97: crate::Real = t95 * t96;
+        let t98: crate::Real = t34 * t97;
+        let t99: crate::Real = 0.3333333333333333;
+        let t100: crate::Real = t98 * t99;
+        let t101: crate::Real = t92 * t95;
+        let t102: crate::Real = t29 * t101;
+        let t103: crate::Real = t32 * t102;
+        let t104: crate::Real = t36 * t92;
+        let t105: crate::Real = t95 * t104;
+        let t106: crate::Real = t29 * t105;
+        let t107: crate::Real = 0.125;
+        let t108: crate::Real = t106 * t107;
+        let t109: crate::Real = t42 * t92;
+        let t110: crate::Real = t95 * t109;
+        let t111: crate::Real = t34 * t110;
+        let t112: crate::Real = 0.03333333333333333;
+        let t113: crate::Real = t111 * t112;
+        let t114: crate::Real = t108 + t113;
+        let t115: crate::Real = t48 * t92;
+        let t116: crate::Real = t95 * t115;
+        let t117: crate::Real = t29 * t116;
+        let t118: crate::Real = 0.006944444444444444;
+        let t119: crate::Real = t117 * t118;
+        let t120: crate::Real = t114 - t119;
+        let t121: crate::Real = t54 * t92;
+        let t122: crate::Real = t95 * t121;
+        let t123: crate::Real = t34 * t122;
+        let t124: crate::Real = 0.0011904761904761906;
+        let t125: crate::Real = t123 * t124;
+        let t126: crate::Real = t120 - t125;
+        let t127: crate::Real = t60 * t92;
+        let t128: crate::Real = t95 * t127;
+        let t129: crate::Real = t29 * t128;
+        let t130: crate::Real = 0.00017361111111111112;
+        let t131: crate::Real = t129 * t130;
+        let t132: crate::Real = t126 + t131;
+        let t133: crate::Real = t66 * t92;
+        let t134: crate::Real = t95 * t133;
+        let t135: crate::Real = t34 * t134;
+        let t136: crate::Real = 0.000022045855379188714;
+        let t137: crate::Real = t135 * t136;
+        let t138: crate::Real = t132 + t137;
+        let t139: crate::Real = t72 * t92;
+        let t140: crate::Real = t95 * t139;
+        let t141: crate::Real = t29 * t140;
+        let t142: crate::Real = 0.00000248015873015873;
+        let t143: crate::Real = t141 * t142;
+        let t144: crate::Real = t138 - t143;
+        let t145: crate::Real = t144 - t100;
+        let t146: crate::Real = t145 - t103;
+        let t166: crate::Real = t30 * t34;
+        let t167: crate::Real = t32 * t166;
+        let t169: crate::Real = t167 + t168;
+        let t170: crate::Real = t29 * t37;
+        let t171: crate::Real = t39 * t170;
+        let t172: crate::Real = t169 - t171;
+        let t173: crate::Real = t34 * t43;
+        let t174: crate::Real = t45 * t173;
+        let t175: crate::Real = t172 - t174;
+        let t176: crate::Real = t29 * t49;
+        let t177: crate::Real = t51 * t176;
+        let t178: crate::Real = t175 + t177;
+        let t179: crate::Real = t34 * t55;
+        let t180: crate::Real = t57 * t179;
+        let t181: crate::Real = t178 + t180;
+        let t182: crate::Real = t29 * t61;
+        let t183: crate::Real = t63 * t182;
+        let t184: crate::Real = t181 - t183;
+        let t185: crate::Real = t34 * t67;
+        let t186: crate::Real = t69 * t185;
+        let t187: crate::Real = t184 - t186;
+        let t188: crate::Real = t29 * t73;
+        let t189: crate::Real = t75 * t188;
+        let t190: crate::Real = t187 + t189;
+        let t197: crate::Real = t29 * t97;
+        let t198: crate::Real = t99 * t197;
+        let t199: crate::Real = t34 * t101;
+        let t200: crate::Real = t32 * t199;
+        let t201: crate::Real = t34 * t105;
+        let t202: crate::Real = t107 * t201;
+        let t203: crate::Real = t200 - t202;
+        let t204: crate::Real = t29 * t110;
+        let t205: crate::Real = t112 * t204;
+        let t206: crate::Real = t203 + t205;
+        let t207: crate::Real = t34 * t116;
+        let t208: crate::Real = t118 * t207;
+        let t209: crate::Real = t206 + t208;
+        let t210: crate::Real = t29 * t122;
+        let t211: crate::Real = t124 * t210;
+        let t212: crate::Real = t209 - t211;
+        let t213: crate::Real = t34 * t128;
+        let t214: crate::Real = t130 * t213;
+        let t215: crate::Real = t212 - t214;
+        let t216: crate::Real = t29 * t134;
+        let t217: crate::Real = t136 * t216;
+        let t218: crate::Real = t215 + t217;
+        let t219: crate::Real = t34 * t140;
+        let t220: crate::Real = t142 * t219;
+        let t221: crate::Real = t218 + t220;
+        let t222: crate::Real = t221 - t198;
         [t78, t146, t190, t222]
     } else {
-        let t79: f64 = libm::sin(t28);
-        let t80: f64 = t10 * t79;
-        let t81: f64 = t34 * t80;
-        let t82: f64 = t17 / t28;
-        let t83: f64 = t81 * t82;
-        let t84: f64 = 1f64;
-        let t85: f64 = libm::cos(t28);
-        let t86: f64 = t84 - t85;
-        let t87: f64 = t10 * t86;
-        let t88: f64 = t29 * t87;
-        let t89: f64 = t88 * t82;
-        let t90: f64 = t83 - t89;
-        let t147: f64 = t10 * t95;
-        let t148: f64 = t29 * t147;
-        let t149: f64 = t79 * t148;
-        let t150: f64 = t149 * t82;
-        let t151: f64 = t34 * t147;
-        let t152: f64 = t85 * t151;
-        let t153: f64 = t152 * t82;
-        let t154: f64 = t87 * t95;
-        let t155: f64 = t29 * t154;
-        let t156: f64 = t17 / t36;
-        let t157: f64 = t155 * t156;
-        let t158: f64 = t153 + t157;
-        let t159: f64 = t79 * t147;
-        let t160: f64 = t34 * t159;
-        let t161: f64 = t160 * t156;
-        let t162: f64 = t158 - t161;
-        let t163: f64 = t162 - t150;
-        let t164: f64 = t10 * t163;
-        let t191: f64 = t79 * t168;
-        let t192: f64 = t191 * t82;
-        let t193: f64 = t34 * t87;
-        let t194: f64 = t193 * t82;
-        let t195: f64 = t192 + t194;
-        let t223: f64 = t85 * t148;
-        let t224: f64 = t223 * t82;
-        let t225: f64 = t160 * t82;
-        let t226: f64 = t224 + t225;
-        let t227: f64 = t34 * t154;
-        let t228: f64 = t227 * t156;
-        let t229: f64 = t226 - t228;
-        let t230: f64 = t149 * t156;
-        let t231: f64 = t229 - t230;
-        let t232: f64 = t10 * t231;
+        let t79: crate::Real = crate::math::sin(t28);
+        let t80: crate::Real = t10 * t79;
+        let t81: crate::Real = t34 * t80;
+        let t82: crate::Real = t17 / t28;
+        let t83: crate::Real = t81 * t82;
+        let t84: crate::Real = 1.0;
+        let t85: crate::Real = crate::math::cos(t28);
+        let t86: crate::Real = t84 - t85;
+        let t87: crate::Real = t10 * t86;
+        let t88: crate::Real = t29 * t87;
+        let t89: crate::Real = t88 * t82;
+        let t90: crate::Real = t83 - t89;
+        let t147: crate::Real = t10 * t95;
+        let t148: crate::Real = t29 * t147;
+        let t149: crate::Real = t79 * t148;
+        let t150: crate::Real = t149 * t82;
+        let t151: crate::Real = t34 * t147;
+        let t152: crate::Real = t85 * t151;
+        let t153: crate::Real = t152 * t82;
+        let t154: crate::Real = t87 * t95;
+        let t155: crate::Real = t29 * t154;
+        let t156: crate::Real = t17 / t36;
+        let t157: crate::Real = t155 * t156;
+        let t158: crate::Real = t153 + t157;
+        let t159: crate::Real = t79 * t147;
+        let t160: crate::Real = t34 * t159;
+        let t161: crate::Real = t160 * t156;
+        let t162: crate::Real = t158 - t161;
+        let t163: crate::Real = t162 - t150;
+        let t164: crate::Real = t10 * t163;
+        let t191: crate::Real = t79 * t168;
+        let t192: crate::Real = t191 * t82;
+        let t193: crate::Real = t34 * t87;
+        let t194: crate::Real = t193 * t82;
+        let t195: crate::Real = t192 + t194;
+        let t223: crate::Real = t85 * t148;
+        let t224: crate::Real = t223 * t82;
+        let t225: crate::Real = t160 * t82;
+        let t226: crate::Real = t224 + t225;
+        let t227: crate::Real = t34 * t154;
+        let t228: crate::Real = t227 * t156;
+        let t229: crate::Real = t226 - t228;
+        let t230: crate::Real = t149 * t156;
+        let t231: crate::Real = t229 - t230;
+        let t232: crate::Real = t10 * t231;
         [t90, t164, t195, t232]
     };
-    let t91: f64 = g0[0usize];
-    let t165: f64 = g0[1usize];
-    let t196: f64 = g0[2usize];
-    let t233: f64 = g0[3usize];
-    let t234: f64 = 0f64;
+    let t91: crate::Real = g0[0usize];
+    let t165: crate::Real = g0[1usize];
+    let t196: crate::Real = g0[2usize];
+    let t233: crate::Real = g0[3usize];
+    let t234: crate::Real = 0.0;
     [[t91, t165], [t196, t233], [t234, t10]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
@@ -1474,838 +1485,840 @@ pub fn step_exact_jac_w(
 775 arithmetic operations (14299 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [[f64; 5usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = p[2usize];
-    let t8: f64 = p[3usize];
-    let t9: f64 = p[4usize];
-    let t10: f64 = dt;
-    let t11: f64 = 3.141592653589793f64;
-    let t12: f64 = t1 * t11;
-    let t13: f64 = t5 * t12;
-    let t14: f64 = t9 * t13;
-    let t15: f64 = 2f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = 1f64;
-    let t18: f64 = t17 / t8;
-    let t19: f64 = t16 * t18;
-    let t20: f64 = t2 * t11;
-    let t21: f64 = t6 * t20;
-    let t22: f64 = t9 * t21;
-    let t23: f64 = t15 * t22;
-    let t24: f64 = t23 * t18;
-    let t25: f64 = t19 - t24;
-    let t26: f64 = t17 / t7;
-    let t27: f64 = t25 * t26;
-    let t28: f64 = t4 + t27;
-    let t29: f64 = t10 * t28;
-    let t31: f64 = t19 + t24;
-    let t32: f64 = 0.5f64;
-    let t33: f64 = t31 * t32;
-    let t34: f64 = t3 + t33;
-    let t35: f64 = libm::cos(t0);
-    let t36: f64 = t9 * t12;
-    let t42: f64 = t7 * t8;
-    let t43: f64 = t17 / t42;
-    let t46: f64 = libm::sin(t0);
-    let t47: f64 = t10 * t36;
-    let t48: f64 = t46 * t47;
-    let t53: f64 = t29 * t29;
-    let t167: f64 = t9 * t20;
-    let t173: f64 = t10 * t167;
-    let t174: f64 = t46 * t173;
-    let t248: f64 = t7 * t7;
-    let t255: f64 = t17 / t248;
-    let t319: f64 = t10 * t25;
-    let t324: f64 = t8 * t8;
-    let t325: f64 = t17 / t324;
-    let t326: f64 = t16 * t325;
-    let t327: f64 = -t326;
-    let t328: f64 = t23 * t325;
-    let t329: f64 = t327 - t328;
-    let t330: f64 = t10 * t329;
-    let t333: f64 = t46 * t330;
-    let t336: f64 = t328 - t326;
-    let t406: f64 = t10 * t336;
-    let t412: f64 = t13 * t15;
-    let t413: f64 = t412 * t18;
-    let t414: f64 = t15 * t21;
-    let t415: f64 = t414 * t18;
-    let t416: f64 = t413 + t415;
-    let t417: f64 = t10 * t416;
-    let t420: f64 = t46 * t417;
-    let t423: f64 = t413 - t415;
-    let t486: f64 = t10 * t423;
-    let g0: [f64; 10usize] = if libm::fabs(t29) < 0.05f64 {
-        let t30: f64 = t10 * t10;
-        let t37: f64 = t30 * t36;
-        let t38: f64 = t34 * t37;
-        let t39: f64 = t35 * t38;
-        let t40: f64 = 0.6666666666666666f64;
-        let t41: f64 = t39 * t40;
-        let t44: f64 = t41 * t43;
-        let t45: f64 = -t44;
-        let t49: f64 = t32 * t48;
-        let t50: f64 = t49 * t18;
-        let t51: f64 = t45 - t50;
-        let t52: f64 = t29 * t51;
-        let t54: f64 = t38 * t46;
-        let t55: f64 = 0.25f64;
-        let t56: f64 = t54 * t55;
-        let t57: f64 = t56 * t43;
-        let t58: f64 = t35 * t47;
-        let t59: f64 = 0.16666666666666666f64;
-        let t60: f64 = t58 * t59;
-        let t61: f64 = t60 * t18;
-        let t62: f64 = t57 - t61;
-        let t63: f64 = t53 * t62;
-        let t64: f64 = t52 + t63;
-        let t65: f64 = t29 * t53;
-        let t66: f64 = 0.06666666666666667f64;
-        let t67: f64 = t39 * t66;
-        let t68: f64 = t67 * t43;
-        let t69: f64 = 0.041666666666666664f64;
-        let t70: f64 = t48 * t69;
-        let t71: f64 = t70 * t18;
-        let t72: f64 = t68 + t71;
-        let t73: f64 = t65 * t72;
-        let t74: f64 = t64 + t73;
-        let t75: f64 = t53 * t53;
-        let t76: f64 = 0.013888888888888888f64;
-        let t77: f64 = t54 * t76;
-        let t78: f64 = t77 * t43;
-        let t79: f64 = 0.008333333333333333f64;
-        let t80: f64 = t58 * t79;
-        let t81: f64 = t80 * t18;
-        let t82: f64 = t81 - t78;
-        let t83: f64 = t75 * t82;
-        let t84: f64 = t74 + t83;
-        let t85: f64 = t29 * t75;
-        let t86: f64 = 0.002380952380952381f64;
-        let t87: f64 = t39 * t86;
-        let t88: f64 = t87 * t43;
-        let t89: f64 = -t88;
-        let t90: f64 = 0.001388888888888889f64;
-        let t91: f64 = t48 * t90;
-        let t92: f64 = t91 * t18;
-        let t93: f64 = t89 - t92;
-        let t94: f64 = t85 * t93;
-        let t95: f64 = t84 + t94;
-        let t96: f64 = t65 * t65;
-        let t97: f64 = 0.00034722222222222224f64;
-        let t98: f64 = t54 * t97;
-        let t99: f64 = t98 * t43;
-        let t100: f64 = 0.0001984126984126984f64;
-        let t101: f64 = t58 * t100;
-        let t102: f64 = t101 * t18;
-        let t103: f64 = t99 - t102;
-        let t104: f64 = t96 * t103;
-        let t105: f64 = t95 + t104;
-        let t106: f64 = t29 * t96;
-        let t107: f64 = 0.00004409171075837743f64;
-        let t108: f64 = t39 * t107;
-        let t109: f64 = t108 * t43;
-        let t110: f64 = 0.0000248015873015873f64;
-        let t111: f64 = t48 * t110;
-        let t112: f64 = t111 * t18;
-        let t113: f64 = t109 + t112;
-        let t114: f64 = t106 * t113;
-        let t115: f64 = t105 + t114;
-        let t116: f64 = t75 * t75;
-        let t117: f64 = 0.00000496031746031746f64;
-        let t118: f64 = t54 * t117;
-        let t119: f64 = t118 * t43;
-        let t120: f64 = 0.0000027557319223985893f64;
-        let t121: f64 = t58 * t120;
-        let t122: f64 = t121 * t18;
-        let t123: f64 = t122 - t119;
-        let t124: f64 = t116 * t123;
-        let t125: f64 = t115 + t124;
-        let t126: f64 = t54 * t43;
-        let t127: f64 = t125 - t126;
-        let t128: f64 = t58 * t18;
-        let t129: f64 = t127 + t128;
-        let t168: f64 = t30 * t167;
-        let t169: f64 = t34 * t168;
-        let t170: f64 = t35 * t169;
-        let t171: f64 = t40 * t170;
-        let t172: f64 = t171 * t43;
-        let t175: f64 = t32 * t174;
-        let t176: f64 = t175 * t18;
-        let t177: f64 = t172 - t176;
-        let t178: f64 = t29 * t177;
-        let t179: f64 = t46 * t169;
-        let t180: f64 = t55 * t179;
-        let t181: f64 = t180 * t43;
-        let t182: f64 = -t181;
-        let t183: f64 = t35 * t173;
-        let t184: f64 = t59 * t183;
-        let t185: f64 = t184 * t18;
-        let t186: f64 = t182 - t185;
-        let t187: f64 = t53 * t186;
-        let t188: f64 = t178 + t187;
-        let t189: f64 = t66 * t170;
-        let t190: f64 = t189 * t43;
-        let t191: f64 = t69 * t174;
-        let t192: f64 = t191 * t18;
-        let t193: f64 = t192 - t190;
-        let t194: f64 = t65 * t193;
-        let t195: f64 = t188 + t194;
-        let t196: f64 = t76 * t179;
-        let t197: f64 = t196 * t43;
-        let t198: f64 = t79 * t183;
-        let t199: f64 = t198 * t18;
-        let t200: f64 = t197 + t199;
-        let t201: f64 = t75 * t200;
-        let t202: f64 = t195 + t201;
-        let t203: f64 = t86 * t170;
-        let t204: f64 = t203 * t43;
-        let t205: f64 = t90 * t174;
-        let t206: f64 = t205 * t18;
-        let t207: f64 = t204 - t206;
-        let t208: f64 = t85 * t207;
-        let t209: f64 = t202 + t208;
-        let t210: f64 = t97 * t179;
-        let t211: f64 = t210 * t43;
-        let t212: f64 = -t211;
-        let t213: f64 = t100 * t183;
-        let t214: f64 = t213 * t18;
-        let t215: f64 = t212 - t214;
-        let t216: f64 = t96 * t215;
-        let t217: f64 = t209 + t216;
-        let t218: f64 = t107 * t170;
-        let t219: f64 = t218 * t43;
-        let t220: f64 = t110 * t174;
-        let t221: f64 = t220 * t18;
-        let t222: f64 = t221 - t219;
-        let t223: f64 = t106 * t222;
-        let t224: f64 = t217 + t223;
-        let t225: f64 = t117 * t179;
-        let t226: f64 = t225 * t43;
-        let t227: f64 = t120 * t183;
-        let t228: f64 = t227 * t18;
-        let t229: f64 = t226 + t228;
-        let t230: f64 = t116 * t229;
-        let t231: f64 = t224 + t230;
-        let t232: f64 = t179 * t43;
-        let t233: f64 = t231 + t232;
-        let t234: f64 = t183 * t18;
-        let t235: f64 = t233 + t234;
-        let t249: f64 = t29 * t30;
-        let t250: f64 = t34 * t249;
-        let t251: f64 = t25 * t250;
-        let t252: f64 = t35 * t251;
-        let t253: f64 = 0.3333333333333333f64;
-        let t254: f64 = t252 * t253;
-        let t256: f64 = t254 * t255;
-        let t257: f64 = t30 * t34;
-        let t258: f64 = t25 * t257;
-        let t259: f64 = t46 * t258;
-        let t260: f64 = t32 * t259;
-        let t261: f64 = t260 * t255;
-        let t262: f64 = t256 + t261;
-        let t263: f64 = t30 * t53;
-        let t264: f64 = t34 * t263;
-        let t265: f64 = t25 * t264;
-        let t266: f64 = t46 * t265;
-        let t267: f64 = 0.125f64;
-        let t268: f64 = t266 * t267;
-        let t269: f64 = t268 * t255;
-        let t270: f64 = t262 - t269;
-        let t271: f64 = t30 * t65;
-        let t272: f64 = t34 * t271;
-        let t273: f64 = t25 * t272;
-        let t274: f64 = t35 * t273;
-        let t275: f64 = 0.03333333333333333f64;
-        let t276: f64 = t274 * t275;
-        let t277: f64 = t276 * t255;
-        let t278: f64 = t270 - t277;
-        let t279: f64 = t30 * t75;
-        let t280: f64 = t34 * t279;
-        let t281: f64 = t25 * t280;
-        let t282: f64 = t46 * t281;
-        let t283: f64 = 0.006944444444444444f64;
-        let t284: f64 = t282 * t283;
-        let t285: f64 = t284 * t255;
-        let t286: f64 = t278 + t285;
-        let t287: f64 = t30 * t85;
-        let t288: f64 = t34 * t287;
-        let t289: f64 = t25 * t288;
-        let t290: f64 = t35 * t289;
-        let t291: f64 = 0.0011904761904761906f64;
-        let t292: f64 = t290 * t291;
-        let t293: f64 = t292 * t255;
-        let t294: f64 = t286 + t293;
-        let t295: f64 = t30 * t96;
-        let t296: f64 = t34 * t295;
-        let t297: f64 = t25 * t296;
-        let t298: f64 = t46 * t297;
-        let t299: f64 = 0.00017361111111111112f64;
-        let t300: f64 = t298 * t299;
-        let t301: f64 = t300 * t255;
-        let t302: f64 = t294 - t301;
-        let t303: f64 = t30 * t106;
-        let t304: f64 = t34 * t303;
-        let t305: f64 = t25 * t304;
-        let t306: f64 = t35 * t305;
-        let t307: f64 = 0.000022045855379188714f64;
-        let t308: f64 = t306 * t307;
-        let t309: f64 = t308 * t255;
-        let t310: f64 = t302 - t309;
-        let t311: f64 = t30 * t116;
-        let t312: f64 = t34 * t311;
-        let t313: f64 = t25 * t312;
-        let t314: f64 = t46 * t313;
-        let t315: f64 = 0.00000248015873015873f64;
-        let t316: f64 = t314 * t315;
-        let t317: f64 = t316 * t255;
-        let t318: f64 = t310 + t317;
-        let t331: f64 = t35 * t330;
-        let t332: f64 = t32 * t331;
-        let t334: f64 = t55 * t333;
-        let t335: f64 = -t334;
-        let t337: f64 = t257 * t336;
-        let t338: f64 = t35 * t337;
-        let t339: f64 = t253 * t338;
-        let t340: f64 = t339 * t26;
-        let t341: f64 = t335 - t340;
-        let t342: f64 = t29 * t341;
-        let t343: f64 = t332 + t342;
-        let t344: f64 = t46 * t337;
-        let t345: f64 = t32 * t344;
-        let t346: f64 = t345 * t26;
-        let t347: f64 = t343 - t346;
-        let t348: f64 = 0.08333333333333333f64;
-        let t349: f64 = t331 * t348;
-        let t350: f64 = t267 * t344;
-        let t351: f64 = t350 * t26;
-        let t352: f64 = t351 - t349;
-        let t353: f64 = t53 * t352;
-        let t354: f64 = t347 + t353;
-        let t355: f64 = 0.020833333333333332f64;
-        let t356: f64 = t333 * t355;
-        let t357: f64 = t275 * t338;
-        let t358: f64 = t357 * t26;
-        let t359: f64 = t356 + t358;
-        let t360: f64 = t65 * t359;
-        let t361: f64 = t354 + t360;
-        let t362: f64 = 0.004166666666666667f64;
-        let t363: f64 = t331 * t362;
-        let t364: f64 = t283 * t344;
-        let t365: f64 = t364 * t26;
-        let t366: f64 = t363 - t365;
-        let t367: f64 = t75 * t366;
-        let t368: f64 = t361 + t367;
-        let t369: f64 = 0.0006944444444444445f64;
-        let t370: f64 = t333 * t369;
-        let t371: f64 = -t370;
-        let t372: f64 = t291 * t338;
-        let t373: f64 = t372 * t26;
-        let t374: f64 = t371 - t373;
-        let t375: f64 = t85 * t374;
-        let t376: f64 = t368 + t375;
-        let t377: f64 = 0.0000992063492063492f64;
-        let t378: f64 = t331 * t377;
-        let t379: f64 = t299 * t344;
-        let t380: f64 = t379 * t26;
-        let t381: f64 = t380 - t378;
-        let t382: f64 = t96 * t381;
-        let t383: f64 = t376 + t382;
-        let t384: f64 = 0.00001240079365079365f64;
-        let t385: f64 = t333 * t384;
-        let t386: f64 = t307 * t338;
-        let t387: f64 = t386 * t26;
-        let t388: f64 = t385 + t387;
-        let t389: f64 = t106 * t388;
-        let t390: f64 = t383 + t389;
-        let t391: f64 = 0.0000013778659611992946f64;
-        let t392: f64 = t331 * t391;
-        let t393: f64 = t315 * t344;
-        let t394: f64 = t393 * t26;
-        let t395: f64 = t392 - t394;
-        let t396: f64 = t116 * t395;
-        let t397: f64 = t390 + t396;
-        let t418: f64 = t35 * t417;
-        let t419: f64 = t32 * t418;
-        let t421: f64 = t55 * t420;
-        let t422: f64 = -t421;
-        let t424: f64 = t257 * t423;
-        let t425: f64 = t35 * t424;
-        let t426: f64 = t253 * t425;
-        let t427: f64 = t426 * t26;
-        let t428: f64 = t422 - t427;
-        let t429: f64 = t29 * t428;
-        let t430: f64 = t419 + t429;
-        let t431: f64 = t46 * t424;
-        let t432: f64 = t32 * t431;
-        let t433: f64 = t432 * t26;
-        let t434: f64 = t430 - t433;
-        let t435: f64 = t348 * t418;
-        let t436: f64 = t267 * t431;
-        let t437: f64 = t436 * t26;
-        let t438: f64 = t437 - t435;
-        let t439: f64 = t53 * t438;
-        let t440: f64 = t434 + t439;
-        let t441: f64 = t355 * t420;
-        let t442: f64 = t275 * t425;
-        let t443: f64 = t442 * t26;
-        let t444: f64 = t441 + t443;
-        let t445: f64 = t65 * t444;
-        let t446: f64 = t440 + t445;
-        let t447: f64 = t362 * t418;
-        let t448: f64 = t283 * t431;
-        let t449: f64 = t448 * t26;
-        let t450: f64 = t447 - t449;
-        let t451: f64 = t75 * t450;
-        let t452: f64 = t446 + t451;
-        let t453: f64 = t369 * t420;
-        let t454: f64 = -t453;
-        let t455: f64 = t291 * t425;
-        let t456: f64 = t455 * t26;
-        let t457: f64 = t454 - t456;
-        let t458: f64 = t85 * t457;
-        let t459: f64 = t452 + t458;
-        let t460: f64 = t377 * t418;
-        let t461: f64 = t299 * t431;
-        let t462: f64 = t461 * t26;
-        let t463: f64 = t462 - t460;
-        let t464: f64 = t96 * t463;
-        let t465: f64 = t459 + t464;
-        let t466: f64 = t384 * t420;
-        let t467: f64 = t307 * t425;
-        let t468: f64 = t467 * t26;
-        let t469: f64 = t466 + t468;
-        let t470: f64 = t106 * t469;
-        let t471: f64 = t465 + t470;
-        let t472: f64 = t391 * t418;
-        let t473: f64 = t315 * t431;
-        let t474: f64 = t473 * t26;
-        let t475: f64 = t472 - t474;
-        let t476: f64 = t116 * t475;
-        let t477: f64 = t471 + t476;
-        let t492: f64 = t40 * t54;
-        let t493: f64 = t492 * t43;
-        let t494: f64 = t32 * t58;
-        let t495: f64 = t494 * t18;
-        let t496: f64 = t495 - t493;
-        let t497: f64 = t29 * t496;
-        let t498: f64 = t39 * t55;
-        let t499: f64 = t498 * t43;
-        let t500: f64 = -t499;
-        let t501: f64 = t48 * t59;
-        let t502: f64 = t501 * t18;
-        let t503: f64 = t500 - t502;
-        let t504: f64 = t53 * t503;
-        let t505: f64 = t497 + t504;
-        let t506: f64 = t54 * t66;
-        let t507: f64 = t506 * t43;
-        let t508: f64 = t58 * t69;
-        let t509: f64 = t508 * t18;
-        let t510: f64 = t507 - t509;
-        let t511: f64 = t65 * t510;
-        let t512: f64 = t505 + t511;
-        let t513: f64 = t39 * t76;
-        let t514: f64 = t513 * t43;
-        let t515: f64 = t48 * t79;
-        let t516: f64 = t515 * t18;
-        let t517: f64 = t514 + t516;
-        let t518: f64 = t75 * t517;
-        let t519: f64 = t512 + t518;
-        let t520: f64 = t54 * t86;
-        let t521: f64 = t520 * t43;
-        let t522: f64 = t58 * t90;
-        let t523: f64 = t522 * t18;
-        let t524: f64 = t523 - t521;
-        let t525: f64 = t85 * t524;
-        let t526: f64 = t519 + t525;
-        let t527: f64 = t39 * t97;
-        let t528: f64 = t527 * t43;
-        let t529: f64 = -t528;
-        let t530: f64 = t48 * t100;
-        let t531: f64 = t530 * t18;
-        let t532: f64 = t529 - t531;
-        let t533: f64 = t96 * t532;
-        let t534: f64 = t526 + t533;
-        let t535: f64 = t54 * t107;
-        let t536: f64 = t535 * t43;
-        let t537: f64 = t58 * t110;
-        let t538: f64 = t537 * t18;
-        let t539: f64 = t536 - t538;
-        let t540: f64 = t106 * t539;
-        let t541: f64 = t534 + t540;
-        let t542: f64 = t39 * t117;
-        let t543: f64 = t542 * t43;
-        let t544: f64 = t48 * t120;
-        let t545: f64 = t544 * t18;
-        let t546: f64 = t543 + t545;
-        let t547: f64 = t116 * t546;
-        let t548: f64 = t541 + t547;
-        let t549: f64 = t39 * t43;
-        let t550: f64 = t548 + t549;
-        let t551: f64 = t48 * t18;
-        let t552: f64 = t550 + t551;
-        let t572: f64 = t40 * t179;
-        let t573: f64 = t572 * t43;
-        let t574: f64 = t32 * t183;
-        let t575: f64 = t574 * t18;
-        let t576: f64 = t573 + t575;
-        let t577: f64 = t29 * t576;
-        let t578: f64 = t55 * t170;
-        let t579: f64 = t578 * t43;
-        let t580: f64 = t59 * t174;
-        let t581: f64 = t580 * t18;
-        let t582: f64 = t579 - t581;
-        let t583: f64 = t53 * t582;
-        let t584: f64 = t577 + t583;
-        let t585: f64 = t66 * t179;
-        let t586: f64 = t585 * t43;
-        let t587: f64 = -t586;
-        let t588: f64 = t69 * t183;
-        let t589: f64 = t588 * t18;
-        let t590: f64 = t587 - t589;
-        let t591: f64 = t65 * t590;
-        let t592: f64 = t584 + t591;
-        let t593: f64 = t76 * t170;
-        let t594: f64 = t593 * t43;
-        let t595: f64 = t79 * t174;
-        let t596: f64 = t595 * t18;
-        let t597: f64 = t596 - t594;
-        let t598: f64 = t75 * t597;
-        let t599: f64 = t592 + t598;
-        let t600: f64 = t86 * t179;
-        let t601: f64 = t600 * t43;
-        let t602: f64 = t90 * t183;
-        let t603: f64 = t602 * t18;
-        let t604: f64 = t601 + t603;
-        let t605: f64 = t85 * t604;
-        let t606: f64 = t599 + t605;
-        let t607: f64 = t97 * t170;
-        let t608: f64 = t607 * t43;
-        let t609: f64 = t100 * t174;
-        let t610: f64 = t609 * t18;
-        let t611: f64 = t608 - t610;
-        let t612: f64 = t96 * t611;
-        let t613: f64 = t606 + t612;
-        let t614: f64 = t107 * t179;
-        let t615: f64 = t614 * t43;
-        let t616: f64 = -t615;
-        let t617: f64 = t110 * t183;
-        let t618: f64 = t617 * t18;
-        let t619: f64 = t616 - t618;
-        let t620: f64 = t106 * t619;
-        let t621: f64 = t613 + t620;
-        let t622: f64 = t117 * t170;
-        let t623: f64 = t622 * t43;
-        let t624: f64 = t120 * t174;
-        let t625: f64 = t624 * t18;
-        let t626: f64 = t625 - t623;
-        let t627: f64 = t116 * t626;
-        let t628: f64 = t621 + t627;
-        let t629: f64 = t170 * t43;
-        let t630: f64 = t628 - t629;
-        let t631: f64 = t174 * t18;
-        let t632: f64 = t630 + t631;
-        let t643: f64 = t46 * t251;
-        let t644: f64 = t253 * t643;
-        let t645: f64 = t644 * t255;
-        let t646: f64 = t35 * t258;
-        let t647: f64 = t32 * t646;
-        let t648: f64 = t647 * t255;
-        let t649: f64 = t645 - t648;
-        let t650: f64 = t35 * t265;
-        let t651: f64 = t267 * t650;
-        let t652: f64 = t651 * t255;
-        let t653: f64 = t649 + t652;
-        let t654: f64 = t46 * t273;
-        let t655: f64 = t275 * t654;
-        let t656: f64 = t655 * t255;
-        let t657: f64 = t653 - t656;
-        let t658: f64 = t35 * t281;
-        let t659: f64 = t283 * t658;
-        let t660: f64 = t659 * t255;
-        let t661: f64 = t657 - t660;
-        let t662: f64 = t46 * t289;
-        let t663: f64 = t291 * t662;
-        let t664: f64 = t663 * t255;
-        let t665: f64 = t661 + t664;
-        let t666: f64 = t35 * t297;
-        let t667: f64 = t299 * t666;
-        let t668: f64 = t667 * t255;
-        let t669: f64 = t665 + t668;
-        let t670: f64 = t46 * t305;
-        let t671: f64 = t307 * t670;
-        let t672: f64 = t671 * t255;
-        let t673: f64 = t669 - t672;
-        let t674: f64 = t35 * t313;
-        let t675: f64 = t315 * t674;
-        let t676: f64 = t675 * t255;
-        let t677: f64 = t673 - t676;
-        let t682: f64 = t32 * t333;
-        let t683: f64 = t55 * t331;
-        let t684: f64 = t253 * t344;
-        let t685: f64 = t684 * t26;
-        let t686: f64 = t683 - t685;
-        let t687: f64 = t29 * t686;
-        let t688: f64 = t682 + t687;
-        let t689: f64 = t32 * t338;
-        let t690: f64 = t689 * t26;
-        let t691: f64 = t688 + t690;
-        let t692: f64 = t333 * t348;
-        let t693: f64 = -t692;
-        let t694: f64 = t267 * t338;
-        let t695: f64 = t694 * t26;
-        let t696: f64 = t693 - t695;
-        let t697: f64 = t53 * t696;
-        let t698: f64 = t691 + t697;
-        let t699: f64 = t331 * t355;
-        let t700: f64 = t275 * t344;
-        let t701: f64 = t700 * t26;
-        let t702: f64 = t701 - t699;
-        let t703: f64 = t65 * t702;
-        let t704: f64 = t698 + t703;
-        let t705: f64 = t333 * t362;
-        let t706: f64 = t283 * t338;
-        let t707: f64 = t706 * t26;
-        let t708: f64 = t705 + t707;
-        let t709: f64 = t75 * t708;
-        let t710: f64 = t704 + t709;
-        let t711: f64 = t331 * t369;
-        let t712: f64 = t291 * t344;
-        let t713: f64 = t712 * t26;
-        let t714: f64 = t711 - t713;
-        let t715: f64 = t85 * t714;
-        let t716: f64 = t710 + t715;
-        let t717: f64 = t333 * t377;
-        let t718: f64 = -t717;
-        let t719: f64 = t299 * t338;
-        let t720: f64 = t719 * t26;
-        let t721: f64 = t718 - t720;
-        let t722: f64 = t96 * t721;
-        let t723: f64 = t716 + t722;
-        let t724: f64 = t331 * t384;
-        let t725: f64 = t307 * t344;
-        let t726: f64 = t725 * t26;
-        let t727: f64 = t726 - t724;
-        let t728: f64 = t106 * t727;
-        let t729: f64 = t723 + t728;
-        let t730: f64 = t333 * t391;
-        let t731: f64 = t315 * t338;
-        let t732: f64 = t731 * t26;
-        let t733: f64 = t730 + t732;
-        let t734: f64 = t116 * t733;
-        let t735: f64 = t729 + t734;
-        let t747: f64 = t32 * t420;
-        let t748: f64 = t55 * t418;
-        let t749: f64 = t253 * t431;
-        let t750: f64 = t749 * t26;
-        let t751: f64 = t748 - t750;
-        let t752: f64 = t29 * t751;
-        let t753: f64 = t747 + t752;
-        let t754: f64 = t32 * t425;
-        let t755: f64 = t754 * t26;
-        let t756: f64 = t753 + t755;
-        let t757: f64 = t348 * t420;
-        let t758: f64 = -t757;
-        let t759: f64 = t267 * t425;
-        let t760: f64 = t759 * t26;
-        let t761: f64 = t758 - t760;
-        let t762: f64 = t53 * t761;
-        let t763: f64 = t756 + t762;
-        let t764: f64 = t355 * t418;
-        let t765: f64 = t275 * t431;
-        let t766: f64 = t765 * t26;
-        let t767: f64 = t766 - t764;
-        let t768: f64 = t65 * t767;
-        let t769: f64 = t763 + t768;
-        let t770: f64 = t362 * t420;
-        let t771: f64 = t283 * t425;
-        let t772: f64 = t771 * t26;
-        let t773: f64 = t770 + t772;
-        let t774: f64 = t75 * t773;
-        let t775: f64 = t769 + t774;
-        let t776: f64 = t369 * t418;
-        let t777: f64 = t291 * t431;
-        let t778: f64 = t777 * t26;
-        let t779: f64 = t776 - t778;
-        let t780: f64 = t85 * t779;
-        let t781: f64 = t775 + t780;
-        let t782: f64 = t377 * t420;
-        let t783: f64 = -t782;
-        let t784: f64 = t299 * t425;
-        let t785: f64 = t784 * t26;
-        let t786: f64 = t783 - t785;
-        let t787: f64 = t96 * t786;
-        let t788: f64 = t781 + t787;
-        let t789: f64 = t384 * t418;
-        let t790: f64 = t307 * t431;
-        let t791: f64 = t790 * t26;
-        let t792: f64 = t791 - t789;
-        let t793: f64 = t106 * t792;
-        let t794: f64 = t788 + t793;
-        let t795: f64 = t391 * t420;
-        let t796: f64 = t315 * t425;
-        let t797: f64 = t796 * t26;
-        let t798: f64 = t795 + t797;
-        let t799: f64 = t116 * t798;
-        let t800: f64 = t794 + t799;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [[crate::Real; 5usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = p[2usize];
+    let t8: crate::Real = p[3usize];
+    let t9: crate::Real = p[4usize];
+    let t10: crate::Real = dt;
+    let t11: crate::Real = 3.141592653589793;
+    let t12: crate::Real = t1 * t11;
+    let t13: crate::Real = t5 * t12;
+    let t14: crate::Real = t9 * t13;
+    let t15: crate::Real = 2.0;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t17 / t8;
+    let t19: crate::Real = t16 * t18;
+    let t20: crate::Real = t2 * t11;
+    let t21: crate::Real = t6 * t20;
+    let t22: crate::Real = t9 * t21;
+    let t23: crate::Real = t15 * t22;
+    let t24: crate::Real = t23 * t18;
+    let t25: crate::Real = t19 - t24;
+    let t26: crate::Real = t17 / t7;
+    let t27: crate::Real = t25 * t26;
+    let t28: crate::Real = t4 + t27;
+    let t29: crate::Real = t10 * t28;
+    let t31: crate::Real = t19 + t24;
+    let t32: crate::Real = 0.5;
+    let t33: crate::Real = t31 * t32;
+    let t34: crate::Real = t3 + t33;
+    let t35: crate::Real = crate::math::cos(t0);
+    let t36: crate::Real = t9 * t12;
+    let t42: crate::Real = t7 * t8;
+    let t43: crate::Real = t17 / t42;
+    let t46: crate::Real = crate::math::sin(t0);
+    let t47: crate::Real = t10 * t36;
+    let t48: crate::Real = t46 * t47;
+    let t53: crate::Real = t29 * t29;
+    let t167: crate::Real = t9 * t20;
+    let t173: crate::Real = t10 * t167;
+    let t174: crate::Real = t46 * t173;
+    let t248: crate::Real = t7 * t7;
+    let t255: crate::Real = t17 / t248;
+    let t319: crate::Real = t10 * t25;
+    let t324: crate::Real = t8 * t8;
+    let t325: crate::Real = t17 / t324;
+    let t326: crate::Real = t16 * t325;
+    let t327: crate::Real = -t326;
+    let t328: crate::Real = t23 * t325;
+    let t329: crate::Real = t327 - t328;
+    let t330: crate::Real = t10 * t329;
+    let t333: crate::Real = t46 * t330;
+    let t336: crate::Real = t328 - t326;
+    let t406: crate::Real = t10 * t336;
+    let t412: crate::Real = t13 * t15;
+    let t413: crate::Real = t412 * t18;
+    let t414: crate::Real = t15 * t21;
+    let t415: crate::Real = t414 * t18;
+    let t416: crate::Real = t413 + t415;
+    let t417: crate::Real = t10 * t416;
+    let t420: crate::Real = t46 * t417;
+    let t423: crate::Real = t413 - t415;
+    let t486: crate::Real = t10 * t423;
+    let g0: [crate::Real; 10usize] = if crate::math::fabs(t29)
+        < crate::math::series_switch(0.05)
+    {
+        let t30: crate::Real = t10 * t10;
+        let t37: crate::Real = t30 * t36;
+        let t38: crate::Real = t34 * t37;
+        let t39: crate::Real = t35 * t38;
+        let t40: crate::Real = 0.6666666666666666;
+        let t41: crate::Real = t39 * t40;
+        let t44: crate::Real = t41 * t43;
+        let t45: crate::Real = -t44;
+        let t49: crate::Real = t32 * t48;
+        let t50: crate::Real = t49 * t18;
+        let t51: crate::Real = t45 - t50;
+        let t52: crate::Real = t29 * t51;
+        let t54: crate::Real = t38 * t46;
+        let t55: crate::Real = 0.25;
+        let t56: crate::Real = t54 * t55;
+        let t57: crate::Real = t56 * t43;
+        let t58: crate::Real = t35 * t47;
+        let t59: crate::Real = 0.16666666666666666;
+        let t60: crate::Real = t58 * t59;
+        let t61: crate::Real = t60 * t18;
+        let t62: crate::Real = t57 - t61;
+        let t63: crate::Real = t53 * t62;
+        let t64: crate::Real = t52 + t63;
+        let t65: crate::Real = t29 * t53;
+        let t66: crate::Real = 0.06666666666666667;
+        let t67: crate::Real = t39 * t66;
+        let t68: crate::Real = t67 * t43;
+        let t69: crate::Real = 0.041666666666666664;
+        let t70: crate::Real = t48 * t69;
+        let t71: crate::Real = t70 * t18;
+        let t72: crate::Real = t68 + t71;
+        let t73: crate::Real = t65 * t72;
+        let t74: crate::Real = t64 + t73;
+        let t75: crate::Real = t53 * t53;
+        let t76: crate::Real = 0.013888888888888888;
+        let t77: crate::Real = t54 * t76;
+        let t78: crate::Real = t77 * t43;
+        let t79: crate::Real = 0.008333333333333333;
+        let t80: crate::Real = t58 * t79;
+        let t81: crate::Real = t80 * t18;
+        let t82: crate::Real = t81 - t78;
+        let t83: crate::Real = t75 * t82;
+        let t84: crate::Real = t74 + t83;
+        let t85: crate::Real = t29 * t75;
+        let t86: crate::Real = 0.002380952380952381;
+        let t87: crate::Real = t39 * t86;
+        let t88: crate::Real = t87 * t43;
+        let t89: crate::Real = -t88;
+        let t90: crate::Real = 0.001388888888888889;
+        let t91: crate::Real = t48 * t90;
+        let t92: crate::Real = t91 * t18;
+        let t93: crate::Real = t89 - t92;
+        let t94: crate::Real = t85 * t93;
+        let t95: crate::Real = t84 + t94;
+        let t96: crate::Real = t65 * t65;
+        let t97: crate::Real = 0.00034722222222222224;
+        let t98: crate::Real = t54 * t97;
+        let t99: crate::Real = t98 * t43;
+        let t100: crate::Real = 0.0001984126984126984;
+        let t101: crate::Real = t58 * t100;
+        let t102: crate::Real = t101 * t18;
+        let t103: crate::Real = t99 - t102;
+        let t104: crate::Real = t96 * t103;
+        let t105: crate::Real = t95 + t104;
+        let t106: crate::Real = t29 * t96;
+        let t107: crate::Real = 0.00004409171075837743;
+        let t108: crate::Real = t39 * t107;
+        let t109: crate::Real = t108 * t43;
+        let t110: crate::Real = 0.0000248015873015873;
+        let t111: crate::Real = t48 * t110;
+        let t112: crate::Real = t111 * t18;
+        let t113: crate::Real = t109 + t112;
+        let t114: crate::Real = t106 * t113;
+        let t115: crate::Real = t105 + t114;
+        let t116: crate::Real = t75 * t75;
+        let t117: crate::Real = 0.00000496031746031746;
+        let t118: crate::Real = t54 * t117;
+        let t119: crate::Real = t118 * t43;
+        let t120: crate::Real = 0.0000027557319223985893;
+        let t121: crate::Real = t58 * t120;
+        let t122: crate::Real = t121 * t18;
+        let t123: crate::Real = t122 - t119;
+        let t124: crate::Real = t116 * t123;
+        let t125: crate::Real = t115 + t124;
+        let t126: crate::Real = t54 * t43;
+        let t127: crate::Real = t125 - t126;
+        let t128: crate::Real = t58 * t18;
+        let t129: crate::Real = t127 + t128;
+        let t168: crate::Real = t30 * t167;
+        let t169: crate::Real = t34 * t168;
+        let t170: crate::Real = t35 * t169;
+        let t171: crate::Real = t40 * t170;
+        let t172: crate::Real = t171 * t43;
+        let t175: crate::Real = t32 * t174;
+        let t176: crate::Real = t175 * t18;
+        let t177: crate::Real = t172 - t176;
+        let t178: crate::Real = t29 * t177;
+        let t179: crate::Real = t46 * t169;
+        let t180: crate::Real = t55 * t179;
+        let t181: crate::Real = t180 * t43;
+        let t182: crate::Real = -t181;
+        let t183: crate::Real = t35 * t173;
+        let t184: crate::Real = t59 * t183;
+        let t185: crate::Real = t184 * t18;
+        let t186: crate::Real = t182 - t185;
+        let t187: crate::Real = t53 * t186;
+        let t188: crate::Real = t178 + t187;
+        let t189: crate::Real = t66 * t170;
+        let t190: crate::Real = t189 * t43;
+        let t191: crate::Real = t69 * t174;
+        let t192: crate::Real = t191 * t18;
+        let t193: crate::Real = t192 - t190;
+        let t194: crate::Real = t65 * t193;
+        let t195: crate::Real = t188 + t194;
+        let t196: crate::Real = t76 * t179;
+        let t197: crate::Real = t196 * t43;
+        let t198: crate::Real = t79 * t183;
+        let t199: crate::Real = t198 * t18;
+        let t200: crate::Real = t197 + t199;
+        let t201: crate::Real = t75 * t200;
+        let t202: crate::Real = t195 + t201;
+        let t203: crate::Real = t86 * t170;
+        let t204: crate::Real = t203 * t43;
+        let t205: crate::Real = t90 * t174;
+        let t206: crate::Real = t205 * t18;
+        let t207: crate::Real = t204 - t206;
+        let t208: crate::Real = t85 * t207;
+        let t209: crate::Real = t202 + t208;
+        let t210: crate::Real = t97 * t179;
+        let t211: crate::Real = t210 * t43;
+        let t212: crate::Real = -t211;
+        let t213: crate::Real = t100 * t183;
+        let t214: crate::Real = t213 * t18;
+        let t215: crate::Real = t212 - t214;
+        let t216: crate::Real = t96 * t215;
+        let t217: crate::Real = t209 + t216;
+        let t218: crate::Real = t107 * t170;
+        let t219: crate::Real = t218 * t43;
+        let t220: crate::Real = t110 * t174;
+        let t221: crate::Real = t220 * t18;
+        let t222: crate::Real = t221 - t219;
+        let t223: crate::Real = t106 * t222;
+        let t224: crate::Real = t217 + t223;
+        let t225: crate::Real = t117 * t179;
+        let t226: crate::Real = t225 * t43;
+        let t227: crate::Real = t120 * t183;
+        let t228: crate::Real = t227 * t18;
+        let t229: crate::Real = t226 + t228;
+        let t230: crate::Real = t116 * t229;
+        let t231: crate::Real = t224 + t230;
+        let t232: crate::Real = t179 * t43;
+        let t233: crate::Real = t231 + t232;
+        let t234: crate::Real = t183 * t18;
+        let t235: crate::Real = t233 + t234;
+        let t249: crate::Real = t29 * t30;
+        let t250: crate::Real = t34 * t249;
+        let t251: crate::Real = t25 * t250;
+        let t252: crate::Real = t35 * t251;
+        let t253: crate::Real = 0.3333333333333333;
+        let t254: crate::Real = t252 * t253;
+        let t256: crate::Real = t254 * t255;
+        let t257: crate::Real = t30 * t34;
+        let t258: crate::Real = t25 * t257;
+        let t259: crate::Real = t46 * t258;
+        let t260: crate::Real = t32 * t259;
+        let t261: crate::Real = t260 * t255;
+        let t262: crate::Real = t256 + t261;
+        let t263: crate::Real = t30 * t53;
+        let t264: crate::Real = t34 * t263;
+        let t265: crate::Real = t25 * t264;
+        let t266: crate::Real = t46 * t265;
+        let t267: crate::Real = 0.125;
+        let t268: crate::Real = t266 * t267;
+        let t269: crate::Real = t268 * t255;
+        let t270: crate::Real = t262 - t269;
+        let t271: crate::Real = t30 * t65;
+        let t272: crate::Real = t34 * t271;
+        let t273: crate::Real = t25 * t272;
+        let t274: crate::Real = t35 * t273;
+        let t275: crate::Real = 0.03333333333333333;
+        let t276: crate::Real = t274 * t275;
+        let t277: crate::Real = t276 * t255;
+        let t278: crate::Real = t270 - t277;
+        let t279: crate::Real = t30 * t75;
+        let t280: crate::Real = t34 * t279;
+        let t281: crate::Real = t25 * t280;
+        let t282: crate::Real = t46 * t281;
+        let t283: crate::Real = 0.006944444444444444;
+        let t284: crate::Real = t282 * t283;
+        let t285: crate::Real = t284 * t255;
+        let t286: crate::Real = t278 + t285;
+        let t287: crate::Real = t30 * t85;
+        let t288: crate::Real = t34 * t287;
+        let t289: crate::Real = t25 * t288;
+        let t290: crate::Real = t35 * t289;
+        let t291: crate::Real = 0.0011904761904761906;
+        let t292: crate::Real = t290 * t291;
+        let t293: crate::Real = t292 * t255;
+        let t294: crate::Real = t286 + t293;
+        let t295: crate::Real = t30 * t96;
+        let t296: crate::Real = t34 * t295;
+        let t297: crate::Real = t25 * t296;
+        let t298: crate::Real = t46 * t297;
+        let t299: crate::Real = 0.00017361111111111112;
+        let t300: crate::Real = t298 * t299;
+        let t301: crate::Real = t300 * t255;
+        let t302: crate::Real = t294 - t301;
+        let t303: crate::Real = t30 * t106;
+        let t304: crate::Real = t34 * t303;
+        let t305: crate::Real = t25 * t304;
+        let t306: crate::Real = t35 * t305;
+        let t307: crate::Real = 0.000022045855379188714;
+        let t308: crate::Real = t306 * t307;
+        let t309: crate::Real = t308 * t255;
+        let t310: crate::Real = t302 - t309;
+        let t311: crate::Real = t30 * t116;
+        let t312: crate::Real = t34 * t311;
+        let t313: crate::Real = t25 * t312;
+        let t314: crate::Real = t46 * t313;
+        let t315: crate::Real = 0.00000248015873015873;
+        let t316: crate::Real = t314 * t315;
+        let t317: crate::Real = t316 * t255;
+        let t318: crate::Real = t310 + t317;
+        let t331: crate::Real = t35 * t330;
+        let t332: crate::Real = t32 * t331;
+        let t334: crate::Real = t55 * t333;
+        let t335: crate::Real = -t334;
+        let t337: crate::Real = t257 * t336;
+        let t338: crate::Real = t35 * t337;
+        let t339: crate::Real = t253 * t338;
+        let t340: crate::Real = t339 * t26;
+        let t341: crate::Real = t335 - t340;
+        let t342: crate::Real = t29 * t341;
+        let t343: crate::Real = t332 + t342;
+        let t344: crate::Real = t46 * t337;
+        let t345: crate::Real = t32 * t344;
+        let t346: crate::Real = t345 * t26;
+        let t347: crate::Real = t343 - t346;
+        let t348: crate::Real = 0.08333333333333333;
+        let t349: crate::Real = t331 * t348;
+        let t350: crate::Real = t267 * t344;
+        let t351: crate::Real = t350 * t26;
+        let t352: crate::Real = t351 - t349;
+        let t353: crate::Real = t53 * t352;
+        let t354: crate::Real = t347 + t353;
+        let t355: crate::Real = 0.020833333333333332;
+        let t356: crate::Real = t333 * t355;
+        let t357: crate::Real = t275 * t338;
+        let t358: crate::Real = t357 * t26;
+        let t359: crate::Real = t356 + t358;
+        let t360: crate::Real = t65 * t359;
+        let t361: crate::Real = t354 + t360;
+        let t362: crate::Real = 0.004166666666666667;
+        let t363: crate::Real = t331 * t362;
+        let t364: crate::Real = t283 * t344;
+        let t365: crate::Real = t364 * t26;
+        let t366: crate::Real = t363 - t365;
+        let t367: crate::Real = t75 * t366;
+        let t368: crate::Real = t361 + t367;
+        let t369: crate::Real = 0.0006944444444444445;
+        let t370: crate::Real = t333 * t369;
+        let t371: crate::Real = -t370;
+        let t372: crate::Real = t291 * t338;
+        let t373: crate::Real = t372 * t26;
+        let t374: crate::Real = t371 - t373;
+        let t375: crate::Real = t85 * t374;
+        let t376: crate::Real = t368 + t375;
+        let t377: crate::Real = 0.0000992063492063492;
+        let t378: crate::Real = t331 * t377;
+        let t379: crate::Real = t299 * t344;
+        let t380: crate::Real = t379 * t26;
+        let t381: crate::Real = t380 - t378;
+        let t382: crate::Real = t96 * t381;
+        let t383: crate::Real = t376 + t382;
+        let t384: crate::Real = 0.00001240079365079365;
+        let t385: crate::Real = t333 * t384;
+        let t386: crate::Real = t307 * t338;
+        let t387: crate::Real = t386 * t26;
+        let t388: crate::Real = t385 + t387;
+        let t389: crate::Real = t106 * t388;
+        let t390: crate::Real = t383 + t389;
+        let t391: crate::Real = 0.0000013778659611992946;
+        let t392: crate::Real = t331 * t391;
+        let t393: crate::Real = t315 * t344;
+        let t394: crate::Real = t393 * t26;
+        let t395: crate::Real = t392 - t394;
+        let t396: crate::Real = t116 * t395;
+        let t397: crate::Real = t390 + t396;
+        let t418: crate::Real = t35 * t417;
+        let t419: crate::Real = t32 * t418;
+        let t421: crate::Real = t55 * t420;
+        let t422: crate::Real = -t421;
+        let t424: crate::Real = t257 * t423;
+        let t425: crate::Real = t35 * t424;
+        let t426: crate::Real = t253 * t425;
+        let t427: crate::Real = t426 * t26;
+        let t428: crate::Real = t422 - t427;
+        let t429: crate::Real = t29 * t428;
+        let t430: crate::Real = t419 + t429;
+        let t431: crate::Real = t46 * t424;
+        let t432: crate::Real = t32 * t431;
+        let t433: crate::Real = t432 * t26;
+        let t434: crate::Real = t430 - t433;
+        let t435: crate::Real = t348 * t418;
+        let t436: crate::Real = t267 * t431;
+        let t437: crate::Real = t436 * t26;
+        let t438: crate::Real = t437 - t435;
+        let t439: crate::Real = t53 * t438;
+        let t440: crate::Real = t434 + t439;
+        let t441: crate::Real = t355 * t420;
+        let t442: crate::Real = t275 * t425;
+        let t443: crate::Real = t442 * t26;
+        let t444: crate::Real = t441 + t443;
+        let t445: crate::Real = t65 * t444;
+        let t446: crate::Real = t440 + t445;
+        let t447: crate::Real = t362 * t418;
+        let t448: crate::Real = t283 * t431;
+        let t449: crate::Real = t448 * t26;
+        let t450: crate::Real = t447 - t449;
+        let t451: crate::Real = t75 * t450;
+        let t452: crate::Real = t446 + t451;
+        let t453: crate::Real = t369 * t420;
+        let t454: crate::Real = -t453;
+        let t455: crate::Real = t291 * t425;
+        let t456: crate::Real = t455 * t26;
+        let t457: crate::Real = t454 - t456;
+        let t458: crate::Real = t85 * t457;
+        let t459: crate::Real = t452 + t458;
+        let t460: crate::Real = t377 * t418;
+        let t461: crate::Real = t299 * t431;
+        let t462: crate::Real = t461 * t26;
+        let t463: crate::Real = t462 - t460;
+        let t464: crate::Real = t96 * t463;
+        let t465: crate::Real = t459 + t464;
+        let t466: crate::Real = t384 * t420;
+        let t467: crate::Real = t307 * t425;
+        let t468: crate::Real = t467 * t26;
+        let t469: crate::Real = t466 + t468;
+        let t470: crate::Real = t106 * t469;
+        let t471: crate::Real = t465 + t470;
+        let t472: crate::Real = t391 * t418;
+        let t473: crate::Real = t315 * t431;
+        let t474: crate::Real = t473 * t26;
+        let t475: crate::Real = t472 - t474;
+        let t476: crate::Real = t116 * t475;
+        let t477: crate::Real = t471 + t476;
+        let t492: crate::Real = t40 * t54;
+        let t493: crate::Real = t492 * t43;
+        let t494: crate::Real = t32 * t58;
+        let t495: crate::Real = t494 * t18;
+        let t496: crate::Real = t495 - t493;
+        let t497: crate::Real = t29 * t496;
+        let t498: crate::Real = t39 * t55;
+        let t499: crate::Real = t498 * t43;
+        let t500: crate::Real = -t499;
+        let t501: crate::Real = t48 * t59;
+        let t502: crate::Real = t501 * t18;
+        let t503: crate::Real = t500 - t502;
+        let t504: crate::Real = t53 * t503;
+        let t505: crate::Real = t497 + t504;
+        let t506: crate::Real = t54 * t66;
+        let t507: crate::Real = t506 * t43;
+        let t508: crate::Real = t58 * t69;
+        let t509: crate::Real = t508 * t18;
+        let t510: crate::Real = t507 - t509;
+        let t511: crate::Real = t65 * t510;
+        let t512: crate::Real = t505 + t511;
+        let t513: crate::Real = t39 * t76;
+        let t514: crate::Real = t513 * t43;
+        let t515: crate::Real = t48 * t79;
+        let t516: crate::Real = t515 * t18;
+        let t517: crate::Real = t514 + t516;
+        let t518: crate::Real = t75 * t517;
+        let t519: crate::Real = t512 + t518;
+        let t520: crate::Real = t54 * t86;
+        let t521: crate::Real = t520 * t43;
+        let t522: crate::Real = t58 * t90;
+        let t523: crate::Real = t522 * t18;
+        let t524: crate::Real = t523 - t521;
+        let t525: crate::Real = t85 * t524;
+        let t526: crate::Real = t519 + t525;
+        let t527: crate::Real = t39 * t97;
+        let t528: crate::Real = t527 * t43;
+        let t529: crate::Real = -t528;
+        let t530: crate::Real = t48 * t100;
+        let t531: crate::Real = t530 * t18;
+        let t532: crate::Real = t529 - t531;
+        let t533: crate::Real = t96 * t532;
+        let t534: crate::Real = t526 + t533;
+        let t535: crate::Real = t54 * t107;
+        let t536: crate::Real = t535 * t43;
+        let t537: crate::Real = t58 * t110;
+        let t538: crate::Real = t537 * t18;
+        let t539: crate::Real = t536 - t538;
+        let t540: crate::Real = t106 * t539;
+        let t541: crate::Real = t534 + t540;
+        let t542: crate::Real = t39 * t117;
+        let t543: crate::Real = t542 * t43;
+        let t544: crate::Real = t48 * t120;
+        let t545: crate::Real = t544 * t18;
+        let t546: crate::Real = t543 + t545;
+        let t547: crate::Real = t116 * t546;
+        let t548: crate::Real = t541 + t547;
+        let t549: crate::Real = t39 * t43;
+        let t550: crate::Real = t548 + t549;
+        let t551: crate::Real = t48 * t18;
+        let t552: crate::Real = t550 + t551;
+        let t572: crate::Real = t40 * t179;
+        let t573: crate::Real = t572 * t43;
+        let t574: crate::Real = t32 * t183;
+        let t575: crate::Real = t574 * t18;
+        let t576: crate::Real = t573 + t575;
+        let t577: crate::Real = t29 * t576;
+        let t578: crate::Real = t55 * t170;
+        let t579: crate::Real = t578 * t43;
+        let t580: crate::Real = t59 * t174;
+        let t581: crate::Real = t580 * t18;
+        let t582: crate::Real = t579 - t581;
+        let t583: crate::Real = t53 * t582;
+        let t584: crate::Real = t577 + t583;
+        let t585: crate::Real = t66 * t179;
+        let t586: crate::Real = t585 * t43;
+        let t587: crate::Real = -t586;
+        let t588: crate::Real = t69 * t183;
+        let t589: crate::Real = t588 * t18;
+        let t590: crate::Real = t587 - t589;
+        let t591: crate::Real = t65 * t590;
+        let t592: crate::Real = t584 + t591;
+        let t593: crate::Real = t76 * t170;
+        let t594: crate::Real = t593 * t43;
+        let t595: crate::Real = t79 * t174;
+        let t596: crate::Real = t595 * t18;
+        let t597: crate::Real = t596 - t594;
+        let t598: crate::Real = t75 * t597;
+        let t599: crate::Real = t592 + t598;
+        let t600: crate::Real = t86 * t179;
+        let t601: crate::Real = t600 * t43;
+        let t602: crate::Real = t90 * t183;
+        let t603: crate::Real = t602 * t18;
+        let t604: crate::Real = t601 + t603;
+        let t605: crate::Real = t85 * t604;
+        let t606: crate::Real = t599 + t605;
+        let t607: crate::Real = t97 * t170;
+        let t608: crate::Real = t607 * t43;
+        let t609: crate::Real = t100 * t174;
+        let t610: crate::Real = t609 * t18;
+        let t611: crate::Real = t608 - t610;
+        let t612: crate::Real = t96 * t611;
+        let t613: crate::Real = t606 + t612;
+        let t614: crate::Real = t107 * t179;
+        let t615: crate::Real = t614 * t43;
+        let t616: crate::Real = -t615;
+        let t617: crate::Real = t110 * t183;
+        let t618: crate::Real = t617 * t18;
+        let t619: crate::Real = t616 - t618;
+        let t620: crate::Real = t106 * t619;
+        let t621: crate::Real = t613 + t620;
+        let t622: crate::Real = t117 * t170;
+        let t623: crate::Real = t622 * t43;
+        let t624: crate::Real = t120 * t174;
+        let t625: crate::Real = t624 * t18;
+        let t626: crate::Real = t625 - t623;
+        let t627: crate::Real = t116 * t626;
+        let t628: crate::Real = t621 + t627;
+        let t629: crate::Real = t170 * t43;
+        let t630: crate::Real = t628 - t629;
+        let t631: crate::Real = t174 * t18;
+        let t632: crate::Real = t630 + t631;
+        let t643: crate::Real = t46 * t251;
+        let t644: crate::Real = t253 * t643;
+        let t645: crate::Real = t644 * t255;
+        let t646: crate::Real = t35 * t258;
+        let t647: crate::Real = t32 * t646;
+        let t648: crate::Real = t647 * t255;
+        let t649: crate::Real = t645 - t648;
+        let t650: crate::Real = t35 * t265;
+        let t651: crate::Real = t267 * t650;
+        let t652: crate::Real = t651 * t255;
+        let t653: crate::Real = t649 + t652;
+        let t654: crate::Real = t46 * t273;
+        let t655: crate::Real = t275 * t654;
+        let t656: crate::Real = t655 * t255;
+        let t657: crate::Real = t653 - t656;
+        let t658: crate::Real = t35 * t281;
+        let t659: crate::Real = t283 * t658;
+        let t660: crate::Real = t659 * t255;
+        let t661: crate::Real = t657 - t660;
+        let t662: crate::Real = t46 * t289;
+        let t663: crate::Real = t291 * t662;
+        let t664: crate::Real = t663 * t255;
+        let t665: crate::Real = t661 + t664;
+        let t666: crate::Real = t35 * t297;
+        let t667: crate::Real = t299 * t666;
+        let t668: crate::Real = t667 * t255;
+        let t669: crate::Real = t665 + t668;
+        let t670: crate::Real = t46 * t305;
+        let t671: crate::Real = t307 * t670;
+        let t672: crate::Real = t671 * t255;
+        let t673: crate::Real = t669 - t672;
+        let t674: crate::Real = t35 * t313;
+        let t675: crate::Real = t315 * t674;
+        let t676: crate::Real = t675 * t255;
+        let t677: crate::Real = t673 - t676;
+        let t682: crate::Real = t32 * t333;
+        let t683: crate::Real = t55 * t331;
+        let t684: crate::Real = t253 * t344;
+        let t685: crate::Real = t684 * t26;
+        let t686: crate::Real = t683 - t685;
+        let t687: crate::Real = t29 * t686;
+        let t688: crate::Real = t682 + t687;
+        let t689: crate::Real = t32 * t338;
+        let t690: crate::Real = t689 * t26;
+        let t691: crate::Real = t688 + t690;
+        let t692: crate::Real = t333 * t348;
+        let t693: crate::Real = -t692;
+        let t694: crate::Real = t267 * t338;
+        let t695: crate::Real = t694 * t26;
+        let t696: crate::Real = t693 - t695;
+        let t697: crate::Real = t53 * t696;
+        let t698: crate::Real = t691 + t697;
+        let t699: crate::Real = t331 * t355;
+        let t700: crate::Real = t275 * t344;
+        let t701: crate::Real = t700 * t26;
+        let t702: crate::Real = t701 - t699;
+        let t703: crate::Real = t65 * t702;
+        let t704: crate::Real = t698 + t703;
+        let t705: crate::Real = t333 * t362;
+        let t706: crate::Real = t283 * t338;
+        let t707: crate::Real = t706 * t26;
+        let t708: crate::Real = t705 + t707;
+        let t709: crate::Real = t75 * t708;
+        let t710: crate::Real = t704 + t709;
+        let t711: crate::Real = t331 * t369;
+        let t712: crate::Real = t291 * t344;
+        let t713: crate::Real = t712 * t26;
+        let t714: crate::Real = t711 - t713;
+        let t715: crate::Real = t85 * t714;
+        let t716: crate::Real = t710 + t715;
+        let t717: crate::Real = t333 * t377;
+        let t718: crate::Real = -t717;
+        let t719: crate::Real = t299 * t338;
+        let t720: crate::Real = t719 * t26;
+        let t721: crate::Real = t718 - t720;
+        let t722: crate::Real = t96 * t721;
+        let t723: crate::Real = t716 + t722;
+        let t724: crate::Real = t331 * t384;
+        let t725: crate::Real = t307 * t344;
+        let t726: crate::Real = t725 * t26;
+        let t727: crate::Real = t726 - t724;
+        let t728: crate::Real = t106 * t727;
+        let t729: crate::Real = t723 + t728;
+        let t730: crate::Real = t333 * t391;
+        let t731: crate::Real = t315 * t338;
+        let t732: crate::Real = t731 * t26;
+        let t733: crate::Real = t730 + t732;
+        let t734: crate::Real = t116 * t733;
+        let t735: crate::Real = t729 + t734;
+        let t747: crate::Real = t32 * t420;
+        let t748: crate::Real = t55 * t418;
+        let t749: crate::Real = t253 * t431;
+        let t750: crate::Real = t749 * t26;
+        let t751: crate::Real = t748 - t750;
+        let t752: crate::Real = t29 * t751;
+        let t753: crate::Real = t747 + t752;
+        let t754: crate::Real = t32 * t425;
+        let t755: crate::Real = t754 * t26;
+        let t756: crate::Real = t753 + t755;
+        let t757: crate::Real = t348 * t420;
+        let t758: crate::Real = -t757;
+        let t759: crate::Real = t267 * t425;
+        let t760: crate::Real = t759 * t26;
+        let t761: crate::Real = t758 - t760;
+        let t762: crate::Real = t53 * t761;
+        let t763: crate::Real = t756 + t762;
+        let t764: crate::Real = t355 * t418;
+        let t765: crate::Real = t275 * t431;
+        let t766: crate::Real = t765 * t26;
+        let t767: crate::Real = t766 - t764;
+        let t768: crate::Real = t65 * t767;
+        let t769: crate::Real = t763 + t768;
+        let t770: crate::Real = t362 * t420;
+        let t771: crate::Real = t283 * t425;
+        let t772: crate::Real = t771 * t26;
+        let t773: crate::Real = t770 + t772;
+        let t774: crate::Real = t75 * t773;
+        let t775: crate::Real = t769 + t774;
+        let t776: crate::Real = t369 * t418;
+        let t777: crate::Real = t291 * t431;
+        let t778: crate::Real = t777 * t26;
+        let t779: crate::Real = t776 - t778;
+        let t780: crate::Real = t85 * t779;
+        let t781: crate::Real = t775 + t780;
+        let t782: crate::Real = t377 * t420;
+        let t783: crate::Real = -t782;
+        let t784: crate::Real = t299 * t425;
+        let t785: crate::Real = t784 * t26;
+        let t786: crate::Real = t783 - t785;
+        let t787: crate::Real = t96 * t786;
+        let t788: crate::Real = t781 + t787;
+        let t789: crate::Real = t384 * t418;
+        let t790: crate::Real = t307 * t431;
+        let t791: crate::Real = t790 * t26;
+        let t792: crate::Real = t791 - t789;
+        let t793: crate::Real = t106 * t792;
+        let t794: crate::Real = t788 + t793;
+        let t795: crate::Real = t391 * t420;
+        let t796: crate::Real = t315 * t425;
+        let t797: crate::Real = t796 * t26;
+        let t798: crate::Real = t795 + t797;
+        let t799: crate::Real = t116 * t798;
+        let t800: crate::Real = t794 + t799;
         [t129, t235, t318, t397, t477, t552, t632, t677, t735, t800]
     } else {
-        let t130: f64 = libm::sin(t29);
-        let t131: f64 = t10 * t34;
-        let t132: f64 = t46 * t131;
-        let t133: f64 = t130 * t132;
-        let t134: f64 = t17 / t29;
-        let t135: f64 = t133 * t134;
-        let t136: f64 = libm::cos(t29);
-        let t137: f64 = t35 * t131;
-        let t138: f64 = t136 * t137;
-        let t139: f64 = t138 * t134;
-        let t140: f64 = 1f64;
-        let t141: f64 = t140 - t136;
-        let t142: f64 = t10 * t141;
-        let t143: f64 = t34 * t142;
-        let t144: f64 = t46 * t143;
-        let t145: f64 = t17 / t53;
-        let t146: f64 = t144 * t145;
-        let t147: f64 = t139 + t146;
-        let t148: f64 = t130 * t131;
-        let t149: f64 = t35 * t148;
-        let t150: f64 = t149 * t145;
-        let t151: f64 = t147 - t150;
-        let t152: f64 = t151 - t135;
-        let t153: f64 = t47 * t152;
-        let t154: f64 = t15 * t153;
-        let t155: f64 = t154 * t43;
-        let t156: f64 = t47 * t130;
-        let t157: f64 = t35 * t156;
-        let t158: f64 = t8 * t29;
-        let t159: f64 = t17 / t158;
-        let t160: f64 = t157 * t159;
-        let t161: f64 = t155 + t160;
-        let t162: f64 = t47 * t141;
-        let t163: f64 = t46 * t162;
-        let t164: f64 = t163 * t159;
-        let t165: f64 = t161 - t164;
-        let t236: f64 = t152 * t173;
-        let t237: f64 = t15 * t236;
-        let t238: f64 = t237 * t43;
-        let t239: f64 = t130 * t173;
-        let t240: f64 = t35 * t239;
-        let t241: f64 = t240 * t159;
-        let t242: f64 = t141 * t173;
-        let t243: f64 = t46 * t242;
-        let t244: f64 = t243 * t159;
-        let t245: f64 = t241 - t244;
-        let t246: f64 = t245 - t238;
-        let t320: f64 = t152 * t319;
-        let t321: f64 = t320 * t255;
-        let t322: f64 = -t321;
-        let t398: f64 = t142 * t329;
-        let t399: f64 = t46 * t398;
-        let t400: f64 = t32 * t399;
-        let t401: f64 = t400 * t134;
-        let t402: f64 = t130 * t330;
-        let t403: f64 = t35 * t402;
-        let t404: f64 = t32 * t403;
-        let t405: f64 = t404 * t134;
-        let t407: f64 = t152 * t406;
-        let t408: f64 = t407 * t26;
-        let t409: f64 = t405 + t408;
-        let t410: f64 = t409 - t401;
-        let t478: f64 = t142 * t416;
-        let t479: f64 = t46 * t478;
-        let t480: f64 = t32 * t479;
-        let t481: f64 = t480 * t134;
-        let t482: f64 = t130 * t417;
-        let t483: f64 = t35 * t482;
-        let t484: f64 = t32 * t483;
-        let t485: f64 = t484 * t134;
-        let t487: f64 = t152 * t486;
-        let t488: f64 = t487 * t26;
-        let t489: f64 = t485 + t488;
-        let t490: f64 = t489 - t481;
-        let t553: f64 = t132 * t136;
-        let t554: f64 = t553 * t134;
-        let t555: f64 = t149 * t134;
-        let t556: f64 = t554 + t555;
-        let t557: f64 = t35 * t143;
-        let t558: f64 = t557 * t145;
-        let t559: f64 = t556 - t558;
-        let t560: f64 = t133 * t145;
-        let t561: f64 = t559 - t560;
-        let t562: f64 = t47 * t561;
-        let t563: f64 = t15 * t562;
-        let t564: f64 = t563 * t43;
-        let t565: f64 = t48 * t130;
-        let t566: f64 = t565 * t159;
-        let t567: f64 = t564 + t566;
-        let t568: f64 = t35 * t162;
-        let t569: f64 = t568 * t159;
-        let t570: f64 = t567 + t569;
-        let t633: f64 = t173 * t561;
-        let t634: f64 = t15 * t633;
-        let t635: f64 = t634 * t43;
-        let t636: f64 = t130 * t174;
-        let t637: f64 = t636 * t159;
-        let t638: f64 = t35 * t242;
-        let t639: f64 = t638 * t159;
-        let t640: f64 = t637 + t639;
-        let t641: f64 = t640 - t635;
-        let t678: f64 = t319 * t561;
-        let t679: f64 = t678 * t255;
-        let t680: f64 = -t679;
-        let t736: f64 = t35 * t398;
-        let t737: f64 = t32 * t736;
-        let t738: f64 = t737 * t134;
-        let t739: f64 = t130 * t333;
-        let t740: f64 = t32 * t739;
-        let t741: f64 = t740 * t134;
-        let t742: f64 = t738 + t741;
-        let t743: f64 = t406 * t561;
-        let t744: f64 = t743 * t26;
-        let t745: f64 = t742 + t744;
-        let t801: f64 = t35 * t478;
-        let t802: f64 = t32 * t801;
-        let t803: f64 = t802 * t134;
-        let t804: f64 = t130 * t420;
-        let t805: f64 = t32 * t804;
-        let t806: f64 = t805 * t134;
-        let t807: f64 = t803 + t806;
-        let t808: f64 = t486 * t561;
-        let t809: f64 = t808 * t26;
-        let t810: f64 = t807 + t809;
+        let t130: crate::Real = crate::math::sin(t29);
+        let t131: crate::Real = t10 * t34;
+        let t132: crate::Real = t46 * t131;
+        let t133: crate::Real = t130 * t132;
+        let t134: crate::Real = t17 / t29;
+        let t135: crate::Real = t133 * t134;
+        let t136: crate::Real = crate::math::cos(t29);
+        let t137: crate::Real = t35 * t131;
+        let t138: crate::Real = t136 * t137;
+        let t139: crate::Real = t138 * t134;
+        let t140: crate::Real = 1.0;
+        let t141: crate::Real = t140 - t136;
+        let t142: crate::Real = t10 * t141;
+        let t143: crate::Real = t34 * t142;
+        let t144: crate::Real = t46 * t143;
+        let t145: crate::Real = t17 / t53;
+        let t146: crate::Real = t144 * t145;
+        let t147: crate::Real = t139 + t146;
+        let t148: crate::Real = t130 * t131;
+        let t149: crate::Real = t35 * t148;
+        let t150: crate::Real = t149 * t145;
+        let t151: crate::Real = t147 - t150;
+        let t152: crate::Real = t151 - t135;
+        let t153: crate::Real = t47 * t152;
+        let t154: crate::Real = t15 * t153;
+        let t155: crate::Real = t154 * t43;
+        let t156: crate::Real = t47 * t130;
+        let t157: crate::Real = t35 * t156;
+        let t158: crate::Real = t8 * t29;
+        let t159: crate::Real = t17 / t158;
+        let t160: crate::Real = t157 * t159;
+        let t161: crate::Real = t155 + t160;
+        let t162: crate::Real = t47 * t141;
+        let t163: crate::Real = t46 * t162;
+        let t164: crate::Real = t163 * t159;
+        let t165: crate::Real = t161 - t164;
+        let t236: crate::Real = t152 * t173;
+        let t237: crate::Real = t15 * t236;
+        let t238: crate::Real = t237 * t43;
+        let t239: crate::Real = t130 * t173;
+        let t240: crate::Real = t35 * t239;
+        let t241: crate::Real = t240 * t159;
+        let t242: crate::Real = t141 * t173;
+        let t243: crate::Real = t46 * t242;
+        let t244: crate::Real = t243 * t159;
+        let t245: crate::Real = t241 - t244;
+        let t246: crate::Real = t245 - t238;
+        let t320: crate::Real = t152 * t319;
+        let t321: crate::Real = t320 * t255;
+        let t322: crate::Real = -t321;
+        let t398: crate::Real = t142 * t329;
+        let t399: crate::Real = t46 * t398;
+        let t400: crate::Real = t32 * t399;
+        let t401: crate::Real = t400 * t134;
+        let t402: crate::Real = t130 * t330;
+        let t403: crate::Real = t35 * t402;
+        let t404: crate::Real = t32 * t403;
+        let t405: crate::Real = t404 * t134;
+        let t407: crate::Real = t152 * t406;
+        let t408: crate::Real = t407 * t26;
+        let t409: crate::Real = t405 + t408;
+        let t410: crate::Real = t409 - t401;
+        let t478: crate::Real = t142 * t416;
+        let t479: crate::Real = t46 * t478;
+        let t480: crate::Real = t32 * t479;
+        let t481: crate::Real = t480 * t134;
+        let t482: crate::Real = t130 * t417;
+        let t483: crate::Real = t35 * t482;
+        let t484: crate::Real = t32 * t483;
+        let t485: crate::Real = t484 * t134;
+        let t487: crate::Real = t152 * t486;
+        let t488: crate::Real = t487 * t26;
+        let t489: crate::Real = t485 + t488;
+        let t490: crate::Real = t489 - t481;
+        let t553: crate::Real = t132 * t136;
+        let t554: crate::Real = t553 * t134;
+        let t555: crate::Real = t149 * t134;
+        let t556: crate::Real = t554 + t555;
+        let t557: crate::Real = t35 * t143;
+        let t558: crate::Real = t557 * t145;
+        let t559: crate::Real = t556 - t558;
+        let t560: crate::Real = t133 * t145;
+        let t561: crate::Real = t559 - t560;
+        let t562: crate::Real = t47 * t561;
+        let t563: crate::Real = t15 * t562;
+        let t564: crate::Real = t563 * t43;
+        let t565: crate::Real = t48 * t130;
+        let t566: crate::Real = t565 * t159;
+        let t567: crate::Real = t564 + t566;
+        let t568: crate::Real = t35 * t162;
+        let t569: crate::Real = t568 * t159;
+        let t570: crate::Real = t567 + t569;
+        let t633: crate::Real = t173 * t561;
+        let t634: crate::Real = t15 * t633;
+        let t635: crate::Real = t634 * t43;
+        let t636: crate::Real = t130 * t174;
+        let t637: crate::Real = t636 * t159;
+        let t638: crate::Real = t35 * t242;
+        let t639: crate::Real = t638 * t159;
+        let t640: crate::Real = t637 + t639;
+        let t641: crate::Real = t640 - t635;
+        let t678: crate::Real = t319 * t561;
+        let t679: crate::Real = t678 * t255;
+        let t680: crate::Real = -t679;
+        let t736: crate::Real = t35 * t398;
+        let t737: crate::Real = t32 * t736;
+        let t738: crate::Real = t737 * t134;
+        let t739: crate::Real = t130 * t333;
+        let t740: crate::Real = t32 * t739;
+        let t741: crate::Real = t740 * t134;
+        let t742: crate::Real = t738 + t741;
+        let t743: crate::Real = t406 * t561;
+        let t744: crate::Real = t743 * t26;
+        let t745: crate::Real = t742 + t744;
+        let t801: crate::Real = t35 * t478;
+        let t802: crate::Real = t32 * t801;
+        let t803: crate::Real = t802 * t134;
+        let t804: crate::Real = t130 * t420;
+        let t805: crate::Real = t32 * t804;
+        let t806: crate::Real = t805 * t134;
+        let t807: crate::Real = t803 + t806;
+        let t808: crate::Real = t486 * t561;
+        let t809: crate::Real = t808 * t26;
+        let t810: crate::Real = t807 + t809;
         [t165, t246, t322, t410, t490, t570, t641, t680, t745, t810]
     };
-    let t166: f64 = g0[0usize];
-    let t247: f64 = g0[1usize];
-    let t323: f64 = g0[2usize];
-    let t411: f64 = g0[3usize];
-    let t491: f64 = g0[4usize];
-    let t571: f64 = g0[5usize];
-    let t642: f64 = g0[6usize];
-    let t681: f64 = g0[7usize];
-    let t746: f64 = g0[8usize];
-    let t811: f64 = g0[9usize];
-    let t812: f64 = t15 * t47;
-    let t813: f64 = t812 * t43;
-    let t814: f64 = t15 * t173;
-    let t815: f64 = t814 * t43;
-    let t816: f64 = -t815;
-    let t817: f64 = t319 * t255;
-    let t818: f64 = -t817;
-    let t819: f64 = t406 * t26;
-    let t820: f64 = t486 * t26;
+    let t166: crate::Real = g0[0usize];
+    let t247: crate::Real = g0[1usize];
+    let t323: crate::Real = g0[2usize];
+    let t411: crate::Real = g0[3usize];
+    let t491: crate::Real = g0[4usize];
+    let t571: crate::Real = g0[5usize];
+    let t642: crate::Real = g0[6usize];
+    let t681: crate::Real = g0[7usize];
+    let t746: crate::Real = g0[8usize];
+    let t811: crate::Real = g0[9usize];
+    let t812: crate::Real = t15 * t47;
+    let t813: crate::Real = t812 * t43;
+    let t814: crate::Real = t15 * t173;
+    let t815: crate::Real = t814 * t43;
+    let t816: crate::Real = -t815;
+    let t817: crate::Real = t319 * t255;
+    let t818: crate::Real = -t817;
+    let t819: crate::Real = t406 * t26;
+    let t820: crate::Real = t486 * t26;
     [
         [t166, t247, t323, t411, t491],
         [t571, t642, t681, t746, t811],
@@ -2322,33 +2335,33 @@ pub fn step_exact_jac_p(
 13 arithmetic operations (14 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-) -> [f64; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = p[2usize];
-    let t5: f64 = p[3usize];
-    let t6: f64 = p[4usize];
-    let t7: f64 = 3.141592653589793f64;
-    let t8: f64 = t0 * t7;
-    let t9: f64 = t2 * t8;
-    let t10: f64 = t6 * t9;
-    let t11: f64 = 2f64;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t5;
-    let t15: f64 = t12 * t14;
-    let t16: f64 = t1 * t7;
-    let t17: f64 = t3 * t16;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t11 * t18;
-    let t20: f64 = t19 * t14;
-    let t21: f64 = t15 - t20;
-    let t22: f64 = t21 / t4;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+) -> [crate::Real; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = p[2usize];
+    let t5: crate::Real = p[3usize];
+    let t6: crate::Real = p[4usize];
+    let t7: crate::Real = 3.141592653589793;
+    let t8: crate::Real = t0 * t7;
+    let t9: crate::Real = t2 * t8;
+    let t10: crate::Real = t6 * t9;
+    let t11: crate::Real = 2.0;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t5;
+    let t15: crate::Real = t12 * t14;
+    let t16: crate::Real = t1 * t7;
+    let t17: crate::Real = t3 * t16;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t11 * t18;
+    let t20: crate::Real = t19 * t14;
+    let t21: crate::Real = t15 - t20;
+    let t22: crate::Real = t21 / t4;
     [t22]
 }
 /**Jacobian of `obs_gyro` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -2361,11 +2374,11 @@ pub fn obs_gyro(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-) -> [[f64; 3usize]; 1usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+) -> [[crate::Real; 3usize]; 1usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0, t0]]
 }
 /**Jacobian of `obs_gyro` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -2378,57 +2391,57 @@ pub fn obs_gyro_jac_x(
 37 arithmetic operations (59 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-) -> [[f64; 5usize]; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = p[2usize];
-    let t5: f64 = p[3usize];
-    let t6: f64 = p[4usize];
-    let t7: f64 = 3.141592653589793f64;
-    let t8: f64 = t0 * t7;
-    let t9: f64 = t6 * t8;
-    let t10: f64 = 2f64;
-    let t11: f64 = t9 * t10;
-    let t12: f64 = t4 * t5;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t12;
-    let t15: f64 = t11 * t14;
-    let t16: f64 = t1 * t7;
-    let t17: f64 = t6 * t16;
-    let t18: f64 = t10 * t17;
-    let t19: f64 = t18 * t14;
-    let t20: f64 = -t19;
-    let t21: f64 = t4 * t4;
-    let t22: f64 = t2 * t8;
-    let t23: f64 = t6 * t22;
-    let t24: f64 = t10 * t23;
-    let t25: f64 = t13 / t5;
-    let t26: f64 = t24 * t25;
-    let t27: f64 = t3 * t16;
-    let t28: f64 = t6 * t27;
-    let t29: f64 = t10 * t28;
-    let t30: f64 = t29 * t25;
-    let t31: f64 = t26 - t30;
-    let t32: f64 = t31 / t21;
-    let t33: f64 = -t32;
-    let t34: f64 = t5 * t5;
-    let t35: f64 = t13 / t34;
-    let t36: f64 = t24 * t35;
-    let t37: f64 = t29 * t35;
-    let t38: f64 = t37 - t36;
-    let t39: f64 = t13 / t4;
-    let t40: f64 = t38 * t39;
-    let t41: f64 = t10 * t22;
-    let t42: f64 = t41 * t25;
-    let t43: f64 = t10 * t27;
-    let t44: f64 = t43 * t25;
-    let t45: f64 = t42 - t44;
-    let t46: f64 = t45 * t39;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+) -> [[crate::Real; 5usize]; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = p[2usize];
+    let t5: crate::Real = p[3usize];
+    let t6: crate::Real = p[4usize];
+    let t7: crate::Real = 3.141592653589793;
+    let t8: crate::Real = t0 * t7;
+    let t9: crate::Real = t6 * t8;
+    let t10: crate::Real = 2.0;
+    let t11: crate::Real = t9 * t10;
+    let t12: crate::Real = t4 * t5;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t12;
+    let t15: crate::Real = t11 * t14;
+    let t16: crate::Real = t1 * t7;
+    let t17: crate::Real = t6 * t16;
+    let t18: crate::Real = t10 * t17;
+    let t19: crate::Real = t18 * t14;
+    let t20: crate::Real = -t19;
+    let t21: crate::Real = t4 * t4;
+    let t22: crate::Real = t2 * t8;
+    let t23: crate::Real = t6 * t22;
+    let t24: crate::Real = t10 * t23;
+    let t25: crate::Real = t13 / t5;
+    let t26: crate::Real = t24 * t25;
+    let t27: crate::Real = t3 * t16;
+    let t28: crate::Real = t6 * t27;
+    let t29: crate::Real = t10 * t28;
+    let t30: crate::Real = t29 * t25;
+    let t31: crate::Real = t26 - t30;
+    let t32: crate::Real = t31 / t21;
+    let t33: crate::Real = -t32;
+    let t34: crate::Real = t5 * t5;
+    let t35: crate::Real = t13 / t34;
+    let t36: crate::Real = t24 * t35;
+    let t37: crate::Real = t29 * t35;
+    let t38: crate::Real = t37 - t36;
+    let t39: crate::Real = t13 / t4;
+    let t40: crate::Real = t38 * t39;
+    let t41: crate::Real = t10 * t22;
+    let t42: crate::Real = t41 * t25;
+    let t43: crate::Real = t10 * t27;
+    let t44: crate::Real = t43 * t25;
+    let t45: crate::Real = t42 - t44;
+    let t46: crate::Real = t45 * t39;
     [[t15, t20, t33, t40, t46]]
 }
 /**Range and bearing to a known landmark (seed 001 eq. 6, with atan2 for the full circle). Predicted columns: range, bearing.
@@ -2442,24 +2455,24 @@ pub fn obs_gyro_jac_p(
 8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-    lm: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
     [t10, t12]
 }
 /**Jacobian of `obs_landmark` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -2473,33 +2486,33 @@ pub fn obs_landmark(
 15 arithmetic operations (45 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 3usize]; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = lm[0usize];
-    let t3: f64 = lm[1usize];
-    let t4: f64 = t2 - t0;
-    let t5: f64 = t4 * t4;
-    let t6: f64 = t3 - t1;
-    let t7: f64 = t6 * t6;
-    let t8: f64 = t5 + t7;
-    let t9: f64 = libm::sqrt(t8);
-    let t10: f64 = 1f64;
-    let t11: f64 = t10 / t9;
-    let t12: f64 = t4 * t11;
-    let t13: f64 = -t12;
-    let t14: f64 = t6 * t11;
-    let t15: f64 = -t14;
-    let t16: f64 = 0f64;
-    let t17: f64 = t10 / t8;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t4 * t17;
-    let t20: f64 = -t19;
-    let t21: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = lm[0usize];
+    let t3: crate::Real = lm[1usize];
+    let t4: crate::Real = t2 - t0;
+    let t5: crate::Real = t4 * t4;
+    let t6: crate::Real = t3 - t1;
+    let t7: crate::Real = t6 * t6;
+    let t8: crate::Real = t5 + t7;
+    let t9: crate::Real = crate::math::sqrt(t8);
+    let t10: crate::Real = 1.0;
+    let t11: crate::Real = t10 / t9;
+    let t12: crate::Real = t4 * t11;
+    let t13: crate::Real = -t12;
+    let t14: crate::Real = t6 * t11;
+    let t15: crate::Real = -t14;
+    let t16: crate::Real = 0.0;
+    let t17: crate::Real = t10 / t8;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t4 * t17;
+    let t20: crate::Real = -t19;
+    let t21: crate::Real = (-1.0);
     [[t13, t15, t16], [t18, t20, t21]]
 }
 /**Jacobian of `obs_landmark` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -2513,12 +2526,12 @@ pub fn obs_landmark_jac_x(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 5usize]; 2usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 5usize]; 2usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0, t0, t0, t0], [t0, t0, t0, t0, t0]]
 }
 /**Input rates from a body twist: the inverse of the (square, invertible) map from input rates to the twist rows that are not identically zero, derived symbolically (seed 003: W = (V_T_W)^-1 V).
@@ -2529,35 +2542,38 @@ pub fn obs_landmark_jac_p(
 
 17 arithmetic operations (28 before common-subexpression elimination).*/
 #[inline]
-pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 5usize]) -> [f64; 2usize] {
-    let t0: f64 = twist[0usize];
-    let t1: f64 = twist[2usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = p[2usize];
-    let t5: f64 = p[3usize];
-    let t6: f64 = p[4usize];
-    let t7: f64 = 3.141592653589793f64;
-    let t8: f64 = t4 * t5;
-    let t9: f64 = t1 * t8;
-    let t10: f64 = 0.25f64;
-    let t11: f64 = t9 * t10;
-    let t12: f64 = t2 * t7;
-    let t13: f64 = t6 * t12;
-    let t14: f64 = 1f64;
-    let t15: f64 = t14 / t13;
-    let t16: f64 = t11 * t15;
-    let t17: f64 = t0 * t5;
-    let t18: f64 = 0.5f64;
-    let t19: f64 = t17 * t18;
-    let t20: f64 = t19 * t15;
-    let t21: f64 = t16 + t20;
-    let t22: f64 = t3 * t7;
-    let t23: f64 = t6 * t22;
-    let t24: f64 = t14 / t23;
-    let t25: f64 = t11 * t24;
-    let t26: f64 = t19 * t24;
-    let t27: f64 = t26 - t25;
+pub fn inverse_twist(
+    twist: &[crate::Real; 3usize],
+    p: &[crate::Real; 5usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = twist[0usize];
+    let t1: crate::Real = twist[2usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = p[2usize];
+    let t5: crate::Real = p[3usize];
+    let t6: crate::Real = p[4usize];
+    let t7: crate::Real = 3.141592653589793;
+    let t8: crate::Real = t4 * t5;
+    let t9: crate::Real = t1 * t8;
+    let t10: crate::Real = 0.25;
+    let t11: crate::Real = t9 * t10;
+    let t12: crate::Real = t2 * t7;
+    let t13: crate::Real = t6 * t12;
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t13;
+    let t16: crate::Real = t11 * t15;
+    let t17: crate::Real = t0 * t5;
+    let t18: crate::Real = 0.5;
+    let t19: crate::Real = t17 * t18;
+    let t20: crate::Real = t19 * t15;
+    let t21: crate::Real = t16 + t20;
+    let t22: crate::Real = t3 * t7;
+    let t23: crate::Real = t6 * t22;
+    let t24: crate::Real = t14 / t23;
+    let t25: crate::Real = t11 * t24;
+    let t26: crate::Real = t19 * t24;
+    let t27: crate::Real = t26 - t25;
     [t21, t27]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
@@ -2570,76 +2586,78 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 5usize]) -> [f64; 2usize] 
 45 arithmetic operations (112 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
-    dpose: &[f64; 3usize],
-    dt: f64,
-    p: &[f64; 5usize],
-) -> [f64; 2usize] {
-    let t0: f64 = dpose[0usize];
-    let t1: f64 = dpose[2usize];
-    let t2: f64 = dt;
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = p[2usize];
-    let t6: f64 = p[3usize];
-    let t7: f64 = p[4usize];
-    let g0: [f64; 1usize] = if libm::fabs(t1) < 0.05f64 {
-        let t8: f64 = 1f64;
-        let t9: f64 = t8 / t2;
-        let t10: f64 = t0 * t9;
-        let t11: f64 = t1 * t1;
-        let t12: f64 = t0 * t11;
-        let t13: f64 = 0.16666666666666666f64;
-        let t14: f64 = t12 * t13;
-        let t15: f64 = t14 * t9;
-        let t16: f64 = t10 + t15;
-        let t17: f64 = t11 * t11;
-        let t18: f64 = t0 * t17;
-        let t19: f64 = 0.019444444444444445f64;
-        let t20: f64 = t18 * t19;
-        let t21: f64 = t20 * t9;
-        let t22: f64 = t16 + t21;
-        let t23: f64 = t1 * t11;
-        let t24: f64 = t23 * t23;
-        let t25: f64 = t0 * t24;
-        let t26: f64 = 0.00205026455026455f64;
-        let t27: f64 = t25 * t26;
-        let t28: f64 = t27 * t9;
-        let t29: f64 = t22 + t28;
-        let t30: f64 = t17 * t17;
-        let t31: f64 = t0 * t30;
-        let t32: f64 = 0.0002099867724867725f64;
-        let t33: f64 = t31 * t32;
-        let t34: f64 = t33 * t9;
-        let t35: f64 = t29 + t34;
+    dpose: &[crate::Real; 3usize],
+    dt: crate::Real,
+    p: &[crate::Real; 5usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = dpose[0usize];
+    let t1: crate::Real = dpose[2usize];
+    let t2: crate::Real = dt;
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = p[2usize];
+    let t6: crate::Real = p[3usize];
+    let t7: crate::Real = p[4usize];
+    let g0: [crate::Real; 1usize] = if crate::math::fabs(t1)
+        < crate::math::series_switch(0.05)
+    {
+        let t8: crate::Real = 1.0;
+        let t9: crate::Real = t8 / t2;
+        let t10: crate::Real = t0 * t9;
+        let t11: crate::Real = t1 * t1;
+        let t12: crate::Real = t0 * t11;
+        let t13: crate::Real = 0.16666666666666666;
+        let t14: crate::Real = t12 * t13;
+        let t15: crate::Real = t14 * t9;
+        let t16: crate::Real = t10 + t15;
+        let t17: crate::Real = t11 * t11;
+        let t18: crate::Real = t0 * t17;
+        let t19: crate::Real = 0.019444444444444445;
+        let t20: crate::Real = t18 * t19;
+        let t21: crate::Real = t20 * t9;
+        let t22: crate::Real = t16 + t21;
+        let t23: crate::Real = t1 * t11;
+        let t24: crate::Real = t23 * t23;
+        let t25: crate::Real = t0 * t24;
+        let t26: crate::Real = 0.00205026455026455;
+        let t27: crate::Real = t25 * t26;
+        let t28: crate::Real = t27 * t9;
+        let t29: crate::Real = t22 + t28;
+        let t30: crate::Real = t17 * t17;
+        let t31: crate::Real = t0 * t30;
+        let t32: crate::Real = 0.0002099867724867725;
+        let t33: crate::Real = t31 * t32;
+        let t34: crate::Real = t33 * t9;
+        let t35: crate::Real = t29 + t34;
         [t35]
     } else {
-        let t36: f64 = libm::sin(t1);
-        let t37: f64 = t0 * t1;
-        let t38: f64 = t2 * t36;
-        let t39: f64 = t37 / t38;
+        let t36: crate::Real = crate::math::sin(t1);
+        let t37: crate::Real = t0 * t1;
+        let t38: crate::Real = t2 * t36;
+        let t39: crate::Real = t37 / t38;
         [t39]
     };
-    let t40: f64 = g0[0usize];
-    let t41: f64 = 3.141592653589793f64;
-    let t42: f64 = t5 * t6;
-    let t43: f64 = t1 * t42;
-    let t44: f64 = 0.25f64;
-    let t45: f64 = t43 * t44;
-    let t46: f64 = t3 * t41;
-    let t47: f64 = t7 * t46;
-    let t48: f64 = t2 * t47;
-    let t49: f64 = t45 / t48;
-    let t50: f64 = t6 * t40;
-    let t51: f64 = 0.5f64;
-    let t52: f64 = t50 * t51;
-    let t53: f64 = t52 / t47;
-    let t54: f64 = t49 + t53;
-    let t55: f64 = t4 * t41;
-    let t56: f64 = t7 * t55;
-    let t57: f64 = t2 * t56;
-    let t58: f64 = t45 / t57;
-    let t59: f64 = t52 / t56;
-    let t60: f64 = t59 - t58;
+    let t40: crate::Real = g0[0usize];
+    let t41: crate::Real = 3.141592653589793;
+    let t42: crate::Real = t5 * t6;
+    let t43: crate::Real = t1 * t42;
+    let t44: crate::Real = 0.25;
+    let t45: crate::Real = t43 * t44;
+    let t46: crate::Real = t3 * t41;
+    let t47: crate::Real = t7 * t46;
+    let t48: crate::Real = t2 * t47;
+    let t49: crate::Real = t45 / t48;
+    let t50: crate::Real = t6 * t40;
+    let t51: crate::Real = 0.5;
+    let t52: crate::Real = t50 * t51;
+    let t53: crate::Real = t52 / t47;
+    let t54: crate::Real = t49 + t53;
+    let t55: crate::Real = t4 * t41;
+    let t56: crate::Real = t7 * t55;
+    let t57: crate::Real = t2 * t56;
+    let t58: crate::Real = t45 / t57;
+    let t59: crate::Real = t52 / t56;
+    let t60: crate::Real = t59 - t58;
     [t54, t60]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
@@ -2654,374 +2672,376 @@ pub fn inverse_increment(
 324 arithmetic operations (7316 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = p[2usize];
-    let t10: f64 = p[3usize];
-    let t11: f64 = p[4usize];
-    let t12: f64 = dt;
-    let t13: f64 = 3.141592653589793f64;
-    let t14: f64 = t3 * t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = t11 * t15;
-    let t17: f64 = 2f64;
-    let t18: f64 = t16 * t17;
-    let t19: f64 = 1f64;
-    let t20: f64 = t19 / t10;
-    let t21: f64 = t18 * t20;
-    let t22: f64 = t4 * t13;
-    let t23: f64 = t8 * t22;
-    let t24: f64 = t11 * t23;
-    let t25: f64 = t17 * t24;
-    let t26: f64 = t25 * t20;
-    let t27: f64 = t21 - t26;
-    let t28: f64 = t27 / t9;
-    let t29: f64 = t6 + t28;
-    let t30: f64 = t12 * t29;
-    let t31: f64 = t21 + t26;
-    let t32: f64 = 0.5f64;
-    let t33: f64 = t31 * t32;
-    let t34: f64 = t5 + t33;
-    let t35: f64 = libm::sin(t2);
-    let t41: f64 = libm::cos(t2);
-    let t42: f64 = t12 * t34;
-    let t45: f64 = t30 * t30;
-    let t111: f64 = t35 * t42;
-    let t217: f64 = t32 * t31;
-    let t218: f64 = t5 + t217;
-    let t291: f64 = t12 * t35;
-    let g0: [f64; 8usize] = if libm::fabs(t30) < 0.05f64 {
-        let t36: f64 = t12 * t30;
-        let t37: f64 = t34 * t36;
-        let t38: f64 = t35 * t37;
-        let t39: f64 = t32 * t38;
-        let t40: f64 = t0 - t39;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t40 + t43;
-        let t46: f64 = t12 * t45;
-        let t47: f64 = t34 * t46;
-        let t48: f64 = t41 * t47;
-        let t49: f64 = 0.16666666666666666f64;
-        let t50: f64 = t48 * t49;
-        let t51: f64 = t44 - t50;
-        let t52: f64 = t30 * t45;
-        let t53: f64 = t12 * t52;
-        let t54: f64 = t34 * t53;
-        let t55: f64 = t35 * t54;
-        let t56: f64 = 0.041666666666666664f64;
-        let t57: f64 = t55 * t56;
-        let t58: f64 = t51 + t57;
-        let t59: f64 = t45 * t45;
-        let t60: f64 = t12 * t59;
-        let t61: f64 = t34 * t60;
-        let t62: f64 = t41 * t61;
-        let t63: f64 = 0.008333333333333333f64;
-        let t64: f64 = t62 * t63;
-        let t65: f64 = t58 + t64;
-        let t66: f64 = t30 * t59;
-        let t67: f64 = t12 * t66;
-        let t68: f64 = t34 * t67;
-        let t69: f64 = t35 * t68;
-        let t70: f64 = 0.001388888888888889f64;
-        let t71: f64 = t69 * t70;
-        let t72: f64 = t65 - t71;
-        let t73: f64 = t52 * t52;
-        let t74: f64 = t12 * t73;
-        let t75: f64 = t34 * t74;
-        let t76: f64 = t41 * t75;
-        let t77: f64 = 0.0001984126984126984f64;
-        let t78: f64 = t76 * t77;
-        let t79: f64 = t72 - t78;
-        let t80: f64 = t30 * t73;
-        let t81: f64 = t12 * t80;
-        let t82: f64 = t34 * t81;
-        let t83: f64 = t35 * t82;
-        let t84: f64 = 0.0000248015873015873f64;
-        let t85: f64 = t83 * t84;
-        let t86: f64 = t79 + t85;
-        let t87: f64 = t59 * t59;
-        let t88: f64 = t12 * t87;
-        let t89: f64 = t34 * t88;
-        let t90: f64 = t41 * t89;
-        let t91: f64 = 0.0000027557319223985893f64;
-        let t92: f64 = t90 * t91;
-        let t93: f64 = t86 + t92;
-        let t108: f64 = t37 * t41;
-        let t109: f64 = t32 * t108;
-        let t110: f64 = t1 + t109;
-        let t112: f64 = t110 + t111;
-        let t113: f64 = t35 * t47;
-        let t114: f64 = t49 * t113;
-        let t115: f64 = t112 - t114;
-        let t116: f64 = t41 * t54;
-        let t117: f64 = t56 * t116;
-        let t118: f64 = t115 - t117;
-        let t119: f64 = t35 * t61;
-        let t120: f64 = t63 * t119;
-        let t121: f64 = t118 + t120;
-        let t122: f64 = t41 * t68;
-        let t123: f64 = t70 * t122;
-        let t124: f64 = t121 + t123;
-        let t125: f64 = t35 * t75;
-        let t126: f64 = t77 * t125;
-        let t127: f64 = t124 - t126;
-        let t128: f64 = t41 * t82;
-        let t129: f64 = t84 * t128;
-        let t130: f64 = t127 - t129;
-        let t131: f64 = t35 * t89;
-        let t132: f64 = t91 * t131;
-        let t133: f64 = t130 + t132;
-        let t143: f64 = t41 * t37;
-        let t144: f64 = t32 * t143;
-        let t145: f64 = t113 * t49;
-        let t146: f64 = t116 * t56;
-        let t147: f64 = t145 + t146;
-        let t148: f64 = t119 * t63;
-        let t149: f64 = t147 - t148;
-        let t150: f64 = t122 * t70;
-        let t151: f64 = t149 - t150;
-        let t152: f64 = t125 * t77;
-        let t153: f64 = t151 + t152;
-        let t154: f64 = t128 * t84;
-        let t155: f64 = t153 + t154;
-        let t156: f64 = t131 * t91;
-        let t157: f64 = t155 - t156;
-        let t158: f64 = t157 - t144;
-        let t159: f64 = t158 - t111;
-        let t165: f64 = t37 * t35;
-        let t166: f64 = t32 * t165;
-        let t167: f64 = t49 * t48;
-        let t168: f64 = t43 - t167;
-        let t169: f64 = t56 * t55;
-        let t170: f64 = t168 + t169;
-        let t171: f64 = t63 * t62;
-        let t172: f64 = t170 + t171;
-        let t173: f64 = t70 * t69;
-        let t174: f64 = t172 - t173;
-        let t175: f64 = t77 * t76;
-        let t176: f64 = t174 - t175;
-        let t177: f64 = t84 * t83;
-        let t178: f64 = t176 + t177;
-        let t179: f64 = t91 * t90;
-        let t180: f64 = t178 + t179;
-        let t181: f64 = t180 - t166;
-        let t184: f64 = t35 * t36;
-        let t185: f64 = t184 * t32;
-        let t186: f64 = t12 * t41;
-        let t187: f64 = t41 * t46;
-        let t188: f64 = t187 * t49;
-        let t189: f64 = t186 - t188;
-        let t190: f64 = t35 * t53;
-        let t191: f64 = t190 * t56;
-        let t192: f64 = t189 + t191;
-        let t193: f64 = t41 * t60;
-        let t194: f64 = t193 * t63;
-        let t195: f64 = t192 + t194;
-        let t196: f64 = t35 * t67;
-        let t197: f64 = t196 * t70;
-        let t198: f64 = t195 - t197;
-        let t199: f64 = t41 * t74;
-        let t200: f64 = t199 * t77;
-        let t201: f64 = t198 - t200;
-        let t202: f64 = t35 * t81;
-        let t203: f64 = t202 * t84;
-        let t204: f64 = t201 + t203;
-        let t205: f64 = t41 * t88;
-        let t206: f64 = t205 * t91;
-        let t207: f64 = t204 + t206;
-        let t208: f64 = t207 - t185;
-        let t216: f64 = t12 * t12;
-        let t219: f64 = t30 * t216;
-        let t220: f64 = t218 * t219;
-        let t221: f64 = t41 * t220;
-        let t222: f64 = 0.3333333333333333f64;
-        let t223: f64 = t221 * t222;
-        let t224: f64 = t216 * t218;
-        let t225: f64 = t35 * t224;
-        let t226: f64 = t32 * t225;
-        let t227: f64 = t45 * t216;
-        let t228: f64 = t218 * t227;
-        let t229: f64 = t35 * t228;
-        let t230: f64 = 0.125f64;
-        let t231: f64 = t229 * t230;
-        let t232: f64 = t52 * t216;
-        let t233: f64 = t218 * t232;
-        let t234: f64 = t41 * t233;
-        let t235: f64 = 0.03333333333333333f64;
-        let t236: f64 = t234 * t235;
-        let t237: f64 = t231 + t236;
-        let t238: f64 = t59 * t216;
-        let t239: f64 = t218 * t238;
-        let t240: f64 = t35 * t239;
-        let t241: f64 = 0.006944444444444444f64;
-        let t242: f64 = t240 * t241;
-        let t243: f64 = t237 - t242;
-        let t244: f64 = t66 * t216;
-        let t245: f64 = t218 * t244;
-        let t246: f64 = t41 * t245;
-        let t247: f64 = 0.0011904761904761906f64;
-        let t248: f64 = t246 * t247;
-        let t249: f64 = t243 - t248;
-        let t250: f64 = t73 * t216;
-        let t251: f64 = t218 * t250;
-        let t252: f64 = t35 * t251;
-        let t253: f64 = 0.00017361111111111112f64;
-        let t254: f64 = t252 * t253;
-        let t255: f64 = t249 + t254;
-        let t256: f64 = t80 * t216;
-        let t257: f64 = t218 * t256;
-        let t258: f64 = t41 * t257;
-        let t259: f64 = 0.000022045855379188714f64;
-        let t260: f64 = t258 * t259;
-        let t261: f64 = t255 + t260;
-        let t262: f64 = t87 * t216;
-        let t263: f64 = t218 * t262;
-        let t264: f64 = t35 * t263;
-        let t265: f64 = 0.00000248015873015873f64;
-        let t266: f64 = t264 * t265;
-        let t267: f64 = t261 - t266;
-        let t268: f64 = t267 - t223;
-        let t269: f64 = t268 - t226;
-        let t289: f64 = t36 * t41;
-        let t290: f64 = t32 * t289;
-        let t292: f64 = t290 + t291;
-        let t293: f64 = t35 * t46;
-        let t294: f64 = t49 * t293;
-        let t295: f64 = t292 - t294;
-        let t296: f64 = t41 * t53;
-        let t297: f64 = t56 * t296;
-        let t298: f64 = t295 - t297;
-        let t299: f64 = t35 * t60;
-        let t300: f64 = t63 * t299;
-        let t301: f64 = t298 + t300;
-        let t302: f64 = t41 * t67;
-        let t303: f64 = t70 * t302;
-        let t304: f64 = t301 + t303;
-        let t305: f64 = t35 * t74;
-        let t306: f64 = t77 * t305;
-        let t307: f64 = t304 - t306;
-        let t308: f64 = t41 * t81;
-        let t309: f64 = t84 * t308;
-        let t310: f64 = t307 - t309;
-        let t311: f64 = t35 * t88;
-        let t312: f64 = t91 * t311;
-        let t313: f64 = t310 + t312;
-        let t320: f64 = t35 * t220;
-        let t321: f64 = t222 * t320;
-        let t322: f64 = t41 * t224;
-        let t323: f64 = t32 * t322;
-        let t324: f64 = t41 * t228;
-        let t325: f64 = t230 * t324;
-        let t326: f64 = t323 - t325;
-        let t327: f64 = t35 * t233;
-        let t328: f64 = t235 * t327;
-        let t329: f64 = t326 + t328;
-        let t330: f64 = t41 * t239;
-        let t331: f64 = t241 * t330;
-        let t332: f64 = t329 + t331;
-        let t333: f64 = t35 * t245;
-        let t334: f64 = t247 * t333;
-        let t335: f64 = t332 - t334;
-        let t336: f64 = t41 * t251;
-        let t337: f64 = t253 * t336;
-        let t338: f64 = t335 - t337;
-        let t339: f64 = t35 * t257;
-        let t340: f64 = t259 * t339;
-        let t341: f64 = t338 + t340;
-        let t342: f64 = t41 * t263;
-        let t343: f64 = t265 * t342;
-        let t344: f64 = t341 + t343;
-        let t345: f64 = t344 - t321;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = p[2usize];
+    let t10: crate::Real = p[3usize];
+    let t11: crate::Real = p[4usize];
+    let t12: crate::Real = dt;
+    let t13: crate::Real = 3.141592653589793;
+    let t14: crate::Real = t3 * t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = t11 * t15;
+    let t17: crate::Real = 2.0;
+    let t18: crate::Real = t16 * t17;
+    let t19: crate::Real = 1.0;
+    let t20: crate::Real = t19 / t10;
+    let t21: crate::Real = t18 * t20;
+    let t22: crate::Real = t4 * t13;
+    let t23: crate::Real = t8 * t22;
+    let t24: crate::Real = t11 * t23;
+    let t25: crate::Real = t17 * t24;
+    let t26: crate::Real = t25 * t20;
+    let t27: crate::Real = t21 - t26;
+    let t28: crate::Real = t27 / t9;
+    let t29: crate::Real = t6 + t28;
+    let t30: crate::Real = t12 * t29;
+    let t31: crate::Real = t21 + t26;
+    let t32: crate::Real = 0.5;
+    let t33: crate::Real = t31 * t32;
+    let t34: crate::Real = t5 + t33;
+    let t35: crate::Real = crate::math::sin(t2);
+    let t41: crate::Real = crate::math::cos(t2);
+    let t42: crate::Real = t12 * t34;
+    let t45: crate::Real = t30 * t30;
+    let t111: crate::Real = t35 * t42;
+    let t217: crate::Real = t32 * t31;
+    let t218: crate::Real = t5 + t217;
+    let t291: crate::Real = t12 * t35;
+    let g0: [crate::Real; 8usize] = if crate::math::fabs(t30)
+        < crate::math::series_switch(0.05)
+    {
+        let t36: crate::Real = t12 * t30;
+        let t37: crate::Real = t34 * t36;
+        let t38: crate::Real = t35 * t37;
+        let t39: crate::Real = t32 * t38;
+        let t40: crate::Real = t0 - t39;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t40 + t43;
+        let t46: crate::Real = t12 * t45;
+        let t47: crate::Real = t34 * t46;
+        let t48: crate::Real = t41 * t47;
+        let t49: crate::Real = 0.16666666666666666;
+        let t50: crate::Real = t48 * t49;
+        let t51: crate::Real = t44 - t50;
+        let t52: crate::Real = t30 * t45;
+        let t53: crate::Real = t12 * t52;
+        let t54: crate::Real = t34 * t53;
+        let t55: crate::Real = t35 * t54;
+        let t56: crate::Real = 0.041666666666666664;
+        let t57: crate::Real = t55 * t56;
+        let t58: crate::Real = t51 + t57;
+        let t59: crate::Real = t45 * t45;
+        let t60: crate::Real = t12 * t59;
+        let t61: crate::Real = t34 * t60;
+        let t62: crate::Real = t41 * t61;
+        let t63: crate::Real = 0.008333333333333333;
+        let t64: crate::Real = t62 * t63;
+        let t65: crate::Real = t58 + t64;
+        let t66: crate::Real = t30 * t59;
+        let t67: crate::Real = t12 * t66;
+        let t68: crate::Real = t34 * t67;
+        let t69: crate::Real = t35 * t68;
+        let t70: crate::Real = 0.001388888888888889;
+        let t71: crate::Real = t69 * t70;
+        let t72: crate::Real = t65 - t71;
+        let t73: crate::Real = t52 * t52;
+        let t74: crate::Real = t12 * t73;
+        let t75: crate::Real = t34 * t74;
+        let t76: crate::Real = t41 * t75;
+        let t77: crate::Real = 0.0001984126984126984;
+        let t78: crate::Real = t76 * t77;
+        let t79: crate::Real = t72 - t78;
+        let t80: crate::Real = t30 * t73;
+        let t81: crate::Real = t12 * t80;
+        let t82: crate::Real = t34 * t81;
+        let t83: crate::Real = t35 * t82;
+        let t84: crate::Real = 0.0000248015873015873;
+        let t85: crate::Real = t83 * t84;
+        let t86: crate::Real = t79 + t85;
+        let t87: crate::Real = t59 * t59;
+        let t88: crate::Real = t12 * t87;
+        let t89: crate::Real = t34 * t88;
+        let t90: crate::Real = t41 * t89;
+        let t91: crate::Real = 0.0000027557319223985893;
+        let t92: crate::Real = t90 * t91;
+        let t93: crate::Real = t86 + t92;
+        let t108: crate::Real = t37 * t41;
+        let t109: crate::Real = t32 * t108;
+        let t110: crate::Real = t1 + t109;
+        let t112: crate::Real = t110 + t111;
+        let t113: crate::Real = t35 * t47;
+        let t114: crate::Real = t49 * t113;
+        let t115: crate::Real = t112 - t114;
+        let t116: crate::Real = t41 * t54;
+        let t117: crate::Real = t56 * t116;
+        let t118: crate::Real = t115 - t117;
+        let t119: crate::Real = t35 * t61;
+        let t120: crate::Real = t63 * t119;
+        let t121: crate::Real = t118 + t120;
+        let t122: crate::Real = t41 * t68;
+        let t123: crate::Real = t70 * t122;
+        let t124: crate::Real = t121 + t123;
+        let t125: crate::Real = t35 * t75;
+        let t126: crate::Real = t77 * t125;
+        let t127: crate::Real = t124 - t126;
+        let t128: crate::Real = t41 * t82;
+        let t129: crate::Real = t84 * t128;
+        let t130: crate::Real = t127 - t129;
+        let t131: crate::Real = t35 * t89;
+        let t132: crate::Real = t91 * t131;
+        let t133: crate::Real = t130 + t132;
+        let t143: crate::Real = t41 * t37;
+        let t144: crate::Real = t32 * t143;
+        let t145: crate::Real = t113 * t49;
+        let t146: crate::Real = t116 * t56;
+        let t147: crate::Real = t145 + t146;
+        let t148: crate::Real = t119 * t63;
+        let t149: crate::Real = t147 - t148;
+        let t150: crate::Real = t122 * t70;
+        let t151: crate::Real = t149 - t150;
+        let t152: crate::Real = t125 * t77;
+        let t153: crate::Real = t151 + t152;
+        let t154: crate::Real = t128 * t84;
+        let t155: crate::Real = t153 + t154;
+        let t156: crate::Real = t131 * t91;
+        let t157: crate::Real = t155 - t156;
+        let t158: crate::Real = t157 - t144;
+        let t159: crate::Real = t158 - t111;
+        let t165: crate::Real = t37 * t35;
+        let t166: crate::Real = t32 * t165;
+        let t167: crate::Real = t49 * t48;
+        let t168: crate::Real = t43 - t167;
+        let t169: crate::Real = t56 * t55;
+        let t170: crate::Real = t168 + t169;
+        let t171: crate::Real = t63 * t62;
+        let t172: crate::Real = t170 + t171;
+        let t173: crate::Real = t70 * t69;
+        let t174: crate::Real = t172 - t173;
+        let t175: crate::Real = t77 * t76;
+        let t176: crate::Real = t174 - t175;
+        let t177: crate::Real = t84 * t83;
+        let t178: crate::Real = t176 + t177;
+        let t179: crate::Real = t91 * t90;
+        let t180: crate::Real = t178 + t179;
+        let t181: crate::Real = t180 - t166;
+        let t184: crate::Real = t35 * t36;
+        let t185: crate::Real = t184 * t32;
+        let t186: crate::Real = t12 * t41;
+        let t187: crate::Real = t41 * t46;
+        let t188: crate::Real = t187 * t49;
+        let t189: crate::Real = t186 - t188;
+        let t190: crate::Real = t35 * t53;
+        let t191: crate::Real = t190 * t56;
+        let t192: crate::Real = t189 + t191;
+        let t193: crate::Real = t41 * t60;
+        let t194: crate::Real = t193 * t63;
+        let t195: crate::Real = t192 + t194;
+        let t196: crate::Real = t35 * t67;
+        let t197: crate::Real = t196 * t70;
+        let t198: crate::Real = t195 - t197;
+        let t199: crate::Real = t41 * t74;
+        let t200: crate::Real = t199 * t77;
+        let t201: crate::Real = t198 - t200;
+        let t202: crate::Real = t35 * t81;
+        let t203: crate::Real = t202 * t84;
+        let t204: crate::Real = t201 + t203;
+        let t205: crate::Real = t41 * t88;
+        let t206: crate::Real = t205 * t91;
+        let t207: crate::Real = t204 + t206;
+        let t208: crate::Real = t207 - t185;
+        let t216: crate::Real = t12 * t12;
+        let t219: crate::Real = t30 * t216;
+        let t220: crate::Real = t218 * t219;
+        let t221: crate::Real = t41 * t220;
+        let t222: crate::Real = 0.3333333333333333;
+        let t223: crate::Real = t221 * t222;
+        let t224: crate::Real = t216 * t218;
+        let t225: crate::Real = t35 * t224;
+        let t226: crate::Real = t32 * t225;
+        let t227: crate::Real = t45 * t216;
+        let t228: crate::Real = t218 * t227;
+        let t229: crate::Real = t35 * t228;
+        let t230: crate::Real = 0.125;
+        let t231: crate::Real = t229 * t230;
+        let t232: crate::Real = t52 * t216;
+        let t233: crate::Real = t218 * t232;
+        let t234: crate::Real = t41 * t233;
+        let t235: crate::Real = 0.03333333333333333;
+        let t236: crate::Real = t234 * t235;
+        let t237: crate::Real = t231 + t236;
+        let t238: crate::Real = t59 * t216;
+        let t239: crate::Real = t218 * t238;
+        let t240: crate::Real = t35 * t239;
+        let t241: crate::Real = 0.006944444444444444;
+        let t242: crate::Real = t240 * t241;
+        let t243: crate::Real = t237 - t242;
+        let t244: crate::Real = t66 * t216;
+        let t245: crate::Real = t218 * t244;
+        let t246: crate::Real = t41 * t245;
+        let t247: crate::Real = 0.0011904761904761906;
+        let t248: crate::Real = t246 * t247;
+        let t249: crate::Real = t243 - t248;
+        let t250: crate::Real = t73 * t216;
+        let t251: crate::Real = t218 * t250;
+        let t252: crate::Real = t35 * t251;
+        let t253: crate::Real = 0.00017361111111111112;
+        let t254: crate::Real = t252 * t253;
+        let t255: crate::Real = t249 + t254;
+        let t256: crate::Real = t80 * t216;
+        let t257: crate::Real = t218 * t256;
+        let t258: crate::Real = t41 * t257;
+        let t259: crate::Real = 0.000022045855379188714;
+        let t260: crate::Real = t258 * t259;
+        let t261: crate::Real = t255 + t260;
+        let t262: crate::Real = t87 * t216;
+        let t263: crate::Real = t218 * t262;
+        let t264: crate::Real = t35 * t263;
+        let t265: crate::Real = 0.00000248015873015873;
+        let t266: crate::Real = t264 * t265;
+        let t267: crate::Real = t261 - t266;
+        let t268: crate::Real = t267 - t223;
+        let t269: crate::Real = t268 - t226;
+        let t289: crate::Real = t36 * t41;
+        let t290: crate::Real = t32 * t289;
+        let t292: crate::Real = t290 + t291;
+        let t293: crate::Real = t35 * t46;
+        let t294: crate::Real = t49 * t293;
+        let t295: crate::Real = t292 - t294;
+        let t296: crate::Real = t41 * t53;
+        let t297: crate::Real = t56 * t296;
+        let t298: crate::Real = t295 - t297;
+        let t299: crate::Real = t35 * t60;
+        let t300: crate::Real = t63 * t299;
+        let t301: crate::Real = t298 + t300;
+        let t302: crate::Real = t41 * t67;
+        let t303: crate::Real = t70 * t302;
+        let t304: crate::Real = t301 + t303;
+        let t305: crate::Real = t35 * t74;
+        let t306: crate::Real = t77 * t305;
+        let t307: crate::Real = t304 - t306;
+        let t308: crate::Real = t41 * t81;
+        let t309: crate::Real = t84 * t308;
+        let t310: crate::Real = t307 - t309;
+        let t311: crate::Real = t35 * t88;
+        let t312: crate::Real = t91 * t311;
+        let t313: crate::Real = t310 + t312;
+        let t320: crate::Real = t35 * t220;
+        let t321: crate::Real = t222 * t320;
+        let t322: crate::Real = t41 * t224;
+        let t323: crate::Real = t32 * t322;
+        let t324: crate::Real = t41 * t228;
+        let t325: crate::Real = t230 * t324;
+        let t326: crate::Real = t323 - t325;
+        let t327: crate::Real = t35 * t233;
+        let t328: crate::Real = t235 * t327;
+        let t329: crate::Real = t326 + t328;
+        let t330: crate::Real = t41 * t239;
+        let t331: crate::Real = t241 * t330;
+        let t332: crate::Real = t329 + t331;
+        let t333: crate::Real = t35 * t245;
+        let t334: crate::Real = t247 * t333;
+        let t335: crate::Real = t332 - t334;
+        let t336: crate::Real = t41 * t251;
+        let t337: crate::Real = t253 * t336;
+        let t338: crate::Real = t335 - t337;
+        let t339: crate::Real = t35 * t257;
+        let t340: crate::Real = t259 * t339;
+        let t341: crate::Real = t338 + t340;
+        let t342: crate::Real = t41 * t263;
+        let t343: crate::Real = t265 * t342;
+        let t344: crate::Real = t341 + t343;
+        let t345: crate::Real = t344 - t321;
         [t93, t133, t159, t181, t208, t269, t313, t345]
     } else {
-        let t94: f64 = libm::cos(t30);
-        let t95: f64 = t19 - t94;
-        let t96: f64 = t12 * t95;
-        let t97: f64 = t34 * t96;
-        let t98: f64 = t35 * t97;
-        let t99: f64 = t19 / t30;
-        let t100: f64 = t98 * t99;
-        let t101: f64 = t0 - t100;
-        let t102: f64 = libm::sin(t30);
-        let t103: f64 = t42 * t102;
-        let t104: f64 = t41 * t103;
-        let t105: f64 = t104 * t99;
-        let t106: f64 = t101 + t105;
-        let t134: f64 = t41 * t97;
-        let t135: f64 = t134 * t99;
-        let t136: f64 = t1 + t135;
-        let t137: f64 = t102 * t111;
-        let t138: f64 = t137 * t99;
-        let t139: f64 = t136 + t138;
-        let t160: f64 = -t135;
-        let t161: f64 = t111 * t102;
-        let t162: f64 = t161 * t99;
-        let t163: f64 = t160 - t162;
-        let t182: f64 = t105 - t100;
-        let t209: f64 = t12 * t102;
-        let t210: f64 = t41 * t209;
-        let t211: f64 = t210 * t99;
-        let t212: f64 = t35 * t96;
-        let t213: f64 = t212 * t99;
-        let t214: f64 = t211 - t213;
-        let t270: f64 = t12 * t218;
-        let t271: f64 = t35 * t270;
-        let t272: f64 = t102 * t271;
-        let t273: f64 = t272 * t99;
-        let t274: f64 = t41 * t270;
-        let t275: f64 = t94 * t274;
-        let t276: f64 = t275 * t99;
-        let t277: f64 = t96 * t218;
-        let t278: f64 = t35 * t277;
-        let t279: f64 = t19 / t45;
-        let t280: f64 = t278 * t279;
-        let t281: f64 = t276 + t280;
-        let t282: f64 = t102 * t270;
-        let t283: f64 = t41 * t282;
-        let t284: f64 = t283 * t279;
-        let t285: f64 = t281 - t284;
-        let t286: f64 = t285 - t273;
-        let t287: f64 = t12 * t286;
-        let t314: f64 = t102 * t291;
-        let t315: f64 = t314 * t99;
-        let t316: f64 = t41 * t96;
-        let t317: f64 = t316 * t99;
-        let t318: f64 = t315 + t317;
-        let t346: f64 = t94 * t271;
-        let t347: f64 = t346 * t99;
-        let t348: f64 = t283 * t99;
-        let t349: f64 = t347 + t348;
-        let t350: f64 = t41 * t277;
-        let t351: f64 = t350 * t279;
-        let t352: f64 = t349 - t351;
-        let t353: f64 = t272 * t279;
-        let t354: f64 = t352 - t353;
-        let t355: f64 = t12 * t354;
+        let t94: crate::Real = crate::math::cos(t30);
+        let t95: crate::Real = t19 - t94;
+        let t96: crate::Real = t12 * t95;
+        let t97: crate::Real = t34 * t96;
+        let t98: crate::Real = t35 * t97;
+        let t99: crate::Real = t19 / t30;
+        let t100: crate::Real = t98 * t99;
+        let t101: crate::Real = t0 - t100;
+        let t102: crate::Real = crate::math::sin(t30);
+        let t103: crate::Real = t42 * t102;
+        let t104: crate::Real = t41 * t103;
+        let t105: crate::Real = t104 * t99;
+        let t106: crate::Real = t101 + t105;
+        let t134: crate::Real = t41 * t97;
+        let t135: crate::Real = t134 * t99;
+        let t136: crate::Real = t1 + t135;
+        let t137: crate::Real = t102 * t111;
+        let t138: crate::Real = t137 * t99;
+        let t139: crate::Real = t136 + t138;
+        let t160: crate::Real = -t135;
+        let t161: crate::Real = t111 * t102;
+        let t162: crate::Real = t161 * t99;
+        let t163: crate::Real = t160 - t162;
+        let t182: crate::Real = t105 - t100;
+        let t209: crate::Real = t12 * t102;
+        let t210: crate::Real = t41 * t209;
+        let t211: crate::Real = t210 * t99;
+        let t212: crate::Real = t35 * t96;
+        let t213: crate::Real = t212 * t99;
+        let t214: crate::Real = t211 - t213;
+        let t270: crate::Real = t12 * t218;
+        let t271: crate::Real = t35 * t270;
+        let t272: crate::Real = t102 * t271;
+        let t273: crate::Real = t272 * t99;
+        let t274: crate::Real = t41 * t270;
+        let t275: crate::Real = t94 * t274;
+        let t276: crate::Real = t275 * t99;
+        let t277: crate::Real = t96 * t218;
+        let t278: crate::Real = t35 * t277;
+        let t279: crate::Real = t19 / t45;
+        let t280: crate::Real = t278 * t279;
+        let t281: crate::Real = t276 + t280;
+        let t282: crate::Real = t102 * t270;
+        let t283: crate::Real = t41 * t282;
+        let t284: crate::Real = t283 * t279;
+        let t285: crate::Real = t281 - t284;
+        let t286: crate::Real = t285 - t273;
+        let t287: crate::Real = t12 * t286;
+        let t314: crate::Real = t102 * t291;
+        let t315: crate::Real = t314 * t99;
+        let t316: crate::Real = t41 * t96;
+        let t317: crate::Real = t316 * t99;
+        let t318: crate::Real = t315 + t317;
+        let t346: crate::Real = t94 * t271;
+        let t347: crate::Real = t346 * t99;
+        let t348: crate::Real = t283 * t99;
+        let t349: crate::Real = t347 + t348;
+        let t350: crate::Real = t41 * t277;
+        let t351: crate::Real = t350 * t279;
+        let t352: crate::Real = t349 - t351;
+        let t353: crate::Real = t272 * t279;
+        let t354: crate::Real = t352 - t353;
+        let t355: crate::Real = t12 * t354;
         [t106, t139, t163, t182, t214, t287, t318, t355]
     };
-    let t107: f64 = g0[0usize];
-    let t140: f64 = g0[1usize];
-    let t164: f64 = g0[2usize];
-    let t183: f64 = g0[3usize];
-    let t215: f64 = g0[4usize];
-    let t288: f64 = g0[5usize];
-    let t319: f64 = g0[6usize];
-    let t356: f64 = g0[7usize];
-    let t141: f64 = t2 + t30;
-    let t142: f64 = 0f64;
+    let t107: crate::Real = g0[0usize];
+    let t140: crate::Real = g0[1usize];
+    let t164: crate::Real = g0[2usize];
+    let t183: crate::Real = g0[3usize];
+    let t215: crate::Real = g0[4usize];
+    let t288: crate::Real = g0[5usize];
+    let t319: crate::Real = g0[6usize];
+    let t356: crate::Real = g0[7usize];
+    let t141: crate::Real = t2 + t30;
+    let t142: crate::Real = 0.0;
     [
         t107,
         t140,
@@ -3048,12 +3068,16 @@ pub fn step_exact_linearized_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_w`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 2usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 2usize]; 3usize],
+) {
     let o = step_exact_linearized_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -3077,984 +3101,988 @@ pub fn step_exact_linearized(
 914 arithmetic operations (17989 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> [f64; 27usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = p[2usize];
-    let t10: f64 = p[3usize];
-    let t11: f64 = p[4usize];
-    let t12: f64 = dt;
-    let t13: f64 = 3.141592653589793f64;
-    let t14: f64 = t3 * t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = t11 * t15;
-    let t17: f64 = 2f64;
-    let t18: f64 = t16 * t17;
-    let t19: f64 = 1f64;
-    let t20: f64 = t19 / t10;
-    let t21: f64 = t18 * t20;
-    let t22: f64 = t4 * t13;
-    let t23: f64 = t8 * t22;
-    let t24: f64 = t11 * t23;
-    let t25: f64 = t17 * t24;
-    let t26: f64 = t25 * t20;
-    let t27: f64 = t21 - t26;
-    let t28: f64 = t27 / t9;
-    let t29: f64 = t6 + t28;
-    let t30: f64 = t12 * t29;
-    let t31: f64 = t21 + t26;
-    let t32: f64 = 0.5f64;
-    let t33: f64 = t31 * t32;
-    let t34: f64 = t5 + t33;
-    let t35: f64 = libm::sin(t2);
-    let t41: f64 = libm::cos(t2);
-    let t42: f64 = t12 * t34;
-    let t43: f64 = t41 * t42;
-    let t49: f64 = 0.16666666666666666f64;
-    let t56: f64 = 0.041666666666666664f64;
-    let t63: f64 = 0.008333333333333333f64;
-    let t70: f64 = 0.001388888888888889f64;
-    let t77: f64 = 0.0001984126984126984f64;
-    let t84: f64 = 0.0000248015873015873f64;
-    let t91: f64 = 0.0000027557319223985893f64;
-    let t111: f64 = t35 * t42;
-    let g0: [f64; 4usize] = if libm::fabs(t30) < 0.05f64 {
-        let t36: f64 = t12 * t30;
-        let t37: f64 = t34 * t36;
-        let t38: f64 = t35 * t37;
-        let t39: f64 = t32 * t38;
-        let t40: f64 = t0 - t39;
-        let t44: f64 = t40 + t43;
-        let t45: f64 = t30 * t30;
-        let t46: f64 = t12 * t45;
-        let t47: f64 = t34 * t46;
-        let t48: f64 = t41 * t47;
-        let t50: f64 = t48 * t49;
-        let t51: f64 = t44 - t50;
-        let t52: f64 = t30 * t45;
-        let t53: f64 = t12 * t52;
-        let t54: f64 = t34 * t53;
-        let t55: f64 = t35 * t54;
-        let t57: f64 = t55 * t56;
-        let t58: f64 = t51 + t57;
-        let t59: f64 = t45 * t45;
-        let t60: f64 = t12 * t59;
-        let t61: f64 = t34 * t60;
-        let t62: f64 = t41 * t61;
-        let t64: f64 = t62 * t63;
-        let t65: f64 = t58 + t64;
-        let t66: f64 = t30 * t59;
-        let t67: f64 = t12 * t66;
-        let t68: f64 = t34 * t67;
-        let t69: f64 = t35 * t68;
-        let t71: f64 = t69 * t70;
-        let t72: f64 = t65 - t71;
-        let t73: f64 = t52 * t52;
-        let t74: f64 = t12 * t73;
-        let t75: f64 = t34 * t74;
-        let t76: f64 = t41 * t75;
-        let t78: f64 = t76 * t77;
-        let t79: f64 = t72 - t78;
-        let t80: f64 = t30 * t73;
-        let t81: f64 = t12 * t80;
-        let t82: f64 = t34 * t81;
-        let t83: f64 = t35 * t82;
-        let t85: f64 = t83 * t84;
-        let t86: f64 = t79 + t85;
-        let t87: f64 = t59 * t59;
-        let t88: f64 = t12 * t87;
-        let t89: f64 = t34 * t88;
-        let t90: f64 = t41 * t89;
-        let t92: f64 = t90 * t91;
-        let t93: f64 = t86 + t92;
-        let t108: f64 = t37 * t41;
-        let t109: f64 = t32 * t108;
-        let t110: f64 = t1 + t109;
-        let t112: f64 = t110 + t111;
-        let t113: f64 = t35 * t47;
-        let t114: f64 = t49 * t113;
-        let t115: f64 = t112 - t114;
-        let t116: f64 = t41 * t54;
-        let t117: f64 = t56 * t116;
-        let t118: f64 = t115 - t117;
-        let t119: f64 = t35 * t61;
-        let t120: f64 = t63 * t119;
-        let t121: f64 = t118 + t120;
-        let t122: f64 = t41 * t68;
-        let t123: f64 = t70 * t122;
-        let t124: f64 = t121 + t123;
-        let t125: f64 = t35 * t75;
-        let t126: f64 = t77 * t125;
-        let t127: f64 = t124 - t126;
-        let t128: f64 = t41 * t82;
-        let t129: f64 = t84 * t128;
-        let t130: f64 = t127 - t129;
-        let t131: f64 = t35 * t89;
-        let t132: f64 = t91 * t131;
-        let t133: f64 = t130 + t132;
-        let t143: f64 = t41 * t37;
-        let t144: f64 = t32 * t143;
-        let t145: f64 = t113 * t49;
-        let t146: f64 = t116 * t56;
-        let t147: f64 = t145 + t146;
-        let t148: f64 = t119 * t63;
-        let t149: f64 = t147 - t148;
-        let t150: f64 = t122 * t70;
-        let t151: f64 = t149 - t150;
-        let t152: f64 = t125 * t77;
-        let t153: f64 = t151 + t152;
-        let t154: f64 = t128 * t84;
-        let t155: f64 = t153 + t154;
-        let t156: f64 = t131 * t91;
-        let t157: f64 = t155 - t156;
-        let t158: f64 = t157 - t144;
-        let t159: f64 = t158 - t111;
-        let t165: f64 = t37 * t35;
-        let t166: f64 = t32 * t165;
-        let t167: f64 = t49 * t48;
-        let t168: f64 = t43 - t167;
-        let t169: f64 = t56 * t55;
-        let t170: f64 = t168 + t169;
-        let t171: f64 = t63 * t62;
-        let t172: f64 = t170 + t171;
-        let t173: f64 = t70 * t69;
-        let t174: f64 = t172 - t173;
-        let t175: f64 = t77 * t76;
-        let t176: f64 = t174 - t175;
-        let t177: f64 = t84 * t83;
-        let t178: f64 = t176 + t177;
-        let t179: f64 = t91 * t90;
-        let t180: f64 = t178 + t179;
-        let t181: f64 = t180 - t166;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> [crate::Real; 27usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = p[2usize];
+    let t10: crate::Real = p[3usize];
+    let t11: crate::Real = p[4usize];
+    let t12: crate::Real = dt;
+    let t13: crate::Real = 3.141592653589793;
+    let t14: crate::Real = t3 * t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = t11 * t15;
+    let t17: crate::Real = 2.0;
+    let t18: crate::Real = t16 * t17;
+    let t19: crate::Real = 1.0;
+    let t20: crate::Real = t19 / t10;
+    let t21: crate::Real = t18 * t20;
+    let t22: crate::Real = t4 * t13;
+    let t23: crate::Real = t8 * t22;
+    let t24: crate::Real = t11 * t23;
+    let t25: crate::Real = t17 * t24;
+    let t26: crate::Real = t25 * t20;
+    let t27: crate::Real = t21 - t26;
+    let t28: crate::Real = t27 / t9;
+    let t29: crate::Real = t6 + t28;
+    let t30: crate::Real = t12 * t29;
+    let t31: crate::Real = t21 + t26;
+    let t32: crate::Real = 0.5;
+    let t33: crate::Real = t31 * t32;
+    let t34: crate::Real = t5 + t33;
+    let t35: crate::Real = crate::math::sin(t2);
+    let t41: crate::Real = crate::math::cos(t2);
+    let t42: crate::Real = t12 * t34;
+    let t43: crate::Real = t41 * t42;
+    let t49: crate::Real = 0.16666666666666666;
+    let t56: crate::Real = 0.041666666666666664;
+    let t63: crate::Real = 0.008333333333333333;
+    let t70: crate::Real = 0.001388888888888889;
+    let t77: crate::Real = 0.0001984126984126984;
+    let t84: crate::Real = 0.0000248015873015873;
+    let t91: crate::Real = 0.0000027557319223985893;
+    let t111: crate::Real = t35 * t42;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t30)
+        < crate::math::series_switch(0.05)
+    {
+        let t36: crate::Real = t12 * t30;
+        let t37: crate::Real = t34 * t36;
+        let t38: crate::Real = t35 * t37;
+        let t39: crate::Real = t32 * t38;
+        let t40: crate::Real = t0 - t39;
+        let t44: crate::Real = t40 + t43;
+        let t45: crate::Real = t30 * t30;
+        let t46: crate::Real = t12 * t45;
+        let t47: crate::Real = t34 * t46;
+        let t48: crate::Real = t41 * t47;
+        let t50: crate::Real = t48 * t49;
+        let t51: crate::Real = t44 - t50;
+        let t52: crate::Real = t30 * t45;
+        let t53: crate::Real = t12 * t52;
+        let t54: crate::Real = t34 * t53;
+        let t55: crate::Real = t35 * t54;
+        let t57: crate::Real = t55 * t56;
+        let t58: crate::Real = t51 + t57;
+        let t59: crate::Real = t45 * t45;
+        let t60: crate::Real = t12 * t59;
+        let t61: crate::Real = t34 * t60;
+        let t62: crate::Real = t41 * t61;
+        let t64: crate::Real = t62 * t63;
+        let t65: crate::Real = t58 + t64;
+        let t66: crate::Real = t30 * t59;
+        let t67: crate::Real = t12 * t66;
+        let t68: crate::Real = t34 * t67;
+        let t69: crate::Real = t35 * t68;
+        let t71: crate::Real = t69 * t70;
+        let t72: crate::Real = t65 - t71;
+        let t73: crate::Real = t52 * t52;
+        let t74: crate::Real = t12 * t73;
+        let t75: crate::Real = t34 * t74;
+        let t76: crate::Real = t41 * t75;
+        let t78: crate::Real = t76 * t77;
+        let t79: crate::Real = t72 - t78;
+        let t80: crate::Real = t30 * t73;
+        let t81: crate::Real = t12 * t80;
+        let t82: crate::Real = t34 * t81;
+        let t83: crate::Real = t35 * t82;
+        let t85: crate::Real = t83 * t84;
+        let t86: crate::Real = t79 + t85;
+        let t87: crate::Real = t59 * t59;
+        let t88: crate::Real = t12 * t87;
+        let t89: crate::Real = t34 * t88;
+        let t90: crate::Real = t41 * t89;
+        let t92: crate::Real = t90 * t91;
+        let t93: crate::Real = t86 + t92;
+        let t108: crate::Real = t37 * t41;
+        let t109: crate::Real = t32 * t108;
+        let t110: crate::Real = t1 + t109;
+        let t112: crate::Real = t110 + t111;
+        let t113: crate::Real = t35 * t47;
+        let t114: crate::Real = t49 * t113;
+        let t115: crate::Real = t112 - t114;
+        let t116: crate::Real = t41 * t54;
+        let t117: crate::Real = t56 * t116;
+        let t118: crate::Real = t115 - t117;
+        let t119: crate::Real = t35 * t61;
+        let t120: crate::Real = t63 * t119;
+        let t121: crate::Real = t118 + t120;
+        let t122: crate::Real = t41 * t68;
+        let t123: crate::Real = t70 * t122;
+        let t124: crate::Real = t121 + t123;
+        let t125: crate::Real = t35 * t75;
+        let t126: crate::Real = t77 * t125;
+        let t127: crate::Real = t124 - t126;
+        let t128: crate::Real = t41 * t82;
+        let t129: crate::Real = t84 * t128;
+        let t130: crate::Real = t127 - t129;
+        let t131: crate::Real = t35 * t89;
+        let t132: crate::Real = t91 * t131;
+        let t133: crate::Real = t130 + t132;
+        let t143: crate::Real = t41 * t37;
+        let t144: crate::Real = t32 * t143;
+        let t145: crate::Real = t113 * t49;
+        let t146: crate::Real = t116 * t56;
+        let t147: crate::Real = t145 + t146;
+        let t148: crate::Real = t119 * t63;
+        let t149: crate::Real = t147 - t148;
+        let t150: crate::Real = t122 * t70;
+        let t151: crate::Real = t149 - t150;
+        let t152: crate::Real = t125 * t77;
+        let t153: crate::Real = t151 + t152;
+        let t154: crate::Real = t128 * t84;
+        let t155: crate::Real = t153 + t154;
+        let t156: crate::Real = t131 * t91;
+        let t157: crate::Real = t155 - t156;
+        let t158: crate::Real = t157 - t144;
+        let t159: crate::Real = t158 - t111;
+        let t165: crate::Real = t37 * t35;
+        let t166: crate::Real = t32 * t165;
+        let t167: crate::Real = t49 * t48;
+        let t168: crate::Real = t43 - t167;
+        let t169: crate::Real = t56 * t55;
+        let t170: crate::Real = t168 + t169;
+        let t171: crate::Real = t63 * t62;
+        let t172: crate::Real = t170 + t171;
+        let t173: crate::Real = t70 * t69;
+        let t174: crate::Real = t172 - t173;
+        let t175: crate::Real = t77 * t76;
+        let t176: crate::Real = t174 - t175;
+        let t177: crate::Real = t84 * t83;
+        let t178: crate::Real = t176 + t177;
+        let t179: crate::Real = t91 * t90;
+        let t180: crate::Real = t178 + t179;
+        let t181: crate::Real = t180 - t166;
         [t93, t133, t159, t181]
     } else {
-        let t94: f64 = libm::cos(t30);
-        let t95: f64 = t19 - t94;
-        let t96: f64 = t12 * t95;
-        let t97: f64 = t34 * t96;
-        let t98: f64 = t35 * t97;
-        let t99: f64 = t19 / t30;
-        let t100: f64 = t98 * t99;
-        let t101: f64 = t0 - t100;
-        let t102: f64 = libm::sin(t30);
-        let t103: f64 = t42 * t102;
-        let t104: f64 = t41 * t103;
-        let t105: f64 = t104 * t99;
-        let t106: f64 = t101 + t105;
-        let t134: f64 = t41 * t97;
-        let t135: f64 = t134 * t99;
-        let t136: f64 = t1 + t135;
-        let t137: f64 = t102 * t111;
-        let t138: f64 = t137 * t99;
-        let t139: f64 = t136 + t138;
-        let t160: f64 = -t135;
-        let t161: f64 = t111 * t102;
-        let t162: f64 = t161 * t99;
-        let t163: f64 = t160 - t162;
-        let t182: f64 = t105 - t100;
+        let t94: crate::Real = crate::math::cos(t30);
+        let t95: crate::Real = t19 - t94;
+        let t96: crate::Real = t12 * t95;
+        let t97: crate::Real = t34 * t96;
+        let t98: crate::Real = t35 * t97;
+        let t99: crate::Real = t19 / t30;
+        let t100: crate::Real = t98 * t99;
+        let t101: crate::Real = t0 - t100;
+        let t102: crate::Real = crate::math::sin(t30);
+        let t103: crate::Real = t42 * t102;
+        let t104: crate::Real = t41 * t103;
+        let t105: crate::Real = t104 * t99;
+        let t106: crate::Real = t101 + t105;
+        let t134: crate::Real = t41 * t97;
+        let t135: crate::Real = t134 * t99;
+        let t136: crate::Real = t1 + t135;
+        let t137: crate::Real = t102 * t111;
+        let t138: crate::Real = t137 * t99;
+        let t139: crate::Real = t136 + t138;
+        let t160: crate::Real = -t135;
+        let t161: crate::Real = t111 * t102;
+        let t162: crate::Real = t161 * t99;
+        let t163: crate::Real = t160 - t162;
+        let t182: crate::Real = t105 - t100;
         [t106, t139, t163, t182]
     };
-    let t107: f64 = g0[0usize];
-    let t140: f64 = g0[1usize];
-    let t164: f64 = g0[2usize];
-    let t183: f64 = g0[3usize];
-    let t141: f64 = t2 + t30;
-    let t142: f64 = 0f64;
-    let t184: f64 = t19 / t9;
-    let t185: f64 = t27 * t184;
-    let t186: f64 = t6 + t185;
-    let t187: f64 = t12 * t186;
-    let t189: f64 = t11 * t14;
-    let t195: f64 = t9 * t10;
-    let t196: f64 = t19 / t195;
-    let t199: f64 = t12 * t189;
-    let t200: f64 = t35 * t199;
-    let t205: f64 = t187 * t187;
-    let t308: f64 = t11 * t22;
-    let t314: f64 = t12 * t308;
-    let t315: f64 = t35 * t314;
-    let t389: f64 = t9 * t9;
-    let t396: f64 = t19 / t389;
-    let t460: f64 = t12 * t27;
-    let t465: f64 = t10 * t10;
-    let t466: f64 = t19 / t465;
-    let t467: f64 = t18 * t466;
-    let t468: f64 = -t467;
-    let t469: f64 = t25 * t466;
-    let t470: f64 = t468 - t469;
-    let t471: f64 = t12 * t470;
-    let t474: f64 = t35 * t471;
-    let t477: f64 = t469 - t467;
-    let t547: f64 = t12 * t477;
-    let t553: f64 = t15 * t17;
-    let t554: f64 = t553 * t20;
-    let t555: f64 = t17 * t23;
-    let t556: f64 = t555 * t20;
-    let t557: f64 = t554 + t556;
-    let t558: f64 = t12 * t557;
-    let t561: f64 = t35 * t558;
-    let t564: f64 = t554 - t556;
-    let t627: f64 = t12 * t564;
-    let g1: [f64; 10usize] = if libm::fabs(t187) < 0.05f64 {
-        let t188: f64 = t12 * t12;
-        let t190: f64 = t188 * t189;
-        let t191: f64 = t34 * t190;
-        let t192: f64 = t41 * t191;
-        let t193: f64 = 0.6666666666666666f64;
-        let t194: f64 = t192 * t193;
-        let t197: f64 = t194 * t196;
-        let t198: f64 = -t197;
-        let t201: f64 = t32 * t200;
-        let t202: f64 = t201 * t20;
-        let t203: f64 = t198 - t202;
-        let t204: f64 = t187 * t203;
-        let t206: f64 = t191 * t35;
-        let t207: f64 = 0.25f64;
-        let t208: f64 = t206 * t207;
-        let t209: f64 = t208 * t196;
-        let t210: f64 = t41 * t199;
-        let t211: f64 = t210 * t49;
-        let t212: f64 = t211 * t20;
-        let t213: f64 = t209 - t212;
-        let t214: f64 = t205 * t213;
-        let t215: f64 = t204 + t214;
-        let t216: f64 = t187 * t205;
-        let t217: f64 = 0.06666666666666667f64;
-        let t218: f64 = t192 * t217;
-        let t219: f64 = t218 * t196;
-        let t220: f64 = t200 * t56;
-        let t221: f64 = t220 * t20;
-        let t222: f64 = t219 + t221;
-        let t223: f64 = t216 * t222;
-        let t224: f64 = t215 + t223;
-        let t225: f64 = t205 * t205;
-        let t226: f64 = 0.013888888888888888f64;
-        let t227: f64 = t206 * t226;
-        let t228: f64 = t227 * t196;
-        let t229: f64 = t210 * t63;
-        let t230: f64 = t229 * t20;
-        let t231: f64 = t230 - t228;
-        let t232: f64 = t225 * t231;
-        let t233: f64 = t224 + t232;
-        let t234: f64 = t187 * t225;
-        let t235: f64 = 0.002380952380952381f64;
-        let t236: f64 = t192 * t235;
-        let t237: f64 = t236 * t196;
-        let t238: f64 = -t237;
-        let t239: f64 = t200 * t70;
-        let t240: f64 = t239 * t20;
-        let t241: f64 = t238 - t240;
-        let t242: f64 = t234 * t241;
-        let t243: f64 = t233 + t242;
-        let t244: f64 = t216 * t216;
-        let t245: f64 = 0.00034722222222222224f64;
-        let t246: f64 = t206 * t245;
-        let t247: f64 = t246 * t196;
-        let t248: f64 = t210 * t77;
-        let t249: f64 = t248 * t20;
-        let t250: f64 = t247 - t249;
-        let t251: f64 = t244 * t250;
-        let t252: f64 = t243 + t251;
-        let t253: f64 = t187 * t244;
-        let t254: f64 = 0.00004409171075837743f64;
-        let t255: f64 = t192 * t254;
-        let t256: f64 = t255 * t196;
-        let t257: f64 = t200 * t84;
-        let t258: f64 = t257 * t20;
-        let t259: f64 = t256 + t258;
-        let t260: f64 = t253 * t259;
-        let t261: f64 = t252 + t260;
-        let t262: f64 = t225 * t225;
-        let t263: f64 = 0.00000496031746031746f64;
-        let t264: f64 = t206 * t263;
-        let t265: f64 = t264 * t196;
-        let t266: f64 = t210 * t91;
-        let t267: f64 = t266 * t20;
-        let t268: f64 = t267 - t265;
-        let t269: f64 = t262 * t268;
-        let t270: f64 = t261 + t269;
-        let t271: f64 = t206 * t196;
-        let t272: f64 = t270 - t271;
-        let t273: f64 = t210 * t20;
-        let t274: f64 = t272 + t273;
-        let t309: f64 = t188 * t308;
-        let t310: f64 = t34 * t309;
-        let t311: f64 = t41 * t310;
-        let t312: f64 = t193 * t311;
-        let t313: f64 = t312 * t196;
-        let t316: f64 = t32 * t315;
-        let t317: f64 = t316 * t20;
-        let t318: f64 = t313 - t317;
-        let t319: f64 = t187 * t318;
-        let t320: f64 = t35 * t310;
-        let t321: f64 = t207 * t320;
-        let t322: f64 = t321 * t196;
-        let t323: f64 = -t322;
-        let t324: f64 = t41 * t314;
-        let t325: f64 = t49 * t324;
-        let t326: f64 = t325 * t20;
-        let t327: f64 = t323 - t326;
-        let t328: f64 = t205 * t327;
-        let t329: f64 = t319 + t328;
-        let t330: f64 = t217 * t311;
-        let t331: f64 = t330 * t196;
-        let t332: f64 = t56 * t315;
-        let t333: f64 = t332 * t20;
-        let t334: f64 = t333 - t331;
-        let t335: f64 = t216 * t334;
-        let t336: f64 = t329 + t335;
-        let t337: f64 = t226 * t320;
-        let t338: f64 = t337 * t196;
-        let t339: f64 = t63 * t324;
-        let t340: f64 = t339 * t20;
-        let t341: f64 = t338 + t340;
-        let t342: f64 = t225 * t341;
-        let t343: f64 = t336 + t342;
-        let t344: f64 = t235 * t311;
-        let t345: f64 = t344 * t196;
-        let t346: f64 = t70 * t315;
-        let t347: f64 = t346 * t20;
-        let t348: f64 = t345 - t347;
-        let t349: f64 = t234 * t348;
-        let t350: f64 = t343 + t349;
-        let t351: f64 = t245 * t320;
-        let t352: f64 = t351 * t196;
-        let t353: f64 = -t352;
-        let t354: f64 = t77 * t324;
-        let t355: f64 = t354 * t20;
-        let t356: f64 = t353 - t355;
-        let t357: f64 = t244 * t356;
-        let t358: f64 = t350 + t357;
-        let t359: f64 = t254 * t311;
-        let t360: f64 = t359 * t196;
-        let t361: f64 = t84 * t315;
-        let t362: f64 = t361 * t20;
-        let t363: f64 = t362 - t360;
-        let t364: f64 = t253 * t363;
-        let t365: f64 = t358 + t364;
-        let t366: f64 = t263 * t320;
-        let t367: f64 = t366 * t196;
-        let t368: f64 = t91 * t324;
-        let t369: f64 = t368 * t20;
-        let t370: f64 = t367 + t369;
-        let t371: f64 = t262 * t370;
-        let t372: f64 = t365 + t371;
-        let t373: f64 = t320 * t196;
-        let t374: f64 = t372 + t373;
-        let t375: f64 = t324 * t20;
-        let t376: f64 = t374 + t375;
-        let t390: f64 = t187 * t188;
-        let t391: f64 = t34 * t390;
-        let t392: f64 = t27 * t391;
-        let t393: f64 = t41 * t392;
-        let t394: f64 = 0.3333333333333333f64;
-        let t395: f64 = t393 * t394;
-        let t397: f64 = t395 * t396;
-        let t398: f64 = t188 * t34;
-        let t399: f64 = t27 * t398;
-        let t400: f64 = t35 * t399;
-        let t401: f64 = t32 * t400;
-        let t402: f64 = t401 * t396;
-        let t403: f64 = t397 + t402;
-        let t404: f64 = t188 * t205;
-        let t405: f64 = t34 * t404;
-        let t406: f64 = t27 * t405;
-        let t407: f64 = t35 * t406;
-        let t408: f64 = 0.125f64;
-        let t409: f64 = t407 * t408;
-        let t410: f64 = t409 * t396;
-        let t411: f64 = t403 - t410;
-        let t412: f64 = t188 * t216;
-        let t413: f64 = t34 * t412;
-        let t414: f64 = t27 * t413;
-        let t415: f64 = t41 * t414;
-        let t416: f64 = 0.03333333333333333f64;
-        let t417: f64 = t415 * t416;
-        let t418: f64 = t417 * t396;
-        let t419: f64 = t411 - t418;
-        let t420: f64 = t188 * t225;
-        let t421: f64 = t34 * t420;
-        let t422: f64 = t27 * t421;
-        let t423: f64 = t35 * t422;
-        let t424: f64 = 0.006944444444444444f64;
-        let t425: f64 = t423 * t424;
-        let t426: f64 = t425 * t396;
-        let t427: f64 = t419 + t426;
-        let t428: f64 = t188 * t234;
-        let t429: f64 = t34 * t428;
-        let t430: f64 = t27 * t429;
-        let t431: f64 = t41 * t430;
-        let t432: f64 = 0.0011904761904761906f64;
-        let t433: f64 = t431 * t432;
-        let t434: f64 = t433 * t396;
-        let t435: f64 = t427 + t434;
-        let t436: f64 = t188 * t244;
-        let t437: f64 = t34 * t436;
-        let t438: f64 = t27 * t437;
-        let t439: f64 = t35 * t438;
-        let t440: f64 = 0.00017361111111111112f64;
-        let t441: f64 = t439 * t440;
-        let t442: f64 = t441 * t396;
-        let t443: f64 = t435 - t442;
-        let t444: f64 = t188 * t253;
-        let t445: f64 = t34 * t444;
-        let t446: f64 = t27 * t445;
-        let t447: f64 = t41 * t446;
-        let t448: f64 = 0.000022045855379188714f64;
-        let t449: f64 = t447 * t448;
-        let t450: f64 = t449 * t396;
-        let t451: f64 = t443 - t450;
-        let t452: f64 = t188 * t262;
-        let t453: f64 = t34 * t452;
-        let t454: f64 = t27 * t453;
-        let t455: f64 = t35 * t454;
-        let t456: f64 = 0.00000248015873015873f64;
-        let t457: f64 = t455 * t456;
-        let t458: f64 = t457 * t396;
-        let t459: f64 = t451 + t458;
-        let t472: f64 = t41 * t471;
-        let t473: f64 = t32 * t472;
-        let t475: f64 = t207 * t474;
-        let t476: f64 = -t475;
-        let t478: f64 = t398 * t477;
-        let t479: f64 = t41 * t478;
-        let t480: f64 = t394 * t479;
-        let t481: f64 = t480 * t184;
-        let t482: f64 = t476 - t481;
-        let t483: f64 = t187 * t482;
-        let t484: f64 = t473 + t483;
-        let t485: f64 = t35 * t478;
-        let t486: f64 = t32 * t485;
-        let t487: f64 = t486 * t184;
-        let t488: f64 = t484 - t487;
-        let t489: f64 = 0.08333333333333333f64;
-        let t490: f64 = t472 * t489;
-        let t491: f64 = t408 * t485;
-        let t492: f64 = t491 * t184;
-        let t493: f64 = t492 - t490;
-        let t494: f64 = t205 * t493;
-        let t495: f64 = t488 + t494;
-        let t496: f64 = 0.020833333333333332f64;
-        let t497: f64 = t474 * t496;
-        let t498: f64 = t416 * t479;
-        let t499: f64 = t498 * t184;
-        let t500: f64 = t497 + t499;
-        let t501: f64 = t216 * t500;
-        let t502: f64 = t495 + t501;
-        let t503: f64 = 0.004166666666666667f64;
-        let t504: f64 = t472 * t503;
-        let t505: f64 = t424 * t485;
-        let t506: f64 = t505 * t184;
-        let t507: f64 = t504 - t506;
-        let t508: f64 = t225 * t507;
-        let t509: f64 = t502 + t508;
-        let t510: f64 = 0.0006944444444444445f64;
-        let t511: f64 = t474 * t510;
-        let t512: f64 = -t511;
-        let t513: f64 = t432 * t479;
-        let t514: f64 = t513 * t184;
-        let t515: f64 = t512 - t514;
-        let t516: f64 = t234 * t515;
-        let t517: f64 = t509 + t516;
-        let t518: f64 = 0.0000992063492063492f64;
-        let t519: f64 = t472 * t518;
-        let t520: f64 = t440 * t485;
-        let t521: f64 = t520 * t184;
-        let t522: f64 = t521 - t519;
-        let t523: f64 = t244 * t522;
-        let t524: f64 = t517 + t523;
-        let t525: f64 = 0.00001240079365079365f64;
-        let t526: f64 = t474 * t525;
-        let t527: f64 = t448 * t479;
-        let t528: f64 = t527 * t184;
-        let t529: f64 = t526 + t528;
-        let t530: f64 = t253 * t529;
-        let t531: f64 = t524 + t530;
-        let t532: f64 = 0.0000013778659611992946f64;
-        let t533: f64 = t472 * t532;
-        let t534: f64 = t456 * t485;
-        let t535: f64 = t534 * t184;
-        let t536: f64 = t533 - t535;
-        let t537: f64 = t262 * t536;
-        let t538: f64 = t531 + t537;
-        let t559: f64 = t41 * t558;
-        let t560: f64 = t32 * t559;
-        let t562: f64 = t207 * t561;
-        let t563: f64 = -t562;
-        let t565: f64 = t398 * t564;
-        let t566: f64 = t41 * t565;
-        let t567: f64 = t394 * t566;
-        let t568: f64 = t567 * t184;
-        let t569: f64 = t563 - t568;
-        let t570: f64 = t187 * t569;
-        let t571: f64 = t560 + t570;
-        let t572: f64 = t35 * t565;
-        let t573: f64 = t32 * t572;
-        let t574: f64 = t573 * t184;
-        let t575: f64 = t571 - t574;
-        let t576: f64 = t489 * t559;
-        let t577: f64 = t408 * t572;
-        let t578: f64 = t577 * t184;
-        let t579: f64 = t578 - t576;
-        let t580: f64 = t205 * t579;
-        let t581: f64 = t575 + t580;
-        let t582: f64 = t496 * t561;
-        let t583: f64 = t416 * t566;
-        let t584: f64 = t583 * t184;
-        let t585: f64 = t582 + t584;
-        let t586: f64 = t216 * t585;
-        let t587: f64 = t581 + t586;
-        let t588: f64 = t503 * t559;
-        let t589: f64 = t424 * t572;
-        let t590: f64 = t589 * t184;
-        let t591: f64 = t588 - t590;
-        let t592: f64 = t225 * t591;
-        let t593: f64 = t587 + t592;
-        let t594: f64 = t510 * t561;
-        let t595: f64 = -t594;
-        let t596: f64 = t432 * t566;
-        let t597: f64 = t596 * t184;
-        let t598: f64 = t595 - t597;
-        let t599: f64 = t234 * t598;
-        let t600: f64 = t593 + t599;
-        let t601: f64 = t518 * t559;
-        let t602: f64 = t440 * t572;
-        let t603: f64 = t602 * t184;
-        let t604: f64 = t603 - t601;
-        let t605: f64 = t244 * t604;
-        let t606: f64 = t600 + t605;
-        let t607: f64 = t525 * t561;
-        let t608: f64 = t448 * t566;
-        let t609: f64 = t608 * t184;
-        let t610: f64 = t607 + t609;
-        let t611: f64 = t253 * t610;
-        let t612: f64 = t606 + t611;
-        let t613: f64 = t532 * t559;
-        let t614: f64 = t456 * t572;
-        let t615: f64 = t614 * t184;
-        let t616: f64 = t613 - t615;
-        let t617: f64 = t262 * t616;
-        let t618: f64 = t612 + t617;
-        let t633: f64 = t193 * t206;
-        let t634: f64 = t633 * t196;
-        let t635: f64 = t32 * t210;
-        let t636: f64 = t635 * t20;
-        let t637: f64 = t636 - t634;
-        let t638: f64 = t187 * t637;
-        let t639: f64 = t192 * t207;
-        let t640: f64 = t639 * t196;
-        let t641: f64 = -t640;
-        let t642: f64 = t200 * t49;
-        let t643: f64 = t642 * t20;
-        let t644: f64 = t641 - t643;
-        let t645: f64 = t205 * t644;
-        let t646: f64 = t638 + t645;
-        let t647: f64 = t206 * t217;
-        let t648: f64 = t647 * t196;
-        let t649: f64 = t210 * t56;
-        let t650: f64 = t649 * t20;
-        let t651: f64 = t648 - t650;
-        let t652: f64 = t216 * t651;
-        let t653: f64 = t646 + t652;
-        let t654: f64 = t192 * t226;
-        let t655: f64 = t654 * t196;
-        let t656: f64 = t200 * t63;
-        let t657: f64 = t656 * t20;
-        let t658: f64 = t655 + t657;
-        let t659: f64 = t225 * t658;
-        let t660: f64 = t653 + t659;
-        let t661: f64 = t206 * t235;
-        let t662: f64 = t661 * t196;
-        let t663: f64 = t210 * t70;
-        let t664: f64 = t663 * t20;
-        let t665: f64 = t664 - t662;
-        let t666: f64 = t234 * t665;
-        let t667: f64 = t660 + t666;
-        let t668: f64 = t192 * t245;
-        let t669: f64 = t668 * t196;
-        let t670: f64 = -t669;
-        let t671: f64 = t200 * t77;
-        let t672: f64 = t671 * t20;
-        let t673: f64 = t670 - t672;
-        let t674: f64 = t244 * t673;
-        let t675: f64 = t667 + t674;
-        let t676: f64 = t206 * t254;
-        let t677: f64 = t676 * t196;
-        let t678: f64 = t210 * t84;
-        let t679: f64 = t678 * t20;
-        let t680: f64 = t677 - t679;
-        let t681: f64 = t253 * t680;
-        let t682: f64 = t675 + t681;
-        let t683: f64 = t192 * t263;
-        let t684: f64 = t683 * t196;
-        let t685: f64 = t200 * t91;
-        let t686: f64 = t685 * t20;
-        let t687: f64 = t684 + t686;
-        let t688: f64 = t262 * t687;
-        let t689: f64 = t682 + t688;
-        let t690: f64 = t192 * t196;
-        let t691: f64 = t689 + t690;
-        let t692: f64 = t200 * t20;
-        let t693: f64 = t691 + t692;
-        let t713: f64 = t193 * t320;
-        let t714: f64 = t713 * t196;
-        let t715: f64 = t32 * t324;
-        let t716: f64 = t715 * t20;
-        let t717: f64 = t714 + t716;
-        let t718: f64 = t187 * t717;
-        let t719: f64 = t207 * t311;
-        let t720: f64 = t719 * t196;
-        let t721: f64 = t49 * t315;
-        let t722: f64 = t721 * t20;
-        let t723: f64 = t720 - t722;
-        let t724: f64 = t205 * t723;
-        let t725: f64 = t718 + t724;
-        let t726: f64 = t217 * t320;
-        let t727: f64 = t726 * t196;
-        let t728: f64 = -t727;
-        let t729: f64 = t56 * t324;
-        let t730: f64 = t729 * t20;
-        let t731: f64 = t728 - t730;
-        let t732: f64 = t216 * t731;
-        let t733: f64 = t725 + t732;
-        let t734: f64 = t226 * t311;
-        let t735: f64 = t734 * t196;
-        let t736: f64 = t63 * t315;
-        let t737: f64 = t736 * t20;
-        let t738: f64 = t737 - t735;
-        let t739: f64 = t225 * t738;
-        let t740: f64 = t733 + t739;
-        let t741: f64 = t235 * t320;
-        let t742: f64 = t741 * t196;
-        let t743: f64 = t70 * t324;
-        let t744: f64 = t743 * t20;
-        let t745: f64 = t742 + t744;
-        let t746: f64 = t234 * t745;
-        let t747: f64 = t740 + t746;
-        let t748: f64 = t245 * t311;
-        let t749: f64 = t748 * t196;
-        let t750: f64 = t77 * t315;
-        let t751: f64 = t750 * t20;
-        let t752: f64 = t749 - t751;
-        let t753: f64 = t244 * t752;
-        let t754: f64 = t747 + t753;
-        let t755: f64 = t254 * t320;
-        let t756: f64 = t755 * t196;
-        let t757: f64 = -t756;
-        let t758: f64 = t84 * t324;
-        let t759: f64 = t758 * t20;
-        let t760: f64 = t757 - t759;
-        let t761: f64 = t253 * t760;
-        let t762: f64 = t754 + t761;
-        let t763: f64 = t263 * t311;
-        let t764: f64 = t763 * t196;
-        let t765: f64 = t91 * t315;
-        let t766: f64 = t765 * t20;
-        let t767: f64 = t766 - t764;
-        let t768: f64 = t262 * t767;
-        let t769: f64 = t762 + t768;
-        let t770: f64 = t311 * t196;
-        let t771: f64 = t769 - t770;
-        let t772: f64 = t315 * t20;
-        let t773: f64 = t771 + t772;
-        let t784: f64 = t35 * t392;
-        let t785: f64 = t394 * t784;
-        let t786: f64 = t785 * t396;
-        let t787: f64 = t41 * t399;
-        let t788: f64 = t32 * t787;
-        let t789: f64 = t788 * t396;
-        let t790: f64 = t786 - t789;
-        let t791: f64 = t41 * t406;
-        let t792: f64 = t408 * t791;
-        let t793: f64 = t792 * t396;
-        let t794: f64 = t790 + t793;
-        let t795: f64 = t35 * t414;
-        let t796: f64 = t416 * t795;
-        let t797: f64 = t796 * t396;
-        let t798: f64 = t794 - t797;
-        let t799: f64 = t41 * t422;
-        let t800: f64 = t424 * t799;
-        let t801: f64 = t800 * t396;
-        let t802: f64 = t798 - t801;
-        let t803: f64 = t35 * t430;
-        let t804: f64 = t432 * t803;
-        let t805: f64 = t804 * t396;
-        let t806: f64 = t802 + t805;
-        let t807: f64 = t41 * t438;
-        let t808: f64 = t440 * t807;
-        let t809: f64 = t808 * t396;
-        let t810: f64 = t806 + t809;
-        let t811: f64 = t35 * t446;
-        let t812: f64 = t448 * t811;
-        let t813: f64 = t812 * t396;
-        let t814: f64 = t810 - t813;
-        let t815: f64 = t41 * t454;
-        let t816: f64 = t456 * t815;
-        let t817: f64 = t816 * t396;
-        let t818: f64 = t814 - t817;
-        let t823: f64 = t32 * t474;
-        let t824: f64 = t207 * t472;
-        let t825: f64 = t394 * t485;
-        let t826: f64 = t825 * t184;
-        let t827: f64 = t824 - t826;
-        let t828: f64 = t187 * t827;
-        let t829: f64 = t823 + t828;
-        let t830: f64 = t32 * t479;
-        let t831: f64 = t830 * t184;
-        let t832: f64 = t829 + t831;
-        let t833: f64 = t474 * t489;
-        let t834: f64 = -t833;
-        let t835: f64 = t408 * t479;
-        let t836: f64 = t835 * t184;
-        let t837: f64 = t834 - t836;
-        let t838: f64 = t205 * t837;
-        let t839: f64 = t832 + t838;
-        let t840: f64 = t472 * t496;
-        let t841: f64 = t416 * t485;
-        let t842: f64 = t841 * t184;
-        let t843: f64 = t842 - t840;
-        let t844: f64 = t216 * t843;
-        let t845: f64 = t839 + t844;
-        let t846: f64 = t474 * t503;
-        let t847: f64 = t424 * t479;
-        let t848: f64 = t847 * t184;
-        let t849: f64 = t846 + t848;
-        let t850: f64 = t225 * t849;
-        let t851: f64 = t845 + t850;
-        let t852: f64 = t472 * t510;
-        let t853: f64 = t432 * t485;
-        let t854: f64 = t853 * t184;
-        let t855: f64 = t852 - t854;
-        let t856: f64 = t234 * t855;
-        let t857: f64 = t851 + t856;
-        let t858: f64 = t474 * t518;
-        let t859: f64 = -t858;
-        let t860: f64 = t440 * t479;
-        let t861: f64 = t860 * t184;
-        let t862: f64 = t859 - t861;
-        let t863: f64 = t244 * t862;
-        let t864: f64 = t857 + t863;
-        let t865: f64 = t472 * t525;
-        let t866: f64 = t448 * t485;
-        let t867: f64 = t866 * t184;
-        let t868: f64 = t867 - t865;
-        let t869: f64 = t253 * t868;
-        let t870: f64 = t864 + t869;
-        let t871: f64 = t474 * t532;
-        let t872: f64 = t456 * t479;
-        let t873: f64 = t872 * t184;
-        let t874: f64 = t871 + t873;
-        let t875: f64 = t262 * t874;
-        let t876: f64 = t870 + t875;
-        let t888: f64 = t32 * t561;
-        let t889: f64 = t207 * t559;
-        let t890: f64 = t394 * t572;
-        let t891: f64 = t890 * t184;
-        let t892: f64 = t889 - t891;
-        let t893: f64 = t187 * t892;
-        let t894: f64 = t888 + t893;
-        let t895: f64 = t32 * t566;
-        let t896: f64 = t895 * t184;
-        let t897: f64 = t894 + t896;
-        let t898: f64 = t489 * t561;
-        let t899: f64 = -t898;
-        let t900: f64 = t408 * t566;
-        let t901: f64 = t900 * t184;
-        let t902: f64 = t899 - t901;
-        let t903: f64 = t205 * t902;
-        let t904: f64 = t897 + t903;
-        let t905: f64 = t496 * t559;
-        let t906: f64 = t416 * t572;
-        let t907: f64 = t906 * t184;
-        let t908: f64 = t907 - t905;
-        let t909: f64 = t216 * t908;
-        let t910: f64 = t904 + t909;
-        let t911: f64 = t503 * t561;
-        let t912: f64 = t424 * t566;
-        let t913: f64 = t912 * t184;
-        let t914: f64 = t911 + t913;
-        let t915: f64 = t225 * t914;
-        let t916: f64 = t910 + t915;
-        let t917: f64 = t510 * t559;
-        let t918: f64 = t432 * t572;
-        let t919: f64 = t918 * t184;
-        let t920: f64 = t917 - t919;
-        let t921: f64 = t234 * t920;
-        let t922: f64 = t916 + t921;
-        let t923: f64 = t518 * t561;
-        let t924: f64 = -t923;
-        let t925: f64 = t440 * t566;
-        let t926: f64 = t925 * t184;
-        let t927: f64 = t924 - t926;
-        let t928: f64 = t244 * t927;
-        let t929: f64 = t922 + t928;
-        let t930: f64 = t525 * t559;
-        let t931: f64 = t448 * t572;
-        let t932: f64 = t931 * t184;
-        let t933: f64 = t932 - t930;
-        let t934: f64 = t253 * t933;
-        let t935: f64 = t929 + t934;
-        let t936: f64 = t532 * t561;
-        let t937: f64 = t456 * t566;
-        let t938: f64 = t937 * t184;
-        let t939: f64 = t936 + t938;
-        let t940: f64 = t262 * t939;
-        let t941: f64 = t935 + t940;
+    let t107: crate::Real = g0[0usize];
+    let t140: crate::Real = g0[1usize];
+    let t164: crate::Real = g0[2usize];
+    let t183: crate::Real = g0[3usize];
+    let t141: crate::Real = t2 + t30;
+    let t142: crate::Real = 0.0;
+    let t184: crate::Real = t19 / t9;
+    let t185: crate::Real = t27 * t184;
+    let t186: crate::Real = t6 + t185;
+    let t187: crate::Real = t12 * t186;
+    let t189: crate::Real = t11 * t14;
+    let t195: crate::Real = t9 * t10;
+    let t196: crate::Real = t19 / t195;
+    let t199: crate::Real = t12 * t189;
+    let t200: crate::Real = t35 * t199;
+    let t205: crate::Real = t187 * t187;
+    let t308: crate::Real = t11 * t22;
+    let t314: crate::Real = t12 * t308;
+    let t315: crate::Real = t35 * t314;
+    let t389: crate::Real = t9 * t9;
+    let t396: crate::Real = t19 / t389;
+    let t460: crate::Real = t12 * t27;
+    let t465: crate::Real = t10 * t10;
+    let t466: crate::Real = t19 / t465;
+    let t467: crate::Real = t18 * t466;
+    let t468: crate::Real = -t467;
+    let t469: crate::Real = t25 * t466;
+    let t470: crate::Real = t468 - t469;
+    let t471: crate::Real = t12 * t470;
+    let t474: crate::Real = t35 * t471;
+    let t477: crate::Real = t469 - t467;
+    let t547: crate::Real = t12 * t477;
+    let t553: crate::Real = t15 * t17;
+    let t554: crate::Real = t553 * t20;
+    let t555: crate::Real = t17 * t23;
+    let t556: crate::Real = t555 * t20;
+    let t557: crate::Real = t554 + t556;
+    let t558: crate::Real = t12 * t557;
+    let t561: crate::Real = t35 * t558;
+    let t564: crate::Real = t554 - t556;
+    let t627: crate::Real = t12 * t564;
+    let g1: [crate::Real; 10usize] = if crate::math::fabs(t187)
+        < crate::math::series_switch(0.05)
+    {
+        let t188: crate::Real = t12 * t12;
+        let t190: crate::Real = t188 * t189;
+        let t191: crate::Real = t34 * t190;
+        let t192: crate::Real = t41 * t191;
+        let t193: crate::Real = 0.6666666666666666;
+        let t194: crate::Real = t192 * t193;
+        let t197: crate::Real = t194 * t196;
+        let t198: crate::Real = -t197;
+        let t201: crate::Real = t32 * t200;
+        let t202: crate::Real = t201 * t20;
+        let t203: crate::Real = t198 - t202;
+        let t204: crate::Real = t187 * t203;
+        let t206: crate::Real = t191 * t35;
+        let t207: crate::Real = 0.25;
+        let t208: crate::Real = t206 * t207;
+        let t209: crate::Real = t208 * t196;
+        let t210: crate::Real = t41 * t199;
+        let t211: crate::Real = t210 * t49;
+        let t212: crate::Real = t211 * t20;
+        let t213: crate::Real = t209 - t212;
+        let t214: crate::Real = t205 * t213;
+        let t215: crate::Real = t204 + t214;
+        let t216: crate::Real = t187 * t205;
+        let t217: crate::Real = 0.06666666666666667;
+        let t218: crate::Real = t192 * t217;
+        let t219: crate::Real = t218 * t196;
+        let t220: crate::Real = t200 * t56;
+        let t221: crate::Real = t220 * t20;
+        let t222: crate::Real = t219 + t221;
+        let t223: crate::Real = t216 * t222;
+        let t224: crate::Real = t215 + t223;
+        let t225: crate::Real = t205 * t205;
+        let t226: crate::Real = 0.013888888888888888;
+        let t227: crate::Real = t206 * t226;
+        let t228: crate::Real = t227 * t196;
+        let t229: crate::Real = t210 * t63;
+        let t230: crate::Real = t229 * t20;
+        let t231: crate::Real = t230 - t228;
+        let t232: crate::Real = t225 * t231;
+        let t233: crate::Real = t224 + t232;
+        let t234: crate::Real = t187 * t225;
+        let t235: crate::Real = 0.002380952380952381;
+        let t236: crate::Real = t192 * t235;
+        let t237: crate::Real = t236 * t196;
+        let t238: crate::Real = -t237;
+        let t239: crate::Real = t200 * t70;
+        let t240: crate::Real = t239 * t20;
+        let t241: crate::Real = t238 - t240;
+        let t242: crate::Real = t234 * t241;
+        let t243: crate::Real = t233 + t242;
+        let t244: crate::Real = t216 * t216;
+        let t245: crate::Real = 0.00034722222222222224;
+        let t246: crate::Real = t206 * t245;
+        let t247: crate::Real = t246 * t196;
+        let t248: crate::Real = t210 * t77;
+        let t249: crate::Real = t248 * t20;
+        let t250: crate::Real = t247 - t249;
+        let t251: crate::Real = t244 * t250;
+        let t252: crate::Real = t243 + t251;
+        let t253: crate::Real = t187 * t244;
+        let t254: crate::Real = 0.00004409171075837743;
+        let t255: crate::Real = t192 * t254;
+        let t256: crate::Real = t255 * t196;
+        let t257: crate::Real = t200 * t84;
+        let t258: crate::Real = t257 * t20;
+        let t259: crate::Real = t256 + t258;
+        let t260: crate::Real = t253 * t259;
+        let t261: crate::Real = t252 + t260;
+        let t262: crate::Real = t225 * t225;
+        let t263: crate::Real = 0.00000496031746031746;
+        let t264: crate::Real = t206 * t263;
+        let t265: crate::Real = t264 * t196;
+        let t266: crate::Real = t210 * t91;
+        let t267: crate::Real = t266 * t20;
+        let t268: crate::Real = t267 - t265;
+        let t269: crate::Real = t262 * t268;
+        let t270: crate::Real = t261 + t269;
+        let t271: crate::Real = t206 * t196;
+        let t272: crate::Real = t270 - t271;
+        let t273: crate::Real = t210 * t20;
+        let t274: crate::Real = t272 + t273;
+        let t309: crate::Real = t188 * t308;
+        let t310: crate::Real = t34 * t309;
+        let t311: crate::Real = t41 * t310;
+        let t312: crate::Real = t193 * t311;
+        let t313: crate::Real = t312 * t196;
+        let t316: crate::Real = t32 * t315;
+        let t317: crate::Real = t316 * t20;
+        let t318: crate::Real = t313 - t317;
+        let t319: crate::Real = t187 * t318;
+        let t320: crate::Real = t35 * t310;
+        let t321: crate::Real = t207 * t320;
+        let t322: crate::Real = t321 * t196;
+        let t323: crate::Real = -t322;
+        let t324: crate::Real = t41 * t314;
+        let t325: crate::Real = t49 * t324;
+        let t326: crate::Real = t325 * t20;
+        let t327: crate::Real = t323 - t326;
+        let t328: crate::Real = t205 * t327;
+        let t329: crate::Real = t319 + t328;
+        let t330: crate::Real = t217 * t311;
+        let t331: crate::Real = t330 * t196;
+        let t332: crate::Real = t56 * t315;
+        let t333: crate::Real = t332 * t20;
+        let t334: crate::Real = t333 - t331;
+        let t335: crate::Real = t216 * t334;
+        let t336: crate::Real = t329 + t335;
+        let t337: crate::Real = t226 * t320;
+        let t338: crate::Real = t337 * t196;
+        let t339: crate::Real = t63 * t324;
+        let t340: crate::Real = t339 * t20;
+        let t341: crate::Real = t338 + t340;
+        let t342: crate::Real = t225 * t341;
+        let t343: crate::Real = t336 + t342;
+        let t344: crate::Real = t235 * t311;
+        let t345: crate::Real = t344 * t196;
+        let t346: crate::Real = t70 * t315;
+        let t347: crate::Real = t346 * t20;
+        let t348: crate::Real = t345 - t347;
+        let t349: crate::Real = t234 * t348;
+        let t350: crate::Real = t343 + t349;
+        let t351: crate::Real = t245 * t320;
+        let t352: crate::Real = t351 * t196;
+        let t353: crate::Real = -t352;
+        let t354: crate::Real = t77 * t324;
+        let t355: crate::Real = t354 * t20;
+        let t356: crate::Real = t353 - t355;
+        let t357: crate::Real = t244 * t356;
+        let t358: crate::Real = t350 + t357;
+        let t359: crate::Real = t254 * t311;
+        let t360: crate::Real = t359 * t196;
+        let t361: crate::Real = t84 * t315;
+        let t362: crate::Real = t361 * t20;
+        let t363: crate::Real = t362 - t360;
+        let t364: crate::Real = t253 * t363;
+        let t365: crate::Real = t358 + t364;
+        let t366: crate::Real = t263 * t320;
+        let t367: crate::Real = t366 * t196;
+        let t368: crate::Real = t91 * t324;
+        let t369: crate::Real = t368 * t20;
+        let t370: crate::Real = t367 + t369;
+        let t371: crate::Real = t262 * t370;
+        let t372: crate::Real = t365 + t371;
+        let t373: crate::Real = t320 * t196;
+        let t374: crate::Real = t372 + t373;
+        let t375: crate::Real = t324 * t20;
+        let t376: crate::Real = t374 + t375;
+        let t390: crate::Real = t187 * t188;
+        let t391: crate::Real = t34 * t390;
+        let t392: crate::Real = t27 * t391;
+        let t393: crate::Real = t41 * t392;
+        let t394: crate::Real = 0.3333333333333333;
+        let t395: crate::Real = t393 * t394;
+        let t397: crate::Real = t395 * t396;
+        let t398: crate::Real = t188 * t34;
+        let t399: crate::Real = t27 * t398;
+        let t400: crate::Real = t35 * t399;
+        let t401: crate::Real = t32 * t400;
+        let t402: crate::Real = t401 * t396;
+        let t403: crate::Real = t397 + t402;
+        let t404: crate::Real = t188 * t205;
+        let t405: crate::Real = t34 * t404;
+        let t406: crate::Real = t27 * t405;
+        let t407: crate::Real = t35 * t406;
+        let t408: crate::Real = 0.125;
+        let t409: crate::Real = t407 * t408;
+        let t410: crate::Real = t409 * t396;
+        let t411: crate::Real = t403 - t410;
+        let t412: crate::Real = t188 * t216;
+        let t413: crate::Real = t34 * t412;
+        let t414: crate::Real = t27 * t413;
+        let t415: crate::Real = t41 * t414;
+        let t416: crate::Real = 0.03333333333333333;
+        let t417: crate::Real = t415 * t416;
+        let t418: crate::Real = t417 * t396;
+        let t419: crate::Real = t411 - t418;
+        let t420: crate::Real = t188 * t225;
+        let t421: crate::Real = t34 * t420;
+        let t422: crate::Real = t27 * t421;
+        let t423: crate::Real = t35 * t422;
+        let t424: crate::Real = 0.006944444444444444;
+        let t425: crate::Real = t423 * t424;
+        let t426: crate::Real = t425 * t396;
+        let t427: crate::Real = t419 + t426;
+        let t428: crate::Real = t188 * t234;
+        let t429: crate::Real = t34 * t428;
+        let t430: crate::Real = t27 * t429;
+        let t431: crate::Real = t41 * t430;
+        let t432: crate::Real = 0.0011904761904761906;
+        let t433: crate::Real = t431 * t432;
+        let t434: crate::Real = t433 * t396;
+        let t435: crate::Real = t427 + t434;
+        let t436: crate::Real = t188 * t244;
+        let t437: crate::Real = t34 * t436;
+        let t438: crate::Real = t27 * t437;
+        let t439: crate::Real = t35 * t438;
+        let t440: crate::Real = 0.00017361111111111112;
+        let t441: crate::Real = t439 * t440;
+        let t442: crate::Real = t441 * t396;
+        let t443: crate::Real = t435 - t442;
+        let t444: crate::Real = t188 * t253;
+        let t445: crate::Real = t34 * t444;
+        let t446: crate::Real = t27 * t445;
+        let t447: crate::Real = t41 * t446;
+        let t448: crate::Real = 0.000022045855379188714;
+        let t449: crate::Real = t447 * t448;
+        let t450: crate::Real = t449 * t396;
+        let t451: crate::Real = t443 - t450;
+        let t452: crate::Real = t188 * t262;
+        let t453: crate::Real = t34 * t452;
+        let t454: crate::Real = t27 * t453;
+        let t455: crate::Real = t35 * t454;
+        let t456: crate::Real = 0.00000248015873015873;
+        let t457: crate::Real = t455 * t456;
+        let t458: crate::Real = t457 * t396;
+        let t459: crate::Real = t451 + t458;
+        let t472: crate::Real = t41 * t471;
+        let t473: crate::Real = t32 * t472;
+        let t475: crate::Real = t207 * t474;
+        let t476: crate::Real = -t475;
+        let t478: crate::Real = t398 * t477;
+        let t479: crate::Real = t41 * t478;
+        let t480: crate::Real = t394 * t479;
+        let t481: crate::Real = t480 * t184;
+        let t482: crate::Real = t476 - t481;
+        let t483: crate::Real = t187 * t482;
+        let t484: crate::Real = t473 + t483;
+        let t485: crate::Real = t35 * t478;
+        let t486: crate::Real = t32 * t485;
+        let t487: crate::Real = t486 * t184;
+        let t488: crate::Real = t484 - t487;
+        let t489: crate::Real = 0.08333333333333333;
+        let t490: crate::Real = t472 * t489;
+        let t491: crate::Real = t408 * t485;
+        let t492: crate::Real = t491 * t184;
+        let t493: crate::Real = t492 - t490;
+        let t494: crate::Real = t205 * t493;
+        let t495: crate::Real = t488 + t494;
+        let t496: crate::Real = 0.020833333333333332;
+        let t497: crate::Real = t474 * t496;
+        let t498: crate::Real = t416 * t479;
+        let t499: crate::Real = t498 * t184;
+        let t500: crate::Real = t497 + t499;
+        let t501: crate::Real = t216 * t500;
+        let t502: crate::Real = t495 + t501;
+        let t503: crate::Real = 0.004166666666666667;
+        let t504: crate::Real = t472 * t503;
+        let t505: crate::Real = t424 * t485;
+        let t506: crate::Real = t505 * t184;
+        let t507: crate::Real = t504 - t506;
+        let t508: crate::Real = t225 * t507;
+        let t509: crate::Real = t502 + t508;
+        let t510: crate::Real = 0.0006944444444444445;
+        let t511: crate::Real = t474 * t510;
+        let t512: crate::Real = -t511;
+        let t513: crate::Real = t432 * t479;
+        let t514: crate::Real = t513 * t184;
+        let t515: crate::Real = t512 - t514;
+        let t516: crate::Real = t234 * t515;
+        let t517: crate::Real = t509 + t516;
+        let t518: crate::Real = 0.0000992063492063492;
+        let t519: crate::Real = t472 * t518;
+        let t520: crate::Real = t440 * t485;
+        let t521: crate::Real = t520 * t184;
+        let t522: crate::Real = t521 - t519;
+        let t523: crate::Real = t244 * t522;
+        let t524: crate::Real = t517 + t523;
+        let t525: crate::Real = 0.00001240079365079365;
+        let t526: crate::Real = t474 * t525;
+        let t527: crate::Real = t448 * t479;
+        let t528: crate::Real = t527 * t184;
+        let t529: crate::Real = t526 + t528;
+        let t530: crate::Real = t253 * t529;
+        let t531: crate::Real = t524 + t530;
+        let t532: crate::Real = 0.0000013778659611992946;
+        let t533: crate::Real = t472 * t532;
+        let t534: crate::Real = t456 * t485;
+        let t535: crate::Real = t534 * t184;
+        let t536: crate::Real = t533 - t535;
+        let t537: crate::Real = t262 * t536;
+        let t538: crate::Real = t531 + t537;
+        let t559: crate::Real = t41 * t558;
+        let t560: crate::Real = t32 * t559;
+        let t562: crate::Real = t207 * t561;
+        let t563: crate::Real = -t562;
+        let t565: crate::Real = t398 * t564;
+        let t566: crate::Real = t41 * t565;
+        let t567: crate::Real = t394 * t566;
+        let t568: crate::Real = t567 * t184;
+        let t569: crate::Real = t563 - t568;
+        let t570: crate::Real = t187 * t569;
+        let t571: crate::Real = t560 + t570;
+        let t572: crate::Real = t35 * t565;
+        let t573: crate::Real = t32 * t572;
+        let t574: crate::Real = t573 * t184;
+        let t575: crate::Real = t571 - t574;
+        let t576: crate::Real = t489 * t559;
+        let t577: crate::Real = t408 * t572;
+        let t578: crate::Real = t577 * t184;
+        let t579: crate::Real = t578 - t576;
+        let t580: crate::Real = t205 * t579;
+        let t581: crate::Real = t575 + t580;
+        let t582: crate::Real = t496 * t561;
+        let t583: crate::Real = t416 * t566;
+        let t584: crate::Real = t583 * t184;
+        let t585: crate::Real = t582 + t584;
+        let t586: crate::Real = t216 * t585;
+        let t587: crate::Real = t581 + t586;
+        let t588: crate::Real = t503 * t559;
+        let t589: crate::Real = t424 * t572;
+        let t590: crate::Real = t589 * t184;
+        let t591: crate::Real = t588 - t590;
+        let t592: crate::Real = t225 * t591;
+        let t593: crate::Real = t587 + t592;
+        let t594: crate::Real = t510 * t561;
+        let t595: crate::Real = -t594;
+        let t596: crate::Real = t432 * t566;
+        let t597: crate::Real = t596 * t184;
+        let t598: crate::Real = t595 - t597;
+        let t599: crate::Real = t234 * t598;
+        let t600: crate::Real = t593 + t599;
+        let t601: crate::Real = t518 * t559;
+        let t602: crate::Real = t440 * t572;
+        let t603: crate::Real = t602 * t184;
+        let t604: crate::Real = t603 - t601;
+        let t605: crate::Real = t244 * t604;
+        let t606: crate::Real = t600 + t605;
+        let t607: crate::Real = t525 * t561;
+        let t608: crate::Real = t448 * t566;
+        let t609: crate::Real = t608 * t184;
+        let t610: crate::Real = t607 + t609;
+        let t611: crate::Real = t253 * t610;
+        let t612: crate::Real = t606 + t611;
+        let t613: crate::Real = t532 * t559;
+        let t614: crate::Real = t456 * t572;
+        let t615: crate::Real = t614 * t184;
+        let t616: crate::Real = t613 - t615;
+        let t617: crate::Real = t262 * t616;
+        let t618: crate::Real = t612 + t617;
+        let t633: crate::Real = t193 * t206;
+        let t634: crate::Real = t633 * t196;
+        let t635: crate::Real = t32 * t210;
+        let t636: crate::Real = t635 * t20;
+        let t637: crate::Real = t636 - t634;
+        let t638: crate::Real = t187 * t637;
+        let t639: crate::Real = t192 * t207;
+        let t640: crate::Real = t639 * t196;
+        let t641: crate::Real = -t640;
+        let t642: crate::Real = t200 * t49;
+        let t643: crate::Real = t642 * t20;
+        let t644: crate::Real = t641 - t643;
+        let t645: crate::Real = t205 * t644;
+        let t646: crate::Real = t638 + t645;
+        let t647: crate::Real = t206 * t217;
+        let t648: crate::Real = t647 * t196;
+        let t649: crate::Real = t210 * t56;
+        let t650: crate::Real = t649 * t20;
+        let t651: crate::Real = t648 - t650;
+        let t652: crate::Real = t216 * t651;
+        let t653: crate::Real = t646 + t652;
+        let t654: crate::Real = t192 * t226;
+        let t655: crate::Real = t654 * t196;
+        let t656: crate::Real = t200 * t63;
+        let t657: crate::Real = t656 * t20;
+        let t658: crate::Real = t655 + t657;
+        let t659: crate::Real = t225 * t658;
+        let t660: crate::Real = t653 + t659;
+        let t661: crate::Real = t206 * t235;
+        let t662: crate::Real = t661 * t196;
+        let t663: crate::Real = t210 * t70;
+        let t664: crate::Real = t663 * t20;
+        let t665: crate::Real = t664 - t662;
+        let t666: crate::Real = t234 * t665;
+        let t667: crate::Real = t660 + t666;
+        let t668: crate::Real = t192 * t245;
+        let t669: crate::Real = t668 * t196;
+        let t670: crate::Real = -t669;
+        let t671: crate::Real = t200 * t77;
+        let t672: crate::Real = t671 * t20;
+        let t673: crate::Real = t670 - t672;
+        let t674: crate::Real = t244 * t673;
+        let t675: crate::Real = t667 + t674;
+        let t676: crate::Real = t206 * t254;
+        let t677: crate::Real = t676 * t196;
+        let t678: crate::Real = t210 * t84;
+        let t679: crate::Real = t678 * t20;
+        let t680: crate::Real = t677 - t679;
+        let t681: crate::Real = t253 * t680;
+        let t682: crate::Real = t675 + t681;
+        let t683: crate::Real = t192 * t263;
+        let t684: crate::Real = t683 * t196;
+        let t685: crate::Real = t200 * t91;
+        let t686: crate::Real = t685 * t20;
+        let t687: crate::Real = t684 + t686;
+        let t688: crate::Real = t262 * t687;
+        let t689: crate::Real = t682 + t688;
+        let t690: crate::Real = t192 * t196;
+        let t691: crate::Real = t689 + t690;
+        let t692: crate::Real = t200 * t20;
+        let t693: crate::Real = t691 + t692;
+        let t713: crate::Real = t193 * t320;
+        let t714: crate::Real = t713 * t196;
+        let t715: crate::Real = t32 * t324;
+        let t716: crate::Real = t715 * t20;
+        let t717: crate::Real = t714 + t716;
+        let t718: crate::Real = t187 * t717;
+        let t719: crate::Real = t207 * t311;
+        let t720: crate::Real = t719 * t196;
+        let t721: crate::Real = t49 * t315;
+        let t722: crate::Real = t721 * t20;
+        let t723: crate::Real = t720 - t722;
+        let t724: crate::Real = t205 * t723;
+        let t725: crate::Real = t718 + t724;
+        let t726: crate::Real = t217 * t320;
+        let t727: crate::Real = t726 * t196;
+        let t728: crate::Real = -t727;
+        let t729: crate::Real = t56 * t324;
+        let t730: crate::Real = t729 * t20;
+        let t731: crate::Real = t728 - t730;
+        let t732: crate::Real = t216 * t731;
+        let t733: crate::Real = t725 + t732;
+        let t734: crate::Real = t226 * t311;
+        let t735: crate::Real = t734 * t196;
+        let t736: crate::Real = t63 * t315;
+        let t737: crate::Real = t736 * t20;
+        let t738: crate::Real = t737 - t735;
+        let t739: crate::Real = t225 * t738;
+        let t740: crate::Real = t733 + t739;
+        let t741: crate::Real = t235 * t320;
+        let t742: crate::Real = t741 * t196;
+        let t743: crate::Real = t70 * t324;
+        let t744: crate::Real = t743 * t20;
+        let t745: crate::Real = t742 + t744;
+        let t746: crate::Real = t234 * t745;
+        let t747: crate::Real = t740 + t746;
+        let t748: crate::Real = t245 * t311;
+        let t749: crate::Real = t748 * t196;
+        let t750: crate::Real = t77 * t315;
+        let t751: crate::Real = t750 * t20;
+        let t752: crate::Real = t749 - t751;
+        let t753: crate::Real = t244 * t752;
+        let t754: crate::Real = t747 + t753;
+        let t755: crate::Real = t254 * t320;
+        let t756: crate::Real = t755 * t196;
+        let t757: crate::Real = -t756;
+        let t758: crate::Real = t84 * t324;
+        let t759: crate::Real = t758 * t20;
+        let t760: crate::Real = t757 - t759;
+        let t761: crate::Real = t253 * t760;
+        let t762: crate::Real = t754 + t761;
+        let t763: crate::Real = t263 * t311;
+        let t764: crate::Real = t763 * t196;
+        let t765: crate::Real = t91 * t315;
+        let t766: crate::Real = t765 * t20;
+        let t767: crate::Real = t766 - t764;
+        let t768: crate::Real = t262 * t767;
+        let t769: crate::Real = t762 + t768;
+        let t770: crate::Real = t311 * t196;
+        let t771: crate::Real = t769 - t770;
+        let t772: crate::Real = t315 * t20;
+        let t773: crate::Real = t771 + t772;
+        let t784: crate::Real = t35 * t392;
+        let t785: crate::Real = t394 * t784;
+        let t786: crate::Real = t785 * t396;
+        let t787: crate::Real = t41 * t399;
+        let t788: crate::Real = t32 * t787;
+        let t789: crate::Real = t788 * t396;
+        let t790: crate::Real = t786 - t789;
+        let t791: crate::Real = t41 * t406;
+        let t792: crate::Real = t408 * t791;
+        let t793: crate::Real = t792 * t396;
+        let t794: crate::Real = t790 + t793;
+        let t795: crate::Real = t35 * t414;
+        let t796: crate::Real = t416 * t795;
+        let t797: crate::Real = t796 * t396;
+        let t798: crate::Real = t794 - t797;
+        let t799: crate::Real = t41 * t422;
+        let t800: crate::Real = t424 * t799;
+        let t801: crate::Real = t800 * t396;
+        let t802: crate::Real = t798 - t801;
+        let t803: crate::Real = t35 * t430;
+        let t804: crate::Real = t432 * t803;
+        let t805: crate::Real = t804 * t396;
+        let t806: crate::Real = t802 + t805;
+        let t807: crate::Real = t41 * t438;
+        let t808: crate::Real = t440 * t807;
+        let t809: crate::Real = t808 * t396;
+        let t810: crate::Real = t806 + t809;
+        let t811: crate::Real = t35 * t446;
+        let t812: crate::Real = t448 * t811;
+        let t813: crate::Real = t812 * t396;
+        let t814: crate::Real = t810 - t813;
+        let t815: crate::Real = t41 * t454;
+        let t816: crate::Real = t456 * t815;
+        let t817: crate::Real = t816 * t396;
+        let t818: crate::Real = t814 - t817;
+        let t823: crate::Real = t32 * t474;
+        let t824: crate::Real = t207 * t472;
+        let t825: crate::Real = t394 * t485;
+        let t826: crate::Real = t825 * t184;
+        let t827: crate::Real = t824 - t826;
+        let t828: crate::Real = t187 * t827;
+        let t829: crate::Real = t823 + t828;
+        let t830: crate::Real = t32 * t479;
+        let t831: crate::Real = t830 * t184;
+        let t832: crate::Real = t829 + t831;
+        let t833: crate::Real = t474 * t489;
+        let t834: crate::Real = -t833;
+        let t835: crate::Real = t408 * t479;
+        let t836: crate::Real = t835 * t184;
+        let t837: crate::Real = t834 - t836;
+        let t838: crate::Real = t205 * t837;
+        let t839: crate::Real = t832 + t838;
+        let t840: crate::Real = t472 * t496;
+        let t841: crate::Real = t416 * t485;
+        let t842: crate::Real = t841 * t184;
+        let t843: crate::Real = t842 - t840;
+        let t844: crate::Real = t216 * t843;
+        let t845: crate::Real = t839 + t844;
+        let t846: crate::Real = t474 * t503;
+        let t847: crate::Real = t424 * t479;
+        let t848: crate::Real = t847 * t184;
+        let t849: crate::Real = t846 + t848;
+        let t850: crate::Real = t225 * t849;
+        let t851: crate::Real = t845 + t850;
+        let t852: crate::Real = t472 * t510;
+        let t853: crate::Real = t432 * t485;
+        let t854: crate::Real = t853 * t184;
+        let t855: crate::Real = t852 - t854;
+        let t856: crate::Real = t234 * t855;
+        let t857: crate::Real = t851 + t856;
+        let t858: crate::Real = t474 * t518;
+        let t859: crate::Real = -t858;
+        let t860: crate::Real = t440 * t479;
+        let t861: crate::Real = t860 * t184;
+        let t862: crate::Real = t859 - t861;
+        let t863: crate::Real = t244 * t862;
+        let t864: crate::Real = t857 + t863;
+        let t865: crate::Real = t472 * t525;
+        let t866: crate::Real = t448 * t485;
+        let t867: crate::Real = t866 * t184;
+        let t868: crate::Real = t867 - t865;
+        let t869: crate::Real = t253 * t868;
+        let t870: crate::Real = t864 + t869;
+        let t871: crate::Real = t474 * t532;
+        let t872: crate::Real = t456 * t479;
+        let t873: crate::Real = t872 * t184;
+        let t874: crate::Real = t871 + t873;
+        let t875: crate::Real = t262 * t874;
+        let t876: crate::Real = t870 + t875;
+        let t888: crate::Real = t32 * t561;
+        let t889: crate::Real = t207 * t559;
+        let t890: crate::Real = t394 * t572;
+        let t891: crate::Real = t890 * t184;
+        let t892: crate::Real = t889 - t891;
+        let t893: crate::Real = t187 * t892;
+        let t894: crate::Real = t888 + t893;
+        let t895: crate::Real = t32 * t566;
+        let t896: crate::Real = t895 * t184;
+        let t897: crate::Real = t894 + t896;
+        let t898: crate::Real = t489 * t561;
+        let t899: crate::Real = -t898;
+        let t900: crate::Real = t408 * t566;
+        let t901: crate::Real = t900 * t184;
+        let t902: crate::Real = t899 - t901;
+        let t903: crate::Real = t205 * t902;
+        let t904: crate::Real = t897 + t903;
+        let t905: crate::Real = t496 * t559;
+        let t906: crate::Real = t416 * t572;
+        let t907: crate::Real = t906 * t184;
+        let t908: crate::Real = t907 - t905;
+        let t909: crate::Real = t216 * t908;
+        let t910: crate::Real = t904 + t909;
+        let t911: crate::Real = t503 * t561;
+        let t912: crate::Real = t424 * t566;
+        let t913: crate::Real = t912 * t184;
+        let t914: crate::Real = t911 + t913;
+        let t915: crate::Real = t225 * t914;
+        let t916: crate::Real = t910 + t915;
+        let t917: crate::Real = t510 * t559;
+        let t918: crate::Real = t432 * t572;
+        let t919: crate::Real = t918 * t184;
+        let t920: crate::Real = t917 - t919;
+        let t921: crate::Real = t234 * t920;
+        let t922: crate::Real = t916 + t921;
+        let t923: crate::Real = t518 * t561;
+        let t924: crate::Real = -t923;
+        let t925: crate::Real = t440 * t566;
+        let t926: crate::Real = t925 * t184;
+        let t927: crate::Real = t924 - t926;
+        let t928: crate::Real = t244 * t927;
+        let t929: crate::Real = t922 + t928;
+        let t930: crate::Real = t525 * t559;
+        let t931: crate::Real = t448 * t572;
+        let t932: crate::Real = t931 * t184;
+        let t933: crate::Real = t932 - t930;
+        let t934: crate::Real = t253 * t933;
+        let t935: crate::Real = t929 + t934;
+        let t936: crate::Real = t532 * t561;
+        let t937: crate::Real = t456 * t566;
+        let t938: crate::Real = t937 * t184;
+        let t939: crate::Real = t936 + t938;
+        let t940: crate::Real = t262 * t939;
+        let t941: crate::Real = t935 + t940;
         [t274, t376, t459, t538, t618, t693, t773, t818, t876, t941]
     } else {
-        let t275: f64 = libm::sin(t187);
-        let t276: f64 = t275 * t111;
-        let t277: f64 = t19 / t187;
-        let t278: f64 = t276 * t277;
-        let t279: f64 = libm::cos(t187);
-        let t280: f64 = t279 * t43;
-        let t281: f64 = t280 * t277;
-        let t282: f64 = t19 - t279;
-        let t283: f64 = t12 * t282;
-        let t284: f64 = t34 * t283;
-        let t285: f64 = t35 * t284;
-        let t286: f64 = t19 / t205;
-        let t287: f64 = t285 * t286;
-        let t288: f64 = t281 + t287;
-        let t289: f64 = t275 * t42;
-        let t290: f64 = t41 * t289;
-        let t291: f64 = t290 * t286;
-        let t292: f64 = t288 - t291;
-        let t293: f64 = t292 - t278;
-        let t294: f64 = t199 * t293;
-        let t295: f64 = t17 * t294;
-        let t296: f64 = t295 * t196;
-        let t297: f64 = t199 * t275;
-        let t298: f64 = t41 * t297;
-        let t299: f64 = t10 * t187;
-        let t300: f64 = t19 / t299;
-        let t301: f64 = t298 * t300;
-        let t302: f64 = t296 + t301;
-        let t303: f64 = t199 * t282;
-        let t304: f64 = t35 * t303;
-        let t305: f64 = t304 * t300;
-        let t306: f64 = t302 - t305;
-        let t377: f64 = t293 * t314;
-        let t378: f64 = t17 * t377;
-        let t379: f64 = t378 * t196;
-        let t380: f64 = t275 * t314;
-        let t381: f64 = t41 * t380;
-        let t382: f64 = t381 * t300;
-        let t383: f64 = t282 * t314;
-        let t384: f64 = t35 * t383;
-        let t385: f64 = t384 * t300;
-        let t386: f64 = t382 - t385;
-        let t387: f64 = t386 - t379;
-        let t461: f64 = t293 * t460;
-        let t462: f64 = t461 * t396;
-        let t463: f64 = -t462;
-        let t539: f64 = t283 * t470;
-        let t540: f64 = t35 * t539;
-        let t541: f64 = t32 * t540;
-        let t542: f64 = t541 * t277;
-        let t543: f64 = t275 * t471;
-        let t544: f64 = t41 * t543;
-        let t545: f64 = t32 * t544;
-        let t546: f64 = t545 * t277;
-        let t548: f64 = t293 * t547;
-        let t549: f64 = t548 * t184;
-        let t550: f64 = t546 + t549;
-        let t551: f64 = t550 - t542;
-        let t619: f64 = t283 * t557;
-        let t620: f64 = t35 * t619;
-        let t621: f64 = t32 * t620;
-        let t622: f64 = t621 * t277;
-        let t623: f64 = t275 * t558;
-        let t624: f64 = t41 * t623;
-        let t625: f64 = t32 * t624;
-        let t626: f64 = t625 * t277;
-        let t628: f64 = t293 * t627;
-        let t629: f64 = t628 * t184;
-        let t630: f64 = t626 + t629;
-        let t631: f64 = t630 - t622;
-        let t694: f64 = t111 * t279;
-        let t695: f64 = t694 * t277;
-        let t696: f64 = t290 * t277;
-        let t697: f64 = t695 + t696;
-        let t698: f64 = t41 * t284;
-        let t699: f64 = t698 * t286;
-        let t700: f64 = t697 - t699;
-        let t701: f64 = t276 * t286;
-        let t702: f64 = t700 - t701;
-        let t703: f64 = t199 * t702;
-        let t704: f64 = t17 * t703;
-        let t705: f64 = t704 * t196;
-        let t706: f64 = t200 * t275;
-        let t707: f64 = t706 * t300;
-        let t708: f64 = t705 + t707;
-        let t709: f64 = t41 * t303;
-        let t710: f64 = t709 * t300;
-        let t711: f64 = t708 + t710;
-        let t774: f64 = t314 * t702;
-        let t775: f64 = t17 * t774;
-        let t776: f64 = t775 * t196;
-        let t777: f64 = t275 * t315;
-        let t778: f64 = t777 * t300;
-        let t779: f64 = t41 * t383;
-        let t780: f64 = t779 * t300;
-        let t781: f64 = t778 + t780;
-        let t782: f64 = t781 - t776;
-        let t819: f64 = t460 * t702;
-        let t820: f64 = t819 * t396;
-        let t821: f64 = -t820;
-        let t877: f64 = t41 * t539;
-        let t878: f64 = t32 * t877;
-        let t879: f64 = t878 * t277;
-        let t880: f64 = t275 * t474;
-        let t881: f64 = t32 * t880;
-        let t882: f64 = t881 * t277;
-        let t883: f64 = t879 + t882;
-        let t884: f64 = t547 * t702;
-        let t885: f64 = t884 * t184;
-        let t886: f64 = t883 + t885;
-        let t942: f64 = t41 * t619;
-        let t943: f64 = t32 * t942;
-        let t944: f64 = t943 * t277;
-        let t945: f64 = t275 * t561;
-        let t946: f64 = t32 * t945;
-        let t947: f64 = t946 * t277;
-        let t948: f64 = t944 + t947;
-        let t949: f64 = t627 * t702;
-        let t950: f64 = t949 * t184;
-        let t951: f64 = t948 + t950;
+        let t275: crate::Real = crate::math::sin(t187);
+        let t276: crate::Real = t275 * t111;
+        let t277: crate::Real = t19 / t187;
+        let t278: crate::Real = t276 * t277;
+        let t279: crate::Real = crate::math::cos(t187);
+        let t280: crate::Real = t279 * t43;
+        let t281: crate::Real = t280 * t277;
+        let t282: crate::Real = t19 - t279;
+        let t283: crate::Real = t12 * t282;
+        let t284: crate::Real = t34 * t283;
+        let t285: crate::Real = t35 * t284;
+        let t286: crate::Real = t19 / t205;
+        let t287: crate::Real = t285 * t286;
+        let t288: crate::Real = t281 + t287;
+        let t289: crate::Real = t275 * t42;
+        let t290: crate::Real = t41 * t289;
+        let t291: crate::Real = t290 * t286;
+        let t292: crate::Real = t288 - t291;
+        let t293: crate::Real = t292 - t278;
+        let t294: crate::Real = t199 * t293;
+        let t295: crate::Real = t17 * t294;
+        let t296: crate::Real = t295 * t196;
+        let t297: crate::Real = t199 * t275;
+        let t298: crate::Real = t41 * t297;
+        let t299: crate::Real = t10 * t187;
+        let t300: crate::Real = t19 / t299;
+        let t301: crate::Real = t298 * t300;
+        let t302: crate::Real = t296 + t301;
+        let t303: crate::Real = t199 * t282;
+        let t304: crate::Real = t35 * t303;
+        let t305: crate::Real = t304 * t300;
+        let t306: crate::Real = t302 - t305;
+        let t377: crate::Real = t293 * t314;
+        let t378: crate::Real = t17 * t377;
+        let t379: crate::Real = t378 * t196;
+        let t380: crate::Real = t275 * t314;
+        let t381: crate::Real = t41 * t380;
+        let t382: crate::Real = t381 * t300;
+        let t383: crate::Real = t282 * t314;
+        let t384: crate::Real = t35 * t383;
+        let t385: crate::Real = t384 * t300;
+        let t386: crate::Real = t382 - t385;
+        let t387: crate::Real = t386 - t379;
+        let t461: crate::Real = t293 * t460;
+        let t462: crate::Real = t461 * t396;
+        let t463: crate::Real = -t462;
+        let t539: crate::Real = t283 * t470;
+        let t540: crate::Real = t35 * t539;
+        let t541: crate::Real = t32 * t540;
+        let t542: crate::Real = t541 * t277;
+        let t543: crate::Real = t275 * t471;
+        let t544: crate::Real = t41 * t543;
+        let t545: crate::Real = t32 * t544;
+        let t546: crate::Real = t545 * t277;
+        let t548: crate::Real = t293 * t547;
+        let t549: crate::Real = t548 * t184;
+        let t550: crate::Real = t546 + t549;
+        let t551: crate::Real = t550 - t542;
+        let t619: crate::Real = t283 * t557;
+        let t620: crate::Real = t35 * t619;
+        let t621: crate::Real = t32 * t620;
+        let t622: crate::Real = t621 * t277;
+        let t623: crate::Real = t275 * t558;
+        let t624: crate::Real = t41 * t623;
+        let t625: crate::Real = t32 * t624;
+        let t626: crate::Real = t625 * t277;
+        let t628: crate::Real = t293 * t627;
+        let t629: crate::Real = t628 * t184;
+        let t630: crate::Real = t626 + t629;
+        let t631: crate::Real = t630 - t622;
+        let t694: crate::Real = t111 * t279;
+        let t695: crate::Real = t694 * t277;
+        let t696: crate::Real = t290 * t277;
+        let t697: crate::Real = t695 + t696;
+        let t698: crate::Real = t41 * t284;
+        let t699: crate::Real = t698 * t286;
+        let t700: crate::Real = t697 - t699;
+        let t701: crate::Real = t276 * t286;
+        let t702: crate::Real = t700 - t701;
+        let t703: crate::Real = t199 * t702;
+        let t704: crate::Real = t17 * t703;
+        let t705: crate::Real = t704 * t196;
+        let t706: crate::Real = t200 * t275;
+        let t707: crate::Real = t706 * t300;
+        let t708: crate::Real = t705 + t707;
+        let t709: crate::Real = t41 * t303;
+        let t710: crate::Real = t709 * t300;
+        let t711: crate::Real = t708 + t710;
+        let t774: crate::Real = t314 * t702;
+        let t775: crate::Real = t17 * t774;
+        let t776: crate::Real = t775 * t196;
+        let t777: crate::Real = t275 * t315;
+        let t778: crate::Real = t777 * t300;
+        let t779: crate::Real = t41 * t383;
+        let t780: crate::Real = t779 * t300;
+        let t781: crate::Real = t778 + t780;
+        let t782: crate::Real = t781 - t776;
+        let t819: crate::Real = t460 * t702;
+        let t820: crate::Real = t819 * t396;
+        let t821: crate::Real = -t820;
+        let t877: crate::Real = t41 * t539;
+        let t878: crate::Real = t32 * t877;
+        let t879: crate::Real = t878 * t277;
+        let t880: crate::Real = t275 * t474;
+        let t881: crate::Real = t32 * t880;
+        let t882: crate::Real = t881 * t277;
+        let t883: crate::Real = t879 + t882;
+        let t884: crate::Real = t547 * t702;
+        let t885: crate::Real = t884 * t184;
+        let t886: crate::Real = t883 + t885;
+        let t942: crate::Real = t41 * t619;
+        let t943: crate::Real = t32 * t942;
+        let t944: crate::Real = t943 * t277;
+        let t945: crate::Real = t275 * t561;
+        let t946: crate::Real = t32 * t945;
+        let t947: crate::Real = t946 * t277;
+        let t948: crate::Real = t944 + t947;
+        let t949: crate::Real = t627 * t702;
+        let t950: crate::Real = t949 * t184;
+        let t951: crate::Real = t948 + t950;
         [t306, t387, t463, t551, t631, t711, t782, t821, t886, t951]
     };
-    let t307: f64 = g1[0usize];
-    let t388: f64 = g1[1usize];
-    let t464: f64 = g1[2usize];
-    let t552: f64 = g1[3usize];
-    let t632: f64 = g1[4usize];
-    let t712: f64 = g1[5usize];
-    let t783: f64 = g1[6usize];
-    let t822: f64 = g1[7usize];
-    let t887: f64 = g1[8usize];
-    let t952: f64 = g1[9usize];
-    let t953: f64 = t17 * t199;
-    let t954: f64 = t953 * t196;
-    let t955: f64 = t17 * t314;
-    let t956: f64 = t955 * t196;
-    let t957: f64 = -t956;
-    let t958: f64 = t460 * t396;
-    let t959: f64 = -t958;
-    let t960: f64 = t547 * t184;
-    let t961: f64 = t627 * t184;
+    let t307: crate::Real = g1[0usize];
+    let t388: crate::Real = g1[1usize];
+    let t464: crate::Real = g1[2usize];
+    let t552: crate::Real = g1[3usize];
+    let t632: crate::Real = g1[4usize];
+    let t712: crate::Real = g1[5usize];
+    let t783: crate::Real = g1[6usize];
+    let t822: crate::Real = g1[7usize];
+    let t887: crate::Real = g1[8usize];
+    let t952: crate::Real = g1[9usize];
+    let t953: crate::Real = t17 * t199;
+    let t954: crate::Real = t953 * t196;
+    let t955: crate::Real = t17 * t314;
+    let t956: crate::Real = t955 * t196;
+    let t957: crate::Real = -t956;
+    let t958: crate::Real = t460 * t396;
+    let t959: crate::Real = -t958;
+    let t960: crate::Real = t547 * t184;
+    let t961: crate::Real = t627 * t184;
     [
         t107,
         t140,
@@ -4090,12 +4118,16 @@ pub fn step_exact_with_jac_p_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_with_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 5usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 5usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 5usize]; 3usize],
+) {
     let o = step_exact_with_jac_p_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -4121,62 +4153,62 @@ pub fn step_exact_with_jac_p(
 41 arithmetic operations (73 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-) -> [f64; 9usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = p[2usize];
-    let t5: f64 = p[3usize];
-    let t6: f64 = p[4usize];
-    let t7: f64 = 3.141592653589793f64;
-    let t8: f64 = t0 * t7;
-    let t9: f64 = t2 * t8;
-    let t10: f64 = t6 * t9;
-    let t11: f64 = 2f64;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t5;
-    let t15: f64 = t12 * t14;
-    let t16: f64 = t1 * t7;
-    let t17: f64 = t3 * t16;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t11 * t18;
-    let t20: f64 = t19 * t14;
-    let t21: f64 = t15 - t20;
-    let t22: f64 = t21 / t4;
-    let t23: f64 = 0f64;
-    let t24: f64 = t6 * t8;
-    let t25: f64 = t24 * t11;
-    let t26: f64 = t4 * t5;
-    let t27: f64 = t13 / t26;
-    let t28: f64 = t25 * t27;
-    let t29: f64 = t6 * t16;
-    let t30: f64 = t11 * t29;
-    let t31: f64 = t30 * t27;
-    let t32: f64 = -t31;
-    let t33: f64 = t4 * t4;
-    let t34: f64 = t11 * t10;
-    let t35: f64 = t34 * t14;
-    let t36: f64 = t35 - t20;
-    let t37: f64 = t36 / t33;
-    let t38: f64 = -t37;
-    let t39: f64 = t5 * t5;
-    let t40: f64 = t13 / t39;
-    let t41: f64 = t34 * t40;
-    let t42: f64 = t19 * t40;
-    let t43: f64 = t42 - t41;
-    let t44: f64 = t13 / t4;
-    let t45: f64 = t43 * t44;
-    let t46: f64 = t11 * t9;
-    let t47: f64 = t46 * t14;
-    let t48: f64 = t11 * t17;
-    let t49: f64 = t48 * t14;
-    let t50: f64 = t47 - t49;
-    let t51: f64 = t50 * t44;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+) -> [crate::Real; 9usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = p[2usize];
+    let t5: crate::Real = p[3usize];
+    let t6: crate::Real = p[4usize];
+    let t7: crate::Real = 3.141592653589793;
+    let t8: crate::Real = t0 * t7;
+    let t9: crate::Real = t2 * t8;
+    let t10: crate::Real = t6 * t9;
+    let t11: crate::Real = 2.0;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t5;
+    let t15: crate::Real = t12 * t14;
+    let t16: crate::Real = t1 * t7;
+    let t17: crate::Real = t3 * t16;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t11 * t18;
+    let t20: crate::Real = t19 * t14;
+    let t21: crate::Real = t15 - t20;
+    let t22: crate::Real = t21 / t4;
+    let t23: crate::Real = 0.0;
+    let t24: crate::Real = t6 * t8;
+    let t25: crate::Real = t24 * t11;
+    let t26: crate::Real = t4 * t5;
+    let t27: crate::Real = t13 / t26;
+    let t28: crate::Real = t25 * t27;
+    let t29: crate::Real = t6 * t16;
+    let t30: crate::Real = t11 * t29;
+    let t31: crate::Real = t30 * t27;
+    let t32: crate::Real = -t31;
+    let t33: crate::Real = t4 * t4;
+    let t34: crate::Real = t11 * t10;
+    let t35: crate::Real = t34 * t14;
+    let t36: crate::Real = t35 - t20;
+    let t37: crate::Real = t36 / t33;
+    let t38: crate::Real = -t37;
+    let t39: crate::Real = t5 * t5;
+    let t40: crate::Real = t13 / t39;
+    let t41: crate::Real = t34 * t40;
+    let t42: crate::Real = t19 * t40;
+    let t43: crate::Real = t42 - t41;
+    let t44: crate::Real = t13 / t4;
+    let t45: crate::Real = t43 * t44;
+    let t46: crate::Real = t11 * t9;
+    let t47: crate::Real = t46 * t14;
+    let t48: crate::Real = t11 * t17;
+    let t49: crate::Real = t48 * t14;
+    let t50: crate::Real = t47 - t49;
+    let t51: crate::Real = t50 * t44;
     [t22, t23, t23, t23, t28, t32, t38, t45, t51]
 }
 /**Observation `gyro` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -4184,10 +4216,14 @@ pub fn obs_gyro_linearized_flat(
 Returns (`obs_gyro`, `obs_gyro_jac_x`, `obs_gyro_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_gyro_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-) -> ([f64; 1usize], [[f64; 3usize]; 1usize], [[f64; 5usize]; 1usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+) -> (
+    [crate::Real; 1usize],
+    [[crate::Real; 3usize]; 1usize],
+    [[crate::Real; 5usize]; 1usize],
+) {
     let o = obs_gyro_linearized_flat(x, u, p);
     (
         [o[0usize]],
@@ -4206,36 +4242,36 @@ pub fn obs_gyro_linearized(
 17 arithmetic operations (57 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-    lm: &[f64; 2usize],
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t10;
-    let t15: f64 = t5 * t14;
-    let t16: f64 = -t15;
-    let t17: f64 = t7 * t14;
-    let t18: f64 = -t17;
-    let t19: f64 = 0f64;
-    let t20: f64 = t13 / t9;
-    let t21: f64 = t7 * t20;
-    let t22: f64 = t5 * t20;
-    let t23: f64 = -t22;
-    let t24: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t10;
+    let t15: crate::Real = t5 * t14;
+    let t16: crate::Real = -t15;
+    let t17: crate::Real = t7 * t14;
+    let t18: crate::Real = -t17;
+    let t19: crate::Real = 0.0;
+    let t20: crate::Real = t13 / t9;
+    let t21: crate::Real = t7 * t20;
+    let t22: crate::Real = t5 * t20;
+    let t23: crate::Real = -t22;
+    let t24: crate::Real = (-1.0);
     [
         t10,
         t12,
@@ -4262,11 +4298,15 @@ pub fn obs_landmark_linearized_flat(
 Returns (`obs_landmark`, `obs_landmark_jac_x`, `obs_landmark_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_landmark_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 5usize],
-    lm: &[f64; 2usize],
-) -> ([f64; 2usize], [[f64; 3usize]; 2usize], [[f64; 5usize]; 2usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 5usize],
+    lm: &[crate::Real; 2usize],
+) -> (
+    [crate::Real; 2usize],
+    [[crate::Real; 3usize]; 2usize],
+    [[crate::Real; 5usize]; 2usize],
+) {
     let o = obs_landmark_linearized_flat(x, u, p, lm);
     (
         [o[0usize], o[1usize]],
@@ -4282,17 +4322,21 @@ pub fn obs_landmark_linearized(
 /// wrong lengths. Behind the `dispatch` feature: firmware calls the
 /// kernels themselves and need not carry every kernel and its name.
 #[cfg(feature = "dispatch")]
-pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+pub fn call(name: &str, args: &[&[crate::Real]], out: &mut [crate::Real]) -> bool {
     match name {
         "twist" => {
             if args.len() != 2usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4305,15 +4349,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4326,23 +4376,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4355,23 +4413,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4384,23 +4450,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4413,23 +4487,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4442,23 +4524,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 15usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4471,23 +4561,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4500,23 +4598,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4529,23 +4635,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4558,23 +4672,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4587,23 +4709,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 15usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4616,15 +4746,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 1usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4637,15 +4773,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4658,15 +4800,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 5usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4679,19 +4827,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4704,19 +4860,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4729,19 +4893,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 10usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4754,11 +4926,15 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 2usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4771,15 +4947,19 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: f64 = match args[1usize] {
+            let a1: crate::Real = match args[1usize] {
                 [v] => *v,
                 _ => return false,
             };
-            let a2: &[f64; 5usize] = match <&[f64; 5usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 5usize] = match <&[crate::Real; 5usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };

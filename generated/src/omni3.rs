@@ -15,15 +15,15 @@ pub const SPEC_FINGERPRINT: &str = "49fbd1d849272a03";
 /// Runtime parameters, in the order of the `p` argument.
 pub const PARAMS: [&str; 2usize] = ["r", "L"];
 /// Nominal values of [`PARAMS`].
-pub const PARAM_NOMINAL: [f64; 2usize] = [0.15f64, 1f64];
+pub const PARAM_NOMINAL: [crate::Real; 2usize] = [0.15, 1.0];
 /// The runtime parameters by name; [`Params::to_array`] gives the `p`
 /// argument of every kernel.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
     /// `r` (m): Wheel radius.
-    pub r: f64,
+    pub r: crate::Real,
     /// `L` (m): Distance from the robot centre to the wheels.
-    pub L: f64,
+    pub L: crate::Real,
 }
 impl Params {
     /// The spec's nominal values.
@@ -32,11 +32,11 @@ impl Params {
         L: PARAM_NOMINAL[1usize],
     };
     /// The `p` argument of the kernels, in the order of [`PARAMS`].
-    pub const fn to_array(&self) -> [f64; 2usize] {
+    pub const fn to_array(&self) -> [crate::Real; 2usize] {
         [self.r, self.L]
     }
     /// From a `p` array in the order of [`PARAMS`].
-    pub const fn from_array(p: &[f64; 2usize]) -> Params {
+    pub const fn from_array(p: &[crate::Real; 2usize]) -> Params {
         Params {
             r: p[0usize],
             L: p[1usize],
@@ -55,28 +55,31 @@ pub const INPUT_COLUMNS: [&str; 3usize] = ["phi1", "phi2", "phi3"];
 
 14 arithmetic operations (14 before common-subexpression elimination).*/
 #[inline]
-pub fn twist(u: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 3usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = u[2usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = 0.3333333333333333f64;
-    let t6: f64 = libm::sqrt(t5);
-    let t7: f64 = t1 + t2;
-    let t8: f64 = t3 * t6;
-    let t9: f64 = t7 * t8;
-    let t10: f64 = 2f64;
-    let t11: f64 = t0 * t10;
-    let t12: f64 = t1 - t2;
-    let t13: f64 = t12 - t11;
-    let t14: f64 = t3 * t13;
-    let t15: f64 = t5 * t14;
-    let t16: f64 = t0 + t1;
-    let t17: f64 = t16 - t2;
-    let t18: f64 = t3 * t17;
-    let t19: f64 = t5 * t18;
-    let t20: f64 = t19 / t4;
+pub fn twist(
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = u[2usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = 0.3333333333333333;
+    let t6: crate::Real = crate::math::sqrt(t5);
+    let t7: crate::Real = t1 + t2;
+    let t8: crate::Real = t3 * t6;
+    let t9: crate::Real = t7 * t8;
+    let t10: crate::Real = 2.0;
+    let t11: crate::Real = t0 * t10;
+    let t12: crate::Real = t1 - t2;
+    let t13: crate::Real = t12 - t11;
+    let t14: crate::Real = t3 * t13;
+    let t15: crate::Real = t5 * t14;
+    let t16: crate::Real = t0 + t1;
+    let t17: crate::Real = t16 - t2;
+    let t18: crate::Real = t3 * t17;
+    let t19: crate::Real = t5 * t18;
+    let t20: crate::Real = t19 / t4;
     [t9, t15, t20]
 }
 /**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
@@ -89,25 +92,25 @@ pub fn twist(u: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 3usize] {
 9 arithmetic operations (9 before common-subexpression elimination).*/
 #[inline]
 pub fn twist_gyro(
-    u: &[f64; 3usize],
-    omega: &[f64; 1usize],
-    p: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = u[2usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = 0.3333333333333333f64;
-    let t5: f64 = libm::sqrt(t4);
-    let t6: f64 = t1 + t2;
-    let t7: f64 = t3 * t5;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = 2f64;
-    let t10: f64 = t0 * t9;
-    let t11: f64 = t1 - t2;
-    let t12: f64 = t11 - t10;
-    let t13: f64 = t3 * t12;
-    let t14: f64 = t4 * t13;
+    u: &[crate::Real; 3usize],
+    omega: &[crate::Real; 1usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = u[2usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = 0.3333333333333333;
+    let t5: crate::Real = crate::math::sqrt(t4);
+    let t6: crate::Real = t1 + t2;
+    let t7: crate::Real = t3 * t5;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = 2.0;
+    let t10: crate::Real = t0 * t9;
+    let t11: crate::Real = t1 - t2;
+    let t12: crate::Real = t11 - t10;
+    let t13: crate::Real = t3 * t12;
+    let t14: crate::Real = t4 * t13;
     [t8, t14]
 }
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
@@ -122,57 +125,57 @@ pub fn twist_gyro(
 31 arithmetic operations (44 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = u[2usize];
-    let t6: f64 = w[0usize];
-    let t7: f64 = w[1usize];
-    let t8: f64 = w[2usize];
-    let t9: f64 = p[0usize];
-    let t10: f64 = p[1usize];
-    let t11: f64 = dt;
-    let t12: f64 = 0.3333333333333333f64;
-    let t13: f64 = libm::sqrt(t12);
-    let t14: f64 = t4 + t5;
-    let t15: f64 = t9 * t13;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = t6 + t16;
-    let t18: f64 = libm::cos(t2);
-    let t19: f64 = t17 * t18;
-    let t20: f64 = 2f64;
-    let t21: f64 = t3 * t20;
-    let t22: f64 = t4 - t5;
-    let t23: f64 = t22 - t21;
-    let t24: f64 = t9 * t23;
-    let t25: f64 = t12 * t24;
-    let t26: f64 = t7 + t25;
-    let t27: f64 = libm::sin(t2);
-    let t28: f64 = t26 * t27;
-    let t29: f64 = t19 - t28;
-    let t30: f64 = t11 * t29;
-    let t31: f64 = t0 + t30;
-    let t32: f64 = t17 * t27;
-    let t33: f64 = t18 * t26;
-    let t34: f64 = t32 + t33;
-    let t35: f64 = t11 * t34;
-    let t36: f64 = t1 + t35;
-    let t37: f64 = t3 + t4;
-    let t38: f64 = t37 - t5;
-    let t39: f64 = t9 * t38;
-    let t40: f64 = t12 * t39;
-    let t41: f64 = t40 / t10;
-    let t42: f64 = t8 + t41;
-    let t43: f64 = t11 * t42;
-    let t44: f64 = t2 + t43;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = u[2usize];
+    let t6: crate::Real = w[0usize];
+    let t7: crate::Real = w[1usize];
+    let t8: crate::Real = w[2usize];
+    let t9: crate::Real = p[0usize];
+    let t10: crate::Real = p[1usize];
+    let t11: crate::Real = dt;
+    let t12: crate::Real = 0.3333333333333333;
+    let t13: crate::Real = crate::math::sqrt(t12);
+    let t14: crate::Real = t4 + t5;
+    let t15: crate::Real = t9 * t13;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = t6 + t16;
+    let t18: crate::Real = crate::math::cos(t2);
+    let t19: crate::Real = t17 * t18;
+    let t20: crate::Real = 2.0;
+    let t21: crate::Real = t3 * t20;
+    let t22: crate::Real = t4 - t5;
+    let t23: crate::Real = t22 - t21;
+    let t24: crate::Real = t9 * t23;
+    let t25: crate::Real = t12 * t24;
+    let t26: crate::Real = t7 + t25;
+    let t27: crate::Real = crate::math::sin(t2);
+    let t28: crate::Real = t26 * t27;
+    let t29: crate::Real = t19 - t28;
+    let t30: crate::Real = t11 * t29;
+    let t31: crate::Real = t0 + t30;
+    let t32: crate::Real = t17 * t27;
+    let t33: crate::Real = t18 * t26;
+    let t34: crate::Real = t32 + t33;
+    let t35: crate::Real = t11 * t34;
+    let t36: crate::Real = t1 + t35;
+    let t37: crate::Real = t3 + t4;
+    let t38: crate::Real = t37 - t5;
+    let t39: crate::Real = t9 * t38;
+    let t40: crate::Real = t12 * t39;
+    let t41: crate::Real = t40 / t10;
+    let t42: crate::Real = t8 + t41;
+    let t43: crate::Real = t11 * t42;
+    let t44: crate::Real = t2 + t43;
     [t31, t36, t44]
 }
 /**Jacobian of `step_euler` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -187,46 +190,46 @@ pub fn step_euler(
 22 arithmetic operations (35 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = u[2usize];
-    let t4: f64 = w[0usize];
-    let t5: f64 = w[1usize];
-    let t6: f64 = p[0usize];
-    let t7: f64 = dt;
-    let t8: f64 = 1f64;
-    let t9: f64 = 0f64;
-    let t10: f64 = 0.3333333333333333f64;
-    let t11: f64 = libm::sqrt(t10);
-    let t12: f64 = t2 + t3;
-    let t13: f64 = t6 * t11;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = t4 + t14;
-    let t16: f64 = libm::sin(t0);
-    let t17: f64 = t15 * t16;
-    let t18: f64 = -t17;
-    let t19: f64 = 2f64;
-    let t20: f64 = t1 * t19;
-    let t21: f64 = t2 - t3;
-    let t22: f64 = t21 - t20;
-    let t23: f64 = t6 * t22;
-    let t24: f64 = t10 * t23;
-    let t25: f64 = t5 + t24;
-    let t26: f64 = libm::cos(t0);
-    let t27: f64 = t25 * t26;
-    let t28: f64 = t18 - t27;
-    let t29: f64 = t7 * t28;
-    let t30: f64 = t15 * t26;
-    let t31: f64 = t16 * t25;
-    let t32: f64 = t30 - t31;
-    let t33: f64 = t7 * t32;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = u[2usize];
+    let t4: crate::Real = w[0usize];
+    let t5: crate::Real = w[1usize];
+    let t6: crate::Real = p[0usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = 1.0;
+    let t9: crate::Real = 0.0;
+    let t10: crate::Real = 0.3333333333333333;
+    let t11: crate::Real = crate::math::sqrt(t10);
+    let t12: crate::Real = t2 + t3;
+    let t13: crate::Real = t6 * t11;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = t4 + t14;
+    let t16: crate::Real = crate::math::sin(t0);
+    let t17: crate::Real = t15 * t16;
+    let t18: crate::Real = -t17;
+    let t19: crate::Real = 2.0;
+    let t20: crate::Real = t1 * t19;
+    let t21: crate::Real = t2 - t3;
+    let t22: crate::Real = t21 - t20;
+    let t23: crate::Real = t6 * t22;
+    let t24: crate::Real = t10 * t23;
+    let t25: crate::Real = t5 + t24;
+    let t26: crate::Real = crate::math::cos(t0);
+    let t27: crate::Real = t25 * t26;
+    let t28: crate::Real = t18 - t27;
+    let t29: crate::Real = t7 * t28;
+    let t30: crate::Real = t15 * t26;
+    let t31: crate::Real = t16 * t25;
+    let t32: crate::Real = t30 - t31;
+    let t33: crate::Real = t7 * t32;
     [[t8, t9, t29], [t9, t8, t33], [t9, t9, t8]]
 }
 /**Jacobian of `step_euler` with respect to the inputs; rows x, y, theta.
@@ -241,45 +244,45 @@ pub fn step_euler_jac_x(
 27 arithmetic operations (55 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = p[0usize];
-    let t2: f64 = p[1usize];
-    let t3: f64 = dt;
-    let t4: f64 = libm::sin(t0);
-    let t5: f64 = t1 * t3;
-    let t6: f64 = t4 * t5;
-    let t7: f64 = 0.6666666666666666f64;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = t1 * t4;
-    let t10: f64 = 0.3333333333333333f64;
-    let t11: f64 = t9 * t10;
-    let t12: f64 = libm::sqrt(t10);
-    let t13: f64 = libm::cos(t0);
-    let t14: f64 = t1 * t12;
-    let t15: f64 = t13 * t14;
-    let t16: f64 = t15 - t11;
-    let t17: f64 = t3 * t16;
-    let t18: f64 = t11 + t15;
-    let t19: f64 = t3 * t18;
-    let t20: f64 = t5 * t13;
-    let t21: f64 = t7 * t20;
-    let t22: f64 = -t21;
-    let t23: f64 = t1 * t13;
-    let t24: f64 = t10 * t23;
-    let t25: f64 = t4 * t14;
-    let t26: f64 = t24 + t25;
-    let t27: f64 = t3 * t26;
-    let t28: f64 = t25 - t24;
-    let t29: f64 = t3 * t28;
-    let t30: f64 = t5 * t10;
-    let t31: f64 = t30 / t2;
-    let t32: f64 = -t31;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = p[0usize];
+    let t2: crate::Real = p[1usize];
+    let t3: crate::Real = dt;
+    let t4: crate::Real = crate::math::sin(t0);
+    let t5: crate::Real = t1 * t3;
+    let t6: crate::Real = t4 * t5;
+    let t7: crate::Real = 0.6666666666666666;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = t1 * t4;
+    let t10: crate::Real = 0.3333333333333333;
+    let t11: crate::Real = t9 * t10;
+    let t12: crate::Real = crate::math::sqrt(t10);
+    let t13: crate::Real = crate::math::cos(t0);
+    let t14: crate::Real = t1 * t12;
+    let t15: crate::Real = t13 * t14;
+    let t16: crate::Real = t15 - t11;
+    let t17: crate::Real = t3 * t16;
+    let t18: crate::Real = t11 + t15;
+    let t19: crate::Real = t3 * t18;
+    let t20: crate::Real = t5 * t13;
+    let t21: crate::Real = t7 * t20;
+    let t22: crate::Real = -t21;
+    let t23: crate::Real = t1 * t13;
+    let t24: crate::Real = t10 * t23;
+    let t25: crate::Real = t4 * t14;
+    let t26: crate::Real = t24 + t25;
+    let t27: crate::Real = t3 * t26;
+    let t28: crate::Real = t25 - t24;
+    let t29: crate::Real = t3 * t28;
+    let t30: crate::Real = t5 * t10;
+    let t31: crate::Real = t30 / t2;
+    let t32: crate::Real = -t31;
     [[t8, t17, t19], [t22, t27, t29], [t31, t31, t32]]
 }
 /**Jacobian of `step_euler` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -294,20 +297,20 @@ pub fn step_euler_jac_u(
 5 arithmetic operations (9 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = dt;
-    let t2: f64 = libm::cos(t0);
-    let t3: f64 = t1 * t2;
-    let t4: f64 = libm::sin(t0);
-    let t5: f64 = t1 * t4;
-    let t6: f64 = -t5;
-    let t7: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = dt;
+    let t2: crate::Real = crate::math::cos(t0);
+    let t3: crate::Real = t1 * t2;
+    let t4: crate::Real = crate::math::sin(t0);
+    let t5: crate::Real = t1 * t4;
+    let t6: crate::Real = -t5;
+    let t7: crate::Real = 0.0;
     [[t3, t6, t7], [t5, t3, t7], [t7, t7, t1]]
 }
 /**Jacobian of `step_euler` with respect to the parameters; rows x, y, theta.
@@ -322,51 +325,51 @@ pub fn step_euler_jac_w(
 29 arithmetic operations (39 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = u[2usize];
-    let t4: f64 = p[0usize];
-    let t5: f64 = p[1usize];
-    let t6: f64 = dt;
-    let t7: f64 = 2f64;
-    let t8: f64 = t1 * t7;
-    let t9: f64 = t2 - t3;
-    let t10: f64 = t9 - t8;
-    let t11: f64 = libm::sin(t0);
-    let t12: f64 = t10 * t11;
-    let t13: f64 = 0.3333333333333333f64;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = libm::sqrt(t13);
-    let t16: f64 = t2 + t3;
-    let t17: f64 = libm::cos(t0);
-    let t18: f64 = t15 * t16;
-    let t19: f64 = t17 * t18;
-    let t20: f64 = t19 - t14;
-    let t21: f64 = t6 * t20;
-    let t22: f64 = 0f64;
-    let t23: f64 = t10 * t17;
-    let t24: f64 = t13 * t23;
-    let t25: f64 = t11 * t18;
-    let t26: f64 = t24 + t25;
-    let t27: f64 = t6 * t26;
-    let t28: f64 = t1 + t2;
-    let t29: f64 = t28 - t3;
-    let t30: f64 = t6 * t29;
-    let t31: f64 = t13 * t30;
-    let t32: f64 = t31 / t5;
-    let t33: f64 = t5 * t5;
-    let t34: f64 = t4 * t6;
-    let t35: f64 = t29 * t34;
-    let t36: f64 = t13 * t35;
-    let t37: f64 = t36 / t33;
-    let t38: f64 = -t37;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = u[2usize];
+    let t4: crate::Real = p[0usize];
+    let t5: crate::Real = p[1usize];
+    let t6: crate::Real = dt;
+    let t7: crate::Real = 2.0;
+    let t8: crate::Real = t1 * t7;
+    let t9: crate::Real = t2 - t3;
+    let t10: crate::Real = t9 - t8;
+    let t11: crate::Real = crate::math::sin(t0);
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = 0.3333333333333333;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = crate::math::sqrt(t13);
+    let t16: crate::Real = t2 + t3;
+    let t17: crate::Real = crate::math::cos(t0);
+    let t18: crate::Real = t15 * t16;
+    let t19: crate::Real = t17 * t18;
+    let t20: crate::Real = t19 - t14;
+    let t21: crate::Real = t6 * t20;
+    let t22: crate::Real = 0.0;
+    let t23: crate::Real = t10 * t17;
+    let t24: crate::Real = t13 * t23;
+    let t25: crate::Real = t11 * t18;
+    let t26: crate::Real = t24 + t25;
+    let t27: crate::Real = t6 * t26;
+    let t28: crate::Real = t1 + t2;
+    let t29: crate::Real = t28 - t3;
+    let t30: crate::Real = t6 * t29;
+    let t31: crate::Real = t13 * t30;
+    let t32: crate::Real = t31 / t5;
+    let t33: crate::Real = t5 * t5;
+    let t34: crate::Real = t4 * t6;
+    let t35: crate::Real = t29 * t34;
+    let t36: crate::Real = t13 * t35;
+    let t37: crate::Real = t36 / t33;
+    let t38: crate::Real = -t37;
     [[t21, t22], [t27, t22], [t32, t38]]
 }
 /**Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).
@@ -381,188 +384,190 @@ pub fn step_euler_jac_p(
 147 arithmetic operations (1194 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = u[2usize];
-    let t6: f64 = w[0usize];
-    let t7: f64 = w[1usize];
-    let t8: f64 = w[2usize];
-    let t9: f64 = p[0usize];
-    let t10: f64 = p[1usize];
-    let t11: f64 = dt;
-    let t12: f64 = t3 + t4;
-    let t13: f64 = t12 - t5;
-    let t14: f64 = t9 * t13;
-    let t15: f64 = 0.3333333333333333f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = t16 / t10;
-    let t18: f64 = t8 + t17;
-    let t19: f64 = t11 * t18;
-    let t20: f64 = libm::sqrt(t15);
-    let t21: f64 = t4 + t5;
-    let t22: f64 = t9 * t20;
-    let t23: f64 = t21 * t22;
-    let t24: f64 = t6 + t23;
-    let t25: f64 = libm::cos(t2);
-    let t26: f64 = t11 * t24;
-    let t29: f64 = 2f64;
-    let t30: f64 = t3 * t29;
-    let t31: f64 = t4 - t5;
-    let t32: f64 = t31 - t30;
-    let t33: f64 = t9 * t32;
-    let t34: f64 = t15 * t33;
-    let t35: f64 = t7 + t34;
-    let t36: f64 = libm::sin(t2);
-    let t37: f64 = t11 * t35;
-    let g0: [f64; 2usize] = if libm::fabs(t19) < 0.05f64 {
-        let t27: f64 = t25 * t26;
-        let t28: f64 = t0 + t27;
-        let t38: f64 = t36 * t37;
-        let t39: f64 = t28 - t38;
-        let t40: f64 = t26 * t36;
-        let t41: f64 = 0.5f64;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = -t42;
-        let t44: f64 = t25 * t37;
-        let t45: f64 = t41 * t44;
-        let t46: f64 = t43 - t45;
-        let t47: f64 = t19 * t46;
-        let t48: f64 = t39 + t47;
-        let t49: f64 = t19 * t19;
-        let t50: f64 = 0.16666666666666666f64;
-        let t51: f64 = t27 * t50;
-        let t52: f64 = t38 * t50;
-        let t53: f64 = t52 - t51;
-        let t54: f64 = t49 * t53;
-        let t55: f64 = t48 + t54;
-        let t56: f64 = t19 * t49;
-        let t57: f64 = 0.041666666666666664f64;
-        let t58: f64 = t40 * t57;
-        let t59: f64 = t44 * t57;
-        let t60: f64 = t58 + t59;
-        let t61: f64 = t56 * t60;
-        let t62: f64 = t55 + t61;
-        let t63: f64 = t49 * t49;
-        let t64: f64 = 0.008333333333333333f64;
-        let t65: f64 = t27 * t64;
-        let t66: f64 = t38 * t64;
-        let t67: f64 = t65 - t66;
-        let t68: f64 = t63 * t67;
-        let t69: f64 = t62 + t68;
-        let t70: f64 = t19 * t63;
-        let t71: f64 = 0.001388888888888889f64;
-        let t72: f64 = t40 * t71;
-        let t73: f64 = -t72;
-        let t74: f64 = t44 * t71;
-        let t75: f64 = t73 - t74;
-        let t76: f64 = t70 * t75;
-        let t77: f64 = t69 + t76;
-        let t78: f64 = t56 * t56;
-        let t79: f64 = 0.0001984126984126984f64;
-        let t80: f64 = t27 * t79;
-        let t81: f64 = t38 * t79;
-        let t82: f64 = t81 - t80;
-        let t83: f64 = t78 * t82;
-        let t84: f64 = t77 + t83;
-        let t85: f64 = t19 * t78;
-        let t86: f64 = 0.0000248015873015873f64;
-        let t87: f64 = t40 * t86;
-        let t88: f64 = t44 * t86;
-        let t89: f64 = t87 + t88;
-        let t90: f64 = t85 * t89;
-        let t91: f64 = t84 + t90;
-        let t92: f64 = t63 * t63;
-        let t93: f64 = 0.0000027557319223985893f64;
-        let t94: f64 = t27 * t93;
-        let t95: f64 = t38 * t93;
-        let t96: f64 = t94 - t95;
-        let t97: f64 = t92 * t96;
-        let t98: f64 = t91 + t97;
-        let t121: f64 = t1 + t40;
-        let t122: f64 = t44 + t121;
-        let t123: f64 = t27 * t41;
-        let t124: f64 = t38 * t41;
-        let t125: f64 = t123 - t124;
-        let t126: f64 = t19 * t125;
-        let t127: f64 = t122 + t126;
-        let t128: f64 = t40 * t50;
-        let t129: f64 = -t128;
-        let t130: f64 = t44 * t50;
-        let t131: f64 = t129 - t130;
-        let t132: f64 = t49 * t131;
-        let t133: f64 = t127 + t132;
-        let t134: f64 = t27 * t57;
-        let t135: f64 = t38 * t57;
-        let t136: f64 = t135 - t134;
-        let t137: f64 = t56 * t136;
-        let t138: f64 = t133 + t137;
-        let t139: f64 = t40 * t64;
-        let t140: f64 = t44 * t64;
-        let t141: f64 = t139 + t140;
-        let t142: f64 = t63 * t141;
-        let t143: f64 = t138 + t142;
-        let t144: f64 = t27 * t71;
-        let t145: f64 = t38 * t71;
-        let t146: f64 = t144 - t145;
-        let t147: f64 = t70 * t146;
-        let t148: f64 = t143 + t147;
-        let t149: f64 = t40 * t79;
-        let t150: f64 = -t149;
-        let t151: f64 = t44 * t79;
-        let t152: f64 = t150 - t151;
-        let t153: f64 = t78 * t152;
-        let t154: f64 = t148 + t153;
-        let t155: f64 = t27 * t86;
-        let t156: f64 = t38 * t86;
-        let t157: f64 = t156 - t155;
-        let t158: f64 = t85 * t157;
-        let t159: f64 = t154 + t158;
-        let t160: f64 = t40 * t93;
-        let t161: f64 = t44 * t93;
-        let t162: f64 = t160 + t161;
-        let t163: f64 = t92 * t162;
-        let t164: f64 = t159 + t163;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = u[2usize];
+    let t6: crate::Real = w[0usize];
+    let t7: crate::Real = w[1usize];
+    let t8: crate::Real = w[2usize];
+    let t9: crate::Real = p[0usize];
+    let t10: crate::Real = p[1usize];
+    let t11: crate::Real = dt;
+    let t12: crate::Real = t3 + t4;
+    let t13: crate::Real = t12 - t5;
+    let t14: crate::Real = t9 * t13;
+    let t15: crate::Real = 0.3333333333333333;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = t16 / t10;
+    let t18: crate::Real = t8 + t17;
+    let t19: crate::Real = t11 * t18;
+    let t20: crate::Real = crate::math::sqrt(t15);
+    let t21: crate::Real = t4 + t5;
+    let t22: crate::Real = t9 * t20;
+    let t23: crate::Real = t21 * t22;
+    let t24: crate::Real = t6 + t23;
+    let t25: crate::Real = crate::math::cos(t2);
+    let t26: crate::Real = t11 * t24;
+    let t29: crate::Real = 2.0;
+    let t30: crate::Real = t3 * t29;
+    let t31: crate::Real = t4 - t5;
+    let t32: crate::Real = t31 - t30;
+    let t33: crate::Real = t9 * t32;
+    let t34: crate::Real = t15 * t33;
+    let t35: crate::Real = t7 + t34;
+    let t36: crate::Real = crate::math::sin(t2);
+    let t37: crate::Real = t11 * t35;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t19)
+        < crate::math::series_switch(0.05)
+    {
+        let t27: crate::Real = t25 * t26;
+        let t28: crate::Real = t0 + t27;
+        let t38: crate::Real = t36 * t37;
+        let t39: crate::Real = t28 - t38;
+        let t40: crate::Real = t26 * t36;
+        let t41: crate::Real = 0.5;
+        let t42: crate::Real = t40 * t41;
+        let t43: crate::Real = -t42;
+        let t44: crate::Real = t25 * t37;
+        let t45: crate::Real = t41 * t44;
+        let t46: crate::Real = t43 - t45;
+        let t47: crate::Real = t19 * t46;
+        let t48: crate::Real = t39 + t47;
+        let t49: crate::Real = t19 * t19;
+        let t50: crate::Real = 0.16666666666666666;
+        let t51: crate::Real = t27 * t50;
+        let t52: crate::Real = t38 * t50;
+        let t53: crate::Real = t52 - t51;
+        let t54: crate::Real = t49 * t53;
+        let t55: crate::Real = t48 + t54;
+        let t56: crate::Real = t19 * t49;
+        let t57: crate::Real = 0.041666666666666664;
+        let t58: crate::Real = t40 * t57;
+        let t59: crate::Real = t44 * t57;
+        let t60: crate::Real = t58 + t59;
+        let t61: crate::Real = t56 * t60;
+        let t62: crate::Real = t55 + t61;
+        let t63: crate::Real = t49 * t49;
+        let t64: crate::Real = 0.008333333333333333;
+        let t65: crate::Real = t27 * t64;
+        let t66: crate::Real = t38 * t64;
+        let t67: crate::Real = t65 - t66;
+        let t68: crate::Real = t63 * t67;
+        let t69: crate::Real = t62 + t68;
+        let t70: crate::Real = t19 * t63;
+        let t71: crate::Real = 0.001388888888888889;
+        let t72: crate::Real = t40 * t71;
+        let t73: crate::Real = -t72;
+        let t74: crate::Real = t44 * t71;
+        let t75: crate::Real = t73 - t74;
+        let t76: crate::Real = t70 * t75;
+        let t77: crate::Real = t69 + t76;
+        let t78: crate::Real = t56 * t56;
+        let t79: crate::Real = 0.0001984126984126984;
+        let t80: crate::Real = t27 * t79;
+        let t81: crate::Real = t38 * t79;
+        let t82: crate::Real = t81 - t80;
+        let t83: crate::Real = t78 * t82;
+        let t84: crate::Real = t77 + t83;
+        let t85: crate::Real = t19 * t78;
+        let t86: crate::Real = 0.0000248015873015873;
+        let t87: crate::Real = t40 * t86;
+        let t88: crate::Real = t44 * t86;
+        let t89: crate::Real = t87 + t88;
+        let t90: crate::Real = t85 * t89;
+        let t91: crate::Real = t84 + t90;
+        let t92: crate::Real = t63 * t63;
+        let t93: crate::Real = 0.0000027557319223985893;
+        let t94: crate::Real = t27 * t93;
+        let t95: crate::Real = t38 * t93;
+        let t96: crate::Real = t94 - t95;
+        let t97: crate::Real = t92 * t96;
+        let t98: crate::Real = t91 + t97;
+        let t121: crate::Real = t1 + t40;
+        let t122: crate::Real = t44 + t121;
+        let t123: crate::Real = t27 * t41;
+        let t124: crate::Real = t38 * t41;
+        let t125: crate::Real = t123 - t124;
+        let t126: crate::Real = t19 * t125;
+        let t127: crate::Real = t122 + t126;
+        let t128: crate::Real = t40 * t50;
+        let t129: crate::Real = -t128;
+        let t130: crate::Real = t44 * t50;
+        let t131: crate::Real = t129 - t130;
+        let t132: crate::Real = t49 * t131;
+        let t133: crate::Real = t127 + t132;
+        let t134: crate::Real = t27 * t57;
+        let t135: crate::Real = t38 * t57;
+        let t136: crate::Real = t135 - t134;
+        let t137: crate::Real = t56 * t136;
+        let t138: crate::Real = t133 + t137;
+        let t139: crate::Real = t40 * t64;
+        let t140: crate::Real = t44 * t64;
+        let t141: crate::Real = t139 + t140;
+        let t142: crate::Real = t63 * t141;
+        let t143: crate::Real = t138 + t142;
+        let t144: crate::Real = t27 * t71;
+        let t145: crate::Real = t38 * t71;
+        let t146: crate::Real = t144 - t145;
+        let t147: crate::Real = t70 * t146;
+        let t148: crate::Real = t143 + t147;
+        let t149: crate::Real = t40 * t79;
+        let t150: crate::Real = -t149;
+        let t151: crate::Real = t44 * t79;
+        let t152: crate::Real = t150 - t151;
+        let t153: crate::Real = t78 * t152;
+        let t154: crate::Real = t148 + t153;
+        let t155: crate::Real = t27 * t86;
+        let t156: crate::Real = t38 * t86;
+        let t157: crate::Real = t156 - t155;
+        let t158: crate::Real = t85 * t157;
+        let t159: crate::Real = t154 + t158;
+        let t160: crate::Real = t40 * t93;
+        let t161: crate::Real = t44 * t93;
+        let t162: crate::Real = t160 + t161;
+        let t163: crate::Real = t92 * t162;
+        let t164: crate::Real = t159 + t163;
         [t98, t164]
     } else {
-        let t99: f64 = 1f64;
-        let t100: f64 = libm::cos(t19);
-        let t101: f64 = t99 - t100;
-        let t102: f64 = t11 * t101;
-        let t103: f64 = t24 * t102;
-        let t104: f64 = 1f64;
-        let t105: f64 = t104 / t19;
-        let t106: f64 = t103 * t105;
-        let t107: f64 = libm::sin(t19);
-        let t108: f64 = t37 * t107;
-        let t109: f64 = t108 * t105;
-        let t110: f64 = t106 + t109;
-        let t111: f64 = t36 * t110;
-        let t112: f64 = t0 - t111;
-        let t113: f64 = t35 * t102;
-        let t114: f64 = t113 * t105;
-        let t115: f64 = t26 * t107;
-        let t116: f64 = t115 * t105;
-        let t117: f64 = t116 - t114;
-        let t118: f64 = t25 * t117;
-        let t119: f64 = t112 + t118;
-        let t165: f64 = t25 * t110;
-        let t166: f64 = t1 + t165;
-        let t167: f64 = t36 * t117;
-        let t168: f64 = t166 + t167;
+        let t99: crate::Real = 1.0;
+        let t100: crate::Real = crate::math::cos(t19);
+        let t101: crate::Real = t99 - t100;
+        let t102: crate::Real = t11 * t101;
+        let t103: crate::Real = t24 * t102;
+        let t104: crate::Real = 1.0;
+        let t105: crate::Real = t104 / t19;
+        let t106: crate::Real = t103 * t105;
+        let t107: crate::Real = crate::math::sin(t19);
+        let t108: crate::Real = t37 * t107;
+        let t109: crate::Real = t108 * t105;
+        let t110: crate::Real = t106 + t109;
+        let t111: crate::Real = t36 * t110;
+        let t112: crate::Real = t0 - t111;
+        let t113: crate::Real = t35 * t102;
+        let t114: crate::Real = t113 * t105;
+        let t115: crate::Real = t26 * t107;
+        let t116: crate::Real = t115 * t105;
+        let t117: crate::Real = t116 - t114;
+        let t118: crate::Real = t25 * t117;
+        let t119: crate::Real = t112 + t118;
+        let t165: crate::Real = t25 * t110;
+        let t166: crate::Real = t1 + t165;
+        let t167: crate::Real = t36 * t117;
+        let t168: crate::Real = t166 + t167;
         [t119, t168]
     };
-    let t120: f64 = g0[0usize];
-    let t169: f64 = g0[1usize];
-    let t170: f64 = t2 + t19;
+    let t120: crate::Real = g0[0usize];
+    let t169: crate::Real = g0[1usize];
+    let t170: crate::Real = t2 + t19;
     [t120, t169, t170]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -577,183 +582,185 @@ pub fn step_exact(
 143 arithmetic operations (1183 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = u[2usize];
-    let t4: f64 = w[0usize];
-    let t5: f64 = w[1usize];
-    let t6: f64 = w[2usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = t1 + t2;
-    let t11: f64 = t10 - t3;
-    let t12: f64 = t7 * t11;
-    let t13: f64 = 0.3333333333333333f64;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = t14 / t8;
-    let t16: f64 = t6 + t15;
-    let t17: f64 = t9 * t16;
-    let t18: f64 = 1f64;
-    let t19: f64 = 0f64;
-    let t20: f64 = libm::sqrt(t13);
-    let t21: f64 = t2 + t3;
-    let t22: f64 = t7 * t20;
-    let t23: f64 = t21 * t22;
-    let t24: f64 = t4 + t23;
-    let t25: f64 = libm::sin(t0);
-    let t26: f64 = t9 * t24;
-    let t28: f64 = 2f64;
-    let t29: f64 = t1 * t28;
-    let t30: f64 = t2 - t3;
-    let t31: f64 = t30 - t29;
-    let t32: f64 = t7 * t31;
-    let t33: f64 = t13 * t32;
-    let t34: f64 = t5 + t33;
-    let t35: f64 = libm::cos(t0);
-    let t36: f64 = t9 * t34;
-    let g0: [f64; 2usize] = if libm::fabs(t17) < 0.05f64 {
-        let t27: f64 = t25 * t26;
-        let t37: f64 = t35 * t36;
-        let t38: f64 = t26 * t35;
-        let t39: f64 = 0.5f64;
-        let t40: f64 = t38 * t39;
-        let t41: f64 = t25 * t36;
-        let t42: f64 = t39 * t41;
-        let t43: f64 = t42 - t40;
-        let t44: f64 = t17 * t43;
-        let t45: f64 = t17 * t17;
-        let t46: f64 = 0.16666666666666666f64;
-        let t47: f64 = t27 * t46;
-        let t48: f64 = t37 * t46;
-        let t49: f64 = t47 + t48;
-        let t50: f64 = t45 * t49;
-        let t51: f64 = t44 + t50;
-        let t52: f64 = t17 * t45;
-        let t53: f64 = 0.041666666666666664f64;
-        let t54: f64 = t38 * t53;
-        let t55: f64 = t41 * t53;
-        let t56: f64 = t54 - t55;
-        let t57: f64 = t52 * t56;
-        let t58: f64 = t51 + t57;
-        let t59: f64 = t45 * t45;
-        let t60: f64 = 0.008333333333333333f64;
-        let t61: f64 = t27 * t60;
-        let t62: f64 = -t61;
-        let t63: f64 = t37 * t60;
-        let t64: f64 = t62 - t63;
-        let t65: f64 = t59 * t64;
-        let t66: f64 = t58 + t65;
-        let t67: f64 = t17 * t59;
-        let t68: f64 = 0.001388888888888889f64;
-        let t69: f64 = t38 * t68;
-        let t70: f64 = t41 * t68;
-        let t71: f64 = t70 - t69;
-        let t72: f64 = t67 * t71;
-        let t73: f64 = t66 + t72;
-        let t74: f64 = t52 * t52;
-        let t75: f64 = 0.0001984126984126984f64;
-        let t76: f64 = t27 * t75;
-        let t77: f64 = t37 * t75;
-        let t78: f64 = t76 + t77;
-        let t79: f64 = t74 * t78;
-        let t80: f64 = t73 + t79;
-        let t81: f64 = t17 * t74;
-        let t82: f64 = 0.0000248015873015873f64;
-        let t83: f64 = t38 * t82;
-        let t84: f64 = t41 * t82;
-        let t85: f64 = t83 - t84;
-        let t86: f64 = t81 * t85;
-        let t87: f64 = t80 + t86;
-        let t88: f64 = t59 * t59;
-        let t89: f64 = 0.0000027557319223985893f64;
-        let t90: f64 = t27 * t89;
-        let t91: f64 = -t90;
-        let t92: f64 = t37 * t89;
-        let t93: f64 = t91 - t92;
-        let t94: f64 = t88 * t93;
-        let t95: f64 = t87 + t94;
-        let t96: f64 = t95 - t27;
-        let t97: f64 = t96 - t37;
-        let t119: f64 = t38 - t41;
-        let t120: f64 = t27 * t39;
-        let t121: f64 = -t120;
-        let t122: f64 = t37 * t39;
-        let t123: f64 = t121 - t122;
-        let t124: f64 = t17 * t123;
-        let t125: f64 = t119 + t124;
-        let t126: f64 = t38 * t46;
-        let t127: f64 = t41 * t46;
-        let t128: f64 = t127 - t126;
-        let t129: f64 = t45 * t128;
-        let t130: f64 = t125 + t129;
-        let t131: f64 = t27 * t53;
-        let t132: f64 = t37 * t53;
-        let t133: f64 = t131 + t132;
-        let t134: f64 = t52 * t133;
-        let t135: f64 = t130 + t134;
-        let t136: f64 = t38 * t60;
-        let t137: f64 = t41 * t60;
-        let t138: f64 = t136 - t137;
-        let t139: f64 = t59 * t138;
-        let t140: f64 = t135 + t139;
-        let t141: f64 = t27 * t68;
-        let t142: f64 = -t141;
-        let t143: f64 = t37 * t68;
-        let t144: f64 = t142 - t143;
-        let t145: f64 = t67 * t144;
-        let t146: f64 = t140 + t145;
-        let t147: f64 = t38 * t75;
-        let t148: f64 = t41 * t75;
-        let t149: f64 = t148 - t147;
-        let t150: f64 = t74 * t149;
-        let t151: f64 = t146 + t150;
-        let t152: f64 = t27 * t82;
-        let t153: f64 = t37 * t82;
-        let t154: f64 = t152 + t153;
-        let t155: f64 = t81 * t154;
-        let t156: f64 = t151 + t155;
-        let t157: f64 = t38 * t89;
-        let t158: f64 = t41 * t89;
-        let t159: f64 = t157 - t158;
-        let t160: f64 = t88 * t159;
-        let t161: f64 = t156 + t160;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = u[2usize];
+    let t4: crate::Real = w[0usize];
+    let t5: crate::Real = w[1usize];
+    let t6: crate::Real = w[2usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = t1 + t2;
+    let t11: crate::Real = t10 - t3;
+    let t12: crate::Real = t7 * t11;
+    let t13: crate::Real = 0.3333333333333333;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = t14 / t8;
+    let t16: crate::Real = t6 + t15;
+    let t17: crate::Real = t9 * t16;
+    let t18: crate::Real = 1.0;
+    let t19: crate::Real = 0.0;
+    let t20: crate::Real = crate::math::sqrt(t13);
+    let t21: crate::Real = t2 + t3;
+    let t22: crate::Real = t7 * t20;
+    let t23: crate::Real = t21 * t22;
+    let t24: crate::Real = t4 + t23;
+    let t25: crate::Real = crate::math::sin(t0);
+    let t26: crate::Real = t9 * t24;
+    let t28: crate::Real = 2.0;
+    let t29: crate::Real = t1 * t28;
+    let t30: crate::Real = t2 - t3;
+    let t31: crate::Real = t30 - t29;
+    let t32: crate::Real = t7 * t31;
+    let t33: crate::Real = t13 * t32;
+    let t34: crate::Real = t5 + t33;
+    let t35: crate::Real = crate::math::cos(t0);
+    let t36: crate::Real = t9 * t34;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t17)
+        < crate::math::series_switch(0.05)
+    {
+        let t27: crate::Real = t25 * t26;
+        let t37: crate::Real = t35 * t36;
+        let t38: crate::Real = t26 * t35;
+        let t39: crate::Real = 0.5;
+        let t40: crate::Real = t38 * t39;
+        let t41: crate::Real = t25 * t36;
+        let t42: crate::Real = t39 * t41;
+        let t43: crate::Real = t42 - t40;
+        let t44: crate::Real = t17 * t43;
+        let t45: crate::Real = t17 * t17;
+        let t46: crate::Real = 0.16666666666666666;
+        let t47: crate::Real = t27 * t46;
+        let t48: crate::Real = t37 * t46;
+        let t49: crate::Real = t47 + t48;
+        let t50: crate::Real = t45 * t49;
+        let t51: crate::Real = t44 + t50;
+        let t52: crate::Real = t17 * t45;
+        let t53: crate::Real = 0.041666666666666664;
+        let t54: crate::Real = t38 * t53;
+        let t55: crate::Real = t41 * t53;
+        let t56: crate::Real = t54 - t55;
+        let t57: crate::Real = t52 * t56;
+        let t58: crate::Real = t51 + t57;
+        let t59: crate::Real = t45 * t45;
+        let t60: crate::Real = 0.008333333333333333;
+        let t61: crate::Real = t27 * t60;
+        let t62: crate::Real = -t61;
+        let t63: crate::Real = t37 * t60;
+        let t64: crate::Real = t62 - t63;
+        let t65: crate::Real = t59 * t64;
+        let t66: crate::Real = t58 + t65;
+        let t67: crate::Real = t17 * t59;
+        let t68: crate::Real = 0.001388888888888889;
+        let t69: crate::Real = t38 * t68;
+        let t70: crate::Real = t41 * t68;
+        let t71: crate::Real = t70 - t69;
+        let t72: crate::Real = t67 * t71;
+        let t73: crate::Real = t66 + t72;
+        let t74: crate::Real = t52 * t52;
+        let t75: crate::Real = 0.0001984126984126984;
+        let t76: crate::Real = t27 * t75;
+        let t77: crate::Real = t37 * t75;
+        let t78: crate::Real = t76 + t77;
+        let t79: crate::Real = t74 * t78;
+        let t80: crate::Real = t73 + t79;
+        let t81: crate::Real = t17 * t74;
+        let t82: crate::Real = 0.0000248015873015873;
+        let t83: crate::Real = t38 * t82;
+        let t84: crate::Real = t41 * t82;
+        let t85: crate::Real = t83 - t84;
+        let t86: crate::Real = t81 * t85;
+        let t87: crate::Real = t80 + t86;
+        let t88: crate::Real = t59 * t59;
+        let t89: crate::Real = 0.0000027557319223985893;
+        let t90: crate::Real = t27 * t89;
+        let t91: crate::Real = -t90;
+        let t92: crate::Real = t37 * t89;
+        let t93: crate::Real = t91 - t92;
+        let t94: crate::Real = t88 * t93;
+        let t95: crate::Real = t87 + t94;
+        let t96: crate::Real = t95 - t27;
+        let t97: crate::Real = t96 - t37;
+        let t119: crate::Real = t38 - t41;
+        let t120: crate::Real = t27 * t39;
+        let t121: crate::Real = -t120;
+        let t122: crate::Real = t37 * t39;
+        let t123: crate::Real = t121 - t122;
+        let t124: crate::Real = t17 * t123;
+        let t125: crate::Real = t119 + t124;
+        let t126: crate::Real = t38 * t46;
+        let t127: crate::Real = t41 * t46;
+        let t128: crate::Real = t127 - t126;
+        let t129: crate::Real = t45 * t128;
+        let t130: crate::Real = t125 + t129;
+        let t131: crate::Real = t27 * t53;
+        let t132: crate::Real = t37 * t53;
+        let t133: crate::Real = t131 + t132;
+        let t134: crate::Real = t52 * t133;
+        let t135: crate::Real = t130 + t134;
+        let t136: crate::Real = t38 * t60;
+        let t137: crate::Real = t41 * t60;
+        let t138: crate::Real = t136 - t137;
+        let t139: crate::Real = t59 * t138;
+        let t140: crate::Real = t135 + t139;
+        let t141: crate::Real = t27 * t68;
+        let t142: crate::Real = -t141;
+        let t143: crate::Real = t37 * t68;
+        let t144: crate::Real = t142 - t143;
+        let t145: crate::Real = t67 * t144;
+        let t146: crate::Real = t140 + t145;
+        let t147: crate::Real = t38 * t75;
+        let t148: crate::Real = t41 * t75;
+        let t149: crate::Real = t148 - t147;
+        let t150: crate::Real = t74 * t149;
+        let t151: crate::Real = t146 + t150;
+        let t152: crate::Real = t27 * t82;
+        let t153: crate::Real = t37 * t82;
+        let t154: crate::Real = t152 + t153;
+        let t155: crate::Real = t81 * t154;
+        let t156: crate::Real = t151 + t155;
+        let t157: crate::Real = t38 * t89;
+        let t158: crate::Real = t41 * t89;
+        let t159: crate::Real = t157 - t158;
+        let t160: crate::Real = t88 * t159;
+        let t161: crate::Real = t156 + t160;
         [t97, t161]
     } else {
-        let t98: f64 = libm::cos(t17);
-        let t99: f64 = t18 - t98;
-        let t100: f64 = t9 * t99;
-        let t101: f64 = t24 * t100;
-        let t102: f64 = 1f64;
-        let t103: f64 = t102 / t17;
-        let t104: f64 = t101 * t103;
-        let t105: f64 = libm::sin(t17);
-        let t106: f64 = t36 * t105;
-        let t107: f64 = t106 * t103;
-        let t108: f64 = t104 + t107;
-        let t109: f64 = t35 * t108;
-        let t110: f64 = -t109;
-        let t111: f64 = t34 * t100;
-        let t112: f64 = t111 * t103;
-        let t113: f64 = t26 * t105;
-        let t114: f64 = t113 * t103;
-        let t115: f64 = t114 - t112;
-        let t116: f64 = t25 * t115;
-        let t117: f64 = t110 - t116;
-        let t162: f64 = t25 * t108;
-        let t163: f64 = t35 * t115;
-        let t164: f64 = t163 - t162;
+        let t98: crate::Real = crate::math::cos(t17);
+        let t99: crate::Real = t18 - t98;
+        let t100: crate::Real = t9 * t99;
+        let t101: crate::Real = t24 * t100;
+        let t102: crate::Real = 1.0;
+        let t103: crate::Real = t102 / t17;
+        let t104: crate::Real = t101 * t103;
+        let t105: crate::Real = crate::math::sin(t17);
+        let t106: crate::Real = t36 * t105;
+        let t107: crate::Real = t106 * t103;
+        let t108: crate::Real = t104 + t107;
+        let t109: crate::Real = t35 * t108;
+        let t110: crate::Real = -t109;
+        let t111: crate::Real = t34 * t100;
+        let t112: crate::Real = t111 * t103;
+        let t113: crate::Real = t26 * t105;
+        let t114: crate::Real = t113 * t103;
+        let t115: crate::Real = t114 - t112;
+        let t116: crate::Real = t25 * t115;
+        let t117: crate::Real = t110 - t116;
+        let t162: crate::Real = t25 * t108;
+        let t163: crate::Real = t35 * t115;
+        let t164: crate::Real = t163 - t162;
         [t117, t164]
     };
-    let t118: f64 = g0[0usize];
-    let t165: f64 = g0[1usize];
+    let t118: crate::Real = g0[0usize];
+    let t165: crate::Real = g0[1usize];
     [[t18, t19, t118], [t19, t18, t165], [t19, t19, t18]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
@@ -768,548 +775,550 @@ pub fn step_exact_jac_x(
 487 arithmetic operations (6044 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = u[2usize];
-    let t4: f64 = w[0usize];
-    let t5: f64 = w[1usize];
-    let t6: f64 = w[2usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = t1 + t2;
-    let t11: f64 = t10 - t3;
-    let t12: f64 = t7 * t11;
-    let t13: f64 = 0.3333333333333333f64;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = 1f64;
-    let t16: f64 = t15 / t8;
-    let t17: f64 = t14 * t16;
-    let t18: f64 = t6 + t17;
-    let t19: f64 = t9 * t18;
-    let t20: f64 = libm::sin(t0);
-    let t21: f64 = t7 * t9;
-    let t22: f64 = t20 * t21;
-    let t23: f64 = 0.6666666666666666f64;
-    let t25: f64 = libm::sqrt(t13);
-    let t26: f64 = t2 + t3;
-    let t27: f64 = t7 * t25;
-    let t28: f64 = t26 * t27;
-    let t29: f64 = t4 + t28;
-    let t30: f64 = t9 * t29;
-    let t35: f64 = 2f64;
-    let t36: f64 = t1 * t35;
-    let t37: f64 = t2 - t3;
-    let t38: f64 = t37 - t36;
-    let t39: f64 = t7 * t38;
-    let t40: f64 = t13 * t39;
-    let t41: f64 = t5 + t40;
-    let t42: f64 = libm::cos(t0);
-    let t43: f64 = t9 * t41;
-    let t64: f64 = t19 * t19;
-    let t203: f64 = t9 * t25;
-    let t204: f64 = t7 * t203;
-    let g0: [f64; 6usize] = if libm::fabs(t19) < 0.05f64 {
-        let t24: f64 = t22 * t23;
-        let t31: f64 = t20 * t30;
-        let t32: f64 = 0.5f64;
-        let t33: f64 = t31 * t32;
-        let t34: f64 = -t33;
-        let t44: f64 = t42 * t43;
-        let t45: f64 = t32 * t44;
-        let t46: f64 = t34 - t45;
-        let t47: f64 = t21 * t46;
-        let t48: f64 = t13 * t47;
-        let t49: f64 = t48 * t16;
-        let t50: f64 = t24 + t49;
-        let t51: f64 = t21 * t42;
-        let t52: f64 = t13 * t51;
-        let t53: f64 = t30 * t42;
-        let t54: f64 = t13 * t53;
-        let t55: f64 = t20 * t43;
-        let t56: f64 = t13 * t55;
-        let t57: f64 = t56 - t54;
-        let t58: f64 = t21 * t57;
-        let t59: f64 = t13 * t58;
-        let t60: f64 = t59 * t16;
-        let t61: f64 = t52 + t60;
-        let t62: f64 = t19 * t61;
-        let t63: f64 = t50 + t62;
-        let t65: f64 = 0.1111111111111111f64;
-        let t66: f64 = t22 * t65;
-        let t67: f64 = 0.125f64;
-        let t68: f64 = t31 * t67;
-        let t69: f64 = t44 * t67;
-        let t70: f64 = t68 + t69;
-        let t71: f64 = t21 * t70;
-        let t72: f64 = t13 * t71;
-        let t73: f64 = t72 * t16;
-        let t74: f64 = t73 - t66;
-        let t75: f64 = t64 * t74;
-        let t76: f64 = t63 + t75;
-        let t77: f64 = t19 * t64;
-        let t78: f64 = 0.027777777777777776f64;
-        let t79: f64 = t51 * t78;
-        let t80: f64 = 0.03333333333333333f64;
-        let t81: f64 = t53 * t80;
-        let t82: f64 = t55 * t80;
-        let t83: f64 = t81 - t82;
-        let t84: f64 = t21 * t83;
-        let t85: f64 = t13 * t84;
-        let t86: f64 = t85 * t16;
-        let t87: f64 = t86 - t79;
-        let t88: f64 = t77 * t87;
-        let t89: f64 = t76 + t88;
-        let t90: f64 = t64 * t64;
-        let t91: f64 = 0.005555555555555556f64;
-        let t92: f64 = t22 * t91;
-        let t93: f64 = 0.006944444444444444f64;
-        let t94: f64 = t31 * t93;
-        let t95: f64 = -t94;
-        let t96: f64 = t44 * t93;
-        let t97: f64 = t95 - t96;
-        let t98: f64 = t21 * t97;
-        let t99: f64 = t13 * t98;
-        let t100: f64 = t99 * t16;
-        let t101: f64 = t92 + t100;
-        let t102: f64 = t90 * t101;
-        let t103: f64 = t89 + t102;
-        let t104: f64 = t19 * t90;
-        let t105: f64 = 0.000925925925925926f64;
-        let t106: f64 = t51 * t105;
-        let t107: f64 = 0.0011904761904761906f64;
-        let t108: f64 = t53 * t107;
-        let t109: f64 = t55 * t107;
-        let t110: f64 = t109 - t108;
-        let t111: f64 = t21 * t110;
-        let t112: f64 = t13 * t111;
-        let t113: f64 = t112 * t16;
-        let t114: f64 = t106 + t113;
-        let t115: f64 = t104 * t114;
-        let t116: f64 = t103 + t115;
-        let t117: f64 = t77 * t77;
-        let t118: f64 = 0.00013227513227513228f64;
-        let t119: f64 = t22 * t118;
-        let t120: f64 = 0.00017361111111111112f64;
-        let t121: f64 = t31 * t120;
-        let t122: f64 = t44 * t120;
-        let t123: f64 = t121 + t122;
-        let t124: f64 = t21 * t123;
-        let t125: f64 = t13 * t124;
-        let t126: f64 = t125 * t16;
-        let t127: f64 = t126 - t119;
-        let t128: f64 = t117 * t127;
-        let t129: f64 = t116 + t128;
-        let t130: f64 = t19 * t117;
-        let t131: f64 = 0.000016534391534391536f64;
-        let t132: f64 = t51 * t131;
-        let t133: f64 = 0.000022045855379188714f64;
-        let t134: f64 = t53 * t133;
-        let t135: f64 = t55 * t133;
-        let t136: f64 = t134 - t135;
-        let t137: f64 = t21 * t136;
-        let t138: f64 = t13 * t137;
-        let t139: f64 = t138 * t16;
-        let t140: f64 = t139 - t132;
-        let t141: f64 = t130 * t140;
-        let t142: f64 = t129 + t141;
-        let t143: f64 = t90 * t90;
-        let t144: f64 = 0.0000018371546149323928f64;
-        let t145: f64 = t22 * t144;
-        let t146: f64 = 0.00000248015873015873f64;
-        let t147: f64 = t31 * t146;
-        let t148: f64 = -t147;
-        let t149: f64 = t44 * t146;
-        let t150: f64 = t148 - t149;
-        let t151: f64 = t21 * t150;
-        let t152: f64 = t13 * t151;
-        let t153: f64 = t152 * t16;
-        let t154: f64 = t145 + t153;
-        let t155: f64 = t143 * t154;
-        let t156: f64 = t142 + t155;
-        let t200: f64 = t13 * t22;
-        let t201: f64 = 0.16666666666666666f64;
-        let t202: f64 = t51 * t201;
-        let t205: f64 = t20 * t204;
-        let t206: f64 = t32 * t205;
-        let t207: f64 = t60 - t206;
-        let t208: f64 = t207 - t202;
-        let t209: f64 = t19 * t208;
-        let t210: f64 = t49 + t209;
-        let t211: f64 = t42 * t204;
-        let t212: f64 = t210 + t211;
-        let t213: f64 = 0.05555555555555555f64;
-        let t214: f64 = t22 * t213;
-        let t215: f64 = t73 + t214;
-        let t216: f64 = t201 * t211;
-        let t217: f64 = t215 - t216;
-        let t218: f64 = t64 * t217;
-        let t219: f64 = t212 + t218;
-        let t220: f64 = 0.013888888888888888f64;
-        let t221: f64 = t51 * t220;
-        let t222: f64 = t86 + t221;
-        let t223: f64 = 0.041666666666666664f64;
-        let t224: f64 = t205 * t223;
-        let t225: f64 = t222 + t224;
-        let t226: f64 = t77 * t225;
-        let t227: f64 = t219 + t226;
-        let t228: f64 = 0.002777777777777778f64;
-        let t229: f64 = t22 * t228;
-        let t230: f64 = 0.008333333333333333f64;
-        let t231: f64 = t211 * t230;
-        let t232: f64 = t100 + t231;
-        let t233: f64 = t232 - t229;
-        let t234: f64 = t90 * t233;
-        let t235: f64 = t227 + t234;
-        let t236: f64 = 0.000462962962962963f64;
-        let t237: f64 = t51 * t236;
-        let t238: f64 = 0.001388888888888889f64;
-        let t239: f64 = t205 * t238;
-        let t240: f64 = t113 - t239;
-        let t241: f64 = t240 - t237;
-        let t242: f64 = t104 * t241;
-        let t243: f64 = t235 + t242;
-        let t244: f64 = 0.00006613756613756614f64;
-        let t245: f64 = t22 * t244;
-        let t246: f64 = t126 + t245;
-        let t247: f64 = 0.0001984126984126984f64;
-        let t248: f64 = t211 * t247;
-        let t249: f64 = t246 - t248;
-        let t250: f64 = t117 * t249;
-        let t251: f64 = t243 + t250;
-        let t252: f64 = 0.000008267195767195768f64;
-        let t253: f64 = t51 * t252;
-        let t254: f64 = t139 + t253;
-        let t255: f64 = 0.0000248015873015873f64;
-        let t256: f64 = t205 * t255;
-        let t257: f64 = t254 + t256;
-        let t258: f64 = t130 * t257;
-        let t259: f64 = t251 + t258;
-        let t260: f64 = 0.0000009185773074661964f64;
-        let t261: f64 = t22 * t260;
-        let t262: f64 = 0.0000027557319223985893f64;
-        let t263: f64 = t211 * t262;
-        let t264: f64 = t153 + t263;
-        let t265: f64 = t264 - t261;
-        let t266: f64 = t143 * t265;
-        let t267: f64 = t259 + t266;
-        let t268: f64 = t267 - t200;
-        let t285: f64 = t200 - t49;
-        let t286: f64 = t202 - t60;
-        let t287: f64 = t286 - t206;
-        let t288: f64 = t19 * t287;
-        let t289: f64 = t285 + t288;
-        let t290: f64 = t211 + t289;
-        let t291: f64 = -t214;
-        let t292: f64 = t291 - t73;
-        let t293: f64 = t292 - t216;
-        let t294: f64 = t64 * t293;
-        let t295: f64 = t290 + t294;
-        let t296: f64 = t224 - t221;
-        let t297: f64 = t296 - t86;
-        let t298: f64 = t77 * t297;
-        let t299: f64 = t295 + t298;
-        let t300: f64 = t229 - t100;
-        let t301: f64 = t231 + t300;
-        let t302: f64 = t90 * t301;
-        let t303: f64 = t299 + t302;
-        let t304: f64 = t237 - t113;
-        let t305: f64 = t304 - t239;
-        let t306: f64 = t104 * t305;
-        let t307: f64 = t303 + t306;
-        let t308: f64 = -t245;
-        let t309: f64 = t308 - t126;
-        let t310: f64 = t309 - t248;
-        let t311: f64 = t117 * t310;
-        let t312: f64 = t307 + t311;
-        let t313: f64 = t256 - t253;
-        let t314: f64 = t313 - t139;
-        let t315: f64 = t130 * t314;
-        let t316: f64 = t312 + t315;
-        let t317: f64 = t261 - t153;
-        let t318: f64 = t263 + t317;
-        let t319: f64 = t143 * t318;
-        let t320: f64 = t316 + t319;
-        let t328: f64 = t23 * t51;
-        let t329: f64 = t32 * t53;
-        let t330: f64 = t32 * t55;
-        let t331: f64 = t329 - t330;
-        let t332: f64 = t21 * t331;
-        let t333: f64 = t13 * t332;
-        let t334: f64 = t333 * t16;
-        let t335: f64 = t13 * t31;
-        let t336: f64 = -t335;
-        let t337: f64 = t13 * t44;
-        let t338: f64 = t336 - t337;
-        let t339: f64 = t21 * t338;
-        let t340: f64 = t13 * t339;
-        let t341: f64 = t340 * t16;
-        let t342: f64 = t200 + t341;
-        let t343: f64 = t19 * t342;
-        let t344: f64 = t334 + t343;
-        let t345: f64 = t51 * t65;
-        let t346: f64 = t53 * t67;
-        let t347: f64 = t55 * t67;
-        let t348: f64 = t347 - t346;
-        let t349: f64 = t21 * t348;
-        let t350: f64 = t13 * t349;
-        let t351: f64 = t350 * t16;
-        let t352: f64 = t345 + t351;
-        let t353: f64 = t64 * t352;
-        let t354: f64 = t344 + t353;
-        let t355: f64 = t22 * t78;
-        let t356: f64 = t31 * t80;
-        let t357: f64 = t44 * t80;
-        let t358: f64 = t356 + t357;
-        let t359: f64 = t21 * t358;
-        let t360: f64 = t13 * t359;
-        let t361: f64 = t360 * t16;
-        let t362: f64 = t361 - t355;
-        let t363: f64 = t77 * t362;
-        let t364: f64 = t354 + t363;
-        let t365: f64 = t51 * t91;
-        let t366: f64 = t53 * t93;
-        let t367: f64 = t55 * t93;
-        let t368: f64 = t366 - t367;
-        let t369: f64 = t21 * t368;
-        let t370: f64 = t13 * t369;
-        let t371: f64 = t370 * t16;
-        let t372: f64 = t371 - t365;
-        let t373: f64 = t90 * t372;
-        let t374: f64 = t364 + t373;
-        let t375: f64 = t22 * t105;
-        let t376: f64 = t31 * t107;
-        let t377: f64 = -t376;
-        let t378: f64 = t44 * t107;
-        let t379: f64 = t377 - t378;
-        let t380: f64 = t21 * t379;
-        let t381: f64 = t13 * t380;
-        let t382: f64 = t381 * t16;
-        let t383: f64 = t375 + t382;
-        let t384: f64 = t104 * t383;
-        let t385: f64 = t374 + t384;
-        let t386: f64 = t51 * t118;
-        let t387: f64 = t53 * t120;
-        let t388: f64 = t55 * t120;
-        let t389: f64 = t388 - t387;
-        let t390: f64 = t21 * t389;
-        let t391: f64 = t13 * t390;
-        let t392: f64 = t391 * t16;
-        let t393: f64 = t386 + t392;
-        let t394: f64 = t117 * t393;
-        let t395: f64 = t385 + t394;
-        let t396: f64 = t22 * t131;
-        let t397: f64 = t31 * t133;
-        let t398: f64 = t44 * t133;
-        let t399: f64 = t397 + t398;
-        let t400: f64 = t21 * t399;
-        let t401: f64 = t13 * t400;
-        let t402: f64 = t401 * t16;
-        let t403: f64 = t402 - t396;
-        let t404: f64 = t130 * t403;
-        let t405: f64 = t395 + t404;
-        let t406: f64 = t51 * t144;
-        let t407: f64 = t53 * t146;
-        let t408: f64 = t55 * t146;
-        let t409: f64 = t407 - t408;
-        let t410: f64 = t21 * t409;
-        let t411: f64 = t13 * t410;
-        let t412: f64 = t411 * t16;
-        let t413: f64 = t412 - t406;
-        let t414: f64 = t143 * t413;
-        let t415: f64 = t405 + t414;
-        let t416: f64 = t415 - t328;
-        let t432: f64 = t52 + t334;
-        let t433: f64 = t22 * t201;
-        let t434: f64 = t32 * t211;
-        let t435: f64 = t341 + t434;
-        let t436: f64 = t435 - t433;
-        let t437: f64 = t19 * t436;
-        let t438: f64 = t432 + t437;
-        let t439: f64 = t205 + t438;
-        let t440: f64 = t51 * t213;
-        let t441: f64 = t201 * t205;
-        let t442: f64 = t351 - t441;
-        let t443: f64 = t442 - t440;
-        let t444: f64 = t64 * t443;
-        let t445: f64 = t439 + t444;
-        let t446: f64 = t22 * t220;
-        let t447: f64 = t361 + t446;
-        let t448: f64 = t211 * t223;
-        let t449: f64 = t447 - t448;
-        let t450: f64 = t77 * t449;
-        let t451: f64 = t445 + t450;
-        let t452: f64 = t51 * t228;
-        let t453: f64 = t371 + t452;
-        let t454: f64 = t205 * t230;
-        let t455: f64 = t453 + t454;
-        let t456: f64 = t90 * t455;
-        let t457: f64 = t451 + t456;
-        let t458: f64 = t22 * t236;
-        let t459: f64 = t211 * t238;
-        let t460: f64 = t382 + t459;
-        let t461: f64 = t460 - t458;
-        let t462: f64 = t104 * t461;
-        let t463: f64 = t457 + t462;
-        let t464: f64 = t51 * t244;
-        let t465: f64 = t205 * t247;
-        let t466: f64 = t392 - t465;
-        let t467: f64 = t466 - t464;
-        let t468: f64 = t117 * t467;
-        let t469: f64 = t463 + t468;
-        let t470: f64 = t22 * t252;
-        let t471: f64 = t402 + t470;
-        let t472: f64 = t211 * t255;
-        let t473: f64 = t471 - t472;
-        let t474: f64 = t130 * t473;
-        let t475: f64 = t469 + t474;
-        let t476: f64 = t51 * t260;
-        let t477: f64 = t412 + t476;
-        let t478: f64 = t205 * t262;
-        let t479: f64 = t477 + t478;
-        let t480: f64 = t143 * t479;
-        let t481: f64 = t475 + t480;
-        let t487: f64 = t433 - t341;
-        let t488: f64 = t434 + t487;
-        let t489: f64 = t19 * t488;
-        let t490: f64 = t205 + t489;
-        let t491: f64 = t440 - t351;
-        let t492: f64 = t491 - t441;
-        let t493: f64 = t64 * t492;
-        let t494: f64 = t490 + t493;
-        let t495: f64 = -t446;
-        let t496: f64 = t495 - t361;
-        let t497: f64 = t496 - t448;
-        let t498: f64 = t77 * t497;
-        let t499: f64 = t494 + t498;
-        let t500: f64 = t454 - t452;
-        let t501: f64 = t500 - t371;
-        let t502: f64 = t90 * t501;
-        let t503: f64 = t499 + t502;
-        let t504: f64 = t458 - t382;
-        let t505: f64 = t459 + t504;
-        let t506: f64 = t104 * t505;
-        let t507: f64 = t503 + t506;
-        let t508: f64 = t464 - t392;
-        let t509: f64 = t508 - t465;
-        let t510: f64 = t117 * t509;
-        let t511: f64 = t507 + t510;
-        let t512: f64 = -t470;
-        let t513: f64 = t512 - t402;
-        let t514: f64 = t513 - t472;
-        let t515: f64 = t130 * t514;
-        let t516: f64 = t511 + t515;
-        let t517: f64 = t478 - t476;
-        let t518: f64 = t517 - t412;
-        let t519: f64 = t143 * t518;
-        let t520: f64 = t516 + t519;
-        let t521: f64 = t520 - t52;
-        let t522: f64 = t521 - t334;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = u[2usize];
+    let t4: crate::Real = w[0usize];
+    let t5: crate::Real = w[1usize];
+    let t6: crate::Real = w[2usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = t1 + t2;
+    let t11: crate::Real = t10 - t3;
+    let t12: crate::Real = t7 * t11;
+    let t13: crate::Real = 0.3333333333333333;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = 1.0;
+    let t16: crate::Real = t15 / t8;
+    let t17: crate::Real = t14 * t16;
+    let t18: crate::Real = t6 + t17;
+    let t19: crate::Real = t9 * t18;
+    let t20: crate::Real = crate::math::sin(t0);
+    let t21: crate::Real = t7 * t9;
+    let t22: crate::Real = t20 * t21;
+    let t23: crate::Real = 0.6666666666666666;
+    let t25: crate::Real = crate::math::sqrt(t13);
+    let t26: crate::Real = t2 + t3;
+    let t27: crate::Real = t7 * t25;
+    let t28: crate::Real = t26 * t27;
+    let t29: crate::Real = t4 + t28;
+    let t30: crate::Real = t9 * t29;
+    let t35: crate::Real = 2.0;
+    let t36: crate::Real = t1 * t35;
+    let t37: crate::Real = t2 - t3;
+    let t38: crate::Real = t37 - t36;
+    let t39: crate::Real = t7 * t38;
+    let t40: crate::Real = t13 * t39;
+    let t41: crate::Real = t5 + t40;
+    let t42: crate::Real = crate::math::cos(t0);
+    let t43: crate::Real = t9 * t41;
+    let t64: crate::Real = t19 * t19;
+    let t203: crate::Real = t9 * t25;
+    let t204: crate::Real = t7 * t203;
+    let g0: [crate::Real; 6usize] = if crate::math::fabs(t19)
+        < crate::math::series_switch(0.05)
+    {
+        let t24: crate::Real = t22 * t23;
+        let t31: crate::Real = t20 * t30;
+        let t32: crate::Real = 0.5;
+        let t33: crate::Real = t31 * t32;
+        let t34: crate::Real = -t33;
+        let t44: crate::Real = t42 * t43;
+        let t45: crate::Real = t32 * t44;
+        let t46: crate::Real = t34 - t45;
+        let t47: crate::Real = t21 * t46;
+        let t48: crate::Real = t13 * t47;
+        let t49: crate::Real = t48 * t16;
+        let t50: crate::Real = t24 + t49;
+        let t51: crate::Real = t21 * t42;
+        let t52: crate::Real = t13 * t51;
+        let t53: crate::Real = t30 * t42;
+        let t54: crate::Real = t13 * t53;
+        let t55: crate::Real = t20 * t43;
+        let t56: crate::Real = t13 * t55;
+        let t57: crate::Real = t56 - t54;
+        let t58: crate::Real = t21 * t57;
+        let t59: crate::Real = t13 * t58;
+        let t60: crate::Real = t59 * t16;
+        let t61: crate::Real = t52 + t60;
+        let t62: crate::Real = t19 * t61;
+        let t63: crate::Real = t50 + t62;
+        let t65: crate::Real = 0.1111111111111111;
+        let t66: crate::Real = t22 * t65;
+        let t67: crate::Real = 0.125;
+        let t68: crate::Real = t31 * t67;
+        let t69: crate::Real = t44 * t67;
+        let t70: crate::Real = t68 + t69;
+        let t71: crate::Real = t21 * t70;
+        let t72: crate::Real = t13 * t71;
+        let t73: crate::Real = t72 * t16;
+        let t74: crate::Real = t73 - t66;
+        let t75: crate::Real = t64 * t74;
+        let t76: crate::Real = t63 + t75;
+        let t77: crate::Real = t19 * t64;
+        let t78: crate::Real = 0.027777777777777776;
+        let t79: crate::Real = t51 * t78;
+        let t80: crate::Real = 0.03333333333333333;
+        let t81: crate::Real = t53 * t80;
+        let t82: crate::Real = t55 * t80;
+        let t83: crate::Real = t81 - t82;
+        let t84: crate::Real = t21 * t83;
+        let t85: crate::Real = t13 * t84;
+        let t86: crate::Real = t85 * t16;
+        let t87: crate::Real = t86 - t79;
+        let t88: crate::Real = t77 * t87;
+        let t89: crate::Real = t76 + t88;
+        let t90: crate::Real = t64 * t64;
+        let t91: crate::Real = 0.005555555555555556;
+        let t92: crate::Real = t22 * t91;
+        let t93: crate::Real = 0.006944444444444444;
+        let t94: crate::Real = t31 * t93;
+        let t95: crate::Real = -t94;
+        let t96: crate::Real = t44 * t93;
+        let t97: crate::Real = t95 - t96;
+        let t98: crate::Real = t21 * t97;
+        let t99: crate::Real = t13 * t98;
+        let t100: crate::Real = t99 * t16;
+        let t101: crate::Real = t92 + t100;
+        let t102: crate::Real = t90 * t101;
+        let t103: crate::Real = t89 + t102;
+        let t104: crate::Real = t19 * t90;
+        let t105: crate::Real = 0.000925925925925926;
+        let t106: crate::Real = t51 * t105;
+        let t107: crate::Real = 0.0011904761904761906;
+        let t108: crate::Real = t53 * t107;
+        let t109: crate::Real = t55 * t107;
+        let t110: crate::Real = t109 - t108;
+        let t111: crate::Real = t21 * t110;
+        let t112: crate::Real = t13 * t111;
+        let t113: crate::Real = t112 * t16;
+        let t114: crate::Real = t106 + t113;
+        let t115: crate::Real = t104 * t114;
+        let t116: crate::Real = t103 + t115;
+        let t117: crate::Real = t77 * t77;
+        let t118: crate::Real = 0.00013227513227513228;
+        let t119: crate::Real = t22 * t118;
+        let t120: crate::Real = 0.00017361111111111112;
+        let t121: crate::Real = t31 * t120;
+        let t122: crate::Real = t44 * t120;
+        let t123: crate::Real = t121 + t122;
+        let t124: crate::Real = t21 * t123;
+        let t125: crate::Real = t13 * t124;
+        let t126: crate::Real = t125 * t16;
+        let t127: crate::Real = t126 - t119;
+        let t128: crate::Real = t117 * t127;
+        let t129: crate::Real = t116 + t128;
+        let t130: crate::Real = t19 * t117;
+        let t131: crate::Real = 0.000016534391534391536;
+        let t132: crate::Real = t51 * t131;
+        let t133: crate::Real = 0.000022045855379188714;
+        let t134: crate::Real = t53 * t133;
+        let t135: crate::Real = t55 * t133;
+        let t136: crate::Real = t134 - t135;
+        let t137: crate::Real = t21 * t136;
+        let t138: crate::Real = t13 * t137;
+        let t139: crate::Real = t138 * t16;
+        let t140: crate::Real = t139 - t132;
+        let t141: crate::Real = t130 * t140;
+        let t142: crate::Real = t129 + t141;
+        let t143: crate::Real = t90 * t90;
+        let t144: crate::Real = 0.0000018371546149323928;
+        let t145: crate::Real = t22 * t144;
+        let t146: crate::Real = 0.00000248015873015873;
+        let t147: crate::Real = t31 * t146;
+        let t148: crate::Real = -t147;
+        let t149: crate::Real = t44 * t146;
+        let t150: crate::Real = t148 - t149;
+        let t151: crate::Real = t21 * t150;
+        let t152: crate::Real = t13 * t151;
+        let t153: crate::Real = t152 * t16;
+        let t154: crate::Real = t145 + t153;
+        let t155: crate::Real = t143 * t154;
+        let t156: crate::Real = t142 + t155;
+        let t200: crate::Real = t13 * t22;
+        let t201: crate::Real = 0.16666666666666666;
+        let t202: crate::Real = t51 * t201;
+        let t205: crate::Real = t20 * t204;
+        let t206: crate::Real = t32 * t205;
+        let t207: crate::Real = t60 - t206;
+        let t208: crate::Real = t207 - t202;
+        let t209: crate::Real = t19 * t208;
+        let t210: crate::Real = t49 + t209;
+        let t211: crate::Real = t42 * t204;
+        let t212: crate::Real = t210 + t211;
+        let t213: crate::Real = 0.05555555555555555;
+        let t214: crate::Real = t22 * t213;
+        let t215: crate::Real = t73 + t214;
+        let t216: crate::Real = t201 * t211;
+        let t217: crate::Real = t215 - t216;
+        let t218: crate::Real = t64 * t217;
+        let t219: crate::Real = t212 + t218;
+        let t220: crate::Real = 0.013888888888888888;
+        let t221: crate::Real = t51 * t220;
+        let t222: crate::Real = t86 + t221;
+        let t223: crate::Real = 0.041666666666666664;
+        let t224: crate::Real = t205 * t223;
+        let t225: crate::Real = t222 + t224;
+        let t226: crate::Real = t77 * t225;
+        let t227: crate::Real = t219 + t226;
+        let t228: crate::Real = 0.002777777777777778;
+        let t229: crate::Real = t22 * t228;
+        let t230: crate::Real = 0.008333333333333333;
+        let t231: crate::Real = t211 * t230;
+        let t232: crate::Real = t100 + t231;
+        let t233: crate::Real = t232 - t229;
+        let t234: crate::Real = t90 * t233;
+        let t235: crate::Real = t227 + t234;
+        let t236: crate::Real = 0.000462962962962963;
+        let t237: crate::Real = t51 * t236;
+        let t238: crate::Real = 0.001388888888888889;
+        let t239: crate::Real = t205 * t238;
+        let t240: crate::Real = t113 - t239;
+        let t241: crate::Real = t240 - t237;
+        let t242: crate::Real = t104 * t241;
+        let t243: crate::Real = t235 + t242;
+        let t244: crate::Real = 0.00006613756613756614;
+        let t245: crate::Real = t22 * t244;
+        let t246: crate::Real = t126 + t245;
+        let t247: crate::Real = 0.0001984126984126984;
+        let t248: crate::Real = t211 * t247;
+        let t249: crate::Real = t246 - t248;
+        let t250: crate::Real = t117 * t249;
+        let t251: crate::Real = t243 + t250;
+        let t252: crate::Real = 0.000008267195767195768;
+        let t253: crate::Real = t51 * t252;
+        let t254: crate::Real = t139 + t253;
+        let t255: crate::Real = 0.0000248015873015873;
+        let t256: crate::Real = t205 * t255;
+        let t257: crate::Real = t254 + t256;
+        let t258: crate::Real = t130 * t257;
+        let t259: crate::Real = t251 + t258;
+        let t260: crate::Real = 0.0000009185773074661964;
+        let t261: crate::Real = t22 * t260;
+        let t262: crate::Real = 0.0000027557319223985893;
+        let t263: crate::Real = t211 * t262;
+        let t264: crate::Real = t153 + t263;
+        let t265: crate::Real = t264 - t261;
+        let t266: crate::Real = t143 * t265;
+        let t267: crate::Real = t259 + t266;
+        let t268: crate::Real = t267 - t200;
+        let t285: crate::Real = t200 - t49;
+        let t286: crate::Real = t202 - t60;
+        let t287: crate::Real = t286 - t206;
+        let t288: crate::Real = t19 * t287;
+        let t289: crate::Real = t285 + t288;
+        let t290: crate::Real = t211 + t289;
+        let t291: crate::Real = -t214;
+        let t292: crate::Real = t291 - t73;
+        let t293: crate::Real = t292 - t216;
+        let t294: crate::Real = t64 * t293;
+        let t295: crate::Real = t290 + t294;
+        let t296: crate::Real = t224 - t221;
+        let t297: crate::Real = t296 - t86;
+        let t298: crate::Real = t77 * t297;
+        let t299: crate::Real = t295 + t298;
+        let t300: crate::Real = t229 - t100;
+        let t301: crate::Real = t231 + t300;
+        let t302: crate::Real = t90 * t301;
+        let t303: crate::Real = t299 + t302;
+        let t304: crate::Real = t237 - t113;
+        let t305: crate::Real = t304 - t239;
+        let t306: crate::Real = t104 * t305;
+        let t307: crate::Real = t303 + t306;
+        let t308: crate::Real = -t245;
+        let t309: crate::Real = t308 - t126;
+        let t310: crate::Real = t309 - t248;
+        let t311: crate::Real = t117 * t310;
+        let t312: crate::Real = t307 + t311;
+        let t313: crate::Real = t256 - t253;
+        let t314: crate::Real = t313 - t139;
+        let t315: crate::Real = t130 * t314;
+        let t316: crate::Real = t312 + t315;
+        let t317: crate::Real = t261 - t153;
+        let t318: crate::Real = t263 + t317;
+        let t319: crate::Real = t143 * t318;
+        let t320: crate::Real = t316 + t319;
+        let t328: crate::Real = t23 * t51;
+        let t329: crate::Real = t32 * t53;
+        let t330: crate::Real = t32 * t55;
+        let t331: crate::Real = t329 - t330;
+        let t332: crate::Real = t21 * t331;
+        let t333: crate::Real = t13 * t332;
+        let t334: crate::Real = t333 * t16;
+        let t335: crate::Real = t13 * t31;
+        let t336: crate::Real = -t335;
+        let t337: crate::Real = t13 * t44;
+        let t338: crate::Real = t336 - t337;
+        let t339: crate::Real = t21 * t338;
+        let t340: crate::Real = t13 * t339;
+        let t341: crate::Real = t340 * t16;
+        let t342: crate::Real = t200 + t341;
+        let t343: crate::Real = t19 * t342;
+        let t344: crate::Real = t334 + t343;
+        let t345: crate::Real = t51 * t65;
+        let t346: crate::Real = t53 * t67;
+        let t347: crate::Real = t55 * t67;
+        let t348: crate::Real = t347 - t346;
+        let t349: crate::Real = t21 * t348;
+        let t350: crate::Real = t13 * t349;
+        let t351: crate::Real = t350 * t16;
+        let t352: crate::Real = t345 + t351;
+        let t353: crate::Real = t64 * t352;
+        let t354: crate::Real = t344 + t353;
+        let t355: crate::Real = t22 * t78;
+        let t356: crate::Real = t31 * t80;
+        let t357: crate::Real = t44 * t80;
+        let t358: crate::Real = t356 + t357;
+        let t359: crate::Real = t21 * t358;
+        let t360: crate::Real = t13 * t359;
+        let t361: crate::Real = t360 * t16;
+        let t362: crate::Real = t361 - t355;
+        let t363: crate::Real = t77 * t362;
+        let t364: crate::Real = t354 + t363;
+        let t365: crate::Real = t51 * t91;
+        let t366: crate::Real = t53 * t93;
+        let t367: crate::Real = t55 * t93;
+        let t368: crate::Real = t366 - t367;
+        let t369: crate::Real = t21 * t368;
+        let t370: crate::Real = t13 * t369;
+        let t371: crate::Real = t370 * t16;
+        let t372: crate::Real = t371 - t365;
+        let t373: crate::Real = t90 * t372;
+        let t374: crate::Real = t364 + t373;
+        let t375: crate::Real = t22 * t105;
+        let t376: crate::Real = t31 * t107;
+        let t377: crate::Real = -t376;
+        let t378: crate::Real = t44 * t107;
+        let t379: crate::Real = t377 - t378;
+        let t380: crate::Real = t21 * t379;
+        let t381: crate::Real = t13 * t380;
+        let t382: crate::Real = t381 * t16;
+        let t383: crate::Real = t375 + t382;
+        let t384: crate::Real = t104 * t383;
+        let t385: crate::Real = t374 + t384;
+        let t386: crate::Real = t51 * t118;
+        let t387: crate::Real = t53 * t120;
+        let t388: crate::Real = t55 * t120;
+        let t389: crate::Real = t388 - t387;
+        let t390: crate::Real = t21 * t389;
+        let t391: crate::Real = t13 * t390;
+        let t392: crate::Real = t391 * t16;
+        let t393: crate::Real = t386 + t392;
+        let t394: crate::Real = t117 * t393;
+        let t395: crate::Real = t385 + t394;
+        let t396: crate::Real = t22 * t131;
+        let t397: crate::Real = t31 * t133;
+        let t398: crate::Real = t44 * t133;
+        let t399: crate::Real = t397 + t398;
+        let t400: crate::Real = t21 * t399;
+        let t401: crate::Real = t13 * t400;
+        let t402: crate::Real = t401 * t16;
+        let t403: crate::Real = t402 - t396;
+        let t404: crate::Real = t130 * t403;
+        let t405: crate::Real = t395 + t404;
+        let t406: crate::Real = t51 * t144;
+        let t407: crate::Real = t53 * t146;
+        let t408: crate::Real = t55 * t146;
+        let t409: crate::Real = t407 - t408;
+        let t410: crate::Real = t21 * t409;
+        let t411: crate::Real = t13 * t410;
+        let t412: crate::Real = t411 * t16;
+        let t413: crate::Real = t412 - t406;
+        let t414: crate::Real = t143 * t413;
+        let t415: crate::Real = t405 + t414;
+        let t416: crate::Real = t415 - t328;
+        let t432: crate::Real = t52 + t334;
+        let t433: crate::Real = t22 * t201;
+        let t434: crate::Real = t32 * t211;
+        let t435: crate::Real = t341 + t434;
+        let t436: crate::Real = t435 - t433;
+        let t437: crate::Real = t19 * t436;
+        let t438: crate::Real = t432 + t437;
+        let t439: crate::Real = t205 + t438;
+        let t440: crate::Real = t51 * t213;
+        let t441: crate::Real = t201 * t205;
+        let t442: crate::Real = t351 - t441;
+        let t443: crate::Real = t442 - t440;
+        let t444: crate::Real = t64 * t443;
+        let t445: crate::Real = t439 + t444;
+        let t446: crate::Real = t22 * t220;
+        let t447: crate::Real = t361 + t446;
+        let t448: crate::Real = t211 * t223;
+        let t449: crate::Real = t447 - t448;
+        let t450: crate::Real = t77 * t449;
+        let t451: crate::Real = t445 + t450;
+        let t452: crate::Real = t51 * t228;
+        let t453: crate::Real = t371 + t452;
+        let t454: crate::Real = t205 * t230;
+        let t455: crate::Real = t453 + t454;
+        let t456: crate::Real = t90 * t455;
+        let t457: crate::Real = t451 + t456;
+        let t458: crate::Real = t22 * t236;
+        let t459: crate::Real = t211 * t238;
+        let t460: crate::Real = t382 + t459;
+        let t461: crate::Real = t460 - t458;
+        let t462: crate::Real = t104 * t461;
+        let t463: crate::Real = t457 + t462;
+        let t464: crate::Real = t51 * t244;
+        let t465: crate::Real = t205 * t247;
+        let t466: crate::Real = t392 - t465;
+        let t467: crate::Real = t466 - t464;
+        let t468: crate::Real = t117 * t467;
+        let t469: crate::Real = t463 + t468;
+        let t470: crate::Real = t22 * t252;
+        let t471: crate::Real = t402 + t470;
+        let t472: crate::Real = t211 * t255;
+        let t473: crate::Real = t471 - t472;
+        let t474: crate::Real = t130 * t473;
+        let t475: crate::Real = t469 + t474;
+        let t476: crate::Real = t51 * t260;
+        let t477: crate::Real = t412 + t476;
+        let t478: crate::Real = t205 * t262;
+        let t479: crate::Real = t477 + t478;
+        let t480: crate::Real = t143 * t479;
+        let t481: crate::Real = t475 + t480;
+        let t487: crate::Real = t433 - t341;
+        let t488: crate::Real = t434 + t487;
+        let t489: crate::Real = t19 * t488;
+        let t490: crate::Real = t205 + t489;
+        let t491: crate::Real = t440 - t351;
+        let t492: crate::Real = t491 - t441;
+        let t493: crate::Real = t64 * t492;
+        let t494: crate::Real = t490 + t493;
+        let t495: crate::Real = -t446;
+        let t496: crate::Real = t495 - t361;
+        let t497: crate::Real = t496 - t448;
+        let t498: crate::Real = t77 * t497;
+        let t499: crate::Real = t494 + t498;
+        let t500: crate::Real = t454 - t452;
+        let t501: crate::Real = t500 - t371;
+        let t502: crate::Real = t90 * t501;
+        let t503: crate::Real = t499 + t502;
+        let t504: crate::Real = t458 - t382;
+        let t505: crate::Real = t459 + t504;
+        let t506: crate::Real = t104 * t505;
+        let t507: crate::Real = t503 + t506;
+        let t508: crate::Real = t464 - t392;
+        let t509: crate::Real = t508 - t465;
+        let t510: crate::Real = t117 * t509;
+        let t511: crate::Real = t507 + t510;
+        let t512: crate::Real = -t470;
+        let t513: crate::Real = t512 - t402;
+        let t514: crate::Real = t513 - t472;
+        let t515: crate::Real = t130 * t514;
+        let t516: crate::Real = t511 + t515;
+        let t517: crate::Real = t478 - t476;
+        let t518: crate::Real = t517 - t412;
+        let t519: crate::Real = t143 * t518;
+        let t520: crate::Real = t516 + t519;
+        let t521: crate::Real = t520 - t52;
+        let t522: crate::Real = t521 - t334;
         [t156, t268, t320, t416, t481, t522]
     } else {
-        let t157: f64 = libm::sin(t19);
-        let t158: f64 = t30 * t157;
-        let t159: f64 = t15 / t19;
-        let t160: f64 = t158 * t159;
-        let t161: f64 = libm::cos(t19);
-        let t162: f64 = t43 * t161;
-        let t163: f64 = t162 * t159;
-        let t164: f64 = t160 + t163;
-        let t165: f64 = 1f64;
-        let t166: f64 = t165 - t161;
-        let t167: f64 = t9 * t166;
-        let t168: f64 = t29 * t167;
-        let t169: f64 = t15 / t64;
-        let t170: f64 = t168 * t169;
-        let t171: f64 = t164 - t170;
-        let t172: f64 = t43 * t157;
-        let t173: f64 = t172 * t169;
-        let t174: f64 = t171 - t173;
-        let t175: f64 = t20 * t174;
-        let t176: f64 = t30 * t161;
-        let t177: f64 = t176 * t159;
-        let t178: f64 = t172 * t159;
-        let t179: f64 = t177 - t178;
-        let t180: f64 = t41 * t167;
-        let t181: f64 = t180 * t169;
-        let t182: f64 = t179 + t181;
-        let t183: f64 = t158 * t169;
-        let t184: f64 = t182 - t183;
-        let t185: f64 = t42 * t184;
-        let t186: f64 = t185 - t175;
-        let t187: f64 = t21 * t186;
-        let t188: f64 = t13 * t187;
-        let t189: f64 = t188 * t16;
-        let t190: f64 = t22 * t157;
-        let t191: f64 = t23 * t190;
-        let t192: f64 = t191 * t159;
-        let t193: f64 = t189 + t192;
-        let t194: f64 = t21 * t166;
-        let t195: f64 = t42 * t194;
-        let t196: f64 = t23 * t195;
-        let t197: f64 = t196 * t159;
-        let t198: f64 = t193 + t197;
-        let t269: f64 = t21 * t157;
-        let t270: f64 = t13 * t269;
-        let t271: f64 = t270 * t159;
-        let t272: f64 = t166 * t204;
-        let t273: f64 = t272 * t159;
-        let t274: f64 = t271 + t273;
-        let t275: f64 = t20 * t274;
-        let t276: f64 = t189 - t275;
-        let t277: f64 = t13 * t194;
-        let t278: f64 = t277 * t159;
-        let t279: f64 = t157 * t204;
-        let t280: f64 = t279 * t159;
-        let t281: f64 = t280 - t278;
-        let t282: f64 = t42 * t281;
-        let t283: f64 = t276 + t282;
-        let t321: f64 = t273 - t271;
-        let t322: f64 = t20 * t321;
-        let t323: f64 = t278 + t280;
-        let t324: f64 = t42 * t323;
-        let t325: f64 = t324 - t189;
-        let t326: f64 = t325 - t322;
-        let t417: f64 = t42 * t174;
-        let t418: f64 = t20 * t184;
-        let t419: f64 = t417 + t418;
-        let t420: f64 = t21 * t419;
-        let t421: f64 = t13 * t420;
-        let t422: f64 = t421 * t16;
-        let t423: f64 = t42 * t269;
-        let t424: f64 = t23 * t423;
-        let t425: f64 = t424 * t159;
-        let t426: f64 = t422 - t425;
-        let t427: f64 = t20 * t194;
-        let t428: f64 = t23 * t427;
-        let t429: f64 = t428 * t159;
-        let t430: f64 = t426 + t429;
-        let t482: f64 = t42 * t274;
-        let t483: f64 = t422 + t482;
-        let t484: f64 = t20 * t281;
-        let t485: f64 = t483 + t484;
-        let t523: f64 = t42 * t321;
-        let t524: f64 = t20 * t323;
-        let t525: f64 = t523 + t524;
-        let t526: f64 = t525 - t422;
+        let t157: crate::Real = crate::math::sin(t19);
+        let t158: crate::Real = t30 * t157;
+        let t159: crate::Real = t15 / t19;
+        let t160: crate::Real = t158 * t159;
+        let t161: crate::Real = crate::math::cos(t19);
+        let t162: crate::Real = t43 * t161;
+        let t163: crate::Real = t162 * t159;
+        let t164: crate::Real = t160 + t163;
+        let t165: crate::Real = 1.0;
+        let t166: crate::Real = t165 - t161;
+        let t167: crate::Real = t9 * t166;
+        let t168: crate::Real = t29 * t167;
+        let t169: crate::Real = t15 / t64;
+        let t170: crate::Real = t168 * t169;
+        let t171: crate::Real = t164 - t170;
+        let t172: crate::Real = t43 * t157;
+        let t173: crate::Real = t172 * t169;
+        let t174: crate::Real = t171 - t173;
+        let t175: crate::Real = t20 * t174;
+        let t176: crate::Real = t30 * t161;
+        let t177: crate::Real = t176 * t159;
+        let t178: crate::Real = t172 * t159;
+        let t179: crate::Real = t177 - t178;
+        let t180: crate::Real = t41 * t167;
+        let t181: crate::Real = t180 * t169;
+        let t182: crate::Real = t179 + t181;
+        let t183: crate::Real = t158 * t169;
+        let t184: crate::Real = t182 - t183;
+        let t185: crate::Real = t42 * t184;
+        let t186: crate::Real = t185 - t175;
+        let t187: crate::Real = t21 * t186;
+        let t188: crate::Real = t13 * t187;
+        let t189: crate::Real = t188 * t16;
+        let t190: crate::Real = t22 * t157;
+        let t191: crate::Real = t23 * t190;
+        let t192: crate::Real = t191 * t159;
+        let t193: crate::Real = t189 + t192;
+        let t194: crate::Real = t21 * t166;
+        let t195: crate::Real = t42 * t194;
+        let t196: crate::Real = t23 * t195;
+        let t197: crate::Real = t196 * t159;
+        let t198: crate::Real = t193 + t197;
+        let t269: crate::Real = t21 * t157;
+        let t270: crate::Real = t13 * t269;
+        let t271: crate::Real = t270 * t159;
+        let t272: crate::Real = t166 * t204;
+        let t273: crate::Real = t272 * t159;
+        let t274: crate::Real = t271 + t273;
+        let t275: crate::Real = t20 * t274;
+        let t276: crate::Real = t189 - t275;
+        let t277: crate::Real = t13 * t194;
+        let t278: crate::Real = t277 * t159;
+        let t279: crate::Real = t157 * t204;
+        let t280: crate::Real = t279 * t159;
+        let t281: crate::Real = t280 - t278;
+        let t282: crate::Real = t42 * t281;
+        let t283: crate::Real = t276 + t282;
+        let t321: crate::Real = t273 - t271;
+        let t322: crate::Real = t20 * t321;
+        let t323: crate::Real = t278 + t280;
+        let t324: crate::Real = t42 * t323;
+        let t325: crate::Real = t324 - t189;
+        let t326: crate::Real = t325 - t322;
+        let t417: crate::Real = t42 * t174;
+        let t418: crate::Real = t20 * t184;
+        let t419: crate::Real = t417 + t418;
+        let t420: crate::Real = t21 * t419;
+        let t421: crate::Real = t13 * t420;
+        let t422: crate::Real = t421 * t16;
+        let t423: crate::Real = t42 * t269;
+        let t424: crate::Real = t23 * t423;
+        let t425: crate::Real = t424 * t159;
+        let t426: crate::Real = t422 - t425;
+        let t427: crate::Real = t20 * t194;
+        let t428: crate::Real = t23 * t427;
+        let t429: crate::Real = t428 * t159;
+        let t430: crate::Real = t426 + t429;
+        let t482: crate::Real = t42 * t274;
+        let t483: crate::Real = t422 + t482;
+        let t484: crate::Real = t20 * t281;
+        let t485: crate::Real = t483 + t484;
+        let t523: crate::Real = t42 * t321;
+        let t524: crate::Real = t20 * t323;
+        let t525: crate::Real = t523 + t524;
+        let t526: crate::Real = t525 - t422;
         [t198, t283, t326, t430, t485, t526]
     };
-    let t199: f64 = g0[0usize];
-    let t284: f64 = g0[1usize];
-    let t327: f64 = g0[2usize];
-    let t431: f64 = g0[3usize];
-    let t486: f64 = g0[4usize];
-    let t527: f64 = g0[5usize];
-    let t528: f64 = t13 * t21;
-    let t529: f64 = t528 * t16;
-    let t530: f64 = -t529;
+    let t199: crate::Real = g0[0usize];
+    let t284: crate::Real = g0[1usize];
+    let t327: crate::Real = g0[2usize];
+    let t431: crate::Real = g0[3usize];
+    let t486: crate::Real = g0[4usize];
+    let t527: crate::Real = g0[5usize];
+    let t528: crate::Real = t13 * t21;
+    let t529: crate::Real = t528 * t16;
+    let t530: crate::Real = -t529;
     [[t199, t284, t327], [t431, t486, t527], [t529, t529, t530]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -1324,291 +1333,293 @@ pub fn step_exact_jac_u(
 244 arithmetic operations (2964 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = u[2usize];
-    let t4: f64 = w[0usize];
-    let t5: f64 = w[1usize];
-    let t6: f64 = w[2usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = t1 + t2;
-    let t11: f64 = t10 - t3;
-    let t12: f64 = t7 * t11;
-    let t13: f64 = 0.3333333333333333f64;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = t14 / t8;
-    let t16: f64 = t6 + t15;
-    let t17: f64 = t9 * t16;
-    let t18: f64 = libm::sin(t0);
-    let t23: f64 = libm::cos(t0);
-    let t25: f64 = t17 * t17;
-    let t84: f64 = t9 * t18;
-    let t115: f64 = t2 + t3;
-    let t114: f64 = libm::sqrt(t13);
-    let t116: f64 = t7 * t114;
-    let t117: f64 = t115 * t116;
-    let t118: f64 = t4 + t117;
-    let t119: f64 = t9 * t118;
-    let t124: f64 = t2 - t3;
-    let t122: f64 = 2f64;
-    let t123: f64 = t1 * t122;
-    let t125: f64 = t124 - t123;
-    let t126: f64 = t7 * t125;
-    let t127: f64 = t13 * t126;
-    let t128: f64 = t5 + t127;
-    let t129: f64 = t9 * t128;
-    let g0: [f64; 5usize] = if libm::fabs(t17) < 0.05f64 {
-        let t19: f64 = t9 * t17;
-        let t20: f64 = t18 * t19;
-        let t21: f64 = 0.5f64;
-        let t22: f64 = t20 * t21;
-        let t24: f64 = t9 * t23;
-        let t26: f64 = t9 * t25;
-        let t27: f64 = t23 * t26;
-        let t28: f64 = 0.16666666666666666f64;
-        let t29: f64 = t27 * t28;
-        let t30: f64 = t24 - t29;
-        let t31: f64 = t17 * t25;
-        let t32: f64 = t9 * t31;
-        let t33: f64 = t18 * t32;
-        let t34: f64 = 0.041666666666666664f64;
-        let t35: f64 = t33 * t34;
-        let t36: f64 = t30 + t35;
-        let t37: f64 = t25 * t25;
-        let t38: f64 = t9 * t37;
-        let t39: f64 = t23 * t38;
-        let t40: f64 = 0.008333333333333333f64;
-        let t41: f64 = t39 * t40;
-        let t42: f64 = t36 + t41;
-        let t43: f64 = t17 * t37;
-        let t44: f64 = t9 * t43;
-        let t45: f64 = t18 * t44;
-        let t46: f64 = 0.001388888888888889f64;
-        let t47: f64 = t45 * t46;
-        let t48: f64 = t42 - t47;
-        let t49: f64 = t31 * t31;
-        let t50: f64 = t9 * t49;
-        let t51: f64 = t23 * t50;
-        let t52: f64 = 0.0001984126984126984f64;
-        let t53: f64 = t51 * t52;
-        let t54: f64 = t48 - t53;
-        let t55: f64 = t17 * t49;
-        let t56: f64 = t9 * t55;
-        let t57: f64 = t18 * t56;
-        let t58: f64 = 0.0000248015873015873f64;
-        let t59: f64 = t57 * t58;
-        let t60: f64 = t54 + t59;
-        let t61: f64 = t37 * t37;
-        let t62: f64 = t9 * t61;
-        let t63: f64 = t23 * t62;
-        let t64: f64 = 0.0000027557319223985893f64;
-        let t65: f64 = t63 * t64;
-        let t66: f64 = t60 + t65;
-        let t67: f64 = t66 - t22;
-        let t82: f64 = t19 * t23;
-        let t83: f64 = t21 * t82;
-        let t85: f64 = t18 * t26;
-        let t86: f64 = t28 * t85;
-        let t87: f64 = t23 * t32;
-        let t88: f64 = t34 * t87;
-        let t89: f64 = t86 + t88;
-        let t90: f64 = t18 * t38;
-        let t91: f64 = t40 * t90;
-        let t92: f64 = t89 - t91;
-        let t93: f64 = t23 * t44;
-        let t94: f64 = t46 * t93;
-        let t95: f64 = t92 - t94;
-        let t96: f64 = t18 * t50;
-        let t97: f64 = t52 * t96;
-        let t98: f64 = t95 + t97;
-        let t99: f64 = t23 * t56;
-        let t100: f64 = t58 * t99;
-        let t101: f64 = t98 + t100;
-        let t102: f64 = t18 * t62;
-        let t103: f64 = t64 * t102;
-        let t104: f64 = t101 - t103;
-        let t105: f64 = t104 - t83;
-        let t106: f64 = t105 - t84;
-        let t120: f64 = t23 * t119;
-        let t121: f64 = t13 * t120;
-        let t130: f64 = t18 * t129;
-        let t131: f64 = t13 * t130;
-        let t132: f64 = t131 - t121;
-        let t133: f64 = t19 * t132;
-        let t134: f64 = t18 * t119;
-        let t135: f64 = t21 * t134;
-        let t136: f64 = -t135;
-        let t137: f64 = t23 * t129;
-        let t138: f64 = t21 * t137;
-        let t139: f64 = t136 - t138;
-        let t140: f64 = t9 * t139;
-        let t141: f64 = t133 + t140;
-        let t142: f64 = 0.125f64;
-        let t143: f64 = t134 * t142;
-        let t144: f64 = t137 * t142;
-        let t145: f64 = t143 + t144;
-        let t146: f64 = t26 * t145;
-        let t147: f64 = t141 + t146;
-        let t148: f64 = 0.03333333333333333f64;
-        let t149: f64 = t120 * t148;
-        let t150: f64 = t130 * t148;
-        let t151: f64 = t149 - t150;
-        let t152: f64 = t32 * t151;
-        let t153: f64 = t147 + t152;
-        let t154: f64 = 0.006944444444444444f64;
-        let t155: f64 = t134 * t154;
-        let t156: f64 = -t155;
-        let t157: f64 = t137 * t154;
-        let t158: f64 = t156 - t157;
-        let t159: f64 = t38 * t158;
-        let t160: f64 = t153 + t159;
-        let t161: f64 = 0.0011904761904761906f64;
-        let t162: f64 = t120 * t161;
-        let t163: f64 = t130 * t161;
-        let t164: f64 = t163 - t162;
-        let t165: f64 = t44 * t164;
-        let t166: f64 = t160 + t165;
-        let t167: f64 = 0.00017361111111111112f64;
-        let t168: f64 = t134 * t167;
-        let t169: f64 = t137 * t167;
-        let t170: f64 = t168 + t169;
-        let t171: f64 = t50 * t170;
-        let t172: f64 = t166 + t171;
-        let t173: f64 = 0.000022045855379188714f64;
-        let t174: f64 = t120 * t173;
-        let t175: f64 = t130 * t173;
-        let t176: f64 = t174 - t175;
-        let t177: f64 = t56 * t176;
-        let t178: f64 = t172 + t177;
-        let t179: f64 = 0.00000248015873015873f64;
-        let t180: f64 = t134 * t179;
-        let t181: f64 = -t180;
-        let t182: f64 = t137 * t179;
-        let t183: f64 = t181 - t182;
-        let t184: f64 = t62 * t183;
-        let t185: f64 = t178 + t184;
-        let t212: f64 = t83 + t84;
-        let t213: f64 = t212 - t86;
-        let t214: f64 = t213 - t88;
-        let t215: f64 = t91 + t214;
-        let t216: f64 = t94 + t215;
-        let t217: f64 = t216 - t97;
-        let t218: f64 = t217 - t100;
-        let t219: f64 = t103 + t218;
-        let t222: f64 = t13 * t134;
-        let t223: f64 = -t222;
-        let t224: f64 = t13 * t137;
-        let t225: f64 = t223 - t224;
-        let t226: f64 = t19 * t225;
-        let t227: f64 = t21 * t120;
-        let t228: f64 = t21 * t130;
-        let t229: f64 = t227 - t228;
-        let t230: f64 = t9 * t229;
-        let t231: f64 = t226 + t230;
-        let t232: f64 = t120 * t142;
-        let t233: f64 = t130 * t142;
-        let t234: f64 = t233 - t232;
-        let t235: f64 = t26 * t234;
-        let t236: f64 = t231 + t235;
-        let t237: f64 = t134 * t148;
-        let t238: f64 = t137 * t148;
-        let t239: f64 = t237 + t238;
-        let t240: f64 = t32 * t239;
-        let t241: f64 = t236 + t240;
-        let t242: f64 = t120 * t154;
-        let t243: f64 = t130 * t154;
-        let t244: f64 = t242 - t243;
-        let t245: f64 = t38 * t244;
-        let t246: f64 = t241 + t245;
-        let t247: f64 = t134 * t161;
-        let t248: f64 = -t247;
-        let t249: f64 = t137 * t161;
-        let t250: f64 = t248 - t249;
-        let t251: f64 = t44 * t250;
-        let t252: f64 = t246 + t251;
-        let t253: f64 = t120 * t167;
-        let t254: f64 = t130 * t167;
-        let t255: f64 = t254 - t253;
-        let t256: f64 = t50 * t255;
-        let t257: f64 = t252 + t256;
-        let t258: f64 = t134 * t173;
-        let t259: f64 = t137 * t173;
-        let t260: f64 = t258 + t259;
-        let t261: f64 = t56 * t260;
-        let t262: f64 = t257 + t261;
-        let t263: f64 = t120 * t179;
-        let t264: f64 = t130 * t179;
-        let t265: f64 = t263 - t264;
-        let t266: f64 = t62 * t265;
-        let t267: f64 = t262 + t266;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = u[2usize];
+    let t4: crate::Real = w[0usize];
+    let t5: crate::Real = w[1usize];
+    let t6: crate::Real = w[2usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = t1 + t2;
+    let t11: crate::Real = t10 - t3;
+    let t12: crate::Real = t7 * t11;
+    let t13: crate::Real = 0.3333333333333333;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = t14 / t8;
+    let t16: crate::Real = t6 + t15;
+    let t17: crate::Real = t9 * t16;
+    let t18: crate::Real = crate::math::sin(t0);
+    let t23: crate::Real = crate::math::cos(t0);
+    let t25: crate::Real = t17 * t17;
+    let t84: crate::Real = t9 * t18;
+    let t115: crate::Real = t2 + t3;
+    let t114: crate::Real = crate::math::sqrt(t13);
+    let t116: crate::Real = t7 * t114;
+    let t117: crate::Real = t115 * t116;
+    let t118: crate::Real = t4 + t117;
+    let t119: crate::Real = t9 * t118;
+    let t124: crate::Real = t2 - t3;
+    let t122: crate::Real = 2.0;
+    let t123: crate::Real = t1 * t122;
+    let t125: crate::Real = t124 - t123;
+    let t126: crate::Real = t7 * t125;
+    let t127: crate::Real = t13 * t126;
+    let t128: crate::Real = t5 + t127;
+    let t129: crate::Real = t9 * t128;
+    let g0: [crate::Real; 5usize] = if crate::math::fabs(t17)
+        < crate::math::series_switch(0.05)
+    {
+        let t19: crate::Real = t9 * t17;
+        let t20: crate::Real = t18 * t19;
+        let t21: crate::Real = 0.5;
+        let t22: crate::Real = t20 * t21;
+        let t24: crate::Real = t9 * t23;
+        let t26: crate::Real = t9 * t25;
+        let t27: crate::Real = t23 * t26;
+        let t28: crate::Real = 0.16666666666666666;
+        let t29: crate::Real = t27 * t28;
+        let t30: crate::Real = t24 - t29;
+        let t31: crate::Real = t17 * t25;
+        let t32: crate::Real = t9 * t31;
+        let t33: crate::Real = t18 * t32;
+        let t34: crate::Real = 0.041666666666666664;
+        let t35: crate::Real = t33 * t34;
+        let t36: crate::Real = t30 + t35;
+        let t37: crate::Real = t25 * t25;
+        let t38: crate::Real = t9 * t37;
+        let t39: crate::Real = t23 * t38;
+        let t40: crate::Real = 0.008333333333333333;
+        let t41: crate::Real = t39 * t40;
+        let t42: crate::Real = t36 + t41;
+        let t43: crate::Real = t17 * t37;
+        let t44: crate::Real = t9 * t43;
+        let t45: crate::Real = t18 * t44;
+        let t46: crate::Real = 0.001388888888888889;
+        let t47: crate::Real = t45 * t46;
+        let t48: crate::Real = t42 - t47;
+        let t49: crate::Real = t31 * t31;
+        let t50: crate::Real = t9 * t49;
+        let t51: crate::Real = t23 * t50;
+        let t52: crate::Real = 0.0001984126984126984;
+        let t53: crate::Real = t51 * t52;
+        let t54: crate::Real = t48 - t53;
+        let t55: crate::Real = t17 * t49;
+        let t56: crate::Real = t9 * t55;
+        let t57: crate::Real = t18 * t56;
+        let t58: crate::Real = 0.0000248015873015873;
+        let t59: crate::Real = t57 * t58;
+        let t60: crate::Real = t54 + t59;
+        let t61: crate::Real = t37 * t37;
+        let t62: crate::Real = t9 * t61;
+        let t63: crate::Real = t23 * t62;
+        let t64: crate::Real = 0.0000027557319223985893;
+        let t65: crate::Real = t63 * t64;
+        let t66: crate::Real = t60 + t65;
+        let t67: crate::Real = t66 - t22;
+        let t82: crate::Real = t19 * t23;
+        let t83: crate::Real = t21 * t82;
+        let t85: crate::Real = t18 * t26;
+        let t86: crate::Real = t28 * t85;
+        let t87: crate::Real = t23 * t32;
+        let t88: crate::Real = t34 * t87;
+        let t89: crate::Real = t86 + t88;
+        let t90: crate::Real = t18 * t38;
+        let t91: crate::Real = t40 * t90;
+        let t92: crate::Real = t89 - t91;
+        let t93: crate::Real = t23 * t44;
+        let t94: crate::Real = t46 * t93;
+        let t95: crate::Real = t92 - t94;
+        let t96: crate::Real = t18 * t50;
+        let t97: crate::Real = t52 * t96;
+        let t98: crate::Real = t95 + t97;
+        let t99: crate::Real = t23 * t56;
+        let t100: crate::Real = t58 * t99;
+        let t101: crate::Real = t98 + t100;
+        let t102: crate::Real = t18 * t62;
+        let t103: crate::Real = t64 * t102;
+        let t104: crate::Real = t101 - t103;
+        let t105: crate::Real = t104 - t83;
+        let t106: crate::Real = t105 - t84;
+        let t120: crate::Real = t23 * t119;
+        let t121: crate::Real = t13 * t120;
+        let t130: crate::Real = t18 * t129;
+        let t131: crate::Real = t13 * t130;
+        let t132: crate::Real = t131 - t121;
+        let t133: crate::Real = t19 * t132;
+        let t134: crate::Real = t18 * t119;
+        let t135: crate::Real = t21 * t134;
+        let t136: crate::Real = -t135;
+        let t137: crate::Real = t23 * t129;
+        let t138: crate::Real = t21 * t137;
+        let t139: crate::Real = t136 - t138;
+        let t140: crate::Real = t9 * t139;
+        let t141: crate::Real = t133 + t140;
+        let t142: crate::Real = 0.125;
+        let t143: crate::Real = t134 * t142;
+        let t144: crate::Real = t137 * t142;
+        let t145: crate::Real = t143 + t144;
+        let t146: crate::Real = t26 * t145;
+        let t147: crate::Real = t141 + t146;
+        let t148: crate::Real = 0.03333333333333333;
+        let t149: crate::Real = t120 * t148;
+        let t150: crate::Real = t130 * t148;
+        let t151: crate::Real = t149 - t150;
+        let t152: crate::Real = t32 * t151;
+        let t153: crate::Real = t147 + t152;
+        let t154: crate::Real = 0.006944444444444444;
+        let t155: crate::Real = t134 * t154;
+        let t156: crate::Real = -t155;
+        let t157: crate::Real = t137 * t154;
+        let t158: crate::Real = t156 - t157;
+        let t159: crate::Real = t38 * t158;
+        let t160: crate::Real = t153 + t159;
+        let t161: crate::Real = 0.0011904761904761906;
+        let t162: crate::Real = t120 * t161;
+        let t163: crate::Real = t130 * t161;
+        let t164: crate::Real = t163 - t162;
+        let t165: crate::Real = t44 * t164;
+        let t166: crate::Real = t160 + t165;
+        let t167: crate::Real = 0.00017361111111111112;
+        let t168: crate::Real = t134 * t167;
+        let t169: crate::Real = t137 * t167;
+        let t170: crate::Real = t168 + t169;
+        let t171: crate::Real = t50 * t170;
+        let t172: crate::Real = t166 + t171;
+        let t173: crate::Real = 0.000022045855379188714;
+        let t174: crate::Real = t120 * t173;
+        let t175: crate::Real = t130 * t173;
+        let t176: crate::Real = t174 - t175;
+        let t177: crate::Real = t56 * t176;
+        let t178: crate::Real = t172 + t177;
+        let t179: crate::Real = 0.00000248015873015873;
+        let t180: crate::Real = t134 * t179;
+        let t181: crate::Real = -t180;
+        let t182: crate::Real = t137 * t179;
+        let t183: crate::Real = t181 - t182;
+        let t184: crate::Real = t62 * t183;
+        let t185: crate::Real = t178 + t184;
+        let t212: crate::Real = t83 + t84;
+        let t213: crate::Real = t212 - t86;
+        let t214: crate::Real = t213 - t88;
+        let t215: crate::Real = t91 + t214;
+        let t216: crate::Real = t94 + t215;
+        let t217: crate::Real = t216 - t97;
+        let t218: crate::Real = t217 - t100;
+        let t219: crate::Real = t103 + t218;
+        let t222: crate::Real = t13 * t134;
+        let t223: crate::Real = -t222;
+        let t224: crate::Real = t13 * t137;
+        let t225: crate::Real = t223 - t224;
+        let t226: crate::Real = t19 * t225;
+        let t227: crate::Real = t21 * t120;
+        let t228: crate::Real = t21 * t130;
+        let t229: crate::Real = t227 - t228;
+        let t230: crate::Real = t9 * t229;
+        let t231: crate::Real = t226 + t230;
+        let t232: crate::Real = t120 * t142;
+        let t233: crate::Real = t130 * t142;
+        let t234: crate::Real = t233 - t232;
+        let t235: crate::Real = t26 * t234;
+        let t236: crate::Real = t231 + t235;
+        let t237: crate::Real = t134 * t148;
+        let t238: crate::Real = t137 * t148;
+        let t239: crate::Real = t237 + t238;
+        let t240: crate::Real = t32 * t239;
+        let t241: crate::Real = t236 + t240;
+        let t242: crate::Real = t120 * t154;
+        let t243: crate::Real = t130 * t154;
+        let t244: crate::Real = t242 - t243;
+        let t245: crate::Real = t38 * t244;
+        let t246: crate::Real = t241 + t245;
+        let t247: crate::Real = t134 * t161;
+        let t248: crate::Real = -t247;
+        let t249: crate::Real = t137 * t161;
+        let t250: crate::Real = t248 - t249;
+        let t251: crate::Real = t44 * t250;
+        let t252: crate::Real = t246 + t251;
+        let t253: crate::Real = t120 * t167;
+        let t254: crate::Real = t130 * t167;
+        let t255: crate::Real = t254 - t253;
+        let t256: crate::Real = t50 * t255;
+        let t257: crate::Real = t252 + t256;
+        let t258: crate::Real = t134 * t173;
+        let t259: crate::Real = t137 * t173;
+        let t260: crate::Real = t258 + t259;
+        let t261: crate::Real = t56 * t260;
+        let t262: crate::Real = t257 + t261;
+        let t263: crate::Real = t120 * t179;
+        let t264: crate::Real = t130 * t179;
+        let t265: crate::Real = t263 - t264;
+        let t266: crate::Real = t62 * t265;
+        let t267: crate::Real = t262 + t266;
         [t67, t106, t185, t219, t267]
     } else {
-        let t68: f64 = libm::sin(t17);
-        let t69: f64 = t9 * t68;
-        let t70: f64 = t23 * t69;
-        let t71: f64 = 1f64;
-        let t72: f64 = t71 / t17;
-        let t73: f64 = t70 * t72;
-        let t74: f64 = 1f64;
-        let t75: f64 = libm::cos(t17);
-        let t76: f64 = t74 - t75;
-        let t77: f64 = t9 * t76;
-        let t78: f64 = t18 * t77;
-        let t79: f64 = t78 * t72;
-        let t80: f64 = t73 - t79;
-        let t107: f64 = t68 * t84;
-        let t108: f64 = t107 * t72;
-        let t109: f64 = -t108;
-        let t110: f64 = t23 * t77;
-        let t111: f64 = t110 * t72;
-        let t112: f64 = t109 - t111;
-        let t186: f64 = t68 * t119;
-        let t187: f64 = t186 * t72;
-        let t188: f64 = t75 * t129;
-        let t189: f64 = t188 * t72;
-        let t190: f64 = t187 + t189;
-        let t191: f64 = t77 * t118;
-        let t192: f64 = t71 / t25;
-        let t193: f64 = t191 * t192;
-        let t194: f64 = t190 - t193;
-        let t195: f64 = t68 * t129;
-        let t196: f64 = t195 * t192;
-        let t197: f64 = t194 - t196;
-        let t198: f64 = t18 * t197;
-        let t199: f64 = t75 * t119;
-        let t200: f64 = t199 * t72;
-        let t201: f64 = t195 * t72;
-        let t202: f64 = t200 - t201;
-        let t203: f64 = t77 * t128;
-        let t204: f64 = t203 * t192;
-        let t205: f64 = t202 + t204;
-        let t206: f64 = t186 * t192;
-        let t207: f64 = t205 - t206;
-        let t208: f64 = t23 * t207;
-        let t209: f64 = t208 - t198;
-        let t210: f64 = t9 * t209;
-        let t220: f64 = t108 + t111;
-        let t268: f64 = t23 * t197;
-        let t269: f64 = t18 * t207;
-        let t270: f64 = t268 + t269;
-        let t271: f64 = t9 * t270;
+        let t68: crate::Real = crate::math::sin(t17);
+        let t69: crate::Real = t9 * t68;
+        let t70: crate::Real = t23 * t69;
+        let t71: crate::Real = 1.0;
+        let t72: crate::Real = t71 / t17;
+        let t73: crate::Real = t70 * t72;
+        let t74: crate::Real = 1.0;
+        let t75: crate::Real = crate::math::cos(t17);
+        let t76: crate::Real = t74 - t75;
+        let t77: crate::Real = t9 * t76;
+        let t78: crate::Real = t18 * t77;
+        let t79: crate::Real = t78 * t72;
+        let t80: crate::Real = t73 - t79;
+        let t107: crate::Real = t68 * t84;
+        let t108: crate::Real = t107 * t72;
+        let t109: crate::Real = -t108;
+        let t110: crate::Real = t23 * t77;
+        let t111: crate::Real = t110 * t72;
+        let t112: crate::Real = t109 - t111;
+        let t186: crate::Real = t68 * t119;
+        let t187: crate::Real = t186 * t72;
+        let t188: crate::Real = t75 * t129;
+        let t189: crate::Real = t188 * t72;
+        let t190: crate::Real = t187 + t189;
+        let t191: crate::Real = t77 * t118;
+        let t192: crate::Real = t71 / t25;
+        let t193: crate::Real = t191 * t192;
+        let t194: crate::Real = t190 - t193;
+        let t195: crate::Real = t68 * t129;
+        let t196: crate::Real = t195 * t192;
+        let t197: crate::Real = t194 - t196;
+        let t198: crate::Real = t18 * t197;
+        let t199: crate::Real = t75 * t119;
+        let t200: crate::Real = t199 * t72;
+        let t201: crate::Real = t195 * t72;
+        let t202: crate::Real = t200 - t201;
+        let t203: crate::Real = t77 * t128;
+        let t204: crate::Real = t203 * t192;
+        let t205: crate::Real = t202 + t204;
+        let t206: crate::Real = t186 * t192;
+        let t207: crate::Real = t205 - t206;
+        let t208: crate::Real = t23 * t207;
+        let t209: crate::Real = t208 - t198;
+        let t210: crate::Real = t9 * t209;
+        let t220: crate::Real = t108 + t111;
+        let t268: crate::Real = t23 * t197;
+        let t269: crate::Real = t18 * t207;
+        let t270: crate::Real = t268 + t269;
+        let t271: crate::Real = t9 * t270;
         [t80, t112, t210, t220, t271]
     };
-    let t81: f64 = g0[0usize];
-    let t113: f64 = g0[1usize];
-    let t211: f64 = g0[2usize];
-    let t221: f64 = g0[3usize];
-    let t272: f64 = g0[4usize];
-    let t273: f64 = 0f64;
+    let t81: crate::Real = g0[0usize];
+    let t113: crate::Real = g0[1usize];
+    let t211: crate::Real = g0[2usize];
+    let t221: crate::Real = g0[3usize];
+    let t272: crate::Real = g0[4usize];
+    let t273: crate::Real = 0.0;
     [[t81, t113, t211], [t221, t81, t272], [t273, t273, t9]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
@@ -1623,518 +1634,520 @@ pub fn step_exact_jac_w(
 465 arithmetic operations (3979 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = u[2usize];
-    let t4: f64 = w[0usize];
-    let t5: f64 = w[1usize];
-    let t6: f64 = w[2usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = t1 + t2;
-    let t11: f64 = t10 - t3;
-    let t12: f64 = t7 * t11;
-    let t13: f64 = 0.3333333333333333f64;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = 1f64;
-    let t16: f64 = t15 / t8;
-    let t17: f64 = t14 * t16;
-    let t18: f64 = t6 + t17;
-    let t19: f64 = t9 * t18;
-    let t20: f64 = 2f64;
-    let t21: f64 = t1 * t20;
-    let t22: f64 = t2 - t3;
-    let t23: f64 = t22 - t21;
-    let t24: f64 = libm::sin(t0);
-    let t25: f64 = t9 * t23;
-    let t28: f64 = libm::sqrt(t13);
-    let t29: f64 = t2 + t3;
-    let t30: f64 = t7 * t28;
-    let t31: f64 = t29 * t30;
-    let t32: f64 = t4 + t31;
-    let t33: f64 = t9 * t32;
-    let t38: f64 = t7 * t23;
-    let t39: f64 = t13 * t38;
-    let t40: f64 = t5 + t39;
-    let t41: f64 = libm::cos(t0);
-    let t42: f64 = t9 * t40;
-    let t62: f64 = t9 * t28;
-    let t63: f64 = t29 * t62;
-    let t72: f64 = t19 * t19;
-    let t245: f64 = t8 * t8;
-    let t251: f64 = t15 / t245;
-    let t254: f64 = t7 * t9;
-    let g0: [f64; 4usize] = if libm::fabs(t19) < 0.05f64 {
-        let t26: f64 = t24 * t25;
-        let t27: f64 = t13 * t26;
-        let t34: f64 = t24 * t33;
-        let t35: f64 = 0.5f64;
-        let t36: f64 = t34 * t35;
-        let t37: f64 = -t36;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t35 * t43;
-        let t45: f64 = t37 - t44;
-        let t46: f64 = t9 * t45;
-        let t47: f64 = t11 * t46;
-        let t48: f64 = t13 * t47;
-        let t49: f64 = t48 * t16;
-        let t50: f64 = t25 * t41;
-        let t51: f64 = 0.16666666666666666f64;
-        let t52: f64 = t50 * t51;
-        let t53: f64 = t33 * t41;
-        let t54: f64 = t13 * t53;
-        let t55: f64 = t24 * t42;
-        let t56: f64 = t13 * t55;
-        let t57: f64 = t56 - t54;
-        let t58: f64 = t9 * t57;
-        let t59: f64 = t11 * t58;
-        let t60: f64 = t13 * t59;
-        let t61: f64 = t60 * t16;
-        let t64: f64 = t24 * t63;
-        let t65: f64 = t35 * t64;
-        let t66: f64 = t61 - t65;
-        let t67: f64 = t66 - t52;
-        let t68: f64 = t19 * t67;
-        let t69: f64 = t49 + t68;
-        let t70: f64 = t41 * t63;
-        let t71: f64 = t69 + t70;
-        let t73: f64 = 0.05555555555555555f64;
-        let t74: f64 = t26 * t73;
-        let t75: f64 = 0.125f64;
-        let t76: f64 = t34 * t75;
-        let t77: f64 = t43 * t75;
-        let t78: f64 = t76 + t77;
-        let t79: f64 = t9 * t78;
-        let t80: f64 = t11 * t79;
-        let t81: f64 = t13 * t80;
-        let t82: f64 = t81 * t16;
-        let t83: f64 = t74 + t82;
-        let t84: f64 = t51 * t70;
-        let t85: f64 = t83 - t84;
-        let t86: f64 = t72 * t85;
-        let t87: f64 = t71 + t86;
-        let t88: f64 = t19 * t72;
-        let t89: f64 = 0.013888888888888888f64;
-        let t90: f64 = t50 * t89;
-        let t91: f64 = 0.03333333333333333f64;
-        let t92: f64 = t53 * t91;
-        let t93: f64 = t55 * t91;
-        let t94: f64 = t92 - t93;
-        let t95: f64 = t9 * t94;
-        let t96: f64 = t11 * t95;
-        let t97: f64 = t13 * t96;
-        let t98: f64 = t97 * t16;
-        let t99: f64 = t90 + t98;
-        let t100: f64 = 0.041666666666666664f64;
-        let t101: f64 = t64 * t100;
-        let t102: f64 = t99 + t101;
-        let t103: f64 = t88 * t102;
-        let t104: f64 = t87 + t103;
-        let t105: f64 = t72 * t72;
-        let t106: f64 = 0.002777777777777778f64;
-        let t107: f64 = t26 * t106;
-        let t108: f64 = 0.006944444444444444f64;
-        let t109: f64 = t34 * t108;
-        let t110: f64 = -t109;
-        let t111: f64 = t43 * t108;
-        let t112: f64 = t110 - t111;
-        let t113: f64 = t9 * t112;
-        let t114: f64 = t11 * t113;
-        let t115: f64 = t13 * t114;
-        let t116: f64 = t115 * t16;
-        let t117: f64 = 0.008333333333333333f64;
-        let t118: f64 = t70 * t117;
-        let t119: f64 = t116 + t118;
-        let t120: f64 = t119 - t107;
-        let t121: f64 = t105 * t120;
-        let t122: f64 = t104 + t121;
-        let t123: f64 = t19 * t105;
-        let t124: f64 = 0.000462962962962963f64;
-        let t125: f64 = t50 * t124;
-        let t126: f64 = 0.0011904761904761906f64;
-        let t127: f64 = t53 * t126;
-        let t128: f64 = t55 * t126;
-        let t129: f64 = t128 - t127;
-        let t130: f64 = t9 * t129;
-        let t131: f64 = t11 * t130;
-        let t132: f64 = t13 * t131;
-        let t133: f64 = t132 * t16;
-        let t134: f64 = 0.001388888888888889f64;
-        let t135: f64 = t64 * t134;
-        let t136: f64 = t133 - t135;
-        let t137: f64 = t136 - t125;
-        let t138: f64 = t123 * t137;
-        let t139: f64 = t122 + t138;
-        let t140: f64 = t88 * t88;
-        let t141: f64 = 0.00006613756613756614f64;
-        let t142: f64 = t26 * t141;
-        let t143: f64 = 0.00017361111111111112f64;
-        let t144: f64 = t34 * t143;
-        let t145: f64 = t43 * t143;
-        let t146: f64 = t144 + t145;
-        let t147: f64 = t9 * t146;
-        let t148: f64 = t11 * t147;
-        let t149: f64 = t13 * t148;
-        let t150: f64 = t149 * t16;
-        let t151: f64 = t142 + t150;
-        let t152: f64 = 0.0001984126984126984f64;
-        let t153: f64 = t70 * t152;
-        let t154: f64 = t151 - t153;
-        let t155: f64 = t140 * t154;
-        let t156: f64 = t139 + t155;
-        let t157: f64 = t19 * t140;
-        let t158: f64 = 0.000008267195767195768f64;
-        let t159: f64 = t50 * t158;
-        let t160: f64 = 0.000022045855379188714f64;
-        let t161: f64 = t53 * t160;
-        let t162: f64 = t55 * t160;
-        let t163: f64 = t161 - t162;
-        let t164: f64 = t9 * t163;
-        let t165: f64 = t11 * t164;
-        let t166: f64 = t13 * t165;
-        let t167: f64 = t166 * t16;
-        let t168: f64 = t159 + t167;
-        let t169: f64 = 0.0000248015873015873f64;
-        let t170: f64 = t64 * t169;
-        let t171: f64 = t168 + t170;
-        let t172: f64 = t157 * t171;
-        let t173: f64 = t156 + t172;
-        let t174: f64 = t105 * t105;
-        let t175: f64 = 0.0000009185773074661964f64;
-        let t176: f64 = t26 * t175;
-        let t177: f64 = 0.00000248015873015873f64;
-        let t178: f64 = t34 * t177;
-        let t179: f64 = -t178;
-        let t180: f64 = t43 * t177;
-        let t181: f64 = t179 - t180;
-        let t182: f64 = t9 * t181;
-        let t183: f64 = t11 * t182;
-        let t184: f64 = t13 * t183;
-        let t185: f64 = t184 * t16;
-        let t186: f64 = 0.0000027557319223985893f64;
-        let t187: f64 = t70 * t186;
-        let t188: f64 = t185 + t187;
-        let t189: f64 = t188 - t176;
-        let t190: f64 = t174 * t189;
-        let t191: f64 = t173 + t190;
-        let t192: f64 = t191 - t27;
-        let t246: f64 = t9 * t19;
-        let t247: f64 = t7 * t246;
-        let t248: f64 = t57 * t247;
-        let t249: f64 = t11 * t248;
-        let t250: f64 = t13 * t249;
-        let t252: f64 = t250 * t251;
-        let t253: f64 = -t252;
-        let t255: f64 = t45 * t254;
-        let t256: f64 = t11 * t255;
-        let t257: f64 = t13 * t256;
-        let t258: f64 = t257 * t251;
-        let t259: f64 = t9 * t72;
-        let t260: f64 = t7 * t259;
-        let t261: f64 = t78 * t260;
-        let t262: f64 = t11 * t261;
-        let t263: f64 = t13 * t262;
-        let t264: f64 = t263 * t251;
-        let t265: f64 = t9 * t88;
-        let t266: f64 = t7 * t265;
-        let t267: f64 = t94 * t266;
-        let t268: f64 = t11 * t267;
-        let t269: f64 = t13 * t268;
-        let t270: f64 = t269 * t251;
-        let t271: f64 = t9 * t105;
-        let t272: f64 = t7 * t271;
-        let t273: f64 = t112 * t272;
-        let t274: f64 = t11 * t273;
-        let t275: f64 = t13 * t274;
-        let t276: f64 = t275 * t251;
-        let t277: f64 = t9 * t123;
-        let t278: f64 = t7 * t277;
-        let t279: f64 = t129 * t278;
-        let t280: f64 = t11 * t279;
-        let t281: f64 = t13 * t280;
-        let t282: f64 = t281 * t251;
-        let t283: f64 = t9 * t140;
-        let t284: f64 = t7 * t283;
-        let t285: f64 = t146 * t284;
-        let t286: f64 = t11 * t285;
-        let t287: f64 = t13 * t286;
-        let t288: f64 = t287 * t251;
-        let t289: f64 = t9 * t157;
-        let t290: f64 = t7 * t289;
-        let t291: f64 = t163 * t290;
-        let t292: f64 = t11 * t291;
-        let t293: f64 = t13 * t292;
-        let t294: f64 = t293 * t251;
-        let t295: f64 = t9 * t174;
-        let t296: f64 = t7 * t295;
-        let t297: f64 = t181 * t296;
-        let t298: f64 = t11 * t297;
-        let t299: f64 = t13 * t298;
-        let t300: f64 = t299 * t251;
-        let t301: f64 = t253 - t258;
-        let t302: f64 = t301 - t264;
-        let t303: f64 = t302 - t270;
-        let t304: f64 = t303 - t276;
-        let t305: f64 = t304 - t282;
-        let t306: f64 = t305 - t288;
-        let t307: f64 = t306 - t294;
-        let t308: f64 = t307 - t300;
-        let t315: f64 = t13 * t50;
-        let t316: f64 = t35 * t53;
-        let t317: f64 = t35 * t55;
-        let t318: f64 = t316 - t317;
-        let t319: f64 = t9 * t318;
-        let t320: f64 = t11 * t319;
-        let t321: f64 = t13 * t320;
-        let t322: f64 = t321 * t16;
-        let t323: f64 = t315 + t322;
-        let t324: f64 = t26 * t51;
-        let t325: f64 = t13 * t34;
-        let t326: f64 = -t325;
-        let t327: f64 = t13 * t43;
-        let t328: f64 = t326 - t327;
-        let t329: f64 = t9 * t328;
-        let t330: f64 = t11 * t329;
-        let t331: f64 = t13 * t330;
-        let t332: f64 = t331 * t16;
-        let t333: f64 = t35 * t70;
-        let t334: f64 = t332 + t333;
-        let t335: f64 = t334 - t324;
-        let t336: f64 = t19 * t335;
-        let t337: f64 = t323 + t336;
-        let t338: f64 = t64 + t337;
-        let t339: f64 = t50 * t73;
-        let t340: f64 = t53 * t75;
-        let t341: f64 = t55 * t75;
-        let t342: f64 = t341 - t340;
-        let t343: f64 = t9 * t342;
-        let t344: f64 = t11 * t343;
-        let t345: f64 = t13 * t344;
-        let t346: f64 = t345 * t16;
-        let t347: f64 = t51 * t64;
-        let t348: f64 = t346 - t347;
-        let t349: f64 = t348 - t339;
-        let t350: f64 = t72 * t349;
-        let t351: f64 = t338 + t350;
-        let t352: f64 = t26 * t89;
-        let t353: f64 = t34 * t91;
-        let t354: f64 = t43 * t91;
-        let t355: f64 = t353 + t354;
-        let t356: f64 = t9 * t355;
-        let t357: f64 = t11 * t356;
-        let t358: f64 = t13 * t357;
-        let t359: f64 = t358 * t16;
-        let t360: f64 = t352 + t359;
-        let t361: f64 = t70 * t100;
-        let t362: f64 = t360 - t361;
-        let t363: f64 = t88 * t362;
-        let t364: f64 = t351 + t363;
-        let t365: f64 = t50 * t106;
-        let t366: f64 = t53 * t108;
-        let t367: f64 = t55 * t108;
-        let t368: f64 = t366 - t367;
-        let t369: f64 = t9 * t368;
-        let t370: f64 = t11 * t369;
-        let t371: f64 = t13 * t370;
-        let t372: f64 = t371 * t16;
-        let t373: f64 = t365 + t372;
-        let t374: f64 = t64 * t117;
-        let t375: f64 = t373 + t374;
-        let t376: f64 = t105 * t375;
-        let t377: f64 = t364 + t376;
-        let t378: f64 = t26 * t124;
-        let t379: f64 = t34 * t126;
-        let t380: f64 = -t379;
-        let t381: f64 = t43 * t126;
-        let t382: f64 = t380 - t381;
-        let t383: f64 = t9 * t382;
-        let t384: f64 = t11 * t383;
-        let t385: f64 = t13 * t384;
-        let t386: f64 = t385 * t16;
-        let t387: f64 = t70 * t134;
-        let t388: f64 = t386 + t387;
-        let t389: f64 = t388 - t378;
-        let t390: f64 = t123 * t389;
-        let t391: f64 = t377 + t390;
-        let t392: f64 = t50 * t141;
-        let t393: f64 = t53 * t143;
-        let t394: f64 = t55 * t143;
-        let t395: f64 = t394 - t393;
-        let t396: f64 = t9 * t395;
-        let t397: f64 = t11 * t396;
-        let t398: f64 = t13 * t397;
-        let t399: f64 = t398 * t16;
-        let t400: f64 = t64 * t152;
-        let t401: f64 = t399 - t400;
-        let t402: f64 = t401 - t392;
-        let t403: f64 = t140 * t402;
-        let t404: f64 = t391 + t403;
-        let t405: f64 = t26 * t158;
-        let t406: f64 = t34 * t160;
-        let t407: f64 = t43 * t160;
-        let t408: f64 = t406 + t407;
-        let t409: f64 = t9 * t408;
-        let t410: f64 = t11 * t409;
-        let t411: f64 = t13 * t410;
-        let t412: f64 = t411 * t16;
-        let t413: f64 = t405 + t412;
-        let t414: f64 = t70 * t169;
-        let t415: f64 = t413 - t414;
-        let t416: f64 = t157 * t415;
-        let t417: f64 = t404 + t416;
-        let t418: f64 = t50 * t175;
-        let t419: f64 = t53 * t177;
-        let t420: f64 = t55 * t177;
-        let t421: f64 = t419 - t420;
-        let t422: f64 = t9 * t421;
-        let t423: f64 = t11 * t422;
-        let t424: f64 = t13 * t423;
-        let t425: f64 = t424 * t16;
-        let t426: f64 = t418 + t425;
-        let t427: f64 = t64 * t186;
-        let t428: f64 = t426 + t427;
-        let t429: f64 = t174 * t428;
-        let t430: f64 = t417 + t429;
-        let t443: f64 = t247 * t328;
-        let t444: f64 = t11 * t443;
-        let t445: f64 = t13 * t444;
-        let t446: f64 = t445 * t251;
-        let t447: f64 = -t446;
-        let t448: f64 = t254 * t318;
-        let t449: f64 = t11 * t448;
-        let t450: f64 = t13 * t449;
-        let t451: f64 = t450 * t251;
-        let t452: f64 = t260 * t342;
-        let t453: f64 = t11 * t452;
-        let t454: f64 = t13 * t453;
-        let t455: f64 = t454 * t251;
-        let t456: f64 = t266 * t355;
-        let t457: f64 = t11 * t456;
-        let t458: f64 = t13 * t457;
-        let t459: f64 = t458 * t251;
-        let t460: f64 = t272 * t368;
-        let t461: f64 = t11 * t460;
-        let t462: f64 = t13 * t461;
-        let t463: f64 = t462 * t251;
-        let t464: f64 = t278 * t382;
-        let t465: f64 = t11 * t464;
-        let t466: f64 = t13 * t465;
-        let t467: f64 = t466 * t251;
-        let t468: f64 = t284 * t395;
-        let t469: f64 = t11 * t468;
-        let t470: f64 = t13 * t469;
-        let t471: f64 = t470 * t251;
-        let t472: f64 = t290 * t408;
-        let t473: f64 = t11 * t472;
-        let t474: f64 = t13 * t473;
-        let t475: f64 = t474 * t251;
-        let t476: f64 = t296 * t421;
-        let t477: f64 = t11 * t476;
-        let t478: f64 = t13 * t477;
-        let t479: f64 = t478 * t251;
-        let t480: f64 = t447 - t451;
-        let t481: f64 = t480 - t455;
-        let t482: f64 = t481 - t459;
-        let t483: f64 = t482 - t463;
-        let t484: f64 = t483 - t467;
-        let t485: f64 = t484 - t471;
-        let t486: f64 = t485 - t475;
-        let t487: f64 = t486 - t479;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = u[2usize];
+    let t4: crate::Real = w[0usize];
+    let t5: crate::Real = w[1usize];
+    let t6: crate::Real = w[2usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = t1 + t2;
+    let t11: crate::Real = t10 - t3;
+    let t12: crate::Real = t7 * t11;
+    let t13: crate::Real = 0.3333333333333333;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = 1.0;
+    let t16: crate::Real = t15 / t8;
+    let t17: crate::Real = t14 * t16;
+    let t18: crate::Real = t6 + t17;
+    let t19: crate::Real = t9 * t18;
+    let t20: crate::Real = 2.0;
+    let t21: crate::Real = t1 * t20;
+    let t22: crate::Real = t2 - t3;
+    let t23: crate::Real = t22 - t21;
+    let t24: crate::Real = crate::math::sin(t0);
+    let t25: crate::Real = t9 * t23;
+    let t28: crate::Real = crate::math::sqrt(t13);
+    let t29: crate::Real = t2 + t3;
+    let t30: crate::Real = t7 * t28;
+    let t31: crate::Real = t29 * t30;
+    let t32: crate::Real = t4 + t31;
+    let t33: crate::Real = t9 * t32;
+    let t38: crate::Real = t7 * t23;
+    let t39: crate::Real = t13 * t38;
+    let t40: crate::Real = t5 + t39;
+    let t41: crate::Real = crate::math::cos(t0);
+    let t42: crate::Real = t9 * t40;
+    let t62: crate::Real = t9 * t28;
+    let t63: crate::Real = t29 * t62;
+    let t72: crate::Real = t19 * t19;
+    let t245: crate::Real = t8 * t8;
+    let t251: crate::Real = t15 / t245;
+    let t254: crate::Real = t7 * t9;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t19)
+        < crate::math::series_switch(0.05)
+    {
+        let t26: crate::Real = t24 * t25;
+        let t27: crate::Real = t13 * t26;
+        let t34: crate::Real = t24 * t33;
+        let t35: crate::Real = 0.5;
+        let t36: crate::Real = t34 * t35;
+        let t37: crate::Real = -t36;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t35 * t43;
+        let t45: crate::Real = t37 - t44;
+        let t46: crate::Real = t9 * t45;
+        let t47: crate::Real = t11 * t46;
+        let t48: crate::Real = t13 * t47;
+        let t49: crate::Real = t48 * t16;
+        let t50: crate::Real = t25 * t41;
+        let t51: crate::Real = 0.16666666666666666;
+        let t52: crate::Real = t50 * t51;
+        let t53: crate::Real = t33 * t41;
+        let t54: crate::Real = t13 * t53;
+        let t55: crate::Real = t24 * t42;
+        let t56: crate::Real = t13 * t55;
+        let t57: crate::Real = t56 - t54;
+        let t58: crate::Real = t9 * t57;
+        let t59: crate::Real = t11 * t58;
+        let t60: crate::Real = t13 * t59;
+        let t61: crate::Real = t60 * t16;
+        let t64: crate::Real = t24 * t63;
+        let t65: crate::Real = t35 * t64;
+        let t66: crate::Real = t61 - t65;
+        let t67: crate::Real = t66 - t52;
+        let t68: crate::Real = t19 * t67;
+        let t69: crate::Real = t49 + t68;
+        let t70: crate::Real = t41 * t63;
+        let t71: crate::Real = t69 + t70;
+        let t73: crate::Real = 0.05555555555555555;
+        let t74: crate::Real = t26 * t73;
+        let t75: crate::Real = 0.125;
+        let t76: crate::Real = t34 * t75;
+        let t77: crate::Real = t43 * t75;
+        let t78: crate::Real = t76 + t77;
+        let t79: crate::Real = t9 * t78;
+        let t80: crate::Real = t11 * t79;
+        let t81: crate::Real = t13 * t80;
+        let t82: crate::Real = t81 * t16;
+        let t83: crate::Real = t74 + t82;
+        let t84: crate::Real = t51 * t70;
+        let t85: crate::Real = t83 - t84;
+        let t86: crate::Real = t72 * t85;
+        let t87: crate::Real = t71 + t86;
+        let t88: crate::Real = t19 * t72;
+        let t89: crate::Real = 0.013888888888888888;
+        let t90: crate::Real = t50 * t89;
+        let t91: crate::Real = 0.03333333333333333;
+        let t92: crate::Real = t53 * t91;
+        let t93: crate::Real = t55 * t91;
+        let t94: crate::Real = t92 - t93;
+        let t95: crate::Real = t9 * t94;
+        let t96: crate::Real = t11 * t95;
+        let t97: crate::Real = t13 * t96;
+        let t98: crate::Real = t97 * t16;
+        let t99: crate::Real = t90 + t98;
+        let t100: crate::Real = 0.041666666666666664;
+        let t101: crate::Real = t64 * t100;
+        let t102: crate::Real = t99 + t101;
+        let t103: crate::Real = t88 * t102;
+        let t104: crate::Real = t87 + t103;
+        let t105: crate::Real = t72 * t72;
+        let t106: crate::Real = 0.002777777777777778;
+        let t107: crate::Real = t26 * t106;
+        let t108: crate::Real = 0.006944444444444444;
+        let t109: crate::Real = t34 * t108;
+        let t110: crate::Real = -t109;
+        let t111: crate::Real = t43 * t108;
+        let t112: crate::Real = t110 - t111;
+        let t113: crate::Real = t9 * t112;
+        let t114: crate::Real = t11 * t113;
+        let t115: crate::Real = t13 * t114;
+        let t116: crate::Real = t115 * t16;
+        let t117: crate::Real = 0.008333333333333333;
+        let t118: crate::Real = t70 * t117;
+        let t119: crate::Real = t116 + t118;
+        let t120: crate::Real = t119 - t107;
+        let t121: crate::Real = t105 * t120;
+        let t122: crate::Real = t104 + t121;
+        let t123: crate::Real = t19 * t105;
+        let t124: crate::Real = 0.000462962962962963;
+        let t125: crate::Real = t50 * t124;
+        let t126: crate::Real = 0.0011904761904761906;
+        let t127: crate::Real = t53 * t126;
+        let t128: crate::Real = t55 * t126;
+        let t129: crate::Real = t128 - t127;
+        let t130: crate::Real = t9 * t129;
+        let t131: crate::Real = t11 * t130;
+        let t132: crate::Real = t13 * t131;
+        let t133: crate::Real = t132 * t16;
+        let t134: crate::Real = 0.001388888888888889;
+        let t135: crate::Real = t64 * t134;
+        let t136: crate::Real = t133 - t135;
+        let t137: crate::Real = t136 - t125;
+        let t138: crate::Real = t123 * t137;
+        let t139: crate::Real = t122 + t138;
+        let t140: crate::Real = t88 * t88;
+        let t141: crate::Real = 0.00006613756613756614;
+        let t142: crate::Real = t26 * t141;
+        let t143: crate::Real = 0.00017361111111111112;
+        let t144: crate::Real = t34 * t143;
+        let t145: crate::Real = t43 * t143;
+        let t146: crate::Real = t144 + t145;
+        let t147: crate::Real = t9 * t146;
+        let t148: crate::Real = t11 * t147;
+        let t149: crate::Real = t13 * t148;
+        let t150: crate::Real = t149 * t16;
+        let t151: crate::Real = t142 + t150;
+        let t152: crate::Real = 0.0001984126984126984;
+        let t153: crate::Real = t70 * t152;
+        let t154: crate::Real = t151 - t153;
+        let t155: crate::Real = t140 * t154;
+        let t156: crate::Real = t139 + t155;
+        let t157: crate::Real = t19 * t140;
+        let t158: crate::Real = 0.000008267195767195768;
+        let t159: crate::Real = t50 * t158;
+        let t160: crate::Real = 0.000022045855379188714;
+        let t161: crate::Real = t53 * t160;
+        let t162: crate::Real = t55 * t160;
+        let t163: crate::Real = t161 - t162;
+        let t164: crate::Real = t9 * t163;
+        let t165: crate::Real = t11 * t164;
+        let t166: crate::Real = t13 * t165;
+        let t167: crate::Real = t166 * t16;
+        let t168: crate::Real = t159 + t167;
+        let t169: crate::Real = 0.0000248015873015873;
+        let t170: crate::Real = t64 * t169;
+        let t171: crate::Real = t168 + t170;
+        let t172: crate::Real = t157 * t171;
+        let t173: crate::Real = t156 + t172;
+        let t174: crate::Real = t105 * t105;
+        let t175: crate::Real = 0.0000009185773074661964;
+        let t176: crate::Real = t26 * t175;
+        let t177: crate::Real = 0.00000248015873015873;
+        let t178: crate::Real = t34 * t177;
+        let t179: crate::Real = -t178;
+        let t180: crate::Real = t43 * t177;
+        let t181: crate::Real = t179 - t180;
+        let t182: crate::Real = t9 * t181;
+        let t183: crate::Real = t11 * t182;
+        let t184: crate::Real = t13 * t183;
+        let t185: crate::Real = t184 * t16;
+        let t186: crate::Real = 0.0000027557319223985893;
+        let t187: crate::Real = t70 * t186;
+        let t188: crate::Real = t185 + t187;
+        let t189: crate::Real = t188 - t176;
+        let t190: crate::Real = t174 * t189;
+        let t191: crate::Real = t173 + t190;
+        let t192: crate::Real = t191 - t27;
+        let t246: crate::Real = t9 * t19;
+        let t247: crate::Real = t7 * t246;
+        let t248: crate::Real = t57 * t247;
+        let t249: crate::Real = t11 * t248;
+        let t250: crate::Real = t13 * t249;
+        let t252: crate::Real = t250 * t251;
+        let t253: crate::Real = -t252;
+        let t255: crate::Real = t45 * t254;
+        let t256: crate::Real = t11 * t255;
+        let t257: crate::Real = t13 * t256;
+        let t258: crate::Real = t257 * t251;
+        let t259: crate::Real = t9 * t72;
+        let t260: crate::Real = t7 * t259;
+        let t261: crate::Real = t78 * t260;
+        let t262: crate::Real = t11 * t261;
+        let t263: crate::Real = t13 * t262;
+        let t264: crate::Real = t263 * t251;
+        let t265: crate::Real = t9 * t88;
+        let t266: crate::Real = t7 * t265;
+        let t267: crate::Real = t94 * t266;
+        let t268: crate::Real = t11 * t267;
+        let t269: crate::Real = t13 * t268;
+        let t270: crate::Real = t269 * t251;
+        let t271: crate::Real = t9 * t105;
+        let t272: crate::Real = t7 * t271;
+        let t273: crate::Real = t112 * t272;
+        let t274: crate::Real = t11 * t273;
+        let t275: crate::Real = t13 * t274;
+        let t276: crate::Real = t275 * t251;
+        let t277: crate::Real = t9 * t123;
+        let t278: crate::Real = t7 * t277;
+        let t279: crate::Real = t129 * t278;
+        let t280: crate::Real = t11 * t279;
+        let t281: crate::Real = t13 * t280;
+        let t282: crate::Real = t281 * t251;
+        let t283: crate::Real = t9 * t140;
+        let t284: crate::Real = t7 * t283;
+        let t285: crate::Real = t146 * t284;
+        let t286: crate::Real = t11 * t285;
+        let t287: crate::Real = t13 * t286;
+        let t288: crate::Real = t287 * t251;
+        let t289: crate::Real = t9 * t157;
+        let t290: crate::Real = t7 * t289;
+        let t291: crate::Real = t163 * t290;
+        let t292: crate::Real = t11 * t291;
+        let t293: crate::Real = t13 * t292;
+        let t294: crate::Real = t293 * t251;
+        let t295: crate::Real = t9 * t174;
+        let t296: crate::Real = t7 * t295;
+        let t297: crate::Real = t181 * t296;
+        let t298: crate::Real = t11 * t297;
+        let t299: crate::Real = t13 * t298;
+        let t300: crate::Real = t299 * t251;
+        let t301: crate::Real = t253 - t258;
+        let t302: crate::Real = t301 - t264;
+        let t303: crate::Real = t302 - t270;
+        let t304: crate::Real = t303 - t276;
+        let t305: crate::Real = t304 - t282;
+        let t306: crate::Real = t305 - t288;
+        let t307: crate::Real = t306 - t294;
+        let t308: crate::Real = t307 - t300;
+        let t315: crate::Real = t13 * t50;
+        let t316: crate::Real = t35 * t53;
+        let t317: crate::Real = t35 * t55;
+        let t318: crate::Real = t316 - t317;
+        let t319: crate::Real = t9 * t318;
+        let t320: crate::Real = t11 * t319;
+        let t321: crate::Real = t13 * t320;
+        let t322: crate::Real = t321 * t16;
+        let t323: crate::Real = t315 + t322;
+        let t324: crate::Real = t26 * t51;
+        let t325: crate::Real = t13 * t34;
+        let t326: crate::Real = -t325;
+        let t327: crate::Real = t13 * t43;
+        let t328: crate::Real = t326 - t327;
+        let t329: crate::Real = t9 * t328;
+        let t330: crate::Real = t11 * t329;
+        let t331: crate::Real = t13 * t330;
+        let t332: crate::Real = t331 * t16;
+        let t333: crate::Real = t35 * t70;
+        let t334: crate::Real = t332 + t333;
+        let t335: crate::Real = t334 - t324;
+        let t336: crate::Real = t19 * t335;
+        let t337: crate::Real = t323 + t336;
+        let t338: crate::Real = t64 + t337;
+        let t339: crate::Real = t50 * t73;
+        let t340: crate::Real = t53 * t75;
+        let t341: crate::Real = t55 * t75;
+        let t342: crate::Real = t341 - t340;
+        let t343: crate::Real = t9 * t342;
+        let t344: crate::Real = t11 * t343;
+        let t345: crate::Real = t13 * t344;
+        let t346: crate::Real = t345 * t16;
+        let t347: crate::Real = t51 * t64;
+        let t348: crate::Real = t346 - t347;
+        let t349: crate::Real = t348 - t339;
+        let t350: crate::Real = t72 * t349;
+        let t351: crate::Real = t338 + t350;
+        let t352: crate::Real = t26 * t89;
+        let t353: crate::Real = t34 * t91;
+        let t354: crate::Real = t43 * t91;
+        let t355: crate::Real = t353 + t354;
+        let t356: crate::Real = t9 * t355;
+        let t357: crate::Real = t11 * t356;
+        let t358: crate::Real = t13 * t357;
+        let t359: crate::Real = t358 * t16;
+        let t360: crate::Real = t352 + t359;
+        let t361: crate::Real = t70 * t100;
+        let t362: crate::Real = t360 - t361;
+        let t363: crate::Real = t88 * t362;
+        let t364: crate::Real = t351 + t363;
+        let t365: crate::Real = t50 * t106;
+        let t366: crate::Real = t53 * t108;
+        let t367: crate::Real = t55 * t108;
+        let t368: crate::Real = t366 - t367;
+        let t369: crate::Real = t9 * t368;
+        let t370: crate::Real = t11 * t369;
+        let t371: crate::Real = t13 * t370;
+        let t372: crate::Real = t371 * t16;
+        let t373: crate::Real = t365 + t372;
+        let t374: crate::Real = t64 * t117;
+        let t375: crate::Real = t373 + t374;
+        let t376: crate::Real = t105 * t375;
+        let t377: crate::Real = t364 + t376;
+        let t378: crate::Real = t26 * t124;
+        let t379: crate::Real = t34 * t126;
+        let t380: crate::Real = -t379;
+        let t381: crate::Real = t43 * t126;
+        let t382: crate::Real = t380 - t381;
+        let t383: crate::Real = t9 * t382;
+        let t384: crate::Real = t11 * t383;
+        let t385: crate::Real = t13 * t384;
+        let t386: crate::Real = t385 * t16;
+        let t387: crate::Real = t70 * t134;
+        let t388: crate::Real = t386 + t387;
+        let t389: crate::Real = t388 - t378;
+        let t390: crate::Real = t123 * t389;
+        let t391: crate::Real = t377 + t390;
+        let t392: crate::Real = t50 * t141;
+        let t393: crate::Real = t53 * t143;
+        let t394: crate::Real = t55 * t143;
+        let t395: crate::Real = t394 - t393;
+        let t396: crate::Real = t9 * t395;
+        let t397: crate::Real = t11 * t396;
+        let t398: crate::Real = t13 * t397;
+        let t399: crate::Real = t398 * t16;
+        let t400: crate::Real = t64 * t152;
+        let t401: crate::Real = t399 - t400;
+        let t402: crate::Real = t401 - t392;
+        let t403: crate::Real = t140 * t402;
+        let t404: crate::Real = t391 + t403;
+        let t405: crate::Real = t26 * t158;
+        let t406: crate::Real = t34 * t160;
+        let t407: crate::Real = t43 * t160;
+        let t408: crate::Real = t406 + t407;
+        let t409: crate::Real = t9 * t408;
+        let t410: crate::Real = t11 * t409;
+        let t411: crate::Real = t13 * t410;
+        let t412: crate::Real = t411 * t16;
+        let t413: crate::Real = t405 + t412;
+        let t414: crate::Real = t70 * t169;
+        let t415: crate::Real = t413 - t414;
+        let t416: crate::Real = t157 * t415;
+        let t417: crate::Real = t404 + t416;
+        let t418: crate::Real = t50 * t175;
+        let t419: crate::Real = t53 * t177;
+        let t420: crate::Real = t55 * t177;
+        let t421: crate::Real = t419 - t420;
+        let t422: crate::Real = t9 * t421;
+        let t423: crate::Real = t11 * t422;
+        let t424: crate::Real = t13 * t423;
+        let t425: crate::Real = t424 * t16;
+        let t426: crate::Real = t418 + t425;
+        let t427: crate::Real = t64 * t186;
+        let t428: crate::Real = t426 + t427;
+        let t429: crate::Real = t174 * t428;
+        let t430: crate::Real = t417 + t429;
+        let t443: crate::Real = t247 * t328;
+        let t444: crate::Real = t11 * t443;
+        let t445: crate::Real = t13 * t444;
+        let t446: crate::Real = t445 * t251;
+        let t447: crate::Real = -t446;
+        let t448: crate::Real = t254 * t318;
+        let t449: crate::Real = t11 * t448;
+        let t450: crate::Real = t13 * t449;
+        let t451: crate::Real = t450 * t251;
+        let t452: crate::Real = t260 * t342;
+        let t453: crate::Real = t11 * t452;
+        let t454: crate::Real = t13 * t453;
+        let t455: crate::Real = t454 * t251;
+        let t456: crate::Real = t266 * t355;
+        let t457: crate::Real = t11 * t456;
+        let t458: crate::Real = t13 * t457;
+        let t459: crate::Real = t458 * t251;
+        let t460: crate::Real = t272 * t368;
+        let t461: crate::Real = t11 * t460;
+        let t462: crate::Real = t13 * t461;
+        let t463: crate::Real = t462 * t251;
+        let t464: crate::Real = t278 * t382;
+        let t465: crate::Real = t11 * t464;
+        let t466: crate::Real = t13 * t465;
+        let t467: crate::Real = t466 * t251;
+        let t468: crate::Real = t284 * t395;
+        let t469: crate::Real = t11 * t468;
+        let t470: crate::Real = t13 * t469;
+        let t471: crate::Real = t470 * t251;
+        let t472: crate::Real = t290 * t408;
+        let t473: crate::Real = t11 * t472;
+        let t474: crate::Real = t13 * t473;
+        let t475: crate::Real = t474 * t251;
+        let t476: crate::Real = t296 * t421;
+        let t477: crate::Real = t11 * t476;
+        let t478: crate::Real = t13 * t477;
+        let t479: crate::Real = t478 * t251;
+        let t480: crate::Real = t447 - t451;
+        let t481: crate::Real = t480 - t455;
+        let t482: crate::Real = t481 - t459;
+        let t483: crate::Real = t482 - t463;
+        let t484: crate::Real = t483 - t467;
+        let t485: crate::Real = t484 - t471;
+        let t486: crate::Real = t485 - t475;
+        let t487: crate::Real = t486 - t479;
         [t192, t308, t430, t487]
     } else {
-        let t193: f64 = libm::sin(t19);
-        let t194: f64 = t33 * t193;
-        let t195: f64 = t15 / t19;
-        let t196: f64 = t194 * t195;
-        let t197: f64 = libm::cos(t19);
-        let t198: f64 = t42 * t197;
-        let t199: f64 = t198 * t195;
-        let t200: f64 = t196 + t199;
-        let t201: f64 = 1f64;
-        let t202: f64 = t201 - t197;
-        let t203: f64 = t9 * t202;
-        let t204: f64 = t32 * t203;
-        let t205: f64 = t15 / t72;
-        let t206: f64 = t204 * t205;
-        let t207: f64 = t200 - t206;
-        let t208: f64 = t42 * t193;
-        let t209: f64 = t208 * t205;
-        let t210: f64 = t207 - t209;
-        let t211: f64 = t24 * t210;
-        let t212: f64 = t33 * t197;
-        let t213: f64 = t212 * t195;
-        let t214: f64 = t208 * t195;
-        let t215: f64 = t213 - t214;
-        let t216: f64 = t40 * t203;
-        let t217: f64 = t216 * t205;
-        let t218: f64 = t215 + t217;
-        let t219: f64 = t194 * t205;
-        let t220: f64 = t218 - t219;
-        let t221: f64 = t41 * t220;
-        let t222: f64 = t221 - t211;
-        let t223: f64 = t9 * t222;
-        let t224: f64 = t11 * t223;
-        let t225: f64 = t13 * t224;
-        let t226: f64 = t225 * t16;
-        let t227: f64 = t25 * t193;
-        let t228: f64 = t13 * t227;
-        let t229: f64 = t228 * t195;
-        let t230: f64 = t62 * t202;
-        let t231: f64 = t29 * t230;
-        let t232: f64 = t231 * t195;
-        let t233: f64 = t229 + t232;
-        let t234: f64 = t24 * t233;
-        let t235: f64 = t226 - t234;
-        let t236: f64 = t23 * t203;
-        let t237: f64 = t13 * t236;
-        let t238: f64 = t237 * t195;
-        let t239: f64 = t63 * t193;
-        let t240: f64 = t239 * t195;
-        let t241: f64 = t240 - t238;
-        let t242: f64 = t41 * t241;
-        let t243: f64 = t235 + t242;
-        let t309: f64 = t222 * t254;
-        let t310: f64 = t11 * t309;
-        let t311: f64 = t13 * t310;
-        let t312: f64 = t311 * t251;
-        let t313: f64 = -t312;
-        let t431: f64 = t41 * t210;
-        let t432: f64 = t24 * t220;
-        let t433: f64 = t431 + t432;
-        let t434: f64 = t9 * t433;
-        let t435: f64 = t11 * t434;
-        let t436: f64 = t13 * t435;
-        let t437: f64 = t436 * t16;
-        let t438: f64 = t41 * t233;
-        let t439: f64 = t437 + t438;
-        let t440: f64 = t24 * t241;
-        let t441: f64 = t439 + t440;
-        let t488: f64 = t254 * t433;
-        let t489: f64 = t11 * t488;
-        let t490: f64 = t13 * t489;
-        let t491: f64 = t490 * t251;
-        let t492: f64 = -t491;
+        let t193: crate::Real = crate::math::sin(t19);
+        let t194: crate::Real = t33 * t193;
+        let t195: crate::Real = t15 / t19;
+        let t196: crate::Real = t194 * t195;
+        let t197: crate::Real = crate::math::cos(t19);
+        let t198: crate::Real = t42 * t197;
+        let t199: crate::Real = t198 * t195;
+        let t200: crate::Real = t196 + t199;
+        let t201: crate::Real = 1.0;
+        let t202: crate::Real = t201 - t197;
+        let t203: crate::Real = t9 * t202;
+        let t204: crate::Real = t32 * t203;
+        let t205: crate::Real = t15 / t72;
+        let t206: crate::Real = t204 * t205;
+        let t207: crate::Real = t200 - t206;
+        let t208: crate::Real = t42 * t193;
+        let t209: crate::Real = t208 * t205;
+        let t210: crate::Real = t207 - t209;
+        let t211: crate::Real = t24 * t210;
+        let t212: crate::Real = t33 * t197;
+        let t213: crate::Real = t212 * t195;
+        let t214: crate::Real = t208 * t195;
+        let t215: crate::Real = t213 - t214;
+        let t216: crate::Real = t40 * t203;
+        let t217: crate::Real = t216 * t205;
+        let t218: crate::Real = t215 + t217;
+        let t219: crate::Real = t194 * t205;
+        let t220: crate::Real = t218 - t219;
+        let t221: crate::Real = t41 * t220;
+        let t222: crate::Real = t221 - t211;
+        let t223: crate::Real = t9 * t222;
+        let t224: crate::Real = t11 * t223;
+        let t225: crate::Real = t13 * t224;
+        let t226: crate::Real = t225 * t16;
+        let t227: crate::Real = t25 * t193;
+        let t228: crate::Real = t13 * t227;
+        let t229: crate::Real = t228 * t195;
+        let t230: crate::Real = t62 * t202;
+        let t231: crate::Real = t29 * t230;
+        let t232: crate::Real = t231 * t195;
+        let t233: crate::Real = t229 + t232;
+        let t234: crate::Real = t24 * t233;
+        let t235: crate::Real = t226 - t234;
+        let t236: crate::Real = t23 * t203;
+        let t237: crate::Real = t13 * t236;
+        let t238: crate::Real = t237 * t195;
+        let t239: crate::Real = t63 * t193;
+        let t240: crate::Real = t239 * t195;
+        let t241: crate::Real = t240 - t238;
+        let t242: crate::Real = t41 * t241;
+        let t243: crate::Real = t235 + t242;
+        let t309: crate::Real = t222 * t254;
+        let t310: crate::Real = t11 * t309;
+        let t311: crate::Real = t13 * t310;
+        let t312: crate::Real = t311 * t251;
+        let t313: crate::Real = -t312;
+        let t431: crate::Real = t41 * t210;
+        let t432: crate::Real = t24 * t220;
+        let t433: crate::Real = t431 + t432;
+        let t434: crate::Real = t9 * t433;
+        let t435: crate::Real = t11 * t434;
+        let t436: crate::Real = t13 * t435;
+        let t437: crate::Real = t436 * t16;
+        let t438: crate::Real = t41 * t233;
+        let t439: crate::Real = t437 + t438;
+        let t440: crate::Real = t24 * t241;
+        let t441: crate::Real = t439 + t440;
+        let t488: crate::Real = t254 * t433;
+        let t489: crate::Real = t11 * t488;
+        let t490: crate::Real = t13 * t489;
+        let t491: crate::Real = t490 * t251;
+        let t492: crate::Real = -t491;
         [t243, t313, t441, t492]
     };
-    let t244: f64 = g0[0usize];
-    let t314: f64 = g0[1usize];
-    let t442: f64 = g0[2usize];
-    let t493: f64 = g0[3usize];
-    let t494: f64 = t9 * t11;
-    let t495: f64 = t13 * t494;
-    let t496: f64 = t495 * t16;
-    let t497: f64 = t11 * t254;
-    let t498: f64 = t13 * t497;
-    let t499: f64 = t498 * t251;
-    let t500: f64 = -t499;
+    let t244: crate::Real = g0[0usize];
+    let t314: crate::Real = g0[1usize];
+    let t442: crate::Real = g0[2usize];
+    let t493: crate::Real = g0[3usize];
+    let t494: crate::Real = t9 * t11;
+    let t495: crate::Real = t13 * t494;
+    let t496: crate::Real = t495 * t16;
+    let t497: crate::Real = t11 * t254;
+    let t498: crate::Real = t13 * t497;
+    let t499: crate::Real = t498 * t251;
+    let t500: crate::Real = -t499;
     [[t244, t314], [t442, t493], [t496, t500]]
 }
 /**Gyro yaw rate (seed 000 eq. 13). Predicted columns: gyro_z.
@@ -2147,21 +2160,21 @@ pub fn step_exact_jac_p(
 5 arithmetic operations (5 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-) -> [f64; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = u[2usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = t0 + t1;
-    let t6: f64 = t5 - t2;
-    let t7: f64 = t3 * t6;
-    let t8: f64 = 0.3333333333333333f64;
-    let t9: f64 = t7 * t8;
-    let t10: f64 = t9 / t4;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = u[2usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = t0 + t1;
+    let t6: crate::Real = t5 - t2;
+    let t7: crate::Real = t3 * t6;
+    let t8: crate::Real = 0.3333333333333333;
+    let t9: crate::Real = t7 * t8;
+    let t10: crate::Real = t9 / t4;
     [t10]
 }
 /**Jacobian of `obs_gyro` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -2174,11 +2187,11 @@ pub fn obs_gyro(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-) -> [[f64; 3usize]; 1usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 1usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0, t0]]
 }
 /**Jacobian of `obs_gyro` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -2191,25 +2204,25 @@ pub fn obs_gyro_jac_x(
 9 arithmetic operations (11 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-) -> [[f64; 2usize]; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = u[2usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = t0 + t1;
-    let t6: f64 = t5 - t2;
-    let t7: f64 = 0.3333333333333333f64;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = t8 / t4;
-    let t10: f64 = t4 * t4;
-    let t11: f64 = t3 * t6;
-    let t12: f64 = t7 * t11;
-    let t13: f64 = t12 / t10;
-    let t14: f64 = -t13;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [[crate::Real; 2usize]; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = u[2usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = t0 + t1;
+    let t6: crate::Real = t5 - t2;
+    let t7: crate::Real = 0.3333333333333333;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = t8 / t4;
+    let t10: crate::Real = t4 * t4;
+    let t11: crate::Real = t3 * t6;
+    let t12: crate::Real = t7 * t11;
+    let t13: crate::Real = t12 / t10;
+    let t14: crate::Real = -t13;
     [[t9, t14]]
 }
 /**Range and bearing to a known landmark (seed 001 eq. 6). Predicted columns: range, bearing.
@@ -2223,24 +2236,24 @@ pub fn obs_gyro_jac_p(
 8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
     [t10, t12]
 }
 /**Jacobian of `obs_landmark` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -2254,33 +2267,33 @@ pub fn obs_landmark(
 15 arithmetic operations (45 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 3usize]; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = lm[0usize];
-    let t3: f64 = lm[1usize];
-    let t4: f64 = t2 - t0;
-    let t5: f64 = t4 * t4;
-    let t6: f64 = t3 - t1;
-    let t7: f64 = t6 * t6;
-    let t8: f64 = t5 + t7;
-    let t9: f64 = libm::sqrt(t8);
-    let t10: f64 = 1f64;
-    let t11: f64 = t10 / t9;
-    let t12: f64 = t4 * t11;
-    let t13: f64 = -t12;
-    let t14: f64 = t6 * t11;
-    let t15: f64 = -t14;
-    let t16: f64 = 0f64;
-    let t17: f64 = t10 / t8;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t4 * t17;
-    let t20: f64 = -t19;
-    let t21: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = lm[0usize];
+    let t3: crate::Real = lm[1usize];
+    let t4: crate::Real = t2 - t0;
+    let t5: crate::Real = t4 * t4;
+    let t6: crate::Real = t3 - t1;
+    let t7: crate::Real = t6 * t6;
+    let t8: crate::Real = t5 + t7;
+    let t9: crate::Real = crate::math::sqrt(t8);
+    let t10: crate::Real = 1.0;
+    let t11: crate::Real = t10 / t9;
+    let t12: crate::Real = t4 * t11;
+    let t13: crate::Real = -t12;
+    let t14: crate::Real = t6 * t11;
+    let t15: crate::Real = -t14;
+    let t16: crate::Real = 0.0;
+    let t17: crate::Real = t10 / t8;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t4 * t17;
+    let t20: crate::Real = -t19;
+    let t21: crate::Real = (-1.0);
     [[t13, t15, t16], [t18, t20, t21]]
 }
 /**Jacobian of `obs_landmark` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -2294,12 +2307,12 @@ pub fn obs_landmark_jac_x(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 2usize]; 2usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 2usize]; 2usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0], [t0, t0]]
 }
 /**Input rates from a body twist: the inverse of the (square, invertible) map from input rates to the twist rows that are not identically zero, derived symbolically (seed 003: W = (V_T_W)^-1 V).
@@ -2310,35 +2323,38 @@ pub fn obs_landmark_jac_p(
 
 19 arithmetic operations (56 before common-subexpression elimination).*/
 #[inline]
-pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 3usize] {
-    let t0: f64 = twist[0usize];
-    let t1: f64 = twist[1usize];
-    let t2: f64 = twist[2usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = 0.3333333333333333f64;
-    let t6: f64 = libm::sqrt(t5);
-    let t7: f64 = 3f64;
-    let t8: f64 = libm::sqrt(t7);
-    let t9: f64 = t6 * t8;
-    let t10: f64 = t1 * t9;
-    let t11: f64 = 1f64;
-    let t12: f64 = t11 / t3;
-    let t13: f64 = t10 * t12;
-    let t14: f64 = t2 * t9;
-    let t15: f64 = t4 * t14;
-    let t16: f64 = t15 * t12;
-    let t17: f64 = t16 - t13;
-    let t18: f64 = t0 * t8;
-    let t19: f64 = 0.5f64;
-    let t20: f64 = t18 * t19;
-    let t21: f64 = t20 * t12;
-    let t22: f64 = t10 * t19;
-    let t23: f64 = t22 * t12;
-    let t24: f64 = t21 + t23;
-    let t25: f64 = t16 + t24;
-    let t26: f64 = t21 - t23;
-    let t27: f64 = t26 - t16;
+pub fn inverse_twist(
+    twist: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = twist[0usize];
+    let t1: crate::Real = twist[1usize];
+    let t2: crate::Real = twist[2usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = 0.3333333333333333;
+    let t6: crate::Real = crate::math::sqrt(t5);
+    let t7: crate::Real = 3.0;
+    let t8: crate::Real = crate::math::sqrt(t7);
+    let t9: crate::Real = t6 * t8;
+    let t10: crate::Real = t1 * t9;
+    let t11: crate::Real = 1.0;
+    let t12: crate::Real = t11 / t3;
+    let t13: crate::Real = t10 * t12;
+    let t14: crate::Real = t2 * t9;
+    let t15: crate::Real = t4 * t14;
+    let t16: crate::Real = t15 * t12;
+    let t17: crate::Real = t16 - t13;
+    let t18: crate::Real = t0 * t8;
+    let t19: crate::Real = 0.5;
+    let t20: crate::Real = t18 * t19;
+    let t21: crate::Real = t20 * t12;
+    let t22: crate::Real = t10 * t19;
+    let t23: crate::Real = t22 * t12;
+    let t24: crate::Real = t21 + t23;
+    let t25: crate::Real = t16 + t24;
+    let t26: crate::Real = t21 - t23;
+    let t27: crate::Real = t26 - t16;
     [t17, t25, t27]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Holonomic: dx, dy and dtheta are all imposed (exact SE(2) logarithm). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
@@ -2351,114 +2367,116 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 3usize] 
 84 arithmetic operations (341 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
-    dpose: &[f64; 3usize],
-    dt: f64,
-    p: &[f64; 2usize],
-) -> [f64; 3usize] {
-    let t0: f64 = dpose[0usize];
-    let t1: f64 = dpose[1usize];
-    let t2: f64 = dpose[2usize];
-    let t3: f64 = dt;
-    let t4: f64 = p[0usize];
-    let t5: f64 = p[1usize];
-    let t6: f64 = 1f64;
-    let t7: f64 = t6 / t3;
-    let t34: f64 = t1 * t2;
-    let t35: f64 = 0.5f64;
-    let t36: f64 = t34 * t35;
-    let t43: f64 = t0 * t2;
-    let t51: f64 = t35 * t43;
-    let g0: [f64; 2usize] = if libm::fabs(t2) < 0.05f64 {
-        let t8: f64 = t0 * t7;
-        let t9: f64 = t2 * t2;
-        let t10: f64 = t0 * t9;
-        let t11: f64 = 0.08333333333333333f64;
-        let t12: f64 = t10 * t11;
-        let t13: f64 = t12 * t7;
-        let t14: f64 = t8 - t13;
-        let t15: f64 = t9 * t9;
-        let t16: f64 = t0 * t15;
-        let t17: f64 = 0.001388888888888889f64;
-        let t18: f64 = t16 * t17;
-        let t19: f64 = t18 * t7;
-        let t20: f64 = t14 - t19;
-        let t21: f64 = t2 * t9;
-        let t22: f64 = t21 * t21;
-        let t23: f64 = t0 * t22;
-        let t24: f64 = 0.00003306878306878307f64;
-        let t25: f64 = t23 * t24;
-        let t26: f64 = t25 * t7;
-        let t27: f64 = t20 - t26;
-        let t28: f64 = t15 * t15;
-        let t29: f64 = t0 * t28;
-        let t30: f64 = 0.0000008267195767195768f64;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t31 * t7;
-        let t33: f64 = t27 - t32;
-        let t37: f64 = t36 * t7;
-        let t38: f64 = t33 + t37;
-        let t52: f64 = t51 * t7;
-        let t53: f64 = t1 * t7;
-        let t54: f64 = t1 * t9;
-        let t55: f64 = t11 * t54;
-        let t56: f64 = t55 * t7;
-        let t57: f64 = t53 - t56;
-        let t58: f64 = t1 * t15;
-        let t59: f64 = t17 * t58;
-        let t60: f64 = t59 * t7;
-        let t61: f64 = t57 - t60;
-        let t62: f64 = t1 * t22;
-        let t63: f64 = t24 * t62;
-        let t64: f64 = t63 * t7;
-        let t65: f64 = t61 - t64;
-        let t66: f64 = t1 * t28;
-        let t67: f64 = t30 * t66;
-        let t68: f64 = t67 * t7;
-        let t69: f64 = t65 - t68;
-        let t70: f64 = t69 - t52;
+    dpose: &[crate::Real; 3usize],
+    dt: crate::Real,
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = dpose[0usize];
+    let t1: crate::Real = dpose[1usize];
+    let t2: crate::Real = dpose[2usize];
+    let t3: crate::Real = dt;
+    let t4: crate::Real = p[0usize];
+    let t5: crate::Real = p[1usize];
+    let t6: crate::Real = 1.0;
+    let t7: crate::Real = t6 / t3;
+    let t34: crate::Real = t1 * t2;
+    let t35: crate::Real = 0.5;
+    let t36: crate::Real = t34 * t35;
+    let t43: crate::Real = t0 * t2;
+    let t51: crate::Real = t35 * t43;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t2)
+        < crate::math::series_switch(0.05)
+    {
+        let t8: crate::Real = t0 * t7;
+        let t9: crate::Real = t2 * t2;
+        let t10: crate::Real = t0 * t9;
+        let t11: crate::Real = 0.08333333333333333;
+        let t12: crate::Real = t10 * t11;
+        let t13: crate::Real = t12 * t7;
+        let t14: crate::Real = t8 - t13;
+        let t15: crate::Real = t9 * t9;
+        let t16: crate::Real = t0 * t15;
+        let t17: crate::Real = 0.001388888888888889;
+        let t18: crate::Real = t16 * t17;
+        let t19: crate::Real = t18 * t7;
+        let t20: crate::Real = t14 - t19;
+        let t21: crate::Real = t2 * t9;
+        let t22: crate::Real = t21 * t21;
+        let t23: crate::Real = t0 * t22;
+        let t24: crate::Real = 0.00003306878306878307;
+        let t25: crate::Real = t23 * t24;
+        let t26: crate::Real = t25 * t7;
+        let t27: crate::Real = t20 - t26;
+        let t28: crate::Real = t15 * t15;
+        let t29: crate::Real = t0 * t28;
+        let t30: crate::Real = 0.0000008267195767195768;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t31 * t7;
+        let t33: crate::Real = t27 - t32;
+        let t37: crate::Real = t36 * t7;
+        let t38: crate::Real = t33 + t37;
+        let t52: crate::Real = t51 * t7;
+        let t53: crate::Real = t1 * t7;
+        let t54: crate::Real = t1 * t9;
+        let t55: crate::Real = t11 * t54;
+        let t56: crate::Real = t55 * t7;
+        let t57: crate::Real = t53 - t56;
+        let t58: crate::Real = t1 * t15;
+        let t59: crate::Real = t17 * t58;
+        let t60: crate::Real = t59 * t7;
+        let t61: crate::Real = t57 - t60;
+        let t62: crate::Real = t1 * t22;
+        let t63: crate::Real = t24 * t62;
+        let t64: crate::Real = t63 * t7;
+        let t65: crate::Real = t61 - t64;
+        let t66: crate::Real = t1 * t28;
+        let t67: crate::Real = t30 * t66;
+        let t68: crate::Real = t67 * t7;
+        let t69: crate::Real = t65 - t68;
+        let t70: crate::Real = t69 - t52;
         [t38, t70]
     } else {
-        let t39: f64 = 1f64;
-        let t40: f64 = libm::cos(t2);
-        let t41: f64 = t39 - t40;
-        let t42: f64 = libm::sin(t2);
-        let t44: f64 = t42 * t43;
-        let t45: f64 = t35 * t44;
-        let t46: f64 = t6 / t41;
-        let t47: f64 = t45 * t46;
-        let t48: f64 = t36 + t47;
-        let t49: f64 = t48 * t7;
-        let t71: f64 = t34 * t42;
-        let t72: f64 = t35 * t71;
-        let t73: f64 = t72 * t46;
-        let t74: f64 = t73 - t51;
-        let t75: f64 = t74 * t7;
+        let t39: crate::Real = 1.0;
+        let t40: crate::Real = crate::math::cos(t2);
+        let t41: crate::Real = t39 - t40;
+        let t42: crate::Real = crate::math::sin(t2);
+        let t44: crate::Real = t42 * t43;
+        let t45: crate::Real = t35 * t44;
+        let t46: crate::Real = t6 / t41;
+        let t47: crate::Real = t45 * t46;
+        let t48: crate::Real = t36 + t47;
+        let t49: crate::Real = t48 * t7;
+        let t71: crate::Real = t34 * t42;
+        let t72: crate::Real = t35 * t71;
+        let t73: crate::Real = t72 * t46;
+        let t74: crate::Real = t73 - t51;
+        let t75: crate::Real = t74 * t7;
         [t49, t75]
     };
-    let t50: f64 = g0[0usize];
-    let t76: f64 = g0[1usize];
-    let t77: f64 = 0.3333333333333333f64;
-    let t78: f64 = libm::sqrt(t77);
-    let t79: f64 = 3f64;
-    let t80: f64 = libm::sqrt(t79);
-    let t81: f64 = t78 * t80;
-    let t82: f64 = t76 * t81;
-    let t83: f64 = t6 / t4;
-    let t84: f64 = t82 * t83;
-    let t85: f64 = t2 * t81;
-    let t86: f64 = t5 * t85;
-    let t87: f64 = t3 * t4;
-    let t88: f64 = t86 / t87;
-    let t89: f64 = t88 - t84;
-    let t90: f64 = t50 * t80;
-    let t91: f64 = t35 * t90;
-    let t92: f64 = t91 * t83;
-    let t93: f64 = t35 * t82;
-    let t94: f64 = t93 * t83;
-    let t95: f64 = t92 + t94;
-    let t96: f64 = t88 + t95;
-    let t97: f64 = t92 - t94;
-    let t98: f64 = t97 - t88;
+    let t50: crate::Real = g0[0usize];
+    let t76: crate::Real = g0[1usize];
+    let t77: crate::Real = 0.3333333333333333;
+    let t78: crate::Real = crate::math::sqrt(t77);
+    let t79: crate::Real = 3.0;
+    let t80: crate::Real = crate::math::sqrt(t79);
+    let t81: crate::Real = t78 * t80;
+    let t82: crate::Real = t76 * t81;
+    let t83: crate::Real = t6 / t4;
+    let t84: crate::Real = t82 * t83;
+    let t85: crate::Real = t2 * t81;
+    let t86: crate::Real = t5 * t85;
+    let t87: crate::Real = t3 * t4;
+    let t88: crate::Real = t86 / t87;
+    let t89: crate::Real = t88 - t84;
+    let t90: crate::Real = t50 * t80;
+    let t91: crate::Real = t35 * t90;
+    let t92: crate::Real = t91 * t83;
+    let t93: crate::Real = t35 * t82;
+    let t94: crate::Real = t93 * t83;
+    let t95: crate::Real = t92 + t94;
+    let t96: crate::Real = t88 + t95;
+    let t97: crate::Real = t92 - t94;
+    let t98: crate::Real = t97 - t88;
     [t89, t96, t98]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
@@ -2473,478 +2491,480 @@ pub fn inverse_increment(
 430 arithmetic operations (5341 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 21usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = u[2usize];
-    let t6: f64 = w[0usize];
-    let t7: f64 = w[1usize];
-    let t8: f64 = w[2usize];
-    let t9: f64 = p[0usize];
-    let t10: f64 = p[1usize];
-    let t11: f64 = dt;
-    let t12: f64 = t3 + t4;
-    let t13: f64 = t12 - t5;
-    let t14: f64 = t9 * t13;
-    let t15: f64 = 0.3333333333333333f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = t16 / t10;
-    let t18: f64 = t8 + t17;
-    let t19: f64 = t11 * t18;
-    let t20: f64 = libm::sqrt(t15);
-    let t21: f64 = t4 + t5;
-    let t22: f64 = t9 * t20;
-    let t23: f64 = t21 * t22;
-    let t24: f64 = t6 + t23;
-    let t25: f64 = libm::cos(t2);
-    let t26: f64 = t11 * t24;
-    let t29: f64 = 2f64;
-    let t30: f64 = t3 * t29;
-    let t31: f64 = t4 - t5;
-    let t32: f64 = t31 - t30;
-    let t33: f64 = t9 * t32;
-    let t34: f64 = t15 * t33;
-    let t35: f64 = t7 + t34;
-    let t36: f64 = libm::sin(t2);
-    let t37: f64 = t11 * t35;
-    let t49: f64 = t19 * t19;
-    let t99: f64 = 1f64;
-    let t292: f64 = t11 * t36;
-    let g0: [f64; 9usize] = if libm::fabs(t19) < 0.05f64 {
-        let t27: f64 = t25 * t26;
-        let t28: f64 = t0 + t27;
-        let t38: f64 = t36 * t37;
-        let t39: f64 = t28 - t38;
-        let t40: f64 = t26 * t36;
-        let t41: f64 = 0.5f64;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = -t42;
-        let t44: f64 = t25 * t37;
-        let t45: f64 = t41 * t44;
-        let t46: f64 = t43 - t45;
-        let t47: f64 = t19 * t46;
-        let t48: f64 = t39 + t47;
-        let t50: f64 = 0.16666666666666666f64;
-        let t51: f64 = t27 * t50;
-        let t52: f64 = t38 * t50;
-        let t53: f64 = t52 - t51;
-        let t54: f64 = t49 * t53;
-        let t55: f64 = t48 + t54;
-        let t56: f64 = t19 * t49;
-        let t57: f64 = 0.041666666666666664f64;
-        let t58: f64 = t40 * t57;
-        let t59: f64 = t44 * t57;
-        let t60: f64 = t58 + t59;
-        let t61: f64 = t56 * t60;
-        let t62: f64 = t55 + t61;
-        let t63: f64 = t49 * t49;
-        let t64: f64 = 0.008333333333333333f64;
-        let t65: f64 = t27 * t64;
-        let t66: f64 = t38 * t64;
-        let t67: f64 = t65 - t66;
-        let t68: f64 = t63 * t67;
-        let t69: f64 = t62 + t68;
-        let t70: f64 = t19 * t63;
-        let t71: f64 = 0.001388888888888889f64;
-        let t72: f64 = t40 * t71;
-        let t73: f64 = -t72;
-        let t74: f64 = t44 * t71;
-        let t75: f64 = t73 - t74;
-        let t76: f64 = t70 * t75;
-        let t77: f64 = t69 + t76;
-        let t78: f64 = t56 * t56;
-        let t79: f64 = 0.0001984126984126984f64;
-        let t80: f64 = t27 * t79;
-        let t81: f64 = t38 * t79;
-        let t82: f64 = t81 - t80;
-        let t83: f64 = t78 * t82;
-        let t84: f64 = t77 + t83;
-        let t85: f64 = t19 * t78;
-        let t86: f64 = 0.0000248015873015873f64;
-        let t87: f64 = t40 * t86;
-        let t88: f64 = t44 * t86;
-        let t89: f64 = t87 + t88;
-        let t90: f64 = t85 * t89;
-        let t91: f64 = t84 + t90;
-        let t92: f64 = t63 * t63;
-        let t93: f64 = 0.0000027557319223985893f64;
-        let t94: f64 = t27 * t93;
-        let t95: f64 = t38 * t93;
-        let t96: f64 = t94 - t95;
-        let t97: f64 = t92 * t96;
-        let t98: f64 = t91 + t97;
-        let t120: f64 = t1 + t40;
-        let t121: f64 = t44 + t120;
-        let t122: f64 = t27 * t41;
-        let t123: f64 = t38 * t41;
-        let t124: f64 = t122 - t123;
-        let t125: f64 = t19 * t124;
-        let t126: f64 = t121 + t125;
-        let t127: f64 = t40 * t50;
-        let t128: f64 = -t127;
-        let t129: f64 = t44 * t50;
-        let t130: f64 = t128 - t129;
-        let t131: f64 = t49 * t130;
-        let t132: f64 = t126 + t131;
-        let t133: f64 = t27 * t57;
-        let t134: f64 = t38 * t57;
-        let t135: f64 = t134 - t133;
-        let t136: f64 = t56 * t135;
-        let t137: f64 = t132 + t136;
-        let t138: f64 = t40 * t64;
-        let t139: f64 = t44 * t64;
-        let t140: f64 = t138 + t139;
-        let t141: f64 = t63 * t140;
-        let t142: f64 = t137 + t141;
-        let t143: f64 = t27 * t71;
-        let t144: f64 = t38 * t71;
-        let t145: f64 = t143 - t144;
-        let t146: f64 = t70 * t145;
-        let t147: f64 = t142 + t146;
-        let t148: f64 = t40 * t79;
-        let t149: f64 = -t148;
-        let t150: f64 = t44 * t79;
-        let t151: f64 = t149 - t150;
-        let t152: f64 = t78 * t151;
-        let t153: f64 = t147 + t152;
-        let t154: f64 = t27 * t86;
-        let t155: f64 = t38 * t86;
-        let t156: f64 = t155 - t154;
-        let t157: f64 = t85 * t156;
-        let t158: f64 = t153 + t157;
-        let t159: f64 = t40 * t93;
-        let t160: f64 = t44 * t93;
-        let t161: f64 = t159 + t160;
-        let t162: f64 = t92 * t161;
-        let t163: f64 = t158 + t162;
-        let t171: f64 = t36 * t26;
-        let t172: f64 = t26 * t25;
-        let t173: f64 = t172 * t41;
-        let t174: f64 = t41 * t38;
-        let t175: f64 = t174 - t173;
-        let t176: f64 = t19 * t175;
-        let t177: f64 = t171 * t50;
-        let t178: f64 = t177 + t129;
-        let t179: f64 = t49 * t178;
-        let t180: f64 = t176 + t179;
-        let t181: f64 = t172 * t57;
-        let t182: f64 = t181 - t134;
-        let t183: f64 = t56 * t182;
-        let t184: f64 = t180 + t183;
-        let t185: f64 = t171 * t64;
-        let t186: f64 = -t185;
-        let t187: f64 = t186 - t139;
-        let t188: f64 = t63 * t187;
-        let t189: f64 = t184 + t188;
-        let t190: f64 = t172 * t71;
-        let t191: f64 = t144 - t190;
-        let t192: f64 = t70 * t191;
-        let t193: f64 = t189 + t192;
-        let t194: f64 = t171 * t79;
-        let t195: f64 = t194 + t150;
-        let t196: f64 = t78 * t195;
-        let t197: f64 = t193 + t196;
-        let t198: f64 = t172 * t86;
-        let t199: f64 = t198 - t155;
-        let t200: f64 = t85 * t199;
-        let t201: f64 = t197 + t200;
-        let t202: f64 = t171 * t93;
-        let t203: f64 = -t202;
-        let t204: f64 = t203 - t160;
-        let t205: f64 = t92 * t204;
-        let t206: f64 = t201 + t205;
-        let t207: f64 = t206 - t171;
-        let t208: f64 = t207 - t44;
-        let t212: f64 = t172 - t38;
-        let t213: f64 = t171 * t41;
-        let t214: f64 = -t213;
-        let t215: f64 = t44 * t41;
-        let t216: f64 = t214 - t215;
-        let t217: f64 = t19 * t216;
-        let t218: f64 = t212 + t217;
-        let t219: f64 = t172 * t50;
-        let t220: f64 = t52 - t219;
-        let t221: f64 = t49 * t220;
-        let t222: f64 = t218 + t221;
-        let t223: f64 = t171 * t57;
-        let t224: f64 = t223 + t59;
-        let t225: f64 = t56 * t224;
-        let t226: f64 = t222 + t225;
-        let t227: f64 = t172 * t64;
-        let t228: f64 = t227 - t66;
-        let t229: f64 = t63 * t228;
-        let t230: f64 = t226 + t229;
-        let t231: f64 = t171 * t71;
-        let t232: f64 = -t231;
-        let t233: f64 = t232 - t74;
-        let t234: f64 = t70 * t233;
-        let t235: f64 = t230 + t234;
-        let t236: f64 = t172 * t79;
-        let t237: f64 = t81 - t236;
-        let t238: f64 = t78 * t237;
-        let t239: f64 = t235 + t238;
-        let t240: f64 = t171 * t86;
-        let t241: f64 = t240 + t88;
-        let t242: f64 = t85 * t241;
-        let t243: f64 = t239 + t242;
-        let t244: f64 = t172 * t93;
-        let t245: f64 = t244 - t95;
-        let t246: f64 = t92 * t245;
-        let t247: f64 = t243 + t246;
-        let t250: f64 = t11 * t19;
-        let t251: f64 = t36 * t250;
-        let t252: f64 = t251 * t41;
-        let t253: f64 = t11 * t25;
-        let t254: f64 = t11 * t49;
-        let t255: f64 = t25 * t254;
-        let t256: f64 = t255 * t50;
-        let t257: f64 = t253 - t256;
-        let t258: f64 = t11 * t56;
-        let t259: f64 = t36 * t258;
-        let t260: f64 = t259 * t57;
-        let t261: f64 = t257 + t260;
-        let t262: f64 = t11 * t63;
-        let t263: f64 = t25 * t262;
-        let t264: f64 = t263 * t64;
-        let t265: f64 = t261 + t264;
-        let t266: f64 = t11 * t70;
-        let t267: f64 = t36 * t266;
-        let t268: f64 = t267 * t71;
-        let t269: f64 = t265 - t268;
-        let t270: f64 = t11 * t78;
-        let t271: f64 = t25 * t270;
-        let t272: f64 = t271 * t79;
-        let t273: f64 = t269 - t272;
-        let t274: f64 = t11 * t85;
-        let t275: f64 = t36 * t274;
-        let t276: f64 = t275 * t86;
-        let t277: f64 = t273 + t276;
-        let t278: f64 = t11 * t92;
-        let t279: f64 = t25 * t278;
-        let t280: f64 = t279 * t93;
-        let t281: f64 = t277 + t280;
-        let t282: f64 = t281 - t252;
-        let t290: f64 = t250 * t25;
-        let t291: f64 = t41 * t290;
-        let t293: f64 = t36 * t254;
-        let t294: f64 = t50 * t293;
-        let t295: f64 = t25 * t258;
-        let t296: f64 = t57 * t295;
-        let t297: f64 = t294 + t296;
-        let t298: f64 = t36 * t262;
-        let t299: f64 = t64 * t298;
-        let t300: f64 = t297 - t299;
-        let t301: f64 = t25 * t266;
-        let t302: f64 = t71 * t301;
-        let t303: f64 = t300 - t302;
-        let t304: f64 = t36 * t270;
-        let t305: f64 = t79 * t304;
-        let t306: f64 = t303 + t305;
-        let t307: f64 = t25 * t274;
-        let t308: f64 = t86 * t307;
-        let t309: f64 = t306 + t308;
-        let t310: f64 = t36 * t278;
-        let t311: f64 = t93 * t310;
-        let t312: f64 = t309 - t311;
-        let t313: f64 = t312 - t291;
-        let t314: f64 = t313 - t292;
-        let t322: f64 = t15 * t27;
-        let t323: f64 = t15 * t38;
-        let t324: f64 = t323 - t322;
-        let t325: f64 = t250 * t324;
-        let t326: f64 = t41 * t171;
-        let t327: f64 = -t326;
-        let t328: f64 = t327 - t45;
-        let t329: f64 = t11 * t328;
-        let t330: f64 = t325 + t329;
-        let t331: f64 = 0.125f64;
-        let t332: f64 = t171 * t331;
-        let t333: f64 = t44 * t331;
-        let t334: f64 = t332 + t333;
-        let t335: f64 = t254 * t334;
-        let t336: f64 = t330 + t335;
-        let t337: f64 = 0.03333333333333333f64;
-        let t338: f64 = t27 * t337;
-        let t339: f64 = t38 * t337;
-        let t340: f64 = t338 - t339;
-        let t341: f64 = t258 * t340;
-        let t342: f64 = t336 + t341;
-        let t343: f64 = 0.006944444444444444f64;
-        let t344: f64 = t171 * t343;
-        let t345: f64 = -t344;
-        let t346: f64 = t44 * t343;
-        let t347: f64 = t345 - t346;
-        let t348: f64 = t262 * t347;
-        let t349: f64 = t342 + t348;
-        let t350: f64 = 0.0011904761904761906f64;
-        let t351: f64 = t27 * t350;
-        let t352: f64 = t38 * t350;
-        let t353: f64 = t352 - t351;
-        let t354: f64 = t266 * t353;
-        let t355: f64 = t349 + t354;
-        let t356: f64 = 0.00017361111111111112f64;
-        let t357: f64 = t171 * t356;
-        let t358: f64 = t44 * t356;
-        let t359: f64 = t357 + t358;
-        let t360: f64 = t270 * t359;
-        let t361: f64 = t355 + t360;
-        let t362: f64 = 0.000022045855379188714f64;
-        let t363: f64 = t27 * t362;
-        let t364: f64 = t38 * t362;
-        let t365: f64 = t363 - t364;
-        let t366: f64 = t274 * t365;
-        let t367: f64 = t361 + t366;
-        let t368: f64 = 0.00000248015873015873f64;
-        let t369: f64 = t171 * t368;
-        let t370: f64 = -t369;
-        let t371: f64 = t44 * t368;
-        let t372: f64 = t370 - t371;
-        let t373: f64 = t278 * t372;
-        let t374: f64 = t367 + t373;
-        let t401: f64 = t291 + t292;
-        let t402: f64 = t401 - t294;
-        let t403: f64 = t402 - t296;
-        let t404: f64 = t299 + t403;
-        let t405: f64 = t302 + t404;
-        let t406: f64 = t405 - t305;
-        let t407: f64 = t406 - t308;
-        let t408: f64 = t311 + t407;
-        let t411: f64 = t15 * t171;
-        let t412: f64 = -t411;
-        let t413: f64 = t15 * t44;
-        let t414: f64 = t412 - t413;
-        let t415: f64 = t250 * t414;
-        let t416: f64 = t41 * t27;
-        let t417: f64 = t416 - t174;
-        let t418: f64 = t11 * t417;
-        let t419: f64 = t415 + t418;
-        let t420: f64 = t27 * t331;
-        let t421: f64 = t38 * t331;
-        let t422: f64 = t421 - t420;
-        let t423: f64 = t254 * t422;
-        let t424: f64 = t419 + t423;
-        let t425: f64 = t171 * t337;
-        let t426: f64 = t44 * t337;
-        let t427: f64 = t425 + t426;
-        let t428: f64 = t258 * t427;
-        let t429: f64 = t424 + t428;
-        let t430: f64 = t27 * t343;
-        let t431: f64 = t38 * t343;
-        let t432: f64 = t430 - t431;
-        let t433: f64 = t262 * t432;
-        let t434: f64 = t429 + t433;
-        let t435: f64 = t171 * t350;
-        let t436: f64 = -t435;
-        let t437: f64 = t44 * t350;
-        let t438: f64 = t436 - t437;
-        let t439: f64 = t266 * t438;
-        let t440: f64 = t434 + t439;
-        let t441: f64 = t27 * t356;
-        let t442: f64 = t38 * t356;
-        let t443: f64 = t442 - t441;
-        let t444: f64 = t270 * t443;
-        let t445: f64 = t440 + t444;
-        let t446: f64 = t171 * t362;
-        let t447: f64 = t44 * t362;
-        let t448: f64 = t446 + t447;
-        let t449: f64 = t274 * t448;
-        let t450: f64 = t445 + t449;
-        let t451: f64 = t27 * t368;
-        let t452: f64 = t38 * t368;
-        let t453: f64 = t451 - t452;
-        let t454: f64 = t278 * t453;
-        let t455: f64 = t450 + t454;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 21usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = u[2usize];
+    let t6: crate::Real = w[0usize];
+    let t7: crate::Real = w[1usize];
+    let t8: crate::Real = w[2usize];
+    let t9: crate::Real = p[0usize];
+    let t10: crate::Real = p[1usize];
+    let t11: crate::Real = dt;
+    let t12: crate::Real = t3 + t4;
+    let t13: crate::Real = t12 - t5;
+    let t14: crate::Real = t9 * t13;
+    let t15: crate::Real = 0.3333333333333333;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = t16 / t10;
+    let t18: crate::Real = t8 + t17;
+    let t19: crate::Real = t11 * t18;
+    let t20: crate::Real = crate::math::sqrt(t15);
+    let t21: crate::Real = t4 + t5;
+    let t22: crate::Real = t9 * t20;
+    let t23: crate::Real = t21 * t22;
+    let t24: crate::Real = t6 + t23;
+    let t25: crate::Real = crate::math::cos(t2);
+    let t26: crate::Real = t11 * t24;
+    let t29: crate::Real = 2.0;
+    let t30: crate::Real = t3 * t29;
+    let t31: crate::Real = t4 - t5;
+    let t32: crate::Real = t31 - t30;
+    let t33: crate::Real = t9 * t32;
+    let t34: crate::Real = t15 * t33;
+    let t35: crate::Real = t7 + t34;
+    let t36: crate::Real = crate::math::sin(t2);
+    let t37: crate::Real = t11 * t35;
+    let t49: crate::Real = t19 * t19;
+    let t99: crate::Real = 1.0;
+    let t292: crate::Real = t11 * t36;
+    let g0: [crate::Real; 9usize] = if crate::math::fabs(t19)
+        < crate::math::series_switch(0.05)
+    {
+        let t27: crate::Real = t25 * t26;
+        let t28: crate::Real = t0 + t27;
+        let t38: crate::Real = t36 * t37;
+        let t39: crate::Real = t28 - t38;
+        let t40: crate::Real = t26 * t36;
+        let t41: crate::Real = 0.5;
+        let t42: crate::Real = t40 * t41;
+        let t43: crate::Real = -t42;
+        let t44: crate::Real = t25 * t37;
+        let t45: crate::Real = t41 * t44;
+        let t46: crate::Real = t43 - t45;
+        let t47: crate::Real = t19 * t46;
+        let t48: crate::Real = t39 + t47;
+        let t50: crate::Real = 0.16666666666666666;
+        let t51: crate::Real = t27 * t50;
+        let t52: crate::Real = t38 * t50;
+        let t53: crate::Real = t52 - t51;
+        let t54: crate::Real = t49 * t53;
+        let t55: crate::Real = t48 + t54;
+        let t56: crate::Real = t19 * t49;
+        let t57: crate::Real = 0.041666666666666664;
+        let t58: crate::Real = t40 * t57;
+        let t59: crate::Real = t44 * t57;
+        let t60: crate::Real = t58 + t59;
+        let t61: crate::Real = t56 * t60;
+        let t62: crate::Real = t55 + t61;
+        let t63: crate::Real = t49 * t49;
+        let t64: crate::Real = 0.008333333333333333;
+        let t65: crate::Real = t27 * t64;
+        let t66: crate::Real = t38 * t64;
+        let t67: crate::Real = t65 - t66;
+        let t68: crate::Real = t63 * t67;
+        let t69: crate::Real = t62 + t68;
+        let t70: crate::Real = t19 * t63;
+        let t71: crate::Real = 0.001388888888888889;
+        let t72: crate::Real = t40 * t71;
+        let t73: crate::Real = -t72;
+        let t74: crate::Real = t44 * t71;
+        let t75: crate::Real = t73 - t74;
+        let t76: crate::Real = t70 * t75;
+        let t77: crate::Real = t69 + t76;
+        let t78: crate::Real = t56 * t56;
+        let t79: crate::Real = 0.0001984126984126984;
+        let t80: crate::Real = t27 * t79;
+        let t81: crate::Real = t38 * t79;
+        let t82: crate::Real = t81 - t80;
+        let t83: crate::Real = t78 * t82;
+        let t84: crate::Real = t77 + t83;
+        let t85: crate::Real = t19 * t78;
+        let t86: crate::Real = 0.0000248015873015873;
+        let t87: crate::Real = t40 * t86;
+        let t88: crate::Real = t44 * t86;
+        let t89: crate::Real = t87 + t88;
+        let t90: crate::Real = t85 * t89;
+        let t91: crate::Real = t84 + t90;
+        let t92: crate::Real = t63 * t63;
+        let t93: crate::Real = 0.0000027557319223985893;
+        let t94: crate::Real = t27 * t93;
+        let t95: crate::Real = t38 * t93;
+        let t96: crate::Real = t94 - t95;
+        let t97: crate::Real = t92 * t96;
+        let t98: crate::Real = t91 + t97;
+        let t120: crate::Real = t1 + t40;
+        let t121: crate::Real = t44 + t120;
+        let t122: crate::Real = t27 * t41;
+        let t123: crate::Real = t38 * t41;
+        let t124: crate::Real = t122 - t123;
+        let t125: crate::Real = t19 * t124;
+        let t126: crate::Real = t121 + t125;
+        let t127: crate::Real = t40 * t50;
+        let t128: crate::Real = -t127;
+        let t129: crate::Real = t44 * t50;
+        let t130: crate::Real = t128 - t129;
+        let t131: crate::Real = t49 * t130;
+        let t132: crate::Real = t126 + t131;
+        let t133: crate::Real = t27 * t57;
+        let t134: crate::Real = t38 * t57;
+        let t135: crate::Real = t134 - t133;
+        let t136: crate::Real = t56 * t135;
+        let t137: crate::Real = t132 + t136;
+        let t138: crate::Real = t40 * t64;
+        let t139: crate::Real = t44 * t64;
+        let t140: crate::Real = t138 + t139;
+        let t141: crate::Real = t63 * t140;
+        let t142: crate::Real = t137 + t141;
+        let t143: crate::Real = t27 * t71;
+        let t144: crate::Real = t38 * t71;
+        let t145: crate::Real = t143 - t144;
+        let t146: crate::Real = t70 * t145;
+        let t147: crate::Real = t142 + t146;
+        let t148: crate::Real = t40 * t79;
+        let t149: crate::Real = -t148;
+        let t150: crate::Real = t44 * t79;
+        let t151: crate::Real = t149 - t150;
+        let t152: crate::Real = t78 * t151;
+        let t153: crate::Real = t147 + t152;
+        let t154: crate::Real = t27 * t86;
+        let t155: crate::Real = t38 * t86;
+        let t156: crate::Real = t155 - t154;
+        let t157: crate::Real = t85 * t156;
+        let t158: crate::Real = t153 + t157;
+        let t159: crate::Real = t40 * t93;
+        let t160: crate::Real = t44 * t93;
+        let t161: crate::Real = t159 + t160;
+        let t162: crate::Real = t92 * t161;
+        let t163: crate::Real = t158 + t162;
+        let t171: crate::Real = t36 * t26;
+        let t172: crate::Real = t26 * t25;
+        let t173: crate::Real = t172 * t41;
+        let t174: crate::Real = t41 * t38;
+        let t175: crate::Real = t174 - t173;
+        let t176: crate::Real = t19 * t175;
+        let t177: crate::Real = t171 * t50;
+        let t178: crate::Real = t177 + t129;
+        let t179: crate::Real = t49 * t178;
+        let t180: crate::Real = t176 + t179;
+        let t181: crate::Real = t172 * t57;
+        let t182: crate::Real = t181 - t134;
+        let t183: crate::Real = t56 * t182;
+        let t184: crate::Real = t180 + t183;
+        let t185: crate::Real = t171 * t64;
+        let t186: crate::Real = -t185;
+        let t187: crate::Real = t186 - t139;
+        let t188: crate::Real = t63 * t187;
+        let t189: crate::Real = t184 + t188;
+        let t190: crate::Real = t172 * t71;
+        let t191: crate::Real = t144 - t190;
+        let t192: crate::Real = t70 * t191;
+        let t193: crate::Real = t189 + t192;
+        let t194: crate::Real = t171 * t79;
+        let t195: crate::Real = t194 + t150;
+        let t196: crate::Real = t78 * t195;
+        let t197: crate::Real = t193 + t196;
+        let t198: crate::Real = t172 * t86;
+        let t199: crate::Real = t198 - t155;
+        let t200: crate::Real = t85 * t199;
+        let t201: crate::Real = t197 + t200;
+        let t202: crate::Real = t171 * t93;
+        let t203: crate::Real = -t202;
+        let t204: crate::Real = t203 - t160;
+        let t205: crate::Real = t92 * t204;
+        let t206: crate::Real = t201 + t205;
+        let t207: crate::Real = t206 - t171;
+        let t208: crate::Real = t207 - t44;
+        let t212: crate::Real = t172 - t38;
+        let t213: crate::Real = t171 * t41;
+        let t214: crate::Real = -t213;
+        let t215: crate::Real = t44 * t41;
+        let t216: crate::Real = t214 - t215;
+        let t217: crate::Real = t19 * t216;
+        let t218: crate::Real = t212 + t217;
+        let t219: crate::Real = t172 * t50;
+        let t220: crate::Real = t52 - t219;
+        let t221: crate::Real = t49 * t220;
+        let t222: crate::Real = t218 + t221;
+        let t223: crate::Real = t171 * t57;
+        let t224: crate::Real = t223 + t59;
+        let t225: crate::Real = t56 * t224;
+        let t226: crate::Real = t222 + t225;
+        let t227: crate::Real = t172 * t64;
+        let t228: crate::Real = t227 - t66;
+        let t229: crate::Real = t63 * t228;
+        let t230: crate::Real = t226 + t229;
+        let t231: crate::Real = t171 * t71;
+        let t232: crate::Real = -t231;
+        let t233: crate::Real = t232 - t74;
+        let t234: crate::Real = t70 * t233;
+        let t235: crate::Real = t230 + t234;
+        let t236: crate::Real = t172 * t79;
+        let t237: crate::Real = t81 - t236;
+        let t238: crate::Real = t78 * t237;
+        let t239: crate::Real = t235 + t238;
+        let t240: crate::Real = t171 * t86;
+        let t241: crate::Real = t240 + t88;
+        let t242: crate::Real = t85 * t241;
+        let t243: crate::Real = t239 + t242;
+        let t244: crate::Real = t172 * t93;
+        let t245: crate::Real = t244 - t95;
+        let t246: crate::Real = t92 * t245;
+        let t247: crate::Real = t243 + t246;
+        let t250: crate::Real = t11 * t19;
+        let t251: crate::Real = t36 * t250;
+        let t252: crate::Real = t251 * t41;
+        let t253: crate::Real = t11 * t25;
+        let t254: crate::Real = t11 * t49;
+        let t255: crate::Real = t25 * t254;
+        let t256: crate::Real = t255 * t50;
+        let t257: crate::Real = t253 - t256;
+        let t258: crate::Real = t11 * t56;
+        let t259: crate::Real = t36 * t258;
+        let t260: crate::Real = t259 * t57;
+        let t261: crate::Real = t257 + t260;
+        let t262: crate::Real = t11 * t63;
+        let t263: crate::Real = t25 * t262;
+        let t264: crate::Real = t263 * t64;
+        let t265: crate::Real = t261 + t264;
+        let t266: crate::Real = t11 * t70;
+        let t267: crate::Real = t36 * t266;
+        let t268: crate::Real = t267 * t71;
+        let t269: crate::Real = t265 - t268;
+        let t270: crate::Real = t11 * t78;
+        let t271: crate::Real = t25 * t270;
+        let t272: crate::Real = t271 * t79;
+        let t273: crate::Real = t269 - t272;
+        let t274: crate::Real = t11 * t85;
+        let t275: crate::Real = t36 * t274;
+        let t276: crate::Real = t275 * t86;
+        let t277: crate::Real = t273 + t276;
+        let t278: crate::Real = t11 * t92;
+        let t279: crate::Real = t25 * t278;
+        let t280: crate::Real = t279 * t93;
+        let t281: crate::Real = t277 + t280;
+        let t282: crate::Real = t281 - t252;
+        let t290: crate::Real = t250 * t25;
+        let t291: crate::Real = t41 * t290;
+        let t293: crate::Real = t36 * t254;
+        let t294: crate::Real = t50 * t293;
+        let t295: crate::Real = t25 * t258;
+        let t296: crate::Real = t57 * t295;
+        let t297: crate::Real = t294 + t296;
+        let t298: crate::Real = t36 * t262;
+        let t299: crate::Real = t64 * t298;
+        let t300: crate::Real = t297 - t299;
+        let t301: crate::Real = t25 * t266;
+        let t302: crate::Real = t71 * t301;
+        let t303: crate::Real = t300 - t302;
+        let t304: crate::Real = t36 * t270;
+        let t305: crate::Real = t79 * t304;
+        let t306: crate::Real = t303 + t305;
+        let t307: crate::Real = t25 * t274;
+        let t308: crate::Real = t86 * t307;
+        let t309: crate::Real = t306 + t308;
+        let t310: crate::Real = t36 * t278;
+        let t311: crate::Real = t93 * t310;
+        let t312: crate::Real = t309 - t311;
+        let t313: crate::Real = t312 - t291;
+        let t314: crate::Real = t313 - t292;
+        let t322: crate::Real = t15 * t27;
+        let t323: crate::Real = t15 * t38;
+        let t324: crate::Real = t323 - t322;
+        let t325: crate::Real = t250 * t324;
+        let t326: crate::Real = t41 * t171;
+        let t327: crate::Real = -t326;
+        let t328: crate::Real = t327 - t45;
+        let t329: crate::Real = t11 * t328;
+        let t330: crate::Real = t325 + t329;
+        let t331: crate::Real = 0.125;
+        let t332: crate::Real = t171 * t331;
+        let t333: crate::Real = t44 * t331;
+        let t334: crate::Real = t332 + t333;
+        let t335: crate::Real = t254 * t334;
+        let t336: crate::Real = t330 + t335;
+        let t337: crate::Real = 0.03333333333333333;
+        let t338: crate::Real = t27 * t337;
+        let t339: crate::Real = t38 * t337;
+        let t340: crate::Real = t338 - t339;
+        let t341: crate::Real = t258 * t340;
+        let t342: crate::Real = t336 + t341;
+        let t343: crate::Real = 0.006944444444444444;
+        let t344: crate::Real = t171 * t343;
+        let t345: crate::Real = -t344;
+        let t346: crate::Real = t44 * t343;
+        let t347: crate::Real = t345 - t346;
+        let t348: crate::Real = t262 * t347;
+        let t349: crate::Real = t342 + t348;
+        let t350: crate::Real = 0.0011904761904761906;
+        let t351: crate::Real = t27 * t350;
+        let t352: crate::Real = t38 * t350;
+        let t353: crate::Real = t352 - t351;
+        let t354: crate::Real = t266 * t353;
+        let t355: crate::Real = t349 + t354;
+        let t356: crate::Real = 0.00017361111111111112;
+        let t357: crate::Real = t171 * t356;
+        let t358: crate::Real = t44 * t356;
+        let t359: crate::Real = t357 + t358;
+        let t360: crate::Real = t270 * t359;
+        let t361: crate::Real = t355 + t360;
+        let t362: crate::Real = 0.000022045855379188714;
+        let t363: crate::Real = t27 * t362;
+        let t364: crate::Real = t38 * t362;
+        let t365: crate::Real = t363 - t364;
+        let t366: crate::Real = t274 * t365;
+        let t367: crate::Real = t361 + t366;
+        let t368: crate::Real = 0.00000248015873015873;
+        let t369: crate::Real = t171 * t368;
+        let t370: crate::Real = -t369;
+        let t371: crate::Real = t44 * t368;
+        let t372: crate::Real = t370 - t371;
+        let t373: crate::Real = t278 * t372;
+        let t374: crate::Real = t367 + t373;
+        let t401: crate::Real = t291 + t292;
+        let t402: crate::Real = t401 - t294;
+        let t403: crate::Real = t402 - t296;
+        let t404: crate::Real = t299 + t403;
+        let t405: crate::Real = t302 + t404;
+        let t406: crate::Real = t405 - t305;
+        let t407: crate::Real = t406 - t308;
+        let t408: crate::Real = t311 + t407;
+        let t411: crate::Real = t15 * t171;
+        let t412: crate::Real = -t411;
+        let t413: crate::Real = t15 * t44;
+        let t414: crate::Real = t412 - t413;
+        let t415: crate::Real = t250 * t414;
+        let t416: crate::Real = t41 * t27;
+        let t417: crate::Real = t416 - t174;
+        let t418: crate::Real = t11 * t417;
+        let t419: crate::Real = t415 + t418;
+        let t420: crate::Real = t27 * t331;
+        let t421: crate::Real = t38 * t331;
+        let t422: crate::Real = t421 - t420;
+        let t423: crate::Real = t254 * t422;
+        let t424: crate::Real = t419 + t423;
+        let t425: crate::Real = t171 * t337;
+        let t426: crate::Real = t44 * t337;
+        let t427: crate::Real = t425 + t426;
+        let t428: crate::Real = t258 * t427;
+        let t429: crate::Real = t424 + t428;
+        let t430: crate::Real = t27 * t343;
+        let t431: crate::Real = t38 * t343;
+        let t432: crate::Real = t430 - t431;
+        let t433: crate::Real = t262 * t432;
+        let t434: crate::Real = t429 + t433;
+        let t435: crate::Real = t171 * t350;
+        let t436: crate::Real = -t435;
+        let t437: crate::Real = t44 * t350;
+        let t438: crate::Real = t436 - t437;
+        let t439: crate::Real = t266 * t438;
+        let t440: crate::Real = t434 + t439;
+        let t441: crate::Real = t27 * t356;
+        let t442: crate::Real = t38 * t356;
+        let t443: crate::Real = t442 - t441;
+        let t444: crate::Real = t270 * t443;
+        let t445: crate::Real = t440 + t444;
+        let t446: crate::Real = t171 * t362;
+        let t447: crate::Real = t44 * t362;
+        let t448: crate::Real = t446 + t447;
+        let t449: crate::Real = t274 * t448;
+        let t450: crate::Real = t445 + t449;
+        let t451: crate::Real = t27 * t368;
+        let t452: crate::Real = t38 * t368;
+        let t453: crate::Real = t451 - t452;
+        let t454: crate::Real = t278 * t453;
+        let t455: crate::Real = t450 + t454;
         [t98, t163, t208, t247, t282, t314, t374, t408, t455]
     } else {
-        let t100: f64 = libm::cos(t19);
-        let t101: f64 = t99 - t100;
-        let t102: f64 = t11 * t101;
-        let t103: f64 = t24 * t102;
-        let t104: f64 = t99 / t19;
-        let t105: f64 = t103 * t104;
-        let t106: f64 = libm::sin(t19);
-        let t107: f64 = t37 * t106;
-        let t108: f64 = t107 * t104;
-        let t109: f64 = t105 + t108;
-        let t110: f64 = t36 * t109;
-        let t111: f64 = t0 - t110;
-        let t112: f64 = t35 * t102;
-        let t113: f64 = t112 * t104;
-        let t114: f64 = t26 * t106;
-        let t115: f64 = t114 * t104;
-        let t116: f64 = t115 - t113;
-        let t117: f64 = t25 * t116;
-        let t118: f64 = t111 + t117;
-        let t164: f64 = t25 * t109;
-        let t165: f64 = t1 + t164;
-        let t166: f64 = t36 * t116;
-        let t167: f64 = t165 + t166;
-        let t209: f64 = -t164;
-        let t210: f64 = t209 - t166;
-        let t248: f64 = t117 - t110;
-        let t283: f64 = t11 * t106;
-        let t284: f64 = t25 * t283;
-        let t285: f64 = t284 * t104;
-        let t286: f64 = t36 * t102;
-        let t287: f64 = t286 * t104;
-        let t288: f64 = t285 - t287;
-        let t315: f64 = t106 * t292;
-        let t316: f64 = t315 * t104;
-        let t317: f64 = -t316;
-        let t318: f64 = t25 * t102;
-        let t319: f64 = t318 * t104;
-        let t320: f64 = t317 - t319;
-        let t375: f64 = t106 * t26;
-        let t376: f64 = t375 * t104;
-        let t377: f64 = t100 * t37;
-        let t378: f64 = t377 * t104;
-        let t379: f64 = t376 + t378;
-        let t380: f64 = t102 * t24;
-        let t381: f64 = t99 / t49;
-        let t382: f64 = t380 * t381;
-        let t383: f64 = t379 - t382;
-        let t384: f64 = t106 * t37;
-        let t385: f64 = t384 * t381;
-        let t386: f64 = t383 - t385;
-        let t387: f64 = t36 * t386;
-        let t388: f64 = t100 * t26;
-        let t389: f64 = t388 * t104;
-        let t390: f64 = t384 * t104;
-        let t391: f64 = t389 - t390;
-        let t392: f64 = t102 * t35;
-        let t393: f64 = t392 * t381;
-        let t394: f64 = t391 + t393;
-        let t395: f64 = t375 * t381;
-        let t396: f64 = t394 - t395;
-        let t397: f64 = t25 * t396;
-        let t398: f64 = t397 - t387;
-        let t399: f64 = t11 * t398;
-        let t409: f64 = t316 + t319;
-        let t456: f64 = t25 * t386;
-        let t457: f64 = t36 * t396;
-        let t458: f64 = t456 + t457;
-        let t459: f64 = t11 * t458;
+        let t100: crate::Real = crate::math::cos(t19);
+        let t101: crate::Real = t99 - t100;
+        let t102: crate::Real = t11 * t101;
+        let t103: crate::Real = t24 * t102;
+        let t104: crate::Real = t99 / t19;
+        let t105: crate::Real = t103 * t104;
+        let t106: crate::Real = crate::math::sin(t19);
+        let t107: crate::Real = t37 * t106;
+        let t108: crate::Real = t107 * t104;
+        let t109: crate::Real = t105 + t108;
+        let t110: crate::Real = t36 * t109;
+        let t111: crate::Real = t0 - t110;
+        let t112: crate::Real = t35 * t102;
+        let t113: crate::Real = t112 * t104;
+        let t114: crate::Real = t26 * t106;
+        let t115: crate::Real = t114 * t104;
+        let t116: crate::Real = t115 - t113;
+        let t117: crate::Real = t25 * t116;
+        let t118: crate::Real = t111 + t117;
+        let t164: crate::Real = t25 * t109;
+        let t165: crate::Real = t1 + t164;
+        let t166: crate::Real = t36 * t116;
+        let t167: crate::Real = t165 + t166;
+        let t209: crate::Real = -t164;
+        let t210: crate::Real = t209 - t166;
+        let t248: crate::Real = t117 - t110;
+        let t283: crate::Real = t11 * t106;
+        let t284: crate::Real = t25 * t283;
+        let t285: crate::Real = t284 * t104;
+        let t286: crate::Real = t36 * t102;
+        let t287: crate::Real = t286 * t104;
+        let t288: crate::Real = t285 - t287;
+        let t315: crate::Real = t106 * t292;
+        let t316: crate::Real = t315 * t104;
+        let t317: crate::Real = -t316;
+        let t318: crate::Real = t25 * t102;
+        let t319: crate::Real = t318 * t104;
+        let t320: crate::Real = t317 - t319;
+        let t375: crate::Real = t106 * t26;
+        let t376: crate::Real = t375 * t104;
+        let t377: crate::Real = t100 * t37;
+        let t378: crate::Real = t377 * t104;
+        let t379: crate::Real = t376 + t378;
+        let t380: crate::Real = t102 * t24;
+        let t381: crate::Real = t99 / t49;
+        let t382: crate::Real = t380 * t381;
+        let t383: crate::Real = t379 - t382;
+        let t384: crate::Real = t106 * t37;
+        let t385: crate::Real = t384 * t381;
+        let t386: crate::Real = t383 - t385;
+        let t387: crate::Real = t36 * t386;
+        let t388: crate::Real = t100 * t26;
+        let t389: crate::Real = t388 * t104;
+        let t390: crate::Real = t384 * t104;
+        let t391: crate::Real = t389 - t390;
+        let t392: crate::Real = t102 * t35;
+        let t393: crate::Real = t392 * t381;
+        let t394: crate::Real = t391 + t393;
+        let t395: crate::Real = t375 * t381;
+        let t396: crate::Real = t394 - t395;
+        let t397: crate::Real = t25 * t396;
+        let t398: crate::Real = t397 - t387;
+        let t399: crate::Real = t11 * t398;
+        let t409: crate::Real = t316 + t319;
+        let t456: crate::Real = t25 * t386;
+        let t457: crate::Real = t36 * t396;
+        let t458: crate::Real = t456 + t457;
+        let t459: crate::Real = t11 * t458;
         [t118, t167, t210, t248, t288, t320, t399, t409, t459]
     };
-    let t119: f64 = g0[0usize];
-    let t168: f64 = g0[1usize];
-    let t211: f64 = g0[2usize];
-    let t249: f64 = g0[3usize];
-    let t289: f64 = g0[4usize];
-    let t321: f64 = g0[5usize];
-    let t400: f64 = g0[6usize];
-    let t410: f64 = g0[7usize];
-    let t460: f64 = g0[8usize];
-    let t169: f64 = t2 + t19;
-    let t170: f64 = 0f64;
+    let t119: crate::Real = g0[0usize];
+    let t168: crate::Real = g0[1usize];
+    let t211: crate::Real = g0[2usize];
+    let t249: crate::Real = g0[3usize];
+    let t289: crate::Real = g0[4usize];
+    let t321: crate::Real = g0[5usize];
+    let t400: crate::Real = g0[6usize];
+    let t410: crate::Real = g0[7usize];
+    let t460: crate::Real = g0[8usize];
+    let t169: crate::Real = t2 + t19;
+    let t170: crate::Real = 0.0;
     [
         t119,
         t168,
@@ -2974,12 +2994,16 @@ pub fn step_exact_linearized_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_w`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 3usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+) {
     let o = step_exact_linearized_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -3007,724 +3031,728 @@ pub fn step_exact_linearized(
 664 arithmetic operations (6356 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = u[2usize];
-    let t6: f64 = w[0usize];
-    let t7: f64 = w[1usize];
-    let t8: f64 = w[2usize];
-    let t9: f64 = p[0usize];
-    let t10: f64 = p[1usize];
-    let t11: f64 = dt;
-    let t12: f64 = t3 + t4;
-    let t13: f64 = t12 - t5;
-    let t14: f64 = t9 * t13;
-    let t15: f64 = 0.3333333333333333f64;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = t16 / t10;
-    let t18: f64 = t8 + t17;
-    let t19: f64 = t11 * t18;
-    let t20: f64 = libm::sqrt(t15);
-    let t21: f64 = t4 + t5;
-    let t22: f64 = t9 * t20;
-    let t23: f64 = t21 * t22;
-    let t24: f64 = t6 + t23;
-    let t25: f64 = libm::cos(t2);
-    let t26: f64 = t11 * t24;
-    let t29: f64 = 2f64;
-    let t30: f64 = t3 * t29;
-    let t31: f64 = t4 - t5;
-    let t32: f64 = t31 - t30;
-    let t33: f64 = t9 * t32;
-    let t34: f64 = t15 * t33;
-    let t35: f64 = t7 + t34;
-    let t36: f64 = libm::sin(t2);
-    let t37: f64 = t11 * t35;
-    let t38: f64 = t36 * t37;
-    let t41: f64 = 0.5f64;
-    let t44: f64 = t25 * t37;
-    let t45: f64 = t41 * t44;
-    let t50: f64 = 0.16666666666666666f64;
-    let t57: f64 = 0.041666666666666664f64;
-    let t64: f64 = 0.008333333333333333f64;
-    let t71: f64 = 0.001388888888888889f64;
-    let t79: f64 = 0.0001984126984126984f64;
-    let t86: f64 = 0.0000248015873015873f64;
-    let t93: f64 = 0.0000027557319223985893f64;
-    let t99: f64 = 1f64;
-    let t172: f64 = t26 * t25;
-    let t174: f64 = t41 * t38;
-    let t171: f64 = t36 * t26;
-    let t213: f64 = t171 * t41;
-    let t214: f64 = -t213;
-    let g0: [f64; 4usize] = if libm::fabs(t19) < 0.05f64 {
-        let t27: f64 = t25 * t26;
-        let t28: f64 = t0 + t27;
-        let t39: f64 = t28 - t38;
-        let t40: f64 = t26 * t36;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = -t42;
-        let t46: f64 = t43 - t45;
-        let t47: f64 = t19 * t46;
-        let t48: f64 = t39 + t47;
-        let t49: f64 = t19 * t19;
-        let t51: f64 = t27 * t50;
-        let t52: f64 = t38 * t50;
-        let t53: f64 = t52 - t51;
-        let t54: f64 = t49 * t53;
-        let t55: f64 = t48 + t54;
-        let t56: f64 = t19 * t49;
-        let t58: f64 = t40 * t57;
-        let t59: f64 = t44 * t57;
-        let t60: f64 = t58 + t59;
-        let t61: f64 = t56 * t60;
-        let t62: f64 = t55 + t61;
-        let t63: f64 = t49 * t49;
-        let t65: f64 = t27 * t64;
-        let t66: f64 = t38 * t64;
-        let t67: f64 = t65 - t66;
-        let t68: f64 = t63 * t67;
-        let t69: f64 = t62 + t68;
-        let t70: f64 = t19 * t63;
-        let t72: f64 = t40 * t71;
-        let t73: f64 = -t72;
-        let t74: f64 = t44 * t71;
-        let t75: f64 = t73 - t74;
-        let t76: f64 = t70 * t75;
-        let t77: f64 = t69 + t76;
-        let t78: f64 = t56 * t56;
-        let t80: f64 = t27 * t79;
-        let t81: f64 = t38 * t79;
-        let t82: f64 = t81 - t80;
-        let t83: f64 = t78 * t82;
-        let t84: f64 = t77 + t83;
-        let t85: f64 = t19 * t78;
-        let t87: f64 = t40 * t86;
-        let t88: f64 = t44 * t86;
-        let t89: f64 = t87 + t88;
-        let t90: f64 = t85 * t89;
-        let t91: f64 = t84 + t90;
-        let t92: f64 = t63 * t63;
-        let t94: f64 = t27 * t93;
-        let t95: f64 = t38 * t93;
-        let t96: f64 = t94 - t95;
-        let t97: f64 = t92 * t96;
-        let t98: f64 = t91 + t97;
-        let t120: f64 = t1 + t40;
-        let t121: f64 = t44 + t120;
-        let t122: f64 = t27 * t41;
-        let t123: f64 = t38 * t41;
-        let t124: f64 = t122 - t123;
-        let t125: f64 = t19 * t124;
-        let t126: f64 = t121 + t125;
-        let t127: f64 = t40 * t50;
-        let t128: f64 = -t127;
-        let t129: f64 = t44 * t50;
-        let t130: f64 = t128 - t129;
-        let t131: f64 = t49 * t130;
-        let t132: f64 = t126 + t131;
-        let t133: f64 = t27 * t57;
-        let t134: f64 = t38 * t57;
-        let t135: f64 = t134 - t133;
-        let t136: f64 = t56 * t135;
-        let t137: f64 = t132 + t136;
-        let t138: f64 = t40 * t64;
-        let t139: f64 = t44 * t64;
-        let t140: f64 = t138 + t139;
-        let t141: f64 = t63 * t140;
-        let t142: f64 = t137 + t141;
-        let t143: f64 = t27 * t71;
-        let t144: f64 = t38 * t71;
-        let t145: f64 = t143 - t144;
-        let t146: f64 = t70 * t145;
-        let t147: f64 = t142 + t146;
-        let t148: f64 = t40 * t79;
-        let t149: f64 = -t148;
-        let t150: f64 = t44 * t79;
-        let t151: f64 = t149 - t150;
-        let t152: f64 = t78 * t151;
-        let t153: f64 = t147 + t152;
-        let t154: f64 = t27 * t86;
-        let t155: f64 = t38 * t86;
-        let t156: f64 = t155 - t154;
-        let t157: f64 = t85 * t156;
-        let t158: f64 = t153 + t157;
-        let t159: f64 = t40 * t93;
-        let t160: f64 = t44 * t93;
-        let t161: f64 = t159 + t160;
-        let t162: f64 = t92 * t161;
-        let t163: f64 = t158 + t162;
-        let t173: f64 = t172 * t41;
-        let t175: f64 = t174 - t173;
-        let t176: f64 = t19 * t175;
-        let t177: f64 = t171 * t50;
-        let t178: f64 = t177 + t129;
-        let t179: f64 = t49 * t178;
-        let t180: f64 = t176 + t179;
-        let t181: f64 = t172 * t57;
-        let t182: f64 = t181 - t134;
-        let t183: f64 = t56 * t182;
-        let t184: f64 = t180 + t183;
-        let t185: f64 = t171 * t64;
-        let t186: f64 = -t185;
-        let t187: f64 = t186 - t139;
-        let t188: f64 = t63 * t187;
-        let t189: f64 = t184 + t188;
-        let t190: f64 = t172 * t71;
-        let t191: f64 = t144 - t190;
-        let t192: f64 = t70 * t191;
-        let t193: f64 = t189 + t192;
-        let t194: f64 = t171 * t79;
-        let t195: f64 = t194 + t150;
-        let t196: f64 = t78 * t195;
-        let t197: f64 = t193 + t196;
-        let t198: f64 = t172 * t86;
-        let t199: f64 = t198 - t155;
-        let t200: f64 = t85 * t199;
-        let t201: f64 = t197 + t200;
-        let t202: f64 = t171 * t93;
-        let t203: f64 = -t202;
-        let t204: f64 = t203 - t160;
-        let t205: f64 = t92 * t204;
-        let t206: f64 = t201 + t205;
-        let t207: f64 = t206 - t171;
-        let t208: f64 = t207 - t44;
-        let t212: f64 = t172 - t38;
-        let t215: f64 = t44 * t41;
-        let t216: f64 = t214 - t215;
-        let t217: f64 = t19 * t216;
-        let t218: f64 = t212 + t217;
-        let t219: f64 = t172 * t50;
-        let t220: f64 = t52 - t219;
-        let t221: f64 = t49 * t220;
-        let t222: f64 = t218 + t221;
-        let t223: f64 = t171 * t57;
-        let t224: f64 = t223 + t59;
-        let t225: f64 = t56 * t224;
-        let t226: f64 = t222 + t225;
-        let t227: f64 = t172 * t64;
-        let t228: f64 = t227 - t66;
-        let t229: f64 = t63 * t228;
-        let t230: f64 = t226 + t229;
-        let t231: f64 = t171 * t71;
-        let t232: f64 = -t231;
-        let t233: f64 = t232 - t74;
-        let t234: f64 = t70 * t233;
-        let t235: f64 = t230 + t234;
-        let t236: f64 = t172 * t79;
-        let t237: f64 = t81 - t236;
-        let t238: f64 = t78 * t237;
-        let t239: f64 = t235 + t238;
-        let t240: f64 = t171 * t86;
-        let t241: f64 = t240 + t88;
-        let t242: f64 = t85 * t241;
-        let t243: f64 = t239 + t242;
-        let t244: f64 = t172 * t93;
-        let t245: f64 = t244 - t95;
-        let t246: f64 = t92 * t245;
-        let t247: f64 = t243 + t246;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = u[2usize];
+    let t6: crate::Real = w[0usize];
+    let t7: crate::Real = w[1usize];
+    let t8: crate::Real = w[2usize];
+    let t9: crate::Real = p[0usize];
+    let t10: crate::Real = p[1usize];
+    let t11: crate::Real = dt;
+    let t12: crate::Real = t3 + t4;
+    let t13: crate::Real = t12 - t5;
+    let t14: crate::Real = t9 * t13;
+    let t15: crate::Real = 0.3333333333333333;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = t16 / t10;
+    let t18: crate::Real = t8 + t17;
+    let t19: crate::Real = t11 * t18;
+    let t20: crate::Real = crate::math::sqrt(t15);
+    let t21: crate::Real = t4 + t5;
+    let t22: crate::Real = t9 * t20;
+    let t23: crate::Real = t21 * t22;
+    let t24: crate::Real = t6 + t23;
+    let t25: crate::Real = crate::math::cos(t2);
+    let t26: crate::Real = t11 * t24;
+    let t29: crate::Real = 2.0;
+    let t30: crate::Real = t3 * t29;
+    let t31: crate::Real = t4 - t5;
+    let t32: crate::Real = t31 - t30;
+    let t33: crate::Real = t9 * t32;
+    let t34: crate::Real = t15 * t33;
+    let t35: crate::Real = t7 + t34;
+    let t36: crate::Real = crate::math::sin(t2);
+    let t37: crate::Real = t11 * t35;
+    let t38: crate::Real = t36 * t37;
+    let t41: crate::Real = 0.5;
+    let t44: crate::Real = t25 * t37;
+    let t45: crate::Real = t41 * t44;
+    let t50: crate::Real = 0.16666666666666666;
+    let t57: crate::Real = 0.041666666666666664;
+    let t64: crate::Real = 0.008333333333333333;
+    let t71: crate::Real = 0.001388888888888889;
+    let t79: crate::Real = 0.0001984126984126984;
+    let t86: crate::Real = 0.0000248015873015873;
+    let t93: crate::Real = 0.0000027557319223985893;
+    let t99: crate::Real = 1.0;
+    let t172: crate::Real = t26 * t25;
+    let t174: crate::Real = t41 * t38;
+    let t171: crate::Real = t36 * t26;
+    let t213: crate::Real = t171 * t41;
+    let t214: crate::Real = -t213;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t19)
+        < crate::math::series_switch(0.05)
+    {
+        let t27: crate::Real = t25 * t26;
+        let t28: crate::Real = t0 + t27;
+        let t39: crate::Real = t28 - t38;
+        let t40: crate::Real = t26 * t36;
+        let t42: crate::Real = t40 * t41;
+        let t43: crate::Real = -t42;
+        let t46: crate::Real = t43 - t45;
+        let t47: crate::Real = t19 * t46;
+        let t48: crate::Real = t39 + t47;
+        let t49: crate::Real = t19 * t19;
+        let t51: crate::Real = t27 * t50;
+        let t52: crate::Real = t38 * t50;
+        let t53: crate::Real = t52 - t51;
+        let t54: crate::Real = t49 * t53;
+        let t55: crate::Real = t48 + t54;
+        let t56: crate::Real = t19 * t49;
+        let t58: crate::Real = t40 * t57;
+        let t59: crate::Real = t44 * t57;
+        let t60: crate::Real = t58 + t59;
+        let t61: crate::Real = t56 * t60;
+        let t62: crate::Real = t55 + t61;
+        let t63: crate::Real = t49 * t49;
+        let t65: crate::Real = t27 * t64;
+        let t66: crate::Real = t38 * t64;
+        let t67: crate::Real = t65 - t66;
+        let t68: crate::Real = t63 * t67;
+        let t69: crate::Real = t62 + t68;
+        let t70: crate::Real = t19 * t63;
+        let t72: crate::Real = t40 * t71;
+        let t73: crate::Real = -t72;
+        let t74: crate::Real = t44 * t71;
+        let t75: crate::Real = t73 - t74;
+        let t76: crate::Real = t70 * t75;
+        let t77: crate::Real = t69 + t76;
+        let t78: crate::Real = t56 * t56;
+        let t80: crate::Real = t27 * t79;
+        let t81: crate::Real = t38 * t79;
+        let t82: crate::Real = t81 - t80;
+        let t83: crate::Real = t78 * t82;
+        let t84: crate::Real = t77 + t83;
+        let t85: crate::Real = t19 * t78;
+        let t87: crate::Real = t40 * t86;
+        let t88: crate::Real = t44 * t86;
+        let t89: crate::Real = t87 + t88;
+        let t90: crate::Real = t85 * t89;
+        let t91: crate::Real = t84 + t90;
+        let t92: crate::Real = t63 * t63;
+        let t94: crate::Real = t27 * t93;
+        let t95: crate::Real = t38 * t93;
+        let t96: crate::Real = t94 - t95;
+        let t97: crate::Real = t92 * t96;
+        let t98: crate::Real = t91 + t97;
+        let t120: crate::Real = t1 + t40;
+        let t121: crate::Real = t44 + t120;
+        let t122: crate::Real = t27 * t41;
+        let t123: crate::Real = t38 * t41;
+        let t124: crate::Real = t122 - t123;
+        let t125: crate::Real = t19 * t124;
+        let t126: crate::Real = t121 + t125;
+        let t127: crate::Real = t40 * t50;
+        let t128: crate::Real = -t127;
+        let t129: crate::Real = t44 * t50;
+        let t130: crate::Real = t128 - t129;
+        let t131: crate::Real = t49 * t130;
+        let t132: crate::Real = t126 + t131;
+        let t133: crate::Real = t27 * t57;
+        let t134: crate::Real = t38 * t57;
+        let t135: crate::Real = t134 - t133;
+        let t136: crate::Real = t56 * t135;
+        let t137: crate::Real = t132 + t136;
+        let t138: crate::Real = t40 * t64;
+        let t139: crate::Real = t44 * t64;
+        let t140: crate::Real = t138 + t139;
+        let t141: crate::Real = t63 * t140;
+        let t142: crate::Real = t137 + t141;
+        let t143: crate::Real = t27 * t71;
+        let t144: crate::Real = t38 * t71;
+        let t145: crate::Real = t143 - t144;
+        let t146: crate::Real = t70 * t145;
+        let t147: crate::Real = t142 + t146;
+        let t148: crate::Real = t40 * t79;
+        let t149: crate::Real = -t148;
+        let t150: crate::Real = t44 * t79;
+        let t151: crate::Real = t149 - t150;
+        let t152: crate::Real = t78 * t151;
+        let t153: crate::Real = t147 + t152;
+        let t154: crate::Real = t27 * t86;
+        let t155: crate::Real = t38 * t86;
+        let t156: crate::Real = t155 - t154;
+        let t157: crate::Real = t85 * t156;
+        let t158: crate::Real = t153 + t157;
+        let t159: crate::Real = t40 * t93;
+        let t160: crate::Real = t44 * t93;
+        let t161: crate::Real = t159 + t160;
+        let t162: crate::Real = t92 * t161;
+        let t163: crate::Real = t158 + t162;
+        let t173: crate::Real = t172 * t41;
+        let t175: crate::Real = t174 - t173;
+        let t176: crate::Real = t19 * t175;
+        let t177: crate::Real = t171 * t50;
+        let t178: crate::Real = t177 + t129;
+        let t179: crate::Real = t49 * t178;
+        let t180: crate::Real = t176 + t179;
+        let t181: crate::Real = t172 * t57;
+        let t182: crate::Real = t181 - t134;
+        let t183: crate::Real = t56 * t182;
+        let t184: crate::Real = t180 + t183;
+        let t185: crate::Real = t171 * t64;
+        let t186: crate::Real = -t185;
+        let t187: crate::Real = t186 - t139;
+        let t188: crate::Real = t63 * t187;
+        let t189: crate::Real = t184 + t188;
+        let t190: crate::Real = t172 * t71;
+        let t191: crate::Real = t144 - t190;
+        let t192: crate::Real = t70 * t191;
+        let t193: crate::Real = t189 + t192;
+        let t194: crate::Real = t171 * t79;
+        let t195: crate::Real = t194 + t150;
+        let t196: crate::Real = t78 * t195;
+        let t197: crate::Real = t193 + t196;
+        let t198: crate::Real = t172 * t86;
+        let t199: crate::Real = t198 - t155;
+        let t200: crate::Real = t85 * t199;
+        let t201: crate::Real = t197 + t200;
+        let t202: crate::Real = t171 * t93;
+        let t203: crate::Real = -t202;
+        let t204: crate::Real = t203 - t160;
+        let t205: crate::Real = t92 * t204;
+        let t206: crate::Real = t201 + t205;
+        let t207: crate::Real = t206 - t171;
+        let t208: crate::Real = t207 - t44;
+        let t212: crate::Real = t172 - t38;
+        let t215: crate::Real = t44 * t41;
+        let t216: crate::Real = t214 - t215;
+        let t217: crate::Real = t19 * t216;
+        let t218: crate::Real = t212 + t217;
+        let t219: crate::Real = t172 * t50;
+        let t220: crate::Real = t52 - t219;
+        let t221: crate::Real = t49 * t220;
+        let t222: crate::Real = t218 + t221;
+        let t223: crate::Real = t171 * t57;
+        let t224: crate::Real = t223 + t59;
+        let t225: crate::Real = t56 * t224;
+        let t226: crate::Real = t222 + t225;
+        let t227: crate::Real = t172 * t64;
+        let t228: crate::Real = t227 - t66;
+        let t229: crate::Real = t63 * t228;
+        let t230: crate::Real = t226 + t229;
+        let t231: crate::Real = t171 * t71;
+        let t232: crate::Real = -t231;
+        let t233: crate::Real = t232 - t74;
+        let t234: crate::Real = t70 * t233;
+        let t235: crate::Real = t230 + t234;
+        let t236: crate::Real = t172 * t79;
+        let t237: crate::Real = t81 - t236;
+        let t238: crate::Real = t78 * t237;
+        let t239: crate::Real = t235 + t238;
+        let t240: crate::Real = t171 * t86;
+        let t241: crate::Real = t240 + t88;
+        let t242: crate::Real = t85 * t241;
+        let t243: crate::Real = t239 + t242;
+        let t244: crate::Real = t172 * t93;
+        let t245: crate::Real = t244 - t95;
+        let t246: crate::Real = t92 * t245;
+        let t247: crate::Real = t243 + t246;
         [t98, t163, t208, t247]
     } else {
-        let t100: f64 = libm::cos(t19);
-        let t101: f64 = t99 - t100;
-        let t102: f64 = t11 * t101;
-        let t103: f64 = t24 * t102;
-        let t104: f64 = t99 / t19;
-        let t105: f64 = t103 * t104;
-        let t106: f64 = libm::sin(t19);
-        let t107: f64 = t37 * t106;
-        let t108: f64 = t107 * t104;
-        let t109: f64 = t105 + t108;
-        let t110: f64 = t36 * t109;
-        let t111: f64 = t0 - t110;
-        let t112: f64 = t35 * t102;
-        let t113: f64 = t112 * t104;
-        let t114: f64 = t26 * t106;
-        let t115: f64 = t114 * t104;
-        let t116: f64 = t115 - t113;
-        let t117: f64 = t25 * t116;
-        let t118: f64 = t111 + t117;
-        let t164: f64 = t25 * t109;
-        let t165: f64 = t1 + t164;
-        let t166: f64 = t36 * t116;
-        let t167: f64 = t165 + t166;
-        let t209: f64 = -t164;
-        let t210: f64 = t209 - t166;
-        let t248: f64 = t117 - t110;
+        let t100: crate::Real = crate::math::cos(t19);
+        let t101: crate::Real = t99 - t100;
+        let t102: crate::Real = t11 * t101;
+        let t103: crate::Real = t24 * t102;
+        let t104: crate::Real = t99 / t19;
+        let t105: crate::Real = t103 * t104;
+        let t106: crate::Real = crate::math::sin(t19);
+        let t107: crate::Real = t37 * t106;
+        let t108: crate::Real = t107 * t104;
+        let t109: crate::Real = t105 + t108;
+        let t110: crate::Real = t36 * t109;
+        let t111: crate::Real = t0 - t110;
+        let t112: crate::Real = t35 * t102;
+        let t113: crate::Real = t112 * t104;
+        let t114: crate::Real = t26 * t106;
+        let t115: crate::Real = t114 * t104;
+        let t116: crate::Real = t115 - t113;
+        let t117: crate::Real = t25 * t116;
+        let t118: crate::Real = t111 + t117;
+        let t164: crate::Real = t25 * t109;
+        let t165: crate::Real = t1 + t164;
+        let t166: crate::Real = t36 * t116;
+        let t167: crate::Real = t165 + t166;
+        let t209: crate::Real = -t164;
+        let t210: crate::Real = t209 - t166;
+        let t248: crate::Real = t117 - t110;
         [t118, t167, t210, t248]
     };
-    let t119: f64 = g0[0usize];
-    let t168: f64 = g0[1usize];
-    let t211: f64 = g0[2usize];
-    let t249: f64 = g0[3usize];
-    let t169: f64 = t2 + t19;
-    let t170: f64 = 0f64;
-    let t250: f64 = t99 / t10;
-    let t251: f64 = t16 * t250;
-    let t252: f64 = t8 + t251;
-    let t253: f64 = t11 * t252;
-    let t254: f64 = t11 * t32;
-    let t271: f64 = t11 * t20;
-    let t272: f64 = t21 * t271;
-    let t281: f64 = t253 * t253;
-    let t447: f64 = t10 * t10;
-    let t453: f64 = t99 / t447;
-    let t456: f64 = t9 * t11;
-    let g1: [f64; 4usize] = if libm::fabs(t253) < 0.05f64 {
-        let t255: f64 = t36 * t254;
-        let t256: f64 = t15 * t255;
-        let t257: f64 = t214 - t45;
-        let t258: f64 = t11 * t257;
-        let t259: f64 = t13 * t258;
-        let t260: f64 = t15 * t259;
-        let t261: f64 = t260 * t250;
-        let t262: f64 = t254 * t25;
-        let t263: f64 = t262 * t50;
-        let t264: f64 = t15 * t172;
-        let t265: f64 = t15 * t38;
-        let t266: f64 = t265 - t264;
-        let t267: f64 = t11 * t266;
-        let t268: f64 = t13 * t267;
-        let t269: f64 = t15 * t268;
-        let t270: f64 = t269 * t250;
-        let t273: f64 = t36 * t272;
-        let t274: f64 = t41 * t273;
-        let t275: f64 = t270 - t274;
-        let t276: f64 = t275 - t263;
-        let t277: f64 = t253 * t276;
-        let t278: f64 = t261 + t277;
-        let t279: f64 = t25 * t272;
-        let t280: f64 = t278 + t279;
-        let t282: f64 = 0.05555555555555555f64;
-        let t283: f64 = t255 * t282;
-        let t284: f64 = 0.125f64;
-        let t285: f64 = t171 * t284;
-        let t286: f64 = t44 * t284;
-        let t287: f64 = t285 + t286;
-        let t288: f64 = t11 * t287;
-        let t289: f64 = t13 * t288;
-        let t290: f64 = t15 * t289;
-        let t291: f64 = t290 * t250;
-        let t292: f64 = t283 + t291;
-        let t293: f64 = t50 * t279;
-        let t294: f64 = t292 - t293;
-        let t295: f64 = t281 * t294;
-        let t296: f64 = t280 + t295;
-        let t297: f64 = t253 * t281;
-        let t298: f64 = 0.013888888888888888f64;
-        let t299: f64 = t262 * t298;
-        let t300: f64 = 0.03333333333333333f64;
-        let t301: f64 = t172 * t300;
-        let t302: f64 = t38 * t300;
-        let t303: f64 = t301 - t302;
-        let t304: f64 = t11 * t303;
-        let t305: f64 = t13 * t304;
-        let t306: f64 = t15 * t305;
-        let t307: f64 = t306 * t250;
-        let t308: f64 = t299 + t307;
-        let t309: f64 = t273 * t57;
-        let t310: f64 = t308 + t309;
-        let t311: f64 = t297 * t310;
-        let t312: f64 = t296 + t311;
-        let t313: f64 = t281 * t281;
-        let t314: f64 = 0.002777777777777778f64;
-        let t315: f64 = t255 * t314;
-        let t316: f64 = 0.006944444444444444f64;
-        let t317: f64 = t171 * t316;
-        let t318: f64 = -t317;
-        let t319: f64 = t44 * t316;
-        let t320: f64 = t318 - t319;
-        let t321: f64 = t11 * t320;
-        let t322: f64 = t13 * t321;
-        let t323: f64 = t15 * t322;
-        let t324: f64 = t323 * t250;
-        let t325: f64 = t279 * t64;
-        let t326: f64 = t324 + t325;
-        let t327: f64 = t326 - t315;
-        let t328: f64 = t313 * t327;
-        let t329: f64 = t312 + t328;
-        let t330: f64 = t253 * t313;
-        let t331: f64 = 0.000462962962962963f64;
-        let t332: f64 = t262 * t331;
-        let t333: f64 = 0.0011904761904761906f64;
-        let t334: f64 = t172 * t333;
-        let t335: f64 = t38 * t333;
-        let t336: f64 = t335 - t334;
-        let t337: f64 = t11 * t336;
-        let t338: f64 = t13 * t337;
-        let t339: f64 = t15 * t338;
-        let t340: f64 = t339 * t250;
-        let t341: f64 = t273 * t71;
-        let t342: f64 = t340 - t341;
-        let t343: f64 = t342 - t332;
-        let t344: f64 = t330 * t343;
-        let t345: f64 = t329 + t344;
-        let t346: f64 = t297 * t297;
-        let t347: f64 = 0.00006613756613756614f64;
-        let t348: f64 = t255 * t347;
-        let t349: f64 = 0.00017361111111111112f64;
-        let t350: f64 = t171 * t349;
-        let t351: f64 = t44 * t349;
-        let t352: f64 = t350 + t351;
-        let t353: f64 = t11 * t352;
-        let t354: f64 = t13 * t353;
-        let t355: f64 = t15 * t354;
-        let t356: f64 = t355 * t250;
-        let t357: f64 = t348 + t356;
-        let t358: f64 = t279 * t79;
-        let t359: f64 = t357 - t358;
-        let t360: f64 = t346 * t359;
-        let t361: f64 = t345 + t360;
-        let t362: f64 = t253 * t346;
-        let t363: f64 = 0.000008267195767195768f64;
-        let t364: f64 = t262 * t363;
-        let t365: f64 = 0.000022045855379188714f64;
-        let t366: f64 = t172 * t365;
-        let t367: f64 = t38 * t365;
-        let t368: f64 = t366 - t367;
-        let t369: f64 = t11 * t368;
-        let t370: f64 = t13 * t369;
-        let t371: f64 = t15 * t370;
-        let t372: f64 = t371 * t250;
-        let t373: f64 = t364 + t372;
-        let t374: f64 = t273 * t86;
-        let t375: f64 = t373 + t374;
-        let t376: f64 = t362 * t375;
-        let t377: f64 = t361 + t376;
-        let t378: f64 = t313 * t313;
-        let t379: f64 = 0.0000009185773074661964f64;
-        let t380: f64 = t255 * t379;
-        let t381: f64 = 0.00000248015873015873f64;
-        let t382: f64 = t171 * t381;
-        let t383: f64 = -t382;
-        let t384: f64 = t44 * t381;
-        let t385: f64 = t383 - t384;
-        let t386: f64 = t11 * t385;
-        let t387: f64 = t13 * t386;
-        let t388: f64 = t15 * t387;
-        let t389: f64 = t388 * t250;
-        let t390: f64 = t279 * t93;
-        let t391: f64 = t389 + t390;
-        let t392: f64 = t391 - t380;
-        let t393: f64 = t378 * t392;
-        let t394: f64 = t377 + t393;
-        let t395: f64 = t394 - t256;
-        let t448: f64 = t11 * t253;
-        let t449: f64 = t9 * t448;
-        let t450: f64 = t266 * t449;
-        let t451: f64 = t13 * t450;
-        let t452: f64 = t15 * t451;
-        let t454: f64 = t452 * t453;
-        let t455: f64 = -t454;
-        let t457: f64 = t257 * t456;
-        let t458: f64 = t13 * t457;
-        let t459: f64 = t15 * t458;
-        let t460: f64 = t459 * t453;
-        let t461: f64 = t11 * t281;
-        let t462: f64 = t9 * t461;
-        let t463: f64 = t287 * t462;
-        let t464: f64 = t13 * t463;
-        let t465: f64 = t15 * t464;
-        let t466: f64 = t465 * t453;
-        let t467: f64 = t11 * t297;
-        let t468: f64 = t9 * t467;
-        let t469: f64 = t303 * t468;
-        let t470: f64 = t13 * t469;
-        let t471: f64 = t15 * t470;
-        let t472: f64 = t471 * t453;
-        let t473: f64 = t11 * t313;
-        let t474: f64 = t9 * t473;
-        let t475: f64 = t320 * t474;
-        let t476: f64 = t13 * t475;
-        let t477: f64 = t15 * t476;
-        let t478: f64 = t477 * t453;
-        let t479: f64 = t11 * t330;
-        let t480: f64 = t9 * t479;
-        let t481: f64 = t336 * t480;
-        let t482: f64 = t13 * t481;
-        let t483: f64 = t15 * t482;
-        let t484: f64 = t483 * t453;
-        let t485: f64 = t11 * t346;
-        let t486: f64 = t9 * t485;
-        let t487: f64 = t352 * t486;
-        let t488: f64 = t13 * t487;
-        let t489: f64 = t15 * t488;
-        let t490: f64 = t489 * t453;
-        let t491: f64 = t11 * t362;
-        let t492: f64 = t9 * t491;
-        let t493: f64 = t368 * t492;
-        let t494: f64 = t13 * t493;
-        let t495: f64 = t15 * t494;
-        let t496: f64 = t495 * t453;
-        let t497: f64 = t11 * t378;
-        let t498: f64 = t9 * t497;
-        let t499: f64 = t385 * t498;
-        let t500: f64 = t13 * t499;
-        let t501: f64 = t15 * t500;
-        let t502: f64 = t501 * t453;
-        let t503: f64 = t455 - t460;
-        let t504: f64 = t503 - t466;
-        let t505: f64 = t504 - t472;
-        let t506: f64 = t505 - t478;
-        let t507: f64 = t506 - t484;
-        let t508: f64 = t507 - t490;
-        let t509: f64 = t508 - t496;
-        let t510: f64 = t509 - t502;
-        let t517: f64 = t15 * t262;
-        let t518: f64 = t41 * t172;
-        let t519: f64 = t518 - t174;
-        let t520: f64 = t11 * t519;
-        let t521: f64 = t13 * t520;
-        let t522: f64 = t15 * t521;
-        let t523: f64 = t522 * t250;
-        let t524: f64 = t517 + t523;
-        let t525: f64 = t255 * t50;
-        let t526: f64 = t15 * t171;
-        let t527: f64 = -t526;
-        let t528: f64 = t15 * t44;
-        let t529: f64 = t527 - t528;
-        let t530: f64 = t11 * t529;
-        let t531: f64 = t13 * t530;
-        let t532: f64 = t15 * t531;
-        let t533: f64 = t532 * t250;
-        let t534: f64 = t41 * t279;
-        let t535: f64 = t533 + t534;
-        let t536: f64 = t535 - t525;
-        let t537: f64 = t253 * t536;
-        let t538: f64 = t524 + t537;
-        let t539: f64 = t273 + t538;
-        let t540: f64 = t262 * t282;
-        let t541: f64 = t172 * t284;
-        let t542: f64 = t38 * t284;
-        let t543: f64 = t542 - t541;
-        let t544: f64 = t11 * t543;
-        let t545: f64 = t13 * t544;
-        let t546: f64 = t15 * t545;
-        let t547: f64 = t546 * t250;
-        let t548: f64 = t50 * t273;
-        let t549: f64 = t547 - t548;
-        let t550: f64 = t549 - t540;
-        let t551: f64 = t281 * t550;
-        let t552: f64 = t539 + t551;
-        let t553: f64 = t255 * t298;
-        let t554: f64 = t171 * t300;
-        let t555: f64 = t44 * t300;
-        let t556: f64 = t554 + t555;
-        let t557: f64 = t11 * t556;
-        let t558: f64 = t13 * t557;
-        let t559: f64 = t15 * t558;
-        let t560: f64 = t559 * t250;
-        let t561: f64 = t553 + t560;
-        let t562: f64 = t279 * t57;
-        let t563: f64 = t561 - t562;
-        let t564: f64 = t297 * t563;
-        let t565: f64 = t552 + t564;
-        let t566: f64 = t262 * t314;
-        let t567: f64 = t172 * t316;
-        let t568: f64 = t38 * t316;
-        let t569: f64 = t567 - t568;
-        let t570: f64 = t11 * t569;
-        let t571: f64 = t13 * t570;
-        let t572: f64 = t15 * t571;
-        let t573: f64 = t572 * t250;
-        let t574: f64 = t566 + t573;
-        let t575: f64 = t273 * t64;
-        let t576: f64 = t574 + t575;
-        let t577: f64 = t313 * t576;
-        let t578: f64 = t565 + t577;
-        let t579: f64 = t255 * t331;
-        let t580: f64 = t171 * t333;
-        let t581: f64 = -t580;
-        let t582: f64 = t44 * t333;
-        let t583: f64 = t581 - t582;
-        let t584: f64 = t11 * t583;
-        let t585: f64 = t13 * t584;
-        let t586: f64 = t15 * t585;
-        let t587: f64 = t586 * t250;
-        let t588: f64 = t279 * t71;
-        let t589: f64 = t587 + t588;
-        let t590: f64 = t589 - t579;
-        let t591: f64 = t330 * t590;
-        let t592: f64 = t578 + t591;
-        let t593: f64 = t262 * t347;
-        let t594: f64 = t172 * t349;
-        let t595: f64 = t38 * t349;
-        let t596: f64 = t595 - t594;
-        let t597: f64 = t11 * t596;
-        let t598: f64 = t13 * t597;
-        let t599: f64 = t15 * t598;
-        let t600: f64 = t599 * t250;
-        let t601: f64 = t273 * t79;
-        let t602: f64 = t600 - t601;
-        let t603: f64 = t602 - t593;
-        let t604: f64 = t346 * t603;
-        let t605: f64 = t592 + t604;
-        let t606: f64 = t255 * t363;
-        let t607: f64 = t171 * t365;
-        let t608: f64 = t44 * t365;
-        let t609: f64 = t607 + t608;
-        let t610: f64 = t11 * t609;
-        let t611: f64 = t13 * t610;
-        let t612: f64 = t15 * t611;
-        let t613: f64 = t612 * t250;
-        let t614: f64 = t606 + t613;
-        let t615: f64 = t279 * t86;
-        let t616: f64 = t614 - t615;
-        let t617: f64 = t362 * t616;
-        let t618: f64 = t605 + t617;
-        let t619: f64 = t262 * t379;
-        let t620: f64 = t172 * t381;
-        let t621: f64 = t38 * t381;
-        let t622: f64 = t620 - t621;
-        let t623: f64 = t11 * t622;
-        let t624: f64 = t13 * t623;
-        let t625: f64 = t15 * t624;
-        let t626: f64 = t625 * t250;
-        let t627: f64 = t619 + t626;
-        let t628: f64 = t273 * t93;
-        let t629: f64 = t627 + t628;
-        let t630: f64 = t378 * t629;
-        let t631: f64 = t618 + t630;
-        let t644: f64 = t449 * t529;
-        let t645: f64 = t13 * t644;
-        let t646: f64 = t15 * t645;
-        let t647: f64 = t646 * t453;
-        let t648: f64 = -t647;
-        let t649: f64 = t456 * t519;
-        let t650: f64 = t13 * t649;
-        let t651: f64 = t15 * t650;
-        let t652: f64 = t651 * t453;
-        let t653: f64 = t462 * t543;
-        let t654: f64 = t13 * t653;
-        let t655: f64 = t15 * t654;
-        let t656: f64 = t655 * t453;
-        let t657: f64 = t468 * t556;
-        let t658: f64 = t13 * t657;
-        let t659: f64 = t15 * t658;
-        let t660: f64 = t659 * t453;
-        let t661: f64 = t474 * t569;
-        let t662: f64 = t13 * t661;
-        let t663: f64 = t15 * t662;
-        let t664: f64 = t663 * t453;
-        let t665: f64 = t480 * t583;
-        let t666: f64 = t13 * t665;
-        let t667: f64 = t15 * t666;
-        let t668: f64 = t667 * t453;
-        let t669: f64 = t486 * t596;
-        let t670: f64 = t13 * t669;
-        let t671: f64 = t15 * t670;
-        let t672: f64 = t671 * t453;
-        let t673: f64 = t492 * t609;
-        let t674: f64 = t13 * t673;
-        let t675: f64 = t15 * t674;
-        let t676: f64 = t675 * t453;
-        let t677: f64 = t498 * t622;
-        let t678: f64 = t13 * t677;
-        let t679: f64 = t15 * t678;
-        let t680: f64 = t679 * t453;
-        let t681: f64 = t648 - t652;
-        let t682: f64 = t681 - t656;
-        let t683: f64 = t682 - t660;
-        let t684: f64 = t683 - t664;
-        let t685: f64 = t684 - t668;
-        let t686: f64 = t685 - t672;
-        let t687: f64 = t686 - t676;
-        let t688: f64 = t687 - t680;
+    let t119: crate::Real = g0[0usize];
+    let t168: crate::Real = g0[1usize];
+    let t211: crate::Real = g0[2usize];
+    let t249: crate::Real = g0[3usize];
+    let t169: crate::Real = t2 + t19;
+    let t170: crate::Real = 0.0;
+    let t250: crate::Real = t99 / t10;
+    let t251: crate::Real = t16 * t250;
+    let t252: crate::Real = t8 + t251;
+    let t253: crate::Real = t11 * t252;
+    let t254: crate::Real = t11 * t32;
+    let t271: crate::Real = t11 * t20;
+    let t272: crate::Real = t21 * t271;
+    let t281: crate::Real = t253 * t253;
+    let t447: crate::Real = t10 * t10;
+    let t453: crate::Real = t99 / t447;
+    let t456: crate::Real = t9 * t11;
+    let g1: [crate::Real; 4usize] = if crate::math::fabs(t253)
+        < crate::math::series_switch(0.05)
+    {
+        let t255: crate::Real = t36 * t254;
+        let t256: crate::Real = t15 * t255;
+        let t257: crate::Real = t214 - t45;
+        let t258: crate::Real = t11 * t257;
+        let t259: crate::Real = t13 * t258;
+        let t260: crate::Real = t15 * t259;
+        let t261: crate::Real = t260 * t250;
+        let t262: crate::Real = t254 * t25;
+        let t263: crate::Real = t262 * t50;
+        let t264: crate::Real = t15 * t172;
+        let t265: crate::Real = t15 * t38;
+        let t266: crate::Real = t265 - t264;
+        let t267: crate::Real = t11 * t266;
+        let t268: crate::Real = t13 * t267;
+        let t269: crate::Real = t15 * t268;
+        let t270: crate::Real = t269 * t250;
+        let t273: crate::Real = t36 * t272;
+        let t274: crate::Real = t41 * t273;
+        let t275: crate::Real = t270 - t274;
+        let t276: crate::Real = t275 - t263;
+        let t277: crate::Real = t253 * t276;
+        let t278: crate::Real = t261 + t277;
+        let t279: crate::Real = t25 * t272;
+        let t280: crate::Real = t278 + t279;
+        let t282: crate::Real = 0.05555555555555555;
+        let t283: crate::Real = t255 * t282;
+        let t284: crate::Real = 0.125;
+        let t285: crate::Real = t171 * t284;
+        let t286: crate::Real = t44 * t284;
+        let t287: crate::Real = t285 + t286;
+        let t288: crate::Real = t11 * t287;
+        let t289: crate::Real = t13 * t288;
+        let t290: crate::Real = t15 * t289;
+        let t291: crate::Real = t290 * t250;
+        let t292: crate::Real = t283 + t291;
+        let t293: crate::Real = t50 * t279;
+        let t294: crate::Real = t292 - t293;
+        let t295: crate::Real = t281 * t294;
+        let t296: crate::Real = t280 + t295;
+        let t297: crate::Real = t253 * t281;
+        let t298: crate::Real = 0.013888888888888888;
+        let t299: crate::Real = t262 * t298;
+        let t300: crate::Real = 0.03333333333333333;
+        let t301: crate::Real = t172 * t300;
+        let t302: crate::Real = t38 * t300;
+        let t303: crate::Real = t301 - t302;
+        let t304: crate::Real = t11 * t303;
+        let t305: crate::Real = t13 * t304;
+        let t306: crate::Real = t15 * t305;
+        let t307: crate::Real = t306 * t250;
+        let t308: crate::Real = t299 + t307;
+        let t309: crate::Real = t273 * t57;
+        let t310: crate::Real = t308 + t309;
+        let t311: crate::Real = t297 * t310;
+        let t312: crate::Real = t296 + t311;
+        let t313: crate::Real = t281 * t281;
+        let t314: crate::Real = 0.002777777777777778;
+        let t315: crate::Real = t255 * t314;
+        let t316: crate::Real = 0.006944444444444444;
+        let t317: crate::Real = t171 * t316;
+        let t318: crate::Real = -t317;
+        let t319: crate::Real = t44 * t316;
+        let t320: crate::Real = t318 - t319;
+        let t321: crate::Real = t11 * t320;
+        let t322: crate::Real = t13 * t321;
+        let t323: crate::Real = t15 * t322;
+        let t324: crate::Real = t323 * t250;
+        let t325: crate::Real = t279 * t64;
+        let t326: crate::Real = t324 + t325;
+        let t327: crate::Real = t326 - t315;
+        let t328: crate::Real = t313 * t327;
+        let t329: crate::Real = t312 + t328;
+        let t330: crate::Real = t253 * t313;
+        let t331: crate::Real = 0.000462962962962963;
+        let t332: crate::Real = t262 * t331;
+        let t333: crate::Real = 0.0011904761904761906;
+        let t334: crate::Real = t172 * t333;
+        let t335: crate::Real = t38 * t333;
+        let t336: crate::Real = t335 - t334;
+        let t337: crate::Real = t11 * t336;
+        let t338: crate::Real = t13 * t337;
+        let t339: crate::Real = t15 * t338;
+        let t340: crate::Real = t339 * t250;
+        let t341: crate::Real = t273 * t71;
+        let t342: crate::Real = t340 - t341;
+        let t343: crate::Real = t342 - t332;
+        let t344: crate::Real = t330 * t343;
+        let t345: crate::Real = t329 + t344;
+        let t346: crate::Real = t297 * t297;
+        let t347: crate::Real = 0.00006613756613756614;
+        let t348: crate::Real = t255 * t347;
+        let t349: crate::Real = 0.00017361111111111112;
+        let t350: crate::Real = t171 * t349;
+        let t351: crate::Real = t44 * t349;
+        let t352: crate::Real = t350 + t351;
+        let t353: crate::Real = t11 * t352;
+        let t354: crate::Real = t13 * t353;
+        let t355: crate::Real = t15 * t354;
+        let t356: crate::Real = t355 * t250;
+        let t357: crate::Real = t348 + t356;
+        let t358: crate::Real = t279 * t79;
+        let t359: crate::Real = t357 - t358;
+        let t360: crate::Real = t346 * t359;
+        let t361: crate::Real = t345 + t360;
+        let t362: crate::Real = t253 * t346;
+        let t363: crate::Real = 0.000008267195767195768;
+        let t364: crate::Real = t262 * t363;
+        let t365: crate::Real = 0.000022045855379188714;
+        let t366: crate::Real = t172 * t365;
+        let t367: crate::Real = t38 * t365;
+        let t368: crate::Real = t366 - t367;
+        let t369: crate::Real = t11 * t368;
+        let t370: crate::Real = t13 * t369;
+        let t371: crate::Real = t15 * t370;
+        let t372: crate::Real = t371 * t250;
+        let t373: crate::Real = t364 + t372;
+        let t374: crate::Real = t273 * t86;
+        let t375: crate::Real = t373 + t374;
+        let t376: crate::Real = t362 * t375;
+        let t377: crate::Real = t361 + t376;
+        let t378: crate::Real = t313 * t313;
+        let t379: crate::Real = 0.0000009185773074661964;
+        let t380: crate::Real = t255 * t379;
+        let t381: crate::Real = 0.00000248015873015873;
+        let t382: crate::Real = t171 * t381;
+        let t383: crate::Real = -t382;
+        let t384: crate::Real = t44 * t381;
+        let t385: crate::Real = t383 - t384;
+        let t386: crate::Real = t11 * t385;
+        let t387: crate::Real = t13 * t386;
+        let t388: crate::Real = t15 * t387;
+        let t389: crate::Real = t388 * t250;
+        let t390: crate::Real = t279 * t93;
+        let t391: crate::Real = t389 + t390;
+        let t392: crate::Real = t391 - t380;
+        let t393: crate::Real = t378 * t392;
+        let t394: crate::Real = t377 + t393;
+        let t395: crate::Real = t394 - t256;
+        let t448: crate::Real = t11 * t253;
+        let t449: crate::Real = t9 * t448;
+        let t450: crate::Real = t266 * t449;
+        let t451: crate::Real = t13 * t450;
+        let t452: crate::Real = t15 * t451;
+        let t454: crate::Real = t452 * t453;
+        let t455: crate::Real = -t454;
+        let t457: crate::Real = t257 * t456;
+        let t458: crate::Real = t13 * t457;
+        let t459: crate::Real = t15 * t458;
+        let t460: crate::Real = t459 * t453;
+        let t461: crate::Real = t11 * t281;
+        let t462: crate::Real = t9 * t461;
+        let t463: crate::Real = t287 * t462;
+        let t464: crate::Real = t13 * t463;
+        let t465: crate::Real = t15 * t464;
+        let t466: crate::Real = t465 * t453;
+        let t467: crate::Real = t11 * t297;
+        let t468: crate::Real = t9 * t467;
+        let t469: crate::Real = t303 * t468;
+        let t470: crate::Real = t13 * t469;
+        let t471: crate::Real = t15 * t470;
+        let t472: crate::Real = t471 * t453;
+        let t473: crate::Real = t11 * t313;
+        let t474: crate::Real = t9 * t473;
+        let t475: crate::Real = t320 * t474;
+        let t476: crate::Real = t13 * t475;
+        let t477: crate::Real = t15 * t476;
+        let t478: crate::Real = t477 * t453;
+        let t479: crate::Real = t11 * t330;
+        let t480: crate::Real = t9 * t479;
+        let t481: crate::Real = t336 * t480;
+        let t482: crate::Real = t13 * t481;
+        let t483: crate::Real = t15 * t482;
+        let t484: crate::Real = t483 * t453;
+        let t485: crate::Real = t11 * t346;
+        let t486: crate::Real = t9 * t485;
+        let t487: crate::Real = t352 * t486;
+        let t488: crate::Real = t13 * t487;
+        let t489: crate::Real = t15 * t488;
+        let t490: crate::Real = t489 * t453;
+        let t491: crate::Real = t11 * t362;
+        let t492: crate::Real = t9 * t491;
+        let t493: crate::Real = t368 * t492;
+        let t494: crate::Real = t13 * t493;
+        let t495: crate::Real = t15 * t494;
+        let t496: crate::Real = t495 * t453;
+        let t497: crate::Real = t11 * t378;
+        let t498: crate::Real = t9 * t497;
+        let t499: crate::Real = t385 * t498;
+        let t500: crate::Real = t13 * t499;
+        let t501: crate::Real = t15 * t500;
+        let t502: crate::Real = t501 * t453;
+        let t503: crate::Real = t455 - t460;
+        let t504: crate::Real = t503 - t466;
+        let t505: crate::Real = t504 - t472;
+        let t506: crate::Real = t505 - t478;
+        let t507: crate::Real = t506 - t484;
+        let t508: crate::Real = t507 - t490;
+        let t509: crate::Real = t508 - t496;
+        let t510: crate::Real = t509 - t502;
+        let t517: crate::Real = t15 * t262;
+        let t518: crate::Real = t41 * t172;
+        let t519: crate::Real = t518 - t174;
+        let t520: crate::Real = t11 * t519;
+        let t521: crate::Real = t13 * t520;
+        let t522: crate::Real = t15 * t521;
+        let t523: crate::Real = t522 * t250;
+        let t524: crate::Real = t517 + t523;
+        let t525: crate::Real = t255 * t50;
+        let t526: crate::Real = t15 * t171;
+        let t527: crate::Real = -t526;
+        let t528: crate::Real = t15 * t44;
+        let t529: crate::Real = t527 - t528;
+        let t530: crate::Real = t11 * t529;
+        let t531: crate::Real = t13 * t530;
+        let t532: crate::Real = t15 * t531;
+        let t533: crate::Real = t532 * t250;
+        let t534: crate::Real = t41 * t279;
+        let t535: crate::Real = t533 + t534;
+        let t536: crate::Real = t535 - t525;
+        let t537: crate::Real = t253 * t536;
+        let t538: crate::Real = t524 + t537;
+        let t539: crate::Real = t273 + t538;
+        let t540: crate::Real = t262 * t282;
+        let t541: crate::Real = t172 * t284;
+        let t542: crate::Real = t38 * t284;
+        let t543: crate::Real = t542 - t541;
+        let t544: crate::Real = t11 * t543;
+        let t545: crate::Real = t13 * t544;
+        let t546: crate::Real = t15 * t545;
+        let t547: crate::Real = t546 * t250;
+        let t548: crate::Real = t50 * t273;
+        let t549: crate::Real = t547 - t548;
+        let t550: crate::Real = t549 - t540;
+        let t551: crate::Real = t281 * t550;
+        let t552: crate::Real = t539 + t551;
+        let t553: crate::Real = t255 * t298;
+        let t554: crate::Real = t171 * t300;
+        let t555: crate::Real = t44 * t300;
+        let t556: crate::Real = t554 + t555;
+        let t557: crate::Real = t11 * t556;
+        let t558: crate::Real = t13 * t557;
+        let t559: crate::Real = t15 * t558;
+        let t560: crate::Real = t559 * t250;
+        let t561: crate::Real = t553 + t560;
+        let t562: crate::Real = t279 * t57;
+        let t563: crate::Real = t561 - t562;
+        let t564: crate::Real = t297 * t563;
+        let t565: crate::Real = t552 + t564;
+        let t566: crate::Real = t262 * t314;
+        let t567: crate::Real = t172 * t316;
+        let t568: crate::Real = t38 * t316;
+        let t569: crate::Real = t567 - t568;
+        let t570: crate::Real = t11 * t569;
+        let t571: crate::Real = t13 * t570;
+        let t572: crate::Real = t15 * t571;
+        let t573: crate::Real = t572 * t250;
+        let t574: crate::Real = t566 + t573;
+        let t575: crate::Real = t273 * t64;
+        let t576: crate::Real = t574 + t575;
+        let t577: crate::Real = t313 * t576;
+        let t578: crate::Real = t565 + t577;
+        let t579: crate::Real = t255 * t331;
+        let t580: crate::Real = t171 * t333;
+        let t581: crate::Real = -t580;
+        let t582: crate::Real = t44 * t333;
+        let t583: crate::Real = t581 - t582;
+        let t584: crate::Real = t11 * t583;
+        let t585: crate::Real = t13 * t584;
+        let t586: crate::Real = t15 * t585;
+        let t587: crate::Real = t586 * t250;
+        let t588: crate::Real = t279 * t71;
+        let t589: crate::Real = t587 + t588;
+        let t590: crate::Real = t589 - t579;
+        let t591: crate::Real = t330 * t590;
+        let t592: crate::Real = t578 + t591;
+        let t593: crate::Real = t262 * t347;
+        let t594: crate::Real = t172 * t349;
+        let t595: crate::Real = t38 * t349;
+        let t596: crate::Real = t595 - t594;
+        let t597: crate::Real = t11 * t596;
+        let t598: crate::Real = t13 * t597;
+        let t599: crate::Real = t15 * t598;
+        let t600: crate::Real = t599 * t250;
+        let t601: crate::Real = t273 * t79;
+        let t602: crate::Real = t600 - t601;
+        let t603: crate::Real = t602 - t593;
+        let t604: crate::Real = t346 * t603;
+        let t605: crate::Real = t592 + t604;
+        let t606: crate::Real = t255 * t363;
+        let t607: crate::Real = t171 * t365;
+        let t608: crate::Real = t44 * t365;
+        let t609: crate::Real = t607 + t608;
+        let t610: crate::Real = t11 * t609;
+        let t611: crate::Real = t13 * t610;
+        let t612: crate::Real = t15 * t611;
+        let t613: crate::Real = t612 * t250;
+        let t614: crate::Real = t606 + t613;
+        let t615: crate::Real = t279 * t86;
+        let t616: crate::Real = t614 - t615;
+        let t617: crate::Real = t362 * t616;
+        let t618: crate::Real = t605 + t617;
+        let t619: crate::Real = t262 * t379;
+        let t620: crate::Real = t172 * t381;
+        let t621: crate::Real = t38 * t381;
+        let t622: crate::Real = t620 - t621;
+        let t623: crate::Real = t11 * t622;
+        let t624: crate::Real = t13 * t623;
+        let t625: crate::Real = t15 * t624;
+        let t626: crate::Real = t625 * t250;
+        let t627: crate::Real = t619 + t626;
+        let t628: crate::Real = t273 * t93;
+        let t629: crate::Real = t627 + t628;
+        let t630: crate::Real = t378 * t629;
+        let t631: crate::Real = t618 + t630;
+        let t644: crate::Real = t449 * t529;
+        let t645: crate::Real = t13 * t644;
+        let t646: crate::Real = t15 * t645;
+        let t647: crate::Real = t646 * t453;
+        let t648: crate::Real = -t647;
+        let t649: crate::Real = t456 * t519;
+        let t650: crate::Real = t13 * t649;
+        let t651: crate::Real = t15 * t650;
+        let t652: crate::Real = t651 * t453;
+        let t653: crate::Real = t462 * t543;
+        let t654: crate::Real = t13 * t653;
+        let t655: crate::Real = t15 * t654;
+        let t656: crate::Real = t655 * t453;
+        let t657: crate::Real = t468 * t556;
+        let t658: crate::Real = t13 * t657;
+        let t659: crate::Real = t15 * t658;
+        let t660: crate::Real = t659 * t453;
+        let t661: crate::Real = t474 * t569;
+        let t662: crate::Real = t13 * t661;
+        let t663: crate::Real = t15 * t662;
+        let t664: crate::Real = t663 * t453;
+        let t665: crate::Real = t480 * t583;
+        let t666: crate::Real = t13 * t665;
+        let t667: crate::Real = t15 * t666;
+        let t668: crate::Real = t667 * t453;
+        let t669: crate::Real = t486 * t596;
+        let t670: crate::Real = t13 * t669;
+        let t671: crate::Real = t15 * t670;
+        let t672: crate::Real = t671 * t453;
+        let t673: crate::Real = t492 * t609;
+        let t674: crate::Real = t13 * t673;
+        let t675: crate::Real = t15 * t674;
+        let t676: crate::Real = t675 * t453;
+        let t677: crate::Real = t498 * t622;
+        let t678: crate::Real = t13 * t677;
+        let t679: crate::Real = t15 * t678;
+        let t680: crate::Real = t679 * t453;
+        let t681: crate::Real = t648 - t652;
+        let t682: crate::Real = t681 - t656;
+        let t683: crate::Real = t682 - t660;
+        let t684: crate::Real = t683 - t664;
+        let t685: crate::Real = t684 - t668;
+        let t686: crate::Real = t685 - t672;
+        let t687: crate::Real = t686 - t676;
+        let t688: crate::Real = t687 - t680;
         [t395, t510, t631, t688]
     } else {
-        let t396: f64 = libm::sin(t253);
-        let t397: f64 = t26 * t396;
-        let t398: f64 = t99 / t253;
-        let t399: f64 = t397 * t398;
-        let t400: f64 = libm::cos(t253);
-        let t401: f64 = t37 * t400;
-        let t402: f64 = t401 * t398;
-        let t403: f64 = t399 + t402;
-        let t404: f64 = t99 - t400;
-        let t405: f64 = t11 * t404;
-        let t406: f64 = t24 * t405;
-        let t407: f64 = t99 / t281;
-        let t408: f64 = t406 * t407;
-        let t409: f64 = t403 - t408;
-        let t410: f64 = t37 * t396;
-        let t411: f64 = t410 * t407;
-        let t412: f64 = t409 - t411;
-        let t413: f64 = t36 * t412;
-        let t414: f64 = t26 * t400;
-        let t415: f64 = t414 * t398;
-        let t416: f64 = t410 * t398;
-        let t417: f64 = t415 - t416;
-        let t418: f64 = t35 * t405;
-        let t419: f64 = t418 * t407;
-        let t420: f64 = t417 + t419;
-        let t421: f64 = t397 * t407;
-        let t422: f64 = t420 - t421;
-        let t423: f64 = t25 * t422;
-        let t424: f64 = t423 - t413;
-        let t425: f64 = t11 * t424;
-        let t426: f64 = t13 * t425;
-        let t427: f64 = t15 * t426;
-        let t428: f64 = t427 * t250;
-        let t429: f64 = t254 * t396;
-        let t430: f64 = t15 * t429;
-        let t431: f64 = t430 * t398;
-        let t432: f64 = t271 * t404;
-        let t433: f64 = t21 * t432;
-        let t434: f64 = t433 * t398;
-        let t435: f64 = t431 + t434;
-        let t436: f64 = t36 * t435;
-        let t437: f64 = t428 - t436;
-        let t438: f64 = t32 * t405;
-        let t439: f64 = t15 * t438;
-        let t440: f64 = t439 * t398;
-        let t441: f64 = t272 * t396;
-        let t442: f64 = t441 * t398;
-        let t443: f64 = t442 - t440;
-        let t444: f64 = t25 * t443;
-        let t445: f64 = t437 + t444;
-        let t511: f64 = t424 * t456;
-        let t512: f64 = t13 * t511;
-        let t513: f64 = t15 * t512;
-        let t514: f64 = t513 * t453;
-        let t515: f64 = -t514;
-        let t632: f64 = t25 * t412;
-        let t633: f64 = t36 * t422;
-        let t634: f64 = t632 + t633;
-        let t635: f64 = t11 * t634;
-        let t636: f64 = t13 * t635;
-        let t637: f64 = t15 * t636;
-        let t638: f64 = t637 * t250;
-        let t639: f64 = t25 * t435;
-        let t640: f64 = t638 + t639;
-        let t641: f64 = t36 * t443;
-        let t642: f64 = t640 + t641;
-        let t689: f64 = t456 * t634;
-        let t690: f64 = t13 * t689;
-        let t691: f64 = t15 * t690;
-        let t692: f64 = t691 * t453;
-        let t693: f64 = -t692;
+        let t396: crate::Real = crate::math::sin(t253);
+        let t397: crate::Real = t26 * t396;
+        let t398: crate::Real = t99 / t253;
+        let t399: crate::Real = t397 * t398;
+        let t400: crate::Real = crate::math::cos(t253);
+        let t401: crate::Real = t37 * t400;
+        let t402: crate::Real = t401 * t398;
+        let t403: crate::Real = t399 + t402;
+        let t404: crate::Real = t99 - t400;
+        let t405: crate::Real = t11 * t404;
+        let t406: crate::Real = t24 * t405;
+        let t407: crate::Real = t99 / t281;
+        let t408: crate::Real = t406 * t407;
+        let t409: crate::Real = t403 - t408;
+        let t410: crate::Real = t37 * t396;
+        let t411: crate::Real = t410 * t407;
+        let t412: crate::Real = t409 - t411;
+        let t413: crate::Real = t36 * t412;
+        let t414: crate::Real = t26 * t400;
+        let t415: crate::Real = t414 * t398;
+        let t416: crate::Real = t410 * t398;
+        let t417: crate::Real = t415 - t416;
+        let t418: crate::Real = t35 * t405;
+        let t419: crate::Real = t418 * t407;
+        let t420: crate::Real = t417 + t419;
+        let t421: crate::Real = t397 * t407;
+        let t422: crate::Real = t420 - t421;
+        let t423: crate::Real = t25 * t422;
+        let t424: crate::Real = t423 - t413;
+        let t425: crate::Real = t11 * t424;
+        let t426: crate::Real = t13 * t425;
+        let t427: crate::Real = t15 * t426;
+        let t428: crate::Real = t427 * t250;
+        let t429: crate::Real = t254 * t396;
+        let t430: crate::Real = t15 * t429;
+        let t431: crate::Real = t430 * t398;
+        let t432: crate::Real = t271 * t404;
+        let t433: crate::Real = t21 * t432;
+        let t434: crate::Real = t433 * t398;
+        let t435: crate::Real = t431 + t434;
+        let t436: crate::Real = t36 * t435;
+        let t437: crate::Real = t428 - t436;
+        let t438: crate::Real = t32 * t405;
+        let t439: crate::Real = t15 * t438;
+        let t440: crate::Real = t439 * t398;
+        let t441: crate::Real = t272 * t396;
+        let t442: crate::Real = t441 * t398;
+        let t443: crate::Real = t442 - t440;
+        let t444: crate::Real = t25 * t443;
+        let t445: crate::Real = t437 + t444;
+        let t511: crate::Real = t424 * t456;
+        let t512: crate::Real = t13 * t511;
+        let t513: crate::Real = t15 * t512;
+        let t514: crate::Real = t513 * t453;
+        let t515: crate::Real = -t514;
+        let t632: crate::Real = t25 * t412;
+        let t633: crate::Real = t36 * t422;
+        let t634: crate::Real = t632 + t633;
+        let t635: crate::Real = t11 * t634;
+        let t636: crate::Real = t13 * t635;
+        let t637: crate::Real = t15 * t636;
+        let t638: crate::Real = t637 * t250;
+        let t639: crate::Real = t25 * t435;
+        let t640: crate::Real = t638 + t639;
+        let t641: crate::Real = t36 * t443;
+        let t642: crate::Real = t640 + t641;
+        let t689: crate::Real = t456 * t634;
+        let t690: crate::Real = t13 * t689;
+        let t691: crate::Real = t15 * t690;
+        let t692: crate::Real = t691 * t453;
+        let t693: crate::Real = -t692;
         [t445, t515, t642, t693]
     };
-    let t446: f64 = g1[0usize];
-    let t516: f64 = g1[1usize];
-    let t643: f64 = g1[2usize];
-    let t694: f64 = g1[3usize];
-    let t695: f64 = t11 * t13;
-    let t696: f64 = t15 * t695;
-    let t697: f64 = t696 * t250;
-    let t698: f64 = t13 * t456;
-    let t699: f64 = t15 * t698;
-    let t700: f64 = t699 * t453;
-    let t701: f64 = -t700;
+    let t446: crate::Real = g1[0usize];
+    let t516: crate::Real = g1[1usize];
+    let t643: crate::Real = g1[2usize];
+    let t694: crate::Real = g1[3usize];
+    let t695: crate::Real = t11 * t13;
+    let t696: crate::Real = t15 * t695;
+    let t697: crate::Real = t696 * t250;
+    let t698: crate::Real = t13 * t456;
+    let t699: crate::Real = t15 * t698;
+    let t700: crate::Real = t699 * t453;
+    let t701: crate::Real = -t700;
     [
         t119,
         t168,
@@ -3751,12 +3779,16 @@ pub fn step_exact_with_jac_p_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_with_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    w: &[f64; 3usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 2usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    w: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 2usize]; 3usize],
+) {
     let o = step_exact_with_jac_p_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -3778,28 +3810,28 @@ pub fn step_exact_with_jac_p(
 11 arithmetic operations (16 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-) -> [f64; 6usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = u[2usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = t0 + t1;
-    let t6: f64 = t5 - t2;
-    let t7: f64 = t3 * t6;
-    let t8: f64 = 0.3333333333333333f64;
-    let t9: f64 = t7 * t8;
-    let t10: f64 = t9 / t4;
-    let t11: f64 = 0f64;
-    let t12: f64 = t6 * t8;
-    let t13: f64 = t12 / t4;
-    let t14: f64 = t4 * t4;
-    let t15: f64 = t8 * t7;
-    let t16: f64 = t15 / t14;
-    let t17: f64 = -t16;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 6usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = u[2usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = t0 + t1;
+    let t6: crate::Real = t5 - t2;
+    let t7: crate::Real = t3 * t6;
+    let t8: crate::Real = 0.3333333333333333;
+    let t9: crate::Real = t7 * t8;
+    let t10: crate::Real = t9 / t4;
+    let t11: crate::Real = 0.0;
+    let t12: crate::Real = t6 * t8;
+    let t13: crate::Real = t12 / t4;
+    let t14: crate::Real = t4 * t4;
+    let t15: crate::Real = t8 * t7;
+    let t16: crate::Real = t15 / t14;
+    let t17: crate::Real = -t16;
     [t10, t11, t11, t11, t13, t17]
 }
 /**Observation `gyro` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -3807,10 +3839,14 @@ pub fn obs_gyro_linearized_flat(
 Returns (`obs_gyro`, `obs_gyro_jac_x`, `obs_gyro_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_gyro_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-) -> ([f64; 1usize], [[f64; 3usize]; 1usize], [[f64; 2usize]; 1usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> (
+    [crate::Real; 1usize],
+    [[crate::Real; 3usize]; 1usize],
+    [[crate::Real; 2usize]; 1usize],
+) {
     let o = obs_gyro_linearized_flat(x, u, p);
     ([o[0usize]], [[o[1usize], o[2usize], o[3usize]]], [[o[4usize], o[5usize]]])
 }
@@ -3825,36 +3861,36 @@ pub fn obs_gyro_linearized(
 17 arithmetic operations (57 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [f64; 12usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t10;
-    let t15: f64 = t5 * t14;
-    let t16: f64 = -t15;
-    let t17: f64 = t7 * t14;
-    let t18: f64 = -t17;
-    let t19: f64 = 0f64;
-    let t20: f64 = t13 / t9;
-    let t21: f64 = t7 * t20;
-    let t22: f64 = t5 * t20;
-    let t23: f64 = -t22;
-    let t24: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 12usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t10;
+    let t15: crate::Real = t5 * t14;
+    let t16: crate::Real = -t15;
+    let t17: crate::Real = t7 * t14;
+    let t18: crate::Real = -t17;
+    let t19: crate::Real = 0.0;
+    let t20: crate::Real = t13 / t9;
+    let t21: crate::Real = t7 * t20;
+    let t22: crate::Real = t5 * t20;
+    let t23: crate::Real = -t22;
+    let t24: crate::Real = (-1.0);
     [t10, t12, t16, t18, t19, t21, t23, t24, t19, t19, t19, t19]
 }
 /**Observation `landmark` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -3862,11 +3898,15 @@ pub fn obs_landmark_linearized_flat(
 Returns (`obs_landmark`, `obs_landmark_jac_x`, `obs_landmark_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_landmark_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 3usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> ([f64; 2usize], [[f64; 3usize]; 2usize], [[f64; 2usize]; 2usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> (
+    [crate::Real; 2usize],
+    [[crate::Real; 3usize]; 2usize],
+    [[crate::Real; 2usize]; 2usize],
+) {
     let o = obs_landmark_linearized_flat(x, u, p, lm);
     (
         [o[0usize], o[1usize]],
@@ -3879,17 +3919,21 @@ pub fn obs_landmark_linearized(
 /// wrong lengths. Behind the `dispatch` feature: firmware calls the
 /// kernels themselves and need not carry every kernel and its name.
 #[cfg(feature = "dispatch")]
-pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+pub fn call(name: &str, args: &[&[crate::Real]], out: &mut [crate::Real]) -> bool {
     match name {
         "twist" => {
             if args.len() != 2usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3902,15 +3946,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3923,23 +3973,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3952,23 +4010,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3981,23 +4047,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4010,23 +4084,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4039,23 +4121,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4068,23 +4158,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4097,23 +4195,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4126,23 +4232,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4155,23 +4269,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4184,23 +4306,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -4213,15 +4343,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 1usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4234,15 +4370,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4255,15 +4397,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4276,19 +4424,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4301,19 +4457,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4326,19 +4490,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 4usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4351,11 +4523,15 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 2usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -4368,15 +4544,19 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: f64 = match args[1usize] {
+            let a1: crate::Real = match args[1usize] {
                 [v] => *v,
                 _ => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };

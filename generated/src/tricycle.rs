@@ -15,15 +15,15 @@ pub const SPEC_FINGERPRINT: &str = "a159bb775db20e93";
 /// Runtime parameters, in the order of the `p` argument.
 pub const PARAMS: [&str; 2usize] = ["r", "L"];
 /// Nominal values of [`PARAMS`].
-pub const PARAM_NOMINAL: [f64; 2usize] = [0.15f64, 1f64];
+pub const PARAM_NOMINAL: [crate::Real; 2usize] = [0.15, 1.0];
 /// The runtime parameters by name; [`Params::to_array`] gives the `p`
 /// argument of every kernel.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
     /// `r` (m): Drive-wheel radius (seed 001 sec. 3: 0.15 m).
-    pub r: f64,
+    pub r: crate::Real,
     /// `L` (m): Distance from the drive axle to the steered wheel (seed 001 sec. 3: 1 m).
-    pub L: f64,
+    pub L: crate::Real,
 }
 impl Params {
     /// The spec's nominal values.
@@ -32,11 +32,11 @@ impl Params {
         L: PARAM_NOMINAL[1usize],
     };
     /// The `p` argument of the kernels, in the order of [`PARAMS`].
-    pub const fn to_array(&self) -> [f64; 2usize] {
+    pub const fn to_array(&self) -> [crate::Real; 2usize] {
         [self.r, self.L]
     }
     /// From a `p` array in the order of [`PARAMS`].
-    pub const fn from_array(p: &[f64; 2usize]) -> Params {
+    pub const fn from_array(p: &[crate::Real; 2usize]) -> Params {
         Params {
             r: p[0usize],
             L: p[1usize],
@@ -55,16 +55,19 @@ pub const INPUT_COLUMNS: [&str; 2usize] = ["phi", "alpha"];
 
 4 arithmetic operations (5 before common-subexpression elimination).*/
 #[inline]
-pub fn twist(u: &[f64; 2usize], p: &[f64; 2usize]) -> [f64; 3usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = t0 * t2;
-    let t5: f64 = 0f64;
-    let t6: f64 = libm::tan(t1);
-    let t7: f64 = t4 * t6;
-    let t8: f64 = t7 / t3;
+pub fn twist(
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = t0 * t2;
+    let t5: crate::Real = 0.0;
+    let t6: crate::Real = crate::math::tan(t1);
+    let t7: crate::Real = t4 * t6;
+    let t8: crate::Real = t7 / t3;
     [t4, t5, t8]
 }
 /**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
@@ -77,14 +80,14 @@ pub fn twist(u: &[f64; 2usize], p: &[f64; 2usize]) -> [f64; 3usize] {
 1 arithmetic operations (1 before common-subexpression elimination).*/
 #[inline]
 pub fn twist_gyro(
-    u: &[f64; 2usize],
-    omega: &[f64; 1usize],
-    p: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = p[0usize];
-    let t2: f64 = t0 * t1;
-    let t3: f64 = 0f64;
+    u: &[crate::Real; 2usize],
+    omega: &[crate::Real; 1usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = p[0usize];
+    let t2: crate::Real = t0 * t1;
+    let t3: crate::Real = 0.0;
     [t2, t3]
 }
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
@@ -99,37 +102,37 @@ pub fn twist_gyro(
 15 arithmetic operations (19 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = t3 * t7;
-    let t11: f64 = t5 + t10;
-    let t12: f64 = libm::cos(t2);
-    let t13: f64 = t9 * t11;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = t0 + t14;
-    let t16: f64 = libm::sin(t2);
-    let t17: f64 = t13 * t16;
-    let t18: f64 = t1 + t17;
-    let t19: f64 = libm::tan(t4);
-    let t20: f64 = t10 * t19;
-    let t21: f64 = t20 / t8;
-    let t22: f64 = t6 + t21;
-    let t23: f64 = t9 * t22;
-    let t24: f64 = t2 + t23;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = t3 * t7;
+    let t11: crate::Real = t5 + t10;
+    let t12: crate::Real = crate::math::cos(t2);
+    let t13: crate::Real = t9 * t11;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = t0 + t14;
+    let t16: crate::Real = crate::math::sin(t2);
+    let t17: crate::Real = t13 * t16;
+    let t18: crate::Real = t1 + t17;
+    let t19: crate::Real = crate::math::tan(t4);
+    let t20: crate::Real = t10 * t19;
+    let t21: crate::Real = t20 / t8;
+    let t22: crate::Real = t6 + t21;
+    let t23: crate::Real = t9 * t22;
+    let t24: crate::Real = t2 + t23;
     [t15, t18, t24]
 }
 /**Jacobian of `step_euler` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -144,27 +147,27 @@ pub fn step_euler(
 8 arithmetic operations (11 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = w[0usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = dt;
-    let t5: f64 = 1f64;
-    let t6: f64 = 0f64;
-    let t7: f64 = t1 * t3;
-    let t8: f64 = t2 + t7;
-    let t9: f64 = libm::sin(t0);
-    let t10: f64 = t4 * t8;
-    let t11: f64 = t9 * t10;
-    let t12: f64 = -t11;
-    let t13: f64 = libm::cos(t0);
-    let t14: f64 = t10 * t13;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = w[0usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = dt;
+    let t5: crate::Real = 1.0;
+    let t6: crate::Real = 0.0;
+    let t7: crate::Real = t1 * t3;
+    let t8: crate::Real = t2 + t7;
+    let t9: crate::Real = crate::math::sin(t0);
+    let t10: crate::Real = t4 * t8;
+    let t11: crate::Real = t9 * t10;
+    let t12: crate::Real = -t11;
+    let t13: crate::Real = crate::math::cos(t0);
+    let t14: crate::Real = t10 * t13;
     [[t5, t6, t12], [t6, t5, t14], [t6, t6, t5]]
 }
 /**Jacobian of `step_euler` with respect to the inputs; rows x, y, theta.
@@ -179,35 +182,35 @@ pub fn step_euler_jac_x(
 14 arithmetic operations (20 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = dt;
-    let t6: f64 = libm::cos(t0);
-    let t7: f64 = t3 * t5;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = 0f64;
-    let t10: f64 = libm::sin(t0);
-    let t11: f64 = t7 * t10;
-    let t12: f64 = libm::tan(t2);
-    let t13: f64 = t7 * t12;
-    let t14: f64 = 1f64;
-    let t15: f64 = t14 / t4;
-    let t16: f64 = t13 * t15;
-    let t17: f64 = 1f64;
-    let t18: f64 = t12 * t12;
-    let t19: f64 = t17 + t18;
-    let t20: f64 = t1 * t7;
-    let t21: f64 = t19 * t20;
-    let t22: f64 = t21 * t15;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = dt;
+    let t6: crate::Real = crate::math::cos(t0);
+    let t7: crate::Real = t3 * t5;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = 0.0;
+    let t10: crate::Real = crate::math::sin(t0);
+    let t11: crate::Real = t7 * t10;
+    let t12: crate::Real = crate::math::tan(t2);
+    let t13: crate::Real = t7 * t12;
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t4;
+    let t16: crate::Real = t13 * t15;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t12 * t12;
+    let t19: crate::Real = t17 + t18;
+    let t20: crate::Real = t1 * t7;
+    let t21: crate::Real = t19 * t20;
+    let t22: crate::Real = t21 * t15;
     [[t8, t9], [t11, t9], [t16, t22]]
 }
 /**Jacobian of `step_euler` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -222,19 +225,19 @@ pub fn step_euler_jac_u(
 4 arithmetic operations (4 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = dt;
-    let t2: f64 = libm::cos(t0);
-    let t3: f64 = t1 * t2;
-    let t4: f64 = 0f64;
-    let t5: f64 = libm::sin(t0);
-    let t6: f64 = t1 * t5;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = dt;
+    let t2: crate::Real = crate::math::cos(t0);
+    let t3: crate::Real = t1 * t2;
+    let t4: crate::Real = 0.0;
+    let t5: crate::Real = crate::math::sin(t0);
+    let t6: crate::Real = t1 * t5;
     [[t3, t4], [t6, t4], [t4, t1]]
 }
 /**Jacobian of `step_euler` with respect to the parameters; rows x, y, theta.
@@ -249,33 +252,33 @@ pub fn step_euler_jac_w(
 14 arithmetic operations (17 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = dt;
-    let t6: f64 = libm::cos(t0);
-    let t7: f64 = t1 * t5;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = 0f64;
-    let t10: f64 = libm::sin(t0);
-    let t11: f64 = t7 * t10;
-    let t12: f64 = libm::tan(t2);
-    let t13: f64 = t7 * t12;
-    let t14: f64 = t13 / t4;
-    let t15: f64 = t4 * t4;
-    let t16: f64 = t3 * t5;
-    let t17: f64 = t1 * t16;
-    let t18: f64 = t12 * t17;
-    let t19: f64 = t18 / t15;
-    let t20: f64 = -t19;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = dt;
+    let t6: crate::Real = crate::math::cos(t0);
+    let t7: crate::Real = t1 * t5;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = 0.0;
+    let t10: crate::Real = crate::math::sin(t0);
+    let t11: crate::Real = t7 * t10;
+    let t12: crate::Real = crate::math::tan(t2);
+    let t13: crate::Real = t7 * t12;
+    let t14: crate::Real = t13 / t4;
+    let t15: crate::Real = t4 * t4;
+    let t16: crate::Real = t3 * t5;
+    let t17: crate::Real = t1 * t16;
+    let t18: crate::Real = t12 * t17;
+    let t19: crate::Real = t18 / t15;
+    let t20: crate::Real = -t19;
     [[t8, t9], [t11, t9], [t14, t20]]
 }
 /**Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).
@@ -290,144 +293,146 @@ pub fn step_euler_jac_p(
 107 arithmetic operations (739 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = libm::tan(t4);
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t12 / t8;
-    let t14: f64 = t6 + t13;
-    let t15: f64 = t9 * t14;
-    let t16: f64 = t5 + t11;
-    let t17: f64 = libm::sin(t2);
-    let t24: f64 = libm::cos(t2);
-    let t25: f64 = t9 * t16;
-    let t96: f64 = t17 * t25;
-    let g0: [f64; 2usize] = if libm::fabs(t15) < 0.05f64 {
-        let t18: f64 = t9 * t15;
-        let t19: f64 = t16 * t18;
-        let t20: f64 = t17 * t19;
-        let t21: f64 = 0.5f64;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = t0 - t22;
-        let t26: f64 = t24 * t25;
-        let t27: f64 = t23 + t26;
-        let t28: f64 = t15 * t15;
-        let t29: f64 = t9 * t28;
-        let t30: f64 = t16 * t29;
-        let t31: f64 = t24 * t30;
-        let t32: f64 = 0.16666666666666666f64;
-        let t33: f64 = t31 * t32;
-        let t34: f64 = t27 - t33;
-        let t35: f64 = t15 * t28;
-        let t36: f64 = t9 * t35;
-        let t37: f64 = t16 * t36;
-        let t38: f64 = t17 * t37;
-        let t39: f64 = 0.041666666666666664f64;
-        let t40: f64 = t38 * t39;
-        let t41: f64 = t34 + t40;
-        let t42: f64 = t28 * t28;
-        let t43: f64 = t9 * t42;
-        let t44: f64 = t16 * t43;
-        let t45: f64 = t24 * t44;
-        let t46: f64 = 0.008333333333333333f64;
-        let t47: f64 = t45 * t46;
-        let t48: f64 = t41 + t47;
-        let t49: f64 = t15 * t42;
-        let t50: f64 = t9 * t49;
-        let t51: f64 = t16 * t50;
-        let t52: f64 = t17 * t51;
-        let t53: f64 = 0.001388888888888889f64;
-        let t54: f64 = t52 * t53;
-        let t55: f64 = t48 - t54;
-        let t56: f64 = t35 * t35;
-        let t57: f64 = t9 * t56;
-        let t58: f64 = t16 * t57;
-        let t59: f64 = t24 * t58;
-        let t60: f64 = 0.0001984126984126984f64;
-        let t61: f64 = t59 * t60;
-        let t62: f64 = t55 - t61;
-        let t63: f64 = t15 * t56;
-        let t64: f64 = t9 * t63;
-        let t65: f64 = t16 * t64;
-        let t66: f64 = t17 * t65;
-        let t67: f64 = 0.0000248015873015873f64;
-        let t68: f64 = t66 * t67;
-        let t69: f64 = t62 + t68;
-        let t70: f64 = t42 * t42;
-        let t71: f64 = t9 * t70;
-        let t72: f64 = t16 * t71;
-        let t73: f64 = t24 * t72;
-        let t74: f64 = 0.0000027557319223985893f64;
-        let t75: f64 = t73 * t74;
-        let t76: f64 = t69 + t75;
-        let t93: f64 = t19 * t24;
-        let t94: f64 = t21 * t93;
-        let t95: f64 = t1 + t94;
-        let t97: f64 = t95 + t96;
-        let t98: f64 = t17 * t30;
-        let t99: f64 = t32 * t98;
-        let t100: f64 = t97 - t99;
-        let t101: f64 = t24 * t37;
-        let t102: f64 = t39 * t101;
-        let t103: f64 = t100 - t102;
-        let t104: f64 = t17 * t44;
-        let t105: f64 = t46 * t104;
-        let t106: f64 = t103 + t105;
-        let t107: f64 = t24 * t51;
-        let t108: f64 = t53 * t107;
-        let t109: f64 = t106 + t108;
-        let t110: f64 = t17 * t58;
-        let t111: f64 = t60 * t110;
-        let t112: f64 = t109 - t111;
-        let t113: f64 = t24 * t65;
-        let t114: f64 = t67 * t113;
-        let t115: f64 = t112 - t114;
-        let t116: f64 = t17 * t72;
-        let t117: f64 = t74 * t116;
-        let t118: f64 = t115 + t117;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = crate::math::tan(t4);
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t12 / t8;
+    let t14: crate::Real = t6 + t13;
+    let t15: crate::Real = t9 * t14;
+    let t16: crate::Real = t5 + t11;
+    let t17: crate::Real = crate::math::sin(t2);
+    let t24: crate::Real = crate::math::cos(t2);
+    let t25: crate::Real = t9 * t16;
+    let t96: crate::Real = t17 * t25;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t18: crate::Real = t9 * t15;
+        let t19: crate::Real = t16 * t18;
+        let t20: crate::Real = t17 * t19;
+        let t21: crate::Real = 0.5;
+        let t22: crate::Real = t20 * t21;
+        let t23: crate::Real = t0 - t22;
+        let t26: crate::Real = t24 * t25;
+        let t27: crate::Real = t23 + t26;
+        let t28: crate::Real = t15 * t15;
+        let t29: crate::Real = t9 * t28;
+        let t30: crate::Real = t16 * t29;
+        let t31: crate::Real = t24 * t30;
+        let t32: crate::Real = 0.16666666666666666;
+        let t33: crate::Real = t31 * t32;
+        let t34: crate::Real = t27 - t33;
+        let t35: crate::Real = t15 * t28;
+        let t36: crate::Real = t9 * t35;
+        let t37: crate::Real = t16 * t36;
+        let t38: crate::Real = t17 * t37;
+        let t39: crate::Real = 0.041666666666666664;
+        let t40: crate::Real = t38 * t39;
+        let t41: crate::Real = t34 + t40;
+        let t42: crate::Real = t28 * t28;
+        let t43: crate::Real = t9 * t42;
+        let t44: crate::Real = t16 * t43;
+        let t45: crate::Real = t24 * t44;
+        let t46: crate::Real = 0.008333333333333333;
+        let t47: crate::Real = t45 * t46;
+        let t48: crate::Real = t41 + t47;
+        let t49: crate::Real = t15 * t42;
+        let t50: crate::Real = t9 * t49;
+        let t51: crate::Real = t16 * t50;
+        let t52: crate::Real = t17 * t51;
+        let t53: crate::Real = 0.001388888888888889;
+        let t54: crate::Real = t52 * t53;
+        let t55: crate::Real = t48 - t54;
+        let t56: crate::Real = t35 * t35;
+        let t57: crate::Real = t9 * t56;
+        let t58: crate::Real = t16 * t57;
+        let t59: crate::Real = t24 * t58;
+        let t60: crate::Real = 0.0001984126984126984;
+        let t61: crate::Real = t59 * t60;
+        let t62: crate::Real = t55 - t61;
+        let t63: crate::Real = t15 * t56;
+        let t64: crate::Real = t9 * t63;
+        let t65: crate::Real = t16 * t64;
+        let t66: crate::Real = t17 * t65;
+        let t67: crate::Real = 0.0000248015873015873;
+        let t68: crate::Real = t66 * t67;
+        let t69: crate::Real = t62 + t68;
+        let t70: crate::Real = t42 * t42;
+        let t71: crate::Real = t9 * t70;
+        let t72: crate::Real = t16 * t71;
+        let t73: crate::Real = t24 * t72;
+        let t74: crate::Real = 0.0000027557319223985893;
+        let t75: crate::Real = t73 * t74;
+        let t76: crate::Real = t69 + t75;
+        let t93: crate::Real = t19 * t24;
+        let t94: crate::Real = t21 * t93;
+        let t95: crate::Real = t1 + t94;
+        let t97: crate::Real = t95 + t96;
+        let t98: crate::Real = t17 * t30;
+        let t99: crate::Real = t32 * t98;
+        let t100: crate::Real = t97 - t99;
+        let t101: crate::Real = t24 * t37;
+        let t102: crate::Real = t39 * t101;
+        let t103: crate::Real = t100 - t102;
+        let t104: crate::Real = t17 * t44;
+        let t105: crate::Real = t46 * t104;
+        let t106: crate::Real = t103 + t105;
+        let t107: crate::Real = t24 * t51;
+        let t108: crate::Real = t53 * t107;
+        let t109: crate::Real = t106 + t108;
+        let t110: crate::Real = t17 * t58;
+        let t111: crate::Real = t60 * t110;
+        let t112: crate::Real = t109 - t111;
+        let t113: crate::Real = t24 * t65;
+        let t114: crate::Real = t67 * t113;
+        let t115: crate::Real = t112 - t114;
+        let t116: crate::Real = t17 * t72;
+        let t117: crate::Real = t74 * t116;
+        let t118: crate::Real = t115 + t117;
         [t76, t118]
     } else {
-        let t77: f64 = libm::sin(t15);
-        let t78: f64 = t25 * t77;
-        let t79: f64 = t24 * t78;
-        let t80: f64 = 1f64;
-        let t81: f64 = t80 / t15;
-        let t82: f64 = t79 * t81;
-        let t83: f64 = t0 + t82;
-        let t84: f64 = 1f64;
-        let t85: f64 = libm::cos(t15);
-        let t86: f64 = t84 - t85;
-        let t87: f64 = t9 * t86;
-        let t88: f64 = t16 * t87;
-        let t89: f64 = t17 * t88;
-        let t90: f64 = t89 * t81;
-        let t91: f64 = t83 - t90;
-        let t119: f64 = t77 * t96;
-        let t120: f64 = t119 * t81;
-        let t121: f64 = t1 + t120;
-        let t122: f64 = t24 * t88;
-        let t123: f64 = t122 * t81;
-        let t124: f64 = t121 + t123;
+        let t77: crate::Real = crate::math::sin(t15);
+        let t78: crate::Real = t25 * t77;
+        let t79: crate::Real = t24 * t78;
+        let t80: crate::Real = 1.0;
+        let t81: crate::Real = t80 / t15;
+        let t82: crate::Real = t79 * t81;
+        let t83: crate::Real = t0 + t82;
+        let t84: crate::Real = 1.0;
+        let t85: crate::Real = crate::math::cos(t15);
+        let t86: crate::Real = t84 - t85;
+        let t87: crate::Real = t9 * t86;
+        let t88: crate::Real = t16 * t87;
+        let t89: crate::Real = t17 * t88;
+        let t90: crate::Real = t89 * t81;
+        let t91: crate::Real = t83 - t90;
+        let t119: crate::Real = t77 * t96;
+        let t120: crate::Real = t119 * t81;
+        let t121: crate::Real = t1 + t120;
+        let t122: crate::Real = t24 * t88;
+        let t123: crate::Real = t122 * t81;
+        let t124: crate::Real = t121 + t123;
         [t91, t124]
     };
-    let t92: f64 = g0[0usize];
-    let t125: f64 = g0[1usize];
-    let t126: f64 = t2 + t15;
+    let t92: crate::Real = g0[0usize];
+    let t125: crate::Real = g0[1usize];
+    let t126: crate::Real = t2 + t15;
     [t92, t125, t126]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -442,139 +447,141 @@ pub fn step_exact(
 103 arithmetic operations (729 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::tan(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t10 / t6;
-    let t12: f64 = t4 + t11;
-    let t13: f64 = t7 * t12;
-    let t14: f64 = 1f64;
-    let t15: f64 = 0f64;
-    let t16: f64 = t3 + t9;
-    let t17: f64 = libm::cos(t0);
-    let t23: f64 = libm::sin(t0);
-    let t24: f64 = t7 * t16;
-    let t25: f64 = t23 * t24;
-    let g0: [f64; 2usize] = if libm::fabs(t13) < 0.05f64 {
-        let t18: f64 = t7 * t13;
-        let t19: f64 = t16 * t18;
-        let t20: f64 = t17 * t19;
-        let t21: f64 = 0.5f64;
-        let t22: f64 = t20 * t21;
-        let t26: f64 = t13 * t13;
-        let t27: f64 = t7 * t26;
-        let t28: f64 = t16 * t27;
-        let t29: f64 = t23 * t28;
-        let t30: f64 = 0.16666666666666666f64;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t13 * t26;
-        let t33: f64 = t7 * t32;
-        let t34: f64 = t16 * t33;
-        let t35: f64 = t17 * t34;
-        let t36: f64 = 0.041666666666666664f64;
-        let t37: f64 = t35 * t36;
-        let t38: f64 = t31 + t37;
-        let t39: f64 = t26 * t26;
-        let t40: f64 = t7 * t39;
-        let t41: f64 = t16 * t40;
-        let t42: f64 = t23 * t41;
-        let t43: f64 = 0.008333333333333333f64;
-        let t44: f64 = t42 * t43;
-        let t45: f64 = t38 - t44;
-        let t46: f64 = t13 * t39;
-        let t47: f64 = t7 * t46;
-        let t48: f64 = t16 * t47;
-        let t49: f64 = t17 * t48;
-        let t50: f64 = 0.001388888888888889f64;
-        let t51: f64 = t49 * t50;
-        let t52: f64 = t45 - t51;
-        let t53: f64 = t32 * t32;
-        let t54: f64 = t7 * t53;
-        let t55: f64 = t16 * t54;
-        let t56: f64 = t23 * t55;
-        let t57: f64 = 0.0001984126984126984f64;
-        let t58: f64 = t56 * t57;
-        let t59: f64 = t52 + t58;
-        let t60: f64 = t13 * t53;
-        let t61: f64 = t7 * t60;
-        let t62: f64 = t16 * t61;
-        let t63: f64 = t17 * t62;
-        let t64: f64 = 0.0000248015873015873f64;
-        let t65: f64 = t63 * t64;
-        let t66: f64 = t59 + t65;
-        let t67: f64 = t39 * t39;
-        let t68: f64 = t7 * t67;
-        let t69: f64 = t16 * t68;
-        let t70: f64 = t23 * t69;
-        let t71: f64 = 0.0000027557319223985893f64;
-        let t72: f64 = t70 * t71;
-        let t73: f64 = t66 - t72;
-        let t74: f64 = t73 - t22;
-        let t75: f64 = t74 - t25;
-        let t90: f64 = t19 * t23;
-        let t91: f64 = t21 * t90;
-        let t92: f64 = t17 * t24;
-        let t93: f64 = t17 * t28;
-        let t94: f64 = t30 * t93;
-        let t95: f64 = t92 - t94;
-        let t96: f64 = t23 * t34;
-        let t97: f64 = t36 * t96;
-        let t98: f64 = t95 + t97;
-        let t99: f64 = t17 * t41;
-        let t100: f64 = t43 * t99;
-        let t101: f64 = t98 + t100;
-        let t102: f64 = t23 * t48;
-        let t103: f64 = t50 * t102;
-        let t104: f64 = t101 - t103;
-        let t105: f64 = t17 * t55;
-        let t106: f64 = t57 * t105;
-        let t107: f64 = t104 - t106;
-        let t108: f64 = t23 * t62;
-        let t109: f64 = t64 * t108;
-        let t110: f64 = t107 + t109;
-        let t111: f64 = t17 * t69;
-        let t112: f64 = t71 * t111;
-        let t113: f64 = t110 + t112;
-        let t114: f64 = t113 - t91;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::tan(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t10 / t6;
+    let t12: crate::Real = t4 + t11;
+    let t13: crate::Real = t7 * t12;
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = 0.0;
+    let t16: crate::Real = t3 + t9;
+    let t17: crate::Real = crate::math::cos(t0);
+    let t23: crate::Real = crate::math::sin(t0);
+    let t24: crate::Real = t7 * t16;
+    let t25: crate::Real = t23 * t24;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t13)
+        < crate::math::series_switch(0.05)
+    {
+        let t18: crate::Real = t7 * t13;
+        let t19: crate::Real = t16 * t18;
+        let t20: crate::Real = t17 * t19;
+        let t21: crate::Real = 0.5;
+        let t22: crate::Real = t20 * t21;
+        let t26: crate::Real = t13 * t13;
+        let t27: crate::Real = t7 * t26;
+        let t28: crate::Real = t16 * t27;
+        let t29: crate::Real = t23 * t28;
+        let t30: crate::Real = 0.16666666666666666;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t13 * t26;
+        let t33: crate::Real = t7 * t32;
+        let t34: crate::Real = t16 * t33;
+        let t35: crate::Real = t17 * t34;
+        let t36: crate::Real = 0.041666666666666664;
+        let t37: crate::Real = t35 * t36;
+        let t38: crate::Real = t31 + t37;
+        let t39: crate::Real = t26 * t26;
+        let t40: crate::Real = t7 * t39;
+        let t41: crate::Real = t16 * t40;
+        let t42: crate::Real = t23 * t41;
+        let t43: crate::Real = 0.008333333333333333;
+        let t44: crate::Real = t42 * t43;
+        let t45: crate::Real = t38 - t44;
+        let t46: crate::Real = t13 * t39;
+        let t47: crate::Real = t7 * t46;
+        let t48: crate::Real = t16 * t47;
+        let t49: crate::Real = t17 * t48;
+        let t50: crate::Real = 0.001388888888888889;
+        let t51: crate::Real = t49 * t50;
+        let t52: crate::Real = t45 - t51;
+        let t53: crate::Real = t32 * t32;
+        let t54: crate::Real = t7 * t53;
+        let t55: crate::Real = t16 * t54;
+        let t56: crate::Real = t23 * t55;
+        let t57: crate::Real = 0.0001984126984126984;
+        let t58: crate::Real = t56 * t57;
+        let t59: crate::Real = t52 + t58;
+        let t60: crate::Real = t13 * t53;
+        let t61: crate::Real = t7 * t60;
+        let t62: crate::Real = t16 * t61;
+        let t63: crate::Real = t17 * t62;
+        let t64: crate::Real = 0.0000248015873015873;
+        let t65: crate::Real = t63 * t64;
+        let t66: crate::Real = t59 + t65;
+        let t67: crate::Real = t39 * t39;
+        let t68: crate::Real = t7 * t67;
+        let t69: crate::Real = t16 * t68;
+        let t70: crate::Real = t23 * t69;
+        let t71: crate::Real = 0.0000027557319223985893;
+        let t72: crate::Real = t70 * t71;
+        let t73: crate::Real = t66 - t72;
+        let t74: crate::Real = t73 - t22;
+        let t75: crate::Real = t74 - t25;
+        let t90: crate::Real = t19 * t23;
+        let t91: crate::Real = t21 * t90;
+        let t92: crate::Real = t17 * t24;
+        let t93: crate::Real = t17 * t28;
+        let t94: crate::Real = t30 * t93;
+        let t95: crate::Real = t92 - t94;
+        let t96: crate::Real = t23 * t34;
+        let t97: crate::Real = t36 * t96;
+        let t98: crate::Real = t95 + t97;
+        let t99: crate::Real = t17 * t41;
+        let t100: crate::Real = t43 * t99;
+        let t101: crate::Real = t98 + t100;
+        let t102: crate::Real = t23 * t48;
+        let t103: crate::Real = t50 * t102;
+        let t104: crate::Real = t101 - t103;
+        let t105: crate::Real = t17 * t55;
+        let t106: crate::Real = t57 * t105;
+        let t107: crate::Real = t104 - t106;
+        let t108: crate::Real = t23 * t62;
+        let t109: crate::Real = t64 * t108;
+        let t110: crate::Real = t107 + t109;
+        let t111: crate::Real = t17 * t69;
+        let t112: crate::Real = t71 * t111;
+        let t113: crate::Real = t110 + t112;
+        let t114: crate::Real = t113 - t91;
         [t75, t114]
     } else {
-        let t76: f64 = libm::sin(t13);
-        let t77: f64 = t25 * t76;
-        let t78: f64 = 1f64;
-        let t79: f64 = t78 / t13;
-        let t80: f64 = t77 * t79;
-        let t81: f64 = -t80;
-        let t82: f64 = libm::cos(t13);
-        let t83: f64 = t14 - t82;
-        let t84: f64 = t7 * t83;
-        let t85: f64 = t16 * t84;
-        let t86: f64 = t17 * t85;
-        let t87: f64 = t86 * t79;
-        let t88: f64 = t81 - t87;
-        let t115: f64 = t24 * t76;
-        let t116: f64 = t17 * t115;
-        let t117: f64 = t116 * t79;
-        let t118: f64 = t23 * t85;
-        let t119: f64 = t118 * t79;
-        let t120: f64 = t117 - t119;
+        let t76: crate::Real = crate::math::sin(t13);
+        let t77: crate::Real = t25 * t76;
+        let t78: crate::Real = 1.0;
+        let t79: crate::Real = t78 / t13;
+        let t80: crate::Real = t77 * t79;
+        let t81: crate::Real = -t80;
+        let t82: crate::Real = crate::math::cos(t13);
+        let t83: crate::Real = t14 - t82;
+        let t84: crate::Real = t7 * t83;
+        let t85: crate::Real = t16 * t84;
+        let t86: crate::Real = t17 * t85;
+        let t87: crate::Real = t86 * t79;
+        let t88: crate::Real = t81 - t87;
+        let t115: crate::Real = t24 * t76;
+        let t116: crate::Real = t17 * t115;
+        let t117: crate::Real = t116 * t79;
+        let t118: crate::Real = t23 * t85;
+        let t119: crate::Real = t118 * t79;
+        let t120: crate::Real = t117 - t119;
         [t88, t120]
     };
-    let t89: f64 = g0[0usize];
-    let t121: f64 = g0[1usize];
+    let t89: crate::Real = g0[0usize];
+    let t121: crate::Real = g0[1usize];
     [[t14, t15, t89], [t15, t14, t121], [t15, t15, t14]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
@@ -589,355 +596,357 @@ pub fn step_exact_jac_x(
 312 arithmetic operations (2396 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::tan(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = 1f64;
-    let t12: f64 = t11 / t6;
-    let t13: f64 = t10 * t12;
-    let t14: f64 = t4 + t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = libm::cos(t0);
-    let t17: f64 = t5 * t7;
-    let t19: f64 = libm::sin(t0);
-    let t20: f64 = t17 * t19;
-    let t25: f64 = t3 + t9;
-    let t41: f64 = t15 * t15;
-    let t120: f64 = 1f64;
-    let t140: f64 = t8 * t8;
-    let t141: f64 = t120 + t140;
-    let t220: f64 = t1 * t17;
-    let t221: f64 = t141 * t220;
-    let g0: [f64; 4usize] = if libm::fabs(t15) < 0.05f64 {
-        let t18: f64 = t16 * t17;
-        let t21: f64 = 0.5f64;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = -t22;
-        let t24: f64 = t7 * t7;
-        let t26: f64 = t5 * t24;
-        let t27: f64 = t25 * t26;
-        let t28: f64 = t16 * t27;
-        let t29: f64 = t8 * t28;
-        let t30: f64 = 0.3333333333333333f64;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t31 * t12;
-        let t33: f64 = t23 - t32;
-        let t34: f64 = t15 * t33;
-        let t35: f64 = t18 + t34;
-        let t36: f64 = t19 * t27;
-        let t37: f64 = t8 * t36;
-        let t38: f64 = t21 * t37;
-        let t39: f64 = t38 * t12;
-        let t40: f64 = t35 - t39;
-        let t42: f64 = 0.16666666666666666f64;
-        let t43: f64 = t18 * t42;
-        let t44: f64 = 0.125f64;
-        let t45: f64 = t37 * t44;
-        let t46: f64 = t45 * t12;
-        let t47: f64 = t46 - t43;
-        let t48: f64 = t41 * t47;
-        let t49: f64 = t40 + t48;
-        let t50: f64 = t15 * t41;
-        let t51: f64 = 0.041666666666666664f64;
-        let t52: f64 = t20 * t51;
-        let t53: f64 = 0.03333333333333333f64;
-        let t54: f64 = t29 * t53;
-        let t55: f64 = t54 * t12;
-        let t56: f64 = t52 + t55;
-        let t57: f64 = t50 * t56;
-        let t58: f64 = t49 + t57;
-        let t59: f64 = t41 * t41;
-        let t60: f64 = 0.008333333333333333f64;
-        let t61: f64 = t18 * t60;
-        let t62: f64 = 0.006944444444444444f64;
-        let t63: f64 = t37 * t62;
-        let t64: f64 = t63 * t12;
-        let t65: f64 = t61 - t64;
-        let t66: f64 = t59 * t65;
-        let t67: f64 = t58 + t66;
-        let t68: f64 = t15 * t59;
-        let t69: f64 = 0.001388888888888889f64;
-        let t70: f64 = t20 * t69;
-        let t71: f64 = -t70;
-        let t72: f64 = 0.0011904761904761906f64;
-        let t73: f64 = t29 * t72;
-        let t74: f64 = t73 * t12;
-        let t75: f64 = t71 - t74;
-        let t76: f64 = t68 * t75;
-        let t77: f64 = t67 + t76;
-        let t78: f64 = t50 * t50;
-        let t79: f64 = 0.0001984126984126984f64;
-        let t80: f64 = t18 * t79;
-        let t81: f64 = 0.00017361111111111112f64;
-        let t82: f64 = t37 * t81;
-        let t83: f64 = t82 * t12;
-        let t84: f64 = t83 - t80;
-        let t85: f64 = t78 * t84;
-        let t86: f64 = t77 + t85;
-        let t87: f64 = t15 * t78;
-        let t88: f64 = 0.0000248015873015873f64;
-        let t89: f64 = t20 * t88;
-        let t90: f64 = 0.000022045855379188714f64;
-        let t91: f64 = t29 * t90;
-        let t92: f64 = t91 * t12;
-        let t93: f64 = t89 + t92;
-        let t94: f64 = t87 * t93;
-        let t95: f64 = t86 + t94;
-        let t96: f64 = t59 * t59;
-        let t97: f64 = 0.0000027557319223985893f64;
-        let t98: f64 = t18 * t97;
-        let t99: f64 = 0.00000248015873015873f64;
-        let t100: f64 = t37 * t99;
-        let t101: f64 = t100 * t12;
-        let t102: f64 = t98 - t101;
-        let t103: f64 = t96 * t102;
-        let t104: f64 = t95 + t103;
-        let t142: f64 = t15 * t24;
-        let t143: f64 = t5 * t142;
-        let t144: f64 = t1 * t143;
-        let t145: f64 = t141 * t144;
-        let t146: f64 = t25 * t145;
-        let t147: f64 = t16 * t146;
-        let t148: f64 = t30 * t147;
-        let t149: f64 = t148 * t12;
-        let t150: f64 = t1 * t26;
-        let t151: f64 = t141 * t150;
-        let t152: f64 = t25 * t151;
-        let t153: f64 = t19 * t152;
-        let t154: f64 = t21 * t153;
-        let t155: f64 = t154 * t12;
-        let t156: f64 = t24 * t41;
-        let t157: f64 = t5 * t156;
-        let t158: f64 = t1 * t157;
-        let t159: f64 = t141 * t158;
-        let t160: f64 = t25 * t159;
-        let t161: f64 = t19 * t160;
-        let t162: f64 = t44 * t161;
-        let t163: f64 = t162 * t12;
-        let t164: f64 = t24 * t50;
-        let t165: f64 = t5 * t164;
-        let t166: f64 = t1 * t165;
-        let t167: f64 = t141 * t166;
-        let t168: f64 = t25 * t167;
-        let t169: f64 = t16 * t168;
-        let t170: f64 = t53 * t169;
-        let t171: f64 = t170 * t12;
-        let t172: f64 = t163 + t171;
-        let t173: f64 = t24 * t59;
-        let t174: f64 = t5 * t173;
-        let t175: f64 = t1 * t174;
-        let t176: f64 = t141 * t175;
-        let t177: f64 = t25 * t176;
-        let t178: f64 = t19 * t177;
-        let t179: f64 = t62 * t178;
-        let t180: f64 = t179 * t12;
-        let t181: f64 = t172 - t180;
-        let t182: f64 = t24 * t68;
-        let t183: f64 = t5 * t182;
-        let t184: f64 = t1 * t183;
-        let t185: f64 = t141 * t184;
-        let t186: f64 = t25 * t185;
-        let t187: f64 = t16 * t186;
-        let t188: f64 = t72 * t187;
-        let t189: f64 = t188 * t12;
-        let t190: f64 = t181 - t189;
-        let t191: f64 = t24 * t78;
-        let t192: f64 = t5 * t191;
-        let t193: f64 = t1 * t192;
-        let t194: f64 = t141 * t193;
-        let t195: f64 = t25 * t194;
-        let t196: f64 = t19 * t195;
-        let t197: f64 = t81 * t196;
-        let t198: f64 = t197 * t12;
-        let t199: f64 = t190 + t198;
-        let t200: f64 = t24 * t87;
-        let t201: f64 = t5 * t200;
-        let t202: f64 = t1 * t201;
-        let t203: f64 = t141 * t202;
-        let t204: f64 = t25 * t203;
-        let t205: f64 = t16 * t204;
-        let t206: f64 = t90 * t205;
-        let t207: f64 = t206 * t12;
-        let t208: f64 = t199 + t207;
-        let t209: f64 = t24 * t96;
-        let t210: f64 = t5 * t209;
-        let t211: f64 = t1 * t210;
-        let t212: f64 = t141 * t211;
-        let t213: f64 = t25 * t212;
-        let t214: f64 = t19 * t213;
-        let t215: f64 = t99 * t214;
-        let t216: f64 = t215 * t12;
-        let t217: f64 = t208 - t216;
-        let t218: f64 = t217 - t149;
-        let t219: f64 = t218 - t155;
-        let t225: f64 = t18 * t21;
-        let t226: f64 = t30 * t37;
-        let t227: f64 = t226 * t12;
-        let t228: f64 = t225 - t227;
-        let t229: f64 = t15 * t228;
-        let t230: f64 = t20 + t229;
-        let t231: f64 = t21 * t29;
-        let t232: f64 = t231 * t12;
-        let t233: f64 = t230 + t232;
-        let t234: f64 = t20 * t42;
-        let t235: f64 = -t234;
-        let t236: f64 = t29 * t44;
-        let t237: f64 = t236 * t12;
-        let t238: f64 = t235 - t237;
-        let t239: f64 = t41 * t238;
-        let t240: f64 = t233 + t239;
-        let t241: f64 = t18 * t51;
-        let t242: f64 = t37 * t53;
-        let t243: f64 = t242 * t12;
-        let t244: f64 = t243 - t241;
-        let t245: f64 = t50 * t244;
-        let t246: f64 = t240 + t245;
-        let t247: f64 = t20 * t60;
-        let t248: f64 = t29 * t62;
-        let t249: f64 = t248 * t12;
-        let t250: f64 = t247 + t249;
-        let t251: f64 = t59 * t250;
-        let t252: f64 = t246 + t251;
-        let t253: f64 = t18 * t69;
-        let t254: f64 = t37 * t72;
-        let t255: f64 = t254 * t12;
-        let t256: f64 = t253 - t255;
-        let t257: f64 = t68 * t256;
-        let t258: f64 = t252 + t257;
-        let t259: f64 = t20 * t79;
-        let t260: f64 = -t259;
-        let t261: f64 = t29 * t81;
-        let t262: f64 = t261 * t12;
-        let t263: f64 = t260 - t262;
-        let t264: f64 = t78 * t263;
-        let t265: f64 = t258 + t264;
-        let t266: f64 = t18 * t88;
-        let t267: f64 = t37 * t90;
-        let t268: f64 = t267 * t12;
-        let t269: f64 = t268 - t266;
-        let t270: f64 = t87 * t269;
-        let t271: f64 = t265 + t270;
-        let t272: f64 = t20 * t97;
-        let t273: f64 = t29 * t99;
-        let t274: f64 = t273 * t12;
-        let t275: f64 = t272 + t274;
-        let t276: f64 = t96 * t275;
-        let t277: f64 = t271 + t276;
-        let t297: f64 = t19 * t146;
-        let t298: f64 = t30 * t297;
-        let t299: f64 = t298 * t12;
-        let t300: f64 = t16 * t152;
-        let t301: f64 = t21 * t300;
-        let t302: f64 = t301 * t12;
-        let t303: f64 = t16 * t160;
-        let t304: f64 = t44 * t303;
-        let t305: f64 = t304 * t12;
-        let t306: f64 = t302 - t305;
-        let t307: f64 = t19 * t168;
-        let t308: f64 = t53 * t307;
-        let t309: f64 = t308 * t12;
-        let t310: f64 = t306 + t309;
-        let t311: f64 = t16 * t177;
-        let t312: f64 = t62 * t311;
-        let t313: f64 = t312 * t12;
-        let t314: f64 = t310 + t313;
-        let t315: f64 = t19 * t186;
-        let t316: f64 = t72 * t315;
-        let t317: f64 = t316 * t12;
-        let t318: f64 = t314 - t317;
-        let t319: f64 = t16 * t195;
-        let t320: f64 = t81 * t319;
-        let t321: f64 = t320 * t12;
-        let t322: f64 = t318 - t321;
-        let t323: f64 = t19 * t204;
-        let t324: f64 = t90 * t323;
-        let t325: f64 = t324 * t12;
-        let t326: f64 = t322 + t325;
-        let t327: f64 = t16 * t213;
-        let t328: f64 = t99 * t327;
-        let t329: f64 = t328 * t12;
-        let t330: f64 = t326 + t329;
-        let t331: f64 = t330 - t299;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::tan(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = 1.0;
+    let t12: crate::Real = t11 / t6;
+    let t13: crate::Real = t10 * t12;
+    let t14: crate::Real = t4 + t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = crate::math::cos(t0);
+    let t17: crate::Real = t5 * t7;
+    let t19: crate::Real = crate::math::sin(t0);
+    let t20: crate::Real = t17 * t19;
+    let t25: crate::Real = t3 + t9;
+    let t41: crate::Real = t15 * t15;
+    let t120: crate::Real = 1.0;
+    let t140: crate::Real = t8 * t8;
+    let t141: crate::Real = t120 + t140;
+    let t220: crate::Real = t1 * t17;
+    let t221: crate::Real = t141 * t220;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t18: crate::Real = t16 * t17;
+        let t21: crate::Real = 0.5;
+        let t22: crate::Real = t20 * t21;
+        let t23: crate::Real = -t22;
+        let t24: crate::Real = t7 * t7;
+        let t26: crate::Real = t5 * t24;
+        let t27: crate::Real = t25 * t26;
+        let t28: crate::Real = t16 * t27;
+        let t29: crate::Real = t8 * t28;
+        let t30: crate::Real = 0.3333333333333333;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t31 * t12;
+        let t33: crate::Real = t23 - t32;
+        let t34: crate::Real = t15 * t33;
+        let t35: crate::Real = t18 + t34;
+        let t36: crate::Real = t19 * t27;
+        let t37: crate::Real = t8 * t36;
+        let t38: crate::Real = t21 * t37;
+        let t39: crate::Real = t38 * t12;
+        let t40: crate::Real = t35 - t39;
+        let t42: crate::Real = 0.16666666666666666;
+        let t43: crate::Real = t18 * t42;
+        let t44: crate::Real = 0.125;
+        let t45: crate::Real = t37 * t44;
+        let t46: crate::Real = t45 * t12;
+        let t47: crate::Real = t46 - t43;
+        let t48: crate::Real = t41 * t47;
+        let t49: crate::Real = t40 + t48;
+        let t50: crate::Real = t15 * t41;
+        let t51: crate::Real = 0.041666666666666664;
+        let t52: crate::Real = t20 * t51;
+        let t53: crate::Real = 0.03333333333333333;
+        let t54: crate::Real = t29 * t53;
+        let t55: crate::Real = t54 * t12;
+        let t56: crate::Real = t52 + t55;
+        let t57: crate::Real = t50 * t56;
+        let t58: crate::Real = t49 + t57;
+        let t59: crate::Real = t41 * t41;
+        let t60: crate::Real = 0.008333333333333333;
+        let t61: crate::Real = t18 * t60;
+        let t62: crate::Real = 0.006944444444444444;
+        let t63: crate::Real = t37 * t62;
+        let t64: crate::Real = t63 * t12;
+        let t65: crate::Real = t61 - t64;
+        let t66: crate::Real = t59 * t65;
+        let t67: crate::Real = t58 + t66;
+        let t68: crate::Real = t15 * t59;
+        let t69: crate::Real = 0.001388888888888889;
+        let t70: crate::Real = t20 * t69;
+        let t71: crate::Real = -t70;
+        let t72: crate::Real = 0.0011904761904761906;
+        let t73: crate::Real = t29 * t72;
+        let t74: crate::Real = t73 * t12;
+        let t75: crate::Real = t71 - t74;
+        let t76: crate::Real = t68 * t75;
+        let t77: crate::Real = t67 + t76;
+        let t78: crate::Real = t50 * t50;
+        let t79: crate::Real = 0.0001984126984126984;
+        let t80: crate::Real = t18 * t79;
+        let t81: crate::Real = 0.00017361111111111112;
+        let t82: crate::Real = t37 * t81;
+        let t83: crate::Real = t82 * t12;
+        let t84: crate::Real = t83 - t80;
+        let t85: crate::Real = t78 * t84;
+        let t86: crate::Real = t77 + t85;
+        let t87: crate::Real = t15 * t78;
+        let t88: crate::Real = 0.0000248015873015873;
+        let t89: crate::Real = t20 * t88;
+        let t90: crate::Real = 0.000022045855379188714;
+        let t91: crate::Real = t29 * t90;
+        let t92: crate::Real = t91 * t12;
+        let t93: crate::Real = t89 + t92;
+        let t94: crate::Real = t87 * t93;
+        let t95: crate::Real = t86 + t94;
+        let t96: crate::Real = t59 * t59;
+        let t97: crate::Real = 0.0000027557319223985893;
+        let t98: crate::Real = t18 * t97;
+        let t99: crate::Real = 0.00000248015873015873;
+        let t100: crate::Real = t37 * t99;
+        let t101: crate::Real = t100 * t12;
+        let t102: crate::Real = t98 - t101;
+        let t103: crate::Real = t96 * t102;
+        let t104: crate::Real = t95 + t103;
+        let t142: crate::Real = t15 * t24;
+        let t143: crate::Real = t5 * t142;
+        let t144: crate::Real = t1 * t143;
+        let t145: crate::Real = t141 * t144;
+        let t146: crate::Real = t25 * t145;
+        let t147: crate::Real = t16 * t146;
+        let t148: crate::Real = t30 * t147;
+        let t149: crate::Real = t148 * t12;
+        let t150: crate::Real = t1 * t26;
+        let t151: crate::Real = t141 * t150;
+        let t152: crate::Real = t25 * t151;
+        let t153: crate::Real = t19 * t152;
+        let t154: crate::Real = t21 * t153;
+        let t155: crate::Real = t154 * t12;
+        let t156: crate::Real = t24 * t41;
+        let t157: crate::Real = t5 * t156;
+        let t158: crate::Real = t1 * t157;
+        let t159: crate::Real = t141 * t158;
+        let t160: crate::Real = t25 * t159;
+        let t161: crate::Real = t19 * t160;
+        let t162: crate::Real = t44 * t161;
+        let t163: crate::Real = t162 * t12;
+        let t164: crate::Real = t24 * t50;
+        let t165: crate::Real = t5 * t164;
+        let t166: crate::Real = t1 * t165;
+        let t167: crate::Real = t141 * t166;
+        let t168: crate::Real = t25 * t167;
+        let t169: crate::Real = t16 * t168;
+        let t170: crate::Real = t53 * t169;
+        let t171: crate::Real = t170 * t12;
+        let t172: crate::Real = t163 + t171;
+        let t173: crate::Real = t24 * t59;
+        let t174: crate::Real = t5 * t173;
+        let t175: crate::Real = t1 * t174;
+        let t176: crate::Real = t141 * t175;
+        let t177: crate::Real = t25 * t176;
+        let t178: crate::Real = t19 * t177;
+        let t179: crate::Real = t62 * t178;
+        let t180: crate::Real = t179 * t12;
+        let t181: crate::Real = t172 - t180;
+        let t182: crate::Real = t24 * t68;
+        let t183: crate::Real = t5 * t182;
+        let t184: crate::Real = t1 * t183;
+        let t185: crate::Real = t141 * t184;
+        let t186: crate::Real = t25 * t185;
+        let t187: crate::Real = t16 * t186;
+        let t188: crate::Real = t72 * t187;
+        let t189: crate::Real = t188 * t12;
+        let t190: crate::Real = t181 - t189;
+        let t191: crate::Real = t24 * t78;
+        let t192: crate::Real = t5 * t191;
+        let t193: crate::Real = t1 * t192;
+        let t194: crate::Real = t141 * t193;
+        let t195: crate::Real = t25 * t194;
+        let t196: crate::Real = t19 * t195;
+        let t197: crate::Real = t81 * t196;
+        let t198: crate::Real = t197 * t12;
+        let t199: crate::Real = t190 + t198;
+        let t200: crate::Real = t24 * t87;
+        let t201: crate::Real = t5 * t200;
+        let t202: crate::Real = t1 * t201;
+        let t203: crate::Real = t141 * t202;
+        let t204: crate::Real = t25 * t203;
+        let t205: crate::Real = t16 * t204;
+        let t206: crate::Real = t90 * t205;
+        let t207: crate::Real = t206 * t12;
+        let t208: crate::Real = t199 + t207;
+        let t209: crate::Real = t24 * t96;
+        let t210: crate::Real = t5 * t209;
+        let t211: crate::Real = t1 * t210;
+        let t212: crate::Real = t141 * t211;
+        let t213: crate::Real = t25 * t212;
+        let t214: crate::Real = t19 * t213;
+        let t215: crate::Real = t99 * t214;
+        let t216: crate::Real = t215 * t12;
+        let t217: crate::Real = t208 - t216;
+        let t218: crate::Real = t217 - t149;
+        let t219: crate::Real = t218 - t155;
+        let t225: crate::Real = t18 * t21;
+        let t226: crate::Real = t30 * t37;
+        let t227: crate::Real = t226 * t12;
+        let t228: crate::Real = t225 - t227;
+        let t229: crate::Real = t15 * t228;
+        let t230: crate::Real = t20 + t229;
+        let t231: crate::Real = t21 * t29;
+        let t232: crate::Real = t231 * t12;
+        let t233: crate::Real = t230 + t232;
+        let t234: crate::Real = t20 * t42;
+        let t235: crate::Real = -t234;
+        let t236: crate::Real = t29 * t44;
+        let t237: crate::Real = t236 * t12;
+        let t238: crate::Real = t235 - t237;
+        let t239: crate::Real = t41 * t238;
+        let t240: crate::Real = t233 + t239;
+        let t241: crate::Real = t18 * t51;
+        let t242: crate::Real = t37 * t53;
+        let t243: crate::Real = t242 * t12;
+        let t244: crate::Real = t243 - t241;
+        let t245: crate::Real = t50 * t244;
+        let t246: crate::Real = t240 + t245;
+        let t247: crate::Real = t20 * t60;
+        let t248: crate::Real = t29 * t62;
+        let t249: crate::Real = t248 * t12;
+        let t250: crate::Real = t247 + t249;
+        let t251: crate::Real = t59 * t250;
+        let t252: crate::Real = t246 + t251;
+        let t253: crate::Real = t18 * t69;
+        let t254: crate::Real = t37 * t72;
+        let t255: crate::Real = t254 * t12;
+        let t256: crate::Real = t253 - t255;
+        let t257: crate::Real = t68 * t256;
+        let t258: crate::Real = t252 + t257;
+        let t259: crate::Real = t20 * t79;
+        let t260: crate::Real = -t259;
+        let t261: crate::Real = t29 * t81;
+        let t262: crate::Real = t261 * t12;
+        let t263: crate::Real = t260 - t262;
+        let t264: crate::Real = t78 * t263;
+        let t265: crate::Real = t258 + t264;
+        let t266: crate::Real = t18 * t88;
+        let t267: crate::Real = t37 * t90;
+        let t268: crate::Real = t267 * t12;
+        let t269: crate::Real = t268 - t266;
+        let t270: crate::Real = t87 * t269;
+        let t271: crate::Real = t265 + t270;
+        let t272: crate::Real = t20 * t97;
+        let t273: crate::Real = t29 * t99;
+        let t274: crate::Real = t273 * t12;
+        let t275: crate::Real = t272 + t274;
+        let t276: crate::Real = t96 * t275;
+        let t277: crate::Real = t271 + t276;
+        let t297: crate::Real = t19 * t146;
+        let t298: crate::Real = t30 * t297;
+        let t299: crate::Real = t298 * t12;
+        let t300: crate::Real = t16 * t152;
+        let t301: crate::Real = t21 * t300;
+        let t302: crate::Real = t301 * t12;
+        let t303: crate::Real = t16 * t160;
+        let t304: crate::Real = t44 * t303;
+        let t305: crate::Real = t304 * t12;
+        let t306: crate::Real = t302 - t305;
+        let t307: crate::Real = t19 * t168;
+        let t308: crate::Real = t53 * t307;
+        let t309: crate::Real = t308 * t12;
+        let t310: crate::Real = t306 + t309;
+        let t311: crate::Real = t16 * t177;
+        let t312: crate::Real = t62 * t311;
+        let t313: crate::Real = t312 * t12;
+        let t314: crate::Real = t310 + t313;
+        let t315: crate::Real = t19 * t186;
+        let t316: crate::Real = t72 * t315;
+        let t317: crate::Real = t316 * t12;
+        let t318: crate::Real = t314 - t317;
+        let t319: crate::Real = t16 * t195;
+        let t320: crate::Real = t81 * t319;
+        let t321: crate::Real = t320 * t12;
+        let t322: crate::Real = t318 - t321;
+        let t323: crate::Real = t19 * t204;
+        let t324: crate::Real = t90 * t323;
+        let t325: crate::Real = t324 * t12;
+        let t326: crate::Real = t322 + t325;
+        let t327: crate::Real = t16 * t213;
+        let t328: crate::Real = t99 * t327;
+        let t329: crate::Real = t328 * t12;
+        let t330: crate::Real = t326 + t329;
+        let t331: crate::Real = t330 - t299;
         [t104, t219, t277, t331]
     } else {
-        let t105: f64 = libm::sin(t15);
-        let t106: f64 = t7 * t25;
-        let t107: f64 = t19 * t106;
-        let t108: f64 = t105 * t107;
-        let t109: f64 = t11 / t15;
-        let t110: f64 = t108 * t109;
-        let t111: f64 = libm::cos(t15);
-        let t112: f64 = t16 * t106;
-        let t113: f64 = t111 * t112;
-        let t114: f64 = t113 * t109;
-        let t115: f64 = t105 * t106;
-        let t116: f64 = t16 * t115;
-        let t117: f64 = t11 / t41;
-        let t118: f64 = t116 * t117;
-        let t119: f64 = t114 - t118;
-        let t121: f64 = t120 - t111;
-        let t122: f64 = t7 * t121;
-        let t123: f64 = t25 * t122;
-        let t124: f64 = t19 * t123;
-        let t125: f64 = t124 * t117;
-        let t126: f64 = t119 + t125;
-        let t127: f64 = t126 - t110;
-        let t128: f64 = t17 * t127;
-        let t129: f64 = t8 * t128;
-        let t130: f64 = t129 * t12;
-        let t131: f64 = t17 * t105;
-        let t132: f64 = t16 * t131;
-        let t133: f64 = t132 * t109;
-        let t134: f64 = t130 + t133;
-        let t135: f64 = t17 * t121;
-        let t136: f64 = t19 * t135;
-        let t137: f64 = t136 * t109;
-        let t138: f64 = t134 - t137;
-        let t222: f64 = t127 * t221;
-        let t223: f64 = t222 * t12;
-        let t278: f64 = t107 * t111;
-        let t279: f64 = t278 * t109;
-        let t280: f64 = t116 * t109;
-        let t281: f64 = t279 + t280;
-        let t282: f64 = t108 * t117;
-        let t283: f64 = t281 - t282;
-        let t284: f64 = t16 * t123;
-        let t285: f64 = t284 * t117;
-        let t286: f64 = t283 - t285;
-        let t287: f64 = t17 * t286;
-        let t288: f64 = t8 * t287;
-        let t289: f64 = t288 * t12;
-        let t290: f64 = t20 * t105;
-        let t291: f64 = t290 * t109;
-        let t292: f64 = t289 + t291;
-        let t293: f64 = t16 * t135;
-        let t294: f64 = t293 * t109;
-        let t295: f64 = t292 + t294;
-        let t332: f64 = t221 * t286;
-        let t333: f64 = t332 * t12;
+        let t105: crate::Real = crate::math::sin(t15);
+        let t106: crate::Real = t7 * t25;
+        let t107: crate::Real = t19 * t106;
+        let t108: crate::Real = t105 * t107;
+        let t109: crate::Real = t11 / t15;
+        let t110: crate::Real = t108 * t109;
+        let t111: crate::Real = crate::math::cos(t15);
+        let t112: crate::Real = t16 * t106;
+        let t113: crate::Real = t111 * t112;
+        let t114: crate::Real = t113 * t109;
+        let t115: crate::Real = t105 * t106;
+        let t116: crate::Real = t16 * t115;
+        let t117: crate::Real = t11 / t41;
+        let t118: crate::Real = t116 * t117;
+        let t119: crate::Real = t114 - t118;
+        let t121: crate::Real = t120 - t111;
+        let t122: crate::Real = t7 * t121;
+        let t123: crate::Real = t25 * t122;
+        let t124: crate::Real = t19 * t123;
+        let t125: crate::Real = t124 * t117;
+        let t126: crate::Real = t119 + t125;
+        let t127: crate::Real = t126 - t110;
+        let t128: crate::Real = t17 * t127;
+        let t129: crate::Real = t8 * t128;
+        let t130: crate::Real = t129 * t12;
+        let t131: crate::Real = t17 * t105;
+        let t132: crate::Real = t16 * t131;
+        let t133: crate::Real = t132 * t109;
+        let t134: crate::Real = t130 + t133;
+        let t135: crate::Real = t17 * t121;
+        let t136: crate::Real = t19 * t135;
+        let t137: crate::Real = t136 * t109;
+        let t138: crate::Real = t134 - t137;
+        let t222: crate::Real = t127 * t221;
+        let t223: crate::Real = t222 * t12;
+        let t278: crate::Real = t107 * t111;
+        let t279: crate::Real = t278 * t109;
+        let t280: crate::Real = t116 * t109;
+        let t281: crate::Real = t279 + t280;
+        let t282: crate::Real = t108 * t117;
+        let t283: crate::Real = t281 - t282;
+        let t284: crate::Real = t16 * t123;
+        let t285: crate::Real = t284 * t117;
+        let t286: crate::Real = t283 - t285;
+        let t287: crate::Real = t17 * t286;
+        let t288: crate::Real = t8 * t287;
+        let t289: crate::Real = t288 * t12;
+        let t290: crate::Real = t20 * t105;
+        let t291: crate::Real = t290 * t109;
+        let t292: crate::Real = t289 + t291;
+        let t293: crate::Real = t16 * t135;
+        let t294: crate::Real = t293 * t109;
+        let t295: crate::Real = t292 + t294;
+        let t332: crate::Real = t221 * t286;
+        let t333: crate::Real = t332 * t12;
         [t138, t223, t295, t333]
     };
-    let t139: f64 = g0[0usize];
-    let t224: f64 = g0[1usize];
-    let t296: f64 = g0[2usize];
-    let t334: f64 = g0[3usize];
-    let t335: f64 = t8 * t17;
-    let t336: f64 = t335 * t12;
-    let t337: f64 = t221 * t12;
+    let t139: crate::Real = g0[0usize];
+    let t224: crate::Real = g0[1usize];
+    let t296: crate::Real = g0[2usize];
+    let t334: crate::Real = g0[3usize];
+    let t335: crate::Real = t8 * t17;
+    let t336: crate::Real = t335 * t12;
+    let t337: crate::Real = t221 * t12;
     [[t139, t224], [t296, t334], [t336, t337]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -952,236 +961,238 @@ pub fn step_exact_jac_u(
 192 arithmetic operations (1528 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::tan(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t10 / t6;
-    let t12: f64 = t4 + t11;
-    let t13: f64 = t7 * t12;
-    let t14: f64 = libm::sin(t0);
-    let t19: f64 = libm::cos(t0);
-    let t21: f64 = t13 * t13;
-    let t79: f64 = t3 + t9;
-    let t152: f64 = t7 * t14;
-    let g0: [f64; 4usize] = if libm::fabs(t13) < 0.05f64 {
-        let t15: f64 = t7 * t13;
-        let t16: f64 = t14 * t15;
-        let t17: f64 = 0.5f64;
-        let t18: f64 = t16 * t17;
-        let t20: f64 = t7 * t19;
-        let t22: f64 = t7 * t21;
-        let t23: f64 = t19 * t22;
-        let t24: f64 = 0.16666666666666666f64;
-        let t25: f64 = t23 * t24;
-        let t26: f64 = t20 - t25;
-        let t27: f64 = t13 * t21;
-        let t28: f64 = t7 * t27;
-        let t29: f64 = t14 * t28;
-        let t30: f64 = 0.041666666666666664f64;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t26 + t31;
-        let t33: f64 = t21 * t21;
-        let t34: f64 = t7 * t33;
-        let t35: f64 = t19 * t34;
-        let t36: f64 = 0.008333333333333333f64;
-        let t37: f64 = t35 * t36;
-        let t38: f64 = t32 + t37;
-        let t39: f64 = t13 * t33;
-        let t40: f64 = t7 * t39;
-        let t41: f64 = t14 * t40;
-        let t42: f64 = 0.001388888888888889f64;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t38 - t43;
-        let t45: f64 = t27 * t27;
-        let t46: f64 = t7 * t45;
-        let t47: f64 = t19 * t46;
-        let t48: f64 = 0.0001984126984126984f64;
-        let t49: f64 = t47 * t48;
-        let t50: f64 = t44 - t49;
-        let t51: f64 = t13 * t45;
-        let t52: f64 = t7 * t51;
-        let t53: f64 = t14 * t52;
-        let t54: f64 = 0.0000248015873015873f64;
-        let t55: f64 = t53 * t54;
-        let t56: f64 = t50 + t55;
-        let t57: f64 = t33 * t33;
-        let t58: f64 = t7 * t57;
-        let t59: f64 = t19 * t58;
-        let t60: f64 = 0.0000027557319223985893f64;
-        let t61: f64 = t59 * t60;
-        let t62: f64 = t56 + t61;
-        let t63: f64 = t62 - t18;
-        let t78: f64 = t7 * t7;
-        let t80: f64 = t13 * t78;
-        let t81: f64 = t79 * t80;
-        let t82: f64 = t19 * t81;
-        let t83: f64 = 0.3333333333333333f64;
-        let t84: f64 = t82 * t83;
-        let t85: f64 = t78 * t79;
-        let t86: f64 = t14 * t85;
-        let t87: f64 = t17 * t86;
-        let t88: f64 = t21 * t78;
-        let t89: f64 = t79 * t88;
-        let t90: f64 = t14 * t89;
-        let t91: f64 = 0.125f64;
-        let t92: f64 = t90 * t91;
-        let t93: f64 = t27 * t78;
-        let t94: f64 = t79 * t93;
-        let t95: f64 = t19 * t94;
-        let t96: f64 = 0.03333333333333333f64;
-        let t97: f64 = t95 * t96;
-        let t98: f64 = t92 + t97;
-        let t99: f64 = t33 * t78;
-        let t100: f64 = t79 * t99;
-        let t101: f64 = t14 * t100;
-        let t102: f64 = 0.006944444444444444f64;
-        let t103: f64 = t101 * t102;
-        let t104: f64 = t98 - t103;
-        let t105: f64 = t39 * t78;
-        let t106: f64 = t79 * t105;
-        let t107: f64 = t19 * t106;
-        let t108: f64 = 0.0011904761904761906f64;
-        let t109: f64 = t107 * t108;
-        let t110: f64 = t104 - t109;
-        let t111: f64 = t45 * t78;
-        let t112: f64 = t79 * t111;
-        let t113: f64 = t14 * t112;
-        let t114: f64 = 0.00017361111111111112f64;
-        let t115: f64 = t113 * t114;
-        let t116: f64 = t110 + t115;
-        let t117: f64 = t51 * t78;
-        let t118: f64 = t79 * t117;
-        let t119: f64 = t19 * t118;
-        let t120: f64 = 0.000022045855379188714f64;
-        let t121: f64 = t119 * t120;
-        let t122: f64 = t116 + t121;
-        let t123: f64 = t57 * t78;
-        let t124: f64 = t79 * t123;
-        let t125: f64 = t14 * t124;
-        let t126: f64 = 0.00000248015873015873f64;
-        let t127: f64 = t125 * t126;
-        let t128: f64 = t122 - t127;
-        let t129: f64 = t128 - t84;
-        let t130: f64 = t129 - t87;
-        let t150: f64 = t15 * t19;
-        let t151: f64 = t17 * t150;
-        let t153: f64 = t151 + t152;
-        let t154: f64 = t14 * t22;
-        let t155: f64 = t24 * t154;
-        let t156: f64 = t153 - t155;
-        let t157: f64 = t19 * t28;
-        let t158: f64 = t30 * t157;
-        let t159: f64 = t156 - t158;
-        let t160: f64 = t14 * t34;
-        let t161: f64 = t36 * t160;
-        let t162: f64 = t159 + t161;
-        let t163: f64 = t19 * t40;
-        let t164: f64 = t42 * t163;
-        let t165: f64 = t162 + t164;
-        let t166: f64 = t14 * t46;
-        let t167: f64 = t48 * t166;
-        let t168: f64 = t165 - t167;
-        let t169: f64 = t19 * t52;
-        let t170: f64 = t54 * t169;
-        let t171: f64 = t168 - t170;
-        let t172: f64 = t14 * t58;
-        let t173: f64 = t60 * t172;
-        let t174: f64 = t171 + t173;
-        let t181: f64 = t14 * t81;
-        let t182: f64 = t83 * t181;
-        let t183: f64 = t19 * t85;
-        let t184: f64 = t17 * t183;
-        let t185: f64 = t19 * t89;
-        let t186: f64 = t91 * t185;
-        let t187: f64 = t184 - t186;
-        let t188: f64 = t14 * t94;
-        let t189: f64 = t96 * t188;
-        let t190: f64 = t187 + t189;
-        let t191: f64 = t19 * t100;
-        let t192: f64 = t102 * t191;
-        let t193: f64 = t190 + t192;
-        let t194: f64 = t14 * t106;
-        let t195: f64 = t108 * t194;
-        let t196: f64 = t193 - t195;
-        let t197: f64 = t19 * t112;
-        let t198: f64 = t114 * t197;
-        let t199: f64 = t196 - t198;
-        let t200: f64 = t14 * t118;
-        let t201: f64 = t120 * t200;
-        let t202: f64 = t199 + t201;
-        let t203: f64 = t19 * t124;
-        let t204: f64 = t126 * t203;
-        let t205: f64 = t202 + t204;
-        let t206: f64 = t205 - t182;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::tan(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t10 / t6;
+    let t12: crate::Real = t4 + t11;
+    let t13: crate::Real = t7 * t12;
+    let t14: crate::Real = crate::math::sin(t0);
+    let t19: crate::Real = crate::math::cos(t0);
+    let t21: crate::Real = t13 * t13;
+    let t79: crate::Real = t3 + t9;
+    let t152: crate::Real = t7 * t14;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t13)
+        < crate::math::series_switch(0.05)
+    {
+        let t15: crate::Real = t7 * t13;
+        let t16: crate::Real = t14 * t15;
+        let t17: crate::Real = 0.5;
+        let t18: crate::Real = t16 * t17;
+        let t20: crate::Real = t7 * t19;
+        let t22: crate::Real = t7 * t21;
+        let t23: crate::Real = t19 * t22;
+        let t24: crate::Real = 0.16666666666666666;
+        let t25: crate::Real = t23 * t24;
+        let t26: crate::Real = t20 - t25;
+        let t27: crate::Real = t13 * t21;
+        let t28: crate::Real = t7 * t27;
+        let t29: crate::Real = t14 * t28;
+        let t30: crate::Real = 0.041666666666666664;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t26 + t31;
+        let t33: crate::Real = t21 * t21;
+        let t34: crate::Real = t7 * t33;
+        let t35: crate::Real = t19 * t34;
+        let t36: crate::Real = 0.008333333333333333;
+        let t37: crate::Real = t35 * t36;
+        let t38: crate::Real = t32 + t37;
+        let t39: crate::Real = t13 * t33;
+        let t40: crate::Real = t7 * t39;
+        let t41: crate::Real = t14 * t40;
+        let t42: crate::Real = 0.001388888888888889;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t38 - t43;
+        let t45: crate::Real = t27 * t27;
+        let t46: crate::Real = t7 * t45;
+        let t47: crate::Real = t19 * t46;
+        let t48: crate::Real = 0.0001984126984126984;
+        let t49: crate::Real = t47 * t48;
+        let t50: crate::Real = t44 - t49;
+        let t51: crate::Real = t13 * t45;
+        let t52: crate::Real = t7 * t51;
+        let t53: crate::Real = t14 * t52;
+        let t54: crate::Real = 0.0000248015873015873;
+        let t55: crate::Real = t53 * t54;
+        let t56: crate::Real = t50 + t55;
+        let t57: crate::Real = t33 * t33;
+        let t58: crate::Real = t7 * t57;
+        let t59: crate::Real = t19 * t58;
+        let t60: crate::Real = 0.0000027557319223985893;
+        let t61: crate::Real = t59 * t60;
+        let t62: crate::Real = t56 + t61;
+        let t63: crate::Real = t62 - t18;
+        let t78: crate::Real = t7 * t7;
+        let t80: crate::Real = t13 * t78;
+        let t81: crate::Real = t79 * t80;
+        let t82: crate::Real = t19 * t81;
+        let t83: crate::Real = 0.3333333333333333;
+        let t84: crate::Real = t82 * t83;
+        let t85: crate::Real = t78 * t79;
+        let t86: crate::Real = t14 * t85;
+        let t87: crate::Real = t17 * t86;
+        let t88: crate::Real = t21 * t78;
+        let t89: crate::Real = t79 * t88;
+        let t90: crate::Real = t14 * t89;
+        let t91: crate::Real = 0.125;
+        let t92: crate::Real = t90 * t91;
+        let t93: crate::Real = t27 * t78;
+        let t94: crate::Real = t79 * t93;
+        let t95: crate::Real = t19 * t94;
+        let t96: crate::Real = 0.03333333333333333;
+        let t97: crate::Real = t95 * t96;
+        let t98: crate::Real = t92 + t97;
+        let t99: crate::Real = t33 * t78;
+        let t100: crate::Real = t79 * t99;
+        let t101: crate::Real = t14 * t100;
+        let t102: crate::Real = 0.006944444444444444;
+        let t103: crate::Real = t101 * t102;
+        let t104: crate::Real = t98 - t103;
+        let t105: crate::Real = t39 * t78;
+        let t106: crate::Real = t79 * t105;
+        let t107: crate::Real = t19 * t106;
+        let t108: crate::Real = 0.0011904761904761906;
+        let t109: crate::Real = t107 * t108;
+        let t110: crate::Real = t104 - t109;
+        let t111: crate::Real = t45 * t78;
+        let t112: crate::Real = t79 * t111;
+        let t113: crate::Real = t14 * t112;
+        let t114: crate::Real = 0.00017361111111111112;
+        let t115: crate::Real = t113 * t114;
+        let t116: crate::Real = t110 + t115;
+        let t117: crate::Real = t51 * t78;
+        let t118: crate::Real = t79 * t117;
+        let t119: crate::Real = t19 * t118;
+        let t120: crate::Real = 0.000022045855379188714;
+        let t121: crate::Real = t119 * t120;
+        let t122: crate::Real = t116 + t121;
+        let t123: crate::Real = t57 * t78;
+        let t124: crate::Real = t79 * t123;
+        let t125: crate::Real = t14 * t124;
+        let t126: crate::Real = 0.00000248015873015873;
+        let t127: crate::Real = t125 * t126;
+        let t128: crate::Real = t122 - t127;
+        let t129: crate::Real = t128 - t84;
+        let t130: crate::Real = t129 - t87;
+        let t150: crate::Real = t15 * t19;
+        let t151: crate::Real = t17 * t150;
+        let t153: crate::Real = t151 + t152;
+        let t154: crate::Real = t14 * t22;
+        let t155: crate::Real = t24 * t154;
+        let t156: crate::Real = t153 - t155;
+        let t157: crate::Real = t19 * t28;
+        let t158: crate::Real = t30 * t157;
+        let t159: crate::Real = t156 - t158;
+        let t160: crate::Real = t14 * t34;
+        let t161: crate::Real = t36 * t160;
+        let t162: crate::Real = t159 + t161;
+        let t163: crate::Real = t19 * t40;
+        let t164: crate::Real = t42 * t163;
+        let t165: crate::Real = t162 + t164;
+        let t166: crate::Real = t14 * t46;
+        let t167: crate::Real = t48 * t166;
+        let t168: crate::Real = t165 - t167;
+        let t169: crate::Real = t19 * t52;
+        let t170: crate::Real = t54 * t169;
+        let t171: crate::Real = t168 - t170;
+        let t172: crate::Real = t14 * t58;
+        let t173: crate::Real = t60 * t172;
+        let t174: crate::Real = t171 + t173;
+        let t181: crate::Real = t14 * t81;
+        let t182: crate::Real = t83 * t181;
+        let t183: crate::Real = t19 * t85;
+        let t184: crate::Real = t17 * t183;
+        let t185: crate::Real = t19 * t89;
+        let t186: crate::Real = t91 * t185;
+        let t187: crate::Real = t184 - t186;
+        let t188: crate::Real = t14 * t94;
+        let t189: crate::Real = t96 * t188;
+        let t190: crate::Real = t187 + t189;
+        let t191: crate::Real = t19 * t100;
+        let t192: crate::Real = t102 * t191;
+        let t193: crate::Real = t190 + t192;
+        let t194: crate::Real = t14 * t106;
+        let t195: crate::Real = t108 * t194;
+        let t196: crate::Real = t193 - t195;
+        let t197: crate::Real = t19 * t112;
+        let t198: crate::Real = t114 * t197;
+        let t199: crate::Real = t196 - t198;
+        let t200: crate::Real = t14 * t118;
+        let t201: crate::Real = t120 * t200;
+        let t202: crate::Real = t199 + t201;
+        let t203: crate::Real = t19 * t124;
+        let t204: crate::Real = t126 * t203;
+        let t205: crate::Real = t202 + t204;
+        let t206: crate::Real = t205 - t182;
         [t63, t130, t174, t206]
     } else {
-        let t64: f64 = libm::sin(t13);
-        let t65: f64 = t7 * t64;
-        let t66: f64 = t19 * t65;
-        let t67: f64 = 1f64;
-        let t68: f64 = t67 / t13;
-        let t69: f64 = t66 * t68;
-        let t70: f64 = 1f64;
-        let t71: f64 = libm::cos(t13);
-        let t72: f64 = t70 - t71;
-        let t73: f64 = t7 * t72;
-        let t74: f64 = t14 * t73;
-        let t75: f64 = t74 * t68;
-        let t76: f64 = t69 - t75;
-        let t131: f64 = t7 * t79;
-        let t132: f64 = t14 * t131;
-        let t133: f64 = t64 * t132;
-        let t134: f64 = t133 * t68;
-        let t135: f64 = t19 * t131;
-        let t136: f64 = t71 * t135;
-        let t137: f64 = t136 * t68;
-        let t138: f64 = t64 * t131;
-        let t139: f64 = t19 * t138;
-        let t140: f64 = t67 / t21;
-        let t141: f64 = t139 * t140;
-        let t142: f64 = t137 - t141;
-        let t143: f64 = t73 * t79;
-        let t144: f64 = t14 * t143;
-        let t145: f64 = t144 * t140;
-        let t146: f64 = t142 + t145;
-        let t147: f64 = t146 - t134;
-        let t148: f64 = t7 * t147;
-        let t175: f64 = t64 * t152;
-        let t176: f64 = t175 * t68;
-        let t177: f64 = t19 * t73;
-        let t178: f64 = t177 * t68;
-        let t179: f64 = t176 + t178;
-        let t207: f64 = t71 * t132;
-        let t208: f64 = t207 * t68;
-        let t209: f64 = t139 * t68;
-        let t210: f64 = t208 + t209;
-        let t211: f64 = t133 * t140;
-        let t212: f64 = t210 - t211;
-        let t213: f64 = t19 * t143;
-        let t214: f64 = t213 * t140;
-        let t215: f64 = t212 - t214;
-        let t216: f64 = t7 * t215;
+        let t64: crate::Real = crate::math::sin(t13);
+        let t65: crate::Real = t7 * t64;
+        let t66: crate::Real = t19 * t65;
+        let t67: crate::Real = 1.0;
+        let t68: crate::Real = t67 / t13;
+        let t69: crate::Real = t66 * t68;
+        let t70: crate::Real = 1.0;
+        let t71: crate::Real = crate::math::cos(t13);
+        let t72: crate::Real = t70 - t71;
+        let t73: crate::Real = t7 * t72;
+        let t74: crate::Real = t14 * t73;
+        let t75: crate::Real = t74 * t68;
+        let t76: crate::Real = t69 - t75;
+        let t131: crate::Real = t7 * t79;
+        let t132: crate::Real = t14 * t131;
+        let t133: crate::Real = t64 * t132;
+        let t134: crate::Real = t133 * t68;
+        let t135: crate::Real = t19 * t131;
+        let t136: crate::Real = t71 * t135;
+        let t137: crate::Real = t136 * t68;
+        let t138: crate::Real = t64 * t131;
+        let t139: crate::Real = t19 * t138;
+        let t140: crate::Real = t67 / t21;
+        let t141: crate::Real = t139 * t140;
+        let t142: crate::Real = t137 - t141;
+        let t143: crate::Real = t73 * t79;
+        let t144: crate::Real = t14 * t143;
+        let t145: crate::Real = t144 * t140;
+        let t146: crate::Real = t142 + t145;
+        let t147: crate::Real = t146 - t134;
+        let t148: crate::Real = t7 * t147;
+        let t175: crate::Real = t64 * t152;
+        let t176: crate::Real = t175 * t68;
+        let t177: crate::Real = t19 * t73;
+        let t178: crate::Real = t177 * t68;
+        let t179: crate::Real = t176 + t178;
+        let t207: crate::Real = t71 * t132;
+        let t208: crate::Real = t207 * t68;
+        let t209: crate::Real = t139 * t68;
+        let t210: crate::Real = t208 + t209;
+        let t211: crate::Real = t133 * t140;
+        let t212: crate::Real = t210 - t211;
+        let t213: crate::Real = t19 * t143;
+        let t214: crate::Real = t213 * t140;
+        let t215: crate::Real = t212 - t214;
+        let t216: crate::Real = t7 * t215;
         [t76, t148, t179, t216]
     };
-    let t77: f64 = g0[0usize];
-    let t149: f64 = g0[1usize];
-    let t180: f64 = g0[2usize];
-    let t217: f64 = g0[3usize];
-    let t218: f64 = 0f64;
+    let t77: crate::Real = g0[0usize];
+    let t149: crate::Real = g0[1usize];
+    let t180: crate::Real = g0[2usize];
+    let t217: crate::Real = g0[3usize];
+    let t218: crate::Real = 0.0;
     [[t77, t149], [t180, t217], [t218, t7]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
@@ -1196,371 +1207,373 @@ pub fn step_exact_jac_w(
 328 arithmetic operations (2357 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::tan(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = 1f64;
-    let t12: f64 = t11 / t6;
-    let t13: f64 = t10 * t12;
-    let t14: f64 = t4 + t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = libm::cos(t0);
-    let t17: f64 = t1 * t7;
-    let t19: f64 = libm::sin(t0);
-    let t20: f64 = t17 * t19;
-    let t25: f64 = t3 + t9;
-    let t41: f64 = t15 * t15;
-    let t140: f64 = t6 * t6;
-    let t148: f64 = t11 / t140;
-    let t221: f64 = t5 * t7;
-    let t222: f64 = t1 * t221;
-    let g0: [f64; 4usize] = if libm::fabs(t15) < 0.05f64 {
-        let t18: f64 = t16 * t17;
-        let t21: f64 = 0.5f64;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = -t22;
-        let t24: f64 = t7 * t7;
-        let t26: f64 = t1 * t24;
-        let t27: f64 = t25 * t26;
-        let t28: f64 = t16 * t27;
-        let t29: f64 = t8 * t28;
-        let t30: f64 = 0.3333333333333333f64;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t31 * t12;
-        let t33: f64 = t23 - t32;
-        let t34: f64 = t15 * t33;
-        let t35: f64 = t18 + t34;
-        let t36: f64 = t19 * t27;
-        let t37: f64 = t8 * t36;
-        let t38: f64 = t21 * t37;
-        let t39: f64 = t38 * t12;
-        let t40: f64 = t35 - t39;
-        let t42: f64 = 0.16666666666666666f64;
-        let t43: f64 = t18 * t42;
-        let t44: f64 = 0.125f64;
-        let t45: f64 = t37 * t44;
-        let t46: f64 = t45 * t12;
-        let t47: f64 = t46 - t43;
-        let t48: f64 = t41 * t47;
-        let t49: f64 = t40 + t48;
-        let t50: f64 = t15 * t41;
-        let t51: f64 = 0.041666666666666664f64;
-        let t52: f64 = t20 * t51;
-        let t53: f64 = 0.03333333333333333f64;
-        let t54: f64 = t29 * t53;
-        let t55: f64 = t54 * t12;
-        let t56: f64 = t52 + t55;
-        let t57: f64 = t50 * t56;
-        let t58: f64 = t49 + t57;
-        let t59: f64 = t41 * t41;
-        let t60: f64 = 0.008333333333333333f64;
-        let t61: f64 = t18 * t60;
-        let t62: f64 = 0.006944444444444444f64;
-        let t63: f64 = t37 * t62;
-        let t64: f64 = t63 * t12;
-        let t65: f64 = t61 - t64;
-        let t66: f64 = t59 * t65;
-        let t67: f64 = t58 + t66;
-        let t68: f64 = t15 * t59;
-        let t69: f64 = 0.001388888888888889f64;
-        let t70: f64 = t20 * t69;
-        let t71: f64 = -t70;
-        let t72: f64 = 0.0011904761904761906f64;
-        let t73: f64 = t29 * t72;
-        let t74: f64 = t73 * t12;
-        let t75: f64 = t71 - t74;
-        let t76: f64 = t68 * t75;
-        let t77: f64 = t67 + t76;
-        let t78: f64 = t50 * t50;
-        let t79: f64 = 0.0001984126984126984f64;
-        let t80: f64 = t18 * t79;
-        let t81: f64 = 0.00017361111111111112f64;
-        let t82: f64 = t37 * t81;
-        let t83: f64 = t82 * t12;
-        let t84: f64 = t83 - t80;
-        let t85: f64 = t78 * t84;
-        let t86: f64 = t77 + t85;
-        let t87: f64 = t15 * t78;
-        let t88: f64 = 0.0000248015873015873f64;
-        let t89: f64 = t20 * t88;
-        let t90: f64 = 0.000022045855379188714f64;
-        let t91: f64 = t29 * t90;
-        let t92: f64 = t91 * t12;
-        let t93: f64 = t89 + t92;
-        let t94: f64 = t87 * t93;
-        let t95: f64 = t86 + t94;
-        let t96: f64 = t59 * t59;
-        let t97: f64 = 0.0000027557319223985893f64;
-        let t98: f64 = t18 * t97;
-        let t99: f64 = 0.00000248015873015873f64;
-        let t100: f64 = t37 * t99;
-        let t101: f64 = t100 * t12;
-        let t102: f64 = t98 - t101;
-        let t103: f64 = t96 * t102;
-        let t104: f64 = t95 + t103;
-        let t141: f64 = t15 * t24;
-        let t142: f64 = t5 * t141;
-        let t143: f64 = t1 * t142;
-        let t144: f64 = t25 * t143;
-        let t145: f64 = t16 * t144;
-        let t146: f64 = t8 * t145;
-        let t147: f64 = t30 * t146;
-        let t149: f64 = t147 * t148;
-        let t150: f64 = t5 * t24;
-        let t151: f64 = t1 * t150;
-        let t152: f64 = t25 * t151;
-        let t153: f64 = t19 * t152;
-        let t154: f64 = t8 * t153;
-        let t155: f64 = t21 * t154;
-        let t156: f64 = t155 * t148;
-        let t157: f64 = t149 + t156;
-        let t158: f64 = t24 * t41;
-        let t159: f64 = t5 * t158;
-        let t160: f64 = t1 * t159;
-        let t161: f64 = t25 * t160;
-        let t162: f64 = t19 * t161;
-        let t163: f64 = t8 * t162;
-        let t164: f64 = t44 * t163;
-        let t165: f64 = t164 * t148;
-        let t166: f64 = t157 - t165;
-        let t167: f64 = t24 * t50;
-        let t168: f64 = t5 * t167;
-        let t169: f64 = t1 * t168;
-        let t170: f64 = t25 * t169;
-        let t171: f64 = t16 * t170;
-        let t172: f64 = t8 * t171;
-        let t173: f64 = t53 * t172;
-        let t174: f64 = t173 * t148;
-        let t175: f64 = t166 - t174;
-        let t176: f64 = t24 * t59;
-        let t177: f64 = t5 * t176;
-        let t178: f64 = t1 * t177;
-        let t179: f64 = t25 * t178;
-        let t180: f64 = t19 * t179;
-        let t181: f64 = t8 * t180;
-        let t182: f64 = t62 * t181;
-        let t183: f64 = t182 * t148;
-        let t184: f64 = t175 + t183;
-        let t185: f64 = t24 * t68;
-        let t186: f64 = t5 * t185;
-        let t187: f64 = t1 * t186;
-        let t188: f64 = t25 * t187;
-        let t189: f64 = t16 * t188;
-        let t190: f64 = t8 * t189;
-        let t191: f64 = t72 * t190;
-        let t192: f64 = t191 * t148;
-        let t193: f64 = t184 + t192;
-        let t194: f64 = t24 * t78;
-        let t195: f64 = t5 * t194;
-        let t196: f64 = t1 * t195;
-        let t197: f64 = t25 * t196;
-        let t198: f64 = t19 * t197;
-        let t199: f64 = t8 * t198;
-        let t200: f64 = t81 * t199;
-        let t201: f64 = t200 * t148;
-        let t202: f64 = t193 - t201;
-        let t203: f64 = t24 * t87;
-        let t204: f64 = t5 * t203;
-        let t205: f64 = t1 * t204;
-        let t206: f64 = t25 * t205;
-        let t207: f64 = t16 * t206;
-        let t208: f64 = t8 * t207;
-        let t209: f64 = t90 * t208;
-        let t210: f64 = t209 * t148;
-        let t211: f64 = t202 - t210;
-        let t212: f64 = t24 * t96;
-        let t213: f64 = t5 * t212;
-        let t214: f64 = t1 * t213;
-        let t215: f64 = t25 * t214;
-        let t216: f64 = t19 * t215;
-        let t217: f64 = t8 * t216;
-        let t218: f64 = t99 * t217;
-        let t219: f64 = t218 * t148;
-        let t220: f64 = t211 + t219;
-        let t228: f64 = t18 * t21;
-        let t229: f64 = t30 * t37;
-        let t230: f64 = t229 * t12;
-        let t231: f64 = t228 - t230;
-        let t232: f64 = t15 * t231;
-        let t233: f64 = t20 + t232;
-        let t234: f64 = t21 * t29;
-        let t235: f64 = t234 * t12;
-        let t236: f64 = t233 + t235;
-        let t237: f64 = t20 * t42;
-        let t238: f64 = -t237;
-        let t239: f64 = t29 * t44;
-        let t240: f64 = t239 * t12;
-        let t241: f64 = t238 - t240;
-        let t242: f64 = t41 * t241;
-        let t243: f64 = t236 + t242;
-        let t244: f64 = t18 * t51;
-        let t245: f64 = t37 * t53;
-        let t246: f64 = t245 * t12;
-        let t247: f64 = t246 - t244;
-        let t248: f64 = t50 * t247;
-        let t249: f64 = t243 + t248;
-        let t250: f64 = t20 * t60;
-        let t251: f64 = t29 * t62;
-        let t252: f64 = t251 * t12;
-        let t253: f64 = t250 + t252;
-        let t254: f64 = t59 * t253;
-        let t255: f64 = t249 + t254;
-        let t256: f64 = t18 * t69;
-        let t257: f64 = t37 * t72;
-        let t258: f64 = t257 * t12;
-        let t259: f64 = t256 - t258;
-        let t260: f64 = t68 * t259;
-        let t261: f64 = t255 + t260;
-        let t262: f64 = t20 * t79;
-        let t263: f64 = -t262;
-        let t264: f64 = t29 * t81;
-        let t265: f64 = t264 * t12;
-        let t266: f64 = t263 - t265;
-        let t267: f64 = t78 * t266;
-        let t268: f64 = t261 + t267;
-        let t269: f64 = t18 * t88;
-        let t270: f64 = t37 * t90;
-        let t271: f64 = t270 * t12;
-        let t272: f64 = t271 - t269;
-        let t273: f64 = t87 * t272;
-        let t274: f64 = t268 + t273;
-        let t275: f64 = t20 * t97;
-        let t276: f64 = t29 * t99;
-        let t277: f64 = t276 * t12;
-        let t278: f64 = t275 + t277;
-        let t279: f64 = t96 * t278;
-        let t280: f64 = t274 + t279;
-        let t300: f64 = t19 * t144;
-        let t301: f64 = t8 * t300;
-        let t302: f64 = t30 * t301;
-        let t303: f64 = t302 * t148;
-        let t304: f64 = t16 * t152;
-        let t305: f64 = t8 * t304;
-        let t306: f64 = t21 * t305;
-        let t307: f64 = t306 * t148;
-        let t308: f64 = t303 - t307;
-        let t309: f64 = t16 * t161;
-        let t310: f64 = t8 * t309;
-        let t311: f64 = t44 * t310;
-        let t312: f64 = t311 * t148;
-        let t313: f64 = t308 + t312;
-        let t314: f64 = t19 * t170;
-        let t315: f64 = t8 * t314;
-        let t316: f64 = t53 * t315;
-        let t317: f64 = t316 * t148;
-        let t318: f64 = t313 - t317;
-        let t319: f64 = t16 * t179;
-        let t320: f64 = t8 * t319;
-        let t321: f64 = t62 * t320;
-        let t322: f64 = t321 * t148;
-        let t323: f64 = t318 - t322;
-        let t324: f64 = t19 * t188;
-        let t325: f64 = t8 * t324;
-        let t326: f64 = t72 * t325;
-        let t327: f64 = t326 * t148;
-        let t328: f64 = t323 + t327;
-        let t329: f64 = t16 * t197;
-        let t330: f64 = t8 * t329;
-        let t331: f64 = t81 * t330;
-        let t332: f64 = t331 * t148;
-        let t333: f64 = t328 + t332;
-        let t334: f64 = t19 * t206;
-        let t335: f64 = t8 * t334;
-        let t336: f64 = t90 * t335;
-        let t337: f64 = t336 * t148;
-        let t338: f64 = t333 - t337;
-        let t339: f64 = t16 * t215;
-        let t340: f64 = t8 * t339;
-        let t341: f64 = t99 * t340;
-        let t342: f64 = t341 * t148;
-        let t343: f64 = t338 - t342;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::tan(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = 1.0;
+    let t12: crate::Real = t11 / t6;
+    let t13: crate::Real = t10 * t12;
+    let t14: crate::Real = t4 + t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = crate::math::cos(t0);
+    let t17: crate::Real = t1 * t7;
+    let t19: crate::Real = crate::math::sin(t0);
+    let t20: crate::Real = t17 * t19;
+    let t25: crate::Real = t3 + t9;
+    let t41: crate::Real = t15 * t15;
+    let t140: crate::Real = t6 * t6;
+    let t148: crate::Real = t11 / t140;
+    let t221: crate::Real = t5 * t7;
+    let t222: crate::Real = t1 * t221;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t18: crate::Real = t16 * t17;
+        let t21: crate::Real = 0.5;
+        let t22: crate::Real = t20 * t21;
+        let t23: crate::Real = -t22;
+        let t24: crate::Real = t7 * t7;
+        let t26: crate::Real = t1 * t24;
+        let t27: crate::Real = t25 * t26;
+        let t28: crate::Real = t16 * t27;
+        let t29: crate::Real = t8 * t28;
+        let t30: crate::Real = 0.3333333333333333;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t31 * t12;
+        let t33: crate::Real = t23 - t32;
+        let t34: crate::Real = t15 * t33;
+        let t35: crate::Real = t18 + t34;
+        let t36: crate::Real = t19 * t27;
+        let t37: crate::Real = t8 * t36;
+        let t38: crate::Real = t21 * t37;
+        let t39: crate::Real = t38 * t12;
+        let t40: crate::Real = t35 - t39;
+        let t42: crate::Real = 0.16666666666666666;
+        let t43: crate::Real = t18 * t42;
+        let t44: crate::Real = 0.125;
+        let t45: crate::Real = t37 * t44;
+        let t46: crate::Real = t45 * t12;
+        let t47: crate::Real = t46 - t43;
+        let t48: crate::Real = t41 * t47;
+        let t49: crate::Real = t40 + t48;
+        let t50: crate::Real = t15 * t41;
+        let t51: crate::Real = 0.041666666666666664;
+        let t52: crate::Real = t20 * t51;
+        let t53: crate::Real = 0.03333333333333333;
+        let t54: crate::Real = t29 * t53;
+        let t55: crate::Real = t54 * t12;
+        let t56: crate::Real = t52 + t55;
+        let t57: crate::Real = t50 * t56;
+        let t58: crate::Real = t49 + t57;
+        let t59: crate::Real = t41 * t41;
+        let t60: crate::Real = 0.008333333333333333;
+        let t61: crate::Real = t18 * t60;
+        let t62: crate::Real = 0.006944444444444444;
+        let t63: crate::Real = t37 * t62;
+        let t64: crate::Real = t63 * t12;
+        let t65: crate::Real = t61 - t64;
+        let t66: crate::Real = t59 * t65;
+        let t67: crate::Real = t58 + t66;
+        let t68: crate::Real = t15 * t59;
+        let t69: crate::Real = 0.001388888888888889;
+        let t70: crate::Real = t20 * t69;
+        let t71: crate::Real = -t70;
+        let t72: crate::Real = 0.0011904761904761906;
+        let t73: crate::Real = t29 * t72;
+        let t74: crate::Real = t73 * t12;
+        let t75: crate::Real = t71 - t74;
+        let t76: crate::Real = t68 * t75;
+        let t77: crate::Real = t67 + t76;
+        let t78: crate::Real = t50 * t50;
+        let t79: crate::Real = 0.0001984126984126984;
+        let t80: crate::Real = t18 * t79;
+        let t81: crate::Real = 0.00017361111111111112;
+        let t82: crate::Real = t37 * t81;
+        let t83: crate::Real = t82 * t12;
+        let t84: crate::Real = t83 - t80;
+        let t85: crate::Real = t78 * t84;
+        let t86: crate::Real = t77 + t85;
+        let t87: crate::Real = t15 * t78;
+        let t88: crate::Real = 0.0000248015873015873;
+        let t89: crate::Real = t20 * t88;
+        let t90: crate::Real = 0.000022045855379188714;
+        let t91: crate::Real = t29 * t90;
+        let t92: crate::Real = t91 * t12;
+        let t93: crate::Real = t89 + t92;
+        let t94: crate::Real = t87 * t93;
+        let t95: crate::Real = t86 + t94;
+        let t96: crate::Real = t59 * t59;
+        let t97: crate::Real = 0.0000027557319223985893;
+        let t98: crate::Real = t18 * t97;
+        let t99: crate::Real = 0.00000248015873015873;
+        let t100: crate::Real = t37 * t99;
+        let t101: crate::Real = t100 * t12;
+        let t102: crate::Real = t98 - t101;
+        let t103: crate::Real = t96 * t102;
+        let t104: crate::Real = t95 + t103;
+        let t141: crate::Real = t15 * t24;
+        let t142: crate::Real = t5 * t141;
+        let t143: crate::Real = t1 * t142;
+        let t144: crate::Real = t25 * t143;
+        let t145: crate::Real = t16 * t144;
+        let t146: crate::Real = t8 * t145;
+        let t147: crate::Real = t30 * t146;
+        let t149: crate::Real = t147 * t148;
+        let t150: crate::Real = t5 * t24;
+        let t151: crate::Real = t1 * t150;
+        let t152: crate::Real = t25 * t151;
+        let t153: crate::Real = t19 * t152;
+        let t154: crate::Real = t8 * t153;
+        let t155: crate::Real = t21 * t154;
+        let t156: crate::Real = t155 * t148;
+        let t157: crate::Real = t149 + t156;
+        let t158: crate::Real = t24 * t41;
+        let t159: crate::Real = t5 * t158;
+        let t160: crate::Real = t1 * t159;
+        let t161: crate::Real = t25 * t160;
+        let t162: crate::Real = t19 * t161;
+        let t163: crate::Real = t8 * t162;
+        let t164: crate::Real = t44 * t163;
+        let t165: crate::Real = t164 * t148;
+        let t166: crate::Real = t157 - t165;
+        let t167: crate::Real = t24 * t50;
+        let t168: crate::Real = t5 * t167;
+        let t169: crate::Real = t1 * t168;
+        let t170: crate::Real = t25 * t169;
+        let t171: crate::Real = t16 * t170;
+        let t172: crate::Real = t8 * t171;
+        let t173: crate::Real = t53 * t172;
+        let t174: crate::Real = t173 * t148;
+        let t175: crate::Real = t166 - t174;
+        let t176: crate::Real = t24 * t59;
+        let t177: crate::Real = t5 * t176;
+        let t178: crate::Real = t1 * t177;
+        let t179: crate::Real = t25 * t178;
+        let t180: crate::Real = t19 * t179;
+        let t181: crate::Real = t8 * t180;
+        let t182: crate::Real = t62 * t181;
+        let t183: crate::Real = t182 * t148;
+        let t184: crate::Real = t175 + t183;
+        let t185: crate::Real = t24 * t68;
+        let t186: crate::Real = t5 * t185;
+        let t187: crate::Real = t1 * t186;
+        let t188: crate::Real = t25 * t187;
+        let t189: crate::Real = t16 * t188;
+        let t190: crate::Real = t8 * t189;
+        let t191: crate::Real = t72 * t190;
+        let t192: crate::Real = t191 * t148;
+        let t193: crate::Real = t184 + t192;
+        let t194: crate::Real = t24 * t78;
+        let t195: crate::Real = t5 * t194;
+        let t196: crate::Real = t1 * t195;
+        let t197: crate::Real = t25 * t196;
+        let t198: crate::Real = t19 * t197;
+        let t199: crate::Real = t8 * t198;
+        let t200: crate::Real = t81 * t199;
+        let t201: crate::Real = t200 * t148;
+        let t202: crate::Real = t193 - t201;
+        let t203: crate::Real = t24 * t87;
+        let t204: crate::Real = t5 * t203;
+        let t205: crate::Real = t1 * t204;
+        let t206: crate::Real = t25 * t205;
+        let t207: crate::Real = t16 * t206;
+        let t208: crate::Real = t8 * t207;
+        let t209: crate::Real = t90 * t208;
+        let t210: crate::Real = t209 * t148;
+        let t211: crate::Real = t202 - t210;
+        let t212: crate::Real = t24 * t96;
+        let t213: crate::Real = t5 * t212;
+        let t214: crate::Real = t1 * t213;
+        let t215: crate::Real = t25 * t214;
+        let t216: crate::Real = t19 * t215;
+        let t217: crate::Real = t8 * t216;
+        let t218: crate::Real = t99 * t217;
+        let t219: crate::Real = t218 * t148;
+        let t220: crate::Real = t211 + t219;
+        let t228: crate::Real = t18 * t21;
+        let t229: crate::Real = t30 * t37;
+        let t230: crate::Real = t229 * t12;
+        let t231: crate::Real = t228 - t230;
+        let t232: crate::Real = t15 * t231;
+        let t233: crate::Real = t20 + t232;
+        let t234: crate::Real = t21 * t29;
+        let t235: crate::Real = t234 * t12;
+        let t236: crate::Real = t233 + t235;
+        let t237: crate::Real = t20 * t42;
+        let t238: crate::Real = -t237;
+        let t239: crate::Real = t29 * t44;
+        let t240: crate::Real = t239 * t12;
+        let t241: crate::Real = t238 - t240;
+        let t242: crate::Real = t41 * t241;
+        let t243: crate::Real = t236 + t242;
+        let t244: crate::Real = t18 * t51;
+        let t245: crate::Real = t37 * t53;
+        let t246: crate::Real = t245 * t12;
+        let t247: crate::Real = t246 - t244;
+        let t248: crate::Real = t50 * t247;
+        let t249: crate::Real = t243 + t248;
+        let t250: crate::Real = t20 * t60;
+        let t251: crate::Real = t29 * t62;
+        let t252: crate::Real = t251 * t12;
+        let t253: crate::Real = t250 + t252;
+        let t254: crate::Real = t59 * t253;
+        let t255: crate::Real = t249 + t254;
+        let t256: crate::Real = t18 * t69;
+        let t257: crate::Real = t37 * t72;
+        let t258: crate::Real = t257 * t12;
+        let t259: crate::Real = t256 - t258;
+        let t260: crate::Real = t68 * t259;
+        let t261: crate::Real = t255 + t260;
+        let t262: crate::Real = t20 * t79;
+        let t263: crate::Real = -t262;
+        let t264: crate::Real = t29 * t81;
+        let t265: crate::Real = t264 * t12;
+        let t266: crate::Real = t263 - t265;
+        let t267: crate::Real = t78 * t266;
+        let t268: crate::Real = t261 + t267;
+        let t269: crate::Real = t18 * t88;
+        let t270: crate::Real = t37 * t90;
+        let t271: crate::Real = t270 * t12;
+        let t272: crate::Real = t271 - t269;
+        let t273: crate::Real = t87 * t272;
+        let t274: crate::Real = t268 + t273;
+        let t275: crate::Real = t20 * t97;
+        let t276: crate::Real = t29 * t99;
+        let t277: crate::Real = t276 * t12;
+        let t278: crate::Real = t275 + t277;
+        let t279: crate::Real = t96 * t278;
+        let t280: crate::Real = t274 + t279;
+        let t300: crate::Real = t19 * t144;
+        let t301: crate::Real = t8 * t300;
+        let t302: crate::Real = t30 * t301;
+        let t303: crate::Real = t302 * t148;
+        let t304: crate::Real = t16 * t152;
+        let t305: crate::Real = t8 * t304;
+        let t306: crate::Real = t21 * t305;
+        let t307: crate::Real = t306 * t148;
+        let t308: crate::Real = t303 - t307;
+        let t309: crate::Real = t16 * t161;
+        let t310: crate::Real = t8 * t309;
+        let t311: crate::Real = t44 * t310;
+        let t312: crate::Real = t311 * t148;
+        let t313: crate::Real = t308 + t312;
+        let t314: crate::Real = t19 * t170;
+        let t315: crate::Real = t8 * t314;
+        let t316: crate::Real = t53 * t315;
+        let t317: crate::Real = t316 * t148;
+        let t318: crate::Real = t313 - t317;
+        let t319: crate::Real = t16 * t179;
+        let t320: crate::Real = t8 * t319;
+        let t321: crate::Real = t62 * t320;
+        let t322: crate::Real = t321 * t148;
+        let t323: crate::Real = t318 - t322;
+        let t324: crate::Real = t19 * t188;
+        let t325: crate::Real = t8 * t324;
+        let t326: crate::Real = t72 * t325;
+        let t327: crate::Real = t326 * t148;
+        let t328: crate::Real = t323 + t327;
+        let t329: crate::Real = t16 * t197;
+        let t330: crate::Real = t8 * t329;
+        let t331: crate::Real = t81 * t330;
+        let t332: crate::Real = t331 * t148;
+        let t333: crate::Real = t328 + t332;
+        let t334: crate::Real = t19 * t206;
+        let t335: crate::Real = t8 * t334;
+        let t336: crate::Real = t90 * t335;
+        let t337: crate::Real = t336 * t148;
+        let t338: crate::Real = t333 - t337;
+        let t339: crate::Real = t16 * t215;
+        let t340: crate::Real = t8 * t339;
+        let t341: crate::Real = t99 * t340;
+        let t342: crate::Real = t341 * t148;
+        let t343: crate::Real = t338 - t342;
         [t104, t220, t280, t343]
     } else {
-        let t105: f64 = libm::sin(t15);
-        let t106: f64 = t17 * t105;
-        let t107: f64 = t16 * t106;
-        let t108: f64 = t11 / t15;
-        let t109: f64 = t107 * t108;
-        let t110: f64 = 1f64;
-        let t111: f64 = libm::cos(t15);
-        let t112: f64 = t110 - t111;
-        let t113: f64 = t17 * t112;
-        let t114: f64 = t19 * t113;
-        let t115: f64 = t114 * t108;
-        let t116: f64 = t109 - t115;
-        let t117: f64 = t7 * t25;
-        let t118: f64 = t19 * t117;
-        let t119: f64 = t105 * t118;
-        let t120: f64 = t119 * t108;
-        let t121: f64 = t16 * t117;
-        let t122: f64 = t111 * t121;
-        let t123: f64 = t122 * t108;
-        let t124: f64 = t105 * t117;
-        let t125: f64 = t16 * t124;
-        let t126: f64 = t11 / t41;
-        let t127: f64 = t125 * t126;
-        let t128: f64 = t123 - t127;
-        let t129: f64 = t7 * t112;
-        let t130: f64 = t25 * t129;
-        let t131: f64 = t19 * t130;
-        let t132: f64 = t131 * t126;
-        let t133: f64 = t128 + t132;
-        let t134: f64 = t133 - t120;
-        let t135: f64 = t17 * t134;
-        let t136: f64 = t8 * t135;
-        let t137: f64 = t136 * t12;
-        let t138: f64 = t116 + t137;
-        let t223: f64 = t134 * t222;
-        let t224: f64 = t8 * t223;
-        let t225: f64 = t224 * t148;
-        let t226: f64 = -t225;
-        let t281: f64 = t20 * t105;
-        let t282: f64 = t281 * t108;
-        let t283: f64 = t16 * t113;
-        let t284: f64 = t283 * t108;
-        let t285: f64 = t282 + t284;
-        let t286: f64 = t111 * t118;
-        let t287: f64 = t286 * t108;
-        let t288: f64 = t125 * t108;
-        let t289: f64 = t287 + t288;
-        let t290: f64 = t119 * t126;
-        let t291: f64 = t289 - t290;
-        let t292: f64 = t16 * t130;
-        let t293: f64 = t292 * t126;
-        let t294: f64 = t291 - t293;
-        let t295: f64 = t17 * t294;
-        let t296: f64 = t8 * t295;
-        let t297: f64 = t296 * t12;
-        let t298: f64 = t285 + t297;
-        let t344: f64 = t222 * t294;
-        let t345: f64 = t8 * t344;
-        let t346: f64 = t345 * t148;
-        let t347: f64 = -t346;
+        let t105: crate::Real = crate::math::sin(t15);
+        let t106: crate::Real = t17 * t105;
+        let t107: crate::Real = t16 * t106;
+        let t108: crate::Real = t11 / t15;
+        let t109: crate::Real = t107 * t108;
+        let t110: crate::Real = 1.0;
+        let t111: crate::Real = crate::math::cos(t15);
+        let t112: crate::Real = t110 - t111;
+        let t113: crate::Real = t17 * t112;
+        let t114: crate::Real = t19 * t113;
+        let t115: crate::Real = t114 * t108;
+        let t116: crate::Real = t109 - t115;
+        let t117: crate::Real = t7 * t25;
+        let t118: crate::Real = t19 * t117;
+        let t119: crate::Real = t105 * t118;
+        let t120: crate::Real = t119 * t108;
+        let t121: crate::Real = t16 * t117;
+        let t122: crate::Real = t111 * t121;
+        let t123: crate::Real = t122 * t108;
+        let t124: crate::Real = t105 * t117;
+        let t125: crate::Real = t16 * t124;
+        let t126: crate::Real = t11 / t41;
+        let t127: crate::Real = t125 * t126;
+        let t128: crate::Real = t123 - t127;
+        let t129: crate::Real = t7 * t112;
+        let t130: crate::Real = t25 * t129;
+        let t131: crate::Real = t19 * t130;
+        let t132: crate::Real = t131 * t126;
+        let t133: crate::Real = t128 + t132;
+        let t134: crate::Real = t133 - t120;
+        let t135: crate::Real = t17 * t134;
+        let t136: crate::Real = t8 * t135;
+        let t137: crate::Real = t136 * t12;
+        let t138: crate::Real = t116 + t137;
+        let t223: crate::Real = t134 * t222;
+        let t224: crate::Real = t8 * t223;
+        let t225: crate::Real = t224 * t148;
+        let t226: crate::Real = -t225;
+        let t281: crate::Real = t20 * t105;
+        let t282: crate::Real = t281 * t108;
+        let t283: crate::Real = t16 * t113;
+        let t284: crate::Real = t283 * t108;
+        let t285: crate::Real = t282 + t284;
+        let t286: crate::Real = t111 * t118;
+        let t287: crate::Real = t286 * t108;
+        let t288: crate::Real = t125 * t108;
+        let t289: crate::Real = t287 + t288;
+        let t290: crate::Real = t119 * t126;
+        let t291: crate::Real = t289 - t290;
+        let t292: crate::Real = t16 * t130;
+        let t293: crate::Real = t292 * t126;
+        let t294: crate::Real = t291 - t293;
+        let t295: crate::Real = t17 * t294;
+        let t296: crate::Real = t8 * t295;
+        let t297: crate::Real = t296 * t12;
+        let t298: crate::Real = t285 + t297;
+        let t344: crate::Real = t222 * t294;
+        let t345: crate::Real = t8 * t344;
+        let t346: crate::Real = t345 * t148;
+        let t347: crate::Real = -t346;
         [t138, t226, t298, t347]
     };
-    let t139: f64 = g0[0usize];
-    let t227: f64 = g0[1usize];
-    let t299: f64 = g0[2usize];
-    let t348: f64 = g0[3usize];
-    let t349: f64 = t8 * t17;
-    let t350: f64 = t349 * t12;
-    let t351: f64 = t8 * t222;
-    let t352: f64 = t351 * t148;
-    let t353: f64 = -t352;
+    let t139: crate::Real = g0[0usize];
+    let t227: crate::Real = g0[1usize];
+    let t299: crate::Real = g0[2usize];
+    let t348: crate::Real = g0[3usize];
+    let t349: crate::Real = t8 * t17;
+    let t350: crate::Real = t349 * t12;
+    let t351: crate::Real = t8 * t222;
+    let t352: crate::Real = t351 * t148;
+    let t353: crate::Real = -t352;
     [[t139, t227], [t299, t348], [t350, t353]]
 }
 /**Gyro yaw rate (seed 000 eq. 13). Predicted columns: gyro_z.
@@ -1573,18 +1586,18 @@ pub fn step_exact_jac_p(
 4 arithmetic operations (4 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [f64; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = libm::tan(t1);
-    let t5: f64 = t0 * t2;
-    let t6: f64 = t4 * t5;
-    let t7: f64 = t6 / t3;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = crate::math::tan(t1);
+    let t5: crate::Real = t0 * t2;
+    let t6: crate::Real = t4 * t5;
+    let t7: crate::Real = t6 / t3;
     [t7]
 }
 /**Jacobian of `obs_gyro` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -1597,11 +1610,11 @@ pub fn obs_gyro(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [[f64; 3usize]; 1usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 1usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0, t0]]
 }
 /**Jacobian of `obs_gyro` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -1614,22 +1627,22 @@ pub fn obs_gyro_jac_x(
 8 arithmetic operations (9 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [[f64; 2usize]; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = libm::tan(t1);
-    let t5: f64 = t0 * t4;
-    let t6: f64 = t5 / t3;
-    let t7: f64 = t3 * t3;
-    let t8: f64 = t0 * t2;
-    let t9: f64 = t4 * t8;
-    let t10: f64 = t9 / t7;
-    let t11: f64 = -t10;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [[crate::Real; 2usize]; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = crate::math::tan(t1);
+    let t5: crate::Real = t0 * t4;
+    let t6: crate::Real = t5 / t3;
+    let t7: crate::Real = t3 * t3;
+    let t8: crate::Real = t0 * t2;
+    let t9: crate::Real = t4 * t8;
+    let t10: crate::Real = t9 / t7;
+    let t11: crate::Real = -t10;
     [[t6, t11]]
 }
 /**Range and bearing to a known landmark (seed 001 eq. 6). Predicted columns: range, bearing.
@@ -1643,24 +1656,24 @@ pub fn obs_gyro_jac_p(
 8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
     [t10, t12]
 }
 /**Jacobian of `obs_landmark` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -1674,33 +1687,33 @@ pub fn obs_landmark(
 15 arithmetic operations (45 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 3usize]; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = lm[0usize];
-    let t3: f64 = lm[1usize];
-    let t4: f64 = t2 - t0;
-    let t5: f64 = t4 * t4;
-    let t6: f64 = t3 - t1;
-    let t7: f64 = t6 * t6;
-    let t8: f64 = t5 + t7;
-    let t9: f64 = libm::sqrt(t8);
-    let t10: f64 = 1f64;
-    let t11: f64 = t10 / t9;
-    let t12: f64 = t4 * t11;
-    let t13: f64 = -t12;
-    let t14: f64 = t6 * t11;
-    let t15: f64 = -t14;
-    let t16: f64 = 0f64;
-    let t17: f64 = t10 / t8;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t4 * t17;
-    let t20: f64 = -t19;
-    let t21: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = lm[0usize];
+    let t3: crate::Real = lm[1usize];
+    let t4: crate::Real = t2 - t0;
+    let t5: crate::Real = t4 * t4;
+    let t6: crate::Real = t3 - t1;
+    let t7: crate::Real = t6 * t6;
+    let t8: crate::Real = t5 + t7;
+    let t9: crate::Real = crate::math::sqrt(t8);
+    let t10: crate::Real = 1.0;
+    let t11: crate::Real = t10 / t9;
+    let t12: crate::Real = t4 * t11;
+    let t13: crate::Real = -t12;
+    let t14: crate::Real = t6 * t11;
+    let t15: crate::Real = -t14;
+    let t16: crate::Real = 0.0;
+    let t17: crate::Real = t10 / t8;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t4 * t17;
+    let t20: crate::Real = -t19;
+    let t21: crate::Real = (-1.0);
     [[t13, t15, t16], [t18, t20, t21]]
 }
 /**Jacobian of `obs_landmark` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -1714,12 +1727,12 @@ pub fn obs_landmark_jac_x(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 2usize]; 2usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 2usize]; 2usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0], [t0, t0]]
 }
 /**Seed 001 eq. 15/16: drive rate from the speed, steering from the curvature (alpha := 0 at standstill, where it is undetermined).
@@ -1730,16 +1743,19 @@ pub fn obs_landmark_jac_p(
 
 5 arithmetic operations (5 before common-subexpression elimination).*/
 #[inline]
-pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 2usize] {
-    let t0: f64 = twist[0usize];
-    let t1: f64 = twist[2usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = t0 / t2;
-    let t5: f64 = t0 * t1;
-    let t6: f64 = t3 * t5;
-    let t7: f64 = t0 * t0;
-    let t8: f64 = libm::atan2(t6, t7);
+pub fn inverse_twist(
+    twist: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = twist[0usize];
+    let t1: crate::Real = twist[2usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = t0 / t2;
+    let t5: crate::Real = t0 * t1;
+    let t6: crate::Real = t3 * t5;
+    let t7: crate::Real = t0 * t0;
+    let t8: crate::Real = crate::math::atan2(t6, t7);
     [t4, t8]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
@@ -1752,59 +1768,61 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 2usize] 
 34 arithmetic operations (179 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
-    dpose: &[f64; 3usize],
-    dt: f64,
-    p: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = dpose[0usize];
-    let t1: f64 = dpose[2usize];
-    let t2: f64 = dt;
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = 1f64;
-    let t6: f64 = t5 / t2;
-    let g0: [f64; 1usize] = if libm::fabs(t1) < 0.05f64 {
-        let t7: f64 = t0 * t6;
-        let t8: f64 = t1 * t1;
-        let t9: f64 = t0 * t8;
-        let t10: f64 = 0.16666666666666666f64;
-        let t11: f64 = t9 * t10;
-        let t12: f64 = t11 * t6;
-        let t13: f64 = t7 + t12;
-        let t14: f64 = t8 * t8;
-        let t15: f64 = t0 * t14;
-        let t16: f64 = 0.019444444444444445f64;
-        let t17: f64 = t15 * t16;
-        let t18: f64 = t17 * t6;
-        let t19: f64 = t13 + t18;
-        let t20: f64 = t1 * t8;
-        let t21: f64 = t20 * t20;
-        let t22: f64 = t0 * t21;
-        let t23: f64 = 0.00205026455026455f64;
-        let t24: f64 = t22 * t23;
-        let t25: f64 = t24 * t6;
-        let t26: f64 = t19 + t25;
-        let t27: f64 = t14 * t14;
-        let t28: f64 = t0 * t27;
-        let t29: f64 = 0.0002099867724867725f64;
-        let t30: f64 = t28 * t29;
-        let t31: f64 = t30 * t6;
-        let t32: f64 = t26 + t31;
+    dpose: &[crate::Real; 3usize],
+    dt: crate::Real,
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = dpose[0usize];
+    let t1: crate::Real = dpose[2usize];
+    let t2: crate::Real = dt;
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = 1.0;
+    let t6: crate::Real = t5 / t2;
+    let g0: [crate::Real; 1usize] = if crate::math::fabs(t1)
+        < crate::math::series_switch(0.05)
+    {
+        let t7: crate::Real = t0 * t6;
+        let t8: crate::Real = t1 * t1;
+        let t9: crate::Real = t0 * t8;
+        let t10: crate::Real = 0.16666666666666666;
+        let t11: crate::Real = t9 * t10;
+        let t12: crate::Real = t11 * t6;
+        let t13: crate::Real = t7 + t12;
+        let t14: crate::Real = t8 * t8;
+        let t15: crate::Real = t0 * t14;
+        let t16: crate::Real = 0.019444444444444445;
+        let t17: crate::Real = t15 * t16;
+        let t18: crate::Real = t17 * t6;
+        let t19: crate::Real = t13 + t18;
+        let t20: crate::Real = t1 * t8;
+        let t21: crate::Real = t20 * t20;
+        let t22: crate::Real = t0 * t21;
+        let t23: crate::Real = 0.00205026455026455;
+        let t24: crate::Real = t22 * t23;
+        let t25: crate::Real = t24 * t6;
+        let t26: crate::Real = t19 + t25;
+        let t27: crate::Real = t14 * t14;
+        let t28: crate::Real = t0 * t27;
+        let t29: crate::Real = 0.0002099867724867725;
+        let t30: crate::Real = t28 * t29;
+        let t31: crate::Real = t30 * t6;
+        let t32: crate::Real = t26 + t31;
         [t32]
     } else {
-        let t33: f64 = libm::sin(t1);
-        let t34: f64 = t0 * t1;
-        let t35: f64 = t2 * t33;
-        let t36: f64 = t34 / t35;
+        let t33: crate::Real = crate::math::sin(t1);
+        let t34: crate::Real = t0 * t1;
+        let t35: crate::Real = t2 * t33;
+        let t36: crate::Real = t34 / t35;
         [t36]
     };
-    let t37: f64 = g0[0usize];
-    let t38: f64 = t37 / t3;
-    let t39: f64 = t1 * t37;
-    let t40: f64 = t4 * t39;
-    let t41: f64 = t40 * t6;
-    let t42: f64 = t37 * t37;
-    let t43: f64 = libm::atan2(t41, t42);
+    let t37: crate::Real = g0[0usize];
+    let t38: crate::Real = t37 / t3;
+    let t39: crate::Real = t1 * t37;
+    let t40: crate::Real = t4 * t39;
+    let t41: crate::Real = t40 * t6;
+    let t42: crate::Real = t37 * t37;
+    let t43: crate::Real = crate::math::atan2(t41, t42);
     [t38, t43]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
@@ -1819,351 +1837,353 @@ pub fn inverse_increment(
 306 arithmetic operations (2996 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = libm::tan(t4);
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t12 / t8;
-    let t14: f64 = t6 + t13;
-    let t15: f64 = t9 * t14;
-    let t16: f64 = t5 + t11;
-    let t17: f64 = libm::sin(t2);
-    let t24: f64 = libm::cos(t2);
-    let t25: f64 = t9 * t16;
-    let t26: f64 = t24 * t25;
-    let t28: f64 = t15 * t15;
-    let t80: f64 = 1f64;
-    let t95: f64 = t17 * t25;
-    let t268: f64 = t9 * t17;
-    let g0: [f64; 8usize] = if libm::fabs(t15) < 0.05f64 {
-        let t18: f64 = t9 * t15;
-        let t19: f64 = t16 * t18;
-        let t20: f64 = t17 * t19;
-        let t21: f64 = 0.5f64;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = t0 - t22;
-        let t27: f64 = t23 + t26;
-        let t29: f64 = t9 * t28;
-        let t30: f64 = t16 * t29;
-        let t31: f64 = t24 * t30;
-        let t32: f64 = 0.16666666666666666f64;
-        let t33: f64 = t31 * t32;
-        let t34: f64 = t27 - t33;
-        let t35: f64 = t15 * t28;
-        let t36: f64 = t9 * t35;
-        let t37: f64 = t16 * t36;
-        let t38: f64 = t17 * t37;
-        let t39: f64 = 0.041666666666666664f64;
-        let t40: f64 = t38 * t39;
-        let t41: f64 = t34 + t40;
-        let t42: f64 = t28 * t28;
-        let t43: f64 = t9 * t42;
-        let t44: f64 = t16 * t43;
-        let t45: f64 = t24 * t44;
-        let t46: f64 = 0.008333333333333333f64;
-        let t47: f64 = t45 * t46;
-        let t48: f64 = t41 + t47;
-        let t49: f64 = t15 * t42;
-        let t50: f64 = t9 * t49;
-        let t51: f64 = t16 * t50;
-        let t52: f64 = t17 * t51;
-        let t53: f64 = 0.001388888888888889f64;
-        let t54: f64 = t52 * t53;
-        let t55: f64 = t48 - t54;
-        let t56: f64 = t35 * t35;
-        let t57: f64 = t9 * t56;
-        let t58: f64 = t16 * t57;
-        let t59: f64 = t24 * t58;
-        let t60: f64 = 0.0001984126984126984f64;
-        let t61: f64 = t59 * t60;
-        let t62: f64 = t55 - t61;
-        let t63: f64 = t15 * t56;
-        let t64: f64 = t9 * t63;
-        let t65: f64 = t16 * t64;
-        let t66: f64 = t17 * t65;
-        let t67: f64 = 0.0000248015873015873f64;
-        let t68: f64 = t66 * t67;
-        let t69: f64 = t62 + t68;
-        let t70: f64 = t42 * t42;
-        let t71: f64 = t9 * t70;
-        let t72: f64 = t16 * t71;
-        let t73: f64 = t24 * t72;
-        let t74: f64 = 0.0000027557319223985893f64;
-        let t75: f64 = t73 * t74;
-        let t76: f64 = t69 + t75;
-        let t92: f64 = t19 * t24;
-        let t93: f64 = t21 * t92;
-        let t94: f64 = t1 + t93;
-        let t96: f64 = t94 + t95;
-        let t97: f64 = t17 * t30;
-        let t98: f64 = t32 * t97;
-        let t99: f64 = t96 - t98;
-        let t100: f64 = t24 * t37;
-        let t101: f64 = t39 * t100;
-        let t102: f64 = t99 - t101;
-        let t103: f64 = t17 * t44;
-        let t104: f64 = t46 * t103;
-        let t105: f64 = t102 + t104;
-        let t106: f64 = t24 * t51;
-        let t107: f64 = t53 * t106;
-        let t108: f64 = t105 + t107;
-        let t109: f64 = t17 * t58;
-        let t110: f64 = t60 * t109;
-        let t111: f64 = t108 - t110;
-        let t112: f64 = t24 * t65;
-        let t113: f64 = t67 * t112;
-        let t114: f64 = t111 - t113;
-        let t115: f64 = t17 * t72;
-        let t116: f64 = t74 * t115;
-        let t117: f64 = t114 + t116;
-        let t127: f64 = t24 * t19;
-        let t128: f64 = t127 * t21;
-        let t129: f64 = t97 * t32;
-        let t130: f64 = t100 * t39;
-        let t131: f64 = t129 + t130;
-        let t132: f64 = t103 * t46;
-        let t133: f64 = t131 - t132;
-        let t134: f64 = t106 * t53;
-        let t135: f64 = t133 - t134;
-        let t136: f64 = t109 * t60;
-        let t137: f64 = t135 + t136;
-        let t138: f64 = t112 * t67;
-        let t139: f64 = t137 + t138;
-        let t140: f64 = t115 * t74;
-        let t141: f64 = t139 - t140;
-        let t142: f64 = t141 - t128;
-        let t143: f64 = t142 - t95;
-        let t149: f64 = t19 * t17;
-        let t150: f64 = t21 * t149;
-        let t151: f64 = t32 * t31;
-        let t152: f64 = t26 - t151;
-        let t153: f64 = t39 * t38;
-        let t154: f64 = t152 + t153;
-        let t155: f64 = t46 * t45;
-        let t156: f64 = t154 + t155;
-        let t157: f64 = t53 * t52;
-        let t158: f64 = t156 - t157;
-        let t159: f64 = t60 * t59;
-        let t160: f64 = t158 - t159;
-        let t161: f64 = t67 * t66;
-        let t162: f64 = t160 + t161;
-        let t163: f64 = t74 * t73;
-        let t164: f64 = t162 + t163;
-        let t165: f64 = t164 - t150;
-        let t168: f64 = t17 * t18;
-        let t169: f64 = t168 * t21;
-        let t170: f64 = t9 * t24;
-        let t171: f64 = t24 * t29;
-        let t172: f64 = t171 * t32;
-        let t173: f64 = t170 - t172;
-        let t174: f64 = t17 * t36;
-        let t175: f64 = t174 * t39;
-        let t176: f64 = t173 + t175;
-        let t177: f64 = t24 * t43;
-        let t178: f64 = t177 * t46;
-        let t179: f64 = t176 + t178;
-        let t180: f64 = t17 * t50;
-        let t181: f64 = t180 * t53;
-        let t182: f64 = t179 - t181;
-        let t183: f64 = t24 * t57;
-        let t184: f64 = t183 * t60;
-        let t185: f64 = t182 - t184;
-        let t186: f64 = t17 * t64;
-        let t187: f64 = t186 * t67;
-        let t188: f64 = t185 + t187;
-        let t189: f64 = t24 * t71;
-        let t190: f64 = t189 * t74;
-        let t191: f64 = t188 + t190;
-        let t192: f64 = t191 - t169;
-        let t200: f64 = t9 * t9;
-        let t201: f64 = t15 * t200;
-        let t202: f64 = t16 * t201;
-        let t203: f64 = t24 * t202;
-        let t204: f64 = 0.3333333333333333f64;
-        let t205: f64 = t203 * t204;
-        let t206: f64 = t200 * t16;
-        let t207: f64 = t17 * t206;
-        let t208: f64 = t21 * t207;
-        let t209: f64 = t28 * t200;
-        let t210: f64 = t16 * t209;
-        let t211: f64 = t17 * t210;
-        let t212: f64 = 0.125f64;
-        let t213: f64 = t211 * t212;
-        let t214: f64 = t35 * t200;
-        let t215: f64 = t16 * t214;
-        let t216: f64 = t24 * t215;
-        let t217: f64 = 0.03333333333333333f64;
-        let t218: f64 = t216 * t217;
-        let t219: f64 = t213 + t218;
-        let t220: f64 = t42 * t200;
-        let t221: f64 = t16 * t220;
-        let t222: f64 = t17 * t221;
-        let t223: f64 = 0.006944444444444444f64;
-        let t224: f64 = t222 * t223;
-        let t225: f64 = t219 - t224;
-        let t226: f64 = t49 * t200;
-        let t227: f64 = t16 * t226;
-        let t228: f64 = t24 * t227;
-        let t229: f64 = 0.0011904761904761906f64;
-        let t230: f64 = t228 * t229;
-        let t231: f64 = t225 - t230;
-        let t232: f64 = t56 * t200;
-        let t233: f64 = t16 * t232;
-        let t234: f64 = t17 * t233;
-        let t235: f64 = 0.00017361111111111112f64;
-        let t236: f64 = t234 * t235;
-        let t237: f64 = t231 + t236;
-        let t238: f64 = t63 * t200;
-        let t239: f64 = t16 * t238;
-        let t240: f64 = t24 * t239;
-        let t241: f64 = 0.000022045855379188714f64;
-        let t242: f64 = t240 * t241;
-        let t243: f64 = t237 + t242;
-        let t244: f64 = t70 * t200;
-        let t245: f64 = t16 * t244;
-        let t246: f64 = t17 * t245;
-        let t247: f64 = 0.00000248015873015873f64;
-        let t248: f64 = t246 * t247;
-        let t249: f64 = t243 - t248;
-        let t250: f64 = t249 - t205;
-        let t251: f64 = t250 - t208;
-        let t266: f64 = t18 * t24;
-        let t267: f64 = t21 * t266;
-        let t269: f64 = t267 + t268;
-        let t270: f64 = t17 * t29;
-        let t271: f64 = t32 * t270;
-        let t272: f64 = t269 - t271;
-        let t273: f64 = t24 * t36;
-        let t274: f64 = t39 * t273;
-        let t275: f64 = t272 - t274;
-        let t276: f64 = t17 * t43;
-        let t277: f64 = t46 * t276;
-        let t278: f64 = t275 + t277;
-        let t279: f64 = t24 * t50;
-        let t280: f64 = t53 * t279;
-        let t281: f64 = t278 + t280;
-        let t282: f64 = t17 * t57;
-        let t283: f64 = t60 * t282;
-        let t284: f64 = t281 - t283;
-        let t285: f64 = t24 * t64;
-        let t286: f64 = t67 * t285;
-        let t287: f64 = t284 - t286;
-        let t288: f64 = t17 * t71;
-        let t289: f64 = t74 * t288;
-        let t290: f64 = t287 + t289;
-        let t297: f64 = t17 * t202;
-        let t298: f64 = t204 * t297;
-        let t299: f64 = t24 * t206;
-        let t300: f64 = t21 * t299;
-        let t301: f64 = t24 * t210;
-        let t302: f64 = t212 * t301;
-        let t303: f64 = t300 - t302;
-        let t304: f64 = t17 * t215;
-        let t305: f64 = t217 * t304;
-        let t306: f64 = t303 + t305;
-        let t307: f64 = t24 * t221;
-        let t308: f64 = t223 * t307;
-        let t309: f64 = t306 + t308;
-        let t310: f64 = t17 * t227;
-        let t311: f64 = t229 * t310;
-        let t312: f64 = t309 - t311;
-        let t313: f64 = t24 * t233;
-        let t314: f64 = t235 * t313;
-        let t315: f64 = t312 - t314;
-        let t316: f64 = t17 * t239;
-        let t317: f64 = t241 * t316;
-        let t318: f64 = t315 + t317;
-        let t319: f64 = t24 * t245;
-        let t320: f64 = t247 * t319;
-        let t321: f64 = t318 + t320;
-        let t322: f64 = t321 - t298;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = crate::math::tan(t4);
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t12 / t8;
+    let t14: crate::Real = t6 + t13;
+    let t15: crate::Real = t9 * t14;
+    let t16: crate::Real = t5 + t11;
+    let t17: crate::Real = crate::math::sin(t2);
+    let t24: crate::Real = crate::math::cos(t2);
+    let t25: crate::Real = t9 * t16;
+    let t26: crate::Real = t24 * t25;
+    let t28: crate::Real = t15 * t15;
+    let t80: crate::Real = 1.0;
+    let t95: crate::Real = t17 * t25;
+    let t268: crate::Real = t9 * t17;
+    let g0: [crate::Real; 8usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t18: crate::Real = t9 * t15;
+        let t19: crate::Real = t16 * t18;
+        let t20: crate::Real = t17 * t19;
+        let t21: crate::Real = 0.5;
+        let t22: crate::Real = t20 * t21;
+        let t23: crate::Real = t0 - t22;
+        let t27: crate::Real = t23 + t26;
+        let t29: crate::Real = t9 * t28;
+        let t30: crate::Real = t16 * t29;
+        let t31: crate::Real = t24 * t30;
+        let t32: crate::Real = 0.16666666666666666;
+        let t33: crate::Real = t31 * t32;
+        let t34: crate::Real = t27 - t33;
+        let t35: crate::Real = t15 * t28;
+        let t36: crate::Real = t9 * t35;
+        let t37: crate::Real = t16 * t36;
+        let t38: crate::Real = t17 * t37;
+        let t39: crate::Real = 0.041666666666666664;
+        let t40: crate::Real = t38 * t39;
+        let t41: crate::Real = t34 + t40;
+        let t42: crate::Real = t28 * t28;
+        let t43: crate::Real = t9 * t42;
+        let t44: crate::Real = t16 * t43;
+        let t45: crate::Real = t24 * t44;
+        let t46: crate::Real = 0.008333333333333333;
+        let t47: crate::Real = t45 * t46;
+        let t48: crate::Real = t41 + t47;
+        let t49: crate::Real = t15 * t42;
+        let t50: crate::Real = t9 * t49;
+        let t51: crate::Real = t16 * t50;
+        let t52: crate::Real = t17 * t51;
+        let t53: crate::Real = 0.001388888888888889;
+        let t54: crate::Real = t52 * t53;
+        let t55: crate::Real = t48 - t54;
+        let t56: crate::Real = t35 * t35;
+        let t57: crate::Real = t9 * t56;
+        let t58: crate::Real = t16 * t57;
+        let t59: crate::Real = t24 * t58;
+        let t60: crate::Real = 0.0001984126984126984;
+        let t61: crate::Real = t59 * t60;
+        let t62: crate::Real = t55 - t61;
+        let t63: crate::Real = t15 * t56;
+        let t64: crate::Real = t9 * t63;
+        let t65: crate::Real = t16 * t64;
+        let t66: crate::Real = t17 * t65;
+        let t67: crate::Real = 0.0000248015873015873;
+        let t68: crate::Real = t66 * t67;
+        let t69: crate::Real = t62 + t68;
+        let t70: crate::Real = t42 * t42;
+        let t71: crate::Real = t9 * t70;
+        let t72: crate::Real = t16 * t71;
+        let t73: crate::Real = t24 * t72;
+        let t74: crate::Real = 0.0000027557319223985893;
+        let t75: crate::Real = t73 * t74;
+        let t76: crate::Real = t69 + t75;
+        let t92: crate::Real = t19 * t24;
+        let t93: crate::Real = t21 * t92;
+        let t94: crate::Real = t1 + t93;
+        let t96: crate::Real = t94 + t95;
+        let t97: crate::Real = t17 * t30;
+        let t98: crate::Real = t32 * t97;
+        let t99: crate::Real = t96 - t98;
+        let t100: crate::Real = t24 * t37;
+        let t101: crate::Real = t39 * t100;
+        let t102: crate::Real = t99 - t101;
+        let t103: crate::Real = t17 * t44;
+        let t104: crate::Real = t46 * t103;
+        let t105: crate::Real = t102 + t104;
+        let t106: crate::Real = t24 * t51;
+        let t107: crate::Real = t53 * t106;
+        let t108: crate::Real = t105 + t107;
+        let t109: crate::Real = t17 * t58;
+        let t110: crate::Real = t60 * t109;
+        let t111: crate::Real = t108 - t110;
+        let t112: crate::Real = t24 * t65;
+        let t113: crate::Real = t67 * t112;
+        let t114: crate::Real = t111 - t113;
+        let t115: crate::Real = t17 * t72;
+        let t116: crate::Real = t74 * t115;
+        let t117: crate::Real = t114 + t116;
+        let t127: crate::Real = t24 * t19;
+        let t128: crate::Real = t127 * t21;
+        let t129: crate::Real = t97 * t32;
+        let t130: crate::Real = t100 * t39;
+        let t131: crate::Real = t129 + t130;
+        let t132: crate::Real = t103 * t46;
+        let t133: crate::Real = t131 - t132;
+        let t134: crate::Real = t106 * t53;
+        let t135: crate::Real = t133 - t134;
+        let t136: crate::Real = t109 * t60;
+        let t137: crate::Real = t135 + t136;
+        let t138: crate::Real = t112 * t67;
+        let t139: crate::Real = t137 + t138;
+        let t140: crate::Real = t115 * t74;
+        let t141: crate::Real = t139 - t140;
+        let t142: crate::Real = t141 - t128;
+        let t143: crate::Real = t142 - t95;
+        let t149: crate::Real = t19 * t17;
+        let t150: crate::Real = t21 * t149;
+        let t151: crate::Real = t32 * t31;
+        let t152: crate::Real = t26 - t151;
+        let t153: crate::Real = t39 * t38;
+        let t154: crate::Real = t152 + t153;
+        let t155: crate::Real = t46 * t45;
+        let t156: crate::Real = t154 + t155;
+        let t157: crate::Real = t53 * t52;
+        let t158: crate::Real = t156 - t157;
+        let t159: crate::Real = t60 * t59;
+        let t160: crate::Real = t158 - t159;
+        let t161: crate::Real = t67 * t66;
+        let t162: crate::Real = t160 + t161;
+        let t163: crate::Real = t74 * t73;
+        let t164: crate::Real = t162 + t163;
+        let t165: crate::Real = t164 - t150;
+        let t168: crate::Real = t17 * t18;
+        let t169: crate::Real = t168 * t21;
+        let t170: crate::Real = t9 * t24;
+        let t171: crate::Real = t24 * t29;
+        let t172: crate::Real = t171 * t32;
+        let t173: crate::Real = t170 - t172;
+        let t174: crate::Real = t17 * t36;
+        let t175: crate::Real = t174 * t39;
+        let t176: crate::Real = t173 + t175;
+        let t177: crate::Real = t24 * t43;
+        let t178: crate::Real = t177 * t46;
+        let t179: crate::Real = t176 + t178;
+        let t180: crate::Real = t17 * t50;
+        let t181: crate::Real = t180 * t53;
+        let t182: crate::Real = t179 - t181;
+        let t183: crate::Real = t24 * t57;
+        let t184: crate::Real = t183 * t60;
+        let t185: crate::Real = t182 - t184;
+        let t186: crate::Real = t17 * t64;
+        let t187: crate::Real = t186 * t67;
+        let t188: crate::Real = t185 + t187;
+        let t189: crate::Real = t24 * t71;
+        let t190: crate::Real = t189 * t74;
+        let t191: crate::Real = t188 + t190;
+        let t192: crate::Real = t191 - t169;
+        let t200: crate::Real = t9 * t9;
+        let t201: crate::Real = t15 * t200;
+        let t202: crate::Real = t16 * t201;
+        let t203: crate::Real = t24 * t202;
+        let t204: crate::Real = 0.3333333333333333;
+        let t205: crate::Real = t203 * t204;
+        let t206: crate::Real = t200 * t16;
+        let t207: crate::Real = t17 * t206;
+        let t208: crate::Real = t21 * t207;
+        let t209: crate::Real = t28 * t200;
+        let t210: crate::Real = t16 * t209;
+        let t211: crate::Real = t17 * t210;
+        let t212: crate::Real = 0.125;
+        let t213: crate::Real = t211 * t212;
+        let t214: crate::Real = t35 * t200;
+        let t215: crate::Real = t16 * t214;
+        let t216: crate::Real = t24 * t215;
+        let t217: crate::Real = 0.03333333333333333;
+        let t218: crate::Real = t216 * t217;
+        let t219: crate::Real = t213 + t218;
+        let t220: crate::Real = t42 * t200;
+        let t221: crate::Real = t16 * t220;
+        let t222: crate::Real = t17 * t221;
+        let t223: crate::Real = 0.006944444444444444;
+        let t224: crate::Real = t222 * t223;
+        let t225: crate::Real = t219 - t224;
+        let t226: crate::Real = t49 * t200;
+        let t227: crate::Real = t16 * t226;
+        let t228: crate::Real = t24 * t227;
+        let t229: crate::Real = 0.0011904761904761906;
+        let t230: crate::Real = t228 * t229;
+        let t231: crate::Real = t225 - t230;
+        let t232: crate::Real = t56 * t200;
+        let t233: crate::Real = t16 * t232;
+        let t234: crate::Real = t17 * t233;
+        let t235: crate::Real = 0.00017361111111111112;
+        let t236: crate::Real = t234 * t235;
+        let t237: crate::Real = t231 + t236;
+        let t238: crate::Real = t63 * t200;
+        let t239: crate::Real = t16 * t238;
+        let t240: crate::Real = t24 * t239;
+        let t241: crate::Real = 0.000022045855379188714;
+        let t242: crate::Real = t240 * t241;
+        let t243: crate::Real = t237 + t242;
+        let t244: crate::Real = t70 * t200;
+        let t245: crate::Real = t16 * t244;
+        let t246: crate::Real = t17 * t245;
+        let t247: crate::Real = 0.00000248015873015873;
+        let t248: crate::Real = t246 * t247;
+        let t249: crate::Real = t243 - t248;
+        let t250: crate::Real = t249 - t205;
+        let t251: crate::Real = t250 - t208;
+        let t266: crate::Real = t18 * t24;
+        let t267: crate::Real = t21 * t266;
+        let t269: crate::Real = t267 + t268;
+        let t270: crate::Real = t17 * t29;
+        let t271: crate::Real = t32 * t270;
+        let t272: crate::Real = t269 - t271;
+        let t273: crate::Real = t24 * t36;
+        let t274: crate::Real = t39 * t273;
+        let t275: crate::Real = t272 - t274;
+        let t276: crate::Real = t17 * t43;
+        let t277: crate::Real = t46 * t276;
+        let t278: crate::Real = t275 + t277;
+        let t279: crate::Real = t24 * t50;
+        let t280: crate::Real = t53 * t279;
+        let t281: crate::Real = t278 + t280;
+        let t282: crate::Real = t17 * t57;
+        let t283: crate::Real = t60 * t282;
+        let t284: crate::Real = t281 - t283;
+        let t285: crate::Real = t24 * t64;
+        let t286: crate::Real = t67 * t285;
+        let t287: crate::Real = t284 - t286;
+        let t288: crate::Real = t17 * t71;
+        let t289: crate::Real = t74 * t288;
+        let t290: crate::Real = t287 + t289;
+        let t297: crate::Real = t17 * t202;
+        let t298: crate::Real = t204 * t297;
+        let t299: crate::Real = t24 * t206;
+        let t300: crate::Real = t21 * t299;
+        let t301: crate::Real = t24 * t210;
+        let t302: crate::Real = t212 * t301;
+        let t303: crate::Real = t300 - t302;
+        let t304: crate::Real = t17 * t215;
+        let t305: crate::Real = t217 * t304;
+        let t306: crate::Real = t303 + t305;
+        let t307: crate::Real = t24 * t221;
+        let t308: crate::Real = t223 * t307;
+        let t309: crate::Real = t306 + t308;
+        let t310: crate::Real = t17 * t227;
+        let t311: crate::Real = t229 * t310;
+        let t312: crate::Real = t309 - t311;
+        let t313: crate::Real = t24 * t233;
+        let t314: crate::Real = t235 * t313;
+        let t315: crate::Real = t312 - t314;
+        let t316: crate::Real = t17 * t239;
+        let t317: crate::Real = t241 * t316;
+        let t318: crate::Real = t315 + t317;
+        let t319: crate::Real = t24 * t245;
+        let t320: crate::Real = t247 * t319;
+        let t321: crate::Real = t318 + t320;
+        let t322: crate::Real = t321 - t298;
         [t76, t117, t143, t165, t192, t251, t290, t322]
     } else {
-        let t77: f64 = libm::sin(t15);
-        let t78: f64 = t25 * t77;
-        let t79: f64 = t24 * t78;
-        let t81: f64 = t80 / t15;
-        let t82: f64 = t79 * t81;
-        let t83: f64 = t0 + t82;
-        let t84: f64 = libm::cos(t15);
-        let t85: f64 = t80 - t84;
-        let t86: f64 = t9 * t85;
-        let t87: f64 = t16 * t86;
-        let t88: f64 = t17 * t87;
-        let t89: f64 = t88 * t81;
-        let t90: f64 = t83 - t89;
-        let t118: f64 = t77 * t95;
-        let t119: f64 = t118 * t81;
-        let t120: f64 = t1 + t119;
-        let t121: f64 = t24 * t87;
-        let t122: f64 = t121 * t81;
-        let t123: f64 = t120 + t122;
-        let t144: f64 = t95 * t77;
-        let t145: f64 = t144 * t81;
-        let t146: f64 = -t145;
-        let t147: f64 = t146 - t122;
-        let t166: f64 = t82 - t89;
-        let t193: f64 = t9 * t77;
-        let t194: f64 = t24 * t193;
-        let t195: f64 = t194 * t81;
-        let t196: f64 = t17 * t86;
-        let t197: f64 = t196 * t81;
-        let t198: f64 = t195 - t197;
-        let t252: f64 = t84 * t26;
-        let t253: f64 = t252 * t81;
-        let t254: f64 = t77 * t25;
-        let t255: f64 = t24 * t254;
-        let t256: f64 = t80 / t28;
-        let t257: f64 = t255 * t256;
-        let t258: f64 = t253 - t257;
-        let t259: f64 = t86 * t16;
-        let t260: f64 = t17 * t259;
-        let t261: f64 = t260 * t256;
-        let t262: f64 = t258 + t261;
-        let t263: f64 = t262 - t119;
-        let t264: f64 = t9 * t263;
-        let t291: f64 = t77 * t268;
-        let t292: f64 = t291 * t81;
-        let t293: f64 = t24 * t86;
-        let t294: f64 = t293 * t81;
-        let t295: f64 = t292 + t294;
-        let t323: f64 = t84 * t95;
-        let t324: f64 = t323 * t81;
-        let t325: f64 = t255 * t81;
-        let t326: f64 = t324 + t325;
-        let t327: f64 = t118 * t256;
-        let t328: f64 = t326 - t327;
-        let t329: f64 = t24 * t259;
-        let t330: f64 = t329 * t256;
-        let t331: f64 = t328 - t330;
-        let t332: f64 = t9 * t331;
+        let t77: crate::Real = crate::math::sin(t15);
+        let t78: crate::Real = t25 * t77;
+        let t79: crate::Real = t24 * t78;
+        let t81: crate::Real = t80 / t15;
+        let t82: crate::Real = t79 * t81;
+        let t83: crate::Real = t0 + t82;
+        let t84: crate::Real = crate::math::cos(t15);
+        let t85: crate::Real = t80 - t84;
+        let t86: crate::Real = t9 * t85;
+        let t87: crate::Real = t16 * t86;
+        let t88: crate::Real = t17 * t87;
+        let t89: crate::Real = t88 * t81;
+        let t90: crate::Real = t83 - t89;
+        let t118: crate::Real = t77 * t95;
+        let t119: crate::Real = t118 * t81;
+        let t120: crate::Real = t1 + t119;
+        let t121: crate::Real = t24 * t87;
+        let t122: crate::Real = t121 * t81;
+        let t123: crate::Real = t120 + t122;
+        let t144: crate::Real = t95 * t77;
+        let t145: crate::Real = t144 * t81;
+        let t146: crate::Real = -t145;
+        let t147: crate::Real = t146 - t122;
+        let t166: crate::Real = t82 - t89;
+        let t193: crate::Real = t9 * t77;
+        let t194: crate::Real = t24 * t193;
+        let t195: crate::Real = t194 * t81;
+        let t196: crate::Real = t17 * t86;
+        let t197: crate::Real = t196 * t81;
+        let t198: crate::Real = t195 - t197;
+        let t252: crate::Real = t84 * t26;
+        let t253: crate::Real = t252 * t81;
+        let t254: crate::Real = t77 * t25;
+        let t255: crate::Real = t24 * t254;
+        let t256: crate::Real = t80 / t28;
+        let t257: crate::Real = t255 * t256;
+        let t258: crate::Real = t253 - t257;
+        let t259: crate::Real = t86 * t16;
+        let t260: crate::Real = t17 * t259;
+        let t261: crate::Real = t260 * t256;
+        let t262: crate::Real = t258 + t261;
+        let t263: crate::Real = t262 - t119;
+        let t264: crate::Real = t9 * t263;
+        let t291: crate::Real = t77 * t268;
+        let t292: crate::Real = t291 * t81;
+        let t293: crate::Real = t24 * t86;
+        let t294: crate::Real = t293 * t81;
+        let t295: crate::Real = t292 + t294;
+        let t323: crate::Real = t84 * t95;
+        let t324: crate::Real = t323 * t81;
+        let t325: crate::Real = t255 * t81;
+        let t326: crate::Real = t324 + t325;
+        let t327: crate::Real = t118 * t256;
+        let t328: crate::Real = t326 - t327;
+        let t329: crate::Real = t24 * t259;
+        let t330: crate::Real = t329 * t256;
+        let t331: crate::Real = t328 - t330;
+        let t332: crate::Real = t9 * t331;
         [t90, t123, t147, t166, t198, t264, t295, t332]
     };
-    let t91: f64 = g0[0usize];
-    let t124: f64 = g0[1usize];
-    let t148: f64 = g0[2usize];
-    let t167: f64 = g0[3usize];
-    let t199: f64 = g0[4usize];
-    let t265: f64 = g0[5usize];
-    let t296: f64 = g0[6usize];
-    let t333: f64 = g0[7usize];
-    let t125: f64 = t2 + t15;
-    let t126: f64 = 0f64;
+    let t91: crate::Real = g0[0usize];
+    let t124: crate::Real = g0[1usize];
+    let t148: crate::Real = g0[2usize];
+    let t167: crate::Real = g0[3usize];
+    let t199: crate::Real = g0[4usize];
+    let t265: crate::Real = g0[5usize];
+    let t296: crate::Real = g0[6usize];
+    let t333: crate::Real = g0[7usize];
+    let t125: crate::Real = t2 + t15;
+    let t126: crate::Real = 0.0;
     [
         t91,
         t124,
@@ -2190,12 +2210,16 @@ pub fn step_exact_linearized_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_w`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 2usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 2usize]; 3usize],
+) {
     let o = step_exact_linearized_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -2219,517 +2243,521 @@ pub fn step_exact_linearized(
 467 arithmetic operations (3825 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = libm::tan(t4);
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t12 / t8;
-    let t14: f64 = t6 + t13;
-    let t15: f64 = t9 * t14;
-    let t16: f64 = t5 + t11;
-    let t17: f64 = libm::sin(t2);
-    let t21: f64 = 0.5f64;
-    let t24: f64 = libm::cos(t2);
-    let t25: f64 = t9 * t16;
-    let t26: f64 = t24 * t25;
-    let t32: f64 = 0.16666666666666666f64;
-    let t39: f64 = 0.041666666666666664f64;
-    let t46: f64 = 0.008333333333333333f64;
-    let t53: f64 = 0.001388888888888889f64;
-    let t60: f64 = 0.0001984126984126984f64;
-    let t67: f64 = 0.0000248015873015873f64;
-    let t74: f64 = 0.0000027557319223985893f64;
-    let t80: f64 = 1f64;
-    let t95: f64 = t17 * t25;
-    let g0: [f64; 4usize] = if libm::fabs(t15) < 0.05f64 {
-        let t18: f64 = t9 * t15;
-        let t19: f64 = t16 * t18;
-        let t20: f64 = t17 * t19;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = t0 - t22;
-        let t27: f64 = t23 + t26;
-        let t28: f64 = t15 * t15;
-        let t29: f64 = t9 * t28;
-        let t30: f64 = t16 * t29;
-        let t31: f64 = t24 * t30;
-        let t33: f64 = t31 * t32;
-        let t34: f64 = t27 - t33;
-        let t35: f64 = t15 * t28;
-        let t36: f64 = t9 * t35;
-        let t37: f64 = t16 * t36;
-        let t38: f64 = t17 * t37;
-        let t40: f64 = t38 * t39;
-        let t41: f64 = t34 + t40;
-        let t42: f64 = t28 * t28;
-        let t43: f64 = t9 * t42;
-        let t44: f64 = t16 * t43;
-        let t45: f64 = t24 * t44;
-        let t47: f64 = t45 * t46;
-        let t48: f64 = t41 + t47;
-        let t49: f64 = t15 * t42;
-        let t50: f64 = t9 * t49;
-        let t51: f64 = t16 * t50;
-        let t52: f64 = t17 * t51;
-        let t54: f64 = t52 * t53;
-        let t55: f64 = t48 - t54;
-        let t56: f64 = t35 * t35;
-        let t57: f64 = t9 * t56;
-        let t58: f64 = t16 * t57;
-        let t59: f64 = t24 * t58;
-        let t61: f64 = t59 * t60;
-        let t62: f64 = t55 - t61;
-        let t63: f64 = t15 * t56;
-        let t64: f64 = t9 * t63;
-        let t65: f64 = t16 * t64;
-        let t66: f64 = t17 * t65;
-        let t68: f64 = t66 * t67;
-        let t69: f64 = t62 + t68;
-        let t70: f64 = t42 * t42;
-        let t71: f64 = t9 * t70;
-        let t72: f64 = t16 * t71;
-        let t73: f64 = t24 * t72;
-        let t75: f64 = t73 * t74;
-        let t76: f64 = t69 + t75;
-        let t92: f64 = t19 * t24;
-        let t93: f64 = t21 * t92;
-        let t94: f64 = t1 + t93;
-        let t96: f64 = t94 + t95;
-        let t97: f64 = t17 * t30;
-        let t98: f64 = t32 * t97;
-        let t99: f64 = t96 - t98;
-        let t100: f64 = t24 * t37;
-        let t101: f64 = t39 * t100;
-        let t102: f64 = t99 - t101;
-        let t103: f64 = t17 * t44;
-        let t104: f64 = t46 * t103;
-        let t105: f64 = t102 + t104;
-        let t106: f64 = t24 * t51;
-        let t107: f64 = t53 * t106;
-        let t108: f64 = t105 + t107;
-        let t109: f64 = t17 * t58;
-        let t110: f64 = t60 * t109;
-        let t111: f64 = t108 - t110;
-        let t112: f64 = t24 * t65;
-        let t113: f64 = t67 * t112;
-        let t114: f64 = t111 - t113;
-        let t115: f64 = t17 * t72;
-        let t116: f64 = t74 * t115;
-        let t117: f64 = t114 + t116;
-        let t127: f64 = t24 * t19;
-        let t128: f64 = t127 * t21;
-        let t129: f64 = t97 * t32;
-        let t130: f64 = t100 * t39;
-        let t131: f64 = t129 + t130;
-        let t132: f64 = t103 * t46;
-        let t133: f64 = t131 - t132;
-        let t134: f64 = t106 * t53;
-        let t135: f64 = t133 - t134;
-        let t136: f64 = t109 * t60;
-        let t137: f64 = t135 + t136;
-        let t138: f64 = t112 * t67;
-        let t139: f64 = t137 + t138;
-        let t140: f64 = t115 * t74;
-        let t141: f64 = t139 - t140;
-        let t142: f64 = t141 - t128;
-        let t143: f64 = t142 - t95;
-        let t149: f64 = t19 * t17;
-        let t150: f64 = t21 * t149;
-        let t151: f64 = t32 * t31;
-        let t152: f64 = t26 - t151;
-        let t153: f64 = t39 * t38;
-        let t154: f64 = t152 + t153;
-        let t155: f64 = t46 * t45;
-        let t156: f64 = t154 + t155;
-        let t157: f64 = t53 * t52;
-        let t158: f64 = t156 - t157;
-        let t159: f64 = t60 * t59;
-        let t160: f64 = t158 - t159;
-        let t161: f64 = t67 * t66;
-        let t162: f64 = t160 + t161;
-        let t163: f64 = t74 * t73;
-        let t164: f64 = t162 + t163;
-        let t165: f64 = t164 - t150;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = crate::math::tan(t4);
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t12 / t8;
+    let t14: crate::Real = t6 + t13;
+    let t15: crate::Real = t9 * t14;
+    let t16: crate::Real = t5 + t11;
+    let t17: crate::Real = crate::math::sin(t2);
+    let t21: crate::Real = 0.5;
+    let t24: crate::Real = crate::math::cos(t2);
+    let t25: crate::Real = t9 * t16;
+    let t26: crate::Real = t24 * t25;
+    let t32: crate::Real = 0.16666666666666666;
+    let t39: crate::Real = 0.041666666666666664;
+    let t46: crate::Real = 0.008333333333333333;
+    let t53: crate::Real = 0.001388888888888889;
+    let t60: crate::Real = 0.0001984126984126984;
+    let t67: crate::Real = 0.0000248015873015873;
+    let t74: crate::Real = 0.0000027557319223985893;
+    let t80: crate::Real = 1.0;
+    let t95: crate::Real = t17 * t25;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t18: crate::Real = t9 * t15;
+        let t19: crate::Real = t16 * t18;
+        let t20: crate::Real = t17 * t19;
+        let t22: crate::Real = t20 * t21;
+        let t23: crate::Real = t0 - t22;
+        let t27: crate::Real = t23 + t26;
+        let t28: crate::Real = t15 * t15;
+        let t29: crate::Real = t9 * t28;
+        let t30: crate::Real = t16 * t29;
+        let t31: crate::Real = t24 * t30;
+        let t33: crate::Real = t31 * t32;
+        let t34: crate::Real = t27 - t33;
+        let t35: crate::Real = t15 * t28;
+        let t36: crate::Real = t9 * t35;
+        let t37: crate::Real = t16 * t36;
+        let t38: crate::Real = t17 * t37;
+        let t40: crate::Real = t38 * t39;
+        let t41: crate::Real = t34 + t40;
+        let t42: crate::Real = t28 * t28;
+        let t43: crate::Real = t9 * t42;
+        let t44: crate::Real = t16 * t43;
+        let t45: crate::Real = t24 * t44;
+        let t47: crate::Real = t45 * t46;
+        let t48: crate::Real = t41 + t47;
+        let t49: crate::Real = t15 * t42;
+        let t50: crate::Real = t9 * t49;
+        let t51: crate::Real = t16 * t50;
+        let t52: crate::Real = t17 * t51;
+        let t54: crate::Real = t52 * t53;
+        let t55: crate::Real = t48 - t54;
+        let t56: crate::Real = t35 * t35;
+        let t57: crate::Real = t9 * t56;
+        let t58: crate::Real = t16 * t57;
+        let t59: crate::Real = t24 * t58;
+        let t61: crate::Real = t59 * t60;
+        let t62: crate::Real = t55 - t61;
+        let t63: crate::Real = t15 * t56;
+        let t64: crate::Real = t9 * t63;
+        let t65: crate::Real = t16 * t64;
+        let t66: crate::Real = t17 * t65;
+        let t68: crate::Real = t66 * t67;
+        let t69: crate::Real = t62 + t68;
+        let t70: crate::Real = t42 * t42;
+        let t71: crate::Real = t9 * t70;
+        let t72: crate::Real = t16 * t71;
+        let t73: crate::Real = t24 * t72;
+        let t75: crate::Real = t73 * t74;
+        let t76: crate::Real = t69 + t75;
+        let t92: crate::Real = t19 * t24;
+        let t93: crate::Real = t21 * t92;
+        let t94: crate::Real = t1 + t93;
+        let t96: crate::Real = t94 + t95;
+        let t97: crate::Real = t17 * t30;
+        let t98: crate::Real = t32 * t97;
+        let t99: crate::Real = t96 - t98;
+        let t100: crate::Real = t24 * t37;
+        let t101: crate::Real = t39 * t100;
+        let t102: crate::Real = t99 - t101;
+        let t103: crate::Real = t17 * t44;
+        let t104: crate::Real = t46 * t103;
+        let t105: crate::Real = t102 + t104;
+        let t106: crate::Real = t24 * t51;
+        let t107: crate::Real = t53 * t106;
+        let t108: crate::Real = t105 + t107;
+        let t109: crate::Real = t17 * t58;
+        let t110: crate::Real = t60 * t109;
+        let t111: crate::Real = t108 - t110;
+        let t112: crate::Real = t24 * t65;
+        let t113: crate::Real = t67 * t112;
+        let t114: crate::Real = t111 - t113;
+        let t115: crate::Real = t17 * t72;
+        let t116: crate::Real = t74 * t115;
+        let t117: crate::Real = t114 + t116;
+        let t127: crate::Real = t24 * t19;
+        let t128: crate::Real = t127 * t21;
+        let t129: crate::Real = t97 * t32;
+        let t130: crate::Real = t100 * t39;
+        let t131: crate::Real = t129 + t130;
+        let t132: crate::Real = t103 * t46;
+        let t133: crate::Real = t131 - t132;
+        let t134: crate::Real = t106 * t53;
+        let t135: crate::Real = t133 - t134;
+        let t136: crate::Real = t109 * t60;
+        let t137: crate::Real = t135 + t136;
+        let t138: crate::Real = t112 * t67;
+        let t139: crate::Real = t137 + t138;
+        let t140: crate::Real = t115 * t74;
+        let t141: crate::Real = t139 - t140;
+        let t142: crate::Real = t141 - t128;
+        let t143: crate::Real = t142 - t95;
+        let t149: crate::Real = t19 * t17;
+        let t150: crate::Real = t21 * t149;
+        let t151: crate::Real = t32 * t31;
+        let t152: crate::Real = t26 - t151;
+        let t153: crate::Real = t39 * t38;
+        let t154: crate::Real = t152 + t153;
+        let t155: crate::Real = t46 * t45;
+        let t156: crate::Real = t154 + t155;
+        let t157: crate::Real = t53 * t52;
+        let t158: crate::Real = t156 - t157;
+        let t159: crate::Real = t60 * t59;
+        let t160: crate::Real = t158 - t159;
+        let t161: crate::Real = t67 * t66;
+        let t162: crate::Real = t160 + t161;
+        let t163: crate::Real = t74 * t73;
+        let t164: crate::Real = t162 + t163;
+        let t165: crate::Real = t164 - t150;
         [t76, t117, t143, t165]
     } else {
-        let t77: f64 = libm::sin(t15);
-        let t78: f64 = t25 * t77;
-        let t79: f64 = t24 * t78;
-        let t81: f64 = t80 / t15;
-        let t82: f64 = t79 * t81;
-        let t83: f64 = t0 + t82;
-        let t84: f64 = libm::cos(t15);
-        let t85: f64 = t80 - t84;
-        let t86: f64 = t9 * t85;
-        let t87: f64 = t16 * t86;
-        let t88: f64 = t17 * t87;
-        let t89: f64 = t88 * t81;
-        let t90: f64 = t83 - t89;
-        let t118: f64 = t77 * t95;
-        let t119: f64 = t118 * t81;
-        let t120: f64 = t1 + t119;
-        let t121: f64 = t24 * t87;
-        let t122: f64 = t121 * t81;
-        let t123: f64 = t120 + t122;
-        let t144: f64 = t95 * t77;
-        let t145: f64 = t144 * t81;
-        let t146: f64 = -t145;
-        let t147: f64 = t146 - t122;
-        let t166: f64 = t82 - t89;
+        let t77: crate::Real = crate::math::sin(t15);
+        let t78: crate::Real = t25 * t77;
+        let t79: crate::Real = t24 * t78;
+        let t81: crate::Real = t80 / t15;
+        let t82: crate::Real = t79 * t81;
+        let t83: crate::Real = t0 + t82;
+        let t84: crate::Real = crate::math::cos(t15);
+        let t85: crate::Real = t80 - t84;
+        let t86: crate::Real = t9 * t85;
+        let t87: crate::Real = t16 * t86;
+        let t88: crate::Real = t17 * t87;
+        let t89: crate::Real = t88 * t81;
+        let t90: crate::Real = t83 - t89;
+        let t118: crate::Real = t77 * t95;
+        let t119: crate::Real = t118 * t81;
+        let t120: crate::Real = t1 + t119;
+        let t121: crate::Real = t24 * t87;
+        let t122: crate::Real = t121 * t81;
+        let t123: crate::Real = t120 + t122;
+        let t144: crate::Real = t95 * t77;
+        let t145: crate::Real = t144 * t81;
+        let t146: crate::Real = -t145;
+        let t147: crate::Real = t146 - t122;
+        let t166: crate::Real = t82 - t89;
         [t90, t123, t147, t166]
     };
-    let t91: f64 = g0[0usize];
-    let t124: f64 = g0[1usize];
-    let t148: f64 = g0[2usize];
-    let t167: f64 = g0[3usize];
-    let t125: f64 = t2 + t15;
-    let t126: f64 = 0f64;
-    let t168: f64 = t80 / t8;
-    let t169: f64 = t12 * t168;
-    let t170: f64 = t6 + t169;
-    let t171: f64 = t9 * t170;
-    let t172: f64 = t3 * t9;
-    let t174: f64 = t172 * t17;
-    let t193: f64 = t171 * t171;
-    let t281: f64 = t8 * t8;
-    let t289: f64 = t80 / t281;
-    let t362: f64 = t7 * t9;
-    let t363: f64 = t3 * t362;
-    let g1: [f64; 4usize] = if libm::fabs(t171) < 0.05f64 {
-        let t173: f64 = t24 * t172;
-        let t175: f64 = t174 * t21;
-        let t176: f64 = -t175;
-        let t177: f64 = t9 * t9;
-        let t178: f64 = t3 * t177;
-        let t179: f64 = t16 * t178;
-        let t180: f64 = t24 * t179;
-        let t181: f64 = t10 * t180;
-        let t182: f64 = 0.3333333333333333f64;
-        let t183: f64 = t181 * t182;
-        let t184: f64 = t183 * t168;
-        let t185: f64 = t176 - t184;
-        let t186: f64 = t171 * t185;
-        let t187: f64 = t173 + t186;
-        let t188: f64 = t17 * t179;
-        let t189: f64 = t10 * t188;
-        let t190: f64 = t21 * t189;
-        let t191: f64 = t190 * t168;
-        let t192: f64 = t187 - t191;
-        let t194: f64 = t173 * t32;
-        let t195: f64 = 0.125f64;
-        let t196: f64 = t189 * t195;
-        let t197: f64 = t196 * t168;
-        let t198: f64 = t197 - t194;
-        let t199: f64 = t193 * t198;
-        let t200: f64 = t192 + t199;
-        let t201: f64 = t171 * t193;
-        let t202: f64 = t174 * t39;
-        let t203: f64 = 0.03333333333333333f64;
-        let t204: f64 = t181 * t203;
-        let t205: f64 = t204 * t168;
-        let t206: f64 = t202 + t205;
-        let t207: f64 = t201 * t206;
-        let t208: f64 = t200 + t207;
-        let t209: f64 = t193 * t193;
-        let t210: f64 = t173 * t46;
-        let t211: f64 = 0.006944444444444444f64;
-        let t212: f64 = t189 * t211;
-        let t213: f64 = t212 * t168;
-        let t214: f64 = t210 - t213;
-        let t215: f64 = t209 * t214;
-        let t216: f64 = t208 + t215;
-        let t217: f64 = t171 * t209;
-        let t218: f64 = t174 * t53;
-        let t219: f64 = -t218;
-        let t220: f64 = 0.0011904761904761906f64;
-        let t221: f64 = t181 * t220;
-        let t222: f64 = t221 * t168;
-        let t223: f64 = t219 - t222;
-        let t224: f64 = t217 * t223;
-        let t225: f64 = t216 + t224;
-        let t226: f64 = t201 * t201;
-        let t227: f64 = t173 * t60;
-        let t228: f64 = 0.00017361111111111112f64;
-        let t229: f64 = t189 * t228;
-        let t230: f64 = t229 * t168;
-        let t231: f64 = t230 - t227;
-        let t232: f64 = t226 * t231;
-        let t233: f64 = t225 + t232;
-        let t234: f64 = t171 * t226;
-        let t235: f64 = t174 * t67;
-        let t236: f64 = 0.000022045855379188714f64;
-        let t237: f64 = t181 * t236;
-        let t238: f64 = t237 * t168;
-        let t239: f64 = t235 + t238;
-        let t240: f64 = t234 * t239;
-        let t241: f64 = t233 + t240;
-        let t242: f64 = t209 * t209;
-        let t243: f64 = t173 * t74;
-        let t244: f64 = 0.00000248015873015873f64;
-        let t245: f64 = t189 * t244;
-        let t246: f64 = t245 * t168;
-        let t247: f64 = t243 - t246;
-        let t248: f64 = t242 * t247;
-        let t249: f64 = t241 + t248;
-        let t282: f64 = t171 * t177;
-        let t283: f64 = t7 * t282;
-        let t284: f64 = t3 * t283;
-        let t285: f64 = t16 * t284;
-        let t286: f64 = t24 * t285;
-        let t287: f64 = t10 * t286;
-        let t288: f64 = t182 * t287;
-        let t290: f64 = t288 * t289;
-        let t291: f64 = t7 * t177;
-        let t292: f64 = t3 * t291;
-        let t293: f64 = t16 * t292;
-        let t294: f64 = t17 * t293;
-        let t295: f64 = t10 * t294;
-        let t296: f64 = t21 * t295;
-        let t297: f64 = t296 * t289;
-        let t298: f64 = t290 + t297;
-        let t299: f64 = t177 * t193;
-        let t300: f64 = t7 * t299;
-        let t301: f64 = t3 * t300;
-        let t302: f64 = t16 * t301;
-        let t303: f64 = t17 * t302;
-        let t304: f64 = t10 * t303;
-        let t305: f64 = t195 * t304;
-        let t306: f64 = t305 * t289;
-        let t307: f64 = t298 - t306;
-        let t308: f64 = t177 * t201;
-        let t309: f64 = t7 * t308;
-        let t310: f64 = t3 * t309;
-        let t311: f64 = t16 * t310;
-        let t312: f64 = t24 * t311;
-        let t313: f64 = t10 * t312;
-        let t314: f64 = t203 * t313;
-        let t315: f64 = t314 * t289;
-        let t316: f64 = t307 - t315;
-        let t317: f64 = t177 * t209;
-        let t318: f64 = t7 * t317;
-        let t319: f64 = t3 * t318;
-        let t320: f64 = t16 * t319;
-        let t321: f64 = t17 * t320;
-        let t322: f64 = t10 * t321;
-        let t323: f64 = t211 * t322;
-        let t324: f64 = t323 * t289;
-        let t325: f64 = t316 + t324;
-        let t326: f64 = t177 * t217;
-        let t327: f64 = t7 * t326;
-        let t328: f64 = t3 * t327;
-        let t329: f64 = t16 * t328;
-        let t330: f64 = t24 * t329;
-        let t331: f64 = t10 * t330;
-        let t332: f64 = t220 * t331;
-        let t333: f64 = t332 * t289;
-        let t334: f64 = t325 + t333;
-        let t335: f64 = t177 * t226;
-        let t336: f64 = t7 * t335;
-        let t337: f64 = t3 * t336;
-        let t338: f64 = t16 * t337;
-        let t339: f64 = t17 * t338;
-        let t340: f64 = t10 * t339;
-        let t341: f64 = t228 * t340;
-        let t342: f64 = t341 * t289;
-        let t343: f64 = t334 - t342;
-        let t344: f64 = t177 * t234;
-        let t345: f64 = t7 * t344;
-        let t346: f64 = t3 * t345;
-        let t347: f64 = t16 * t346;
-        let t348: f64 = t24 * t347;
-        let t349: f64 = t10 * t348;
-        let t350: f64 = t236 * t349;
-        let t351: f64 = t350 * t289;
-        let t352: f64 = t343 - t351;
-        let t353: f64 = t177 * t242;
-        let t354: f64 = t7 * t353;
-        let t355: f64 = t3 * t354;
-        let t356: f64 = t16 * t355;
-        let t357: f64 = t17 * t356;
-        let t358: f64 = t10 * t357;
-        let t359: f64 = t244 * t358;
-        let t360: f64 = t359 * t289;
-        let t361: f64 = t352 + t360;
-        let t369: f64 = t173 * t21;
-        let t370: f64 = t182 * t189;
-        let t371: f64 = t370 * t168;
-        let t372: f64 = t369 - t371;
-        let t373: f64 = t171 * t372;
-        let t374: f64 = t174 + t373;
-        let t375: f64 = t21 * t181;
-        let t376: f64 = t375 * t168;
-        let t377: f64 = t374 + t376;
-        let t378: f64 = t174 * t32;
-        let t379: f64 = -t378;
-        let t380: f64 = t181 * t195;
-        let t381: f64 = t380 * t168;
-        let t382: f64 = t379 - t381;
-        let t383: f64 = t193 * t382;
-        let t384: f64 = t377 + t383;
-        let t385: f64 = t173 * t39;
-        let t386: f64 = t189 * t203;
-        let t387: f64 = t386 * t168;
-        let t388: f64 = t387 - t385;
-        let t389: f64 = t201 * t388;
-        let t390: f64 = t384 + t389;
-        let t391: f64 = t174 * t46;
-        let t392: f64 = t181 * t211;
-        let t393: f64 = t392 * t168;
-        let t394: f64 = t391 + t393;
-        let t395: f64 = t209 * t394;
-        let t396: f64 = t390 + t395;
-        let t397: f64 = t173 * t53;
-        let t398: f64 = t189 * t220;
-        let t399: f64 = t398 * t168;
-        let t400: f64 = t397 - t399;
-        let t401: f64 = t217 * t400;
-        let t402: f64 = t396 + t401;
-        let t403: f64 = t174 * t60;
-        let t404: f64 = -t403;
-        let t405: f64 = t181 * t228;
-        let t406: f64 = t405 * t168;
-        let t407: f64 = t404 - t406;
-        let t408: f64 = t226 * t407;
-        let t409: f64 = t402 + t408;
-        let t410: f64 = t173 * t67;
-        let t411: f64 = t189 * t236;
-        let t412: f64 = t411 * t168;
-        let t413: f64 = t412 - t410;
-        let t414: f64 = t234 * t413;
-        let t415: f64 = t409 + t414;
-        let t416: f64 = t174 * t74;
-        let t417: f64 = t181 * t244;
-        let t418: f64 = t417 * t168;
-        let t419: f64 = t416 + t418;
-        let t420: f64 = t242 * t419;
-        let t421: f64 = t415 + t420;
-        let t441: f64 = t17 * t285;
-        let t442: f64 = t10 * t441;
-        let t443: f64 = t182 * t442;
-        let t444: f64 = t443 * t289;
-        let t445: f64 = t24 * t293;
-        let t446: f64 = t10 * t445;
-        let t447: f64 = t21 * t446;
-        let t448: f64 = t447 * t289;
-        let t449: f64 = t444 - t448;
-        let t450: f64 = t24 * t302;
-        let t451: f64 = t10 * t450;
-        let t452: f64 = t195 * t451;
-        let t453: f64 = t452 * t289;
-        let t454: f64 = t449 + t453;
-        let t455: f64 = t17 * t311;
-        let t456: f64 = t10 * t455;
-        let t457: f64 = t203 * t456;
-        let t458: f64 = t457 * t289;
-        let t459: f64 = t454 - t458;
-        let t460: f64 = t24 * t320;
-        let t461: f64 = t10 * t460;
-        let t462: f64 = t211 * t461;
-        let t463: f64 = t462 * t289;
-        let t464: f64 = t459 - t463;
-        let t465: f64 = t17 * t329;
-        let t466: f64 = t10 * t465;
-        let t467: f64 = t220 * t466;
-        let t468: f64 = t467 * t289;
-        let t469: f64 = t464 + t468;
-        let t470: f64 = t24 * t338;
-        let t471: f64 = t10 * t470;
-        let t472: f64 = t228 * t471;
-        let t473: f64 = t472 * t289;
-        let t474: f64 = t469 + t473;
-        let t475: f64 = t17 * t347;
-        let t476: f64 = t10 * t475;
-        let t477: f64 = t236 * t476;
-        let t478: f64 = t477 * t289;
-        let t479: f64 = t474 - t478;
-        let t480: f64 = t24 * t356;
-        let t481: f64 = t10 * t480;
-        let t482: f64 = t244 * t481;
-        let t483: f64 = t482 * t289;
-        let t484: f64 = t479 - t483;
+    let t91: crate::Real = g0[0usize];
+    let t124: crate::Real = g0[1usize];
+    let t148: crate::Real = g0[2usize];
+    let t167: crate::Real = g0[3usize];
+    let t125: crate::Real = t2 + t15;
+    let t126: crate::Real = 0.0;
+    let t168: crate::Real = t80 / t8;
+    let t169: crate::Real = t12 * t168;
+    let t170: crate::Real = t6 + t169;
+    let t171: crate::Real = t9 * t170;
+    let t172: crate::Real = t3 * t9;
+    let t174: crate::Real = t172 * t17;
+    let t193: crate::Real = t171 * t171;
+    let t281: crate::Real = t8 * t8;
+    let t289: crate::Real = t80 / t281;
+    let t362: crate::Real = t7 * t9;
+    let t363: crate::Real = t3 * t362;
+    let g1: [crate::Real; 4usize] = if crate::math::fabs(t171)
+        < crate::math::series_switch(0.05)
+    {
+        let t173: crate::Real = t24 * t172;
+        let t175: crate::Real = t174 * t21;
+        let t176: crate::Real = -t175;
+        let t177: crate::Real = t9 * t9;
+        let t178: crate::Real = t3 * t177;
+        let t179: crate::Real = t16 * t178;
+        let t180: crate::Real = t24 * t179;
+        let t181: crate::Real = t10 * t180;
+        let t182: crate::Real = 0.3333333333333333;
+        let t183: crate::Real = t181 * t182;
+        let t184: crate::Real = t183 * t168;
+        let t185: crate::Real = t176 - t184;
+        let t186: crate::Real = t171 * t185;
+        let t187: crate::Real = t173 + t186;
+        let t188: crate::Real = t17 * t179;
+        let t189: crate::Real = t10 * t188;
+        let t190: crate::Real = t21 * t189;
+        let t191: crate::Real = t190 * t168;
+        let t192: crate::Real = t187 - t191;
+        let t194: crate::Real = t173 * t32;
+        let t195: crate::Real = 0.125;
+        let t196: crate::Real = t189 * t195;
+        let t197: crate::Real = t196 * t168;
+        let t198: crate::Real = t197 - t194;
+        let t199: crate::Real = t193 * t198;
+        let t200: crate::Real = t192 + t199;
+        let t201: crate::Real = t171 * t193;
+        let t202: crate::Real = t174 * t39;
+        let t203: crate::Real = 0.03333333333333333;
+        let t204: crate::Real = t181 * t203;
+        let t205: crate::Real = t204 * t168;
+        let t206: crate::Real = t202 + t205;
+        let t207: crate::Real = t201 * t206;
+        let t208: crate::Real = t200 + t207;
+        let t209: crate::Real = t193 * t193;
+        let t210: crate::Real = t173 * t46;
+        let t211: crate::Real = 0.006944444444444444;
+        let t212: crate::Real = t189 * t211;
+        let t213: crate::Real = t212 * t168;
+        let t214: crate::Real = t210 - t213;
+        let t215: crate::Real = t209 * t214;
+        let t216: crate::Real = t208 + t215;
+        let t217: crate::Real = t171 * t209;
+        let t218: crate::Real = t174 * t53;
+        let t219: crate::Real = -t218;
+        let t220: crate::Real = 0.0011904761904761906;
+        let t221: crate::Real = t181 * t220;
+        let t222: crate::Real = t221 * t168;
+        let t223: crate::Real = t219 - t222;
+        let t224: crate::Real = t217 * t223;
+        let t225: crate::Real = t216 + t224;
+        let t226: crate::Real = t201 * t201;
+        let t227: crate::Real = t173 * t60;
+        let t228: crate::Real = 0.00017361111111111112;
+        let t229: crate::Real = t189 * t228;
+        let t230: crate::Real = t229 * t168;
+        let t231: crate::Real = t230 - t227;
+        let t232: crate::Real = t226 * t231;
+        let t233: crate::Real = t225 + t232;
+        let t234: crate::Real = t171 * t226;
+        let t235: crate::Real = t174 * t67;
+        let t236: crate::Real = 0.000022045855379188714;
+        let t237: crate::Real = t181 * t236;
+        let t238: crate::Real = t237 * t168;
+        let t239: crate::Real = t235 + t238;
+        let t240: crate::Real = t234 * t239;
+        let t241: crate::Real = t233 + t240;
+        let t242: crate::Real = t209 * t209;
+        let t243: crate::Real = t173 * t74;
+        let t244: crate::Real = 0.00000248015873015873;
+        let t245: crate::Real = t189 * t244;
+        let t246: crate::Real = t245 * t168;
+        let t247: crate::Real = t243 - t246;
+        let t248: crate::Real = t242 * t247;
+        let t249: crate::Real = t241 + t248;
+        let t282: crate::Real = t171 * t177;
+        let t283: crate::Real = t7 * t282;
+        let t284: crate::Real = t3 * t283;
+        let t285: crate::Real = t16 * t284;
+        let t286: crate::Real = t24 * t285;
+        let t287: crate::Real = t10 * t286;
+        let t288: crate::Real = t182 * t287;
+        let t290: crate::Real = t288 * t289;
+        let t291: crate::Real = t7 * t177;
+        let t292: crate::Real = t3 * t291;
+        let t293: crate::Real = t16 * t292;
+        let t294: crate::Real = t17 * t293;
+        let t295: crate::Real = t10 * t294;
+        let t296: crate::Real = t21 * t295;
+        let t297: crate::Real = t296 * t289;
+        let t298: crate::Real = t290 + t297;
+        let t299: crate::Real = t177 * t193;
+        let t300: crate::Real = t7 * t299;
+        let t301: crate::Real = t3 * t300;
+        let t302: crate::Real = t16 * t301;
+        let t303: crate::Real = t17 * t302;
+        let t304: crate::Real = t10 * t303;
+        let t305: crate::Real = t195 * t304;
+        let t306: crate::Real = t305 * t289;
+        let t307: crate::Real = t298 - t306;
+        let t308: crate::Real = t177 * t201;
+        let t309: crate::Real = t7 * t308;
+        let t310: crate::Real = t3 * t309;
+        let t311: crate::Real = t16 * t310;
+        let t312: crate::Real = t24 * t311;
+        let t313: crate::Real = t10 * t312;
+        let t314: crate::Real = t203 * t313;
+        let t315: crate::Real = t314 * t289;
+        let t316: crate::Real = t307 - t315;
+        let t317: crate::Real = t177 * t209;
+        let t318: crate::Real = t7 * t317;
+        let t319: crate::Real = t3 * t318;
+        let t320: crate::Real = t16 * t319;
+        let t321: crate::Real = t17 * t320;
+        let t322: crate::Real = t10 * t321;
+        let t323: crate::Real = t211 * t322;
+        let t324: crate::Real = t323 * t289;
+        let t325: crate::Real = t316 + t324;
+        let t326: crate::Real = t177 * t217;
+        let t327: crate::Real = t7 * t326;
+        let t328: crate::Real = t3 * t327;
+        let t329: crate::Real = t16 * t328;
+        let t330: crate::Real = t24 * t329;
+        let t331: crate::Real = t10 * t330;
+        let t332: crate::Real = t220 * t331;
+        let t333: crate::Real = t332 * t289;
+        let t334: crate::Real = t325 + t333;
+        let t335: crate::Real = t177 * t226;
+        let t336: crate::Real = t7 * t335;
+        let t337: crate::Real = t3 * t336;
+        let t338: crate::Real = t16 * t337;
+        let t339: crate::Real = t17 * t338;
+        let t340: crate::Real = t10 * t339;
+        let t341: crate::Real = t228 * t340;
+        let t342: crate::Real = t341 * t289;
+        let t343: crate::Real = t334 - t342;
+        let t344: crate::Real = t177 * t234;
+        let t345: crate::Real = t7 * t344;
+        let t346: crate::Real = t3 * t345;
+        let t347: crate::Real = t16 * t346;
+        let t348: crate::Real = t24 * t347;
+        let t349: crate::Real = t10 * t348;
+        let t350: crate::Real = t236 * t349;
+        let t351: crate::Real = t350 * t289;
+        let t352: crate::Real = t343 - t351;
+        let t353: crate::Real = t177 * t242;
+        let t354: crate::Real = t7 * t353;
+        let t355: crate::Real = t3 * t354;
+        let t356: crate::Real = t16 * t355;
+        let t357: crate::Real = t17 * t356;
+        let t358: crate::Real = t10 * t357;
+        let t359: crate::Real = t244 * t358;
+        let t360: crate::Real = t359 * t289;
+        let t361: crate::Real = t352 + t360;
+        let t369: crate::Real = t173 * t21;
+        let t370: crate::Real = t182 * t189;
+        let t371: crate::Real = t370 * t168;
+        let t372: crate::Real = t369 - t371;
+        let t373: crate::Real = t171 * t372;
+        let t374: crate::Real = t174 + t373;
+        let t375: crate::Real = t21 * t181;
+        let t376: crate::Real = t375 * t168;
+        let t377: crate::Real = t374 + t376;
+        let t378: crate::Real = t174 * t32;
+        let t379: crate::Real = -t378;
+        let t380: crate::Real = t181 * t195;
+        let t381: crate::Real = t380 * t168;
+        let t382: crate::Real = t379 - t381;
+        let t383: crate::Real = t193 * t382;
+        let t384: crate::Real = t377 + t383;
+        let t385: crate::Real = t173 * t39;
+        let t386: crate::Real = t189 * t203;
+        let t387: crate::Real = t386 * t168;
+        let t388: crate::Real = t387 - t385;
+        let t389: crate::Real = t201 * t388;
+        let t390: crate::Real = t384 + t389;
+        let t391: crate::Real = t174 * t46;
+        let t392: crate::Real = t181 * t211;
+        let t393: crate::Real = t392 * t168;
+        let t394: crate::Real = t391 + t393;
+        let t395: crate::Real = t209 * t394;
+        let t396: crate::Real = t390 + t395;
+        let t397: crate::Real = t173 * t53;
+        let t398: crate::Real = t189 * t220;
+        let t399: crate::Real = t398 * t168;
+        let t400: crate::Real = t397 - t399;
+        let t401: crate::Real = t217 * t400;
+        let t402: crate::Real = t396 + t401;
+        let t403: crate::Real = t174 * t60;
+        let t404: crate::Real = -t403;
+        let t405: crate::Real = t181 * t228;
+        let t406: crate::Real = t405 * t168;
+        let t407: crate::Real = t404 - t406;
+        let t408: crate::Real = t226 * t407;
+        let t409: crate::Real = t402 + t408;
+        let t410: crate::Real = t173 * t67;
+        let t411: crate::Real = t189 * t236;
+        let t412: crate::Real = t411 * t168;
+        let t413: crate::Real = t412 - t410;
+        let t414: crate::Real = t234 * t413;
+        let t415: crate::Real = t409 + t414;
+        let t416: crate::Real = t174 * t74;
+        let t417: crate::Real = t181 * t244;
+        let t418: crate::Real = t417 * t168;
+        let t419: crate::Real = t416 + t418;
+        let t420: crate::Real = t242 * t419;
+        let t421: crate::Real = t415 + t420;
+        let t441: crate::Real = t17 * t285;
+        let t442: crate::Real = t10 * t441;
+        let t443: crate::Real = t182 * t442;
+        let t444: crate::Real = t443 * t289;
+        let t445: crate::Real = t24 * t293;
+        let t446: crate::Real = t10 * t445;
+        let t447: crate::Real = t21 * t446;
+        let t448: crate::Real = t447 * t289;
+        let t449: crate::Real = t444 - t448;
+        let t450: crate::Real = t24 * t302;
+        let t451: crate::Real = t10 * t450;
+        let t452: crate::Real = t195 * t451;
+        let t453: crate::Real = t452 * t289;
+        let t454: crate::Real = t449 + t453;
+        let t455: crate::Real = t17 * t311;
+        let t456: crate::Real = t10 * t455;
+        let t457: crate::Real = t203 * t456;
+        let t458: crate::Real = t457 * t289;
+        let t459: crate::Real = t454 - t458;
+        let t460: crate::Real = t24 * t320;
+        let t461: crate::Real = t10 * t460;
+        let t462: crate::Real = t211 * t461;
+        let t463: crate::Real = t462 * t289;
+        let t464: crate::Real = t459 - t463;
+        let t465: crate::Real = t17 * t329;
+        let t466: crate::Real = t10 * t465;
+        let t467: crate::Real = t220 * t466;
+        let t468: crate::Real = t467 * t289;
+        let t469: crate::Real = t464 + t468;
+        let t470: crate::Real = t24 * t338;
+        let t471: crate::Real = t10 * t470;
+        let t472: crate::Real = t228 * t471;
+        let t473: crate::Real = t472 * t289;
+        let t474: crate::Real = t469 + t473;
+        let t475: crate::Real = t17 * t347;
+        let t476: crate::Real = t10 * t475;
+        let t477: crate::Real = t236 * t476;
+        let t478: crate::Real = t477 * t289;
+        let t479: crate::Real = t474 - t478;
+        let t480: crate::Real = t24 * t356;
+        let t481: crate::Real = t10 * t480;
+        let t482: crate::Real = t244 * t481;
+        let t483: crate::Real = t482 * t289;
+        let t484: crate::Real = t479 - t483;
         [t249, t361, t421, t484]
     } else {
-        let t250: f64 = libm::sin(t171);
-        let t251: f64 = t172 * t250;
-        let t252: f64 = t24 * t251;
-        let t253: f64 = t80 / t171;
-        let t254: f64 = t252 * t253;
-        let t255: f64 = libm::cos(t171);
-        let t256: f64 = t80 - t255;
-        let t257: f64 = t172 * t256;
-        let t258: f64 = t17 * t257;
-        let t259: f64 = t258 * t253;
-        let t260: f64 = t254 - t259;
-        let t261: f64 = t250 * t95;
-        let t262: f64 = t261 * t253;
-        let t263: f64 = t255 * t26;
-        let t264: f64 = t263 * t253;
-        let t265: f64 = t250 * t25;
-        let t266: f64 = t24 * t265;
-        let t267: f64 = t80 / t193;
-        let t268: f64 = t266 * t267;
-        let t269: f64 = t264 - t268;
-        let t270: f64 = t9 * t256;
-        let t271: f64 = t16 * t270;
-        let t272: f64 = t17 * t271;
-        let t273: f64 = t272 * t267;
-        let t274: f64 = t269 + t273;
-        let t275: f64 = t274 - t262;
-        let t276: f64 = t172 * t275;
-        let t277: f64 = t10 * t276;
-        let t278: f64 = t277 * t168;
-        let t279: f64 = t260 + t278;
-        let t364: f64 = t275 * t363;
-        let t365: f64 = t10 * t364;
-        let t366: f64 = t365 * t289;
-        let t367: f64 = -t366;
-        let t422: f64 = t174 * t250;
-        let t423: f64 = t422 * t253;
-        let t424: f64 = t24 * t257;
-        let t425: f64 = t424 * t253;
-        let t426: f64 = t423 + t425;
-        let t427: f64 = t255 * t95;
-        let t428: f64 = t427 * t253;
-        let t429: f64 = t266 * t253;
-        let t430: f64 = t428 + t429;
-        let t431: f64 = t261 * t267;
-        let t432: f64 = t430 - t431;
-        let t433: f64 = t24 * t271;
-        let t434: f64 = t433 * t267;
-        let t435: f64 = t432 - t434;
-        let t436: f64 = t172 * t435;
-        let t437: f64 = t10 * t436;
-        let t438: f64 = t437 * t168;
-        let t439: f64 = t426 + t438;
-        let t485: f64 = t363 * t435;
-        let t486: f64 = t10 * t485;
-        let t487: f64 = t486 * t289;
-        let t488: f64 = -t487;
+        let t250: crate::Real = crate::math::sin(t171);
+        let t251: crate::Real = t172 * t250;
+        let t252: crate::Real = t24 * t251;
+        let t253: crate::Real = t80 / t171;
+        let t254: crate::Real = t252 * t253;
+        let t255: crate::Real = crate::math::cos(t171);
+        let t256: crate::Real = t80 - t255;
+        let t257: crate::Real = t172 * t256;
+        let t258: crate::Real = t17 * t257;
+        let t259: crate::Real = t258 * t253;
+        let t260: crate::Real = t254 - t259;
+        let t261: crate::Real = t250 * t95;
+        let t262: crate::Real = t261 * t253;
+        let t263: crate::Real = t255 * t26;
+        let t264: crate::Real = t263 * t253;
+        let t265: crate::Real = t250 * t25;
+        let t266: crate::Real = t24 * t265;
+        let t267: crate::Real = t80 / t193;
+        let t268: crate::Real = t266 * t267;
+        let t269: crate::Real = t264 - t268;
+        let t270: crate::Real = t9 * t256;
+        let t271: crate::Real = t16 * t270;
+        let t272: crate::Real = t17 * t271;
+        let t273: crate::Real = t272 * t267;
+        let t274: crate::Real = t269 + t273;
+        let t275: crate::Real = t274 - t262;
+        let t276: crate::Real = t172 * t275;
+        let t277: crate::Real = t10 * t276;
+        let t278: crate::Real = t277 * t168;
+        let t279: crate::Real = t260 + t278;
+        let t364: crate::Real = t275 * t363;
+        let t365: crate::Real = t10 * t364;
+        let t366: crate::Real = t365 * t289;
+        let t367: crate::Real = -t366;
+        let t422: crate::Real = t174 * t250;
+        let t423: crate::Real = t422 * t253;
+        let t424: crate::Real = t24 * t257;
+        let t425: crate::Real = t424 * t253;
+        let t426: crate::Real = t423 + t425;
+        let t427: crate::Real = t255 * t95;
+        let t428: crate::Real = t427 * t253;
+        let t429: crate::Real = t266 * t253;
+        let t430: crate::Real = t428 + t429;
+        let t431: crate::Real = t261 * t267;
+        let t432: crate::Real = t430 - t431;
+        let t433: crate::Real = t24 * t271;
+        let t434: crate::Real = t433 * t267;
+        let t435: crate::Real = t432 - t434;
+        let t436: crate::Real = t172 * t435;
+        let t437: crate::Real = t10 * t436;
+        let t438: crate::Real = t437 * t168;
+        let t439: crate::Real = t426 + t438;
+        let t485: crate::Real = t363 * t435;
+        let t486: crate::Real = t10 * t485;
+        let t487: crate::Real = t486 * t289;
+        let t488: crate::Real = -t487;
         [t279, t367, t439, t488]
     };
-    let t280: f64 = g1[0usize];
-    let t368: f64 = g1[1usize];
-    let t440: f64 = g1[2usize];
-    let t489: f64 = g1[3usize];
-    let t490: f64 = t10 * t172;
-    let t491: f64 = t490 * t168;
-    let t492: f64 = t10 * t363;
-    let t493: f64 = t492 * t289;
-    let t494: f64 = -t493;
+    let t280: crate::Real = g1[0usize];
+    let t368: crate::Real = g1[1usize];
+    let t440: crate::Real = g1[2usize];
+    let t489: crate::Real = g1[3usize];
+    let t490: crate::Real = t10 * t172;
+    let t491: crate::Real = t490 * t168;
+    let t492: crate::Real = t10 * t363;
+    let t493: crate::Real = t492 * t289;
+    let t494: crate::Real = -t493;
     [
         t91,
         t124,
@@ -2756,12 +2784,16 @@ pub fn step_exact_with_jac_p_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_with_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 2usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 2usize]; 3usize],
+) {
     let o = step_exact_with_jac_p_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -2783,24 +2815,24 @@ pub fn step_exact_with_jac_p(
 9 arithmetic operations (13 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [f64; 6usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = libm::tan(t1);
-    let t5: f64 = t0 * t2;
-    let t6: f64 = t4 * t5;
-    let t7: f64 = t6 / t3;
-    let t8: f64 = 0f64;
-    let t9: f64 = t0 * t4;
-    let t10: f64 = t9 / t3;
-    let t11: f64 = t3 * t3;
-    let t12: f64 = t6 / t11;
-    let t13: f64 = -t12;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 6usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = crate::math::tan(t1);
+    let t5: crate::Real = t0 * t2;
+    let t6: crate::Real = t4 * t5;
+    let t7: crate::Real = t6 / t3;
+    let t8: crate::Real = 0.0;
+    let t9: crate::Real = t0 * t4;
+    let t10: crate::Real = t9 / t3;
+    let t11: crate::Real = t3 * t3;
+    let t12: crate::Real = t6 / t11;
+    let t13: crate::Real = -t12;
     [t7, t8, t8, t8, t10, t13]
 }
 /**Observation `gyro` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -2808,10 +2840,14 @@ pub fn obs_gyro_linearized_flat(
 Returns (`obs_gyro`, `obs_gyro_jac_x`, `obs_gyro_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_gyro_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> ([f64; 1usize], [[f64; 3usize]; 1usize], [[f64; 2usize]; 1usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> (
+    [crate::Real; 1usize],
+    [[crate::Real; 3usize]; 1usize],
+    [[crate::Real; 2usize]; 1usize],
+) {
     let o = obs_gyro_linearized_flat(x, u, p);
     ([o[0usize]], [[o[1usize], o[2usize], o[3usize]]], [[o[4usize], o[5usize]]])
 }
@@ -2826,36 +2862,36 @@ pub fn obs_gyro_linearized(
 17 arithmetic operations (57 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [f64; 12usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t10;
-    let t15: f64 = t5 * t14;
-    let t16: f64 = -t15;
-    let t17: f64 = t7 * t14;
-    let t18: f64 = -t17;
-    let t19: f64 = 0f64;
-    let t20: f64 = t13 / t9;
-    let t21: f64 = t7 * t20;
-    let t22: f64 = t5 * t20;
-    let t23: f64 = -t22;
-    let t24: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 12usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t10;
+    let t15: crate::Real = t5 * t14;
+    let t16: crate::Real = -t15;
+    let t17: crate::Real = t7 * t14;
+    let t18: crate::Real = -t17;
+    let t19: crate::Real = 0.0;
+    let t20: crate::Real = t13 / t9;
+    let t21: crate::Real = t7 * t20;
+    let t22: crate::Real = t5 * t20;
+    let t23: crate::Real = -t22;
+    let t24: crate::Real = (-1.0);
     [t10, t12, t16, t18, t19, t21, t23, t24, t19, t19, t19, t19]
 }
 /**Observation `landmark` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -2863,11 +2899,15 @@ pub fn obs_landmark_linearized_flat(
 Returns (`obs_landmark`, `obs_landmark_jac_x`, `obs_landmark_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_landmark_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> ([f64; 2usize], [[f64; 3usize]; 2usize], [[f64; 2usize]; 2usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> (
+    [crate::Real; 2usize],
+    [[crate::Real; 3usize]; 2usize],
+    [[crate::Real; 2usize]; 2usize],
+) {
     let o = obs_landmark_linearized_flat(x, u, p, lm);
     (
         [o[0usize], o[1usize]],
@@ -2880,17 +2920,21 @@ pub fn obs_landmark_linearized(
 /// wrong lengths. Behind the `dispatch` feature: firmware calls the
 /// kernels themselves and need not carry every kernel and its name.
 #[cfg(feature = "dispatch")]
-pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+pub fn call(name: &str, args: &[&[crate::Real]], out: &mut [crate::Real]) -> bool {
     match name {
         "twist" => {
             if args.len() != 2usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2903,15 +2947,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2924,23 +2974,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2953,23 +3011,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2982,23 +3048,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3011,23 +3085,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3040,23 +3122,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3069,23 +3159,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3098,23 +3196,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3127,23 +3233,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3156,23 +3270,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3185,23 +3307,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3214,15 +3344,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 1usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3235,15 +3371,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3256,15 +3398,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3277,19 +3425,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3302,19 +3458,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3327,19 +3491,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 4usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3352,11 +3524,15 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 2usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3369,15 +3545,19 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: f64 = match args[1usize] {
+            let a1: crate::Real = match args[1usize] {
                 [v] => *v,
                 _ => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };

@@ -15,15 +15,15 @@ pub const SPEC_FINGERPRINT: &str = "f9c9f9a12c6c6bd7";
 /// Runtime parameters, in the order of the `p` argument.
 pub const PARAMS: [&str; 2usize] = ["r", "L"];
 /// Nominal values of [`PARAMS`].
-pub const PARAM_NOMINAL: [f64; 2usize] = [0.15f64, 1f64];
+pub const PARAM_NOMINAL: [crate::Real; 2usize] = [0.15, 1.0];
 /// The runtime parameters by name; [`Params::to_array`] gives the `p`
 /// argument of every kernel.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
     /// `r` (m): Driven (steered) wheel radius.
-    pub r: f64,
+    pub r: crate::Real,
     /// `L` (m): Distance from the rear axle (the body origin) to the steered wheel.
-    pub L: f64,
+    pub L: crate::Real,
 }
 impl Params {
     /// The spec's nominal values.
@@ -32,11 +32,11 @@ impl Params {
         L: PARAM_NOMINAL[1usize],
     };
     /// The `p` argument of the kernels, in the order of [`PARAMS`].
-    pub const fn to_array(&self) -> [f64; 2usize] {
+    pub const fn to_array(&self) -> [crate::Real; 2usize] {
         [self.r, self.L]
     }
     /// From a `p` array in the order of [`PARAMS`].
-    pub const fn from_array(p: &[f64; 2usize]) -> Params {
+    pub const fn from_array(p: &[crate::Real; 2usize]) -> Params {
         Params {
             r: p[0usize],
             L: p[1usize],
@@ -55,18 +55,21 @@ pub const INPUT_COLUMNS: [&str; 2usize] = ["phi", "alpha"];
 
 6 arithmetic operations (7 before common-subexpression elimination).*/
 #[inline]
-pub fn twist(u: &[f64; 2usize], p: &[f64; 2usize]) -> [f64; 3usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = libm::cos(t1);
-    let t5: f64 = t0 * t2;
-    let t6: f64 = t4 * t5;
-    let t7: f64 = 0f64;
-    let t8: f64 = libm::sin(t1);
-    let t9: f64 = t5 * t8;
-    let t10: f64 = t9 / t3;
+pub fn twist(
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = crate::math::cos(t1);
+    let t5: crate::Real = t0 * t2;
+    let t6: crate::Real = t4 * t5;
+    let t7: crate::Real = 0.0;
+    let t8: crate::Real = crate::math::sin(t1);
+    let t9: crate::Real = t5 * t8;
+    let t10: crate::Real = t9 / t3;
     [t6, t7, t10]
 }
 /**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
@@ -79,17 +82,17 @@ pub fn twist(u: &[f64; 2usize], p: &[f64; 2usize]) -> [f64; 3usize] {
 3 arithmetic operations (3 before common-subexpression elimination).*/
 #[inline]
 pub fn twist_gyro(
-    u: &[f64; 2usize],
-    omega: &[f64; 1usize],
-    p: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = libm::cos(t1);
-    let t4: f64 = t0 * t2;
-    let t5: f64 = t3 * t4;
-    let t6: f64 = 0f64;
+    u: &[crate::Real; 2usize],
+    omega: &[crate::Real; 1usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = crate::math::cos(t1);
+    let t4: crate::Real = t0 * t2;
+    let t5: crate::Real = t3 * t4;
+    let t6: crate::Real = 0.0;
     [t5, t6]
 }
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
@@ -104,39 +107,39 @@ pub fn twist_gyro(
 17 arithmetic operations (23 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = libm::cos(t4);
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t5 + t12;
-    let t14: f64 = libm::cos(t2);
-    let t15: f64 = t9 * t13;
-    let t16: f64 = t14 * t15;
-    let t17: f64 = t0 + t16;
-    let t18: f64 = libm::sin(t2);
-    let t19: f64 = t15 * t18;
-    let t20: f64 = t1 + t19;
-    let t21: f64 = libm::sin(t4);
-    let t22: f64 = t11 * t21;
-    let t23: f64 = t22 / t8;
-    let t24: f64 = t6 + t23;
-    let t25: f64 = t9 * t24;
-    let t26: f64 = t2 + t25;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = crate::math::cos(t4);
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t5 + t12;
+    let t14: crate::Real = crate::math::cos(t2);
+    let t15: crate::Real = t9 * t13;
+    let t16: crate::Real = t14 * t15;
+    let t17: crate::Real = t0 + t16;
+    let t18: crate::Real = crate::math::sin(t2);
+    let t19: crate::Real = t15 * t18;
+    let t20: crate::Real = t1 + t19;
+    let t21: crate::Real = crate::math::sin(t4);
+    let t22: crate::Real = t11 * t21;
+    let t23: crate::Real = t22 / t8;
+    let t24: crate::Real = t6 + t23;
+    let t25: crate::Real = t9 * t24;
+    let t26: crate::Real = t2 + t25;
     [t17, t20, t26]
 }
 /**Jacobian of `step_euler` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -151,30 +154,30 @@ pub fn step_euler(
 10 arithmetic operations (15 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = p[0usize];
-    let t5: f64 = dt;
-    let t6: f64 = 1f64;
-    let t7: f64 = 0f64;
-    let t8: f64 = libm::cos(t2);
-    let t9: f64 = t1 * t4;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t3 + t10;
-    let t12: f64 = libm::sin(t0);
-    let t13: f64 = t5 * t11;
-    let t14: f64 = t12 * t13;
-    let t15: f64 = -t14;
-    let t16: f64 = libm::cos(t0);
-    let t17: f64 = t13 * t16;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = p[0usize];
+    let t5: crate::Real = dt;
+    let t6: crate::Real = 1.0;
+    let t7: crate::Real = 0.0;
+    let t8: crate::Real = crate::math::cos(t2);
+    let t9: crate::Real = t1 * t4;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t3 + t10;
+    let t12: crate::Real = crate::math::sin(t0);
+    let t13: crate::Real = t5 * t11;
+    let t14: crate::Real = t12 * t13;
+    let t15: crate::Real = -t14;
+    let t16: crate::Real = crate::math::cos(t0);
+    let t17: crate::Real = t13 * t16;
     [[t6, t7, t15], [t7, t6, t17], [t7, t7, t6]]
 }
 /**Jacobian of `step_euler` with respect to the inputs; rows x, y, theta.
@@ -189,40 +192,40 @@ pub fn step_euler_jac_x(
 21 arithmetic operations (35 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = dt;
-    let t6: f64 = libm::cos(t0);
-    let t7: f64 = libm::cos(t2);
-    let t8: f64 = t3 * t5;
-    let t9: f64 = t6 * t8;
-    let t10: f64 = t7 * t9;
-    let t11: f64 = libm::sin(t2);
-    let t12: f64 = t1 * t8;
-    let t13: f64 = t11 * t12;
-    let t14: f64 = t6 * t13;
-    let t15: f64 = -t14;
-    let t16: f64 = libm::sin(t0);
-    let t17: f64 = t8 * t16;
-    let t18: f64 = t7 * t17;
-    let t19: f64 = t12 * t16;
-    let t20: f64 = t11 * t19;
-    let t21: f64 = -t20;
-    let t22: f64 = t8 * t11;
-    let t23: f64 = 1f64;
-    let t24: f64 = t23 / t4;
-    let t25: f64 = t22 * t24;
-    let t26: f64 = t7 * t12;
-    let t27: f64 = t26 * t24;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = dt;
+    let t6: crate::Real = crate::math::cos(t0);
+    let t7: crate::Real = crate::math::cos(t2);
+    let t8: crate::Real = t3 * t5;
+    let t9: crate::Real = t6 * t8;
+    let t10: crate::Real = t7 * t9;
+    let t11: crate::Real = crate::math::sin(t2);
+    let t12: crate::Real = t1 * t8;
+    let t13: crate::Real = t11 * t12;
+    let t14: crate::Real = t6 * t13;
+    let t15: crate::Real = -t14;
+    let t16: crate::Real = crate::math::sin(t0);
+    let t17: crate::Real = t8 * t16;
+    let t18: crate::Real = t7 * t17;
+    let t19: crate::Real = t12 * t16;
+    let t20: crate::Real = t11 * t19;
+    let t21: crate::Real = -t20;
+    let t22: crate::Real = t8 * t11;
+    let t23: crate::Real = 1.0;
+    let t24: crate::Real = t23 / t4;
+    let t25: crate::Real = t22 * t24;
+    let t26: crate::Real = t7 * t12;
+    let t27: crate::Real = t26 * t24;
     [[t10, t15], [t18, t21], [t25, t27]]
 }
 /**Jacobian of `step_euler` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -237,19 +240,19 @@ pub fn step_euler_jac_u(
 4 arithmetic operations (4 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = dt;
-    let t2: f64 = libm::cos(t0);
-    let t3: f64 = t1 * t2;
-    let t4: f64 = 0f64;
-    let t5: f64 = libm::sin(t0);
-    let t6: f64 = t1 * t5;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = dt;
+    let t2: crate::Real = crate::math::cos(t0);
+    let t3: crate::Real = t1 * t2;
+    let t4: crate::Real = 0.0;
+    let t5: crate::Real = crate::math::sin(t0);
+    let t6: crate::Real = t1 * t5;
     [[t3, t4], [t6, t4], [t4, t1]]
 }
 /**Jacobian of `step_euler` with respect to the parameters; rows x, y, theta.
@@ -264,36 +267,36 @@ pub fn step_euler_jac_w(
 17 arithmetic operations (21 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = dt;
-    let t6: f64 = libm::cos(t0);
-    let t7: f64 = libm::cos(t2);
-    let t8: f64 = t1 * t5;
-    let t9: f64 = t6 * t8;
-    let t10: f64 = t7 * t9;
-    let t11: f64 = 0f64;
-    let t12: f64 = libm::sin(t0);
-    let t13: f64 = t8 * t12;
-    let t14: f64 = t7 * t13;
-    let t15: f64 = libm::sin(t2);
-    let t16: f64 = t8 * t15;
-    let t17: f64 = t16 / t4;
-    let t18: f64 = t4 * t4;
-    let t19: f64 = t3 * t5;
-    let t20: f64 = t1 * t19;
-    let t21: f64 = t15 * t20;
-    let t22: f64 = t21 / t18;
-    let t23: f64 = -t22;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = dt;
+    let t6: crate::Real = crate::math::cos(t0);
+    let t7: crate::Real = crate::math::cos(t2);
+    let t8: crate::Real = t1 * t5;
+    let t9: crate::Real = t6 * t8;
+    let t10: crate::Real = t7 * t9;
+    let t11: crate::Real = 0.0;
+    let t12: crate::Real = crate::math::sin(t0);
+    let t13: crate::Real = t8 * t12;
+    let t14: crate::Real = t7 * t13;
+    let t15: crate::Real = crate::math::sin(t2);
+    let t16: crate::Real = t8 * t15;
+    let t17: crate::Real = t16 / t4;
+    let t18: crate::Real = t4 * t4;
+    let t19: crate::Real = t3 * t5;
+    let t20: crate::Real = t1 * t19;
+    let t21: crate::Real = t15 * t20;
+    let t22: crate::Real = t21 / t18;
+    let t23: crate::Real = -t22;
     [[t10, t11], [t14, t11], [t17, t23]]
 }
 /**Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).
@@ -308,146 +311,148 @@ pub fn step_euler_jac_p(
 109 arithmetic operations (783 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = libm::sin(t4);
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t12 / t8;
-    let t14: f64 = t6 + t13;
-    let t15: f64 = t9 * t14;
-    let t16: f64 = libm::cos(t4);
-    let t17: f64 = t11 * t16;
-    let t18: f64 = t5 + t17;
-    let t19: f64 = libm::sin(t2);
-    let t26: f64 = libm::cos(t2);
-    let t27: f64 = t9 * t18;
-    let t98: f64 = t19 * t27;
-    let g0: [f64; 2usize] = if libm::fabs(t15) < 0.05f64 {
-        let t20: f64 = t9 * t15;
-        let t21: f64 = t18 * t20;
-        let t22: f64 = t19 * t21;
-        let t23: f64 = 0.5f64;
-        let t24: f64 = t22 * t23;
-        let t25: f64 = t0 - t24;
-        let t28: f64 = t26 * t27;
-        let t29: f64 = t25 + t28;
-        let t30: f64 = t15 * t15;
-        let t31: f64 = t9 * t30;
-        let t32: f64 = t18 * t31;
-        let t33: f64 = t26 * t32;
-        let t34: f64 = 0.16666666666666666f64;
-        let t35: f64 = t33 * t34;
-        let t36: f64 = t29 - t35;
-        let t37: f64 = t15 * t30;
-        let t38: f64 = t9 * t37;
-        let t39: f64 = t18 * t38;
-        let t40: f64 = t19 * t39;
-        let t41: f64 = 0.041666666666666664f64;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = t36 + t42;
-        let t44: f64 = t30 * t30;
-        let t45: f64 = t9 * t44;
-        let t46: f64 = t18 * t45;
-        let t47: f64 = t26 * t46;
-        let t48: f64 = 0.008333333333333333f64;
-        let t49: f64 = t47 * t48;
-        let t50: f64 = t43 + t49;
-        let t51: f64 = t15 * t44;
-        let t52: f64 = t9 * t51;
-        let t53: f64 = t18 * t52;
-        let t54: f64 = t19 * t53;
-        let t55: f64 = 0.001388888888888889f64;
-        let t56: f64 = t54 * t55;
-        let t57: f64 = t50 - t56;
-        let t58: f64 = t37 * t37;
-        let t59: f64 = t9 * t58;
-        let t60: f64 = t18 * t59;
-        let t61: f64 = t26 * t60;
-        let t62: f64 = 0.0001984126984126984f64;
-        let t63: f64 = t61 * t62;
-        let t64: f64 = t57 - t63;
-        let t65: f64 = t15 * t58;
-        let t66: f64 = t9 * t65;
-        let t67: f64 = t18 * t66;
-        let t68: f64 = t19 * t67;
-        let t69: f64 = 0.0000248015873015873f64;
-        let t70: f64 = t68 * t69;
-        let t71: f64 = t64 + t70;
-        let t72: f64 = t44 * t44;
-        let t73: f64 = t9 * t72;
-        let t74: f64 = t18 * t73;
-        let t75: f64 = t26 * t74;
-        let t76: f64 = 0.0000027557319223985893f64;
-        let t77: f64 = t75 * t76;
-        let t78: f64 = t71 + t77;
-        let t95: f64 = t21 * t26;
-        let t96: f64 = t23 * t95;
-        let t97: f64 = t1 + t96;
-        let t99: f64 = t97 + t98;
-        let t100: f64 = t19 * t32;
-        let t101: f64 = t34 * t100;
-        let t102: f64 = t99 - t101;
-        let t103: f64 = t26 * t39;
-        let t104: f64 = t41 * t103;
-        let t105: f64 = t102 - t104;
-        let t106: f64 = t19 * t46;
-        let t107: f64 = t48 * t106;
-        let t108: f64 = t105 + t107;
-        let t109: f64 = t26 * t53;
-        let t110: f64 = t55 * t109;
-        let t111: f64 = t108 + t110;
-        let t112: f64 = t19 * t60;
-        let t113: f64 = t62 * t112;
-        let t114: f64 = t111 - t113;
-        let t115: f64 = t26 * t67;
-        let t116: f64 = t69 * t115;
-        let t117: f64 = t114 - t116;
-        let t118: f64 = t19 * t74;
-        let t119: f64 = t76 * t118;
-        let t120: f64 = t117 + t119;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = crate::math::sin(t4);
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t12 / t8;
+    let t14: crate::Real = t6 + t13;
+    let t15: crate::Real = t9 * t14;
+    let t16: crate::Real = crate::math::cos(t4);
+    let t17: crate::Real = t11 * t16;
+    let t18: crate::Real = t5 + t17;
+    let t19: crate::Real = crate::math::sin(t2);
+    let t26: crate::Real = crate::math::cos(t2);
+    let t27: crate::Real = t9 * t18;
+    let t98: crate::Real = t19 * t27;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t20: crate::Real = t9 * t15;
+        let t21: crate::Real = t18 * t20;
+        let t22: crate::Real = t19 * t21;
+        let t23: crate::Real = 0.5;
+        let t24: crate::Real = t22 * t23;
+        let t25: crate::Real = t0 - t24;
+        let t28: crate::Real = t26 * t27;
+        let t29: crate::Real = t25 + t28;
+        let t30: crate::Real = t15 * t15;
+        let t31: crate::Real = t9 * t30;
+        let t32: crate::Real = t18 * t31;
+        let t33: crate::Real = t26 * t32;
+        let t34: crate::Real = 0.16666666666666666;
+        let t35: crate::Real = t33 * t34;
+        let t36: crate::Real = t29 - t35;
+        let t37: crate::Real = t15 * t30;
+        let t38: crate::Real = t9 * t37;
+        let t39: crate::Real = t18 * t38;
+        let t40: crate::Real = t19 * t39;
+        let t41: crate::Real = 0.041666666666666664;
+        let t42: crate::Real = t40 * t41;
+        let t43: crate::Real = t36 + t42;
+        let t44: crate::Real = t30 * t30;
+        let t45: crate::Real = t9 * t44;
+        let t46: crate::Real = t18 * t45;
+        let t47: crate::Real = t26 * t46;
+        let t48: crate::Real = 0.008333333333333333;
+        let t49: crate::Real = t47 * t48;
+        let t50: crate::Real = t43 + t49;
+        let t51: crate::Real = t15 * t44;
+        let t52: crate::Real = t9 * t51;
+        let t53: crate::Real = t18 * t52;
+        let t54: crate::Real = t19 * t53;
+        let t55: crate::Real = 0.001388888888888889;
+        let t56: crate::Real = t54 * t55;
+        let t57: crate::Real = t50 - t56;
+        let t58: crate::Real = t37 * t37;
+        let t59: crate::Real = t9 * t58;
+        let t60: crate::Real = t18 * t59;
+        let t61: crate::Real = t26 * t60;
+        let t62: crate::Real = 0.0001984126984126984;
+        let t63: crate::Real = t61 * t62;
+        let t64: crate::Real = t57 - t63;
+        let t65: crate::Real = t15 * t58;
+        let t66: crate::Real = t9 * t65;
+        let t67: crate::Real = t18 * t66;
+        let t68: crate::Real = t19 * t67;
+        let t69: crate::Real = 0.0000248015873015873;
+        let t70: crate::Real = t68 * t69;
+        let t71: crate::Real = t64 + t70;
+        let t72: crate::Real = t44 * t44;
+        let t73: crate::Real = t9 * t72;
+        let t74: crate::Real = t18 * t73;
+        let t75: crate::Real = t26 * t74;
+        let t76: crate::Real = 0.0000027557319223985893;
+        let t77: crate::Real = t75 * t76;
+        let t78: crate::Real = t71 + t77;
+        let t95: crate::Real = t21 * t26;
+        let t96: crate::Real = t23 * t95;
+        let t97: crate::Real = t1 + t96;
+        let t99: crate::Real = t97 + t98;
+        let t100: crate::Real = t19 * t32;
+        let t101: crate::Real = t34 * t100;
+        let t102: crate::Real = t99 - t101;
+        let t103: crate::Real = t26 * t39;
+        let t104: crate::Real = t41 * t103;
+        let t105: crate::Real = t102 - t104;
+        let t106: crate::Real = t19 * t46;
+        let t107: crate::Real = t48 * t106;
+        let t108: crate::Real = t105 + t107;
+        let t109: crate::Real = t26 * t53;
+        let t110: crate::Real = t55 * t109;
+        let t111: crate::Real = t108 + t110;
+        let t112: crate::Real = t19 * t60;
+        let t113: crate::Real = t62 * t112;
+        let t114: crate::Real = t111 - t113;
+        let t115: crate::Real = t26 * t67;
+        let t116: crate::Real = t69 * t115;
+        let t117: crate::Real = t114 - t116;
+        let t118: crate::Real = t19 * t74;
+        let t119: crate::Real = t76 * t118;
+        let t120: crate::Real = t117 + t119;
         [t78, t120]
     } else {
-        let t79: f64 = 1f64;
-        let t80: f64 = libm::cos(t15);
-        let t81: f64 = t79 - t80;
-        let t82: f64 = t9 * t81;
-        let t83: f64 = t18 * t82;
-        let t84: f64 = t19 * t83;
-        let t85: f64 = 1f64;
-        let t86: f64 = t85 / t15;
-        let t87: f64 = t84 * t86;
-        let t88: f64 = t0 - t87;
-        let t89: f64 = libm::sin(t15);
-        let t90: f64 = t27 * t89;
-        let t91: f64 = t26 * t90;
-        let t92: f64 = t91 * t86;
-        let t93: f64 = t88 + t92;
-        let t121: f64 = t26 * t83;
-        let t122: f64 = t121 * t86;
-        let t123: f64 = t1 + t122;
-        let t124: f64 = t89 * t98;
-        let t125: f64 = t124 * t86;
-        let t126: f64 = t123 + t125;
+        let t79: crate::Real = 1.0;
+        let t80: crate::Real = crate::math::cos(t15);
+        let t81: crate::Real = t79 - t80;
+        let t82: crate::Real = t9 * t81;
+        let t83: crate::Real = t18 * t82;
+        let t84: crate::Real = t19 * t83;
+        let t85: crate::Real = 1.0;
+        let t86: crate::Real = t85 / t15;
+        let t87: crate::Real = t84 * t86;
+        let t88: crate::Real = t0 - t87;
+        let t89: crate::Real = crate::math::sin(t15);
+        let t90: crate::Real = t27 * t89;
+        let t91: crate::Real = t26 * t90;
+        let t92: crate::Real = t91 * t86;
+        let t93: crate::Real = t88 + t92;
+        let t121: crate::Real = t26 * t83;
+        let t122: crate::Real = t121 * t86;
+        let t123: crate::Real = t1 + t122;
+        let t124: crate::Real = t89 * t98;
+        let t125: crate::Real = t124 * t86;
+        let t126: crate::Real = t123 + t125;
         [t93, t126]
     };
-    let t94: f64 = g0[0usize];
-    let t127: f64 = g0[1usize];
-    let t128: f64 = t2 + t15;
+    let t94: crate::Real = g0[0usize];
+    let t127: crate::Real = g0[1usize];
+    let t128: crate::Real = t2 + t15;
     [t94, t127, t128]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -462,141 +467,143 @@ pub fn step_exact(
 105 arithmetic operations (773 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::sin(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t10 / t6;
-    let t12: f64 = t4 + t11;
-    let t13: f64 = t7 * t12;
-    let t14: f64 = 1f64;
-    let t15: f64 = 0f64;
-    let t16: f64 = libm::cos(t2);
-    let t17: f64 = t9 * t16;
-    let t18: f64 = t3 + t17;
-    let t19: f64 = libm::cos(t0);
-    let t25: f64 = libm::sin(t0);
-    let t26: f64 = t7 * t18;
-    let t27: f64 = t25 * t26;
-    let g0: [f64; 2usize] = if libm::fabs(t13) < 0.05f64 {
-        let t20: f64 = t7 * t13;
-        let t21: f64 = t18 * t20;
-        let t22: f64 = t19 * t21;
-        let t23: f64 = 0.5f64;
-        let t24: f64 = t22 * t23;
-        let t28: f64 = t13 * t13;
-        let t29: f64 = t7 * t28;
-        let t30: f64 = t18 * t29;
-        let t31: f64 = t25 * t30;
-        let t32: f64 = 0.16666666666666666f64;
-        let t33: f64 = t31 * t32;
-        let t34: f64 = t13 * t28;
-        let t35: f64 = t7 * t34;
-        let t36: f64 = t18 * t35;
-        let t37: f64 = t19 * t36;
-        let t38: f64 = 0.041666666666666664f64;
-        let t39: f64 = t37 * t38;
-        let t40: f64 = t33 + t39;
-        let t41: f64 = t28 * t28;
-        let t42: f64 = t7 * t41;
-        let t43: f64 = t18 * t42;
-        let t44: f64 = t25 * t43;
-        let t45: f64 = 0.008333333333333333f64;
-        let t46: f64 = t44 * t45;
-        let t47: f64 = t40 - t46;
-        let t48: f64 = t13 * t41;
-        let t49: f64 = t7 * t48;
-        let t50: f64 = t18 * t49;
-        let t51: f64 = t19 * t50;
-        let t52: f64 = 0.001388888888888889f64;
-        let t53: f64 = t51 * t52;
-        let t54: f64 = t47 - t53;
-        let t55: f64 = t34 * t34;
-        let t56: f64 = t7 * t55;
-        let t57: f64 = t18 * t56;
-        let t58: f64 = t25 * t57;
-        let t59: f64 = 0.0001984126984126984f64;
-        let t60: f64 = t58 * t59;
-        let t61: f64 = t54 + t60;
-        let t62: f64 = t13 * t55;
-        let t63: f64 = t7 * t62;
-        let t64: f64 = t18 * t63;
-        let t65: f64 = t19 * t64;
-        let t66: f64 = 0.0000248015873015873f64;
-        let t67: f64 = t65 * t66;
-        let t68: f64 = t61 + t67;
-        let t69: f64 = t41 * t41;
-        let t70: f64 = t7 * t69;
-        let t71: f64 = t18 * t70;
-        let t72: f64 = t25 * t71;
-        let t73: f64 = 0.0000027557319223985893f64;
-        let t74: f64 = t72 * t73;
-        let t75: f64 = t68 - t74;
-        let t76: f64 = t75 - t24;
-        let t77: f64 = t76 - t27;
-        let t92: f64 = t21 * t25;
-        let t93: f64 = t23 * t92;
-        let t94: f64 = t19 * t26;
-        let t95: f64 = t19 * t30;
-        let t96: f64 = t32 * t95;
-        let t97: f64 = t94 - t96;
-        let t98: f64 = t25 * t36;
-        let t99: f64 = t38 * t98;
-        let t100: f64 = t97 + t99;
-        let t101: f64 = t19 * t43;
-        let t102: f64 = t45 * t101;
-        let t103: f64 = t100 + t102;
-        let t104: f64 = t25 * t50;
-        let t105: f64 = t52 * t104;
-        let t106: f64 = t103 - t105;
-        let t107: f64 = t19 * t57;
-        let t108: f64 = t59 * t107;
-        let t109: f64 = t106 - t108;
-        let t110: f64 = t25 * t64;
-        let t111: f64 = t66 * t110;
-        let t112: f64 = t109 + t111;
-        let t113: f64 = t19 * t71;
-        let t114: f64 = t73 * t113;
-        let t115: f64 = t112 + t114;
-        let t116: f64 = t115 - t93;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::sin(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t10 / t6;
+    let t12: crate::Real = t4 + t11;
+    let t13: crate::Real = t7 * t12;
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = 0.0;
+    let t16: crate::Real = crate::math::cos(t2);
+    let t17: crate::Real = t9 * t16;
+    let t18: crate::Real = t3 + t17;
+    let t19: crate::Real = crate::math::cos(t0);
+    let t25: crate::Real = crate::math::sin(t0);
+    let t26: crate::Real = t7 * t18;
+    let t27: crate::Real = t25 * t26;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t13)
+        < crate::math::series_switch(0.05)
+    {
+        let t20: crate::Real = t7 * t13;
+        let t21: crate::Real = t18 * t20;
+        let t22: crate::Real = t19 * t21;
+        let t23: crate::Real = 0.5;
+        let t24: crate::Real = t22 * t23;
+        let t28: crate::Real = t13 * t13;
+        let t29: crate::Real = t7 * t28;
+        let t30: crate::Real = t18 * t29;
+        let t31: crate::Real = t25 * t30;
+        let t32: crate::Real = 0.16666666666666666;
+        let t33: crate::Real = t31 * t32;
+        let t34: crate::Real = t13 * t28;
+        let t35: crate::Real = t7 * t34;
+        let t36: crate::Real = t18 * t35;
+        let t37: crate::Real = t19 * t36;
+        let t38: crate::Real = 0.041666666666666664;
+        let t39: crate::Real = t37 * t38;
+        let t40: crate::Real = t33 + t39;
+        let t41: crate::Real = t28 * t28;
+        let t42: crate::Real = t7 * t41;
+        let t43: crate::Real = t18 * t42;
+        let t44: crate::Real = t25 * t43;
+        let t45: crate::Real = 0.008333333333333333;
+        let t46: crate::Real = t44 * t45;
+        let t47: crate::Real = t40 - t46;
+        let t48: crate::Real = t13 * t41;
+        let t49: crate::Real = t7 * t48;
+        let t50: crate::Real = t18 * t49;
+        let t51: crate::Real = t19 * t50;
+        let t52: crate::Real = 0.001388888888888889;
+        let t53: crate::Real = t51 * t52;
+        let t54: crate::Real = t47 - t53;
+        let t55: crate::Real = t34 * t34;
+        let t56: crate::Real = t7 * t55;
+        let t57: crate::Real = t18 * t56;
+        let t58: crate::Real = t25 * t57;
+        let t59: crate::Real = 0.0001984126984126984;
+        let t60: crate::Real = t58 * t59;
+        let t61: crate::Real = t54 + t60;
+        let t62: crate::Real = t13 * t55;
+        let t63: crate::Real = t7 * t62;
+        let t64: crate::Real = t18 * t63;
+        let t65: crate::Real = t19 * t64;
+        let t66: crate::Real = 0.0000248015873015873;
+        let t67: crate::Real = t65 * t66;
+        let t68: crate::Real = t61 + t67;
+        let t69: crate::Real = t41 * t41;
+        let t70: crate::Real = t7 * t69;
+        let t71: crate::Real = t18 * t70;
+        let t72: crate::Real = t25 * t71;
+        let t73: crate::Real = 0.0000027557319223985893;
+        let t74: crate::Real = t72 * t73;
+        let t75: crate::Real = t68 - t74;
+        let t76: crate::Real = t75 - t24;
+        let t77: crate::Real = t76 - t27;
+        let t92: crate::Real = t21 * t25;
+        let t93: crate::Real = t23 * t92;
+        let t94: crate::Real = t19 * t26;
+        let t95: crate::Real = t19 * t30;
+        let t96: crate::Real = t32 * t95;
+        let t97: crate::Real = t94 - t96;
+        let t98: crate::Real = t25 * t36;
+        let t99: crate::Real = t38 * t98;
+        let t100: crate::Real = t97 + t99;
+        let t101: crate::Real = t19 * t43;
+        let t102: crate::Real = t45 * t101;
+        let t103: crate::Real = t100 + t102;
+        let t104: crate::Real = t25 * t50;
+        let t105: crate::Real = t52 * t104;
+        let t106: crate::Real = t103 - t105;
+        let t107: crate::Real = t19 * t57;
+        let t108: crate::Real = t59 * t107;
+        let t109: crate::Real = t106 - t108;
+        let t110: crate::Real = t25 * t64;
+        let t111: crate::Real = t66 * t110;
+        let t112: crate::Real = t109 + t111;
+        let t113: crate::Real = t19 * t71;
+        let t114: crate::Real = t73 * t113;
+        let t115: crate::Real = t112 + t114;
+        let t116: crate::Real = t115 - t93;
         [t77, t116]
     } else {
-        let t78: f64 = libm::cos(t13);
-        let t79: f64 = t14 - t78;
-        let t80: f64 = t7 * t79;
-        let t81: f64 = t18 * t80;
-        let t82: f64 = t19 * t81;
-        let t83: f64 = 1f64;
-        let t84: f64 = t83 / t13;
-        let t85: f64 = t82 * t84;
-        let t86: f64 = -t85;
-        let t87: f64 = libm::sin(t13);
-        let t88: f64 = t27 * t87;
-        let t89: f64 = t88 * t84;
-        let t90: f64 = t86 - t89;
-        let t117: f64 = t25 * t81;
-        let t118: f64 = t117 * t84;
-        let t119: f64 = t26 * t87;
-        let t120: f64 = t19 * t119;
-        let t121: f64 = t120 * t84;
-        let t122: f64 = t121 - t118;
+        let t78: crate::Real = crate::math::cos(t13);
+        let t79: crate::Real = t14 - t78;
+        let t80: crate::Real = t7 * t79;
+        let t81: crate::Real = t18 * t80;
+        let t82: crate::Real = t19 * t81;
+        let t83: crate::Real = 1.0;
+        let t84: crate::Real = t83 / t13;
+        let t85: crate::Real = t82 * t84;
+        let t86: crate::Real = -t85;
+        let t87: crate::Real = crate::math::sin(t13);
+        let t88: crate::Real = t27 * t87;
+        let t89: crate::Real = t88 * t84;
+        let t90: crate::Real = t86 - t89;
+        let t117: crate::Real = t25 * t81;
+        let t118: crate::Real = t117 * t84;
+        let t119: crate::Real = t26 * t87;
+        let t120: crate::Real = t19 * t119;
+        let t121: crate::Real = t120 * t84;
+        let t122: crate::Real = t121 - t118;
         [t90, t122]
     };
-    let t91: f64 = g0[0usize];
-    let t123: f64 = g0[1usize];
+    let t91: crate::Real = g0[0usize];
+    let t123: crate::Real = g0[1usize];
     [[t14, t15, t91], [t15, t14, t123], [t15, t15, t14]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
@@ -611,384 +618,386 @@ pub fn step_exact_jac_x(
 341 arithmetic operations (2729 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::sin(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = 1f64;
-    let t12: f64 = t11 / t6;
-    let t13: f64 = t10 * t12;
-    let t14: f64 = t4 + t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = libm::cos(t0);
-    let t17: f64 = libm::cos(t2);
-    let t18: f64 = t5 * t7;
-    let t21: f64 = libm::sin(t0);
-    let t22: f64 = t18 * t21;
-    let t28: f64 = t9 * t17;
-    let t29: f64 = t3 + t28;
-    let t45: f64 = t15 * t15;
-    let t146: f64 = t1 * t18;
-    let t149: f64 = t21 * t146;
-    let g0: [f64; 4usize] = if libm::fabs(t15) < 0.05f64 {
-        let t19: f64 = t16 * t18;
-        let t20: f64 = t17 * t19;
-        let t23: f64 = t17 * t22;
-        let t24: f64 = 0.5f64;
-        let t25: f64 = t23 * t24;
-        let t26: f64 = -t25;
-        let t27: f64 = t7 * t7;
-        let t30: f64 = t5 * t27;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t8 * t31;
-        let t33: f64 = t16 * t32;
-        let t34: f64 = 0.3333333333333333f64;
-        let t35: f64 = t33 * t34;
-        let t36: f64 = t35 * t12;
-        let t37: f64 = t26 - t36;
-        let t38: f64 = t15 * t37;
-        let t39: f64 = t20 + t38;
-        let t40: f64 = t21 * t31;
-        let t41: f64 = t8 * t40;
-        let t42: f64 = t24 * t41;
-        let t43: f64 = t42 * t12;
-        let t44: f64 = t39 - t43;
-        let t46: f64 = 0.16666666666666666f64;
-        let t47: f64 = t20 * t46;
-        let t48: f64 = 0.125f64;
-        let t49: f64 = t41 * t48;
-        let t50: f64 = t49 * t12;
-        let t51: f64 = t50 - t47;
-        let t52: f64 = t45 * t51;
-        let t53: f64 = t44 + t52;
-        let t54: f64 = t15 * t45;
-        let t55: f64 = 0.041666666666666664f64;
-        let t56: f64 = t23 * t55;
-        let t57: f64 = 0.03333333333333333f64;
-        let t58: f64 = t33 * t57;
-        let t59: f64 = t58 * t12;
-        let t60: f64 = t56 + t59;
-        let t61: f64 = t54 * t60;
-        let t62: f64 = t53 + t61;
-        let t63: f64 = t45 * t45;
-        let t64: f64 = 0.008333333333333333f64;
-        let t65: f64 = t20 * t64;
-        let t66: f64 = 0.006944444444444444f64;
-        let t67: f64 = t41 * t66;
-        let t68: f64 = t67 * t12;
-        let t69: f64 = t65 - t68;
-        let t70: f64 = t63 * t69;
-        let t71: f64 = t62 + t70;
-        let t72: f64 = t15 * t63;
-        let t73: f64 = 0.001388888888888889f64;
-        let t74: f64 = t23 * t73;
-        let t75: f64 = -t74;
-        let t76: f64 = 0.0011904761904761906f64;
-        let t77: f64 = t33 * t76;
-        let t78: f64 = t77 * t12;
-        let t79: f64 = t75 - t78;
-        let t80: f64 = t72 * t79;
-        let t81: f64 = t71 + t80;
-        let t82: f64 = t54 * t54;
-        let t83: f64 = 0.0001984126984126984f64;
-        let t84: f64 = t20 * t83;
-        let t85: f64 = 0.00017361111111111112f64;
-        let t86: f64 = t41 * t85;
-        let t87: f64 = t86 * t12;
-        let t88: f64 = t87 - t84;
-        let t89: f64 = t82 * t88;
-        let t90: f64 = t81 + t89;
-        let t91: f64 = t15 * t82;
-        let t92: f64 = 0.0000248015873015873f64;
-        let t93: f64 = t23 * t92;
-        let t94: f64 = 0.000022045855379188714f64;
-        let t95: f64 = t33 * t94;
-        let t96: f64 = t95 * t12;
-        let t97: f64 = t93 + t96;
-        let t98: f64 = t91 * t97;
-        let t99: f64 = t90 + t98;
-        let t100: f64 = t63 * t63;
-        let t101: f64 = 0.0000027557319223985893f64;
-        let t102: f64 = t20 * t101;
-        let t103: f64 = 0.00000248015873015873f64;
-        let t104: f64 = t41 * t103;
-        let t105: f64 = t104 * t12;
-        let t106: f64 = t102 - t105;
-        let t107: f64 = t100 * t106;
-        let t108: f64 = t99 + t107;
-        let t147: f64 = t8 * t146;
-        let t148: f64 = t16 * t147;
-        let t150: f64 = t8 * t149;
-        let t151: f64 = t24 * t150;
-        let t152: f64 = t1 * t30;
-        let t153: f64 = t29 * t152;
-        let t154: f64 = t16 * t153;
-        let t155: f64 = t17 * t154;
-        let t156: f64 = t34 * t155;
-        let t157: f64 = t156 * t12;
-        let t158: f64 = t151 - t157;
-        let t159: f64 = t15 * t158;
-        let t160: f64 = t21 * t153;
-        let t161: f64 = t17 * t160;
-        let t162: f64 = t24 * t161;
-        let t163: f64 = t162 * t12;
-        let t164: f64 = t159 - t163;
-        let t165: f64 = t46 * t148;
-        let t166: f64 = t48 * t161;
-        let t167: f64 = t166 * t12;
-        let t168: f64 = t165 + t167;
-        let t169: f64 = t45 * t168;
-        let t170: f64 = t164 + t169;
-        let t171: f64 = t55 * t150;
-        let t172: f64 = t57 * t155;
-        let t173: f64 = t172 * t12;
-        let t174: f64 = t173 - t171;
-        let t175: f64 = t54 * t174;
-        let t176: f64 = t170 + t175;
-        let t177: f64 = t64 * t148;
-        let t178: f64 = -t177;
-        let t179: f64 = t66 * t161;
-        let t180: f64 = t179 * t12;
-        let t181: f64 = t178 - t180;
-        let t182: f64 = t63 * t181;
-        let t183: f64 = t176 + t182;
-        let t184: f64 = t73 * t150;
-        let t185: f64 = t76 * t155;
-        let t186: f64 = t185 * t12;
-        let t187: f64 = t184 - t186;
-        let t188: f64 = t72 * t187;
-        let t189: f64 = t183 + t188;
-        let t190: f64 = t83 * t148;
-        let t191: f64 = t85 * t161;
-        let t192: f64 = t191 * t12;
-        let t193: f64 = t190 + t192;
-        let t194: f64 = t82 * t193;
-        let t195: f64 = t189 + t194;
-        let t196: f64 = t92 * t150;
-        let t197: f64 = t94 * t155;
-        let t198: f64 = t197 * t12;
-        let t199: f64 = t198 - t196;
-        let t200: f64 = t91 * t199;
-        let t201: f64 = t195 + t200;
-        let t202: f64 = t101 * t148;
-        let t203: f64 = -t202;
-        let t204: f64 = t103 * t161;
-        let t205: f64 = t204 * t12;
-        let t206: f64 = t203 - t205;
-        let t207: f64 = t100 * t206;
-        let t208: f64 = t201 + t207;
-        let t209: f64 = t208 - t148;
-        let t224: f64 = t20 * t24;
-        let t225: f64 = t34 * t41;
-        let t226: f64 = t225 * t12;
-        let t227: f64 = t224 - t226;
-        let t228: f64 = t15 * t227;
-        let t229: f64 = t23 + t228;
-        let t230: f64 = t24 * t33;
-        let t231: f64 = t230 * t12;
-        let t232: f64 = t229 + t231;
-        let t233: f64 = t23 * t46;
-        let t234: f64 = -t233;
-        let t235: f64 = t33 * t48;
-        let t236: f64 = t235 * t12;
-        let t237: f64 = t234 - t236;
-        let t238: f64 = t45 * t237;
-        let t239: f64 = t232 + t238;
-        let t240: f64 = t20 * t55;
-        let t241: f64 = t41 * t57;
-        let t242: f64 = t241 * t12;
-        let t243: f64 = t242 - t240;
-        let t244: f64 = t54 * t243;
-        let t245: f64 = t239 + t244;
-        let t246: f64 = t23 * t64;
-        let t247: f64 = t33 * t66;
-        let t248: f64 = t247 * t12;
-        let t249: f64 = t246 + t248;
-        let t250: f64 = t63 * t249;
-        let t251: f64 = t245 + t250;
-        let t252: f64 = t20 * t73;
-        let t253: f64 = t41 * t76;
-        let t254: f64 = t253 * t12;
-        let t255: f64 = t252 - t254;
-        let t256: f64 = t72 * t255;
-        let t257: f64 = t251 + t256;
-        let t258: f64 = t23 * t83;
-        let t259: f64 = -t258;
-        let t260: f64 = t33 * t85;
-        let t261: f64 = t260 * t12;
-        let t262: f64 = t259 - t261;
-        let t263: f64 = t82 * t262;
-        let t264: f64 = t257 + t263;
-        let t265: f64 = t20 * t92;
-        let t266: f64 = t41 * t94;
-        let t267: f64 = t266 * t12;
-        let t268: f64 = t267 - t265;
-        let t269: f64 = t91 * t268;
-        let t270: f64 = t264 + t269;
-        let t271: f64 = t23 * t101;
-        let t272: f64 = t33 * t103;
-        let t273: f64 = t272 * t12;
-        let t274: f64 = t271 + t273;
-        let t275: f64 = t100 * t274;
-        let t276: f64 = t270 + t275;
-        let t298: f64 = t24 * t148;
-        let t299: f64 = -t298;
-        let t300: f64 = t34 * t161;
-        let t301: f64 = t300 * t12;
-        let t302: f64 = t299 - t301;
-        let t303: f64 = t15 * t302;
-        let t304: f64 = t24 * t155;
-        let t305: f64 = t304 * t12;
-        let t306: f64 = t303 + t305;
-        let t307: f64 = t46 * t150;
-        let t308: f64 = t48 * t155;
-        let t309: f64 = t308 * t12;
-        let t310: f64 = t307 - t309;
-        let t311: f64 = t45 * t310;
-        let t312: f64 = t306 + t311;
-        let t313: f64 = t55 * t148;
-        let t314: f64 = t57 * t161;
-        let t315: f64 = t314 * t12;
-        let t316: f64 = t313 + t315;
-        let t317: f64 = t54 * t316;
-        let t318: f64 = t312 + t317;
-        let t319: f64 = t64 * t150;
-        let t320: f64 = t66 * t155;
-        let t321: f64 = t320 * t12;
-        let t322: f64 = t321 - t319;
-        let t323: f64 = t63 * t322;
-        let t324: f64 = t318 + t323;
-        let t325: f64 = t73 * t148;
-        let t326: f64 = -t325;
-        let t327: f64 = t76 * t161;
-        let t328: f64 = t327 * t12;
-        let t329: f64 = t326 - t328;
-        let t330: f64 = t72 * t329;
-        let t331: f64 = t324 + t330;
-        let t332: f64 = t83 * t150;
-        let t333: f64 = t85 * t155;
-        let t334: f64 = t333 * t12;
-        let t335: f64 = t332 - t334;
-        let t336: f64 = t82 * t335;
-        let t337: f64 = t331 + t336;
-        let t338: f64 = t92 * t148;
-        let t339: f64 = t94 * t161;
-        let t340: f64 = t339 * t12;
-        let t341: f64 = t338 + t340;
-        let t342: f64 = t91 * t341;
-        let t343: f64 = t337 + t342;
-        let t344: f64 = t101 * t150;
-        let t345: f64 = t103 * t155;
-        let t346: f64 = t345 * t12;
-        let t347: f64 = t346 - t344;
-        let t348: f64 = t100 * t347;
-        let t349: f64 = t343 + t348;
-        let t350: f64 = t349 - t150;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::sin(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = 1.0;
+    let t12: crate::Real = t11 / t6;
+    let t13: crate::Real = t10 * t12;
+    let t14: crate::Real = t4 + t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = crate::math::cos(t0);
+    let t17: crate::Real = crate::math::cos(t2);
+    let t18: crate::Real = t5 * t7;
+    let t21: crate::Real = crate::math::sin(t0);
+    let t22: crate::Real = t18 * t21;
+    let t28: crate::Real = t9 * t17;
+    let t29: crate::Real = t3 + t28;
+    let t45: crate::Real = t15 * t15;
+    let t146: crate::Real = t1 * t18;
+    let t149: crate::Real = t21 * t146;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t19: crate::Real = t16 * t18;
+        let t20: crate::Real = t17 * t19;
+        let t23: crate::Real = t17 * t22;
+        let t24: crate::Real = 0.5;
+        let t25: crate::Real = t23 * t24;
+        let t26: crate::Real = -t25;
+        let t27: crate::Real = t7 * t7;
+        let t30: crate::Real = t5 * t27;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t8 * t31;
+        let t33: crate::Real = t16 * t32;
+        let t34: crate::Real = 0.3333333333333333;
+        let t35: crate::Real = t33 * t34;
+        let t36: crate::Real = t35 * t12;
+        let t37: crate::Real = t26 - t36;
+        let t38: crate::Real = t15 * t37;
+        let t39: crate::Real = t20 + t38;
+        let t40: crate::Real = t21 * t31;
+        let t41: crate::Real = t8 * t40;
+        let t42: crate::Real = t24 * t41;
+        let t43: crate::Real = t42 * t12;
+        let t44: crate::Real = t39 - t43;
+        let t46: crate::Real = 0.16666666666666666;
+        let t47: crate::Real = t20 * t46;
+        let t48: crate::Real = 0.125;
+        let t49: crate::Real = t41 * t48;
+        let t50: crate::Real = t49 * t12;
+        let t51: crate::Real = t50 - t47;
+        let t52: crate::Real = t45 * t51;
+        let t53: crate::Real = t44 + t52;
+        let t54: crate::Real = t15 * t45;
+        let t55: crate::Real = 0.041666666666666664;
+        let t56: crate::Real = t23 * t55;
+        let t57: crate::Real = 0.03333333333333333;
+        let t58: crate::Real = t33 * t57;
+        let t59: crate::Real = t58 * t12;
+        let t60: crate::Real = t56 + t59;
+        let t61: crate::Real = t54 * t60;
+        let t62: crate::Real = t53 + t61;
+        let t63: crate::Real = t45 * t45;
+        let t64: crate::Real = 0.008333333333333333;
+        let t65: crate::Real = t20 * t64;
+        let t66: crate::Real = 0.006944444444444444;
+        let t67: crate::Real = t41 * t66;
+        let t68: crate::Real = t67 * t12;
+        let t69: crate::Real = t65 - t68;
+        let t70: crate::Real = t63 * t69;
+        let t71: crate::Real = t62 + t70;
+        let t72: crate::Real = t15 * t63;
+        let t73: crate::Real = 0.001388888888888889;
+        let t74: crate::Real = t23 * t73;
+        let t75: crate::Real = -t74;
+        let t76: crate::Real = 0.0011904761904761906;
+        let t77: crate::Real = t33 * t76;
+        let t78: crate::Real = t77 * t12;
+        let t79: crate::Real = t75 - t78;
+        let t80: crate::Real = t72 * t79;
+        let t81: crate::Real = t71 + t80;
+        let t82: crate::Real = t54 * t54;
+        let t83: crate::Real = 0.0001984126984126984;
+        let t84: crate::Real = t20 * t83;
+        let t85: crate::Real = 0.00017361111111111112;
+        let t86: crate::Real = t41 * t85;
+        let t87: crate::Real = t86 * t12;
+        let t88: crate::Real = t87 - t84;
+        let t89: crate::Real = t82 * t88;
+        let t90: crate::Real = t81 + t89;
+        let t91: crate::Real = t15 * t82;
+        let t92: crate::Real = 0.0000248015873015873;
+        let t93: crate::Real = t23 * t92;
+        let t94: crate::Real = 0.000022045855379188714;
+        let t95: crate::Real = t33 * t94;
+        let t96: crate::Real = t95 * t12;
+        let t97: crate::Real = t93 + t96;
+        let t98: crate::Real = t91 * t97;
+        let t99: crate::Real = t90 + t98;
+        let t100: crate::Real = t63 * t63;
+        let t101: crate::Real = 0.0000027557319223985893;
+        let t102: crate::Real = t20 * t101;
+        let t103: crate::Real = 0.00000248015873015873;
+        let t104: crate::Real = t41 * t103;
+        let t105: crate::Real = t104 * t12;
+        let t106: crate::Real = t102 - t105;
+        let t107: crate::Real = t100 * t106;
+        let t108: crate::Real = t99 + t107;
+        let t147: crate::Real = t8 * t146;
+        let t148: crate::Real = t16 * t147;
+        let t150: crate::Real = t8 * t149;
+        let t151: crate::Real = t24 * t150;
+        let t152: crate::Real = t1 * t30;
+        let t153: crate::Real = t29 * t152;
+        let t154: crate::Real = t16 * t153;
+        let t155: crate::Real = t17 * t154;
+        let t156: crate::Real = t34 * t155;
+        let t157: crate::Real = t156 * t12;
+        let t158: crate::Real = t151 - t157;
+        let t159: crate::Real = t15 * t158;
+        let t160: crate::Real = t21 * t153;
+        let t161: crate::Real = t17 * t160;
+        let t162: crate::Real = t24 * t161;
+        let t163: crate::Real = t162 * t12;
+        let t164: crate::Real = t159 - t163;
+        let t165: crate::Real = t46 * t148;
+        let t166: crate::Real = t48 * t161;
+        let t167: crate::Real = t166 * t12;
+        let t168: crate::Real = t165 + t167;
+        let t169: crate::Real = t45 * t168;
+        let t170: crate::Real = t164 + t169;
+        let t171: crate::Real = t55 * t150;
+        let t172: crate::Real = t57 * t155;
+        let t173: crate::Real = t172 * t12;
+        let t174: crate::Real = t173 - t171;
+        let t175: crate::Real = t54 * t174;
+        let t176: crate::Real = t170 + t175;
+        let t177: crate::Real = t64 * t148;
+        let t178: crate::Real = -t177;
+        let t179: crate::Real = t66 * t161;
+        let t180: crate::Real = t179 * t12;
+        let t181: crate::Real = t178 - t180;
+        let t182: crate::Real = t63 * t181;
+        let t183: crate::Real = t176 + t182;
+        let t184: crate::Real = t73 * t150;
+        let t185: crate::Real = t76 * t155;
+        let t186: crate::Real = t185 * t12;
+        let t187: crate::Real = t184 - t186;
+        let t188: crate::Real = t72 * t187;
+        let t189: crate::Real = t183 + t188;
+        let t190: crate::Real = t83 * t148;
+        let t191: crate::Real = t85 * t161;
+        let t192: crate::Real = t191 * t12;
+        let t193: crate::Real = t190 + t192;
+        let t194: crate::Real = t82 * t193;
+        let t195: crate::Real = t189 + t194;
+        let t196: crate::Real = t92 * t150;
+        let t197: crate::Real = t94 * t155;
+        let t198: crate::Real = t197 * t12;
+        let t199: crate::Real = t198 - t196;
+        let t200: crate::Real = t91 * t199;
+        let t201: crate::Real = t195 + t200;
+        let t202: crate::Real = t101 * t148;
+        let t203: crate::Real = -t202;
+        let t204: crate::Real = t103 * t161;
+        let t205: crate::Real = t204 * t12;
+        let t206: crate::Real = t203 - t205;
+        let t207: crate::Real = t100 * t206;
+        let t208: crate::Real = t201 + t207;
+        let t209: crate::Real = t208 - t148;
+        let t224: crate::Real = t20 * t24;
+        let t225: crate::Real = t34 * t41;
+        let t226: crate::Real = t225 * t12;
+        let t227: crate::Real = t224 - t226;
+        let t228: crate::Real = t15 * t227;
+        let t229: crate::Real = t23 + t228;
+        let t230: crate::Real = t24 * t33;
+        let t231: crate::Real = t230 * t12;
+        let t232: crate::Real = t229 + t231;
+        let t233: crate::Real = t23 * t46;
+        let t234: crate::Real = -t233;
+        let t235: crate::Real = t33 * t48;
+        let t236: crate::Real = t235 * t12;
+        let t237: crate::Real = t234 - t236;
+        let t238: crate::Real = t45 * t237;
+        let t239: crate::Real = t232 + t238;
+        let t240: crate::Real = t20 * t55;
+        let t241: crate::Real = t41 * t57;
+        let t242: crate::Real = t241 * t12;
+        let t243: crate::Real = t242 - t240;
+        let t244: crate::Real = t54 * t243;
+        let t245: crate::Real = t239 + t244;
+        let t246: crate::Real = t23 * t64;
+        let t247: crate::Real = t33 * t66;
+        let t248: crate::Real = t247 * t12;
+        let t249: crate::Real = t246 + t248;
+        let t250: crate::Real = t63 * t249;
+        let t251: crate::Real = t245 + t250;
+        let t252: crate::Real = t20 * t73;
+        let t253: crate::Real = t41 * t76;
+        let t254: crate::Real = t253 * t12;
+        let t255: crate::Real = t252 - t254;
+        let t256: crate::Real = t72 * t255;
+        let t257: crate::Real = t251 + t256;
+        let t258: crate::Real = t23 * t83;
+        let t259: crate::Real = -t258;
+        let t260: crate::Real = t33 * t85;
+        let t261: crate::Real = t260 * t12;
+        let t262: crate::Real = t259 - t261;
+        let t263: crate::Real = t82 * t262;
+        let t264: crate::Real = t257 + t263;
+        let t265: crate::Real = t20 * t92;
+        let t266: crate::Real = t41 * t94;
+        let t267: crate::Real = t266 * t12;
+        let t268: crate::Real = t267 - t265;
+        let t269: crate::Real = t91 * t268;
+        let t270: crate::Real = t264 + t269;
+        let t271: crate::Real = t23 * t101;
+        let t272: crate::Real = t33 * t103;
+        let t273: crate::Real = t272 * t12;
+        let t274: crate::Real = t271 + t273;
+        let t275: crate::Real = t100 * t274;
+        let t276: crate::Real = t270 + t275;
+        let t298: crate::Real = t24 * t148;
+        let t299: crate::Real = -t298;
+        let t300: crate::Real = t34 * t161;
+        let t301: crate::Real = t300 * t12;
+        let t302: crate::Real = t299 - t301;
+        let t303: crate::Real = t15 * t302;
+        let t304: crate::Real = t24 * t155;
+        let t305: crate::Real = t304 * t12;
+        let t306: crate::Real = t303 + t305;
+        let t307: crate::Real = t46 * t150;
+        let t308: crate::Real = t48 * t155;
+        let t309: crate::Real = t308 * t12;
+        let t310: crate::Real = t307 - t309;
+        let t311: crate::Real = t45 * t310;
+        let t312: crate::Real = t306 + t311;
+        let t313: crate::Real = t55 * t148;
+        let t314: crate::Real = t57 * t161;
+        let t315: crate::Real = t314 * t12;
+        let t316: crate::Real = t313 + t315;
+        let t317: crate::Real = t54 * t316;
+        let t318: crate::Real = t312 + t317;
+        let t319: crate::Real = t64 * t150;
+        let t320: crate::Real = t66 * t155;
+        let t321: crate::Real = t320 * t12;
+        let t322: crate::Real = t321 - t319;
+        let t323: crate::Real = t63 * t322;
+        let t324: crate::Real = t318 + t323;
+        let t325: crate::Real = t73 * t148;
+        let t326: crate::Real = -t325;
+        let t327: crate::Real = t76 * t161;
+        let t328: crate::Real = t327 * t12;
+        let t329: crate::Real = t326 - t328;
+        let t330: crate::Real = t72 * t329;
+        let t331: crate::Real = t324 + t330;
+        let t332: crate::Real = t83 * t150;
+        let t333: crate::Real = t85 * t155;
+        let t334: crate::Real = t333 * t12;
+        let t335: crate::Real = t332 - t334;
+        let t336: crate::Real = t82 * t335;
+        let t337: crate::Real = t331 + t336;
+        let t338: crate::Real = t92 * t148;
+        let t339: crate::Real = t94 * t161;
+        let t340: crate::Real = t339 * t12;
+        let t341: crate::Real = t338 + t340;
+        let t342: crate::Real = t91 * t341;
+        let t343: crate::Real = t337 + t342;
+        let t344: crate::Real = t101 * t150;
+        let t345: crate::Real = t103 * t155;
+        let t346: crate::Real = t345 * t12;
+        let t347: crate::Real = t346 - t344;
+        let t348: crate::Real = t100 * t347;
+        let t349: crate::Real = t343 + t348;
+        let t350: crate::Real = t349 - t150;
         [t108, t209, t276, t350]
     } else {
-        let t109: f64 = libm::sin(t15);
-        let t110: f64 = t7 * t29;
-        let t111: f64 = t21 * t110;
-        let t112: f64 = t109 * t111;
-        let t113: f64 = t11 / t15;
-        let t114: f64 = t112 * t113;
-        let t115: f64 = libm::cos(t15);
-        let t116: f64 = t16 * t110;
-        let t117: f64 = t115 * t116;
-        let t118: f64 = t117 * t113;
-        let t119: f64 = 1f64;
-        let t120: f64 = t119 - t115;
-        let t121: f64 = t7 * t120;
-        let t122: f64 = t29 * t121;
-        let t123: f64 = t21 * t122;
-        let t124: f64 = t11 / t45;
-        let t125: f64 = t123 * t124;
-        let t126: f64 = t118 + t125;
-        let t127: f64 = t109 * t110;
-        let t128: f64 = t16 * t127;
-        let t129: f64 = t128 * t124;
-        let t130: f64 = t126 - t129;
-        let t131: f64 = t130 - t114;
-        let t132: f64 = t18 * t131;
-        let t133: f64 = t8 * t132;
-        let t134: f64 = t133 * t12;
-        let t135: f64 = t18 * t109;
-        let t136: f64 = t16 * t135;
-        let t137: f64 = t17 * t136;
-        let t138: f64 = t137 * t113;
-        let t139: f64 = t134 + t138;
-        let t140: f64 = t18 * t120;
-        let t141: f64 = t21 * t140;
-        let t142: f64 = t17 * t141;
-        let t143: f64 = t142 * t113;
-        let t144: f64 = t139 - t143;
-        let t210: f64 = t131 * t146;
-        let t211: f64 = t17 * t210;
-        let t212: f64 = t211 * t12;
-        let t213: f64 = t109 * t146;
-        let t214: f64 = t8 * t213;
-        let t215: f64 = t16 * t214;
-        let t216: f64 = t215 * t113;
-        let t217: f64 = t212 - t216;
-        let t218: f64 = t120 * t146;
-        let t219: f64 = t21 * t218;
-        let t220: f64 = t8 * t219;
-        let t221: f64 = t220 * t113;
-        let t222: f64 = t217 + t221;
-        let t277: f64 = t111 * t115;
-        let t278: f64 = t277 * t113;
-        let t279: f64 = t128 * t113;
-        let t280: f64 = t278 + t279;
-        let t281: f64 = t16 * t122;
-        let t282: f64 = t281 * t124;
-        let t283: f64 = t280 - t282;
-        let t284: f64 = t112 * t124;
-        let t285: f64 = t283 - t284;
-        let t286: f64 = t18 * t285;
-        let t287: f64 = t8 * t286;
-        let t288: f64 = t287 * t12;
-        let t289: f64 = t22 * t109;
-        let t290: f64 = t17 * t289;
-        let t291: f64 = t290 * t113;
-        let t292: f64 = t288 + t291;
-        let t293: f64 = t16 * t140;
-        let t294: f64 = t17 * t293;
-        let t295: f64 = t294 * t113;
-        let t296: f64 = t292 + t295;
-        let t351: f64 = t146 * t285;
-        let t352: f64 = t17 * t351;
-        let t353: f64 = t352 * t12;
-        let t354: f64 = t109 * t149;
-        let t355: f64 = t8 * t354;
-        let t356: f64 = t355 * t113;
-        let t357: f64 = t353 - t356;
-        let t358: f64 = t8 * t218;
-        let t359: f64 = t16 * t358;
-        let t360: f64 = t359 * t113;
-        let t361: f64 = t357 - t360;
+        let t109: crate::Real = crate::math::sin(t15);
+        let t110: crate::Real = t7 * t29;
+        let t111: crate::Real = t21 * t110;
+        let t112: crate::Real = t109 * t111;
+        let t113: crate::Real = t11 / t15;
+        let t114: crate::Real = t112 * t113;
+        let t115: crate::Real = crate::math::cos(t15);
+        let t116: crate::Real = t16 * t110;
+        let t117: crate::Real = t115 * t116;
+        let t118: crate::Real = t117 * t113;
+        let t119: crate::Real = 1.0;
+        let t120: crate::Real = t119 - t115;
+        let t121: crate::Real = t7 * t120;
+        let t122: crate::Real = t29 * t121;
+        let t123: crate::Real = t21 * t122;
+        let t124: crate::Real = t11 / t45;
+        let t125: crate::Real = t123 * t124;
+        let t126: crate::Real = t118 + t125;
+        let t127: crate::Real = t109 * t110;
+        let t128: crate::Real = t16 * t127;
+        let t129: crate::Real = t128 * t124;
+        let t130: crate::Real = t126 - t129;
+        let t131: crate::Real = t130 - t114;
+        let t132: crate::Real = t18 * t131;
+        let t133: crate::Real = t8 * t132;
+        let t134: crate::Real = t133 * t12;
+        let t135: crate::Real = t18 * t109;
+        let t136: crate::Real = t16 * t135;
+        let t137: crate::Real = t17 * t136;
+        let t138: crate::Real = t137 * t113;
+        let t139: crate::Real = t134 + t138;
+        let t140: crate::Real = t18 * t120;
+        let t141: crate::Real = t21 * t140;
+        let t142: crate::Real = t17 * t141;
+        let t143: crate::Real = t142 * t113;
+        let t144: crate::Real = t139 - t143;
+        let t210: crate::Real = t131 * t146;
+        let t211: crate::Real = t17 * t210;
+        let t212: crate::Real = t211 * t12;
+        let t213: crate::Real = t109 * t146;
+        let t214: crate::Real = t8 * t213;
+        let t215: crate::Real = t16 * t214;
+        let t216: crate::Real = t215 * t113;
+        let t217: crate::Real = t212 - t216;
+        let t218: crate::Real = t120 * t146;
+        let t219: crate::Real = t21 * t218;
+        let t220: crate::Real = t8 * t219;
+        let t221: crate::Real = t220 * t113;
+        let t222: crate::Real = t217 + t221;
+        let t277: crate::Real = t111 * t115;
+        let t278: crate::Real = t277 * t113;
+        let t279: crate::Real = t128 * t113;
+        let t280: crate::Real = t278 + t279;
+        let t281: crate::Real = t16 * t122;
+        let t282: crate::Real = t281 * t124;
+        let t283: crate::Real = t280 - t282;
+        let t284: crate::Real = t112 * t124;
+        let t285: crate::Real = t283 - t284;
+        let t286: crate::Real = t18 * t285;
+        let t287: crate::Real = t8 * t286;
+        let t288: crate::Real = t287 * t12;
+        let t289: crate::Real = t22 * t109;
+        let t290: crate::Real = t17 * t289;
+        let t291: crate::Real = t290 * t113;
+        let t292: crate::Real = t288 + t291;
+        let t293: crate::Real = t16 * t140;
+        let t294: crate::Real = t17 * t293;
+        let t295: crate::Real = t294 * t113;
+        let t296: crate::Real = t292 + t295;
+        let t351: crate::Real = t146 * t285;
+        let t352: crate::Real = t17 * t351;
+        let t353: crate::Real = t352 * t12;
+        let t354: crate::Real = t109 * t149;
+        let t355: crate::Real = t8 * t354;
+        let t356: crate::Real = t355 * t113;
+        let t357: crate::Real = t353 - t356;
+        let t358: crate::Real = t8 * t218;
+        let t359: crate::Real = t16 * t358;
+        let t360: crate::Real = t359 * t113;
+        let t361: crate::Real = t357 - t360;
         [t144, t222, t296, t361]
     };
-    let t145: f64 = g0[0usize];
-    let t223: f64 = g0[1usize];
-    let t297: f64 = g0[2usize];
-    let t362: f64 = g0[3usize];
-    let t363: f64 = t8 * t18;
-    let t364: f64 = t363 * t12;
-    let t365: f64 = t17 * t146;
-    let t366: f64 = t365 * t12;
+    let t145: crate::Real = g0[0usize];
+    let t223: crate::Real = g0[1usize];
+    let t297: crate::Real = g0[2usize];
+    let t362: crate::Real = g0[3usize];
+    let t363: crate::Real = t8 * t18;
+    let t364: crate::Real = t363 * t12;
+    let t365: crate::Real = t17 * t146;
+    let t366: crate::Real = t365 * t12;
     [[t145, t223], [t297, t362], [t364, t366]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -1003,238 +1012,240 @@ pub fn step_exact_jac_u(
 194 arithmetic operations (1580 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::sin(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t10 / t6;
-    let t12: f64 = t4 + t11;
-    let t13: f64 = t7 * t12;
-    let t14: f64 = libm::sin(t0);
-    let t19: f64 = libm::cos(t0);
-    let t21: f64 = t13 * t13;
-    let t79: f64 = libm::cos(t2);
-    let t80: f64 = t9 * t79;
-    let t81: f64 = t3 + t80;
-    let t154: f64 = t7 * t14;
-    let g0: [f64; 4usize] = if libm::fabs(t13) < 0.05f64 {
-        let t15: f64 = t7 * t13;
-        let t16: f64 = t14 * t15;
-        let t17: f64 = 0.5f64;
-        let t18: f64 = t16 * t17;
-        let t20: f64 = t7 * t19;
-        let t22: f64 = t7 * t21;
-        let t23: f64 = t19 * t22;
-        let t24: f64 = 0.16666666666666666f64;
-        let t25: f64 = t23 * t24;
-        let t26: f64 = t20 - t25;
-        let t27: f64 = t13 * t21;
-        let t28: f64 = t7 * t27;
-        let t29: f64 = t14 * t28;
-        let t30: f64 = 0.041666666666666664f64;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t26 + t31;
-        let t33: f64 = t21 * t21;
-        let t34: f64 = t7 * t33;
-        let t35: f64 = t19 * t34;
-        let t36: f64 = 0.008333333333333333f64;
-        let t37: f64 = t35 * t36;
-        let t38: f64 = t32 + t37;
-        let t39: f64 = t13 * t33;
-        let t40: f64 = t7 * t39;
-        let t41: f64 = t14 * t40;
-        let t42: f64 = 0.001388888888888889f64;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t38 - t43;
-        let t45: f64 = t27 * t27;
-        let t46: f64 = t7 * t45;
-        let t47: f64 = t19 * t46;
-        let t48: f64 = 0.0001984126984126984f64;
-        let t49: f64 = t47 * t48;
-        let t50: f64 = t44 - t49;
-        let t51: f64 = t13 * t45;
-        let t52: f64 = t7 * t51;
-        let t53: f64 = t14 * t52;
-        let t54: f64 = 0.0000248015873015873f64;
-        let t55: f64 = t53 * t54;
-        let t56: f64 = t50 + t55;
-        let t57: f64 = t33 * t33;
-        let t58: f64 = t7 * t57;
-        let t59: f64 = t19 * t58;
-        let t60: f64 = 0.0000027557319223985893f64;
-        let t61: f64 = t59 * t60;
-        let t62: f64 = t56 + t61;
-        let t63: f64 = t62 - t18;
-        let t78: f64 = t7 * t7;
-        let t82: f64 = t13 * t78;
-        let t83: f64 = t81 * t82;
-        let t84: f64 = t19 * t83;
-        let t85: f64 = 0.3333333333333333f64;
-        let t86: f64 = t84 * t85;
-        let t87: f64 = t78 * t81;
-        let t88: f64 = t14 * t87;
-        let t89: f64 = t17 * t88;
-        let t90: f64 = t21 * t78;
-        let t91: f64 = t81 * t90;
-        let t92: f64 = t14 * t91;
-        let t93: f64 = 0.125f64;
-        let t94: f64 = t92 * t93;
-        let t95: f64 = t27 * t78;
-        let t96: f64 = t81 * t95;
-        let t97: f64 = t19 * t96;
-        let t98: f64 = 0.03333333333333333f64;
-        let t99: f64 = t97 * t98;
-        let t100: f64 = t94 + t99;
-        let t101: f64 = t33 * t78;
-        let t102: f64 = t81 * t101;
-        let t103: f64 = t14 * t102;
-        let t104: f64 = 0.006944444444444444f64;
-        let t105: f64 = t103 * t104;
-        let t106: f64 = t100 - t105;
-        let t107: f64 = t39 * t78;
-        let t108: f64 = t81 * t107;
-        let t109: f64 = t19 * t108;
-        let t110: f64 = 0.0011904761904761906f64;
-        let t111: f64 = t109 * t110;
-        let t112: f64 = t106 - t111;
-        let t113: f64 = t45 * t78;
-        let t114: f64 = t81 * t113;
-        let t115: f64 = t14 * t114;
-        let t116: f64 = 0.00017361111111111112f64;
-        let t117: f64 = t115 * t116;
-        let t118: f64 = t112 + t117;
-        let t119: f64 = t51 * t78;
-        let t120: f64 = t81 * t119;
-        let t121: f64 = t19 * t120;
-        let t122: f64 = 0.000022045855379188714f64;
-        let t123: f64 = t121 * t122;
-        let t124: f64 = t118 + t123;
-        let t125: f64 = t57 * t78;
-        let t126: f64 = t81 * t125;
-        let t127: f64 = t14 * t126;
-        let t128: f64 = 0.00000248015873015873f64;
-        let t129: f64 = t127 * t128;
-        let t130: f64 = t124 - t129;
-        let t131: f64 = t130 - t86;
-        let t132: f64 = t131 - t89;
-        let t152: f64 = t15 * t19;
-        let t153: f64 = t17 * t152;
-        let t155: f64 = t153 + t154;
-        let t156: f64 = t14 * t22;
-        let t157: f64 = t24 * t156;
-        let t158: f64 = t155 - t157;
-        let t159: f64 = t19 * t28;
-        let t160: f64 = t30 * t159;
-        let t161: f64 = t158 - t160;
-        let t162: f64 = t14 * t34;
-        let t163: f64 = t36 * t162;
-        let t164: f64 = t161 + t163;
-        let t165: f64 = t19 * t40;
-        let t166: f64 = t42 * t165;
-        let t167: f64 = t164 + t166;
-        let t168: f64 = t14 * t46;
-        let t169: f64 = t48 * t168;
-        let t170: f64 = t167 - t169;
-        let t171: f64 = t19 * t52;
-        let t172: f64 = t54 * t171;
-        let t173: f64 = t170 - t172;
-        let t174: f64 = t14 * t58;
-        let t175: f64 = t60 * t174;
-        let t176: f64 = t173 + t175;
-        let t183: f64 = t14 * t83;
-        let t184: f64 = t85 * t183;
-        let t185: f64 = t19 * t87;
-        let t186: f64 = t17 * t185;
-        let t187: f64 = t19 * t91;
-        let t188: f64 = t93 * t187;
-        let t189: f64 = t186 - t188;
-        let t190: f64 = t14 * t96;
-        let t191: f64 = t98 * t190;
-        let t192: f64 = t189 + t191;
-        let t193: f64 = t19 * t102;
-        let t194: f64 = t104 * t193;
-        let t195: f64 = t192 + t194;
-        let t196: f64 = t14 * t108;
-        let t197: f64 = t110 * t196;
-        let t198: f64 = t195 - t197;
-        let t199: f64 = t19 * t114;
-        let t200: f64 = t116 * t199;
-        let t201: f64 = t198 - t200;
-        let t202: f64 = t14 * t120;
-        let t203: f64 = t122 * t202;
-        let t204: f64 = t201 + t203;
-        let t205: f64 = t19 * t126;
-        let t206: f64 = t128 * t205;
-        let t207: f64 = t204 + t206;
-        let t208: f64 = t207 - t184;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::sin(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t10 / t6;
+    let t12: crate::Real = t4 + t11;
+    let t13: crate::Real = t7 * t12;
+    let t14: crate::Real = crate::math::sin(t0);
+    let t19: crate::Real = crate::math::cos(t0);
+    let t21: crate::Real = t13 * t13;
+    let t79: crate::Real = crate::math::cos(t2);
+    let t80: crate::Real = t9 * t79;
+    let t81: crate::Real = t3 + t80;
+    let t154: crate::Real = t7 * t14;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t13)
+        < crate::math::series_switch(0.05)
+    {
+        let t15: crate::Real = t7 * t13;
+        let t16: crate::Real = t14 * t15;
+        let t17: crate::Real = 0.5;
+        let t18: crate::Real = t16 * t17;
+        let t20: crate::Real = t7 * t19;
+        let t22: crate::Real = t7 * t21;
+        let t23: crate::Real = t19 * t22;
+        let t24: crate::Real = 0.16666666666666666;
+        let t25: crate::Real = t23 * t24;
+        let t26: crate::Real = t20 - t25;
+        let t27: crate::Real = t13 * t21;
+        let t28: crate::Real = t7 * t27;
+        let t29: crate::Real = t14 * t28;
+        let t30: crate::Real = 0.041666666666666664;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t26 + t31;
+        let t33: crate::Real = t21 * t21;
+        let t34: crate::Real = t7 * t33;
+        let t35: crate::Real = t19 * t34;
+        let t36: crate::Real = 0.008333333333333333;
+        let t37: crate::Real = t35 * t36;
+        let t38: crate::Real = t32 + t37;
+        let t39: crate::Real = t13 * t33;
+        let t40: crate::Real = t7 * t39;
+        let t41: crate::Real = t14 * t40;
+        let t42: crate::Real = 0.001388888888888889;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t38 - t43;
+        let t45: crate::Real = t27 * t27;
+        let t46: crate::Real = t7 * t45;
+        let t47: crate::Real = t19 * t46;
+        let t48: crate::Real = 0.0001984126984126984;
+        let t49: crate::Real = t47 * t48;
+        let t50: crate::Real = t44 - t49;
+        let t51: crate::Real = t13 * t45;
+        let t52: crate::Real = t7 * t51;
+        let t53: crate::Real = t14 * t52;
+        let t54: crate::Real = 0.0000248015873015873;
+        let t55: crate::Real = t53 * t54;
+        let t56: crate::Real = t50 + t55;
+        let t57: crate::Real = t33 * t33;
+        let t58: crate::Real = t7 * t57;
+        let t59: crate::Real = t19 * t58;
+        let t60: crate::Real = 0.0000027557319223985893;
+        let t61: crate::Real = t59 * t60;
+        let t62: crate::Real = t56 + t61;
+        let t63: crate::Real = t62 - t18;
+        let t78: crate::Real = t7 * t7;
+        let t82: crate::Real = t13 * t78;
+        let t83: crate::Real = t81 * t82;
+        let t84: crate::Real = t19 * t83;
+        let t85: crate::Real = 0.3333333333333333;
+        let t86: crate::Real = t84 * t85;
+        let t87: crate::Real = t78 * t81;
+        let t88: crate::Real = t14 * t87;
+        let t89: crate::Real = t17 * t88;
+        let t90: crate::Real = t21 * t78;
+        let t91: crate::Real = t81 * t90;
+        let t92: crate::Real = t14 * t91;
+        let t93: crate::Real = 0.125;
+        let t94: crate::Real = t92 * t93;
+        let t95: crate::Real = t27 * t78;
+        let t96: crate::Real = t81 * t95;
+        let t97: crate::Real = t19 * t96;
+        let t98: crate::Real = 0.03333333333333333;
+        let t99: crate::Real = t97 * t98;
+        let t100: crate::Real = t94 + t99;
+        let t101: crate::Real = t33 * t78;
+        let t102: crate::Real = t81 * t101;
+        let t103: crate::Real = t14 * t102;
+        let t104: crate::Real = 0.006944444444444444;
+        let t105: crate::Real = t103 * t104;
+        let t106: crate::Real = t100 - t105;
+        let t107: crate::Real = t39 * t78;
+        let t108: crate::Real = t81 * t107;
+        let t109: crate::Real = t19 * t108;
+        let t110: crate::Real = 0.0011904761904761906;
+        let t111: crate::Real = t109 * t110;
+        let t112: crate::Real = t106 - t111;
+        let t113: crate::Real = t45 * t78;
+        let t114: crate::Real = t81 * t113;
+        let t115: crate::Real = t14 * t114;
+        let t116: crate::Real = 0.00017361111111111112;
+        let t117: crate::Real = t115 * t116;
+        let t118: crate::Real = t112 + t117;
+        let t119: crate::Real = t51 * t78;
+        let t120: crate::Real = t81 * t119;
+        let t121: crate::Real = t19 * t120;
+        let t122: crate::Real = 0.000022045855379188714;
+        let t123: crate::Real = t121 * t122;
+        let t124: crate::Real = t118 + t123;
+        let t125: crate::Real = t57 * t78;
+        let t126: crate::Real = t81 * t125;
+        let t127: crate::Real = t14 * t126;
+        let t128: crate::Real = 0.00000248015873015873;
+        let t129: crate::Real = t127 * t128;
+        let t130: crate::Real = t124 - t129;
+        let t131: crate::Real = t130 - t86;
+        let t132: crate::Real = t131 - t89;
+        let t152: crate::Real = t15 * t19;
+        let t153: crate::Real = t17 * t152;
+        let t155: crate::Real = t153 + t154;
+        let t156: crate::Real = t14 * t22;
+        let t157: crate::Real = t24 * t156;
+        let t158: crate::Real = t155 - t157;
+        let t159: crate::Real = t19 * t28;
+        let t160: crate::Real = t30 * t159;
+        let t161: crate::Real = t158 - t160;
+        let t162: crate::Real = t14 * t34;
+        let t163: crate::Real = t36 * t162;
+        let t164: crate::Real = t161 + t163;
+        let t165: crate::Real = t19 * t40;
+        let t166: crate::Real = t42 * t165;
+        let t167: crate::Real = t164 + t166;
+        let t168: crate::Real = t14 * t46;
+        let t169: crate::Real = t48 * t168;
+        let t170: crate::Real = t167 - t169;
+        let t171: crate::Real = t19 * t52;
+        let t172: crate::Real = t54 * t171;
+        let t173: crate::Real = t170 - t172;
+        let t174: crate::Real = t14 * t58;
+        let t175: crate::Real = t60 * t174;
+        let t176: crate::Real = t173 + t175;
+        let t183: crate::Real = t14 * t83;
+        let t184: crate::Real = t85 * t183;
+        let t185: crate::Real = t19 * t87;
+        let t186: crate::Real = t17 * t185;
+        let t187: crate::Real = t19 * t91;
+        let t188: crate::Real = t93 * t187;
+        let t189: crate::Real = t186 - t188;
+        let t190: crate::Real = t14 * t96;
+        let t191: crate::Real = t98 * t190;
+        let t192: crate::Real = t189 + t191;
+        let t193: crate::Real = t19 * t102;
+        let t194: crate::Real = t104 * t193;
+        let t195: crate::Real = t192 + t194;
+        let t196: crate::Real = t14 * t108;
+        let t197: crate::Real = t110 * t196;
+        let t198: crate::Real = t195 - t197;
+        let t199: crate::Real = t19 * t114;
+        let t200: crate::Real = t116 * t199;
+        let t201: crate::Real = t198 - t200;
+        let t202: crate::Real = t14 * t120;
+        let t203: crate::Real = t122 * t202;
+        let t204: crate::Real = t201 + t203;
+        let t205: crate::Real = t19 * t126;
+        let t206: crate::Real = t128 * t205;
+        let t207: crate::Real = t204 + t206;
+        let t208: crate::Real = t207 - t184;
         [t63, t132, t176, t208]
     } else {
-        let t64: f64 = libm::sin(t13);
-        let t65: f64 = t7 * t64;
-        let t66: f64 = t19 * t65;
-        let t67: f64 = 1f64;
-        let t68: f64 = t67 / t13;
-        let t69: f64 = t66 * t68;
-        let t70: f64 = 1f64;
-        let t71: f64 = libm::cos(t13);
-        let t72: f64 = t70 - t71;
-        let t73: f64 = t7 * t72;
-        let t74: f64 = t14 * t73;
-        let t75: f64 = t74 * t68;
-        let t76: f64 = t69 - t75;
-        let t133: f64 = t7 * t81;
-        let t134: f64 = t14 * t133;
-        let t135: f64 = t64 * t134;
-        let t136: f64 = t135 * t68;
-        let t137: f64 = t19 * t133;
-        let t138: f64 = t71 * t137;
-        let t139: f64 = t138 * t68;
-        let t140: f64 = t73 * t81;
-        let t141: f64 = t14 * t140;
-        let t142: f64 = t67 / t21;
-        let t143: f64 = t141 * t142;
-        let t144: f64 = t139 + t143;
-        let t145: f64 = t64 * t133;
-        let t146: f64 = t19 * t145;
-        let t147: f64 = t146 * t142;
-        let t148: f64 = t144 - t147;
-        let t149: f64 = t148 - t136;
-        let t150: f64 = t7 * t149;
-        let t177: f64 = t64 * t154;
-        let t178: f64 = t177 * t68;
-        let t179: f64 = t19 * t73;
-        let t180: f64 = t179 * t68;
-        let t181: f64 = t178 + t180;
-        let t209: f64 = t71 * t134;
-        let t210: f64 = t209 * t68;
-        let t211: f64 = t146 * t68;
-        let t212: f64 = t210 + t211;
-        let t213: f64 = t19 * t140;
-        let t214: f64 = t213 * t142;
-        let t215: f64 = t212 - t214;
-        let t216: f64 = t135 * t142;
-        let t217: f64 = t215 - t216;
-        let t218: f64 = t7 * t217;
+        let t64: crate::Real = crate::math::sin(t13);
+        let t65: crate::Real = t7 * t64;
+        let t66: crate::Real = t19 * t65;
+        let t67: crate::Real = 1.0;
+        let t68: crate::Real = t67 / t13;
+        let t69: crate::Real = t66 * t68;
+        let t70: crate::Real = 1.0;
+        let t71: crate::Real = crate::math::cos(t13);
+        let t72: crate::Real = t70 - t71;
+        let t73: crate::Real = t7 * t72;
+        let t74: crate::Real = t14 * t73;
+        let t75: crate::Real = t74 * t68;
+        let t76: crate::Real = t69 - t75;
+        let t133: crate::Real = t7 * t81;
+        let t134: crate::Real = t14 * t133;
+        let t135: crate::Real = t64 * t134;
+        let t136: crate::Real = t135 * t68;
+        let t137: crate::Real = t19 * t133;
+        let t138: crate::Real = t71 * t137;
+        let t139: crate::Real = t138 * t68;
+        let t140: crate::Real = t73 * t81;
+        let t141: crate::Real = t14 * t140;
+        let t142: crate::Real = t67 / t21;
+        let t143: crate::Real = t141 * t142;
+        let t144: crate::Real = t139 + t143;
+        let t145: crate::Real = t64 * t133;
+        let t146: crate::Real = t19 * t145;
+        let t147: crate::Real = t146 * t142;
+        let t148: crate::Real = t144 - t147;
+        let t149: crate::Real = t148 - t136;
+        let t150: crate::Real = t7 * t149;
+        let t177: crate::Real = t64 * t154;
+        let t178: crate::Real = t177 * t68;
+        let t179: crate::Real = t19 * t73;
+        let t180: crate::Real = t179 * t68;
+        let t181: crate::Real = t178 + t180;
+        let t209: crate::Real = t71 * t134;
+        let t210: crate::Real = t209 * t68;
+        let t211: crate::Real = t146 * t68;
+        let t212: crate::Real = t210 + t211;
+        let t213: crate::Real = t19 * t140;
+        let t214: crate::Real = t213 * t142;
+        let t215: crate::Real = t212 - t214;
+        let t216: crate::Real = t135 * t142;
+        let t217: crate::Real = t215 - t216;
+        let t218: crate::Real = t7 * t217;
         [t76, t150, t181, t218]
     };
-    let t77: f64 = g0[0usize];
-    let t151: f64 = g0[1usize];
-    let t182: f64 = g0[2usize];
-    let t219: f64 = g0[3usize];
-    let t220: f64 = 0f64;
+    let t77: crate::Real = g0[0usize];
+    let t151: crate::Real = g0[1usize];
+    let t182: crate::Real = g0[2usize];
+    let t219: crate::Real = g0[3usize];
+    let t220: crate::Real = 0.0;
     [[t77, t151], [t182, t219], [t220, t7]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
@@ -1249,379 +1260,381 @@ pub fn step_exact_jac_w(
 336 arithmetic operations (2505 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = p[1usize];
-    let t7: f64 = dt;
-    let t8: f64 = libm::sin(t2);
-    let t9: f64 = t1 * t5;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = 1f64;
-    let t12: f64 = t11 / t6;
-    let t13: f64 = t10 * t12;
-    let t14: f64 = t4 + t13;
-    let t15: f64 = t7 * t14;
-    let t16: f64 = libm::cos(t0);
-    let t17: f64 = libm::cos(t2);
-    let t18: f64 = t1 * t7;
-    let t21: f64 = libm::sin(t0);
-    let t22: f64 = t18 * t21;
-    let t28: f64 = t9 * t17;
-    let t29: f64 = t3 + t28;
-    let t45: f64 = t15 * t15;
-    let t146: f64 = t6 * t6;
-    let t154: f64 = t11 / t146;
-    let t227: f64 = t5 * t7;
-    let t228: f64 = t1 * t227;
-    let g0: [f64; 4usize] = if libm::fabs(t15) < 0.05f64 {
-        let t19: f64 = t16 * t18;
-        let t20: f64 = t17 * t19;
-        let t23: f64 = t17 * t22;
-        let t24: f64 = 0.5f64;
-        let t25: f64 = t23 * t24;
-        let t26: f64 = -t25;
-        let t27: f64 = t7 * t7;
-        let t30: f64 = t1 * t27;
-        let t31: f64 = t29 * t30;
-        let t32: f64 = t8 * t31;
-        let t33: f64 = t16 * t32;
-        let t34: f64 = 0.3333333333333333f64;
-        let t35: f64 = t33 * t34;
-        let t36: f64 = t35 * t12;
-        let t37: f64 = t26 - t36;
-        let t38: f64 = t15 * t37;
-        let t39: f64 = t20 + t38;
-        let t40: f64 = t21 * t31;
-        let t41: f64 = t8 * t40;
-        let t42: f64 = t24 * t41;
-        let t43: f64 = t42 * t12;
-        let t44: f64 = t39 - t43;
-        let t46: f64 = 0.16666666666666666f64;
-        let t47: f64 = t20 * t46;
-        let t48: f64 = 0.125f64;
-        let t49: f64 = t41 * t48;
-        let t50: f64 = t49 * t12;
-        let t51: f64 = t50 - t47;
-        let t52: f64 = t45 * t51;
-        let t53: f64 = t44 + t52;
-        let t54: f64 = t15 * t45;
-        let t55: f64 = 0.041666666666666664f64;
-        let t56: f64 = t23 * t55;
-        let t57: f64 = 0.03333333333333333f64;
-        let t58: f64 = t33 * t57;
-        let t59: f64 = t58 * t12;
-        let t60: f64 = t56 + t59;
-        let t61: f64 = t54 * t60;
-        let t62: f64 = t53 + t61;
-        let t63: f64 = t45 * t45;
-        let t64: f64 = 0.008333333333333333f64;
-        let t65: f64 = t20 * t64;
-        let t66: f64 = 0.006944444444444444f64;
-        let t67: f64 = t41 * t66;
-        let t68: f64 = t67 * t12;
-        let t69: f64 = t65 - t68;
-        let t70: f64 = t63 * t69;
-        let t71: f64 = t62 + t70;
-        let t72: f64 = t15 * t63;
-        let t73: f64 = 0.001388888888888889f64;
-        let t74: f64 = t23 * t73;
-        let t75: f64 = -t74;
-        let t76: f64 = 0.0011904761904761906f64;
-        let t77: f64 = t33 * t76;
-        let t78: f64 = t77 * t12;
-        let t79: f64 = t75 - t78;
-        let t80: f64 = t72 * t79;
-        let t81: f64 = t71 + t80;
-        let t82: f64 = t54 * t54;
-        let t83: f64 = 0.0001984126984126984f64;
-        let t84: f64 = t20 * t83;
-        let t85: f64 = 0.00017361111111111112f64;
-        let t86: f64 = t41 * t85;
-        let t87: f64 = t86 * t12;
-        let t88: f64 = t87 - t84;
-        let t89: f64 = t82 * t88;
-        let t90: f64 = t81 + t89;
-        let t91: f64 = t15 * t82;
-        let t92: f64 = 0.0000248015873015873f64;
-        let t93: f64 = t23 * t92;
-        let t94: f64 = 0.000022045855379188714f64;
-        let t95: f64 = t33 * t94;
-        let t96: f64 = t95 * t12;
-        let t97: f64 = t93 + t96;
-        let t98: f64 = t91 * t97;
-        let t99: f64 = t90 + t98;
-        let t100: f64 = t63 * t63;
-        let t101: f64 = 0.0000027557319223985893f64;
-        let t102: f64 = t20 * t101;
-        let t103: f64 = 0.00000248015873015873f64;
-        let t104: f64 = t41 * t103;
-        let t105: f64 = t104 * t12;
-        let t106: f64 = t102 - t105;
-        let t107: f64 = t100 * t106;
-        let t108: f64 = t99 + t107;
-        let t147: f64 = t15 * t27;
-        let t148: f64 = t5 * t147;
-        let t149: f64 = t1 * t148;
-        let t150: f64 = t29 * t149;
-        let t151: f64 = t8 * t150;
-        let t152: f64 = t16 * t151;
-        let t153: f64 = t34 * t152;
-        let t155: f64 = t153 * t154;
-        let t156: f64 = t5 * t27;
-        let t157: f64 = t1 * t156;
-        let t158: f64 = t29 * t157;
-        let t159: f64 = t21 * t158;
-        let t160: f64 = t8 * t159;
-        let t161: f64 = t24 * t160;
-        let t162: f64 = t161 * t154;
-        let t163: f64 = t155 + t162;
-        let t164: f64 = t27 * t45;
-        let t165: f64 = t5 * t164;
-        let t166: f64 = t1 * t165;
-        let t167: f64 = t29 * t166;
-        let t168: f64 = t21 * t167;
-        let t169: f64 = t8 * t168;
-        let t170: f64 = t48 * t169;
-        let t171: f64 = t170 * t154;
-        let t172: f64 = t163 - t171;
-        let t173: f64 = t27 * t54;
-        let t174: f64 = t5 * t173;
-        let t175: f64 = t1 * t174;
-        let t176: f64 = t29 * t175;
-        let t177: f64 = t8 * t176;
-        let t178: f64 = t16 * t177;
-        let t179: f64 = t57 * t178;
-        let t180: f64 = t179 * t154;
-        let t181: f64 = t172 - t180;
-        let t182: f64 = t27 * t63;
-        let t183: f64 = t5 * t182;
-        let t184: f64 = t1 * t183;
-        let t185: f64 = t29 * t184;
-        let t186: f64 = t21 * t185;
-        let t187: f64 = t8 * t186;
-        let t188: f64 = t66 * t187;
-        let t189: f64 = t188 * t154;
-        let t190: f64 = t181 + t189;
-        let t191: f64 = t27 * t72;
-        let t192: f64 = t5 * t191;
-        let t193: f64 = t1 * t192;
-        let t194: f64 = t29 * t193;
-        let t195: f64 = t8 * t194;
-        let t196: f64 = t16 * t195;
-        let t197: f64 = t76 * t196;
-        let t198: f64 = t197 * t154;
-        let t199: f64 = t190 + t198;
-        let t200: f64 = t27 * t82;
-        let t201: f64 = t5 * t200;
-        let t202: f64 = t1 * t201;
-        let t203: f64 = t29 * t202;
-        let t204: f64 = t21 * t203;
-        let t205: f64 = t8 * t204;
-        let t206: f64 = t85 * t205;
-        let t207: f64 = t206 * t154;
-        let t208: f64 = t199 - t207;
-        let t209: f64 = t27 * t91;
-        let t210: f64 = t5 * t209;
-        let t211: f64 = t1 * t210;
-        let t212: f64 = t29 * t211;
-        let t213: f64 = t8 * t212;
-        let t214: f64 = t16 * t213;
-        let t215: f64 = t94 * t214;
-        let t216: f64 = t215 * t154;
-        let t217: f64 = t208 - t216;
-        let t218: f64 = t27 * t100;
-        let t219: f64 = t5 * t218;
-        let t220: f64 = t1 * t219;
-        let t221: f64 = t29 * t220;
-        let t222: f64 = t21 * t221;
-        let t223: f64 = t8 * t222;
-        let t224: f64 = t103 * t223;
-        let t225: f64 = t224 * t154;
-        let t226: f64 = t217 + t225;
-        let t234: f64 = t20 * t24;
-        let t235: f64 = t34 * t41;
-        let t236: f64 = t235 * t12;
-        let t237: f64 = t234 - t236;
-        let t238: f64 = t15 * t237;
-        let t239: f64 = t23 + t238;
-        let t240: f64 = t24 * t33;
-        let t241: f64 = t240 * t12;
-        let t242: f64 = t239 + t241;
-        let t243: f64 = t23 * t46;
-        let t244: f64 = -t243;
-        let t245: f64 = t33 * t48;
-        let t246: f64 = t245 * t12;
-        let t247: f64 = t244 - t246;
-        let t248: f64 = t45 * t247;
-        let t249: f64 = t242 + t248;
-        let t250: f64 = t20 * t55;
-        let t251: f64 = t41 * t57;
-        let t252: f64 = t251 * t12;
-        let t253: f64 = t252 - t250;
-        let t254: f64 = t54 * t253;
-        let t255: f64 = t249 + t254;
-        let t256: f64 = t23 * t64;
-        let t257: f64 = t33 * t66;
-        let t258: f64 = t257 * t12;
-        let t259: f64 = t256 + t258;
-        let t260: f64 = t63 * t259;
-        let t261: f64 = t255 + t260;
-        let t262: f64 = t20 * t73;
-        let t263: f64 = t41 * t76;
-        let t264: f64 = t263 * t12;
-        let t265: f64 = t262 - t264;
-        let t266: f64 = t72 * t265;
-        let t267: f64 = t261 + t266;
-        let t268: f64 = t23 * t83;
-        let t269: f64 = -t268;
-        let t270: f64 = t33 * t85;
-        let t271: f64 = t270 * t12;
-        let t272: f64 = t269 - t271;
-        let t273: f64 = t82 * t272;
-        let t274: f64 = t267 + t273;
-        let t275: f64 = t20 * t92;
-        let t276: f64 = t41 * t94;
-        let t277: f64 = t276 * t12;
-        let t278: f64 = t277 - t275;
-        let t279: f64 = t91 * t278;
-        let t280: f64 = t274 + t279;
-        let t281: f64 = t23 * t101;
-        let t282: f64 = t33 * t103;
-        let t283: f64 = t282 * t12;
-        let t284: f64 = t281 + t283;
-        let t285: f64 = t100 * t284;
-        let t286: f64 = t280 + t285;
-        let t308: f64 = t21 * t150;
-        let t309: f64 = t8 * t308;
-        let t310: f64 = t34 * t309;
-        let t311: f64 = t310 * t154;
-        let t312: f64 = t8 * t158;
-        let t313: f64 = t16 * t312;
-        let t314: f64 = t24 * t313;
-        let t315: f64 = t314 * t154;
-        let t316: f64 = t311 - t315;
-        let t317: f64 = t8 * t167;
-        let t318: f64 = t16 * t317;
-        let t319: f64 = t48 * t318;
-        let t320: f64 = t319 * t154;
-        let t321: f64 = t316 + t320;
-        let t322: f64 = t21 * t176;
-        let t323: f64 = t8 * t322;
-        let t324: f64 = t57 * t323;
-        let t325: f64 = t324 * t154;
-        let t326: f64 = t321 - t325;
-        let t327: f64 = t8 * t185;
-        let t328: f64 = t16 * t327;
-        let t329: f64 = t66 * t328;
-        let t330: f64 = t329 * t154;
-        let t331: f64 = t326 - t330;
-        let t332: f64 = t21 * t194;
-        let t333: f64 = t8 * t332;
-        let t334: f64 = t76 * t333;
-        let t335: f64 = t334 * t154;
-        let t336: f64 = t331 + t335;
-        let t337: f64 = t8 * t203;
-        let t338: f64 = t16 * t337;
-        let t339: f64 = t85 * t338;
-        let t340: f64 = t339 * t154;
-        let t341: f64 = t336 + t340;
-        let t342: f64 = t21 * t212;
-        let t343: f64 = t8 * t342;
-        let t344: f64 = t94 * t343;
-        let t345: f64 = t344 * t154;
-        let t346: f64 = t341 - t345;
-        let t347: f64 = t8 * t221;
-        let t348: f64 = t16 * t347;
-        let t349: f64 = t103 * t348;
-        let t350: f64 = t349 * t154;
-        let t351: f64 = t346 - t350;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = p[1usize];
+    let t7: crate::Real = dt;
+    let t8: crate::Real = crate::math::sin(t2);
+    let t9: crate::Real = t1 * t5;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = 1.0;
+    let t12: crate::Real = t11 / t6;
+    let t13: crate::Real = t10 * t12;
+    let t14: crate::Real = t4 + t13;
+    let t15: crate::Real = t7 * t14;
+    let t16: crate::Real = crate::math::cos(t0);
+    let t17: crate::Real = crate::math::cos(t2);
+    let t18: crate::Real = t1 * t7;
+    let t21: crate::Real = crate::math::sin(t0);
+    let t22: crate::Real = t18 * t21;
+    let t28: crate::Real = t9 * t17;
+    let t29: crate::Real = t3 + t28;
+    let t45: crate::Real = t15 * t15;
+    let t146: crate::Real = t6 * t6;
+    let t154: crate::Real = t11 / t146;
+    let t227: crate::Real = t5 * t7;
+    let t228: crate::Real = t1 * t227;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t19: crate::Real = t16 * t18;
+        let t20: crate::Real = t17 * t19;
+        let t23: crate::Real = t17 * t22;
+        let t24: crate::Real = 0.5;
+        let t25: crate::Real = t23 * t24;
+        let t26: crate::Real = -t25;
+        let t27: crate::Real = t7 * t7;
+        let t30: crate::Real = t1 * t27;
+        let t31: crate::Real = t29 * t30;
+        let t32: crate::Real = t8 * t31;
+        let t33: crate::Real = t16 * t32;
+        let t34: crate::Real = 0.3333333333333333;
+        let t35: crate::Real = t33 * t34;
+        let t36: crate::Real = t35 * t12;
+        let t37: crate::Real = t26 - t36;
+        let t38: crate::Real = t15 * t37;
+        let t39: crate::Real = t20 + t38;
+        let t40: crate::Real = t21 * t31;
+        let t41: crate::Real = t8 * t40;
+        let t42: crate::Real = t24 * t41;
+        let t43: crate::Real = t42 * t12;
+        let t44: crate::Real = t39 - t43;
+        let t46: crate::Real = 0.16666666666666666;
+        let t47: crate::Real = t20 * t46;
+        let t48: crate::Real = 0.125;
+        let t49: crate::Real = t41 * t48;
+        let t50: crate::Real = t49 * t12;
+        let t51: crate::Real = t50 - t47;
+        let t52: crate::Real = t45 * t51;
+        let t53: crate::Real = t44 + t52;
+        let t54: crate::Real = t15 * t45;
+        let t55: crate::Real = 0.041666666666666664;
+        let t56: crate::Real = t23 * t55;
+        let t57: crate::Real = 0.03333333333333333;
+        let t58: crate::Real = t33 * t57;
+        let t59: crate::Real = t58 * t12;
+        let t60: crate::Real = t56 + t59;
+        let t61: crate::Real = t54 * t60;
+        let t62: crate::Real = t53 + t61;
+        let t63: crate::Real = t45 * t45;
+        let t64: crate::Real = 0.008333333333333333;
+        let t65: crate::Real = t20 * t64;
+        let t66: crate::Real = 0.006944444444444444;
+        let t67: crate::Real = t41 * t66;
+        let t68: crate::Real = t67 * t12;
+        let t69: crate::Real = t65 - t68;
+        let t70: crate::Real = t63 * t69;
+        let t71: crate::Real = t62 + t70;
+        let t72: crate::Real = t15 * t63;
+        let t73: crate::Real = 0.001388888888888889;
+        let t74: crate::Real = t23 * t73;
+        let t75: crate::Real = -t74;
+        let t76: crate::Real = 0.0011904761904761906;
+        let t77: crate::Real = t33 * t76;
+        let t78: crate::Real = t77 * t12;
+        let t79: crate::Real = t75 - t78;
+        let t80: crate::Real = t72 * t79;
+        let t81: crate::Real = t71 + t80;
+        let t82: crate::Real = t54 * t54;
+        let t83: crate::Real = 0.0001984126984126984;
+        let t84: crate::Real = t20 * t83;
+        let t85: crate::Real = 0.00017361111111111112;
+        let t86: crate::Real = t41 * t85;
+        let t87: crate::Real = t86 * t12;
+        let t88: crate::Real = t87 - t84;
+        let t89: crate::Real = t82 * t88;
+        let t90: crate::Real = t81 + t89;
+        let t91: crate::Real = t15 * t82;
+        let t92: crate::Real = 0.0000248015873015873;
+        let t93: crate::Real = t23 * t92;
+        let t94: crate::Real = 0.000022045855379188714;
+        let t95: crate::Real = t33 * t94;
+        let t96: crate::Real = t95 * t12;
+        let t97: crate::Real = t93 + t96;
+        let t98: crate::Real = t91 * t97;
+        let t99: crate::Real = t90 + t98;
+        let t100: crate::Real = t63 * t63;
+        let t101: crate::Real = 0.0000027557319223985893;
+        let t102: crate::Real = t20 * t101;
+        let t103: crate::Real = 0.00000248015873015873;
+        let t104: crate::Real = t41 * t103;
+        let t105: crate::Real = t104 * t12;
+        let t106: crate::Real = t102 - t105;
+        let t107: crate::Real = t100 * t106;
+        let t108: crate::Real = t99 + t107;
+        let t147: crate::Real = t15 * t27;
+        let t148: crate::Real = t5 * t147;
+        let t149: crate::Real = t1 * t148;
+        let t150: crate::Real = t29 * t149;
+        let t151: crate::Real = t8 * t150;
+        let t152: crate::Real = t16 * t151;
+        let t153: crate::Real = t34 * t152;
+        let t155: crate::Real = t153 * t154;
+        let t156: crate::Real = t5 * t27;
+        let t157: crate::Real = t1 * t156;
+        let t158: crate::Real = t29 * t157;
+        let t159: crate::Real = t21 * t158;
+        let t160: crate::Real = t8 * t159;
+        let t161: crate::Real = t24 * t160;
+        let t162: crate::Real = t161 * t154;
+        let t163: crate::Real = t155 + t162;
+        let t164: crate::Real = t27 * t45;
+        let t165: crate::Real = t5 * t164;
+        let t166: crate::Real = t1 * t165;
+        let t167: crate::Real = t29 * t166;
+        let t168: crate::Real = t21 * t167;
+        let t169: crate::Real = t8 * t168;
+        let t170: crate::Real = t48 * t169;
+        let t171: crate::Real = t170 * t154;
+        let t172: crate::Real = t163 - t171;
+        let t173: crate::Real = t27 * t54;
+        let t174: crate::Real = t5 * t173;
+        let t175: crate::Real = t1 * t174;
+        let t176: crate::Real = t29 * t175;
+        let t177: crate::Real = t8 * t176;
+        let t178: crate::Real = t16 * t177;
+        let t179: crate::Real = t57 * t178;
+        let t180: crate::Real = t179 * t154;
+        let t181: crate::Real = t172 - t180;
+        let t182: crate::Real = t27 * t63;
+        let t183: crate::Real = t5 * t182;
+        let t184: crate::Real = t1 * t183;
+        let t185: crate::Real = t29 * t184;
+        let t186: crate::Real = t21 * t185;
+        let t187: crate::Real = t8 * t186;
+        let t188: crate::Real = t66 * t187;
+        let t189: crate::Real = t188 * t154;
+        let t190: crate::Real = t181 + t189;
+        let t191: crate::Real = t27 * t72;
+        let t192: crate::Real = t5 * t191;
+        let t193: crate::Real = t1 * t192;
+        let t194: crate::Real = t29 * t193;
+        let t195: crate::Real = t8 * t194;
+        let t196: crate::Real = t16 * t195;
+        let t197: crate::Real = t76 * t196;
+        let t198: crate::Real = t197 * t154;
+        let t199: crate::Real = t190 + t198;
+        let t200: crate::Real = t27 * t82;
+        let t201: crate::Real = t5 * t200;
+        let t202: crate::Real = t1 * t201;
+        let t203: crate::Real = t29 * t202;
+        let t204: crate::Real = t21 * t203;
+        let t205: crate::Real = t8 * t204;
+        let t206: crate::Real = t85 * t205;
+        let t207: crate::Real = t206 * t154;
+        let t208: crate::Real = t199 - t207;
+        let t209: crate::Real = t27 * t91;
+        let t210: crate::Real = t5 * t209;
+        let t211: crate::Real = t1 * t210;
+        let t212: crate::Real = t29 * t211;
+        let t213: crate::Real = t8 * t212;
+        let t214: crate::Real = t16 * t213;
+        let t215: crate::Real = t94 * t214;
+        let t216: crate::Real = t215 * t154;
+        let t217: crate::Real = t208 - t216;
+        let t218: crate::Real = t27 * t100;
+        let t219: crate::Real = t5 * t218;
+        let t220: crate::Real = t1 * t219;
+        let t221: crate::Real = t29 * t220;
+        let t222: crate::Real = t21 * t221;
+        let t223: crate::Real = t8 * t222;
+        let t224: crate::Real = t103 * t223;
+        let t225: crate::Real = t224 * t154;
+        let t226: crate::Real = t217 + t225;
+        let t234: crate::Real = t20 * t24;
+        let t235: crate::Real = t34 * t41;
+        let t236: crate::Real = t235 * t12;
+        let t237: crate::Real = t234 - t236;
+        let t238: crate::Real = t15 * t237;
+        let t239: crate::Real = t23 + t238;
+        let t240: crate::Real = t24 * t33;
+        let t241: crate::Real = t240 * t12;
+        let t242: crate::Real = t239 + t241;
+        let t243: crate::Real = t23 * t46;
+        let t244: crate::Real = -t243;
+        let t245: crate::Real = t33 * t48;
+        let t246: crate::Real = t245 * t12;
+        let t247: crate::Real = t244 - t246;
+        let t248: crate::Real = t45 * t247;
+        let t249: crate::Real = t242 + t248;
+        let t250: crate::Real = t20 * t55;
+        let t251: crate::Real = t41 * t57;
+        let t252: crate::Real = t251 * t12;
+        let t253: crate::Real = t252 - t250;
+        let t254: crate::Real = t54 * t253;
+        let t255: crate::Real = t249 + t254;
+        let t256: crate::Real = t23 * t64;
+        let t257: crate::Real = t33 * t66;
+        let t258: crate::Real = t257 * t12;
+        let t259: crate::Real = t256 + t258;
+        let t260: crate::Real = t63 * t259;
+        let t261: crate::Real = t255 + t260;
+        let t262: crate::Real = t20 * t73;
+        let t263: crate::Real = t41 * t76;
+        let t264: crate::Real = t263 * t12;
+        let t265: crate::Real = t262 - t264;
+        let t266: crate::Real = t72 * t265;
+        let t267: crate::Real = t261 + t266;
+        let t268: crate::Real = t23 * t83;
+        let t269: crate::Real = -t268;
+        let t270: crate::Real = t33 * t85;
+        let t271: crate::Real = t270 * t12;
+        let t272: crate::Real = t269 - t271;
+        let t273: crate::Real = t82 * t272;
+        let t274: crate::Real = t267 + t273;
+        let t275: crate::Real = t20 * t92;
+        let t276: crate::Real = t41 * t94;
+        let t277: crate::Real = t276 * t12;
+        let t278: crate::Real = t277 - t275;
+        let t279: crate::Real = t91 * t278;
+        let t280: crate::Real = t274 + t279;
+        let t281: crate::Real = t23 * t101;
+        let t282: crate::Real = t33 * t103;
+        let t283: crate::Real = t282 * t12;
+        let t284: crate::Real = t281 + t283;
+        let t285: crate::Real = t100 * t284;
+        let t286: crate::Real = t280 + t285;
+        let t308: crate::Real = t21 * t150;
+        let t309: crate::Real = t8 * t308;
+        let t310: crate::Real = t34 * t309;
+        let t311: crate::Real = t310 * t154;
+        let t312: crate::Real = t8 * t158;
+        let t313: crate::Real = t16 * t312;
+        let t314: crate::Real = t24 * t313;
+        let t315: crate::Real = t314 * t154;
+        let t316: crate::Real = t311 - t315;
+        let t317: crate::Real = t8 * t167;
+        let t318: crate::Real = t16 * t317;
+        let t319: crate::Real = t48 * t318;
+        let t320: crate::Real = t319 * t154;
+        let t321: crate::Real = t316 + t320;
+        let t322: crate::Real = t21 * t176;
+        let t323: crate::Real = t8 * t322;
+        let t324: crate::Real = t57 * t323;
+        let t325: crate::Real = t324 * t154;
+        let t326: crate::Real = t321 - t325;
+        let t327: crate::Real = t8 * t185;
+        let t328: crate::Real = t16 * t327;
+        let t329: crate::Real = t66 * t328;
+        let t330: crate::Real = t329 * t154;
+        let t331: crate::Real = t326 - t330;
+        let t332: crate::Real = t21 * t194;
+        let t333: crate::Real = t8 * t332;
+        let t334: crate::Real = t76 * t333;
+        let t335: crate::Real = t334 * t154;
+        let t336: crate::Real = t331 + t335;
+        let t337: crate::Real = t8 * t203;
+        let t338: crate::Real = t16 * t337;
+        let t339: crate::Real = t85 * t338;
+        let t340: crate::Real = t339 * t154;
+        let t341: crate::Real = t336 + t340;
+        let t342: crate::Real = t21 * t212;
+        let t343: crate::Real = t8 * t342;
+        let t344: crate::Real = t94 * t343;
+        let t345: crate::Real = t344 * t154;
+        let t346: crate::Real = t341 - t345;
+        let t347: crate::Real = t8 * t221;
+        let t348: crate::Real = t16 * t347;
+        let t349: crate::Real = t103 * t348;
+        let t350: crate::Real = t349 * t154;
+        let t351: crate::Real = t346 - t350;
         [t108, t226, t286, t351]
     } else {
-        let t109: f64 = libm::sin(t15);
-        let t110: f64 = t18 * t109;
-        let t111: f64 = t16 * t110;
-        let t112: f64 = t17 * t111;
-        let t113: f64 = t11 / t15;
-        let t114: f64 = t112 * t113;
-        let t115: f64 = 1f64;
-        let t116: f64 = libm::cos(t15);
-        let t117: f64 = t115 - t116;
-        let t118: f64 = t18 * t117;
-        let t119: f64 = t21 * t118;
-        let t120: f64 = t17 * t119;
-        let t121: f64 = t120 * t113;
-        let t122: f64 = t114 - t121;
-        let t123: f64 = t7 * t29;
-        let t124: f64 = t21 * t123;
-        let t125: f64 = t109 * t124;
-        let t126: f64 = t125 * t113;
-        let t127: f64 = t16 * t123;
-        let t128: f64 = t116 * t127;
-        let t129: f64 = t128 * t113;
-        let t130: f64 = t7 * t117;
-        let t131: f64 = t29 * t130;
-        let t132: f64 = t21 * t131;
-        let t133: f64 = t11 / t45;
-        let t134: f64 = t132 * t133;
-        let t135: f64 = t129 + t134;
-        let t136: f64 = t109 * t123;
-        let t137: f64 = t16 * t136;
-        let t138: f64 = t137 * t133;
-        let t139: f64 = t135 - t138;
-        let t140: f64 = t139 - t126;
-        let t141: f64 = t18 * t140;
-        let t142: f64 = t8 * t141;
-        let t143: f64 = t142 * t12;
-        let t144: f64 = t122 + t143;
-        let t229: f64 = t140 * t228;
-        let t230: f64 = t8 * t229;
-        let t231: f64 = t230 * t154;
-        let t232: f64 = -t231;
-        let t287: f64 = t22 * t109;
-        let t288: f64 = t17 * t287;
-        let t289: f64 = t288 * t113;
-        let t290: f64 = t16 * t118;
-        let t291: f64 = t17 * t290;
-        let t292: f64 = t291 * t113;
-        let t293: f64 = t289 + t292;
-        let t294: f64 = t116 * t124;
-        let t295: f64 = t294 * t113;
-        let t296: f64 = t137 * t113;
-        let t297: f64 = t295 + t296;
-        let t298: f64 = t16 * t131;
-        let t299: f64 = t298 * t133;
-        let t300: f64 = t297 - t299;
-        let t301: f64 = t125 * t133;
-        let t302: f64 = t300 - t301;
-        let t303: f64 = t18 * t302;
-        let t304: f64 = t8 * t303;
-        let t305: f64 = t304 * t12;
-        let t306: f64 = t293 + t305;
-        let t352: f64 = t228 * t302;
-        let t353: f64 = t8 * t352;
-        let t354: f64 = t353 * t154;
-        let t355: f64 = -t354;
+        let t109: crate::Real = crate::math::sin(t15);
+        let t110: crate::Real = t18 * t109;
+        let t111: crate::Real = t16 * t110;
+        let t112: crate::Real = t17 * t111;
+        let t113: crate::Real = t11 / t15;
+        let t114: crate::Real = t112 * t113;
+        let t115: crate::Real = 1.0;
+        let t116: crate::Real = crate::math::cos(t15);
+        let t117: crate::Real = t115 - t116;
+        let t118: crate::Real = t18 * t117;
+        let t119: crate::Real = t21 * t118;
+        let t120: crate::Real = t17 * t119;
+        let t121: crate::Real = t120 * t113;
+        let t122: crate::Real = t114 - t121;
+        let t123: crate::Real = t7 * t29;
+        let t124: crate::Real = t21 * t123;
+        let t125: crate::Real = t109 * t124;
+        let t126: crate::Real = t125 * t113;
+        let t127: crate::Real = t16 * t123;
+        let t128: crate::Real = t116 * t127;
+        let t129: crate::Real = t128 * t113;
+        let t130: crate::Real = t7 * t117;
+        let t131: crate::Real = t29 * t130;
+        let t132: crate::Real = t21 * t131;
+        let t133: crate::Real = t11 / t45;
+        let t134: crate::Real = t132 * t133;
+        let t135: crate::Real = t129 + t134;
+        let t136: crate::Real = t109 * t123;
+        let t137: crate::Real = t16 * t136;
+        let t138: crate::Real = t137 * t133;
+        let t139: crate::Real = t135 - t138;
+        let t140: crate::Real = t139 - t126;
+        let t141: crate::Real = t18 * t140;
+        let t142: crate::Real = t8 * t141;
+        let t143: crate::Real = t142 * t12;
+        let t144: crate::Real = t122 + t143;
+        let t229: crate::Real = t140 * t228;
+        let t230: crate::Real = t8 * t229;
+        let t231: crate::Real = t230 * t154;
+        let t232: crate::Real = -t231;
+        let t287: crate::Real = t22 * t109;
+        let t288: crate::Real = t17 * t287;
+        let t289: crate::Real = t288 * t113;
+        let t290: crate::Real = t16 * t118;
+        let t291: crate::Real = t17 * t290;
+        let t292: crate::Real = t291 * t113;
+        let t293: crate::Real = t289 + t292;
+        let t294: crate::Real = t116 * t124;
+        let t295: crate::Real = t294 * t113;
+        let t296: crate::Real = t137 * t113;
+        let t297: crate::Real = t295 + t296;
+        let t298: crate::Real = t16 * t131;
+        let t299: crate::Real = t298 * t133;
+        let t300: crate::Real = t297 - t299;
+        let t301: crate::Real = t125 * t133;
+        let t302: crate::Real = t300 - t301;
+        let t303: crate::Real = t18 * t302;
+        let t304: crate::Real = t8 * t303;
+        let t305: crate::Real = t304 * t12;
+        let t306: crate::Real = t293 + t305;
+        let t352: crate::Real = t228 * t302;
+        let t353: crate::Real = t8 * t352;
+        let t354: crate::Real = t353 * t154;
+        let t355: crate::Real = -t354;
         [t144, t232, t306, t355]
     };
-    let t145: f64 = g0[0usize];
-    let t233: f64 = g0[1usize];
-    let t307: f64 = g0[2usize];
-    let t356: f64 = g0[3usize];
-    let t357: f64 = t8 * t18;
-    let t358: f64 = t357 * t12;
-    let t359: f64 = t8 * t228;
-    let t360: f64 = t359 * t154;
-    let t361: f64 = -t360;
+    let t145: crate::Real = g0[0usize];
+    let t233: crate::Real = g0[1usize];
+    let t307: crate::Real = g0[2usize];
+    let t356: crate::Real = g0[3usize];
+    let t357: crate::Real = t8 * t18;
+    let t358: crate::Real = t357 * t12;
+    let t359: crate::Real = t8 * t228;
+    let t360: crate::Real = t359 * t154;
+    let t361: crate::Real = -t360;
     [[t145, t233], [t307, t356], [t358, t361]]
 }
 /**Gyro yaw rate (seed 000 eq. 13). Predicted columns: gyro_z.
@@ -1634,18 +1647,18 @@ pub fn step_exact_jac_p(
 4 arithmetic operations (4 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [f64; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = libm::sin(t1);
-    let t5: f64 = t0 * t2;
-    let t6: f64 = t4 * t5;
-    let t7: f64 = t6 / t3;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = crate::math::sin(t1);
+    let t5: crate::Real = t0 * t2;
+    let t6: crate::Real = t4 * t5;
+    let t7: crate::Real = t6 / t3;
     [t7]
 }
 /**Jacobian of `obs_gyro` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -1658,11 +1671,11 @@ pub fn obs_gyro(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [[f64; 3usize]; 1usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 1usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0, t0]]
 }
 /**Jacobian of `obs_gyro` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -1675,22 +1688,22 @@ pub fn obs_gyro_jac_x(
 8 arithmetic operations (9 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [[f64; 2usize]; 1usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = libm::sin(t1);
-    let t5: f64 = t0 * t4;
-    let t6: f64 = t5 / t3;
-    let t7: f64 = t3 * t3;
-    let t8: f64 = t0 * t2;
-    let t9: f64 = t4 * t8;
-    let t10: f64 = t9 / t7;
-    let t11: f64 = -t10;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [[crate::Real; 2usize]; 1usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = crate::math::sin(t1);
+    let t5: crate::Real = t0 * t4;
+    let t6: crate::Real = t5 / t3;
+    let t7: crate::Real = t3 * t3;
+    let t8: crate::Real = t0 * t2;
+    let t9: crate::Real = t4 * t8;
+    let t10: crate::Real = t9 / t7;
+    let t11: crate::Real = -t10;
     [[t6, t11]]
 }
 /**Range and bearing to a known landmark (seed 001 eq. 6). Predicted columns: range, bearing.
@@ -1704,24 +1717,24 @@ pub fn obs_gyro_jac_p(
 8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
     [t10, t12]
 }
 /**Jacobian of `obs_landmark` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -1735,33 +1748,33 @@ pub fn obs_landmark(
 15 arithmetic operations (45 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 3usize]; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = lm[0usize];
-    let t3: f64 = lm[1usize];
-    let t4: f64 = t2 - t0;
-    let t5: f64 = t4 * t4;
-    let t6: f64 = t3 - t1;
-    let t7: f64 = t6 * t6;
-    let t8: f64 = t5 + t7;
-    let t9: f64 = libm::sqrt(t8);
-    let t10: f64 = 1f64;
-    let t11: f64 = t10 / t9;
-    let t12: f64 = t4 * t11;
-    let t13: f64 = -t12;
-    let t14: f64 = t6 * t11;
-    let t15: f64 = -t14;
-    let t16: f64 = 0f64;
-    let t17: f64 = t10 / t8;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t4 * t17;
-    let t20: f64 = -t19;
-    let t21: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = lm[0usize];
+    let t3: crate::Real = lm[1usize];
+    let t4: crate::Real = t2 - t0;
+    let t5: crate::Real = t4 * t4;
+    let t6: crate::Real = t3 - t1;
+    let t7: crate::Real = t6 * t6;
+    let t8: crate::Real = t5 + t7;
+    let t9: crate::Real = crate::math::sqrt(t8);
+    let t10: crate::Real = 1.0;
+    let t11: crate::Real = t10 / t9;
+    let t12: crate::Real = t4 * t11;
+    let t13: crate::Real = -t12;
+    let t14: crate::Real = t6 * t11;
+    let t15: crate::Real = -t14;
+    let t16: crate::Real = 0.0;
+    let t17: crate::Real = t10 / t8;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t4 * t17;
+    let t20: crate::Real = -t19;
+    let t21: crate::Real = (-1.0);
     [[t13, t15, t16], [t18, t20, t21]]
 }
 /**Jacobian of `obs_landmark` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -1775,12 +1788,12 @@ pub fn obs_landmark_jac_x(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 2usize]; 2usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 2usize]; 2usize] {
+    let t0: crate::Real = 0.0;
     [[t0, t0], [t0, t0]]
 }
 /**Steering from the curvature (alpha := 0 at standstill), wheel rate from the twist projected on the wheel's heading.
@@ -1791,22 +1804,25 @@ pub fn obs_landmark_jac_p(
 
 11 arithmetic operations (19 before common-subexpression elimination).*/
 #[inline]
-pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 2usize] {
-    let t0: f64 = twist[0usize];
-    let t1: f64 = twist[2usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = t0 * t1;
-    let t5: f64 = t3 * t4;
-    let t6: f64 = t0 * t0;
-    let t7: f64 = libm::atan2(t5, t6);
-    let t8: f64 = libm::cos(t7);
-    let t9: f64 = t0 * t8;
-    let t10: f64 = libm::sin(t7);
-    let t11: f64 = t1 * t3;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t9 + t12;
-    let t14: f64 = t13 / t2;
+pub fn inverse_twist(
+    twist: &[crate::Real; 3usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = twist[0usize];
+    let t1: crate::Real = twist[2usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = t0 * t1;
+    let t5: crate::Real = t3 * t4;
+    let t6: crate::Real = t0 * t0;
+    let t7: crate::Real = crate::math::atan2(t5, t6);
+    let t8: crate::Real = crate::math::cos(t7);
+    let t9: crate::Real = t0 * t8;
+    let t10: crate::Real = crate::math::sin(t7);
+    let t11: crate::Real = t1 * t3;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t9 + t12;
+    let t14: crate::Real = t13 / t2;
     [t14, t7]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
@@ -1819,66 +1835,68 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 2usize]) -> [f64; 2usize] 
 41 arithmetic operations (457 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
-    dpose: &[f64; 3usize],
-    dt: f64,
-    p: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = dpose[0usize];
-    let t1: f64 = dpose[2usize];
-    let t2: f64 = dt;
-    let t3: f64 = p[0usize];
-    let t4: f64 = p[1usize];
-    let t5: f64 = 1f64;
-    let t6: f64 = t5 / t2;
-    let g0: [f64; 1usize] = if libm::fabs(t1) < 0.05f64 {
-        let t7: f64 = t0 * t6;
-        let t8: f64 = t1 * t1;
-        let t9: f64 = t0 * t8;
-        let t10: f64 = 0.16666666666666666f64;
-        let t11: f64 = t9 * t10;
-        let t12: f64 = t11 * t6;
-        let t13: f64 = t7 + t12;
-        let t14: f64 = t8 * t8;
-        let t15: f64 = t0 * t14;
-        let t16: f64 = 0.019444444444444445f64;
-        let t17: f64 = t15 * t16;
-        let t18: f64 = t17 * t6;
-        let t19: f64 = t13 + t18;
-        let t20: f64 = t1 * t8;
-        let t21: f64 = t20 * t20;
-        let t22: f64 = t0 * t21;
-        let t23: f64 = 0.00205026455026455f64;
-        let t24: f64 = t22 * t23;
-        let t25: f64 = t24 * t6;
-        let t26: f64 = t19 + t25;
-        let t27: f64 = t14 * t14;
-        let t28: f64 = t0 * t27;
-        let t29: f64 = 0.0002099867724867725f64;
-        let t30: f64 = t28 * t29;
-        let t31: f64 = t30 * t6;
-        let t32: f64 = t26 + t31;
+    dpose: &[crate::Real; 3usize],
+    dt: crate::Real,
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = dpose[0usize];
+    let t1: crate::Real = dpose[2usize];
+    let t2: crate::Real = dt;
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = p[1usize];
+    let t5: crate::Real = 1.0;
+    let t6: crate::Real = t5 / t2;
+    let g0: [crate::Real; 1usize] = if crate::math::fabs(t1)
+        < crate::math::series_switch(0.05)
+    {
+        let t7: crate::Real = t0 * t6;
+        let t8: crate::Real = t1 * t1;
+        let t9: crate::Real = t0 * t8;
+        let t10: crate::Real = 0.16666666666666666;
+        let t11: crate::Real = t9 * t10;
+        let t12: crate::Real = t11 * t6;
+        let t13: crate::Real = t7 + t12;
+        let t14: crate::Real = t8 * t8;
+        let t15: crate::Real = t0 * t14;
+        let t16: crate::Real = 0.019444444444444445;
+        let t17: crate::Real = t15 * t16;
+        let t18: crate::Real = t17 * t6;
+        let t19: crate::Real = t13 + t18;
+        let t20: crate::Real = t1 * t8;
+        let t21: crate::Real = t20 * t20;
+        let t22: crate::Real = t0 * t21;
+        let t23: crate::Real = 0.00205026455026455;
+        let t24: crate::Real = t22 * t23;
+        let t25: crate::Real = t24 * t6;
+        let t26: crate::Real = t19 + t25;
+        let t27: crate::Real = t14 * t14;
+        let t28: crate::Real = t0 * t27;
+        let t29: crate::Real = 0.0002099867724867725;
+        let t30: crate::Real = t28 * t29;
+        let t31: crate::Real = t30 * t6;
+        let t32: crate::Real = t26 + t31;
         [t32]
     } else {
-        let t33: f64 = libm::sin(t1);
-        let t34: f64 = t0 * t1;
-        let t35: f64 = t2 * t33;
-        let t36: f64 = t34 / t35;
+        let t33: crate::Real = crate::math::sin(t1);
+        let t34: crate::Real = t0 * t1;
+        let t35: crate::Real = t2 * t33;
+        let t36: crate::Real = t34 / t35;
         [t36]
     };
-    let t37: f64 = g0[0usize];
-    let t38: f64 = t1 * t37;
-    let t39: f64 = t4 * t38;
-    let t40: f64 = t39 * t6;
-    let t41: f64 = t37 * t37;
-    let t42: f64 = libm::atan2(t40, t41);
-    let t43: f64 = libm::cos(t42);
-    let t44: f64 = t37 * t43;
-    let t45: f64 = libm::sin(t42);
-    let t46: f64 = t1 * t4;
-    let t47: f64 = t45 * t46;
-    let t48: f64 = t47 * t6;
-    let t49: f64 = t44 + t48;
-    let t50: f64 = t49 / t3;
+    let t37: crate::Real = g0[0usize];
+    let t38: crate::Real = t1 * t37;
+    let t39: crate::Real = t4 * t38;
+    let t40: crate::Real = t39 * t6;
+    let t41: crate::Real = t37 * t37;
+    let t42: crate::Real = crate::math::atan2(t40, t41);
+    let t43: crate::Real = crate::math::cos(t42);
+    let t44: crate::Real = t37 * t43;
+    let t45: crate::Real = crate::math::sin(t42);
+    let t46: crate::Real = t1 * t4;
+    let t47: crate::Real = t45 * t46;
+    let t48: crate::Real = t47 * t6;
+    let t49: crate::Real = t44 + t48;
+    let t50: crate::Real = t49 / t3;
     [t50, t42]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
@@ -1893,353 +1911,355 @@ pub fn inverse_increment(
 308 arithmetic operations (3136 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = libm::sin(t4);
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t12 / t8;
-    let t14: f64 = t6 + t13;
-    let t15: f64 = t9 * t14;
-    let t16: f64 = libm::cos(t4);
-    let t17: f64 = t11 * t16;
-    let t18: f64 = t5 + t17;
-    let t19: f64 = libm::sin(t2);
-    let t26: f64 = libm::cos(t2);
-    let t27: f64 = t9 * t18;
-    let t28: f64 = t26 * t27;
-    let t30: f64 = t15 * t15;
-    let t79: f64 = 1f64;
-    let t97: f64 = t19 * t27;
-    let t270: f64 = t9 * t19;
-    let g0: [f64; 8usize] = if libm::fabs(t15) < 0.05f64 {
-        let t20: f64 = t9 * t15;
-        let t21: f64 = t18 * t20;
-        let t22: f64 = t19 * t21;
-        let t23: f64 = 0.5f64;
-        let t24: f64 = t22 * t23;
-        let t25: f64 = t0 - t24;
-        let t29: f64 = t25 + t28;
-        let t31: f64 = t9 * t30;
-        let t32: f64 = t18 * t31;
-        let t33: f64 = t26 * t32;
-        let t34: f64 = 0.16666666666666666f64;
-        let t35: f64 = t33 * t34;
-        let t36: f64 = t29 - t35;
-        let t37: f64 = t15 * t30;
-        let t38: f64 = t9 * t37;
-        let t39: f64 = t18 * t38;
-        let t40: f64 = t19 * t39;
-        let t41: f64 = 0.041666666666666664f64;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = t36 + t42;
-        let t44: f64 = t30 * t30;
-        let t45: f64 = t9 * t44;
-        let t46: f64 = t18 * t45;
-        let t47: f64 = t26 * t46;
-        let t48: f64 = 0.008333333333333333f64;
-        let t49: f64 = t47 * t48;
-        let t50: f64 = t43 + t49;
-        let t51: f64 = t15 * t44;
-        let t52: f64 = t9 * t51;
-        let t53: f64 = t18 * t52;
-        let t54: f64 = t19 * t53;
-        let t55: f64 = 0.001388888888888889f64;
-        let t56: f64 = t54 * t55;
-        let t57: f64 = t50 - t56;
-        let t58: f64 = t37 * t37;
-        let t59: f64 = t9 * t58;
-        let t60: f64 = t18 * t59;
-        let t61: f64 = t26 * t60;
-        let t62: f64 = 0.0001984126984126984f64;
-        let t63: f64 = t61 * t62;
-        let t64: f64 = t57 - t63;
-        let t65: f64 = t15 * t58;
-        let t66: f64 = t9 * t65;
-        let t67: f64 = t18 * t66;
-        let t68: f64 = t19 * t67;
-        let t69: f64 = 0.0000248015873015873f64;
-        let t70: f64 = t68 * t69;
-        let t71: f64 = t64 + t70;
-        let t72: f64 = t44 * t44;
-        let t73: f64 = t9 * t72;
-        let t74: f64 = t18 * t73;
-        let t75: f64 = t26 * t74;
-        let t76: f64 = 0.0000027557319223985893f64;
-        let t77: f64 = t75 * t76;
-        let t78: f64 = t71 + t77;
-        let t94: f64 = t21 * t26;
-        let t95: f64 = t23 * t94;
-        let t96: f64 = t1 + t95;
-        let t98: f64 = t96 + t97;
-        let t99: f64 = t19 * t32;
-        let t100: f64 = t34 * t99;
-        let t101: f64 = t98 - t100;
-        let t102: f64 = t26 * t39;
-        let t103: f64 = t41 * t102;
-        let t104: f64 = t101 - t103;
-        let t105: f64 = t19 * t46;
-        let t106: f64 = t48 * t105;
-        let t107: f64 = t104 + t106;
-        let t108: f64 = t26 * t53;
-        let t109: f64 = t55 * t108;
-        let t110: f64 = t107 + t109;
-        let t111: f64 = t19 * t60;
-        let t112: f64 = t62 * t111;
-        let t113: f64 = t110 - t112;
-        let t114: f64 = t26 * t67;
-        let t115: f64 = t69 * t114;
-        let t116: f64 = t113 - t115;
-        let t117: f64 = t19 * t74;
-        let t118: f64 = t76 * t117;
-        let t119: f64 = t116 + t118;
-        let t129: f64 = t26 * t21;
-        let t130: f64 = t129 * t23;
-        let t131: f64 = t99 * t34;
-        let t132: f64 = t102 * t41;
-        let t133: f64 = t131 + t132;
-        let t134: f64 = t105 * t48;
-        let t135: f64 = t133 - t134;
-        let t136: f64 = t108 * t55;
-        let t137: f64 = t135 - t136;
-        let t138: f64 = t111 * t62;
-        let t139: f64 = t137 + t138;
-        let t140: f64 = t114 * t69;
-        let t141: f64 = t139 + t140;
-        let t142: f64 = t117 * t76;
-        let t143: f64 = t141 - t142;
-        let t144: f64 = t143 - t130;
-        let t145: f64 = t144 - t97;
-        let t151: f64 = t21 * t19;
-        let t152: f64 = t23 * t151;
-        let t153: f64 = t34 * t33;
-        let t154: f64 = t28 - t153;
-        let t155: f64 = t41 * t40;
-        let t156: f64 = t154 + t155;
-        let t157: f64 = t48 * t47;
-        let t158: f64 = t156 + t157;
-        let t159: f64 = t55 * t54;
-        let t160: f64 = t158 - t159;
-        let t161: f64 = t62 * t61;
-        let t162: f64 = t160 - t161;
-        let t163: f64 = t69 * t68;
-        let t164: f64 = t162 + t163;
-        let t165: f64 = t76 * t75;
-        let t166: f64 = t164 + t165;
-        let t167: f64 = t166 - t152;
-        let t170: f64 = t19 * t20;
-        let t171: f64 = t170 * t23;
-        let t172: f64 = t9 * t26;
-        let t173: f64 = t26 * t31;
-        let t174: f64 = t173 * t34;
-        let t175: f64 = t172 - t174;
-        let t176: f64 = t19 * t38;
-        let t177: f64 = t176 * t41;
-        let t178: f64 = t175 + t177;
-        let t179: f64 = t26 * t45;
-        let t180: f64 = t179 * t48;
-        let t181: f64 = t178 + t180;
-        let t182: f64 = t19 * t52;
-        let t183: f64 = t182 * t55;
-        let t184: f64 = t181 - t183;
-        let t185: f64 = t26 * t59;
-        let t186: f64 = t185 * t62;
-        let t187: f64 = t184 - t186;
-        let t188: f64 = t19 * t66;
-        let t189: f64 = t188 * t69;
-        let t190: f64 = t187 + t189;
-        let t191: f64 = t26 * t73;
-        let t192: f64 = t191 * t76;
-        let t193: f64 = t190 + t192;
-        let t194: f64 = t193 - t171;
-        let t202: f64 = t9 * t9;
-        let t203: f64 = t15 * t202;
-        let t204: f64 = t18 * t203;
-        let t205: f64 = t26 * t204;
-        let t206: f64 = 0.3333333333333333f64;
-        let t207: f64 = t205 * t206;
-        let t208: f64 = t202 * t18;
-        let t209: f64 = t19 * t208;
-        let t210: f64 = t23 * t209;
-        let t211: f64 = t30 * t202;
-        let t212: f64 = t18 * t211;
-        let t213: f64 = t19 * t212;
-        let t214: f64 = 0.125f64;
-        let t215: f64 = t213 * t214;
-        let t216: f64 = t37 * t202;
-        let t217: f64 = t18 * t216;
-        let t218: f64 = t26 * t217;
-        let t219: f64 = 0.03333333333333333f64;
-        let t220: f64 = t218 * t219;
-        let t221: f64 = t215 + t220;
-        let t222: f64 = t44 * t202;
-        let t223: f64 = t18 * t222;
-        let t224: f64 = t19 * t223;
-        let t225: f64 = 0.006944444444444444f64;
-        let t226: f64 = t224 * t225;
-        let t227: f64 = t221 - t226;
-        let t228: f64 = t51 * t202;
-        let t229: f64 = t18 * t228;
-        let t230: f64 = t26 * t229;
-        let t231: f64 = 0.0011904761904761906f64;
-        let t232: f64 = t230 * t231;
-        let t233: f64 = t227 - t232;
-        let t234: f64 = t58 * t202;
-        let t235: f64 = t18 * t234;
-        let t236: f64 = t19 * t235;
-        let t237: f64 = 0.00017361111111111112f64;
-        let t238: f64 = t236 * t237;
-        let t239: f64 = t233 + t238;
-        let t240: f64 = t65 * t202;
-        let t241: f64 = t18 * t240;
-        let t242: f64 = t26 * t241;
-        let t243: f64 = 0.000022045855379188714f64;
-        let t244: f64 = t242 * t243;
-        let t245: f64 = t239 + t244;
-        let t246: f64 = t72 * t202;
-        let t247: f64 = t18 * t246;
-        let t248: f64 = t19 * t247;
-        let t249: f64 = 0.00000248015873015873f64;
-        let t250: f64 = t248 * t249;
-        let t251: f64 = t245 - t250;
-        let t252: f64 = t251 - t207;
-        let t253: f64 = t252 - t210;
-        let t268: f64 = t20 * t26;
-        let t269: f64 = t23 * t268;
-        let t271: f64 = t269 + t270;
-        let t272: f64 = t19 * t31;
-        let t273: f64 = t34 * t272;
-        let t274: f64 = t271 - t273;
-        let t275: f64 = t26 * t38;
-        let t276: f64 = t41 * t275;
-        let t277: f64 = t274 - t276;
-        let t278: f64 = t19 * t45;
-        let t279: f64 = t48 * t278;
-        let t280: f64 = t277 + t279;
-        let t281: f64 = t26 * t52;
-        let t282: f64 = t55 * t281;
-        let t283: f64 = t280 + t282;
-        let t284: f64 = t19 * t59;
-        let t285: f64 = t62 * t284;
-        let t286: f64 = t283 - t285;
-        let t287: f64 = t26 * t66;
-        let t288: f64 = t69 * t287;
-        let t289: f64 = t286 - t288;
-        let t290: f64 = t19 * t73;
-        let t291: f64 = t76 * t290;
-        let t292: f64 = t289 + t291;
-        let t299: f64 = t19 * t204;
-        let t300: f64 = t206 * t299;
-        let t301: f64 = t26 * t208;
-        let t302: f64 = t23 * t301;
-        let t303: f64 = t26 * t212;
-        let t304: f64 = t214 * t303;
-        let t305: f64 = t302 - t304;
-        let t306: f64 = t19 * t217;
-        let t307: f64 = t219 * t306;
-        let t308: f64 = t305 + t307;
-        let t309: f64 = t26 * t223;
-        let t310: f64 = t225 * t309;
-        let t311: f64 = t308 + t310;
-        let t312: f64 = t19 * t229;
-        let t313: f64 = t231 * t312;
-        let t314: f64 = t311 - t313;
-        let t315: f64 = t26 * t235;
-        let t316: f64 = t237 * t315;
-        let t317: f64 = t314 - t316;
-        let t318: f64 = t19 * t241;
-        let t319: f64 = t243 * t318;
-        let t320: f64 = t317 + t319;
-        let t321: f64 = t26 * t247;
-        let t322: f64 = t249 * t321;
-        let t323: f64 = t320 + t322;
-        let t324: f64 = t323 - t300;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = crate::math::sin(t4);
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t12 / t8;
+    let t14: crate::Real = t6 + t13;
+    let t15: crate::Real = t9 * t14;
+    let t16: crate::Real = crate::math::cos(t4);
+    let t17: crate::Real = t11 * t16;
+    let t18: crate::Real = t5 + t17;
+    let t19: crate::Real = crate::math::sin(t2);
+    let t26: crate::Real = crate::math::cos(t2);
+    let t27: crate::Real = t9 * t18;
+    let t28: crate::Real = t26 * t27;
+    let t30: crate::Real = t15 * t15;
+    let t79: crate::Real = 1.0;
+    let t97: crate::Real = t19 * t27;
+    let t270: crate::Real = t9 * t19;
+    let g0: [crate::Real; 8usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t20: crate::Real = t9 * t15;
+        let t21: crate::Real = t18 * t20;
+        let t22: crate::Real = t19 * t21;
+        let t23: crate::Real = 0.5;
+        let t24: crate::Real = t22 * t23;
+        let t25: crate::Real = t0 - t24;
+        let t29: crate::Real = t25 + t28;
+        let t31: crate::Real = t9 * t30;
+        let t32: crate::Real = t18 * t31;
+        let t33: crate::Real = t26 * t32;
+        let t34: crate::Real = 0.16666666666666666;
+        let t35: crate::Real = t33 * t34;
+        let t36: crate::Real = t29 - t35;
+        let t37: crate::Real = t15 * t30;
+        let t38: crate::Real = t9 * t37;
+        let t39: crate::Real = t18 * t38;
+        let t40: crate::Real = t19 * t39;
+        let t41: crate::Real = 0.041666666666666664;
+        let t42: crate::Real = t40 * t41;
+        let t43: crate::Real = t36 + t42;
+        let t44: crate::Real = t30 * t30;
+        let t45: crate::Real = t9 * t44;
+        let t46: crate::Real = t18 * t45;
+        let t47: crate::Real = t26 * t46;
+        let t48: crate::Real = 0.008333333333333333;
+        let t49: crate::Real = t47 * t48;
+        let t50: crate::Real = t43 + t49;
+        let t51: crate::Real = t15 * t44;
+        let t52: crate::Real = t9 * t51;
+        let t53: crate::Real = t18 * t52;
+        let t54: crate::Real = t19 * t53;
+        let t55: crate::Real = 0.001388888888888889;
+        let t56: crate::Real = t54 * t55;
+        let t57: crate::Real = t50 - t56;
+        let t58: crate::Real = t37 * t37;
+        let t59: crate::Real = t9 * t58;
+        let t60: crate::Real = t18 * t59;
+        let t61: crate::Real = t26 * t60;
+        let t62: crate::Real = 0.0001984126984126984;
+        let t63: crate::Real = t61 * t62;
+        let t64: crate::Real = t57 - t63;
+        let t65: crate::Real = t15 * t58;
+        let t66: crate::Real = t9 * t65;
+        let t67: crate::Real = t18 * t66;
+        let t68: crate::Real = t19 * t67;
+        let t69: crate::Real = 0.0000248015873015873;
+        let t70: crate::Real = t68 * t69;
+        let t71: crate::Real = t64 + t70;
+        let t72: crate::Real = t44 * t44;
+        let t73: crate::Real = t9 * t72;
+        let t74: crate::Real = t18 * t73;
+        let t75: crate::Real = t26 * t74;
+        let t76: crate::Real = 0.0000027557319223985893;
+        let t77: crate::Real = t75 * t76;
+        let t78: crate::Real = t71 + t77;
+        let t94: crate::Real = t21 * t26;
+        let t95: crate::Real = t23 * t94;
+        let t96: crate::Real = t1 + t95;
+        let t98: crate::Real = t96 + t97;
+        let t99: crate::Real = t19 * t32;
+        let t100: crate::Real = t34 * t99;
+        let t101: crate::Real = t98 - t100;
+        let t102: crate::Real = t26 * t39;
+        let t103: crate::Real = t41 * t102;
+        let t104: crate::Real = t101 - t103;
+        let t105: crate::Real = t19 * t46;
+        let t106: crate::Real = t48 * t105;
+        let t107: crate::Real = t104 + t106;
+        let t108: crate::Real = t26 * t53;
+        let t109: crate::Real = t55 * t108;
+        let t110: crate::Real = t107 + t109;
+        let t111: crate::Real = t19 * t60;
+        let t112: crate::Real = t62 * t111;
+        let t113: crate::Real = t110 - t112;
+        let t114: crate::Real = t26 * t67;
+        let t115: crate::Real = t69 * t114;
+        let t116: crate::Real = t113 - t115;
+        let t117: crate::Real = t19 * t74;
+        let t118: crate::Real = t76 * t117;
+        let t119: crate::Real = t116 + t118;
+        let t129: crate::Real = t26 * t21;
+        let t130: crate::Real = t129 * t23;
+        let t131: crate::Real = t99 * t34;
+        let t132: crate::Real = t102 * t41;
+        let t133: crate::Real = t131 + t132;
+        let t134: crate::Real = t105 * t48;
+        let t135: crate::Real = t133 - t134;
+        let t136: crate::Real = t108 * t55;
+        let t137: crate::Real = t135 - t136;
+        let t138: crate::Real = t111 * t62;
+        let t139: crate::Real = t137 + t138;
+        let t140: crate::Real = t114 * t69;
+        let t141: crate::Real = t139 + t140;
+        let t142: crate::Real = t117 * t76;
+        let t143: crate::Real = t141 - t142;
+        let t144: crate::Real = t143 - t130;
+        let t145: crate::Real = t144 - t97;
+        let t151: crate::Real = t21 * t19;
+        let t152: crate::Real = t23 * t151;
+        let t153: crate::Real = t34 * t33;
+        let t154: crate::Real = t28 - t153;
+        let t155: crate::Real = t41 * t40;
+        let t156: crate::Real = t154 + t155;
+        let t157: crate::Real = t48 * t47;
+        let t158: crate::Real = t156 + t157;
+        let t159: crate::Real = t55 * t54;
+        let t160: crate::Real = t158 - t159;
+        let t161: crate::Real = t62 * t61;
+        let t162: crate::Real = t160 - t161;
+        let t163: crate::Real = t69 * t68;
+        let t164: crate::Real = t162 + t163;
+        let t165: crate::Real = t76 * t75;
+        let t166: crate::Real = t164 + t165;
+        let t167: crate::Real = t166 - t152;
+        let t170: crate::Real = t19 * t20;
+        let t171: crate::Real = t170 * t23;
+        let t172: crate::Real = t9 * t26;
+        let t173: crate::Real = t26 * t31;
+        let t174: crate::Real = t173 * t34;
+        let t175: crate::Real = t172 - t174;
+        let t176: crate::Real = t19 * t38;
+        let t177: crate::Real = t176 * t41;
+        let t178: crate::Real = t175 + t177;
+        let t179: crate::Real = t26 * t45;
+        let t180: crate::Real = t179 * t48;
+        let t181: crate::Real = t178 + t180;
+        let t182: crate::Real = t19 * t52;
+        let t183: crate::Real = t182 * t55;
+        let t184: crate::Real = t181 - t183;
+        let t185: crate::Real = t26 * t59;
+        let t186: crate::Real = t185 * t62;
+        let t187: crate::Real = t184 - t186;
+        let t188: crate::Real = t19 * t66;
+        let t189: crate::Real = t188 * t69;
+        let t190: crate::Real = t187 + t189;
+        let t191: crate::Real = t26 * t73;
+        let t192: crate::Real = t191 * t76;
+        let t193: crate::Real = t190 + t192;
+        let t194: crate::Real = t193 - t171;
+        let t202: crate::Real = t9 * t9;
+        let t203: crate::Real = t15 * t202;
+        let t204: crate::Real = t18 * t203;
+        let t205: crate::Real = t26 * t204;
+        let t206: crate::Real = 0.3333333333333333;
+        let t207: crate::Real = t205 * t206;
+        let t208: crate::Real = t202 * t18;
+        let t209: crate::Real = t19 * t208;
+        let t210: crate::Real = t23 * t209;
+        let t211: crate::Real = t30 * t202;
+        let t212: crate::Real = t18 * t211;
+        let t213: crate::Real = t19 * t212;
+        let t214: crate::Real = 0.125;
+        let t215: crate::Real = t213 * t214;
+        let t216: crate::Real = t37 * t202;
+        let t217: crate::Real = t18 * t216;
+        let t218: crate::Real = t26 * t217;
+        let t219: crate::Real = 0.03333333333333333;
+        let t220: crate::Real = t218 * t219;
+        let t221: crate::Real = t215 + t220;
+        let t222: crate::Real = t44 * t202;
+        let t223: crate::Real = t18 * t222;
+        let t224: crate::Real = t19 * t223;
+        let t225: crate::Real = 0.006944444444444444;
+        let t226: crate::Real = t224 * t225;
+        let t227: crate::Real = t221 - t226;
+        let t228: crate::Real = t51 * t202;
+        let t229: crate::Real = t18 * t228;
+        let t230: crate::Real = t26 * t229;
+        let t231: crate::Real = 0.0011904761904761906;
+        let t232: crate::Real = t230 * t231;
+        let t233: crate::Real = t227 - t232;
+        let t234: crate::Real = t58 * t202;
+        let t235: crate::Real = t18 * t234;
+        let t236: crate::Real = t19 * t235;
+        let t237: crate::Real = 0.00017361111111111112;
+        let t238: crate::Real = t236 * t237;
+        let t239: crate::Real = t233 + t238;
+        let t240: crate::Real = t65 * t202;
+        let t241: crate::Real = t18 * t240;
+        let t242: crate::Real = t26 * t241;
+        let t243: crate::Real = 0.000022045855379188714;
+        let t244: crate::Real = t242 * t243;
+        let t245: crate::Real = t239 + t244;
+        let t246: crate::Real = t72 * t202;
+        let t247: crate::Real = t18 * t246;
+        let t248: crate::Real = t19 * t247;
+        let t249: crate::Real = 0.00000248015873015873;
+        let t250: crate::Real = t248 * t249;
+        let t251: crate::Real = t245 - t250;
+        let t252: crate::Real = t251 - t207;
+        let t253: crate::Real = t252 - t210;
+        let t268: crate::Real = t20 * t26;
+        let t269: crate::Real = t23 * t268;
+        let t271: crate::Real = t269 + t270;
+        let t272: crate::Real = t19 * t31;
+        let t273: crate::Real = t34 * t272;
+        let t274: crate::Real = t271 - t273;
+        let t275: crate::Real = t26 * t38;
+        let t276: crate::Real = t41 * t275;
+        let t277: crate::Real = t274 - t276;
+        let t278: crate::Real = t19 * t45;
+        let t279: crate::Real = t48 * t278;
+        let t280: crate::Real = t277 + t279;
+        let t281: crate::Real = t26 * t52;
+        let t282: crate::Real = t55 * t281;
+        let t283: crate::Real = t280 + t282;
+        let t284: crate::Real = t19 * t59;
+        let t285: crate::Real = t62 * t284;
+        let t286: crate::Real = t283 - t285;
+        let t287: crate::Real = t26 * t66;
+        let t288: crate::Real = t69 * t287;
+        let t289: crate::Real = t286 - t288;
+        let t290: crate::Real = t19 * t73;
+        let t291: crate::Real = t76 * t290;
+        let t292: crate::Real = t289 + t291;
+        let t299: crate::Real = t19 * t204;
+        let t300: crate::Real = t206 * t299;
+        let t301: crate::Real = t26 * t208;
+        let t302: crate::Real = t23 * t301;
+        let t303: crate::Real = t26 * t212;
+        let t304: crate::Real = t214 * t303;
+        let t305: crate::Real = t302 - t304;
+        let t306: crate::Real = t19 * t217;
+        let t307: crate::Real = t219 * t306;
+        let t308: crate::Real = t305 + t307;
+        let t309: crate::Real = t26 * t223;
+        let t310: crate::Real = t225 * t309;
+        let t311: crate::Real = t308 + t310;
+        let t312: crate::Real = t19 * t229;
+        let t313: crate::Real = t231 * t312;
+        let t314: crate::Real = t311 - t313;
+        let t315: crate::Real = t26 * t235;
+        let t316: crate::Real = t237 * t315;
+        let t317: crate::Real = t314 - t316;
+        let t318: crate::Real = t19 * t241;
+        let t319: crate::Real = t243 * t318;
+        let t320: crate::Real = t317 + t319;
+        let t321: crate::Real = t26 * t247;
+        let t322: crate::Real = t249 * t321;
+        let t323: crate::Real = t320 + t322;
+        let t324: crate::Real = t323 - t300;
         [t78, t119, t145, t167, t194, t253, t292, t324]
     } else {
-        let t80: f64 = libm::cos(t15);
-        let t81: f64 = t79 - t80;
-        let t82: f64 = t9 * t81;
-        let t83: f64 = t18 * t82;
-        let t84: f64 = t19 * t83;
-        let t85: f64 = t79 / t15;
-        let t86: f64 = t84 * t85;
-        let t87: f64 = t0 - t86;
-        let t88: f64 = libm::sin(t15);
-        let t89: f64 = t27 * t88;
-        let t90: f64 = t26 * t89;
-        let t91: f64 = t90 * t85;
-        let t92: f64 = t87 + t91;
-        let t120: f64 = t26 * t83;
-        let t121: f64 = t120 * t85;
-        let t122: f64 = t1 + t121;
-        let t123: f64 = t88 * t97;
-        let t124: f64 = t123 * t85;
-        let t125: f64 = t122 + t124;
-        let t146: f64 = -t121;
-        let t147: f64 = t97 * t88;
-        let t148: f64 = t147 * t85;
-        let t149: f64 = t146 - t148;
-        let t168: f64 = t91 - t86;
-        let t195: f64 = t9 * t88;
-        let t196: f64 = t26 * t195;
-        let t197: f64 = t196 * t85;
-        let t198: f64 = t19 * t82;
-        let t199: f64 = t198 * t85;
-        let t200: f64 = t197 - t199;
-        let t254: f64 = t80 * t28;
-        let t255: f64 = t254 * t85;
-        let t256: f64 = t82 * t18;
-        let t257: f64 = t19 * t256;
-        let t258: f64 = t79 / t30;
-        let t259: f64 = t257 * t258;
-        let t260: f64 = t255 + t259;
-        let t261: f64 = t88 * t27;
-        let t262: f64 = t26 * t261;
-        let t263: f64 = t262 * t258;
-        let t264: f64 = t260 - t263;
-        let t265: f64 = t264 - t124;
-        let t266: f64 = t9 * t265;
-        let t293: f64 = t88 * t270;
-        let t294: f64 = t293 * t85;
-        let t295: f64 = t26 * t82;
-        let t296: f64 = t295 * t85;
-        let t297: f64 = t294 + t296;
-        let t325: f64 = t80 * t97;
-        let t326: f64 = t325 * t85;
-        let t327: f64 = t262 * t85;
-        let t328: f64 = t326 + t327;
-        let t329: f64 = t26 * t256;
-        let t330: f64 = t329 * t258;
-        let t331: f64 = t328 - t330;
-        let t332: f64 = t123 * t258;
-        let t333: f64 = t331 - t332;
-        let t334: f64 = t9 * t333;
+        let t80: crate::Real = crate::math::cos(t15);
+        let t81: crate::Real = t79 - t80;
+        let t82: crate::Real = t9 * t81;
+        let t83: crate::Real = t18 * t82;
+        let t84: crate::Real = t19 * t83;
+        let t85: crate::Real = t79 / t15;
+        let t86: crate::Real = t84 * t85;
+        let t87: crate::Real = t0 - t86;
+        let t88: crate::Real = crate::math::sin(t15);
+        let t89: crate::Real = t27 * t88;
+        let t90: crate::Real = t26 * t89;
+        let t91: crate::Real = t90 * t85;
+        let t92: crate::Real = t87 + t91;
+        let t120: crate::Real = t26 * t83;
+        let t121: crate::Real = t120 * t85;
+        let t122: crate::Real = t1 + t121;
+        let t123: crate::Real = t88 * t97;
+        let t124: crate::Real = t123 * t85;
+        let t125: crate::Real = t122 + t124;
+        let t146: crate::Real = -t121;
+        let t147: crate::Real = t97 * t88;
+        let t148: crate::Real = t147 * t85;
+        let t149: crate::Real = t146 - t148;
+        let t168: crate::Real = t91 - t86;
+        let t195: crate::Real = t9 * t88;
+        let t196: crate::Real = t26 * t195;
+        let t197: crate::Real = t196 * t85;
+        let t198: crate::Real = t19 * t82;
+        let t199: crate::Real = t198 * t85;
+        let t200: crate::Real = t197 - t199;
+        let t254: crate::Real = t80 * t28;
+        let t255: crate::Real = t254 * t85;
+        let t256: crate::Real = t82 * t18;
+        let t257: crate::Real = t19 * t256;
+        let t258: crate::Real = t79 / t30;
+        let t259: crate::Real = t257 * t258;
+        let t260: crate::Real = t255 + t259;
+        let t261: crate::Real = t88 * t27;
+        let t262: crate::Real = t26 * t261;
+        let t263: crate::Real = t262 * t258;
+        let t264: crate::Real = t260 - t263;
+        let t265: crate::Real = t264 - t124;
+        let t266: crate::Real = t9 * t265;
+        let t293: crate::Real = t88 * t270;
+        let t294: crate::Real = t293 * t85;
+        let t295: crate::Real = t26 * t82;
+        let t296: crate::Real = t295 * t85;
+        let t297: crate::Real = t294 + t296;
+        let t325: crate::Real = t80 * t97;
+        let t326: crate::Real = t325 * t85;
+        let t327: crate::Real = t262 * t85;
+        let t328: crate::Real = t326 + t327;
+        let t329: crate::Real = t26 * t256;
+        let t330: crate::Real = t329 * t258;
+        let t331: crate::Real = t328 - t330;
+        let t332: crate::Real = t123 * t258;
+        let t333: crate::Real = t331 - t332;
+        let t334: crate::Real = t9 * t333;
         [t92, t125, t149, t168, t200, t266, t297, t334]
     };
-    let t93: f64 = g0[0usize];
-    let t126: f64 = g0[1usize];
-    let t150: f64 = g0[2usize];
-    let t169: f64 = g0[3usize];
-    let t201: f64 = g0[4usize];
-    let t267: f64 = g0[5usize];
-    let t298: f64 = g0[6usize];
-    let t335: f64 = g0[7usize];
-    let t127: f64 = t2 + t15;
-    let t128: f64 = 0f64;
+    let t93: crate::Real = g0[0usize];
+    let t126: crate::Real = g0[1usize];
+    let t150: crate::Real = g0[2usize];
+    let t169: crate::Real = g0[3usize];
+    let t201: crate::Real = g0[4usize];
+    let t267: crate::Real = g0[5usize];
+    let t298: crate::Real = g0[6usize];
+    let t335: crate::Real = g0[7usize];
+    let t127: crate::Real = t2 + t15;
+    let t128: crate::Real = 0.0;
     [
         t93,
         t126,
@@ -2266,12 +2286,16 @@ pub fn step_exact_linearized_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_w`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 2usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 2usize]; 3usize],
+) {
     let o = step_exact_linearized_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -2295,525 +2319,529 @@ pub fn step_exact_linearized(
 475 arithmetic operations (4061 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = p[1usize];
-    let t9: f64 = dt;
-    let t10: f64 = libm::sin(t4);
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t10 * t11;
-    let t13: f64 = t12 / t8;
-    let t14: f64 = t6 + t13;
-    let t15: f64 = t9 * t14;
-    let t16: f64 = libm::cos(t4);
-    let t17: f64 = t11 * t16;
-    let t18: f64 = t5 + t17;
-    let t19: f64 = libm::sin(t2);
-    let t23: f64 = 0.5f64;
-    let t26: f64 = libm::cos(t2);
-    let t27: f64 = t9 * t18;
-    let t28: f64 = t26 * t27;
-    let t34: f64 = 0.16666666666666666f64;
-    let t41: f64 = 0.041666666666666664f64;
-    let t48: f64 = 0.008333333333333333f64;
-    let t55: f64 = 0.001388888888888889f64;
-    let t62: f64 = 0.0001984126984126984f64;
-    let t69: f64 = 0.0000248015873015873f64;
-    let t76: f64 = 0.0000027557319223985893f64;
-    let t79: f64 = 1f64;
-    let t97: f64 = t19 * t27;
-    let g0: [f64; 4usize] = if libm::fabs(t15) < 0.05f64 {
-        let t20: f64 = t9 * t15;
-        let t21: f64 = t18 * t20;
-        let t22: f64 = t19 * t21;
-        let t24: f64 = t22 * t23;
-        let t25: f64 = t0 - t24;
-        let t29: f64 = t25 + t28;
-        let t30: f64 = t15 * t15;
-        let t31: f64 = t9 * t30;
-        let t32: f64 = t18 * t31;
-        let t33: f64 = t26 * t32;
-        let t35: f64 = t33 * t34;
-        let t36: f64 = t29 - t35;
-        let t37: f64 = t15 * t30;
-        let t38: f64 = t9 * t37;
-        let t39: f64 = t18 * t38;
-        let t40: f64 = t19 * t39;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = t36 + t42;
-        let t44: f64 = t30 * t30;
-        let t45: f64 = t9 * t44;
-        let t46: f64 = t18 * t45;
-        let t47: f64 = t26 * t46;
-        let t49: f64 = t47 * t48;
-        let t50: f64 = t43 + t49;
-        let t51: f64 = t15 * t44;
-        let t52: f64 = t9 * t51;
-        let t53: f64 = t18 * t52;
-        let t54: f64 = t19 * t53;
-        let t56: f64 = t54 * t55;
-        let t57: f64 = t50 - t56;
-        let t58: f64 = t37 * t37;
-        let t59: f64 = t9 * t58;
-        let t60: f64 = t18 * t59;
-        let t61: f64 = t26 * t60;
-        let t63: f64 = t61 * t62;
-        let t64: f64 = t57 - t63;
-        let t65: f64 = t15 * t58;
-        let t66: f64 = t9 * t65;
-        let t67: f64 = t18 * t66;
-        let t68: f64 = t19 * t67;
-        let t70: f64 = t68 * t69;
-        let t71: f64 = t64 + t70;
-        let t72: f64 = t44 * t44;
-        let t73: f64 = t9 * t72;
-        let t74: f64 = t18 * t73;
-        let t75: f64 = t26 * t74;
-        let t77: f64 = t75 * t76;
-        let t78: f64 = t71 + t77;
-        let t94: f64 = t21 * t26;
-        let t95: f64 = t23 * t94;
-        let t96: f64 = t1 + t95;
-        let t98: f64 = t96 + t97;
-        let t99: f64 = t19 * t32;
-        let t100: f64 = t34 * t99;
-        let t101: f64 = t98 - t100;
-        let t102: f64 = t26 * t39;
-        let t103: f64 = t41 * t102;
-        let t104: f64 = t101 - t103;
-        let t105: f64 = t19 * t46;
-        let t106: f64 = t48 * t105;
-        let t107: f64 = t104 + t106;
-        let t108: f64 = t26 * t53;
-        let t109: f64 = t55 * t108;
-        let t110: f64 = t107 + t109;
-        let t111: f64 = t19 * t60;
-        let t112: f64 = t62 * t111;
-        let t113: f64 = t110 - t112;
-        let t114: f64 = t26 * t67;
-        let t115: f64 = t69 * t114;
-        let t116: f64 = t113 - t115;
-        let t117: f64 = t19 * t74;
-        let t118: f64 = t76 * t117;
-        let t119: f64 = t116 + t118;
-        let t129: f64 = t26 * t21;
-        let t130: f64 = t129 * t23;
-        let t131: f64 = t99 * t34;
-        let t132: f64 = t102 * t41;
-        let t133: f64 = t131 + t132;
-        let t134: f64 = t105 * t48;
-        let t135: f64 = t133 - t134;
-        let t136: f64 = t108 * t55;
-        let t137: f64 = t135 - t136;
-        let t138: f64 = t111 * t62;
-        let t139: f64 = t137 + t138;
-        let t140: f64 = t114 * t69;
-        let t141: f64 = t139 + t140;
-        let t142: f64 = t117 * t76;
-        let t143: f64 = t141 - t142;
-        let t144: f64 = t143 - t130;
-        let t145: f64 = t144 - t97;
-        let t151: f64 = t21 * t19;
-        let t152: f64 = t23 * t151;
-        let t153: f64 = t34 * t33;
-        let t154: f64 = t28 - t153;
-        let t155: f64 = t41 * t40;
-        let t156: f64 = t154 + t155;
-        let t157: f64 = t48 * t47;
-        let t158: f64 = t156 + t157;
-        let t159: f64 = t55 * t54;
-        let t160: f64 = t158 - t159;
-        let t161: f64 = t62 * t61;
-        let t162: f64 = t160 - t161;
-        let t163: f64 = t69 * t68;
-        let t164: f64 = t162 + t163;
-        let t165: f64 = t76 * t75;
-        let t166: f64 = t164 + t165;
-        let t167: f64 = t166 - t152;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = p[1usize];
+    let t9: crate::Real = dt;
+    let t10: crate::Real = crate::math::sin(t4);
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t10 * t11;
+    let t13: crate::Real = t12 / t8;
+    let t14: crate::Real = t6 + t13;
+    let t15: crate::Real = t9 * t14;
+    let t16: crate::Real = crate::math::cos(t4);
+    let t17: crate::Real = t11 * t16;
+    let t18: crate::Real = t5 + t17;
+    let t19: crate::Real = crate::math::sin(t2);
+    let t23: crate::Real = 0.5;
+    let t26: crate::Real = crate::math::cos(t2);
+    let t27: crate::Real = t9 * t18;
+    let t28: crate::Real = t26 * t27;
+    let t34: crate::Real = 0.16666666666666666;
+    let t41: crate::Real = 0.041666666666666664;
+    let t48: crate::Real = 0.008333333333333333;
+    let t55: crate::Real = 0.001388888888888889;
+    let t62: crate::Real = 0.0001984126984126984;
+    let t69: crate::Real = 0.0000248015873015873;
+    let t76: crate::Real = 0.0000027557319223985893;
+    let t79: crate::Real = 1.0;
+    let t97: crate::Real = t19 * t27;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t15)
+        < crate::math::series_switch(0.05)
+    {
+        let t20: crate::Real = t9 * t15;
+        let t21: crate::Real = t18 * t20;
+        let t22: crate::Real = t19 * t21;
+        let t24: crate::Real = t22 * t23;
+        let t25: crate::Real = t0 - t24;
+        let t29: crate::Real = t25 + t28;
+        let t30: crate::Real = t15 * t15;
+        let t31: crate::Real = t9 * t30;
+        let t32: crate::Real = t18 * t31;
+        let t33: crate::Real = t26 * t32;
+        let t35: crate::Real = t33 * t34;
+        let t36: crate::Real = t29 - t35;
+        let t37: crate::Real = t15 * t30;
+        let t38: crate::Real = t9 * t37;
+        let t39: crate::Real = t18 * t38;
+        let t40: crate::Real = t19 * t39;
+        let t42: crate::Real = t40 * t41;
+        let t43: crate::Real = t36 + t42;
+        let t44: crate::Real = t30 * t30;
+        let t45: crate::Real = t9 * t44;
+        let t46: crate::Real = t18 * t45;
+        let t47: crate::Real = t26 * t46;
+        let t49: crate::Real = t47 * t48;
+        let t50: crate::Real = t43 + t49;
+        let t51: crate::Real = t15 * t44;
+        let t52: crate::Real = t9 * t51;
+        let t53: crate::Real = t18 * t52;
+        let t54: crate::Real = t19 * t53;
+        let t56: crate::Real = t54 * t55;
+        let t57: crate::Real = t50 - t56;
+        let t58: crate::Real = t37 * t37;
+        let t59: crate::Real = t9 * t58;
+        let t60: crate::Real = t18 * t59;
+        let t61: crate::Real = t26 * t60;
+        let t63: crate::Real = t61 * t62;
+        let t64: crate::Real = t57 - t63;
+        let t65: crate::Real = t15 * t58;
+        let t66: crate::Real = t9 * t65;
+        let t67: crate::Real = t18 * t66;
+        let t68: crate::Real = t19 * t67;
+        let t70: crate::Real = t68 * t69;
+        let t71: crate::Real = t64 + t70;
+        let t72: crate::Real = t44 * t44;
+        let t73: crate::Real = t9 * t72;
+        let t74: crate::Real = t18 * t73;
+        let t75: crate::Real = t26 * t74;
+        let t77: crate::Real = t75 * t76;
+        let t78: crate::Real = t71 + t77;
+        let t94: crate::Real = t21 * t26;
+        let t95: crate::Real = t23 * t94;
+        let t96: crate::Real = t1 + t95;
+        let t98: crate::Real = t96 + t97;
+        let t99: crate::Real = t19 * t32;
+        let t100: crate::Real = t34 * t99;
+        let t101: crate::Real = t98 - t100;
+        let t102: crate::Real = t26 * t39;
+        let t103: crate::Real = t41 * t102;
+        let t104: crate::Real = t101 - t103;
+        let t105: crate::Real = t19 * t46;
+        let t106: crate::Real = t48 * t105;
+        let t107: crate::Real = t104 + t106;
+        let t108: crate::Real = t26 * t53;
+        let t109: crate::Real = t55 * t108;
+        let t110: crate::Real = t107 + t109;
+        let t111: crate::Real = t19 * t60;
+        let t112: crate::Real = t62 * t111;
+        let t113: crate::Real = t110 - t112;
+        let t114: crate::Real = t26 * t67;
+        let t115: crate::Real = t69 * t114;
+        let t116: crate::Real = t113 - t115;
+        let t117: crate::Real = t19 * t74;
+        let t118: crate::Real = t76 * t117;
+        let t119: crate::Real = t116 + t118;
+        let t129: crate::Real = t26 * t21;
+        let t130: crate::Real = t129 * t23;
+        let t131: crate::Real = t99 * t34;
+        let t132: crate::Real = t102 * t41;
+        let t133: crate::Real = t131 + t132;
+        let t134: crate::Real = t105 * t48;
+        let t135: crate::Real = t133 - t134;
+        let t136: crate::Real = t108 * t55;
+        let t137: crate::Real = t135 - t136;
+        let t138: crate::Real = t111 * t62;
+        let t139: crate::Real = t137 + t138;
+        let t140: crate::Real = t114 * t69;
+        let t141: crate::Real = t139 + t140;
+        let t142: crate::Real = t117 * t76;
+        let t143: crate::Real = t141 - t142;
+        let t144: crate::Real = t143 - t130;
+        let t145: crate::Real = t144 - t97;
+        let t151: crate::Real = t21 * t19;
+        let t152: crate::Real = t23 * t151;
+        let t153: crate::Real = t34 * t33;
+        let t154: crate::Real = t28 - t153;
+        let t155: crate::Real = t41 * t40;
+        let t156: crate::Real = t154 + t155;
+        let t157: crate::Real = t48 * t47;
+        let t158: crate::Real = t156 + t157;
+        let t159: crate::Real = t55 * t54;
+        let t160: crate::Real = t158 - t159;
+        let t161: crate::Real = t62 * t61;
+        let t162: crate::Real = t160 - t161;
+        let t163: crate::Real = t69 * t68;
+        let t164: crate::Real = t162 + t163;
+        let t165: crate::Real = t76 * t75;
+        let t166: crate::Real = t164 + t165;
+        let t167: crate::Real = t166 - t152;
         [t78, t119, t145, t167]
     } else {
-        let t80: f64 = libm::cos(t15);
-        let t81: f64 = t79 - t80;
-        let t82: f64 = t9 * t81;
-        let t83: f64 = t18 * t82;
-        let t84: f64 = t19 * t83;
-        let t85: f64 = t79 / t15;
-        let t86: f64 = t84 * t85;
-        let t87: f64 = t0 - t86;
-        let t88: f64 = libm::sin(t15);
-        let t89: f64 = t27 * t88;
-        let t90: f64 = t26 * t89;
-        let t91: f64 = t90 * t85;
-        let t92: f64 = t87 + t91;
-        let t120: f64 = t26 * t83;
-        let t121: f64 = t120 * t85;
-        let t122: f64 = t1 + t121;
-        let t123: f64 = t88 * t97;
-        let t124: f64 = t123 * t85;
-        let t125: f64 = t122 + t124;
-        let t146: f64 = -t121;
-        let t147: f64 = t97 * t88;
-        let t148: f64 = t147 * t85;
-        let t149: f64 = t146 - t148;
-        let t168: f64 = t91 - t86;
+        let t80: crate::Real = crate::math::cos(t15);
+        let t81: crate::Real = t79 - t80;
+        let t82: crate::Real = t9 * t81;
+        let t83: crate::Real = t18 * t82;
+        let t84: crate::Real = t19 * t83;
+        let t85: crate::Real = t79 / t15;
+        let t86: crate::Real = t84 * t85;
+        let t87: crate::Real = t0 - t86;
+        let t88: crate::Real = crate::math::sin(t15);
+        let t89: crate::Real = t27 * t88;
+        let t90: crate::Real = t26 * t89;
+        let t91: crate::Real = t90 * t85;
+        let t92: crate::Real = t87 + t91;
+        let t120: crate::Real = t26 * t83;
+        let t121: crate::Real = t120 * t85;
+        let t122: crate::Real = t1 + t121;
+        let t123: crate::Real = t88 * t97;
+        let t124: crate::Real = t123 * t85;
+        let t125: crate::Real = t122 + t124;
+        let t146: crate::Real = -t121;
+        let t147: crate::Real = t97 * t88;
+        let t148: crate::Real = t147 * t85;
+        let t149: crate::Real = t146 - t148;
+        let t168: crate::Real = t91 - t86;
         [t92, t125, t149, t168]
     };
-    let t93: f64 = g0[0usize];
-    let t126: f64 = g0[1usize];
-    let t150: f64 = g0[2usize];
-    let t169: f64 = g0[3usize];
-    let t127: f64 = t2 + t15;
-    let t128: f64 = 0f64;
-    let t170: f64 = t79 / t8;
-    let t171: f64 = t12 * t170;
-    let t172: f64 = t6 + t171;
-    let t173: f64 = t9 * t172;
-    let t174: f64 = t3 * t9;
-    let t177: f64 = t174 * t19;
-    let t197: f64 = t173 * t173;
-    let t287: f64 = t8 * t8;
-    let t295: f64 = t79 / t287;
-    let t368: f64 = t7 * t9;
-    let t369: f64 = t3 * t368;
-    let g1: [f64; 4usize] = if libm::fabs(t173) < 0.05f64 {
-        let t175: f64 = t26 * t174;
-        let t176: f64 = t16 * t175;
-        let t178: f64 = t16 * t177;
-        let t179: f64 = t178 * t23;
-        let t180: f64 = -t179;
-        let t181: f64 = t9 * t9;
-        let t182: f64 = t3 * t181;
-        let t183: f64 = t18 * t182;
-        let t184: f64 = t10 * t183;
-        let t185: f64 = t26 * t184;
-        let t186: f64 = 0.3333333333333333f64;
-        let t187: f64 = t185 * t186;
-        let t188: f64 = t187 * t170;
-        let t189: f64 = t180 - t188;
-        let t190: f64 = t173 * t189;
-        let t191: f64 = t176 + t190;
-        let t192: f64 = t19 * t183;
-        let t193: f64 = t10 * t192;
-        let t194: f64 = t23 * t193;
-        let t195: f64 = t194 * t170;
-        let t196: f64 = t191 - t195;
-        let t198: f64 = t176 * t34;
-        let t199: f64 = 0.125f64;
-        let t200: f64 = t193 * t199;
-        let t201: f64 = t200 * t170;
-        let t202: f64 = t201 - t198;
-        let t203: f64 = t197 * t202;
-        let t204: f64 = t196 + t203;
-        let t205: f64 = t173 * t197;
-        let t206: f64 = t178 * t41;
-        let t207: f64 = 0.03333333333333333f64;
-        let t208: f64 = t185 * t207;
-        let t209: f64 = t208 * t170;
-        let t210: f64 = t206 + t209;
-        let t211: f64 = t205 * t210;
-        let t212: f64 = t204 + t211;
-        let t213: f64 = t197 * t197;
-        let t214: f64 = t176 * t48;
-        let t215: f64 = 0.006944444444444444f64;
-        let t216: f64 = t193 * t215;
-        let t217: f64 = t216 * t170;
-        let t218: f64 = t214 - t217;
-        let t219: f64 = t213 * t218;
-        let t220: f64 = t212 + t219;
-        let t221: f64 = t173 * t213;
-        let t222: f64 = t178 * t55;
-        let t223: f64 = -t222;
-        let t224: f64 = 0.0011904761904761906f64;
-        let t225: f64 = t185 * t224;
-        let t226: f64 = t225 * t170;
-        let t227: f64 = t223 - t226;
-        let t228: f64 = t221 * t227;
-        let t229: f64 = t220 + t228;
-        let t230: f64 = t205 * t205;
-        let t231: f64 = t176 * t62;
-        let t232: f64 = 0.00017361111111111112f64;
-        let t233: f64 = t193 * t232;
-        let t234: f64 = t233 * t170;
-        let t235: f64 = t234 - t231;
-        let t236: f64 = t230 * t235;
-        let t237: f64 = t229 + t236;
-        let t238: f64 = t173 * t230;
-        let t239: f64 = t178 * t69;
-        let t240: f64 = 0.000022045855379188714f64;
-        let t241: f64 = t185 * t240;
-        let t242: f64 = t241 * t170;
-        let t243: f64 = t239 + t242;
-        let t244: f64 = t238 * t243;
-        let t245: f64 = t237 + t244;
-        let t246: f64 = t213 * t213;
-        let t247: f64 = t176 * t76;
-        let t248: f64 = 0.00000248015873015873f64;
-        let t249: f64 = t193 * t248;
-        let t250: f64 = t249 * t170;
-        let t251: f64 = t247 - t250;
-        let t252: f64 = t246 * t251;
-        let t253: f64 = t245 + t252;
-        let t288: f64 = t173 * t181;
-        let t289: f64 = t7 * t288;
-        let t290: f64 = t3 * t289;
-        let t291: f64 = t18 * t290;
-        let t292: f64 = t10 * t291;
-        let t293: f64 = t26 * t292;
-        let t294: f64 = t186 * t293;
-        let t296: f64 = t294 * t295;
-        let t297: f64 = t7 * t181;
-        let t298: f64 = t3 * t297;
-        let t299: f64 = t18 * t298;
-        let t300: f64 = t19 * t299;
-        let t301: f64 = t10 * t300;
-        let t302: f64 = t23 * t301;
-        let t303: f64 = t302 * t295;
-        let t304: f64 = t296 + t303;
-        let t305: f64 = t181 * t197;
-        let t306: f64 = t7 * t305;
-        let t307: f64 = t3 * t306;
-        let t308: f64 = t18 * t307;
-        let t309: f64 = t19 * t308;
-        let t310: f64 = t10 * t309;
-        let t311: f64 = t199 * t310;
-        let t312: f64 = t311 * t295;
-        let t313: f64 = t304 - t312;
-        let t314: f64 = t181 * t205;
-        let t315: f64 = t7 * t314;
-        let t316: f64 = t3 * t315;
-        let t317: f64 = t18 * t316;
-        let t318: f64 = t10 * t317;
-        let t319: f64 = t26 * t318;
-        let t320: f64 = t207 * t319;
-        let t321: f64 = t320 * t295;
-        let t322: f64 = t313 - t321;
-        let t323: f64 = t181 * t213;
-        let t324: f64 = t7 * t323;
-        let t325: f64 = t3 * t324;
-        let t326: f64 = t18 * t325;
-        let t327: f64 = t19 * t326;
-        let t328: f64 = t10 * t327;
-        let t329: f64 = t215 * t328;
-        let t330: f64 = t329 * t295;
-        let t331: f64 = t322 + t330;
-        let t332: f64 = t181 * t221;
-        let t333: f64 = t7 * t332;
-        let t334: f64 = t3 * t333;
-        let t335: f64 = t18 * t334;
-        let t336: f64 = t10 * t335;
-        let t337: f64 = t26 * t336;
-        let t338: f64 = t224 * t337;
-        let t339: f64 = t338 * t295;
-        let t340: f64 = t331 + t339;
-        let t341: f64 = t181 * t230;
-        let t342: f64 = t7 * t341;
-        let t343: f64 = t3 * t342;
-        let t344: f64 = t18 * t343;
-        let t345: f64 = t19 * t344;
-        let t346: f64 = t10 * t345;
-        let t347: f64 = t232 * t346;
-        let t348: f64 = t347 * t295;
-        let t349: f64 = t340 - t348;
-        let t350: f64 = t181 * t238;
-        let t351: f64 = t7 * t350;
-        let t352: f64 = t3 * t351;
-        let t353: f64 = t18 * t352;
-        let t354: f64 = t10 * t353;
-        let t355: f64 = t26 * t354;
-        let t356: f64 = t240 * t355;
-        let t357: f64 = t356 * t295;
-        let t358: f64 = t349 - t357;
-        let t359: f64 = t181 * t246;
-        let t360: f64 = t7 * t359;
-        let t361: f64 = t3 * t360;
-        let t362: f64 = t18 * t361;
-        let t363: f64 = t19 * t362;
-        let t364: f64 = t10 * t363;
-        let t365: f64 = t248 * t364;
-        let t366: f64 = t365 * t295;
-        let t367: f64 = t358 + t366;
-        let t375: f64 = t176 * t23;
-        let t376: f64 = t186 * t193;
-        let t377: f64 = t376 * t170;
-        let t378: f64 = t375 - t377;
-        let t379: f64 = t173 * t378;
-        let t380: f64 = t178 + t379;
-        let t381: f64 = t23 * t185;
-        let t382: f64 = t381 * t170;
-        let t383: f64 = t380 + t382;
-        let t384: f64 = t178 * t34;
-        let t385: f64 = -t384;
-        let t386: f64 = t185 * t199;
-        let t387: f64 = t386 * t170;
-        let t388: f64 = t385 - t387;
-        let t389: f64 = t197 * t388;
-        let t390: f64 = t383 + t389;
-        let t391: f64 = t176 * t41;
-        let t392: f64 = t193 * t207;
-        let t393: f64 = t392 * t170;
-        let t394: f64 = t393 - t391;
-        let t395: f64 = t205 * t394;
-        let t396: f64 = t390 + t395;
-        let t397: f64 = t178 * t48;
-        let t398: f64 = t185 * t215;
-        let t399: f64 = t398 * t170;
-        let t400: f64 = t397 + t399;
-        let t401: f64 = t213 * t400;
-        let t402: f64 = t396 + t401;
-        let t403: f64 = t176 * t55;
-        let t404: f64 = t193 * t224;
-        let t405: f64 = t404 * t170;
-        let t406: f64 = t403 - t405;
-        let t407: f64 = t221 * t406;
-        let t408: f64 = t402 + t407;
-        let t409: f64 = t178 * t62;
-        let t410: f64 = -t409;
-        let t411: f64 = t185 * t232;
-        let t412: f64 = t411 * t170;
-        let t413: f64 = t410 - t412;
-        let t414: f64 = t230 * t413;
-        let t415: f64 = t408 + t414;
-        let t416: f64 = t176 * t69;
-        let t417: f64 = t193 * t240;
-        let t418: f64 = t417 * t170;
-        let t419: f64 = t418 - t416;
-        let t420: f64 = t238 * t419;
-        let t421: f64 = t415 + t420;
-        let t422: f64 = t178 * t76;
-        let t423: f64 = t185 * t248;
-        let t424: f64 = t423 * t170;
-        let t425: f64 = t422 + t424;
-        let t426: f64 = t246 * t425;
-        let t427: f64 = t421 + t426;
-        let t449: f64 = t19 * t291;
-        let t450: f64 = t10 * t449;
-        let t451: f64 = t186 * t450;
-        let t452: f64 = t451 * t295;
-        let t453: f64 = t10 * t299;
-        let t454: f64 = t26 * t453;
-        let t455: f64 = t23 * t454;
-        let t456: f64 = t455 * t295;
-        let t457: f64 = t452 - t456;
-        let t458: f64 = t10 * t308;
-        let t459: f64 = t26 * t458;
-        let t460: f64 = t199 * t459;
-        let t461: f64 = t460 * t295;
-        let t462: f64 = t457 + t461;
-        let t463: f64 = t19 * t317;
-        let t464: f64 = t10 * t463;
-        let t465: f64 = t207 * t464;
-        let t466: f64 = t465 * t295;
-        let t467: f64 = t462 - t466;
-        let t468: f64 = t10 * t326;
-        let t469: f64 = t26 * t468;
-        let t470: f64 = t215 * t469;
-        let t471: f64 = t470 * t295;
-        let t472: f64 = t467 - t471;
-        let t473: f64 = t19 * t335;
-        let t474: f64 = t10 * t473;
-        let t475: f64 = t224 * t474;
-        let t476: f64 = t475 * t295;
-        let t477: f64 = t472 + t476;
-        let t478: f64 = t10 * t344;
-        let t479: f64 = t26 * t478;
-        let t480: f64 = t232 * t479;
-        let t481: f64 = t480 * t295;
-        let t482: f64 = t477 + t481;
-        let t483: f64 = t19 * t353;
-        let t484: f64 = t10 * t483;
-        let t485: f64 = t240 * t484;
-        let t486: f64 = t485 * t295;
-        let t487: f64 = t482 - t486;
-        let t488: f64 = t10 * t362;
-        let t489: f64 = t26 * t488;
-        let t490: f64 = t248 * t489;
-        let t491: f64 = t490 * t295;
-        let t492: f64 = t487 - t491;
+    let t93: crate::Real = g0[0usize];
+    let t126: crate::Real = g0[1usize];
+    let t150: crate::Real = g0[2usize];
+    let t169: crate::Real = g0[3usize];
+    let t127: crate::Real = t2 + t15;
+    let t128: crate::Real = 0.0;
+    let t170: crate::Real = t79 / t8;
+    let t171: crate::Real = t12 * t170;
+    let t172: crate::Real = t6 + t171;
+    let t173: crate::Real = t9 * t172;
+    let t174: crate::Real = t3 * t9;
+    let t177: crate::Real = t174 * t19;
+    let t197: crate::Real = t173 * t173;
+    let t287: crate::Real = t8 * t8;
+    let t295: crate::Real = t79 / t287;
+    let t368: crate::Real = t7 * t9;
+    let t369: crate::Real = t3 * t368;
+    let g1: [crate::Real; 4usize] = if crate::math::fabs(t173)
+        < crate::math::series_switch(0.05)
+    {
+        let t175: crate::Real = t26 * t174;
+        let t176: crate::Real = t16 * t175;
+        let t178: crate::Real = t16 * t177;
+        let t179: crate::Real = t178 * t23;
+        let t180: crate::Real = -t179;
+        let t181: crate::Real = t9 * t9;
+        let t182: crate::Real = t3 * t181;
+        let t183: crate::Real = t18 * t182;
+        let t184: crate::Real = t10 * t183;
+        let t185: crate::Real = t26 * t184;
+        let t186: crate::Real = 0.3333333333333333;
+        let t187: crate::Real = t185 * t186;
+        let t188: crate::Real = t187 * t170;
+        let t189: crate::Real = t180 - t188;
+        let t190: crate::Real = t173 * t189;
+        let t191: crate::Real = t176 + t190;
+        let t192: crate::Real = t19 * t183;
+        let t193: crate::Real = t10 * t192;
+        let t194: crate::Real = t23 * t193;
+        let t195: crate::Real = t194 * t170;
+        let t196: crate::Real = t191 - t195;
+        let t198: crate::Real = t176 * t34;
+        let t199: crate::Real = 0.125;
+        let t200: crate::Real = t193 * t199;
+        let t201: crate::Real = t200 * t170;
+        let t202: crate::Real = t201 - t198;
+        let t203: crate::Real = t197 * t202;
+        let t204: crate::Real = t196 + t203;
+        let t205: crate::Real = t173 * t197;
+        let t206: crate::Real = t178 * t41;
+        let t207: crate::Real = 0.03333333333333333;
+        let t208: crate::Real = t185 * t207;
+        let t209: crate::Real = t208 * t170;
+        let t210: crate::Real = t206 + t209;
+        let t211: crate::Real = t205 * t210;
+        let t212: crate::Real = t204 + t211;
+        let t213: crate::Real = t197 * t197;
+        let t214: crate::Real = t176 * t48;
+        let t215: crate::Real = 0.006944444444444444;
+        let t216: crate::Real = t193 * t215;
+        let t217: crate::Real = t216 * t170;
+        let t218: crate::Real = t214 - t217;
+        let t219: crate::Real = t213 * t218;
+        let t220: crate::Real = t212 + t219;
+        let t221: crate::Real = t173 * t213;
+        let t222: crate::Real = t178 * t55;
+        let t223: crate::Real = -t222;
+        let t224: crate::Real = 0.0011904761904761906;
+        let t225: crate::Real = t185 * t224;
+        let t226: crate::Real = t225 * t170;
+        let t227: crate::Real = t223 - t226;
+        let t228: crate::Real = t221 * t227;
+        let t229: crate::Real = t220 + t228;
+        let t230: crate::Real = t205 * t205;
+        let t231: crate::Real = t176 * t62;
+        let t232: crate::Real = 0.00017361111111111112;
+        let t233: crate::Real = t193 * t232;
+        let t234: crate::Real = t233 * t170;
+        let t235: crate::Real = t234 - t231;
+        let t236: crate::Real = t230 * t235;
+        let t237: crate::Real = t229 + t236;
+        let t238: crate::Real = t173 * t230;
+        let t239: crate::Real = t178 * t69;
+        let t240: crate::Real = 0.000022045855379188714;
+        let t241: crate::Real = t185 * t240;
+        let t242: crate::Real = t241 * t170;
+        let t243: crate::Real = t239 + t242;
+        let t244: crate::Real = t238 * t243;
+        let t245: crate::Real = t237 + t244;
+        let t246: crate::Real = t213 * t213;
+        let t247: crate::Real = t176 * t76;
+        let t248: crate::Real = 0.00000248015873015873;
+        let t249: crate::Real = t193 * t248;
+        let t250: crate::Real = t249 * t170;
+        let t251: crate::Real = t247 - t250;
+        let t252: crate::Real = t246 * t251;
+        let t253: crate::Real = t245 + t252;
+        let t288: crate::Real = t173 * t181;
+        let t289: crate::Real = t7 * t288;
+        let t290: crate::Real = t3 * t289;
+        let t291: crate::Real = t18 * t290;
+        let t292: crate::Real = t10 * t291;
+        let t293: crate::Real = t26 * t292;
+        let t294: crate::Real = t186 * t293;
+        let t296: crate::Real = t294 * t295;
+        let t297: crate::Real = t7 * t181;
+        let t298: crate::Real = t3 * t297;
+        let t299: crate::Real = t18 * t298;
+        let t300: crate::Real = t19 * t299;
+        let t301: crate::Real = t10 * t300;
+        let t302: crate::Real = t23 * t301;
+        let t303: crate::Real = t302 * t295;
+        let t304: crate::Real = t296 + t303;
+        let t305: crate::Real = t181 * t197;
+        let t306: crate::Real = t7 * t305;
+        let t307: crate::Real = t3 * t306;
+        let t308: crate::Real = t18 * t307;
+        let t309: crate::Real = t19 * t308;
+        let t310: crate::Real = t10 * t309;
+        let t311: crate::Real = t199 * t310;
+        let t312: crate::Real = t311 * t295;
+        let t313: crate::Real = t304 - t312;
+        let t314: crate::Real = t181 * t205;
+        let t315: crate::Real = t7 * t314;
+        let t316: crate::Real = t3 * t315;
+        let t317: crate::Real = t18 * t316;
+        let t318: crate::Real = t10 * t317;
+        let t319: crate::Real = t26 * t318;
+        let t320: crate::Real = t207 * t319;
+        let t321: crate::Real = t320 * t295;
+        let t322: crate::Real = t313 - t321;
+        let t323: crate::Real = t181 * t213;
+        let t324: crate::Real = t7 * t323;
+        let t325: crate::Real = t3 * t324;
+        let t326: crate::Real = t18 * t325;
+        let t327: crate::Real = t19 * t326;
+        let t328: crate::Real = t10 * t327;
+        let t329: crate::Real = t215 * t328;
+        let t330: crate::Real = t329 * t295;
+        let t331: crate::Real = t322 + t330;
+        let t332: crate::Real = t181 * t221;
+        let t333: crate::Real = t7 * t332;
+        let t334: crate::Real = t3 * t333;
+        let t335: crate::Real = t18 * t334;
+        let t336: crate::Real = t10 * t335;
+        let t337: crate::Real = t26 * t336;
+        let t338: crate::Real = t224 * t337;
+        let t339: crate::Real = t338 * t295;
+        let t340: crate::Real = t331 + t339;
+        let t341: crate::Real = t181 * t230;
+        let t342: crate::Real = t7 * t341;
+        let t343: crate::Real = t3 * t342;
+        let t344: crate::Real = t18 * t343;
+        let t345: crate::Real = t19 * t344;
+        let t346: crate::Real = t10 * t345;
+        let t347: crate::Real = t232 * t346;
+        let t348: crate::Real = t347 * t295;
+        let t349: crate::Real = t340 - t348;
+        let t350: crate::Real = t181 * t238;
+        let t351: crate::Real = t7 * t350;
+        let t352: crate::Real = t3 * t351;
+        let t353: crate::Real = t18 * t352;
+        let t354: crate::Real = t10 * t353;
+        let t355: crate::Real = t26 * t354;
+        let t356: crate::Real = t240 * t355;
+        let t357: crate::Real = t356 * t295;
+        let t358: crate::Real = t349 - t357;
+        let t359: crate::Real = t181 * t246;
+        let t360: crate::Real = t7 * t359;
+        let t361: crate::Real = t3 * t360;
+        let t362: crate::Real = t18 * t361;
+        let t363: crate::Real = t19 * t362;
+        let t364: crate::Real = t10 * t363;
+        let t365: crate::Real = t248 * t364;
+        let t366: crate::Real = t365 * t295;
+        let t367: crate::Real = t358 + t366;
+        let t375: crate::Real = t176 * t23;
+        let t376: crate::Real = t186 * t193;
+        let t377: crate::Real = t376 * t170;
+        let t378: crate::Real = t375 - t377;
+        let t379: crate::Real = t173 * t378;
+        let t380: crate::Real = t178 + t379;
+        let t381: crate::Real = t23 * t185;
+        let t382: crate::Real = t381 * t170;
+        let t383: crate::Real = t380 + t382;
+        let t384: crate::Real = t178 * t34;
+        let t385: crate::Real = -t384;
+        let t386: crate::Real = t185 * t199;
+        let t387: crate::Real = t386 * t170;
+        let t388: crate::Real = t385 - t387;
+        let t389: crate::Real = t197 * t388;
+        let t390: crate::Real = t383 + t389;
+        let t391: crate::Real = t176 * t41;
+        let t392: crate::Real = t193 * t207;
+        let t393: crate::Real = t392 * t170;
+        let t394: crate::Real = t393 - t391;
+        let t395: crate::Real = t205 * t394;
+        let t396: crate::Real = t390 + t395;
+        let t397: crate::Real = t178 * t48;
+        let t398: crate::Real = t185 * t215;
+        let t399: crate::Real = t398 * t170;
+        let t400: crate::Real = t397 + t399;
+        let t401: crate::Real = t213 * t400;
+        let t402: crate::Real = t396 + t401;
+        let t403: crate::Real = t176 * t55;
+        let t404: crate::Real = t193 * t224;
+        let t405: crate::Real = t404 * t170;
+        let t406: crate::Real = t403 - t405;
+        let t407: crate::Real = t221 * t406;
+        let t408: crate::Real = t402 + t407;
+        let t409: crate::Real = t178 * t62;
+        let t410: crate::Real = -t409;
+        let t411: crate::Real = t185 * t232;
+        let t412: crate::Real = t411 * t170;
+        let t413: crate::Real = t410 - t412;
+        let t414: crate::Real = t230 * t413;
+        let t415: crate::Real = t408 + t414;
+        let t416: crate::Real = t176 * t69;
+        let t417: crate::Real = t193 * t240;
+        let t418: crate::Real = t417 * t170;
+        let t419: crate::Real = t418 - t416;
+        let t420: crate::Real = t238 * t419;
+        let t421: crate::Real = t415 + t420;
+        let t422: crate::Real = t178 * t76;
+        let t423: crate::Real = t185 * t248;
+        let t424: crate::Real = t423 * t170;
+        let t425: crate::Real = t422 + t424;
+        let t426: crate::Real = t246 * t425;
+        let t427: crate::Real = t421 + t426;
+        let t449: crate::Real = t19 * t291;
+        let t450: crate::Real = t10 * t449;
+        let t451: crate::Real = t186 * t450;
+        let t452: crate::Real = t451 * t295;
+        let t453: crate::Real = t10 * t299;
+        let t454: crate::Real = t26 * t453;
+        let t455: crate::Real = t23 * t454;
+        let t456: crate::Real = t455 * t295;
+        let t457: crate::Real = t452 - t456;
+        let t458: crate::Real = t10 * t308;
+        let t459: crate::Real = t26 * t458;
+        let t460: crate::Real = t199 * t459;
+        let t461: crate::Real = t460 * t295;
+        let t462: crate::Real = t457 + t461;
+        let t463: crate::Real = t19 * t317;
+        let t464: crate::Real = t10 * t463;
+        let t465: crate::Real = t207 * t464;
+        let t466: crate::Real = t465 * t295;
+        let t467: crate::Real = t462 - t466;
+        let t468: crate::Real = t10 * t326;
+        let t469: crate::Real = t26 * t468;
+        let t470: crate::Real = t215 * t469;
+        let t471: crate::Real = t470 * t295;
+        let t472: crate::Real = t467 - t471;
+        let t473: crate::Real = t19 * t335;
+        let t474: crate::Real = t10 * t473;
+        let t475: crate::Real = t224 * t474;
+        let t476: crate::Real = t475 * t295;
+        let t477: crate::Real = t472 + t476;
+        let t478: crate::Real = t10 * t344;
+        let t479: crate::Real = t26 * t478;
+        let t480: crate::Real = t232 * t479;
+        let t481: crate::Real = t480 * t295;
+        let t482: crate::Real = t477 + t481;
+        let t483: crate::Real = t19 * t353;
+        let t484: crate::Real = t10 * t483;
+        let t485: crate::Real = t240 * t484;
+        let t486: crate::Real = t485 * t295;
+        let t487: crate::Real = t482 - t486;
+        let t488: crate::Real = t10 * t362;
+        let t489: crate::Real = t26 * t488;
+        let t490: crate::Real = t248 * t489;
+        let t491: crate::Real = t490 * t295;
+        let t492: crate::Real = t487 - t491;
         [t253, t367, t427, t492]
     } else {
-        let t254: f64 = libm::sin(t173);
-        let t255: f64 = t174 * t254;
-        let t256: f64 = t26 * t255;
-        let t257: f64 = t16 * t256;
-        let t258: f64 = t79 / t173;
-        let t259: f64 = t257 * t258;
-        let t260: f64 = libm::cos(t173);
-        let t261: f64 = t79 - t260;
-        let t262: f64 = t174 * t261;
-        let t263: f64 = t19 * t262;
-        let t264: f64 = t16 * t263;
-        let t265: f64 = t264 * t258;
-        let t266: f64 = t259 - t265;
-        let t267: f64 = t254 * t97;
-        let t268: f64 = t267 * t258;
-        let t269: f64 = t260 * t28;
-        let t270: f64 = t269 * t258;
-        let t271: f64 = t9 * t261;
-        let t272: f64 = t18 * t271;
-        let t273: f64 = t19 * t272;
-        let t274: f64 = t79 / t197;
-        let t275: f64 = t273 * t274;
-        let t276: f64 = t270 + t275;
-        let t277: f64 = t254 * t27;
-        let t278: f64 = t26 * t277;
-        let t279: f64 = t278 * t274;
-        let t280: f64 = t276 - t279;
-        let t281: f64 = t280 - t268;
-        let t282: f64 = t174 * t281;
-        let t283: f64 = t10 * t282;
-        let t284: f64 = t283 * t170;
-        let t285: f64 = t266 + t284;
-        let t370: f64 = t281 * t369;
-        let t371: f64 = t10 * t370;
-        let t372: f64 = t371 * t295;
-        let t373: f64 = -t372;
-        let t428: f64 = t177 * t254;
-        let t429: f64 = t16 * t428;
-        let t430: f64 = t429 * t258;
-        let t431: f64 = t26 * t262;
-        let t432: f64 = t16 * t431;
-        let t433: f64 = t432 * t258;
-        let t434: f64 = t430 + t433;
-        let t435: f64 = t260 * t97;
-        let t436: f64 = t435 * t258;
-        let t437: f64 = t278 * t258;
-        let t438: f64 = t436 + t437;
-        let t439: f64 = t26 * t272;
-        let t440: f64 = t439 * t274;
-        let t441: f64 = t438 - t440;
-        let t442: f64 = t267 * t274;
-        let t443: f64 = t441 - t442;
-        let t444: f64 = t174 * t443;
-        let t445: f64 = t10 * t444;
-        let t446: f64 = t445 * t170;
-        let t447: f64 = t434 + t446;
-        let t493: f64 = t369 * t443;
-        let t494: f64 = t10 * t493;
-        let t495: f64 = t494 * t295;
-        let t496: f64 = -t495;
+        let t254: crate::Real = crate::math::sin(t173);
+        let t255: crate::Real = t174 * t254;
+        let t256: crate::Real = t26 * t255;
+        let t257: crate::Real = t16 * t256;
+        let t258: crate::Real = t79 / t173;
+        let t259: crate::Real = t257 * t258;
+        let t260: crate::Real = crate::math::cos(t173);
+        let t261: crate::Real = t79 - t260;
+        let t262: crate::Real = t174 * t261;
+        let t263: crate::Real = t19 * t262;
+        let t264: crate::Real = t16 * t263;
+        let t265: crate::Real = t264 * t258;
+        let t266: crate::Real = t259 - t265;
+        let t267: crate::Real = t254 * t97;
+        let t268: crate::Real = t267 * t258;
+        let t269: crate::Real = t260 * t28;
+        let t270: crate::Real = t269 * t258;
+        let t271: crate::Real = t9 * t261;
+        let t272: crate::Real = t18 * t271;
+        let t273: crate::Real = t19 * t272;
+        let t274: crate::Real = t79 / t197;
+        let t275: crate::Real = t273 * t274;
+        let t276: crate::Real = t270 + t275;
+        let t277: crate::Real = t254 * t27;
+        let t278: crate::Real = t26 * t277;
+        let t279: crate::Real = t278 * t274;
+        let t280: crate::Real = t276 - t279;
+        let t281: crate::Real = t280 - t268;
+        let t282: crate::Real = t174 * t281;
+        let t283: crate::Real = t10 * t282;
+        let t284: crate::Real = t283 * t170;
+        let t285: crate::Real = t266 + t284;
+        let t370: crate::Real = t281 * t369;
+        let t371: crate::Real = t10 * t370;
+        let t372: crate::Real = t371 * t295;
+        let t373: crate::Real = -t372;
+        let t428: crate::Real = t177 * t254;
+        let t429: crate::Real = t16 * t428;
+        let t430: crate::Real = t429 * t258;
+        let t431: crate::Real = t26 * t262;
+        let t432: crate::Real = t16 * t431;
+        let t433: crate::Real = t432 * t258;
+        let t434: crate::Real = t430 + t433;
+        let t435: crate::Real = t260 * t97;
+        let t436: crate::Real = t435 * t258;
+        let t437: crate::Real = t278 * t258;
+        let t438: crate::Real = t436 + t437;
+        let t439: crate::Real = t26 * t272;
+        let t440: crate::Real = t439 * t274;
+        let t441: crate::Real = t438 - t440;
+        let t442: crate::Real = t267 * t274;
+        let t443: crate::Real = t441 - t442;
+        let t444: crate::Real = t174 * t443;
+        let t445: crate::Real = t10 * t444;
+        let t446: crate::Real = t445 * t170;
+        let t447: crate::Real = t434 + t446;
+        let t493: crate::Real = t369 * t443;
+        let t494: crate::Real = t10 * t493;
+        let t495: crate::Real = t494 * t295;
+        let t496: crate::Real = -t495;
         [t285, t373, t447, t496]
     };
-    let t286: f64 = g1[0usize];
-    let t374: f64 = g1[1usize];
-    let t448: f64 = g1[2usize];
-    let t497: f64 = g1[3usize];
-    let t498: f64 = t10 * t174;
-    let t499: f64 = t498 * t170;
-    let t500: f64 = t10 * t369;
-    let t501: f64 = t500 * t295;
-    let t502: f64 = -t501;
+    let t286: crate::Real = g1[0usize];
+    let t374: crate::Real = g1[1usize];
+    let t448: crate::Real = g1[2usize];
+    let t497: crate::Real = g1[3usize];
+    let t498: crate::Real = t10 * t174;
+    let t499: crate::Real = t498 * t170;
+    let t500: crate::Real = t10 * t369;
+    let t501: crate::Real = t500 * t295;
+    let t502: crate::Real = -t501;
     [
         t93,
         t126,
@@ -2840,12 +2868,16 @@ pub fn step_exact_with_jac_p_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_with_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 2usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 2usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 2usize]; 3usize],
+) {
     let o = step_exact_with_jac_p_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -2867,24 +2899,24 @@ pub fn step_exact_with_jac_p(
 9 arithmetic operations (13 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> [f64; 6usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = p[1usize];
-    let t4: f64 = libm::sin(t1);
-    let t5: f64 = t0 * t2;
-    let t6: f64 = t4 * t5;
-    let t7: f64 = t6 / t3;
-    let t8: f64 = 0f64;
-    let t9: f64 = t0 * t4;
-    let t10: f64 = t9 / t3;
-    let t11: f64 = t3 * t3;
-    let t12: f64 = t6 / t11;
-    let t13: f64 = -t12;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> [crate::Real; 6usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = p[1usize];
+    let t4: crate::Real = crate::math::sin(t1);
+    let t5: crate::Real = t0 * t2;
+    let t6: crate::Real = t4 * t5;
+    let t7: crate::Real = t6 / t3;
+    let t8: crate::Real = 0.0;
+    let t9: crate::Real = t0 * t4;
+    let t10: crate::Real = t9 / t3;
+    let t11: crate::Real = t3 * t3;
+    let t12: crate::Real = t6 / t11;
+    let t13: crate::Real = -t12;
     [t7, t8, t8, t8, t10, t13]
 }
 /**Observation `gyro` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -2892,10 +2924,14 @@ pub fn obs_gyro_linearized_flat(
 Returns (`obs_gyro`, `obs_gyro_jac_x`, `obs_gyro_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_gyro_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-) -> ([f64; 1usize], [[f64; 3usize]; 1usize], [[f64; 2usize]; 1usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+) -> (
+    [crate::Real; 1usize],
+    [[crate::Real; 3usize]; 1usize],
+    [[crate::Real; 2usize]; 1usize],
+) {
     let o = obs_gyro_linearized_flat(x, u, p);
     ([o[0usize]], [[o[1usize], o[2usize], o[3usize]]], [[o[4usize], o[5usize]]])
 }
@@ -2910,36 +2946,36 @@ pub fn obs_gyro_linearized(
 17 arithmetic operations (57 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> [f64; 12usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t10;
-    let t15: f64 = t5 * t14;
-    let t16: f64 = -t15;
-    let t17: f64 = t7 * t14;
-    let t18: f64 = -t17;
-    let t19: f64 = 0f64;
-    let t20: f64 = t13 / t9;
-    let t21: f64 = t7 * t20;
-    let t22: f64 = t5 * t20;
-    let t23: f64 = -t22;
-    let t24: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 12usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t10;
+    let t15: crate::Real = t5 * t14;
+    let t16: crate::Real = -t15;
+    let t17: crate::Real = t7 * t14;
+    let t18: crate::Real = -t17;
+    let t19: crate::Real = 0.0;
+    let t20: crate::Real = t13 / t9;
+    let t21: crate::Real = t7 * t20;
+    let t22: crate::Real = t5 * t20;
+    let t23: crate::Real = -t22;
+    let t24: crate::Real = (-1.0);
     [t10, t12, t16, t18, t19, t21, t23, t24, t19, t19, t19, t19]
 }
 /**Observation `landmark` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -2947,11 +2983,15 @@ pub fn obs_landmark_linearized_flat(
 Returns (`obs_landmark`, `obs_landmark_jac_x`, `obs_landmark_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_landmark_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 2usize],
-    lm: &[f64; 2usize],
-) -> ([f64; 2usize], [[f64; 3usize]; 2usize], [[f64; 2usize]; 2usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 2usize],
+    lm: &[crate::Real; 2usize],
+) -> (
+    [crate::Real; 2usize],
+    [[crate::Real; 3usize]; 2usize],
+    [[crate::Real; 2usize]; 2usize],
+) {
     let o = obs_landmark_linearized_flat(x, u, p, lm);
     (
         [o[0usize], o[1usize]],
@@ -2964,17 +3004,21 @@ pub fn obs_landmark_linearized(
 /// wrong lengths. Behind the `dispatch` feature: firmware calls the
 /// kernels themselves and need not carry every kernel and its name.
 #[cfg(feature = "dispatch")]
-pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+pub fn call(name: &str, args: &[&[crate::Real]], out: &mut [crate::Real]) -> bool {
     match name {
         "twist" => {
             if args.len() != 2usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2987,15 +3031,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3008,23 +3058,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3037,23 +3095,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3066,23 +3132,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3095,23 +3169,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3124,23 +3206,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3153,23 +3243,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3182,23 +3280,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3211,23 +3317,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3240,23 +3354,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3269,23 +3391,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -3298,15 +3428,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 1usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3319,15 +3455,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3340,15 +3482,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3361,19 +3509,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3386,19 +3542,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3411,19 +3575,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 4usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3436,11 +3608,15 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 2usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -3453,15 +3629,19 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: f64 = match args[1usize] {
+            let a1: crate::Real = match args[1usize] {
                 [v] => *v,
                 _ => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };

@@ -15,13 +15,13 @@ pub const SPEC_FINGERPRINT: &str = "9f98113660086834";
 /// Runtime parameters, in the order of the `p` argument.
 pub const PARAMS: [&str; 1usize] = ["v_scale"];
 /// Nominal values of [`PARAMS`].
-pub const PARAM_NOMINAL: [f64; 1usize] = [1f64];
+pub const PARAM_NOMINAL: [crate::Real; 1usize] = [1.0];
 /// The runtime parameters by name; [`Params::to_array`] gives the `p`
 /// argument of every kernel.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
     /// `v_scale` (1): Actuator speed scale (1 = the commanded speed is achieved).
-    pub v_scale: f64,
+    pub v_scale: crate::Real,
 }
 impl Params {
     /// The spec's nominal values.
@@ -29,11 +29,11 @@ impl Params {
         v_scale: PARAM_NOMINAL[0usize],
     };
     /// The `p` argument of the kernels, in the order of [`PARAMS`].
-    pub const fn to_array(&self) -> [f64; 1usize] {
+    pub const fn to_array(&self) -> [crate::Real; 1usize] {
         [self.v_scale]
     }
     /// From a `p` array in the order of [`PARAMS`].
-    pub const fn from_array(p: &[f64; 1usize]) -> Params {
+    pub const fn from_array(p: &[crate::Real; 1usize]) -> Params {
         Params { v_scale: p[0usize] }
     }
 }
@@ -49,12 +49,15 @@ pub const INPUT_COLUMNS: [&str; 2usize] = ["v", "w"];
 
 1 arithmetic operations (1 before common-subexpression elimination).*/
 #[inline]
-pub fn twist(u: &[f64; 2usize], p: &[f64; 1usize]) -> [f64; 3usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = u[1usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = t0 * t2;
-    let t4: f64 = 0f64;
+pub fn twist(
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = u[1usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = t0 * t2;
+    let t4: crate::Real = 0.0;
     [t3, t4, t1]
 }
 /**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
@@ -67,14 +70,14 @@ pub fn twist(u: &[f64; 2usize], p: &[f64; 1usize]) -> [f64; 3usize] {
 1 arithmetic operations (1 before common-subexpression elimination).*/
 #[inline]
 pub fn twist_gyro(
-    u: &[f64; 2usize],
-    omega: &[f64; 1usize],
-    p: &[f64; 1usize],
-) -> [f64; 2usize] {
-    let t0: f64 = u[0usize];
-    let t1: f64 = p[0usize];
-    let t2: f64 = t0 * t1;
-    let t3: f64 = 0f64;
+    u: &[crate::Real; 2usize],
+    omega: &[crate::Real; 1usize],
+    p: &[crate::Real; 1usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = u[0usize];
+    let t1: crate::Real = p[0usize];
+    let t2: crate::Real = t0 * t1;
+    let t3: crate::Real = 0.0;
     [t2, t3]
 }
 /**Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.
@@ -89,33 +92,33 @@ pub fn twist_gyro(
 12 arithmetic operations (15 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = dt;
-    let t9: f64 = t3 * t7;
-    let t10: f64 = t5 + t9;
-    let t11: f64 = libm::cos(t2);
-    let t12: f64 = t8 * t10;
-    let t13: f64 = t11 * t12;
-    let t14: f64 = t0 + t13;
-    let t15: f64 = libm::sin(t2);
-    let t16: f64 = t12 * t15;
-    let t17: f64 = t1 + t16;
-    let t18: f64 = t4 + t6;
-    let t19: f64 = t8 * t18;
-    let t20: f64 = t2 + t19;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = dt;
+    let t9: crate::Real = t3 * t7;
+    let t10: crate::Real = t5 + t9;
+    let t11: crate::Real = crate::math::cos(t2);
+    let t12: crate::Real = t8 * t10;
+    let t13: crate::Real = t11 * t12;
+    let t14: crate::Real = t0 + t13;
+    let t15: crate::Real = crate::math::sin(t2);
+    let t16: crate::Real = t12 * t15;
+    let t17: crate::Real = t1 + t16;
+    let t18: crate::Real = t4 + t6;
+    let t19: crate::Real = t8 * t18;
+    let t20: crate::Real = t2 + t19;
     [t14, t17, t20]
 }
 /**Jacobian of `step_euler` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -130,27 +133,27 @@ pub fn step_euler(
 8 arithmetic operations (11 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = w[0usize];
-    let t3: f64 = p[0usize];
-    let t4: f64 = dt;
-    let t5: f64 = 1f64;
-    let t6: f64 = 0f64;
-    let t7: f64 = t1 * t3;
-    let t8: f64 = t2 + t7;
-    let t9: f64 = libm::sin(t0);
-    let t10: f64 = t4 * t8;
-    let t11: f64 = t9 * t10;
-    let t12: f64 = -t11;
-    let t13: f64 = libm::cos(t0);
-    let t14: f64 = t10 * t13;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = w[0usize];
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = dt;
+    let t5: crate::Real = 1.0;
+    let t6: crate::Real = 0.0;
+    let t7: crate::Real = t1 * t3;
+    let t8: crate::Real = t2 + t7;
+    let t9: crate::Real = crate::math::sin(t0);
+    let t10: crate::Real = t4 * t8;
+    let t11: crate::Real = t9 * t10;
+    let t12: crate::Real = -t11;
+    let t13: crate::Real = crate::math::cos(t0);
+    let t14: crate::Real = t10 * t13;
     [[t5, t6, t12], [t6, t5, t14], [t6, t6, t5]]
 }
 /**Jacobian of `step_euler` with respect to the inputs; rows x, y, theta.
@@ -165,21 +168,21 @@ pub fn step_euler_jac_x(
 5 arithmetic operations (6 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = p[0usize];
-    let t2: f64 = dt;
-    let t3: f64 = libm::cos(t0);
-    let t4: f64 = t1 * t2;
-    let t5: f64 = t3 * t4;
-    let t6: f64 = 0f64;
-    let t7: f64 = libm::sin(t0);
-    let t8: f64 = t4 * t7;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = p[0usize];
+    let t2: crate::Real = dt;
+    let t3: crate::Real = crate::math::cos(t0);
+    let t4: crate::Real = t1 * t2;
+    let t5: crate::Real = t3 * t4;
+    let t6: crate::Real = 0.0;
+    let t7: crate::Real = crate::math::sin(t0);
+    let t8: crate::Real = t4 * t7;
     [[t5, t6], [t8, t6], [t6, t2]]
 }
 /**Jacobian of `step_euler` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -194,19 +197,19 @@ pub fn step_euler_jac_u(
 4 arithmetic operations (4 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = dt;
-    let t2: f64 = libm::cos(t0);
-    let t3: f64 = t1 * t2;
-    let t4: f64 = 0f64;
-    let t5: f64 = libm::sin(t0);
-    let t6: f64 = t1 * t5;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = dt;
+    let t2: crate::Real = crate::math::cos(t0);
+    let t3: crate::Real = t1 * t2;
+    let t4: crate::Real = 0.0;
+    let t5: crate::Real = crate::math::sin(t0);
+    let t6: crate::Real = t1 * t5;
     [[t3, t4], [t6, t4], [t4, t1]]
 }
 /**Jacobian of `step_euler` with respect to the parameters; rows x, y, theta.
@@ -221,21 +224,21 @@ pub fn step_euler_jac_w(
 5 arithmetic operations (6 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = dt;
-    let t3: f64 = libm::cos(t0);
-    let t4: f64 = t1 * t2;
-    let t5: f64 = t3 * t4;
-    let t6: f64 = libm::sin(t0);
-    let t7: f64 = t4 * t6;
-    let t8: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = dt;
+    let t3: crate::Real = crate::math::cos(t0);
+    let t4: crate::Real = t1 * t2;
+    let t5: crate::Real = t3 * t4;
+    let t6: crate::Real = crate::math::sin(t0);
+    let t7: crate::Real = t4 * t6;
+    let t8: crate::Real = 0.0;
     [t5, t7, t8]
 }
 /**Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).
@@ -250,140 +253,142 @@ pub fn step_euler_jac_p(
 104 arithmetic operations (407 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = dt;
-    let t9: f64 = t4 + t6;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t5 + t11;
-    let t13: f64 = libm::sin(t2);
-    let t20: f64 = libm::cos(t2);
-    let t21: f64 = t8 * t12;
-    let t92: f64 = t13 * t21;
-    let g0: [f64; 2usize] = if libm::fabs(t10) < 0.05f64 {
-        let t14: f64 = t8 * t10;
-        let t15: f64 = t12 * t14;
-        let t16: f64 = t13 * t15;
-        let t17: f64 = 0.5f64;
-        let t18: f64 = t16 * t17;
-        let t19: f64 = t0 - t18;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = t19 + t22;
-        let t24: f64 = t10 * t10;
-        let t25: f64 = t8 * t24;
-        let t26: f64 = t12 * t25;
-        let t27: f64 = t20 * t26;
-        let t28: f64 = 0.16666666666666666f64;
-        let t29: f64 = t27 * t28;
-        let t30: f64 = t23 - t29;
-        let t31: f64 = t10 * t24;
-        let t32: f64 = t8 * t31;
-        let t33: f64 = t12 * t32;
-        let t34: f64 = t13 * t33;
-        let t35: f64 = 0.041666666666666664f64;
-        let t36: f64 = t34 * t35;
-        let t37: f64 = t30 + t36;
-        let t38: f64 = t24 * t24;
-        let t39: f64 = t8 * t38;
-        let t40: f64 = t12 * t39;
-        let t41: f64 = t20 * t40;
-        let t42: f64 = 0.008333333333333333f64;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t37 + t43;
-        let t45: f64 = t10 * t38;
-        let t46: f64 = t8 * t45;
-        let t47: f64 = t12 * t46;
-        let t48: f64 = t13 * t47;
-        let t49: f64 = 0.001388888888888889f64;
-        let t50: f64 = t48 * t49;
-        let t51: f64 = t44 - t50;
-        let t52: f64 = t31 * t31;
-        let t53: f64 = t8 * t52;
-        let t54: f64 = t12 * t53;
-        let t55: f64 = t20 * t54;
-        let t56: f64 = 0.0001984126984126984f64;
-        let t57: f64 = t55 * t56;
-        let t58: f64 = t51 - t57;
-        let t59: f64 = t10 * t52;
-        let t60: f64 = t8 * t59;
-        let t61: f64 = t12 * t60;
-        let t62: f64 = t13 * t61;
-        let t63: f64 = 0.0000248015873015873f64;
-        let t64: f64 = t62 * t63;
-        let t65: f64 = t58 + t64;
-        let t66: f64 = t38 * t38;
-        let t67: f64 = t8 * t66;
-        let t68: f64 = t12 * t67;
-        let t69: f64 = t20 * t68;
-        let t70: f64 = 0.0000027557319223985893f64;
-        let t71: f64 = t69 * t70;
-        let t72: f64 = t65 + t71;
-        let t89: f64 = t15 * t20;
-        let t90: f64 = t17 * t89;
-        let t91: f64 = t1 + t90;
-        let t93: f64 = t91 + t92;
-        let t94: f64 = t13 * t26;
-        let t95: f64 = t28 * t94;
-        let t96: f64 = t93 - t95;
-        let t97: f64 = t20 * t33;
-        let t98: f64 = t35 * t97;
-        let t99: f64 = t96 - t98;
-        let t100: f64 = t13 * t40;
-        let t101: f64 = t42 * t100;
-        let t102: f64 = t99 + t101;
-        let t103: f64 = t20 * t47;
-        let t104: f64 = t49 * t103;
-        let t105: f64 = t102 + t104;
-        let t106: f64 = t13 * t54;
-        let t107: f64 = t56 * t106;
-        let t108: f64 = t105 - t107;
-        let t109: f64 = t20 * t61;
-        let t110: f64 = t63 * t109;
-        let t111: f64 = t108 - t110;
-        let t112: f64 = t13 * t68;
-        let t113: f64 = t70 * t112;
-        let t114: f64 = t111 + t113;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = dt;
+    let t9: crate::Real = t4 + t6;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t5 + t11;
+    let t13: crate::Real = crate::math::sin(t2);
+    let t20: crate::Real = crate::math::cos(t2);
+    let t21: crate::Real = t8 * t12;
+    let t92: crate::Real = t13 * t21;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t10)
+        < crate::math::series_switch(0.05)
+    {
+        let t14: crate::Real = t8 * t10;
+        let t15: crate::Real = t12 * t14;
+        let t16: crate::Real = t13 * t15;
+        let t17: crate::Real = 0.5;
+        let t18: crate::Real = t16 * t17;
+        let t19: crate::Real = t0 - t18;
+        let t22: crate::Real = t20 * t21;
+        let t23: crate::Real = t19 + t22;
+        let t24: crate::Real = t10 * t10;
+        let t25: crate::Real = t8 * t24;
+        let t26: crate::Real = t12 * t25;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = 0.16666666666666666;
+        let t29: crate::Real = t27 * t28;
+        let t30: crate::Real = t23 - t29;
+        let t31: crate::Real = t10 * t24;
+        let t32: crate::Real = t8 * t31;
+        let t33: crate::Real = t12 * t32;
+        let t34: crate::Real = t13 * t33;
+        let t35: crate::Real = 0.041666666666666664;
+        let t36: crate::Real = t34 * t35;
+        let t37: crate::Real = t30 + t36;
+        let t38: crate::Real = t24 * t24;
+        let t39: crate::Real = t8 * t38;
+        let t40: crate::Real = t12 * t39;
+        let t41: crate::Real = t20 * t40;
+        let t42: crate::Real = 0.008333333333333333;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t37 + t43;
+        let t45: crate::Real = t10 * t38;
+        let t46: crate::Real = t8 * t45;
+        let t47: crate::Real = t12 * t46;
+        let t48: crate::Real = t13 * t47;
+        let t49: crate::Real = 0.001388888888888889;
+        let t50: crate::Real = t48 * t49;
+        let t51: crate::Real = t44 - t50;
+        let t52: crate::Real = t31 * t31;
+        let t53: crate::Real = t8 * t52;
+        let t54: crate::Real = t12 * t53;
+        let t55: crate::Real = t20 * t54;
+        let t56: crate::Real = 0.0001984126984126984;
+        let t57: crate::Real = t55 * t56;
+        let t58: crate::Real = t51 - t57;
+        let t59: crate::Real = t10 * t52;
+        let t60: crate::Real = t8 * t59;
+        let t61: crate::Real = t12 * t60;
+        let t62: crate::Real = t13 * t61;
+        let t63: crate::Real = 0.0000248015873015873;
+        let t64: crate::Real = t62 * t63;
+        let t65: crate::Real = t58 + t64;
+        let t66: crate::Real = t38 * t38;
+        let t67: crate::Real = t8 * t66;
+        let t68: crate::Real = t12 * t67;
+        let t69: crate::Real = t20 * t68;
+        let t70: crate::Real = 0.0000027557319223985893;
+        let t71: crate::Real = t69 * t70;
+        let t72: crate::Real = t65 + t71;
+        let t89: crate::Real = t15 * t20;
+        let t90: crate::Real = t17 * t89;
+        let t91: crate::Real = t1 + t90;
+        let t93: crate::Real = t91 + t92;
+        let t94: crate::Real = t13 * t26;
+        let t95: crate::Real = t28 * t94;
+        let t96: crate::Real = t93 - t95;
+        let t97: crate::Real = t20 * t33;
+        let t98: crate::Real = t35 * t97;
+        let t99: crate::Real = t96 - t98;
+        let t100: crate::Real = t13 * t40;
+        let t101: crate::Real = t42 * t100;
+        let t102: crate::Real = t99 + t101;
+        let t103: crate::Real = t20 * t47;
+        let t104: crate::Real = t49 * t103;
+        let t105: crate::Real = t102 + t104;
+        let t106: crate::Real = t13 * t54;
+        let t107: crate::Real = t56 * t106;
+        let t108: crate::Real = t105 - t107;
+        let t109: crate::Real = t20 * t61;
+        let t110: crate::Real = t63 * t109;
+        let t111: crate::Real = t108 - t110;
+        let t112: crate::Real = t13 * t68;
+        let t113: crate::Real = t70 * t112;
+        let t114: crate::Real = t111 + t113;
         [t72, t114]
     } else {
-        let t73: f64 = libm::sin(t10);
-        let t74: f64 = t21 * t73;
-        let t75: f64 = t20 * t74;
-        let t76: f64 = 1f64;
-        let t77: f64 = t76 / t10;
-        let t78: f64 = t75 * t77;
-        let t79: f64 = t0 + t78;
-        let t80: f64 = 1f64;
-        let t81: f64 = libm::cos(t10);
-        let t82: f64 = t80 - t81;
-        let t83: f64 = t8 * t82;
-        let t84: f64 = t12 * t83;
-        let t85: f64 = t13 * t84;
-        let t86: f64 = t85 * t77;
-        let t87: f64 = t79 - t86;
-        let t115: f64 = t73 * t92;
-        let t116: f64 = t115 * t77;
-        let t117: f64 = t1 + t116;
-        let t118: f64 = t20 * t84;
-        let t119: f64 = t118 * t77;
-        let t120: f64 = t117 + t119;
+        let t73: crate::Real = crate::math::sin(t10);
+        let t74: crate::Real = t21 * t73;
+        let t75: crate::Real = t20 * t74;
+        let t76: crate::Real = 1.0;
+        let t77: crate::Real = t76 / t10;
+        let t78: crate::Real = t75 * t77;
+        let t79: crate::Real = t0 + t78;
+        let t80: crate::Real = 1.0;
+        let t81: crate::Real = crate::math::cos(t10);
+        let t82: crate::Real = t80 - t81;
+        let t83: crate::Real = t8 * t82;
+        let t84: crate::Real = t12 * t83;
+        let t85: crate::Real = t13 * t84;
+        let t86: crate::Real = t85 * t77;
+        let t87: crate::Real = t79 - t86;
+        let t115: crate::Real = t73 * t92;
+        let t116: crate::Real = t115 * t77;
+        let t117: crate::Real = t1 + t116;
+        let t118: crate::Real = t20 * t84;
+        let t119: crate::Real = t118 * t77;
+        let t120: crate::Real = t117 + t119;
         [t87, t120]
     };
-    let t88: f64 = g0[0usize];
-    let t121: f64 = g0[1usize];
-    let t122: f64 = t2 + t10;
+    let t88: crate::Real = g0[0usize];
+    let t121: crate::Real = g0[1usize];
+    let t122: crate::Real = t2 + t10;
     [t88, t121, t122]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
@@ -398,135 +403,137 @@ pub fn step_exact(
 100 arithmetic operations (401 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [[f64; 3usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = dt;
-    let t7: f64 = t2 + t4;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = 1f64;
-    let t10: f64 = 0f64;
-    let t11: f64 = t1 * t5;
-    let t12: f64 = t3 + t11;
-    let t13: f64 = libm::cos(t0);
-    let t19: f64 = libm::sin(t0);
-    let t20: f64 = t6 * t12;
-    let t21: f64 = t19 * t20;
-    let g0: [f64; 2usize] = if libm::fabs(t8) < 0.05f64 {
-        let t14: f64 = t6 * t8;
-        let t15: f64 = t12 * t14;
-        let t16: f64 = t13 * t15;
-        let t17: f64 = 0.5f64;
-        let t18: f64 = t16 * t17;
-        let t22: f64 = t8 * t8;
-        let t23: f64 = t6 * t22;
-        let t24: f64 = t12 * t23;
-        let t25: f64 = t19 * t24;
-        let t26: f64 = 0.16666666666666666f64;
-        let t27: f64 = t25 * t26;
-        let t28: f64 = t8 * t22;
-        let t29: f64 = t6 * t28;
-        let t30: f64 = t12 * t29;
-        let t31: f64 = t13 * t30;
-        let t32: f64 = 0.041666666666666664f64;
-        let t33: f64 = t31 * t32;
-        let t34: f64 = t27 + t33;
-        let t35: f64 = t22 * t22;
-        let t36: f64 = t6 * t35;
-        let t37: f64 = t12 * t36;
-        let t38: f64 = t19 * t37;
-        let t39: f64 = 0.008333333333333333f64;
-        let t40: f64 = t38 * t39;
-        let t41: f64 = t34 - t40;
-        let t42: f64 = t8 * t35;
-        let t43: f64 = t6 * t42;
-        let t44: f64 = t12 * t43;
-        let t45: f64 = t13 * t44;
-        let t46: f64 = 0.001388888888888889f64;
-        let t47: f64 = t45 * t46;
-        let t48: f64 = t41 - t47;
-        let t49: f64 = t28 * t28;
-        let t50: f64 = t6 * t49;
-        let t51: f64 = t12 * t50;
-        let t52: f64 = t19 * t51;
-        let t53: f64 = 0.0001984126984126984f64;
-        let t54: f64 = t52 * t53;
-        let t55: f64 = t48 + t54;
-        let t56: f64 = t8 * t49;
-        let t57: f64 = t6 * t56;
-        let t58: f64 = t12 * t57;
-        let t59: f64 = t13 * t58;
-        let t60: f64 = 0.0000248015873015873f64;
-        let t61: f64 = t59 * t60;
-        let t62: f64 = t55 + t61;
-        let t63: f64 = t35 * t35;
-        let t64: f64 = t6 * t63;
-        let t65: f64 = t12 * t64;
-        let t66: f64 = t19 * t65;
-        let t67: f64 = 0.0000027557319223985893f64;
-        let t68: f64 = t66 * t67;
-        let t69: f64 = t62 - t68;
-        let t70: f64 = t69 - t18;
-        let t71: f64 = t70 - t21;
-        let t86: f64 = t15 * t19;
-        let t87: f64 = t17 * t86;
-        let t88: f64 = t13 * t20;
-        let t89: f64 = t13 * t24;
-        let t90: f64 = t26 * t89;
-        let t91: f64 = t88 - t90;
-        let t92: f64 = t19 * t30;
-        let t93: f64 = t32 * t92;
-        let t94: f64 = t91 + t93;
-        let t95: f64 = t13 * t37;
-        let t96: f64 = t39 * t95;
-        let t97: f64 = t94 + t96;
-        let t98: f64 = t19 * t44;
-        let t99: f64 = t46 * t98;
-        let t100: f64 = t97 - t99;
-        let t101: f64 = t13 * t51;
-        let t102: f64 = t53 * t101;
-        let t103: f64 = t100 - t102;
-        let t104: f64 = t19 * t58;
-        let t105: f64 = t60 * t104;
-        let t106: f64 = t103 + t105;
-        let t107: f64 = t13 * t65;
-        let t108: f64 = t67 * t107;
-        let t109: f64 = t106 + t108;
-        let t110: f64 = t109 - t87;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [[crate::Real; 3usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = dt;
+    let t7: crate::Real = t2 + t4;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = 1.0;
+    let t10: crate::Real = 0.0;
+    let t11: crate::Real = t1 * t5;
+    let t12: crate::Real = t3 + t11;
+    let t13: crate::Real = crate::math::cos(t0);
+    let t19: crate::Real = crate::math::sin(t0);
+    let t20: crate::Real = t6 * t12;
+    let t21: crate::Real = t19 * t20;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t8)
+        < crate::math::series_switch(0.05)
+    {
+        let t14: crate::Real = t6 * t8;
+        let t15: crate::Real = t12 * t14;
+        let t16: crate::Real = t13 * t15;
+        let t17: crate::Real = 0.5;
+        let t18: crate::Real = t16 * t17;
+        let t22: crate::Real = t8 * t8;
+        let t23: crate::Real = t6 * t22;
+        let t24: crate::Real = t12 * t23;
+        let t25: crate::Real = t19 * t24;
+        let t26: crate::Real = 0.16666666666666666;
+        let t27: crate::Real = t25 * t26;
+        let t28: crate::Real = t8 * t22;
+        let t29: crate::Real = t6 * t28;
+        let t30: crate::Real = t12 * t29;
+        let t31: crate::Real = t13 * t30;
+        let t32: crate::Real = 0.041666666666666664;
+        let t33: crate::Real = t31 * t32;
+        let t34: crate::Real = t27 + t33;
+        let t35: crate::Real = t22 * t22;
+        let t36: crate::Real = t6 * t35;
+        let t37: crate::Real = t12 * t36;
+        let t38: crate::Real = t19 * t37;
+        let t39: crate::Real = 0.008333333333333333;
+        let t40: crate::Real = t38 * t39;
+        let t41: crate::Real = t34 - t40;
+        let t42: crate::Real = t8 * t35;
+        let t43: crate::Real = t6 * t42;
+        let t44: crate::Real = t12 * t43;
+        let t45: crate::Real = t13 * t44;
+        let t46: crate::Real = 0.001388888888888889;
+        let t47: crate::Real = t45 * t46;
+        let t48: crate::Real = t41 - t47;
+        let t49: crate::Real = t28 * t28;
+        let t50: crate::Real = t6 * t49;
+        let t51: crate::Real = t12 * t50;
+        let t52: crate::Real = t19 * t51;
+        let t53: crate::Real = 0.0001984126984126984;
+        let t54: crate::Real = t52 * t53;
+        let t55: crate::Real = t48 + t54;
+        let t56: crate::Real = t8 * t49;
+        let t57: crate::Real = t6 * t56;
+        let t58: crate::Real = t12 * t57;
+        let t59: crate::Real = t13 * t58;
+        let t60: crate::Real = 0.0000248015873015873;
+        let t61: crate::Real = t59 * t60;
+        let t62: crate::Real = t55 + t61;
+        let t63: crate::Real = t35 * t35;
+        let t64: crate::Real = t6 * t63;
+        let t65: crate::Real = t12 * t64;
+        let t66: crate::Real = t19 * t65;
+        let t67: crate::Real = 0.0000027557319223985893;
+        let t68: crate::Real = t66 * t67;
+        let t69: crate::Real = t62 - t68;
+        let t70: crate::Real = t69 - t18;
+        let t71: crate::Real = t70 - t21;
+        let t86: crate::Real = t15 * t19;
+        let t87: crate::Real = t17 * t86;
+        let t88: crate::Real = t13 * t20;
+        let t89: crate::Real = t13 * t24;
+        let t90: crate::Real = t26 * t89;
+        let t91: crate::Real = t88 - t90;
+        let t92: crate::Real = t19 * t30;
+        let t93: crate::Real = t32 * t92;
+        let t94: crate::Real = t91 + t93;
+        let t95: crate::Real = t13 * t37;
+        let t96: crate::Real = t39 * t95;
+        let t97: crate::Real = t94 + t96;
+        let t98: crate::Real = t19 * t44;
+        let t99: crate::Real = t46 * t98;
+        let t100: crate::Real = t97 - t99;
+        let t101: crate::Real = t13 * t51;
+        let t102: crate::Real = t53 * t101;
+        let t103: crate::Real = t100 - t102;
+        let t104: crate::Real = t19 * t58;
+        let t105: crate::Real = t60 * t104;
+        let t106: crate::Real = t103 + t105;
+        let t107: crate::Real = t13 * t65;
+        let t108: crate::Real = t67 * t107;
+        let t109: crate::Real = t106 + t108;
+        let t110: crate::Real = t109 - t87;
         [t71, t110]
     } else {
-        let t72: f64 = libm::sin(t8);
-        let t73: f64 = t21 * t72;
-        let t74: f64 = 1f64;
-        let t75: f64 = t74 / t8;
-        let t76: f64 = t73 * t75;
-        let t77: f64 = -t76;
-        let t78: f64 = libm::cos(t8);
-        let t79: f64 = t9 - t78;
-        let t80: f64 = t6 * t79;
-        let t81: f64 = t12 * t80;
-        let t82: f64 = t13 * t81;
-        let t83: f64 = t82 * t75;
-        let t84: f64 = t77 - t83;
-        let t111: f64 = t20 * t72;
-        let t112: f64 = t13 * t111;
-        let t113: f64 = t112 * t75;
-        let t114: f64 = t19 * t81;
-        let t115: f64 = t114 * t75;
-        let t116: f64 = t113 - t115;
+        let t72: crate::Real = crate::math::sin(t8);
+        let t73: crate::Real = t21 * t72;
+        let t74: crate::Real = 1.0;
+        let t75: crate::Real = t74 / t8;
+        let t76: crate::Real = t73 * t75;
+        let t77: crate::Real = -t76;
+        let t78: crate::Real = crate::math::cos(t8);
+        let t79: crate::Real = t9 - t78;
+        let t80: crate::Real = t6 * t79;
+        let t81: crate::Real = t12 * t80;
+        let t82: crate::Real = t13 * t81;
+        let t83: crate::Real = t82 * t75;
+        let t84: crate::Real = t77 - t83;
+        let t111: crate::Real = t20 * t72;
+        let t112: crate::Real = t13 * t111;
+        let t113: crate::Real = t112 * t75;
+        let t114: crate::Real = t19 * t81;
+        let t115: crate::Real = t114 * t75;
+        let t116: crate::Real = t113 - t115;
         [t84, t116]
     };
-    let t85: f64 = g0[0usize];
-    let t117: f64 = g0[1usize];
+    let t85: crate::Real = g0[0usize];
+    let t117: crate::Real = g0[1usize];
     [[t9, t10, t85], [t10, t9, t117], [t10, t10, t9]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
@@ -541,242 +548,244 @@ pub fn step_exact_jac_x(
 199 arithmetic operations (846 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = dt;
-    let t7: f64 = t2 + t4;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = libm::sin(t0);
-    let t15: f64 = libm::cos(t0);
-    let t16: f64 = t5 * t6;
-    let t18: f64 = t8 * t8;
-    let t83: f64 = t1 * t5;
-    let t84: f64 = t3 + t83;
-    let t158: f64 = t9 * t16;
-    let g0: [f64; 4usize] = if libm::fabs(t8) < 0.05f64 {
-        let t10: f64 = t6 * t8;
-        let t11: f64 = t5 * t10;
-        let t12: f64 = t9 * t11;
-        let t13: f64 = 0.5f64;
-        let t14: f64 = t12 * t13;
-        let t17: f64 = t15 * t16;
-        let t19: f64 = t6 * t18;
-        let t20: f64 = t5 * t19;
-        let t21: f64 = t15 * t20;
-        let t22: f64 = 0.16666666666666666f64;
-        let t23: f64 = t21 * t22;
-        let t24: f64 = t17 - t23;
-        let t25: f64 = t8 * t18;
-        let t26: f64 = t6 * t25;
-        let t27: f64 = t5 * t26;
-        let t28: f64 = t9 * t27;
-        let t29: f64 = 0.041666666666666664f64;
-        let t30: f64 = t28 * t29;
-        let t31: f64 = t24 + t30;
-        let t32: f64 = t18 * t18;
-        let t33: f64 = t6 * t32;
-        let t34: f64 = t5 * t33;
-        let t35: f64 = t15 * t34;
-        let t36: f64 = 0.008333333333333333f64;
-        let t37: f64 = t35 * t36;
-        let t38: f64 = t31 + t37;
-        let t39: f64 = t8 * t32;
-        let t40: f64 = t6 * t39;
-        let t41: f64 = t5 * t40;
-        let t42: f64 = t9 * t41;
-        let t43: f64 = 0.001388888888888889f64;
-        let t44: f64 = t42 * t43;
-        let t45: f64 = t38 - t44;
-        let t46: f64 = t25 * t25;
-        let t47: f64 = t6 * t46;
-        let t48: f64 = t5 * t47;
-        let t49: f64 = t15 * t48;
-        let t50: f64 = 0.0001984126984126984f64;
-        let t51: f64 = t49 * t50;
-        let t52: f64 = t45 - t51;
-        let t53: f64 = t8 * t46;
-        let t54: f64 = t6 * t53;
-        let t55: f64 = t5 * t54;
-        let t56: f64 = t9 * t55;
-        let t57: f64 = 0.0000248015873015873f64;
-        let t58: f64 = t56 * t57;
-        let t59: f64 = t52 + t58;
-        let t60: f64 = t32 * t32;
-        let t61: f64 = t6 * t60;
-        let t62: f64 = t5 * t61;
-        let t63: f64 = t15 * t62;
-        let t64: f64 = 0.0000027557319223985893f64;
-        let t65: f64 = t63 * t64;
-        let t66: f64 = t59 + t65;
-        let t67: f64 = t66 - t14;
-        let t82: f64 = t6 * t6;
-        let t85: f64 = t8 * t82;
-        let t86: f64 = t84 * t85;
-        let t87: f64 = t15 * t86;
-        let t88: f64 = 0.3333333333333333f64;
-        let t89: f64 = t87 * t88;
-        let t90: f64 = t82 * t84;
-        let t91: f64 = t9 * t90;
-        let t92: f64 = t13 * t91;
-        let t93: f64 = t18 * t82;
-        let t94: f64 = t84 * t93;
-        let t95: f64 = t9 * t94;
-        let t96: f64 = 0.125f64;
-        let t97: f64 = t95 * t96;
-        let t98: f64 = t25 * t82;
-        let t99: f64 = t84 * t98;
-        let t100: f64 = t15 * t99;
-        let t101: f64 = 0.03333333333333333f64;
-        let t102: f64 = t100 * t101;
-        let t103: f64 = t97 + t102;
-        let t104: f64 = t32 * t82;
-        let t105: f64 = t84 * t104;
-        let t106: f64 = t9 * t105;
-        let t107: f64 = 0.006944444444444444f64;
-        let t108: f64 = t106 * t107;
-        let t109: f64 = t103 - t108;
-        let t110: f64 = t39 * t82;
-        let t111: f64 = t84 * t110;
-        let t112: f64 = t15 * t111;
-        let t113: f64 = 0.0011904761904761906f64;
-        let t114: f64 = t112 * t113;
-        let t115: f64 = t109 - t114;
-        let t116: f64 = t46 * t82;
-        let t117: f64 = t84 * t116;
-        let t118: f64 = t9 * t117;
-        let t119: f64 = 0.00017361111111111112f64;
-        let t120: f64 = t118 * t119;
-        let t121: f64 = t115 + t120;
-        let t122: f64 = t53 * t82;
-        let t123: f64 = t84 * t122;
-        let t124: f64 = t15 * t123;
-        let t125: f64 = 0.000022045855379188714f64;
-        let t126: f64 = t124 * t125;
-        let t127: f64 = t121 + t126;
-        let t128: f64 = t60 * t82;
-        let t129: f64 = t84 * t128;
-        let t130: f64 = t9 * t129;
-        let t131: f64 = 0.00000248015873015873f64;
-        let t132: f64 = t130 * t131;
-        let t133: f64 = t127 - t132;
-        let t134: f64 = t133 - t89;
-        let t135: f64 = t134 - t92;
-        let t156: f64 = t11 * t15;
-        let t157: f64 = t13 * t156;
-        let t159: f64 = t157 + t158;
-        let t160: f64 = t9 * t20;
-        let t161: f64 = t22 * t160;
-        let t162: f64 = t159 - t161;
-        let t163: f64 = t15 * t27;
-        let t164: f64 = t29 * t163;
-        let t165: f64 = t162 - t164;
-        let t166: f64 = t9 * t34;
-        let t167: f64 = t36 * t166;
-        let t168: f64 = t165 + t167;
-        let t169: f64 = t15 * t41;
-        let t170: f64 = t43 * t169;
-        let t171: f64 = t168 + t170;
-        let t172: f64 = t9 * t48;
-        let t173: f64 = t50 * t172;
-        let t174: f64 = t171 - t173;
-        let t175: f64 = t15 * t55;
-        let t176: f64 = t57 * t175;
-        let t177: f64 = t174 - t176;
-        let t178: f64 = t9 * t62;
-        let t179: f64 = t64 * t178;
-        let t180: f64 = t177 + t179;
-        let t187: f64 = t9 * t86;
-        let t188: f64 = t88 * t187;
-        let t189: f64 = t15 * t90;
-        let t190: f64 = t13 * t189;
-        let t191: f64 = t15 * t94;
-        let t192: f64 = t96 * t191;
-        let t193: f64 = t190 - t192;
-        let t194: f64 = t9 * t99;
-        let t195: f64 = t101 * t194;
-        let t196: f64 = t193 + t195;
-        let t197: f64 = t15 * t105;
-        let t198: f64 = t107 * t197;
-        let t199: f64 = t196 + t198;
-        let t200: f64 = t9 * t111;
-        let t201: f64 = t113 * t200;
-        let t202: f64 = t199 - t201;
-        let t203: f64 = t15 * t117;
-        let t204: f64 = t119 * t203;
-        let t205: f64 = t202 - t204;
-        let t206: f64 = t9 * t123;
-        let t207: f64 = t125 * t206;
-        let t208: f64 = t205 + t207;
-        let t209: f64 = t15 * t129;
-        let t210: f64 = t131 * t209;
-        let t211: f64 = t208 + t210;
-        let t212: f64 = t211 - t188;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = dt;
+    let t7: crate::Real = t2 + t4;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = crate::math::sin(t0);
+    let t15: crate::Real = crate::math::cos(t0);
+    let t16: crate::Real = t5 * t6;
+    let t18: crate::Real = t8 * t8;
+    let t83: crate::Real = t1 * t5;
+    let t84: crate::Real = t3 + t83;
+    let t158: crate::Real = t9 * t16;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t8)
+        < crate::math::series_switch(0.05)
+    {
+        let t10: crate::Real = t6 * t8;
+        let t11: crate::Real = t5 * t10;
+        let t12: crate::Real = t9 * t11;
+        let t13: crate::Real = 0.5;
+        let t14: crate::Real = t12 * t13;
+        let t17: crate::Real = t15 * t16;
+        let t19: crate::Real = t6 * t18;
+        let t20: crate::Real = t5 * t19;
+        let t21: crate::Real = t15 * t20;
+        let t22: crate::Real = 0.16666666666666666;
+        let t23: crate::Real = t21 * t22;
+        let t24: crate::Real = t17 - t23;
+        let t25: crate::Real = t8 * t18;
+        let t26: crate::Real = t6 * t25;
+        let t27: crate::Real = t5 * t26;
+        let t28: crate::Real = t9 * t27;
+        let t29: crate::Real = 0.041666666666666664;
+        let t30: crate::Real = t28 * t29;
+        let t31: crate::Real = t24 + t30;
+        let t32: crate::Real = t18 * t18;
+        let t33: crate::Real = t6 * t32;
+        let t34: crate::Real = t5 * t33;
+        let t35: crate::Real = t15 * t34;
+        let t36: crate::Real = 0.008333333333333333;
+        let t37: crate::Real = t35 * t36;
+        let t38: crate::Real = t31 + t37;
+        let t39: crate::Real = t8 * t32;
+        let t40: crate::Real = t6 * t39;
+        let t41: crate::Real = t5 * t40;
+        let t42: crate::Real = t9 * t41;
+        let t43: crate::Real = 0.001388888888888889;
+        let t44: crate::Real = t42 * t43;
+        let t45: crate::Real = t38 - t44;
+        let t46: crate::Real = t25 * t25;
+        let t47: crate::Real = t6 * t46;
+        let t48: crate::Real = t5 * t47;
+        let t49: crate::Real = t15 * t48;
+        let t50: crate::Real = 0.0001984126984126984;
+        let t51: crate::Real = t49 * t50;
+        let t52: crate::Real = t45 - t51;
+        let t53: crate::Real = t8 * t46;
+        let t54: crate::Real = t6 * t53;
+        let t55: crate::Real = t5 * t54;
+        let t56: crate::Real = t9 * t55;
+        let t57: crate::Real = 0.0000248015873015873;
+        let t58: crate::Real = t56 * t57;
+        let t59: crate::Real = t52 + t58;
+        let t60: crate::Real = t32 * t32;
+        let t61: crate::Real = t6 * t60;
+        let t62: crate::Real = t5 * t61;
+        let t63: crate::Real = t15 * t62;
+        let t64: crate::Real = 0.0000027557319223985893;
+        let t65: crate::Real = t63 * t64;
+        let t66: crate::Real = t59 + t65;
+        let t67: crate::Real = t66 - t14;
+        let t82: crate::Real = t6 * t6;
+        let t85: crate::Real = t8 * t82;
+        let t86: crate::Real = t84 * t85;
+        let t87: crate::Real = t15 * t86;
+        let t88: crate::Real = 0.3333333333333333;
+        let t89: crate::Real = t87 * t88;
+        let t90: crate::Real = t82 * t84;
+        let t91: crate::Real = t9 * t90;
+        let t92: crate::Real = t13 * t91;
+        let t93: crate::Real = t18 * t82;
+        let t94: crate::Real = t84 * t93;
+        let t95: crate::Real = t9 * t94;
+        let t96: crate::Real = 0.125;
+        let t97: crate::Real = t95 * t96;
+        let t98: crate::Real = t25 * t82;
+        let t99: crate::Real = t84 * t98;
+        let t100: crate::Real = t15 * t99;
+        let t101: crate::Real = 0.03333333333333333;
+        let t102: crate::Real = t100 * t101;
+        let t103: crate::Real = t97 + t102;
+        let t104: crate::Real = t32 * t82;
+        let t105: crate::Real = t84 * t104;
+        let t106: crate::Real = t9 * t105;
+        let t107: crate::Real = 0.006944444444444444;
+        let t108: crate::Real = t106 * t107;
+        let t109: crate::Real = t103 - t108;
+        let t110: crate::Real = t39 * t82;
+        let t111: crate::Real = t84 * t110;
+        let t112: crate::Real = t15 * t111;
+        let t113: crate::Real = 0.0011904761904761906;
+        let t114: crate::Real = t112 * t113;
+        let t115: crate::Real = t109 - t114;
+        let t116: crate::Real = t46 * t82;
+        let t117: crate::Real = t84 * t116;
+        let t118: crate::Real = t9 * t117;
+        let t119: crate::Real = 0.00017361111111111112;
+        let t120: crate::Real = t118 * t119;
+        let t121: crate::Real = t115 + t120;
+        let t122: crate::Real = t53 * t82;
+        let t123: crate::Real = t84 * t122;
+        let t124: crate::Real = t15 * t123;
+        let t125: crate::Real = 0.000022045855379188714;
+        let t126: crate::Real = t124 * t125;
+        let t127: crate::Real = t121 + t126;
+        let t128: crate::Real = t60 * t82;
+        let t129: crate::Real = t84 * t128;
+        let t130: crate::Real = t9 * t129;
+        let t131: crate::Real = 0.00000248015873015873;
+        let t132: crate::Real = t130 * t131;
+        let t133: crate::Real = t127 - t132;
+        let t134: crate::Real = t133 - t89;
+        let t135: crate::Real = t134 - t92;
+        let t156: crate::Real = t11 * t15;
+        let t157: crate::Real = t13 * t156;
+        let t159: crate::Real = t157 + t158;
+        let t160: crate::Real = t9 * t20;
+        let t161: crate::Real = t22 * t160;
+        let t162: crate::Real = t159 - t161;
+        let t163: crate::Real = t15 * t27;
+        let t164: crate::Real = t29 * t163;
+        let t165: crate::Real = t162 - t164;
+        let t166: crate::Real = t9 * t34;
+        let t167: crate::Real = t36 * t166;
+        let t168: crate::Real = t165 + t167;
+        let t169: crate::Real = t15 * t41;
+        let t170: crate::Real = t43 * t169;
+        let t171: crate::Real = t168 + t170;
+        let t172: crate::Real = t9 * t48;
+        let t173: crate::Real = t50 * t172;
+        let t174: crate::Real = t171 - t173;
+        let t175: crate::Real = t15 * t55;
+        let t176: crate::Real = t57 * t175;
+        let t177: crate::Real = t174 - t176;
+        let t178: crate::Real = t9 * t62;
+        let t179: crate::Real = t64 * t178;
+        let t180: crate::Real = t177 + t179;
+        let t187: crate::Real = t9 * t86;
+        let t188: crate::Real = t88 * t187;
+        let t189: crate::Real = t15 * t90;
+        let t190: crate::Real = t13 * t189;
+        let t191: crate::Real = t15 * t94;
+        let t192: crate::Real = t96 * t191;
+        let t193: crate::Real = t190 - t192;
+        let t194: crate::Real = t9 * t99;
+        let t195: crate::Real = t101 * t194;
+        let t196: crate::Real = t193 + t195;
+        let t197: crate::Real = t15 * t105;
+        let t198: crate::Real = t107 * t197;
+        let t199: crate::Real = t196 + t198;
+        let t200: crate::Real = t9 * t111;
+        let t201: crate::Real = t113 * t200;
+        let t202: crate::Real = t199 - t201;
+        let t203: crate::Real = t15 * t117;
+        let t204: crate::Real = t119 * t203;
+        let t205: crate::Real = t202 - t204;
+        let t206: crate::Real = t9 * t123;
+        let t207: crate::Real = t125 * t206;
+        let t208: crate::Real = t205 + t207;
+        let t209: crate::Real = t15 * t129;
+        let t210: crate::Real = t131 * t209;
+        let t211: crate::Real = t208 + t210;
+        let t212: crate::Real = t211 - t188;
         [t67, t135, t180, t212]
     } else {
-        let t68: f64 = libm::sin(t8);
-        let t69: f64 = t16 * t68;
-        let t70: f64 = t15 * t69;
-        let t71: f64 = 1f64;
-        let t72: f64 = t71 / t8;
-        let t73: f64 = t70 * t72;
-        let t74: f64 = 1f64;
-        let t75: f64 = libm::cos(t8);
-        let t76: f64 = t74 - t75;
-        let t77: f64 = t16 * t76;
-        let t78: f64 = t9 * t77;
-        let t79: f64 = t78 * t72;
-        let t80: f64 = t73 - t79;
-        let t136: f64 = t6 * t84;
-        let t137: f64 = t9 * t136;
-        let t138: f64 = t68 * t137;
-        let t139: f64 = t138 * t72;
-        let t140: f64 = t15 * t136;
-        let t141: f64 = t75 * t140;
-        let t142: f64 = t141 * t72;
-        let t143: f64 = t68 * t136;
-        let t144: f64 = t15 * t143;
-        let t145: f64 = t71 / t18;
-        let t146: f64 = t144 * t145;
-        let t147: f64 = t142 - t146;
-        let t148: f64 = t6 * t76;
-        let t149: f64 = t84 * t148;
-        let t150: f64 = t9 * t149;
-        let t151: f64 = t150 * t145;
-        let t152: f64 = t147 + t151;
-        let t153: f64 = t152 - t139;
-        let t154: f64 = t6 * t153;
-        let t181: f64 = t68 * t158;
-        let t182: f64 = t181 * t72;
-        let t183: f64 = t15 * t77;
-        let t184: f64 = t183 * t72;
-        let t185: f64 = t182 + t184;
-        let t213: f64 = t75 * t137;
-        let t214: f64 = t213 * t72;
-        let t215: f64 = t144 * t72;
-        let t216: f64 = t214 + t215;
-        let t217: f64 = t138 * t145;
-        let t218: f64 = t216 - t217;
-        let t219: f64 = t15 * t149;
-        let t220: f64 = t219 * t145;
-        let t221: f64 = t218 - t220;
-        let t222: f64 = t6 * t221;
+        let t68: crate::Real = crate::math::sin(t8);
+        let t69: crate::Real = t16 * t68;
+        let t70: crate::Real = t15 * t69;
+        let t71: crate::Real = 1.0;
+        let t72: crate::Real = t71 / t8;
+        let t73: crate::Real = t70 * t72;
+        let t74: crate::Real = 1.0;
+        let t75: crate::Real = crate::math::cos(t8);
+        let t76: crate::Real = t74 - t75;
+        let t77: crate::Real = t16 * t76;
+        let t78: crate::Real = t9 * t77;
+        let t79: crate::Real = t78 * t72;
+        let t80: crate::Real = t73 - t79;
+        let t136: crate::Real = t6 * t84;
+        let t137: crate::Real = t9 * t136;
+        let t138: crate::Real = t68 * t137;
+        let t139: crate::Real = t138 * t72;
+        let t140: crate::Real = t15 * t136;
+        let t141: crate::Real = t75 * t140;
+        let t142: crate::Real = t141 * t72;
+        let t143: crate::Real = t68 * t136;
+        let t144: crate::Real = t15 * t143;
+        let t145: crate::Real = t71 / t18;
+        let t146: crate::Real = t144 * t145;
+        let t147: crate::Real = t142 - t146;
+        let t148: crate::Real = t6 * t76;
+        let t149: crate::Real = t84 * t148;
+        let t150: crate::Real = t9 * t149;
+        let t151: crate::Real = t150 * t145;
+        let t152: crate::Real = t147 + t151;
+        let t153: crate::Real = t152 - t139;
+        let t154: crate::Real = t6 * t153;
+        let t181: crate::Real = t68 * t158;
+        let t182: crate::Real = t181 * t72;
+        let t183: crate::Real = t15 * t77;
+        let t184: crate::Real = t183 * t72;
+        let t185: crate::Real = t182 + t184;
+        let t213: crate::Real = t75 * t137;
+        let t214: crate::Real = t213 * t72;
+        let t215: crate::Real = t144 * t72;
+        let t216: crate::Real = t214 + t215;
+        let t217: crate::Real = t138 * t145;
+        let t218: crate::Real = t216 - t217;
+        let t219: crate::Real = t15 * t149;
+        let t220: crate::Real = t219 * t145;
+        let t221: crate::Real = t218 - t220;
+        let t222: crate::Real = t6 * t221;
         [t80, t154, t185, t222]
     };
-    let t81: f64 = g0[0usize];
-    let t155: f64 = g0[1usize];
-    let t186: f64 = g0[2usize];
-    let t223: f64 = g0[3usize];
-    let t224: f64 = 0f64;
+    let t81: crate::Real = g0[0usize];
+    let t155: crate::Real = g0[1usize];
+    let t186: crate::Real = g0[2usize];
+    let t223: crate::Real = g0[3usize];
+    let t224: crate::Real = 0.0;
     [[t81, t155], [t186, t223], [t224, t6]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
@@ -791,232 +800,234 @@ pub fn step_exact_jac_u(
 189 arithmetic operations (824 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [[f64; 2usize]; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[0usize];
-    let t4: f64 = w[1usize];
-    let t5: f64 = p[0usize];
-    let t6: f64 = dt;
-    let t7: f64 = t2 + t4;
-    let t8: f64 = t6 * t7;
-    let t9: f64 = libm::sin(t0);
-    let t14: f64 = libm::cos(t0);
-    let t16: f64 = t8 * t8;
-    let t74: f64 = t1 * t5;
-    let t75: f64 = t3 + t74;
-    let t148: f64 = t6 * t9;
-    let g0: [f64; 4usize] = if libm::fabs(t8) < 0.05f64 {
-        let t10: f64 = t6 * t8;
-        let t11: f64 = t9 * t10;
-        let t12: f64 = 0.5f64;
-        let t13: f64 = t11 * t12;
-        let t15: f64 = t6 * t14;
-        let t17: f64 = t6 * t16;
-        let t18: f64 = t14 * t17;
-        let t19: f64 = 0.16666666666666666f64;
-        let t20: f64 = t18 * t19;
-        let t21: f64 = t15 - t20;
-        let t22: f64 = t8 * t16;
-        let t23: f64 = t6 * t22;
-        let t24: f64 = t9 * t23;
-        let t25: f64 = 0.041666666666666664f64;
-        let t26: f64 = t24 * t25;
-        let t27: f64 = t21 + t26;
-        let t28: f64 = t16 * t16;
-        let t29: f64 = t6 * t28;
-        let t30: f64 = t14 * t29;
-        let t31: f64 = 0.008333333333333333f64;
-        let t32: f64 = t30 * t31;
-        let t33: f64 = t27 + t32;
-        let t34: f64 = t8 * t28;
-        let t35: f64 = t6 * t34;
-        let t36: f64 = t9 * t35;
-        let t37: f64 = 0.001388888888888889f64;
-        let t38: f64 = t36 * t37;
-        let t39: f64 = t33 - t38;
-        let t40: f64 = t22 * t22;
-        let t41: f64 = t6 * t40;
-        let t42: f64 = t14 * t41;
-        let t43: f64 = 0.0001984126984126984f64;
-        let t44: f64 = t42 * t43;
-        let t45: f64 = t39 - t44;
-        let t46: f64 = t8 * t40;
-        let t47: f64 = t6 * t46;
-        let t48: f64 = t9 * t47;
-        let t49: f64 = 0.0000248015873015873f64;
-        let t50: f64 = t48 * t49;
-        let t51: f64 = t45 + t50;
-        let t52: f64 = t28 * t28;
-        let t53: f64 = t6 * t52;
-        let t54: f64 = t14 * t53;
-        let t55: f64 = 0.0000027557319223985893f64;
-        let t56: f64 = t54 * t55;
-        let t57: f64 = t51 + t56;
-        let t58: f64 = t57 - t13;
-        let t73: f64 = t6 * t6;
-        let t76: f64 = t8 * t73;
-        let t77: f64 = t75 * t76;
-        let t78: f64 = t14 * t77;
-        let t79: f64 = 0.3333333333333333f64;
-        let t80: f64 = t78 * t79;
-        let t81: f64 = t73 * t75;
-        let t82: f64 = t9 * t81;
-        let t83: f64 = t12 * t82;
-        let t84: f64 = t16 * t73;
-        let t85: f64 = t75 * t84;
-        let t86: f64 = t9 * t85;
-        let t87: f64 = 0.125f64;
-        let t88: f64 = t86 * t87;
-        let t89: f64 = t22 * t73;
-        let t90: f64 = t75 * t89;
-        let t91: f64 = t14 * t90;
-        let t92: f64 = 0.03333333333333333f64;
-        let t93: f64 = t91 * t92;
-        let t94: f64 = t88 + t93;
-        let t95: f64 = t28 * t73;
-        let t96: f64 = t75 * t95;
-        let t97: f64 = t9 * t96;
-        let t98: f64 = 0.006944444444444444f64;
-        let t99: f64 = t97 * t98;
-        let t100: f64 = t94 - t99;
-        let t101: f64 = t34 * t73;
-        let t102: f64 = t75 * t101;
-        let t103: f64 = t14 * t102;
-        let t104: f64 = 0.0011904761904761906f64;
-        let t105: f64 = t103 * t104;
-        let t106: f64 = t100 - t105;
-        let t107: f64 = t40 * t73;
-        let t108: f64 = t75 * t107;
-        let t109: f64 = t9 * t108;
-        let t110: f64 = 0.00017361111111111112f64;
-        let t111: f64 = t109 * t110;
-        let t112: f64 = t106 + t111;
-        let t113: f64 = t46 * t73;
-        let t114: f64 = t75 * t113;
-        let t115: f64 = t14 * t114;
-        let t116: f64 = 0.000022045855379188714f64;
-        let t117: f64 = t115 * t116;
-        let t118: f64 = t112 + t117;
-        let t119: f64 = t52 * t73;
-        let t120: f64 = t75 * t119;
-        let t121: f64 = t9 * t120;
-        let t122: f64 = 0.00000248015873015873f64;
-        let t123: f64 = t121 * t122;
-        let t124: f64 = t118 - t123;
-        let t125: f64 = t124 - t80;
-        let t126: f64 = t125 - t83;
-        let t146: f64 = t10 * t14;
-        let t147: f64 = t12 * t146;
-        let t149: f64 = t147 + t148;
-        let t150: f64 = t9 * t17;
-        let t151: f64 = t19 * t150;
-        let t152: f64 = t149 - t151;
-        let t153: f64 = t14 * t23;
-        let t154: f64 = t25 * t153;
-        let t155: f64 = t152 - t154;
-        let t156: f64 = t9 * t29;
-        let t157: f64 = t31 * t156;
-        let t158: f64 = t155 + t157;
-        let t159: f64 = t14 * t35;
-        let t160: f64 = t37 * t159;
-        let t161: f64 = t158 + t160;
-        let t162: f64 = t9 * t41;
-        let t163: f64 = t43 * t162;
-        let t164: f64 = t161 - t163;
-        let t165: f64 = t14 * t47;
-        let t166: f64 = t49 * t165;
-        let t167: f64 = t164 - t166;
-        let t168: f64 = t9 * t53;
-        let t169: f64 = t55 * t168;
-        let t170: f64 = t167 + t169;
-        let t177: f64 = t9 * t77;
-        let t178: f64 = t79 * t177;
-        let t179: f64 = t14 * t81;
-        let t180: f64 = t12 * t179;
-        let t181: f64 = t14 * t85;
-        let t182: f64 = t87 * t181;
-        let t183: f64 = t180 - t182;
-        let t184: f64 = t9 * t90;
-        let t185: f64 = t92 * t184;
-        let t186: f64 = t183 + t185;
-        let t187: f64 = t14 * t96;
-        let t188: f64 = t98 * t187;
-        let t189: f64 = t186 + t188;
-        let t190: f64 = t9 * t102;
-        let t191: f64 = t104 * t190;
-        let t192: f64 = t189 - t191;
-        let t193: f64 = t14 * t108;
-        let t194: f64 = t110 * t193;
-        let t195: f64 = t192 - t194;
-        let t196: f64 = t9 * t114;
-        let t197: f64 = t116 * t196;
-        let t198: f64 = t195 + t197;
-        let t199: f64 = t14 * t120;
-        let t200: f64 = t122 * t199;
-        let t201: f64 = t198 + t200;
-        let t202: f64 = t201 - t178;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [[crate::Real; 2usize]; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[0usize];
+    let t4: crate::Real = w[1usize];
+    let t5: crate::Real = p[0usize];
+    let t6: crate::Real = dt;
+    let t7: crate::Real = t2 + t4;
+    let t8: crate::Real = t6 * t7;
+    let t9: crate::Real = crate::math::sin(t0);
+    let t14: crate::Real = crate::math::cos(t0);
+    let t16: crate::Real = t8 * t8;
+    let t74: crate::Real = t1 * t5;
+    let t75: crate::Real = t3 + t74;
+    let t148: crate::Real = t6 * t9;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t8)
+        < crate::math::series_switch(0.05)
+    {
+        let t10: crate::Real = t6 * t8;
+        let t11: crate::Real = t9 * t10;
+        let t12: crate::Real = 0.5;
+        let t13: crate::Real = t11 * t12;
+        let t15: crate::Real = t6 * t14;
+        let t17: crate::Real = t6 * t16;
+        let t18: crate::Real = t14 * t17;
+        let t19: crate::Real = 0.16666666666666666;
+        let t20: crate::Real = t18 * t19;
+        let t21: crate::Real = t15 - t20;
+        let t22: crate::Real = t8 * t16;
+        let t23: crate::Real = t6 * t22;
+        let t24: crate::Real = t9 * t23;
+        let t25: crate::Real = 0.041666666666666664;
+        let t26: crate::Real = t24 * t25;
+        let t27: crate::Real = t21 + t26;
+        let t28: crate::Real = t16 * t16;
+        let t29: crate::Real = t6 * t28;
+        let t30: crate::Real = t14 * t29;
+        let t31: crate::Real = 0.008333333333333333;
+        let t32: crate::Real = t30 * t31;
+        let t33: crate::Real = t27 + t32;
+        let t34: crate::Real = t8 * t28;
+        let t35: crate::Real = t6 * t34;
+        let t36: crate::Real = t9 * t35;
+        let t37: crate::Real = 0.001388888888888889;
+        let t38: crate::Real = t36 * t37;
+        let t39: crate::Real = t33 - t38;
+        let t40: crate::Real = t22 * t22;
+        let t41: crate::Real = t6 * t40;
+        let t42: crate::Real = t14 * t41;
+        let t43: crate::Real = 0.0001984126984126984;
+        let t44: crate::Real = t42 * t43;
+        let t45: crate::Real = t39 - t44;
+        let t46: crate::Real = t8 * t40;
+        let t47: crate::Real = t6 * t46;
+        let t48: crate::Real = t9 * t47;
+        let t49: crate::Real = 0.0000248015873015873;
+        let t50: crate::Real = t48 * t49;
+        let t51: crate::Real = t45 + t50;
+        let t52: crate::Real = t28 * t28;
+        let t53: crate::Real = t6 * t52;
+        let t54: crate::Real = t14 * t53;
+        let t55: crate::Real = 0.0000027557319223985893;
+        let t56: crate::Real = t54 * t55;
+        let t57: crate::Real = t51 + t56;
+        let t58: crate::Real = t57 - t13;
+        let t73: crate::Real = t6 * t6;
+        let t76: crate::Real = t8 * t73;
+        let t77: crate::Real = t75 * t76;
+        let t78: crate::Real = t14 * t77;
+        let t79: crate::Real = 0.3333333333333333;
+        let t80: crate::Real = t78 * t79;
+        let t81: crate::Real = t73 * t75;
+        let t82: crate::Real = t9 * t81;
+        let t83: crate::Real = t12 * t82;
+        let t84: crate::Real = t16 * t73;
+        let t85: crate::Real = t75 * t84;
+        let t86: crate::Real = t9 * t85;
+        let t87: crate::Real = 0.125;
+        let t88: crate::Real = t86 * t87;
+        let t89: crate::Real = t22 * t73;
+        let t90: crate::Real = t75 * t89;
+        let t91: crate::Real = t14 * t90;
+        let t92: crate::Real = 0.03333333333333333;
+        let t93: crate::Real = t91 * t92;
+        let t94: crate::Real = t88 + t93;
+        let t95: crate::Real = t28 * t73;
+        let t96: crate::Real = t75 * t95;
+        let t97: crate::Real = t9 * t96;
+        let t98: crate::Real = 0.006944444444444444;
+        let t99: crate::Real = t97 * t98;
+        let t100: crate::Real = t94 - t99;
+        let t101: crate::Real = t34 * t73;
+        let t102: crate::Real = t75 * t101;
+        let t103: crate::Real = t14 * t102;
+        let t104: crate::Real = 0.0011904761904761906;
+        let t105: crate::Real = t103 * t104;
+        let t106: crate::Real = t100 - t105;
+        let t107: crate::Real = t40 * t73;
+        let t108: crate::Real = t75 * t107;
+        let t109: crate::Real = t9 * t108;
+        let t110: crate::Real = 0.00017361111111111112;
+        let t111: crate::Real = t109 * t110;
+        let t112: crate::Real = t106 + t111;
+        let t113: crate::Real = t46 * t73;
+        let t114: crate::Real = t75 * t113;
+        let t115: crate::Real = t14 * t114;
+        let t116: crate::Real = 0.000022045855379188714;
+        let t117: crate::Real = t115 * t116;
+        let t118: crate::Real = t112 + t117;
+        let t119: crate::Real = t52 * t73;
+        let t120: crate::Real = t75 * t119;
+        let t121: crate::Real = t9 * t120;
+        let t122: crate::Real = 0.00000248015873015873;
+        let t123: crate::Real = t121 * t122;
+        let t124: crate::Real = t118 - t123;
+        let t125: crate::Real = t124 - t80;
+        let t126: crate::Real = t125 - t83;
+        let t146: crate::Real = t10 * t14;
+        let t147: crate::Real = t12 * t146;
+        let t149: crate::Real = t147 + t148;
+        let t150: crate::Real = t9 * t17;
+        let t151: crate::Real = t19 * t150;
+        let t152: crate::Real = t149 - t151;
+        let t153: crate::Real = t14 * t23;
+        let t154: crate::Real = t25 * t153;
+        let t155: crate::Real = t152 - t154;
+        let t156: crate::Real = t9 * t29;
+        let t157: crate::Real = t31 * t156;
+        let t158: crate::Real = t155 + t157;
+        let t159: crate::Real = t14 * t35;
+        let t160: crate::Real = t37 * t159;
+        let t161: crate::Real = t158 + t160;
+        let t162: crate::Real = t9 * t41;
+        let t163: crate::Real = t43 * t162;
+        let t164: crate::Real = t161 - t163;
+        let t165: crate::Real = t14 * t47;
+        let t166: crate::Real = t49 * t165;
+        let t167: crate::Real = t164 - t166;
+        let t168: crate::Real = t9 * t53;
+        let t169: crate::Real = t55 * t168;
+        let t170: crate::Real = t167 + t169;
+        let t177: crate::Real = t9 * t77;
+        let t178: crate::Real = t79 * t177;
+        let t179: crate::Real = t14 * t81;
+        let t180: crate::Real = t12 * t179;
+        let t181: crate::Real = t14 * t85;
+        let t182: crate::Real = t87 * t181;
+        let t183: crate::Real = t180 - t182;
+        let t184: crate::Real = t9 * t90;
+        let t185: crate::Real = t92 * t184;
+        let t186: crate::Real = t183 + t185;
+        let t187: crate::Real = t14 * t96;
+        let t188: crate::Real = t98 * t187;
+        let t189: crate::Real = t186 + t188;
+        let t190: crate::Real = t9 * t102;
+        let t191: crate::Real = t104 * t190;
+        let t192: crate::Real = t189 - t191;
+        let t193: crate::Real = t14 * t108;
+        let t194: crate::Real = t110 * t193;
+        let t195: crate::Real = t192 - t194;
+        let t196: crate::Real = t9 * t114;
+        let t197: crate::Real = t116 * t196;
+        let t198: crate::Real = t195 + t197;
+        let t199: crate::Real = t14 * t120;
+        let t200: crate::Real = t122 * t199;
+        let t201: crate::Real = t198 + t200;
+        let t202: crate::Real = t201 - t178;
         [t58, t126, t170, t202]
     } else {
-        let t59: f64 = libm::sin(t8);
-        let t60: f64 = t6 * t59;
-        let t61: f64 = t14 * t60;
-        let t62: f64 = 1f64;
-        let t63: f64 = t62 / t8;
-        let t64: f64 = t61 * t63;
-        let t65: f64 = 1f64;
-        let t66: f64 = libm::cos(t8);
-        let t67: f64 = t65 - t66;
-        let t68: f64 = t6 * t67;
-        let t69: f64 = t9 * t68;
-        let t70: f64 = t69 * t63;
-        let t71: f64 = t64 - t70;
-        let t127: f64 = t6 * t75;
-        let t128: f64 = t9 * t127;
-        let t129: f64 = t59 * t128;
-        let t130: f64 = t129 * t63;
-        let t131: f64 = t14 * t127;
-        let t132: f64 = t66 * t131;
-        let t133: f64 = t132 * t63;
-        let t134: f64 = t59 * t127;
-        let t135: f64 = t14 * t134;
-        let t136: f64 = t62 / t16;
-        let t137: f64 = t135 * t136;
-        let t138: f64 = t133 - t137;
-        let t139: f64 = t68 * t75;
-        let t140: f64 = t9 * t139;
-        let t141: f64 = t140 * t136;
-        let t142: f64 = t138 + t141;
-        let t143: f64 = t142 - t130;
-        let t144: f64 = t6 * t143;
-        let t171: f64 = t59 * t148;
-        let t172: f64 = t171 * t63;
-        let t173: f64 = t14 * t68;
-        let t174: f64 = t173 * t63;
-        let t175: f64 = t172 + t174;
-        let t203: f64 = t66 * t128;
-        let t204: f64 = t203 * t63;
-        let t205: f64 = t135 * t63;
-        let t206: f64 = t204 + t205;
-        let t207: f64 = t129 * t136;
-        let t208: f64 = t206 - t207;
-        let t209: f64 = t14 * t139;
-        let t210: f64 = t209 * t136;
-        let t211: f64 = t208 - t210;
-        let t212: f64 = t6 * t211;
+        let t59: crate::Real = crate::math::sin(t8);
+        let t60: crate::Real = t6 * t59;
+        let t61: crate::Real = t14 * t60;
+        let t62: crate::Real = 1.0;
+        let t63: crate::Real = t62 / t8;
+        let t64: crate::Real = t61 * t63;
+        let t65: crate::Real = 1.0;
+        let t66: crate::Real = crate::math::cos(t8);
+        let t67: crate::Real = t65 - t66;
+        let t68: crate::Real = t6 * t67;
+        let t69: crate::Real = t9 * t68;
+        let t70: crate::Real = t69 * t63;
+        let t71: crate::Real = t64 - t70;
+        let t127: crate::Real = t6 * t75;
+        let t128: crate::Real = t9 * t127;
+        let t129: crate::Real = t59 * t128;
+        let t130: crate::Real = t129 * t63;
+        let t131: crate::Real = t14 * t127;
+        let t132: crate::Real = t66 * t131;
+        let t133: crate::Real = t132 * t63;
+        let t134: crate::Real = t59 * t127;
+        let t135: crate::Real = t14 * t134;
+        let t136: crate::Real = t62 / t16;
+        let t137: crate::Real = t135 * t136;
+        let t138: crate::Real = t133 - t137;
+        let t139: crate::Real = t68 * t75;
+        let t140: crate::Real = t9 * t139;
+        let t141: crate::Real = t140 * t136;
+        let t142: crate::Real = t138 + t141;
+        let t143: crate::Real = t142 - t130;
+        let t144: crate::Real = t6 * t143;
+        let t171: crate::Real = t59 * t148;
+        let t172: crate::Real = t171 * t63;
+        let t173: crate::Real = t14 * t68;
+        let t174: crate::Real = t173 * t63;
+        let t175: crate::Real = t172 + t174;
+        let t203: crate::Real = t66 * t128;
+        let t204: crate::Real = t203 * t63;
+        let t205: crate::Real = t135 * t63;
+        let t206: crate::Real = t204 + t205;
+        let t207: crate::Real = t129 * t136;
+        let t208: crate::Real = t206 - t207;
+        let t209: crate::Real = t14 * t139;
+        let t210: crate::Real = t209 * t136;
+        let t211: crate::Real = t208 - t210;
+        let t212: crate::Real = t6 * t211;
         [t71, t144, t175, t212]
     };
-    let t72: f64 = g0[0usize];
-    let t145: f64 = g0[1usize];
-    let t176: f64 = g0[2usize];
-    let t213: f64 = g0[3usize];
-    let t214: f64 = 0f64;
+    let t72: crate::Real = g0[0usize];
+    let t145: crate::Real = g0[1usize];
+    let t176: crate::Real = g0[2usize];
+    let t213: crate::Real = g0[3usize];
+    let t214: crate::Real = 0.0;
     [[t72, t145], [t176, t213], [t214, t6]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
@@ -1031,129 +1042,131 @@ pub fn step_exact_jac_w(
 96 arithmetic operations (356 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [f64; 3usize] {
-    let t0: f64 = x[2usize];
-    let t1: f64 = u[0usize];
-    let t2: f64 = u[1usize];
-    let t3: f64 = w[1usize];
-    let t4: f64 = dt;
-    let t5: f64 = t2 + t3;
-    let t6: f64 = t4 * t5;
-    let t7: f64 = libm::sin(t0);
-    let t13: f64 = libm::cos(t0);
-    let t14: f64 = t1 * t4;
-    let t82: f64 = t7 * t14;
-    let g0: [f64; 2usize] = if libm::fabs(t6) < 0.05f64 {
-        let t8: f64 = t4 * t6;
-        let t9: f64 = t1 * t8;
-        let t10: f64 = t7 * t9;
-        let t11: f64 = 0.5f64;
-        let t12: f64 = t10 * t11;
-        let t15: f64 = t13 * t14;
-        let t16: f64 = t6 * t6;
-        let t17: f64 = t4 * t16;
-        let t18: f64 = t1 * t17;
-        let t19: f64 = t13 * t18;
-        let t20: f64 = 0.16666666666666666f64;
-        let t21: f64 = t19 * t20;
-        let t22: f64 = t15 - t21;
-        let t23: f64 = t6 * t16;
-        let t24: f64 = t4 * t23;
-        let t25: f64 = t1 * t24;
-        let t26: f64 = t7 * t25;
-        let t27: f64 = 0.041666666666666664f64;
-        let t28: f64 = t26 * t27;
-        let t29: f64 = t22 + t28;
-        let t30: f64 = t16 * t16;
-        let t31: f64 = t4 * t30;
-        let t32: f64 = t1 * t31;
-        let t33: f64 = t13 * t32;
-        let t34: f64 = 0.008333333333333333f64;
-        let t35: f64 = t33 * t34;
-        let t36: f64 = t29 + t35;
-        let t37: f64 = t6 * t30;
-        let t38: f64 = t4 * t37;
-        let t39: f64 = t1 * t38;
-        let t40: f64 = t7 * t39;
-        let t41: f64 = 0.001388888888888889f64;
-        let t42: f64 = t40 * t41;
-        let t43: f64 = t36 - t42;
-        let t44: f64 = t23 * t23;
-        let t45: f64 = t4 * t44;
-        let t46: f64 = t1 * t45;
-        let t47: f64 = t13 * t46;
-        let t48: f64 = 0.0001984126984126984f64;
-        let t49: f64 = t47 * t48;
-        let t50: f64 = t43 - t49;
-        let t51: f64 = t6 * t44;
-        let t52: f64 = t4 * t51;
-        let t53: f64 = t1 * t52;
-        let t54: f64 = t7 * t53;
-        let t55: f64 = 0.0000248015873015873f64;
-        let t56: f64 = t54 * t55;
-        let t57: f64 = t50 + t56;
-        let t58: f64 = t30 * t30;
-        let t59: f64 = t4 * t58;
-        let t60: f64 = t1 * t59;
-        let t61: f64 = t13 * t60;
-        let t62: f64 = 0.0000027557319223985893f64;
-        let t63: f64 = t61 * t62;
-        let t64: f64 = t57 + t63;
-        let t65: f64 = t64 - t12;
-        let t80: f64 = t9 * t13;
-        let t81: f64 = t11 * t80;
-        let t83: f64 = t81 + t82;
-        let t84: f64 = t7 * t18;
-        let t85: f64 = t20 * t84;
-        let t86: f64 = t83 - t85;
-        let t87: f64 = t13 * t25;
-        let t88: f64 = t27 * t87;
-        let t89: f64 = t86 - t88;
-        let t90: f64 = t7 * t32;
-        let t91: f64 = t34 * t90;
-        let t92: f64 = t89 + t91;
-        let t93: f64 = t13 * t39;
-        let t94: f64 = t41 * t93;
-        let t95: f64 = t92 + t94;
-        let t96: f64 = t7 * t46;
-        let t97: f64 = t48 * t96;
-        let t98: f64 = t95 - t97;
-        let t99: f64 = t13 * t53;
-        let t100: f64 = t55 * t99;
-        let t101: f64 = t98 - t100;
-        let t102: f64 = t7 * t60;
-        let t103: f64 = t62 * t102;
-        let t104: f64 = t101 + t103;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [crate::Real; 3usize] {
+    let t0: crate::Real = x[2usize];
+    let t1: crate::Real = u[0usize];
+    let t2: crate::Real = u[1usize];
+    let t3: crate::Real = w[1usize];
+    let t4: crate::Real = dt;
+    let t5: crate::Real = t2 + t3;
+    let t6: crate::Real = t4 * t5;
+    let t7: crate::Real = crate::math::sin(t0);
+    let t13: crate::Real = crate::math::cos(t0);
+    let t14: crate::Real = t1 * t4;
+    let t82: crate::Real = t7 * t14;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t6)
+        < crate::math::series_switch(0.05)
+    {
+        let t8: crate::Real = t4 * t6;
+        let t9: crate::Real = t1 * t8;
+        let t10: crate::Real = t7 * t9;
+        let t11: crate::Real = 0.5;
+        let t12: crate::Real = t10 * t11;
+        let t15: crate::Real = t13 * t14;
+        let t16: crate::Real = t6 * t6;
+        let t17: crate::Real = t4 * t16;
+        let t18: crate::Real = t1 * t17;
+        let t19: crate::Real = t13 * t18;
+        let t20: crate::Real = 0.16666666666666666;
+        let t21: crate::Real = t19 * t20;
+        let t22: crate::Real = t15 - t21;
+        let t23: crate::Real = t6 * t16;
+        let t24: crate::Real = t4 * t23;
+        let t25: crate::Real = t1 * t24;
+        let t26: crate::Real = t7 * t25;
+        let t27: crate::Real = 0.041666666666666664;
+        let t28: crate::Real = t26 * t27;
+        let t29: crate::Real = t22 + t28;
+        let t30: crate::Real = t16 * t16;
+        let t31: crate::Real = t4 * t30;
+        let t32: crate::Real = t1 * t31;
+        let t33: crate::Real = t13 * t32;
+        let t34: crate::Real = 0.008333333333333333;
+        let t35: crate::Real = t33 * t34;
+        let t36: crate::Real = t29 + t35;
+        let t37: crate::Real = t6 * t30;
+        let t38: crate::Real = t4 * t37;
+        let t39: crate::Real = t1 * t38;
+        let t40: crate::Real = t7 * t39;
+        let t41: crate::Real = 0.001388888888888889;
+        let t42: crate::Real = t40 * t41;
+        let t43: crate::Real = t36 - t42;
+        let t44: crate::Real = t23 * t23;
+        let t45: crate::Real = t4 * t44;
+        let t46: crate::Real = t1 * t45;
+        let t47: crate::Real = t13 * t46;
+        let t48: crate::Real = 0.0001984126984126984;
+        let t49: crate::Real = t47 * t48;
+        let t50: crate::Real = t43 - t49;
+        let t51: crate::Real = t6 * t44;
+        let t52: crate::Real = t4 * t51;
+        let t53: crate::Real = t1 * t52;
+        let t54: crate::Real = t7 * t53;
+        let t55: crate::Real = 0.0000248015873015873;
+        let t56: crate::Real = t54 * t55;
+        let t57: crate::Real = t50 + t56;
+        let t58: crate::Real = t30 * t30;
+        let t59: crate::Real = t4 * t58;
+        let t60: crate::Real = t1 * t59;
+        let t61: crate::Real = t13 * t60;
+        let t62: crate::Real = 0.0000027557319223985893;
+        let t63: crate::Real = t61 * t62;
+        let t64: crate::Real = t57 + t63;
+        let t65: crate::Real = t64 - t12;
+        let t80: crate::Real = t9 * t13;
+        let t81: crate::Real = t11 * t80;
+        let t83: crate::Real = t81 + t82;
+        let t84: crate::Real = t7 * t18;
+        let t85: crate::Real = t20 * t84;
+        let t86: crate::Real = t83 - t85;
+        let t87: crate::Real = t13 * t25;
+        let t88: crate::Real = t27 * t87;
+        let t89: crate::Real = t86 - t88;
+        let t90: crate::Real = t7 * t32;
+        let t91: crate::Real = t34 * t90;
+        let t92: crate::Real = t89 + t91;
+        let t93: crate::Real = t13 * t39;
+        let t94: crate::Real = t41 * t93;
+        let t95: crate::Real = t92 + t94;
+        let t96: crate::Real = t7 * t46;
+        let t97: crate::Real = t48 * t96;
+        let t98: crate::Real = t95 - t97;
+        let t99: crate::Real = t13 * t53;
+        let t100: crate::Real = t55 * t99;
+        let t101: crate::Real = t98 - t100;
+        let t102: crate::Real = t7 * t60;
+        let t103: crate::Real = t62 * t102;
+        let t104: crate::Real = t101 + t103;
         [t65, t104]
     } else {
-        let t66: f64 = libm::sin(t6);
-        let t67: f64 = t14 * t66;
-        let t68: f64 = t13 * t67;
-        let t69: f64 = 1f64;
-        let t70: f64 = t69 / t6;
-        let t71: f64 = t68 * t70;
-        let t72: f64 = 1f64;
-        let t73: f64 = libm::cos(t6);
-        let t74: f64 = t72 - t73;
-        let t75: f64 = t14 * t74;
-        let t76: f64 = t7 * t75;
-        let t77: f64 = t76 * t70;
-        let t78: f64 = t71 - t77;
-        let t105: f64 = t66 * t82;
-        let t106: f64 = t105 * t70;
-        let t107: f64 = t13 * t75;
-        let t108: f64 = t107 * t70;
-        let t109: f64 = t106 + t108;
+        let t66: crate::Real = crate::math::sin(t6);
+        let t67: crate::Real = t14 * t66;
+        let t68: crate::Real = t13 * t67;
+        let t69: crate::Real = 1.0;
+        let t70: crate::Real = t69 / t6;
+        let t71: crate::Real = t68 * t70;
+        let t72: crate::Real = 1.0;
+        let t73: crate::Real = crate::math::cos(t6);
+        let t74: crate::Real = t72 - t73;
+        let t75: crate::Real = t14 * t74;
+        let t76: crate::Real = t7 * t75;
+        let t77: crate::Real = t76 * t70;
+        let t78: crate::Real = t71 - t77;
+        let t105: crate::Real = t66 * t82;
+        let t106: crate::Real = t105 * t70;
+        let t107: crate::Real = t13 * t75;
+        let t108: crate::Real = t107 * t70;
+        let t109: crate::Real = t106 + t108;
         [t78, t109]
     };
-    let t79: f64 = g0[0usize];
-    let t110: f64 = g0[1usize];
-    let t111: f64 = 0f64;
+    let t79: crate::Real = g0[0usize];
+    let t110: crate::Real = g0[1usize];
+    let t111: crate::Real = 0.0;
     [t79, t110, t111]
 }
 /**Range and bearing to beacon i (seed 001 eq. 6, with atan2 for the full circle); Jacobian eq. 7. Predicted columns: range, bearing.
@@ -1167,24 +1180,24 @@ pub fn step_exact_jac_p(
 8 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 1usize],
-    lm: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
     [t10, t12]
 }
 /**Jacobian of `obs_landmark` with respect to the state (seed 001 eq. 7 for range-bearing).
@@ -1198,33 +1211,33 @@ pub fn obs_landmark(
 15 arithmetic operations (45 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 1usize],
-    lm: &[f64; 2usize],
-) -> [[f64; 3usize]; 2usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = lm[0usize];
-    let t3: f64 = lm[1usize];
-    let t4: f64 = t2 - t0;
-    let t5: f64 = t4 * t4;
-    let t6: f64 = t3 - t1;
-    let t7: f64 = t6 * t6;
-    let t8: f64 = t5 + t7;
-    let t9: f64 = libm::sqrt(t8);
-    let t10: f64 = 1f64;
-    let t11: f64 = t10 / t9;
-    let t12: f64 = t4 * t11;
-    let t13: f64 = -t12;
-    let t14: f64 = t6 * t11;
-    let t15: f64 = -t14;
-    let t16: f64 = 0f64;
-    let t17: f64 = t10 / t8;
-    let t18: f64 = t6 * t17;
-    let t19: f64 = t4 * t17;
-    let t20: f64 = -t19;
-    let t21: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    lm: &[crate::Real; 2usize],
+) -> [[crate::Real; 3usize]; 2usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = lm[0usize];
+    let t3: crate::Real = lm[1usize];
+    let t4: crate::Real = t2 - t0;
+    let t5: crate::Real = t4 * t4;
+    let t6: crate::Real = t3 - t1;
+    let t7: crate::Real = t6 * t6;
+    let t8: crate::Real = t5 + t7;
+    let t9: crate::Real = crate::math::sqrt(t8);
+    let t10: crate::Real = 1.0;
+    let t11: crate::Real = t10 / t9;
+    let t12: crate::Real = t4 * t11;
+    let t13: crate::Real = -t12;
+    let t14: crate::Real = t6 * t11;
+    let t15: crate::Real = -t14;
+    let t16: crate::Real = 0.0;
+    let t17: crate::Real = t10 / t8;
+    let t18: crate::Real = t6 * t17;
+    let t19: crate::Real = t4 * t17;
+    let t20: crate::Real = -t19;
+    let t21: crate::Real = (-1.0);
     [[t13, t15, t16], [t18, t20, t21]]
 }
 /**Jacobian of `obs_landmark` with respect to the parameters (seed 001 eq. 7 for range-bearing).
@@ -1238,12 +1251,12 @@ pub fn obs_landmark_jac_x(
 0 arithmetic operations (0 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 1usize],
-    lm: &[f64; 2usize],
-) -> [f64; 2usize] {
-    let t0: f64 = 0f64;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = 0.0;
     [t0, t0]
 }
 /**Commands that produce a body twist.
@@ -1254,11 +1267,14 @@ pub fn obs_landmark_jac_p(
 
 1 arithmetic operations (1 before common-subexpression elimination).*/
 #[inline]
-pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 1usize]) -> [f64; 2usize] {
-    let t0: f64 = twist[0usize];
-    let t1: f64 = twist[2usize];
-    let t2: f64 = p[0usize];
-    let t3: f64 = t0 / t2;
+pub fn inverse_twist(
+    twist: &[crate::Real; 3usize],
+    p: &[crate::Real; 1usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = twist[0usize];
+    let t1: crate::Real = twist[2usize];
+    let t2: crate::Real = p[0usize];
+    let t3: crate::Real = t0 / t2;
     [t3, t1]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
@@ -1271,54 +1287,56 @@ pub fn inverse_twist(twist: &[f64; 3usize], p: &[f64; 1usize]) -> [f64; 2usize] 
 30 arithmetic operations (46 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
-    dpose: &[f64; 3usize],
-    dt: f64,
-    p: &[f64; 1usize],
-) -> [f64; 2usize] {
-    let t0: f64 = dpose[0usize];
-    let t1: f64 = dpose[2usize];
-    let t2: f64 = dt;
-    let t3: f64 = p[0usize];
-    let t4: f64 = 1f64;
-    let t5: f64 = t4 / t2;
-    let g0: [f64; 1usize] = if libm::fabs(t1) < 0.05f64 {
-        let t6: f64 = t0 * t5;
-        let t7: f64 = t1 * t1;
-        let t8: f64 = t0 * t7;
-        let t9: f64 = 0.16666666666666666f64;
-        let t10: f64 = t8 * t9;
-        let t11: f64 = t10 * t5;
-        let t12: f64 = t6 + t11;
-        let t13: f64 = t7 * t7;
-        let t14: f64 = t0 * t13;
-        let t15: f64 = 0.019444444444444445f64;
-        let t16: f64 = t14 * t15;
-        let t17: f64 = t16 * t5;
-        let t18: f64 = t12 + t17;
-        let t19: f64 = t1 * t7;
-        let t20: f64 = t19 * t19;
-        let t21: f64 = t0 * t20;
-        let t22: f64 = 0.00205026455026455f64;
-        let t23: f64 = t21 * t22;
-        let t24: f64 = t23 * t5;
-        let t25: f64 = t18 + t24;
-        let t26: f64 = t13 * t13;
-        let t27: f64 = t0 * t26;
-        let t28: f64 = 0.0002099867724867725f64;
-        let t29: f64 = t27 * t28;
-        let t30: f64 = t29 * t5;
-        let t31: f64 = t25 + t30;
+    dpose: &[crate::Real; 3usize],
+    dt: crate::Real,
+    p: &[crate::Real; 1usize],
+) -> [crate::Real; 2usize] {
+    let t0: crate::Real = dpose[0usize];
+    let t1: crate::Real = dpose[2usize];
+    let t2: crate::Real = dt;
+    let t3: crate::Real = p[0usize];
+    let t4: crate::Real = 1.0;
+    let t5: crate::Real = t4 / t2;
+    let g0: [crate::Real; 1usize] = if crate::math::fabs(t1)
+        < crate::math::series_switch(0.05)
+    {
+        let t6: crate::Real = t0 * t5;
+        let t7: crate::Real = t1 * t1;
+        let t8: crate::Real = t0 * t7;
+        let t9: crate::Real = 0.16666666666666666;
+        let t10: crate::Real = t8 * t9;
+        let t11: crate::Real = t10 * t5;
+        let t12: crate::Real = t6 + t11;
+        let t13: crate::Real = t7 * t7;
+        let t14: crate::Real = t0 * t13;
+        let t15: crate::Real = 0.019444444444444445;
+        let t16: crate::Real = t14 * t15;
+        let t17: crate::Real = t16 * t5;
+        let t18: crate::Real = t12 + t17;
+        let t19: crate::Real = t1 * t7;
+        let t20: crate::Real = t19 * t19;
+        let t21: crate::Real = t0 * t20;
+        let t22: crate::Real = 0.00205026455026455;
+        let t23: crate::Real = t21 * t22;
+        let t24: crate::Real = t23 * t5;
+        let t25: crate::Real = t18 + t24;
+        let t26: crate::Real = t13 * t13;
+        let t27: crate::Real = t0 * t26;
+        let t28: crate::Real = 0.0002099867724867725;
+        let t29: crate::Real = t27 * t28;
+        let t30: crate::Real = t29 * t5;
+        let t31: crate::Real = t25 + t30;
         [t31]
     } else {
-        let t32: f64 = libm::sin(t1);
-        let t33: f64 = t0 * t1;
-        let t34: f64 = t2 * t32;
-        let t35: f64 = t33 / t34;
+        let t32: crate::Real = crate::math::sin(t1);
+        let t33: crate::Real = t0 * t1;
+        let t34: crate::Real = t2 * t32;
+        let t35: crate::Real = t33 / t34;
         [t35]
     };
-    let t36: f64 = g0[0usize];
-    let t37: f64 = t36 / t3;
-    let t38: f64 = t1 * t5;
+    let t36: crate::Real = g0[0usize];
+    let t37: crate::Real = t36 / t3;
+    let t38: crate::Real = t1 * t5;
     [t37, t38]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
@@ -1333,347 +1351,349 @@ pub fn inverse_increment(
 303 arithmetic operations (1632 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [f64; 18usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = dt;
-    let t9: f64 = t4 + t6;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t5 + t11;
-    let t13: f64 = libm::sin(t2);
-    let t20: f64 = libm::cos(t2);
-    let t21: f64 = t8 * t12;
-    let t22: f64 = t20 * t21;
-    let t24: f64 = t10 * t10;
-    let t76: f64 = 1f64;
-    let t91: f64 = t13 * t21;
-    let t264: f64 = t8 * t13;
-    let g0: [f64; 8usize] = if libm::fabs(t10) < 0.05f64 {
-        let t14: f64 = t8 * t10;
-        let t15: f64 = t12 * t14;
-        let t16: f64 = t13 * t15;
-        let t17: f64 = 0.5f64;
-        let t18: f64 = t16 * t17;
-        let t19: f64 = t0 - t18;
-        let t23: f64 = t19 + t22;
-        let t25: f64 = t8 * t24;
-        let t26: f64 = t12 * t25;
-        let t27: f64 = t20 * t26;
-        let t28: f64 = 0.16666666666666666f64;
-        let t29: f64 = t27 * t28;
-        let t30: f64 = t23 - t29;
-        let t31: f64 = t10 * t24;
-        let t32: f64 = t8 * t31;
-        let t33: f64 = t12 * t32;
-        let t34: f64 = t13 * t33;
-        let t35: f64 = 0.041666666666666664f64;
-        let t36: f64 = t34 * t35;
-        let t37: f64 = t30 + t36;
-        let t38: f64 = t24 * t24;
-        let t39: f64 = t8 * t38;
-        let t40: f64 = t12 * t39;
-        let t41: f64 = t20 * t40;
-        let t42: f64 = 0.008333333333333333f64;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t37 + t43;
-        let t45: f64 = t10 * t38;
-        let t46: f64 = t8 * t45;
-        let t47: f64 = t12 * t46;
-        let t48: f64 = t13 * t47;
-        let t49: f64 = 0.001388888888888889f64;
-        let t50: f64 = t48 * t49;
-        let t51: f64 = t44 - t50;
-        let t52: f64 = t31 * t31;
-        let t53: f64 = t8 * t52;
-        let t54: f64 = t12 * t53;
-        let t55: f64 = t20 * t54;
-        let t56: f64 = 0.0001984126984126984f64;
-        let t57: f64 = t55 * t56;
-        let t58: f64 = t51 - t57;
-        let t59: f64 = t10 * t52;
-        let t60: f64 = t8 * t59;
-        let t61: f64 = t12 * t60;
-        let t62: f64 = t13 * t61;
-        let t63: f64 = 0.0000248015873015873f64;
-        let t64: f64 = t62 * t63;
-        let t65: f64 = t58 + t64;
-        let t66: f64 = t38 * t38;
-        let t67: f64 = t8 * t66;
-        let t68: f64 = t12 * t67;
-        let t69: f64 = t20 * t68;
-        let t70: f64 = 0.0000027557319223985893f64;
-        let t71: f64 = t69 * t70;
-        let t72: f64 = t65 + t71;
-        let t88: f64 = t15 * t20;
-        let t89: f64 = t17 * t88;
-        let t90: f64 = t1 + t89;
-        let t92: f64 = t90 + t91;
-        let t93: f64 = t13 * t26;
-        let t94: f64 = t28 * t93;
-        let t95: f64 = t92 - t94;
-        let t96: f64 = t20 * t33;
-        let t97: f64 = t35 * t96;
-        let t98: f64 = t95 - t97;
-        let t99: f64 = t13 * t40;
-        let t100: f64 = t42 * t99;
-        let t101: f64 = t98 + t100;
-        let t102: f64 = t20 * t47;
-        let t103: f64 = t49 * t102;
-        let t104: f64 = t101 + t103;
-        let t105: f64 = t13 * t54;
-        let t106: f64 = t56 * t105;
-        let t107: f64 = t104 - t106;
-        let t108: f64 = t20 * t61;
-        let t109: f64 = t63 * t108;
-        let t110: f64 = t107 - t109;
-        let t111: f64 = t13 * t68;
-        let t112: f64 = t70 * t111;
-        let t113: f64 = t110 + t112;
-        let t123: f64 = t20 * t15;
-        let t124: f64 = t123 * t17;
-        let t125: f64 = t93 * t28;
-        let t126: f64 = t96 * t35;
-        let t127: f64 = t125 + t126;
-        let t128: f64 = t99 * t42;
-        let t129: f64 = t127 - t128;
-        let t130: f64 = t102 * t49;
-        let t131: f64 = t129 - t130;
-        let t132: f64 = t105 * t56;
-        let t133: f64 = t131 + t132;
-        let t134: f64 = t108 * t63;
-        let t135: f64 = t133 + t134;
-        let t136: f64 = t111 * t70;
-        let t137: f64 = t135 - t136;
-        let t138: f64 = t137 - t124;
-        let t139: f64 = t138 - t91;
-        let t145: f64 = t15 * t13;
-        let t146: f64 = t17 * t145;
-        let t147: f64 = t28 * t27;
-        let t148: f64 = t22 - t147;
-        let t149: f64 = t35 * t34;
-        let t150: f64 = t148 + t149;
-        let t151: f64 = t42 * t41;
-        let t152: f64 = t150 + t151;
-        let t153: f64 = t49 * t48;
-        let t154: f64 = t152 - t153;
-        let t155: f64 = t56 * t55;
-        let t156: f64 = t154 - t155;
-        let t157: f64 = t63 * t62;
-        let t158: f64 = t156 + t157;
-        let t159: f64 = t70 * t69;
-        let t160: f64 = t158 + t159;
-        let t161: f64 = t160 - t146;
-        let t164: f64 = t13 * t14;
-        let t165: f64 = t164 * t17;
-        let t166: f64 = t8 * t20;
-        let t167: f64 = t20 * t25;
-        let t168: f64 = t167 * t28;
-        let t169: f64 = t166 - t168;
-        let t170: f64 = t13 * t32;
-        let t171: f64 = t170 * t35;
-        let t172: f64 = t169 + t171;
-        let t173: f64 = t20 * t39;
-        let t174: f64 = t173 * t42;
-        let t175: f64 = t172 + t174;
-        let t176: f64 = t13 * t46;
-        let t177: f64 = t176 * t49;
-        let t178: f64 = t175 - t177;
-        let t179: f64 = t20 * t53;
-        let t180: f64 = t179 * t56;
-        let t181: f64 = t178 - t180;
-        let t182: f64 = t13 * t60;
-        let t183: f64 = t182 * t63;
-        let t184: f64 = t181 + t183;
-        let t185: f64 = t20 * t67;
-        let t186: f64 = t185 * t70;
-        let t187: f64 = t184 + t186;
-        let t188: f64 = t187 - t165;
-        let t196: f64 = t8 * t8;
-        let t197: f64 = t10 * t196;
-        let t198: f64 = t12 * t197;
-        let t199: f64 = t20 * t198;
-        let t200: f64 = 0.3333333333333333f64;
-        let t201: f64 = t199 * t200;
-        let t202: f64 = t196 * t12;
-        let t203: f64 = t13 * t202;
-        let t204: f64 = t17 * t203;
-        let t205: f64 = t24 * t196;
-        let t206: f64 = t12 * t205;
-        let t207: f64 = t13 * t206;
-        let t208: f64 = 0.125f64;
-        let t209: f64 = t207 * t208;
-        let t210: f64 = t31 * t196;
-        let t211: f64 = t12 * t210;
-        let t212: f64 = t20 * t211;
-        let t213: f64 = 0.03333333333333333f64;
-        let t214: f64 = t212 * t213;
-        let t215: f64 = t209 + t214;
-        let t216: f64 = t38 * t196;
-        let t217: f64 = t12 * t216;
-        let t218: f64 = t13 * t217;
-        let t219: f64 = 0.006944444444444444f64;
-        let t220: f64 = t218 * t219;
-        let t221: f64 = t215 - t220;
-        let t222: f64 = t45 * t196;
-        let t223: f64 = t12 * t222;
-        let t224: f64 = t20 * t223;
-        let t225: f64 = 0.0011904761904761906f64;
-        let t226: f64 = t224 * t225;
-        let t227: f64 = t221 - t226;
-        let t228: f64 = t52 * t196;
-        let t229: f64 = t12 * t228;
-        let t230: f64 = t13 * t229;
-        let t231: f64 = 0.00017361111111111112f64;
-        let t232: f64 = t230 * t231;
-        let t233: f64 = t227 + t232;
-        let t234: f64 = t59 * t196;
-        let t235: f64 = t12 * t234;
-        let t236: f64 = t20 * t235;
-        let t237: f64 = 0.000022045855379188714f64;
-        let t238: f64 = t236 * t237;
-        let t239: f64 = t233 + t238;
-        let t240: f64 = t66 * t196;
-        let t241: f64 = t12 * t240;
-        let t242: f64 = t13 * t241;
-        let t243: f64 = 0.00000248015873015873f64;
-        let t244: f64 = t242 * t243;
-        let t245: f64 = t239 - t244;
-        let t246: f64 = t245 - t201;
-        let t247: f64 = t246 - t204;
-        let t262: f64 = t14 * t20;
-        let t263: f64 = t17 * t262;
-        let t265: f64 = t263 + t264;
-        let t266: f64 = t13 * t25;
-        let t267: f64 = t28 * t266;
-        let t268: f64 = t265 - t267;
-        let t269: f64 = t20 * t32;
-        let t270: f64 = t35 * t269;
-        let t271: f64 = t268 - t270;
-        let t272: f64 = t13 * t39;
-        let t273: f64 = t42 * t272;
-        let t274: f64 = t271 + t273;
-        let t275: f64 = t20 * t46;
-        let t276: f64 = t49 * t275;
-        let t277: f64 = t274 + t276;
-        let t278: f64 = t13 * t53;
-        let t279: f64 = t56 * t278;
-        let t280: f64 = t277 - t279;
-        let t281: f64 = t20 * t60;
-        let t282: f64 = t63 * t281;
-        let t283: f64 = t280 - t282;
-        let t284: f64 = t13 * t67;
-        let t285: f64 = t70 * t284;
-        let t286: f64 = t283 + t285;
-        let t293: f64 = t13 * t198;
-        let t294: f64 = t200 * t293;
-        let t295: f64 = t20 * t202;
-        let t296: f64 = t17 * t295;
-        let t297: f64 = t20 * t206;
-        let t298: f64 = t208 * t297;
-        let t299: f64 = t296 - t298;
-        let t300: f64 = t13 * t211;
-        let t301: f64 = t213 * t300;
-        let t302: f64 = t299 + t301;
-        let t303: f64 = t20 * t217;
-        let t304: f64 = t219 * t303;
-        let t305: f64 = t302 + t304;
-        let t306: f64 = t13 * t223;
-        let t307: f64 = t225 * t306;
-        let t308: f64 = t305 - t307;
-        let t309: f64 = t20 * t229;
-        let t310: f64 = t231 * t309;
-        let t311: f64 = t308 - t310;
-        let t312: f64 = t13 * t235;
-        let t313: f64 = t237 * t312;
-        let t314: f64 = t311 + t313;
-        let t315: f64 = t20 * t241;
-        let t316: f64 = t243 * t315;
-        let t317: f64 = t314 + t316;
-        let t318: f64 = t317 - t294;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [crate::Real; 18usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = dt;
+    let t9: crate::Real = t4 + t6;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t5 + t11;
+    let t13: crate::Real = crate::math::sin(t2);
+    let t20: crate::Real = crate::math::cos(t2);
+    let t21: crate::Real = t8 * t12;
+    let t22: crate::Real = t20 * t21;
+    let t24: crate::Real = t10 * t10;
+    let t76: crate::Real = 1.0;
+    let t91: crate::Real = t13 * t21;
+    let t264: crate::Real = t8 * t13;
+    let g0: [crate::Real; 8usize] = if crate::math::fabs(t10)
+        < crate::math::series_switch(0.05)
+    {
+        let t14: crate::Real = t8 * t10;
+        let t15: crate::Real = t12 * t14;
+        let t16: crate::Real = t13 * t15;
+        let t17: crate::Real = 0.5;
+        let t18: crate::Real = t16 * t17;
+        let t19: crate::Real = t0 - t18;
+        let t23: crate::Real = t19 + t22;
+        let t25: crate::Real = t8 * t24;
+        let t26: crate::Real = t12 * t25;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = 0.16666666666666666;
+        let t29: crate::Real = t27 * t28;
+        let t30: crate::Real = t23 - t29;
+        let t31: crate::Real = t10 * t24;
+        let t32: crate::Real = t8 * t31;
+        let t33: crate::Real = t12 * t32;
+        let t34: crate::Real = t13 * t33;
+        let t35: crate::Real = 0.041666666666666664;
+        let t36: crate::Real = t34 * t35;
+        let t37: crate::Real = t30 + t36;
+        let t38: crate::Real = t24 * t24;
+        let t39: crate::Real = t8 * t38;
+        let t40: crate::Real = t12 * t39;
+        let t41: crate::Real = t20 * t40;
+        let t42: crate::Real = 0.008333333333333333;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t37 + t43;
+        let t45: crate::Real = t10 * t38;
+        let t46: crate::Real = t8 * t45;
+        let t47: crate::Real = t12 * t46;
+        let t48: crate::Real = t13 * t47;
+        let t49: crate::Real = 0.001388888888888889;
+        let t50: crate::Real = t48 * t49;
+        let t51: crate::Real = t44 - t50;
+        let t52: crate::Real = t31 * t31;
+        let t53: crate::Real = t8 * t52;
+        let t54: crate::Real = t12 * t53;
+        let t55: crate::Real = t20 * t54;
+        let t56: crate::Real = 0.0001984126984126984;
+        let t57: crate::Real = t55 * t56;
+        let t58: crate::Real = t51 - t57;
+        let t59: crate::Real = t10 * t52;
+        let t60: crate::Real = t8 * t59;
+        let t61: crate::Real = t12 * t60;
+        let t62: crate::Real = t13 * t61;
+        let t63: crate::Real = 0.0000248015873015873;
+        let t64: crate::Real = t62 * t63;
+        let t65: crate::Real = t58 + t64;
+        let t66: crate::Real = t38 * t38;
+        let t67: crate::Real = t8 * t66;
+        let t68: crate::Real = t12 * t67;
+        let t69: crate::Real = t20 * t68;
+        let t70: crate::Real = 0.0000027557319223985893;
+        let t71: crate::Real = t69 * t70;
+        let t72: crate::Real = t65 + t71;
+        let t88: crate::Real = t15 * t20;
+        let t89: crate::Real = t17 * t88;
+        let t90: crate::Real = t1 + t89;
+        let t92: crate::Real = t90 + t91;
+        let t93: crate::Real = t13 * t26;
+        let t94: crate::Real = t28 * t93;
+        let t95: crate::Real = t92 - t94;
+        let t96: crate::Real = t20 * t33;
+        let t97: crate::Real = t35 * t96;
+        let t98: crate::Real = t95 - t97;
+        let t99: crate::Real = t13 * t40;
+        let t100: crate::Real = t42 * t99;
+        let t101: crate::Real = t98 + t100;
+        let t102: crate::Real = t20 * t47;
+        let t103: crate::Real = t49 * t102;
+        let t104: crate::Real = t101 + t103;
+        let t105: crate::Real = t13 * t54;
+        let t106: crate::Real = t56 * t105;
+        let t107: crate::Real = t104 - t106;
+        let t108: crate::Real = t20 * t61;
+        let t109: crate::Real = t63 * t108;
+        let t110: crate::Real = t107 - t109;
+        let t111: crate::Real = t13 * t68;
+        let t112: crate::Real = t70 * t111;
+        let t113: crate::Real = t110 + t112;
+        let t123: crate::Real = t20 * t15;
+        let t124: crate::Real = t123 * t17;
+        let t125: crate::Real = t93 * t28;
+        let t126: crate::Real = t96 * t35;
+        let t127: crate::Real = t125 + t126;
+        let t128: crate::Real = t99 * t42;
+        let t129: crate::Real = t127 - t128;
+        let t130: crate::Real = t102 * t49;
+        let t131: crate::Real = t129 - t130;
+        let t132: crate::Real = t105 * t56;
+        let t133: crate::Real = t131 + t132;
+        let t134: crate::Real = t108 * t63;
+        let t135: crate::Real = t133 + t134;
+        let t136: crate::Real = t111 * t70;
+        let t137: crate::Real = t135 - t136;
+        let t138: crate::Real = t137 - t124;
+        let t139: crate::Real = t138 - t91;
+        let t145: crate::Real = t15 * t13;
+        let t146: crate::Real = t17 * t145;
+        let t147: crate::Real = t28 * t27;
+        let t148: crate::Real = t22 - t147;
+        let t149: crate::Real = t35 * t34;
+        let t150: crate::Real = t148 + t149;
+        let t151: crate::Real = t42 * t41;
+        let t152: crate::Real = t150 + t151;
+        let t153: crate::Real = t49 * t48;
+        let t154: crate::Real = t152 - t153;
+        let t155: crate::Real = t56 * t55;
+        let t156: crate::Real = t154 - t155;
+        let t157: crate::Real = t63 * t62;
+        let t158: crate::Real = t156 + t157;
+        let t159: crate::Real = t70 * t69;
+        let t160: crate::Real = t158 + t159;
+        let t161: crate::Real = t160 - t146;
+        let t164: crate::Real = t13 * t14;
+        let t165: crate::Real = t164 * t17;
+        let t166: crate::Real = t8 * t20;
+        let t167: crate::Real = t20 * t25;
+        let t168: crate::Real = t167 * t28;
+        let t169: crate::Real = t166 - t168;
+        let t170: crate::Real = t13 * t32;
+        let t171: crate::Real = t170 * t35;
+        let t172: crate::Real = t169 + t171;
+        let t173: crate::Real = t20 * t39;
+        let t174: crate::Real = t173 * t42;
+        let t175: crate::Real = t172 + t174;
+        let t176: crate::Real = t13 * t46;
+        let t177: crate::Real = t176 * t49;
+        let t178: crate::Real = t175 - t177;
+        let t179: crate::Real = t20 * t53;
+        let t180: crate::Real = t179 * t56;
+        let t181: crate::Real = t178 - t180;
+        let t182: crate::Real = t13 * t60;
+        let t183: crate::Real = t182 * t63;
+        let t184: crate::Real = t181 + t183;
+        let t185: crate::Real = t20 * t67;
+        let t186: crate::Real = t185 * t70;
+        let t187: crate::Real = t184 + t186;
+        let t188: crate::Real = t187 - t165;
+        let t196: crate::Real = t8 * t8;
+        let t197: crate::Real = t10 * t196;
+        let t198: crate::Real = t12 * t197;
+        let t199: crate::Real = t20 * t198;
+        let t200: crate::Real = 0.3333333333333333;
+        let t201: crate::Real = t199 * t200;
+        let t202: crate::Real = t196 * t12;
+        let t203: crate::Real = t13 * t202;
+        let t204: crate::Real = t17 * t203;
+        let t205: crate::Real = t24 * t196;
+        let t206: crate::Real = t12 * t205;
+        let t207: crate::Real = t13 * t206;
+        let t208: crate::Real = 0.125;
+        let t209: crate::Real = t207 * t208;
+        let t210: crate::Real = t31 * t196;
+        let t211: crate::Real = t12 * t210;
+        let t212: crate::Real = t20 * t211;
+        let t213: crate::Real = 0.03333333333333333;
+        let t214: crate::Real = t212 * t213;
+        let t215: crate::Real = t209 + t214;
+        let t216: crate::Real = t38 * t196;
+        let t217: crate::Real = t12 * t216;
+        let t218: crate::Real = t13 * t217;
+        let t219: crate::Real = 0.006944444444444444;
+        let t220: crate::Real = t218 * t219;
+        let t221: crate::Real = t215 - t220;
+        let t222: crate::Real = t45 * t196;
+        let t223: crate::Real = t12 * t222;
+        let t224: crate::Real = t20 * t223;
+        let t225: crate::Real = 0.0011904761904761906;
+        let t226: crate::Real = t224 * t225;
+        let t227: crate::Real = t221 - t226;
+        let t228: crate::Real = t52 * t196;
+        let t229: crate::Real = t12 * t228;
+        let t230: crate::Real = t13 * t229;
+        let t231: crate::Real = 0.00017361111111111112;
+        let t232: crate::Real = t230 * t231;
+        let t233: crate::Real = t227 + t232;
+        let t234: crate::Real = t59 * t196;
+        let t235: crate::Real = t12 * t234;
+        let t236: crate::Real = t20 * t235;
+        let t237: crate::Real = 0.000022045855379188714;
+        let t238: crate::Real = t236 * t237;
+        let t239: crate::Real = t233 + t238;
+        let t240: crate::Real = t66 * t196;
+        let t241: crate::Real = t12 * t240;
+        let t242: crate::Real = t13 * t241;
+        let t243: crate::Real = 0.00000248015873015873;
+        let t244: crate::Real = t242 * t243;
+        let t245: crate::Real = t239 - t244;
+        let t246: crate::Real = t245 - t201;
+        let t247: crate::Real = t246 - t204;
+        let t262: crate::Real = t14 * t20;
+        let t263: crate::Real = t17 * t262;
+        let t265: crate::Real = t263 + t264;
+        let t266: crate::Real = t13 * t25;
+        let t267: crate::Real = t28 * t266;
+        let t268: crate::Real = t265 - t267;
+        let t269: crate::Real = t20 * t32;
+        let t270: crate::Real = t35 * t269;
+        let t271: crate::Real = t268 - t270;
+        let t272: crate::Real = t13 * t39;
+        let t273: crate::Real = t42 * t272;
+        let t274: crate::Real = t271 + t273;
+        let t275: crate::Real = t20 * t46;
+        let t276: crate::Real = t49 * t275;
+        let t277: crate::Real = t274 + t276;
+        let t278: crate::Real = t13 * t53;
+        let t279: crate::Real = t56 * t278;
+        let t280: crate::Real = t277 - t279;
+        let t281: crate::Real = t20 * t60;
+        let t282: crate::Real = t63 * t281;
+        let t283: crate::Real = t280 - t282;
+        let t284: crate::Real = t13 * t67;
+        let t285: crate::Real = t70 * t284;
+        let t286: crate::Real = t283 + t285;
+        let t293: crate::Real = t13 * t198;
+        let t294: crate::Real = t200 * t293;
+        let t295: crate::Real = t20 * t202;
+        let t296: crate::Real = t17 * t295;
+        let t297: crate::Real = t20 * t206;
+        let t298: crate::Real = t208 * t297;
+        let t299: crate::Real = t296 - t298;
+        let t300: crate::Real = t13 * t211;
+        let t301: crate::Real = t213 * t300;
+        let t302: crate::Real = t299 + t301;
+        let t303: crate::Real = t20 * t217;
+        let t304: crate::Real = t219 * t303;
+        let t305: crate::Real = t302 + t304;
+        let t306: crate::Real = t13 * t223;
+        let t307: crate::Real = t225 * t306;
+        let t308: crate::Real = t305 - t307;
+        let t309: crate::Real = t20 * t229;
+        let t310: crate::Real = t231 * t309;
+        let t311: crate::Real = t308 - t310;
+        let t312: crate::Real = t13 * t235;
+        let t313: crate::Real = t237 * t312;
+        let t314: crate::Real = t311 + t313;
+        let t315: crate::Real = t20 * t241;
+        let t316: crate::Real = t243 * t315;
+        let t317: crate::Real = t314 + t316;
+        let t318: crate::Real = t317 - t294;
         [t72, t113, t139, t161, t188, t247, t286, t318]
     } else {
-        let t73: f64 = libm::sin(t10);
-        let t74: f64 = t21 * t73;
-        let t75: f64 = t20 * t74;
-        let t77: f64 = t76 / t10;
-        let t78: f64 = t75 * t77;
-        let t79: f64 = t0 + t78;
-        let t80: f64 = libm::cos(t10);
-        let t81: f64 = t76 - t80;
-        let t82: f64 = t8 * t81;
-        let t83: f64 = t12 * t82;
-        let t84: f64 = t13 * t83;
-        let t85: f64 = t84 * t77;
-        let t86: f64 = t79 - t85;
-        let t114: f64 = t73 * t91;
-        let t115: f64 = t114 * t77;
-        let t116: f64 = t1 + t115;
-        let t117: f64 = t20 * t83;
-        let t118: f64 = t117 * t77;
-        let t119: f64 = t116 + t118;
-        let t140: f64 = t91 * t73;
-        let t141: f64 = t140 * t77;
-        let t142: f64 = -t141;
-        let t143: f64 = t142 - t118;
-        let t162: f64 = t78 - t85;
-        let t189: f64 = t8 * t73;
-        let t190: f64 = t20 * t189;
-        let t191: f64 = t190 * t77;
-        let t192: f64 = t13 * t82;
-        let t193: f64 = t192 * t77;
-        let t194: f64 = t191 - t193;
-        let t248: f64 = t80 * t22;
-        let t249: f64 = t248 * t77;
-        let t250: f64 = t73 * t21;
-        let t251: f64 = t20 * t250;
-        let t252: f64 = t76 / t24;
-        let t253: f64 = t251 * t252;
-        let t254: f64 = t249 - t253;
-        let t255: f64 = t82 * t12;
-        let t256: f64 = t13 * t255;
-        let t257: f64 = t256 * t252;
-        let t258: f64 = t254 + t257;
-        let t259: f64 = t258 - t115;
-        let t260: f64 = t8 * t259;
-        let t287: f64 = t73 * t264;
-        let t288: f64 = t287 * t77;
-        let t289: f64 = t20 * t82;
-        let t290: f64 = t289 * t77;
-        let t291: f64 = t288 + t290;
-        let t319: f64 = t80 * t91;
-        let t320: f64 = t319 * t77;
-        let t321: f64 = t251 * t77;
-        let t322: f64 = t320 + t321;
-        let t323: f64 = t114 * t252;
-        let t324: f64 = t322 - t323;
-        let t325: f64 = t20 * t255;
-        let t326: f64 = t325 * t252;
-        let t327: f64 = t324 - t326;
-        let t328: f64 = t8 * t327;
+        let t73: crate::Real = crate::math::sin(t10);
+        let t74: crate::Real = t21 * t73;
+        let t75: crate::Real = t20 * t74;
+        let t77: crate::Real = t76 / t10;
+        let t78: crate::Real = t75 * t77;
+        let t79: crate::Real = t0 + t78;
+        let t80: crate::Real = crate::math::cos(t10);
+        let t81: crate::Real = t76 - t80;
+        let t82: crate::Real = t8 * t81;
+        let t83: crate::Real = t12 * t82;
+        let t84: crate::Real = t13 * t83;
+        let t85: crate::Real = t84 * t77;
+        let t86: crate::Real = t79 - t85;
+        let t114: crate::Real = t73 * t91;
+        let t115: crate::Real = t114 * t77;
+        let t116: crate::Real = t1 + t115;
+        let t117: crate::Real = t20 * t83;
+        let t118: crate::Real = t117 * t77;
+        let t119: crate::Real = t116 + t118;
+        let t140: crate::Real = t91 * t73;
+        let t141: crate::Real = t140 * t77;
+        let t142: crate::Real = -t141;
+        let t143: crate::Real = t142 - t118;
+        let t162: crate::Real = t78 - t85;
+        let t189: crate::Real = t8 * t73;
+        let t190: crate::Real = t20 * t189;
+        let t191: crate::Real = t190 * t77;
+        let t192: crate::Real = t13 * t82;
+        let t193: crate::Real = t192 * t77;
+        let t194: crate::Real = t191 - t193;
+        let t248: crate::Real = t80 * t22;
+        let t249: crate::Real = t248 * t77;
+        let t250: crate::Real = t73 * t21;
+        let t251: crate::Real = t20 * t250;
+        let t252: crate::Real = t76 / t24;
+        let t253: crate::Real = t251 * t252;
+        let t254: crate::Real = t249 - t253;
+        let t255: crate::Real = t82 * t12;
+        let t256: crate::Real = t13 * t255;
+        let t257: crate::Real = t256 * t252;
+        let t258: crate::Real = t254 + t257;
+        let t259: crate::Real = t258 - t115;
+        let t260: crate::Real = t8 * t259;
+        let t287: crate::Real = t73 * t264;
+        let t288: crate::Real = t287 * t77;
+        let t289: crate::Real = t20 * t82;
+        let t290: crate::Real = t289 * t77;
+        let t291: crate::Real = t288 + t290;
+        let t319: crate::Real = t80 * t91;
+        let t320: crate::Real = t319 * t77;
+        let t321: crate::Real = t251 * t77;
+        let t322: crate::Real = t320 + t321;
+        let t323: crate::Real = t114 * t252;
+        let t324: crate::Real = t322 - t323;
+        let t325: crate::Real = t20 * t255;
+        let t326: crate::Real = t325 * t252;
+        let t327: crate::Real = t324 - t326;
+        let t328: crate::Real = t8 * t327;
         [t86, t119, t143, t162, t194, t260, t291, t328]
     };
-    let t87: f64 = g0[0usize];
-    let t120: f64 = g0[1usize];
-    let t144: f64 = g0[2usize];
-    let t163: f64 = g0[3usize];
-    let t195: f64 = g0[4usize];
-    let t261: f64 = g0[5usize];
-    let t292: f64 = g0[6usize];
-    let t329: f64 = g0[7usize];
-    let t121: f64 = t2 + t10;
-    let t122: f64 = 0f64;
+    let t87: crate::Real = g0[0usize];
+    let t120: crate::Real = g0[1usize];
+    let t144: crate::Real = g0[2usize];
+    let t163: crate::Real = g0[3usize];
+    let t195: crate::Real = g0[4usize];
+    let t261: crate::Real = g0[5usize];
+    let t292: crate::Real = g0[6usize];
+    let t329: crate::Real = g0[7usize];
+    let t121: crate::Real = t2 + t10;
+    let t122: crate::Real = 0.0;
     [
         t87,
         t120,
@@ -1700,12 +1720,16 @@ pub fn step_exact_linearized_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_w`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [[f64; 2usize]; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> (
+    [crate::Real; 3usize],
+    [[crate::Real; 3usize]; 3usize],
+    [[crate::Real; 2usize]; 3usize],
+) {
     let o = step_exact_linearized_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -1729,254 +1753,256 @@ pub fn step_exact_linearized(
 218 arithmetic operations (1164 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> [f64; 15usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = u[0usize];
-    let t4: f64 = u[1usize];
-    let t5: f64 = w[0usize];
-    let t6: f64 = w[1usize];
-    let t7: f64 = p[0usize];
-    let t8: f64 = dt;
-    let t9: f64 = t4 + t6;
-    let t10: f64 = t8 * t9;
-    let t11: f64 = t3 * t7;
-    let t12: f64 = t5 + t11;
-    let t13: f64 = libm::sin(t2);
-    let t20: f64 = libm::cos(t2);
-    let t21: f64 = t8 * t12;
-    let t76: f64 = 1f64;
-    let t91: f64 = t13 * t21;
-    let t167: f64 = t3 * t8;
-    let t208: f64 = t13 * t167;
-    let g0: [f64; 6usize] = if libm::fabs(t10) < 0.05f64 {
-        let t14: f64 = t8 * t10;
-        let t15: f64 = t12 * t14;
-        let t16: f64 = t13 * t15;
-        let t17: f64 = 0.5f64;
-        let t18: f64 = t16 * t17;
-        let t19: f64 = t0 - t18;
-        let t22: f64 = t20 * t21;
-        let t23: f64 = t19 + t22;
-        let t24: f64 = t10 * t10;
-        let t25: f64 = t8 * t24;
-        let t26: f64 = t12 * t25;
-        let t27: f64 = t20 * t26;
-        let t28: f64 = 0.16666666666666666f64;
-        let t29: f64 = t27 * t28;
-        let t30: f64 = t23 - t29;
-        let t31: f64 = t10 * t24;
-        let t32: f64 = t8 * t31;
-        let t33: f64 = t12 * t32;
-        let t34: f64 = t13 * t33;
-        let t35: f64 = 0.041666666666666664f64;
-        let t36: f64 = t34 * t35;
-        let t37: f64 = t30 + t36;
-        let t38: f64 = t24 * t24;
-        let t39: f64 = t8 * t38;
-        let t40: f64 = t12 * t39;
-        let t41: f64 = t20 * t40;
-        let t42: f64 = 0.008333333333333333f64;
-        let t43: f64 = t41 * t42;
-        let t44: f64 = t37 + t43;
-        let t45: f64 = t10 * t38;
-        let t46: f64 = t8 * t45;
-        let t47: f64 = t12 * t46;
-        let t48: f64 = t13 * t47;
-        let t49: f64 = 0.001388888888888889f64;
-        let t50: f64 = t48 * t49;
-        let t51: f64 = t44 - t50;
-        let t52: f64 = t31 * t31;
-        let t53: f64 = t8 * t52;
-        let t54: f64 = t12 * t53;
-        let t55: f64 = t20 * t54;
-        let t56: f64 = 0.0001984126984126984f64;
-        let t57: f64 = t55 * t56;
-        let t58: f64 = t51 - t57;
-        let t59: f64 = t10 * t52;
-        let t60: f64 = t8 * t59;
-        let t61: f64 = t12 * t60;
-        let t62: f64 = t13 * t61;
-        let t63: f64 = 0.0000248015873015873f64;
-        let t64: f64 = t62 * t63;
-        let t65: f64 = t58 + t64;
-        let t66: f64 = t38 * t38;
-        let t67: f64 = t8 * t66;
-        let t68: f64 = t12 * t67;
-        let t69: f64 = t20 * t68;
-        let t70: f64 = 0.0000027557319223985893f64;
-        let t71: f64 = t69 * t70;
-        let t72: f64 = t65 + t71;
-        let t88: f64 = t15 * t20;
-        let t89: f64 = t17 * t88;
-        let t90: f64 = t1 + t89;
-        let t92: f64 = t90 + t91;
-        let t93: f64 = t13 * t26;
-        let t94: f64 = t28 * t93;
-        let t95: f64 = t92 - t94;
-        let t96: f64 = t20 * t33;
-        let t97: f64 = t35 * t96;
-        let t98: f64 = t95 - t97;
-        let t99: f64 = t13 * t40;
-        let t100: f64 = t42 * t99;
-        let t101: f64 = t98 + t100;
-        let t102: f64 = t20 * t47;
-        let t103: f64 = t49 * t102;
-        let t104: f64 = t101 + t103;
-        let t105: f64 = t13 * t54;
-        let t106: f64 = t56 * t105;
-        let t107: f64 = t104 - t106;
-        let t108: f64 = t20 * t61;
-        let t109: f64 = t63 * t108;
-        let t110: f64 = t107 - t109;
-        let t111: f64 = t13 * t68;
-        let t112: f64 = t70 * t111;
-        let t113: f64 = t110 + t112;
-        let t123: f64 = t20 * t15;
-        let t124: f64 = t123 * t17;
-        let t125: f64 = t93 * t28;
-        let t126: f64 = t96 * t35;
-        let t127: f64 = t125 + t126;
-        let t128: f64 = t99 * t42;
-        let t129: f64 = t127 - t128;
-        let t130: f64 = t102 * t49;
-        let t131: f64 = t129 - t130;
-        let t132: f64 = t105 * t56;
-        let t133: f64 = t131 + t132;
-        let t134: f64 = t108 * t63;
-        let t135: f64 = t133 + t134;
-        let t136: f64 = t111 * t70;
-        let t137: f64 = t135 - t136;
-        let t138: f64 = t137 - t124;
-        let t139: f64 = t138 - t91;
-        let t145: f64 = t15 * t13;
-        let t146: f64 = t17 * t145;
-        let t147: f64 = t28 * t27;
-        let t148: f64 = t22 - t147;
-        let t149: f64 = t35 * t34;
-        let t150: f64 = t148 + t149;
-        let t151: f64 = t42 * t41;
-        let t152: f64 = t150 + t151;
-        let t153: f64 = t49 * t48;
-        let t154: f64 = t152 - t153;
-        let t155: f64 = t56 * t55;
-        let t156: f64 = t154 - t155;
-        let t157: f64 = t63 * t62;
-        let t158: f64 = t156 + t157;
-        let t159: f64 = t70 * t69;
-        let t160: f64 = t158 + t159;
-        let t161: f64 = t160 - t146;
-        let t164: f64 = t3 * t14;
-        let t165: f64 = t13 * t164;
-        let t166: f64 = t165 * t17;
-        let t168: f64 = t20 * t167;
-        let t169: f64 = t3 * t25;
-        let t170: f64 = t20 * t169;
-        let t171: f64 = t170 * t28;
-        let t172: f64 = t168 - t171;
-        let t173: f64 = t3 * t32;
-        let t174: f64 = t13 * t173;
-        let t175: f64 = t174 * t35;
-        let t176: f64 = t172 + t175;
-        let t177: f64 = t3 * t39;
-        let t178: f64 = t20 * t177;
-        let t179: f64 = t178 * t42;
-        let t180: f64 = t176 + t179;
-        let t181: f64 = t3 * t46;
-        let t182: f64 = t13 * t181;
-        let t183: f64 = t182 * t49;
-        let t184: f64 = t180 - t183;
-        let t185: f64 = t3 * t53;
-        let t186: f64 = t20 * t185;
-        let t187: f64 = t186 * t56;
-        let t188: f64 = t184 - t187;
-        let t189: f64 = t3 * t60;
-        let t190: f64 = t13 * t189;
-        let t191: f64 = t190 * t63;
-        let t192: f64 = t188 + t191;
-        let t193: f64 = t3 * t67;
-        let t194: f64 = t20 * t193;
-        let t195: f64 = t194 * t70;
-        let t196: f64 = t192 + t195;
-        let t197: f64 = t196 - t166;
-        let t206: f64 = t164 * t20;
-        let t207: f64 = t17 * t206;
-        let t209: f64 = t207 + t208;
-        let t210: f64 = t13 * t169;
-        let t211: f64 = t28 * t210;
-        let t212: f64 = t209 - t211;
-        let t213: f64 = t20 * t173;
-        let t214: f64 = t35 * t213;
-        let t215: f64 = t212 - t214;
-        let t216: f64 = t13 * t177;
-        let t217: f64 = t42 * t216;
-        let t218: f64 = t215 + t217;
-        let t219: f64 = t20 * t181;
-        let t220: f64 = t49 * t219;
-        let t221: f64 = t218 + t220;
-        let t222: f64 = t13 * t185;
-        let t223: f64 = t56 * t222;
-        let t224: f64 = t221 - t223;
-        let t225: f64 = t20 * t189;
-        let t226: f64 = t63 * t225;
-        let t227: f64 = t224 - t226;
-        let t228: f64 = t13 * t193;
-        let t229: f64 = t70 * t228;
-        let t230: f64 = t227 + t229;
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> [crate::Real; 15usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = u[0usize];
+    let t4: crate::Real = u[1usize];
+    let t5: crate::Real = w[0usize];
+    let t6: crate::Real = w[1usize];
+    let t7: crate::Real = p[0usize];
+    let t8: crate::Real = dt;
+    let t9: crate::Real = t4 + t6;
+    let t10: crate::Real = t8 * t9;
+    let t11: crate::Real = t3 * t7;
+    let t12: crate::Real = t5 + t11;
+    let t13: crate::Real = crate::math::sin(t2);
+    let t20: crate::Real = crate::math::cos(t2);
+    let t21: crate::Real = t8 * t12;
+    let t76: crate::Real = 1.0;
+    let t91: crate::Real = t13 * t21;
+    let t167: crate::Real = t3 * t8;
+    let t208: crate::Real = t13 * t167;
+    let g0: [crate::Real; 6usize] = if crate::math::fabs(t10)
+        < crate::math::series_switch(0.05)
+    {
+        let t14: crate::Real = t8 * t10;
+        let t15: crate::Real = t12 * t14;
+        let t16: crate::Real = t13 * t15;
+        let t17: crate::Real = 0.5;
+        let t18: crate::Real = t16 * t17;
+        let t19: crate::Real = t0 - t18;
+        let t22: crate::Real = t20 * t21;
+        let t23: crate::Real = t19 + t22;
+        let t24: crate::Real = t10 * t10;
+        let t25: crate::Real = t8 * t24;
+        let t26: crate::Real = t12 * t25;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = 0.16666666666666666;
+        let t29: crate::Real = t27 * t28;
+        let t30: crate::Real = t23 - t29;
+        let t31: crate::Real = t10 * t24;
+        let t32: crate::Real = t8 * t31;
+        let t33: crate::Real = t12 * t32;
+        let t34: crate::Real = t13 * t33;
+        let t35: crate::Real = 0.041666666666666664;
+        let t36: crate::Real = t34 * t35;
+        let t37: crate::Real = t30 + t36;
+        let t38: crate::Real = t24 * t24;
+        let t39: crate::Real = t8 * t38;
+        let t40: crate::Real = t12 * t39;
+        let t41: crate::Real = t20 * t40;
+        let t42: crate::Real = 0.008333333333333333;
+        let t43: crate::Real = t41 * t42;
+        let t44: crate::Real = t37 + t43;
+        let t45: crate::Real = t10 * t38;
+        let t46: crate::Real = t8 * t45;
+        let t47: crate::Real = t12 * t46;
+        let t48: crate::Real = t13 * t47;
+        let t49: crate::Real = 0.001388888888888889;
+        let t50: crate::Real = t48 * t49;
+        let t51: crate::Real = t44 - t50;
+        let t52: crate::Real = t31 * t31;
+        let t53: crate::Real = t8 * t52;
+        let t54: crate::Real = t12 * t53;
+        let t55: crate::Real = t20 * t54;
+        let t56: crate::Real = 0.0001984126984126984;
+        let t57: crate::Real = t55 * t56;
+        let t58: crate::Real = t51 - t57;
+        let t59: crate::Real = t10 * t52;
+        let t60: crate::Real = t8 * t59;
+        let t61: crate::Real = t12 * t60;
+        let t62: crate::Real = t13 * t61;
+        let t63: crate::Real = 0.0000248015873015873;
+        let t64: crate::Real = t62 * t63;
+        let t65: crate::Real = t58 + t64;
+        let t66: crate::Real = t38 * t38;
+        let t67: crate::Real = t8 * t66;
+        let t68: crate::Real = t12 * t67;
+        let t69: crate::Real = t20 * t68;
+        let t70: crate::Real = 0.0000027557319223985893;
+        let t71: crate::Real = t69 * t70;
+        let t72: crate::Real = t65 + t71;
+        let t88: crate::Real = t15 * t20;
+        let t89: crate::Real = t17 * t88;
+        let t90: crate::Real = t1 + t89;
+        let t92: crate::Real = t90 + t91;
+        let t93: crate::Real = t13 * t26;
+        let t94: crate::Real = t28 * t93;
+        let t95: crate::Real = t92 - t94;
+        let t96: crate::Real = t20 * t33;
+        let t97: crate::Real = t35 * t96;
+        let t98: crate::Real = t95 - t97;
+        let t99: crate::Real = t13 * t40;
+        let t100: crate::Real = t42 * t99;
+        let t101: crate::Real = t98 + t100;
+        let t102: crate::Real = t20 * t47;
+        let t103: crate::Real = t49 * t102;
+        let t104: crate::Real = t101 + t103;
+        let t105: crate::Real = t13 * t54;
+        let t106: crate::Real = t56 * t105;
+        let t107: crate::Real = t104 - t106;
+        let t108: crate::Real = t20 * t61;
+        let t109: crate::Real = t63 * t108;
+        let t110: crate::Real = t107 - t109;
+        let t111: crate::Real = t13 * t68;
+        let t112: crate::Real = t70 * t111;
+        let t113: crate::Real = t110 + t112;
+        let t123: crate::Real = t20 * t15;
+        let t124: crate::Real = t123 * t17;
+        let t125: crate::Real = t93 * t28;
+        let t126: crate::Real = t96 * t35;
+        let t127: crate::Real = t125 + t126;
+        let t128: crate::Real = t99 * t42;
+        let t129: crate::Real = t127 - t128;
+        let t130: crate::Real = t102 * t49;
+        let t131: crate::Real = t129 - t130;
+        let t132: crate::Real = t105 * t56;
+        let t133: crate::Real = t131 + t132;
+        let t134: crate::Real = t108 * t63;
+        let t135: crate::Real = t133 + t134;
+        let t136: crate::Real = t111 * t70;
+        let t137: crate::Real = t135 - t136;
+        let t138: crate::Real = t137 - t124;
+        let t139: crate::Real = t138 - t91;
+        let t145: crate::Real = t15 * t13;
+        let t146: crate::Real = t17 * t145;
+        let t147: crate::Real = t28 * t27;
+        let t148: crate::Real = t22 - t147;
+        let t149: crate::Real = t35 * t34;
+        let t150: crate::Real = t148 + t149;
+        let t151: crate::Real = t42 * t41;
+        let t152: crate::Real = t150 + t151;
+        let t153: crate::Real = t49 * t48;
+        let t154: crate::Real = t152 - t153;
+        let t155: crate::Real = t56 * t55;
+        let t156: crate::Real = t154 - t155;
+        let t157: crate::Real = t63 * t62;
+        let t158: crate::Real = t156 + t157;
+        let t159: crate::Real = t70 * t69;
+        let t160: crate::Real = t158 + t159;
+        let t161: crate::Real = t160 - t146;
+        let t164: crate::Real = t3 * t14;
+        let t165: crate::Real = t13 * t164;
+        let t166: crate::Real = t165 * t17;
+        let t168: crate::Real = t20 * t167;
+        let t169: crate::Real = t3 * t25;
+        let t170: crate::Real = t20 * t169;
+        let t171: crate::Real = t170 * t28;
+        let t172: crate::Real = t168 - t171;
+        let t173: crate::Real = t3 * t32;
+        let t174: crate::Real = t13 * t173;
+        let t175: crate::Real = t174 * t35;
+        let t176: crate::Real = t172 + t175;
+        let t177: crate::Real = t3 * t39;
+        let t178: crate::Real = t20 * t177;
+        let t179: crate::Real = t178 * t42;
+        let t180: crate::Real = t176 + t179;
+        let t181: crate::Real = t3 * t46;
+        let t182: crate::Real = t13 * t181;
+        let t183: crate::Real = t182 * t49;
+        let t184: crate::Real = t180 - t183;
+        let t185: crate::Real = t3 * t53;
+        let t186: crate::Real = t20 * t185;
+        let t187: crate::Real = t186 * t56;
+        let t188: crate::Real = t184 - t187;
+        let t189: crate::Real = t3 * t60;
+        let t190: crate::Real = t13 * t189;
+        let t191: crate::Real = t190 * t63;
+        let t192: crate::Real = t188 + t191;
+        let t193: crate::Real = t3 * t67;
+        let t194: crate::Real = t20 * t193;
+        let t195: crate::Real = t194 * t70;
+        let t196: crate::Real = t192 + t195;
+        let t197: crate::Real = t196 - t166;
+        let t206: crate::Real = t164 * t20;
+        let t207: crate::Real = t17 * t206;
+        let t209: crate::Real = t207 + t208;
+        let t210: crate::Real = t13 * t169;
+        let t211: crate::Real = t28 * t210;
+        let t212: crate::Real = t209 - t211;
+        let t213: crate::Real = t20 * t173;
+        let t214: crate::Real = t35 * t213;
+        let t215: crate::Real = t212 - t214;
+        let t216: crate::Real = t13 * t177;
+        let t217: crate::Real = t42 * t216;
+        let t218: crate::Real = t215 + t217;
+        let t219: crate::Real = t20 * t181;
+        let t220: crate::Real = t49 * t219;
+        let t221: crate::Real = t218 + t220;
+        let t222: crate::Real = t13 * t185;
+        let t223: crate::Real = t56 * t222;
+        let t224: crate::Real = t221 - t223;
+        let t225: crate::Real = t20 * t189;
+        let t226: crate::Real = t63 * t225;
+        let t227: crate::Real = t224 - t226;
+        let t228: crate::Real = t13 * t193;
+        let t229: crate::Real = t70 * t228;
+        let t230: crate::Real = t227 + t229;
         [t72, t113, t139, t161, t197, t230]
     } else {
-        let t73: f64 = libm::sin(t10);
-        let t74: f64 = t21 * t73;
-        let t75: f64 = t20 * t74;
-        let t77: f64 = t76 / t10;
-        let t78: f64 = t75 * t77;
-        let t79: f64 = t0 + t78;
-        let t80: f64 = libm::cos(t10);
-        let t81: f64 = t76 - t80;
-        let t82: f64 = t8 * t81;
-        let t83: f64 = t12 * t82;
-        let t84: f64 = t13 * t83;
-        let t85: f64 = t84 * t77;
-        let t86: f64 = t79 - t85;
-        let t114: f64 = t73 * t91;
-        let t115: f64 = t114 * t77;
-        let t116: f64 = t1 + t115;
-        let t117: f64 = t20 * t83;
-        let t118: f64 = t117 * t77;
-        let t119: f64 = t116 + t118;
-        let t140: f64 = t91 * t73;
-        let t141: f64 = t140 * t77;
-        let t142: f64 = -t141;
-        let t143: f64 = t142 - t118;
-        let t162: f64 = t78 - t85;
-        let t198: f64 = t167 * t73;
-        let t199: f64 = t20 * t198;
-        let t200: f64 = t199 * t77;
-        let t201: f64 = t167 * t81;
-        let t202: f64 = t13 * t201;
-        let t203: f64 = t202 * t77;
-        let t204: f64 = t200 - t203;
-        let t231: f64 = t73 * t208;
-        let t232: f64 = t231 * t77;
-        let t233: f64 = t20 * t201;
-        let t234: f64 = t233 * t77;
-        let t235: f64 = t232 + t234;
+        let t73: crate::Real = crate::math::sin(t10);
+        let t74: crate::Real = t21 * t73;
+        let t75: crate::Real = t20 * t74;
+        let t77: crate::Real = t76 / t10;
+        let t78: crate::Real = t75 * t77;
+        let t79: crate::Real = t0 + t78;
+        let t80: crate::Real = crate::math::cos(t10);
+        let t81: crate::Real = t76 - t80;
+        let t82: crate::Real = t8 * t81;
+        let t83: crate::Real = t12 * t82;
+        let t84: crate::Real = t13 * t83;
+        let t85: crate::Real = t84 * t77;
+        let t86: crate::Real = t79 - t85;
+        let t114: crate::Real = t73 * t91;
+        let t115: crate::Real = t114 * t77;
+        let t116: crate::Real = t1 + t115;
+        let t117: crate::Real = t20 * t83;
+        let t118: crate::Real = t117 * t77;
+        let t119: crate::Real = t116 + t118;
+        let t140: crate::Real = t91 * t73;
+        let t141: crate::Real = t140 * t77;
+        let t142: crate::Real = -t141;
+        let t143: crate::Real = t142 - t118;
+        let t162: crate::Real = t78 - t85;
+        let t198: crate::Real = t167 * t73;
+        let t199: crate::Real = t20 * t198;
+        let t200: crate::Real = t199 * t77;
+        let t201: crate::Real = t167 * t81;
+        let t202: crate::Real = t13 * t201;
+        let t203: crate::Real = t202 * t77;
+        let t204: crate::Real = t200 - t203;
+        let t231: crate::Real = t73 * t208;
+        let t232: crate::Real = t231 * t77;
+        let t233: crate::Real = t20 * t201;
+        let t234: crate::Real = t233 * t77;
+        let t235: crate::Real = t232 + t234;
         [t86, t119, t143, t162, t204, t235]
     };
-    let t87: f64 = g0[0usize];
-    let t120: f64 = g0[1usize];
-    let t144: f64 = g0[2usize];
-    let t163: f64 = g0[3usize];
-    let t205: f64 = g0[4usize];
-    let t236: f64 = g0[5usize];
-    let t121: f64 = t2 + t10;
-    let t122: f64 = 0f64;
+    let t87: crate::Real = g0[0usize];
+    let t120: crate::Real = g0[1usize];
+    let t144: crate::Real = g0[2usize];
+    let t163: crate::Real = g0[3usize];
+    let t205: crate::Real = g0[4usize];
+    let t236: crate::Real = g0[5usize];
+    let t121: crate::Real = t2 + t10;
+    let t122: crate::Real = 0.0;
     [
         t87,
         t120,
@@ -2000,12 +2026,12 @@ pub fn step_exact_with_jac_p_flat(
 Returns (`step_exact`, `step_exact_jac_x`, `step_exact_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn step_exact_with_jac_p(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    w: &[f64; 2usize],
-    p: &[f64; 1usize],
-    dt: f64,
-) -> ([f64; 3usize], [[f64; 3usize]; 3usize], [f64; 3usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    w: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    dt: crate::Real,
+) -> ([crate::Real; 3usize], [[crate::Real; 3usize]; 3usize], [crate::Real; 3usize]) {
     let o = step_exact_with_jac_p_flat(x, u, w, p, dt);
     (
         [o[0usize], o[1usize], o[2usize]],
@@ -2028,36 +2054,36 @@ pub fn step_exact_with_jac_p(
 17 arithmetic operations (57 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 1usize],
-    lm: &[f64; 2usize],
-) -> [f64; 10usize] {
-    let t0: f64 = x[0usize];
-    let t1: f64 = x[1usize];
-    let t2: f64 = x[2usize];
-    let t3: f64 = lm[0usize];
-    let t4: f64 = lm[1usize];
-    let t5: f64 = t3 - t0;
-    let t6: f64 = t5 * t5;
-    let t7: f64 = t4 - t1;
-    let t8: f64 = t7 * t7;
-    let t9: f64 = t6 + t8;
-    let t10: f64 = libm::sqrt(t9);
-    let t11: f64 = libm::atan2(t7, t5);
-    let t12: f64 = t11 - t2;
-    let t13: f64 = 1f64;
-    let t14: f64 = t13 / t10;
-    let t15: f64 = t5 * t14;
-    let t16: f64 = -t15;
-    let t17: f64 = t7 * t14;
-    let t18: f64 = -t17;
-    let t19: f64 = 0f64;
-    let t20: f64 = t13 / t9;
-    let t21: f64 = t7 * t20;
-    let t22: f64 = t5 * t20;
-    let t23: f64 = -t22;
-    let t24: f64 = (-1f64);
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    lm: &[crate::Real; 2usize],
+) -> [crate::Real; 10usize] {
+    let t0: crate::Real = x[0usize];
+    let t1: crate::Real = x[1usize];
+    let t2: crate::Real = x[2usize];
+    let t3: crate::Real = lm[0usize];
+    let t4: crate::Real = lm[1usize];
+    let t5: crate::Real = t3 - t0;
+    let t6: crate::Real = t5 * t5;
+    let t7: crate::Real = t4 - t1;
+    let t8: crate::Real = t7 * t7;
+    let t9: crate::Real = t6 + t8;
+    let t10: crate::Real = crate::math::sqrt(t9);
+    let t11: crate::Real = crate::math::atan2(t7, t5);
+    let t12: crate::Real = t11 - t2;
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t13 / t10;
+    let t15: crate::Real = t5 * t14;
+    let t16: crate::Real = -t15;
+    let t17: crate::Real = t7 * t14;
+    let t18: crate::Real = -t17;
+    let t19: crate::Real = 0.0;
+    let t20: crate::Real = t13 / t9;
+    let t21: crate::Real = t7 * t20;
+    let t22: crate::Real = t5 * t20;
+    let t23: crate::Real = -t22;
+    let t24: crate::Real = (-1.0);
     [t10, t12, t16, t18, t19, t21, t23, t24, t19, t19]
 }
 /**Observation `landmark` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -2065,11 +2091,11 @@ pub fn obs_landmark_linearized_flat(
 Returns (`obs_landmark`, `obs_landmark_jac_x`, `obs_landmark_jac_p`), each exactly as that kernel alone returns it.*/
 #[inline]
 pub fn obs_landmark_linearized(
-    x: &[f64; 3usize],
-    u: &[f64; 2usize],
-    p: &[f64; 1usize],
-    lm: &[f64; 2usize],
-) -> ([f64; 2usize], [[f64; 3usize]; 2usize], [f64; 2usize]) {
+    x: &[crate::Real; 3usize],
+    u: &[crate::Real; 2usize],
+    p: &[crate::Real; 1usize],
+    lm: &[crate::Real; 2usize],
+) -> ([crate::Real; 2usize], [[crate::Real; 3usize]; 2usize], [crate::Real; 2usize]) {
     let o = obs_landmark_linearized_flat(x, u, p, lm);
     (
         [o[0usize], o[1usize]],
@@ -2082,17 +2108,21 @@ pub fn obs_landmark_linearized(
 /// wrong lengths. Behind the `dispatch` feature: firmware calls the
 /// kernels themselves and need not carry every kernel and its name.
 #[cfg(feature = "dispatch")]
-pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
+pub fn call(name: &str, args: &[&[crate::Real]], out: &mut [crate::Real]) -> bool {
     match name {
         "twist" => {
             if args.len() != 2usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2105,15 +2135,21 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2126,23 +2162,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2155,23 +2199,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2184,23 +2236,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2213,23 +2273,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2242,23 +2310,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2271,23 +2347,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2300,23 +2384,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 9usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2329,23 +2421,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2358,23 +2458,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2387,23 +2495,31 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 5usize || out.len() != 3usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a4: f64 = match args[4usize] {
+            let a4: crate::Real = match args[4usize] {
                 [v] => *v,
                 _ => return false,
             };
@@ -2416,19 +2532,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2441,19 +2565,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 6usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2466,19 +2598,27 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 4usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a3: &[f64; 2usize] = match <&[f64; 2usize]>::try_from(args[3usize]) {
+            let a3: &[crate::Real; 2usize] = match <&[crate::Real; 2usize]>::try_from(
+                args[3usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2491,11 +2631,15 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 2usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[1usize]) {
+            let a1: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[1usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
@@ -2508,15 +2652,19 @@ pub fn call(name: &str, args: &[&[f64]], out: &mut [f64]) -> bool {
             if args.len() != 3usize || out.len() != 2usize {
                 return false;
             }
-            let a0: &[f64; 3usize] = match <&[f64; 3usize]>::try_from(args[0usize]) {
+            let a0: &[crate::Real; 3usize] = match <&[crate::Real; 3usize]>::try_from(
+                args[0usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };
-            let a1: f64 = match args[1usize] {
+            let a1: crate::Real = match args[1usize] {
                 [v] => *v,
                 _ => return false,
             };
-            let a2: &[f64; 1usize] = match <&[f64; 1usize]>::try_from(args[2usize]) {
+            let a2: &[crate::Real; 1usize] = match <&[crate::Real; 1usize]>::try_from(
+                args[2usize],
+            ) {
                 Ok(v) => v,
                 Err(_) => return false,
             };

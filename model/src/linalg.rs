@@ -11,11 +11,19 @@
 //! dependency-light (libm only) and allocation- and panic-free, and a cyclic Jacobi
 //! eigen-decomposition of a 3x3 symmetric matrix is a few dozen lines.
 
+/// A tolerance by float type: `for_f64` here. The generated crate's copy of this
+/// file takes the `f32` value when built with its `f32` feature (`kinegen
+/// generate` replaces this function by `crate::math::tolerance`).
+const fn tolerance(for_f64: f64, _for_f32: f64) -> f64 {
+    for_f64
+}
+
 /// Eigenvalues below `RANK_TOL` times the largest count as zero: the rank check.
-/// For M = S^T S this is a singular-value ratio of 1e-5 of S. Directions with a
-/// zero eigenvalue are left out, which gives the minimum-norm least-squares
-/// solution (seed 000 eq. 11) instead of an infinite one.
-pub const RANK_TOL: f64 = 1e-10;
+/// For M = S^T S this is a singular-value ratio of 1e-5 of S (3e-3 in f32,
+/// whose round-off is 5e8 times larger). Directions with a zero eigenvalue are
+/// left out, which gives the minimum-norm least-squares solution (seed 000 eq.
+/// 11) instead of an infinite one.
+pub const RANK_TOL: f64 = tolerance(1e-10, 1e-5);
 
 /// Upper-triangle index of (i, j) in the packed order [m00, m01, m02, m11, m12, m22].
 pub const fn packed_index(i: usize, j: usize) -> usize {
@@ -52,7 +60,7 @@ pub fn eigen_sym3(m: [f64; 6]) -> ([f64; 3], [[f64; 3]; 3]) {
             }
             let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
             // t = tan of the rotation angle, the smaller root (Numerical Recipes 11.1)
-            let t = if libm::fabs(theta) > 1e150 {
+            let t = if libm::fabs(theta) > tolerance(1e150, 1e18) {
                 0.5 / theta
             } else {
                 let sign = if theta >= 0.0 { 1.0 } else { -1.0 };
@@ -84,7 +92,8 @@ pub fn eigen_sym3(m: [f64; 6]) -> ([f64; 3], [[f64; 3]; 3]) {
 /// Number of eigenvalues above the rank threshold (0 to 3).
 pub fn rank_sym3(m: [f64; 6]) -> usize {
     let (l, _) = eigen_sym3(m);
-    let lmax = l.iter().fold(0.0f64, |a, &b| if b > a { b } else { a });
+    let zero: f64 = 0.0; // typed: the generated copy's `Real` may be f32
+    let lmax = l.iter().fold(zero, |a, &b| if b > a { b } else { a });
     l.iter()
         .filter(|&&x| lmax > 0.0 && x > RANK_TOL * lmax)
         .count()
@@ -95,7 +104,7 @@ pub fn rank_sym3(m: [f64; 6]) -> usize {
 /// trace for a positive semi-definite matrix), far above [`RANK_TOL`], so the
 /// matrix has full rank and the closed-form inverse loses at most about 1e-10
 /// relative to round-off.
-const WELL_CONDITIONED: f64 = 1e-6;
+const WELL_CONDITIONED: f64 = tolerance(1e-6, 1e-2);
 
 /// The inverse by cofactors (a dozen products and one division, against the
 /// Jacobi sweeps' square roots and divisions: 3x faster for seed 000's omni
@@ -128,7 +137,8 @@ pub fn pinv_sym3(m: [f64; 6]) -> [f64; 6] {
         return inv;
     }
     let (l, v) = eigen_sym3(m);
-    let lmax = l.iter().fold(0.0f64, |a, &b| if b > a { b } else { a });
+    let zero: f64 = 0.0; // typed: the generated copy's `Real` may be f32
+    let lmax = l.iter().fold(zero, |a, &b| if b > a { b } else { a });
     let mut out = [0.0; 6];
     if l.iter().any(|x| x.is_nan()) {
         return [f64::NAN; 6];
@@ -211,13 +221,13 @@ mod tests {
             }
             match inverse_well_conditioned(m) {
                 Some(inv) => {
-                    let scale = by_eigen.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+                    let scale = by_eigen.iter().fold(0.0, |a: f64, b| a.max(b.abs()));
                     for k in 0..6 {
                         assert!((inv[k] - by_eigen[k]).abs() <= 1e-9 * scale, "{m:?}");
                     }
                 }
                 None => {
-                    let lmax = l.iter().fold(0.0f64, |a, &b| a.max(b));
+                    let lmax = l.iter().fold(0.0, |a: f64, &b| a.max(b));
                     let lmin = l.iter().fold(f64::INFINITY, |a, &b| a.min(b));
                     assert!(lmin < 1e-2 * lmax, "well conditioned yet refused: {l:?}");
                 }
