@@ -118,9 +118,21 @@ fn emit_function(f: &Function) -> TokenStream {
                 quote!(-#a)
             }
             // small integer powers as products: cheaper than pow and exact
-            Op::PowI(a, n) if (1..=4).contains(&n) => {
+            // (up to the cube the plain product is the same chain, bit for bit)
+            Op::PowI(a, n) if (1..=3).contains(&n) => {
                 let a = t(a);
                 (1..n).fold(quote!(#a), |e, _| quote!(#e * #a))
+            }
+            // larger ones as the multiplication chain of binary exponentiation
+            // (the order f64::powi and the evaluator's JIT use), not a pow call
+            Op::PowI(a, n) if n != 0 && n.unsigned_abs() <= 64 => {
+                let a = t(a);
+                let chain = powi_chain(quote!(#a), n.unsigned_abs());
+                if n < 0 {
+                    quote!(1.0 / #chain)
+                } else {
+                    chain
+                }
             }
             Op::PowI(a, n) => {
                 let a = t(a);
@@ -261,6 +273,33 @@ fn emit_items(
         }
     }
     out
+}
+
+/// `x^n` (n >= 1) as one block of multiplications: the factors x, x^2, x^4...
+/// by repeated squaring, multiplied in from the lowest bit of n up.
+fn powi_chain(x: TokenStream, n: u32) -> TokenStream {
+    let mut stmts = vec![quote!(let s0 = #x;)];
+    let mut result: Option<TokenStream> = None;
+    let bits = 32 - n.leading_zeros();
+    for k in 0..bits {
+        let s = format_ident!("s{}", k);
+        if n & (1 << k) != 0 {
+            result = Some(match result {
+                None => quote!(#s),
+                Some(r) => {
+                    let r_id = format_ident!("r{}", k);
+                    stmts.push(quote!(let #r_id = #r * #s;));
+                    quote!(#r_id)
+                }
+            });
+        }
+        if k + 1 < bits {
+            let next = format_ident!("s{}", k + 1);
+            stmts.push(quote!(let #next = #s * #s;));
+        }
+    }
+    let r = result.expect("n >= 1");
+    quote!({ #(#stmts)* #r })
 }
 
 /// Fused kernels that share work, as SymForce's `with_jacobians` functions do:
@@ -620,6 +659,27 @@ pub fn emit_lib(models: &[String]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// x^5 = x * (x^2)^2, multiplied in from the lowest bit, as f64::powi and
+    /// the evaluator's JIT do it (the same bits).
+    #[test]
+    fn integer_powers_are_multiplication_chains() {
+        let chain = powi_chain(quote!(x), 5).to_string();
+        assert_eq!(
+            chain,
+            quote!({
+                let s0 = x;
+                let s1 = s0 * s0;
+                let s2 = s1 * s1;
+                let r2 = s0 * s2;
+                r2
+            })
+            .to_string()
+        );
+        let x = 1.1f64;
+        let s2 = (x * x) * (x * x);
+        assert_eq!((x * s2).to_bits(), x.powi(5).to_bits());
+    }
 
     /// Parameter names that are Rust keywords still make struct fields.
     #[test]
