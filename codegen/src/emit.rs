@@ -586,6 +586,7 @@ pub fn emit_lib(models: &[String]) -> String {
         quote!(#[rustfmt::skip] pub mod #id;)
     });
     let names = models.iter();
+    let idents = models.iter().map(|m| format_ident!("{}", m));
     let calls = models.iter().map(|m| {
         let id = format_ident!("{}", m);
         quote!(#m => #id::call(function, args, out),)
@@ -614,6 +615,15 @@ pub fn emit_lib(models: &[String]) -> String {
 
         /// The models in this crate.
         pub const MODELS: &[&str] = &[#(#names),*];
+
+        /// Invoke the macro `$m` with the module name of every model of this
+        /// crate, `$m!(diff_drive, tricycle, ...)`: code written once for all
+        /// models (tests, probes) takes in a new model by itself.
+        #[macro_export]
+        #[rustfmt::skip]
+        macro_rules! for_each_model {
+            ($m:ident) => { $m!(#(#idents),*) };
+        }
 
         /// The fingerprint of the spec a model was generated from.
         pub fn spec_fingerprint(model: &str) -> Option<&'static str> {

@@ -36,6 +36,16 @@ pub const MODELS: &[&str] = &[
     "tricycle_fwd",
     "unicycle_ekf",
 ];
+/// Invoke the macro `$m` with the module name of every model of this
+/// crate, `$m!(diff_drive, tricycle, ...)`: code written once for all
+/// models (tests, probes) takes in a new model by itself.
+#[macro_export]
+#[rustfmt::skip]
+macro_rules! for_each_model {
+    ($m:ident) => {
+        $m ! (diff_drive, omni3, omni_caster, tricycle, tricycle_fwd, unicycle_ekf)
+    };
+}
 /// The fingerprint of the spec a model was generated from.
 pub fn spec_fingerprint(model: &str) -> Option<&'static str> {
     match model {

@@ -77,14 +77,7 @@ fn the_f32_build_agrees_with_the_f64_kernels() {
                 }
             };
         }
-        let want: Vec<f64> = want!(
-            diff_drive,
-            tricycle,
-            tricycle_fwd,
-            omni3,
-            omni_caster,
-            unicycle_ekf
-        );
+        let want: Vec<f64> = kinegen_generated::for_each_model!(want);
         assert_eq!(want.len(), got.len(), "{line}");
         // relative to the output's own size (an entry near zero is compared
         // with the largest of its kernel's outputs)
@@ -97,7 +90,11 @@ fn the_f32_build_agrees_with_the_f64_kernels() {
         }
         checked += 1;
     }
-    assert_eq!(checked, 6 * 7 * 4, "every model, case and kernel printed");
+    assert_eq!(
+        checked,
+        kinegen_generated::MODELS.len() * 7 * 4,
+        "every model, case and kernel printed"
+    );
     // f32 carries 24 bits (6e-8); the kernels chain a few dozen operations
     assert!(
         worst.0 < 2e-5,

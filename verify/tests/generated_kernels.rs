@@ -64,14 +64,7 @@ fn params_structs_match_the_parameter_arrays() {
             }
         })*};
     }
-    check!(
-        diff_drive,
-        tricycle,
-        tricycle_fwd,
-        omni3,
-        omni_caster,
-        unicycle_ekf
-    );
+    kinegen_generated::for_each_model!(check);
 }
 
 /// The fused kernels (`step_exact_linearized`, `step_exact_with_jac_p`,
@@ -115,14 +108,7 @@ fn fused_kernels_equal_their_parts_bit_for_bit() {
             }
         })*};
     }
-    steps!(
-        diff_drive,
-        tricycle,
-        tricycle_fwd,
-        omni3,
-        omni_caster,
-        unicycle_ekf
-    );
+    kinegen_generated::for_each_model!(steps);
     use kinegen_generated::diff_drive as m;
     for _ in 0..50 {
         let x = arr(&mut rnd, false);

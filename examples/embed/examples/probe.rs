@@ -44,12 +44,5 @@ macro_rules! probe {
 }
 
 fn main() {
-    probe!(
-        diff_drive,
-        tricycle,
-        tricycle_fwd,
-        omni3,
-        omni_caster,
-        unicycle_ekf
-    );
+    kinegen_generated::for_each_model!(probe);
 }
