@@ -295,7 +295,10 @@ impl<'de> DeserializeSeed<'de> for Elem<'_> {
             Ty::Prim(U64) => Value::Int(u64::deserialize(d)?.into()),
             Ty::Prim(F32) => Value::Float(f32::deserialize(d)?.into()),
             Ty::Prim(F64) => Value::Float(f64::deserialize(d)?),
-            Ty::Prim(Str) => Value::Text(String::deserialize(d)?),
+            // the length read here, the bytes one at a time: the cdr crate's own
+            // string reader reserves the (untrusted) length before checking it
+            // against the message, so a corrupt one would allocate gigabytes
+            Ty::Prim(Str) => Value::Text(d.deserialize_tuple(2, CdrString)?),
             Ty::Msg(name) => {
                 let fields = &self.schema.types[name];
                 if fields.is_empty() {
@@ -367,6 +370,85 @@ impl<'de> Visitor<'de> for List<'_> {
             out.push(v);
         }
         Ok(Value::List(out))
+    }
+}
+
+/// A CDR string: a u32 length (with the terminating NUL), then the bytes.
+struct CdrString;
+
+/// A CDR string field of a serde type (`#[serde(deserialize_with)]`), read
+/// as [`CdrString`] does: never the cdr crate's reader, which reserves an
+/// untrusted length first.
+pub fn cdr_string<'de, D: de::Deserializer<'de>>(d: D) -> Result<String, D::Error> {
+    d.deserialize_tuple(2, CdrString)
+}
+
+/// A CDR sequence of strings (`string[]`), each as [`cdr_string`].
+pub fn cdr_strings<'de, D: de::Deserializer<'de>>(d: D) -> Result<Vec<String>, D::Error> {
+    struct Strings;
+    struct One;
+    impl<'de> DeserializeSeed<'de> for One {
+        type Value = String;
+        fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<String, D::Error> {
+            cdr_string(d)
+        }
+    }
+    impl<'de> Visitor<'de> for Strings {
+        type Value = Vec<String>;
+        fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+            write!(f, "a sequence of strings")
+        }
+        fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<String>, A::Error> {
+            let mut out = Vec::new();
+            while let Some(s) = seq.next_element_seed(One)? {
+                out.push(s);
+            }
+            Ok(out)
+        }
+    }
+    d.deserialize_seq(Strings)
+}
+
+/// `n` bytes, each checked against the end of the message as it is read.
+struct Bytes(usize);
+
+impl<'de> Visitor<'de> for CdrString {
+    type Value = String;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "a string")
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<String, A::Error> {
+        let len: u32 = seq
+            .next_element()?
+            .ok_or_else(|| de::Error::custom("string length missing"))?;
+        let mut bytes: Vec<u8> = seq
+            .next_element_seed(Bytes(len as usize))?
+            .ok_or_else(|| de::Error::custom("string bytes missing"))?;
+        if bytes.last() == Some(&0) {
+            bytes.pop();
+        }
+        String::from_utf8(bytes).map_err(|_| de::Error::custom("a string is not UTF-8"))
+    }
+}
+
+impl<'de> DeserializeSeed<'de> for Bytes {
+    type Value = Vec<u8>;
+    fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<Vec<u8>, D::Error> {
+        d.deserialize_tuple(self.0, self)
+    }
+}
+
+impl<'de> Visitor<'de> for Bytes {
+    type Value = Vec<u8>;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        write!(f, "{} bytes", self.0)
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<u8>, A::Error> {
+        let mut out = Vec::new();
+        while let Some(b) = seq.next_element::<u8>()? {
+            out.push(b);
+        }
+        Ok(out)
     }
 }
 
@@ -584,6 +666,44 @@ MSG: my_msgs/Detection\nuint16 id # the tag\nfloat64 range\nfloat64 bearing\n";
         // a truncated message is an error, not a panic or a short answer
         let b = bytes();
         assert!(s.decode(&b[..b.len() - 5]).is_err());
+    }
+
+    /// Corrupt messages (random bytes, every truncation, flipped bytes) are
+    /// errors or values, never a panic or a hang: lengths come from the data.
+    #[test]
+    fn corrupt_bytes_never_panic() {
+        let s = Schema::parse("my_msgs/msg/Detections", DEF).unwrap();
+        let good = bytes();
+        for cut in 0..good.len() {
+            let _ = s.decode(&good[..cut]);
+        }
+        let mut seed = 1u64;
+        for _ in 0..2000 {
+            let mut b = good.clone();
+            for _ in 0..3 {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+                let i = (seed >> 33) as usize % b.len();
+                b[i] = (seed >> 13) as u8;
+            }
+            let _ = s.decode(&b);
+        }
+    }
+
+    /// A corrupt string length (4 GB) in a message kinegen decodes with its
+    /// serde types is an error at once, with nothing reserved for it.
+    #[test]
+    fn a_corrupt_string_length_is_refused_without_reserving_it() {
+        let mut b = vec![0u8, 1, 0, 0]; // CDR, little-endian
+        b.extend(12i32.to_le_bytes()); // stamp.sec
+        b.extend(5u32.to_le_bytes()); // stamp.nanosec
+        b.extend(0xffff_fff0u32.to_le_bytes()); // frame_id length
+        b.extend(b"base\0");
+        let t0 = std::time::Instant::now();
+        assert!(crate::rosmsg::decode::<crate::rosmsg::Header>(&b).is_err());
+        assert!(t0.elapsed().as_secs_f64() < 0.5, "{:?}", t0.elapsed());
+        b[12..16].copy_from_slice(&5u32.to_le_bytes());
+        let h: crate::rosmsg::Header = crate::rosmsg::decode(&b).unwrap();
+        assert_eq!(h.frame_id, "base");
     }
 
     #[test]
