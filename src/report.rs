@@ -47,8 +47,13 @@ const BUCKETS: usize = 1000;
 /// (223 MB seen); this keeps every extreme, so a spike or a collapse stays
 /// visible.
 fn decimated(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
-    let mut d = Decimator::new(pts.len());
-    pts.iter().for_each(|p| d.push(*p));
+    series_of(pts.len(), pts.iter().copied())
+}
+
+/// The points of a series, decimated as they are computed (see [`decimated`]).
+fn series_of(len: usize, pts: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
+    let mut d = Decimator::new(len);
+    pts.for_each(|p| d.push(p));
     d.finish()
 }
 
@@ -250,19 +255,10 @@ th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{
 
 /// The model's track where the pose sensor sees it (an off-centre tracker's
 /// point, not the body origin), so it is drawn against what was measured.
-/// The points of a series, decimated as they are computed.
-fn series_of(len: usize, pts: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
-    let mut d = Decimator::new(len);
-    pts.for_each(|p| d.push(p));
-    d.finish()
-}
-
 fn traj(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
     let _ = run;
-    series_of(
-        tr.measured().len(),
-        tr.measured().iter().map(|p| (p[0], p[1])),
-    )
+    let m = tr.measured();
+    series_of(m.len(), m.iter().map(|p| (p[0], p[1])))
 }
 
 fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
@@ -274,13 +270,14 @@ fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
 
 fn pos_err(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
     let Some(g) = &run.gt else { return vec![] };
-    let pts = g.iter().zip(tr.measured()).zip(&run.t).map(|((a, b), t)| {
+    let m = tr.measured();
+    let pts = g.iter().zip(m).zip(&run.t).map(|((a, b), t)| {
         (
             t - run.t[0],
             ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
         )
     });
-    series_of(g.len().min(tr.measured().len()), pts)
+    series_of(g.len().min(m.len()), pts)
 }
 
 /// Heading-error rate residual per step against speed, turn rate and heading.

@@ -403,9 +403,10 @@ fn landmark_detections(
                 )));
             }
         }
-        let pick = |vals: &[&crate::rosdyn::Value], k: usize| {
-            vals[if vals.len() == 1 { 0 } else { k }].clone()
-        };
+        // a field with one value serves every detection of the message
+        fn pick<'v>(vals: &[&'v crate::rosdyn::Value], k: usize) -> &'v crate::rosdyn::Value {
+            vals[if vals.len() == 1 { 0 } else { k }]
+        }
         for k in 0..n {
             let ident = pick(&ids, k)
                 .as_id()
@@ -413,7 +414,7 @@ fn landmark_detections(
             let num = |vals: &[&crate::rosdyn::Value], p: &crate::rosdyn::FieldPath| {
                 pick(vals, k)
                     .as_f64()
-                    .filter(|x| x.is_finite() && x.abs() <= crate::log::MAX_MAGNITUDE)
+                    .filter(|x| crate::log::physical(*x))
                     .ok_or_else(|| here(format!("`{}` is not a finite number", p.text())))
             };
             let (p, q) = (num(&a, &polar.0)?, num(&b, &polar.1)?);
@@ -700,10 +701,11 @@ fn align(
                 s.t.len()
             )));
         }
-        if let Some(k) = s.values.iter().position(|v| {
-            v.iter()
-                .any(|x| !x.is_finite() || x.abs() > crate::log::MAX_MAGNITUDE)
-        }) {
+        if let Some(k) = s
+            .values
+            .iter()
+            .position(|v| !v.iter().all(|x| crate::log::physical(*x)))
+        {
             return Err(at(
                 file,
                 &s.topic,

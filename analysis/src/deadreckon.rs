@@ -84,15 +84,12 @@ impl Track {
                 ));
             }
         }
-        for k in 0..self.measured().len() {
-            if !finite(&self.measured()[k]) {
-                return Some((k, format!("the model's predicted pose is not finite ({:?}): check the parameter values and the inputs up to this row", self.measured()[k])));
+        for (k, m) in self.measured().iter().enumerate() {
+            if !finite(m) {
+                return Some((k, format!("the model's predicted pose is not finite ({m:?}): check the parameter values and the inputs up to this row")));
             }
             if let Some(g) = &run.gt {
-                let e = [
-                    g[k][0] - self.measured()[k][0],
-                    g[k][1] - self.measured()[k][1],
-                ];
+                let e = [g[k][0] - m[0], g[k][1] - m[1]];
                 if !(e[0].hypot(e[1])).is_finite() || !(e[0] * e[0] + e[1] * e[1]).is_finite() {
                     return Some((
                         k,

@@ -184,8 +184,14 @@ impl CsvHeader {
     }
 }
 
-/// The largest magnitude a CSV number may have.
+/// The largest magnitude a number read from a log may have.
 pub const MAX_MAGNITUDE: f64 = 1e150;
+
+/// Whether a value read from a log (CSV cell, bag field) is a finite number
+/// within [`MAX_MAGNITUDE`].
+pub fn physical(x: f64) -> bool {
+    x.is_finite() && x.abs() <= MAX_MAGNITUDE
+}
 
 /// A log: named numeric columns of equal length.
 #[derive(Debug, Clone)]

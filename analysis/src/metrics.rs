@@ -162,10 +162,7 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
                 if j >= gt.len() {
                     break;
                 }
-                let (a, b) = (
-                    rel(&gt[i], &gt[j]),
-                    rel(&tr.measured()[i], &tr.measured()[j]),
-                );
+                let (a, b) = (rel(&gt[i], &gt[j]), rel(&measured[i], &measured[j]));
                 rpe_t += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
                 rpe_tn += 1;
             }

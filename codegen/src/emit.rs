@@ -28,13 +28,21 @@ fn arg_type(name: &str, len: usize) -> TokenStream {
 /// Tape length above which a kernel is emitted with an array of temporaries.
 const BIG_KERNEL: usize = 1500;
 
+/// A kernel's parameter list: each argument with its array type.
+fn params(f: &Function) -> Vec<TokenStream> {
+    f.args
+        .iter()
+        .map(|a| {
+            let id = format_ident!("{}", a.name);
+            let ty = arg_type(&a.name, a.names.len());
+            quote!(#id: #ty)
+        })
+        .collect()
+}
+
 fn emit_function(f: &Function) -> TokenStream {
     let name = format_ident!("{}", f.name);
-    let params = f.args.iter().map(|a| {
-        let id = format_ident!("{}", a.name);
-        let ty = arg_type(&a.name, a.names.len());
-        quote!(#id: #ty)
-    });
+    let params = params(f);
     // Small kernels bind one `let` per op (readable, and what the optimiser likes
     // best). Very large ones (the parameter Jacobians of a least-squares model) write
     // into one local array instead: thousands of nested `let` scopes overflow rustc's
@@ -350,11 +358,7 @@ fn emit_fused(name: &str, doc: &str, parts: &[&Function]) -> TokenStream {
     let flat_fn = emit_function(&flat);
     let id = format_ident!("{}", name);
     let flat_id = format_ident!("{}", flat_name);
-    let params = flat.args.iter().map(|a| {
-        let id = format_ident!("{}", a.name);
-        let ty = arg_type(&a.name, a.names.len());
-        quote!(#id: #ty)
-    });
+    let params = params(&flat);
     let vars = flat.args.iter().map(|a| format_ident!("{}", a.name));
     let mut at = 0usize;
     let (mut tys, mut vals) = (Vec::new(), Vec::new());
