@@ -3,15 +3,16 @@ use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::bag::{is_bag, Detection, TopicMap};
-use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon;
 use kinegen_analysis::fit::{fit, FitOptions, FitResult};
+use kinegen_analysis::innovations::{self, Innovation, InnovationStats};
 use kinegen_analysis::input_range;
-use kinegen_analysis::landmarks::{self, Innovation, InnovationStats};
+use kinegen_analysis::landmarks;
 use kinegen_analysis::methods::{by_name, Method, Settings, METHODS};
 use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
 use kinegen_analysis::model::{parse_sets, Runner};
-use kinegen_model::spec::ObservationRole::RangeBearing;
+use kinegen_analysis::run::Run;
+use kinegen_model::decl::ObservationRole::RangeBearing;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -169,7 +170,11 @@ fn attach_landmarks(
         _ => {}
     }
     let map_path = c.landmarks.as_ref().unwrap();
-    if r.ir.observation_fn(RangeBearing, "").is_none() {
+    if r.ir
+        .observation_kernels(RangeBearing)
+        .map(|o| o.value)
+        .is_none()
+    {
         return Err(format!(
             "{}: the model has no `landmark` observation to predict range-bearing data with",
             c.spec.display()
@@ -251,9 +256,9 @@ pub fn evaluation(r: &Runner, p: &[f64], runs: &[Run]) -> Evaluation {
     let all: Vec<Innovation> = runs
         .iter()
         .zip(&tracks)
-        .flat_map(|(run, t)| landmarks::innovations(r, p, run, t))
+        .flat_map(|(run, t)| innovations::innovations(r, p, run, t))
         .collect();
-    let landmarks = landmarks::stats(&all);
+    let landmarks = innovations::stats(&all);
     if !runs.iter().any(|x| x.gt.is_some()) {
         if let Some(s) = &landmarks {
             errors.rmse = s.range_rmse_m;
@@ -397,9 +402,9 @@ pub fn compare(c: Common) -> ExitCode {
     let innov: Vec<Vec<Innovation>> = all
         .iter()
         .zip(&tracks)
-        .map(|(run, t)| landmarks::innovations(r, &r.p, run, t))
+        .map(|(run, t)| innovations::innovations(r, &r.p, run, t))
         .collect();
-    let lm_stats = landmarks::stats(&innov.concat());
+    let lm_stats = innovations::stats(&innov.concat());
     if let Some(s) = &lm_stats {
         out.say(&format!("  {}", fmt_landmarks(s)));
     }

@@ -50,7 +50,7 @@ fn deriver<'a>(
 pub fn run_diagnosis(
     spec: &Model,
     runner: &Runner,
-    runs: &[kinegen_analysis::dataset::Run],
+    runs: &[kinegen_analysis::run::Run],
     dirs: &[std::path::PathBuf],
     sets: &[(String, f64)],
     candidates: &dyn Fn(usize),

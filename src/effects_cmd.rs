@@ -4,9 +4,9 @@ use crate::ir_source;
 use kinegen_analysis::effects::{catalogue, find, Applicability};
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
-use kinegen_model::spec::InputKind;
+use kinegen_model::decl::InputKind;
+use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::spec::Model;
-use kinegen_model::spec::ObservationRole::RangeBearing;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -143,7 +143,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
         let (base, truth) = base_and_truth(&a.spec, &a.effect, &sets, &a.catalogue.effects)?;
         let landmarks = match (&a.landmarks, &a.observations) {
             (Some(m), Some(_)) => {
-                if truth.ir.observation_fn(RangeBearing, "").is_none() {
+                if truth.ir.observation_kernels(RangeBearing).map(|o| o.value).is_none() {
                     return Err(format!("{}: the model has no `landmark` observation to simulate range-bearing data with", a.spec.display()));
                 }
                 let map = kinegen_analysis::landmarks::read_map(m).map_err(|e| e.to_string())?;

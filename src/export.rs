@@ -15,7 +15,7 @@ use std::path::Path;
 /// The body twist's derivatives with respect to each input at `p` (the twist of
 /// a wheeled base is linear in its wheel rates): (dvx/du, domega/du) per input.
 fn twist_gains(r: &Runner, p: &[f64]) -> Vec<(f64, f64)> {
-    let tw = r.f("twist");
+    let tw = r.ir.twist();
     let n = r.ir.inputs.len();
     let (mut out, mut scratch) = ([0.0; 3], Vec::new());
     let mut at = |u: &[f64]| {

@@ -15,12 +15,12 @@ pub fn run(spec_dir: &Path, out: &Path, check: bool) -> ExitCode {
         }
         Ok(report) => {
             for (ir, took) in &report.models {
-                let tree: usize = ir.functions.iter().map(|f| f.ops_tree).sum();
-                let tape: usize = ir.functions.iter().map(|f| f.ops_tape()).sum();
+                let tree: usize = ir.functions().iter().map(|f| f.ops_tree).sum();
+                let tape: usize = ir.functions().iter().map(|f| f.ops_tape()).sum();
                 eprintln!(
                     "{:<14} {:>3} functions  {:>7.2} s  ops {:>6} -> {:>5} after CSE",
                     ir.name,
-                    ir.functions.len(),
+                    ir.functions().len(),
                     took.as_secs_f64(),
                     tree,
                     tape

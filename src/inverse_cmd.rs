@@ -58,7 +58,7 @@ pub fn run(a: &InverseArgs) -> ExitCode {
             path.t.last().unwrap() - path.t[0]
         ));
         for i in &prof.inputs {
-            let per = if i.kind == kinegen_model::spec::InputKind::Absolute {
+            let per = if i.kind == kinegen_model::decl::InputKind::Absolute {
                 "/s"
             } else {
                 ""

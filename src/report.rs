@@ -1,11 +1,11 @@
 //! `--report DIR`: one self-contained HTML page (inline SVG figures drawn with
 //! plotters, no external files or scripts).
-use kinegen_analysis::dataset::Run;
 use kinegen_analysis::deadreckon::Track;
-use kinegen_analysis::landmarks::Innovation;
+use kinegen_analysis::innovations::Innovation;
 use kinegen_analysis::log::wrap;
 use kinegen_analysis::metrics::regime;
 use kinegen_analysis::model::Runner;
+use kinegen_analysis::run::Run;
 use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
@@ -830,7 +830,7 @@ pub fn inverse_report(
                         .zip(inp.value.iter().copied())
                         .collect(),
                 ));
-                if let (Some(m), kinegen_model::spec::InputKind::Cumulative) =
+                if let (Some(m), kinegen_model::decl::InputKind::Cumulative) =
                     (inp.max_rate, inp.kind)
                 {
                     let (a, b) = (prof.t[0], *prof.t.last().unwrap());

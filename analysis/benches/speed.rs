@@ -12,10 +12,10 @@
 //! needs the CLI to derive the augmented models.)
 //! Figures are medians of repeated runs in this process; ratios compare numbers
 //! measured in the same run.
-use kinegen_analysis::dataset::Run;
 use kinegen_analysis::fit::{fit, FitOptions};
 use kinegen_analysis::model::Runner;
-use kinegen_model::ir::ModelIr;
+use kinegen_analysis::run::Run;
+use kinegen_model::ir::{ModelIr, StepForm};
 use rand::{Rng, SeedableRng};
 use std::hint::black_box;
 use std::time::Instant;
@@ -118,8 +118,9 @@ fn ir_vs_generated<const U: usize, const W: usize, const P: usize>(
     jac_p: Kernel<U, W, P, [[f64; P]; 3]>,
 ) {
     let w = [0.0; W];
-    for name in ["step_exact", "step_exact_jac_p"] {
-        let f = ir.function(name).unwrap();
+    let exact = ir.step(StepForm::Exact);
+    for (f, is_step) in [(exact.value, true), (exact.jac_p.unwrap(), false)] {
+        let name = &f.name;
         let mut out = vec![0.0; f.rows * f.cols];
         let mut scratch = Vec::new();
         // the tape interpreted (the reference), then as the evaluator runs it
@@ -146,7 +147,7 @@ fn ir_vs_generated<const U: usize, const W: usize, const P: usize>(
                 },
                 |k| {
                     let (x, u) = &inputs[k];
-                    if name == "step_exact" {
+                    if is_step {
                         black_box(step(black_box(x), u, &w, p, 0.05));
                     } else {
                         black_box(jac_p(black_box(x), u, &w, p, 0.05));

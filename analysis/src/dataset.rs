@@ -1,32 +1,11 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
 use crate::bag::{Detection, TopicMap};
-use crate::landmarks::{pose_from_landmarks, LandmarkObs};
 use crate::log::{unwrap, Log, LogError};
 use crate::model::Runner;
 use crate::rows::Inputs;
-use kinegen_model::spec::{InputKind, ObservationRole};
-
-#[derive(Debug, Clone)]
-pub struct Run {
-    pub name: String,
-    /// The log file as the user named it (runs are reported by path: two runs
-    /// called `run1.csv` in different directories are different runs).
-    pub path: String,
-    pub t: Vec<f64>,
-    /// Step k goes from row k to row k+1.
-    pub dt: Vec<f64>,
-    pub u: Inputs,
-    /// Ground-truth pose per row, heading unwrapped.
-    pub gt: Option<Vec<[f64; 3]>>,
-    /// Gyro yaw rate per row; row k+1 is compared with the model rate of step k.
-    pub gyro: Option<Vec<f64>>,
-    /// Range-bearing observations of mapped landmarks during the run (may be empty).
-    pub landmarks: Vec<LandmarkObs>,
-    /// Which inputs are rates of cumulative columns (the others are absolute
-    /// values, like a steering angle, which say nothing about standing still).
-    pub rate_inputs: Vec<bool>,
-}
+use crate::run::Run;
+use kinegen_model::decl::{InputKind, ObservationRole};
 
 /// Shortest time step a log may have, s.
 pub const MIN_STEP_S: f64 = 1e-6;
@@ -70,114 +49,6 @@ pub fn channel_missing(runs: &[Run], r: &Runner, role: ObservationRole) -> Optio
 }
 
 impl Run {
-    pub fn steps(&self) -> usize {
-        self.dt.len()
-    }
-
-    /// Where dead reckoning starts: the mean ground-truth pose over the rows before
-    /// the inputs first change (the robot at rest), which averages out the motion
-    /// capture noise that would otherwise rotate the whole track; row 0 if the robot
-    /// moves at once. Origin when there is no ground truth.
-    ///
-    /// Without ground truth, the pose that places the landmarks seen during that
-    /// rest (or the first 0.1 s) on the map, if at least two are seen.
-    pub fn start_pose(&self) -> [f64; 3] {
-        let rest_rows = self.rest_steps();
-        let Some(g) = &self.gt else {
-            return pose_from_landmarks(&self.landmarks, self.start_window_end())
-                .unwrap_or([0.0; 3]);
-        };
-        let rest = rest_rows.max(1).min(g.len());
-        let mut m = [0.0; 3];
-        for p in &g[..rest] {
-            for i in 0..3 {
-                m[i] += p[i] / rest as f64;
-            }
-        }
-        m
-    }
-
-    /// Until when observations still see the start pose: the end of the rest
-    /// at the start, or the first 0.1 s when the robot moves at once.
-    pub fn start_window_end(&self) -> f64 {
-        let rest_rows = self.rest_steps();
-        if rest_rows > 0 {
-            self.t[rest_rows]
-        } else {
-            self.t[0] + 0.1
-        }
-    }
-
-    /// Leading steps in which the robot stands still: every rate input is zero
-    /// (a steering angle may read anything while the robot stands).
-    /// A model without rate inputs (speeds given directly) stands when all are zero.
-    pub fn rest_steps(&self) -> usize {
-        let any_rate = self.rate_inputs.iter().any(|r| *r);
-        self.u
-            .iter()
-            .take_while(|u| {
-                u.iter().enumerate().all(|(i, v)| {
-                    *v == 0.0 || (any_rate && !self.rate_inputs.get(i).copied().unwrap_or(true))
-                })
-            })
-            .count()
-    }
-
-    /// Where time `s` falls among the rows: (j, a) with t_j <= s < t_{j+1} and
-    /// a = (s - t_j)/(t_{j+1} - t_j), j clamped to the first and last interval (so
-    /// a may fall outside [0, 1] before the start or after the end: linear
-    /// extrapolation).
-    pub fn locate(&self, s: f64) -> (usize, f64) {
-        let n = self.t.len();
-        let j = self.t.partition_point(|t| *t <= s).clamp(1, n - 1) - 1;
-        (j, (s - self.t[j]) / (self.t[j + 1] - self.t[j]))
-    }
-
-    /// Rows `a..b` (inclusive of b-1) as a run of their own.
-    pub fn slice(&self, a: usize, b: usize) -> Run {
-        Run {
-            name: format!("{}[{a}..{b}]", self.name),
-            path: self.path.clone(),
-            t: self.t[a..b].to_vec(),
-            dt: self.dt[a..b - 1].to_vec(),
-            u: self.u.slice(a, b - 1),
-            gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
-            gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
-            landmarks: self
-                .landmarks
-                .iter()
-                .filter(|o| o.t >= self.t[a] && o.t <= self.t[b - 1])
-                .cloned()
-                .collect(),
-            rate_inputs: self.rate_inputs.clone(),
-        }
-    }
-
-    /// Split a long run into pieces of about `seconds`, each dead-reckoned from its
-    /// own measured start pose (a run shorter than twice that stays whole).
-    pub fn segments(&self, seconds: f64) -> Vec<Run> {
-        let dur = self.t.last().unwrap() - self.t[0];
-        if dur < 2.0 * seconds || self.gt.is_none() {
-            return vec![self.clone()];
-        }
-        let mut out = Vec::new();
-        let mut a = 0;
-        while a + 2 < self.t.len() {
-            let mut b = a + 1;
-            while b < self.t.len() && self.t[b] - self.t[a] < seconds {
-                b += 1;
-            }
-            let b = if self.t.len() - b < 10 {
-                self.t.len()
-            } else {
-                (b + 1).min(self.t.len())
-            };
-            out.push(self.slice(a, b));
-            a = b - 1;
-        }
-        out
-    }
-
     /// Columns a model needs from a log.
     pub fn wanted(r: &Runner) -> Vec<String> {
         let mut w: Vec<String> = vec!["t".into()];

@@ -1,8 +1,9 @@
 //! Dead reckoning with the exact step, optionally with the sensitivities
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
-use crate::dataset::Run;
+use crate::interp::{chain, lerp3};
 use crate::model::Runner;
-use kinegen_model::spec::ObservationRole::{Pose, YawRate};
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::{Pose, YawRate};
 
 pub struct Track {
     pub pose: Vec<[f64; 3]>,
@@ -119,7 +120,7 @@ impl Track {
 /// fixed-point iteration (it is a small displacement of the identity). Also returns
 /// d start / d p = -dh/dp (3 x P, row-major) for the sensitivities.
 pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64; 3], Vec<f64>) {
-    let Some(h) = r.ir.observation_fn(Pose, "") else {
+    let Some(h) = r.ir.observation_kernels(Pose).map(|o| o.value) else {
         return (measured, vec![0.0; 3 * p.len()]);
     };
     let mut x = measured;
@@ -130,7 +131,8 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
         }
     }
     let hp =
-        r.ir.observation_fn(Pose, "_jac_p")
+        r.ir.observation_kernels(Pose)
+            .and_then(|o| o.jac_p)
             .expect("derived with the pose observation");
     let d = hp
         .eval(&Runner::obs_args(hp, &x, u, p, &[]))
@@ -206,7 +208,7 @@ pub fn run_from(
             let dtj = data.t[j + 1] - data.t[j];
             let vel = [0, 1, 2].map(|i| (g[j + 1][i] - g[j][i]) / dtj);
             // the rest-averaged start when the robot has not moved yet
-            let at = [0, 1, 2].map(|i| g[j][i] + a * (g[j + 1][i] - g[j][i]));
+            let at = lerp3(&g[j], &g[j + 1], a);
             if data.rest_steps() > 0 {
                 (start, [0.0; 3])
             } else {
@@ -262,10 +264,8 @@ pub fn run_from(
             for m in 0..3 {
                 for c in 0..cols {
                     let prev = |i: usize| s.data[start + i * cols + c];
-                    let carried =
-                        jx[m * 3] * prev(0) + jx[m * 3 + 1] * prev(1) + jx[m * 3 + 2] * prev(2);
-                    s.data
-                        .push(carried + if c < np { jp[m * np + c] } else { 0.0 });
+                    let direct = if c < np { jp[m * np + c] } else { 0.0 };
+                    s.data.push(chain(&jx[m * 3..m * 3 + 3], prev, direct));
                 }
             }
         }
@@ -293,7 +293,7 @@ fn predicted_gyro(
     if data.gyro.is_none() {
         return Vec::new();
     }
-    let Some(h) = r.ir.observation_fn(YawRate, "") else {
+    let Some(h) = r.ir.observation_kernels(YawRate).map(|o| o.value) else {
         return twist.iter().map(|w| w[2]).collect();
     };
     let (mut out, mut scratch) = ([0.0], Vec::new());
@@ -313,7 +313,7 @@ fn predicted_gyro(
 /// when they are the track's poses themselves (no delay, no pose observation).
 fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) -> Vec<[f64; 3]> {
     let tau = crate::timeline::delay(r, p);
-    let h = r.ir.observation_fn(Pose, "");
+    let h = r.ir.observation_kernels(Pose).map(|o| o.value);
     if h.is_none() && (tau == 0.0 || pose.len() < 2) {
         return Vec::new();
     }
@@ -323,7 +323,7 @@ fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) 
                 pose[k]
             } else {
                 let (j, a) = crate::timeline::model_instant(data, k, tau);
-                [0, 1, 2].map(|i| pose[j][i] + a * (pose[j + 1][i] - pose[j][i]))
+                lerp3(&pose[j], &pose[j + 1], a)
             };
             match h {
                 Some(h) => {
@@ -355,7 +355,7 @@ pub fn gyrodometry_with(
     data: &Run,
     omega_of: &dyn Fn(usize) -> f64,
 ) -> Option<Track> {
-    let tg = r.ir.function("twist_gyro")?;
+    let tg = r.ir.twist_gyro();
     let start = model_start(r, p, data);
     let mut pose = Vec::with_capacity(data.steps() + 1);
     pose.push(start);

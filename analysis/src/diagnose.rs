@@ -10,11 +10,13 @@
 //! 4. Whiteness: regress the one-step prediction residuals of the best model on
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
-use crate::dataset::Run;
 use crate::fit::{fit, residuals, FitOptions, FitResult};
+use crate::interp::lerp_rows;
 use crate::log::wrap;
 use crate::model::Runner;
-use kinegen_model::spec::ObservationRole::{Pose, YawRate};
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::{Pose, YawRate};
+use kinegen_model::ir::StepForm;
 use nalgebra::DVector;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -108,7 +110,10 @@ fn channel_names(r: &Runner, runs: &[Run], o: &FitOptions) -> Vec<&'static str> 
                 v.extend(["x position", "y position", "heading"]);
             }
         }
-        if o.use_gyro && run.gyro.is_some() && r.ir.observation_fn(YawRate, "").is_some() {
+        if o.use_gyro
+            && run.gyro.is_some()
+            && r.ir.observation_kernels(YawRate).map(|o| o.value).is_some()
+        {
             v.extend(std::iter::repeat_n("gyro", run.steps()));
         }
     }
@@ -172,13 +177,13 @@ fn one_step(
     p: &[f64],
     runs: &[Run],
 ) -> (Vec<[f64; 4]>, Vec<[f64; 6]>, Vec<&'static str>) {
-    let step = r.f("step_exact");
-    let tw = r.f("twist");
+    let step = r.ir.step(StepForm::Exact).value;
+    let tw = r.ir.twist();
     let zeros = [0.0; 16];
     let mut res = Vec::new();
     let mut feat = Vec::new();
     let mut regimes = Vec::new();
-    let gyro = r.ir.observation_fn(YawRate, "");
+    let gyro = r.ir.observation_kernels(YawRate).map(|o| o.value);
     let tau = crate::timeline::delay(r, p);
     for run in runs {
         let Some(g) = &run.gt else { continue };
@@ -194,17 +199,13 @@ fn one_step(
                 let (j, a) = crate::timeline::model_instant(run, k, tau);
                 let a = a.clamp(0.0, 1.0);
                 let j1 = (j + 1).min(run.steps() - 1);
-                shifted_u = run.u[j]
-                    .iter()
-                    .zip(&run.u[j1])
-                    .map(|(x, y)| x + a * (y - x))
-                    .collect();
+                shifted_u = lerp_rows(&run.u[j], &run.u[j1], a);
                 &shifted_u
             };
             // from the body pose behind the measured one, to the predicted measurement
             let (x0, _) = crate::deadreckon::body_start(r, p, g[k], u_k);
             let x1 = step.eval(&Runner::step_args(step, &x0, u_k, p, &dt, &zeros));
-            let pred = match r.ir.observation_fn(Pose, "") {
+            let pred = match r.ir.observation_kernels(Pose).map(|o| o.value) {
                 Some(h) => h.eval(&Runner::obs_args(h, &x1, &run.u[k], p, &[])),
                 None => x1,
             };
@@ -273,13 +274,8 @@ pub fn signature(
 ) -> Option<(String, Vec<(f64, f64)>)> {
     let i = aug.param_index(param)?;
     let start = seeded(aug, base, pb);
-    let h = {
-        let rp = aug.ir.runtime_params();
-        match (rp[i].min, rp[i].max) {
-            (Some(a), Some(b)) => 0.01 * (b - a),
-            _ => 1e-3,
-        }
-    };
+    // one unit of the effect parameter, from zero (Runner::param_scale)
+    let h = aug.param_scale(i, 0.0);
     let mut moved = start.p.clone();
     moved[i] += h;
     let (r0, _, _) = one_step(&start, &start.p, runs);
@@ -345,7 +341,7 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
     ];
     // absolute inputs (a steering angle) act through their value
     for (i, inp) in r.ir.inputs.iter().enumerate() {
-        if inp.kind == kinegen_model::spec::InputKind::Absolute {
+        if inp.kind == kinegen_model::decl::InputKind::Absolute {
             let v = runs
                 .iter()
                 .filter(|run| run.gt.is_some())

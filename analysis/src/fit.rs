@@ -17,12 +17,13 @@
 //! standard deviation of the estimate.
 mod arrow;
 
-use crate::dataset::Run;
 use crate::deadreckon;
+use crate::interp::{chain, lerp3};
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::rows::Rows;
-use kinegen_model::spec::ObservationRole::{Pose, RangeBearing, YawRate};
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -357,7 +358,7 @@ fn run_residuals(
     let shifted = |k: usize| crate::timeline::model_instant(run, k, tau);
     if o.use_pose {
         if let Some(gt) = &run.gt {
-            let obs = r.ir.observation_fn(Pose, "");
+            let tracker = r.ir.observation_kernels(Pose);
             let first = if o.endpoints_only { gt.len() - 1 } else { 1 };
             for k in first..gt.len() {
                 let (j, a) = if tau_i.is_some() {
@@ -365,27 +366,21 @@ fn run_residuals(
                 } else {
                     (k - 1, 1.0)
                 };
-                let lerp = |v0: &[f64; 3], v1: &[f64; 3]| -> [f64; 3] {
-                    [0, 1, 2].map(|i| v0[i] + a * (v1[i] - v0[i]))
-                };
-                let x = lerp(&track.pose[j], &track.pose[j + 1]);
+                let x = lerp3(&track.pose[j], &track.pose[j + 1], a);
                 let vel: [f64; 3] =
                     [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
                 let u = &run.u[j.min(run.steps() - 1)];
-                let (pred, hx, hp) = match obs {
-                    Some(h) => {
-                        let args = Runner::obs_args(h, &x, u, p, &[]);
-                        let pred = h.eval(&args);
+                let (pred, hx, hp) = match tracker {
+                    Some(t) => {
+                        let h = t.value;
+                        let pred = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
                         let (hx, hp) = if with_jac {
-                            let (fx, fp) = (
-                                r.ir.observation_fn(Pose, "_jac_x")
-                                    .expect("derived with the pose observation"),
-                                r.ir.observation_fn(Pose, "_jac_p")
-                                    .expect("derived with the pose observation"),
-                            );
+                            let fx = t.jac_x;
                             (
                                 fx.eval(&Runner::obs_args(fx, &x, u, p, &[])),
-                                fp.eval(&Runner::obs_args(fp, &x, u, p, &[])),
+                                t.jac_p.map_or(vec![0.0; 3 * np], |fp| {
+                                    fp.eval(&Runner::obs_args(fp, &x, u, p, &[]))
+                                }),
                             )
                         } else {
                             (vec![], vec![])
@@ -413,9 +408,8 @@ fn run_residuals(
                                     s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
                                 }
                             };
-                            ((0..3).map(|m| hx[i * 3 + m] * dx(m)).sum::<f64>()
-                                + if c < np { hp[i * np + c] } else { 0.0 })
-                                / sig[i]
+                            let direct = if c < np { hp[i * np + c] } else { 0.0 };
+                            chain(&hx[i * 3..i * 3 + 3], dx, direct) / sig[i]
                         }));
                     }
                 }
@@ -426,9 +420,8 @@ fn run_residuals(
         landmark_residuals(r, p, free, run, &track, with_jac, &mut res, &mut jac);
     }
     if o.use_gyro {
-        if let (Some(g), Some(_)) = (&run.gyro, r.ir.observation_fn(YawRate, "")) {
-            let hp = r.ir.observation_fn(YawRate, "_jac_p");
-            let hx = r.ir.observation_fn(YawRate, "_jac_x");
+        if let (Some(g), Some(gyro)) = (&run.gyro, r.ir.observation_kernels(YawRate)) {
+            let (hx, hp) = (gyro.jac_x, gyro.jac_p);
             let mut jp = vec![0.0; np];
             let mut jx = [0.0; 3];
             for k in 0..run.steps() {
@@ -436,12 +429,13 @@ fn run_residuals(
                 // the track already predicted the reading (Track::gyro)
                 res.push((track.gyro[k] - g[k + 1]) / o.gyro_sigma);
                 if with_jac {
-                    let (hp, hx) = (hp.unwrap(), hx.unwrap());
-                    hp.eval_into(
-                        &Runner::obs_args(hp, &x, &run.u[k], p, &[]),
-                        &mut jp,
-                        &mut scratch,
-                    );
+                    if let Some(hp) = hp {
+                        hp.eval_into(
+                            &Runner::obs_args(hp, &x, &run.u[k], p, &[]),
+                            &mut jp,
+                            &mut scratch,
+                        );
+                    }
                     hx.eval_into(
                         &Runner::obs_args(hx, &x, &run.u[k], p, &[]),
                         &mut jx,
@@ -449,9 +443,8 @@ fn run_residuals(
                     );
                     let s = track.sens.as_ref().unwrap().at(k);
                     jac.push(free.iter().map(|&c| {
-                        (if c < np { jp[c] } else { 0.0 }
-                            + (0..3).map(|m| jx[m] * s[(m, c)]).sum::<f64>())
-                            / o.gyro_sigma
+                        let direct = if c < np { jp[c] } else { 0.0 };
+                        chain(&jx, |m| s[(m, c)], direct) / o.gyro_sigma
                     }));
                 }
             }
@@ -475,36 +468,32 @@ fn landmark_residuals(
     res: &mut Vec<f64>,
     jac: &mut Rows,
 ) {
-    let Some(h) = r.ir.observation_fn(RangeBearing, "") else {
+    let Some(sensor) = r.ir.observation_kernels(RangeBearing) else {
         return;
     };
+    let h = sensor.value;
     let sig = crate::landmarks::sigma(r);
     let np = p.len();
     for o in &run.landmarks {
-        let (j, a, x) = crate::landmarks::locate_on(run, track, o.t);
+        let (j, a, x) = crate::innovations::locate_on(run, track, o.t);
         let u = &run.u[j.min(run.steps() - 1)];
         let lm = [o.xl, o.yl];
         let pred = h.eval(&Runner::obs_args(h, &x, u, p, &lm));
         res.push((pred[0] - o.range) / sig[0]);
         res.push(wrap(pred[1] - o.bearing) / sig[1]);
         if with_jac {
-            let (fx, fp) = (
-                r.ir.observation_fn(RangeBearing, "_jac_x")
-                    .expect("derived with the observation"),
-                r.ir.observation_fn(RangeBearing, "_jac_p")
-                    .expect("derived with the observation"),
-            );
+            let fx = sensor.jac_x;
             let hx = fx.eval(&Runner::obs_args(fx, &x, u, p, &lm));
-            let hp = fp.eval(&Runner::obs_args(fp, &x, u, p, &lm));
+            let hp = sensor
+                .jac_p
+                .map_or(vec![], |fp| fp.eval(&Runner::obs_args(fp, &x, u, p, &lm)));
             let sens = track.sens.as_ref().unwrap();
             let (s0, s1) = (sens.at(j), sens.at(j + 1));
             for i in 0..2 {
                 jac.push(free.iter().map(|&c| {
-                    ((0..3)
-                        .map(|m| hx[i * 3 + m] * (s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])))
-                        .sum::<f64>()
-                        + if c < np { hp[i * np + c] } else { 0.0 })
-                        / sig[i]
+                    let direct = if c < np { hp[i * np + c] } else { 0.0 };
+                    let dx = |m: usize| s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]);
+                    chain(&hx[i * 3..i * 3 + 3], dx, direct) / sig[i]
                 }));
             }
         }
@@ -844,8 +833,8 @@ fn thinned(pieces: Vec<Run>, rows: usize) -> Vec<Run> {
 /// The parameters of a gyro-only fit, when the logs have both a gyro the model
 /// predicts and ground truth (with only one of them the direct fit is the same).
 fn gyro_start(r: &Runner, runs: &[Run], o: &FitOptions) -> Option<Vec<f64>> {
-    let has_gyro =
-        runs.iter().any(|x| x.gyro.is_some()) && r.ir.observation_fn(YawRate, "").is_some();
+    let has_gyro = runs.iter().any(|x| x.gyro.is_some())
+        && r.ir.observation_kernels(YawRate).map(|o| o.value).is_some();
     let has_pose = runs.iter().any(|x| x.gt.is_some());
     if !(o.use_gyro && o.use_pose && has_gyro && has_pose) {
         return None;
@@ -906,19 +895,9 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             (lo, p.max.unwrap_or(f64::INFINITY))
         })
         .collect();
-    // Work in scaled variables so radii (cm), gains (s) and offsets (rad) weigh
-    // alike: a parameter's scale is its magnitude, or 1% of its bounded range when
-    // it starts at zero (effect parameters); start headings scale with 10 mrad.
-    let mut scale: Vec<f64> = free
-        .iter()
-        .map(|&i| {
-            let range = match (rp[i].min, rp[i].max) {
-                (Some(a), Some(b)) => 0.01 * (b - a),
-                _ => 1e-3,
-            };
-            r.p[i].abs().max(range).max(1e-9)
-        })
-        .collect();
+    // Work in scaled variables (Runner::param_scale); start headings scale
+    // with 10 mrad.
+    let mut scale: Vec<f64> = free.iter().map(|&i| r.param_scale(i, r.p[i])).collect();
     for _ in 0..n_start {
         scale.push(0.01);
         bounds.push((-0.5, 0.5));

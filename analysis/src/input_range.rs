@@ -4,8 +4,8 @@
 //! and diagnose say so (with the rows) instead of letting a fit blame
 //! identifiability.
 
-use crate::dataset::Run;
-use kinegen_model::spec::{Input, InputKind};
+use crate::run::Run;
+use kinegen_model::decl::{Input, InputKind};
 
 /// Stretches listed by name before the rest are only counted.
 const SHOWN_STRETCHES: usize = 3;

@@ -6,7 +6,8 @@
 //! absolute input such as a steering angle can change).
 use crate::log::{read_csv, unwrap, LogError};
 use crate::model::Runner;
-use kinegen_model::spec::InputKind;
+use kinegen_model::decl::InputKind;
+use kinegen_model::ir::{ArgRole, StepForm};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -114,19 +115,14 @@ const MERGE_GAP_S: f64 = 1.0;
 
 /// The input profile of `path` for the model of `r`.
 pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
-    let inv = r.ir.function("inverse_increment").ok_or_else(|| {
-        format!(
-            "model `{}` has no inverse_increment (regenerate its IR)",
-            r.ir.name
-        )
-    })?;
-    let step = r.f("step_exact");
+    let inv = r.ir.inverse_increment();
+    let step = r.ir.step(StepForm::Exact).value;
     let names = &inv.row_names;
     // configuration inputs (steering angles of caster wheels) the inverse starts from
     let cfg_names: Vec<String> = inv
         .args
         .iter()
-        .find(|a| !["dpose", "dt", "p"].contains(&a.name.as_str()))
+        .find(|a| a.role == ArgRole::Configuration)
         .map(|a| a.names.clone())
         .unwrap_or_default();
     let mut cfg = vec![0.0; cfg_names.len()];
@@ -143,10 +139,10 @@ pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
         let args: Vec<&[f64]> = inv
             .args
             .iter()
-            .map(|a| match a.name.as_str() {
-                "dpose" => &dpose[..],
-                "dt" => std::slice::from_ref(&dt),
-                "p" => &r.p[..],
+            .map(|a| match a.role {
+                ArgRole::PoseIncrement => &dpose[..],
+                ArgRole::Dt => std::slice::from_ref(&dt),
+                ArgRole::Params => &r.p[..],
                 _ => &cfg[..],
             })
             .collect();

@@ -6,10 +6,11 @@
 //! gate are rejected and counted. Consistency: NIS (always) and NEES (against
 //! ground truth, when the log has it and the model measures the body pose
 //! directly) against their chi-square bounds.
-use crate::dataset::Run;
 use crate::log::wrap;
 use crate::model::Runner;
-use kinegen_model::spec::ObservationRole::{Pose, RangeBearing};
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::{Pose, RangeBearing};
+use kinegen_model::ir::StepForm;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 #[derive(Debug, Clone)]
@@ -66,13 +67,15 @@ pub fn mean_bounds(n: usize, dof: f64) -> (f64, f64) {
 /// Run the filter over one run.
 pub fn localize(r: &Runner, run: &Run, o: &EkfOptions) -> Result<Localization, String> {
     let h =
-        r.ir.observation_fn(RangeBearing, "")
+        r.ir.observation_kernels(RangeBearing)
+            .map(|o| o.value)
             .ok_or("the model has no range-bearing (`landmark = true`) observation")?;
     let hx =
-        r.ir.observation_fn(RangeBearing, "_jac_x")
+        r.ir.observation_kernels(RangeBearing)
+            .map(|o| o.jac_x)
             .ok_or("the model has no range-bearing observation Jacobian")?;
-    let (step, fx) = (r.f("step_exact"), r.f("step_exact_jac_x"));
-    let fw = r.ir.function("step_exact_jac_w");
+    let exact = r.ir.step(StepForm::Exact);
+    let (step, fx, fw) = (exact.value, exact.jac_x, exact.jac_w);
     let nw = r.ir.noise.len();
     let q = DMatrix::from_diagonal(&DVector::from_iterator(
         nw,

@@ -2,11 +2,11 @@
 //! ([`METHODS`]): the CLI's `--method` choices, `--method all` and the dispatch
 //! all read the registry, so a new method (issue #15's neural gyrodometry, say)
 //! is one `impl` and one line here.
-use crate::dataset::Run;
 use crate::fit::{fit, FitOptions, FitResult};
 use crate::model::Runner;
+use crate::run::Run;
 use crate::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
-use kinegen_model::spec::ObservationRole::YawRate;
+use kinegen_model::decl::ObservationRole::YawRate;
 
 /// What every method may read besides the model and the logs.
 pub struct Settings<'a> {
@@ -177,16 +177,10 @@ impl Method for Neural {
         true
     }
     fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
-        if r.ir.function("twist_gyro").is_none() {
-            return Err(format!(
-                "model `{}` has no twist_gyro to drive with a learned yaw rate",
-                r.ir.name
-            ));
-        }
         let angles: Vec<bool> =
             r.ir.inputs
                 .iter()
-                .map(|i| i.kind == kinegen_model::spec::InputKind::Absolute && i.unit == "rad")
+                .map(|i| i.kind == kinegen_model::decl::InputKind::Absolute && i.unit == "rad")
                 .collect();
         let (net, t) = crate::neural::train(runs, &angles, s.hidden, 0)?;
         let note = format!(

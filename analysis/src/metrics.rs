@@ -1,9 +1,9 @@
 //! How wrong is the model, and where: absolute trajectory error, relative pose
 //! error over distance and time windows, gyro residuals, and which motion regimes
 //! and segments carry the error.
-use crate::dataset::Run;
 use crate::deadreckon::Track;
 use crate::log::wrap;
+use crate::run::Run;
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]

@@ -1,7 +1,7 @@
 //! A model ready to run: its IR, the runtime parameter vector (nominal values with
 //! `--set` overrides) and which parameters are free.
-use kinegen_model::ir::{ArgSpec, Function, ModelIr};
-use kinegen_model::spec::ObservationRole;
+use kinegen_model::decl::ObservationRole;
+use kinegen_model::ir::{ArgRole, ArgSpec, Function, ModelIr, StepForm};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
@@ -111,31 +111,20 @@ impl Runner {
             }
             p[i] = *v;
         }
-        for f in [
-            "step_exact",
-            "step_exact_jac_x",
-            "step_exact_jac_p",
-            "twist",
-        ] {
-            if ir.function(f).is_none() {
-                return Err(ModelError::Missing(ir.name.clone(), f.into()));
-            }
-        }
-        let part = |n: &str| ir.function(n).expect("checked above");
-        let fused = |name: &str, parts: &[&str]| {
-            let parts: Vec<&Function> = parts.iter().map(|n| part(n)).collect();
+        let exact = ir.step(StepForm::Exact);
+        // a model without runtime parameters has no jac_p: its sensitivities are empty
+        let jac_p = exact.jac_p.into_iter();
+        let fused = |name: &str, parts: Vec<&Function>| {
             kinegen_model::fuse::fuse(name, &parts)
                 .map_err(|e| ModelError::Missing(ir.name.clone(), format!("{name} ({e})")))
         };
-        let step_twist = fused("step_twist", &["step_exact", "twist"])?;
+        let step_twist = fused("step_twist", vec![exact.value, ir.twist()])?;
         let step_linearized = fused(
             "step_linearized",
-            &[
-                "step_exact",
-                "twist",
-                "step_exact_jac_x",
-                "step_exact_jac_p",
-            ],
+            [exact.value, ir.twist(), exact.jac_x]
+                .into_iter()
+                .chain(jac_p)
+                .collect(),
         )?;
         let delay = rp.iter().position(|q| q.measurement_delay);
         Ok(Runner {
@@ -149,13 +138,23 @@ impl Runner {
         })
     }
 
-    pub fn f(&self, name: &str) -> &Function {
-        self.ir.function(name).expect("checked in Runner::new")
-    }
-
     /// The noise standard deviations the spec declares for the observation playing `role`.
     pub fn obs_sigma(&self, role: ObservationRole) -> Option<&[f64]> {
         self.ir.observation(role).map(|o| &o.sigma[..])
+    }
+
+    /// The size of a unit change of runtime parameter `i` at `value`, for the
+    /// numerics (scaled variables of the fit, probing steps of diagnosis), so
+    /// radii (cm), gains (s) and offsets (rad) weigh alike: the value's magnitude,
+    /// or 1% of the declared range when the value is smaller (effect parameters
+    /// start at zero), or 1e-3 for an unbounded parameter at zero.
+    pub fn param_scale(&self, i: usize, value: f64) -> f64 {
+        let q = self.ir.runtime_params()[i];
+        let range = match (q.min, q.max) {
+            (Some(a), Some(b)) => 0.01 * (b - a),
+            _ => 1e-3,
+        };
+        value.abs().max(range).max(1e-9)
     }
 
     pub fn param_index(&self, name: &str) -> Option<usize> {
@@ -187,11 +186,11 @@ impl Runner {
         dt: &'a [f64],
         zeros: &'a [f64],
     ) -> &'a [f64] {
-        match a.name.as_str() {
-            "x" => x,
-            "u" => u,
-            "p" => p,
-            "dt" => dt,
+        match a.role {
+            ArgRole::State => x,
+            ArgRole::Inputs => u,
+            ArgRole::Params => p,
+            ArgRole::Dt => dt,
             _ => &zeros[..a.names.len()],
         }
     }
@@ -206,10 +205,10 @@ impl Runner {
     ) -> Vec<&'a [f64]> {
         f.args
             .iter()
-            .map(|a| match a.name.as_str() {
-                "x" => x,
-                "u" => u,
-                "p" => p,
+            .map(|a| match a.role {
+                ArgRole::State => x,
+                ArgRole::Inputs => u,
+                ArgRole::Params => p,
                 _ => lm,
             })
             .collect()

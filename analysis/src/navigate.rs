@@ -9,6 +9,7 @@
 //! each move from its odometry pose.
 use crate::grid::Grid;
 use crate::model::Runner;
+use kinegen_model::ir::{ArgRole, StepForm};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use serde::Serialize;
@@ -82,8 +83,11 @@ pub fn drive(
             belief.ir.name
         ));
     }
-    let inv = belief.f("inverse_increment");
-    let (step_b, step_t) = (belief.f("step_exact"), truth.f("step_exact"));
+    let inv = belief.ir.inverse_increment();
+    let (step_b, step_t) = (
+        belief.ir.step(StepForm::Exact).value,
+        truth.ir.step(StepForm::Exact).value,
+    );
     let zeros = [0.0; 16];
     let mut rng = rand::rngs::SmallRng::seed_from_u64(o.seed);
     let noise = Normal::new(0.0, o.actuation.max(0.0)).map_err(|e| e.to_string())?;
@@ -124,9 +128,9 @@ pub fn drive(
         let args: Vec<&[f64]> = inv
             .args
             .iter()
-            .map(|a| match a.name.as_str() {
-                "dpose" => &per[..],
-                "dt" => std::slice::from_ref(&dt),
+            .map(|a| match a.role {
+                ArgRole::PoseIncrement => &per[..],
+                ArgRole::Dt => std::slice::from_ref(&dt),
                 _ => &belief.p[..],
             })
             .collect();

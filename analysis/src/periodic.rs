@@ -7,9 +7,9 @@
 //! over the coordinate adds it up coherently. The coordinate need not be sampled
 //! evenly or grow monotonically (wheels stop and reverse), so this is a direct
 //! non-uniform Fourier sum, not an FFT.
-use crate::dataset::Run;
 use crate::model::Runner;
-use kinegen_model::spec::InputKind;
+use crate::run::Run;
+use kinegen_model::decl::InputKind;
 
 /// The strongest sinusoid found in one residual channel.
 #[derive(Debug, Clone, Copy)]

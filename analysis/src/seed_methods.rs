@@ -12,11 +12,11 @@
 //! The yaw-rate methods use the gyro column when the log has one; otherwise the
 //! yaw rate measured by the ground-truth heading, (theta_{k+1} - theta_k)/dt: the
 //! reference heading that seed 000 takes from its laser gyro.
-use crate::dataset::Run;
 use crate::deadreckon;
 use crate::log::wrap;
 use crate::model::Runner;
-use kinegen_model::spec::ObservationRole::YawRate;
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::YawRate;
 use nalgebra::{DMatrix, DVector};
 
 /// Measured yaw rate per step (gyro row k+1, or ground-truth heading rate).
@@ -35,11 +35,11 @@ fn yaw_rates(run: &Run) -> Option<Vec<f64>> {
 /// Model yaw rate per step and its gradient w.r.t. the free parameters.
 fn predicted(r: &Runner, p: &[f64], run: &Run, free: &[usize]) -> (Vec<f64>, Vec<Vec<f64>>) {
     let h =
-        r.ir.observation_fn(YawRate, "")
-            .or_else(|| r.ir.function("twist"))
-            .unwrap();
-    let jp = r.ir.observation_fn(YawRate, "_jac_p");
-    let tw = r.f("twist");
+        r.ir.observation_kernels(YawRate)
+            .map(|o| o.value)
+            .unwrap_or(r.ir.twist());
+    let jp = r.ir.observation_kernels(YawRate).and_then(|o| o.jac_p);
+    let tw = r.ir.twist();
     let mut w = Vec::new();
     let mut g = Vec::new();
     let x = [0.0; 3];

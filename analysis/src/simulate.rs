@@ -8,8 +8,9 @@
 //! capture with wrapped heading, noisy gyro.
 use crate::log::wrap;
 use crate::model::Runner;
-use kinegen_model::spec::InputKind;
-use kinegen_model::spec::ObservationRole::{Pose, RangeBearing, YawRate};
+use kinegen_model::decl::InputKind;
+use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
+use kinegen_model::ir::{ArgRole, StepForm};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -99,11 +100,7 @@ pub struct SimLog {
 impl SimLog {
     /// The log as a run of `r`'s model, read as its CSV would be (`name` names
     /// it in messages), without writing a file.
-    pub fn to_run(
-        &self,
-        r: &Runner,
-        name: &str,
-    ) -> Result<crate::dataset::Run, crate::log::LogError> {
+    pub fn to_run(&self, r: &Runner, name: &str) -> Result<crate::run::Run, crate::log::LogError> {
         let columns = self
             .header
             .iter()
@@ -115,7 +112,7 @@ impl SimLog {
             columns,
             len: self.rows.len(),
         };
-        crate::dataset::Run::from_log(&log, r)
+        crate::run::Run::from_log(&log, r)
     }
 }
 
@@ -310,14 +307,14 @@ fn planner(
 /// the configuration inputs (e.g. caster steering angles, see [`config_inputs`])
 /// at `cfg`, one value per configuration input.
 pub fn command_at(base: &Runner, twist: &[f64; 3], cfg: &[f64]) -> Vec<f64> {
-    let inv = base.f("inverse_twist");
+    let inv = base.ir.inverse_twist();
     let args: Vec<&[f64]> = inv
         .args
         .iter()
-        .map(|a| match a.name.as_str() {
-            "twist" => &twist[..],
-            "p" => &base.p[..],
-            "cfg" => cfg,
+        .map(|a| match a.role {
+            ArgRole::Twist => &twist[..],
+            ArgRole::Params => &base.p[..],
+            ArgRole::Configuration => cfg,
             _ => &[][..],
         })
         .collect();
@@ -374,7 +371,7 @@ fn config_rates(base: &Runner, cfg: &[usize]) -> Vec<usize> {
 /// Can the base model turn in place (is the pure rotation in the image of its inputs)?
 pub fn can_spin(base: &Runner) -> bool {
     let u = command(base, &[0.0, 0.0, 1.0]);
-    let t = base.f("twist").eval(&[&u, &base.p]);
+    let t = base.ir.twist().eval(&[&u, &base.p]);
     (t[2] - 1.0).abs() < 1e-6 && t[0].abs() < 1e-9
 }
 
@@ -383,7 +380,7 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     let mut rng = SmallRng::seed_from_u64(o.seed);
     let lateral = {
         let u = command(base, &[0.0, 1.0, 0.0]);
-        base.f("twist").eval(&[&u, &base.p])[1] > 0.5
+        base.ir.twist().eval(&[&u, &base.p])[1] > 0.5
     };
     let spin = can_spin(base);
     let (plan1, dur0) = planner(o, spin, lateral, &mut rng);
@@ -414,13 +411,13 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
             }
         })
         .collect();
-    let step = truth.f("step_exact");
+    let step = truth.ir.step(StepForm::Exact).value;
     let zeros = [0.0; 16];
     let inputs = &truth.ir.inputs;
     let mut cum = vec![0.0; inputs.len()];
     let mut x = [0.0, 0.0, 0.0];
-    let obs_pose = truth.ir.observation_fn(Pose, "");
-    let obs_gyro = truth.ir.observation_fn(YawRate, "");
+    let obs_pose = truth.ir.observation_kernels(Pose).map(|o| o.value);
+    let obs_gyro = truth.ir.observation_kernels(YawRate).map(|o| o.value);
     let cfg_idx = config_inputs(base);
     let cfg_rate = config_rates(base, &cfg_idx);
     let mut header: Vec<String> = vec!["t".into()];
@@ -561,7 +558,7 @@ fn observe_landmarks(
     history: &[(f64, [f64; 3])],
     rng: &mut SmallRng,
 ) -> Vec<(f64, String, f64, f64)> {
-    let Some(h) = truth.ir.observation_fn(RangeBearing, "") else {
+    let Some(h) = truth.ir.observation_kernels(RangeBearing).map(|o| o.value) else {
         return vec![];
     };
     if o.landmarks.is_empty() {

@@ -5,11 +5,12 @@
 //! observed again at the log's observation times with the sensor's noise, and
 //! the filter, told the true noise, localises it; the position error against
 //! this simulated truth is averaged over seeds.
-use crate::dataset::Run;
-use crate::landmarks::LandmarkObs;
 use crate::localize::{localize, EkfOptions};
 use crate::model::Runner;
-use kinegen_model::spec::ObservationRole::RangeBearing;
+use crate::run::LandmarkObs;
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::RangeBearing;
+use kinegen_model::ir::StepForm;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
@@ -39,9 +40,10 @@ fn normal(s: f64) -> Normal<f64> {
 /// process noise `sigmas` (one per `[[noise]]`) and the sensor's noise.
 fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
     let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
-    let step = r.f("step_exact");
+    let step = r.ir.step(StepForm::Exact).value;
     let h =
-        r.ir.observation_fn(RangeBearing, "")
+        r.ir.observation_kernels(RangeBearing)
+            .map(|o| o.value)
             .expect("checked by the caller");
     let sig = r
         .obs_sigma(RangeBearing)

@@ -6,8 +6,8 @@
 //! interpolated between rows. Dead reckoning, calibration, diagnosis and
 //! simulation all ask here, so a delay is handled the same way everywhere and
 //! found by what the spec declares, never by a parameter's name.
-use crate::dataset::Run;
 use crate::model::Runner;
+use crate::run::Run;
 
 /// The measurement delay under parameters `p`, s (0 when the spec declares none).
 pub fn delay(r: &Runner, p: &[f64]) -> f64 {

@@ -10,7 +10,7 @@
 //! Bounded in time for CI: cases stop being checked after
 //! `KINEGEN_FUZZ_SECONDS` (default 20) seconds; `PROPTEST_CASES` raises the
 //! number of cases for a longer local run.
-use kinegen_analysis::dataset::Run;
+use kinegen_analysis::run::Run;
 use kinegen_analysis::{deadreckon, metrics, model::Runner};
 use kinegen_model::ir::ModelIr;
 use proptest::prelude::*;

@@ -15,7 +15,7 @@ use crate::symbolic::{
 };
 use crate::tape::TapeBuilder;
 use kinegen_model::expr::Expr;
-use kinegen_model::ir::{ArgSpec, Function, ModelIr, Op};
+use kinegen_model::ir::{ArgRole, ArgSpec, Function, IrFile, Kernel, ModelIr, Op, StepForm, Wrt};
 use kinegen_model::spec::{Constraints, InputKind, Kinematics, Model, STATE};
 use kinegen_model::{SourceError, SourcePos};
 use std::collections::HashMap;
@@ -50,10 +50,10 @@ struct Arg {
     syms: Vec<Symbol>,
 }
 
-fn arg(sym: &Sym, name: &str, names: &[String]) -> Arg {
+fn arg(sym: &Sym, role: ArgRole, names: &[String]) -> Arg {
     Arg {
         spec: ArgSpec {
-            name: name.to_string(),
+            role,
             names: names.to_vec(),
         },
         syms: names.iter().map(|n| sym.s(n)).collect(),
@@ -115,7 +115,7 @@ fn has_vanishing_denominator(a: AtomView, s: Symbol) -> bool {
 
 /// A derived function before lowering.
 struct Spec {
-    name: String,
+    kernel: Kernel,
     doc: String,
     args: Vec<Arg>,
     /// Intermediates computed once from the arguments (e.g. dth = omega*dt).
@@ -143,11 +143,11 @@ fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), Symbo
     }
     let mut outs = Vec::new();
     for (k, o) in spec.outputs.iter().enumerate() {
-        check_no_placeholder(o, &format!("{} output {k}", spec.name))?;
+        check_no_placeholder(o, &format!("{:?} output {k}", spec.kernel))?;
         let mut o = o.clone();
         for &s in &spec.singular {
             o = regularize(&o, s, fx)
-                .map_err(|e| SymbolicError(format!("{} output {k}: {}", spec.name, e.0)))?;
+                .map_err(|e| SymbolicError(format!("{:?} output {k}: {}", spec.kernel, e.0)))?;
         }
         outs.push(tb.atom(o.as_view())?);
     }
@@ -236,11 +236,14 @@ fn has_negative_power(a: AtomView, s: Symbol) -> bool {
     }
 }
 
-fn finish(spec: Spec, fx: Funcs) -> Result<Function, SymbolicError> {
+fn finish(spec: Spec, model: &Model, fx: Funcs) -> Result<Function, SymbolicError> {
     let (tape, outputs) = lower(&spec, fx, true)?;
     let ops_tree = tree_size(&tape, &outputs);
     Ok(Function {
-        name: spec.name,
+        kernel: spec.kernel,
+        name: spec
+            .kernel
+            .name(|o| model.observations[o as usize].name.clone()),
         doc: spec.doc,
         args: spec.args.into_iter().map(|a| a.spec).collect(),
         rows: spec.rows,
@@ -326,12 +329,12 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let w_names: Vec<String> = model.noise.iter().map(|n| n.name.clone()).collect();
     let p_names: Vec<String> = model.runtime_params().map(|p| p.name.clone()).collect();
     let (ax, au, aw, ap) = (
-        arg(&sym, "x", &state),
-        arg(&sym, "u", &u_names),
-        arg(&sym, "w", &w_names),
-        arg(&sym, "p", &p_names),
+        arg(&sym, ArgRole::State, &state),
+        arg(&sym, ArgRole::Inputs, &u_names),
+        arg(&sym, ArgRole::Noise, &w_names),
+        arg(&sym, ArgRole::Params, &p_names),
     );
-    let adt = arg(&sym, "dt", &strings(&["dt"]));
+    let adt = arg(&sym, ArgRole::Dt, &strings(&["dt"]));
 
     // Body twist with and without noise.
     let twist_noisy: Vec<Atom> = match &model.kinematics {
@@ -353,7 +356,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let twist_rows = strings(&["vx", "vy", "omega"]);
     let pose_rows = strings(&["x", "y", "theta"]);
     fns.push(Spec {
-        name: "twist".into(),
+        kernel: Kernel::Twist,
         doc: format!("Body twist [vx, vy, omega] (m/s, m/s, rad/s) from the inputs: the forward kinematics. {}", model.motion_doc),
         args: vec![au.clone(), ap.clone()],
         lets: vec![],
@@ -388,11 +391,11 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         ),
     };
     fns.push(Spec {
-        name: "twist_gyro".into(),
+        kernel: Kernel::TwistGyro,
         doc: gyro_doc.into(),
         args: vec![
             au.clone(),
-            arg(&sym, "omega", &strings(&["omega"])),
+            arg(&sym, ArgRole::YawRate, &strings(&["omega"])),
             ap.clone(),
         ],
         lets: vec![],
@@ -434,18 +437,25 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         v.extend([ap.clone(), adt.clone()]);
         v
     };
-    let groups: Vec<(&str, &Arg)> = [("x", &ax), ("u", &au), ("w", &aw), ("p", &ap)]
-        .into_iter()
-        .filter(|(_, a)| !a.syms.is_empty())
-        .collect();
+    let groups: Vec<(Wrt, &Arg)> = [
+        (Wrt::State, &ax),
+        (Wrt::Inputs, &au),
+        (Wrt::Noise, &aw),
+        (Wrt::Params, &ap),
+    ]
+    .into_iter()
+    .filter(|(_, a)| !a.syms.is_empty())
+    .collect();
     for (form, outs, chain, doc) in [
-        ("euler", &euler, None, "Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading."),
-        ("exact", &exact, Some((dth_sym, &dth_expr)), "Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch)."),
+        (StepForm::Euler, &euler, None, "Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading."),
+        (StepForm::Exact, &exact, Some((dth_sym, &dth_expr)), "Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch)."),
     ] {
         let lets = chain.map(|(s, e): (Symbol, &Atom)| vec![(s, e.clone())]).unwrap_or_default();
         let singular = if chain.is_some() { vec![dth_sym] } else { vec![] };
+        let step = Kernel::Step(form, None);
+        let step_name = step.name(|_| String::new());
         fns.push(Spec {
-            name: format!("step_{form}"),
+            kernel: step,
             doc: doc.to_string(),
             args: step_args(true),
             lets: lets.clone(),
@@ -459,14 +469,14 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         for (g, garg) in &groups {
             let j = jacobian(outs, &garg.syms, chain);
             let what = match *g {
-                "x" => "state (seed 001 eq. 4 for Euler)",
-                "u" => "inputs",
-                "w" => "noise inputs (seed 001 eq. 5 for Euler)",
-                _ => "parameters",
+                Wrt::State => "state (seed 001 eq. 4 for Euler)",
+                Wrt::Inputs => "inputs",
+                Wrt::Noise => "noise inputs (seed 001 eq. 5 for Euler)",
+                Wrt::Params => "parameters",
             };
             fns.push(Spec {
-                name: format!("step_{form}_jac_{g}"),
-                doc: format!("Jacobian of `step_{form}` with respect to the {what}; rows x, y, theta."),
+                kernel: step.jacobian(*g),
+                doc: format!("Jacobian of `{step_name}` with respect to the {what}; rows x, y, theta."),
                 args: step_args(true),
                 lets: lets.clone(),
                 rows: 3,
@@ -484,7 +494,8 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     for (n, t) in ["vx", "vy", "omega"].iter().zip(&twist) {
         obs_vars.insert(n.to_string(), t.clone());
     }
-    for o in &model.observations {
+    for (index, o) in model.observations.iter().enumerate() {
+        let obs = Kernel::Observation(index as u16, None);
         let outs: Vec<Atom> = o
             .exprs
             .iter()
@@ -493,7 +504,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             .map_err(se)?;
         let mut args = vec![ax.clone(), au.clone(), ap.clone()];
         if o.landmark {
-            args.push(arg(&sym, "lm", &strings(&["xl", "yl"])));
+            args.push(arg(&sym, ArgRole::Landmark, &strings(&["xl", "yl"])));
         }
         let doc = if o.doc.is_empty() {
             format!("Observation `{}`", o.name)
@@ -501,7 +512,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             o.doc.clone()
         };
         fns.push(Spec {
-            name: format!("obs_{}", o.name),
+            kernel: obs,
             doc: format!("{doc} Predicted columns: {}.", o.columns.join(", ")),
             args: args.clone(),
             lets: vec![],
@@ -512,13 +523,13 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             outputs: outs.clone(),
             singular: vec![],
         });
-        for (g, garg) in [("x", &ax), ("p", &ap)] {
+        for (g, garg) in [(Wrt::State, &ax), (Wrt::Params, &ap)] {
             if garg.syms.is_empty() {
                 continue;
             }
             fns.push(Spec {
-                name: format!("obs_{}_jac_{g}", o.name),
-                doc: format!("Jacobian of `obs_{}` with respect to the {} (seed 001 eq. 7 for range-bearing).", o.name, if g == "x" { "state" } else { "parameters" }),
+                kernel: obs.jacobian(g),
+                doc: format!("Jacobian of `obs_{}` with respect to the {} (seed 001 eq. 7 for range-bearing).", o.name, if g == Wrt::State { "state" } else { "parameters" }),
                 args: args.clone(),
                 lets: vec![],
                 rows: outs.len(),
@@ -536,9 +547,9 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
 
     let mut functions = Vec::new();
     for s in fns {
-        functions.push(finish(s, fx).map_err(se)?);
+        functions.push(finish(s, model, fx).map_err(se)?);
     }
-    Ok(ModelIr {
+    ModelIr::try_from(IrFile {
         name: model.name.clone(),
         doc: model.doc.clone(),
         seed: model.seed.clone(),
@@ -546,10 +557,11 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         inputs: model.inputs.clone(),
         params: model.params.clone(),
         noise: model.noise.clone(),
-        observations: model.observations.clone(),
+        observations: model.observations.iter().map(|o| o.decl()).collect(),
         effects: model.effects.clone(),
         functions,
     })
+    .map_err(|e| se(SymbolicError(e.to_string())))
 }
 
 /// The rows of S (seed 000 eq. 7) as atoms, with their rate symbols.
@@ -616,10 +628,11 @@ fn eval_at(a: &Atom, values: &[(Symbol, f64)], fx: Funcs) -> Result<f64, Symboli
     let out = tb.atom(a.as_view())?;
     let (tape, outputs) = tb.finish(&[out]);
     let f = Function {
+        kernel: Kernel::Fused,
         name: String::new(),
         doc: String::new(),
         args: vec![ArgSpec {
-            name: "v".into(),
+            role: ArgRole::Values,
             names: vec![String::new(); vals.len()],
         }],
         rows: 1,
@@ -858,15 +871,15 @@ fn inverse_kinematics(
         (outs, names, "Input rates from a body twist: the inverse of the (square, invertible) map from input rates to the twist rows that are not identically zero, derived symbolically (seed 003: W = (V_T_W)^-1 V).".into())
     };
 
-    let twist_arg = arg(sym, "twist", &strings(&["vx", "vy", "omega"]));
-    let cfg_arg = arg(sym, "cfg", &cfg_names);
+    let twist_arg = arg(sym, ArgRole::Twist, &strings(&["vx", "vy", "omega"]));
+    let cfg_arg = arg(sym, ArgRole::Configuration, &cfg_names);
     let mut args = vec![twist_arg];
     if model.inverse.is_none() && !cfg_names.is_empty() {
         args.push(cfg_arg.clone());
     }
     args.push(ap.clone());
     let mut specs = vec![Spec {
-        name: "inverse_twist".into(),
+        kernel: Kernel::InverseTwist,
         doc,
         args,
         lets: vec![],
@@ -916,7 +929,11 @@ fn inverse_kinematics(
         substitute(&a, tw_syms[2], &om_i)
     };
     let mut args = vec![
-        arg(sym, "dpose", &strings(&["dx", "dy", "dtheta"])),
+        arg(
+            sym,
+            ArgRole::PoseIncrement,
+            &strings(&["dx", "dy", "dtheta"]),
+        ),
         adt.clone(),
     ];
     if model.inverse.is_none() && !cfg_names.is_empty() {
@@ -924,7 +941,7 @@ fn inverse_kinematics(
     }
     args.push(ap.clone());
     specs.push(Spec {
-        name: "inverse_increment".into(),
+        kernel: Kernel::InverseIncrement,
         doc: format!(
             "Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. {} Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.",
             if lateral { "Holonomic: dx, dy and dtheta are all imposed (exact SE(2) logarithm)." } else { "Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15)." }

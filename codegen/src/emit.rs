@@ -1,7 +1,7 @@
 //! Rust emission: one `#![no_std]`-compatible module per model, built with quote
 //! and formatted with prettyplease. Kernels take and return plain arrays, use libm
 //! for transcendental functions, never allocate and never panic.
-use kinegen_model::ir::{Function, ModelIr, Op};
+use kinegen_model::ir::{ArgKind, ArgSpec, Function, ModelIr, Op, StepForm};
 use kinegen_model::schedule::{Group, Item};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
@@ -17,11 +17,10 @@ fn lit(c: f64) -> TokenStream {
     }
 }
 
-fn arg_type(name: &str, len: usize) -> TokenStream {
-    if name == "dt" {
-        quote!(crate::Real)
-    } else {
-        quote!(&[crate::Real; #len])
+fn arg_type(a: &ArgSpec) -> TokenStream {
+    match a.kind() {
+        ArgKind::Scalar => quote!(crate::Real),
+        ArgKind::Vector(len) => quote!(&[crate::Real; #len]),
     }
 }
 
@@ -33,8 +32,8 @@ fn params(f: &Function) -> Vec<TokenStream> {
     f.args
         .iter()
         .map(|a| {
-            let id = format_ident!("{}", a.name);
-            let ty = arg_type(&a.name, a.names.len());
+            let id = format_ident!("{}", a.ident());
+            let ty = arg_type(a);
             quote!(#id: #ty)
         })
         .collect()
@@ -97,12 +96,13 @@ fn emit_function(f: &Function) -> TokenStream {
             Op::Const(c) => lit(c),
             Op::Arg(a, k) => {
                 let spec = &f.args[a as usize];
-                let id = format_ident!("{}", spec.name);
-                if spec.name == "dt" {
-                    quote!(#id)
-                } else {
-                    let k = k as usize;
-                    quote!(#id[#k])
+                let id = format_ident!("{}", spec.ident());
+                match spec.kind() {
+                    ArgKind::Scalar => quote!(#id),
+                    ArgKind::Vector(_) => {
+                        let k = k as usize;
+                        quote!(#id[#k])
+                    }
                 }
             }
             Op::Add(a, b) => {
@@ -210,7 +210,7 @@ fn emit_function(f: &Function) -> TokenStream {
     };
     let mut doc = vec![f.doc.clone(), String::new()];
     for a in &f.args {
-        doc.push(format!("* `{}`: [{}]", a.name, a.names.join(", ")));
+        doc.push(format!("* `{}`: [{}]", a.ident(), a.names.join(", ")));
     }
     if f.is_matrix() {
         doc.push(format!(
@@ -315,28 +315,30 @@ fn powi_chain(x: TokenStream, n: u32) -> TokenStream {
 /// state and the noise; a calibration step the pose with its Jacobians wrt the
 /// state and the parameters; an update each observation with its Jacobians.
 fn fused_kernels(ir: &ModelIr) -> Vec<(String, String, Vec<&Function>)> {
-    let mut want: Vec<(String, String, Vec<String>)> = vec![
+    let exact = ir.step(StepForm::Exact);
+    let mut want: Vec<(String, String, Vec<Option<&Function>>)> = vec![
         (
             "step_exact_linearized".into(),
             "The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3).".into(),
-            vec!["step_exact".into(), "step_exact_jac_x".into(), "step_exact_jac_w".into()],
+            vec![Some(exact.value), Some(exact.jac_x), exact.jac_w],
         ),
         (
             "step_exact_with_jac_p".into(),
             "The exact step with its Jacobians wrt the state and the parameters, from one shared computation: one step of calibration's forward sensitivities.".into(),
-            vec!["step_exact".into(), "step_exact_jac_x".into(), "step_exact_jac_p".into()],
+            vec![Some(exact.value), Some(exact.jac_x), exact.jac_p],
         ),
     ];
-    for o in &ir.observations {
+    for i in 0..ir.observations().len() {
+        let o = ir.observation_kernels_at(i);
         want.push((
-            format!("obs_{}_linearized", o.name),
-            format!("Observation `{}` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.", o.name),
-            ["", "_jac_x", "_jac_p"].iter().map(|s| format!("obs_{}{s}", o.name)).collect(),
+            format!("obs_{}_linearized", o.decl.name),
+            format!("Observation `{}` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.", o.decl.name),
+            vec![Some(o.value), Some(o.jac_x), o.jac_p],
         ));
     }
     want.into_iter()
         .filter_map(|(name, doc, parts)| {
-            let parts: Option<Vec<&Function>> = parts.iter().map(|n| ir.function(n)).collect();
+            let parts: Option<Vec<&Function>> = parts.into_iter().collect();
             parts.map(|p| (name, doc, p))
         })
         .collect()
@@ -359,7 +361,7 @@ fn emit_fused(name: &str, doc: &str, parts: &[&Function]) -> TokenStream {
     let id = format_ident!("{}", name);
     let flat_id = format_ident!("{}", flat_name);
     let params = params(&flat);
-    let vars = flat.args.iter().map(|a| format_ident!("{}", a.name));
+    let vars = flat.args.iter().map(|a| format_ident!("{}", a.ident()));
     let mut at = 0usize;
     let (mut tys, mut vals) = (Vec::new(), Vec::new());
     for p in parts {
@@ -447,19 +449,17 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
     let inames: Vec<&str> = ir.inputs.iter().map(|i| i.name.as_str()).collect();
     let icols: Vec<&str> = ir.inputs.iter().map(|i| i.column.as_str()).collect();
     let ni = inames.len();
-    let fns = ir.functions.iter().map(emit_function);
+    let fns = ir.functions().iter().map(emit_function);
     let fused = fused_kernels(ir);
     let fused = fused.iter().map(|(n, d, parts)| emit_fused(n, d, parts));
-    let arms = ir.functions.iter().map(|f| {
+    let arms = ir.functions().iter().map(|f| {
         let name = &f.name;
         let id = format_ident!("{}", f.name);
         let conv = f.args.iter().enumerate().map(|(i, a)| {
             let v = format_ident!("a{}", i);
-            let n = a.names.len();
-            if a.name == "dt" {
-                quote!(let #v: crate::Real = match args[#i] { [v] => *v, _ => return false };)
-            } else {
-                quote!(let #v: &[crate::Real; #n] = match <&[crate::Real; #n]>::try_from(args[#i]) { Ok(v) => v, Err(_) => return false };)
+            match a.kind() {
+                ArgKind::Scalar => quote!(let #v: crate::Real = match args[#i] { [v] => *v, _ => return false };),
+                ArgKind::Vector(n) => quote!(let #v: &[crate::Real; #n] = match <&[crate::Real; #n]>::try_from(args[#i]) { Ok(v) => v, Err(_) => return false };),
             }
         });
         let vars = (0..f.args.len()).map(|i| format_ident!("a{}", i));

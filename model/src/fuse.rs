@@ -6,22 +6,22 @@
 //! parts have in common is computed once (hash-consing over the merged tape), the
 //! way SymForce's `with_jacobians` functions share it. Each part's outputs are
 //! the same values, to the last bit, as the part evaluated alone.
-use crate::ir::{ArgSpec, Function, Op};
+use crate::ir::{ArgSpec, Function, Kernel, Op};
 use std::collections::HashMap;
 
 /// `parts` as one function named `name`. Its arguments are the union of the
-/// parts' arguments (matched by name, in order of first appearance); its outputs
+/// parts' arguments (matched by role, in order of first appearance); its outputs
 /// the parts' outputs one after another, as a column (`rows` = their total).
-/// Fails when two parts give one argument name different lengths.
+/// Fails when two parts give one argument different lengths.
 pub fn fuse(name: &str, parts: &[&Function]) -> Result<Function, String> {
     let mut args: Vec<ArgSpec> = Vec::new();
     for f in parts {
         for a in &f.args {
-            match args.iter().find(|b| b.name == a.name) {
+            match args.iter().find(|b| b.role == a.role) {
                 Some(b) if b.names.len() != a.names.len() => {
                     return Err(format!(
                         "argument `{}` has {} values in {} but {} in another part",
-                        a.name,
+                        a.ident(),
                         a.names.len(),
                         f.name,
                         b.names.len()
@@ -42,7 +42,7 @@ pub fn fuse(name: &str, parts: &[&Function]) -> Result<Function, String> {
         let arg_of: Vec<u16> = f
             .args
             .iter()
-            .map(|a| args.iter().position(|b| b.name == a.name).unwrap() as u16)
+            .map(|a| args.iter().position(|b| b.role == a.role).unwrap() as u16)
             .collect();
         let mut slot_of: Vec<u32> = Vec::with_capacity(f.tape.len());
         for op in &f.tape {
@@ -62,6 +62,7 @@ pub fn fuse(name: &str, parts: &[&Function]) -> Result<Function, String> {
         }
     }
     Ok(Function {
+        kernel: Kernel::Fused,
         name: name.to_string(),
         doc: format!(
             "{} in one tape",
@@ -86,7 +87,7 @@ pub fn fuse(name: &str, parts: &[&Function]) -> Result<Function, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ir::ModelIr;
+    use crate::ir::{ArgRole, ModelIr, StepForm};
 
     /// On every bundled model, the pose, twist and Jacobians of a step fused give
     /// each part's own outputs to the last bit, with fewer operations than the
@@ -97,13 +98,8 @@ mod tests {
         for entry in std::fs::read_dir(dir).unwrap() {
             let ir = ModelIr::from_json(&std::fs::read_to_string(entry.unwrap().path()).unwrap())
                 .unwrap();
-            let names = [
-                "step_exact",
-                "twist",
-                "step_exact_jac_x",
-                "step_exact_jac_p",
-            ];
-            let parts: Vec<&Function> = names.iter().map(|n| ir.function(n).unwrap()).collect();
+            let exact = ir.step(StepForm::Exact);
+            let parts = vec![exact.value, ir.twist(), exact.jac_x, exact.jac_p.unwrap()];
             let fused = fuse("linearized", &parts).unwrap();
             let apart: usize = parts.iter().map(|f| f.ops_tape()).sum();
             assert!(
@@ -133,7 +129,7 @@ mod tests {
                         .args
                         .iter()
                         .map(|a| {
-                            let k = fused.args.iter().position(|b| b.name == a.name).unwrap();
+                            let k = fused.args.iter().position(|b| b.role == a.role).unwrap();
                             values[k].as_slice()
                         })
                         .collect();
@@ -155,10 +151,11 @@ mod tests {
     #[test]
     fn one_argument_name_with_two_lengths_is_refused() {
         let f = |n: usize| Function {
+            kernel: Kernel::Fused,
             name: format!("f{n}"),
             doc: String::new(),
             args: vec![ArgSpec {
-                name: "x".into(),
+                role: ArgRole::State,
                 names: vec![String::new(); n],
             }],
             rows: 1,

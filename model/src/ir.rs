@@ -5,11 +5,14 @@
 //! subexpressions shared. The same tape is emitted as Rust by kinegen-codegen and
 //! interpreted here by [`Function::eval`], so a freshly edited spec can be fitted
 //! without compiling anything.
-use crate::jit::NativeCache;
-use crate::spec::{
-    Input, Noise, Observation, ObservationRole, Param, DEFAULT_GYRO_COLUMN, DEFAULT_POSE_COLUMNS,
+use crate::decl::{
+    Input, Noise, ObservationDecl, ObservationRole, Param, DEFAULT_GYRO_COLUMN,
+    DEFAULT_POSE_COLUMNS,
 };
+use crate::jit::NativeCache;
+pub use crate::kernel::{ArgKind, ArgRole, ArgSpec, Kernel, StepForm, Wrt};
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// One tape instruction. Operands are indices of earlier slots.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -112,18 +115,13 @@ impl Op {
     }
 }
 
-/// A named argument of a derived function: a vector of `names.len()` values.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ArgSpec {
-    /// Rust-side argument name (`x`, `u`, `w`, `p`, `dt`, `lm`, `twist`, `dpose`).
-    pub name: String,
-    pub names: Vec<String>,
-}
-
 /// A derived function: output matrix of `rows x cols` (cols = 1 for vectors),
 /// stored row-major in `outputs`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Function {
+    /// Which kernel this is; consumers look kernels up by it.
+    pub kernel: Kernel,
+    /// The emitted name (derived from `kernel`, see [`Kernel::name`]).
     pub name: String,
     pub doc: String,
     pub args: Vec<ArgSpec>,
@@ -136,8 +134,9 @@ pub struct Function {
     /// Arithmetic operations if every output were evaluated as its own tree
     /// (before common-subexpression elimination).
     pub ops_tree: usize,
-    /// The tape compiled to machine code once it is hot (see [`crate::jit`]);
-    /// derived from `tape`, so never serialised.
+    /// The tape compiled to machine code once it is hot (see [`crate::jit`]): a
+    /// cache derived from `tape`, empty until then, so never serialised (a
+    /// loaded IR lacks nothing by it).
     #[serde(skip)]
     pub native: NativeCache,
 }
@@ -146,6 +145,11 @@ impl Function {
     /// Arithmetic operations on the tape (after CSE).
     pub fn ops_tape(&self) -> usize {
         self.tape.iter().filter(|o| o.is_arithmetic()).count()
+    }
+
+    /// Position of the argument playing `role`, if the function takes it.
+    pub fn arg(&self, role: ArgRole) -> Option<usize> {
+        self.args.iter().position(|a| a.role == role)
     }
 
     /// Is the output a matrix (Jacobian) rather than a vector?
@@ -229,8 +233,11 @@ impl Function {
     }
 }
 
-/// Everything the analysis side needs to know about a derived model.
+/// Everything the analysis side needs to know about a derived model: the
+/// declarations and the kernels, indexed by [`Kernel`] once, when the IR is built
+/// or loaded (a loaded IR is checked to have every kernel a model must have).
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(try_from = "IrFile", into = "IrFile")]
 pub struct ModelIr {
     pub name: String,
     pub doc: String,
@@ -241,26 +248,212 @@ pub struct ModelIr {
     /// All parameters; `constant` ones are folded into the tapes.
     pub params: Vec<Param>,
     pub noise: Vec<Noise>,
-    pub observations: Vec<Observation>,
+    observations: Vec<ObservationDecl>,
+    pub effects: Vec<String>,
+    functions: Vec<Function>,
+    index: HashMap<Kernel, usize>,
+}
+
+/// The IR as stored in `generated/ir/*.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct IrFile {
+    pub name: String,
+    pub doc: String,
+    pub seed: String,
+    pub spec_fingerprint: String,
+    pub inputs: Vec<Input>,
+    pub params: Vec<Param>,
+    pub noise: Vec<Noise>,
+    pub observations: Vec<ObservationDecl>,
     pub effects: Vec<String>,
     pub functions: Vec<Function>,
 }
 
+/// An IR that lacks a kernel every model has, or holds one twice.
+#[derive(Debug, thiserror::Error)]
+pub enum IrError {
+    #[error("model `{0}`: the IR lacks the kernel `{1}` (regenerate it)")]
+    Missing(String, String),
+    #[error("model `{0}`: the IR holds the kernel `{1}` twice")]
+    Duplicate(String, String),
+    #[error("model `{0}`: `{1}` is a fused kernel, which an IR never holds")]
+    Fused(String, String),
+    #[error("model `{0}`: kernel `{1}` refers to observation {2}, which the IR lacks")]
+    NoObservation(String, String, u16),
+}
+
+impl TryFrom<IrFile> for ModelIr {
+    type Error = IrError;
+
+    fn try_from(f: IrFile) -> Result<ModelIr, IrError> {
+        let mut index = HashMap::new();
+        for (i, k) in f.functions.iter().enumerate() {
+            if let Kernel::Observation(o, _) = k.kernel {
+                if o as usize >= f.observations.len() {
+                    return Err(IrError::NoObservation(f.name, k.name.clone(), o));
+                }
+            }
+            if k.kernel == Kernel::Fused {
+                return Err(IrError::Fused(f.name, k.name.clone()));
+            }
+            if index.insert(k.kernel, i).is_some() {
+                return Err(IrError::Duplicate(f.name, k.name.clone()));
+            }
+        }
+        let mut required = vec![
+            Kernel::Twist,
+            Kernel::TwistGyro,
+            Kernel::InverseTwist,
+            Kernel::InverseIncrement,
+        ];
+        for form in [StepForm::Exact, StepForm::Euler] {
+            required.push(Kernel::Step(form, None));
+            required.push(Kernel::Step(form, Some(Wrt::State)));
+        }
+        for o in 0..f.observations.len() as u16 {
+            required.push(Kernel::Observation(o, None));
+            required.push(Kernel::Observation(o, Some(Wrt::State)));
+        }
+        if let Some(k) = required.into_iter().find(|k| !index.contains_key(k)) {
+            let name = k.name(|o| f.observations[o as usize].name.clone());
+            return Err(IrError::Missing(f.name, name));
+        }
+        Ok(ModelIr {
+            name: f.name,
+            doc: f.doc,
+            seed: f.seed,
+            spec_fingerprint: f.spec_fingerprint,
+            inputs: f.inputs,
+            params: f.params,
+            noise: f.noise,
+            observations: f.observations,
+            effects: f.effects,
+            functions: f.functions,
+            index,
+        })
+    }
+}
+
+impl From<ModelIr> for IrFile {
+    fn from(ir: ModelIr) -> IrFile {
+        IrFile {
+            name: ir.name,
+            doc: ir.doc,
+            seed: ir.seed,
+            spec_fingerprint: ir.spec_fingerprint,
+            inputs: ir.inputs,
+            params: ir.params,
+            noise: ir.noise,
+            observations: ir.observations,
+            effects: ir.effects,
+            functions: ir.functions,
+        }
+    }
+}
+
+/// The kernels of one discretisation: the step and its Jacobians.
+#[derive(Debug, Clone, Copy)]
+pub struct StepKernels<'a> {
+    pub value: &'a Function,
+    pub jac_x: &'a Function,
+    /// Absent when the model has no inputs, noise or runtime parameters.
+    pub jac_u: Option<&'a Function>,
+    pub jac_w: Option<&'a Function>,
+    pub jac_p: Option<&'a Function>,
+}
+
+/// An observation with its prediction and Jacobians.
+#[derive(Debug, Clone, Copy)]
+pub struct ObservationKernels<'a> {
+    pub decl: &'a ObservationDecl,
+    pub value: &'a Function,
+    pub jac_x: &'a Function,
+    /// Absent when the model has no runtime parameters.
+    pub jac_p: Option<&'a Function>,
+}
+
 impl ModelIr {
-    pub fn function(&self, name: &str) -> Option<&Function> {
-        self.functions.iter().find(|f| f.name == name)
+    /// The kernel `k`, if the model has it.
+    pub fn kernel(&self, k: Kernel) -> Option<&Function> {
+        self.index.get(&k).map(|&i| &self.functions[i])
+    }
+
+    /// A kernel every model has (checked when the IR was built or loaded).
+    fn required(&self, k: Kernel) -> &Function {
+        self.kernel(k).expect("checked by ModelIr::try_from")
+    }
+
+    /// Every kernel, in derivation order.
+    pub fn functions(&self) -> &[Function] {
+        &self.functions
+    }
+
+    /// The emitted name of kernel `k` (also for kernels the model lacks).
+    pub fn kernel_name(&self, k: Kernel) -> String {
+        k.name(|o| {
+            self.observations
+                .get(o as usize)
+                .map_or_else(|| format!("#{o}"), |d| d.name.clone())
+        })
+    }
+
+    /// Body twist from the inputs.
+    pub fn twist(&self) -> &Function {
+        self.required(Kernel::Twist)
+    }
+
+    /// Body velocity with a measured yaw rate.
+    pub fn twist_gyro(&self) -> &Function {
+        self.required(Kernel::TwistGyro)
+    }
+
+    /// The step of one discretisation with its Jacobians.
+    pub fn step(&self, form: StepForm) -> StepKernels<'_> {
+        let k = |w| self.kernel(Kernel::Step(form, w));
+        StepKernels {
+            value: self.required(Kernel::Step(form, None)),
+            jac_x: self.required(Kernel::Step(form, Some(Wrt::State))),
+            jac_u: k(Some(Wrt::Inputs)),
+            jac_w: k(Some(Wrt::Noise)),
+            jac_p: k(Some(Wrt::Params)),
+        }
+    }
+
+    /// Inputs from a body twist (every model has its inverse kinematics).
+    pub fn inverse_twist(&self) -> &Function {
+        self.required(Kernel::InverseTwist)
+    }
+
+    /// Inputs from a pose increment over dt.
+    pub fn inverse_increment(&self) -> &Function {
+        self.required(Kernel::InverseIncrement)
+    }
+
+    /// Every observation the spec declares.
+    pub fn observations(&self) -> &[ObservationDecl] {
+        &self.observations
+    }
+
+    /// The kernels of observation number `i`.
+    pub fn observation_kernels_at(&self, i: usize) -> ObservationKernels<'_> {
+        let k = |w| Kernel::Observation(i as u16, w);
+        ObservationKernels {
+            decl: &self.observations[i],
+            value: self.required(k(None)),
+            jac_x: self.required(k(Some(Wrt::State))),
+            jac_p: self.kernel(k(Some(Wrt::Params))),
+        }
     }
 
     /// The observation that plays `role`, if the model has one.
-    pub fn observation(&self, role: ObservationRole) -> Option<&Observation> {
+    pub fn observation(&self, role: ObservationRole) -> Option<&ObservationDecl> {
         self.observations.iter().find(|o| o.role == role)
     }
 
-    /// The derived function of the observation that plays `role`: `part` is ""
-    /// for the prediction, "_jac_x" or "_jac_p" for its Jacobians.
-    pub fn observation_fn(&self, role: ObservationRole, part: &str) -> Option<&Function> {
-        self.observation(role)
-            .and_then(|o| self.function(&format!("obs_{}{part}", o.name)))
+    /// The kernels of the observation that plays `role`, if the model has one.
+    pub fn observation_kernels(&self, role: ObservationRole) -> Option<ObservationKernels<'_>> {
+        let i = self.observations.iter().position(|o| o.role == role)?;
+        Some(self.observation_kernels_at(i))
     }
 
     /// Log columns of the measured pose: the pose observation's, or the contract's
@@ -316,10 +509,11 @@ mod tests {
             },
         ];
         let f = Function {
+            kernel: Kernel::Twist,
             name: "sinc".into(),
             doc: String::new(),
             args: vec![ArgSpec {
-                name: "a".into(),
+                role: ArgRole::Values,
                 names: vec!["a".into()],
             }],
             rows: 1,

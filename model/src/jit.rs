@@ -610,15 +610,22 @@ fn powi(b: &mut FunctionBuilder, x: Value, n: i32) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ir::ArgSpec;
+    use crate::ir::{ArgRole, ArgSpec, Kernel};
 
     fn function(tape: Vec<Op>, outputs: Vec<u32>, args: usize) -> Function {
+        const ROLES: [ArgRole; 4] = [
+            ArgRole::State,
+            ArgRole::Inputs,
+            ArgRole::Noise,
+            ArgRole::Params,
+        ];
         Function {
+            kernel: Kernel::Fused,
             name: "t".into(),
             doc: String::new(),
             args: (0..args)
                 .map(|a| ArgSpec {
-                    name: format!("a{a}"),
+                    role: ROLES[a],
                     names: vec!["v".into(); 3],
                 })
                 .collect(),
@@ -762,7 +769,7 @@ mod bundled {
         for entry in std::fs::read_dir(dir).unwrap() {
             let text = std::fs::read_to_string(entry.unwrap().path()).unwrap();
             let ir = ModelIr::from_json(&text).unwrap();
-            for f in &ir.functions {
+            for f in ir.functions() {
                 let native = Native::compile(f)
                     .unwrap_or_else(|| panic!("{}::{} does not compile", ir.name, f.name));
                 for trial in 0..40u64 {

@@ -2,6 +2,8 @@
 //!
 //! * [`spec`]: the TOML spec language (`spec/*.toml`), parsed and validated with
 //!   errors that point at file, line and column.
+//! * [`decl`]: inputs, parameters, noise and observations as plain data, shared
+//!   by the spec (which parses them) and the IR (which carries them).
 //! * [`expr`]: the math-expression language used inside specs (parser with spans).
 //! * [`ir`]: the serialisable model IR that the derivation stage (kinegen-codegen,
 //!   which owns symbolica) produces, and a fast evaluator for it. The Rust emitter,
@@ -9,12 +11,14 @@
 //!   them ever touches symbolica.
 //! * [`linalg`]: the pseudo-inverse with a rank check used by least-squares
 //!   (constraint) kinematics, shared verbatim with the generated crate.
+pub mod decl;
 pub mod effects;
 pub mod error;
 pub mod expr;
 pub mod fuse;
 pub mod ir;
 pub mod jit;
+pub mod kernel;
 pub mod linalg;
 pub mod schedule;
 pub mod spec;

@@ -2,9 +2,13 @@
 //!
 //! [`Model::load`] parses and validates a spec and reports every problem as a
 //! [`SourceError`] naming the file, line and column.
+pub use crate::decl::{
+    Input, InputKind, Noise, ObservationDecl, ObservationRole, Param, DEFAULT_GYRO_COLUMN,
+    DEFAULT_POSE_COLUMNS,
+};
 use crate::error::{SourceError, SourcePos};
 use crate::expr::{self, Expr, ExprKind, CONSTANTS, FUNCTIONS};
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use toml::Spanned;
@@ -166,124 +170,30 @@ struct RawInverse {
     inputs: Spanned<Vec<Spanned<String>>>,
 }
 
-/// How a log column feeds an input symbol.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum InputKind {
-    /// Cumulative counter or wheel angle; the input symbol is its rate over the step
-    /// (increment / dt), constant within the step.
-    Cumulative,
-    /// Absolute value (e.g. a steering angle) held from the start of the step.
-    Absolute,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Input {
-    pub name: String,
-    pub column: String,
-    pub kind: InputKind,
-    /// Physical domain of the input's value (rate for cumulative inputs), e.g. a
-    /// steering lock; verification samples inside it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub range: Option<[f64; 2]>,
-    /// Bits of a cumulative counter that wraps around (e.g. 16 or 32: a count
-    /// that passes 2^bits starts again at 0, or at -2^(bits-1) for a signed
-    /// one): steps are differenced modulo 2^bits, so a wrap is not read as a
-    /// huge backwards jump.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub wrap: Option<u32>,
-    /// Actuator limit: the largest |rate| the input can deliver (a cumulative
-    /// input's value is its rate; an absolute input's rate is how fast it can
-    /// change, e.g. a steering servo's slew rate), in the input's unit (per
-    /// second for an absolute input). `kinegen inverse` marks where a path
-    /// needs more.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub max_rate: Option<f64>,
-    pub unit: String,
-    pub doc: String,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Param {
-    pub name: String,
-    pub nominal: f64,
-    pub unit: String,
-    pub doc: String,
-    pub min: Option<f64>,
-    pub max: Option<f64>,
-    /// Calibrated by `fit` unless false.
-    pub free: bool,
-    /// Folded into generated code; not a runtime argument.
-    pub constant: bool,
-    /// The delay, in s, of every measurement (poses, gyro) relative to the
-    /// inputs: measurement k, logged at t_k, is compared with the model at
-    /// t_k - delay. At most one parameter of a spec; the analysis handles it in
-    /// one place (kinegen_analysis::timeline).
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub measurement_delay: bool,
-}
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Noise {
-    pub name: String,
-    pub doc: String,
-    pub sigma: f64,
-}
-
-/// What an observation measures. The analysis finds the pose tracker, the gyro
-/// and the range-bearing sensor by role, never by observation name, and effects
-/// patch observations by role.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ObservationRole {
-    /// The pose (x, y, heading) of a body-fixed point, in the world frame: a
-    /// motion-capture marker, a tracker. Three columns.
-    Pose,
-    /// The body yaw rate: a gyro. One column.
-    YawRate,
-    /// Range and bearing to a mapped landmark (`landmark = true`).
-    RangeBearing,
-    /// Anything else: derived and verified, not used by the analysis.
-    Other,
-}
-
-impl ObservationRole {
-    /// Exteroceptive observations see the robot from outside (or the world from
-    /// the robot): where the sensor is mounted matters.
-    pub fn is_exteroceptive(self) -> bool {
-        matches!(self, ObservationRole::Pose | ObservationRole::RangeBearing)
-    }
-
-    /// The role an undeclared observation plays, from its structure: a landmark
-    /// observation is range-bearing; a single expression of the yaw rate is a
-    /// gyro (also with a scale or bias written in); three expressions whose last
-    /// is the heading (an angle) are a pose.
-    fn infer(landmark: bool, exprs: &[Expr], angle: &[bool]) -> ObservationRole {
-        let is_var = |e: &Expr, name: &str| matches!(&e.kind, ExprKind::Var(v) if v == name);
-        if landmark {
-            ObservationRole::RangeBearing
-        } else if exprs.len() == 1
-            && exprs[0].variables().iter().any(|(v, _)| *v == "omega")
-            && !exprs[0]
-                .variables()
-                .iter()
-                .any(|(v, _)| ["x", "y", "theta", "vx", "vy"].contains(v))
-        {
-            ObservationRole::YawRate
-        } else if exprs.len() == 3 && angle.get(2) == Some(&true) && is_var(&exprs[2], "theta") {
-            ObservationRole::Pose
-        } else {
-            ObservationRole::Other
-        }
+/// The role an undeclared observation plays, from its structure: a landmark
+/// observation is range-bearing; a single expression of the yaw rate is a
+/// gyro (also with a scale or bias written in); three expressions whose last
+/// is the heading (an angle) are a pose.
+fn infer_role(landmark: bool, exprs: &[Expr], angle: &[bool]) -> ObservationRole {
+    let is_var = |e: &Expr, name: &str| matches!(&e.kind, ExprKind::Var(v) if v == name);
+    if landmark {
+        ObservationRole::RangeBearing
+    } else if exprs.len() == 1
+        && exprs[0].variables().iter().any(|(v, _)| *v == "omega")
+        && !exprs[0]
+            .variables()
+            .iter()
+            .any(|(v, _)| ["x", "y", "theta", "vx", "vy"].contains(v))
+    {
+        ObservationRole::YawRate
+    } else if exprs.len() == 3 && angle.get(2) == Some(&true) && is_var(&exprs[2], "theta") {
+        ObservationRole::Pose
+    } else {
+        ObservationRole::Other
     }
 }
 
-/// The log columns of a ground-truth pose when a spec declares no pose observation.
-pub const DEFAULT_POSE_COLUMNS: [&str; 3] = ["gt_x", "gt_y", "gt_theta"];
-/// The log column of the yaw rate when a spec declares no yaw-rate observation.
-pub const DEFAULT_GYRO_COLUMN: &str = "gyro_z";
-
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone)]
 pub struct Observation {
     pub name: String,
     pub doc: String,
@@ -292,8 +202,22 @@ pub struct Observation {
     pub sigma: Vec<f64>,
     pub landmark: bool,
     pub role: ObservationRole,
-    #[serde(skip)]
     pub exprs: Vec<Expr>,
+}
+
+impl Observation {
+    /// The observation as the IR carries it (its expressions become kernels).
+    pub fn decl(&self) -> ObservationDecl {
+        ObservationDecl {
+            name: self.name.clone(),
+            doc: self.doc.clone(),
+            columns: self.columns.clone(),
+            angle: self.angle.clone(),
+            sigma: self.sigma.clone(),
+            landmark: self.landmark,
+            role: self.role,
+        }
+    }
 }
 
 /// How the inputs determine the body twist.
@@ -708,7 +632,7 @@ impl Model {
             };
             let role = o
                 .role
-                .unwrap_or_else(|| ObservationRole::infer(o.landmark, &exprs, &angle));
+                .unwrap_or_else(|| infer_role(o.landmark, &exprs, &angle));
             let (want, what) = match role {
                 ObservationRole::Pose => (3, "a pose observation has 3 columns (x, y, heading)"),
                 ObservationRole::YawRate => (1, "a yaw-rate observation has 1 column"),

@@ -34,13 +34,14 @@ pub fn compare(ir: &ModelIr, fx: &Fixture, k: &dyn Kernel) -> Vec<Finding> {
     const TOL: f64 = 1e-10;
     let mut out: Vec<Finding> = Vec::new();
     for p in &fx.points {
-        let Some(f) = ir.function(&p.function) else {
+        // the fixture names kernels as the emitted code does
+        let Some(f) = ir.functions().iter().find(|f| f.name == p.function) else {
             continue;
         };
         let args: Vec<Vec<f64>> = f
             .args
             .iter()
-            .map(|a| p.args.get(&a.name).cloned().unwrap_or_default())
+            .map(|a| p.args.get(a.ident()).cloned().unwrap_or_default())
             .collect();
         let refs: Vec<&[f64]> = args.iter().map(|a| &a[..]).collect();
         let mut got = vec![f64::NAN; f.rows * f.cols];
@@ -51,7 +52,7 @@ pub fn compare(ir: &ModelIr, fx: &Fixture, k: &dyn Kernel) -> Vec<Finding> {
         let idx = match out.iter().position(|x| x.function == f.name) {
             Some(i) => i,
             None => {
-                out.push(Finding::blank(ir, &f.name, "vs CasADi"));
+                out.push(Finding::blank(ir, f, "vs CasADi"));
                 out.len() - 1
             }
         };

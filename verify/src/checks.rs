@@ -2,7 +2,7 @@
 //! normalised error found: error / tolerance, so a value above 1 fails.
 use crate::kernel::{IrKernel, Kernel};
 use crate::sample::Sampler;
-use kinegen_model::ir::{Function, ModelIr};
+use kinegen_model::ir::{ArgRole, Function, Kernel as KernelId, ModelIr, StepForm, Wrt};
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
 
@@ -12,6 +12,8 @@ pub const SWITCH: f64 = 0.05;
 #[derive(Debug, Clone)]
 pub struct Finding {
     pub model: String,
+    /// The kernel checked, and its name for people.
+    pub kernel: KernelId,
     pub function: String,
     pub check: &'static str,
     pub samples: usize,
@@ -26,7 +28,7 @@ pub struct Finding {
 
 impl Finding {
     /// An empty finding for `function` under `check` (for checks outside this module).
-    pub fn blank(ir: &ModelIr, function: &str, check: &'static str) -> Self {
+    pub fn blank(ir: &ModelIr, function: &Function, check: &'static str) -> Self {
         Finding::new(ir, function, check)
     }
 
@@ -42,10 +44,11 @@ impl Finding {
         self.record(err, ratio, entry, args, f)
     }
 
-    fn new(ir: &ModelIr, function: &str, check: &'static str) -> Self {
+    fn new(ir: &ModelIr, function: &Function, check: &'static str) -> Self {
         Finding {
             model: ir.name.clone(),
-            function: function.into(),
+            kernel: function.kernel,
+            function: function.name.clone(),
             check,
             samples: 0,
             max_err: 0.0,
@@ -89,7 +92,7 @@ fn describe(f: &Function, args: &[Vec<f64>]) -> String {
                 .zip(v)
                 .map(|(n, x)| format!("{n}={x:.6e}"))
                 .collect();
-            format!("{}: [{}]", a.name, vals.join(", "))
+            format!("{}: [{}]", a.ident(), vals.join(", "))
         })
         .collect::<Vec<_>>()
         .join("; ")
@@ -181,15 +184,17 @@ pub fn jacobians_vs_finite_differences(
     const TOL: f64 = 1e-6;
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
-    for jf in ir.functions.iter().filter(|f| f.name.contains("_jac_")) {
-        let (base_name, group) = jf.name.rsplit_once("_jac_").unwrap();
-        let Some(base) = ir.function(base_name) else {
+    for jf in ir.functions() {
+        let Some((of, wrt)) = jf.kernel.differentiates() else {
             continue;
         };
-        let Some(gi) = base.args.iter().position(|a| a.name == group) else {
+        let Some(base) = ir.kernel(of) else {
             continue;
         };
-        let mut fd = Finding::new(ir, &jf.name, "jacobian vs FD");
+        let Some(gi) = base.arg(wrt.role()) else {
+            continue;
+        };
+        let mut fd = Finding::new(ir, jf, "jacobian vs FD");
         for _ in 0..n {
             let args = sampler.args(base);
             let j = eval(k, jf, &args);
@@ -198,7 +203,7 @@ pub fn jacobians_vs_finite_differences(
                 let v = args[gi][c];
                 let scale = v
                     .abs()
-                    .max(if group == "p" { v.abs() } else { 1.0 })
+                    .max(if wrt == Wrt::Params { v.abs() } else { 1.0 })
                     .max(1e-6);
                 let diff = |h: f64| {
                     let (mut a, mut b) = (args.clone(), args.clone());
@@ -266,7 +271,7 @@ pub fn kernels_agree(
     seed: u64,
 ) -> Vec<Finding> {
     let mut sampler = Sampler::new(ir, seed);
-    ir.functions
+    ir.functions()
         .iter()
         .map(|f| {
             // Both sides run the same tape; they differ only by the last-ulp
@@ -282,7 +287,7 @@ pub fn kernels_agree(
             } else {
                 1e-12
             };
-            let mut fd = Finding::new(ir, &f.name, "generated vs IR");
+            let mut fd = Finding::new(ir, f, "generated vs IR");
             for _ in 0..n {
                 let args = sampler.args(f);
                 let (x, y) = (eval(a, f, &args), eval(b, f, &args));
@@ -304,32 +309,26 @@ pub fn kernels_agree(
         .collect()
 }
 
-fn arg_pos(f: &Function, name: &str) -> Option<usize> {
-    f.args.iter().position(|a| a.name == name)
-}
-
 /// Exact integration against N Euler sub-steps, N = 1, 64, 4096. Euler's error
 /// on an arc of length s turning by a = omega*dt is about s*|a|/(2N); we require
 /// err <= 0.55*s*|a|/N + 1e-12*(s+1). This also checks Euler -> exact as dt -> 0.
 pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
-    let (Some(ex), Some(eu), Some(tw)) = (
-        ir.function("step_exact"),
-        ir.function("step_euler"),
-        ir.function("twist"),
-    ) else {
-        return vec![];
-    };
+    let (ex, eu, tw) = (
+        ir.step(StepForm::Exact).value,
+        ir.step(StepForm::Euler).value,
+        ir.twist(),
+    );
     let mut sampler = Sampler::new(ir, seed);
-    let mut fd = Finding::new(ir, "step_exact", "exact vs Euler substeps");
+    let mut fd = Finding::new(ir, ex, "exact vs Euler substeps");
     for _ in 0..n {
         let args = sampler.args(ex);
         let (pi, ui, dti) = (
-            arg_pos(ex, "p").unwrap(),
-            arg_pos(ex, "u").unwrap(),
-            arg_pos(ex, "dt").unwrap(),
+            ex.arg(ArgRole::Params).unwrap(),
+            ex.arg(ArgRole::Inputs).unwrap(),
+            ex.arg(ArgRole::Dt).unwrap(),
         );
         let mut args = args;
-        if let Some(wi) = arg_pos(ex, "w") {
+        if let Some(wi) = ex.arg(ArgRole::Noise) {
             args[wi].iter_mut().for_each(|w| *w = 0.0);
         }
         let t = eval(k, tw, &[args[ui].clone(), args[pi].clone()]);
@@ -358,17 +357,17 @@ pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<
         fd.samples += 1;
     }
     // The twist is the Euler step's velocity: step_euler(0, u, 0, p, dt) = twist * dt.
-    let mut ft = Finding::new(ir, "twist", "twist = Euler step / dt");
+    let mut ft = Finding::new(ir, tw, "twist = Euler step / dt");
     for _ in 0..n {
         let mut args = sampler.args(eu);
         args[0] = vec![0.0; 3];
-        if let Some(wi) = arg_pos(eu, "w") {
+        if let Some(wi) = eu.arg(ArgRole::Noise) {
             args[wi].iter_mut().for_each(|w| *w = 0.0);
         }
         let (ui, pi, dti) = (
-            arg_pos(eu, "u").unwrap(),
-            arg_pos(eu, "p").unwrap(),
-            arg_pos(eu, "dt").unwrap(),
+            eu.arg(ArgRole::Inputs).unwrap(),
+            eu.arg(ArgRole::Params).unwrap(),
+            eu.arg(ArgRole::Dt).unwrap(),
         );
         let t = eval(k, tw, &[args[ui].clone(), args[pi].clone()]);
         let step = eval(k, eu, &args);
@@ -394,18 +393,16 @@ pub fn exact_vs_euler(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<
 /// minimiser also minimises with omega fixed at its optimum), so the inputs are
 /// perturbed by a few percent to make the least squares bite.
 pub fn gyrodometry_consistency(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Finding {
-    let mut fd = Finding::new(ir, "twist_gyro", "gyrodometry = odometry at model omega");
-    let (Some(g), Some(tw)) = (ir.function("twist_gyro"), ir.function("twist")) else {
-        return fd;
-    };
+    let (g, tw) = (ir.twist_gyro(), ir.twist());
+    let mut fd = Finding::new(ir, g, "gyrodometry = odometry at model omega");
     let mut sampler = Sampler::new(ir, seed);
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     for _ in 0..n {
         let mut args = sampler.args(g);
         let (ui, oi, pi) = (
-            arg_pos(g, "u").unwrap(),
-            arg_pos(g, "omega").unwrap(),
-            arg_pos(g, "p").unwrap(),
+            g.arg(ArgRole::Inputs).unwrap(),
+            g.arg(ArgRole::YawRate).unwrap(),
+            g.arg(ArgRole::Params).unwrap(),
         );
         for (v, inp) in args[ui].iter_mut().zip(&ir.inputs) {
             if inp.kind == kinegen_model::spec::InputKind::Cumulative {
@@ -432,13 +429,14 @@ pub fn gyrodometry_consistency(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64
 }
 
 fn twist_of(ir: &ModelIr, k: &dyn Kernel, u: &[f64], p: &[f64]) -> Vec<f64> {
-    eval(k, ir.function("twist").unwrap(), &[u.to_vec(), p.to_vec()])
+    eval(k, ir.twist(), &[u.to_vec(), p.to_vec()])
 }
 
 /// Assemble the model's input vector from an inverse-kinematics output (rates or
 /// all inputs) plus configuration inputs.
 fn inputs_from(ir: &ModelIr, inv: &Function, out: &[f64], cfg: &[f64]) -> Vec<f64> {
-    let cfg_names: Vec<String> = arg_pos(inv, "cfg")
+    let cfg_names: Vec<String> = inv
+        .arg(ArgRole::Configuration)
         .map(|i| inv.args[i].names.clone())
         .unwrap_or_default();
     ir.inputs
@@ -472,15 +470,17 @@ pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) ->
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
     let rows = sampler.twist_rows;
-    if let Some(inv) = ir.function("inverse_twist") {
-        let mut fd = Finding::new(ir, "inverse_twist", "forward(inverse) = id");
+    {
+        let inv = ir.inverse_twist();
+        let mut fd = Finding::new(ir, inv, "forward(inverse) = id");
         for _ in 0..n {
             let args = sampler.args(inv);
             let o = eval(k, inv, &args);
-            let cfg = arg_pos(inv, "cfg")
+            let cfg = inv
+                .arg(ArgRole::Configuration)
                 .map(|i| args[i].clone())
                 .unwrap_or_default();
-            let p = args[arg_pos(inv, "p").unwrap()].clone();
+            let p = args[inv.arg(ArgRole::Params).unwrap()].clone();
             let u = inputs_from(ir, inv, &o, &cfg);
             let back = twist_of(ir, k, &u, &p);
             let t = &args[0];
@@ -498,24 +498,26 @@ pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) ->
         }
         out.push(fd);
     }
-    if let (Some(inv), Some(ex)) = (ir.function("inverse_increment"), ir.function("step_exact")) {
-        let mut fd = Finding::new(ir, "inverse_increment", "integrated inverse");
+    {
+        let inv = ir.inverse_increment();
+        let ex = ir.step(StepForm::Exact).value;
+        let mut fd = Finding::new(ir, inv, "integrated inverse");
         for _ in 0..n {
             let args = sampler.args(inv);
             let o = eval(k, inv, &args);
-            let cfg = arg_pos(inv, "cfg")
+            let cfg = inv
+                .arg(ArgRole::Configuration)
                 .map(|i| args[i].clone())
                 .unwrap_or_default();
-            let p = args[arg_pos(inv, "p").unwrap()].clone();
-            let dt = args[arg_pos(inv, "dt").unwrap()].clone();
+            let p = args[inv.arg(ArgRole::Params).unwrap()].clone();
+            let dt = args[inv.arg(ArgRole::Dt).unwrap()].clone();
             let u = inputs_from(ir, inv, &o, &cfg);
             let mut sa: Vec<Vec<f64>> = Vec::new();
             for a in &ex.args {
-                sa.push(match a.name.as_str() {
-                    "x" => vec![0.0; 3],
-                    "u" => u.clone(),
-                    "p" => p.clone(),
-                    "dt" => dt.clone(),
+                sa.push(match a.role {
+                    ArgRole::Inputs => u.clone(),
+                    ArgRole::Params => p.clone(),
+                    ArgRole::Dt => dt.clone(),
                     _ => vec![0.0; a.names.len()],
                 });
             }
@@ -556,15 +558,19 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
     let small = [1e-12, -1e-12, 1e-8, -1e-8, 1e-4, -1e-4];
-    let names: Vec<String> = ir
-        .functions
+    let singular: Vec<&Function> = ir
+        .functions()
         .iter()
-        .filter(|f| f.name.starts_with("step_exact") || f.name == "inverse_increment")
-        .map(|f| f.name.clone())
+        .filter(|f| {
+            matches!(
+                f.kernel,
+                KernelId::Step(StepForm::Exact, _) | KernelId::InverseIncrement
+            )
+        })
         .collect();
-    for name in names {
-        let f = ir.function(&name).unwrap();
-        let mut fd = Finding::new(ir, &name, "singular limit");
+    for f in singular {
+        let increment = f.kernel == KernelId::InverseIncrement;
+        let mut fd = Finding::new(ir, f, "singular limit");
         for _ in 0..n {
             let base = sampler.args(f);
             // Argument values that put the singular variable at s, everything else
@@ -573,19 +579,19 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
             let rng0 = sampler.rng.clone();
             let mut eval_at = |s: f64| {
                 let mut a = base.clone();
-                if name == "inverse_increment" {
+                if increment {
                     a[0][2] = s;
                 } else {
                     let (ui, pi, dti) = (
-                        arg_pos(f, "u").unwrap(),
-                        arg_pos(f, "p").unwrap(),
-                        arg_pos(f, "dt").unwrap(),
+                        f.arg(ArgRole::Inputs).unwrap(),
+                        f.arg(ArgRole::Params).unwrap(),
+                        f.arg(ArgRole::Dt).unwrap(),
                     );
                     let mut tw = tw0.clone();
                     tw[2] = s / a[dti][0];
                     sampler.rng = rng0.clone();
                     a[ui] = sampler.inputs_for(&tw, &a[pi]);
-                    if let Some(wi) = arg_pos(f, "w") {
+                    if let Some(wi) = f.arg(ArgRole::Noise) {
                         a[wi].iter_mut().for_each(|w| *w = 0.0);
                     }
                 }
@@ -670,13 +676,10 @@ enum Frame {
 fn frames(ir: &ModelIr) -> Vec<(&kinegen_model::ir::Function, Frame, Vec<bool>)> {
     use kinegen_model::spec::ObservationRole as Role;
     let mut out = Vec::new();
-    for name in ["step_euler", "step_exact"] {
-        out.extend(
-            ir.function(name)
-                .map(|f| (f, Frame::Pose, vec![false, false, true])),
-        );
+    for form in [StepForm::Euler, StepForm::Exact] {
+        out.push((ir.step(form).value, Frame::Pose, vec![false, false, true]));
     }
-    for o in &ir.observations {
+    for (i, o) in ir.observations().iter().enumerate() {
         let frame = match o.role {
             Role::Pose => Frame::Pose,
             Role::YawRate | Role::RangeBearing => Frame::Invariant,
@@ -685,10 +688,7 @@ fn frames(ir: &ModelIr) -> Vec<(&kinegen_model::ir::Function, Frame, Vec<bool>)>
         let angles = (0..o.angle.len())
             .map(|i| o.angle[i] || (frame == Frame::Pose && i == 2))
             .collect();
-        out.extend(
-            ir.function(&format!("obs_{}", o.name))
-                .map(|f| (f, frame, angles)),
-        );
+        out.push((ir.observation_kernels_at(i).value, frame, angles));
     }
     out
 }
@@ -700,7 +700,7 @@ pub fn se2_equivariance(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Ve
     let mut out = Vec::new();
     let mut sampler = Sampler::new(ir, seed);
     for (f, frame, angles) in frames(ir) {
-        let mut fd = Finding::new(ir, &f.name, "SE(2) equivariance");
+        let mut fd = Finding::new(ir, f, "SE(2) equivariance");
         for _ in 0..n {
             let args = sampler.args(f);
             let (tx, ty, phi): (f64, f64, f64) = (
@@ -717,7 +717,7 @@ pub fn se2_equivariance(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Ve
             let mut moved = args.clone();
             let [gx, gy] = g(&args[0]);
             moved[0] = vec![gx, gy, args[0][2] + phi];
-            if let Some(li) = arg_pos(f, "lm") {
+            if let Some(li) = f.arg(ArgRole::Landmark) {
                 let [lx, ly] = g(&args[li]);
                 moved[li] = vec![lx, ly];
             }

@@ -1,5 +1,5 @@
 //! What is verified: a way to evaluate a model's functions by name.
-use kinegen_model::ir::{Function, ModelIr, Op};
+use kinegen_model::ir::{Function, Kernel as KernelId, ModelIr, Op};
 
 pub trait Kernel {
     /// Evaluate `f` (row-major output); false if this kernel lacks the function.
@@ -38,6 +38,8 @@ impl Kernel for Generated {
 /// entry gets its sign flipped (the kind of slip a hand derivation makes). The
 /// corrupted tape is what the emitter would turn into code.
 pub struct Corrupted {
+    pub kernel: KernelId,
+    /// The corrupted kernel's name, for messages.
     pub function: String,
     pub tape: Vec<Op>,
     pub outputs: Vec<u32>,
@@ -45,8 +47,8 @@ pub struct Corrupted {
 
 impl Corrupted {
     /// Flip the sign of one term of output `entry` of `function`.
-    pub fn flip_term(ir: &ModelIr, function: &str, entry: usize) -> Corrupted {
-        let f = ir.function(function).expect("function exists");
+    pub fn flip_term(ir: &ModelIr, kernel: KernelId, entry: usize) -> Corrupted {
+        let f = ir.kernel(kernel).expect("the model has the kernel");
         let mut tape = f.tape.clone();
         let mut outputs = f.outputs.clone();
         let slot = outputs[entry] as usize;
@@ -59,7 +61,8 @@ impl Corrupted {
             }
         }
         Corrupted {
-            function: function.to_string(),
+            kernel,
+            function: f.name.clone(),
             tape,
             outputs,
         }
@@ -68,7 +71,7 @@ impl Corrupted {
 
 impl Kernel for Corrupted {
     fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool {
-        if f.name == self.function {
+        if f.kernel == self.kernel {
             let g = Function {
                 tape: self.tape.clone(),
                 outputs: self.outputs.clone(),

@@ -1,7 +1,7 @@
 //! Sampling a model's domain: poses, physically meaningful inputs (obtained from a
 //! random body twist through the model's own inverse kinematics), parameters around
 //! their nominal values within their bounds, noise at a few sigma, landmarks.
-use kinegen_model::ir::{Function, ModelIr};
+use kinegen_model::ir::{ArgRole, Function, ModelIr};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
@@ -13,9 +13,7 @@ pub struct Sampler<'a> {
 }
 
 pub fn twist_rows(ir: &ModelIr) -> [bool; 3] {
-    let Some(tw) = ir.function("twist") else {
-        return [true; 3];
-    };
+    let tw = ir.twist();
     let mut rows = [false; 3];
     let mut rng = SmallRng::seed_from_u64(7);
     // over the sampled parameter domain, not only at nominal values (an effect
@@ -96,14 +94,11 @@ impl<'a> Sampler<'a> {
 
     /// Inputs that produce `twist` with parameters `p` (through inverse_twist).
     pub fn inputs_for(&mut self, twist: &[f64], p: &[f64]) -> Vec<f64> {
-        let n = self.ir.inputs.len();
-        let Some(inv) = self.ir.function("inverse_twist") else {
-            return (0..n).map(|_| self.rng.gen_range(-10.0..10.0)).collect();
-        };
+        let inv = self.ir.inverse_twist();
         let cfg: Vec<f64> = inv
             .args
             .iter()
-            .find(|a| a.name == "cfg")
+            .find(|a| a.role == ArgRole::Configuration)
             .map(|a| {
                 a.names
                     .iter()
@@ -114,9 +109,9 @@ impl<'a> Sampler<'a> {
         let args: Vec<&[f64]> = inv
             .args
             .iter()
-            .map(|a| match a.name.as_str() {
-                "twist" => twist,
-                "cfg" => &cfg[..],
+            .map(|a| match a.role {
+                ArgRole::Twist => twist,
+                ArgRole::Configuration => &cfg[..],
                 _ => p,
             })
             .collect();
@@ -133,7 +128,7 @@ impl<'a> Sampler<'a> {
                         let k = inv
                             .args
                             .iter()
-                            .find(|a| a.name == "cfg")
+                            .find(|a| a.role == ArgRole::Configuration)
                             .and_then(|a| a.names.iter().position(|c| *c == i.name));
                         k.map(|k| cfg[k]).unwrap_or(0.0)
                     })
@@ -175,19 +170,19 @@ impl<'a> Sampler<'a> {
         }
         f.args
             .iter()
-            .map(|a| match a.name.as_str() {
-                "x" => pose.clone(),
-                "u" => u.clone(),
-                "w" => self.noise(),
-                "p" => p.clone(),
-                "dt" => vec![self.rng.gen_range(0.005..0.2)],
-                "lm" => {
+            .map(|a| match a.role {
+                ArgRole::State => pose.clone(),
+                ArgRole::Inputs => u.clone(),
+                ArgRole::Noise => self.noise(),
+                ArgRole::Params => p.clone(),
+                ArgRole::Dt => vec![self.rng.gen_range(0.005..0.2)],
+                ArgRole::Landmark => {
                     let (r, b) = (self.rng.gen_range(1.0..10.0), self.rng.gen_range(-3.1..3.1));
                     vec![pose[0] + r * f64::cos(b), pose[1] + r * f64::sin(b)]
                 }
-                "twist" => tw.clone(),
-                "omega" => vec![tw[2]],
-                "dpose" => {
+                ArgRole::Twist => tw.clone(),
+                ArgRole::YawRate => vec![tw[2]],
+                ArgRole::PoseIncrement => {
                     let d: f64 = self.rng.gen_range(-1.0..1.0);
                     let dy = if self.twist_rows[1] {
                         self.rng.gen_range(-0.5..0.5)
@@ -196,7 +191,7 @@ impl<'a> Sampler<'a> {
                     };
                     vec![self.rng.gen_range(-1.0..1.0), dy, d]
                 }
-                _ => a
+                ArgRole::Configuration | ArgRole::Values => a
                     .names
                     .iter()
                     .map(|_| self.rng.gen_range(-1.0..1.0))

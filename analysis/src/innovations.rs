@@ -1,0 +1,102 @@
+//! Range-bearing innovations along a dead-reckoned track: each observation
+//! predicted through the model's `landmark` observation (seed 001 eq. 6) at the
+//! track interpolated to its time, so the innovations (seed 001's EKF update)
+//! measure the model's error.
+use crate::deadreckon::Track;
+use crate::interp::lerp3;
+use crate::log::wrap;
+use crate::model::Runner;
+use crate::run::{LandmarkObs, Run};
+use kinegen_model::decl::ObservationRole::RangeBearing;
+use serde::Serialize;
+use std::collections::HashMap;
+
+/// Where an observation falls on a track: (step j, fraction a, interpolated pose).
+pub fn locate_on(run: &Run, track: &Track, t: f64) -> (usize, f64, [f64; 3]) {
+    let (j, a) = run.locate(t);
+    let a = a.clamp(0.0, 1.0);
+    let (p0, p1) = (track.pose[j], track.pose[j + 1]);
+    (j, a, lerp3(&p0, &p1, a))
+}
+
+/// Model prediction (range, bearing) of an observation from a track.
+pub fn predict(
+    r: &Runner,
+    p: &[f64],
+    run: &Run,
+    track: &Track,
+    o: &LandmarkObs,
+) -> Option<[f64; 2]> {
+    let h = r.ir.observation_kernels(RangeBearing).map(|o| o.value)?;
+    let (j, _, x) = locate_on(run, track, o.t);
+    let u = &run.u[j.min(run.steps() - 1)];
+    let v = h.eval(&Runner::obs_args(h, &x, u, p, &[o.xl, o.yl]));
+    Some([v[0], v[1]])
+}
+
+/// One innovation: measured minus predicted.
+#[derive(Debug, Clone, Serialize)]
+pub struct Innovation {
+    pub t: f64,
+    pub id: String,
+    pub range_m: f64,
+    pub bearing_rad: f64,
+}
+
+/// Innovation summary over runs.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct InnovationStats {
+    pub observations: usize,
+    pub landmarks: usize,
+    pub range_rmse_m: f64,
+    pub bearing_rmse_rad: f64,
+    pub range_bias_m: f64,
+    pub bearing_bias_rad: f64,
+    /// The landmark with the largest RMS range innovation, and that RMS.
+    pub worst_landmark: Option<(String, f64)>,
+}
+
+pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &Track) -> Vec<Innovation> {
+    run.landmarks
+        .iter()
+        .filter_map(|o| {
+            predict(r, p, run, track, o).map(|pr| Innovation {
+                t: o.t,
+                id: o.id.clone(),
+                range_m: o.range - pr[0],
+                bearing_rad: wrap(o.bearing - pr[1]),
+            })
+        })
+        .collect()
+}
+
+pub fn stats(all: &[Innovation]) -> Option<InnovationStats> {
+    if all.is_empty() {
+        return None;
+    }
+    let n = all.len() as f64;
+    let mut per: HashMap<&str, (f64, usize)> = HashMap::new();
+    for i in all {
+        let e = per.entry(&i.id).or_default();
+        e.0 += i.range_m * i.range_m;
+        e.1 += 1;
+    }
+    let worst = per
+        .iter()
+        .map(|(id, (s, k))| (id.to_string(), (s / *k as f64).sqrt()))
+        .max_by(|a, b| a.1.total_cmp(&b.1));
+    Some(InnovationStats {
+        observations: all.len(),
+        landmarks: per.len(),
+        range_rmse_m: (all.iter().map(|i| i.range_m * i.range_m).sum::<f64>() / n).sqrt(),
+        bearing_rmse_rad: (all
+            .iter()
+            .map(|i| i.bearing_rad * i.bearing_rad)
+            .sum::<f64>()
+            / n)
+            .sqrt(),
+        range_bias_m: all.iter().map(|i| i.range_m).sum::<f64>() / n,
+        bearing_bias_rad: all.iter().map(|i| i.bearing_rad).sum::<f64>() / n,
+        worst_landmark: worst,
+    })
+}

@@ -1,0 +1,226 @@
+//! A run: one log as model steps (per-step inputs, step lengths) with its
+//! measurements, and what follows from the run alone (where it rests, where a
+//! time falls among its rows, its pieces). Reading logs into runs is
+//! [`crate::dataset`]; everything that runs a model over a run sits above both.
+use crate::rows::Inputs;
+
+#[derive(Debug, Clone)]
+pub struct Run {
+    pub name: String,
+    /// The log file as the user named it (runs are reported by path: two runs
+    /// called `run1.csv` in different directories are different runs).
+    pub path: String,
+    pub t: Vec<f64>,
+    /// Step k goes from row k to row k+1.
+    pub dt: Vec<f64>,
+    pub u: Inputs,
+    /// Ground-truth pose per row, heading unwrapped.
+    pub gt: Option<Vec<[f64; 3]>>,
+    /// Gyro yaw rate per row; row k+1 is compared with the model rate of step k.
+    pub gyro: Option<Vec<f64>>,
+    /// Range-bearing observations of mapped landmarks during the run (may be empty).
+    pub landmarks: Vec<LandmarkObs>,
+    /// Which inputs are rates of cumulative columns (the others are absolute
+    /// values, like a steering angle, which say nothing about standing still).
+    pub rate_inputs: Vec<bool>,
+}
+
+/// One range-bearing observation, with the mapped landmark it refers to.
+#[derive(Debug, Clone)]
+pub struct LandmarkObs {
+    pub t: f64,
+    pub id: String,
+    pub xl: f64,
+    pub yl: f64,
+    pub range: f64,
+    pub bearing: f64,
+}
+
+impl Run {
+    pub fn steps(&self) -> usize {
+        self.dt.len()
+    }
+
+    /// Where dead reckoning starts: the mean ground-truth pose over the rows before
+    /// the inputs first change (the robot at rest), which averages out the motion
+    /// capture noise that would otherwise rotate the whole track; row 0 if the robot
+    /// moves at once. Origin when there is no ground truth.
+    ///
+    /// Without ground truth, the pose that places the landmarks seen during that
+    /// rest (or the first 0.1 s) on the map, if at least two are seen.
+    pub fn start_pose(&self) -> [f64; 3] {
+        let rest_rows = self.rest_steps();
+        let Some(g) = &self.gt else {
+            return pose_from_landmarks(&self.landmarks, self.start_window_end())
+                .unwrap_or([0.0; 3]);
+        };
+        let rest = rest_rows.max(1).min(g.len());
+        let mut m = [0.0; 3];
+        for p in &g[..rest] {
+            for i in 0..3 {
+                m[i] += p[i] / rest as f64;
+            }
+        }
+        m
+    }
+
+    /// The range-bearing observations that see the start pose (see
+    /// [`Run::start_window_end`]), if they fix it: two distinct landmarks.
+    pub fn start_observations(&self) -> Option<Vec<&LandmarkObs>> {
+        observations_until(&self.landmarks, self.start_window_end())
+    }
+
+    /// Until when observations still see the start pose: the end of the rest
+    /// at the start, or the first 0.1 s when the robot moves at once.
+    pub fn start_window_end(&self) -> f64 {
+        let rest_rows = self.rest_steps();
+        if rest_rows > 0 {
+            self.t[rest_rows]
+        } else {
+            self.t[0] + 0.1
+        }
+    }
+
+    /// Leading steps in which the robot stands still: every rate input is zero
+    /// (a steering angle may read anything while the robot stands).
+    /// A model without rate inputs (speeds given directly) stands when all are zero.
+    pub fn rest_steps(&self) -> usize {
+        let any_rate = self.rate_inputs.iter().any(|r| *r);
+        self.u
+            .iter()
+            .take_while(|u| {
+                u.iter().enumerate().all(|(i, v)| {
+                    *v == 0.0 || (any_rate && !self.rate_inputs.get(i).copied().unwrap_or(true))
+                })
+            })
+            .count()
+    }
+
+    /// Where time `s` falls among the rows: (j, a) with t_j <= s < t_{j+1} and
+    /// a = (s - t_j)/(t_{j+1} - t_j), j clamped to the first and last interval (so
+    /// a may fall outside [0, 1] before the start or after the end: linear
+    /// extrapolation).
+    pub fn locate(&self, s: f64) -> (usize, f64) {
+        let n = self.t.len();
+        let j = self.t.partition_point(|t| *t <= s).clamp(1, n - 1) - 1;
+        (j, (s - self.t[j]) / (self.t[j + 1] - self.t[j]))
+    }
+
+    /// Rows `a..b` (inclusive of b-1) as a run of their own.
+    pub fn slice(&self, a: usize, b: usize) -> Run {
+        Run {
+            name: format!("{}[{a}..{b}]", self.name),
+            path: self.path.clone(),
+            t: self.t[a..b].to_vec(),
+            dt: self.dt[a..b - 1].to_vec(),
+            u: self.u.slice(a, b - 1),
+            gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
+            gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
+            landmarks: self
+                .landmarks
+                .iter()
+                .filter(|o| o.t >= self.t[a] && o.t <= self.t[b - 1])
+                .cloned()
+                .collect(),
+            rate_inputs: self.rate_inputs.clone(),
+        }
+    }
+
+    /// Split a long run into pieces of about `seconds`, each dead-reckoned from its
+    /// own measured start pose (a run shorter than twice that stays whole).
+    pub fn segments(&self, seconds: f64) -> Vec<Run> {
+        let dur = self.t.last().unwrap() - self.t[0];
+        if dur < 2.0 * seconds || self.gt.is_none() {
+            return vec![self.clone()];
+        }
+        let mut out = Vec::new();
+        let mut a = 0;
+        while a + 2 < self.t.len() {
+            let mut b = a + 1;
+            while b < self.t.len() && self.t[b] - self.t[a] < seconds {
+                b += 1;
+            }
+            let b = if self.t.len() - b < 10 {
+                self.t.len()
+            } else {
+                (b + 1).min(self.t.len())
+            };
+            out.push(self.slice(a, b));
+            a = b - 1;
+        }
+        out
+    }
+}
+
+/// The robot pose from landmarks seen while it stands still at the start (at
+/// least two distinct landmarks before `t_until`): each observation places a
+/// landmark in the robot frame, and the rigid transform that maps those points
+/// onto the map is the pose (2-D Kabsch / Procrustes, closed form). Used when a
+/// log has no ground truth.
+pub fn pose_from_landmarks(obs: &[LandmarkObs], t_until: f64) -> Option<[f64; 3]> {
+    let seen = observations_until(obs, t_until)?;
+    let body: Vec<[f64; 2]> = seen
+        .iter()
+        .map(|o| [o.range * o.bearing.cos(), o.range * o.bearing.sin()])
+        .collect();
+    let world: Vec<[f64; 2]> = seen.iter().map(|o| [o.xl, o.yl]).collect();
+    let n = seen.len() as f64;
+    let mean = |v: &[[f64; 2]]| {
+        [
+            v.iter().map(|p| p[0]).sum::<f64>() / n,
+            v.iter().map(|p| p[1]).sum::<f64>() / n,
+        ]
+    };
+    let (mb, mw) = (mean(&body), mean(&world));
+    let (mut sdot, mut scross) = (0.0, 0.0);
+    for (b, w) in body.iter().zip(&world) {
+        let (bx, by, wx, wy) = (b[0] - mb[0], b[1] - mb[1], w[0] - mw[0], w[1] - mw[1]);
+        sdot += bx * wx + by * wy;
+        scross += bx * wy - by * wx;
+    }
+    let th = scross.atan2(sdot);
+    let (s, c) = th.sin_cos();
+    Some([
+        mw[0] - (c * mb[0] - s * mb[1]),
+        mw[1] - (s * mb[0] + c * mb[1]),
+        th,
+    ])
+}
+
+/// The observations up to `t_until`, if they see at least two distinct
+/// landmarks (what fixes a pose).
+pub fn observations_until(obs: &[LandmarkObs], t_until: f64) -> Option<Vec<&LandmarkObs>> {
+    let seen: Vec<&LandmarkObs> = obs.iter().filter(|o| o.t <= t_until).collect();
+    let distinct: std::collections::HashSet<&str> = seen.iter().map(|o| o.id.as_str()).collect();
+    (distinct.len() >= 2).then_some(seen)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pose_from_two_landmarks_is_exact() {
+        let pose = [1.0, -2.0, 0.7];
+        let marks = [("a", 4.0, 1.0), ("b", -1.0, 3.0), ("c", 0.0, -5.0)];
+        let obs: Vec<LandmarkObs> = marks
+            .iter()
+            .map(|(id, x, y)| {
+                let (dx, dy) = (x - pose[0], y - pose[1]);
+                LandmarkObs {
+                    t: 0.0,
+                    id: id.to_string(),
+                    xl: *x,
+                    yl: *y,
+                    range: dx.hypot(dy),
+                    bearing: dy.atan2(dx) - pose[2],
+                }
+            })
+            .collect();
+        let got = pose_from_landmarks(&obs, 0.5).unwrap();
+        for i in 0..3 {
+            assert!((got[i] - pose[i]).abs() < 1e-12, "{got:?}");
+        }
+        assert!(pose_from_landmarks(&obs[..1], 0.5).is_none());
+    }
+}
