@@ -145,6 +145,25 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
     let o = kinegen_in(dir, &["generate", "--spec-dir", "specs", "--out", "crate"]);
     assert!(o.status.success(), "{spec}: generate: {}", stderr(&o));
     assert!(dir.join("crate/src").read_dir().unwrap().count() > 1);
+    // the new crate has a manifest and builds as it is, outside the workspace
+    let build = std::process::Command::new(env!("CARGO"))
+        .args(["build", "--quiet", "--manifest-path"])
+        .arg(dir.join("crate/Cargo.toml"))
+        .env("CARGO_TARGET_DIR", root().join("target/user-crates"))
+        .output()
+        .unwrap();
+    assert!(
+        build.status.success(),
+        "{spec}: the generated crate does not build: {}",
+        String::from_utf8_lossy(&build.stderr)
+    );
+    // a manifest the user edited is theirs: generating again keeps it
+    let manifest = dir.join("crate/Cargo.toml");
+    let edited = std::fs::read_to_string(&manifest).unwrap() + "# mine\n";
+    std::fs::write(&manifest, &edited).unwrap();
+    let o = kinegen_in(dir, &["generate", "--spec-dir", "specs", "--out", "crate"]);
+    assert!(o.status.success(), "{spec}: generate again: {}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&manifest).unwrap(), edited);
     let o = kinegen_in(dir, &["verify", "--spec", "fixed.toml", "--samples", "50"]);
     assert!(
         o.status.success(),

@@ -847,7 +847,7 @@ fn inverse_kinematics(
         }
         let Some((rows, inv)) = chosen else {
             if any_square {
-                return Err(err_kin(model, "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0)"));
+                return Err(err_kin(model, "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)"));
             }
             return Err(err_kin(
                 model,
