@@ -2,8 +2,9 @@
 # The whole test suite, as CI runs it (.ci/run calls this script).
 #  1. install the Python tooling of the CasADi cross-check and of the bag tests
 #     (pinned versions)
-#  2. regenerate the CasADi reference fixtures from the specs and fail if they
-#     differ from the committed ones (the check is live, not frozen)
+#  2. regenerate the CasADi reference fixtures (and wrenfold's peer kernels)
+#     from the specs and fail if they differ from the committed ones (the
+#     check is live, not frozen)
 #  3. fail if generated/ is stale (kinegen generate --check)
 #  4. cargo test over the whole workspace. Tests that use symbolica run it only in
 #     child processes that queue on a machine-wide lock, so the default parallel
@@ -11,8 +12,9 @@
 #     in parallel, which is also safe here, but is not what this project tests).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt
+python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt
 python3 verify/casadi/reference.py --check
+python3 verify/peers/wrenfold_kernels.py --check
 cargo build --workspace --all-targets
 # the binary the workspace build just made: `cargo run --bin kinegen` resolves
 # features for the one package and would compile symbolica a second time (~10 min)

@@ -11,7 +11,7 @@
 //! series still has negative powers the singularity is not removable and derivation
 //! fails instead of emitting code that blows up.
 use crate::symbolic::{
-    check_no_placeholder, number_f64, pinv_entry, to_atom, Funcs, SymbolicError,
+    check_no_placeholder, lsq_entry, number_f64, pinv_entry, to_atom, Funcs, SymbolicError,
 };
 use crate::tape::TapeBuilder;
 use kinegen_model::expr::Expr;
@@ -162,7 +162,7 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
     if !has_vanishing_denominator(a.as_view(), s) {
         return Ok(a.clone());
     }
-    let own_fn = |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs, fx.pinv].contains(&f);
+    let own_fn = |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs, fx.pinv, fx.lsq].contains(&f);
     if !matches!(a.as_view(), AtomView::Fun(f) if own_fn(f.get_symbol())) {
         if let Ok(series) = a.series(s, Atom::num(0), SeriesDepth::absolute(SERIES_ORDER)) {
             let series = series.to_atom();
@@ -273,6 +273,56 @@ fn tree_size(tape: &[Op], outputs: &[u32]) -> usize {
     outputs
         .iter()
         .fold(0usize, |acc, &o| acc.saturating_add(size[o as usize]))
+}
+
+/// Jacobian of `outs` w.r.t. `vars` (row-major) when the outputs are written in
+/// the variables and in let-bound intermediates `lets` (each may use earlier
+/// ones): the total derivative by the chain rule. Each intermediate's total
+/// derivative is bound once as a further let (returned with the Jacobian), so
+/// it is computed once and shared by every output, not expanded into each: the
+/// twist's parameter derivatives of a least-squares model are long.
+fn jacobian_through(
+    outs: &[Atom],
+    vars: &[Symbol],
+    lets: &[(Symbol, Atom)],
+) -> (Vec<Atom>, Vec<(Symbol, Atom)>) {
+    let mut dlets: Vec<(Symbol, Atom)> = Vec::new();
+    // d_of[l][v]: the symbol bound to D(let l)/D(var v); None when it is zero
+    let mut d_of: Vec<Vec<Option<Symbol>>> = Vec::new();
+    for (li, (_, e)) in lets.iter().enumerate() {
+        let row = vars
+            .iter()
+            .enumerate()
+            .map(|(vi, &v)| {
+                let mut d = e.derivative(v);
+                for (mi, (m, _)) in lets[..li].iter().enumerate() {
+                    if let Some(dm) = d_of[mi][vi] {
+                        d += e.derivative(*m) * Atom::var(dm);
+                    }
+                }
+                (!d.is_zero()).then(|| {
+                    let s = symbol!(&format!("kg_d_{li}_{vi}"));
+                    dlets.push((s, d));
+                    s
+                })
+            })
+            .collect();
+        d_of.push(row);
+    }
+    let mut j = Vec::new();
+    for o in outs {
+        let by_let: Vec<Atom> = lets.iter().map(|(l, _)| o.derivative(*l)).collect();
+        for (vi, &v) in vars.iter().enumerate() {
+            let mut d = o.derivative(v);
+            for (li, dl) in by_let.iter().enumerate() {
+                if let Some(s) = d_of[li][vi] {
+                    d += dl * Atom::var(s);
+                }
+            }
+            j.push(d);
+        }
+    }
+    (j, dlets)
 }
 
 /// Jacobian of `outs` w.r.t. `vars`, row-major. With `chain = (s, e)` the
@@ -407,9 +457,27 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         singular: vec![],
     });
 
-    // Discrete motion models.
+    // Discrete motion models, written in the twist (let-bound: computed once, and
+    // differentiated once per variable, see `jacobian_through`).
     let (x, y, th, dt) = (sym.a("x"), sym.a("y"), sym.a("theta"), sym.a("dt"));
-    let (vx, vy, om) = (&twist_noisy[0], &twist_noisy[1], &twist_noisy[2]);
+    // A component that is a number or a single symbol stays inline: a let would
+    // hide a zero (vy of a differential drive) from simplification.
+    let tw_syms = [
+        symbol!("kg_tw_vx"),
+        symbol!("kg_tw_vy"),
+        symbol!("kg_tw_om"),
+    ];
+    let mut tw_lets: Vec<(Symbol, Atom)> = Vec::new();
+    let [vx, vy, om] = [0, 1, 2].map(|k| {
+        let e = &twist_noisy[k];
+        if matches!(e.as_view(), AtomView::Num(_) | AtomView::Var(_)) {
+            e.clone()
+        } else {
+            tw_lets.push((tw_syms[k], e.clone()));
+            Atom::var(tw_syms[k])
+        }
+    });
+    let (vx, vy, om) = (&vx, &vy, &om);
     let euler = vec![
         &x + (th.cos() * vx - th.sin() * vy) * &dt,
         &y + (th.sin() * vx + th.cos() * vy) * &dt,
@@ -450,7 +518,8 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         (StepForm::Euler, &euler, None, "Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading."),
         (StepForm::Exact, &exact, Some((dth_sym, &dth_expr)), "Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch)."),
     ] {
-        let lets = chain.map(|(s, e): (Symbol, &Atom)| vec![(s, e.clone())]).unwrap_or_default();
+        let mut lets = tw_lets.clone();
+        lets.extend(chain.map(|(s, e): (Symbol, &Atom)| (s, e.clone())));
         let singular = if chain.is_some() { vec![dth_sym] } else { vec![] };
         let step = Kernel::Step(form, None);
         let step_name = step.name(|_| String::new());
@@ -467,7 +536,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             singular: singular.clone(),
         });
         for (g, garg) in &groups {
-            let j = jacobian(outs, &garg.syms, chain);
+            let (j, dlets) = jacobian_through(outs, &garg.syms, &lets);
             let what = match *g {
                 Wrt::State => "state (seed 001 eq. 4 for Euler)",
                 Wrt::Inputs => "inputs",
@@ -478,7 +547,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
                 kernel: step.jacobian(*g),
                 doc: format!("Jacobian of `{step_name}` with respect to the {what}; rows x, y, theta."),
                 args: step_args(true),
-                lets: lets.clone(),
+                lets: lets.iter().cloned().chain(dlets).collect(),
                 rows: 3,
                 cols: garg.syms.len(),
                 row_names: pose_rows.clone(),
@@ -581,33 +650,20 @@ fn constraint_rows(
         .collect()
 }
 
-/// Twist of a constraint model: z = (S^T S)^+ S^T q' (seed 000 eq. 9-10), with the
-/// pseudo-inverse left as `kg_pinv` entries: evaluated numerically with a rank check
-/// in the emitted code, differentiated by its own rule (dP = -P dM P).
+/// Twist of a constraint model: z = (S^T S)^+ S^T q' (seed 000 eq. 9-10), as
+/// `kg_lsq` entries: lowered through the pseudo-inverse (evaluated numerically
+/// with a rank check in the emitted code), differentiated by their own rule.
 fn least_squares_twist(
     model: &Model,
     c: &Constraints,
     sym: &Sym,
 ) -> Result<Vec<Atom>, SymbolicError> {
     let rows = constraint_rows(model, c, sym)?;
-    let m: Vec<Atom> = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
-        .iter()
-        .map(|&(a, b)| {
-            rows.iter()
-                .fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b])
-        })
-        .collect();
-    let st_rates: Vec<Atom> = (0..3)
-        .map(|a| {
-            rows.iter()
-                .fold(Atom::num(0), |acc, (r, s)| acc + &s[a] * Atom::var(*r))
-        })
-        .collect();
+    let s: Vec<[Atom; 3]> = rows.iter().map(|(_, s)| s.clone()).collect();
+    let q: Vec<Atom> = rows.iter().map(|(r, _)| Atom::var(*r)).collect();
     Ok((0..3)
         .map(|k| {
-            let solved = (0..3).fold(Atom::num(0), |acc, j| {
-                acc + pinv_entry(k, j, &m) * &st_rates[j]
-            });
+            let solved = lsq_entry(k, &s, &q);
             match &c.noise[k] {
                 Some(n) => solved + sym.a(n),
                 None => solved,

@@ -24,6 +24,13 @@ pub struct Funcs {
     /// Derivative: dP = -P dM P, so d P_ij / d m_ab = -(P_ia P_bj + P_ib P_aj)
     /// for a != b and -P_ia P_aj for a = b; again entries of P.
     pub pinv: Symbol,
+    /// `kg_lsq(k, n, S (n x 3, row-major), q (n))`: component k of the least-squares
+    /// solution z = (S^T S)^+ S^T q (seed 000 eq. 9-10), lowered through
+    /// `kg_pinv`. Its own derivative rule, from dz = P (dS^T (q - S z) - S^T dS z)
+    /// and dz = P S^T dq, is a few products per argument; differentiating the
+    /// expanded P S^T q instead goes through dP = -P dM P for every entry of M,
+    /// which made seed 000's parameter Jacobian 2.4x longer than wrenfold's.
+    pub lsq: Symbol,
 }
 
 /// (a, b) of the packed argument k (after the two index arguments) of `kg_pinv`.
@@ -39,6 +46,52 @@ pub fn pinv_entry(i: usize, j: usize, m: &[Atom]) -> Atom {
         fb = fb.add_arg(x);
     }
     fb.finish()
+}
+
+/// The normal-equation matrix M = S^T S (packed upper triangle) and S^T q of a
+/// least-squares problem with rows `s` and right-hand side `q`.
+pub fn normal_equations(s: &[[Atom; 3]], q: &[Atom]) -> ([Atom; 6], [Atom; 3]) {
+    let m = PACKED.map(|(a, b)| {
+        s.iter()
+            .fold(Atom::num(0), |acc, row| acc + &row[a] * &row[b])
+    });
+    let stq = [0, 1, 2].map(|a| {
+        s.iter()
+            .zip(q)
+            .fold(Atom::num(0), |acc, (row, qr)| acc + &row[a] * qr)
+    });
+    (m, stq)
+}
+
+/// `kg_lsq(k, ...)`: component k of the least-squares solution of `s` z = `q`.
+pub fn lsq_entry(k: usize, s: &[[Atom; 3]], q: &[Atom]) -> Atom {
+    let mut fb = symbolica::atom::FunctionBuilder::new(symbol!("kg_lsq"))
+        .add_arg(Atom::num(k as i64))
+        .add_arg(Atom::num(s.len() as i64));
+    for x in s.iter().flatten().chain(q) {
+        fb = fb.add_arg(x);
+    }
+    fb.finish()
+}
+
+/// The (k, S, q) of a `kg_lsq` call's arguments (None if malformed).
+pub fn lsq_parts(args: &[Atom]) -> Option<(usize, Vec<[Atom; 3]>, Vec<Atom>)> {
+    let num = |a: &Atom| as_f64(a.as_view()).map(|v| v as usize);
+    let (k, n) = (num(args.first()?)?, num(args.get(1)?)?);
+    if args.len() != 2 + 4 * n || k > 2 {
+        return None;
+    }
+    let s = (0..n)
+        .map(|r| [0, 1, 2].map(|a| args[2 + 3 * r + a].clone()))
+        .collect();
+    Some((k, s, args[2 + 3 * n..].to_vec()))
+}
+
+/// z_k = sum_j P_kj (S^T q)_j with the pseudo-inverse as `kg_pinv` entries: what
+/// `kg_lsq(k, ...)` stands for.
+pub fn lsq_expanded(k: usize, s: &[[Atom; 3]], q: &[Atom]) -> Atom {
+    let (m, stq) = normal_equations(s, q);
+    (0..3).fold(Atom::num(0), |acc, j| acc + pinv_entry(k, j, &m) * &stq[j])
 }
 
 impl Funcs {
@@ -114,6 +167,33 @@ impl Funcs {
                 };
             }
         );
+        let lsq = symbol!(
+            "kg_lsq",
+            der = |x, i, out| {
+                let AtomView::Fun(f) = x else { return };
+                let args: Vec<Atom> = f.iter().map(|a| a.to_owned()).collect();
+                let Some((k, s, q)) = lsq_parts(&args) else {
+                    return;
+                };
+                let n = s.len();
+                if i < 2 {
+                    **out = Atom::num(0);
+                    return;
+                }
+                let (m, _) = normal_equations(&s, &q);
+                let p = |r: usize, c: usize| pinv_entry(r, c, &m);
+                // (P S^T)_{k r} = sum_b P_kb S_rb
+                let pst = |r: usize| (0..3).fold(Atom::num(0), |acc, b| acc + p(k, b) * &s[r][b]);
+                **out = if i < 2 + 3 * n {
+                    let (r, a) = ((i - 2) / 3, (i - 2) % 3);
+                    let z = |c: usize| lsq_entry(c, &s, &q);
+                    let res = (0..3).fold(q[r].clone(), |acc, b| acc - &s[r][b] * z(b));
+                    p(k, a) * res - pst(r) * z(a)
+                } else {
+                    pst(i - 2 - 3 * n)
+                };
+            }
+        );
         Funcs {
             tan,
             atan,
@@ -121,6 +201,7 @@ impl Funcs {
             abs,
             near,
             pinv,
+            lsq,
         }
     }
 }

@@ -80,6 +80,15 @@ impl TapeBuilder {
                     })
                 }
             }
+            AtomView::Fun(f) if f.get_symbol() == self.fx.lsq => {
+                // lowered as what it stands for, so its pseudo-inverse is the
+                // very `kg_pinv` its derivatives read (one decomposition)
+                let args: Vec<_> = f.iter().map(|x| x.to_owned()).collect();
+                let (k, s, q) = crate::symbolic::lsq_parts(&args).ok_or_else(|| {
+                    SymbolicError(format!("malformed least-squares solution `{a}`"))
+                })?;
+                self.atom(crate::symbolic::lsq_expanded(k, &s, &q).as_view())
+            }
             AtomView::Fun(f) => {
                 let s = f.get_symbol();
                 let args: Vec<u32> = f.iter().map(|x| self.atom(x)).collect::<Result<_, _>>()?;
@@ -168,6 +177,19 @@ impl TapeBuilder {
                     if let Some(c) = as_f64(f) {
                         coef *= c;
                         continue;
+                    }
+                    // pi and e are numbers too: folded into the coefficient
+                    // (2*pi*r*n/cpr is one constant factor, not two products)
+                    if let AtomView::Var(v) = f {
+                        let s = v.get_symbol();
+                        if s == Symbol::PI || s == Symbol::E {
+                            coef *= if s == Symbol::PI {
+                                std::f64::consts::PI
+                            } else {
+                                std::f64::consts::E
+                            };
+                            continue;
+                        }
                     }
                     if let AtomView::Pow(p) = f {
                         let (base, exp) = p.get_base_exp();

@@ -29,8 +29,14 @@ STATE = ["x", "y", "theta"]
 SAMPLES = 40
 
 
-def to_sx(src, env):
-    """A spec math string as a CasADi SX expression (`^` is power)."""
+CASADI_FUNCTIONS = {"sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "atan": ca.atan, "atan2": ca.atan2,
+                    "sqrt": ca.sqrt, "exp": ca.exp, "ln": ca.log, "abs": ca.fabs}
+
+
+def to_sx(src, env, functions=None):
+    """A spec math string as a CasADi SX expression (`^` is power); with
+    `functions`, as an expression of another symbolic library."""
+    functions = functions or CASADI_FUNCTIONS
     tree = ast.parse(src.replace("^", "**"), mode="eval")
 
     def go(n):
@@ -51,12 +57,26 @@ def to_sx(src, env):
                     ast.Div: lambda: a / b, ast.Pow: lambda: a ** b}[type(n.op)]()
         if isinstance(n, ast.Call):
             args = [go(a) for a in n.args]
-            f = {"sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "atan": ca.atan, "atan2": ca.atan2,
-                 "sqrt": ca.sqrt, "exp": ca.exp, "ln": ca.log, "abs": ca.fabs}[n.func.id]
-            return f(*args)
+            return functions[n.func.id](*args)
         raise ValueError(f"unsupported syntax in `{src}`")
 
     return go(tree)
+
+
+def define(spec, env, functions=None):
+    """Add the spec's definitions to `env`, in dependency order."""
+    pending = {d["name"]: d["expr"] for d in spec.get("define", [])}
+    while pending:
+        progress = False
+        for name, src in list(pending.items()):
+            try:
+                env[name] = to_sx(src, env, functions)
+                del pending[name]
+                progress = True
+            except KeyError:
+                pass
+        if not progress:
+            raise ValueError(f"unresolvable definitions {list(pending)}")
 
 
 def model(spec):
@@ -67,19 +87,7 @@ def model(spec):
     sym = {n: ca.SX.sym(n) for n in STATE + inputs + noise + [p["name"] for p in params] + ["dt", "xl", "yl"]}
     env = dict(sym)
     env.update(consts)
-    # definitions, in dependency order
-    pending = {d["name"]: d["expr"] for d in spec.get("define", [])}
-    while pending:
-        progress = False
-        for name, src in list(pending.items()):
-            try:
-                env[name] = to_sx(src, env)
-                del pending[name]
-                progress = True
-            except KeyError:
-                pass
-        if not progress:
-            raise ValueError(f"unresolvable definitions {list(pending)}")
+    define(spec, env)
     omega_meas = ca.SX.sym("omega_meas")
     if "constraints" in spec:
         # seed 000 eq. 9-10: the twist solves S z = q' in the least-squares sense;

@@ -1,6 +1,9 @@
-//! CasADi's generated C functions behind a safe call: inputs as slices, outputs
-//! as dense row-major matrices (CasADi writes only the structural non-zeros,
-//! column-major; [`CasadiKernel::dense`] scatters them).
+//! The peers of the benchmark. CasADi's generated C functions behind a safe
+//! call: inputs as slices, outputs as dense row-major matrices (CasADi writes
+//! only the structural non-zeros, column-major; [`CasadiKernel::dense`]
+//! scatters them). wrenfold's generated Rust ([`wrenfold`], written by
+//! `verify/peers/wrenfold_kernels.py`) reads and writes through its span
+//! traits, implemented here for arrays ([`Col`], [`Out`]).
 use std::os::raw::c_int;
 
 type CasadiInt = i64;
@@ -142,4 +145,45 @@ pub fn omni_caster_twist() -> CasadiKernel {
 /// omni_caster: (x, u, w, p, dt) -> step_exact, step_exact_jac_p
 pub fn omni_caster_step() -> CasadiKernel {
     CasadiKernel::new(oc_step, oc_step_work, oc_step_sparsity_out, oc_step_n_out)
+}
+
+/// wrenfold's generated kernels (same names and argument order as CasADi's),
+/// kept as wrenfold wrote them (`wrenfold_kernels.py --check` compares).
+#[rustfmt::skip]
+#[path = "../wrenfold/kernels.rs"]
+pub mod wrenfold;
+
+/// An input column for wrenfold's kernels.
+pub struct Col<'a, const N: usize>(pub &'a [f64; N]);
+
+impl<const N: usize> wrenfold_traits::Span2D<N, 1> for Col<'_, N> {
+    type ValueType = f64;
+    #[inline(always)]
+    fn get(&self, i: usize, _j: usize) -> f64 {
+        self.0[i]
+    }
+}
+
+/// An output matrix of wrenfold's kernels, row-major.
+pub struct Out<const R: usize, const C: usize>(pub [[f64; C]; R]);
+
+impl<const R: usize, const C: usize> Default for Out<R, C> {
+    fn default() -> Self {
+        Out([[0.0; C]; R])
+    }
+}
+
+impl<const R: usize, const C: usize> Out<R, C> {
+    /// The entries, row after row.
+    pub fn flat(&self) -> Vec<f64> {
+        self.0.concat()
+    }
+}
+
+impl<const R: usize, const C: usize> wrenfold_traits::OutputSpan2D<R, C> for Out<R, C> {
+    type ValueType = f64;
+    #[inline(always)]
+    fn set(&mut self, i: usize, j: usize, val: f64) {
+        self.0[i][j] = val;
+    }
 }
