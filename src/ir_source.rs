@@ -14,8 +14,9 @@ use std::process::{Command, Stdio};
 /// an older kinegen (without observation roles, or with libm::pow powers
 /// instead of products: format 3; unshared reciprocals: 4; an integrated
 /// inverse whose whole expression got the series branch: 5; measurement delays
-/// found by name: 6; kernels and arguments named by string: 7) is never reused.
-const IR_FORMAT: u32 = 7;
+/// found by name: 6; kernels and arguments named by string: 7; steps
+/// differentiated through the expanded twist: 8) is never reused.
+const IR_FORMAT: u32 = 8;
 
 pub fn cache_dir() -> PathBuf {
     std::env::temp_dir().join("kinegen-ir-cache")
