@@ -528,6 +528,45 @@ pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOption
     (res.iter().map(|x| x * x).sum::<f64>() / res.len().max(1) as f64).sqrt()
 }
 
+/// The white-noise level of the weighted residuals of `r` at `p`: the error a
+/// model that explained every structure in the logs would reach. Estimated by
+/// successive differences within each channel (von Neumann): a model error
+/// varies smoothly along the track and cancels in r_k - r_(k-1), while white
+/// sensor noise doubles its variance there. Channels: each pose coordinate,
+/// the gyro, the range and the bearing.
+pub fn noise_floor(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
+    let seg = segmented(runs);
+    let mut fixed = r.clone();
+    fixed.p = p.to_vec();
+    fixed.free = vec![];
+    let starts = fit_stage(&fixed, &seg, o)
+        .map(|f| f.starts)
+        .unwrap_or_default();
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (stride, pose, gyro, landmarks) in [
+        (3, true, false, false),
+        (1, false, true, false),
+        (2, false, false, true),
+    ] {
+        let only = FitOptions {
+            use_pose: o.use_pose && pose,
+            use_gyro: o.use_gyro && gyro,
+            use_landmarks: o.use_landmarks && landmarks,
+            ..o.clone()
+        };
+        if !(only.use_pose || only.use_gyro || only.use_landmarks) {
+            continue;
+        }
+        let (res, _) = residuals(&fixed, p, &[], &seg, &only, false, &starts);
+        for k in stride..res.len() {
+            let d = res[k] - res[k - stride];
+            sum += 0.5 * d * d;
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
+}
+
 fn cost(res: &[f64]) -> f64 {
     0.5 * res.iter().map(|r| r * r).sum::<f64>()
 }
