@@ -16,6 +16,7 @@ use crate::symbolic::{
 use crate::tape::TapeBuilder;
 use kinegen_model::expr::Expr;
 use kinegen_model::ir::{ArgRole, ArgSpec, Function, IrFile, Kernel, ModelIr, Op, StepForm, Wrt};
+use kinegen_model::options::GenOptions;
 use kinegen_model::spec::{Constraints, InputKind, Kinematics, Model, STATE};
 use kinegen_model::{SourceError, SourcePos};
 use std::collections::HashMap;
@@ -23,11 +24,9 @@ use symbolica::atom::{Atom, AtomCore, AtomView, Symbol};
 use symbolica::poly::series::SeriesDepth;
 use symbolica::symbol;
 
-/// Below this |s| the series branch is used. Chosen with SERIES_ORDER so that the
-/// truncation error (< EPS^(N+1)/(N+1)! ~ 1e-19) and the cancellation error of the
-/// closed form at the switch point (~1e-16/EPS^2 ~ 4e-14) are both negligible.
-pub const EPS: f64 = 0.05;
-pub const SERIES_ORDER: i64 = 8;
+/// Below this |s| the series branch is used ([`GenOptions`] says why this value).
+pub const EPS: f64 = GenOptions::DEFAULT.series_switch;
+pub const SERIES_ORDER: i64 = GenOptions::DEFAULT.series_order;
 
 struct Sym {
     fx: Funcs,

@@ -1,5 +1,5 @@
 //! `kinegen generate`: derive every spec and write (or check) the generated crate.
-use crate::emit::{emit_lib, emit_linalg, emit_math, emit_module};
+use crate::emit::{Backend, RustBackend};
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use kinegen_model::SourceError;
@@ -77,10 +77,8 @@ pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError
         let ir = crate::derive_model(&model)?;
         let took = t0.elapsed();
         let rel = format!("{dir_name}/{}", path.file_name().unwrap().to_string_lossy());
-        files.push((
-            out_dir.join("src").join(format!("{}.rs", ir.name)),
-            emit_module(&ir, &rel),
-        ));
+        let (module, source) = RustBackend.module(&ir, &rel);
+        files.push((out_dir.join(module), source));
         files.push((
             out_dir.join("ir").join(format!("{}.json", ir.name)),
             ir.to_json() + "\n",
@@ -88,9 +86,12 @@ pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError
         models.push((ir, took));
     }
     let names: Vec<String> = models.iter().map(|(m, _)| m.name.clone()).collect();
-    files.push((out_dir.join("src").join("lib.rs"), emit_lib(&names)));
-    files.push((out_dir.join("src").join("linalg.rs"), emit_linalg()));
-    files.push((out_dir.join("src").join("math.rs"), emit_math()));
+    files.extend(
+        RustBackend
+            .shared(&names)
+            .into_iter()
+            .map(|(p, text)| (out_dir.join(p), text)),
+    );
     Ok((files, models))
 }
 

@@ -20,6 +20,7 @@ pub mod ir;
 pub mod jit;
 pub mod kernel;
 pub mod linalg;
+pub mod options;
 pub mod schedule;
 pub mod spec;
 

@@ -6,8 +6,8 @@ use kinegen_model::ir::{ArgRole, Function, Kernel as KernelId, ModelIr, StepForm
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
 
-/// Series/closed-form switch of the generator (kinegen-codegen's derive::EPS).
-pub const SWITCH: f64 = 0.05;
+/// Series/closed-form switch of the generator.
+pub const SWITCH: f64 = kinegen_model::options::GenOptions::DEFAULT.series_switch;
 
 #[derive(Debug, Clone)]
 pub struct Finding {
@@ -608,10 +608,18 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
                 .iter()
                 .zip(&f0)
                 .fold(0.0f64, |m, (a, b)| m.max((a - b).abs() / 1e-6));
+            // and its curvature: holding the twist at omega = s/dt moves the
+            // inputs by s/dt, and an entry may vary with them at second order
+            // (a steering angle's sec^2), which a slope taken at 1e-6 misses
+            let h = 1e-3;
+            let ((fp, _), (fm, _)) = (eval_at(h), eval_at(-h));
+            let curvature = (0..f0.len()).fold(0.0f64, |m, i| {
+                m.max((fp[i] + fm[i] - 2.0 * f0[i]).abs() / (h * h))
+            });
             for s in small {
                 let (fs, a) = eval_at(s);
                 for (i, (x, y)) in fs.iter().zip(&f0).enumerate() {
-                    let allowed = 2.0 * slope * s.abs() + 1e-9 * scale;
+                    let allowed = 2.0 * slope * s.abs() + 2.0 * curvature * s * s + 1e-9 * scale;
                     let err = (x - y).abs();
                     let ratio = if x.is_finite() {
                         err / allowed
