@@ -670,6 +670,37 @@ pub fn emit_lib(models: &[String]) -> String {
     prettyplease::unparse(&parsed)
 }
 
+/// What a code generator provides for the crate `kinegen generate` writes:
+/// one module per model and the crate's shared files. The derivation hands
+/// every backend the same [`ModelIr`]; Rust is the one backend today.
+pub trait Backend {
+    /// The model's module: (path relative to the crate, source).
+    fn module(&self, ir: &ModelIr, spec_path: &str) -> (std::path::PathBuf, String);
+    /// The crate's files that are not one model's (path relative to the crate, source).
+    fn shared(&self, models: &[String]) -> Vec<(std::path::PathBuf, String)>;
+}
+
+/// `no_std` Rust over libm (the `kinegen-generated` crate).
+pub struct RustBackend;
+
+impl Backend for RustBackend {
+    fn module(&self, ir: &ModelIr, spec_path: &str) -> (std::path::PathBuf, String) {
+        (
+            std::path::Path::new("src").join(format!("{}.rs", ir.name)),
+            emit_module(ir, spec_path),
+        )
+    }
+
+    fn shared(&self, models: &[String]) -> Vec<(std::path::PathBuf, String)> {
+        let src = std::path::Path::new("src");
+        vec![
+            (src.join("lib.rs"), emit_lib(models)),
+            (src.join("linalg.rs"), emit_linalg()),
+            (src.join("math.rs"), emit_math()),
+        ]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -710,36 +741,5 @@ mod tests {
             let item = quote!(pub struct P { pub #f: f64 });
             syn::parse2::<syn::ItemStruct>(item).unwrap_or_else(|e| panic!("{name}: {e}"));
         }
-    }
-}
-
-/// What a code generator provides for the crate `kinegen generate` writes:
-/// one module per model and the crate's shared files. The derivation hands
-/// every backend the same [`ModelIr`]; Rust is the one backend today.
-pub trait Backend {
-    /// The model's module: (path relative to the crate, source).
-    fn module(&self, ir: &ModelIr, spec_path: &str) -> (std::path::PathBuf, String);
-    /// The crate's files that are not one model's (path relative to the crate, source).
-    fn shared(&self, models: &[String]) -> Vec<(std::path::PathBuf, String)>;
-}
-
-/// `no_std` Rust over libm (the `kinegen-generated` crate).
-pub struct RustBackend;
-
-impl Backend for RustBackend {
-    fn module(&self, ir: &ModelIr, spec_path: &str) -> (std::path::PathBuf, String) {
-        (
-            std::path::Path::new("src").join(format!("{}.rs", ir.name)),
-            emit_module(ir, spec_path),
-        )
-    }
-
-    fn shared(&self, models: &[String]) -> Vec<(std::path::PathBuf, String)> {
-        let src = std::path::Path::new("src");
-        vec![
-            (src.join("lib.rs"), emit_lib(models)),
-            (src.join("linalg.rs"), emit_linalg()),
-            (src.join("math.rs"), emit_math()),
-        ]
     }
 }
