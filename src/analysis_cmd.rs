@@ -961,7 +961,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             ));
         } else {
             let written = crate::export::ros2_yaml(&c.spec, r, &res).and_then(|y| {
-                kinegen_codegen::generate::write_atomic(path, &y).map_err(|e| e.to_string())
+                kinegen_model::files::write_atomic(path, &y).map_err(|e| e.to_string())
             });
             match written {
                 Ok(()) => out.say(&format!("exported: {}", path.display())),

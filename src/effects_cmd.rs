@@ -19,7 +19,7 @@ pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> 
         kinegen_model::spec::fingerprint(spec_text)
     ));
     if !path.exists() {
-        kinegen_codegen::generate::write_atomic(&path, spec_text).map_err(|e| e.to_string())?;
+        kinegen_model::files::write_atomic(&path, spec_text).map_err(|e| e.to_string())?;
     }
     Ok(path)
 }
@@ -172,7 +172,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
             .iter()
             .map(|i| i.kind == InputKind::Cumulative && i.unit.contains("count"))
             .collect();
-        kinegen_codegen::generate::write_atomic(&a.out, &to_csv(&sim.header, &sim.rows, &counts))
+        kinegen_model::files::write_atomic(&a.out, &to_csv(&sim.header, &sim.rows, &counts))
             .map_err(|e| e.to_string())?;
         let mut msg = format!(
             "wrote {} rows ({:.1} s) to {}",
@@ -185,7 +185,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
             for (t, id, r, b) in &sim.observations {
                 text += &format!("{t:.9},{id},{r:.9},{b:.9}\n");
             }
-            kinegen_codegen::generate::write_atomic(path, &text).map_err(|e| e.to_string())?;
+            kinegen_model::files::write_atomic(path, &text).map_err(|e| e.to_string())?;
             msg += &format!(
                 "\nwrote {} landmark observations to {}",
                 sim.observations.len(),
@@ -254,7 +254,7 @@ pub fn run_add_effect(
                 p.name, p.nominal, p.min, p.max
             ));
         }
-        kinegen_codegen::generate::write_atomic(out, &new).map_err(|e| e.to_string())?;
+        kinegen_model::files::write_atomic(out, &new).map_err(|e| e.to_string())?;
         Ok(format!(
             "added `{effect}` to {} -> {}:\n{}",
             spec.display(),

@@ -1,9 +1,16 @@
 //! `kinegen generate`.
-use kinegen_codegen::generate::{generate, GenerateError};
 use std::path::Path;
 use std::process::ExitCode;
 
+#[cfg(not(feature = "symbolic"))]
+pub fn run(_spec_dir: &Path, _out: &Path, _check: bool) -> ExitCode {
+    eprintln!("error: {}", crate::ir_source::NO_SYMBOLIC);
+    ExitCode::from(2)
+}
+
+#[cfg(feature = "symbolic")]
 pub fn run(spec_dir: &Path, out: &Path, check: bool) -> ExitCode {
+    use kinegen_codegen::generate::{generate, GenerateError};
     match generate(spec_dir, out, check) {
         Err(e @ GenerateError::Spec(_)) => {
             eprintln!("error: {e}");

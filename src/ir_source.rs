@@ -72,9 +72,20 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
     ModelIr::from_json(&text).map_err(|e| format!("{}: {e}", cached.display()))
 }
 
+/// What a binary built without the derivation stage says when it needs it.
+#[cfg_attr(feature = "symbolic", allow(dead_code))]
+pub const NO_SYMBOLIC: &str = "this kinegen was built without its symbolic stage (the `symbolic` feature): it runs on the committed IR of the bundled specs only; build it with `cargo build --bin kinegen` (the default features) to derive a new or edited spec";
+
 /// `kinegen derive`: derive one spec's IR into a file (used by `load`).
+#[cfg(not(feature = "symbolic"))]
+pub fn derive_to(_spec: &Path, _out: &Path) -> Result<(), String> {
+    Err(NO_SYMBOLIC.into())
+}
+
+/// `kinegen derive`: derive one spec's IR into a file (used by `load`).
+#[cfg(feature = "symbolic")]
 pub fn derive_to(spec: &Path, out: &Path) -> Result<(), String> {
     let model = Model::load(spec).map_err(|e| e.to_string())?;
     let ir = kinegen_codegen::derive_model(&model).map_err(|e| e.to_string())?;
-    kinegen_codegen::generate::write_atomic(out, &ir.to_json()).map_err(|e| e.to_string())
+    kinegen_model::files::write_atomic(out, &ir.to_json()).map_err(|e| e.to_string())
 }

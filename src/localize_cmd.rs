@@ -227,7 +227,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
     if let Some(t) = &a.track {
-        if let Err(e) = kinegen_codegen::generate::write_atomic(t, &csv) {
+        if let Err(e) = kinegen_model::files::write_atomic(t, &csv) {
             return bad(e);
         }
         out.say(&format!("track: {}", t.display()));

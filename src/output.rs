@@ -31,7 +31,7 @@ impl Out {
                 .write_all(text.as_bytes())
                 .map_err(|e| e.to_string())
         } else {
-            kinegen_codegen::generate::write_atomic(path, &text).map_err(|e| e.to_string())
+            kinegen_model::files::write_atomic(path, &text).map_err(|e| e.to_string())
         }
     }
 }

@@ -298,8 +298,7 @@ fn residual_scatter(run: &Run, tr: &Track) -> [Vec<(f64, f64)>; 3] {
 }
 
 fn write(dir: &Path, html: &str) -> Result<(), String> {
-    kinegen_codegen::generate::write_atomic(&dir.join("index.html"), html)
-        .map_err(|e| e.to_string())
+    kinegen_model::files::write_atomic(&dir.join("index.html"), html).map_err(|e| e.to_string())
 }
 
 fn worst_marks(doc: &Value, run: &str) -> Vec<(f64, f64)> {

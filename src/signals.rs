@@ -23,7 +23,7 @@ pub fn child_finished(pid: u32) {
 
 /// Remove the temporaries and stop the derive child.
 fn clean_up() {
-    kinegen_codegen::generate::remove_temporaries();
+    kinegen_model::files::remove_temporaries();
     for pid in children().drain(..) {
         // SAFETY: kill(2) with a pid this process spawned and still waits on
         unsafe {

@@ -1,6 +1,5 @@
 //! `kinegen verify`.
-use kinegen_codegen::generate::spec_files;
-use kinegen_model::spec::Model;
+use kinegen_model::files::spec_files;
 use kinegen_verify::checks::where_;
 use kinegen_verify::{run_all, IrKernel};
 use std::path::Path;
@@ -12,21 +11,15 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
         None => match spec_files(Path::new("spec")) {
             Ok(v) => v,
             Err(e) => {
-                eprintln!("error: {e}");
+                eprintln!("error: spec: {e}");
                 return ExitCode::from(2);
             }
         },
     };
     let mut failed = false;
     for path in specs {
-        let model = match Model::load(&path) {
-            Ok(m) => m,
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::from(2);
-            }
-        };
-        let ir = match kinegen_codegen::derive_model(&model) {
+        // the committed IR when it is current, else derived (in a child process)
+        let ir = match crate::ir_source::load(&path) {
             Ok(ir) => ir,
             Err(e) => {
                 eprintln!("error: {e}");

@@ -15,6 +15,7 @@ pub mod decl;
 pub mod effects;
 pub mod error;
 pub mod expr;
+pub mod files;
 pub mod fuse;
 pub mod ir;
 pub mod jit;

@@ -1,0 +1,90 @@
+//! Files as kinegen writes them: never half-written (a temporary in the same
+//! directory, renamed into place; removed on a signal), and the spec files of a
+//! directory. Used by every stage that writes (the generated crate, reports,
+//! logs, specs), so it lives below them all.
+use std::path::{Path, PathBuf};
+
+/// A file that could not be written, named as the user asked for it.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {source}", path.display())]
+pub struct WriteError {
+    pub path: PathBuf,
+    pub source: std::io::Error,
+}
+
+fn err(path: &Path) -> impl FnOnce(std::io::Error) -> WriteError + '_ {
+    move |source| WriteError {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Spec files (`*.toml`) directly in `dir`, sorted.
+pub fn spec_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+/// Temporary files being written now, so a signal handler can remove them
+/// (`remove_temporaries`): a run interrupted while writing leaves nothing behind.
+static TEMPORARIES: std::sync::Mutex<Vec<std::path::PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+fn temporaries() -> std::sync::MutexGuard<'static, Vec<std::path::PathBuf>> {
+    // a panic elsewhere while holding the lock leaves the list itself intact
+    TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// `std::fs::write`, except that with `KINEGEN_TEST_WRITE_PAUSE_MS=N` in the
+/// environment it writes half, pauses N ms, then writes the rest: the one way a
+/// test can interrupt a write at a known moment (the cleanup on signals is
+/// otherwise untestable, the window being microseconds wide).
+fn write_slowly_if_asked(tmp: &Path, content: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    let pause = std::env::var("KINEGEN_TEST_WRITE_PAUSE_MS")
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok());
+    let Some(ms) = pause else {
+        return std::fs::write(tmp, content);
+    };
+    let mut f = std::fs::File::create(tmp)?;
+    let half = content.len() / 2;
+    f.write_all(&content.as_bytes()[..half])?;
+    f.flush()?;
+    std::thread::sleep(std::time::Duration::from_millis(ms));
+    f.write_all(&content.as_bytes()[half..])
+}
+
+/// Remove every temporary file a `write_atomic` in this process is writing
+/// (from the CLI's SIGINT/SIGTERM/SIGHUP handler).
+pub fn remove_temporaries() {
+    for p in temporaries().drain(..) {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+/// Write via a temporary file in the same directory and rename, so a reader never
+/// sees a half-written file.
+pub fn write_atomic(path: &Path, content: &str) -> Result<(), WriteError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(err(dir))?;
+    // unique per writer, so concurrent writers of the same file never share a temp file
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!(
+        ".{}.{}-{n}.kinegen-tmp",
+        path.file_name().unwrap().to_string_lossy(),
+        std::process::id()
+    ));
+    temporaries().push(tmp.clone());
+    // errors name the file the user asked for, not the temporary one
+    let done = write_slowly_if_asked(&tmp, content).and_then(|()| std::fs::rename(&tmp, path));
+    if done.is_err() {
+        let _ = std::fs::remove_file(&tmp); // never leave a half-written temporary
+    }
+    temporaries().retain(|p| p != &tmp);
+    done.map_err(err(path))
+}
