@@ -57,15 +57,19 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
     }
 }
 
-/// Run the independent CasADi reference script for one spec into a temp dir.
+/// The CasADi reference script, built into the binary so the cross-check runs
+/// from any directory (it needs python3 with the pinned casadi and numpy).
+const REFERENCE_PY: &str = include_str!("../verify/casadi/reference.py");
+
+/// Run the independent CasADi reference script for one spec into a temp dir
+/// (removed again when the script fails).
 fn casadi_reference(spec: &Path) -> Result<std::path::PathBuf, String> {
-    let script = Path::new("verify/casadi/reference.py");
-    if !script.exists() {
-        return Err("verify/casadi/reference.py not found (run from the kinegen checkout)".into());
-    }
     let dir = std::env::temp_dir().join(format!("kinegen-casadi-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let script = dir.join("reference.py");
+    std::fs::write(&script, REFERENCE_PY).map_err(|e| format!("{}: {e}", script.display()))?;
     let o = std::process::Command::new("python3")
-        .arg(script)
+        .arg(&script)
         .args(["--spec"])
         .arg(spec)
         .arg("--out")
@@ -73,8 +77,9 @@ fn casadi_reference(spec: &Path) -> Result<std::path::PathBuf, String> {
         .output()
         .map_err(|e| format!("cannot run python3: {e}"))?;
     if !o.status.success() {
+        let _ = std::fs::remove_dir_all(&dir);
         return Err(format!(
-            "the CasADi script failed (pip install -r verify/casadi/requirements.txt): {}",
+            "the CasADi script failed (it needs python3 with casadi 3.8.2 and numpy: pip install -r verify/casadi/requirements.txt in the kinegen checkout): {}",
             String::from_utf8_lossy(&o.stderr)
                 .lines()
                 .last()

@@ -170,6 +170,12 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
         "{spec}: verify of the augmented spec failed: {}",
         stdout(&o)
     );
+    // the CasADi cross-check runs outside the checkout too (the script is built in)
+    assert!(
+        stdout(&o).contains("vs CasADi"),
+        "{spec}: no CasADi cross-check: {}",
+        stderr(&o)
+    );
 }
 
 #[test]

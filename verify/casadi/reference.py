@@ -142,7 +142,7 @@ def model(spec):
     return groups, funcs, params
 
 
-def sample(spec, groups, params, rng):
+def sample(spec, groups, params, rng, scale=1.0):
     """Sample points; rates scaled by input unit, |omega*dt| >= 0.05: the closed
     form above loses accuracy to cancellation as omega*dt -> 0 (relative error
     ~1e-16/(omega*dt)^2 in the Jacobians), which is exactly why kinegen switches
@@ -151,7 +151,12 @@ def sample(spec, groups, params, rng):
     vals = {}
     vals["x"] = [rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-3, 3)]
     ranges = {"count/s": 4000.0, "rad/s": 8.0, "rad": 0.6, "m/s": 1.0}
-    vals["u"] = [rng.uniform(-1, 1) * ranges.get(i.get("unit", ""), 1.0) for i in spec.get("input", [])]
+    # an input in a unit not listed here (a steering encoder in ticks) may need
+    # wider values to turn the robot at all: `scale` > 1 (see `fixtures`)
+    # samples declared ranges, and widens the others
+    vals["u"] = [rng.uniform(*i["range"]) if scale > 1 and "range" in i
+                 else rng.uniform(-1, 1) * ranges.get(i.get("unit", ""), 1.0) * scale
+                 for i in spec.get("input", [])]
     vals["w"] = [rng.uniform(-0.03, 0.03) for _ in groups["w"]]
     vals["p"] = [float(p["nominal"]) * rng.uniform(0.9, 1.1) if p["nominal"] != 0 else rng.uniform(-0.05, 0.05) for p in params]
     vals["dt"] = [rng.uniform(0.01, 0.1)]
@@ -168,11 +173,14 @@ def fixtures(spec_path):
     twist_fn = ca.Function("tw", [ca.vertcat(*groups["u"]), ca.vertcat(*groups["p"])], [funcs["twist"][1]])
     points = []
     for _ in range(SAMPLES):
-        while True:
-            v = sample(spec, groups, params, rng)
+        for attempt in range(2000):
+            v = sample(spec, groups, params, rng, 10.0 ** (attempt // 200))
             om = float(twist_fn(v["u"], v["p"])[2])
             if abs(om * v["dt"][0]) > 0.05:
                 break
+        else:
+            sys.exit(f"{spec_path}: no sampled input turns the robot by more than 0.05 rad "
+                     "in a step (the closed-form reference needs |omega dt| > 0.05)")
         for name, (args, expr) in funcs.items():
             inputs = [ca.vertcat(*groups[a]) for a in args]
             f = ca.Function(name, inputs, [expr])
