@@ -514,9 +514,14 @@ pub fn run_starts(r: &Runner, p: &[f64], runs: &[Run], starts: &[[f64; 3]]) -> V
         .collect()
 }
 
-/// Weighted residual RMS of `p` on `runs` (segmented as calibration sees them),
-/// after refining only the start poses.
-pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
+/// `r` with parameters `p` held fixed, the runs as calibration sees them, and
+/// each segment's start refined for those parameters: how a model is scored.
+fn at_fitted_starts(
+    r: &Runner,
+    p: &[f64],
+    runs: &[Run],
+    o: &FitOptions,
+) -> (Runner, Vec<Run>, Vec<[f64; 3]>) {
     let seg = segmented(runs);
     let mut fixed = r.clone();
     fixed.p = p.to_vec();
@@ -524,6 +529,13 @@ pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOption
     let starts = fit_stage(&fixed, &seg, o)
         .map(|f| f.starts)
         .unwrap_or_default();
+    (fixed, seg, starts)
+}
+
+/// Weighted residual RMS of `p` on `runs` (segmented as calibration sees them),
+/// after refining only the start poses.
+pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
+    let (fixed, seg, starts) = at_fitted_starts(r, p, runs, o);
     let (res, _) = residuals(&fixed, p, &[], &seg, o, false, &starts);
     (res.iter().map(|x| x * x).sum::<f64>() / res.len().max(1) as f64).sqrt()
 }
@@ -535,13 +547,7 @@ pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOption
 /// sensor noise doubles its variance there. Channels: each pose coordinate,
 /// the gyro, the range and the bearing.
 pub fn noise_floor(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
-    let seg = segmented(runs);
-    let mut fixed = r.clone();
-    fixed.p = p.to_vec();
-    fixed.free = vec![];
-    let starts = fit_stage(&fixed, &seg, o)
-        .map(|f| f.starts)
-        .unwrap_or_default();
+    let (fixed, seg, starts) = at_fitted_starts(r, p, runs, o);
     let (mut sum, mut n) = (0.0, 0usize);
     for (stride, pose, gyro, landmarks) in [
         (3, true, false, false),

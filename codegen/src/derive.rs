@@ -625,7 +625,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         inputs: model.inputs.clone(),
         params: model.params.clone(),
         noise: model.noise.clone(),
-        observations: model.observations.iter().map(|o| o.decl()).collect(),
+        observations: model.observations.iter().map(|o| o.decl.clone()).collect(),
         effects: model.effects.clone(),
         functions,
     })

@@ -193,30 +193,19 @@ fn infer_role(landmark: bool, exprs: &[Expr], angle: &[bool]) -> ObservationRole
     }
 }
 
+/// An observation as the spec declares it: what the IR carries
+/// ([`ObservationDecl`], read through this type as if its own fields) and the
+/// expressions the derivation turns into kernels.
 #[derive(Debug, Clone)]
 pub struct Observation {
-    pub name: String,
-    pub doc: String,
-    pub columns: Vec<String>,
-    pub angle: Vec<bool>,
-    pub sigma: Vec<f64>,
-    pub landmark: bool,
-    pub role: ObservationRole,
+    pub decl: ObservationDecl,
     pub exprs: Vec<Expr>,
 }
 
-impl Observation {
-    /// The observation as the IR carries it (its expressions become kernels).
-    pub fn decl(&self) -> ObservationDecl {
-        ObservationDecl {
-            name: self.name.clone(),
-            doc: self.doc.clone(),
-            columns: self.columns.clone(),
-            angle: self.angle.clone(),
-            sigma: self.sigma.clone(),
-            landmark: self.landmark,
-            role: self.role,
-        }
+impl std::ops::Deref for Observation {
+    type Target = ObservationDecl;
+    fn deref(&self) -> &ObservationDecl {
+        &self.decl
     }
 }
 
@@ -654,17 +643,19 @@ impl Model {
                 }
             }
             observations.push(Observation {
-                name: o.name.get_ref().clone(),
-                doc: o.doc.clone(),
-                columns: o.columns.get_ref().clone(),
-                angle,
-                sigma: if o.sigma.is_empty() {
-                    vec![0.0; ncols]
-                } else {
-                    o.sigma.clone()
+                decl: ObservationDecl {
+                    name: o.name.get_ref().clone(),
+                    doc: o.doc.clone(),
+                    columns: o.columns.get_ref().clone(),
+                    angle,
+                    sigma: if o.sigma.is_empty() {
+                        vec![0.0; ncols]
+                    } else {
+                        o.sigma.clone()
+                    },
+                    landmark: o.landmark,
+                    role,
                 },
-                landmark: o.landmark,
-                role,
                 exprs,
             });
         }
