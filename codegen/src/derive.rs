@@ -324,23 +324,6 @@ fn jacobian_through(
     (j, dlets)
 }
 
-/// Jacobian of `outs` w.r.t. `vars`, row-major. With `chain = (s, e)` the
-/// outputs depend on the let-bound symbol s = e(vars) too (chain rule).
-fn jacobian(outs: &[Atom], vars: &[Symbol], chain: Option<(Symbol, &Atom)>) -> Vec<Atom> {
-    let mut j = Vec::new();
-    for o in outs {
-        let d_chain = chain.map(|(s, _)| o.derivative(s));
-        for &v in vars {
-            let mut d = o.derivative(v);
-            if let (Some((_, e)), Some(dc)) = (chain, &d_chain) {
-                d += dc * e.derivative(v);
-            }
-            j.push(d);
-        }
-    }
-    j
-}
-
 /// Derive every function of a model.
 pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let fx = Funcs::get();
@@ -604,7 +587,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
                 cols: garg.syms.len(),
                 row_names: o.columns.clone(),
                 col_names: garg.spec.names.clone(),
-                outputs: jacobian(&outs, &garg.syms, None),
+                outputs: jacobian_through(&outs, &garg.syms, &[]).0,
                 singular: vec![],
             });
         }
