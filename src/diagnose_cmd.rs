@@ -47,6 +47,10 @@ fn deriver<'a>(
 /// are ranked and chained (kinegen_analysis::diagnose); the others are listed as
 /// skipped with the reason. `candidates(n)` is told how many effects are tried,
 /// `progress` each step. Returns the diagnosis and the number of candidates.
+/// The share of the noise floor above which the model's own discretisation
+/// error is no longer "far below the noise" (issue 12 item 3).
+const DISCRETISATION_WARN: f64 = 0.3;
+
 pub fn run_diagnosis(
     spec: &Model,
     runner: &Runner,
@@ -285,6 +289,19 @@ pub fn run(c: Common) -> ExitCode {
     } else {
         out.say("the residuals left are noise (no structure explained by the motion)");
     }
+    let disc = &d.discretisation;
+    let disc_ratio = disc.error / d.noise_floor.max(1e-300);
+    if disc_ratio > DISCRETISATION_WARN {
+        out.say(&format!(
+            "warning: the model's own step at the log's {:.0} Hz errs by about {:.3}, {disc_ratio:.1}x the noise floor {:.3} (estimated from the log at half its rate): its inputs change too fast between samples for a constant-twist step. Effects are named only beyond that error, and structure of its size may be the step's, not the robot's; a faster log would tell",
+            disc.rate_hz, disc.error, d.noise_floor
+        ));
+    } else {
+        out.say(&format!(
+            "the model's own step at the log's {:.0} Hz errs by about {:.3}, {disc_ratio:.2}x the noise floor {:.3}: far below it",
+            disc.rate_hz, disc.error, d.noise_floor
+        ));
+    }
     let per_candidate = if n_candidates == 0 {
         0.0
     } else {
@@ -303,6 +320,7 @@ pub fn run(c: Common) -> ExitCode {
             "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
         "candidates": d.candidates,
         "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
+        "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc_ratio <= DISCRETISATION_WARN},
         "warnings": prep.warnings,
         "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},

@@ -927,10 +927,12 @@ fn a_method_worse_than_nominal_on_held_out_runs_says_so() {
 
 /// Issue #11.2: reported standard deviations are honest. Over 50 simulated seeds
 /// of a differential drive (random driving, 91 s, parameter errors), the spread
-/// of each estimate matches the mean reported standard deviation within 30% with
-/// the increments likelihood; the default absolute-track likelihood, whose
-/// residuals are a random walk, is overconfident on the same logs (so the check
-/// can fail; that is the open part of the issue).
+/// of each estimate matches the mean reported standard deviation within 30%,
+/// with the increments likelihood and with the default absolute-track one. The
+/// track's standard deviations were 3-9x too small while a start heading
+/// averaged over the logs' rest was held fixed: its leftover error rotated the
+/// whole track, differently in every log, which the residuals' random walk
+/// took the blame for.
 #[test]
 fn fifty_seeds_spread_matches_the_reported_standard_deviation() {
     let tmp = tempfile::tempdir().unwrap();
@@ -990,9 +992,12 @@ fn fifty_seeds_spread_matches_the_reported_standard_deviation() {
             mean(&std[k])
         );
         let track_ratio = spread_of(&track_est[k]) / mean(&track_std[k]);
+        eprintln!("{n}: increments {ratio:.2}, track {track_ratio:.2}");
         assert!(
-            track_ratio > 3.0,
-            "{n}: the track likelihood's ratio is only {track_ratio:.2}"
+            (0.7..=1.3).contains(&track_ratio),
+            "{n}: track likelihood: spread {:.3e} against reported {:.3e} (ratio {track_ratio:.2})",
+            spread_of(&track_est[k]),
+            mean(&track_std[k])
         );
     }
 }

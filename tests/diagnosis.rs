@@ -48,10 +48,12 @@ fn check_model(model: &str, cases: &[(&str, &str, f64)]) {
             "{}",
             report.last().unwrap()
         );
-        // 4.5x: since fit's continuation ladder, the model without the effect
+        // 3.5x: since fit's continuation ladder, the model without the effect
         // calibrates to a better optimum on omni_caster (it absorbs more of a
-        // steering offset), which leaves x4.9 for the effect, not x5
-        assert!(ratio >= 4.5, "{}", report.last().unwrap());
+        // steering offset: x4.9, not x5), and since a rested start heading is
+        // refined within its measured uncertainty, the base model absorbs a
+        // little more of a toe angle (x4.3) or a tricycle's lateral slip (x3.7)
+        assert!(ratio >= 3.5, "{}", report.last().unwrap());
         assert_eq!(
             d["verdict"]["unexplained_structure"],
             false,
@@ -719,4 +721,58 @@ fn two_hidden_effects_are_found_one_after_the_other() {
         "{}",
         d["verdict"]
     );
+}
+
+/// Issue #12.3: the model's own discretisation is never blamed on the robot.
+/// A spec's own clean log (the user spec fwd_tricycle, tracker 1.8 m ahead)
+/// calibrates down to its noise floor: its start heading, averaged over a 1 s
+/// rest, still leaves 3e-4 rad, which over 30 m of driving the fit showed as
+/// 1.6x the floor (structure for effects to absorb) until a rested start was
+/// refined within its measured uncertainty. Diagnosis says its step is far
+/// below the noise at the log's 20 Hz, and warns on the same log at 5 Hz,
+/// where the steering swings between samples.
+#[test]
+fn the_models_own_step_is_checked_against_the_noise() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = root().join("tests/user_specs/fwd_tricycle.toml");
+    let spec = spec.to_str().unwrap();
+    for seed in ["1", "2", "3"] {
+        let name = format!("clean{seed}.csv");
+        let log = simulate(
+            tmp.path(),
+            &name,
+            &["--spec", spec, "--trajectory", "random", "--seed", seed],
+        );
+        let d = kinegen_json(&["diagnose", "--spec", spec, "--data", log.to_str().unwrap()]);
+        let floor = d["discretisation"]["noise_floor"].as_f64().unwrap();
+        let calibrated = d["calibrated"]["rmse"].as_f64().unwrap();
+        assert!(
+            calibrated < 1.15 * floor,
+            "seed {seed}: calibrated {calibrated:.3} against a floor of {floor:.3}"
+        );
+        assert_eq!(
+            d["verdict"]["effects"],
+            serde_json::json!([]),
+            "seed {seed}"
+        );
+        assert_eq!(d["discretisation"]["far_below_noise"], true, "seed {seed}");
+        if seed == "1" {
+            // every fourth row: 5 Hz
+            let text = std::fs::read_to_string(&log).unwrap();
+            let coarse: Vec<&str> = text
+                .lines()
+                .enumerate()
+                .filter(|(i, _)| *i == 0 || (i - 1) % 4 == 0)
+                .map(|x| x.1)
+                .collect();
+            let slow = tmp.path().join("clean1_5hz.csv");
+            std::fs::write(&slow, coarse.join("\n") + "\n").unwrap();
+            let out = kinegen(&["diagnose", "--spec", spec, "--data", slow.to_str().unwrap()]);
+            let text = stdout(&out);
+            assert!(
+                text.contains("warning: the model's own step at the log's 5 Hz"),
+                "{text}"
+            );
+        }
+    }
 }

@@ -126,6 +126,19 @@ impl Run {
             }));
         }
         let u = Inputs::from_flat(dt.len(), cols.len(), u);
+        let swing = cols
+            .iter()
+            .any(|(_, kind)| *kind == InputKind::Absolute)
+            .then(|| {
+                let mut s = Vec::with_capacity(dt.len() * cols.len());
+                for k in 0..dt.len() {
+                    s.extend(cols.iter().map(|(c, kind)| match kind {
+                        InputKind::Absolute => c[k + 1] - c[k],
+                        InputKind::Cumulative => 0.0,
+                    }));
+                }
+                Inputs::from_flat(dt.len(), cols.len(), s)
+            });
         let [cx, cy, cth] = r.ir.pose_columns();
         let gt = if log.has(&cx) && log.has(&cy) && log.has(&cth) {
             let (x, y, th) = (log.col(&cx)?, log.col(&cy)?, unwrap(log.col(&cth)?));
@@ -154,6 +167,7 @@ impl Run {
             gyro,
             landmarks: Vec::new(),
             rate_inputs,
+            swing,
         })
     }
 

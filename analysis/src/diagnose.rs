@@ -10,6 +10,7 @@
 //! 4. Whiteness: regress the one-step prediction residuals of the best model on
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
+use crate::discretisation::Discretisation;
 use crate::fit::{fit, residuals, FitOptions, FitResult};
 use crate::interp::lerp_rows;
 use crate::log::wrap;
@@ -54,6 +55,11 @@ pub struct Diagnosis {
     pub chain: Vec<ChainStep>,
     /// What remains in the residuals of the final model (base plus chain).
     pub structure: Structure,
+    /// The calibrated base model's discretisation error at the log's rate
+    /// (counted with the noise floor when effects are judged).
+    pub discretisation: Discretisation,
+    /// The calibrated base model's noise floor (see `fit::noise_floor`).
+    pub noise_floor: f64,
     pub skipped: Vec<(String, String)>,
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
@@ -540,7 +546,9 @@ fn periodic_findings(
 /// floor) is as real as a large one. Only when the current model leaves a clear
 /// excess (its mean square 20% above the floor's).
 fn explains_excess(cur: &Stage, rmse: f64, holdout_rmse: f64) -> bool {
-    let f2 = cur.floor * cur.floor;
+    // what no catalogue effect can explain: the sensor noise and the model's own
+    // discretisation at the log's rate
+    let f2 = cur.floor * cur.floor + cur.step_error * cur.step_error;
     let share =
         |before: f64, after: f64| (before * before - after * after) / (before * before - f2);
     cur.rmse * cur.rmse > 1.2 * f2
@@ -559,6 +567,9 @@ struct Stage {
     holdout_rmse: f64,
     /// The error a model explaining every structure would reach (white noise).
     floor: f64,
+    /// The model's own discretisation error at the log's rate (the base
+    /// model's, see `crate::discretisation`), which no effect explains.
+    step_error: f64,
 }
 
 fn stage(
@@ -584,6 +595,7 @@ fn stage(
         train_p,
         holdout_rmse,
         floor,
+        step_error: 0.0,
     })
 }
 
@@ -713,6 +725,7 @@ fn rank(
     o: &FitOptions,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<Candidate> {
+    let disc = cur.step_error;
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
         .filter_map(|(name, doc, aug)| {
@@ -735,7 +748,12 @@ fn rank(
             progress(name);
             let improvement = 1.0 - rmse / cur.rmse;
             let large = improvement > 0.2 && holdout_rmse < 0.8 * cur.holdout_rmse;
-            let significant = gain > 10.0 && (large || explains_excess(cur, rmse, holdout_rmse)) && rmse.is_finite();
+            // and more than the model's own discretisation could account for
+            let beyond_step = cur.rmse * cur.rmse - rmse * rmse > disc * disc;
+            let significant = gain > 10.0
+                && beyond_step
+                && (large || explains_excess(cur, rmse, holdout_rmse))
+                && rmse.is_finite();
             let parameters = effect_params
                 .iter()
                 .map(|&i| {
@@ -793,8 +811,24 @@ pub fn diagnose(
     let (train, test) = split(runs, 0.6);
     let first = stage(base.clone(), runs, &train, &test, &o)?;
     progress("base model calibrated");
-    let (calibrated_rmse, base_fit, base_holdout_rmse) =
-        (first.rmse, first.fit.clone(), first.holdout_rmse);
+    let mut disc = crate::discretisation::estimate(base, &first.fit.p, runs, &o);
+    // the asymptotic e(2h) = 4 e(h) overstates the error of a coarse log
+    // (larger steps err faster than that); the step cannot leave more than
+    // what the calibrated model leaves above the noise
+    let excess = (first.rmse * first.rmse - first.floor * first.floor)
+        .max(0.0)
+        .sqrt();
+    disc.error = disc.error.min(excess);
+    let first = Stage {
+        step_error: disc.error,
+        ..first
+    };
+    let (calibrated_rmse, base_fit, base_holdout_rmse, noise_floor) = (
+        first.rmse,
+        first.fit.clone(),
+        first.holdout_rmse,
+        first.floor,
+    );
 
     let mut cur = first;
     let mut chain: Vec<ChainStep> = Vec::new();
@@ -832,7 +866,10 @@ pub fn diagnose(
             .expect("ranked from augmented");
         let mut runner = aug.clone();
         runner.p = w.fitted.clone();
-        let next = stage(runner, runs, &train, &test, &o)?;
+        let next = Stage {
+            step_error: cur.step_error,
+            ..stage(runner, runs, &train, &test, &o)?
+        };
         let parameters = w.parameters.clone();
         chain.push(ChainStep {
             effect: w.effect.clone(),
@@ -852,6 +889,8 @@ pub fn diagnose(
         candidates: first_candidates.unwrap_or_default(),
         chain,
         structure,
+        discretisation: disc,
+        noise_floor,
         skipped,
         final_runner: cur.runner,
         final_p: cur.fit.p,

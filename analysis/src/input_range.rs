@@ -154,6 +154,7 @@ mod tests {
             gyro: None,
             landmarks: vec![],
             rate_inputs: vec![false],
+            swing: None,
         }
     }
 

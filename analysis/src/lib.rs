@@ -8,6 +8,7 @@ pub mod bag;
 pub mod dataset;
 pub mod deadreckon;
 pub mod diagnose;
+pub mod discretisation;
 pub mod fit;
 pub mod grid;
 pub mod innovations;

@@ -312,6 +312,7 @@ mod tests {
             gyro: Some(gyro),
             landmarks: Vec::new(),
             rate_inputs: vec![true, true],
+            swing: None,
         }
     }
 

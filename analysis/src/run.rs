@@ -23,6 +23,11 @@ pub struct Run {
     /// Which inputs are rates of cumulative columns (the others are absolute
     /// values, like a steering angle, which say nothing about standing still).
     pub rate_inputs: Vec<bool>,
+    /// Per step, how much each absolute input (a steering angle) changes over it
+    /// (0 for rates); `u` holds their mid-step values. Dead reckoning reads it
+    /// to sub-step where a fast-changing input bends the twist within a step
+    /// (see `deadreckon::substeps`). None: the model has no absolute input.
+    pub swing: Option<Inputs>,
 }
 
 /// One range-bearing observation, with the mapped landmark it refers to.
@@ -62,6 +67,23 @@ impl Run {
             }
         }
         m
+    }
+
+    /// How well the start heading is measured when the run starts at rest for
+    /// half a second or more: the spread of the measured heading over the rest
+    /// rows over sqrt(rows), its mean's standard error. None otherwise (one
+    /// sample, or no ground truth).
+    pub fn start_heading_std(&self) -> Option<f64> {
+        let rest = self.rest_steps();
+        let g = self.gt.as_ref()?;
+        if rest < 2 || self.t[rest] - self.t[0] < 0.5 {
+            return None;
+        }
+        let n = rest.min(g.len()) as f64;
+        let mean = g[..rest].iter().map(|p| p[2]).sum::<f64>() / n;
+        let var = g[..rest].iter().map(|p| (p[2] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        // a noiseless (simulated, quantised) heading still gets a finite weight
+        Some((var.sqrt() / n.sqrt()).max(1e-6))
     }
 
     /// The range-bearing observations that see the start pose (see
@@ -123,6 +145,53 @@ impl Run {
                 .cloned()
                 .collect(),
             rate_inputs: self.rate_inputs.clone(),
+            swing: self.swing.as_ref().map(|s| s.slice(a, b - 1)),
+        }
+    }
+
+    /// The run as a log at half its rate would give it: every other row, each
+    /// step spanning two of this run's (rates averaged over both, absolute
+    /// inputs from the samples that bound the pair). The measurements of the
+    /// rows kept stay; the gyro, whose reading spans a step, is dropped.
+    pub fn halved(&self) -> Run {
+        let rows: Vec<usize> = (0..self.t.len()).step_by(2).collect();
+        let width = self.u.width();
+        let (mut u, mut swing) = (Vec::new(), Vec::new());
+        let mut dt = Vec::with_capacity(rows.len());
+        for w in rows.windows(2) {
+            let k = w[0];
+            let d = self.dt[k] + self.dt[k + 1];
+            dt.push(d);
+            for i in 0..width {
+                if self.rate_inputs.get(i).copied().unwrap_or(true) {
+                    u.push((self.u[k][i] * self.dt[k] + self.u[k + 1][i] * self.dt[k + 1]) / d);
+                    swing.push(0.0);
+                } else {
+                    let s = |j: usize| self.swing.as_ref().map_or(0.0, |s| s[j][i]);
+                    let (a, b) = (self.u[k][i] - s(k) / 2.0, self.u[k + 1][i] + s(k + 1) / 2.0);
+                    u.push(0.5 * (a + b));
+                    swing.push(b - a);
+                }
+            }
+        }
+        let steps = dt.len();
+        Run {
+            name: format!("{} at half rate", self.name),
+            path: self.path.clone(),
+            t: rows.iter().map(|&k| self.t[k]).collect(),
+            dt,
+            u: Inputs::from_flat(steps, width, u),
+            gt: self
+                .gt
+                .as_ref()
+                .map(|g| rows.iter().map(|&k| g[k]).collect()),
+            gyro: None,
+            landmarks: self.landmarks.clone(),
+            rate_inputs: self.rate_inputs.clone(),
+            swing: self
+                .swing
+                .as_ref()
+                .map(|_| Inputs::from_flat(steps, width, swing)),
         }
     }
 
