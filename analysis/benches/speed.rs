@@ -82,6 +82,7 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
         gyro: None,
         landmarks: Vec::new(),
         rate_inputs: Vec::new(),
+        swing: None,
     };
     let track = kinegen_analysis::deadreckon::run(&truth, &truth.p, &run, false);
     run.gt = Some(
