@@ -334,6 +334,36 @@ fn method_evaluation(
 }
 
 /// The error summary of [`evaluation`].
+/// When a calibration made the held-out runs worse (`nominal` -> `now` m), the
+/// warning that says so and why: the motions and inputs of the held-out runs
+/// the fitted runs do not cover (dead-reckoned with the nominal values in
+/// `fitted` and `held`), or else that the fitted runs do not determine what
+/// the held-out runs need.
+fn held_out_worse(
+    r: &Runner,
+    fitted: (&[Run], &[deadreckon::Track]),
+    held: (&[Run], &[deadreckon::Track]),
+    nominal: f64,
+    now: f64,
+) -> Option<String> {
+    // (a NaN is not "worse": the fit's own checks name non-finite results)
+    if now.partial_cmp(&(1.001 * nominal)) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let gaps = kinegen_analysis::coverage::uncovered(r, fitted, held);
+    let why = if gaps.is_empty() {
+        "the fitted runs do not determine what the held-out runs need (see the standard deviations): fit on runs that drive like the held-out ones".to_string()
+    } else {
+        format!(
+            "the fitted runs do not cover them ({}): add runs that do to --data",
+            gaps.join("; ")
+        )
+    };
+    Some(format!(
+        "worse than the nominal parameters on the held-out runs ({nominal:.4} m -> {now:.4} m): {why}"
+    ))
+}
+
 pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
     evaluation(r, p, runs).errors
 }
@@ -742,8 +772,13 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
                 .sqrt()
         };
         let d0 = scaled(&r.p);
-        let hold_nominal =
-            (!prep.holdout.is_empty()).then(|| evaluate(r, &r.p, &prep.holdout).rmse);
+        let nominal_eval = (!prep.holdout.is_empty()).then(|| {
+            (
+                evaluation(r, &r.p, &prep.runs),
+                evaluation(r, &r.p, &prep.holdout),
+            )
+        });
+        let hold_nominal = nominal_eval.as_ref().map(|x| x.1.errors.rmse);
         for (name, m) in &rows {
             let Evaluation {
                 tracks: after_tracks,
@@ -759,7 +794,18 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
                 _ => ("fitted runs", after.rmse, before.errors.rmse),
             };
             let mut note = m.note.clone();
-            if now > 1.001 * nominal {
+            let held_worse = nominal_eval.as_ref().and_then(|(f, h)| {
+                held_out_worse(
+                    r,
+                    (&prep.runs, &f.tracks),
+                    (&prep.holdout, &h.tracks),
+                    nominal,
+                    now,
+                )
+            });
+            if let Some(w) = held_worse {
+                note += &format!("\n      WARNING: {w}: do not use these values");
+            } else if now > 1.001 * nominal {
                 note += &format!("\n      WARNING: worse than the nominal parameters on the {what} ({nominal:.4} m -> {now:.4} m): do not use these values");
             }
             let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
@@ -948,6 +994,18 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             fmt_errors(&ha.errors)
         ));
         runs.extend(per_run(&prep.holdout, &hb.tracks, &ha.tracks, None));
+        if let Some(w) = held_out_worse(
+            r,
+            (&prep.runs, &eval_before.tracks),
+            (&prep.holdout, &hb.tracks),
+            hb.errors.rmse,
+            ha.errors.rmse,
+        ) {
+            out.say(&format!("warning: {w}"));
+            if let Some(list) = doc["warnings"].as_array_mut() {
+                list.push(json!(w));
+            }
+        }
         doc["holdout"] = json!({"before": {"rmse": hb.errors.rmse, "errors": hb.errors}, "after": {"rmse": ha.errors.rmse, "errors": ha.errors}});
     }
     if runs.len() > 1 {

@@ -1447,3 +1447,122 @@ fn a_reader_that_stops_reading_ends_the_run_quietly() {
     assert!(!err.contains("panicked"), "{err}");
     assert_eq!(o.status.code(), Some(141), "{err}");
 }
+
+/// Issue #11 (done when): across simulated runs of every robot type (squares,
+/// figures of eight, free driving, turns in place; one lap and four), a
+/// calibration never leaves held-out runs worse than the nominal values
+/// without saying why. Each model's free parameters are set 3% off nominal
+/// (alternately up and down) in the simulated robot; every fit is scored on a
+/// held-out free-driving run. Runs that move like the held-out one must halve
+/// its error. A turn in place does not: there, a fit that makes the held-out
+/// run worse must say so and name what the fitted runs do not cover (a
+/// unicycle's speed scale fitted on a robot that does not drive shrinks to a
+/// third: 0.74 m -> 17.6 m held out), and what the runs do not determine
+/// stays nominal (before: the speed scale slid to its bound, 0.74 m -> 26 m,
+/// with no word about the held-out runs).
+#[test]
+fn calibration_never_leaves_held_out_runs_worse_than_nominal_without_saying_why() {
+    let tmp = tempfile::tempdir().unwrap();
+    let specs = [
+        "spec/diff_drive.toml",
+        "spec/tricycle.toml",
+        "spec/tricycle_fwd.toml",
+        "spec/omni3.toml",
+        "spec/unicycle_ekf.toml",
+        "spec/omni_caster.toml",
+        "tests/user_specs/fwd_tricycle.toml",
+        "tests/user_specs/mecanum4.toml",
+        "tests/user_specs/offset_diff.toml",
+        "tests/user_specs/skid4.toml",
+    ];
+    let (mut worse, mut cases) = (Vec::new(), 0);
+    for spec in specs {
+        let path = root().join(spec);
+        let model = kinegen_model::spec::Model::load(&path).unwrap();
+        let name = model.name.clone();
+        let mut truth = Vec::new();
+        for (k, p) in model
+            .params
+            .iter()
+            .filter(|p| p.free && !p.constant && p.nominal != 0.0)
+            .enumerate()
+        {
+            let f = if k % 2 == 0 { 1.03 } else { 0.97 };
+            truth.push(format!("{}={}", p.name, p.nominal * f));
+        }
+        let spec = path.to_str().unwrap();
+        let sim = |file: &str, traj: &str, laps: &str, seed: &str| {
+            let mut a = vec![
+                "--spec",
+                spec,
+                "--trajectory",
+                traj,
+                "--laps",
+                laps,
+                "--seed",
+                seed,
+            ];
+            for s in &truth {
+                a.extend(["--set", s.as_str()]);
+            }
+            simulate(tmp.path(), &format!("{name}-{file}"), &a)
+        };
+        let hold = sim("held.csv", "random", "2", "99");
+        for (traj, laps) in [
+            ("square", "1"),
+            ("figure8", "4"),
+            ("random", "1"),
+            ("spin", "1"),
+            ("spin", "4"),
+        ] {
+            let log = sim(&format!("{traj}-{laps}.csv"), traj, laps, "3");
+            let doc = kinegen_json(&[
+                "fit",
+                "--spec",
+                spec,
+                "--data",
+                log.to_str().unwrap(),
+                "--holdout",
+                hold.to_str().unwrap(),
+            ]);
+            cases += 1;
+            let (before, after) = (
+                doc["holdout"]["before"]["rmse"].as_f64().unwrap(),
+                doc["holdout"]["after"]["rmse"].as_f64().unwrap(),
+            );
+            let case = format!("{name} {traj} x{laps}: held out {before:.4} m -> {after:.4} m");
+            if traj != "spin" {
+                assert!(after < 0.5 * before, "{case}");
+            }
+            let said = doc["warnings"].as_array().unwrap().iter().any(|w| {
+                let w = w.as_str().unwrap();
+                w.contains("worse than the nominal parameters on the held-out runs")
+                    && (w.contains("do not cover") || w.contains("do not determine"))
+            });
+            assert_eq!(after > 1.001 * before, said, "{case}: {}", doc["warnings"]);
+            if said {
+                worse.push(case);
+            }
+        }
+    }
+    eprintln!(
+        "{} of {cases} calibrations left the held-out run worse, each with its reason: {worse:#?}",
+        worse.len()
+    );
+    // the turn-in-place unicycle is the case that shows the warning works;
+    // the others are only the turns in place of the 12-parameter omni_caster
+    // (a unicycle turning in place for one lap stays nominal: its speed scale
+    // is undetermined there)
+    assert!(
+        worse.iter().any(|c| c.starts_with("unicycle_ekf spin x4")),
+        "{worse:?}"
+    );
+    let expected = [
+        "unicycle_ekf spin x4",
+        "omni_caster spin x1",
+        "omni_caster spin x4",
+    ];
+    for c in &worse {
+        assert!(expected.iter().any(|e| c.starts_with(e)), "{c}");
+    }
+}

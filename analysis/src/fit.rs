@@ -75,6 +75,10 @@ pub struct FitOptions {
     pub increments: Option<f64>,
     /// Pose residuals at the last row of each run only (see `increments`).
     pub endpoints_only: bool,
+    /// Directions in parameter space (unscaled, one entry per free parameter)
+    /// along which the parameters stay at their starting values: ones an
+    /// earlier fit of the same data found undetermined (see [`fit_stage`]).
+    pub hold: Vec<DVector<f64>>,
 }
 
 impl Default for FitOptions {
@@ -91,6 +95,7 @@ impl Default for FitOptions {
             estimate_start: true,
             increments: None,
             endpoints_only: false,
+            hold: Vec::new(),
         }
     }
 }
@@ -115,6 +120,22 @@ pub struct FitResult {
     pub warnings: Vec<String>,
     /// Fitted start-pose offsets of the (segmented) runs, see [`FitOptions::estimate_start`].
     pub starts: Vec<[f64; 3]>,
+    /// Unit directions in parameter space (unscaled, indexed like `free`) that
+    /// the data do not determine.
+    pub undetermined: Vec<DVector<f64>>,
+}
+
+impl FitResult {
+    /// This fit as the continuation of `earlier` (a fit of the same data
+    /// from the same starting values): the starting cost is the earlier one's,
+    /// the iterations are both fits'.
+    fn continuing(self, earlier: &FitResult) -> FitResult {
+        FitResult {
+            cost_before: earlier.cost_before,
+            iterations: earlier.iterations + self.iterations,
+            ..self
+        }
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -641,7 +662,23 @@ const AT_NOISE: f64 = 1.5;
 /// continuation ladder [`LADDER_S`] and (b) a gyro-only fit (the yaw-rate residual
 /// does not accumulate along the track, so it is nearly convex in the
 /// parameters); the candidate with the lowest full cost wins.
+///
+/// A direction the final fit finds undetermined keeps its starting value: when
+/// an earlier stage or another starting point moved the parameters along it
+/// (where it still looked determined: the first stage of [`fit_from`] has no
+/// start-heading nuisance, and a turn-in-place log then slid a speed scale to
+/// its bound), the whole fit is redone with that direction held.
 pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+    let res = fit_unheld(r, runs, o)?;
+    if !moved_along_undetermined(r, &res) {
+        return Ok(res);
+    }
+    let held = fit_unheld(r, runs, &holding(o, &res))?;
+    Ok(held.continuing(&res))
+}
+
+/// [`fit`] without its final check of the undetermined directions.
+fn fit_unheld(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     // Dead reckoning over hours drifts beyond any basin of attraction: runs longer
     // than 2 min are calibrated as 60 s segments, each re-anchored on its measured
     // start pose (relative rather than absolute error).
@@ -649,7 +686,7 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
     if let Some(w) = o.increments.filter(|_| all_measured && o.use_pose) {
         // the estimate and its uncertainty from independent window increments,
         // started from the best absolute-track fit (which finds the basin)
-        let track = fit(
+        let track = fit_unheld(
             r,
             runs,
             &FitOptions {
@@ -719,11 +756,7 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
         if let Ok(cand) = fit_from(&from, &split, o) {
             if cand.cost_after < best.cost_after {
                 best_on_screen = None;
-                best = FitResult {
-                    cost_before: best.cost_before,
-                    iterations: best.iterations + cand.iterations,
-                    ..cand
-                };
+                best = cand.continuing(&best);
             }
         }
     }
@@ -742,7 +775,7 @@ fn coarse_to_fine(r: &Runner, split: &[Run], o: &FitOptions) -> Result<FitResult
     }
     let coarse = fit_from(r, &thinned(split.to_vec(), SCREEN_ROWS), o)?;
     let mut from = r.clone();
-    from.p = coarse.p;
+    from.p = coarse.p.clone();
     // from the coarse optimum, the start headings are refined with the
     // parameters at once (fit_from's first stage guards against a far start)
     let fine = fit_stage(&from, split, o)?;
@@ -751,8 +784,7 @@ fn coarse_to_fine(r: &Runner, split: &[Run], o: &FitOptions) -> Result<FitResult
     let before = cost(&residuals(r, &r.p, &r.free, split, o, false, &starts).0);
     Ok(FitResult {
         cost_before: before,
-        iterations: coarse.iterations + fine.iterations,
-        ..fine
+        ..fine.continuing(&coarse)
     })
 }
 
@@ -954,18 +986,84 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     let mut from = r.clone();
     from.p = first.p.clone();
     let joint = fit_stage(&from, runs, o)?;
-    Ok(FitResult {
-        cost_before: first.cost_before,
-        iterations: first.iterations + joint.iterations,
-        ..joint
-    })
+    Ok(joint.continuing(&first))
 }
 
 /// Information (in scaled units, residuals weighted by their sigmas) below which
 /// a parameter direction counts as undetermined by the data during the fit.
 const UNDETERMINED_INFORMATION: f64 = 1.0;
 
+/// Scaled displacement (in units of [`Runner::param_scale`]) along an
+/// undetermined direction below which a fit counts as not having moved along
+/// it: 1% of a parameter's size. A direction computed from the information
+/// matrix is a little off the true null space (by 0.02 rad on a turn in
+/// place), so a step along the determined directions shows a small component
+/// along it (0.0013 for a 0.04 step) that is no drift.
+const NOT_MOVED: f64 = 0.01;
+
+/// One Levenberg-Marquardt fit from `r.p`. The iterations judge a direction
+/// undetermined with the nominal noise ([`UNDETERMINED_INFORMATION`]) and the
+/// Jacobian of the moment; the final check uses the residuals' own variance at
+/// the optimum. Where the final check finds a direction the iterations did not
+/// (a turn-in-place log: the speed scale's information is tiny but not below
+/// 1, so it slid to its bound and the held-out error went 0.74 m -> 26 m), the
+/// fit is redone from the start with those directions locked, so that the
+/// parameters stay at their starting values along what the data cannot see.
 fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+    let first = levenberg_marquardt(r, runs, o)?;
+    if !moved_along_undetermined(r, &first) {
+        return Ok(first);
+    }
+    let locked = levenberg_marquardt(r, runs, &holding(o, &first))?;
+    Ok(locked.continuing(&first))
+}
+
+/// Whether `res` moved the parameters away from `r.p` along a direction it
+/// found undetermined (by [`NOT_MOVED`] in scaled units).
+fn moved_along_undetermined(r: &Runner, res: &FitResult) -> bool {
+    let scale: Vec<f64> = res.free.iter().map(|&i| r.param_scale(i, r.p[i])).collect();
+    let moved = DVector::from_fn(scale.len(), |k, _| {
+        let i = res.free[k];
+        (res.p[i] - r.p[i]) / scale[k]
+    });
+    res.undetermined.iter().any(|u| {
+        let v = u.component_div(&DVector::from_row_slice(&scale));
+        v.dot(&moved).abs() > NOT_MOVED * v.norm()
+    })
+}
+
+/// `o` that also holds the directions `res` found undetermined.
+fn holding(o: &FitOptions, res: &FitResult) -> FitOptions {
+    FitOptions {
+        hold: o.hold.iter().chain(&res.undetermined).cloned().collect(),
+        ..o.clone()
+    }
+}
+
+/// Orthonormal basis of the span of `vs` (Gram-Schmidt), so that removing
+/// each basis vector's component from a step removes the whole span's.
+fn orthonormal(vs: impl IntoIterator<Item = DVector<f64>>) -> Vec<DVector<f64>> {
+    let mut basis: Vec<DVector<f64>> = Vec::new();
+    for v in vs {
+        let Some(mut v) = v.try_normalize(0.0) else {
+            continue;
+        };
+        for b in &basis {
+            v -= b * b.dot(&v);
+        }
+        // a vector within 1% of the span so far is taken to be in it: a
+        // direction found again, a little off numerically, would otherwise
+        // add its (meaningless) difference as a new direction
+        let n = v.norm();
+        if n > 1e-2 {
+            basis.push(v / n);
+        }
+    }
+    basis
+}
+
+/// [`fit_stage`]'s solver. The directions of `o.hold` get no step at all.
+fn levenberg_marquardt(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     let free = r.free.clone();
     let m = free.len();
     let rp = r.ir.runtime_params();
@@ -991,6 +1089,13 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         scale.push(0.01);
         bounds.push((-0.5, 0.5));
     }
+    // held directions in the scaled variables
+    let locked: Vec<DVector<f64>> = o
+        .hold
+        .iter()
+        .filter(|u| u.len() == m)
+        .map(|u| u.component_div(&DVector::from_row_slice(&scale[..m])))
+        .collect();
     let starts_of = |x: &[f64]| -> Vec<[f64; 3]> {
         start_cols
             .iter()
@@ -1037,10 +1142,10 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         } else {
             let eig = arrow::marginal(&jtj, m).symmetric_eigen();
             let emax = eig.eigenvalues.max();
-            (0..m)
+            let seen = (0..m)
                 .filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax))
-                .map(|k| eig.eigenvectors.column(k).into_owned())
-                .collect()
+                .map(|k| eig.eigenvectors.column(k).into_owned());
+            orthonormal(locked.iter().cloned().chain(seen))
         };
         let mut improved = false;
         let mut first_trial = true;
@@ -1118,7 +1223,17 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     let full = DMatrix::from_fn(dims, dims, |a, b| jtj_raw[(a, b)] * scale[a] * scale[b]);
     // information about the parameters with the start offsets marginalised out
     // (Schur complement), so the nuisance never shows up as a parameter
-    let jtj = arrow::marginal(&full, m);
+    let mut jtj = arrow::marginal(&full, m);
+    if !locked.is_empty() {
+        // held directions carry no information: the data were not let to
+        // move them, so they are reported undetermined, with the rest
+        // estimated on the complement
+        let mut proj = DMatrix::identity(m, m);
+        for v in orthonormal(locked.iter().cloned()) {
+            proj -= &v * v.transpose();
+        }
+        jtj = &proj * jtj * &proj;
+    }
     if m == 0 {
         // only start poses were refined: no parameter to report on
         return Ok(FitResult {
@@ -1132,6 +1247,7 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
             n_residuals: n,
             warnings: vec![],
             starts,
+            undetermined: vec![],
         });
     }
     let d = DMatrix::from_diagonal(&DVector::from_vec(scale[..m].to_vec()));
@@ -1148,11 +1264,17 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
     let rank = svd.singular_values.iter().filter(|&&s| s > cutoff).count();
     // parameters taking part in a direction the data do not determine
     let mut undetermined = vec![false; m];
+    let mut null = Vec::new();
     if rank < m {
         let v_t = svd.v_t.as_ref().unwrap();
         for (k, &s) in svd.singular_values.iter().enumerate() {
             if s <= cutoff {
                 let row = v_t.row(k);
+                // back to unscaled parameter space
+                let u = row
+                    .transpose()
+                    .component_mul(&DVector::from_row_slice(&scale[..m]));
+                null.push(u.normalize());
                 for (j, v) in row.iter().enumerate() {
                     undetermined[j] |= v.abs() > 0.2;
                 }
@@ -1163,10 +1285,14 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
                     .filter(|(v, _)| *v > 0.2)
                     .collect();
                 parts.sort_by(|a, b| b.0.total_cmp(&a.0));
-                warnings.push(format!(
-                    "not identifiable from these logs: the combination of {} cannot be separated (rank {rank} of {m})",
-                    parts.iter().map(|p| p.1).collect::<Vec<_>>().join(" and ")
-                ));
+                let names: Vec<&str> = parts.iter().map(|p| p.1).collect();
+                warnings.push(match names.as_slice() {
+                    [one] => format!("not identifiable from these logs: {one} (kept at its starting value)"),
+                    _ => format!(
+                        "not identifiable from these logs: the combination of {} cannot be separated (rank {rank} of {m}; kept at the starting values along it)",
+                        names.join(" and ")
+                    ),
+                });
             }
         }
     }
@@ -1215,5 +1341,6 @@ fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitE
         n_residuals: n,
         warnings,
         starts,
+        undetermined: null,
     })
 }
