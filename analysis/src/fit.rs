@@ -778,7 +778,7 @@ fn coarse_to_fine(r: &Runner, split: &[Run], o: &FitOptions) -> Result<FitResult
     from.p = coarse.p.clone();
     // from the coarse optimum, the start headings are refined with the
     // parameters at once (fit_from's first stage guards against a far start)
-    let fine = fit_stage(&from, split, o)?;
+    let fine = fit_stage_from(&from, split, o, Start::NearOptimum)?;
     // the cost at the starting values, on the whole log, as a direct fit reports it
     let starts = vec![[0.0; 3]; split.len()];
     let before = cost(&residuals(r, &r.p, &r.free, split, o, false, &starts).0);
@@ -1010,11 +1010,42 @@ const NOT_MOVED: f64 = 0.01;
 /// fit is redone from the start with those directions locked, so that the
 /// parameters stay at their starting values along what the data cannot see.
 fn fit_stage(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
-    let first = levenberg_marquardt(r, runs, o)?;
+    fit_stage_from(r, runs, o, Start::Rough)
+}
+
+/// Where a Levenberg-Marquardt stage starts, which sets its damping.
+#[derive(Clone, Copy, PartialEq)]
+enum Start {
+    /// Anywhere (nominal values, another stage's result): the usual damping
+    /// of 1e-3 of the normal equations' diagonal, and the stage ends when an
+    /// accepted step changes nothing.
+    Rough,
+    /// At the optimum of evenly spaced pieces of the same log (see
+    /// [`coarse_to_fine`]), where the quadratic model is good. The usual
+    /// damping would only slow the first steps along weakly determined
+    /// directions (on a million rows: 7 passes with sensitivities instead of
+    /// 3), so it starts at 1e-7; and the stage ends as soon as the undamped
+    /// Gauss-Newton step predicts a negligible decrease, instead of trying a
+    /// round-off-level step and then ever more damped ones (each a pass over
+    /// the log). From a rough start that prediction cannot be trusted: a
+    /// badly wrong model has a huge residual variance, so a step it calls
+    /// negligible can still lead out of a collapse (seen: a tricycle whose
+    /// fit then stopped with its wheel radius at zero).
+    NearOptimum,
+}
+
+/// [`fit_stage`] from a `start` of the given kind.
+fn fit_stage_from(
+    r: &Runner,
+    runs: &[Run],
+    o: &FitOptions,
+    start: Start,
+) -> Result<FitResult, FitError> {
+    let first = levenberg_marquardt(r, runs, o, start)?;
     if !moved_along_undetermined(r, &first) {
         return Ok(first);
     }
-    let locked = levenberg_marquardt(r, runs, &holding(o, &first))?;
+    let locked = levenberg_marquardt(r, runs, &holding(o, &first), start)?;
     Ok(locked.continuing(&first))
 }
 
@@ -1063,7 +1094,12 @@ fn orthonormal(vs: impl IntoIterator<Item = DVector<f64>>) -> Vec<DVector<f64>> 
 }
 
 /// [`fit_stage`]'s solver. The directions of `o.hold` get no step at all.
-fn levenberg_marquardt(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+fn levenberg_marquardt(
+    r: &Runner,
+    runs: &[Run],
+    o: &FitOptions,
+    start: Start,
+) -> Result<FitResult, FitError> {
     let free = r.free.clone();
     let m = free.len();
     let rp = r.ir.runtime_params();
@@ -1120,7 +1156,10 @@ fn levenberg_marquardt(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitRe
         ));
     }
     let mut c = cost_before;
-    let mut lambda = 1e-3;
+    let mut lambda = match start {
+        Start::Rough => 1e-3,
+        Start::NearOptimum => 1e-7,
+    };
     let mut iterations = 0;
     for it in 0..o.max_iter {
         if dims == 0 {
@@ -1147,6 +1186,18 @@ fn levenberg_marquardt(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitRe
                 .map(|k| eig.eigenvectors.column(k).into_owned());
             orthonormal(locked.iter().cloned().chain(seen))
         };
+        // Near the optimum: converged when even the undamped Gauss-Newton
+        // step would lower the cost by a negligible amount (a hundredth of a
+        // standard deviation, see `negligible` below); see [`Start`].
+        if start == Start::NearOptimum {
+            let s2 = 2.0 * c / (res.len().saturating_sub(dims).max(1)) as f64;
+            if let Some(gn) = arrow::damped_step(&jtj, &g, m, 1e-12, &undetermined) {
+                let predicted = -(g.dot(&gn) + 0.5 * gn.dot(&(&jtj * &gn)));
+                if 2.0 * predicted < 1e-4 * s2 {
+                    break;
+                }
+            }
+        }
         let mut improved = false;
         let mut first_trial = true;
         for _ in 0..30 {
