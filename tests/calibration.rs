@@ -1566,3 +1566,44 @@ fn calibration_never_leaves_held_out_runs_worse_than_nominal_without_saying_why(
         assert!(expected.iter().any(|e| c.starts_with(e)), "{c}");
     }
 }
+
+/// Issue #11.5: a million-sample log fits through the CLI, and its report stays
+/// under 5 MB whatever the log length (plots decimated, extremes kept): before,
+/// a million-sample fit wrote a 223 MB report. Also a check that the fit is
+/// right at that length: b within 0.1% of the simulated robot's.
+#[test]
+fn a_million_sample_fit_writes_a_report_under_5_mb() {
+    let tmp = tempfile::tempdir().unwrap();
+    // 550 laps of 91 s at 20 Hz: 1,001,001 rows
+    let log = simulate(
+        tmp.path(),
+        "long.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--trajectory",
+            "random",
+            "--laps",
+            "550",
+            "--seed",
+            "4",
+            "--set",
+            "b=0.204",
+        ],
+    );
+    let report = tmp.path().join("report");
+    let doc = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(doc["residuals"].as_u64().unwrap() > 3_000_000);
+    let b = doc["parameters"]["b"]["estimate"].as_f64().unwrap();
+    assert!((b / 0.204 - 1.0).abs() < 1e-3, "b = {b}");
+    let size = std::fs::metadata(report.join("index.html")).unwrap().len();
+    assert!(size < 5_000_000, "report of {size} bytes");
+}
