@@ -989,6 +989,11 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     Ok(joint.continuing(&first))
 }
 
+/// A fit ends when an accepted step moves the estimate by less than this many
+/// of its standard deviations: nothing a user could see (see `negligible` in
+/// [`levenberg_marquardt`]).
+const STEP_TOLERANCE: f64 = 0.01;
+
 /// Information (in scaled units, residuals weighted by their sigmas) below which
 /// a parameter direction counts as undetermined by the data during the fit.
 const UNDETERMINED_INFORMATION: f64 = 1.0;
@@ -1193,7 +1198,7 @@ fn levenberg_marquardt(
             let s2 = 2.0 * c / (res.len().saturating_sub(dims).max(1)) as f64;
             if let Some(gn) = arrow::damped_step(&jtj, &g, m, 1e-12, &undetermined) {
                 let predicted = -(g.dot(&gn) + 0.5 * gn.dot(&(&jtj * &gn)));
-                if 2.0 * predicted < 1e-4 * s2 {
+                if 2.0 * predicted < STEP_TOLERANCE * STEP_TOLERANCE * s2 {
                     break;
                 }
             }
@@ -1237,7 +1242,7 @@ fn levenberg_marquardt(
                 // for a dozen passes over the log. Exact (noise-free) data
                 // have s^2 near zero and still converge to round-off.
                 let s2 = 2.0 * tc / (res.len().saturating_sub(dims).max(1)) as f64;
-                let negligible = 2.0 * (c - tc) < 1e-4 * s2;
+                let negligible = 2.0 * (c - tc) < STEP_TOLERANCE * STEP_TOLERANCE * s2;
                 p = trial;
                 x = xt;
                 c = tc;
