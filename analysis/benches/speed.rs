@@ -441,8 +441,8 @@ fn million_sample_fit(r: &Runner) {
     let mut passes = Vec::new();
     for _ in 0..3 {
         let t0 = Instant::now();
-        black_box(kinegen_analysis::fit::residuals(
-            r, &r.p, &r.free, &pieces, &o, false, &starts,
+        black_box(kinegen_analysis::fit::residual_sums(
+            r, &r.p, &r.free, &pieces, &o, &starts,
         ));
         passes.push(t0.elapsed().as_secs_f64());
     }

@@ -244,7 +244,9 @@ pub fn residuals(
 /// forming J: each run's start-heading column touches only its own rows, so J is
 /// block-sparse and can be huge (a 1,000,000-sample log cut into 833 segments
 /// would need a 3e6 x 836 dense matrix), while J^T J is small. Columns as in
-/// [`residuals`]. Returns (weighted residuals, J^T J, J^T r).
+/// [`residuals`]. Returns the weighted residuals' [`Sums`], J^T J and J^T r:
+/// the residuals themselves are not kept (on a million rows they would be
+/// the largest thing the fit holds besides the log).
 pub fn normal_equations(
     r: &Runner,
     p: &[f64],
@@ -252,12 +254,12 @@ pub fn normal_equations(
     runs: &[Run],
     o: &FitOptions,
     starts: &[[f64; 3]],
-) -> (Vec<f64>, DMatrix<f64>, DVector<f64>) {
+) -> (Sums, DMatrix<f64>, DVector<f64>) {
     let m = free.len();
     let cols = start_columns(runs, o, m);
     let n = m + cols.iter().flatten().count();
     // per run: residuals, A^T A, A^T b, b^T b, A^T r, b^T r (A: parameter columns, b: start heading)
-    type Part = (Vec<f64>, DMatrix<f64>, DVector<f64>, f64, DVector<f64>, f64);
+    type Part = (Sums, DMatrix<f64>, DVector<f64>, f64, DVector<f64>, f64);
     let parts: Vec<Part> = runs
         .par_iter()
         .enumerate()
@@ -308,14 +310,14 @@ pub fn normal_equations(
                 atr.gemv_tr(1.0, &a, &rb, 1.0);
                 btr += b.dot(&rb);
             }
-            (rv, ata, atb, btb, atr, btr)
+            (Sums::of(&rv), ata, atb, btb, atr, btr)
         })
         .collect();
-    let mut res = Vec::new();
+    let mut sums = Sums::default();
     let mut jtj = DMatrix::zeros(n, n);
     let mut jtr = DVector::zeros(n);
     for (i, (rv, ata, atb, btb, atr, btr)) in parts.into_iter().enumerate() {
-        res.extend(rv);
+        sums.add(rv);
         let mut top = jtj.view_mut((0, 0), (m, m));
         top += &ata;
         let mut g = jtr.rows_mut(0, m);
@@ -329,7 +331,55 @@ pub fn normal_equations(
             jtr[c] += btr;
         }
     }
-    (res, jtj, jtr)
+    (sums, jtj, jtr)
+}
+
+/// The cost (half the sum of squares) of weighted residuals and their count.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Sums {
+    pub cost: f64,
+    pub n: usize,
+}
+
+impl Sums {
+    fn of(res: &[f64]) -> Sums {
+        Sums {
+            cost: cost(res),
+            n: res.len(),
+        }
+    }
+
+    fn add(&mut self, other: Sums) {
+        self.cost += other.cost;
+        self.n += other.n;
+    }
+}
+
+/// The [`Sums`] of [`residuals`] without the residuals: each run's are summed
+/// and dropped as its thread finishes it.
+pub fn residual_sums(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    runs: &[Run],
+    o: &FitOptions,
+    starts: &[[f64; 3]],
+) -> Sums {
+    let cols = start_columns(runs, o, free.len());
+    runs.par_iter()
+        .enumerate()
+        .map(|(i, run)| {
+            let start = starts.get(i).copied().unwrap_or([0.0; 3]);
+            let (mut rv, _) = run_residuals(r, p, free, run, o, false, start, cols[i].is_some());
+            if let Some(k) = o.huber {
+                rv.iter_mut().for_each(|x| *x *= huber_weight(*x, k));
+            }
+            Sums::of(&rv)
+        })
+        .reduce(Sums::default, |mut a, b| {
+            a.add(b);
+            a
+        })
 }
 
 /// Huber loss by iteratively reweighted least squares: a residual r beyond k is
@@ -781,7 +831,7 @@ fn coarse_to_fine(r: &Runner, split: &[Run], o: &FitOptions) -> Result<FitResult
     let fine = fit_stage_from(&from, split, o, Start::NearOptimum)?;
     // the cost at the starting values, on the whole log, as a direct fit reports it
     let starts = vec![[0.0; 3]; split.len()];
-    let before = cost(&residuals(r, &r.p, &r.free, split, o, false, &starts).0);
+    let before = residual_sums(r, &r.p, &r.free, split, o, &starts).cost;
     Ok(FitResult {
         cost_before: before,
         ..fine.continuing(&coarse)
@@ -1145,16 +1195,16 @@ fn levenberg_marquardt(
     };
     let mut p = r.p.clone();
     let mut x = vec![0.0; dims]; // the start headings live in x[m..]
-    let eval = |p: &[f64], x: &[f64]| residuals(r, p, &free, runs, o, false, &starts_of(x)).0;
+    let eval = |p: &[f64], x: &[f64]| residual_sums(r, p, &free, runs, o, &starts_of(x));
     let normal = |p: &[f64], x: &[f64]| normal_equations(r, p, &free, runs, o, &starts_of(x));
     let (mut res, mut jtj_raw, mut jtr_raw) = normal(&p, &x);
-    if res.is_empty() {
+    if res.n == 0 {
         return Err(FitError::NoResiduals {
             pose: r.ir.pose_columns().join(", "),
             gyro: r.ir.gyro_column(),
         });
     }
-    let cost_before = cost(&res);
+    let cost_before = res.cost;
     if !cost_before.is_finite() {
         return Err(FitError::Diverged(
             "the residuals at the starting point are not finite".into(),
@@ -1195,7 +1245,7 @@ fn levenberg_marquardt(
         // step would lower the cost by a negligible amount (a hundredth of a
         // standard deviation, see `negligible` below); see [`Start`].
         if start == Start::NearOptimum {
-            let s2 = 2.0 * c / (res.len().saturating_sub(dims).max(1)) as f64;
+            let s2 = 2.0 * c / (res.n.saturating_sub(dims).max(1)) as f64;
             if let Some(gn) = arrow::damped_step(&jtj, &g, m, 1e-12, &undetermined) {
                 let predicted = -(g.dot(&gn) + 0.5 * gn.dot(&(&jtj * &gn)));
                 if 2.0 * predicted < STEP_TOLERANCE * STEP_TOLERANCE * s2 {
@@ -1230,7 +1280,7 @@ fn levenberg_marquardt(
                 (eval(&trial, &xt), None)
             };
             first_trial = false;
-            let tc = cost(&tres);
+            let tc = tres.cost;
             if tc.is_finite() && tc < c {
                 let rel = (c - tc) / c.max(1e-300);
                 // The step's length in standard deviations of the estimate:
@@ -1241,7 +1291,7 @@ fn levenberg_marquardt(
                 // could see; on a million residuals LM would otherwise go on
                 // for a dozen passes over the log. Exact (noise-free) data
                 // have s^2 near zero and still converge to round-off.
-                let s2 = 2.0 * tc / (res.len().saturating_sub(dims).max(1)) as f64;
+                let s2 = 2.0 * tc / (res.n.saturating_sub(dims).max(1)) as f64;
                 let negligible = 2.0 * (c - tc) < STEP_TOLERANCE * STEP_TOLERANCE * s2;
                 p = trial;
                 x = xt;
@@ -1274,7 +1324,7 @@ fn levenberg_marquardt(
     // residuals; dead-reckoning residuals are correlated, so these are optimistic).
     // Identifiability and covariance in the scaled variables (then scaled back), so
     // that parameters of different units are compared fairly.
-    let n = res.len();
+    let n = res.n;
     let s2 = 2.0 * c / (n.saturating_sub(dims).max(1)) as f64;
     let full = DMatrix::from_fn(dims, dims, |a, b| jtj_raw[(a, b)] * scale[a] * scale[b]);
     // information about the parameters with the start offsets marginalised out
