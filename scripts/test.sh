@@ -12,6 +12,18 @@
 #     in parallel, which is also safe here, but is not what this project tests).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Some containers ship /dev/null as a plain file: whatever a program sends
+# there stays (Chromium's launcher, run by the report test, sends an `ls` error
+# there), and cargo's rustc probe, which reads /dev/null as source, then fails
+# in every fresh target directory (the generated-crate tests). Put the
+# character device back when we may.
+if [ ! -c /dev/null ]; then
+  if mknod -m 666 /dev/null.kinegen c 1 3 2>/dev/null && mv -f /dev/null.kinegen /dev/null; then
+    echo "note: /dev/null was a plain file; restored the null device"
+  else
+    echo "warning: /dev/null is a plain file here and could not be restored; the generated-crate tests may fail" >&2
+  fi
+fi
 python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt
 python3 verify/casadi/reference.py --check
 python3 verify/peers/wrenfold_kernels.py --check

@@ -56,11 +56,17 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
         .arg(spec)
         .arg("--ir-out")
         .arg(&cached)
-        .stdout(Stdio::null())
+        // symbolica's banner is drained here rather than sent to /dev/null,
+        // which is a plain file on some containers and would keep it.
+        .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
         .map_err(|e| format!("cannot run `kinegen derive`: {e}"))?;
     crate::signals::child_started(child.id());
+    if let Some(mut banner) = child.stdout.take() {
+        // an error here only means the child closed its stdout early
+        let _ = std::io::copy(&mut banner, &mut std::io::sink());
+    }
     let status = child.wait();
     crate::signals::child_finished(child.id());
     let status = status.map_err(|e| format!("`kinegen derive` did not finish: {e}"))?;
