@@ -15,8 +15,10 @@ use std::process::{Command, Stdio};
 /// instead of products: format 3; unshared reciprocals: 4; an integrated
 /// inverse whose whole expression got the series branch: 5; measurement delays
 /// found by name: 6; kernels and arguments named by string: 7; steps
-/// differentiated through the expanded twist: 8) is never reused.
-const IR_FORMAT: u32 = 8;
+/// differentiated through the expanded twist: 8, which also divided by a
+/// denominator used once instead of multiplying by its reciprocal) is never
+/// reused.
+const IR_FORMAT: u32 = 9;
 
 pub fn cache_dir() -> PathBuf {
     std::env::temp_dir().join("kinegen-ir-cache")

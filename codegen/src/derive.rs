@@ -91,7 +91,8 @@ fn substitute(a: &Atom, s: Symbol, by: &Atom) -> Atom {
     a.replace(Atom::var(s).to_pattern()).with(by.to_pattern())
 }
 
-/// Does `a` divide by something that vanishes at s = 0?
+/// Does `a` divide by something that vanishes at s = 0? (The closed form inside
+/// a `kg_near` already has its series: it does not count.)
 fn has_vanishing_denominator(a: AtomView, s: Symbol) -> bool {
     match a {
         AtomView::Pow(p) => {
@@ -107,6 +108,7 @@ fn has_vanishing_denominator(a: AtomView, s: Symbol) -> bool {
         }
         AtomView::Mul(m) => m.iter().any(|x| has_vanishing_denominator(x, s)),
         AtomView::Add(m) => m.iter().any(|x| has_vanishing_denominator(x, s)),
+        AtomView::Fun(f) if f.get_symbol() == Funcs::get().near => false,
         AtomView::Fun(f) => f.iter().any(|x| has_vanishing_denominator(x, s)),
         _ => false,
     }
@@ -137,6 +139,13 @@ fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), Symbo
         }
     }
     for (s, e) in &spec.lets {
+        // a let may itself be singular (sin(dth)/dth of the exact step): it gets
+        // its series here, once, instead of in every output that uses it
+        let mut e = e.clone();
+        for &sing in spec.singular.iter().filter(|&&sing| sing != *s) {
+            e = regularize(&e, sing, fx)
+                .map_err(|err| SymbolicError(format!("{:?} let {s}: {}", spec.kernel, err.0)))?;
+        }
         let slot = tb.atom(e.as_view())?;
         tb.bind(*s, slot);
     }
@@ -176,7 +185,7 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
                 return Ok(symbolica::function!(
                     fx.near,
                     Atom::var(s),
-                    series,
+                    horner(&series, s),
                     a.clone()
                 ));
             }
@@ -218,6 +227,76 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
         }
         _ => a.clone(),
     })
+}
+
+/// The series `sum c_k s^k` (k >= 0) in Horner form,
+/// `s^k0 (c_k0 + s^(k1-k0) (c_k1 + ...))`: one multiplication and one addition
+/// per nonzero term, where the expanded sum costs a power and a product each.
+/// The coefficients may hold other symbols (a series of a whole output).
+fn horner(series: &Atom, s: Symbol) -> Atom {
+    let mut by_power: Vec<(i64, Atom)> = Vec::new();
+    let add_term = |by_power: &mut Vec<(i64, Atom)>, t: AtomView| {
+        let (k, c) = split_power(t, s);
+        match by_power.iter_mut().find(|(kk, _)| *kk == k) {
+            Some((_, acc)) => *acc = &*acc + &c,
+            None => by_power.push((k, c)),
+        }
+    };
+    match series.as_view() {
+        AtomView::Add(terms) => terms.iter().for_each(|t| add_term(&mut by_power, t)),
+        t => add_term(&mut by_power, t),
+    }
+    by_power.sort_by_key(|(k, _)| *k);
+    let sv = Atom::var(s);
+    let mut acc: Option<Atom> = None;
+    for w in (0..by_power.len()).rev() {
+        let (k, c) = &by_power[w];
+        acc = Some(match acc {
+            None => c.clone(),
+            Some(inner) => {
+                let gap = by_power[w + 1].0 - k;
+                c + &sv.pow(Atom::num(gap)) * &inner
+            }
+        });
+    }
+    match (acc, by_power.first()) {
+        (Some(p), Some((k0, _))) if *k0 > 0 => sv.pow(Atom::num(*k0)) * &p,
+        (Some(p), _) => p,
+        (None, _) => Atom::num(0),
+    }
+}
+
+/// A series term `c * s^k` as (k, c); k is 0 when s does not occur as a factor.
+fn split_power(t: AtomView, s: Symbol) -> (i64, Atom) {
+    let power_of = |f: AtomView| -> Option<i64> {
+        match f {
+            AtomView::Var(v) if v.get_symbol() == s => Some(1),
+            AtomView::Pow(p) => {
+                let (b, e) = p.get_base_exp();
+                let k = crate::symbolic::as_f64(e)?;
+                (matches!(b, AtomView::Var(v) if v.get_symbol() == s) && k.fract() == 0.0)
+                    .then_some(k as i64)
+            }
+            _ => None,
+        }
+    };
+    match t {
+        AtomView::Mul(m) => {
+            let mut k = 0;
+            let mut c = Atom::num(1);
+            for f in m.iter() {
+                match power_of(f) {
+                    Some(kk) => k += kk,
+                    None => c *= f.to_owned(),
+                }
+            }
+            (k, c)
+        }
+        f => match power_of(f) {
+            Some(k) => (k, Atom::num(1)),
+            None => (0, f.to_owned()),
+        },
+    }
 }
 
 fn has_negative_power(a: AtomView, s: Symbol) -> bool {
@@ -289,14 +368,30 @@ fn jacobian_through(
     // d_of[l][v]: the symbol bound to D(let l)/D(var v); None when it is zero
     let mut d_of: Vec<Vec<Option<Symbol>>> = Vec::new();
     for (li, (_, e)) in lets.iter().enumerate() {
+        // the partial derivative wrt each earlier let, bound once when it is more
+        // than a number or a symbol: shared by every variable's chain rule (and,
+        // when singular, given one series)
+        let partial: Vec<Atom> = lets[..li]
+            .iter()
+            .enumerate()
+            .map(|(mi, (m, _))| {
+                let p = e.derivative(*m);
+                if matches!(p.as_view(), AtomView::Num(_) | AtomView::Var(_)) {
+                    return p;
+                }
+                let s = symbol!(&format!("kg_p_{li}_{mi}"));
+                dlets.push((s, p));
+                Atom::var(s)
+            })
+            .collect();
         let row = vars
             .iter()
             .enumerate()
             .map(|(vi, &v)| {
                 let mut d = e.derivative(v);
-                for (mi, (m, _)) in lets[..li].iter().enumerate() {
+                for (mi, p) in partial.iter().enumerate() {
                     if let Some(dm) = d_of[mi][vi] {
-                        d += e.derivative(*m) * Atom::var(dm);
+                        d += p * Atom::var(dm);
                     }
                 }
                 (!d.is_zero()).then(|| {
@@ -343,6 +438,8 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         "dy",
         "dtheta",
         "kg_dth",
+        "kg_sinc",
+        "kg_cosc",
         "kg_inc_vx",
         "kg_inc_vy",
     ]));
@@ -468,8 +565,16 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let dth_sym = sym.s("kg_dth");
     let dth = sym.a("kg_dth");
     let dth_expr = om * &dt;
-    let s_fun = dth.sin() / &dth;
-    let c_fun = (Atom::num(1) - dth.cos()) / &dth;
+    // S = sin(dth)/dth and C = (1 - cos dth)/dth are lets: their series (and
+    // those of their derivatives, see `jacobian_through`) are computed once per
+    // kernel, so the series branch evaluates four short polynomials instead of
+    // a series of every output.
+    let (s_sym, c_sym) = (sym.s("kg_sinc"), sym.s("kg_cosc"));
+    let arc_lets = [
+        (s_sym, dth.sin() / &dth),
+        (c_sym, (Atom::num(1) - dth.cos()) / &dth),
+    ];
+    let (s_fun, c_fun) = (Atom::var(s_sym), Atom::var(c_sym));
     let (a, b) = (vx * &dt, vy * &dt);
     let bx = &s_fun * &a - &c_fun * &b;
     let by = &c_fun * &a + &s_fun * &b;
@@ -501,7 +606,10 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         (StepForm::Exact, &exact, Some((dth_sym, &dth_expr)), "Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch)."),
     ] {
         let mut lets = tw_lets.clone();
-        lets.extend(chain.map(|(s, e): (Symbol, &Atom)| (s, e.clone())));
+        if let Some((s, e)) = chain {
+            lets.push((s, e.clone()));
+            lets.extend(arc_lets.iter().cloned());
+        }
         let singular = if chain.is_some() { vec![dth_sym] } else { vec![] };
         let step = Kernel::Step(form, None);
         let step_name = step.name(|_| String::new());

@@ -131,6 +131,8 @@ nalgebra = ["dep:nalgebra"]
 dispatch = []
 # every kernel in f32 (`Real = f32`), for a single-precision FPU
 f32 = []
+# on a computer: std's (the C library's) atan2, atan, exp, pow: faster than libm's
+std = []
 
 [dependencies]
 libm = "0.2"

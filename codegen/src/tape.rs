@@ -334,25 +334,37 @@ impl TapeBuilder {
     }
 }
 
-/// Divisions by one denominator share its reciprocal: a/d and b/d become
-/// r = 1/d, a*r and b*r (a division costs about ten multiplications; the
-/// parameter Jacobian of seed 000's omni step divides 52 times by one slot).
-/// Each result moves by at most an ulp or so. The reciprocal is placed right
-/// before its first use, so the tape stays in dependency order.
+/// Every division becomes a product with the denominator's reciprocal: a/d and
+/// b/d become r = 1/d, a*r and b*r (a division costs about ten
+/// multiplications; the parameter Jacobian of seed 000's omni step divides 52
+/// times by one slot). Done even for a single division, so that one quantity
+/// has one form in every function of a model: the heading change of a step and
+/// of its parameter Jacobian then hash to the same slot when the two are fused,
+/// and their sines, cosines and guards are computed once, not twice. Each
+/// result moves by at most an ulp or so. The reciprocal is placed right before
+/// its first use, so the tape stays in dependency order; `1/d` itself is the
+/// reciprocal.
 fn share_reciprocals(tape: Vec<Op>, outputs: &[u32]) -> (Vec<Op>, Vec<u32>) {
-    let mut uses = vec![0usize; tape.len()];
-    for op in &tape {
-        if let Op::Div(_, d) = *op {
-            uses[d as usize] += 1;
-        }
-    }
     let mut new_index = vec![u32::MAX; tape.len()];
     let mut recip = vec![u32::MAX; tape.len()];
     let mut one = u32::MAX;
     let mut out: Vec<Op> = Vec::with_capacity(tape.len());
     for (i, op) in tape.into_iter().enumerate() {
         let op = match op {
-            Op::Div(a, d) if uses[d as usize] >= 2 => {
+            Op::Div(a, d) if tape_const(&out, new_index[a as usize]) == Some(1.0) => {
+                let d = d as usize;
+                if recip[d] != u32::MAX {
+                    // this 1/d was already made for an earlier division by d
+                    new_index[i] = recip[d];
+                    continue;
+                }
+                let op = Op::Div(new_index[a as usize], new_index[d]);
+                new_index[i] = out.len() as u32;
+                recip[d] = new_index[i];
+                out.push(op);
+                continue;
+            }
+            Op::Div(a, d) => {
                 let d = d as usize;
                 if recip[d] == u32::MAX {
                     if one == u32::MAX {
@@ -373,4 +385,12 @@ fn share_reciprocals(tape: Vec<Op>, outputs: &[u32]) -> (Vec<Op>, Vec<u32>) {
         out,
         outputs.iter().map(|&o| new_index[o as usize]).collect(),
     )
+}
+
+/// The value of slot `s` when it is a constant.
+fn tape_const(tape: &[Op], s: u32) -> Option<f64> {
+    match tape[s as usize] {
+        Op::Const(c) => Some(c),
+        _ => None,
+    }
 }

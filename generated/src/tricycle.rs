@@ -53,7 +53,7 @@ pub const INPUT_COLUMNS: [&str; 2usize] = ["phi", "alpha"];
 * `p`: [r, L]
 * returns [vx, vy, omega]
 
-4 arithmetic operations (5 before common-subexpression elimination).*/
+5 arithmetic operations (6 before common-subexpression elimination).*/
 #[inline]
 pub fn twist(
     u: &[crate::Real; 2usize],
@@ -67,8 +67,10 @@ pub fn twist(
     let t5: crate::Real = 0.0;
     let t6: crate::Real = crate::math::tan(t1);
     let t7: crate::Real = t4 * t6;
-    let t8: crate::Real = t7 / t3;
-    [t4, t5, t8]
+    let t8: crate::Real = 1.0;
+    let t9: crate::Real = t8 / t3;
+    let t10: crate::Real = t7 * t9;
+    [t4, t5, t10]
 }
 /**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
 
@@ -99,7 +101,7 @@ pub fn twist_gyro(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-15 arithmetic operations (19 before common-subexpression elimination).*/
+16 arithmetic operations (20 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
     x: &[crate::Real; 3usize],
@@ -122,18 +124,21 @@ pub fn step_euler(
     let t11: crate::Real = t5 + t10;
     let t12: crate::Real = crate::math::tan(t4);
     let t13: crate::Real = t10 * t12;
-    let t14: crate::Real = t13 / t8;
-    let t15: crate::Real = t6 + t14;
-    let t16: crate::Real = crate::math::cos(t2);
-    let t17: crate::Real = t9 * t11;
-    let t18: crate::Real = t16 * t17;
-    let t19: crate::Real = t0 + t18;
-    let t20: crate::Real = crate::math::sin(t2);
-    let t21: crate::Real = t17 * t20;
-    let t22: crate::Real = t1 + t21;
-    let t23: crate::Real = t9 * t15;
-    let t24: crate::Real = t2 + t23;
-    [t19, t22, t24]
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t8;
+    let t16: crate::Real = t13 * t15;
+    let t17: crate::Real = t6 + t16;
+    let sc18 = crate::math::sincos(t2);
+    let t22: crate::Real = sc18.0;
+    let t18: crate::Real = sc18.1;
+    let t19: crate::Real = t9 * t11;
+    let t20: crate::Real = t18 * t19;
+    let t21: crate::Real = t0 + t20;
+    let t23: crate::Real = t19 * t22;
+    let t24: crate::Real = t1 + t23;
+    let t25: crate::Real = t9 * t17;
+    let t26: crate::Real = t2 + t25;
+    [t21, t24, t26]
 }
 /**Jacobian of `step_euler` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
 
@@ -162,11 +167,12 @@ pub fn step_euler_jac_x(
     let t6: crate::Real = t2 + t5;
     let t7: crate::Real = 1.0;
     let t8: crate::Real = 0.0;
-    let t9: crate::Real = crate::math::sin(t0);
+    let sc9 = crate::math::sincos(t0);
+    let t9: crate::Real = sc9.0;
+    let t13: crate::Real = sc9.1;
     let t10: crate::Real = t4 * t6;
     let t11: crate::Real = t9 * t10;
     let t12: crate::Real = -t11;
-    let t13: crate::Real = crate::math::cos(t0);
     let t14: crate::Real = t10 * t13;
     [[t7, t8, t12], [t8, t7, t14], [t8, t8, t7]]
 }
@@ -205,11 +211,12 @@ pub fn step_euler_jac_u(
     let t14: crate::Real = t12 + t13;
     let t15: crate::Real = t6 * t14;
     let t16: crate::Real = t15 * t10;
-    let t17: crate::Real = crate::math::cos(t0);
+    let sc17 = crate::math::sincos(t0);
+    let t21: crate::Real = sc17.0;
+    let t17: crate::Real = sc17.1;
     let t18: crate::Real = t3 * t5;
     let t19: crate::Real = t17 * t18;
     let t20: crate::Real = 0.0;
-    let t21: crate::Real = crate::math::sin(t0);
     let t22: crate::Real = t18 * t21;
     let t23: crate::Real = t5 * t11;
     let t24: crate::Real = t5 * t16;
@@ -236,11 +243,12 @@ pub fn step_euler_jac_w(
     let t0: crate::Real = x[2usize];
     let t1: crate::Real = dt;
     let t2: crate::Real = 1.0;
-    let t3: crate::Real = crate::math::cos(t0);
+    let sc3 = crate::math::sincos(t0);
+    let t7: crate::Real = sc3.0;
+    let t3: crate::Real = sc3.1;
     let t4: crate::Real = t1 * t2;
     let t5: crate::Real = t3 * t4;
     let t6: crate::Real = 0.0;
-    let t7: crate::Real = crate::math::sin(t0);
     let t8: crate::Real = t4 * t7;
     [[t5, t6], [t8, t6], [t6, t4]]
 }
@@ -253,7 +261,7 @@ pub fn step_euler_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-15 arithmetic operations (17 before common-subexpression elimination).*/
+17 arithmetic operations (19 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
     x: &[crate::Real; 3usize],
@@ -272,19 +280,23 @@ pub fn step_euler_jac_p(
     let t7: crate::Real = crate::math::tan(t2);
     let t8: crate::Real = t6 * t7;
     let t9: crate::Real = t1 * t7;
-    let t10: crate::Real = t9 / t4;
-    let t11: crate::Real = t4 * t4;
-    let t12: crate::Real = t8 / t11;
-    let t13: crate::Real = -t12;
-    let t14: crate::Real = crate::math::cos(t0);
-    let t15: crate::Real = t1 * t5;
-    let t16: crate::Real = t14 * t15;
-    let t17: crate::Real = 0.0;
-    let t18: crate::Real = crate::math::sin(t0);
-    let t19: crate::Real = t15 * t18;
-    let t20: crate::Real = t5 * t10;
-    let t21: crate::Real = t5 * t13;
-    [[t16, t17], [t19, t17], [t20, t21]]
+    let t10: crate::Real = 1.0;
+    let t11: crate::Real = t10 / t4;
+    let t12: crate::Real = t9 * t11;
+    let t13: crate::Real = t4 * t4;
+    let t14: crate::Real = t10 / t13;
+    let t15: crate::Real = t8 * t14;
+    let t16: crate::Real = -t15;
+    let sc17 = crate::math::sincos(t0);
+    let t21: crate::Real = sc17.0;
+    let t17: crate::Real = sc17.1;
+    let t18: crate::Real = t1 * t5;
+    let t19: crate::Real = t17 * t18;
+    let t20: crate::Real = 0.0;
+    let t22: crate::Real = t18 * t21;
+    let t23: crate::Real = t5 * t12;
+    let t24: crate::Real = t5 * t16;
+    [[t19, t20], [t22, t20], [t23, t24]]
 }
 /**Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).
 
@@ -295,7 +307,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-106 arithmetic operations (739 before common-subexpression elimination).*/
+47 arithmetic operations (392 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[crate::Real; 3usize],
@@ -318,126 +330,69 @@ pub fn step_exact(
     let t11: crate::Real = t5 + t10;
     let t12: crate::Real = crate::math::tan(t4);
     let t13: crate::Real = t10 * t12;
-    let t14: crate::Real = t13 / t8;
-    let t15: crate::Real = t6 + t14;
-    let t16: crate::Real = t9 * t15;
-    let t17: crate::Real = crate::math::sin(t2);
-    let t24: crate::Real = crate::math::cos(t2);
-    let t25: crate::Real = t9 * t11;
-    let t95: crate::Real = t17 * t25;
-    let g0: [crate::Real; 2usize] = if crate::math::fabs(t16)
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t8;
+    let t16: crate::Real = t13 * t15;
+    let t17: crate::Real = t6 + t16;
+    let t18: crate::Real = t9 * t17;
+    let t19: crate::Real = 1.0;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
-        let t18: crate::Real = t9 * t16;
-        let t19: crate::Real = t11 * t18;
-        let t20: crate::Real = t17 * t19;
-        let t21: crate::Real = 0.5;
-        let t22: crate::Real = t20 * t21;
-        let t23: crate::Real = t0 - t22;
-        let t26: crate::Real = t24 * t25;
-        let t27: crate::Real = t23 + t26;
-        let t28: crate::Real = t16 * t16;
-        let t29: crate::Real = t9 * t28;
-        let t30: crate::Real = t11 * t29;
-        let t31: crate::Real = t24 * t30;
-        let t32: crate::Real = 0.16666666666666666;
-        let t33: crate::Real = t31 * t32;
-        let t34: crate::Real = t27 - t33;
-        let t35: crate::Real = t16 * t28;
-        let t36: crate::Real = t9 * t35;
-        let t37: crate::Real = t11 * t36;
-        let t38: crate::Real = t17 * t37;
-        let t39: crate::Real = 0.041666666666666664;
-        let t40: crate::Real = t38 * t39;
-        let t41: crate::Real = t34 + t40;
-        let t42: crate::Real = t28 * t28;
-        let t43: crate::Real = t9 * t42;
-        let t44: crate::Real = t11 * t43;
-        let t45: crate::Real = t24 * t44;
-        let t46: crate::Real = 0.008333333333333333;
-        let t47: crate::Real = t45 * t46;
-        let t48: crate::Real = t41 + t47;
-        let t49: crate::Real = t16 * t42;
-        let t50: crate::Real = t9 * t49;
-        let t51: crate::Real = t11 * t50;
-        let t52: crate::Real = t17 * t51;
-        let t53: crate::Real = 0.001388888888888889;
-        let t54: crate::Real = t52 * t53;
-        let t55: crate::Real = t48 - t54;
-        let t56: crate::Real = t35 * t35;
-        let t57: crate::Real = t9 * t56;
-        let t58: crate::Real = t11 * t57;
-        let t59: crate::Real = t24 * t58;
-        let t60: crate::Real = 0.0001984126984126984;
-        let t61: crate::Real = t59 * t60;
-        let t62: crate::Real = t55 - t61;
-        let t63: crate::Real = t16 * t56;
-        let t64: crate::Real = t9 * t63;
-        let t65: crate::Real = t11 * t64;
-        let t66: crate::Real = t17 * t65;
-        let t67: crate::Real = 0.0000248015873015873;
-        let t68: crate::Real = t66 * t67;
-        let t69: crate::Real = t62 + t68;
-        let t70: crate::Real = t42 * t42;
-        let t71: crate::Real = t9 * t70;
-        let t72: crate::Real = t11 * t71;
-        let t73: crate::Real = t24 * t72;
-        let t74: crate::Real = 0.0000027557319223985893;
-        let t75: crate::Real = t73 * t74;
-        let t76: crate::Real = t69 + t75;
-        let t92: crate::Real = t19 * t24;
-        let t93: crate::Real = t21 * t92;
-        let t94: crate::Real = t1 + t93;
-        let t96: crate::Real = t94 + t95;
-        let t97: crate::Real = t17 * t30;
-        let t98: crate::Real = t32 * t97;
-        let t99: crate::Real = t96 - t98;
-        let t100: crate::Real = t24 * t37;
-        let t101: crate::Real = t39 * t100;
-        let t102: crate::Real = t99 - t101;
-        let t103: crate::Real = t17 * t44;
-        let t104: crate::Real = t46 * t103;
-        let t105: crate::Real = t102 + t104;
-        let t106: crate::Real = t24 * t51;
-        let t107: crate::Real = t53 * t106;
-        let t108: crate::Real = t105 + t107;
-        let t109: crate::Real = t17 * t58;
-        let t110: crate::Real = t60 * t109;
-        let t111: crate::Real = t108 - t110;
-        let t112: crate::Real = t24 * t65;
-        let t113: crate::Real = t67 * t112;
-        let t114: crate::Real = t111 - t113;
-        let t115: crate::Real = t17 * t72;
-        let t116: crate::Real = t74 * t115;
-        let t117: crate::Real = t114 + t116;
-        [t76, t117]
+        let t20: crate::Real = t18 * t18;
+        let t21: crate::Real = 0.16666666666666666;
+        let t22: crate::Real = 0.008333333333333333;
+        let t23: crate::Real = 0.0001984126984126984;
+        let t24: crate::Real = 0.0000027557319223985893;
+        let t25: crate::Real = t20 * t24;
+        let t26: crate::Real = t25 - t23;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = t22 + t27;
+        let t29: crate::Real = t20 * t28;
+        let t30: crate::Real = t29 - t21;
+        let t31: crate::Real = t20 * t30;
+        let t32: crate::Real = t19 + t31;
+        let t37: crate::Real = 0.5;
+        let t38: crate::Real = 0.041666666666666664;
+        let t39: crate::Real = 0.001388888888888889;
+        let t40: crate::Real = 0.0000248015873015873;
+        let t41: crate::Real = t20 * t40;
+        let t42: crate::Real = t39 - t41;
+        let t43: crate::Real = t20 * t42;
+        let t44: crate::Real = t43 - t38;
+        let t45: crate::Real = t20 * t44;
+        let t46: crate::Real = t37 + t45;
+        let t47: crate::Real = t18 * t46;
+        [t32, t47]
     } else {
-        let t77: crate::Real = crate::math::sin(t16);
-        let t78: crate::Real = t25 * t77;
-        let t79: crate::Real = t24 * t78;
-        let t80: crate::Real = 1.0;
-        let t81: crate::Real = t80 / t16;
-        let t82: crate::Real = t79 * t81;
-        let t83: crate::Real = t0 + t82;
-        let t84: crate::Real = 1.0;
-        let t85: crate::Real = crate::math::cos(t16);
-        let t86: crate::Real = t84 - t85;
-        let t87: crate::Real = t25 * t86;
-        let t88: crate::Real = t17 * t87;
-        let t89: crate::Real = t88 * t81;
-        let t90: crate::Real = t83 - t89;
-        let t118: crate::Real = t77 * t95;
-        let t119: crate::Real = t118 * t81;
-        let t120: crate::Real = t1 + t119;
-        let t121: crate::Real = t24 * t87;
-        let t122: crate::Real = t121 * t81;
-        let t123: crate::Real = t120 + t122;
-        [t90, t123]
+        let sc33 = crate::math::sincos(t18);
+        let t33: crate::Real = sc33.0;
+        let t48: crate::Real = sc33.1;
+        let t34: crate::Real = t14 / t18;
+        let t35: crate::Real = t33 * t34;
+        let t49: crate::Real = t19 - t48;
+        let t50: crate::Real = t49 * t34;
+        [t35, t50]
     };
-    let t91: crate::Real = g0[0usize];
-    let t124: crate::Real = g0[1usize];
-    let t125: crate::Real = t2 + t16;
-    [t91, t124, t125]
+    let t36: crate::Real = g0[0usize];
+    let t51: crate::Real = g0[1usize];
+    let sc52 = crate::math::sincos(t2);
+    let t57: crate::Real = sc52.0;
+    let t52: crate::Real = sc52.1;
+    let t53: crate::Real = t9 * t36;
+    let t54: crate::Real = t11 * t53;
+    let t55: crate::Real = t52 * t54;
+    let t56: crate::Real = t0 + t55;
+    let t58: crate::Real = t9 * t51;
+    let t59: crate::Real = t11 * t58;
+    let t60: crate::Real = t57 * t59;
+    let t61: crate::Real = t56 - t60;
+    let t62: crate::Real = t54 * t57;
+    let t63: crate::Real = t1 + t62;
+    let t64: crate::Real = t52 * t59;
+    let t65: crate::Real = t63 + t64;
+    let t66: crate::Real = t2 + t18;
+    [t61, t65, t66]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
 
@@ -448,7 +403,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-102 arithmetic operations (729 before common-subexpression elimination).*/
+45 arithmetic operations (383 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[crate::Real; 3usize],
@@ -469,123 +424,68 @@ pub fn step_exact_jac_x(
     let t9: crate::Real = t3 + t8;
     let t10: crate::Real = crate::math::tan(t2);
     let t11: crate::Real = t8 * t10;
-    let t12: crate::Real = t11 / t6;
-    let t13: crate::Real = t4 + t12;
-    let t14: crate::Real = t7 * t13;
-    let t15: crate::Real = 1.0;
-    let t16: crate::Real = 0.0;
-    let t17: crate::Real = crate::math::cos(t0);
-    let t23: crate::Real = crate::math::sin(t0);
-    let t24: crate::Real = t7 * t9;
-    let t25: crate::Real = t23 * t24;
-    let g0: [crate::Real; 2usize] = if crate::math::fabs(t14)
+    let t12: crate::Real = 1.0;
+    let t13: crate::Real = t12 / t6;
+    let t14: crate::Real = t11 * t13;
+    let t15: crate::Real = t4 + t14;
+    let t16: crate::Real = t7 * t15;
+    let t17: crate::Real = 1.0;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t16)
         < crate::math::series_switch(0.05)
     {
-        let t18: crate::Real = t7 * t14;
-        let t19: crate::Real = t9 * t18;
-        let t20: crate::Real = t17 * t19;
-        let t21: crate::Real = 0.5;
-        let t22: crate::Real = t20 * t21;
-        let t26: crate::Real = t14 * t14;
-        let t27: crate::Real = t7 * t26;
-        let t28: crate::Real = t9 * t27;
-        let t29: crate::Real = t23 * t28;
-        let t30: crate::Real = 0.16666666666666666;
-        let t31: crate::Real = t29 * t30;
-        let t32: crate::Real = t14 * t26;
-        let t33: crate::Real = t7 * t32;
-        let t34: crate::Real = t9 * t33;
-        let t35: crate::Real = t17 * t34;
+        let t18: crate::Real = t16 * t16;
+        let t19: crate::Real = 0.16666666666666666;
+        let t20: crate::Real = 0.008333333333333333;
+        let t21: crate::Real = 0.0001984126984126984;
+        let t22: crate::Real = 0.0000027557319223985893;
+        let t23: crate::Real = t18 * t22;
+        let t24: crate::Real = t23 - t21;
+        let t25: crate::Real = t18 * t24;
+        let t26: crate::Real = t20 + t25;
+        let t27: crate::Real = t18 * t26;
+        let t28: crate::Real = t27 - t19;
+        let t29: crate::Real = t18 * t28;
+        let t30: crate::Real = t17 + t29;
+        let t35: crate::Real = 0.5;
         let t36: crate::Real = 0.041666666666666664;
-        let t37: crate::Real = t35 * t36;
-        let t38: crate::Real = t31 + t37;
-        let t39: crate::Real = t26 * t26;
-        let t40: crate::Real = t7 * t39;
-        let t41: crate::Real = t9 * t40;
-        let t42: crate::Real = t23 * t41;
-        let t43: crate::Real = 0.008333333333333333;
-        let t44: crate::Real = t42 * t43;
-        let t45: crate::Real = t38 - t44;
-        let t46: crate::Real = t14 * t39;
-        let t47: crate::Real = t7 * t46;
-        let t48: crate::Real = t9 * t47;
-        let t49: crate::Real = t17 * t48;
-        let t50: crate::Real = 0.001388888888888889;
-        let t51: crate::Real = t49 * t50;
-        let t52: crate::Real = t45 - t51;
-        let t53: crate::Real = t32 * t32;
-        let t54: crate::Real = t7 * t53;
-        let t55: crate::Real = t9 * t54;
-        let t56: crate::Real = t23 * t55;
-        let t57: crate::Real = 0.0001984126984126984;
-        let t58: crate::Real = t56 * t57;
-        let t59: crate::Real = t52 + t58;
-        let t60: crate::Real = t14 * t53;
-        let t61: crate::Real = t7 * t60;
-        let t62: crate::Real = t9 * t61;
-        let t63: crate::Real = t17 * t62;
-        let t64: crate::Real = 0.0000248015873015873;
-        let t65: crate::Real = t63 * t64;
-        let t66: crate::Real = t59 + t65;
-        let t67: crate::Real = t39 * t39;
-        let t68: crate::Real = t7 * t67;
-        let t69: crate::Real = t9 * t68;
-        let t70: crate::Real = t23 * t69;
-        let t71: crate::Real = 0.0000027557319223985893;
-        let t72: crate::Real = t70 * t71;
-        let t73: crate::Real = t66 - t72;
-        let t74: crate::Real = t73 - t22;
-        let t75: crate::Real = t74 - t25;
-        let t89: crate::Real = t19 * t23;
-        let t90: crate::Real = t21 * t89;
-        let t91: crate::Real = t17 * t24;
-        let t92: crate::Real = t17 * t28;
-        let t93: crate::Real = t30 * t92;
-        let t94: crate::Real = t91 - t93;
-        let t95: crate::Real = t23 * t34;
-        let t96: crate::Real = t36 * t95;
-        let t97: crate::Real = t94 + t96;
-        let t98: crate::Real = t17 * t41;
-        let t99: crate::Real = t43 * t98;
-        let t100: crate::Real = t97 + t99;
-        let t101: crate::Real = t23 * t48;
-        let t102: crate::Real = t50 * t101;
-        let t103: crate::Real = t100 - t102;
-        let t104: crate::Real = t17 * t55;
-        let t105: crate::Real = t57 * t104;
-        let t106: crate::Real = t103 - t105;
-        let t107: crate::Real = t23 * t62;
-        let t108: crate::Real = t64 * t107;
-        let t109: crate::Real = t106 + t108;
-        let t110: crate::Real = t17 * t69;
-        let t111: crate::Real = t71 * t110;
-        let t112: crate::Real = t109 + t111;
-        let t113: crate::Real = t112 - t90;
-        [t75, t113]
+        let t37: crate::Real = 0.001388888888888889;
+        let t38: crate::Real = 0.0000248015873015873;
+        let t39: crate::Real = t18 * t38;
+        let t40: crate::Real = t37 - t39;
+        let t41: crate::Real = t18 * t40;
+        let t42: crate::Real = t41 - t36;
+        let t43: crate::Real = t18 * t42;
+        let t44: crate::Real = t35 + t43;
+        let t45: crate::Real = t16 * t44;
+        [t30, t45]
     } else {
-        let t76: crate::Real = crate::math::sin(t14);
-        let t77: crate::Real = t25 * t76;
-        let t78: crate::Real = 1.0;
-        let t79: crate::Real = t78 / t14;
-        let t80: crate::Real = t77 * t79;
-        let t81: crate::Real = -t80;
-        let t82: crate::Real = crate::math::cos(t14);
-        let t83: crate::Real = t15 - t82;
-        let t84: crate::Real = t24 * t83;
-        let t85: crate::Real = t17 * t84;
-        let t86: crate::Real = t85 * t79;
-        let t87: crate::Real = t81 - t86;
-        let t114: crate::Real = t24 * t76;
-        let t115: crate::Real = t17 * t114;
-        let t116: crate::Real = t115 * t79;
-        let t117: crate::Real = t23 * t84;
-        let t118: crate::Real = t117 * t79;
-        let t119: crate::Real = t116 - t118;
-        [t87, t119]
+        let sc31 = crate::math::sincos(t16);
+        let t31: crate::Real = sc31.0;
+        let t46: crate::Real = sc31.1;
+        let t32: crate::Real = t12 / t16;
+        let t33: crate::Real = t31 * t32;
+        let t47: crate::Real = t17 - t46;
+        let t48: crate::Real = t47 * t32;
+        [t33, t48]
     };
-    let t88: crate::Real = g0[0usize];
-    let t120: crate::Real = g0[1usize];
-    [[t15, t16, t88], [t16, t15, t120], [t16, t16, t15]]
+    let t34: crate::Real = g0[0usize];
+    let t49: crate::Real = g0[1usize];
+    let t50: crate::Real = 0.0;
+    let sc51 = crate::math::sincos(t0);
+    let t51: crate::Real = sc51.0;
+    let t56: crate::Real = sc51.1;
+    let t52: crate::Real = t7 * t34;
+    let t53: crate::Real = t9 * t52;
+    let t54: crate::Real = t51 * t53;
+    let t55: crate::Real = -t54;
+    let t57: crate::Real = t7 * t49;
+    let t58: crate::Real = t9 * t57;
+    let t59: crate::Real = t56 * t58;
+    let t60: crate::Real = t55 - t59;
+    let t61: crate::Real = t53 * t56;
+    let t62: crate::Real = t51 * t58;
+    let t63: crate::Real = t61 - t62;
+    [[t17, t50, t60], [t50, t17, t63], [t50, t50, t17]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
 
@@ -596,7 +496,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w, alpha]
 
-251 arithmetic operations (2394 before common-subexpression elimination).*/
+98 arithmetic operations (1424 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -622,274 +522,123 @@ pub fn step_exact_jac_u(
     let t14: crate::Real = t11 * t13;
     let t15: crate::Real = t4 + t14;
     let t16: crate::Real = t7 * t15;
-    let t17: crate::Real = t5 * t10;
-    let t18: crate::Real = t17 * t13;
-    let t19: crate::Real = 1.0;
-    let t20: crate::Real = t10 * t10;
-    let t21: crate::Real = t19 + t20;
-    let t22: crate::Real = t8 * t21;
-    let t23: crate::Real = t22 * t13;
-    let t24: crate::Real = t7 * t18;
-    let t25: crate::Real = t7 * t23;
-    let t26: crate::Real = crate::math::sin(t0);
-    let t27: crate::Real = t7 * t9;
-    let t32: crate::Real = crate::math::cos(t0);
-    let t44: crate::Real = t16 * t16;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t16 * t16;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
         < crate::math::series_switch(0.05)
     {
-        let t28: crate::Real = t24 * t27;
-        let t29: crate::Real = t26 * t28;
-        let t30: crate::Real = 0.5;
-        let t31: crate::Real = t29 * t30;
-        let t33: crate::Real = t5 * t7;
-        let t34: crate::Real = t32 * t33;
-        let t35: crate::Real = t28 * t32;
-        let t36: crate::Real = 0.3333333333333333;
-        let t37: crate::Real = t35 * t36;
-        let t38: crate::Real = -t37;
-        let t39: crate::Real = t26 * t33;
-        let t40: crate::Real = t30 * t39;
-        let t41: crate::Real = t38 - t40;
-        let t42: crate::Real = t16 * t41;
-        let t43: crate::Real = t34 + t42;
-        let t45: crate::Real = 0.125;
-        let t46: crate::Real = t29 * t45;
-        let t47: crate::Real = 0.16666666666666666;
-        let t48: crate::Real = t34 * t47;
-        let t49: crate::Real = t46 - t48;
-        let t50: crate::Real = t44 * t49;
-        let t51: crate::Real = t43 + t50;
-        let t52: crate::Real = t16 * t44;
-        let t53: crate::Real = 0.03333333333333333;
-        let t54: crate::Real = t35 * t53;
-        let t55: crate::Real = 0.041666666666666664;
-        let t56: crate::Real = t39 * t55;
-        let t57: crate::Real = t54 + t56;
-        let t58: crate::Real = t52 * t57;
-        let t59: crate::Real = t51 + t58;
-        let t60: crate::Real = t44 * t44;
-        let t61: crate::Real = 0.006944444444444444;
-        let t62: crate::Real = t29 * t61;
-        let t63: crate::Real = 0.008333333333333333;
-        let t64: crate::Real = t34 * t63;
-        let t65: crate::Real = t64 - t62;
-        let t66: crate::Real = t60 * t65;
-        let t67: crate::Real = t59 + t66;
-        let t68: crate::Real = t16 * t60;
-        let t69: crate::Real = 0.0011904761904761906;
-        let t70: crate::Real = t35 * t69;
-        let t71: crate::Real = -t70;
-        let t72: crate::Real = 0.001388888888888889;
-        let t73: crate::Real = t39 * t72;
-        let t74: crate::Real = t71 - t73;
-        let t75: crate::Real = t68 * t74;
-        let t76: crate::Real = t67 + t75;
-        let t77: crate::Real = t52 * t52;
+        let t19: crate::Real = 0.16666666666666666;
+        let t20: crate::Real = 0.008333333333333333;
+        let t21: crate::Real = 0.0001984126984126984;
+        let t22: crate::Real = 0.0000027557319223985893;
+        let t23: crate::Real = t18 * t22;
+        let t24: crate::Real = t23 - t21;
+        let t25: crate::Real = t18 * t24;
+        let t26: crate::Real = t20 + t25;
+        let t27: crate::Real = t18 * t26;
+        let t28: crate::Real = t27 - t19;
+        let t29: crate::Real = t18 * t28;
+        let t30: crate::Real = t17 + t29;
+        let t35: crate::Real = 0.5;
+        let t36: crate::Real = 0.041666666666666664;
+        let t37: crate::Real = 0.001388888888888889;
+        let t38: crate::Real = 0.0000248015873015873;
+        let t39: crate::Real = t18 * t38;
+        let t40: crate::Real = t37 - t39;
+        let t41: crate::Real = t18 * t40;
+        let t42: crate::Real = t41 - t36;
+        let t43: crate::Real = t18 * t42;
+        let t44: crate::Real = t35 + t43;
+        let t45: crate::Real = t16 * t44;
+        let t58: crate::Real = 0.3333333333333333;
+        let t59: crate::Real = 0.03333333333333333;
+        let t60: crate::Real = 0.0011904761904761906;
+        let t61: crate::Real = 0.000022045855379188714;
+        let t62: crate::Real = t18 * t61;
+        let t63: crate::Real = t62 - t60;
+        let t64: crate::Real = t18 * t63;
+        let t65: crate::Real = t59 + t64;
+        let t66: crate::Real = t18 * t65;
+        let t67: crate::Real = t66 - t58;
+        let t68: crate::Real = t16 * t67;
+        let t76: crate::Real = 0.125;
+        let t77: crate::Real = 0.006944444444444444;
         let t78: crate::Real = 0.00017361111111111112;
-        let t79: crate::Real = t29 * t78;
-        let t80: crate::Real = 0.0001984126984126984;
-        let t81: crate::Real = t34 * t80;
-        let t82: crate::Real = t79 - t81;
-        let t83: crate::Real = t77 * t82;
-        let t84: crate::Real = t76 + t83;
-        let t85: crate::Real = t16 * t77;
-        let t86: crate::Real = 0.000022045855379188714;
-        let t87: crate::Real = t35 * t86;
-        let t88: crate::Real = 0.0000248015873015873;
-        let t89: crate::Real = t39 * t88;
-        let t90: crate::Real = t87 + t89;
-        let t91: crate::Real = t85 * t90;
-        let t92: crate::Real = t84 + t91;
-        let t93: crate::Real = t60 * t60;
-        let t94: crate::Real = 0.00000248015873015873;
-        let t95: crate::Real = t29 * t94;
-        let t96: crate::Real = 0.0000027557319223985893;
-        let t97: crate::Real = t34 * t96;
-        let t98: crate::Real = t97 - t95;
-        let t99: crate::Real = t93 * t98;
-        let t100: crate::Real = t92 + t99;
-        let t101: crate::Real = t100 - t31;
-        let t133: crate::Real = t7 * t16;
-        let t134: crate::Real = t9 * t133;
-        let t135: crate::Real = t25 * t134;
-        let t136: crate::Real = t32 * t135;
-        let t137: crate::Real = t36 * t136;
-        let t138: crate::Real = t25 * t27;
-        let t139: crate::Real = t26 * t138;
-        let t140: crate::Real = t30 * t139;
-        let t141: crate::Real = t7 * t44;
-        let t142: crate::Real = t9 * t141;
-        let t143: crate::Real = t25 * t142;
-        let t144: crate::Real = t26 * t143;
-        let t145: crate::Real = t45 * t144;
-        let t146: crate::Real = t7 * t52;
-        let t147: crate::Real = t9 * t146;
-        let t148: crate::Real = t25 * t147;
-        let t149: crate::Real = t32 * t148;
-        let t150: crate::Real = t53 * t149;
-        let t151: crate::Real = t145 + t150;
-        let t152: crate::Real = t7 * t60;
-        let t153: crate::Real = t9 * t152;
-        let t154: crate::Real = t25 * t153;
-        let t155: crate::Real = t26 * t154;
-        let t156: crate::Real = t61 * t155;
-        let t157: crate::Real = t151 - t156;
-        let t158: crate::Real = t7 * t68;
-        let t159: crate::Real = t9 * t158;
-        let t160: crate::Real = t25 * t159;
-        let t161: crate::Real = t32 * t160;
-        let t162: crate::Real = t69 * t161;
-        let t163: crate::Real = t157 - t162;
-        let t164: crate::Real = t7 * t77;
-        let t165: crate::Real = t9 * t164;
-        let t166: crate::Real = t25 * t165;
-        let t167: crate::Real = t26 * t166;
-        let t168: crate::Real = t78 * t167;
-        let t169: crate::Real = t163 + t168;
-        let t170: crate::Real = t7 * t85;
-        let t171: crate::Real = t9 * t170;
-        let t172: crate::Real = t25 * t171;
-        let t173: crate::Real = t32 * t172;
-        let t174: crate::Real = t86 * t173;
-        let t175: crate::Real = t169 + t174;
-        let t176: crate::Real = t7 * t93;
-        let t177: crate::Real = t9 * t176;
-        let t178: crate::Real = t25 * t177;
-        let t179: crate::Real = t26 * t178;
-        let t180: crate::Real = t94 * t179;
-        let t181: crate::Real = t175 - t180;
-        let t182: crate::Real = t181 - t137;
-        let t183: crate::Real = t182 - t140;
-        let t186: crate::Real = t30 * t35;
-        let t187: crate::Real = t39 + t186;
-        let t188: crate::Real = t29 * t36;
-        let t189: crate::Real = t30 * t34;
-        let t190: crate::Real = t189 - t188;
-        let t191: crate::Real = t16 * t190;
-        let t192: crate::Real = t187 + t191;
-        let t193: crate::Real = t35 * t45;
-        let t194: crate::Real = -t193;
-        let t195: crate::Real = t39 * t47;
-        let t196: crate::Real = t194 - t195;
-        let t197: crate::Real = t44 * t196;
-        let t198: crate::Real = t192 + t197;
-        let t199: crate::Real = t29 * t53;
-        let t200: crate::Real = t34 * t55;
-        let t201: crate::Real = t199 - t200;
-        let t202: crate::Real = t52 * t201;
-        let t203: crate::Real = t198 + t202;
-        let t204: crate::Real = t35 * t61;
-        let t205: crate::Real = t39 * t63;
-        let t206: crate::Real = t204 + t205;
-        let t207: crate::Real = t60 * t206;
-        let t208: crate::Real = t203 + t207;
-        let t209: crate::Real = t29 * t69;
-        let t210: crate::Real = t34 * t72;
-        let t211: crate::Real = t210 - t209;
-        let t212: crate::Real = t68 * t211;
-        let t213: crate::Real = t208 + t212;
-        let t214: crate::Real = t35 * t78;
-        let t215: crate::Real = -t214;
-        let t216: crate::Real = t39 * t80;
-        let t217: crate::Real = t215 - t216;
-        let t218: crate::Real = t77 * t217;
-        let t219: crate::Real = t213 + t218;
-        let t220: crate::Real = t29 * t86;
-        let t221: crate::Real = t34 * t88;
-        let t222: crate::Real = t220 - t221;
-        let t223: crate::Real = t85 * t222;
-        let t224: crate::Real = t219 + t223;
-        let t225: crate::Real = t35 * t94;
-        let t226: crate::Real = t39 * t96;
-        let t227: crate::Real = t225 + t226;
-        let t228: crate::Real = t93 * t227;
-        let t229: crate::Real = t224 + t228;
-        let t249: crate::Real = t26 * t135;
-        let t250: crate::Real = t36 * t249;
-        let t251: crate::Real = t32 * t138;
-        let t252: crate::Real = t30 * t251;
-        let t253: crate::Real = t32 * t143;
-        let t254: crate::Real = t45 * t253;
-        let t255: crate::Real = t252 - t254;
-        let t256: crate::Real = t26 * t148;
-        let t257: crate::Real = t53 * t256;
-        let t258: crate::Real = t255 + t257;
-        let t259: crate::Real = t32 * t154;
-        let t260: crate::Real = t61 * t259;
-        let t261: crate::Real = t258 + t260;
-        let t262: crate::Real = t26 * t160;
-        let t263: crate::Real = t69 * t262;
-        let t264: crate::Real = t261 - t263;
-        let t265: crate::Real = t32 * t166;
-        let t266: crate::Real = t78 * t265;
-        let t267: crate::Real = t264 - t266;
-        let t268: crate::Real = t26 * t172;
-        let t269: crate::Real = t86 * t268;
-        let t270: crate::Real = t267 + t269;
-        let t271: crate::Real = t32 * t178;
-        let t272: crate::Real = t94 * t271;
-        let t273: crate::Real = t270 + t272;
-        let t274: crate::Real = t273 - t250;
-        [t101, t183, t229, t274]
+        let t79: crate::Real = 0.00000248015873015873;
+        let t80: crate::Real = t18 * t79;
+        let t81: crate::Real = t80 - t78;
+        let t82: crate::Real = t18 * t81;
+        let t83: crate::Real = t77 + t82;
+        let t84: crate::Real = t18 * t83;
+        let t85: crate::Real = t84 - t76;
+        let t86: crate::Real = t18 * t85;
+        let t87: crate::Real = t35 + t86;
+        [t30, t45, t68, t87]
     } else {
-        let t102: crate::Real = crate::math::sin(t16);
-        let t103: crate::Real = t7 * t102;
-        let t104: crate::Real = t32 * t103;
-        let t105: crate::Real = t12 / t16;
-        let t106: crate::Real = t104 * t105;
-        let t107: crate::Real = crate::math::cos(t16);
-        let t108: crate::Real = t19 - t107;
-        let t109: crate::Real = t7 * t108;
-        let t110: crate::Real = t26 * t109;
-        let t111: crate::Real = t110 * t105;
-        let t112: crate::Real = t106 - t111;
-        let t113: crate::Real = t5 * t112;
-        let t114: crate::Real = t26 * t27;
-        let t115: crate::Real = t102 * t114;
-        let t116: crate::Real = t115 * t105;
-        let t117: crate::Real = t27 * t32;
-        let t118: crate::Real = t107 * t117;
-        let t119: crate::Real = t118 * t105;
-        let t120: crate::Real = t27 * t102;
-        let t121: crate::Real = t32 * t120;
-        let t122: crate::Real = t12 / t44;
-        let t123: crate::Real = t121 * t122;
-        let t124: crate::Real = t119 - t123;
-        let t125: crate::Real = t27 * t108;
-        let t126: crate::Real = t26 * t125;
-        let t127: crate::Real = t126 * t122;
-        let t128: crate::Real = t124 + t127;
-        let t129: crate::Real = t128 - t116;
-        let t130: crate::Real = t24 * t129;
-        let t131: crate::Real = t113 + t130;
-        let t184: crate::Real = t25 * t129;
-        let t230: crate::Real = t7 * t26;
-        let t231: crate::Real = t102 * t230;
-        let t232: crate::Real = t231 * t105;
-        let t233: crate::Real = t32 * t109;
-        let t234: crate::Real = t233 * t105;
-        let t235: crate::Real = t232 + t234;
-        let t236: crate::Real = t5 * t235;
-        let t237: crate::Real = t107 * t114;
-        let t238: crate::Real = t237 * t105;
-        let t239: crate::Real = t121 * t105;
-        let t240: crate::Real = t238 + t239;
-        let t241: crate::Real = t115 * t122;
-        let t242: crate::Real = t240 - t241;
-        let t243: crate::Real = t32 * t125;
-        let t244: crate::Real = t243 * t122;
-        let t245: crate::Real = t242 - t244;
-        let t246: crate::Real = t24 * t245;
-        let t247: crate::Real = t236 + t246;
-        let t275: crate::Real = t25 * t245;
-        [t131, t184, t247, t275]
+        let sc31 = crate::math::sincos(t16);
+        let t31: crate::Real = sc31.0;
+        let t46: crate::Real = sc31.1;
+        let t32: crate::Real = t12 / t16;
+        let t33: crate::Real = t31 * t32;
+        let t47: crate::Real = t17 - t46;
+        let t48: crate::Real = t47 * t32;
+        let t69: crate::Real = t46 * t32;
+        let t70: crate::Real = t12 / t18;
+        let t71: crate::Real = t31 * t70;
+        let t72: crate::Real = t69 - t71;
+        let t88: crate::Real = t47 * t70;
+        let t89: crate::Real = t33 - t88;
+        [t33, t48, t72, t89]
     };
-    let t132: crate::Real = g0[0usize];
-    let t185: crate::Real = g0[1usize];
-    let t248: crate::Real = g0[2usize];
-    let t276: crate::Real = g0[3usize];
-    [[t132, t185], [t248, t276], [t24, t25]]
+    let t34: crate::Real = g0[0usize];
+    let t49: crate::Real = g0[1usize];
+    let t73: crate::Real = g0[2usize];
+    let t90: crate::Real = g0[3usize];
+    let t50: crate::Real = t5 * t10;
+    let t51: crate::Real = t50 * t13;
+    let t52: crate::Real = t10 * t10;
+    let t53: crate::Real = t17 + t52;
+    let t54: crate::Real = t8 * t53;
+    let t55: crate::Real = t54 * t13;
+    let t56: crate::Real = t7 * t51;
+    let t57: crate::Real = t7 * t55;
+    let t74: crate::Real = t56 * t73;
+    let t75: crate::Real = t57 * t73;
+    let t91: crate::Real = t56 * t90;
+    let t92: crate::Real = t57 * t90;
+    let sc93 = crate::math::sincos(t0);
+    let t97: crate::Real = sc93.0;
+    let t93: crate::Real = sc93.1;
+    let t94: crate::Real = t7 * t9;
+    let t95: crate::Real = t74 * t94;
+    let t96: crate::Real = t93 * t95;
+    let t98: crate::Real = t91 * t94;
+    let t99: crate::Real = t97 * t98;
+    let t100: crate::Real = t96 - t99;
+    let t101: crate::Real = t7 * t34;
+    let t102: crate::Real = t93 * t101;
+    let t103: crate::Real = t7 * t49;
+    let t104: crate::Real = t97 * t103;
+    let t105: crate::Real = t102 - t104;
+    let t106: crate::Real = t5 * t105;
+    let t107: crate::Real = t100 + t106;
+    let t108: crate::Real = t75 * t94;
+    let t109: crate::Real = t93 * t108;
+    let t110: crate::Real = t92 * t94;
+    let t111: crate::Real = t97 * t110;
+    let t112: crate::Real = t109 - t111;
+    let t113: crate::Real = t95 * t97;
+    let t114: crate::Real = t93 * t98;
+    let t115: crate::Real = t113 + t114;
+    let t116: crate::Real = t97 * t101;
+    let t117: crate::Real = t93 * t103;
+    let t118: crate::Real = t116 + t117;
+    let t119: crate::Real = t5 * t118;
+    let t120: crate::Real = t115 + t119;
+    let t121: crate::Real = t97 * t108;
+    let t122: crate::Real = t93 * t110;
+    let t123: crate::Real = t121 + t122;
+    [[t107, t112], [t120, t123], [t56, t57]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
 
@@ -900,7 +649,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-203 arithmetic operations (1569 before common-subexpression elimination).*/
+79 arithmetic operations (867 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -921,232 +670,110 @@ pub fn step_exact_jac_w(
     let t9: crate::Real = t3 + t8;
     let t10: crate::Real = crate::math::tan(t2);
     let t11: crate::Real = t8 * t10;
-    let t12: crate::Real = t11 / t6;
-    let t13: crate::Real = t4 + t12;
-    let t14: crate::Real = t7 * t13;
-    let t15: crate::Real = 1.0;
+    let t12: crate::Real = 1.0;
+    let t13: crate::Real = t12 / t6;
+    let t14: crate::Real = t11 * t13;
+    let t15: crate::Real = t4 + t14;
     let t16: crate::Real = t7 * t15;
-    let t17: crate::Real = crate::math::sin(t0);
-    let t23: crate::Real = crate::math::cos(t0);
-    let t25: crate::Real = t14 * t14;
-    let t94: crate::Real = t7 * t9;
-    let g0: [crate::Real; 4usize] = if crate::math::fabs(t14)
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t16 * t16;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
         < crate::math::series_switch(0.05)
     {
-        let t18: crate::Real = t7 * t14;
-        let t19: crate::Real = t15 * t18;
-        let t20: crate::Real = t17 * t19;
-        let t21: crate::Real = 0.5;
-        let t22: crate::Real = t20 * t21;
-        let t24: crate::Real = t16 * t23;
-        let t26: crate::Real = t7 * t25;
-        let t27: crate::Real = t15 * t26;
-        let t28: crate::Real = t23 * t27;
-        let t29: crate::Real = 0.16666666666666666;
-        let t30: crate::Real = t28 * t29;
-        let t31: crate::Real = t24 - t30;
-        let t32: crate::Real = t14 * t25;
-        let t33: crate::Real = t7 * t32;
-        let t34: crate::Real = t15 * t33;
-        let t35: crate::Real = t17 * t34;
+        let t19: crate::Real = 0.16666666666666666;
+        let t20: crate::Real = 0.008333333333333333;
+        let t21: crate::Real = 0.0001984126984126984;
+        let t22: crate::Real = 0.0000027557319223985893;
+        let t23: crate::Real = t18 * t22;
+        let t24: crate::Real = t23 - t21;
+        let t25: crate::Real = t18 * t24;
+        let t26: crate::Real = t20 + t25;
+        let t27: crate::Real = t18 * t26;
+        let t28: crate::Real = t27 - t19;
+        let t29: crate::Real = t18 * t28;
+        let t30: crate::Real = t17 + t29;
+        let t35: crate::Real = 0.5;
         let t36: crate::Real = 0.041666666666666664;
-        let t37: crate::Real = t35 * t36;
-        let t38: crate::Real = t31 + t37;
-        let t39: crate::Real = t25 * t25;
-        let t40: crate::Real = t7 * t39;
-        let t41: crate::Real = t15 * t40;
-        let t42: crate::Real = t23 * t41;
-        let t43: crate::Real = 0.008333333333333333;
-        let t44: crate::Real = t42 * t43;
-        let t45: crate::Real = t38 + t44;
-        let t46: crate::Real = t14 * t39;
-        let t47: crate::Real = t7 * t46;
-        let t48: crate::Real = t15 * t47;
-        let t49: crate::Real = t17 * t48;
-        let t50: crate::Real = 0.001388888888888889;
-        let t51: crate::Real = t49 * t50;
-        let t52: crate::Real = t45 - t51;
-        let t53: crate::Real = t32 * t32;
-        let t54: crate::Real = t7 * t53;
-        let t55: crate::Real = t15 * t54;
-        let t56: crate::Real = t23 * t55;
-        let t57: crate::Real = 0.0001984126984126984;
-        let t58: crate::Real = t56 * t57;
-        let t59: crate::Real = t52 - t58;
-        let t60: crate::Real = t14 * t53;
-        let t61: crate::Real = t7 * t60;
-        let t62: crate::Real = t15 * t61;
-        let t63: crate::Real = t17 * t62;
-        let t64: crate::Real = 0.0000248015873015873;
-        let t65: crate::Real = t63 * t64;
-        let t66: crate::Real = t59 + t65;
-        let t67: crate::Real = t39 * t39;
-        let t68: crate::Real = t7 * t67;
-        let t69: crate::Real = t15 * t68;
-        let t70: crate::Real = t23 * t69;
-        let t71: crate::Real = 0.0000027557319223985893;
-        let t72: crate::Real = t70 * t71;
-        let t73: crate::Real = t66 + t72;
-        let t74: crate::Real = t73 - t22;
-        let t89: crate::Real = t9 * t18;
-        let t90: crate::Real = t16 * t89;
-        let t91: crate::Real = t23 * t90;
-        let t92: crate::Real = 0.3333333333333333;
-        let t93: crate::Real = t91 * t92;
-        let t95: crate::Real = t16 * t94;
-        let t96: crate::Real = t17 * t95;
-        let t97: crate::Real = t21 * t96;
-        let t98: crate::Real = t9 * t26;
-        let t99: crate::Real = t16 * t98;
-        let t100: crate::Real = t17 * t99;
-        let t101: crate::Real = 0.125;
-        let t102: crate::Real = t100 * t101;
-        let t103: crate::Real = t9 * t33;
-        let t104: crate::Real = t16 * t103;
-        let t105: crate::Real = t23 * t104;
-        let t106: crate::Real = 0.03333333333333333;
-        let t107: crate::Real = t105 * t106;
-        let t108: crate::Real = t102 + t107;
-        let t109: crate::Real = t9 * t40;
-        let t110: crate::Real = t16 * t109;
-        let t111: crate::Real = t17 * t110;
-        let t112: crate::Real = 0.006944444444444444;
-        let t113: crate::Real = t111 * t112;
-        let t114: crate::Real = t108 - t113;
-        let t115: crate::Real = t9 * t47;
-        let t116: crate::Real = t16 * t115;
-        let t117: crate::Real = t23 * t116;
-        let t118: crate::Real = 0.0011904761904761906;
-        let t119: crate::Real = t117 * t118;
-        let t120: crate::Real = t114 - t119;
-        let t121: crate::Real = t9 * t54;
-        let t122: crate::Real = t16 * t121;
-        let t123: crate::Real = t17 * t122;
-        let t124: crate::Real = 0.00017361111111111112;
-        let t125: crate::Real = t123 * t124;
-        let t126: crate::Real = t120 + t125;
-        let t127: crate::Real = t9 * t61;
-        let t128: crate::Real = t16 * t127;
-        let t129: crate::Real = t23 * t128;
-        let t130: crate::Real = 0.000022045855379188714;
-        let t131: crate::Real = t129 * t130;
-        let t132: crate::Real = t126 + t131;
-        let t133: crate::Real = t9 * t68;
-        let t134: crate::Real = t16 * t133;
-        let t135: crate::Real = t17 * t134;
-        let t136: crate::Real = 0.00000248015873015873;
-        let t137: crate::Real = t135 * t136;
-        let t138: crate::Real = t132 - t137;
-        let t139: crate::Real = t138 - t93;
-        let t140: crate::Real = t139 - t97;
-        let t159: crate::Real = t19 * t23;
-        let t160: crate::Real = t21 * t159;
-        let t161: crate::Real = t16 * t17;
-        let t162: crate::Real = t160 + t161;
-        let t163: crate::Real = t17 * t27;
-        let t164: crate::Real = t29 * t163;
-        let t165: crate::Real = t162 - t164;
-        let t166: crate::Real = t23 * t34;
-        let t167: crate::Real = t36 * t166;
-        let t168: crate::Real = t165 - t167;
-        let t169: crate::Real = t17 * t41;
-        let t170: crate::Real = t43 * t169;
-        let t171: crate::Real = t168 + t170;
-        let t172: crate::Real = t23 * t48;
-        let t173: crate::Real = t50 * t172;
-        let t174: crate::Real = t171 + t173;
-        let t175: crate::Real = t17 * t55;
-        let t176: crate::Real = t57 * t175;
-        let t177: crate::Real = t174 - t176;
-        let t178: crate::Real = t23 * t62;
-        let t179: crate::Real = t64 * t178;
-        let t180: crate::Real = t177 - t179;
-        let t181: crate::Real = t17 * t69;
-        let t182: crate::Real = t71 * t181;
-        let t183: crate::Real = t180 + t182;
-        let t192: crate::Real = t17 * t90;
-        let t193: crate::Real = t92 * t192;
-        let t194: crate::Real = t23 * t95;
-        let t195: crate::Real = t21 * t194;
-        let t196: crate::Real = t23 * t99;
-        let t197: crate::Real = t101 * t196;
-        let t198: crate::Real = t195 - t197;
-        let t199: crate::Real = t17 * t104;
-        let t200: crate::Real = t106 * t199;
-        let t201: crate::Real = t198 + t200;
-        let t202: crate::Real = t23 * t110;
-        let t203: crate::Real = t112 * t202;
-        let t204: crate::Real = t201 + t203;
-        let t205: crate::Real = t17 * t116;
-        let t206: crate::Real = t118 * t205;
-        let t207: crate::Real = t204 - t206;
-        let t208: crate::Real = t23 * t122;
-        let t209: crate::Real = t124 * t208;
-        let t210: crate::Real = t207 - t209;
-        let t211: crate::Real = t17 * t128;
-        let t212: crate::Real = t130 * t211;
-        let t213: crate::Real = t210 + t212;
-        let t214: crate::Real = t23 * t134;
-        let t215: crate::Real = t136 * t214;
-        let t216: crate::Real = t213 + t215;
-        let t217: crate::Real = t216 - t193;
-        [t74, t140, t183, t217]
+        let t37: crate::Real = 0.001388888888888889;
+        let t38: crate::Real = 0.0000248015873015873;
+        let t39: crate::Real = t18 * t38;
+        let t40: crate::Real = t37 - t39;
+        let t41: crate::Real = t18 * t40;
+        let t42: crate::Real = t41 - t36;
+        let t43: crate::Real = t18 * t42;
+        let t44: crate::Real = t35 + t43;
+        let t45: crate::Real = t16 * t44;
+        let t51: crate::Real = 0.3333333333333333;
+        let t52: crate::Real = 0.03333333333333333;
+        let t53: crate::Real = 0.0011904761904761906;
+        let t54: crate::Real = 0.000022045855379188714;
+        let t55: crate::Real = t18 * t54;
+        let t56: crate::Real = t55 - t53;
+        let t57: crate::Real = t18 * t56;
+        let t58: crate::Real = t52 + t57;
+        let t59: crate::Real = t18 * t58;
+        let t60: crate::Real = t59 - t51;
+        let t61: crate::Real = t16 * t60;
+        let t68: crate::Real = 0.125;
+        let t69: crate::Real = 0.006944444444444444;
+        let t70: crate::Real = 0.00017361111111111112;
+        let t71: crate::Real = 0.00000248015873015873;
+        let t72: crate::Real = t18 * t71;
+        let t73: crate::Real = t72 - t70;
+        let t74: crate::Real = t18 * t73;
+        let t75: crate::Real = t69 + t74;
+        let t76: crate::Real = t18 * t75;
+        let t77: crate::Real = t76 - t68;
+        let t78: crate::Real = t18 * t77;
+        let t79: crate::Real = t35 + t78;
+        [t30, t45, t61, t79]
     } else {
-        let t75: crate::Real = crate::math::sin(t14);
-        let t76: crate::Real = t7 * t75;
-        let t77: crate::Real = t23 * t76;
-        let t78: crate::Real = 1.0;
-        let t79: crate::Real = t78 / t14;
-        let t80: crate::Real = t77 * t79;
-        let t81: crate::Real = crate::math::cos(t14);
-        let t82: crate::Real = t15 - t81;
-        let t83: crate::Real = t7 * t82;
-        let t84: crate::Real = t17 * t83;
-        let t85: crate::Real = t84 * t79;
-        let t86: crate::Real = t80 - t85;
-        let t87: crate::Real = t15 * t86;
-        let t141: crate::Real = t17 * t94;
-        let t142: crate::Real = t75 * t141;
-        let t143: crate::Real = t142 * t79;
-        let t144: crate::Real = t23 * t94;
-        let t145: crate::Real = t81 * t144;
-        let t146: crate::Real = t145 * t79;
-        let t147: crate::Real = t75 * t94;
-        let t148: crate::Real = t23 * t147;
-        let t149: crate::Real = t78 / t25;
-        let t150: crate::Real = t148 * t149;
-        let t151: crate::Real = t146 - t150;
-        let t152: crate::Real = t82 * t94;
-        let t153: crate::Real = t17 * t152;
-        let t154: crate::Real = t153 * t149;
-        let t155: crate::Real = t151 + t154;
-        let t156: crate::Real = t155 - t143;
-        let t157: crate::Real = t16 * t156;
-        let t184: crate::Real = t7 * t17;
-        let t185: crate::Real = t75 * t184;
-        let t186: crate::Real = t185 * t79;
-        let t187: crate::Real = t23 * t83;
-        let t188: crate::Real = t187 * t79;
-        let t189: crate::Real = t186 + t188;
-        let t190: crate::Real = t15 * t189;
-        let t218: crate::Real = t81 * t141;
-        let t219: crate::Real = t218 * t79;
-        let t220: crate::Real = t148 * t79;
-        let t221: crate::Real = t219 + t220;
-        let t222: crate::Real = t142 * t149;
-        let t223: crate::Real = t221 - t222;
-        let t224: crate::Real = t23 * t152;
-        let t225: crate::Real = t224 * t149;
-        let t226: crate::Real = t223 - t225;
-        let t227: crate::Real = t16 * t226;
-        [t87, t157, t190, t227]
+        let sc31 = crate::math::sincos(t16);
+        let t31: crate::Real = sc31.0;
+        let t46: crate::Real = sc31.1;
+        let t32: crate::Real = t12 / t16;
+        let t33: crate::Real = t31 * t32;
+        let t47: crate::Real = t17 - t46;
+        let t48: crate::Real = t47 * t32;
+        let t62: crate::Real = t46 * t32;
+        let t63: crate::Real = t12 / t18;
+        let t64: crate::Real = t31 * t63;
+        let t65: crate::Real = t62 - t64;
+        let t80: crate::Real = t47 * t63;
+        let t81: crate::Real = t33 - t80;
+        [t33, t48, t65, t81]
     };
-    let t88: crate::Real = g0[0usize];
-    let t158: crate::Real = g0[1usize];
-    let t191: crate::Real = g0[2usize];
-    let t228: crate::Real = g0[3usize];
-    let t229: crate::Real = 0.0;
-    [[t88, t158], [t191, t228], [t229, t16]]
+    let t34: crate::Real = g0[0usize];
+    let t49: crate::Real = g0[1usize];
+    let t66: crate::Real = g0[2usize];
+    let t82: crate::Real = g0[3usize];
+    let t50: crate::Real = t7 * t17;
+    let t67: crate::Real = t50 * t66;
+    let t83: crate::Real = t50 * t82;
+    let sc84 = crate::math::sincos(t0);
+    let t87: crate::Real = sc84.0;
+    let t84: crate::Real = sc84.1;
+    let t85: crate::Real = t7 * t34;
+    let t86: crate::Real = t84 * t85;
+    let t88: crate::Real = t7 * t49;
+    let t89: crate::Real = t87 * t88;
+    let t90: crate::Real = t86 - t89;
+    let t91: crate::Real = t17 * t90;
+    let t92: crate::Real = t7 * t9;
+    let t93: crate::Real = t67 * t92;
+    let t94: crate::Real = t84 * t93;
+    let t95: crate::Real = t83 * t92;
+    let t96: crate::Real = t87 * t95;
+    let t97: crate::Real = t94 - t96;
+    let t98: crate::Real = t85 * t87;
+    let t99: crate::Real = t84 * t88;
+    let t100: crate::Real = t98 + t99;
+    let t101: crate::Real = t17 * t100;
+    let t102: crate::Real = t87 * t93;
+    let t103: crate::Real = t84 * t95;
+    let t104: crate::Real = t102 + t103;
+    let t105: crate::Real = 0.0;
+    [[t91, t97], [t101, t104], [t105, t50]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
 
@@ -1157,7 +784,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-250 arithmetic operations (2352 before common-subexpression elimination).*/
+98 arithmetic operations (1419 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -1183,273 +810,123 @@ pub fn step_exact_jac_p(
     let t14: crate::Real = t11 * t13;
     let t15: crate::Real = t4 + t14;
     let t16: crate::Real = t7 * t15;
-    let t17: crate::Real = t1 * t10;
-    let t18: crate::Real = t17 * t13;
-    let t19: crate::Real = t6 * t6;
-    let t20: crate::Real = t11 / t19;
-    let t21: crate::Real = -t20;
-    let t22: crate::Real = t7 * t18;
-    let t23: crate::Real = t7 * t21;
-    let t24: crate::Real = crate::math::sin(t0);
-    let t25: crate::Real = t7 * t9;
-    let t30: crate::Real = crate::math::cos(t0);
-    let t42: crate::Real = t16 * t16;
+    let t17: crate::Real = 1.0;
+    let t18: crate::Real = t16 * t16;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
         < crate::math::series_switch(0.05)
     {
-        let t26: crate::Real = t22 * t25;
-        let t27: crate::Real = t24 * t26;
-        let t28: crate::Real = 0.5;
-        let t29: crate::Real = t27 * t28;
-        let t31: crate::Real = t1 * t7;
-        let t32: crate::Real = t30 * t31;
-        let t33: crate::Real = t26 * t30;
-        let t34: crate::Real = 0.3333333333333333;
-        let t35: crate::Real = t33 * t34;
-        let t36: crate::Real = -t35;
-        let t37: crate::Real = t24 * t31;
-        let t38: crate::Real = t28 * t37;
-        let t39: crate::Real = t36 - t38;
-        let t40: crate::Real = t16 * t39;
-        let t41: crate::Real = t32 + t40;
-        let t43: crate::Real = 0.125;
-        let t44: crate::Real = t27 * t43;
-        let t45: crate::Real = 0.16666666666666666;
-        let t46: crate::Real = t32 * t45;
-        let t47: crate::Real = t44 - t46;
-        let t48: crate::Real = t42 * t47;
-        let t49: crate::Real = t41 + t48;
-        let t50: crate::Real = t16 * t42;
-        let t51: crate::Real = 0.03333333333333333;
-        let t52: crate::Real = t33 * t51;
-        let t53: crate::Real = 0.041666666666666664;
-        let t54: crate::Real = t37 * t53;
-        let t55: crate::Real = t52 + t54;
-        let t56: crate::Real = t50 * t55;
-        let t57: crate::Real = t49 + t56;
-        let t58: crate::Real = t42 * t42;
-        let t59: crate::Real = 0.006944444444444444;
-        let t60: crate::Real = t27 * t59;
-        let t61: crate::Real = 0.008333333333333333;
-        let t62: crate::Real = t32 * t61;
+        let t19: crate::Real = 0.16666666666666666;
+        let t20: crate::Real = 0.008333333333333333;
+        let t21: crate::Real = 0.0001984126984126984;
+        let t22: crate::Real = 0.0000027557319223985893;
+        let t23: crate::Real = t18 * t22;
+        let t24: crate::Real = t23 - t21;
+        let t25: crate::Real = t18 * t24;
+        let t26: crate::Real = t20 + t25;
+        let t27: crate::Real = t18 * t26;
+        let t28: crate::Real = t27 - t19;
+        let t29: crate::Real = t18 * t28;
+        let t30: crate::Real = t17 + t29;
+        let t35: crate::Real = 0.5;
+        let t36: crate::Real = 0.041666666666666664;
+        let t37: crate::Real = 0.001388888888888889;
+        let t38: crate::Real = 0.0000248015873015873;
+        let t39: crate::Real = t18 * t38;
+        let t40: crate::Real = t37 - t39;
+        let t41: crate::Real = t18 * t40;
+        let t42: crate::Real = t41 - t36;
+        let t43: crate::Real = t18 * t42;
+        let t44: crate::Real = t35 + t43;
+        let t45: crate::Real = t16 * t44;
+        let t58: crate::Real = 0.3333333333333333;
+        let t59: crate::Real = 0.03333333333333333;
+        let t60: crate::Real = 0.0011904761904761906;
+        let t61: crate::Real = 0.000022045855379188714;
+        let t62: crate::Real = t18 * t61;
         let t63: crate::Real = t62 - t60;
-        let t64: crate::Real = t58 * t63;
-        let t65: crate::Real = t57 + t64;
-        let t66: crate::Real = t16 * t58;
-        let t67: crate::Real = 0.0011904761904761906;
-        let t68: crate::Real = t33 * t67;
-        let t69: crate::Real = -t68;
-        let t70: crate::Real = 0.001388888888888889;
-        let t71: crate::Real = t37 * t70;
-        let t72: crate::Real = t69 - t71;
-        let t73: crate::Real = t66 * t72;
-        let t74: crate::Real = t65 + t73;
-        let t75: crate::Real = t50 * t50;
-        let t76: crate::Real = 0.00017361111111111112;
-        let t77: crate::Real = t27 * t76;
-        let t78: crate::Real = 0.0001984126984126984;
-        let t79: crate::Real = t32 * t78;
-        let t80: crate::Real = t77 - t79;
-        let t81: crate::Real = t75 * t80;
-        let t82: crate::Real = t74 + t81;
-        let t83: crate::Real = t16 * t75;
-        let t84: crate::Real = 0.000022045855379188714;
-        let t85: crate::Real = t33 * t84;
-        let t86: crate::Real = 0.0000248015873015873;
-        let t87: crate::Real = t37 * t86;
-        let t88: crate::Real = t85 + t87;
-        let t89: crate::Real = t83 * t88;
-        let t90: crate::Real = t82 + t89;
-        let t91: crate::Real = t58 * t58;
-        let t92: crate::Real = 0.00000248015873015873;
-        let t93: crate::Real = t27 * t92;
-        let t94: crate::Real = 0.0000027557319223985893;
-        let t95: crate::Real = t32 * t94;
-        let t96: crate::Real = t95 - t93;
-        let t97: crate::Real = t91 * t96;
-        let t98: crate::Real = t90 + t97;
-        let t99: crate::Real = t98 - t29;
-        let t132: crate::Real = t7 * t16;
-        let t133: crate::Real = t9 * t132;
-        let t134: crate::Real = t23 * t133;
-        let t135: crate::Real = t30 * t134;
-        let t136: crate::Real = t34 * t135;
-        let t137: crate::Real = t23 * t25;
-        let t138: crate::Real = t24 * t137;
-        let t139: crate::Real = t28 * t138;
-        let t140: crate::Real = t7 * t42;
-        let t141: crate::Real = t9 * t140;
-        let t142: crate::Real = t23 * t141;
-        let t143: crate::Real = t24 * t142;
-        let t144: crate::Real = t43 * t143;
-        let t145: crate::Real = t7 * t50;
-        let t146: crate::Real = t9 * t145;
-        let t147: crate::Real = t23 * t146;
-        let t148: crate::Real = t30 * t147;
-        let t149: crate::Real = t51 * t148;
-        let t150: crate::Real = t144 + t149;
-        let t151: crate::Real = t7 * t58;
-        let t152: crate::Real = t9 * t151;
-        let t153: crate::Real = t23 * t152;
-        let t154: crate::Real = t24 * t153;
-        let t155: crate::Real = t59 * t154;
-        let t156: crate::Real = t150 - t155;
-        let t157: crate::Real = t7 * t66;
-        let t158: crate::Real = t9 * t157;
-        let t159: crate::Real = t23 * t158;
-        let t160: crate::Real = t30 * t159;
-        let t161: crate::Real = t67 * t160;
-        let t162: crate::Real = t156 - t161;
-        let t163: crate::Real = t7 * t75;
-        let t164: crate::Real = t9 * t163;
-        let t165: crate::Real = t23 * t164;
-        let t166: crate::Real = t24 * t165;
-        let t167: crate::Real = t76 * t166;
-        let t168: crate::Real = t162 + t167;
-        let t169: crate::Real = t7 * t83;
-        let t170: crate::Real = t9 * t169;
-        let t171: crate::Real = t23 * t170;
-        let t172: crate::Real = t30 * t171;
-        let t173: crate::Real = t84 * t172;
-        let t174: crate::Real = t168 + t173;
-        let t175: crate::Real = t7 * t91;
-        let t176: crate::Real = t9 * t175;
-        let t177: crate::Real = t23 * t176;
-        let t178: crate::Real = t24 * t177;
-        let t179: crate::Real = t92 * t178;
-        let t180: crate::Real = t174 - t179;
-        let t181: crate::Real = t180 - t136;
-        let t182: crate::Real = t181 - t139;
-        let t185: crate::Real = t28 * t33;
-        let t186: crate::Real = t37 + t185;
-        let t187: crate::Real = t27 * t34;
-        let t188: crate::Real = t28 * t32;
-        let t189: crate::Real = t188 - t187;
-        let t190: crate::Real = t16 * t189;
-        let t191: crate::Real = t186 + t190;
-        let t192: crate::Real = t33 * t43;
-        let t193: crate::Real = -t192;
-        let t194: crate::Real = t37 * t45;
-        let t195: crate::Real = t193 - t194;
-        let t196: crate::Real = t42 * t195;
-        let t197: crate::Real = t191 + t196;
-        let t198: crate::Real = t27 * t51;
-        let t199: crate::Real = t32 * t53;
-        let t200: crate::Real = t198 - t199;
-        let t201: crate::Real = t50 * t200;
-        let t202: crate::Real = t197 + t201;
-        let t203: crate::Real = t33 * t59;
-        let t204: crate::Real = t37 * t61;
-        let t205: crate::Real = t203 + t204;
-        let t206: crate::Real = t58 * t205;
-        let t207: crate::Real = t202 + t206;
-        let t208: crate::Real = t27 * t67;
-        let t209: crate::Real = t32 * t70;
-        let t210: crate::Real = t209 - t208;
-        let t211: crate::Real = t66 * t210;
-        let t212: crate::Real = t207 + t211;
-        let t213: crate::Real = t33 * t76;
-        let t214: crate::Real = -t213;
-        let t215: crate::Real = t37 * t78;
-        let t216: crate::Real = t214 - t215;
-        let t217: crate::Real = t75 * t216;
-        let t218: crate::Real = t212 + t217;
-        let t219: crate::Real = t27 * t84;
-        let t220: crate::Real = t32 * t86;
-        let t221: crate::Real = t219 - t220;
-        let t222: crate::Real = t83 * t221;
-        let t223: crate::Real = t218 + t222;
-        let t224: crate::Real = t33 * t92;
-        let t225: crate::Real = t37 * t94;
-        let t226: crate::Real = t224 + t225;
-        let t227: crate::Real = t91 * t226;
-        let t228: crate::Real = t223 + t227;
-        let t248: crate::Real = t24 * t134;
-        let t249: crate::Real = t34 * t248;
-        let t250: crate::Real = t30 * t137;
-        let t251: crate::Real = t28 * t250;
-        let t252: crate::Real = t30 * t142;
-        let t253: crate::Real = t43 * t252;
-        let t254: crate::Real = t251 - t253;
-        let t255: crate::Real = t24 * t147;
-        let t256: crate::Real = t51 * t255;
-        let t257: crate::Real = t254 + t256;
-        let t258: crate::Real = t30 * t153;
-        let t259: crate::Real = t59 * t258;
-        let t260: crate::Real = t257 + t259;
-        let t261: crate::Real = t24 * t159;
-        let t262: crate::Real = t67 * t261;
-        let t263: crate::Real = t260 - t262;
-        let t264: crate::Real = t30 * t165;
-        let t265: crate::Real = t76 * t264;
-        let t266: crate::Real = t263 - t265;
-        let t267: crate::Real = t24 * t171;
-        let t268: crate::Real = t84 * t267;
-        let t269: crate::Real = t266 + t268;
-        let t270: crate::Real = t30 * t177;
-        let t271: crate::Real = t92 * t270;
-        let t272: crate::Real = t269 + t271;
-        let t273: crate::Real = t272 - t249;
-        [t99, t182, t228, t273]
+        let t64: crate::Real = t18 * t63;
+        let t65: crate::Real = t59 + t64;
+        let t66: crate::Real = t18 * t65;
+        let t67: crate::Real = t66 - t58;
+        let t68: crate::Real = t16 * t67;
+        let t76: crate::Real = 0.125;
+        let t77: crate::Real = 0.006944444444444444;
+        let t78: crate::Real = 0.00017361111111111112;
+        let t79: crate::Real = 0.00000248015873015873;
+        let t80: crate::Real = t18 * t79;
+        let t81: crate::Real = t80 - t78;
+        let t82: crate::Real = t18 * t81;
+        let t83: crate::Real = t77 + t82;
+        let t84: crate::Real = t18 * t83;
+        let t85: crate::Real = t84 - t76;
+        let t86: crate::Real = t18 * t85;
+        let t87: crate::Real = t35 + t86;
+        [t30, t45, t68, t87]
     } else {
-        let t100: crate::Real = crate::math::sin(t16);
-        let t101: crate::Real = t7 * t100;
-        let t102: crate::Real = t30 * t101;
-        let t103: crate::Real = t12 / t16;
-        let t104: crate::Real = t102 * t103;
-        let t105: crate::Real = 1.0;
-        let t106: crate::Real = crate::math::cos(t16);
-        let t107: crate::Real = t105 - t106;
-        let t108: crate::Real = t7 * t107;
-        let t109: crate::Real = t24 * t108;
-        let t110: crate::Real = t109 * t103;
-        let t111: crate::Real = t104 - t110;
-        let t112: crate::Real = t1 * t111;
-        let t113: crate::Real = t24 * t25;
-        let t114: crate::Real = t100 * t113;
-        let t115: crate::Real = t114 * t103;
-        let t116: crate::Real = t25 * t30;
-        let t117: crate::Real = t106 * t116;
-        let t118: crate::Real = t117 * t103;
-        let t119: crate::Real = t25 * t100;
-        let t120: crate::Real = t30 * t119;
-        let t121: crate::Real = t12 / t42;
-        let t122: crate::Real = t120 * t121;
-        let t123: crate::Real = t118 - t122;
-        let t124: crate::Real = t25 * t107;
-        let t125: crate::Real = t24 * t124;
-        let t126: crate::Real = t125 * t121;
-        let t127: crate::Real = t123 + t126;
-        let t128: crate::Real = t127 - t115;
-        let t129: crate::Real = t22 * t128;
-        let t130: crate::Real = t112 + t129;
-        let t183: crate::Real = t23 * t128;
-        let t229: crate::Real = t7 * t24;
-        let t230: crate::Real = t100 * t229;
-        let t231: crate::Real = t230 * t103;
-        let t232: crate::Real = t30 * t108;
-        let t233: crate::Real = t232 * t103;
-        let t234: crate::Real = t231 + t233;
-        let t235: crate::Real = t1 * t234;
-        let t236: crate::Real = t106 * t113;
-        let t237: crate::Real = t236 * t103;
-        let t238: crate::Real = t120 * t103;
-        let t239: crate::Real = t237 + t238;
-        let t240: crate::Real = t114 * t121;
-        let t241: crate::Real = t239 - t240;
-        let t242: crate::Real = t30 * t124;
-        let t243: crate::Real = t242 * t121;
-        let t244: crate::Real = t241 - t243;
-        let t245: crate::Real = t22 * t244;
-        let t246: crate::Real = t235 + t245;
-        let t274: crate::Real = t23 * t244;
-        [t130, t183, t246, t274]
+        let sc31 = crate::math::sincos(t16);
+        let t31: crate::Real = sc31.0;
+        let t46: crate::Real = sc31.1;
+        let t32: crate::Real = t12 / t16;
+        let t33: crate::Real = t31 * t32;
+        let t47: crate::Real = t17 - t46;
+        let t48: crate::Real = t47 * t32;
+        let t69: crate::Real = t46 * t32;
+        let t70: crate::Real = t12 / t18;
+        let t71: crate::Real = t31 * t70;
+        let t72: crate::Real = t69 - t71;
+        let t88: crate::Real = t47 * t70;
+        let t89: crate::Real = t33 - t88;
+        [t33, t48, t72, t89]
     };
-    let t131: crate::Real = g0[0usize];
-    let t184: crate::Real = g0[1usize];
-    let t247: crate::Real = g0[2usize];
-    let t275: crate::Real = g0[3usize];
-    [[t131, t184], [t247, t275], [t22, t23]]
+    let t34: crate::Real = g0[0usize];
+    let t49: crate::Real = g0[1usize];
+    let t73: crate::Real = g0[2usize];
+    let t90: crate::Real = g0[3usize];
+    let t50: crate::Real = t1 * t10;
+    let t51: crate::Real = t50 * t13;
+    let t52: crate::Real = t6 * t6;
+    let t53: crate::Real = t12 / t52;
+    let t54: crate::Real = t11 * t53;
+    let t55: crate::Real = -t54;
+    let t56: crate::Real = t7 * t51;
+    let t57: crate::Real = t7 * t55;
+    let t74: crate::Real = t56 * t73;
+    let t75: crate::Real = t57 * t73;
+    let t91: crate::Real = t56 * t90;
+    let t92: crate::Real = t57 * t90;
+    let sc93 = crate::math::sincos(t0);
+    let t97: crate::Real = sc93.0;
+    let t93: crate::Real = sc93.1;
+    let t94: crate::Real = t7 * t9;
+    let t95: crate::Real = t74 * t94;
+    let t96: crate::Real = t93 * t95;
+    let t98: crate::Real = t91 * t94;
+    let t99: crate::Real = t97 * t98;
+    let t100: crate::Real = t96 - t99;
+    let t101: crate::Real = t7 * t34;
+    let t102: crate::Real = t93 * t101;
+    let t103: crate::Real = t7 * t49;
+    let t104: crate::Real = t97 * t103;
+    let t105: crate::Real = t102 - t104;
+    let t106: crate::Real = t1 * t105;
+    let t107: crate::Real = t100 + t106;
+    let t108: crate::Real = t75 * t94;
+    let t109: crate::Real = t93 * t108;
+    let t110: crate::Real = t92 * t94;
+    let t111: crate::Real = t97 * t110;
+    let t112: crate::Real = t109 - t111;
+    let t113: crate::Real = t95 * t97;
+    let t114: crate::Real = t93 * t98;
+    let t115: crate::Real = t113 + t114;
+    let t116: crate::Real = t97 * t101;
+    let t117: crate::Real = t93 * t103;
+    let t118: crate::Real = t116 + t117;
+    let t119: crate::Real = t1 * t118;
+    let t120: crate::Real = t115 + t119;
+    let t121: crate::Real = t97 * t108;
+    let t122: crate::Real = t93 * t110;
+    let t123: crate::Real = t121 + t122;
+    [[t107, t112], [t120, t123], [t56, t57]]
 }
 /**Gyro yaw rate (seed 000 eq. 13). Predicted columns: gyro_z.
 
@@ -1458,7 +935,7 @@ pub fn step_exact_jac_p(
 * `p`: [r, L]
 * returns [gyro_z]
 
-4 arithmetic operations (4 before common-subexpression elimination).*/
+5 arithmetic operations (5 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro(
     x: &[crate::Real; 3usize],
@@ -1472,8 +949,10 @@ pub fn obs_gyro(
     let t4: crate::Real = crate::math::tan(t1);
     let t5: crate::Real = t0 * t2;
     let t6: crate::Real = t4 * t5;
-    let t7: crate::Real = t6 / t3;
-    [t7]
+    let t7: crate::Real = 1.0;
+    let t8: crate::Real = t7 / t3;
+    let t9: crate::Real = t6 * t8;
+    [t9]
 }
 /**Jacobian of `obs_gyro` with respect to the state (seed 001 eq. 7 for range-bearing).
 
@@ -1499,7 +978,7 @@ pub fn obs_gyro_jac_x(
 * `p`: [r, L]
 * returns rows [gyro_z], columns [r, L]
 
-8 arithmetic operations (9 before common-subexpression elimination).*/
+10 arithmetic operations (11 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
     x: &[crate::Real; 3usize],
@@ -1512,13 +991,16 @@ pub fn obs_gyro_jac_p(
     let t3: crate::Real = p[1usize];
     let t4: crate::Real = crate::math::tan(t1);
     let t5: crate::Real = t0 * t4;
-    let t6: crate::Real = t5 / t3;
-    let t7: crate::Real = t3 * t3;
-    let t8: crate::Real = t0 * t2;
-    let t9: crate::Real = t4 * t8;
-    let t10: crate::Real = t9 / t7;
-    let t11: crate::Real = -t10;
-    [[t6, t11]]
+    let t6: crate::Real = 1.0;
+    let t7: crate::Real = t6 / t3;
+    let t8: crate::Real = t5 * t7;
+    let t9: crate::Real = t3 * t3;
+    let t10: crate::Real = t0 * t2;
+    let t11: crate::Real = t4 * t10;
+    let t12: crate::Real = t6 / t9;
+    let t13: crate::Real = t11 * t12;
+    let t14: crate::Real = -t13;
+    [[t8, t14]]
 }
 /**Range and bearing to a known landmark (seed 001 eq. 6). Predicted columns: range, bearing.
 
@@ -1616,7 +1098,7 @@ pub fn obs_landmark_jac_p(
 * `p`: [r, L]
 * returns [w, alpha]
 
-5 arithmetic operations (5 before common-subexpression elimination).*/
+6 arithmetic operations (6 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_twist(
     twist: &[crate::Real; 3usize],
@@ -1626,12 +1108,14 @@ pub fn inverse_twist(
     let t1: crate::Real = twist[2usize];
     let t2: crate::Real = p[0usize];
     let t3: crate::Real = p[1usize];
-    let t4: crate::Real = t0 / t2;
-    let t5: crate::Real = t0 * t1;
-    let t6: crate::Real = t3 * t5;
-    let t7: crate::Real = t0 * t0;
-    let t8: crate::Real = crate::math::atan2(t6, t7);
-    [t4, t8]
+    let t4: crate::Real = 1.0;
+    let t5: crate::Real = t4 / t2;
+    let t6: crate::Real = t0 * t5;
+    let t7: crate::Real = t0 * t1;
+    let t8: crate::Real = t3 * t7;
+    let t9: crate::Real = t0 * t0;
+    let t10: crate::Real = crate::math::atan2(t8, t9);
+    [t6, t10]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
 
@@ -1640,7 +1124,7 @@ pub fn inverse_twist(
 * `p`: [r, L]
 * returns [w, alpha]
 
-34 arithmetic operations (179 before common-subexpression elimination).*/
+32 arithmetic operations (136 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[crate::Real; 3usize],
@@ -1659,46 +1143,44 @@ pub fn inverse_increment(
     {
         let t7: crate::Real = t0 * t6;
         let t8: crate::Real = t1 * t1;
-        let t9: crate::Real = t0 * t8;
-        let t10: crate::Real = 0.16666666666666666;
-        let t11: crate::Real = t9 * t10;
-        let t12: crate::Real = t11 * t6;
-        let t13: crate::Real = t7 + t12;
-        let t14: crate::Real = t8 * t8;
-        let t15: crate::Real = t0 * t14;
-        let t16: crate::Real = 0.019444444444444445;
-        let t17: crate::Real = t15 * t16;
-        let t18: crate::Real = t17 * t6;
-        let t19: crate::Real = t13 + t18;
-        let t20: crate::Real = t1 * t8;
-        let t21: crate::Real = t20 * t20;
-        let t22: crate::Real = t0 * t21;
-        let t23: crate::Real = 0.00205026455026455;
-        let t24: crate::Real = t22 * t23;
-        let t25: crate::Real = t24 * t6;
-        let t26: crate::Real = t19 + t25;
-        let t27: crate::Real = t14 * t14;
-        let t28: crate::Real = t0 * t27;
-        let t29: crate::Real = 0.0002099867724867725;
-        let t30: crate::Real = t28 * t29;
-        let t31: crate::Real = t30 * t6;
-        let t32: crate::Real = t26 + t31;
-        [t32]
+        let t9: crate::Real = 0.16666666666666666;
+        let t10: crate::Real = t0 * t9;
+        let t11: crate::Real = t10 * t6;
+        let t12: crate::Real = 0.019444444444444445;
+        let t13: crate::Real = t0 * t12;
+        let t14: crate::Real = t13 * t6;
+        let t15: crate::Real = 0.00205026455026455;
+        let t16: crate::Real = t0 * t15;
+        let t17: crate::Real = t16 * t6;
+        let t18: crate::Real = t0 * t8;
+        let t19: crate::Real = 0.0002099867724867725;
+        let t20: crate::Real = t18 * t19;
+        let t21: crate::Real = t20 * t6;
+        let t22: crate::Real = t17 + t21;
+        let t23: crate::Real = t8 * t22;
+        let t24: crate::Real = t14 + t23;
+        let t25: crate::Real = t8 * t24;
+        let t26: crate::Real = t11 + t25;
+        let t27: crate::Real = t8 * t26;
+        let t28: crate::Real = t7 + t27;
+        [t28]
     } else {
-        let t33: crate::Real = crate::math::sin(t1);
-        let t34: crate::Real = t0 * t1;
-        let t35: crate::Real = t2 * t33;
-        let t36: crate::Real = t34 / t35;
-        [t36]
+        let t29: crate::Real = crate::math::sin(t1);
+        let t30: crate::Real = t0 * t1;
+        let t31: crate::Real = t2 * t29;
+        let t32: crate::Real = t5 / t31;
+        let t33: crate::Real = t30 * t32;
+        [t33]
     };
-    let t37: crate::Real = g0[0usize];
-    let t38: crate::Real = t37 / t3;
-    let t39: crate::Real = t1 * t37;
-    let t40: crate::Real = t4 * t39;
-    let t41: crate::Real = t40 * t6;
-    let t42: crate::Real = t37 * t37;
-    let t43: crate::Real = crate::math::atan2(t41, t42);
-    [t38, t43]
+    let t34: crate::Real = g0[0usize];
+    let t35: crate::Real = t5 / t3;
+    let t36: crate::Real = t34 * t35;
+    let t37: crate::Real = t1 * t34;
+    let t38: crate::Real = t4 * t37;
+    let t39: crate::Real = t38 * t6;
+    let t40: crate::Real = t34 * t34;
+    let t41: crate::Real = crate::math::atan2(t39, t40);
+    [t36, t41]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
 
@@ -1709,7 +1191,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5]]
 
-309 arithmetic operations (3037 before common-subexpression elimination).*/
+95 arithmetic operations (1642 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1732,355 +1214,143 @@ pub fn step_exact_linearized_flat(
     let t11: crate::Real = t5 + t10;
     let t12: crate::Real = crate::math::tan(t4);
     let t13: crate::Real = t10 * t12;
-    let t14: crate::Real = t13 / t8;
-    let t15: crate::Real = t6 + t14;
-    let t16: crate::Real = t9 * t15;
-    let t17: crate::Real = crate::math::sin(t2);
-    let t24: crate::Real = crate::math::cos(t2);
-    let t25: crate::Real = t9 * t11;
-    let t26: crate::Real = t24 * t25;
-    let t28: crate::Real = t16 * t16;
-    let t80: crate::Real = 1.0;
-    let t94: crate::Real = t17 * t25;
-    let t167: crate::Real = t9 * t80;
-    let g0: [crate::Real; 8usize] = if crate::math::fabs(t16)
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t8;
+    let t16: crate::Real = t13 * t15;
+    let t17: crate::Real = t6 + t16;
+    let t18: crate::Real = t9 * t17;
+    let t19: crate::Real = t18 * t18;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
-        let t18: crate::Real = t9 * t16;
-        let t19: crate::Real = t11 * t18;
-        let t20: crate::Real = t17 * t19;
-        let t21: crate::Real = 0.5;
-        let t22: crate::Real = t20 * t21;
-        let t23: crate::Real = t0 - t22;
-        let t27: crate::Real = t23 + t26;
-        let t29: crate::Real = t9 * t28;
-        let t30: crate::Real = t11 * t29;
-        let t31: crate::Real = t24 * t30;
-        let t32: crate::Real = 0.16666666666666666;
-        let t33: crate::Real = t31 * t32;
-        let t34: crate::Real = t27 - t33;
-        let t35: crate::Real = t16 * t28;
-        let t36: crate::Real = t9 * t35;
-        let t37: crate::Real = t11 * t36;
-        let t38: crate::Real = t17 * t37;
-        let t39: crate::Real = 0.041666666666666664;
-        let t40: crate::Real = t38 * t39;
-        let t41: crate::Real = t34 + t40;
-        let t42: crate::Real = t28 * t28;
-        let t43: crate::Real = t9 * t42;
-        let t44: crate::Real = t11 * t43;
-        let t45: crate::Real = t24 * t44;
-        let t46: crate::Real = 0.008333333333333333;
-        let t47: crate::Real = t45 * t46;
-        let t48: crate::Real = t41 + t47;
-        let t49: crate::Real = t16 * t42;
-        let t50: crate::Real = t9 * t49;
-        let t51: crate::Real = t11 * t50;
-        let t52: crate::Real = t17 * t51;
-        let t53: crate::Real = 0.001388888888888889;
-        let t54: crate::Real = t52 * t53;
-        let t55: crate::Real = t48 - t54;
-        let t56: crate::Real = t35 * t35;
-        let t57: crate::Real = t9 * t56;
-        let t58: crate::Real = t11 * t57;
-        let t59: crate::Real = t24 * t58;
-        let t60: crate::Real = 0.0001984126984126984;
-        let t61: crate::Real = t59 * t60;
-        let t62: crate::Real = t55 - t61;
-        let t63: crate::Real = t16 * t56;
-        let t64: crate::Real = t9 * t63;
-        let t65: crate::Real = t11 * t64;
-        let t66: crate::Real = t17 * t65;
-        let t67: crate::Real = 0.0000248015873015873;
-        let t68: crate::Real = t66 * t67;
-        let t69: crate::Real = t62 + t68;
-        let t70: crate::Real = t42 * t42;
-        let t71: crate::Real = t9 * t70;
-        let t72: crate::Real = t11 * t71;
-        let t73: crate::Real = t24 * t72;
-        let t74: crate::Real = 0.0000027557319223985893;
-        let t75: crate::Real = t73 * t74;
-        let t76: crate::Real = t69 + t75;
-        let t91: crate::Real = t19 * t24;
-        let t92: crate::Real = t21 * t91;
-        let t93: crate::Real = t1 + t92;
-        let t95: crate::Real = t93 + t94;
-        let t96: crate::Real = t17 * t30;
-        let t97: crate::Real = t32 * t96;
-        let t98: crate::Real = t95 - t97;
-        let t99: crate::Real = t24 * t37;
-        let t100: crate::Real = t39 * t99;
-        let t101: crate::Real = t98 - t100;
-        let t102: crate::Real = t17 * t44;
-        let t103: crate::Real = t46 * t102;
-        let t104: crate::Real = t101 + t103;
-        let t105: crate::Real = t24 * t51;
-        let t106: crate::Real = t53 * t105;
-        let t107: crate::Real = t104 + t106;
-        let t108: crate::Real = t17 * t58;
-        let t109: crate::Real = t60 * t108;
-        let t110: crate::Real = t107 - t109;
-        let t111: crate::Real = t24 * t65;
-        let t112: crate::Real = t67 * t111;
-        let t113: crate::Real = t110 - t112;
-        let t114: crate::Real = t17 * t72;
-        let t115: crate::Real = t74 * t114;
-        let t116: crate::Real = t113 + t115;
-        let t126: crate::Real = t24 * t19;
-        let t127: crate::Real = t126 * t21;
-        let t128: crate::Real = t96 * t32;
-        let t129: crate::Real = t99 * t39;
-        let t130: crate::Real = t128 + t129;
-        let t131: crate::Real = t102 * t46;
-        let t132: crate::Real = t130 - t131;
-        let t133: crate::Real = t105 * t53;
-        let t134: crate::Real = t132 - t133;
-        let t135: crate::Real = t108 * t60;
-        let t136: crate::Real = t134 + t135;
-        let t137: crate::Real = t111 * t67;
-        let t138: crate::Real = t136 + t137;
-        let t139: crate::Real = t114 * t74;
-        let t140: crate::Real = t138 - t139;
-        let t141: crate::Real = t140 - t127;
-        let t142: crate::Real = t141 - t94;
-        let t148: crate::Real = t19 * t17;
-        let t149: crate::Real = t21 * t148;
-        let t150: crate::Real = t32 * t31;
-        let t151: crate::Real = t26 - t150;
-        let t152: crate::Real = t39 * t38;
-        let t153: crate::Real = t151 + t152;
-        let t154: crate::Real = t46 * t45;
-        let t155: crate::Real = t153 + t154;
-        let t156: crate::Real = t53 * t52;
-        let t157: crate::Real = t155 - t156;
-        let t158: crate::Real = t60 * t59;
-        let t159: crate::Real = t157 - t158;
-        let t160: crate::Real = t67 * t66;
-        let t161: crate::Real = t159 + t160;
-        let t162: crate::Real = t74 * t73;
-        let t163: crate::Real = t161 + t162;
-        let t164: crate::Real = t163 - t149;
-        let t168: crate::Real = t80 * t18;
-        let t169: crate::Real = t17 * t168;
-        let t170: crate::Real = t169 * t21;
-        let t171: crate::Real = t167 * t24;
-        let t172: crate::Real = t80 * t29;
-        let t173: crate::Real = t24 * t172;
-        let t174: crate::Real = t173 * t32;
-        let t175: crate::Real = t171 - t174;
-        let t176: crate::Real = t80 * t36;
-        let t177: crate::Real = t17 * t176;
-        let t178: crate::Real = t177 * t39;
-        let t179: crate::Real = t175 + t178;
-        let t180: crate::Real = t80 * t43;
-        let t181: crate::Real = t24 * t180;
-        let t182: crate::Real = t181 * t46;
-        let t183: crate::Real = t179 + t182;
-        let t184: crate::Real = t80 * t50;
-        let t185: crate::Real = t17 * t184;
-        let t186: crate::Real = t185 * t53;
-        let t187: crate::Real = t183 - t186;
-        let t188: crate::Real = t80 * t57;
-        let t189: crate::Real = t24 * t188;
-        let t190: crate::Real = t189 * t60;
-        let t191: crate::Real = t187 - t190;
-        let t192: crate::Real = t80 * t64;
-        let t193: crate::Real = t17 * t192;
-        let t194: crate::Real = t193 * t67;
-        let t195: crate::Real = t191 + t194;
-        let t196: crate::Real = t80 * t71;
-        let t197: crate::Real = t24 * t196;
-        let t198: crate::Real = t197 * t74;
-        let t199: crate::Real = t195 + t198;
-        let t200: crate::Real = t199 - t170;
-        let t210: crate::Real = t167 * t19;
-        let t211: crate::Real = t24 * t210;
-        let t212: crate::Real = 0.3333333333333333;
-        let t213: crate::Real = t211 * t212;
-        let t214: crate::Real = t167 * t25;
-        let t215: crate::Real = t17 * t214;
-        let t216: crate::Real = t21 * t215;
-        let t217: crate::Real = t167 * t30;
-        let t218: crate::Real = t17 * t217;
-        let t219: crate::Real = 0.125;
-        let t220: crate::Real = t218 * t219;
-        let t221: crate::Real = t167 * t37;
-        let t222: crate::Real = t24 * t221;
-        let t223: crate::Real = 0.03333333333333333;
-        let t224: crate::Real = t222 * t223;
-        let t225: crate::Real = t220 + t224;
-        let t226: crate::Real = t167 * t44;
-        let t227: crate::Real = t17 * t226;
-        let t228: crate::Real = 0.006944444444444444;
-        let t229: crate::Real = t227 * t228;
-        let t230: crate::Real = t225 - t229;
-        let t231: crate::Real = t167 * t51;
-        let t232: crate::Real = t24 * t231;
-        let t233: crate::Real = 0.0011904761904761906;
-        let t234: crate::Real = t232 * t233;
-        let t235: crate::Real = t230 - t234;
-        let t236: crate::Real = t167 * t58;
-        let t237: crate::Real = t17 * t236;
-        let t238: crate::Real = 0.00017361111111111112;
-        let t239: crate::Real = t237 * t238;
-        let t240: crate::Real = t235 + t239;
-        let t241: crate::Real = t167 * t65;
-        let t242: crate::Real = t24 * t241;
-        let t243: crate::Real = 0.000022045855379188714;
-        let t244: crate::Real = t242 * t243;
-        let t245: crate::Real = t240 + t244;
-        let t246: crate::Real = t167 * t72;
-        let t247: crate::Real = t17 * t246;
-        let t248: crate::Real = 0.00000248015873015873;
-        let t249: crate::Real = t247 * t248;
-        let t250: crate::Real = t245 - t249;
-        let t251: crate::Real = t250 - t213;
-        let t252: crate::Real = t251 - t216;
-        let t267: crate::Real = t168 * t24;
-        let t268: crate::Real = t21 * t267;
-        let t269: crate::Real = t167 * t17;
-        let t270: crate::Real = t268 + t269;
-        let t271: crate::Real = t17 * t172;
-        let t272: crate::Real = t32 * t271;
-        let t273: crate::Real = t270 - t272;
-        let t274: crate::Real = t24 * t176;
-        let t275: crate::Real = t39 * t274;
-        let t276: crate::Real = t273 - t275;
-        let t277: crate::Real = t17 * t180;
-        let t278: crate::Real = t46 * t277;
-        let t279: crate::Real = t276 + t278;
-        let t280: crate::Real = t24 * t184;
-        let t281: crate::Real = t53 * t280;
-        let t282: crate::Real = t279 + t281;
-        let t283: crate::Real = t17 * t188;
-        let t284: crate::Real = t60 * t283;
-        let t285: crate::Real = t282 - t284;
-        let t286: crate::Real = t24 * t192;
-        let t287: crate::Real = t67 * t286;
-        let t288: crate::Real = t285 - t287;
-        let t289: crate::Real = t17 * t196;
-        let t290: crate::Real = t74 * t289;
-        let t291: crate::Real = t288 + t290;
-        let t300: crate::Real = t17 * t210;
-        let t301: crate::Real = t212 * t300;
-        let t302: crate::Real = t24 * t214;
-        let t303: crate::Real = t21 * t302;
-        let t304: crate::Real = t24 * t217;
-        let t305: crate::Real = t219 * t304;
-        let t306: crate::Real = t303 - t305;
-        let t307: crate::Real = t17 * t221;
-        let t308: crate::Real = t223 * t307;
-        let t309: crate::Real = t306 + t308;
-        let t310: crate::Real = t24 * t226;
-        let t311: crate::Real = t228 * t310;
-        let t312: crate::Real = t309 + t311;
-        let t313: crate::Real = t17 * t231;
-        let t314: crate::Real = t233 * t313;
-        let t315: crate::Real = t312 - t314;
-        let t316: crate::Real = t24 * t236;
-        let t317: crate::Real = t238 * t316;
-        let t318: crate::Real = t315 - t317;
-        let t319: crate::Real = t17 * t241;
-        let t320: crate::Real = t243 * t319;
-        let t321: crate::Real = t318 + t320;
-        let t322: crate::Real = t24 * t246;
-        let t323: crate::Real = t248 * t322;
-        let t324: crate::Real = t321 + t323;
-        let t325: crate::Real = t324 - t301;
-        [t76, t116, t142, t164, t200, t252, t291, t325]
+        let t20: crate::Real = 0.16666666666666666;
+        let t21: crate::Real = 0.008333333333333333;
+        let t22: crate::Real = 0.0001984126984126984;
+        let t23: crate::Real = 0.0000027557319223985893;
+        let t24: crate::Real = t19 * t23;
+        let t25: crate::Real = t24 - t22;
+        let t26: crate::Real = t19 * t25;
+        let t27: crate::Real = t21 + t26;
+        let t28: crate::Real = t19 * t27;
+        let t29: crate::Real = t28 - t20;
+        let t30: crate::Real = t19 * t29;
+        let t31: crate::Real = t14 + t30;
+        let t36: crate::Real = 0.5;
+        let t37: crate::Real = 0.041666666666666664;
+        let t38: crate::Real = 0.001388888888888889;
+        let t39: crate::Real = 0.0000248015873015873;
+        let t40: crate::Real = t19 * t39;
+        let t41: crate::Real = t38 - t40;
+        let t42: crate::Real = t19 * t41;
+        let t43: crate::Real = t42 - t37;
+        let t44: crate::Real = t19 * t43;
+        let t45: crate::Real = t36 + t44;
+        let t46: crate::Real = t18 * t45;
+        let t73: crate::Real = 0.3333333333333333;
+        let t74: crate::Real = 0.03333333333333333;
+        let t75: crate::Real = 0.0011904761904761906;
+        let t76: crate::Real = 0.000022045855379188714;
+        let t77: crate::Real = t19 * t76;
+        let t78: crate::Real = t77 - t75;
+        let t79: crate::Real = t19 * t78;
+        let t80: crate::Real = t74 + t79;
+        let t81: crate::Real = t19 * t80;
+        let t82: crate::Real = t81 - t73;
+        let t83: crate::Real = t18 * t82;
+        let t90: crate::Real = 0.125;
+        let t91: crate::Real = 0.006944444444444444;
+        let t92: crate::Real = 0.00017361111111111112;
+        let t93: crate::Real = 0.00000248015873015873;
+        let t94: crate::Real = t19 * t93;
+        let t95: crate::Real = t94 - t92;
+        let t96: crate::Real = t19 * t95;
+        let t97: crate::Real = t91 + t96;
+        let t98: crate::Real = t19 * t97;
+        let t99: crate::Real = t98 - t90;
+        let t100: crate::Real = t19 * t99;
+        let t101: crate::Real = t36 + t100;
+        [t31, t46, t83, t101]
     } else {
-        let t77: crate::Real = crate::math::sin(t16);
-        let t78: crate::Real = t25 * t77;
-        let t79: crate::Real = t24 * t78;
-        let t81: crate::Real = t80 / t16;
-        let t82: crate::Real = t79 * t81;
-        let t83: crate::Real = t0 + t82;
-        let t84: crate::Real = crate::math::cos(t16);
-        let t85: crate::Real = t80 - t84;
-        let t86: crate::Real = t25 * t85;
-        let t87: crate::Real = t17 * t86;
-        let t88: crate::Real = t87 * t81;
-        let t89: crate::Real = t83 - t88;
-        let t117: crate::Real = t77 * t94;
-        let t118: crate::Real = t117 * t81;
-        let t119: crate::Real = t1 + t118;
-        let t120: crate::Real = t24 * t86;
-        let t121: crate::Real = t120 * t81;
-        let t122: crate::Real = t119 + t121;
-        let t143: crate::Real = t94 * t77;
-        let t144: crate::Real = t143 * t81;
-        let t145: crate::Real = -t144;
-        let t146: crate::Real = t145 - t121;
-        let t165: crate::Real = t82 - t88;
-        let t201: crate::Real = t9 * t77;
-        let t202: crate::Real = t24 * t201;
-        let t203: crate::Real = t202 * t81;
-        let t204: crate::Real = t9 * t85;
-        let t205: crate::Real = t17 * t204;
-        let t206: crate::Real = t205 * t81;
-        let t207: crate::Real = t203 - t206;
-        let t208: crate::Real = t80 * t207;
-        let t253: crate::Real = t84 * t26;
-        let t254: crate::Real = t253 * t81;
-        let t255: crate::Real = t77 * t25;
-        let t256: crate::Real = t24 * t255;
-        let t257: crate::Real = t80 / t28;
-        let t258: crate::Real = t256 * t257;
-        let t259: crate::Real = t254 - t258;
-        let t260: crate::Real = t85 * t25;
-        let t261: crate::Real = t17 * t260;
-        let t262: crate::Real = t261 * t257;
-        let t263: crate::Real = t259 + t262;
-        let t264: crate::Real = t263 - t118;
-        let t265: crate::Real = t167 * t264;
-        let t292: crate::Real = t9 * t17;
-        let t293: crate::Real = t77 * t292;
-        let t294: crate::Real = t293 * t81;
-        let t295: crate::Real = t24 * t204;
-        let t296: crate::Real = t295 * t81;
-        let t297: crate::Real = t294 + t296;
-        let t298: crate::Real = t80 * t297;
-        let t326: crate::Real = t84 * t94;
-        let t327: crate::Real = t326 * t81;
-        let t328: crate::Real = t256 * t81;
-        let t329: crate::Real = t327 + t328;
-        let t330: crate::Real = t117 * t257;
-        let t331: crate::Real = t329 - t330;
-        let t332: crate::Real = t24 * t260;
-        let t333: crate::Real = t332 * t257;
-        let t334: crate::Real = t331 - t333;
-        let t335: crate::Real = t167 * t334;
-        [t89, t122, t146, t165, t208, t265, t298, t335]
+        let sc32 = crate::math::sincos(t18);
+        let t32: crate::Real = sc32.0;
+        let t47: crate::Real = sc32.1;
+        let t33: crate::Real = t14 / t18;
+        let t34: crate::Real = t32 * t33;
+        let t48: crate::Real = t14 - t47;
+        let t49: crate::Real = t48 * t33;
+        let t84: crate::Real = t47 * t33;
+        let t85: crate::Real = t14 / t19;
+        let t86: crate::Real = t32 * t85;
+        let t87: crate::Real = t84 - t86;
+        let t102: crate::Real = t48 * t85;
+        let t103: crate::Real = t34 - t102;
+        [t34, t49, t87, t103]
     };
-    let t90: crate::Real = g0[0usize];
-    let t123: crate::Real = g0[1usize];
-    let t147: crate::Real = g0[2usize];
-    let t166: crate::Real = g0[3usize];
-    let t209: crate::Real = g0[4usize];
-    let t266: crate::Real = g0[5usize];
-    let t299: crate::Real = g0[6usize];
-    let t336: crate::Real = g0[7usize];
-    let t124: crate::Real = t2 + t16;
-    let t125: crate::Real = 0.0;
+    let t35: crate::Real = g0[0usize];
+    let t50: crate::Real = g0[1usize];
+    let t88: crate::Real = g0[2usize];
+    let t104: crate::Real = g0[3usize];
+    let sc51 = crate::math::sincos(t2);
+    let t56: crate::Real = sc51.0;
+    let t51: crate::Real = sc51.1;
+    let t52: crate::Real = t9 * t35;
+    let t53: crate::Real = t11 * t52;
+    let t54: crate::Real = t51 * t53;
+    let t55: crate::Real = t0 + t54;
+    let t57: crate::Real = t9 * t50;
+    let t58: crate::Real = t11 * t57;
+    let t59: crate::Real = t56 * t58;
+    let t60: crate::Real = t55 - t59;
+    let t61: crate::Real = t53 * t56;
+    let t62: crate::Real = t1 + t61;
+    let t63: crate::Real = t51 * t58;
+    let t64: crate::Real = t62 + t63;
+    let t65: crate::Real = t2 + t18;
+    let t66: crate::Real = 0.0;
+    let t67: crate::Real = t56 * t53;
+    let t68: crate::Real = -t67;
+    let t69: crate::Real = t68 - t63;
+    let t70: crate::Real = t53 * t51;
+    let t71: crate::Real = t70 - t59;
+    let t72: crate::Real = t9 * t14;
+    let t89: crate::Real = t72 * t88;
+    let t105: crate::Real = t72 * t104;
+    let t106: crate::Real = t51 * t52;
+    let t107: crate::Real = t56 * t57;
+    let t108: crate::Real = t106 - t107;
+    let t109: crate::Real = t14 * t108;
+    let t110: crate::Real = t9 * t11;
+    let t111: crate::Real = t89 * t110;
+    let t112: crate::Real = t51 * t111;
+    let t113: crate::Real = t105 * t110;
+    let t114: crate::Real = t56 * t113;
+    let t115: crate::Real = t112 - t114;
+    let t116: crate::Real = t52 * t56;
+    let t117: crate::Real = t51 * t57;
+    let t118: crate::Real = t116 + t117;
+    let t119: crate::Real = t14 * t118;
+    let t120: crate::Real = t56 * t111;
+    let t121: crate::Real = t51 * t113;
+    let t122: crate::Real = t120 + t121;
     [
-        t90,
-        t123,
-        t124,
-        t80,
-        t125,
-        t147,
-        t125,
-        t80,
-        t166,
-        t125,
-        t125,
-        t80,
-        t209,
-        t266,
-        t299,
-        t336,
-        t125,
-        t167,
+        t60,
+        t64,
+        t65,
+        t14,
+        t66,
+        t69,
+        t66,
+        t14,
+        t71,
+        t66,
+        t66,
+        t14,
+        t109,
+        t115,
+        t119,
+        t122,
+        t66,
+        t72,
     ]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3).
@@ -2118,7 +1388,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2], step_exact_jac_p[3], step_exact_jac_p[4], step_exact_jac_p[5]]
 
-389 arithmetic operations (3820 before common-subexpression elimination).*/
+114 arithmetic operations (2194 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -2141,442 +1411,162 @@ pub fn step_exact_with_jac_p_flat(
     let t11: crate::Real = t5 + t10;
     let t12: crate::Real = crate::math::tan(t4);
     let t13: crate::Real = t10 * t12;
-    let t14: crate::Real = t13 / t8;
-    let t15: crate::Real = t6 + t14;
-    let t16: crate::Real = t9 * t15;
-    let t17: crate::Real = crate::math::sin(t2);
-    let t21: crate::Real = 0.5;
-    let t24: crate::Real = crate::math::cos(t2);
-    let t25: crate::Real = t9 * t11;
-    let t32: crate::Real = 0.16666666666666666;
-    let t39: crate::Real = 0.041666666666666664;
-    let t46: crate::Real = 0.008333333333333333;
-    let t53: crate::Real = 0.001388888888888889;
-    let t60: crate::Real = 0.0001984126984126984;
-    let t67: crate::Real = 0.0000248015873015873;
-    let t74: crate::Real = 0.0000027557319223985893;
-    let t80: crate::Real = 1.0;
-    let t94: crate::Real = t17 * t25;
-    let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t8;
+    let t16: crate::Real = t13 * t15;
+    let t17: crate::Real = t6 + t16;
+    let t18: crate::Real = t9 * t17;
+    let t19: crate::Real = t18 * t18;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
-        let t18: crate::Real = t9 * t16;
-        let t19: crate::Real = t11 * t18;
-        let t20: crate::Real = t17 * t19;
-        let t22: crate::Real = t20 * t21;
-        let t23: crate::Real = t0 - t22;
-        let t26: crate::Real = t24 * t25;
-        let t27: crate::Real = t23 + t26;
-        let t28: crate::Real = t16 * t16;
-        let t29: crate::Real = t9 * t28;
-        let t30: crate::Real = t11 * t29;
-        let t31: crate::Real = t24 * t30;
-        let t33: crate::Real = t31 * t32;
-        let t34: crate::Real = t27 - t33;
-        let t35: crate::Real = t16 * t28;
-        let t36: crate::Real = t9 * t35;
-        let t37: crate::Real = t11 * t36;
-        let t38: crate::Real = t17 * t37;
-        let t40: crate::Real = t38 * t39;
-        let t41: crate::Real = t34 + t40;
-        let t42: crate::Real = t28 * t28;
-        let t43: crate::Real = t9 * t42;
-        let t44: crate::Real = t11 * t43;
-        let t45: crate::Real = t24 * t44;
-        let t47: crate::Real = t45 * t46;
-        let t48: crate::Real = t41 + t47;
-        let t49: crate::Real = t16 * t42;
-        let t50: crate::Real = t9 * t49;
-        let t51: crate::Real = t11 * t50;
-        let t52: crate::Real = t17 * t51;
-        let t54: crate::Real = t52 * t53;
-        let t55: crate::Real = t48 - t54;
-        let t56: crate::Real = t35 * t35;
-        let t57: crate::Real = t9 * t56;
-        let t58: crate::Real = t11 * t57;
-        let t59: crate::Real = t24 * t58;
-        let t61: crate::Real = t59 * t60;
-        let t62: crate::Real = t55 - t61;
-        let t63: crate::Real = t16 * t56;
-        let t64: crate::Real = t9 * t63;
-        let t65: crate::Real = t11 * t64;
-        let t66: crate::Real = t17 * t65;
-        let t68: crate::Real = t66 * t67;
-        let t69: crate::Real = t62 + t68;
-        let t70: crate::Real = t42 * t42;
-        let t71: crate::Real = t9 * t70;
-        let t72: crate::Real = t11 * t71;
-        let t73: crate::Real = t24 * t72;
-        let t75: crate::Real = t73 * t74;
-        let t76: crate::Real = t69 + t75;
-        let t91: crate::Real = t19 * t24;
-        let t92: crate::Real = t21 * t91;
-        let t93: crate::Real = t1 + t92;
-        let t95: crate::Real = t93 + t94;
-        let t96: crate::Real = t17 * t30;
-        let t97: crate::Real = t32 * t96;
-        let t98: crate::Real = t95 - t97;
-        let t99: crate::Real = t24 * t37;
-        let t100: crate::Real = t39 * t99;
-        let t101: crate::Real = t98 - t100;
-        let t102: crate::Real = t17 * t44;
-        let t103: crate::Real = t46 * t102;
-        let t104: crate::Real = t101 + t103;
-        let t105: crate::Real = t24 * t51;
-        let t106: crate::Real = t53 * t105;
-        let t107: crate::Real = t104 + t106;
-        let t108: crate::Real = t17 * t58;
-        let t109: crate::Real = t60 * t108;
-        let t110: crate::Real = t107 - t109;
-        let t111: crate::Real = t24 * t65;
-        let t112: crate::Real = t67 * t111;
-        let t113: crate::Real = t110 - t112;
-        let t114: crate::Real = t17 * t72;
-        let t115: crate::Real = t74 * t114;
-        let t116: crate::Real = t113 + t115;
-        let t126: crate::Real = t24 * t19;
-        let t127: crate::Real = t126 * t21;
-        let t128: crate::Real = t96 * t32;
-        let t129: crate::Real = t99 * t39;
-        let t130: crate::Real = t128 + t129;
-        let t131: crate::Real = t102 * t46;
-        let t132: crate::Real = t130 - t131;
-        let t133: crate::Real = t105 * t53;
-        let t134: crate::Real = t132 - t133;
-        let t135: crate::Real = t108 * t60;
-        let t136: crate::Real = t134 + t135;
-        let t137: crate::Real = t111 * t67;
-        let t138: crate::Real = t136 + t137;
-        let t139: crate::Real = t114 * t74;
-        let t140: crate::Real = t138 - t139;
-        let t141: crate::Real = t140 - t127;
-        let t142: crate::Real = t141 - t94;
-        let t148: crate::Real = t19 * t17;
-        let t149: crate::Real = t21 * t148;
-        let t150: crate::Real = t32 * t31;
-        let t151: crate::Real = t26 - t150;
-        let t152: crate::Real = t39 * t38;
-        let t153: crate::Real = t151 + t152;
-        let t154: crate::Real = t46 * t45;
-        let t155: crate::Real = t153 + t154;
-        let t156: crate::Real = t53 * t52;
-        let t157: crate::Real = t155 - t156;
-        let t158: crate::Real = t60 * t59;
-        let t159: crate::Real = t157 - t158;
-        let t160: crate::Real = t67 * t66;
-        let t161: crate::Real = t159 + t160;
-        let t162: crate::Real = t74 * t73;
-        let t163: crate::Real = t161 + t162;
-        let t164: crate::Real = t163 - t149;
-        [t76, t116, t142, t164]
+        let t20: crate::Real = 0.16666666666666666;
+        let t21: crate::Real = 0.008333333333333333;
+        let t22: crate::Real = 0.0001984126984126984;
+        let t23: crate::Real = 0.0000027557319223985893;
+        let t24: crate::Real = t19 * t23;
+        let t25: crate::Real = t24 - t22;
+        let t26: crate::Real = t19 * t25;
+        let t27: crate::Real = t21 + t26;
+        let t28: crate::Real = t19 * t27;
+        let t29: crate::Real = t28 - t20;
+        let t30: crate::Real = t19 * t29;
+        let t31: crate::Real = t14 + t30;
+        let t36: crate::Real = 0.5;
+        let t37: crate::Real = 0.041666666666666664;
+        let t38: crate::Real = 0.001388888888888889;
+        let t39: crate::Real = 0.0000248015873015873;
+        let t40: crate::Real = t19 * t39;
+        let t41: crate::Real = t38 - t40;
+        let t42: crate::Real = t19 * t41;
+        let t43: crate::Real = t42 - t37;
+        let t44: crate::Real = t19 * t43;
+        let t45: crate::Real = t36 + t44;
+        let t46: crate::Real = t18 * t45;
+        let t80: crate::Real = 0.3333333333333333;
+        let t81: crate::Real = 0.03333333333333333;
+        let t82: crate::Real = 0.0011904761904761906;
+        let t83: crate::Real = 0.000022045855379188714;
+        let t84: crate::Real = t19 * t83;
+        let t85: crate::Real = t84 - t82;
+        let t86: crate::Real = t19 * t85;
+        let t87: crate::Real = t81 + t86;
+        let t88: crate::Real = t19 * t87;
+        let t89: crate::Real = t88 - t80;
+        let t90: crate::Real = t18 * t89;
+        let t98: crate::Real = 0.125;
+        let t99: crate::Real = 0.006944444444444444;
+        let t100: crate::Real = 0.00017361111111111112;
+        let t101: crate::Real = 0.00000248015873015873;
+        let t102: crate::Real = t19 * t101;
+        let t103: crate::Real = t102 - t100;
+        let t104: crate::Real = t19 * t103;
+        let t105: crate::Real = t99 + t104;
+        let t106: crate::Real = t19 * t105;
+        let t107: crate::Real = t106 - t98;
+        let t108: crate::Real = t19 * t107;
+        let t109: crate::Real = t36 + t108;
+        [t31, t46, t90, t109]
     } else {
-        let t77: crate::Real = crate::math::sin(t16);
-        let t78: crate::Real = t25 * t77;
-        let t79: crate::Real = t24 * t78;
-        let t81: crate::Real = t80 / t16;
-        let t82: crate::Real = t79 * t81;
-        let t83: crate::Real = t0 + t82;
-        let t84: crate::Real = crate::math::cos(t16);
-        let t85: crate::Real = t80 - t84;
-        let t86: crate::Real = t25 * t85;
-        let t87: crate::Real = t17 * t86;
-        let t88: crate::Real = t87 * t81;
-        let t89: crate::Real = t83 - t88;
-        let t117: crate::Real = t77 * t94;
-        let t118: crate::Real = t117 * t81;
-        let t119: crate::Real = t1 + t118;
-        let t120: crate::Real = t24 * t86;
-        let t121: crate::Real = t120 * t81;
-        let t122: crate::Real = t119 + t121;
-        let t143: crate::Real = t94 * t77;
-        let t144: crate::Real = t143 * t81;
-        let t145: crate::Real = -t144;
-        let t146: crate::Real = t145 - t121;
-        let t165: crate::Real = t82 - t88;
-        [t89, t122, t146, t165]
+        let sc32 = crate::math::sincos(t18);
+        let t32: crate::Real = sc32.0;
+        let t47: crate::Real = sc32.1;
+        let t33: crate::Real = t14 / t18;
+        let t34: crate::Real = t32 * t33;
+        let t48: crate::Real = t14 - t47;
+        let t49: crate::Real = t48 * t33;
+        let t91: crate::Real = t47 * t33;
+        let t92: crate::Real = t14 / t19;
+        let t93: crate::Real = t32 * t92;
+        let t94: crate::Real = t91 - t93;
+        let t110: crate::Real = t48 * t92;
+        let t111: crate::Real = t34 - t110;
+        [t34, t49, t94, t111]
     };
-    let t90: crate::Real = g0[0usize];
-    let t123: crate::Real = g0[1usize];
-    let t147: crate::Real = g0[2usize];
-    let t166: crate::Real = g0[3usize];
-    let t124: crate::Real = t2 + t16;
-    let t125: crate::Real = 0.0;
-    let t167: crate::Real = t80 / t8;
-    let t168: crate::Real = t13 * t167;
-    let t169: crate::Real = t6 + t168;
-    let t170: crate::Real = t9 * t169;
-    let t171: crate::Real = t3 * t12;
-    let t172: crate::Real = t171 * t167;
-    let t173: crate::Real = t8 * t8;
-    let t174: crate::Real = t13 / t173;
-    let t175: crate::Real = -t174;
-    let t176: crate::Real = t9 * t172;
-    let t177: crate::Real = t9 * t175;
-    let t192: crate::Real = t170 * t170;
-    let g1: [crate::Real; 4usize] = if crate::math::fabs(t170)
-        < crate::math::series_switch(0.05)
-    {
-        let t178: crate::Real = t176 * t25;
-        let t179: crate::Real = t17 * t178;
-        let t180: crate::Real = t179 * t21;
-        let t181: crate::Real = t3 * t9;
-        let t182: crate::Real = t24 * t181;
-        let t183: crate::Real = t178 * t24;
-        let t184: crate::Real = 0.3333333333333333;
-        let t185: crate::Real = t183 * t184;
-        let t186: crate::Real = -t185;
-        let t187: crate::Real = t17 * t181;
-        let t188: crate::Real = t21 * t187;
-        let t189: crate::Real = t186 - t188;
-        let t190: crate::Real = t170 * t189;
-        let t191: crate::Real = t182 + t190;
-        let t193: crate::Real = 0.125;
-        let t194: crate::Real = t179 * t193;
-        let t195: crate::Real = t182 * t32;
-        let t196: crate::Real = t194 - t195;
-        let t197: crate::Real = t192 * t196;
-        let t198: crate::Real = t191 + t197;
-        let t199: crate::Real = t170 * t192;
-        let t200: crate::Real = 0.03333333333333333;
-        let t201: crate::Real = t183 * t200;
-        let t202: crate::Real = t187 * t39;
-        let t203: crate::Real = t201 + t202;
-        let t204: crate::Real = t199 * t203;
-        let t205: crate::Real = t198 + t204;
-        let t206: crate::Real = t192 * t192;
-        let t207: crate::Real = 0.006944444444444444;
-        let t208: crate::Real = t179 * t207;
-        let t209: crate::Real = t182 * t46;
-        let t210: crate::Real = t209 - t208;
-        let t211: crate::Real = t206 * t210;
-        let t212: crate::Real = t205 + t211;
-        let t213: crate::Real = t170 * t206;
-        let t214: crate::Real = 0.0011904761904761906;
-        let t215: crate::Real = t183 * t214;
-        let t216: crate::Real = -t215;
-        let t217: crate::Real = t187 * t53;
-        let t218: crate::Real = t216 - t217;
-        let t219: crate::Real = t213 * t218;
-        let t220: crate::Real = t212 + t219;
-        let t221: crate::Real = t199 * t199;
-        let t222: crate::Real = 0.00017361111111111112;
-        let t223: crate::Real = t179 * t222;
-        let t224: crate::Real = t182 * t60;
-        let t225: crate::Real = t223 - t224;
-        let t226: crate::Real = t221 * t225;
-        let t227: crate::Real = t220 + t226;
-        let t228: crate::Real = t170 * t221;
-        let t229: crate::Real = 0.000022045855379188714;
-        let t230: crate::Real = t183 * t229;
-        let t231: crate::Real = t187 * t67;
-        let t232: crate::Real = t230 + t231;
-        let t233: crate::Real = t228 * t232;
-        let t234: crate::Real = t227 + t233;
-        let t235: crate::Real = t206 * t206;
-        let t236: crate::Real = 0.00000248015873015873;
-        let t237: crate::Real = t179 * t236;
-        let t238: crate::Real = t182 * t74;
-        let t239: crate::Real = t238 - t237;
-        let t240: crate::Real = t235 * t239;
-        let t241: crate::Real = t234 + t240;
-        let t242: crate::Real = t241 - t180;
-        let t273: crate::Real = t9 * t170;
-        let t274: crate::Real = t11 * t273;
-        let t275: crate::Real = t177 * t274;
-        let t276: crate::Real = t24 * t275;
-        let t277: crate::Real = t184 * t276;
-        let t278: crate::Real = t177 * t25;
-        let t279: crate::Real = t17 * t278;
-        let t280: crate::Real = t21 * t279;
-        let t281: crate::Real = t9 * t192;
-        let t282: crate::Real = t11 * t281;
-        let t283: crate::Real = t177 * t282;
-        let t284: crate::Real = t17 * t283;
-        let t285: crate::Real = t193 * t284;
-        let t286: crate::Real = t9 * t199;
-        let t287: crate::Real = t11 * t286;
-        let t288: crate::Real = t177 * t287;
-        let t289: crate::Real = t24 * t288;
-        let t290: crate::Real = t200 * t289;
-        let t291: crate::Real = t285 + t290;
-        let t292: crate::Real = t9 * t206;
-        let t293: crate::Real = t11 * t292;
-        let t294: crate::Real = t177 * t293;
-        let t295: crate::Real = t17 * t294;
-        let t296: crate::Real = t207 * t295;
-        let t297: crate::Real = t291 - t296;
-        let t298: crate::Real = t9 * t213;
-        let t299: crate::Real = t11 * t298;
-        let t300: crate::Real = t177 * t299;
-        let t301: crate::Real = t24 * t300;
-        let t302: crate::Real = t214 * t301;
-        let t303: crate::Real = t297 - t302;
-        let t304: crate::Real = t9 * t221;
-        let t305: crate::Real = t11 * t304;
-        let t306: crate::Real = t177 * t305;
-        let t307: crate::Real = t17 * t306;
-        let t308: crate::Real = t222 * t307;
-        let t309: crate::Real = t303 + t308;
-        let t310: crate::Real = t9 * t228;
-        let t311: crate::Real = t11 * t310;
-        let t312: crate::Real = t177 * t311;
-        let t313: crate::Real = t24 * t312;
-        let t314: crate::Real = t229 * t313;
-        let t315: crate::Real = t309 + t314;
-        let t316: crate::Real = t9 * t235;
-        let t317: crate::Real = t11 * t316;
-        let t318: crate::Real = t177 * t317;
-        let t319: crate::Real = t17 * t318;
-        let t320: crate::Real = t236 * t319;
-        let t321: crate::Real = t315 - t320;
-        let t322: crate::Real = t321 - t277;
-        let t323: crate::Real = t322 - t280;
-        let t326: crate::Real = t21 * t183;
-        let t327: crate::Real = t187 + t326;
-        let t328: crate::Real = t179 * t184;
-        let t329: crate::Real = t21 * t182;
-        let t330: crate::Real = t329 - t328;
-        let t331: crate::Real = t170 * t330;
-        let t332: crate::Real = t327 + t331;
-        let t333: crate::Real = t183 * t193;
-        let t334: crate::Real = -t333;
-        let t335: crate::Real = t187 * t32;
-        let t336: crate::Real = t334 - t335;
-        let t337: crate::Real = t192 * t336;
-        let t338: crate::Real = t332 + t337;
-        let t339: crate::Real = t179 * t200;
-        let t340: crate::Real = t182 * t39;
-        let t341: crate::Real = t339 - t340;
-        let t342: crate::Real = t199 * t341;
-        let t343: crate::Real = t338 + t342;
-        let t344: crate::Real = t183 * t207;
-        let t345: crate::Real = t187 * t46;
-        let t346: crate::Real = t344 + t345;
-        let t347: crate::Real = t206 * t346;
-        let t348: crate::Real = t343 + t347;
-        let t349: crate::Real = t179 * t214;
-        let t350: crate::Real = t182 * t53;
-        let t351: crate::Real = t350 - t349;
-        let t352: crate::Real = t213 * t351;
-        let t353: crate::Real = t348 + t352;
-        let t354: crate::Real = t183 * t222;
-        let t355: crate::Real = -t354;
-        let t356: crate::Real = t187 * t60;
-        let t357: crate::Real = t355 - t356;
-        let t358: crate::Real = t221 * t357;
-        let t359: crate::Real = t353 + t358;
-        let t360: crate::Real = t179 * t229;
-        let t361: crate::Real = t182 * t67;
-        let t362: crate::Real = t360 - t361;
-        let t363: crate::Real = t228 * t362;
-        let t364: crate::Real = t359 + t363;
-        let t365: crate::Real = t183 * t236;
-        let t366: crate::Real = t187 * t74;
-        let t367: crate::Real = t365 + t366;
-        let t368: crate::Real = t235 * t367;
-        let t369: crate::Real = t364 + t368;
-        let t389: crate::Real = t17 * t275;
-        let t390: crate::Real = t184 * t389;
-        let t391: crate::Real = t24 * t278;
-        let t392: crate::Real = t21 * t391;
-        let t393: crate::Real = t24 * t283;
-        let t394: crate::Real = t193 * t393;
-        let t395: crate::Real = t392 - t394;
-        let t396: crate::Real = t17 * t288;
-        let t397: crate::Real = t200 * t396;
-        let t398: crate::Real = t395 + t397;
-        let t399: crate::Real = t24 * t294;
-        let t400: crate::Real = t207 * t399;
-        let t401: crate::Real = t398 + t400;
-        let t402: crate::Real = t17 * t300;
-        let t403: crate::Real = t214 * t402;
-        let t404: crate::Real = t401 - t403;
-        let t405: crate::Real = t24 * t306;
-        let t406: crate::Real = t222 * t405;
-        let t407: crate::Real = t404 - t406;
-        let t408: crate::Real = t17 * t312;
-        let t409: crate::Real = t229 * t408;
-        let t410: crate::Real = t407 + t409;
-        let t411: crate::Real = t24 * t318;
-        let t412: crate::Real = t236 * t411;
-        let t413: crate::Real = t410 + t412;
-        let t414: crate::Real = t413 - t390;
-        [t242, t323, t369, t414]
-    } else {
-        let t243: crate::Real = crate::math::sin(t170);
-        let t244: crate::Real = t9 * t243;
-        let t245: crate::Real = t24 * t244;
-        let t246: crate::Real = t80 / t170;
-        let t247: crate::Real = t245 * t246;
-        let t248: crate::Real = crate::math::cos(t170);
-        let t249: crate::Real = t80 - t248;
-        let t250: crate::Real = t9 * t249;
-        let t251: crate::Real = t17 * t250;
-        let t252: crate::Real = t251 * t246;
-        let t253: crate::Real = t247 - t252;
-        let t254: crate::Real = t3 * t253;
-        let t255: crate::Real = t243 * t94;
-        let t256: crate::Real = t255 * t246;
-        let t257: crate::Real = t25 * t24;
-        let t258: crate::Real = t248 * t257;
-        let t259: crate::Real = t258 * t246;
-        let t260: crate::Real = t25 * t243;
-        let t261: crate::Real = t24 * t260;
-        let t262: crate::Real = t80 / t192;
-        let t263: crate::Real = t261 * t262;
-        let t264: crate::Real = t259 - t263;
-        let t265: crate::Real = t25 * t249;
-        let t266: crate::Real = t17 * t265;
-        let t267: crate::Real = t266 * t262;
-        let t268: crate::Real = t264 + t267;
-        let t269: crate::Real = t268 - t256;
-        let t270: crate::Real = t176 * t269;
-        let t271: crate::Real = t254 + t270;
-        let t324: crate::Real = t177 * t269;
-        let t370: crate::Real = t9 * t17;
-        let t371: crate::Real = t243 * t370;
-        let t372: crate::Real = t371 * t246;
-        let t373: crate::Real = t24 * t250;
-        let t374: crate::Real = t373 * t246;
-        let t375: crate::Real = t372 + t374;
-        let t376: crate::Real = t3 * t375;
-        let t377: crate::Real = t248 * t94;
-        let t378: crate::Real = t377 * t246;
-        let t379: crate::Real = t261 * t246;
-        let t380: crate::Real = t378 + t379;
-        let t381: crate::Real = t255 * t262;
-        let t382: crate::Real = t380 - t381;
-        let t383: crate::Real = t24 * t265;
-        let t384: crate::Real = t383 * t262;
-        let t385: crate::Real = t382 - t384;
-        let t386: crate::Real = t176 * t385;
-        let t387: crate::Real = t376 + t386;
-        let t415: crate::Real = t177 * t385;
-        [t271, t324, t387, t415]
-    };
-    let t272: crate::Real = g1[0usize];
-    let t325: crate::Real = g1[1usize];
-    let t388: crate::Real = g1[2usize];
-    let t416: crate::Real = g1[3usize];
+    let t35: crate::Real = g0[0usize];
+    let t50: crate::Real = g0[1usize];
+    let t95: crate::Real = g0[2usize];
+    let t112: crate::Real = g0[3usize];
+    let sc51 = crate::math::sincos(t2);
+    let t56: crate::Real = sc51.0;
+    let t51: crate::Real = sc51.1;
+    let t52: crate::Real = t9 * t35;
+    let t53: crate::Real = t11 * t52;
+    let t54: crate::Real = t51 * t53;
+    let t55: crate::Real = t0 + t54;
+    let t57: crate::Real = t9 * t50;
+    let t58: crate::Real = t11 * t57;
+    let t59: crate::Real = t56 * t58;
+    let t60: crate::Real = t55 - t59;
+    let t61: crate::Real = t53 * t56;
+    let t62: crate::Real = t1 + t61;
+    let t63: crate::Real = t51 * t58;
+    let t64: crate::Real = t62 + t63;
+    let t65: crate::Real = t2 + t18;
+    let t66: crate::Real = 0.0;
+    let t67: crate::Real = t56 * t53;
+    let t68: crate::Real = -t67;
+    let t69: crate::Real = t68 - t63;
+    let t70: crate::Real = t53 * t51;
+    let t71: crate::Real = t70 - t59;
+    let t72: crate::Real = t3 * t12;
+    let t73: crate::Real = t72 * t15;
+    let t74: crate::Real = t8 * t8;
+    let t75: crate::Real = t14 / t74;
+    let t76: crate::Real = t13 * t75;
+    let t77: crate::Real = -t76;
+    let t78: crate::Real = t9 * t73;
+    let t79: crate::Real = t9 * t77;
+    let t96: crate::Real = t78 * t95;
+    let t97: crate::Real = t79 * t95;
+    let t113: crate::Real = t78 * t112;
+    let t114: crate::Real = t79 * t112;
+    let t115: crate::Real = t9 * t11;
+    let t116: crate::Real = t96 * t115;
+    let t117: crate::Real = t51 * t116;
+    let t118: crate::Real = t113 * t115;
+    let t119: crate::Real = t56 * t118;
+    let t120: crate::Real = t117 - t119;
+    let t121: crate::Real = t51 * t52;
+    let t122: crate::Real = t56 * t57;
+    let t123: crate::Real = t121 - t122;
+    let t124: crate::Real = t3 * t123;
+    let t125: crate::Real = t120 + t124;
+    let t126: crate::Real = t97 * t115;
+    let t127: crate::Real = t51 * t126;
+    let t128: crate::Real = t114 * t115;
+    let t129: crate::Real = t56 * t128;
+    let t130: crate::Real = t127 - t129;
+    let t131: crate::Real = t116 * t56;
+    let t132: crate::Real = t51 * t118;
+    let t133: crate::Real = t131 + t132;
+    let t134: crate::Real = t56 * t52;
+    let t135: crate::Real = t51 * t57;
+    let t136: crate::Real = t134 + t135;
+    let t137: crate::Real = t3 * t136;
+    let t138: crate::Real = t133 + t137;
+    let t139: crate::Real = t56 * t126;
+    let t140: crate::Real = t51 * t128;
+    let t141: crate::Real = t139 + t140;
     [
-        t90,
-        t123,
-        t124,
-        t80,
+        t60,
+        t64,
+        t65,
+        t14,
+        t66,
+        t69,
+        t66,
+        t14,
+        t71,
+        t66,
+        t66,
+        t14,
         t125,
-        t147,
-        t125,
-        t80,
-        t166,
-        t125,
-        t125,
-        t80,
-        t272,
-        t325,
-        t388,
-        t416,
-        t176,
-        t177,
+        t130,
+        t138,
+        t141,
+        t78,
+        t79,
     ]
 }
 /**The exact step with its Jacobians wrt the state and the parameters, from one shared computation: one step of calibration's forward sensitivities.
@@ -2612,7 +1602,7 @@ pub fn step_exact_with_jac_p(
 * `p`: [r, L]
 * returns [obs_gyro[0], obs_gyro_jac_x[0], obs_gyro_jac_x[1], obs_gyro_jac_x[2], obs_gyro_jac_p[0], obs_gyro_jac_p[1]]
 
-9 arithmetic operations (13 before common-subexpression elimination).*/
+11 arithmetic operations (16 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -2626,14 +1616,17 @@ pub fn obs_gyro_linearized_flat(
     let t4: crate::Real = crate::math::tan(t1);
     let t5: crate::Real = t0 * t2;
     let t6: crate::Real = t4 * t5;
-    let t7: crate::Real = t6 / t3;
-    let t8: crate::Real = 0.0;
-    let t9: crate::Real = t0 * t4;
-    let t10: crate::Real = t9 / t3;
-    let t11: crate::Real = t3 * t3;
-    let t12: crate::Real = t6 / t11;
-    let t13: crate::Real = -t12;
-    [t7, t8, t8, t8, t10, t13]
+    let t7: crate::Real = 1.0;
+    let t8: crate::Real = t7 / t3;
+    let t9: crate::Real = t6 * t8;
+    let t10: crate::Real = 0.0;
+    let t11: crate::Real = t0 * t4;
+    let t12: crate::Real = t11 * t8;
+    let t13: crate::Real = t3 * t3;
+    let t14: crate::Real = t7 / t13;
+    let t15: crate::Real = t6 * t14;
+    let t16: crate::Real = -t15;
+    [t9, t10, t10, t10, t12, t16]
 }
 /**Observation `gyro` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
 

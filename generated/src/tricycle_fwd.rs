@@ -53,7 +53,7 @@ pub const INPUT_COLUMNS: [&str; 2usize] = ["phi", "alpha"];
 * `p`: [r, L]
 * returns [vx, vy, omega]
 
-6 arithmetic operations (7 before common-subexpression elimination).*/
+7 arithmetic operations (8 before common-subexpression elimination).*/
 #[inline]
 pub fn twist(
     u: &[crate::Real; 2usize],
@@ -63,14 +63,17 @@ pub fn twist(
     let t1: crate::Real = u[1usize];
     let t2: crate::Real = p[0usize];
     let t3: crate::Real = p[1usize];
-    let t4: crate::Real = crate::math::cos(t1);
+    let sc4 = crate::math::sincos(t1);
+    let t8: crate::Real = sc4.0;
+    let t4: crate::Real = sc4.1;
     let t5: crate::Real = t0 * t2;
     let t6: crate::Real = t4 * t5;
     let t7: crate::Real = 0.0;
-    let t8: crate::Real = crate::math::sin(t1);
     let t9: crate::Real = t5 * t8;
-    let t10: crate::Real = t9 / t3;
-    [t6, t7, t10]
+    let t10: crate::Real = 1.0;
+    let t11: crate::Real = t10 / t3;
+    let t12: crate::Real = t9 * t11;
+    [t6, t7, t12]
 }
 /**Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.
 
@@ -104,7 +107,7 @@ pub fn twist_gyro(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-17 arithmetic operations (23 before common-subexpression elimination).*/
+18 arithmetic operations (24 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
     x: &[crate::Real; 3usize],
@@ -123,24 +126,28 @@ pub fn step_euler(
     let t7: crate::Real = p[0usize];
     let t8: crate::Real = p[1usize];
     let t9: crate::Real = dt;
-    let t10: crate::Real = crate::math::cos(t4);
+    let sc10 = crate::math::sincos(t4);
+    let t14: crate::Real = sc10.0;
+    let t10: crate::Real = sc10.1;
     let t11: crate::Real = t3 * t7;
     let t12: crate::Real = t10 * t11;
     let t13: crate::Real = t5 + t12;
-    let t14: crate::Real = crate::math::sin(t4);
     let t15: crate::Real = t11 * t14;
-    let t16: crate::Real = t15 / t8;
-    let t17: crate::Real = t6 + t16;
-    let t18: crate::Real = crate::math::cos(t2);
-    let t19: crate::Real = t9 * t13;
-    let t20: crate::Real = t18 * t19;
-    let t21: crate::Real = t0 + t20;
-    let t22: crate::Real = crate::math::sin(t2);
-    let t23: crate::Real = t19 * t22;
-    let t24: crate::Real = t1 + t23;
-    let t25: crate::Real = t9 * t17;
-    let t26: crate::Real = t2 + t25;
-    [t21, t24, t26]
+    let t16: crate::Real = 1.0;
+    let t17: crate::Real = t16 / t8;
+    let t18: crate::Real = t15 * t17;
+    let t19: crate::Real = t6 + t18;
+    let sc20 = crate::math::sincos(t2);
+    let t24: crate::Real = sc20.0;
+    let t20: crate::Real = sc20.1;
+    let t21: crate::Real = t9 * t13;
+    let t22: crate::Real = t20 * t21;
+    let t23: crate::Real = t0 + t22;
+    let t25: crate::Real = t21 * t24;
+    let t26: crate::Real = t1 + t25;
+    let t27: crate::Real = t9 * t19;
+    let t28: crate::Real = t2 + t27;
+    [t23, t26, t28]
 }
 /**Jacobian of `step_euler` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
 
@@ -172,11 +179,12 @@ pub fn step_euler_jac_x(
     let t9: crate::Real = t3 + t8;
     let t10: crate::Real = 1.0;
     let t11: crate::Real = 0.0;
-    let t12: crate::Real = crate::math::sin(t0);
+    let sc12 = crate::math::sincos(t0);
+    let t12: crate::Real = sc12.0;
+    let t16: crate::Real = sc12.1;
     let t13: crate::Real = t5 * t9;
     let t14: crate::Real = t12 * t13;
     let t15: crate::Real = -t14;
-    let t16: crate::Real = crate::math::cos(t0);
     let t17: crate::Real = t13 * t16;
     [[t10, t11, t15], [t11, t10, t17], [t11, t11, t10]]
 }
@@ -204,10 +212,11 @@ pub fn step_euler_jac_u(
     let t3: crate::Real = p[0usize];
     let t4: crate::Real = p[1usize];
     let t5: crate::Real = dt;
-    let t6: crate::Real = crate::math::cos(t2);
+    let sc6 = crate::math::sincos(t2);
+    let t9: crate::Real = sc6.0;
+    let t6: crate::Real = sc6.1;
     let t7: crate::Real = t1 * t3;
     let t8: crate::Real = t6 * t7;
-    let t9: crate::Real = crate::math::sin(t2);
     let t10: crate::Real = t7 * t9;
     let t11: crate::Real = t3 * t6;
     let t12: crate::Real = -t10;
@@ -216,12 +225,13 @@ pub fn step_euler_jac_u(
     let t15: crate::Real = t14 / t4;
     let t16: crate::Real = t13 * t15;
     let t17: crate::Real = t8 * t15;
-    let t18: crate::Real = crate::math::cos(t0);
+    let sc18 = crate::math::sincos(t0);
+    let t23: crate::Real = sc18.0;
+    let t18: crate::Real = sc18.1;
     let t19: crate::Real = t5 * t11;
     let t20: crate::Real = t18 * t19;
     let t21: crate::Real = t5 * t12;
     let t22: crate::Real = t18 * t21;
-    let t23: crate::Real = crate::math::sin(t0);
     let t24: crate::Real = t19 * t23;
     let t25: crate::Real = t21 * t23;
     let t26: crate::Real = t5 * t16;
@@ -249,11 +259,12 @@ pub fn step_euler_jac_w(
     let t0: crate::Real = x[2usize];
     let t1: crate::Real = dt;
     let t2: crate::Real = 1.0;
-    let t3: crate::Real = crate::math::cos(t0);
+    let sc3 = crate::math::sincos(t0);
+    let t7: crate::Real = sc3.0;
+    let t3: crate::Real = sc3.1;
     let t4: crate::Real = t1 * t2;
     let t5: crate::Real = t3 * t4;
     let t6: crate::Real = 0.0;
-    let t7: crate::Real = crate::math::sin(t0);
     let t8: crate::Real = t4 * t7;
     [[t5, t6], [t8, t6], [t6, t4]]
 }
@@ -266,7 +277,7 @@ pub fn step_euler_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-17 arithmetic operations (21 before common-subexpression elimination).*/
+19 arithmetic operations (23 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
     x: &[crate::Real; 3usize],
@@ -281,25 +292,30 @@ pub fn step_euler_jac_p(
     let t3: crate::Real = p[0usize];
     let t4: crate::Real = p[1usize];
     let t5: crate::Real = dt;
-    let t6: crate::Real = crate::math::cos(t2);
+    let sc6 = crate::math::sincos(t2);
+    let t8: crate::Real = sc6.0;
+    let t6: crate::Real = sc6.1;
     let t7: crate::Real = t1 * t3;
-    let t8: crate::Real = crate::math::sin(t2);
     let t9: crate::Real = t7 * t8;
     let t10: crate::Real = t1 * t6;
     let t11: crate::Real = t1 * t8;
-    let t12: crate::Real = t11 / t4;
-    let t13: crate::Real = t4 * t4;
-    let t14: crate::Real = t9 / t13;
-    let t15: crate::Real = -t14;
-    let t16: crate::Real = crate::math::cos(t0);
-    let t17: crate::Real = t5 * t10;
-    let t18: crate::Real = t16 * t17;
-    let t19: crate::Real = 0.0;
-    let t20: crate::Real = crate::math::sin(t0);
-    let t21: crate::Real = t17 * t20;
-    let t22: crate::Real = t5 * t12;
-    let t23: crate::Real = t5 * t15;
-    [[t18, t19], [t21, t19], [t22, t23]]
+    let t12: crate::Real = 1.0;
+    let t13: crate::Real = t12 / t4;
+    let t14: crate::Real = t11 * t13;
+    let t15: crate::Real = t4 * t4;
+    let t16: crate::Real = t12 / t15;
+    let t17: crate::Real = t9 * t16;
+    let t18: crate::Real = -t17;
+    let sc19 = crate::math::sincos(t0);
+    let t23: crate::Real = sc19.0;
+    let t19: crate::Real = sc19.1;
+    let t20: crate::Real = t5 * t10;
+    let t21: crate::Real = t19 * t20;
+    let t22: crate::Real = 0.0;
+    let t24: crate::Real = t20 * t23;
+    let t25: crate::Real = t5 * t14;
+    let t26: crate::Real = t5 * t18;
+    [[t21, t22], [t24, t22], [t25, t26]]
 }
 /**Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).
 
@@ -310,7 +326,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-108 arithmetic operations (783 before common-subexpression elimination).*/
+49 arithmetic operations (400 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[crate::Real; 3usize],
@@ -329,132 +345,76 @@ pub fn step_exact(
     let t7: crate::Real = p[0usize];
     let t8: crate::Real = p[1usize];
     let t9: crate::Real = dt;
-    let t10: crate::Real = crate::math::cos(t4);
+    let sc10 = crate::math::sincos(t4);
+    let t14: crate::Real = sc10.0;
+    let t10: crate::Real = sc10.1;
     let t11: crate::Real = t3 * t7;
     let t12: crate::Real = t10 * t11;
     let t13: crate::Real = t5 + t12;
-    let t14: crate::Real = crate::math::sin(t4);
     let t15: crate::Real = t11 * t14;
-    let t16: crate::Real = t15 / t8;
-    let t17: crate::Real = t6 + t16;
-    let t18: crate::Real = t9 * t17;
-    let t19: crate::Real = crate::math::sin(t2);
-    let t26: crate::Real = crate::math::cos(t2);
-    let t27: crate::Real = t9 * t13;
-    let t97: crate::Real = t19 * t27;
-    let g0: [crate::Real; 2usize] = if crate::math::fabs(t18)
+    let t16: crate::Real = 1.0;
+    let t17: crate::Real = t16 / t8;
+    let t18: crate::Real = t15 * t17;
+    let t19: crate::Real = t6 + t18;
+    let t20: crate::Real = t9 * t19;
+    let t21: crate::Real = 1.0;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t20)
         < crate::math::series_switch(0.05)
     {
-        let t20: crate::Real = t9 * t18;
-        let t21: crate::Real = t13 * t20;
-        let t22: crate::Real = t19 * t21;
-        let t23: crate::Real = 0.5;
-        let t24: crate::Real = t22 * t23;
-        let t25: crate::Real = t0 - t24;
-        let t28: crate::Real = t26 * t27;
-        let t29: crate::Real = t25 + t28;
-        let t30: crate::Real = t18 * t18;
-        let t31: crate::Real = t9 * t30;
-        let t32: crate::Real = t13 * t31;
-        let t33: crate::Real = t26 * t32;
-        let t34: crate::Real = 0.16666666666666666;
-        let t35: crate::Real = t33 * t34;
-        let t36: crate::Real = t29 - t35;
-        let t37: crate::Real = t18 * t30;
-        let t38: crate::Real = t9 * t37;
-        let t39: crate::Real = t13 * t38;
-        let t40: crate::Real = t19 * t39;
-        let t41: crate::Real = 0.041666666666666664;
-        let t42: crate::Real = t40 * t41;
-        let t43: crate::Real = t36 + t42;
-        let t44: crate::Real = t30 * t30;
-        let t45: crate::Real = t9 * t44;
-        let t46: crate::Real = t13 * t45;
-        let t47: crate::Real = t26 * t46;
-        let t48: crate::Real = 0.008333333333333333;
-        let t49: crate::Real = t47 * t48;
-        let t50: crate::Real = t43 + t49;
-        let t51: crate::Real = t18 * t44;
-        let t52: crate::Real = t9 * t51;
-        let t53: crate::Real = t13 * t52;
-        let t54: crate::Real = t19 * t53;
-        let t55: crate::Real = 0.001388888888888889;
-        let t56: crate::Real = t54 * t55;
-        let t57: crate::Real = t50 - t56;
-        let t58: crate::Real = t37 * t37;
-        let t59: crate::Real = t9 * t58;
-        let t60: crate::Real = t13 * t59;
-        let t61: crate::Real = t26 * t60;
-        let t62: crate::Real = 0.0001984126984126984;
-        let t63: crate::Real = t61 * t62;
-        let t64: crate::Real = t57 - t63;
-        let t65: crate::Real = t18 * t58;
-        let t66: crate::Real = t9 * t65;
-        let t67: crate::Real = t13 * t66;
-        let t68: crate::Real = t19 * t67;
-        let t69: crate::Real = 0.0000248015873015873;
-        let t70: crate::Real = t68 * t69;
-        let t71: crate::Real = t64 + t70;
-        let t72: crate::Real = t44 * t44;
-        let t73: crate::Real = t9 * t72;
-        let t74: crate::Real = t13 * t73;
-        let t75: crate::Real = t26 * t74;
-        let t76: crate::Real = 0.0000027557319223985893;
-        let t77: crate::Real = t75 * t76;
-        let t78: crate::Real = t71 + t77;
-        let t94: crate::Real = t21 * t26;
-        let t95: crate::Real = t23 * t94;
-        let t96: crate::Real = t1 + t95;
-        let t98: crate::Real = t96 + t97;
-        let t99: crate::Real = t19 * t32;
-        let t100: crate::Real = t34 * t99;
-        let t101: crate::Real = t98 - t100;
-        let t102: crate::Real = t26 * t39;
-        let t103: crate::Real = t41 * t102;
-        let t104: crate::Real = t101 - t103;
-        let t105: crate::Real = t19 * t46;
-        let t106: crate::Real = t48 * t105;
-        let t107: crate::Real = t104 + t106;
-        let t108: crate::Real = t26 * t53;
-        let t109: crate::Real = t55 * t108;
-        let t110: crate::Real = t107 + t109;
-        let t111: crate::Real = t19 * t60;
-        let t112: crate::Real = t62 * t111;
-        let t113: crate::Real = t110 - t112;
-        let t114: crate::Real = t26 * t67;
-        let t115: crate::Real = t69 * t114;
-        let t116: crate::Real = t113 - t115;
-        let t117: crate::Real = t19 * t74;
-        let t118: crate::Real = t76 * t117;
-        let t119: crate::Real = t116 + t118;
-        [t78, t119]
+        let t22: crate::Real = t20 * t20;
+        let t23: crate::Real = 0.16666666666666666;
+        let t24: crate::Real = 0.008333333333333333;
+        let t25: crate::Real = 0.0001984126984126984;
+        let t26: crate::Real = 0.0000027557319223985893;
+        let t27: crate::Real = t22 * t26;
+        let t28: crate::Real = t27 - t25;
+        let t29: crate::Real = t22 * t28;
+        let t30: crate::Real = t24 + t29;
+        let t31: crate::Real = t22 * t30;
+        let t32: crate::Real = t31 - t23;
+        let t33: crate::Real = t22 * t32;
+        let t34: crate::Real = t21 + t33;
+        let t39: crate::Real = 0.5;
+        let t40: crate::Real = 0.041666666666666664;
+        let t41: crate::Real = 0.001388888888888889;
+        let t42: crate::Real = 0.0000248015873015873;
+        let t43: crate::Real = t22 * t42;
+        let t44: crate::Real = t41 - t43;
+        let t45: crate::Real = t22 * t44;
+        let t46: crate::Real = t45 - t40;
+        let t47: crate::Real = t22 * t46;
+        let t48: crate::Real = t39 + t47;
+        let t49: crate::Real = t20 * t48;
+        [t34, t49]
     } else {
-        let t79: crate::Real = crate::math::sin(t18);
-        let t80: crate::Real = t27 * t79;
-        let t81: crate::Real = t26 * t80;
-        let t82: crate::Real = 1.0;
-        let t83: crate::Real = t82 / t18;
-        let t84: crate::Real = t81 * t83;
-        let t85: crate::Real = t0 + t84;
-        let t86: crate::Real = 1.0;
-        let t87: crate::Real = crate::math::cos(t18);
-        let t88: crate::Real = t86 - t87;
-        let t89: crate::Real = t27 * t88;
-        let t90: crate::Real = t19 * t89;
-        let t91: crate::Real = t90 * t83;
-        let t92: crate::Real = t85 - t91;
-        let t120: crate::Real = t79 * t97;
-        let t121: crate::Real = t120 * t83;
-        let t122: crate::Real = t1 + t121;
-        let t123: crate::Real = t26 * t89;
-        let t124: crate::Real = t123 * t83;
-        let t125: crate::Real = t122 + t124;
-        [t92, t125]
+        let sc35 = crate::math::sincos(t20);
+        let t35: crate::Real = sc35.0;
+        let t50: crate::Real = sc35.1;
+        let t36: crate::Real = t16 / t20;
+        let t37: crate::Real = t35 * t36;
+        let t51: crate::Real = t21 - t50;
+        let t52: crate::Real = t51 * t36;
+        [t37, t52]
     };
-    let t93: crate::Real = g0[0usize];
-    let t126: crate::Real = g0[1usize];
-    let t127: crate::Real = t2 + t18;
-    [t93, t126, t127]
+    let t38: crate::Real = g0[0usize];
+    let t53: crate::Real = g0[1usize];
+    let sc54 = crate::math::sincos(t2);
+    let t59: crate::Real = sc54.0;
+    let t54: crate::Real = sc54.1;
+    let t55: crate::Real = t9 * t38;
+    let t56: crate::Real = t13 * t55;
+    let t57: crate::Real = t54 * t56;
+    let t58: crate::Real = t0 + t57;
+    let t60: crate::Real = t9 * t53;
+    let t61: crate::Real = t13 * t60;
+    let t62: crate::Real = t59 * t61;
+    let t63: crate::Real = t58 - t62;
+    let t64: crate::Real = t56 * t59;
+    let t65: crate::Real = t1 + t64;
+    let t66: crate::Real = t54 * t61;
+    let t67: crate::Real = t65 + t66;
+    let t68: crate::Real = t2 + t20;
+    [t63, t67, t68]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
 
@@ -465,7 +425,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-104 arithmetic operations (773 before common-subexpression elimination).*/
+47 arithmetic operations (391 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[crate::Real; 3usize],
@@ -482,129 +442,75 @@ pub fn step_exact_jac_x(
     let t5: crate::Real = p[0usize];
     let t6: crate::Real = p[1usize];
     let t7: crate::Real = dt;
-    let t8: crate::Real = crate::math::cos(t2);
+    let sc8 = crate::math::sincos(t2);
+    let t12: crate::Real = sc8.0;
+    let t8: crate::Real = sc8.1;
     let t9: crate::Real = t1 * t5;
     let t10: crate::Real = t8 * t9;
     let t11: crate::Real = t3 + t10;
-    let t12: crate::Real = crate::math::sin(t2);
     let t13: crate::Real = t9 * t12;
-    let t14: crate::Real = t13 / t6;
-    let t15: crate::Real = t4 + t14;
-    let t16: crate::Real = t7 * t15;
-    let t17: crate::Real = 1.0;
-    let t18: crate::Real = 0.0;
-    let t19: crate::Real = crate::math::cos(t0);
-    let t25: crate::Real = crate::math::sin(t0);
-    let t26: crate::Real = t7 * t11;
-    let t27: crate::Real = t25 * t26;
-    let g0: [crate::Real; 2usize] = if crate::math::fabs(t16)
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t6;
+    let t16: crate::Real = t13 * t15;
+    let t17: crate::Real = t4 + t16;
+    let t18: crate::Real = t7 * t17;
+    let t19: crate::Real = 1.0;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
-        let t20: crate::Real = t7 * t16;
-        let t21: crate::Real = t11 * t20;
-        let t22: crate::Real = t19 * t21;
-        let t23: crate::Real = 0.5;
-        let t24: crate::Real = t22 * t23;
-        let t28: crate::Real = t16 * t16;
-        let t29: crate::Real = t7 * t28;
-        let t30: crate::Real = t11 * t29;
-        let t31: crate::Real = t25 * t30;
-        let t32: crate::Real = 0.16666666666666666;
-        let t33: crate::Real = t31 * t32;
-        let t34: crate::Real = t16 * t28;
-        let t35: crate::Real = t7 * t34;
-        let t36: crate::Real = t11 * t35;
-        let t37: crate::Real = t19 * t36;
+        let t20: crate::Real = t18 * t18;
+        let t21: crate::Real = 0.16666666666666666;
+        let t22: crate::Real = 0.008333333333333333;
+        let t23: crate::Real = 0.0001984126984126984;
+        let t24: crate::Real = 0.0000027557319223985893;
+        let t25: crate::Real = t20 * t24;
+        let t26: crate::Real = t25 - t23;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = t22 + t27;
+        let t29: crate::Real = t20 * t28;
+        let t30: crate::Real = t29 - t21;
+        let t31: crate::Real = t20 * t30;
+        let t32: crate::Real = t19 + t31;
+        let t37: crate::Real = 0.5;
         let t38: crate::Real = 0.041666666666666664;
-        let t39: crate::Real = t37 * t38;
-        let t40: crate::Real = t33 + t39;
-        let t41: crate::Real = t28 * t28;
-        let t42: crate::Real = t7 * t41;
-        let t43: crate::Real = t11 * t42;
-        let t44: crate::Real = t25 * t43;
-        let t45: crate::Real = 0.008333333333333333;
-        let t46: crate::Real = t44 * t45;
-        let t47: crate::Real = t40 - t46;
-        let t48: crate::Real = t16 * t41;
-        let t49: crate::Real = t7 * t48;
-        let t50: crate::Real = t11 * t49;
-        let t51: crate::Real = t19 * t50;
-        let t52: crate::Real = 0.001388888888888889;
-        let t53: crate::Real = t51 * t52;
-        let t54: crate::Real = t47 - t53;
-        let t55: crate::Real = t34 * t34;
-        let t56: crate::Real = t7 * t55;
-        let t57: crate::Real = t11 * t56;
-        let t58: crate::Real = t25 * t57;
-        let t59: crate::Real = 0.0001984126984126984;
-        let t60: crate::Real = t58 * t59;
-        let t61: crate::Real = t54 + t60;
-        let t62: crate::Real = t16 * t55;
-        let t63: crate::Real = t7 * t62;
-        let t64: crate::Real = t11 * t63;
-        let t65: crate::Real = t19 * t64;
-        let t66: crate::Real = 0.0000248015873015873;
-        let t67: crate::Real = t65 * t66;
-        let t68: crate::Real = t61 + t67;
-        let t69: crate::Real = t41 * t41;
-        let t70: crate::Real = t7 * t69;
-        let t71: crate::Real = t11 * t70;
-        let t72: crate::Real = t25 * t71;
-        let t73: crate::Real = 0.0000027557319223985893;
-        let t74: crate::Real = t72 * t73;
-        let t75: crate::Real = t68 - t74;
-        let t76: crate::Real = t75 - t24;
-        let t77: crate::Real = t76 - t27;
-        let t91: crate::Real = t21 * t25;
-        let t92: crate::Real = t23 * t91;
-        let t93: crate::Real = t19 * t26;
-        let t94: crate::Real = t19 * t30;
-        let t95: crate::Real = t32 * t94;
-        let t96: crate::Real = t93 - t95;
-        let t97: crate::Real = t25 * t36;
-        let t98: crate::Real = t38 * t97;
-        let t99: crate::Real = t96 + t98;
-        let t100: crate::Real = t19 * t43;
-        let t101: crate::Real = t45 * t100;
-        let t102: crate::Real = t99 + t101;
-        let t103: crate::Real = t25 * t50;
-        let t104: crate::Real = t52 * t103;
-        let t105: crate::Real = t102 - t104;
-        let t106: crate::Real = t19 * t57;
-        let t107: crate::Real = t59 * t106;
-        let t108: crate::Real = t105 - t107;
-        let t109: crate::Real = t25 * t64;
-        let t110: crate::Real = t66 * t109;
-        let t111: crate::Real = t108 + t110;
-        let t112: crate::Real = t19 * t71;
-        let t113: crate::Real = t73 * t112;
-        let t114: crate::Real = t111 + t113;
-        let t115: crate::Real = t114 - t92;
-        [t77, t115]
+        let t39: crate::Real = 0.001388888888888889;
+        let t40: crate::Real = 0.0000248015873015873;
+        let t41: crate::Real = t20 * t40;
+        let t42: crate::Real = t39 - t41;
+        let t43: crate::Real = t20 * t42;
+        let t44: crate::Real = t43 - t38;
+        let t45: crate::Real = t20 * t44;
+        let t46: crate::Real = t37 + t45;
+        let t47: crate::Real = t18 * t46;
+        [t32, t47]
     } else {
-        let t78: crate::Real = crate::math::sin(t16);
-        let t79: crate::Real = t27 * t78;
-        let t80: crate::Real = 1.0;
-        let t81: crate::Real = t80 / t16;
-        let t82: crate::Real = t79 * t81;
-        let t83: crate::Real = -t82;
-        let t84: crate::Real = crate::math::cos(t16);
-        let t85: crate::Real = t17 - t84;
-        let t86: crate::Real = t26 * t85;
-        let t87: crate::Real = t19 * t86;
-        let t88: crate::Real = t87 * t81;
-        let t89: crate::Real = t83 - t88;
-        let t116: crate::Real = t26 * t78;
-        let t117: crate::Real = t19 * t116;
-        let t118: crate::Real = t117 * t81;
-        let t119: crate::Real = t25 * t86;
-        let t120: crate::Real = t119 * t81;
-        let t121: crate::Real = t118 - t120;
-        [t89, t121]
+        let sc33 = crate::math::sincos(t18);
+        let t33: crate::Real = sc33.0;
+        let t48: crate::Real = sc33.1;
+        let t34: crate::Real = t14 / t18;
+        let t35: crate::Real = t33 * t34;
+        let t49: crate::Real = t19 - t48;
+        let t50: crate::Real = t49 * t34;
+        [t35, t50]
     };
-    let t90: crate::Real = g0[0usize];
-    let t122: crate::Real = g0[1usize];
-    [[t17, t18, t90], [t18, t17, t122], [t18, t18, t17]]
+    let t36: crate::Real = g0[0usize];
+    let t51: crate::Real = g0[1usize];
+    let t52: crate::Real = 0.0;
+    let sc53 = crate::math::sincos(t0);
+    let t53: crate::Real = sc53.0;
+    let t58: crate::Real = sc53.1;
+    let t54: crate::Real = t7 * t36;
+    let t55: crate::Real = t11 * t54;
+    let t56: crate::Real = t53 * t55;
+    let t57: crate::Real = -t56;
+    let t59: crate::Real = t7 * t51;
+    let t60: crate::Real = t11 * t59;
+    let t61: crate::Real = t58 * t60;
+    let t62: crate::Real = t57 - t61;
+    let t63: crate::Real = t55 * t58;
+    let t64: crate::Real = t53 * t60;
+    let t65: crate::Real = t63 - t64;
+    [[t19, t52, t62], [t52, t19, t65], [t52, t52, t19]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
 
@@ -615,7 +521,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w, alpha]
 
-273 arithmetic operations (2735 before common-subexpression elimination).*/
+103 arithmetic operations (1811 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -632,305 +538,138 @@ pub fn step_exact_jac_u(
     let t5: crate::Real = p[0usize];
     let t6: crate::Real = p[1usize];
     let t7: crate::Real = dt;
-    let t8: crate::Real = crate::math::cos(t2);
+    let sc8 = crate::math::sincos(t2);
+    let t12: crate::Real = sc8.0;
+    let t8: crate::Real = sc8.1;
     let t9: crate::Real = t1 * t5;
     let t10: crate::Real = t8 * t9;
     let t11: crate::Real = t3 + t10;
-    let t12: crate::Real = crate::math::sin(t2);
     let t13: crate::Real = t9 * t12;
     let t14: crate::Real = 1.0;
     let t15: crate::Real = t14 / t6;
     let t16: crate::Real = t13 * t15;
     let t17: crate::Real = t4 + t16;
     let t18: crate::Real = t7 * t17;
-    let t19: crate::Real = t5 * t8;
-    let t20: crate::Real = -t13;
-    let t21: crate::Real = t5 * t12;
-    let t22: crate::Real = t21 * t15;
-    let t23: crate::Real = t10 * t15;
-    let t24: crate::Real = t7 * t22;
-    let t25: crate::Real = t7 * t23;
-    let t26: crate::Real = crate::math::sin(t0);
-    let t27: crate::Real = t7 * t11;
-    let t32: crate::Real = crate::math::cos(t0);
-    let t44: crate::Real = t18 * t18;
+    let t19: crate::Real = 1.0;
+    let t20: crate::Real = t18 * t18;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
-        let t28: crate::Real = t24 * t27;
-        let t29: crate::Real = t26 * t28;
-        let t30: crate::Real = 0.5;
-        let t31: crate::Real = t29 * t30;
-        let t33: crate::Real = t7 * t19;
-        let t34: crate::Real = t32 * t33;
-        let t35: crate::Real = t28 * t32;
-        let t36: crate::Real = 0.3333333333333333;
-        let t37: crate::Real = t35 * t36;
-        let t38: crate::Real = -t37;
-        let t39: crate::Real = t26 * t33;
-        let t40: crate::Real = t30 * t39;
-        let t41: crate::Real = t38 - t40;
-        let t42: crate::Real = t18 * t41;
-        let t43: crate::Real = t34 + t42;
-        let t45: crate::Real = 0.125;
-        let t46: crate::Real = t29 * t45;
-        let t47: crate::Real = 0.16666666666666666;
-        let t48: crate::Real = t34 * t47;
-        let t49: crate::Real = t46 - t48;
-        let t50: crate::Real = t44 * t49;
-        let t51: crate::Real = t43 + t50;
-        let t52: crate::Real = t18 * t44;
-        let t53: crate::Real = 0.03333333333333333;
-        let t54: crate::Real = t35 * t53;
-        let t55: crate::Real = 0.041666666666666664;
-        let t56: crate::Real = t39 * t55;
-        let t57: crate::Real = t54 + t56;
-        let t58: crate::Real = t52 * t57;
-        let t59: crate::Real = t51 + t58;
-        let t60: crate::Real = t44 * t44;
-        let t61: crate::Real = 0.006944444444444444;
-        let t62: crate::Real = t29 * t61;
-        let t63: crate::Real = 0.008333333333333333;
-        let t64: crate::Real = t34 * t63;
-        let t65: crate::Real = t64 - t62;
-        let t66: crate::Real = t60 * t65;
-        let t67: crate::Real = t59 + t66;
-        let t68: crate::Real = t18 * t60;
-        let t69: crate::Real = 0.0011904761904761906;
-        let t70: crate::Real = t35 * t69;
-        let t71: crate::Real = -t70;
-        let t72: crate::Real = 0.001388888888888889;
-        let t73: crate::Real = t39 * t72;
-        let t74: crate::Real = t71 - t73;
-        let t75: crate::Real = t68 * t74;
-        let t76: crate::Real = t67 + t75;
-        let t77: crate::Real = t52 * t52;
-        let t78: crate::Real = 0.00017361111111111112;
-        let t79: crate::Real = t29 * t78;
-        let t80: crate::Real = 0.0001984126984126984;
-        let t81: crate::Real = t34 * t80;
-        let t82: crate::Real = t79 - t81;
-        let t83: crate::Real = t77 * t82;
-        let t84: crate::Real = t76 + t83;
-        let t85: crate::Real = t18 * t77;
-        let t86: crate::Real = 0.000022045855379188714;
-        let t87: crate::Real = t35 * t86;
-        let t88: crate::Real = 0.0000248015873015873;
-        let t89: crate::Real = t39 * t88;
-        let t90: crate::Real = t87 + t89;
-        let t91: crate::Real = t85 * t90;
-        let t92: crate::Real = t84 + t91;
-        let t93: crate::Real = t60 * t60;
-        let t94: crate::Real = 0.00000248015873015873;
-        let t95: crate::Real = t29 * t94;
-        let t96: crate::Real = 0.0000027557319223985893;
-        let t97: crate::Real = t34 * t96;
-        let t98: crate::Real = t97 - t95;
-        let t99: crate::Real = t93 * t98;
-        let t100: crate::Real = t92 + t99;
-        let t101: crate::Real = t100 - t31;
-        let t134: crate::Real = t25 * t27;
-        let t135: crate::Real = t26 * t134;
-        let t136: crate::Real = t30 * t135;
-        let t137: crate::Real = t7 * t20;
-        let t138: crate::Real = t32 * t137;
-        let t139: crate::Real = t32 * t134;
-        let t140: crate::Real = t36 * t139;
-        let t141: crate::Real = -t140;
-        let t142: crate::Real = t26 * t137;
-        let t143: crate::Real = t30 * t142;
-        let t144: crate::Real = t141 - t143;
-        let t145: crate::Real = t18 * t144;
-        let t146: crate::Real = t138 + t145;
-        let t147: crate::Real = t45 * t135;
-        let t148: crate::Real = t47 * t138;
-        let t149: crate::Real = t147 - t148;
-        let t150: crate::Real = t44 * t149;
-        let t151: crate::Real = t146 + t150;
-        let t152: crate::Real = t53 * t139;
-        let t153: crate::Real = t55 * t142;
-        let t154: crate::Real = t152 + t153;
-        let t155: crate::Real = t52 * t154;
-        let t156: crate::Real = t151 + t155;
-        let t157: crate::Real = t61 * t135;
-        let t158: crate::Real = t63 * t138;
-        let t159: crate::Real = t158 - t157;
-        let t160: crate::Real = t60 * t159;
-        let t161: crate::Real = t156 + t160;
-        let t162: crate::Real = t69 * t139;
-        let t163: crate::Real = -t162;
-        let t164: crate::Real = t72 * t142;
-        let t165: crate::Real = t163 - t164;
-        let t166: crate::Real = t68 * t165;
-        let t167: crate::Real = t161 + t166;
-        let t168: crate::Real = t78 * t135;
-        let t169: crate::Real = t80 * t138;
-        let t170: crate::Real = t168 - t169;
-        let t171: crate::Real = t77 * t170;
-        let t172: crate::Real = t167 + t171;
-        let t173: crate::Real = t86 * t139;
-        let t174: crate::Real = t88 * t142;
-        let t175: crate::Real = t173 + t174;
-        let t176: crate::Real = t85 * t175;
-        let t177: crate::Real = t172 + t176;
-        let t178: crate::Real = t94 * t135;
-        let t179: crate::Real = t96 * t138;
-        let t180: crate::Real = t179 - t178;
-        let t181: crate::Real = t93 * t180;
-        let t182: crate::Real = t177 + t181;
-        let t183: crate::Real = t182 - t136;
-        let t188: crate::Real = t30 * t35;
-        let t189: crate::Real = t39 + t188;
-        let t190: crate::Real = t29 * t36;
-        let t191: crate::Real = t30 * t34;
-        let t192: crate::Real = t191 - t190;
-        let t193: crate::Real = t18 * t192;
-        let t194: crate::Real = t189 + t193;
-        let t195: crate::Real = t35 * t45;
-        let t196: crate::Real = -t195;
-        let t197: crate::Real = t39 * t47;
-        let t198: crate::Real = t196 - t197;
-        let t199: crate::Real = t44 * t198;
-        let t200: crate::Real = t194 + t199;
-        let t201: crate::Real = t29 * t53;
-        let t202: crate::Real = t34 * t55;
-        let t203: crate::Real = t201 - t202;
-        let t204: crate::Real = t52 * t203;
-        let t205: crate::Real = t200 + t204;
-        let t206: crate::Real = t35 * t61;
-        let t207: crate::Real = t39 * t63;
-        let t208: crate::Real = t206 + t207;
-        let t209: crate::Real = t60 * t208;
-        let t210: crate::Real = t205 + t209;
-        let t211: crate::Real = t29 * t69;
-        let t212: crate::Real = t34 * t72;
-        let t213: crate::Real = t212 - t211;
-        let t214: crate::Real = t68 * t213;
-        let t215: crate::Real = t210 + t214;
-        let t216: crate::Real = t35 * t78;
-        let t217: crate::Real = -t216;
-        let t218: crate::Real = t39 * t80;
-        let t219: crate::Real = t217 - t218;
-        let t220: crate::Real = t77 * t219;
-        let t221: crate::Real = t215 + t220;
-        let t222: crate::Real = t29 * t86;
-        let t223: crate::Real = t34 * t88;
-        let t224: crate::Real = t222 - t223;
-        let t225: crate::Real = t85 * t224;
-        let t226: crate::Real = t221 + t225;
-        let t227: crate::Real = t35 * t94;
-        let t228: crate::Real = t39 * t96;
-        let t229: crate::Real = t227 + t228;
-        let t230: crate::Real = t93 * t229;
-        let t231: crate::Real = t226 + t230;
-        let t251: crate::Real = t30 * t139;
-        let t252: crate::Real = t142 + t251;
-        let t253: crate::Real = t36 * t135;
-        let t254: crate::Real = t30 * t138;
-        let t255: crate::Real = t254 - t253;
-        let t256: crate::Real = t18 * t255;
-        let t257: crate::Real = t252 + t256;
-        let t258: crate::Real = t45 * t139;
-        let t259: crate::Real = -t258;
-        let t260: crate::Real = t47 * t142;
-        let t261: crate::Real = t259 - t260;
-        let t262: crate::Real = t44 * t261;
-        let t263: crate::Real = t257 + t262;
-        let t264: crate::Real = t53 * t135;
-        let t265: crate::Real = t55 * t138;
-        let t266: crate::Real = t264 - t265;
-        let t267: crate::Real = t52 * t266;
-        let t268: crate::Real = t263 + t267;
-        let t269: crate::Real = t61 * t139;
-        let t270: crate::Real = t63 * t142;
-        let t271: crate::Real = t269 + t270;
-        let t272: crate::Real = t60 * t271;
-        let t273: crate::Real = t268 + t272;
-        let t274: crate::Real = t69 * t135;
-        let t275: crate::Real = t72 * t138;
-        let t276: crate::Real = t275 - t274;
-        let t277: crate::Real = t68 * t276;
-        let t278: crate::Real = t273 + t277;
-        let t279: crate::Real = t78 * t139;
-        let t280: crate::Real = -t279;
-        let t281: crate::Real = t80 * t142;
-        let t282: crate::Real = t280 - t281;
-        let t283: crate::Real = t77 * t282;
-        let t284: crate::Real = t278 + t283;
-        let t285: crate::Real = t86 * t135;
-        let t286: crate::Real = t88 * t138;
-        let t287: crate::Real = t285 - t286;
-        let t288: crate::Real = t85 * t287;
-        let t289: crate::Real = t284 + t288;
-        let t290: crate::Real = t94 * t139;
-        let t291: crate::Real = t96 * t142;
-        let t292: crate::Real = t290 + t291;
-        let t293: crate::Real = t93 * t292;
-        let t294: crate::Real = t289 + t293;
-        [t101, t183, t231, t294]
+        let t21: crate::Real = 0.16666666666666666;
+        let t22: crate::Real = 0.008333333333333333;
+        let t23: crate::Real = 0.0001984126984126984;
+        let t24: crate::Real = 0.0000027557319223985893;
+        let t25: crate::Real = t20 * t24;
+        let t26: crate::Real = t25 - t23;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = t22 + t27;
+        let t29: crate::Real = t20 * t28;
+        let t30: crate::Real = t29 - t21;
+        let t31: crate::Real = t20 * t30;
+        let t32: crate::Real = t19 + t31;
+        let t37: crate::Real = 0.5;
+        let t38: crate::Real = 0.041666666666666664;
+        let t39: crate::Real = 0.001388888888888889;
+        let t40: crate::Real = 0.0000248015873015873;
+        let t41: crate::Real = t20 * t40;
+        let t42: crate::Real = t39 - t41;
+        let t43: crate::Real = t20 * t42;
+        let t44: crate::Real = t43 - t38;
+        let t45: crate::Real = t20 * t44;
+        let t46: crate::Real = t37 + t45;
+        let t47: crate::Real = t18 * t46;
+        let t59: crate::Real = 0.3333333333333333;
+        let t60: crate::Real = 0.03333333333333333;
+        let t61: crate::Real = 0.0011904761904761906;
+        let t62: crate::Real = 0.000022045855379188714;
+        let t63: crate::Real = t20 * t62;
+        let t64: crate::Real = t63 - t61;
+        let t65: crate::Real = t20 * t64;
+        let t66: crate::Real = t60 + t65;
+        let t67: crate::Real = t20 * t66;
+        let t68: crate::Real = t67 - t59;
+        let t69: crate::Real = t18 * t68;
+        let t77: crate::Real = 0.125;
+        let t78: crate::Real = 0.006944444444444444;
+        let t79: crate::Real = 0.00017361111111111112;
+        let t80: crate::Real = 0.00000248015873015873;
+        let t81: crate::Real = t20 * t80;
+        let t82: crate::Real = t81 - t79;
+        let t83: crate::Real = t20 * t82;
+        let t84: crate::Real = t78 + t83;
+        let t85: crate::Real = t20 * t84;
+        let t86: crate::Real = t85 - t77;
+        let t87: crate::Real = t20 * t86;
+        let t88: crate::Real = t37 + t87;
+        [t32, t47, t69, t88]
     } else {
-        let t102: crate::Real = crate::math::sin(t18);
-        let t103: crate::Real = t7 * t102;
-        let t104: crate::Real = t32 * t103;
-        let t105: crate::Real = t14 / t18;
-        let t106: crate::Real = t104 * t105;
-        let t107: crate::Real = 1.0;
-        let t108: crate::Real = crate::math::cos(t18);
-        let t109: crate::Real = t107 - t108;
-        let t110: crate::Real = t7 * t109;
-        let t111: crate::Real = t26 * t110;
-        let t112: crate::Real = t111 * t105;
-        let t113: crate::Real = t106 - t112;
-        let t114: crate::Real = t19 * t113;
-        let t115: crate::Real = t26 * t27;
-        let t116: crate::Real = t102 * t115;
-        let t117: crate::Real = t116 * t105;
-        let t118: crate::Real = t27 * t32;
-        let t119: crate::Real = t108 * t118;
-        let t120: crate::Real = t119 * t105;
-        let t121: crate::Real = t27 * t102;
-        let t122: crate::Real = t32 * t121;
-        let t123: crate::Real = t14 / t44;
-        let t124: crate::Real = t122 * t123;
-        let t125: crate::Real = t120 - t124;
-        let t126: crate::Real = t27 * t109;
-        let t127: crate::Real = t26 * t126;
-        let t128: crate::Real = t127 * t123;
-        let t129: crate::Real = t125 + t128;
-        let t130: crate::Real = t129 - t117;
-        let t131: crate::Real = t24 * t130;
-        let t132: crate::Real = t114 + t131;
-        let t184: crate::Real = t20 * t113;
-        let t185: crate::Real = t25 * t130;
-        let t186: crate::Real = t184 + t185;
-        let t232: crate::Real = t7 * t26;
-        let t233: crate::Real = t102 * t232;
-        let t234: crate::Real = t233 * t105;
-        let t235: crate::Real = t32 * t110;
-        let t236: crate::Real = t235 * t105;
-        let t237: crate::Real = t234 + t236;
-        let t238: crate::Real = t19 * t237;
-        let t239: crate::Real = t108 * t115;
-        let t240: crate::Real = t239 * t105;
-        let t241: crate::Real = t122 * t105;
-        let t242: crate::Real = t240 + t241;
-        let t243: crate::Real = t116 * t123;
-        let t244: crate::Real = t242 - t243;
-        let t245: crate::Real = t32 * t126;
-        let t246: crate::Real = t245 * t123;
-        let t247: crate::Real = t244 - t246;
-        let t248: crate::Real = t24 * t247;
-        let t249: crate::Real = t238 + t248;
-        let t295: crate::Real = t20 * t237;
-        let t296: crate::Real = t25 * t247;
-        let t297: crate::Real = t295 + t296;
-        [t132, t186, t249, t297]
+        let sc33 = crate::math::sincos(t18);
+        let t33: crate::Real = sc33.0;
+        let t48: crate::Real = sc33.1;
+        let t34: crate::Real = t14 / t18;
+        let t35: crate::Real = t33 * t34;
+        let t49: crate::Real = t19 - t48;
+        let t50: crate::Real = t49 * t34;
+        let t70: crate::Real = t48 * t34;
+        let t71: crate::Real = t14 / t20;
+        let t72: crate::Real = t33 * t71;
+        let t73: crate::Real = t70 - t72;
+        let t89: crate::Real = t49 * t71;
+        let t90: crate::Real = t35 - t89;
+        [t35, t50, t73, t90]
     };
-    let t133: crate::Real = g0[0usize];
-    let t187: crate::Real = g0[1usize];
-    let t250: crate::Real = g0[2usize];
-    let t298: crate::Real = g0[3usize];
-    [[t133, t187], [t250, t298], [t24, t25]]
+    let t36: crate::Real = g0[0usize];
+    let t51: crate::Real = g0[1usize];
+    let t74: crate::Real = g0[2usize];
+    let t91: crate::Real = g0[3usize];
+    let t52: crate::Real = t5 * t8;
+    let t53: crate::Real = -t13;
+    let t54: crate::Real = t5 * t12;
+    let t55: crate::Real = t54 * t15;
+    let t56: crate::Real = t10 * t15;
+    let t57: crate::Real = t7 * t55;
+    let t58: crate::Real = t7 * t56;
+    let t75: crate::Real = t57 * t74;
+    let t76: crate::Real = t58 * t74;
+    let t92: crate::Real = t57 * t91;
+    let t93: crate::Real = t58 * t91;
+    let sc94 = crate::math::sincos(t0);
+    let t98: crate::Real = sc94.0;
+    let t94: crate::Real = sc94.1;
+    let t95: crate::Real = t7 * t11;
+    let t96: crate::Real = t75 * t95;
+    let t97: crate::Real = t94 * t96;
+    let t99: crate::Real = t92 * t95;
+    let t100: crate::Real = t98 * t99;
+    let t101: crate::Real = t97 - t100;
+    let t102: crate::Real = t7 * t36;
+    let t103: crate::Real = t94 * t102;
+    let t104: crate::Real = t7 * t51;
+    let t105: crate::Real = t98 * t104;
+    let t106: crate::Real = t103 - t105;
+    let t107: crate::Real = t52 * t106;
+    let t108: crate::Real = t101 + t107;
+    let t109: crate::Real = t76 * t95;
+    let t110: crate::Real = t94 * t109;
+    let t111: crate::Real = t93 * t95;
+    let t112: crate::Real = t98 * t111;
+    let t113: crate::Real = t110 - t112;
+    let t114: crate::Real = t53 * t106;
+    let t115: crate::Real = t113 + t114;
+    let t116: crate::Real = t96 * t98;
+    let t117: crate::Real = t94 * t99;
+    let t118: crate::Real = t116 + t117;
+    let t119: crate::Real = t98 * t102;
+    let t120: crate::Real = t94 * t104;
+    let t121: crate::Real = t119 + t120;
+    let t122: crate::Real = t52 * t121;
+    let t123: crate::Real = t118 + t122;
+    let t124: crate::Real = t98 * t109;
+    let t125: crate::Real = t94 * t111;
+    let t126: crate::Real = t124 + t125;
+    let t127: crate::Real = t53 * t121;
+    let t128: crate::Real = t126 + t127;
+    [[t108, t115], [t123, t128], [t57, t58]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
 
@@ -941,7 +680,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-205 arithmetic operations (1621 before common-subexpression elimination).*/
+81 arithmetic operations (875 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -958,238 +697,117 @@ pub fn step_exact_jac_w(
     let t5: crate::Real = p[0usize];
     let t6: crate::Real = p[1usize];
     let t7: crate::Real = dt;
-    let t8: crate::Real = crate::math::cos(t2);
+    let sc8 = crate::math::sincos(t2);
+    let t12: crate::Real = sc8.0;
+    let t8: crate::Real = sc8.1;
     let t9: crate::Real = t1 * t5;
     let t10: crate::Real = t8 * t9;
     let t11: crate::Real = t3 + t10;
-    let t12: crate::Real = crate::math::sin(t2);
     let t13: crate::Real = t9 * t12;
-    let t14: crate::Real = t13 / t6;
-    let t15: crate::Real = t4 + t14;
-    let t16: crate::Real = t7 * t15;
-    let t17: crate::Real = 1.0;
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t6;
+    let t16: crate::Real = t13 * t15;
+    let t17: crate::Real = t4 + t16;
     let t18: crate::Real = t7 * t17;
-    let t19: crate::Real = crate::math::sin(t0);
-    let t25: crate::Real = crate::math::cos(t0);
-    let t27: crate::Real = t16 * t16;
-    let t96: crate::Real = t7 * t11;
-    let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
+    let t19: crate::Real = 1.0;
+    let t20: crate::Real = t18 * t18;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
-        let t20: crate::Real = t7 * t16;
-        let t21: crate::Real = t17 * t20;
-        let t22: crate::Real = t19 * t21;
-        let t23: crate::Real = 0.5;
-        let t24: crate::Real = t22 * t23;
-        let t26: crate::Real = t18 * t25;
-        let t28: crate::Real = t7 * t27;
-        let t29: crate::Real = t17 * t28;
-        let t30: crate::Real = t25 * t29;
-        let t31: crate::Real = 0.16666666666666666;
-        let t32: crate::Real = t30 * t31;
-        let t33: crate::Real = t26 - t32;
-        let t34: crate::Real = t16 * t27;
-        let t35: crate::Real = t7 * t34;
-        let t36: crate::Real = t17 * t35;
-        let t37: crate::Real = t19 * t36;
+        let t21: crate::Real = 0.16666666666666666;
+        let t22: crate::Real = 0.008333333333333333;
+        let t23: crate::Real = 0.0001984126984126984;
+        let t24: crate::Real = 0.0000027557319223985893;
+        let t25: crate::Real = t20 * t24;
+        let t26: crate::Real = t25 - t23;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = t22 + t27;
+        let t29: crate::Real = t20 * t28;
+        let t30: crate::Real = t29 - t21;
+        let t31: crate::Real = t20 * t30;
+        let t32: crate::Real = t19 + t31;
+        let t37: crate::Real = 0.5;
         let t38: crate::Real = 0.041666666666666664;
-        let t39: crate::Real = t37 * t38;
-        let t40: crate::Real = t33 + t39;
-        let t41: crate::Real = t27 * t27;
-        let t42: crate::Real = t7 * t41;
-        let t43: crate::Real = t17 * t42;
-        let t44: crate::Real = t25 * t43;
-        let t45: crate::Real = 0.008333333333333333;
-        let t46: crate::Real = t44 * t45;
-        let t47: crate::Real = t40 + t46;
-        let t48: crate::Real = t16 * t41;
-        let t49: crate::Real = t7 * t48;
-        let t50: crate::Real = t17 * t49;
-        let t51: crate::Real = t19 * t50;
-        let t52: crate::Real = 0.001388888888888889;
-        let t53: crate::Real = t51 * t52;
-        let t54: crate::Real = t47 - t53;
-        let t55: crate::Real = t34 * t34;
-        let t56: crate::Real = t7 * t55;
-        let t57: crate::Real = t17 * t56;
-        let t58: crate::Real = t25 * t57;
-        let t59: crate::Real = 0.0001984126984126984;
-        let t60: crate::Real = t58 * t59;
-        let t61: crate::Real = t54 - t60;
-        let t62: crate::Real = t16 * t55;
-        let t63: crate::Real = t7 * t62;
-        let t64: crate::Real = t17 * t63;
-        let t65: crate::Real = t19 * t64;
-        let t66: crate::Real = 0.0000248015873015873;
-        let t67: crate::Real = t65 * t66;
-        let t68: crate::Real = t61 + t67;
-        let t69: crate::Real = t41 * t41;
-        let t70: crate::Real = t7 * t69;
-        let t71: crate::Real = t17 * t70;
-        let t72: crate::Real = t25 * t71;
-        let t73: crate::Real = 0.0000027557319223985893;
-        let t74: crate::Real = t72 * t73;
-        let t75: crate::Real = t68 + t74;
-        let t76: crate::Real = t75 - t24;
-        let t91: crate::Real = t11 * t20;
-        let t92: crate::Real = t18 * t91;
-        let t93: crate::Real = t25 * t92;
-        let t94: crate::Real = 0.3333333333333333;
-        let t95: crate::Real = t93 * t94;
-        let t97: crate::Real = t18 * t96;
-        let t98: crate::Real = t19 * t97;
-        let t99: crate::Real = t23 * t98;
-        let t100: crate::Real = t11 * t28;
-        let t101: crate::Real = t18 * t100;
-        let t102: crate::Real = t19 * t101;
-        let t103: crate::Real = 0.125;
-        let t104: crate::Real = t102 * t103;
-        let t105: crate::Real = t11 * t35;
-        let t106: crate::Real = t18 * t105;
-        let t107: crate::Real = t25 * t106;
-        let t108: crate::Real = 0.03333333333333333;
-        let t109: crate::Real = t107 * t108;
-        let t110: crate::Real = t104 + t109;
-        let t111: crate::Real = t11 * t42;
-        let t112: crate::Real = t18 * t111;
-        let t113: crate::Real = t19 * t112;
-        let t114: crate::Real = 0.006944444444444444;
-        let t115: crate::Real = t113 * t114;
-        let t116: crate::Real = t110 - t115;
-        let t117: crate::Real = t11 * t49;
-        let t118: crate::Real = t18 * t117;
-        let t119: crate::Real = t25 * t118;
-        let t120: crate::Real = 0.0011904761904761906;
-        let t121: crate::Real = t119 * t120;
-        let t122: crate::Real = t116 - t121;
-        let t123: crate::Real = t11 * t56;
-        let t124: crate::Real = t18 * t123;
-        let t125: crate::Real = t19 * t124;
-        let t126: crate::Real = 0.00017361111111111112;
-        let t127: crate::Real = t125 * t126;
-        let t128: crate::Real = t122 + t127;
-        let t129: crate::Real = t11 * t63;
-        let t130: crate::Real = t18 * t129;
-        let t131: crate::Real = t25 * t130;
-        let t132: crate::Real = 0.000022045855379188714;
-        let t133: crate::Real = t131 * t132;
-        let t134: crate::Real = t128 + t133;
-        let t135: crate::Real = t11 * t70;
-        let t136: crate::Real = t18 * t135;
-        let t137: crate::Real = t19 * t136;
-        let t138: crate::Real = 0.00000248015873015873;
-        let t139: crate::Real = t137 * t138;
-        let t140: crate::Real = t134 - t139;
-        let t141: crate::Real = t140 - t95;
-        let t142: crate::Real = t141 - t99;
-        let t161: crate::Real = t21 * t25;
-        let t162: crate::Real = t23 * t161;
-        let t163: crate::Real = t18 * t19;
-        let t164: crate::Real = t162 + t163;
-        let t165: crate::Real = t19 * t29;
-        let t166: crate::Real = t31 * t165;
-        let t167: crate::Real = t164 - t166;
-        let t168: crate::Real = t25 * t36;
-        let t169: crate::Real = t38 * t168;
-        let t170: crate::Real = t167 - t169;
-        let t171: crate::Real = t19 * t43;
-        let t172: crate::Real = t45 * t171;
-        let t173: crate::Real = t170 + t172;
-        let t174: crate::Real = t25 * t50;
-        let t175: crate::Real = t52 * t174;
-        let t176: crate::Real = t173 + t175;
-        let t177: crate::Real = t19 * t57;
-        let t178: crate::Real = t59 * t177;
-        let t179: crate::Real = t176 - t178;
-        let t180: crate::Real = t25 * t64;
-        let t181: crate::Real = t66 * t180;
-        let t182: crate::Real = t179 - t181;
-        let t183: crate::Real = t19 * t71;
-        let t184: crate::Real = t73 * t183;
-        let t185: crate::Real = t182 + t184;
-        let t194: crate::Real = t19 * t92;
-        let t195: crate::Real = t94 * t194;
-        let t196: crate::Real = t25 * t97;
-        let t197: crate::Real = t23 * t196;
-        let t198: crate::Real = t25 * t101;
-        let t199: crate::Real = t103 * t198;
-        let t200: crate::Real = t197 - t199;
-        let t201: crate::Real = t19 * t106;
-        let t202: crate::Real = t108 * t201;
-        let t203: crate::Real = t200 + t202;
-        let t204: crate::Real = t25 * t112;
-        let t205: crate::Real = t114 * t204;
-        let t206: crate::Real = t203 + t205;
-        let t207: crate::Real = t19 * t118;
-        let t208: crate::Real = t120 * t207;
-        let t209: crate::Real = t206 - t208;
-        let t210: crate::Real = t25 * t124;
-        let t211: crate::Real = t126 * t210;
-        let t212: crate::Real = t209 - t211;
-        let t213: crate::Real = t19 * t130;
-        let t214: crate::Real = t132 * t213;
-        let t215: crate::Real = t212 + t214;
-        let t216: crate::Real = t25 * t136;
-        let t217: crate::Real = t138 * t216;
-        let t218: crate::Real = t215 + t217;
-        let t219: crate::Real = t218 - t195;
-        [t76, t142, t185, t219]
+        let t39: crate::Real = 0.001388888888888889;
+        let t40: crate::Real = 0.0000248015873015873;
+        let t41: crate::Real = t20 * t40;
+        let t42: crate::Real = t39 - t41;
+        let t43: crate::Real = t20 * t42;
+        let t44: crate::Real = t43 - t38;
+        let t45: crate::Real = t20 * t44;
+        let t46: crate::Real = t37 + t45;
+        let t47: crate::Real = t18 * t46;
+        let t53: crate::Real = 0.3333333333333333;
+        let t54: crate::Real = 0.03333333333333333;
+        let t55: crate::Real = 0.0011904761904761906;
+        let t56: crate::Real = 0.000022045855379188714;
+        let t57: crate::Real = t20 * t56;
+        let t58: crate::Real = t57 - t55;
+        let t59: crate::Real = t20 * t58;
+        let t60: crate::Real = t54 + t59;
+        let t61: crate::Real = t20 * t60;
+        let t62: crate::Real = t61 - t53;
+        let t63: crate::Real = t18 * t62;
+        let t70: crate::Real = 0.125;
+        let t71: crate::Real = 0.006944444444444444;
+        let t72: crate::Real = 0.00017361111111111112;
+        let t73: crate::Real = 0.00000248015873015873;
+        let t74: crate::Real = t20 * t73;
+        let t75: crate::Real = t74 - t72;
+        let t76: crate::Real = t20 * t75;
+        let t77: crate::Real = t71 + t76;
+        let t78: crate::Real = t20 * t77;
+        let t79: crate::Real = t78 - t70;
+        let t80: crate::Real = t20 * t79;
+        let t81: crate::Real = t37 + t80;
+        [t32, t47, t63, t81]
     } else {
-        let t77: crate::Real = crate::math::sin(t16);
-        let t78: crate::Real = t7 * t77;
-        let t79: crate::Real = t25 * t78;
-        let t80: crate::Real = 1.0;
-        let t81: crate::Real = t80 / t16;
-        let t82: crate::Real = t79 * t81;
-        let t83: crate::Real = crate::math::cos(t16);
-        let t84: crate::Real = t17 - t83;
-        let t85: crate::Real = t7 * t84;
-        let t86: crate::Real = t19 * t85;
-        let t87: crate::Real = t86 * t81;
-        let t88: crate::Real = t82 - t87;
-        let t89: crate::Real = t17 * t88;
-        let t143: crate::Real = t19 * t96;
-        let t144: crate::Real = t77 * t143;
-        let t145: crate::Real = t144 * t81;
-        let t146: crate::Real = t25 * t96;
-        let t147: crate::Real = t83 * t146;
-        let t148: crate::Real = t147 * t81;
-        let t149: crate::Real = t77 * t96;
-        let t150: crate::Real = t25 * t149;
-        let t151: crate::Real = t80 / t27;
-        let t152: crate::Real = t150 * t151;
-        let t153: crate::Real = t148 - t152;
-        let t154: crate::Real = t84 * t96;
-        let t155: crate::Real = t19 * t154;
-        let t156: crate::Real = t155 * t151;
-        let t157: crate::Real = t153 + t156;
-        let t158: crate::Real = t157 - t145;
-        let t159: crate::Real = t18 * t158;
-        let t186: crate::Real = t7 * t19;
-        let t187: crate::Real = t77 * t186;
-        let t188: crate::Real = t187 * t81;
-        let t189: crate::Real = t25 * t85;
-        let t190: crate::Real = t189 * t81;
-        let t191: crate::Real = t188 + t190;
-        let t192: crate::Real = t17 * t191;
-        let t220: crate::Real = t83 * t143;
-        let t221: crate::Real = t220 * t81;
-        let t222: crate::Real = t150 * t81;
-        let t223: crate::Real = t221 + t222;
-        let t224: crate::Real = t144 * t151;
-        let t225: crate::Real = t223 - t224;
-        let t226: crate::Real = t25 * t154;
-        let t227: crate::Real = t226 * t151;
-        let t228: crate::Real = t225 - t227;
-        let t229: crate::Real = t18 * t228;
-        [t89, t159, t192, t229]
+        let sc33 = crate::math::sincos(t18);
+        let t33: crate::Real = sc33.0;
+        let t48: crate::Real = sc33.1;
+        let t34: crate::Real = t14 / t18;
+        let t35: crate::Real = t33 * t34;
+        let t49: crate::Real = t19 - t48;
+        let t50: crate::Real = t49 * t34;
+        let t64: crate::Real = t48 * t34;
+        let t65: crate::Real = t14 / t20;
+        let t66: crate::Real = t33 * t65;
+        let t67: crate::Real = t64 - t66;
+        let t82: crate::Real = t49 * t65;
+        let t83: crate::Real = t35 - t82;
+        [t35, t50, t67, t83]
     };
-    let t90: crate::Real = g0[0usize];
-    let t160: crate::Real = g0[1usize];
-    let t193: crate::Real = g0[2usize];
-    let t230: crate::Real = g0[3usize];
-    let t231: crate::Real = 0.0;
-    [[t90, t160], [t193, t230], [t231, t18]]
+    let t36: crate::Real = g0[0usize];
+    let t51: crate::Real = g0[1usize];
+    let t68: crate::Real = g0[2usize];
+    let t84: crate::Real = g0[3usize];
+    let t52: crate::Real = t7 * t19;
+    let t69: crate::Real = t52 * t68;
+    let t85: crate::Real = t52 * t84;
+    let sc86 = crate::math::sincos(t0);
+    let t89: crate::Real = sc86.0;
+    let t86: crate::Real = sc86.1;
+    let t87: crate::Real = t7 * t36;
+    let t88: crate::Real = t86 * t87;
+    let t90: crate::Real = t7 * t51;
+    let t91: crate::Real = t89 * t90;
+    let t92: crate::Real = t88 - t91;
+    let t93: crate::Real = t19 * t92;
+    let t94: crate::Real = t7 * t11;
+    let t95: crate::Real = t69 * t94;
+    let t96: crate::Real = t86 * t95;
+    let t97: crate::Real = t85 * t94;
+    let t98: crate::Real = t89 * t97;
+    let t99: crate::Real = t96 - t98;
+    let t100: crate::Real = t87 * t89;
+    let t101: crate::Real = t86 * t90;
+    let t102: crate::Real = t100 + t101;
+    let t103: crate::Real = t19 * t102;
+    let t104: crate::Real = t89 * t95;
+    let t105: crate::Real = t86 * t97;
+    let t106: crate::Real = t104 + t105;
+    let t107: crate::Real = 0.0;
+    [[t93, t99], [t103, t106], [t107, t52]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
 
@@ -1200,7 +818,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-253 arithmetic operations (2496 before common-subexpression elimination).*/
+101 arithmetic operations (1439 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -1217,285 +835,136 @@ pub fn step_exact_jac_p(
     let t5: crate::Real = p[0usize];
     let t6: crate::Real = p[1usize];
     let t7: crate::Real = dt;
-    let t8: crate::Real = crate::math::cos(t2);
+    let sc8 = crate::math::sincos(t2);
+    let t12: crate::Real = sc8.0;
+    let t8: crate::Real = sc8.1;
     let t9: crate::Real = t1 * t5;
     let t10: crate::Real = t8 * t9;
     let t11: crate::Real = t3 + t10;
-    let t12: crate::Real = crate::math::sin(t2);
     let t13: crate::Real = t9 * t12;
     let t14: crate::Real = 1.0;
     let t15: crate::Real = t14 / t6;
     let t16: crate::Real = t13 * t15;
     let t17: crate::Real = t4 + t16;
     let t18: crate::Real = t7 * t17;
-    let t19: crate::Real = t1 * t8;
-    let t20: crate::Real = t1 * t12;
-    let t21: crate::Real = t20 * t15;
-    let t22: crate::Real = t6 * t6;
-    let t23: crate::Real = t13 / t22;
-    let t24: crate::Real = -t23;
-    let t25: crate::Real = t7 * t21;
-    let t26: crate::Real = t7 * t24;
-    let t27: crate::Real = crate::math::sin(t0);
-    let t28: crate::Real = t7 * t11;
-    let t33: crate::Real = crate::math::cos(t0);
-    let t45: crate::Real = t18 * t18;
+    let t19: crate::Real = 1.0;
+    let t20: crate::Real = t18 * t18;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
-        let t29: crate::Real = t25 * t28;
-        let t30: crate::Real = t27 * t29;
-        let t31: crate::Real = 0.5;
-        let t32: crate::Real = t30 * t31;
-        let t34: crate::Real = t7 * t19;
-        let t35: crate::Real = t33 * t34;
-        let t36: crate::Real = t29 * t33;
-        let t37: crate::Real = 0.3333333333333333;
-        let t38: crate::Real = t36 * t37;
-        let t39: crate::Real = -t38;
-        let t40: crate::Real = t27 * t34;
-        let t41: crate::Real = t31 * t40;
+        let t21: crate::Real = 0.16666666666666666;
+        let t22: crate::Real = 0.008333333333333333;
+        let t23: crate::Real = 0.0001984126984126984;
+        let t24: crate::Real = 0.0000027557319223985893;
+        let t25: crate::Real = t20 * t24;
+        let t26: crate::Real = t25 - t23;
+        let t27: crate::Real = t20 * t26;
+        let t28: crate::Real = t22 + t27;
+        let t29: crate::Real = t20 * t28;
+        let t30: crate::Real = t29 - t21;
+        let t31: crate::Real = t20 * t30;
+        let t32: crate::Real = t19 + t31;
+        let t37: crate::Real = 0.5;
+        let t38: crate::Real = 0.041666666666666664;
+        let t39: crate::Real = 0.001388888888888889;
+        let t40: crate::Real = 0.0000248015873015873;
+        let t41: crate::Real = t20 * t40;
         let t42: crate::Real = t39 - t41;
-        let t43: crate::Real = t18 * t42;
-        let t44: crate::Real = t35 + t43;
-        let t46: crate::Real = 0.125;
-        let t47: crate::Real = t30 * t46;
-        let t48: crate::Real = 0.16666666666666666;
-        let t49: crate::Real = t35 * t48;
-        let t50: crate::Real = t47 - t49;
-        let t51: crate::Real = t45 * t50;
-        let t52: crate::Real = t44 + t51;
-        let t53: crate::Real = t18 * t45;
-        let t54: crate::Real = 0.03333333333333333;
-        let t55: crate::Real = t36 * t54;
-        let t56: crate::Real = 0.041666666666666664;
-        let t57: crate::Real = t40 * t56;
-        let t58: crate::Real = t55 + t57;
-        let t59: crate::Real = t53 * t58;
-        let t60: crate::Real = t52 + t59;
-        let t61: crate::Real = t45 * t45;
-        let t62: crate::Real = 0.006944444444444444;
-        let t63: crate::Real = t30 * t62;
-        let t64: crate::Real = 0.008333333333333333;
-        let t65: crate::Real = t35 * t64;
+        let t43: crate::Real = t20 * t42;
+        let t44: crate::Real = t43 - t38;
+        let t45: crate::Real = t20 * t44;
+        let t46: crate::Real = t37 + t45;
+        let t47: crate::Real = t18 * t46;
+        let t61: crate::Real = 0.3333333333333333;
+        let t62: crate::Real = 0.03333333333333333;
+        let t63: crate::Real = 0.0011904761904761906;
+        let t64: crate::Real = 0.000022045855379188714;
+        let t65: crate::Real = t20 * t64;
         let t66: crate::Real = t65 - t63;
-        let t67: crate::Real = t61 * t66;
-        let t68: crate::Real = t60 + t67;
-        let t69: crate::Real = t18 * t61;
-        let t70: crate::Real = 0.0011904761904761906;
-        let t71: crate::Real = t36 * t70;
-        let t72: crate::Real = -t71;
-        let t73: crate::Real = 0.001388888888888889;
-        let t74: crate::Real = t40 * t73;
-        let t75: crate::Real = t72 - t74;
-        let t76: crate::Real = t69 * t75;
-        let t77: crate::Real = t68 + t76;
-        let t78: crate::Real = t53 * t53;
-        let t79: crate::Real = 0.00017361111111111112;
-        let t80: crate::Real = t30 * t79;
-        let t81: crate::Real = 0.0001984126984126984;
-        let t82: crate::Real = t35 * t81;
-        let t83: crate::Real = t80 - t82;
-        let t84: crate::Real = t78 * t83;
-        let t85: crate::Real = t77 + t84;
-        let t86: crate::Real = t18 * t78;
-        let t87: crate::Real = 0.000022045855379188714;
-        let t88: crate::Real = t36 * t87;
-        let t89: crate::Real = 0.0000248015873015873;
-        let t90: crate::Real = t40 * t89;
-        let t91: crate::Real = t88 + t90;
-        let t92: crate::Real = t86 * t91;
-        let t93: crate::Real = t85 + t92;
-        let t94: crate::Real = t61 * t61;
-        let t95: crate::Real = 0.00000248015873015873;
-        let t96: crate::Real = t30 * t95;
-        let t97: crate::Real = 0.0000027557319223985893;
-        let t98: crate::Real = t35 * t97;
-        let t99: crate::Real = t98 - t96;
-        let t100: crate::Real = t94 * t99;
-        let t101: crate::Real = t93 + t100;
-        let t102: crate::Real = t101 - t32;
-        let t135: crate::Real = t7 * t18;
-        let t136: crate::Real = t11 * t135;
-        let t137: crate::Real = t26 * t136;
-        let t138: crate::Real = t33 * t137;
-        let t139: crate::Real = t37 * t138;
-        let t140: crate::Real = t26 * t28;
-        let t141: crate::Real = t27 * t140;
-        let t142: crate::Real = t31 * t141;
-        let t143: crate::Real = t7 * t45;
-        let t144: crate::Real = t11 * t143;
-        let t145: crate::Real = t26 * t144;
-        let t146: crate::Real = t27 * t145;
-        let t147: crate::Real = t46 * t146;
-        let t148: crate::Real = t7 * t53;
-        let t149: crate::Real = t11 * t148;
-        let t150: crate::Real = t26 * t149;
-        let t151: crate::Real = t33 * t150;
-        let t152: crate::Real = t54 * t151;
-        let t153: crate::Real = t147 + t152;
-        let t154: crate::Real = t7 * t61;
-        let t155: crate::Real = t11 * t154;
-        let t156: crate::Real = t26 * t155;
-        let t157: crate::Real = t27 * t156;
-        let t158: crate::Real = t62 * t157;
-        let t159: crate::Real = t153 - t158;
-        let t160: crate::Real = t7 * t69;
-        let t161: crate::Real = t11 * t160;
-        let t162: crate::Real = t26 * t161;
-        let t163: crate::Real = t33 * t162;
-        let t164: crate::Real = t70 * t163;
-        let t165: crate::Real = t159 - t164;
-        let t166: crate::Real = t7 * t78;
-        let t167: crate::Real = t11 * t166;
-        let t168: crate::Real = t26 * t167;
-        let t169: crate::Real = t27 * t168;
-        let t170: crate::Real = t79 * t169;
-        let t171: crate::Real = t165 + t170;
-        let t172: crate::Real = t7 * t86;
-        let t173: crate::Real = t11 * t172;
-        let t174: crate::Real = t26 * t173;
-        let t175: crate::Real = t33 * t174;
-        let t176: crate::Real = t87 * t175;
-        let t177: crate::Real = t171 + t176;
-        let t178: crate::Real = t7 * t94;
-        let t179: crate::Real = t11 * t178;
-        let t180: crate::Real = t26 * t179;
-        let t181: crate::Real = t27 * t180;
-        let t182: crate::Real = t95 * t181;
-        let t183: crate::Real = t177 - t182;
-        let t184: crate::Real = t183 - t139;
-        let t185: crate::Real = t184 - t142;
-        let t188: crate::Real = t31 * t36;
-        let t189: crate::Real = t40 + t188;
-        let t190: crate::Real = t30 * t37;
-        let t191: crate::Real = t31 * t35;
-        let t192: crate::Real = t191 - t190;
-        let t193: crate::Real = t18 * t192;
-        let t194: crate::Real = t189 + t193;
-        let t195: crate::Real = t36 * t46;
-        let t196: crate::Real = -t195;
-        let t197: crate::Real = t40 * t48;
-        let t198: crate::Real = t196 - t197;
-        let t199: crate::Real = t45 * t198;
-        let t200: crate::Real = t194 + t199;
-        let t201: crate::Real = t30 * t54;
-        let t202: crate::Real = t35 * t56;
-        let t203: crate::Real = t201 - t202;
-        let t204: crate::Real = t53 * t203;
-        let t205: crate::Real = t200 + t204;
-        let t206: crate::Real = t36 * t62;
-        let t207: crate::Real = t40 * t64;
-        let t208: crate::Real = t206 + t207;
-        let t209: crate::Real = t61 * t208;
-        let t210: crate::Real = t205 + t209;
-        let t211: crate::Real = t30 * t70;
-        let t212: crate::Real = t35 * t73;
-        let t213: crate::Real = t212 - t211;
-        let t214: crate::Real = t69 * t213;
-        let t215: crate::Real = t210 + t214;
-        let t216: crate::Real = t36 * t79;
-        let t217: crate::Real = -t216;
-        let t218: crate::Real = t40 * t81;
-        let t219: crate::Real = t217 - t218;
-        let t220: crate::Real = t78 * t219;
-        let t221: crate::Real = t215 + t220;
-        let t222: crate::Real = t30 * t87;
-        let t223: crate::Real = t35 * t89;
-        let t224: crate::Real = t222 - t223;
-        let t225: crate::Real = t86 * t224;
-        let t226: crate::Real = t221 + t225;
-        let t227: crate::Real = t36 * t95;
-        let t228: crate::Real = t40 * t97;
-        let t229: crate::Real = t227 + t228;
-        let t230: crate::Real = t94 * t229;
-        let t231: crate::Real = t226 + t230;
-        let t251: crate::Real = t27 * t137;
-        let t252: crate::Real = t37 * t251;
-        let t253: crate::Real = t33 * t140;
-        let t254: crate::Real = t31 * t253;
-        let t255: crate::Real = t33 * t145;
-        let t256: crate::Real = t46 * t255;
-        let t257: crate::Real = t254 - t256;
-        let t258: crate::Real = t27 * t150;
-        let t259: crate::Real = t54 * t258;
-        let t260: crate::Real = t257 + t259;
-        let t261: crate::Real = t33 * t156;
-        let t262: crate::Real = t62 * t261;
-        let t263: crate::Real = t260 + t262;
-        let t264: crate::Real = t27 * t162;
-        let t265: crate::Real = t70 * t264;
-        let t266: crate::Real = t263 - t265;
-        let t267: crate::Real = t33 * t168;
-        let t268: crate::Real = t79 * t267;
-        let t269: crate::Real = t266 - t268;
-        let t270: crate::Real = t27 * t174;
-        let t271: crate::Real = t87 * t270;
-        let t272: crate::Real = t269 + t271;
-        let t273: crate::Real = t33 * t180;
-        let t274: crate::Real = t95 * t273;
-        let t275: crate::Real = t272 + t274;
-        let t276: crate::Real = t275 - t252;
-        [t102, t185, t231, t276]
+        let t67: crate::Real = t20 * t66;
+        let t68: crate::Real = t62 + t67;
+        let t69: crate::Real = t20 * t68;
+        let t70: crate::Real = t69 - t61;
+        let t71: crate::Real = t18 * t70;
+        let t79: crate::Real = 0.125;
+        let t80: crate::Real = 0.006944444444444444;
+        let t81: crate::Real = 0.00017361111111111112;
+        let t82: crate::Real = 0.00000248015873015873;
+        let t83: crate::Real = t20 * t82;
+        let t84: crate::Real = t83 - t81;
+        let t85: crate::Real = t20 * t84;
+        let t86: crate::Real = t80 + t85;
+        let t87: crate::Real = t20 * t86;
+        let t88: crate::Real = t87 - t79;
+        let t89: crate::Real = t20 * t88;
+        let t90: crate::Real = t37 + t89;
+        [t32, t47, t71, t90]
     } else {
-        let t103: crate::Real = crate::math::sin(t18);
-        let t104: crate::Real = t7 * t103;
-        let t105: crate::Real = t33 * t104;
-        let t106: crate::Real = t14 / t18;
-        let t107: crate::Real = t105 * t106;
-        let t108: crate::Real = 1.0;
-        let t109: crate::Real = crate::math::cos(t18);
-        let t110: crate::Real = t108 - t109;
-        let t111: crate::Real = t7 * t110;
-        let t112: crate::Real = t27 * t111;
-        let t113: crate::Real = t112 * t106;
-        let t114: crate::Real = t107 - t113;
-        let t115: crate::Real = t19 * t114;
-        let t116: crate::Real = t27 * t28;
-        let t117: crate::Real = t103 * t116;
-        let t118: crate::Real = t117 * t106;
-        let t119: crate::Real = t28 * t33;
-        let t120: crate::Real = t109 * t119;
-        let t121: crate::Real = t120 * t106;
-        let t122: crate::Real = t28 * t103;
-        let t123: crate::Real = t33 * t122;
-        let t124: crate::Real = t14 / t45;
-        let t125: crate::Real = t123 * t124;
-        let t126: crate::Real = t121 - t125;
-        let t127: crate::Real = t28 * t110;
-        let t128: crate::Real = t27 * t127;
-        let t129: crate::Real = t128 * t124;
-        let t130: crate::Real = t126 + t129;
-        let t131: crate::Real = t130 - t118;
-        let t132: crate::Real = t25 * t131;
-        let t133: crate::Real = t115 + t132;
-        let t186: crate::Real = t26 * t131;
-        let t232: crate::Real = t7 * t27;
-        let t233: crate::Real = t103 * t232;
-        let t234: crate::Real = t233 * t106;
-        let t235: crate::Real = t33 * t111;
-        let t236: crate::Real = t235 * t106;
-        let t237: crate::Real = t234 + t236;
-        let t238: crate::Real = t19 * t237;
-        let t239: crate::Real = t109 * t116;
-        let t240: crate::Real = t239 * t106;
-        let t241: crate::Real = t123 * t106;
-        let t242: crate::Real = t240 + t241;
-        let t243: crate::Real = t117 * t124;
-        let t244: crate::Real = t242 - t243;
-        let t245: crate::Real = t33 * t127;
-        let t246: crate::Real = t245 * t124;
-        let t247: crate::Real = t244 - t246;
-        let t248: crate::Real = t25 * t247;
-        let t249: crate::Real = t238 + t248;
-        let t277: crate::Real = t26 * t247;
-        [t133, t186, t249, t277]
+        let sc33 = crate::math::sincos(t18);
+        let t33: crate::Real = sc33.0;
+        let t48: crate::Real = sc33.1;
+        let t34: crate::Real = t14 / t18;
+        let t35: crate::Real = t33 * t34;
+        let t49: crate::Real = t19 - t48;
+        let t50: crate::Real = t49 * t34;
+        let t72: crate::Real = t48 * t34;
+        let t73: crate::Real = t14 / t20;
+        let t74: crate::Real = t33 * t73;
+        let t75: crate::Real = t72 - t74;
+        let t91: crate::Real = t49 * t73;
+        let t92: crate::Real = t35 - t91;
+        [t35, t50, t75, t92]
     };
-    let t134: crate::Real = g0[0usize];
-    let t187: crate::Real = g0[1usize];
-    let t250: crate::Real = g0[2usize];
-    let t278: crate::Real = g0[3usize];
-    [[t134, t187], [t250, t278], [t25, t26]]
+    let t36: crate::Real = g0[0usize];
+    let t51: crate::Real = g0[1usize];
+    let t76: crate::Real = g0[2usize];
+    let t93: crate::Real = g0[3usize];
+    let t52: crate::Real = t1 * t8;
+    let t53: crate::Real = t1 * t12;
+    let t54: crate::Real = t53 * t15;
+    let t55: crate::Real = t6 * t6;
+    let t56: crate::Real = t14 / t55;
+    let t57: crate::Real = t13 * t56;
+    let t58: crate::Real = -t57;
+    let t59: crate::Real = t7 * t54;
+    let t60: crate::Real = t7 * t58;
+    let t77: crate::Real = t59 * t76;
+    let t78: crate::Real = t60 * t76;
+    let t94: crate::Real = t59 * t93;
+    let t95: crate::Real = t60 * t93;
+    let sc96 = crate::math::sincos(t0);
+    let t100: crate::Real = sc96.0;
+    let t96: crate::Real = sc96.1;
+    let t97: crate::Real = t7 * t11;
+    let t98: crate::Real = t77 * t97;
+    let t99: crate::Real = t96 * t98;
+    let t101: crate::Real = t94 * t97;
+    let t102: crate::Real = t100 * t101;
+    let t103: crate::Real = t99 - t102;
+    let t104: crate::Real = t7 * t36;
+    let t105: crate::Real = t96 * t104;
+    let t106: crate::Real = t7 * t51;
+    let t107: crate::Real = t100 * t106;
+    let t108: crate::Real = t105 - t107;
+    let t109: crate::Real = t52 * t108;
+    let t110: crate::Real = t103 + t109;
+    let t111: crate::Real = t78 * t97;
+    let t112: crate::Real = t96 * t111;
+    let t113: crate::Real = t95 * t97;
+    let t114: crate::Real = t100 * t113;
+    let t115: crate::Real = t112 - t114;
+    let t116: crate::Real = t98 * t100;
+    let t117: crate::Real = t96 * t101;
+    let t118: crate::Real = t116 + t117;
+    let t119: crate::Real = t100 * t104;
+    let t120: crate::Real = t96 * t106;
+    let t121: crate::Real = t119 + t120;
+    let t122: crate::Real = t52 * t121;
+    let t123: crate::Real = t118 + t122;
+    let t124: crate::Real = t100 * t111;
+    let t125: crate::Real = t96 * t113;
+    let t126: crate::Real = t124 + t125;
+    [[t110, t115], [t123, t126], [t59, t60]]
 }
 /**Gyro yaw rate (seed 000 eq. 13). Predicted columns: gyro_z.
 
@@ -1504,7 +973,7 @@ pub fn step_exact_jac_p(
 * `p`: [r, L]
 * returns [gyro_z]
 
-4 arithmetic operations (4 before common-subexpression elimination).*/
+5 arithmetic operations (5 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro(
     x: &[crate::Real; 3usize],
@@ -1518,8 +987,10 @@ pub fn obs_gyro(
     let t4: crate::Real = crate::math::sin(t1);
     let t5: crate::Real = t0 * t2;
     let t6: crate::Real = t4 * t5;
-    let t7: crate::Real = t6 / t3;
-    [t7]
+    let t7: crate::Real = 1.0;
+    let t8: crate::Real = t7 / t3;
+    let t9: crate::Real = t6 * t8;
+    [t9]
 }
 /**Jacobian of `obs_gyro` with respect to the state (seed 001 eq. 7 for range-bearing).
 
@@ -1545,7 +1016,7 @@ pub fn obs_gyro_jac_x(
 * `p`: [r, L]
 * returns rows [gyro_z], columns [r, L]
 
-8 arithmetic operations (9 before common-subexpression elimination).*/
+10 arithmetic operations (11 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
     x: &[crate::Real; 3usize],
@@ -1558,13 +1029,16 @@ pub fn obs_gyro_jac_p(
     let t3: crate::Real = p[1usize];
     let t4: crate::Real = crate::math::sin(t1);
     let t5: crate::Real = t0 * t4;
-    let t6: crate::Real = t5 / t3;
-    let t7: crate::Real = t3 * t3;
-    let t8: crate::Real = t0 * t2;
-    let t9: crate::Real = t4 * t8;
-    let t10: crate::Real = t9 / t7;
-    let t11: crate::Real = -t10;
-    [[t6, t11]]
+    let t6: crate::Real = 1.0;
+    let t7: crate::Real = t6 / t3;
+    let t8: crate::Real = t5 * t7;
+    let t9: crate::Real = t3 * t3;
+    let t10: crate::Real = t0 * t2;
+    let t11: crate::Real = t4 * t10;
+    let t12: crate::Real = t6 / t9;
+    let t13: crate::Real = t11 * t12;
+    let t14: crate::Real = -t13;
+    [[t8, t14]]
 }
 /**Range and bearing to a known landmark (seed 001 eq. 6). Predicted columns: range, bearing.
 
@@ -1662,7 +1136,7 @@ pub fn obs_landmark_jac_p(
 * `p`: [r, L]
 * returns [w, alpha]
 
-11 arithmetic operations (19 before common-subexpression elimination).*/
+12 arithmetic operations (20 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_twist(
     twist: &[crate::Real; 3usize],
@@ -1676,14 +1150,17 @@ pub fn inverse_twist(
     let t5: crate::Real = t3 * t4;
     let t6: crate::Real = t0 * t0;
     let t7: crate::Real = crate::math::atan2(t5, t6);
-    let t8: crate::Real = crate::math::cos(t7);
+    let sc8 = crate::math::sincos(t7);
+    let t10: crate::Real = sc8.0;
+    let t8: crate::Real = sc8.1;
     let t9: crate::Real = t0 * t8;
-    let t10: crate::Real = crate::math::sin(t7);
     let t11: crate::Real = t1 * t3;
     let t12: crate::Real = t10 * t11;
     let t13: crate::Real = t9 + t12;
-    let t14: crate::Real = t13 / t2;
-    [t14, t7]
+    let t14: crate::Real = 1.0;
+    let t15: crate::Real = t14 / t2;
+    let t16: crate::Real = t13 * t15;
+    [t16, t7]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
 
@@ -1692,7 +1169,7 @@ pub fn inverse_twist(
 * `p`: [r, L]
 * returns [w, alpha]
 
-41 arithmetic operations (457 before common-subexpression elimination).*/
+39 arithmetic operations (348 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[crate::Real; 3usize],
@@ -1711,53 +1188,52 @@ pub fn inverse_increment(
     {
         let t7: crate::Real = t0 * t6;
         let t8: crate::Real = t1 * t1;
-        let t9: crate::Real = t0 * t8;
-        let t10: crate::Real = 0.16666666666666666;
-        let t11: crate::Real = t9 * t10;
-        let t12: crate::Real = t11 * t6;
-        let t13: crate::Real = t7 + t12;
-        let t14: crate::Real = t8 * t8;
-        let t15: crate::Real = t0 * t14;
-        let t16: crate::Real = 0.019444444444444445;
-        let t17: crate::Real = t15 * t16;
-        let t18: crate::Real = t17 * t6;
-        let t19: crate::Real = t13 + t18;
-        let t20: crate::Real = t1 * t8;
-        let t21: crate::Real = t20 * t20;
-        let t22: crate::Real = t0 * t21;
-        let t23: crate::Real = 0.00205026455026455;
-        let t24: crate::Real = t22 * t23;
-        let t25: crate::Real = t24 * t6;
-        let t26: crate::Real = t19 + t25;
-        let t27: crate::Real = t14 * t14;
-        let t28: crate::Real = t0 * t27;
-        let t29: crate::Real = 0.0002099867724867725;
-        let t30: crate::Real = t28 * t29;
-        let t31: crate::Real = t30 * t6;
-        let t32: crate::Real = t26 + t31;
-        [t32]
+        let t9: crate::Real = 0.16666666666666666;
+        let t10: crate::Real = t0 * t9;
+        let t11: crate::Real = t10 * t6;
+        let t12: crate::Real = 0.019444444444444445;
+        let t13: crate::Real = t0 * t12;
+        let t14: crate::Real = t13 * t6;
+        let t15: crate::Real = 0.00205026455026455;
+        let t16: crate::Real = t0 * t15;
+        let t17: crate::Real = t16 * t6;
+        let t18: crate::Real = t0 * t8;
+        let t19: crate::Real = 0.0002099867724867725;
+        let t20: crate::Real = t18 * t19;
+        let t21: crate::Real = t20 * t6;
+        let t22: crate::Real = t17 + t21;
+        let t23: crate::Real = t8 * t22;
+        let t24: crate::Real = t14 + t23;
+        let t25: crate::Real = t8 * t24;
+        let t26: crate::Real = t11 + t25;
+        let t27: crate::Real = t8 * t26;
+        let t28: crate::Real = t7 + t27;
+        [t28]
     } else {
-        let t33: crate::Real = crate::math::sin(t1);
-        let t34: crate::Real = t0 * t1;
-        let t35: crate::Real = t2 * t33;
-        let t36: crate::Real = t34 / t35;
-        [t36]
+        let t29: crate::Real = crate::math::sin(t1);
+        let t30: crate::Real = t0 * t1;
+        let t31: crate::Real = t2 * t29;
+        let t32: crate::Real = t5 / t31;
+        let t33: crate::Real = t30 * t32;
+        [t33]
     };
-    let t37: crate::Real = g0[0usize];
-    let t38: crate::Real = t1 * t37;
-    let t39: crate::Real = t4 * t38;
-    let t40: crate::Real = t39 * t6;
-    let t41: crate::Real = t37 * t37;
-    let t42: crate::Real = crate::math::atan2(t40, t41);
-    let t43: crate::Real = crate::math::cos(t42);
-    let t44: crate::Real = t37 * t43;
-    let t45: crate::Real = crate::math::sin(t42);
-    let t46: crate::Real = t1 * t4;
-    let t47: crate::Real = t45 * t46;
-    let t48: crate::Real = t47 * t6;
-    let t49: crate::Real = t44 + t48;
-    let t50: crate::Real = t49 / t3;
-    [t50, t42]
+    let t34: crate::Real = g0[0usize];
+    let t35: crate::Real = t1 * t34;
+    let t36: crate::Real = t4 * t35;
+    let t37: crate::Real = t36 * t6;
+    let t38: crate::Real = t34 * t34;
+    let t39: crate::Real = crate::math::atan2(t37, t38);
+    let sc40 = crate::math::sincos(t39);
+    let t42: crate::Real = sc40.0;
+    let t40: crate::Real = sc40.1;
+    let t41: crate::Real = t34 * t40;
+    let t43: crate::Real = t1 * t4;
+    let t44: crate::Real = t42 * t43;
+    let t45: crate::Real = t44 * t6;
+    let t46: crate::Real = t41 + t45;
+    let t47: crate::Real = t5 / t3;
+    let t48: crate::Real = t46 * t47;
+    [t48, t39]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
 
@@ -1768,7 +1244,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5]]
 
-311 arithmetic operations (3177 before common-subexpression elimination).*/
+97 arithmetic operations (1666 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1787,361 +1263,150 @@ pub fn step_exact_linearized_flat(
     let t7: crate::Real = p[0usize];
     let t8: crate::Real = p[1usize];
     let t9: crate::Real = dt;
-    let t10: crate::Real = crate::math::cos(t4);
+    let sc10 = crate::math::sincos(t4);
+    let t14: crate::Real = sc10.0;
+    let t10: crate::Real = sc10.1;
     let t11: crate::Real = t3 * t7;
     let t12: crate::Real = t10 * t11;
     let t13: crate::Real = t5 + t12;
-    let t14: crate::Real = crate::math::sin(t4);
     let t15: crate::Real = t11 * t14;
-    let t16: crate::Real = t15 / t8;
-    let t17: crate::Real = t6 + t16;
-    let t18: crate::Real = t9 * t17;
-    let t19: crate::Real = crate::math::sin(t2);
-    let t26: crate::Real = crate::math::cos(t2);
-    let t27: crate::Real = t9 * t13;
-    let t28: crate::Real = t26 * t27;
-    let t30: crate::Real = t18 * t18;
-    let t82: crate::Real = 1.0;
-    let t96: crate::Real = t19 * t27;
-    let t169: crate::Real = t9 * t82;
-    let g0: [crate::Real; 8usize] = if crate::math::fabs(t18)
+    let t16: crate::Real = 1.0;
+    let t17: crate::Real = t16 / t8;
+    let t18: crate::Real = t15 * t17;
+    let t19: crate::Real = t6 + t18;
+    let t20: crate::Real = t9 * t19;
+    let t21: crate::Real = t20 * t20;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t20)
         < crate::math::series_switch(0.05)
     {
-        let t20: crate::Real = t9 * t18;
-        let t21: crate::Real = t13 * t20;
-        let t22: crate::Real = t19 * t21;
-        let t23: crate::Real = 0.5;
-        let t24: crate::Real = t22 * t23;
-        let t25: crate::Real = t0 - t24;
-        let t29: crate::Real = t25 + t28;
-        let t31: crate::Real = t9 * t30;
-        let t32: crate::Real = t13 * t31;
-        let t33: crate::Real = t26 * t32;
-        let t34: crate::Real = 0.16666666666666666;
-        let t35: crate::Real = t33 * t34;
-        let t36: crate::Real = t29 - t35;
-        let t37: crate::Real = t18 * t30;
-        let t38: crate::Real = t9 * t37;
-        let t39: crate::Real = t13 * t38;
-        let t40: crate::Real = t19 * t39;
-        let t41: crate::Real = 0.041666666666666664;
-        let t42: crate::Real = t40 * t41;
-        let t43: crate::Real = t36 + t42;
-        let t44: crate::Real = t30 * t30;
-        let t45: crate::Real = t9 * t44;
-        let t46: crate::Real = t13 * t45;
-        let t47: crate::Real = t26 * t46;
-        let t48: crate::Real = 0.008333333333333333;
-        let t49: crate::Real = t47 * t48;
-        let t50: crate::Real = t43 + t49;
-        let t51: crate::Real = t18 * t44;
-        let t52: crate::Real = t9 * t51;
-        let t53: crate::Real = t13 * t52;
-        let t54: crate::Real = t19 * t53;
-        let t55: crate::Real = 0.001388888888888889;
-        let t56: crate::Real = t54 * t55;
-        let t57: crate::Real = t50 - t56;
-        let t58: crate::Real = t37 * t37;
-        let t59: crate::Real = t9 * t58;
-        let t60: crate::Real = t13 * t59;
-        let t61: crate::Real = t26 * t60;
-        let t62: crate::Real = 0.0001984126984126984;
-        let t63: crate::Real = t61 * t62;
-        let t64: crate::Real = t57 - t63;
-        let t65: crate::Real = t18 * t58;
-        let t66: crate::Real = t9 * t65;
-        let t67: crate::Real = t13 * t66;
-        let t68: crate::Real = t19 * t67;
-        let t69: crate::Real = 0.0000248015873015873;
-        let t70: crate::Real = t68 * t69;
-        let t71: crate::Real = t64 + t70;
-        let t72: crate::Real = t44 * t44;
-        let t73: crate::Real = t9 * t72;
-        let t74: crate::Real = t13 * t73;
-        let t75: crate::Real = t26 * t74;
-        let t76: crate::Real = 0.0000027557319223985893;
-        let t77: crate::Real = t75 * t76;
-        let t78: crate::Real = t71 + t77;
-        let t93: crate::Real = t21 * t26;
-        let t94: crate::Real = t23 * t93;
-        let t95: crate::Real = t1 + t94;
-        let t97: crate::Real = t95 + t96;
-        let t98: crate::Real = t19 * t32;
-        let t99: crate::Real = t34 * t98;
-        let t100: crate::Real = t97 - t99;
-        let t101: crate::Real = t26 * t39;
-        let t102: crate::Real = t41 * t101;
-        let t103: crate::Real = t100 - t102;
-        let t104: crate::Real = t19 * t46;
-        let t105: crate::Real = t48 * t104;
-        let t106: crate::Real = t103 + t105;
-        let t107: crate::Real = t26 * t53;
-        let t108: crate::Real = t55 * t107;
-        let t109: crate::Real = t106 + t108;
-        let t110: crate::Real = t19 * t60;
-        let t111: crate::Real = t62 * t110;
-        let t112: crate::Real = t109 - t111;
-        let t113: crate::Real = t26 * t67;
-        let t114: crate::Real = t69 * t113;
-        let t115: crate::Real = t112 - t114;
-        let t116: crate::Real = t19 * t74;
-        let t117: crate::Real = t76 * t116;
-        let t118: crate::Real = t115 + t117;
-        let t128: crate::Real = t26 * t21;
-        let t129: crate::Real = t128 * t23;
-        let t130: crate::Real = t98 * t34;
-        let t131: crate::Real = t101 * t41;
-        let t132: crate::Real = t130 + t131;
-        let t133: crate::Real = t104 * t48;
-        let t134: crate::Real = t132 - t133;
-        let t135: crate::Real = t107 * t55;
-        let t136: crate::Real = t134 - t135;
-        let t137: crate::Real = t110 * t62;
-        let t138: crate::Real = t136 + t137;
-        let t139: crate::Real = t113 * t69;
-        let t140: crate::Real = t138 + t139;
-        let t141: crate::Real = t116 * t76;
-        let t142: crate::Real = t140 - t141;
-        let t143: crate::Real = t142 - t129;
-        let t144: crate::Real = t143 - t96;
-        let t150: crate::Real = t21 * t19;
-        let t151: crate::Real = t23 * t150;
-        let t152: crate::Real = t34 * t33;
-        let t153: crate::Real = t28 - t152;
-        let t154: crate::Real = t41 * t40;
-        let t155: crate::Real = t153 + t154;
-        let t156: crate::Real = t48 * t47;
-        let t157: crate::Real = t155 + t156;
-        let t158: crate::Real = t55 * t54;
-        let t159: crate::Real = t157 - t158;
-        let t160: crate::Real = t62 * t61;
-        let t161: crate::Real = t159 - t160;
-        let t162: crate::Real = t69 * t68;
-        let t163: crate::Real = t161 + t162;
-        let t164: crate::Real = t76 * t75;
-        let t165: crate::Real = t163 + t164;
-        let t166: crate::Real = t165 - t151;
-        let t170: crate::Real = t82 * t20;
-        let t171: crate::Real = t19 * t170;
-        let t172: crate::Real = t171 * t23;
-        let t173: crate::Real = t169 * t26;
-        let t174: crate::Real = t82 * t31;
-        let t175: crate::Real = t26 * t174;
-        let t176: crate::Real = t175 * t34;
-        let t177: crate::Real = t173 - t176;
-        let t178: crate::Real = t82 * t38;
-        let t179: crate::Real = t19 * t178;
-        let t180: crate::Real = t179 * t41;
-        let t181: crate::Real = t177 + t180;
-        let t182: crate::Real = t82 * t45;
-        let t183: crate::Real = t26 * t182;
-        let t184: crate::Real = t183 * t48;
-        let t185: crate::Real = t181 + t184;
-        let t186: crate::Real = t82 * t52;
-        let t187: crate::Real = t19 * t186;
-        let t188: crate::Real = t187 * t55;
-        let t189: crate::Real = t185 - t188;
-        let t190: crate::Real = t82 * t59;
-        let t191: crate::Real = t26 * t190;
-        let t192: crate::Real = t191 * t62;
-        let t193: crate::Real = t189 - t192;
-        let t194: crate::Real = t82 * t66;
-        let t195: crate::Real = t19 * t194;
-        let t196: crate::Real = t195 * t69;
-        let t197: crate::Real = t193 + t196;
-        let t198: crate::Real = t82 * t73;
-        let t199: crate::Real = t26 * t198;
-        let t200: crate::Real = t199 * t76;
-        let t201: crate::Real = t197 + t200;
-        let t202: crate::Real = t201 - t172;
-        let t212: crate::Real = t169 * t21;
-        let t213: crate::Real = t26 * t212;
-        let t214: crate::Real = 0.3333333333333333;
-        let t215: crate::Real = t213 * t214;
-        let t216: crate::Real = t169 * t27;
-        let t217: crate::Real = t19 * t216;
-        let t218: crate::Real = t23 * t217;
-        let t219: crate::Real = t169 * t32;
-        let t220: crate::Real = t19 * t219;
-        let t221: crate::Real = 0.125;
-        let t222: crate::Real = t220 * t221;
-        let t223: crate::Real = t169 * t39;
-        let t224: crate::Real = t26 * t223;
-        let t225: crate::Real = 0.03333333333333333;
-        let t226: crate::Real = t224 * t225;
-        let t227: crate::Real = t222 + t226;
-        let t228: crate::Real = t169 * t46;
-        let t229: crate::Real = t19 * t228;
-        let t230: crate::Real = 0.006944444444444444;
-        let t231: crate::Real = t229 * t230;
-        let t232: crate::Real = t227 - t231;
-        let t233: crate::Real = t169 * t53;
-        let t234: crate::Real = t26 * t233;
-        let t235: crate::Real = 0.0011904761904761906;
-        let t236: crate::Real = t234 * t235;
-        let t237: crate::Real = t232 - t236;
-        let t238: crate::Real = t169 * t60;
-        let t239: crate::Real = t19 * t238;
-        let t240: crate::Real = 0.00017361111111111112;
-        let t241: crate::Real = t239 * t240;
-        let t242: crate::Real = t237 + t241;
-        let t243: crate::Real = t169 * t67;
-        let t244: crate::Real = t26 * t243;
-        let t245: crate::Real = 0.000022045855379188714;
-        let t246: crate::Real = t244 * t245;
-        let t247: crate::Real = t242 + t246;
-        let t248: crate::Real = t169 * t74;
-        let t249: crate::Real = t19 * t248;
-        let t250: crate::Real = 0.00000248015873015873;
-        let t251: crate::Real = t249 * t250;
-        let t252: crate::Real = t247 - t251;
-        let t253: crate::Real = t252 - t215;
-        let t254: crate::Real = t253 - t218;
-        let t269: crate::Real = t170 * t26;
-        let t270: crate::Real = t23 * t269;
-        let t271: crate::Real = t169 * t19;
-        let t272: crate::Real = t270 + t271;
-        let t273: crate::Real = t19 * t174;
-        let t274: crate::Real = t34 * t273;
-        let t275: crate::Real = t272 - t274;
-        let t276: crate::Real = t26 * t178;
-        let t277: crate::Real = t41 * t276;
-        let t278: crate::Real = t275 - t277;
-        let t279: crate::Real = t19 * t182;
-        let t280: crate::Real = t48 * t279;
-        let t281: crate::Real = t278 + t280;
-        let t282: crate::Real = t26 * t186;
-        let t283: crate::Real = t55 * t282;
-        let t284: crate::Real = t281 + t283;
-        let t285: crate::Real = t19 * t190;
-        let t286: crate::Real = t62 * t285;
-        let t287: crate::Real = t284 - t286;
-        let t288: crate::Real = t26 * t194;
-        let t289: crate::Real = t69 * t288;
-        let t290: crate::Real = t287 - t289;
-        let t291: crate::Real = t19 * t198;
-        let t292: crate::Real = t76 * t291;
-        let t293: crate::Real = t290 + t292;
-        let t302: crate::Real = t19 * t212;
-        let t303: crate::Real = t214 * t302;
-        let t304: crate::Real = t26 * t216;
-        let t305: crate::Real = t23 * t304;
-        let t306: crate::Real = t26 * t219;
-        let t307: crate::Real = t221 * t306;
-        let t308: crate::Real = t305 - t307;
-        let t309: crate::Real = t19 * t223;
-        let t310: crate::Real = t225 * t309;
-        let t311: crate::Real = t308 + t310;
-        let t312: crate::Real = t26 * t228;
-        let t313: crate::Real = t230 * t312;
-        let t314: crate::Real = t311 + t313;
-        let t315: crate::Real = t19 * t233;
-        let t316: crate::Real = t235 * t315;
-        let t317: crate::Real = t314 - t316;
-        let t318: crate::Real = t26 * t238;
-        let t319: crate::Real = t240 * t318;
-        let t320: crate::Real = t317 - t319;
-        let t321: crate::Real = t19 * t243;
-        let t322: crate::Real = t245 * t321;
-        let t323: crate::Real = t320 + t322;
-        let t324: crate::Real = t26 * t248;
-        let t325: crate::Real = t250 * t324;
-        let t326: crate::Real = t323 + t325;
-        let t327: crate::Real = t326 - t303;
-        [t78, t118, t144, t166, t202, t254, t293, t327]
+        let t22: crate::Real = 0.16666666666666666;
+        let t23: crate::Real = 0.008333333333333333;
+        let t24: crate::Real = 0.0001984126984126984;
+        let t25: crate::Real = 0.0000027557319223985893;
+        let t26: crate::Real = t21 * t25;
+        let t27: crate::Real = t26 - t24;
+        let t28: crate::Real = t21 * t27;
+        let t29: crate::Real = t23 + t28;
+        let t30: crate::Real = t21 * t29;
+        let t31: crate::Real = t30 - t22;
+        let t32: crate::Real = t21 * t31;
+        let t33: crate::Real = t16 + t32;
+        let t38: crate::Real = 0.5;
+        let t39: crate::Real = 0.041666666666666664;
+        let t40: crate::Real = 0.001388888888888889;
+        let t41: crate::Real = 0.0000248015873015873;
+        let t42: crate::Real = t21 * t41;
+        let t43: crate::Real = t40 - t42;
+        let t44: crate::Real = t21 * t43;
+        let t45: crate::Real = t44 - t39;
+        let t46: crate::Real = t21 * t45;
+        let t47: crate::Real = t38 + t46;
+        let t48: crate::Real = t20 * t47;
+        let t75: crate::Real = 0.3333333333333333;
+        let t76: crate::Real = 0.03333333333333333;
+        let t77: crate::Real = 0.0011904761904761906;
+        let t78: crate::Real = 0.000022045855379188714;
+        let t79: crate::Real = t21 * t78;
+        let t80: crate::Real = t79 - t77;
+        let t81: crate::Real = t21 * t80;
+        let t82: crate::Real = t76 + t81;
+        let t83: crate::Real = t21 * t82;
+        let t84: crate::Real = t83 - t75;
+        let t85: crate::Real = t20 * t84;
+        let t92: crate::Real = 0.125;
+        let t93: crate::Real = 0.006944444444444444;
+        let t94: crate::Real = 0.00017361111111111112;
+        let t95: crate::Real = 0.00000248015873015873;
+        let t96: crate::Real = t21 * t95;
+        let t97: crate::Real = t96 - t94;
+        let t98: crate::Real = t21 * t97;
+        let t99: crate::Real = t93 + t98;
+        let t100: crate::Real = t21 * t99;
+        let t101: crate::Real = t100 - t92;
+        let t102: crate::Real = t21 * t101;
+        let t103: crate::Real = t38 + t102;
+        [t33, t48, t85, t103]
     } else {
-        let t79: crate::Real = crate::math::sin(t18);
-        let t80: crate::Real = t27 * t79;
-        let t81: crate::Real = t26 * t80;
-        let t83: crate::Real = t82 / t18;
-        let t84: crate::Real = t81 * t83;
-        let t85: crate::Real = t0 + t84;
-        let t86: crate::Real = crate::math::cos(t18);
-        let t87: crate::Real = t82 - t86;
-        let t88: crate::Real = t27 * t87;
-        let t89: crate::Real = t19 * t88;
-        let t90: crate::Real = t89 * t83;
-        let t91: crate::Real = t85 - t90;
-        let t119: crate::Real = t79 * t96;
-        let t120: crate::Real = t119 * t83;
-        let t121: crate::Real = t1 + t120;
-        let t122: crate::Real = t26 * t88;
-        let t123: crate::Real = t122 * t83;
-        let t124: crate::Real = t121 + t123;
-        let t145: crate::Real = t96 * t79;
-        let t146: crate::Real = t145 * t83;
-        let t147: crate::Real = -t146;
-        let t148: crate::Real = t147 - t123;
-        let t167: crate::Real = t84 - t90;
-        let t203: crate::Real = t9 * t79;
-        let t204: crate::Real = t26 * t203;
-        let t205: crate::Real = t204 * t83;
-        let t206: crate::Real = t9 * t87;
-        let t207: crate::Real = t19 * t206;
-        let t208: crate::Real = t207 * t83;
-        let t209: crate::Real = t205 - t208;
-        let t210: crate::Real = t82 * t209;
-        let t255: crate::Real = t86 * t28;
-        let t256: crate::Real = t255 * t83;
-        let t257: crate::Real = t79 * t27;
-        let t258: crate::Real = t26 * t257;
-        let t259: crate::Real = t82 / t30;
-        let t260: crate::Real = t258 * t259;
-        let t261: crate::Real = t256 - t260;
-        let t262: crate::Real = t87 * t27;
-        let t263: crate::Real = t19 * t262;
-        let t264: crate::Real = t263 * t259;
-        let t265: crate::Real = t261 + t264;
-        let t266: crate::Real = t265 - t120;
-        let t267: crate::Real = t169 * t266;
-        let t294: crate::Real = t9 * t19;
-        let t295: crate::Real = t79 * t294;
-        let t296: crate::Real = t295 * t83;
-        let t297: crate::Real = t26 * t206;
-        let t298: crate::Real = t297 * t83;
-        let t299: crate::Real = t296 + t298;
-        let t300: crate::Real = t82 * t299;
-        let t328: crate::Real = t86 * t96;
-        let t329: crate::Real = t328 * t83;
-        let t330: crate::Real = t258 * t83;
-        let t331: crate::Real = t329 + t330;
-        let t332: crate::Real = t119 * t259;
-        let t333: crate::Real = t331 - t332;
-        let t334: crate::Real = t26 * t262;
-        let t335: crate::Real = t334 * t259;
-        let t336: crate::Real = t333 - t335;
-        let t337: crate::Real = t169 * t336;
-        [t91, t124, t148, t167, t210, t267, t300, t337]
+        let sc34 = crate::math::sincos(t20);
+        let t34: crate::Real = sc34.0;
+        let t49: crate::Real = sc34.1;
+        let t35: crate::Real = t16 / t20;
+        let t36: crate::Real = t34 * t35;
+        let t50: crate::Real = t16 - t49;
+        let t51: crate::Real = t50 * t35;
+        let t86: crate::Real = t49 * t35;
+        let t87: crate::Real = t16 / t21;
+        let t88: crate::Real = t34 * t87;
+        let t89: crate::Real = t86 - t88;
+        let t104: crate::Real = t50 * t87;
+        let t105: crate::Real = t36 - t104;
+        [t36, t51, t89, t105]
     };
-    let t92: crate::Real = g0[0usize];
-    let t125: crate::Real = g0[1usize];
-    let t149: crate::Real = g0[2usize];
-    let t168: crate::Real = g0[3usize];
-    let t211: crate::Real = g0[4usize];
-    let t268: crate::Real = g0[5usize];
-    let t301: crate::Real = g0[6usize];
-    let t338: crate::Real = g0[7usize];
-    let t126: crate::Real = t2 + t18;
-    let t127: crate::Real = 0.0;
+    let t37: crate::Real = g0[0usize];
+    let t52: crate::Real = g0[1usize];
+    let t90: crate::Real = g0[2usize];
+    let t106: crate::Real = g0[3usize];
+    let sc53 = crate::math::sincos(t2);
+    let t58: crate::Real = sc53.0;
+    let t53: crate::Real = sc53.1;
+    let t54: crate::Real = t9 * t37;
+    let t55: crate::Real = t13 * t54;
+    let t56: crate::Real = t53 * t55;
+    let t57: crate::Real = t0 + t56;
+    let t59: crate::Real = t9 * t52;
+    let t60: crate::Real = t13 * t59;
+    let t61: crate::Real = t58 * t60;
+    let t62: crate::Real = t57 - t61;
+    let t63: crate::Real = t55 * t58;
+    let t64: crate::Real = t1 + t63;
+    let t65: crate::Real = t53 * t60;
+    let t66: crate::Real = t64 + t65;
+    let t67: crate::Real = t2 + t20;
+    let t68: crate::Real = 0.0;
+    let t69: crate::Real = t58 * t55;
+    let t70: crate::Real = -t69;
+    let t71: crate::Real = t70 - t65;
+    let t72: crate::Real = t55 * t53;
+    let t73: crate::Real = t72 - t61;
+    let t74: crate::Real = t9 * t16;
+    let t91: crate::Real = t74 * t90;
+    let t107: crate::Real = t74 * t106;
+    let t108: crate::Real = t53 * t54;
+    let t109: crate::Real = t58 * t59;
+    let t110: crate::Real = t108 - t109;
+    let t111: crate::Real = t16 * t110;
+    let t112: crate::Real = t9 * t13;
+    let t113: crate::Real = t91 * t112;
+    let t114: crate::Real = t53 * t113;
+    let t115: crate::Real = t107 * t112;
+    let t116: crate::Real = t58 * t115;
+    let t117: crate::Real = t114 - t116;
+    let t118: crate::Real = t54 * t58;
+    let t119: crate::Real = t53 * t59;
+    let t120: crate::Real = t118 + t119;
+    let t121: crate::Real = t16 * t120;
+    let t122: crate::Real = t58 * t113;
+    let t123: crate::Real = t53 * t115;
+    let t124: crate::Real = t122 + t123;
     [
-        t92,
-        t125,
-        t126,
-        t82,
-        t127,
-        t149,
-        t127,
-        t82,
-        t168,
-        t127,
-        t127,
-        t82,
-        t211,
-        t268,
-        t301,
-        t338,
-        t127,
-        t169,
+        t62,
+        t66,
+        t67,
+        t16,
+        t68,
+        t71,
+        t68,
+        t16,
+        t73,
+        t68,
+        t68,
+        t16,
+        t111,
+        t117,
+        t121,
+        t124,
+        t68,
+        t74,
     ]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3).
@@ -2179,7 +1444,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2], step_exact_jac_p[3], step_exact_jac_p[4], step_exact_jac_p[5]]
 
-392 arithmetic operations (4052 before common-subexpression elimination).*/
+117 arithmetic operations (2230 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -2198,449 +1463,170 @@ pub fn step_exact_with_jac_p_flat(
     let t7: crate::Real = p[0usize];
     let t8: crate::Real = p[1usize];
     let t9: crate::Real = dt;
-    let t10: crate::Real = crate::math::cos(t4);
+    let sc10 = crate::math::sincos(t4);
+    let t14: crate::Real = sc10.0;
+    let t10: crate::Real = sc10.1;
     let t11: crate::Real = t3 * t7;
     let t12: crate::Real = t10 * t11;
     let t13: crate::Real = t5 + t12;
-    let t14: crate::Real = crate::math::sin(t4);
     let t15: crate::Real = t11 * t14;
-    let t16: crate::Real = t15 / t8;
-    let t17: crate::Real = t6 + t16;
-    let t18: crate::Real = t9 * t17;
-    let t19: crate::Real = crate::math::sin(t2);
-    let t23: crate::Real = 0.5;
-    let t26: crate::Real = crate::math::cos(t2);
-    let t27: crate::Real = t9 * t13;
-    let t34: crate::Real = 0.16666666666666666;
-    let t41: crate::Real = 0.041666666666666664;
-    let t48: crate::Real = 0.008333333333333333;
-    let t55: crate::Real = 0.001388888888888889;
-    let t62: crate::Real = 0.0001984126984126984;
-    let t69: crate::Real = 0.0000248015873015873;
-    let t76: crate::Real = 0.0000027557319223985893;
-    let t82: crate::Real = 1.0;
-    let t96: crate::Real = t19 * t27;
-    let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
+    let t16: crate::Real = 1.0;
+    let t17: crate::Real = t16 / t8;
+    let t18: crate::Real = t15 * t17;
+    let t19: crate::Real = t6 + t18;
+    let t20: crate::Real = t9 * t19;
+    let t21: crate::Real = t20 * t20;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t20)
         < crate::math::series_switch(0.05)
     {
-        let t20: crate::Real = t9 * t18;
-        let t21: crate::Real = t13 * t20;
-        let t22: crate::Real = t19 * t21;
-        let t24: crate::Real = t22 * t23;
-        let t25: crate::Real = t0 - t24;
-        let t28: crate::Real = t26 * t27;
-        let t29: crate::Real = t25 + t28;
-        let t30: crate::Real = t18 * t18;
-        let t31: crate::Real = t9 * t30;
-        let t32: crate::Real = t13 * t31;
-        let t33: crate::Real = t26 * t32;
-        let t35: crate::Real = t33 * t34;
-        let t36: crate::Real = t29 - t35;
-        let t37: crate::Real = t18 * t30;
-        let t38: crate::Real = t9 * t37;
-        let t39: crate::Real = t13 * t38;
-        let t40: crate::Real = t19 * t39;
-        let t42: crate::Real = t40 * t41;
-        let t43: crate::Real = t36 + t42;
-        let t44: crate::Real = t30 * t30;
-        let t45: crate::Real = t9 * t44;
-        let t46: crate::Real = t13 * t45;
-        let t47: crate::Real = t26 * t46;
-        let t49: crate::Real = t47 * t48;
-        let t50: crate::Real = t43 + t49;
-        let t51: crate::Real = t18 * t44;
-        let t52: crate::Real = t9 * t51;
-        let t53: crate::Real = t13 * t52;
-        let t54: crate::Real = t19 * t53;
-        let t56: crate::Real = t54 * t55;
-        let t57: crate::Real = t50 - t56;
-        let t58: crate::Real = t37 * t37;
-        let t59: crate::Real = t9 * t58;
-        let t60: crate::Real = t13 * t59;
-        let t61: crate::Real = t26 * t60;
-        let t63: crate::Real = t61 * t62;
-        let t64: crate::Real = t57 - t63;
-        let t65: crate::Real = t18 * t58;
-        let t66: crate::Real = t9 * t65;
-        let t67: crate::Real = t13 * t66;
-        let t68: crate::Real = t19 * t67;
-        let t70: crate::Real = t68 * t69;
-        let t71: crate::Real = t64 + t70;
-        let t72: crate::Real = t44 * t44;
-        let t73: crate::Real = t9 * t72;
-        let t74: crate::Real = t13 * t73;
-        let t75: crate::Real = t26 * t74;
-        let t77: crate::Real = t75 * t76;
-        let t78: crate::Real = t71 + t77;
-        let t93: crate::Real = t21 * t26;
-        let t94: crate::Real = t23 * t93;
-        let t95: crate::Real = t1 + t94;
-        let t97: crate::Real = t95 + t96;
-        let t98: crate::Real = t19 * t32;
-        let t99: crate::Real = t34 * t98;
-        let t100: crate::Real = t97 - t99;
-        let t101: crate::Real = t26 * t39;
-        let t102: crate::Real = t41 * t101;
-        let t103: crate::Real = t100 - t102;
-        let t104: crate::Real = t19 * t46;
-        let t105: crate::Real = t48 * t104;
-        let t106: crate::Real = t103 + t105;
-        let t107: crate::Real = t26 * t53;
-        let t108: crate::Real = t55 * t107;
-        let t109: crate::Real = t106 + t108;
-        let t110: crate::Real = t19 * t60;
-        let t111: crate::Real = t62 * t110;
-        let t112: crate::Real = t109 - t111;
-        let t113: crate::Real = t26 * t67;
-        let t114: crate::Real = t69 * t113;
-        let t115: crate::Real = t112 - t114;
-        let t116: crate::Real = t19 * t74;
-        let t117: crate::Real = t76 * t116;
-        let t118: crate::Real = t115 + t117;
-        let t128: crate::Real = t26 * t21;
-        let t129: crate::Real = t128 * t23;
-        let t130: crate::Real = t98 * t34;
-        let t131: crate::Real = t101 * t41;
-        let t132: crate::Real = t130 + t131;
-        let t133: crate::Real = t104 * t48;
-        let t134: crate::Real = t132 - t133;
-        let t135: crate::Real = t107 * t55;
-        let t136: crate::Real = t134 - t135;
-        let t137: crate::Real = t110 * t62;
-        let t138: crate::Real = t136 + t137;
-        let t139: crate::Real = t113 * t69;
-        let t140: crate::Real = t138 + t139;
-        let t141: crate::Real = t116 * t76;
-        let t142: crate::Real = t140 - t141;
-        let t143: crate::Real = t142 - t129;
-        let t144: crate::Real = t143 - t96;
-        let t150: crate::Real = t21 * t19;
-        let t151: crate::Real = t23 * t150;
-        let t152: crate::Real = t34 * t33;
-        let t153: crate::Real = t28 - t152;
-        let t154: crate::Real = t41 * t40;
-        let t155: crate::Real = t153 + t154;
-        let t156: crate::Real = t48 * t47;
-        let t157: crate::Real = t155 + t156;
-        let t158: crate::Real = t55 * t54;
-        let t159: crate::Real = t157 - t158;
-        let t160: crate::Real = t62 * t61;
-        let t161: crate::Real = t159 - t160;
-        let t162: crate::Real = t69 * t68;
-        let t163: crate::Real = t161 + t162;
-        let t164: crate::Real = t76 * t75;
-        let t165: crate::Real = t163 + t164;
-        let t166: crate::Real = t165 - t151;
-        [t78, t118, t144, t166]
+        let t22: crate::Real = 0.16666666666666666;
+        let t23: crate::Real = 0.008333333333333333;
+        let t24: crate::Real = 0.0001984126984126984;
+        let t25: crate::Real = 0.0000027557319223985893;
+        let t26: crate::Real = t21 * t25;
+        let t27: crate::Real = t26 - t24;
+        let t28: crate::Real = t21 * t27;
+        let t29: crate::Real = t23 + t28;
+        let t30: crate::Real = t21 * t29;
+        let t31: crate::Real = t30 - t22;
+        let t32: crate::Real = t21 * t31;
+        let t33: crate::Real = t16 + t32;
+        let t38: crate::Real = 0.5;
+        let t39: crate::Real = 0.041666666666666664;
+        let t40: crate::Real = 0.001388888888888889;
+        let t41: crate::Real = 0.0000248015873015873;
+        let t42: crate::Real = t21 * t41;
+        let t43: crate::Real = t40 - t42;
+        let t44: crate::Real = t21 * t43;
+        let t45: crate::Real = t44 - t39;
+        let t46: crate::Real = t21 * t45;
+        let t47: crate::Real = t38 + t46;
+        let t48: crate::Real = t20 * t47;
+        let t83: crate::Real = 0.3333333333333333;
+        let t84: crate::Real = 0.03333333333333333;
+        let t85: crate::Real = 0.0011904761904761906;
+        let t86: crate::Real = 0.000022045855379188714;
+        let t87: crate::Real = t21 * t86;
+        let t88: crate::Real = t87 - t85;
+        let t89: crate::Real = t21 * t88;
+        let t90: crate::Real = t84 + t89;
+        let t91: crate::Real = t21 * t90;
+        let t92: crate::Real = t91 - t83;
+        let t93: crate::Real = t20 * t92;
+        let t101: crate::Real = 0.125;
+        let t102: crate::Real = 0.006944444444444444;
+        let t103: crate::Real = 0.00017361111111111112;
+        let t104: crate::Real = 0.00000248015873015873;
+        let t105: crate::Real = t21 * t104;
+        let t106: crate::Real = t105 - t103;
+        let t107: crate::Real = t21 * t106;
+        let t108: crate::Real = t102 + t107;
+        let t109: crate::Real = t21 * t108;
+        let t110: crate::Real = t109 - t101;
+        let t111: crate::Real = t21 * t110;
+        let t112: crate::Real = t38 + t111;
+        [t33, t48, t93, t112]
     } else {
-        let t79: crate::Real = crate::math::sin(t18);
-        let t80: crate::Real = t27 * t79;
-        let t81: crate::Real = t26 * t80;
-        let t83: crate::Real = t82 / t18;
-        let t84: crate::Real = t81 * t83;
-        let t85: crate::Real = t0 + t84;
-        let t86: crate::Real = crate::math::cos(t18);
-        let t87: crate::Real = t82 - t86;
-        let t88: crate::Real = t27 * t87;
-        let t89: crate::Real = t19 * t88;
-        let t90: crate::Real = t89 * t83;
-        let t91: crate::Real = t85 - t90;
-        let t119: crate::Real = t79 * t96;
-        let t120: crate::Real = t119 * t83;
-        let t121: crate::Real = t1 + t120;
-        let t122: crate::Real = t26 * t88;
-        let t123: crate::Real = t122 * t83;
-        let t124: crate::Real = t121 + t123;
-        let t145: crate::Real = t96 * t79;
-        let t146: crate::Real = t145 * t83;
-        let t147: crate::Real = -t146;
-        let t148: crate::Real = t147 - t123;
-        let t167: crate::Real = t84 - t90;
-        [t91, t124, t148, t167]
+        let sc34 = crate::math::sincos(t20);
+        let t34: crate::Real = sc34.0;
+        let t49: crate::Real = sc34.1;
+        let t35: crate::Real = t16 / t20;
+        let t36: crate::Real = t34 * t35;
+        let t50: crate::Real = t16 - t49;
+        let t51: crate::Real = t50 * t35;
+        let t94: crate::Real = t49 * t35;
+        let t95: crate::Real = t16 / t21;
+        let t96: crate::Real = t34 * t95;
+        let t97: crate::Real = t94 - t96;
+        let t113: crate::Real = t50 * t95;
+        let t114: crate::Real = t36 - t113;
+        [t36, t51, t97, t114]
     };
-    let t92: crate::Real = g0[0usize];
-    let t125: crate::Real = g0[1usize];
-    let t149: crate::Real = g0[2usize];
-    let t168: crate::Real = g0[3usize];
-    let t126: crate::Real = t2 + t18;
-    let t127: crate::Real = 0.0;
-    let t169: crate::Real = t82 / t8;
-    let t170: crate::Real = t15 * t169;
-    let t171: crate::Real = t6 + t170;
-    let t172: crate::Real = t9 * t171;
-    let t173: crate::Real = t3 * t10;
-    let t174: crate::Real = t3 * t14;
-    let t175: crate::Real = t174 * t169;
-    let t176: crate::Real = t8 * t8;
-    let t177: crate::Real = t15 / t176;
-    let t178: crate::Real = -t177;
-    let t179: crate::Real = t9 * t175;
-    let t180: crate::Real = t9 * t178;
-    let t195: crate::Real = t172 * t172;
-    let g1: [crate::Real; 4usize] = if crate::math::fabs(t172)
-        < crate::math::series_switch(0.05)
-    {
-        let t181: crate::Real = t179 * t27;
-        let t182: crate::Real = t19 * t181;
-        let t183: crate::Real = t182 * t23;
-        let t184: crate::Real = t9 * t173;
-        let t185: crate::Real = t26 * t184;
-        let t186: crate::Real = t181 * t26;
-        let t187: crate::Real = 0.3333333333333333;
-        let t188: crate::Real = t186 * t187;
-        let t189: crate::Real = -t188;
-        let t190: crate::Real = t19 * t184;
-        let t191: crate::Real = t23 * t190;
-        let t192: crate::Real = t189 - t191;
-        let t193: crate::Real = t172 * t192;
-        let t194: crate::Real = t185 + t193;
-        let t196: crate::Real = 0.125;
-        let t197: crate::Real = t182 * t196;
-        let t198: crate::Real = t185 * t34;
-        let t199: crate::Real = t197 - t198;
-        let t200: crate::Real = t195 * t199;
-        let t201: crate::Real = t194 + t200;
-        let t202: crate::Real = t172 * t195;
-        let t203: crate::Real = 0.03333333333333333;
-        let t204: crate::Real = t186 * t203;
-        let t205: crate::Real = t190 * t41;
-        let t206: crate::Real = t204 + t205;
-        let t207: crate::Real = t202 * t206;
-        let t208: crate::Real = t201 + t207;
-        let t209: crate::Real = t195 * t195;
-        let t210: crate::Real = 0.006944444444444444;
-        let t211: crate::Real = t182 * t210;
-        let t212: crate::Real = t185 * t48;
-        let t213: crate::Real = t212 - t211;
-        let t214: crate::Real = t209 * t213;
-        let t215: crate::Real = t208 + t214;
-        let t216: crate::Real = t172 * t209;
-        let t217: crate::Real = 0.0011904761904761906;
-        let t218: crate::Real = t186 * t217;
-        let t219: crate::Real = -t218;
-        let t220: crate::Real = t190 * t55;
-        let t221: crate::Real = t219 - t220;
-        let t222: crate::Real = t216 * t221;
-        let t223: crate::Real = t215 + t222;
-        let t224: crate::Real = t202 * t202;
-        let t225: crate::Real = 0.00017361111111111112;
-        let t226: crate::Real = t182 * t225;
-        let t227: crate::Real = t185 * t62;
-        let t228: crate::Real = t226 - t227;
-        let t229: crate::Real = t224 * t228;
-        let t230: crate::Real = t223 + t229;
-        let t231: crate::Real = t172 * t224;
-        let t232: crate::Real = 0.000022045855379188714;
-        let t233: crate::Real = t186 * t232;
-        let t234: crate::Real = t190 * t69;
-        let t235: crate::Real = t233 + t234;
-        let t236: crate::Real = t231 * t235;
-        let t237: crate::Real = t230 + t236;
-        let t238: crate::Real = t209 * t209;
-        let t239: crate::Real = 0.00000248015873015873;
-        let t240: crate::Real = t182 * t239;
-        let t241: crate::Real = t185 * t76;
-        let t242: crate::Real = t241 - t240;
-        let t243: crate::Real = t238 * t242;
-        let t244: crate::Real = t237 + t243;
-        let t245: crate::Real = t244 - t183;
-        let t276: crate::Real = t9 * t172;
-        let t277: crate::Real = t13 * t276;
-        let t278: crate::Real = t180 * t277;
-        let t279: crate::Real = t26 * t278;
-        let t280: crate::Real = t187 * t279;
-        let t281: crate::Real = t180 * t27;
-        let t282: crate::Real = t19 * t281;
-        let t283: crate::Real = t23 * t282;
-        let t284: crate::Real = t9 * t195;
-        let t285: crate::Real = t13 * t284;
-        let t286: crate::Real = t180 * t285;
-        let t287: crate::Real = t19 * t286;
-        let t288: crate::Real = t196 * t287;
-        let t289: crate::Real = t9 * t202;
-        let t290: crate::Real = t13 * t289;
-        let t291: crate::Real = t180 * t290;
-        let t292: crate::Real = t26 * t291;
-        let t293: crate::Real = t203 * t292;
-        let t294: crate::Real = t288 + t293;
-        let t295: crate::Real = t9 * t209;
-        let t296: crate::Real = t13 * t295;
-        let t297: crate::Real = t180 * t296;
-        let t298: crate::Real = t19 * t297;
-        let t299: crate::Real = t210 * t298;
-        let t300: crate::Real = t294 - t299;
-        let t301: crate::Real = t9 * t216;
-        let t302: crate::Real = t13 * t301;
-        let t303: crate::Real = t180 * t302;
-        let t304: crate::Real = t26 * t303;
-        let t305: crate::Real = t217 * t304;
-        let t306: crate::Real = t300 - t305;
-        let t307: crate::Real = t9 * t224;
-        let t308: crate::Real = t13 * t307;
-        let t309: crate::Real = t180 * t308;
-        let t310: crate::Real = t19 * t309;
-        let t311: crate::Real = t225 * t310;
-        let t312: crate::Real = t306 + t311;
-        let t313: crate::Real = t9 * t231;
-        let t314: crate::Real = t13 * t313;
-        let t315: crate::Real = t180 * t314;
-        let t316: crate::Real = t26 * t315;
-        let t317: crate::Real = t232 * t316;
-        let t318: crate::Real = t312 + t317;
-        let t319: crate::Real = t9 * t238;
-        let t320: crate::Real = t13 * t319;
-        let t321: crate::Real = t180 * t320;
-        let t322: crate::Real = t19 * t321;
-        let t323: crate::Real = t239 * t322;
-        let t324: crate::Real = t318 - t323;
-        let t325: crate::Real = t324 - t280;
-        let t326: crate::Real = t325 - t283;
-        let t329: crate::Real = t23 * t186;
-        let t330: crate::Real = t190 + t329;
-        let t331: crate::Real = t182 * t187;
-        let t332: crate::Real = t23 * t185;
-        let t333: crate::Real = t332 - t331;
-        let t334: crate::Real = t172 * t333;
-        let t335: crate::Real = t330 + t334;
-        let t336: crate::Real = t186 * t196;
-        let t337: crate::Real = -t336;
-        let t338: crate::Real = t190 * t34;
-        let t339: crate::Real = t337 - t338;
-        let t340: crate::Real = t195 * t339;
-        let t341: crate::Real = t335 + t340;
-        let t342: crate::Real = t182 * t203;
-        let t343: crate::Real = t185 * t41;
-        let t344: crate::Real = t342 - t343;
-        let t345: crate::Real = t202 * t344;
-        let t346: crate::Real = t341 + t345;
-        let t347: crate::Real = t186 * t210;
-        let t348: crate::Real = t190 * t48;
-        let t349: crate::Real = t347 + t348;
-        let t350: crate::Real = t209 * t349;
-        let t351: crate::Real = t346 + t350;
-        let t352: crate::Real = t182 * t217;
-        let t353: crate::Real = t185 * t55;
-        let t354: crate::Real = t353 - t352;
-        let t355: crate::Real = t216 * t354;
-        let t356: crate::Real = t351 + t355;
-        let t357: crate::Real = t186 * t225;
-        let t358: crate::Real = -t357;
-        let t359: crate::Real = t190 * t62;
-        let t360: crate::Real = t358 - t359;
-        let t361: crate::Real = t224 * t360;
-        let t362: crate::Real = t356 + t361;
-        let t363: crate::Real = t182 * t232;
-        let t364: crate::Real = t185 * t69;
-        let t365: crate::Real = t363 - t364;
-        let t366: crate::Real = t231 * t365;
-        let t367: crate::Real = t362 + t366;
-        let t368: crate::Real = t186 * t239;
-        let t369: crate::Real = t190 * t76;
-        let t370: crate::Real = t368 + t369;
-        let t371: crate::Real = t238 * t370;
-        let t372: crate::Real = t367 + t371;
-        let t392: crate::Real = t19 * t278;
-        let t393: crate::Real = t187 * t392;
-        let t394: crate::Real = t26 * t281;
-        let t395: crate::Real = t23 * t394;
-        let t396: crate::Real = t26 * t286;
-        let t397: crate::Real = t196 * t396;
-        let t398: crate::Real = t395 - t397;
-        let t399: crate::Real = t19 * t291;
-        let t400: crate::Real = t203 * t399;
-        let t401: crate::Real = t398 + t400;
-        let t402: crate::Real = t26 * t297;
-        let t403: crate::Real = t210 * t402;
-        let t404: crate::Real = t401 + t403;
-        let t405: crate::Real = t19 * t303;
-        let t406: crate::Real = t217 * t405;
-        let t407: crate::Real = t404 - t406;
-        let t408: crate::Real = t26 * t309;
-        let t409: crate::Real = t225 * t408;
-        let t410: crate::Real = t407 - t409;
-        let t411: crate::Real = t19 * t315;
-        let t412: crate::Real = t232 * t411;
-        let t413: crate::Real = t410 + t412;
-        let t414: crate::Real = t26 * t321;
-        let t415: crate::Real = t239 * t414;
-        let t416: crate::Real = t413 + t415;
-        let t417: crate::Real = t416 - t393;
-        [t245, t326, t372, t417]
-    } else {
-        let t246: crate::Real = crate::math::sin(t172);
-        let t247: crate::Real = t9 * t246;
-        let t248: crate::Real = t26 * t247;
-        let t249: crate::Real = t82 / t172;
-        let t250: crate::Real = t248 * t249;
-        let t251: crate::Real = crate::math::cos(t172);
-        let t252: crate::Real = t82 - t251;
-        let t253: crate::Real = t9 * t252;
-        let t254: crate::Real = t19 * t253;
-        let t255: crate::Real = t254 * t249;
-        let t256: crate::Real = t250 - t255;
-        let t257: crate::Real = t173 * t256;
-        let t258: crate::Real = t246 * t96;
-        let t259: crate::Real = t258 * t249;
-        let t260: crate::Real = t27 * t26;
-        let t261: crate::Real = t251 * t260;
-        let t262: crate::Real = t261 * t249;
-        let t263: crate::Real = t27 * t246;
-        let t264: crate::Real = t26 * t263;
-        let t265: crate::Real = t82 / t195;
-        let t266: crate::Real = t264 * t265;
-        let t267: crate::Real = t262 - t266;
-        let t268: crate::Real = t27 * t252;
-        let t269: crate::Real = t19 * t268;
-        let t270: crate::Real = t269 * t265;
-        let t271: crate::Real = t267 + t270;
-        let t272: crate::Real = t271 - t259;
-        let t273: crate::Real = t179 * t272;
-        let t274: crate::Real = t257 + t273;
-        let t327: crate::Real = t180 * t272;
-        let t373: crate::Real = t9 * t19;
-        let t374: crate::Real = t246 * t373;
-        let t375: crate::Real = t374 * t249;
-        let t376: crate::Real = t26 * t253;
-        let t377: crate::Real = t376 * t249;
-        let t378: crate::Real = t375 + t377;
-        let t379: crate::Real = t173 * t378;
-        let t380: crate::Real = t251 * t96;
-        let t381: crate::Real = t380 * t249;
-        let t382: crate::Real = t264 * t249;
-        let t383: crate::Real = t381 + t382;
-        let t384: crate::Real = t258 * t265;
-        let t385: crate::Real = t383 - t384;
-        let t386: crate::Real = t26 * t268;
-        let t387: crate::Real = t386 * t265;
-        let t388: crate::Real = t385 - t387;
-        let t389: crate::Real = t179 * t388;
-        let t390: crate::Real = t379 + t389;
-        let t418: crate::Real = t180 * t388;
-        [t274, t327, t390, t418]
-    };
-    let t275: crate::Real = g1[0usize];
-    let t328: crate::Real = g1[1usize];
-    let t391: crate::Real = g1[2usize];
-    let t419: crate::Real = g1[3usize];
+    let t37: crate::Real = g0[0usize];
+    let t52: crate::Real = g0[1usize];
+    let t98: crate::Real = g0[2usize];
+    let t115: crate::Real = g0[3usize];
+    let sc53 = crate::math::sincos(t2);
+    let t58: crate::Real = sc53.0;
+    let t53: crate::Real = sc53.1;
+    let t54: crate::Real = t9 * t37;
+    let t55: crate::Real = t13 * t54;
+    let t56: crate::Real = t53 * t55;
+    let t57: crate::Real = t0 + t56;
+    let t59: crate::Real = t9 * t52;
+    let t60: crate::Real = t13 * t59;
+    let t61: crate::Real = t58 * t60;
+    let t62: crate::Real = t57 - t61;
+    let t63: crate::Real = t55 * t58;
+    let t64: crate::Real = t1 + t63;
+    let t65: crate::Real = t53 * t60;
+    let t66: crate::Real = t64 + t65;
+    let t67: crate::Real = t2 + t20;
+    let t68: crate::Real = 0.0;
+    let t69: crate::Real = t58 * t55;
+    let t70: crate::Real = -t69;
+    let t71: crate::Real = t70 - t65;
+    let t72: crate::Real = t55 * t53;
+    let t73: crate::Real = t72 - t61;
+    let t74: crate::Real = t3 * t10;
+    let t75: crate::Real = t3 * t14;
+    let t76: crate::Real = t75 * t17;
+    let t77: crate::Real = t8 * t8;
+    let t78: crate::Real = t16 / t77;
+    let t79: crate::Real = t15 * t78;
+    let t80: crate::Real = -t79;
+    let t81: crate::Real = t9 * t76;
+    let t82: crate::Real = t9 * t80;
+    let t99: crate::Real = t81 * t98;
+    let t100: crate::Real = t82 * t98;
+    let t116: crate::Real = t81 * t115;
+    let t117: crate::Real = t82 * t115;
+    let t118: crate::Real = t9 * t13;
+    let t119: crate::Real = t99 * t118;
+    let t120: crate::Real = t53 * t119;
+    let t121: crate::Real = t116 * t118;
+    let t122: crate::Real = t58 * t121;
+    let t123: crate::Real = t120 - t122;
+    let t124: crate::Real = t53 * t54;
+    let t125: crate::Real = t58 * t59;
+    let t126: crate::Real = t124 - t125;
+    let t127: crate::Real = t74 * t126;
+    let t128: crate::Real = t123 + t127;
+    let t129: crate::Real = t100 * t118;
+    let t130: crate::Real = t53 * t129;
+    let t131: crate::Real = t117 * t118;
+    let t132: crate::Real = t58 * t131;
+    let t133: crate::Real = t130 - t132;
+    let t134: crate::Real = t119 * t58;
+    let t135: crate::Real = t53 * t121;
+    let t136: crate::Real = t134 + t135;
+    let t137: crate::Real = t58 * t54;
+    let t138: crate::Real = t53 * t59;
+    let t139: crate::Real = t137 + t138;
+    let t140: crate::Real = t74 * t139;
+    let t141: crate::Real = t136 + t140;
+    let t142: crate::Real = t58 * t129;
+    let t143: crate::Real = t53 * t131;
+    let t144: crate::Real = t142 + t143;
     [
-        t92,
-        t125,
-        t126,
+        t62,
+        t66,
+        t67,
+        t16,
+        t68,
+        t71,
+        t68,
+        t16,
+        t73,
+        t68,
+        t68,
+        t16,
+        t128,
+        t133,
+        t141,
+        t144,
+        t81,
         t82,
-        t127,
-        t149,
-        t127,
-        t82,
-        t168,
-        t127,
-        t127,
-        t82,
-        t275,
-        t328,
-        t391,
-        t419,
-        t179,
-        t180,
     ]
 }
 /**The exact step with its Jacobians wrt the state and the parameters, from one shared computation: one step of calibration's forward sensitivities.
@@ -2676,7 +1662,7 @@ pub fn step_exact_with_jac_p(
 * `p`: [r, L]
 * returns [obs_gyro[0], obs_gyro_jac_x[0], obs_gyro_jac_x[1], obs_gyro_jac_x[2], obs_gyro_jac_p[0], obs_gyro_jac_p[1]]
 
-9 arithmetic operations (13 before common-subexpression elimination).*/
+11 arithmetic operations (16 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -2690,14 +1676,17 @@ pub fn obs_gyro_linearized_flat(
     let t4: crate::Real = crate::math::sin(t1);
     let t5: crate::Real = t0 * t2;
     let t6: crate::Real = t4 * t5;
-    let t7: crate::Real = t6 / t3;
-    let t8: crate::Real = 0.0;
-    let t9: crate::Real = t0 * t4;
-    let t10: crate::Real = t9 / t3;
-    let t11: crate::Real = t3 * t3;
-    let t12: crate::Real = t6 / t11;
-    let t13: crate::Real = -t12;
-    [t7, t8, t8, t8, t10, t13]
+    let t7: crate::Real = 1.0;
+    let t8: crate::Real = t7 / t3;
+    let t9: crate::Real = t6 * t8;
+    let t10: crate::Real = 0.0;
+    let t11: crate::Real = t0 * t4;
+    let t12: crate::Real = t11 * t8;
+    let t13: crate::Real = t3 * t3;
+    let t14: crate::Real = t7 / t13;
+    let t15: crate::Real = t6 * t14;
+    let t16: crate::Real = -t15;
+    [t9, t10, t10, t10, t12, t16]
 }
 /**Observation `gyro` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
 

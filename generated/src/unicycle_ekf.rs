@@ -110,11 +110,12 @@ pub fn step_euler(
     let t9: crate::Real = t3 * t7;
     let t10: crate::Real = t5 + t9;
     let t11: crate::Real = t4 + t6;
-    let t12: crate::Real = crate::math::cos(t2);
+    let sc12 = crate::math::sincos(t2);
+    let t16: crate::Real = sc12.0;
+    let t12: crate::Real = sc12.1;
     let t13: crate::Real = t8 * t10;
     let t14: crate::Real = t12 * t13;
     let t15: crate::Real = t0 + t14;
-    let t16: crate::Real = crate::math::sin(t2);
     let t17: crate::Real = t13 * t16;
     let t18: crate::Real = t1 + t17;
     let t19: crate::Real = t8 * t11;
@@ -148,11 +149,12 @@ pub fn step_euler_jac_x(
     let t6: crate::Real = t2 + t5;
     let t7: crate::Real = 1.0;
     let t8: crate::Real = 0.0;
-    let t9: crate::Real = crate::math::sin(t0);
+    let sc9 = crate::math::sincos(t0);
+    let t9: crate::Real = sc9.0;
+    let t13: crate::Real = sc9.1;
     let t10: crate::Real = t4 * t6;
     let t11: crate::Real = t9 * t10;
     let t12: crate::Real = -t11;
-    let t13: crate::Real = crate::math::cos(t0);
     let t14: crate::Real = t10 * t13;
     [[t7, t8, t12], [t8, t7, t14], [t8, t8, t7]]
 }
@@ -178,11 +180,12 @@ pub fn step_euler_jac_u(
     let t1: crate::Real = p[0usize];
     let t2: crate::Real = dt;
     let t3: crate::Real = 1.0;
-    let t4: crate::Real = crate::math::cos(t0);
+    let sc4 = crate::math::sincos(t0);
+    let t8: crate::Real = sc4.0;
+    let t4: crate::Real = sc4.1;
     let t5: crate::Real = t1 * t2;
     let t6: crate::Real = t4 * t5;
     let t7: crate::Real = 0.0;
-    let t8: crate::Real = crate::math::sin(t0);
     let t9: crate::Real = t5 * t8;
     let t10: crate::Real = t2 * t3;
     [[t6, t7], [t9, t7], [t7, t10]]
@@ -208,11 +211,12 @@ pub fn step_euler_jac_w(
     let t0: crate::Real = x[2usize];
     let t1: crate::Real = dt;
     let t2: crate::Real = 1.0;
-    let t3: crate::Real = crate::math::cos(t0);
+    let sc3 = crate::math::sincos(t0);
+    let t7: crate::Real = sc3.0;
+    let t3: crate::Real = sc3.1;
     let t4: crate::Real = t1 * t2;
     let t5: crate::Real = t3 * t4;
     let t6: crate::Real = 0.0;
-    let t7: crate::Real = crate::math::sin(t0);
     let t8: crate::Real = t4 * t7;
     [[t5, t6], [t8, t6], [t6, t4]]
 }
@@ -237,10 +241,11 @@ pub fn step_euler_jac_p(
     let t0: crate::Real = x[2usize];
     let t1: crate::Real = u[0usize];
     let t2: crate::Real = dt;
-    let t3: crate::Real = crate::math::cos(t0);
+    let sc3 = crate::math::sincos(t0);
+    let t6: crate::Real = sc3.0;
+    let t3: crate::Real = sc3.1;
     let t4: crate::Real = t1 * t2;
     let t5: crate::Real = t3 * t4;
-    let t6: crate::Real = crate::math::sin(t0);
     let t7: crate::Real = t4 * t6;
     let t8: crate::Real = 0.0;
     [t5, t7, t8]
@@ -254,7 +259,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-103 arithmetic operations (407 before common-subexpression elimination).*/
+43 arithmetic operations (177 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[crate::Real; 3usize],
@@ -276,123 +281,65 @@ pub fn step_exact(
     let t10: crate::Real = t5 + t9;
     let t11: crate::Real = t4 + t6;
     let t12: crate::Real = t8 * t11;
-    let t13: crate::Real = crate::math::sin(t2);
-    let t20: crate::Real = crate::math::cos(t2);
-    let t21: crate::Real = t8 * t10;
-    let t91: crate::Real = t13 * t21;
+    let t13: crate::Real = 1.0;
     let g0: [crate::Real; 2usize] = if crate::math::fabs(t12)
         < crate::math::series_switch(0.05)
     {
-        let t14: crate::Real = t8 * t12;
-        let t15: crate::Real = t10 * t14;
-        let t16: crate::Real = t13 * t15;
-        let t17: crate::Real = 0.5;
-        let t18: crate::Real = t16 * t17;
-        let t19: crate::Real = t0 - t18;
-        let t22: crate::Real = t20 * t21;
-        let t23: crate::Real = t19 + t22;
-        let t24: crate::Real = t12 * t12;
-        let t25: crate::Real = t8 * t24;
-        let t26: crate::Real = t10 * t25;
-        let t27: crate::Real = t20 * t26;
-        let t28: crate::Real = 0.16666666666666666;
-        let t29: crate::Real = t27 * t28;
-        let t30: crate::Real = t23 - t29;
-        let t31: crate::Real = t12 * t24;
-        let t32: crate::Real = t8 * t31;
-        let t33: crate::Real = t10 * t32;
-        let t34: crate::Real = t13 * t33;
-        let t35: crate::Real = 0.041666666666666664;
-        let t36: crate::Real = t34 * t35;
-        let t37: crate::Real = t30 + t36;
-        let t38: crate::Real = t24 * t24;
-        let t39: crate::Real = t8 * t38;
-        let t40: crate::Real = t10 * t39;
-        let t41: crate::Real = t20 * t40;
-        let t42: crate::Real = 0.008333333333333333;
-        let t43: crate::Real = t41 * t42;
-        let t44: crate::Real = t37 + t43;
-        let t45: crate::Real = t12 * t38;
-        let t46: crate::Real = t8 * t45;
-        let t47: crate::Real = t10 * t46;
-        let t48: crate::Real = t13 * t47;
-        let t49: crate::Real = 0.001388888888888889;
-        let t50: crate::Real = t48 * t49;
-        let t51: crate::Real = t44 - t50;
-        let t52: crate::Real = t31 * t31;
-        let t53: crate::Real = t8 * t52;
-        let t54: crate::Real = t10 * t53;
-        let t55: crate::Real = t20 * t54;
-        let t56: crate::Real = 0.0001984126984126984;
-        let t57: crate::Real = t55 * t56;
-        let t58: crate::Real = t51 - t57;
-        let t59: crate::Real = t12 * t52;
-        let t60: crate::Real = t8 * t59;
-        let t61: crate::Real = t10 * t60;
-        let t62: crate::Real = t13 * t61;
-        let t63: crate::Real = 0.0000248015873015873;
-        let t64: crate::Real = t62 * t63;
-        let t65: crate::Real = t58 + t64;
-        let t66: crate::Real = t38 * t38;
-        let t67: crate::Real = t8 * t66;
-        let t68: crate::Real = t10 * t67;
-        let t69: crate::Real = t20 * t68;
-        let t70: crate::Real = 0.0000027557319223985893;
-        let t71: crate::Real = t69 * t70;
-        let t72: crate::Real = t65 + t71;
-        let t88: crate::Real = t15 * t20;
-        let t89: crate::Real = t17 * t88;
-        let t90: crate::Real = t1 + t89;
-        let t92: crate::Real = t90 + t91;
-        let t93: crate::Real = t13 * t26;
-        let t94: crate::Real = t28 * t93;
-        let t95: crate::Real = t92 - t94;
-        let t96: crate::Real = t20 * t33;
-        let t97: crate::Real = t35 * t96;
-        let t98: crate::Real = t95 - t97;
-        let t99: crate::Real = t13 * t40;
-        let t100: crate::Real = t42 * t99;
-        let t101: crate::Real = t98 + t100;
-        let t102: crate::Real = t20 * t47;
-        let t103: crate::Real = t49 * t102;
-        let t104: crate::Real = t101 + t103;
-        let t105: crate::Real = t13 * t54;
-        let t106: crate::Real = t56 * t105;
-        let t107: crate::Real = t104 - t106;
-        let t108: crate::Real = t20 * t61;
-        let t109: crate::Real = t63 * t108;
-        let t110: crate::Real = t107 - t109;
-        let t111: crate::Real = t13 * t68;
-        let t112: crate::Real = t70 * t111;
-        let t113: crate::Real = t110 + t112;
-        [t72, t113]
+        let t14: crate::Real = t12 * t12;
+        let t15: crate::Real = 0.16666666666666666;
+        let t16: crate::Real = 0.008333333333333333;
+        let t17: crate::Real = 0.0001984126984126984;
+        let t18: crate::Real = 0.0000027557319223985893;
+        let t19: crate::Real = t14 * t18;
+        let t20: crate::Real = t19 - t17;
+        let t21: crate::Real = t14 * t20;
+        let t22: crate::Real = t16 + t21;
+        let t23: crate::Real = t14 * t22;
+        let t24: crate::Real = t23 - t15;
+        let t25: crate::Real = t14 * t24;
+        let t26: crate::Real = t13 + t25;
+        let t32: crate::Real = 0.5;
+        let t33: crate::Real = 0.041666666666666664;
+        let t34: crate::Real = 0.001388888888888889;
+        let t35: crate::Real = 0.0000248015873015873;
+        let t36: crate::Real = t14 * t35;
+        let t37: crate::Real = t34 - t36;
+        let t38: crate::Real = t14 * t37;
+        let t39: crate::Real = t38 - t33;
+        let t40: crate::Real = t14 * t39;
+        let t41: crate::Real = t32 + t40;
+        let t42: crate::Real = t12 * t41;
+        [t26, t42]
     } else {
-        let t73: crate::Real = crate::math::sin(t12);
-        let t74: crate::Real = t21 * t73;
-        let t75: crate::Real = t20 * t74;
-        let t76: crate::Real = 1.0;
-        let t77: crate::Real = t76 / t12;
-        let t78: crate::Real = t75 * t77;
-        let t79: crate::Real = t0 + t78;
-        let t80: crate::Real = 1.0;
-        let t81: crate::Real = crate::math::cos(t12);
-        let t82: crate::Real = t80 - t81;
-        let t83: crate::Real = t21 * t82;
-        let t84: crate::Real = t13 * t83;
-        let t85: crate::Real = t84 * t77;
-        let t86: crate::Real = t79 - t85;
-        let t114: crate::Real = t73 * t91;
-        let t115: crate::Real = t114 * t77;
-        let t116: crate::Real = t1 + t115;
-        let t117: crate::Real = t20 * t83;
-        let t118: crate::Real = t117 * t77;
-        let t119: crate::Real = t116 + t118;
-        [t86, t119]
+        let sc27 = crate::math::sincos(t12);
+        let t27: crate::Real = sc27.0;
+        let t43: crate::Real = sc27.1;
+        let t28: crate::Real = 1.0;
+        let t29: crate::Real = t28 / t12;
+        let t30: crate::Real = t27 * t29;
+        let t44: crate::Real = t13 - t43;
+        let t45: crate::Real = t44 * t29;
+        [t30, t45]
     };
-    let t87: crate::Real = g0[0usize];
-    let t120: crate::Real = g0[1usize];
-    let t121: crate::Real = t2 + t12;
-    [t87, t120, t121]
+    let t31: crate::Real = g0[0usize];
+    let t46: crate::Real = g0[1usize];
+    let sc47 = crate::math::sincos(t2);
+    let t52: crate::Real = sc47.0;
+    let t47: crate::Real = sc47.1;
+    let t48: crate::Real = t8 * t31;
+    let t49: crate::Real = t10 * t48;
+    let t50: crate::Real = t47 * t49;
+    let t51: crate::Real = t0 + t50;
+    let t53: crate::Real = t8 * t46;
+    let t54: crate::Real = t10 * t53;
+    let t55: crate::Real = t52 * t54;
+    let t56: crate::Real = t51 - t55;
+    let t57: crate::Real = t49 * t52;
+    let t58: crate::Real = t1 + t57;
+    let t59: crate::Real = t47 * t54;
+    let t60: crate::Real = t58 + t59;
+    let t61: crate::Real = t2 + t12;
+    [t56, t60, t61]
 }
 /**Jacobian of `step_exact` with respect to the state (seed 001 eq. 4 for Euler); rows x, y, theta.
 
@@ -403,7 +350,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-99 arithmetic operations (401 before common-subexpression elimination).*/
+41 arithmetic operations (173 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[crate::Real; 3usize],
@@ -424,119 +371,63 @@ pub fn step_exact_jac_x(
     let t9: crate::Real = t2 + t4;
     let t10: crate::Real = t6 * t9;
     let t11: crate::Real = 1.0;
-    let t12: crate::Real = 0.0;
-    let t13: crate::Real = crate::math::cos(t0);
-    let t19: crate::Real = crate::math::sin(t0);
-    let t20: crate::Real = t6 * t8;
-    let t21: crate::Real = t19 * t20;
     let g0: [crate::Real; 2usize] = if crate::math::fabs(t10)
         < crate::math::series_switch(0.05)
     {
-        let t14: crate::Real = t6 * t10;
-        let t15: crate::Real = t8 * t14;
-        let t16: crate::Real = t13 * t15;
-        let t17: crate::Real = 0.5;
-        let t18: crate::Real = t16 * t17;
-        let t22: crate::Real = t10 * t10;
-        let t23: crate::Real = t6 * t22;
-        let t24: crate::Real = t8 * t23;
-        let t25: crate::Real = t19 * t24;
-        let t26: crate::Real = 0.16666666666666666;
-        let t27: crate::Real = t25 * t26;
-        let t28: crate::Real = t10 * t22;
-        let t29: crate::Real = t6 * t28;
-        let t30: crate::Real = t8 * t29;
-        let t31: crate::Real = t13 * t30;
-        let t32: crate::Real = 0.041666666666666664;
-        let t33: crate::Real = t31 * t32;
-        let t34: crate::Real = t27 + t33;
-        let t35: crate::Real = t22 * t22;
-        let t36: crate::Real = t6 * t35;
-        let t37: crate::Real = t8 * t36;
-        let t38: crate::Real = t19 * t37;
-        let t39: crate::Real = 0.008333333333333333;
-        let t40: crate::Real = t38 * t39;
-        let t41: crate::Real = t34 - t40;
-        let t42: crate::Real = t10 * t35;
-        let t43: crate::Real = t6 * t42;
-        let t44: crate::Real = t8 * t43;
-        let t45: crate::Real = t13 * t44;
-        let t46: crate::Real = 0.001388888888888889;
-        let t47: crate::Real = t45 * t46;
-        let t48: crate::Real = t41 - t47;
-        let t49: crate::Real = t28 * t28;
-        let t50: crate::Real = t6 * t49;
-        let t51: crate::Real = t8 * t50;
-        let t52: crate::Real = t19 * t51;
-        let t53: crate::Real = 0.0001984126984126984;
-        let t54: crate::Real = t52 * t53;
-        let t55: crate::Real = t48 + t54;
-        let t56: crate::Real = t10 * t49;
-        let t57: crate::Real = t6 * t56;
-        let t58: crate::Real = t8 * t57;
-        let t59: crate::Real = t13 * t58;
-        let t60: crate::Real = 0.0000248015873015873;
-        let t61: crate::Real = t59 * t60;
-        let t62: crate::Real = t55 + t61;
-        let t63: crate::Real = t35 * t35;
-        let t64: crate::Real = t6 * t63;
-        let t65: crate::Real = t8 * t64;
-        let t66: crate::Real = t19 * t65;
-        let t67: crate::Real = 0.0000027557319223985893;
-        let t68: crate::Real = t66 * t67;
-        let t69: crate::Real = t62 - t68;
-        let t70: crate::Real = t69 - t18;
-        let t71: crate::Real = t70 - t21;
-        let t85: crate::Real = t15 * t19;
-        let t86: crate::Real = t17 * t85;
-        let t87: crate::Real = t13 * t20;
-        let t88: crate::Real = t13 * t24;
-        let t89: crate::Real = t26 * t88;
-        let t90: crate::Real = t87 - t89;
-        let t91: crate::Real = t19 * t30;
-        let t92: crate::Real = t32 * t91;
-        let t93: crate::Real = t90 + t92;
-        let t94: crate::Real = t13 * t37;
-        let t95: crate::Real = t39 * t94;
-        let t96: crate::Real = t93 + t95;
-        let t97: crate::Real = t19 * t44;
-        let t98: crate::Real = t46 * t97;
-        let t99: crate::Real = t96 - t98;
-        let t100: crate::Real = t13 * t51;
-        let t101: crate::Real = t53 * t100;
-        let t102: crate::Real = t99 - t101;
-        let t103: crate::Real = t19 * t58;
-        let t104: crate::Real = t60 * t103;
-        let t105: crate::Real = t102 + t104;
-        let t106: crate::Real = t13 * t65;
-        let t107: crate::Real = t67 * t106;
-        let t108: crate::Real = t105 + t107;
-        let t109: crate::Real = t108 - t86;
-        [t71, t109]
+        let t12: crate::Real = t10 * t10;
+        let t13: crate::Real = 0.16666666666666666;
+        let t14: crate::Real = 0.008333333333333333;
+        let t15: crate::Real = 0.0001984126984126984;
+        let t16: crate::Real = 0.0000027557319223985893;
+        let t17: crate::Real = t12 * t16;
+        let t18: crate::Real = t17 - t15;
+        let t19: crate::Real = t12 * t18;
+        let t20: crate::Real = t14 + t19;
+        let t21: crate::Real = t12 * t20;
+        let t22: crate::Real = t21 - t13;
+        let t23: crate::Real = t12 * t22;
+        let t24: crate::Real = t11 + t23;
+        let t30: crate::Real = 0.5;
+        let t31: crate::Real = 0.041666666666666664;
+        let t32: crate::Real = 0.001388888888888889;
+        let t33: crate::Real = 0.0000248015873015873;
+        let t34: crate::Real = t12 * t33;
+        let t35: crate::Real = t32 - t34;
+        let t36: crate::Real = t12 * t35;
+        let t37: crate::Real = t36 - t31;
+        let t38: crate::Real = t12 * t37;
+        let t39: crate::Real = t30 + t38;
+        let t40: crate::Real = t10 * t39;
+        [t24, t40]
     } else {
-        let t72: crate::Real = crate::math::sin(t10);
-        let t73: crate::Real = t21 * t72;
-        let t74: crate::Real = 1.0;
-        let t75: crate::Real = t74 / t10;
-        let t76: crate::Real = t73 * t75;
-        let t77: crate::Real = -t76;
-        let t78: crate::Real = crate::math::cos(t10);
-        let t79: crate::Real = t11 - t78;
-        let t80: crate::Real = t20 * t79;
-        let t81: crate::Real = t13 * t80;
-        let t82: crate::Real = t81 * t75;
-        let t83: crate::Real = t77 - t82;
-        let t110: crate::Real = t20 * t72;
-        let t111: crate::Real = t13 * t110;
-        let t112: crate::Real = t111 * t75;
-        let t113: crate::Real = t19 * t80;
-        let t114: crate::Real = t113 * t75;
-        let t115: crate::Real = t112 - t114;
-        [t83, t115]
+        let sc25 = crate::math::sincos(t10);
+        let t25: crate::Real = sc25.0;
+        let t41: crate::Real = sc25.1;
+        let t26: crate::Real = 1.0;
+        let t27: crate::Real = t26 / t10;
+        let t28: crate::Real = t25 * t27;
+        let t42: crate::Real = t11 - t41;
+        let t43: crate::Real = t42 * t27;
+        [t28, t43]
     };
-    let t84: crate::Real = g0[0usize];
-    let t116: crate::Real = g0[1usize];
-    [[t11, t12, t84], [t12, t11, t116], [t12, t12, t11]]
+    let t29: crate::Real = g0[0usize];
+    let t44: crate::Real = g0[1usize];
+    let t45: crate::Real = 0.0;
+    let sc46 = crate::math::sincos(t0);
+    let t46: crate::Real = sc46.0;
+    let t51: crate::Real = sc46.1;
+    let t47: crate::Real = t6 * t29;
+    let t48: crate::Real = t8 * t47;
+    let t49: crate::Real = t46 * t48;
+    let t50: crate::Real = -t49;
+    let t52: crate::Real = t6 * t44;
+    let t53: crate::Real = t8 * t52;
+    let t54: crate::Real = t51 * t53;
+    let t55: crate::Real = t50 - t54;
+    let t56: crate::Real = t48 * t51;
+    let t57: crate::Real = t46 * t53;
+    let t58: crate::Real = t56 - t57;
+    [[t11, t45, t55], [t45, t11, t58], [t45, t45, t11]]
 }
 /**Jacobian of `step_exact` with respect to the inputs; rows x, y, theta.
 
@@ -547,7 +438,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [v, w]
 
-201 arithmetic operations (865 before common-subexpression elimination).*/
+75 arithmetic operations (387 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -568,229 +459,105 @@ pub fn step_exact_jac_u(
     let t9: crate::Real = t2 + t4;
     let t10: crate::Real = t6 * t9;
     let t11: crate::Real = 1.0;
-    let t12: crate::Real = t6 * t11;
-    let t13: crate::Real = crate::math::sin(t0);
-    let t19: crate::Real = crate::math::cos(t0);
-    let t22: crate::Real = t10 * t10;
-    let t91: crate::Real = t6 * t8;
+    let t12: crate::Real = t10 * t10;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t10)
         < crate::math::series_switch(0.05)
     {
-        let t14: crate::Real = t6 * t10;
-        let t15: crate::Real = t5 * t14;
-        let t16: crate::Real = t13 * t15;
-        let t17: crate::Real = 0.5;
-        let t18: crate::Real = t16 * t17;
-        let t20: crate::Real = t5 * t6;
-        let t21: crate::Real = t19 * t20;
-        let t23: crate::Real = t6 * t22;
-        let t24: crate::Real = t5 * t23;
-        let t25: crate::Real = t19 * t24;
-        let t26: crate::Real = 0.16666666666666666;
-        let t27: crate::Real = t25 * t26;
-        let t28: crate::Real = t21 - t27;
-        let t29: crate::Real = t10 * t22;
-        let t30: crate::Real = t6 * t29;
-        let t31: crate::Real = t5 * t30;
-        let t32: crate::Real = t13 * t31;
-        let t33: crate::Real = 0.041666666666666664;
-        let t34: crate::Real = t32 * t33;
-        let t35: crate::Real = t28 + t34;
-        let t36: crate::Real = t22 * t22;
-        let t37: crate::Real = t6 * t36;
-        let t38: crate::Real = t5 * t37;
-        let t39: crate::Real = t19 * t38;
-        let t40: crate::Real = 0.008333333333333333;
-        let t41: crate::Real = t39 * t40;
-        let t42: crate::Real = t35 + t41;
-        let t43: crate::Real = t10 * t36;
-        let t44: crate::Real = t6 * t43;
-        let t45: crate::Real = t5 * t44;
-        let t46: crate::Real = t13 * t45;
-        let t47: crate::Real = 0.001388888888888889;
-        let t48: crate::Real = t46 * t47;
-        let t49: crate::Real = t42 - t48;
-        let t50: crate::Real = t29 * t29;
-        let t51: crate::Real = t6 * t50;
-        let t52: crate::Real = t5 * t51;
-        let t53: crate::Real = t19 * t52;
-        let t54: crate::Real = 0.0001984126984126984;
-        let t55: crate::Real = t53 * t54;
-        let t56: crate::Real = t49 - t55;
-        let t57: crate::Real = t10 * t50;
-        let t58: crate::Real = t6 * t57;
-        let t59: crate::Real = t5 * t58;
-        let t60: crate::Real = t13 * t59;
-        let t61: crate::Real = 0.0000248015873015873;
-        let t62: crate::Real = t60 * t61;
-        let t63: crate::Real = t56 + t62;
-        let t64: crate::Real = t36 * t36;
-        let t65: crate::Real = t6 * t64;
-        let t66: crate::Real = t5 * t65;
-        let t67: crate::Real = t19 * t66;
-        let t68: crate::Real = 0.0000027557319223985893;
-        let t69: crate::Real = t67 * t68;
-        let t70: crate::Real = t63 + t69;
-        let t71: crate::Real = t70 - t18;
-        let t86: crate::Real = t8 * t14;
-        let t87: crate::Real = t12 * t86;
-        let t88: crate::Real = t19 * t87;
-        let t89: crate::Real = 0.3333333333333333;
-        let t90: crate::Real = t88 * t89;
-        let t92: crate::Real = t12 * t91;
-        let t93: crate::Real = t13 * t92;
-        let t94: crate::Real = t17 * t93;
-        let t95: crate::Real = t8 * t23;
-        let t96: crate::Real = t12 * t95;
-        let t97: crate::Real = t13 * t96;
-        let t98: crate::Real = 0.125;
-        let t99: crate::Real = t97 * t98;
-        let t100: crate::Real = t8 * t30;
-        let t101: crate::Real = t12 * t100;
-        let t102: crate::Real = t19 * t101;
-        let t103: crate::Real = 0.03333333333333333;
-        let t104: crate::Real = t102 * t103;
-        let t105: crate::Real = t99 + t104;
-        let t106: crate::Real = t8 * t37;
-        let t107: crate::Real = t12 * t106;
-        let t108: crate::Real = t13 * t107;
-        let t109: crate::Real = 0.006944444444444444;
-        let t110: crate::Real = t108 * t109;
-        let t111: crate::Real = t105 - t110;
-        let t112: crate::Real = t8 * t44;
-        let t113: crate::Real = t12 * t112;
-        let t114: crate::Real = t19 * t113;
-        let t115: crate::Real = 0.0011904761904761906;
-        let t116: crate::Real = t114 * t115;
-        let t117: crate::Real = t111 - t116;
-        let t118: crate::Real = t8 * t51;
-        let t119: crate::Real = t12 * t118;
-        let t120: crate::Real = t13 * t119;
-        let t121: crate::Real = 0.00017361111111111112;
-        let t122: crate::Real = t120 * t121;
-        let t123: crate::Real = t117 + t122;
-        let t124: crate::Real = t8 * t58;
-        let t125: crate::Real = t12 * t124;
-        let t126: crate::Real = t19 * t125;
-        let t127: crate::Real = 0.000022045855379188714;
-        let t128: crate::Real = t126 * t127;
-        let t129: crate::Real = t123 + t128;
-        let t130: crate::Real = t8 * t65;
-        let t131: crate::Real = t12 * t130;
-        let t132: crate::Real = t13 * t131;
-        let t133: crate::Real = 0.00000248015873015873;
-        let t134: crate::Real = t132 * t133;
-        let t135: crate::Real = t129 - t134;
-        let t136: crate::Real = t135 - t90;
-        let t137: crate::Real = t136 - t94;
-        let t156: crate::Real = t15 * t19;
-        let t157: crate::Real = t17 * t156;
-        let t158: crate::Real = t13 * t20;
-        let t159: crate::Real = t157 + t158;
-        let t160: crate::Real = t13 * t24;
-        let t161: crate::Real = t26 * t160;
-        let t162: crate::Real = t159 - t161;
-        let t163: crate::Real = t19 * t31;
-        let t164: crate::Real = t33 * t163;
-        let t165: crate::Real = t162 - t164;
-        let t166: crate::Real = t13 * t38;
-        let t167: crate::Real = t40 * t166;
-        let t168: crate::Real = t165 + t167;
-        let t169: crate::Real = t19 * t45;
-        let t170: crate::Real = t47 * t169;
-        let t171: crate::Real = t168 + t170;
-        let t172: crate::Real = t13 * t52;
-        let t173: crate::Real = t54 * t172;
-        let t174: crate::Real = t171 - t173;
-        let t175: crate::Real = t19 * t59;
-        let t176: crate::Real = t61 * t175;
-        let t177: crate::Real = t174 - t176;
-        let t178: crate::Real = t13 * t66;
-        let t179: crate::Real = t68 * t178;
-        let t180: crate::Real = t177 + t179;
-        let t189: crate::Real = t13 * t87;
-        let t190: crate::Real = t89 * t189;
-        let t191: crate::Real = t19 * t92;
-        let t192: crate::Real = t17 * t191;
-        let t193: crate::Real = t19 * t96;
-        let t194: crate::Real = t98 * t193;
-        let t195: crate::Real = t192 - t194;
-        let t196: crate::Real = t13 * t101;
-        let t197: crate::Real = t103 * t196;
-        let t198: crate::Real = t195 + t197;
-        let t199: crate::Real = t19 * t107;
-        let t200: crate::Real = t109 * t199;
-        let t201: crate::Real = t198 + t200;
-        let t202: crate::Real = t13 * t113;
-        let t203: crate::Real = t115 * t202;
-        let t204: crate::Real = t201 - t203;
-        let t205: crate::Real = t19 * t119;
-        let t206: crate::Real = t121 * t205;
-        let t207: crate::Real = t204 - t206;
-        let t208: crate::Real = t13 * t125;
-        let t209: crate::Real = t127 * t208;
-        let t210: crate::Real = t207 + t209;
-        let t211: crate::Real = t19 * t131;
-        let t212: crate::Real = t133 * t211;
-        let t213: crate::Real = t210 + t212;
-        let t214: crate::Real = t213 - t190;
-        [t71, t137, t180, t214]
+        let t13: crate::Real = 0.16666666666666666;
+        let t14: crate::Real = 0.008333333333333333;
+        let t15: crate::Real = 0.0001984126984126984;
+        let t16: crate::Real = 0.0000027557319223985893;
+        let t17: crate::Real = t12 * t16;
+        let t18: crate::Real = t17 - t15;
+        let t19: crate::Real = t12 * t18;
+        let t20: crate::Real = t14 + t19;
+        let t21: crate::Real = t12 * t20;
+        let t22: crate::Real = t21 - t13;
+        let t23: crate::Real = t12 * t22;
+        let t24: crate::Real = t11 + t23;
+        let t30: crate::Real = 0.5;
+        let t31: crate::Real = 0.041666666666666664;
+        let t32: crate::Real = 0.001388888888888889;
+        let t33: crate::Real = 0.0000248015873015873;
+        let t34: crate::Real = t12 * t33;
+        let t35: crate::Real = t32 - t34;
+        let t36: crate::Real = t12 * t35;
+        let t37: crate::Real = t36 - t31;
+        let t38: crate::Real = t12 * t37;
+        let t39: crate::Real = t30 + t38;
+        let t40: crate::Real = t10 * t39;
+        let t46: crate::Real = 0.3333333333333333;
+        let t47: crate::Real = 0.03333333333333333;
+        let t48: crate::Real = 0.0011904761904761906;
+        let t49: crate::Real = 0.000022045855379188714;
+        let t50: crate::Real = t12 * t49;
+        let t51: crate::Real = t50 - t48;
+        let t52: crate::Real = t12 * t51;
+        let t53: crate::Real = t47 + t52;
+        let t54: crate::Real = t12 * t53;
+        let t55: crate::Real = t54 - t46;
+        let t56: crate::Real = t10 * t55;
+        let t63: crate::Real = 0.125;
+        let t64: crate::Real = 0.006944444444444444;
+        let t65: crate::Real = 0.00017361111111111112;
+        let t66: crate::Real = 0.00000248015873015873;
+        let t67: crate::Real = t12 * t66;
+        let t68: crate::Real = t67 - t65;
+        let t69: crate::Real = t12 * t68;
+        let t70: crate::Real = t64 + t69;
+        let t71: crate::Real = t12 * t70;
+        let t72: crate::Real = t71 - t63;
+        let t73: crate::Real = t12 * t72;
+        let t74: crate::Real = t30 + t73;
+        [t24, t40, t56, t74]
     } else {
-        let t72: crate::Real = crate::math::sin(t10);
-        let t73: crate::Real = t6 * t72;
-        let t74: crate::Real = t19 * t73;
-        let t75: crate::Real = 1.0;
-        let t76: crate::Real = t75 / t10;
-        let t77: crate::Real = t74 * t76;
-        let t78: crate::Real = crate::math::cos(t10);
-        let t79: crate::Real = t11 - t78;
-        let t80: crate::Real = t6 * t79;
-        let t81: crate::Real = t13 * t80;
-        let t82: crate::Real = t81 * t76;
-        let t83: crate::Real = t77 - t82;
-        let t84: crate::Real = t5 * t83;
-        let t138: crate::Real = t13 * t91;
-        let t139: crate::Real = t72 * t138;
-        let t140: crate::Real = t139 * t76;
-        let t141: crate::Real = t19 * t91;
-        let t142: crate::Real = t78 * t141;
-        let t143: crate::Real = t142 * t76;
-        let t144: crate::Real = t72 * t91;
-        let t145: crate::Real = t19 * t144;
-        let t146: crate::Real = t75 / t22;
-        let t147: crate::Real = t145 * t146;
-        let t148: crate::Real = t143 - t147;
-        let t149: crate::Real = t79 * t91;
-        let t150: crate::Real = t13 * t149;
-        let t151: crate::Real = t150 * t146;
-        let t152: crate::Real = t148 + t151;
-        let t153: crate::Real = t152 - t140;
-        let t154: crate::Real = t12 * t153;
-        let t181: crate::Real = t6 * t13;
-        let t182: crate::Real = t72 * t181;
-        let t183: crate::Real = t182 * t76;
-        let t184: crate::Real = t19 * t80;
-        let t185: crate::Real = t184 * t76;
-        let t186: crate::Real = t183 + t185;
-        let t187: crate::Real = t5 * t186;
-        let t215: crate::Real = t78 * t138;
-        let t216: crate::Real = t215 * t76;
-        let t217: crate::Real = t145 * t76;
-        let t218: crate::Real = t216 + t217;
-        let t219: crate::Real = t139 * t146;
-        let t220: crate::Real = t218 - t219;
-        let t221: crate::Real = t19 * t149;
-        let t222: crate::Real = t221 * t146;
-        let t223: crate::Real = t220 - t222;
-        let t224: crate::Real = t12 * t223;
-        [t84, t154, t187, t224]
+        let sc25 = crate::math::sincos(t10);
+        let t25: crate::Real = sc25.0;
+        let t41: crate::Real = sc25.1;
+        let t26: crate::Real = 1.0;
+        let t27: crate::Real = t26 / t10;
+        let t28: crate::Real = t25 * t27;
+        let t42: crate::Real = t11 - t41;
+        let t43: crate::Real = t42 * t27;
+        let t57: crate::Real = t41 * t27;
+        let t58: crate::Real = t26 / t12;
+        let t59: crate::Real = t25 * t58;
+        let t60: crate::Real = t57 - t59;
+        let t75: crate::Real = t42 * t58;
+        let t76: crate::Real = t28 - t75;
+        [t28, t43, t60, t76]
     };
-    let t85: crate::Real = g0[0usize];
-    let t155: crate::Real = g0[1usize];
-    let t188: crate::Real = g0[2usize];
-    let t225: crate::Real = g0[3usize];
-    let t226: crate::Real = 0.0;
-    [[t85, t155], [t188, t225], [t226, t12]]
+    let t29: crate::Real = g0[0usize];
+    let t44: crate::Real = g0[1usize];
+    let t61: crate::Real = g0[2usize];
+    let t77: crate::Real = g0[3usize];
+    let t45: crate::Real = t6 * t11;
+    let t62: crate::Real = t45 * t61;
+    let t78: crate::Real = t45 * t77;
+    let sc79 = crate::math::sincos(t0);
+    let t82: crate::Real = sc79.0;
+    let t79: crate::Real = sc79.1;
+    let t80: crate::Real = t6 * t29;
+    let t81: crate::Real = t79 * t80;
+    let t83: crate::Real = t6 * t44;
+    let t84: crate::Real = t82 * t83;
+    let t85: crate::Real = t81 - t84;
+    let t86: crate::Real = t5 * t85;
+    let t87: crate::Real = t6 * t8;
+    let t88: crate::Real = t62 * t87;
+    let t89: crate::Real = t79 * t88;
+    let t90: crate::Real = t78 * t87;
+    let t91: crate::Real = t82 * t90;
+    let t92: crate::Real = t89 - t91;
+    let t93: crate::Real = t80 * t82;
+    let t94: crate::Real = t79 * t83;
+    let t95: crate::Real = t93 + t94;
+    let t96: crate::Real = t5 * t95;
+    let t97: crate::Real = t82 * t88;
+    let t98: crate::Real = t79 * t90;
+    let t99: crate::Real = t97 + t98;
+    let t100: crate::Real = 0.0;
+    [[t86, t92], [t96, t99], [t100, t45]]
 }
 /**Jacobian of `step_exact` with respect to the noise inputs (seed 001 eq. 5 for Euler); rows x, y, theta.
 
@@ -801,7 +568,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-200 arithmetic operations (865 before common-subexpression elimination).*/
+75 arithmetic operations (387 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -822,228 +589,105 @@ pub fn step_exact_jac_w(
     let t9: crate::Real = t2 + t4;
     let t10: crate::Real = t6 * t9;
     let t11: crate::Real = 1.0;
-    let t12: crate::Real = t6 * t11;
-    let t13: crate::Real = crate::math::sin(t0);
-    let t19: crate::Real = crate::math::cos(t0);
-    let t21: crate::Real = t10 * t10;
-    let t90: crate::Real = t6 * t8;
+    let t12: crate::Real = t10 * t10;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t10)
         < crate::math::series_switch(0.05)
     {
-        let t14: crate::Real = t6 * t10;
-        let t15: crate::Real = t11 * t14;
-        let t16: crate::Real = t13 * t15;
-        let t17: crate::Real = 0.5;
-        let t18: crate::Real = t16 * t17;
-        let t20: crate::Real = t12 * t19;
-        let t22: crate::Real = t6 * t21;
-        let t23: crate::Real = t11 * t22;
-        let t24: crate::Real = t19 * t23;
-        let t25: crate::Real = 0.16666666666666666;
-        let t26: crate::Real = t24 * t25;
-        let t27: crate::Real = t20 - t26;
-        let t28: crate::Real = t10 * t21;
-        let t29: crate::Real = t6 * t28;
-        let t30: crate::Real = t11 * t29;
-        let t31: crate::Real = t13 * t30;
-        let t32: crate::Real = 0.041666666666666664;
-        let t33: crate::Real = t31 * t32;
-        let t34: crate::Real = t27 + t33;
-        let t35: crate::Real = t21 * t21;
-        let t36: crate::Real = t6 * t35;
-        let t37: crate::Real = t11 * t36;
-        let t38: crate::Real = t19 * t37;
-        let t39: crate::Real = 0.008333333333333333;
-        let t40: crate::Real = t38 * t39;
-        let t41: crate::Real = t34 + t40;
-        let t42: crate::Real = t10 * t35;
-        let t43: crate::Real = t6 * t42;
-        let t44: crate::Real = t11 * t43;
-        let t45: crate::Real = t13 * t44;
-        let t46: crate::Real = 0.001388888888888889;
-        let t47: crate::Real = t45 * t46;
-        let t48: crate::Real = t41 - t47;
-        let t49: crate::Real = t28 * t28;
-        let t50: crate::Real = t6 * t49;
-        let t51: crate::Real = t11 * t50;
-        let t52: crate::Real = t19 * t51;
-        let t53: crate::Real = 0.0001984126984126984;
-        let t54: crate::Real = t52 * t53;
-        let t55: crate::Real = t48 - t54;
-        let t56: crate::Real = t10 * t49;
-        let t57: crate::Real = t6 * t56;
-        let t58: crate::Real = t11 * t57;
-        let t59: crate::Real = t13 * t58;
-        let t60: crate::Real = 0.0000248015873015873;
-        let t61: crate::Real = t59 * t60;
-        let t62: crate::Real = t55 + t61;
-        let t63: crate::Real = t35 * t35;
-        let t64: crate::Real = t6 * t63;
-        let t65: crate::Real = t11 * t64;
-        let t66: crate::Real = t19 * t65;
-        let t67: crate::Real = 0.0000027557319223985893;
-        let t68: crate::Real = t66 * t67;
-        let t69: crate::Real = t62 + t68;
-        let t70: crate::Real = t69 - t18;
-        let t85: crate::Real = t8 * t14;
-        let t86: crate::Real = t12 * t85;
-        let t87: crate::Real = t19 * t86;
-        let t88: crate::Real = 0.3333333333333333;
-        let t89: crate::Real = t87 * t88;
-        let t91: crate::Real = t12 * t90;
-        let t92: crate::Real = t13 * t91;
-        let t93: crate::Real = t17 * t92;
-        let t94: crate::Real = t8 * t22;
-        let t95: crate::Real = t12 * t94;
-        let t96: crate::Real = t13 * t95;
-        let t97: crate::Real = 0.125;
-        let t98: crate::Real = t96 * t97;
-        let t99: crate::Real = t8 * t29;
-        let t100: crate::Real = t12 * t99;
-        let t101: crate::Real = t19 * t100;
-        let t102: crate::Real = 0.03333333333333333;
-        let t103: crate::Real = t101 * t102;
-        let t104: crate::Real = t98 + t103;
-        let t105: crate::Real = t8 * t36;
-        let t106: crate::Real = t12 * t105;
-        let t107: crate::Real = t13 * t106;
-        let t108: crate::Real = 0.006944444444444444;
-        let t109: crate::Real = t107 * t108;
-        let t110: crate::Real = t104 - t109;
-        let t111: crate::Real = t8 * t43;
-        let t112: crate::Real = t12 * t111;
-        let t113: crate::Real = t19 * t112;
-        let t114: crate::Real = 0.0011904761904761906;
-        let t115: crate::Real = t113 * t114;
-        let t116: crate::Real = t110 - t115;
-        let t117: crate::Real = t8 * t50;
-        let t118: crate::Real = t12 * t117;
-        let t119: crate::Real = t13 * t118;
-        let t120: crate::Real = 0.00017361111111111112;
-        let t121: crate::Real = t119 * t120;
-        let t122: crate::Real = t116 + t121;
-        let t123: crate::Real = t8 * t57;
-        let t124: crate::Real = t12 * t123;
-        let t125: crate::Real = t19 * t124;
-        let t126: crate::Real = 0.000022045855379188714;
-        let t127: crate::Real = t125 * t126;
-        let t128: crate::Real = t122 + t127;
-        let t129: crate::Real = t8 * t64;
-        let t130: crate::Real = t12 * t129;
-        let t131: crate::Real = t13 * t130;
-        let t132: crate::Real = 0.00000248015873015873;
-        let t133: crate::Real = t131 * t132;
-        let t134: crate::Real = t128 - t133;
-        let t135: crate::Real = t134 - t89;
-        let t136: crate::Real = t135 - t93;
-        let t155: crate::Real = t15 * t19;
-        let t156: crate::Real = t17 * t155;
-        let t157: crate::Real = t12 * t13;
-        let t158: crate::Real = t156 + t157;
-        let t159: crate::Real = t13 * t23;
-        let t160: crate::Real = t25 * t159;
-        let t161: crate::Real = t158 - t160;
-        let t162: crate::Real = t19 * t30;
-        let t163: crate::Real = t32 * t162;
-        let t164: crate::Real = t161 - t163;
-        let t165: crate::Real = t13 * t37;
-        let t166: crate::Real = t39 * t165;
-        let t167: crate::Real = t164 + t166;
-        let t168: crate::Real = t19 * t44;
-        let t169: crate::Real = t46 * t168;
-        let t170: crate::Real = t167 + t169;
-        let t171: crate::Real = t13 * t51;
-        let t172: crate::Real = t53 * t171;
-        let t173: crate::Real = t170 - t172;
-        let t174: crate::Real = t19 * t58;
-        let t175: crate::Real = t60 * t174;
-        let t176: crate::Real = t173 - t175;
-        let t177: crate::Real = t13 * t65;
-        let t178: crate::Real = t67 * t177;
-        let t179: crate::Real = t176 + t178;
-        let t188: crate::Real = t13 * t86;
-        let t189: crate::Real = t88 * t188;
-        let t190: crate::Real = t19 * t91;
-        let t191: crate::Real = t17 * t190;
-        let t192: crate::Real = t19 * t95;
-        let t193: crate::Real = t97 * t192;
-        let t194: crate::Real = t191 - t193;
-        let t195: crate::Real = t13 * t100;
-        let t196: crate::Real = t102 * t195;
-        let t197: crate::Real = t194 + t196;
-        let t198: crate::Real = t19 * t106;
-        let t199: crate::Real = t108 * t198;
-        let t200: crate::Real = t197 + t199;
-        let t201: crate::Real = t13 * t112;
-        let t202: crate::Real = t114 * t201;
-        let t203: crate::Real = t200 - t202;
-        let t204: crate::Real = t19 * t118;
-        let t205: crate::Real = t120 * t204;
-        let t206: crate::Real = t203 - t205;
-        let t207: crate::Real = t13 * t124;
-        let t208: crate::Real = t126 * t207;
-        let t209: crate::Real = t206 + t208;
-        let t210: crate::Real = t19 * t130;
-        let t211: crate::Real = t132 * t210;
-        let t212: crate::Real = t209 + t211;
-        let t213: crate::Real = t212 - t189;
-        [t70, t136, t179, t213]
+        let t13: crate::Real = 0.16666666666666666;
+        let t14: crate::Real = 0.008333333333333333;
+        let t15: crate::Real = 0.0001984126984126984;
+        let t16: crate::Real = 0.0000027557319223985893;
+        let t17: crate::Real = t12 * t16;
+        let t18: crate::Real = t17 - t15;
+        let t19: crate::Real = t12 * t18;
+        let t20: crate::Real = t14 + t19;
+        let t21: crate::Real = t12 * t20;
+        let t22: crate::Real = t21 - t13;
+        let t23: crate::Real = t12 * t22;
+        let t24: crate::Real = t11 + t23;
+        let t30: crate::Real = 0.5;
+        let t31: crate::Real = 0.041666666666666664;
+        let t32: crate::Real = 0.001388888888888889;
+        let t33: crate::Real = 0.0000248015873015873;
+        let t34: crate::Real = t12 * t33;
+        let t35: crate::Real = t32 - t34;
+        let t36: crate::Real = t12 * t35;
+        let t37: crate::Real = t36 - t31;
+        let t38: crate::Real = t12 * t37;
+        let t39: crate::Real = t30 + t38;
+        let t40: crate::Real = t10 * t39;
+        let t46: crate::Real = 0.3333333333333333;
+        let t47: crate::Real = 0.03333333333333333;
+        let t48: crate::Real = 0.0011904761904761906;
+        let t49: crate::Real = 0.000022045855379188714;
+        let t50: crate::Real = t12 * t49;
+        let t51: crate::Real = t50 - t48;
+        let t52: crate::Real = t12 * t51;
+        let t53: crate::Real = t47 + t52;
+        let t54: crate::Real = t12 * t53;
+        let t55: crate::Real = t54 - t46;
+        let t56: crate::Real = t10 * t55;
+        let t63: crate::Real = 0.125;
+        let t64: crate::Real = 0.006944444444444444;
+        let t65: crate::Real = 0.00017361111111111112;
+        let t66: crate::Real = 0.00000248015873015873;
+        let t67: crate::Real = t12 * t66;
+        let t68: crate::Real = t67 - t65;
+        let t69: crate::Real = t12 * t68;
+        let t70: crate::Real = t64 + t69;
+        let t71: crate::Real = t12 * t70;
+        let t72: crate::Real = t71 - t63;
+        let t73: crate::Real = t12 * t72;
+        let t74: crate::Real = t30 + t73;
+        [t24, t40, t56, t74]
     } else {
-        let t71: crate::Real = crate::math::sin(t10);
-        let t72: crate::Real = t6 * t71;
-        let t73: crate::Real = t19 * t72;
-        let t74: crate::Real = 1.0;
-        let t75: crate::Real = t74 / t10;
-        let t76: crate::Real = t73 * t75;
-        let t77: crate::Real = crate::math::cos(t10);
-        let t78: crate::Real = t11 - t77;
-        let t79: crate::Real = t6 * t78;
-        let t80: crate::Real = t13 * t79;
-        let t81: crate::Real = t80 * t75;
-        let t82: crate::Real = t76 - t81;
-        let t83: crate::Real = t11 * t82;
-        let t137: crate::Real = t13 * t90;
-        let t138: crate::Real = t71 * t137;
-        let t139: crate::Real = t138 * t75;
-        let t140: crate::Real = t19 * t90;
-        let t141: crate::Real = t77 * t140;
-        let t142: crate::Real = t141 * t75;
-        let t143: crate::Real = t71 * t90;
-        let t144: crate::Real = t19 * t143;
-        let t145: crate::Real = t74 / t21;
-        let t146: crate::Real = t144 * t145;
-        let t147: crate::Real = t142 - t146;
-        let t148: crate::Real = t78 * t90;
-        let t149: crate::Real = t13 * t148;
-        let t150: crate::Real = t149 * t145;
-        let t151: crate::Real = t147 + t150;
-        let t152: crate::Real = t151 - t139;
-        let t153: crate::Real = t12 * t152;
-        let t180: crate::Real = t6 * t13;
-        let t181: crate::Real = t71 * t180;
-        let t182: crate::Real = t181 * t75;
-        let t183: crate::Real = t19 * t79;
-        let t184: crate::Real = t183 * t75;
-        let t185: crate::Real = t182 + t184;
-        let t186: crate::Real = t11 * t185;
-        let t214: crate::Real = t77 * t137;
-        let t215: crate::Real = t214 * t75;
-        let t216: crate::Real = t144 * t75;
-        let t217: crate::Real = t215 + t216;
-        let t218: crate::Real = t138 * t145;
-        let t219: crate::Real = t217 - t218;
-        let t220: crate::Real = t19 * t148;
-        let t221: crate::Real = t220 * t145;
-        let t222: crate::Real = t219 - t221;
-        let t223: crate::Real = t12 * t222;
-        [t83, t153, t186, t223]
+        let sc25 = crate::math::sincos(t10);
+        let t25: crate::Real = sc25.0;
+        let t41: crate::Real = sc25.1;
+        let t26: crate::Real = 1.0;
+        let t27: crate::Real = t26 / t10;
+        let t28: crate::Real = t25 * t27;
+        let t42: crate::Real = t11 - t41;
+        let t43: crate::Real = t42 * t27;
+        let t57: crate::Real = t41 * t27;
+        let t58: crate::Real = t26 / t12;
+        let t59: crate::Real = t25 * t58;
+        let t60: crate::Real = t57 - t59;
+        let t75: crate::Real = t42 * t58;
+        let t76: crate::Real = t28 - t75;
+        [t28, t43, t60, t76]
     };
-    let t84: crate::Real = g0[0usize];
-    let t154: crate::Real = g0[1usize];
-    let t187: crate::Real = g0[2usize];
-    let t224: crate::Real = g0[3usize];
-    let t225: crate::Real = 0.0;
-    [[t84, t154], [t187, t224], [t225, t12]]
+    let t29: crate::Real = g0[0usize];
+    let t44: crate::Real = g0[1usize];
+    let t61: crate::Real = g0[2usize];
+    let t77: crate::Real = g0[3usize];
+    let t45: crate::Real = t6 * t11;
+    let t62: crate::Real = t45 * t61;
+    let t78: crate::Real = t45 * t77;
+    let sc79 = crate::math::sincos(t0);
+    let t82: crate::Real = sc79.0;
+    let t79: crate::Real = sc79.1;
+    let t80: crate::Real = t6 * t29;
+    let t81: crate::Real = t79 * t80;
+    let t83: crate::Real = t6 * t44;
+    let t84: crate::Real = t82 * t83;
+    let t85: crate::Real = t81 - t84;
+    let t86: crate::Real = t11 * t85;
+    let t87: crate::Real = t6 * t8;
+    let t88: crate::Real = t62 * t87;
+    let t89: crate::Real = t79 * t88;
+    let t90: crate::Real = t78 * t87;
+    let t91: crate::Real = t82 * t90;
+    let t92: crate::Real = t89 - t91;
+    let t93: crate::Real = t80 * t82;
+    let t94: crate::Real = t79 * t83;
+    let t95: crate::Real = t93 + t94;
+    let t96: crate::Real = t11 * t95;
+    let t97: crate::Real = t82 * t88;
+    let t98: crate::Real = t79 * t90;
+    let t99: crate::Real = t97 + t98;
+    let t100: crate::Real = 0.0;
+    [[t86, t92], [t96, t99], [t100, t45]]
 }
 /**Jacobian of `step_exact` with respect to the parameters; rows x, y, theta.
 
@@ -1054,7 +698,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-99 arithmetic operations (354 before common-subexpression elimination).*/
+38 arithmetic operations (162 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -1070,122 +714,63 @@ pub fn step_exact_jac_p(
     let t4: crate::Real = dt;
     let t5: crate::Real = t2 + t3;
     let t6: crate::Real = t4 * t5;
-    let t7: crate::Real = crate::math::sin(t0);
-    let t13: crate::Real = crate::math::cos(t0);
+    let t7: crate::Real = 1.0;
     let g0: [crate::Real; 2usize] = if crate::math::fabs(t6)
         < crate::math::series_switch(0.05)
     {
-        let t8: crate::Real = t4 * t6;
-        let t9: crate::Real = t1 * t8;
-        let t10: crate::Real = t7 * t9;
-        let t11: crate::Real = 0.5;
-        let t12: crate::Real = t10 * t11;
-        let t14: crate::Real = t1 * t4;
-        let t15: crate::Real = t13 * t14;
-        let t16: crate::Real = t6 * t6;
-        let t17: crate::Real = t4 * t16;
-        let t18: crate::Real = t1 * t17;
-        let t19: crate::Real = t13 * t18;
-        let t20: crate::Real = 0.16666666666666666;
-        let t21: crate::Real = t19 * t20;
-        let t22: crate::Real = t15 - t21;
-        let t23: crate::Real = t6 * t16;
-        let t24: crate::Real = t4 * t23;
-        let t25: crate::Real = t1 * t24;
-        let t26: crate::Real = t7 * t25;
+        let t8: crate::Real = t6 * t6;
+        let t9: crate::Real = 0.16666666666666666;
+        let t10: crate::Real = 0.008333333333333333;
+        let t11: crate::Real = 0.0001984126984126984;
+        let t12: crate::Real = 0.0000027557319223985893;
+        let t13: crate::Real = t8 * t12;
+        let t14: crate::Real = t13 - t11;
+        let t15: crate::Real = t8 * t14;
+        let t16: crate::Real = t10 + t15;
+        let t17: crate::Real = t8 * t16;
+        let t18: crate::Real = t17 - t9;
+        let t19: crate::Real = t8 * t18;
+        let t20: crate::Real = t7 + t19;
+        let t26: crate::Real = 0.5;
         let t27: crate::Real = 0.041666666666666664;
-        let t28: crate::Real = t26 * t27;
-        let t29: crate::Real = t22 + t28;
-        let t30: crate::Real = t16 * t16;
-        let t31: crate::Real = t4 * t30;
-        let t32: crate::Real = t1 * t31;
-        let t33: crate::Real = t13 * t32;
-        let t34: crate::Real = 0.008333333333333333;
-        let t35: crate::Real = t33 * t34;
-        let t36: crate::Real = t29 + t35;
-        let t37: crate::Real = t6 * t30;
-        let t38: crate::Real = t4 * t37;
-        let t39: crate::Real = t1 * t38;
-        let t40: crate::Real = t7 * t39;
-        let t41: crate::Real = 0.001388888888888889;
-        let t42: crate::Real = t40 * t41;
-        let t43: crate::Real = t36 - t42;
-        let t44: crate::Real = t23 * t23;
-        let t45: crate::Real = t4 * t44;
-        let t46: crate::Real = t1 * t45;
-        let t47: crate::Real = t13 * t46;
-        let t48: crate::Real = 0.0001984126984126984;
-        let t49: crate::Real = t47 * t48;
-        let t50: crate::Real = t43 - t49;
-        let t51: crate::Real = t6 * t44;
-        let t52: crate::Real = t4 * t51;
-        let t53: crate::Real = t1 * t52;
-        let t54: crate::Real = t7 * t53;
-        let t55: crate::Real = 0.0000248015873015873;
-        let t56: crate::Real = t54 * t55;
-        let t57: crate::Real = t50 + t56;
-        let t58: crate::Real = t30 * t30;
-        let t59: crate::Real = t4 * t58;
-        let t60: crate::Real = t1 * t59;
-        let t61: crate::Real = t13 * t60;
-        let t62: crate::Real = 0.0000027557319223985893;
-        let t63: crate::Real = t61 * t62;
-        let t64: crate::Real = t57 + t63;
-        let t65: crate::Real = t64 - t12;
-        let t81: crate::Real = t9 * t13;
-        let t82: crate::Real = t11 * t81;
-        let t83: crate::Real = t7 * t14;
-        let t84: crate::Real = t82 + t83;
-        let t85: crate::Real = t7 * t18;
-        let t86: crate::Real = t20 * t85;
-        let t87: crate::Real = t84 - t86;
-        let t88: crate::Real = t13 * t25;
-        let t89: crate::Real = t27 * t88;
-        let t90: crate::Real = t87 - t89;
-        let t91: crate::Real = t7 * t32;
-        let t92: crate::Real = t34 * t91;
-        let t93: crate::Real = t90 + t92;
-        let t94: crate::Real = t13 * t39;
-        let t95: crate::Real = t41 * t94;
-        let t96: crate::Real = t93 + t95;
-        let t97: crate::Real = t7 * t46;
-        let t98: crate::Real = t48 * t97;
-        let t99: crate::Real = t96 - t98;
-        let t100: crate::Real = t13 * t53;
-        let t101: crate::Real = t55 * t100;
-        let t102: crate::Real = t99 - t101;
-        let t103: crate::Real = t7 * t60;
-        let t104: crate::Real = t62 * t103;
-        let t105: crate::Real = t102 + t104;
-        [t65, t105]
+        let t28: crate::Real = 0.001388888888888889;
+        let t29: crate::Real = 0.0000248015873015873;
+        let t30: crate::Real = t8 * t29;
+        let t31: crate::Real = t28 - t30;
+        let t32: crate::Real = t8 * t31;
+        let t33: crate::Real = t32 - t27;
+        let t34: crate::Real = t8 * t33;
+        let t35: crate::Real = t26 + t34;
+        let t36: crate::Real = t6 * t35;
+        [t20, t36]
     } else {
-        let t66: crate::Real = crate::math::sin(t6);
-        let t67: crate::Real = t4 * t66;
-        let t68: crate::Real = t13 * t67;
-        let t69: crate::Real = 1.0;
-        let t70: crate::Real = t69 / t6;
-        let t71: crate::Real = t68 * t70;
-        let t72: crate::Real = 1.0;
-        let t73: crate::Real = crate::math::cos(t6);
-        let t74: crate::Real = t72 - t73;
-        let t75: crate::Real = t4 * t74;
-        let t76: crate::Real = t7 * t75;
-        let t77: crate::Real = t76 * t70;
-        let t78: crate::Real = t71 - t77;
-        let t79: crate::Real = t1 * t78;
-        let t106: crate::Real = t4 * t7;
-        let t107: crate::Real = t66 * t106;
-        let t108: crate::Real = t107 * t70;
-        let t109: crate::Real = t13 * t75;
-        let t110: crate::Real = t109 * t70;
-        let t111: crate::Real = t108 + t110;
-        let t112: crate::Real = t1 * t111;
-        [t79, t112]
+        let sc21 = crate::math::sincos(t6);
+        let t21: crate::Real = sc21.0;
+        let t37: crate::Real = sc21.1;
+        let t22: crate::Real = 1.0;
+        let t23: crate::Real = t22 / t6;
+        let t24: crate::Real = t21 * t23;
+        let t38: crate::Real = t7 - t37;
+        let t39: crate::Real = t38 * t23;
+        [t24, t39]
     };
-    let t80: crate::Real = g0[0usize];
-    let t113: crate::Real = g0[1usize];
-    let t114: crate::Real = 0.0;
-    [t80, t113, t114]
+    let t25: crate::Real = g0[0usize];
+    let t40: crate::Real = g0[1usize];
+    let sc41 = crate::math::sincos(t0);
+    let t44: crate::Real = sc41.0;
+    let t41: crate::Real = sc41.1;
+    let t42: crate::Real = t4 * t25;
+    let t43: crate::Real = t41 * t42;
+    let t45: crate::Real = t4 * t40;
+    let t46: crate::Real = t44 * t45;
+    let t47: crate::Real = t43 - t46;
+    let t48: crate::Real = t1 * t47;
+    let t49: crate::Real = t42 * t44;
+    let t50: crate::Real = t41 * t45;
+    let t51: crate::Real = t49 + t50;
+    let t52: crate::Real = t1 * t51;
+    let t53: crate::Real = 0.0;
+    [t48, t52, t53]
 }
 /**Range and bearing to beacon i (seed 001 eq. 6, with atan2 for the full circle); Jacobian eq. 7. Predicted columns: range, bearing.
 
@@ -1283,7 +868,7 @@ pub fn obs_landmark_jac_p(
 * `p`: [v_scale]
 * returns [v, w]
 
-1 arithmetic operations (1 before common-subexpression elimination).*/
+2 arithmetic operations (2 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_twist(
     twist: &[crate::Real; 3usize],
@@ -1292,8 +877,10 @@ pub fn inverse_twist(
     let t0: crate::Real = twist[0usize];
     let t1: crate::Real = twist[2usize];
     let t2: crate::Real = p[0usize];
-    let t3: crate::Real = t0 / t2;
-    [t3, t1]
+    let t3: crate::Real = 1.0;
+    let t4: crate::Real = t3 / t2;
+    let t5: crate::Real = t0 * t4;
+    [t5, t1]
 }
 /**Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15). Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.
 
@@ -1302,7 +889,7 @@ pub fn inverse_twist(
 * `p`: [v_scale]
 * returns [v, w]
 
-30 arithmetic operations (46 before common-subexpression elimination).*/
+28 arithmetic operations (36 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[crate::Real; 3usize],
@@ -1320,42 +907,40 @@ pub fn inverse_increment(
     {
         let t6: crate::Real = t0 * t5;
         let t7: crate::Real = t1 * t1;
-        let t8: crate::Real = t0 * t7;
-        let t9: crate::Real = 0.16666666666666666;
-        let t10: crate::Real = t8 * t9;
-        let t11: crate::Real = t10 * t5;
-        let t12: crate::Real = t6 + t11;
-        let t13: crate::Real = t7 * t7;
-        let t14: crate::Real = t0 * t13;
-        let t15: crate::Real = 0.019444444444444445;
-        let t16: crate::Real = t14 * t15;
-        let t17: crate::Real = t16 * t5;
-        let t18: crate::Real = t12 + t17;
-        let t19: crate::Real = t1 * t7;
-        let t20: crate::Real = t19 * t19;
-        let t21: crate::Real = t0 * t20;
-        let t22: crate::Real = 0.00205026455026455;
-        let t23: crate::Real = t21 * t22;
-        let t24: crate::Real = t23 * t5;
-        let t25: crate::Real = t18 + t24;
-        let t26: crate::Real = t13 * t13;
-        let t27: crate::Real = t0 * t26;
-        let t28: crate::Real = 0.0002099867724867725;
-        let t29: crate::Real = t27 * t28;
-        let t30: crate::Real = t29 * t5;
-        let t31: crate::Real = t25 + t30;
-        [t31]
+        let t8: crate::Real = 0.16666666666666666;
+        let t9: crate::Real = t0 * t8;
+        let t10: crate::Real = t9 * t5;
+        let t11: crate::Real = 0.019444444444444445;
+        let t12: crate::Real = t0 * t11;
+        let t13: crate::Real = t12 * t5;
+        let t14: crate::Real = 0.00205026455026455;
+        let t15: crate::Real = t0 * t14;
+        let t16: crate::Real = t15 * t5;
+        let t17: crate::Real = t0 * t7;
+        let t18: crate::Real = 0.0002099867724867725;
+        let t19: crate::Real = t17 * t18;
+        let t20: crate::Real = t19 * t5;
+        let t21: crate::Real = t16 + t20;
+        let t22: crate::Real = t7 * t21;
+        let t23: crate::Real = t13 + t22;
+        let t24: crate::Real = t7 * t23;
+        let t25: crate::Real = t10 + t24;
+        let t26: crate::Real = t7 * t25;
+        let t27: crate::Real = t6 + t26;
+        [t27]
     } else {
-        let t32: crate::Real = crate::math::sin(t1);
-        let t33: crate::Real = t0 * t1;
-        let t34: crate::Real = t2 * t32;
-        let t35: crate::Real = t33 / t34;
-        [t35]
+        let t28: crate::Real = crate::math::sin(t1);
+        let t29: crate::Real = t0 * t1;
+        let t30: crate::Real = t2 * t28;
+        let t31: crate::Real = t4 / t30;
+        let t32: crate::Real = t29 * t31;
+        [t32]
     };
-    let t36: crate::Real = g0[0usize];
-    let t37: crate::Real = t36 / t3;
-    let t38: crate::Real = t1 * t5;
-    [t37, t38]
+    let t33: crate::Real = g0[0usize];
+    let t34: crate::Real = t4 / t3;
+    let t35: crate::Real = t33 * t34;
+    let t36: crate::Real = t1 * t5;
+    [t35, t36]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3). Outputs one after another: step_exact, step_exact_jac_x, step_exact_jac_w (row-major); see `step_exact_linearized`.
 
@@ -1366,7 +951,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5]]
 
-306 arithmetic operations (1673 before common-subexpression elimination).*/
+91 arithmetic operations (737 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1388,352 +973,139 @@ pub fn step_exact_linearized_flat(
     let t10: crate::Real = t5 + t9;
     let t11: crate::Real = t4 + t6;
     let t12: crate::Real = t8 * t11;
-    let t13: crate::Real = crate::math::sin(t2);
-    let t20: crate::Real = crate::math::cos(t2);
-    let t21: crate::Real = t8 * t10;
-    let t22: crate::Real = t20 * t21;
-    let t24: crate::Real = t12 * t12;
-    let t76: crate::Real = 1.0;
-    let t90: crate::Real = t13 * t21;
-    let t163: crate::Real = t8 * t76;
-    let g0: [crate::Real; 8usize] = if crate::math::fabs(t12)
+    let t13: crate::Real = 1.0;
+    let t14: crate::Real = t12 * t12;
+    let g0: [crate::Real; 4usize] = if crate::math::fabs(t12)
         < crate::math::series_switch(0.05)
     {
-        let t14: crate::Real = t8 * t12;
-        let t15: crate::Real = t10 * t14;
-        let t16: crate::Real = t13 * t15;
-        let t17: crate::Real = 0.5;
-        let t18: crate::Real = t16 * t17;
-        let t19: crate::Real = t0 - t18;
-        let t23: crate::Real = t19 + t22;
-        let t25: crate::Real = t8 * t24;
-        let t26: crate::Real = t10 * t25;
-        let t27: crate::Real = t20 * t26;
-        let t28: crate::Real = 0.16666666666666666;
-        let t29: crate::Real = t27 * t28;
-        let t30: crate::Real = t23 - t29;
-        let t31: crate::Real = t12 * t24;
-        let t32: crate::Real = t8 * t31;
-        let t33: crate::Real = t10 * t32;
-        let t34: crate::Real = t13 * t33;
-        let t35: crate::Real = 0.041666666666666664;
-        let t36: crate::Real = t34 * t35;
-        let t37: crate::Real = t30 + t36;
-        let t38: crate::Real = t24 * t24;
-        let t39: crate::Real = t8 * t38;
-        let t40: crate::Real = t10 * t39;
-        let t41: crate::Real = t20 * t40;
-        let t42: crate::Real = 0.008333333333333333;
-        let t43: crate::Real = t41 * t42;
-        let t44: crate::Real = t37 + t43;
-        let t45: crate::Real = t12 * t38;
-        let t46: crate::Real = t8 * t45;
-        let t47: crate::Real = t10 * t46;
-        let t48: crate::Real = t13 * t47;
-        let t49: crate::Real = 0.001388888888888889;
-        let t50: crate::Real = t48 * t49;
-        let t51: crate::Real = t44 - t50;
-        let t52: crate::Real = t31 * t31;
-        let t53: crate::Real = t8 * t52;
-        let t54: crate::Real = t10 * t53;
-        let t55: crate::Real = t20 * t54;
-        let t56: crate::Real = 0.0001984126984126984;
-        let t57: crate::Real = t55 * t56;
-        let t58: crate::Real = t51 - t57;
-        let t59: crate::Real = t12 * t52;
-        let t60: crate::Real = t8 * t59;
-        let t61: crate::Real = t10 * t60;
-        let t62: crate::Real = t13 * t61;
-        let t63: crate::Real = 0.0000248015873015873;
-        let t64: crate::Real = t62 * t63;
-        let t65: crate::Real = t58 + t64;
-        let t66: crate::Real = t38 * t38;
-        let t67: crate::Real = t8 * t66;
-        let t68: crate::Real = t10 * t67;
-        let t69: crate::Real = t20 * t68;
-        let t70: crate::Real = 0.0000027557319223985893;
-        let t71: crate::Real = t69 * t70;
-        let t72: crate::Real = t65 + t71;
-        let t87: crate::Real = t15 * t20;
-        let t88: crate::Real = t17 * t87;
-        let t89: crate::Real = t1 + t88;
-        let t91: crate::Real = t89 + t90;
-        let t92: crate::Real = t13 * t26;
-        let t93: crate::Real = t28 * t92;
-        let t94: crate::Real = t91 - t93;
-        let t95: crate::Real = t20 * t33;
-        let t96: crate::Real = t35 * t95;
-        let t97: crate::Real = t94 - t96;
-        let t98: crate::Real = t13 * t40;
-        let t99: crate::Real = t42 * t98;
-        let t100: crate::Real = t97 + t99;
-        let t101: crate::Real = t20 * t47;
-        let t102: crate::Real = t49 * t101;
-        let t103: crate::Real = t100 + t102;
-        let t104: crate::Real = t13 * t54;
-        let t105: crate::Real = t56 * t104;
-        let t106: crate::Real = t103 - t105;
-        let t107: crate::Real = t20 * t61;
-        let t108: crate::Real = t63 * t107;
-        let t109: crate::Real = t106 - t108;
-        let t110: crate::Real = t13 * t68;
-        let t111: crate::Real = t70 * t110;
-        let t112: crate::Real = t109 + t111;
-        let t122: crate::Real = t20 * t15;
-        let t123: crate::Real = t122 * t17;
-        let t124: crate::Real = t92 * t28;
-        let t125: crate::Real = t95 * t35;
-        let t126: crate::Real = t124 + t125;
-        let t127: crate::Real = t98 * t42;
-        let t128: crate::Real = t126 - t127;
-        let t129: crate::Real = t101 * t49;
-        let t130: crate::Real = t128 - t129;
-        let t131: crate::Real = t104 * t56;
-        let t132: crate::Real = t130 + t131;
-        let t133: crate::Real = t107 * t63;
-        let t134: crate::Real = t132 + t133;
-        let t135: crate::Real = t110 * t70;
-        let t136: crate::Real = t134 - t135;
-        let t137: crate::Real = t136 - t123;
-        let t138: crate::Real = t137 - t90;
-        let t144: crate::Real = t15 * t13;
-        let t145: crate::Real = t17 * t144;
-        let t146: crate::Real = t28 * t27;
-        let t147: crate::Real = t22 - t146;
-        let t148: crate::Real = t35 * t34;
-        let t149: crate::Real = t147 + t148;
-        let t150: crate::Real = t42 * t41;
-        let t151: crate::Real = t149 + t150;
-        let t152: crate::Real = t49 * t48;
-        let t153: crate::Real = t151 - t152;
-        let t154: crate::Real = t56 * t55;
-        let t155: crate::Real = t153 - t154;
-        let t156: crate::Real = t63 * t62;
-        let t157: crate::Real = t155 + t156;
-        let t158: crate::Real = t70 * t69;
-        let t159: crate::Real = t157 + t158;
-        let t160: crate::Real = t159 - t145;
-        let t164: crate::Real = t76 * t14;
-        let t165: crate::Real = t13 * t164;
-        let t166: crate::Real = t165 * t17;
-        let t167: crate::Real = t163 * t20;
-        let t168: crate::Real = t76 * t25;
-        let t169: crate::Real = t20 * t168;
-        let t170: crate::Real = t169 * t28;
-        let t171: crate::Real = t167 - t170;
-        let t172: crate::Real = t76 * t32;
-        let t173: crate::Real = t13 * t172;
-        let t174: crate::Real = t173 * t35;
-        let t175: crate::Real = t171 + t174;
-        let t176: crate::Real = t76 * t39;
-        let t177: crate::Real = t20 * t176;
-        let t178: crate::Real = t177 * t42;
-        let t179: crate::Real = t175 + t178;
-        let t180: crate::Real = t76 * t46;
-        let t181: crate::Real = t13 * t180;
-        let t182: crate::Real = t181 * t49;
-        let t183: crate::Real = t179 - t182;
-        let t184: crate::Real = t76 * t53;
-        let t185: crate::Real = t20 * t184;
-        let t186: crate::Real = t185 * t56;
-        let t187: crate::Real = t183 - t186;
-        let t188: crate::Real = t76 * t60;
-        let t189: crate::Real = t13 * t188;
-        let t190: crate::Real = t189 * t63;
-        let t191: crate::Real = t187 + t190;
-        let t192: crate::Real = t76 * t67;
-        let t193: crate::Real = t20 * t192;
-        let t194: crate::Real = t193 * t70;
-        let t195: crate::Real = t191 + t194;
-        let t196: crate::Real = t195 - t166;
-        let t206: crate::Real = t163 * t15;
-        let t207: crate::Real = t20 * t206;
-        let t208: crate::Real = 0.3333333333333333;
-        let t209: crate::Real = t207 * t208;
-        let t210: crate::Real = t163 * t21;
-        let t211: crate::Real = t13 * t210;
-        let t212: crate::Real = t17 * t211;
-        let t213: crate::Real = t163 * t26;
-        let t214: crate::Real = t13 * t213;
-        let t215: crate::Real = 0.125;
-        let t216: crate::Real = t214 * t215;
-        let t217: crate::Real = t163 * t33;
-        let t218: crate::Real = t20 * t217;
-        let t219: crate::Real = 0.03333333333333333;
-        let t220: crate::Real = t218 * t219;
-        let t221: crate::Real = t216 + t220;
-        let t222: crate::Real = t163 * t40;
-        let t223: crate::Real = t13 * t222;
-        let t224: crate::Real = 0.006944444444444444;
-        let t225: crate::Real = t223 * t224;
-        let t226: crate::Real = t221 - t225;
-        let t227: crate::Real = t163 * t47;
-        let t228: crate::Real = t20 * t227;
-        let t229: crate::Real = 0.0011904761904761906;
-        let t230: crate::Real = t228 * t229;
-        let t231: crate::Real = t226 - t230;
-        let t232: crate::Real = t163 * t54;
-        let t233: crate::Real = t13 * t232;
-        let t234: crate::Real = 0.00017361111111111112;
-        let t235: crate::Real = t233 * t234;
-        let t236: crate::Real = t231 + t235;
-        let t237: crate::Real = t163 * t61;
-        let t238: crate::Real = t20 * t237;
-        let t239: crate::Real = 0.000022045855379188714;
-        let t240: crate::Real = t238 * t239;
-        let t241: crate::Real = t236 + t240;
-        let t242: crate::Real = t163 * t68;
-        let t243: crate::Real = t13 * t242;
-        let t244: crate::Real = 0.00000248015873015873;
-        let t245: crate::Real = t243 * t244;
-        let t246: crate::Real = t241 - t245;
-        let t247: crate::Real = t246 - t209;
-        let t248: crate::Real = t247 - t212;
-        let t263: crate::Real = t164 * t20;
-        let t264: crate::Real = t17 * t263;
-        let t265: crate::Real = t163 * t13;
-        let t266: crate::Real = t264 + t265;
-        let t267: crate::Real = t13 * t168;
-        let t268: crate::Real = t28 * t267;
-        let t269: crate::Real = t266 - t268;
-        let t270: crate::Real = t20 * t172;
-        let t271: crate::Real = t35 * t270;
-        let t272: crate::Real = t269 - t271;
-        let t273: crate::Real = t13 * t176;
-        let t274: crate::Real = t42 * t273;
-        let t275: crate::Real = t272 + t274;
-        let t276: crate::Real = t20 * t180;
-        let t277: crate::Real = t49 * t276;
-        let t278: crate::Real = t275 + t277;
-        let t279: crate::Real = t13 * t184;
-        let t280: crate::Real = t56 * t279;
-        let t281: crate::Real = t278 - t280;
-        let t282: crate::Real = t20 * t188;
-        let t283: crate::Real = t63 * t282;
-        let t284: crate::Real = t281 - t283;
-        let t285: crate::Real = t13 * t192;
-        let t286: crate::Real = t70 * t285;
-        let t287: crate::Real = t284 + t286;
-        let t296: crate::Real = t13 * t206;
-        let t297: crate::Real = t208 * t296;
-        let t298: crate::Real = t20 * t210;
-        let t299: crate::Real = t17 * t298;
-        let t300: crate::Real = t20 * t213;
-        let t301: crate::Real = t215 * t300;
-        let t302: crate::Real = t299 - t301;
-        let t303: crate::Real = t13 * t217;
-        let t304: crate::Real = t219 * t303;
-        let t305: crate::Real = t302 + t304;
-        let t306: crate::Real = t20 * t222;
-        let t307: crate::Real = t224 * t306;
-        let t308: crate::Real = t305 + t307;
-        let t309: crate::Real = t13 * t227;
-        let t310: crate::Real = t229 * t309;
-        let t311: crate::Real = t308 - t310;
-        let t312: crate::Real = t20 * t232;
-        let t313: crate::Real = t234 * t312;
-        let t314: crate::Real = t311 - t313;
-        let t315: crate::Real = t13 * t237;
-        let t316: crate::Real = t239 * t315;
-        let t317: crate::Real = t314 + t316;
-        let t318: crate::Real = t20 * t242;
-        let t319: crate::Real = t244 * t318;
-        let t320: crate::Real = t317 + t319;
-        let t321: crate::Real = t320 - t297;
-        [t72, t112, t138, t160, t196, t248, t287, t321]
+        let t15: crate::Real = 0.16666666666666666;
+        let t16: crate::Real = 0.008333333333333333;
+        let t17: crate::Real = 0.0001984126984126984;
+        let t18: crate::Real = 0.0000027557319223985893;
+        let t19: crate::Real = t14 * t18;
+        let t20: crate::Real = t19 - t17;
+        let t21: crate::Real = t14 * t20;
+        let t22: crate::Real = t16 + t21;
+        let t23: crate::Real = t14 * t22;
+        let t24: crate::Real = t23 - t15;
+        let t25: crate::Real = t14 * t24;
+        let t26: crate::Real = t13 + t25;
+        let t31: crate::Real = 0.5;
+        let t32: crate::Real = 0.041666666666666664;
+        let t33: crate::Real = 0.001388888888888889;
+        let t34: crate::Real = 0.0000248015873015873;
+        let t35: crate::Real = t14 * t34;
+        let t36: crate::Real = t33 - t35;
+        let t37: crate::Real = t14 * t36;
+        let t38: crate::Real = t37 - t32;
+        let t39: crate::Real = t14 * t38;
+        let t40: crate::Real = t31 + t39;
+        let t41: crate::Real = t12 * t40;
+        let t68: crate::Real = 0.3333333333333333;
+        let t69: crate::Real = 0.03333333333333333;
+        let t70: crate::Real = 0.0011904761904761906;
+        let t71: crate::Real = 0.000022045855379188714;
+        let t72: crate::Real = t14 * t71;
+        let t73: crate::Real = t72 - t70;
+        let t74: crate::Real = t14 * t73;
+        let t75: crate::Real = t69 + t74;
+        let t76: crate::Real = t14 * t75;
+        let t77: crate::Real = t76 - t68;
+        let t78: crate::Real = t12 * t77;
+        let t85: crate::Real = 0.125;
+        let t86: crate::Real = 0.006944444444444444;
+        let t87: crate::Real = 0.00017361111111111112;
+        let t88: crate::Real = 0.00000248015873015873;
+        let t89: crate::Real = t14 * t88;
+        let t90: crate::Real = t89 - t87;
+        let t91: crate::Real = t14 * t90;
+        let t92: crate::Real = t86 + t91;
+        let t93: crate::Real = t14 * t92;
+        let t94: crate::Real = t93 - t85;
+        let t95: crate::Real = t14 * t94;
+        let t96: crate::Real = t31 + t95;
+        [t26, t41, t78, t96]
     } else {
-        let t73: crate::Real = crate::math::sin(t12);
-        let t74: crate::Real = t21 * t73;
-        let t75: crate::Real = t20 * t74;
-        let t77: crate::Real = t76 / t12;
-        let t78: crate::Real = t75 * t77;
-        let t79: crate::Real = t0 + t78;
-        let t80: crate::Real = crate::math::cos(t12);
-        let t81: crate::Real = t76 - t80;
-        let t82: crate::Real = t21 * t81;
-        let t83: crate::Real = t13 * t82;
-        let t84: crate::Real = t83 * t77;
-        let t85: crate::Real = t79 - t84;
-        let t113: crate::Real = t73 * t90;
-        let t114: crate::Real = t113 * t77;
-        let t115: crate::Real = t1 + t114;
-        let t116: crate::Real = t20 * t82;
-        let t117: crate::Real = t116 * t77;
-        let t118: crate::Real = t115 + t117;
-        let t139: crate::Real = t90 * t73;
-        let t140: crate::Real = t139 * t77;
-        let t141: crate::Real = -t140;
-        let t142: crate::Real = t141 - t117;
-        let t161: crate::Real = t78 - t84;
-        let t197: crate::Real = t8 * t73;
-        let t198: crate::Real = t20 * t197;
-        let t199: crate::Real = t198 * t77;
-        let t200: crate::Real = t8 * t81;
-        let t201: crate::Real = t13 * t200;
-        let t202: crate::Real = t201 * t77;
-        let t203: crate::Real = t199 - t202;
-        let t204: crate::Real = t76 * t203;
-        let t249: crate::Real = t80 * t22;
-        let t250: crate::Real = t249 * t77;
-        let t251: crate::Real = t73 * t21;
-        let t252: crate::Real = t20 * t251;
-        let t253: crate::Real = t76 / t24;
-        let t254: crate::Real = t252 * t253;
-        let t255: crate::Real = t250 - t254;
-        let t256: crate::Real = t81 * t21;
-        let t257: crate::Real = t13 * t256;
-        let t258: crate::Real = t257 * t253;
-        let t259: crate::Real = t255 + t258;
-        let t260: crate::Real = t259 - t114;
-        let t261: crate::Real = t163 * t260;
-        let t288: crate::Real = t8 * t13;
-        let t289: crate::Real = t73 * t288;
-        let t290: crate::Real = t289 * t77;
-        let t291: crate::Real = t20 * t200;
-        let t292: crate::Real = t291 * t77;
-        let t293: crate::Real = t290 + t292;
-        let t294: crate::Real = t76 * t293;
-        let t322: crate::Real = t80 * t90;
-        let t323: crate::Real = t322 * t77;
-        let t324: crate::Real = t252 * t77;
-        let t325: crate::Real = t323 + t324;
-        let t326: crate::Real = t113 * t253;
-        let t327: crate::Real = t325 - t326;
-        let t328: crate::Real = t20 * t256;
-        let t329: crate::Real = t328 * t253;
-        let t330: crate::Real = t327 - t329;
-        let t331: crate::Real = t163 * t330;
-        [t85, t118, t142, t161, t204, t261, t294, t331]
+        let sc27 = crate::math::sincos(t12);
+        let t27: crate::Real = sc27.0;
+        let t42: crate::Real = sc27.1;
+        let t28: crate::Real = t13 / t12;
+        let t29: crate::Real = t27 * t28;
+        let t43: crate::Real = t13 - t42;
+        let t44: crate::Real = t43 * t28;
+        let t79: crate::Real = t42 * t28;
+        let t80: crate::Real = t13 / t14;
+        let t81: crate::Real = t27 * t80;
+        let t82: crate::Real = t79 - t81;
+        let t97: crate::Real = t43 * t80;
+        let t98: crate::Real = t29 - t97;
+        [t29, t44, t82, t98]
     };
-    let t86: crate::Real = g0[0usize];
-    let t119: crate::Real = g0[1usize];
-    let t143: crate::Real = g0[2usize];
-    let t162: crate::Real = g0[3usize];
-    let t205: crate::Real = g0[4usize];
-    let t262: crate::Real = g0[5usize];
-    let t295: crate::Real = g0[6usize];
-    let t332: crate::Real = g0[7usize];
-    let t120: crate::Real = t2 + t12;
-    let t121: crate::Real = 0.0;
+    let t30: crate::Real = g0[0usize];
+    let t45: crate::Real = g0[1usize];
+    let t83: crate::Real = g0[2usize];
+    let t99: crate::Real = g0[3usize];
+    let sc46 = crate::math::sincos(t2);
+    let t51: crate::Real = sc46.0;
+    let t46: crate::Real = sc46.1;
+    let t47: crate::Real = t8 * t30;
+    let t48: crate::Real = t10 * t47;
+    let t49: crate::Real = t46 * t48;
+    let t50: crate::Real = t0 + t49;
+    let t52: crate::Real = t8 * t45;
+    let t53: crate::Real = t10 * t52;
+    let t54: crate::Real = t51 * t53;
+    let t55: crate::Real = t50 - t54;
+    let t56: crate::Real = t48 * t51;
+    let t57: crate::Real = t1 + t56;
+    let t58: crate::Real = t46 * t53;
+    let t59: crate::Real = t57 + t58;
+    let t60: crate::Real = t2 + t12;
+    let t61: crate::Real = 0.0;
+    let t62: crate::Real = t51 * t48;
+    let t63: crate::Real = -t62;
+    let t64: crate::Real = t63 - t58;
+    let t65: crate::Real = t48 * t46;
+    let t66: crate::Real = t65 - t54;
+    let t67: crate::Real = t8 * t13;
+    let t84: crate::Real = t67 * t83;
+    let t100: crate::Real = t67 * t99;
+    let t101: crate::Real = t46 * t47;
+    let t102: crate::Real = t51 * t52;
+    let t103: crate::Real = t101 - t102;
+    let t104: crate::Real = t13 * t103;
+    let t105: crate::Real = t8 * t10;
+    let t106: crate::Real = t84 * t105;
+    let t107: crate::Real = t46 * t106;
+    let t108: crate::Real = t100 * t105;
+    let t109: crate::Real = t51 * t108;
+    let t110: crate::Real = t107 - t109;
+    let t111: crate::Real = t47 * t51;
+    let t112: crate::Real = t46 * t52;
+    let t113: crate::Real = t111 + t112;
+    let t114: crate::Real = t13 * t113;
+    let t115: crate::Real = t51 * t106;
+    let t116: crate::Real = t46 * t108;
+    let t117: crate::Real = t115 + t116;
     [
-        t86,
-        t119,
-        t120,
-        t76,
-        t121,
-        t143,
-        t121,
-        t76,
-        t162,
-        t121,
-        t121,
-        t76,
-        t205,
-        t262,
-        t295,
-        t332,
-        t121,
-        t163,
+        t55,
+        t59,
+        t60,
+        t13,
+        t61,
+        t64,
+        t61,
+        t13,
+        t66,
+        t61,
+        t61,
+        t13,
+        t104,
+        t110,
+        t114,
+        t117,
+        t61,
+        t67,
     ]
 }
 /**The exact step with its Jacobians wrt the state and the process noise, from one shared computation: an EKF's prediction (seed 001 eq. 2-3).
@@ -1771,7 +1143,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2]]
 
-220 arithmetic operations (1162 before common-subexpression elimination).*/
+56 arithmetic operations (512 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -1793,256 +1165,78 @@ pub fn step_exact_with_jac_p_flat(
     let t10: crate::Real = t5 + t9;
     let t11: crate::Real = t4 + t6;
     let t12: crate::Real = t8 * t11;
-    let t13: crate::Real = crate::math::sin(t2);
-    let t20: crate::Real = crate::math::cos(t2);
-    let t21: crate::Real = t8 * t10;
-    let t76: crate::Real = 1.0;
-    let t90: crate::Real = t13 * t21;
-    let g0: [crate::Real; 6usize] = if crate::math::fabs(t12)
+    let t13: crate::Real = 1.0;
+    let g0: [crate::Real; 2usize] = if crate::math::fabs(t12)
         < crate::math::series_switch(0.05)
     {
-        let t14: crate::Real = t8 * t12;
-        let t15: crate::Real = t10 * t14;
-        let t16: crate::Real = t13 * t15;
-        let t17: crate::Real = 0.5;
-        let t18: crate::Real = t16 * t17;
-        let t19: crate::Real = t0 - t18;
-        let t22: crate::Real = t20 * t21;
-        let t23: crate::Real = t19 + t22;
-        let t24: crate::Real = t12 * t12;
-        let t25: crate::Real = t8 * t24;
-        let t26: crate::Real = t10 * t25;
-        let t27: crate::Real = t20 * t26;
-        let t28: crate::Real = 0.16666666666666666;
-        let t29: crate::Real = t27 * t28;
-        let t30: crate::Real = t23 - t29;
-        let t31: crate::Real = t12 * t24;
-        let t32: crate::Real = t8 * t31;
-        let t33: crate::Real = t10 * t32;
-        let t34: crate::Real = t13 * t33;
-        let t35: crate::Real = 0.041666666666666664;
-        let t36: crate::Real = t34 * t35;
-        let t37: crate::Real = t30 + t36;
-        let t38: crate::Real = t24 * t24;
-        let t39: crate::Real = t8 * t38;
-        let t40: crate::Real = t10 * t39;
-        let t41: crate::Real = t20 * t40;
-        let t42: crate::Real = 0.008333333333333333;
-        let t43: crate::Real = t41 * t42;
-        let t44: crate::Real = t37 + t43;
-        let t45: crate::Real = t12 * t38;
-        let t46: crate::Real = t8 * t45;
-        let t47: crate::Real = t10 * t46;
-        let t48: crate::Real = t13 * t47;
-        let t49: crate::Real = 0.001388888888888889;
-        let t50: crate::Real = t48 * t49;
-        let t51: crate::Real = t44 - t50;
-        let t52: crate::Real = t31 * t31;
-        let t53: crate::Real = t8 * t52;
-        let t54: crate::Real = t10 * t53;
-        let t55: crate::Real = t20 * t54;
-        let t56: crate::Real = 0.0001984126984126984;
-        let t57: crate::Real = t55 * t56;
-        let t58: crate::Real = t51 - t57;
-        let t59: crate::Real = t12 * t52;
-        let t60: crate::Real = t8 * t59;
-        let t61: crate::Real = t10 * t60;
-        let t62: crate::Real = t13 * t61;
-        let t63: crate::Real = 0.0000248015873015873;
-        let t64: crate::Real = t62 * t63;
-        let t65: crate::Real = t58 + t64;
-        let t66: crate::Real = t38 * t38;
-        let t67: crate::Real = t8 * t66;
-        let t68: crate::Real = t10 * t67;
-        let t69: crate::Real = t20 * t68;
-        let t70: crate::Real = 0.0000027557319223985893;
-        let t71: crate::Real = t69 * t70;
-        let t72: crate::Real = t65 + t71;
-        let t87: crate::Real = t15 * t20;
-        let t88: crate::Real = t17 * t87;
-        let t89: crate::Real = t1 + t88;
-        let t91: crate::Real = t89 + t90;
-        let t92: crate::Real = t13 * t26;
-        let t93: crate::Real = t28 * t92;
-        let t94: crate::Real = t91 - t93;
-        let t95: crate::Real = t20 * t33;
-        let t96: crate::Real = t35 * t95;
-        let t97: crate::Real = t94 - t96;
-        let t98: crate::Real = t13 * t40;
-        let t99: crate::Real = t42 * t98;
-        let t100: crate::Real = t97 + t99;
-        let t101: crate::Real = t20 * t47;
-        let t102: crate::Real = t49 * t101;
-        let t103: crate::Real = t100 + t102;
-        let t104: crate::Real = t13 * t54;
-        let t105: crate::Real = t56 * t104;
-        let t106: crate::Real = t103 - t105;
-        let t107: crate::Real = t20 * t61;
-        let t108: crate::Real = t63 * t107;
-        let t109: crate::Real = t106 - t108;
-        let t110: crate::Real = t13 * t68;
-        let t111: crate::Real = t70 * t110;
-        let t112: crate::Real = t109 + t111;
-        let t122: crate::Real = t20 * t15;
-        let t123: crate::Real = t122 * t17;
-        let t124: crate::Real = t92 * t28;
-        let t125: crate::Real = t95 * t35;
-        let t126: crate::Real = t124 + t125;
-        let t127: crate::Real = t98 * t42;
-        let t128: crate::Real = t126 - t127;
-        let t129: crate::Real = t101 * t49;
-        let t130: crate::Real = t128 - t129;
-        let t131: crate::Real = t104 * t56;
-        let t132: crate::Real = t130 + t131;
-        let t133: crate::Real = t107 * t63;
-        let t134: crate::Real = t132 + t133;
-        let t135: crate::Real = t110 * t70;
-        let t136: crate::Real = t134 - t135;
-        let t137: crate::Real = t136 - t123;
-        let t138: crate::Real = t137 - t90;
-        let t144: crate::Real = t15 * t13;
-        let t145: crate::Real = t17 * t144;
-        let t146: crate::Real = t28 * t27;
-        let t147: crate::Real = t22 - t146;
-        let t148: crate::Real = t35 * t34;
-        let t149: crate::Real = t147 + t148;
-        let t150: crate::Real = t42 * t41;
-        let t151: crate::Real = t149 + t150;
-        let t152: crate::Real = t49 * t48;
-        let t153: crate::Real = t151 - t152;
-        let t154: crate::Real = t56 * t55;
-        let t155: crate::Real = t153 - t154;
-        let t156: crate::Real = t63 * t62;
-        let t157: crate::Real = t155 + t156;
-        let t158: crate::Real = t70 * t69;
-        let t159: crate::Real = t157 + t158;
-        let t160: crate::Real = t159 - t145;
-        let t163: crate::Real = t3 * t14;
-        let t164: crate::Real = t13 * t163;
-        let t165: crate::Real = t164 * t17;
-        let t166: crate::Real = t3 * t8;
-        let t167: crate::Real = t20 * t166;
-        let t168: crate::Real = t3 * t25;
-        let t169: crate::Real = t20 * t168;
-        let t170: crate::Real = t169 * t28;
-        let t171: crate::Real = t167 - t170;
-        let t172: crate::Real = t3 * t32;
-        let t173: crate::Real = t13 * t172;
-        let t174: crate::Real = t173 * t35;
-        let t175: crate::Real = t171 + t174;
-        let t176: crate::Real = t3 * t39;
-        let t177: crate::Real = t20 * t176;
-        let t178: crate::Real = t177 * t42;
-        let t179: crate::Real = t175 + t178;
-        let t180: crate::Real = t3 * t46;
-        let t181: crate::Real = t13 * t180;
-        let t182: crate::Real = t181 * t49;
-        let t183: crate::Real = t179 - t182;
-        let t184: crate::Real = t3 * t53;
-        let t185: crate::Real = t20 * t184;
-        let t186: crate::Real = t185 * t56;
-        let t187: crate::Real = t183 - t186;
-        let t188: crate::Real = t3 * t60;
-        let t189: crate::Real = t13 * t188;
-        let t190: crate::Real = t189 * t63;
-        let t191: crate::Real = t187 + t190;
-        let t192: crate::Real = t3 * t67;
-        let t193: crate::Real = t20 * t192;
-        let t194: crate::Real = t193 * t70;
-        let t195: crate::Real = t191 + t194;
-        let t196: crate::Real = t195 - t165;
-        let t206: crate::Real = t163 * t20;
-        let t207: crate::Real = t17 * t206;
-        let t208: crate::Real = t13 * t166;
-        let t209: crate::Real = t207 + t208;
-        let t210: crate::Real = t13 * t168;
-        let t211: crate::Real = t28 * t210;
-        let t212: crate::Real = t209 - t211;
-        let t213: crate::Real = t20 * t172;
-        let t214: crate::Real = t35 * t213;
-        let t215: crate::Real = t212 - t214;
-        let t216: crate::Real = t13 * t176;
-        let t217: crate::Real = t42 * t216;
-        let t218: crate::Real = t215 + t217;
-        let t219: crate::Real = t20 * t180;
-        let t220: crate::Real = t49 * t219;
-        let t221: crate::Real = t218 + t220;
-        let t222: crate::Real = t13 * t184;
-        let t223: crate::Real = t56 * t222;
-        let t224: crate::Real = t221 - t223;
-        let t225: crate::Real = t20 * t188;
-        let t226: crate::Real = t63 * t225;
-        let t227: crate::Real = t224 - t226;
-        let t228: crate::Real = t13 * t192;
-        let t229: crate::Real = t70 * t228;
-        let t230: crate::Real = t227 + t229;
-        [t72, t112, t138, t160, t196, t230]
+        let t14: crate::Real = t12 * t12;
+        let t15: crate::Real = 0.16666666666666666;
+        let t16: crate::Real = 0.008333333333333333;
+        let t17: crate::Real = 0.0001984126984126984;
+        let t18: crate::Real = 0.0000027557319223985893;
+        let t19: crate::Real = t14 * t18;
+        let t20: crate::Real = t19 - t17;
+        let t21: crate::Real = t14 * t20;
+        let t22: crate::Real = t16 + t21;
+        let t23: crate::Real = t14 * t22;
+        let t24: crate::Real = t23 - t15;
+        let t25: crate::Real = t14 * t24;
+        let t26: crate::Real = t13 + t25;
+        let t31: crate::Real = 0.5;
+        let t32: crate::Real = 0.041666666666666664;
+        let t33: crate::Real = 0.001388888888888889;
+        let t34: crate::Real = 0.0000248015873015873;
+        let t35: crate::Real = t14 * t34;
+        let t36: crate::Real = t33 - t35;
+        let t37: crate::Real = t14 * t36;
+        let t38: crate::Real = t37 - t32;
+        let t39: crate::Real = t14 * t38;
+        let t40: crate::Real = t31 + t39;
+        let t41: crate::Real = t12 * t40;
+        [t26, t41]
     } else {
-        let t73: crate::Real = crate::math::sin(t12);
-        let t74: crate::Real = t21 * t73;
-        let t75: crate::Real = t20 * t74;
-        let t77: crate::Real = t76 / t12;
-        let t78: crate::Real = t75 * t77;
-        let t79: crate::Real = t0 + t78;
-        let t80: crate::Real = crate::math::cos(t12);
-        let t81: crate::Real = t76 - t80;
-        let t82: crate::Real = t21 * t81;
-        let t83: crate::Real = t13 * t82;
-        let t84: crate::Real = t83 * t77;
-        let t85: crate::Real = t79 - t84;
-        let t113: crate::Real = t73 * t90;
-        let t114: crate::Real = t113 * t77;
-        let t115: crate::Real = t1 + t114;
-        let t116: crate::Real = t20 * t82;
-        let t117: crate::Real = t116 * t77;
-        let t118: crate::Real = t115 + t117;
-        let t139: crate::Real = t90 * t73;
-        let t140: crate::Real = t139 * t77;
-        let t141: crate::Real = -t140;
-        let t142: crate::Real = t141 - t117;
-        let t161: crate::Real = t78 - t84;
-        let t197: crate::Real = t8 * t73;
-        let t198: crate::Real = t20 * t197;
-        let t199: crate::Real = t198 * t77;
-        let t200: crate::Real = t8 * t81;
-        let t201: crate::Real = t13 * t200;
-        let t202: crate::Real = t201 * t77;
-        let t203: crate::Real = t199 - t202;
-        let t204: crate::Real = t3 * t203;
-        let t231: crate::Real = t8 * t13;
-        let t232: crate::Real = t73 * t231;
-        let t233: crate::Real = t232 * t77;
-        let t234: crate::Real = t20 * t200;
-        let t235: crate::Real = t234 * t77;
-        let t236: crate::Real = t233 + t235;
-        let t237: crate::Real = t3 * t236;
-        [t85, t118, t142, t161, t204, t237]
+        let sc27 = crate::math::sincos(t12);
+        let t27: crate::Real = sc27.0;
+        let t42: crate::Real = sc27.1;
+        let t28: crate::Real = t13 / t12;
+        let t29: crate::Real = t27 * t28;
+        let t43: crate::Real = t13 - t42;
+        let t44: crate::Real = t43 * t28;
+        [t29, t44]
     };
-    let t86: crate::Real = g0[0usize];
-    let t119: crate::Real = g0[1usize];
-    let t143: crate::Real = g0[2usize];
-    let t162: crate::Real = g0[3usize];
-    let t205: crate::Real = g0[4usize];
-    let t238: crate::Real = g0[5usize];
-    let t120: crate::Real = t2 + t12;
-    let t121: crate::Real = 0.0;
-    [
-        t86,
-        t119,
-        t120,
-        t76,
-        t121,
-        t143,
-        t121,
-        t76,
-        t162,
-        t121,
-        t121,
-        t76,
-        t205,
-        t238,
-        t121,
-    ]
+    let t30: crate::Real = g0[0usize];
+    let t45: crate::Real = g0[1usize];
+    let sc46 = crate::math::sincos(t2);
+    let t51: crate::Real = sc46.0;
+    let t46: crate::Real = sc46.1;
+    let t47: crate::Real = t8 * t30;
+    let t48: crate::Real = t10 * t47;
+    let t49: crate::Real = t46 * t48;
+    let t50: crate::Real = t0 + t49;
+    let t52: crate::Real = t8 * t45;
+    let t53: crate::Real = t10 * t52;
+    let t54: crate::Real = t51 * t53;
+    let t55: crate::Real = t50 - t54;
+    let t56: crate::Real = t48 * t51;
+    let t57: crate::Real = t1 + t56;
+    let t58: crate::Real = t46 * t53;
+    let t59: crate::Real = t57 + t58;
+    let t60: crate::Real = t2 + t12;
+    let t61: crate::Real = 0.0;
+    let t62: crate::Real = t51 * t48;
+    let t63: crate::Real = -t62;
+    let t64: crate::Real = t63 - t58;
+    let t65: crate::Real = t48 * t46;
+    let t66: crate::Real = t65 - t54;
+    let t67: crate::Real = t46 * t47;
+    let t68: crate::Real = t51 * t52;
+    let t69: crate::Real = t67 - t68;
+    let t70: crate::Real = t3 * t69;
+    let t71: crate::Real = t47 * t51;
+    let t72: crate::Real = t46 * t52;
+    let t73: crate::Real = t71 + t72;
+    let t74: crate::Real = t3 * t73;
+    [t55, t59, t60, t13, t61, t64, t61, t13, t66, t61, t61, t13, t70, t74, t61]
 }
 /**The exact step with its Jacobians wrt the state and the parameters, from one shared computation: one step of calibration's forward sensitivities.
 

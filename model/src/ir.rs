@@ -191,8 +191,10 @@ impl Function {
                 Op::PowI(a, n) => v(a).powi(n),
                 Op::Pow(a, b) => v(a).powf(v(b)),
                 Op::Sqrt(a) => v(a).sqrt(),
-                Op::Sin(a) => v(a).sin(),
-                Op::Cos(a) => v(a).cos(),
+                // libm's, as the generated kernels and the JIT call them (and
+                // its sincos gives bit for bit the same pair): one result everywhere
+                Op::Sin(a) => libm::sin(v(a)),
+                Op::Cos(a) => libm::cos(v(a)),
                 Op::Tan(a) => v(a).tan(),
                 Op::Atan(a) => v(a).atan(),
                 Op::Atan2(a, b) => v(a).atan2(v(b)),

@@ -226,10 +226,10 @@ fn enabled() -> bool {
 }
 
 extern "C" fn host_sin(x: f64) -> f64 {
-    x.sin()
+    libm::sin(x)
 }
 extern "C" fn host_cos(x: f64) -> f64 {
-    x.cos()
+    libm::cos(x)
 }
 extern "C" fn host_tan(x: f64) -> f64 {
     x.tan()
@@ -249,13 +249,14 @@ extern "C" fn host_atan2(y: f64, x: f64) -> f64 {
 extern "C" fn host_pow(x: f64, y: f64) -> f64 {
     x.powf(y)
 }
-/// Both `sin x` and `cos x` in one call (the same two libm calls as apart, but
-/// one call's register spills instead of two), into the 2 values at `out`.
+/// Both `sin x` and `cos x` from libm's `sincos`, one argument reduction for
+/// the two (bit for bit `host_sin` and `host_cos`), into the 2 values at `out`.
 ///
 /// # Safety
 /// `out` points at 2 values (a stack slot of the compiled code).
 unsafe extern "C" fn host_sincos(x: f64, out: *mut f64) {
-    unsafe { std::slice::from_raw_parts_mut(out, 2) }.copy_from_slice(&[x.sin(), x.cos()]);
+    let (sin, cos) = libm::sincos(x);
+    unsafe { std::slice::from_raw_parts_mut(out, 2) }.copy_from_slice(&[sin, cos]);
 }
 /// The packed pseudo-inverse of the packed symmetric 3x3 matrix at `m`.
 ///
@@ -729,14 +730,14 @@ mod tests {
         let f = function(vec![Op::Arg(0, 0), Op::Sin(0)], vec![1], 1);
         let hot =
             |g: &Function, x: f64| (0..=HOT_CALLS).map(|_| g.eval(&[&[x]])[0]).last().unwrap();
-        assert_eq!(hot(&f, 0.3), 0.3f64.sin());
+        assert_eq!(hot(&f, 0.3), libm::sin(0.3));
         let same = f.clone();
-        assert_eq!(hot(&same, 0.3), 0.3f64.sin());
+        assert_eq!(hot(&same, 0.3), libm::sin(0.3));
         let edited = Function {
             tape: vec![Op::Arg(0, 0), Op::Cos(0)],
             ..f.clone()
         };
-        assert_eq!(hot(&edited, 0.3), 0.3f64.cos());
+        assert_eq!(hot(&edited, 0.3), libm::cos(0.3));
         assert_eq!(format!("{:?}", edited.native), "NativeCache(compiled)");
     }
 
@@ -744,7 +745,7 @@ mod tests {
     fn a_hot_function_is_compiled_and_a_clone_starts_cold() {
         let f = function(vec![Op::Arg(0, 0), Op::Sin(0)], vec![1], 1);
         for _ in 0..=HOT_CALLS {
-            assert_eq!(f.eval(&[&[0.5]])[0], 0.5f64.sin());
+            assert_eq!(f.eval(&[&[0.5]])[0], libm::sin(0.5));
         }
         assert_eq!(format!("{:?}", f.native), "NativeCache(compiled)");
         assert_eq!(

@@ -253,8 +253,25 @@ fn main() {
             })
             .sum()
     };
-    let [ours, theirs, wren] = race(N, [&mut ours, &mut theirs, &mut wren]);
+    // the same two outputs from the fused kernel (one call, as an EKF update makes it)
+    let mut fused = || {
+        inputs
+            .iter()
+            .map(|(x, u, p, l)| {
+                let (x, u, p, l) = black_box((x, u, p, l));
+                let (h, hx, _) = black_box(uc::obs_landmark_linearized(x, u, p, l));
+                h[0] + hx[1][2]
+            })
+            .sum()
+    };
+    let [ours, theirs, wren, fused] = race(N, [&mut ours, &mut theirs, &mut wren, &mut fused]);
     row("unicycle_ekf obs_landmark + jac_x", ours, theirs, wren);
+    row(
+        "unicycle_ekf obs_landmark_linearized (fused)",
+        fused,
+        theirs,
+        wren,
+    );
 
     // omni_caster (seed 000): least-squares twist, and step_exact + jac_p
     type OcIn = ([f64; 3], [f64; 9], [f64; 3], [f64; 12], f64);
