@@ -761,6 +761,97 @@ fn turning_in_place_leaves_the_common_scale_unidentified_and_says_so() {
     );
 }
 
+/// A cart whose only steering is a fixed toe angle: the log shows the curvature
+/// tan(toe)/L and nothing else, a curved set of equally good (L, toe) pairs.
+/// From toe = 0 the fit must still reach the curvature (before: the
+/// undetermined direction found at the optimum, held from the start, was
+/// nearly the toe axis there, and the fit ended where it began, 0.77 m RMSE)
+/// and say that L and toe cannot be separated.
+#[test]
+fn a_curved_undetermined_direction_does_not_stop_the_fit_at_its_start() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = tmp.path().join("cart.toml");
+    std::fs::write(
+        &spec,
+        r#"name = "cart"
+state = ["x", "y", "theta"]
+
+[[input]]
+name = "w"
+column = "wheel_rad"
+kind = "cumulative"
+unit = "rad/s"
+
+[[parameter]]
+name = "r"
+nominal = 0.11
+unit = "m"
+min = 0.01
+
+[[parameter]]
+name = "L"
+nominal = 0.65
+unit = "m"
+min = 0.1
+
+[[parameter]]
+name = "toe"
+nominal = 0.0
+unit = "rad"
+min = -0.2
+max = 0.2
+
+[motion]
+vx = "r*w"
+vy = "0"
+omega = "r*w*tan(toe)/L"
+
+[[observation]]
+name = "mocap"
+columns = ["mx", "my", "myaw"]
+expr = ["x", "y", "theta"]
+angle = [false, false, true]
+sigma = [0.003, 0.003, 0.005]
+"#,
+    )
+    .unwrap();
+    let spec = spec.to_str().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "cart.csv",
+        &[
+            "--spec",
+            spec,
+            "--set",
+            "toe=0.05",
+            "--trajectory",
+            "figure8",
+            "--seed",
+            "4",
+        ],
+    );
+    let fit = kinegen_json(&["fit", "--spec", spec, "--data", log.to_str().unwrap()]);
+    let after = fit["after"]["rmse"].as_f64().unwrap();
+    assert!(
+        after < 0.01,
+        "position RMSE after the fit {after} m: {}",
+        fit["warnings"]
+    );
+    let est = |n: &str| fit["parameters"][n]["estimate"].as_f64().unwrap();
+    let curvature = est("toe").tan() / est("L");
+    let truth = 0.05f64.tan() / 0.65;
+    assert!(
+        (curvature / truth - 1.0).abs() < 0.01,
+        "tan(toe)/L = {curvature}, truth {truth}"
+    );
+    let warnings = fit["warnings"].to_string();
+    assert!(
+        warnings.contains("combination of L and toe")
+            || warnings.contains("combination of toe and L"),
+        "{warnings}"
+    );
+}
+
 /// Issue #11: a front-wheel-drive tricycle (tests/user_specs) whose steering gain
 /// is 5x off its nominal value and whose tracker sits 1.8 m ahead of the rear
 /// axle. From the nominal values a whole-track fit falls into the "robot that

@@ -724,7 +724,22 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
         return Ok(res);
     }
     let held = fit_unheld(r, runs, &holding(o, &res))?;
-    Ok(held.continuing(&res))
+    if !lock_undoes_fit(&held, &res) {
+        return Ok(held.continuing(&res));
+    }
+    // a curved undetermined direction (see `fit_stage_from`): hold it from
+    // where the data put the parameters, not from the start
+    let mut at = r.clone();
+    at.p = res.p.clone();
+    let kept = held_where_fitted(
+        r,
+        fit_stage_from(&at, runs, &holding(o, &res), Start::NearOptimum)?,
+    );
+    Ok(FitResult {
+        cost_before: res.cost_before,
+        iterations: res.iterations + held.iterations + kept.iterations,
+        ..kept
+    })
 }
 
 /// [`fit`] without its final check of the undetermined directions.
@@ -1101,7 +1116,61 @@ fn fit_stage_from(
         return Ok(first);
     }
     let locked = levenberg_marquardt(r, runs, &holding(o, &first), start)?;
-    Ok(locked.continuing(&first))
+    if !lock_undoes_fit(&locked, &first) {
+        return Ok(locked.continuing(&first));
+    }
+    // The undetermined direction is curved (a car-like robot that never
+    // steered: only tan(steer_offset)/wheelbase is seen, a hyperbola in the
+    // parameters). Its tangent at the optimum, held from the start, blocks
+    // what the data do determine (the offset that moves from 0) and the fit
+    // ends where it began. Hold it from the optimum instead: the parameters
+    // stay where the data put them and do not move further along it.
+    let mut at = r.clone();
+    at.p = first.p.clone();
+    let kept = levenberg_marquardt(&at, runs, &holding(o, &first), Start::NearOptimum)?;
+    Ok(held_where_fitted(r, kept.continuing(&first)))
+}
+
+/// A fit whose undetermined directions were held from its optimum (see
+/// [`fit_stage_from`]) may have moved along them from the start (`r.p`): the
+/// warnings of those that moved say so instead of "kept at the starting value".
+fn held_where_fitted(r: &Runner, mut res: FitResult) -> FitResult {
+    let moved: Vec<&str> = res
+        .free
+        .iter()
+        .filter(|&&i| (res.p[i] - r.p[i]).abs() > NOT_MOVED * r.param_scale(i, r.p[i]))
+        .map(|&i| r.names[i].as_str())
+        .collect();
+    for w in &mut res.warnings {
+        let words: Vec<&str> = w.split([' ', '(', ')', ';', ':']).collect();
+        if !moved.iter().any(|n| words.contains(n)) {
+            continue;
+        }
+        *w = w
+            .replace(
+                "(kept at its starting value)",
+                "(one of many values that fit equally well: it had to move from its starting value with the parameters the data do determine)",
+            )
+            .replace(
+                "kept at the starting values along it)",
+                "the values shown are one of many that fit equally well: they had to move from the starting values with what the data do determine)",
+            );
+    }
+    res
+}
+
+/// Whether holding the undetermined directions from the start (`locked`)
+/// fits the data visibly worse than the free fit (`first`): its cost more
+/// than doubled (RMS up by 41%) and by far more than the noise. Then those
+/// directions were not undetermined where the fit started. (Going back along
+/// a direction that is undetermined costs little next to the whole misfit:
+/// a turn in place whose speed scale slid loses a few percent.)
+fn lock_undoes_fit(locked: &FitResult, first: &FitResult) -> bool {
+    let lost = locked.cost_after - first.cost_after;
+    let dof = first.n_residuals.saturating_sub(first.free.len()).max(1) as f64;
+    let s2 = 2.0 * first.cost_after / dof;
+    // 25: a 5-sigma change of a one-parameter chi-square
+    locked.cost_after > 2.0 * first.cost_after && 2.0 * lost > 25.0 * s2
 }
 
 /// Whether `res` moved the parameters away from `r.p` along a direction it
