@@ -192,3 +192,85 @@ fn bad_paths_are_located() {
         "{err}"
     );
 }
+
+/// A car-like rover whose steering angle is a configuration input (no
+/// `[inverse]` section): its inverse imposes vx only, since the steering sets
+/// omega, so the integrated inverse is checked on increments its own inputs
+/// reach (the rates come back). Before, verify asked it for random heading
+/// changes and reported a failure of 3e3. A sign flipped in the inverse is
+/// still caught.
+#[test]
+fn a_steered_robot_without_a_declared_inverse_verifies_and_a_broken_one_does_not() {
+    use kinegen_model::ir::{Kernel, ModelIr};
+    use kinegen_verify::checks::inverse_round_trips;
+    use kinegen_verify::{Corrupted, IrKernel};
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = root().join("tests/user_specs/rover.toml");
+    let o = kinegen(&["verify", "--spec", spec.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}{}", stdout(&o), stderr(&o));
+    let ir_path = tmp.path().join("rover.json");
+    let o = kinegen(&[
+        "derive",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--ir-out",
+        ir_path.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let ir = ModelIr::from_json(&std::fs::read_to_string(&ir_path).unwrap()).unwrap();
+    let increment = |f: &kinegen_verify::Finding| f.kernel == Kernel::InverseIncrement;
+    let good = inverse_round_trips(&ir, &IrKernel, 50, 7);
+    assert!(good.iter().filter(|f| increment(f)).all(|f| f.passed()));
+    let bad = Corrupted::flip_term(&ir, Kernel::InverseIncrement, 0);
+    let found = inverse_round_trips(&ir, &bad, 50, 7);
+    let f = found.iter().find(|f| increment(f)).unwrap();
+    assert!(!f.passed(), "a corrupted integrated inverse passed");
+}
+
+/// The rover's inverse gives only the drive rate; `inverse` solves the
+/// steering angle of every step and checks it against the spec's range and
+/// max_rate like any other input.
+#[test]
+fn a_car_like_robots_steering_profile_is_solved_and_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("tests/user_specs/rover.toml"))
+        .unwrap()
+        .replace("range = [-0.6, 0.6]", "range = [-0.6, 0.6]\nmax_rate = 0.3");
+    let spec = tmp.path().join("rover.toml");
+    std::fs::write(&spec, text).unwrap();
+    let tour = root().join("data/beacon_tour.csv");
+    let (code, doc, err) = inverse(&[
+        "--spec",
+        spec.to_str().unwrap(),
+        "--path",
+        tour.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    let m = model(&doc, "rover");
+    let inputs = m["inputs"].as_array().unwrap();
+    let delta = inputs
+        .iter()
+        .find(|i| i["name"] == "delta")
+        .expect("steering reported");
+    let peak = delta["peak_rate"].as_f64().unwrap();
+    assert!(peak > 0.3 && peak < 1.0, "steering rate {peak}");
+    let values: Vec<f64> = m["profile"]["inputs"]["delta"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        values.iter().any(|v| v.abs() > 0.05),
+        "the rover never steers"
+    );
+    assert!(
+        m["infeasible"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["input"] == "delta"),
+        "{}",
+        m["infeasible"]
+    );
+}

@@ -218,6 +218,21 @@ fn front_wheel_drive_tricycle_with_a_tick_steering_encoder() {
     );
 }
 
+/// Car-like rover without an `[inverse]` section: the simulator solves its
+/// steering angle for the planned path (it wrote 0 before, so the robot never
+/// steered and the log could not tell the wheelbase from anything).
+#[test]
+fn car_like_rover_whose_steering_angle_kinegen_solves() {
+    user_robot(
+        "rover",
+        "steering_offset=0.05",
+        &["r=0.115"],
+        "steering_offset",
+        "steer_offset_delta",
+        0.05,
+    );
+}
+
 #[test]
 fn differential_drive_with_a_tracker_far_ahead() {
     user_robot(

@@ -6,6 +6,7 @@
 //! absolute input such as a steering angle can change).
 use crate::log::{read_csv, unwrap, LogError};
 use crate::model::Runner;
+use crate::steering;
 use kinegen_model::decl::InputKind;
 use kinegen_model::ir::{ArgRole, StepForm};
 use serde::Serialize;
@@ -126,6 +127,19 @@ pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
         .map(|a| a.names.clone())
         .unwrap_or_default();
     let mut cfg = vec![0.0; cfg_names.len()];
+    // absolute inputs the inverse only reads (a car-like robot's steering
+    // angle, see crate::steering): solved for each step's twist and reported
+    // with the rates
+    let tw_names = steering::configuration_names(r);
+    let solve_idx = steering::to_solve(r, &[]);
+    let solved: Vec<String> = solve_idx.iter().map(|&k| tw_names[k].clone()).collect();
+    let mut tw_cfg = vec![0.0; tw_names.len()];
+    let names: Vec<String> = names
+        .iter()
+        .cloned()
+        .chain(solved.iter().cloned())
+        .collect();
+    let names = &names;
     let n = path.t.len() - 1;
     let mut values: Vec<Vec<f64>> = vec![Vec::with_capacity(n); names.len()];
     let mut misses = Vec::with_capacity(n);
@@ -136,6 +150,14 @@ pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
         let (c, s) = (a[2].cos(), a[2].sin());
         let (wx, wy) = (b[0] - a[0], b[1] - a[1]);
         let dpose = [c * wx + s * wy, -s * wx + c * wy, b[2] - a[2]];
+        if !solve_idx.is_empty() {
+            steering::solve(r, &se2_log(&dpose, dt), &mut tw_cfg, &solve_idx);
+            for (cv, name) in cfg.iter_mut().zip(&cfg_names) {
+                if let Some(k) = solved.iter().position(|x| x == name) {
+                    *cv = tw_cfg[solve_idx[k]];
+                }
+            }
+        }
         let args: Vec<&[f64]> = inv
             .args
             .iter()
@@ -146,7 +168,8 @@ pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
                 _ => &cfg[..],
             })
             .collect();
-        let u = inv.eval(&args);
+        let mut u = inv.eval(&args);
+        u.extend(solve_idx.iter().map(|&k| tw_cfg[k]));
         if let Some(i) = u.iter().position(|v| !v.is_finite()) {
             return Err(format!(
                 "{}: the inverse of the step at t = {} s gives a non-finite `{}` (a turn of {:.3} rad in one step: the path needs more rows)",
@@ -169,7 +192,9 @@ pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
                     names
                         .iter()
                         .position(|x| x == &i.name)
-                        .map_or(0.0, |j| u[j])
+                        .map(|j| u[j])
+                        .or_else(|| cfg_names.iter().position(|x| x == &i.name).map(|j| cfg[j]))
+                        .unwrap_or(0.0)
                 })
                 .collect::<Vec<_>>();
         let end = step.eval(&Runner::step_args(
@@ -282,6 +307,24 @@ pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
         infeasible,
         max_step_miss_m,
     })
+}
+
+/// The constant body twist that moves by `dpose` (start body frame) in `dt`:
+/// the SE(2) logarithm over dt.
+fn se2_log(dpose: &[f64; 3], dt: f64) -> [f64; 3] {
+    let [dx, dy, dth] = *dpose;
+    let half = 0.5 * dth;
+    // half / tan(half) -> 1 as dth -> 0 (series below 1e-4: error ~ dth^4/720)
+    let a = if half.abs() < 1e-4 {
+        1.0 - half * half / 3.0
+    } else {
+        half / half.tan()
+    };
+    [
+        (a * dx + half * dy) / dt,
+        (a * dy - half * dx) / dt,
+        dth / dt,
+    ]
 }
 
 /// Maximal runs of steps where `bad(x)` holds: (start time, end time, peak x).

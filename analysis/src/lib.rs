@@ -31,6 +31,7 @@ pub mod rows;
 pub mod run;
 pub mod seed_methods;
 pub mod simulate;
+pub mod steering;
 pub mod sweep;
 pub mod timeline;
 

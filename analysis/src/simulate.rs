@@ -8,9 +8,10 @@
 //! capture with wrapped heading, noisy gyro.
 use crate::log::wrap;
 use crate::model::Runner;
+use crate::steering;
 use kinegen_model::decl::InputKind;
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
-use kinegen_model::ir::{ArgRole, StepForm};
+use kinegen_model::ir::StepForm;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -305,34 +306,21 @@ fn planner(
 
 /// Inputs (as the robot's sensors read them) that realise `twist` in `base`, with
 /// the configuration inputs (e.g. caster steering angles, see [`config_inputs`])
-/// at `cfg`, one value per configuration input.
+/// at `cfg`, one value per configuration input. Absolute inputs the inverse
+/// only reads (a car-like robot's steering angle, see [`crate::steering`]) are
+/// solved for so that the model drives `twist`.
 pub fn command_at(base: &Runner, twist: &[f64; 3], cfg: &[f64]) -> Vec<f64> {
-    let inv = base.ir.inverse_twist();
-    let args: Vec<&[f64]> = inv
-        .args
-        .iter()
-        .map(|a| match a.role {
-            ArgRole::Twist => &twist[..],
-            ArgRole::Params => &base.p[..],
-            ArgRole::Configuration => cfg,
-            _ => &[][..],
-        })
-        .collect();
-    let out = inv.eval(&args);
     let cfg_idx = config_inputs(base);
-    base.ir
-        .inputs
+    let given: Vec<String> = cfg_idx
         .iter()
-        .enumerate()
-        .map(|(i, inp)| match cfg_idx.iter().position(|&c| c == i) {
-            Some(k) => cfg[k],
-            None => inv
-                .row_names
-                .iter()
-                .position(|r| *r == inp.name)
-                .map_or(0.0, |k| out[k]),
-        })
-        .collect()
+        .map(|&i| base.ir.inputs[i].name.clone())
+        .collect();
+    let mut at: Vec<f64> = steering::configuration_names(base)
+        .iter()
+        .map(|n| given.iter().position(|g| g == n).map_or(0.0, |k| cfg[k]))
+        .collect();
+    steering::solve(base, twist, &mut at, &steering::to_solve(base, &given));
+    steering::inputs_for(base, twist, &at)
 }
 
 /// [`command_at`] with every configuration input at 0.
