@@ -119,19 +119,34 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
             })
             .collect::<Result<Vec<_>, _>>()
     };
+    let mut warnings: Vec<String> = Vec::new();
     let (mut runs, found): (Vec<Run>, Vec<_>) = read(&c.data)?.into_iter().unzip();
     let (mut holdout, found_holdout): (Vec<Run>, Vec<_>) = read(&c.holdout)?.into_iter().unzip();
     attach_landmarks(c, &runner, &mut runs, &found, &mut holdout, &found_holdout)?;
+    // a log with gaps becomes one run per piece between them
+    let mut split = |set: Vec<Run>| -> Vec<Run> {
+        set.into_iter()
+            .flat_map(|run| {
+                let (pieces, warning) = run.split_at_gaps();
+                warnings.extend(warning);
+                pieces
+            })
+            .collect()
+    };
+    let (runs, holdout) = (split(runs), split(holdout));
+    if runs.is_empty() {
+        return Err("no run of 3 rows or more between the gaps of the logs (--data)".into());
+    }
     // results that would be NaN or infinite are refused here, with the row
     for set in [&runs, &holdout] {
         check_finite(set, &tracks(&runner, &runner.p, set, &[]), &c.set)?;
     }
-    let warnings = runs
-        .iter()
-        .chain(&holdout)
-        .flat_map(|run| input_range::excursions(run, &runner.ir.inputs))
-        .map(|e| e.to_string())
-        .collect();
+    warnings.extend(
+        runs.iter()
+            .chain(&holdout)
+            .flat_map(|run| input_range::excursions(run, &runner.ir.inputs))
+            .map(|e| e.to_string()),
+    );
     Ok(Prepared {
         runner,
         runs,

@@ -215,14 +215,6 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
         ),
         (
             Box::leak(
-                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n9.0,3,3,0,0,0\n")
-                    .into_boxed_str(),
-            ),
-            ":5: column `t`".into(),
-            "gap",
-        ),
-        (
-            Box::leak(
                 format!("{ok_header}\n0,0,0,0,0,0\n1e-300,1,1,0,0,0\n2e-300,2,2,0,0,0\n3e-300,3,3,0,0,0\n")
                     .into_boxed_str(),
             ),
@@ -243,6 +235,81 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
             "at least 3",
         ),
     ]
+}
+
+/// Real logs have holes: a connection that dropped for seconds. A gap cuts
+/// the log into runs, each started from its own measured pose (dead reckoning
+/// cannot bridge it), and says so in the text and the JSON warnings. A row
+/// logged twice breaks the contract's strictly increasing time: an error that
+/// names both lines and says whether they are the same row.
+#[test]
+fn gaps_split_a_log_and_repeated_rows_are_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "log.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--trajectory",
+            "random",
+            "--seed",
+            "2",
+        ],
+    );
+    let text = std::fs::read_to_string(&log).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    // lines 501-600 lost: a 5 s gap at 20 Hz
+    let mut holed: Vec<&str> = lines[..500].to_vec();
+    holed.extend(&lines[600..]);
+    let holed_path = tmp.path().join("holed.csv");
+    std::fs::write(&holed_path, holed.join("\n") + "\n").unwrap();
+    let doc = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        holed_path.to_str().unwrap(),
+    ]);
+    let warnings = doc["warnings"].to_string();
+    assert!(
+        warnings.contains("1 gap(s)") && warnings.contains("used as 2 run(s)"),
+        "{warnings}"
+    );
+    assert_eq!(doc["runs"].as_array().unwrap().len(), 2, "{}", doc["runs"]);
+    assert!(doc["after"]["rmse"].as_f64().unwrap() < doc["before"]["rmse"].as_f64().unwrap());
+    let fit = |name: &str, rows: Vec<String>| {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, rows.join("\n") + "\n").unwrap();
+        let o = kinegen(&[
+            "fit",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            p.to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{name}");
+        stderr(&o)
+    };
+    // line 51 written twice
+    let mut twice: Vec<String> = lines[..51].iter().map(|s| s.to_string()).collect();
+    twice.extend(lines[50..].iter().map(|s| s.to_string()));
+    let err = fit("twice.csv", twice);
+    assert!(
+        err.contains("twice.csv:52: column `t`") && err.contains("line 52 repeats line 51 exactly"),
+        "{err}"
+    );
+    // the same time with other values
+    let mut clash: Vec<String> = lines[..51].iter().map(|s| s.to_string()).collect();
+    let mut other: Vec<String> = lines[50].split(',').map(str::to_string).collect();
+    other[1] = format!("{}1", other[1]);
+    clash.push(other.join(","));
+    clash.extend(lines[51..].iter().map(|s| s.to_string()));
+    let err = fit("clash.csv", clash);
+    assert!(
+        err.contains("clash.csv:52: column `t`") && err.contains("lines 51 and 52 are both at t ="),
+        "{err}"
+    );
 }
 
 /// Issue 16: parameter values inside their declared bounds that make the model

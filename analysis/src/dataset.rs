@@ -72,9 +72,7 @@ impl Run {
         }
         let t = log.col("t")?.to_vec();
         let dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        let mut sorted = dt.clone();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
+        // (gaps are cut out later, by Run::split_at_gaps, with a warning)
         // a step under a microsecond is no sampling interval of a robot: t is in
         // the wrong unit, or rows are duplicated with rounding noise
         if let Some(k) = dt.iter().position(|&d| d < MIN_STEP_S) {
@@ -84,16 +82,6 @@ impl Run {
                 format!(
                     "time step of {:.3e} s (under {MIN_STEP_S} s): t must be in seconds",
                     dt[k]
-                ),
-            ));
-        }
-        if let Some(k) = dt.iter().position(|&d| d > 20.0 * median) {
-            return Err(log.err(
-                Some(k + 3),
-                Some("t"),
-                format!(
-                    "gap of {:.3} s in the log (median step {:.4} s)",
-                    dt[k], median
                 ),
             ));
         }

@@ -263,11 +263,15 @@ impl Log {
         let t = log.col("t")?;
         for k in 1..t.len() {
             if t[k] <= t[k - 1] {
-                return Err(log.err(
-                    Some(k + 2),
-                    Some("t"),
-                    format!("time must increase strictly: {} follows {}", t[k], t[k - 1]),
-                ));
+                let same_row = t[k] == t[k - 1] && log.columns.values().all(|c| c[k] == c[k - 1]);
+                let why = if same_row {
+                    format!("time must increase strictly: line {} repeats line {} exactly (a sample logged twice?): remove one", k + 2, k + 1)
+                } else if t[k] == t[k - 1] {
+                    format!("time must increase strictly: lines {} and {} are both at t = {} with different values (which one holds?)", k + 1, k + 2, t[k])
+                } else {
+                    format!("time must increase strictly: {} follows {}", t[k], t[k - 1])
+                };
+                return Err(log.err(Some(k + 2), Some("t"), why));
             }
         }
         Ok(log)

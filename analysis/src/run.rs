@@ -41,6 +41,9 @@ pub struct LandmarkObs {
     pub bearing: f64,
 }
 
+/// A step longer than this many median steps is a gap in the log.
+pub const GAP_STEPS: f64 = 20.0;
+
 impl Run {
     pub fn steps(&self) -> usize {
         self.dt.len()
@@ -193,6 +196,53 @@ impl Run {
                 .as_ref()
                 .map(|_| Inputs::from_flat(steps, width, swing)),
         }
+    }
+
+    /// The run cut at its gaps (a step over [`GAP_STEPS`] median steps long: a
+    /// logger that stopped, a dropped connection), which no model can bridge
+    /// by dead reckoning with held inputs: each piece of 3 rows or more becomes
+    /// a run of its own, started from its own measured pose. With the warning
+    /// that says where, when there was a gap.
+    pub fn split_at_gaps(self) -> (Vec<Run>, Option<String>) {
+        let mut sorted = self.dt.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        let gaps: Vec<usize> = (0..self.dt.len())
+            .filter(|&k| self.dt[k] > GAP_STEPS * median)
+            .collect();
+        if gaps.is_empty() {
+            return (vec![self], None);
+        }
+        let mut bounds = vec![0];
+        bounds.extend(gaps.iter().map(|&k| k + 1));
+        bounds.push(self.t.len());
+        let pieces: Vec<Run> = bounds
+            .windows(2)
+            .filter(|w| w[1] - w[0] >= 3)
+            .map(|w| {
+                let mut piece = self.slice(w[0], w[1]);
+                let span = format!("{:.2}-{:.2} s", self.t[w[0]], self.t[w[1] - 1]);
+                piece.name = format!("{} ({span})", self.name);
+                piece.path = format!("{} ({span})", self.path);
+                piece
+            })
+            .collect();
+        let at: Vec<String> = gaps
+            .iter()
+            .take(5)
+            .map(|&k| format!("{:.3} s after t = {:.3} s", self.dt[k], self.t[k]))
+            .collect();
+        let warning = format!(
+            "{}: {} gap(s) in the log ({}{}; median step {:.4} s): used as {} run(s), each started from its own measured pose{}",
+            self.path,
+            gaps.len(),
+            at.join(", "),
+            if gaps.len() > 5 { ", ..." } else { "" },
+            median,
+            pieces.len(),
+            if pieces.len() < gaps.len() + 1 { " (pieces under 3 rows dropped)" } else { "" }
+        );
+        (pieces, Some(warning))
     }
 
     /// Split a long run into pieces of about `seconds`, each dead-reckoned from its
