@@ -259,6 +259,7 @@ fn tracks(r: &Runner, p: &[f64], runs: &[Run], offsets: &[[f64; 3]]) -> Vec<dead
                 run,
                 false,
                 offsets.get(i).copied().unwrap_or([0.0; 3]),
+                None,
             )
         })
         .collect()

@@ -186,7 +186,7 @@ pub fn placed_start(
 /// Sensitivities (with `with_sens`) have P + 3 columns: the parameters, then the
 /// start pose (x, y, theta), for calibrations that refine the start.
 pub fn run(r: &Runner, p: &[f64], data: &Run, with_sens: bool) -> Track {
-    run_from(r, p, data, with_sens, [0.0; 3])
+    run_from(r, p, data, with_sens, [0.0; 3], None)
 }
 
 /// [`run`] with `start_offset` added to the measured start pose: the start pose
@@ -198,6 +198,7 @@ pub fn run_from(
     data: &Run,
     with_sens: bool,
     start_offset: [f64; 3],
+    plan: Option<&[u8]>,
 ) -> Track {
     let start = data.start_pose();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
@@ -254,6 +255,9 @@ pub fn run_from(
     let mut u_sub = Vec::new();
     for k in 0..data.steps() {
         let n = data.swing.as_ref().map_or(1, |s| {
+            if let Some(plan) = plan {
+                return usize::from(plan[k]);
+            }
             substeps(
                 r,
                 p,
@@ -316,6 +320,29 @@ pub fn run_from(
         twist,
         gyro,
     }
+}
+
+/// The sub-steps each step of `data` needs at parameters `p` ([`substeps`]),
+/// for a fit that fixes them across its passes; None when the run has no
+/// absolute input that swings.
+pub fn substep_plan(r: &Runner, p: &[f64], data: &Run) -> Option<Vec<u8>> {
+    let swing = data.swing.as_ref()?;
+    let (mut buf, mut scratch) = (Vec::new(), Vec::new());
+    Some(
+        (0..data.steps())
+            .map(|k| {
+                substeps(
+                    r,
+                    p,
+                    &data.u[k],
+                    &swing[k],
+                    data.dt[k],
+                    &mut buf,
+                    &mut scratch,
+                ) as u8
+            })
+            .collect(),
+    )
 }
 
 /// Error of one step (m, or rad over [`ARM`]) that sub-stepping keeps a step

@@ -11,7 +11,7 @@
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
 use crate::discretisation::Discretisation;
-use crate::fit::{fit, residuals, FitOptions, FitResult};
+use crate::fit::{fit, refine, residuals, FitOptions, FitResult};
 use crate::interp::lerp_rows;
 use crate::log::wrap;
 use crate::model::Runner;
@@ -733,8 +733,14 @@ fn rank(
             let effect_params = effect_params(&start, &cur.runner);
             let ev = evidence(&start, &effect_params, runs, o);
             // start from the current estimates and from nominal: a structurally wrong
-            // model can calibrate itself into a corner the effect cannot leave
-            let (from_cur, from_nominal) = (fit(&start, runs, o).ok(), fit(aug, runs, o).ok());
+            // model can calibrate itself into a corner the effect cannot leave. The
+            // current estimates are an optimum of all but the effect, so from there
+            // a local refinement suffices; the global search (continuation,
+            // other starts) is the one from nominal.
+            let (from_cur, from_nominal) = rayon::join(
+                || refine(&start, runs, o).ok(),
+                || fit(aug, runs, o).ok(),
+            );
             let cur_start_wins = match (&from_cur, &from_nominal) {
                 (Some(a), Some(b)) => a.cost_after <= b.cost_after,
                 (a, _) => a.is_some(),
@@ -742,9 +748,11 @@ fn rank(
             let f = if cur_start_wins { from_cur } else { from_nominal }?;
             let rmse = weighted_rms(&start, &f.p, runs, o);
             let gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
-            // the held-out fit starts where the full-data fit did best
+            // the held-out fit starts where the full-data fit did best (and, from
+            // the current training estimates, refines locally as above)
             let tr_start = if cur_start_wins { seeded(aug, &cur.runner, &cur.train_p) } else { aug.clone() };
-            let holdout_rmse = fit(&tr_start, train, o).map(|ft| weighted_rms(&tr_start, &ft.p, test, o)).unwrap_or(f64::INFINITY);
+            let tr_fit = if cur_start_wins { refine(&tr_start, train, o) } else { fit(&tr_start, train, o) };
+            let holdout_rmse = tr_fit.map(|ft| weighted_rms(&tr_start, &ft.p, test, o)).unwrap_or(f64::INFINITY);
             progress(name);
             let improvement = 1.0 - rmse / cur.rmse;
             let large = improvement > 0.2 && holdout_rmse < 0.8 * cur.holdout_rmse;

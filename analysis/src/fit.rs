@@ -27,6 +27,7 @@ use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
+use std::sync::Arc;
 
 /// Length of the re-anchored segments of long runs (see [`fit`]).
 pub const SEGMENT_S: f64 = 60.0;
@@ -79,6 +80,17 @@ pub struct FitOptions {
     /// along which the parameters stay at their starting values: ones an
     /// earlier fit of the same data found undetermined (see [`fit_stage`]).
     pub hold: Vec<DVector<f64>>,
+    /// Sub-steps per step of each run in the `runs` a fit is given (see
+    /// [`deadreckon::substep_plan`]), fixed by a Levenberg-Marquardt stage for
+    /// all its passes (see [`levenberg_marquardt`]). None: each pass chooses.
+    pub substeps: Option<Arc<Vec<Option<Vec<u8>>>>>,
+}
+
+impl FitOptions {
+    /// The fixed sub-step counts of run `i`, if any.
+    fn plan(&self, i: usize) -> Option<&[u8]> {
+        self.substeps.as_ref()?.get(i)?.as_deref()
+    }
 }
 
 impl Default for FitOptions {
@@ -96,6 +108,7 @@ impl Default for FitOptions {
             increments: None,
             endpoints_only: false,
             hold: Vec::new(),
+            substeps: None,
         }
     }
 }
@@ -211,6 +224,7 @@ pub fn residuals(
                 with_jac,
                 starts.get(i).copied().unwrap_or([0.0; 3]),
                 cols[i].is_some(),
+                o.plan(i),
             )
         })
         .collect();
@@ -274,6 +288,7 @@ pub fn normal_equations(
                 true,
                 starts.get(i).copied().unwrap_or([0.0; 3]),
                 nuis,
+                o.plan(i),
             );
             let (mut ata, mut atb, mut btb, mut atr, mut btr) = (
                 DMatrix::zeros(m, m),
@@ -370,7 +385,17 @@ pub fn residual_sums(
         .enumerate()
         .map(|(i, run)| {
             let start = starts.get(i).copied().unwrap_or([0.0; 3]);
-            let (mut rv, _) = run_residuals(r, p, free, run, o, false, start, cols[i].is_some());
+            let (mut rv, _) = run_residuals(
+                r,
+                p,
+                free,
+                run,
+                o,
+                false,
+                start,
+                cols[i].is_some(),
+                o.plan(i),
+            );
             if let Some(k) = o.huber {
                 rv.iter_mut().for_each(|x| *x *= huber_weight(*x, k));
             }
@@ -422,10 +447,11 @@ fn run_residuals(
     with_jac: bool,
     start: [f64; 3],
     nuis: bool,
+    plan: Option<&[u8]>,
 ) -> (Vec<f64>, Rows) {
     let mut res = Vec::new();
     let mut jac = Rows::new(free.len() + usize::from(nuis));
-    let track = deadreckon::run_from(r, p, run, with_jac, start);
+    let track = deadreckon::run_from(r, p, run, with_jac, start, plan);
     let np = p.len();
     // sensitivity columns to read: the free parameters, then the start heading
     let cols: Vec<usize> = free
@@ -870,7 +896,7 @@ fn sandwich(r: &Runner, windows: &[Run], o: &FitOptions, res: &mut FitResult) {
     let (scores, infos): (Vec<DVector<f64>>, Vec<DMatrix<f64>>) = windows
         .par_iter()
         .map(|w| {
-            let (rv, jv) = run_residuals(r, &r.p, free, w, o, true, [0.0; 3], false);
+            let (rv, jv) = run_residuals(r, &r.p, free, w, o, true, [0.0; 3], false, None);
             let (mut g, mut info) = (DVector::zeros(m), DMatrix::zeros(m, m));
             for (res, row) in rv.iter().zip(jv.iter()) {
                 let row = DVector::from_column_slice(&row[..m]);
@@ -1217,8 +1243,82 @@ fn orthonormal(vs: impl IntoIterator<Item = DVector<f64>>) -> Vec<DVector<f64>> 
     basis
 }
 
+/// A step may run with up to this many sub-steps fewer than its inputs need at
+/// the current parameters (see [`levenberg_marquardt`]): one fewer than
+/// `deadreckon::substep_plan` asks for leaves its error within a factor
+/// (n/(n-1))^2 of the per-step tolerance, still far below any sensor's noise.
+const PLAN_SLACK: u8 = 1;
+
 /// [`fit_stage`]'s solver. The directions of `o.hold` get no step at all.
+///
+/// A model whose absolute inputs swing within a step (steering angles) is
+/// dead-reckoned with sub-steps, as many as the swing needs at the parameters
+/// of the moment (`deadreckon::substep_plan`: three twist evaluations a step,
+/// a fifth of a pass). The stage fixes the counts at its starting parameters
+/// for all its passes, which also makes its cost one smooth function of the
+/// parameters (counts that change between trial points are small jumps in
+/// it); where the optimum needs more than [`PLAN_SLACK`] more sub-steps in
+/// some step, the stage goes on from there with the counts raised.
 fn levenberg_marquardt(
+    r: &Runner,
+    runs: &[Run],
+    o: &FitOptions,
+    start: Start,
+) -> Result<FitResult, FitError> {
+    if o.substeps.is_some() {
+        return levenberg_marquardt_planned(r, runs, o, start);
+    }
+    let plans = |p: &[f64]| -> Vec<Option<Vec<u8>>> {
+        runs.par_iter()
+            .map(|run| deadreckon::substep_plan(r, p, run))
+            .collect()
+    };
+    let mut plan = plans(&r.p);
+    if plan.iter().all(Option::is_none) {
+        return levenberg_marquardt_planned(r, runs, o, start);
+    }
+    let (mut at, mut kind) = (r.clone(), start);
+    let mut first: Option<FitResult> = None;
+    // the counts only grow (up to deadreckon's cap): a few rounds at most
+    for round in 0.. {
+        let planned = FitOptions {
+            substeps: Some(Arc::new(plan.clone())),
+            ..o.clone()
+        };
+        let res = levenberg_marquardt_planned(&at, runs, &planned, kind)?;
+        let res = match &first {
+            None => res,
+            Some(f) => FitResult {
+                cost_before: f.cost_before,
+                iterations: f.iterations + res.iterations,
+                ..res
+            },
+        };
+        let needed = plans(&res.p);
+        let short = plan
+            .iter()
+            .zip(&needed)
+            .any(|(have, need)| match (have, need) {
+                (Some(h), Some(n)) => h.iter().zip(n).any(|(h, n)| *n > h + PLAN_SLACK),
+                _ => false,
+            });
+        if !short || round == 2 {
+            return Ok(res);
+        }
+        for (have, need) in plan.iter_mut().zip(needed) {
+            if let (Some(h), Some(n)) = (have.as_mut(), need) {
+                h.iter_mut().zip(n).for_each(|(h, n)| *h = (*h).max(n));
+            }
+        }
+        at.p = res.p.clone();
+        kind = Start::NearOptimum;
+        first = Some(res);
+    }
+    unreachable!("the loop returns by its third round")
+}
+
+/// [`levenberg_marquardt`] with the sub-step counts of `o` as they are.
+fn levenberg_marquardt_planned(
     r: &Runner,
     runs: &[Run],
     o: &FitOptions,
