@@ -76,7 +76,7 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
         name: "bench".into(),
         path: "bench".into(),
         t: (0..n).map(|k| k as f64 * dt).collect(),
-        dt: vec![dt; n - 1],
+        dt: vec![dt; n - 1].into(),
         u: u.into_iter().collect(),
         gt: None,
         gyro: None,
@@ -405,7 +405,7 @@ fn main() {
         let mut bag_run = log(&r, 60_000, 3);
         let t: Vec<f64> = (0..bag_run.t.len()).map(|k| k as f64 * 0.01).collect();
         bag_run.dt = t.windows(2).map(|w| w[1] - w[0]).collect();
-        bag_run.t = t;
+        bag_run.t = t.into();
         let dir = std::env::temp_dir().join(format!("kinegen-bag-bench-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         bag_reading(&r, &bag_run, &dir);

@@ -1,6 +1,7 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
 use crate::bag::{Detection, TopicMap};
+use crate::column::Column;
 use crate::log::{unwrap, Log, LogError};
 use crate::model::Runner;
 use crate::rows::Inputs;
@@ -148,11 +149,11 @@ impl Run {
         Ok(Run {
             name,
             path: log.path.display().to_string(),
-            t,
-            dt,
+            t: t.into(),
+            dt: dt.into(),
             u,
             gt,
-            gyro,
+            gyro: gyro.map(Column::from),
             landmarks: Vec::new(),
             rate_inputs,
             swing,

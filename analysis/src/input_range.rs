@@ -148,7 +148,7 @@ mod tests {
             name: "r".into(),
             path: "logs/r.csv".into(),
             t: (0..=values.len()).map(|k| 0.1 * k as f64).collect(),
-            dt: vec![0.1; values.len()],
+            dt: vec![0.1; values.len()].into(),
             u: values.iter().map(|v| [*v]).collect(),
             gt: None,
             gyro: None,

@@ -5,6 +5,7 @@
 //! and diagnosed without compiling anything, and nothing here touches symbolica
 //! (so it may use threads freely).
 pub mod bag;
+pub mod column;
 pub mod coverage;
 pub mod dataset;
 pub mod deadreckon;

@@ -1,7 +1,9 @@
 //! Rows of equal width stored in one flat vector: the per-step inputs of a
 //! run ([`Inputs`]), the Jacobian rows of a fit's residuals. A long log has
 //! millions of steps, and a `Vec` per row would cost an allocation (and its
-//! bookkeeping, more than the values) each.
+//! bookkeeping, more than the values) each. The values are a [`Column`], so a
+//! slice shares them.
+use crate::column::Column;
 use std::ops::Index;
 
 /// Per-step model inputs of a run, in the spec's order.
@@ -12,7 +14,7 @@ pub struct Rows {
     /// Values per row.
     width: usize,
     steps: usize,
-    values: Vec<f64>,
+    values: Column<f64>,
 }
 
 impl Rows {
@@ -21,7 +23,7 @@ impl Rows {
         Rows {
             width,
             steps: 0,
-            values: Vec::new(),
+            values: Column::default(),
         }
     }
 
@@ -31,7 +33,7 @@ impl Rows {
         Rows {
             width,
             steps,
-            values,
+            values: values.into(),
         }
     }
 
@@ -63,12 +65,12 @@ impl Rows {
         self.steps += 1;
     }
 
-    /// Rows `a..b` as rows of their own.
+    /// Rows `a..b`, sharing the values.
     pub fn slice(&self, a: usize, b: usize) -> Rows {
         Rows {
             width: self.width,
             steps: b - a,
-            values: self.values[a * self.width..b * self.width].to_vec(),
+            values: self.values.slice(a * self.width, b * self.width),
         }
     }
 }
@@ -94,7 +96,7 @@ impl<R: AsRef<[f64]>> FromIterator<R> for Rows {
         Rows {
             width: width.unwrap_or(0),
             steps,
-            values,
+            values: values.into(),
         }
     }
 }

@@ -2,6 +2,7 @@
 //! measurements, and what follows from the run alone (where it rests, where a
 //! time falls among its rows, its pieces). Reading logs into runs is
 //! [`crate::dataset`]; everything that runs a model over a run sits above both.
+use crate::column::Column;
 use crate::rows::Inputs;
 
 #[derive(Debug, Clone)]
@@ -10,14 +11,14 @@ pub struct Run {
     /// The log file as the user named it (runs are reported by path: two runs
     /// called `run1.csv` in different directories are different runs).
     pub path: String,
-    pub t: Vec<f64>,
+    pub t: Column<f64>,
     /// Step k goes from row k to row k+1.
-    pub dt: Vec<f64>,
+    pub dt: Column<f64>,
     pub u: Inputs,
     /// Ground-truth pose per row, heading unwrapped.
-    pub gt: Option<Vec<[f64; 3]>>,
+    pub gt: Option<Column<[f64; 3]>>,
     /// Gyro yaw rate per row; row k+1 is compared with the model rate of step k.
-    pub gyro: Option<Vec<f64>>,
+    pub gyro: Option<Column<f64>>,
     /// Range-bearing observations of mapped landmarks during the run (may be empty).
     pub landmarks: Vec<LandmarkObs>,
     /// Which inputs are rates of cumulative columns (the others are absolute
@@ -131,16 +132,17 @@ impl Run {
         (j, (s - self.t[j]) / (self.t[j + 1] - self.t[j]))
     }
 
-    /// Rows `a..b` (inclusive of b-1) as a run of their own.
+    /// Rows `a..b` (inclusive of b-1) as a run of their own, sharing this run's
+    /// columns.
     pub fn slice(&self, a: usize, b: usize) -> Run {
         Run {
             name: format!("{}[{a}..{b}]", self.name),
             path: self.path.clone(),
-            t: self.t[a..b].to_vec(),
-            dt: self.dt[a..b - 1].to_vec(),
+            t: self.t.slice(a, b),
+            dt: self.dt.slice(a, b - 1),
             u: self.u.slice(a, b - 1),
-            gt: self.gt.as_ref().map(|g| g[a..b].to_vec()),
-            gyro: self.gyro.as_ref().map(|g| g[a..b].to_vec()),
+            gt: self.gt.as_ref().map(|g| g.slice(a, b)),
+            gyro: self.gyro.as_ref().map(|g| g.slice(a, b)),
             landmarks: self
                 .landmarks
                 .iter()
@@ -182,7 +184,7 @@ impl Run {
             name: format!("{} at half rate", self.name),
             path: self.path.clone(),
             t: rows.iter().map(|&k| self.t[k]).collect(),
-            dt,
+            dt: dt.into(),
             u: Inputs::from_flat(steps, width, u),
             gt: self
                 .gt
@@ -204,7 +206,7 @@ impl Run {
     /// a run of its own, started from its own measured pose. With the warning
     /// that says where, when there was a gap.
     pub fn split_at_gaps(self) -> (Vec<Run>, Option<String>) {
-        let mut sorted = self.dt.clone();
+        let mut sorted = self.dt.to_vec();
         sorted.sort_by(f64::total_cmp);
         let median = sorted[sorted.len() / 2];
         let gaps: Vec<usize> = (0..self.dt.len())

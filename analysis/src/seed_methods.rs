@@ -276,8 +276,8 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
             let one = Run {
                 name: String::new(),
                 path: String::new(),
-                t: vec![0.0, run.dt[k]],
-                dt: vec![run.dt[k]],
+                t: vec![0.0, run.dt[k]].into(),
+                dt: vec![run.dt[k]].into(),
                 u: std::iter::once(&run.u[k]).collect(),
                 gt: None,
                 gyro: None,

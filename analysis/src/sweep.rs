@@ -87,7 +87,7 @@ fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
         })
         .collect();
     Run {
-        gt: Some(truth),
+        gt: Some(truth.into()),
         landmarks,
         ..run.clone()
     }

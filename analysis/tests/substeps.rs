@@ -41,8 +41,8 @@ fn run(steps: usize, swing: bool) -> Run {
     Run {
         name: "sweep".into(),
         path: "sweep".into(),
-        t,
-        dt: vec![dt; steps],
+        t: t.into(),
+        dt: vec![dt; steps].into(),
         u: Inputs::from_flat(steps, 2, u),
         gt: None,
         gyro: None,
