@@ -33,8 +33,13 @@ pub struct Candidate {
     pub bic_gain: f64,
     pub holdout_rmse: f64,
     pub doc: String,
+    /// The calibration of the model with this effect on all runs, and its
+    /// estimates on the training part: the next stage of the chain when the
+    /// effect wins.
     #[serde(skip)]
-    pub fitted: Vec<f64>,
+    pub fit: FitResult,
+    #[serde(skip)]
+    pub train_p: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -752,7 +757,13 @@ fn rank(
             // the current training estimates, refines locally as above)
             let tr_start = if cur_start_wins { seeded(aug, &cur.runner, &cur.train_p) } else { aug.clone() };
             let tr_fit = if cur_start_wins { refine(&tr_start, train, o) } else { fit(&tr_start, train, o) };
-            let holdout_rmse = tr_fit.map(|ft| weighted_rms(&tr_start, &ft.p, test, o)).unwrap_or(f64::INFINITY);
+            let (train_p, holdout_rmse) = match tr_fit {
+                Ok(ft) => {
+                    let h = weighted_rms(&tr_start, &ft.p, test, o);
+                    (ft.p, h)
+                }
+                Err(_) => (tr_start.p.clone(), f64::INFINITY),
+            };
             progress(name);
             let improvement = 1.0 - rmse / cur.rmse;
             let large = improvement > 0.2 && holdout_rmse < 0.8 * cur.holdout_rmse;
@@ -779,7 +790,7 @@ fn rank(
                 holdout_rmse,
                 cur.floor
             );
-            Some(Candidate { effect: name.clone(), rmse, improvement, significant, parameters, evidence, bic_gain: gain, holdout_rmse, doc: doc.clone(), fitted: f.p })
+            Some(Candidate { effect: name.clone(), rmse, improvement, significant, parameters, evidence, bic_gain: gain, holdout_rmse, doc: doc.clone(), fit: f, train_p })
         })
         .collect();
     candidates.sort_by(|a, b| {
@@ -872,11 +883,20 @@ pub fn diagnose(
             .iter()
             .find(|a| a.0 == w.effect)
             .expect("ranked from augmented");
+        // the ranking calibrated the winner already, on all runs and on the
+        // training part: that is the next stage
         let mut runner = aug.clone();
-        runner.p = w.fitted.clone();
+        runner.p = w.fit.p.clone();
+        let floor = crate::fit::noise_floor(&runner, &w.fit.p, runs, &o);
         let next = Stage {
+            runner,
+            bic: bic(w.fit.cost_after, w.fit.n_residuals, w.fit.free.len()),
+            fit: w.fit.clone(),
+            rmse: w.rmse,
+            train_p: w.train_p.clone(),
+            holdout_rmse: w.holdout_rmse,
+            floor,
             step_error: cur.step_error,
-            ..stage(runner, runs, &train, &test, &o)?
         };
         let parameters = w.parameters.clone();
         chain.push(ChainStep {
