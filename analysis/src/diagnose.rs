@@ -584,12 +584,12 @@ fn stage(
     test: &[Run],
     o: &FitOptions,
 ) -> Result<Stage, String> {
-    let fit = fit(&runner, runs, o).map_err(|e| e.to_string())?;
+    // the two calibrations are independent: one per core
+    let (fit, train_fit) = rayon::join(|| fit(&runner, runs, o), || fit(&runner, train, o));
+    let fit = fit.map_err(|e| e.to_string())?;
     let rmse = weighted_rms(&runner, &fit.p, runs, o);
     let bic = bic(fit.cost_after, fit.n_residuals, fit.free.len());
-    let train_p = crate::fit::fit(&runner, train, o)
-        .map_err(|e| e.to_string())?
-        .p;
+    let train_p = train_fit.map_err(|e| e.to_string())?.p;
     let holdout_rmse = weighted_rms(&runner, &train_p, test, o);
     let floor = crate::fit::noise_floor(&runner, &fit.p, runs, o);
     Ok(Stage {

@@ -53,7 +53,8 @@ pub fn estimate(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> Discreti
             .unwrap_or(f64::NAN)
     };
     let half: Vec<Run> = runs.iter().map(Run::halved).collect();
-    let (full, coarse) = (rms_at(runs), rms_at(&half));
+    // independent refinements: one per core
+    let (full, coarse) = rayon::join(|| rms_at(runs), || rms_at(&half));
     let e2 = (coarse * coarse - full * full) / 15.0;
     Discretisation {
         rate_hz,
