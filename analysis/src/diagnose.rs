@@ -587,12 +587,25 @@ fn stage(
     // the two calibrations are independent: one per core
     let (fit, train_fit) = rayon::join(|| fit(&runner, runs, o), || fit(&runner, train, o));
     let fit = fit.map_err(|e| e.to_string())?;
+    let train_p = train_fit.map_err(|e| e.to_string())?.p;
+    Ok(stage_from(runner, fit, train_p, runs, test, o))
+}
+
+/// The stage of `runner` calibrated as `fit` on all runs and at `train_p` on
+/// the training part.
+fn stage_from(
+    runner: Runner,
+    fit: FitResult,
+    train_p: Vec<f64>,
+    runs: &[Run],
+    test: &[Run],
+    o: &FitOptions,
+) -> Stage {
     let rmse = weighted_rms(&runner, &fit.p, runs, o);
     let bic = bic(fit.cost_after, fit.n_residuals, fit.free.len());
-    let train_p = train_fit.map_err(|e| e.to_string())?.p;
     let holdout_rmse = weighted_rms(&runner, &train_p, test, o);
     let floor = crate::fit::noise_floor(&runner, &fit.p, runs, o);
-    Ok(Stage {
+    Stage {
         runner,
         fit,
         rmse,
@@ -601,7 +614,7 @@ fn stage(
         holdout_rmse,
         floor,
         step_error: 0.0,
-    })
+    }
 }
 
 /// One step of the chain found by sequential diagnosis.
@@ -887,16 +900,9 @@ pub fn diagnose(
         // training part: that is the next stage
         let mut runner = aug.clone();
         runner.p = w.fit.p.clone();
-        let floor = crate::fit::noise_floor(&runner, &w.fit.p, runs, &o);
         let next = Stage {
-            runner,
-            bic: bic(w.fit.cost_after, w.fit.n_residuals, w.fit.free.len()),
-            fit: w.fit.clone(),
-            rmse: w.rmse,
-            train_p: w.train_p.clone(),
-            holdout_rmse: w.holdout_rmse,
-            floor,
             step_error: cur.step_error,
+            ..stage_from(runner, w.fit.clone(), w.train_p.clone(), runs, &test, &o)
         };
         let parameters = w.parameters.clone();
         chain.push(ChainStep {
