@@ -42,10 +42,6 @@ impl<T: Clone> Column<T> {
         v.extend(values);
         self.range.end = v.len();
     }
-
-    pub fn push(&mut self, value: T) {
-        self.extend(std::iter::once(value));
-    }
 }
 
 impl<T> Deref for Column<T> {
@@ -102,22 +98,22 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_slice_shares_its_values_and_a_push_never_changes_another_column() {
+    fn a_slice_shares_its_values_and_extending_never_changes_another_column() {
         let mut whole: Column<f64> = vec![1.0, 2.0, 3.0, 4.0].into();
         let mut piece = whole.slice(1, 3);
         assert_eq!(&*piece, &[2.0, 3.0]);
         assert!(Arc::ptr_eq(&whole.values, &piece.values));
         assert_eq!(&*piece.slice(1, 2), &[3.0]);
-        piece.push(9.0);
+        piece.extend([9.0]);
         assert_eq!(
             (&*piece, &*whole),
             (&[2.0, 3.0, 9.0][..], &[1.0, 2.0, 3.0, 4.0][..])
         );
-        whole.push(5.0);
+        whole.extend([5.0]);
         assert_eq!(&*whole, &[1.0, 2.0, 3.0, 4.0, 5.0]);
         let mut own: Column<f64> = Column::default();
-        own.push(1.0);
-        own.push(2.0);
+        own.extend([1.0]);
+        own.extend([2.0]);
         assert_eq!(&*own, &[1.0, 2.0]);
     }
 }
