@@ -247,9 +247,9 @@ proptest! {
 fn every_hostile_value_in_every_column() {
     let ncols = base()[0].split(',').count();
     for c in 0..ncols {
-        for v in 0..HOSTILE.len() {
+        for (v, hostile) in HOSTILE.iter().enumerate() {
             let text = mutate(&[Edit::Cell(57, c, v)]);
-            check(&text).unwrap_or_else(|e| panic!("column {c}, {:?}: {e}", HOSTILE[v]));
+            check(&text).unwrap_or_else(|e| panic!("column {c}, {hostile:?}: {e}"));
         }
     }
 }

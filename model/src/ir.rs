@@ -160,6 +160,7 @@ impl Function {
     /// Evaluate into `out` (length rows*cols, row-major). `scratch` is reused
     /// between calls to avoid allocation in loops. A hot tape runs as machine
     /// code ([`crate::jit`]), with the interpreter's results to the last bit.
+    #[inline]
     pub fn eval_into(&self, args: &[&[f64]], out: &mut [f64], scratch: &mut Vec<f64>) {
         if let Some(native) = self.native.get(self) {
             if native.eval_into(args, out).is_some() {

@@ -67,6 +67,7 @@ impl Native {
     /// Evaluate into `out`; `None` (nothing written) when the argument or output
     /// lengths do not fit the tape, so the caller falls back to the interpreter
     /// (whose bounds checks then say what is wrong).
+    #[inline]
     pub fn eval_into(&self, args: &[&[f64]], out: &mut [f64]) -> Option<()> {
         if args.len() != self.arg_len.len()
             || out.len() < self.outputs
@@ -91,8 +92,7 @@ impl Native {
         if f.args.len() > 16 {
             return None;
         }
-        let mut jb =
-            JITBuilder::with_flags(&[("opt_level", "speed")], default_libcall_names()).ok()?;
+        let mut jb = JITBuilder::with_isa(host_isa()?, default_libcall_names());
         for (name, ptr, _) in host_functions() {
             jb.symbol(name, ptr);
         }
@@ -116,6 +116,19 @@ impl Native {
     }
 }
 
+/// The host's instruction set, `None` where Cranelift has no backend for it
+/// (`JITBuilder::with_flags` would panic there).
+fn host_isa() -> Option<cranelift_codegen::isa::OwnedTargetIsa> {
+    use cranelift_codegen::settings::{self, Configurable};
+    let mut flags = settings::builder();
+    flags.set("opt_level", "speed").ok()?;
+    // as `JITBuilder::with_flags` sets them: calls to host functions anywhere
+    flags.set("use_colocated_libcalls", "false").ok()?;
+    flags.set("is_pic", "false").ok()?;
+    let isa = cranelift_native::builder().ok()?;
+    isa.finish(settings::Flags::new(flags)).ok()
+}
+
 /// The compiled form of a tape, filled on demand. Cloning gives an empty cache:
 /// a clone may be edited (the mutation sweep corrupts tapes), and must never run
 /// the original's code. An unedited clone finds its code again in [`compiled`].
@@ -127,6 +140,7 @@ pub struct NativeCache {
 
 impl NativeCache {
     /// The compiled tape once `f` is hot, compiling it on the call that makes it so.
+    #[inline]
     pub fn get(&self, f: &Function) -> Option<&Native> {
         if let Some(n) = self.native.get() {
             return n.as_deref();
@@ -431,13 +445,24 @@ fn sin_cos_pairs(tape: &[Op], items: &[Item]) -> HashSet<u32> {
 }
 
 impl Translator<'_, '_> {
-    fn v(&self, s: u32) -> Value {
+    /// The value of slot `s` for a use about to be emitted. An argument is
+    /// loaded again at each use, where it is needed: loaded once at the top, every
+    /// argument would stay live across the whole tape and its host calls, and be
+    /// spilled to the stack and reloaded anyway (LLVM rematerialises such loads
+    /// in the generated kernels; Cranelift's register allocator does not).
+    fn v(&mut self, s: u32) -> Value {
+        if let Op::Arg(a, i) = self.tape[s as usize] {
+            let base = self.arg_bases[a as usize];
+            return self.b.ins().load(types::F64, MEM, base, i as i32 * 8);
+        }
         self.slots[s as usize].expect("the schedule emits every operand before its reader")
     }
 
     fn items(&mut self, items: &[Item]) {
         for item in items {
             match item {
+                // loaded at each use instead (`v`)
+                Item::Slot(s) if matches!(self.tape[*s], Op::Arg(..)) => {}
                 Item::Slot(s) => {
                     let v = self.op(*s);
                     self.slots[*s] = Some(v);
@@ -500,6 +525,11 @@ impl Translator<'_, '_> {
                 .b
                 .ins()
                 .stack_load(self.ptr, types::F64, out, k as i32 * 8);
+        }
+        for o in self.tape[s].operands() {
+            if matches!(self.tape[o as usize], Op::Arg(..)) {
+                self.slots[o as usize] = Some(self.v(o));
+            }
         }
         match self.tape[s] {
             Op::Sin(x) if self.both.contains(&x) => return self.sin_cos(x).0,
