@@ -11,7 +11,7 @@
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
 use crate::discretisation::Discretisation;
-use crate::fit::{fit, refine, residuals, FitOptions, FitResult};
+use crate::fit::{fit, refine_from, residuals, FitOptions, FitResult};
 use crate::interp::lerp_rows;
 use crate::log::wrap;
 use crate::model::Runner;
@@ -33,13 +33,12 @@ pub struct Candidate {
     pub bic_gain: f64,
     pub holdout_rmse: f64,
     pub doc: String,
-    /// The calibration of the model with this effect on all runs, and its
-    /// estimates on the training part: the next stage of the chain when the
-    /// effect wins.
+    /// The calibration of the model with this effect on all runs, and on the
+    /// training part: the next stage of the chain when the effect wins.
     #[serde(skip)]
     pub fit: FitResult,
     #[serde(skip)]
-    pub train_p: Vec<f64>,
+    pub train_fit: FitResult,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -569,6 +568,8 @@ struct Stage {
     rmse: f64,
     bic: f64,
     train_p: Vec<f64>,
+    /// The training fit's start offsets (see [`refine_from`]).
+    train_starts: Vec<[f64; 3]>,
     holdout_rmse: f64,
     /// The error a model explaining every structure would reach (white noise).
     floor: f64,
@@ -587,30 +588,31 @@ fn stage(
     // the two calibrations are independent: one per core
     let (fit, train_fit) = rayon::join(|| fit(&runner, runs, o), || fit(&runner, train, o));
     let fit = fit.map_err(|e| e.to_string())?;
-    let train_p = train_fit.map_err(|e| e.to_string())?.p;
-    Ok(stage_from(runner, fit, train_p, runs, test, o))
+    let train_fit = train_fit.map_err(|e| e.to_string())?;
+    Ok(stage_from(runner, fit, train_fit, runs, test, o))
 }
 
-/// The stage of `runner` calibrated as `fit` on all runs and at `train_p` on
+/// The stage of `runner` calibrated as `fit` on all runs and as `train_fit` on
 /// the training part.
 fn stage_from(
     runner: Runner,
     fit: FitResult,
-    train_p: Vec<f64>,
+    train_fit: FitResult,
     runs: &[Run],
     test: &[Run],
     o: &FitOptions,
 ) -> Stage {
     let rmse = weighted_rms(&runner, &fit.p, runs, o);
     let bic = bic(fit.cost_after, fit.n_residuals, fit.free.len());
-    let holdout_rmse = weighted_rms(&runner, &train_p, test, o);
+    let holdout_rmse = weighted_rms(&runner, &train_fit.p, test, o);
     let floor = crate::fit::noise_floor(&runner, &fit.p, runs, o);
     Stage {
         runner,
         fit,
         rmse,
         bic,
-        train_p,
+        train_p: train_fit.p,
+        train_starts: train_fit.starts,
         holdout_rmse,
         floor,
         step_error: 0.0,
@@ -733,6 +735,11 @@ fn effect_params(aug: &Runner, cur: &Runner) -> Vec<usize> {
         .collect()
 }
 
+/// [`FitOptions::cost_tolerance`] of the ranking's calibrations: 1e-6 of the
+/// cost, a BIC gain known to about 0.05 where significance needs 10 (a
+/// misspecified candidate's fit otherwise creeps on for dozens of passes).
+const RANKING_TOLERANCE: f64 = 1e-6;
+
 /// Calibrate every candidate on top of `cur` and score it against it.
 fn rank(
     cur: &Stage,
@@ -744,6 +751,11 @@ fn rank(
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<Candidate> {
     let disc = cur.step_error;
+    let strict = o;
+    let o = &FitOptions {
+        cost_tolerance: RANKING_TOLERANCE,
+        ..o.clone()
+    };
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
         .filter_map(|(name, doc, aug)| {
@@ -756,26 +768,40 @@ fn rank(
             // a local refinement suffices; the global search (continuation,
             // other starts) is the one from nominal.
             let (from_cur, from_nominal) = rayon::join(
-                || refine(&start, runs, o).ok(),
+                || refine_from(&start, runs, o, &cur.fit.starts).ok(),
                 || fit(aug, runs, o).ok(),
             );
             let cur_start_wins = match (&from_cur, &from_nominal) {
                 (Some(a), Some(b)) => a.cost_after <= b.cost_after,
                 (a, _) => a.is_some(),
             };
-            let f = if cur_start_wins { from_cur } else { from_nominal }?;
-            let rmse = weighted_rms(&start, &f.p, runs, o);
-            let gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
+            let mut f = if cur_start_wins { from_cur } else { from_nominal }?;
+            let mut rmse = weighted_rms(&start, &f.p, runs, o);
+            let mut gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
+            // what the verdict reports is converged fully: an effect that may
+            // win is refined from its ranking fit with the strict tolerance
+            let beyond_step = cur.rmse * cur.rmse - rmse * rmse > disc * disc;
+            if gain > 10.0 && beyond_step && (1.0 - rmse / cur.rmse > 0.2 || explains_excess(cur, rmse, 0.0)) {
+                let mut at = start.clone();
+                at.p = f.p.clone();
+                if let Ok(polished) = refine_from(&at, runs, strict, &f.starts) {
+                    f = FitResult { cost_before: f.cost_before, iterations: f.iterations + polished.iterations, ..polished };
+                    rmse = weighted_rms(&start, &f.p, runs, o);
+                    gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
+                }
+            }
             // the held-out fit starts where the full-data fit did best (and, from
             // the current training estimates, refines locally as above)
             let tr_start = if cur_start_wins { seeded(aug, &cur.runner, &cur.train_p) } else { aug.clone() };
-            let tr_fit = if cur_start_wins { refine(&tr_start, train, o) } else { fit(&tr_start, train, o) };
-            let (train_p, holdout_rmse) = match tr_fit {
+            let tr_fit = if cur_start_wins { refine_from(&tr_start, train, o, &cur.train_starts) } else { fit(&tr_start, train, o) };
+            let (train_fit, holdout_rmse) = match tr_fit {
                 Ok(ft) => {
                     let h = weighted_rms(&tr_start, &ft.p, test, o);
-                    (ft.p, h)
+                    (ft, h)
                 }
-                Err(_) => (tr_start.p.clone(), f64::INFINITY),
+                // no training calibration: the next stage, if any, starts
+                // from the full one
+                Err(_) => (f.clone(), f64::INFINITY),
             };
             progress(name);
             let improvement = 1.0 - rmse / cur.rmse;
@@ -803,7 +829,7 @@ fn rank(
                 holdout_rmse,
                 cur.floor
             );
-            Some(Candidate { effect: name.clone(), rmse, improvement, significant, parameters, evidence, bic_gain: gain, holdout_rmse, doc: doc.clone(), fit: f, train_p })
+            Some(Candidate { effect: name.clone(), rmse, improvement, significant, parameters, evidence, bic_gain: gain, holdout_rmse, doc: doc.clone(), fit: f, train_fit })
         })
         .collect();
     candidates.sort_by(|a, b| {
@@ -843,7 +869,7 @@ pub fn diagnose(
     let (train, test) = split(runs, 0.6);
     let first = stage(base.clone(), runs, &train, &test, &o)?;
     progress("base model calibrated");
-    let mut disc = crate::discretisation::estimate(base, &first.fit.p, runs, &o);
+    let mut disc = crate::discretisation::estimate(base, &first.fit.p, &first.fit.starts, runs, &o);
     // the asymptotic e(2h) = 4 e(h) overstates the error of a coarse log
     // (larger steps err faster than that); the step cannot leave more than
     // what the calibrated model leaves above the noise
@@ -902,7 +928,7 @@ pub fn diagnose(
         runner.p = w.fit.p.clone();
         let next = Stage {
             step_error: cur.step_error,
-            ..stage_from(runner, w.fit.clone(), w.train_p.clone(), runs, &test, &o)
+            ..stage_from(runner, w.fit.clone(), w.train_fit.clone(), runs, &test, &o)
         };
         let parameters = w.parameters.clone();
         chain.push(ChainStep {

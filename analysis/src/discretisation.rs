@@ -11,7 +11,7 @@
 //! is left is what could be mistaken for a missing effect. Diagnosis counts it
 //! with the sensor noise, so structure the model's own step leaves is never
 //! blamed on the robot (issue 12 item 3).
-use crate::fit::{refine, rms_with_fitted_starts, FitOptions};
+use crate::fit::{refine_from, rms_with_fitted_starts, FitOptions};
 use crate::model::Runner;
 use crate::run::Run;
 use serde::Serialize;
@@ -26,10 +26,17 @@ pub struct Discretisation {
     pub error: f64,
 }
 
-/// The discretisation error of `r` calibrated at `p` on `runs`: pose residuals
-/// of fits at the logs' rate and at half of it, refined from `p`. Logs without ground
-/// truth, or too short to halve, give 0.
-pub fn estimate(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> Discretisation {
+/// The discretisation error of `r` calibrated at `p` (with start offsets
+/// `starts`, see [`refine_from`]) on `runs`: pose residuals of fits at the logs'
+/// rate and at half of it, refined from there. Logs without ground truth, or
+/// too short to halve, give 0.
+pub fn estimate(
+    r: &Runner,
+    p: &[f64],
+    starts: &[[f64; 3]],
+    runs: &[Run],
+    o: &FitOptions,
+) -> Discretisation {
     let mut dts: Vec<f64> = runs.iter().flat_map(|x| x.dt.iter().copied()).collect();
     dts.sort_by(f64::total_cmp);
     let rate_hz = dts.get(dts.len() / 2).map_or(0.0, |d| 1.0 / d);
@@ -48,7 +55,7 @@ pub fn estimate(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> Discreti
     let mut from = r.clone();
     from.p = p.to_vec();
     let rms_at = |runs: &[Run]| {
-        refine(&from, runs, &pose)
+        refine_from(&from, runs, &pose, starts)
             .map(|f| rms_with_fitted_starts(&from, &f.p, runs, &pose))
             .unwrap_or(f64::NAN)
     };

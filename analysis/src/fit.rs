@@ -84,7 +84,25 @@ pub struct FitOptions {
     /// [`deadreckon::substep_plan`]), fixed by a Levenberg-Marquardt stage for
     /// all its passes (see [`levenberg_marquardt`]). None: each pass chooses.
     pub substeps: Option<Arc<Vec<Option<Vec<u8>>>>>,
+    /// Start-pose offsets a Levenberg-Marquardt stage begins from: an earlier
+    /// fit's [`FitResult::starts`] on the same runs (see [`refine_from`]).
+    /// None, or a count that does not match the runs: the measured starts.
+    pub start_offsets: Option<Arc<Vec<[f64; 3]>>>,
+    /// A stage also ends when the decrease still to come, extrapolated from
+    /// its last two steps (Gauss-Newton on a misspecified model converges
+    /// linearly: each step gains a fixed fraction of the one before), is below
+    /// this fraction of the cost. 0: only the statistical test (steps below a
+    /// hundredth of a standard deviation) and round-off end it. For fits
+    /// whose optimum is only a starting point ([`BASIN_TOLERANCE`]) or only
+    /// compared ([`crate::diagnose`]'s ranking).
+    pub cost_tolerance: f64,
 }
+
+/// [`FitOptions::cost_tolerance`] of a stage that only has to reach the
+/// optimum's basin for the next one (the measured-start stage of a calibration
+/// with start headings): 1e-5 of the cost, where that stage spent 25 of its 59
+/// passes over a diagnosis log gaining 1e-4 of it.
+pub const BASIN_TOLERANCE: f64 = 1e-5;
 
 impl FitOptions {
     /// The fixed sub-step counts of run `i`, if any.
@@ -109,6 +127,8 @@ impl Default for FitOptions {
             endpoints_only: false,
             hold: Vec::new(),
             substeps: None,
+            start_offsets: None,
+            cost_tolerance: 0.0,
         }
     }
 }
@@ -1058,6 +1078,32 @@ pub fn refine(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, Fit
     fit_from(r, &segmented(runs), o)
 }
 
+/// Refine from an earlier fit's optimum on the same runs: `r.p` holds its
+/// parameters (and those it did not have, such as a candidate effect's, at
+/// their starting values), `starts` its fitted start offsets
+/// ([`FitResult::starts`]). One joint stage
+/// from there: [`refine`]'s first stage with the measured starts would leave
+/// the optimum only for the joint stage to creep back to it (a misspecified
+/// model's Gauss-Newton steps shrink by a constant factor: 40 passes over a
+/// diagnosis log for a candidate that changes nothing). Without matching
+/// start offsets this is [`refine`].
+pub fn refine_from(
+    r: &Runner,
+    runs: &[Run],
+    o: &FitOptions,
+    starts: &[[f64; 3]],
+) -> Result<FitResult, FitError> {
+    let split = segmented(runs);
+    if !o.estimate_start || starts.len() != split.len() {
+        return refine(r, runs, o);
+    }
+    let warm = FitOptions {
+        start_offsets: Some(Arc::new(starts.to_vec())),
+        ..o.clone()
+    };
+    fit_stage_from(r, &split, &warm, Start::NearOptimum)
+}
+
 /// Calibrate from `r.p`. With start-pose refinement the parameters are fitted
 /// first with the measured starts, then jointly with the starts from there: a
 /// free start heading from the outset can rotate a badly scaled track into a
@@ -1071,6 +1117,7 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
         runs,
         &FitOptions {
             estimate_start: false,
+            cost_tolerance: o.cost_tolerance.max(BASIN_TOLERANCE),
             ..o.clone()
         },
     )?;
@@ -1278,11 +1325,13 @@ fn levenberg_marquardt(
         return levenberg_marquardt_planned(r, runs, o, start);
     }
     let (mut at, mut kind) = (r.clone(), start);
+    let mut warm = o.start_offsets.clone();
     let mut first: Option<FitResult> = None;
     // the counts only grow (up to deadreckon's cap): a few rounds at most
     for round in 0.. {
         let planned = FitOptions {
             substeps: Some(Arc::new(plan.clone())),
+            start_offsets: warm.clone(),
             ..o.clone()
         };
         let res = levenberg_marquardt_planned(&at, runs, &planned, kind)?;
@@ -1312,6 +1361,7 @@ fn levenberg_marquardt(
         }
         at.p = res.p.clone();
         kind = Start::NearOptimum;
+        warm = Some(Arc::new(res.starts.clone()));
         first = Some(res);
     }
     unreachable!("the loop returns by its third round")
@@ -1364,6 +1414,13 @@ fn levenberg_marquardt_planned(
     };
     let mut p = r.p.clone();
     let mut x = vec![0.0; dims]; // the start headings live in x[m..]
+    if let Some(warm) = o.start_offsets.as_ref().filter(|w| w.len() == runs.len()) {
+        for (c, w) in start_cols.iter().zip(warm.iter()) {
+            if let Some(c) = *c {
+                x[c] = w[2].clamp(bounds[c].0, bounds[c].1);
+            }
+        }
+    }
     let eval = |p: &[f64], x: &[f64]| residual_sums(r, p, &free, runs, o, &starts_of(x));
     let normal = |p: &[f64], x: &[f64]| normal_equations(r, p, &free, runs, o, &starts_of(x));
     let (mut res, mut jtj_raw, mut jtr_raw) = normal(&p, &x);
@@ -1385,6 +1442,8 @@ fn levenberg_marquardt_planned(
         Start::NearOptimum => 1e-7,
     };
     let mut iterations = 0;
+    // the last accepted step's decrease, for the extrapolation of `cost_tolerance`
+    let mut last_gain: Option<f64> = None;
     for it in 0..o.max_iter {
         if dims == 0 {
             break;
@@ -1462,6 +1521,14 @@ fn levenberg_marquardt_planned(
                 // have s^2 near zero and still converge to round-off.
                 let s2 = 2.0 * tc / (res.n.saturating_sub(dims).max(1)) as f64;
                 let negligible = 2.0 * (c - tc) < STEP_TOLERANCE * STEP_TOLERANCE * s2;
+                let gain = c - tc;
+                // a geometric series: the gains still to come sum to gain q / (1 - q)
+                let to_come = last_gain
+                    .map(|g| gain / g)
+                    .filter(|q| *q < 1.0)
+                    .map(|q| gain * q / (1.0 - q));
+                let converged = to_come.is_some_and(|d| d < o.cost_tolerance * tc);
+                last_gain = Some(gain);
                 p = trial;
                 x = xt;
                 c = tc;
@@ -1471,7 +1538,7 @@ fn levenberg_marquardt_planned(
                     Some((a, b)) => (tres, a, b),
                     None => normal(&p, &x),
                 };
-                if rel < 1e-12 || negligible {
+                if rel < 1e-12 || negligible || converged {
                     improved = false;
                 }
                 break;
