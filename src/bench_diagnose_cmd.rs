@@ -234,7 +234,8 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
             for &noise in &NOISE {
                 for seed in 1..=a.seeds {
                     // every case its own trajectory
-                    let c = match run_case(spec_path, hidden, noise, 1000 * j as u64 + seed, a.laps) {
+                    let c = match run_case(spec_path, hidden, noise, 1000 * j as u64 + seed, a.laps)
+                    {
                         Ok(c) => c,
                         Err(e) => {
                             out.say(&format!(

@@ -1,0 +1,84 @@
+//! Refinement from an earlier calibration's optimum (`fit::refine_from`): what
+//! diagnosis does for every candidate effect (issue 12's speed target).
+use kinegen_analysis::fit::{fit, refine, refine_from, FitOptions};
+use kinegen_analysis::model::Runner;
+use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_model::ir::ModelIr;
+use std::path::Path;
+
+fn runner(model: &str) -> Runner {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../generated/ir/{model}.json"));
+    let ir = ModelIr::from_json(&std::fs::read_to_string(p).unwrap()).unwrap();
+    Runner::new(ir, &[]).unwrap()
+}
+
+/// From a fit's own optimum and start headings, the joint refinement is done
+/// at once; from the optimum with the measured start headings (as `refine`
+/// starts) it has to find them again first. A refinement that ignored the
+/// start headings it is given fails the first assertion.
+#[test]
+fn a_refinement_from_an_optimum_and_its_start_headings_stays_there() {
+    let base = runner("diff_drive");
+    let mut truth = base.clone();
+    for (i, f) in [(0, 1.03), (2, 0.97)] {
+        truth.p[i] *= f;
+    }
+    let o = SimOptions {
+        trajectory: Trajectory::Random,
+        seed: 5,
+        laps: 2,
+        ..SimOptions::default()
+    };
+    let run = simulate(&base, &truth, &o).to_run(&base, "r").unwrap();
+    let runs = [run];
+    let opts = FitOptions::default();
+    let first = fit(&base, &runs, &opts).unwrap();
+    let mut at = base.clone();
+    at.p = first.p.clone();
+    let warm = refine_from(&at, &runs, &opts, &first.starts).unwrap();
+    let cold = refine(&at, &runs, &opts).unwrap();
+    eprintln!(
+        "warm: {} iterations, cost {} -> {}; cold: {} iterations, cost {}",
+        warm.iterations, first.cost_after, warm.cost_after, cold.iterations, cold.cost_after
+    );
+    assert!(warm.iterations <= 2, "{} iterations", warm.iterations);
+    assert!(warm.cost_after <= first.cost_after * (1.0 + 1e-9));
+    assert!(cold.iterations > warm.iterations);
+}
+
+/// A calibration with a cost tolerance (what diagnosis ranks candidates with)
+/// ends within that fraction of the strict optimum's cost.
+#[test]
+fn a_cost_tolerance_ends_within_it_of_the_optimum() {
+    let base = runner("omni3");
+    let mut truth = base.clone();
+    for (i, v) in truth.p.iter_mut().enumerate() {
+        *v *= 1.0 + 0.04 * (i as f64 - 1.0);
+    }
+    let o = SimOptions {
+        trajectory: Trajectory::Random,
+        seed: 9,
+        ..SimOptions::default()
+    };
+    let runs = [simulate(&base, &truth, &o).to_run(&base, "r").unwrap()];
+    let strict = fit(&base, &runs, &FitOptions::default()).unwrap();
+    let loose = fit(
+        &base,
+        &runs,
+        &FitOptions {
+            cost_tolerance: 1e-6,
+            ..FitOptions::default()
+        },
+    )
+    .unwrap();
+    eprintln!(
+        "strict: {} iterations, cost {}; tolerance 1e-6: {} iterations, cost {}",
+        strict.iterations, strict.cost_after, loose.iterations, loose.cost_after
+    );
+    assert!(
+        strict.cost_before > 10.0 * strict.cost_after,
+        "the fit must have work to do"
+    );
+    assert!(loose.cost_after <= strict.cost_after * (1.0 + 1e-5));
+    assert!(loose.iterations <= strict.iterations);
+}
