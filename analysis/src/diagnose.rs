@@ -548,8 +548,9 @@ fn periodic_findings(
 /// noise floor, in the fit and on held-out data: an effect small next to the
 /// sensor noise (a 5% gyro scale under 3x noise lowers the error by 15%, to the
 /// floor) is as real as a large one. Only when the current model leaves a clear
-/// excess (its mean square 20% above the floor's).
-fn explains_excess(cur: &Stage, rmse: f64, holdout_rmse: f64) -> bool {
+/// excess (its mean square 20% above the floor's). With `holdout_rmse` None,
+/// only the fit's share is judged (see [`significant`]).
+fn explains_excess(cur: &Stage, rmse: f64, holdout_rmse: Option<f64>) -> bool {
     // what no catalogue effect can explain: the sensor noise and the model's own
     // discretisation at the log's rate
     let f2 = cur.floor * cur.floor + cur.step_error * cur.step_error;
@@ -558,7 +559,22 @@ fn explains_excess(cur: &Stage, rmse: f64, holdout_rmse: f64) -> bool {
     cur.rmse * cur.rmse > 1.2 * f2
         && cur.holdout_rmse * cur.holdout_rmse > 1.2 * f2
         && share(cur.rmse, rmse) > 0.5
-        && share(cur.holdout_rmse, holdout_rmse) > 0.5
+        && holdout_rmse.is_none_or(|h| share(cur.holdout_rmse, h) > 0.5)
+}
+
+/// Whether a candidate calibrated to `rmse` with BIC gain `gain` over `cur` is
+/// significant: a large improvement that holds out, or most of the excess over
+/// the noise explained, and more than the model's own discretisation could
+/// account for. With `holdout_rmse` None: whether it can still be, once its
+/// held-out error is known.
+fn significant(cur: &Stage, rmse: f64, gain: f64, holdout_rmse: Option<f64>) -> bool {
+    let improvement = 1.0 - rmse / cur.rmse;
+    let large = improvement > 0.2 && holdout_rmse.is_none_or(|h| h < 0.8 * cur.holdout_rmse);
+    let beyond_step = cur.rmse * cur.rmse - rmse * rmse > cur.step_error * cur.step_error;
+    gain > 10.0
+        && beyond_step
+        && (large || explains_excess(cur, rmse, holdout_rmse))
+        && rmse.is_finite()
 }
 
 /// The current model of a diagnosis step: its runner, calibration and scores.
@@ -567,9 +583,9 @@ struct Stage {
     fit: FitResult,
     rmse: f64,
     bic: f64,
-    train_p: Vec<f64>,
-    /// The training fit's start offsets (see [`refine_from`]).
-    train_starts: Vec<[f64; 3]>,
+    /// The calibration on the training part (its start offsets seed the
+    /// candidates' training refinements, see [`refine_from`]).
+    train_fit: FitResult,
     holdout_rmse: f64,
     /// The error a model explaining every structure would reach (white noise).
     floor: f64,
@@ -611,8 +627,7 @@ fn stage_from(
         fit,
         rmse,
         bic,
-        train_p: train_fit.p,
-        train_starts: train_fit.starts,
+        train_fit,
         holdout_rmse,
         floor,
         step_error: 0.0,
@@ -754,7 +769,6 @@ fn rank(
     o: &FitOptions,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<Candidate> {
-    let disc = cur.step_error;
     let strict = o;
     let o = &FitOptions {
         cost_tolerance: RANKING_TOLERANCE,
@@ -788,8 +802,7 @@ fn rank(
             let mut gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
             // what the verdict reports is converged fully: an effect that may
             // win is refined from its ranking fit with the strict tolerance
-            let beyond_step = cur.rmse * cur.rmse - rmse * rmse > disc * disc;
-            if gain > 10.0 && beyond_step && (1.0 - rmse / cur.rmse > 0.2 || explains_excess(cur, rmse, 0.0)) {
+            if significant(cur, rmse, gain, None) {
                 let mut at = start.clone();
                 at.p = f.p.clone();
                 if let Ok(polished) = refine_from(&at, runs, strict, &f.starts) {
@@ -800,8 +813,8 @@ fn rank(
             }
             // the held-out fit starts where the full-data fit did best (and, from
             // the current training estimates, refines locally as above)
-            let tr_start = if cur_start_wins { seeded(aug, &cur.runner, &cur.train_p) } else { aug.clone() };
-            let tr_fit = if cur_start_wins { refine_from(&tr_start, train, o, &cur.train_starts) } else { fit(&tr_start, train, o) };
+            let tr_start = if cur_start_wins { seeded(aug, &cur.runner, &cur.train_fit.p) } else { aug.clone() };
+            let tr_fit = if cur_start_wins { refine_from(&tr_start, train, o, &cur.train_fit.starts) } else { fit(&tr_start, train, o) };
             let (train_fit, holdout_rmse) = match tr_fit {
                 Ok(ft) => {
                     let h = weighted_rms(&tr_start, &ft.p, test, o);
@@ -813,13 +826,7 @@ fn rank(
             };
             progress(name);
             let improvement = 1.0 - rmse / cur.rmse;
-            let large = improvement > 0.2 && holdout_rmse < 0.8 * cur.holdout_rmse;
-            // and more than the model's own discretisation could account for
-            let beyond_step = cur.rmse * cur.rmse - rmse * rmse > disc * disc;
-            let significant = gain > 10.0
-                && beyond_step
-                && (large || explains_excess(cur, rmse, holdout_rmse))
-                && rmse.is_finite();
+            let significant = significant(cur, rmse, gain, Some(holdout_rmse));
             let parameters = effect_params
                 .iter()
                 .map(|&i| {

@@ -1081,12 +1081,11 @@ pub fn refine(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, Fit
 /// Refine from an earlier fit's optimum on the same runs: `r.p` holds its
 /// parameters (and those it did not have, such as a candidate effect's, at
 /// their starting values), `starts` its fitted start offsets
-/// ([`FitResult::starts`]). One joint stage
-/// from there: [`refine`]'s first stage with the measured starts would leave
-/// the optimum only for the joint stage to creep back to it (a misspecified
-/// model's Gauss-Newton steps shrink by a constant factor: 40 passes over a
-/// diagnosis log for a candidate that changes nothing). Without matching
-/// start offsets this is [`refine`].
+/// ([`FitResult::starts`]). One joint stage from there: [`refine`]'s first
+/// stage with the measured starts would leave the optimum only for the joint
+/// stage to creep back to it (a misspecified model's Gauss-Newton steps shrink
+/// by a constant factor: 40 passes over a diagnosis log for a candidate that
+/// changes nothing). Without matching start offsets this is [`refine`].
 pub fn refine_from(
     r: &Runner,
     runs: &[Run],
@@ -1520,8 +1519,8 @@ fn levenberg_marquardt_planned(
                 // for a dozen passes over the log. Exact (noise-free) data
                 // have s^2 near zero and still converge to round-off.
                 let s2 = 2.0 * tc / (res.n.saturating_sub(dims).max(1)) as f64;
-                let negligible = 2.0 * (c - tc) < STEP_TOLERANCE * STEP_TOLERANCE * s2;
                 let gain = c - tc;
+                let negligible = 2.0 * gain < STEP_TOLERANCE * STEP_TOLERANCE * s2;
                 // a geometric series: the gains still to come sum to gain q / (1 - q)
                 let to_come = last_gain
                     .map(|g| gain / g)

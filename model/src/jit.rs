@@ -526,6 +526,8 @@ impl Translator<'_, '_> {
                 .ins()
                 .stack_load(self.ptr, types::F64, out, k as i32 * 8);
         }
+        // this op's argument operands, loaded here for it alone: the emission
+        // below reads operands from `slots` while it holds the builder
         for o in self.tape[s].operands() {
             if matches!(self.tape[o as usize], Op::Arg(..)) {
                 self.slots[o as usize] = Some(self.v(o));
