@@ -15,6 +15,8 @@
 //! interpreting when compilation is unavailable or switched off
 //! (`KINEGEN_JIT=0`).
 
+mod libm_sincos;
+
 use crate::ir::{Function, Op};
 use crate::schedule::{schedule, Group, Item};
 use cranelift_codegen::ir::condcodes::FloatCC;
@@ -239,12 +241,6 @@ fn enabled() -> bool {
     *ON.get_or_init(|| std::env::var("KINEGEN_JIT").map_or(true, |v| v != "0"))
 }
 
-extern "C" fn host_sin(x: f64) -> f64 {
-    libm::sin(x)
-}
-extern "C" fn host_cos(x: f64) -> f64 {
-    libm::cos(x)
-}
 extern "C" fn host_tan(x: f64) -> f64 {
     x.tan()
 }
@@ -263,8 +259,9 @@ extern "C" fn host_atan2(y: f64, x: f64) -> f64 {
 extern "C" fn host_pow(x: f64, y: f64) -> f64 {
     x.powf(y)
 }
-/// Both `sin x` and `cos x` from libm's `sincos`, one argument reduction for
-/// the two (bit for bit `host_sin` and `host_cos`), into the 2 values at `out`.
+/// Both `sin x` and `cos x` from libm's `sincos` (bit for bit `libm::sin` and
+/// `libm::cos`), into the 2 values at `out`: the cold path of the inline
+/// [`libm_sincos`] for arguments beyond 2^20 pi/2, infinities and NaN.
 ///
 /// # Safety
 /// `out` points at 2 values (a stack slot of the compiled code).
@@ -295,12 +292,10 @@ enum HostSig {
 
 /// Every host function the compiled code may call: its symbol, address and
 /// signature (one table serves the JIT's symbol table and the declarations).
-fn host_functions() -> [(&'static str, *const u8, HostSig); 10] {
+fn host_functions() -> [(&'static str, *const u8, HostSig); 8] {
     use HostSig::*;
     [
         ("kg_sincos", host_sincos as *const u8, SinCos),
-        ("kg_sin", host_sin as *const u8, Math(1)),
-        ("kg_cos", host_cos as *const u8, Math(1)),
         ("kg_tan", host_tan as *const u8, Math(1)),
         ("kg_atan", host_atan as *const u8, Math(1)),
         ("kg_exp", host_exp as *const u8, Math(1)),
@@ -366,11 +361,20 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
         both,
         sincos_of: HashMap::new(),
         slots: vec![None; f.tape.len()],
+        out_ptr,
+        unstored: HashMap::new(),
     };
-    t.items(&items);
     for (k, &s) in f.outputs.iter().enumerate() {
-        let v = t.v(s);
-        t.b.ins().store(MEM, v, out_ptr, k as i32 * 8);
+        t.unstored.entry(s as usize).or_default().push(k);
+    }
+    t.items(&items);
+    let mut rest: Vec<(usize, Vec<usize>)> = t.unstored.drain().collect();
+    rest.sort();
+    for (s, ks) in rest {
+        let v = t.v(s as u32);
+        for k in ks {
+            t.b.ins().store(MEM, v, out_ptr, k as i32 * 8);
+        }
     }
     t.b.ins().return_(&[]);
     t.b.finalize(module.target_config());
@@ -402,6 +406,11 @@ struct Translator<'a, 'f> {
     /// (sin, cos) of such a slot, once the first of the two is emitted.
     sincos_of: HashMap<u32, (Value, Value)>,
     slots: Vec<Option<Value>>,
+    out_ptr: Value,
+    /// Output positions of each slot not yet stored. An output is stored as
+    /// soon as it is computed, so its register is free for the rest of the
+    /// tape instead of being held (or spilled) until the end.
+    unstored: HashMap<usize, Vec<usize>>,
 }
 
 /// The slots whose sine and cosine the tape takes in the same scope of the
@@ -466,6 +475,11 @@ impl Translator<'_, '_> {
                 Item::Slot(s) => {
                     let v = self.op(*s);
                     self.slots[*s] = Some(v);
+                    if let Some(ks) = self.unstored.remove(s) {
+                        for k in ks {
+                            self.b.ins().store(MEM, v, self.out_ptr, k as i32 * 8);
+                        }
+                    }
                 }
                 Item::Guard { group, near, far } => self.guard(*group, near, far),
             }
@@ -534,8 +548,8 @@ impl Translator<'_, '_> {
             }
         }
         match self.tape[s] {
-            Op::Sin(x) if self.both.contains(&x) => return self.sin_cos(x).0,
-            Op::Cos(x) if self.both.contains(&x) => return self.sin_cos(x).1,
+            Op::Sin(x) => return self.sin_cos(x, self.both.contains(&x)).0,
+            Op::Cos(x) => return self.sin_cos(x, self.both.contains(&x)).1,
             _ => {}
         }
         let (slots, host, b) = (&self.slots, &self.host, &mut self.b);
@@ -547,8 +561,6 @@ impl Translator<'_, '_> {
         };
         match self.tape[s] {
             Op::Pow(x, y) => return call("kg_pow", &[v(x), v(y)]),
-            Op::Sin(x) => return call("kg_sin", &[v(x)]),
-            Op::Cos(x) => return call("kg_cos", &[v(x)]),
             Op::Tan(x) => return call("kg_tan", &[v(x)]),
             Op::Atan(x) => return call("kg_atan", &[v(x)]),
             Op::Atan2(y, x) => return call("kg_atan2", &[v(y), v(x)]),
@@ -575,20 +587,31 @@ impl Translator<'_, '_> {
         }
     }
 
-    /// The sine and cosine of slot `x`, from one host call.
-    fn sin_cos(&mut self, x: u32) -> (Value, Value) {
+    /// The sine and cosine of slot `x`, as libm's `sincos` computes them:
+    /// inline for |x| < 2^20 pi/2, from a host call on a cold path beyond. A
+    /// call clobbers every SSE register, so each call on the hot path spilled
+    /// every value live across it (the generated kernels inline libm too).
+    /// `shared`: the pair is kept for the other of the two ops (both are in
+    /// this scope, see [`sin_cos_pairs`]).
+    fn sin_cos(&mut self, x: u32, shared: bool) -> (Value, Value) {
         if let Some(&pair) = self.sincos_of.get(&x) {
             return pair;
         }
-        let out =
-            self.b
-                .create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, 16, 3));
-        let (arg, addr) = (self.v(x), self.b.ins().stack_addr(self.ptr, out, 0));
-        self.b.ins().call(self.sincos, &[arg, addr]);
-        let sin = self.b.ins().stack_load(self.ptr, types::F64, out, 0);
-        let cos = self.b.ins().stack_load(self.ptr, types::F64, out, 8);
-        self.sincos_of.insert(x, (sin, cos));
-        (sin, cos)
+        let arg = self.v(x);
+        let (ptr, host) = (self.ptr, self.sincos);
+        let pair = libm_sincos::emit(&mut self.b, arg, |b, arg| {
+            let out =
+                b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, 16, 3));
+            let addr = b.ins().stack_addr(ptr, out, 0);
+            b.ins().call(host, &[arg, addr]);
+            let sin = b.ins().stack_load(ptr, types::F64, out, 0);
+            let cos = b.ins().stack_load(ptr, types::F64, out, 8);
+            (sin, cos)
+        });
+        if shared {
+            self.sincos_of.insert(x, pair);
+        }
+        pair
     }
 
     /// The pseudo-inverse of the packed matrix in slots `m`; returns the stack
@@ -795,6 +818,107 @@ mod tests {
                     g.to_bits() == w.to_bits() || (g.is_nan() && w.is_nan()),
                     "x = {x}, slot {k} ({:?}): compiled {g:e}, interpreted {w:e}",
                     f.tape[k]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn sine_and_cosine_are_libms_to_the_bit_on_every_branch() {
+        // sin x, cos x (one inline sincos) and cos 2x alone
+        let tape = vec![
+            Op::Arg(0, 0),
+            Op::Sin(0),
+            Op::Cos(0),
+            Op::Add(0, 0),
+            Op::Cos(3),
+        ];
+        let f = function(tape, vec![1, 2, 4], 1);
+        let native = Native::compile(&f).expect("this host has a Cranelift backend");
+        let pi_2 = std::f64::consts::FRAC_PI_2;
+        // every boundary of libm's branches, and the multiples of pi/2 where
+        // one round of reduction cancels, each with its neighbours
+        let mut xs: Vec<f64> = vec![
+            0.0,
+            1e-300,
+            5e-324,
+            1e-9,
+            1e-8,
+            0.5,
+            1.0,
+            2.0,
+            3.0,
+            6.0,
+            7.5,
+            10.0,
+            100.0,
+            12345.678,
+            1.6e6,
+            1.7e6,
+            1e9,
+            1e300,
+            f64::INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+        ];
+        for high in [
+            0x3e46_a09e_u64,
+            0x3e50_0000,
+            0x3fe9_21fb,
+            0x4002_d97c,
+            0x400f_6a7a,
+        ]
+        .into_iter()
+        .chain([
+            0x4012_d97c,
+            0x4015_fdbc,
+            0x4019_21fb,
+            0x401c_463b,
+            0x4139_21fb,
+        ]) {
+            for h in [high - 1, high, high + 1] {
+                for low in [0, 1, 0x1234_5678, 0x7fff_ffff, 0xffff_ffff] {
+                    xs.push(f64::from_bits(h << 32 | low));
+                }
+            }
+        }
+        xs.extend((1..=400).map(|k| k as f64 * pi_2 / 2.0));
+        // near multiples of pi/2, the first round cancelling 10 to 60 bits: the
+        // second and third rounds and their thresholds
+        for m in [1.0, 2.0, 3.0, 4.0, 5.0, 17.0, 7919.0, 104_729.0, 600_000.0] {
+            for j in 10..=60 {
+                xs.push(m * pi_2 * (1.0 + (-j as f64).exp2()));
+                xs.push(m * pi_2 * (1.0 - (-j as f64).exp2()));
+            }
+        }
+        let mut rng = 0x2545_f491_4f6c_dd1d_u64;
+        xs.extend((0..20_000).map(|_| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            // log-uniform magnitudes from 1e-10 to 1e7
+            let u = (rng >> 11) as f64 / (1u64 << 53) as f64;
+            10f64.powf(-10.0 + 17.0 * u)
+        }));
+        let near: Vec<f64> = xs
+            .iter()
+            .flat_map(|&x| {
+                let (up, down) = (
+                    f64::from_bits(x.to_bits() + 1),
+                    f64::from_bits(x.to_bits().saturating_sub(1)),
+                );
+                [x, up, down]
+            })
+            .collect();
+        for x in near.iter().flat_map(|&x| [x, -x]) {
+            let mut got = [0.0; 3];
+            native.eval_into(&[&[x]], &mut got).unwrap();
+            let want = [libm::sin(x), libm::cos(x), libm::cos(x + x)];
+            for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+                assert!(
+                    g.to_bits() == w.to_bits() || (g.is_nan() && w.is_nan()),
+                    "x = {x:e} ({:#x}), output {k}: compiled {g:e}, libm {w:e}",
+                    x.to_bits()
                 );
             }
         }
