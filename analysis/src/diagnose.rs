@@ -11,7 +11,7 @@
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
 use crate::discretisation::Discretisation;
-use crate::fit::{fit, refine_from, residuals, FitOptions, FitResult};
+use crate::fit::{fit, fit_continued, refine_from, residuals, FitOptions, FitResult};
 use crate::interp::lerp_rows;
 use crate::log::wrap;
 use crate::model::Runner;
@@ -791,7 +791,7 @@ fn rank(
             // for one of them on an omni_caster log with a 0.2 rad offset).
             let (from_cur, from_nominal) = rayon::join(
                 || refine_from(&start, runs, o, &cur.fit.starts).ok(),
-                || from_nominal.then(|| fit(aug, runs, o).ok()).flatten(),
+                || from_nominal.then(|| fit_continued(aug, runs, o).ok()).flatten(),
             );
             let cur_start_wins = match (&from_cur, &from_nominal) {
                 (Some(a), Some(b)) => a.cost_after <= b.cost_after,
@@ -814,7 +814,7 @@ fn rank(
             // the held-out fit starts where the full-data fit did best (and, from
             // the current training estimates, refines locally as above)
             let tr_start = if cur_start_wins { seeded(aug, &cur.runner, &cur.train_fit.p) } else { aug.clone() };
-            let tr_fit = if cur_start_wins { refine_from(&tr_start, train, o, &cur.train_fit.starts) } else { fit(&tr_start, train, o) };
+            let tr_fit = if cur_start_wins { refine_from(&tr_start, train, o, &cur.train_fit.starts) } else { fit_continued(&tr_start, train, o) };
             let (train_fit, holdout_rmse) = match tr_fit {
                 Ok(ft) => {
                     let h = weighted_rms(&tr_start, &ft.p, test, o);

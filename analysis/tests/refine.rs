@@ -82,3 +82,33 @@ fn a_cost_tolerance_ends_within_it_of_the_optimum() {
     assert!(loose.cost_after <= strict.cost_after * (1.0 + 1e-5));
     assert!(loose.iterations <= strict.iterations);
 }
+
+/// A model that cannot fit its log: a tricycle whose steering encoder reads
+/// 0.1 rad more than the wheel's angle, calibrated as if it read true (what
+/// diagnosis does first with such a log). Gauss-Newton then creeps along one
+/// straight valley, each step first tried too long and damped back; the fit
+/// now doubles a step along a direction it keeps taking while the cost falls.
+/// 298 passes before, 120 with the longer steps, to a cost no higher than where
+/// the creeping fit ended. Without them (`PERSISTENT` above 1) this fails on
+/// the pass count.
+#[test]
+fn a_misspecified_model_does_not_creep() {
+    let base = runner("tricycle");
+    let o = SimOptions {
+        trajectory: Trajectory::Random,
+        seed: 4001,
+        laps: 6,
+        ..SimOptions::default()
+    };
+    let mut log = simulate(&base, &base, &o);
+    let alpha = log.header.iter().position(|h| h == "alpha").unwrap();
+    for row in &mut log.rows {
+        row[alpha] += 0.1;
+    }
+    let runs = [log.to_run(&base, "r").unwrap()];
+    let f = fit(&base, &runs, &FitOptions::default()).unwrap();
+    eprintln!("{} passes, cost {}", f.iterations, f.cost_after);
+    assert!(f.iterations < 200, "{} passes", f.iterations);
+    // where the creeping fit ended: 1.0163086e11
+    assert!(f.cost_after < 1.0163087e11, "cost {}", f.cost_after);
+}
