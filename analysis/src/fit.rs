@@ -1171,9 +1171,9 @@ fn fit_from(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitEr
     Ok(joint.continuing(&first))
 }
 
-/// Cosine above which an accepted step continues the one before it (see
-/// [`levenberg_marquardt_planned`]).
-const PERSISTENT: f64 = 0.99;
+/// Cosine above which an accepted step continues the one before it (below
+/// minus this, it turns back; see [`levenberg_marquardt_planned`]).
+const PERSISTENT: f64 = 0.95;
 
 /// At most 2^this times a step along a persistent direction.
 const MAX_DOUBLINGS: u32 = 4;
@@ -1583,13 +1583,24 @@ fn levenberg_marquardt_planned(
                 // Only while the gains shrink slowly: near an optimum the steps
                 // shrink fast and a doubled one would only overshoot.
                 let creeping = last_gain.is_some_and(|g| c - tc > 0.5 * g);
-                let persistent = creeping
-                    && last_step
-                        .as_ref()
-                        .is_some_and(|last: &DVector<f64>| cosine(last, &step) > PERSISTENT);
+                let turn = last_step
+                    .as_ref()
+                    .map_or(0.0, |last: &DVector<f64>| cosine(last, &step));
+                let persistent = creeping && turn > PERSISTENT;
                 let mut taken = step.clone();
                 let mut tnormal = tnormal;
                 let mut tres = tres;
+                // Back along the step before it: Gauss-Newton overshoots
+                // across a valley and zig-zags; its floor is about half-way.
+                if creeping && turn < -PERSISTENT {
+                    let s2 = &step * 0.5;
+                    let (p2, x2) = (moved(&p, &s2), moved_x(&x, &s2));
+                    let r2 = eval(&p2, &x2);
+                    if r2.cost.is_finite() && r2.cost < tc {
+                        tc = r2.cost;
+                        (taken, trial, xt, tres, tnormal) = (s2, p2, x2, r2, None);
+                    }
+                }
                 if persistent {
                     let mut longer = None;
                     for k in 1..=MAX_DOUBLINGS {

@@ -87,8 +87,9 @@ fn a_cost_tolerance_ends_within_it_of_the_optimum() {
 /// 0.1 rad more than the wheel's angle, calibrated as if it read true (what
 /// diagnosis does first with such a log). Gauss-Newton then creeps along one
 /// straight valley, each step first tried too long and damped back; the fit
-/// now doubles a step along a direction it keeps taking while the cost falls.
-/// 298 passes before, 120 with the longer steps, to a cost no higher than where
+/// now doubles a step along a direction it keeps taking while the cost falls
+/// (and halves one that turns back, see `levenberg_marquardt_planned`). 298
+/// passes before, 120 with the longer steps, to a cost no higher than where
 /// the creeping fit ended. Without them (`PERSISTENT` above 1) this fails on
 /// the pass count.
 #[test]
