@@ -794,13 +794,17 @@ fn continued_unheld(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResul
     let mut from = r.clone();
     from.p = start;
     let res = fit_from(&from, &split, o)?;
-    // the cost at the starting values, as a fit from them reports it
-    let starts = vec![[0.0; 3]; split.len()];
-    let before = residual_sums(r, &r.p, &r.free, &split, o, &starts).cost;
     Ok(FitResult {
-        cost_before: before,
+        cost_before: cost_at_start(r, &split, o),
         ..res
     })
+}
+
+/// The cost at the starting values `r.p` with the measured start poses, on all
+/// of `split`: what a direct fit from them reports as its `cost_before`.
+fn cost_at_start(r: &Runner, split: &[Run], o: &FitOptions) -> f64 {
+    let starts = vec![[0.0; 3]; split.len()];
+    residual_sums(r, &r.p, &r.free, split, o, &starts).cost
 }
 
 /// `search`, with its final check of the undetermined directions (see [`fit`]).
@@ -935,11 +939,8 @@ fn coarse_to_fine(r: &Runner, split: &[Run], o: &FitOptions) -> Result<FitResult
     // from the coarse optimum, the start headings are refined with the
     // parameters at once (fit_from's first stage guards against a far start)
     let fine = fit_stage_from(&from, split, o, Start::NearOptimum)?;
-    // the cost at the starting values, on the whole log, as a direct fit reports it
-    let starts = vec![[0.0; 3]; split.len()];
-    let before = residual_sums(r, &r.p, &r.free, split, o, &starts).cost;
     Ok(FitResult {
-        cost_before: before,
+        cost_before: cost_at_start(r, split, o),
         ..fine.continuing(&coarse)
     })
 }
@@ -1501,19 +1502,17 @@ fn levenberg_marquardt_planned(
     let mut last_gain: Option<f64> = None;
     // the last accepted step (scaled), to recognise a persistent direction
     let mut last_step: Option<DVector<f64>> = None;
-    let moved = |p: &[f64], s: &DVector<f64>| {
+    // the parameters and start offsets a scaled step `s` leads to, within bounds
+    let moved = |p: &[f64], x: &[f64], s: &DVector<f64>| {
         let mut t = p.to_vec();
         for (k, &i) in free.iter().enumerate() {
             t[i] = (p[i] + s[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
         }
-        t
-    };
-    let moved_x = |x: &[f64], s: &DVector<f64>| {
-        let mut t = x.to_vec();
+        let mut xt = x.to_vec();
         for k in m..dims {
-            t[k] = (x[k] + s[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
+            xt[k] = (x[k] + s[k] * scale[k]).clamp(bounds[k].0, bounds[k].1);
         }
-        t
+        (t, xt)
     };
     for it in 0..o.max_iter {
         if dims == 0 {
@@ -1559,8 +1558,7 @@ fn levenberg_marquardt_planned(
                 lambda *= 10.0;
                 continue;
             };
-            let mut trial = moved(&p, &step);
-            let mut xt = moved_x(&x, &step);
+            let (mut trial, mut xt) = moved(&p, &x, &step);
             // The first trial of an iteration is usually accepted (lambda
             // shrinks as the fit converges), so it is evaluated with its
             // normal equations at once: the accepted point needs them next,
@@ -1590,12 +1588,17 @@ fn levenberg_marquardt_planned(
                 let mut taken = step.clone();
                 let mut tnormal = tnormal;
                 let mut tres = tres;
+                // the step times `f`, evaluated
+                let scaled = |f: f64| {
+                    let s = &step * f;
+                    let (p2, x2) = moved(&p, &x, &s);
+                    let r2 = eval(&p2, &x2);
+                    (s, p2, x2, r2)
+                };
                 // Back along the step before it: Gauss-Newton overshoots
                 // across a valley and zig-zags; its floor is about half-way.
                 if creeping && turn < -PERSISTENT {
-                    let s2 = &step * 0.5;
-                    let (p2, x2) = (moved(&p, &s2), moved_x(&x, &s2));
-                    let r2 = eval(&p2, &x2);
+                    let (s2, p2, x2, r2) = scaled(0.5);
                     if r2.cost.is_finite() && r2.cost < tc {
                         tc = r2.cost;
                         (taken, trial, xt, tres, tnormal) = (s2, p2, x2, r2, None);
@@ -1604,9 +1607,7 @@ fn levenberg_marquardt_planned(
                 if persistent {
                     let mut longer = None;
                     for k in 1..=MAX_DOUBLINGS {
-                        let s2 = &step * f64::from(1u32 << k);
-                        let (p2, x2) = (moved(&p, &s2), moved_x(&x, &s2));
-                        let r2 = eval(&p2, &x2);
+                        let (s2, p2, x2, r2) = scaled(f64::from(1u32 << k));
                         if !(r2.cost.is_finite() && r2.cost < tc) {
                             break;
                         }

@@ -368,13 +368,12 @@ fn build(module: &mut JITModule, f: &Function) -> Result<cranelift_module::FuncI
         t.unstored.entry(s as usize).or_default().push(k);
     }
     t.items(&items);
-    let mut rest: Vec<(usize, Vec<usize>)> = t.unstored.drain().collect();
+    // outputs no item computes (arguments) or computed inside a guard's merge
+    let mut rest: Vec<usize> = t.unstored.keys().copied().collect();
     rest.sort();
-    for (s, ks) in rest {
+    for s in rest {
         let v = t.v(s as u32);
-        for k in ks {
-            t.b.ins().store(MEM, v, out_ptr, k as i32 * 8);
-        }
+        t.store_if_output(s, v);
     }
     t.b.ins().return_(&[]);
     t.b.finalize(module.target_config());
@@ -467,6 +466,13 @@ impl Translator<'_, '_> {
         self.slots[s as usize].expect("the schedule emits every operand before its reader")
     }
 
+    /// Stores `v` at every output position of slot `s` not yet stored.
+    fn store_if_output(&mut self, s: usize, v: Value) {
+        for k in self.unstored.remove(&s).unwrap_or_default() {
+            self.b.ins().store(MEM, v, self.out_ptr, k as i32 * 8);
+        }
+    }
+
     fn items(&mut self, items: &[Item]) {
         for item in items {
             match item {
@@ -475,11 +481,7 @@ impl Translator<'_, '_> {
                 Item::Slot(s) => {
                     let v = self.op(*s);
                     self.slots[*s] = Some(v);
-                    if let Some(ks) = self.unstored.remove(s) {
-                        for k in ks {
-                            self.b.ins().store(MEM, v, self.out_ptr, k as i32 * 8);
-                        }
-                    }
+                    self.store_if_output(*s, v);
                 }
                 Item::Guard { group, near, far } => self.guard(*group, near, far),
             }
