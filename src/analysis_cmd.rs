@@ -938,11 +938,20 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             crate::output::fmt_std(Some(res.std[k]))
         ));
     }
+    // a fit that cannot be used is said plainly, never shown as a success
+    let mut unusable = kinegen_analysis::metrics::degenerate(&prep.runs, &eval_after.tracks);
+    let (worse, worse_warnings) = kinegen_analysis::metrics::gyro_worse(before, after);
+    unusable.extend(worse);
+    let implausible = kinegen_analysis::metrics::implausible(
+        res.free
+            .iter()
+            .map(|&i| (r.names[i].as_str(), r.p[i], res.p[i])),
+    );
+    res.warnings
+        .extend(worse_warnings.into_iter().chain(implausible));
     for w in &res.warnings {
         out.say(&format!("warning: {w}"));
     }
-    // a fit that cannot be used is said plainly, never shown as a success
-    let mut unusable = kinegen_analysis::metrics::degenerate(&prep.runs, &eval_after.tracks);
     if after.rmse.is_finite() && after.rmse > 1.001 * before.rmse {
         // Long runs are fitted as re-anchored segments (fit::SEGMENT_S): judge the
         // fit on what it minimised; over a whole long run the absolute error is a
@@ -976,6 +985,9 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     }
     for u in &unusable {
         out.say(&format!("FIT UNUSABLE: {u}"));
+    }
+    if !unusable.is_empty() {
+        out.say("  no parameter values make this model follow these logs: it is likely missing a physical effect (`kinegen diagnose` with the same --spec and --data names it)");
     }
     let mut doc = fit_json(r, &res, before, after, metric_name(&prep.runs));
     doc["unusable"] = json!(unusable);

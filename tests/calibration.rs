@@ -1765,3 +1765,61 @@ fn a_million_sample_fit_writes_a_report_under_5_mb() {
     let size = std::fs::metadata(report.join("index.html")).unwrap().len();
     assert!(size < 5_000_000, "report of {size} bytes");
 }
+
+/// Issue #11 item 3: a fit that needs an implausible model is named unusable.
+/// A tricycle (seed 001 eq. 14) whose steering encoder reads 0.1 rad high,
+/// fitted with the spec as it is: the best the model can do on 60 s
+/// re-anchored segments is a 2 km wheelbase, a robot that travels as far as
+/// the measured one but never turns. Its whole-track error falls (what the
+/// report used to show as a success); it must say the model turns 0 rad
+/// against the measured tens, that the gyro residual grew, that the wheelbase
+/// is thousands of times its drawing, and exit 1.
+#[test]
+fn a_calibration_that_stops_turning_is_unusable() {
+    let tmp = tempfile::tempdir().unwrap();
+    let clean = simulate(
+        tmp.path(),
+        "clean.csv",
+        &[
+            "--spec",
+            "spec/tricycle.toml",
+            "--trajectory",
+            "random",
+            "--seed",
+            "4001",
+            "--laps",
+            "2",
+        ],
+    );
+    let text = std::fs::read_to_string(&clean).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let alpha = header.iter().position(|h| *h == "alpha").unwrap();
+    let mut shifted = header.join(",") + "\n";
+    for line in lines {
+        let mut v: Vec<String> = line.split(',').map(str::to_string).collect();
+        v[alpha] = (v[alpha].parse::<f64>().unwrap() + 0.1).to_string();
+        shifted += &(v.join(",") + "\n");
+    }
+    let log = tmp.path().join("steer_high.csv");
+    std::fs::write(&log, shifted).unwrap();
+    let out = tmp.path().join("fit.json");
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        "spec/tricycle.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--json",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let unusable = doc["unusable"].to_string();
+    assert!(unusable.contains("turns 0.0 rad in all"), "{unusable}");
+    assert!(unusable.contains("fits the gyro worse"), "{unusable}");
+    let warnings = doc["warnings"].to_string();
+    assert!(warnings.contains("times its nominal value"), "{warnings}");
+    assert!(stdout(&o).contains("kinegen diagnose"), "{}", stdout(&o));
+}

@@ -284,8 +284,41 @@ pub fn path_length(xy: impl Iterator<Item = (f64, f64)>, every: usize) -> f64 {
         .sum()
 }
 
-/// A calibration that cannot be used: on some run the model's track barely moves
-/// (or runs away) while the measured one moves. Returns what happened, per run.
+/// Window over which [`turning`] adds heading changes, s: long enough that
+/// the measurement noise of a heading adds little (about 1.5 rad over 9 min
+/// of a 5 mrad tracker), short enough not to alias a robot turning in place
+/// below pi/2 rad/s.
+const TURN_WINDOW_S: f64 = 2.0;
+
+/// Measured turning (rad) below which [`degenerate`] does not compare it: a
+/// log that hardly turns measures mostly its noise.
+const MIN_TURNING: f64 = 4.0 * std::f64::consts::PI;
+
+/// Rows of `run` in about `seconds` (at least 1).
+fn rows_per(run: &Run, seconds: f64) -> usize {
+    let span = run.t.last().copied().unwrap_or(0.0) - run.t.first().copied().unwrap_or(0.0);
+    let rate = (run.t.len().saturating_sub(1)) as f64 / span;
+    if rate.is_finite() && rate > 0.0 {
+        ((seconds * rate).round() as usize).max(1)
+    } else {
+        1
+    }
+}
+
+/// Total turning of a heading series, rad: the absolute heading changes
+/// between every `every`-th row, each wrapped to (-pi, pi].
+pub fn turning(heading: impl Iterator<Item = f64>, every: usize) -> f64 {
+    let h: Vec<f64> = heading.step_by(every.max(1)).collect();
+    h.windows(2)
+        .map(|w| crate::log::wrap(w[1] - w[0]).abs())
+        .sum()
+}
+
+/// A calibration that cannot be used: on some run the model's track barely
+/// moves or turns (or runs away) while the measured one does (a tricycle
+/// whose steering encoder reads 0.1 rad high calibrates to a 2 km
+/// wheelbase: it travels as far as the robot but never turns). Returns what
+/// happened, per run.
 pub fn degenerate(runs: &[Run], tracks: &[crate::deadreckon::Track]) -> Vec<String> {
     let mut out = Vec::new();
     for (run, tr) in runs.iter().zip(tracks) {
@@ -296,6 +329,71 @@ pub fn degenerate(runs: &[Run], tracks: &[crate::deadreckon::Track]) -> Vec<Stri
         if measured > 0.5 && !(model > 0.2 * measured && model < 5.0 * measured) {
             out.push(format!("on {} the calibrated model travels {model:.2} m while the measurements travel {measured:.2} m", run.name));
         }
+        let every = rows_per(run, TURN_WINDOW_S);
+        let measured = turning(g.iter().map(|p| p[2]), every);
+        let model = turning(tr.measured().iter().map(|p| p[2]), every);
+        if measured > MIN_TURNING && !(model > 0.2 * measured && model < 5.0 * measured) {
+            out.push(format!("on {} the calibrated model turns {model:.1} rad in all while the measurements turn {measured:.1} rad", run.name));
+        }
     }
     out
+}
+
+/// Ratio by which a calibration may worsen the gyro residual before it is
+/// named (a warning; twice this makes the fit unusable). A model that can
+/// follow the robot fits the gyro as well as the track, or leaves it at the
+/// noise (1.00x on simulated logs of every bundled model); one that lacks an
+/// effect can still lower its track cost by giving up the turning the gyro
+/// sees: a tricycle whose steering encoder read 0.1 rad high calibrated to a
+/// wheelbase of 2 km, its gyro residual 4.6x that of the nominal values. (The
+/// drift over 5 s windows is no such test: on clean simulated tricycle logs
+/// the absolute-track fit's bias alone worsens it by up to 1.5x.)
+pub const GYRO_WORSE: f64 = 1.25;
+
+/// What a calibration made worse in the gyro's eyes although its track error
+/// may have fallen (see [`GYRO_WORSE`]): (unusable, warnings).
+pub fn gyro_worse(before: &Errors, after: &Errors) -> (Vec<String>, Vec<String>) {
+    let (Some(b), Some(a)) = (before.gyro_rmse_rad_s, after.gyro_rmse_rad_s) else {
+        return (vec![], vec![]);
+    };
+    let what = format!(
+        "the calibrated model's yaw rate fits the gyro worse ({b:.5} -> {a:.5} rad/s, x{:.2})",
+        a / b
+    );
+    if a > 2.0 * GYRO_WORSE * b {
+        (vec![what], vec![])
+    } else if a > GYRO_WORSE * b {
+        (
+            vec![],
+            vec![format!(
+                "{what}: the wheels and the gyro disagree in a way the model cannot reconcile"
+            )],
+        )
+    } else {
+        (vec![], vec![])
+    }
+}
+
+/// Factor between an estimate and its (nonzero) nominal value beyond which the
+/// estimate is named as implausible: a calibration from rough nominal values
+/// moves a gain 5x (issue #11's tricycle), a dimension 10x is no longer the
+/// robot's but compensation for something the model lacks.
+pub const IMPLAUSIBLE_FACTOR: f64 = 10.0;
+
+/// One line per parameter whose estimate is more than [`IMPLAUSIBLE_FACTOR`]
+/// times its (nonzero) nominal value, or less than its inverse, from
+/// `(name, nominal, estimate)`. A sign change is left alone: an offset may
+/// take either sign, and bounds already keep sizes positive.
+pub fn implausible<'a>(params: impl IntoIterator<Item = (&'a str, f64, f64)>) -> Vec<String> {
+    params
+        .into_iter()
+        .filter_map(|(name, nominal, estimate)| {
+            let ratio = estimate / nominal;
+            (nominal != 0.0 && ratio.is_finite() && ratio >= 0.0 && !(1.0 / IMPLAUSIBLE_FACTOR..=IMPLAUSIBLE_FACTOR).contains(&ratio)).then(|| {
+                format!(
+                    "{name} = {estimate:.6} is {ratio:.3} times its nominal value {nominal}: no robot is that far from its drawing; the parameter is compensating for something the model lacks"
+                )
+            })
+        })
+        .collect()
 }
