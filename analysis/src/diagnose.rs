@@ -601,10 +601,23 @@ fn stage(
     test: &[Run],
     o: &FitOptions,
 ) -> Result<Stage, String> {
-    // the two calibrations are independent: one per core
-    let (fit, train_fit) = rayon::join(|| fit(&runner, runs, o), || fit(&runner, train, o));
-    let fit = fit.map_err(|e| e.to_string())?;
-    let train_fit = train_fit.map_err(|e| e.to_string())?;
+    let fit = fit(&runner, runs, o).map_err(|e| e.to_string())?;
+    // The training part is the first 60% of the same runs: its calibration
+    // starts where the whole log's ended, with the start headings of the
+    // segments the two share, and refines locally, as each candidate's does
+    // from this one. A second global search on the training part (run beside
+    // the first) spent as many passes again retracing the same journey from
+    // nominal values: on an omni_caster log with a 0.2 rad steering offset
+    // left out, most of the base model's calibration.
+    let mut from = runner.clone();
+    from.p = fit.p.clone();
+    let warm = crate::fit::part_starts(runs, train, &fit.starts);
+    let train_fit = match warm {
+        Some(starts) => refine_from(&from, train, o, &starts),
+        None => crate::fit::refine(&from, train, o),
+    }
+    .or_else(|_| crate::fit::fit(&runner, train, o))
+    .map_err(|e| e.to_string())?;
     Ok(stage_from(runner, fit, train_fit, runs, test, o))
 }
 

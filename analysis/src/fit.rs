@@ -45,6 +45,24 @@ pub fn segmented(runs: &[Run]) -> Vec<Run> {
     runs.iter().flat_map(|x| x.segments(SEGMENT_S)).collect()
 }
 
+/// The fitted start offsets `starts` of [`segmented`]`(runs)` carried to the
+/// segments of `part`, whose runs begin where `runs`' do (a training part cut
+/// from each run's start): a segment of both starts at the same row. None if
+/// some segment of `part` has no such twin.
+pub fn part_starts(runs: &[Run], part: &[Run], starts: &[[f64; 3]]) -> Option<Vec<[f64; 3]>> {
+    let mut out = Vec::new();
+    let mut first = 0;
+    for (run, cut) in runs.iter().zip(part) {
+        let whole = run.segments(SEGMENT_S);
+        for seg in cut.segments(SEGMENT_S) {
+            let k = whole.iter().position(|w| w.t[0] == seg.t[0])?;
+            out.push(*starts.get(first + k)?);
+        }
+        first += whole.len();
+    }
+    (runs.len() == part.len()).then_some(out)
+}
+
 #[derive(Debug, Clone)]
 pub struct FitOptions {
     pub pos_sigma: f64,
