@@ -940,7 +940,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     }
     // a fit that cannot be used is said plainly, never shown as a success
     let mut unusable = kinegen_analysis::metrics::degenerate(&prep.runs, &eval_after.tracks);
-    let (worse, worse_warnings) = kinegen_analysis::metrics::gyro_worse(before, after);
+    let (worse, worse_warnings) = kinegen_analysis::metrics::short_term_worse(before, after);
     unusable.extend(worse);
     let implausible = kinegen_analysis::metrics::implausible(
         res.free

@@ -116,7 +116,25 @@ fn inputs_outside_their_declared_range_are_reported_with_their_lines() {
     let wide = tmp.path().join("wide.csv");
     std::fs::write(&wide, lines.join("\n") + "\n").unwrap();
     for cmd in ["compare", "fit"] {
-        let doc = kinegen_json(&[cmd, "--spec", spec, "--data", wide.to_str().unwrap()]);
+        // the fit exits 1: one second of 1.5 rad steering drags the wheel
+        // radius 32% short and the drift over 5 s windows grows 5x (unusable)
+        let out = tmp.path().join(format!("{cmd}.json"));
+        let o = kinegen(&[
+            cmd,
+            "--spec",
+            spec,
+            "--data",
+            wide.to_str().unwrap(),
+            "--json",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            matches!(o.status.code(), Some(0 | 1)),
+            "{cmd}: {}",
+            stderr(&o)
+        );
+        let doc: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
         let w = doc["warnings"].as_array().unwrap();
         let hit: Vec<&str> = w
             .iter()
@@ -1822,4 +1840,48 @@ fn a_calibration_that_stops_turning_is_unusable() {
     let warnings = doc["warnings"].to_string();
     assert!(warnings.contains("times its nominal value"), "{warnings}");
     assert!(stdout(&o).contains("kinegen diagnose"), "{}", stdout(&o));
+}
+
+/// Issue #11 item 3, a fit that still turns: a user-written rover
+/// (`tests/user_specs/rover.toml`) whose log hides a 0.1 rad steering offset,
+/// fitted with the spec as it is. The model keeps moving and turning and its
+/// whole-track error falls (26.0 -> 23.2 m), but the wheel radius is fitted
+/// 44% short and the drift over 5 s windows triples: unusable, exit 1.
+#[test]
+fn a_calibration_that_triples_the_short_term_drift_is_unusable() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "rover.csv",
+        &[
+            "--spec",
+            "tests/user_specs/rover.toml",
+            "--trajectory",
+            "random",
+            "--laps",
+            "3",
+            "--seed",
+            "11",
+            "--effect",
+            "steering_offset=0.1",
+        ],
+    );
+    let out = tmp.path().join("fit.json");
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        "tests/user_specs/rover.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--json",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let unusable = doc["unusable"].to_string();
+    assert!(
+        unusable.contains("drifts more over 5 s windows"),
+        "{unusable}"
+    );
 }

@@ -48,14 +48,18 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
     }
     run_in(dir, &sim);
     run_in(dir, &["compare", "--spec", s, "--data", "log.csv"]);
-    let fit: serde_json::Value = serde_json::from_slice(
-        &run_in(
-            dir,
-            &["fit", "--spec", s, "--data", "log.csv", "--json", "-"],
-        )
-        .stdout,
-    )
-    .unwrap();
+    // the spec as it is misses the hidden effect: its fit may be named
+    // unusable (exit 1, pointing to diagnose) but never fails outright
+    let first = kinegen_in(
+        dir,
+        &["fit", "--spec", s, "--data", "log.csv", "--json", "-"],
+    );
+    assert!(
+        matches!(first.status.code(), Some(0 | 1)),
+        "{spec}: {}",
+        stderr(&first)
+    );
+    let fit: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
     assert!(
         fit["after"]["rmse"].as_f64().unwrap() < fit["before"]["rmse"].as_f64().unwrap(),
         "{spec}: {}",
