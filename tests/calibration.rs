@@ -3,6 +3,26 @@
 mod common;
 use common::*;
 
+/// Run `kinegen ARGS --json DIR/NAME.json` where the command may exit 1 (a fit
+/// named unusable): returns the output and the JSON it wrote.
+fn run_to_json(
+    dir: &std::path::Path,
+    name: &str,
+    args: &[&str],
+) -> (std::process::Output, serde_json::Value) {
+    let out = dir.join(format!("{name}.json"));
+    let mut a = args.to_vec();
+    a.extend(["--json", out.to_str().unwrap()]);
+    let o = kinegen(&a);
+    assert!(
+        matches!(o.status.code(), Some(0 | 1)),
+        "{args:?}: {}",
+        stderr(&o)
+    );
+    let doc = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    (o, doc)
+}
+
 #[test]
 fn fit_recovers_wheel_radii_and_wheelbase_within_0_2_percent_and_error_falls_tenfold() {
     let tmp = tempfile::tempdir().unwrap();
@@ -118,23 +138,11 @@ fn inputs_outside_their_declared_range_are_reported_with_their_lines() {
     for cmd in ["compare", "fit"] {
         // the fit exits 1: one second of 1.5 rad steering drags the wheel
         // radius 32% short and the drift over 5 s windows grows 5x (unusable)
-        let out = tmp.path().join(format!("{cmd}.json"));
-        let o = kinegen(&[
+        let (_, doc) = run_to_json(
+            tmp.path(),
             cmd,
-            "--spec",
-            spec,
-            "--data",
-            wide.to_str().unwrap(),
-            "--json",
-            out.to_str().unwrap(),
-        ]);
-        assert!(
-            matches!(o.status.code(), Some(0 | 1)),
-            "{cmd}: {}",
-            stderr(&o)
+            &[cmd, "--spec", spec, "--data", wide.to_str().unwrap()],
         );
-        let doc: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
         let w = doc["warnings"].as_array().unwrap();
         let hit: Vec<&str> = w
             .iter()
@@ -1821,19 +1829,18 @@ fn a_calibration_that_stops_turning_is_unusable() {
     }
     let log = tmp.path().join("steer_high.csv");
     std::fs::write(&log, shifted).unwrap();
-    let out = tmp.path().join("fit.json");
-    let o = kinegen(&[
+    let (o, doc) = run_to_json(
+        tmp.path(),
         "fit",
-        "--spec",
-        "spec/tricycle.toml",
-        "--data",
-        log.to_str().unwrap(),
-        "--json",
-        out.to_str().unwrap(),
-    ]);
+        &[
+            "fit",
+            "--spec",
+            "spec/tricycle.toml",
+            "--data",
+            log.to_str().unwrap(),
+        ],
+    );
     assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
-    let doc: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let unusable = doc["unusable"].to_string();
     assert!(unusable.contains("turns 0.0 rad in all"), "{unusable}");
     assert!(unusable.contains("fits the gyro worse"), "{unusable}");
@@ -1866,19 +1873,18 @@ fn a_calibration_that_triples_the_short_term_drift_is_unusable() {
             "steering_offset=0.1",
         ],
     );
-    let out = tmp.path().join("fit.json");
-    let o = kinegen(&[
+    let (o, doc) = run_to_json(
+        tmp.path(),
         "fit",
-        "--spec",
-        "tests/user_specs/rover.toml",
-        "--data",
-        log.to_str().unwrap(),
-        "--json",
-        out.to_str().unwrap(),
-    ]);
+        &[
+            "fit",
+            "--spec",
+            "tests/user_specs/rover.toml",
+            "--data",
+            log.to_str().unwrap(),
+        ],
+    );
     assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
-    let doc: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let unusable = doc["unusable"].to_string();
     assert!(
         unusable.contains("drifts more over 5 s windows"),

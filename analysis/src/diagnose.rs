@@ -802,26 +802,29 @@ fn rank(
     // searches are skipped. Diagnoses of 10,921-row omni_caster logs with a
     // steering offset: 4.7-8.0 s -> 3.6-4.9 s; clean ones 2.3-2.8 -> 1.5-1.8 s;
     // bench-diagnose --seeds 1 names the same effects in all 686 cases.
-    let local: Vec<Option<FitResult>> = augmented
+    // (each candidate's start, its local refinement and that one's error)
+    let local: Vec<(Runner, Option<(FitResult, f64)>)> = augmented
         .par_iter()
         .map(|(_, _, aug)| {
             let start = seeded(aug, &cur.runner, &cur.fit.p);
-            refine_from(&start, runs, o, &cur.fit.starts).ok()
+            let refined = refine_from(&start, runs, o, &cur.fit.starts).ok().map(|f| {
+                let rmse = weighted_rms(&start, &f.p, runs, o);
+                (f, rmse)
+            });
+            (start, refined)
         })
         .collect();
     let floor = (cur.floor * cur.floor + cur.step_error * cur.step_error).sqrt();
-    let at_floor = local.iter().zip(augmented).any(|(f, (_, _, aug))| {
-        f.as_ref().is_some_and(|f| {
-            let start = seeded(aug, &cur.runner, &cur.fit.p);
-            weighted_rms(&start, &f.p, runs, o) <= FLOOR_REACHED * floor
-        })
+    let at_floor = local.iter().any(|(_, f)| {
+        f.as_ref()
+            .is_some_and(|(_, rmse)| *rmse <= FLOOR_REACHED * floor)
     });
     let from_nominal = from_nominal && !at_floor;
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
         .zip(local)
-        .filter_map(|((name, doc, aug), from_cur)| {
-            let start = seeded(aug, &cur.runner, &cur.fit.p);
+        .filter_map(|((name, doc, aug), (start, from_cur))| {
+            let (from_cur, rmse_cur) = from_cur.unzip();
             let effect_params = effect_params(&start, &cur.runner);
             let ev = evidence(&start, &effect_params, runs, o);
             // start from the current estimates and from nominal: a structurally wrong
@@ -839,7 +842,10 @@ fn rank(
                 (a, _) => a.is_some(),
             };
             let mut f = if cur_start_wins { from_cur } else { from_nominal }?;
-            let mut rmse = weighted_rms(&start, &f.p, runs, o);
+            let mut rmse = match rmse_cur {
+                Some(e) if cur_start_wins => e,
+                _ => weighted_rms(&start, &f.p, runs, o),
+            };
             let mut gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
             // what the verdict reports is converged fully: an effect that may
             // win is refined from its ranking fit with the strict tolerance

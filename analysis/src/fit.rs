@@ -50,6 +50,9 @@ pub fn segmented(runs: &[Run]) -> Vec<Run> {
 /// from each run's start): a segment of both starts at the same row. None if
 /// some segment of `part` has no such twin.
 pub fn part_starts(runs: &[Run], part: &[Run], starts: &[[f64; 3]]) -> Option<Vec<[f64; 3]>> {
+    if runs.len() != part.len() {
+        return None;
+    }
     let mut out = Vec::new();
     let mut first = 0;
     for (run, cut) in runs.iter().zip(part) {
@@ -60,7 +63,7 @@ pub fn part_starts(runs: &[Run], part: &[Run], starts: &[[f64; 3]]) -> Option<Ve
         }
         first += whole.len();
     }
-    (runs.len() == part.len()).then_some(out)
+    Some(out)
 }
 
 #[derive(Debug, Clone)]

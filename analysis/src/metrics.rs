@@ -361,7 +361,7 @@ pub const DRIFT_WORSE: f64 = 2.0;
 /// What a calibration made worse over short windows although its track error
 /// may have fallen (see [`GYRO_WORSE`], [`DRIFT_WORSE`]): (unusable, warnings).
 pub fn short_term_worse(before: &Errors, after: &Errors) -> (Vec<String>, Vec<String>) {
-    let (mut unusable, mut warnings) = gyro_worse(before, after);
+    let (mut unusable, warnings) = gyro_worse(before, after);
     if let (Some(b), Some(a)) = (before.rpe_5s_m, after.rpe_5s_m) {
         if a > DRIFT_WORSE * b {
             unusable.push(format!(
@@ -370,8 +370,6 @@ pub fn short_term_worse(before: &Errors, after: &Errors) -> (Vec<String>, Vec<St
             ));
         }
     }
-    unusable.dedup();
-    warnings.dedup();
     (unusable, warnings)
 }
 
