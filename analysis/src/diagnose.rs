@@ -931,7 +931,7 @@ struct Local {
 ///
 /// An effect that brings a measurement delay is also started from the delay
 /// the motion's cross-correlation suggests
-/// ([`crate::timeline::delay_estimate`]), and the best kept: from the current
+/// ([`crate::lag::delay_estimate`]), and the best kept: from the current
 /// calibration and no delay the refinement stays near zero (10,921-row
 /// omni_caster logs lagging 0.05-0.2 s: error 1.1-4.0 against floors of
 /// 0.3-0.35), and every candidate then needed its global search from nominal
@@ -965,7 +965,7 @@ fn local_refinement(
     let q = start.ir.runtime_params()[d];
     let bounds = (q.min.unwrap_or(-1.0), q.max.unwrap_or(1.0));
     let Some(tau) =
-        crate::timeline::delay_estimate(start, &start.p, runs, bounds).filter(|t| *t != start.p[d])
+        crate::lag::delay_estimate(start, &start.p, runs, bounds).filter(|t| *t != start.p[d])
     else {
         return plain(from_nominal);
     };

@@ -17,6 +17,7 @@ pub mod innovations;
 pub mod input_range;
 pub mod interp;
 pub mod inverse;
+pub mod lag;
 pub mod landmarks;
 pub mod localize;
 pub mod log;

@@ -1,11 +1,11 @@
-//! The first estimate of a measurement delay (`timeline::delay_estimate`),
+//! The first estimate of a measurement delay (`lag::delay_estimate`),
 //! which diagnosis starts the `time_offset` effect from: a model calibrated
 //! without a delay absorbs part of it, and a refinement from no delay stays
 //! near zero (issue 12's speed target).
+use kinegen_analysis::lag::delay_estimate;
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
 use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
-use kinegen_analysis::timeline::delay_estimate;
 use kinegen_model::ir::ModelIr;
 use std::path::Path;
 
