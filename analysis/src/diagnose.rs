@@ -18,6 +18,7 @@ use crate::model::Runner;
 use crate::run::Run;
 use kinegen_model::decl::ObservationRole::{Pose, YawRate};
 use kinegen_model::ir::StepForm;
+use kinegen_model::kernel::ArgRole;
 use nalgebra::DVector;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -616,13 +617,9 @@ fn stage(
     // left out, most of the base model's calibration.
     let mut from = runner.clone();
     from.p = fit.p.clone();
-    let warm = crate::fit::part_starts(runs, train, &fit.starts);
-    let train_fit = match warm {
-        Some(starts) => refine_from(&from, train, o, &starts),
-        None => crate::fit::refine(&from, train, o),
-    }
-    .or_else(|_| crate::fit::fit(&runner, train, o))
-    .map_err(|e| e.to_string())?;
+    let train_fit = crate::fit::refine_on_part(&from, runs, train, &fit.starts, o)
+        .or_else(|_| crate::fit::fit(&runner, train, o))
+        .map_err(|e| e.to_string())?;
     Ok(stage_from(runner, fit, train_fit, runs, test, o))
 }
 
@@ -868,20 +865,18 @@ fn rank(
             }
             // the held-out fit starts where the full-data fit did best (and, from
             // the current training estimates, refines locally as above)
-            let tr_start = if !cur_start_wins {
-                aug.clone()
-            } else if train_from_fit {
-                Runner { p: f.p.clone(), ..start.clone() }
-            } else {
-                seeded(aug, &cur.runner, &cur.train_fit.p)
-            };
-            let tr_fit = match (cur_start_wins, train_from_fit) {
-                (false, _) => fit_continued(&tr_start, train, o),
-                (true, true) => match crate::fit::part_starts(runs, train, &f.starts) {
-                    Some(starts) => refine_from(&tr_start, train, o, &starts),
-                    None => crate::fit::refine(&tr_start, train, o),
-                },
-                (true, false) => refine_from(&tr_start, train, o, &cur.train_fit.starts),
+            let (tr_start, tr_fit) = match (cur_start_wins, train_from_fit) {
+                (false, _) => (aug.clone(), fit_continued(aug, train, o)),
+                (true, true) => {
+                    let at = Runner { p: f.p.clone(), ..start.clone() };
+                    let fit = crate::fit::refine_on_part(&at, runs, train, &f.starts, o);
+                    (at, fit)
+                }
+                (true, false) => {
+                    let at = seeded(aug, &cur.runner, &cur.train_fit.p);
+                    let fit = refine_from(&at, train, o, &cur.train_fit.starts);
+                    (at, fit)
+                }
             };
             let (train_fit, holdout_rmse) = match tr_fit {
                 Ok(ft) => {
@@ -933,13 +928,7 @@ fn rank(
 /// omni_caster logs the gyro effects' searches took 2.5-3.4 s each and ended
 /// where their refinements from the current calibration did.
 fn gyro_only(aug: &Runner, effect_params: &[usize]) -> bool {
-    let reads = |f: &kinegen_model::ir::Function, i: usize| {
-        f.arg(kinegen_model::kernel::ArgRole::Params).is_some_and(|a| {
-            f.tape
-                .iter()
-                .any(|op| matches!(op, kinegen_model::ir::Op::Arg(x, k) if usize::from(*x) == a && usize::from(*k) == i))
-        })
-    };
+    let reads = |f: &kinegen_model::ir::Function, i| f.reads(ArgRole::Params, i);
     let motion = [aug.ir.twist(), aug.ir.step(StepForm::Exact).value];
     let others: Vec<_> = (0..aug.ir.observations().len())
         .map(|k| aug.ir.observation_kernels_at(k))

@@ -66,6 +66,23 @@ pub fn part_starts(runs: &[Run], part: &[Run], starts: &[[f64; 3]]) -> Option<Ve
     Some(out)
 }
 
+/// The calibration `at`, an optimum on `runs` whose segments started at
+/// `starts` ([`FitResult::starts`]), refined locally on `part` (runs cut from
+/// the same starts, such as a training part): from the start headings of the
+/// segments the two share, or from the measured ones when they share none.
+pub fn refine_on_part(
+    at: &Runner,
+    runs: &[Run],
+    part: &[Run],
+    starts: &[[f64; 3]],
+    o: &FitOptions,
+) -> Result<FitResult, FitError> {
+    match part_starts(runs, part, starts) {
+        Some(warm) => refine_from(at, part, o, &warm),
+        None => refine(at, part, o),
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct FitOptions {
     pub pos_sigma: f64,

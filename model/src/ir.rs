@@ -152,6 +152,16 @@ impl Function {
         self.args.iter().position(|a| a.role == role)
     }
 
+    /// Whether the tape reads element `index` of the argument playing `role`
+    /// (a parameter the function does not read cannot change its outputs).
+    pub fn reads(&self, role: ArgRole, index: usize) -> bool {
+        self.arg(role).is_some_and(|a| {
+            self.tape.iter().any(
+                |op| matches!(op, Op::Arg(x, k) if usize::from(*x) == a && usize::from(*k) == index),
+            )
+        })
+    }
+
     /// Is the output a matrix (Jacobian) rather than a vector?
     pub fn is_matrix(&self) -> bool {
         self.cols > 1
@@ -531,5 +541,34 @@ mod tests {
         assert_eq!(f.eval(&[&[0.0]])[0], 1.0);
         assert!((f.eval(&[&[0.5]])[0] - 0.5f64.sin() / 0.5).abs() < 1e-15);
         assert_eq!(f.ops_tape(), 6);
+    }
+
+    /// `reads` sees which elements of which argument the tape loads: p[1]
+    /// of (x, p), not p[0], not x[1], and nothing of a role it does not take.
+    #[test]
+    fn reads_names_the_loaded_elements() {
+        let arg = |role, n: usize| ArgSpec {
+            role,
+            names: (0..n).map(|i| format!("a{i}")).collect(),
+        };
+        let f = Function {
+            kernel: Kernel::Twist,
+            name: "f".into(),
+            doc: String::new(),
+            args: vec![arg(ArgRole::State, 3), arg(ArgRole::Params, 2)],
+            rows: 1,
+            cols: 1,
+            row_names: vec![],
+            col_names: vec![],
+            tape: vec![Op::Arg(0, 0), Op::Arg(1, 1), Op::Mul(0, 1)],
+            outputs: vec![2],
+            ops_tree: 0,
+            native: Default::default(),
+        };
+        assert!(f.reads(ArgRole::Params, 1));
+        assert!(!f.reads(ArgRole::Params, 0));
+        assert!(f.reads(ArgRole::State, 0));
+        assert!(!f.reads(ArgRole::State, 1));
+        assert!(!f.reads(ArgRole::Inputs, 0));
     }
 }
