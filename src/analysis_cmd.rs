@@ -3,15 +3,15 @@ use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::bag::{is_bag, Detection, TopicMap};
-use kinegen_analysis::deadreckon;
 use kinegen_analysis::fit::{fit, FitOptions, FitResult};
 use kinegen_analysis::innovations::{self, Innovation, InnovationStats};
 use kinegen_analysis::input_range;
 use kinegen_analysis::landmarks;
 use kinegen_analysis::methods::{by_name, Method, Settings, METHODS};
-use kinegen_analysis::metrics::{errors, where_it_fails, Errors};
+use kinegen_analysis::metrics::{errors, errors_each, where_it_fails, Errors};
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_analysis::run::Run;
+use kinegen_analysis::track_rows::{first_non_finite, Heading, Recipe, TrackRows};
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -248,43 +248,54 @@ fn attach_landmarks(
 }
 
 /// Dead-reckoned tracks of every run with parameters `p`, each from its
-/// measured start plus its offset in `offsets` (none: the measured start).
-fn tracks(r: &Runner, p: &[f64], runs: &[Run], offsets: &[[f64; 3]]) -> Vec<deadreckon::Track> {
-    runs.iter()
-        .enumerate()
-        .map(|(i, run)| {
-            deadreckon::run_from(
-                r,
-                p,
-                run,
-                false,
-                offsets.get(i).copied().unwrap_or([0.0; 3]),
-                None,
-            )
+/// measured start plus its offset in `offsets` (none: the measured start):
+/// described, and computed each time they are read (a long log's tracks are
+/// never held, see `kinegen_analysis::track_rows`).
+fn tracks<'r>(r: &'r Runner, p: &[f64], runs: &[Run], offsets: &[[f64; 3]]) -> Vec<Recipe<'r>> {
+    (0..runs.len())
+        .map(|i| Recipe {
+            r,
+            p: p.to_vec(),
+            offset: offsets.get(i).copied().unwrap_or([0.0; 3]),
+            heading: Heading::Model,
         })
         .collect()
 }
 
+/// Each run with its track, as the metrics read them.
+fn pairs<'a>(runs: &'a [Run], tracks: &'a [Recipe<'_>]) -> Vec<(&'a Run, &'a dyn TrackRows)> {
+    runs.iter()
+        .zip(tracks)
+        .map(|(run, t)| (run, t as &dyn TrackRows))
+        .collect()
+}
+
 /// Parameters `p` on `runs`: the dead-reckoned tracks, the errors they make and
-/// the landmark innovations, from one dead-reckoning pass.
-pub struct Evaluation {
-    pub tracks: Vec<deadreckon::Track>,
+/// the landmark innovations.
+pub struct Evaluation<'r> {
+    pub tracks: Vec<Recipe<'r>>,
     /// Error summary; on logs without ground truth but with landmarks, `rmse` is
     /// the landmark range innovation RMSE.
     pub errors: Errors,
+    /// Each run's own error summary.
+    pub per_run: Vec<Errors>,
     pub landmarks: Option<InnovationStats>,
 }
 
-pub fn evaluation(r: &Runner, p: &[f64], runs: &[Run]) -> Evaluation {
+pub fn evaluation<'r>(r: &'r Runner, p: &[f64], runs: &[Run]) -> Evaluation<'r> {
     evaluation_from(r, p, runs, &[])
 }
 
 /// [`evaluation`] with each run started at its measured start plus its offset
 /// in `offsets` (the start headings a fit refined).
-pub fn evaluation_from(r: &Runner, p: &[f64], runs: &[Run], offsets: &[[f64; 3]]) -> Evaluation {
+pub fn evaluation_from<'r>(
+    r: &'r Runner,
+    p: &[f64],
+    runs: &[Run],
+    offsets: &[[f64; 3]],
+) -> Evaluation<'r> {
     let tracks = tracks(r, p, runs, offsets);
-    let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
-    let mut errors = errors(&pairs);
+    let (mut errors, per_run) = errors_each(&pairs(runs, &tracks));
     let all: Vec<Innovation> = runs
         .iter()
         .zip(&tracks)
@@ -299,19 +310,16 @@ pub fn evaluation_from(r: &Runner, p: &[f64], runs: &[Run], offsets: &[[f64; 3]]
     Evaluation {
         tracks,
         errors,
+        per_run,
         landmarks,
     }
 }
 
-/// Refuse tracks that stop being numbers (see `Track::first_non_finite`),
+/// Refuse tracks that stop being numbers (see `track_rows::first_non_finite`),
 /// naming the log and its line; `sets` are the --set values, named as suspects.
-pub fn check_finite(
-    runs: &[Run],
-    tracks: &[deadreckon::Track],
-    sets: &[String],
-) -> Result<(), String> {
+pub fn check_finite(runs: &[Run], tracks: &[Recipe<'_>], sets: &[String]) -> Result<(), String> {
     for (run, t) in runs.iter().zip(tracks) {
-        if let Some((k, what)) = t.first_non_finite(run) {
+        if let Some((k, what)) = first_non_finite(t, run) {
             let suspects = if sets.is_empty() {
                 String::new()
             } else {
@@ -326,24 +334,27 @@ pub fn check_finite(
 /// A method's evaluation: dead reckoning with its parameters, or, for a method
 /// that learned the yaw rate (neural gyrodometry), gyrodometry with its virtual
 /// gyro.
-fn method_evaluation(
-    r: &Runner,
+fn method_evaluation<'r>(
+    r: &'r Runner,
     m: &kinegen_analysis::methods::Calibration,
     runs: &[Run],
-) -> Evaluation {
+) -> Evaluation<'r> {
     let Some(f) = &m.yaw_rate else {
         return evaluation(r, &m.p, runs);
     };
-    let tracks: Vec<deadreckon::Track> = runs
+    let tracks: Vec<Recipe> = runs
         .iter()
-        .map(|run| {
-            deadreckon::gyrodometry_with(r, &m.p, run, &|k| f(&run.u[k]))
-                .expect("the method checked that the model has twist_gyro")
+        .map(|_| Recipe {
+            r,
+            p: m.p.clone(),
+            offset: [0.0; 3],
+            heading: Heading::Learned(f.clone()),
         })
         .collect();
-    let pairs: Vec<_> = runs.iter().zip(&tracks).collect();
+    let (errors, per_run) = errors_each(&pairs(runs, &tracks));
     Evaluation {
-        errors: errors(&pairs),
+        errors,
+        per_run,
         tracks,
         landmarks: None,
     }
@@ -357,8 +368,8 @@ fn method_evaluation(
 /// the held-out runs need.
 fn held_out_worse(
     r: &Runner,
-    fitted: (&[Run], &[deadreckon::Track]),
-    held: (&[Run], &[deadreckon::Track]),
+    fitted: (&[Run], &[Recipe<'_>]),
+    held: (&[Run], &[Recipe<'_>]),
     nominal: f64,
     now: f64,
 ) -> Option<String> {
@@ -366,7 +377,11 @@ fn held_out_worse(
     if now.partial_cmp(&(1.001 * nominal)) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
-    let gaps = kinegen_analysis::coverage::uncovered(r, fitted, held);
+    let gaps = kinegen_analysis::coverage::uncovered(
+        r,
+        &pairs(fitted.0, fitted.1),
+        &pairs(held.0, held.1),
+    );
     let why = if gaps.is_empty() {
         "the fitted runs do not determine what the held-out runs need (see the standard deviations): fit on runs that drive like the held-out ones".to_string()
     } else {
@@ -437,9 +452,8 @@ pub fn compare(c: Common) -> ExitCode {
     all.append(&mut prep.holdout);
     let r = &prep.runner;
     let tracks = tracks(r, &r.p, &all, &[]);
-    let pairs: Vec<_> = all.iter().zip(&tracks).collect();
-    let e = errors(&pairs);
-    let (regimes, segments) = where_it_fails(&pairs);
+    let (e, each) = errors_each(&pairs(&all, &tracks));
+    let (regimes, segments) = where_it_fails(&pairs(&all, &tracks));
     let secs: f64 = all.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
     let which = if c.set.is_empty() {
         "nominal parameters".to_string()
@@ -496,14 +510,21 @@ pub fn compare(c: Common) -> ExitCode {
         }
     }
     // Gyrodometry (seed 000 eq. 13-18) on the runs that log a gyro.
-    let gyro_tracks: Vec<Option<deadreckon::Track>> = all
+    let gyro_tracks: Vec<Option<Recipe>> = all
         .iter()
-        .map(|run| deadreckon::gyrodometry(r, &r.p, run))
+        .map(|run| {
+            run.gyro.is_some().then(|| Recipe {
+                r,
+                p: r.p.clone(),
+                offset: [0.0; 3],
+                heading: Heading::Gyro,
+            })
+        })
         .collect();
-    let gyro_pairs: Vec<_> = all
+    let gyro_pairs: Vec<(&Run, &dyn TrackRows)> = all
         .iter()
         .zip(&gyro_tracks)
-        .filter_map(|(run, t)| t.as_ref().map(|t| (run, t)))
+        .filter_map(|(run, t)| t.as_ref().map(|t| (run, t as &dyn TrackRows)))
         // errors need the ground truth to compare with
         .filter(|(run, _)| run.gt.is_some())
         .collect();
@@ -520,8 +541,8 @@ pub fn compare(c: Common) -> ExitCode {
     }
     let per_run: Vec<Value> = all
         .iter()
-        .zip(&tracks)
-        .map(|(run, t)| json!({"run": run.name, "errors": errors(&[(run, t)])}))
+        .zip(&each)
+        .map(|(run, e)| json!({"run": run.name, "errors": e}))
         .collect();
     let doc = json!({
         "model": r.ir.name, "metric": metric_name(&all),
@@ -581,14 +602,14 @@ pub fn fit_json(
 /// fitted runs the start pose the fit used (measured start plus its refinement).
 fn per_run(
     runs: &[Run],
-    before: &[deadreckon::Track],
-    after: &[deadreckon::Track],
+    before: &[Errors],
+    after: &[Errors],
     starts: Option<&[[f64; 3]]>,
 ) -> Vec<Value> {
     runs.iter()
         .enumerate()
         .map(|(i, run)| {
-            let (b, a) = (errors(&[(run, &before[i])]), errors(&[(run, &after[i])]));
+            let (b, a) = (&before[i], &after[i]);
             json!({
                 "path": run.path, "holdout": starts.is_none(),
                 "rmse": a.rmse, "final_error": a.final_position_error_m,
@@ -772,7 +793,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         let before = evaluation(r, &r.p, &prep.runs);
         out.say(&format!("{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m", r.ir.name, rows.len(), prep.runs.len(), before.errors.rmse));
         let mut methods_json = serde_json::Map::new();
-        let mut per_method: Vec<(String, Vec<deadreckon::Track>)> = Vec::new();
+        let mut per_method: Vec<(String, Vec<Recipe>)> = Vec::new();
         let mut best: Option<(f64, &str)> = None;
         // Distance to the truth, each parameter scaled by its size (so a 2 mm
         // offset of a 0.3 m axis and of a 0 m axis weigh the same), as a
@@ -939,7 +960,8 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         ));
     }
     // a fit that cannot be used is said plainly, never shown as a success
-    let mut unusable = kinegen_analysis::metrics::degenerate(&prep.runs, &eval_after.tracks);
+    let mut unusable =
+        kinegen_analysis::metrics::degenerate(&pairs(&prep.runs, &eval_after.tracks));
     let (worse, worse_warnings) = kinegen_analysis::metrics::short_term_worse(before, after);
     unusable.extend(worse);
     let implausible = kinegen_analysis::metrics::implausible(
@@ -1007,8 +1029,8 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     let starts = kinegen_analysis::fit::run_starts(r, &res.p, &prep.runs, &res.starts);
     let mut runs = per_run(
         &prep.runs,
-        &eval_before.tracks,
-        &eval_after.tracks,
+        &eval_before.per_run,
+        &eval_after.per_run,
         Some(&starts),
     );
     if !prep.holdout.is_empty() {
@@ -1021,7 +1043,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             fmt_errors(&hb.errors),
             fmt_errors(&ha.errors)
         ));
-        runs.extend(per_run(&prep.holdout, &hb.tracks, &ha.tracks, None));
+        runs.extend(per_run(&prep.holdout, &hb.per_run, &ha.per_run, None));
         if let Some(w) = held_out_worse(
             r,
             (&prep.runs, &eval_before.tracks),

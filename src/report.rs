@@ -1,11 +1,11 @@
 //! `--report DIR`: one self-contained HTML page (inline SVG figures drawn with
 //! plotters, no external files or scripts).
-use kinegen_analysis::deadreckon::Track;
 use kinegen_analysis::innovations::Innovation;
 use kinegen_analysis::log::wrap;
 use kinegen_analysis::metrics::regime;
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
+use kinegen_analysis::track_rows::{Heading, Recipe, TrackRows};
 use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
@@ -255,10 +255,48 @@ th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{
 
 /// The model's track where the pose sensor sees it (an off-centre tracker's
 /// point, not the body origin), so it is drawn against what was measured.
-fn traj(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
-    let _ = run;
-    let m = tr.measured();
-    series_of(m.len(), m.iter().map(|p| (p[0], p[1])))
+fn traj(run: &Run, tr: &dyn TrackRows) -> Vec<(f64, f64)> {
+    drawn(run, tr).traj
+}
+
+/// What the pages draw of one track, from one reading of it (a long log's
+/// track is computed as it is read, see `kinegen_analysis::track_rows`).
+struct Drawn {
+    /// The track where the pose sensor sees it (see [`traj`]).
+    traj: Vec<(f64, f64)>,
+    /// Position error against time.
+    pos_err: Vec<(f64, f64)>,
+    /// Heading-error rate residual per step against speed, turn rate and
+    /// heading.
+    scatter: [Vec<(f64, f64)>; 3],
+}
+
+fn drawn(run: &Run, tr: &dyn TrackRows) -> Drawn {
+    let mut traj = Decimator::new(run.t.len());
+    let mut err = Decimator::new(run.t.len());
+    let mut scatter = [0, 1, 2].map(|_| Decimator::new(run.steps()));
+    let gt = run.gt.as_ref();
+    for (k, row) in tr.rows(run).enumerate() {
+        let m = row.measured;
+        traj.push((m[0], m[1]));
+        let Some(g) = gt else { continue };
+        err.push((
+            run.t[k] - run.t[0],
+            ((g[k][0] - m[0]).powi(2) + (g[k][1] - m[1]).powi(2)).sqrt(),
+        ));
+        if let Some(tw) = row.twist {
+            let res = tw[2] - wrap(g[k + 1][2] - g[k][2]) / run.dt[k];
+            let v = (tw[0].powi(2) + tw[1].powi(2)).sqrt();
+            scatter[0].push((v, res));
+            scatter[1].push((tw[2], res));
+            scatter[2].push((wrap(g[k][2]), res));
+        }
+    }
+    Drawn {
+        traj: traj.finish(),
+        pos_err: err.finish(),
+        scatter: scatter.map(Decimator::finish),
+    }
 }
 
 fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
@@ -266,35 +304,6 @@ fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
         .as_ref()
         .map(|g| series_of(g.len(), g.iter().map(|p| (p[0], p[1]))))
         .unwrap_or_default()
-}
-
-fn pos_err(run: &Run, tr: &Track) -> Vec<(f64, f64)> {
-    let Some(g) = &run.gt else { return vec![] };
-    let m = tr.measured();
-    let pts = g.iter().zip(m).zip(&run.t).map(|((a, b), t)| {
-        (
-            t - run.t[0],
-            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
-        )
-    });
-    series_of(g.len().min(m.len()), pts)
-}
-
-/// Heading-error rate residual per step against speed, turn rate and heading.
-fn residual_scatter(run: &Run, tr: &Track) -> [Vec<(f64, f64)>; 3] {
-    let Some(g) = &run.gt else {
-        return [vec![], vec![], vec![]];
-    };
-    let mut out = [0, 1, 2].map(|_| Decimator::new(run.steps()));
-    for k in 0..run.steps() {
-        let meas = wrap(g[k + 1][2] - g[k][2]) / run.dt[k];
-        let res = tr.twist[k][2] - meas;
-        let v = (tr.twist[k][0].powi(2) + tr.twist[k][1].powi(2)).sqrt();
-        out[0].push((v, res));
-        out[1].push((tr.twist[k][2], res));
-        out[2].push((wrap(g[k][2]), res));
-    }
-    out.map(Decimator::finish)
 }
 
 fn write(dir: &Path, html: &str) -> Result<(), String> {
@@ -322,8 +331,8 @@ pub fn compare_report(
     dir: &Path,
     r: &Runner,
     runs: &[Run],
-    tracks: &[Track],
-    gyro: &[Option<Track>],
+    tracks: &[Recipe<'_>],
+    gyro: &[Option<Recipe<'_>>],
     innov: &[Vec<Innovation>],
     doc: &Value,
 ) -> Result<(), String> {
@@ -352,9 +361,10 @@ pub fn compare_report(
         )?);
     }
     for ((run, tr), g) in runs.iter().zip(tracks).zip(gyro) {
+        let d = drawn(run, tr);
         let mut series: Vec<Series> = vec![
             ("measured", BLACK, gt_xy(run)),
-            ("model (nominal)", RED, traj(run, tr)),
+            ("model (nominal)", RED, d.traj),
         ];
         if let Some(g) = g {
             series.push(("gyrodometry", RGBColor(0, 90, 200), traj(run, g)));
@@ -372,12 +382,12 @@ pub fn compare_report(
             &format!("{}: position error, worst 1 s segments shaded", run.name),
             "t (s)",
             "error (m)",
-            &[("model (nominal)", RED, pos_err(run, tr))],
+            &[("model (nominal)", RED, d.pos_err)],
             false,
             false,
             &worst_marks(doc, &run.name),
         )?);
-        let [a, b, c] = residual_scatter(run, tr);
+        let [a, b, c] = d.scatter;
         figs.push(chart(
             "turn-rate residual vs speed",
             "speed (m/s)",
@@ -460,20 +470,21 @@ pub fn fit_report(
     dir: &Path,
     r: &Runner,
     runs: &[Run],
-    before: &[Track],
-    after: &[Track],
+    before: &[Recipe<'_>],
+    after: &[Recipe<'_>],
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();
     for ((run, b), a) in runs.iter().zip(before).zip(after) {
+        let (b, a) = (drawn(run, b), drawn(run, a));
         figs.push(chart(
             &format!("{}: trajectory", run.name),
             "x (m)",
             "y (m)",
             &[
                 ("measured", BLACK, gt_xy(run)),
-                ("before calibration", RED, traj(run, b)),
-                ("after calibration", GREEN, traj(run, a)),
+                ("before calibration", RED, b.traj),
+                ("after calibration", GREEN, a.traj),
             ],
             false,
             true,
@@ -483,16 +494,13 @@ pub fn fit_report(
             &format!("{}: position error", run.name),
             "t (s)",
             "error (m)",
-            &[
-                ("before", RED, pos_err(run, b)),
-                ("after", GREEN, pos_err(run, a)),
-            ],
+            &[("before", RED, b.pos_err), ("after", GREEN, a.pos_err)],
             false,
             false,
             &[],
         )?);
-        let [sb, _, _] = residual_scatter(run, b);
-        let [sa, _, _] = residual_scatter(run, a);
+        let [sb, _, _] = b.scatter;
+        let [sa, _, _] = a.scatter;
         figs.push(chart(
             "turn-rate residual vs speed",
             "speed (m/s)",
@@ -533,7 +541,12 @@ pub fn diagnose_report(
     derive: &dyn Fn(&[String]) -> Result<Runner, String>,
     doc: &Value,
 ) -> Result<(), String> {
-    use kinegen_analysis::deadreckon::run as dr;
+    let dr = |r, p: &[f64]| Recipe {
+        r,
+        p: p.to_vec(),
+        offset: [0.0; 3],
+        heading: Heading::Model,
+    };
     let mut figs = Vec::new();
     // the first effect of the chain alone (for its signature), and the final model
     let first = d.verdict().and_then(|v| {
@@ -552,16 +565,16 @@ pub fn diagnose_report(
             .join(" + ")
     );
     for run in runs {
-        let b = dr(base, &d.base_fit.p, run, false);
+        let b = drawn(run, &dr(base, &d.base_fit.p));
         let mut series: Vec<Series> = vec![
             ("measured", BLACK, gt_xy(run)),
-            ("calibrated spec", RED, traj(run, &b)),
+            ("calibrated spec", RED, b.traj),
         ];
-        let mut errs: Vec<Series> = vec![("calibrated spec", RED, pos_err(run, &b))];
+        let mut errs: Vec<Series> = vec![("calibrated spec", RED, b.pos_err)];
         if !d.chain.is_empty() {
-            let a = dr(&d.final_runner, &d.final_p, run, false);
-            series.push((chain_label.as_str(), GREEN, traj(run, &a)));
-            errs.push((chain_label.as_str(), GREEN, pos_err(run, &a)));
+            let a = drawn(run, &dr(&d.final_runner, &d.final_p));
+            series.push((chain_label.as_str(), GREEN, a.traj));
+            errs.push((chain_label.as_str(), GREEN, a.pos_err));
         }
         if let Some((name, aug, cand)) = &first {
             // the first effect's residual signature
@@ -681,21 +694,23 @@ pub fn methods_report(
     dir: &Path,
     r: &Runner,
     runs: &[Run],
-    nominal: &[Track],
-    methods: &[(String, Vec<Track>)],
+    nominal: &[Recipe<'_>],
+    methods: &[(String, Vec<Recipe<'_>>)],
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();
     for (k, run) in runs.iter().enumerate() {
+        let nominal_drawn = drawn(run, &nominal[k]);
         let mut traj_series: Vec<Series> = vec![
             ("measured", BLACK, gt_xy(run)),
-            ("nominal", RED, traj(run, &nominal[k])),
+            ("nominal", RED, nominal_drawn.traj),
         ];
-        let mut err_series: Vec<Series> = vec![("nominal", RED, pos_err(run, &nominal[k]))];
+        let mut err_series: Vec<Series> = vec![("nominal", RED, nominal_drawn.pos_err)];
         for (m, (name, tracks)) in methods.iter().enumerate() {
             let color = METHOD_COLORS[m % METHOD_COLORS.len()];
-            traj_series.push((name.as_str(), color, traj(run, &tracks[k])));
-            err_series.push((name.as_str(), color, pos_err(run, &tracks[k])));
+            let d = drawn(run, &tracks[k]);
+            traj_series.push((name.as_str(), color, d.traj));
+            err_series.push((name.as_str(), color, d.pos_err));
         }
         figs.push(chart(
             &format!("{}: trajectory", run.name),

@@ -5,9 +5,10 @@
 //! the held-out error went 0.74 m -> 17.6 m). When a calibration makes runs it
 //! was not fitted on worse, this names the motions and inputs those runs use
 //! and the fitted ones do not, so that the user knows which runs to add.
-use crate::deadreckon::Track;
+use crate::metrics::sample_every;
 use crate::model::Runner;
 use crate::run::Run;
+use crate::track_rows::TrackRows;
 
 /// A held-out motion counts as not covered when its typical size is this many
 /// times the fitted runs'.
@@ -29,13 +30,20 @@ fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
     *v.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
-/// Per twist component, the `Q` quantile of its absolute value over `tracks`.
-fn twist_sizes(tracks: &[Track]) -> [f64; 3] {
+/// Per twist component, the `Q` quantile of its absolute value over the
+/// tracks (of every k-th step of a long log, see [`sample_every`]).
+fn twist_sizes(tracks: &[(&Run, &dyn TrackRows)]) -> [f64; 3] {
+    let every = sample_every(tracks.iter().map(|(run, _)| run.steps()).sum());
+    let twists: Vec<[f64; 3]> = tracks
+        .iter()
+        .flat_map(|&(run, t)| t.rows(run).filter_map(|row| row.twist))
+        .step_by(every)
+        .collect();
     std::array::from_fn(|c| {
         quantile(
-            tracks
+            twists
                 .iter()
-                .flat_map(|t| t.twist.iter().map(move |w| w[c].abs()))
+                .map(|w| w[c].abs())
                 .filter(|x| x.is_finite())
                 .collect(),
             Q,
@@ -43,11 +51,14 @@ fn twist_sizes(tracks: &[Track]) -> [f64; 3] {
     })
 }
 
-/// The (2.5%, 97.5%) range of absolute input `i` over `runs`.
-fn input_range(runs: &[Run], i: usize) -> (f64, f64) {
+/// The (2.5%, 97.5%) range of absolute input `i` over `runs` (of every k-th
+/// step of long logs, see [`sample_every`]).
+fn input_range(runs: &[&Run], i: usize) -> (f64, f64) {
+    let every = sample_every(runs.iter().map(|run| run.steps()).sum());
     let v: Vec<f64> = runs
         .iter()
         .flat_map(|x| x.u.iter().map(move |u| u[i]))
+        .step_by(every)
         .filter(|x| x.is_finite())
         .collect();
     (quantile(v.clone(), 0.025), quantile(v, 0.975))
@@ -57,8 +68,12 @@ fn input_range(runs: &[Run], i: usize) -> (f64, f64) {
 /// the `fitted` runs do not, in words (empty: the fitted runs cover them).
 /// Each set is its runs and their dead reckoning with one parameter set (the
 /// twist is what matters).
-pub fn uncovered(r: &Runner, fitted: (&[Run], &[Track]), held: (&[Run], &[Track])) -> Vec<String> {
-    let (f, h) = (twist_sizes(fitted.1), twist_sizes(held.1));
+pub fn uncovered(
+    r: &Runner,
+    fitted: &[(&Run, &dyn TrackRows)],
+    held: &[(&Run, &dyn TrackRows)],
+) -> Vec<String> {
+    let (f, h) = (twist_sizes(fitted), twist_sizes(held));
     let motion = ["forward speed", "sideways speed", "turn rate"];
     let unit = ["m/s", "m/s", "rad/s"];
     let mut found = Vec::new();
@@ -70,7 +85,8 @@ pub fn uncovered(r: &Runner, fitted: (&[Run], &[Track]), held: (&[Run], &[Track]
             ));
         }
     }
-    let (fr, hr) = (fitted.0, held.0);
+    let fr: Vec<&Run> = fitted.iter().map(|x| x.0).collect();
+    let hr: Vec<&Run> = held.iter().map(|x| x.0).collect();
     let absolute = fr
         .first()
         .map(|x| x.rate_inputs.clone())
@@ -79,7 +95,7 @@ pub fn uncovered(r: &Runner, fitted: (&[Run], &[Track]), held: (&[Run], &[Track]
         if absolute.get(i).copied().unwrap_or(true) {
             continue; // rates are covered through the twist
         }
-        let ((flo, fhi), (hlo, hhi)) = (input_range(fr, i), input_range(hr, i));
+        let ((flo, fhi), (hlo, hhi)) = (input_range(&fr, i), input_range(&hr, i));
         let width = hhi - hlo;
         // the held-out range reaches a quarter of its width beyond the fitted one
         if width > 0.0 && (flo - hlo).max(hhi - fhi) > 0.25 * width {

@@ -64,55 +64,6 @@ impl Track {
             &self.sensed
         }
     }
-
-    /// The first row where the track stops being a number, with what did: a
-    /// predicted pose or gyro reading that is not finite (parameters that
-    /// divide by almost zero, an input that overflows), or a pose error against
-    /// the log that overflows (a cell like 1e308). Results past such a row
-    /// would be NaN or infinite, so commands refuse instead.
-    pub fn first_non_finite(&self, run: &Run) -> Option<(usize, String)> {
-        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-        // a logged pose so large its square overflows is no position at all
-        // (and the start pose, estimated from the first rows, inherits it)
-        if let Some(g) = &run.gt {
-            if let Some(k) = g
-                .iter()
-                .position(|p| p.iter().any(|v| !(v * v).is_finite()))
-            {
-                return Some((
-                    k,
-                    format!("the measured pose {:?} is out of any physical range", g[k]),
-                ));
-            }
-        }
-        for (k, m) in self.measured().iter().enumerate() {
-            if !finite(m) {
-                return Some((k, format!("the model's predicted pose is not finite ({m:?}): check the parameter values and the inputs up to this row")));
-            }
-            if let Some(g) = &run.gt {
-                let e = [g[k][0] - m[0], g[k][1] - m[1]];
-                if !(e[0].hypot(e[1])).is_finite() || !(e[0] * e[0] + e[1] * e[1]).is_finite() {
-                    return Some((
-                        k,
-                        format!(
-                            "the pose error against the log overflows (measured pose {:?})",
-                            g[k]
-                        ),
-                    ));
-                }
-            }
-            if k > 0 {
-                if let Some(w) = self
-                    .gyro
-                    .get(k - 1)
-                    .filter(|w| !w.is_finite() || w.abs() > 1e150)
-                {
-                    return Some((k, format!("the model's predicted gyro reading is {w:.3e}: check the parameter values and the inputs")));
-                }
-            }
-        }
-        None
-    }
 }
 
 /// The body pose whose measurement is `measured`: the identity unless the model
@@ -200,6 +151,70 @@ pub fn run_from(
     start_offset: [f64; 3],
     plan: Option<&[u8]>,
 ) -> Track {
+    let (start, dstart) = reckoning_start(r, p, data, start_offset);
+    let np = p.len();
+    let mut pose = Vec::with_capacity(data.steps() + 1);
+    pose.push(start);
+    // columns: parameters, then the start pose (identity at the start)
+    let cols = np + 3;
+    let mut sens = with_sens.then(|| {
+        let mut data = Vec::with_capacity(3 * cols * (data.steps() + 1));
+        for m in 0..3 {
+            data.extend((0..cols).map(|c| match c {
+                c if c < np => dstart[m * np + c],
+                c => f64::from(u8::from(c == np + m)),
+            }));
+        }
+        Sens { cols, data }
+    });
+    let mut twist = Vec::with_capacity(data.steps());
+    let mut stepper = Stepper::new(r, p, data, with_sens, plan);
+    // the sensitivity of the current (sub)step's pose, and the next one's
+    let mut cur: Vec<f64> = sens.as_ref().map_or_else(Vec::new, |s| s.data.clone());
+    let mut next = vec![0.0; cur.len()];
+    for k in 0..data.steps() {
+        let x = *pose.last().unwrap();
+        let (x, mean_twist) = stepper.step(k, x, |out| {
+            if with_sens {
+                // S_{j+1} = F_x S_j + [F_p | 0], written out
+                let (jx, jp) = (&out[6..15], &out[15..]);
+                for m in 0..3 {
+                    for c in 0..cols {
+                        let prev = |i: usize| cur[i * cols + c];
+                        let direct = if c < np { jp[m * np + c] } else { 0.0 };
+                        next[m * cols + c] = chain(&jx[m * 3..m * 3 + 3], prev, direct);
+                    }
+                }
+                std::mem::swap(&mut cur, &mut next);
+            }
+        });
+        twist.push(mean_twist);
+        if let Some(s) = sens.as_mut() {
+            s.data.extend_from_slice(&cur);
+        }
+        pose.push(x);
+    }
+    let sensed = predicted_measurements(r, p, data, &pose);
+    let gyro = predicted_gyro(r, p, data, &pose, &twist);
+    Track {
+        pose,
+        sensed,
+        sens,
+        twist,
+        gyro,
+    }
+}
+
+/// The body pose dead reckoning of `data` starts from: the measured start
+/// (with a measurement delay, the measurement at t0 + delay, which saw the
+/// pose at t0) plus `start_offset`, placed through the model's pose
+/// observation; with d start / d p (3 x P, row-major).
+pub(crate) fn reckoning_start(
+    r: &Runner,
+    p: &[f64],
+    data: &Run,
+    start_offset: [f64; 3],
+) -> ([f64; 3], Vec<f64>) {
     let start = data.start_pose();
     // With delayed measurements the pose at t0 is seen at t0 + time_offset.
     let tau_i = r.delay;
@@ -224,38 +239,61 @@ pub fn run_from(
             dstart[m * p.len() + ti] += gt_vel[m];
         }
     }
-    let np = p.len();
-    let zeros = [0.0; 16];
-    let mut scratch = Vec::new();
-    let mut pose = Vec::with_capacity(data.steps() + 1);
-    pose.push(start);
-    // columns: parameters, then the start pose (identity at the start)
-    let cols = np + 3;
-    let mut sens = with_sens.then(|| {
-        let mut data = Vec::with_capacity(3 * cols * (data.steps() + 1));
-        for m in 0..3 {
-            data.extend((0..cols).map(|c| match c {
-                c if c < np => dstart[m * np + c],
-                c => f64::from(u8::from(c == np + m)),
-            }));
+    (start, dstart)
+}
+
+/// One step of dead reckoning at a time, through the model's fused step tape
+/// (pose and twist, then with sensitivities F_x and F_p): what [`run_from`]
+/// keeps for a whole track, and what a track read a row at a time
+/// (`crate::track_rows`) does not.
+pub(crate) struct Stepper<'a> {
+    r: &'a Runner,
+    p: &'a [f64],
+    data: &'a Run,
+    plan: Option<&'a [u8]>,
+    f: &'a kinegen_model::ir::Function,
+    out: Vec<f64>,
+    scratch: Vec<f64>,
+    u_sub: Vec<f64>,
+}
+
+impl<'a> Stepper<'a> {
+    pub(crate) fn new(
+        r: &'a Runner,
+        p: &'a [f64],
+        data: &'a Run,
+        with_sens: bool,
+        plan: Option<&'a [u8]>,
+    ) -> Self {
+        let f = if with_sens {
+            &r.step_linearized
+        } else {
+            &r.step_twist
+        };
+        Stepper {
+            r,
+            p,
+            data,
+            plan,
+            f,
+            out: vec![0.0; f.rows],
+            scratch: Vec::new(),
+            u_sub: Vec::new(),
         }
-        Sens { cols, data }
-    });
-    let mut twist = Vec::with_capacity(data.steps());
-    // pose and twist, then (with sensitivities) F_x and F_p, from one fused tape
-    let f = if with_sens {
-        &r.step_linearized
-    } else {
-        &r.step_twist
-    };
-    let mut out = vec![0.0; f.rows];
-    // the sensitivity of the current (sub)step's pose, and the next one's
-    let mut cur: Vec<f64> = sens.as_ref().map_or_else(Vec::new, |s| s.data.clone());
-    let mut next = vec![0.0; cur.len()];
-    let mut u_sub = Vec::new();
-    for k in 0..data.steps() {
+    }
+
+    /// Step `k` from pose `x`: the pose at row k + 1 and the step's mean body
+    /// twist. `each` sees the tape's outputs after every sub-step.
+    pub(crate) fn step(
+        &mut self,
+        k: usize,
+        mut x: [f64; 3],
+        mut each: impl FnMut(&[f64]),
+    ) -> ([f64; 3], [f64; 3]) {
+        let (r, p, data) = (self.r, self.p, self.data);
+        let zeros = [0.0; 16];
         let n = data.swing.as_ref().map_or(1, |s| {
-            if let Some(plan) = plan {
+            if let Some(plan) = self.plan {
                 return usize::from(plan[k]);
             }
             substeps(
@@ -264,12 +302,11 @@ pub fn run_from(
                 &data.u[k],
                 &s[k],
                 data.dt[k],
-                &mut u_sub,
-                &mut scratch,
+                &mut self.u_sub,
+                &mut self.scratch,
             )
         });
         let dt = [data.dt[k] / n as f64];
-        let mut x = *pose.last().unwrap();
         let mut mean_twist = [0.0; 3];
         for j in 0..n {
             let u: &[f64] = if n == 1 {
@@ -279,46 +316,24 @@ pub fn run_from(
                 // each sub-step's middle; rates stay the step's mean
                 let at = (j as f64 + 0.5) / n as f64 - 0.5;
                 let swing = &data.swing.as_ref().expect("n > 1 needs a swing")[k];
-                u_sub.clear();
-                u_sub.extend(data.u[k].iter().zip(swing).map(|(u, s)| u + at * s));
-                &u_sub
+                self.u_sub.clear();
+                self.u_sub
+                    .extend(data.u[k].iter().zip(swing).map(|(u, s)| u + at * s));
+                &self.u_sub
             };
             let mut args: [&[f64]; 8] = [&[]; 8];
-            for (slot, a) in args.iter_mut().zip(&f.args) {
+            for (slot, a) in args.iter_mut().zip(&self.f.args) {
                 *slot = Runner::step_arg(a, &x, u, p, &dt, &zeros);
             }
-            f.eval_into(&args[..f.args.len()], &mut out, &mut scratch);
-            for (m, t) in mean_twist.iter_mut().zip(&out[3..6]) {
+            self.f
+                .eval_into(&args[..self.f.args.len()], &mut self.out, &mut self.scratch);
+            for (m, t) in mean_twist.iter_mut().zip(&self.out[3..6]) {
                 *m += t / n as f64;
             }
-            if with_sens {
-                // S_{j+1} = F_x S_j + [F_p | 0], written out
-                let (jx, jp) = (&out[6..15], &out[15..]);
-                for m in 0..3 {
-                    for c in 0..cols {
-                        let prev = |i: usize| cur[i * cols + c];
-                        let direct = if c < np { jp[m * np + c] } else { 0.0 };
-                        next[m * cols + c] = chain(&jx[m * 3..m * 3 + 3], prev, direct);
-                    }
-                }
-                std::mem::swap(&mut cur, &mut next);
-            }
-            x = [out[0], out[1], out[2]];
+            each(&self.out);
+            x = [self.out[0], self.out[1], self.out[2]];
         }
-        twist.push(mean_twist);
-        if let Some(s) = sens.as_mut() {
-            s.data.extend_from_slice(&cur);
-        }
-        pose.push(x);
-    }
-    let sensed = predicted_measurements(r, p, data, &pose);
-    let gyro = predicted_gyro(r, p, data, &pose, &twist);
-    Track {
-        pose,
-        sensed,
-        sens,
-        twist,
-        gyro,
+        (x, mean_twist)
     }
 }
 
@@ -415,20 +430,33 @@ fn predicted_gyro(
     if data.gyro.is_none() {
         return Vec::new();
     }
-    let Some(h) = r.ir.observation_kernels(YawRate).map(|o| o.value) else {
-        return twist.iter().map(|w| w[2]).collect();
-    };
-    let (mut out, mut scratch) = ([0.0], Vec::new());
+    let h = r.ir.observation_kernels(YawRate).map(|o| o.value);
+    let mut scratch = Vec::new();
     (0..data.steps())
-        .map(|k| {
-            h.eval_into(
-                &Runner::obs_args(h, &pose[k], &data.u[k], p, &[]),
-                &mut out,
-                &mut scratch,
-            );
-            out[0]
-        })
+        .map(|k| gyro_at(h, p, data, k, &pose[k], &twist[k], &mut scratch))
         .collect()
+}
+
+/// What the gyro reads over step `k` (see [`Track::gyro`]) of a track at
+/// `pose` (row k) moving with `twist`, through the yaw-rate observation `h`
+/// when the model has one.
+pub(crate) fn gyro_at(
+    h: Option<&kinegen_model::ir::Function>,
+    p: &[f64],
+    data: &Run,
+    k: usize,
+    pose: &[f64; 3],
+    twist: &[f64; 3],
+    scratch: &mut Vec<f64>,
+) -> f64 {
+    let Some(h) = h else { return twist[2] };
+    let mut out = [0.0];
+    h.eval_into(
+        &Runner::obs_args(h, pose, &data.u[k], p, &[]),
+        &mut out,
+        scratch,
+    );
+    out[0]
 }
 
 /// The pose measurements a track predicts (see [`Track::measured`]); empty
@@ -447,16 +475,29 @@ fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) 
                 let (j, a) = crate::timeline::model_instant(data, k, tau);
                 lerp3(&pose[j], &pose[j + 1], a)
             };
-            match h {
-                Some(h) => {
-                    let u = &data.u[k.min(data.steps().saturating_sub(1))];
-                    let m = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
-                    [m[0], m[1], m[2]]
-                }
-                None => x,
-            }
+            sensed_at(h, p, data, k, &x)
         })
         .collect()
+}
+
+/// What the pose sensor reads at row `k` of a track that was at body pose `x`
+/// when the measurement was taken: `x` through the pose observation `h` (an
+/// off-centre marker), or `x` itself when the model has none.
+pub(crate) fn sensed_at(
+    h: Option<&kinegen_model::ir::Function>,
+    p: &[f64],
+    data: &Run,
+    k: usize,
+    x: &[f64; 3],
+) -> [f64; 3] {
+    match h {
+        Some(h) => {
+            let u = &data.u[k.min(data.steps().saturating_sub(1))];
+            let m = h.eval(&Runner::obs_args(h, x, u, p, &[]));
+            [m[0], m[1], m[2]]
+        }
+        None => *x,
+    }
 }
 
 /// Gyrodometry (seed 000 eq. 13-18): the heading integrated from the gyro
@@ -486,14 +527,12 @@ pub fn gyrodometry_with(
         Vec::with_capacity(data.steps()),
     );
     let mut scratch = Vec::new();
-    let mut v = [0.0; 2];
     for k in 0..data.steps() {
         let w = omega_of(k);
-        tg.eval_into(&[&data.u[k], &[w], p], &mut v, &mut scratch);
-        let x = *pose.last().unwrap();
-        pose.push(arc_step(x, [v[0], v[1], w], data.dt[k]));
+        let (x, tw) = gyro_step(tg, p, data, k, w, *pose.last().unwrap(), &mut scratch);
+        pose.push(x);
         omega.push(w);
-        twist.push([v[0], v[1], w]);
+        twist.push(tw);
     }
     let sensed = predicted_measurements(r, p, data, &pose);
     Some(Track {
@@ -503,6 +542,23 @@ pub fn gyrodometry_with(
         gyro: omega,
         twist,
     })
+}
+
+/// Step `k` of gyrodometry from pose `x` with yaw rate `w`: the next pose and
+/// the step's twist (the translation `twist_gyro` gives for that yaw rate).
+pub(crate) fn gyro_step(
+    tg: &kinegen_model::ir::Function,
+    p: &[f64],
+    data: &Run,
+    k: usize,
+    w: f64,
+    x: [f64; 3],
+    scratch: &mut Vec<f64>,
+) -> ([f64; 3], [f64; 3]) {
+    let mut v = [0.0; 2];
+    tg.eval_into(&[&data.u[k], &[w], p], &mut v, scratch);
+    let tw = [v[0], v[1], w];
+    (arc_step(x, tw, data.dt[k]), tw)
 }
 
 /// Pose after moving with the constant body twist `tw` for `dt` (exact SE(2)

@@ -7,6 +7,7 @@ use crate::interp::lerp3;
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::run::{LandmarkObs, Run};
+use crate::track_rows::{Cursor, TrackRows};
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use serde::Serialize;
 use std::collections::HashMap;
@@ -56,18 +57,33 @@ pub struct InnovationStats {
     pub worst_landmark: Option<(String, f64)>,
 }
 
-pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &Track) -> Vec<Innovation> {
-    run.landmarks
-        .iter()
-        .filter_map(|o| {
-            predict(r, p, run, track, o).map(|pr| Innovation {
-                t: o.t,
-                id: o.id.clone(),
-                range_m: o.range - pr[0],
-                bearing_rad: wrap(o.bearing - pr[1]),
-            })
-        })
-        .collect()
+/// The innovations of a run's observations along `track`, in the run's
+/// order; read off the track as it passes them, in time order.
+pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &dyn TrackRows) -> Vec<Innovation> {
+    let Some(h) = r.ir.observation_kernels(RangeBearing).map(|o| o.value) else {
+        return Vec::new();
+    };
+    let mut order: Vec<usize> = (0..run.landmarks.len()).collect();
+    order.sort_by(|&a, &b| run.landmarks[a].t.total_cmp(&run.landmarks[b].t));
+    let mut cursor = Cursor::new(track, run);
+    let mut out: Vec<Option<Innovation>> = vec![None; run.landmarks.len()];
+    for i in order {
+        let o = &run.landmarks[i];
+        let (j, a) = run.locate(o.t);
+        let (Some(next), Some(at)) = (cursor.get(j + 1), cursor.get(j)) else {
+            continue;
+        };
+        let x = lerp3(&at.pose, &next.pose, a.clamp(0.0, 1.0));
+        let u = &run.u[j.min(run.steps() - 1)];
+        let v = h.eval(&Runner::obs_args(h, &x, u, p, &[o.xl, o.yl]));
+        out[i] = Some(Innovation {
+            t: o.t,
+            id: o.id.clone(),
+            range_m: o.range - v[0],
+            bearing_rad: wrap(o.bearing - v[1]),
+        });
+    }
+    out.into_iter().flatten().collect()
 }
 
 pub fn stats(all: &[Innovation]) -> Option<InnovationStats> {

@@ -36,6 +36,7 @@ pub mod simulate;
 pub mod steering;
 pub mod sweep;
 pub mod timeline;
+pub mod track_rows;
 
 pub use kinegen_model::effects;
 pub use kinegen_model::ir::ModelIr;

@@ -21,7 +21,7 @@ pub struct Settings<'a> {
 }
 
 /// A learned yaw rate (rad/s) from one step's inputs: a virtual gyro.
-pub type YawRateModel = std::sync::Arc<dyn Fn(&[f64]) -> f64 + Send + Sync>;
+pub type YawRateModel = crate::track_rows::LearnedYawRate;
 
 /// One method's outcome.
 pub struct Calibration {

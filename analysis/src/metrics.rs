@@ -1,9 +1,9 @@
 //! How wrong is the model, and where: absolute trajectory error, relative pose
 //! error over distance and time windows, gyro residuals, and which motion regimes
 //! and segments carry the error.
-use crate::deadreckon::Track;
 use crate::log::wrap;
 use crate::run::Run;
+use crate::track_rows::{Cursor, TrackRows};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -53,28 +53,12 @@ pub struct Errors {
     pub samples: usize,
 }
 
-/// Per-row errors of a track against a run's ground truth.
-pub struct RowErrors {
-    pub pos: Vec<f64>,
-    pub head: Vec<f64>,
-}
-
-pub fn row_errors(track: &Track, gt: &[[f64; 3]]) -> RowErrors {
-    let (pos, head) = row_error_iter(track, gt).unzip();
-    RowErrors { pos, head }
-}
-
-/// (position error, heading error) per row, computed as they are read.
-fn row_error_iter<'a>(
-    track: &'a Track,
-    gt: &'a [[f64; 3]],
-) -> impl Iterator<Item = (f64, f64)> + 'a {
-    track.measured().iter().zip(gt).map(|(a, b)| {
-        (
-            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
-            wrap(a[2] - b[2]),
-        )
-    })
+/// (position error, heading error) of a measured pose against the logged one.
+fn row_error(measured: &[f64; 3], gt: &[f64; 3]) -> (f64, f64) {
+    (
+        ((measured[0] - gt[0]).powi(2) + (measured[1] - gt[1]).powi(2)).sqrt(),
+        wrap(measured[2] - gt[2]),
+    )
 }
 
 /// Motion regime of a step from its body twist.
@@ -106,74 +90,129 @@ fn rel(a: &[f64; 3], b: &[f64; 3]) -> [f64; 2] {
     [c * dx + s * dy, -s * dx + c * dy]
 }
 
+/// What [`errors`] adds up over one run: summed, then divided once over all
+/// the runs (or over each run alone, [`errors_each`]).
+#[derive(Default)]
+struct Sums {
+    position_sq: f64,
+    heading_sq: f64,
+    rows: usize,
+    gyro_sq: f64,
+    gyro_rows: usize,
+    rpe_distance: f64,
+    rpe_distance_windows: usize,
+    rpe_time: f64,
+    rpe_time_windows: usize,
+    /// The largest position error and when (s from the run's start).
+    max: (f64, f64),
+    /// The last row's (position, heading) error, for runs with ground truth.
+    last: Option<(f64, f64)>,
+}
+
 /// Error summary over several runs (each with its own track).
-pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
-    let mut e = Errors::default();
-    let (mut sp, mut sh, mut n) = (0.0, 0.0, 0usize);
-    let (mut gsum, mut gn) = (0.0, 0usize);
-    let (mut rpe_d, mut rpe_dn, mut rpe_t, mut rpe_tn) = (0.0, 0usize, 0.0, 0usize);
-    let mut finals: Vec<(f64, f64)> = Vec::new();
-    for (run, tr) in runs {
-        if let Some(gt) = &run.gt {
-            // per-row errors are summed as they are computed: a long log is
-            // not held a second time
-            let mut last = (0.0, 0.0);
-            for (k, (pos, head)) in row_error_iter(tr, gt).enumerate() {
-                sp += pos * pos;
-                sh += head * head;
-                n += 1;
-                if pos > e.max_position_error_m {
-                    e.max_position_error_m = pos;
-                    e.max_error_at_s = run.t[k] - run.t[0];
+pub fn errors(runs: &[(&Run, &dyn TrackRows)]) -> Errors {
+    let sums: Vec<Sums> = runs.iter().map(|&(run, tr)| sums(run, tr)).collect();
+    summary(&sums)
+}
+
+/// [`errors`] over all the runs, and each run's own, from one reading of
+/// each track.
+pub fn errors_each(runs: &[(&Run, &dyn TrackRows)]) -> (Errors, Vec<Errors>) {
+    let sums: Vec<Sums> = runs.iter().map(|&(run, tr)| sums(run, tr)).collect();
+    let each = sums
+        .iter()
+        .map(|x| summary(std::slice::from_ref(x)))
+        .collect();
+    (summary(&sums), each)
+}
+
+/// One run's [`Sums`], in one pass over its track (and two cursors for the
+/// far ends of the relative pose windows): a long log's track is not held.
+fn sums(run: &Run, tr: &dyn TrackRows) -> Sums {
+    let mut s = Sums::default();
+    let gyro = run.gyro.as_ref();
+    let Some(gt) = &run.gt else {
+        if let Some(g) = gyro {
+            for (k, row) in tr.rows(run).enumerate() {
+                if let Some(w) = row.gyro {
+                    s.gyro_sq += (w - g[k + 1]).powi(2);
+                    s.gyro_rows += 1;
                 }
-                last = (pos, head);
-            }
-            finals.push(last);
-            // RPE: windows of 1 m travelled (the distance between rows i and j
-            // kept as a running sum) and of 5 s
-            let step = |k: usize| (gt[k][0] - gt[k - 1][0]).hypot(gt[k][1] - gt[k - 1][1]);
-            let measured = tr.measured();
-            let (mut j, mut travelled) = (0, 0.0);
-            for i in 0..gt.len() {
-                if i > 0 {
-                    travelled -= step(i);
-                }
-                if j < i {
-                    (j, travelled) = (i, 0.0);
-                }
-                while j < gt.len() && travelled < 1.0 {
-                    j += 1;
-                    if j < gt.len() {
-                        travelled += step(j);
-                    }
-                }
-                if j >= gt.len() {
-                    break;
-                }
-                let (a, b) = (rel(&gt[i], &gt[j]), rel(&measured[i], &measured[j]));
-                rpe_d += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / travelled;
-                rpe_dn += 1;
-            }
-            let mut j = 0;
-            for i in 0..gt.len() {
-                while j < gt.len() && run.t[j] - run.t[i] < 5.0 {
-                    j += 1;
-                }
-                if j >= gt.len() {
-                    break;
-                }
-                let (a, b) = (rel(&gt[i], &gt[j]), rel(&measured[i], &measured[j]));
-                rpe_t += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
-                rpe_tn += 1;
             }
         }
-        if let Some(g) = &run.gyro {
-            for k in 0..tr.gyro.len() {
-                gsum += (tr.gyro[k] - g[k + 1]).powi(2);
-                gn += 1;
+        return s;
+    };
+    // RPE: windows of 1 m travelled (the distance between rows i and j
+    // kept as a running sum) and of 5 s, each far end read by its cursor
+    let step = |k: usize| (gt[k][0] - gt[k - 1][0]).hypot(gt[k][1] - gt[k - 1][1]);
+    let (mut far_d, mut far_t) = (Cursor::new(tr, run), Cursor::new(tr, run));
+    let (mut j, mut travelled, mut jt) = (0, 0.0, 0);
+    let (mut by_distance, mut by_time) = (true, true);
+    for (i, row) in tr.rows(run).enumerate() {
+        let (pos, head) = row_error(&row.measured, &gt[i]);
+        s.position_sq += pos * pos;
+        s.heading_sq += head * head;
+        s.rows += 1;
+        if pos > s.max.0 {
+            s.max = (pos, run.t[i] - run.t[0]);
+        }
+        s.last = Some((pos, head));
+        if let (Some(g), Some(w)) = (gyro, row.gyro) {
+            s.gyro_sq += (w - g[i + 1]).powi(2);
+            s.gyro_rows += 1;
+        }
+        if by_distance {
+            if i > 0 {
+                travelled -= step(i);
+            }
+            if j < i {
+                (j, travelled) = (i, 0.0);
+            }
+            while j < gt.len() && travelled < 1.0 {
+                j += 1;
+                if j < gt.len() {
+                    travelled += step(j);
+                }
+            }
+            match far_d.get(j).filter(|_| j < gt.len()) {
+                Some(far) => {
+                    let (a, b) = (rel(&gt[i], &gt[j]), rel(&row.measured, &far.measured));
+                    s.rpe_distance +=
+                        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() / travelled;
+                    s.rpe_distance_windows += 1;
+                }
+                None => by_distance = false,
+            }
+        }
+        if by_time {
+            while jt < gt.len() && run.t[jt] - run.t[i] < 5.0 {
+                jt += 1;
+            }
+            match far_t.get(jt).filter(|_| jt < gt.len()) {
+                Some(far) => {
+                    let (a, b) = (rel(&gt[i], &gt[jt]), rel(&row.measured, &far.measured));
+                    s.rpe_time += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+                    s.rpe_time_windows += 1;
+                }
+                None => by_time = false,
             }
         }
     }
+    s.last = s.last.or(Some((0.0, 0.0)));
+    s
+}
+
+/// The [`Errors`] of runs' [`Sums`] together.
+fn summary(runs: &[Sums]) -> Errors {
+    let mut e = Errors::default();
+    let total = |f: fn(&Sums) -> f64| runs.iter().map(f).sum::<f64>();
+    let count = |f: fn(&Sums) -> usize| runs.iter().map(f).sum::<usize>();
+    for s in runs {
+        if s.max.0 > e.max_position_error_m {
+            (e.max_position_error_m, e.max_error_at_s) = s.max;
+        }
+    }
+    let finals: Vec<(f64, f64)> = runs.iter().filter_map(|s| s.last).collect();
     match finals[..] {
         [] => {}
         [(pos, head)] => (e.final_position_error_m, e.final_heading_error_rad) = (pos, head),
@@ -186,36 +225,72 @@ pub fn errors(runs: &[(&Run, &Track)]) -> Errors {
         }
     }
     e.worst_final_position_error_m = finals.iter().map(|x| x.0).fold(0.0, f64::max);
+    let (n, gn) = (count(|s| s.rows), count(|s| s.gyro_rows));
     if n > 0 {
-        e.rmse = (sp / n as f64).sqrt();
-        e.heading_rmse_rad = (sh / n as f64).sqrt();
+        e.rmse = (total(|s| s.position_sq) / n as f64).sqrt();
+        e.heading_rmse_rad = (total(|s| s.heading_sq) / n as f64).sqrt();
     }
     e.samples = n.max(gn);
-    e.rpe_per_m = (rpe_dn > 0).then(|| rpe_d / rpe_dn as f64);
-    e.rpe_5s_m = (rpe_tn > 0).then(|| rpe_t / rpe_tn as f64);
-    e.gyro_rmse_rad_s = (gn > 0).then(|| (gsum / gn as f64).sqrt());
+    let (dn, tn) = (
+        count(|s| s.rpe_distance_windows),
+        count(|s| s.rpe_time_windows),
+    );
+    e.rpe_per_m = (dn > 0).then(|| total(|s| s.rpe_distance) / dn as f64);
+    e.rpe_5s_m = (tn > 0).then(|| total(|s| s.rpe_time) / tn as f64);
+    e.gyro_rmse_rad_s = (gn > 0).then(|| (total(|s| s.gyro_sq) / gn as f64).sqrt());
     e
 }
 
-/// Which regimes carry the error growth, and the worst 1 s segments.
-pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment>) {
-    let mut speeds: Vec<f64> = runs
-        .iter()
-        .flat_map(|(_, t)| t.twist.iter().map(|w| (w[0] * w[0] + w[1] * w[1]).sqrt()))
-        .filter(|v| *v > 0.02)
-        .collect();
+/// Most values a robust statistic of a whole log is taken from (the median
+/// moving speed, a twist quantile): every k-th step of a longer log, so that
+/// what it keeps does not grow with the log.
+pub const SAMPLE: usize = 100_000;
+
+/// Steps between the values kept of `steps` steps (see [`SAMPLE`]).
+pub fn sample_every(steps: usize) -> usize {
+    steps.div_ceil(SAMPLE).max(1)
+}
+
+/// Worst segments [`where_it_fails`] reports.
+const WORST_SEGMENTS: usize = 5;
+
+/// Which regimes carry the error growth, and the worst 1 s segments. Two
+/// passes over each track (the median moving speed that splits fast from
+/// slow, then the regimes); only the worst segments so far are kept.
+pub fn where_it_fails(runs: &[(&Run, &dyn TrackRows)]) -> (Vec<RegimeShare>, Vec<Segment>) {
+    let every = sample_every(runs.iter().map(|(run, _)| run.steps()).sum());
+    let mut speeds: Vec<f64> = Vec::new();
+    let mut k = 0usize;
+    for &(run, tr) in runs {
+        for w in tr.rows(run).filter_map(|row| row.twist) {
+            if k.is_multiple_of(every) {
+                speeds.push((w[0] * w[0] + w[1] * w[1]).sqrt());
+            }
+            k += 1;
+        }
+    }
+    speeds.retain(|v| *v > 0.02);
     speeds.sort_by(f64::total_cmp);
     let fast = speeds.get(speeds.len() / 2).copied().unwrap_or(0.0);
     let mut shares: Vec<RegimeShare> = Vec::new();
-    let mut segments = Vec::new();
-    for (run, tr) in runs {
+    let mut worst: Vec<Segment> = Vec::new();
+    for &(run, tr) in runs {
         let Some(gt) = &run.gt else { continue };
-        let re = row_errors(tr, gt);
-        let mut seg_start = 0;
-        for k in 0..run.steps() {
-            let reg = regime(&tr.twist[k], fast);
-            let s = match shares.iter_mut().find(|s| s.regime == reg) {
-                Some(s) => s,
+        let mut rows = tr.rows(run);
+        let Some(mut prev) = rows.next() else {
+            continue;
+        };
+        let mut prev_err = row_error(&prev.measured, &gt[0]);
+        let (mut seg_start, mut start_err) = (0, prev_err);
+        // the regimes of the current segment's steps (its middle one names it)
+        let mut seg_regimes: Vec<&'static str> = Vec::new();
+        for (k, row) in rows.enumerate() {
+            let err = row_error(&row.measured, &gt[k + 1]);
+            let tw = prev.twist.unwrap_or([0.0; 3]);
+            let reg = regime(&tw, fast);
+            seg_regimes.push(reg);
+            let s = match shares.iter_mut().position(|s| s.regime == reg) {
+                Some(i) => &mut shares[i],
                 None => {
                     shares.push(RegimeShare {
                         regime: reg.into(),
@@ -230,22 +305,26 @@ pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment
                 }
             };
             s.time_s += run.dt[k];
-            s.distance_m += (tr.twist[k][0].powi(2) + tr.twist[k][1].powi(2)).sqrt() * run.dt[k];
-            s.position_error_growth_m += (re.pos[k + 1] - re.pos[k]).max(0.0);
-            s.heading_error_growth_rad += (re.head[k + 1].abs() - re.head[k].abs()).max(0.0);
+            s.distance_m += (tw[0].powi(2) + tw[1].powi(2)).sqrt() * run.dt[k];
+            s.position_error_growth_m += (err.0 - prev_err.0).max(0.0);
+            s.heading_error_growth_rad += (err.1.abs() - prev_err.1.abs()).max(0.0);
             if run.t[k + 1] - run.t[seg_start] >= 1.0 || k + 1 == run.steps() {
-                // dominant regime of the segment: the one of its middle step
-                let mid = (seg_start + k) / 2;
-                segments.push(Segment {
-                    run: run.name.clone(),
-                    t_start: run.t[seg_start] - run.t[0],
-                    t_end: run.t[k + 1] - run.t[0],
-                    regime: regime(&tr.twist[mid], fast).into(),
-                    position_error_growth_m: re.pos[k + 1] - re.pos[seg_start],
-                    heading_error_growth_rad: re.head[k + 1].abs() - re.head[seg_start].abs(),
-                });
-                seg_start = k + 1;
+                keep_worst(
+                    &mut worst,
+                    Segment {
+                        run: run.name.clone(),
+                        t_start: run.t[seg_start] - run.t[0],
+                        t_end: run.t[k + 1] - run.t[0],
+                        // dominant regime of the segment: the one of its middle step
+                        regime: seg_regimes[(k - seg_start) / 2].into(),
+                        position_error_growth_m: err.0 - start_err.0,
+                        heading_error_growth_rad: err.1.abs() - start_err.1.abs(),
+                    },
+                );
+                (seg_start, start_err) = (k + 1, err);
+                seg_regimes.clear();
             }
+            (prev, prev_err) = (row, err);
         }
     }
     let (tp, th): (f64, f64) = shares.iter().fold((0.0, 0.0), |a, s| {
@@ -267,21 +346,40 @@ pub fn where_it_fails(runs: &[(&Run, &Track)]) -> (Vec<RegimeShare>, Vec<Segment
         };
     }
     shares.sort_by(|a, b| b.position_share.total_cmp(&a.position_share));
-    segments.sort_by(|a, b| {
-        b.position_error_growth_m
-            .total_cmp(&a.position_error_growth_m)
-    });
-    segments.truncate(5);
-    (shares, segments)
+    (shares, worst)
+}
+
+/// `seg` into `worst`, which holds the [`WORST_SEGMENTS`] largest position
+/// error growths so far, largest first (earlier segments first among equals,
+/// as a stable sort of them all would put them).
+fn keep_worst(worst: &mut Vec<Segment>, seg: Segment) {
+    let at = worst
+        .iter()
+        .position(|w| {
+            w.position_error_growth_m
+                .total_cmp(&seg.position_error_growth_m)
+                .is_lt()
+        })
+        .unwrap_or(worst.len());
+    if at < WORST_SEGMENTS {
+        worst.insert(at, seg);
+        worst.truncate(WORST_SEGMENTS);
+    }
 }
 
 /// Path length of a planar track, sampled every `every` rows (so measurement
 /// noise does not add length).
 pub fn path_length(xy: impl Iterator<Item = (f64, f64)>, every: usize) -> f64 {
-    let pts: Vec<(f64, f64)> = xy.step_by(every.max(1)).collect();
-    pts.windows(2)
-        .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
-        .sum()
+    let mut pts = xy.step_by(every.max(1));
+    let Some(mut last) = pts.next() else {
+        return 0.0;
+    };
+    pts.map(|p| {
+        let d = (p.0 - last.0).hypot(p.1 - last.1);
+        last = p;
+        d
+    })
+    .sum()
 }
 
 /// Window over which [`turning`] adds heading changes, s: long enough that
@@ -308,10 +406,14 @@ fn rows_per(run: &Run, seconds: f64) -> usize {
 /// Total turning of a heading series, rad: the absolute heading changes
 /// between every `every`-th row, each wrapped to (-pi, pi].
 pub fn turning(heading: impl Iterator<Item = f64>, every: usize) -> f64 {
-    let h: Vec<f64> = heading.step_by(every.max(1)).collect();
-    h.windows(2)
-        .map(|w| crate::log::wrap(w[1] - w[0]).abs())
-        .sum()
+    let mut h = heading.step_by(every.max(1));
+    let Some(mut last) = h.next() else { return 0.0 };
+    h.map(|x| {
+        let d = crate::log::wrap(x - last).abs();
+        last = x;
+        d
+    })
+    .sum()
 }
 
 /// A calibration that cannot be used: on some run the model's track barely
@@ -319,19 +421,19 @@ pub fn turning(heading: impl Iterator<Item = f64>, every: usize) -> f64 {
 /// whose steering encoder reads 0.1 rad high calibrates to a 2 km
 /// wheelbase: it travels as far as the robot but never turns). Returns what
 /// happened, per run.
-pub fn degenerate(runs: &[Run], tracks: &[crate::deadreckon::Track]) -> Vec<String> {
+pub fn degenerate(runs: &[(&Run, &dyn TrackRows)]) -> Vec<String> {
     let mut out = Vec::new();
-    for (run, tr) in runs.iter().zip(tracks) {
+    for &(run, tr) in runs {
         let Some(g) = &run.gt else { continue };
         let every = (run.t.len() / 200).max(1);
         let measured = path_length(g.iter().map(|p| (p[0], p[1])), every);
-        let model = path_length(tr.measured().iter().map(|p| (p[0], p[1])), every);
+        let model = path_length(tr.rows(run).map(|r| (r.measured[0], r.measured[1])), every);
         if measured > 0.5 && !(model > 0.2 * measured && model < 5.0 * measured) {
             out.push(format!("on {} the calibrated model travels {model:.2} m while the measurements travel {measured:.2} m", run.name));
         }
         let every = rows_per(run, TURN_WINDOW_S);
         let measured = turning(g.iter().map(|p| p[2]), every);
-        let model = turning(tr.measured().iter().map(|p| p[2]), every);
+        let model = turning(tr.rows(run).map(|r| r.measured[2]), every);
         if measured > MIN_TURNING && !(model > 0.2 * measured && model < 5.0 * measured) {
             out.push(format!("on {} the calibrated model turns {model:.1} rad in all while the measurements turn {measured:.1} rad", run.name));
         }

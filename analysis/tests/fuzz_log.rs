@@ -4,13 +4,15 @@
 //! byte-order mark). Whatever the file, reading it for a model either fails
 //! with an error that names the file and a line or column inside it, or gives
 //! a run whose dead reckoning is refused at a located row
-//! (`Track::first_non_finite`) or yields finite error figures: never a panic,
-//! never a NaN that looks like a result.
+//! (`track_rows::first_non_finite`) or yields finite error figures: never a
+//! panic, never a NaN that looks like a result. The track computed at once
+//! and the one computed as it is read (`track_rows::Recipe`) agree.
 //!
 //! Bounded in time for CI: cases stop being checked after
 //! `KINEGEN_FUZZ_SECONDS` (default 20) seconds; `PROPTEST_CASES` raises the
 //! number of cases for a longer local run.
 use kinegen_analysis::run::Run;
+use kinegen_analysis::track_rows::{first_non_finite, Heading, Recipe, TrackRows};
 use kinegen_analysis::{deadreckon, metrics, model::Runner};
 use kinegen_model::ir::ModelIr;
 use proptest::prelude::*;
@@ -200,11 +202,21 @@ fn check(text: &str) -> Result<(), TestCaseError> {
             }
         }
         Ok((run, track)) => {
-            if let Some((k, _)) = track.first_non_finite(&run) {
+            let recipe = Recipe {
+                r,
+                p: r.p.clone(),
+                offset: [0.0; 3],
+                heading: Heading::Model,
+            };
+            let refused = first_non_finite(&track, &run);
+            prop_assert_eq!(&refused, &first_non_finite(&recipe, &run));
+            if let Some((k, _)) = refused {
                 prop_assert!(k < run.t.len(), "refused at row {k} of {}", run.t.len());
                 return Ok(());
             }
-            let e = metrics::errors(&[(&run, &track)]);
+            let e = metrics::errors(&[(&run, &track as &dyn TrackRows)]);
+            let streamed = metrics::errors(&[(&run, &recipe as &dyn TrackRows)]);
+            prop_assert_eq!(format!("{e:?}"), format!("{streamed:?}"));
             let figures = [
                 e.rmse,
                 e.heading_rmse_rad,
