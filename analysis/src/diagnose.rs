@@ -584,9 +584,6 @@ struct Stage {
     fit: FitResult,
     rmse: f64,
     bic: f64,
-    /// The calibration on the training part (its start offsets seed the
-    /// candidates' training refinements, see [`refine_from`]).
-    train_fit: FitResult,
     holdout_rmse: f64,
     /// The error a model explaining every structure would reach (white noise).
     floor: f64,
@@ -642,7 +639,6 @@ fn stage_from(
         fit,
         rmse,
         bic,
-        train_fit,
         holdout_rmse,
         floor,
         step_error: 0.0,
@@ -828,7 +824,7 @@ fn rank(
         .par_iter()
         .zip(local)
         .filter_map(|((name, doc, aug), (start, local))| {
-            let Local { fit: from_cur, train_from_fit, searched } = local;
+            let Local { fit: from_cur, searched } = local;
             let (from_cur, rmse_cur) = from_cur.unzip();
             let effect_params = effect_params(&start, &cur.runner);
             let ev = evidence(&start, &effect_params, runs, o);
@@ -863,21 +859,14 @@ fn rank(
                     gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
                 }
             }
-            // the held-out fit starts where the full-data fit did best (and, from
-            // the current training estimates, refines locally as above)
-            let (tr_start, tr_fit) = match (cur_start_wins, train_from_fit) {
-                (false, _) => (aug.clone(), fit_continued(aug, train, o)),
-                (true, true) => {
-                    let at = Runner { p: f.p.clone(), ..start.clone() };
-                    let fit = crate::fit::refine_on_part(&at, runs, train, &f.starts, o);
-                    (at, fit)
-                }
-                (true, false) => {
-                    let at = seeded(aug, &cur.runner, &cur.train_fit.p);
-                    let fit = refine_from(&at, train, o, &cur.train_fit.starts);
-                    (at, fit)
-                }
-            };
+            // The training fit refines locally from the whole log's optimum,
+            // as the base stage's does. From the current training calibration
+            // it retraced the whole log's journey (round 2 of an omni_caster
+            // log with a steering offset left after a time offset: 37
+            // iterations after the whole log's 42), and after a search from
+            // nominal values a second search on the training part did.
+            let tr_start = Runner { p: f.p.clone(), ..start.clone() };
+            let tr_fit = crate::fit::refine_on_part(&tr_start, runs, train, &f.starts, o);
             let (train_fit, holdout_rmse) = match tr_fit {
                 Ok(ft) => {
                     let h = weighted_rms(&tr_start, &ft.p, test, o);
@@ -948,11 +937,6 @@ fn gyro_only(aug: &Runner, effect_params: &[usize]) -> bool {
 struct Local {
     /// The calibration and its error.
     fit: Option<(FitResult, f64)>,
-    /// Its training part is refined from this calibration's optimum (as
-    /// [`stage`] does) rather than from the current training calibration: it
-    /// started elsewhere than the current one, and a training fit from there
-    /// would stay where it started.
-    train_from_fit: bool,
     /// The effect's global search from nominal values ran already.
     searched: bool,
 }
@@ -989,28 +973,27 @@ fn local_refinement(
         ..o.clone()
     };
     let local_o = if first_round { &capped } else { o };
-    let from_nominal = refine_from(start, runs, local_o, &cur.fit.starts)
+    let from_cur = refine_from(start, runs, local_o, &cur.fit.starts)
         .ok()
         .map(scored);
     let plain = |fit| Local {
         fit,
-        train_from_fit: false,
         searched: false,
     };
     let Some(d) = start.delay.filter(|_| cur.runner.delay.is_none()) else {
-        return plain(from_nominal);
+        return plain(from_cur);
     };
     let q = start.ir.runtime_params()[d];
     let bounds = (q.min.unwrap_or(-1.0), q.max.unwrap_or(1.0));
     let Some(tau) =
         crate::lag::delay_estimate(start, &start.p, runs, bounds).filter(|t| *t != start.p[d])
     else {
-        return plain(from_nominal);
+        return plain(from_cur);
     };
     let better = |a: Option<(FitResult, f64)>, b: Option<(FitResult, f64)>| match (a, b) {
-        (Some(a), Some(b)) if b.0.cost_after < a.0.cost_after => (Some(b), true),
-        (None, b) => (b, true),
-        (a, _) => (a, false),
+        (Some(a), Some(b)) if b.0.cost_after < a.0.cost_after => Some(b),
+        (None, b) => b,
+        (a, _) => a,
     };
     let mut lagged = start.clone();
     lagged.p[d] = tau;
@@ -1019,33 +1002,37 @@ fn local_refinement(
         .map(scored);
     // the search runs only where the estimated delay is plainly there: its
     // refinement halved the cost at least
-    let clear = match (&from_nominal, &from_lag) {
+    let clear = match (&from_cur, &from_lag) {
         (Some(a), Some(b)) => b.0.cost_after < 0.5 * a.0.cost_after,
         (None, b) => b.is_some(),
         _ => false,
     };
-    let (best, lag_won) = better(from_nominal, from_lag);
+    let best = better(from_cur, from_lag);
     if !clear
         || best
             .as_ref()
             .is_some_and(|(_, rmse)| *rmse <= FLOOR_REACHED * floor)
     {
-        return Local {
-            fit: best,
-            train_from_fit: lag_won,
-            searched: false,
-        };
+        return plain(best);
     }
     for (i, q) in start.ir.runtime_params().iter().enumerate() {
         lagged.p[i] = if i == d { tau } else { q.nominal };
     }
     let searched = fit_continued(&lagged, runs, o).ok().map(scored);
-    let (best, searched_won) = better(best, searched);
     Local {
-        fit: best,
-        train_from_fit: lag_won || searched_won,
+        fit: better(best, searched),
         searched: true,
     }
+}
+
+/// Whether a stage leaves nothing above the noise floor and its own
+/// discretisation: no effect added to it can then be significant (it would
+/// need most of an excess that is not there, or an error 20% below the white
+/// noise), so the chain ends without another round (the last round of every
+/// chain: 0.5 s of an omni_caster diagnosis whose second effect reached the
+/// floor).
+fn leaves_only_noise(cur: &Stage) -> bool {
+    cur.rmse * cur.rmse <= cur.floor * cur.floor + cur.step_error * cur.step_error
 }
 
 /// Fewest rows per run diagnosis accepts.
@@ -1100,7 +1087,10 @@ pub fn diagnose(
     let mut chain: Vec<ChainStep> = Vec::new();
     let mut first_candidates: Option<Vec<Candidate>> = None;
     let mut remaining: Vec<(String, String)> = cat.effects.clone();
-    while chain.len() < MAX_CHAIN && !remaining.is_empty() {
+    while chain.len() < MAX_CHAIN
+        && !remaining.is_empty()
+        && !(!chain.is_empty() && leaves_only_noise(&cur))
+    {
         let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
         let mut augmented = Vec::new();
         for (name, doc) in &remaining {
