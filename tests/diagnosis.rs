@@ -671,6 +671,56 @@ fn an_effect_small_next_to_the_noise_is_named_when_it_explains_the_excess() {
 /// Issue 12: two hidden effects at once (lateral slip and a gyro bias on the
 /// differential drive) are both named, one after the other, each with its
 /// parameter near the hidden value, and nothing is left unexplained.
+/// A model far off its log (a user's rover missing a 0.08 rad steering
+/// offset: error 489 against a floor of 20) gives a meaningless estimate of
+/// its own step's error (3.3, capped only by its excess), which hid the
+/// second effect once the first brought the error to 1.6. The step's error is
+/// estimated again at that stage (0.04), and the delay is named. Without the
+/// new estimate the chain stops at the steering offset and this test fails.
+#[test]
+fn a_step_error_estimated_far_from_the_log_is_estimated_again() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = "tests/user_specs/rover.toml";
+    let log = simulate(
+        tmp.path(),
+        "rover.csv",
+        &[
+            "--spec",
+            spec,
+            "--effect",
+            "steering_offset=0.08",
+            "--effect",
+            "time_offset=0.1",
+            "--trajectory",
+            "random",
+            "--seed",
+            "4",
+        ],
+    );
+    let d = kinegen_json(&["diagnose", "--spec", spec, "--data", log.to_str().unwrap()]);
+    let names: Vec<&str> = d["verdict"]["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["effect"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        ["steering_offset", "time_offset"],
+        "{}",
+        d["verdict"]
+    );
+    let delay = d["verdict"]["effects"][1]["parameters"]["time_offset"]["estimate"]
+        .as_f64()
+        .unwrap();
+    assert!((delay - 0.1).abs() < 0.005, "time_offset {delay}");
+    let disc = &d["discretisation"];
+    assert!(
+        disc["noise_floor"].as_f64().unwrap() < 1.0 && disc["ratio"].as_f64().unwrap() < 0.3,
+        "estimated at the stage near the floor: {disc}"
+    );
+}
+
 #[test]
 fn two_hidden_effects_are_found_one_after_the_other() {
     let tmp = tempfile::tempdir().unwrap();
