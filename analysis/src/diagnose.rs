@@ -1107,7 +1107,7 @@ pub fn diagnose(
     let mut remaining: Vec<(String, String)> = cat.effects.clone();
     while chain.len() < MAX_CHAIN
         && !remaining.is_empty()
-        && !(!chain.is_empty() && leaves_only_noise(&cur))
+        && (chain.is_empty() || !leaves_only_noise(&cur))
     {
         let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
         let mut augmented = Vec::new();
