@@ -452,8 +452,9 @@ pub fn compare(c: Common) -> ExitCode {
     all.append(&mut prep.holdout);
     let r = &prep.runner;
     let tracks = tracks(r, &r.p, &all, &[]);
-    let (e, each) = errors_each(&pairs(&all, &tracks));
-    let (regimes, segments) = where_it_fails(&pairs(&all, &tracks));
+    let read = pairs(&all, &tracks);
+    let (e, each) = errors_each(&read);
+    let (regimes, segments) = where_it_fails(&read);
     let secs: f64 = all.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
     let which = if c.set.is_empty() {
         "nominal parameters".to_string()

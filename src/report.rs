@@ -256,11 +256,15 @@ th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{
 /// The model's track where the pose sensor sees it (an off-centre tracker's
 /// point, not the body origin), so it is drawn against what was measured.
 fn traj(run: &Run, tr: &dyn TrackRows) -> Vec<(f64, f64)> {
-    drawn(run, tr).traj
+    series_of(
+        run.t.len(),
+        tr.rows(run).map(|row| (row.measured[0], row.measured[1])),
+    )
 }
 
 /// What the pages draw of one track, from one reading of it (a long log's
-/// track is computed as it is read, see `kinegen_analysis::track_rows`).
+/// track is computed as it is read, see `kinegen_analysis::track_rows`);
+/// [`traj`] alone for a track drawn only as a trajectory.
 struct Drawn {
     /// The track where the pose sensor sees it (see [`traj`]).
     traj: Vec<(f64, f64)>,

@@ -5,7 +5,7 @@
 //! the held-out error went 0.74 m -> 17.6 m). When a calibration makes runs it
 //! was not fitted on worse, this names the motions and inputs those runs use
 //! and the fitted ones do not, so that the user knows which runs to add.
-use crate::metrics::sample_every;
+use crate::metrics::{sample_every, sampled_twists};
 use crate::model::Runner;
 use crate::run::Run;
 use crate::track_rows::TrackRows;
@@ -31,14 +31,9 @@ fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
 }
 
 /// Per twist component, the `Q` quantile of its absolute value over the
-/// tracks (of every k-th step of a long log, see [`sample_every`]).
+/// tracks (of every k-th step of a long log, see [`sampled_twists`]).
 fn twist_sizes(tracks: &[(&Run, &dyn TrackRows)]) -> [f64; 3] {
-    let every = sample_every(tracks.iter().map(|(run, _)| run.steps()).sum());
-    let twists: Vec<[f64; 3]> = tracks
-        .iter()
-        .flat_map(|&(run, t)| t.rows(run).filter_map(|row| row.twist))
-        .step_by(every)
-        .collect();
+    let twists = sampled_twists(tracks);
     std::array::from_fn(|c| {
         quantile(
             twists

@@ -9,30 +9,37 @@ use crate::model::Runner;
 use crate::run::{LandmarkObs, Run};
 use crate::track_rows::{Cursor, TrackRows};
 use kinegen_model::decl::ObservationRole::RangeBearing;
+use kinegen_model::ir::Function;
 use serde::Serialize;
 use std::collections::HashMap;
 
-/// Where an observation falls on a track: (step j, fraction a, interpolated pose).
-pub fn locate_on(run: &Run, track: &Track, t: f64) -> (usize, f64, [f64; 3]) {
+/// Where time `t` falls among a run's steps: (step j, fraction a of it),
+/// within the run (an observation before the first row or after the last is
+/// seen at the track's end).
+fn step_at(run: &Run, t: f64) -> (usize, f64) {
     let (j, a) = run.locate(t);
-    let a = a.clamp(0.0, 1.0);
-    let (p0, p1) = (track.pose[j], track.pose[j + 1]);
-    (j, a, lerp3(&p0, &p1, a))
+    (j, a.clamp(0.0, 1.0))
 }
 
-/// Model prediction (range, bearing) of an observation from a track.
-pub fn predict(
-    r: &Runner,
+/// Where an observation falls on a track: (step j, fraction a, interpolated pose).
+pub fn locate_on(run: &Run, track: &Track, t: f64) -> (usize, f64, [f64; 3]) {
+    let (j, a) = step_at(run, t);
+    (j, a, lerp3(&track.pose[j], &track.pose[j + 1], a))
+}
+
+/// The range and bearing the observation `h` predicts for `o` from body
+/// pose `x`, during step `j` of `run`.
+fn predict(
+    h: &Function,
     p: &[f64],
     run: &Run,
-    track: &Track,
+    j: usize,
+    x: &[f64; 3],
     o: &LandmarkObs,
-) -> Option<[f64; 2]> {
-    let h = r.ir.observation_kernels(RangeBearing).map(|o| o.value)?;
-    let (j, _, x) = locate_on(run, track, o.t);
+) -> [f64; 2] {
     let u = &run.u[j.min(run.steps() - 1)];
-    let v = h.eval(&Runner::obs_args(h, &x, u, p, &[o.xl, o.yl]));
-    Some([v[0], v[1]])
+    let v = h.eval(&Runner::obs_args(h, x, u, p, &[o.xl, o.yl]));
+    [v[0], v[1]]
 }
 
 /// One innovation: measured minus predicted.
@@ -69,13 +76,11 @@ pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &dyn TrackRows) -> V
     let mut out: Vec<Option<Innovation>> = vec![None; run.landmarks.len()];
     for i in order {
         let o = &run.landmarks[i];
-        let (j, a) = run.locate(o.t);
+        let (j, a) = step_at(run, o.t);
         let (Some(next), Some(at)) = (cursor.get(j + 1), cursor.get(j)) else {
             continue;
         };
-        let x = lerp3(&at.pose, &next.pose, a.clamp(0.0, 1.0));
-        let u = &run.u[j.min(run.steps() - 1)];
-        let v = h.eval(&Runner::obs_args(h, &x, u, p, &[o.xl, o.yl]));
+        let v = predict(h, p, run, j, &lerp3(&at.pose, &next.pose, a), o);
         out[i] = Some(Innovation {
             t: o.t,
             id: o.id.clone(),

@@ -251,6 +251,16 @@ pub fn sample_every(steps: usize) -> usize {
     steps.div_ceil(SAMPLE).max(1)
 }
 
+/// The body twists of every step of the tracks, or of every k-th step of
+/// long ones (see [`sample_every`]).
+pub fn sampled_twists(runs: &[(&Run, &dyn TrackRows)]) -> Vec<[f64; 3]> {
+    let every = sample_every(runs.iter().map(|(run, _)| run.steps()).sum());
+    runs.iter()
+        .flat_map(|&(run, tr)| tr.rows(run).filter_map(|row| row.twist))
+        .step_by(every)
+        .collect()
+}
+
 /// Worst segments [`where_it_fails`] reports.
 const WORST_SEGMENTS: usize = 5;
 
@@ -258,18 +268,11 @@ const WORST_SEGMENTS: usize = 5;
 /// passes over each track (the median moving speed that splits fast from
 /// slow, then the regimes); only the worst segments so far are kept.
 pub fn where_it_fails(runs: &[(&Run, &dyn TrackRows)]) -> (Vec<RegimeShare>, Vec<Segment>) {
-    let every = sample_every(runs.iter().map(|(run, _)| run.steps()).sum());
-    let mut speeds: Vec<f64> = Vec::new();
-    let mut k = 0usize;
-    for &(run, tr) in runs {
-        for w in tr.rows(run).filter_map(|row| row.twist) {
-            if k.is_multiple_of(every) {
-                speeds.push((w[0] * w[0] + w[1] * w[1]).sqrt());
-            }
-            k += 1;
-        }
-    }
-    speeds.retain(|v| *v > 0.02);
+    let mut speeds: Vec<f64> = sampled_twists(runs)
+        .iter()
+        .map(|w| (w[0] * w[0] + w[1] * w[1]).sqrt())
+        .filter(|v| *v > 0.02)
+        .collect();
     speeds.sort_by(f64::total_cmp);
     let fast = speeds.get(speeds.len() / 2).copied().unwrap_or(0.0);
     let mut shares: Vec<RegimeShare> = Vec::new();
