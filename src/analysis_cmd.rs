@@ -50,6 +50,11 @@ pub struct Common {
     /// Write one JSON document to PATH (`-`: stdout).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Split a log into runs only at gaps longer than this (seconds); shorter
+    /// gaps are bridged: a command holds its value, a counter's difference
+    /// spreads over the interval.
+    #[arg(long, value_name = "SECONDS", default_value_t = kinegen_analysis::run::DEFAULT_MAX_GAP_S, value_parser = positive)]
+    pub max_gap: f64,
     #[command(flatten)]
     pub catalogue: EffectDirs,
 }
@@ -127,7 +132,7 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     let mut split = |set: Vec<Run>| -> Vec<Run> {
         set.into_iter()
             .flat_map(|run| {
-                let (pieces, warning) = run.split_at_gaps();
+                let (pieces, warning) = run.split_at_gaps(c.max_gap);
                 warnings.extend(warning);
                 pieces
             })

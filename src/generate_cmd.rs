@@ -32,6 +32,12 @@ pub fn run(spec_dir: &Path, out: &Path, check: bool) -> ExitCode {
                     tree,
                     tape
                 );
+                if let Some(why) = &ir.no_inverse {
+                    eprintln!(
+                        "warning: {}: no inverse kinematics (`inverse` and `navigate` refuse it; everything else works): {why}",
+                        ir.name
+                    );
+                }
             }
             eprintln!("total {:.2} s", report.total.as_secs_f64());
             if check {

@@ -3,7 +3,9 @@
 use crate::analysis_cmd::{bad, evaluate, prepare, Common};
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::localize::{localize, mean_bounds, EkfOptions};
+use kinegen_analysis::localize::{
+    localize_with, mean_bounds, nees_of, noise_for, EkfOptions, Localization, NoiseSource,
+};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -19,11 +21,19 @@ pub struct LocalizeArgs {
     /// with a `run` column).
     #[arg(long)]
     pub track: Option<PathBuf>,
-    /// Process-noise standard deviation NAME=SIGMA replacing the spec's
-    /// `[[noise]]` value (repeatable): a filter whose NEES or NIS lies above its
-    /// bounds is overconfident and needs more.
+    /// Process-noise standard deviation NAME=SIGMA (repeatable), in the spec's
+    /// form for that `[[noise]]` (a density where its unit says `/sqrt(Hz)`,
+    /// per row otherwise). Without it the noise is estimated from the log.
     #[arg(long)]
     pub noise: Vec<String>,
+    /// Use the spec's `[[noise]]` sigmas and observation sigmas as written
+    /// instead of estimating the noise from the log.
+    #[arg(long)]
+    pub spec_noise: bool,
+    /// Also run the fixed-interval RTS smoother (offline: every estimate uses
+    /// the sightings after it too); its track goes to --track and the report.
+    #[arg(long)]
+    pub smooth: bool,
     /// Noise sweep (seed 001 Figs 6-7): drive the first log's robot again with
     /// each [[noise]] sigma in turn raised from 0.001 to 0.1, re-observe its
     /// landmarks, and report the EKF's position error for each.
@@ -64,86 +74,42 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     let o = EkfOptions {
         gate: a.gate,
         noise_sigma,
+        noise: if a.spec_noise {
+            NoiseSource::Spec
+        } else {
+            NoiseSource::Estimate
+        },
+        smooth: a.smooth,
         ..EkfOptions::default()
     };
-    // mapped landmarks no log ever observes are probably a mapping mistake (an id
-    // spelled differently in the map and the observations)
-    if let Some(m) = &c.landmarks {
-        if let Ok(map) = kinegen_analysis::landmarks::read_map(m) {
-            for (i, id) in map.ids.iter().enumerate() {
-                let seen = prep
-                    .runs
-                    .iter()
-                    .chain(&prep.holdout)
-                    .any(|r| r.landmarks.iter().any(|z| &z.id == id));
-                if !seen {
-                    eprintln!("warning: {}:{}: landmark `{id}` is never observed in the --observations files", m.display(), i + 2);
-                }
-            }
-        }
+    warn_unseen_landmarks(&c, &prep);
+    if prep.runs.iter().all(|r| r.landmarks.is_empty()) {
+        return bad(format!(
+            "{}: no landmark observations for these logs (give --observations OBS.csv --landmarks MAP.csv, one OBS per --data)",
+            c.data[0].display()
+        ));
+    }
+    // one robot, one noise: estimated on the --data runs, used on the held-out ones too
+    let (noise, note) = match noise_for(r, &prep.runs, &o) {
+        Ok(n) => n,
+        Err(e) => return bad(e),
+    };
+    out.say(&note);
+    for line in noise.describe() {
+        out.say(&format!("  {line}"));
     }
     let mut runs_json = Vec::new();
     let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
     for run in prep.runs.iter().chain(&prep.holdout) {
-        if run.landmarks.is_empty() {
-            return bad(format!(
-                "{}: no landmark observations for this log (give --observations OBS.csv --landmarks MAP.csv, one OBS per --data)",
-                run.path
-            ));
-        }
-        let loc = match localize(r, run, &o) {
+        let loc = match localize_with(r, run, &noise, &o) {
             Ok(l) => l,
             Err(e) => return bad(e),
         };
-        let dr = evaluate(r, &r.p, std::slice::from_ref(run));
-        let rmse = run.gt.as_ref().map(|g| {
-            let s: f64 = loc
-                .track
-                .iter()
-                .zip(g)
-                .map(|(x, g)| (x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2))
-                .sum();
-            (s / g.len() as f64).sqrt()
-        });
-        let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
-        let (nis, nees) = (mean(&loc.nis), mean(&loc.nees));
-        let nis_b = (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0));
-        let nees_b = (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0));
-        let verdict = |m: Option<f64>, b: Option<(f64, f64)>| match (m, b) {
-            (Some(m), Some((lo, hi))) if m < lo => {
-                format!("{m:.2} (below its 95% bounds {lo:.2}..{hi:.2}: the filter is pessimistic)")
-            }
-            (Some(m), Some((lo, hi))) if m > hi => format!(
-                "{m:.2} (above its 95% bounds {lo:.2}..{hi:.2}: the filter is overconfident)"
-            ),
-            (Some(m), Some((lo, hi))) => format!("{m:.2} (within its 95% bounds {lo:.2}..{hi:.2})"),
-            _ => "n/a".into(),
-        };
-        out.say(&format!(
-            "{}: EKF over {} steps; {} landmark observations used, {} rejected by the gate (NIS > {})",
-            run.path,
-            run.steps(),
-            loc.accepted,
-            loc.rejected,
-            a.gate
-        ));
-        if let Some(e) = rmse {
-            out.say(&format!(
-                "  position RMSE {e:.4} m (dead reckoning with the same model: {:.4} m)",
-                dr.rmse
-            ));
-        }
-        out.say(&format!("  mean NIS  {}", verdict(nis, nis_b)));
-        out.say(&format!("  mean NEES {}", verdict(nees, nees_b)));
-        let last = loc.cov.last().unwrap();
-        out.say(&format!(
-            "  final standard deviations: x {:.4} m, y {:.4} m, theta {:.4} rad",
-            last[(0, 0)].sqrt(),
-            last[(1, 1)].sqrt(),
-            last[(2, 2)].sqrt()
-        ));
-        for (k, (x, p)) in loc.track.iter().zip(&loc.cov).enumerate() {
+        let summary = summarise(r, run, &loc, &o);
+        say_run(&out, run, &loc, &summary, a.gate);
+        let (track, cov) = loc.smoothed.clone().unwrap_or((loc.track.clone(), loc.cov.clone()));
+        for (k, (x, p)) in track.iter().zip(&cov).enumerate() {
             csv += &format!(
                 "{},{},{},{},{},{},{},{},{}\n",
                 run.path,
@@ -157,17 +123,21 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
                 p[(2, 2)]
             );
         }
+        let last = loc.cov.last().unwrap();
         runs_json.push(json!({
             "path": run.path, "steps": run.steps(),
             "observations_used": loc.accepted, "observations_rejected": loc.rejected,
-            "position_rmse_m": rmse, "dead_reckoning_rmse_m": run.gt.as_ref().map(|_| dr.rmse),
-            "nis_mean": nis, "nis_bounds": nis_b.map(|b| [b.0, b.1]),
-            "nees_mean": nees, "nees_bounds": nees_b.map(|b| [b.0, b.1]),
+            "observations_outside_log": loc.outside,
+            "position_rmse_m": summary.rmse, "dead_reckoning_rmse_m": summary.dead_reckoning,
+            "nis_mean": summary.nis, "nis_bounds": summary.nis_bounds.map(|b| [b.0, b.1]),
+            "nees_mean": summary.nees, "nees_bounds": summary.nees_bounds.map(|b| [b.0, b.1]),
+            "smoothed": summary.smoothed.map(|(rmse, nees)| json!({"position_rmse_m": rmse, "nees_mean": nees})),
             "final_pose": loc.track.last(),
             "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
         }));
         locs.push((run, loc));
     }
+    let noise_json = noise_json(&noise, &note);
     let sweep = if a.sweep {
         match kinegen_analysis::sweep::sweep(r, locs[0].0, &kinegen_analysis::sweep::LEVELS, &o) {
             Ok(s) => s,
@@ -220,7 +190,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     }
     if let Some(dir) = &c.report {
         let pairs: Vec<_> = locs.iter().map(|(r, l)| (*r, l)).collect();
-        let doc = json!({"model": r.ir.name, "runs": runs_json, "sweep": sweep});
+        let doc = json!({"model": r.ir.name, "noise": noise_json, "runs": runs_json, "sweep": sweep});
         if let Err(e) = crate::report::localize_report(dir, &pairs, &sweep, &doc) {
             return bad(e);
         }
@@ -232,9 +202,148 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         }
         out.say(&format!("track: {}", t.display()));
     }
-    let doc = json!({"model": r.ir.name, "gate": a.gate, "runs": runs_json, "sweep": sweep});
+    let doc = json!({"model": r.ir.name, "gate": a.gate, "noise": noise_json, "runs": runs_json, "sweep": sweep});
     match out.json(c.json.as_deref(), &doc) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => bad(e),
     }
+}
+
+/// Mapped landmarks no log ever observes are probably a mapping mistake (an id
+/// spelled differently in the map and the observations).
+fn warn_unseen_landmarks(c: &Common, prep: &crate::analysis_cmd::Prepared) {
+    let Some(m) = &c.landmarks else { return };
+    let Ok(map) = kinegen_analysis::landmarks::read_map(m) else {
+        return;
+    };
+    for (i, id) in map.ids.iter().enumerate() {
+        let seen = prep
+            .runs
+            .iter()
+            .chain(&prep.holdout)
+            .any(|r| r.landmarks.iter().any(|z| &z.id == id));
+        if !seen {
+            eprintln!(
+                "warning: {}:{}: landmark `{id}` is never observed in the --observations files",
+                m.display(),
+                i + 2
+            );
+        }
+    }
+}
+
+/// One run's figures: errors against ground truth, consistency.
+pub struct Summary {
+    pub rmse: Option<f64>,
+    pub dead_reckoning: Option<f64>,
+    pub nis: Option<f64>,
+    pub nis_bounds: Option<(f64, f64)>,
+    pub nees: Option<f64>,
+    pub nees_bounds: Option<(f64, f64)>,
+    /// The smoother's position RMSE and mean NEES.
+    pub smoothed: Option<(Option<f64>, Option<f64>)>,
+}
+
+fn position_rmse(run: &kinegen_analysis::run::Run, track: &[[f64; 3]]) -> Option<f64> {
+    run.gt.as_ref().map(|g| {
+        let s: f64 = track
+            .iter()
+            .zip(g)
+            .map(|(x, g)| (x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2))
+            .sum();
+        (s / g.len() as f64).sqrt()
+    })
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let (n, s) = v.fold((0usize, 0.0), |(n, s), x| (n + 1, s + x));
+    (n > 0).then(|| s / n as f64)
+}
+
+fn summarise(
+    r: &kinegen_analysis::model::Runner,
+    run: &kinegen_analysis::run::Run,
+    loc: &Localization,
+    o: &EkfOptions,
+) -> Summary {
+    let dr = evaluate(r, &r.p, std::slice::from_ref(run));
+    let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
+        let nees = nees_of(r, run, track, cov, o).unwrap_or_default();
+        (position_rmse(run, track), mean(nees.iter().map(|n| n.1)))
+    });
+    Summary {
+        rmse: position_rmse(run, &loc.track),
+        dead_reckoning: run.gt.as_ref().map(|_| dr.rmse),
+        nis: mean(loc.nis.iter().map(|n| n.1)),
+        nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
+        nees: mean(loc.nees.iter().map(|n| n.1)),
+        nees_bounds: (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0)),
+        smoothed,
+    }
+}
+
+fn verdict(m: Option<f64>, b: Option<(f64, f64)>) -> String {
+    match (m, b) {
+        (Some(m), Some((lo, hi))) if m < lo => {
+            format!("{m:.2} (below its 95% bounds {lo:.2}..{hi:.2}: the filter is pessimistic)")
+        }
+        (Some(m), Some((lo, hi))) if m > hi => {
+            format!("{m:.2} (above its 95% bounds {lo:.2}..{hi:.2}: the filter is overconfident)")
+        }
+        (Some(m), Some((lo, hi))) => format!("{m:.2} (within its 95% bounds {lo:.2}..{hi:.2})"),
+        _ => "n/a".into(),
+    }
+}
+
+fn say_run(out: &Out, run: &kinegen_analysis::run::Run, loc: &Localization, s: &Summary, gate: f64) {
+    out.say(&format!(
+        "{}: EKF over {} steps ({:.1} s); {} landmark observations used, {} rejected by the gate (NIS > {gate}){}",
+        run.path,
+        run.steps(),
+        run.t.last().unwrap() - run.t[0],
+        loc.accepted,
+        loc.rejected,
+        if loc.outside > 0 {
+            format!(", {} outside the log's time span", loc.outside)
+        } else {
+            String::new()
+        }
+    ));
+    if let (Some(e), Some(d)) = (s.rmse, s.dead_reckoning) {
+        out.say(&format!(
+            "  position RMSE {e:.4} m (dead reckoning with the same model: {d:.4} m)"
+        ));
+    }
+    out.say(&format!("  mean NIS  {}", verdict(s.nis, s.nis_bounds)));
+    out.say(&format!("  mean NEES {}", verdict(s.nees, s.nees_bounds)));
+    if let Some((rmse, nees)) = s.smoothed {
+        out.say(&format!(
+            "  smoothed (RTS): position RMSE {}, mean NEES {}",
+            rmse.map_or("n/a".into(), |e| format!("{e:.4} m")),
+            nees.map_or("n/a".into(), |n| format!("{n:.2}"))
+        ));
+    }
+    let last = loc.cov.last().unwrap();
+    out.say(&format!(
+        "  final standard deviations: x {:.4} m, y {:.4} m, theta {:.4} rad",
+        last[(0, 0)].sqrt(),
+        last[(1, 1)].sqrt(),
+        last[(2, 2)].sqrt()
+    ));
+}
+
+fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_json::Value {
+    let process: serde_json::Map<String, serde_json::Value> = n
+        .names
+        .iter()
+        .zip(&n.sigma)
+        .zip(&n.density)
+        .map(|((name, s), d)| {
+            (
+                name.clone(),
+                json!({"sigma": s, "form": if *d { "density_per_sqrt_s" } else { "per_row" }}),
+            )
+        })
+        .collect();
+    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range": n.persistent[0], "bearing": n.persistent[1]}, "memory_s": n.memory_s, "source": note})
 }

@@ -25,16 +25,21 @@ fn reports_render_in_headless_chromium() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let real = real_runs();
+    // any two runs of one robot: the bundled log and a simulated one
+    let second = simulate(
+        tmp.path(),
+        "second.csv",
+        &["--spec", "spec/diff_drive.toml", "--trajectory", "random", "--seed", "7"],
+    );
     let dir = tmp.path().join("report");
     let o = kinegen(&[
         "fit",
         "--spec",
         "spec/diff_drive.toml",
         "--data",
-        real[0].to_str().unwrap(),
+        "data/mystery_robot.csv",
         "--data",
-        real[3].to_str().unwrap(),
+        second.to_str().unwrap(),
         "--report",
         dir.to_str().unwrap(),
     ]);

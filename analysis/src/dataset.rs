@@ -8,6 +8,27 @@ use crate::rows::Inputs;
 use crate::run::Run;
 use kinegen_model::decl::{InputKind, ObservationRole};
 
+/// How a log column becomes a step's input value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Between {
+    /// A cumulative column: its difference over the step, as a rate.
+    Spread,
+    /// An absolute column held from its row (a command).
+    Hold,
+    /// An absolute column sampled from a continuous signal (a steering angle).
+    Linear,
+}
+
+impl Between {
+    fn of(i: &kinegen_model::decl::Input) -> Between {
+        match (i.kind, i.between()) {
+            (InputKind::Cumulative, _) => Between::Spread,
+            (InputKind::Absolute, kinegen_model::decl::Between::Hold) => Between::Hold,
+            (InputKind::Absolute, kinegen_model::decl::Between::Linear) => Between::Linear,
+        }
+    }
+}
+
 /// Shortest time step a log may have, s.
 pub const MIN_STEP_S: f64 = 1e-6;
 
@@ -103,27 +124,30 @@ impl Run {
             } else {
                 c.to_vec()
             };
-            cols.push((unwrap_counter(c, i.wrap), i.kind));
+            cols.push((unwrap_counter(c, i.wrap), Between::of(i)));
         }
         let mut u = Vec::with_capacity(dt.len() * cols.len());
         for k in 0..dt.len() {
-            u.extend(cols.iter().map(|(c, kind)| match kind {
-                InputKind::Cumulative => (c[k + 1] - c[k]) / dt[k],
+            u.extend(cols.iter().map(|(c, between)| match between {
+                // a counter's difference spreads evenly over the interval, however long
+                Between::Spread => (c[k + 1] - c[k]) / dt[k],
+                // a command holds from its row until the next (CONTRACT.md, --max-gap)
+                Between::Hold => c[k],
                 // a sampled continuous angle: its mean over the step is best
                 // estimated by the mean of the two samples that bound it
-                InputKind::Absolute => 0.5 * (c[k] + c[k + 1]),
+                Between::Linear => 0.5 * (c[k] + c[k + 1]),
             }));
         }
         let u = Inputs::from_flat(dt.len(), cols.len(), u);
         let swing = cols
             .iter()
-            .any(|(_, kind)| *kind == InputKind::Absolute)
+            .any(|(_, b)| *b == Between::Linear)
             .then(|| {
                 let mut s = Vec::with_capacity(dt.len() * cols.len());
                 for k in 0..dt.len() {
-                    s.extend(cols.iter().map(|(c, kind)| match kind {
-                        InputKind::Absolute => c[k + 1] - c[k],
-                        InputKind::Cumulative => 0.0,
+                    s.extend(cols.iter().map(|(c, b)| match b {
+                        Between::Linear => c[k + 1] - c[k],
+                        Between::Hold | Between::Spread => 0.0,
                     }));
                 }
                 Inputs::from_flat(dt.len(), cols.len(), s)

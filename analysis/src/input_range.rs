@@ -138,6 +138,7 @@ mod tests {
             range: Some(range),
             wrap: None,
             max_rate: None,
+            between: None,
             unit: "rad".into(),
             doc: String::new(),
         }

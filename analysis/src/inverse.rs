@@ -116,7 +116,7 @@ const MERGE_GAP_S: f64 = 1.0;
 
 /// The input profile of `path` for the model of `r`.
 pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
-    let inv = r.ir.inverse_increment();
+    let inv = r.ir.inverse_increment().map_err(|e| e.to_string())?;
     let step = r.ir.step(StepForm::Exact).value;
     let names = &inv.row_names;
     // configuration inputs (steering angles of caster wheels) the inverse starts from

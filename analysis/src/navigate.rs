@@ -83,7 +83,7 @@ pub fn drive(
             belief.ir.name
         ));
     }
-    let inv = belief.ir.inverse_increment();
+    let inv = belief.ir.inverse_increment().map_err(|e| e.to_string())?;
     let (step_b, step_t) = (
         belief.ir.step(StepForm::Exact).value,
         truth.ir.step(StepForm::Exact).value,

@@ -42,8 +42,11 @@ pub struct LandmarkObs {
     pub bearing: f64,
 }
 
-/// A step longer than this many median steps is a gap in the log.
-pub const GAP_STEPS: f64 = 20.0;
+/// The default `--max-gap`, s: a log is split into runs only at steps longer
+/// than this. A few seconds: irregular loggers (velocity commands sent when
+/// they change, 0.01-1.4 s apart) stay one run, while a logger that stopped
+/// for longer is not bridged by holding its last command.
+pub const DEFAULT_MAX_GAP_S: f64 = 3.0;
 
 impl Run {
     pub fn steps(&self) -> usize {
@@ -200,17 +203,15 @@ impl Run {
         }
     }
 
-    /// The run cut at its gaps (a step over [`GAP_STEPS`] median steps long: a
-    /// logger that stopped, a dropped connection), which no model can bridge
-    /// by dead reckoning with held inputs: each piece of 3 rows or more becomes
-    /// a run of its own, started from its own measured pose. With the warning
-    /// that says where, when there was a gap.
-    pub fn split_at_gaps(self) -> (Vec<Run>, Option<String>) {
-        let mut sorted = self.dt.to_vec();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
+    /// The run cut at its gaps: steps longer than `max_gap` seconds (a logger
+    /// that stopped, a dropped connection). Shorter gaps are bridged (commands
+    /// hold, counter differences spread over the interval: a log at irregular
+    /// times stays one run). Each piece of 3 rows or more becomes a run of its
+    /// own, started from its own measured pose, with the warning that says
+    /// where and what the split costs.
+    pub fn split_at_gaps(self, max_gap: f64) -> (Vec<Run>, Option<String>) {
         let gaps: Vec<usize> = (0..self.dt.len())
-            .filter(|&k| self.dt[k] > GAP_STEPS * median)
+            .filter(|&k| self.dt[k] > max_gap)
             .collect();
         if gaps.is_empty() {
             return (vec![self], None);
@@ -234,13 +235,13 @@ impl Run {
             .take(5)
             .map(|&k| format!("{:.3} s after t = {:.3} s", self.dt[k], self.t[k]))
             .collect();
+        let lost: f64 = gaps.iter().map(|&k| self.dt[k]).sum();
         let warning = format!(
-            "{}: {} gap(s) in the log ({}{}; median step {:.4} s): used as {} run(s), each started from its own measured pose{}",
+            "{}: {} gap(s) longer than --max-gap {max_gap} s ({}{}): used as {} run(s), each started from its own measured pose{}; the {lost:.1} s in the gaps are not dead-reckoned, so drift across them is not counted (a larger --max-gap bridges them)",
             self.path,
             gaps.len(),
             at.join(", "),
             if gaps.len() > 5 { ", ..." } else { "" },
-            median,
             pieces.len(),
             if pieces.len() < gaps.len() + 1 { " (pieces under 3 rows dropped)" } else { "" }
         );

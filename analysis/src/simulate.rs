@@ -9,7 +9,7 @@
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::steering;
-use kinegen_model::decl::InputKind;
+use kinegen_model::decl::{Between, InputKind};
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use kinegen_model::ir::StepForm;
 use rand::rngs::SmallRng;
@@ -435,6 +435,16 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     // follows its commanded rate, integrated with the midpoint rule
     let mut cfg = vec![0.0; cfg_idx.len()];
     let mut last_u = command_at(base, &plan(0.0), &cfg);
+    // commands (absolute inputs that hold between rows, see Input::between):
+    // the robot executes the value logged at the row before, until the next
+    let hold_idx: Vec<usize> = (0..inputs.len())
+        .filter(|&i| {
+            inputs[i].kind == InputKind::Absolute
+                && inputs[i].between() == Between::Hold
+                && !cfg_idx.contains(&i)
+        })
+        .collect();
+    let mut held = last_u.clone();
     // The gyro reports the mean yaw rate over the sample interval (an integrating
     // or low-pass-filtered MEMS gyro), which is what a step of the model predicts.
     let mut gyro_mean = 0.0;
@@ -461,6 +471,10 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
                     }
                     u
                 };
+                let mut u = u;
+                for &i in &hold_idx {
+                    u[i] = held[i];
+                }
                 let dt = [h];
                 x = {
                     let out = step.eval(&Runner::step_args(step, &x, &u, &truth.p, &dt, &zeros));
@@ -480,6 +494,13 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
         let mut row = vec![times[k]];
         // the inputs commanded at t_k, which absolute sensors sample (computed once per row)
         let mut commanded: Option<Vec<f64>> = None;
+        if !hold_idx.is_empty() {
+            let c = command(base, &plan(times[k] % dur));
+            for &i in &hold_idx {
+                held[i] = c[i];
+            }
+            commanded = Some(c);
+        }
         for &i in &written {
             let inp = &inputs[i];
             if let Some(c) = cfg_idx.iter().position(|&c| c == i) {
@@ -500,6 +521,8 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
                         .round()
                         * ENCODER_LINE
                 }
+                // a command is logged as sent: what the robot executes until the next row
+                InputKind::Absolute if hold_idx.contains(&i) => held[i],
                 InputKind::Absolute => {
                     commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i]
                         + gaussian(0.002, &mut rng)

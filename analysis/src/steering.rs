@@ -14,10 +14,14 @@ use kinegen_model::ir::ArgRole;
 /// the steering lock), and the best angle found is kept.
 const MAX_ITERATIONS: usize = 30;
 
-/// The names of the inverse twist's configuration argument, in order.
+/// The names of the inverse twist's configuration argument, in order. A model
+/// without inverse kinematics (`ModelIr::no_inverse`) has every input as
+/// configuration: all of them are solved for numerically.
 pub fn configuration_names(r: &Runner) -> Vec<String> {
-    r.ir.inverse_twist()
-        .args
+    let Ok(inv) = r.ir.inverse_twist() else {
+        return r.ir.inputs.iter().map(|i| i.name.clone()).collect();
+    };
+    inv.args
         .iter()
         .find(|a| a.role == ArgRole::Configuration)
         .map(|a| a.names.clone())
@@ -25,17 +29,22 @@ pub fn configuration_names(r: &Runner) -> Vec<String> {
 }
 
 /// Positions in [`configuration_names`] of the absolute inputs the inverse does
-/// not produce and `given` does not name: those a planned twist must set.
+/// not produce and `given` does not name: those a planned twist must set
+/// (every input not given, for a model without inverse kinematics).
 pub fn to_solve(r: &Runner, given: &[String]) -> Vec<usize> {
-    let inv = r.ir.inverse_twist();
+    let produced: &[String] = match r.ir.inverse_twist() {
+        Ok(inv) => &inv.row_names,
+        Err(_) => &[],
+    };
+    let no_inverse = r.ir.inverse_twist().is_err();
     configuration_names(r)
         .iter()
         .enumerate()
-        .filter(|(_, n)| !given.contains(n) && !inv.row_names.contains(n))
+        .filter(|(_, n)| !given.contains(n) && !produced.contains(n))
         .filter(|(_, n)| {
             r.ir.inputs
                 .iter()
-                .any(|i| &i.name == *n && i.kind == InputKind::Absolute)
+                .any(|i| &i.name == *n && (no_inverse || i.kind == InputKind::Absolute))
         })
         .map(|(k, _)| k)
         .collect()
@@ -44,7 +53,9 @@ pub fn to_solve(r: &Runner, given: &[String]) -> Vec<usize> {
 /// The model's inputs (in `r.ir.inputs` order) that the inverse gives for
 /// `twist` at configuration `cfg` (one value per [`configuration_names`]).
 pub fn inputs_for(r: &Runner, twist: &[f64; 3], cfg: &[f64]) -> Vec<f64> {
-    let inv = r.ir.inverse_twist();
+    let Ok(inv) = r.ir.inverse_twist() else {
+        return cfg.to_vec();
+    };
     let args: Vec<&[f64]> = inv
         .args
         .iter()

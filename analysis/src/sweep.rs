@@ -138,12 +138,13 @@ pub fn sweep(
                     .map(|n| n.name.clone())
                     .zip(sigmas.iter().copied())
                     .collect(),
+                smooth: false,
                 ..base.clone()
             };
             let (mut pos, mut head, mut nees) = (0.0, 0.0, 0.0);
             for s in 0..SEEDS {
                 let sim = resimulate(r, run, &sigmas, 1000 * (c as u64 + 1) + 100 * l as u64 + s);
-                let loc = localize(r, &sim, &o)?;
+                let loc = localize(r, &sim, &o).map_err(|e| e.to_string())?;
                 let g = sim.gt.as_ref().unwrap();
                 let n = g.len() as f64;
                 pos += (loc
@@ -162,7 +163,7 @@ pub fn sweep(
                     .sum::<f64>()
                     / n)
                     .sqrt();
-                nees += loc.nees.iter().sum::<f64>() / loc.nees.len().max(1) as f64;
+                nees += loc.nees.iter().map(|(_, v)| v).sum::<f64>() / loc.nees.len().max(1) as f64;
             }
             let m = SEEDS as f64;
             Ok(SweepPoint {

@@ -702,7 +702,13 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     }
 
     // Inverse kinematics.
-    fns.extend(inverse_kinematics(model, &sym, &twist, &ap, &adt)?);
+    let no_inverse = match inverse_kinematics(model, &sym, &twist, &ap, &adt)? {
+        Inverse::Derived(specs) => {
+            fns.extend(specs);
+            None
+        }
+        Inverse::Unavailable(reason) => Some(reason),
+    };
 
     let mut functions = Vec::new();
     for s in fns {
@@ -718,6 +724,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         noise: model.noise.clone(),
         observations: model.observations.iter().map(|o| o.decl.clone()).collect(),
         effects: model.effects.clone(),
+        no_inverse,
         functions,
     })
     .map_err(|e| se(SymbolicError(e.to_string())))
@@ -803,24 +810,42 @@ fn sample(k: usize, i: usize) -> f64 {
 
 /// Inverse kinematics: inputs from a body twist, and the integrated form (seed 001
 /// eq. 12-18): inputs that produce a given pose increment over dt.
+///
+/// A derived inverse that does not exist (the twist is not linear in the
+/// inputs it would give) is no error: compare, fit, diagnose and localize never
+/// need it, so the model gets [`Inverse::Unavailable`] with the reason, which
+/// `generate` prints and `inverse` and `navigate` give when they refuse it.
 fn inverse_kinematics(
     model: &Model,
     sym: &Sym,
     twist: &[Atom],
     ap: &Arg,
     adt: &Arg,
-) -> Result<Vec<Spec>, SourceError> {
+) -> Result<Inverse, SourceError> {
     let fx = sym.fx;
     let se = |e| sym_err(model, e);
-    let rates: Vec<&kinegen_model::spec::Input> = model
+    // What the inverse gives: the rates of the cumulative inputs; a model
+    // without any (a velocity-commanded robot, wheel speeds from tachometers)
+    // gets the absolute inputs that enter the twist linearly. The other
+    // absolute inputs (a steering angle) are configuration it reads.
+    let cumulative: Vec<&kinegen_model::spec::Input> = model
         .inputs
         .iter()
         .filter(|i| i.kind == InputKind::Cumulative)
         .collect();
+    let rates: Vec<&kinegen_model::spec::Input> = if cumulative.is_empty() {
+        model
+            .inputs
+            .iter()
+            .filter(|i| enters_linearly(twist, sym.s(&i.name)))
+            .collect()
+    } else {
+        cumulative
+    };
     let cfg_names: Vec<String> = model
         .inputs
         .iter()
-        .filter(|i| i.kind == InputKind::Absolute)
+        .filter(|i| i.kind == InputKind::Absolute && !rates.iter().any(|r| r.name == i.name))
         .map(|i| i.name.clone())
         .collect();
     let rate_syms: Vec<Symbol> = rates.iter().map(|i| sym.s(&i.name)).collect();
@@ -993,17 +1018,15 @@ fn inverse_kinematics(
         }
         let Some((rows, inv)) = chosen else {
             if any_square {
-                return Err(err_kin(model, "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)"));
+                return Ok(Inverse::Unavailable("inverse kinematics is singular everywhere: the twist rows are linearly dependent in the inputs (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));
             }
-            return Err(err_kin(
-                model,
-                format!(
-                    "cannot derive inverse kinematics: {} twist row(s) are linear in the {} input rate(s), {} needed; declare an [inverse] section",
-                    candidates.len(),
-                    k,
-                    k
-                ),
-            ));
+            return Ok(Inverse::Unavailable(format!(
+                "cannot derive inverse kinematics: {} twist row(s) are linear in the {} input(s) it would give ({}), {} needed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)",
+                candidates.len(),
+                k,
+                rates.iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", "),
+                k.max(1)
+            )));
         };
         let outs: Vec<Atom> = (0..rows.len())
             .map(|i| {
@@ -1101,7 +1124,21 @@ fn inverse_kinematics(
         outputs: inverse_outs.iter().map(subst).collect(),
         singular: vec![sym.s("dtheta")],
     });
-    Ok(specs)
+    Ok(Inverse::Derived(specs))
+}
+
+/// The inverse kinematics a model gets: its kernels, or why it has none.
+enum Inverse {
+    Derived(Vec<Spec>),
+    Unavailable(String),
+}
+
+/// Whether the twist depends on `s` and every row is linear in it (no
+/// second derivative): a velocity command scaled by a gain, not a steering
+/// angle inside a sine.
+fn enters_linearly(twist: &[Atom], s: Symbol) -> bool {
+    let first: Vec<Atom> = twist.iter().map(|t| t.derivative(s)).collect();
+    first.iter().any(|d| !is_zero(d)) && first.iter().all(|d| is_zero(&d.derivative(s)))
 }
 
 /// Inverse of a 1x1, 2x2 or 3x3 symbolic matrix by the adjugate; returns (inverse, det).

@@ -11,8 +11,41 @@ pub enum InputKind {
     /// Cumulative counter or wheel angle; the input symbol is its rate over the step
     /// (increment / dt), constant within the step.
     Cumulative,
-    /// Absolute value (e.g. a steering angle) held from the start of the step.
+    /// Absolute value: a velocity command, a steering angle (see [`Between`]).
     Absolute,
+}
+
+/// What an absolute input does between two rows of a log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Between {
+    /// The value holds from its row until the next row, as a command does
+    /// (the robot executes the last command it received).
+    Hold,
+    /// A sampled continuous signal (a steering encoder's angle): the value
+    /// moves linearly from one row's sample to the next.
+    Linear,
+}
+
+impl Input {
+    /// What the input does between rows: as declared; otherwise a position
+    /// (an angle or an absolute encoder's reading: unit rad, deg, tick or
+    /// count) is a sampled continuous signal and anything else (a speed or
+    /// turn-rate command) holds, as CONTRACT.md section 1 says of commands.
+    /// Cumulative inputs spread their difference over the interval either way.
+    pub fn between(&self) -> Between {
+        if let Some(b) = self.between {
+            return b;
+        }
+        let unit = self.unit.trim().to_ascii_lowercase();
+        let position = ["rad", "deg", "degree", "degrees", "tick", "ticks", "count", "counts"]
+            .contains(&unit.as_str());
+        if position {
+            Between::Linear
+        } else {
+            Between::Hold
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -37,6 +70,10 @@ pub struct Input {
     /// needs more.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_rate: Option<f64>,
+    /// An absolute input's value between rows, where the spec says
+    /// (`between = "hold"` or `"linear"`); see [`Input::between`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub between: Option<Between>,
     pub unit: String,
     pub doc: String,
 }
@@ -66,6 +103,29 @@ pub struct Noise {
     pub name: String,
     pub doc: String,
     pub sigma: f64,
+    /// The sigma's unit. A density (`m/s/sqrt(Hz)`, `rad/s/sqrt(Hz)`: see
+    /// [`Noise::is_density`]) gives a variance that grows with elapsed time;
+    /// anything else is seed 001's per-step sigma (eq. 5), whose variance
+    /// grows with the number of rows.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub unit: String,
+}
+
+impl Noise {
+    /// Whether `sigma` is a spectral density (its unit has a `/sqrt(Hz)` or
+    /// `sqrt(s)`): white noise whose variance over an interval is sigma^2
+    /// times its length, whatever the log's rate.
+    pub fn is_density(&self) -> bool {
+        let u: String = self
+            .unit
+            .to_ascii_lowercase()
+            .chars()
+            .filter(|c| !c.is_whitespace())
+            .collect();
+        ["sqrt(hz)", "\u{221a}hz", "rthz", "sqrt(s)", "\u{221a}s"]
+            .iter()
+            .any(|d| u.contains(d))
+    }
 }
 
 /// What an observation measures. The analysis finds the pose tracker, the gyro

@@ -263,8 +263,19 @@ pub struct ModelIr {
     pub noise: Vec<Noise>,
     observations: Vec<ObservationDecl>,
     pub effects: Vec<String>,
+    /// Why the model has no inverse kinematics (the twist is not linear in
+    /// the inputs and the spec declares no `[inverse]`); `None` when it has.
+    pub no_inverse: Option<String>,
     functions: Vec<Function>,
     index: HashMap<Kernel, usize>,
+}
+
+/// A model without inverse kinematics, asked for them (`inverse`, `navigate`).
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("model `{model}` has no inverse kinematics: {reason}")]
+pub struct NoInverse {
+    pub model: String,
+    pub reason: String,
 }
 
 /// The IR as stored in `generated/ir/*.json`.
@@ -279,6 +290,9 @@ pub struct IrFile {
     pub noise: Vec<Noise>,
     pub observations: Vec<ObservationDecl>,
     pub effects: Vec<String>,
+    /// See [`ModelIr::no_inverse`] (absent from the file when the model has them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub no_inverse: Option<String>,
     pub functions: Vec<Function>,
 }
 
@@ -313,12 +327,10 @@ impl TryFrom<IrFile> for ModelIr {
                 return Err(IrError::Duplicate(f.name, k.name.clone()));
             }
         }
-        let mut required = vec![
-            Kernel::Twist,
-            Kernel::TwistGyro,
-            Kernel::InverseTwist,
-            Kernel::InverseIncrement,
-        ];
+        let mut required = vec![Kernel::Twist, Kernel::TwistGyro];
+        if f.no_inverse.is_none() {
+            required.extend([Kernel::InverseTwist, Kernel::InverseIncrement]);
+        }
         for form in [StepForm::Exact, StepForm::Euler] {
             required.push(Kernel::Step(form, None));
             required.push(Kernel::Step(form, Some(Wrt::State)));
@@ -341,6 +353,7 @@ impl TryFrom<IrFile> for ModelIr {
             noise: f.noise,
             observations: f.observations,
             effects: f.effects,
+            no_inverse: f.no_inverse,
             functions: f.functions,
             index,
         })
@@ -359,6 +372,7 @@ impl From<ModelIr> for IrFile {
             noise: ir.noise,
             observations: ir.observations,
             effects: ir.effects,
+            no_inverse: ir.no_inverse,
             functions: ir.functions,
         }
     }
@@ -432,14 +446,24 @@ impl ModelIr {
         }
     }
 
-    /// Inputs from a body twist (every model has its inverse kinematics).
-    pub fn inverse_twist(&self) -> &Function {
-        self.required(Kernel::InverseTwist)
+    /// Inputs from a body twist, where the model has inverse kinematics.
+    pub fn inverse_twist(&self) -> Result<&Function, NoInverse> {
+        self.inverse(Kernel::InverseTwist)
     }
 
-    /// Inputs from a pose increment over dt.
-    pub fn inverse_increment(&self) -> &Function {
-        self.required(Kernel::InverseIncrement)
+    /// Inputs from a pose increment over dt, where the model has inverse kinematics.
+    pub fn inverse_increment(&self) -> Result<&Function, NoInverse> {
+        self.inverse(Kernel::InverseIncrement)
+    }
+
+    fn inverse(&self, k: Kernel) -> Result<&Function, NoInverse> {
+        self.kernel(k).ok_or_else(|| NoInverse {
+            model: self.name.clone(),
+            reason: self
+                .no_inverse
+                .clone()
+                .unwrap_or_else(|| "the IR lacks it (regenerate it)".into()),
+        })
     }
 
     /// Every observation the spec declares.

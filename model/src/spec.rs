@@ -63,6 +63,8 @@ struct RawInput {
     #[serde(default)]
     max_rate: Option<Spanned<f64>>,
     #[serde(default)]
+    between: Option<Spanned<crate::decl::Between>>,
+    #[serde(default)]
     unit: String,
     #[serde(default)]
     doc: String,
@@ -99,6 +101,8 @@ struct RawNoise {
     doc: String,
     #[serde(default)]
     sigma: f64,
+    #[serde(default)]
+    unit: String,
 }
 
 #[derive(Debug, Deserialize)]
@@ -400,6 +404,14 @@ impl Model {
                 }
                 if !(2..=64).contains(w.get_ref()) {
                     return Err(cx.err_span(w, "`wrap` is the counter's width in bits (2 to 64)"));
+                }
+            }
+            if let Some(b) = &i.between {
+                if i.kind != InputKind::Absolute {
+                    return Err(cx.err_span(
+                        b,
+                        "`between` is for absolute inputs (a cumulative input's difference always spreads over the interval)",
+                    ));
                 }
             }
             if let Some(m) = &i.max_rate {
@@ -712,6 +724,7 @@ impl Model {
                     range: i.range,
                     wrap: i.wrap.as_ref().map(|w| *w.get_ref()),
                     max_rate: i.max_rate.as_ref().map(|m| *m.get_ref()),
+                    between: i.between.as_ref().map(|b| *b.get_ref()),
                     unit: i.unit.clone(),
                     doc: i.doc.clone(),
                 })
@@ -726,6 +739,7 @@ impl Model {
                             name: n.name.get_ref().clone(),
                             doc: n.doc.clone(),
                             sigma: n.sigma,
+                            unit: n.unit.clone(),
                         })
                     } else {
                         Err(cx.err_span(

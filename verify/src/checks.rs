@@ -448,7 +448,9 @@ fn imposes_heading(
     p: &[f64],
     dt: &[f64],
 ) -> bool {
-    let tw = ir.inverse_twist();
+    let Ok(tw) = ir.inverse_twist() else {
+        return false;
+    };
     let d = &increment_args[0];
     let args: Vec<Vec<f64>> = tw
         .args
@@ -499,10 +501,14 @@ fn depends_on(k: &dyn Kernel, f: &Function, args: &[Vec<f64>], a: usize, e: usiz
 /// reproduces the pose increment it was asked for when integrated exactly.
 pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
     let mut out = Vec::new();
+    // a model without inverse kinematics (ModelIr::no_inverse) has none to check
+    let (Ok(inv_twist), Ok(inv_increment)) = (ir.inverse_twist(), ir.inverse_increment()) else {
+        return out;
+    };
     let mut sampler = Sampler::new(ir, seed);
     let rows = sampler.twist_rows;
     {
-        let inv = ir.inverse_twist();
+        let inv = inv_twist;
         let mut fd = Finding::new(ir, inv, "forward(inverse) = id");
         for _ in 0..n {
             let args = sampler.args(inv);
@@ -530,7 +536,7 @@ pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) ->
         out.push(fd);
     }
     {
-        let inv = ir.inverse_increment();
+        let inv = inv_increment;
         let ex = ir.step(StepForm::Exact).value;
         let mut fd = Finding::new(ir, inv, "integrated inverse");
         for _ in 0..n {

@@ -93,8 +93,20 @@ impl<'a> Sampler<'a> {
     }
 
     /// Inputs that produce `twist` with parameters `p` (through inverse_twist).
+    /// A model without inverse kinematics gets inputs drawn in their ranges.
     pub fn inputs_for(&mut self, twist: &[f64], p: &[f64]) -> Vec<f64> {
-        let inv = self.ir.inverse_twist();
+        let Ok(inv) = self.ir.inverse_twist() else {
+            let ranges: Vec<[f64; 2]> = self
+                .ir
+                .inputs
+                .iter()
+                .map(|i| i.range.unwrap_or([-1.0, 1.0]))
+                .collect();
+            return ranges
+                .iter()
+                .map(|r| self.rng.gen_range(r[0]..r[1]))
+                .collect();
+        };
         let cfg: Vec<f64> = inv
             .args
             .iter()

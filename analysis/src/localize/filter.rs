@@ -1,0 +1,655 @@
+//! One pass of the extended Kalman filter over a run (seed 001 eq. 1-9), with
+//! the prediction cut at each sighting's own time.
+use super::noise::NoiseModel;
+use super::{EkfOptions, LocalizeError};
+use crate::log::wrap;
+use crate::model::Runner;
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::{Pose, RangeBearing};
+use kinegen_model::ir::{ArgRole, Function, StepForm};
+use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
+
+/// A prediction shorter than this (s) moves nothing: a sighting at a row's
+/// time, several sightings in one camera frame.
+const NO_TIME: f64 = 1e-9;
+
+/// The model's kernels the filter calls, fused so one call gives what a step
+/// needs (the pose, F and G share the twist and the arc's sines).
+pub struct Filter<'a> {
+    r: &'a Runner,
+    /// [pose (3), F_x (9), F_w (3 x nw)] of the exact step.
+    step: Function,
+    /// [range, bearing (2), H_x (6)].
+    observe: Function,
+    /// `[[noise]]` inputs of the spec (0: white noise on the body twist instead).
+    nw: usize,
+    obs_sigma: [f64; 2],
+    gate: f64,
+    start_sigma: [f64; 3],
+}
+
+/// The filter's state at one time: the prediction that reached it (with the
+/// transition F from the node before) and the estimate after that time's
+/// sightings.
+#[derive(Debug, Clone)]
+pub struct Node {
+    pub t: f64,
+    pub f: Matrix3<f64>,
+    pub x_pred: Vector3<f64>,
+    pub p_pred: Matrix3<f64>,
+    pub x: Vector3<f64>,
+    pub p: Matrix3<f64>,
+}
+
+/// A row's estimate.
+#[derive(Debug, Clone, Copy)]
+pub struct RowEstimate {
+    pub x: [f64; 3],
+    pub p: Matrix3<f64>,
+}
+
+/// One pass: the estimate at every row, every node (kept for the smoother),
+/// and what the sightings said.
+#[derive(Debug, Clone, Default)]
+pub struct Pass {
+    pub rows: Vec<RowEstimate>,
+    /// Every node in time order, with `row_node[k]` the node of row k (kept
+    /// only when asked for: the smoother reads them).
+    pub nodes: Vec<Node>,
+    pub row_node: Vec<usize>,
+    /// (t, NIS) of each sighting used.
+    pub nis: Vec<(f64, f64)>,
+    pub accepted: usize,
+    pub rejected: usize,
+    /// Sightings outside the log's time span (not used, not rejected).
+    pub outside: usize,
+    /// The sightings' negative log-likelihood (robust beyond the gate: the
+    /// noise estimate's objective).
+    pub cost: f64,
+}
+
+impl<'a> Filter<'a> {
+    pub fn new(r: &'a Runner, o: &EkfOptions) -> Result<Filter<'a>, LocalizeError> {
+        let obs =
+            r.ir.observation_kernels(RangeBearing)
+                .ok_or(LocalizeError::NoLandmarkObservation)?;
+        let exact = r.ir.step(StepForm::Exact);
+        let nw = r.ir.noise.len();
+        let mut parts = vec![exact.value, exact.jac_x];
+        parts.extend(exact.jac_w.filter(|_| nw > 0));
+        let nw = if parts.len() == 3 { nw } else { 0 };
+        let fuse = |name: &str, parts: &[&Function]| {
+            kinegen_model::fuse::fuse(name, parts).expect("the parts of one model share argument sizes")
+        };
+        Ok(Filter {
+            r,
+            step: fuse("ekf_step", &parts),
+            observe: fuse("ekf_observe", &[obs.value, obs.jac_x]),
+            nw,
+            obs_sigma: crate::landmarks::sigma(r),
+            gate: o.gate,
+            start_sigma: o.start_sigma,
+        })
+    }
+
+    /// The process noise the model itself declares, in its own form (or white
+    /// noise on the twist, for a model without `[[noise]]`).
+    pub fn declared_noise(&self) -> NoiseModel {
+        if self.nw == 0 {
+            return NoiseModel::twist_default();
+        }
+        NoiseModel {
+            names: self.r.ir.noise.iter().map(|n| n.name.clone()).collect(),
+            sigma: self.r.ir.noise.iter().map(|n| n.sigma).collect(),
+            density: self.r.ir.noise.iter().map(|n| n.is_density()).collect(),
+            obs_scale: [1.0; 2],
+            persistent: [0.0; 2],
+            memory_s: 10.0,
+        }
+    }
+
+    /// Whether the noise model has as many entries as this filter maps.
+    pub fn noise_count(&self) -> usize {
+        if self.nw == 0 {
+            3
+        } else {
+            self.nw
+        }
+    }
+
+    /// What a run asks of the filter whatever its noise: the prediction
+    /// segments (each row cut at its sightings' times) with their body-frame
+    /// motion and noise Jacobian, computed once by the model's kernels.
+    ///
+    /// Every kinegen model moves its pose by a body twist that does not
+    /// depend on the pose, so its exact step is SE(2)-equivariant (`kinegen
+    /// verify` checks it): a segment's step from any pose is its step from
+    /// the origin rotated and moved there, and its F and G follow. The noise
+    /// estimate's hundred passes then cost a few 3x3 products a segment.
+    pub fn plan(&self, run: &Run) -> Plan {
+        let mut order: Vec<usize> = (0..run.landmarks.len()).collect();
+        order.sort_by(|a, b| run.landmarks[*a].t.total_cmp(&run.landmarks[*b].t));
+        let mut s = Scratch::new(self, run);
+        let t_first = run.t[0];
+        let mut plan = Plan {
+            start: Vector3::from(crate::deadreckon::model_start(self.r, &self.r.p, run)),
+            segments: Vec::with_capacity(run.steps() + run.landmarks.len()),
+            sightings: Vec::with_capacity(run.landmarks.len()),
+            first: 0,
+            outside: 0,
+            landmark: std::mem::take(&mut s.landmark),
+            landmarks: s.landmarks,
+            nw: self.noise_count(),
+        };
+        let mut next = 0;
+        while next < order.len() && run.landmarks[order[next]].t < t_first {
+            plan.outside += 1;
+            next += 1;
+        }
+        while next < order.len() && run.landmarks[order[next]].t <= t_first {
+            plan.sightings.push((order[next], 0));
+            next += 1;
+        }
+        plan.first = plan.sightings.len();
+        for k in 0..run.steps() {
+            let (t1, u) = (run.t[k + 1], &run.u[k]);
+            let mut tau = run.t[k];
+            loop {
+                let at = order.get(next).map(|&i| run.landmarks[i].t).filter(|&t| t <= t1);
+                let until = at.unwrap_or(t1).max(tau);
+                let from = plan.sightings.len();
+                while let Some(&i) = order.get(next).filter(|&&i| run.landmarks[i].t <= until) {
+                    plan.sightings.push((i, k));
+                    next += 1;
+                }
+                let (delta, g) = self.body_step(u, until - tau, &mut s);
+                plan.segments.push(Segment {
+                    turn: delta[2].sin_cos(),
+                    t: until,
+                    h: until - tau,
+                    dt_row: run.dt[k],
+                    delta,
+                    g,
+                    sightings: (from, plan.sightings.len()),
+                    row_end: at.is_none(),
+                });
+                tau = until;
+                if at.is_none() {
+                    break;
+                }
+            }
+        }
+        plan.outside += order.len() - next;
+        plan
+    }
+
+    /// One segment's motion from the origin over `h` s with inputs `u`, and
+    /// its noise Jacobian there (3 x noise inputs, row-major).
+    fn body_step(&self, u: &[f64], h: f64, s: &mut Scratch) -> ([f64; 3], Vec<f64>) {
+        let nw = self.noise_count();
+        if h < NO_TIME {
+            return ([0.0; 3], vec![0.0; 3 * nw]);
+        }
+        let origin = [0.0; 3];
+        let dt = [h];
+        {
+            let args: Vec<&[f64]> = self
+                .step
+                .args
+                .iter()
+                .map(|a| Runner::step_arg(a, &origin, u, &self.r.p, &dt, &s.zeros))
+                .collect();
+            self.step.eval_into(&args, &mut s.step_out, &mut s.tape);
+        }
+        let o = &s.step_out;
+        let g = if self.nw > 0 {
+            o[12..12 + 3 * self.nw].to_vec()
+        } else {
+            // white noise on the body twist (vx, vy, omega)
+            vec![h, 0.0, 0.0, 0.0, h, 0.0, 0.0, 0.0, h]
+        };
+        ([o[0], o[1], o[2]], g)
+    }
+
+    /// Run the filter over `run` with `noise`, keeping what `keep` says.
+    pub fn run(&self, run: &Run, noise: &NoiseModel, keep: Keep) -> Result<Pass, LocalizeError> {
+        self.run_plan(&self.plan(run), run, noise, keep)
+    }
+
+    /// Run the filter along a [`Plan`] of `run` with `noise`.
+    pub fn run_plan(
+        &self,
+        plan: &Plan,
+        run: &Run,
+        noise: &NoiseModel,
+        keep: Keep,
+    ) -> Result<Pass, LocalizeError> {
+        let mut s = Scratch::bare(self);
+        s.landmark.clone_from(&plan.landmark);
+        let start_cov = Matrix3::from_diagonal(&Vector3::from(self.start_sigma.map(|s| s * s)));
+        let var = Vector2::from_fn(|j, _| (self.obs_sigma[j] * noise.persistent[j]).powi(2));
+        let mut b = Belief::new(plan.start, start_cov, plan.landmarks, var, noise.memory_s, run.t[0]);
+        let mut pass = Pass {
+            outside: plan.outside,
+            ..Pass::default()
+        };
+        for &(i, k) in &plan.sightings[..plan.first] {
+            self.update(&mut b, run, i, &run.u[k], noise, &mut pass, &mut s);
+        }
+        let node = Node {
+            t: run.t[0],
+            f: Matrix3::identity(),
+            x_pred: plan.start,
+            p_pred: start_cov,
+            x: b.x,
+            p: b.p,
+        };
+        self.close(&mut pass, node, keep, true);
+        for seg in &plan.segments {
+            let f = predict(&mut b, seg, plan.nw, noise);
+            let mut node = Node {
+                t: seg.t,
+                f,
+                x_pred: b.x,
+                p_pred: b.p,
+                x: b.x,
+                p: b.p,
+            };
+            for &(i, k) in &plan.sightings[seg.sightings.0..seg.sightings.1] {
+                self.update(&mut b, run, i, &run.u[k], noise, &mut pass, &mut s);
+            }
+            if !b.x.iter().all(|v| v.is_finite()) {
+                return Err(LocalizeError::Diverged {
+                    path: run.path.clone(),
+                    t: seg.t,
+                });
+            }
+            node.x = b.x;
+            node.p = b.p;
+            self.close(&mut pass, node, keep, seg.row_end);
+        }
+        Ok(pass)
+    }
+
+    /// Record a node (and a row's estimate when it ends a row).
+    fn close(&self, pass: &mut Pass, node: Node, keep: Keep, row_end: bool) {
+        if keep == Keep::Cost {
+            return;
+        }
+        if row_end {
+            pass.rows.push(RowEstimate {
+                x: [node.x[0], node.x[1], node.x[2]],
+                p: node.p,
+            });
+        }
+        if keep == Keep::Nodes {
+            if row_end {
+                pass.row_node.push(pass.nodes.len());
+            }
+            pass.nodes.push(node);
+        }
+    }
+
+    /// Update with sighting `i` (eq. 6-9), or reject it at the gate; add its
+    /// share of the likelihood to the pass.
+    #[allow(clippy::too_many_arguments)]
+    fn update(
+        &self,
+        b: &mut Belief,
+        run: &Run,
+        i: usize,
+        u: &[f64],
+        noise: &NoiseModel,
+        pass: &mut Pass,
+        s: &mut Scratch,
+    ) {
+        let z = &run.landmarks[i];
+        let xs = [b.x[0], b.x[1], b.x[2]];
+        let lm = [z.xl, z.yl];
+        {
+            let args: Vec<&[f64]> = self
+                .observe
+                .args
+                .iter()
+                .map(|a| match a.role {
+                    ArgRole::State => &xs[..],
+                    ArgRole::Inputs => u,
+                    ArgRole::Params => &self.r.p[..],
+                    ArgRole::Landmark => &lm[..],
+                    _ => &s.zeros[..a.names.len()],
+                })
+                .collect();
+            self.observe.eval_into(&args, &mut s.obs_out, &mut s.tape);
+        }
+        let o = &s.obs_out;
+        let hm = Matrix2x3::from_row_slice(&o[2..8]);
+        let white = |j: usize| (self.obs_sigma[j] * noise.obs_scale[j]).powi(2);
+        let rm = Matrix2::new(white(0), 0.0, 0.0, white(1));
+        b.catch_up(z.t);
+        let l = s.landmark[i];
+        let (bias, pb, bb) = b.of(l);
+        let y = Vector2::new(z.range - o[0] - bias[0], wrap(z.bearing - o[1] - bias[1]));
+        // P H^T for the pose rows, and S
+        let ph = b.p * hm.transpose() + pb;
+        let sm = hm * ph + pb.transpose() * hm.transpose() + bb + rm;
+        let Some(si) = sm.try_inverse() else {
+            pass.rejected += 1;
+            return;
+        };
+        let nis = (y.transpose() * si * y)[(0, 0)];
+        // beyond the gate the cost grows with the log of the NIS (a robust
+        // tail, continuous in value and slope at the gate): outliers do not
+        // pull the noise up, and a filter that rejects everything is still
+        // told which way to go
+        let robust = if nis <= self.gate {
+            nis
+        } else {
+            self.gate * (1.0 + (nis / self.gate).ln())
+        };
+        pass.cost += sm.determinant().max(1e-300).ln() + robust;
+        if !nis.is_finite() || nis > self.gate {
+            pass.rejected += 1;
+            return;
+        }
+        b.fuse(l, &hm, &ph, &sm, &si, &y);
+        pass.nis.push((z.t, nis));
+        pass.accepted += 1;
+    }
+
+    /// NEES of a pass's rows against the run's ground truth.
+    pub fn nees(&self, run: &Run, pass: &Pass) -> Vec<(usize, f64)> {
+        let track: Vec<[f64; 3]> = pass.rows.iter().map(|r| r.x).collect();
+        let cov: Vec<Matrix3<f64>> = pass.rows.iter().map(|r| r.p).collect();
+        self.nees_rows(run, &track, &cov)
+    }
+
+    /// NEES of `track` with covariances `cov` at every row after the first,
+    /// when the log has ground truth of the body pose (a model that observes
+    /// an offset tracker has none to compare with).
+    pub fn nees_rows(&self, run: &Run, track: &[[f64; 3]], cov: &[Matrix3<f64>]) -> Vec<(usize, f64)> {
+        let Some(g) = run.gt.as_ref().filter(|_| self.r.ir.observation(Pose).is_none()) else {
+            return Vec::new();
+        };
+        (1..track.len().min(g.len()))
+            .filter_map(|k| {
+                let x = track[k];
+                let e = Vector3::new(x[0] - g[k][0], x[1] - g[k][1], wrap(x[2] - g[k][2]));
+                cov[k].try_inverse().map(|ci| (k, (e.transpose() * ci * e)[(0, 0)]))
+            })
+            .collect()
+    }
+}
+
+/// What a pass keeps besides its likelihood and counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Keep {
+    /// Nothing (the noise estimate's passes).
+    Cost,
+    /// Every row's estimate.
+    Rows,
+    /// The rows and every node (the smoother's input).
+    Nodes,
+}
+
+/// A run cut into prediction segments (see [`Filter::plan`]).
+pub struct Plan {
+    start: Vector3<f64>,
+    segments: Vec<Segment>,
+    /// (sighting, row whose inputs hold then), in time order; the first
+    /// `first` update the start.
+    sightings: Vec<(usize, usize)>,
+    first: usize,
+    outside: usize,
+    landmark: Vec<usize>,
+    landmarks: usize,
+    nw: usize,
+}
+
+/// One prediction: `h` s of a row of `dt_row` s, ending at `t` with the
+/// sightings `sightings` (a range of `Plan::sightings`).
+struct Segment {
+    t: f64,
+    h: f64,
+    dt_row: f64,
+    /// The motion from the origin (body frame of the segment's start).
+    delta: [f64; 3],
+    /// The noise Jacobian there (3 x nw, row-major).
+    g: Vec<f64>,
+    /// sin and cos of the segment's heading change.
+    turn: (f64, f64),
+    sightings: (usize, usize),
+    row_end: bool,
+}
+
+/// Predict one segment (seed 001 eq. 2-5) from the body-frame step: the
+/// pose moves by the rotated increment, F = d(pose')/d(pose) of that
+/// composition, G the body noise Jacobian rotated; returns F.
+///
+/// F is the identity but for its heading column (-wy, wx, 1), so F P F^T is
+/// written out (a third of the general product) and the F's since the last
+/// sighting add up instead of multiplying. The heading's sine and cosine
+/// are carried along and turned by the segment's own, computed once in the
+/// plan, rather than recomputed from the heading every segment.
+fn predict(b: &mut Belief, seg: &Segment, nw: usize, noise: &NoiseModel) -> Matrix3<f64> {
+    if seg.h < NO_TIME {
+        return Matrix3::identity();
+    }
+    let (sn, cs) = b.sin_cos;
+    let [dx, dy, dth] = seg.delta;
+    let (wx, wy) = (cs * dx - sn * dy, sn * dx + cs * dy);
+    let (a, c) = (-wy, wx);
+    let p = &mut b.p;
+    // (F P F^T) with F = I + a e0 e2^T + c e1 e2^T
+    let (p02, p12, p22) = (p[(0, 2)], p[(1, 2)], p[(2, 2)]);
+    let n00 = p[(0, 0)] + 2.0 * a * p02 + a * a * p22;
+    let n01 = p[(0, 1)] + a * p12 + c * p02 + a * c * p22;
+    let n11 = p[(1, 1)] + 2.0 * c * p12 + c * c * p22;
+    let n02 = p02 + a * p22;
+    let n12 = p12 + c * p22;
+    let mut q = Matrix3::new(n00, n01, n02, n01, n11, n12, n02, n12, p22);
+    for i in 0..nw {
+        let var = noise.step_variance(i, seg.h, seg.dt_row);
+        let (gx, gy, gt) = (seg.g[i], seg.g[nw + i], seg.g[2 * nw + i]);
+        let g = Vector3::new(cs * gx - sn * gy, sn * gx + cs * gy, gt);
+        q += g * g.transpose() * var;
+    }
+    *p = q;
+    b.f_acc[(0, 2)] += a;
+    b.f_acc[(1, 2)] += c;
+    b.x += Vector3::new(wx, wy, dth);
+    let (sd, cd) = seg.turn;
+    b.sin_cos = (sn * cd + cs * sd, cs * cd - sn * sd);
+    Matrix3::new(1.0, 0.0, a, 0.0, 1.0, c, 0.0, 0.0, 1.0)
+}
+
+/// Buffers reused by every call of a pass.
+struct Scratch {
+    zeros: Vec<f64>,
+    step_out: Vec<f64>,
+    obs_out: Vec<f64>,
+    tape: Vec<f64>,
+    /// Each sighting's landmark (an index), and how many landmarks there are.
+    landmark: Vec<usize>,
+    landmarks: usize,
+}
+
+impl Scratch {
+    fn bare(f: &Filter) -> Scratch {
+        Scratch {
+            zeros: vec![0.0; 64],
+            step_out: vec![0.0; f.step.rows * f.step.cols],
+            obs_out: vec![0.0; f.observe.rows * f.observe.cols],
+            tape: Vec::new(),
+            landmark: Vec::new(),
+            landmarks: 0,
+        }
+    }
+
+    fn new(f: &Filter, run: &Run) -> Scratch {
+        let mut ids: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+        let landmark = run
+            .landmarks
+            .iter()
+            .map(|z| {
+                let n = ids.len();
+                *ids.entry(z.id.as_str()).or_insert(n)
+            })
+            .collect();
+        Scratch {
+            zeros: vec![0.0; 64],
+            step_out: vec![0.0; f.step.rows * f.step.cols],
+            obs_out: vec![0.0; f.observe.rows * f.observe.cols],
+            tape: Vec::new(),
+            landmark,
+            landmarks: ids.len(),
+        }
+    }
+}
+
+/// What the filter believes: the pose and its covariance, and (when the
+/// noise has a persistent part) the persistent error of each landmark's
+/// range and bearing, a first-order Gauss-Markov process (Gelb, Applied
+/// Optimal Estimation, 1974, sec. 3.8: a coloured measurement error as a
+/// state). Estimating it is what keeps a filter that sees one landmark for
+/// seconds from trusting the same error a hundred times.
+///
+/// The errors change only by decaying toward zero, so their covariance and
+/// their correlation with the pose are brought up to date only when a
+/// sighting needs them (`catch_up`): between sightings a step costs no more
+/// than without them.
+struct Belief {
+    x: Vector3<f64>,
+    /// sin and cos of the heading x[2], kept in step with it.
+    sin_cos: (f64, f64),
+    p: Matrix3<f64>,
+    /// Persistent errors, [range, bearing] per landmark.
+    bias: Vec<Vector2<f64>>,
+    /// Pose-error covariance (3 x 2 per landmark), as of `since`.
+    pb: Vec<nalgebra::Matrix3x2<f64>>,
+    /// Error covariance (2 x 2 blocks, row-major over landmarks), as of
+    /// `since`, stored scaled: the covariance is `bb_scale * bb` plus
+    /// `bb_diag` times the stationary variance on the diagonal blocks, so a
+    /// decay costs two multiplications instead of a pass over every block.
+    bb: Vec<Matrix2<f64>>,
+    bb_scale: f64,
+    bb_diag: f64,
+    /// The product of the transitions F since `since`.
+    f_acc: Matrix3<f64>,
+    since: f64,
+    /// Stationary variance of the persistent errors and their time constant.
+    var: Matrix2<f64>,
+    memory_s: f64,
+}
+
+impl Belief {
+    fn new(
+        x: Vector3<f64>,
+        p: Matrix3<f64>,
+        landmarks: usize,
+        var: Vector2<f64>,
+        memory_s: f64,
+        t: f64,
+    ) -> Belief {
+        let n = if var.iter().any(|v| *v > 0.0) { landmarks } else { 0 };
+        Belief {
+            x,
+            sin_cos: x[2].sin_cos(),
+            p,
+            bias: vec![Vector2::zeros(); n],
+            pb: vec![nalgebra::Matrix3x2::zeros(); n],
+            bb: vec![Matrix2::zeros(); n * n],
+            bb_scale: 1.0,
+            bb_diag: 1.0,
+            f_acc: Matrix3::identity(),
+            since: t,
+            var: Matrix2::from_diagonal(&var),
+            memory_s,
+        }
+    }
+
+    fn n(&self) -> usize {
+        self.bias.len()
+    }
+
+    /// Block (i, j) of the persistent errors' covariance.
+    fn bb_at(&self, i: usize, j: usize) -> Matrix2<f64> {
+        let stored = self.bb[i * self.n() + j] * self.bb_scale;
+        if i == j {
+            stored + self.var * self.bb_diag
+        } else {
+            stored
+        }
+    }
+
+    /// Bring the persistent errors and their covariances up to time `t`:
+    /// each decays by phi = exp(-dt/memory) toward its stationary variance.
+    fn catch_up(&mut self, t: f64) {
+        if self.n() == 0 {
+            return;
+        }
+        let phi = (-(t - self.since).max(0.0) / self.memory_s).exp();
+        for v in &mut self.bias {
+            *v *= phi;
+        }
+        for c in &mut self.pb {
+            *c = self.f_acc * *c * phi;
+        }
+        self.bb_scale *= phi * phi;
+        self.bb_diag = phi * phi * self.bb_diag + (1.0 - phi * phi);
+        if self.bb_scale < 1e-6 {
+            // fold the scale in before it underflows
+            let k = self.bb_scale;
+            self.bb.iter_mut().for_each(|b| *b *= k);
+            self.bb_scale = 1.0;
+        }
+        self.f_acc = Matrix3::identity();
+        self.since = t;
+    }
+
+    /// Landmark `l`'s persistent error, its covariance with the pose, and its
+    /// own covariance (zeros without persistent errors).
+    fn of(&self, l: usize) -> (Vector2<f64>, nalgebra::Matrix3x2<f64>, Matrix2<f64>) {
+        if self.n() == 0 {
+            return (Vector2::zeros(), nalgebra::Matrix3x2::zeros(), Matrix2::zeros());
+        }
+        (self.bias[l], self.pb[l], self.bb_at(l, l))
+    }
+
+    /// The Kalman update with a sighting of landmark `l`: H = [hm | I at l],
+    /// `ph` the pose rows of P H^T, `sm` = H P H^T + R and its inverse `si`.
+    fn fuse(
+        &mut self,
+        l: usize,
+        hm: &Matrix2x3<f64>,
+        ph: &nalgebra::Matrix3x2<f64>,
+        sm: &Matrix2<f64>,
+        si: &Matrix2<f64>,
+        y: &Vector2<f64>,
+    ) {
+        let n = self.n();
+        // the error rows of P H^T: P_bp H_x^T + P_b,l
+        let eh: Vec<Matrix2<f64>> = (0..n)
+            .map(|j| self.pb[j].transpose() * hm.transpose() + self.bb_at(j, l))
+            .collect();
+        let kp = ph * si;
+        let kb: Vec<Matrix2<f64>> = eh.iter().map(|e| e * si).collect();
+        self.x += kp * y;
+        self.sin_cos = self.x[2].sin_cos();
+        for j in 0..n {
+            self.bias[j] += kb[j] * y;
+        }
+        let ks = kp * sm;
+        let p = self.p - ks * kp.transpose();
+        self.p = (p + p.transpose()) * 0.5;
+        for j in 0..n {
+            self.pb[j] -= ks * kb[j].transpose();
+        }
+        let unscale = 1.0 / self.bb_scale;
+        for i in 0..n {
+            let ki = kb[i] * sm * unscale;
+            for j in 0..n {
+                self.bb[i * n + j] -= ki * kb[j].transpose();
+            }
+        }
+    }
+}

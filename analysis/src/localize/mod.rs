@@ -1,0 +1,169 @@
+//! EKF localisation with mapped landmarks (seed 001 eq. 1-9) on the model's own
+//! kernels, for logs as robots write them: rows at irregular times, commands
+//! that hold between rows, sightings between rows.
+//!
+//! - Predict with the exact step and its Jacobians with respect to the state
+//!   (F, eq. 4) and the process noise (G, eq. 5), to each sighting's own time
+//!   (the row's inputs hold over the row), then to the next row.
+//! - Process noise: a `[[noise]]` sigma whose unit is a density
+//!   (`/sqrt(Hz)`) adds variance in proportion to elapsed time; seed 001's
+//!   per-step sigma adds it per row, spread over the pieces a sighting cuts a
+//!   row into. A model without `[[noise]]` gets white noise on its body twist.
+//! - Noise chosen from the log itself unless the user gives it
+//!   ([`noise::estimate`]: the innovations' likelihood, maximised over the
+//!   process-noise densities and a scale of the observation sigmas).
+//! - Update with the range-bearing observation and its Jacobian (H, eq. 6-7),
+//!   R from its sigmas; innovations beyond a chi-square gate are rejected and
+//!   counted.
+//! - Consistency: NIS (always) and NEES (against ground truth, when the log has
+//!   it and the model measures the body pose directly) against their
+//!   chi-square bounds; a fixed-interval RTS smoother over the same pass for
+//!   offline use ([`smoother`]).
+mod filter;
+pub mod noise;
+mod smoother;
+
+pub use filter::{Filter, Keep, Pass};
+pub use noise::{NoiseModel, NoiseSource};
+
+use crate::model::Runner;
+use crate::run::Run;
+use nalgebra::Matrix3;
+
+#[derive(Debug, Clone)]
+pub struct EkfOptions {
+    /// NIS above which an observation is rejected (chi-square, 2 dof: 9.21 is
+    /// the 99% point).
+    pub gate: f64,
+    /// Start-pose standard deviations (x, y m; theta rad).
+    pub start_sigma: [f64; 3],
+    /// Process-noise sigmas by `[[noise]]` name, replacing the spec's (in the
+    /// spec's form: a density where its unit says so, per row otherwise).
+    pub noise_sigma: Vec<(String, f64)>,
+    /// Where the sigmas `noise_sigma` does not give come from.
+    pub noise: NoiseSource,
+    /// Also run the RTS smoother over the filter's pass.
+    pub smooth: bool,
+}
+
+impl Default for EkfOptions {
+    fn default() -> Self {
+        EkfOptions {
+            gate: 9.21,
+            start_sigma: [0.05, 0.05, 0.02],
+            noise_sigma: Vec::new(),
+            noise: NoiseSource::Spec,
+            smooth: false,
+        }
+    }
+}
+
+/// One run's filter output.
+#[derive(Debug, Clone)]
+pub struct Localization {
+    /// Estimated pose at every row, and its covariance.
+    pub track: Vec<[f64; 3]>,
+    pub cov: Vec<Matrix3<f64>>,
+    /// The smoothed pose and covariance at every row (with `smooth`).
+    pub smoothed: Option<(Vec<[f64; 3]>, Vec<Matrix3<f64>>)>,
+    /// Time and normalised innovation squared of each accepted observation.
+    pub nis: Vec<(f64, f64)>,
+    /// Normalised estimation error squared at each row with ground truth
+    /// (row index, value).
+    pub nees: Vec<(usize, f64)>,
+    pub accepted: usize,
+    pub rejected: usize,
+    /// Sightings outside the run's time span.
+    pub outside: usize,
+}
+
+/// Chi-square quantile (Wilson-Hilferty; within 1% for k >= 3): the p-quantile
+/// of a chi-square variable with k degrees of freedom, for the z-score of p.
+pub fn chi2_quantile(k: f64, z: f64) -> f64 {
+    let a = 2.0 / (9.0 * k);
+    k * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
+/// 95% bounds of the mean of n chi-square values with `dof` degrees of freedom.
+pub fn mean_bounds(n: usize, dof: f64) -> (f64, f64) {
+    let k = n as f64 * dof;
+    (
+        chi2_quantile(k, -1.959964) / n as f64,
+        chi2_quantile(k, 1.959964) / n as f64,
+    )
+}
+
+/// A run the filter cannot work on.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum LocalizeError {
+    #[error("the model has no range-bearing (`landmark = true`) observation")]
+    NoLandmarkObservation,
+    #[error("{path}: the filter diverged at t = {t}")]
+    Diverged { path: String, t: f64 },
+}
+
+/// The noise for the runs of one robot (`o` says where it comes from; an
+/// estimate pools every run's sightings), with a sentence saying how it was
+/// chosen.
+pub fn noise_for(
+    r: &Runner,
+    runs: &[Run],
+    o: &EkfOptions,
+) -> Result<(NoiseModel, String), LocalizeError> {
+    noise::choose(&Filter::new(r, o)?, runs, o)
+}
+
+/// Run the filter (and the smoother, with `o.smooth`) over one run with `noise`.
+pub fn localize_with(
+    r: &Runner,
+    run: &Run,
+    noise: &NoiseModel,
+    o: &EkfOptions,
+) -> Result<Localization, LocalizeError> {
+    let f = Filter::new(r, o)?;
+    let keep = if o.smooth { Keep::Nodes } else { Keep::Rows };
+    let pass = f.run(run, noise, keep)?;
+    let smoothed = o.smooth.then(|| smoother::smooth(&pass));
+    Ok(Localization {
+        track: pass.rows.iter().map(|n| n.x).collect(),
+        cov: pass.rows.iter().map(|n| n.p).collect(),
+        nees: f.nees(run, &pass),
+        smoothed,
+        nis: pass.nis,
+        accepted: pass.accepted,
+        rejected: pass.rejected,
+        outside: pass.outside,
+    })
+}
+
+/// [`noise_for`] the one run, then [`localize_with`] it.
+pub fn localize(r: &Runner, run: &Run, o: &EkfOptions) -> Result<Localization, LocalizeError> {
+    let (noise, _) = noise_for(r, std::slice::from_ref(run), o)?;
+    localize_with(r, run, &noise, o)
+}
+
+/// NEES of `track` (a smoothed one, say) against the run's ground truth at
+/// every row after the first.
+pub fn nees_of(
+    r: &Runner,
+    run: &Run,
+    track: &[[f64; 3]],
+    cov: &[Matrix3<f64>],
+    o: &EkfOptions,
+) -> Result<Vec<(usize, f64)>, LocalizeError> {
+    Ok(Filter::new(r, o)?.nees_rows(run, track, cov))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi_square_bounds_bracket_the_degrees_of_freedom() {
+        let (lo, hi) = mean_bounds(100, 2.0);
+        assert!(lo < 2.0 && hi > 2.0 && (hi - lo) < 1.2, "{lo} {hi}");
+        // 95% of chi2(30): 16.79 .. 46.98
+        assert!((chi2_quantile(30.0, -1.959964) - 16.79).abs() < 0.3);
+        assert!((chi2_quantile(30.0, 1.959964) - 46.98).abs() < 0.3);
+    }
+}
