@@ -13,6 +13,7 @@ mod generate_cmd;
 mod inverse_cmd;
 mod ir_source;
 mod localize_cmd;
+mod localize_report;
 mod navigate_cmd;
 mod output;
 mod progress;

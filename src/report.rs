@@ -10,10 +10,10 @@ use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
 
-const W: u32 = 560;
-const H: u32 = 420;
+pub(crate) const W: u32 = 560;
+pub(crate) const H: u32 = 420;
 
-type Series<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
+pub(crate) type Series<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
 
 fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
     let pts = series.iter().flat_map(|s| s.2.iter());
@@ -46,12 +46,12 @@ const BUCKETS: usize = 1000;
 /// million-row log would otherwise put millions of SVG elements in the page
 /// (223 MB seen); this keeps every extreme, so a spike or a collapse stays
 /// visible.
-fn decimated(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
+pub(crate) fn decimated(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
     series_of(pts.len(), pts.iter().copied())
 }
 
 /// The points of a series, decimated as they are computed (see [`decimated`]).
-fn series_of(len: usize, pts: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
+pub(crate) fn series_of(len: usize, pts: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
     let mut d = Decimator::new(len);
     pts.for_each(|p| d.push(p));
     d.finish()
@@ -135,7 +135,7 @@ impl Decimator {
 }
 
 /// A line (or scatter) chart as an SVG string.
-fn chart(
+pub(crate) fn chart(
     title: &str,
     xl: &str,
     yl: &str,
@@ -216,13 +216,19 @@ fn chart(
     Ok(svg)
 }
 
-fn esc(s: &str) -> String {
+pub(crate) fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
 }
 
-fn page(title: &str, intro: &str, figures: &[String], tables: &str, doc: &Value) -> String {
+pub(crate) fn page(
+    title: &str,
+    intro: &str,
+    figures: &[String],
+    tables: &str,
+    doc: &Value,
+) -> String {
     let figs: String = figures
         .iter()
         .map(|f| format!("<figure>{f}</figure>"))
@@ -303,14 +309,14 @@ fn drawn(run: &Run, tr: &dyn TrackRows) -> Drawn {
     }
 }
 
-fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
+pub(crate) fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
     run.gt
         .as_ref()
         .map(|g| series_of(g.len(), g.iter().map(|p| (p[0], p[1]))))
         .unwrap_or_default()
 }
 
-fn write(dir: &Path, html: &str) -> Result<(), String> {
+pub(crate) fn write(dir: &Path, html: &str) -> Result<(), String> {
     kinegen_model::files::write_atomic(&dir.join("index.html"), html).map_err(|e| e.to_string())
 }
 
@@ -909,93 +915,6 @@ pub fn inverse_report(
         ),
         &figs,
         &table,
-        doc,
-    );
-    write(dir, &html)
-}
-
-/// `kinegen localize --report`: per run the estimated track against the truth
-/// with 3-sigma position ellipses (seed 001 Figs 3-5), and the noise sweep
-/// (Figs 6-7) when it was run.
-pub fn localize_report(
-    dir: &Path,
-    runs: &[(&Run, &kinegen_analysis::localize::Localization)],
-    sweep: &[kinegen_analysis::sweep::SweepPoint],
-    doc: &Value,
-) -> Result<(), String> {
-    const ELLIPSES: usize = 40;
-    let mut figs = Vec::new();
-    for (run, loc) in runs {
-        let mut series: Vec<Series> = vec![(
-            "EKF estimate",
-            BLUE,
-            loc.track.iter().map(|p| (p[0], p[1])).collect(),
-        )];
-        if run.gt.is_some() {
-            series.push(("ground truth", BLACK, gt_xy(run)));
-        }
-        let every = (loc.track.len() / ELLIPSES).max(1);
-        for (k, (x, p)) in loc.track.iter().zip(&loc.cov).enumerate().step_by(every) {
-            // principal axes of the 2x2 position covariance (closed form)
-            let (a, b, c) = (p[(0, 0)], p[(0, 1)], p[(1, 1)]);
-            let mid = (a + c) / 2.0;
-            let rad = (((a - c) / 2.0).powi(2) + b * b).sqrt();
-            let (l1, l2) = ((mid + rad).max(0.0), (mid - rad).max(0.0));
-            let phi = 0.5 * (2.0 * b).atan2(a - c);
-            let (cp, sp) = (phi.cos(), phi.sin());
-            let pts = (0..=24)
-                .map(|i| {
-                    let t = i as f64 / 24.0 * std::f64::consts::TAU;
-                    let (u, v) = (3.0 * l1.sqrt() * t.cos(), 3.0 * l2.sqrt() * t.sin());
-                    (x[0] + cp * u - sp * v, x[1] + sp * u + cp * v)
-                })
-                .collect();
-            series.push((if k == 0 { "3-sigma ellipse" } else { "" }, RED, pts));
-        }
-        figs.push(chart(
-            &format!("{}: EKF track", run.name),
-            "x (m)",
-            "y (m)",
-            &series,
-            false,
-            true,
-            &[],
-        )?);
-    }
-    if !sweep.is_empty() {
-        const COLORS: [RGBColor; 4] = [BLUE, RED, GREEN, MAGENTA];
-        let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
-        names.dedup();
-        let series: Vec<Series> = names
-            .iter()
-            .enumerate()
-            .map(|(i, n)| {
-                (
-                    *n,
-                    COLORS[i % COLORS.len()],
-                    sweep
-                        .iter()
-                        .filter(|p| p.noise == *n)
-                        .map(|p| (p.sigma.log10(), p.position_rmse_m))
-                        .collect(),
-                )
-            })
-            .collect();
-        figs.push(chart(
-            "noise sweep: position RMSE against each process-noise sigma",
-            "log10(sigma)",
-            "position RMSE (m)",
-            &series,
-            false,
-            false,
-            &[],
-        )?);
-    }
-    let html = page(
-        "EKF localisation",
-        "<p>seed 001 eq. 1-9; the sweep reproduces Figs 6-7.</p>",
-        &figs,
-        "",
         doc,
     );
     write(dir, &html)

@@ -382,6 +382,7 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
         obs.to_str().unwrap(),
         "--landmarks",
         m.to_str().unwrap(),
+        "--spec-noise",
     ]);
     assert!(stdout(&o).contains("overconfident"), "{}", stdout(&o));
     let o = kinegen(&[

@@ -29,7 +29,14 @@ fn reports_render_in_headless_chromium() {
     let second = simulate(
         tmp.path(),
         "second.csv",
-        &["--spec", "spec/diff_drive.toml", "--trajectory", "random", "--seed", "7"],
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--trajectory",
+            "random",
+            "--seed",
+            "7",
+        ],
     );
     let dir = tmp.path().join("report");
     let o = kinegen(&[

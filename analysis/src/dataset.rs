@@ -139,19 +139,16 @@ impl Run {
             }));
         }
         let u = Inputs::from_flat(dt.len(), cols.len(), u);
-        let swing = cols
-            .iter()
-            .any(|(_, b)| *b == Between::Linear)
-            .then(|| {
-                let mut s = Vec::with_capacity(dt.len() * cols.len());
-                for k in 0..dt.len() {
-                    s.extend(cols.iter().map(|(c, b)| match b {
-                        Between::Linear => c[k + 1] - c[k],
-                        Between::Hold | Between::Spread => 0.0,
-                    }));
-                }
-                Inputs::from_flat(dt.len(), cols.len(), s)
-            });
+        let swing = cols.iter().any(|(_, b)| *b == Between::Linear).then(|| {
+            let mut s = Vec::with_capacity(dt.len() * cols.len());
+            for k in 0..dt.len() {
+                s.extend(cols.iter().map(|(c, b)| match b {
+                    Between::Linear => c[k + 1] - c[k],
+                    Between::Hold | Between::Spread => 0.0,
+                }));
+            }
+            Inputs::from_flat(dt.len(), cols.len(), s)
+        });
         let [cx, cy, cth] = r.ir.pose_columns();
         let gt = if log.has(&cx) && log.has(&cy) && log.has(&cth) {
             let (x, y, th) = (log.col(&cx)?, log.col(&cy)?, unwrap(log.col(&cth)?));

@@ -9,8 +9,8 @@
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::steering;
-use kinegen_model::decl::{Between, InputKind};
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
+use kinegen_model::decl::{Between, InputKind};
 use kinegen_model::ir::StepForm;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};

@@ -1020,12 +1020,15 @@ fn inverse_kinematics(
             if any_square {
                 return Ok(Inverse::Unavailable("inverse kinematics is singular everywhere: the twist rows are linearly dependent in the inputs (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));
             }
+            if rates.is_empty() {
+                return Ok(Inverse::Unavailable("the twist is not linear in any input (no cumulative input, and no absolute input enters it linearly), so it cannot be inverted symbolically; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));
+            }
             return Ok(Inverse::Unavailable(format!(
                 "cannot derive inverse kinematics: {} twist row(s) are linear in the {} input(s) it would give ({}), {} needed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)",
                 candidates.len(),
                 k,
                 rates.iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", "),
-                k.max(1)
+                k
             )));
         };
         let outs: Vec<Atom> = (0..rows.len())

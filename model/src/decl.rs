@@ -38,8 +38,10 @@ impl Input {
             return b;
         }
         let unit = self.unit.trim().to_ascii_lowercase();
-        let position = ["rad", "deg", "degree", "degrees", "tick", "ticks", "count", "counts"]
-            .contains(&unit.as_str());
+        let position = [
+            "rad", "deg", "degree", "degrees", "tick", "ticks", "count", "counts",
+        ]
+        .contains(&unit.as_str());
         if position {
             Between::Linear
         } else {

@@ -294,7 +294,11 @@ pub fn inputs_of(m: &Model, class: InputClass) -> Vec<String> {
         .iter()
         .enumerate()
         .filter(|(k, i)| match class {
-            InputClass::Steering => i.kind == InputKind::Absolute,
+            // an angle sampled from a joint (Between::Linear), not a command
+            // that holds between rows: a speed command has no zero offset to read
+            InputClass::Steering => {
+                i.kind == InputKind::Absolute && i.between() == crate::decl::Between::Linear
+            }
             InputClass::RightWheel => signs.as_ref().is_some_and(|s| s[*k] > 0),
             InputClass::LeftWheel => signs.as_ref().is_some_and(|s| s[*k] < 0),
         })
@@ -327,7 +331,7 @@ pub fn has(m: &Model, c: Capability) -> Result<(), &'static str> {
     Err(match c {
         Capability::Twist => "it patches an explicit body twist ([motion]) and this model is given by kinematic constraints",
         Capability::Nonholonomic => "it adds lateral velocity to a model whose twist has none (vy = 0), and this model already moves sideways",
-        Capability::Steering => "the model has no absolute (steering) input",
+        Capability::Steering => "the model has no absolute steering input (an angle read between rows; commands that hold are not)",
         Capability::Differential => "the model has no wheels that turn the body in opposite directions",
         Capability::YawRate => "the model has no yaw-rate (gyro) observation",
     })

@@ -79,7 +79,8 @@ impl<'a> Filter<'a> {
         parts.extend(exact.jac_w.filter(|_| nw > 0));
         let nw = if parts.len() == 3 { nw } else { 0 };
         let fuse = |name: &str, parts: &[&Function]| {
-            kinegen_model::fuse::fuse(name, parts).expect("the parts of one model share argument sizes")
+            kinegen_model::fuse::fuse(name, parts)
+                .expect("the parts of one model share argument sizes")
         };
         Ok(Filter {
             r,
@@ -155,7 +156,10 @@ impl<'a> Filter<'a> {
             let (t1, u) = (run.t[k + 1], &run.u[k]);
             let mut tau = run.t[k];
             loop {
-                let at = order.get(next).map(|&i| run.landmarks[i].t).filter(|&t| t <= t1);
+                let at = order
+                    .get(next)
+                    .map(|&i| run.landmarks[i].t)
+                    .filter(|&t| t <= t1);
                 let until = at.unwrap_or(t1).max(tau);
                 let from = plan.sightings.len();
                 while let Some(&i) = order.get(next).filter(|&&i| run.landmarks[i].t <= until) {
@@ -228,7 +232,14 @@ impl<'a> Filter<'a> {
         s.landmark.clone_from(&plan.landmark);
         let start_cov = Matrix3::from_diagonal(&Vector3::from(self.start_sigma.map(|s| s * s)));
         let var = Vector2::from_fn(|j, _| (self.obs_sigma[j] * noise.persistent[j]).powi(2));
-        let mut b = Belief::new(plan.start, start_cov, plan.landmarks, var, noise.memory_s, run.t[0]);
+        let mut b = Belief::new(
+            plan.start,
+            start_cov,
+            plan.landmarks,
+            var,
+            noise.memory_s,
+            run.t[0],
+        );
         let mut pass = Pass {
             outside: plan.outside,
             ..Pass::default()
@@ -366,15 +377,26 @@ impl<'a> Filter<'a> {
     /// NEES of `track` with covariances `cov` at every row after the first,
     /// when the log has ground truth of the body pose (a model that observes
     /// an offset tracker has none to compare with).
-    pub fn nees_rows(&self, run: &Run, track: &[[f64; 3]], cov: &[Matrix3<f64>]) -> Vec<(usize, f64)> {
-        let Some(g) = run.gt.as_ref().filter(|_| self.r.ir.observation(Pose).is_none()) else {
+    pub fn nees_rows(
+        &self,
+        run: &Run,
+        track: &[[f64; 3]],
+        cov: &[Matrix3<f64>],
+    ) -> Vec<(usize, f64)> {
+        let Some(g) = run
+            .gt
+            .as_ref()
+            .filter(|_| self.r.ir.observation(Pose).is_none())
+        else {
             return Vec::new();
         };
         (1..track.len().min(g.len()))
             .filter_map(|k| {
                 let x = track[k];
                 let e = Vector3::new(x[0] - g[k][0], x[1] - g[k][1], wrap(x[2] - g[k][2]));
-                cov[k].try_inverse().map(|ci| (k, (e.transpose() * ci * e)[(0, 0)]))
+                cov[k]
+                    .try_inverse()
+                    .map(|ci| (k, (e.transpose() * ci * e)[(0, 0)]))
             })
             .collect()
     }
@@ -550,7 +572,11 @@ impl Belief {
         memory_s: f64,
         t: f64,
     ) -> Belief {
-        let n = if var.iter().any(|v| *v > 0.0) { landmarks } else { 0 };
+        let n = if var.iter().any(|v| *v > 0.0) {
+            landmarks
+        } else {
+            0
+        };
         Belief {
             x,
             sin_cos: x[2].sin_cos(),
@@ -610,7 +636,11 @@ impl Belief {
     /// own covariance (zeros without persistent errors).
     fn of(&self, l: usize) -> (Vector2<f64>, nalgebra::Matrix3x2<f64>, Matrix2<f64>) {
         if self.n() == 0 {
-            return (Vector2::zeros(), nalgebra::Matrix3x2::zeros(), Matrix2::zeros());
+            return (
+                Vector2::zeros(),
+                nalgebra::Matrix3x2::zeros(),
+                Matrix2::zeros(),
+            );
         }
         (self.bias[l], self.pb[l], self.bb_at(l, l))
     }

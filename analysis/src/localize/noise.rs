@@ -41,6 +41,9 @@ pub struct NoiseModel {
     pub memory_s: f64,
 }
 
+/// Nelder-Mead runs at most this many times, each from the last one's result.
+const RESTARTS: usize = 4;
+
 /// Fewer sightings than this say too little about the noise: the spec's is kept.
 pub const MIN_SIGHTINGS: usize = 20;
 
@@ -81,16 +84,25 @@ impl NoiseModel {
             .zip(&self.density)
             .map(|((n, s), d)| {
                 if *d {
-                    format!("{n} = {s:.4e} per sqrt(s) (density: variance {:.3e} per second)", s * s)
+                    format!(
+                        "{n} = {s:.4e} per sqrt(s) (density: variance {:.3e} per second)",
+                        s * s
+                    )
                 } else {
                     format!("{n} = {s:.4e} per row (seed 001 eq. 5)")
                 }
             })
             .collect();
         out.push(format!(
-            "observation sigmas: the spec's times {:.3} (range) and {:.3} (bearing)",
+            "observation sigmas, white part: the spec's times {:.3} (range) and {:.3} (bearing)",
             self.obs_scale[0], self.obs_scale[1]
         ));
+        if self.persistent.iter().any(|p| *p > 0.0) {
+            out.push(format!(
+                "observation errors, persistent part (per landmark, lasting about {:.0} s): the spec's sigmas times {:.3} (range) and {:.3} (bearing)",
+                self.memory_s, self.persistent[0], self.persistent[1]
+            ));
+        }
         out
     }
 }
@@ -176,10 +188,12 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
         let m = at(v);
         runs.iter()
             .zip(&plans)
-            .map(|(run, plan)| match f.run_plan(plan, run, &m, super::Keep::Cost) {
-                Ok(Pass { cost, .. }) if cost.is_finite() => cost,
-                _ => f64::INFINITY,
-            })
+            .map(
+                |(run, plan)| match f.run_plan(plan, run, &m, super::Keep::Cost) {
+                    Ok(Pass { cost, .. }) if cost.is_finite() => cost,
+                    _ => f64::INFINITY,
+                },
+            )
             .sum()
     };
     // coarse: one factor on every free sigma, 1e-2 .. 1e3 (in parallel: the
@@ -200,8 +214,22 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|b| b.1)
         .unwrap_or_else(|| vec![0.0; n]);
-    let evals = std::env::var("KG_EVALS").ok().and_then(|v| v.parse().ok()).unwrap_or(300);
-    at(&nelder_mead(&cost, best, 0.7, 1e-4, evals))
+    // Nelder-Mead restarted from its own result until a restart gains
+    // nothing: a simplex can collapse on a flat valley before its floor
+    let mut x = best;
+    let mut c = cost(&x);
+    for _ in 0..RESTARTS {
+        let next = nelder_mead(&cost, x.clone(), 0.7, 1e-4, 300);
+        let cn = cost(&next);
+        let gained = c - cn;
+        if cn < c {
+            (x, c) = (next, cn);
+        }
+        if gained < 1e-3 * (1.0 + c.abs()) * 1e-2 {
+            break;
+        }
+    }
+    at(&x)
 }
 
 /// Minimise `f` from `x0` by Nelder-Mead (the standard coefficients 1, 2,
@@ -212,7 +240,13 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
 /// filter pass over a log with a gate in it (piecewise smooth, no gradient),
 /// in 2 to 5 dimensions, and this is the textbook method in 40 lines;
 /// argmin's would bring its own math backend traits for that.
-pub fn nelder_mead(f: &dyn Fn(&[f64]) -> f64, x0: Vec<f64>, step: f64, tol: f64, max_evals: usize) -> Vec<f64> {
+pub fn nelder_mead(
+    f: &dyn Fn(&[f64]) -> f64,
+    x0: Vec<f64>,
+    step: f64,
+    tol: f64,
+    max_evals: usize,
+) -> Vec<f64> {
     let n = x0.len();
     let mut simplex: Vec<(f64, Vec<f64>)> = vec![(f(&x0), x0.clone())];
     for i in 0..n {
@@ -273,7 +307,10 @@ mod tests {
     fn nelder_mead_finds_a_quadratic_minimum() {
         let f = |x: &[f64]| (x[0] - 1.0).powi(2) + 10.0 * (x[1] + 2.0).powi(2) + 3.0;
         let x = nelder_mead(&f, vec![0.0, 0.0], 0.5, 1e-12, 2000);
-        assert!((x[0] - 1.0).abs() < 1e-4 && (x[1] + 2.0).abs() < 1e-4, "{x:?}");
+        assert!(
+            (x[0] - 1.0).abs() < 1e-4 && (x[1] + 2.0).abs() < 1e-4,
+            "{x:?}"
+        );
     }
 
     #[test]
@@ -288,7 +325,10 @@ mod tests {
         };
         // pose variance of one noise input over h: G ~ h, so h^2 * var
         let over = |i: usize, pieces: &[f64], row: f64| -> f64 {
-            pieces.iter().map(|h| h * h * m.step_variance(i, *h, row)).sum()
+            pieces
+                .iter()
+                .map(|h| h * h * m.step_variance(i, *h, row))
+                .sum()
         };
         for i in 0..2 {
             let whole = over(i, &[0.1], 0.1);

@@ -1,0 +1,346 @@
+//! `kinegen localize --report`: for each run, a map (estimate, smoothed
+//! estimate, ground truth, dead reckoning, landmarks; legend beside the map,
+//! never over it), the position error over time with its 3-sigma bound, the
+//! NIS over time with its chi-square band, and a table of the figures and
+//! the noise; the noise sweep (seed 001 Figs 6-7) when it was run.
+use crate::localize_cmd::Summary;
+use crate::report::{decimated, esc, page, series_of, write, Series, H, W};
+use kinegen_analysis::localize::{mean_bounds, Localization};
+use kinegen_analysis::model::Runner;
+use kinegen_analysis::run::Run;
+use plotters::prelude::*;
+use serde_json::Value;
+use std::path::Path;
+
+/// Width of the legend strip beside a chart, px.
+const LEGEND_W: u32 = 170;
+/// Sightings averaged by the NIS curve.
+const NIS_WINDOW: usize = 50;
+
+/// One run's inputs to the page.
+pub struct RunPage<'a> {
+    pub run: &'a Run,
+    pub loc: &'a Localization,
+    pub summary: &'a Summary,
+}
+
+pub fn localize_report(
+    dir: &Path,
+    r: &Runner,
+    runs: &[RunPage],
+    noise: &[String],
+    sweep: &[kinegen_analysis::sweep::SweepPoint],
+    doc: &Value,
+) -> Result<(), String> {
+    let mut figs = Vec::new();
+    for p in runs {
+        figs.push(map(r, p)?);
+        if p.run.gt.is_some() {
+            figs.push(error_over_time(p)?);
+        }
+        if !p.loc.nis.is_empty() {
+            figs.push(nis_over_time(p)?);
+        }
+    }
+    if !sweep.is_empty() {
+        figs.push(sweep_chart(sweep)?);
+    }
+    let html = page(
+        "EKF localisation",
+        "<p>Extended Kalman filter on the model's own kernels (seed 001 eq. 1-9), predicting to each sighting's own time; \
+         the smoother (with --smooth) also uses the sightings after each moment.</p>",
+        &figs,
+        &tables(runs, noise),
+        doc,
+    );
+    write(dir, &html)
+}
+
+/// A chart whose legend stands in a strip to its right.
+fn chart_beside(
+    title: &str,
+    xl: &str,
+    yl: &str,
+    series: &[Series],
+    points: &[Series],
+    equal: bool,
+) -> Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (W + LEGEND_W, H)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (area, legend) = root.split_horizontally(W);
+        let all: Vec<(f64, f64)> = series
+            .iter()
+            .chain(points)
+            .flat_map(|s| s.2.iter().copied())
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .collect();
+        let ((mut x0, mut x1), (mut y0, mut y1)) = span(&all);
+        if equal {
+            let (cx, cy, half) = (
+                (x0 + x1) / 2.0,
+                (y0 + y1) / 2.0,
+                (x1 - x0).max(y1 - y0) / 2.0,
+            );
+            (x0, x1, y0, y1) = (cx - half, cx + half, cy - half, cy + half);
+        }
+        let mut c = ChartBuilder::on(&area)
+            .caption(title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(36)
+            .y_label_area_size(56)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| e.to_string())?;
+        c.configure_mesh()
+            .x_desc(xl)
+            .y_desc(yl)
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (_, color, pts) in points {
+            c.draw_series(pts.iter().map(|p| Circle::new(*p, 2, color.filled())))
+                .map_err(|e| e.to_string())?;
+        }
+        for (name, color, pts) in series {
+            let width = if name.is_empty() { 1 } else { 2 };
+            c.draw_series(LineSeries::new(decimated(pts), color.stroke_width(width)))
+                .map_err(|e| e.to_string())?;
+        }
+        let entries = series
+            .iter()
+            .map(|s| (s.0, s.1, false))
+            .chain(points.iter().map(|s| (s.0, s.1, true)))
+            .filter(|e| !e.0.is_empty());
+        for (i, (name, color, dot)) in entries.enumerate() {
+            let y = 40 + 22 * i as i32;
+            if dot {
+                legend
+                    .draw(&Circle::new((14, y), 4, color.filled()))
+                    .map_err(|e| e.to_string())?;
+            } else {
+                legend
+                    .draw(&PathElement::new(
+                        vec![(4, y), (24, y)],
+                        color.stroke_width(2),
+                    ))
+                    .map_err(|e| e.to_string())?;
+            }
+            legend
+                .draw(&Text::new(
+                    name.to_string(),
+                    (30, y - 7),
+                    ("sans-serif", 13),
+                ))
+                .map_err(|e| e.to_string())?;
+        }
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// The bounding box of `pts` with a 5% margin.
+fn span(pts: &[(f64, f64)]) -> ((f64, f64), (f64, f64)) {
+    if pts.is_empty() {
+        return ((0.0, 1.0), (0.0, 1.0));
+    }
+    let fold = |f: fn(&(f64, f64)) -> f64| {
+        pts.iter()
+            .map(f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            })
+    };
+    let ((x0, x1), (y0, y1)) = (fold(|p| p.0), fold(|p| p.1));
+    let (px, py) = (((x1 - x0) * 0.05).max(1e-9), ((y1 - y0) * 0.05).max(1e-9));
+    ((x0 - px, x1 + px), (y0 - py, y1 + py))
+}
+
+/// The last two parts of a run's path (`robot3/log.csv`): enough to tell
+/// runs apart in a chart's title.
+fn short(path: &str) -> String {
+    let parts: Vec<&str> = path.rsplit('/').take(2).collect();
+    parts.into_iter().rev().collect::<Vec<_>>().join("/")
+}
+
+fn xy(track: &[[f64; 3]]) -> Vec<(f64, f64)> {
+    series_of(track.len(), track.iter().map(|p| (p[0], p[1])))
+}
+
+fn map(r: &Runner, p: &RunPage) -> Result<String, String> {
+    let (run, loc) = (p.run, p.loc);
+    let dead = kinegen_analysis::deadreckon::run(r, &r.p, run, false);
+    let mut series: Vec<Series> = vec![("dead reckoning", RGBColor(170, 170, 170), xy(&dead.pose))];
+    if let Some(g) = &run.gt {
+        series.push((
+            "ground truth",
+            BLACK,
+            series_of(g.len(), g.iter().map(|p| (p[0], p[1]))),
+        ));
+    }
+    series.push(("EKF estimate", BLUE, xy(&loc.track)));
+    if let Some((s, _)) = &loc.smoothed {
+        series.push(("smoothed (RTS)", RGBColor(0, 150, 60), xy(s)));
+    }
+    let mut marks: Vec<(f64, f64)> = run.landmarks.iter().map(|z| (z.xl, z.yl)).collect();
+    marks.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    marks.dedup();
+    // the map is drawn around the robot's paths and the landmarks it saw;
+    // dead reckoning that wanders far off would shrink everything else
+    let keep: Vec<(f64, f64)> = series[1..]
+        .iter()
+        .flat_map(|s| s.2.iter().copied())
+        .chain(marks.iter().copied())
+        .collect();
+    let ((x0, x1), (y0, y1)) = span(&keep);
+    let pad = 0.25 * (x1 - x0).max(y1 - y0);
+    series[0]
+        .2
+        .retain(|q| q.0 > x0 - pad && q.0 < x1 + pad && q.1 > y0 - pad && q.1 < y1 + pad);
+    chart_beside(
+        &format!("{}: map", short(&run.path)),
+        "x (m)",
+        "y (m)",
+        &series,
+        &[("landmarks", RED, marks)],
+        true,
+    )
+}
+
+fn error_over_time(p: &RunPage) -> Result<String, String> {
+    let (run, loc) = (p.run, p.loc);
+    let g = run.gt.as_ref().expect("checked by the caller");
+    let t0 = run.t[0];
+    let err = |track: &[[f64; 3]]| {
+        series_of(
+            track.len(),
+            track.iter().zip(g).enumerate().map(|(k, (x, g))| {
+                (
+                    run.t[k] - t0,
+                    ((x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2)).sqrt(),
+                )
+            }),
+        )
+    };
+    let bound = |cov: &[kinegen_analysis::localize::Matrix3<f64>]| {
+        series_of(
+            cov.len(),
+            cov.iter()
+                .enumerate()
+                .map(|(k, c)| (run.t[k] - t0, 3.0 * (c[(0, 0)] + c[(1, 1)]).max(0.0).sqrt())),
+        )
+    };
+    let mut series: Vec<Series> = vec![
+        ("EKF error", BLUE, err(&loc.track)),
+        ("EKF 3-sigma", RGBColor(120, 160, 255), bound(&loc.cov)),
+    ];
+    if let Some((s, c)) = &loc.smoothed {
+        series.push(("smoothed error", RGBColor(0, 150, 60), err(s)));
+        series.push(("smoothed 3-sigma", RGBColor(140, 210, 160), bound(c)));
+    }
+    chart_beside(
+        &format!("{}: position error, 3-sigma bound", short(&run.path)),
+        "t (s)",
+        "position error (m)",
+        &series,
+        &[],
+        false,
+    )
+}
+
+fn nis_over_time(p: &RunPage) -> Result<String, String> {
+    let (run, loc) = (p.run, p.loc);
+    let t0 = run.t[0];
+    let pts: Vec<(f64, f64)> = loc.nis.iter().map(|(t, n)| (t - t0, *n)).collect();
+    let w = NIS_WINDOW.min(pts.len()).max(1);
+    let mean: Vec<(f64, f64)> = pts
+        .windows(w)
+        .map(|win| {
+            (
+                win[w / 2].0,
+                win.iter().map(|q| q.1).sum::<f64>() / w as f64,
+            )
+        })
+        .collect();
+    let (lo, hi) = mean_bounds(w, 2.0);
+    let (a, b) = (
+        pts.first().map_or(0.0, |q| q.0),
+        pts.last().map_or(1.0, |q| q.0),
+    );
+    chart_beside(
+        &format!("{}: NIS of each sighting used", short(&run.path)),
+        "t (s)",
+        "NIS (chi-square, 2 dof)",
+        &[
+            (&format!("mean of {w}"), BLUE, mean),
+            ("95% band of the mean", RED, vec![(a, lo), (b, lo)]),
+            ("", RED, vec![(a, hi), (b, hi)]),
+        ],
+        &[("each sighting", RGBColor(150, 150, 150), decimated(&pts))],
+        false,
+    )
+}
+
+fn sweep_chart(sweep: &[kinegen_analysis::sweep::SweepPoint]) -> Result<String, String> {
+    const COLORS: [RGBColor; 4] = [BLUE, RED, GREEN, MAGENTA];
+    let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
+    names.dedup();
+    let series: Vec<Series> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            (
+                *n,
+                COLORS[i % COLORS.len()],
+                sweep
+                    .iter()
+                    .filter(|p| p.noise == *n)
+                    .map(|p| (p.sigma.log10(), p.position_rmse_m))
+                    .collect(),
+            )
+        })
+        .collect();
+    chart_beside(
+        "noise sweep (seed 001 Figs 6-7): position RMSE against each sigma",
+        "log10(sigma)",
+        "position RMSE (m)",
+        &series,
+        &[],
+        false,
+    )
+}
+
+fn num(v: Option<f64>, digits: usize) -> String {
+    v.map_or("n/a".into(), |v| format!("{v:.digits$}"))
+}
+
+fn tables(runs: &[RunPage], noise: &[String]) -> String {
+    let mut t = String::from(
+        "<table><tr><th>run</th><th>position RMSE (m)</th><th>smoothed RMSE (m)</th><th>dead reckoning RMSE (m)</th>\
+         <th>mean NEES (95% bounds)</th><th>mean NIS (95% bounds)</th><th>sightings used</th><th>rejected</th><th>outside the log</th></tr>",
+    );
+    for p in runs {
+        let s = p.summary;
+        let bounded = |m: Option<f64>, b: Option<(f64, f64)>| match (m, b) {
+            (Some(m), Some((lo, hi))) => format!("{m:.2} ({lo:.2}-{hi:.2})"),
+            _ => "n/a".into(),
+        };
+        t += &format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(&p.run.path),
+            num(s.rmse, 4),
+            num(s.smoothed.and_then(|x| x.0), 4),
+            num(s.dead_reckoning, 4),
+            bounded(s.nees, s.nees_bounds),
+            bounded(s.nis, s.nis_bounds),
+            p.loc.accepted,
+            p.loc.rejected,
+            p.loc.outside,
+        );
+    }
+    t += "</table><table><tr><th>noise the filter ran with</th></tr>";
+    for line in noise {
+        t += &format!("<tr><td>{}</td></tr>", esc(line));
+    }
+    t + "</table>"
+}
