@@ -26,7 +26,9 @@ pub struct LocalizeArgs {
     pub track: Option<PathBuf>,
     /// Process-noise standard deviation NAME=SIGMA (repeatable), in the spec's
     /// form for that `[[noise]]` (a density where its unit says `/sqrt(Hz)`,
-    /// per row otherwise). Without it the noise is estimated from the log.
+    /// per row otherwise). With every `[[noise]]` given the filter runs as
+    /// given, with the spec's observation sigmas; otherwise what is not given
+    /// is estimated from the log.
     #[arg(long)]
     pub noise: Vec<String>,
     /// Use the spec's `[[noise]]` sigmas and observation sigmas as written

@@ -1730,12 +1730,15 @@ fn calibration_never_leaves_held_out_runs_worse_than_nominal_without_saying_why(
         "{} of {cases} calibrations left the held-out run worse, each with its reason: {worse:#?}",
         worse.len()
     );
-    // the turn-in-place unicycle is the case that shows the warning works;
-    // the others are only the turns in place of the 12-parameter omni_caster
-    // (a unicycle turning in place for one lap stays nominal: its speed scale
-    // is undetermined there)
+    // the turns in place are the cases that show the warning works (every
+    // other trajectory halves the held-out error, asserted above). The
+    // unicycle's logged commands are what it executes (they hold between
+    // rows, issue 34), so turning in place its speed command is exactly 0 and
+    // its speed scale stays nominal, undetermined; the 12-parameter
+    // omni_caster turning in place for four laps is the case left worse, and
+    // says why.
     assert!(
-        worse.iter().any(|c| c.starts_with("unicycle_ekf spin x4")),
+        !worse.is_empty() && worse.iter().all(|c| c.contains(" spin x")),
         "{worse:?}"
     );
     let expected = [

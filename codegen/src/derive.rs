@@ -1018,7 +1018,9 @@ fn inverse_kinematics(
         }
         let Some((rows, inv)) = chosen else {
             if any_square {
-                return Ok(Inverse::Unavailable("inverse kinematics is singular everywhere: the twist rows are linearly dependent in the inputs (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));
+                // linear but singular everywhere: almost always a slip in the
+                // spec (a sum where a difference was meant), so an error
+                return Err(err_kin(model, "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)"));
             }
             if rates.is_empty() {
                 return Ok(Inverse::Unavailable("the twist is not linear in any input (no cumulative input, and no absolute input enters it linearly), so it cannot be inverted symbolically; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));

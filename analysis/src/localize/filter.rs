@@ -665,20 +665,20 @@ impl Belief {
         let kb: Vec<Matrix2<f64>> = eh.iter().map(|e| e * si).collect();
         self.x += kp * y;
         self.sin_cos = self.x[2].sin_cos();
-        for j in 0..n {
-            self.bias[j] += kb[j] * y;
+        for (b, k) in self.bias.iter_mut().zip(&kb) {
+            *b += k * y;
         }
         let ks = kp * sm;
         let p = self.p - ks * kp.transpose();
         self.p = (p + p.transpose()) * 0.5;
-        for j in 0..n {
-            self.pb[j] -= ks * kb[j].transpose();
+        for (c, k) in self.pb.iter_mut().zip(&kb) {
+            *c -= ks * k.transpose();
         }
         let unscale = 1.0 / self.bb_scale;
-        for i in 0..n {
-            let ki = kb[i] * sm * unscale;
-            for j in 0..n {
-                self.bb[i * n + j] -= ki * kb[j].transpose();
+        for (row, ki) in self.bb.chunks_mut(n.max(1)).zip(&kb) {
+            let ki = ki * sm * unscale;
+            for (b, kj) in row.iter_mut().zip(&kb) {
+                *b -= ki * kj.transpose();
             }
         }
     }

@@ -64,6 +64,9 @@ impl Default for EkfOptions {
     }
 }
 
+/// The smoother's pose and covariance at every row.
+pub type Smoothed = (Vec<[f64; 3]>, Vec<Matrix3<f64>>);
+
 /// One run's filter output.
 #[derive(Debug, Clone)]
 pub struct Localization {
@@ -71,7 +74,7 @@ pub struct Localization {
     pub track: Vec<[f64; 3]>,
     pub cov: Vec<Matrix3<f64>>,
     /// The smoothed pose and covariance at every row (with `smooth`).
-    pub smoothed: Option<(Vec<[f64; 3]>, Vec<Matrix3<f64>>)>,
+    pub smoothed: Option<Smoothed>,
     /// Time and normalised innovation squared of each accepted observation.
     pub nis: Vec<(f64, f64)>,
     /// Normalised estimation error squared at each row with ground truth

@@ -122,7 +122,10 @@ pub fn choose(
             given[i] = true;
         }
     }
-    if o.noise == NoiseSource::Spec {
+    // every process noise given: the user has chosen the filter, the
+    // observation sigmas are the spec's (estimating them alone against a
+    // fixed process noise would let them explain the motion's errors)
+    if o.noise == NoiseSource::Spec || given.iter().all(|g| *g) {
         let from = if given.iter().any(|g| *g) {
             "given (--noise) and the spec's"
         } else {
@@ -141,8 +144,8 @@ pub fn choose(
     Ok((
         est,
         format!(
-            "noise: estimated from the {sightings} sightings of the log(s) by the innovations' likelihood: {} and the observation errors, white and persistent (--noise NAME=SIGMA fixes a process noise; --spec-noise takes the spec's)",
-            if given.iter().all(|g| *g) { "the process noise as given" } else { "the process-noise densities" }
+            "noise: estimated from the {sightings} sightings of the log(s) by the innovations' likelihood: the process-noise densities{} and the observation errors, white and persistent (--noise NAME=SIGMA fixes a process noise, all of them fix the filter; --spec-noise takes the spec's)",
+            if given.iter().any(|g| *g) { " not given" } else { "" }
         ),
     ))
 }
@@ -160,15 +163,19 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
     };
     // a per-row sigma as the density that adds the same variance per median row
     let mut base = start.clone();
-    for i in 0..base.sigma.len() {
-        if !given[i] {
-            if !base.density[i] {
-                base.sigma[i] *= median_dt.sqrt();
-                base.density[i] = true;
-            }
-            if base.sigma[i] <= 0.0 {
-                base.sigma[i] = 0.01;
-            }
+    for ((sigma, density), _) in base
+        .sigma
+        .iter_mut()
+        .zip(base.density.iter_mut())
+        .zip(given)
+        .filter(|(_, g)| !**g)
+    {
+        if !*density {
+            *sigma *= median_dt.sqrt();
+            *density = true;
+        }
+        if *sigma <= 0.0 {
+            *sigma = 0.01;
         }
     }
     let free: Vec<usize> = (0..base.sigma.len()).filter(|&i| !given[i]).collect();

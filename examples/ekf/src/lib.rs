@@ -69,7 +69,8 @@ impl Ekf {
         let s = h * self.cov * h.transpose() + self.r;
         let si = s.try_inverse()?;
         let nis = (y.transpose() * si * y)[(0, 0)];
-        if !(nis <= self.gate) {
+        // a NaN innovation is rejected like one beyond the gate
+        if nis.is_nan() || nis > self.gate {
             return None;
         }
         let k = self.cov * h.transpose() * si;

@@ -7,6 +7,8 @@
 //! as f64 text (an f32 widens exactly).
 use kinegen_generated::Real;
 
+// `Real` is f32 in the `f32` build, where the cast is not the identity
+#[allow(clippy::unnecessary_cast)]
 fn show(v: &[Real]) -> String {
     v.iter()
         .map(|x| format!("{:e}", *x as f64))
