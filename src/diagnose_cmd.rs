@@ -113,10 +113,25 @@ pub fn run_diagnosis(
 pub fn run(c: Common) -> ExitCode {
     let out = Out::new(c.json.as_deref());
     let t0 = Instant::now();
-    let prep = match prepare(&c) {
+    let mut prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
+    // pieces of a log cut at its gaps that are too short to diagnose are left
+    // out, as long as the log leaves enough: diagnosis pools the rest
+    let min = kinegen_analysis::diagnose::MIN_ROWS;
+    if prep.runs.iter().any(|r| r.t.len() >= min) {
+        let (keep, short): (Vec<_>, Vec<_>) = prep.runs.drain(..).partition(|r| r.t.len() >= min);
+        if !short.is_empty() {
+            prep.warnings.push(format!(
+                "{} piece(s) under {min} rows left out of the diagnosis ({}); it pools the other {}",
+                short.len(),
+                short.iter().take(3).map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
+                keep.len()
+            ));
+        }
+        prep.runs = keep;
+    }
     crate::analysis_cmd::say_warnings(&out, &prep.warnings);
     // a robot that never moves shows no effect; every ratio would be 0/0
     if prep.runs.iter().all(|r| r.rest_steps() == r.steps()) {

@@ -141,6 +141,7 @@ impl<'a> Filter<'a> {
             landmark: std::mem::take(&mut s.landmark),
             landmarks: s.landmarks,
             nw: self.noise_count(),
+            macros: Vec::new(),
         };
         let mut next = 0;
         while next < order.len() && run.landmarks[order[next]].t < t_first {
@@ -184,6 +185,7 @@ impl<'a> Filter<'a> {
             }
         }
         plan.outside += order.len() - next;
+        plan.compose();
         plan
     }
 
@@ -256,6 +258,21 @@ impl<'a> Filter<'a> {
             p: b.p,
         };
         self.close(&mut pass, node, keep, true);
+        if keep == Keep::Cost {
+            for m in &plan.macros {
+                predict_macro(&mut b, m, noise);
+                for &(i, k) in &plan.sightings[m.sightings.0..m.sightings.1] {
+                    self.update(&mut b, run, i, &run.u[k], noise, &mut pass, &mut s);
+                }
+                if !b.x.iter().all(|v| v.is_finite()) {
+                    return Err(LocalizeError::Diverged {
+                        path: run.path.clone(),
+                        t: m.t,
+                    });
+                }
+            }
+            return Ok(pass);
+        }
         for seg in &plan.segments {
             let f = predict(&mut b, seg, plan.nw, noise);
             let mut node = Node {
@@ -425,6 +442,87 @@ pub struct Plan {
     landmark: Vec<usize>,
     landmarks: usize,
     nw: usize,
+    /// The segments from one sighting time to the next composed into one
+    /// (see [`Macro`]): what the noise estimate's passes run on.
+    macros: Vec<Macro>,
+}
+
+/// The segments between two sighting times as one prediction, in the body
+/// frame of its start. The pose moves by `delta`; the process noise it adds
+/// is `sum_i sigma_i^2 m[i]` (rotated into the world at run time), since
+/// each segment's noise variance is sigma_i^2 times a factor of its length
+/// and the transitions that carry it to the end do not depend on the noise.
+/// A pass that needs no row estimates then costs one step per sighting time
+/// rather than one per row.
+struct Macro {
+    delta: [f64; 3],
+    turn: (f64, f64),
+    /// Per noise input, its contribution at unit sigma (3 x 3, body frame),
+    /// [as a density, as a per-row sigma].
+    m: Vec<[Matrix3<f64>; 2]>,
+    /// The sightings at the end (a range of `Plan::sightings`).
+    sightings: (usize, usize),
+    t: f64,
+}
+
+impl Plan {
+    /// Compose the segments into [`Macro`]s.
+    fn compose(&mut self) {
+        let nw = self.nw;
+        let mut out = Vec::new();
+        let mut from = 0;
+        while from < self.segments.len() {
+            let mut to = from;
+            while to + 1 < self.segments.len()
+                && self.segments[to].sightings.0 == self.segments[to].sightings.1
+            {
+                to += 1;
+            }
+            let segs = &self.segments[from..=to];
+            // positions after each segment, from the origin
+            let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 0.0f64);
+            let mut after = Vec::with_capacity(segs.len());
+            let mut heading = Vec::with_capacity(segs.len());
+            for seg in segs {
+                heading.push(th);
+                let (sn, cs) = th.sin_cos();
+                let [dx, dy, dth] = seg.delta;
+                x += cs * dx - sn * dy;
+                y += sn * dx + cs * dy;
+                th += dth;
+                after.push((x, y));
+            }
+            let mut m = vec![[Matrix3::zeros(); 2]; nw];
+            for (j, seg) in segs.iter().enumerate() {
+                if seg.h < NO_TIME {
+                    continue;
+                }
+                let (sn, cs) = heading[j].sin_cos();
+                // the transition from this segment's end to the macro's end
+                let (xj, yj) = after[j];
+                let (a, c) = (-(y - yj), x - xj);
+                for (i, mi) in m.iter_mut().enumerate() {
+                    let (gx, gy, gt) = (seg.g[i], seg.g[nw + i], seg.g[2 * nw + i]);
+                    let g =
+                        Vector3::new(cs * gx - sn * gy + a * gt, sn * gx + cs * gy + c * gt, gt);
+                    let gg = g * g.transpose();
+                    // variance per unit sigma^2: see NoiseModel::step_variance
+                    mi[0] += gg / seg.h;
+                    mi[1] += gg * (seg.dt_row / seg.h);
+                }
+            }
+            let last = &segs[segs.len() - 1];
+            out.push(Macro {
+                delta: [x, y, th],
+                turn: th.sin_cos(),
+                m,
+                sightings: last.sightings,
+                t: last.t,
+            });
+            from = to + 1;
+        }
+        self.macros = out;
+    }
 }
 
 /// One prediction: `h` s of a row of `dt_row` s, ending at `t` with the
@@ -445,43 +543,36 @@ struct Segment {
 
 /// Predict one segment (seed 001 eq. 2-5) from the body-frame step: the
 /// pose moves by the rotated increment, F = d(pose')/d(pose) of that
-/// composition, G the body noise Jacobian rotated; returns F.
-///
-/// F is the identity but for its heading column (-wy, wx, 1), so F P F^T is
-/// written out (a third of the general product) and the F's since the last
-/// sighting add up instead of multiplying. The heading's sine and cosine
-/// are carried along and turned by the segment's own, computed once in the
-/// plan, rather than recomputed from the heading every segment.
+/// composition (see [`Belief::advance`]), G the body noise Jacobian rotated;
+/// returns F. The heading's sine and cosine are carried along and turned by
+/// the segment's own, computed once in the plan, rather than recomputed from
+/// the heading every segment.
 fn predict(b: &mut Belief, seg: &Segment, nw: usize, noise: &NoiseModel) -> Matrix3<f64> {
     if seg.h < NO_TIME {
         return Matrix3::identity();
     }
     let (sn, cs) = b.sin_cos;
-    let [dx, dy, dth] = seg.delta;
-    let (wx, wy) = (cs * dx - sn * dy, sn * dx + cs * dy);
-    let (a, c) = (-wy, wx);
-    let p = &mut b.p;
-    // (F P F^T) with F = I + a e0 e2^T + c e1 e2^T
-    let (p02, p12, p22) = (p[(0, 2)], p[(1, 2)], p[(2, 2)]);
-    let n00 = p[(0, 0)] + 2.0 * a * p02 + a * a * p22;
-    let n01 = p[(0, 1)] + a * p12 + c * p02 + a * c * p22;
-    let n11 = p[(1, 1)] + 2.0 * c * p12 + c * c * p22;
-    let n02 = p02 + a * p22;
-    let n12 = p12 + c * p22;
-    let mut q = Matrix3::new(n00, n01, n02, n01, n11, n12, n02, n12, p22);
+    let mut q = Matrix3::zeros();
     for i in 0..nw {
         let var = noise.step_variance(i, seg.h, seg.dt_row);
         let (gx, gy, gt) = (seg.g[i], seg.g[nw + i], seg.g[2 * nw + i]);
         let g = Vector3::new(cs * gx - sn * gy, sn * gx + cs * gy, gt);
         q += g * g.transpose() * var;
     }
-    *p = q;
-    b.f_acc[(0, 2)] += a;
-    b.f_acc[(1, 2)] += c;
-    b.x += Vector3::new(wx, wy, dth);
-    let (sd, cd) = seg.turn;
-    b.sin_cos = (sn * cd + cs * sd, cs * cd - sn * sd);
-    Matrix3::new(1.0, 0.0, a, 0.0, 1.0, c, 0.0, 0.0, 1.0)
+    b.advance(seg.delta, seg.turn, q)
+}
+
+/// Predict a whole [`Macro`]: the same as its segments one by one, to
+/// rounding.
+fn predict_macro(b: &mut Belief, m: &Macro, noise: &NoiseModel) -> Matrix3<f64> {
+    let (sn, cs) = b.sin_cos;
+    let mut qb = Matrix3::zeros();
+    for (i, mi) in m.m.iter().enumerate() {
+        let s2 = noise.sigma[i] * noise.sigma[i];
+        qb += mi[usize::from(!noise.density[i])] * s2;
+    }
+    let rot = Matrix3::new(cs, -sn, 0.0, sn, cs, 0.0, 0.0, 0.0, 1.0);
+    b.advance(m.delta, m.turn, rot * qb * rot.transpose())
 }
 
 /// Buffers reused by every call of a pass.
@@ -597,9 +688,42 @@ impl Belief {
         self.bias.len()
     }
 
-    /// Block (i, j) of the persistent errors' covariance.
+    /// Move by `delta` (body frame; its heading change's sine and cosine
+    /// `turn`) and add the process noise `q` (world frame): P = F P F^T + Q
+    /// with F the identity but for its heading column (-wy, wx, 1), written
+    /// out (a third of the general product). The F's since the last sighting
+    /// add up instead of multiplying. Returns F.
+    fn advance(&mut self, delta: [f64; 3], turn: (f64, f64), q: Matrix3<f64>) -> Matrix3<f64> {
+        let (sn, cs) = self.sin_cos;
+        let [dx, dy, dth] = delta;
+        let (wx, wy) = (cs * dx - sn * dy, sn * dx + cs * dy);
+        let (a, c) = (-wy, wx);
+        let p = &self.p;
+        let (p02, p12, p22) = (p[(0, 2)], p[(1, 2)], p[(2, 2)]);
+        let n00 = p[(0, 0)] + 2.0 * a * p02 + a * a * p22;
+        let n01 = p[(0, 1)] + a * p12 + c * p02 + a * c * p22;
+        let n11 = p[(1, 1)] + 2.0 * c * p12 + c * c * p22;
+        let n02 = p02 + a * p22;
+        let n12 = p12 + c * p22;
+        self.p = Matrix3::new(n00, n01, n02, n01, n11, n12, n02, n12, p22) + q;
+        self.f_acc[(0, 2)] += a;
+        self.f_acc[(1, 2)] += c;
+        self.x += Vector3::new(wx, wy, dth);
+        let (sd, cd) = turn;
+        self.sin_cos = (sn * cd + cs * sd, cs * cd - sn * sd);
+        Matrix3::new(1.0, 0.0, a, 0.0, 1.0, c, 0.0, 0.0, 1.0)
+    }
+
+    /// Block (i, j) of the persistent errors' covariance (stored for i <= j
+    /// only: it is symmetric, and the update's cost is in these blocks).
     fn bb_at(&self, i: usize, j: usize) -> Matrix2<f64> {
-        let stored = self.bb[i * self.n() + j] * self.bb_scale;
+        let n = self.n();
+        let block = if i <= j {
+            self.bb[i * n + j]
+        } else {
+            self.bb[j * n + i].transpose()
+        };
+        let stored = block * self.bb_scale;
         if i == j {
             stored + self.var * self.bb_diag
         } else {
@@ -675,9 +799,9 @@ impl Belief {
             *c -= ks * k.transpose();
         }
         let unscale = 1.0 / self.bb_scale;
-        for (row, ki) in self.bb.chunks_mut(n.max(1)).zip(&kb) {
+        for (i, (row, ki)) in self.bb.chunks_mut(n.max(1)).zip(&kb).enumerate() {
             let ki = ki * sm * unscale;
-            for (b, kj) in row.iter_mut().zip(&kb) {
+            for (b, kj) in row.iter_mut().zip(&kb).skip(i) {
                 *b -= ki * kj.transpose();
             }
         }

@@ -44,6 +44,10 @@ pub struct NoiseModel {
 /// Nelder-Mead runs at most this many times, each from the last one's result.
 const RESTARTS: usize = 4;
 
+/// A difference in the cost (-2 log-likelihood of the sightings) under this
+/// is no evidence for one noise over another (a likelihood ratio of 1.6).
+const SIGNIFICANT: f64 = 1.0;
+
 /// Fewer sightings than this say too little about the noise: the spec's is kept.
 pub const MIN_SIGHTINGS: usize = 20;
 
@@ -222,17 +226,20 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
         .map(|b| b.1)
         .unwrap_or_else(|| vec![0.0; n]);
     // Nelder-Mead restarted from its own result until a restart gains
-    // nothing: a simplex can collapse on a flat valley before its floor
+    // nothing: a simplex can collapse on a flat valley before its floor.
+    // The cost is -2 log-likelihood: differences under SIGNIFICANT say
+    // nothing about the noise, so both the simplex and the restarts stop there.
     let mut x = best;
     let mut c = cost(&x);
     for _ in 0..RESTARTS {
-        let next = nelder_mead(&cost, x.clone(), 0.7, 1e-4, 300);
+        let tol = SIGNIFICANT / (1.0 + c.abs());
+        let next = nelder_mead(&cost, x.clone(), 0.7, tol, 300);
         let cn = cost(&next);
         let gained = c - cn;
         if cn < c {
             (x, c) = (next, cn);
         }
-        if gained < 1e-3 * (1.0 + c.abs()) * 1e-2 {
+        if gained < SIGNIFICANT {
             break;
         }
     }
