@@ -587,7 +587,8 @@ pub fn fit_json(
         .map(|(k, &i)| {
             (
                 r.names[i].clone(),
-                json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k]}),
+                json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k],
+                       "tolerance": r.ir.runtime_params()[i].tolerance}),
             )
         })
         .collect();
@@ -995,10 +996,26 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
                 before.rmse, after.rmse, kinegen_analysis::fit::SEGMENT_S
             ));
         } else if after.rmse > 1.05 * before.rmse {
-            unusable.push(format!(
-                "calibration made the position error worse ({:.4} m -> {:.4} m)",
-                before.rmse, after.rmse
-            ));
+            let with_prior: Vec<&str> = res
+                .free
+                .iter()
+                .filter(|&&i| r.ir.runtime_params()[i].tolerance.is_some())
+                .map(|&i| r.names[i].as_str())
+                .collect();
+            let grew = format!("{:.4} m -> {:.4} m", before.rmse, after.rmse);
+            if with_prior.is_empty() {
+                unusable.push(format!(
+                    "calibration made the position error worse ({grew})"
+                ));
+            } else {
+                // a prior may rightly cost some fit: the spec says what is known
+                let w = format!(
+                    "the position error grew ({grew}) under the spec's tolerances on {}: the log pulls them further than the tolerances allow; loosen a tolerance if the robot can differ from nominal that much",
+                    with_prior.join(", ")
+                );
+                out.say(&format!("warning: {w}"));
+                res.warnings.push(w);
+            }
         } else {
             // within 5%: the starting values were already as good as these logs
             // can tell; the fit traded a little whole-track error for its cost

@@ -255,9 +255,28 @@ fn start_columns(runs: &[Run], o: &FitOptions, m: usize) -> Vec<Option<usize>> {
         .collect()
 }
 
+/// The Gaussian priors of the free parameters whose spec declares a
+/// `tolerance`: per prior, its column, its residual (p - nominal) / tolerance
+/// and that residual's derivative. The nominal value is the runner's (the
+/// spec's, or `--set`'s). They enter every cost the fit minimises, after the
+/// data's residuals (which are in units of their sigma too), but not the
+/// residual count its error figures divide by.
+fn priors(r: &Runner, p: &[f64], free: &[usize]) -> Vec<(usize, f64, f64)> {
+    let params = r.ir.runtime_params();
+    free.iter()
+        .enumerate()
+        .filter_map(|(c, &i)| {
+            params[i]
+                .tolerance
+                .map(|tol| (c, (p[i] - r.p[i]) / tol, 1.0 / tol))
+        })
+        .collect()
+}
+
 /// Weighted residuals (and their Jacobian w.r.t. the free parameters, then the
 /// start-heading offsets of the runs that have them) over all runs; `starts`
-/// holds one start-pose offset per run (empty: none).
+/// holds one start-pose offset per run (empty: none). The parameters' priors
+/// ([`priors`]) come last.
 pub fn residuals(
     r: &Runner,
     p: &[f64],
@@ -286,9 +305,10 @@ pub fn residuals(
             )
         })
         .collect();
+    let prior = priors(r, p, free);
     let n: usize = parts.iter().map(|x| x.0.len()).sum();
-    let mut res = Vec::with_capacity(n);
-    let mut jac = with_jac.then(|| DMatrix::zeros(n, ncols));
+    let mut res = Vec::with_capacity(n + prior.len());
+    let mut jac = with_jac.then(|| DMatrix::zeros(n + prior.len(), ncols));
     let mut row = 0;
     for (i, (rv, jv)) in parts.into_iter().enumerate() {
         if let Some(j) = jac.as_mut() {
@@ -308,6 +328,12 @@ pub fn residuals(
     }
     if let Some(k) = o.huber {
         huber_weights(&mut res, jac.as_mut(), k);
+    }
+    for (c, value, slope) in prior {
+        if let Some(j) = jac.as_mut() {
+            j[(res.len(), c)] = slope;
+        }
+        res.push(value);
     }
     (res, jac)
 }
@@ -404,6 +430,11 @@ pub fn normal_equations(
             jtr[c] += btr;
         }
     }
+    for (c, value, slope) in priors(r, p, free) {
+        jtj[(c, c)] += slope * slope;
+        jtr[c] += slope * value;
+        sums.cost += 0.5 * value * value;
+    }
     (sums, jtj, jtr)
 }
 
@@ -439,7 +470,8 @@ pub fn residual_sums(
     starts: &[[f64; 3]],
 ) -> Sums {
     let cols = start_columns(runs, o, free.len());
-    runs.par_iter()
+    let mut sums = runs
+        .par_iter()
         .enumerate()
         .map(|(i, run)| {
             let start = starts.get(i).copied().unwrap_or([0.0; 3]);
@@ -462,7 +494,11 @@ pub fn residual_sums(
         .reduce(Sums::default, |mut a, b| {
             a.add(b);
             a
-        })
+        });
+    for (_, value, _) in priors(r, p, free) {
+        sums.cost += 0.5 * value * value;
+    }
+    sums
 }
 
 /// Huber loss by iteratively reweighted least squares: a residual r beyond k is

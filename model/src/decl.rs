@@ -98,6 +98,12 @@ pub struct Param {
     /// one place (kinegen_analysis::timeline).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub measurement_delay: bool,
+    /// How far from its nominal value the parameter is known to lie (one
+    /// standard deviation, in its unit; a spec's `"2%"` is resolved against
+    /// the nominal value): `fit` adds it as a Gaussian prior, so a log that
+    /// says little about the parameter leaves it near nominal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -87,6 +87,17 @@ struct RawParam {
     constant: bool,
     #[serde(default)]
     measurement_delay: bool,
+    #[serde(default)]
+    tolerance: Option<Spanned<RawTolerance>>,
+}
+
+/// `tolerance = 0.002` (in the parameter's unit) or `tolerance = "2%"` (of
+/// its nominal value).
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RawTolerance {
+    Absolute(f64),
+    Relative(String),
 }
 
 fn yes() -> bool {
@@ -460,6 +471,10 @@ impl Model {
                         format!("nominal {nominal} is outside the declared bounds"),
                     ));
                 }
+                let tolerance = match &p.tolerance {
+                    None => None,
+                    Some(t) => Some(tolerance(&cx, t, nominal)?),
+                };
                 Ok(Param {
                     name: p.name.get_ref().clone(),
                     nominal,
@@ -470,6 +485,7 @@ impl Model {
                     free: p.free && !p.constant,
                     constant: p.constant,
                     measurement_delay: p.measurement_delay,
+                    tolerance,
                 })
             })
             .collect::<Result<_, _>>()?;
@@ -962,4 +978,38 @@ fn order_definitions(
             )
         })
         .collect())
+}
+
+/// A parameter's `tolerance` in its own unit: a number as it is, `"2%"` of
+/// `nominal`; above 0 and finite.
+fn tolerance(cx: &Ctx, t: &Spanned<RawTolerance>, nominal: f64) -> Result<f64, SourceError> {
+    let value = match t.get_ref() {
+        RawTolerance::Absolute(v) => *v,
+        RawTolerance::Relative(text) => {
+            let Some(pct) = text
+                .trim()
+                .strip_suffix('%')
+                .and_then(|n| n.trim().parse::<f64>().ok())
+            else {
+                return Err(cx.err_span(
+                    t,
+                    format!("tolerance `{text}`: a number in the parameter's unit (0.002) or a percentage of its nominal value (\"2%\")"),
+                ));
+            };
+            if nominal == 0.0 {
+                return Err(cx.err_span(
+                    t,
+                    "a relative tolerance of a parameter whose nominal value is 0 is 0: give it in the parameter's unit",
+                ));
+            }
+            pct / 100.0 * nominal.abs()
+        }
+    };
+    if !(value.is_finite() && value > 0.0) {
+        return Err(cx.err_span(
+            t,
+            format!("tolerance {value}: a standard deviation above 0"),
+        ));
+    }
+    Ok(value)
 }
