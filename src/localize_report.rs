@@ -4,7 +4,7 @@
 //! NIS over time with its chi-square band, and a table of the figures and
 //! the noise; the noise sweep (seed 001 Figs 6-7) when it was run.
 use crate::localize_cmd::Summary;
-use crate::report::{decimated, esc, page, series_of, write, Series, H, W};
+use crate::report::{axes, decimated, esc, page, series_of, squared, write, Series, H, W};
 use kinegen_analysis::localize::{mean_bounds, Localization};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
@@ -76,28 +76,7 @@ fn chart_beside(
             .flat_map(|s| s.2.iter().copied())
             .filter(|p| p.0.is_finite() && p.1.is_finite())
             .collect();
-        let ((mut x0, mut x1), (mut y0, mut y1)) = span(&all);
-        if equal {
-            let (cx, cy, half) = (
-                (x0 + x1) / 2.0,
-                (y0 + y1) / 2.0,
-                (x1 - x0).max(y1 - y0) / 2.0,
-            );
-            (x0, x1, y0, y1) = (cx - half, cx + half, cy - half, cy + half);
-        }
-        let mut c = ChartBuilder::on(&area)
-            .caption(title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(36)
-            .y_label_area_size(56)
-            .build_cartesian_2d(x0..x1, y0..y1)
-            .map_err(|e| e.to_string())?;
-        c.configure_mesh()
-            .x_desc(xl)
-            .y_desc(yl)
-            .light_line_style(WHITE.mix(0.0))
-            .draw()
-            .map_err(|e| e.to_string())?;
+        let mut c = axes(&area, title, xl, yl, squared(span(&all), equal))?;
         for (_, color, pts) in points {
             c.draw_series(pts.iter().map(|p| Circle::new(*p, 2, color.filled())))
                 .map_err(|e| e.to_string())?;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 mod analysis_cmd;
+mod batch_cmd;
 mod bench_diagnose_cmd;
 mod diagnose_cmd;
 mod effects_cmd;
@@ -136,6 +137,14 @@ enum Command {
         #[command(flatten)]
         catalogue: analysis_cmd::EffectDirs,
     },
+    /// Run many jobs (a fleet's nightly fits and diagnoses): one JSON line a
+    /// job in, one result line a job out, at most --jobs at once, each job a
+    /// process of its own; rerun after an interruption, it skips the jobs
+    /// whose results are already there. Exit 1 when a job failed.
+    ///
+    /// Example: kinegen batch jobs.jsonl --out results.jsonl --jobs 2
+    /// with jobs.jsonl lines like {"id": "r17-fit", "args": ["fit", "--spec", "robot.toml", "--data", "r17.csv"]}
+    Batch(batch_cmd::BatchArgs),
     /// Derive one spec's IR into a file (used internally by the analysis commands).
     #[command(hide = true)]
     Derive {
@@ -171,6 +180,7 @@ fn main() -> ExitCode {
             out,
             catalogue,
         } => effects_cmd::run_add_effect(&spec, &effect, &value, &out, &catalogue.effects),
+        Command::Batch(a) => batch_cmd::run(&a),
         Command::Derive { spec, ir_out } => match ir_source::derive_to(&spec, &ir_out) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => analysis_cmd::bad(e),

@@ -148,28 +148,9 @@ pub(crate) fn chart(
     {
         let root = SVGBackend::with_string(&mut svg, (W, H)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let ((mut x0, mut x1), (mut y0, mut y1)) = bounds(series);
-        if equal {
-            let (cx, cy, half) = (
-                (x0 + x1) / 2.0,
-                (y0 + y1) / 2.0,
-                (x1 - x0).max(y1 - y0) / 2.0,
-            );
-            (x0, x1, y0, y1) = (cx - half, cx + half, cy - half, cy + half);
-        }
-        let mut c = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(36)
-            .y_label_area_size(56)
-            .build_cartesian_2d(x0..x1, y0..y1)
-            .map_err(|e| e.to_string())?;
-        c.configure_mesh()
-            .x_desc(xl)
-            .y_desc(yl)
-            .light_line_style(WHITE.mix(0.0))
-            .draw()
-            .map_err(|e| e.to_string())?;
+        let span = squared(bounds(series), equal);
+        let ((_, _), (y0, y1)) = span;
+        let mut c = axes(&root, title, xl, yl, span)?;
         for (a, b) in marks {
             c.draw_series(std::iter::once(Rectangle::new(
                 [(*a, y0), (*b, y1)],
@@ -214,6 +195,52 @@ pub(crate) fn chart(
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
+}
+
+/// `span` made square about its centre when `equal` (a map: metres the
+/// same both ways).
+pub(crate) fn squared(span: ((f64, f64), (f64, f64)), equal: bool) -> ((f64, f64), (f64, f64)) {
+    let ((x0, x1), (y0, y1)) = span;
+    if !equal {
+        return span;
+    }
+    let (cx, cy, half) = (
+        (x0 + x1) / 2.0,
+        (y0 + y1) / 2.0,
+        (x1 - x0).max(y1 - y0) / 2.0,
+    );
+    ((cx - half, cx + half), (cy - half, cy + half))
+}
+
+/// The captioned axes every chart of the reports draws on.
+pub(crate) fn axes<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    title: &str,
+    xl: &str,
+    yl: &str,
+    ((x0, x1), (y0, y1)): ((f64, f64), (f64, f64)),
+) -> Result<
+    ChartContext<
+        'a,
+        SVGBackend<'b>,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    String,
+> {
+    let mut c = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 16))
+        .margin(8)
+        .x_label_area_size(36)
+        .y_label_area_size(56)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|e| e.to_string())?;
+    c.configure_mesh()
+        .x_desc(xl)
+        .y_desc(yl)
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    Ok(c)
 }
 
 pub(crate) fn esc(s: &str) -> String {

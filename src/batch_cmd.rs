@@ -1,0 +1,234 @@
+//! `kinegen batch JOBS.jsonl --out RESULTS.jsonl [--jobs N]`: many robots'
+//! commands, each a child process of this same binary (a job that fails,
+//! panics or runs out of memory cannot take the others down, and symbolic
+//! derivation keeps its one machine-wide permit per process), at most N at
+//! once, one result line each as it finishes. Results already in RESULTS
+//! are not run again, so a killed batch resumes where it stopped.
+use crate::analysis_cmd::bad;
+use clap::Args;
+use serde_json::{json, Value};
+use std::collections::{HashSet, VecDeque};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+use std::sync::Mutex;
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct BatchArgs {
+    /// The jobs: one JSON object a line, `{"id": "r17-fit", "args": ["fit",
+    /// "--spec", "robot.toml", "--data", "r17.csv"]}` (the arguments exactly as
+    /// the command line takes them; relative paths from where batch runs).
+    #[arg(value_name = "JOBS.jsonl")]
+    pub jobs_file: PathBuf,
+    /// Where the results go, one JSON line a job: `{"id", "exit", "result"
+    /// (the command's own JSON document) or "error" (its message),
+    /// "seconds"}`. Appended to: ids already there are not run again.
+    #[arg(long, value_name = "RESULTS.jsonl")]
+    pub out: PathBuf,
+    /// At most this many jobs at once (default: the machine's cores).
+    #[arg(long = "jobs", value_name = "N", value_parser = crate::at_least_one)]
+    pub parallel: Option<usize>,
+}
+
+/// One line of JOBS.jsonl.
+#[derive(Debug, Clone)]
+struct Job {
+    id: String,
+    args: Vec<String>,
+}
+
+/// Commands that write their JSON document with `--json -`.
+const WITH_JSON: [&str; 7] = [
+    "compare",
+    "fit",
+    "diagnose",
+    "localize",
+    "inverse",
+    "navigate",
+    "bench-diagnose",
+];
+
+/// Read JOBS.jsonl: every problem names the file and line.
+fn read_jobs(path: &Path) -> Result<Vec<Job>, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read the jobs: {e}", path.display()))?;
+    let mut jobs = Vec::new();
+    let mut seen = HashSet::new();
+    for (n, line) in text.lines().enumerate() {
+        let at = format!("{}:{}", path.display(), n + 1);
+        if line.trim().is_empty() {
+            continue;
+        }
+        let v: Value =
+            serde_json::from_str(line).map_err(|e| format!("{at}: not a JSON object: {e}"))?;
+        let id = v["id"]
+            .as_str()
+            .ok_or_else(|| format!("{at}: the job has no string `id`"))?
+            .to_string();
+        let args: Vec<String> = v["args"]
+            .as_array()
+            .ok_or_else(|| format!("{at}: job `{id}` has no `args` list"))?
+            .iter()
+            .map(|a| a.as_str().map(str::to_string))
+            .collect::<Option<_>>()
+            .ok_or_else(|| format!("{at}: job `{id}`: every argument is a string"))?;
+        match args.first().map(String::as_str) {
+            None => return Err(format!("{at}: job `{id}` has no command")),
+            Some("batch") => return Err(format!("{at}: job `{id}` is a batch itself")),
+            Some(_) => {}
+        }
+        if !seen.insert(id.clone()) {
+            return Err(format!("{at}: the id `{id}` is used twice"));
+        }
+        jobs.push(Job { id, args });
+    }
+    Ok(jobs)
+}
+
+/// The ids RESULTS.jsonl already holds. A last line cut short by a kill is
+/// dropped from the file, so the job runs again and the file stays one JSON
+/// object a line.
+fn done_ids(out: &Path) -> Result<HashSet<String>, String> {
+    let Ok(text) = std::fs::read_to_string(out) else {
+        return Ok(HashSet::new());
+    };
+    let whole = text.rfind('\n').map_or(0, |i| i + 1);
+    if whole < text.len() {
+        let f = std::fs::OpenOptions::new()
+            .write(true)
+            .open(out)
+            .map_err(|e| format!("{}: {e}", out.display()))?;
+        f.set_len(whole as u64)
+            .map_err(|e| format!("{}: {e}", out.display()))?;
+    }
+    Ok(text[..whole]
+        .lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter_map(|v| v["id"].as_str().map(str::to_string))
+        .collect())
+}
+
+/// Run one job and describe its outcome as a result line.
+fn run_job(job: &Job) -> Value {
+    let t0 = Instant::now();
+    let mut args = job.args.clone();
+    let json = WITH_JSON.contains(&args[0].as_str());
+    if json {
+        // the batch reads the document from stdout; a --json of the job's own
+        // is replaced (the document lands in RESULTS)
+        if let Some(k) = args.iter().position(|a| a == "--json") {
+            args.drain(k..(k + 2).min(args.len()));
+        }
+        args.retain(|a| !a.starts_with("--json="));
+        args.extend(["--json".into(), "-".into()]);
+    }
+    let exe = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("kinegen"));
+    let out = Command::new(exe).args(&args).output();
+    let seconds = t0.elapsed().as_secs_f64();
+    let out = match out {
+        Ok(o) => o,
+        Err(e) => {
+            return json!({"id": job.id, "exit": null, "error": format!("cannot run: {e}"), "seconds": seconds})
+        }
+    };
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let message = stderr
+        .lines()
+        .rev()
+        .find(|l| l.starts_with("error"))
+        .or_else(|| stderr.lines().rev().find(|l| !l.trim().is_empty()))
+        .unwrap_or("")
+        .to_string();
+    let doc: Option<Value> = json
+        .then(|| serde_json::from_slice(&out.stdout).ok())
+        .flatten();
+    let mut line = json!({"id": job.id, "exit": out.status.code(), "seconds": seconds});
+    match doc {
+        Some(d) => line["result"] = d,
+        None if out.status.success() => {
+            line["result"] = json!({"stdout": String::from_utf8_lossy(&out.stdout)})
+        }
+        None => {
+            line["error"] = json!(if message.is_empty() {
+                format!(
+                    "ended by signal or exit {:?} without a message",
+                    out.status.code()
+                )
+            } else {
+                message
+            })
+        }
+    }
+    line
+}
+
+pub fn run(a: &BatchArgs) -> ExitCode {
+    let jobs = match read_jobs(&a.jobs_file) {
+        Ok(j) => j,
+        Err(e) => return bad(e),
+    };
+    let done = match done_ids(&a.out) {
+        Ok(d) => d,
+        Err(e) => return bad(e),
+    };
+    let file = match std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&a.out)
+    {
+        Ok(f) => f,
+        Err(e) => return bad(format!("--out {}: {e}", a.out.display())),
+    };
+    let pending: VecDeque<Job> = jobs
+        .iter()
+        .filter(|j| !done.contains(&j.id))
+        .cloned()
+        .collect();
+    let to_run = pending.len();
+    let n = a
+        .parallel
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    eprintln!(
+        "batch: {} job(s), {} already in {}, {} to run, {} at once",
+        jobs.len(),
+        jobs.len() - pending.len(),
+        a.out.display(),
+        pending.len(),
+        n
+    );
+    let bar = crate::progress::Progress::bar(pending.len() as u64, "batch", false);
+    let queue = Mutex::new(pending);
+    let sink = Mutex::new((file, 0usize, None::<String>));
+    std::thread::scope(|s| {
+        for _ in 0..n {
+            s.spawn(|| loop {
+                let Some(job) = queue.lock().unwrap().pop_front() else {
+                    return;
+                };
+                let line = run_job(&job);
+                let failed = line["exit"] != json!(0);
+                let mut g = sink.lock().unwrap();
+                let text = format!("{line}\n");
+                if let Err(e) = g.0.write_all(text.as_bytes()).and_then(|_| g.0.flush()) {
+                    g.2.get_or_insert(format!("--out {}: {e}", a.out.display()));
+                }
+                g.1 += usize::from(failed);
+                bar.inc();
+            });
+        }
+    });
+    let (_, failed, write_error) = sink.into_inner().unwrap();
+    if let Some(e) = write_error {
+        return bad(e);
+    }
+    eprintln!(
+        "batch: {to_run} job(s) run, {failed} failed; results in {}",
+        a.out.display()
+    );
+    if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
