@@ -36,9 +36,33 @@ pub struct BenchDiagnoseArgs {
     /// 6 is 546 s (10,921 rows), the size of diagnosis' speed target.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=100))]
     pub laps: u64,
+    /// Run only slice K of N (K from 1): case number i (in the benchmark's
+    /// fixed order) belongs to slice i mod N + 1. Shards run on different
+    /// machines; `--merge` joins their JSON documents into the whole table.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<(u64, u64)>,
+    /// Join the JSON documents of shards (`--shard K/N --json FILE`) into the
+    /// table the unsharded run gives; nothing is diagnosed.
+    #[arg(long, value_name = "FILE", num_args = 1.., conflicts_with = "shard")]
+    pub merge: Vec<PathBuf>,
     /// Write one JSON document to PATH (`-`: stdout).
     #[arg(long)]
     pub json: Option<PathBuf>,
+}
+
+/// `K/N` with 1 <= K <= N.
+fn parse_shard(s: &str) -> Result<(u64, u64), String> {
+    let bad = || format!("`{s}` is not K/N with whole numbers 1 <= K <= N");
+    let (k, n) = s.split_once('/').ok_or_else(bad)?;
+    let (k, n): (u64, u64) = (
+        k.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if k >= 1 && k <= n {
+        Ok((k, n))
+    } else {
+        Err(bad())
+    }
 }
 
 /// Hidden magnitudes, as fractions of each effect parameter's largest bound.
@@ -48,6 +72,9 @@ const NOISE: [f64; 2] = [1.0, 3.0];
 
 #[derive(Debug, Clone)]
 struct Case {
+    /// Its number in the benchmark's fixed order (what `--shard` slices).
+    index: u64,
+    model: String,
     spec: String,
     hidden: Vec<String>,
     noise: f64,
@@ -169,6 +196,8 @@ fn run_case(
     )?;
     let names: Vec<String> = hidden.iter().map(|h| h.0.clone()).collect();
     Ok(Case {
+        index: 0,
+        model: spec.name.clone(),
         spec: spec_path.display().to_string(),
         redundant: d
             .skipped
@@ -186,6 +215,12 @@ fn run_case(
 
 pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
     let out = Out::new(a.json.as_deref());
+    if !a.merge.is_empty() {
+        return match merged(&a.merge) {
+            Ok((seeds, laps, cases)) => finish(&out, a, seeds, laps, &cases, Some(a.merge.len())),
+            Err(e) => bad(e),
+        };
+    }
     let specs = if a.spec.is_empty() {
         match default_specs() {
             Ok(s) => s,
@@ -194,8 +229,18 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
     } else {
         a.spec.clone()
     };
+    let known: Vec<String> = match catalogue(&[]) {
+        Ok(c) => c.iter().map(|e| e.name.clone()).collect(),
+        Err(e) => return bad(e),
+    };
+    if let Some(e) = a.effect.iter().find(|e| !known.contains(e)) {
+        return bad(format!(
+            "--effect {e}: no such effect in the catalogue (it has: {})",
+            known.join(", ")
+        ));
+    }
     let mut cases = Vec::new();
-    let mut table = Vec::new();
+    let mut index = 0u64;
     for spec_path in &specs {
         let spec = match Model::load(spec_path) {
             Ok(m) => m,
@@ -213,80 +258,112 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
         if !a.effect.is_empty() {
             effects.retain(|(e, _, _)| a.effect.contains(e));
         }
-        let mut rates = Rates::default();
-        let mut jobs: Vec<Vec<(String, String, f64)>> = Vec::new();
-        for (e, p, bound) in &effects {
-            for m in MAGNITUDES {
-                jobs.push(vec![(e.clone(), p.clone(), m * bound)]);
-            }
-        }
-        // two effects at once: consecutive pairs of the catalogue, at the middle magnitude
-        for w in effects.windows(2) {
-            jobs.push(
-                w.iter()
-                    .map(|(e, p, b)| (e.clone(), p.clone(), MAGNITUDES[1] * b))
-                    .collect(),
-            );
-        }
-        jobs.push(Vec::new()); // clean
-        jobs.push(Vec::new());
-        for (j, hidden) in jobs.iter().enumerate() {
+        for (j, hidden) in hidden_sets(&effects).iter().enumerate() {
             for &noise in &NOISE {
                 for seed in 1..=a.seeds {
-                    // every case its own trajectory
-                    let c = match run_case(spec_path, hidden, noise, 1000 * j as u64 + seed, a.laps)
-                    {
-                        Ok(c) => c,
-                        Err(e) => {
-                            out.say(&format!(
-                                "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",
-                                spec.name
-                            ));
-                            continue;
-                        }
-                    };
-                    rates.seconds.push(c.seconds);
-                    match c.hidden.len() {
-                        0 => {
-                            rates.false_alarms.1 += 1;
-                            rates.false_alarms.0 += usize::from(!c.found.is_empty());
-                        }
-                        _ if !c.redundant.is_empty() => rates.redundant += 1,
-                        1 => {
-                            rates.top1.1 += 1;
-                            rates.top1.0 += usize::from(c.found.first() == c.hidden.first());
-                            rates.chains.1 += 1;
-                            rates.chains.0 += usize::from(c.found == c.hidden);
-                        }
-                        _ => {
-                            let (mut f, mut h) = (c.found.clone(), c.hidden.clone());
-                            f.sort();
-                            h.sort();
-                            rates.chains.1 += 1;
-                            rates.chains.0 += usize::from(f == h);
-                        }
+                    let i = index;
+                    index += 1;
+                    if a.shard.is_some_and(|(k, n)| i % n != k - 1) {
+                        continue;
                     }
-                    cases.push(json!({
-                        "spec": c.spec, "hidden": c.hidden, "noise": c.noise, "seed": c.seed,
-                        "found": c.found, "redundant": c.redundant, "seconds": c.seconds,
-                    }));
+                    // every case its own trajectory
+                    match run_case(spec_path, hidden, noise, 1000 * j as u64 + seed, a.laps) {
+                        Ok(c) => cases.push(Case { index: i, ..c }),
+                        Err(e) => out.say(&format!(
+                            "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",
+                            spec.name
+                        )),
+                    }
                 }
             }
         }
-        let pct = |(k, n): (usize, usize)| {
-            if n == 0 {
-                "-".to_string()
-            } else {
-                format!("{:.0}% ({k}/{n})", 100.0 * k as f64 / n as f64)
+    }
+    finish(&out, a, a.seeds, a.laps, &cases, None)
+}
+
+/// The hidden effects of a spec's cases: each effect at each magnitude,
+/// consecutive pairs of the catalogue at the middle magnitude, and two
+/// clean logs.
+fn hidden_sets(effects: &[(String, String, f64)]) -> Vec<Vec<(String, String, f64)>> {
+    let mut jobs: Vec<Vec<(String, String, f64)>> = Vec::new();
+    for (e, p, bound) in effects {
+        for m in MAGNITUDES {
+            jobs.push(vec![(e.clone(), p.clone(), m * bound)]);
+        }
+    }
+    for w in effects.windows(2) {
+        jobs.push(
+            w.iter()
+                .map(|(e, p, b)| (e.clone(), p.clone(), MAGNITUDES[1] * b))
+                .collect(),
+        );
+    }
+    jobs.push(Vec::new()); // clean
+    jobs.push(Vec::new());
+    jobs
+}
+
+/// The rates of one model's cases.
+fn rates_of<'a>(cases: impl Iterator<Item = &'a Case>) -> Rates {
+    let mut rates = Rates::default();
+    for c in cases {
+        rates.seconds.push(c.seconds);
+        match c.hidden.len() {
+            0 => {
+                rates.false_alarms.1 += 1;
+                rates.false_alarms.0 += usize::from(!c.found.is_empty());
             }
-        };
+            _ if !c.redundant.is_empty() => rates.redundant += 1,
+            1 => {
+                rates.top1.1 += 1;
+                rates.top1.0 += usize::from(c.found.first() == c.hidden.first());
+                rates.chains.1 += 1;
+                rates.chains.0 += usize::from(c.found == c.hidden);
+            }
+            _ => {
+                let (mut f, mut h) = (c.found.clone(), c.hidden.clone());
+                f.sort();
+                h.sort();
+                rates.chains.1 += 1;
+                rates.chains.0 += usize::from(f == h);
+            }
+        }
+    }
+    rates
+}
+
+/// The table of `cases` (in their benchmark order), said and written as JSON.
+fn finish(
+    out: &Out,
+    a: &BenchDiagnoseArgs,
+    seeds: u64,
+    laps: u64,
+    cases: &[Case],
+    shards: Option<usize>,
+) -> ExitCode {
+    let mut specs: Vec<(&str, &str)> = Vec::new();
+    for c in cases {
+        if !specs.iter().any(|s| s.1 == c.spec) {
+            specs.push((&c.model, &c.spec));
+        }
+    }
+    let pct = |(k, n): (usize, usize)| {
+        if n == 0 {
+            "-".to_string()
+        } else {
+            format!("{:.0}% ({k}/{n})", 100.0 * k as f64 / n as f64)
+        }
+    };
+    let mut table = Vec::new();
+    for (model, spec) in specs {
+        let rates = rates_of(cases.iter().filter(|c| c.spec == spec));
         let mut secs = rates.seconds.clone();
         secs.sort_by(f64::total_cmp);
         let median = secs.get(secs.len() / 2).copied().unwrap_or(0.0);
         let slowest = secs.last().copied().unwrap_or(0.0);
         out.say(&format!(
             "{:<14} top-1 {:<14} full chain {:<14} false alarms {:<12} redundant {:<3} median {:.1} s, slowest {:.1} s per diagnosis",
-            spec.name,
+            model,
             pct(rates.top1),
             pct(rates.chains),
             pct(rates.false_alarms),
@@ -296,14 +373,75 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
         ));
         let rate = |(k, n): (usize, usize)| json!({"found": k, "of": n});
         table.push(json!({
-            "model": spec.name, "spec": spec_path.display().to_string(),
+            "model": model, "spec": spec,
             "top1": rate(rates.top1), "full_chain": rate(rates.chains), "false_alarms": rate(rates.false_alarms),
             "redundant_cases": rates.redundant, "median_seconds": median, "slowest_seconds": slowest,
         }));
     }
-    let doc = json!({"command": "bench-diagnose", "seeds": a.seeds, "laps": a.laps, "magnitudes_of_bound": MAGNITUDES, "noise_levels": NOISE, "models": table, "cases": cases});
+    let cases_json: Vec<_> = cases
+        .iter()
+        .map(|c| {
+            json!({
+                "index": c.index, "model": c.model, "spec": c.spec, "hidden": c.hidden, "noise": c.noise,
+                "seed": c.seed, "found": c.found, "redundant": c.redundant, "seconds": c.seconds,
+            })
+        })
+        .collect();
+    let shard = a.shard.map(|(k, n)| format!("{k}/{n}"));
+    let doc = json!({"command": "bench-diagnose", "seeds": seeds, "laps": laps, "shard": shard, "merged_shards": shards,
+        "magnitudes_of_bound": MAGNITUDES, "noise_levels": NOISE, "models": table, "cases": cases_json});
     match out.json(a.json.as_deref(), &doc) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => bad(e),
     }
+}
+
+/// The cases of shard documents, in benchmark order; each case once.
+fn merged(files: &[PathBuf]) -> Result<(u64, u64, Vec<Case>), String> {
+    let mut cases: Vec<Case> = Vec::new();
+    let mut settings = None;
+    for f in files {
+        let text = std::fs::read_to_string(f).map_err(|e| format!("{}: {e}", f.display()))?;
+        let doc: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| format!("{}: not a bench-diagnose JSON document: {e}", f.display()))?;
+        let here = (doc["seeds"].as_u64(), doc["laps"].as_u64());
+        if *settings.get_or_insert(here) != here {
+            return Err(format!(
+                "{}: its --seeds or --laps differ from the other shards'",
+                f.display()
+            ));
+        }
+        let list = doc["cases"]
+            .as_array()
+            .ok_or_else(|| format!("{}: no `cases` (write shards with --json)", f.display()))?;
+        let strings = |v: &serde_json::Value| -> Vec<String> {
+            v.as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|s| s.as_str().map(str::to_string))
+                .collect()
+        };
+        for c in list {
+            let index = c["index"]
+                .as_u64()
+                .ok_or_else(|| format!("{}: a case without `index` (not a shard)", f.display()))?;
+            if cases.iter().any(|d| d.index == index) {
+                return Err(format!("{}: case {index} is in two shards", f.display()));
+            }
+            cases.push(Case {
+                index,
+                model: c["model"].as_str().unwrap_or_default().to_string(),
+                spec: c["spec"].as_str().unwrap_or_default().to_string(),
+                hidden: strings(&c["hidden"]),
+                noise: c["noise"].as_f64().unwrap_or(0.0),
+                seed: c["seed"].as_u64().unwrap_or(0),
+                found: strings(&c["found"]),
+                redundant: strings(&c["redundant"]),
+                seconds: c["seconds"].as_f64().unwrap_or(0.0),
+            });
+        }
+    }
+    cases.sort_by_key(|c| c.index);
+    let (seeds, laps) = settings.unwrap_or((Some(1), Some(1)));
+    Ok((seeds.unwrap_or(1), laps.unwrap_or(1), cases))
 }

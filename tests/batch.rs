@@ -141,3 +141,84 @@ fn a_bad_jobs_file_is_refused_with_its_line() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("used twice"), "{}", stderr(&o));
 }
+
+/// Issue #38.2: `bench-diagnose --shard K/N` runs a deterministic slice, and
+/// `--merge` of the N shards' documents gives the unsharded table (the
+/// counts of every model; timings differ run to run) and the same cases.
+#[test]
+fn bench_diagnose_shards_merge_into_the_whole_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let spec = root().join("spec/diff_drive.toml");
+    let base = [
+        "bench-diagnose",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--effect",
+        "gyro_bias",
+        "--seeds",
+        "1",
+    ];
+    let run = |extra: &[&str], json: &str| {
+        let mut a: Vec<&str> = base.to_vec();
+        a.extend_from_slice(extra);
+        a.extend(["--json", json]);
+        let o = kinegen_in(dir, &a);
+        assert!(o.status.success(), "{a:?}: {}", stderr(&o));
+        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(dir.join(json)).unwrap())
+            .unwrap()
+    };
+    let whole = run(&[], "whole.json");
+    let mut shard_files = Vec::new();
+    let mut sizes = Vec::new();
+    for k in 1..=3 {
+        let name = format!("shard{k}.json");
+        let d = run(&["--shard", &format!("{k}/3")], &name);
+        sizes.push(d["cases"].as_array().unwrap().len());
+        shard_files.push(dir.join(name).to_str().unwrap().to_string());
+    }
+    let n = whole["cases"].as_array().unwrap().len();
+    assert_eq!(
+        sizes.iter().sum::<usize>(),
+        n,
+        "the shards split the cases: {sizes:?} of {n}"
+    );
+    let mut a = vec!["bench-diagnose", "--merge"];
+    a.extend(shard_files.iter().map(String::as_str));
+    a.extend(["--json", "merged.json"]);
+    let o = kinegen_in(dir, &a);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let merged: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("merged.json")).unwrap()).unwrap();
+    let counts = |d: &serde_json::Value| -> Vec<String> {
+        d["models"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| {
+                format!(
+                    "{} {} {} {} {}",
+                    m["model"], m["top1"], m["full_chain"], m["false_alarms"], m["redundant_cases"]
+                )
+            })
+            .collect()
+    };
+    assert_eq!(counts(&merged), counts(&whole));
+    let found = |d: &serde_json::Value| -> Vec<String> {
+        d["cases"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| format!("{} {} {}", c["index"], c["hidden"], c["found"]))
+            .collect()
+    };
+    assert_eq!(
+        found(&merged),
+        found(&whole),
+        "the same cases with the same verdicts"
+    );
+    // an effect outside the catalogue is refused, not benchmarked as nothing
+    let o = kinegen_in(dir, &["bench-diagnose", "--effect", "warp_drive"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--effect warp_drive"), "{}", stderr(&o));
+}
