@@ -19,13 +19,28 @@ pub struct BatchArgs {
     /// The jobs: one JSON object a line, `{"id": "r17-fit", "args": ["fit",
     /// "--spec", "robot.toml", "--data", "r17.csv"]}` (the arguments exactly as
     /// the command line takes them; relative paths from where batch runs).
-    #[arg(value_name = "JOBS.jsonl")]
+    /// With --plan: the directory of logs and bags to plan jobs for.
+    #[arg(value_name = "JOBS.jsonl | DIR")]
     pub jobs_file: PathBuf,
     /// Where the results go, one JSON line a job: `{"id", "exit", "result"
     /// (the command's own JSON document) or "error" (its message),
-    /// "seconds"}`. Appended to: ids already there are not run again.
+    /// "seconds"}`. Appended to: ids already there are not run again. With
+    /// --plan: where the jobs go.
     #[arg(long, value_name = "RESULTS.jsonl")]
     pub out: PathBuf,
+    /// Write a job for COMMAND (fit, diagnose, compare) on every log in DIR
+    /// (CSV files with the spec's input columns; ROS 2 bags, `.mcap`, to one
+    /// level down) instead of running jobs: a nightly run is then `batch
+    /// --plan fit --spec robot.toml logs/ --out jobs.jsonl` and `batch
+    /// jobs.jsonl --out results.jsonl`.
+    #[arg(long, value_name = "COMMAND", requires = "spec")]
+    pub plan: Option<String>,
+    /// The spec of the planned jobs (with --plan).
+    #[arg(long)]
+    pub spec: Option<PathBuf>,
+    /// The topic mapping of the planned jobs' bags (with --plan).
+    #[arg(long)]
+    pub topics: Option<PathBuf>,
     /// At most this many jobs at once (default: the machine's cores).
     #[arg(long = "jobs", value_name = "N", value_parser = crate::at_least_one)]
     pub parallel: Option<usize>,
@@ -163,7 +178,116 @@ fn run_job(job: &Job) -> Value {
     line
 }
 
+/// The logs of `dir` a spec with these input `columns` can read: CSV files
+/// whose header has them, and `.mcap` bags, to one level down, sorted.
+fn logs_in(dir: &Path, columns: &[String]) -> Result<Vec<PathBuf>, String> {
+    let list = |d: &Path| -> Result<Vec<PathBuf>, String> {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(d)
+            .map_err(|e| format!("{}: {e}", d.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        v.sort();
+        Ok(v)
+    };
+    let is_log = |p: &Path| -> bool {
+        match p.extension().and_then(|e| e.to_str()) {
+            Some("mcap") => true,
+            Some("csv") => std::fs::read_to_string(p).ok().is_some_and(|t| {
+                let header: Vec<&str> = t
+                    .lines()
+                    .next()
+                    .unwrap_or("")
+                    .split(',')
+                    .map(str::trim)
+                    .collect();
+                columns.iter().all(|c| header.contains(&c.as_str()))
+            }),
+            _ => false,
+        }
+    };
+    let mut out = Vec::new();
+    for p in list(dir)? {
+        if p.is_dir() {
+            out.extend(list(&p)?.into_iter().filter(|q| q.is_file() && is_log(q)));
+        } else if is_log(&p) {
+            out.push(p);
+        }
+    }
+    Ok(out)
+}
+
+/// `--plan`: write a job for every log of the directory.
+fn plan(a: &BatchArgs, command: &str) -> ExitCode {
+    if !["fit", "diagnose", "compare"].contains(&command) {
+        return bad(format!(
+            "--plan {command}: plans are for fit, diagnose and compare"
+        ));
+    }
+    let spec = a.spec.as_ref().expect("clap requires --spec with --plan");
+    let model = match kinegen_model::spec::Model::load(spec) {
+        Ok(m) => m,
+        Err(e) => return bad(e),
+    };
+    let columns: Vec<String> = model.inputs.iter().map(|i| i.column.clone()).collect();
+    let logs = match logs_in(&a.jobs_file, &columns) {
+        Ok(l) => l,
+        Err(e) => return bad(e),
+    };
+    if logs.is_empty() {
+        return bad(format!(
+            "{}: no log there has the spec's input columns ({}) and no .mcap bag",
+            a.jobs_file.display(),
+            columns.join(", ")
+        ));
+    }
+    // ids from the file names, or from the paths below DIR when two logs share
+    // a name (run-01.csv of two robots' folders)
+    let stem = |p: &Path| {
+        p.file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default()
+    };
+    let stems: HashSet<String> = logs.iter().map(|l| stem(l)).collect();
+    let unique = stems.len() == logs.len();
+    let mut text = String::new();
+    for log in &logs {
+        let name = if unique {
+            stem(log)
+        } else {
+            log.strip_prefix(&a.jobs_file)
+                .unwrap_or(log)
+                .with_extension("")
+                .to_string_lossy()
+                .replace(['/', '\\'], "-")
+        };
+        let id = format!("{name}-{command}");
+        let mut args = vec![
+            command.to_string(),
+            "--spec".into(),
+            spec.display().to_string(),
+            "--data".into(),
+            log.display().to_string(),
+        ];
+        if let Some(t) = &a.topics {
+            args.extend(["--topics".into(), t.display().to_string()]);
+        }
+        text += &format!("{}\n", json!({"id": id, "args": args}));
+    }
+    if let Err(e) = kinegen_model::files::write_atomic(&a.out, &text) {
+        return bad(e);
+    }
+    eprintln!(
+        "batch: {} job(s) for {command} written to {}",
+        logs.len(),
+        a.out.display()
+    );
+    ExitCode::SUCCESS
+}
+
 pub fn run(a: &BatchArgs) -> ExitCode {
+    if let Some(command) = &a.plan {
+        return plan(a, command);
+    }
     let jobs = match read_jobs(&a.jobs_file) {
         Ok(j) => j,
         Err(e) => return bad(e),
