@@ -55,13 +55,13 @@ fn a_batch_writes_one_line_a_job_and_resumes_after_a_kill() {
     );
     let spec = root().join("spec/diff_drive.toml");
     let s = spec.to_str().unwrap();
-    // 200 jobs: compares, every tenth a fit, two diagnoses, and one that fails
+    // 200 jobs: fits, two diagnoses, a compare, and one that fails
     let mut jobs = String::new();
     for k in 0..199 {
         let cmd = match k {
             0 | 100 => "diagnose",
-            _ if k % 10 == 0 => "fit",
-            _ => "compare",
+            1 => "compare",
+            _ => "fit",
         };
         jobs += &serde_json::json!({"id": format!("job{k}"), "args": [cmd, "--spec", s, "--data", "r1.csv"]}).to_string();
         jobs.push('\n');
