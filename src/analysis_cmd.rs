@@ -98,6 +98,11 @@ pub struct Prepared {
 
 pub fn prepare(c: &Common) -> Result<Prepared, String> {
     crate::output::check_outputs(c.json.as_deref(), c.report.as_deref())?;
+    // --effects is read whatever the command: a broken catalogue is said now,
+    // not on the day diagnose reads it
+    if !c.catalogue.effects.is_empty() {
+        kinegen_analysis::effects::catalogue(&c.catalogue.effects).map_err(|e| e.to_string())?;
+    }
     let ir = ir_source::load(&c.spec)?;
     let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
     let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;

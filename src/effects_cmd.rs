@@ -229,10 +229,16 @@ pub fn run_add_effect(
                 ))
             }
         }
-        let vals: BTreeMap<String, f64> = kinegen_analysis::model::parse_pairs("--value", values)
-            .map_err(|e| e.to_string())?
-            .into_iter()
-            .collect();
+        let pairs =
+            kinegen_analysis::model::parse_pairs("--value", values).map_err(|e| e.to_string())?;
+        let mut vals: BTreeMap<String, f64> = BTreeMap::new();
+        for (name, v) in pairs {
+            if let Some(first) = vals.insert(name.clone(), v) {
+                return Err(format!(
+                    "--value {name}={v}: `{name}` is given twice (first {first}); give each parameter once"
+                ));
+            }
+        }
         let new = eff
             .apply(&model, &vals)
             .map_err(|e| format!("--value: {e}"))?;

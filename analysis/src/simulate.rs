@@ -593,12 +593,20 @@ fn observe_landmarks(
                 continue;
             }
             let v = h.eval(&Runner::obs_args(h, &x, &u0, &truth.p, lm));
-            out.push((
-                t,
-                id.clone(),
-                v[0] + gaussian(sig[0], rng),
-                wrap(v[1] + gaussian(sig[1], rng)),
-            ));
+            // a range sensor reports no negative range: right beside a
+            // landmark the noise is drawn again (a truncated Gaussian), so
+            // the simulator never writes what `localize` rightly refuses
+            let mut range = v[0] + gaussian(sig[0], rng);
+            for _ in 0..100 {
+                if range > 0.0 {
+                    break;
+                }
+                range = v[0] + gaussian(sig[0], rng);
+            }
+            if range <= 0.0 {
+                continue;
+            }
+            out.push((t, id.clone(), range, wrap(v[1] + gaussian(sig[1], rng))));
         }
     }
     out

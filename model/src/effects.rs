@@ -189,12 +189,28 @@ pub fn catalogue(extra: &[PathBuf]) -> Result<Vec<Effect>, EffectError> {
             return Err(err("no effect files (*.toml) in this directory".into()));
         }
         files.sort();
+        // two files of one directory naming the same effect: which one the
+        // user meant is not ours to guess (a directory may still replace a
+        // bundled effect, or one of an earlier directory)
+        let mut here: Vec<(String, PathBuf)> = Vec::new();
         for f in files {
             let text = std::fs::read_to_string(&f).map_err(|x| EffectError {
                 file: f.clone(),
                 message: x.to_string(),
             })?;
-            add(parse_effect(&f, &text)?);
+            let e = parse_effect(&f, &text)?;
+            if let Some((_, first)) = here.iter().find(|(n, _)| *n == e.name) {
+                return Err(EffectError {
+                    file: f.clone(),
+                    message: format!(
+                        "effect `{}` is defined here and in {} (one directory, one file an effect)",
+                        e.name,
+                        first.display()
+                    ),
+                });
+            }
+            here.push((e.name.clone(), f.clone()));
+            add(e);
         }
     }
     Ok(out)
