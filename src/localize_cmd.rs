@@ -113,36 +113,8 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         };
         let summary = summarise(r, run, &loc, &o);
         say_run(&out, run, &loc, &summary, a.gate);
-        let (track, cov) = loc
-            .smoothed
-            .clone()
-            .unwrap_or((loc.track.clone(), loc.cov.clone()));
-        for (k, (x, p)) in track.iter().zip(&cov).enumerate() {
-            csv += &format!(
-                "{},{},{},{},{},{},{},{},{}\n",
-                run.path,
-                run.t[k],
-                x[0],
-                x[1],
-                x[2],
-                p[(0, 0)],
-                p[(0, 1)],
-                p[(1, 1)],
-                p[(2, 2)]
-            );
-        }
-        let last = loc.cov.last().unwrap();
-        runs_json.push(json!({
-            "path": run.path, "steps": run.steps(),
-            "observations_used": loc.accepted, "observations_rejected": loc.rejected,
-            "observations_outside_log": loc.outside,
-            "position_rmse_m": summary.rmse, "dead_reckoning_rmse_m": summary.dead_reckoning,
-            "nis_mean": summary.nis, "nis_bounds": summary.nis_bounds.map(|b| [b.0, b.1]),
-            "nees_mean": summary.nees, "nees_bounds": summary.nees_bounds.map(|b| [b.0, b.1]),
-            "smoothed": summary.smoothed.map(|(rmse, nees)| json!({"position_rmse_m": rmse, "nees_mean": nees})),
-            "final_pose": loc.track.last(),
-            "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
-        }));
+        csv += &track_rows(run, &loc);
+        runs_json.push(run_json(run, &loc, &summary));
         locs.push((run, loc, summary));
     }
     let noise_json = noise_json(&noise, &note);
@@ -155,46 +127,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         Vec::new()
     };
     if !sweep.is_empty() {
-        out.say(&format!(
-            "noise sweep on {} ({} simulated repetitions per level): EKF position RMSE (m)",
-            locs[0].0.path,
-            kinegen_analysis::sweep::SEEDS
-        ));
-        let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
-        names.dedup();
-        out.say(&format!(
-            "  {:<10}{}",
-            "sigma",
-            names.iter().map(|n| format!("{n:>12}")).collect::<String>()
-        ));
-        for level in kinegen_analysis::sweep::LEVELS {
-            let row: String = names
-                .iter()
-                .map(|n| {
-                    let p = sweep
-                        .iter()
-                        .find(|p| p.noise == *n && p.sigma == level)
-                        .unwrap();
-                    format!("{:>12.4}", p.position_rmse_m)
-                })
-                .collect();
-            out.say(&format!("  {level:<10}{row}"));
-        }
-        let top = |n: &str| {
-            sweep
-                .iter()
-                .filter(|p| p.noise == n)
-                .map(|p| p.position_rmse_m)
-                .fold(0.0, f64::max)
-        };
-        let mut ranked: Vec<(&str, f64)> = names.iter().map(|n| (*n, top(n))).collect();
-        ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
-        if let [(worst, w), .., (least, l)] = ranked.as_slice() {
-            out.say(&format!(
-                "  at the largest sigma, uncertainty in `{worst}` costs {:.1}x the position error of uncertainty in `{least}`",
-                w / l.max(1e-12)
-            ));
-        }
+        say_sweep(&out, &locs[0].0.path, &sweep);
     }
     if let Some(dir) = &c.report {
         let pages: Vec<crate::localize_report::RunPage> = locs
@@ -220,6 +153,95 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     match out.json(c.json.as_deref(), &doc) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => bad(e),
+    }
+}
+
+/// The `--track` CSV rows of a run: the estimate (smoothed with --smooth)
+/// and its covariance at every row.
+fn track_rows(run: &kinegen_analysis::run::Run, loc: &Localization) -> String {
+    let (track, cov) = loc
+        .smoothed
+        .clone()
+        .unwrap_or((loc.track.clone(), loc.cov.clone()));
+    let mut csv = String::new();
+    for (k, (x, p)) in track.iter().zip(&cov).enumerate() {
+        csv += &format!(
+            "{},{},{},{},{},{},{},{},{}\n",
+            run.path,
+            run.t[k],
+            x[0],
+            x[1],
+            x[2],
+            p[(0, 0)],
+            p[(0, 1)],
+            p[(1, 1)],
+            p[(2, 2)]
+        );
+    }
+    csv
+}
+
+/// A run's entry in the JSON document.
+fn run_json(
+    run: &kinegen_analysis::run::Run,
+    loc: &Localization,
+    s: &Summary,
+) -> serde_json::Value {
+    let last = loc.cov.last().unwrap();
+    json!({
+        "path": run.path, "steps": run.steps(),
+        "observations_used": loc.accepted, "observations_rejected": loc.rejected,
+        "observations_outside_log": loc.outside,
+        "position_rmse_m": s.rmse, "dead_reckoning_rmse_m": s.dead_reckoning,
+        "nis_mean": s.nis, "nis_bounds": s.nis_bounds.map(|b| [b.0, b.1]),
+        "nees_mean": s.nees, "nees_bounds": s.nees_bounds.map(|b| [b.0, b.1]),
+        "smoothed": s.smoothed.map(|(rmse, nees)| json!({"position_rmse_m": rmse, "nees_mean": nees})),
+        "final_pose": loc.track.last(),
+        "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
+    })
+}
+
+/// The noise sweep's table (seed 001 Figs 6-7) and which uncertainty costs most.
+fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::sweep::SweepPoint]) {
+    out.say(&format!(
+        "noise sweep on {} ({} simulated repetitions per level): EKF position RMSE (m)",
+        path,
+        kinegen_analysis::sweep::SEEDS
+    ));
+    let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
+    names.dedup();
+    out.say(&format!(
+        "  {:<10}{}",
+        "sigma",
+        names.iter().map(|n| format!("{n:>12}")).collect::<String>()
+    ));
+    for level in kinegen_analysis::sweep::LEVELS {
+        let row: String = names
+            .iter()
+            .map(|n| {
+                let p = sweep
+                    .iter()
+                    .find(|p| p.noise == *n && p.sigma == level)
+                    .unwrap();
+                format!("{:>12.4}", p.position_rmse_m)
+            })
+            .collect();
+        out.say(&format!("  {level:<10}{row}"));
+    }
+    let top = |n: &str| {
+        sweep
+            .iter()
+            .filter(|p| p.noise == n)
+            .map(|p| p.position_rmse_m)
+            .fold(0.0, f64::max)
+    };
+    let mut ranked: Vec<(&str, f64)> = names.iter().map(|n| (*n, top(n))).collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    if let [(worst, w), .., (least, l)] = ranked.as_slice() {
+        out.say(&format!(
+            "  at the largest sigma, uncertainty in `{worst}` costs {:.1}x the position error of uncertainty in `{least}`",
+            w / l.max(1e-12)
+        ));
     }
 }
 
