@@ -107,7 +107,20 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
     let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
     let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;
     let topics = match &c.topics {
-        Some(p) => TopicMap::read(p).map_err(|e| e.to_string())?,
+        Some(p) => {
+            let t = TopicMap::read(p).map_err(|e| e.to_string())?;
+            // an [inputs] entry for a column the spec does not read would be
+            // ignored: most likely a misspelt column
+            let columns: Vec<&str> = runner.ir.inputs.iter().map(|i| i.column.as_str()).collect();
+            if let Some(c) = t.inputs.keys().find(|k| !columns.contains(&k.as_str())) {
+                return Err(format!(
+                    "{}: [inputs] maps `{c}`, which is no input column of the spec (it reads: {})",
+                    p.display(),
+                    columns.join(", ")
+                ));
+            }
+            t
+        }
         None => TopicMap::default(),
     };
     let read = |paths: &[PathBuf]| {

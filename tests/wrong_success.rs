@@ -122,3 +122,28 @@ fn simulated_ranges_beside_a_landmark_stay_positive() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+/// A `--topics` `[inputs]` entry for a column the spec does not read was
+/// ignored (a misspelt column passed silently); it is refused, naming the
+/// file and the column.
+#[test]
+fn a_topic_entry_for_an_unknown_column_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let map = tmp.path().join("topics.toml");
+    std::fs::write(&map, "[inputs.enc_rigth]\njoint = \"right_wheel\"\n").unwrap();
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        "data/mystery_robot.csv",
+        "--topics",
+        map.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("topics.toml") && e.contains("enc_rigth") && e.contains("enc_r"),
+        "{e}"
+    );
+}
