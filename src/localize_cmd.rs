@@ -111,7 +111,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             Ok(l) => l,
             Err(e) => return bad(e),
         };
-        let summary = summarise(r, run, &loc, &o);
+        let summary = summarise(r, run, &loc);
         say_run(&out, run, &loc, &summary, a.gate);
         csv += &track_rows(run, &loc);
         runs_json.push(run_json(run, &loc, &summary));
@@ -300,11 +300,10 @@ fn summarise(
     r: &kinegen_analysis::model::Runner,
     run: &kinegen_analysis::run::Run,
     loc: &Localization,
-    o: &EkfOptions,
 ) -> Summary {
     let dr = evaluate(r, &r.p, std::slice::from_ref(run));
     let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
-        let nees = nees_of(r, run, track, cov, o).unwrap_or_default();
+        let nees = nees_of(r, run, track, cov);
         (position_rmse(run, track), mean(nees.iter().map(|n| n.1)))
     });
     Summary {

@@ -5,7 +5,7 @@ use super::{EkfOptions, LocalizeError};
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::run::Run;
-use kinegen_model::decl::ObservationRole::{Pose, RangeBearing};
+use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::{ArgRole, Function, StepForm};
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
 
@@ -17,7 +17,8 @@ const NO_TIME: f64 = 1e-9;
 /// needs (the pose, F and G share the twist and the arc's sines).
 pub struct Filter<'a> {
     r: &'a Runner,
-    /// [pose (3), F_x (9), F_w (3 x nw)] of the exact step.
+    /// [pose (3), F_w (3 x nw)] of the exact step from the origin (F_x
+    /// follows from the pose: see [`Belief::advance`]).
     step: Function,
     /// [range, bearing (2), H_x (6)].
     observe: Function,
@@ -75,9 +76,9 @@ impl<'a> Filter<'a> {
                 .ok_or(LocalizeError::NoLandmarkObservation)?;
         let exact = r.ir.step(StepForm::Exact);
         let nw = r.ir.noise.len();
-        let mut parts = vec![exact.value, exact.jac_x];
+        let mut parts = vec![exact.value];
         parts.extend(exact.jac_w.filter(|_| nw > 0));
-        let nw = if parts.len() == 3 { nw } else { 0 };
+        let nw = if parts.len() == 2 { nw } else { 0 };
         let fuse = |name: &str, parts: &[&Function]| {
             kinegen_model::fuse::fuse(name, parts)
                 .expect("the parts of one model share argument sizes")
@@ -109,7 +110,8 @@ impl<'a> Filter<'a> {
         }
     }
 
-    /// Whether the noise model has as many entries as this filter maps.
+    /// How many noise inputs the filter maps: the spec's `[[noise]]`, or the
+    /// body twist's three.
     pub fn noise_count(&self) -> usize {
         if self.nw == 0 {
             3
@@ -130,7 +132,16 @@ impl<'a> Filter<'a> {
     pub fn plan(&self, run: &Run) -> Plan {
         let mut order: Vec<usize> = (0..run.landmarks.len()).collect();
         order.sort_by(|a, b| run.landmarks[*a].t.total_cmp(&run.landmarks[*b].t));
-        let mut s = Scratch::new(self, run);
+        let mut s = Scratch::new(self);
+        let mut ids: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+        let landmark: Vec<usize> = run
+            .landmarks
+            .iter()
+            .map(|z| {
+                let n = ids.len();
+                *ids.entry(z.id.as_str()).or_insert(n)
+            })
+            .collect();
         let t_first = run.t[0];
         let mut plan = Plan {
             start: Vector3::from(crate::deadreckon::model_start(self.r, &self.r.p, run)),
@@ -138,8 +149,8 @@ impl<'a> Filter<'a> {
             sightings: Vec::with_capacity(run.landmarks.len()),
             first: 0,
             outside: 0,
-            landmark: std::mem::take(&mut s.landmark),
-            landmarks: s.landmarks,
+            landmark,
+            landmarks: ids.len(),
             nw: self.noise_count(),
             macros: Vec::new(),
         };
@@ -209,7 +220,7 @@ impl<'a> Filter<'a> {
         }
         let o = &s.step_out;
         let g = if self.nw > 0 {
-            o[12..12 + 3 * self.nw].to_vec()
+            o[3..3 + 3 * self.nw].to_vec()
         } else {
             // white noise on the body twist (vx, vy, omega)
             vec![h, 0.0, 0.0, 0.0, h, 0.0, 0.0, 0.0, h]
@@ -230,8 +241,7 @@ impl<'a> Filter<'a> {
         noise: &NoiseModel,
         keep: Keep,
     ) -> Result<Pass, LocalizeError> {
-        let mut s = Scratch::bare(self);
-        s.landmark.clone_from(&plan.landmark);
+        let mut s = Scratch::new(self);
         let start_cov = Matrix3::from_diagonal(&Vector3::from(self.start_sigma.map(|s| s * s)));
         let var = Vector2::from_fn(|j, _| (self.obs_sigma[j] * noise.persistent[j]).powi(2));
         let mut b = Belief::new(
@@ -246,9 +256,14 @@ impl<'a> Filter<'a> {
             outside: plan.outside,
             ..Pass::default()
         };
-        for &(i, k) in &plan.sightings[..plan.first] {
-            self.update(&mut b, run, i, &run.u[k], noise, &mut pass, &mut s);
-        }
+        let mut at = Sightings {
+            plan,
+            run,
+            noise,
+            pass: &mut pass,
+            s: &mut s,
+        };
+        self.sightings(&mut b, &mut at, (0, plan.first), run.t[0])?;
         let node = Node {
             t: run.t[0],
             f: Matrix3::identity(),
@@ -257,19 +272,11 @@ impl<'a> Filter<'a> {
             x: b.x,
             p: b.p,
         };
-        self.close(&mut pass, node, keep, true);
+        close(at.pass, node, keep, true);
         if keep == Keep::Cost {
             for m in &plan.macros {
                 predict_macro(&mut b, m, noise);
-                for &(i, k) in &plan.sightings[m.sightings.0..m.sightings.1] {
-                    self.update(&mut b, run, i, &run.u[k], noise, &mut pass, &mut s);
-                }
-                if !b.x.iter().all(|v| v.is_finite()) {
-                    return Err(LocalizeError::Diverged {
-                        path: run.path.clone(),
-                        t: m.t,
-                    });
-                }
+                self.sightings(&mut b, &mut at, m.sightings, m.t)?;
             }
             return Ok(pass);
         }
@@ -283,54 +290,67 @@ impl<'a> Filter<'a> {
                 x: b.x,
                 p: b.p,
             };
-            for &(i, k) in &plan.sightings[seg.sightings.0..seg.sightings.1] {
-                self.update(&mut b, run, i, &run.u[k], noise, &mut pass, &mut s);
-            }
-            if !b.x.iter().all(|v| v.is_finite()) {
-                return Err(LocalizeError::Diverged {
-                    path: run.path.clone(),
-                    t: seg.t,
-                });
-            }
+            self.sightings(&mut b, &mut at, seg.sightings, seg.t)?;
             node.x = b.x;
             node.p = b.p;
-            self.close(&mut pass, node, keep, seg.row_end);
+            close(at.pass, node, keep, seg.row_end);
         }
         Ok(pass)
     }
 
-    /// Record a node (and a row's estimate when it ends a row).
-    fn close(&self, pass: &mut Pass, node: Node, keep: Keep, row_end: bool) {
-        if keep == Keep::Cost {
-            return;
-        }
-        if row_end {
-            pass.rows.push(RowEstimate {
-                x: [node.x[0], node.x[1], node.x[2]],
-                p: node.p,
-            });
-        }
-        if keep == Keep::Nodes {
-            if row_end {
-                pass.row_node.push(pass.nodes.len());
-            }
-            pass.nodes.push(node);
-        }
-    }
-
-    /// Update with sighting `i` (eq. 6-9), or reject it at the gate; add its
-    /// share of the likelihood to the pass.
-    #[allow(clippy::too_many_arguments)]
-    fn update(
+    /// Update with the plan's sightings `range` (at time `t`), then check
+    /// that the estimate is still finite.
+    fn sightings(
         &self,
         b: &mut Belief,
-        run: &Run,
-        i: usize,
-        u: &[f64],
-        noise: &NoiseModel,
-        pass: &mut Pass,
-        s: &mut Scratch,
-    ) {
+        at: &mut Sightings,
+        range: (usize, usize),
+        t: f64,
+    ) -> Result<(), LocalizeError> {
+        for &(i, k) in &at.plan.sightings[range.0..range.1] {
+            self.update(b, at, i, &at.run.u[k]);
+        }
+        if b.x.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(LocalizeError::Diverged {
+                path: at.run.path.clone(),
+                t,
+            })
+        }
+    }
+}
+
+/// Record a node (and a row's estimate when it ends a row).
+fn close(pass: &mut Pass, node: Node, keep: Keep, row_end: bool) {
+    if keep == Keep::Cost {
+        return;
+    }
+    if row_end {
+        pass.rows.push(RowEstimate {
+            x: [node.x[0], node.x[1], node.x[2]],
+            p: node.p,
+        });
+    }
+    if keep == Keep::Nodes {
+        if row_end {
+            pass.row_node.push(pass.nodes.len());
+        }
+        pass.nodes.push(node);
+    }
+}
+
+impl<'a> Filter<'a> {
+    /// Update with sighting `i` (eq. 6-9), or reject it at the gate; add its
+    /// share of the likelihood to the pass.
+    fn update(&self, b: &mut Belief, at: &mut Sightings, i: usize, u: &[f64]) {
+        let Sightings {
+            plan,
+            run,
+            noise,
+            pass,
+            s,
+        } = at;
         let z = &run.landmarks[i];
         let xs = [b.x[0], b.x[1], b.x[2]];
         let lm = [z.xl, z.yl];
@@ -354,7 +374,7 @@ impl<'a> Filter<'a> {
         let white = |j: usize| (self.obs_sigma[j] * noise.obs_scale[j]).powi(2);
         let rm = Matrix2::new(white(0), 0.0, 0.0, white(1));
         b.catch_up(z.t);
-        let l = s.landmark[i];
+        let l = plan.landmark[i];
         let (bias, pb, bb) = b.of(l);
         let y = Vector2::new(z.range - o[0] - bias[0], wrap(z.bearing - o[1] - bias[1]));
         // P H^T for the pose rows, and S
@@ -382,40 +402,6 @@ impl<'a> Filter<'a> {
         b.fuse(l, &hm, &ph, &sm, &si, &y);
         pass.nis.push((z.t, nis));
         pass.accepted += 1;
-    }
-
-    /// NEES of a pass's rows against the run's ground truth.
-    pub fn nees(&self, run: &Run, pass: &Pass) -> Vec<(usize, f64)> {
-        let track: Vec<[f64; 3]> = pass.rows.iter().map(|r| r.x).collect();
-        let cov: Vec<Matrix3<f64>> = pass.rows.iter().map(|r| r.p).collect();
-        self.nees_rows(run, &track, &cov)
-    }
-
-    /// NEES of `track` with covariances `cov` at every row after the first,
-    /// when the log has ground truth of the body pose (a model that observes
-    /// an offset tracker has none to compare with).
-    pub fn nees_rows(
-        &self,
-        run: &Run,
-        track: &[[f64; 3]],
-        cov: &[Matrix3<f64>],
-    ) -> Vec<(usize, f64)> {
-        let Some(g) = run
-            .gt
-            .as_ref()
-            .filter(|_| self.r.ir.observation(Pose).is_none())
-        else {
-            return Vec::new();
-        };
-        (1..track.len().min(g.len()))
-            .filter_map(|k| {
-                let x = track[k];
-                let e = Vector3::new(x[0] - g[k][0], x[1] - g[k][1], wrap(x[2] - g[k][2]));
-                cov[k]
-                    .try_inverse()
-                    .map(|ci| (k, (e.transpose() * ci * e)[(0, 0)]))
-            })
-            .collect()
     }
 }
 
@@ -581,42 +567,27 @@ struct Scratch {
     step_out: Vec<f64>,
     obs_out: Vec<f64>,
     tape: Vec<f64>,
-    /// Each sighting's landmark (an index), and how many landmarks there are.
-    landmark: Vec<usize>,
-    landmarks: usize,
 }
 
 impl Scratch {
-    fn bare(f: &Filter) -> Scratch {
+    fn new(f: &Filter) -> Scratch {
         Scratch {
             zeros: vec![0.0; 64],
             step_out: vec![0.0; f.step.rows * f.step.cols],
             obs_out: vec![0.0; f.observe.rows * f.observe.cols],
             tape: Vec::new(),
-            landmark: Vec::new(),
-            landmarks: 0,
         }
     }
+}
 
-    fn new(f: &Filter, run: &Run) -> Scratch {
-        let mut ids: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
-        let landmark = run
-            .landmarks
-            .iter()
-            .map(|z| {
-                let n = ids.len();
-                *ids.entry(z.id.as_str()).or_insert(n)
-            })
-            .collect();
-        Scratch {
-            zeros: vec![0.0; 64],
-            step_out: vec![0.0; f.step.rows * f.step.cols],
-            obs_out: vec![0.0; f.observe.rows * f.observe.cols],
-            tape: Vec::new(),
-            landmark,
-            landmarks: ids.len(),
-        }
-    }
+/// What an update needs besides the belief: the pass's plan, log and noise,
+/// and where its results and buffers go.
+struct Sightings<'p, 'q> {
+    plan: &'p Plan,
+    run: &'p Run,
+    noise: &'p NoiseModel,
+    pass: &'q mut Pass,
+    s: &'q mut Scratch,
 }
 
 /// What the filter believes: the pose and its covariance, and (when the

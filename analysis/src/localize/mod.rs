@@ -26,8 +26,10 @@ mod smoother;
 pub use filter::{Filter, Keep, Pass};
 pub use noise::{NoiseModel, NoiseSource};
 
+use crate::log::wrap;
 use crate::model::Runner;
 use crate::run::Run;
+use kinegen_model::decl::ObservationRole::Pose;
 pub use nalgebra::Matrix3;
 
 /// The default gate on a sighting's NIS: the 99.9% point of chi-square with
@@ -133,10 +135,12 @@ pub fn localize_with(
     let keep = if o.smooth { Keep::Nodes } else { Keep::Rows };
     let pass = f.run(run, noise, keep)?;
     let smoothed = o.smooth.then(|| smoother::smooth(&pass));
+    let track: Vec<[f64; 3]> = pass.rows.iter().map(|n| n.x).collect();
+    let cov: Vec<Matrix3<f64>> = pass.rows.iter().map(|n| n.p).collect();
     Ok(Localization {
-        track: pass.rows.iter().map(|n| n.x).collect(),
-        cov: pass.rows.iter().map(|n| n.p).collect(),
-        nees: f.nees(run, &pass),
+        nees: nees_of(r, run, &track, &cov),
+        track,
+        cov,
         smoothed,
         nis: pass.nis,
         accepted: pass.accepted,
@@ -151,16 +155,28 @@ pub fn localize(r: &Runner, run: &Run, o: &EkfOptions) -> Result<Localization, L
     localize_with(r, run, &noise, o)
 }
 
-/// NEES of `track` (a smoothed one, say) against the run's ground truth at
-/// every row after the first.
+/// NEES of `track` with covariances `cov` (a filter's or a smoother's)
+/// against the run's ground truth at every row after the first, when the log
+/// has ground truth of the body pose (a model that observes an offset tracker
+/// has none to compare with).
 pub fn nees_of(
     r: &Runner,
     run: &Run,
     track: &[[f64; 3]],
     cov: &[Matrix3<f64>],
-    o: &EkfOptions,
-) -> Result<Vec<(usize, f64)>, LocalizeError> {
-    Ok(Filter::new(r, o)?.nees_rows(run, track, cov))
+) -> Vec<(usize, f64)> {
+    let Some(g) = run.gt.as_ref().filter(|_| r.ir.observation(Pose).is_none()) else {
+        return Vec::new();
+    };
+    (1..track.len().min(g.len()))
+        .filter_map(|k| {
+            let x = track[k];
+            let e = nalgebra::Vector3::new(x[0] - g[k][0], x[1] - g[k][1], wrap(x[2] - g[k][2]));
+            cov[k]
+                .try_inverse()
+                .map(|ci| (k, (e.transpose() * ci * e)[(0, 0)]))
+        })
+        .collect()
 }
 
 #[cfg(test)]
