@@ -670,13 +670,16 @@ pub struct FitArgs {
     /// truth), gyro, landmarks. Default: every kind the logs have.
     #[arg(long, value_parser = ["pose", "gyro", "landmarks"])]
     pub residuals: Vec<String>,
-    /// What the Levenberg-Marquardt fit compares: track (the absolute track,
-    /// re-anchored every 60 s, each start heading refined: the most accurate
-    /// estimates) or increments (pose increments over 5 s windows, each
-    /// dead-reckoned from its measured start, with a sandwich covariance;
-    /// needs ground truth in every run). Over 50 simulated logs both report
-    /// standard deviations within 30% of the estimates' spread.
-    #[arg(long, default_value = "track", value_parser = ["track", "increments"])]
+    /// What the Levenberg-Marquardt fit compares: track (each whole run
+    /// dead-reckoned from its start, as the odometry will run; found through
+    /// 60 s re-anchored segments, kept where it does not trade their
+    /// short-term accuracy; standard deviations that account for the track's
+    /// drift), segments (the re-anchored 60 s segments only, each start
+    /// heading refined) or increments (pose increments over 5 s windows,
+    /// each dead-reckoned from its measured start, with a sandwich
+    /// covariance; needs ground truth in every run). Over 50 simulated logs
+    /// each reports standard deviations within 30% of the estimates' spread.
+    #[arg(long, default_value = "track", value_parser = kinegen_analysis::fit::Likelihood::NAMES)]
     pub likelihood: String,
     /// Write the calibrated values for the robot's configuration: `--export
     /// ros2-yaml PATH` (ROS 2 diff_drive_controller parameters for a differential
@@ -754,9 +757,11 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         use_pose: uses("pose"),
         use_gyro: uses("gyro"),
         use_landmarks: uses("landmarks"),
-        increments: (likelihood == "increments").then_some(kinegen_analysis::fit::WINDOW_S),
         ..FitOptions::default()
     };
+    let fo = kinegen_analysis::fit::Likelihood::parse(likelihood)
+        .expect("clap checked the name")
+        .apply(fo);
     let prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),

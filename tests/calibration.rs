@@ -1160,11 +1160,6 @@ fn fifty_seeds_spread_matches_the_reported_standard_deviation() {
             track_est[k].push(track["parameters"][n]["estimate"].as_f64().unwrap());
         }
     }
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    let spread_of = |v: &[f64]| {
-        let m = mean(v);
-        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
-    };
     for (k, n) in names.iter().enumerate() {
         let spread = spread_of(&est[k]);
         let ratio = spread / mean(&std[k]);
@@ -1890,4 +1885,105 @@ fn a_calibration_that_triples_the_short_term_drift_is_unusable() {
         unusable.contains("drifts more over 5 s windows"),
         "{unusable}"
     );
+}
+
+/// Issue #35.2: a clean long log (364 s at 50 Hz, quantised encoders, white
+/// motion-capture noise, simulated with exactly the nominal values) is not
+/// made worse by calibration: over 20 seeds the whole-run position RMSE
+/// after the fit stays within 5% of the nominal values' (the fit ends on
+/// the whole runs), and the reported standard deviations match the spread
+/// of the estimates over the seeds within 30% (a sandwich over the track's
+/// drift). On the issue's own log (seed 2) every estimate is within 2
+/// reported standard deviations of the truth. The re-anchored segments alone
+/// (what the fit used to report) fail the first check on that log: 0.0015 m
+/// -> 0.0030 m, estimates 8 standard deviations off.
+///
+/// Measured over these seeds: after/before at most 0.98; spread / mean std
+/// 0.84 (r_r, r_l) and 0.74 (b). The estimates' mean sits about 1.5 mean
+/// standard deviations from nominal on this trajectory (a 5e-5 common length
+/// scale, which dead reckoning the simulator's data by hand confirms: the
+/// held-input 50 Hz step against the simulator's sub-stepped motion), so a
+/// "within 2 standard deviations of the truth" check holds on most seeds, not
+/// all.
+#[test]
+fn a_clean_long_log_keeps_its_whole_run_error_and_honest_standard_deviations() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = "spec/diff_drive.toml";
+    let names = ["r_r", "r_l", "b"];
+    let nominal = [0.042, 0.042, 0.2];
+    let (mut est, mut std) = (vec![vec![]; 3], vec![vec![]; 3]);
+    for seed in 1..=20 {
+        let s = seed.to_string();
+        let log = simulate(
+            tmp.path(),
+            &format!("c{seed}.csv"),
+            &[
+                "--spec",
+                spec,
+                "--trajectory",
+                "random",
+                "--laps",
+                "4",
+                "--seed",
+                &s,
+            ],
+        );
+        let log = log.to_str().unwrap();
+        let doc = kinegen_json(&["fit", "--spec", spec, "--data", log]);
+        let (before, after) = (
+            doc["before"]["rmse"].as_f64().unwrap(),
+            doc["after"]["rmse"].as_f64().unwrap(),
+        );
+        assert!(
+            after <= 1.05 * before,
+            "seed {seed}: whole-run RMSE {before} -> {after}"
+        );
+        for (k, n) in names.iter().enumerate() {
+            let (e, sd) = (
+                doc["parameters"][n]["estimate"].as_f64().unwrap(),
+                doc["parameters"][n]["std"].as_f64().unwrap(),
+            );
+            if seed == 2 {
+                assert!((e - nominal[k]).abs() <= 2.0 * sd, "seed 2: {n} {e} ± {sd}");
+            }
+            est[k].push(e);
+            std[k].push(sd);
+        }
+        if seed == 2 {
+            let seg = kinegen_json(&[
+                "fit",
+                "--spec",
+                spec,
+                "--data",
+                log,
+                "--likelihood",
+                "segments",
+            ]);
+            let grown =
+                seg["after"]["rmse"].as_f64().unwrap() / seg["before"]["rmse"].as_f64().unwrap();
+            assert!(
+                grown > 1.05,
+                "the segments alone no longer degrade this log ({grown:.2})"
+            );
+        }
+    }
+    for (k, n) in names.iter().enumerate() {
+        let spread = spread_of(&est[k]);
+        let ratio = spread / mean(&std[k]);
+        assert!(
+            (0.7..=1.3).contains(&ratio),
+            "{n}: spread {spread:.3e}, mean std {:.3e} ({ratio:.2})",
+            mean(&std[k])
+        );
+    }
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// Sample standard deviation.
+fn spread_of(v: &[f64]) -> f64 {
+    let m = mean(v);
+    (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
 }
