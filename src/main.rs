@@ -7,6 +7,7 @@ use std::process::ExitCode;
 mod analysis_cmd;
 mod batch_cmd;
 mod bench_diagnose_cmd;
+mod bench_real_cmd;
 mod diagnose_cmd;
 mod effects_cmd;
 mod export;
@@ -98,6 +99,13 @@ enum Command {
     ///
     /// Example: kinegen bench-diagnose --seeds 5 --json bench.json
     BenchDiagnose(bench_diagnose_cmd::BenchDiagnoseArgs),
+    /// Calibration judged on real runs it was not fitted on: each session of
+    /// the OptiOdom study calibrated by kinegen, scored with the nominal values
+    /// and every published method's parameters on the robot's other sessions
+    /// (median final position error and whole-run RMSE) and on its own runs.
+    ///
+    /// Example: kinegen bench-real ../shared/real/optiodom-dev --json bench-real.json
+    BenchReal(bench_real_cmd::BenchRealArgs),
     /// Calibrate the spec's free parameters (bounded Levenberg-Marquardt on the
     /// generated parameter Jacobians): before/after error, estimates with standard
     /// deviations, correlations and identifiability warnings.
@@ -170,6 +178,7 @@ fn main() -> ExitCode {
         Command::Inverse(a) => inverse_cmd::run(&a),
         Command::Navigate(a) => navigate_cmd::run(&a),
         Command::BenchDiagnose(a) => bench_diagnose_cmd::run(&a),
+        Command::BenchReal(a) => bench_real_cmd::run(&a),
         Command::Diagnose(c) => diagnose_cmd::run(c),
         Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
         Command::Simulate(a) => effects_cmd::run_simulate(a),

@@ -13,6 +13,7 @@ pub mod diagnose;
 pub mod discretisation;
 pub mod fit;
 pub mod grid;
+pub mod holdout_bench;
 pub mod innovations;
 pub mod input_range;
 pub mod interp;

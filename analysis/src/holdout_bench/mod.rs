@@ -1,0 +1,237 @@
+//! Calibration judged where its users feel it (issue 35): on runs it was not
+//! fitted on. Each session (runs of one robot recorded together) is
+//! calibrated by [`fit`]; its parameters, the nominal values and every
+//! published method's parameters from the same session are then scored on
+//! the runs of the robot's *other* sessions, each dead-reckoned from its
+//! measured start: the median over those runs of the final position error
+//! and of the whole-run position RMSE. Beside them, the study's own
+//! in-sample figure: the largest final position error over the session's
+//! own runs.
+use crate::fit::{fit, FitOptions};
+use crate::metrics;
+use crate::model::Runner;
+use crate::run::Run;
+use crate::track_rows::{Heading, Recipe, TrackRows};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+pub mod optiodom;
+
+/// One session: its runs, the model at the session's nominal values, and the
+/// calibrations published from it.
+pub struct Session {
+    /// e.g. `diff/square/230620202144`
+    pub name: String,
+    /// The robot it was recorded with; sessions of the same robot score each other.
+    pub robot: String,
+    pub runner: Runner,
+    pub runs: Vec<Run>,
+    pub published: Vec<Calibration>,
+}
+
+/// Parameter values a method gives, by the spec's parameter index; the
+/// others stay at the session's nominal values.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    pub method: String,
+    pub values: Vec<(usize, f64)>,
+    /// The study's own in-sample figure for it (largest final position error
+    /// over the session's runs, m), where published: a check that the spec
+    /// dead-reckons as the study did.
+    pub study_final_m: Option<f64>,
+}
+
+/// How one parameter set does.
+#[derive(Debug, Clone, Serialize)]
+pub struct Score {
+    /// Median over the other sessions' runs of the final position error, m.
+    pub held_out_final_m: Option<f64>,
+    /// Median over the other sessions' runs of the whole-run position RMSE, m.
+    pub held_out_rmse_m: Option<f64>,
+    pub held_out_runs: usize,
+    /// Largest final position error over the session's own runs, m.
+    pub in_sample_final_m: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct MethodResult {
+    pub method: String,
+    pub params: BTreeMap<String, f64>,
+    pub score: Score,
+    pub study_final_m: Option<f64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SessionResult {
+    pub session: String,
+    pub robot: String,
+    pub runs: usize,
+    /// Logged time over the session's runs, s.
+    pub seconds: f64,
+    /// Wall time of kinegen's calibration, s.
+    pub fit_seconds: f64,
+    /// What fit said (or why it failed).
+    pub warnings: Vec<String>,
+    /// `kinegen` first, then `nominal`, then the published methods.
+    pub methods: Vec<MethodResult>,
+}
+
+/// The name kinegen's own calibration is listed under.
+pub const KINEGEN: &str = "kinegen";
+/// The name of the nominal values.
+pub const NOMINAL: &str = "nominal";
+
+/// A measure of a [`Score`] (smaller is better).
+pub type Measure = fn(&Score) -> Option<f64>;
+
+pub const HELD_OUT_FINAL: Measure = |s| s.held_out_final_m;
+pub const HELD_OUT_RMSE: Measure = |s| s.held_out_rmse_m;
+pub const IN_SAMPLE_FINAL: Measure = |s| Some(s.in_sample_final_m);
+
+impl SessionResult {
+    /// The published method with the smallest `measure`, with its value.
+    pub fn best_published(&self, measure: Measure) -> Option<(&str, f64)> {
+        self.methods
+            .iter()
+            .filter(|m| m.method != KINEGEN && m.method != NOMINAL)
+            .filter_map(|m| measure(&m.score).map(|v| (m.method.as_str(), v)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
+    pub fn score_of(&self, method: &str) -> Option<&Score> {
+        self.methods
+            .iter()
+            .find(|m| m.method == method)
+            .map(|m| &m.score)
+    }
+
+    /// Whether kinegen's `measure` is at or below every published method's
+    /// (None: not measured, or nothing published to compare with).
+    pub fn kinegen_wins(&self, measure: Measure) -> Option<bool> {
+        let ours = measure(self.score_of(KINEGEN)?)?;
+        let (_, best) = self.best_published(measure)?;
+        Some(ours <= best)
+    }
+}
+
+/// Calibrate every session and score every method (see the module doc).
+/// `progress` hears each session's name as its calibration starts.
+pub fn benchmark(
+    sessions: &[Session],
+    o: &FitOptions,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Vec<SessionResult> {
+    sessions
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            progress(&s.name);
+            let started = Instant::now();
+            let (ours, warnings) = match fit(&s.runner, &s.runs, o) {
+                Ok(res) => (
+                    Some(Calibration {
+                        method: KINEGEN.into(),
+                        values: res.free.iter().map(|&k| (k, res.p[k])).collect(),
+                        study_final_m: None,
+                    }),
+                    res.warnings,
+                ),
+                Err(e) => (None, vec![format!("fit failed: {e}")]),
+            };
+            let fit_seconds = started.elapsed().as_secs_f64();
+            let nominal = Calibration {
+                method: NOMINAL.into(),
+                values: vec![],
+                study_final_m: None,
+            };
+            let others: Vec<&Session> = sessions
+                .iter()
+                .enumerate()
+                .filter(|(j, o)| *j != i && o.robot == s.robot)
+                .map(|x| x.1)
+                .collect();
+            let methods = ours
+                .iter()
+                .chain([&nominal])
+                .chain(&s.published)
+                .map(|c| MethodResult {
+                    method: c.method.clone(),
+                    params: named(&s.runner, c),
+                    score: score(s, &others, c),
+                    study_final_m: c.study_final_m,
+                })
+                .collect();
+            SessionResult {
+                session: s.name.clone(),
+                robot: s.robot.clone(),
+                runs: s.runs.len(),
+                seconds: s.runs.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum(),
+                fit_seconds,
+                warnings,
+                methods,
+            }
+        })
+        .collect()
+}
+
+/// A calibration's values by parameter name.
+fn named(r: &Runner, c: &Calibration) -> BTreeMap<String, f64> {
+    c.values
+        .iter()
+        .map(|&(k, v)| (r.names[k].clone(), v))
+        .collect()
+}
+
+/// `c` scored on `own`'s runs (in sample) and on the runs of `others`, each
+/// at that session's nominal values with `c`'s values in place.
+fn score(own: &Session, others: &[&Session], c: &Calibration) -> Score {
+    let own_errors = errors(own, c);
+    let held: Vec<(f64, f64)> = others.par_iter().flat_map(|s| errors(s, c)).collect();
+    // a run whose dead reckoning stops being a number counts as the worst
+    Score {
+        held_out_final_m: median(held.iter().map(|e| e.0).collect()),
+        held_out_rmse_m: median(held.iter().map(|e| e.1).collect()),
+        held_out_runs: held.len(),
+        in_sample_final_m: own_errors.iter().map(|e| e.0).fold(0.0, f64::max),
+    }
+}
+
+/// (final position error, position RMSE) of each of `s`'s runs dead-reckoned
+/// with `c` from its measured start.
+fn errors(s: &Session, c: &Calibration) -> Vec<(f64, f64)> {
+    let mut p = s.runner.p.clone();
+    for &(k, v) in &c.values {
+        p[k] = v;
+    }
+    s.runs
+        .par_iter()
+        .map(|run| {
+            let track = Recipe {
+                r: &s.runner,
+                p: p.clone(),
+                offset: [0.0; 3],
+                heading: Heading::Model,
+            };
+            let (_, each) = metrics::errors_each(&[(run, &track as &dyn TrackRows)]);
+            let e = &each[0];
+            let bad = |v: f64| if v.is_finite() { v } else { f64::INFINITY };
+            (bad(e.final_position_error_m), bad(e.rmse))
+        })
+        .collect()
+}
+
+/// The median (mean of the middle two for an even count); None when empty.
+pub fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    })
+}

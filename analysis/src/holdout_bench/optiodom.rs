@@ -1,0 +1,230 @@
+//! Sessions in the layout of the OptiOdom study (Sousa et al. 2022; see
+//! `../shared/real/optiodom-dev/README.md`): one folder per session with
+//! `run-NN.csv` files and a `metadata.json`, and one `published.json` with
+//! every method's calibration per session. A benchmark file
+//! (`spec/benchmarks/optiodom/benchmark.toml`) names, per robot type, the
+//! spec its user would write and how the study's parameter names map onto
+//! the spec's.
+use super::{Calibration, Session};
+use crate::model::Runner;
+use crate::run::Run;
+use kinegen_model::ir::ModelIr;
+use serde::Deserialize;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The benchmark file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Per robot type (a session's `type`).
+    pub robot: BTreeMap<String, RobotConfig>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotConfig {
+    /// The spec, relative to the benchmark file.
+    pub spec: PathBuf,
+    /// Spec parameter -> the study's parameter (value = study's * scale).
+    #[serde(default)]
+    pub published: BTreeMap<String, Mapped>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mapped {
+    pub name: String,
+    #[serde(default = "one")]
+    pub scale: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Config {
+    pub fn read(path: &Path) -> Result<Config, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        toml::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+}
+
+/// Where a session's folder says what it is.
+#[derive(Debug, Deserialize)]
+struct Metadata {
+    #[serde(rename = "type")]
+    robot: String,
+    pattern: String,
+    session: String,
+    run_files: Vec<RunFile>,
+    #[serde(default)]
+    kinegen_nominal: BTreeMap<String, Value>,
+}
+
+#[derive(Debug, Deserialize)]
+struct RunFile {
+    file: String,
+}
+
+/// What reading a study folder gives: its sessions, and what was left out.
+pub struct Loaded {
+    pub sessions: Vec<Session>,
+    pub warnings: Vec<String>,
+}
+
+/// Read the sessions under `dir` whose folder name starts with one of
+/// `only` (all when empty), for the robot types `config` (read from
+/// `config_path`) knows. `load_ir` gives a spec's IR (the CLI derives it
+/// in a child process); `max_gap` splits a log at longer gaps as every
+/// command does.
+pub fn load(
+    dir: &Path,
+    config_path: &Path,
+    only: &[String],
+    max_gap: f64,
+    load_ir: &dyn Fn(&Path) -> Result<ModelIr, String>,
+) -> Result<Loaded, String> {
+    let config = Config::read(config_path)?;
+    let base = config_path.parent().unwrap_or(Path::new("."));
+    let published = read_json(&dir.join("published.json"))?;
+    let mut folders: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("metadata.json").is_file())
+        .collect();
+    folders.sort();
+    let mut irs: BTreeMap<String, ModelIr> = BTreeMap::new();
+    let (mut sessions, mut warnings) = (Vec::new(), Vec::new());
+    for folder in folders {
+        let name = folder.file_name().unwrap().to_string_lossy().to_string();
+        if !only.is_empty() && !only.iter().any(|o| name.starts_with(o.as_str())) {
+            continue;
+        }
+        let meta_path = folder.join("metadata.json");
+        let meta: Metadata = serde_json::from_value(read_json(&meta_path)?)
+            .map_err(|e| format!("{}: {e}", meta_path.display()))?;
+        let Some(robot) = config.robot.get(&meta.robot) else {
+            warnings.push(format!(
+                "{name}: robot type `{}` has no entry in {}; left out",
+                meta.robot,
+                config_path.display()
+            ));
+            continue;
+        };
+        if !irs.contains_key(&meta.robot) {
+            let spec = base.join(&robot.spec);
+            let ir = load_ir(&spec)?;
+            let known: Vec<String> = ir.runtime_params().iter().map(|p| p.name.clone()).collect();
+            if let Some(k) = robot.published.keys().find(|k| !known.contains(k)) {
+                return Err(format!(
+                    "{}: robot.{}.published.{k}: {} has no parameter `{k}` (it has: {})",
+                    config_path.display(),
+                    meta.robot,
+                    spec.display(),
+                    known.join(", ")
+                ));
+            }
+            irs.insert(meta.robot.clone(), ir);
+        }
+        let ir = irs[&meta.robot].clone();
+        let key = format!("{}/{}/{}", meta.robot, meta.pattern, meta.session);
+        let session = session(
+            &folder,
+            &meta,
+            robot,
+            ir,
+            published.get(&key),
+            max_gap,
+            &mut warnings,
+        )?;
+        sessions.push(Session {
+            name: key,
+            ..session
+        });
+    }
+    if sessions.is_empty() {
+        return Err(format!(
+            "{}: no session folders (with a metadata.json){}",
+            dir.display(),
+            if only.is_empty() {
+                String::new()
+            } else {
+                format!(" named {}", only.join(", "))
+            }
+        ));
+    }
+    Ok(Loaded { sessions, warnings })
+}
+
+fn read_json(path: &Path) -> Result<Value, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// One session folder: the model at its nominal values, its runs, and the
+/// published calibrations (`published`: its entry of published.json).
+fn session(
+    folder: &Path,
+    meta: &Metadata,
+    robot: &RobotConfig,
+    ir: ModelIr,
+    published: Option<&Value>,
+    max_gap: f64,
+    warnings: &mut Vec<String>,
+) -> Result<Session, String> {
+    let known: Vec<String> = ir.runtime_params().iter().map(|p| p.name.clone()).collect();
+    let sets: Vec<(String, f64)> = meta
+        .kinegen_nominal
+        .iter()
+        .filter(|(k, _)| known.contains(k))
+        .filter_map(|(k, v)| v.as_f64().map(|v| (k.clone(), v)))
+        .collect();
+    let runner = Runner::new(ir, &sets).map_err(|e| format!("{}: {e}", folder.display()))?;
+    let mut runs = Vec::new();
+    for f in &meta.run_files {
+        let run = Run::read(&folder.join(&f.file), &runner).map_err(|e| e.to_string())?;
+        let (pieces, warning) = run.split_at_gaps(max_gap);
+        warnings.extend(warning);
+        runs.extend(pieces);
+    }
+    let published = published
+        .and_then(Value::as_array)
+        .map(|methods| calibrations(methods, robot, &runner))
+        .unwrap_or_default();
+    Ok(Session {
+        name: String::new(),
+        robot: meta.robot.clone(),
+        runner,
+        runs,
+        published,
+    })
+}
+
+/// The published calibrations of a session in the spec's terms: each
+/// method's `session` variant with calibrated parameters (the study also
+/// lists re-runs from other starting values, and methods it could not
+/// calibrate with).
+fn calibrations(methods: &[Value], robot: &RobotConfig, r: &Runner) -> Vec<Calibration> {
+    methods
+        .iter()
+        .filter(|m| m["variant"] == "session")
+        .filter_map(|m| {
+            let cal = m["params_cal"].as_object().filter(|c| !c.is_empty())?;
+            let values = robot
+                .published
+                .iter()
+                .filter_map(|(spec_name, mapped)| {
+                    let k = r.names.iter().position(|n| n == spec_name)?;
+                    Some((k, cal.get(&mapped.name)?.as_f64()? * mapped.scale))
+                })
+                .collect();
+            Some(Calibration {
+                method: m["sheet"].as_str()?.to_string(),
+                values,
+                study_final_m: m["cal"]["final_pos"].as_f64(),
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,191 @@
+//! `kinegen bench-real`: calibration judged on real runs it was not fitted
+//! on (issue 35), on sessions in the OptiOdom layout. The library reads the
+//! sessions and scores every method (`kinegen_analysis::holdout_bench`);
+//! this renders the table (markdown, as the README shows it) and the JSON.
+use crate::analysis_cmd::bad;
+use crate::output::Out;
+use clap::Args;
+use kinegen_analysis::fit::{FitOptions, Likelihood};
+use kinegen_analysis::holdout_bench::{
+    self, optiodom, Measure, SessionResult, HELD_OUT_FINAL, HELD_OUT_RMSE, IN_SAMPLE_FINAL,
+    KINEGEN, NOMINAL,
+};
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct BenchRealArgs {
+    /// Folder of sessions in the OptiOdom layout (one folder per session with
+    /// run-NN.csv and metadata.json; published.json beside them).
+    #[arg(default_value = "../shared/real/optiodom-dev")]
+    pub dir: PathBuf,
+    /// The benchmark file: per robot type, its spec and the mapping of the
+    /// study's parameter names.
+    #[arg(long, default_value = "spec/benchmarks/optiodom/benchmark.toml")]
+    pub config: PathBuf,
+    /// Only the sessions whose folder name starts with this (repeatable); they
+    /// are then scored on each other only.
+    #[arg(long)]
+    pub session: Vec<String>,
+    /// Split a log where rows are more than this many seconds apart.
+    #[arg(long, value_name = "SECONDS", default_value_t = kinegen_analysis::run::DEFAULT_MAX_GAP_S, value_parser = crate::analysis_cmd::positive)]
+    pub max_gap: f64,
+    /// What kinegen's calibration compares (as `fit --likelihood`).
+    #[arg(long, default_value = "track", value_parser = Likelihood::NAMES)]
+    pub likelihood: String,
+    /// Write one JSON document to PATH (`-`: stdout).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn run(a: &BenchRealArgs) -> ExitCode {
+    let out = Out::new(a.json.as_deref());
+    if let Err(e) = crate::output::check_outputs(a.json.as_deref(), None) {
+        return bad(e);
+    }
+    if a.max_gap.is_nan() || a.max_gap <= 0.0 {
+        return bad(format!(
+            "--max-gap {}: must be a positive number of seconds",
+            a.max_gap
+        ));
+    }
+    if !a.config.is_file() {
+        return bad(format!(
+            "--config {}: no such file (the benchmark file is spec/benchmarks/optiodom/benchmark.toml in the kinegen checkout)",
+            a.config.display()
+        ));
+    }
+    let loaded = match optiodom::load(&a.dir, &a.config, &a.session, a.max_gap, &|spec| {
+        crate::ir_source::load(spec)
+    }) {
+        Ok(l) => l,
+        Err(e) => return bad(e),
+    };
+    for w in &loaded.warnings {
+        out.say(&format!("warning: {w}"));
+    }
+    let started = Instant::now();
+    let spin = crate::progress::Progress::spinner(
+        "calibrating",
+        a.quiet || a.json.as_deref() == Some(std::path::Path::new("-")),
+    );
+    let options = Likelihood::parse(&a.likelihood)
+        .expect("clap checked the name")
+        .apply(FitOptions::default());
+    let results = holdout_bench::benchmark(&loaded.sessions, &options, &|s| spin.message(s));
+    drop(spin);
+    for line in table(&results) {
+        out.say(&line);
+    }
+    out.say("");
+    for line in summary_lines(&results) {
+        out.say(&line);
+    }
+    out.say(&format!(
+        "({} sessions in {:.0} s)",
+        results.len(),
+        started.elapsed().as_secs_f64()
+    ));
+    let doc = json!({
+        "dir": a.dir.display().to_string(),
+        "sessions": results,
+        "summary": summary(&results),
+        "seconds": started.elapsed().as_secs_f64(),
+    });
+    match out.json(a.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
+
+/// The three measures, as the table names them.
+const MEASURES: [(&str, Measure); 3] = [
+    ("held-out final", HELD_OUT_FINAL),
+    ("held-out RMSE", HELD_OUT_RMSE),
+    ("in-sample worst final", IN_SAMPLE_FINAL),
+];
+
+/// The per-session table in markdown: for each measure kinegen's figure, the
+/// best published method's (and which), the nominal values', and whether
+/// kinegen is at or below the best published.
+fn table(results: &[SessionResult]) -> Vec<String> {
+    let mut lines = vec![
+        "| session | runs | fit s | held-out final (m): kinegen / best published / nominal | held-out RMSE (m): kinegen / best published / nominal | in-sample worst final (m): kinegen / best published / nominal |".to_string(),
+        "|---|---|---|---|---|---|".to_string(),
+    ];
+    for s in results {
+        let mut cells = vec![
+            s.session.clone(),
+            s.runs.to_string(),
+            format!("{:.1}", s.fit_seconds),
+        ];
+        for (_, m) in MEASURES {
+            cells.push(cell(s, m));
+        }
+        lines.push(format!("| {} |", cells.join(" | ")));
+    }
+    lines
+}
+
+fn cell(s: &SessionResult, m: Measure) -> String {
+    let fmt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3}"));
+    let ours = s.score_of(KINEGEN).and_then(m);
+    let nominal = s.score_of(NOMINAL).and_then(m);
+    let best = s.best_published(m);
+    let mark = match s.kinegen_wins(m) {
+        Some(true) => "**",
+        _ => "",
+    };
+    let best = best.map_or("-".into(), |(name, v)| format!("{v:.3} ({})", short(name)));
+    format!("{mark}{}{mark} / {best} / {}", fmt(ours), fmt(nominal))
+}
+
+/// A published method's name without its robot prefix (`diff-UMBmark` -> `UMBmark`).
+fn short(method: &str) -> &str {
+    method.split_once('-').map_or(method, |x| x.1)
+}
+
+/// Per robot and measure: sessions where kinegen is at or below the best
+/// published method, out of those with one to compare.
+fn summary(results: &[SessionResult]) -> serde_json::Value {
+    let mut robots: BTreeMap<&str, serde_json::Map<String, serde_json::Value>> = BTreeMap::new();
+    for (name, m) in MEASURES {
+        for (robot, (wins, of)) in wins(results, m) {
+            robots
+                .entry(robot)
+                .or_default()
+                .insert(name.into(), json!({"kinegen_best": wins, "sessions": of}));
+        }
+    }
+    json!(robots)
+}
+
+fn wins(results: &[SessionResult], m: Measure) -> BTreeMap<&str, (usize, usize)> {
+    let mut out: BTreeMap<&str, (usize, usize)> = BTreeMap::new();
+    for s in results {
+        if let Some(w) = s.kinegen_wins(m) {
+            let e = out.entry(s.robot.as_str()).or_default();
+            e.0 += usize::from(w);
+            e.1 += 1;
+        }
+    }
+    out
+}
+
+fn summary_lines(results: &[SessionResult]) -> Vec<String> {
+    let mut lines = vec!["kinegen at or below the best published method (sessions):".to_string()];
+    for (name, m) in MEASURES {
+        let parts: Vec<String> = wins(results, m)
+            .iter()
+            .map(|(robot, (w, of))| format!("{robot} {w} of {of}"))
+            .collect();
+        lines.push(format!("  {name:<22} {}", parts.join(", ")));
+    }
+    lines
+}
