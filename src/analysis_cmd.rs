@@ -418,6 +418,46 @@ fn held_out_worse(
     ))
 }
 
+/// Leave-one-run-out ([`kinegen_analysis::fit::leave_one_out`]): the runs
+/// the others' calibration dead-reckons worse than the starting values are
+/// named in a warning; every left-out run's figures go to the JSON.
+fn say_leave_one_out(
+    out: &Out,
+    r: &Runner,
+    p: &[f64],
+    runs: &[Run],
+    fo: &FitOptions,
+    doc: &mut Value,
+) {
+    let checked = kinegen_analysis::fit::leave_one_out::leave_one_out(r, p, runs, fo);
+    if checked.is_empty() {
+        return;
+    }
+    let unsupported: Vec<String> = checked
+        .iter()
+        .filter(|x| x.unsupported())
+        .map(|x| {
+            format!(
+                "{} ({:.4} m -> {:.4} m)",
+                x.path, x.nominal_rmse_m, x.calibrated_rmse_m
+            )
+        })
+        .collect();
+    if !unsupported.is_empty() {
+        let w = format!(
+            "leave-one-run-out: calibrated on the other runs, {} of {} runs are dead-reckoned worse than with the starting values: {}. These runs do not support the estimate (too short, or driven differently from the rest): look at them, add runs like them, or give the parameters a `tolerance` in the spec",
+            unsupported.len(),
+            checked.len(),
+            unsupported.join(", ")
+        );
+        out.say(&format!("warning: {w}"));
+        if let Some(list) = doc["warnings"].as_array_mut() {
+            list.push(json!(w));
+        }
+    }
+    doc["leave_one_out"] = json!(checked);
+}
+
 pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
     evaluation(r, p, runs).errors
 }
@@ -757,6 +797,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         use_pose: uses("pose"),
         use_gyro: uses("gyro"),
         use_landmarks: uses("landmarks"),
+        multi_start: true,
         ..FitOptions::default()
     };
     let fo = kinegen_analysis::fit::Likelihood::parse(likelihood)
@@ -1125,6 +1166,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         }
     }
     doc["runs"] = json!(runs);
+    say_leave_one_out(&out, r, &res.p, &prep.runs, &fo, &mut doc);
     if let Some(dir) = &c.report {
         if let Err(e) = crate::report::fit_report(
             dir,

@@ -77,7 +77,10 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
     );
     let options = Likelihood::parse(&a.likelihood)
         .expect("clap checked the name")
-        .apply(FitOptions::default());
+        .apply(FitOptions {
+            multi_start: true,
+            ..FitOptions::default()
+        });
     let results = holdout_bench::benchmark(&loaded.sessions, &options, &|s| spin.message(s));
     drop(spin);
     for line in table(&results) {
@@ -125,15 +128,15 @@ fn table(results: &[SessionResult]) -> Vec<String> {
             s.runs.to_string(),
             format!("{:.1}", s.fit_seconds),
         ];
-        for (_, m) in MEASURES {
-            cells.push(cell(s, m));
+        for (k, (_, m)) in MEASURES.iter().enumerate() {
+            cells.push(cell(s, *m, (k < 2).then_some(k)));
         }
         lines.push(format!("| {} |", cells.join(" | ")));
     }
     lines
 }
 
-fn cell(s: &SessionResult, m: Measure) -> String {
+fn cell(s: &SessionResult, m: Measure, k: Option<usize>) -> String {
     let fmt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3}"));
     let ours = s.score_of(KINEGEN).and_then(m);
     let nominal = s.score_of(NOMINAL).and_then(m);
@@ -143,7 +146,17 @@ fn cell(s: &SessionResult, m: Measure) -> String {
         _ => "",
     };
     let best = best.map_or("-".into(), |(name, v)| format!("{v:.3} ({})", short(name)));
-    format!("{mark}{}{mark} / {best} / {}", fmt(ours), fmt(nominal))
+    // run by run against that method: where kinegen is lower, and whether the
+    // split is beyond the runs' scatter (sign test at 5%)
+    let paired = k.and_then(|k| s.paired(m, k)).map_or(String::new(), |p| {
+        let sig = if p.p_value < 0.05 { ", p < 0.05" } else { "" };
+        format!(" [{}/{}{sig}]", p.lower, p.differ)
+    });
+    format!(
+        "{mark}{}{mark}{paired} / {best} / {}",
+        fmt(ours),
+        fmt(nominal)
+    )
 }
 
 /// A published method's name without its robot prefix (`diff-UMBmark` -> `UMBmark`).

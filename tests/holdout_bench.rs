@@ -166,3 +166,57 @@ fn bench_real_refuses_bad_input_with_its_location() {
     assert!(e.contains("published.wheel"), "{e}");
     assert!(!json.exists());
 }
+
+/// Issue #35.4: from starting values far off (a wheelbase 10x too small, a
+/// wheel radius 5x too large), fit on a real tricycle session reaches the
+/// optimum the nominal values reach, and says that its result depended on
+/// where it started. Before the scaled starts it stopped at a wheelbase of
+/// 0.0156 m with 2.5x the error (0.131 m against 0.053 m), and said nothing.
+#[test]
+fn fit_from_far_starting_values_reaches_the_optimum_and_says_the_start_mattered() {
+    let Some(dir) = real_data("optiodom-dev") else {
+        return;
+    };
+    let session = dir.join("tricyc-square-140120211430");
+    let (a, b) = (session.join("run-01.csv"), session.join("run-02.csv"));
+    let spec = "spec/benchmarks/optiodom/tricycle.toml";
+    let fit = |sets: &[&str]| {
+        let mut args = vec![
+            "fit",
+            "--spec",
+            spec,
+            "--data",
+            a.to_str().unwrap(),
+            "--data",
+            b.to_str().unwrap(),
+        ];
+        for s in sets {
+            args.extend(["--set", s]);
+        }
+        kinegen_json(&args)
+    };
+    let nominal = fit(&[]);
+    let far = fit(&["L=0.015", "r=0.16"]);
+    let rmse = |d: &Value| d["after"]["rmse"].as_f64().unwrap();
+    assert!(
+        rmse(&far) <= 1.01 * rmse(&nominal),
+        "{} against {}",
+        rmse(&far),
+        rmse(&nominal)
+    );
+    for p in ["r", "L", "steer_offset"] {
+        let (x, y) = (&far["parameters"][p], &nominal["parameters"][p]);
+        let (ex, ey, sd) = (
+            x["estimate"].as_f64().unwrap(),
+            y["estimate"].as_f64().unwrap(),
+            y["std"].as_f64().unwrap(),
+        );
+        assert!(
+            (ex - ey).abs() <= sd,
+            "{p}: {ex} from far, {ey} ± {sd} from nominal"
+        );
+    }
+    let warnings = far["warnings"].to_string();
+    assert!(warnings.contains("local minimum"), "{warnings}");
+    assert!(!nominal["warnings"].to_string().contains("local minimum"));
+}

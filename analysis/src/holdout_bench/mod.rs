@@ -53,6 +53,9 @@ pub struct Score {
     pub held_out_runs: usize,
     /// Largest final position error over the session's own runs, m.
     pub in_sample_final_m: f64,
+    /// Each held-out run's (final position error, position RMSE), m, in the
+    /// same order for every method of a session: paired comparisons.
+    pub held_out: Vec<[f64; 2]>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -105,6 +108,29 @@ impl SessionResult {
             .iter()
             .find(|m| m.method == method)
             .map(|m| &m.score)
+    }
+
+    /// Kinegen against the best published method by `measure` (by its
+    /// median), run by run on the held-out runs: the runs where kinegen's
+    /// error (component `k` of [`Score::held_out`]: 0 final, 1 RMSE) is
+    /// lower, the runs that differ, and the two-sided sign test's p-value
+    /// (a small one: the difference is more than the runs' scatter).
+    pub fn paired(&self, measure: Measure, k: usize) -> Option<Paired> {
+        let (best, _) = self.best_published(measure)?;
+        let ours = &self.score_of(KINEGEN)?.held_out;
+        let theirs = &self.score_of(best)?.held_out;
+        let (mut lower, mut differ) = (0, 0);
+        for (a, b) in ours.iter().zip(theirs) {
+            if a[k] != b[k] {
+                differ += 1;
+                lower += usize::from(a[k] < b[k]);
+            }
+        }
+        Some(Paired {
+            lower,
+            differ,
+            p_value: sign_test(lower, differ),
+        })
     }
 
     /// Whether kinegen's `measure` is at or below every published method's
@@ -195,6 +221,7 @@ fn score(own: &Session, others: &[&Session], c: &Calibration) -> Score {
         held_out_rmse_m: median(held.iter().map(|e| e.1).collect()),
         held_out_runs: held.len(),
         in_sample_final_m: own_errors.iter().map(|e| e.0).fold(0.0, f64::max),
+        held_out: held.iter().map(|e| [e.0, e.1]).collect(),
     }
 }
 
@@ -220,6 +247,30 @@ fn errors(s: &Session, c: &Calibration) -> Vec<(f64, f64)> {
             (bad(e.final_position_error_m), bad(e.rmse))
         })
         .collect()
+}
+
+/// A paired comparison over held-out runs (see [`SessionResult::paired`]).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Paired {
+    pub lower: usize,
+    pub differ: usize,
+    pub p_value: f64,
+}
+
+/// Two-sided exact sign test: the probability, with no difference, of a
+/// split at least as uneven as `k` of `n`.
+pub fn sign_test(k: usize, n: usize) -> f64 {
+    if n == 0 {
+        return 1.0;
+    }
+    let tail = k.min(n - k);
+    // sum_{i <= tail} C(n, i) / 2^n, in logs (n may be in the hundreds)
+    let ln_choose =
+        |i: usize| -> f64 { (1..=i).map(|j| ((n - i + j) as f64 / j as f64).ln()).sum() };
+    let one: f64 = (0..=tail)
+        .map(|i| (ln_choose(i) - n as f64 * 2f64.ln()).exp())
+        .sum();
+    (2.0 * one).min(1.0)
 }
 
 /// The median (mean of the middle two for an even count); None when empty.
