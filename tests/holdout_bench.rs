@@ -220,3 +220,68 @@ fn fit_from_far_starting_values_reaches_the_optimum_and_says_the_start_mattered(
     assert!(warnings.contains("local minimum"), "{warnings}");
     assert!(!nominal["warnings"].to_string().contains("local minimum"));
 }
+
+/// Issue #35.3: leave-one-run-out. On a real tricycle session of two circles
+/// (one each way), each circle alone calibrates a model that dead-reckons the
+/// other worse than the nominal values: fit names both runs. On three
+/// simulated runs of a differential drive whose wheel is 1% large, each
+/// left-out run comes out better than nominal and nothing is said.
+#[test]
+fn leave_one_run_out_names_runs_that_do_not_support_the_estimate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = "spec/diff_drive.toml";
+    let mut args = vec!["fit", "--spec", spec];
+    let logs: Vec<String> = (1..=3)
+        .map(|seed| {
+            let s = seed.to_string();
+            let sim = [
+                "--spec",
+                spec,
+                "--trajectory",
+                "random",
+                "--seed",
+                &s,
+                "--set",
+                "r_r=0.0424",
+            ];
+            simulate(tmp.path(), &format!("s{seed}.csv"), &sim)
+                .to_str()
+                .unwrap()
+                .to_string()
+        })
+        .collect();
+    for l in &logs {
+        args.extend(["--data", l.as_str()]);
+    }
+    let doc = kinegen_json(&args);
+    let loo = doc["leave_one_out"].as_array().unwrap();
+    assert_eq!(loo.len(), 3);
+    for x in loo {
+        let (n, c) = (
+            x["nominal_rmse_m"].as_f64().unwrap(),
+            x["calibrated_rmse_m"].as_f64().unwrap(),
+        );
+        assert!(c < n, "{x}");
+    }
+    assert!(!doc["warnings"].to_string().contains("leave-one-run-out"));
+    let Some(dir) = real_data("optiodom-dev") else {
+        return;
+    };
+    let session = dir.join("tricyc-circular-140120211440");
+    let (a, b) = (session.join("run-01.csv"), session.join("run-02.csv"));
+    let spec = "spec/benchmarks/optiodom/tricycle.toml";
+    let doc = kinegen_json(&[
+        "fit",
+        "--spec",
+        spec,
+        "--data",
+        a.to_str().unwrap(),
+        "--data",
+        b.to_str().unwrap(),
+    ]);
+    let warnings = doc["warnings"].to_string();
+    assert!(
+        warnings.contains("leave-one-run-out") && warnings.contains("2 of 2 runs"),
+        "{warnings}"
+    );
+}
