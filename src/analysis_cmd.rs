@@ -665,22 +665,26 @@ pub fn fit_json(
 /// Every run's own figures, named by the path the user gave (CONTRACT section 4
 /// `runs`): after calibration at the top, before it under `before`, and for
 /// fitted runs the start pose the fit used (measured start plus its refinement).
+/// Each run's JSON: its errors before and after, whether it was held out,
+/// and the start pose its dead reckoning used (a fitted run's with its
+/// refined start heading, a held-out run's as measured).
 fn per_run(
     runs: &[Run],
     before: &[Errors],
     after: &[Errors],
-    starts: Option<&[[f64; 3]]>,
+    starts: &[[f64; 3]],
+    holdout: bool,
 ) -> Vec<Value> {
     runs.iter()
         .enumerate()
         .map(|(i, run)| {
             let (b, a) = (&before[i], &after[i]);
             json!({
-                "path": run.path, "holdout": starts.is_none(),
+                "path": run.path, "holdout": holdout,
                 "rmse": a.rmse, "final_error": a.final_position_error_m,
                 "final_heading_error": a.final_heading_error_rad, "errors": a,
                 "before": {"rmse": b.rmse, "final_error": b.final_position_error_m},
-                "start_pose": starts.map(|s| s[i]),
+                "start_pose": starts.get(i),
             })
         })
         .collect()
@@ -1118,7 +1122,8 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         &prep.runs,
         &eval_before.per_run,
         &eval_after.per_run,
-        Some(&starts),
+        &starts,
+        false,
     );
     if !prep.holdout.is_empty() {
         let (hb, ha) = (
@@ -1130,7 +1135,14 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             fmt_errors(&hb.errors),
             fmt_errors(&ha.errors)
         ));
-        runs.extend(per_run(&prep.holdout, &hb.per_run, &ha.per_run, None));
+        let measured = kinegen_analysis::fit::run_starts(r, &res.p, &prep.holdout, &[]);
+        runs.extend(per_run(
+            &prep.holdout,
+            &hb.per_run,
+            &ha.per_run,
+            &measured,
+            true,
+        ));
         if let Some(w) = held_out_worse(
             r,
             (&prep.runs, &eval_before.tracks),

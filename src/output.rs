@@ -57,6 +57,15 @@ pub fn check_writable(option: &str, path: &Path) -> Result<(), String> {
     if path.is_dir() {
         return fail("is a directory".into());
     }
+    match std::fs::metadata(path) {
+        // a device or a pipe (/dev/null, /dev/stdout) is written in place
+        Ok(m) if !m.is_file() => return Ok(()),
+        Ok(m) if m.permissions().readonly() => return fail(
+            "is read-only: kinegen does not replace it (make it writable, or choose another path)"
+                .into(),
+        ),
+        _ => {}
+    }
     let mut dir = path.parent().unwrap_or(Path::new("."));
     if dir.as_os_str().is_empty() {
         dir = Path::new(".");

@@ -1512,6 +1512,49 @@ fn an_interrupted_write_leaves_nothing_behind() {
     }
 }
 
+/// Issue #37.5: SIGKILL cannot be caught, so a run killed while writing leaves
+/// its temporary; the next write of the same output removes it (its writer's
+/// process no longer runs) and writes the file.
+#[test]
+fn a_temporary_left_by_a_killed_run_is_swept_by_the_next() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sim.csv");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_kinegen"))
+        .args(["simulate", "--spec", "spec/diff_drive.toml", "--out"])
+        .arg(&out)
+        .current_dir(root())
+        .env("KINEGEN_TEST_WRITE_PAUSE_MS", "3000")
+        .spawn()
+        .unwrap();
+    let names = || -> Vec<String> {
+        std::fs::read_dir(tmp.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .collect()
+    };
+    let t0 = std::time::Instant::now();
+    while names().is_empty() {
+        assert!(t0.elapsed().as_secs() < 60, "the write never started");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let left = names();
+    assert!(
+        left.len() == 1 && left[0].ends_with(".kinegen-tmp"),
+        "{left:?}"
+    );
+    let o = kinegen(&[
+        "simulate",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(names(), vec!["sim.csv".to_string()]);
+}
+
 /// Signal numbers for `kill -N` (POSIX values on Linux).
 mod libc_sig {
     pub const INT: i32 = 2;

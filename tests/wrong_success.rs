@@ -147,3 +147,169 @@ fn a_topic_entry_for_an_unknown_column_is_refused() {
         "{e}"
     );
 }
+
+/// Issue #37.1: an output never destroys what is there. A device is written
+/// in place (it stays a device; /dev/full's write error exits 2 naming it), a
+/// symbolic link keeps being a link to the file that gets the new content, a
+/// FIFO receives the document, and a read-only file is refused, unchanged.
+/// (Before: /dev/null became a regular file as root, /dev/full exited 0, and
+/// a 0444 file was replaced.)
+#[test]
+fn outputs_to_devices_links_pipes_and_read_only_files_are_written_or_refused_in_place() {
+    use std::os::unix::fs::FileTypeExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let (spec, data) = ("spec/diff_drive.toml", "data/mystery_robot.csv");
+    let compare_to = |json: &std::path::Path| {
+        kinegen(&[
+            "compare",
+            "--spec",
+            spec,
+            "--data",
+            data,
+            "--json",
+            json.to_str().unwrap(),
+        ])
+    };
+    let o = compare_to(std::path::Path::new("/dev/null"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::metadata("/dev/null")
+        .unwrap()
+        .file_type()
+        .is_char_device());
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        spec,
+        "--data",
+        data,
+        "--export",
+        "ros2-yaml",
+        "/dev/full",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("/dev/full"), "{}", stderr(&o));
+    // a link to a file: the file gets the document, the link stays
+    let target = tmp.path().join("target.json");
+    std::fs::write(&target, "{}").unwrap();
+    let link = tmp.path().join("link.json");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    assert!(compare_to(&link).status.success());
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert!(std::fs::read_to_string(&target)
+        .unwrap()
+        .contains("\"rmse\""));
+    // a FIFO: read by another process while kinegen writes
+    let fifo = tmp.path().join("fifo");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    assert!(compare_to(&fifo).status.success());
+    assert!(reader.join().unwrap().contains("\"rmse\""));
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+    // read-only files are refused and left as they were
+    let ro = tmp.path().join("ro.csv");
+    std::fs::write(&ro, "old\n").unwrap();
+    let mut perm = std::fs::metadata(&ro).unwrap().permissions();
+    perm.set_readonly(true);
+    std::fs::set_permissions(&ro, perm.clone()).unwrap();
+    let o = kinegen(&[
+        "simulate",
+        "--spec",
+        spec,
+        "--trajectory",
+        "square",
+        "--out",
+        ro.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("read-only"), "{}", stderr(&o));
+    let ro_toml = tmp.path().join("ro.toml");
+    std::fs::write(&ro_toml, "old\n").unwrap();
+    std::fs::set_permissions(&ro_toml, perm).unwrap();
+    let o = kinegen(&[
+        "add-effect",
+        "--spec",
+        spec,
+        "--effect",
+        "lateral_slip",
+        "--value",
+        "k_slip=0.1",
+        "--out",
+        ro_toml.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    for f in [&ro, &ro_toml] {
+        assert_eq!(std::fs::read_to_string(f).unwrap(), "old\n");
+    }
+}
+
+/// Issue #37.5: a counter that wraps like a 16- or 32-bit register, in a spec
+/// that declares no `wrap`, is refused with its file, line and column and
+/// the declaration to add (compare exited 0 with a gyro residual of 1e6 rad/s).
+/// A held-out run that stands still for three rows gets its measured start
+/// pose in the JSON (it was null).
+#[test]
+fn an_undeclared_wrapping_counter_is_named_and_a_standing_holdout_has_a_start_pose() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("data/mystery_robot.csv")).unwrap();
+    for (bits, modulus) in [(16, 65536.0), (32, 4294967296.0)] {
+        let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+        let col = lines[0].split(',').position(|h| h == "enc_r").unwrap();
+        for line in lines.iter_mut().skip(501) {
+            let mut v: Vec<String> = line.split(',').map(str::to_string).collect();
+            v[col] = format!("{}", v[col].parse::<f64>().unwrap() - modulus);
+            *line = v.join(",");
+        }
+        let log = tmp.path().join(format!("wrap{bits}.csv"));
+        std::fs::write(&log, lines.join("\n") + "\n").unwrap();
+        let o = kinegen(&[
+            "compare",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            log.to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{}", stdout(&o));
+        let e = stderr(&o);
+        assert!(
+            e.contains(&format!("wrap{bits}.csv:502")) && e.contains("enc_r"),
+            "{e}"
+        );
+        assert!(e.contains(&format!("wrap = {bits}")), "{e}");
+    }
+    let stand = tmp.path().join("stand.csv");
+    std::fs::write(
+        &stand,
+        "t,enc_r,enc_l,gt_x,gt_y,gt_theta\n0,0,0,1,2,0.5\n0.05,0,0,1,2,0.5\n0.1,0,0,1,2,0.5\n",
+    )
+    .unwrap();
+    let doc = kinegen_json(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        "data/mystery_robot.csv",
+        "--holdout",
+        stand.to_str().unwrap(),
+    ]);
+    let held = doc["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["holdout"] == true)
+        .unwrap();
+    assert_eq!(
+        held["start_pose"],
+        serde_json::json!([1.0, 2.0, 0.5]),
+        "{held}"
+    );
+}

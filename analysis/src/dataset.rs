@@ -49,6 +49,30 @@ fn unwrap_counter(c: Vec<f64>, bits: Option<u32>) -> Vec<f64> {
     out
 }
 
+/// A counter that wraps without its spec declaring `wrap`: the first step
+/// (index k: rows k to k + 1) whose jump is within 5% of 2^16 or 2^32 in
+/// size while the counter's typical step is under 5% of it (20x smaller). Such
+/// a jump read as motion gave a yaw rate of 1e6 rad/s, and compare exited 0.
+fn undeclared_wrap(c: &[f64]) -> Option<(usize, f64, u32)> {
+    let mut steps: Vec<f64> = c.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    if steps.is_empty() {
+        return None;
+    }
+    let jumps: Vec<f64> = steps.clone();
+    let mid = steps.len() / 2;
+    let typical = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    for bits in [16u32, 32] {
+        let m = 2f64.powi(bits as i32);
+        if typical >= 0.05 * m {
+            continue;
+        }
+        if let Some(k) = jumps.iter().position(|d| (d - m).abs() <= 0.05 * m) {
+            return Some((k, c[k + 1] - c[k], bits));
+        }
+    }
+    None
+}
+
 /// Whether any run measures the observation that plays `role`, and if not, the
 /// data it would need. Roles kinegen does not read from logs count as measured.
 pub fn channel_missing(runs: &[Run], r: &Runner, role: ObservationRole) -> Option<String> {
@@ -118,6 +142,18 @@ impl Run {
                 .collect();
         let mut cols = Vec::new();
         for i in &r.ir.inputs {
+            if i.kind == InputKind::Cumulative && i.wrap.is_none() {
+                if let Some((k, d, bits)) = undeclared_wrap(log.col(&i.column)?) {
+                    return Err(log.err(
+                        Some(k + 3),
+                        Some(&i.column),
+                        format!(
+                            "the counter jumps by {d} from the line before, about 2^{bits}: it wraps like a {bits}-bit register; declare `wrap = {bits}` on input `{}` in the spec",
+                            i.name
+                        ),
+                    ));
+                }
+            }
             let c = log.col(&i.column)?;
             let c = if angle_cols.contains(&i.column.as_str()) {
                 unwrap(c)

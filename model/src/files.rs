@@ -66,9 +66,113 @@ pub fn remove_temporaries() {
     }
 }
 
+/// Where an output path leads, and so how it is written.
+enum Target {
+    /// A regular file, or none yet: written atomically at this path (a
+    /// symbolic link's final target, so the link stays a link).
+    File(PathBuf),
+    /// A device, a pipe or a socket (/dev/null, /dev/stdout, a FIFO): written
+    /// in place. Renaming a temporary over it would replace the device with a
+    /// regular file.
+    Stream,
+}
+
+/// Classify `path` for [`write_atomic`]; a regular file that is read-only
+/// (no write permission bit) is refused even where the user could override
+/// it (root): a read-only output is someone's decision not to have it
+/// replaced.
+fn target(path: &Path) -> Result<Target, WriteError> {
+    let Ok(meta) = std::fs::metadata(path) else {
+        // none yet, or a dangling link: written where the link points, if it
+        // is one, else here
+        return Ok(Target::File(
+            std::fs::read_link(path).map_or_else(|_| path.to_path_buf(), |t| resolve(path, &t)),
+        ));
+    };
+    if !meta.is_file() {
+        return if meta.is_dir() {
+            Err(err(path)(std::io::Error::new(
+                std::io::ErrorKind::IsADirectory,
+                "is a directory",
+            )))
+        } else {
+            Ok(Target::Stream)
+        };
+    }
+    if meta.permissions().readonly() {
+        return Err(err(path)(std::io::Error::new(
+            std::io::ErrorKind::PermissionDenied,
+            "is read-only: kinegen does not replace it (make it writable, or choose another path)",
+        )));
+    }
+    Ok(Target::File(
+        std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
+    ))
+}
+
+/// Remove the temporaries of `path` that a process killed while writing it
+/// left in `dir` (SIGKILL cannot be caught: `.index.html.PID-N.kinegen-tmp`
+/// stayed behind in 3 of 5 tries). A temporary's name carries its writer's
+/// process id; one whose process no longer runs is stale. Where /proc does
+/// not tell (not Linux), nothing is removed.
+fn sweep_stale(dir: &Path, path: &Path) {
+    let proc = Path::new("/proc/self");
+    if !proc.exists() {
+        return;
+    }
+    let Some(name) = path.file_name().map(|n| n.to_string_lossy().to_string()) else {
+        return;
+    };
+    let prefix = format!(".{name}.");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let file = e.file_name().to_string_lossy().to_string();
+        let Some(rest) = file
+            .strip_prefix(&prefix)
+            .and_then(|r| r.strip_suffix(".kinegen-tmp"))
+        else {
+            continue;
+        };
+        let Some(pid) = rest
+            .split_once('-')
+            .and_then(|(p, _)| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new("/proc").join(pid.to_string()).exists() {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+/// A link target `t` read from `link`, relative to the link's directory.
+fn resolve(link: &Path, t: &Path) -> PathBuf {
+    link.parent().unwrap_or(Path::new(".")).join(t)
+}
+
 /// Write via a temporary file in the same directory and rename, so a reader never
-/// sees a half-written file.
+/// sees a half-written file. Through a symbolic link the file it points to is
+/// replaced (the link stays); a device or a pipe is written in place, and its
+/// write errors (/dev/full) are reported; a read-only file is refused.
 pub fn write_atomic(path: &Path, content: &str) -> Result<(), WriteError> {
+    let asked = path;
+    let path = match target(path)? {
+        Target::File(p) => p,
+        Target::Stream => {
+            use std::io::Write;
+            let mut f = std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .map_err(err(path))?;
+            return f
+                .write_all(content.as_bytes())
+                .and_then(|()| f.flush())
+                .map_err(err(path));
+        }
+    };
+    let path = path.as_path();
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(err(dir))?;
     // unique per writer, so concurrent writers of the same file never share a temp file
@@ -79,6 +183,7 @@ pub fn write_atomic(path: &Path, content: &str) -> Result<(), WriteError> {
         path.file_name().unwrap().to_string_lossy(),
         std::process::id()
     ));
+    sweep_stale(dir, path);
     temporaries().push(tmp.clone());
     // errors name the file the user asked for, not the temporary one
     let done = write_slowly_if_asked(&tmp, content).and_then(|()| std::fs::rename(&tmp, path));
@@ -86,5 +191,5 @@ pub fn write_atomic(path: &Path, content: &str) -> Result<(), WriteError> {
         let _ = std::fs::remove_file(&tmp); // never leave a half-written temporary
     }
     temporaries().retain(|p| p != &tmp);
-    done.map_err(err(path))
+    done.map_err(err(asked))
 }
