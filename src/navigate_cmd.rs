@@ -136,7 +136,11 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
     out.say(&format!(
         "{}: {rows} x {cols} cells of {} m, path {how}",
         a.grid.display(),
-        a.cell
+        if (1e-3..1e3).contains(&a.cell) {
+            a.cell.to_string()
+        } else {
+            format!("{:e}", a.cell)
+        }
     ));
     let before = match drive(&grid, &belief, &truth, &o) {
         Ok(d) => d,

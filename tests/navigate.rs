@@ -88,3 +88,49 @@ fn bad_grids_and_robots_are_refused_with_their_place() {
         stderr(&o)
     );
 }
+
+/// Issue #37.2: a cell of 1e300 m is refused, naming the option (it allocated
+/// until the process aborted), and a 1000 x 1000 grid is driven (0.1 s here;
+/// the distance diffusion swept the grid once per cell of path, and every
+/// integration step checked every obstacle: over two minutes, then 50 s).
+/// The time per cell is measured by `cargo bench -p kinegen-analysis --bench
+/// speed -- grid`.
+#[test]
+fn absurd_cells_are_refused_and_large_grids_are_driven() {
+    let o = kinegen(&[
+        "navigate",
+        "--spec",
+        "data/seed004/epuck.toml",
+        "--grid",
+        "data/seed004/arena.txt",
+        "--cell",
+        "1e300",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--cell 1e300"), "{}", stderr(&o));
+    let tmp = tempfile::tempdir().unwrap();
+    let n = 1000;
+    let mut text = String::new();
+    for r in 0..n {
+        for c in 0..n {
+            text.push(match (r, c) {
+                (1, 1) => 'S',
+                _ if r == n - 2 && c == n - 2 => 'G',
+                _ if r % 50 == 25 && (c < 2 * n / 3) == (r % 100 == 25) => '#',
+                _ => '.',
+            });
+        }
+        text.push('\n');
+    }
+    let grid = tmp.path().join("big.txt");
+    std::fs::write(&grid, text).unwrap();
+    let t0 = std::time::Instant::now();
+    let o = kinegen(&[
+        "navigate",
+        "--spec",
+        "data/seed004/epuck.toml",
+        "--grid",
+        grid.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}

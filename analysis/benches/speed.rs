@@ -432,6 +432,10 @@ fn main() {
         localize_speed(&r);
     }
 
+    if runs("grid") {
+        grid_distances();
+    }
+
     // issue 11: the 1M-sample fit is timed on one core (a one-thread pool),
     // against one evaluation pass on the same core
     if runs("fit") {
@@ -525,5 +529,55 @@ fn localize_speed(r: &Runner) {
     println!(
         "localize 60,000 rows, 3,000 sightings: {w:.2} s with the noise estimated = {:.0} filter passes of {o:.4} s with the spec's noise",
         w / o
+    );
+}
+
+/// Issue 37.2: navigate's distance diffusion is linear in the cells. The
+/// time per cell of a 250 x 250 grid against a 2000 x 2000 one (64x the
+/// cells) and a 1 x 1,000,000 corridor: near 1 each (the sweep it replaced
+/// took a pass per cell of path: 1000 x 1000 over two minutes).
+fn grid_distances() {
+    use kinegen_analysis::grid::Grid;
+    let room = |n: usize| {
+        let mut text = String::with_capacity((n + 1) * n);
+        for r in 0..n {
+            for c in 0..n {
+                text.push(match (r, c) {
+                    (1, 1) => 'S',
+                    _ if r == n - 2 && c == n - 2 => 'G',
+                    // a wall across two thirds of the room, every 50 rows
+                    _ if r % 50 == 25 && (c < 2 * n / 3) == (r % 100 == 25) => '#',
+                    _ => '.',
+                });
+            }
+            text.push('\n');
+        }
+        Grid::parse(std::path::Path::new("bench.txt"), &text, 0.07).unwrap()
+    };
+    let per_cell = |g: &Grid| {
+        let cells = (g.size().0 * g.size().1) as f64;
+        let t = (0..3)
+            .map(|_| {
+                let t0 = Instant::now();
+                black_box(g.distances());
+                t0.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min);
+        (t, t / cells)
+    };
+    let (small, large) = (room(250), room(2000));
+    let corridor = {
+        let mut text = String::from("S");
+        text.push_str(&".".repeat(999_998));
+        text.push_str("G\n");
+        Grid::parse(std::path::Path::new("corridor.txt"), &text, 0.07).unwrap()
+    };
+    let (ts, s) = per_cell(&small);
+    let (tl, l) = per_cell(&large);
+    let (tc, c) = per_cell(&corridor);
+    println!(
+        "grid distances: 250x250 {ts:.3} s, 2000x2000 {tl:.2} s ({:.2}x the time per cell), 1x1,000,000 corridor {tc:.2} s ({:.2}x)",
+        l / s,
+        c / s
     );
 }

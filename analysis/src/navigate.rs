@@ -65,6 +65,9 @@ pub struct Drive {
     pub reached: bool,
 }
 
+/// Integration steps one move may take (see [`drive`]).
+pub const MAX_STEPS_PER_MOVE: f64 = 1e5;
+
 fn wrap(a: f64) -> f64 {
     crate::log::wrap(a)
 }
@@ -81,6 +84,15 @@ pub fn drive(
         return Err(format!(
             "model `{}` cannot turn in place: seed 004's moves turn toward the next cell first",
             belief.ir.name
+        ));
+    }
+    // one move to a diagonal neighbour, in integration steps: a cell of 1e300 m
+    // made each move allocate until the process aborted
+    let per_move = grid.cell * std::f64::consts::SQRT_2 / (o.speed * o.dt);
+    if !(per_move <= MAX_STEPS_PER_MOVE) {
+        return Err(format!(
+            "--cell {:e} m: a move to the next cell would take {per_move:.3e} integration steps of {} s at {} m/s (at most {MAX_STEPS_PER_MOVE:.0e}): cells are about the robot's size (seed 004: 7 cm for the e-puck)",
+            grid.cell, o.dt, o.speed
         ));
     }
     let inv = belief.ir.inverse_increment().map_err(|e| e.to_string())?;

@@ -243,6 +243,7 @@ impl Schema {
         let seed = Elem {
             schema: self,
             ty: &Ty::Msg(self.root.clone()),
+            limit: body.len(),
         };
         let limit = cdr::Bounded(body.len() as u64);
         let value = match head[1] {
@@ -258,21 +259,27 @@ impl Schema {
     }
 }
 
-/// One value of type `ty`.
+/// One value of type `ty`. `limit`: the message's length in bytes, which
+/// no sequence in it can have more elements than (an element that takes no
+/// bytes, a message of empty fixed arrays, would otherwise let a corrupt
+/// length of 0xFFFFFFFF fill memory).
 struct Elem<'a> {
     schema: &'a Schema,
     ty: &'a Ty,
+    limit: usize,
 }
 
 /// A field: one value, a fixed array or a sequence.
 struct Slot<'a> {
     schema: &'a Schema,
     field: &'a Field,
+    limit: usize,
 }
 
 struct Fields<'a> {
     schema: &'a Schema,
     fields: &'a [Field],
+    limit: usize,
 }
 
 struct List<'a> {
@@ -311,6 +318,7 @@ impl<'de> DeserializeSeed<'de> for Elem<'_> {
                         Fields {
                             schema: self.schema,
                             fields,
+                            limit: self.limit,
                         },
                     )?
                 }
@@ -325,6 +333,7 @@ impl<'de> DeserializeSeed<'de> for Slot<'_> {
         let elem = Elem {
             schema: self.schema,
             ty: &self.field.ty,
+            limit: self.limit,
         };
         match self.field.arity {
             Arity::One => elem.deserialize(d),
@@ -346,6 +355,7 @@ impl<'de> Visitor<'de> for Fields<'_> {
                 .next_element_seed(Slot {
                     schema: self.schema,
                     field,
+                    limit: self.limit,
                 })?
                 .ok_or_else(|| de::Error::custom(format!("field `{}` missing", field.name)))?;
             out.push((field.name.clone(), v));
@@ -366,7 +376,14 @@ impl<'de> Visitor<'de> for List<'_> {
         while let Some(v) = seq.next_element_seed(Elem {
             schema: self.elem.schema,
             ty: self.elem.ty,
+            limit: self.elem.limit,
         })? {
+            if out.len() >= self.elem.limit {
+                return Err(de::Error::custom(format!(
+                    "an array of more elements than the message has bytes ({}): a corrupt length",
+                    self.elem.limit
+                )));
+            }
             out.push(v);
         }
         Ok(Value::List(out))
@@ -704,6 +721,27 @@ MSG: my_msgs/Detection\nuint16 id # the tag\nfloat64 range\nfloat64 bearing\n";
         b[12..16].copy_from_slice(&5u32.to_le_bytes());
         let h: crate::rosmsg::Header = crate::rosmsg::decode(&b).unwrap();
         assert_eq!(h.frame_id, "base");
+    }
+
+    /// Issue #37.2: a sequence of 0xFFFFFFFF elements that take no bytes (a
+    /// message of empty fixed arrays) is refused at once; it filled memory
+    /// until the process aborted.
+    #[test]
+    fn a_sequence_of_empty_elements_cannot_fill_memory() {
+        let def = "my_msgs/Nothing[] items\n\
+================================================================================\n\
+MSG: my_msgs/Nothing\nfloat64[0] none\n";
+        let s = Schema::parse("my_msgs/msg/Many", def).unwrap();
+        let mut b = vec![0u8, 1, 0, 0];
+        b.extend(0xffff_ffffu32.to_le_bytes());
+        let t0 = std::time::Instant::now();
+        let e = s.decode(&b).unwrap_err();
+        assert!(e.contains("corrupt length"), "{e}");
+        assert!(t0.elapsed().as_secs_f64() < 0.5, "{:?}", t0.elapsed());
+        // an honest empty sequence still decodes
+        let mut ok = vec![0u8, 1, 0, 0];
+        ok.extend(0u32.to_le_bytes());
+        assert!(s.decode(&ok).is_ok());
     }
 
     #[test]
