@@ -124,7 +124,6 @@ fn absurd_cells_are_refused_and_large_grids_are_driven() {
     }
     let grid = tmp.path().join("big.txt");
     std::fs::write(&grid, text).unwrap();
-    let t0 = std::time::Instant::now();
     let o = kinegen(&[
         "navigate",
         "--spec",

@@ -89,7 +89,7 @@ pub fn drive(
     // one move to a diagonal neighbour, in integration steps: a cell of 1e300 m
     // made each move allocate until the process aborted
     let per_move = grid.cell * std::f64::consts::SQRT_2 / (o.speed * o.dt);
-    if !(per_move <= MAX_STEPS_PER_MOVE) {
+    if per_move.is_nan() || per_move > MAX_STEPS_PER_MOVE {
         return Err(format!(
             "--cell {:e} m: a move to the next cell would take {per_move:.3e} integration steps of {} s at {} m/s (at most {MAX_STEPS_PER_MOVE:.0e}): cells are about the robot's size (seed 004: 7 cm for the e-puck)",
             grid.cell, o.dt, o.speed
