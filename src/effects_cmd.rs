@@ -239,14 +239,27 @@ pub fn run_add_effect(
                 ));
             }
         }
+        for (name, v) in &vals {
+            if let Some((lo, hi)) = effect_bounds(&eff, name) {
+                if !(lo..=hi).contains(v) {
+                    return Err(format!(
+                        "--value {name}={v}: outside the bounds of `{effect}`'s parameter `{name}` [{lo}, {hi}] ({})",
+                        eff.origin
+                    ));
+                }
+            }
+        }
         let new = eff
             .apply(&model, &vals)
             .map_err(|e| format!("--value: {e}"))?;
         // validate before writing; a problem is the combination of the user's
-        // spec and the effect, so name the user's file
+        // spec and the effect: the effect file's line where the message's
+        // symbol is, else the user's file
         let checked = Model::parse(spec, &new).map_err(|e| {
+            let at = locate_in_effect(&eff, &e.message)
+                .map_or(String::new(), |l| format!(" (from {l})"));
             format!(
-                "adding `{effect}` to {} gives an invalid spec: {}",
+                "adding `{effect}`{at} to {} gives an invalid spec: {}",
                 spec.display(),
                 e.message
             )
@@ -275,4 +288,40 @@ pub fn run_add_effect(
         }
         Err(e) => bad(e),
     }
+}
+
+/// The declared [min, max] of an effect's parameter `name` (either side
+/// open when not declared), if it has one.
+fn effect_bounds(eff: &kinegen_model::effects::Effect, name: &str) -> Option<(f64, f64)> {
+    let p = eff
+        .parameter
+        .iter()
+        .find(|p| p.get("name").and_then(|n| n.as_str()) == Some(name))?;
+    let bound = |k: &str| {
+        p.get(k)
+            .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
+    };
+    Some((
+        bound("min").unwrap_or(f64::NEG_INFINITY),
+        bound("max").unwrap_or(f64::INFINITY),
+    ))
+}
+
+/// `FILE:LINE` of the first line of the effect's file that holds the symbol a
+/// spec error names in backticks (`unknown symbol `k_zz``), when it is there.
+fn locate_in_effect(eff: &kinegen_model::effects::Effect, message: &str) -> Option<String> {
+    let symbol = message.split('`').nth(1).filter(|s| !s.is_empty())?;
+    let text = std::fs::read_to_string(&eff.origin).ok()?;
+    let is_word = |c: char| c.is_alphanumeric() || c == '_';
+    let line = text.lines().position(|l| {
+        l.match_indices(symbol).any(|(i, _)| {
+            let before = l[..i].chars().next_back().is_none_or(|c| !is_word(c));
+            let after = l[i + symbol.len()..]
+                .chars()
+                .next()
+                .is_none_or(|c| !is_word(c));
+            before && after
+        })
+    })?;
+    Some(format!("{}:{}", eff.origin, line + 1))
 }

@@ -144,7 +144,9 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
     ));
     let before = match drive(&grid, &belief, &truth, &o) {
         Ok(d) => d,
-        Err(e) => return bad(e),
+        // (the grid's errors name it themselves; the rest is the spec's)
+        Err(e) if e.starts_with("--cell") => return bad(e),
+        Err(e) => return bad(format!("{}: {e}", a.spec.display())),
     };
     out.say(&format!(
         "  odometry with the nominal parameters: {}",

@@ -313,3 +313,96 @@ fn an_undeclared_wrapping_counter_is_named_and_a_standing_holdout_has_a_start_po
         "{held}"
     );
 }
+
+/// Issue #37.4: errors with a place. A user's effect file with an unknown
+/// symbol is named with its line; an out-of-bounds `--value` names the
+/// option and the bounds; a `--topics` TOML error and bytes that are not
+/// UTF-8 in a topic map, a grid or an effect file give line and column.
+#[test]
+fn errors_in_effect_files_topics_grids_and_values_are_located() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("fx");
+    std::fs::create_dir(&dir).unwrap();
+    let slip = std::fs::read_to_string(root().join("spec/effects/lateral_slip.toml")).unwrap();
+    let bad = slip
+        .replace("name = \"lateral_slip\"", "name = \"bad_slip\"")
+        .replace("k_slip*(", "k_zz*(");
+    std::fs::write(dir.join("bad.toml"), &bad).unwrap();
+    let line = bad.lines().position(|l| l.contains("k_zz")).unwrap() + 1;
+    let out = tmp.path().join("o.toml");
+    let (o_s, d) = (out.to_str().unwrap(), dir.to_str().unwrap());
+    let spec = "spec/diff_drive.toml";
+    let fails = |args: &[&str]| {
+        let o = kinegen(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        stderr(&o)
+    };
+    let e = fails(&[
+        "add-effect",
+        "--spec",
+        spec,
+        "--effect",
+        "bad_slip",
+        "--effects",
+        d,
+        "--out",
+        o_s,
+    ]);
+    assert!(
+        e.contains(&format!("bad.toml:{line}")) && e.contains("k_zz"),
+        "{e}"
+    );
+    let e = fails(&[
+        "add-effect",
+        "--spec",
+        spec,
+        "--effect",
+        "lateral_slip",
+        "--value",
+        "k_slip=5",
+        "--out",
+        o_s,
+    ]);
+    assert!(
+        e.contains("--value k_slip=5") && e.contains("[-1, 1]"),
+        "{e}"
+    );
+    assert!(!out.exists());
+    let topics = tmp.path().join("t.toml");
+    std::fs::write(&topics, "[inputs]\nenc_r = { topic = \"/j\" ").unwrap();
+    let data = "data/mystery_robot.csv";
+    let e = fails(&[
+        "fit",
+        "--spec",
+        spec,
+        "--data",
+        data,
+        "--topics",
+        topics.to_str().unwrap(),
+    ]);
+    assert!(e.contains("t.toml:2: column 24"), "{e}");
+    std::fs::write(&topics, b"[inputs]\n# caf\xe9\n").unwrap();
+    let e = fails(&[
+        "fit",
+        "--spec",
+        spec,
+        "--data",
+        data,
+        "--topics",
+        topics.to_str().unwrap(),
+    ]);
+    assert!(e.contains("t.toml:2: column 6: not UTF-8"), "{e}");
+    let grid = tmp.path().join("g.txt");
+    std::fs::write(&grid, b"....\n.S\xff.\n").unwrap();
+    let e = fails(&[
+        "navigate",
+        "--spec",
+        "data/seed004/epuck.toml",
+        "--grid",
+        grid.to_str().unwrap(),
+    ]);
+    assert!(e.contains("g.txt:2: column 3: not UTF-8"), "{e}");
+    std::fs::write(dir.join("bad.toml"), b"name = \"x\"\ndoc = \"\xff\"\n").unwrap();
+    let e = fails(&["compare", "--spec", spec, "--data", data, "--effects", d]);
+    assert!(e.contains("bad.toml: line 2, column 8: not UTF-8"), "{e}");
+}

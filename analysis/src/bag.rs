@@ -114,19 +114,33 @@ pub struct TopicMap {
 
 impl TopicMap {
     pub fn read(path: &Path) -> Result<TopicMap, LogError> {
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            LogError::new(
+        let text = kinegen_model::files::read_text(path).map_err(|(at, e)| match at {
+            Some((line, col)) => {
+                LogError::new(path, Some(line), None, format!("column {col}: {e}"))
+            }
+            None => LogError::new(
                 path,
                 None,
                 None,
                 format!("cannot read the topic mapping: {e}"),
-            )
+            ),
         })?;
         toml::from_str(&text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
-            LogError::new(path, line, None, e.message().to_string())
+            let Some(start) = e.span().map(|s| s.start.min(text.len())) else {
+                return LogError::new(path, None, None, e.message().to_string());
+            };
+            let line = text[..start].matches('\n').count() + 1;
+            let column = text[..start]
+                .rsplit('\n')
+                .next()
+                .map_or(0, |l| l.chars().count())
+                + 1;
+            LogError::new(
+                path,
+                Some(line),
+                None,
+                format!("column {column}: {}", e.message()),
+            )
         })
     }
 }

@@ -50,8 +50,12 @@ pub const MOORE: [(i64, i64); 8] = [
 
 impl Grid {
     pub fn read(path: &Path, cell: f64) -> Result<Grid, LogError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| LogError::new(path, None, None, format!("cannot read the grid: {e}")))?;
+        let text = kinegen_model::files::read_text(path).map_err(|(at, e)| match at {
+            Some((line, col)) => {
+                LogError::new(path, Some(line), None, format!("column {col}: {e}"))
+            }
+            None => LogError::new(path, None, None, format!("cannot read the grid: {e}")),
+        })?;
         Grid::parse(path, &text, cell)
     }
 

@@ -194,9 +194,12 @@ pub fn catalogue(extra: &[PathBuf]) -> Result<Vec<Effect>, EffectError> {
         // bundled effect, or one of an earlier directory)
         let mut here: Vec<(String, PathBuf)> = Vec::new();
         for f in files {
-            let text = std::fs::read_to_string(&f).map_err(|x| EffectError {
+            let text = crate::files::read_text(&f).map_err(|(at, message)| EffectError {
                 file: f.clone(),
-                message: x.to_string(),
+                message: match at {
+                    Some((l, c)) => format!("line {l}, column {c}: {message}"),
+                    None => message,
+                },
             })?;
             let e = parse_effect(&f, &text)?;
             if let Some((_, first)) = here.iter().find(|(n, _)| *n == e.name) {

@@ -19,6 +19,24 @@ fn err(path: &Path) -> impl FnOnce(std::io::Error) -> WriteError + '_ {
     }
 }
 
+/// A text file's contents. Err: (where the first byte that is not UTF-8 is,
+/// as a 1-based line and column, if that is the trouble; the message).
+pub fn read_text(path: &Path) -> Result<String, (Option<(usize, usize)>, String)> {
+    let bytes = std::fs::read(path).map_err(|e| (None, e.to_string()))?;
+    String::from_utf8(bytes).map_err(|e| {
+        let bytes = e.as_bytes();
+        let ok = &bytes[..e.utf8_error().valid_up_to()];
+        let line = ok.iter().filter(|&&b| b == b'\n').count() + 1;
+        let start = ok.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        let column = std::str::from_utf8(&ok[start..]).map_or(1, |s| s.chars().count() + 1);
+        let byte = bytes[ok.len()];
+        (
+            Some((line, column)),
+            format!("not UTF-8 text (byte 0x{byte:02x})"),
+        )
+    })
+}
+
 /// Spec files (`*.toml`) directly in `dir`, sorted.
 pub fn spec_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)?
