@@ -240,7 +240,7 @@ pub fn run_add_effect(
             }
         }
         for (name, v) in &vals {
-            if let Some((lo, hi)) = effect_bounds(&eff, name) {
+            if let Some((lo, hi)) = effect_bounds(eff, name) {
                 if !(lo..=hi).contains(v) {
                     return Err(format!(
                         "--value {name}={v}: outside the bounds of `{effect}`'s parameter `{name}` [{lo}, {hi}] ({})",
@@ -256,7 +256,7 @@ pub fn run_add_effect(
         // spec and the effect: the effect file's line where the message's
         // symbol is, else the user's file
         let checked = Model::parse(spec, &new).map_err(|e| {
-            let at = locate_in_effect(&eff, &e.message)
+            let at = locate_in_effect(eff, &e.message)
                 .map_or(String::new(), |l| format!(" (from {l})"));
             format!(
                 "adding `{effect}`{at} to {} gives an invalid spec: {}",
