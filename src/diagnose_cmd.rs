@@ -239,6 +239,15 @@ pub fn run(c: Common) -> ExitCode {
         let mut before = d.calibrated_rmse;
         for (k, step) in d.chain.iter().enumerate() {
             out.say(&format!("  {}. `{}`: {}", k + 1, step.effect, step.doc));
+            if !step.equivalent.is_empty() {
+                let others: Vec<String> =
+                    step.equivalent.iter().map(|e| format!("`{e}`")).collect();
+                out.say(&format!(
+                    "     these logs cannot tell it apart from {}: the same error and held-out error (within {:.1}%); a log with another channel (a gyro, landmarks) or the robot's documentation decides",
+                    others.join(" or "),
+                    100.0 * kinegen_analysis::diagnose::EQUIVALENT
+                ));
+            }
             let vals: BTreeMap<String, f64> = step
                 .parameters
                 .iter()

@@ -256,8 +256,8 @@ pub fn run_add_effect(
         // spec and the effect: the effect file's line where the message's
         // symbol is, else the user's file
         let checked = Model::parse(spec, &new).map_err(|e| {
-            let at = locate_in_effect(eff, &e.message)
-                .map_or(String::new(), |l| format!(" (from {l})"));
+            let at =
+                locate_in_effect(eff, &e.message).map_or(String::new(), |l| format!(" (from {l})"));
             format!(
                 "adding `{effect}`{at} to {} gives an invalid spec: {}",
                 spec.display(),

@@ -442,3 +442,113 @@ fn real_velocity_commanded_robots_localize_and_calibrate_as_logged() {
         .collect();
     assert!(!tested.contains(&"steering_offset"), "{tested:?}");
 }
+
+/// Issue #34 / CONTRACT section 3: `input_delay`, the robot executing its
+/// commands late. A commanded robot simulated with a 0.3 s delay: diagnose
+/// names it first (its estimate within 0.005 s) and says that these
+/// pose-only logs cannot tell it apart from `time_offset` (a late motion
+/// capture moves the track alike); with landmark sightings the two differ
+/// and `fit` of the spec with the effect recovers the delay from the
+/// sightings alone. A robot without commands (encoders only) does not get
+/// the candidate (a late measured input is `time_offset`).
+#[test]
+fn a_late_command_is_named_and_calibrated() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = commanded_spec(tmp.path(), "");
+    let s = spec.to_str().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "late.csv",
+        &[
+            "--spec",
+            s,
+            "--effect",
+            "input_delay=0.3",
+            "--trajectory",
+            "random",
+            "--seed",
+            "3",
+        ],
+    );
+    let d = kinegen_json(&["diagnose", "--spec", s, "--data", log.to_str().unwrap()]);
+    let first = &d["verdict"]["effects"][0];
+    let named = first["effect"].as_str().unwrap();
+    let equivalent = first["equivalent"].to_string();
+    assert!(
+        named == "input_delay" || equivalent.contains("input_delay"),
+        "{named}, equivalent {equivalent}"
+    );
+    let candidate = d["candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["effect"] == "input_delay")
+        .unwrap();
+    let tau = candidate["parameters"]["input_delay"]["estimate"]
+        .as_f64()
+        .unwrap();
+    assert!((tau - 0.3).abs() < 0.005, "{tau}");
+    // with landmarks only, the delay shows in the sightings
+    let delayed = tmp.path().join("delayed.toml");
+    let o = kinegen(&[
+        "add-effect",
+        "--spec",
+        s,
+        "--effect",
+        "input_delay",
+        "--out",
+        delayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (map, obs) = (root().join("data/beacons.csv"), tmp.path().join("obs.csv"));
+    let lm_log = simulate(
+        tmp.path(),
+        "lm.csv",
+        &[
+            "--spec",
+            delayed.to_str().unwrap(),
+            "--set",
+            "input_delay=0.3",
+            "--trajectory",
+            "random",
+            "--seed",
+            "4",
+            "--landmarks",
+            map.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+        ],
+    );
+    let fit = kinegen_json(&[
+        "fit",
+        "--spec",
+        delayed.to_str().unwrap(),
+        "--data",
+        lm_log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+        "--residuals",
+        "landmarks",
+    ]);
+    let p = &fit["parameters"]["input_delay"];
+    let (est, sd) = (p["estimate"].as_f64().unwrap(), p["std"].as_f64().unwrap());
+    assert!(
+        (est - 0.3).abs() < 0.05 && (est - 0.3).abs() < 4.0 * sd.max(1e-3),
+        "{est} ± {sd}"
+    );
+    let encoders = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        "data/mystery_robot.csv",
+    ]);
+    assert!(
+        !encoders["candidates"]
+            .to_string()
+            .contains("\"input_delay\""),
+        "an encoder robot got the input_delay candidate"
+    );
+}

@@ -151,6 +151,11 @@ pub fn run_from(
     start_offset: [f64; 3],
     plan: Option<&[u8]>,
 ) -> Track {
+    // the commands as executed (an input delay), and as logged for their
+    // derivative in the delay
+    let logged = data;
+    let executed = crate::timeline::executed(r, p, data);
+    let data: &Run = &executed;
     let (start, dstart) = reckoning_start(r, p, data, start_offset);
     let np = p.len();
     let mut pose = Vec::with_capacity(data.steps() + 1);
@@ -168,12 +173,15 @@ pub fn run_from(
         Sens { cols, data }
     });
     let mut twist = Vec::with_capacity(data.steps());
-    let mut stepper = Stepper::new(r, p, data, with_sens, plan);
+    let mut stepper = Stepper::new(r, p, logged, with_sens, plan);
     // the sensitivity of the current (sub)step's pose, and the next one's
     let mut cur: Vec<f64> = sens.as_ref().map_or_else(Vec::new, |s| s.data.clone());
     let mut next = vec![0.0; cur.len()];
+    let delay_col = r.input_delay.filter(|_| with_sens);
     for k in 0..data.steps() {
         let x = *pose.last().unwrap();
+        // the step's response to the input delay: F_u d(executed u)/d tau
+        let by_delay = delay_col.map(|_| delay_response(r, p, logged, data, k, x));
         let (x, mean_twist) = stepper.step(k, x, |out| {
             if with_sens {
                 // S_{j+1} = F_x S_j + [F_p | 0], written out
@@ -181,7 +189,12 @@ pub fn run_from(
                 for m in 0..3 {
                     for c in 0..cols {
                         let prev = |i: usize| cur[i * cols + c];
-                        let direct = if c < np { jp[m * np + c] } else { 0.0 };
+                        let mut direct = if c < np { jp[m * np + c] } else { 0.0 };
+                        if let (Some(d), Some(ti)) = (by_delay, delay_col) {
+                            if c == ti {
+                                direct += d[m];
+                            }
+                        }
                         next[m * cols + c] = chain(&jx[m * 3..m * 3 + 3], prev, direct);
                     }
                 }
@@ -203,6 +216,47 @@ pub fn run_from(
         twist,
         gyro,
     }
+}
+
+/// How step k's end pose moves with the input delay: the exact step's
+/// directional derivative along d(executed inputs)/d tau
+/// ([`crate::timeline::executed_rate`]), by central differences (the fused
+/// tape has no input Jacobian; the step is smooth in its inputs, so the
+/// difference is accurate to ~1e-8 of the step). Zero where no command
+/// changes across the step's window.
+fn delay_response(
+    r: &Runner,
+    p: &[f64],
+    logged: &Run,
+    executed: &Run,
+    k: usize,
+    x: [f64; 3],
+) -> [f64; 3] {
+    let Some(du) = crate::timeline::executed_rate(r, p, logged, k) else {
+        return [0.0; 3];
+    };
+    let size = du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if size == 0.0 {
+        return [0.0; 3];
+    }
+    let u = &executed.u[k];
+    let scale = u.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    let h = 1e-6 * scale / size;
+    let step = r.ir.step(kinegen_model::ir::StepForm::Exact).value;
+    let zeros = [0.0; 16];
+    let at = |sign: f64| {
+        let v: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u + sign * h * d).collect();
+        step.eval(&Runner::step_args(
+            step,
+            &x,
+            &v,
+            p,
+            &[executed.dt[k]],
+            &zeros,
+        ))
+    };
+    let (a, b) = (at(1.0), at(-1.0));
+    [0, 1, 2].map(|m| (a[m] - b[m]) / (2.0 * h))
 }
 
 /// The body pose dead reckoning of `data` starts from: the measured start
@@ -250,6 +304,8 @@ pub(crate) struct Stepper<'a> {
     r: &'a Runner,
     p: &'a [f64],
     data: &'a Run,
+    /// `data`'s inputs as executed ([`crate::timeline::executed`]).
+    u: crate::rows::Rows,
     plan: Option<&'a [u8]>,
     f: &'a kinegen_model::ir::Function,
     out: Vec<f64>,
@@ -274,6 +330,11 @@ impl<'a> Stepper<'a> {
             r,
             p,
             data,
+            // the commands as the robot executed them (an input delay)
+            u: match crate::timeline::executed(r, p, data) {
+                std::borrow::Cow::Borrowed(run) => run.u.clone(),
+                std::borrow::Cow::Owned(run) => run.u,
+            },
             plan,
             f,
             out: vec![0.0; f.rows],
@@ -299,7 +360,7 @@ impl<'a> Stepper<'a> {
             substeps(
                 r,
                 p,
-                &data.u[k],
+                &self.u[k],
                 &s[k],
                 data.dt[k],
                 &mut self.u_sub,
@@ -310,7 +371,7 @@ impl<'a> Stepper<'a> {
         let mut mean_twist = [0.0; 3];
         for j in 0..n {
             let u: &[f64] = if n == 1 {
-                &data.u[k]
+                &self.u[k]
             } else {
                 // absolute inputs move linearly across the step, sampled at
                 // each sub-step's middle; rates stay the step's mean
@@ -318,7 +379,7 @@ impl<'a> Stepper<'a> {
                 let swing = &data.swing.as_ref().expect("n > 1 needs a swing")[k];
                 self.u_sub.clear();
                 self.u_sub
-                    .extend(data.u[k].iter().zip(swing).map(|(u, s)| u + at * s));
+                    .extend(self.u[k].iter().zip(swing).map(|(u, s)| u + at * s));
                 &self.u_sub
             };
             let mut args: [&[f64]; 8] = [&[]; 8];

@@ -648,6 +648,20 @@ fn stage_from(
     }
 }
 
+/// The significant candidates of a ranking that explain the logs as well as
+/// its winner `w` (see [`ChainStep::equivalent`]).
+fn ranked_equivalents(ranked: &[Candidate], w: &Candidate, base: (f64, f64)) -> Vec<String> {
+    // within EQUIVALENT of what the winner explains (the base stage's error
+    // minus its own), on all runs and held out
+    let close = |a: f64, b: f64, from: f64| (a - b).abs() <= EQUIVALENT * (from - b).abs();
+    ranked
+        .iter()
+        .filter(|c| c.effect != w.effect && c.significant)
+        .filter(|c| close(c.rmse, w.rmse, base.0) && close(c.holdout_rmse, w.holdout_rmse, base.1))
+        .map(|c| c.effect.clone())
+        .collect()
+}
+
 /// One step of the chain found by sequential diagnosis.
 #[derive(Debug, Clone, Serialize)]
 pub struct ChainStep {
@@ -656,7 +670,17 @@ pub struct ChainStep {
     /// Error (weighted residual RMS) after adding this effect and recalibrating.
     pub rmse_after: f64,
     pub doc: String,
+    /// Other significant candidates these logs cannot tell apart from it:
+    /// their error and held-out error within [`EQUIVALENT`] of what it
+    /// explains (a late command and a late motion capture move a pose-only
+    /// log alike).
+    pub equivalent: Vec<String>,
 }
+
+/// Difference in error and held-out error, as a fraction of what the winner
+/// explains, under which two candidates explain the logs equally (see
+/// [`ChainStep::equivalent`]).
+pub const EQUIVALENT: f64 = 0.005;
 
 /// Everything diagnosis needs from the outside: which effects to try, and the
 /// runner of the spec with a list of effects added (derivation lives with the
@@ -1139,6 +1163,10 @@ pub fn diagnose(
             progress,
         );
         let winner = ranked.first().filter(|c| c.significant).cloned();
+        let equivalent = winner
+            .as_ref()
+            .map(|w| ranked_equivalents(&ranked, w, (cur.rmse, cur.holdout_rmse)))
+            .unwrap_or_default();
         if first_candidates.is_none() {
             first_candidates = Some(ranked);
         }
@@ -1165,6 +1193,7 @@ pub fn diagnose(
             parameters,
             rmse_after: w.rmse,
             doc: w.doc.clone(),
+            equivalent,
         });
         remaining.retain(|(n, _)| n != &w.effect);
         cur = next;

@@ -611,6 +611,8 @@ fn run_residuals(
     let mut res = Vec::new();
     let mut jac = Rows::new(free.len() + usize::from(nuis));
     let track = deadreckon::run_from(r, p, run, with_jac, start, plan);
+    // the inputs as executed (an input delay), for the observations' arguments
+    let inputs = crate::timeline::executed(r, p, run);
     let np = p.len();
     // sensitivity columns to read: the free parameters, then the start heading
     let cols: Vec<usize> = free
@@ -639,7 +641,7 @@ fn run_residuals(
                 let x = lerp3(&track.pose[j], &track.pose[j + 1], a);
                 let vel: [f64; 3] =
                     [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
-                let u = &run.u[j.min(run.steps() - 1)];
+                let u = &inputs.u[j.min(run.steps() - 1)];
                 let (pred, hx, hp) = match tracker {
                     Some(t) => {
                         let h = t.value;
@@ -709,13 +711,13 @@ fn run_residuals(
                 if with_jac {
                     if let Some(hp) = hp {
                         hp.eval_into(
-                            &Runner::obs_args(hp, &x, &run.u[k], p, &[]),
+                            &Runner::obs_args(hp, &x, &inputs.u[k], p, &[]),
                             &mut jp,
                             &mut scratch,
                         );
                     }
                     hx.eval_into(
-                        &Runner::obs_args(hx, &x, &run.u[k], p, &[]),
+                        &Runner::obs_args(hx, &x, &inputs.u[k], p, &[]),
                         &mut jx,
                         &mut scratch,
                     );

@@ -45,6 +45,9 @@ pub struct Runner {
     /// Index (into `p`) of the spec's measurement delay, if it declares one
     /// (see [`crate::timeline`]).
     pub delay: Option<usize>,
+    /// Index (into `p`) of the spec's input delay, if it declares one: the
+    /// robot executes its commands that late (see [`crate::timeline::executed`]).
+    pub input_delay: Option<usize>,
     /// One step's pose and twist in one tape (dead reckoning).
     pub step_twist: Function,
     /// One step's pose, twist, state and parameter Jacobians in one tape
@@ -127,12 +130,14 @@ impl Runner {
                 .collect(),
         )?;
         let delay = rp.iter().position(|q| q.measurement_delay);
+        let input_delay = rp.iter().position(|q| q.input_delay);
         Ok(Runner {
             ir,
             p,
             names,
             free,
             delay,
+            input_delay,
             step_twist,
             step_linearized,
         })

@@ -328,6 +328,11 @@ pub fn command(base: &Runner, twist: &[f64; 3]) -> Vec<f64> {
     command_at(base, twist, &vec![0.0; config_inputs(base).len()])
 }
 
+/// The time of sub-step `j`'s middle in a step from `t0` with sub-steps of `h`.
+fn tm_abs(t0: f64, j: usize, h: f64) -> f64 {
+    t0 + (j as f64 + 0.5) * h
+}
+
 /// Absolute inputs whose column also feeds a cumulative input (a steerable wheel's
 /// angle and its rate): the robot's configuration, which the simulator integrates
 /// from the commanded rates instead of commanding it.
@@ -445,6 +450,11 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
         })
         .collect();
     let mut held = last_u.clone();
+    // Under an input delay the robot executes, at time s, the command logged
+    // at the last row before s - delay (crate::timeline): the rows' commands
+    // are kept to look back into.
+    let input_delay = crate::timeline::input_delay(truth, &truth.p);
+    let mut logged: Vec<(f64, Vec<f64>)> = Vec::new();
     // The gyro reports the mean yaw rate over the sample interval (an integrating
     // or low-pass-filtered MEMS gyro), which is what a step of the model predicts.
     let mut gyro_mean = 0.0;
@@ -472,8 +482,15 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
                     u
                 };
                 let mut u = u;
+                let executing = if input_delay == 0.0 {
+                    &held
+                } else {
+                    let at = tm_abs(t0, j, h) - input_delay;
+                    let n = logged.partition_point(|(t, _)| *t <= at);
+                    logged.get(n.saturating_sub(1)).map_or(&held, |(_, c)| c)
+                };
                 for &i in &hold_idx {
-                    u[i] = held[i];
+                    u[i] = executing[i];
                 }
                 let dt = [h];
                 x = {
@@ -498,6 +515,9 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
             let c = command(base, &plan(times[k] % dur));
             for &i in &hold_idx {
                 held[i] = c[i];
+            }
+            if input_delay != 0.0 {
+                logged.push((times[k], held.clone()));
             }
             commanded = Some(c);
         }

@@ -98,6 +98,11 @@ pub struct Param {
     /// one place (kinegen_analysis::timeline).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub measurement_delay: bool,
+    /// The delay, in s, with which the robot executes its commands (absolute
+    /// inputs that hold between rows): the command logged at t acts from t +
+    /// delay. At most one parameter of a spec (kinegen_analysis::timeline).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub input_delay: bool,
     /// How far from its nominal value the parameter is known to lie (one
     /// standard deviation, in its unit; a spec's `"2%"` is resolved against
     /// the nominal value): `fit` adds it as a Gaussian prior, so a log that

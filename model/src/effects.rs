@@ -34,6 +34,10 @@ const BUNDLED: &[(&str, &str)] = &[
         include_str!("../../spec/effects/gyro_scale.toml"),
     ),
     (
+        "input_delay.toml",
+        include_str!("../../spec/effects/input_delay.toml"),
+    ),
+    (
         "lateral_slip.toml",
         include_str!("../../spec/effects/lateral_slip.toml"),
     ),
@@ -387,13 +391,30 @@ impl Effect {
                     p.create || m.observations.iter().any(|o| Some(o.role) == role_of(role))
                 })
                 .count();
-        let times = self.measurement_delay().is_some();
-        if times {
+        let times = self.timing().is_some();
+        if self.measurement_delay().is_some() {
             if let Some(d) = m.params.iter().find(|p| p.measurement_delay) {
                 return Applicability::NotApplicable(format!(
                     "the model already declares a measurement delay (`{}`)",
                     d.name
                 ));
+            }
+        }
+        if self.input_delay().is_some() {
+            if let Some(d) = m.params.iter().find(|p| p.input_delay) {
+                return Applicability::NotApplicable(format!(
+                    "the model already declares an input delay (`{}`)",
+                    d.name
+                ));
+            }
+            let commanded = m.inputs.iter().any(|i| {
+                i.kind == crate::decl::InputKind::Absolute
+                    && i.between() == crate::decl::Between::Hold
+            });
+            if !commanded {
+                return Applicability::NotApplicable(
+                    "the model has no commands (absolute inputs that hold between rows): a delay of measured inputs is `time_offset`".into(),
+                );
             }
         }
         if patches == 0 && !times {
@@ -437,13 +458,33 @@ impl Effect {
             .find_map(|p| p.get("name").and_then(|n| n.as_str()))
     }
 
+    /// The parameter the analysis reads as the delay with which the robot
+    /// executes its commands (see [`crate::decl::Param::input_delay`]).
+    pub fn input_delay(&self) -> Option<&str> {
+        let patches =
+            !self.motion.is_empty() || !self.each_input.is_empty() || !self.observation.is_empty();
+        if patches {
+            return None;
+        }
+        self.parameter
+            .iter()
+            .filter(|p| p.get("input_delay").and_then(|d| d.as_bool()) == Some(true))
+            .find_map(|p| p.get("name").and_then(|n| n.as_str()))
+    }
+
+    /// The timing parameter of an effect that shifts a timeline instead of
+    /// patching expressions (`time_offset`, `input_delay`).
+    pub fn timing(&self) -> Option<&str> {
+        self.measurement_delay().or(self.input_delay())
+    }
+
     /// Observation roles this effect changes when it changes nothing else (a gyro
     /// bias is visible in gyro readings only, so a log without a gyro cannot test
     /// it). None for effects that change the motion or the timing.
     pub fn observation_only_roles(&self) -> Option<Vec<ObservationRole>> {
         (self.motion.is_empty()
             && self.each_input.is_empty()
-            && self.measurement_delay().is_none()
+            && self.timing().is_none()
             && !self.observation.is_empty())
         .then(|| self.observation.keys().filter_map(|k| role_of(k)).collect())
     }
@@ -551,7 +592,7 @@ impl Effect {
                 vec![(name.to_string(), None)]
             };
             for (n, input) in names {
-                if used.contains(&n) || self.measurement_delay() == Some(n.as_str()) {
+                if used.contains(&n) || self.timing() == Some(n.as_str()) {
                     let mut t = p.clone();
                     t.insert("name".into(), toml::Value::String(n.clone()));
                     // `unit = "{input_unit}"`: the parameter is in its input's units

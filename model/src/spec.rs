@@ -88,6 +88,8 @@ struct RawParam {
     #[serde(default)]
     measurement_delay: bool,
     #[serde(default)]
+    input_delay: bool,
+    #[serde(default)]
     tolerance: Option<Spanned<RawTolerance>>,
 }
 
@@ -485,39 +487,48 @@ impl Model {
                     free: p.free && !p.constant,
                     constant: p.constant,
                     measurement_delay: p.measurement_delay,
+                    input_delay: p.input_delay,
                     tolerance,
                 })
             })
             .collect::<Result<_, _>>()?;
-        let delays: Vec<&RawParam> = raw
-            .parameter
-            .iter()
-            .filter(|p| p.measurement_delay)
-            .collect();
-        if let Some(second) = delays.get(1) {
-            return Err(cx.err_span(
-                &second.name,
-                format!(
-                    "a second `measurement_delay` parameter (`{}` is one already): the measurements have one delay",
-                    delays[0].name.get_ref()
-                ),
-            ));
-        }
-        if let Some(d) = delays.first() {
-            if d.constant {
+        for (flag, is, what) in [
+            (
+                "measurement_delay",
+                (|p: &RawParam| p.measurement_delay) as fn(&RawParam) -> bool,
+                "the measurements",
+            ),
+            ("input_delay", |p: &RawParam| p.input_delay, "the commands"),
+        ] {
+            let delays: Vec<&RawParam> = raw.parameter.iter().filter(|p| is(p)).collect();
+            if let Some(second) = delays.get(1) {
                 return Err(cx.err_span(
-                    &d.name,
-                    "a `measurement_delay` parameter cannot be `const`: the analysis shifts the measurements by its value at run time",
-                ));
-            }
-            if !matches!(d.unit.as_str(), "s" | "") {
-                return Err(cx.err_span(
-                    &d.name,
+                    &second.name,
                     format!(
-                        "a `measurement_delay` is in seconds (unit \"s\"), not \"{}\"",
-                        d.unit
+                        "a second `{flag}` parameter (`{}` is one already): {what} have one delay",
+                        delays[0].name.get_ref()
                     ),
                 ));
+            }
+            if let Some(d) = delays.first() {
+                if d.constant {
+                    return Err(cx.err_span(
+                        &d.name,
+                        format!("a `{flag}` parameter cannot be `const`: the analysis shifts {what} by its value at run time"),
+                    ));
+                }
+                if d.measurement_delay && d.input_delay {
+                    return Err(cx.err_span(
+                        &d.name,
+                        "a parameter is a `measurement_delay` or an `input_delay`, not both",
+                    ));
+                }
+                if !matches!(d.unit.as_str(), "s" | "") {
+                    return Err(cx.err_span(
+                        &d.name,
+                        format!("a `{flag}` is in seconds (unit \"s\"), not \"{}\"", d.unit),
+                    ));
+                }
             }
         }
 

@@ -121,7 +121,12 @@ pub fn noise_for(
     runs: &[Run],
     o: &EkfOptions,
 ) -> Result<(NoiseModel, String), LocalizeError> {
-    noise::choose(&Filter::new(r, o)?, runs, o)
+    // the commands as the robot executed them (an input delay: timeline)
+    let executed: Vec<Run> = runs
+        .iter()
+        .map(|run| crate::timeline::executed(r, &r.p, run).into_owned())
+        .collect();
+    noise::choose(&Filter::new(r, o)?, &executed, o)
 }
 
 /// Run the filter (and the smoother, with `o.smooth`) over one run with `noise`.
@@ -132,6 +137,8 @@ pub fn localize_with(
     o: &EkfOptions,
 ) -> Result<Localization, LocalizeError> {
     let f = Filter::new(r, o)?;
+    let executed = crate::timeline::executed(r, &r.p, run);
+    let run: &Run = &executed;
     let keep = if o.smooth { Keep::Nodes } else { Keep::Rows };
     let pass = f.run(run, noise, keep)?;
     let smoothed = o.smooth.then(|| smoother::smooth(&pass));
