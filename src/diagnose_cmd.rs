@@ -243,9 +243,9 @@ pub fn run(c: Common) -> ExitCode {
                 let others: Vec<String> =
                     step.equivalent.iter().map(|e| format!("`{e}`")).collect();
                 out.say(&format!(
-                    "     these logs cannot tell it apart from {}: the same error and held-out error (within {:.1}%); a log with another channel (a gyro, landmarks) or the robot's documentation decides",
+                    "     these logs cannot tell it apart from {}: it fits them as well (likelihood ratio under {}, 5%); a log with another channel (a gyro, landmarks) or the robot's documentation decides",
                     others.join(" or "),
-                    100.0 * kinegen_analysis::diagnose::EQUIVALENT
+                    kinegen_analysis::diagnose::EQUIVALENT
                 ));
             }
             let vals: BTreeMap<String, f64> = step

@@ -83,7 +83,9 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
     );
     // every catalogue effect is either a candidate or skipped with a reason
     let tested = d["candidates"].as_array().unwrap().len() + d["skipped"].as_array().unwrap().len();
-    let catalogue = std::fs::read_dir(root().join("spec/effects")).unwrap().count();
+    let catalogue = std::fs::read_dir(root().join("spec/effects"))
+        .unwrap()
+        .count();
     assert_eq!(tested, catalogue, "{spec}: {d}");
     let v = format!("{param}={est}");
     run_in(

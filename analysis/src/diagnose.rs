@@ -649,15 +649,19 @@ fn stage_from(
 }
 
 /// The significant candidates of a ranking that explain the logs as well as
-/// its winner `w` (see [`ChainStep::equivalent`]).
-fn ranked_equivalents(ranked: &[Candidate], w: &Candidate, base: (f64, f64)) -> Vec<String> {
-    // within EQUIVALENT of what the winner explains (the base stage's error
-    // minus its own), on all runs and held out
-    let close = |a: f64, b: f64, from: f64| (a - b).abs() <= EQUIVALENT * (from - b).abs();
+/// its winner `w` (see [`ChainStep::equivalent`]): a likelihood ratio between
+/// the two calibrated models below [`EQUIVALENT`] (chi-square, one degree of
+/// freedom, 5%), the residual variance taken from the winner's own fit.
+/// (Held-out errors were tried as a second test: the few rows at the start
+/// of each held-out part, where a late command and a late motion capture do
+/// differ, decided it by chance.)
+fn ranked_equivalents(ranked: &[Candidate], w: &Candidate) -> Vec<String> {
+    let n = w.fit.n_residuals as f64;
+    let s2 = (w.rmse * w.rmse).max(1e-300);
     ranked
         .iter()
         .filter(|c| c.effect != w.effect && c.significant)
-        .filter(|c| close(c.rmse, w.rmse, base.0) && close(c.holdout_rmse, w.holdout_rmse, base.1))
+        .filter(|c| n * (c.rmse * c.rmse - w.rmse * w.rmse).abs() / s2 < EQUIVALENT)
         .map(|c| c.effect.clone())
         .collect()
 }
@@ -671,16 +675,14 @@ pub struct ChainStep {
     pub rmse_after: f64,
     pub doc: String,
     /// Other significant candidates these logs cannot tell apart from it:
-    /// their error and held-out error within [`EQUIVALENT`] of what it
-    /// explains (a late command and a late motion capture move a pose-only
-    /// log alike).
+    /// their fit's likelihood ratio to its own under [`EQUIVALENT`] (a late
+    /// command and a late motion capture move a pose-only log alike).
     pub equivalent: Vec<String>,
 }
 
-/// Difference in error and held-out error, as a fraction of what the winner
-/// explains, under which two candidates explain the logs equally (see
-/// [`ChainStep::equivalent`]).
-pub const EQUIVALENT: f64 = 0.005;
+/// The likelihood ratio (chi-square with one degree of freedom at 5%) under
+/// which two candidates explain the logs equally (see [`ChainStep::equivalent`]).
+pub const EQUIVALENT: f64 = 3.84;
 
 /// Everything diagnosis needs from the outside: which effects to try, and the
 /// runner of the spec with a list of effects added (derivation lives with the
@@ -1165,7 +1167,7 @@ pub fn diagnose(
         let winner = ranked.first().filter(|c| c.significant).cloned();
         let equivalent = winner
             .as_ref()
-            .map(|w| ranked_equivalents(&ranked, w, (cur.rmse, cur.holdout_rmse)))
+            .map(|w| ranked_equivalents(&ranked, w))
             .unwrap_or_default();
         if first_candidates.is_none() {
             first_candidates = Some(ranked);
