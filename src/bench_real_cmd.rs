@@ -23,9 +23,10 @@ pub struct BenchRealArgs {
     #[arg(default_value = "../shared/real/optiodom-dev")]
     pub dir: PathBuf,
     /// The benchmark file: per robot type, its spec and the mapping of the
-    /// study's parameter names.
-    #[arg(long, default_value = "spec/benchmarks/optiodom/benchmark.toml")]
-    pub config: PathBuf,
+    /// study's parameter names. Default: spec/benchmarks/optiodom/benchmark.toml
+    /// under the working directory, or the copy built into kinegen elsewhere.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Only the sessions whose folder name starts with this (repeatable); they
     /// are then scored on each other only.
     #[arg(long)]
@@ -55,13 +56,17 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
             a.max_gap
         ));
     }
-    if !a.config.is_file() {
-        return bad(format!(
-            "--config {}: no such file (the benchmark file is spec/benchmarks/optiodom/benchmark.toml in the kinegen checkout)",
-            a.config.display()
-        ));
-    }
-    let loaded = match optiodom::load(&a.dir, &a.config, &a.session, a.max_gap, &|spec| {
+    let config = match &a.config {
+        Some(c) if !c.is_file() => {
+            return bad(format!("--config {}: no such file", c.display()));
+        }
+        Some(c) => c.clone(),
+        None => match default_config() {
+            Ok(c) => c,
+            Err(e) => return bad(e),
+        },
+    };
+    let loaded = match optiodom::load(&a.dir, &config, &a.session, a.max_gap, &|spec| {
         crate::ir_source::load(spec)
     }) {
         Ok(l) => l,
@@ -201,4 +206,47 @@ fn summary_lines(results: &[SessionResult]) -> Vec<String> {
         lines.push(format!("  {name:<22} {}", parts.join(", ")));
     }
     lines
+}
+
+/// The bundled benchmark file and the specs it names, compiled in so that
+/// `bench-real` runs from any directory (paths as in the checkout).
+const BUNDLED: [(&str, &str); 5] = [
+    (
+        "spec/benchmarks/optiodom/benchmark.toml",
+        include_str!("../spec/benchmarks/optiodom/benchmark.toml"),
+    ),
+    (
+        "spec/benchmarks/optiodom/tricycle.toml",
+        include_str!("../spec/benchmarks/optiodom/tricycle.toml"),
+    ),
+    (
+        "spec/benchmarks/optiodom/omni3.toml",
+        include_str!("../spec/benchmarks/optiodom/omni3.toml"),
+    ),
+    (
+        "spec/benchmarks/optiodom/omni4.toml",
+        include_str!("../spec/benchmarks/optiodom/omni4.toml"),
+    ),
+    (
+        "spec/diff_drive.toml",
+        include_str!("../spec/diff_drive.toml"),
+    ),
+];
+
+/// The benchmark file under the working directory when there is one (a
+/// checkout), else the bundled copy written, with its specs, to kinegen's
+/// folder in the temporary directory (as the IR cache is).
+fn default_config() -> Result<PathBuf, String> {
+    let here = PathBuf::from(BUNDLED[0].0);
+    if here.is_file() {
+        return Ok(here);
+    }
+    let root = std::env::temp_dir().join("kinegen-bench-real");
+    for (path, text) in BUNDLED {
+        let to = root.join(path);
+        if std::fs::read_to_string(&to).ok().as_deref() != Some(text) {
+            kinegen_model::files::write_atomic(&to, text).map_err(|e| e.to_string())?;
+        }
+    }
+    Ok(root.join(BUNDLED[0].0))
 }
