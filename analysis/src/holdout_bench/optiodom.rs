@@ -86,6 +86,12 @@ pub fn load(
     max_gap: f64,
     load_ir: &dyn Fn(&Path) -> Result<ModelIr, String>,
 ) -> Result<Loaded, String> {
+    if !dir.is_dir() {
+        return Err(format!(
+            "{}: no such folder (give the folder of OptiOdom sessions, e.g. ../shared/real/optiodom-dev)",
+            dir.display()
+        ));
+    }
     let config = Config::read(config_path)?;
     let base = config_path.parent().unwrap_or(Path::new("."));
     let published = read_json(&dir.join("published.json"))?;
