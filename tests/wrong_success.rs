@@ -369,28 +369,22 @@ fn errors_in_effect_files_topics_grids_and_values_are_located() {
     );
     assert!(!out.exists());
     let topics = tmp.path().join("t.toml");
-    std::fs::write(&topics, "[inputs]\nenc_r = { topic = \"/j\" ").unwrap();
     let data = "data/mystery_robot.csv";
-    let e = fails(&[
-        "fit",
-        "--spec",
-        spec,
-        "--data",
-        data,
-        "--topics",
-        topics.to_str().unwrap(),
-    ]);
+    let fit_with_topics = |text: &[u8]| {
+        std::fs::write(&topics, text).unwrap();
+        fails(&[
+            "fit",
+            "--spec",
+            spec,
+            "--data",
+            data,
+            "--topics",
+            topics.to_str().unwrap(),
+        ])
+    };
+    let e = fit_with_topics(b"[inputs]\nenc_r = { topic = \"/j\" ");
     assert!(e.contains("t.toml:2: column 24"), "{e}");
-    std::fs::write(&topics, b"[inputs]\n# caf\xe9\n").unwrap();
-    let e = fails(&[
-        "fit",
-        "--spec",
-        spec,
-        "--data",
-        data,
-        "--topics",
-        topics.to_str().unwrap(),
-    ]);
+    let e = fit_with_topics(b"[inputs]\n# caf\xe9\n");
     assert!(e.contains("t.toml:2: column 6: not UTF-8"), "{e}");
     let grid = tmp.path().join("g.txt");
     std::fs::write(&grid, b"....\n.S\xff.\n").unwrap();

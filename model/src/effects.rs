@@ -447,20 +447,18 @@ impl Effect {
     /// The parameter the analysis reads as a measurement delay (the timeline
     /// shifts measurements by it); None for effects that patch expressions.
     pub fn measurement_delay(&self) -> Option<&str> {
-        let patches =
-            !self.motion.is_empty() || !self.each_input.is_empty() || !self.observation.is_empty();
-        if patches {
-            return None;
-        }
-        self.parameter
-            .iter()
-            .filter(|p| p.get("measurement_delay").and_then(|d| d.as_bool()) == Some(true))
-            .find_map(|p| p.get("name").and_then(|n| n.as_str()))
+        self.flagged("measurement_delay")
     }
 
     /// The parameter the analysis reads as the delay with which the robot
     /// executes its commands (see [`crate::decl::Param::input_delay`]).
     pub fn input_delay(&self) -> Option<&str> {
+        self.flagged("input_delay")
+    }
+
+    /// The name of the parameter marked `flag = true`, for an effect that
+    /// patches no expression (a timing effect); None otherwise.
+    fn flagged(&self, flag: &str) -> Option<&str> {
         let patches =
             !self.motion.is_empty() || !self.each_input.is_empty() || !self.observation.is_empty();
         if patches {
@@ -468,7 +466,7 @@ impl Effect {
         }
         self.parameter
             .iter()
-            .filter(|p| p.get("input_delay").and_then(|d| d.as_bool()) == Some(true))
+            .filter(|p| p.get(flag).and_then(|d| d.as_bool()) == Some(true))
             .find_map(|p| p.get("name").and_then(|n| n.as_str()))
     }
 
