@@ -458,6 +458,21 @@ fn say_leave_one_out(
     doc["leave_one_out"] = json!(checked);
 }
 
+/// The logs of `runs` by path, each once, for a message about all of them
+/// (a few named, then how many more).
+fn logs_named(runs: &[Run]) -> String {
+    let mut paths: Vec<&str> = Vec::new();
+    for r in runs {
+        if !paths.contains(&r.path.as_str()) {
+            paths.push(&r.path);
+        }
+    }
+    match paths.len() {
+        0..=3 => paths.join(", "),
+        n => format!("{} and {} more", paths[..3].join(", "), n - 3),
+    }
+}
+
 pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
     evaluation(r, p, runs).errors
 }
@@ -862,7 +877,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             match result {
                 Ok(res) => rows.push((name, res)),
                 Err(e) if method == "all" => out.say(&format!("{name}: not applicable here: {e}")),
-                Err(e) => return bad(e),
+                Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
             }
         }
         let before = evaluation(r, &r.p, &prep.runs);
@@ -985,7 +1000,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(&c));
     let mut res = match fit(r, &prep.runs, &fo) {
         Ok(x) => x,
-        Err(e) => return bad(e),
+        Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
     };
     res.warnings.splice(0..0, prep.warnings.iter().cloned());
     drop(spin);

@@ -400,3 +400,45 @@ fn errors_in_effect_files_topics_grids_and_values_are_located() {
     let e = fails(&["compare", "--spec", spec, "--data", data, "--effects", d]);
     assert!(e.contains("bad.toml: line 2, column 8: not UTF-8"), "{e}");
 }
+
+/// Issue #37.4: a fit that cannot start names the logs it was given: no
+/// ground truth, gyro or landmarks ("nothing to fit"), and neural
+/// gyrodometry without a gyro.
+#[test]
+fn a_fit_that_cannot_start_names_its_logs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("data/mystery_robot.csv")).unwrap();
+    let cut = |n: usize, name: &str| {
+        let t: String = text
+            .lines()
+            .map(|l| l.split(',').take(n).collect::<Vec<_>>().join(",") + "\n")
+            .collect();
+        let p = tmp.path().join(name);
+        std::fs::write(&p, t).unwrap();
+        p
+    };
+    let (bare, no_gyro) = (cut(3, "bare.csv"), cut(6, "no_gyro.csv"));
+    let spec = "spec/diff_drive.toml";
+    let o = kinegen(&["fit", "--spec", spec, "--data", bare.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("bare.csv: nothing to fit"),
+        "{}",
+        stderr(&o)
+    );
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        spec,
+        "--data",
+        no_gyro.to_str().unwrap(),
+        "--method",
+        "neural",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no_gyro.csv: neural gyrodometry"),
+        "{}",
+        stderr(&o)
+    );
+}
