@@ -953,7 +953,6 @@ fn on_whole_runs(r: &Runner, runs: &[Run], o: &FitOptions, searched: FitResult) 
         cost <= SHORT_TERM_SLACK * searched.cost_after
     });
     let Some(whole) = kept else {
-        at.p = searched.p.clone();
         let mut res = searched;
         drift::sandwich(&at, &split, o, &mut res);
         return res;
