@@ -442,3 +442,37 @@ fn a_fit_that_cannot_start_names_its_logs() {
         stderr(&o)
     );
 }
+
+/// Issue #37.4: a noise input in a denominator (`w/dv`) makes a kernel
+/// infinite at zero noise; generate says so and how to fix it, naming the
+/// spec, instead of "non-real constant `⧞`" alone, and writes nothing.
+#[test]
+fn a_noise_in_a_denominator_is_explained() {
+    let tmp = tempfile::tempdir().unwrap();
+    let specs = tmp.path().join("specs");
+    std::fs::create_dir(&specs).unwrap();
+    let text = std::fs::read_to_string(root().join("spec/tricycle_fwd.toml")).unwrap();
+    let (i, j) = (
+        text.find("[inverse]").unwrap(),
+        text.find("[[observation]]").unwrap(),
+    );
+    let text = format!("{}{}", &text[..i], &text[j..]);
+    let line = text.lines().find(|l| l.starts_with("vx = ")).unwrap();
+    let text = text.replace(line, "vx = \"r*w/dv\"");
+    std::fs::write(specs.join("divided.toml"), text).unwrap();
+    let out = tmp.path().join("gen");
+    let o = kinegen(&[
+        "generate",
+        "--spec-dir",
+        specs.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("divided.toml") && e.contains("divides by zero") && e.contains("noise"),
+        "{e}"
+    );
+    assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none());
+}

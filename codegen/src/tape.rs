@@ -64,8 +64,16 @@ impl TapeBuilder {
     pub fn atom(&mut self, a: AtomView) -> Result<u32, SymbolicError> {
         match a {
             AtomView::Num(_) => {
-                let v =
-                    as_f64(a).ok_or_else(|| SymbolicError(format!("non-real constant `{a}`")))?;
+                let v = as_f64(a).ok_or_else(|| {
+                    // symbolica's infinity: a division by zero in a kernel,
+                    // which in a valid spec only the zero-noise point makes
+                    let why = if a.to_string().contains('⧞') {
+                        ": an expression divides by zero where the kernels evaluate it, at zero noise (a noise input in a denominator, such as `w/dv`); noise must leave the model defined at zero (add it, or scale by 1 + noise)"
+                    } else {
+                        ""
+                    };
+                    SymbolicError(format!("non-real constant `{a}`{why}"))
+                })?;
                 Ok(self.constant(v))
             }
             AtomView::Var(v) => {
