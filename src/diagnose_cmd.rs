@@ -36,8 +36,16 @@ fn deriver<'a>(
 ) -> impl Fn(&[String]) -> Result<Runner, String> + Sync + 'a {
     move |effects: &[String]| {
         let m = with_chain(spec, cat, effects)?;
-        let ir = ir_source::load(&materialise(&m.source, name)?)
-            .map_err(|e| format!("could not be derived: {e}"))?;
+        let combined = materialise(&m.source, name)?;
+        // the combined spec lives in kinegen's cache: name it by what it is
+        // (`add-effect` writes the same text where the user can read it)
+        let ir = ir_source::load(&combined).map_err(|e| {
+            let e = e.replace(
+                &combined.display().to_string(),
+                &format!("{} with {} added", spec.path.display(), effects.join(", ")),
+            );
+            format!("could not be derived: {e} (`kinegen add-effect` writes that spec to read)")
+        })?;
         Runner::new(ir, sets).map_err(|e| e.to_string())
     }
 }

@@ -476,3 +476,36 @@ fn a_noise_in_a_denominator_is_explained() {
     );
     assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none());
 }
+
+/// Issue #37.4: a user's effect that cannot be derived on the spec (a noise
+/// input in a denominator) is skipped by diagnose with the user's spec and
+/// the effect named, not kinegen's cache file.
+#[test]
+fn an_effect_that_cannot_be_derived_is_named_by_spec_and_effect() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("fx");
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::write(
+        dir.join("curve.toml"),
+        "name = \"speed_curve\"\ndoc = \"A speed-dependent drive gain.\"\nrequires = [\"twist\"]\n\n\
+         [[parameter]]\nname = \"k_nl\"\nnominal = 0.0\nunit = \"1\"\nmin = -1.0\nmax = 1.0\n\n\
+         [motion]\nvx = \"({vx})*(1 + k_nl/dv)\"\n",
+    )
+    .unwrap();
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        "data/mystery_robot.csv",
+        "--effects",
+        dir.to_str().unwrap(),
+    ]);
+    let skipped = d["skipped"].to_string();
+    assert!(skipped.contains("speed_curve"), "{skipped}");
+    assert!(
+        skipped.contains("spec/diff_drive.toml with speed_curve added"),
+        "{skipped}"
+    );
+    assert!(!skipped.contains("kinegen-ir-cache"), "{skipped}");
+}
