@@ -256,8 +256,9 @@ pub fn run_add_effect(
         // spec and the effect: the effect file's line where the message's
         // symbol is, else the user's file
         let checked = Model::parse(spec, &new).map_err(|e| {
-            let at =
-                locate_in_effect(eff, &e.message).map_or(String::new(), |l| format!(" (from {l})"));
+            let at = eff
+                .locate(&e.message)
+                .map_or(String::new(), |l| format!(" (from {l})"));
             format!(
                 "adding `{effect}`{at} to {} gives an invalid spec: {}",
                 spec.display(),
@@ -305,23 +306,4 @@ fn effect_bounds(eff: &kinegen_model::effects::Effect, name: &str) -> Option<(f6
         bound("min").unwrap_or(f64::NEG_INFINITY),
         bound("max").unwrap_or(f64::INFINITY),
     ))
-}
-
-/// `FILE:LINE` of the first line of the effect's file that holds the symbol a
-/// spec error names in backticks (`unknown symbol `k_zz``), when it is there.
-fn locate_in_effect(eff: &kinegen_model::effects::Effect, message: &str) -> Option<String> {
-    let symbol = message.split('`').nth(1).filter(|s| !s.is_empty())?;
-    let text = std::fs::read_to_string(&eff.origin).ok()?;
-    let is_word = |c: char| c.is_alphanumeric() || c == '_';
-    let line = text.lines().position(|l| {
-        l.match_indices(symbol).any(|(i, _)| {
-            let before = l[..i].chars().next_back().is_none_or(|c| !is_word(c));
-            let after = l[i + symbol.len()..]
-                .chars()
-                .next()
-                .is_none_or(|c| !is_word(c));
-            before && after
-        })
-    })?;
-    Some(format!("{}:{}", eff.origin, line + 1))
 }

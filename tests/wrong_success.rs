@@ -352,6 +352,18 @@ fn errors_in_effect_files_topics_grids_and_values_are_located() {
         e.contains(&format!("bad.toml:{line}")) && e.contains("k_zz"),
         "{e}"
     );
+    // diagnose skips it with the same place
+    let doc = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        spec,
+        "--data",
+        "data/mystery_robot.csv",
+        "--effects",
+        d,
+    ]);
+    let skipped = doc["skipped"].to_string();
+    assert!(skipped.contains(&format!("bad.toml:{line}")), "{skipped}");
     let e = fails(&[
         "add-effect",
         "--spec",

@@ -791,6 +791,26 @@ impl Effect {
         Ok(doc.to_string())
     }
 
+    /// `FILE:LINE` of the first line of this effect's file that holds the
+    /// symbol a spec error names in backticks (`unknown symbol `k_zz``),
+    /// when it is there.
+    pub fn locate(&self, message: &str) -> Option<String> {
+        let symbol = message.split('`').nth(1).filter(|s| !s.is_empty())?;
+        let text = std::fs::read_to_string(&self.origin).ok()?;
+        let is_word = |c: char| c.is_alphanumeric() || c == '_';
+        let line = text.lines().position(|l| {
+            l.match_indices(symbol).any(|(i, _)| {
+                let before = l[..i].chars().next_back().is_none_or(|c| !is_word(c));
+                let after = l[i + symbol.len()..]
+                    .chars()
+                    .next()
+                    .is_none_or(|c| !is_word(c));
+                before && after
+            })
+        })?;
+        Some(format!("{}:{}", self.origin, line + 1))
+    }
+
     /// The model with this effect added at its nominal values (unchanged when
     /// it is already in); Err says why it does not apply or what went wrong.
     pub fn added_to(&self, m: &Model) -> Result<Model, String> {
@@ -799,8 +819,12 @@ impl Effect {
             Applicability::NotApplicable(why) => Err(format!("does not apply: {why}")),
             Applicability::Applies => {
                 let text = self.apply(m, &BTreeMap::new())?;
-                Model::parse(&m.path, &text)
-                    .map_err(|e| format!("adding it gives an invalid spec: {}", e.message))
+                Model::parse(&m.path, &text).map_err(|e| {
+                    let at = self
+                        .locate(&e.message)
+                        .map_or(String::new(), |l| format!(" (from {l})"));
+                    format!("adding it gives an invalid spec: {}{at}", e.message)
+                })
             }
         }
     }
