@@ -71,6 +71,9 @@ const HOSTILE: &[&str] = &[
     "-0",
     "4294967295",
     "2147483648",
+    // a counter that wraps like a 32- or 16-bit register (issue 37.5)
+    "-4294967296",
+    "65536",
     "t",
     "enc_r",
     "gt_theta",
