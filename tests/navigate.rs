@@ -108,6 +108,20 @@ fn absurd_cells_are_refused_and_large_grids_are_driven() {
     ]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--cell 1e300"), "{}", stderr(&o));
+    // a model that cannot turn in place is refused naming its spec
+    let o = kinegen(&[
+        "navigate",
+        "--spec",
+        "spec/tricycle.toml",
+        "--grid",
+        "data/seed004/arena.txt",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("spec/tricycle.toml: model `tricycle` cannot turn in place"),
+        "{}",
+        stderr(&o)
+    );
     let tmp = tempfile::tempdir().unwrap();
     let n = 1000;
     let mut text = String::new();
