@@ -172,10 +172,27 @@ fn outputs_to_devices_links_pipes_and_read_only_files_are_written_or_refused_in_
     };
     let o = compare_to(std::path::Path::new("/dev/null"));
     assert!(o.status.success(), "{}", stderr(&o));
+    let sim = kinegen(&[
+        "simulate",
+        "--spec",
+        spec,
+        "--trajectory",
+        "square",
+        "--out",
+        "/dev/null",
+    ]);
+    assert!(sim.status.success(), "{}", stderr(&sim));
     assert!(std::fs::metadata("/dev/null")
         .unwrap()
         .file_type()
         .is_char_device());
+    // /dev/stdout is a link to this process's stdout: the document arrives there
+    let o = compare_to(std::path::Path::new("/dev/stdout"));
+    assert!(
+        o.status.success() && stdout(&o).contains("\"rmse\""),
+        "{}",
+        stderr(&o)
+    );
     let o = kinegen(&[
         "fit",
         "--spec",
