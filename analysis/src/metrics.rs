@@ -2,8 +2,9 @@
 //! error over distance and time windows, gyro residuals, and which motion regimes
 //! and segments carry the error.
 use crate::log::wrap;
+use crate::model::Runner;
 use crate::run::Run;
-use crate::track_rows::{Cursor, TrackRows};
+use crate::track_rows::{Cursor, Heading, Recipe, TrackRows};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -113,6 +114,25 @@ struct Sums {
 pub fn errors(runs: &[(&Run, &dyn TrackRows)]) -> Errors {
     let sums: Vec<Sums> = runs.iter().map(|&(run, tr)| sums(run, tr)).collect();
     summary(&sums)
+}
+
+/// The errors of `run` dead-reckoned with parameters `p` from its measured
+/// start (how a held-out run is scored), a figure that stops being a number
+/// read as infinite: the worst.
+pub fn from_measured_start(r: &Runner, p: &[f64], run: &Run) -> Errors {
+    let track = Recipe {
+        r,
+        p: p.to_vec(),
+        offset: [0.0; 3],
+        heading: Heading::Model,
+    };
+    let mut e = errors(&[(run, &track as &dyn TrackRows)]);
+    for v in [&mut e.rmse, &mut e.final_position_error_m] {
+        if !v.is_finite() {
+            *v = f64::INFINITY;
+        }
+    }
+    e
 }
 
 /// [`errors`] over all the runs, and each run's own, from one reading of

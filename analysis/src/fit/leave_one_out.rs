@@ -11,7 +11,6 @@ use super::{refine, FitOptions};
 use crate::metrics;
 use crate::model::Runner;
 use crate::run::Run;
-use crate::track_rows::{Heading, Recipe, TrackRows};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -67,25 +66,9 @@ pub fn leave_one_out(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> Vec
             let refit = refine(&from, &others, o).ok()?;
             Some(LeftOut {
                 path: runs[i].path.clone(),
-                nominal_rmse_m: rmse(r, &r.p, &runs[i]),
-                calibrated_rmse_m: rmse(r, &refit.p, &runs[i]),
+                nominal_rmse_m: metrics::from_measured_start(r, &r.p, &runs[i]).rmse,
+                calibrated_rmse_m: metrics::from_measured_start(r, &refit.p, &runs[i]).rmse,
             })
         })
         .collect()
-}
-
-/// Whole-run position RMSE of `run` dead-reckoned with `p` from its measured start.
-fn rmse(r: &Runner, p: &[f64], run: &Run) -> f64 {
-    let track = Recipe {
-        r,
-        p: p.to_vec(),
-        offset: [0.0; 3],
-        heading: Heading::Model,
-    };
-    let e = metrics::errors(&[(run, &track as &dyn TrackRows)]).rmse;
-    if e.is_finite() {
-        e
-    } else {
-        f64::INFINITY
-    }
 }

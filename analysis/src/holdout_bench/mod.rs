@@ -11,7 +11,6 @@ use crate::fit::{fit, FitOptions};
 use crate::metrics;
 use crate::model::Runner;
 use crate::run::Run;
-use crate::track_rows::{Heading, Recipe, TrackRows};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -235,16 +234,8 @@ fn errors(s: &Session, c: &Calibration) -> Vec<(f64, f64)> {
     s.runs
         .par_iter()
         .map(|run| {
-            let track = Recipe {
-                r: &s.runner,
-                p: p.clone(),
-                offset: [0.0; 3],
-                heading: Heading::Model,
-            };
-            let (_, each) = metrics::errors_each(&[(run, &track as &dyn TrackRows)]);
-            let e = &each[0];
-            let bad = |v: f64| if v.is_finite() { v } else { f64::INFINITY };
-            (bad(e.final_position_error_m), bad(e.rmse))
+            let e = metrics::from_measured_start(&s.runner, &p, run);
+            (e.final_position_error_m, e.rmse)
         })
         .collect()
 }
