@@ -41,6 +41,14 @@ pub fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
+/// Run kinegen where it must refuse (exit 2, bad input); its stderr, the
+/// message the assertions read.
+pub fn refused(args: &[&str]) -> String {
+    let o = kinegen(args);
+    assert_eq!(o.status.code(), Some(2), "kinegen {args:?}: {}", stderr(&o));
+    stderr(&o)
+}
+
 /// Run kinegen with `--json -` appended and parse stdout.
 pub fn kinegen_json(args: &[&str]) -> serde_json::Value {
     let mut a = args.to_vec();
