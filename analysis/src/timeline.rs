@@ -86,8 +86,11 @@ fn mean_command(run: &Run, i: usize, a: f64, b: f64) -> f64 {
 /// Without one (or tau = 0), the run as it is.
 pub fn executed<'a>(r: &Runner, p: &[f64], run: &'a Run) -> Cow<'a, Run> {
     let tau = input_delay(r, p);
+    if tau == 0.0 || run.steps() == 0 {
+        return Cow::Borrowed(run);
+    }
     let held = commands(r);
-    if tau == 0.0 || held.is_empty() || run.steps() == 0 {
+    if held.is_empty() {
         return Cow::Borrowed(run);
     }
     let width = run.u.width();

@@ -121,7 +121,11 @@ pub fn noise_for(
     runs: &[Run],
     o: &EkfOptions,
 ) -> Result<(NoiseModel, String), LocalizeError> {
-    // the commands as the robot executed them (an input delay: timeline)
+    // the commands as the robot executed them (an input delay: timeline);
+    // without a delay the runs as they are, not copies
+    if crate::timeline::input_delay(r, &r.p) == 0.0 {
+        return noise::choose(&Filter::new(r, o)?, runs, o);
+    }
     let executed: Vec<Run> = runs
         .iter()
         .map(|run| crate::timeline::executed(r, &r.p, run).into_owned())
