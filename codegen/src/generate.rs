@@ -131,7 +131,7 @@ nalgebra = ["dep:nalgebra"]
 dispatch = []
 # every kernel in f32 (`Real = f32`), for a single-precision FPU
 f32 = []
-# on a computer: std's (the C library's) atan2, atan, exp, pow: faster than libm's
+# on a computer: std's (the C library's) exp and pow: faster than libm's
 std = []
 
 [dependencies]

@@ -8,10 +8,18 @@ sin(s)/s = sinc(s) and (1 - cos s)/s = s/2 sinc(s/2)^2, which have no
 cancellation at any s. `verify/tests/precision.rs` checks the generated
 kernels against it (relative to each output row's scale).
 
+It also writes atan2.json: atan2(y, x) at 50 digits on 2,800 points (every
+octant, radii from 1e-3 to 1e3, the generated crate's reduction cuts, the
+axes, the branch cut at pi and one-argument atan points), each as the double
+nearest the true value plus the remainder, so that the test can measure the
+generated crate's atan2 and libm's in fractions of an ulp.
+
     python3 verify/precision/reference.py           # (re)write near_zero.json
     python3 verify/precision/reference.py --check   # fail if it differs
 """
 import json
+import math
+import random
 import sys
 from pathlib import Path
 
@@ -20,6 +28,7 @@ import mpmath as mp
 mp.mp.dps = 50
 HERE = Path(__file__).resolve().parent
 FIXTURE = HERE / "near_zero.json"
+ATAN2_FIXTURE = HERE / "atan2.json"
 # spec/diff_drive.toml's nominal values: r_r, r_l, b, counts_per_rev, gear_ratio
 PARAMS = [0.042, 0.042, 0.2, 64.0, 0.022883295194508008]
 S_VALUES = [0.0, 1e-12, -1e-12, 1e-8, 1e-5, -1e-3, 0.02, 0.0499, 0.05, 0.0501, -0.0501, 0.2, 1.0]
@@ -69,22 +78,66 @@ def case(s):
     }
 
 
+def atan2_points():
+    """(y, x) pairs, from a fixed seed (Python's Mersenne Twister is stable
+    across versions)."""
+    rng = random.Random(2026)
+    pts = []
+    for _ in range(1200):  # any direction, any scale
+        th, r = rng.uniform(-math.pi, math.pi), 10 ** rng.uniform(-3, 3)
+        pts.append((r * math.sin(th), r * math.cos(th)))
+    for _ in range(800):  # either side of each cut of the octant (q = y/x)
+        q = rng.choice([0.4375, 0.6875, 1.1875, 2.4375]) * (1 + rng.uniform(-1e-3, 1e-3))
+        x = rng.uniform(0.1, 10) * rng.choice([1, -1])
+        pts.append((q * abs(x) * rng.choice([1, -1]), x))
+    for _ in range(400):  # near the axes and the branch cut: y/x tiny or huge
+        a, b = 10 ** rng.uniform(-12, -1), rng.uniform(0.5, 2)
+        y, x = (a * rng.choice([1, -1]), b * rng.choice([1, -1]))
+        pts.append((y, x) if rng.random() < 0.5 else (x, y))
+    for _ in range(400):  # atan(v) = atan2(v, 1)
+        pts.append((rng.uniform(-1, 1) * 10 ** rng.uniform(-3, 3), 1.0))
+    return pts
+
+
+def atan2_fixture():
+    rows = []
+    for y, x in atan2_points():
+        ref = mp.atan2(mp.mpf(y), mp.mpf(x))
+        hi = float(ref)
+        # as text: serde_json's default float parsing may miss the nearest
+        # double by an ulp, Rust's str::parse does not
+        rows.append([repr(v) for v in (y, x, hi, float(ref - mp.mpf(hi)))])
+    return {
+        "doc": "atan2(y, x) at 50 digits: [y, x, nearest double, remainder] (verify/precision/reference.py)",
+        "points": rows,
+    }
+
+
+def write_or_check(path, data, check):
+    text = json.dumps(data, indent=1) + "\n"
+    if "points" in data:  # one point per line
+        rows = ",\n".join(json.dumps(r) for r in data["points"])
+        text = f'{{"doc": {json.dumps(data["doc"])},\n"points": [\n{rows}\n]}}\n'
+    if check:
+        if path.read_text() != text:
+            print(f"{path}: differs from what reference.py writes; rerun it")
+            return 1
+        print(f"{path.relative_to(HERE.parent.parent)}: up to date")
+        return 0
+    path.write_text(text)
+    print(f"wrote {path}")
+    return 0
+
+
 def main(argv):
     data = {
         "doc": "diff_drive step_exact and step_exact_jac_p at omega*dt = s, 50-digit mpmath (verify/precision/reference.py)",
         "params": PARAMS,
         "cases": [case(s) for s in S_VALUES],
     }
-    text = json.dumps(data, indent=1) + "\n"
-    if "--check" in argv:
-        if FIXTURE.read_text() != text:
-            print(f"{FIXTURE}: differs from what reference.py writes; rerun it")
-            return 1
-        print(f"{FIXTURE.relative_to(HERE.parent.parent)}: up to date")
-        return 0
-    FIXTURE.write_text(text)
-    print(f"wrote {FIXTURE}")
-    return 0
+    check = "--check" in argv
+    failed = write_or_check(FIXTURE, data, check)
+    return failed | write_or_check(ATAN2_FIXTURE, atan2_fixture(), check)
 
 
 if __name__ == "__main__":
