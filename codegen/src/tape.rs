@@ -351,12 +351,41 @@ impl TapeBuilder {
 /// and their sines, cosines and guards are computed once, not twice. Each
 /// result moves by at most an ulp or so. The reciprocal is placed right before
 /// its first use, so the tape stays in dependency order; `1/d` itself is the
-/// reciprocal.
+/// reciprocal. A denominator that is a product of slots whose reciprocals
+/// exist already (1/r^2 after 1/r, in seed 000's normal equations), or whose
+/// square root's reciprocal exists (1/d after 1/sqrt(d), in a range-bearing
+/// Jacobian), gets the product of those reciprocals instead of another
+/// division: a division costs a multiplication's throughput ten times over.
 fn share_reciprocals(tape: Vec<Op>, outputs: &[u32]) -> (Vec<Op>, Vec<u32>) {
     let mut new_index = vec![u32::MAX; tape.len()];
     let mut recip = vec![u32::MAX; tape.len()];
     let mut one = u32::MAX;
     let mut out: Vec<Op> = Vec::with_capacity(tape.len());
+    let factors: Vec<Option<(usize, usize)>> = tape
+        .iter()
+        .map(|op| match *op {
+            Op::Mul(a, b) => Some((a as usize, b as usize)),
+            _ => None,
+        })
+        .collect();
+    // the slot holding sqrt(d), by d
+    let mut root_of = vec![usize::MAX; tape.len()];
+    for (i, op) in tape.iter().enumerate() {
+        if let Op::Sqrt(d) = *op {
+            root_of[d as usize] = i;
+        }
+    }
+    // 1/d as the product of its factors' reciprocals, or as 1/sqrt(d)
+    // squared, where those reciprocals exist
+    let from_factors = |d: usize, recip: &[u32]| {
+        let made = |s: usize| s != usize::MAX && recip[s] != u32::MAX;
+        if made(root_of[d]) {
+            let r = recip[root_of[d]];
+            return Some(Op::Mul(r, r));
+        }
+        let (a, b) = factors[d]?;
+        (made(a) && made(b)).then(|| Op::Mul(recip[a], recip[b]))
+    };
     for (i, op) in tape.into_iter().enumerate() {
         let op = match op {
             Op::Div(a, d) if tape_const(&out, new_index[a as usize]) == Some(1.0) => {
@@ -366,7 +395,8 @@ fn share_reciprocals(tape: Vec<Op>, outputs: &[u32]) -> (Vec<Op>, Vec<u32>) {
                     new_index[i] = recip[d];
                     continue;
                 }
-                let op = Op::Div(new_index[a as usize], new_index[d]);
+                let op =
+                    from_factors(d, &recip).unwrap_or(Op::Div(new_index[a as usize], new_index[d]));
                 new_index[i] = out.len() as u32;
                 recip[d] = new_index[i];
                 out.push(op);
@@ -374,6 +404,12 @@ fn share_reciprocals(tape: Vec<Op>, outputs: &[u32]) -> (Vec<Op>, Vec<u32>) {
             }
             Op::Div(a, d) => {
                 let d = d as usize;
+                if recip[d] == u32::MAX {
+                    if let Some(product) = from_factors(d, &recip) {
+                        out.push(product);
+                        recip[d] = out.len() as u32 - 1;
+                    }
+                }
                 if recip[d] == u32::MAX {
                     if one == u32::MAX {
                         out.push(Op::Const(1.0));

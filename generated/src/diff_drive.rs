@@ -350,7 +350,7 @@ pub fn step_euler_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r_r, r_l, b, counts_per_rev, gear_ratio]
 
-64 arithmetic operations (147 before common-subexpression elimination).*/
+64 arithmetic operations (153 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
     x: &[crate::Real; 3usize],
@@ -389,7 +389,7 @@ pub fn step_euler_jac_p(
     let t27: crate::Real = t23 * t26;
     let t28: crate::Real = t27 * t14;
     let t29: crate::Real = t6 * t6;
-    let t30: crate::Real = t13 / t29;
+    let t30: crate::Real = t14 * t14;
     let t31: crate::Real = t12 * t30;
     let t32: crate::Real = -t31;
     let t33: crate::Real = t18 * t30;
@@ -664,7 +664,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [n_r, n_l]
 
-118 arithmetic operations (3433 before common-subexpression elimination).*/
+118 arithmetic operations (3451 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -705,10 +705,10 @@ pub fn step_exact_jac_u(
     let t29: crate::Real = t4 + t28;
     let t30: crate::Real = t10 * t29;
     let t31: crate::Real = 1.0;
-    let t32: crate::Real = t30 * t30;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t30)
         < crate::math::series_switch(0.05)
     {
+        let t32: crate::Real = t30 * t30;
         let t33: crate::Real = 0.16666666666666666;
         let t34: crate::Real = 0.008333333333333333;
         let t35: crate::Real = 0.0001984126984126984;
@@ -764,7 +764,7 @@ pub fn step_exact_jac_u(
         let t60: crate::Real = t31 - t59;
         let t61: crate::Real = t60 * t46;
         let t90: crate::Real = t59 * t46;
-        let t91: crate::Real = t15 / t32;
+        let t91: crate::Real = t46 * t46;
         let t92: crate::Real = t45 * t91;
         let t93: crate::Real = t90 - t92;
         let t109: crate::Real = t60 * t91;
@@ -784,7 +784,7 @@ pub fn step_exact_jac_u(
     let t69: crate::Real = t68 * t16;
     let t70: crate::Real = t13 * t63;
     let t71: crate::Real = t7 * t8;
-    let t72: crate::Real = t15 / t71;
+    let t72: crate::Real = t27 * t16;
     let t73: crate::Real = t70 * t72;
     let t74: crate::Real = t13 * t67;
     let t75: crate::Real = t74 * t72;
@@ -842,7 +842,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-88 arithmetic operations (1679 before common-subexpression elimination).*/
+88 arithmetic operations (1683 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -883,10 +883,10 @@ pub fn step_exact_jac_w(
     let t29: crate::Real = t4 + t28;
     let t30: crate::Real = t10 * t29;
     let t31: crate::Real = 1.0;
-    let t32: crate::Real = t30 * t30;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t30)
         < crate::math::series_switch(0.05)
     {
+        let t32: crate::Real = t30 * t30;
         let t33: crate::Real = 0.16666666666666666;
         let t34: crate::Real = 0.008333333333333333;
         let t35: crate::Real = 0.0001984126984126984;
@@ -942,7 +942,7 @@ pub fn step_exact_jac_w(
         let t60: crate::Real = t31 - t59;
         let t61: crate::Real = t60 * t46;
         let t75: crate::Real = t59 * t46;
-        let t76: crate::Real = t15 / t32;
+        let t76: crate::Real = t46 * t46;
         let t77: crate::Real = t45 * t76;
         let t78: crate::Real = t75 - t77;
         let t93: crate::Real = t60 * t76;
@@ -990,7 +990,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r_r, r_l, b, counts_per_rev, gear_ratio]
 
-180 arithmetic operations (8021 before common-subexpression elimination).*/
+180 arithmetic operations (8070 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -1031,10 +1031,10 @@ pub fn step_exact_jac_p(
     let t29: crate::Real = t4 + t28;
     let t30: crate::Real = t10 * t29;
     let t31: crate::Real = 1.0;
-    let t32: crate::Real = t30 * t30;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t30)
         < crate::math::series_switch(0.05)
     {
+        let t32: crate::Real = t30 * t30;
         let t33: crate::Real = 0.16666666666666666;
         let t34: crate::Real = 0.008333333333333333;
         let t35: crate::Real = 0.0001984126984126984;
@@ -1090,7 +1090,7 @@ pub fn step_exact_jac_p(
         let t60: crate::Real = t31 - t59;
         let t61: crate::Real = t60 * t46;
         let t114: crate::Real = t59 * t46;
-        let t115: crate::Real = t15 / t32;
+        let t115: crate::Real = t46 * t46;
         let t116: crate::Real = t45 * t115;
         let t117: crate::Real = t114 - t116;
         let t136: crate::Real = t60 * t115;
@@ -1109,7 +1109,7 @@ pub fn step_exact_jac_p(
     let t68: crate::Real = t64 * t67;
     let t69: crate::Real = t68 * t16;
     let t70: crate::Real = t8 * t8;
-    let t71: crate::Real = t15 / t70;
+    let t71: crate::Real = t16 * t16;
     let t72: crate::Real = t14 * t71;
     let t73: crate::Real = -t72;
     let t74: crate::Real = t20 * t71;
@@ -1123,13 +1123,13 @@ pub fn step_exact_jac_p(
     let t82: crate::Real = t23 * t81;
     let t83: crate::Real = t13 * t63;
     let t84: crate::Real = t7 * t8;
-    let t85: crate::Real = t15 / t84;
+    let t85: crate::Real = t27 * t16;
     let t86: crate::Real = t83 * t85;
     let t87: crate::Real = t13 * t67;
     let t88: crate::Real = t87 * t85;
     let t89: crate::Real = -t88;
     let t90: crate::Real = t7 * t7;
-    let t91: crate::Real = t15 / t90;
+    let t91: crate::Real = t27 * t27;
     let t92: crate::Real = t26 * t91;
     let t93: crate::Real = -t92;
     let t94: crate::Real = t74 - t72;
@@ -1286,7 +1286,7 @@ pub fn obs_gyro_jac_x(
 * `p`: [r_r, r_l, b, counts_per_rev, gear_ratio]
 * returns rows [gyro_z], columns [r_r, r_l, b, counts_per_rev, gear_ratio]
 
-36 arithmetic operations (52 before common-subexpression elimination).*/
+36 arithmetic operations (54 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
     x: &[crate::Real; 3usize],
@@ -1326,7 +1326,7 @@ pub fn obs_gyro_jac_p(
     let t30: crate::Real = t28 * t29;
     let t31: crate::Real = -t30;
     let t32: crate::Real = t5 * t5;
-    let t33: crate::Real = t11 / t32;
+    let t33: crate::Real = t22 * t22;
     let t34: crate::Real = t21 * t33;
     let t35: crate::Real = t26 * t33;
     let t36: crate::Real = t35 - t34;
@@ -1379,7 +1379,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-15 arithmetic operations (45 before common-subexpression elimination).*/
+15 arithmetic operations (67 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[crate::Real; 3usize],
@@ -1404,7 +1404,7 @@ pub fn obs_landmark_jac_x(
     let t14: crate::Real = t6 * t11;
     let t15: crate::Real = -t14;
     let t16: crate::Real = 0.0;
-    let t17: crate::Real = t10 / t8;
+    let t17: crate::Real = t11 * t11;
     let t18: crate::Real = t6 * t17;
     let t19: crate::Real = t4 * t17;
     let t20: crate::Real = -t19;
@@ -1566,7 +1566,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5]]
 
-104 arithmetic operations (3222 before common-subexpression elimination).*/
+104 arithmetic operations (3226 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1608,10 +1608,10 @@ pub fn step_exact_linearized_flat(
     let t30: crate::Real = t28 * t29;
     let t31: crate::Real = t6 + t30;
     let t32: crate::Real = t12 * t31;
-    let t33: crate::Real = t32 * t32;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t32)
         < crate::math::series_switch(0.05)
     {
+        let t33: crate::Real = t32 * t32;
         let t34: crate::Real = 0.16666666666666666;
         let t35: crate::Real = 0.008333333333333333;
         let t36: crate::Real = 0.0001984126984126984;
@@ -1667,7 +1667,7 @@ pub fn step_exact_linearized_flat(
         let t61: crate::Real = t17 - t60;
         let t62: crate::Real = t61 * t47;
         let t97: crate::Real = t60 * t47;
-        let t98: crate::Real = t17 / t33;
+        let t98: crate::Real = t47 * t47;
         let t99: crate::Real = t46 * t98;
         let t100: crate::Real = t97 - t99;
         let t115: crate::Real = t61 * t98;
@@ -1776,7 +1776,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2], step_exact_jac_p[3], step_exact_jac_p[4], step_exact_jac_p[5], step_exact_jac_p[6], step_exact_jac_p[7], step_exact_jac_p[8], step_exact_jac_p[9], step_exact_jac_p[10], step_exact_jac_p[11], step_exact_jac_p[12], step_exact_jac_p[13], step_exact_jac_p[14]]
 
-196 arithmetic operations (9564 before common-subexpression elimination).*/
+196 arithmetic operations (9613 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -1818,10 +1818,10 @@ pub fn step_exact_with_jac_p_flat(
     let t30: crate::Real = t28 * t29;
     let t31: crate::Real = t6 + t30;
     let t32: crate::Real = t12 * t31;
-    let t33: crate::Real = t32 * t32;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t32)
         < crate::math::series_switch(0.05)
     {
+        let t33: crate::Real = t32 * t32;
         let t34: crate::Real = 0.16666666666666666;
         let t35: crate::Real = 0.008333333333333333;
         let t36: crate::Real = 0.0001984126984126984;
@@ -1877,7 +1877,7 @@ pub fn step_exact_with_jac_p_flat(
         let t61: crate::Real = t17 - t60;
         let t62: crate::Real = t61 * t47;
         let t136: crate::Real = t60 * t47;
-        let t137: crate::Real = t17 / t33;
+        let t137: crate::Real = t47 * t47;
         let t138: crate::Real = t46 * t137;
         let t139: crate::Real = t136 - t138;
         let t158: crate::Real = t61 * t137;
@@ -1918,7 +1918,7 @@ pub fn step_exact_with_jac_p_flat(
     let t90: crate::Real = t86 * t89;
     let t91: crate::Real = t90 * t18;
     let t92: crate::Real = t10 * t10;
-    let t93: crate::Real = t17 / t92;
+    let t93: crate::Real = t18 * t18;
     let t94: crate::Real = t16 * t93;
     let t95: crate::Real = -t94;
     let t96: crate::Real = t22 * t93;
@@ -1932,13 +1932,13 @@ pub fn step_exact_with_jac_p_flat(
     let t104: crate::Real = t25 * t103;
     let t105: crate::Real = t15 * t85;
     let t106: crate::Real = t9 * t10;
-    let t107: crate::Real = t17 / t106;
+    let t107: crate::Real = t29 * t18;
     let t108: crate::Real = t105 * t107;
     let t109: crate::Real = t15 * t89;
     let t110: crate::Real = t109 * t107;
     let t111: crate::Real = -t110;
     let t112: crate::Real = t9 * t9;
-    let t113: crate::Real = t17 / t112;
+    let t113: crate::Real = t29 * t29;
     let t114: crate::Real = t28 * t113;
     let t115: crate::Real = -t114;
     let t116: crate::Real = t96 - t94;
@@ -2090,7 +2090,7 @@ pub fn step_exact_with_jac_p(
 * `p`: [r_r, r_l, b, counts_per_rev, gear_ratio]
 * returns [obs_gyro[0], obs_gyro_jac_x[0], obs_gyro_jac_x[1], obs_gyro_jac_x[2], obs_gyro_jac_p[0], obs_gyro_jac_p[1], obs_gyro_jac_p[2], obs_gyro_jac_p[3], obs_gyro_jac_p[4]]
 
-40 arithmetic operations (65 before common-subexpression elimination).*/
+40 arithmetic operations (67 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -2136,7 +2136,7 @@ pub fn obs_gyro_linearized_flat(
     let t36: crate::Real = t34 * t35;
     let t37: crate::Real = -t36;
     let t38: crate::Real = t5 * t5;
-    let t39: crate::Real = t11 / t38;
+    let t39: crate::Real = t12 * t12;
     let t40: crate::Real = t32 * t39;
     let t41: crate::Real = t16 * t39;
     let t42: crate::Real = t41 - t40;
@@ -2177,7 +2177,7 @@ pub fn obs_gyro_linearized(
 * `lm`: [xl, yl]
 * returns [obs_landmark[0], obs_landmark[1], obs_landmark_jac_x[0], obs_landmark_jac_x[1], obs_landmark_jac_x[2], obs_landmark_jac_x[3], obs_landmark_jac_x[4], obs_landmark_jac_x[5], obs_landmark_jac_p[0], obs_landmark_jac_p[1], obs_landmark_jac_p[2], obs_landmark_jac_p[3], obs_landmark_jac_p[4], obs_landmark_jac_p[5], obs_landmark_jac_p[6], obs_landmark_jac_p[7], obs_landmark_jac_p[8], obs_landmark_jac_p[9]]
 
-17 arithmetic operations (57 before common-subexpression elimination).*/
+17 arithmetic operations (79 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -2205,7 +2205,7 @@ pub fn obs_landmark_linearized_flat(
     let t17: crate::Real = t7 * t14;
     let t18: crate::Real = -t17;
     let t19: crate::Real = 0.0;
-    let t20: crate::Real = t13 / t9;
+    let t20: crate::Real = t14 * t14;
     let t21: crate::Real = t7 * t20;
     let t22: crate::Real = t5 * t20;
     let t23: crate::Real = -t22;

@@ -336,7 +336,7 @@ pub fn step_euler_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-30 arithmetic operations (43 before common-subexpression elimination).*/
+30 arithmetic operations (44 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
     x: &[crate::Real; 3usize],
@@ -370,7 +370,7 @@ pub fn step_euler_jac_p(
     let t22: crate::Real = t21 / t5;
     let t23: crate::Real = t20 * t22;
     let t24: crate::Real = t5 * t5;
-    let t25: crate::Real = t21 / t24;
+    let t25: crate::Real = t22 * t22;
     let t26: crate::Real = t17 * t25;
     let t27: crate::Real = -t26;
     let sc28 = crate::math::sincos(t0);
@@ -625,7 +625,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w1, w2, w3]
 
-132 arithmetic operations (3957 before common-subexpression elimination).*/
+132 arithmetic operations (3969 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -667,10 +667,10 @@ pub fn step_exact_jac_u(
     let t30: crate::Real = t6 + t29;
     let t31: crate::Real = t9 * t30;
     let t32: crate::Real = 1.0;
-    let t33: crate::Real = t31 * t31;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t31)
         < crate::math::series_switch(0.05)
     {
+        let t33: crate::Real = t31 * t31;
         let t34: crate::Real = 0.16666666666666666;
         let t35: crate::Real = 0.008333333333333333;
         let t36: crate::Real = 0.0001984126984126984;
@@ -726,7 +726,7 @@ pub fn step_exact_jac_u(
         let t62: crate::Real = t32 - t61;
         let t63: crate::Real = t62 * t47;
         let t84: crate::Real = t61 * t47;
-        let t85: crate::Real = t27 / t33;
+        let t85: crate::Real = t47 * t47;
         let t86: crate::Real = t46 * t85;
         let t87: crate::Real = t84 - t86;
         let t103: crate::Real = t62 * t85;
@@ -816,7 +816,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dvx, dvy, domega]
 
-100 arithmetic operations (1431 before common-subexpression elimination).*/
+100 arithmetic operations (1435 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -858,10 +858,10 @@ pub fn step_exact_jac_w(
     let t30: crate::Real = t6 + t29;
     let t31: crate::Real = t9 * t30;
     let t32: crate::Real = 1.0;
-    let t33: crate::Real = t31 * t31;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t31)
         < crate::math::series_switch(0.05)
     {
+        let t33: crate::Real = t31 * t31;
         let t34: crate::Real = 0.16666666666666666;
         let t35: crate::Real = 0.008333333333333333;
         let t36: crate::Real = 0.0001984126984126984;
@@ -917,7 +917,7 @@ pub fn step_exact_jac_w(
         let t62: crate::Real = t32 - t61;
         let t63: crate::Real = t62 * t47;
         let t76: crate::Real = t61 * t47;
-        let t77: crate::Real = t27 / t33;
+        let t77: crate::Real = t47 * t47;
         let t78: crate::Real = t46 * t77;
         let t79: crate::Real = t76 - t78;
         let t94: crate::Real = t62 * t77;
@@ -975,7 +975,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-122 arithmetic operations (2116 before common-subexpression elimination).*/
+122 arithmetic operations (2129 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -1017,10 +1017,10 @@ pub fn step_exact_jac_p(
     let t30: crate::Real = t6 + t29;
     let t31: crate::Real = t9 * t30;
     let t32: crate::Real = 1.0;
-    let t33: crate::Real = t31 * t31;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t31)
         < crate::math::series_switch(0.05)
     {
+        let t33: crate::Real = t31 * t31;
         let t34: crate::Real = 0.16666666666666666;
         let t35: crate::Real = 0.008333333333333333;
         let t36: crate::Real = 0.0001984126984126984;
@@ -1076,7 +1076,7 @@ pub fn step_exact_jac_p(
         let t62: crate::Real = t32 - t61;
         let t63: crate::Real = t62 * t47;
         let t85: crate::Real = t61 * t47;
-        let t86: crate::Real = t27 / t33;
+        let t86: crate::Real = t47 * t47;
         let t87: crate::Real = t46 * t86;
         let t88: crate::Real = t85 - t87;
         let t104: crate::Real = t62 * t86;
@@ -1092,7 +1092,7 @@ pub fn step_exact_jac_p(
     let t67: crate::Real = t10 * t24;
     let t68: crate::Real = t67 * t28;
     let t69: crate::Real = t8 * t8;
-    let t70: crate::Real = t27 / t69;
+    let t70: crate::Real = t28 * t28;
     let t71: crate::Real = t26 * t70;
     let t72: crate::Real = -t71;
     let t73: crate::Real = t9 * t68;
@@ -1199,7 +1199,7 @@ pub fn obs_gyro_jac_x(
 * `p`: [r, L]
 * returns rows [gyro_z], columns [r, L]
 
-11 arithmetic operations (13 before common-subexpression elimination).*/
+11 arithmetic operations (14 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
     x: &[crate::Real; 3usize],
@@ -1221,7 +1221,7 @@ pub fn obs_gyro_jac_p(
     let t12: crate::Real = t4 * t4;
     let t13: crate::Real = t3 * t6;
     let t14: crate::Real = t7 * t13;
-    let t15: crate::Real = t9 / t12;
+    let t15: crate::Real = t10 * t10;
     let t16: crate::Real = t14 * t15;
     let t17: crate::Real = -t16;
     [[t11, t17]]
@@ -1265,7 +1265,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-15 arithmetic operations (45 before common-subexpression elimination).*/
+15 arithmetic operations (67 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[crate::Real; 3usize],
@@ -1290,7 +1290,7 @@ pub fn obs_landmark_jac_x(
     let t14: crate::Real = t6 * t11;
     let t15: crate::Real = -t14;
     let t16: crate::Real = 0.0;
-    let t17: crate::Real = t10 / t8;
+    let t17: crate::Real = t11 * t11;
     let t18: crate::Real = t6 * t17;
     let t19: crate::Real = t4 * t17;
     let t20: crate::Real = -t19;
@@ -1365,7 +1365,7 @@ pub fn inverse_twist(
 * `p`: [r, L]
 * returns [w1, w2, w3]
 
-87 arithmetic operations (284 before common-subexpression elimination).*/
+87 arithmetic operations (287 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[crate::Real; 3usize],
@@ -1470,7 +1470,7 @@ pub fn inverse_increment(
     let t87: crate::Real = t2 * t83;
     let t88: crate::Real = t5 * t87;
     let t89: crate::Real = t3 * t4;
-    let t90: crate::Real = t8 / t89;
+    let t90: crate::Real = t9 * t85;
     let t91: crate::Real = t88 * t90;
     let t92: crate::Real = t91 - t86;
     let t93: crate::Real = t49 * t82;
@@ -1493,7 +1493,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5], step_exact_jac_w[6], step_exact_jac_w[7], step_exact_jac_w[8]]
 
-120 arithmetic operations (3183 before common-subexpression elimination).*/
+120 arithmetic operations (3187 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1536,10 +1536,10 @@ pub fn step_exact_linearized_flat(
     let t31: crate::Real = t28 * t30;
     let t32: crate::Real = t8 + t31;
     let t33: crate::Real = t11 * t32;
-    let t34: crate::Real = t33 * t33;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t33)
         < crate::math::series_switch(0.05)
     {
+        let t34: crate::Real = t33 * t33;
         let t35: crate::Real = 0.16666666666666666;
         let t36: crate::Real = 0.008333333333333333;
         let t37: crate::Real = 0.0001984126984126984;
@@ -1595,7 +1595,7 @@ pub fn step_exact_linearized_flat(
         let t63: crate::Real = t29 - t62;
         let t64: crate::Real = t63 * t48;
         let t102: crate::Real = t62 * t48;
-        let t103: crate::Real = t29 / t34;
+        let t103: crate::Real = t48 * t48;
         let t104: crate::Real = t47 * t103;
         let t105: crate::Real = t102 - t104;
         let t120: crate::Real = t63 * t103;
@@ -1725,7 +1725,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2], step_exact_jac_p[3], step_exact_jac_p[4], step_exact_jac_p[5]]
 
-142 arithmetic operations (3868 before common-subexpression elimination).*/
+142 arithmetic operations (3881 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -1768,10 +1768,10 @@ pub fn step_exact_with_jac_p_flat(
     let t31: crate::Real = t28 * t30;
     let t32: crate::Real = t8 + t31;
     let t33: crate::Real = t11 * t32;
-    let t34: crate::Real = t33 * t33;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t33)
         < crate::math::series_switch(0.05)
     {
+        let t34: crate::Real = t33 * t33;
         let t35: crate::Real = 0.16666666666666666;
         let t36: crate::Real = 0.008333333333333333;
         let t37: crate::Real = 0.0001984126984126984;
@@ -1827,7 +1827,7 @@ pub fn step_exact_with_jac_p_flat(
         let t63: crate::Real = t29 - t62;
         let t64: crate::Real = t63 * t48;
         let t111: crate::Real = t62 * t48;
-        let t112: crate::Real = t29 / t34;
+        let t112: crate::Real = t48 * t48;
         let t113: crate::Real = t47 * t112;
         let t114: crate::Real = t111 - t113;
         let t130: crate::Real = t63 * t112;
@@ -1869,7 +1869,7 @@ pub fn step_exact_with_jac_p_flat(
     let t93: crate::Real = t12 * t26;
     let t94: crate::Real = t93 * t30;
     let t95: crate::Real = t10 * t10;
-    let t96: crate::Real = t29 / t95;
+    let t96: crate::Real = t30 * t30;
     let t97: crate::Real = t28 * t96;
     let t98: crate::Real = -t97;
     let t99: crate::Real = t11 * t94;
@@ -1970,7 +1970,7 @@ pub fn step_exact_with_jac_p(
 * `p`: [r, L]
 * returns [obs_gyro[0], obs_gyro_jac_x[0], obs_gyro_jac_x[1], obs_gyro_jac_x[2], obs_gyro_jac_p[0], obs_gyro_jac_p[1]]
 
-13 arithmetic operations (19 before common-subexpression elimination).*/
+13 arithmetic operations (20 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1995,7 +1995,7 @@ pub fn obs_gyro_linearized_flat(
     let t15: crate::Real = t14 * t11;
     let t16: crate::Real = t4 * t4;
     let t17: crate::Real = t8 * t7;
-    let t18: crate::Real = t10 / t16;
+    let t18: crate::Real = t11 * t11;
     let t19: crate::Real = t17 * t18;
     let t20: crate::Real = -t19;
     [t12, t13, t13, t13, t15, t20]
@@ -2024,7 +2024,7 @@ pub fn obs_gyro_linearized(
 * `lm`: [xl, yl]
 * returns [obs_landmark[0], obs_landmark[1], obs_landmark_jac_x[0], obs_landmark_jac_x[1], obs_landmark_jac_x[2], obs_landmark_jac_x[3], obs_landmark_jac_x[4], obs_landmark_jac_x[5], obs_landmark_jac_p[0], obs_landmark_jac_p[1], obs_landmark_jac_p[2], obs_landmark_jac_p[3]]
 
-17 arithmetic operations (57 before common-subexpression elimination).*/
+17 arithmetic operations (79 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -2052,7 +2052,7 @@ pub fn obs_landmark_linearized_flat(
     let t17: crate::Real = t7 * t14;
     let t18: crate::Real = -t17;
     let t19: crate::Real = 0.0;
-    let t20: crate::Real = t13 / t9;
+    let t20: crate::Real = t14 * t14;
     let t21: crate::Real = t7 * t20;
     let t22: crate::Real = t5 * t20;
     let t23: crate::Real = -t22;

@@ -152,7 +152,7 @@ pub const INPUT_COLUMNS: [&str; 9usize] = [
 * `p`: [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 * returns [vx, vy, omega]
 
-207 arithmetic operations (3633 before common-subexpression elimination).*/
+207 arithmetic operations (3876 before common-subexpression elimination).*/
 #[inline]
 pub fn twist(
     u: &[crate::Real; 9usize],
@@ -215,31 +215,31 @@ pub fn twist(
     let t51: crate::Real = 1.0;
     let t52: crate::Real = t9 * t9;
     let t53: crate::Real = t36 * t36;
-    let t54: crate::Real = t23 / t52;
+    let t54: crate::Real = t24 * t24;
     let t55: crate::Real = t53 * t54;
     let t56: crate::Real = t10 * t10;
     let t57: crate::Real = t41 * t41;
-    let t58: crate::Real = t23 / t56;
+    let t58: crate::Real = t28 * t28;
     let t59: crate::Real = t57 * t58;
     let t60: crate::Real = t55 + t59;
     let t61: crate::Real = t11 * t11;
     let t62: crate::Real = t46 * t46;
-    let t63: crate::Real = t23 / t61;
+    let t63: crate::Real = t33 * t33;
     let t64: crate::Real = t62 * t63;
     let t65: crate::Real = t60 + t64;
     let t66: crate::Real = t12 * t12;
     let t67: crate::Real = t21 * t21;
-    let t68: crate::Real = t23 / t66;
+    let t68: crate::Real = t38 * t38;
     let t69: crate::Real = t67 * t68;
     let t70: crate::Real = t65 + t69;
     let t71: crate::Real = t13 * t13;
     let t72: crate::Real = t26 * t26;
-    let t73: crate::Real = t23 / t71;
+    let t73: crate::Real = t43 * t43;
     let t74: crate::Real = t72 * t73;
     let t75: crate::Real = t70 + t74;
     let t76: crate::Real = t14 * t14;
     let t77: crate::Real = t31 * t31;
-    let t78: crate::Real = t23 / t76;
+    let t78: crate::Real = t48 * t48;
     let t79: crate::Real = t77 * t78;
     let t80: crate::Real = t75 + t79;
     let t81: crate::Real = t21 * t36;
@@ -408,7 +408,7 @@ pub fn twist(
 * `p`: [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 * returns [vx, vy]
 
-148 arithmetic operations (846 before common-subexpression elimination).*/
+148 arithmetic operations (918 before common-subexpression elimination).*/
 #[inline]
 pub fn twist_gyro(
     u: &[crate::Real; 9usize],
@@ -513,31 +513,31 @@ pub fn twist_gyro(
     let t92: crate::Real = 0.0;
     let t93: crate::Real = t10 * t10;
     let t94: crate::Real = t25 * t25;
-    let t95: crate::Real = t28 / t93;
+    let t95: crate::Real = t29 * t29;
     let t96: crate::Real = t94 * t95;
     let t97: crate::Real = t11 * t11;
     let t98: crate::Real = t38 * t38;
-    let t99: crate::Real = t28 / t97;
+    let t99: crate::Real = t41 * t41;
     let t100: crate::Real = t98 * t99;
     let t101: crate::Real = t96 + t100;
     let t102: crate::Real = t12 * t12;
     let t103: crate::Real = t51 * t51;
-    let t104: crate::Real = t28 / t102;
+    let t104: crate::Real = t54 * t54;
     let t105: crate::Real = t103 * t104;
     let t106: crate::Real = t101 + t105;
     let t107: crate::Real = t13 * t13;
     let t108: crate::Real = t23 * t23;
-    let t109: crate::Real = t28 / t107;
+    let t109: crate::Real = t66 * t66;
     let t110: crate::Real = t108 * t109;
     let t111: crate::Real = t106 + t110;
     let t112: crate::Real = t14 * t14;
     let t113: crate::Real = t36 * t36;
-    let t114: crate::Real = t28 / t112;
+    let t114: crate::Real = t76 * t76;
     let t115: crate::Real = t113 * t114;
     let t116: crate::Real = t111 + t115;
     let t117: crate::Real = t15 * t15;
     let t118: crate::Real = t49 * t49;
-    let t119: crate::Real = t28 / t117;
+    let t119: crate::Real = t86 * t86;
     let t120: crate::Real = t118 * t119;
     let t121: crate::Real = t116 + t120;
     let t122: crate::Real = t23 * t25;
@@ -610,7 +610,7 @@ pub fn twist_gyro(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-224 arithmetic operations (6076 before common-subexpression elimination).*/
+224 arithmetic operations (6481 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler(
     x: &[crate::Real; 3usize],
@@ -683,31 +683,31 @@ pub fn step_euler(
     let t58: crate::Real = 1.0;
     let t59: crate::Real = t15 * t15;
     let t60: crate::Real = t43 * t43;
-    let t61: crate::Real = t30 / t59;
+    let t61: crate::Real = t31 * t31;
     let t62: crate::Real = t60 * t61;
     let t63: crate::Real = t16 * t16;
     let t64: crate::Real = t48 * t48;
-    let t65: crate::Real = t30 / t63;
+    let t65: crate::Real = t35 * t35;
     let t66: crate::Real = t64 * t65;
     let t67: crate::Real = t62 + t66;
     let t68: crate::Real = t17 * t17;
     let t69: crate::Real = t53 * t53;
-    let t70: crate::Real = t30 / t68;
+    let t70: crate::Real = t40 * t40;
     let t71: crate::Real = t69 * t70;
     let t72: crate::Real = t67 + t71;
     let t73: crate::Real = t18 * t18;
     let t74: crate::Real = t28 * t28;
-    let t75: crate::Real = t30 / t73;
+    let t75: crate::Real = t45 * t45;
     let t76: crate::Real = t74 * t75;
     let t77: crate::Real = t72 + t76;
     let t78: crate::Real = t19 * t19;
     let t79: crate::Real = t33 * t33;
-    let t80: crate::Real = t30 / t78;
+    let t80: crate::Real = t50 * t50;
     let t81: crate::Real = t79 * t80;
     let t82: crate::Real = t77 + t81;
     let t83: crate::Real = t20 * t20;
     let t84: crate::Real = t38 * t38;
-    let t85: crate::Real = t30 / t83;
+    let t85: crate::Real = t55 * t55;
     let t86: crate::Real = t84 * t85;
     let t87: crate::Real = t82 + t86;
     let t88: crate::Real = t28 * t43;
@@ -896,7 +896,7 @@ pub fn step_euler(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-214 arithmetic operations (4861 before common-subexpression elimination).*/
+214 arithmetic operations (5185 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_x(
     x: &[crate::Real; 3usize],
@@ -967,31 +967,31 @@ pub fn step_euler_jac_x(
     let t56: crate::Real = 1.0;
     let t57: crate::Real = t12 * t12;
     let t58: crate::Real = t40 * t40;
-    let t59: crate::Real = t27 / t57;
+    let t59: crate::Real = t28 * t28;
     let t60: crate::Real = t58 * t59;
     let t61: crate::Real = t13 * t13;
     let t62: crate::Real = t45 * t45;
-    let t63: crate::Real = t27 / t61;
+    let t63: crate::Real = t32 * t32;
     let t64: crate::Real = t62 * t63;
     let t65: crate::Real = t60 + t64;
     let t66: crate::Real = t14 * t14;
     let t67: crate::Real = t50 * t50;
-    let t68: crate::Real = t27 / t66;
+    let t68: crate::Real = t37 * t37;
     let t69: crate::Real = t67 * t68;
     let t70: crate::Real = t65 + t69;
     let t71: crate::Real = t15 * t15;
     let t72: crate::Real = t25 * t25;
-    let t73: crate::Real = t27 / t71;
+    let t73: crate::Real = t42 * t42;
     let t74: crate::Real = t72 * t73;
     let t75: crate::Real = t70 + t74;
     let t76: crate::Real = t16 * t16;
     let t77: crate::Real = t30 * t30;
-    let t78: crate::Real = t27 / t76;
+    let t78: crate::Real = t47 * t47;
     let t79: crate::Real = t77 * t78;
     let t80: crate::Real = t75 + t79;
     let t81: crate::Real = t17 * t17;
     let t82: crate::Real = t35 * t35;
-    let t83: crate::Real = t27 / t81;
+    let t83: crate::Real = t52 * t52;
     let t84: crate::Real = t82 * t83;
     let t85: crate::Real = t80 + t84;
     let t86: crate::Real = t25 * t40;
@@ -1170,7 +1170,7 @@ pub fn step_euler_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [beta1, beta2, beta3, dbeta1, dbeta2, dbeta3, dphi1, dphi2, dphi3]
 
-770 arithmetic operations (604695 before common-subexpression elimination).*/
+770 arithmetic operations (646005 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_u(
     x: &[crate::Real; 3usize],
@@ -1238,31 +1238,31 @@ pub fn step_euler_jac_u(
     let t53: crate::Real = 1.0;
     let t54: crate::Real = t10 * t10;
     let t55: crate::Real = t38 * t38;
-    let t56: crate::Real = t25 / t54;
+    let t56: crate::Real = t26 * t26;
     let t57: crate::Real = t55 * t56;
     let t58: crate::Real = t11 * t11;
     let t59: crate::Real = t43 * t43;
-    let t60: crate::Real = t25 / t58;
+    let t60: crate::Real = t30 * t30;
     let t61: crate::Real = t59 * t60;
     let t62: crate::Real = t57 + t61;
     let t63: crate::Real = t12 * t12;
     let t64: crate::Real = t48 * t48;
-    let t65: crate::Real = t25 / t63;
+    let t65: crate::Real = t35 * t35;
     let t66: crate::Real = t64 * t65;
     let t67: crate::Real = t62 + t66;
     let t68: crate::Real = t13 * t13;
     let t69: crate::Real = t23 * t23;
-    let t70: crate::Real = t25 / t68;
+    let t70: crate::Real = t40 * t40;
     let t71: crate::Real = t69 * t70;
     let t72: crate::Real = t67 + t71;
     let t73: crate::Real = t14 * t14;
     let t74: crate::Real = t28 * t28;
-    let t75: crate::Real = t25 / t73;
+    let t75: crate::Real = t45 * t45;
     let t76: crate::Real = t74 * t75;
     let t77: crate::Real = t72 + t76;
     let t78: crate::Real = t15 * t15;
     let t79: crate::Real = t33 * t33;
-    let t80: crate::Real = t25 / t78;
+    let t80: crate::Real = t50 * t50;
     let t81: crate::Real = t79 * t80;
     let t82: crate::Real = t77 + t81;
     let t83: crate::Real = t23 * t38;
@@ -2032,7 +2032,7 @@ pub fn step_euler_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 
-884 arithmetic operations (952245 before common-subexpression elimination).*/
+884 arithmetic operations (1017135 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
     x: &[crate::Real; 3usize],
@@ -2100,31 +2100,31 @@ pub fn step_euler_jac_p(
     let t53: crate::Real = 1.0;
     let t54: crate::Real = t10 * t10;
     let t55: crate::Real = t38 * t38;
-    let t56: crate::Real = t25 / t54;
+    let t56: crate::Real = t26 * t26;
     let t57: crate::Real = t55 * t56;
     let t58: crate::Real = t11 * t11;
     let t59: crate::Real = t43 * t43;
-    let t60: crate::Real = t25 / t58;
+    let t60: crate::Real = t30 * t30;
     let t61: crate::Real = t59 * t60;
     let t62: crate::Real = t57 + t61;
     let t63: crate::Real = t12 * t12;
     let t64: crate::Real = t48 * t48;
-    let t65: crate::Real = t25 / t63;
+    let t65: crate::Real = t35 * t35;
     let t66: crate::Real = t64 * t65;
     let t67: crate::Real = t62 + t66;
     let t68: crate::Real = t13 * t13;
     let t69: crate::Real = t23 * t23;
-    let t70: crate::Real = t25 / t68;
+    let t70: crate::Real = t40 * t40;
     let t71: crate::Real = t69 * t70;
     let t72: crate::Real = t67 + t71;
     let t73: crate::Real = t14 * t14;
     let t74: crate::Real = t28 * t28;
-    let t75: crate::Real = t25 / t73;
+    let t75: crate::Real = t45 * t45;
     let t76: crate::Real = t74 * t75;
     let t77: crate::Real = t72 + t76;
     let t78: crate::Real = t15 * t15;
     let t79: crate::Real = t33 * t33;
-    let t80: crate::Real = t25 / t78;
+    let t80: crate::Real = t50 * t50;
     let t81: crate::Real = t79 * t80;
     let t82: crate::Real = t77 + t81;
     let t83: crate::Real = t23 * t38;
@@ -2977,7 +2977,7 @@ pub fn step_euler_jac_p(
 * `dt`: [dt]
 * returns [x, y, theta]
 
-254 arithmetic operations (112958 before common-subexpression elimination).*/
+254 arithmetic operations (120491 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact(
     x: &[crate::Real; 3usize],
@@ -3050,31 +3050,31 @@ pub fn step_exact(
     let t58: crate::Real = 1.0;
     let t59: crate::Real = t15 * t15;
     let t60: crate::Real = t43 * t43;
-    let t61: crate::Real = t30 / t59;
+    let t61: crate::Real = t31 * t31;
     let t62: crate::Real = t60 * t61;
     let t63: crate::Real = t16 * t16;
     let t64: crate::Real = t48 * t48;
-    let t65: crate::Real = t30 / t63;
+    let t65: crate::Real = t35 * t35;
     let t66: crate::Real = t64 * t65;
     let t67: crate::Real = t62 + t66;
     let t68: crate::Real = t17 * t17;
     let t69: crate::Real = t53 * t53;
-    let t70: crate::Real = t30 / t68;
+    let t70: crate::Real = t40 * t40;
     let t71: crate::Real = t69 * t70;
     let t72: crate::Real = t67 + t71;
     let t73: crate::Real = t18 * t18;
     let t74: crate::Real = t28 * t28;
-    let t75: crate::Real = t30 / t73;
+    let t75: crate::Real = t45 * t45;
     let t76: crate::Real = t74 * t75;
     let t77: crate::Real = t72 + t76;
     let t78: crate::Real = t19 * t19;
     let t79: crate::Real = t33 * t33;
-    let t80: crate::Real = t30 / t78;
+    let t80: crate::Real = t50 * t50;
     let t81: crate::Real = t79 * t80;
     let t82: crate::Real = t77 + t81;
     let t83: crate::Real = t20 * t20;
     let t84: crate::Real = t38 * t38;
-    let t85: crate::Real = t30 / t83;
+    let t85: crate::Real = t55 * t55;
     let t86: crate::Real = t84 * t85;
     let t87: crate::Real = t82 + t86;
     let t88: crate::Real = t28 * t43;
@@ -3309,7 +3309,7 @@ pub fn step_exact(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [x, y, theta]
 
-252 arithmetic operations (111743 before common-subexpression elimination).*/
+252 arithmetic operations (119195 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_x(
     x: &[crate::Real; 3usize],
@@ -3381,31 +3381,31 @@ pub fn step_exact_jac_x(
     let t57: crate::Real = 1.0;
     let t58: crate::Real = t13 * t13;
     let t59: crate::Real = t41 * t41;
-    let t60: crate::Real = t28 / t58;
+    let t60: crate::Real = t29 * t29;
     let t61: crate::Real = t59 * t60;
     let t62: crate::Real = t14 * t14;
     let t63: crate::Real = t46 * t46;
-    let t64: crate::Real = t28 / t62;
+    let t64: crate::Real = t33 * t33;
     let t65: crate::Real = t63 * t64;
     let t66: crate::Real = t61 + t65;
     let t67: crate::Real = t15 * t15;
     let t68: crate::Real = t51 * t51;
-    let t69: crate::Real = t28 / t67;
+    let t69: crate::Real = t38 * t38;
     let t70: crate::Real = t68 * t69;
     let t71: crate::Real = t66 + t70;
     let t72: crate::Real = t16 * t16;
     let t73: crate::Real = t26 * t26;
-    let t74: crate::Real = t28 / t72;
+    let t74: crate::Real = t43 * t43;
     let t75: crate::Real = t73 * t74;
     let t76: crate::Real = t71 + t75;
     let t77: crate::Real = t17 * t17;
     let t78: crate::Real = t31 * t31;
-    let t79: crate::Real = t28 / t77;
+    let t79: crate::Real = t48 * t48;
     let t80: crate::Real = t78 * t79;
     let t81: crate::Real = t76 + t80;
     let t82: crate::Real = t18 * t18;
     let t83: crate::Real = t36 * t36;
-    let t84: crate::Real = t28 / t82;
+    let t84: crate::Real = t53 * t53;
     let t85: crate::Real = t83 * t84;
     let t86: crate::Real = t81 + t85;
     let t87: crate::Real = t26 * t41;
@@ -3638,7 +3638,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [beta1, beta2, beta3, dbeta1, dbeta2, dbeta3, dphi1, dphi2, dphi3]
 
-913 arithmetic operations (2684601 before common-subexpression elimination).*/
+913 arithmetic operations (2865429 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -3709,31 +3709,31 @@ pub fn step_exact_jac_u(
     let t56: crate::Real = 1.0;
     let t57: crate::Real = t13 * t13;
     let t58: crate::Real = t41 * t41;
-    let t59: crate::Real = t28 / t57;
+    let t59: crate::Real = t29 * t29;
     let t60: crate::Real = t58 * t59;
     let t61: crate::Real = t14 * t14;
     let t62: crate::Real = t46 * t46;
-    let t63: crate::Real = t28 / t61;
+    let t63: crate::Real = t33 * t33;
     let t64: crate::Real = t62 * t63;
     let t65: crate::Real = t60 + t64;
     let t66: crate::Real = t15 * t15;
     let t67: crate::Real = t51 * t51;
-    let t68: crate::Real = t28 / t66;
+    let t68: crate::Real = t38 * t38;
     let t69: crate::Real = t67 * t68;
     let t70: crate::Real = t65 + t69;
     let t71: crate::Real = t16 * t16;
     let t72: crate::Real = t26 * t26;
-    let t73: crate::Real = t28 / t71;
+    let t73: crate::Real = t43 * t43;
     let t74: crate::Real = t72 * t73;
     let t75: crate::Real = t70 + t74;
     let t76: crate::Real = t17 * t17;
     let t77: crate::Real = t31 * t31;
-    let t78: crate::Real = t28 / t76;
+    let t78: crate::Real = t48 * t48;
     let t79: crate::Real = t77 * t78;
     let t80: crate::Real = t75 + t79;
     let t81: crate::Real = t18 * t18;
     let t82: crate::Real = t36 * t36;
-    let t83: crate::Real = t28 / t81;
+    let t83: crate::Real = t53 * t53;
     let t84: crate::Real = t82 * t83;
     let t85: crate::Real = t80 + t84;
     let t86: crate::Real = t26 * t41;
@@ -3897,10 +3897,10 @@ pub fn step_exact_jac_u(
     let t236: crate::Real = t233 + t235;
     let t237: crate::Real = t12 + t236;
     let t238: crate::Real = t25 * t237;
-    let t239: crate::Real = t238 * t238;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t238)
         < crate::math::series_switch(0.05)
     {
+        let t239: crate::Real = t238 * t238;
         let t240: crate::Real = 0.16666666666666666;
         let t241: crate::Real = 0.008333333333333333;
         let t242: crate::Real = 0.0001984126984126984;
@@ -3957,7 +3957,7 @@ pub fn step_exact_jac_u(
         let t268: crate::Real = t56 - t267;
         let t269: crate::Real = t268 * t253;
         let t771: crate::Real = t267 * t253;
-        let t772: crate::Real = t28 / t239;
+        let t772: crate::Real = t253 * t253;
         let t773: crate::Real = t252 * t772;
         let t774: crate::Real = t771 - t773;
         let t797: crate::Real = t268 * t772;
@@ -4639,7 +4639,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dvx, dvy, domega]
 
-292 arithmetic operations (177373 before common-subexpression elimination).*/
+292 arithmetic operations (189203 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -4711,31 +4711,31 @@ pub fn step_exact_jac_w(
     let t57: crate::Real = 1.0;
     let t58: crate::Real = t13 * t13;
     let t59: crate::Real = t41 * t41;
-    let t60: crate::Real = t28 / t58;
+    let t60: crate::Real = t29 * t29;
     let t61: crate::Real = t59 * t60;
     let t62: crate::Real = t14 * t14;
     let t63: crate::Real = t46 * t46;
-    let t64: crate::Real = t28 / t62;
+    let t64: crate::Real = t33 * t33;
     let t65: crate::Real = t63 * t64;
     let t66: crate::Real = t61 + t65;
     let t67: crate::Real = t15 * t15;
     let t68: crate::Real = t51 * t51;
-    let t69: crate::Real = t28 / t67;
+    let t69: crate::Real = t38 * t38;
     let t70: crate::Real = t68 * t69;
     let t71: crate::Real = t66 + t70;
     let t72: crate::Real = t16 * t16;
     let t73: crate::Real = t26 * t26;
-    let t74: crate::Real = t28 / t72;
+    let t74: crate::Real = t43 * t43;
     let t75: crate::Real = t73 * t74;
     let t76: crate::Real = t71 + t75;
     let t77: crate::Real = t17 * t17;
     let t78: crate::Real = t31 * t31;
-    let t79: crate::Real = t28 / t77;
+    let t79: crate::Real = t48 * t48;
     let t80: crate::Real = t78 * t79;
     let t81: crate::Real = t76 + t80;
     let t82: crate::Real = t18 * t18;
     let t83: crate::Real = t36 * t36;
-    let t84: crate::Real = t28 / t82;
+    let t84: crate::Real = t53 * t53;
     let t85: crate::Real = t83 * t84;
     let t86: crate::Real = t81 + t85;
     let t87: crate::Real = t26 * t41;
@@ -4899,10 +4899,10 @@ pub fn step_exact_jac_w(
     let t237: crate::Real = t234 + t236;
     let t238: crate::Real = t12 + t237;
     let t239: crate::Real = t25 * t238;
-    let t240: crate::Real = t239 * t239;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t239)
         < crate::math::series_switch(0.05)
     {
+        let t240: crate::Real = t239 * t239;
         let t241: crate::Real = 0.16666666666666666;
         let t242: crate::Real = 0.008333333333333333;
         let t243: crate::Real = 0.0001984126984126984;
@@ -4959,7 +4959,7 @@ pub fn step_exact_jac_w(
         let t269: crate::Real = t57 - t268;
         let t270: crate::Real = t269 * t254;
         let t284: crate::Real = t268 * t254;
-        let t285: crate::Real = t28 / t240;
+        let t285: crate::Real = t254 * t254;
         let t286: crate::Real = t253 * t285;
         let t287: crate::Real = t284 - t286;
         let t302: crate::Real = t269 * t285;
@@ -5016,7 +5016,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 
-1051 arithmetic operations (3842241 before common-subexpression elimination).*/
+1051 arithmetic operations (4101003 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -5087,31 +5087,31 @@ pub fn step_exact_jac_p(
     let t56: crate::Real = 1.0;
     let t57: crate::Real = t13 * t13;
     let t58: crate::Real = t41 * t41;
-    let t59: crate::Real = t28 / t57;
+    let t59: crate::Real = t29 * t29;
     let t60: crate::Real = t58 * t59;
     let t61: crate::Real = t14 * t14;
     let t62: crate::Real = t46 * t46;
-    let t63: crate::Real = t28 / t61;
+    let t63: crate::Real = t33 * t33;
     let t64: crate::Real = t62 * t63;
     let t65: crate::Real = t60 + t64;
     let t66: crate::Real = t15 * t15;
     let t67: crate::Real = t51 * t51;
-    let t68: crate::Real = t28 / t66;
+    let t68: crate::Real = t38 * t38;
     let t69: crate::Real = t67 * t68;
     let t70: crate::Real = t65 + t69;
     let t71: crate::Real = t16 * t16;
     let t72: crate::Real = t26 * t26;
-    let t73: crate::Real = t28 / t71;
+    let t73: crate::Real = t43 * t43;
     let t74: crate::Real = t72 * t73;
     let t75: crate::Real = t70 + t74;
     let t76: crate::Real = t17 * t17;
     let t77: crate::Real = t31 * t31;
-    let t78: crate::Real = t28 / t76;
+    let t78: crate::Real = t48 * t48;
     let t79: crate::Real = t77 * t78;
     let t80: crate::Real = t75 + t79;
     let t81: crate::Real = t18 * t18;
     let t82: crate::Real = t36 * t36;
-    let t83: crate::Real = t28 / t81;
+    let t83: crate::Real = t53 * t53;
     let t84: crate::Real = t82 * t83;
     let t85: crate::Real = t80 + t84;
     let t86: crate::Real = t26 * t41;
@@ -5275,10 +5275,10 @@ pub fn step_exact_jac_p(
     let t236: crate::Real = t233 + t235;
     let t237: crate::Real = t12 + t236;
     let t238: crate::Real = t25 * t237;
-    let t239: crate::Real = t238 * t238;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t238)
         < crate::math::series_switch(0.05)
     {
+        let t239: crate::Real = t238 * t238;
         let t240: crate::Real = 0.16666666666666666;
         let t241: crate::Real = 0.008333333333333333;
         let t242: crate::Real = 0.0001984126984126984;
@@ -5335,7 +5335,7 @@ pub fn step_exact_jac_p(
         let t268: crate::Real = t56 - t267;
         let t269: crate::Real = t268 * t253;
         let t861: crate::Real = t267 * t253;
-        let t862: crate::Real = t28 / t239;
+        let t862: crate::Real = t253 * t253;
         let t863: crate::Real = t252 * t862;
         let t864: crate::Real = t861 - t863;
         let t890: crate::Real = t268 * t862;
@@ -6166,7 +6166,7 @@ pub fn step_exact_jac_p(
 * `p`: [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 * returns [gyro_z]
 
-194 arithmetic operations (1211 before common-subexpression elimination).*/
+194 arithmetic operations (1292 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro(
     x: &[crate::Real; 3usize],
@@ -6230,31 +6230,31 @@ pub fn obs_gyro(
     let t51: crate::Real = 1.0;
     let t52: crate::Real = t9 * t9;
     let t53: crate::Real = t36 * t36;
-    let t54: crate::Real = t23 / t52;
+    let t54: crate::Real = t24 * t24;
     let t55: crate::Real = t53 * t54;
     let t56: crate::Real = t10 * t10;
     let t57: crate::Real = t41 * t41;
-    let t58: crate::Real = t23 / t56;
+    let t58: crate::Real = t28 * t28;
     let t59: crate::Real = t57 * t58;
     let t60: crate::Real = t55 + t59;
     let t61: crate::Real = t11 * t11;
     let t62: crate::Real = t46 * t46;
-    let t63: crate::Real = t23 / t61;
+    let t63: crate::Real = t33 * t33;
     let t64: crate::Real = t62 * t63;
     let t65: crate::Real = t60 + t64;
     let t66: crate::Real = t12 * t12;
     let t67: crate::Real = t21 * t21;
-    let t68: crate::Real = t23 / t66;
+    let t68: crate::Real = t38 * t38;
     let t69: crate::Real = t67 * t68;
     let t70: crate::Real = t65 + t69;
     let t71: crate::Real = t13 * t13;
     let t72: crate::Real = t26 * t26;
-    let t73: crate::Real = t23 / t71;
+    let t73: crate::Real = t43 * t43;
     let t74: crate::Real = t72 * t73;
     let t75: crate::Real = t70 + t74;
     let t76: crate::Real = t14 * t14;
     let t77: crate::Real = t31 * t31;
-    let t78: crate::Real = t23 / t76;
+    let t78: crate::Real = t48 * t48;
     let t79: crate::Real = t77 * t78;
     let t80: crate::Real = t75 + t79;
     let t81: crate::Real = t21 * t36;
@@ -6427,7 +6427,7 @@ pub fn obs_gyro_jac_x(
 * `p`: [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 * returns rows [gyro_z], columns [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 
-438 arithmetic operations (190413 before common-subexpression elimination).*/
+438 arithmetic operations (191856 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
     x: &[crate::Real; 3usize],
@@ -6468,7 +6468,7 @@ pub fn obs_gyro_jac_p(
     let t30: crate::Real = t26 * t29;
     let t31: crate::Real = t30 - t27;
     let t32: crate::Real = t24 * t24;
-    let t33: crate::Real = t28 / t21;
+    let t33: crate::Real = t29 * t29;
     let t34: crate::Real = t32 * t33;
     let t35: crate::Real = t10 * t10;
     let sc36 = crate::math::sincos(t1);
@@ -6947,7 +6947,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-15 arithmetic operations (45 before common-subexpression elimination).*/
+15 arithmetic operations (67 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[crate::Real; 3usize],
@@ -6972,7 +6972,7 @@ pub fn obs_landmark_jac_x(
     let t14: crate::Real = t6 * t11;
     let t15: crate::Real = -t14;
     let t16: crate::Real = 0.0;
-    let t17: crate::Real = t10 / t8;
+    let t17: crate::Real = t11 * t11;
     let t18: crate::Real = t6 * t17;
     let t19: crate::Real = t4 * t17;
     let t20: crate::Real = -t19;
@@ -7129,7 +7129,7 @@ pub fn inverse_twist(
 * `p`: [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 * returns [dbeta1, dbeta2, dbeta3, dphi1, dphi2, dphi3]
 
-156 arithmetic operations (660 before common-subexpression elimination).*/
+156 arithmetic operations (663 before common-subexpression elimination).*/
 #[inline]
 pub fn inverse_increment(
     dpose: &[crate::Real; 3usize],
@@ -7299,7 +7299,7 @@ pub fn inverse_increment(
     let t148: crate::Real = t146 - t147;
     let t149: crate::Real = t2 * t148;
     let t150: crate::Real = t3 * t10;
-    let t151: crate::Real = t21 / t150;
+    let t151: crate::Real = t22 * t141;
     let t152: crate::Real = t149 * t151;
     let t153: crate::Real = t145 + t152;
     let t154: crate::Real = t62 * t112;
@@ -7313,7 +7313,7 @@ pub fn inverse_increment(
     let t162: crate::Real = t160 - t161;
     let t163: crate::Real = t2 * t162;
     let t164: crate::Real = t3 * t11;
-    let t165: crate::Real = t21 / t164;
+    let t165: crate::Real = t22 * t155;
     let t166: crate::Real = t163 * t165;
     let t167: crate::Real = t159 + t166;
     let t168: crate::Real = t62 * t128;
@@ -7327,7 +7327,7 @@ pub fn inverse_increment(
     let t176: crate::Real = t174 - t175;
     let t177: crate::Real = t2 * t176;
     let t178: crate::Real = t3 * t12;
-    let t179: crate::Real = t21 / t178;
+    let t179: crate::Real = t22 * t169;
     let t180: crate::Real = t177 * t179;
     let t181: crate::Real = t173 + t180;
     [t107, t123, t139, t153, t167, t181]
@@ -7341,7 +7341,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5], step_exact_jac_w[6], step_exact_jac_w[7], step_exact_jac_w[8]]
 
-312 arithmetic operations (402074 before common-subexpression elimination).*/
+312 arithmetic operations (428889 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -7413,31 +7413,31 @@ pub fn step_exact_linearized_flat(
     let t57: crate::Real = t52 + t56;
     let t58: crate::Real = t15 * t15;
     let t59: crate::Real = t43 * t43;
-    let t60: crate::Real = t30 / t58;
+    let t60: crate::Real = t31 * t31;
     let t61: crate::Real = t59 * t60;
     let t62: crate::Real = t16 * t16;
     let t63: crate::Real = t48 * t48;
-    let t64: crate::Real = t30 / t62;
+    let t64: crate::Real = t35 * t35;
     let t65: crate::Real = t63 * t64;
     let t66: crate::Real = t61 + t65;
     let t67: crate::Real = t17 * t17;
     let t68: crate::Real = t53 * t53;
-    let t69: crate::Real = t30 / t67;
+    let t69: crate::Real = t40 * t40;
     let t70: crate::Real = t68 * t69;
     let t71: crate::Real = t66 + t70;
     let t72: crate::Real = t18 * t18;
     let t73: crate::Real = t28 * t28;
-    let t74: crate::Real = t30 / t72;
+    let t74: crate::Real = t45 * t45;
     let t75: crate::Real = t73 * t74;
     let t76: crate::Real = t71 + t75;
     let t77: crate::Real = t19 * t19;
     let t78: crate::Real = t33 * t33;
-    let t79: crate::Real = t30 / t77;
+    let t79: crate::Real = t50 * t50;
     let t80: crate::Real = t78 * t79;
     let t81: crate::Real = t76 + t80;
     let t82: crate::Real = t20 * t20;
     let t83: crate::Real = t38 * t38;
-    let t84: crate::Real = t30 / t82;
+    let t84: crate::Real = t55 * t55;
     let t85: crate::Real = t83 * t84;
     let t86: crate::Real = t81 + t85;
     let t87: crate::Real = t28 * t43;
@@ -7601,10 +7601,10 @@ pub fn step_exact_linearized_flat(
     let t237: crate::Real = t234 + t236;
     let t238: crate::Real = t14 + t237;
     let t239: crate::Real = t27 * t238;
-    let t240: crate::Real = t239 * t239;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t239)
         < crate::math::series_switch(0.05)
     {
+        let t240: crate::Real = t239 * t239;
         let t241: crate::Real = 0.16666666666666666;
         let t242: crate::Real = 0.008333333333333333;
         let t243: crate::Real = 0.0001984126984126984;
@@ -7661,7 +7661,7 @@ pub fn step_exact_linearized_flat(
         let t269: crate::Real = t30 - t268;
         let t270: crate::Real = t269 * t254;
         let t309: crate::Real = t268 * t254;
-        let t310: crate::Real = t30 / t240;
+        let t310: crate::Real = t254 * t254;
         let t311: crate::Real = t253 * t310;
         let t312: crate::Real = t309 - t311;
         let t327: crate::Real = t269 * t310;
@@ -7791,7 +7791,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2], step_exact_jac_p[3], step_exact_jac_p[4], step_exact_jac_p[5], step_exact_jac_p[6], step_exact_jac_p[7], step_exact_jac_p[8], step_exact_jac_p[9], step_exact_jac_p[10], step_exact_jac_p[11], step_exact_jac_p[12], step_exact_jac_p[13], step_exact_jac_p[14], step_exact_jac_p[15], step_exact_jac_p[16], step_exact_jac_p[17], step_exact_jac_p[18], step_exact_jac_p[19], step_exact_jac_p[20], step_exact_jac_p[21], step_exact_jac_p[22], step_exact_jac_p[23], step_exact_jac_p[24], step_exact_jac_p[25], step_exact_jac_p[26], step_exact_jac_p[27], step_exact_jac_p[28], step_exact_jac_p[29], step_exact_jac_p[30], step_exact_jac_p[31], step_exact_jac_p[32], step_exact_jac_p[33], step_exact_jac_p[34], step_exact_jac_p[35]]
 
-1071 arithmetic operations (4066942 before common-subexpression elimination).*/
+1071 arithmetic operations (4340689 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -7863,31 +7863,31 @@ pub fn step_exact_with_jac_p_flat(
     let t57: crate::Real = t52 + t56;
     let t58: crate::Real = t15 * t15;
     let t59: crate::Real = t43 * t43;
-    let t60: crate::Real = t30 / t58;
+    let t60: crate::Real = t31 * t31;
     let t61: crate::Real = t59 * t60;
     let t62: crate::Real = t16 * t16;
     let t63: crate::Real = t48 * t48;
-    let t64: crate::Real = t30 / t62;
+    let t64: crate::Real = t35 * t35;
     let t65: crate::Real = t63 * t64;
     let t66: crate::Real = t61 + t65;
     let t67: crate::Real = t17 * t17;
     let t68: crate::Real = t53 * t53;
-    let t69: crate::Real = t30 / t67;
+    let t69: crate::Real = t40 * t40;
     let t70: crate::Real = t68 * t69;
     let t71: crate::Real = t66 + t70;
     let t72: crate::Real = t18 * t18;
     let t73: crate::Real = t28 * t28;
-    let t74: crate::Real = t30 / t72;
+    let t74: crate::Real = t45 * t45;
     let t75: crate::Real = t73 * t74;
     let t76: crate::Real = t71 + t75;
     let t77: crate::Real = t19 * t19;
     let t78: crate::Real = t33 * t33;
-    let t79: crate::Real = t30 / t77;
+    let t79: crate::Real = t50 * t50;
     let t80: crate::Real = t78 * t79;
     let t81: crate::Real = t76 + t80;
     let t82: crate::Real = t20 * t20;
     let t83: crate::Real = t38 * t38;
-    let t84: crate::Real = t30 / t82;
+    let t84: crate::Real = t55 * t55;
     let t85: crate::Real = t83 * t84;
     let t86: crate::Real = t81 + t85;
     let t87: crate::Real = t28 * t43;
@@ -8051,10 +8051,10 @@ pub fn step_exact_with_jac_p_flat(
     let t237: crate::Real = t234 + t236;
     let t238: crate::Real = t14 + t237;
     let t239: crate::Real = t27 * t238;
-    let t240: crate::Real = t239 * t239;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t239)
         < crate::math::series_switch(0.05)
     {
+        let t240: crate::Real = t239 * t239;
         let t241: crate::Real = 0.16666666666666666;
         let t242: crate::Real = 0.008333333333333333;
         let t243: crate::Real = 0.0001984126984126984;
@@ -8111,7 +8111,7 @@ pub fn step_exact_with_jac_p_flat(
         let t269: crate::Real = t30 - t268;
         let t270: crate::Real = t269 * t254;
         let t887: crate::Real = t268 * t254;
-        let t888: crate::Real = t30 / t240;
+        let t888: crate::Real = t254 * t254;
         let t889: crate::Real = t253 * t888;
         let t890: crate::Real = t887 - t889;
         let t916: crate::Real = t269 * t888;
@@ -9064,7 +9064,7 @@ pub fn step_exact_with_jac_p(
 * `p`: [e1, e2, e3, r1, r2, r3, xa1, xa2, xa3, ya1, ya2, ya3]
 * returns [obs_gyro[0], obs_gyro_jac_x[0], obs_gyro_jac_x[1], obs_gyro_jac_x[2], obs_gyro_jac_p[0], obs_gyro_jac_p[1], obs_gyro_jac_p[2], obs_gyro_jac_p[3], obs_gyro_jac_p[4], obs_gyro_jac_p[5], obs_gyro_jac_p[6], obs_gyro_jac_p[7], obs_gyro_jac_p[8], obs_gyro_jac_p[9], obs_gyro_jac_p[10], obs_gyro_jac_p[11]]
 
-457 arithmetic operations (191624 before common-subexpression elimination).*/
+505 arithmetic operations (193148 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -9127,31 +9127,31 @@ pub fn obs_gyro_linearized_flat(
     let t50: crate::Real = t45 + t49;
     let t51: crate::Real = t9 * t9;
     let t52: crate::Real = t36 * t36;
-    let t53: crate::Real = t23 / t51;
+    let t53: crate::Real = t24 * t24;
     let t54: crate::Real = t52 * t53;
     let t55: crate::Real = t10 * t10;
     let t56: crate::Real = t41 * t41;
-    let t57: crate::Real = t23 / t55;
+    let t57: crate::Real = t28 * t28;
     let t58: crate::Real = t56 * t57;
     let t59: crate::Real = t54 + t58;
     let t60: crate::Real = t11 * t11;
     let t61: crate::Real = t46 * t46;
-    let t62: crate::Real = t23 / t60;
+    let t62: crate::Real = t33 * t33;
     let t63: crate::Real = t61 * t62;
     let t64: crate::Real = t59 + t63;
     let t65: crate::Real = t12 * t12;
     let t66: crate::Real = t21 * t21;
-    let t67: crate::Real = t23 / t65;
+    let t67: crate::Real = t38 * t38;
     let t68: crate::Real = t66 * t67;
     let t69: crate::Real = t64 + t68;
     let t70: crate::Real = t13 * t13;
     let t71: crate::Real = t26 * t26;
-    let t72: crate::Real = t23 / t70;
+    let t72: crate::Real = t43 * t43;
     let t73: crate::Real = t71 * t72;
     let t74: crate::Real = t69 + t73;
     let t75: crate::Real = t14 * t14;
     let t76: crate::Real = t31 * t31;
-    let t77: crate::Real = t23 / t75;
+    let t77: crate::Real = t48 * t48;
     let t78: crate::Real = t76 * t77;
     let t79: crate::Real = t74 + t78;
     let t80: crate::Real = t21 * t36;
@@ -9299,294 +9299,342 @@ pub fn obs_gyro_linearized_flat(
     let t214: crate::Real = t212 * t213;
     let t215: crate::Real = t198 + t214;
     let t216: crate::Real = 0.0;
-    let t217: crate::Real = t41 * t26;
-    let t218: crate::Real = t217 * t57;
-    let t219: crate::Real = t46 * t31;
-    let t220: crate::Real = t219 * t62;
-    let t221: crate::Real = t217 * t72;
-    let t222: crate::Real = t86 + t221;
-    let t223: crate::Real = t219 * t77;
-    let t224: crate::Real = t222 + t223;
-    let t225: crate::Real = t224 - t81;
-    let t226: crate::Real = t225 - t218;
-    let t227: crate::Real = t226 - t220;
-    let pinv1: [crate::Real; 6] = crate::linalg::pinv_sym3([
-        t79,
-        t227,
-        t134,
-        t145,
-        t162,
-        t176,
-    ]);
-    let t228: crate::Real = pinv1[5usize];
-    let t229: crate::Real = t98 * t228;
-    let t230: crate::Real = pinv1[2usize];
-    let t231: crate::Real = t36 * t230;
-    let t232: crate::Real = t231 * t24;
-    let t233: crate::Real = t229 - t232;
-    let t234: crate::Real = pinv1[4usize];
-    let t235: crate::Real = t21 * t234;
-    let t236: crate::Real = t235 * t24;
-    let t237: crate::Real = t233 + t236;
-    let t238: crate::Real = t234 * t50;
-    let t239: crate::Real = t230 * t195;
+    let t217: crate::Real = t23 / t55;
+    let t218: crate::Real = t56 * t217;
+    let t219: crate::Real = t54 + t218;
+    let t220: crate::Real = t23 / t60;
+    let t221: crate::Real = t61 * t220;
+    let t222: crate::Real = t219 + t221;
+    let t223: crate::Real = t23 / t65;
+    let t224: crate::Real = t66 * t223;
+    let t225: crate::Real = t222 + t224;
+    let t226: crate::Real = t23 / t70;
+    let t227: crate::Real = t71 * t226;
+    let t228: crate::Real = t225 + t227;
+    let t229: crate::Real = t23 / t75;
+    let t230: crate::Real = t76 * t229;
+    let t231: crate::Real = t228 + t230;
+    let t232: crate::Real = t41 * t26;
+    let t233: crate::Real = t232 * t217;
+    let t234: crate::Real = t46 * t31;
+    let t235: crate::Real = t234 * t220;
+    let t236: crate::Real = t80 * t223;
+    let t237: crate::Real = t232 * t226;
+    let t238: crate::Real = t236 + t237;
+    let t239: crate::Real = t234 * t229;
     let t240: crate::Real = t238 + t239;
-    let t241: crate::Real = t228 * t212;
-    let t242: crate::Real = t240 + t241;
-    let t243: crate::Real = t237 * t242;
-    let t244: crate::Real = t98 * t242;
-    let t245: crate::Real = t3 - t244;
-    let t246: crate::Real = pinv1[1usize];
-    let t247: crate::Real = t50 * t246;
-    let t248: crate::Real = pinv1[0usize];
-    let t249: crate::Real = t195 * t248;
-    let t250: crate::Real = t247 + t249;
-    let t251: crate::Real = t230 * t212;
-    let t252: crate::Real = t250 + t251;
-    let t253: crate::Real = t36 * t252;
-    let t254: crate::Real = t253 * t24;
-    let t255: crate::Real = t245 + t254;
-    let t256: crate::Real = pinv1[3usize];
-    let t257: crate::Real = t50 * t256;
-    let t258: crate::Real = t195 * t246;
+    let t241: crate::Real = t240 - t81;
+    let t242: crate::Real = t241 - t233;
+    let t243: crate::Real = t242 - t235;
+    let t244: crate::Real = t118 * t223;
+    let t245: crate::Real = t123 * t226;
+    let t246: crate::Real = t244 + t245;
+    let t247: crate::Real = t129 * t229;
+    let t248: crate::Real = t246 + t247;
+    let t249: crate::Real = t248 - t100;
+    let t250: crate::Real = t249 - t107;
+    let t251: crate::Real = t250 - t114;
+    let t252: crate::Real = t71 * t217;
+    let t253: crate::Real = t135 + t252;
+    let t254: crate::Real = t76 * t220;
+    let t255: crate::Real = t253 + t254;
+    let t256: crate::Real = t52 * t223;
+    let t257: crate::Real = t255 + t256;
+    let t258: crate::Real = t56 * t226;
     let t259: crate::Real = t257 + t258;
-    let t260: crate::Real = t234 * t212;
+    let t260: crate::Real = t61 * t229;
     let t261: crate::Real = t259 + t260;
-    let t262: crate::Real = t21 * t261;
-    let t263: crate::Real = t262 * t24;
-    let t264: crate::Real = t255 - t263;
-    let t265: crate::Real = t228 * t264;
-    let t266: crate::Real = t265 - t243;
-    let t267: crate::Real = t96 * t266;
-    let t268: crate::Real = t267 * t53;
-    let t269: crate::Real = t237 * t252;
-    let t270: crate::Real = t230 * t264;
-    let t271: crate::Real = t270 - t269;
-    let t272: crate::Real = t36 * t271;
-    let t273: crate::Real = t272 * t53;
-    let t274: crate::Real = t237 * t261;
-    let t275: crate::Real = t234 * t264;
-    let t276: crate::Real = t275 - t274;
-    let t277: crate::Real = t21 * t276;
-    let t278: crate::Real = t277 * t53;
-    let t279: crate::Real = t273 - t278;
-    let t280: crate::Real = t279 - t268;
-    let t281: crate::Real = t105 * t228;
-    let t282: crate::Real = t41 * t230;
-    let t283: crate::Real = t282 * t28;
-    let t284: crate::Real = t281 - t283;
-    let t285: crate::Real = t26 * t234;
-    let t286: crate::Real = t285 * t28;
-    let t287: crate::Real = t284 + t286;
-    let t288: crate::Real = t242 * t287;
-    let t289: crate::Real = t105 * t242;
-    let t290: crate::Real = t4 - t289;
-    let t291: crate::Real = t41 * t252;
-    let t292: crate::Real = t291 * t28;
-    let t293: crate::Real = t290 + t292;
-    let t294: crate::Real = t26 * t261;
-    let t295: crate::Real = t294 * t28;
-    let t296: crate::Real = t293 - t295;
-    let t297: crate::Real = t228 * t296;
-    let t298: crate::Real = t297 - t288;
-    let t299: crate::Real = t103 * t298;
-    let t300: crate::Real = t299 * t57;
-    let t301: crate::Real = t252 * t287;
-    let t302: crate::Real = t230 * t296;
-    let t303: crate::Real = t302 - t301;
-    let t304: crate::Real = t41 * t303;
-    let t305: crate::Real = t304 * t57;
-    let t306: crate::Real = t261 * t287;
-    let t307: crate::Real = t234 * t296;
-    let t308: crate::Real = t307 - t306;
-    let t309: crate::Real = t26 * t308;
-    let t310: crate::Real = t309 * t57;
-    let t311: crate::Real = t305 - t310;
-    let t312: crate::Real = t311 - t300;
-    let t313: crate::Real = t112 * t228;
-    let t314: crate::Real = t46 * t230;
-    let t315: crate::Real = t314 * t33;
-    let t316: crate::Real = t313 - t315;
-    let t317: crate::Real = t31 * t234;
-    let t318: crate::Real = t317 * t33;
-    let t319: crate::Real = t316 + t318;
-    let t320: crate::Real = t242 * t319;
-    let t321: crate::Real = t112 * t242;
-    let t322: crate::Real = t5 - t321;
-    let t323: crate::Real = t46 * t252;
-    let t324: crate::Real = t323 * t33;
-    let t325: crate::Real = t322 + t324;
-    let t326: crate::Real = t31 * t261;
-    let t327: crate::Real = t326 * t33;
-    let t328: crate::Real = t325 - t327;
-    let t329: crate::Real = t228 * t328;
-    let t330: crate::Real = t329 - t320;
-    let t331: crate::Real = t110 * t330;
-    let t332: crate::Real = t331 * t62;
-    let t333: crate::Real = t252 * t319;
-    let t334: crate::Real = t230 * t328;
-    let t335: crate::Real = t334 - t333;
-    let t336: crate::Real = t46 * t335;
-    let t337: crate::Real = t336 * t62;
-    let t338: crate::Real = t261 * t319;
-    let t339: crate::Real = t234 * t328;
-    let t340: crate::Real = t339 - t338;
-    let t341: crate::Real = t31 * t340;
-    let t342: crate::Real = t341 * t62;
-    let t343: crate::Real = t337 - t342;
-    let t344: crate::Real = t343 - t332;
-    let t345: crate::Real = t36 * t234;
-    let t346: crate::Real = t345 * t38;
-    let t347: crate::Real = t21 * t230;
-    let t348: crate::Real = t347 * t38;
-    let t349: crate::Real = t346 + t348;
-    let t350: crate::Real = t117 * t228;
-    let t351: crate::Real = t350 * t38;
-    let t352: crate::Real = t349 + t351;
-    let t353: crate::Real = t242 * t352;
-    let t354: crate::Real = t36 * t261;
-    let t355: crate::Real = t354 * t38;
-    let t356: crate::Real = t6 - t355;
-    let t357: crate::Real = t21 * t252;
-    let t358: crate::Real = t357 * t38;
-    let t359: crate::Real = t356 - t358;
-    let t360: crate::Real = t117 * t242;
-    let t361: crate::Real = t360 * t38;
-    let t362: crate::Real = t359 - t361;
-    let t363: crate::Real = t228 * t362;
-    let t364: crate::Real = t363 - t353;
-    let t365: crate::Real = t117 * t364;
-    let t366: crate::Real = t365 * t67;
-    let t367: crate::Real = -t366;
-    let t368: crate::Real = t252 * t352;
-    let t369: crate::Real = t230 * t362;
-    let t370: crate::Real = t369 - t368;
-    let t371: crate::Real = t21 * t370;
-    let t372: crate::Real = t371 * t67;
-    let t373: crate::Real = t261 * t352;
-    let t374: crate::Real = t234 * t362;
-    let t375: crate::Real = t374 - t373;
-    let t376: crate::Real = t36 * t375;
-    let t377: crate::Real = t376 * t67;
-    let t378: crate::Real = t367 - t372;
-    let t379: crate::Real = t378 - t377;
-    let t380: crate::Real = t41 * t234;
-    let t381: crate::Real = t380 * t43;
-    let t382: crate::Real = t26 * t230;
-    let t383: crate::Real = t382 * t43;
-    let t384: crate::Real = t381 + t383;
-    let t385: crate::Real = t122 * t228;
-    let t386: crate::Real = t385 * t43;
-    let t387: crate::Real = t384 + t386;
-    let t388: crate::Real = t242 * t387;
-    let t389: crate::Real = t41 * t261;
-    let t390: crate::Real = t389 * t43;
-    let t391: crate::Real = t7 - t390;
-    let t392: crate::Real = t26 * t252;
-    let t393: crate::Real = t392 * t43;
-    let t394: crate::Real = t391 - t393;
-    let t395: crate::Real = t122 * t242;
-    let t396: crate::Real = t395 * t43;
-    let t397: crate::Real = t394 - t396;
-    let t398: crate::Real = t228 * t397;
-    let t399: crate::Real = t398 - t388;
-    let t400: crate::Real = t122 * t399;
-    let t401: crate::Real = t400 * t72;
-    let t402: crate::Real = -t401;
-    let t403: crate::Real = t252 * t387;
-    let t404: crate::Real = t230 * t397;
-    let t405: crate::Real = t404 - t403;
-    let t406: crate::Real = t26 * t405;
-    let t407: crate::Real = t406 * t72;
-    let t408: crate::Real = t261 * t387;
-    let t409: crate::Real = t234 * t397;
-    let t410: crate::Real = t409 - t408;
-    let t411: crate::Real = t41 * t410;
-    let t412: crate::Real = t411 * t72;
-    let t413: crate::Real = t402 - t407;
-    let t414: crate::Real = t413 - t412;
-    let t415: crate::Real = t46 * t234;
-    let t416: crate::Real = t415 * t48;
-    let t417: crate::Real = t31 * t230;
-    let t418: crate::Real = t417 * t48;
-    let t419: crate::Real = t416 + t418;
-    let t420: crate::Real = t128 * t228;
-    let t421: crate::Real = t420 * t48;
-    let t422: crate::Real = t419 + t421;
-    let t423: crate::Real = t242 * t422;
-    let t424: crate::Real = t46 * t261;
-    let t425: crate::Real = t424 * t48;
-    let t426: crate::Real = t8 - t425;
-    let t427: crate::Real = t31 * t252;
-    let t428: crate::Real = t427 * t48;
-    let t429: crate::Real = t426 - t428;
-    let t430: crate::Real = t128 * t242;
-    let t431: crate::Real = t430 * t48;
-    let t432: crate::Real = t429 - t431;
-    let t433: crate::Real = t228 * t432;
-    let t434: crate::Real = t433 - t423;
-    let t435: crate::Real = t128 * t434;
-    let t436: crate::Real = t435 * t77;
-    let t437: crate::Real = -t436;
-    let t438: crate::Real = t252 * t422;
-    let t439: crate::Real = t230 * t432;
-    let t440: crate::Real = t439 - t438;
-    let t441: crate::Real = t31 * t440;
-    let t442: crate::Real = t441 * t77;
-    let t443: crate::Real = t261 * t422;
-    let t444: crate::Real = t234 * t432;
-    let t445: crate::Real = t444 - t443;
-    let t446: crate::Real = t46 * t445;
-    let t447: crate::Real = t446 * t77;
-    let t448: crate::Real = t437 - t442;
-    let t449: crate::Real = t448 - t447;
-    let t450: crate::Real = t21 * t266;
-    let t451: crate::Real = t450 * t24;
-    let t452: crate::Real = t36 * t364;
-    let t453: crate::Real = t452 * t38;
-    let t454: crate::Real = t451 + t453;
-    let t455: crate::Real = t26 * t298;
-    let t456: crate::Real = t455 * t28;
-    let t457: crate::Real = t41 * t399;
-    let t458: crate::Real = t457 * t43;
-    let t459: crate::Real = t456 + t458;
-    let t460: crate::Real = t31 * t330;
-    let t461: crate::Real = t460 * t33;
-    let t462: crate::Real = t46 * t434;
-    let t463: crate::Real = t462 * t48;
-    let t464: crate::Real = t461 + t463;
-    let t465: crate::Real = t36 * t266;
-    let t466: crate::Real = t465 * t24;
-    let t467: crate::Real = t21 * t364;
-    let t468: crate::Real = t467 * t38;
-    let t469: crate::Real = t466 - t468;
-    let t470: crate::Real = t41 * t298;
-    let t471: crate::Real = t470 * t28;
-    let t472: crate::Real = t26 * t399;
-    let t473: crate::Real = t472 * t43;
-    let t474: crate::Real = t471 - t473;
-    let t475: crate::Real = t46 * t330;
-    let t476: crate::Real = t475 * t33;
-    let t477: crate::Real = t31 * t434;
-    let t478: crate::Real = t477 * t48;
-    let t479: crate::Real = t476 - t478;
+    let t262: crate::Real = t154 * t223;
+    let t263: crate::Real = t153 + t262;
+    let t264: crate::Real = t157 * t226;
+    let t265: crate::Real = t263 + t264;
+    let t266: crate::Real = t160 * t229;
+    let t267: crate::Real = t265 + t266;
+    let t268: crate::Real = t163 * t223;
+    let t269: crate::Real = t165 * t226;
+    let t270: crate::Real = t268 + t269;
+    let t271: crate::Real = t168 * t229;
+    let t272: crate::Real = t270 + t271;
+    let t273: crate::Real = t272 + t171;
+    let t274: crate::Real = t273 + t173;
+    let t275: crate::Real = t274 + t175;
+    let pinv1: [crate::Real; 6] = crate::linalg::pinv_sym3([
+        t231,
+        t243,
+        t251,
+        t261,
+        t267,
+        t275,
+    ]);
+    let t276: crate::Real = pinv1[5usize];
+    let t277: crate::Real = t98 * t276;
+    let t278: crate::Real = pinv1[2usize];
+    let t279: crate::Real = t36 * t278;
+    let t280: crate::Real = t279 * t24;
+    let t281: crate::Real = t277 - t280;
+    let t282: crate::Real = pinv1[4usize];
+    let t283: crate::Real = t21 * t282;
+    let t284: crate::Real = t283 * t24;
+    let t285: crate::Real = t281 + t284;
+    let t286: crate::Real = t282 * t50;
+    let t287: crate::Real = t278 * t195;
+    let t288: crate::Real = t286 + t287;
+    let t289: crate::Real = t276 * t212;
+    let t290: crate::Real = t288 + t289;
+    let t291: crate::Real = t285 * t290;
+    let t292: crate::Real = t98 * t290;
+    let t293: crate::Real = t3 - t292;
+    let t294: crate::Real = pinv1[1usize];
+    let t295: crate::Real = t50 * t294;
+    let t296: crate::Real = pinv1[0usize];
+    let t297: crate::Real = t195 * t296;
+    let t298: crate::Real = t295 + t297;
+    let t299: crate::Real = t278 * t212;
+    let t300: crate::Real = t298 + t299;
+    let t301: crate::Real = t36 * t300;
+    let t302: crate::Real = t301 * t24;
+    let t303: crate::Real = t293 + t302;
+    let t304: crate::Real = pinv1[3usize];
+    let t305: crate::Real = t50 * t304;
+    let t306: crate::Real = t195 * t294;
+    let t307: crate::Real = t305 + t306;
+    let t308: crate::Real = t282 * t212;
+    let t309: crate::Real = t307 + t308;
+    let t310: crate::Real = t21 * t309;
+    let t311: crate::Real = t310 * t24;
+    let t312: crate::Real = t303 - t311;
+    let t313: crate::Real = t276 * t312;
+    let t314: crate::Real = t313 - t291;
+    let t315: crate::Real = t96 * t314;
+    let t316: crate::Real = t315 * t53;
+    let t317: crate::Real = t285 * t300;
+    let t318: crate::Real = t278 * t312;
+    let t319: crate::Real = t318 - t317;
+    let t320: crate::Real = t36 * t319;
+    let t321: crate::Real = t320 * t53;
+    let t322: crate::Real = t285 * t309;
+    let t323: crate::Real = t282 * t312;
+    let t324: crate::Real = t323 - t322;
+    let t325: crate::Real = t21 * t324;
+    let t326: crate::Real = t325 * t53;
+    let t327: crate::Real = t321 - t326;
+    let t328: crate::Real = t327 - t316;
+    let t329: crate::Real = t105 * t276;
+    let t330: crate::Real = t41 * t278;
+    let t331: crate::Real = t330 * t28;
+    let t332: crate::Real = t329 - t331;
+    let t333: crate::Real = t26 * t282;
+    let t334: crate::Real = t333 * t28;
+    let t335: crate::Real = t332 + t334;
+    let t336: crate::Real = t290 * t335;
+    let t337: crate::Real = t105 * t290;
+    let t338: crate::Real = t4 - t337;
+    let t339: crate::Real = t41 * t300;
+    let t340: crate::Real = t339 * t28;
+    let t341: crate::Real = t338 + t340;
+    let t342: crate::Real = t26 * t309;
+    let t343: crate::Real = t342 * t28;
+    let t344: crate::Real = t341 - t343;
+    let t345: crate::Real = t276 * t344;
+    let t346: crate::Real = t345 - t336;
+    let t347: crate::Real = t103 * t346;
+    let t348: crate::Real = t347 * t217;
+    let t349: crate::Real = t300 * t335;
+    let t350: crate::Real = t278 * t344;
+    let t351: crate::Real = t350 - t349;
+    let t352: crate::Real = t41 * t351;
+    let t353: crate::Real = t352 * t217;
+    let t354: crate::Real = t309 * t335;
+    let t355: crate::Real = t282 * t344;
+    let t356: crate::Real = t355 - t354;
+    let t357: crate::Real = t26 * t356;
+    let t358: crate::Real = t357 * t217;
+    let t359: crate::Real = t353 - t358;
+    let t360: crate::Real = t359 - t348;
+    let t361: crate::Real = t112 * t276;
+    let t362: crate::Real = t46 * t278;
+    let t363: crate::Real = t362 * t33;
+    let t364: crate::Real = t361 - t363;
+    let t365: crate::Real = t31 * t282;
+    let t366: crate::Real = t365 * t33;
+    let t367: crate::Real = t364 + t366;
+    let t368: crate::Real = t290 * t367;
+    let t369: crate::Real = t112 * t290;
+    let t370: crate::Real = t5 - t369;
+    let t371: crate::Real = t46 * t300;
+    let t372: crate::Real = t371 * t33;
+    let t373: crate::Real = t370 + t372;
+    let t374: crate::Real = t31 * t309;
+    let t375: crate::Real = t374 * t33;
+    let t376: crate::Real = t373 - t375;
+    let t377: crate::Real = t276 * t376;
+    let t378: crate::Real = t377 - t368;
+    let t379: crate::Real = t110 * t378;
+    let t380: crate::Real = t379 * t220;
+    let t381: crate::Real = t300 * t367;
+    let t382: crate::Real = t278 * t376;
+    let t383: crate::Real = t382 - t381;
+    let t384: crate::Real = t46 * t383;
+    let t385: crate::Real = t384 * t220;
+    let t386: crate::Real = t309 * t367;
+    let t387: crate::Real = t282 * t376;
+    let t388: crate::Real = t387 - t386;
+    let t389: crate::Real = t31 * t388;
+    let t390: crate::Real = t389 * t220;
+    let t391: crate::Real = t385 - t390;
+    let t392: crate::Real = t391 - t380;
+    let t393: crate::Real = t36 * t282;
+    let t394: crate::Real = t393 * t38;
+    let t395: crate::Real = t21 * t278;
+    let t396: crate::Real = t395 * t38;
+    let t397: crate::Real = t394 + t396;
+    let t398: crate::Real = t117 * t276;
+    let t399: crate::Real = t398 * t38;
+    let t400: crate::Real = t397 + t399;
+    let t401: crate::Real = t290 * t400;
+    let t402: crate::Real = t36 * t309;
+    let t403: crate::Real = t402 * t38;
+    let t404: crate::Real = t6 - t403;
+    let t405: crate::Real = t21 * t300;
+    let t406: crate::Real = t405 * t38;
+    let t407: crate::Real = t404 - t406;
+    let t408: crate::Real = t117 * t290;
+    let t409: crate::Real = t408 * t38;
+    let t410: crate::Real = t407 - t409;
+    let t411: crate::Real = t276 * t410;
+    let t412: crate::Real = t411 - t401;
+    let t413: crate::Real = t117 * t412;
+    let t414: crate::Real = t413 * t223;
+    let t415: crate::Real = -t414;
+    let t416: crate::Real = t300 * t400;
+    let t417: crate::Real = t278 * t410;
+    let t418: crate::Real = t417 - t416;
+    let t419: crate::Real = t21 * t418;
+    let t420: crate::Real = t419 * t223;
+    let t421: crate::Real = t309 * t400;
+    let t422: crate::Real = t282 * t410;
+    let t423: crate::Real = t422 - t421;
+    let t424: crate::Real = t36 * t423;
+    let t425: crate::Real = t424 * t223;
+    let t426: crate::Real = t415 - t420;
+    let t427: crate::Real = t426 - t425;
+    let t428: crate::Real = t41 * t282;
+    let t429: crate::Real = t428 * t43;
+    let t430: crate::Real = t26 * t278;
+    let t431: crate::Real = t430 * t43;
+    let t432: crate::Real = t429 + t431;
+    let t433: crate::Real = t122 * t276;
+    let t434: crate::Real = t433 * t43;
+    let t435: crate::Real = t432 + t434;
+    let t436: crate::Real = t290 * t435;
+    let t437: crate::Real = t41 * t309;
+    let t438: crate::Real = t437 * t43;
+    let t439: crate::Real = t7 - t438;
+    let t440: crate::Real = t26 * t300;
+    let t441: crate::Real = t440 * t43;
+    let t442: crate::Real = t439 - t441;
+    let t443: crate::Real = t122 * t290;
+    let t444: crate::Real = t443 * t43;
+    let t445: crate::Real = t442 - t444;
+    let t446: crate::Real = t276 * t445;
+    let t447: crate::Real = t446 - t436;
+    let t448: crate::Real = t122 * t447;
+    let t449: crate::Real = t448 * t226;
+    let t450: crate::Real = -t449;
+    let t451: crate::Real = t300 * t435;
+    let t452: crate::Real = t278 * t445;
+    let t453: crate::Real = t452 - t451;
+    let t454: crate::Real = t26 * t453;
+    let t455: crate::Real = t454 * t226;
+    let t456: crate::Real = t309 * t435;
+    let t457: crate::Real = t282 * t445;
+    let t458: crate::Real = t457 - t456;
+    let t459: crate::Real = t41 * t458;
+    let t460: crate::Real = t459 * t226;
+    let t461: crate::Real = t450 - t455;
+    let t462: crate::Real = t461 - t460;
+    let t463: crate::Real = t46 * t282;
+    let t464: crate::Real = t463 * t48;
+    let t465: crate::Real = t31 * t278;
+    let t466: crate::Real = t465 * t48;
+    let t467: crate::Real = t464 + t466;
+    let t468: crate::Real = t128 * t276;
+    let t469: crate::Real = t468 * t48;
+    let t470: crate::Real = t467 + t469;
+    let t471: crate::Real = t290 * t470;
+    let t472: crate::Real = t46 * t309;
+    let t473: crate::Real = t472 * t48;
+    let t474: crate::Real = t8 - t473;
+    let t475: crate::Real = t31 * t300;
+    let t476: crate::Real = t475 * t48;
+    let t477: crate::Real = t474 - t476;
+    let t478: crate::Real = t128 * t290;
+    let t479: crate::Real = t478 * t48;
+    let t480: crate::Real = t477 - t479;
+    let t481: crate::Real = t276 * t480;
+    let t482: crate::Real = t481 - t471;
+    let t483: crate::Real = t128 * t482;
+    let t484: crate::Real = t483 * t229;
+    let t485: crate::Real = -t484;
+    let t486: crate::Real = t300 * t470;
+    let t487: crate::Real = t278 * t480;
+    let t488: crate::Real = t487 - t486;
+    let t489: crate::Real = t31 * t488;
+    let t490: crate::Real = t489 * t229;
+    let t491: crate::Real = t309 * t470;
+    let t492: crate::Real = t282 * t480;
+    let t493: crate::Real = t492 - t491;
+    let t494: crate::Real = t46 * t493;
+    let t495: crate::Real = t494 * t229;
+    let t496: crate::Real = t485 - t490;
+    let t497: crate::Real = t496 - t495;
+    let t498: crate::Real = t21 * t314;
+    let t499: crate::Real = t498 * t24;
+    let t500: crate::Real = t36 * t412;
+    let t501: crate::Real = t500 * t38;
+    let t502: crate::Real = t499 + t501;
+    let t503: crate::Real = t26 * t346;
+    let t504: crate::Real = t503 * t28;
+    let t505: crate::Real = t41 * t447;
+    let t506: crate::Real = t505 * t43;
+    let t507: crate::Real = t504 + t506;
+    let t508: crate::Real = t31 * t378;
+    let t509: crate::Real = t508 * t33;
+    let t510: crate::Real = t46 * t482;
+    let t511: crate::Real = t510 * t48;
+    let t512: crate::Real = t509 + t511;
+    let t513: crate::Real = t36 * t314;
+    let t514: crate::Real = t513 * t24;
+    let t515: crate::Real = t21 * t412;
+    let t516: crate::Real = t515 * t38;
+    let t517: crate::Real = t514 - t516;
+    let t518: crate::Real = t41 * t346;
+    let t519: crate::Real = t518 * t28;
+    let t520: crate::Real = t26 * t447;
+    let t521: crate::Real = t520 * t43;
+    let t522: crate::Real = t519 - t521;
+    let t523: crate::Real = t46 * t378;
+    let t524: crate::Real = t523 * t33;
+    let t525: crate::Real = t31 * t482;
+    let t526: crate::Real = t525 * t48;
+    let t527: crate::Real = t524 - t526;
     [
         t215,
         t216,
         t216,
         t216,
-        t280,
-        t312,
-        t344,
-        t379,
-        t414,
-        t449,
-        t454,
-        t459,
-        t464,
-        t469,
-        t474,
-        t479,
+        t328,
+        t360,
+        t392,
+        t427,
+        t462,
+        t497,
+        t502,
+        t507,
+        t512,
+        t517,
+        t522,
+        t527,
     ]
 }
 /**Observation `gyro` with its Jacobians wrt the state and the parameters, from one shared computation: an EKF's update.
@@ -9632,7 +9680,7 @@ pub fn obs_gyro_linearized(
 * `lm`: [xl, yl]
 * returns [obs_landmark[0], obs_landmark[1], obs_landmark_jac_x[0], obs_landmark_jac_x[1], obs_landmark_jac_x[2], obs_landmark_jac_x[3], obs_landmark_jac_x[4], obs_landmark_jac_x[5], obs_landmark_jac_p[0], obs_landmark_jac_p[1], obs_landmark_jac_p[2], obs_landmark_jac_p[3], obs_landmark_jac_p[4], obs_landmark_jac_p[5], obs_landmark_jac_p[6], obs_landmark_jac_p[7], obs_landmark_jac_p[8], obs_landmark_jac_p[9], obs_landmark_jac_p[10], obs_landmark_jac_p[11], obs_landmark_jac_p[12], obs_landmark_jac_p[13], obs_landmark_jac_p[14], obs_landmark_jac_p[15], obs_landmark_jac_p[16], obs_landmark_jac_p[17], obs_landmark_jac_p[18], obs_landmark_jac_p[19], obs_landmark_jac_p[20], obs_landmark_jac_p[21], obs_landmark_jac_p[22], obs_landmark_jac_p[23]]
 
-17 arithmetic operations (57 before common-subexpression elimination).*/
+17 arithmetic operations (79 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -9660,7 +9708,7 @@ pub fn obs_landmark_linearized_flat(
     let t17: crate::Real = t7 * t14;
     let t18: crate::Real = -t17;
     let t19: crate::Real = 0.0;
-    let t20: crate::Real = t13 / t9;
+    let t20: crate::Real = t14 * t14;
     let t21: crate::Real = t7 * t20;
     let t22: crate::Real = t5 * t20;
     let t23: crate::Real = -t22;

@@ -261,7 +261,7 @@ pub fn step_euler_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-17 arithmetic operations (19 before common-subexpression elimination).*/
+17 arithmetic operations (20 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
     x: &[crate::Real; 3usize],
@@ -284,7 +284,7 @@ pub fn step_euler_jac_p(
     let t11: crate::Real = t10 / t4;
     let t12: crate::Real = t9 * t11;
     let t13: crate::Real = t4 * t4;
-    let t14: crate::Real = t10 / t13;
+    let t14: crate::Real = t11 * t11;
     let t15: crate::Real = t8 * t14;
     let t16: crate::Real = -t15;
     let sc17 = crate::math::sincos(t0);
@@ -496,7 +496,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w, alpha]
 
-98 arithmetic operations (1424 before common-subexpression elimination).*/
+98 arithmetic operations (1432 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -523,10 +523,10 @@ pub fn step_exact_jac_u(
     let t15: crate::Real = t4 + t14;
     let t16: crate::Real = t7 * t15;
     let t17: crate::Real = 1.0;
-    let t18: crate::Real = t16 * t16;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
         < crate::math::series_switch(0.05)
     {
+        let t18: crate::Real = t16 * t16;
         let t19: crate::Real = 0.16666666666666666;
         let t20: crate::Real = 0.008333333333333333;
         let t21: crate::Real = 0.0001984126984126984;
@@ -583,7 +583,7 @@ pub fn step_exact_jac_u(
         let t47: crate::Real = t17 - t46;
         let t48: crate::Real = t47 * t32;
         let t69: crate::Real = t46 * t32;
-        let t70: crate::Real = t12 / t18;
+        let t70: crate::Real = t32 * t32;
         let t71: crate::Real = t31 * t70;
         let t72: crate::Real = t69 - t71;
         let t88: crate::Real = t47 * t70;
@@ -649,7 +649,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-79 arithmetic operations (867 before common-subexpression elimination).*/
+79 arithmetic operations (871 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -676,10 +676,10 @@ pub fn step_exact_jac_w(
     let t15: crate::Real = t4 + t14;
     let t16: crate::Real = t7 * t15;
     let t17: crate::Real = 1.0;
-    let t18: crate::Real = t16 * t16;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
         < crate::math::series_switch(0.05)
     {
+        let t18: crate::Real = t16 * t16;
         let t19: crate::Real = 0.16666666666666666;
         let t20: crate::Real = 0.008333333333333333;
         let t21: crate::Real = 0.0001984126984126984;
@@ -736,7 +736,7 @@ pub fn step_exact_jac_w(
         let t47: crate::Real = t17 - t46;
         let t48: crate::Real = t47 * t32;
         let t62: crate::Real = t46 * t32;
-        let t63: crate::Real = t12 / t18;
+        let t63: crate::Real = t32 * t32;
         let t64: crate::Real = t31 * t63;
         let t65: crate::Real = t62 - t64;
         let t80: crate::Real = t47 * t63;
@@ -784,7 +784,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-98 arithmetic operations (1419 before common-subexpression elimination).*/
+98 arithmetic operations (1432 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -811,10 +811,10 @@ pub fn step_exact_jac_p(
     let t15: crate::Real = t4 + t14;
     let t16: crate::Real = t7 * t15;
     let t17: crate::Real = 1.0;
-    let t18: crate::Real = t16 * t16;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t16)
         < crate::math::series_switch(0.05)
     {
+        let t18: crate::Real = t16 * t16;
         let t19: crate::Real = 0.16666666666666666;
         let t20: crate::Real = 0.008333333333333333;
         let t21: crate::Real = 0.0001984126984126984;
@@ -871,7 +871,7 @@ pub fn step_exact_jac_p(
         let t47: crate::Real = t17 - t46;
         let t48: crate::Real = t47 * t32;
         let t69: crate::Real = t46 * t32;
-        let t70: crate::Real = t12 / t18;
+        let t70: crate::Real = t32 * t32;
         let t71: crate::Real = t31 * t70;
         let t72: crate::Real = t69 - t71;
         let t88: crate::Real = t47 * t70;
@@ -885,7 +885,7 @@ pub fn step_exact_jac_p(
     let t50: crate::Real = t1 * t10;
     let t51: crate::Real = t50 * t13;
     let t52: crate::Real = t6 * t6;
-    let t53: crate::Real = t12 / t52;
+    let t53: crate::Real = t13 * t13;
     let t54: crate::Real = t11 * t53;
     let t55: crate::Real = -t54;
     let t56: crate::Real = t7 * t51;
@@ -978,7 +978,7 @@ pub fn obs_gyro_jac_x(
 * `p`: [r, L]
 * returns rows [gyro_z], columns [r, L]
 
-10 arithmetic operations (11 before common-subexpression elimination).*/
+10 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
     x: &[crate::Real; 3usize],
@@ -997,7 +997,7 @@ pub fn obs_gyro_jac_p(
     let t9: crate::Real = t3 * t3;
     let t10: crate::Real = t0 * t2;
     let t11: crate::Real = t4 * t10;
-    let t12: crate::Real = t6 / t9;
+    let t12: crate::Real = t7 * t7;
     let t13: crate::Real = t11 * t12;
     let t14: crate::Real = -t13;
     [[t8, t14]]
@@ -1041,7 +1041,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-15 arithmetic operations (45 before common-subexpression elimination).*/
+15 arithmetic operations (67 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[crate::Real; 3usize],
@@ -1066,7 +1066,7 @@ pub fn obs_landmark_jac_x(
     let t14: crate::Real = t6 * t11;
     let t15: crate::Real = -t14;
     let t16: crate::Real = 0.0;
-    let t17: crate::Real = t10 / t8;
+    let t17: crate::Real = t11 * t11;
     let t18: crate::Real = t6 * t17;
     let t19: crate::Real = t4 * t17;
     let t20: crate::Real = -t19;
@@ -1191,7 +1191,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5]]
 
-95 arithmetic operations (1642 before common-subexpression elimination).*/
+95 arithmetic operations (1646 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1219,10 +1219,10 @@ pub fn step_exact_linearized_flat(
     let t16: crate::Real = t13 * t15;
     let t17: crate::Real = t6 + t16;
     let t18: crate::Real = t9 * t17;
-    let t19: crate::Real = t18 * t18;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
+        let t19: crate::Real = t18 * t18;
         let t20: crate::Real = 0.16666666666666666;
         let t21: crate::Real = 0.008333333333333333;
         let t22: crate::Real = 0.0001984126984126984;
@@ -1279,7 +1279,7 @@ pub fn step_exact_linearized_flat(
         let t48: crate::Real = t14 - t47;
         let t49: crate::Real = t48 * t33;
         let t84: crate::Real = t47 * t33;
-        let t85: crate::Real = t14 / t19;
+        let t85: crate::Real = t33 * t33;
         let t86: crate::Real = t32 * t85;
         let t87: crate::Real = t84 - t86;
         let t102: crate::Real = t48 * t85;
@@ -1388,7 +1388,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2], step_exact_jac_p[3], step_exact_jac_p[4], step_exact_jac_p[5]]
 
-114 arithmetic operations (2194 before common-subexpression elimination).*/
+114 arithmetic operations (2207 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -1416,10 +1416,10 @@ pub fn step_exact_with_jac_p_flat(
     let t16: crate::Real = t13 * t15;
     let t17: crate::Real = t6 + t16;
     let t18: crate::Real = t9 * t17;
-    let t19: crate::Real = t18 * t18;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
+        let t19: crate::Real = t18 * t18;
         let t20: crate::Real = 0.16666666666666666;
         let t21: crate::Real = 0.008333333333333333;
         let t22: crate::Real = 0.0001984126984126984;
@@ -1476,7 +1476,7 @@ pub fn step_exact_with_jac_p_flat(
         let t48: crate::Real = t14 - t47;
         let t49: crate::Real = t48 * t33;
         let t91: crate::Real = t47 * t33;
-        let t92: crate::Real = t14 / t19;
+        let t92: crate::Real = t33 * t33;
         let t93: crate::Real = t32 * t92;
         let t94: crate::Real = t91 - t93;
         let t110: crate::Real = t48 * t92;
@@ -1512,7 +1512,7 @@ pub fn step_exact_with_jac_p_flat(
     let t72: crate::Real = t3 * t12;
     let t73: crate::Real = t72 * t15;
     let t74: crate::Real = t8 * t8;
-    let t75: crate::Real = t14 / t74;
+    let t75: crate::Real = t15 * t15;
     let t76: crate::Real = t13 * t75;
     let t77: crate::Real = -t76;
     let t78: crate::Real = t9 * t73;
@@ -1602,7 +1602,7 @@ pub fn step_exact_with_jac_p(
 * `p`: [r, L]
 * returns [obs_gyro[0], obs_gyro_jac_x[0], obs_gyro_jac_x[1], obs_gyro_jac_x[2], obs_gyro_jac_p[0], obs_gyro_jac_p[1]]
 
-11 arithmetic operations (16 before common-subexpression elimination).*/
+11 arithmetic operations (17 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1623,7 +1623,7 @@ pub fn obs_gyro_linearized_flat(
     let t11: crate::Real = t0 * t4;
     let t12: crate::Real = t11 * t8;
     let t13: crate::Real = t3 * t3;
-    let t14: crate::Real = t7 / t13;
+    let t14: crate::Real = t8 * t8;
     let t15: crate::Real = t6 * t14;
     let t16: crate::Real = -t15;
     [t9, t10, t10, t10, t12, t16]
@@ -1652,7 +1652,7 @@ pub fn obs_gyro_linearized(
 * `lm`: [xl, yl]
 * returns [obs_landmark[0], obs_landmark[1], obs_landmark_jac_x[0], obs_landmark_jac_x[1], obs_landmark_jac_x[2], obs_landmark_jac_x[3], obs_landmark_jac_x[4], obs_landmark_jac_x[5], obs_landmark_jac_p[0], obs_landmark_jac_p[1], obs_landmark_jac_p[2], obs_landmark_jac_p[3]]
 
-17 arithmetic operations (57 before common-subexpression elimination).*/
+17 arithmetic operations (79 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1680,7 +1680,7 @@ pub fn obs_landmark_linearized_flat(
     let t17: crate::Real = t7 * t14;
     let t18: crate::Real = -t17;
     let t19: crate::Real = 0.0;
-    let t20: crate::Real = t13 / t9;
+    let t20: crate::Real = t14 * t14;
     let t21: crate::Real = t7 * t20;
     let t22: crate::Real = t5 * t20;
     let t23: crate::Real = -t22;

@@ -277,7 +277,7 @@ pub fn step_euler_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-19 arithmetic operations (23 before common-subexpression elimination).*/
+19 arithmetic operations (24 before common-subexpression elimination).*/
 #[inline]
 pub fn step_euler_jac_p(
     x: &[crate::Real; 3usize],
@@ -303,7 +303,7 @@ pub fn step_euler_jac_p(
     let t13: crate::Real = t12 / t4;
     let t14: crate::Real = t11 * t13;
     let t15: crate::Real = t4 * t4;
-    let t16: crate::Real = t12 / t15;
+    let t16: crate::Real = t13 * t13;
     let t17: crate::Real = t9 * t16;
     let t18: crate::Real = -t17;
     let sc19 = crate::math::sincos(t0);
@@ -521,7 +521,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [w, alpha]
 
-103 arithmetic operations (1811 before common-subexpression elimination).*/
+103 arithmetic operations (1819 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -551,10 +551,10 @@ pub fn step_exact_jac_u(
     let t17: crate::Real = t4 + t16;
     let t18: crate::Real = t7 * t17;
     let t19: crate::Real = 1.0;
-    let t20: crate::Real = t18 * t18;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
+        let t20: crate::Real = t18 * t18;
         let t21: crate::Real = 0.16666666666666666;
         let t22: crate::Real = 0.008333333333333333;
         let t23: crate::Real = 0.0001984126984126984;
@@ -611,7 +611,7 @@ pub fn step_exact_jac_u(
         let t49: crate::Real = t19 - t48;
         let t50: crate::Real = t49 * t34;
         let t70: crate::Real = t48 * t34;
-        let t71: crate::Real = t14 / t20;
+        let t71: crate::Real = t34 * t34;
         let t72: crate::Real = t33 * t71;
         let t73: crate::Real = t70 - t72;
         let t89: crate::Real = t49 * t71;
@@ -680,7 +680,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-81 arithmetic operations (875 before common-subexpression elimination).*/
+81 arithmetic operations (879 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -710,10 +710,10 @@ pub fn step_exact_jac_w(
     let t17: crate::Real = t4 + t16;
     let t18: crate::Real = t7 * t17;
     let t19: crate::Real = 1.0;
-    let t20: crate::Real = t18 * t18;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
+        let t20: crate::Real = t18 * t18;
         let t21: crate::Real = 0.16666666666666666;
         let t22: crate::Real = 0.008333333333333333;
         let t23: crate::Real = 0.0001984126984126984;
@@ -770,7 +770,7 @@ pub fn step_exact_jac_w(
         let t49: crate::Real = t19 - t48;
         let t50: crate::Real = t49 * t34;
         let t64: crate::Real = t48 * t34;
-        let t65: crate::Real = t14 / t20;
+        let t65: crate::Real = t34 * t34;
         let t66: crate::Real = t33 * t65;
         let t67: crate::Real = t64 - t66;
         let t82: crate::Real = t49 * t65;
@@ -818,7 +818,7 @@ pub fn step_exact_jac_w(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [r, L]
 
-101 arithmetic operations (1439 before common-subexpression elimination).*/
+101 arithmetic operations (1452 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_p(
     x: &[crate::Real; 3usize],
@@ -848,10 +848,10 @@ pub fn step_exact_jac_p(
     let t17: crate::Real = t4 + t16;
     let t18: crate::Real = t7 * t17;
     let t19: crate::Real = 1.0;
-    let t20: crate::Real = t18 * t18;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t18)
         < crate::math::series_switch(0.05)
     {
+        let t20: crate::Real = t18 * t18;
         let t21: crate::Real = 0.16666666666666666;
         let t22: crate::Real = 0.008333333333333333;
         let t23: crate::Real = 0.0001984126984126984;
@@ -908,7 +908,7 @@ pub fn step_exact_jac_p(
         let t49: crate::Real = t19 - t48;
         let t50: crate::Real = t49 * t34;
         let t72: crate::Real = t48 * t34;
-        let t73: crate::Real = t14 / t20;
+        let t73: crate::Real = t34 * t34;
         let t74: crate::Real = t33 * t73;
         let t75: crate::Real = t72 - t74;
         let t91: crate::Real = t49 * t73;
@@ -923,7 +923,7 @@ pub fn step_exact_jac_p(
     let t53: crate::Real = t1 * t12;
     let t54: crate::Real = t53 * t15;
     let t55: crate::Real = t6 * t6;
-    let t56: crate::Real = t14 / t55;
+    let t56: crate::Real = t15 * t15;
     let t57: crate::Real = t13 * t56;
     let t58: crate::Real = -t57;
     let t59: crate::Real = t7 * t54;
@@ -1016,7 +1016,7 @@ pub fn obs_gyro_jac_x(
 * `p`: [r, L]
 * returns rows [gyro_z], columns [r, L]
 
-10 arithmetic operations (11 before common-subexpression elimination).*/
+10 arithmetic operations (12 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_jac_p(
     x: &[crate::Real; 3usize],
@@ -1035,7 +1035,7 @@ pub fn obs_gyro_jac_p(
     let t9: crate::Real = t3 * t3;
     let t10: crate::Real = t0 * t2;
     let t11: crate::Real = t4 * t10;
-    let t12: crate::Real = t6 / t9;
+    let t12: crate::Real = t7 * t7;
     let t13: crate::Real = t11 * t12;
     let t14: crate::Real = -t13;
     [[t8, t14]]
@@ -1079,7 +1079,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-15 arithmetic operations (45 before common-subexpression elimination).*/
+15 arithmetic operations (67 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[crate::Real; 3usize],
@@ -1104,7 +1104,7 @@ pub fn obs_landmark_jac_x(
     let t14: crate::Real = t6 * t11;
     let t15: crate::Real = -t14;
     let t16: crate::Real = 0.0;
-    let t17: crate::Real = t10 / t8;
+    let t17: crate::Real = t11 * t11;
     let t18: crate::Real = t6 * t17;
     let t19: crate::Real = t4 * t17;
     let t20: crate::Real = -t19;
@@ -1244,7 +1244,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5]]
 
-97 arithmetic operations (1666 before common-subexpression elimination).*/
+97 arithmetic operations (1670 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1275,10 +1275,10 @@ pub fn step_exact_linearized_flat(
     let t18: crate::Real = t15 * t17;
     let t19: crate::Real = t6 + t18;
     let t20: crate::Real = t9 * t19;
-    let t21: crate::Real = t20 * t20;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t20)
         < crate::math::series_switch(0.05)
     {
+        let t21: crate::Real = t20 * t20;
         let t22: crate::Real = 0.16666666666666666;
         let t23: crate::Real = 0.008333333333333333;
         let t24: crate::Real = 0.0001984126984126984;
@@ -1335,7 +1335,7 @@ pub fn step_exact_linearized_flat(
         let t50: crate::Real = t16 - t49;
         let t51: crate::Real = t50 * t35;
         let t86: crate::Real = t49 * t35;
-        let t87: crate::Real = t16 / t21;
+        let t87: crate::Real = t35 * t35;
         let t88: crate::Real = t34 * t87;
         let t89: crate::Real = t86 - t88;
         let t104: crate::Real = t50 * t87;
@@ -1444,7 +1444,7 @@ pub fn step_exact_linearized(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_p[0], step_exact_jac_p[1], step_exact_jac_p[2], step_exact_jac_p[3], step_exact_jac_p[4], step_exact_jac_p[5]]
 
-117 arithmetic operations (2230 before common-subexpression elimination).*/
+117 arithmetic operations (2243 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_with_jac_p_flat(
     x: &[crate::Real; 3usize],
@@ -1475,10 +1475,10 @@ pub fn step_exact_with_jac_p_flat(
     let t18: crate::Real = t15 * t17;
     let t19: crate::Real = t6 + t18;
     let t20: crate::Real = t9 * t19;
-    let t21: crate::Real = t20 * t20;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t20)
         < crate::math::series_switch(0.05)
     {
+        let t21: crate::Real = t20 * t20;
         let t22: crate::Real = 0.16666666666666666;
         let t23: crate::Real = 0.008333333333333333;
         let t24: crate::Real = 0.0001984126984126984;
@@ -1535,7 +1535,7 @@ pub fn step_exact_with_jac_p_flat(
         let t50: crate::Real = t16 - t49;
         let t51: crate::Real = t50 * t35;
         let t94: crate::Real = t49 * t35;
-        let t95: crate::Real = t16 / t21;
+        let t95: crate::Real = t35 * t35;
         let t96: crate::Real = t34 * t95;
         let t97: crate::Real = t94 - t96;
         let t113: crate::Real = t50 * t95;
@@ -1572,7 +1572,7 @@ pub fn step_exact_with_jac_p_flat(
     let t75: crate::Real = t3 * t14;
     let t76: crate::Real = t75 * t17;
     let t77: crate::Real = t8 * t8;
-    let t78: crate::Real = t16 / t77;
+    let t78: crate::Real = t17 * t17;
     let t79: crate::Real = t15 * t78;
     let t80: crate::Real = -t79;
     let t81: crate::Real = t9 * t76;
@@ -1662,7 +1662,7 @@ pub fn step_exact_with_jac_p(
 * `p`: [r, L]
 * returns [obs_gyro[0], obs_gyro_jac_x[0], obs_gyro_jac_x[1], obs_gyro_jac_x[2], obs_gyro_jac_p[0], obs_gyro_jac_p[1]]
 
-11 arithmetic operations (16 before common-subexpression elimination).*/
+11 arithmetic operations (17 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_gyro_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1683,7 +1683,7 @@ pub fn obs_gyro_linearized_flat(
     let t11: crate::Real = t0 * t4;
     let t12: crate::Real = t11 * t8;
     let t13: crate::Real = t3 * t3;
-    let t14: crate::Real = t7 / t13;
+    let t14: crate::Real = t8 * t8;
     let t15: crate::Real = t6 * t14;
     let t16: crate::Real = -t15;
     [t9, t10, t10, t10, t12, t16]
@@ -1712,7 +1712,7 @@ pub fn obs_gyro_linearized(
 * `lm`: [xl, yl]
 * returns [obs_landmark[0], obs_landmark[1], obs_landmark_jac_x[0], obs_landmark_jac_x[1], obs_landmark_jac_x[2], obs_landmark_jac_x[3], obs_landmark_jac_x[4], obs_landmark_jac_x[5], obs_landmark_jac_p[0], obs_landmark_jac_p[1], obs_landmark_jac_p[2], obs_landmark_jac_p[3]]
 
-17 arithmetic operations (57 before common-subexpression elimination).*/
+17 arithmetic operations (79 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1740,7 +1740,7 @@ pub fn obs_landmark_linearized_flat(
     let t17: crate::Real = t7 * t14;
     let t18: crate::Real = -t17;
     let t19: crate::Real = 0.0;
-    let t20: crate::Real = t13 / t9;
+    let t20: crate::Real = t14 * t14;
     let t21: crate::Real = t7 * t20;
     let t22: crate::Real = t5 * t20;
     let t23: crate::Real = -t22;

@@ -438,7 +438,7 @@ pub fn step_exact_jac_x(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [v, w]
 
-75 arithmetic operations (387 before common-subexpression elimination).*/
+75 arithmetic operations (391 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_u(
     x: &[crate::Real; 3usize],
@@ -459,10 +459,10 @@ pub fn step_exact_jac_u(
     let t9: crate::Real = t2 + t4;
     let t10: crate::Real = t6 * t9;
     let t11: crate::Real = 1.0;
-    let t12: crate::Real = t10 * t10;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t10)
         < crate::math::series_switch(0.05)
     {
+        let t12: crate::Real = t10 * t10;
         let t13: crate::Real = 0.16666666666666666;
         let t14: crate::Real = 0.008333333333333333;
         let t15: crate::Real = 0.0001984126984126984;
@@ -520,7 +520,7 @@ pub fn step_exact_jac_u(
         let t42: crate::Real = t11 - t41;
         let t43: crate::Real = t42 * t27;
         let t57: crate::Real = t41 * t27;
-        let t58: crate::Real = t26 / t12;
+        let t58: crate::Real = t27 * t27;
         let t59: crate::Real = t25 * t58;
         let t60: crate::Real = t57 - t59;
         let t75: crate::Real = t42 * t58;
@@ -568,7 +568,7 @@ pub fn step_exact_jac_u(
 * `dt`: [dt]
 * returns rows [x, y, theta], columns [dv, domega]
 
-75 arithmetic operations (387 before common-subexpression elimination).*/
+75 arithmetic operations (391 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_jac_w(
     x: &[crate::Real; 3usize],
@@ -589,10 +589,10 @@ pub fn step_exact_jac_w(
     let t9: crate::Real = t2 + t4;
     let t10: crate::Real = t6 * t9;
     let t11: crate::Real = 1.0;
-    let t12: crate::Real = t10 * t10;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t10)
         < crate::math::series_switch(0.05)
     {
+        let t12: crate::Real = t10 * t10;
         let t13: crate::Real = 0.16666666666666666;
         let t14: crate::Real = 0.008333333333333333;
         let t15: crate::Real = 0.0001984126984126984;
@@ -650,7 +650,7 @@ pub fn step_exact_jac_w(
         let t42: crate::Real = t11 - t41;
         let t43: crate::Real = t42 * t27;
         let t57: crate::Real = t41 * t27;
-        let t58: crate::Real = t26 / t12;
+        let t58: crate::Real = t27 * t27;
         let t59: crate::Real = t25 * t58;
         let t60: crate::Real = t57 - t59;
         let t75: crate::Real = t42 * t58;
@@ -811,7 +811,7 @@ pub fn obs_landmark(
 * `lm`: [xl, yl]
 * returns rows [range, bearing], columns [x, y, theta]
 
-15 arithmetic operations (45 before common-subexpression elimination).*/
+15 arithmetic operations (67 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_jac_x(
     x: &[crate::Real; 3usize],
@@ -836,7 +836,7 @@ pub fn obs_landmark_jac_x(
     let t14: crate::Real = t6 * t11;
     let t15: crate::Real = -t14;
     let t16: crate::Real = 0.0;
-    let t17: crate::Real = t10 / t8;
+    let t17: crate::Real = t11 * t11;
     let t18: crate::Real = t6 * t17;
     let t19: crate::Real = t4 * t17;
     let t20: crate::Real = -t19;
@@ -951,7 +951,7 @@ pub fn inverse_increment(
 * `dt`: [dt]
 * returns [step_exact[0], step_exact[1], step_exact[2], step_exact_jac_x[0], step_exact_jac_x[1], step_exact_jac_x[2], step_exact_jac_x[3], step_exact_jac_x[4], step_exact_jac_x[5], step_exact_jac_x[6], step_exact_jac_x[7], step_exact_jac_x[8], step_exact_jac_w[0], step_exact_jac_w[1], step_exact_jac_w[2], step_exact_jac_w[3], step_exact_jac_w[4], step_exact_jac_w[5]]
 
-91 arithmetic operations (737 before common-subexpression elimination).*/
+91 arithmetic operations (741 before common-subexpression elimination).*/
 #[inline]
 pub fn step_exact_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -974,10 +974,10 @@ pub fn step_exact_linearized_flat(
     let t11: crate::Real = t4 + t6;
     let t12: crate::Real = t8 * t11;
     let t13: crate::Real = 1.0;
-    let t14: crate::Real = t12 * t12;
     let g0: [crate::Real; 4usize] = if crate::math::fabs(t12)
         < crate::math::series_switch(0.05)
     {
+        let t14: crate::Real = t12 * t12;
         let t15: crate::Real = 0.16666666666666666;
         let t16: crate::Real = 0.008333333333333333;
         let t17: crate::Real = 0.0001984126984126984;
@@ -1034,7 +1034,7 @@ pub fn step_exact_linearized_flat(
         let t43: crate::Real = t13 - t42;
         let t44: crate::Real = t43 * t28;
         let t79: crate::Real = t42 * t28;
-        let t80: crate::Real = t13 / t14;
+        let t80: crate::Real = t28 * t28;
         let t81: crate::Real = t27 * t80;
         let t82: crate::Real = t79 - t81;
         let t97: crate::Real = t43 * t80;
@@ -1268,7 +1268,7 @@ pub fn step_exact_with_jac_p(
 * `lm`: [xl, yl]
 * returns [obs_landmark[0], obs_landmark[1], obs_landmark_jac_x[0], obs_landmark_jac_x[1], obs_landmark_jac_x[2], obs_landmark_jac_x[3], obs_landmark_jac_x[4], obs_landmark_jac_x[5], obs_landmark_jac_p[0], obs_landmark_jac_p[1]]
 
-17 arithmetic operations (57 before common-subexpression elimination).*/
+17 arithmetic operations (79 before common-subexpression elimination).*/
 #[inline]
 pub fn obs_landmark_linearized_flat(
     x: &[crate::Real; 3usize],
@@ -1296,7 +1296,7 @@ pub fn obs_landmark_linearized_flat(
     let t17: crate::Real = t7 * t14;
     let t18: crate::Real = -t17;
     let t19: crate::Real = 0.0;
-    let t20: crate::Real = t13 / t9;
+    let t20: crate::Real = t14 * t14;
     let t21: crate::Real = t7 * t20;
     let t22: crate::Real = t5 * t20;
     let t23: crate::Real = -t22;
