@@ -2,7 +2,8 @@
 # The whole test suite, as CI runs it (.ci/run calls this script).
 #  1. install the Python tooling of the CasADi cross-check and of the bag tests
 #     (pinned versions)
-#  2. regenerate the CasADi reference fixtures (and wrenfold's peer kernels)
+#  2. regenerate the CasADi reference fixtures (and the peer benchmark's
+#     CasADi, wrenfold and SymForce kernels)
 #     from the specs and fail if they differ from the committed ones (the
 #     check is live, not frozen)
 #  3. fail if generated/ is stale (kinegen generate --check)
@@ -33,6 +34,8 @@ fi
 python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt
 python3 verify/casadi/reference.py --check
 python3 verify/peers/wrenfold_kernels.py --check
+python3 verify/peers/symforce_kernels.py --check
+python3 verify/casadi/reference.py --check-c
 python3 verify/precision/reference.py --check
 cargo build --workspace --all-targets
 # the binary the workspace build just made: `cargo run --bin kinegen` resolves

@@ -12,6 +12,7 @@ compares the compiled kernels with these fixtures.
     python3 verify/casadi/reference.py --check    # regenerate in memory, compare with the committed ones
     python3 verify/casadi/reference.py --spec my.toml --out DIR   # one spec (kinegen verify uses this)
     python3 verify/casadi/reference.py --emit-c verify/peers/casadi   # C code of the peer benchmark
+    python3 verify/casadi/reference.py --check-c   # fail if that committed C code is stale
 """
 import ast
 import json
@@ -53,6 +54,10 @@ def to_sx(src, env, functions=None):
             return -v if isinstance(n.op, ast.USub) else v
         if isinstance(n, ast.BinOp):
             a, b = go(n.left), go(n.right)
+            # an integer exponent stays an integer, as a user of a symbolic
+            # library writes `x**2` (wrenfold makes a float power a pow call)
+            if isinstance(n.op, ast.Pow) and isinstance(n.right, ast.Constant) and float(n.right.value).is_integer():
+                b = int(n.right.value)
             return {ast.Add: lambda: a + b, ast.Sub: lambda: a - b, ast.Mult: lambda: a * b,
                     ast.Div: lambda: a / b, ast.Pow: lambda: a ** b}[type(n.op)]()
         if isinstance(n, ast.Call):
@@ -79,7 +84,22 @@ def define(spec, env, functions=None):
             raise ValueError(f"unresolvable definitions {list(pending)}")
 
 
-def model(spec):
+def small_angle_factors(a, sin, cos, fabs, where):
+    """(sin(a)/a, (1 - cos a)/a) with the small-angle handling a peer's user
+    would write: the closed form where |a| > 0.05, else its series to a^8 and
+    a^9 (the same switch and order as kinegen's kernels, so that both are
+    equally accurate). `where(c, x, y)` is the peer's own conditional."""
+    a2 = a * a
+    sinc = 1 - a2 / 6 * (1 - a2 / 20 * (1 - a2 / 42 * (1 - a2 / 72)))
+    cosc = a / 2 * (1 - a2 / 12 * (1 - a2 / 30 * (1 - a2 / 56 * (1 - a2 / 90))))
+    big = fabs(a) > 0.05
+    return where(big, sin(a) / a, sinc), where(big, (1 - cos(a)) / a, cosc)
+
+
+def model(spec, guard=False):
+    """The spec's kernels as CasADi expressions. With `guard` the exact step
+    switches to a series near omega dt = 0 (`small_angle_factors`), as the
+    peer benchmark's kernels do; without it, the plain closed form."""
     inputs = [i["name"] for i in spec.get("input", [])]
     noise = [n["name"] for n in spec.get("noise", [])]
     params = [p for p in spec.get("parameter", []) if not p.get("const", False)]
@@ -117,6 +137,9 @@ def model(spec):
     # exact constant-twist motion on SE(2), written from the closed form
     a = om * dt
     s, c = ca.sin(a) / om, (1 - ca.cos(a)) / om
+    if guard:
+        sinc, cosc = small_angle_factors(a, ca.sin, ca.cos, ca.fabs, ca.if_else)
+        s, c = sinc * dt, cosc * dt
     bx, by = s * vx - c * vy, c * vx + s * vy
     exact = ca.vertcat(x + ca.cos(th) * bx - ca.sin(th) * by, y + ca.sin(th) * bx + ca.cos(th) * by, th + a)
     groups = {"x": [sym[n] for n in STATE], "u": [sym[n] for n in inputs], "w": [sym[n] for n in noise],
@@ -189,13 +212,22 @@ def fixtures(spec_path):
     return {"model": spec["name"], "casadi": ca.__version__, "points": points}
 
 
-# The kernels of issue #13's table, fused as a C caller would want them (one
-# CasADi Function per row, all outputs sharing its expression graph).
+# The kernels of the peer benchmark (verify/peers): first each row's outputs
+# in one function, as a caller who needs them together would generate them
+# (one CasADi Function, all outputs sharing its expression graph); then each
+# kernel alone, as firmware that needs only it calls it.
 PEER_KERNELS = [
     ("dd_step", "diff_drive", ["step_exact", "step_exact_jac_x", "step_exact_jac_p"]),
     ("uc_landmark", "unicycle_ekf", ["obs_landmark", "obs_landmark_jac_x"]),
     ("oc_twist", "omni_caster", ["twist"]),
     ("oc_step", "omni_caster", ["step_exact", "step_exact_jac_p"]),
+    ("dd_step_exact", "diff_drive", ["step_exact"]),
+    ("dd_step_exact_jac_x", "diff_drive", ["step_exact_jac_x"]),
+    ("dd_step_exact_jac_p", "diff_drive", ["step_exact_jac_p"]),
+    ("uc_obs_landmark", "unicycle_ekf", ["obs_landmark"]),
+    ("uc_obs_landmark_jac_x", "unicycle_ekf", ["obs_landmark_jac_x"]),
+    ("oc_step_exact", "omni_caster", ["step_exact"]),
+    ("oc_step_exact_jac_p", "omni_caster", ["step_exact_jac_p"]),
 ]
 
 
@@ -207,7 +239,7 @@ def emit_c(out_dir):
     for name, model_name, outs in PEER_KERNELS:
         if model_name not in models:
             spec = tomllib.loads((ROOT / "spec" / f"{model_name}.toml").read_text())
-            models[model_name] = model(spec)
+            models[model_name] = model(spec, guard=True)
         groups, funcs, _ = models[model_name]
         args = funcs[outs[0]][0]
         cg.add(ca.Function(name, [ca.vertcat(*groups[a]) for a in args], [funcs[o][1] for o in outs]))
@@ -216,10 +248,26 @@ def emit_c(out_dir):
     print(f"wrote {out_dir}/casadi_kernels.c and .h (CasADi {ca.__version__})")
 
 
+def check_c():
+    """Fail if the committed peer C code differs from what emit_c writes now."""
+    import tempfile
+    committed = ROOT / "verify" / "peers" / "casadi"
+    with tempfile.TemporaryDirectory() as tmp:
+        emit_c(Path(tmp))
+        stale = [f for f in ("casadi_kernels.c", "casadi_kernels.h")
+                 if (Path(tmp) / f).read_text() != (committed / f).read_text()]
+    if stale:
+        sys.exit(f"{committed}: {', '.join(stale)} stale: run python3 verify/casadi/reference.py --emit-c verify/peers/casadi")
+    print(f"{committed.relative_to(ROOT)}: up to date")
+
+
 def main():
     argv = sys.argv[1:]
     if "--emit-c" in argv:
         emit_c(Path(argv[argv.index("--emit-c") + 1]))
+        return
+    if "--check-c" in argv:
+        check_c()
         return
     check = "--check" in argv
     out_dir = Path(argv[argv.index("--out") + 1]) if "--out" in argv else OUT

@@ -1,17 +1,24 @@
 #!/usr/bin/env python3
-"""wrenfold's Rust code for the peer benchmark (issue #13): the kernels of
+"""wrenfold's code for the peer benchmark (issues #13, #39): the kernels of
 verify/casadi/reference.py's PEER_KERNELS, built from the same specs with
 wrenfold's own symbolic library (its differentiation, its simplification, its
-common-subexpression elimination) and emitted by its Rust generator into
-verify/peers/wrenfold/kernels.rs, never edited by hand.
+common-subexpression elimination) and emitted by its generators, never edited
+by hand, in the three builds a wrenfold user has:
 
-    python3 verify/peers/wrenfold_kernels.py           # write the file
-    python3 verify/peers/wrenfold_kernels.py --check   # fail if the committed file differs
+    verify/peers/wrenfold/kernels.rs       Rust, std's float methods
+    verify/peers/wrenfold/kernels_libm.rs  Rust for no_std: the same code with
+                                           libm's functions (wrenfold's documented
+                                           way: a generator that formats calls)
+    verify/peers/wrenfold/kernels.h        C++ (wrenfold's span headers, which
+                                           its pip package installs)
 
-Each kernel takes its arguments in CasADi's order (so the benchmark feeds both
-the same arrays) and writes every output through an output argument. The exact
-step is the plain closed form, as in the CasADi peer: the benchmark compares
-outputs only where |omega dt| > 0.05.
+    python3 verify/peers/wrenfold_kernels.py           # write the files
+    python3 verify/peers/wrenfold_kernels.py --check   # fail if a committed file differs
+
+Each kernel takes its arguments in CasADi's order (so the benchmark feeds every
+side the same arrays) and writes every output through an output argument. The
+exact step switches to a series where |omega dt| <= 0.05 with wrenfold's own
+conditional (`sym.where`), as kinegen's kernels do.
 """
 import sys
 import tomllib
@@ -22,20 +29,17 @@ from wrenfold import sym, type_info
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "verify" / "casadi"))
-from reference import PEER_KERNELS, STATE, define, to_sx  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from peer_files import inverse3, write_or_check  # noqa: E402
+from reference import PEER_KERNELS, STATE, define, small_angle_factors, to_sx  # noqa: E402
 
-OUT = Path(__file__).resolve().parent / "wrenfold" / "kernels.rs"
+OUT_DIR = Path(__file__).resolve().parent / "wrenfold"
+# libm's names for the functions wrenfold calls (`abs` is `fabs` there, a
+# power `pow`)
+LIBM_NAMES = {"abs": "fabs", "powf": "pow", "powi": "pow"}
 
 FUNCTIONS = {"sin": sym.sin, "cos": sym.cos, "tan": sym.tan, "atan": sym.atan, "atan2": sym.atan2,
              "sqrt": sym.sqrt, "exp": sym.exp, "ln": sym.log, "abs": sym.abs}
-
-
-def inverse3(m):
-    """Inverse of a symbolic 3x3 matrix (list of rows) by its adjugate."""
-    c = [[m[(j + 1) % 3][(i + 1) % 3] * m[(j + 2) % 3][(i + 2) % 3]
-          - m[(j + 1) % 3][(i + 2) % 3] * m[(j + 2) % 3][(i + 1) % 3] for j in range(3)] for i in range(3)]
-    det = sum(m[0][k] * c[k][0] for k in range(3))
-    return [[c[i][j] / det for j in range(3)] for i in range(3)]
 
 
 def kernels(spec, desc, arg_names, wanted):
@@ -74,7 +78,9 @@ def kernels(spec, desc, arg_names, wanted):
         x, y, th, dt = env["x"], env["y"], env["theta"], env["dt"]
         vx, vy, om = twist
         a = om * dt
-        s, c = sym.sin(a) / om, (1 - sym.cos(a)) / om
+        # wrenfold's own conditional: it emits an if/else and evaluates one side
+        sinc, cosc = small_angle_factors(a, sym.sin, sym.cos, sym.abs, sym.where)
+        s, c = sinc * dt, cosc * dt
         bx, by = s * vx - c * vy, c * vx + s * vy
         step = [x + sym.cos(th) * bx - sym.sin(th) * by, y + sym.sin(th) * bx + sym.cos(th) * by, th + a]
         out["step_exact"] = step
@@ -83,19 +89,28 @@ def kernels(spec, desc, arg_names, wanted):
     obs_env = dict(env)
     obs_env.update({"vx": twist[0], "vy": twist[1], "omega": twist[2]})
     for o in spec.get("observation", []):
-        if f"obs_{o['name']}" in wanted:
+        if any(w.startswith(f"obs_{o['name']}") for w in wanted):
             h = [to_sx(e, obs_env, FUNCTIONS) for e in o["expr"]]
             out[f"obs_{o['name']}"] = h
             out[f"obs_{o['name']}_jac_x"] = sym.jacobian(h, [env[n] for n in STATE])
     return out
 
 
-def generate():
-    """The Rust source of every peer kernel, in PEER_KERNELS order."""
+class LibmRustGenerator(cg.RustGenerator):
+    """wrenfold's Rust generator with libm's functions instead of std's
+    float methods, for a no_std build."""
+
+    def format_call_std_function(self, element) -> str:
+        name = str(element.function).split(".")[-1].lower()
+        args = ", ".join(self.format(a) for a in element.args)
+        return f"libm::{LIBM_NAMES.get(name, name)}({args})"
+
+
+def descriptions():
+    """wrenfold's description of every peer kernel, in PEER_KERNELS order."""
     import casadi  # noqa: F401  (reference.py's import; fails early if missing)
-    sys.path.insert(0, str(ROOT / "verify" / "casadi"))
     from reference import model
-    code = []
+    out = []
     for name, model_name, outs in PEER_KERNELS:
         spec = tomllib.loads((ROOT / "spec" / f"{model_name}.toml").read_text())
         _, funcs, _ = model(spec)
@@ -106,23 +121,27 @@ def generate():
             e = exprs[o]
             value = e if isinstance(e, sym.MatrixExpr) else sym.vector(*e)
             desc.add_output_argument(o, False, value)
-        code.append(cg.RustGenerator().generate(cg.transpile(desc)))
+        out.append(cg.transpile(desc))
+    return out
+
+
+def generate():
+    """{file name: text} of the three builds."""
     import wrenfold
-    header = (f"// Generated by verify/peers/wrenfold_kernels.py with wrenfold {wrenfold.__version__}: "
-              "do not edit.\n#![allow(clippy::all, non_snake_case, unused_parens, unused_variables)]\n\n")
-    return header + "\n\n".join(code) + "\n"
+    made = f"Generated by verify/peers/wrenfold_kernels.py with wrenfold {wrenfold.__version__}: do not edit."
+    rust_header = f"// {made}\n#![allow(clippy::all, non_snake_case, unused_parens, unused_variables)]\n\n"
+    defs = descriptions()
+    files = {}
+    for file, generator in (("kernels.rs", cg.RustGenerator()), ("kernels_libm.rs", LibmRustGenerator())):
+        files[file] = rust_header + "\n\n".join(generator.generate(d) for d in defs) + "\n"
+    cpp = "\n\n".join(cg.CppGenerator().generate(d) for d in defs)
+    files["kernels.h"] = (f"// {made}\n#pragma once\n#include <cmath>\n#include <cstdint>\n\n#include <wrenfold/span.h>\n\n"
+                          f"namespace wrenfold_peer {{\n\n{cpp}\n\n}}  // namespace wrenfold_peer\n")
+    return files
 
 
 def main(argv):
-    text = generate()
-    if "--check" in argv:
-        if OUT.read_text() != text:
-            sys.exit(f"{OUT} is stale: run python3 verify/peers/wrenfold_kernels.py")
-        print(f"{OUT.relative_to(ROOT)}: up to date")
-        return
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(text)
-    print(f"wrote {OUT.relative_to(ROOT)}")
+    write_or_check(OUT_DIR, generate(), argv, "verify/peers/wrenfold_kernels.py")
 
 
 if __name__ == "__main__":

@@ -89,6 +89,132 @@ int oc_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw
 #define oc_step_SZ_RES 2
 #define oc_step_SZ_IW 0
 #define oc_step_SZ_W 0
+int dd_step_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int dd_step_exact_checkout(void);
+void dd_step_exact_release(int mem);
+void dd_step_exact_incref(void);
+void dd_step_exact_decref(void);
+casadi_int dd_step_exact_n_in(void);
+casadi_int dd_step_exact_n_out(void);
+casadi_real dd_step_exact_default_in(casadi_int i);
+const char* dd_step_exact_name_in(casadi_int i);
+const char* dd_step_exact_name_out(casadi_int i);
+const casadi_int* dd_step_exact_sparsity_in(casadi_int i);
+const casadi_int* dd_step_exact_sparsity_out(casadi_int i);
+int dd_step_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int dd_step_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define dd_step_exact_SZ_ARG 5
+#define dd_step_exact_SZ_RES 1
+#define dd_step_exact_SZ_IW 0
+#define dd_step_exact_SZ_W 0
+int dd_step_exact_jac_x(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int dd_step_exact_jac_x_checkout(void);
+void dd_step_exact_jac_x_release(int mem);
+void dd_step_exact_jac_x_incref(void);
+void dd_step_exact_jac_x_decref(void);
+casadi_int dd_step_exact_jac_x_n_in(void);
+casadi_int dd_step_exact_jac_x_n_out(void);
+casadi_real dd_step_exact_jac_x_default_in(casadi_int i);
+const char* dd_step_exact_jac_x_name_in(casadi_int i);
+const char* dd_step_exact_jac_x_name_out(casadi_int i);
+const casadi_int* dd_step_exact_jac_x_sparsity_in(casadi_int i);
+const casadi_int* dd_step_exact_jac_x_sparsity_out(casadi_int i);
+int dd_step_exact_jac_x_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int dd_step_exact_jac_x_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define dd_step_exact_jac_x_SZ_ARG 5
+#define dd_step_exact_jac_x_SZ_RES 1
+#define dd_step_exact_jac_x_SZ_IW 0
+#define dd_step_exact_jac_x_SZ_W 0
+int dd_step_exact_jac_p(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int dd_step_exact_jac_p_checkout(void);
+void dd_step_exact_jac_p_release(int mem);
+void dd_step_exact_jac_p_incref(void);
+void dd_step_exact_jac_p_decref(void);
+casadi_int dd_step_exact_jac_p_n_in(void);
+casadi_int dd_step_exact_jac_p_n_out(void);
+casadi_real dd_step_exact_jac_p_default_in(casadi_int i);
+const char* dd_step_exact_jac_p_name_in(casadi_int i);
+const char* dd_step_exact_jac_p_name_out(casadi_int i);
+const casadi_int* dd_step_exact_jac_p_sparsity_in(casadi_int i);
+const casadi_int* dd_step_exact_jac_p_sparsity_out(casadi_int i);
+int dd_step_exact_jac_p_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int dd_step_exact_jac_p_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define dd_step_exact_jac_p_SZ_ARG 5
+#define dd_step_exact_jac_p_SZ_RES 1
+#define dd_step_exact_jac_p_SZ_IW 0
+#define dd_step_exact_jac_p_SZ_W 0
+int uc_obs_landmark(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int uc_obs_landmark_checkout(void);
+void uc_obs_landmark_release(int mem);
+void uc_obs_landmark_incref(void);
+void uc_obs_landmark_decref(void);
+casadi_int uc_obs_landmark_n_in(void);
+casadi_int uc_obs_landmark_n_out(void);
+casadi_real uc_obs_landmark_default_in(casadi_int i);
+const char* uc_obs_landmark_name_in(casadi_int i);
+const char* uc_obs_landmark_name_out(casadi_int i);
+const casadi_int* uc_obs_landmark_sparsity_in(casadi_int i);
+const casadi_int* uc_obs_landmark_sparsity_out(casadi_int i);
+int uc_obs_landmark_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int uc_obs_landmark_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define uc_obs_landmark_SZ_ARG 4
+#define uc_obs_landmark_SZ_RES 1
+#define uc_obs_landmark_SZ_IW 0
+#define uc_obs_landmark_SZ_W 0
+int uc_obs_landmark_jac_x(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int uc_obs_landmark_jac_x_checkout(void);
+void uc_obs_landmark_jac_x_release(int mem);
+void uc_obs_landmark_jac_x_incref(void);
+void uc_obs_landmark_jac_x_decref(void);
+casadi_int uc_obs_landmark_jac_x_n_in(void);
+casadi_int uc_obs_landmark_jac_x_n_out(void);
+casadi_real uc_obs_landmark_jac_x_default_in(casadi_int i);
+const char* uc_obs_landmark_jac_x_name_in(casadi_int i);
+const char* uc_obs_landmark_jac_x_name_out(casadi_int i);
+const casadi_int* uc_obs_landmark_jac_x_sparsity_in(casadi_int i);
+const casadi_int* uc_obs_landmark_jac_x_sparsity_out(casadi_int i);
+int uc_obs_landmark_jac_x_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int uc_obs_landmark_jac_x_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define uc_obs_landmark_jac_x_SZ_ARG 4
+#define uc_obs_landmark_jac_x_SZ_RES 1
+#define uc_obs_landmark_jac_x_SZ_IW 0
+#define uc_obs_landmark_jac_x_SZ_W 0
+int oc_step_exact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int oc_step_exact_checkout(void);
+void oc_step_exact_release(int mem);
+void oc_step_exact_incref(void);
+void oc_step_exact_decref(void);
+casadi_int oc_step_exact_n_in(void);
+casadi_int oc_step_exact_n_out(void);
+casadi_real oc_step_exact_default_in(casadi_int i);
+const char* oc_step_exact_name_in(casadi_int i);
+const char* oc_step_exact_name_out(casadi_int i);
+const casadi_int* oc_step_exact_sparsity_in(casadi_int i);
+const casadi_int* oc_step_exact_sparsity_out(casadi_int i);
+int oc_step_exact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int oc_step_exact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define oc_step_exact_SZ_ARG 5
+#define oc_step_exact_SZ_RES 1
+#define oc_step_exact_SZ_IW 0
+#define oc_step_exact_SZ_W 0
+int oc_step_exact_jac_p(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int oc_step_exact_jac_p_checkout(void);
+void oc_step_exact_jac_p_release(int mem);
+void oc_step_exact_jac_p_incref(void);
+void oc_step_exact_jac_p_decref(void);
+casadi_int oc_step_exact_jac_p_n_in(void);
+casadi_int oc_step_exact_jac_p_n_out(void);
+casadi_real oc_step_exact_jac_p_default_in(casadi_int i);
+const char* oc_step_exact_jac_p_name_in(casadi_int i);
+const char* oc_step_exact_jac_p_name_out(casadi_int i);
+const casadi_int* oc_step_exact_jac_p_sparsity_in(casadi_int i);
+const casadi_int* oc_step_exact_jac_p_sparsity_out(casadi_int i);
+int oc_step_exact_jac_p_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int oc_step_exact_jac_p_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define oc_step_exact_jac_p_SZ_ARG 5
+#define oc_step_exact_jac_p_SZ_RES 1
+#define oc_step_exact_jac_p_SZ_IW 0
+#define oc_step_exact_jac_p_SZ_W 0
 void casadi_kernels_casadi_version(int* major, int* minor, int* patch);
 int casadi_kernels_casadi_int_size(void);
 int casadi_kernels_casadi_real_size(void);

@@ -1,189 +1,610 @@
-//! The peers of the benchmark. CasADi's generated C functions behind a safe
-//! call: inputs as slices, outputs as dense row-major matrices (CasADi writes
-//! only the structural non-zeros, column-major; [`CasadiKernel::dense`]
-//! scatters them). wrenfold's generated Rust ([`wrenfold`], written by
-//! `verify/peers/wrenfold_kernels.py`) reads and writes through its span
-//! traits, implemented here for arrays ([`Col`], [`Out`]).
-use std::os::raw::c_int;
+//! The sides of the peer benchmark (`cargo bench -p kinegen-peers`): kinegen's
+//! generated kernels in its default `no_std` build and with `std`, and every
+//! peer build that pip and cargo install here: CasADi's generated C, wrenfold's
+//! generated Rust with std's float methods and with libm (its no_std build),
+//! and wrenfold's generated C++.
+//!
+//! Every side is called the same way, through one function pointer of type
+//! [`Kernel`]: the arguments behind an [`Args`] and the outputs written into
+//! the caller's buffer. Inside, each side computes its kernel as its users
+//! would compile it (kinegen's and wrenfold's Rust inlined into the adapter,
+//! the C and C++ adapters with the peer's code in the same translation unit),
+//! so the call overhead is one indirect call for every side.
+//!
+//! The kernels are the [`Row`]s: first the outputs a caller needs together
+//! in one call (the peers generate one function for them; kinegen calls its
+//! fused kernel), then each kernel alone, as firmware calls it.
+use wrenfold_traits::{OutputSpan2D, Span2D};
 
-type CasadiInt = i64;
-type Eval = unsafe extern "C" fn(
-    arg: *const *const f64,
-    res: *const *mut f64,
-    iw: *mut CasadiInt,
-    w: *mut f64,
-    mem: c_int,
-) -> c_int;
-type Work =
-    unsafe extern "C" fn(*mut CasadiInt, *mut CasadiInt, *mut CasadiInt, *mut CasadiInt) -> c_int;
-type Sparsity = unsafe extern "C" fn(CasadiInt) -> *const CasadiInt;
-type Count = unsafe extern "C" fn() -> CasadiInt;
+pub mod inputs;
 
-macro_rules! casadi_fn {
-    ($($name:ident, $work:ident, $sp:ident, $nout:ident;)*) => {
-        extern "C" {
-            $(
-                fn $name(arg: *const *const f64, res: *const *mut f64, iw: *mut CasadiInt, w: *mut f64, mem: c_int) -> c_int;
-                fn $work(a: *mut CasadiInt, r: *mut CasadiInt, iw: *mut CasadiInt, w: *mut CasadiInt) -> c_int;
-                fn $sp(i: CasadiInt) -> *const CasadiInt;
-                fn $nout() -> CasadiInt;
-            )*
+/// A kernel's arguments (the ones it does not take are ignored).
+#[repr(C)]
+pub struct Args {
+    pub x: *const f64,
+    pub u: *const f64,
+    pub w: *const f64,
+    pub p: *const f64,
+    pub lm: *const f64,
+    pub dt: f64,
+}
+
+/// The one calling convention of every side.
+pub type Kernel = unsafe extern "C" fn(&Args, *mut f64);
+
+/// The model a row's kernel belongs to.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Model {
+    /// diff_drive: x 3, u 2, w 2, p 5
+    DiffDrive,
+    /// unicycle_ekf: x 3, u 2, p 1, lm 2
+    Unicycle,
+    /// omni_caster (seed 000): x 3, u 9, w 3, p 12
+    OmniCaster,
+}
+
+/// One row of the benchmark: a set of outputs computed in one call.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Row {
+    DdStepJacXJacP,
+    UcLandmarkJacX,
+    OcTwist,
+    OcStepJacP,
+    DdStep,
+    DdJacX,
+    DdJacP,
+    UcLandmark,
+    UcJacX,
+    OcStep,
+    OcJacP,
+}
+
+impl Row {
+    pub const ALL: [Row; 11] = [
+        Row::DdStepJacXJacP,
+        Row::UcLandmarkJacX,
+        Row::OcTwist,
+        Row::OcStepJacP,
+        Row::DdStep,
+        Row::DdJacX,
+        Row::DdJacP,
+        Row::UcLandmark,
+        Row::UcJacX,
+        Row::OcStep,
+        Row::OcJacP,
+    ];
+
+    /// The peers' function name (verify/casadi/reference.py's PEER_KERNELS).
+    pub fn name(self) -> &'static str {
+        match self {
+            Row::DdStepJacXJacP => "dd_step",
+            Row::UcLandmarkJacX => "uc_landmark",
+            Row::OcTwist => "oc_twist",
+            Row::OcStepJacP => "oc_step",
+            Row::DdStep => "dd_step_exact",
+            Row::DdJacX => "dd_step_exact_jac_x",
+            Row::DdJacP => "dd_step_exact_jac_p",
+            Row::UcLandmark => "uc_obs_landmark",
+            Row::UcJacX => "uc_obs_landmark_jac_x",
+            Row::OcStep => "oc_step_exact",
+            Row::OcJacP => "oc_step_exact_jac_p",
+        }
+    }
+
+    /// What the row computes, for the table.
+    pub fn label(self) -> &'static str {
+        match self {
+            Row::DdStepJacXJacP => "diff_drive pose + F_x + F_p",
+            Row::UcLandmarkJacX => "unicycle_ekf landmark h + H_x",
+            Row::OcTwist => "omni_caster twist (least squares)",
+            Row::OcStepJacP => "omni_caster pose + F_p",
+            Row::DdStep => "diff_drive step_exact",
+            Row::DdJacX => "diff_drive step_exact_jac_x",
+            Row::DdJacP => "diff_drive step_exact_jac_p",
+            Row::UcLandmark => "unicycle_ekf obs_landmark",
+            Row::UcJacX => "unicycle_ekf obs_landmark_jac_x",
+            Row::OcStep => "omni_caster step_exact",
+            Row::OcJacP => "omni_caster step_exact_jac_p",
+        }
+    }
+
+    /// Every output in one call (the like-for-like rows) rather than one kernel alone.
+    pub fn one_call(self) -> bool {
+        matches!(
+            self,
+            Row::DdStepJacXJacP | Row::UcLandmarkJacX | Row::OcTwist | Row::OcStepJacP
+        )
+    }
+
+    pub fn model(self) -> Model {
+        match self {
+            Row::DdStepJacXJacP | Row::DdStep | Row::DdJacX | Row::DdJacP => Model::DiffDrive,
+            Row::UcLandmarkJacX | Row::UcLandmark | Row::UcJacX => Model::Unicycle,
+            _ => Model::OmniCaster,
+        }
+    }
+
+    /// Whether the row integrates a step, so that its inputs fall on either
+    /// side of the series switch at |omega dt| = 0.05.
+    pub fn steps(self) -> bool {
+        !matches!(
+            self,
+            Row::UcLandmarkJacX | Row::UcLandmark | Row::UcJacX | Row::OcTwist
+        )
+    }
+
+    /// The outputs' shapes (rows, columns), stored one after the other,
+    /// row-major, in the output buffer.
+    pub fn outputs(self) -> &'static [(usize, usize)] {
+        match self {
+            Row::DdStepJacXJacP => &[(3, 1), (3, 3), (3, 5)],
+            Row::UcLandmarkJacX => &[(2, 1), (2, 3)],
+            Row::OcTwist | Row::DdStep | Row::OcStep => &[(3, 1)],
+            Row::OcStepJacP => &[(3, 1), (3, 12)],
+            Row::DdJacX => &[(3, 3)],
+            Row::DdJacP => &[(3, 5)],
+            Row::UcLandmark => &[(2, 1)],
+            Row::UcJacX => &[(2, 3)],
+            Row::OcJacP => &[(3, 12)],
+        }
+    }
+
+    /// Entries in the output buffer.
+    pub fn entries(self) -> usize {
+        self.outputs().iter().map(|(r, c)| r * c).sum()
+    }
+}
+
+/// How a side lays out its outputs in the buffer.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Layout {
+    /// each output dense and row-major, one after the other
+    RowMajor,
+    /// each output dense and column-major (Eigen's and nalgebra's layout)
+    ColMajor,
+    /// CasADi's: each output's structural non-zeros, column-major
+    CasadiSparse,
+}
+
+/// One build of one tool.
+pub struct Side {
+    pub name: &'static str,
+    /// kinegen (the side being measured) or a peer
+    pub kinegen: bool,
+    pub layout: Layout,
+    pub kernel: fn(Row) -> Option<Kernel>,
+}
+
+/// Every side this build has (wrenfold C++ only where its headers were found
+/// at build time: see build.rs).
+pub fn sides() -> Vec<Side> {
+    let mut all = vec![
+        Side {
+            name: "kinegen no_std",
+            kinegen: true,
+            layout: Layout::RowMajor,
+            kernel: kinegen_no_std::kernel,
+        },
+        Side {
+            name: "kinegen std",
+            kinegen: true,
+            layout: Layout::RowMajor,
+            kernel: kinegen_std::kernel,
+        },
+        Side {
+            name: "CasADi C",
+            kinegen: false,
+            layout: Layout::CasadiSparse,
+            kernel: casadi::kernel,
+        },
+        Side {
+            name: "wrenfold Rust",
+            kinegen: false,
+            layout: Layout::RowMajor,
+            kernel: wrenfold_std::kernel,
+        },
+        Side {
+            name: "wrenfold Rust libm",
+            kinegen: false,
+            layout: Layout::RowMajor,
+            kernel: wrenfold_libm::kernel,
+        },
+    ];
+    #[cfg(wrenfold_cpp)]
+    all.push(Side {
+        name: "wrenfold C++",
+        kinegen: false,
+        layout: Layout::RowMajor,
+        kernel: wrenfold_cpp::kernel,
+    });
+    #[cfg(symforce_cpp)]
+    all.push(Side {
+        name: "SymForce C++",
+        kinegen: false,
+        layout: Layout::ColMajor,
+        kernel: symforce_cpp::kernel,
+    });
+    all
+}
+
+/// Whether the wrenfold C++ peer was built (its headers found).
+pub const WRENFOLD_CPP: bool = cfg!(wrenfold_cpp);
+/// Whether the SymForce C++ peer was built (Eigen's headers found).
+pub const SYMFORCE_CPP: bool = cfg!(symforce_cpp);
+
+/// A side's output buffer as the row's outputs, dense and row-major.
+pub fn dense(row: Row, layout: Layout, out: &[f64]) -> Vec<f64> {
+    match layout {
+        Layout::RowMajor => out[..row.entries()].to_vec(),
+        Layout::CasadiSparse => casadi::dense(row, out),
+        Layout::ColMajor => {
+            let mut at = 0;
+            let mut d = Vec::with_capacity(row.entries());
+            for &(r, c) in row.outputs() {
+                d.extend((0..r * c).map(|k| out[at + (k % c) * r + k / c]));
+                at += r * c;
+            }
+            d
+        }
+    }
+}
+
+/// `n` values at `p` as an array reference.
+///
+/// # Safety
+/// `p` points at `N` readable f64 that outlive the call.
+#[inline(always)]
+unsafe fn arr<'a, const N: usize>(p: *const f64) -> &'a [f64; N] {
+    &*(p as *const [f64; N])
+}
+
+/// Write an output array (any shape of f64 arrays) at `o`.
+///
+/// # Safety
+/// `o` points at `size_of::<T>() / 8` writable f64.
+#[inline(always)]
+unsafe fn put<T: Copy>(o: *mut f64, v: T) {
+    o.cast::<T>().write_unaligned(v)
+}
+
+/// `kernel(row)` for a side whose adapters have the names below (kinegen's
+/// and wrenfold's Rust sides).
+macro_rules! kernels_by_row {
+    () => {
+        pub fn kernel(row: Row) -> Option<Kernel> {
+            Some(match row {
+                Row::DdStepJacXJacP => dd_all,
+                Row::UcLandmarkJacX => uc_all,
+                Row::OcTwist => oc_twist,
+                Row::OcStepJacP => oc_all,
+                Row::DdStep => dd_step,
+                Row::DdJacX => dd_jac_x,
+                Row::DdJacP => dd_jac_p,
+                Row::UcLandmark => uc_obs,
+                Row::UcJacX => uc_jac_x,
+                Row::OcStep => oc_step,
+                Row::OcJacP => oc_jac_p,
+            })
         }
     };
 }
 
-casadi_fn! {
-    dd_step, dd_step_work, dd_step_sparsity_out, dd_step_n_out;
-    uc_landmark, uc_landmark_work, uc_landmark_sparsity_out, uc_landmark_n_out;
-    oc_twist, oc_twist_work, oc_twist_sparsity_out, oc_twist_n_out;
-    oc_step, oc_step_work, oc_step_sparsity_out, oc_step_n_out;
-}
+/// kinegen's adapters over one build of the generated crate.
+macro_rules! kinegen_side {
+    ($side:ident, $krate:ident) => {
+        mod $side {
+            use super::{arr, put, Args, Kernel, Row};
+            use $krate::{diff_drive as dd, omni_caster as oc, unicycle_ekf as uc};
 
-/// One CasADi function with its work arrays and output buffers.
-pub struct CasadiKernel {
-    eval: Eval,
-    iw: Vec<CasadiInt>,
-    w: Vec<f64>,
-    /// (rows, cols, column starts, row indices) per output
-    sparsity: Vec<(usize, usize, Vec<usize>, Vec<usize>)>,
-    /// non-zeros per output, as CasADi writes them
-    pub out: Vec<Vec<f64>>,
-    /// pointers into `out` (its buffers never move), built once so that a call
-    /// does not allocate
-    res: Vec<*mut f64>,
-}
-
-impl CasadiKernel {
-    fn new(eval: Eval, work: Work, sparsity: Sparsity, n_out: Count) -> CasadiKernel {
-        // SAFETY: the CasADi-generated query functions only read static tables
-        // and write the four sizes.
-        unsafe {
-            let (mut a, mut r, mut iw, mut w) = (0, 0, 0, 0);
-            work(&mut a, &mut r, &mut iw, &mut w);
-            let sparsity: Vec<_> = (0..n_out())
-                .map(|i| {
-                    let p = sparsity(i);
-                    let (rows, cols) = (*p as usize, *p.add(1) as usize);
-                    // CasADi's compact form: [rows, cols, 1] for a dense matrix,
-                    // else [rows, cols, column starts (from 0)..., row indices...]
-                    if *p.add(2) == 1 {
-                        let colind = (0..=cols).map(|c| c * rows).collect();
-                        let row = (0..rows * cols).map(|k| k % rows).collect();
-                        return (rows, cols, colind, row);
-                    }
-                    let colind: Vec<usize> = (0..=cols).map(|k| *p.add(2 + k) as usize).collect();
-                    let nnz = colind[cols];
-                    let row = (0..nnz).map(|k| *p.add(3 + cols + k) as usize).collect();
-                    (rows, cols, colind, row)
-                })
-                .collect();
-            let mut out: Vec<Vec<f64>> = sparsity.iter().map(|s| vec![0.0; s.2[s.1]]).collect();
-            let res = out.iter_mut().map(|o| o.as_mut_ptr()).collect();
-            CasadiKernel {
-                eval,
-                iw: vec![0; iw as usize],
-                w: vec![0.0; w as usize],
-                sparsity,
-                out,
-                res,
+            macro_rules! step {
+                ($m:ident, $a:ident, $f:ident) => {
+                    $m::$f(arr($a.x), arr($a.u), arr($a.w), arr($a.p), $a.dt)
+                };
             }
-        }
-    }
-
-    /// Evaluate on `args` (one slice per CasADi input, in its order).
-    #[inline]
-    pub fn call(&mut self, args: &[*const f64]) {
-        // SAFETY: args point at vectors of the sizes the function was generated
-        // for (checked by the benchmark's agreement test); res at buffers of each
-        // output's non-zero count; iw and w at the sizes it asked for.
-        unsafe {
-            (self.eval)(
-                args.as_ptr(),
-                self.res.as_ptr(),
-                self.iw.as_mut_ptr(),
-                self.w.as_mut_ptr(),
-                0,
-            );
-        }
-    }
-
-    /// Output `i` as a dense row-major matrix (rows x cols).
-    pub fn dense(&self, i: usize) -> Vec<f64> {
-        let (rows, cols, colind, row) = &self.sparsity[i];
-        let mut d = vec![0.0; rows * cols];
-        for c in 0..*cols {
-            for k in colind[c]..colind[c + 1] {
-                d[row[k] * cols + c] = self.out[i][k];
+            macro_rules! obs {
+                ($a:ident, $f:ident) => {
+                    uc::$f(arr($a.x), arr($a.u), arr($a.p), arr($a.lm))
+                };
             }
+            unsafe extern "C" fn dd_all(a: &Args, o: *mut f64) {
+                let (s, fx, fp) = step!(dd, a, step_exact_with_jac_p);
+                put(o, s);
+                put(o.add(3), fx);
+                put(o.add(12), fp);
+            }
+            unsafe extern "C" fn uc_all(a: &Args, o: *mut f64) {
+                // the fused kernel's H_p, not among the row's outputs, is
+                // left unwritten (the optimiser drops what nobody reads)
+                let (h, hx, _) = obs!(a, obs_landmark_linearized);
+                put(o, h);
+                put(o.add(2), hx);
+            }
+            unsafe extern "C" fn oc_twist(a: &Args, o: *mut f64) {
+                put(o, oc::twist(arr(a.u), arr(a.p)));
+            }
+            unsafe extern "C" fn oc_all(a: &Args, o: *mut f64) {
+                let (s, _, fp) = step!(oc, a, step_exact_with_jac_p);
+                put(o, s);
+                put(o.add(3), fp);
+            }
+            unsafe extern "C" fn dd_step(a: &Args, o: *mut f64) {
+                put(o, step!(dd, a, step_exact));
+            }
+            unsafe extern "C" fn dd_jac_x(a: &Args, o: *mut f64) {
+                put(o, step!(dd, a, step_exact_jac_x));
+            }
+            unsafe extern "C" fn dd_jac_p(a: &Args, o: *mut f64) {
+                put(o, step!(dd, a, step_exact_jac_p));
+            }
+            unsafe extern "C" fn uc_obs(a: &Args, o: *mut f64) {
+                put(o, obs!(a, obs_landmark));
+            }
+            unsafe extern "C" fn uc_jac_x(a: &Args, o: *mut f64) {
+                put(o, obs!(a, obs_landmark_jac_x));
+            }
+            unsafe extern "C" fn oc_step(a: &Args, o: *mut f64) {
+                put(o, step!(oc, a, step_exact));
+            }
+            unsafe extern "C" fn oc_jac_p(a: &Args, o: *mut f64) {
+                put(o, step!(oc, a, step_exact_jac_p));
+            }
+
+            kernels_by_row!();
         }
-        d
-    }
+    };
 }
 
-/// diff_drive: (x, u, w, p, dt) -> step_exact, step_exact_jac_x, step_exact_jac_p
-pub fn diff_drive_step() -> CasadiKernel {
-    CasadiKernel::new(dd_step, dd_step_work, dd_step_sparsity_out, dd_step_n_out)
-}
-/// unicycle_ekf: (x, u, p, lm) -> obs_landmark, obs_landmark_jac_x
-pub fn unicycle_landmark() -> CasadiKernel {
-    CasadiKernel::new(
-        uc_landmark,
-        uc_landmark_work,
-        uc_landmark_sparsity_out,
-        uc_landmark_n_out,
-    )
-}
-/// omni_caster: (u, p) -> twist
-pub fn omni_caster_twist() -> CasadiKernel {
-    CasadiKernel::new(
-        oc_twist,
-        oc_twist_work,
-        oc_twist_sparsity_out,
-        oc_twist_n_out,
-    )
-}
-/// omni_caster: (x, u, w, p, dt) -> step_exact, step_exact_jac_p
-pub fn omni_caster_step() -> CasadiKernel {
-    CasadiKernel::new(oc_step, oc_step_work, oc_step_sparsity_out, oc_step_n_out)
-}
+kinegen_side!(kinegen_no_std, kinegen_generated);
+kinegen_side!(kinegen_std, kinegen_generated_std);
 
-/// wrenfold's generated kernels (same names and argument order as CasADi's),
-/// kept as wrenfold wrote them (`wrenfold_kernels.py --check` compares).
-#[rustfmt::skip]
-#[path = "../wrenfold/kernels.rs"]
-pub mod wrenfold;
+/// An input vector of wrenfold's Rust kernels.
+pub struct In<const N: usize>(*const f64);
 
-/// An input column for wrenfold's kernels.
-pub struct Col<'a, const N: usize>(pub &'a [f64; N]);
-
-impl<const N: usize> wrenfold_traits::Span2D<N, 1> for Col<'_, N> {
+impl<const N: usize> Span2D<N, 1> for In<N> {
     type ValueType = f64;
     #[inline(always)]
     fn get(&self, i: usize, _j: usize) -> f64 {
-        self.0[i]
+        // SAFETY: the benchmark's arrays hold N values for this argument
+        unsafe { *self.0.add(i) }
     }
 }
 
-/// An output matrix of wrenfold's kernels, row-major.
-pub struct Out<const R: usize, const C: usize>(pub [[f64; C]; R]);
+/// An output matrix of wrenfold's Rust kernels, written row-major into the
+/// caller's buffer.
+pub struct Out<const R: usize, const C: usize>(*mut f64);
 
-impl<const R: usize, const C: usize> Default for Out<R, C> {
-    fn default() -> Self {
-        Out([[0.0; C]; R])
-    }
-}
-
-impl<const R: usize, const C: usize> Out<R, C> {
-    /// The entries, row after row.
-    pub fn flat(&self) -> Vec<f64> {
-        self.0.concat()
-    }
-}
-
-impl<const R: usize, const C: usize> wrenfold_traits::OutputSpan2D<R, C> for Out<R, C> {
+impl<const R: usize, const C: usize> OutputSpan2D<R, C> for Out<R, C> {
     type ValueType = f64;
     #[inline(always)]
     fn set(&mut self, i: usize, j: usize, val: f64) {
-        self.0[i][j] = val;
+        // SAFETY: the buffer holds the row's outputs (Row::entries)
+        unsafe { *self.0.add(i * C + j) = val }
+    }
+}
+
+/// wrenfold's Rust kernels (std's float methods, and libm's), kept as
+/// wrenfold wrote them (`wrenfold_kernels.py --check` compares).
+#[rustfmt::skip]
+#[path = "../wrenfold/kernels.rs"]
+pub mod wrenfold;
+#[rustfmt::skip]
+#[path = "../wrenfold/kernels_libm.rs"]
+pub mod wrenfold_no_std;
+
+/// A wrenfold step kernel on the arguments behind `a`.
+macro_rules! wf_step {
+    ($wf:ident, $a:ident, $nu:literal, $nw:literal, $np:literal, $f:ident, $($out:expr),+) => {
+        $wf::$f(&In::<3>($a.x), &In::<$nu>($a.u), &In::<$nw>($a.w),
+                &In::<$np>($a.p), $a.dt, $($out),+)
+    };
+}
+
+/// A wrenfold observation kernel on the arguments behind `a`.
+macro_rules! wf_obs {
+    ($wf:ident, $a:ident, $f:ident, $($out:expr),+) => {
+        $wf::$f(&In::<3>($a.x), &In::<2>($a.u), &In::<1>($a.p), &In::<2>($a.lm), $($out),+)
+    };
+}
+
+macro_rules! wrenfold_side {
+    ($side:ident, $m:ident) => {
+        mod $side {
+            use super::{$m as wf, Args, In, Kernel, Out, Row};
+
+            unsafe extern "C" fn dd_all(a: &Args, o: *mut f64) {
+                wf_step!(
+                    wf,
+                    a,
+                    2,
+                    2,
+                    5,
+                    dd_step,
+                    &mut Out::<3, 1>(o),
+                    &mut Out::<3, 3>(o.add(3)),
+                    &mut Out::<3, 5>(o.add(12))
+                );
+            }
+            unsafe extern "C" fn uc_all(a: &Args, o: *mut f64) {
+                wf_obs!(
+                    wf,
+                    a,
+                    uc_landmark,
+                    &mut Out::<2, 1>(o),
+                    &mut Out::<2, 3>(o.add(2))
+                );
+            }
+            unsafe extern "C" fn oc_twist(a: &Args, o: *mut f64) {
+                wf::oc_twist(&In::<9>(a.u), &In::<12>(a.p), &mut Out::<3, 1>(o));
+            }
+            unsafe extern "C" fn oc_all(a: &Args, o: *mut f64) {
+                wf_step!(
+                    wf,
+                    a,
+                    9,
+                    3,
+                    12,
+                    oc_step,
+                    &mut Out::<3, 1>(o),
+                    &mut Out::<3, 12>(o.add(3))
+                );
+            }
+            unsafe extern "C" fn dd_step(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 2, 2, 5, dd_step_exact, &mut Out::<3, 1>(o));
+            }
+            unsafe extern "C" fn dd_jac_x(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 2, 2, 5, dd_step_exact_jac_x, &mut Out::<3, 3>(o));
+            }
+            unsafe extern "C" fn dd_jac_p(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 2, 2, 5, dd_step_exact_jac_p, &mut Out::<3, 5>(o));
+            }
+            unsafe extern "C" fn uc_obs(a: &Args, o: *mut f64) {
+                wf_obs!(wf, a, uc_obs_landmark, &mut Out::<2, 1>(o));
+            }
+            unsafe extern "C" fn uc_jac_x(a: &Args, o: *mut f64) {
+                wf_obs!(wf, a, uc_obs_landmark_jac_x, &mut Out::<2, 3>(o));
+            }
+            unsafe extern "C" fn oc_step(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 9, 3, 12, oc_step_exact, &mut Out::<3, 1>(o));
+            }
+            unsafe extern "C" fn oc_jac_p(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 9, 3, 12, oc_step_exact_jac_p, &mut Out::<3, 12>(o));
+            }
+
+            kernels_by_row!();
+        }
+    };
+}
+
+wrenfold_side!(wrenfold_std, wrenfold);
+wrenfold_side!(wrenfold_libm, wrenfold_no_std);
+
+/// The C and C++ adapters (casadi/adapters.c, wrenfold/adapters.cpp) by
+/// row, from one list of names.
+macro_rules! foreign_side {
+    ($side:ident, $($cfg:meta)?, $( $row:ident => $sym:ident ),+ $(,)?) => {
+        $(#[$cfg])?
+        mod $side {
+            use super::{Args, Kernel, Row};
+            extern "C" {
+                $( fn $sym(a: &Args, out: *mut f64); )+
+            }
+            pub fn kernel(row: Row) -> Option<Kernel> {
+                match row {
+                    $( Row::$row => Some($sym as Kernel), )+
+                }
+            }
+        }
+    };
+}
+
+foreign_side!(wrenfold_cpp, cfg(wrenfold_cpp),
+    DdStepJacXJacP => wrenfold_cpp_dd_step,
+    UcLandmarkJacX => wrenfold_cpp_uc_landmark,
+    OcTwist => wrenfold_cpp_oc_twist,
+    OcStepJacP => wrenfold_cpp_oc_step,
+    DdStep => wrenfold_cpp_dd_step_exact,
+    DdJacX => wrenfold_cpp_dd_step_exact_jac_x,
+    DdJacP => wrenfold_cpp_dd_step_exact_jac_p,
+    UcLandmark => wrenfold_cpp_uc_obs_landmark,
+    UcJacX => wrenfold_cpp_uc_obs_landmark_jac_x,
+    OcStep => wrenfold_cpp_oc_step_exact,
+    OcJacP => wrenfold_cpp_oc_step_exact_jac_p,
+);
+
+foreign_side!(symforce_cpp, cfg(symforce_cpp),
+    DdStepJacXJacP => symforce_cpp_dd_step,
+    UcLandmarkJacX => symforce_cpp_uc_landmark,
+    OcTwist => symforce_cpp_oc_twist,
+    OcStepJacP => symforce_cpp_oc_step,
+    DdStep => symforce_cpp_dd_step_exact,
+    DdJacX => symforce_cpp_dd_step_exact_jac_x,
+    DdJacP => symforce_cpp_dd_step_exact_jac_p,
+    UcLandmark => symforce_cpp_uc_obs_landmark,
+    UcJacX => symforce_cpp_uc_obs_landmark_jac_x,
+    OcStep => symforce_cpp_oc_step_exact,
+    OcJacP => symforce_cpp_oc_step_exact_jac_p,
+);
+
+/// CasADi's adapters, and its sparse output layout.
+mod casadi {
+    use super::{Args, Kernel, Row};
+    use std::os::raw::c_int;
+    type CasadiInt = i64;
+
+    macro_rules! casadi_rows {
+        ($( $row:ident: $adapter:ident, $init:ident, $sparsity:ident, $n_out:ident; )+) => {
+            extern "C" {
+                $(
+                    fn $adapter(a: &Args, out: *mut f64);
+                    fn $init() -> c_int;
+                    fn $sparsity(i: CasadiInt) -> *const CasadiInt;
+                    fn $n_out() -> CasadiInt;
+                )+
+            }
+            pub fn kernel(row: Row) -> Option<Kernel> {
+                // SAFETY: the init functions only read CasADi's static tables
+                // and set the adapter's output offsets
+                match row {
+                    $( Row::$row => (unsafe { $init() } > 0).then_some($adapter as Kernel), )+
+                }
+            }
+            /// (rows, cols, column starts, row indices) of each output
+            fn sparsity(row: Row) -> Vec<(usize, usize, Vec<usize>, Vec<usize>)> {
+                // SAFETY: CasADi's query functions return static tables
+                match row {
+                    $( Row::$row => (0..unsafe { $n_out() }).map(|i| unsafe { compact($sparsity(i)) }).collect(), )+
+                }
+            }
+        };
+    }
+
+    casadi_rows! {
+        DdStepJacXJacP: casadi_adapter_dd_step, casadi_adapter_init_dd_step, dd_step_sparsity_out, dd_step_n_out;
+        UcLandmarkJacX: casadi_adapter_uc_landmark, casadi_adapter_init_uc_landmark, uc_landmark_sparsity_out, uc_landmark_n_out;
+        OcTwist: casadi_adapter_oc_twist, casadi_adapter_init_oc_twist, oc_twist_sparsity_out, oc_twist_n_out;
+        OcStepJacP: casadi_adapter_oc_step, casadi_adapter_init_oc_step, oc_step_sparsity_out, oc_step_n_out;
+        DdStep: casadi_adapter_dd_step_exact, casadi_adapter_init_dd_step_exact, dd_step_exact_sparsity_out, dd_step_exact_n_out;
+        DdJacX: casadi_adapter_dd_step_exact_jac_x, casadi_adapter_init_dd_step_exact_jac_x, dd_step_exact_jac_x_sparsity_out, dd_step_exact_jac_x_n_out;
+        DdJacP: casadi_adapter_dd_step_exact_jac_p, casadi_adapter_init_dd_step_exact_jac_p, dd_step_exact_jac_p_sparsity_out, dd_step_exact_jac_p_n_out;
+        UcLandmark: casadi_adapter_uc_obs_landmark, casadi_adapter_init_uc_obs_landmark, uc_obs_landmark_sparsity_out, uc_obs_landmark_n_out;
+        UcJacX: casadi_adapter_uc_obs_landmark_jac_x, casadi_adapter_init_uc_obs_landmark_jac_x, uc_obs_landmark_jac_x_sparsity_out, uc_obs_landmark_jac_x_n_out;
+        OcStep: casadi_adapter_oc_step_exact, casadi_adapter_init_oc_step_exact, oc_step_exact_sparsity_out, oc_step_exact_n_out;
+        OcJacP: casadi_adapter_oc_step_exact_jac_p, casadi_adapter_init_oc_step_exact_jac_p, oc_step_exact_jac_p_sparsity_out, oc_step_exact_jac_p_n_out;
+    }
+
+    /// CasADi's compact sparsity: [rows, cols, 1] for a dense matrix, else
+    /// [rows, cols, column starts (cols + 1)..., row indices...].
+    ///
+    /// # Safety
+    /// `p` is a table from a CasADi `*_sparsity_out` function.
+    unsafe fn compact(p: *const CasadiInt) -> (usize, usize, Vec<usize>, Vec<usize>) {
+        let (rows, cols) = (*p as usize, *p.add(1) as usize);
+        if *p.add(2) == 1 {
+            let colind = (0..=cols).map(|c| c * rows).collect();
+            let row = (0..rows * cols).map(|k| k % rows).collect();
+            return (rows, cols, colind, row);
+        }
+        let colind: Vec<usize> = (0..=cols).map(|k| *p.add(2 + k) as usize).collect();
+        let nnz = colind[cols];
+        let row = (0..nnz).map(|k| *p.add(3 + cols + k) as usize).collect();
+        (rows, cols, colind, row)
+    }
+
+    /// CasADi's outputs (non-zeros, column-major, one after the other) as
+    /// the row's dense row-major outputs.
+    pub fn dense(row: Row, out: &[f64]) -> Vec<f64> {
+        let mut d = Vec::with_capacity(row.entries());
+        let mut at = 0;
+        for (rows, cols, colind, ri) in sparsity(row) {
+            let mut m = vec![0.0; rows * cols];
+            for c in 0..cols {
+                for k in colind[c]..colind[c + 1] {
+                    m[ri[k] * cols + c] = out[at + k];
+                }
+            }
+            at += colind[cols];
+            d.extend(m);
+        }
+        d
     }
 }
