@@ -27,7 +27,7 @@
 //! differences of the step (two steps per parameter), both kinegen no_std.
 use kinegen_generated::{diff_drive as dd, omni_caster as oc};
 use kinegen_peers::inputs::{self, Sample};
-use kinegen_peers::{dense, sides, Args, Kernel, Layout, Model, Row, Side};
+use kinegen_peers::{disagreement, sides, Args, Kernel, Layout, Model, Row, Side};
 use rand::SeedableRng;
 use std::hint::black_box;
 use std::time::Instant;
@@ -35,8 +35,6 @@ use std::time::Instant;
 /// Motions drawn; each class of a step row is at most this long.
 const N: usize = 90_000;
 const REPS: usize = 9;
-/// Calls per class checked for agreement before timing.
-const CHECKED: usize = 5_000;
 
 /// ns per call of `k` over `args`.
 fn time(k: Kernel, args: &[Args], out: &mut [f64]) -> f64 {
@@ -68,36 +66,6 @@ fn race(kernels: &[Kernel], args: &[Args]) -> Vec<f64> {
             r[REPS / 2]
         })
         .collect()
-}
-
-/// Largest difference between two sides' outputs over `args`, relative to
-/// each output's largest magnitude.
-fn disagreement(row: Row, a: (Kernel, Layout), b: (Kernel, Layout), args: &[Args]) -> f64 {
-    let (mut oa, mut ob) = (vec![0.0; 64], vec![0.0; 64]);
-    let mut worst = 0.0f64;
-    for call in args.iter().take(CHECKED) {
-        // SAFETY: as in `time`
-        unsafe {
-            a.0(call, oa.as_mut_ptr());
-            b.0(call, ob.as_mut_ptr());
-        }
-        let (da, db) = (dense(row, a.1, &oa), dense(row, b.1, &ob));
-        let mut at = 0;
-        for (r, c) in row.outputs() {
-            let (xa, xb) = (&da[at..at + r * c], &db[at..at + r * c]);
-            at += r * c;
-            let scale = xa.iter().chain(xb).fold(1e-300f64, |m, v| m.max(v.abs()));
-            for (p, q) in xa.iter().zip(xb) {
-                let e = if p.is_finite() && q.is_finite() {
-                    (p - q).abs() / scale
-                } else {
-                    f64::INFINITY
-                };
-                worst = worst.max(e);
-            }
-        }
-    }
-    worst
 }
 
 /// The input classes of a row: the realistic mix, and for a step each side
@@ -148,7 +116,12 @@ fn bench_row(row: Row, samples: &[Sample], long: &[Sample], sides: &[Side]) {
             let worst = classes
                 .iter()
                 .map(|(_, args, _)| {
-                    disagreement(row, (reference, Layout::RowMajor), (k, side.layout), args)
+                    disagreement(
+                        row,
+                        (reference, Layout::RowMajor),
+                        (k, side.layout),
+                        &args[..args.len().min(5_000)],
+                    )
                 })
                 .fold(0.0, f64::max);
             if worst > 1e-9 {

@@ -249,6 +249,37 @@ pub fn dense(row: Row, layout: Layout, out: &[f64]) -> Vec<f64> {
     }
 }
 
+/// Largest difference between two sides' outputs over `args`, relative to
+/// each output's largest magnitude (infinite where either is not finite).
+pub fn disagreement(row: Row, a: (Kernel, Layout), b: (Kernel, Layout), args: &[Args]) -> f64 {
+    let (mut oa, mut ob) = (vec![0.0; 64], vec![0.0; 64]);
+    let mut worst = 0.0f64;
+    for call in args {
+        // SAFETY: the arguments point into live samples of the row's model
+        // and the buffers hold more than any row's outputs
+        unsafe {
+            a.0(call, oa.as_mut_ptr());
+            b.0(call, ob.as_mut_ptr());
+        }
+        let (da, db) = (dense(row, a.1, &oa), dense(row, b.1, &ob));
+        let mut at = 0;
+        for (r, c) in row.outputs() {
+            let (xa, xb) = (&da[at..at + r * c], &db[at..at + r * c]);
+            at += r * c;
+            let scale = xa.iter().chain(xb).fold(1e-300f64, |m, v| m.max(v.abs()));
+            for (p, q) in xa.iter().zip(xb) {
+                let e = if p.is_finite() && q.is_finite() {
+                    (p - q).abs() / scale
+                } else {
+                    f64::INFINITY
+                };
+                worst = worst.max(e);
+            }
+        }
+    }
+    worst
+}
+
 /// `n` values at `p` as an array reference.
 ///
 /// # Safety
