@@ -1,0 +1,514 @@
+//! The weighted residuals a calibration minimises, their Jacobian, and the
+//! Gauss-Newton normal equations summed run by run without forming it.
+use super::FitOptions;
+use crate::deadreckon;
+use crate::interp::{chain, lerp3};
+use crate::log::wrap;
+use crate::model::Runner;
+use crate::rows::Rows;
+use crate::run::Run;
+use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+
+/// Whether a run's start heading is refined: it has measurements of the absolute
+/// pose. A run that starts moving, or a segment cut from a long run, has only
+/// one noisy sample of it. A rest of half a second or more averages the noise
+/// down but not away: with a heading noise of 0.002 rad over 20 rows, 4e-4 rad
+/// is left, 1.2 cm across 30 m of driving, which a spec's own clean simulated
+/// log then showed as structure to explain (issue 12). Such a start is refined
+/// within its measured uncertainty (a prior, see [`start_prior`]), so a wrong
+/// model cannot rotate its track further than the measurement allows to hide
+/// part of a missing effect such as a toe angle.
+///
+/// Without ground truth the start is placed from the landmarks seen during the
+/// rest, and a rested start stays where they place it.
+pub(super) fn has_start_nuisance(run: &Run, o: &FitOptions) -> bool {
+    let rested = run.rest_steps() > 0 && run.t[run.rest_steps()] - run.t[0] >= 0.5;
+    o.estimate_start
+        && ((o.use_pose && run.gt.is_some())
+            || (!rested && o.use_landmarks && !run.landmarks.is_empty()))
+}
+
+/// The standard deviation of a run's measured start heading when the rest it
+/// starts with measures it (None: refined freely).
+pub(super) fn start_prior(run: &Run, o: &FitOptions) -> Option<f64> {
+    o.use_pose.then(|| run.start_heading_std()).flatten()
+}
+
+/// Column of each run's start-heading offset in the Jacobian (after the parameters).
+pub(super) fn start_columns(runs: &[Run], o: &FitOptions, m: usize) -> Vec<Option<usize>> {
+    let mut next = m;
+    runs.iter()
+        .map(|run| {
+            has_start_nuisance(run, o).then(|| {
+                next += 1;
+                next - 1
+            })
+        })
+        .collect()
+}
+
+/// The Gaussian priors of the free parameters whose spec declares a
+/// `tolerance`: per prior, its column, its residual (p - nominal) / tolerance
+/// and that residual's derivative. The nominal value is the runner's (the
+/// spec's, or `--set`'s). They enter every cost the fit minimises, after the
+/// data's residuals (which are in units of their sigma too), but not the
+/// residual count its error figures divide by.
+pub(super) fn priors(r: &Runner, p: &[f64], free: &[usize]) -> Vec<(usize, f64, f64)> {
+    let params = r.ir.runtime_params();
+    free.iter()
+        .enumerate()
+        .filter_map(|(c, &i)| {
+            params[i]
+                .tolerance
+                .map(|tol| (c, (p[i] - r.p[i]) / tol, 1.0 / tol))
+        })
+        .collect()
+}
+
+/// Weighted residuals (and their Jacobian w.r.t. the free parameters, then the
+/// start-heading offsets of the runs that have them) over all runs; `starts`
+/// holds one start-pose offset per run (empty: none). The parameters' priors
+/// ([`priors`]) come last.
+pub fn residuals(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    runs: &[Run],
+    o: &FitOptions,
+    with_jac: bool,
+    starts: &[[f64; 3]],
+) -> (Vec<f64>, Option<DMatrix<f64>>) {
+    let cols = start_columns(runs, o, free.len());
+    let ncols = free.len() + cols.iter().flatten().count();
+    let parts: Vec<(Vec<f64>, Rows)> = runs
+        .par_iter()
+        .enumerate()
+        .map(|(i, run)| {
+            run_residuals(
+                r,
+                p,
+                free,
+                run,
+                o,
+                with_jac,
+                starts.get(i).copied().unwrap_or([0.0; 3]),
+                cols[i].is_some(),
+                o.plan(i),
+            )
+        })
+        .collect();
+    let prior = priors(r, p, free);
+    let n: usize = parts.iter().map(|x| x.0.len()).sum();
+    let mut res = Vec::with_capacity(n + prior.len());
+    let mut jac = with_jac.then(|| DMatrix::zeros(n + prior.len(), ncols));
+    let mut row = 0;
+    for (i, (rv, jv)) in parts.into_iter().enumerate() {
+        if let Some(j) = jac.as_mut() {
+            for (k, jr) in jv.iter().enumerate() {
+                for (c, v) in jr.iter().enumerate() {
+                    let col = if c < free.len() {
+                        c
+                    } else {
+                        cols[i].unwrap() + c - free.len()
+                    };
+                    j[(row + k, col)] = *v;
+                }
+            }
+        }
+        row += rv.len();
+        res.extend(rv);
+    }
+    if let Some(k) = o.huber {
+        huber_weights(&mut res, jac.as_mut(), k);
+    }
+    for (c, value, slope) in prior {
+        if let Some(j) = jac.as_mut() {
+            j[(res.len(), c)] = slope;
+        }
+        res.push(value);
+    }
+    (res, jac)
+}
+
+/// The Gauss-Newton normal equations J^T J and J^T r over all runs, without
+/// forming J: each run's start-heading column touches only its own rows, so J is
+/// block-sparse and can be huge (a 1,000,000-sample log cut into 833 segments
+/// would need a 3e6 x 836 dense matrix), while J^T J is small. Columns as in
+/// [`residuals`]. Returns the weighted residuals' [`Sums`], J^T J and J^T r:
+/// the residuals themselves are not kept (on a million rows they would be
+/// the largest thing the fit holds besides the log).
+pub fn normal_equations(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    runs: &[Run],
+    o: &FitOptions,
+    starts: &[[f64; 3]],
+) -> (Sums, DMatrix<f64>, DVector<f64>) {
+    let m = free.len();
+    let cols = start_columns(runs, o, m);
+    let n = m + cols.iter().flatten().count();
+    // per run: residuals, A^T A, A^T b, b^T b, A^T r, b^T r (A: parameter columns, b: start heading)
+    type Part = (Sums, DMatrix<f64>, DVector<f64>, f64, DVector<f64>, f64);
+    let parts: Vec<Part> = runs
+        .par_iter()
+        .enumerate()
+        .map(|(i, run)| {
+            let nuis = cols[i].is_some();
+            let (mut rv, jv) = run_residuals(
+                r,
+                p,
+                free,
+                run,
+                o,
+                true,
+                starts.get(i).copied().unwrap_or([0.0; 3]),
+                nuis,
+                o.plan(i),
+            );
+            let (mut ata, mut atb, mut btb, mut atr, mut btr) = (
+                DMatrix::zeros(m, m),
+                DVector::zeros(m),
+                0.0,
+                DVector::zeros(m),
+                0.0,
+            );
+            // Rows are gathered in blocks and each block enters A^T A as one
+            // matrix product (blocked and vectorised by nalgebra), not as one
+            // rank-1 update and one allocation per residual.
+            const BLOCK: usize = 256;
+            let (mut a, mut b, mut rb) = (
+                DMatrix::zeros(BLOCK, m),
+                DVector::zeros(BLOCK),
+                DVector::zeros(BLOCK),
+            );
+            for (block, chunk_res) in rv.chunks_mut(BLOCK).enumerate() {
+                let n = chunk_res.len();
+                for (i, res) in chunk_res.iter_mut().enumerate() {
+                    let row = &jv[block * BLOCK + i];
+                    let w = o.huber.map_or(1.0, |k| huber_weight(*res, k));
+                    *res *= w;
+                    for (c, v) in row[..m].iter().enumerate() {
+                        a[(i, c)] = v * w;
+                    }
+                    b[i] = if nuis { row[m] * w } else { 0.0 };
+                    rb[i] = *res;
+                }
+                let (a, b, rb) = (a.rows(0, n), b.rows(0, n), rb.rows(0, n));
+                ata.gemm_tr(1.0, &a, &a, 1.0);
+                atb.gemv_tr(1.0, &a, &b, 1.0);
+                btb += b.dot(&b);
+                atr.gemv_tr(1.0, &a, &rb, 1.0);
+                btr += b.dot(&rb);
+            }
+            (Sums::of(&rv), ata, atb, btb, atr, btr)
+        })
+        .collect();
+    let mut sums = Sums::default();
+    let mut jtj = DMatrix::zeros(n, n);
+    let mut jtr = DVector::zeros(n);
+    for (i, (rv, ata, atb, btb, atr, btr)) in parts.into_iter().enumerate() {
+        sums.add(rv);
+        let mut top = jtj.view_mut((0, 0), (m, m));
+        top += &ata;
+        let mut g = jtr.rows_mut(0, m);
+        g += &atr;
+        if let Some(c) = cols[i] {
+            for k in 0..m {
+                jtj[(k, c)] += atb[k];
+                jtj[(c, k)] += atb[k];
+            }
+            jtj[(c, c)] += btb;
+            jtr[c] += btr;
+        }
+    }
+    for (c, value, slope) in priors(r, p, free) {
+        jtj[(c, c)] += slope * slope;
+        jtr[c] += slope * value;
+        sums.cost += 0.5 * value * value;
+    }
+    (sums, jtj, jtr)
+}
+
+/// The cost (half the sum of squares) of weighted residuals and their count.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Sums {
+    pub cost: f64,
+    pub n: usize,
+}
+
+impl Sums {
+    fn of(res: &[f64]) -> Sums {
+        Sums {
+            cost: cost(res),
+            n: res.len(),
+        }
+    }
+
+    fn add(&mut self, other: Sums) {
+        self.cost += other.cost;
+        self.n += other.n;
+    }
+}
+
+/// The [`Sums`] of [`residuals`] without the residuals: each run's are summed
+/// and dropped as its thread finishes it.
+pub fn residual_sums(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    runs: &[Run],
+    o: &FitOptions,
+    starts: &[[f64; 3]],
+) -> Sums {
+    let cols = start_columns(runs, o, free.len());
+    let mut sums = runs
+        .par_iter()
+        .enumerate()
+        .map(|(i, run)| {
+            let start = starts.get(i).copied().unwrap_or([0.0; 3]);
+            let (mut rv, _) = run_residuals(
+                r,
+                p,
+                free,
+                run,
+                o,
+                false,
+                start,
+                cols[i].is_some(),
+                o.plan(i),
+            );
+            if let Some(k) = o.huber {
+                rv.iter_mut().for_each(|x| *x *= huber_weight(*x, k));
+            }
+            Sums::of(&rv)
+        })
+        .reduce(Sums::default, |mut a, b| {
+            a.add(b);
+            a
+        });
+    for (_, value, _) in priors(r, p, free) {
+        sums.cost += 0.5 * value * value;
+    }
+    sums
+}
+
+/// Huber loss by iteratively reweighted least squares: a residual r beyond k is
+/// scaled by sqrt(k/|r|), so its squared contribution is k|r| (linear growth); its
+/// Jacobian row gets the same weight (the weight's own derivative is neglected, as
+/// IRLS does). Weights are recomputed at every evaluation.
+pub(super) fn huber_weight(r: f64, k: f64) -> f64 {
+    if r.abs() > k {
+        (k / r.abs()).sqrt()
+    } else {
+        1.0
+    }
+}
+
+/// [`huber_weight`] applied to residuals and their Jacobian rows.
+pub(super) fn huber_weights(res: &mut [f64], jac: Option<&mut DMatrix<f64>>, k: f64) {
+    let w: Vec<f64> = res.iter().map(|&r| huber_weight(r, k)).collect();
+    for (r, wi) in res.iter_mut().zip(&w) {
+        *r *= wi;
+    }
+    if let Some(j) = jac {
+        for (i, wi) in w.iter().enumerate() {
+            if *wi != 1.0 {
+                j.row_mut(i).scale_mut(*wi);
+            }
+        }
+    }
+}
+
+/// One run's residuals; Jacobian rows have the free parameters' columns, then
+/// (with `nuis`) the start-heading column.
+#[allow(clippy::too_many_arguments)]
+#[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
+pub(super) fn run_residuals(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    run: &Run,
+    o: &FitOptions,
+    with_jac: bool,
+    start: [f64; 3],
+    nuis: bool,
+    plan: Option<&[u8]>,
+) -> (Vec<f64>, Rows) {
+    let mut res = Vec::new();
+    let mut jac = Rows::new(free.len() + usize::from(nuis));
+    let track = deadreckon::run_from(r, p, run, with_jac, start, plan);
+    // the inputs as executed (an input delay), for the observations' arguments
+    let inputs = crate::timeline::executed(r, p, run);
+    let np = p.len();
+    // sensitivity columns to read: the free parameters, then the start heading
+    let cols: Vec<usize> = free
+        .iter()
+        .copied()
+        .chain(if nuis { vec![np + 2] } else { vec![] })
+        .collect();
+    let free = &cols[..];
+    let mut scratch = Vec::new();
+    // A measurement delay (crate::timeline): measurement k is compared with the
+    // model at t_k - delay, linearly interpolated between rows (exact sensitivities
+    // of the interpolation, and d/d delay = minus the interpolated velocity).
+    let tau_i = r.delay;
+    let tau = crate::timeline::delay(r, p);
+    let shifted = |k: usize| crate::timeline::model_instant(run, k, tau);
+    if o.use_pose {
+        if let Some(gt) = &run.gt {
+            let tracker = r.ir.observation_kernels(Pose);
+            let first = if o.endpoints_only { gt.len() - 1 } else { 1 };
+            for k in first..gt.len() {
+                let (j, a) = if tau_i.is_some() {
+                    shifted(k)
+                } else {
+                    (k - 1, 1.0)
+                };
+                let x = lerp3(&track.pose[j], &track.pose[j + 1], a);
+                let vel: [f64; 3] =
+                    [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
+                let u = &inputs.u[j.min(run.steps() - 1)];
+                let (pred, hx, hp) = match tracker {
+                    Some(t) => {
+                        let h = t.value;
+                        let pred = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
+                        let (hx, hp) = if with_jac {
+                            let fx = t.jac_x;
+                            (
+                                fx.eval(&Runner::obs_args(fx, &x, u, p, &[])),
+                                t.jac_p.map_or(vec![0.0; 3 * np], |fp| {
+                                    fp.eval(&Runner::obs_args(fp, &x, u, p, &[]))
+                                }),
+                            )
+                        } else {
+                            (vec![], vec![])
+                        };
+                        (pred, hx, hp)
+                    }
+                    None => (
+                        x.to_vec(),
+                        vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                        vec![0.0; 3 * np],
+                    ),
+                };
+                let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
+                for i in 0..3 {
+                    let d = pred[i] - gt[k][i];
+                    res.push(if i == 2 { wrap(d) } else { d } / sig[i]);
+                    if with_jac {
+                        let sens = track.sens.as_ref().unwrap();
+                        let (s0, s1) = (sens.at(j), sens.at(j + 1));
+                        jac.push(free.iter().map(|&c| {
+                            let dx = |m: usize| {
+                                if Some(c) == tau_i {
+                                    -vel[m]
+                                } else {
+                                    s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
+                                }
+                            };
+                            let direct = if c < np { hp[i * np + c] } else { 0.0 };
+                            chain(&hx[i * 3..i * 3 + 3], dx, direct) / sig[i]
+                        }));
+                    }
+                }
+            }
+        }
+    }
+    if let Some(sd) = start_prior(run, o).filter(|_| nuis) {
+        // the start-heading offset against its measurement's uncertainty
+        res.push(start[2] / sd);
+        if with_jac {
+            let m = free.len() - 1;
+            jac.push((0..=m).map(|c| if c == m { 1.0 / sd } else { 0.0 }));
+        }
+    }
+    if o.use_landmarks && !run.landmarks.is_empty() {
+        landmark_residuals(r, p, free, run, &track, with_jac, &mut res, &mut jac);
+    }
+    if o.use_gyro {
+        if let (Some(g), Some(gyro)) = (&run.gyro, r.ir.observation_kernels(YawRate)) {
+            let (hx, hp) = (gyro.jac_x, gyro.jac_p);
+            let mut jp = vec![0.0; np];
+            let mut jx = [0.0; 3];
+            for k in 0..run.steps() {
+                let x = track.pose[k];
+                // the track already predicted the reading (Track::gyro)
+                res.push((track.gyro[k] - g[k + 1]) / o.gyro_sigma);
+                if with_jac {
+                    if let Some(hp) = hp {
+                        hp.eval_into(
+                            &Runner::obs_args(hp, &x, &inputs.u[k], p, &[]),
+                            &mut jp,
+                            &mut scratch,
+                        );
+                    }
+                    hx.eval_into(
+                        &Runner::obs_args(hx, &x, &inputs.u[k], p, &[]),
+                        &mut jx,
+                        &mut scratch,
+                    );
+                    let s = track.sens.as_ref().unwrap().at(k);
+                    jac.push(free.iter().map(|&c| {
+                        let direct = if c < np { jp[c] } else { 0.0 };
+                        chain(&jx, |m| s[(m, c)], direct) / o.gyro_sigma
+                    }));
+                }
+            }
+        }
+    }
+    (res, jac)
+}
+
+/// Range and bearing residuals of every landmark observation (seed 001 eq. 6),
+/// predicted at the track interpolated to the observation time; sigmas from the
+/// spec's `landmark` observation. Jacobian: H_x times the interpolated pose
+/// sensitivity, plus H_p.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn landmark_residuals(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    run: &Run,
+    track: &deadreckon::Track,
+    with_jac: bool,
+    res: &mut Vec<f64>,
+    jac: &mut Rows,
+) {
+    let Some(sensor) = r.ir.observation_kernels(RangeBearing) else {
+        return;
+    };
+    let h = sensor.value;
+    let sig = crate::landmarks::sigma(r);
+    let np = p.len();
+    for o in &run.landmarks {
+        let (j, a, x) = crate::innovations::locate_on(run, track, o.t);
+        let u = &run.u[j.min(run.steps() - 1)];
+        let lm = [o.xl, o.yl];
+        let pred = h.eval(&Runner::obs_args(h, &x, u, p, &lm));
+        res.push((pred[0] - o.range) / sig[0]);
+        res.push(wrap(pred[1] - o.bearing) / sig[1]);
+        if with_jac {
+            let fx = sensor.jac_x;
+            let hx = fx.eval(&Runner::obs_args(fx, &x, u, p, &lm));
+            let hp = sensor
+                .jac_p
+                .map_or(vec![], |fp| fp.eval(&Runner::obs_args(fp, &x, u, p, &lm)));
+            let sens = track.sens.as_ref().unwrap();
+            let (s0, s1) = (sens.at(j), sens.at(j + 1));
+            for i in 0..2 {
+                jac.push(free.iter().map(|&c| {
+                    let direct = if c < np { hp[i * np + c] } else { 0.0 };
+                    let dx = |m: usize| s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]);
+                    chain(&hx[i * 3..i * 3 + 3], dx, direct) / sig[i]
+                }));
+            }
+        }
+    }
+}
+
+pub(super) fn cost(res: &[f64]) -> f64 {
+    0.5 * res.iter().map(|r| r * r).sum::<f64>()
+}
