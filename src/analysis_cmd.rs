@@ -780,225 +780,320 @@ fn method_names() -> clap::builder::PossibleValuesParser {
 }
 
 pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
-    let FitArgs {
-        method,
-        side,
-        mu,
-        truth,
-        loss,
-        residuals,
-        likelihood,
-        export,
-        hidden,
-    } = a;
-    let hidden: Vec<usize> = hidden.iter().map(|h| *h as usize).collect();
-    let (side, mu) = (*side, *mu);
-    let export = match export.as_slice() {
-        [] => None,
-        [f, p] if f == "ros2-yaml" => {
-            let p = PathBuf::from(p);
-            if let Err(e) = crate::output::check_writable("--export ros2-yaml", &p) {
-                return bad(e);
-            }
-            Some(p)
-        }
-        [f, _] => return bad(format!("--export {f}: unknown format (known: ros2-yaml)")),
-        _ => return bad("--export takes a format and a path: --export ros2-yaml PATH"),
+    let export = match export_path(&a.export) {
+        Ok(e) => e,
+        Err(e) => return bad(e),
     };
-    if export.is_some() && method != "lm" {
+    if export.is_some() && a.method != "lm" {
         return bad("--export writes the Levenberg-Marquardt calibration: use it with --method lm");
     }
     let out = Out::new(c.json.as_deref());
-    let uses = |k: &str| residuals.is_empty() || residuals.iter().any(|r| r == k);
-    // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
-    let fo = FitOptions {
-        huber: (loss == "huber").then_some(3.0),
-        use_pose: uses("pose"),
-        use_gyro: uses("gyro"),
-        use_landmarks: uses("landmarks"),
-        multi_start: true,
-        ..FitOptions::default()
-    };
-    let fo = kinegen_analysis::fit::Likelihood::parse(likelihood)
-        .expect("clap checked the name")
-        .apply(fo);
+    let fo = fit_options(a);
     let prep = match prepare(&c) {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
-    let r = &prep.runner;
-    let truth = match kinegen_analysis::model::parse_pairs("--truth", truth) {
+    let truth = match truth_values(&prep.runner, &a.truth) {
         Ok(t) => t,
         Err(e) => return bad(e),
     };
+    if a.method != "lm" {
+        say_warnings(&out, &prep.warnings);
+        return run_methods(&c, &out, &prep, a, &fo, &truth);
+    }
+    run_lm(&c, &out, &prep, a, &fo, export.as_deref())
+}
+
+/// `--export FORMAT PATH`: the path to write (checked writable), if any.
+fn export_path(export: &[String]) -> Result<Option<PathBuf>, String> {
+    match export {
+        [] => Ok(None),
+        [f, p] if f == "ros2-yaml" => {
+            let p = PathBuf::from(p);
+            crate::output::check_writable("--export ros2-yaml", &p)?;
+            Ok(Some(p))
+        }
+        [f, _] => Err(format!("--export {f}: unknown format (known: ros2-yaml)")),
+        _ => Err("--export takes a format and a path: --export ros2-yaml PATH".into()),
+    }
+}
+
+/// Whether `fit` uses residuals of `kind` (pose, gyro, landmarks): every kind
+/// when `--residuals` names none.
+fn uses_residuals(a: &FitArgs, kind: &str) -> bool {
+    a.residuals.is_empty() || a.residuals.iter().any(|r| r == kind)
+}
+
+/// The calibration options `fit`'s arguments ask for.
+fn fit_options(a: &FitArgs) -> FitOptions {
+    // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
+    let fo = FitOptions {
+        huber: (a.loss == "huber").then_some(3.0),
+        use_pose: uses_residuals(a, "pose"),
+        use_gyro: uses_residuals(a, "gyro"),
+        use_landmarks: uses_residuals(a, "landmarks"),
+        multi_start: true,
+        ..FitOptions::default()
+    };
+    kinegen_analysis::fit::Likelihood::parse(&a.likelihood)
+        .expect("clap checked the name")
+        .apply(fo)
+}
+
+/// `--truth NAME=VALUE` pairs, each naming a parameter of the spec.
+fn truth_values(r: &Runner, truth: &[String]) -> Result<Vec<(String, f64)>, String> {
+    let truth =
+        kinegen_analysis::model::parse_pairs("--truth", truth).map_err(|e| e.to_string())?;
     if let Some((n, _)) = truth.iter().find(|(n, _)| r.param_index(n).is_none()) {
-        return bad(format!(
+        return Err(format!(
             "--truth {n}: the spec has no parameter `{n}` (it has: {})",
             r.names.join(", ")
         ));
     }
-    if method != "lm" {
-        say_warnings(&out, &prep.warnings);
-        let methods: Vec<&dyn Method> = if method == "all" {
-            METHODS.to_vec()
-        } else {
-            match by_name(method) {
-                Some(m) => vec![m],
-                None => return bad(format!("--method: unknown method `{method}`")),
+    Ok(truth)
+}
+
+/// The methods `--method` names (all of them for `all`), each with a run per
+/// `--hidden` size where the method has one (neural gyrodometry).
+fn method_jobs(a: &FitArgs) -> Result<Vec<(String, &'static dyn Method, usize)>, String> {
+    let methods: Vec<&dyn Method> = if a.method == "all" {
+        METHODS.to_vec()
+    } else {
+        match by_name(&a.method) {
+            Some(m) => vec![m],
+            None => return Err(format!("--method: unknown method `{}`", a.method)),
+        }
+    };
+    Ok(methods
+        .iter()
+        .flat_map(|m| {
+            if m.per_hidden_size() {
+                a.hidden
+                    .iter()
+                    .map(|&h| (format!("{}-{h}", m.name()), *m, h as usize))
+                    .collect::<Vec<_>>()
+            } else {
+                vec![(m.name().to_string(), *m, 0)]
             }
+        })
+        .collect())
+}
+
+/// `fit --method M` (or all): each method's calibration, compared.
+fn run_methods(
+    c: &Common,
+    out: &Out,
+    prep: &Prepared,
+    a: &FitArgs,
+    fo: &FitOptions,
+    truth: &[(String, f64)],
+) -> ExitCode {
+    let r = &prep.runner;
+    let jobs = match method_jobs(a) {
+        Ok(j) => j,
+        Err(e) => return bad(e),
+    };
+    let mut rows = Vec::new();
+    let bar = crate::progress::Progress::bar(jobs.len() as u64, "calibration methods", quiet(c));
+    for (name, m, h) in jobs {
+        bar.message(&name);
+        let settings = Settings {
+            side: a.side,
+            mu: a.mu,
+            fit: fo,
+            hidden: h,
         };
-        // a method with a size (neural gyrodometry) runs once per --hidden size
-        let jobs: Vec<(String, &dyn Method, usize)> = methods
-            .iter()
-            .flat_map(|m| {
-                if m.per_hidden_size() {
-                    hidden
-                        .iter()
-                        .map(|&h| (format!("{}-{h}", m.name()), *m, h))
-                        .collect::<Vec<_>>()
-                } else {
-                    vec![(m.name().to_string(), *m, 0)]
-                }
-            })
-            .collect();
-        let mut rows = Vec::new();
-        let bar =
-            crate::progress::Progress::bar(jobs.len() as u64, "calibration methods", quiet(&c));
-        for (name, m, h) in jobs {
-            bar.message(&name);
-            let settings = Settings {
-                side,
-                mu,
-                fit: &fo,
-                hidden: h,
-            };
-            let result = m.calibrate(r, &prep.runs, &settings);
-            bar.inc();
-            match result {
-                Ok(res) => rows.push((name, res)),
-                Err(e) if method == "all" => out.say(&format!("{name}: not applicable here: {e}")),
-                Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
+        let result = m.calibrate(r, &prep.runs, &settings);
+        bar.inc();
+        match result {
+            Ok(res) => rows.push((name, res)),
+            Err(e) if a.method == "all" => out.say(&format!("{name}: not applicable here: {e}")),
+            Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
+        }
+    }
+    let before = evaluation(r, &r.p, &prep.runs);
+    out.say(&format!(
+        "{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m",
+        r.ir.name,
+        rows.len(),
+        prep.runs.len(),
+        before.errors.rmse
+    ));
+    let compared = MethodComparison::new(r, prep, truth);
+    let mut methods_json = serde_json::Map::new();
+    let mut per_method: Vec<(String, Vec<Recipe>)> = Vec::new();
+    let mut best: Option<(f64, &str)> = None;
+    for (name, m) in &rows {
+        let (entry, tracks, dist) = compared.method(out, name, m, &before);
+        if let Some(d) = dist {
+            if best.is_none_or(|b| d < b.0) {
+                best = Some((d, name.as_str()));
             }
         }
-        let before = evaluation(r, &r.p, &prep.runs);
-        out.say(&format!("{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m", r.ir.name, rows.len(), prep.runs.len(), before.errors.rmse));
-        let mut methods_json = serde_json::Map::new();
-        let mut per_method: Vec<(String, Vec<Recipe>)> = Vec::new();
-        let mut best: Option<(f64, &str)> = None;
-        // Distance to the truth, each parameter scaled by its size (so a 2 mm
-        // offset of a 0.3 m axis and of a 0 m axis weigh the same), as a
-        // fraction of where the nominal values started: < 1 moved toward the truth.
-        let scaled = |p: &[f64]| {
-            truth
-                .iter()
-                .filter_map(|(n, v)| {
-                    r.param_index(n)
-                        .map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))
-                })
-                .sum::<f64>()
-                .sqrt()
+        methods_json.insert(name.to_string(), entry);
+        per_method.push((name.to_string(), tracks));
+    }
+    if let Some((d, name)) = best {
+        out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
+    }
+    // the top-level result is the first method's
+    let first = rows.first().map(|(name, _)| &methods_json[name.as_str()]);
+    let doc = json!({
+        "model": r.ir.name, "metric": metric_name(&prep.runs),
+        "before": {"rmse": before.errors.rmse},
+        "holdout_before": compared.hold_nominal().map(|h| json!({"rmse": h})),
+        "after": {"rmse": first.map(|m| m["after"]["rmse"].clone())},
+        "parameters": first.map(|m| m["parameters"].clone()),
+        "methods": methods_json,
+        "closest_to_truth": best.map(|b| b.1),
+        "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
+        "warnings": prep.warnings,
+    });
+    if let Some(dir) = &c.report {
+        if let Err(e) =
+            crate::report::methods_report(dir, r, &prep.runs, &before.tracks, &per_method, &doc)
+        {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
+
+/// What each method of `fit --method` is compared with: the nominal values
+/// (on the fitted and the held-out runs) and the known truth.
+struct MethodComparison<'a> {
+    r: &'a Runner,
+    prep: &'a Prepared,
+    truth: &'a [(String, f64)],
+    /// the nominal values' distance to the truth
+    d0: f64,
+    /// the nominal values on the fitted and the held-out runs, with held-out runs
+    nominal: Option<(Evaluation<'a>, Evaluation<'a>)>,
+}
+
+impl<'a> MethodComparison<'a> {
+    fn new(r: &'a Runner, prep: &'a Prepared, truth: &'a [(String, f64)]) -> Self {
+        let mut me = MethodComparison {
+            r,
+            prep,
+            truth,
+            d0: 0.0,
+            nominal: (!prep.holdout.is_empty()).then(|| {
+                (
+                    evaluation(r, &r.p, &prep.runs),
+                    evaluation(r, &r.p, &prep.holdout),
+                )
+            }),
         };
-        let d0 = scaled(&r.p);
-        let nominal_eval = (!prep.holdout.is_empty()).then(|| {
-            (
-                evaluation(r, &r.p, &prep.runs),
-                evaluation(r, &r.p, &prep.holdout),
+        me.d0 = me.scaled(&r.p);
+        me
+    }
+
+    /// Distance to the truth, each parameter scaled by its size (so a 2 mm
+    /// offset of a 0.3 m axis and of a 0 m axis weigh the same).
+    fn scaled(&self, p: &[f64]) -> f64 {
+        let r = self.r;
+        self.truth
+            .iter()
+            .filter_map(|(n, v)| {
+                r.param_index(n)
+                    .map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))
+            })
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// The nominal values' RMSE on the held-out runs, if any.
+    fn hold_nominal(&self) -> Option<f64> {
+        self.nominal.as_ref().map(|x| x.1.errors.rmse)
+    }
+
+    /// One method's lines, its JSON entry, its tracks and its distance to the
+    /// truth as a fraction of where the nominal values started (< 1: moved
+    /// toward the truth).
+    fn method(
+        &self,
+        out: &Out,
+        name: &str,
+        m: &kinegen_analysis::methods::Calibration,
+        before: &Evaluation,
+    ) -> (Value, Vec<Recipe<'a>>, Option<f64>) {
+        let (r, prep) = (self.r, self.prep);
+        let Evaluation {
+            tracks: after_tracks,
+            errors: after,
+            ..
+        } = method_evaluation(r, m, &prep.runs);
+        let hold =
+            (!prep.holdout.is_empty()).then(|| method_evaluation(r, m, &prep.holdout).errors);
+        // a method that ends worse than the nominal values says so (on the
+        // held-out runs when there are some)
+        let (what, now, nominal) = match (&hold, self.hold_nominal()) {
+            (Some(h), Some(b)) => ("held-out runs", h.rmse, b),
+            _ => ("fitted runs", after.rmse, before.errors.rmse),
+        };
+        let mut note = m.note.clone();
+        let held_worse = self.nominal.as_ref().and_then(|(f, h)| {
+            held_out_worse(
+                r,
+                (&prep.runs, &f.tracks),
+                (&prep.holdout, &h.tracks),
+                nominal,
+                now,
             )
         });
-        let hold_nominal = nominal_eval.as_ref().map(|x| x.1.errors.rmse);
-        for (name, m) in &rows {
-            let Evaluation {
-                tracks: after_tracks,
-                errors: after,
-                ..
-            } = method_evaluation(r, m, &prep.runs);
-            let hold =
-                (!prep.holdout.is_empty()).then(|| method_evaluation(r, m, &prep.holdout).errors);
-            // a method that ends worse than the nominal values says so (on the
-            // held-out runs when there are some)
-            let (what, now, nominal) = match (&hold, hold_nominal) {
-                (Some(h), Some(b)) => ("held-out runs", h.rmse, b),
-                _ => ("fitted runs", after.rmse, before.errors.rmse),
-            };
-            let mut note = m.note.clone();
-            let held_worse = nominal_eval.as_ref().and_then(|(f, h)| {
-                held_out_worse(
-                    r,
-                    (&prep.runs, &f.tracks),
-                    (&prep.holdout, &h.tracks),
-                    nominal,
-                    now,
-                )
-            });
-            if let Some(w) = held_worse {
-                note += &format!("\n      WARNING: {w}: do not use these values");
-            } else if now > 1.001 * nominal {
-                note += &format!("\n      WARNING: worse than the nominal parameters on the {what} ({nominal:.4} m -> {now:.4} m): do not use these values");
-            }
-            let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
-            let dist = (!truth.is_empty()).then(|| {
-                if d0 > 0.0 {
-                    scaled(&m.p) / d0
-                } else {
-                    scaled(&m.p)
-                }
-            });
-            if let Some(d) = dist {
-                if best.is_none_or(|b| d < b.0) {
-                    best = Some((d, name.as_str()));
-                }
-            }
-            out.say(&format!(
-                "  {:<8} position RMSE {:.4} m{}{}  ({})",
-                name,
-                after.rmse,
-                hold.as_ref()
-                    .map(|h| format!(", held-out {:.4} m", h.rmse))
-                    .unwrap_or_default(),
-                dist.map(|d| format!(
-                    ", {:.1}% of the nominal's distance to truth left",
-                    100.0 * d
-                ))
-                .unwrap_or_default(),
-                note
-            ));
-            for &i in &r.free {
-                out.say(&format!("      {:<14} {:.6}", r.names[i], m.p[i]));
-            }
-            methods_json.insert(name.to_string(), json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": note, "distance_to_truth": dist}));
-            per_method.push((name.to_string(), after_tracks));
+        if let Some(w) = held_worse {
+            note += &format!("\n      WARNING: {w}: do not use these values");
+        } else if now > 1.001 * nominal {
+            note += &format!("\n      WARNING: worse than the nominal parameters on the {what} ({nominal:.4} m -> {now:.4} m): do not use these values");
         }
-        if let Some((d, name)) = best {
-            out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
-        }
-        // the top-level result is the first method's
-        let first = rows.first().map(|(name, _)| &methods_json[name.as_str()]);
-        let doc = json!({
-            "model": r.ir.name, "metric": metric_name(&prep.runs),
-            "before": {"rmse": before.errors.rmse},
-            "holdout_before": hold_nominal.map(|h| json!({"rmse": h})),
-            "after": {"rmse": first.map(|m| m["after"]["rmse"].clone())},
-            "parameters": first.map(|m| m["parameters"].clone()),
-            "methods": methods_json,
-            "closest_to_truth": best.map(|b| b.1),
-            "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
-            "warnings": prep.warnings,
+        let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
+        let dist = (!self.truth.is_empty()).then(|| {
+            if self.d0 > 0.0 {
+                self.scaled(&m.p) / self.d0
+            } else {
+                self.scaled(&m.p)
+            }
         });
-        if let Some(dir) = &c.report {
-            if let Err(e) =
-                crate::report::methods_report(dir, r, &prep.runs, &before.tracks, &per_method, &doc)
-            {
-                return bad(e);
-            }
-            out.say(&format!("report: {}", dir.join("index.html").display()));
+        out.say(&format!(
+            "  {:<8} position RMSE {:.4} m{}{}  ({})",
+            name,
+            after.rmse,
+            hold.as_ref()
+                .map(|h| format!(", held-out {:.4} m", h.rmse))
+                .unwrap_or_default(),
+            dist.map(|d| format!(
+                ", {:.1}% of the nominal's distance to truth left",
+                100.0 * d
+            ))
+            .unwrap_or_default(),
+            note
+        ));
+        for &i in &r.free {
+            out.say(&format!("      {:<14} {:.6}", r.names[i], m.p[i]));
         }
-        return match out.json(c.json.as_deref(), &doc) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(e) => bad(e),
-        };
+        let entry = json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": note, "distance_to_truth": dist});
+        (entry, after_tracks, dist)
     }
-    let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(&c));
-    let mut res = match fit(r, &prep.runs, &fo) {
+}
+
+/// `fit` (Levenberg-Marquardt, the default): the calibration, judged, with
+/// its per-run table, held-out runs, leave-one-out, report and export.
+fn run_lm(
+    c: &Common,
+    out: &Out,
+    prep: &Prepared,
+    a: &FitArgs,
+    fo: &FitOptions,
+    export: Option<&Path>,
+) -> ExitCode {
+    let r = &prep.runner;
+    let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(c));
+    let mut res = match fit(r, &prep.runs, fo) {
         Ok(x) => x,
         Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
     };
@@ -1006,7 +1101,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     drop(spin);
     // both scored with the start headings refined for their own parameters, as
     // the fit refines them (within what the measured start allows)
-    let offsets_before = kinegen_analysis::fit::fitted_offsets(r, &r.p, &prep.runs, &fo);
+    let offsets_before = kinegen_analysis::fit::fitted_offsets(r, &r.p, &prep.runs, fo);
     let (eval_before, eval_after) = (
         evaluation_from(
             r,
@@ -1021,7 +1116,62 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             &kinegen_analysis::fit::run_offsets(&prep.runs, &res.starts),
         ),
     );
+    say_calibration(out, prep, &res, &eval_before.errors, &eval_after.errors);
+    let unusable = judge_fit(
+        out,
+        prep,
+        &mut res,
+        (&eval_before, &eval_after),
+        &offsets_before,
+    );
     let (before, after) = (&eval_before.errors, &eval_after.errors);
+    let mut doc = fit_json(r, &res, before, after, metric_name(&prep.runs));
+    doc["unusable"] = json!(unusable);
+    doc["loss"] = json!(a.loss);
+    doc["residual_kinds"] = json!(["pose", "gyro", "landmarks"]
+        .iter()
+        .filter(|k| uses_residuals(a, k))
+        .collect::<Vec<_>>());
+    if let (Some(lb), Some(la)) = (&eval_before.landmarks, &eval_after.landmarks) {
+        out.say(&format!(
+            "  before: {}\n  after:  {}",
+            fmt_landmarks(lb),
+            fmt_landmarks(la)
+        ));
+        doc["landmarks"] = json!({"before": lb, "after": la});
+    }
+    let runs = fit_runs(out, prep, &res, (&eval_before, &eval_after), &mut doc);
+    doc["runs"] = json!(runs);
+    say_leave_one_out(out, r, &res.p, &prep.runs, fo, &mut doc);
+    if let Some(dir) = &c.report {
+        if let Err(e) = crate::report::fit_report(
+            dir,
+            r,
+            &prep.runs,
+            &eval_before.tracks,
+            &eval_after.tracks,
+            &doc,
+        ) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    if let Some(path) = export {
+        if let Err(e) = export_fit(out, &c.spec, r, &res, path, &unusable) {
+            return bad(e);
+        }
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) if unusable.is_empty() => ExitCode::SUCCESS,
+        Ok(()) => ExitCode::from(1),
+        Err(e) => bad(e),
+    }
+}
+
+/// The calibration's headline: what was fitted, the error before and after,
+/// and each parameter's estimate.
+fn say_calibration(out: &Out, prep: &Prepared, res: &FitResult, before: &Errors, after: &Errors) {
+    let r = &prep.runner;
     out.say(&format!(
         "{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)",
         r.ir.name,
@@ -1049,7 +1199,19 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             crate::output::fmt_std(Some(res.std[k]))
         ));
     }
-    // a fit that cannot be used is said plainly, never shown as a success
+}
+
+/// Why the calibration cannot be used, if it cannot (said plainly, never shown
+/// as a success), with its warnings said and added to `res`.
+fn judge_fit(
+    out: &Out,
+    prep: &Prepared,
+    res: &mut FitResult,
+    (eval_before, eval_after): (&Evaluation, &Evaluation),
+    offsets_before: &[[f64; 3]],
+) -> Vec<String> {
+    let r = &prep.runner;
+    let (before, after) = (&eval_before.errors, &eval_after.errors);
     let mut unusable =
         kinegen_analysis::metrics::degenerate(&pairs(&prep.runs, &eval_after.tracks));
     let (worse, worse_warnings) = kinegen_analysis::metrics::short_term_worse(before, after);
@@ -1065,47 +1227,8 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         out.say(&format!("warning: {w}"));
     }
     if after.rmse.is_finite() && after.rmse > 1.001 * before.rmse {
-        // Long runs are fitted as re-anchored segments (fit::SEGMENT_S): judge the
-        // fit on what it minimised; over a whole long run the absolute error is a
-        // random walk the parameters cannot remove.
-        let seg = kinegen_analysis::fit::segmented(&prep.runs);
-        let (sb, sa) = (
-            evaluation_from(r, &r.p, &seg, &offsets_before).errors.rmse,
-            evaluation_from(r, &res.p, &seg, &res.starts).errors.rmse,
-        );
-        if seg.len() > prep.runs.len() && sa <= 1.001 * sb {
-            out.say(&format!(
-                "note: over whole runs the position error grew ({:.4} m -> {:.4} m) while over the {:.0} s segments the fit works on it fell ({sb:.4} m -> {sa:.4} m): the remaining long-run drift is noise the parameters cannot remove",
-                before.rmse, after.rmse, kinegen_analysis::fit::SEGMENT_S
-            ));
-        } else if after.rmse > 1.05 * before.rmse {
-            let with_prior: Vec<&str> = res
-                .free
-                .iter()
-                .filter(|&&i| r.ir.runtime_params()[i].tolerance.is_some())
-                .map(|&i| r.names[i].as_str())
-                .collect();
-            let grew = format!("{:.4} m -> {:.4} m", before.rmse, after.rmse);
-            if with_prior.is_empty() {
-                unusable.push(format!(
-                    "calibration made the position error worse ({grew})"
-                ));
-            } else {
-                // a prior may rightly cost some fit: the spec says what is known
-                let w = format!(
-                    "the position error grew ({grew}) under the spec's tolerances on {}: the log pulls them further than the tolerances allow; loosen a tolerance if the robot can differ from nominal that much",
-                    with_prior.join(", ")
-                );
-                out.say(&format!("warning: {w}"));
-                res.warnings.push(w);
-            }
-        } else {
-            // within 5%: the starting values were already as good as these logs
-            // can tell; the fit traded a little whole-track error for its cost
-            out.say(&format!(
-                "note: the position error grew slightly ({:.4} m -> {:.4} m): the starting values were already about as good as these logs can tell",
-                before.rmse, after.rmse
-            ));
+        if let Some(u) = judge_growth(out, prep, res, (before.rmse, after.rmse), offsets_before) {
+            unusable.push(u);
         }
     }
     if !after.rmse.is_finite() || res.p.iter().any(|v| !v.is_finite()) {
@@ -1117,21 +1240,75 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     if !unusable.is_empty() {
         out.say("  no parameter values make this model follow these logs: it is likely missing a physical effect (`kinegen diagnose` with the same --spec and --data names it)");
     }
-    let mut doc = fit_json(r, &res, before, after, metric_name(&prep.runs));
-    doc["unusable"] = json!(unusable);
-    doc["loss"] = json!(loss);
-    doc["residual_kinds"] = json!(["pose", "gyro", "landmarks"]
-        .iter()
-        .filter(|k| uses(k))
-        .collect::<Vec<_>>());
-    if let (Some(lb), Some(la)) = (&eval_before.landmarks, &eval_after.landmarks) {
+    unusable
+}
+
+/// A whole-run position error that grew from `before` to `after`: explained
+/// (a note or a warning), or the reason the fit is unusable.
+fn judge_growth(
+    out: &Out,
+    prep: &Prepared,
+    res: &mut FitResult,
+    (before, after): (f64, f64),
+    offsets_before: &[[f64; 3]],
+) -> Option<String> {
+    let r = &prep.runner;
+    // Long runs are fitted as re-anchored segments (fit::SEGMENT_S): judge the
+    // fit on what it minimised; over a whole long run the absolute error is a
+    // random walk the parameters cannot remove.
+    let seg = kinegen_analysis::fit::segmented(&prep.runs);
+    let (sb, sa) = (
+        evaluation_from(r, &r.p, &seg, offsets_before).errors.rmse,
+        evaluation_from(r, &res.p, &seg, &res.starts).errors.rmse,
+    );
+    if seg.len() > prep.runs.len() && sa <= 1.001 * sb {
         out.say(&format!(
-            "  before: {}\n  after:  {}",
-            fmt_landmarks(lb),
-            fmt_landmarks(la)
+            "note: over whole runs the position error grew ({before:.4} m -> {after:.4} m) while over the {:.0} s segments the fit works on it fell ({sb:.4} m -> {sa:.4} m): the remaining long-run drift is noise the parameters cannot remove",
+            kinegen_analysis::fit::SEGMENT_S
         ));
-        doc["landmarks"] = json!({"before": lb, "after": la});
+        return None;
     }
+    if after <= 1.05 * before {
+        // within 5%: the starting values were already as good as these logs
+        // can tell; the fit traded a little whole-track error for its cost
+        out.say(&format!(
+            "note: the position error grew slightly ({before:.4} m -> {after:.4} m): the starting values were already about as good as these logs can tell"
+        ));
+        return None;
+    }
+    let with_prior: Vec<&str> = res
+        .free
+        .iter()
+        .filter(|&&i| r.ir.runtime_params()[i].tolerance.is_some())
+        .map(|&i| r.names[i].as_str())
+        .collect();
+    let grew = format!("{before:.4} m -> {after:.4} m");
+    if with_prior.is_empty() {
+        return Some(format!(
+            "calibration made the position error worse ({grew})"
+        ));
+    }
+    // a prior may rightly cost some fit: the spec says what is known
+    let w = format!(
+        "the position error grew ({grew}) under the spec's tolerances on {}: the log pulls them further than the tolerances allow; loosen a tolerance if the robot can differ from nominal that much",
+        with_prior.join(", ")
+    );
+    out.say(&format!("warning: {w}"));
+    res.warnings.push(w);
+    None
+}
+
+/// Each run's errors before and after (the fitted ones, then the held-out
+/// ones, which also go in `doc["holdout"]` with a warning where the
+/// calibration does worse on them), said as a table when there are several.
+fn fit_runs(
+    out: &Out,
+    prep: &Prepared,
+    res: &FitResult,
+    (eval_before, eval_after): (&Evaluation, &Evaluation),
+    doc: &mut Value,
+) -> Vec<Value> {
+    let r = &prep.runner;
     let starts = kinegen_analysis::fit::run_starts(r, &res.p, &prep.runs, &res.starts);
     let mut runs = per_run(
         &prep.runs,
@@ -1192,40 +1369,28 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
             ));
         }
     }
-    doc["runs"] = json!(runs);
-    say_leave_one_out(&out, r, &res.p, &prep.runs, &fo, &mut doc);
-    if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::fit_report(
-            dir,
-            r,
-            &prep.runs,
-            &eval_before.tracks,
-            &eval_after.tracks,
-            &doc,
-        ) {
-            return bad(e);
-        }
-        out.say(&format!("report: {}", dir.join("index.html").display()));
+    runs
+}
+
+/// `--export ros2-yaml PATH`: the calibration written for the robot, unless
+/// it is unusable (then said, not written).
+fn export_fit(
+    out: &Out,
+    spec: &Path,
+    r: &Runner,
+    res: &FitResult,
+    path: &Path,
+    unusable: &[String],
+) -> Result<(), String> {
+    if !unusable.is_empty() {
+        out.say(&format!(
+            "not exported to {}: the fit is unusable",
+            path.display()
+        ));
+        return Ok(());
     }
-    if let Some(path) = &export {
-        if !unusable.is_empty() {
-            out.say(&format!(
-                "not exported to {}: the fit is unusable",
-                path.display()
-            ));
-        } else {
-            let written = crate::export::ros2_yaml(&c.spec, r, &res).and_then(|y| {
-                kinegen_model::files::write_atomic(path, &y).map_err(|e| e.to_string())
-            });
-            match written {
-                Ok(()) => out.say(&format!("exported: {}", path.display())),
-                Err(e) => return bad(e),
-            }
-        }
-    }
-    match out.json(c.json.as_deref(), &doc) {
-        Ok(()) if unusable.is_empty() => ExitCode::SUCCESS,
-        Ok(()) => ExitCode::from(1),
-        Err(e) => bad(e),
-    }
+    crate::export::ros2_yaml(spec, r, res)
+        .and_then(|y| kinegen_model::files::write_atomic(path, &y).map_err(|e| e.to_string()))?;
+    out.say(&format!("exported: {}", path.display()));
+    Ok(())
 }
