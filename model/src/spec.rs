@@ -360,426 +360,51 @@ impl Model {
             let pos = e.span().map(|s| SourcePos::from_offset(text, s.start));
             SourceError::new(path, pos, e.message().to_string())
         })?;
-
-        if raw.state.get_ref().iter().map(String::as_str).ne(STATE) {
-            return Err(cx.err_span(
-                &raw.state,
-                "state must be [\"x\", \"y\", \"theta\"] (the planar pose)",
-            ));
-        }
-        if !is_identifier(raw.name.get_ref()) {
-            return Err(cx.err_span(
-                &raw.name,
-                "model name must be an identifier (letters, digits, _)",
-            ));
-        }
-        if let Some(why) = reserved_module_name(raw.name.get_ref()) {
-            return Err(cx.err_span(
-                &raw.name,
-                format!("model name `{}` cannot be used: {why}", raw.name.get_ref()),
-            ));
-        }
-
-        // Every declared name, where it was declared, and what it is.
-        let mut declared: HashMap<String, (usize, &'static str)> = HashMap::new();
-        for s in STATE {
-            declared.insert(s.to_string(), (raw.state.span().start, "state"));
-        }
-        let mut declare = |name: &Spanned<String>, what: &'static str| -> Result<(), SourceError> {
-            let n = name.get_ref();
-            if !is_identifier(n) {
-                return Err(cx.err_span(name, format!("`{n}` is not a valid name")));
-            }
-            if RESERVED.contains(&n.as_str())
-                || CONSTANTS.contains(&n.as_str())
-                || FUNCTIONS.iter().any(|f| f.0 == n)
-            {
-                return Err(cx.err_span(name, format!("`{n}` is a reserved name")));
-            }
-            if let Some((at, other)) = declared.get(n) {
-                let p = SourcePos::from_offset(text, *at);
-                return Err(cx.err_span(
-                    name,
-                    format!(
-                        "duplicate name `{n}`: already declared as {other} at line {}",
-                        p.line
-                    ),
-                ));
-            }
-            declared.insert(n.clone(), (name.span().start, what));
-            Ok(())
+        check_header(&cx, &raw)?;
+        let declared = declare_names(&cx, &raw)?;
+        let params = parse_params(&cx, &raw.parameter)?;
+        check_delays(&cx, &raw.parameter)?;
+        let names = Names {
+            declared: &declared,
+            noise: raw
+                .noise
+                .iter()
+                .map(|n| n.name.get_ref().as_str())
+                .collect(),
         };
-        for i in &raw.input {
-            declare(&i.name, "input")?;
-            if let Some(w) = &i.wrap {
-                if i.kind != InputKind::Cumulative {
-                    return Err(cx.err_span(w, "`wrap` is for cumulative counters only"));
-                }
-                if !(2..=64).contains(w.get_ref()) {
-                    return Err(cx.err_span(w, "`wrap` is the counter's width in bits (2 to 64)"));
-                }
-            }
-            if let Some(b) = &i.between {
-                if i.kind != InputKind::Absolute {
-                    return Err(cx.err_span(
-                        b,
-                        "`between` is for absolute inputs (a cumulative input's difference always spreads over the interval)",
-                    ));
-                }
-            }
-            if let Some(m) = &i.max_rate {
-                if !(m.get_ref().is_finite() && *m.get_ref() > 0.0) {
-                    return Err(cx.err_span(
-                        m,
-                        "`max_rate` is the actuator's largest |rate|: a finite number above 0",
-                    ));
-                }
-            }
-        }
-        for p in &raw.parameter {
-            declare(&p.name, "parameter")?;
-        }
-        for n in &raw.noise {
-            declare(&n.name, "noise")?;
-        }
-        for d in &raw.define {
-            declare(&d.name, "definition")?;
-        }
-
-        let params: Vec<Param> = raw
-            .parameter
-            .iter()
-            .map(|p| {
-                let nominal = *p.nominal.get_ref();
-                if !nominal.is_finite() {
-                    return Err(cx.err_span(&p.nominal, "nominal value must be finite"));
-                }
-                if p.min.is_some_and(|m| !m.is_finite()) || p.max.is_some_and(|m| !m.is_finite()) {
-                    return Err(cx.err_span(
-                        &p.name,
-                        "`min` and `max` must be finite numbers (leave one out for no bound)",
-                    ));
-                }
-                if let (Some(a), Some(b)) = (p.min, p.max) {
-                    if a >= b {
-                        return Err(
-                            cx.err_span(&p.name, format!("`min` ({a}) must be below `max` ({b})"))
-                        );
-                    }
-                }
-                if p.min.is_some_and(|m| nominal < m) || p.max.is_some_and(|m| nominal > m) {
-                    return Err(cx.err_span(
-                        &p.nominal,
-                        format!("nominal {nominal} is outside the declared bounds"),
-                    ));
-                }
-                let tolerance = match &p.tolerance {
-                    None => None,
-                    Some(t) => Some(tolerance(&cx, t, nominal)?),
-                };
-                Ok(Param {
-                    name: p.name.get_ref().clone(),
-                    nominal,
-                    unit: p.unit.clone(),
-                    doc: p.doc.clone(),
-                    min: p.min,
-                    max: p.max,
-                    free: p.free && !p.constant,
-                    constant: p.constant,
-                    measurement_delay: p.measurement_delay,
-                    input_delay: p.input_delay,
-                    tolerance,
-                })
-            })
-            .collect::<Result<_, _>>()?;
-        for (flag, is, what) in [
-            (
-                "measurement_delay",
-                (|p: &RawParam| p.measurement_delay) as fn(&RawParam) -> bool,
-                "the measurements",
-            ),
-            ("input_delay", |p: &RawParam| p.input_delay, "the commands"),
-        ] {
-            let delays: Vec<&RawParam> = raw.parameter.iter().filter(|p| is(p)).collect();
-            if let Some(second) = delays.get(1) {
-                return Err(cx.err_span(
-                    &second.name,
-                    format!(
-                        "a second `{flag}` parameter (`{}` is one already): {what} have one delay",
-                        delays[0].name.get_ref()
-                    ),
-                ));
-            }
-            if let Some(d) = delays.first() {
-                if d.constant {
-                    return Err(cx.err_span(
-                        &d.name,
-                        format!("a `{flag}` parameter cannot be `const`: the analysis shifts {what} by its value at run time"),
-                    ));
-                }
-                if d.measurement_delay && d.input_delay {
-                    return Err(cx.err_span(
-                        &d.name,
-                        "a parameter is a `measurement_delay` or an `input_delay`, not both",
-                    ));
-                }
-                if !matches!(d.unit.as_str(), "s" | "") {
-                    return Err(cx.err_span(
-                        &d.name,
-                        format!("a `{flag}` is in seconds (unit \"s\"), not \"{}\"", d.unit),
-                    ));
-                }
-            }
-        }
-
         // Parse definitions, check names, then order them (and reject cycles).
         let def_names: HashSet<&str> = raw
             .define
             .iter()
             .map(|d| d.name.get_ref().as_str())
             .collect();
-        let check_names = |e: &Expr, allow: &dyn Fn(&str) -> bool| -> Result<(), SourceError> {
-            for (v, span) in e.variables() {
-                if CONSTANTS.contains(&v) || declared.contains_key(v) && allow(v) {
-                    continue;
-                }
-                let why = if declared.contains_key(v) || RESERVED.contains(&v) {
-                    format!("`{v}` cannot be used here")
-                } else {
-                    format!("unknown symbol `{v}`")
-                };
-                return Err(cx.err_at(span.0, why));
-            }
-            Ok(())
-        };
-        let noise_names: HashSet<&str> = raw
-            .noise
-            .iter()
-            .map(|n| n.name.get_ref().as_str())
-            .collect();
-        let not_state = |v: &str| !STATE.contains(&v);
         let mut parsed_defs = Vec::new();
         for d in &raw.define {
             let e = cx.parse_expr(&d.expr)?;
-            check_names(&e, &not_state)?;
+            names.check(&cx, &e, &not_state)?;
             parsed_defs.push((d, e));
         }
         let defines = order_definitions(&cx, &parsed_defs, &def_names)?;
-
-        let (kinematics, kinematics_at, motion_doc) =
-            match (&raw.motion, &raw.constraints) {
-                (Some(m), None) => {
-                    let mo = m.get_ref();
-                    let twist_exprs = [&mo.vx, &mo.vy, &mo.omega].map(|s| {
-                        cx.parse_expr(s)
-                            .and_then(|e| check_names(&e, &not_state).map(|_| e))
-                    });
-                    let [vx, vy, omega] = twist_exprs;
-                    (
-                        Kinematics::Twist([vx?, vy?, omega?]),
-                        mo.vx.span().start + 1,
-                        mo.doc.clone(),
-                    )
-                }
-                (None, Some(c)) => {
-                    let k = parse_constraints(&cx, c, &raw.input, &noise_names, &|e: &Expr| {
-                        check_names(e, &|v: &str| not_state(v) && !noise_names.contains(v))
-                    })?;
-                    let at = c.row.first().map_or(0, |r| r.rate.span().start);
-                    (Kinematics::Constraints(k), at, c.doc.clone())
-                }
-                (Some(m), Some(_)) => {
-                    return Err(cx.err_span(m, "give either [motion] or [constraints], not both"))
-                }
-                (None, None) => return Err(cx.err_at(
-                    0,
-                    "missing [motion] (the body twist) or [constraints] (rate = S . twist rows)",
-                )),
-            };
-
+        let (kinematics, kinematics_at, motion_doc) = parse_kinematics(&cx, &raw, &names)?;
         let mut observations: Vec<Observation> = Vec::new();
         for o in &raw.observation {
-            declare_free_name(&cx, &o.name, &declared)?;
-            if observations.iter().any(|x| &x.name == o.name.get_ref()) {
-                return Err(cx.err_span(
-                    &o.name,
-                    format!("duplicate observation name `{}`", o.name.get_ref()),
-                ));
-            }
-            let ncols = o.columns.get_ref().len();
-            if o.expr.len() != ncols {
-                return Err(cx.err_span(
-                    &o.columns,
-                    format!(
-                        "observation `{}` has {ncols} column(s) but {} expression(s)",
-                        o.name.get_ref(),
-                        o.expr.len()
-                    ),
-                ));
-            }
-            if !o.angle.is_empty() && o.angle.len() != ncols
-                || !o.sigma.is_empty() && o.sigma.len() != ncols
-            {
-                return Err(cx.err_span(
-                    &o.columns,
-                    "`angle` and `sigma` must have one entry per column",
-                ));
-            }
-            let mut exprs = Vec::new();
-            for s in &o.expr {
-                let e = cx.parse_expr(s)?;
-                for (v, span) in e.variables() {
-                    let ok = CONSTANTS.contains(&v)
-                        || ["vx", "vy", "omega"].contains(&v)
-                        || (["xl", "yl"].contains(&v) && o.landmark)
-                        || declared.contains_key(v) && !noise_names.contains(v);
-                    if !ok {
-                        let msg = if ["xl", "yl"].contains(&v) {
-                            format!("`{v}` needs `landmark = true` on this observation")
-                        } else {
-                            format!("unknown symbol `{v}`")
-                        };
-                        return Err(cx.err_at(span.0, msg));
-                    }
-                }
-                exprs.push(e);
-            }
-            if let Some(s) = o.sigma.iter().find(|s| !s.is_finite() || **s < 0.0) {
-                return Err(cx.err_span(
-                    &o.columns,
-                    format!(
-                        "observation `{}`: sigma {s} must be a finite number >= 0",
-                        o.name.get_ref()
-                    ),
-                ));
-            }
-            let angle = if o.angle.is_empty() {
-                vec![false; ncols]
-            } else {
-                o.angle.clone()
-            };
-            let role = o
-                .role
-                .unwrap_or_else(|| infer_role(o.landmark, &exprs, &angle));
-            let (want, what) = match role {
-                ObservationRole::Pose => (3, "a pose observation has 3 columns (x, y, heading)"),
-                ObservationRole::YawRate => (1, "a yaw-rate observation has 1 column"),
-                ObservationRole::RangeBearing => (2, "a range-bearing observation has 2 columns (range, bearing) and `landmark = true`"),
-                ObservationRole::Other => (ncols, ""),
-            };
-            if ncols != want
-                || (role == ObservationRole::RangeBearing) != o.landmark
-                    && role != ObservationRole::Other
-            {
-                return Err(cx.err_span(
-                    &o.columns,
-                    format!("observation `{}`: {what}", o.name.get_ref()),
-                ));
-            }
-            if role != ObservationRole::Other {
-                if let Some(other) = observations.iter().find(|x| x.role == role) {
-                    return Err(cx.err_span(&o.name, format!("observation `{}` has the role {role:?} of `{}` already: one observation per role", o.name.get_ref(), other.name)));
-                }
-            }
-            observations.push(Observation {
-                decl: ObservationDecl {
-                    name: o.name.get_ref().clone(),
-                    doc: o.doc.clone(),
-                    columns: o.columns.get_ref().clone(),
-                    angle,
-                    sigma: if o.sigma.is_empty() {
-                        vec![0.0; ncols]
-                    } else {
-                        o.sigma.clone()
-                    },
-                    landmark: o.landmark,
-                    role,
-                },
-                exprs,
-            });
+            let parsed = parse_observation(&cx, o, &names, &observations)?;
+            observations.push(parsed);
         }
-
-        let inverse = match &raw.inverse {
-            None => None,
-            Some(inv) => {
-                if inv.inputs.get_ref().len() != raw.input.len() {
-                    return Err(cx.err_span(
-                        &inv.inputs,
-                        format!(
-                            "inverse gives {} expression(s) for {} input(s)",
-                            inv.inputs.get_ref().len(),
-                            raw.input.len()
-                        ),
-                    ));
-                }
-                let mut es = Vec::new();
-                for s in inv.inputs.get_ref() {
-                    let e = cx.parse_expr(s)?;
-                    for (v, span) in e.variables() {
-                        let is_param = raw.parameter.iter().any(|p| p.name.get_ref() == v);
-                        if !(CONSTANTS.contains(&v)
-                            || ["vx", "vy", "omega"].contains(&v)
-                            || is_param)
-                        {
-                            return Err(cx.err_at(
-                                span.0,
-                                format!(
-                                    "inverse may use vx, vy, omega and parameters only, not `{v}`"
-                                ),
-                            ));
-                        }
-                    }
-                    es.push(e);
-                }
-                Some((es, inv.doc.clone()))
-            }
-        };
-
+        let inverse = parse_inverse(&cx, &raw)?;
         Ok(Model {
             path: path.to_path_buf(),
             source: text.to_string(),
             name: raw.name.get_ref().clone(),
-            doc: raw.doc,
-            seed: raw.seed,
-            inputs: raw
-                .input
-                .iter()
-                .map(|i| Input {
-                    name: i.name.get_ref().clone(),
-                    column: i.column.clone(),
-                    kind: i.kind,
-                    range: i.range,
-                    wrap: i.wrap.as_ref().map(|w| *w.get_ref()),
-                    max_rate: i.max_rate.as_ref().map(|m| *m.get_ref()),
-                    between: i.between.as_ref().map(|b| *b.get_ref()),
-                    unit: i.unit.clone(),
-                    doc: i.doc.clone(),
-                })
-                .collect(),
+            inputs: raw.input.iter().map(RawInput::to_input).collect(),
             params,
             noise: raw
                 .noise
                 .iter()
-                .map(|n| {
-                    if n.sigma.is_finite() && n.sigma >= 0.0 {
-                        Ok(Noise {
-                            name: n.name.get_ref().clone(),
-                            doc: n.doc.clone(),
-                            sigma: n.sigma,
-                            unit: n.unit.clone(),
-                        })
-                    } else {
-                        Err(cx.err_span(
-                            &n.name,
-                            format!(
-                                "noise `{}`: sigma {} must be a finite number >= 0",
-                                n.name.get_ref(),
-                                n.sigma
-                            ),
-                        ))
-                    }
-                })
+                .map(|n| n.to_noise(&cx))
                 .collect::<Result<_, _>>()?,
+            doc: raw.doc,
+            seed: raw.seed,
             defines,
             motion_doc,
             kinematics,
@@ -824,6 +449,482 @@ pub fn fingerprint(text: &str) -> String {
         h = h.wrapping_mul(0x100000001b3);
     }
     format!("{h:016x}")
+}
+
+/// Every declared name: where it was declared (a byte offset) and what it is.
+type Declared = HashMap<String, (usize, &'static str)>;
+
+/// A name not a state, for the expressions that may not read the pose.
+fn not_state(v: &str) -> bool {
+    !STATE.contains(&v)
+}
+
+/// The spec's state and model name.
+fn check_header(cx: &Ctx, raw: &RawSpec) -> Result<(), SourceError> {
+    if raw.state.get_ref().iter().map(String::as_str).ne(STATE) {
+        return Err(cx.err_span(
+            &raw.state,
+            "state must be [\"x\", \"y\", \"theta\"] (the planar pose)",
+        ));
+    }
+    if !is_identifier(raw.name.get_ref()) {
+        return Err(cx.err_span(
+            &raw.name,
+            "model name must be an identifier (letters, digits, _)",
+        ));
+    }
+    if let Some(why) = reserved_module_name(raw.name.get_ref()) {
+        return Err(cx.err_span(
+            &raw.name,
+            format!("model name `{}` cannot be used: {why}", raw.name.get_ref()),
+        ));
+    }
+    Ok(())
+}
+
+/// Declare `name` as `what`: an identifier, not reserved, not declared before.
+fn declare(
+    cx: &Ctx,
+    declared: &mut Declared,
+    name: &Spanned<String>,
+    what: &'static str,
+) -> Result<(), SourceError> {
+    let n = name.get_ref();
+    if !is_identifier(n) {
+        return Err(cx.err_span(name, format!("`{n}` is not a valid name")));
+    }
+    if RESERVED.contains(&n.as_str())
+        || CONSTANTS.contains(&n.as_str())
+        || FUNCTIONS.iter().any(|f| f.0 == n)
+    {
+        return Err(cx.err_span(name, format!("`{n}` is a reserved name")));
+    }
+    if let Some((at, other)) = declared.get(n) {
+        let p = SourcePos::from_offset(cx.text, *at);
+        return Err(cx.err_span(
+            name,
+            format!(
+                "duplicate name `{n}`: already declared as {other} at line {}",
+                p.line
+            ),
+        ));
+    }
+    declared.insert(n.clone(), (name.span().start, what));
+    Ok(())
+}
+
+/// The state, inputs (each checked), parameters, noise and definitions, declared.
+fn declare_names(cx: &Ctx, raw: &RawSpec) -> Result<Declared, SourceError> {
+    let mut declared = Declared::new();
+    for s in STATE {
+        declared.insert(s.to_string(), (raw.state.span().start, "state"));
+    }
+    for i in &raw.input {
+        declare(cx, &mut declared, &i.name, "input")?;
+        i.check(cx)?;
+    }
+    for p in &raw.parameter {
+        declare(cx, &mut declared, &p.name, "parameter")?;
+    }
+    for n in &raw.noise {
+        declare(cx, &mut declared, &n.name, "noise")?;
+    }
+    for d in &raw.define {
+        declare(cx, &mut declared, &d.name, "definition")?;
+    }
+    Ok(declared)
+}
+
+impl RawInput {
+    /// `wrap`, `between` and `max_rate` where they mean something.
+    fn check(&self, cx: &Ctx) -> Result<(), SourceError> {
+        if let Some(w) = &self.wrap {
+            if self.kind != InputKind::Cumulative {
+                return Err(cx.err_span(w, "`wrap` is for cumulative counters only"));
+            }
+            if !(2..=64).contains(w.get_ref()) {
+                return Err(cx.err_span(w, "`wrap` is the counter's width in bits (2 to 64)"));
+            }
+        }
+        if let Some(b) = &self.between {
+            if self.kind != InputKind::Absolute {
+                return Err(cx.err_span(
+                    b,
+                    "`between` is for absolute inputs (a cumulative input's difference always spreads over the interval)",
+                ));
+            }
+        }
+        if let Some(m) = &self.max_rate {
+            if !(m.get_ref().is_finite() && *m.get_ref() > 0.0) {
+                return Err(cx.err_span(
+                    m,
+                    "`max_rate` is the actuator's largest |rate|: a finite number above 0",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn to_input(&self) -> Input {
+        Input {
+            name: self.name.get_ref().clone(),
+            column: self.column.clone(),
+            kind: self.kind,
+            range: self.range,
+            wrap: self.wrap.as_ref().map(|w| *w.get_ref()),
+            max_rate: self.max_rate.as_ref().map(|m| *m.get_ref()),
+            between: self.between.as_ref().map(|b| *b.get_ref()),
+            unit: self.unit.clone(),
+            doc: self.doc.clone(),
+        }
+    }
+}
+
+impl RawNoise {
+    fn to_noise(&self, cx: &Ctx) -> Result<Noise, SourceError> {
+        if self.sigma.is_finite() && self.sigma >= 0.0 {
+            Ok(Noise {
+                name: self.name.get_ref().clone(),
+                doc: self.doc.clone(),
+                sigma: self.sigma,
+                unit: self.unit.clone(),
+            })
+        } else {
+            Err(cx.err_span(
+                &self.name,
+                format!(
+                    "noise `{}`: sigma {} must be a finite number >= 0",
+                    self.name.get_ref(),
+                    self.sigma
+                ),
+            ))
+        }
+    }
+}
+
+/// The parameters: finite nominal values within finite, ordered bounds, and
+/// their tolerances.
+fn parse_params(cx: &Ctx, raw: &[RawParam]) -> Result<Vec<Param>, SourceError> {
+    raw.iter()
+        .map(|p| {
+            let nominal = *p.nominal.get_ref();
+            if !nominal.is_finite() {
+                return Err(cx.err_span(&p.nominal, "nominal value must be finite"));
+            }
+            if p.min.is_some_and(|m| !m.is_finite()) || p.max.is_some_and(|m| !m.is_finite()) {
+                return Err(cx.err_span(
+                    &p.name,
+                    "`min` and `max` must be finite numbers (leave one out for no bound)",
+                ));
+            }
+            if let (Some(a), Some(b)) = (p.min, p.max) {
+                if a >= b {
+                    return Err(
+                        cx.err_span(&p.name, format!("`min` ({a}) must be below `max` ({b})"))
+                    );
+                }
+            }
+            if p.min.is_some_and(|m| nominal < m) || p.max.is_some_and(|m| nominal > m) {
+                return Err(cx.err_span(
+                    &p.nominal,
+                    format!("nominal {nominal} is outside the declared bounds"),
+                ));
+            }
+            let tolerance = match &p.tolerance {
+                None => None,
+                Some(t) => Some(tolerance(cx, t, nominal)?),
+            };
+            Ok(Param {
+                name: p.name.get_ref().clone(),
+                nominal,
+                unit: p.unit.clone(),
+                doc: p.doc.clone(),
+                min: p.min,
+                max: p.max,
+                free: p.free && !p.constant,
+                constant: p.constant,
+                measurement_delay: p.measurement_delay,
+                input_delay: p.input_delay,
+                tolerance,
+            })
+        })
+        .collect()
+}
+
+/// At most one `measurement_delay` and one `input_delay` parameter, each
+/// free to change at run time and in seconds.
+fn check_delays(cx: &Ctx, raw: &[RawParam]) -> Result<(), SourceError> {
+    for (flag, is, what) in [
+        (
+            "measurement_delay",
+            (|p: &RawParam| p.measurement_delay) as fn(&RawParam) -> bool,
+            "the measurements",
+        ),
+        ("input_delay", |p: &RawParam| p.input_delay, "the commands"),
+    ] {
+        let delays: Vec<&RawParam> = raw.iter().filter(|p| is(p)).collect();
+        if let Some(second) = delays.get(1) {
+            return Err(cx.err_span(
+                &second.name,
+                format!(
+                    "a second `{flag}` parameter (`{}` is one already): {what} have one delay",
+                    delays[0].name.get_ref()
+                ),
+            ));
+        }
+        if let Some(d) = delays.first() {
+            if d.constant {
+                return Err(cx.err_span(
+                    &d.name,
+                    format!("a `{flag}` parameter cannot be `const`: the analysis shifts {what} by its value at run time"),
+                ));
+            }
+            if d.measurement_delay && d.input_delay {
+                return Err(cx.err_span(
+                    &d.name,
+                    "a parameter is a `measurement_delay` or an `input_delay`, not both",
+                ));
+            }
+            if !matches!(d.unit.as_str(), "s" | "") {
+                return Err(cx.err_span(
+                    &d.name,
+                    format!("a `{flag}` is in seconds (unit \"s\"), not \"{}\"", d.unit),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// What an expression may name: the declared names, and which are noise.
+struct Names<'a> {
+    declared: &'a Declared,
+    noise: HashSet<&'a str>,
+}
+
+impl Names<'_> {
+    /// Every symbol of `e` a constant or a declared name that `allow` lets it use.
+    fn check(&self, cx: &Ctx, e: &Expr, allow: &dyn Fn(&str) -> bool) -> Result<(), SourceError> {
+        for (v, span) in e.variables() {
+            if CONSTANTS.contains(&v) || self.declared.contains_key(v) && allow(v) {
+                continue;
+            }
+            let why = if self.declared.contains_key(v) || RESERVED.contains(&v) {
+                format!("`{v}` cannot be used here")
+            } else {
+                format!("unknown symbol `{v}`")
+            };
+            return Err(cx.err_at(span.0, why));
+        }
+        Ok(())
+    }
+}
+
+/// The kinematics ([motion] or [constraints]), where they start in the file,
+/// and their doc.
+fn parse_kinematics(
+    cx: &Ctx,
+    raw: &RawSpec,
+    names: &Names,
+) -> Result<(Kinematics, usize, String), SourceError> {
+    match (&raw.motion, &raw.constraints) {
+        (Some(m), None) => {
+            let mo = m.get_ref();
+            let twist_exprs = [&mo.vx, &mo.vy, &mo.omega].map(|s| {
+                cx.parse_expr(s)
+                    .and_then(|e| names.check(cx, &e, &not_state).map(|_| e))
+            });
+            let [vx, vy, omega] = twist_exprs;
+            Ok((
+                Kinematics::Twist([vx?, vy?, omega?]),
+                mo.vx.span().start + 1,
+                mo.doc.clone(),
+            ))
+        }
+        (None, Some(c)) => {
+            let k = parse_constraints(cx, c, &raw.input, &names.noise, &|e: &Expr| {
+                names.check(cx, e, &|v: &str| not_state(v) && !names.noise.contains(v))
+            })?;
+            let at = c.row.first().map_or(0, |r| r.rate.span().start);
+            Ok((Kinematics::Constraints(k), at, c.doc.clone()))
+        }
+        (Some(m), Some(_)) => {
+            Err(cx.err_span(m, "give either [motion] or [constraints], not both"))
+        }
+        (None, None) => Err(cx.err_at(
+            0,
+            "missing [motion] (the body twist) or [constraints] (rate = S . twist rows)",
+        )),
+    }
+}
+
+/// One `[[observation]]`, checked against the names and the observations
+/// before it (one per role).
+fn parse_observation(
+    cx: &Ctx,
+    o: &RawObservation,
+    names: &Names,
+    before: &[Observation],
+) -> Result<Observation, SourceError> {
+    declare_free_name(cx, &o.name, names.declared)?;
+    if before.iter().any(|x| &x.name == o.name.get_ref()) {
+        return Err(cx.err_span(
+            &o.name,
+            format!("duplicate observation name `{}`", o.name.get_ref()),
+        ));
+    }
+    let ncols = o.columns.get_ref().len();
+    if o.expr.len() != ncols {
+        return Err(cx.err_span(
+            &o.columns,
+            format!(
+                "observation `{}` has {ncols} column(s) but {} expression(s)",
+                o.name.get_ref(),
+                o.expr.len()
+            ),
+        ));
+    }
+    if !o.angle.is_empty() && o.angle.len() != ncols
+        || !o.sigma.is_empty() && o.sigma.len() != ncols
+    {
+        return Err(cx.err_span(
+            &o.columns,
+            "`angle` and `sigma` must have one entry per column",
+        ));
+    }
+    let exprs = o
+        .expr
+        .iter()
+        .map(|s| observation_expr(cx, s, o.landmark, names))
+        .collect::<Result<Vec<_>, _>>()?;
+    if let Some(s) = o.sigma.iter().find(|s| !s.is_finite() || **s < 0.0) {
+        return Err(cx.err_span(
+            &o.columns,
+            format!(
+                "observation `{}`: sigma {s} must be a finite number >= 0",
+                o.name.get_ref()
+            ),
+        ));
+    }
+    let angle = if o.angle.is_empty() {
+        vec![false; ncols]
+    } else {
+        o.angle.clone()
+    };
+    let role = o
+        .role
+        .unwrap_or_else(|| infer_role(o.landmark, &exprs, &angle));
+    check_role(cx, o, role, before)?;
+    Ok(Observation {
+        decl: ObservationDecl {
+            name: o.name.get_ref().clone(),
+            doc: o.doc.clone(),
+            columns: o.columns.get_ref().clone(),
+            angle,
+            sigma: if o.sigma.is_empty() {
+                vec![0.0; ncols]
+            } else {
+                o.sigma.clone()
+            },
+            landmark: o.landmark,
+            role,
+        },
+        exprs,
+    })
+}
+
+/// One expression of an observation: it may read the twist, the state, the
+/// parameters, the inputs and definitions, and a landmark's xl, yl when it
+/// has one; not the noise.
+fn observation_expr(
+    cx: &Ctx,
+    s: &Spanned<String>,
+    landmark: bool,
+    names: &Names,
+) -> Result<Expr, SourceError> {
+    let e = cx.parse_expr(s)?;
+    for (v, span) in e.variables() {
+        let ok = CONSTANTS.contains(&v)
+            || ["vx", "vy", "omega"].contains(&v)
+            || (["xl", "yl"].contains(&v) && landmark)
+            || names.declared.contains_key(v) && !names.noise.contains(v);
+        if !ok {
+            let msg = if ["xl", "yl"].contains(&v) {
+                format!("`{v}` needs `landmark = true` on this observation")
+            } else {
+                format!("unknown symbol `{v}`")
+            };
+            return Err(cx.err_at(span.0, msg));
+        }
+    }
+    Ok(e)
+}
+
+/// An observation's columns fit its role, and no observation before it has
+/// the role (other than `Other`).
+fn check_role(
+    cx: &Ctx,
+    o: &RawObservation,
+    role: ObservationRole,
+    before: &[Observation],
+) -> Result<(), SourceError> {
+    let ncols = o.columns.get_ref().len();
+    let (want, what) = match role {
+        ObservationRole::Pose => (3, "a pose observation has 3 columns (x, y, heading)"),
+        ObservationRole::YawRate => (1, "a yaw-rate observation has 1 column"),
+        ObservationRole::RangeBearing => (
+            2,
+            "a range-bearing observation has 2 columns (range, bearing) and `landmark = true`",
+        ),
+        ObservationRole::Other => (ncols, ""),
+    };
+    if ncols != want
+        || (role == ObservationRole::RangeBearing) != o.landmark && role != ObservationRole::Other
+    {
+        return Err(cx.err_span(
+            &o.columns,
+            format!("observation `{}`: {what}", o.name.get_ref()),
+        ));
+    }
+    if role != ObservationRole::Other {
+        if let Some(other) = before.iter().find(|x| x.role == role) {
+            return Err(cx.err_span(&o.name, format!("observation `{}` has the role {role:?} of `{}` already: one observation per role", o.name.get_ref(), other.name)));
+        }
+    }
+    Ok(())
+}
+
+/// The `[inverse]` section: one expression per input, of the twist and the
+/// parameters only.
+fn parse_inverse(cx: &Ctx, raw: &RawSpec) -> Result<Option<(Vec<Expr>, String)>, SourceError> {
+    let Some(inv) = &raw.inverse else {
+        return Ok(None);
+    };
+    if inv.inputs.get_ref().len() != raw.input.len() {
+        return Err(cx.err_span(
+            &inv.inputs,
+            format!(
+                "inverse gives {} expression(s) for {} input(s)",
+                inv.inputs.get_ref().len(),
+                raw.input.len()
+            ),
+        ));
+    }
+    let mut es = Vec::new();
+    for s in inv.inputs.get_ref() {
+        let e = cx.parse_expr(s)?;
+        for (v, span) in e.variables() {
+            let is_param = raw.parameter.iter().any(|p| p.name.get_ref() == v);
+            if !(CONSTANTS.contains(&v) || ["vx", "vy", "omega"].contains(&v) || is_param) {
+                return Err(cx.err_at(
+                    span.0,
+                    format!("inverse may use vx, vy, omega and parameters only, not `{v}`"),
+                ));
+            }
+        }
+        es.push(e);
+    }
+    Ok(Some((es, inv.doc.clone())))
 }
 
 /// Validate a `[constraints]` section: every row constrains a distinct cumulative
