@@ -422,6 +422,73 @@ fn jacobian_through(
 /// Derive every function of a model.
 pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     let fx = Funcs::get();
+    let sym = symbols(model, fx);
+    let se = |e| sym_err(model, e);
+    let args = Args::new(model, &sym);
+    // Body twist with and without noise.
+    let twist_noisy: Vec<Atom> = match &model.kinematics {
+        Kinematics::Twist(t) => t
+            .iter()
+            .map(|e| to_atom(&model.expand(e), &sym.by_name, &fx))
+            .collect::<Result<_, _>>()
+            .map_err(se)?,
+        Kinematics::Constraints(c) => least_squares_twist(model, c, &sym).map_err(se)?,
+    };
+    let twist: Vec<Atom> = twist_noisy
+        .iter()
+        .map(|a| {
+            args.w_names.iter().fold(a.clone(), |acc, n| {
+                substitute(&acc, sym.s(n), &Atom::num(0))
+            })
+        })
+        .collect();
+    let mut fns = vec![Spec {
+        kernel: Kernel::Twist,
+        doc: format!("Body twist [vx, vy, omega] (m/s, m/s, rad/s) from the inputs: the forward kinematics. {}", model.motion_doc),
+        args: vec![args.au.clone(), args.ap.clone()],
+        lets: vec![],
+        rows: 3,
+        cols: 1,
+        row_names: strings(&["vx", "vy", "omega"]),
+        col_names: vec![],
+        outputs: twist.clone(),
+        singular: vec![],
+    }];
+    fns.push(gyro_spec(model, &sym, &args, &twist).map_err(se)?);
+    fns.extend(step_specs(&sym, &args, &twist_noisy));
+    fns.extend(observation_specs(model, &sym, &args, &twist).map_err(se)?);
+    // Inverse kinematics.
+    let no_inverse = match inverse_kinematics(model, &sym, &twist, &args.ap, &args.adt)? {
+        Inverse::Derived(specs) => {
+            fns.extend(specs);
+            None
+        }
+        Inverse::Unavailable(reason) => Some(reason),
+    };
+    let mut functions = Vec::new();
+    for s in fns {
+        functions.push(finish(s, model, fx).map_err(se)?);
+    }
+    ModelIr::try_from(IrFile {
+        name: model.name.clone(),
+        doc: model.doc.clone(),
+        seed: model.seed.clone(),
+        spec_fingerprint: model.fingerprint(),
+        inputs: model.inputs.clone(),
+        params: model.params.clone(),
+        noise: model.noise.clone(),
+        observations: model.observations.iter().map(|o| o.decl.clone()).collect(),
+        effects: model.effects.clone(),
+        no_inverse,
+        functions,
+    })
+    .map_err(|e| se(SymbolicError(e.to_string())))
+}
+
+/// A symbol for every name a kernel may read (the state, inputs, noise,
+/// runtime parameters, the step, the landmark, the twist and the let-bound
+/// quantities), and each const parameter as its exact number.
+fn symbols(model: &Model, fx: Funcs) -> Sym {
     let mut by_name = HashMap::new();
     let mut names: Vec<String> = STATE.iter().map(|s| s.to_string()).collect();
     names.extend(model.inputs.iter().map(|i| i.name.clone()));
@@ -450,82 +517,89 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     for p in model.params.iter().filter(|p| p.constant) {
         by_name.insert(p.name.clone(), number_f64(p.nominal));
     }
-    let sym = Sym { fx, by_name };
-    let se = |e| sym_err(model, e);
+    Sym { fx, by_name }
+}
 
-    let state: Vec<String> = strings(&STATE);
-    let u_names: Vec<String> = model.inputs.iter().map(|i| i.name.clone()).collect();
-    let w_names: Vec<String> = model.noise.iter().map(|n| n.name.clone()).collect();
-    let p_names: Vec<String> = model.runtime_params().map(|p| p.name.clone()).collect();
-    let (ax, au, aw, ap) = (
-        arg(&sym, ArgRole::State, &state),
-        arg(&sym, ArgRole::Inputs, &u_names),
-        arg(&sym, ArgRole::Noise, &w_names),
-        arg(&sym, ArgRole::Params, &p_names),
-    );
-    let adt = arg(&sym, ArgRole::Dt, &strings(&["dt"]));
+/// The kernels' arguments: state, inputs, noise, parameters and time step.
+struct Args {
+    ax: Arg,
+    au: Arg,
+    aw: Arg,
+    ap: Arg,
+    adt: Arg,
+    w_names: Vec<String>,
+}
 
-    // Body twist with and without noise.
-    let twist_noisy: Vec<Atom> = match &model.kinematics {
-        Kinematics::Twist(t) => t
-            .iter()
-            .map(|e| to_atom(&model.expand(e), &sym.by_name, &fx))
-            .collect::<Result<_, _>>()
-            .map_err(se)?,
-        Kinematics::Constraints(c) => least_squares_twist(model, c, &sym).map_err(se)?,
-    };
-    let zero_noise = |a: &Atom| {
-        w_names.iter().fold(a.clone(), |acc, n| {
-            substitute(&acc, sym.s(n), &Atom::num(0))
-        })
-    };
-    let twist: Vec<Atom> = twist_noisy.iter().map(zero_noise).collect();
+impl Args {
+    fn new(model: &Model, sym: &Sym) -> Args {
+        let u_names: Vec<String> = model.inputs.iter().map(|i| i.name.clone()).collect();
+        let w_names: Vec<String> = model.noise.iter().map(|n| n.name.clone()).collect();
+        let p_names: Vec<String> = model.runtime_params().map(|p| p.name.clone()).collect();
+        Args {
+            ax: arg(sym, ArgRole::State, &strings(&STATE)),
+            au: arg(sym, ArgRole::Inputs, &u_names),
+            aw: arg(sym, ArgRole::Noise, &w_names),
+            ap: arg(sym, ArgRole::Params, &p_names),
+            adt: arg(sym, ArgRole::Dt, &strings(&["dt"])),
+            w_names,
+        }
+    }
 
-    let mut fns = Vec::new();
-    let twist_rows = strings(&["vx", "vy", "omega"]);
-    let pose_rows = strings(&["x", "y", "theta"]);
-    fns.push(Spec {
-        kernel: Kernel::Twist,
-        doc: format!("Body twist [vx, vy, omega] (m/s, m/s, rad/s) from the inputs: the forward kinematics. {}", model.motion_doc),
-        args: vec![au.clone(), ap.clone()],
-        lets: vec![],
-        rows: 3,
-        cols: 1,
-        row_names: twist_rows.clone(),
-        col_names: vec![],
-        outputs: twist.clone(),
-        singular: vec![],
-    });
+    /// A step's arguments (with the noise when asked and the model has some).
+    fn step(&self, with_w: bool) -> Vec<Arg> {
+        let mut v = vec![self.ax.clone(), self.au.clone()];
+        if with_w && !self.w_names.is_empty() {
+            v.push(self.aw.clone());
+        }
+        v.extend([self.ap.clone(), self.adt.clone()]);
+        v
+    }
+}
 
-    // Gyrodometry (seed 000 eq. 13-18): the translational velocity when the yaw
-    // rate is measured by a gyro instead of computed from the inputs.
+/// Gyrodometry (seed 000 eq. 13-18): the translational velocity when the yaw
+/// rate is measured by a gyro instead of computed from the inputs.
+fn gyro_spec(model: &Model, sym: &Sym, args: &Args, twist: &[Atom]) -> Result<Spec, SymbolicError> {
     let (twist_gyro, gyro_doc) = match &model.kinematics {
         Kinematics::Constraints(c) => {
             // eq. 17: xi' = J_xi^+ (q' - S_theta theta'), a 2-column least squares,
             // solved with the same pseudo-inverse (M embedded as diag(M_xi, 1))
-            let rows = constraint_rows(model, c, &sym).map_err(se)?;
+            let rows = constraint_rows(model, c, sym)?;
             let om = sym.a("omega");
             let m2: Vec<Atom> = [(0, 0), (0, 1)]
                 .iter()
-                .map(|&(a, b)| rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]))
-                .chain([Atom::num(0), rows.iter().fold(Atom::num(0), |acc, (_, s)| acc + &s[1] * &s[1]), Atom::num(0), Atom::num(1)])
+                .map(|&(a, b)| {
+                    rows.iter()
+                        .fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b])
+                })
+                .chain([
+                    Atom::num(0),
+                    rows.iter()
+                        .fold(Atom::num(0), |acc, (_, s)| acc + &s[1] * &s[1]),
+                    Atom::num(0),
+                    Atom::num(1),
+                ])
                 .collect();
-            let rhs: Vec<Atom> = (0..2).map(|a| rows.iter().fold(Atom::num(0), |acc, (r, s)| acc + &s[a] * (Atom::var(*r) - &s[2] * &om))).collect();
-            let xi = (0..2).map(|k| (0..2).fold(Atom::num(0), |acc, j| acc + pinv_entry(k, j, &m2) * &rhs[j])).collect();
-            (xi, "Gyrodometry, seed 000 eq. 17: body velocity [vx, vy] from the inputs when the yaw rate `omega` is measured (by a gyro, eq. 13): the least-squares solution of the constraints with theta' imposed.")
+            let rhs: Vec<Atom> = (0..2)
+                .map(|a| {
+                    rows.iter().fold(Atom::num(0), |acc, (r, s)| {
+                        acc + &s[a] * (Atom::var(*r) - &s[2] * &om)
+                    })
+                })
+                .collect();
+            let xi = (0..2)
+                .map(|k| (0..2).fold(Atom::num(0), |acc, j| acc + pinv_entry(k, j, &m2) * &rhs[j]))
+                .collect();
+            (xi, GYRO_DOC_C)
         }
-        Kinematics::Twist(_) => (
-            twist[..2].to_vec(),
-            "Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.",
-        ),
+        Kinematics::Twist(_) => (twist[..2].to_vec(), GYRO_DOC_T),
     };
-    fns.push(Spec {
+    Ok(Spec {
         kernel: Kernel::TwistGyro,
         doc: gyro_doc.into(),
         args: vec![
-            au.clone(),
-            arg(&sym, ArgRole::YawRate, &strings(&["omega"])),
-            ap.clone(),
+            args.au.clone(),
+            arg(sym, ArgRole::YawRate, &strings(&["omega"])),
+            args.ap.clone(),
         ],
         lets: vec![],
         rows: 2,
@@ -534,10 +608,13 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         col_names: vec![],
         outputs: twist_gyro,
         singular: vec![],
-    });
+    })
+}
 
-    // Discrete motion models, written in the twist (let-bound: computed once, and
-    // differentiated once per variable, see `jacobian_through`).
+/// The Euler and exact steps and their Jacobians, written in the twist
+/// (let-bound: computed once, and differentiated once per variable, see
+/// `jacobian_through`).
+fn step_specs(sym: &Sym, args: &Args, twist_noisy: &[Atom]) -> Vec<Spec> {
     let (x, y, th, dt) = (sym.a("x"), sym.a("y"), sym.a("theta"), sym.a("dt"));
     // A component that is a number or a single symbol stays inline: a let would
     // hide a zero (vy of a differential drive) from simplification.
@@ -583,40 +660,42 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
         &y + th.sin() * &bx + th.cos() * &by,
         &th + &dth_expr,
     ];
-
-    let step_args = |with_w: bool| {
-        let mut v = vec![ax.clone(), au.clone()];
-        if with_w && !w_names.is_empty() {
-            v.push(aw.clone());
-        }
-        v.extend([ap.clone(), adt.clone()]);
-        v
-    };
     let groups: Vec<(Wrt, &Arg)> = [
-        (Wrt::State, &ax),
-        (Wrt::Inputs, &au),
-        (Wrt::Noise, &aw),
-        (Wrt::Params, &ap),
+        (Wrt::State, &args.ax),
+        (Wrt::Inputs, &args.au),
+        (Wrt::Noise, &args.aw),
+        (Wrt::Params, &args.ap),
     ]
     .into_iter()
     .filter(|(_, a)| !a.syms.is_empty())
     .collect();
+    let pose_rows = strings(&["x", "y", "theta"]);
+    let mut fns = Vec::new();
     for (form, outs, chain, doc) in [
-        (StepForm::Euler, &euler, None, "Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading."),
-        (StepForm::Exact, &exact, Some((dth_sym, &dth_expr)), "Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch)."),
+        (StepForm::Euler, &euler, None, EULER_DOC),
+        (
+            StepForm::Exact,
+            &exact,
+            Some((dth_sym, &dth_expr)),
+            EXACT_DOC,
+        ),
     ] {
         let mut lets = tw_lets.clone();
         if let Some((s, e)) = chain {
             lets.push((s, e.clone()));
             lets.extend(arc_lets.iter().cloned());
         }
-        let singular = if chain.is_some() { vec![dth_sym] } else { vec![] };
+        let singular = if chain.is_some() {
+            vec![dth_sym]
+        } else {
+            vec![]
+        };
         let step = Kernel::Step(form, None);
         let step_name = step.name(|_| String::new());
         fns.push(Spec {
             kernel: step,
             doc: doc.to_string(),
-            args: step_args(true),
+            args: args.step(true),
             lets: lets.clone(),
             rows: 3,
             cols: 1,
@@ -635,8 +714,10 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             };
             fns.push(Spec {
                 kernel: step.jacobian(*g),
-                doc: format!("Jacobian of `{step_name}` with respect to the {what}; rows x, y, theta."),
-                args: step_args(true),
+                doc: format!(
+                    "Jacobian of `{step_name}` with respect to the {what}; rows x, y, theta."
+                ),
+                args: args.step(true),
                 lets: lets.iter().cloned().chain(dlets).collect(),
                 rows: 3,
                 cols: garg.syms.len(),
@@ -647,23 +728,33 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             });
         }
     }
+    fns
+}
 
-    // Observation models.
+/// Each observation model and its Jacobians with respect to the state and
+/// the parameters.
+fn observation_specs(
+    model: &Model,
+    sym: &Sym,
+    args: &Args,
+    twist: &[Atom],
+) -> Result<Vec<Spec>, SymbolicError> {
+    let (ax, au, ap) = (&args.ax, &args.au, &args.ap);
     let mut obs_vars = sym.by_name.clone();
-    for (n, t) in ["vx", "vy", "omega"].iter().zip(&twist) {
+    for (n, t) in ["vx", "vy", "omega"].iter().zip(twist) {
         obs_vars.insert(n.to_string(), t.clone());
     }
+    let mut fns = Vec::new();
     for (index, o) in model.observations.iter().enumerate() {
         let obs = Kernel::Observation(index as u16, None);
         let outs: Vec<Atom> = o
             .exprs
             .iter()
-            .map(|e| to_atom(&model.expand(e), &obs_vars, &fx))
-            .collect::<Result<_, _>>()
-            .map_err(se)?;
+            .map(|e| to_atom(&model.expand(e), &obs_vars, &sym.fx))
+            .collect::<Result<_, _>>()?;
         let mut args = vec![ax.clone(), au.clone(), ap.clone()];
         if o.landmark {
-            args.push(arg(&sym, ArgRole::Landmark, &strings(&["xl", "yl"])));
+            args.push(arg(sym, ArgRole::Landmark, &strings(&["xl", "yl"])));
         }
         let doc = if o.doc.is_empty() {
             format!("Observation `{}`", o.name)
@@ -682,7 +773,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             outputs: outs.clone(),
             singular: vec![],
         });
-        for (g, garg) in [(Wrt::State, &ax), (Wrt::Params, &ap)] {
+        for (g, garg) in [(Wrt::State, ax), (Wrt::Params, ap)] {
             if garg.syms.is_empty() {
                 continue;
             }
@@ -700,35 +791,15 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
             });
         }
     }
-
-    // Inverse kinematics.
-    let no_inverse = match inverse_kinematics(model, &sym, &twist, &ap, &adt)? {
-        Inverse::Derived(specs) => {
-            fns.extend(specs);
-            None
-        }
-        Inverse::Unavailable(reason) => Some(reason),
-    };
-
-    let mut functions = Vec::new();
-    for s in fns {
-        functions.push(finish(s, model, fx).map_err(se)?);
-    }
-    ModelIr::try_from(IrFile {
-        name: model.name.clone(),
-        doc: model.doc.clone(),
-        seed: model.seed.clone(),
-        spec_fingerprint: model.fingerprint(),
-        inputs: model.inputs.clone(),
-        params: model.params.clone(),
-        noise: model.noise.clone(),
-        observations: model.observations.iter().map(|o| o.decl.clone()).collect(),
-        effects: model.effects.clone(),
-        no_inverse,
-        functions,
-    })
-    .map_err(|e| se(SymbolicError(e.to_string())))
+    Ok(fns)
 }
+
+/// The gyrodometry kernel's doc for a constrained model, and for a twist model.
+const GYRO_DOC_C: &str = "Gyrodometry, seed 000 eq. 17: body velocity [vx, vy] from the inputs when the yaw rate `omega` is measured (by a gyro, eq. 13): the least-squares solution of the constraints with theta' imposed.";
+const GYRO_DOC_T: &str = "Gyrodometry (seed 000 eq. 13-18): body velocity [vx, vy] used with a measured yaw rate `omega`. The twist rows are explicit here, so they do not depend on omega.";
+/// The steps' docs.
+const EULER_DOC: &str = "Euler step (seed 003; seed 001 eq. 3): pose advanced along the body twist held at the start-of-step heading.";
+const EXACT_DOC: &str = "Exact step: the pose after moving with the constant body twist for dt along an arc on SE(2) (seed 003, exact integration). Finite and continuous at omega = 0 (series branch).";
 
 /// The rows of S (seed 000 eq. 7) as atoms, with their rate symbols.
 fn constraint_rows(
