@@ -893,67 +893,113 @@ fn inverse_kinematics(
     ap: &Arg,
     adt: &Arg,
 ) -> Result<Inverse, SourceError> {
-    let fx = sym.fx;
-    let se = |e| sym_err(model, e);
-    // What the inverse gives: the rates of the cumulative inputs; a model
-    // without any (a velocity-commanded robot, wheel speeds from tachometers)
-    // gets the absolute inputs that enter the twist linearly. The other
-    // absolute inputs (a steering angle) are configuration it reads.
-    let cumulative: Vec<&kinegen_model::spec::Input> = model
-        .inputs
-        .iter()
-        .filter(|i| i.kind == InputKind::Cumulative)
-        .collect();
-    let rates: Vec<&kinegen_model::spec::Input> = if cumulative.is_empty() {
-        model
+    let cx = InverseCx::new(model, sym, twist);
+    let solved = if let Some((exprs, idoc)) = &model.inverse {
+        cx.declared(exprs, idoc)?
+    } else if let Kinematics::Constraints(c) = &model.kinematics {
+        cx.constrained(c)?
+    } else {
+        match cx.derived()? {
+            Ok(solved) => solved,
+            Err(reason) => return Ok(Inverse::Unavailable(reason)),
+        }
+    };
+    Ok(Inverse::Derived(cx.specs(solved, ap, adt)?))
+}
+
+/// An inverse found: the inputs it gives (expressions of the twist), their
+/// names, its doc, and whether it imposes the lateral speed.
+struct Solved {
+    outs: Vec<Atom>,
+    names: Vec<String>,
+    doc: String,
+    imposes_vy: bool,
+}
+
+/// What the inverse kinematics of a model work with.
+struct InverseCx<'a> {
+    model: &'a Model,
+    sym: &'a Sym,
+    twist: &'a [Atom],
+    /// What the inverse gives: the rates of the cumulative inputs; a model
+    /// without any (a velocity-commanded robot, wheel speeds from tachometers)
+    /// gets the absolute inputs that enter the twist linearly. The other
+    /// absolute inputs (a steering angle) are configuration it reads.
+    rates: Vec<&'a kinegen_model::spec::Input>,
+    cfg_names: Vec<String>,
+    rate_syms: Vec<Symbol>,
+    tw_syms: [Symbol; 3],
+    tw_atoms: [Atom; 3],
+    /// which twist rows cannot be non-zero at all
+    structurally_zero: Vec<bool>,
+}
+
+impl<'a> InverseCx<'a> {
+    fn new(model: &'a Model, sym: &'a Sym, twist: &'a [Atom]) -> Self {
+        let cumulative: Vec<&kinegen_model::spec::Input> = model
             .inputs
             .iter()
-            .filter(|i| enters_linearly(twist, sym.s(&i.name)))
-            .collect()
-    } else {
-        cumulative
-    };
-    let cfg_names: Vec<String> = model
-        .inputs
-        .iter()
-        .filter(|i| i.kind == InputKind::Absolute && !rates.iter().any(|r| r.name == i.name))
-        .map(|i| i.name.clone())
-        .collect();
-    let rate_syms: Vec<Symbol> = rates.iter().map(|i| sym.s(&i.name)).collect();
-    let tw_syms = [sym.s("vx"), sym.s("vy"), sym.s("omega")];
-    let tw_atoms = [sym.a("vx"), sym.a("vy"), sym.a("omega")];
+            .filter(|i| i.kind == InputKind::Cumulative)
+            .collect();
+        let rates: Vec<&kinegen_model::spec::Input> = if cumulative.is_empty() {
+            model
+                .inputs
+                .iter()
+                .filter(|i| enters_linearly(twist, sym.s(&i.name)))
+                .collect()
+        } else {
+            cumulative
+        };
+        let cfg_names: Vec<String> = model
+            .inputs
+            .iter()
+            .filter(|i| i.kind == InputKind::Absolute && !rates.iter().any(|r| r.name == i.name))
+            .map(|i| i.name.clone())
+            .collect();
+        InverseCx {
+            model,
+            sym,
+            twist,
+            rate_syms: rates.iter().map(|i| sym.s(&i.name)).collect(),
+            rates,
+            cfg_names,
+            tw_syms: [sym.s("vx"), sym.s("vy"), sym.s("omega")],
+            tw_atoms: [sym.a("vx"), sym.a("vy"), sym.a("omega")],
+            structurally_zero: twist.iter().map(is_zero).collect(),
+        }
+    }
 
-    // Which twist rows can be non-zero at all?
-    let structurally_zero: Vec<bool> = twist.iter().map(is_zero).collect();
-    // Sample values for parameters (nominal, perturbed) and configuration inputs.
-    let point = |k: usize| -> Vec<(Symbol, f64)> {
-        let mut v: Vec<(Symbol, f64)> = model
+    fn se(&self, e: SymbolicError) -> SourceError {
+        sym_err(self.model, e)
+    }
+
+    /// Sample values for parameters (nominal, perturbed) and configuration inputs.
+    fn point(&self, k: usize) -> Vec<(Symbol, f64)> {
+        let sym = self.sym;
+        let mut v: Vec<(Symbol, f64)> = self
+            .model
             .runtime_params()
             .enumerate()
             .map(|(i, p)| (sym.s(&p.name), p.nominal * (1.0 + 0.1 * sample(k, i))))
             .collect();
-        for (i, c) in cfg_names.iter().enumerate() {
+        for (i, c) in self.cfg_names.iter().enumerate() {
             v.push((sym.s(c), 0.7 * sample(k, 100 + i)));
         }
         v
-    };
+    }
 
-    let imposes_vy;
-    let (inverse_outs, out_names, doc): (Vec<Atom>, Vec<String>, String) = if let Some((
-        exprs,
-        idoc,
-    )) = &model.inverse
-    {
-        // Declared inverse: check it numerically against the forward model.
+    /// A declared inverse, checked numerically against the forward model.
+    fn declared(&self, exprs: &[Expr], idoc: &str) -> Result<Solved, SourceError> {
+        let (model, sym, fx) = (self.model, self.sym, self.sym.fx);
         let mut vars = sym.by_name.clone();
-        for (n, a) in ["vx", "vy", "omega"].iter().zip(&tw_atoms) {
+        for (n, a) in ["vx", "vy", "omega"].iter().zip(&self.tw_atoms) {
             vars.insert(n.to_string(), a.clone());
         }
         let outs: Vec<Atom> = exprs
             .iter()
             .map(|e| to_atom(e, &vars, &fx))
             .collect::<Result<_, _>>()
-            .map_err(se)?;
+            .map_err(|e| self.se(e))?;
         // the rows the declared inverse imposes are the twist components it reads;
         // the others follow from the inputs (like y in seed 001 eq. 12)
         let imposed: Vec<bool> = ["vx", "vy", "omega"]
@@ -964,13 +1010,12 @@ fn inverse_kinematics(
                     .any(|e| e.variables().iter().any(|(v, _)| v == n))
             })
             .collect();
-        imposes_vy = imposed[1];
         for k in 0..8 {
-            let mut pt = point(k);
+            let mut pt = self.point(k);
             pt.retain(|(s, _)| !model.inputs.iter().any(|i| sym.s(&i.name) == *s));
             let tw: Vec<f64> = (0..3)
                 .map(|r| {
-                    if structurally_zero[r] || !imposed[r] {
+                    if self.structurally_zero[r] || !imposed[r] {
                         0.0
                     } else {
                         0.2 + 0.5 * sample(k, 200 + r).abs()
@@ -978,13 +1023,13 @@ fn inverse_kinematics(
                 })
                 .collect();
             let mut at = pt.clone();
-            at.extend(tw_syms.iter().copied().zip(tw.iter().copied()));
+            at.extend(self.tw_syms.iter().copied().zip(tw.iter().copied()));
             let mut fwd_at = pt.clone();
             for (i, o) in model.inputs.iter().zip(&outs) {
-                fwd_at.push((sym.s(&i.name), eval_at(o, &at, fx).map_err(se)?));
+                fwd_at.push((sym.s(&i.name), eval_at(o, &at, fx).map_err(|e| self.se(e))?));
             }
             for r in (0..3).filter(|&r| imposed[r]) {
-                let back = eval_at(&twist[r], &fwd_at, fx).map_err(se)?;
+                let back = eval_at(&self.twist[r], &fwd_at, fx).map_err(|e| self.se(e))?;
                 if (back - tw[r]).abs() > 1e-9 * (1.0 + tw[r].abs()) {
                     return Err(err_at(
                         model,
@@ -994,18 +1039,22 @@ fn inverse_kinematics(
                 }
             }
         }
-        (
+        Ok(Solved {
             outs,
-            model.inputs.iter().map(|i| i.name.clone()).collect(),
-            idoc.clone(),
-        )
-    } else if let Kinematics::Constraints(c) = &model.kinematics {
-        // The constraints are the inverse kinematics (seed 000 eq. 3): q' = S z'.
-        // Their least-squares inverse exists where S has rank 3; if it never does,
-        // the model cannot be used.
-        let rows = constraint_rows(model, c, sym).map_err(se)?;
+            names: model.inputs.iter().map(|i| i.name.clone()).collect(),
+            doc: idoc.to_string(),
+            imposes_vy: imposed[1],
+        })
+    }
+
+    /// The constraints are the inverse kinematics (seed 000 eq. 3): q' = S z'.
+    /// Their least-squares inverse exists where S has rank 3; if it never does,
+    /// the model cannot be used.
+    fn constrained(&self, c: &Constraints) -> Result<Solved, SourceError> {
+        let (model, fx) = (self.model, self.sym.fx);
+        let rows = constraint_rows(model, c, self.sym).map_err(|e| self.se(e))?;
         let full_rank_somewhere = (0..8).any(|k| {
-            let pt = point(k);
+            let pt = self.point(k);
             let m: Option<Vec<f64>> = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
                 .iter()
                 .map(|&(a, b)| {
@@ -1026,19 +1075,34 @@ fn inverse_kinematics(
         if !full_rank_somewhere {
             return Err(err_kin(model, "inverse kinematics is singular everywhere: the constraint rows have rank < 3, so no twist is determined"));
         }
-        imposes_vy = true;
         let by_rate: HashMap<Symbol, &[Atom; 3]> = rows.iter().map(|(r, s)| (*r, s)).collect();
-        let outs = rate_syms
+        let outs = self
+            .rate_syms
             .iter()
-            .map(|r| (0..3).fold(Atom::num(0), |acc, c| acc + &by_rate[r][c] * &tw_atoms[c]))
+            .map(|r| {
+                (0..3).fold(Atom::num(0), |acc, c| {
+                    acc + &by_rate[r][c] * &self.tw_atoms[c]
+                })
+            })
             .collect();
-        let names = rates.iter().map(|i| i.name.clone()).collect();
-        (outs, names, "Input rates from a body twist: the kinematic constraints themselves, q' = S(q, lambda) R(theta) z' (seed 000 eq. 3, 6-7), evaluated in the body frame.".into())
-    } else {
-        // Derived inverse: choose twist rows that are linear in the input rates,
-        // M(cfg, p) * rates, as many as there are rates, with M invertible (vx and
-        // omega first, then vy). The other rows follow from the inputs, as y does in
-        // seed 001 eq. 12 (and the lateral slip of an effect-augmented model).
+        let names = self.rates.iter().map(|i| i.name.clone()).collect();
+        let (outs, names, doc): (Vec<Atom>, Vec<String>, String) = (outs, names, "Input rates from a body twist: the kinematic constraints themselves, q' = S(q, lambda) R(theta) z' (seed 000 eq. 3, 6-7), evaluated in the body frame.".into());
+        Ok(Solved {
+            outs,
+            names,
+            doc,
+            imposes_vy: true,
+        })
+    }
+
+    /// Derived inverse: choose twist rows that are linear in the input rates,
+    /// M(cfg, p) * rates, as many as there are rates, with M invertible (vx and
+    /// omega first, then vy). The other rows follow from the inputs, as y does in
+    /// seed 001 eq. 12 (and the lateral slip of an effect-augmented model).
+    /// Err(reason) where no inverse can be derived.
+    fn derived(&self) -> Result<Result<Solved, String>, SourceError> {
+        let model = self.model;
+        let rate_syms = &self.rate_syms;
         let linear = |t: &Atom| {
             let at_zero = rate_syms
                 .iter()
@@ -1052,51 +1116,21 @@ fn inverse_kinematics(
         };
         let candidates: Vec<usize> = [0usize, 2, 1]
             .into_iter()
-            .filter(|&r| !structurally_zero[r] && linear(&twist[r]))
+            .filter(|&r| !self.structurally_zero[r] && linear(&self.twist[r]))
             .collect();
         let k = rate_syms.len();
-        let mut chosen = None;
-        let mut any_square = false;
-        if (1..=3).contains(&k) && candidates.len() >= k {
-            let combos: Vec<Vec<usize>> = match (k, candidates.len()) {
-                (1, n) => (0..n).map(|i| vec![candidates[i]]).collect(),
-                (2, 2) => vec![vec![candidates[0], candidates[1]]],
-                (2, 3) => vec![
-                    vec![candidates[0], candidates[1]],
-                    vec![candidates[0], candidates[2]],
-                    vec![candidates[1], candidates[2]],
-                ],
-                _ => vec![candidates.clone()],
-            };
-            for mut rows in combos {
-                rows.sort();
-                any_square = true;
-                let m: Vec<Vec<Atom>> = rows
-                    .iter()
-                    .map(|&r| rate_syms.iter().map(|s| twist[r].derivative(*s)).collect())
-                    .collect();
-                let (inv, det) = symbolic_inverse(&m);
-                let singular_everywhere = (0..6).all(|k| {
-                    eval_at(&det, &point(k), fx)
-                        .map(|d| d.abs() < 1e-12)
-                        .unwrap_or(true)
-                });
-                if !singular_everywhere {
-                    chosen = Some((rows, inv));
-                    break;
-                }
-            }
-        }
+        let (chosen, any_square) = self.invertible_rows(&candidates);
         let Some((rows, inv)) = chosen else {
             if any_square {
                 // linear but singular everywhere: almost always a slip in the
                 // spec (a sum where a difference was meant), so an error
                 return Err(err_kin(model, "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)"));
             }
+            let rates = &self.rates;
             if rates.is_empty() {
-                return Ok(Inverse::Unavailable("the twist is not linear in any input (no cumulative input, and no absolute input enters it linearly), so it cannot be inverted symbolically; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));
+                return Ok(Err("the twist is not linear in any input (no cumulative input, and no absolute input enters it linearly), so it cannot be inverted symbolically; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));
             }
-            return Ok(Inverse::Unavailable(format!(
+            return Ok(Err(format!(
                 "cannot derive inverse kinematics: {} twist row(s) are linear in the {} input(s) it would give ({}), {} needed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)",
                 candidates.len(),
                 k,
@@ -1106,101 +1140,176 @@ fn inverse_kinematics(
         };
         let outs: Vec<Atom> = (0..rows.len())
             .map(|i| {
-                rows.iter()
-                    .enumerate()
-                    .fold(Atom::num(0), |acc, (j, &r)| acc + &inv[i][j] * &tw_atoms[r])
+                rows.iter().enumerate().fold(Atom::num(0), |acc, (j, &r)| {
+                    acc + &inv[i][j] * &self.tw_atoms[r]
+                })
             })
             .collect();
-        imposes_vy = rows.contains(&1);
-        let names = rates.iter().map(|i| i.name.clone()).collect();
-        (outs, names, "Input rates from a body twist: the inverse of the (square, invertible) map from input rates to the twist rows that are not identically zero, derived symbolically (seed 003: W = (V_T_W)^-1 V).".into())
-    };
-
-    let twist_arg = arg(sym, ArgRole::Twist, &strings(&["vx", "vy", "omega"]));
-    let cfg_arg = arg(sym, ArgRole::Configuration, &cfg_names);
-    let mut args = vec![twist_arg];
-    if model.inverse.is_none() && !cfg_names.is_empty() {
-        args.push(cfg_arg.clone());
+        let names = self.rates.iter().map(|i| i.name.clone()).collect();
+        let (outs, names, doc): (Vec<Atom>, Vec<String>, String) = (outs, names, "Input rates from a body twist: the inverse of the (square, invertible) map from input rates to the twist rows that are not identically zero, derived symbolically (seed 003: W = (V_T_W)^-1 V).".into());
+        Ok(Ok(Solved {
+            outs,
+            names,
+            doc,
+            imposes_vy: rows.contains(&1),
+        }))
     }
-    args.push(ap.clone());
-    let mut specs = vec![Spec {
-        kernel: Kernel::InverseTwist,
-        doc,
-        args,
-        lets: vec![],
-        rows: inverse_outs.len(),
-        cols: 1,
-        row_names: out_names.clone(),
-        col_names: vec![],
-        outputs: inverse_outs.clone(),
-        singular: vec![],
-    }];
 
-    // Integrated inverse: the constant twist that moves the robot by (dx, dy, dtheta)
-    // (start body frame) in dt, i.e. the SE(2) logarithm. A model whose twist has no
-    // lateral component follows seed 001 eq. 12/15: x and theta are imposed, y follows.
-    let (dx, dy, d, dt) = (sym.a("dx"), sym.a("dy"), sym.a("dtheta"), sym.a("dt"));
-    // vy imposed only when the inverse uses the vy row (holonomic models)
-    let lateral = imposes_vy;
-    let (vx_i, vy_i) = if lateral {
-        let half = &d / Atom::num(2);
-        let k = &half * d.sin() / (Atom::num(1) - d.cos());
-        (
-            (&k * &dx + &half * &dy) / &dt,
-            (&k * &dy - &half * &dx) / &dt,
-        )
-    } else {
-        (&dx * &d / (d.sin() * &dt), Atom::num(0))
-    };
-    let om_i = &d / &dt;
-    // The removable singularity at dtheta = 0 lives in the twist alone (dtheta /
-    // sin dtheta): the twist gets its series branch, and the inverse kinematics
-    // is applied to that twist. A series of the whole composed inverse (an
-    // atan2 of a curvature, say) would converge slowly or not at all.
-    let dtheta = sym.s("dtheta");
-    let lets = vec![
-        (
-            sym.s("kg_inc_vx"),
-            regularize(&vx_i, dtheta, fx).map_err(se)?,
-        ),
-        (
-            sym.s("kg_inc_vy"),
-            regularize(&vy_i, dtheta, fx).map_err(se)?,
-        ),
-    ];
-    let subst = |a: &Atom| {
-        let a = substitute(a, tw_syms[0], &sym.a("kg_inc_vx"));
-        let a = substitute(&a, tw_syms[1], &sym.a("kg_inc_vy"));
-        substitute(&a, tw_syms[2], &om_i)
-    };
-    let mut args = vec![
-        arg(
-            sym,
-            ArgRole::PoseIncrement,
-            &strings(&["dx", "dy", "dtheta"]),
-        ),
-        adt.clone(),
-    ];
-    if model.inverse.is_none() && !cfg_names.is_empty() {
-        args.push(cfg_arg);
+    /// The first set of `candidates` rows (as many as there are rates) whose
+    /// matrix in the rates is not singular everywhere, with its symbolic
+    /// inverse; and whether any square set was tried.
+    #[allow(clippy::type_complexity)]
+    fn invertible_rows(
+        &self,
+        candidates: &[usize],
+    ) -> (Option<(Vec<usize>, Vec<Vec<Atom>>)>, bool) {
+        let k = self.rate_syms.len();
+        if !((1..=3).contains(&k) && candidates.len() >= k) {
+            return (None, false);
+        }
+        let combos: Vec<Vec<usize>> = match (k, candidates.len()) {
+            (1, n) => (0..n).map(|i| vec![candidates[i]]).collect(),
+            (2, 2) => vec![vec![candidates[0], candidates[1]]],
+            (2, 3) => vec![
+                vec![candidates[0], candidates[1]],
+                vec![candidates[0], candidates[2]],
+                vec![candidates[1], candidates[2]],
+            ],
+            _ => vec![candidates.to_vec()],
+        };
+        let mut any_square = false;
+        for mut rows in combos {
+            rows.sort();
+            any_square = true;
+            let m: Vec<Vec<Atom>> = rows
+                .iter()
+                .map(|&r| {
+                    self.rate_syms
+                        .iter()
+                        .map(|s| self.twist[r].derivative(*s))
+                        .collect()
+                })
+                .collect();
+            let (inv, det) = symbolic_inverse(&m);
+            let singular_everywhere = (0..6).all(|k| {
+                eval_at(&det, &self.point(k), self.sym.fx)
+                    .map(|d| d.abs() < 1e-12)
+                    .unwrap_or(true)
+            });
+            if !singular_everywhere {
+                return (Some((rows, inv)), any_square);
+            }
+        }
+        (None, any_square)
     }
-    args.push(ap.clone());
-    specs.push(Spec {
-        kernel: Kernel::InverseIncrement,
-        doc: format!(
-            "Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. {} Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.",
-            if lateral { "Holonomic: dx, dy and dtheta are all imposed (exact SE(2) logarithm)." } else { "Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15)." }
-        ),
-        args,
-        lets,
-        rows: inverse_outs.len(),
-        cols: 1,
-        row_names: out_names,
-        col_names: vec![],
-        outputs: inverse_outs.iter().map(subst).collect(),
-        singular: vec![sym.s("dtheta")],
-    });
-    Ok(Inverse::Derived(specs))
+
+    /// The inverse kernels: the rates for a twist, and for a pose increment.
+    fn specs(&self, solved: Solved, ap: &Arg, adt: &Arg) -> Result<Vec<Spec>, SourceError> {
+        let (model, sym) = (self.model, self.sym);
+        let Solved {
+            outs: inverse_outs,
+            names: out_names,
+            doc,
+            imposes_vy,
+        } = solved;
+        let twist_arg = arg(sym, ArgRole::Twist, &strings(&["vx", "vy", "omega"]));
+        let cfg_arg = arg(sym, ArgRole::Configuration, &self.cfg_names);
+        let mut args = vec![twist_arg];
+        if model.inverse.is_none() && !self.cfg_names.is_empty() {
+            args.push(cfg_arg.clone());
+        }
+        args.push(ap.clone());
+        let mut specs = vec![Spec {
+            kernel: Kernel::InverseTwist,
+            doc,
+            args,
+            lets: vec![],
+            rows: inverse_outs.len(),
+            cols: 1,
+            row_names: out_names.clone(),
+            col_names: vec![],
+            outputs: inverse_outs.clone(),
+            singular: vec![],
+        }];
+        let (lets, subst) = self.increment_twist(imposes_vy)?;
+        let mut args = vec![
+            arg(
+                sym,
+                ArgRole::PoseIncrement,
+                &strings(&["dx", "dy", "dtheta"]),
+            ),
+            adt.clone(),
+        ];
+        if model.inverse.is_none() && !self.cfg_names.is_empty() {
+            args.push(cfg_arg);
+        }
+        args.push(ap.clone());
+        let lateral = imposes_vy;
+        specs.push(Spec {
+            kernel: Kernel::InverseIncrement,
+            doc: format!(
+                "Inputs (rates, held for dt) that move the robot by the pose increment (dx, dy, dtheta), given in the start-of-step body frame: seed 001 eq. 12-18 in general form. {} Finite and continuous at dtheta = 0 (eq. 13/16 limit, series branch); valid for |dtheta| < pi.",
+                if lateral { "Holonomic: dx, dy and dtheta are all imposed (exact SE(2) logarithm)." } else { "Non-holonomic: dx and dtheta are imposed, dy follows (eq. 12, 15)." }
+            ),
+            args,
+            lets,
+            rows: inverse_outs.len(),
+            cols: 1,
+            row_names: out_names,
+            col_names: vec![],
+            outputs: inverse_outs.iter().map(subst).collect(),
+            singular: vec![sym.s("dtheta")],
+        });
+        Ok(specs)
+    }
+
+    /// Integrated inverse: the constant twist that moves the robot by (dx, dy,
+    /// dtheta) (start body frame) in dt, i.e. the SE(2) logarithm, as lets, and
+    /// the substitution of it into the inverse. A model whose twist has no
+    /// lateral component follows seed 001 eq. 12/15: x and theta are imposed, y
+    /// follows; vy is imposed only when the inverse uses the vy row (holonomic
+    /// models).
+    #[allow(clippy::type_complexity)]
+    fn increment_twist(
+        &self,
+        lateral: bool,
+    ) -> Result<(Vec<(Symbol, Atom)>, impl Fn(&Atom) -> Atom + '_), SourceError> {
+        let sym = self.sym;
+        let (dx, dy, d, dt) = (sym.a("dx"), sym.a("dy"), sym.a("dtheta"), sym.a("dt"));
+        let (vx_i, vy_i) = if lateral {
+            let half = &d / Atom::num(2);
+            let k = &half * d.sin() / (Atom::num(1) - d.cos());
+            (
+                (&k * &dx + &half * &dy) / &dt,
+                (&k * &dy - &half * &dx) / &dt,
+            )
+        } else {
+            (&dx * &d / (d.sin() * &dt), Atom::num(0))
+        };
+        let om_i = &d / &dt;
+        // The removable singularity at dtheta = 0 lives in the twist alone (dtheta /
+        // sin dtheta): the twist gets its series branch, and the inverse kinematics
+        // is applied to that twist. A series of the whole composed inverse (an
+        // atan2 of a curvature, say) would converge slowly or not at all.
+        let dtheta = sym.s("dtheta");
+        let lets = vec![
+            (
+                sym.s("kg_inc_vx"),
+                regularize(&vx_i, dtheta, sym.fx).map_err(|e| self.se(e))?,
+            ),
+            (
+                sym.s("kg_inc_vy"),
+                regularize(&vy_i, dtheta, sym.fx).map_err(|e| self.se(e))?,
+            ),
+        ];
+        let tw_syms = self.tw_syms;
+        let subst = move |a: &Atom| {
+            let a = substitute(a, tw_syms[0], &sym.a("kg_inc_vx"));
+            let a = substitute(&a, tw_syms[1], &sym.a("kg_inc_vy"));
+            substitute(&a, tw_syms[2], &om_i)
+        };
+        Ok((lets, subst))
+    }
 }
 
 /// The inverse kinematics a model gets: its kernels, or why it has none.
