@@ -1,10 +1,10 @@
 //! `kinegen diagnose`.
-use crate::analysis_cmd::{bad, prepare, quiet, Common};
+use crate::analysis_cmd::{bad, prepare, quiet, Common, Prepared};
 use crate::effects_cmd::materialise;
 use crate::ir_source;
 use crate::output::Out;
 use kinegen_analysis::dataset::channel_missing;
-use kinegen_analysis::diagnose::{diagnose, Catalogue};
+use kinegen_analysis::diagnose::{diagnose, Catalogue, Diagnosis};
 use kinegen_analysis::effects::{catalogue, Applicability, Effect};
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_model::spec::Model;
@@ -125,36 +125,10 @@ pub fn run(c: Common) -> ExitCode {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
-    // pieces of a log cut at its gaps that are too short to diagnose are left
-    // out, as long as the log leaves enough: diagnosis pools the rest
-    let min = kinegen_analysis::diagnose::MIN_ROWS;
-    if prep.runs.iter().any(|r| r.t.len() >= min) {
-        let (keep, short): (Vec<_>, Vec<_>) = prep.runs.drain(..).partition(|r| r.t.len() >= min);
-        if !short.is_empty() {
-            prep.warnings.push(format!(
-                "{} piece(s) under {min} rows left out of the diagnosis ({}); it pools the other {}",
-                short.len(),
-                short.iter().take(3).map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
-                keep.len()
-            ));
-        }
-        prep.runs = keep;
-    }
+    pool_pieces(&mut prep);
     crate::analysis_cmd::say_warnings(&out, &prep.warnings);
-    // a robot that never moves shows no effect; every ratio would be 0/0
-    if prep.runs.iter().all(|r| r.rest_steps() == r.steps()) {
-        let cols: Vec<&str> = prep
-            .runner
-            .ir
-            .inputs
-            .iter()
-            .map(|i| i.column.as_str())
-            .collect();
-        return bad(format!(
-            "{}: the inputs ({}) never change: the model robot never moves, so there is nothing to diagnose",
-            prep.runs.iter().map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
-            cols.join(", ")
-        ));
+    if let Err(e) = check_moves(&prep) {
+        return bad(e);
     }
     let spec = match Model::load(&c.spec) {
         Ok(m) => m,
@@ -203,6 +177,88 @@ pub fn run(c: Common) -> ExitCode {
         d.calibrated_rmse, d.base_holdout_rmse
     ));
     out.say("  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)");
+    say_candidates(&out, &d);
+    let apply_cmds = say_chain(&out, &c, r, &spec, &cat, &d);
+    say_structure(&out, &d);
+    let disc_ratio = say_discretisation(&out, &d);
+    let per_candidate = if n_candidates == 0 {
+        0.0
+    } else {
+        t_diag.as_secs_f64() / n_candidates as f64
+    };
+    out.say(&format!(
+        "time: {:.2} s preparing, {:.2} s diagnosing",
+        t_prep.as_secs_f64(),
+        t_diag.as_secs_f64()
+    ));
+    let disc = &d.discretisation;
+    let doc = json!({
+        "model": r.ir.name,
+        "metric": "weighted_residual_rms (pose residuals / 0.01 m and 0.01 rad, gyro / 0.01 rad/s)",
+        "baseline": {"rmse": d.baseline_rmse},
+        "calibrated": {"rmse": d.calibrated_rmse, "holdout_rmse": d.base_holdout_rmse,
+            "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
+        "candidates": d.candidates,
+        "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
+        "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc_ratio <= DISCRETISATION_WARN},
+        "warnings": prep.warnings,
+        "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
+        "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
+    });
+    if let Some(dir) = &c.report {
+        if let Err(e) =
+            crate::report::diagnose_report(dir, &prep.runner, &prep.runs, &d, &derive, &doc)
+        {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
+
+/// Pieces of a log cut at its gaps that are too short to diagnose are left
+/// out (with a warning), as long as the log leaves enough: diagnosis pools
+/// the rest.
+fn pool_pieces(prep: &mut Prepared) {
+    let min = kinegen_analysis::diagnose::MIN_ROWS;
+    if prep.runs.iter().any(|r| r.t.len() >= min) {
+        let (keep, short): (Vec<_>, Vec<_>) = prep.runs.drain(..).partition(|r| r.t.len() >= min);
+        if !short.is_empty() {
+            prep.warnings.push(format!(
+                "{} piece(s) under {min} rows left out of the diagnosis ({}); it pools the other {}",
+                short.len(),
+                short.iter().take(3).map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
+                keep.len()
+            ));
+        }
+        prep.runs = keep;
+    }
+}
+
+/// A robot that never moves shows no effect (every ratio would be 0/0): refused.
+fn check_moves(prep: &Prepared) -> Result<(), String> {
+    if prep.runs.iter().all(|r| r.rest_steps() == r.steps()) {
+        let cols: Vec<&str> = prep
+            .runner
+            .ir
+            .inputs
+            .iter()
+            .map(|i| i.column.as_str())
+            .collect();
+        return Err(format!(
+            "{}: the inputs ({}) never change: the model robot never moves, so there is nothing to diagnose",
+            prep.runs.iter().map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
+            cols.join(", ")
+        ));
+    }
+    Ok(())
+}
+
+/// The candidates on the spec as it is, most likely first, and those not tested.
+fn say_candidates(out: &Out, d: &Diagnosis) {
     out.say("candidates on the spec as it is, most likely first:");
     for (i, cand) in d.candidates.iter().enumerate() {
         let params: Vec<String> = cand
@@ -234,6 +290,19 @@ pub fn run(c: Common) -> ExitCode {
     for (n, why) in &d.skipped {
         out.say(&format!("  (not tested: {n}: {why})"));
     }
+}
+
+/// The verdict: the effects found, in order, each with its estimates, the
+/// error it removes, the spec change and the command that applies it (the
+/// commands are returned).
+fn say_chain(
+    out: &Out,
+    c: &Common,
+    r: &Runner,
+    spec: &Model,
+    cat: &[Effect],
+    d: &Diagnosis,
+) -> Vec<String> {
     let mut model = spec.clone();
     let mut apply_cmds = Vec::new();
     if d.chain.is_empty() {
@@ -306,6 +375,11 @@ pub fn run(c: Common) -> ExitCode {
         }
         out.say(&format!("apply with:\n  {}", apply_cmds.join("\n  ")));
     }
+    apply_cmds
+}
+
+/// What structure the residuals keep after the last effect.
+fn say_structure(out: &Out, d: &Diagnosis) {
     if d.structure.structured {
         out.say(&format!(
             "unexplained structure remains in the residuals{}:",
@@ -321,6 +395,11 @@ pub fn run(c: Common) -> ExitCode {
     } else {
         out.say("the residuals left are noise (no structure explained by the motion)");
     }
+}
+
+/// How far the model's own step errs at the log's rate, against the noise
+/// floor; returns that ratio.
+fn say_discretisation(out: &Out, d: &Diagnosis) -> f64 {
     let disc = &d.discretisation;
     let disc_ratio = disc.error / d.noise_floor.max(1e-300);
     if disc_ratio > DISCRETISATION_WARN {
@@ -334,39 +413,5 @@ pub fn run(c: Common) -> ExitCode {
             disc.rate_hz, disc.error, d.noise_floor
         ));
     }
-    let per_candidate = if n_candidates == 0 {
-        0.0
-    } else {
-        t_diag.as_secs_f64() / n_candidates as f64
-    };
-    out.say(&format!(
-        "time: {:.2} s preparing, {:.2} s diagnosing",
-        t_prep.as_secs_f64(),
-        t_diag.as_secs_f64()
-    ));
-    let doc = json!({
-        "model": r.ir.name,
-        "metric": "weighted_residual_rms (pose residuals / 0.01 m and 0.01 rad, gyro / 0.01 rad/s)",
-        "baseline": {"rmse": d.baseline_rmse},
-        "calibrated": {"rmse": d.calibrated_rmse, "holdout_rmse": d.base_holdout_rmse,
-            "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
-        "candidates": d.candidates,
-        "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
-        "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc_ratio <= DISCRETISATION_WARN},
-        "warnings": prep.warnings,
-        "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
-        "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
-    });
-    if let Some(dir) = &c.report {
-        if let Err(e) =
-            crate::report::diagnose_report(dir, &prep.runner, &prep.runs, &d, &derive, &doc)
-        {
-            return bad(e);
-        }
-        out.say(&format!("report: {}", dir.join("index.html").display()));
-    }
-    match out.json(c.json.as_deref(), &doc) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => bad(e),
-    }
+    disc_ratio
 }
