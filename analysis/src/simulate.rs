@@ -371,12 +371,35 @@ pub fn can_spin(base: &Runner) -> bool {
 /// Simulate a log.
 pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     let mut rng = SmallRng::seed_from_u64(o.seed);
+    let (plan, dur) = route(base, o, &mut rng);
+    let times = sample_times(o, dur, &mut rng);
+    let mut sim = Robot::new(base, truth, &plan, dur);
+    let header = sim.header();
+    let mut rows = Vec::with_capacity(times.len());
+    for k in 0..times.len() {
+        if k > 0 {
+            sim.advance(times[k - 1], times[k]);
+        }
+        rows.push(sim.row(k, times[k], o, &mut rng));
+    }
+    let observations = observe_landmarks(truth, o, &times, &sim.history, &mut rng);
+    SimLog {
+        header,
+        rows,
+        observations,
+    }
+}
+
+/// The body twist the robot is commanded at each time after the log starts
+/// (from the trajectory's planner, limited in curvature for a robot that
+/// cannot turn in place, after a second at rest), and the length of one lap.
+fn route(base: &Runner, o: &SimOptions, rng: &mut SmallRng) -> (impl Fn(f64) -> [f64; 3], f64) {
     let lateral = {
         let u = command(base, &[0.0, 1.0, 0.0]);
         base.ir.twist().eval(&[&u, &base.p])[1] > 0.5
     };
     let spin = can_spin(base);
-    let (plan1, dur0) = planner(o, spin, lateral, &mut rng);
+    let (plan1, dur0) = planner(o, spin, lateral, rng);
     // a vehicle that cannot turn in place is limited in curvature (|omega| <= 0.8 v,
     // i.e. radius >= 1.25 m; a 1 m tricycle then steers at most ~39 degrees)
     let plan0 = move |t: f64| {
@@ -390,12 +413,17 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
     // logs start with the robot at rest for a second, as real ones do
     const REST: f64 = 1.0;
     let plan = move |t: f64| if t < REST { [0.0; 3] } else { plan0(t - REST) };
-    let dur = dur0 + REST;
+    (plan, dur0 + REST)
+}
+
+/// The rows' times: `o.laps` laps of `dur` at `o.rate_hz`, each but the first
+/// jittered by up to a tenth of a period.
+fn sample_times(o: &SimOptions, dur: f64, rng: &mut SmallRng) -> Vec<f64> {
     let total = dur * o.laps as f64;
     let n = (total * o.rate_hz).ceil() as usize + 1;
     let period = 1.0 / o.rate_hz;
     let jitter = 0.1 * period;
-    let times: Vec<f64> = (0..n)
+    (0..n)
         .map(|k| {
             if k == 0 {
                 0.0
@@ -403,179 +431,256 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
                 k as f64 * period + rng.gen_range(-jitter..jitter)
             }
         })
-        .collect();
-    let step = truth.ir.step(StepForm::Exact).value;
-    let zeros = [0.0; 16];
-    let inputs = &truth.ir.inputs;
-    let mut cum = vec![0.0; inputs.len()];
-    let mut x = [0.0, 0.0, 0.0];
-    let obs_pose = truth.ir.observation_kernels(Pose).map(|o| o.value);
-    let obs_gyro = truth.ir.observation_kernels(YawRate).map(|o| o.value);
-    let cfg_idx = config_inputs(base);
-    let cfg_rate = config_rates(base, &cfg_idx);
-    let mut header: Vec<String> = vec!["t".into()];
-    // one column per log column: a steering angle feeds both an angle and a rate
-    // input, and is written once, from the angle
-    let written: Vec<usize> = (0..inputs.len())
-        .filter(|&i| {
-            cfg_idx.contains(&i)
-                || !(cfg_idx
-                    .iter()
-                    .any(|&c| inputs[c].column == inputs[i].column)
-                    || inputs[..i].iter().any(|o| o.column == inputs[i].column))
-        })
-        .collect();
-    header.extend(written.iter().map(|&i| inputs[i].column.clone()));
-    // the columns the spec reads measurements from (its pose and yaw-rate observations)
-    header.extend(base.ir.pose_columns());
-    if obs_gyro.is_some() {
-        header.push(base.ir.gyro_column());
-    }
-    let mut rows = Vec::with_capacity(n);
-    // ground truth is recorded with the delay of a `time_offset` parameter
-    let delay = crate::timeline::delay(truth, &truth.p);
-    let mut history: Vec<(f64, [f64; 3])> = vec![(0.0, x)];
-    let mut t_now = 0.0;
-    // configuration (steering angles of caster wheels): starts straight ahead and
-    // follows its commanded rate, integrated with the midpoint rule
-    let mut cfg = vec![0.0; cfg_idx.len()];
-    let mut last_u = command_at(base, &plan(0.0), &cfg);
-    // commands (absolute inputs that hold between rows, see Input::between):
-    // the robot executes the value logged at the row before, until the next
-    let hold_idx: Vec<usize> = (0..inputs.len())
-        .filter(|&i| {
-            inputs[i].kind == InputKind::Absolute
-                && inputs[i].between() == Between::Hold
-                && !cfg_idx.contains(&i)
-        })
-        .collect();
-    let mut held = last_u.clone();
-    // Under an input delay the robot executes, at time s, the command logged
-    // at the last row before s - delay (crate::timeline): the rows' commands
-    // are kept to look back into.
-    let input_delay = crate::timeline::input_delay(truth, &truth.p);
-    let mut logged: Vec<(f64, Vec<f64>)> = Vec::new();
-    // The gyro reports the mean yaw rate over the sample interval (an integrating
-    // or low-pass-filtered MEMS gyro), which is what a step of the model predicts.
-    let mut gyro_mean = 0.0;
-    for k in 0..n {
-        if k > 0 {
-            gyro_mean = 0.0;
-            let (t0, t1) = (times[k - 1], times[k]);
-            let m = 10;
-            let h = (t1 - t0) / m as f64;
-            for j in 0..m {
-                let tm = (t0 + (j as f64 + 0.5) * h) % dur;
-                let u = if cfg.is_empty() {
-                    command(base, &plan(tm))
-                } else {
-                    let u0 = command_at(base, &plan(tm), &cfg);
-                    let mid: Vec<f64> = cfg
+        .collect()
+}
+
+/// The simulated robot: the true model driven along the route, its pose
+/// history, encoder counts, steering configuration and commands.
+struct Robot<'a, P: Fn(f64) -> [f64; 3]> {
+    base: &'a Runner,
+    truth: &'a Runner,
+    plan: &'a P,
+    /// one lap's length (the plan repeats)
+    dur: f64,
+    step: &'a kinegen_model::ir::Function,
+    obs_pose: Option<&'a kinegen_model::ir::Function>,
+    obs_gyro: Option<&'a kinegen_model::ir::Function>,
+    /// each cumulative input's integral
+    cum: Vec<f64>,
+    x: [f64; 3],
+    cfg_idx: Vec<usize>,
+    cfg_rate: Vec<usize>,
+    /// the inputs with a log column of their own
+    written: Vec<usize>,
+    /// ground truth is recorded with the delay of a `time_offset` parameter
+    delay: f64,
+    history: Vec<(f64, [f64; 3])>,
+    t_now: f64,
+    /// configuration (steering angles of caster wheels): starts straight ahead and
+    /// follows its commanded rate, integrated with the midpoint rule
+    cfg: Vec<f64>,
+    last_u: Vec<f64>,
+    /// commands (absolute inputs that hold between rows, see Input::between):
+    /// the robot executes the value logged at the row before, until the next
+    hold_idx: Vec<usize>,
+    held: Vec<f64>,
+    /// Under an input delay the robot executes, at time s, the command logged
+    /// at the last row before s - delay (crate::timeline): the rows' commands
+    /// are kept to look back into.
+    input_delay: f64,
+    logged: Vec<(f64, Vec<f64>)>,
+    /// The gyro reports the mean yaw rate over the sample interval (an
+    /// integrating or low-pass-filtered MEMS gyro), which is what a step of the
+    /// model predicts.
+    gyro_mean: f64,
+}
+
+impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
+    fn new(base: &'a Runner, truth: &'a Runner, plan: &'a P, dur: f64) -> Self {
+        let inputs = &truth.ir.inputs;
+        let cfg_idx = config_inputs(base);
+        let cfg_rate = config_rates(base, &cfg_idx);
+        // one column per log column: a steering angle feeds both an angle and a rate
+        // input, and is written once, from the angle
+        let written: Vec<usize> = (0..inputs.len())
+            .filter(|&i| {
+                cfg_idx.contains(&i)
+                    || !(cfg_idx
                         .iter()
-                        .zip(&cfg_rate)
-                        .map(|(c, &r)| c + 0.5 * h * u0[r])
-                        .collect();
-                    let u = command_at(base, &plan(tm), &mid);
-                    for (c, &r) in cfg.iter_mut().zip(&cfg_rate) {
-                        *c += h * u[r];
-                    }
-                    u
-                };
-                let mut u = u;
-                let executing = if input_delay == 0.0 {
-                    &held
-                } else {
-                    let at = tm_abs(t0, j, h) - input_delay;
-                    let n = logged.partition_point(|(t, _)| *t <= at);
-                    logged.get(n.saturating_sub(1)).map_or(&held, |(_, c)| c)
-                };
-                for &i in &hold_idx {
-                    u[i] = executing[i];
-                }
-                let dt = [h];
-                x = {
-                    let out = step.eval(&Runner::step_args(step, &x, &u, &truth.p, &dt, &zeros));
-                    [out[0], out[1], out[2]]
-                };
-                for (c, ui) in cum.iter_mut().zip(&u) {
-                    *c += ui * h;
-                }
-                t_now += h;
-                history.push((t_now, x));
-                if let Some(g) = obs_gyro {
-                    gyro_mean += g.eval(&Runner::obs_args(g, &x, &u, &truth.p, &[]))[0] / m as f64;
-                }
-                last_u = u;
-            }
+                        .any(|&c| inputs[c].column == inputs[i].column)
+                        || inputs[..i].iter().any(|o| o.column == inputs[i].column))
+            })
+            .collect();
+        let cfg = vec![0.0; cfg_idx.len()];
+        let last_u = command_at(base, &plan(0.0), &cfg);
+        let hold_idx: Vec<usize> = (0..inputs.len())
+            .filter(|&i| {
+                inputs[i].kind == InputKind::Absolute
+                    && inputs[i].between() == Between::Hold
+                    && !cfg_idx.contains(&i)
+            })
+            .collect();
+        let x = [0.0, 0.0, 0.0];
+        Robot {
+            base,
+            truth,
+            plan,
+            dur,
+            step: truth.ir.step(StepForm::Exact).value,
+            obs_pose: truth.ir.observation_kernels(Pose).map(|o| o.value),
+            obs_gyro: truth.ir.observation_kernels(YawRate).map(|o| o.value),
+            cum: vec![0.0; inputs.len()],
+            x,
+            cfg_idx,
+            cfg_rate,
+            written,
+            delay: crate::timeline::delay(truth, &truth.p),
+            history: vec![(0.0, x)],
+            t_now: 0.0,
+            cfg,
+            held: last_u.clone(),
+            last_u,
+            hold_idx,
+            input_delay: crate::timeline::input_delay(truth, &truth.p),
+            logged: Vec::new(),
+            gyro_mean: 0.0,
         }
-        let mut row = vec![times[k]];
+    }
+
+    /// The log's header: time, each written input's column, the pose columns
+    /// and the gyro's.
+    fn header(&self) -> Vec<String> {
+        let inputs = &self.truth.ir.inputs;
+        let mut header: Vec<String> = vec!["t".into()];
+        header.extend(self.written.iter().map(|&i| inputs[i].column.clone()));
+        // the columns the spec reads measurements from (its pose and yaw-rate observations)
+        header.extend(self.base.ir.pose_columns());
+        if self.obs_gyro.is_some() {
+            header.push(self.base.ir.gyro_column());
+        }
+        header
+    }
+
+    /// The inputs at sub-step `j` (of length `h`) of the step from `t0`:
+    /// commanded along the plan, the configuration advanced by the midpoint
+    /// rule, the held commands as the robot executes them.
+    fn inputs_at(&mut self, t0: f64, j: usize, h: f64) -> Vec<f64> {
+        let (base, plan) = (self.base, self.plan);
+        let tm = (t0 + (j as f64 + 0.5) * h) % self.dur;
+        let mut u = if self.cfg.is_empty() {
+            command(base, &plan(tm))
+        } else {
+            let u0 = command_at(base, &plan(tm), &self.cfg);
+            let mid: Vec<f64> = self
+                .cfg
+                .iter()
+                .zip(&self.cfg_rate)
+                .map(|(c, &r)| c + 0.5 * h * u0[r])
+                .collect();
+            let u = command_at(base, &plan(tm), &mid);
+            for (c, &r) in self.cfg.iter_mut().zip(&self.cfg_rate) {
+                *c += h * u[r];
+            }
+            u
+        };
+        let executing = if self.input_delay == 0.0 {
+            &self.held
+        } else {
+            let at = tm_abs(t0, j, h) - self.input_delay;
+            let n = self.logged.partition_point(|(t, _)| *t <= at);
+            self.logged
+                .get(n.saturating_sub(1))
+                .map_or(&self.held, |(_, c)| c)
+        };
+        for &i in &self.hold_idx {
+            u[i] = executing[i];
+        }
+        u
+    }
+
+    /// Drive from `t0` to `t1` in ten exact sub-steps, integrating the
+    /// encoders and averaging the gyro.
+    fn advance(&mut self, t0: f64, t1: f64) {
+        let truth = self.truth;
+        let zeros = [0.0; 16];
+        self.gyro_mean = 0.0;
+        let m = 10;
+        let h = (t1 - t0) / m as f64;
+        for j in 0..m {
+            let u = self.inputs_at(t0, j, h);
+            let dt = [h];
+            self.x = {
+                let out = self.step.eval(&Runner::step_args(
+                    self.step, &self.x, &u, &truth.p, &dt, &zeros,
+                ));
+                [out[0], out[1], out[2]]
+            };
+            for (c, ui) in self.cum.iter_mut().zip(&u) {
+                *c += ui * h;
+            }
+            self.t_now += h;
+            self.history.push((self.t_now, self.x));
+            if let Some(g) = self.obs_gyro {
+                self.gyro_mean +=
+                    g.eval(&Runner::obs_args(g, &self.x, &u, &truth.p, &[]))[0] / m as f64;
+            }
+            self.last_u = u;
+        }
+    }
+
+    /// Row `k` at time `t`: the inputs as logged, the pose as measured (with
+    /// noise and any measurement delay) and the gyro.
+    fn row(&mut self, k: usize, t: f64, o: &SimOptions, rng: &mut SmallRng) -> Vec<f64> {
+        let (base, plan, dur) = (self.base, self.plan, self.dur);
+        let inputs = &self.truth.ir.inputs;
+        let mut row = vec![t];
         // the inputs commanded at t_k, which absolute sensors sample (computed once per row)
         let mut commanded: Option<Vec<f64>> = None;
-        if !hold_idx.is_empty() {
-            let c = command(base, &plan(times[k] % dur));
-            for &i in &hold_idx {
-                held[i] = c[i];
+        if !self.hold_idx.is_empty() {
+            let c = command(base, &plan(t % dur));
+            for &i in &self.hold_idx {
+                self.held[i] = c[i];
             }
-            if input_delay != 0.0 {
-                logged.push((times[k], held.clone()));
+            if self.input_delay != 0.0 {
+                self.logged.push((t, self.held.clone()));
             }
             commanded = Some(c);
         }
-        for &i in &written {
+        for &i in &self.written {
             let inp = &inputs[i];
-            if let Some(c) = cfg_idx.iter().position(|&c| c == i) {
+            if let Some(c) = self.cfg_idx.iter().position(|&c| c == i) {
                 // absolute steering encoder, wrapped to (-pi, pi]
-                row.push(wrap((cfg[c] / ENCODER_LINE).round() * ENCODER_LINE));
+                row.push(wrap((self.cfg[c] / ENCODER_LINE).round() * ENCODER_LINE));
                 continue;
             }
             row.push(match inp.kind {
-                InputKind::Cumulative if inp.unit.contains("count") => cum[i].floor(),
+                InputKind::Cumulative if inp.unit.contains("count") => self.cum[i].floor(),
                 // wheel-angle encoders
-                InputKind::Cumulative => (cum[i] / ENCODER_LINE).floor() * ENCODER_LINE,
+                InputKind::Cumulative => (self.cum[i] / ENCODER_LINE).floor() * ENCODER_LINE,
                 // absolute angle sensors (steering encoders, 12 bit like the caster
                 // wheels' above) sample the value at t_k; other absolute inputs get
                 // Gaussian noise
                 InputKind::Absolute if inp.unit == "rad" => {
-                    (commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i]
+                    (commanded.get_or_insert_with(|| command(base, &plan(t % dur)))[i]
                         / ENCODER_LINE)
                         .round()
                         * ENCODER_LINE
                 }
                 // a command is logged as sent: what the robot executes until the next row
-                InputKind::Absolute if hold_idx.contains(&i) => held[i],
+                InputKind::Absolute if self.hold_idx.contains(&i) => self.held[i],
                 InputKind::Absolute => {
-                    commanded.get_or_insert_with(|| command(base, &plan(times[k] % dur)))[i]
-                        + gaussian(0.002, &mut rng)
+                    commanded.get_or_insert_with(|| command(base, &plan(t % dur)))[i]
+                        + gaussian(0.002, rng)
                 }
             });
         }
-        let seen = if delay == 0.0 {
-            x
+        self.measure(k, t, o, rng, &mut row);
+        row
+    }
+
+    /// The pose and gyro columns of row `k` at time `t`.
+    fn measure(&self, k: usize, t: f64, o: &SimOptions, rng: &mut SmallRng, row: &mut Vec<f64>) {
+        let truth = self.truth;
+        let seen = if self.delay == 0.0 {
+            self.x
         } else {
-            at_time(&history, times[k] - delay)
+            at_time(&self.history, t - self.delay)
         };
-        let pose = match obs_pose {
-            Some(h) => h.eval(&Runner::obs_args(h, &seen, &last_u, &truth.p, &[])),
+        let pose = match self.obs_pose {
+            Some(h) => h.eval(&Runner::obs_args(h, &seen, &self.last_u, &truth.p, &[])),
             None => seen.to_vec(),
         };
-        row.push(pose[0] + gaussian(o.pos_noise, &mut rng));
-        row.push(pose[1] + gaussian(o.pos_noise, &mut rng));
-        row.push(wrap(pose[2] + gaussian(o.heading_noise, &mut rng)));
-        if let Some(g) = obs_gyro {
+        row.push(pose[0] + gaussian(o.pos_noise, rng));
+        row.push(pose[1] + gaussian(o.pos_noise, rng));
+        row.push(wrap(pose[2] + gaussian(o.heading_noise, rng)));
+        if let Some(g) = self.obs_gyro {
             let v = if k == 0 {
-                g.eval(&Runner::obs_args(g, &x, &last_u, &truth.p, &[]))[0]
+                g.eval(&Runner::obs_args(g, &self.x, &self.last_u, &truth.p, &[]))[0]
             } else {
-                gyro_mean
+                self.gyro_mean
             };
-            row.push(v + gaussian(o.gyro_noise, &mut rng));
+            row.push(v + gaussian(o.gyro_noise, rng));
         }
-        rows.push(row);
-    }
-    let observations = observe_landmarks(truth, o, &times, &history, &mut rng);
-    SimLog {
-        header,
-        rows,
-        observations,
     }
 }
 
