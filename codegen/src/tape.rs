@@ -8,7 +8,8 @@
 use crate::symbolic::{as_f64, Funcs, SymbolicError};
 use kinegen_model::ir::Op;
 use std::collections::HashMap;
-use symbolica::atom::{AtomView, Symbol};
+use symbolica::atom::representation::FunView;
+use symbolica::atom::{AddView, AtomView, MulView, PowView, Symbol};
 
 pub struct TapeBuilder {
     pub tape: Vec<Op>,
@@ -63,207 +64,226 @@ impl TapeBuilder {
     /// Lower one atom; returns the slot holding its value.
     pub fn atom(&mut self, a: AtomView) -> Result<u32, SymbolicError> {
         match a {
-            AtomView::Num(_) => {
-                let v = as_f64(a).ok_or_else(|| {
-                    // symbolica's infinity: a division by zero in a kernel,
-                    // which in a valid spec only the zero-noise point makes
-                    let why = if a.to_string().contains('⧞') {
-                        ": an expression divides by zero where the kernels evaluate it, at zero noise (a noise input in a denominator, such as `w/dv`); noise must leave the model defined at zero (add it, or scale by 1 + noise)"
-                    } else {
-                        ""
-                    };
-                    SymbolicError(format!("non-real constant `{a}`{why}"))
-                })?;
-                Ok(self.constant(v))
-            }
-            AtomView::Var(v) => {
-                let s = v.get_symbol();
-                if s == Symbol::PI {
-                    Ok(self.constant(std::f64::consts::PI))
-                } else if s == Symbol::E {
-                    Ok(self.constant(std::f64::consts::E))
-                } else {
-                    self.leaves.get(&s).copied().ok_or_else(|| {
-                        SymbolicError(format!("unbound symbol `{a}` in derived code"))
+            AtomView::Num(_) => self.number(a),
+            AtomView::Var(v) => self.variable(v.get_symbol(), a),
+            AtomView::Fun(f) if f.get_symbol() == self.fx.lsq => self.least_squares(f, a),
+            AtomView::Fun(f) => self.function(f, a),
+            AtomView::Pow(p) => self.power(p),
+            AtomView::Mul(m) => self.product(m),
+            AtomView::Add(add) => self.sum(add),
+        }
+    }
+
+    fn number(&mut self, a: AtomView) -> Result<u32, SymbolicError> {
+        let v = as_f64(a).ok_or_else(|| {
+            // symbolica's infinity: a division by zero in a kernel,
+            // which in a valid spec only the zero-noise point makes
+            let why = if a.to_string().contains('⧞') {
+                ": an expression divides by zero where the kernels evaluate it, at zero noise (a noise input in a denominator, such as `w/dv`); noise must leave the model defined at zero (add it, or scale by 1 + noise)"
+            } else {
+                ""
+            };
+            SymbolicError(format!("non-real constant `{a}`{why}"))
+        })?;
+        Ok(self.constant(v))
+    }
+
+    /// A leaf, or pi or e.
+    fn variable(&mut self, s: Symbol, a: AtomView) -> Result<u32, SymbolicError> {
+        if s == Symbol::PI {
+            Ok(self.constant(std::f64::consts::PI))
+        } else if s == Symbol::E {
+            Ok(self.constant(std::f64::consts::E))
+        } else {
+            self.leaves
+                .get(&s)
+                .copied()
+                .ok_or_else(|| SymbolicError(format!("unbound symbol `{a}` in derived code")))
+        }
+    }
+
+    fn least_squares(&mut self, f: FunView, a: AtomView) -> Result<u32, SymbolicError> {
+        // lowered as what it stands for, so its pseudo-inverse is the
+        // very `kg_pinv` its derivatives read (one decomposition)
+        let args: Vec<_> = f.iter().map(|x| x.to_owned()).collect();
+        let (k, s, q) = crate::symbolic::lsq_parts(&args)
+            .ok_or_else(|| SymbolicError(format!("malformed least-squares solution `{a}`")))?;
+        self.atom(crate::symbolic::lsq_expanded(k, &s, &q).as_view())
+    }
+
+    /// A function call: sin, cos, exp, ln, sqrt, abs, tan, atan, atan2, the
+    /// pseudo-inverse entry and the series switch.
+    fn function(&mut self, f: FunView, a: AtomView) -> Result<u32, SymbolicError> {
+        let s = f.get_symbol();
+        let args: Vec<u32> = f.iter().map(|x| self.atom(x)).collect::<Result<_, _>>()?;
+        let op = if s == Symbol::SIN {
+            Op::Sin(args[0])
+        } else if s == Symbol::COS {
+            Op::Cos(args[0])
+        } else if s == Symbol::EXP {
+            Op::Exp(args[0])
+        } else if s == Symbol::LOG {
+            Op::Ln(args[0])
+        } else if s == Symbol::SQRT {
+            Op::Sqrt(args[0])
+        } else if s == Symbol::ABS || s == self.fx.abs {
+            Op::Abs(args[0])
+        } else if s == self.fx.tan {
+            Op::Tan(args[0])
+        } else if s == self.fx.atan {
+            Op::Atan(args[0])
+        } else if s == self.fx.atan2 {
+            Op::Atan2(args[0], args[1])
+        } else if s == self.fx.pinv {
+            let index = |k: usize| {
+                as_f64(f.iter().nth(k).unwrap())
+                    .map(|v| v as u8)
+                    .ok_or_else(|| {
+                        SymbolicError(format!("pseudo-inverse index is not a number in `{a}`"))
                     })
-                }
+            };
+            if args.len() != 8 {
+                return Err(SymbolicError(format!(
+                    "pseudo-inverse with {} arguments",
+                    args.len()
+                )));
             }
-            AtomView::Fun(f) if f.get_symbol() == self.fx.lsq => {
-                // lowered as what it stands for, so its pseudo-inverse is the
-                // very `kg_pinv` its derivatives read (one decomposition)
-                let args: Vec<_> = f.iter().map(|x| x.to_owned()).collect();
-                let (k, s, q) = crate::symbolic::lsq_parts(&args).ok_or_else(|| {
-                    SymbolicError(format!("malformed least-squares solution `{a}`"))
-                })?;
-                self.atom(crate::symbolic::lsq_expanded(k, &s, &q).as_view())
+            let m = [args[2], args[3], args[4], args[5], args[6], args[7]];
+            Op::PinvSym3 {
+                m,
+                i: index(0)?,
+                j: index(1)?,
             }
-            AtomView::Fun(f) => {
-                let s = f.get_symbol();
-                let args: Vec<u32> = f.iter().map(|x| self.atom(x)).collect::<Result<_, _>>()?;
-                let op = if s == Symbol::SIN {
-                    Op::Sin(args[0])
-                } else if s == Symbol::COS {
-                    Op::Cos(args[0])
-                } else if s == Symbol::EXP {
-                    Op::Exp(args[0])
-                } else if s == Symbol::LOG {
-                    Op::Ln(args[0])
-                } else if s == Symbol::SQRT {
-                    Op::Sqrt(args[0])
-                } else if s == Symbol::ABS || s == self.fx.abs {
-                    Op::Abs(args[0])
-                } else if s == self.fx.tan {
-                    Op::Tan(args[0])
-                } else if s == self.fx.atan {
-                    Op::Atan(args[0])
-                } else if s == self.fx.atan2 {
-                    Op::Atan2(args[0], args[1])
-                } else if s == self.fx.pinv {
-                    let index = |k: usize| {
-                        as_f64(f.iter().nth(k).unwrap())
-                            .map(|v| v as u8)
-                            .ok_or_else(|| {
-                                SymbolicError(format!(
-                                    "pseudo-inverse index is not a number in `{a}`"
-                                ))
-                            })
-                    };
-                    if args.len() != 8 {
-                        return Err(SymbolicError(format!(
-                            "pseudo-inverse with {} arguments",
-                            args.len()
-                        )));
-                    }
-                    let m = [args[2], args[3], args[4], args[5], args[6], args[7]];
-                    Op::PinvSym3 {
-                        m,
-                        i: index(0)?,
-                        j: index(1)?,
-                    }
-                } else if s == self.fx.near {
-                    Op::NearZero {
-                        x: args[0],
-                        eps: crate::derive::EPS,
-                        near: args[1],
-                        far: args[2],
-                    }
-                } else {
-                    return Err(SymbolicError(format!(
-                        "no code for function `{a}` (a derivative placeholder?)"
-                    )));
-                };
-                Ok(self.push(op))
+        } else if s == self.fx.near {
+            Op::NearZero {
+                x: args[0],
+                eps: crate::derive::EPS,
+                near: args[1],
+                far: args[2],
             }
-            AtomView::Pow(p) => {
-                let (base, exp) = p.get_base_exp();
-                if let AtomView::Var(v) = base {
-                    if v.get_symbol() == Symbol::E {
-                        let e = self.atom(exp)?;
-                        return Ok(self.push(Op::Exp(e)));
-                    }
-                }
-                let b = self.atom(base)?;
-                match as_f64(exp) {
-                    Some(n) if n.fract() == 0.0 => Ok(self.powi(b, n as i32)),
-                    Some(h) if (2.0 * h).fract() == 0.0 => {
-                        let s = self.push(Op::Sqrt(b));
-                        Ok(self.powi(s, (2.0 * h) as i32))
-                    }
-                    _ => {
-                        let e = self.atom(exp)?;
-                        Ok(self.push(Op::Pow(b, e)))
-                    }
-                }
-            }
-            AtomView::Mul(m) => {
-                // numerator and denominator collected separately: x*y/z costs two ops,
-                // not a reciprocal and two multiplications.
-                let mut coef = 1.0;
-                let mut num = Vec::new();
-                let mut den = Vec::new();
-                for f in m.iter() {
-                    if let Some(c) = as_f64(f) {
-                        coef *= c;
-                        continue;
-                    }
-                    // pi and e are numbers too: folded into the coefficient
-                    // (2*pi*r*n/cpr is one constant factor, not two products)
-                    if let AtomView::Var(v) = f {
-                        let s = v.get_symbol();
-                        if s == Symbol::PI || s == Symbol::E {
-                            coef *= if s == Symbol::PI {
-                                std::f64::consts::PI
-                            } else {
-                                std::f64::consts::E
-                            };
-                            continue;
-                        }
-                    }
-                    if let AtomView::Pow(p) = f {
-                        let (base, exp) = p.get_base_exp();
-                        if let Some(n) = as_f64(exp) {
-                            if n < 0.0 && (2.0 * n).fract() == 0.0 {
-                                let b = self.atom(base)?;
-                                let d = if n.fract() == 0.0 {
-                                    self.powi(b, (-n) as i32)
-                                } else {
-                                    let s = self.push(Op::Sqrt(b));
-                                    self.powi(s, (-2.0 * n) as i32)
-                                };
-                                den.push(d);
-                                continue;
-                            }
-                        }
-                    }
-                    num.push(self.atom(f)?);
-                }
-                let mut acc = num.into_iter().reduce(|a, b| self.push(Op::Mul(a, b)));
-                if coef.abs() != 1.0 {
-                    let c = self.constant(coef.abs());
-                    acc = Some(match acc {
-                        Some(a) => self.push(Op::Mul(c, a)),
-                        None => c,
-                    });
-                }
-                let mut v = acc.unwrap_or_else(|| self.constant(1.0));
-                if let Some(d) = den.into_iter().reduce(|a, b| self.push(Op::Mul(a, b))) {
-                    v = self.push(Op::Div(v, d));
-                }
-                if coef < 0.0 {
-                    v = self.push(Op::Neg(v));
-                }
-                Ok(v)
-            }
-            AtomView::Add(add) => {
-                let mut acc: Option<u32> = None;
-                let mut pending_neg = Vec::new();
-                for t in add.iter() {
-                    let (neg, slot) = self.term(t)?;
-                    if neg {
-                        match acc {
-                            Some(a) => acc = Some(self.push(Op::Sub(a, slot))),
-                            None => pending_neg.push(slot),
-                        }
-                    } else {
-                        acc = Some(match acc {
-                            Some(a) => self.push(Op::Add(a, slot)),
-                            None => slot,
-                        });
-                    }
-                }
-                let mut v = match acc {
-                    Some(a) => a,
-                    None => {
-                        let first = pending_neg.remove(0);
-                        self.push(Op::Neg(first))
-                    }
-                };
-                for s in pending_neg {
-                    v = self.push(Op::Sub(v, s));
-                }
-                Ok(v)
+        } else {
+            return Err(SymbolicError(format!(
+                "no code for function `{a}` (a derivative placeholder?)"
+            )));
+        };
+        Ok(self.push(op))
+    }
+
+    /// A power: exp for e^x, integer and half-integer powers by
+    /// multiplication and square roots, pow otherwise.
+    fn power(&mut self, p: PowView) -> Result<u32, SymbolicError> {
+        let (base, exp) = p.get_base_exp();
+        if let AtomView::Var(v) = base {
+            if v.get_symbol() == Symbol::E {
+                let e = self.atom(exp)?;
+                return Ok(self.push(Op::Exp(e)));
             }
         }
+        let b = self.atom(base)?;
+        match as_f64(exp) {
+            Some(n) if n.fract() == 0.0 => Ok(self.powi(b, n as i32)),
+            Some(h) if (2.0 * h).fract() == 0.0 => {
+                let s = self.push(Op::Sqrt(b));
+                Ok(self.powi(s, (2.0 * h) as i32))
+            }
+            _ => {
+                let e = self.atom(exp)?;
+                Ok(self.push(Op::Pow(b, e)))
+            }
+        }
+    }
+
+    /// A product: numerator and denominator collected separately: x*y/z costs
+    /// two ops, not a reciprocal and two multiplications.
+    fn product(&mut self, m: MulView) -> Result<u32, SymbolicError> {
+        // numerator and denominator collected separately: x*y/z costs two ops,
+        // not a reciprocal and two multiplications.
+        let mut coef = 1.0;
+        let mut num = Vec::new();
+        let mut den = Vec::new();
+        for f in m.iter() {
+            if let Some(c) = as_f64(f) {
+                coef *= c;
+                continue;
+            }
+            // pi and e are numbers too: folded into the coefficient
+            // (2*pi*r*n/cpr is one constant factor, not two products)
+            if let AtomView::Var(v) = f {
+                let s = v.get_symbol();
+                if s == Symbol::PI || s == Symbol::E {
+                    coef *= if s == Symbol::PI {
+                        std::f64::consts::PI
+                    } else {
+                        std::f64::consts::E
+                    };
+                    continue;
+                }
+            }
+            if let AtomView::Pow(p) = f {
+                let (base, exp) = p.get_base_exp();
+                if let Some(n) = as_f64(exp) {
+                    if n < 0.0 && (2.0 * n).fract() == 0.0 {
+                        let b = self.atom(base)?;
+                        let d = if n.fract() == 0.0 {
+                            self.powi(b, (-n) as i32)
+                        } else {
+                            let s = self.push(Op::Sqrt(b));
+                            self.powi(s, (-2.0 * n) as i32)
+                        };
+                        den.push(d);
+                        continue;
+                    }
+                }
+            }
+            num.push(self.atom(f)?);
+        }
+        let mut acc = num.into_iter().reduce(|a, b| self.push(Op::Mul(a, b)));
+        if coef.abs() != 1.0 {
+            let c = self.constant(coef.abs());
+            acc = Some(match acc {
+                Some(a) => self.push(Op::Mul(c, a)),
+                None => c,
+            });
+        }
+        let mut v = acc.unwrap_or_else(|| self.constant(1.0));
+        if let Some(d) = den.into_iter().reduce(|a, b| self.push(Op::Mul(a, b))) {
+            v = self.push(Op::Div(v, d));
+        }
+        if coef < 0.0 {
+            v = self.push(Op::Neg(v));
+        }
+        Ok(v)
+    }
+
+    /// A sum, with `-` for negative terms instead of negating them.
+    fn sum(&mut self, add: AddView) -> Result<u32, SymbolicError> {
+        let mut acc: Option<u32> = None;
+        let mut pending_neg = Vec::new();
+        for t in add.iter() {
+            let (neg, slot) = self.term(t)?;
+            if neg {
+                match acc {
+                    Some(a) => acc = Some(self.push(Op::Sub(a, slot))),
+                    None => pending_neg.push(slot),
+                }
+            } else {
+                acc = Some(match acc {
+                    Some(a) => self.push(Op::Add(a, slot)),
+                    None => slot,
+                });
+            }
+        }
+        let mut v = match acc {
+            Some(a) => a,
+            None => {
+                let first = pending_neg.remove(0);
+                self.push(Op::Neg(first))
+            }
+        };
+        for s in pending_neg {
+            v = self.push(Op::Sub(v, s));
+        }
+        Ok(v)
     }
 
     /// A sum term as (is_negative, slot of its absolute value), so sums use `-`
