@@ -93,102 +93,8 @@ fn emit_function(f: &Function) -> TokenStream {
             continue;
         }
         let expr = match *op {
-            Op::Const(c) => lit(c),
-            Op::Arg(a, k) => {
-                let spec = &f.args[a as usize];
-                let id = format_ident!("{}", spec.ident());
-                match spec.kind() {
-                    ArgKind::Scalar => quote!(#id),
-                    ArgKind::Vector(_) => {
-                        let k = k as usize;
-                        quote!(#id[#k])
-                    }
-                }
-            }
-            Op::Add(a, b) => {
-                let (a, b) = (t(a), t(b));
-                quote!(#a + #b)
-            }
-            Op::Sub(a, b) => {
-                let (a, b) = (t(a), t(b));
-                quote!(#a - #b)
-            }
-            Op::Mul(a, b) => {
-                let (a, b) = (t(a), t(b));
-                quote!(#a * #b)
-            }
-            Op::Div(a, b) => {
-                let (a, b) = (t(a), t(b));
-                quote!(#a / #b)
-            }
-            Op::Neg(a) => {
-                let a = t(a);
-                quote!(-#a)
-            }
-            // small integer powers as products: cheaper than pow and exact
-            // (up to the cube the plain product is the same chain, bit for bit)
-            Op::PowI(a, n) if (1..=3).contains(&n) => {
-                let a = t(a);
-                (1..n).fold(quote!(#a), |e, _| quote!(#e * #a))
-            }
-            // larger ones as the multiplication chain of binary exponentiation
-            // (the order f64::powi and the evaluator's JIT use), not a pow call
-            Op::PowI(a, n) if n != 0 && n.unsigned_abs() <= 64 => {
-                let a = t(a);
-                let chain = powi_chain(quote!(#a), n.unsigned_abs());
-                if n < 0 {
-                    quote!(1.0 / #chain)
-                } else {
-                    chain
-                }
-            }
-            Op::PowI(a, n) => {
-                let a = t(a);
-                let n = lit(n as f64);
-                quote!(crate::math::pow(#a, #n))
-            }
-            Op::Pow(a, b) => {
-                let (a, b) = (t(a), t(b));
-                quote!(crate::math::pow(#a, #b))
-            }
-            Op::Sqrt(a) => {
-                let a = t(a);
-                quote!(crate::math::sqrt(#a))
-            }
-            Op::Sin(a) => {
-                let a = t(a);
-                quote!(crate::math::sin(#a))
-            }
-            Op::Cos(a) => {
-                let a = t(a);
-                quote!(crate::math::cos(#a))
-            }
-            Op::Tan(a) => {
-                let a = t(a);
-                quote!(crate::math::tan(#a))
-            }
-            Op::Atan(a) => {
-                let a = t(a);
-                quote!(crate::math::atan(#a))
-            }
-            Op::Atan2(a, b) => {
-                let (a, b) = (t(a), t(b));
-                quote!(crate::math::atan2(#a, #b))
-            }
-            Op::Exp(a) => {
-                let a = t(a);
-                quote!(crate::math::exp(#a))
-            }
-            Op::Ln(a) => {
-                let a = t(a);
-                quote!(crate::math::log(#a))
-            }
-            Op::Abs(a) => {
-                let a = t(a);
-                quote!(crate::math::fabs(#a))
-            }
             Op::NearZero { .. } => continue, // see below
-            Op::PinvSym3 { .. } => unreachable!("handled above"),
+            _ => op_expr(f, op, &t),
         };
         stmts.push(bind(i, expr));
     }
@@ -208,6 +114,124 @@ fn emit_function(f: &Function) -> TokenStream {
         let outs = f.outputs.iter().map(|&o| t(o));
         (quote!([crate::Real; #r]), quote!([#(#outs),*]))
     };
+    let doc = function_doc(f);
+    quote! {
+        #[doc = #doc]
+        #[inline]
+        pub fn #name(#(#params),*) -> #ret_ty {
+            #(#stmts)*
+            #ret
+        }
+    }
+}
+
+/// The expression computing one tape slot (not a pseudo-inverse entry or a
+/// series switch, which the caller assembles), its operands read through `t`.
+fn op_expr(f: &Function, op: &Op, t: &dyn Fn(u32) -> TokenStream) -> TokenStream {
+    match *op {
+        Op::Const(c) => lit(c),
+        Op::Arg(a, k) => {
+            let spec = &f.args[a as usize];
+            let id = format_ident!("{}", spec.ident());
+            match spec.kind() {
+                ArgKind::Scalar => quote!(#id),
+                ArgKind::Vector(_) => {
+                    let k = k as usize;
+                    quote!(#id[#k])
+                }
+            }
+        }
+        Op::Add(a, b) => {
+            let (a, b) = (t(a), t(b));
+            quote!(#a + #b)
+        }
+        Op::Sub(a, b) => {
+            let (a, b) = (t(a), t(b));
+            quote!(#a - #b)
+        }
+        Op::Mul(a, b) => {
+            let (a, b) = (t(a), t(b));
+            quote!(#a * #b)
+        }
+        Op::Div(a, b) => {
+            let (a, b) = (t(a), t(b));
+            quote!(#a / #b)
+        }
+        Op::Neg(a) => {
+            let a = t(a);
+            quote!(-#a)
+        }
+        // small integer powers as products: cheaper than pow and exact
+        // (up to the cube the plain product is the same chain, bit for bit)
+        Op::PowI(a, n) if (1..=3).contains(&n) => {
+            let a = t(a);
+            (1..n).fold(quote!(#a), |e, _| quote!(#e * #a))
+        }
+        // larger ones as the multiplication chain of binary exponentiation
+        // (the order f64::powi and the evaluator's JIT use), not a pow call
+        Op::PowI(a, n) if n != 0 && n.unsigned_abs() <= 64 => {
+            let a = t(a);
+            let chain = powi_chain(quote!(#a), n.unsigned_abs());
+            if n < 0 {
+                quote!(1.0 / #chain)
+            } else {
+                chain
+            }
+        }
+        Op::PowI(a, n) => {
+            let a = t(a);
+            let n = lit(n as f64);
+            quote!(crate::math::pow(#a, #n))
+        }
+        Op::Pow(a, b) => {
+            let (a, b) = (t(a), t(b));
+            quote!(crate::math::pow(#a, #b))
+        }
+        Op::Sqrt(a) => {
+            let a = t(a);
+            quote!(crate::math::sqrt(#a))
+        }
+        Op::Sin(a) => {
+            let a = t(a);
+            quote!(crate::math::sin(#a))
+        }
+        Op::Cos(a) => {
+            let a = t(a);
+            quote!(crate::math::cos(#a))
+        }
+        Op::Tan(a) => {
+            let a = t(a);
+            quote!(crate::math::tan(#a))
+        }
+        Op::Atan(a) => {
+            let a = t(a);
+            quote!(crate::math::atan(#a))
+        }
+        Op::Atan2(a, b) => {
+            let (a, b) = (t(a), t(b));
+            quote!(crate::math::atan2(#a, #b))
+        }
+        Op::Exp(a) => {
+            let a = t(a);
+            quote!(crate::math::exp(#a))
+        }
+        Op::Ln(a) => {
+            let a = t(a);
+            quote!(crate::math::log(#a))
+        }
+        Op::Abs(a) => {
+            let a = t(a);
+            quote!(crate::math::fabs(#a))
+        }
+        Op::NearZero { .. } | Op::PinvSym3 { .. } => {
+            unreachable!("pseudo-inverse entries and series switches are assembled by the caller")
+        }
+    }
+}
+
+/// A kernel's doc comment: what it computes, its arguments, its outputs and
+/// its operation counts.
+fn function_doc(f: &Function) -> String {
     let mut doc = vec![f.doc.clone(), String::new()];
     for a in &f.args {
         doc.push(format!("* `{}`: [{}]", a.ident(), a.names.join(", ")));
@@ -226,15 +250,7 @@ fn emit_function(f: &Function) -> TokenStream {
         f.ops_tape(),
         f.ops_tree
     ));
-    let doc = doc.join("\n");
-    quote! {
-        #[doc = #doc]
-        #[inline]
-        pub fn #name(#(#params),*) -> #ret_ty {
-            #(#stmts)*
-            #ret
-        }
-    }
+    doc.join("\n")
 }
 
 /// The statements of `items` (see [`kinegen_model::schedule`]): a guard group binds its
