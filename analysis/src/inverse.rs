@@ -116,6 +116,54 @@ const MERGE_GAP_S: f64 = 1.0;
 
 /// The input profile of `path` for the model of `r`.
 pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
+    let steps = solve_steps(r, path)?;
+    let n = path.t.len() - 1;
+    let t: Vec<f64> = path.t[..n].to_vec();
+    let mut inputs = Vec::new();
+    let mut infeasible = Vec::new();
+    for (j, name) in steps.names.iter().enumerate() {
+        let Some(spec) = r.ir.inputs.iter().find(|i| &i.name == name) else {
+            continue;
+        };
+        let (p, out_of_bounds) = input_profile(spec, name, &steps.values[j], &t, path.t[n]);
+        inputs.push(p);
+        infeasible.extend(out_of_bounds);
+    }
+    let misses = steps.misses;
+    let max_step_miss_m = (0..n)
+        .map(|k| {
+            let a = path.pose[k];
+            let b = path.pose[k + 1];
+            misses[k] * (MISS_ABS_M + MISS_REL * (b[0] - a[0]).hypot(b[1] - a[1]))
+        })
+        .fold(0.0f64, f64::max);
+    infeasible.extend(stretches(&t, &path.t[n], &misses, |x| x > 1.0).into_iter().map(|(a, b, _)| Stretch {
+        input: "path".into(),
+        t_start: a,
+        t_end: b,
+        why: "moves the robot in a direction it cannot move (sideways, for a non-holonomic robot): the inputs shown follow the path's heading and forward motion only".into(),
+    }));
+    infeasible.sort_by(|a, b| a.t_start.total_cmp(&b.t_start));
+    Ok(Profile {
+        t,
+        inputs,
+        infeasible,
+        max_step_miss_m,
+    })
+}
+
+/// Each step's inputs by the inverse kinematics, and how far the model, fed
+/// them, misses the step (in units of the tolerance).
+struct Steps {
+    names: Vec<String>,
+    /// per input, per step
+    values: Vec<Vec<f64>>,
+    misses: Vec<f64>,
+}
+
+/// The inverse kinematics of every step of `path`, the configuration
+/// (caster angles, a steering angle) carried from step to step.
+fn solve_steps(r: &Runner, path: &PlannedPath) -> Result<Steps, String> {
     let inv = r.ir.inverse_increment().map_err(|e| e.to_string())?;
     let step = r.ir.step(StepForm::Exact).value;
     let names = &inv.row_names;
@@ -213,100 +261,88 @@ pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
             col.push(*v);
         }
     }
-    let t: Vec<f64> = path.t[..n].to_vec();
-    let mut inputs = Vec::new();
-    let mut infeasible = Vec::new();
-    for (j, name) in names.iter().enumerate() {
-        let Some(spec) = r.ir.inputs.iter().find(|i| &i.name == name) else {
-            continue;
-        };
-        let v = &values[j];
-        let rate: Vec<f64> = match spec.kind {
-            InputKind::Cumulative => v.iter().map(|x| x.abs()).collect(),
-            InputKind::Absolute => (0..n)
-                .map(|k| {
-                    if k == 0 {
-                        0.0
-                    } else {
-                        ((v[k] - v[k - 1]) / (t[k] - t[k - 1])).abs()
-                    }
-                })
-                .collect(),
-        };
-        let per_s = if spec.kind == InputKind::Absolute {
-            format!("{}/s", spec.unit)
-        } else {
-            spec.unit.clone()
-        };
-        if let Some(m) = spec.max_rate {
-            infeasible.extend(stretches(&t, &path.t[n], &rate, |x| x > m).into_iter().map(
-                |(a, b, peak)| Stretch {
-                    input: name.clone(),
-                    t_start: a,
-                    t_end: b,
-                    why: format!("needs a rate of {peak:.4} {per_s}, above max_rate {m}"),
-                },
-            ));
-        }
-        if let Some([lo, hi]) = spec.range {
-            let out: Vec<f64> = v
-                .iter()
-                .map(|x| {
-                    if *x < lo {
-                        lo - x
-                    } else if *x > hi {
-                        x - hi
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
-            infeasible.extend(
-                stretches(&t, &path.t[n], &out, |x| x > 0.0)
-                    .into_iter()
-                    .map(|(a, b, peak)| Stretch {
-                        input: name.clone(),
-                        t_start: a,
-                        t_end: b,
-                        why: format!(
-                            "leaves its range [{lo}, {hi}] {} by up to {peak:.4}",
-                            spec.unit
-                        ),
-                    }),
-            );
-        }
-        let peak_rate = rate.iter().fold(0.0f64, |a, b| a.max(*b));
-        inputs.push(InputProfile {
-            name: name.clone(),
-            unit: spec.unit.clone(),
-            kind: spec.kind,
-            value: v.clone(),
-            rate,
-            max_rate: spec.max_rate,
-            range: spec.range,
-            peak_rate,
-        });
-    }
-    let max_step_miss_m = (0..n)
-        .map(|k| {
-            let a = path.pose[k];
-            let b = path.pose[k + 1];
-            misses[k] * (MISS_ABS_M + MISS_REL * (b[0] - a[0]).hypot(b[1] - a[1]))
-        })
-        .fold(0.0f64, f64::max);
-    infeasible.extend(stretches(&t, &path.t[n], &misses, |x| x > 1.0).into_iter().map(|(a, b, _)| Stretch {
-        input: "path".into(),
-        t_start: a,
-        t_end: b,
-        why: "moves the robot in a direction it cannot move (sideways, for a non-holonomic robot): the inputs shown follow the path's heading and forward motion only".into(),
-    }));
-    infeasible.sort_by(|a, b| a.t_start.total_cmp(&b.t_start));
-    Ok(Profile {
-        t,
-        inputs,
-        infeasible,
-        max_step_miss_m,
+    Ok(Steps {
+        names: names.clone(),
+        values,
+        misses,
     })
+}
+
+/// One input's profile over the path (its values and rates) and the
+/// stretches where it exceeds its declared rate or range.
+fn input_profile(
+    spec: &kinegen_model::decl::Input,
+    name: &str,
+    v: &[f64],
+    t: &[f64],
+    t_end: f64,
+) -> (InputProfile, Vec<Stretch>) {
+    let n = t.len();
+    let mut infeasible = Vec::new();
+    let rate: Vec<f64> = match spec.kind {
+        InputKind::Cumulative => v.iter().map(|x| x.abs()).collect(),
+        InputKind::Absolute => (0..n)
+            .map(|k| {
+                if k == 0 {
+                    0.0
+                } else {
+                    ((v[k] - v[k - 1]) / (t[k] - t[k - 1])).abs()
+                }
+            })
+            .collect(),
+    };
+    let per_s = if spec.kind == InputKind::Absolute {
+        format!("{}/s", spec.unit)
+    } else {
+        spec.unit.clone()
+    };
+    if let Some(m) = spec.max_rate {
+        infeasible.extend(stretches(t, &t_end, &rate, |x| x > m).into_iter().map(
+            |(a, b, peak)| Stretch {
+                input: name.to_string(),
+                t_start: a,
+                t_end: b,
+                why: format!("needs a rate of {peak:.4} {per_s}, above max_rate {m}"),
+            },
+        ));
+    }
+    if let Some([lo, hi]) = spec.range {
+        let out: Vec<f64> = v
+            .iter()
+            .map(|x| {
+                if *x < lo {
+                    lo - x
+                } else if *x > hi {
+                    x - hi
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        infeasible.extend(stretches(t, &t_end, &out, |x| x > 0.0).into_iter().map(
+            |(a, b, peak)| Stretch {
+                input: name.to_string(),
+                t_start: a,
+                t_end: b,
+                why: format!(
+                    "leaves its range [{lo}, {hi}] {} by up to {peak:.4}",
+                    spec.unit
+                ),
+            },
+        ));
+    }
+    let peak_rate = rate.iter().fold(0.0f64, |a, b| a.max(*b));
+    let profile = InputProfile {
+        name: name.to_string(),
+        unit: spec.unit.clone(),
+        kind: spec.kind,
+        value: v.to_vec(),
+        rate,
+        max_rate: spec.max_rate,
+        range: spec.range,
+        peak_rate,
+    };
+    (profile, infeasible)
 }
 
 /// The constant body twist that moves by `dpose` (start body frame) in `dt`:
