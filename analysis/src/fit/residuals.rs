@@ -349,15 +349,64 @@ pub(super) fn run_residuals(
         .copied()
         .chain(if nuis { vec![np + 2] } else { vec![] })
         .collect();
-    let free = &cols[..];
-    let mut scratch = Vec::new();
-    // A measurement delay (crate::timeline): measurement k is compared with the
-    // model at t_k - delay, linearly interpolated between rows (exact sensitivities
-    // of the interpolation, and d/d delay = minus the interpolated velocity).
-    let tau_i = r.delay;
-    let tau = crate::timeline::delay(r, p);
-    let shifted = |k: usize| crate::timeline::model_instant(run, k, tau);
+    let cx = RunCx {
+        r,
+        p,
+        free: &cols,
+        run,
+        o,
+        with_jac,
+        track: &track,
+        inputs: &inputs,
+    };
     if o.use_pose {
+        cx.pose_residuals(&mut res, &mut jac);
+    }
+    if let Some(sd) = start_prior(run, o).filter(|_| nuis) {
+        // the start-heading offset against its measurement's uncertainty
+        res.push(start[2] / sd);
+        if with_jac {
+            let m = cols.len() - 1;
+            jac.push((0..=m).map(|c| if c == m { 1.0 / sd } else { 0.0 }));
+        }
+    }
+    if o.use_landmarks && !run.landmarks.is_empty() {
+        landmark_residuals(r, p, &cols, run, &track, with_jac, &mut res, &mut jac);
+    }
+    if o.use_gyro {
+        cx.gyro_residuals(&mut res, &mut jac);
+    }
+    (res, jac)
+}
+
+/// One run's track and what its residuals read.
+struct RunCx<'a> {
+    r: &'a Runner,
+    p: &'a [f64],
+    /// sensitivity columns to read: the free parameters, then the start heading
+    free: &'a [usize],
+    run: &'a Run,
+    o: &'a FitOptions,
+    with_jac: bool,
+    track: &'a deadreckon::Track,
+    /// the inputs as executed (an input delay)
+    inputs: &'a Run,
+}
+
+impl RunCx<'_> {
+    /// The pose residuals against the ground truth (through the model's pose
+    /// observation where it has one).
+    fn pose_residuals(&self, res: &mut Vec<f64>, jac: &mut Rows) {
+        let (r, p, free, run, o, with_jac) =
+            (self.r, self.p, self.free, self.run, self.o, self.with_jac);
+        let (track, inputs) = (self.track, self.inputs);
+        let np = p.len();
+        // A measurement delay (crate::timeline): measurement k is compared with the
+        // model at t_k - delay, linearly interpolated between rows (exact sensitivities
+        // of the interpolation, and d/d delay = minus the interpolated velocity).
+        let tau_i = r.delay;
+        let tau = crate::timeline::delay(r, p);
+        let shifted = |k: usize| crate::timeline::model_instant(run, k, tau);
         if let Some(gt) = &run.gt {
             let tracker = r.ir.observation_kernels(Pose);
             let first = if o.endpoints_only { gt.len() - 1 } else { 1 };
@@ -417,18 +466,14 @@ pub(super) fn run_residuals(
             }
         }
     }
-    if let Some(sd) = start_prior(run, o).filter(|_| nuis) {
-        // the start-heading offset against its measurement's uncertainty
-        res.push(start[2] / sd);
-        if with_jac {
-            let m = free.len() - 1;
-            jac.push((0..=m).map(|c| if c == m { 1.0 / sd } else { 0.0 }));
-        }
-    }
-    if o.use_landmarks && !run.landmarks.is_empty() {
-        landmark_residuals(r, p, free, run, &track, with_jac, &mut res, &mut jac);
-    }
-    if o.use_gyro {
+
+    /// The gyro residuals: the track's predicted readings against the gyro's.
+    fn gyro_residuals(&self, res: &mut Vec<f64>, jac: &mut Rows) {
+        let (r, p, free, run, o, with_jac) =
+            (self.r, self.p, self.free, self.run, self.o, self.with_jac);
+        let (track, inputs) = (self.track, self.inputs);
+        let np = p.len();
+        let mut scratch = Vec::new();
         if let (Some(g), Some(gyro)) = (&run.gyro, r.ir.observation_kernels(YawRate)) {
             let (hx, hp) = (gyro.jac_x, gyro.jac_p);
             let mut jp = vec![0.0; np];
@@ -459,7 +504,6 @@ pub(super) fn run_residuals(
             }
         }
     }
-    (res, jac)
 }
 
 /// Range and bearing residuals of every landmark observation (seed 001 eq. 6),
