@@ -27,7 +27,10 @@ from pathlib import Path
 
 import symforce
 
+# epsilon 0 on purpose: the small-angle switch is an explicit Piecewise, so
+# SymForce's warning about epsilon (one per kernel) says nothing here
 symforce.set_epsilon_to_zero()
+symforce.set_log_level("error")
 import symforce.symbolic as sf  # noqa: E402
 from symforce import codegen  # noqa: E402
 from symforce.codegen.backends.rust.rust_config import RustConfig  # noqa: E402
