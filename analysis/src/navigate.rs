@@ -95,14 +95,19 @@ pub fn drive(
             grid.cell, o.dt, o.speed
         ));
     }
-    let inv = belief.ir.inverse_increment().map_err(|e| e.to_string())?;
-    let (step_b, step_t) = (
-        belief.ir.step(StepForm::Exact).value,
-        truth.ir.step(StepForm::Exact).value,
-    );
-    let zeros = [0.0; 16];
-    let mut rng = rand::rngs::SmallRng::seed_from_u64(o.seed);
-    let noise = Normal::new(0.0, o.actuation.max(0.0)).map_err(|e| e.to_string())?;
+    let mut mover = Mover {
+        grid,
+        belief,
+        truth,
+        o,
+        inv: belief.ir.inverse_increment().map_err(|e| e.to_string())?,
+        step_b: belief.ir.step(StepForm::Exact).value,
+        step_t: truth.ir.step(StepForm::Exact).value,
+        rng: rand::rngs::SmallRng::seed_from_u64(o.seed),
+        noise: Normal::new(0.0, o.actuation.max(0.0)).map_err(|e| e.to_string())?,
+        touching: false,
+        in_safety: false,
+    };
     let dist = grid.distances();
     let s = grid.centre(grid.start);
     // start facing the first move
@@ -122,68 +127,6 @@ pub fn drive(
         safety_intrusions: 0,
         final_error_m: 0.0,
         reached: false,
-    };
-    let (mut touching, mut in_safety) = (false, false);
-    // one discrete motion (dpose in the start-of-move body frame) over `dur`
-    let mut execute = |dpose: [f64; 3],
-                       dur: f64,
-                       truth_pose: &mut [f64; 3],
-                       odo: &mut [f64; 3],
-                       out: &mut Drive| {
-        let n = (dur / o.dt).ceil().max(1.0) as usize;
-        let dt = dur / n as f64;
-        let per = [
-            dpose[0] / n as f64,
-            dpose[1] / n as f64,
-            dpose[2] / n as f64,
-        ];
-        let args: Vec<&[f64]> = inv
-            .args
-            .iter()
-            .map(|a| match a.role {
-                ArgRole::PoseIncrement => &per[..],
-                ArgRole::Dt => std::slice::from_ref(&dt),
-                _ => &belief.p[..],
-            })
-            .collect();
-        let cmd = inv.eval(&args);
-        // what the motors really do this move (the encoders measure it)
-        let done: Vec<f64> = cmd
-            .iter()
-            .map(|c| c * (1.0 + noise.sample(&mut rng)))
-            .collect();
-        for _ in 0..n {
-            let t = step_t.eval(&Runner::step_args(
-                step_t,
-                truth_pose,
-                &done,
-                &truth.p,
-                &[dt],
-                &zeros,
-            ));
-            *truth_pose = [t[0], t[1], t[2]];
-            let b = step_b.eval(&Runner::step_args(
-                step_b,
-                odo,
-                &done,
-                &belief.p,
-                &[dt],
-                &zeros,
-            ));
-            *odo = [b[0], b[1], b[2]];
-            out.truth.push(*truth_pose);
-            out.odometry.push(*odo);
-            let hit = grid.collides(truth_pose[0], truth_pose[1], o.radius);
-            if hit && !touching {
-                out.collisions += 1;
-            }
-            touching = hit;
-            let safe = grid.in_safety_zone(truth_pose[0], truth_pose[1]);
-            if safe && !in_safety {
-                out.safety_intrusions += 1;
-            }
-            in_safety = safe;
-        }
     };
     let max_moves = 4 * grid.size().0 * grid.size().1;
     let mut plan = first;
@@ -211,14 +154,14 @@ pub fn drive(
         let heading = dy.atan2(dx);
         let turn = wrap(heading - from[2]);
         let length = dx.hypot(dy);
-        execute(
+        mover.execute(
             [0.0, 0.0, turn],
             turn.abs() / o.turn_rate + o.dt,
             &mut truth_pose,
             &mut odo,
             &mut out,
         );
-        execute(
+        mover.execute(
             [length, 0.0, 0.0],
             length / o.speed + o.dt,
             &mut truth_pose,
@@ -236,4 +179,92 @@ pub fn drive(
     let g = grid.centre(grid.goal);
     out.final_error_m = (truth_pose[0] - g[0]).hypot(truth_pose[1] - g[1]);
     Ok(out)
+}
+
+/// The robot of a navigation run: what it believes (its spec), what it is
+/// (the truth), how its motors err, and whether it is touching an obstacle
+/// or inside the safety zone (a new contact counts once).
+struct Mover<'a> {
+    grid: &'a Grid,
+    belief: &'a Runner,
+    truth: &'a Runner,
+    o: &'a NavOptions,
+    inv: &'a kinegen_model::ir::Function,
+    step_b: &'a kinegen_model::ir::Function,
+    step_t: &'a kinegen_model::ir::Function,
+    rng: rand::rngs::SmallRng,
+    noise: Normal<f64>,
+    touching: bool,
+    in_safety: bool,
+}
+
+impl Mover<'_> {
+    /// One discrete motion (dpose in the start-of-move body frame) over
+    /// `dur`: the believed model's inputs for it, executed with the motors'
+    /// error by the true model (and dead-reckoned by the believed one).
+    fn execute(
+        &mut self,
+        dpose: [f64; 3],
+        dur: f64,
+        truth_pose: &mut [f64; 3],
+        odo: &mut [f64; 3],
+        out: &mut Drive,
+    ) {
+        let o = self.o;
+        let n = (dur / o.dt).ceil().max(1.0) as usize;
+        let dt = dur / n as f64;
+        let per = [
+            dpose[0] / n as f64,
+            dpose[1] / n as f64,
+            dpose[2] / n as f64,
+        ];
+        let args: Vec<&[f64]> = self
+            .inv
+            .args
+            .iter()
+            .map(|a| match a.role {
+                ArgRole::PoseIncrement => &per[..],
+                ArgRole::Dt => std::slice::from_ref(&dt),
+                _ => &self.belief.p[..],
+            })
+            .collect();
+        let cmd = self.inv.eval(&args);
+        // what the motors really do this move (the encoders measure it)
+        let done: Vec<f64> = cmd
+            .iter()
+            .map(|c| c * (1.0 + self.noise.sample(&mut self.rng)))
+            .collect();
+        for _ in 0..n {
+            let t = self.step_t.eval(&Runner::step_args(
+                self.step_t,
+                truth_pose,
+                &done,
+                &self.truth.p,
+                &[dt],
+                &[0.0; 16],
+            ));
+            *truth_pose = [t[0], t[1], t[2]];
+            let b = self.step_b.eval(&Runner::step_args(
+                self.step_b,
+                odo,
+                &done,
+                &self.belief.p,
+                &[dt],
+                &[0.0; 16],
+            ));
+            *odo = [b[0], b[1], b[2]];
+            out.truth.push(*truth_pose);
+            out.odometry.push(*odo);
+            let hit = self.grid.collides(truth_pose[0], truth_pose[1], o.radius);
+            if hit && !self.touching {
+                out.collisions += 1;
+            }
+            self.touching = hit;
+            let safe = self.grid.in_safety_zone(truth_pose[0], truth_pose[1]);
+            if safe && !self.in_safety {
+                out.safety_intrusions += 1;
+            }
+            self.in_safety = safe;
+        }
+    }
 }
