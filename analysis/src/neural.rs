@@ -131,46 +131,121 @@ pub fn train(
             xs.len() + xv.len()
         ));
     }
-    let d = xs[0].len();
-    let (x_mean, x_std): (Vec<f64>, Vec<f64>) = (0..d)
-        .map(|j| mean_std(xs.iter().map(move |x| x[j])))
-        .unzip();
-    let (y_mean, y_std) = mean_std(ys.iter().copied());
-    let norm = |x: &[f64]| -> Vec<f64> {
-        x.iter()
-            .enumerate()
-            .map(|(j, v)| (v - x_mean[j]) / x_std[j])
-            .collect()
+    let data = Standardised::new(&xs, &ys, &xv, &yv);
+    let shape = Shape {
+        hidden,
+        d: xs[0].len(),
     };
-    let stride = xs.len().div_ceil(MAX_SAMPLES).max(1);
-    let train_x: Vec<Vec<f64>> = xs.iter().step_by(stride).map(|x| norm(x)).collect();
-    let train_y: Vec<f64> = ys
-        .iter()
-        .step_by(stride)
-        .map(|y| (y - y_mean) / y_std)
-        .collect();
-    let val_x: Vec<Vec<f64>> = xv.iter().map(|x| norm(x)).collect();
-    let val_y: Vec<f64> = yv.iter().map(|y| (y - y_mean) / y_std).collect();
+    let (best, it) = shape.fit(&data, seed);
+    let mut net = shape.unpack(&best.1);
+    net.x_mean = data.x_mean;
+    net.x_std = data.x_std;
+    net.y_mean = data.y_mean;
+    net.y_std = data.y_std;
+    net.angles = angles.to_vec();
+    let rmse = |x: &[Vec<f64>], y: &[f64]| -> f64 {
+        let s: f64 = x
+            .iter()
+            .zip(y)
+            .map(|(x, y)| (net.predict_features(x) - y).powi(2))
+            .sum();
+        (s / y.len().max(1) as f64).sqrt()
+    };
+    let training = Training {
+        iterations: it,
+        best_iteration: best.2,
+        train_rmse: rmse(&xs, &ys),
+        validation_rmse: rmse(&xv, &yv),
+        samples: data.train_x.len(),
+    };
+    Ok((net, training))
+}
 
-    // weights theta = [w1 (row-major hidden x d), b1, w2, b2]
-    let n_w = hidden * d + 2 * hidden + 1;
-    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
-    let init = Normal::new(0.0, 1.0 / (d as f64).sqrt()).expect("finite");
-    let init2 = Normal::new(0.0, 1.0 / (hidden as f64).sqrt()).expect("finite");
-    let mut theta: Vec<f64> = (0..n_w)
-        .map(|i| {
-            if i < hidden * d {
-                init.sample(&mut rng)
-            } else if i < hidden * d + hidden {
-                0.0
-            } else if i < n_w - 1 {
-                init2.sample(&mut rng)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let unpack = |t: &[f64]| -> Mlp {
+/// The training and validation samples standardised by the training
+/// samples' mean and standard deviation (the training ones thinned to at
+/// most `MAX_SAMPLES`).
+struct Standardised {
+    x_mean: Vec<f64>,
+    x_std: Vec<f64>,
+    y_mean: f64,
+    y_std: f64,
+    train_x: Vec<Vec<f64>>,
+    train_y: Vec<f64>,
+    val_x: Vec<Vec<f64>>,
+    val_y: Vec<f64>,
+}
+
+impl Standardised {
+    fn new(xs: &[Vec<f64>], ys: &[f64], xv: &[Vec<f64>], yv: &[f64]) -> Self {
+        let d = xs[0].len();
+        let (x_mean, x_std): (Vec<f64>, Vec<f64>) = (0..d)
+            .map(|j| mean_std(xs.iter().map(move |x| x[j])))
+            .unzip();
+        let (y_mean, y_std) = mean_std(ys.iter().copied());
+        let norm = |x: &[f64]| -> Vec<f64> {
+            x.iter()
+                .enumerate()
+                .map(|(j, v)| (v - x_mean[j]) / x_std[j])
+                .collect()
+        };
+        let stride = xs.len().div_ceil(MAX_SAMPLES).max(1);
+        let train_x: Vec<Vec<f64>> = xs.iter().step_by(stride).map(|x| norm(x)).collect();
+        let train_y: Vec<f64> = ys
+            .iter()
+            .step_by(stride)
+            .map(|y| (y - y_mean) / y_std)
+            .collect();
+        let val_x: Vec<Vec<f64>> = xv.iter().map(|x| norm(x)).collect();
+        let val_y: Vec<f64> = yv.iter().map(|y| (y - y_mean) / y_std).collect();
+        Standardised {
+            x_mean,
+            x_std,
+            y_mean,
+            y_std,
+            train_x,
+            train_y,
+            val_x,
+            val_y,
+        }
+    }
+}
+
+/// The network's size: `hidden` tanh units on `d` features. Its weights
+/// theta are [w1 (row-major hidden x d), b1, w2, b2].
+struct Shape {
+    hidden: usize,
+    d: usize,
+}
+
+impl Shape {
+    fn weights(&self) -> usize {
+        self.hidden * self.d + 2 * self.hidden + 1
+    }
+
+    /// Random starting weights (scaled by each layer's fan-in), zero biases.
+    fn initial(&self, seed: u64) -> Vec<f64> {
+        let (hidden, d, n_w) = (self.hidden, self.d, self.weights());
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+        let init = Normal::new(0.0, 1.0 / (d as f64).sqrt()).expect("finite");
+        let init2 = Normal::new(0.0, 1.0 / (hidden as f64).sqrt()).expect("finite");
+        (0..n_w)
+            .map(|i| {
+                if i < hidden * d {
+                    init.sample(&mut rng)
+                } else if i < hidden * d + hidden {
+                    0.0
+                } else if i < n_w - 1 {
+                    init2.sample(&mut rng)
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+
+    /// The network of weights `t` (on standardised data).
+    fn unpack(&self, t: &[f64]) -> Mlp {
+        let (hidden, d, n_w) = (self.hidden, self.d, self.weights());
         Mlp {
             w1: DMatrix::from_row_slice(hidden, d, &t[..hidden * d]),
             b1: DVector::from_column_slice(&t[hidden * d..hidden * d + hidden]),
@@ -182,31 +257,87 @@ pub fn train(
             y_std: 1.0,
             angles: Vec::new(),
         }
-    };
-    let sse = |t: &[f64], x: &[Vec<f64>], y: &[f64]| -> f64 {
-        let m = unpack(t);
+    }
+
+    fn sse(&self, t: &[f64], x: &[Vec<f64>], y: &[f64]) -> f64 {
+        let m = self.unpack(t);
         x.iter()
             .zip(y)
             .map(|(x, y)| (m.predict_features(x) - y).powi(2))
             .sum()
-    };
-    // weight decay: the training cost adds DECAY * |theta|^2 (on standardised
-    // data), which keeps a large network from fitting the gyro's noise
-    let decay = DECAY * train_x.len() as f64;
-    let penalised =
-        |t: &[f64]| sse(t, &train_x, &train_y) + decay * t.iter().map(|v| v * v).sum::<f64>();
-    let n = train_x.len();
-    let mut lambda = 1e-2;
-    let mut cost = penalised(&theta);
-    let mut best = (sse(&theta, &val_x, &val_y), theta.clone(), 0);
-    let mut it = 0;
-    while it < MAX_ITERATIONS && it - best.2 < PATIENCE {
-        it += 1;
+    }
+
+    /// Levenberg-Marquardt on the weights with weight decay, stopped early
+    /// on the validation error: (the best (validation SSE, weights,
+    /// iteration)), the iterations run).
+    fn fit(&self, data: &Standardised, seed: u64) -> ((f64, Vec<f64>, usize), usize) {
+        let n_w = self.weights();
+        let (train_x, train_y) = (&data.train_x, &data.train_y);
+        let mut theta = self.initial(seed);
+        // weight decay: the training cost adds DECAY * |theta|^2 (on standardised
+        // data), which keeps a large network from fitting the gyro's noise
+        let decay = DECAY * train_x.len() as f64;
+        let penalised = |t: &[f64]| {
+            self.sse(t, train_x, train_y) + decay * t.iter().map(|v| v * v).sum::<f64>()
+        };
+        let mut lambda = 1e-2;
+        let mut cost = penalised(&theta);
+        let mut best = (self.sse(&theta, &data.val_x, &data.val_y), theta.clone(), 0);
+        let mut it = 0;
+        while it < MAX_ITERATIONS && it - best.2 < PATIENCE {
+            it += 1;
+            let (mut jtj, mut jtr) = self.normal_equations(&theta, train_x, train_y);
+            for k in 0..n_w {
+                jtj[(k, k)] += decay;
+                jtr[k] += decay * theta[k];
+            }
+            // Marquardt's damping, scaled by the diagonal, until a step lowers the cost
+            let mut improved = false;
+            for _ in 0..12 {
+                let mut a = jtj.clone();
+                for k in 0..n_w {
+                    a[(k, k)] += lambda * (jtj[(k, k)] + 1e-9);
+                }
+                let Some(ch) = a.cholesky() else {
+                    lambda *= 4.0;
+                    continue;
+                };
+                let step = ch.solve(&(-&jtr));
+                let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(t, s)| t + s).collect();
+                let c = penalised(&trial);
+                if c.is_finite() && c < cost {
+                    theta = trial;
+                    cost = c;
+                    lambda = (lambda / 3.0).max(1e-12);
+                    improved = true;
+                    break;
+                }
+                lambda *= 4.0;
+            }
+            let v = self.sse(&theta, &data.val_x, &data.val_y);
+            if v < best.0 {
+                best = (v, theta.clone(), it);
+            }
+            if !improved {
+                break;
+            }
+        }
+        (best, it)
+    }
+
+    /// J^T J and J^T r of the training residuals at `theta`.
+    fn normal_equations(
+        &self,
+        theta: &[f64],
+        train_x: &[Vec<f64>],
+        train_y: &[f64],
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        let (hidden, d, n_w, n) = (self.hidden, self.d, self.weights(), train_x.len());
         // residuals and Jacobian (n x n_w)
-        let m = unpack(&theta);
+        let m = self.unpack(theta);
         let mut jac = DMatrix::<f64>::zeros(n, n_w);
         let mut res = DVector::<f64>::zeros(n);
-        for (i, (x, y)) in train_x.iter().zip(&train_y).enumerate() {
+        for (i, (x, y)) in train_x.iter().zip(train_y).enumerate() {
             let xv = DVector::from_column_slice(x);
             let h = (&m.w1 * &xv + &m.b1).map(f64::tanh);
             res[i] = m.w2.dot(&h) + m.b2 - y;
@@ -223,65 +354,8 @@ pub fn train(
         // (the explicit transpose lets nalgebra use its blocked matrix product;
         // tr_mul goes column by column, 5x slower here)
         let jt = jac.transpose();
-        let mut jtj = &jt * &jac;
-        let mut jtr = &jt * &res;
-        for k in 0..n_w {
-            jtj[(k, k)] += decay;
-            jtr[k] += decay * theta[k];
-        }
-        // Marquardt's damping, scaled by the diagonal, until a step lowers the cost
-        let mut improved = false;
-        for _ in 0..12 {
-            let mut a = jtj.clone();
-            for k in 0..n_w {
-                a[(k, k)] += lambda * (jtj[(k, k)] + 1e-9);
-            }
-            let Some(ch) = a.cholesky() else {
-                lambda *= 4.0;
-                continue;
-            };
-            let step = ch.solve(&(-&jtr));
-            let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(t, s)| t + s).collect();
-            let c = penalised(&trial);
-            if c.is_finite() && c < cost {
-                theta = trial;
-                cost = c;
-                lambda = (lambda / 3.0).max(1e-12);
-                improved = true;
-                break;
-            }
-            lambda *= 4.0;
-        }
-        let v = sse(&theta, &val_x, &val_y);
-        if v < best.0 {
-            best = (v, theta.clone(), it);
-        }
-        if !improved {
-            break;
-        }
+        (&jt * &jac, &jt * &res)
     }
-    let mut net = unpack(&best.1);
-    net.x_mean = x_mean;
-    net.x_std = x_std;
-    net.y_mean = y_mean;
-    net.y_std = y_std;
-    net.angles = angles.to_vec();
-    let rmse = |x: &[Vec<f64>], y: &[f64]| -> f64 {
-        let s: f64 = x
-            .iter()
-            .zip(y)
-            .map(|(x, y)| (net.predict_features(x) - y).powi(2))
-            .sum();
-        (s / y.len().max(1) as f64).sqrt()
-    };
-    let training = Training {
-        iterations: it,
-        best_iteration: best.2,
-        train_rmse: rmse(&xs, &ys),
-        validation_rmse: rmse(&xv, &yv),
-        samples: n,
-    };
-    Ok((net, training))
 }
 
 #[cfg(test)]
