@@ -34,7 +34,18 @@ fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
     if !x0.is_finite() {
         return ((0.0, 1.0), (0.0, 1.0));
     }
-    let (px, py) = (((x1 - x0) * 0.05).max(1e-9), ((y1 - y0) * 0.05).max(1e-9));
+    // a flat series (a constant wheel rate) gets 5% of its value either
+    // side, not a range of 1e-9 whose every tick reads the same number
+    let pad = |lo: f64, hi: f64| {
+        let span = hi - lo;
+        let size = lo.abs().max(hi.abs()).max(1.0);
+        if span <= 1e-9 * size {
+            0.05 * size
+        } else {
+            0.05 * span
+        }
+    };
+    let (px, py) = (pad(x0, x1), pad(y0, y1));
     ((x0 - px, x1 + px), (y0 - py, y1 + py))
 }
 
@@ -148,7 +159,7 @@ pub(crate) fn chart(
     {
         let root = SVGBackend::with_string(&mut svg, (W, H)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let span = squared(bounds(series), equal);
+        let span = squared(legend_room(bounds(series), series), equal);
         let ((_, _), (y0, y1)) = span;
         let mut c = axes(&root, title, xl, yl, span)?;
         for (a, b) in marks {
@@ -187,7 +198,9 @@ pub(crate) fn chart(
                 }
             }
         }
+        // at the top, in the room `legend_room` leaves above the data
         c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()
@@ -195,6 +208,22 @@ pub(crate) fn chart(
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
+}
+
+/// `span` with room above the data for the legend, which plotters draws
+/// inside the plot at the upper right: without it the legend covers the
+/// data there (a flat wheel rate, a reference line at the top).
+fn legend_room(span: ((f64, f64), (f64, f64)), series: &[Series]) -> ((f64, f64), (f64, f64)) {
+    let entries = series.iter().filter(|s| !s.0.is_empty()).count();
+    if entries == 0 {
+        return span;
+    }
+    let ((x0, x1), (y0, y1)) = span;
+    // each legend line takes about 20 px of the plot's height (H less the
+    // caption and the x labels), plus its border
+    let plot = f64::from(H) - 80.0;
+    let frac = ((entries as f64 * 20.0 + 16.0) / plot).min(0.6);
+    ((x0, x1), (y0, y1 + (y1 - y0) * frac / (1.0 - frac)))
 }
 
 /// `span` made square about its centre when `equal` (a map: metres the
@@ -870,6 +899,7 @@ pub fn inverse_report(
         units.dedup();
         for unit in units {
             let mut series: Vec<Series> = Vec::new();
+            let mut limits: Vec<f64> = Vec::new();
             for (k, inp) in prof.inputs.iter().filter(|i| i.unit == unit).enumerate() {
                 let c = COLORS[k % COLORS.len()];
                 series.push((
@@ -884,10 +914,18 @@ pub fn inverse_report(
                 if let (Some(m), kinegen_model::decl::InputKind::Cumulative) =
                     (inp.max_rate, inp.kind)
                 {
-                    let (a, b) = (prof.t[0], *prof.t.last().unwrap());
-                    series.push(("max_rate", RED, vec![(a, m), (b, m)]));
-                    series.push(("-max_rate", RED, vec![(a, -m), (b, -m)]));
+                    limits.push(m);
                 }
+            }
+            // each distinct rate limit once, as +-max_rate (one legend entry),
+            // in grey: no input's colour
+            limits.sort_by(f64::total_cmp);
+            limits.dedup();
+            let grey = RGBColor(128, 128, 128);
+            for m in limits {
+                let (a, b) = (prof.t[0], *prof.t.last().unwrap());
+                series.push(("±max_rate", grey, vec![(a, m), (b, m)]));
+                series.push(("", grey, vec![(a, -m), (b, -m)]));
             }
             let names: Vec<&str> = prof
                 .inputs
@@ -930,6 +968,20 @@ pub fn inverse_report(
                 } else {
                     where_.join(", ")
                 }
+            );
+        }
+        // motion the robot cannot make at all (sideways), shaded on every chart
+        let path_stretches: Vec<String> = prof
+            .infeasible
+            .iter()
+            .filter(|s| s.input == "path")
+            .map(|s| format!("{:.2}-{:.2} s", s.t_start, s.t_end))
+            .collect();
+        if !path_stretches.is_empty() {
+            table += &format!(
+                "<tr><td>{}</td><td>path</td><td>-</td><td>-</td><td>motion it cannot make (sideways): {}</td></tr>",
+                esc(model),
+                path_stretches.join(", ")
             );
         }
     }
