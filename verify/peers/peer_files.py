@@ -1,10 +1,12 @@
 """What the peer generators (wrenfold_kernels.py, symforce_kernels.py) share:
-the symbolic 3x3 inverse of seed 000's normal equations, and writing their
-files or checking that the committed ones are what they would write."""
+the body twist of a spec in a peer's symbolic library, and writing their files
+or checking that the committed ones are what they would write."""
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "verify" / "casadi"))
+from reference import to_sx  # noqa: E402
 
 
 def inverse3(m):
@@ -13,6 +15,24 @@ def inverse3(m):
           - m[(j + 1) % 3][(i + 2) % 3] * m[(j + 2) % 3][(i + 1) % 3] for j in range(3)] for i in range(3)]
     det = sum(m[0][k] * c[k][0] for k in range(3))
     return [[c[i][j] / det for j in range(3)] for i in range(3)]
+
+
+def body_twist(spec, env, functions):
+    """The spec's body twist [vx, vy, omega] in the library of `functions`
+    (`env` holds its symbols): the [motion] rows, or for [constraints] the
+    least-squares twist through the normal equations (seed 000 eq. 9-10)."""
+    if "constraints" not in spec:
+        return [to_sx(spec["motion"][k], env, functions) for k in ("vx", "vy", "omega")]
+    c = spec["constraints"]
+    s = [[to_sx(e, env, functions) for e in row["coeffs"]] for row in c["row"]]
+    q = [env[row["rate"]] for row in c["row"]]
+    sts = [[sum(r[i] * r[j] for r in s) for j in range(3)] for i in range(3)]
+    stq = [sum(r[i] * qk for r, qk in zip(s, q)) for i in range(3)]
+    inv = inverse3(sts)
+    twist = [sum(inv[k][j] * stq[j] for j in range(3)) for k in range(3)]
+    if "noise" in c:
+        twist = [t + env.get(n, 0) for t, n in zip(twist, c["noise"])]
+    return twist
 
 
 def write_or_check(out_dir, files, argv, script):

@@ -30,7 +30,7 @@ from wrenfold import sym, type_info
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "verify" / "casadi"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from peer_files import inverse3, write_or_check  # noqa: E402
+from peer_files import body_twist, write_or_check  # noqa: E402
 from reference import PEER_KERNELS, STATE, define, small_angle_factors, to_sx  # noqa: E402
 
 OUT_DIR = Path(__file__).resolve().parent / "wrenfold"
@@ -60,19 +60,7 @@ def kernels(spec, desc, arg_names, wanted):
     # a kernel without the noise argument is the noise-free model
     env.update({n: 0 for n in noise if n not in env})
     define(spec, env, FUNCTIONS)
-    if "constraints" in spec:
-        # seed 000 eq. 9-10: the least-squares twist through the normal equations
-        c = spec["constraints"]
-        s = [[to_sx(e, env, FUNCTIONS) for e in row["coeffs"]] for row in c["row"]]
-        q = [env[row["rate"]] for row in c["row"]]
-        sts = [[sum(r[i] * r[j] for r in s) for j in range(3)] for i in range(3)]
-        stq = [sum(r[i] * qk for r, qk in zip(s, q)) for i in range(3)]
-        inv = inverse3(sts)
-        twist = [sum(inv[k][j] * stq[j] for j in range(3)) for k in range(3)]
-        if "noise" in c:
-            twist = [t + env.get(n, 0) for t, n in zip(twist, c["noise"])]
-    else:
-        twist = [to_sx(spec["motion"][k], env, FUNCTIONS) for k in ("vx", "vy", "omega")]
+    twist = body_twist(spec, env, FUNCTIONS)
     out = {"twist": twist}
     if "dt" in arg_names:
         x, y, th, dt = env["x"], env["y"], env["theta"], env["dt"]
