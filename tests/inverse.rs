@@ -13,6 +13,33 @@ fn inverse(args: &[&str]) -> (Option<i32>, serde_json::Value, String) {
     (o.status.code(), doc, stderr(&o))
 }
 
+/// A planned path file `name` under `dir` with the rows `t,x,y,theta`.
+fn path_file(dir: &std::path::Path, name: &str, rows: &[String]) -> std::path::PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, format!("t,x,y,theta\n{}\n", rows.join("\n"))).unwrap();
+    path
+}
+
+/// The omni drives `path`; the differential drive cannot (motion sideways).
+fn only_the_omni_drives(path: &std::path::Path) {
+    let (code, doc, err) = inverse(&[
+        "--spec",
+        "spec/omni3.toml",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--path",
+        path.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(model(&doc, "omni3")["feasible"], true);
+    let dd = model(&doc, "diff_drive")["infeasible"].as_array().unwrap();
+    assert!(
+        dd.iter()
+            .any(|s| s["input"] == "path" && s["why"].as_str().unwrap().contains("sideways")),
+        "{dd:?}"
+    );
+}
+
 fn model<'a>(doc: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
     doc["specs"]
         .as_array()
@@ -112,27 +139,10 @@ fn a_low_max_rate_and_sideways_motion_are_marked() {
         "{s:?}"
     );
     // a path that strafes: the omni drives it, the differential drive cannot
-    let path = tmp.path().join("strafe.csv");
     let rows: Vec<String> = (0..50)
         .map(|k| format!("{},0,{},0", k as f64 * 0.1, k as f64 * 0.05))
         .collect();
-    std::fs::write(&path, format!("t,x,y,theta\n{}\n", rows.join("\n"))).unwrap();
-    let (code, doc, err) = inverse(&[
-        "--spec",
-        "spec/omni3.toml",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--path",
-        path.to_str().unwrap(),
-    ]);
-    assert_eq!(code, Some(1), "{err}");
-    assert_eq!(model(&doc, "omni3")["feasible"], true);
-    let dd = model(&doc, "diff_drive")["infeasible"].as_array().unwrap();
-    assert!(
-        dd.iter()
-            .any(|s| s["input"] == "path" && s["why"].as_str().unwrap().contains("sideways")),
-        "{dd:?}"
-    );
+    only_the_omni_drives(&path_file(tmp.path(), "strafe.csv", &rows));
 }
 
 /// A path that drifts sideways a little in every step (0.2 m/s beside 0.5 m/s
@@ -142,32 +152,14 @@ fn a_low_max_rate_and_sideways_motion_are_marked() {
 #[test]
 fn slow_sideways_drift_is_marked_and_tracker_noise_is_not() {
     let tmp = tempfile::tempdir().unwrap();
-    let drift = tmp.path().join("drift.csv");
     let rows: Vec<String> = (0..200)
         .map(|k| {
             let t = k as f64 * 0.05;
             format!("{t},{},{},0", 0.5 * t, 0.2 * t)
         })
         .collect();
-    std::fs::write(&drift, format!("t,x,y,theta\n{}\n", rows.join("\n"))).unwrap();
-    let (code, doc, err) = inverse(&[
-        "--spec",
-        "spec/omni3.toml",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--path",
-        drift.to_str().unwrap(),
-    ]);
-    assert_eq!(code, Some(1), "{err}");
-    assert_eq!(model(&doc, "omni3")["feasible"], true);
-    let dd = model(&doc, "diff_drive")["infeasible"].as_array().unwrap();
-    assert!(
-        dd.iter()
-            .any(|s| s["input"] == "path" && s["why"].as_str().unwrap().contains("sideways")),
-        "{dd:?}"
-    );
+    only_the_omni_drives(&path_file(tmp.path(), "drift.csv", &rows));
     // a circle of 2 m radius at 0.6 m/s, recorded with 1 mm / 1 mrad noise
-    let noisy = tmp.path().join("noisy.csv");
     let mut state = 12345u64;
     let mut noise = |s: f64| {
         state = state
@@ -187,7 +179,7 @@ fn slow_sideways_drift_is_marked_and_tracker_noise_is_not() {
             )
         })
         .collect();
-    std::fs::write(&noisy, format!("t,x,y,theta\n{}\n", rows.join("\n"))).unwrap();
+    let noisy = path_file(tmp.path(), "noisy.csv", &rows);
     let (code, doc, err) = inverse(&[
         "--spec",
         "spec/diff_drive.toml",
