@@ -334,6 +334,67 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             r2: 0.0,
         };
     }
+    let coords = crate::periodic::coordinates(r, runs);
+    let features = residual_features(r, runs, &feat, &coords);
+    let mut findings = Vec::new();
+    let mut worst = 0.0f64;
+    let mut structured = false;
+    for (c, cname) in chans.iter().enumerate() {
+        let y: Vec<f64> = res.iter().map(|r| r[c]).collect();
+        if y.iter().all(|v| *v == 0.0) {
+            continue;
+        }
+        let mean = y.iter().sum::<f64>() / n as f64;
+        let ss_tot: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
+        let sd = (ss_tot / (n - 1) as f64).sqrt();
+        if ss_tot <= 0.0 {
+            continue;
+        }
+        let t = mean / (sd / (n as f64).sqrt());
+        if t.abs() > 8.0 && mean.abs() > 0.25 * sd {
+            structured = true;
+            findings.push(format!("{cname} residual has a constant offset of {mean:.3e} ({:.1} sigma of its noise, t = {t:.0})", mean / sd));
+        }
+        let (best, eta2_max) = strongest_dependence(&y, mean, ss_tot, &features);
+        worst = worst.max(eta2_max);
+        if let Some((eta2, f, j, bin, bm)) = best {
+            if eta2 > 0.05 && f > 20.0 {
+                structured = true;
+                // the regime where the channel's residual is largest
+                let per = regimes_by_variance(&y, mean, &regimes);
+                findings.push(format!(
+                    "{cname} residual depends on the {} (explains {:.0}% of its variance, F = {f:.0}; strongest in the {} octile, mean {bm:+.2e}); largest in `{}`",
+                    features[j].0,
+                    100.0 * eta2,
+                    ["lowest", "2nd", "3rd", "4th", "5th", "6th", "7th", "highest"][bin],
+                    per[0].0
+                ));
+            }
+        }
+    }
+    for (finding, eta2) in periodic_findings(&coords, &res, &chans) {
+        structured = true;
+        worst = worst.max(eta2);
+        findings.push(finding);
+    }
+    Structure {
+        structured,
+        findings,
+        r2: worst,
+    }
+}
+
+/// What a step's residual may depend on, per step with ground truth: speed,
+/// yaw rate, their product, heading, time, each absolute input's value (a
+/// steering angle acts through it) and each wheel's angle within its
+/// revolution where the revolution is known exactly.
+fn residual_features(
+    r: &Runner,
+    runs: &[Run],
+    feat: &[[f64; 6]],
+    coords: &[crate::periodic::Coordinate],
+) -> Vec<(String, Vec<f64>)> {
+    let n = feat.len();
     // features per step: v, omega, v*omega (from feat = [v dt, w dt, v w dt, ...]), heading, time
     let mut heading = Vec::with_capacity(n);
     let mut time = Vec::with_capacity(n);
@@ -364,9 +425,8 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             features.push((format!("`{}` value", inp.name), v));
         }
     }
-    let coords = crate::periodic::coordinates(r, runs);
     // wheel angles within the revolution, where a revolution is known exactly
-    for c in &coords {
+    for c in coords {
         if let [(_, rev)] = c.revolution_candidates.as_slice() {
             if c.unit == "rad" {
                 let v = c.values.iter().map(|v| v.rem_euclid(*rev)).collect();
@@ -374,87 +434,70 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             }
         }
     }
-    let mut findings = Vec::new();
+    features
+}
+
+/// The feature whose octiles explain most of the variance of `y` (one-way
+/// analysis of variance over 8 bins): (eta^2, F, feature, the bin whose mean
+/// is farthest from `mean`, that bin's offset), and the largest eta^2 seen.
+#[allow(clippy::type_complexity)]
+fn strongest_dependence(
+    y: &[f64],
+    mean: f64,
+    ss_tot: f64,
+    features: &[(String, Vec<f64>)],
+) -> (Option<(f64, f64, usize, usize, f64)>, f64) {
+    let n = y.len();
     let mut worst = 0.0f64;
-    let mut structured = false;
-    for (c, cname) in chans.iter().enumerate() {
-        let y: Vec<f64> = res.iter().map(|r| r[c]).collect();
-        if y.iter().all(|v| *v == 0.0) {
-            continue;
+    let mut best: Option<(f64, f64, usize, usize, f64)> = None; // (eta2, F, feature, bin, bin mean)
+    for (j, (_, fv)) in features.iter().enumerate() {
+        let mut idx: Vec<usize> = (0..n).collect();
+        idx.sort_by(|a, b| fv[*a].total_cmp(&fv[*b]));
+        let bins = 8;
+        let mut ss_b = 0.0;
+        let mut means = Vec::new();
+        for b in 0..bins {
+            let part = &idx[b * n / bins..(b + 1) * n / bins];
+            let m = part.iter().map(|&i| y[i]).sum::<f64>() / part.len().max(1) as f64;
+            ss_b += part.len() as f64 * (m - mean).powi(2);
+            means.push(m);
         }
-        let mean = y.iter().sum::<f64>() / n as f64;
-        let ss_tot: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
-        let sd = (ss_tot / (n - 1) as f64).sqrt();
-        if ss_tot <= 0.0 {
-            continue;
-        }
-        let t = mean / (sd / (n as f64).sqrt());
-        if t.abs() > 8.0 && mean.abs() > 0.25 * sd {
-            structured = true;
-            findings.push(format!("{cname} residual has a constant offset of {mean:.3e} ({:.1} sigma of its noise, t = {t:.0})", mean / sd));
-        }
-        let mut best: Option<(f64, f64, usize, usize, f64)> = None; // (eta2, F, feature, bin, bin mean)
-        for (j, (_, fv)) in features.iter().enumerate() {
-            let mut idx: Vec<usize> = (0..n).collect();
-            idx.sort_by(|a, b| fv[*a].total_cmp(&fv[*b]));
-            let bins = 8;
-            let mut ss_b = 0.0;
-            let mut means = Vec::new();
-            for b in 0..bins {
-                let part = &idx[b * n / bins..(b + 1) * n / bins];
-                let m = part.iter().map(|&i| y[i]).sum::<f64>() / part.len().max(1) as f64;
-                ss_b += part.len() as f64 * (m - mean).powi(2);
-                means.push(m);
-            }
-            let eta2 = ss_b / ss_tot;
-            let f = (ss_b / (bins - 1) as f64) / ((ss_tot - ss_b).max(1e-300) / (n - bins) as f64);
-            worst = worst.max(eta2);
-            let (bin, bm) = means.iter().enumerate().fold((0, 0.0f64), |acc, (b, m)| {
-                if (m - mean).abs() > acc.1.abs() {
-                    (b, m - mean)
-                } else {
-                    acc
-                }
-            });
-            if best.as_ref().is_none_or(|x| eta2 > x.0) {
-                best = Some((eta2, f, j, bin, bm));
-            }
-        }
-        if let Some((eta2, f, j, bin, bm)) = best {
-            if eta2 > 0.05 && f > 20.0 {
-                structured = true;
-                // the regime where the channel's residual is largest
-                let mut per: Vec<(&str, f64, usize)> = Vec::new();
-                for i in 0..n {
-                    match per.iter_mut().find(|e| e.0 == regimes[i]) {
-                        Some(e) => {
-                            e.1 += (y[i] - mean).powi(2);
-                            e.2 += 1
-                        }
-                        None => per.push((regimes[i], (y[i] - mean).powi(2), 1)),
-                    }
-                }
-                per.sort_by(|a, b| (b.1 / b.2 as f64).total_cmp(&(a.1 / a.2 as f64)));
-                findings.push(format!(
-                    "{cname} residual depends on the {} (explains {:.0}% of its variance, F = {f:.0}; strongest in the {} octile, mean {bm:+.2e}); largest in `{}`",
-                    features[j].0,
-                    100.0 * eta2,
-                    ["lowest", "2nd", "3rd", "4th", "5th", "6th", "7th", "highest"][bin],
-                    per[0].0
-                ));
-            }
-        }
-    }
-    for (finding, eta2) in periodic_findings(&coords, &res, &chans) {
-        structured = true;
+        let eta2 = ss_b / ss_tot;
+        let f = (ss_b / (bins - 1) as f64) / ((ss_tot - ss_b).max(1e-300) / (n - bins) as f64);
         worst = worst.max(eta2);
-        findings.push(finding);
+        let (bin, bm) = means.iter().enumerate().fold((0, 0.0f64), |acc, (b, m)| {
+            if (m - mean).abs() > acc.1.abs() {
+                (b, m - mean)
+            } else {
+                acc
+            }
+        });
+        if best.as_ref().is_none_or(|x| eta2 > x.0) {
+            best = Some((eta2, f, j, bin, bm));
+        }
     }
-    Structure {
-        structured,
-        findings,
-        r2: worst,
+    (best, worst)
+}
+
+/// The driving regimes with the residual's summed squares and step counts,
+/// largest mean square first.
+fn regimes_by_variance<'a>(
+    y: &[f64],
+    mean: f64,
+    regimes: &[&'a str],
+) -> Vec<(&'a str, f64, usize)> {
+    let mut per: Vec<(&str, f64, usize)> = Vec::new();
+    for i in 0..y.len() {
+        match per.iter_mut().find(|e| e.0 == regimes[i]) {
+            Some(e) => {
+                e.1 += (y[i] - mean).powi(2);
+                e.2 += 1
+            }
+            None => per.push((regimes[i], (y[i] - mean).powi(2), 1)),
+        }
     }
+    per.sort_by(|a, b| (b.1 / b.2 as f64).total_cmp(&(a.1 / a.2 as f64)));
+    per
 }
 
 /// Explained over residual variance a sinusoid must reach to count: chi-square
