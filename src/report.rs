@@ -892,7 +892,6 @@ pub fn inverse_report(
         true,
         &[],
     )?];
-    let mut table = String::from("<table><tr><th>model</th><th>input</th><th>peak rate</th><th>max_rate</th><th>infeasible stretches</th></tr>");
     for (model, prof) in profiles {
         // one figure per unit, so counts/s and rad do not share an axis
         let mut units: Vec<&str> = prof.inputs.iter().map(|i| i.unit.as_str()).collect();
@@ -949,6 +948,26 @@ pub fn inverse_report(
                 &marks,
             )?);
         }
+    }
+    let table = inverse_table(profiles);
+    let html = page(
+        "Inverse kinematics along a planned path",
+        &format!(
+            "<p>{} (seed 001 eq. 12-18). Shaded: stretches the robot cannot drive as planned.</p>",
+            esc(&path.file.display().to_string())
+        ),
+        &figs,
+        &table,
+        doc,
+    );
+    write(dir, &html)
+}
+
+/// The inverse report's table: each robot's inputs (peak rate, limit, the
+/// stretches beyond it), and the motion it cannot make at all.
+fn inverse_table(profiles: &[(String, kinegen_analysis::inverse::Profile)]) -> String {
+    let mut table = String::from("<table><tr><th>model</th><th>input</th><th>peak rate</th><th>max_rate</th><th>infeasible stretches</th></tr>");
+    for (model, prof) in profiles {
         for inp in &prof.inputs {
             let where_: Vec<String> = prof
                 .infeasible
@@ -986,17 +1005,7 @@ pub fn inverse_report(
         }
     }
     table += "</table>";
-    let html = page(
-        "Inverse kinematics along a planned path",
-        &format!(
-            "<p>{} (seed 001 eq. 12-18). Shaded: stretches the robot cannot drive as planned.</p>",
-            esc(&path.file.display().to_string())
-        ),
-        &figs,
-        &table,
-        doc,
-    );
-    write(dir, &html)
+    table
 }
 
 /// `kinegen navigate --report`: the grid (obstacles dark, safety zone light),
