@@ -155,14 +155,14 @@ fn simulated(rng: &mut SmallRng, n: usize) -> Vec<Motion> {
 /// over the whole source, so that every session is represented and each
 /// stretch keeps its order.
 fn spread(from: &[Motion], n: usize) -> Vec<Motion> {
-    const STRETCH: usize = 500;
     if from.len() <= n {
         return from.to_vec();
     }
-    let stretches = n.div_ceil(STRETCH);
-    let gap = (from.len() - STRETCH) / stretches.max(1);
+    let stretch = n.min(500);
+    let stretches = n.div_ceil(stretch);
+    let gap = (from.len() - stretch) / stretches;
     (0..stretches)
-        .flat_map(|k| &from[k * gap..k * gap + STRETCH])
+        .flat_map(|k| &from[k * gap..k * gap + stretch])
         .copied()
         .take(n)
         .collect()
