@@ -155,8 +155,8 @@ fn simulated(rng: &mut SmallRng, n: usize) -> Vec<Motion> {
 /// over the whole source, so that every session is represented and each
 /// stretch keeps its order.
 fn spread(from: &[Motion], n: usize) -> Vec<Motion> {
-    if from.len() <= n {
-        return from.to_vec();
+    if from.len() <= n || n == 0 {
+        return from[..from.len().min(n)].to_vec();
     }
     let stretch = n.min(500);
     let stretches = n.div_ceil(stretch);
