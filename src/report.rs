@@ -699,6 +699,29 @@ pub fn diagnose_report(
             )?,
         );
     }
+    let t = candidates_html(d);
+    let intro = format!(
+        "<p>Model <b>{}</b>: error {:.4} with nominal parameters, {:.4} after calibrating the spec as it is (error: RMS of the residuals in units of their sigma). Verdict: <b>{}</b>.</p>",
+        esc(&base.ir.name),
+        d.baseline_rmse,
+        d.calibrated_rmse,
+        esc(&if d.chain.is_empty() { "no catalogue effect is significant".to_string() } else { d.chain.iter().map(|c| format!("{} (error after: {:.4})", c.effect, c.rmse_after)).collect::<Vec<_>>().join(", then ") })
+    );
+    write(
+        dir,
+        &page(
+            &format!("kinegen diagnose: {}", base.ir.name),
+            &intro,
+            &figs,
+            &t,
+            doc,
+        ),
+    )
+}
+
+/// The diagnose report's candidates (table and evidence), the structure the
+/// residuals keep, and the effects not tested, as HTML.
+fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
     let mut t = String::from("<h2>Candidates</h2><table><tr><th>effect</th><th>error</th><th>improvement</th><th>BIC gain</th><th>held-out error</th><th>significant</th></tr>");
     for c in &d.candidates {
         t += &format!(
@@ -726,23 +749,7 @@ pub fn diagnose_report(
         }
         t += "</ul>";
     }
-    let intro = format!(
-        "<p>Model <b>{}</b>: error {:.4} with nominal parameters, {:.4} after calibrating the spec as it is (error: RMS of the residuals in units of their sigma). Verdict: <b>{}</b>.</p>",
-        esc(&base.ir.name),
-        d.baseline_rmse,
-        d.calibrated_rmse,
-        esc(&if d.chain.is_empty() { "no catalogue effect is significant".to_string() } else { d.chain.iter().map(|c| format!("{} (error after: {:.4})", c.effect, c.rmse_after)).collect::<Vec<_>>().join(", then ") })
-    );
-    write(
-        dir,
-        &page(
-            &format!("kinegen diagnose: {}", base.ir.name),
-            &intro,
-            &figs,
-            &t,
-            doc,
-        ),
-    )
+    t
 }
 
 /// Colours for the calibration methods, in the order they are listed.
