@@ -563,31 +563,7 @@ pub fn compare(c: Common) -> ExitCode {
     if let Some(s) = &lm_stats {
         out.say(&format!("  {}", fmt_landmarks(s)));
     }
-    if !regimes.is_empty() {
-        out.say("where the error grows (share of position / heading error growth):");
-        for g in &regimes {
-            out.say(&format!(
-                "  {:<14} {:>7.1} s {:>7.2} m   {:>5.1}% / {:>5.1}%",
-                g.regime,
-                g.time_s,
-                g.distance_m,
-                100.0 * g.position_share,
-                100.0 * g.heading_share
-            ));
-        }
-        out.say("worst 1 s segments:");
-        for s in &segments {
-            out.say(&format!(
-                "  {} {:.1}-{:.1} s ({}): position error +{:.4} m, heading error {:+.4} rad",
-                s.run,
-                s.t_start,
-                s.t_end,
-                s.regime,
-                s.position_error_growth_m,
-                s.heading_error_growth_rad
-            ));
-        }
-    }
+    say_where_it_fails(&out, &regimes, &segments);
     // Gyrodometry (seed 000 eq. 13-18) on the runs that log a gyro.
     let gyro_tracks: Vec<Option<Recipe>> = all
         .iter()
@@ -642,6 +618,40 @@ pub fn compare(c: Common) -> ExitCode {
     match out.json(c.json.as_deref(), &doc) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => bad(e),
+    }
+}
+
+/// Where the error grows: each driving regime's share of the error growth,
+/// and the worst 1 s segments.
+fn say_where_it_fails(
+    out: &Out,
+    regimes: &[kinegen_analysis::metrics::RegimeShare],
+    segments: &[kinegen_analysis::metrics::Segment],
+) {
+    if !regimes.is_empty() {
+        out.say("where the error grows (share of position / heading error growth):");
+        for g in regimes {
+            out.say(&format!(
+                "  {:<14} {:>7.1} s {:>7.2} m   {:>5.1}% / {:>5.1}%",
+                g.regime,
+                g.time_s,
+                g.distance_m,
+                100.0 * g.position_share,
+                100.0 * g.heading_share
+            ));
+        }
+        out.say("worst 1 s segments:");
+        for s in segments {
+            out.say(&format!(
+                "  {} {:.1}-{:.1} s ({}): position error +{:.4} m, heading error {:+.4} rad",
+                s.run,
+                s.t_start,
+                s.t_end,
+                s.regime,
+                s.position_error_growth_m,
+                s.heading_error_growth_rad
+            ));
+        }
     }
 }
 
