@@ -190,80 +190,30 @@ pub fn read(
     progress: &dyn Fn(usize, usize),
 ) -> Result<(Log, Vec<Detection>), LogError> {
     let file = resolve(path)?;
-    let err = |m: String| LogError::new(&file, None, None, m);
-    let buf = std::fs::read(&file).map_err(|e| err(format!("cannot read the bag: {e}")))?;
+    let buf = std::fs::read(&file)
+        .map_err(|e| LogError::new(&file, None, None, format!("cannot read the bag: {e}")))?;
     let keep = map.landmarks.as_ref().map(|l| l.topic.as_str());
     let (topics, all) = collect(&file, &buf, keep, progress)?;
-    let listing = || {
-        if all.is_empty() {
-            "the bag has no messages".to_string()
-        } else {
-            format!(
-                "the bag has: {}",
-                all.iter()
-                    .map(|(t, s)| format!("{t} ({s})"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
-        }
+    let bag = Bag {
+        file: &file,
+        topics,
+        all,
     };
-    let only = |types: &[&str], what: &str| -> Result<Option<String>, LogError> {
-        let found: Vec<&String> = all
-            .iter()
-            .filter(|(_, s)| types.contains(&s.as_str()))
-            .map(|(t, _)| t)
-            .collect();
-        match found.as_slice() {
-            [] => Ok(None),
-            [one] => Ok(Some((*one).clone())),
-            many => Err(err(format!(
-                "{} topics could be the {what} ({}): name one in --topics",
-                many.len(),
-                many.iter()
-                    .map(|t| t.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))),
-        }
-    };
-    let typed = |topic: &str, types: &[&str], what: &str| -> Result<&Topic, LogError> {
-        let t = topics
-            .get(topic)
-            .ok_or_else(|| match all.iter().find(|(t, _)| t == topic) {
-                Some((_, s)) => err(format!(
-                    "topic `{topic}` carries {s}; the {what} needs {}",
-                    types.join(" or ")
-                )),
-                None => err(format!("no topic `{topic}` for the {what}; {}", listing())),
-            })?;
-        if !types.contains(&t.schema.as_str()) {
-            return Err(err(format!(
-                "topic `{topic}` carries {}; the {what} needs {}",
-                t.schema,
-                types.join(" or ")
-            )));
-        }
-        if t.encoding != "cdr" {
-            return Err(err(format!(
-                "topic `{topic}` is encoded as `{}`; kinegen reads ROS 2 CDR messages",
-                t.encoding
-            )));
-        }
-        Ok(t)
-    };
-
+    let file = bag.file;
     // inputs: one series per JointState topic, with the joints each column needs
     let mut joints: Vec<(String, String, String)> = Vec::new(); // (column, topic, joint)
     for col in &wanted.inputs {
         let src = map.inputs.get(col);
         let topic = match src.and_then(|s| s.topic.clone()) {
             Some(t) => t,
-            None => only(&[JOINT_STATE], "wheel and steering joints")?.ok_or_else(|| {
-                err(format!(
-                    "no {JOINT_STATE} topic for the input column `{col}`; {}",
-                    listing()
-                ))
-            })?,
+            None => bag
+                .only(&[JOINT_STATE], "wheel and steering joints")?
+                .ok_or_else(|| {
+                    bag.err(format!(
+                        "no {JOINT_STATE} topic for the input column `{col}`; {}",
+                        bag.listing()
+                    ))
+                })?,
         };
         let joint = src
             .and_then(|s| s.joint.clone())
@@ -279,8 +229,8 @@ pub fn read(
                 .filter(|j| &j.1 == topic)
                 .map(|j| j.2.as_str())
                 .collect();
-            let t = typed(topic, &[JOINT_STATE], &format!("input column `{col}`"))?;
-            series.push(joint_series(&file, topic, t, &names, map.stamps)?);
+            let t = bag.typed(topic, &[JOINT_STATE], &format!("input column `{col}`"))?;
+            series.push(joint_series(file, topic, t, &names, map.stamps)?);
         }
         let s = series.iter().position(|s| &s.topic == topic).unwrap();
         let v = joints
@@ -292,40 +242,124 @@ pub fn read(
     }
     let pose = match &map.pose {
         Some(p) => Some(p.clone()),
-        None => only(&[POSE_STAMPED, ODOMETRY], "ground-truth pose")?
+        None => bag
+            .only(&[POSE_STAMPED, ODOMETRY], "ground-truth pose")?
             .map(|topic| PoseSource { topic, frame: None }),
     };
     if let Some(p) = pose {
-        let t = typed(&p.topic, &POSE_TYPES, "ground-truth pose")?;
-        series.push(pose_series(&file, &p, t, map.stamps)?);
+        let t = bag.typed(&p.topic, &POSE_TYPES, "ground-truth pose")?;
+        series.push(pose_series(file, &p, t, map.stamps)?);
         for (i, c) in wanted.pose.iter().enumerate() {
             columns.insert(c.clone(), (series.len() - 1, i));
         }
     }
     let gyro = match &map.gyro {
         Some(g) => Some(g.topic.clone()),
-        None => only(&[IMU], "gyro")?,
+        None => bag.only(&[IMU], "gyro")?,
     };
     if let Some(topic) = gyro {
-        let t = typed(&topic, &[IMU], "gyro")?;
-        series.push(imu_series(&file, &topic, t, map.stamps)?);
+        let t = bag.typed(&topic, &[IMU], "gyro")?;
+        series.push(imu_series(file, &topic, t, map.stamps)?);
         columns.insert(wanted.gyro.clone(), (series.len() - 1, 0));
     }
-    let (log, t0) = align(&file, &series, &columns, &wanted.pose[2])?;
+    let (log, t0) = align(file, &series, &columns, &wanted.pose[2])?;
     let detections = match &map.landmarks {
         None => Vec::new(),
         Some(l) => {
-            let t = topics.get(&l.topic).ok_or_else(|| {
-                err(format!(
+            let t = bag.topics.get(&l.topic).ok_or_else(|| {
+                bag.err(format!(
                     "no topic `{}` for the landmark observations; {}",
                     l.topic,
-                    listing()
+                    bag.listing()
                 ))
             })?;
-            landmark_detections(&file, l, t, map.stamps, t0)?
+            landmark_detections(file, l, t, map.stamps, t0)?
         }
     };
     Ok((log, detections))
+}
+
+/// A bag's topics as read: the decoded ones kinegen can use, and every
+/// topic with its type, for the errors.
+struct Bag<'a> {
+    file: &'a Path,
+    topics: HashMap<String, Topic>,
+    all: Vec<(String, String)>,
+}
+
+impl Bag<'_> {
+    fn err(&self, m: String) -> LogError {
+        LogError::new(self.file, None, None, m)
+    }
+
+    /// What the bag holds, for an error that cannot find a topic.
+    fn listing(&self) -> String {
+        if self.all.is_empty() {
+            "the bag has no messages".to_string()
+        } else {
+            format!(
+                "the bag has: {}",
+                self.all
+                    .iter()
+                    .map(|(t, s)| format!("{t} ({s})"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
+    }
+
+    /// The one topic of `types` (None without one; an error naming them
+    /// when several could be the `what`).
+    fn only(&self, types: &[&str], what: &str) -> Result<Option<String>, LogError> {
+        let found: Vec<&String> = self
+            .all
+            .iter()
+            .filter(|(_, s)| types.contains(&s.as_str()))
+            .map(|(t, _)| t)
+            .collect();
+        match found.as_slice() {
+            [] => Ok(None),
+            [one] => Ok(Some((*one).clone())),
+            many => Err(self.err(format!(
+                "{} topics could be the {what} ({}): name one in --topics",
+                many.len(),
+                many.iter()
+                    .map(|t| t.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))),
+        }
+    }
+
+    /// Topic `topic`, which must carry one of `types` in CDR, for the `what`.
+    fn typed(&self, topic: &str, types: &[&str], what: &str) -> Result<&Topic, LogError> {
+        let t = self.topics.get(topic).ok_or_else(|| {
+            match self.all.iter().find(|(t, _)| t == topic) {
+                Some((_, s)) => self.err(format!(
+                    "topic `{topic}` carries {s}; the {what} needs {}",
+                    types.join(" or ")
+                )),
+                None => self.err(format!(
+                    "no topic `{topic}` for the {what}; {}",
+                    self.listing()
+                )),
+            }
+        })?;
+        if !types.contains(&t.schema.as_str()) {
+            return Err(self.err(format!(
+                "topic `{topic}` carries {}; the {what} needs {}",
+                t.schema,
+                types.join(" or ")
+            )));
+        }
+        if t.encoding != "cdr" {
+            return Err(self.err(format!(
+                "topic `{topic}` is encoded as `{}`; kinegen reads ROS 2 CDR messages",
+                t.encoding
+            )));
+        }
+        Ok(t)
+    }
 }
 
 /// The detections of a landmark topic, decoded with the definition the bag
