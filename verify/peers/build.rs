@@ -17,6 +17,7 @@ use std::process::Command;
 fn main() {
     println!("cargo:rustc-check-cfg=cfg(wrenfold_cpp, symforce_cpp)");
     for f in [
+        "args.h",
         "casadi/casadi_kernels.c",
         "casadi/adapters.c",
         "wrenfold/kernels.h",

@@ -7,11 +7,7 @@
  * non-zeros, column-major, at `out + offset` (offsets set by
  * casadi_adapters_init from CasADi's sparsity queries). */
 #include "casadi_kernels.c"
-
-typedef struct {
-  const double *x, *u, *w, *p, *lm;
-  double dt;
-} Args;
+#include "../args.h"
 
 static casadi_int iw_buf[256];
 static double w_buf[16384];

@@ -18,7 +18,8 @@ use wrenfold_traits::{OutputSpan2D, Span2D};
 
 pub mod inputs;
 
-/// A kernel's arguments (the ones it does not take are ignored).
+/// A kernel's arguments (the ones it does not take are ignored); the C and
+/// C++ adapters read the same layout from `args.h`.
 #[repr(C)]
 pub struct Args {
     pub x: *const f64,

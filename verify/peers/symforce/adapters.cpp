@@ -9,13 +9,9 @@
 #include <Eigen/Core>
 
 #include "kernels.h"
+#include "../args.h"
 
 namespace {
-struct Args {
-  const double *x, *u, *w, *p, *lm;
-  double dt;
-};
-
 template <int N>
 const Eigen::Matrix<double, N, 1>& in(const double* data) {
   return *reinterpret_cast<const Eigen::Matrix<double, N, 1>*>(data);

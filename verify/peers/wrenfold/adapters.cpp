@@ -4,13 +4,9 @@
 // caller's code would. Inputs are wrenfold spans over the caller's arrays,
 // outputs row-major spans written straight into `out`.
 #include "kernels.h"
+#include "../args.h"
 
 namespace {
-struct Args {
-  const double *x, *u, *w, *p, *lm;
-  double dt;
-};
-
 template <std::size_t N>
 auto in(const double* data) {
   return wf::make_span(data, wf::make_constant_value_pack<N, 1>(),
