@@ -386,5 +386,5 @@ fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_j
             )
         })
         .collect();
-    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range": n.persistent[0], "bearing": n.persistent[1]}, "memory_s": n.memory_s, "source": note})
+    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range_per_m": n.persistent[0], "bearing": n.persistent[1]}, "memory_s": n.memory_s, "source": note})
 }

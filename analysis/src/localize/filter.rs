@@ -376,10 +376,15 @@ impl<'a> Filter<'a> {
         b.catch_up(z.t);
         let l = plan.landmark[i];
         let (bias, pb, bb) = b.of(l);
-        let y = Vector2::new(z.range - o[0] - bias[0], wrap(z.bearing - o[1] - bias[1]));
+        // the persistent range error is per metre of range: H = [hm | d at l]
+        let d = Matrix2::new(o[0].abs(), 0.0, 0.0, 1.0);
+        let y = Vector2::new(
+            z.range - o[0] - d[(0, 0)] * bias[0],
+            wrap(z.bearing - o[1] - bias[1]),
+        );
         // P H^T for the pose rows, and S
-        let ph = b.p * hm.transpose() + pb;
-        let sm = hm * ph + pb.transpose() * hm.transpose() + bb + rm;
+        let ph = b.p * hm.transpose() + pb * d;
+        let sm = hm * ph + d * pb.transpose() * hm.transpose() + d * bb * d + rm;
         let Some(si) = sm.try_inverse() else {
             pass.rejected += 1;
             return;
@@ -399,7 +404,7 @@ impl<'a> Filter<'a> {
             pass.rejected += 1;
             return;
         }
-        b.fuse(l, &hm, &ph, &sm, &si, &y);
+        b.fuse(l, (&hm, &d), &ph, (&sm, &si), &y);
         pass.nis.push((z.t, nis));
         pass.accepted += 1;
     }
@@ -740,21 +745,20 @@ impl Belief {
         (self.bias[l], self.pb[l], self.bb_at(l, l))
     }
 
-    /// The Kalman update with a sighting of landmark `l`: H = [hm | I at l],
+    /// The Kalman update with a sighting of landmark `l`: H = [hm | d at l],
     /// `ph` the pose rows of P H^T, `sm` = H P H^T + R and its inverse `si`.
     fn fuse(
         &mut self,
         l: usize,
-        hm: &Matrix2x3<f64>,
+        (hm, d): (&Matrix2x3<f64>, &Matrix2<f64>),
         ph: &nalgebra::Matrix3x2<f64>,
-        sm: &Matrix2<f64>,
-        si: &Matrix2<f64>,
+        (sm, si): (&Matrix2<f64>, &Matrix2<f64>),
         y: &Vector2<f64>,
     ) {
         let n = self.n();
-        // the error rows of P H^T: P_bp H_x^T + P_b,l
+        // the error rows of P H^T: P_bp H_x^T + P_b,l d
         let eh: Vec<Matrix2<f64>> = (0..n)
-            .map(|j| self.pb[j].transpose() * hm.transpose() + self.bb_at(j, l))
+            .map(|j| self.pb[j].transpose() * hm.transpose() + self.bb_at(j, l) * d)
             .collect();
         let kp = ph * si;
         let kb: Vec<Matrix2<f64>> = eh.iter().map(|e| e * si).collect();
