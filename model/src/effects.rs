@@ -360,6 +360,63 @@ pub fn has(m: &Model, c: Capability) -> Result<(), &'static str> {
     })
 }
 
+/// Add an effect's parameters to the spec's `[[parameter]]` array, with the
+/// nominal values `values` gives.
+fn add_parameters(
+    doc: &mut DocumentMut,
+    params: &[AddedParameter],
+    values: &BTreeMap<String, f64>,
+) -> Result<(), String> {
+    let arr = doc
+        .entry("parameter")
+        .or_insert(Item::ArrayOfTables(ArrayOfTables::new()))
+        .as_array_of_tables_mut()
+        .ok_or("`parameter` is not an array of tables")?;
+    for p in params {
+        let mut t = Table::new();
+        for (k, v) in &p.table {
+            t.insert(k, value(to_edit(v)));
+        }
+        if let Some(v) = values.get(&p.name) {
+            t.insert("nominal", value(*v));
+        }
+        arr.push(t);
+    }
+    Ok(())
+}
+
+/// Substitute inputs (`sub`) in the definitions, the twist and the
+/// constraint rows.
+fn substitute_inputs(doc: &mut DocumentMut, sub: &BTreeMap<String, String>) -> Result<(), String> {
+    for d in doc
+        .get_mut("define")
+        .and_then(Item::as_array_of_tables_mut)
+        .into_iter()
+        .flat_map(|a| a.iter_mut())
+    {
+        edit_str(d.get_mut("expr"), |e| subst(e, sub))?;
+    }
+    if let Some(m) = doc.get_mut("motion").and_then(Item::as_table_like_mut) {
+        for k in ["vx", "vy", "omega"] {
+            edit_str(m.get_mut(k), |e| subst(e, sub))?;
+        }
+    }
+    let rows = doc
+        .get_mut("constraints")
+        .and_then(|c| c.get_mut("row"))
+        .and_then(Item::as_array_of_tables_mut);
+    for row in rows.into_iter().flat_map(|a| a.iter_mut()) {
+        if let Some(co) = row.get_mut("coeffs").and_then(Item::as_array_mut) {
+            for c in co.iter_mut() {
+                if let Some(e) = c.as_str() {
+                    *c = subst(e, sub)?.into();
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A parameter of an effect, as it is added to a spec.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AddedParameter {
@@ -643,88 +700,68 @@ impl Effect {
             .source
             .parse()
             .map_err(|e: toml_edit::TomlError| e.to_string())?;
-        // parameters
-        let arr = doc
-            .entry("parameter")
-            .or_insert(Item::ArrayOfTables(ArrayOfTables::new()))
-            .as_array_of_tables_mut()
-            .ok_or("`parameter` is not an array of tables")?;
-        for p in &params {
-            let mut t = Table::new();
-            for (k, v) in &p.table {
-                t.insert(k, value(to_edit(v)));
-            }
-            if let Some(v) = values.get(&p.name) {
-                t.insert("nominal", value(*v));
-            }
-            arr.push(t);
-        }
+        add_parameters(&mut doc, &params, values)?;
         // input substitutions in definitions, the twist (or constraint rows) and observations
         let sub = self.substitutions(m);
-        let rewrite = |text: &str, map: &BTreeMap<String, String>| -> Result<String, String> {
-            subst(text, map)
-        };
         if !sub.is_empty() {
-            for d in doc
-                .get_mut("define")
-                .and_then(Item::as_array_of_tables_mut)
-                .into_iter()
-                .flat_map(|a| a.iter_mut())
-            {
-                edit_str(d.get_mut("expr"), |e| rewrite(e, &sub))?;
-            }
-            if let Some(m) = doc.get_mut("motion").and_then(Item::as_table_like_mut) {
-                for k in ["vx", "vy", "omega"] {
-                    edit_str(m.get_mut(k), |e| rewrite(e, &sub))?;
-                }
-            }
-            let rows = doc
-                .get_mut("constraints")
-                .and_then(|c| c.get_mut("row"))
-                .and_then(Item::as_array_of_tables_mut);
-            for row in rows.into_iter().flat_map(|a| a.iter_mut()) {
-                if let Some(co) = row.get_mut("coeffs").and_then(Item::as_array_mut) {
-                    for c in co.iter_mut() {
-                        if let Some(e) = c.as_str() {
-                            *c = rewrite(e, &sub)?.into();
-                        }
-                    }
-                }
-            }
+            substitute_inputs(&mut doc, &sub)?;
         }
         self.patch_inverse(m, &mut doc);
-        // twist templates over the (substituted) original twist
         if !self.motion.is_empty() {
-            let motion = doc
-                .get_mut("motion")
-                .and_then(Item::as_table_like_mut)
-                .ok_or("the spec has no [motion] twist to patch")?;
-            let orig: BTreeMap<&str, String> = ["vx", "vy", "omega"]
-                .iter()
-                .map(|k| {
-                    (
-                        *k,
-                        motion
-                            .get(k)
-                            .and_then(|v| v.as_str())
-                            .unwrap_or("0")
-                            .to_string(),
-                    )
-                })
-                .collect();
-            for (k, tpl) in &self.motion {
-                let new = orig.iter().fold(tpl.clone(), |acc, (n, e)| {
-                    acc.replace(&format!("{{{n}}}"), e)
-                });
-                match motion.get_mut(k) {
-                    Some(item) => edit_str(Some(item), |_| Ok(new.clone()))?,
-                    None => {
-                        motion.insert(k, value(new));
-                    }
+            self.patch_motion(&mut doc)?;
+        }
+        self.patch_observations(m, &mut doc, &sub)?;
+        // the effect list, a top-level key (rendered before the tables)
+        match doc.get_mut("effects").and_then(Item::as_array_mut) {
+            Some(a) => a.push(self.name.as_str()),
+            None => {
+                doc.insert("effects", value(Array::from_iter([self.name.as_str()])));
+            }
+        }
+        Ok(doc.to_string())
+    }
+
+    /// Apply the twist templates over the (substituted) original twist.
+    fn patch_motion(&self, doc: &mut DocumentMut) -> Result<(), String> {
+        let motion = doc
+            .get_mut("motion")
+            .and_then(Item::as_table_like_mut)
+            .ok_or("the spec has no [motion] twist to patch")?;
+        let orig: BTreeMap<&str, String> = ["vx", "vy", "omega"]
+            .iter()
+            .map(|k| {
+                (
+                    *k,
+                    motion
+                        .get(k)
+                        .and_then(|v| v.as_str())
+                        .unwrap_or("0")
+                        .to_string(),
+                )
+            })
+            .collect();
+        for (k, tpl) in &self.motion {
+            let new = orig.iter().fold(tpl.clone(), |acc, (n, e)| {
+                acc.replace(&format!("{{{n}}}"), e)
+            });
+            match motion.get_mut(k) {
+                Some(item) => edit_str(Some(item), |_| Ok(new.clone()))?,
+                None => {
+                    motion.insert(k, value(new));
                 }
             }
         }
-        // observations, by role
+        Ok(())
+    }
+
+    /// Apply the observation patches, by role (creating an observation where
+    /// the patch says so), then the input substitutions `sub` in them.
+    fn patch_observations(
+        &self,
+        m: &Model,
+        doc: &mut DocumentMut,
+        sub: &BTreeMap<String, String>,
+    ) -> Result<(), String> {
         for (role_key, patch) in &self.observation {
             let role = role_of(role_key).expect("checked when the catalogue was read");
             let target = m.observations.iter().position(|o| o.role == role);
@@ -763,17 +800,13 @@ impl Effect {
                     })
                     .collect()
             };
-            if !patch.substitute.is_empty() {
-                new = new
-                    .iter()
-                    .map(|e| rewrite(e, &patch.substitute))
-                    .collect::<Result<_, _>>()?;
-            }
-            if !sub.is_empty() {
-                new = new
-                    .iter()
-                    .map(|e| rewrite(e, &sub))
-                    .collect::<Result<_, _>>()?;
+            for map in [&patch.substitute, sub] {
+                if !map.is_empty() {
+                    new = new
+                        .iter()
+                        .map(|e| subst(e, map))
+                        .collect::<Result<_, _>>()?;
+                }
             }
             table.insert("expr", value(new.into_iter().collect::<Array>()));
             // the patched expressions no longer show the role: declare it
@@ -781,14 +814,7 @@ impl Effect {
                 table.insert("role", value(role_key.as_str()));
             }
         }
-        // the effect list, a top-level key (rendered before the tables)
-        match doc.get_mut("effects").and_then(Item::as_array_mut) {
-            Some(a) => a.push(self.name.as_str()),
-            None => {
-                doc.insert("effects", value(Array::from_iter([self.name.as_str()])));
-            }
-        }
-        Ok(doc.to_string())
+        Ok(())
     }
 
     /// `FILE:LINE` of the first line of this effect's file that holds the
