@@ -393,15 +393,24 @@ fn worst_marks(doc: &Value, run: &str) -> Vec<(f64, f64)> {
         .unwrap_or_default()
 }
 
-pub fn compare_report(
-    dir: &Path,
-    r: &Runner,
-    runs: &[Run],
-    tracks: &[Recipe<'_>],
-    gyro: &[Option<Recipe<'_>>],
-    innov: &[Vec<Innovation>],
-    doc: &Value,
-) -> Result<(), String> {
+/// The compare report's table of where the error grows, by regime.
+fn regime_table(doc: &Value) -> String {
+    let mut t = String::from("<h2>Where the error grows</h2><table><tr><th>regime</th><th>time (s)</th><th>distance (m)</th><th>position error share</th><th>heading error share</th></tr>");
+    for g in doc["regimes"].as_array().into_iter().flatten() {
+        t += &format!(
+            "<tr><td>{}</td><td>{:.1}</td><td>{:.2}</td><td>{:.1}%</td><td>{:.1}%</td></tr>",
+            esc(g["regime"].as_str().unwrap_or("")),
+            g["time_s"].as_f64().unwrap_or(0.0),
+            g["distance_m"].as_f64().unwrap_or(0.0),
+            100.0 * g["position_share"].as_f64().unwrap_or(0.0),
+            100.0 * g["heading_share"].as_f64().unwrap_or(0.0)
+        );
+    }
+    t + "</table>"
+}
+
+/// The landmark range and bearing innovations of each run that has sightings.
+fn innovation_charts(runs: &[Run], innov: &[Vec<Innovation>]) -> Result<Vec<String>, String> {
     let mut figs = Vec::new();
     for (run, inn) in runs.iter().zip(innov).filter(|(_, i)| !i.is_empty()) {
         let t0 = run.t[0];
@@ -426,6 +435,19 @@ pub fn compare_report(
             &[],
         )?);
     }
+    Ok(figs)
+}
+
+pub fn compare_report(
+    dir: &Path,
+    r: &Runner,
+    runs: &[Run],
+    tracks: &[Recipe<'_>],
+    gyro: &[Option<Recipe<'_>>],
+    innov: &[Vec<Innovation>],
+    doc: &Value,
+) -> Result<(), String> {
+    let mut figs = innovation_charts(runs, innov)?;
     for ((run, tr), g) in runs.iter().zip(tracks).zip(gyro) {
         let d = drawn(run, tr);
         let mut series: Vec<Series> = vec![
@@ -482,18 +504,7 @@ pub fn compare_report(
             &[],
         )?);
     }
-    let mut t = String::from("<h2>Where the error grows</h2><table><tr><th>regime</th><th>time (s)</th><th>distance (m)</th><th>position error share</th><th>heading error share</th></tr>");
-    for g in doc["regimes"].as_array().into_iter().flatten() {
-        t += &format!(
-            "<tr><td>{}</td><td>{:.1}</td><td>{:.2}</td><td>{:.1}%</td><td>{:.1}%</td></tr>",
-            esc(g["regime"].as_str().unwrap_or("")),
-            g["time_s"].as_f64().unwrap_or(0.0),
-            g["distance_m"].as_f64().unwrap_or(0.0),
-            100.0 * g["position_share"].as_f64().unwrap_or(0.0),
-            100.0 * g["heading_share"].as_f64().unwrap_or(0.0)
-        );
-    }
-    t += "</table>";
+    let t = regime_table(doc);
     let e = &doc["errors"];
     let intro = format!(
         "<p>Model <b>{}</b> with nominal parameters against {} run(s): position RMSE <b>{:.4} m</b>, heading RMSE {:.4} rad, final error {:.4} m.</p>",
@@ -1024,113 +1035,10 @@ pub fn navigate_report(
     drives: &[(&str, &kinegen_analysis::navigate::Drive)],
     doc: &Value,
 ) -> Result<(), String> {
-    use kinegen_analysis::grid::Cell;
-    let (rows, cols) = grid.size();
-    let (w, h) = (cols as f64 * grid.cell, rows as f64 * grid.cell);
-    let mut figs = Vec::new();
-    for (name, d) in drives {
-        let mut svg = String::new();
-        {
-            let px = (W as f64 * 1.4) as u32;
-            let root = SVGBackend::with_string(&mut svg, (px, (px as f64 * h / w) as u32 + 60))
-                .into_drawing_area();
-            root.fill(&WHITE).map_err(|e| e.to_string())?;
-            let mut c = ChartBuilder::on(&root)
-                .caption(
-                    format!(
-                        "{name}: {} collision(s), {:.1} cm from the goal",
-                        d.collisions,
-                        100.0 * d.final_error_m
-                    ),
-                    ("sans-serif", 16),
-                )
-                .margin(8)
-                .x_label_area_size(30)
-                .y_label_area_size(40)
-                .build_cartesian_2d(0.0..w, 0.0..h)
-                .map_err(|e| e.to_string())?;
-            c.configure_mesh()
-                .disable_mesh()
-                .x_desc("x (m)")
-                .y_desc("y (m)")
-                .draw()
-                .map_err(|e| e.to_string())?;
-            for r in 0..rows {
-                for col in 0..cols {
-                    let color = match grid.cell(r, col) {
-                        Cell::Obstacle => RGBColor(60, 60, 60),
-                        Cell::Safety => RGBColor(255, 220, 160),
-                        Cell::Free => continue,
-                    };
-                    let [cx, cy] = grid.centre((r, col));
-                    let half = grid.cell / 2.0;
-                    c.draw_series(std::iter::once(Rectangle::new(
-                        [(cx - half, cy - half), (cx + half, cy + half)],
-                        color.filled(),
-                    )))
-                    .map_err(|e| e.to_string())?;
-                }
-            }
-            let line = |pts: Vec<(f64, f64)>,
-                        color: RGBColor,
-                        label: &str,
-                        c: &mut ChartContext<_, _>|
-             -> Result<(), String> {
-                c.draw_series(LineSeries::new(pts, color.stroke_width(2)))
-                    .map_err(|e| e.to_string())?
-                    .label(label.to_string())
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
-                    });
-                Ok(())
-            };
-            line(
-                d.planned.iter().map(|p| (p[0], p[1])).collect(),
-                GREEN,
-                "planned cells",
-                &mut c,
-            )?;
-            line(
-                series_of(d.odometry.len(), d.odometry.iter().map(|p| (p[0], p[1]))),
-                BLUE,
-                "odometry (believed)",
-                &mut c,
-            )?;
-            line(
-                series_of(d.truth.len(), d.truth.iter().map(|p| (p[0], p[1]))),
-                RED,
-                "true path",
-                &mut c,
-            )?;
-            let touching: Vec<(f64, f64)> = d
-                .truth
-                .iter()
-                .filter(|p| grid.collides(p[0], p[1], 0.035))
-                .map(|p| (p[0], p[1]))
-                .collect();
-            c.draw_series(
-                touching
-                    .iter()
-                    .step_by(5)
-                    .map(|p| Cross::new(*p, 4, BLACK.stroke_width(2))),
-            )
-            .map_err(|e| e.to_string())?;
-            let g = grid.centre(grid.goal);
-            c.draw_series(std::iter::once(Circle::new(
-                (g[0], g[1]),
-                6,
-                MAGENTA.filled(),
-            )))
-            .map_err(|e| e.to_string())?;
-            c.configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
-            root.present().map_err(|e| e.to_string())?;
-        }
-        figs.push(svg);
-    }
+    let figs = drives
+        .iter()
+        .map(|(name, d)| navigation_map(grid, name, d))
+        .collect::<Result<Vec<_>, _>>()?;
     let html = page(
         "Cellular-automaton navigation on odometry (seed 004)",
         "<p>Dark: obstacles; light: safety zone (obstacles enlarged by one cell); crosses: the robot touching an obstacle; magenta: the goal.</p>",
@@ -1139,6 +1047,136 @@ pub fn navigate_report(
         doc,
     );
     write(dir, &html)
+}
+
+/// One drive on the arena: the planned cells, the odometry, the true path,
+/// where it touched an obstacle, and the goal (an SVG).
+fn navigation_map(
+    grid: &kinegen_analysis::grid::Grid,
+    name: &str,
+    d: &kinegen_analysis::navigate::Drive,
+) -> Result<String, String> {
+    let (rows, cols) = grid.size();
+    let (w, h) = (cols as f64 * grid.cell, rows as f64 * grid.cell);
+    let mut svg = String::new();
+    {
+        let px = (W as f64 * 1.4) as u32;
+        let root = SVGBackend::with_string(&mut svg, (px, (px as f64 * h / w) as u32 + 60))
+            .into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let mut c = ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "{name}: {} collision(s), {:.1} cm from the goal",
+                    d.collisions,
+                    100.0 * d.final_error_m
+                ),
+                ("sans-serif", 16),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(40)
+            .build_cartesian_2d(0.0..w, 0.0..h)
+            .map_err(|e| e.to_string())?;
+        c.configure_mesh()
+            .disable_mesh()
+            .x_desc("x (m)")
+            .y_desc("y (m)")
+            .draw()
+            .map_err(|e| e.to_string())?;
+        draw_arena(&mut c, grid)?;
+        let line = |pts: Vec<(f64, f64)>,
+                    color: RGBColor,
+                    label: &str,
+                    c: &mut ChartContext<_, _>|
+         -> Result<(), String> {
+            c.draw_series(LineSeries::new(pts, color.stroke_width(2)))
+                .map_err(|e| e.to_string())?
+                .label(label.to_string())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                });
+            Ok(())
+        };
+        line(
+            d.planned.iter().map(|p| (p[0], p[1])).collect(),
+            GREEN,
+            "planned cells",
+            &mut c,
+        )?;
+        line(
+            series_of(d.odometry.len(), d.odometry.iter().map(|p| (p[0], p[1]))),
+            BLUE,
+            "odometry (believed)",
+            &mut c,
+        )?;
+        line(
+            series_of(d.truth.len(), d.truth.iter().map(|p| (p[0], p[1]))),
+            RED,
+            "true path",
+            &mut c,
+        )?;
+        let touching: Vec<(f64, f64)> = d
+            .truth
+            .iter()
+            .filter(|p| grid.collides(p[0], p[1], 0.035))
+            .map(|p| (p[0], p[1]))
+            .collect();
+        c.draw_series(
+            touching
+                .iter()
+                .step_by(5)
+                .map(|p| Cross::new(*p, 4, BLACK.stroke_width(2))),
+        )
+        .map_err(|e| e.to_string())?;
+        let g = grid.centre(grid.goal);
+        c.draw_series(std::iter::once(Circle::new(
+            (g[0], g[1]),
+            6,
+            MAGENTA.filled(),
+        )))
+        .map_err(|e| e.to_string())?;
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// A chart over metres on both axes.
+type MetreChart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// The arena's obstacles and safety zone, cell by cell.
+fn draw_arena(
+    c: &mut MetreChart<'_, '_>,
+    grid: &kinegen_analysis::grid::Grid,
+) -> Result<(), String> {
+    use kinegen_analysis::grid::Cell;
+    let (rows, cols) = grid.size();
+    for r in 0..rows {
+        for col in 0..cols {
+            let color = match grid.cell(r, col) {
+                Cell::Obstacle => RGBColor(60, 60, 60),
+                Cell::Safety => RGBColor(255, 220, 160),
+                Cell::Free => continue,
+            };
+            let [cx, cy] = grid.centre((r, col));
+            let half = grid.cell / 2.0;
+            c.draw_series(std::iter::once(Rectangle::new(
+                [(cx - half, cy - half), (cx + half, cy + half)],
+                color.filled(),
+            )))
+            .map_err(|e| e.to_string())?;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -362,6 +362,74 @@ impl Bag<'_> {
     }
 }
 
+/// The field paths of a landmark topic's detections: the landmark's id, the
+/// stamp, and either range and bearing or x and y (`polar.2` says which).
+struct DetectionFields {
+    id: crate::rosdyn::FieldPath,
+    stamp: crate::rosdyn::FieldPath,
+    polar: (crate::rosdyn::FieldPath, crate::rosdyn::FieldPath, bool),
+}
+
+impl DetectionFields {
+    /// The topic's message schema and the fields `l` names in it.
+    fn new(
+        file: &Path,
+        l: &LandmarkSource,
+        t: &Topic,
+    ) -> Result<(crate::rosdyn::Schema, DetectionFields), LogError> {
+        let topic = l.topic.as_str();
+        let err = |m: String| LogError::new(file, None, None, format!("topic `{topic}`: {m}"));
+        if t.encoding != "cdr" {
+            return Err(err(format!(
+                "encoded as `{}`; kinegen reads ROS 2 CDR messages",
+                t.encoding
+            )));
+        }
+        let schema = match &t.definition {
+            Some((enc, text)) if enc == "ros2msg" => crate::rosdyn::Schema::parse(&t.schema, text)
+                .map_err(|e| err(format!("its message definition ({}): {e}", t.schema)))?,
+            Some((enc, _)) => {
+                return Err(err(format!(
+                    "its message definition is `{enc}`; kinegen reads `ros2msg` definitions"
+                )))
+            }
+            None => return Err(err("the bag stores no message definition for it".into())),
+        };
+        let path = |field: &str,
+                    p: &Option<String>|
+         -> Result<Option<crate::rosdyn::FieldPath>, LogError> {
+            p.as_deref()
+                .map(|p| {
+                    crate::rosdyn::FieldPath::parse(p)
+                        .map_err(|e| err(format!("[landmarks] {field}: {e}")))
+                })
+                .transpose()
+        };
+        let (range, bearing, x, y) = (
+            path("range", &l.range)?,
+            path("bearing", &l.bearing)?,
+            path("x", &l.x)?,
+            path("y", &l.y)?,
+        );
+        let polar = match (range, bearing, x, y) {
+            (Some(r), Some(b), None, None) => (r, b, true),
+            (None, None, Some(x), Some(y)) => (x, y, false),
+            _ => {
+                return Err(err(
+                    "[landmarks] needs `range` and `bearing`, or `x` and `y` (the landmark in the robot frame), field paths in the message".into(),
+                ))
+            }
+        };
+        let id = path("id", &Some(l.id.clone()))?.unwrap();
+        let stamp = path(
+            "stamp",
+            &Some(l.stamp.clone().unwrap_or("header.stamp".into())),
+        )?
+        .unwrap();
+        Ok((schema, DetectionFields { id, stamp, polar }))
+    }
+}
+
 /// The detections of a landmark topic, decoded with the definition the bag
 /// carries, in the log's time (`t0` is its first row's stamp).
 fn landmark_detections(
@@ -372,53 +440,8 @@ fn landmark_detections(
     t0: f64,
 ) -> Result<Vec<Detection>, LogError> {
     let topic = l.topic.as_str();
-    let err = |m: String| LogError::new(file, None, None, format!("topic `{topic}`: {m}"));
-    if t.encoding != "cdr" {
-        return Err(err(format!(
-            "encoded as `{}`; kinegen reads ROS 2 CDR messages",
-            t.encoding
-        )));
-    }
-    let schema = match &t.definition {
-        Some((enc, text)) if enc == "ros2msg" => crate::rosdyn::Schema::parse(&t.schema, text)
-            .map_err(|e| err(format!("its message definition ({}): {e}", t.schema)))?,
-        Some((enc, _)) => {
-            return Err(err(format!(
-                "its message definition is `{enc}`; kinegen reads `ros2msg` definitions"
-            )))
-        }
-        None => return Err(err("the bag stores no message definition for it".into())),
-    };
-    let path =
-        |field: &str, p: &Option<String>| -> Result<Option<crate::rosdyn::FieldPath>, LogError> {
-            p.as_deref()
-                .map(|p| {
-                    crate::rosdyn::FieldPath::parse(p)
-                        .map_err(|e| err(format!("[landmarks] {field}: {e}")))
-                })
-                .transpose()
-        };
-    let (range, bearing, x, y) = (
-        path("range", &l.range)?,
-        path("bearing", &l.bearing)?,
-        path("x", &l.x)?,
-        path("y", &l.y)?,
-    );
-    let polar = match (range, bearing, x, y) {
-        (Some(r), Some(b), None, None) => (r, b, true),
-        (None, None, Some(x), Some(y)) => (x, y, false),
-        _ => {
-            return Err(err(
-                "[landmarks] needs `range` and `bearing`, or `x` and `y` (the landmark in the robot frame), field paths in the message".into(),
-            ))
-        }
-    };
-    let id = path("id", &Some(l.id.clone()))?.unwrap();
-    let stamp = path(
-        "stamp",
-        &Some(l.stamp.clone().unwrap_or("header.stamp".into())),
-    )?
-    .unwrap();
+    let (schema, fields) = DetectionFields::new(file, l, t)?;
+    let DetectionFields { id, stamp, polar } = fields;
     let mut out = Vec::new();
     for raw in &t.messages {
         let here = |m: String| at(file, topic, raw.index, m);

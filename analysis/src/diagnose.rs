@@ -891,84 +891,22 @@ fn rank(
             .as_ref()
             .is_some_and(|(_, rmse)| *rmse <= FLOOR_REACHED * floor)
     });
-    let from_nominal = from_nominal && !at_floor;
+    let ranking = Ranking {
+        cur,
+        runs,
+        train,
+        test,
+        o,
+        strict,
+        from_nominal: from_nominal && !at_floor,
+    };
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
         .zip(local)
         .filter_map(|((name, doc, aug), (start, local))| {
-            let Local { fit: from_cur, searched } = local;
-            let (from_cur, rmse_cur) = from_cur.unzip();
-            let effect_params = effect_params(&start, &cur.runner);
-            let ev = evidence(&start, &effect_params, runs, o);
-            // start from the current estimates and from nominal: a structurally wrong
-            // model can calibrate itself into a corner the effect cannot leave. The
-            // current estimates are an optimum of all but the effect, so from there
-            // a local refinement suffices; the global search (continuation,
-            // other starts) is the one from nominal. Once the chain has an effect,
-            // the current model is the winner's calibration, itself the best of
-            // both searches: the global one is not repeated (it redid the whole
-            // journey from nominal for every candidate: 11 s of a 36 s diagnosis
-            // for one of them on an omni_caster log with a 0.2 rad offset).
-            let from_nominal = (from_nominal && !searched && !gyro_only(&start, &effect_params)).then(|| fit_continued(aug, runs, o).ok()).flatten();
-            let cur_start_wins = match (&from_cur, &from_nominal) {
-                (Some(a), Some(b)) => a.cost_after <= b.cost_after,
-                (a, _) => a.is_some(),
-            };
-            let mut f = if cur_start_wins { from_cur } else { from_nominal }?;
-            let mut rmse = match rmse_cur {
-                Some(e) if cur_start_wins => e,
-                _ => weighted_rms(&start, &f.p, runs, o),
-            };
-            let mut gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
-            // what the verdict reports is converged fully: an effect that may
-            // win is refined from its ranking fit with the strict tolerance
-            if significant(cur, rmse, gain, None) {
-                let mut at = start.clone();
-                at.p = f.p.clone();
-                if let Ok(polished) = refine_from(&at, runs, strict, &f.starts) {
-                    f = FitResult { cost_before: f.cost_before, iterations: f.iterations + polished.iterations, ..polished };
-                    rmse = weighted_rms(&start, &f.p, runs, o);
-                    gain = cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
-                }
-            }
-            // The training fit refines locally from the whole log's optimum,
-            // as the base stage's does. From the current training calibration
-            // it retraced the whole log's journey (round 2 of an omni_caster
-            // log with a steering offset left after a time offset: 37
-            // iterations after the whole log's 42), and after a search from
-            // nominal values a second search on the training part did.
-            let tr_start = Runner { p: f.p.clone(), ..start.clone() };
-            let tr_fit = crate::fit::refine_on_part(&tr_start, runs, train, &f.starts, o);
-            let (train_fit, holdout_rmse) = match tr_fit {
-                Ok(ft) => {
-                    let h = weighted_rms(&tr_start, &ft.p, test, o);
-                    (ft, h)
-                }
-                // no training calibration: the next stage, if any, starts
-                // from the full one
-                Err(_) => (f.clone(), f64::INFINITY),
-            };
+            let c = ranking.score(name, doc, aug, start, local);
             progress(name);
-            let improvement = 1.0 - rmse / cur.rmse;
-            let significant = significant(cur, rmse, gain, Some(holdout_rmse));
-            let parameters = effect_params
-                .iter()
-                .map(|&i| {
-                    let k = f.free.iter().position(|&j| j == i).unwrap();
-                    (start.names[i].clone(), serde_json::json!({"estimate": f.p[i], "std": f.std[k]}))
-                })
-                .collect();
-            let evidence = format!(
-                "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}, noise floor {:.3}",
-                cur.rmse,
-                rmse,
-                cur.rmse / rmse.max(1e-300),
-                gain,
-                cur.holdout_rmse,
-                holdout_rmse,
-                cur.floor
-            );
-            Some(Candidate { effect: name.clone(), rmse, improvement, significant, parameters, evidence, bic_gain: gain, holdout_rmse, doc: doc.clone(), fit: f, train_fit })
+            c
         })
         .collect();
     candidates.sort_by(|a, b| {
@@ -977,6 +915,139 @@ fn rank(
             .then(b.bic_gain.total_cmp(&a.bic_gain))
     });
     candidates
+}
+
+/// What ranking a diagnosis round's candidates holds fixed: the current
+/// stage, the runs (all, training and held-out parts) and the tolerances.
+struct Ranking<'a> {
+    cur: &'a Stage,
+    runs: &'a [Run],
+    train: &'a [Run],
+    test: &'a [Run],
+    /// The ranking tolerance, and the strict one a possible winner is polished with.
+    o: &'a FitOptions,
+    strict: &'a FitOptions,
+    /// Whether candidates are also calibrated from nominal values.
+    from_nominal: bool,
+}
+
+impl Ranking<'_> {
+    /// Calibrate candidate `name` (its spec `doc`, runner `aug`, seeded
+    /// `start` and local refinement `local`) and score it against the
+    /// current stage.
+    fn score(
+        &self,
+        name: &str,
+        doc: &str,
+        aug: &Runner,
+        start: Runner,
+        local: Local,
+    ) -> Option<Candidate> {
+        let Local {
+            fit: from_cur,
+            searched,
+        } = local;
+        let (from_cur, rmse_cur) = from_cur.unzip();
+        let effect_params = effect_params(&start, &self.cur.runner);
+        let ev = evidence(&start, &effect_params, self.runs, self.o);
+        // start from the current estimates and from nominal: a structurally wrong
+        // model can calibrate itself into a corner the effect cannot leave. The
+        // current estimates are an optimum of all but the effect, so from there
+        // a local refinement suffices; the global search (continuation,
+        // other starts) is the one from nominal. Once the chain has an effect,
+        // the current model is the winner's calibration, itself the best of
+        // both searches: the global one is not repeated (it redid the whole
+        // journey from nominal for every candidate: 11 s of a 36 s diagnosis
+        // for one of them on an omni_caster log with a 0.2 rad offset).
+        let from_nominal = (self.from_nominal && !searched && !gyro_only(&start, &effect_params))
+            .then(|| fit_continued(aug, self.runs, self.o).ok())
+            .flatten();
+        let cur_start_wins = match (&from_cur, &from_nominal) {
+            (Some(a), Some(b)) => a.cost_after <= b.cost_after,
+            (a, _) => a.is_some(),
+        };
+        let mut f = if cur_start_wins {
+            from_cur
+        } else {
+            from_nominal
+        }?;
+        let mut rmse = match rmse_cur {
+            Some(e) if cur_start_wins => e,
+            _ => weighted_rms(&start, &f.p, self.runs, self.o),
+        };
+        let mut gain = self.cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
+        // what the verdict reports is converged fully: an effect that may
+        // win is refined from its ranking fit with the strict tolerance
+        if significant(self.cur, rmse, gain, None) {
+            let mut at = start.clone();
+            at.p = f.p.clone();
+            if let Ok(polished) = refine_from(&at, self.runs, self.strict, &f.starts) {
+                f = FitResult {
+                    cost_before: f.cost_before,
+                    iterations: f.iterations + polished.iterations,
+                    ..polished
+                };
+                rmse = weighted_rms(&start, &f.p, self.runs, self.o);
+                gain = self.cur.bic - bic(f.cost_after, f.n_residuals, f.free.len());
+            }
+        }
+        // The training fit refines locally from the whole log's optimum,
+        // as the base stage's does. From the current training calibration
+        // it retraced the whole log's journey (round 2 of an omni_caster
+        // log with a steering offset left after a time offset: 37
+        // iterations after the whole log's 42), and after a search from
+        // nominal values a second search on the training part did.
+        let tr_start = Runner {
+            p: f.p.clone(),
+            ..start.clone()
+        };
+        let tr_fit =
+            crate::fit::refine_on_part(&tr_start, self.runs, self.train, &f.starts, self.o);
+        let (train_fit, holdout_rmse) = match tr_fit {
+            Ok(ft) => {
+                let h = weighted_rms(&tr_start, &ft.p, self.test, self.o);
+                (ft, h)
+            }
+            // no training calibration: the next stage, if any, starts
+            // from the full one
+            Err(_) => (f.clone(), f64::INFINITY),
+        };
+        let improvement = 1.0 - rmse / self.cur.rmse;
+        let significant = significant(self.cur, rmse, gain, Some(holdout_rmse));
+        let parameters = effect_params
+            .iter()
+            .map(|&i| {
+                let k = f.free.iter().position(|&j| j == i).unwrap();
+                (
+                    start.names[i].clone(),
+                    serde_json::json!({"estimate": f.p[i], "std": f.std[k]}),
+                )
+            })
+            .collect();
+        let evidence = format!(
+            "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}, noise floor {:.3}",
+            self.cur.rmse,
+            rmse,
+            self.cur.rmse / rmse.max(1e-300),
+            gain,
+            self.cur.holdout_rmse,
+            holdout_rmse,
+            self.cur.floor
+        );
+        Some(Candidate {
+            effect: name.to_string(),
+            rmse,
+            improvement,
+            significant,
+            parameters,
+            evidence,
+            bic_gain: gain,
+            holdout_rmse,
+            doc: doc.to_string(),
+            fit: f,
+            train_fit,
+        })
+    }
 }
 
 /// Whether an effect's parameters change only what the gyro reads (its bias,

@@ -466,6 +466,53 @@ fn field_ident(name: &str) -> proc_macro2::Ident {
     }
 }
 
+/// The `call` dispatcher's arm for kernel `f`: check the slices' lengths,
+/// convert them to the kernel's argument types, call it, copy its output.
+fn dispatch_arm(f: &Function) -> TokenStream {
+    let name = &f.name;
+    let id = format_ident!("{}", f.name);
+    let conv = f.args.iter().enumerate().map(|(i, a)| {
+        let v = format_ident!("a{}", i);
+        match a.kind() {
+            ArgKind::Scalar => quote!(let #v: crate::Real = match args[#i] { [v] => *v, _ => return false };),
+            ArgKind::Vector(n) => quote!(let #v: &[crate::Real; #n] = match <&[crate::Real; #n]>::try_from(args[#i]) { Ok(v) => v, Err(_) => return false };),
+        }
+    });
+    let vars = (0..f.args.len()).map(|i| format_ident!("a{}", i));
+    let nargs = f.args.len();
+    let n_out = f.rows * f.cols;
+    let flatten = if f.is_matrix() {
+        quote!(let r = r.as_flattened();)
+    } else {
+        quote!(let r = &r[..];)
+    };
+    quote! {
+        #name => {
+            if args.len() != #nargs || out.len() != #n_out { return false; }
+            #(#conv)*
+            let r = #id(#(#vars),*);
+            #flatten
+            out.copy_from_slice(r);
+            true
+        }
+    }
+}
+
+/// The doc comment of a parameter's field: its name, unit and doc.
+fn field_doc(p: &kinegen_model::decl::Param) -> String {
+    let unit = if p.unit.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", p.unit)
+    };
+    let doc = if p.doc.is_empty() {
+        String::new()
+    } else {
+        format!(": {}", p.doc)
+    };
+    format!(" `{}`{unit}{doc}", p.name)
+}
+
 /// The source of one model's module.
 pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
     let header = format!(
@@ -483,23 +530,7 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
     let pnom: Vec<TokenStream> = ir.runtime_params().iter().map(|p| lit(p.nominal)).collect();
     let np = pnames.len();
     let fields: Vec<proc_macro2::Ident> = pnames.iter().map(|n| field_ident(n)).collect();
-    let field_docs: Vec<String> = ir
-        .runtime_params()
-        .iter()
-        .map(|p| {
-            let unit = if p.unit.is_empty() {
-                String::new()
-            } else {
-                format!(" ({})", p.unit)
-            };
-            let doc = if p.doc.is_empty() {
-                String::new()
-            } else {
-                format!(": {}", p.doc)
-            };
-            format!(" `{}`{unit}{doc}", p.name)
-        })
-        .collect();
+    let field_docs: Vec<String> = ir.runtime_params().into_iter().map(field_doc).collect();
     let idx: Vec<usize> = (0..np).collect();
     let inames: Vec<&str> = ir.inputs.iter().map(|i| i.name.as_str()).collect();
     let icols: Vec<&str> = ir.inputs.iter().map(|i| i.column.as_str()).collect();
@@ -507,31 +538,7 @@ pub fn emit_module(ir: &ModelIr, spec_path: &str) -> String {
     let fns = ir.functions().iter().map(emit_function);
     let fused = fused_kernels(ir);
     let fused = fused.iter().map(|(n, d, parts)| emit_fused(n, d, parts));
-    let arms = ir.functions().iter().map(|f| {
-        let name = &f.name;
-        let id = format_ident!("{}", f.name);
-        let conv = f.args.iter().enumerate().map(|(i, a)| {
-            let v = format_ident!("a{}", i);
-            match a.kind() {
-                ArgKind::Scalar => quote!(let #v: crate::Real = match args[#i] { [v] => *v, _ => return false };),
-                ArgKind::Vector(n) => quote!(let #v: &[crate::Real; #n] = match <&[crate::Real; #n]>::try_from(args[#i]) { Ok(v) => v, Err(_) => return false };),
-            }
-        });
-        let vars = (0..f.args.len()).map(|i| format_ident!("a{}", i));
-        let nargs = f.args.len();
-        let n_out = f.rows * f.cols;
-        let flatten = if f.is_matrix() { quote!(let r = r.as_flattened();) } else { quote!(let r = &r[..];) };
-        quote! {
-            #name => {
-                if args.len() != #nargs || out.len() != #n_out { return false; }
-                #(#conv)*
-                let r = #id(#(#vars),*);
-                #flatten
-                out.copy_from_slice(r);
-                true
-            }
-        }
-    });
+    let arms = ir.functions().iter().map(dispatch_arm);
     let file = quote! {
         #![doc = #header]
         // parameter fields keep the spec's names (`L`, as the papers write it)

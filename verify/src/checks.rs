@@ -500,127 +500,143 @@ fn depends_on(k: &dyn Kernel, f: &Function, args: &[Vec<f64>], a: usize, e: usiz
 /// forward(inverse(twist)) = twist on the rows the inverse imposes; and the integrated inverse (seed 001 eq. 12-18)
 /// reproduces the pose increment it was asked for when integrated exactly.
 pub fn inverse_round_trips(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<Finding> {
-    let mut out = Vec::new();
     // a model without inverse kinematics (ModelIr::no_inverse) has none to check
     let (Ok(inv_twist), Ok(inv_increment)) = (ir.inverse_twist(), ir.inverse_increment()) else {
-        return out;
+        return Vec::new();
     };
     let mut sampler = Sampler::new(ir, seed);
-    let rows = sampler.twist_rows;
-    {
-        let inv = inv_twist;
-        let mut fd = Finding::new(ir, inv, "forward(inverse) = id");
-        for _ in 0..n {
-            let args = sampler.args(inv);
-            let o = eval(k, inv, &args);
-            let cfg = inv
-                .arg(ArgRole::Configuration)
-                .map(|i| args[i].clone())
-                .unwrap_or_default();
-            let p = args[inv.arg(ArgRole::Params).unwrap()].clone();
-            let u = inputs_from(ir, inv, &o, &cfg);
-            let back = twist_of(ir, k, &u, &p);
-            let t = &args[0];
-            // relative to the twist's largest entry, not to each entry: a
-            // least-squares solve is accurate norm-wise (an omega of 1e-7
-            // beside a speed of 1 m/s comes back within 1e-16 of it, which is
-            // 1e-9 of omega)
-            let scale = t.iter().fold(1e-12f64, |m, v| m.max(v.abs()));
-            for r in (0..3).filter(|&r| depends_on(k, inv, &args, 0, r)) {
-                let err = (back[r] - t[r]).abs() / scale;
-                fd.record(
-                    err,
-                    err / 1e-9,
-                    Some((r, 0, ["vx", "vy", "omega"][r].into())),
-                    &args,
-                    inv,
-                );
-            }
-            fd.samples += 1;
+    let twist = twist_round_trip(ir, k, inv_twist, &mut sampler, n);
+    let increment = increment_round_trip(ir, k, inv_increment, &mut sampler, n);
+    vec![twist, increment]
+}
+
+/// forward(inverse(twist)) = twist on the rows the inverse imposes.
+fn twist_round_trip(
+    ir: &ModelIr,
+    k: &dyn Kernel,
+    inv: &Function,
+    sampler: &mut Sampler,
+    n: usize,
+) -> Finding {
+    let mut fd = Finding::new(ir, inv, "forward(inverse) = id");
+    for _ in 0..n {
+        let args = sampler.args(inv);
+        let o = eval(k, inv, &args);
+        let cfg = inv
+            .arg(ArgRole::Configuration)
+            .map(|i| args[i].clone())
+            .unwrap_or_default();
+        let p = args[inv.arg(ArgRole::Params).unwrap()].clone();
+        let u = inputs_from(ir, inv, &o, &cfg);
+        let back = twist_of(ir, k, &u, &p);
+        let t = &args[0];
+        // relative to the twist's largest entry, not to each entry: a
+        // least-squares solve is accurate norm-wise (an omega of 1e-7
+        // beside a speed of 1 m/s comes back within 1e-16 of it, which is
+        // 1e-9 of omega)
+        let scale = t.iter().fold(1e-12f64, |m, v| m.max(v.abs()));
+        for r in (0..3).filter(|&r| depends_on(k, inv, &args, 0, r)) {
+            let err = (back[r] - t[r]).abs() / scale;
+            fd.record(
+                err,
+                err / 1e-9,
+                Some((r, 0, ["vx", "vy", "omega"][r].into())),
+                &args,
+                inv,
+            );
         }
-        out.push(fd);
+        fd.samples += 1;
     }
-    {
-        let inv = inv_increment;
-        let ex = ir.step(StepForm::Exact).value;
-        let mut fd = Finding::new(ir, inv, "integrated inverse");
-        for _ in 0..n {
-            let args = sampler.args(inv);
-            let o = eval(k, inv, &args);
-            let cfg = inv
-                .arg(ArgRole::Configuration)
-                .map(|i| args[i].clone())
-                .unwrap_or_default();
-            let p = args[inv.arg(ArgRole::Params).unwrap()].clone();
-            let dt = args[inv.arg(ArgRole::Dt).unwrap()].clone();
-            let u = inputs_from(ir, inv, &o, &cfg);
-            let mut sa: Vec<Vec<f64>> = Vec::new();
-            for a in &ex.args {
-                sa.push(match a.role {
-                    ArgRole::Inputs => u.clone(),
-                    ArgRole::Params => p.clone(),
-                    ArgRole::Dt => dt.clone(),
-                    _ => vec![0.0; a.names.len()],
-                });
-            }
-            let pose = eval(k, ex, &sa);
-            let d = &args[0];
-            if !imposes_heading(k, ir, &args, &cfg, &p, &dt) {
-                // The configuration (a steering angle) sets the heading change, so
-                // the increment asked for is in general not reachable with it: ask
-                // for the one the inverse's own inputs reach instead, and check the
-                // inverse gives those inputs back.
-                let mut again = args.clone();
-                again[0] = pose.clone();
-                let o2 = eval(k, inv, &again);
-                for (r, (a, b)) in o2.iter().zip(&o).enumerate() {
-                    let err = (a - b).abs() / (b.abs() + 1e-9);
-                    fd.record(
-                        err,
-                        err / 1e-8,
-                        Some((
-                            r,
-                            0,
-                            format!("{} from the increment it drives", inv.row_names[r]),
-                        )),
-                        &again,
-                        inv,
-                    );
-                }
-                fd.samples += 1;
-                continue;
-            }
-            // The integrated inverse imposes the increments it reads: all of (dx, dy,
-            // dtheta) for holonomic models, dx and dtheta when y follows (seed 001 eq.
-            // 12). dx is checked only when the model cannot move sideways at all:
-            // with lateral motion that follows from the inputs (slip), x picks up
-            // part of it.
-            for r in [0usize, 1, 2] {
-                if !depends_on(k, inv, &args, 0, r)
-                    || (r == 0 && rows[1] && !depends_on(k, inv, &args, 0, 1))
-                {
-                    continue;
-                }
-                // relative to the component, or for a near-zero one to the
-                // translation it comes with: a heading change of 8e-8 rad over
-                // 0.96 m is the difference of two wheel travels of about 0.96 m,
-                // whose round-off alone is 2e-15 rad (the floor of 1e-9 alone
-                // failed such a draw: proptest seed 16276049285214292310)
-                let travel = d[0].hypot(d[1]);
-                let err = (pose[r] - d[r]).abs() / (d[r].abs() + 1e-9 + 1e-6 * travel);
+    fd
+}
+
+/// The integrated inverse (seed 001 eq. 12-18) reproduces the pose increment
+/// it was asked for when integrated exactly.
+fn increment_round_trip(
+    ir: &ModelIr,
+    k: &dyn Kernel,
+    inv: &Function,
+    sampler: &mut Sampler,
+    n: usize,
+) -> Finding {
+    let rows = sampler.twist_rows;
+    let ex = ir.step(StepForm::Exact).value;
+    let mut fd = Finding::new(ir, inv, "integrated inverse");
+    for _ in 0..n {
+        let args = sampler.args(inv);
+        let o = eval(k, inv, &args);
+        let cfg = inv
+            .arg(ArgRole::Configuration)
+            .map(|i| args[i].clone())
+            .unwrap_or_default();
+        let p = args[inv.arg(ArgRole::Params).unwrap()].clone();
+        let dt = args[inv.arg(ArgRole::Dt).unwrap()].clone();
+        let u = inputs_from(ir, inv, &o, &cfg);
+        let mut sa: Vec<Vec<f64>> = Vec::new();
+        for a in &ex.args {
+            sa.push(match a.role {
+                ArgRole::Inputs => u.clone(),
+                ArgRole::Params => p.clone(),
+                ArgRole::Dt => dt.clone(),
+                _ => vec![0.0; a.names.len()],
+            });
+        }
+        let pose = eval(k, ex, &sa);
+        let d = &args[0];
+        if !imposes_heading(k, ir, &args, &cfg, &p, &dt) {
+            // The configuration (a steering angle) sets the heading change, so
+            // the increment asked for is in general not reachable with it: ask
+            // for the one the inverse's own inputs reach instead, and check the
+            // inverse gives those inputs back.
+            let mut again = args.clone();
+            again[0] = pose.clone();
+            let o2 = eval(k, inv, &again);
+            for (r, (a, b)) in o2.iter().zip(&o).enumerate() {
+                let err = (a - b).abs() / (b.abs() + 1e-9);
                 fd.record(
                     err,
                     err / 1e-8,
-                    Some((r, 0, ["dx", "dy", "dtheta"][r].into())),
-                    &args,
+                    Some((
+                        r,
+                        0,
+                        format!("{} from the increment it drives", inv.row_names[r]),
+                    )),
+                    &again,
                     inv,
                 );
             }
             fd.samples += 1;
+            continue;
         }
-        out.push(fd);
+        // The integrated inverse imposes the increments it reads: all of (dx, dy,
+        // dtheta) for holonomic models, dx and dtheta when y follows (seed 001 eq.
+        // 12). dx is checked only when the model cannot move sideways at all:
+        // with lateral motion that follows from the inputs (slip), x picks up
+        // part of it.
+        for r in [0usize, 1, 2] {
+            if !depends_on(k, inv, &args, 0, r)
+                || (r == 0 && rows[1] && !depends_on(k, inv, &args, 0, 1))
+            {
+                continue;
+            }
+            // relative to the component, or for a near-zero one to the
+            // translation it comes with: a heading change of 8e-8 rad over
+            // 0.96 m is the difference of two wheel travels of about 0.96 m,
+            // whose round-off alone is 2e-15 rad (the floor of 1e-9 alone
+            // failed such a draw: proptest seed 16276049285214292310)
+            let travel = d[0].hypot(d[1]);
+            let err = (pose[r] - d[r]).abs() / (d[r].abs() + 1e-9 + 1e-6 * travel);
+            fd.record(
+                err,
+                err / 1e-8,
+                Some((r, 0, ["dx", "dy", "dtheta"][r].into())),
+                &args,
+                inv,
+            );
+        }
+        fd.samples += 1;
     }
-    out
+    fd
 }
 
 /// Removable singularities: the exact step (and its Jacobians) at omega*dt = s and

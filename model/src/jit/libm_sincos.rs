@@ -175,6 +175,67 @@ impl E<'_, '_> {
     }
 }
 
+impl E<'_, '_> {
+    /// The medium range (up to 2^20 pi/2): rint(x / (pi/2))
+    /// (round-to-nearest), then a second and a third round where the first
+    /// cancelled more than 16, then 49, bits (rare enough to compute both and
+    /// select); jumps to `quadrant` with (n, y0, y1).
+    fn medium_reduction(&mut self, x: Value, ix: Value, quadrant: Block) {
+        use IntCC::SignedGreaterThan;
+        let e = self;
+        let tmp = e.mulk(x, INV_PIO2);
+        let to_int = e.k(TO_INT);
+        let tmp = e.add(tmp, to_int);
+        let f = e.sub(tmp, to_int);
+        let (r1, w1, y01) = e.first_round(x, f);
+        let ex = e.0.ins().ushr_imm_u(ix, 20);
+        let cancelled = |e: &mut E, y0: Value, bits: i64| {
+            let ey = e.exponent(y0);
+            let lost = e.0.ins().isub(ex, ey);
+            e.cmp(SignedGreaterThan, lost, bits)
+        };
+        let second = cancelled(e, y01, 16);
+        let (r2, w2, y02) = e.round(f, r1, PIO2_2, PIO2_2T);
+        let third = cancelled(e, y02, 49);
+        let third = e.0.ins().band(third, second);
+        let (r3, w3, y03) = e.round(f, r2, PIO2_3, PIO2_3T);
+        let pick = |e: &mut E, a: Value, b: Value, c: Value| {
+            let bc = e.sel(third, c, b);
+            e.sel(second, bc, a)
+        };
+        let r = pick(e, r1, r2, r3);
+        let w = pick(e, w1, w2, w3);
+        let y0 = pick(e, y01, y02, y03);
+        let d = e.sub(r, y0);
+        let y1 = e.sub(d, w);
+        e.0.ins().jump(quadrant, &[f, y0, y1].map(BlockArg::Value));
+    }
+
+    /// The quadrant n & 3 of the reduced argument (y0, y1): (s, c), (c, -s),
+    /// (-s, -c), (-c, s); jumps to `done` with (sin, cos).
+    fn by_quadrant(&mut self, quadrant: Block, done: Block) {
+        use IntCC::NotEqual;
+        let e = self;
+        let [f, y0, y1] = [0, 1, 2].map(|k| e.0.block_params(quadrant)[k]);
+        let (s, c) = e.kernels(y0, y1, true);
+        let n = e.0.ins().fcvt_to_sint_sat(types::I64, f);
+        let odd = e.0.ins().band_imm_u(n, 1);
+        let odd = e.cmp(NotEqual, odd, 0);
+        let half = e.0.ins().band_imm_u(n, 2);
+        let flip_sin = e.cmp(NotEqual, half, 0);
+        let next = e.0.ins().iadd_imm_u(n, 1);
+        let next = e.0.ins().band_imm_u(next, 2);
+        let flip_cos = e.cmp(NotEqual, next, 0);
+        let sin = e.sel(odd, c, s);
+        let cos = e.sel(odd, s, c);
+        let (neg_sin, neg_cos) = (e.0.ins().fneg(sin), e.0.ins().fneg(cos));
+        let sin = e.sel(flip_sin, neg_sin, sin);
+        let cos = e.sel(flip_cos, neg_cos, cos);
+        e.0.ins()
+            .jump(done, &[BlockArg::Value(sin), BlockArg::Value(cos)]);
+    }
+}
+
 /// Emits the blocks computing (sin x, cos x) and switches to the block
 /// where they are the parameters; `host` emits the call for the arguments
 /// libm reduces with its multi-precision path (and infinities and NaN).
@@ -183,7 +244,7 @@ pub fn emit(
     x: Value,
     host: impl FnOnce(&mut FunctionBuilder, Value) -> (Value, Value),
 ) -> (Value, Value) {
-    use IntCC::{NotEqual, SignedGreaterThan, SignedLessThan};
+    use IntCC::{NotEqual, SignedLessThan};
     use IntCC::{UnsignedGreaterThanOrEqual as Ge, UnsignedLessThanOrEqual as Le};
     let mut e = E(b);
     let blocks = [(); 6].map(|_| e.0.create_block());
@@ -255,57 +316,15 @@ pub fn emit(
     let in_range = e.0.create_block();
     e.0.ins().brif(beyond, large, &[], in_range, &[]);
     e.enter(in_range);
-    let tmp = e.mulk(x, INV_PIO2);
-    let to_int = e.k(TO_INT);
-    let tmp = e.add(tmp, to_int);
-    let f = e.sub(tmp, to_int);
-    let (r1, w1, y01) = e.first_round(x, f);
-    let ex = e.0.ins().ushr_imm_u(ix, 20);
-    let cancelled = |e: &mut E, y0: Value, bits: i64| {
-        let ey = e.exponent(y0);
-        let lost = e.0.ins().isub(ex, ey);
-        e.cmp(SignedGreaterThan, lost, bits)
-    };
-    let second = cancelled(&mut e, y01, 16);
-    let (r2, w2, y02) = e.round(f, r1, PIO2_2, PIO2_2T);
-    let third = cancelled(&mut e, y02, 49);
-    let third = e.0.ins().band(third, second);
-    let (r3, w3, y03) = e.round(f, r2, PIO2_3, PIO2_3T);
-    let pick = |e: &mut E, a: Value, b: Value, c: Value| {
-        let bc = e.sel(third, c, b);
-        e.sel(second, bc, a)
-    };
-    let r = pick(&mut e, r1, r2, r3);
-    let w = pick(&mut e, w1, w2, w3);
-    let y0 = pick(&mut e, y01, y02, y03);
-    let d = e.sub(r, y0);
-    let y1 = e.sub(d, w);
-    e.0.ins().jump(quadrant, &[f, y0, y1].map(BlockArg::Value));
+    e.medium_reduction(x, ix, quadrant);
 
     e.enter(large);
     let (sin, cos) = host(e.0, x);
     e.0.ins()
         .jump(done, &[BlockArg::Value(sin), BlockArg::Value(cos)]);
 
-    // quadrant n & 3: (s, c), (c, -s), (-s, -c), (-c, s)
     e.enter(quadrant);
-    let [f, y0, y1] = [0, 1, 2].map(|k| e.0.block_params(quadrant)[k]);
-    let (s, c) = e.kernels(y0, y1, true);
-    let n = e.0.ins().fcvt_to_sint_sat(types::I64, f);
-    let odd = e.0.ins().band_imm_u(n, 1);
-    let odd = e.cmp(NotEqual, odd, 0);
-    let half = e.0.ins().band_imm_u(n, 2);
-    let flip_sin = e.cmp(NotEqual, half, 0);
-    let next = e.0.ins().iadd_imm_u(n, 1);
-    let next = e.0.ins().band_imm_u(next, 2);
-    let flip_cos = e.cmp(NotEqual, next, 0);
-    let sin = e.sel(odd, c, s);
-    let cos = e.sel(odd, s, c);
-    let (neg_sin, neg_cos) = (e.0.ins().fneg(sin), e.0.ins().fneg(cos));
-    let sin = e.sel(flip_sin, neg_sin, sin);
-    let cos = e.sel(flip_cos, neg_cos, cos);
-    e.0.ins()
-        .jump(done, &[BlockArg::Value(sin), BlockArg::Value(cos)]);
+    e.by_quadrant(quadrant, done);
 
     e.enter(done);
     (e.0.block_params(done)[0], e.0.block_params(done)[1])
