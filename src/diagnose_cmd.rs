@@ -365,9 +365,10 @@ fn say_chain(
                     r.ir.name,
                     step.effect
                 ));
-                if let Ok(m) = eff
+                if let Some(m) = eff
                     .apply(&model, &vals)
-                    .and_then(|t| Model::parse(&spec.path, &t).map_err(|e| e.to_string()))
+                    .ok()
+                    .and_then(|t| Model::parse(&spec.path, &t).ok())
                 {
                     model = m;
                 }

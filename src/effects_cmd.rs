@@ -138,7 +138,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
         if a.laps == 0 {
             return Err("--laps 0: at least one lap".into());
         }
-        let traj: Trajectory = a.trajectory.parse()?;
+        let traj: Trajectory = a.trajectory.parse().map_err(|e| format!("{e}"))?;
         let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
         let (base, truth) = base_and_truth(&a.spec, &a.effect, &sets, &a.catalogue.effects)?;
         let landmarks = match (&a.landmarks, &a.observations) {
@@ -279,7 +279,7 @@ pub fn run_add_effect(
             "added `{effect}` to {} -> {}:\n{}",
             spec.display(),
             out.display(),
-            eff.spec_change(&model, &vals)?
+            eff.spec_change(&model, &vals).map_err(|e| e.to_string())?
         ))
     };
     match go() {

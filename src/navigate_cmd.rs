@@ -77,16 +77,18 @@ fn calibrate(method: &str, belief: &Runner, truth: &Runner) -> Result<(Vec<f64>,
     }
     let fo = kinegen_analysis::fit::FitOptions::default();
     let m = by_name(method).expect("clap checked the name");
-    let c = m.calibrate(
-        belief,
-        &runs,
-        &Settings {
-            side: 1.0,
-            mu: 0.01,
-            fit: &fo,
-            hidden: 0,
-        },
-    )?;
+    let c = m
+        .calibrate(
+            belief,
+            &runs,
+            &Settings {
+                side: 1.0,
+                mu: 0.01,
+                fit: &fo,
+                hidden: 0,
+            },
+        )
+        .map_err(|e| e.to_string())?;
     Ok((c.p, c.note))
 }
 
@@ -145,7 +147,7 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
     let before = match drive(&grid, &belief, &truth, &o) {
         Ok(d) => d,
         // (the grid's errors name it themselves; the rest is the spec's)
-        Err(e) if e.starts_with("--cell") => return bad(e),
+        Err(e @ kinegen_analysis::navigate::NavigateError::CellTooLarge { .. }) => return bad(e),
         Err(e) => return bad(format!("{}: {e}", a.spec.display())),
     };
     out.say(&format!(

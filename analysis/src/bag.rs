@@ -452,7 +452,7 @@ fn landmark_detections(
             Stamps::Receive => raw.log_time as f64 * 1e-9,
             Stamps::Header => stamp
                 .values(&v)
-                .map_err(&here)?
+                .map_err(|e| here(e.to_string()))?
                 .first()
                 .and_then(|s| s.as_time())
                 .ok_or_else(|| {
@@ -462,7 +462,7 @@ fn landmark_detections(
                     ))
                 })?,
         };
-        let get = |p: &crate::rosdyn::FieldPath| p.values(&v).map_err(&here);
+        let get = |p: &crate::rosdyn::FieldPath| p.values(&v).map_err(|e| here(e.to_string()));
         let (ids, a, b) = (get(&id)?, get(&polar.0)?, get(&polar.1)?);
         let n = ids.len().max(a.len()).max(b.len());
         for (what, vals) in [(&id, &ids), (&polar.0, &a), (&polar.1, &b)] {

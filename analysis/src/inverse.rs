@@ -114,8 +114,22 @@ const MISS_REL: f64 = 0.25;
 /// Stretches closer than this (s) are one stretch.
 const MERGE_GAP_S: f64 = 1.0;
 
+/// Why a path's inputs cannot be computed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProfileError {
+    #[error(transparent)]
+    NoInverse(#[from] kinegen_model::ir::NoInverse),
+    #[error("{}: the inverse of the step at t = {t} s gives a non-finite `{input}` (a turn of {turn:.3} rad in one step: the path needs more rows)", file.display())]
+    NotFinite {
+        file: std::path::PathBuf,
+        t: f64,
+        input: String,
+        turn: f64,
+    },
+}
+
 /// The input profile of `path` for the model of `r`.
-pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, String> {
+pub fn profile(r: &Runner, path: &PlannedPath) -> Result<Profile, ProfileError> {
     let steps = solve_steps(r, path)?;
     let n = path.t.len() - 1;
     let t: Vec<f64> = path.t[..n].to_vec();
@@ -190,8 +204,8 @@ struct Steps {
 
 /// The inverse kinematics of every step of `path`, the configuration
 /// (caster angles, a steering angle) carried from step to step.
-fn solve_steps(r: &Runner, path: &PlannedPath) -> Result<Steps, String> {
-    let inv = r.ir.inverse_increment().map_err(|e| e.to_string())?;
+fn solve_steps(r: &Runner, path: &PlannedPath) -> Result<Steps, ProfileError> {
+    let inv = r.ir.inverse_increment()?;
     let step = r.ir.step(StepForm::Exact).value;
     let names = &inv.row_names;
     // configuration inputs (steering angles of caster wheels) the inverse starts from
@@ -247,13 +261,12 @@ fn solve_steps(r: &Runner, path: &PlannedPath) -> Result<Steps, String> {
         let mut u = inv.eval(&args);
         u.extend(solve_idx.iter().map(|&k| tw_cfg[k]));
         if let Some(i) = u.iter().position(|v| !v.is_finite()) {
-            return Err(format!(
-                "{}: the inverse of the step at t = {} s gives a non-finite `{}` (a turn of {:.3} rad in one step: the path needs more rows)",
-                path.file.display(),
-                path.t[k],
-                names[i],
-                dpose[2]
-            ));
+            return Err(ProfileError::NotFinite {
+                file: path.file.clone(),
+                t: path.t[k],
+                input: names[i].clone(),
+                turn: dpose[2],
+            });
         }
         for (cv, name) in cfg.iter_mut().zip(&cfg_names) {
             if let Some(i) = names.iter().position(|x| x == name) {

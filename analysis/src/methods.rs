@@ -23,6 +23,17 @@ pub struct Settings<'a> {
 /// A learned yaw rate (rad/s) from one step's inputs: a virtual gyro.
 pub type YawRateModel = crate::track_rows::LearnedYawRate;
 
+/// Why a method does not apply to these logs or this model.
+#[derive(Debug, thiserror::Error)]
+pub enum MethodError {
+    #[error(transparent)]
+    Fit(#[from] crate::fit::FitError),
+    #[error(transparent)]
+    Seed(#[from] crate::seed_methods::SeedError),
+    #[error(transparent)]
+    Neural(#[from] crate::neural::TrainError),
+}
+
 /// One method's outcome.
 pub struct Calibration {
     pub p: Vec<f64>,
@@ -46,7 +57,8 @@ pub trait Method: Sync {
     fn about(&self) -> &'static str;
     /// Calibrate `r`'s free parameters from `r.p`; Err says why the method does
     /// not apply to these logs or this model.
-    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String>;
+    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings)
+        -> Result<Calibration, MethodError>;
     /// Run once per `--hidden` size (named `NAME-SIZE`).
     fn per_hidden_size(&self) -> bool {
         false
@@ -74,8 +86,13 @@ impl Method for Lm {
     fn about(&self) -> &'static str {
         "Levenberg-Marquardt on pose, gyro and landmark residuals"
     }
-    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
-        let res = fit(r, runs, s.fit).map_err(|e| e.to_string())?;
+    fn calibrate(
+        &self,
+        r: &Runner,
+        runs: &[Run],
+        s: &Settings,
+    ) -> Result<Calibration, MethodError> {
+        let res = fit(r, runs, s.fit)?;
         Ok(Calibration {
             p: res.p.clone(),
             std: res.std.clone(),
@@ -93,7 +110,12 @@ impl Method for Gd {
     fn about(&self) -> &'static str {
         "gradient descent on the yaw-rate error, seed 000 eq. 19-21"
     }
-    fn calibrate(&self, r: &Runner, runs: &[Run], _: &Settings) -> Result<Calibration, String> {
+    fn calibrate(
+        &self,
+        r: &Runner,
+        runs: &[Run],
+        _: &Settings,
+    ) -> Result<Calibration, MethodError> {
         let g = gradient_descent(r, runs, 2000)?;
         let note = format!(
             "{} iterations, yaw-rate cost {:.3e} -> {:.3e}{}",
@@ -119,7 +141,12 @@ impl Method for Ekf {
     fn about(&self) -> &'static str {
         "parameter EKF on the yaw rate, seed 000 eq. 22-26"
     }
-    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
+    fn calibrate(
+        &self,
+        r: &Runner,
+        runs: &[Run],
+        s: &Settings,
+    ) -> Result<Calibration, MethodError> {
         let sigma_omega = r
             .obs_sigma(YawRate)
             .and_then(|s| s.first().copied())
@@ -151,7 +178,12 @@ impl Method for UmbMark {
     fn about(&self) -> &'static str {
         "Borenstein & Feng, differential drive, cw and ccw square runs of side --side"
     }
-    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
+    fn calibrate(
+        &self,
+        r: &Runner,
+        runs: &[Run],
+        s: &Settings,
+    ) -> Result<Calibration, MethodError> {
         let u = umbmark(r, runs, s.side)?;
         Ok(Calibration {
             p: u.p,
@@ -176,7 +208,12 @@ impl Method for Neural {
     fn per_hidden_size(&self) -> bool {
         true
     }
-    fn calibrate(&self, r: &Runner, runs: &[Run], s: &Settings) -> Result<Calibration, String> {
+    fn calibrate(
+        &self,
+        r: &Runner,
+        runs: &[Run],
+        s: &Settings,
+    ) -> Result<Calibration, MethodError> {
         let angles: Vec<bool> =
             r.ir.inputs
                 .iter()

@@ -72,6 +72,24 @@ fn wrap(a: f64) -> f64 {
     crate::log::wrap(a)
 }
 
+/// A drive that cannot start.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NavigateError {
+    #[error("model `{0}` cannot turn in place: seed 004's moves turn toward the next cell first")]
+    CannotSpin(String),
+    #[error("--cell {cell:e} m: a move to the next cell would take {steps:.3e} integration steps of {dt} s at {speed} m/s (at most {MAX_STEPS_PER_MOVE:.0e}): cells are about the robot's size (seed 004: 7 cm for the e-puck)")]
+    CellTooLarge {
+        cell: f64,
+        steps: f64,
+        dt: f64,
+        speed: f64,
+    },
+    #[error(transparent)]
+    NoInverse(#[from] kinegen_model::ir::NoInverse),
+    #[error("actuation noise {0} is not a standard deviation")]
+    Actuation(f64),
+}
+
 /// Drive `grid`'s path with the believed model `belief` on the real robot
 /// `truth` (same spec, true parameter values).
 pub fn drive(
@@ -79,32 +97,32 @@ pub fn drive(
     belief: &Runner,
     truth: &Runner,
     o: &NavOptions,
-) -> Result<Drive, String> {
+) -> Result<Drive, NavigateError> {
     if !crate::simulate::can_spin(belief) {
-        return Err(format!(
-            "model `{}` cannot turn in place: seed 004's moves turn toward the next cell first",
-            belief.ir.name
-        ));
+        return Err(NavigateError::CannotSpin(belief.ir.name.clone()));
     }
     // one move to a diagonal neighbour, in integration steps: a cell of 1e300 m
     // made each move allocate until the process aborted
     let per_move = grid.cell * std::f64::consts::SQRT_2 / (o.speed * o.dt);
     if per_move.is_nan() || per_move > MAX_STEPS_PER_MOVE {
-        return Err(format!(
-            "--cell {:e} m: a move to the next cell would take {per_move:.3e} integration steps of {} s at {} m/s (at most {MAX_STEPS_PER_MOVE:.0e}): cells are about the robot's size (seed 004: 7 cm for the e-puck)",
-            grid.cell, o.dt, o.speed
-        ));
+        return Err(NavigateError::CellTooLarge {
+            cell: grid.cell,
+            steps: per_move,
+            dt: o.dt,
+            speed: o.speed,
+        });
     }
     let mut mover = Mover {
         grid,
         belief,
         truth,
         o,
-        inv: belief.ir.inverse_increment().map_err(|e| e.to_string())?,
+        inv: belief.ir.inverse_increment()?,
         step_b: belief.ir.step(StepForm::Exact).value,
         step_t: truth.ir.step(StepForm::Exact).value,
         rng: rand::rngs::SmallRng::seed_from_u64(o.seed),
-        noise: Normal::new(0.0, o.actuation.max(0.0)).map_err(|e| e.to_string())?,
+        noise: Normal::new(0.0, o.actuation.max(0.0))
+            .map_err(|_| NavigateError::Actuation(o.actuation))?,
         touching: false,
         in_safety: false,
     };

@@ -113,6 +113,15 @@ fn mean_std(v: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
     (m, if s > 1e-12 { s } else { 1.0 })
 }
 
+/// Why the network cannot be trained on the runs.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrainError {
+    #[error("--hidden: at least one hidden unit")]
+    NoHiddenUnit,
+    #[error("neural gyrodometry learns the yaw rate from a gyro: the runs have {steps} steps with a gyro, too few for {hidden} hidden units")]
+    TooFewSteps { steps: usize, hidden: usize },
+}
+
 /// Train a network with `hidden` tanh units on the runs' gyro; `angles` marks
 /// the inputs that are absolute angles.
 pub fn train(
@@ -120,16 +129,16 @@ pub fn train(
     angles: &[bool],
     hidden: usize,
     seed: u64,
-) -> Result<(Mlp, Training), String> {
+) -> Result<(Mlp, Training), TrainError> {
     if hidden == 0 {
-        return Err("--hidden: at least one hidden unit".into());
+        return Err(TrainError::NoHiddenUnit);
     }
     let ((xs, ys), (xv, yv)) = samples(runs, angles);
     if xs.len() < 10 * hidden || xv.is_empty() {
-        return Err(format!(
-            "neural gyrodometry learns the yaw rate from a gyro: the runs have {} steps with a gyro, too few for {hidden} hidden units",
-            xs.len() + xv.len()
-        ));
+        return Err(TrainError::TooFewSteps {
+            steps: xs.len() + xv.len(),
+            hidden,
+        });
     }
     let data = Standardised::new(&xs, &ys, &xv, &yv);
     let shape = Shape {
@@ -404,8 +413,8 @@ mod tests {
     fn refuses_runs_without_a_gyro() {
         let mut r = run(200);
         r.gyro = None;
-        assert!(train(&[r], &[false, false], 9, 1)
-            .unwrap_err()
-            .contains("gyro"));
+        let e = train(&[r], &[false, false], 9, 1).unwrap_err();
+        assert!(matches!(e, TrainError::TooFewSteps { steps: 0, .. }), "{e}");
+        assert!(e.to_string().contains("gyro"), "{e}");
     }
 }

@@ -101,8 +101,37 @@ fn prim(name: &str) -> Option<Prim> {
     })
 }
 
+/// A message definition kinegen cannot read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SchemaError {
+    #[error("definition line {line}: `{text}` is not `type name`")]
+    NotAField { line: usize, text: String },
+    #[error("definition line {line}: array size in `{ty}`")]
+    ArraySize { line: usize, ty: String },
+    #[error("definition line {0}: `wstring` fields are not supported")]
+    WideString(usize),
+    #[error("a section of the definition starts with `{0}`, not `MSG: pkg/Type`")]
+    Section(String),
+    #[error("`{0}` nests deeper than 32 levels (a type that contains itself?)")]
+    TooDeep(String),
+    #[error("the definition does not define `{0}`")]
+    Undefined(String),
+}
+
+/// A message that does not decode by its schema.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    #[error("{0} bytes: not a CDR message")]
+    TooShort(usize),
+    #[error("unknown CDR encapsulation {0}")]
+    Encapsulation(u8),
+    /// The body, as the CDR reader says.
+    #[error("{0}")]
+    Body(String),
+}
+
 /// The fields of one message definition (`package` resolves bare type names).
-fn parse_fields(text: &str, package: &str) -> Result<Vec<Field>, String> {
+fn parse_fields(text: &str, package: &str) -> Result<Vec<Field>, SchemaError> {
     let mut fields = Vec::new();
     for (n, raw) in text.lines().enumerate() {
         let line = raw.split('#').next().unwrap_or("").trim();
@@ -111,10 +140,10 @@ fn parse_fields(text: &str, package: &str) -> Result<Vec<Field>, String> {
         }
         let mut words = line.split_whitespace();
         let (Some(ty), Some(rest)) = (words.next(), words.next()) else {
-            return Err(format!(
-                "definition line {}: `{raw}` is not `type name`",
-                n + 1
-            ));
+            return Err(SchemaError::NotAField {
+                line: n + 1,
+                text: raw.to_string(),
+            });
         };
         // a constant (`int32 MAX=5`, `int32 MAX = 5`) is not in the message's bytes
         if rest.contains('=') || words.next() == Some("=") {
@@ -124,22 +153,19 @@ fn parse_fields(text: &str, package: &str) -> Result<Vec<Field>, String> {
             None => (ty, Arity::One),
             Some(i) => {
                 let inside = ty[i + 1..].trim_end_matches(']');
-                let arity =
-                    if inside.is_empty() || inside.starts_with("<=") {
-                        Arity::Seq
-                    } else {
-                        Arity::Fixed(inside.parse().map_err(|_| {
-                            format!("definition line {}: array size in `{ty}`", n + 1)
-                        })?)
-                    };
+                let arity = if inside.is_empty() || inside.starts_with("<=") {
+                    Arity::Seq
+                } else {
+                    Arity::Fixed(inside.parse().map_err(|_| SchemaError::ArraySize {
+                        line: n + 1,
+                        ty: ty.to_string(),
+                    })?)
+                };
                 (&ty[..i], arity)
             }
         };
         if base.starts_with("wstring") {
-            return Err(format!(
-                "definition line {}: `wstring` fields are not supported",
-                n + 1
-            ));
+            return Err(SchemaError::WideString(n + 1));
         }
         let ty = match prim(base) {
             Some(p) => Ty::Prim(p),
@@ -167,7 +193,7 @@ fn capitalise(s: &str) -> String {
 impl Schema {
     /// Parse the definition of `name` (`pkg/msg/Name`) with the definitions of
     /// the types it uses, in sections after `====` lines headed `MSG: pkg/Type`.
-    pub fn parse(name: &str, text: &str) -> Result<Schema, String> {
+    pub fn parse(name: &str, text: &str) -> Result<Schema, SchemaError> {
         let root = full_name(name, "");
         let package = |n: &str| n.split('/').next().unwrap_or("").to_string();
         let mut types = HashMap::new();
@@ -192,9 +218,7 @@ impl Schema {
                 continue;
             };
             let Some(n) = head.trim().strip_prefix("MSG:") else {
-                return Err(format!(
-                    "a section of the definition starts with `{head}`, not `MSG: pkg/Type`"
-                ));
+                return Err(SchemaError::Section(head.to_string()));
             };
             let n = full_name(n.trim(), "");
             let body = &s[head.len()..];
@@ -217,16 +241,14 @@ impl Schema {
     }
 
     /// Every nested type is defined, and none contains itself.
-    fn check(&self, name: &str, depth: usize) -> Result<(), String> {
+    fn check(&self, name: &str, depth: usize) -> Result<(), SchemaError> {
         if depth > 32 {
-            return Err(format!(
-                "`{name}` nests deeper than 32 levels (a type that contains itself?)"
-            ));
+            return Err(SchemaError::TooDeep(name.to_string()));
         }
         let fields = self
             .types
             .get(name)
-            .ok_or_else(|| format!("the definition does not define `{name}`"))?;
+            .ok_or_else(|| SchemaError::Undefined(name.to_string()))?;
         for f in fields {
             if let Ty::Msg(m) = &f.ty {
                 self.check(m, depth + 1)?;
@@ -236,9 +258,9 @@ impl Schema {
     }
 
     /// Decode one CDR message (4-byte encapsulation header, then the body).
-    pub fn decode(&self, data: &[u8]) -> Result<Value, String> {
+    pub fn decode(&self, data: &[u8]) -> Result<Value, DecodeError> {
         let Some((head, body)) = data.split_at_checked(4) else {
-            return Err(format!("{} bytes: not a CDR message", data.len()));
+            return Err(DecodeError::TooShort(data.len()));
         };
         let seed = Elem {
             schema: self,
@@ -253,9 +275,9 @@ impl Schema {
             1 | 3 => seed.deserialize(&mut cdr::Deserializer::<_, _, cdr::LittleEndian>::new(
                 body, limit,
             )),
-            k => return Err(format!("unknown CDR encapsulation {k}")),
+            k => return Err(DecodeError::Encapsulation(k)),
         };
-        value.map_err(|e| e.to_string())
+        value.map_err(|e| DecodeError::Body(e.to_string()))
     }
 }
 
@@ -486,34 +508,76 @@ pub struct FieldPath {
     steps: Vec<Step>,
 }
 
+/// A field path that is not one, or that a message does not have. Each
+/// names the path as the user wrote it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PathError {
+    #[error("`{path}`: `{part}` is not a field name")]
+    FieldName { path: String, part: String },
+    #[error("`{path}`: `{rest}` is not `[]` or `[index]`")]
+    Brackets { path: String, rest: String },
+    #[error("`{path}`: `[{inside}]` is not an index")]
+    Index { path: String, inside: String },
+    #[error("`{0}`: at most one `[]` per path")]
+    SeveralEach(String),
+    /// `at` is the part of the path that was found ("" for the message).
+    #[error("`{path}`: {} has no field `{field}` (it has: {})", if at.is_empty() { "the message".to_string() } else { format!("`{at}`") }, has.join(", "))]
+    NoField {
+        path: String,
+        at: String,
+        field: String,
+        has: Vec<String>,
+    },
+    #[error("`{path}`: `{at}` has {len} elements, no [{index}]")]
+    OutOfRange {
+        path: String,
+        at: String,
+        len: usize,
+        index: usize,
+    },
+    #[error("`{path}`: `{at}` is not a message, so it has no field `{field}`")]
+    NotMessage {
+        path: String,
+        at: String,
+        field: String,
+    },
+    #[error("`{path}`: `{at}` is not an array")]
+    NotArray { path: String, at: String },
+}
+
 impl FieldPath {
-    pub fn parse(text: &str) -> Result<FieldPath, String> {
+    pub fn parse(text: &str) -> Result<FieldPath, PathError> {
         let mut steps = Vec::new();
         for part in text.split('.') {
             let (name, mut rest) = part.split_at(part.find('[').unwrap_or(part.len()));
             if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-                return Err(format!("`{text}`: `{part}` is not a field name"));
+                return Err(PathError::FieldName {
+                    path: text.to_string(),
+                    part: part.to_string(),
+                });
             }
             steps.push(Step::Field(name.to_string()));
             while !rest.is_empty() {
                 let Some(end) = rest.find(']').filter(|_| rest.starts_with('[')) else {
-                    return Err(format!("`{text}`: `{rest}` is not `[]` or `[index]`"));
+                    return Err(PathError::Brackets {
+                        path: text.to_string(),
+                        rest: rest.to_string(),
+                    });
                 };
                 let inside = &rest[1..end];
                 steps.push(if inside.is_empty() {
                     Step::Each
                 } else {
-                    Step::At(
-                        inside
-                            .parse()
-                            .map_err(|_| format!("`{text}`: `[{inside}]` is not an index"))?,
-                    )
+                    Step::At(inside.parse().map_err(|_| PathError::Index {
+                        path: text.to_string(),
+                        inside: inside.to_string(),
+                    })?)
                 });
                 rest = &rest[end + 1..];
             }
         }
         if steps.iter().filter(|s| **s == Step::Each).count() > 1 {
-            return Err(format!("`{text}`: at most one `[]` per path"));
+            return Err(PathError::SeveralEach(text.to_string()));
         }
         Ok(FieldPath {
             text: text.to_string(),
@@ -526,7 +590,7 @@ impl FieldPath {
     }
 
     /// The values at this path (several with `[]`).
-    pub fn values<'v>(&self, v: &'v Value) -> Result<Vec<&'v Value>, String> {
+    pub fn values<'v>(&self, v: &'v Value) -> Result<Vec<&'v Value>, PathError> {
         let mut cur = vec![v];
         for (i, step) in self.steps.iter().enumerate() {
             let shown = || {
@@ -548,42 +612,36 @@ impl FieldPath {
                         match fields.iter().find(|(n, _)| n == f) {
                             Some((_, x)) => next.push(x),
                             None => {
-                                let names: Vec<&str> =
-                                    fields.iter().map(|(n, _)| n.as_str()).collect();
-                                let at = shown();
-                                return Err(format!(
-                                    "`{}`: {} has no field `{f}` (it has: {})",
-                                    self.text,
-                                    if at.is_empty() {
-                                        "the message".to_string()
-                                    } else {
-                                        format!("`{at}`")
-                                    },
-                                    names.join(", ")
-                                ));
+                                return Err(PathError::NoField {
+                                    path: self.text.clone(),
+                                    at: shown(),
+                                    field: f.clone(),
+                                    has: fields.iter().map(|(n, _)| n.clone()).collect(),
+                                });
                             }
                         }
                     }
                     (Step::Each, Value::List(items)) => next.extend(items.iter()),
                     (Step::At(k), Value::List(items)) => {
-                        next.push(items.get(*k).ok_or_else(|| {
-                            format!(
-                                "`{}`: `{}` has {} elements, no [{k}]",
-                                self.text,
-                                shown(),
-                                items.len()
-                            )
+                        next.push(items.get(*k).ok_or_else(|| PathError::OutOfRange {
+                            path: self.text.clone(),
+                            at: shown(),
+                            len: items.len(),
+                            index: *k,
                         })?)
                     }
                     (Step::Field(f), _) => {
-                        return Err(format!(
-                            "`{}`: `{}` is not a message, so it has no field `{f}`",
-                            self.text,
-                            shown()
-                        ))
+                        return Err(PathError::NotMessage {
+                            path: self.text.clone(),
+                            at: shown(),
+                            field: f.clone(),
+                        })
                     }
                     (_, _) => {
-                        return Err(format!("`{}`: `{}` is not an array", self.text, shown()))
+                        return Err(PathError::NotArray {
+                            path: self.text.clone(),
+                            at: shown(),
+                        })
                     }
                 }
             }
@@ -677,7 +735,12 @@ MSG: my_msgs/Detection\nuint16 id # the tag\nfloat64 range\nfloat64 bearing\n";
         assert_eq!(p("extra[2]").values(&v).unwrap()[0].as_f64(), Some(3.0));
         let e = p("detections[].rng").values(&v).unwrap_err();
         assert!(
-            e.contains("no field `rng` (it has: id, range, bearing)"),
+            matches!(&e, PathError::NoField { field, .. } if field == "rng"),
+            "{e}"
+        );
+        assert!(
+            e.to_string()
+                .contains("no field `rng` (it has: id, range, bearing)"),
             "{e}"
         );
         // a truncated message is an error, not a panic or a short answer
@@ -736,7 +799,7 @@ MSG: my_msgs/Nothing\nfloat64[0] none\n";
         b.extend(0xffff_ffffu32.to_le_bytes());
         let t0 = std::time::Instant::now();
         let e = s.decode(&b).unwrap_err();
-        assert!(e.contains("corrupt length"), "{e}");
+        assert!(e.to_string().contains("corrupt length"), "{e}");
         assert!(t0.elapsed().as_secs_f64() < 0.5, "{:?}", t0.elapsed());
         // an honest empty sequence still decodes
         let mut ok = vec![0u8, 1, 0, 0];
@@ -746,12 +809,14 @@ MSG: my_msgs/Nothing\nfloat64[0] none\n";
 
     #[test]
     fn bad_definitions_and_paths_are_refused() {
-        assert!(Schema::parse("a/msg/B", "Missing m\n")
-            .unwrap_err()
-            .contains("does not define `a/msg/Missing`"));
-        assert!(Schema::parse("a/msg/B", "B b\n")
-            .unwrap_err()
-            .contains("deeper"));
+        assert_eq!(
+            Schema::parse("a/msg/B", "Missing m\n").unwrap_err(),
+            SchemaError::Undefined("a/msg/Missing".into())
+        );
+        assert!(matches!(
+            Schema::parse("a/msg/B", "B b\n").unwrap_err(),
+            SchemaError::TooDeep(_)
+        ));
         assert!(FieldPath::parse("a[].b[]").is_err());
         assert!(FieldPath::parse("a[x]").is_err());
         assert!(FieldPath::parse("").is_err());

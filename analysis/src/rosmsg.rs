@@ -147,6 +147,6 @@ pub struct TfMessage {
 
 /// Decode one CDR message (with its 4-byte encapsulation header, as rosbag2
 /// stores it).
-pub fn decode<'de, T: Deserialize<'de>>(data: &'de [u8]) -> Result<T, String> {
-    cdr::deserialize::<T>(data).map_err(|e| e.to_string())
+pub fn decode<'de, T: Deserialize<'de>>(data: &'de [u8]) -> Result<T, cdr::Error> {
+    cdr::deserialize::<T>(data)
 }

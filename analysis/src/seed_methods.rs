@@ -185,15 +185,30 @@ fn without_blind_moves(r: &Runner, from: &[f64], p: Vec<f64>, runs: &[Run]) -> V
     out
 }
 
+/// Why a seed paper's calibration cannot run on the runs.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SeedError {
+    #[error("no yaw-rate measurement (gyro_z or ground-truth heading) in the logs")]
+    NoYawRate,
+    #[error("UMBMark needs a differential drive with parameters r_r, r_l and b")]
+    NotDifferential,
+    #[error("{0}: UMBMark needs ground truth")]
+    NoGroundTruth(String),
+    #[error("{path}: UMBMark needs a bidirectional square test (one square of side --side per run, cw and ccw runs); {why}")]
+    NotASquare { path: String, why: String },
+    #[error("UMBMark needs clockwise and counter-clockwise square runs (got {cw} cw, {ccw} ccw)")]
+    OneDirection { cw: usize, ccw: usize },
+}
+
 /// Seed 000 eq. 21: lambda_n = lambda_{n-1} - eta dV/dlambda. eta is fixed, set
 /// once to 1/L with L the largest eigenvalue of the Gauss-Newton Hessian of V at
 /// the start (the classical stable step for gradient descent).
-pub fn gradient_descent(r: &Runner, runs: &[Run], max_iter: usize) -> Result<SeedFit, String> {
+pub fn gradient_descent(r: &Runner, runs: &[Run], max_iter: usize) -> Result<SeedFit, SeedError> {
     let free = r.free.clone();
     let mut p = r.p.clone();
     let (v0, _, h0) = gyro_cost(r, &p, runs, &free);
     if !v0.is_finite() {
-        return Err("no yaw-rate measurement (gyro_z or ground-truth heading) in the logs".into());
+        return Err(SeedError::NoYawRate);
     }
     let lmax = h0.symmetric_eigenvalues().max().max(1e-300);
     let eta = 1.0 / lmax;
@@ -259,7 +274,7 @@ fn prior_std(r: &Runner, i: usize) -> f64 {
 /// sigma_v^2 = sigma_omega^2 + mu^2. P0 = diag(prior_std^2) (10% of each value;
 /// seed 000 used (5 cm)^2 for parameters of about 5-38 cm).
 #[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
-pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFit, String> {
+pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFit, SeedError> {
     let free = r.free.clone();
     let m = free.len();
     let mut p = r.p.clone();
@@ -298,7 +313,7 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
         }
     }
     if steps == 0 {
-        return Err("no yaw-rate measurement (gyro_z or ground-truth heading) in the logs".into());
+        return Err(SeedError::NoYawRate);
     }
     let p = without_blind_moves(r, &r.p, p, runs);
     let (vf, _, _) = gyro_cost(r, &p, runs, &free);
@@ -315,7 +330,7 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
 /// once in one direction: four 90 degree turns (a full turn in all), a path of
 /// four sides, and a return to the start. Anything else (a circle, a free path,
 /// a wrong `--side`) would give corrections that look precise and mean nothing.
-fn square_check(run: &Run, gt: &[[f64; 3]], side: f64) -> Result<(), String> {
+fn square_check(run: &Run, gt: &[[f64; 3]], side: f64) -> Result<(), SeedError> {
     let turn = (gt.last().unwrap()[2] - gt[0][2]).abs().to_degrees();
     // every n/200-th row, so measurement noise does not add length
     let every = (gt.len() / 200).max(1);
@@ -352,10 +367,10 @@ fn square_check(run: &Run, gt: &[[f64; 3]], side: f64) -> Result<(), String> {
         None
     };
     match problem {
-        Some(why) => Err(format!(
-            "{}: UMBMark needs a bidirectional square test (one square of side --side per run, cw and ccw runs); {why}",
-            run.path
-        )),
+        Some(why) => Err(SeedError::NotASquare {
+            path: run.path.clone(),
+            why,
+        }),
         None => Ok(()),
     }
 }
@@ -377,23 +392,21 @@ pub struct Umbmark {
 /// beta = (x_cw - x_ccw)/(-4L); R = (L/2)/sin(beta/2); Ed = (R + b/2)/(R - b/2);
 /// Eb = 90 deg/(90 deg - alpha). Corrections: b' = Eb b, r_l' = 2/(Ed + 1) r_l,
 /// r_r' = 2/(1/Ed + 1) r_r. Needs parameters named r_r, r_l and b.
-pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
+pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, SeedError> {
     let (ir_, il, ib) = match (
         r.param_index("r_r"),
         r.param_index("r_l"),
         r.param_index("b"),
     ) {
         (Some(a), Some(b), Some(c)) => (a, b, c),
-        _ => {
-            return Err("UMBMark needs a differential drive with parameters r_r, r_l and b".into())
-        }
+        _ => return Err(SeedError::NotDifferential),
     };
     let (mut cw, mut ccw) = (Vec::new(), Vec::new());
     for run in runs {
         let gt = run
             .gt
             .as_ref()
-            .ok_or_else(|| format!("{}: UMBMark needs ground truth", run.name))?;
+            .ok_or_else(|| SeedError::NoGroundTruth(run.name.clone()))?;
         square_check(run, gt, side)?;
         let start = run.start_pose();
         let tr = deadreckon::run(r, &r.p, run, false);
@@ -415,11 +428,10 @@ pub fn umbmark(r: &Runner, runs: &[Run], side: f64) -> Result<Umbmark, String> {
         }
     }
     if cw.is_empty() || ccw.is_empty() {
-        return Err(format!(
-            "UMBMark needs clockwise and counter-clockwise square runs (got {} cw, {} ccw)",
-            cw.len(),
-            ccw.len()
-        ));
+        return Err(SeedError::OneDirection {
+            cw: cw.len(),
+            ccw: ccw.len(),
+        });
     }
     let mean = |v: &[[f64; 2]]| v.iter().map(|e| e[0]).sum::<f64>() / v.len() as f64;
     let (xcw, xccw) = (mean(&cw), mean(&ccw));

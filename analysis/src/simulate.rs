@@ -35,9 +35,14 @@ pub enum Trajectory {
     Beacons,
 }
 
+/// A trajectory name `simulate` does not know.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("unknown trajectory `{0}` (square, square-cw, square-ccw, figure8, random, spin, beacons)")]
+pub struct UnknownTrajectory(pub String);
+
 impl std::str::FromStr for Trajectory {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownTrajectory;
+    fn from_str(s: &str) -> Result<Self, UnknownTrajectory> {
         match s {
             "square" | "umbmark" => Ok(Trajectory::Square),
             "square-cw" => Ok(Trajectory::SquareCw),
@@ -46,9 +51,7 @@ impl std::str::FromStr for Trajectory {
             "random" => Ok(Trajectory::Random),
             "spin" | "turn-in-place" => Ok(Trajectory::Spin),
             "beacons" => Ok(Trajectory::Beacons),
-            _ => Err(format!(
-                "unknown trajectory `{s}` (square, square-cw, square-ccw, figure8, random, spin, beacons)"
-            )),
+            _ => Err(UnknownTrajectory(s.to_string())),
         }
     }
 }

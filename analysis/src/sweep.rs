@@ -93,24 +93,29 @@ fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
     }
 }
 
+/// Why the sweep cannot run.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum SweepError {
+    #[error("model `{0}` declares no [[noise]]: there is nothing to sweep")]
+    NoNoise(String),
+    #[error("{0}: the sweep re-observes the log's landmark observations, and it has none")]
+    NoSightings(String),
+    #[error(transparent)]
+    Filter(#[from] crate::localize::LocalizeError),
+}
+
 /// The sweep over every `[[noise]]` channel and level in `levels`.
 pub fn sweep(
     r: &Runner,
     run: &Run,
     levels: &[f64],
     base: &EkfOptions,
-) -> Result<Vec<SweepPoint>, String> {
+) -> Result<Vec<SweepPoint>, SweepError> {
     if r.ir.noise.is_empty() {
-        return Err(format!(
-            "model `{}` declares no [[noise]]: there is nothing to sweep",
-            r.ir.name
-        ));
+        return Err(SweepError::NoNoise(r.ir.name.clone()));
     }
     if run.landmarks.is_empty() {
-        return Err(format!(
-            "{}: the sweep re-observes the log's landmark observations, and it has none",
-            run.path
-        ));
+        return Err(SweepError::NoSightings(run.path.clone()));
     }
     let spec_sigma: Vec<f64> =
         r.ir.noise
@@ -144,7 +149,7 @@ pub fn sweep(
             let (mut pos, mut head, mut nees) = (0.0, 0.0, 0.0);
             for s in 0..SEEDS {
                 let sim = resimulate(r, run, &sigmas, 1000 * (c as u64 + 1) + 100 * l as u64 + s);
-                let loc = localize(r, &sim, &o).map_err(|e| e.to_string())?;
+                let loc = localize(r, &sim, &o)?;
                 let g = sim.gt.as_ref().unwrap();
                 let n = g.len() as f64;
                 pos += (loc

@@ -901,10 +901,25 @@ fn inverse_kinematics(
     } else {
         match cx.derived()? {
             Ok(solved) => solved,
-            Err(reason) => return Ok(Inverse::Unavailable(reason)),
+            Err(reason) => return Ok(Inverse::Unavailable(reason.to_string())),
         }
     };
     Ok(Inverse::Derived(cx.specs(solved, ap, adt)?))
+}
+
+/// Why no inverse kinematics can be derived from a twist (a spec may still
+/// declare one).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NoInverse {
+    #[error("the twist is not linear in any input (no cumulative input, and no absolute input enters it linearly), so it cannot be inverted symbolically; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)")]
+    NotLinear,
+    #[error("cannot derive inverse kinematics: {linear_rows} twist row(s) are linear in the {needed} input(s) it would give ({}), {needed} needed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)", inputs.join(", "))]
+    TooFewRows {
+        linear_rows: usize,
+        /// The inputs the inverse would give, and how many rows that needs.
+        inputs: Vec<String>,
+        needed: usize,
+    },
 }
 
 /// An inverse found: the inputs it gives (expressions of the twist), their
@@ -1100,7 +1115,7 @@ impl<'a> InverseCx<'a> {
     /// omega first, then vy). The other rows follow from the inputs, as y does in
     /// seed 001 eq. 12 (and the lateral slip of an effect-augmented model).
     /// Err(reason) where no inverse can be derived.
-    fn derived(&self) -> Result<Result<Solved, String>, SourceError> {
+    fn derived(&self) -> Result<Result<Solved, NoInverse>, SourceError> {
         let model = self.model;
         let rate_syms = &self.rate_syms;
         let linear = |t: &Atom| {
@@ -1128,15 +1143,13 @@ impl<'a> InverseCx<'a> {
             }
             let rates = &self.rates;
             if rates.is_empty() {
-                return Ok(Err("the twist is not linear in any input (no cumulative input, and no absolute input enters it linearly), so it cannot be inverted symbolically; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)".into()));
+                return Ok(Err(NoInverse::NotLinear));
             }
-            return Ok(Err(format!(
-                "cannot derive inverse kinematics: {} twist row(s) are linear in the {} input(s) it would give ({}), {} needed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)",
-                candidates.len(),
-                k,
-                rates.iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", "),
-                k
-            )));
+            return Ok(Err(NoInverse::TooFewRows {
+                linear_rows: candidates.len(),
+                inputs: rates.iter().map(|i| i.name.clone()).collect(),
+                needed: k,
+            }));
         };
         let outs: Vec<Atom> = (0..rows.len())
             .map(|i| {

@@ -82,27 +82,41 @@ fn wait_for_symbolica_permit() {
     }
 }
 
+/// A job on the symbolica thread that did not return.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ThreadError {
+    /// The job panicked (with this message); the thread lives on.
+    #[error("{0}")]
+    Panicked(String),
+    /// The thread could not take the job or answer it.
+    #[error("the symbolica thread is gone: {0}")]
+    Gone(String),
+}
+
 /// Run `f` on the process's symbolica thread and wait for its result. A panic in
 /// `f` is caught there (the thread survives for the next job) and returned as Err.
 pub fn on_symbolica_thread<T: Send + 'static>(
     f: impl FnOnce() -> T + Send + 'static,
-) -> Result<T, String> {
+) -> Result<T, ThreadError> {
     let (tx, rx) = channel();
     let job: Job = Box::new(move || {
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
-            p.downcast_ref::<String>()
-                .cloned()
-                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_default()
+            ThreadError::Panicked(
+                p.downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default(),
+            )
         });
         let _ = tx.send(r);
     });
+    let gone = |e: String| ThreadError::Gone(e);
     worker()
         .lock()
-        .map_err(|e| e.to_string())?
+        .map_err(|e| gone(e.to_string()))?
         .send(job)
-        .map_err(|e| e.to_string())?;
-    rx.recv().map_err(|e| e.to_string())?
+        .map_err(|e| gone(e.to_string()))?;
+    rx.recv().map_err(|e| gone(e.to_string()))?
 }
 
 /// Derive the IR of a validated model (symbolica, on the dedicated thread).

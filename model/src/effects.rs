@@ -157,6 +157,41 @@ pub struct EffectError {
     pub message: String,
 }
 
+/// Why an effect cannot be added to a model.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ApplyError {
+    #[error("unknown effect `{name}` (the catalogue has: {known})")]
+    Unknown { name: String, known: String },
+    #[error(
+        "the effect `{effect}` has no parameter `{parameter}` for this model (it adds: {adds})"
+    )]
+    NoSuchParameter {
+        effect: String,
+        parameter: String,
+        adds: String,
+    },
+    #[error("does not apply: {0}")]
+    NotApplicable(String),
+    /// The spec's text is not the TOML document its model was parsed from.
+    #[error("the spec is not a TOML document: {0}")]
+    NotToml(String),
+    /// A table of the spec does not have the shape the effect edits.
+    #[error("{0}")]
+    Shape(&'static str),
+    #[error("an observation of role {0:?} cannot be created by an effect")]
+    CannotCreate(ObservationRole),
+    /// An expression the substitution reads does not parse.
+    #[error("`{text}`: {message}")]
+    Expression { text: String, message: String },
+    /// The spec with the effect added does not parse; `from` is the effect
+    /// file's line that brings the offending symbol, when found.
+    #[error("adding it gives an invalid spec: {message}{}", from.as_ref().map_or(String::new(), |l| format!(" (from {l})")))]
+    InvalidResult {
+        message: String,
+        from: Option<String>,
+    },
+}
+
 /// Whether an effect applies to a model, and if not, why (for people).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Applicability {
@@ -224,16 +259,17 @@ pub fn catalogue(extra: &[PathBuf]) -> Result<Vec<Effect>, EffectError> {
 }
 
 /// Find an effect by name in a catalogue.
-pub fn find<'a>(cat: &'a [Effect], name: &str) -> Result<&'a Effect, String> {
-    cat.iter().find(|e| e.name == name).ok_or_else(|| {
-        format!(
-            "unknown effect `{name}` (the catalogue has: {})",
-            cat.iter()
+pub fn find<'a>(cat: &'a [Effect], name: &str) -> Result<&'a Effect, ApplyError> {
+    cat.iter()
+        .find(|e| e.name == name)
+        .ok_or_else(|| ApplyError::Unknown {
+            name: name.to_string(),
+            known: cat
+                .iter()
                 .map(|e| e.name.as_str())
                 .collect::<Vec<_>>()
-                .join(", ")
-        )
-    })
+                .join(", "),
+        })
 }
 
 fn parse_effect(file: &Path, text: &str) -> Result<Effect, EffectError> {
@@ -366,12 +402,12 @@ fn add_parameters(
     doc: &mut DocumentMut,
     params: &[AddedParameter],
     values: &BTreeMap<String, f64>,
-) -> Result<(), String> {
+) -> Result<(), ApplyError> {
     let arr = doc
         .entry("parameter")
         .or_insert(Item::ArrayOfTables(ArrayOfTables::new()))
         .as_array_of_tables_mut()
-        .ok_or("`parameter` is not an array of tables")?;
+        .ok_or(ApplyError::Shape("`parameter` is not an array of tables"))?;
     for p in params {
         let mut t = Table::new();
         for (k, v) in &p.table {
@@ -387,7 +423,10 @@ fn add_parameters(
 
 /// Substitute inputs (`sub`) in the definitions, the twist and the
 /// constraint rows.
-fn substitute_inputs(doc: &mut DocumentMut, sub: &BTreeMap<String, String>) -> Result<(), String> {
+fn substitute_inputs(
+    doc: &mut DocumentMut,
+    sub: &BTreeMap<String, String>,
+) -> Result<(), ApplyError> {
     for d in doc
         .get_mut("define")
         .and_then(Item::as_array_of_tables_mut)
@@ -680,26 +719,26 @@ impl Effect {
 
     /// The spec text of `m` with this effect added; `values` set the effect
     /// parameters' nominal values (an unknown name is an error).
-    pub fn apply(&self, m: &Model, values: &BTreeMap<String, f64>) -> Result<String, String> {
+    pub fn apply(&self, m: &Model, values: &BTreeMap<String, f64>) -> Result<String, ApplyError> {
         let params = self.parameters_for(m);
         if let Some(k) = values
             .keys()
             .find(|k| !params.iter().any(|p| &p.name == *k))
         {
-            return Err(format!(
-                "the effect `{}` has no parameter `{k}` for this model (it adds: {})",
-                self.name,
-                params
+            return Err(ApplyError::NoSuchParameter {
+                effect: self.name.clone(),
+                parameter: k.clone(),
+                adds: params
                     .iter()
                     .map(|p| p.name.as_str())
                     .collect::<Vec<_>>()
-                    .join(", ")
-            ));
+                    .join(", "),
+            });
         }
         let mut doc: DocumentMut = m
             .source
             .parse()
-            .map_err(|e: toml_edit::TomlError| e.to_string())?;
+            .map_err(|e: toml_edit::TomlError| ApplyError::NotToml(e.to_string()))?;
         add_parameters(&mut doc, &params, values)?;
         // input substitutions in definitions, the twist (or constraint rows) and observations
         let sub = self.substitutions(m);
@@ -722,11 +761,11 @@ impl Effect {
     }
 
     /// Apply the twist templates over the (substituted) original twist.
-    fn patch_motion(&self, doc: &mut DocumentMut) -> Result<(), String> {
+    fn patch_motion(&self, doc: &mut DocumentMut) -> Result<(), ApplyError> {
         let motion = doc
             .get_mut("motion")
             .and_then(Item::as_table_like_mut)
-            .ok_or("the spec has no [motion] twist to patch")?;
+            .ok_or(ApplyError::Shape("the spec has no [motion] twist to patch"))?;
         let orig: BTreeMap<&str, String> = ["vx", "vy", "omega"]
             .iter()
             .map(|k| {
@@ -761,7 +800,7 @@ impl Effect {
         m: &Model,
         doc: &mut DocumentMut,
         sub: &BTreeMap<String, String>,
-    ) -> Result<(), String> {
+    ) -> Result<(), ApplyError> {
         for (role_key, patch) in &self.observation {
             let role = role_of(role_key).expect("checked when the catalogue was read");
             let target = m.observations.iter().position(|o| o.role == role);
@@ -769,9 +808,11 @@ impl Effect {
                 .entry("observation")
                 .or_insert(Item::ArrayOfTables(ArrayOfTables::new()))
                 .as_array_of_tables_mut()
-                .ok_or("`observation` is not an array of tables")?;
+                .ok_or(ApplyError::Shape("`observation` is not an array of tables"))?;
             let table = match target {
-                Some(i) => obs.get_mut(i).ok_or("observation table not found")?,
+                Some(i) => obs
+                    .get_mut(i)
+                    .ok_or(ApplyError::Shape("observation table not found"))?,
                 None if patch.create => {
                     obs.push(created_observation(m, role)?);
                     obs.get_mut(obs.len() - 1).expect("just pushed")
@@ -839,24 +880,26 @@ impl Effect {
 
     /// The model with this effect added at its nominal values (unchanged when
     /// it is already in); Err says why it does not apply or what went wrong.
-    pub fn added_to(&self, m: &Model) -> Result<Model, String> {
+    pub fn added_to(&self, m: &Model) -> Result<Model, ApplyError> {
         match self.applicability(m) {
             Applicability::AlreadyIn => Ok(m.clone()),
-            Applicability::NotApplicable(why) => Err(format!("does not apply: {why}")),
+            Applicability::NotApplicable(why) => Err(ApplyError::NotApplicable(why)),
             Applicability::Applies => {
                 let text = self.apply(m, &BTreeMap::new())?;
-                Model::parse(&m.path, &text).map_err(|e| {
-                    let at = self
-                        .locate(&e.message)
-                        .map_or(String::new(), |l| format!(" (from {l})"));
-                    format!("adding it gives an invalid spec: {}{at}", e.message)
+                Model::parse(&m.path, &text).map_err(|e| ApplyError::InvalidResult {
+                    from: self.locate(&e.message),
+                    message: e.message,
                 })
             }
         }
     }
 
     /// What adding the effect changes, for people: the lines that differ.
-    pub fn spec_change(&self, m: &Model, values: &BTreeMap<String, f64>) -> Result<String, String> {
+    pub fn spec_change(
+        &self,
+        m: &Model,
+        values: &BTreeMap<String, f64>,
+    ) -> Result<String, ApplyError> {
         let after = self.apply(m, values)?;
         let before: Vec<&str> = m.source.lines().collect();
         let mut s = String::new();
@@ -894,11 +937,9 @@ fn robot_size(m: &Model) -> f64 {
 }
 
 /// A new observation of `role` measuring the body origin, on the contract's columns.
-fn created_observation(m: &Model, role: ObservationRole) -> Result<Table, String> {
+fn created_observation(m: &Model, role: ObservationRole) -> Result<Table, ApplyError> {
     if role != ObservationRole::Pose {
-        return Err(format!(
-            "an observation of role {role:?} cannot be created by an effect"
-        ));
+        return Err(ApplyError::CannotCreate(role));
     }
     let mut t = Table::new();
     let name = if m.observations.iter().any(|o| o.name == "pose") {
@@ -934,8 +975,8 @@ fn to_edit(v: &toml::Value) -> Value {
 /// Rewrite a string value in place, keeping its surrounding whitespace and comment.
 fn edit_str(
     item: Option<&mut Item>,
-    f: impl Fn(&str) -> Result<String, String>,
-) -> Result<(), String> {
+    f: impl Fn(&str) -> Result<String, ApplyError>,
+) -> Result<(), ApplyError> {
     if let Some(v) = item.and_then(Item::as_value_mut) {
         if let Some(s) = v.as_str() {
             let new = f(s)?;
@@ -950,20 +991,19 @@ fn edit_str(
 }
 
 /// Substitute whole identifiers in an expression string (unchanged when none occurs).
-fn subst(src: &str, map: &BTreeMap<String, String>) -> Result<String, String> {
-    let e = expr::parse(src).map_err(|e| format!("`{src}`: {}", e.message))?;
+fn subst(src: &str, map: &BTreeMap<String, String>) -> Result<String, ApplyError> {
+    let unparsed = |text: &str, e: expr::ParseError| ApplyError::Expression {
+        text: text.to_string(),
+        message: e.message,
+    };
+    let e = expr::parse(src).map_err(|e| unparsed(src, e))?;
     if !e.variables().iter().any(|(v, _)| map.contains_key(*v)) {
         return Ok(src.to_string());
     }
     let parsed: BTreeMap<&str, Expr> = map
         .iter()
-        .map(|(k, v)| {
-            Ok((
-                k.as_str(),
-                expr::parse(v).map_err(|e| format!("`{v}`: {}", e.message))?,
-            ))
-        })
-        .collect::<Result<_, String>>()?;
+        .map(|(k, v)| Ok((k.as_str(), expr::parse(v).map_err(|e| unparsed(v, e))?)))
+        .collect::<Result<_, ApplyError>>()?;
     Ok(e.substitute(&|v| parsed.get(v).cloned()).to_source())
 }
 
@@ -1092,10 +1132,14 @@ omega = "radius*(fr + rr - fl - rl)/(2*track)"   # effective track
             w.contains("(fr * (1 + radius_asym))") && w.contains("(rl * (1 - radius_asym))"),
             "{w}"
         );
-        assert!(eff
+        let err = eff
             .apply(&m, &BTreeMap::from([("zz".to_string(), 1.0)]))
-            .unwrap_err()
-            .contains("no parameter `zz`"));
+            .unwrap_err();
+        assert!(
+            matches!(&err, ApplyError::NoSuchParameter { parameter, .. } if parameter == "zz"),
+            "{err}"
+        );
+        assert!(err.to_string().contains("no parameter `zz`"), "{err}");
         assert_eq!(eff.applicability(&after), Applicability::AlreadyIn);
     }
 

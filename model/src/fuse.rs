@@ -9,23 +9,32 @@
 use crate::ir::{ArgSpec, Function, Kernel, Op};
 use std::collections::HashMap;
 
+/// Two parts of a fused function disagree on an argument's length.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("argument `{argument}` has {len} values in {part} but {other} in another part")]
+pub struct FuseError {
+    pub argument: String,
+    pub len: usize,
+    pub part: String,
+    pub other: usize,
+}
+
 /// `parts` as one function named `name`. Its arguments are the union of the
 /// parts' arguments (matched by role, in order of first appearance); its outputs
 /// the parts' outputs one after another, as a column (`rows` = their total).
 /// Fails when two parts give one argument different lengths.
-pub fn fuse(name: &str, parts: &[&Function]) -> Result<Function, String> {
+pub fn fuse(name: &str, parts: &[&Function]) -> Result<Function, FuseError> {
     let mut args: Vec<ArgSpec> = Vec::new();
     for f in parts {
         for a in &f.args {
             match args.iter().find(|b| b.role == a.role) {
                 Some(b) if b.names.len() != a.names.len() => {
-                    return Err(format!(
-                        "argument `{}` has {} values in {} but {} in another part",
-                        a.ident(),
-                        a.names.len(),
-                        f.name,
-                        b.names.len()
-                    ))
+                    return Err(FuseError {
+                        argument: a.ident().to_string(),
+                        len: a.names.len(),
+                        part: f.name.clone(),
+                        other: b.names.len(),
+                    })
                 }
                 Some(_) => {}
                 None => args.push(a.clone()),
@@ -168,6 +177,9 @@ mod tests {
             native: Default::default(),
         };
         let err = fuse("both", &[&f(3), &f(2)]).unwrap_err();
-        assert!(err.contains("`x` has 2 values in f2 but 3"), "{err}");
+        assert!(
+            err.to_string().contains("`x` has 2 values in f2 but 3"),
+            "{err}"
+        );
     }
 }

@@ -271,7 +271,7 @@ pub struct ModelIr {
 }
 
 /// A model without inverse kinematics, asked for them (`inverse`, `navigate`).
-#[derive(Debug, Clone, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("model `{model}` has no inverse kinematics: {reason}")]
 pub struct NoInverse {
     pub model: String,

@@ -45,10 +45,39 @@ fn one() -> f64 {
 }
 
 impl Config {
-    pub fn read(path: &Path) -> Result<Config, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        toml::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+    pub fn read(path: &Path) -> Result<Config, BenchError> {
+        let unread = |message: String| BenchError::Unread {
+            path: path.to_path_buf(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| unread(e.to_string()))?;
+        toml::from_str(&text).map_err(|e| unread(e.to_string()))
     }
+}
+
+/// A study folder, benchmark file or session that cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error("{}: no such folder (give the folder of OptiOdom sessions, e.g. ../shared/real/optiodom-dev)", .0.display())]
+    NoFolder(PathBuf),
+    /// A file or folder that cannot be read or parsed, with what its reader says.
+    #[error("{}: {message}", path.display())]
+    Unread { path: PathBuf, message: String },
+    #[error("{}: robot.{robot}.published.{key}: {} has no parameter `{key}` (it has: {})", config.display(), spec.display(), known.join(", "))]
+    UnknownPublished {
+        config: PathBuf,
+        robot: String,
+        key: String,
+        spec: PathBuf,
+        known: Vec<String>,
+    },
+    #[error("{}: no session folders (with a metadata.json){}", dir.display(), if only.is_empty() { String::new() } else { format!(" named {}", only.join(", ")) })]
+    NoSessions { dir: PathBuf, only: Vec<String> },
+    /// A robot's spec that does not give a model.
+    #[error("{0}")]
+    Spec(String),
+    #[error(transparent)]
+    Log(#[from] crate::log::LogError),
 }
 
 /// Where a session's folder says what it is.
@@ -85,18 +114,18 @@ pub fn load(
     only: &[String],
     max_gap: f64,
     load_ir: &dyn Fn(&Path) -> Result<ModelIr, String>,
-) -> Result<Loaded, String> {
+) -> Result<Loaded, BenchError> {
     if !dir.is_dir() {
-        return Err(format!(
-            "{}: no such folder (give the folder of OptiOdom sessions, e.g. ../shared/real/optiodom-dev)",
-            dir.display()
-        ));
+        return Err(BenchError::NoFolder(dir.to_path_buf()));
     }
     let config = Config::read(config_path)?;
     let base = config_path.parent().unwrap_or(Path::new("."));
     let published = read_json(&dir.join("published.json"))?;
     let mut folders: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .map_err(|e| BenchError::Unread {
+            path: dir.to_path_buf(),
+            message: e.to_string(),
+        })?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.join("metadata.json").is_file())
         .collect();
@@ -109,8 +138,11 @@ pub fn load(
             continue;
         }
         let meta_path = folder.join("metadata.json");
-        let meta: Metadata = serde_json::from_value(read_json(&meta_path)?)
-            .map_err(|e| format!("{}: {e}", meta_path.display()))?;
+        let meta: Metadata =
+            serde_json::from_value(read_json(&meta_path)?).map_err(|e| BenchError::Unread {
+                path: meta_path.clone(),
+                message: e.to_string(),
+            })?;
         let Some(robot) = config.robot.get(&meta.robot) else {
             warnings.push(format!(
                 "{name}: robot type `{}` has no entry in {}; left out",
@@ -121,16 +153,16 @@ pub fn load(
         };
         if !irs.contains_key(&meta.robot) {
             let spec = base.join(&robot.spec);
-            let ir = load_ir(&spec)?;
+            let ir = load_ir(&spec).map_err(BenchError::Spec)?;
             let known: Vec<String> = ir.runtime_params().iter().map(|p| p.name.clone()).collect();
             if let Some(k) = robot.published.keys().find(|k| !known.contains(k)) {
-                return Err(format!(
-                    "{}: robot.{}.published.{k}: {} has no parameter `{k}` (it has: {})",
-                    config_path.display(),
-                    meta.robot,
-                    spec.display(),
-                    known.join(", ")
-                ));
+                return Err(BenchError::UnknownPublished {
+                    config: config_path.to_path_buf(),
+                    robot: meta.robot.clone(),
+                    key: k.clone(),
+                    spec,
+                    known,
+                });
             }
             irs.insert(meta.robot.clone(), ir);
         }
@@ -151,22 +183,21 @@ pub fn load(
         });
     }
     if sessions.is_empty() {
-        return Err(format!(
-            "{}: no session folders (with a metadata.json){}",
-            dir.display(),
-            if only.is_empty() {
-                String::new()
-            } else {
-                format!(" named {}", only.join(", "))
-            }
-        ));
+        return Err(BenchError::NoSessions {
+            dir: dir.to_path_buf(),
+            only: only.to_vec(),
+        });
     }
     Ok(Loaded { sessions, warnings })
 }
 
-fn read_json(path: &Path) -> Result<Value, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+fn read_json(path: &Path) -> Result<Value, BenchError> {
+    let unread = |message: String| BenchError::Unread {
+        path: path.to_path_buf(),
+        message,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| unread(e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| unread(e.to_string()))
 }
 
 /// One session folder: the model at its nominal values, its runs, and the
@@ -179,7 +210,7 @@ fn session(
     published: Option<&Value>,
     max_gap: f64,
     warnings: &mut Vec<String>,
-) -> Result<Session, String> {
+) -> Result<Session, BenchError> {
     let known: Vec<String> = ir.runtime_params().iter().map(|p| p.name.clone()).collect();
     let sets: Vec<(String, f64)> = meta
         .kinegen_nominal
@@ -187,10 +218,13 @@ fn session(
         .filter(|(k, _)| known.contains(k))
         .filter_map(|(k, v)| v.as_f64().map(|v| (k.clone(), v)))
         .collect();
-    let runner = Runner::new(ir, &sets).map_err(|e| format!("{}: {e}", folder.display()))?;
+    let runner = Runner::new(ir, &sets).map_err(|e| BenchError::Unread {
+        path: folder.to_path_buf(),
+        message: e.to_string(),
+    })?;
     let mut runs = Vec::new();
     for f in &meta.run_files {
-        let run = Run::read(&folder.join(&f.file), &runner).map_err(|e| e.to_string())?;
+        let run = Run::read(&folder.join(&f.file), &runner)?;
         let (pieces, warning) = run.split_at_gaps(max_gap);
         warnings.extend(warning);
         runs.extend(pieces);
