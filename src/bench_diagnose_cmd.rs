@@ -10,6 +10,7 @@ use crate::diagnose_cmd::run_diagnosis;
 use crate::effects_cmd::base_and_truth;
 use crate::output::Out;
 use clap::Args;
+use kinegen_analysis::diagnose_job::Hooks;
 use kinegen_analysis::effects::{catalogue, Applicability};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
@@ -110,7 +111,7 @@ fn default_specs() -> Result<Vec<PathBuf>, String> {
     let mut v = local_specs();
     if v.is_empty() {
         for (name, text) in BUNDLED {
-            v.push(crate::effects_cmd::materialise(text, name)?);
+            v.push(crate::ir_source::materialise(text, name)?);
         }
     }
     Ok(v)
@@ -185,15 +186,16 @@ fn run_case(
         .map_err(|e| e.to_string())?;
     let spec = Model::load(spec_path).map_err(|e| e.to_string())?;
     let t0 = Instant::now();
-    let (d, _) = run_diagnosis(
+    let outcome = run_diagnosis(
         &spec,
         &base,
         std::slice::from_ref(&run),
         &[],
         &[],
-        &|_| {},
-        &|_| {},
+        false,
+        &Hooks::none(),
     )?;
+    let d = outcome.diagnosis;
     let names: Vec<String> = hidden.iter().map(|h| h.0.clone()).collect();
     Ok(Case {
         index: 0,

@@ -66,9 +66,13 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
             Err(e) => return bad(e),
         },
     };
-    let loaded = match optiodom::load(&a.dir, &config, &a.session, a.max_gap, &|spec| {
-        crate::ir_source::load(spec)
-    }) {
+    let loaded = match optiodom::load(
+        &a.dir,
+        &config,
+        &a.session,
+        a.max_gap,
+        &crate::ir_source::ChildDeriver,
+    ) {
         Ok(l) => l,
         Err(e) => return bad(e),
     };

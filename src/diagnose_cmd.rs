@@ -1,11 +1,11 @@
 //! `kinegen diagnose`.
 use crate::analysis_cmd::{bad, prepare, quiet, Common, Prepared};
-use crate::effects_cmd::materialise;
-use crate::ir_source;
+use crate::ir_source::ChildDeriver;
 use crate::output::Out;
-use kinegen_analysis::dataset::channel_missing;
-use kinegen_analysis::diagnose::{diagnose, Catalogue, Diagnosis};
-use kinegen_analysis::effects::{catalogue, Applicability, Effect};
+use kinegen_analysis::derivation::EffectChains;
+use kinegen_analysis::diagnose::Diagnosis;
+use kinegen_analysis::diagnose_job::{diagnose_job, Hooks, Job, Outcome};
+use kinegen_analysis::effects::catalogue;
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_model::spec::Model;
 use serde_json::json;
@@ -13,109 +13,37 @@ use std::collections::BTreeMap;
 use std::process::ExitCode;
 use std::time::Instant;
 
-/// The spec with `effects` added in order (each at its nominal values).
-fn with_chain(spec: &Model, cat: &[Effect], effects: &[String]) -> Result<Model, String> {
-    effects.iter().try_fold(spec.clone(), |m, name| {
-        let eff = cat
-            .iter()
-            .find(|e| &e.name == name)
-            .ok_or_else(|| format!("unknown effect `{name}`"))?;
-        eff.added_to(&m)
-            .map_err(|why| format!("{why} (on the model with the effects found before it)"))
-    })
-}
-
-/// The runner of `spec` with a chain of catalogue effects added. Derivations
-/// run in `kinegen derive` children, one at a time (symbolica's one-thread
-/// licence), and are cached by spec fingerprint.
-fn deriver<'a>(
-    spec: &'a Model,
-    cat: &'a [Effect],
-    name: &'a str,
-    sets: &'a [(String, f64)],
-) -> impl Fn(&[String]) -> Result<Runner, String> + Sync + 'a {
-    move |effects: &[String]| {
-        let m = with_chain(spec, cat, effects)?;
-        let combined = materialise(&m.source, name)?;
-        // the combined spec lives in kinegen's cache: name it by what it is
-        // (`add-effect` writes the same text where the user can read it)
-        let ir = ir_source::load(&combined).map_err(|e| {
-            let e = e.replace(
-                &combined.display().to_string(),
-                &format!("{} with {} added", spec.path.display(), effects.join(", ")),
-            );
-            format!("could not be derived: {e} (`kinegen add-effect` writes that spec to read)")
-        })?;
-        Runner::new(ir, sets).map_err(|e| e.to_string())
-    }
-}
-
-/// Diagnose `runs` against every applicable effect of the bundled catalogue and
-/// `dirs`: the effects that apply to `spec` and are observable in these logs
-/// are ranked and chained (kinegen_analysis::diagnose); the others are listed as
-/// skipped with the reason. `candidates(n)` is told how many effects are tried,
-/// `progress` each step. Returns the diagnosis and the number of candidates.
 /// The share of the noise floor above which the model's own discretisation
 /// error is no longer "far below the noise" (issue 12 item 3).
 const DISCRETISATION_WARN: f64 = 0.3;
 
+/// Diagnose `runs` against every applicable and observable effect of the
+/// bundled catalogue and `dirs` (kinegen_analysis::diagnose_job), deriving
+/// the candidates with the command line's deriver.
+#[allow(clippy::too_many_arguments)]
 pub fn run_diagnosis(
     spec: &Model,
     runner: &Runner,
     runs: &[kinegen_analysis::run::Run],
     dirs: &[std::path::PathBuf],
     sets: &[(String, f64)],
-    candidates: &dyn Fn(usize),
-    progress: &(dyn Fn(&str) + Sync),
-) -> Result<(kinegen_analysis::diagnose::Diagnosis, usize), String> {
+    signature: bool,
+    hooks: &Hooks,
+) -> Result<Outcome, String> {
     let cat = catalogue(dirs).map_err(|e| e.to_string())?;
-    let mut applicable = Vec::new();
-    let mut skipped = Vec::new();
-    for eff in &cat {
-        match eff.applicability(spec) {
-            Applicability::Applies => {}
-            Applicability::AlreadyIn => {
-                skipped.push((eff.name.clone(), "already in the spec".into()));
-                continue;
-            }
-            Applicability::NotApplicable(why) => {
-                skipped.push((eff.name.clone(), format!("does not apply: {why}")));
-                continue;
-            }
-        }
-        if let Some(roles) = eff.observation_only_roles() {
-            let missing: Vec<String> = roles
-                .iter()
-                .filter_map(|role| {
-                    channel_missing(runs, runner, *role).map(|need| {
-                        format!("the {role:?} observation, and the logs have no {need}")
-                    })
-                })
-                .collect();
-            if missing.len() == roles.len() {
-                skipped.push((
-                    eff.name.clone(),
-                    format!("not observable: it changes only {}", missing.join(" and ")),
-                ));
-                continue;
-            }
-        }
-        applicable.push((eff.name.clone(), eff.doc.clone()));
-    }
-    let derive = deriver(spec, &cat, &runner.ir.name, sets);
-    let n = applicable.len();
-    candidates(n);
-    let d = diagnose(
+    let chains = EffectChains {
+        spec,
+        catalogue: &cat,
+        deriver: &ChildDeriver,
+        sets,
+    };
+    let job = Job {
         runner,
         runs,
-        &Catalogue {
-            effects: applicable,
-            derive: &derive,
-        },
-        skipped,
-        progress,
-    )?;
-    Ok((d, n))
+        chains: &chains,
+        signature,
+    };
+    diagnose_job(&job, hooks).map_err(|e| e.to_string())
 }
 
 pub fn run(c: Common) -> ExitCode {
@@ -138,28 +66,26 @@ pub fn run(c: Common) -> ExitCode {
     let t_prep = t0.elapsed();
     let t1 = Instant::now();
     let bar = crate::progress::Progress::bar(1, "diagnose", quiet(&c));
-    let (d, n_candidates) = match run_diagnosis(
+    let outcome = match run_diagnosis(
         &spec,
         &prep.runner,
         &prep.runs,
         &c.catalogue.effects,
         &sets,
-        &|n| bar.set_length(n as u64 + 1),
-        &|step| {
-            bar.message(step);
-            bar.inc();
+        c.report.is_some(),
+        &Hooks {
+            candidates: &|n| bar.set_length(n as u64 + 1),
+            progress: &|step| {
+                bar.message(step);
+                bar.inc();
+            },
         },
     ) {
         Ok(d) => d,
         Err(e) => return bad(e),
     };
     drop(bar);
-    // the catalogue and derivation again, for the spec changes and the report
-    let cat = match catalogue(&c.catalogue.effects) {
-        Ok(x) => x,
-        Err(e) => return bad(e),
-    };
-    let derive = deriver(&spec, &cat, &prep.runner.ir.name, &sets);
+    let (d, n_candidates) = (&outcome.diagnosis, outcome.tried);
     let t_diag = t1.elapsed();
     let r = &prep.runner;
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();
@@ -177,10 +103,10 @@ pub fn run(c: Common) -> ExitCode {
         d.calibrated_rmse, d.base_holdout_rmse
     ));
     out.say("  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)");
-    say_candidates(&out, &d);
-    let apply_cmds = say_chain(&out, &c, r, &spec, &cat, &d);
-    say_structure(&out, &d);
-    let disc_ratio = say_discretisation(&out, &d);
+    say_candidates(&out, d);
+    let apply_cmds = say_chain(&out, &c, r, &outcome);
+    say_structure(&out, d);
+    let disc_ratio = say_discretisation(&out, d);
     let per_candidate = if n_candidates == 0 {
         0.0
     } else {
@@ -207,7 +133,7 @@ pub fn run(c: Common) -> ExitCode {
     });
     if let Some(dir) = &c.report {
         if let Err(e) =
-            crate::report::diagnose_report(dir, &prep.runner, &prep.runs, &d, &derive, &doc)
+            crate::report::diagnose_report(dir, &prep.runner, &prep.runs, &outcome, &doc)
         {
             return bad(e);
         }
@@ -267,8 +193,8 @@ fn say_candidates(out: &Out, d: &Diagnosis) {
             .map(|(k, v)| {
                 format!(
                     "{k} = {:.5} ± {}",
-                    v["estimate"].as_f64().unwrap_or(f64::NAN),
-                    crate::output::fmt_std(v["std"].as_f64())
+                    v.estimate,
+                    crate::output::fmt_std(Some(v.std).filter(|s| s.is_finite()))
                 )
             })
             .collect();
@@ -295,15 +221,8 @@ fn say_candidates(out: &Out, d: &Diagnosis) {
 /// The verdict: the effects found, in order, each with its estimates, the
 /// error it removes, the spec change and the command that applies it (the
 /// commands are returned).
-fn say_chain(
-    out: &Out,
-    c: &Common,
-    r: &Runner,
-    spec: &Model,
-    cat: &[Effect],
-    d: &Diagnosis,
-) -> Vec<String> {
-    let mut model = spec.clone();
+fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String> {
+    let d = &outcome.diagnosis;
     let mut apply_cmds = Vec::new();
     if d.chain.is_empty() {
         out.say("verdict: no catalogue effect is significant");
@@ -328,7 +247,7 @@ fn say_chain(
             let vals: BTreeMap<String, f64> = step
                 .parameters
                 .iter()
-                .map(|(k, v)| (k.clone(), v["estimate"].as_f64().unwrap_or(0.0)))
+                .map(|(k, v)| (k.clone(), v.estimate))
                 .collect();
             let pv: Vec<String> = vals.iter().map(|(k, v)| format!("{k} = {v:.5}")).collect();
             out.say(&format!(
@@ -338,41 +257,32 @@ fn say_chain(
                 before / step.rmse_after.max(1e-300)
             ));
             before = step.rmse_after;
-            if let Some(eff) = cat.iter().find(|e| e.name == step.effect) {
-                if let Ok(change) = eff.spec_change(&model, &vals) {
-                    out.say(&format!(
-                        "     spec change:\n{}",
-                        change
-                            .lines()
-                            .map(|l| format!("       {l}"))
-                            .collect::<Vec<_>>()
-                            .join("\n")
-                    ));
-                }
-                let args: Vec<String> = vals
-                    .iter()
-                    .map(|(k, v)| format!("--value {k}={v:.6}"))
-                    .collect();
-                let from = if k == 0 {
-                    c.spec.display().to_string()
-                } else {
-                    format!("{}_{}.toml", r.ir.name, d.chain[k - 1].effect)
-                };
-                apply_cmds.push(format!(
-                    "kinegen add-effect --spec {from} --effect {} {} --out {}_{}.toml",
-                    step.effect,
-                    args.join(" "),
-                    r.ir.name,
-                    step.effect
+            if let Some(change) = &outcome.spec_changes[k] {
+                out.say(&format!(
+                    "     spec change:\n{}",
+                    change
+                        .lines()
+                        .map(|l| format!("       {l}"))
+                        .collect::<Vec<_>>()
+                        .join("\n")
                 ));
-                if let Some(m) = eff
-                    .apply(&model, &vals)
-                    .ok()
-                    .and_then(|t| Model::parse(&spec.path, &t).ok())
-                {
-                    model = m;
-                }
             }
+            let args: Vec<String> = vals
+                .iter()
+                .map(|(k, v)| format!("--value {k}={v:.6}"))
+                .collect();
+            let from = if k == 0 {
+                c.spec.display().to_string()
+            } else {
+                format!("{}_{}.toml", r.ir.name, d.chain[k - 1].effect)
+            };
+            apply_cmds.push(format!(
+                "kinegen add-effect --spec {from} --effect {} {} --out {}_{}.toml",
+                step.effect,
+                args.join(" "),
+                r.ir.name,
+                step.effect
+            ));
         }
         out.say(&format!("apply with:\n  {}", apply_cmds.join("\n  ")));
     }

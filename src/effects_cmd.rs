@@ -11,19 +11,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-/// Write an augmented spec where `ir_source` can derive it; returns its path.
-pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> {
-    let dir = ir_source::cache_dir().join("specs");
-    let path = dir.join(format!(
-        "{name_hint}-{}.toml",
-        kinegen_model::spec::fingerprint(spec_text)
-    ));
-    if !path.exists() {
-        kinegen_model::files::write_atomic(&path, spec_text).map_err(|e| e.to_string())?;
-    }
-    Ok(path)
-}
-
 /// Apply `--effect NAME=VALUE` / `NAME.PARAM=VALUE` to a spec; returns the new
 /// spec text and the effect parameter values.
 pub fn with_effects(
@@ -125,7 +112,7 @@ pub fn base_and_truth(
     let truth_ir = if effects.is_empty() {
         base.ir.clone()
     } else {
-        ir_source::load(&materialise(&truth_text, &base.ir.name)?)?
+        ir_source::load(&ir_source::materialise(&truth_text, &base.ir.name)?)?
     };
     let mut all = sets.to_vec();
     all.extend(values);

@@ -5,6 +5,7 @@
 //! 3. Otherwise `kinegen derive` in a child process: symbolica's one-thread permit is
 //!    then held only while deriving, its output never reaches our stdout, and this
 //!    process (fitting, diagnosing) stays free to use threads.
+use kinegen_analysis::derivation::{DerivationFailed, Deriver};
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use std::path::{Path, PathBuf};
@@ -30,6 +31,37 @@ fn committed_candidates(spec: &Path, name: &str) -> Vec<PathBuf> {
         v.push(dir.join("../generated/ir").join(format!("{name}.json")));
     }
     v
+}
+
+/// Write an augmented spec where `ir_source` can derive it; returns its path.
+pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> {
+    let dir = cache_dir().join("specs");
+    let path = dir.join(format!(
+        "{name_hint}-{}.toml",
+        kinegen_model::spec::fingerprint(spec_text)
+    ));
+    if !path.exists() {
+        kinegen_model::files::write_atomic(&path, spec_text).map_err(|e| e.to_string())?;
+    }
+    Ok(path)
+}
+
+/// The command line's [`Deriver`]: [`load`] (the committed IR, the cache, or
+/// `kinegen derive` in a child process) of the model's text, written to the
+/// cache first (a spec with effects added has no file of its own); errors
+/// name the model by `label` rather than by that cache file.
+pub struct ChildDeriver;
+
+impl Deriver for ChildDeriver {
+    fn derive(&self, model: &Model, label: &str) -> Result<ModelIr, DerivationFailed> {
+        // a spec read from its file as it is there: the file itself (next to
+        // its generated/ir, if it has one)
+        if std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source) {
+            return load(&model.path).map_err(DerivationFailed);
+        }
+        let file = materialise(&model.source, &model.name).map_err(DerivationFailed)?;
+        load(&file).map_err(|e| DerivationFailed(e.replace(&file.display().to_string(), label)))
+    }
 }
 
 /// Load and validate a spec and return its IR.

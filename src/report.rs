@@ -614,10 +614,10 @@ pub fn diagnose_report(
     dir: &Path,
     base: &Runner,
     runs: &[Run],
-    d: &kinegen_analysis::diagnose::Diagnosis,
-    derive: &dyn Fn(&[String]) -> Result<Runner, String>,
+    outcome: &kinegen_analysis::diagnose_job::Outcome,
     doc: &Value,
 ) -> Result<(), String> {
+    let d = &outcome.diagnosis;
     let dr = |r, p: &[f64]| Recipe {
         r,
         p: p.to_vec(),
@@ -625,14 +625,6 @@ pub fn diagnose_report(
         heading: Heading::Model,
     };
     let mut figs = Vec::new();
-    // the first effect of the chain alone (for its signature), and the final model
-    let first = d.verdict().and_then(|v| {
-        Some((
-            v,
-            derive(&[v.to_string()]).ok()?,
-            d.candidates.iter().find(|c| c.effect == v)?,
-        ))
-    });
     let chain_label = format!(
         "with {}",
         d.chain
@@ -641,7 +633,7 @@ pub fn diagnose_report(
             .collect::<Vec<_>>()
             .join(" + ")
     );
-    for run in runs {
+    for (k, run) in runs.iter().enumerate() {
         let b = drawn(run, &dr(base, &d.base_fit.p));
         let mut series: Vec<Series> = vec![
             ("measured", BLACK, gt_xy(run)),
@@ -653,37 +645,28 @@ pub fn diagnose_report(
             series.push((chain_label.as_str(), GREEN, a.traj));
             errs.push((chain_label.as_str(), GREEN, a.pos_err));
         }
-        if let Some((name, aug, cand)) = &first {
-            // the first effect's residual signature
-            if let Some(param) = cand.parameters.keys().next() {
-                if let Some((chan, pts)) = kinegen_analysis::diagnose::signature(
-                    base,
-                    &d.base_fit.p,
-                    aug,
-                    std::slice::from_ref(run),
-                    param,
-                ) {
-                    let est = cand.parameters[param]["estimate"].as_f64().unwrap_or(0.0);
-                    let (lo, hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, p| {
-                        (m.0.min(p.0), m.1.max(p.0))
-                    });
-                    let line = vec![(lo, lo * est), (hi, hi * est)];
-                    figs.push(chart(
-                        &format!(
-                            "signature of {name}: {chan} one-step residual of the calibrated spec"
-                        ),
-                        &format!("change of the prediction per unit {param}"),
-                        "residual",
-                        &[
-                            ("calibrated spec, per step", RED, pts),
-                            (&format!("slope = fitted {param}"), GREEN, line),
-                        ],
-                        true,
-                        false,
-                        &[],
-                    )?);
-                }
-            }
+        let signature = outcome
+            .signature
+            .as_ref()
+            .and_then(|sig| Some((sig, sig.per_run.get(k)?.as_ref()?)));
+        if let Some((sig, (chan, pts))) = signature {
+            let (name, param, est, pts) = (&sig.effect, &sig.parameter, sig.estimate, pts.clone());
+            let (lo, hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, p| {
+                (m.0.min(p.0), m.1.max(p.0))
+            });
+            let line = vec![(lo, lo * est), (hi, hi * est)];
+            figs.push(chart(
+                &format!("signature of {name}: {chan} one-step residual of the calibrated spec"),
+                &format!("change of the prediction per unit {param}"),
+                "residual",
+                &[
+                    ("calibrated spec, per step", RED, pts),
+                    (&format!("slope = fitted {param}"), GREEN, line),
+                ],
+                true,
+                false,
+                &[],
+            )?);
         }
         figs.insert(
             0,

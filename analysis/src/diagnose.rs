@@ -10,8 +10,9 @@
 //! 4. Whiteness: regress the one-step prediction residuals of the best model on
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
+use crate::derivation::EffectChains;
 use crate::discretisation::Discretisation;
-use crate::fit::{fit_continued, refine_from, residuals, FitOptions, FitResult};
+use crate::fit::{fit_continued, refine_from, residuals, FitError, FitOptions, FitResult};
 use crate::interp::lerp_rows;
 use crate::log::wrap;
 use crate::model::Runner;
@@ -23,13 +24,23 @@ use nalgebra::DVector;
 use rayon::prelude::*;
 use serde::Serialize;
 
+/// A calibrated parameter: its estimate and standard deviation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Estimate {
+    pub estimate: f64,
+    pub std: f64,
+}
+
+/// An effect's parameters by name, as calibrated.
+pub type Estimates = std::collections::BTreeMap<String, Estimate>;
+
 #[derive(Debug, Clone, Serialize)]
 pub struct Candidate {
     pub effect: String,
     pub rmse: f64,
     pub improvement: f64,
     pub significant: bool,
-    pub parameters: serde_json::Map<String, serde_json::Value>,
+    pub parameters: Estimates,
     pub evidence: String,
     pub bic_gain: f64,
     pub holdout_rmse: f64,
@@ -275,6 +286,9 @@ fn motion_around(twists: &[Vec<f64>], k: usize) -> [f64; 3] {
     m
 }
 
+/// A residual signature: its channel and the (change per unit, residual) points.
+pub type Signature = (String, Vec<(f64, f64)>);
+
 /// The effect's residual signature, for plotting: per step, x = how much one unit
 /// of the effect parameter changes the one-step prediction and y = the calibrated
 /// base model's one-step residual, in the channel where the signature is largest.
@@ -285,7 +299,7 @@ pub fn signature(
     aug: &Runner,
     runs: &[Run],
     param: &str,
-) -> Option<(String, Vec<(f64, f64)>)> {
+) -> Option<Signature> {
     let i = aug.param_index(param)?;
     let start = seeded(aug, base, pb);
     // one unit of the effect parameter, from zero (Runner::param_scale)
@@ -644,13 +658,13 @@ fn stage(
     train: &[Run],
     test: &[Run],
     o: &FitOptions,
-) -> Result<Stage, String> {
+) -> Result<Stage, FitError> {
     // The global search is the continuation ladder's, as each candidate's
     // from nominal values (see `fit_continued`): fit's direct start from
     // nominal values wandered 201-301 passes on omni_caster logs with 0.2 rad
     // steering offsets (over half of their diagnosis) without ever ending
     // below the ladder's; a log too short for the ladder gets fit's search.
-    let fit = fit_continued(&runner, runs, o).map_err(|e| e.to_string())?;
+    let fit = fit_continued(&runner, runs, o)?;
     // The training part is the first 60% of the same runs: its calibration
     // starts where the whole log's ended, with the start headings of the
     // segments the two share, and refines locally, as each candidate's does
@@ -661,8 +675,7 @@ fn stage(
     let mut from = runner.clone();
     from.p = fit.p.clone();
     let train_fit = crate::fit::refine_on_part(&from, runs, train, &fit.starts, o)
-        .or_else(|_| crate::fit::fit(&runner, train, o))
-        .map_err(|e| e.to_string())?;
+        .or_else(|_| crate::fit::fit(&runner, train, o))?;
     Ok(stage_from(runner, fit, train_fit, runs, test, o))
 }
 
@@ -713,7 +726,7 @@ fn ranked_equivalents(ranked: &[Candidate], w: &Candidate) -> Vec<String> {
 #[derive(Debug, Clone, Serialize)]
 pub struct ChainStep {
     pub effect: String,
-    pub parameters: serde_json::Map<String, serde_json::Value>,
+    pub parameters: Estimates,
     /// Error (weighted residual RMS) after adding this effect and recalibrating.
     pub rmse_after: f64,
     pub doc: String,
@@ -727,15 +740,21 @@ pub struct ChainStep {
 /// which two candidates explain the logs equally (see [`ChainStep::equivalent`]).
 pub const EQUIVALENT: f64 = 3.84;
 
-/// Everything diagnosis needs from the outside: which effects to try, and the
-/// runner of the spec with a list of effects added (derivation lives with the
-/// caller, which owns symbolica's process).
+/// The effects a diagnosis tries, and how it gets the spec with a list of
+/// them added.
 pub struct Catalogue<'a> {
     /// (name, doc) of every applicable effect, in catalogue order.
     pub effects: Vec<(String, String)>,
-    /// Runner of the base spec with these effects added (in order); Err(reason)
-    /// when the combination cannot be built (the effect no longer applies...).
-    pub derive: &'a dyn Fn(&[String]) -> Result<Runner, String>,
+    pub chains: &'a EffectChains<'a>,
+}
+
+/// A diagnosis that cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    #[error("{run}: {rows} rows; diagnosis needs at least {MIN_ROWS} per run (it holds out the last 40% of each)")]
+    TooFewRows { run: String, rows: usize },
+    #[error(transparent)]
+    Fit(#[from] FitError),
 }
 
 /// Whether an effect adds nothing the calibrated model cannot already do on
@@ -1020,7 +1039,10 @@ impl Ranking<'_> {
                 let k = f.free.iter().position(|&j| j == i).unwrap();
                 (
                     start.names[i].clone(),
-                    serde_json::json!({"estimate": f.p[i], "std": f.std[k]}),
+                    Estimate {
+                        estimate: f.p[i],
+                        std: f.std[k],
+                    },
                 )
             })
             .collect();
@@ -1223,10 +1245,13 @@ pub fn diagnose(
     cat: &Catalogue,
     mut skipped: Vec<(String, String)>,
     progress: &(dyn Fn(&str) + Sync),
-) -> Result<Diagnosis, String> {
+) -> Result<Diagnosis, DiagnoseError> {
     let o = FitOptions::default();
     if let Some(r) = runs.iter().find(|r| r.t.len() < MIN_ROWS) {
-        return Err(format!("{}: {} rows; diagnosis needs at least {MIN_ROWS} per run (it holds out the last 40% of each)", r.name, r.t.len()));
+        return Err(DiagnoseError::TooFewRows {
+            run: r.name.clone(),
+            rows: r.t.len(),
+        });
     }
     let baseline_rmse = weighted_rms(base, &base.p, runs, &o);
     let (train, test) = split(runs, 0.6);
@@ -1254,7 +1279,7 @@ pub fn diagnose(
         for (name, doc) in &remaining {
             let mut list = names.clone();
             list.push(name.clone());
-            match (cat.derive)(&list) {
+            match cat.chains.runner(&list).map_err(|e| e.to_string()) {
                 Ok(aug) => {
                     let start = seeded(&aug, &cur.runner, &cur.fit.p);
                     let effect_params = effect_params(&start, &cur.runner);

@@ -190,6 +190,25 @@ pub enum ApplyError {
         message: String,
         from: Option<String>,
     },
+    /// A chain names an effect the catalogue does not have.
+    #[error("unknown effect `{0}`")]
+    Unlisted(String),
+    /// An effect of a chain does not go on the model with the ones before it.
+    #[error("{0} (on the model with the effects found before it)")]
+    InChain(Box<ApplyError>),
+}
+
+/// `spec` with the catalogue effects `effects` added in order, each at its
+/// nominal values.
+pub fn with_chain(spec: &Model, cat: &[Effect], effects: &[String]) -> Result<Model, ApplyError> {
+    effects.iter().try_fold(spec.clone(), |m, name| {
+        let eff = cat
+            .iter()
+            .find(|e| &e.name == name)
+            .ok_or_else(|| ApplyError::Unlisted(name.clone()))?;
+        eff.added_to(&m)
+            .map_err(|why| ApplyError::InChain(Box::new(why)))
+    })
 }
 
 /// Whether an effect applies to a model, and if not, why (for people).

@@ -6,9 +6,11 @@
 //! spec its user would write and how the study's parameter names map onto
 //! the spec's.
 use super::{Calibration, Session};
+use crate::derivation::Deriver;
 use crate::model::Runner;
 use crate::run::Run;
 use kinegen_model::ir::ModelIr;
+use kinegen_model::spec::Model;
 use serde::Deserialize;
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -105,7 +107,7 @@ pub struct Loaded {
 
 /// Read the sessions under `dir` whose folder name starts with one of
 /// `only` (all when empty), for the robot types `config` (read from
-/// `config_path`) knows. `load_ir` gives a spec's IR (the CLI derives it
+/// `config_path`) knows. `deriver` gives a spec's IR (the CLI's derives it
 /// in a child process); `max_gap` splits a log at longer gaps as every
 /// command does.
 pub fn load(
@@ -113,7 +115,7 @@ pub fn load(
     config_path: &Path,
     only: &[String],
     max_gap: f64,
-    load_ir: &dyn Fn(&Path) -> Result<ModelIr, String>,
+    deriver: &dyn Deriver,
 ) -> Result<Loaded, BenchError> {
     if !dir.is_dir() {
         return Err(BenchError::NoFolder(dir.to_path_buf()));
@@ -153,7 +155,10 @@ pub fn load(
         };
         if !irs.contains_key(&meta.robot) {
             let spec = base.join(&robot.spec);
-            let ir = load_ir(&spec).map_err(BenchError::Spec)?;
+            let model = Model::load(&spec).map_err(|e| BenchError::Spec(e.to_string()))?;
+            let ir = deriver
+                .derive(&model, &spec.display().to_string())
+                .map_err(|e| BenchError::Spec(e.to_string()))?;
             let known: Vec<String> = ir.runtime_params().iter().map(|p| p.name.clone()).collect();
             if let Some(k) = robot.published.keys().find(|k| !known.contains(k)) {
                 return Err(BenchError::UnknownPublished {

@@ -1,0 +1,197 @@
+//! A whole diagnosis as a user asks for it, in one call: which catalogue
+//! effects apply to the spec and are observable in the logs (the others are
+//! skipped with the reason), the ranking and chain of [`crate::diagnose`],
+//! the spec change each effect found makes, and the first effect's residual
+//! signature for the report.
+//!
+//! ```ignore
+//! let chains = EffectChains { spec: &spec, catalogue: &cat, deriver: &my_deriver, sets: &[] };
+//! let job = Job { runner: &runner, runs: &runs, chains: &chains, signature: false };
+//! let out = diagnose_job(&job, &Hooks::none())?;
+//! println!("{:?}", out.diagnosis.verdict());
+//! ```
+use crate::dataset::channel_missing;
+use crate::derivation::EffectChains;
+use crate::diagnose::{diagnose, signature, Catalogue, DiagnoseError, Diagnosis, Signature};
+use crate::effects::{Applicability, Effect};
+use crate::model::Runner;
+use crate::run::Run;
+use kinegen_model::spec::Model;
+use std::collections::BTreeMap;
+
+/// What to diagnose: the spec's runner (with the user's values), the logs,
+/// and the spec with its catalogue and deriver.
+pub struct Job<'a> {
+    pub runner: &'a Runner,
+    pub runs: &'a [Run],
+    pub chains: &'a EffectChains<'a>,
+    /// Also compute the first effect's signature (for a report: it derives
+    /// the spec with that effect once more).
+    pub signature: bool,
+}
+
+/// Told how many effects are tried, then each step's name (from worker
+/// threads), for a progress bar.
+pub struct Hooks<'a> {
+    pub candidates: &'a dyn Fn(usize),
+    pub progress: &'a (dyn Fn(&str) + Sync),
+}
+
+impl Hooks<'_> {
+    /// No progress reports.
+    pub fn none() -> Hooks<'static> {
+        Hooks {
+            candidates: &|_| {},
+            progress: &|_| {},
+        }
+    }
+}
+
+/// An effect's name and a sentence: its doc, or why it is not tried.
+pub type Named = (String, String);
+
+/// The diagnosis and what its report and its advice need.
+pub struct Outcome {
+    pub diagnosis: Diagnosis,
+    /// How many effects were tried.
+    pub tried: usize,
+    /// Per effect of the chain, the lines of the spec that adding it (at its
+    /// estimates, after the ones before it) changes.
+    pub spec_changes: Vec<Option<String>>,
+    pub signature: Option<FirstSignature>,
+}
+
+/// The first effect's residual signature (see [`signature`]) on each run.
+pub struct FirstSignature {
+    pub effect: String,
+    pub parameter: String,
+    pub estimate: f64,
+    /// Per run: the channel and the (change per unit, residual) points.
+    pub per_run: Vec<Option<Signature>>,
+}
+
+/// Diagnose `job` against every applicable and observable effect of its
+/// catalogue.
+pub fn diagnose_job(job: &Job, hooks: &Hooks) -> Result<Outcome, DiagnoseError> {
+    let chains = job.chains;
+    let (applicable, skipped) = applicable(chains.spec, chains.catalogue, job.runner, job.runs);
+    let tried = applicable.len();
+    (hooks.candidates)(tried);
+    let diagnosis = diagnose(
+        job.runner,
+        job.runs,
+        &Catalogue {
+            effects: applicable,
+            chains,
+        },
+        skipped,
+        hooks.progress,
+    )?;
+    Ok(Outcome {
+        spec_changes: spec_changes(chains.spec, chains.catalogue, &diagnosis),
+        signature: if job.signature {
+            first_signature(job, &diagnosis)
+        } else {
+            None
+        },
+        diagnosis,
+        tried,
+    })
+}
+
+/// The effects of `cat` that apply to `spec` and that the logs can show,
+/// as (name, doc); and the others as (name, why not).
+pub fn applicable(
+    spec: &Model,
+    cat: &[Effect],
+    runner: &Runner,
+    runs: &[Run],
+) -> (Vec<Named>, Vec<Named>) {
+    let mut applicable = Vec::new();
+    let mut skipped = Vec::new();
+    for eff in cat {
+        match eff.applicability(spec) {
+            Applicability::Applies => {}
+            Applicability::AlreadyIn => {
+                skipped.push((eff.name.clone(), "already in the spec".into()));
+                continue;
+            }
+            Applicability::NotApplicable(why) => {
+                skipped.push((eff.name.clone(), format!("does not apply: {why}")));
+                continue;
+            }
+        }
+        if let Some(roles) = eff.observation_only_roles() {
+            let missing: Vec<String> = roles
+                .iter()
+                .filter_map(|role| {
+                    channel_missing(runs, runner, *role).map(|need| {
+                        format!("the {role:?} observation, and the logs have no {need}")
+                    })
+                })
+                .collect();
+            if missing.len() == roles.len() {
+                skipped.push((
+                    eff.name.clone(),
+                    format!("not observable: it changes only {}", missing.join(" and ")),
+                ));
+                continue;
+            }
+        }
+        applicable.push((eff.name.clone(), eff.doc.clone()));
+    }
+    (applicable, skipped)
+}
+
+/// What adding each effect of the chain at its estimates changes in the
+/// spec, on the spec with the effects before it.
+fn spec_changes(spec: &Model, cat: &[Effect], d: &Diagnosis) -> Vec<Option<String>> {
+    let mut model = spec.clone();
+    d.chain
+        .iter()
+        .map(|step| {
+            let eff = cat.iter().find(|e| e.name == step.effect)?;
+            let values: BTreeMap<String, f64> = step
+                .parameters
+                .iter()
+                .map(|(k, v)| (k.clone(), v.estimate))
+                .collect();
+            let change = eff.spec_change(&model, &values).ok();
+            if let Some(m) = eff
+                .apply(&model, &values)
+                .ok()
+                .and_then(|t| Model::parse(&spec.path, &t).ok())
+            {
+                model = m;
+            }
+            change
+        })
+        .collect()
+}
+
+/// The verdict's signature on each run (None without a verdict).
+fn first_signature(job: &Job, d: &Diagnosis) -> Option<FirstSignature> {
+    let effect = d.verdict()?;
+    let aug = job.chains.runner(&[effect.to_string()]).ok()?;
+    let cand = d.candidates.iter().find(|c| c.effect == effect)?;
+    let (parameter, est) = cand.parameters.iter().next()?;
+    let per_run = job
+        .runs
+        .iter()
+        .map(|run| {
+            signature(
+                job.runner,
+                &d.base_fit.p,
+                &aug,
+                std::slice::from_ref(run),
+                parameter,
+            )
+        })
+        .collect();
+    Some(FirstSignature {
+        effect: effect.to_string(),
+        parameter: parameter.clone(),
+        estimate: est.estimate,
+        per_run,
+    })
+}
