@@ -3,7 +3,7 @@ use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::bag::{is_bag, Detection, TopicMap};
-use kinegen_analysis::fit::{fit, FitOptions, FitResult};
+use kinegen_analysis::fit::{FitOptions, FitResult};
 use kinegen_analysis::innovations::{self, Innovation, InnovationStats};
 use kinegen_analysis::input_range;
 use kinegen_analysis::landmarks;
@@ -723,10 +723,10 @@ pub struct FitArgs {
     #[arg(long, default_value = "lm", value_parser = method_names())]
     pub method: String,
     /// Square side (m) of the UMBMark runs.
-    #[arg(long, default_value_t = 1.0, value_parser = positive)]
+    #[arg(long, default_value_t = Settings::SIDE, value_parser = positive)]
     pub side: f64,
     /// EKF measurement-noise inflation mu (seed 000 eq. 26), rad/s.
-    #[arg(long, default_value_t = 0.01, value_parser = non_negative)]
+    #[arg(long, default_value_t = Settings::MU, value_parser = non_negative)]
     pub mu: f64,
     /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
     #[arg(long)]
@@ -1103,8 +1103,18 @@ fn run_lm(
 ) -> ExitCode {
     let r = &prep.runner;
     let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(c));
-    let mut res = match fit(r, &prep.runs, fo) {
-        Ok(x) => x,
+    // through the registry like every method; lm's Calibration carries the
+    // whole fit, which the rest of this report reads
+    let lm = kinegen_analysis::methods::by_name("lm").expect("lm is registered");
+    let settings = Settings {
+        side: a.side,
+        mu: a.mu,
+        fit: fo,
+        hidden: 0,
+    };
+    let mut res = match lm.calibrate(r, &prep.runs, &settings) {
+        Ok(kinegen_analysis::methods::Calibration { fit: Some(x), .. }) => x,
+        Ok(_) => unreachable!("lm's calibration is a fit"),
         Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
     };
     res.warnings.splice(0..0, prep.warnings.iter().cloned());

@@ -34,8 +34,8 @@ pub struct NavigateArgs {
     #[arg(long = "set")]
     pub set: Vec<String>,
     /// Also drive after calibrating the odometry on simulated square runs of
-    /// the real robot: umbmark (seed 004) or lm.
-    #[arg(long, value_parser = ["umbmark", "lm"])]
+    /// the real robot with this `fit` method: umbmark (seed 004), lm...
+    #[arg(long, value_parser = geometry_methods())]
     pub calibrate: Option<String>,
     /// Motors' relative error per move (what the encoders see and an open-loop
     /// plan does not correct).
@@ -49,6 +49,18 @@ pub struct NavigateArgs {
     /// Write one JSON document to PATH (`-`: stdout).
     #[arg(long)]
     pub json: Option<PathBuf>,
+}
+
+/// The calibration methods that calibrate the parameters (not the ones
+/// that learn a virtual gyro), from the registry.
+fn geometry_methods() -> clap::builder::PossibleValuesParser {
+    use kinegen_analysis::methods::METHODS;
+    clap::builder::PossibleValuesParser::new(
+        METHODS
+            .iter()
+            .filter(|m| m.calibrates_parameters())
+            .map(|m| clap::builder::PossibleValue::new(m.name()).help(m.about())),
+    )
 }
 
 /// Calibrate the believed parameters on 3 clockwise and 3 counter-clockwise
@@ -78,16 +90,7 @@ fn calibrate(method: &str, belief: &Runner, truth: &Runner) -> Result<(Vec<f64>,
     let fo = kinegen_analysis::fit::FitOptions::default();
     let m = by_name(method).expect("clap checked the name");
     let c = m
-        .calibrate(
-            belief,
-            &runs,
-            &Settings {
-                side: 1.0,
-                mu: 0.01,
-                fit: &fo,
-                hidden: 0,
-            },
-        )
+        .calibrate(belief, &runs, &Settings::defaults(&fo))
         .map_err(|e| e.to_string())?;
     Ok((c.p, c.note))
 }

@@ -20,6 +20,23 @@ pub struct Settings<'a> {
     pub hidden: usize,
 }
 
+impl<'a> Settings<'a> {
+    /// The side of UMBMark's squares unless told otherwise, m (seed 004: 1 m).
+    pub const SIDE: f64 = 1.0;
+    /// The EKF's measurement-noise inflation unless told otherwise, rad/s.
+    pub const MU: f64 = 0.01;
+
+    /// The defaults, with the fit's options `fit` (one hidden size: none).
+    pub fn defaults(fit: &'a FitOptions) -> Settings<'a> {
+        Settings {
+            side: Self::SIDE,
+            mu: Self::MU,
+            fit,
+            hidden: 0,
+        }
+    }
+}
+
 /// A learned yaw rate (rad/s) from one step's inputs: a virtual gyro.
 pub type YawRateModel = crate::track_rows::LearnedYawRate;
 
@@ -62,6 +79,11 @@ pub trait Method: Sync {
     /// Run once per `--hidden` size (named `NAME-SIZE`).
     fn per_hidden_size(&self) -> bool {
         false
+    }
+    /// Whether the method calibrates the model's parameters (rather than
+    /// learning a virtual gyro beside them).
+    fn calibrates_parameters(&self) -> bool {
+        true
     }
 }
 
@@ -207,6 +229,9 @@ impl Method for Neural {
     }
     fn per_hidden_size(&self) -> bool {
         true
+    }
+    fn calibrates_parameters(&self) -> bool {
+        false
     }
     fn calibrate(
         &self,

@@ -1030,6 +1030,37 @@ fn subst(src: &str, map: &BTreeMap<String, String>) -> Result<String, ApplyError
 mod tests {
     use super::*;
 
+    /// The compiled-in catalogue is every file of `spec/effects/`, each by
+    /// its own name and text: an effect added there and not here (or the
+    /// reverse) would exist for the tests and not for users.
+    #[test]
+    fn the_bundled_catalogue_is_the_effects_folder() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../spec/effects");
+        let mut files: Vec<(String, String)> = std::fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .map(|p| {
+                let name = p.file_name().unwrap().to_string_lossy().to_string();
+                (name, std::fs::read_to_string(&p).unwrap())
+            })
+            .collect();
+        files.sort();
+        let mut bundled: Vec<(String, String)> = BUNDLED
+            .iter()
+            .map(|(f, t)| (f.to_string(), t.to_string()))
+            .collect();
+        bundled.sort();
+        let names = |v: &[(String, String)]| v.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
+        assert_eq!(
+            names(&bundled),
+            names(&files),
+            "BUNDLED against spec/effects/"
+        );
+        assert_eq!(bundled, files);
+    }
+
     fn model(text: &str) -> Model {
         Model::parse(Path::new("robot.toml"), text).unwrap()
     }
