@@ -10,8 +10,8 @@ pub fn run(_spec_dir: &Path, _out: &Path, _check: bool) -> ExitCode {
 
 #[cfg(feature = "symbolic")]
 pub fn run(spec_dir: &Path, out: &Path, check: bool) -> ExitCode {
-    use kinegen_codegen::generate::{generate, GenerateError};
-    match generate(spec_dir, out, check) {
+    use kinegen_codegen::generate::{generate, Config, GenerateError};
+    match generate(&Config::new(spec_dir, out, check)) {
         Err(e @ GenerateError::Spec(_)) => {
             eprintln!("error: {e}");
             ExitCode::from(2)

@@ -11,7 +11,10 @@ fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let (spec, out) = (root.join("spec"), root.join("generated"));
     let run = || {
-        kinegen_codegen::generate::generate(&spec, &out, true).expect("the bundled specs generate")
+        kinegen_codegen::generate::generate(&kinegen_codegen::generate::Config::new(
+            &spec, &out, true,
+        ))
+        .expect("the bundled specs generate")
     };
     run(); // warm-up: symbolica's thread and its symbol table
     let mut reports: Vec<_> = (0..RUNS).map(|_| run()).collect();

@@ -50,8 +50,33 @@ pub fn write_atomic(path: &Path, content: &str) -> Result<(), GenerateError> {
 /// Files to write (path, content) and the derived models with their derivation times.
 pub type Rendered = (Vec<(PathBuf, String)>, Vec<(ModelIr, Duration)>);
 
+/// What `kinegen generate` does, as one value (prost-build's shape): the
+/// specs, where the crate goes, whether only to check it, and the backend
+/// that writes the code. [`Config::new`] is the Rust backend; a new backend
+/// is an implementation of [`Backend`] given here.
+pub struct Config<'a> {
+    pub spec_dir: &'a Path,
+    pub out_dir: &'a Path,
+    /// Only list the files that differ instead of writing them.
+    pub check: bool,
+    pub backend: &'a dyn Backend,
+}
+
+impl<'a> Config<'a> {
+    /// The specs of `spec_dir` into the crate at `out_dir`, with the Rust backend.
+    pub fn new(spec_dir: &'a Path, out_dir: &'a Path, check: bool) -> Config<'a> {
+        Config {
+            spec_dir,
+            out_dir,
+            check,
+            backend: &RustBackend,
+        }
+    }
+}
+
 /// Every file the generated crate should contain, with its content.
-pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError> {
+pub fn render(c: &Config) -> Result<Rendered, GenerateError> {
+    let (spec_dir, out_dir) = (c.spec_dir, c.out_dir);
     let mut files = Vec::new();
     let mut models = Vec::new();
     let dir_name = spec_dir
@@ -79,7 +104,7 @@ pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError
         let ir = crate::derive_model(&model)?;
         let took = t0.elapsed();
         let rel = format!("{dir_name}/{}", path.file_name().unwrap().to_string_lossy());
-        let (module, source) = RustBackend.module(&ir, &rel);
+        let (module, source) = c.backend.module(&ir, &rel);
         files.push((out_dir.join(module), source));
         files.push((
             out_dir.join("ir").join(format!("{}.json", ir.name)),
@@ -89,7 +114,7 @@ pub fn render(spec_dir: &Path, out_dir: &Path) -> Result<Rendered, GenerateError
     }
     let names: Vec<String> = models.iter().map(|(m, _)| m.name.clone()).collect();
     files.extend(
-        RustBackend
+        c.backend
             .shared(&names)
             .into_iter()
             .map(|(p, text)| (out_dir.join(p), text)),
@@ -141,9 +166,10 @@ nalgebra = { version = "0.33", default-features = false, optional = true }
 
 /// Derive all specs, then either write the files (atomically, only after every spec
 /// derived without error) or, with `check`, only list the stale ones.
-pub fn generate(spec_dir: &Path, out_dir: &Path, check: bool) -> Result<Report, GenerateError> {
+pub fn generate(c: &Config) -> Result<Report, GenerateError> {
     let t0 = Instant::now();
-    let (files, models) = render(spec_dir, out_dir)?;
+    let (out_dir, check) = (c.out_dir, c.check);
+    let (files, models) = render(c)?;
     let mut stale: Vec<PathBuf> = files
         .iter()
         .filter(|(p, content)| std::fs::read_to_string(p).map_or(true, |old| old != *content))

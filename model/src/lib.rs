@@ -11,6 +11,56 @@
 //!   them ever touches symbolica.
 //! * [`linalg`]: the pseudo-inverse with a rank check used by least-squares
 //!   (constraint) kinematics, shared verbatim with the generated crate.
+//!
+//! A spec parsed, and a derived IR's exact step evaluated (the IR of the
+//! bundled `unicycle_ekf` spec, committed; `kinegen derive` makes one for any
+//! spec):
+//!
+//! ```
+//! use kinegen_model::ir::{ArgRole, ModelIr, StepForm};
+//! use kinegen_model::spec::Model;
+//!
+//! let spec = Model::parse(
+//!     "my_robot.toml".as_ref(),
+//!     r#"
+//! name = "my_robot"
+//! state = ["x", "y", "theta"]
+//! [[input]]
+//! name = "v"
+//! column = "v_cmd"
+//! kind = "absolute"
+//! [[input]]
+//! name = "w"
+//! column = "w_cmd"
+//! kind = "absolute"
+//! [motion]
+//! vx = "v"
+//! vy = "0"
+//! omega = "w"
+//! "#,
+//! )
+//! .unwrap();
+//! assert_eq!(spec.inputs.len(), 2);
+//!
+//! let ir = ModelIr::from_json(include_str!("../../generated/ir/unicycle_ekf.json")).unwrap();
+//! let step = ir.step(StepForm::Exact).value;
+//! let p: Vec<f64> = ir.runtime_params().iter().map(|q| q.nominal).collect();
+//! // a quarter turn at 1 m/s over pi/2 s from the origin: to (1, 1), heading pi/2
+//! let (x, u, dt) = ([0.0; 3], [1.0, 1.0], [std::f64::consts::FRAC_PI_2]);
+//! let args: Vec<&[f64]> = step
+//!     .args
+//!     .iter()
+//!     .map(|a| match a.role {
+//!         ArgRole::State => &x[..],
+//!         ArgRole::Inputs => &u[..],
+//!         ArgRole::Params => &p[..],
+//!         ArgRole::Dt => &dt[..],
+//!         _ => &[0.0, 0.0][..a.names.len()],
+//!     })
+//!     .collect();
+//! let pose = step.eval(&args);
+//! assert!((pose[0] - 1.0).abs() < 1e-12 && (pose[1] - 1.0).abs() < 1e-12);
+//! ```
 pub mod decl;
 pub mod effects;
 pub mod error;
