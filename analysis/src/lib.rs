@@ -33,42 +33,80 @@
 //! [`diagnose_job`] names the physical effects a spec is missing (its
 //! candidates derived through a [`derivation::Deriver`]), and
 //! [`holdout_bench`] scores calibrations on runs they were not fitted on.
-pub mod bag;
-pub mod column;
-pub mod coverage;
-pub mod dataset;
-pub mod deadreckon;
-pub mod derivation;
-pub mod diagnose;
-pub mod diagnose_job;
-pub mod discretisation;
-pub mod fit;
-pub mod grid;
-pub mod holdout_bench;
-pub mod innovations;
-pub mod input_range;
-pub mod interp;
-pub mod inverse;
-pub mod lag;
-pub mod landmarks;
-pub mod localize;
-pub mod log;
-pub mod methods;
-pub mod metrics;
-pub mod model;
-pub mod navigate;
-pub mod neural;
-pub mod periodic;
-pub mod rosdyn;
-pub mod rosmsg;
-pub mod rows;
-pub mod run;
-pub mod seed_methods;
-pub mod simulate;
-pub mod steering;
-pub mod sweep;
-pub mod timeline;
-pub mod track_rows;
+// The folders follow the pipeline, each using only the ones before it
+// (tests/layers.rs holds them to it): reading logs, the model on a log,
+// estimation, diagnosis, and the seed papers' applications. Every module is
+// also reachable at the crate's top level (`kinegen_analysis::fit`).
+
+/// Reading logs: CSV columns and rows, ROS 2 bags (MCAP, CDR, dynamic
+/// message definitions).
+pub mod logs {
+    pub mod bag;
+    pub mod column;
+    pub mod log;
+    pub mod rosdyn;
+    pub mod rosmsg;
+    pub mod rows;
+}
+
+/// The model on a log: a runnable model, a log as steps, the commands as
+/// executed, dead reckoning, innovations and error metrics.
+pub mod model_on_log {
+    pub mod coverage;
+    pub mod dataset;
+    pub mod deadreckon;
+    pub mod derivation;
+    pub mod innovations;
+    pub mod input_range;
+    pub mod interp;
+    pub mod landmarks;
+    pub mod metrics;
+    pub mod model;
+    pub mod run;
+    pub mod steering;
+    pub mod timeline;
+    pub mod track_rows;
+}
+
+/// Estimation: calibration (the fit and its methods), delays, periodic
+/// errors, the model's own discretisation error.
+pub mod estimation {
+    pub mod discretisation;
+    pub mod fit;
+    pub mod lag;
+    pub mod methods;
+    pub mod neural;
+    pub mod periodic;
+    pub mod seed_methods;
+}
+
+/// Diagnosis: which physical effects the model is missing.
+pub mod diagnosis {
+    pub mod diagnose;
+    pub mod diagnose_job;
+}
+
+/// The seed papers' applications and the benchmarks: localisation,
+/// navigation, inverse kinematics on a path, simulation, calibration on
+/// held-out sessions.
+pub mod applications {
+    pub mod grid;
+    pub mod holdout_bench;
+    pub mod inverse;
+    pub mod localize;
+    pub mod navigate;
+    pub mod simulate;
+    pub mod sweep;
+}
+
+pub use applications::{grid, holdout_bench, inverse, localize, navigate, simulate, sweep};
+pub use diagnosis::{diagnose, diagnose_job};
+pub use estimation::{discretisation, fit, lag, methods, neural, periodic, seed_methods};
+pub use logs::{bag, column, log, rosdyn, rosmsg, rows};
+pub use model_on_log::{
+    coverage, dataset, deadreckon, derivation, innovations, input_range, interp, landmarks,
+    metrics, model, run, steering, timeline, track_rows,
+};
 
 pub use kinegen_model::effects;
 pub use kinegen_model::ir::ModelIr;
