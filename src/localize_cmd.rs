@@ -1,6 +1,7 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
 //! (kinegen_analysis::localize), with its consistency checks.
 use crate::analysis_cmd::{bad, evaluate, prepare, Common};
+use crate::localize_report::Summary;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::localize::{
@@ -266,18 +267,6 @@ fn warn_unseen_landmarks(c: &Common, prep: &crate::analysis_cmd::Prepared) {
             );
         }
     }
-}
-
-/// One run's figures: errors against ground truth, consistency.
-pub struct Summary {
-    pub rmse: Option<f64>,
-    pub dead_reckoning: Option<f64>,
-    pub nis: Option<f64>,
-    pub nis_bounds: Option<(f64, f64)>,
-    pub nees: Option<f64>,
-    pub nees_bounds: Option<(f64, f64)>,
-    /// The smoother's position RMSE and mean NEES.
-    pub smoothed: Option<(Option<f64>, Option<f64>)>,
 }
 
 fn position_rmse(run: &kinegen_analysis::run::Run, track: &[[f64; 3]]) -> Option<f64> {

@@ -157,7 +157,7 @@ impl TapeBuilder {
         } else if s == self.fx.near {
             Op::NearZero {
                 x: args[0],
-                eps: crate::derive::EPS,
+                eps: kinegen_model::options::GenOptions::DEFAULT.series_switch,
                 near: args[1],
                 far: args[2],
             }

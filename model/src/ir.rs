@@ -5,11 +5,11 @@
 //! subexpressions shared. The same tape is emitted as Rust by kinegen-codegen and
 //! interpreted here by [`Function::eval`], so a freshly edited spec can be fitted
 //! without compiling anything.
+use crate::code_slot::NativeCache;
 use crate::decl::{
     Input, Noise, ObservationDecl, ObservationRole, Param, DEFAULT_GYRO_COLUMN,
     DEFAULT_POSE_COLUMNS,
 };
-use crate::jit::NativeCache;
 pub use crate::kernel::{ArgKind, ArgRole, ArgSpec, Kernel, StepForm, Wrt};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -165,19 +165,6 @@ impl Function {
     /// Is the output a matrix (Jacobian) rather than a vector?
     pub fn is_matrix(&self) -> bool {
         self.cols > 1
-    }
-
-    /// Evaluate into `out` (length rows*cols, row-major). `scratch` is reused
-    /// between calls to avoid allocation in loops. A hot tape runs as machine
-    /// code ([`crate::jit`]), with the interpreter's results to the last bit.
-    #[inline]
-    pub fn eval_into(&self, args: &[&[f64]], out: &mut [f64], scratch: &mut Vec<f64>) {
-        if let Some(native) = self.native.get(self) {
-            if native.eval_into(args, out).is_some() {
-                return;
-            }
-        }
-        self.interpret_into(args, out, scratch)
     }
 
     /// Evaluate by interpreting the tape (the reference [`Function::eval_into`]

@@ -17,6 +17,7 @@
 
 mod libm_sincos;
 
+use crate::code_slot::{Entry, Native, NativeCache};
 use crate::ir::{Function, Op};
 use crate::schedule::{schedule, Group, Item};
 use cranelift_codegen::ir::condcodes::FloatCC;
@@ -28,42 +29,13 @@ use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, Linkage, Module};
 use std::collections::{HashMap, HashSet};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Interpreted calls before a tape is compiled: compiling costs about as much as
 /// a few thousand interpreted calls, so one-off evaluations (a verification
 /// probe, a single inverse) never pay for it.
 pub const HOT_CALLS: u32 = 256;
-
-/// `fn(args: *const *const f64, out: *mut f64)`: `args[a]` points at argument
-/// `a`'s values, `out` receives the outputs.
-type Entry = unsafe extern "C" fn(*const *const f64, *mut f64);
-
-/// A compiled tape.
-pub struct Native {
-    entry: Entry,
-    /// Values each argument must have (its largest index read, plus one).
-    arg_len: Vec<usize>,
-    outputs: usize,
-    /// Owns the code memory `entry` points into; freed with the `Native`.
-    module: Mutex<Option<JITModule>>,
-}
-
-// SAFETY: after `finalize_definitions` the code `entry` points into is immutable
-// and only ever called; the module is touched again only by `Drop`, under the
-// mutex. The entry point reads its arguments and writes `out`, nothing shared.
-unsafe impl Send for Native {}
-unsafe impl Sync for Native {}
-
-impl Drop for Native {
-    fn drop(&mut self) {
-        if let Some(m) = self.module.get_mut().ok().and_then(Option::take) {
-            // SAFETY: `self` is being dropped, so `entry` can no longer be called.
-            unsafe { m.free_memory() };
-        }
-    }
-}
 
 impl Native {
     /// Evaluate into `out`; `None` (nothing written) when the argument or output
@@ -131,26 +103,35 @@ fn host_isa() -> Option<cranelift_codegen::isa::OwnedTargetIsa> {
     isa.finish(settings::Flags::new(flags)).ok()
 }
 
-/// The compiled form of a tape, filled on demand. Cloning gives an empty cache:
-/// a clone may be edited (the mutation sweep corrupts tapes), and must never run
-/// the original's code. An unedited clone finds its code again in [`compiled`].
-#[derive(Default)]
-pub struct NativeCache {
-    calls: AtomicU32,
-    native: OnceLock<Option<Arc<Native>>>,
-}
-
 impl NativeCache {
     /// The compiled tape once `f` is hot, compiling it on the call that makes it so.
     #[inline]
     pub fn get(&self, f: &Function) -> Option<&Native> {
-        if let Some(n) = self.native.get() {
-            return n.as_deref();
+        let code = match self.code.get() {
+            Some(code) => code,
+            None => {
+                if !enabled() || self.calls.fetch_add(1, Ordering::Relaxed) < HOT_CALLS {
+                    return None;
+                }
+                self.code.get_or_init(|| compiled(f))
+            }
+        };
+        code.as_deref()
+    }
+}
+
+impl Function {
+    /// Evaluate into `out` (length rows*cols, row-major). `scratch` is reused
+    /// between calls to avoid allocation in loops. A hot tape runs as machine
+    /// code, with the interpreter's results to the last bit.
+    #[inline]
+    pub fn eval_into(&self, args: &[&[f64]], out: &mut [f64], scratch: &mut Vec<f64>) {
+        if let Some(native) = self.native.get(self) {
+            if native.eval_into(args, out).is_some() {
+                return;
+            }
         }
-        if !enabled() || self.calls.fetch_add(1, Ordering::Relaxed) < HOT_CALLS {
-            return None;
-        }
-        self.native.get_or_init(|| compiled(f)).as_deref()
+        self.interpret_into(args, out, scratch)
     }
 }
 
@@ -209,30 +190,6 @@ fn tape_hash(f: &Function) -> u64 {
     }
     let _ = write!(h, "{:?}/{}", f.outputs, f.args.len());
     h.0.finish()
-}
-
-impl Clone for NativeCache {
-    fn clone(&self) -> Self {
-        NativeCache::default()
-    }
-}
-
-impl std::fmt::Debug for NativeCache {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let state = match self.native.get() {
-            Some(Some(_)) => "compiled",
-            Some(None) => "interpreted (no backend)",
-            None => "interpreted",
-        };
-        write!(f, "NativeCache({state})")
-    }
-}
-
-/// A cache is not part of what a function is.
-impl PartialEq for NativeCache {
-    fn eq(&self, _: &Self) -> bool {
-        true
-    }
 }
 
 /// Compilation is on unless `KINEGEN_JIT=0` (benchmarks compare both).

@@ -61,6 +61,7 @@
 //! let pose = step.eval(&args);
 //! assert!((pose[0] - 1.0).abs() < 1e-12 && (pose[1] - 1.0).abs() < 1e-12);
 //! ```
+pub mod code_slot;
 pub mod decl;
 pub mod effects;
 pub mod error;
