@@ -5,7 +5,7 @@ use crate::localize_report::Summary;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::localize::{
-    localize_with, mean_bounds, nees_of, noise_for, EkfOptions, Localization, NoiseSource,
+    localize_runs, mean_bounds, nees_of, EkfOptions, Localization, NoiseSource,
 };
 use serde_json::json;
 use std::path::PathBuf;
@@ -96,29 +96,26 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         ));
     }
     // one robot, one noise: estimated on the --data runs, used on the held-out ones too
-    let (noise, note) = match noise_for(r, &prep.runs, &o) {
-        Ok(n) => n,
+    let done = match localize_runs(r, &prep.runs, &prep.holdout, &o) {
+        Ok(d) => d,
         Err(e) => return bad(e),
     };
-    out.say(&note);
+    let (noise, note) = (&done.noise, &done.note);
+    out.say(note);
     for line in noise.describe() {
         out.say(&format!("  {line}"));
     }
     let mut runs_json = Vec::new();
     let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
-    for run in prep.runs.iter().chain(&prep.holdout) {
-        let loc = match localize_with(r, run, &noise, &o) {
-            Ok(l) => l,
-            Err(e) => return bad(e),
-        };
+    for (run, loc) in prep.runs.iter().chain(&prep.holdout).zip(done.runs) {
         let summary = summarise(r, run, &loc);
         say_run(&out, run, &loc, &summary, a.gate);
         csv += &track_rows(run, &loc);
         runs_json.push(run_json(run, &loc, &summary));
         locs.push((run, loc, summary));
     }
-    let noise_json = noise_json(&noise, &note);
+    let noise_json = noise_json(noise, note);
     let sweep = if a.sweep {
         match kinegen_analysis::sweep::sweep(r, locs[0].0, &kinegen_analysis::sweep::LEVELS, &o) {
             Ok(s) => s,

@@ -133,6 +133,34 @@ pub fn noise_for(
     noise::choose(&Filter::new(r, o)?, &executed, o)
 }
 
+/// One robot's logs localised: the noise and where it came from, and each
+/// run's filter output.
+#[derive(Debug, Clone)]
+pub struct Localized {
+    pub noise: NoiseModel,
+    pub note: String,
+    /// The filter over `runs`, then over `holdout`, in order.
+    pub runs: Vec<Localization>,
+}
+
+/// Localise one robot's runs: the noise from `runs` (estimated on their
+/// sightings pooled unless `o` gives it), then the filter over `runs` and
+/// the `holdout` runs with that noise.
+pub fn localize_runs(
+    r: &Runner,
+    runs: &[Run],
+    holdout: &[Run],
+    o: &EkfOptions,
+) -> Result<Localized, LocalizeError> {
+    let (noise, note) = noise_for(r, runs, o)?;
+    let runs = runs
+        .iter()
+        .chain(holdout)
+        .map(|run| localize_with(r, run, &noise, o))
+        .collect::<Result<_, _>>()?;
+    Ok(Localized { noise, note, runs })
+}
+
 /// Run the filter (and the smoother, with `o.smooth`) over one run with `noise`.
 pub fn localize_with(
     r: &Runner,
