@@ -248,14 +248,7 @@ pub(crate) fn axes<'a, 'b>(
     xl: &str,
     yl: &str,
     ((x0, x1), (y0, y1)): ((f64, f64), (f64, f64)),
-) -> Result<
-    ChartContext<
-        'a,
-        SVGBackend<'b>,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
-    String,
-> {
+) -> Result<RealChart<'a, 'b>, String> {
     let mut c = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 16))
         .margin(8)
@@ -1129,8 +1122,8 @@ fn navigation_map(
     Ok(svg)
 }
 
-/// A chart over metres on both axes.
-type MetreChart<'a, 'b> = ChartContext<
+/// A chart over real numbers on both axes.
+pub(crate) type RealChart<'a, 'b> = ChartContext<
     'a,
     SVGBackend<'b>,
     Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
@@ -1138,7 +1131,7 @@ type MetreChart<'a, 'b> = ChartContext<
 
 /// The arena's obstacles and safety zone, cell by cell.
 fn draw_arena(
-    c: &mut MetreChart<'_, '_>,
+    c: &mut RealChart<'_, '_>,
     grid: &kinegen_analysis::grid::Grid,
 ) -> Result<(), String> {
     use kinegen_analysis::grid::Cell;

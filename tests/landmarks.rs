@@ -7,6 +7,17 @@ use std::path::{Path, PathBuf};
 
 const MAP: &str = "id,x,y\nL1,3,2\nL2,-1,4\nL3,5,-2\nL4,0,-3\nL5,2,6\n";
 
+/// A landmark map `id,x,y` of `points` (ids L0, L1, ...) written to DIR/map.csv.
+fn write_map(dir: &Path, points: &[(f64, f64)]) -> PathBuf {
+    let mut map = String::from("id,x,y\n");
+    for (i, (x, y)) in points.iter().enumerate() {
+        map += &format!("L{i},{x},{y}\n");
+    }
+    let path = dir.join("map.csv");
+    std::fs::write(&path, map).unwrap();
+    path
+}
+
 /// A simulated diff-drive log with landmark observations; returns (log, obs, map).
 fn landmark_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     let map = dir.join("map.csv");
@@ -281,24 +292,20 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let spec = "spec/unicycle_ekf.toml";
-    let mut map = String::from("id,x,y\n");
-    for (i, (x, y)) in [
-        (-8.0, -6.0),
-        (9.0, -7.0),
-        (10.0, 8.0),
-        (-9.0, 9.0),
-        (0.0, 12.0),
-        (1.0, -11.0),
-        (-13.0, 0.5),
-        (13.0, 0.0),
-    ]
-    .iter()
-    .enumerate()
-    {
-        map += &format!("L{i},{x},{y}\n");
-    }
-    std::fs::write(dir.join("map.csv"), map).unwrap();
-    let (m, obs) = (dir.join("map.csv"), dir.join("obs.csv"));
+    let m = write_map(
+        dir,
+        &[
+            (-8.0, -6.0),
+            (9.0, -7.0),
+            (10.0, 8.0),
+            (-9.0, 9.0),
+            (0.0, 12.0),
+            (1.0, -11.0),
+            (-13.0, 0.5),
+            (13.0, 0.0),
+        ],
+    );
+    let obs = dir.join("obs.csv");
     let log = simulate(
         dir,
         "run.csv",
@@ -563,22 +570,18 @@ fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let spec = "spec/unicycle_ekf.toml";
-    let mut map = String::from("id,x,y\n");
-    for (i, (x, y)) in [
-        (-4.0, -3.0),
-        (5.0, -4.0),
-        (4.0, 5.0),
-        (-5.0, 4.0),
-        (0.0, 6.0),
-        (0.0, -6.0),
-    ]
-    .iter()
-    .enumerate()
-    {
-        map += &format!("L{i},{x},{y}\n");
-    }
-    std::fs::write(dir.join("map.csv"), map).unwrap();
-    let (m, obs) = (dir.join("map.csv"), dir.join("obs.csv"));
+    let m = write_map(
+        dir,
+        &[
+            (-4.0, -3.0),
+            (5.0, -4.0),
+            (4.0, 5.0),
+            (-5.0, 4.0),
+            (0.0, 6.0),
+            (0.0, -6.0),
+        ],
+    );
+    let obs = dir.join("obs.csv");
     let log = simulate(
         dir,
         "run.csv",

@@ -1,9 +1,8 @@
-//! The analysis crate is layered: no module reaches, directly or through
-//! others, a module that reaches it back (issue 10 removed the cycle dataset ->
-//! landmarks -> deadreckon -> dataset), and its folders are the pipeline's
-//! stages in order (logs, the model on a log, estimation, diagnosis,
-//! applications), none using a later one. Read from the sources: every
-//! `crate::NAME` outside comments and test modules is an edge.
+//! The analysis crate's folders are the pipeline's stages in order (logs,
+//! the model on a log, estimation, diagnosis, applications), none using a
+//! later one. Read from the sources: every `crate::NAME` outside comments
+//! and test modules is an edge. (That no module reaches a module that
+//! reaches it back, here and in every crate, is `tests/module_cycles.rs`.)
 use std::collections::{BTreeMap, BTreeSet};
 
 /// The pipeline's folders, in order: a module may use modules of its own
@@ -85,44 +84,6 @@ fn edges() -> BTreeMap<String, BTreeSet<String>> {
         .collect()
 }
 
-/// A cycle through `from`, if any (depth-first search).
-fn cycle(g: &BTreeMap<String, BTreeSet<String>>, from: &str) -> Option<Vec<String>> {
-    fn go(
-        g: &BTreeMap<String, BTreeSet<String>>,
-        path: &mut Vec<String>,
-        done: &mut BTreeSet<String>,
-    ) -> Option<Vec<String>> {
-        let at = path.last().unwrap().clone();
-        for next in &g[&at] {
-            if let Some(i) = path.iter().position(|m| m == next) {
-                let mut c = path[i..].to_vec();
-                c.push(next.clone());
-                return Some(c);
-            }
-            if done.insert(next.clone()) {
-                path.push(next.clone());
-                if let Some(c) = go(g, path, done) {
-                    return Some(c);
-                }
-                path.pop();
-            }
-        }
-        None
-    }
-    go(g, &mut vec![from.to_string()], &mut BTreeSet::new())
-}
-
-#[test]
-fn the_analysis_modules_form_no_cycle() {
-    let g = edges();
-    assert!(g.len() > 20 && g["deadreckon"].contains("run"), "{g:?}");
-    for m in g.keys() {
-        if let Some(c) = cycle(&g, m) {
-            panic!("module cycle: {}", c.join(" -> "));
-        }
-    }
-}
-
 #[test]
 fn no_module_uses_a_later_stage_of_the_pipeline() {
     let stage: BTreeMap<String, usize> = sources().into_iter().map(|(m, (s, _))| (m, s)).collect();
@@ -138,11 +99,4 @@ fn no_module_uses_a_later_stage_of_the_pipeline() {
         }
     }
     assert!(back.is_empty(), "{back:#?}");
-}
-
-#[test]
-fn a_cycle_is_found() {
-    let mut g = edges();
-    g.get_mut("run").unwrap().insert("deadreckon".into());
-    assert!(cycle(&g, "run").is_some());
 }
