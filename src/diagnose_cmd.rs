@@ -20,7 +20,6 @@ const DISCRETISATION_WARN: f64 = 0.3;
 /// Diagnose `runs` against every applicable and observable effect of the
 /// bundled catalogue and `dirs` (kinegen_analysis::diagnose_job), deriving
 /// the candidates with the command line's deriver.
-#[allow(clippy::too_many_arguments)]
 pub fn run_diagnosis(
     spec: &Model,
     runner: &Runner,
