@@ -2,20 +2,34 @@
 //! through others, a module that reaches it back. Read from the sources: in
 //! each crate every `crate::NAME` outside comments and test modules is an
 //! edge; a module with a folder of submodules is one module, and the folders
-//! that only group modules (`analysis/src/logs/`...) are looked through (the
-//! analysis crate's own test also holds its folders in pipeline order).
+//! that only group modules (`analysis/src/logs/`...) are looked through.
+//! The analysis crate's folders are also held in pipeline order: a module
+//! never uses a module of a later stage.
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 mod common;
 
+/// A module's source and the grouping folder it sits in ("" at the top).
+#[derive(Default)]
+struct Source {
+    group: String,
+    text: String,
+}
+
+/// A crate's modules.
+fn modules(src: &Path) -> BTreeMap<String, Source> {
+    let mut found = BTreeMap::new();
+    collect(src, src, &mut found);
+    found
+}
+
 /// A crate's modules and the modules each uses.
 fn edges(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
-    let mut text: BTreeMap<String, String> = BTreeMap::new();
-    collect(src, src, &mut text);
+    let text = modules(src);
     let modules: BTreeSet<String> = text.keys().cloned().collect();
     text.iter()
-        .map(|(m, body)| {
+        .map(|(m, Source { text: body, .. })| {
             let mut to = BTreeSet::new();
             for line in body.lines().filter(|l| !l.trim_start().starts_with("//")) {
                 for (i, _) in line.match_indices("crate::") {
@@ -36,7 +50,12 @@ fn edges(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
 /// The modules under `dir`: a file is a module; a folder is one module when
 /// a file or `mod.rs` makes it one (`fit.rs` beside `fit/`), and a group of
 /// modules otherwise.
-fn collect(root: &Path, dir: &Path, text: &mut BTreeMap<String, String>) {
+fn collect(root: &Path, dir: &Path, text: &mut BTreeMap<String, Source>) {
+    let group = dir
+        .strip_prefix(root)
+        .unwrap()
+        .to_string_lossy()
+        .to_string();
     for e in std::fs::read_dir(dir).unwrap().flatten() {
         let p = e.path();
         let name = p.file_stem().unwrap().to_string_lossy().to_string();
@@ -44,12 +63,12 @@ fn collect(root: &Path, dir: &Path, text: &mut BTreeMap<String, String>) {
             if dir == root && (name == "lib" || name == "main") {
                 continue;
             }
-            add(text, &name, &p);
+            add(text, &name, &group, &p);
         } else if p.is_dir() {
             let is_module = p.join("mod.rs").is_file() || dir.join(format!("{name}.rs")).is_file();
             if is_module {
                 for f in walk(&p) {
-                    add(text, &name, &f);
+                    add(text, &name, &group, &f);
                 }
             } else {
                 collect(root, &p, text);
@@ -71,11 +90,13 @@ fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
     out
 }
 
-fn add(text: &mut BTreeMap<String, String>, module: &str, path: &Path) {
+fn add(text: &mut BTreeMap<String, Source>, module: &str, group: &str, path: &Path) {
     let body = std::fs::read_to_string(path).unwrap();
     // test modules may use anything
     let body = body.split("#[cfg(test)]").next().unwrap().to_string();
-    text.entry(module.to_string()).or_default().push_str(&body);
+    let entry = text.entry(module.to_string()).or_default();
+    entry.group = group.to_string();
+    entry.text.push_str(&body);
 }
 
 /// A cycle through `from`, if any (depth-first search).
@@ -124,6 +145,42 @@ fn no_crate_has_a_module_cycle() {
             }
         }
     }
+}
+
+/// The analysis crate's folders: the pipeline's stages, in order.
+const STAGES: [&str; 5] = [
+    "logs",
+    "model_on_log",
+    "estimation",
+    "diagnosis",
+    "applications",
+];
+
+#[test]
+fn no_analysis_module_uses_a_later_stage_of_the_pipeline() {
+    let src = common::root().join("analysis/src");
+    let stage: BTreeMap<String, usize> = modules(&src)
+        .into_iter()
+        .map(|(m, s)| {
+            let k = STAGES.iter().position(|g| *g == s.group);
+            (
+                m.clone(),
+                k.unwrap_or_else(|| panic!("analysis/src: `{m}` is in no stage of the pipeline")),
+            )
+        })
+        .collect();
+    let mut back = Vec::new();
+    for (m, to) in edges(&src) {
+        for t in to {
+            if stage[&t] > stage[&m] {
+                back.push(format!(
+                    "{m} ({}) uses {t} ({})",
+                    STAGES[stage[&m]], STAGES[stage[&t]]
+                ));
+            }
+        }
+    }
+    assert!(back.is_empty(), "{back:#?}");
 }
 
 /// The check sees a cycle where there is one: the model crate's IR reaching

@@ -34,7 +34,7 @@
 //! candidates derived through a [`derivation::Deriver`]), and
 //! [`holdout_bench`] scores calibrations on runs they were not fitted on.
 // The folders follow the pipeline, each using only the ones before it
-// (tests/layers.rs holds them to it): reading logs, the model on a log,
+// (tests/module_cycles.rs holds them to it): reading logs, the model on a log,
 // estimation, diagnosis, and the seed papers' applications. Every module is
 // also reachable at the crate's top level (`kinegen_analysis::fit`).
 
