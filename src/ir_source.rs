@@ -126,6 +126,7 @@ pub fn derive_to(_spec: &Path, _out: &Path) -> Result<(), String> {
 #[cfg(feature = "symbolic")]
 pub fn derive_to(spec: &Path, out: &Path) -> Result<(), String> {
     let model = Model::load(spec).map_err(|e| e.to_string())?;
-    let ir = kinegen_codegen::derive_model(&model).map_err(|e| e.to_string())?;
+    let ir =
+        kinegen_codegen::derive_model(&model, &Default::default()).map_err(|e| e.to_string())?;
     kinegen_model::files::write_atomic(out, &ir.to_json()).map_err(|e| e.to_string())
 }

@@ -7,7 +7,8 @@
 //! scanned for a denominator that vanishes when a designated increment symbol is 0
 //! (the exact-integration rotation `dth = omega*dt`, the pose increment `dtheta` of
 //! the integrated inverse). Such an output gets a Taylor series in that symbol,
-//! computed by symbolica, and a `NearZero` branch that uses it for |s| < EPS. If the
+//! computed by symbolica, and a `NearZero` branch that uses it below the
+//! [`GenOptions`]' switch (the options are a value the caller passes). If the
 //! series still has negative powers the singularity is not removable and derivation
 //! fails instead of emitting code that blows up.
 use crate::symbolic::{
@@ -24,13 +25,11 @@ use symbolica::atom::{Atom, AtomCore, AtomView, Symbol};
 use symbolica::poly::series::SeriesDepth;
 use symbolica::symbol;
 
-/// Below this |s| the series branch is used ([`GenOptions`] says why this value).
-pub const EPS: f64 = GenOptions::DEFAULT.series_switch;
-pub const SERIES_ORDER: i64 = GenOptions::DEFAULT.series_order;
-
 struct Sym {
     fx: Funcs,
     by_name: HashMap<String, Atom>,
+    /// Where the series branches switch and their order.
+    options: GenOptions,
 }
 
 impl Sym {
@@ -130,8 +129,14 @@ struct Spec {
     singular: Vec<Symbol>,
 }
 
-fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), SymbolicError> {
-    let mut tb = TapeBuilder::new(fx, cse);
+fn lower(
+    spec: &Spec,
+    fx: Funcs,
+    options: &GenOptions,
+    cse: bool,
+) -> Result<(Vec<Op>, Vec<u32>), SymbolicError> {
+    let mut tb = TapeBuilder::new(fx, cse, options.series_switch);
+    let order = options.series_order;
     for (ai, a) in spec.args.iter().enumerate() {
         for (i, s) in a.syms.iter().enumerate() {
             let slot = tb.push(Op::Arg(ai as u16, i as u16));
@@ -143,7 +148,7 @@ fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), Symbo
         // its series here, once, instead of in every output that uses it
         let mut e = e.clone();
         for &sing in spec.singular.iter().filter(|&&sing| sing != *s) {
-            e = regularize(&e, sing, fx)
+            e = regularize(&e, sing, fx, order)
                 .map_err(|err| SymbolicError(format!("{:?} let {s}: {}", spec.kernel, err.0)))?;
         }
         let slot = tb.atom(e.as_view())?;
@@ -154,7 +159,7 @@ fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), Symbo
         check_no_placeholder(o, &format!("{:?} output {k}", spec.kernel))?;
         let mut o = o.clone();
         for &s in &spec.singular {
-            o = regularize(&o, s, fx)
+            o = regularize(&o, s, fx, order)
                 .map_err(|e| SymbolicError(format!("{:?} output {k}: {}", spec.kernel, e.0)))?;
         }
         outs.push(tb.atom(o.as_view())?);
@@ -166,13 +171,13 @@ fn lower(spec: &Spec, fx: Funcs, cse: bool) -> Result<(Vec<Op>, Vec<u32>), Symbo
 /// `kg_near(s, series, closed)`. The whole expression is tried first (singular
 /// terms of a sum may cancel only together); if symbolica cannot expand it (e.g. it
 /// contains one of our own functions of s) its parts are regularised one by one.
-fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
+fn regularize(a: &Atom, s: Symbol, fx: Funcs, order: i64) -> Result<Atom, SymbolicError> {
     if !has_vanishing_denominator(a.as_view(), s) {
         return Ok(a.clone());
     }
     let own_fn = |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs, fx.pinv, fx.lsq].contains(&f);
     if !matches!(a.as_view(), AtomView::Fun(f) if own_fn(f.get_symbol())) {
-        if let Ok(series) = a.series(s, Atom::num(0), SeriesDepth::absolute(SERIES_ORDER)) {
+        if let Ok(series) = a.series(s, Atom::num(0), SeriesDepth::absolute(order)) {
             let series = series.to_atom();
             if has_negative_power(series.as_view(), s) {
                 return Err(SymbolicError(format!(
@@ -194,14 +199,14 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
     // Rebuild from regularised parts.
     Ok(match a.as_view() {
         AtomView::Add(add) => add.iter().try_fold(Atom::num(0), |acc, t| {
-            Ok::<_, SymbolicError>(acc + regularize(&t.to_owned(), s, fx)?)
+            Ok::<_, SymbolicError>(acc + regularize(&t.to_owned(), s, fx, order)?)
         })?,
         AtomView::Mul(m) => m.iter().try_fold(Atom::num(1), |acc, t| {
-            Ok::<_, SymbolicError>(acc * regularize(&t.to_owned(), s, fx)?)
+            Ok::<_, SymbolicError>(acc * regularize(&t.to_owned(), s, fx, order)?)
         })?,
         AtomView::Pow(p) => {
             let (b, e) = p.get_base_exp();
-            let b2 = regularize(&b.to_owned(), s, fx)?;
+            let b2 = regularize(&b.to_owned(), s, fx, order)?;
             if has_vanishing_denominator(b2.as_view(), s)
                 || (crate::symbolic::as_f64(e).is_some_and(|n| n < 0.0)
                     && is_zero(&substitute(&b.to_owned(), s, &Atom::num(0))))
@@ -217,7 +222,7 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs) -> Result<Atom, SymbolicError> {
         AtomView::Fun(f) => {
             let mut args = Vec::new();
             for x in f.iter() {
-                args.push(regularize(&x.to_owned(), s, fx)?);
+                args.push(regularize(&x.to_owned(), s, fx, order)?);
             }
             let mut fb = symbolica::atom::FunctionBuilder::new(f.get_symbol());
             for x in &args {
@@ -314,8 +319,8 @@ fn has_negative_power(a: AtomView, s: Symbol) -> bool {
     }
 }
 
-fn finish(spec: Spec, model: &Model, fx: Funcs) -> Result<Function, SymbolicError> {
-    let (tape, outputs) = lower(&spec, fx, true)?;
+fn finish(spec: Spec, model: &Model, sym: &Sym) -> Result<Function, SymbolicError> {
+    let (tape, outputs) = lower(&spec, sym.fx, &sym.options, true)?;
     let ops_tree = tree_size(&tape, &outputs);
     Ok(Function {
         kernel: spec.kernel,
@@ -419,10 +424,10 @@ fn jacobian_through(
     (j, dlets)
 }
 
-/// Derive every function of a model.
-pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
+/// Derive every function of a model, its series branches as `options` say.
+pub fn derive(model: &Model, options: &GenOptions) -> Result<ModelIr, SourceError> {
     let fx = Funcs::get();
-    let sym = symbols(model, fx);
+    let sym = symbols(model, fx, *options);
     let se = |e| sym_err(model, e);
     let args = Args::new(model, &sym);
     // Body twist with and without noise.
@@ -467,7 +472,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
     };
     let mut functions = Vec::new();
     for s in fns {
-        functions.push(finish(s, model, fx).map_err(se)?);
+        functions.push(finish(s, model, &sym).map_err(se)?);
     }
     ModelIr::try_from(IrFile {
         name: model.name.clone(),
@@ -488,7 +493,7 @@ pub fn derive(model: &Model) -> Result<ModelIr, SourceError> {
 /// A symbol for every name a kernel may read (the state, inputs, noise,
 /// runtime parameters, the step, the landmark, the twist and the let-bound
 /// quantities), and each const parameter as its exact number.
-fn symbols(model: &Model, fx: Funcs) -> Sym {
+fn symbols(model: &Model, fx: Funcs, options: GenOptions) -> Sym {
     let mut by_name = HashMap::new();
     let mut names: Vec<String> = STATE.iter().map(|s| s.to_string()).collect();
     names.extend(model.inputs.iter().map(|i| i.name.clone()));
@@ -517,7 +522,11 @@ fn symbols(model: &Model, fx: Funcs) -> Sym {
     for p in model.params.iter().filter(|p| p.constant) {
         by_name.insert(p.name.clone(), number_f64(p.nominal));
     }
-    Sym { fx, by_name }
+    Sym {
+        fx,
+        by_name,
+        options,
+    }
 }
 
 /// The kernels' arguments: state, inputs, noise, parameters and time step.
@@ -842,8 +851,8 @@ fn least_squares_twist(
 
 /// Evaluate an atom numerically with symbol values (used for rank and
 /// consistency checks at sample points, never for emitted code).
-fn eval_at(a: &Atom, values: &[(Symbol, f64)], fx: Funcs) -> Result<f64, SymbolicError> {
-    let mut tb = TapeBuilder::new(fx, true);
+fn eval_at(a: &Atom, values: &[(Symbol, f64)], sym: &Sym) -> Result<f64, SymbolicError> {
+    let mut tb = TapeBuilder::new(sym.fx, true, sym.options.series_switch);
     let vals: Vec<f64> = values.iter().map(|v| v.1).collect();
     for (i, (s, _)) in values.iter().enumerate() {
         let slot = tb.push(Op::Arg(0, i as u16));
@@ -1041,10 +1050,13 @@ impl<'a> InverseCx<'a> {
             at.extend(self.tw_syms.iter().copied().zip(tw.iter().copied()));
             let mut fwd_at = pt.clone();
             for (i, o) in model.inputs.iter().zip(&outs) {
-                fwd_at.push((sym.s(&i.name), eval_at(o, &at, fx).map_err(|e| self.se(e))?));
+                fwd_at.push((
+                    sym.s(&i.name),
+                    eval_at(o, &at, sym).map_err(|e| self.se(e))?,
+                ));
             }
             for r in (0..3).filter(|&r| imposed[r]) {
-                let back = eval_at(&self.twist[r], &fwd_at, fx).map_err(|e| self.se(e))?;
+                let back = eval_at(&self.twist[r], &fwd_at, sym).map_err(|e| self.se(e))?;
                 if (back - tw[r]).abs() > 1e-9 * (1.0 + tw[r].abs()) {
                     return Err(err_at(
                         model,
@@ -1066,7 +1078,7 @@ impl<'a> InverseCx<'a> {
     /// Their least-squares inverse exists where S has rank 3; if it never does,
     /// the model cannot be used.
     fn constrained(&self, c: &Constraints) -> Result<Solved, SourceError> {
-        let (model, fx) = (self.model, self.sym.fx);
+        let model = self.model;
         let rows = constraint_rows(model, c, self.sym).map_err(|e| self.se(e))?;
         let full_rank_somewhere = (0..8).any(|k| {
             let pt = self.point(k);
@@ -1078,7 +1090,7 @@ impl<'a> InverseCx<'a> {
                             .iter()
                             .fold(Atom::num(0), |acc, (_, s)| acc + &s[a] * &s[b]),
                         &pt,
-                        fx,
+                        self.sym,
                     )
                     .ok()
                 })
@@ -1205,7 +1217,7 @@ impl<'a> InverseCx<'a> {
                 .collect();
             let (inv, det) = symbolic_inverse(&m);
             let singular_everywhere = (0..6).all(|k| {
-                eval_at(&det, &self.point(k), self.sym.fx)
+                eval_at(&det, &self.point(k), self.sym)
                     .map(|d| d.abs() < 1e-12)
                     .unwrap_or(true)
             });
@@ -1308,11 +1320,13 @@ impl<'a> InverseCx<'a> {
         let lets = vec![
             (
                 sym.s("kg_inc_vx"),
-                regularize(&vx_i, dtheta, sym.fx).map_err(|e| self.se(e))?,
+                regularize(&vx_i, dtheta, sym.fx, sym.options.series_order)
+                    .map_err(|e| self.se(e))?,
             ),
             (
                 sym.s("kg_inc_vy"),
-                regularize(&vy_i, dtheta, sym.fx).map_err(|e| self.se(e))?,
+                regularize(&vy_i, dtheta, sym.fx, sym.options.series_order)
+                    .map_err(|e| self.se(e))?,
             ),
         ];
         let tw_syms = self.tw_syms;

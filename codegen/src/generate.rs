@@ -1,6 +1,7 @@
 //! `kinegen generate`: derive every spec and write (or check) the generated crate.
 use crate::emit::{Backend, RustBackend};
 use kinegen_model::ir::ModelIr;
+use kinegen_model::options::GenOptions;
 use kinegen_model::spec::Model;
 use kinegen_model::SourceError;
 use std::path::{Path, PathBuf};
@@ -60,6 +61,9 @@ pub struct Config<'a> {
     /// Only list the files that differ instead of writing them.
     pub check: bool,
     pub backend: &'a dyn Backend,
+    /// How derivation handles removable singularities; the emitter writes
+    /// the switch the IR carries, and verification probes it there.
+    pub options: GenOptions,
 }
 
 impl<'a> Config<'a> {
@@ -70,6 +74,7 @@ impl<'a> Config<'a> {
             out_dir,
             check,
             backend: &RustBackend,
+            options: GenOptions::DEFAULT,
         }
     }
 }
@@ -101,7 +106,7 @@ pub fn render(c: &Config) -> Result<Rendered, GenerateError> {
         }
         seen.push((model.name.clone(), path.clone()));
         let t0 = Instant::now();
-        let ir = crate::derive_model(&model)?;
+        let ir = crate::derive_model(&model, &c.options)?;
         let took = t0.elapsed();
         let rel = format!("{dir_name}/{}", path.file_name().unwrap().to_string_lossy());
         let (module, source) = c.backend.module(&ir, &rel);

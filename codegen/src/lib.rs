@@ -12,6 +12,7 @@ mod symbolic;
 mod tape;
 
 use kinegen_model::ir::ModelIr;
+use kinegen_model::options::GenOptions;
 use kinegen_model::spec::Model;
 use kinegen_model::SourceError;
 use std::sync::mpsc::{channel, Sender};
@@ -119,10 +120,11 @@ pub fn on_symbolica_thread<T: Send + 'static>(
     rx.recv().map_err(|e| gone(e.to_string()))?
 }
 
-/// Derive the IR of a validated model (symbolica, on the dedicated thread).
-pub fn derive_model(model: &Model) -> Result<ModelIr, SourceError> {
-    let m = model.clone();
-    on_symbolica_thread(move || derive::derive(&m)).unwrap_or_else(|panic| {
+/// Derive the IR of a validated model (symbolica, on the dedicated thread),
+/// its removable singularities' series as `options` say.
+pub fn derive_model(model: &Model, options: &GenOptions) -> Result<ModelIr, SourceError> {
+    let (m, o) = (model.clone(), *options);
+    on_symbolica_thread(move || derive::derive(&m, &o)).unwrap_or_else(|panic| {
         Err(SourceError::new(
             &model.path,
             None,

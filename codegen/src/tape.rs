@@ -17,16 +17,19 @@ pub struct TapeBuilder {
     leaves: HashMap<Symbol, u32>,
     fx: Funcs,
     cse: bool,
+    /// |x| below which a `NearZero` takes its series branch ([`GenOptions`](kinegen_model::options::GenOptions)).
+    series_switch: f64,
 }
 
 impl TapeBuilder {
-    pub fn new(fx: Funcs, cse: bool) -> Self {
+    pub fn new(fx: Funcs, cse: bool, series_switch: f64) -> Self {
         TapeBuilder {
             tape: Vec::new(),
             dedup: HashMap::new(),
             leaves: HashMap::new(),
             fx,
             cse,
+            series_switch,
         }
     }
 
@@ -157,7 +160,7 @@ impl TapeBuilder {
         } else if s == self.fx.near {
             Op::NearZero {
                 x: args[0],
-                eps: kinegen_model::options::GenOptions::DEFAULT.series_switch,
+                eps: self.series_switch,
                 near: args[1],
                 far: args[2],
             }

@@ -22,7 +22,7 @@ fn emitted(fixture: &str) -> String {
         .join("tests/fixtures")
         .join(format!("{fixture}.toml"));
     let model = Model::load(&path).unwrap();
-    let ir = kinegen_codegen::derive_model(&model).unwrap();
+    let ir = kinegen_codegen::derive_model(&model, &Default::default()).unwrap();
     RustBackend.module(&ir, &format!("{fixture}.toml")).1
 }
 

@@ -162,6 +162,21 @@ impl Function {
         })
     }
 
+    /// The |x| thresholds at which the tape's removable-singularity branches
+    /// switch to their series (derivation's [`GenOptions`](crate::options::GenOptions)),
+    /// each once.
+    pub fn series_switches(&self) -> Vec<f64> {
+        let mut switches: Vec<f64> = Vec::new();
+        for op in &self.tape {
+            if let Op::NearZero { eps, .. } = op {
+                if !switches.contains(eps) {
+                    switches.push(*eps);
+                }
+            }
+        }
+        switches
+    }
+
     /// Is the output a matrix (Jacobian) rather than a vector?
     pub fn is_matrix(&self) -> bool {
         self.cols > 1

@@ -6,9 +6,6 @@ use kinegen_model::ir::{ArgRole, Function, Kernel as KernelId, ModelIr, StepForm
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
 
-/// Series/closed-form switch of the generator.
-pub const SWITCH: f64 = kinegen_model::options::GenOptions::DEFAULT.series_switch;
-
 #[derive(Debug, Clone)]
 pub struct Finding {
     pub model: String,
@@ -720,16 +717,18 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
                     );
                 }
             }
-            for sign in [1.0, -1.0] {
-                let (lo, _) = eval_at(sign * SWITCH * (1.0 - 1e-9));
-                let (hi, a) = eval_at(sign * SWITCH * (1.0 + 1e-9));
+            // the switch the derivation's options put in this function's tape
+            let switches = f.series_switches();
+            for (switch, sign) in switches.iter().flat_map(|&w| [(w, 1.0), (w, -1.0)]) {
+                let (lo, _) = eval_at(sign * switch * (1.0 - 1e-9));
+                let (hi, a) = eval_at(sign * switch * (1.0 + 1e-9));
                 // local slope on the closed-form side, away from the switch
-                let (f1, _) = eval_at(sign * SWITCH * 1.01);
-                let (f2, _) = eval_at(sign * SWITCH * 1.001);
+                let (f1, _) = eval_at(sign * switch * 1.01);
+                let (f2, _) = eval_at(sign * switch * 1.001);
                 for (i, (x, y)) in lo.iter().zip(&hi).enumerate() {
                     let err = (x - y).abs();
-                    let local = (f1[i] - f2[i]).abs() / (SWITCH * 0.009);
-                    let allowed = 1e-9 * scale + 10.0 * local * SWITCH * 2e-9;
+                    let local = (f1[i] - f2[i]).abs() / (switch * 0.009);
+                    let allowed = 1e-9 * scale + 10.0 * local * switch * 2e-9;
                     fd.record(
                         err / scale,
                         err / allowed,
