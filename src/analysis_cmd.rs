@@ -2,17 +2,18 @@
 use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::bag::{is_bag, Detection, TopicMap};
+use kinegen_analysis::bag::is_bag;
+use kinegen_analysis::comparison;
+use kinegen_analysis::evaluation::metric_name;
 use kinegen_analysis::fit::{FitOptions, FitResult};
-use kinegen_analysis::innovations::{self, Innovation, InnovationStats};
-use kinegen_analysis::input_range;
-use kinegen_analysis::landmarks;
-use kinegen_analysis::methods::{by_name, Method, Settings, METHODS};
-use kinegen_analysis::metrics::{errors, errors_each, where_it_fails, Errors};
-use kinegen_analysis::model::{parse_sets, Runner};
+use kinegen_analysis::fit_job::{self, Calibrated, Growth, MethodRow, MethodsJob};
+use kinegen_analysis::innovations::InnovationStats;
+use kinegen_analysis::load::{load, Loaded, Sources};
+use kinegen_analysis::methods::Settings;
+use kinegen_analysis::metrics::Errors;
+use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
-use kinegen_analysis::track_rows::{first_non_finite, Heading, Recipe, TrackRows};
-use kinegen_model::decl::ObservationRole::RangeBearing;
+use kinegen_analysis::track_rows::Recipe;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -87,16 +88,10 @@ pub fn bad(msg: impl std::fmt::Display) -> ExitCode {
     ExitCode::from(2)
 }
 
-pub struct Prepared {
-    pub runner: Runner,
-    pub runs: Vec<Run>,
-    pub holdout: Vec<Run>,
-    /// Things the user should know before reading any result (inputs outside
-    /// their declared range), said by every command and kept in its JSON.
-    pub warnings: Vec<String>,
-}
-
-pub fn prepare(c: &Common) -> Result<Prepared, String> {
+/// The model of `c.spec` and the logs `c` names, read for a job (see
+/// [`kinegen_analysis::load`]), after the options that need no log are
+/// checked: the output paths and the user's effect catalogues.
+pub fn prepare(c: &Common) -> Result<Loaded, String> {
     crate::output::check_outputs(c.json.as_deref(), c.report.as_deref())?;
     // --effects is read whatever the command: a broken catalogue is said now,
     // not on the day diagnose reads it
@@ -104,385 +99,34 @@ pub fn prepare(c: &Common) -> Result<Prepared, String> {
         kinegen_analysis::effects::catalogue(&c.catalogue.effects).map_err(|e| e.to_string())?;
     }
     let ir = ir_source::load(&c.spec)?;
-    let sets = parse_sets(&c.set).map_err(|e| e.to_string())?;
-    let runner = Runner::new(ir, &sets).map_err(|e| e.to_string())?;
-    let topics = match &c.topics {
-        Some(p) => {
-            let t = TopicMap::read(p).map_err(|e| e.to_string())?;
-            // an [inputs] entry for a column the spec does not read would be
-            // ignored: most likely a misspelt column
-            let columns: Vec<&str> = runner.ir.inputs.iter().map(|i| i.column.as_str()).collect();
-            if let Some(c) = t.inputs.keys().find(|k| !columns.contains(&k.as_str())) {
-                return Err(format!(
-                    "{}: [inputs] maps `{c}`, which is no input column of the spec (it reads: {})",
-                    p.display(),
-                    columns.join(", ")
-                ));
+    let quiet = quiet(c);
+    // a bag takes a while: a spinner counts its messages
+    let progress = |p: &Path| -> Box<dyn Fn(usize, usize)> {
+        let bar = is_bag(p).then(|| {
+            crate::progress::Progress::spinner(&format!("reading {}", p.display()), quiet)
+        });
+        Box::new(move |done: usize, total: usize| {
+            if let Some(b) = &bar {
+                b.message(&format!("{done}/{total} messages"));
             }
-            t
-        }
-        None => TopicMap::default(),
-    };
-    let read = |paths: &[PathBuf]| {
-        paths
-            .iter()
-            .map(|p| {
-                let bar = is_bag(p).then(|| {
-                    crate::progress::Progress::spinner(
-                        &format!("reading {}", p.display()),
-                        quiet(c),
-                    )
-                });
-                let progress = |done: usize, total: usize| {
-                    if let Some(b) = &bar {
-                        b.message(&format!("{done}/{total} messages"));
-                    }
-                };
-                Run::read_with(p, &runner, &topics, &progress).map_err(|e| e.to_string())
-            })
-            .collect::<Result<Vec<_>, _>>()
-    };
-    let mut warnings: Vec<String> = Vec::new();
-    let (mut runs, found): (Vec<Run>, Vec<_>) = read(&c.data)?.into_iter().unzip();
-    let (mut holdout, found_holdout): (Vec<Run>, Vec<_>) = read(&c.holdout)?.into_iter().unzip();
-    attach_landmarks(c, &runner, &mut runs, &found, &mut holdout, &found_holdout)?;
-    // a log with gaps becomes one run per piece between them
-    let mut split = |set: Vec<Run>| -> Vec<Run> {
-        set.into_iter()
-            .flat_map(|run| {
-                let (pieces, warning) = run.split_at_gaps(c.max_gap);
-                warnings.extend(warning);
-                pieces
-            })
-            .collect()
-    };
-    let (runs, holdout) = (split(runs), split(holdout));
-    if runs.is_empty() {
-        return Err("no run of 3 rows or more between the gaps of the logs (--data)".into());
-    }
-    // results that would be NaN or infinite are refused here, with the row
-    for set in [&runs, &holdout] {
-        check_finite(set, &tracks(&runner, &runner.p, set, &[]), &c.set)?;
-    }
-    warnings.extend(
-        runs.iter()
-            .chain(&holdout)
-            .flat_map(|run| input_range::excursions(run, &runner.ir.inputs))
-            .map(|e| e.to_string()),
-    );
-    Ok(Prepared {
-        runner,
-        runs,
-        holdout,
-        warnings,
-    })
-}
-
-/// Read --landmarks and attach range-bearing observations to the runs: the
-/// k-th --observations file to the k-th run, or the detections of a bag's
-/// landmark topic (--topics `[landmarks]`) to its run.
-fn attach_landmarks(
-    c: &Common,
-    r: &Runner,
-    runs: &mut [Run],
-    found: &[Vec<Detection>],
-    holdout: &mut [Run],
-    found_holdout: &[Vec<Detection>],
-) -> Result<(), String> {
-    use landmarks::{from_detections, read_map, read_observations};
-    let from_bags = found.iter().chain(found_holdout).any(|d| !d.is_empty());
-    match (&c.landmarks, c.observations.is_empty(), from_bags) {
-        (None, true, false) => return Ok(()),
-        (None, _, true) => {
-            return Err("the bag's landmark topic (--topics [landmarks]) needs --landmarks MAP.csv (the landmark positions)".into())
-        }
-        (None, false, false) => {
-            return Err("--observations needs --landmarks MAP.csv (the landmark positions)".into())
-        }
-        (Some(m), true, false) => {
-            return Err(format!(
-                "--landmarks {} given without --observations (or a bag with a [landmarks] topic in --topics)",
-                m.display()
-            ))
-        }
-        _ => {}
-    }
-    let map_path = c.landmarks.as_ref().unwrap();
-    if r.ir
-        .observation_kernels(RangeBearing)
-        .map(|o| o.value)
-        .is_none()
-    {
-        return Err(format!(
-            "{}: the model has no `landmark` observation to predict range-bearing data with",
-            c.spec.display()
-        ));
-    }
-    if c.observations.len() > runs.len() {
-        return Err(format!(
-            "{} --observations files for {} --data logs (one per log, in order)",
-            c.observations.len(),
-            runs.len()
-        ));
-    }
-    let map = read_map(map_path).map_err(|e| e.to_string())?;
-    let files = c
-        .observations
-        .iter()
-        .map(Some)
-        .chain(std::iter::repeat(None));
-    let all = runs.iter_mut().zip(found).zip(files).chain(
-        holdout
-            .iter_mut()
-            .zip(found_holdout)
-            .zip(std::iter::repeat(None)),
-    );
-    for ((run, found), file) in all {
-        let (obs, source) = match (file, found.is_empty()) {
-            (Some(path), false) => {
-                return Err(format!(
-                    "{}: the run has landmark observations from its bag's topic `{}` and from --observations {}: give one",
-                    run.path,
-                    found[0].topic,
-                    path.display()
-                ))
-            }
-            (Some(path), true) => (
-                read_observations(path, &map, map_path),
-                path.display().to_string(),
-            ),
-            (None, false) => (
-                from_detections(Path::new(&run.path), found, &map, map_path),
-                format!("{} (topic `{}`)", run.path, found[0].topic),
-            ),
-            (None, true) => continue,
-        };
-        let obs = obs.map_err(|e| e.to_string())?;
-        let (t0, t1) = (run.t[0], *run.t.last().unwrap());
-        let inside: Vec<_> = obs.into_iter().filter(|o| o.t >= t0 && o.t <= t1).collect();
-        if inside.is_empty() {
-            return Err(format!(
-                "{source}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s"
-            ));
-        }
-        run.landmarks = inside;
-    }
-    Ok(())
-}
-
-/// Dead-reckoned tracks of every run with parameters `p`, each from its
-/// measured start plus its offset in `offsets` (none: the measured start):
-/// described, and computed each time they are read (a long log's tracks are
-/// never held, see `kinegen_analysis::track_rows`).
-fn tracks<'r>(r: &'r Runner, p: &[f64], runs: &[Run], offsets: &[[f64; 3]]) -> Vec<Recipe<'r>> {
-    (0..runs.len())
-        .map(|i| Recipe {
-            r,
-            p: p.to_vec(),
-            offset: offsets.get(i).copied().unwrap_or([0.0; 3]),
-            heading: Heading::Model,
         })
-        .collect()
-}
-
-/// Each run with its track, as the metrics read them.
-fn pairs<'a>(runs: &'a [Run], tracks: &'a [Recipe<'_>]) -> Vec<(&'a Run, &'a dyn TrackRows)> {
-    runs.iter()
-        .zip(tracks)
-        .map(|(run, t)| (run, t as &dyn TrackRows))
-        .collect()
-}
-
-/// Parameters `p` on `runs`: the dead-reckoned tracks, the errors they make and
-/// the landmark innovations.
-pub struct Evaluation<'r> {
-    pub tracks: Vec<Recipe<'r>>,
-    /// Error summary; on logs without ground truth but with landmarks, `rmse` is
-    /// the landmark range innovation RMSE.
-    pub errors: Errors,
-    /// Each run's own error summary.
-    pub per_run: Vec<Errors>,
-    pub landmarks: Option<InnovationStats>,
-}
-
-pub fn evaluation<'r>(r: &'r Runner, p: &[f64], runs: &[Run]) -> Evaluation<'r> {
-    evaluation_from(r, p, runs, &[])
-}
-
-/// [`evaluation`] with each run started at its measured start plus its offset
-/// in `offsets` (the start headings a fit refined).
-pub fn evaluation_from<'r>(
-    r: &'r Runner,
-    p: &[f64],
-    runs: &[Run],
-    offsets: &[[f64; 3]],
-) -> Evaluation<'r> {
-    let tracks = tracks(r, p, runs, offsets);
-    let (mut errors, per_run) = errors_each(&pairs(runs, &tracks));
-    let all: Vec<Innovation> = runs
-        .iter()
-        .zip(&tracks)
-        .flat_map(|(run, t)| innovations::innovations(r, p, run, t))
-        .collect();
-    let landmarks = innovations::stats(&all);
-    if !runs.iter().any(|x| x.gt.is_some()) {
-        if let Some(s) = &landmarks {
-            errors.rmse = s.range_rmse_m;
-        }
-    }
-    Evaluation {
-        tracks,
-        errors,
-        per_run,
-        landmarks,
-    }
-}
-
-/// Refuse tracks that stop being numbers (see `track_rows::first_non_finite`),
-/// naming the log and its line; `sets` are the --set values, named as suspects.
-pub fn check_finite(runs: &[Run], tracks: &[Recipe<'_>], sets: &[String]) -> Result<(), String> {
-    for (run, t) in runs.iter().zip(tracks) {
-        if let Some((k, what)) = first_non_finite(t, run) {
-            let suspects = if sets.is_empty() {
-                String::new()
-            } else {
-                format!(" (with --set {})", sets.join(" --set "))
-            };
-            return Err(format!("{}:{}: {what}{suspects}", run.path, k + 2));
-        }
-    }
-    Ok(())
-}
-
-/// A method's evaluation: dead reckoning with its parameters, or, for a method
-/// that learned the yaw rate (neural gyrodometry), gyrodometry with its virtual
-/// gyro.
-fn method_evaluation<'r>(
-    r: &'r Runner,
-    m: &kinegen_analysis::methods::Calibration,
-    runs: &[Run],
-) -> Evaluation<'r> {
-    let Some(f) = &m.yaw_rate else {
-        return evaluation(r, &m.p, runs);
     };
-    let tracks: Vec<Recipe> = runs
-        .iter()
-        .map(|_| Recipe {
-            r,
-            p: m.p.clone(),
-            offset: [0.0; 3],
-            heading: Heading::Learned(f.clone()),
-        })
-        .collect();
-    let (errors, per_run) = errors_each(&pairs(runs, &tracks));
-    Evaluation {
-        errors,
-        per_run,
-        tracks,
-        landmarks: None,
-    }
+    load(ir, &c.sources(), &progress).map_err(|e| e.to_string())
 }
 
-/// The error summary of [`evaluation`].
-/// When a calibration made the held-out runs worse (`nominal` -> `now` m), the
-/// warning that says so and why: the motions and inputs of the held-out runs
-/// the fitted runs do not cover (dead-reckoned with the nominal values in
-/// `fitted` and `held`), or else that the fitted runs do not determine what
-/// the held-out runs need.
-fn held_out_worse(
-    r: &Runner,
-    fitted: (&[Run], &[Recipe<'_>]),
-    held: (&[Run], &[Recipe<'_>]),
-    nominal: f64,
-    now: f64,
-) -> Option<String> {
-    // (a NaN is not "worse": the fit's own checks name non-finite results)
-    if now.partial_cmp(&(1.001 * nominal)) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
-    let gaps = kinegen_analysis::coverage::uncovered(
-        r,
-        &pairs(fitted.0, fitted.1),
-        &pairs(held.0, held.1),
-    );
-    let why = if gaps.is_empty() {
-        "the fitted runs do not determine what the held-out runs need (see the standard deviations): fit on runs that drive like the held-out ones".to_string()
-    } else {
-        format!(
-            "the fitted runs do not cover them ({}): add runs that do to --data",
-            gaps.join("; ")
-        )
-    };
-    Some(format!(
-        "worse than the nominal parameters on the held-out runs ({nominal:.4} m -> {now:.4} m): {why}"
-    ))
-}
-
-/// Leave-one-run-out ([`kinegen_analysis::fit::leave_one_out`]): the runs
-/// the others' calibration dead-reckons worse than the starting values are
-/// named in a warning; every left-out run's figures go to the JSON.
-fn say_leave_one_out(
-    out: &Out,
-    r: &Runner,
-    p: &[f64],
-    runs: &[Run],
-    fo: &FitOptions,
-    doc: &mut Value,
-) {
-    let checked = kinegen_analysis::fit::leave_one_out::leave_one_out(r, p, runs, fo);
-    if checked.is_empty() {
-        return;
-    }
-    let unsupported: Vec<String> = checked
-        .iter()
-        .filter(|x| x.unsupported())
-        .map(|x| {
-            format!(
-                "{} ({:.4} m -> {:.4} m)",
-                x.path, x.nominal_rmse_m, x.calibrated_rmse_m
-            )
-        })
-        .collect();
-    if !unsupported.is_empty() {
-        let w = format!(
-            "leave-one-run-out: calibrated on the other runs, {} of {} runs are dead-reckoned worse than with the starting values: {}. These runs do not support the estimate (too short, or driven differently from the rest): look at them, add runs like them, or give the parameters a `tolerance` in the spec",
-            unsupported.len(),
-            checked.len(),
-            unsupported.join(", ")
-        );
-        out.say(&format!("warning: {w}"));
-        if let Some(list) = doc["warnings"].as_array_mut() {
-            list.push(json!(w));
+impl Common {
+    /// Where the job's logs come from, as the library takes it.
+    pub fn sources(&self) -> Sources {
+        Sources {
+            spec: self.spec.clone(),
+            data: self.data.clone(),
+            holdout: self.holdout.clone(),
+            sets: self.set.clone(),
+            topics: self.topics.clone(),
+            observations: self.observations.clone(),
+            landmarks: self.landmarks.clone(),
+            max_gap: self.max_gap,
         }
-    }
-    doc["leave_one_out"] = json!(checked);
-}
-
-/// The logs of `runs` by path, each once, for a message about all of them
-/// (a few named, then how many more).
-fn logs_named(runs: &[Run]) -> String {
-    let mut paths: Vec<&str> = Vec::new();
-    for r in runs {
-        if !paths.contains(&r.path.as_str()) {
-            paths.push(&r.path);
-        }
-    }
-    match paths.len() {
-        0..=3 => paths.join(", "),
-        n => format!("{} and {} more", paths[..3].join(", "), n - 3),
-    }
-}
-
-pub fn evaluate(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
-    evaluation(r, p, runs).errors
-}
-
-/// The metric `rmse` reports (CONTRACT section 4 leaves its name to us).
-pub fn metric_name(runs: &[Run]) -> &'static str {
-    if runs.iter().any(|x| x.gt.is_some()) || !runs.iter().any(|x| !x.landmarks.is_empty()) {
-        "position_rmse_m"
-    } else {
-        "landmark_range_rmse_m"
     }
 }
 
@@ -529,11 +173,8 @@ pub fn compare(c: Common) -> ExitCode {
     let mut all: Vec<Run> = std::mem::take(&mut prep.runs);
     all.append(&mut prep.holdout);
     let r = &prep.runner;
-    let tracks = tracks(r, &r.p, &all, &[]);
-    let read = pairs(&all, &tracks);
-    let (e, each) = errors_each(&read);
-    let (regimes, segments) = where_it_fails(&read);
-    let secs: f64 = all.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
+    let cmp = comparison::compare(r, all);
+    let secs: f64 = cmp.runs.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
     let which = if c.set.is_empty() {
         "nominal parameters".to_string()
     } else {
@@ -542,75 +183,56 @@ pub fn compare(c: Common) -> ExitCode {
     out.say(&format!(
         "{} against {} run(s), {:.1} s of data, {which}",
         r.ir.name,
-        all.len(),
+        cmp.runs.len(),
         secs
     ));
     say_warnings(&out, &prep.warnings);
-    if all.iter().any(|x| x.gt.is_some()) {
-        out.say(&format!("  {}", fmt_errors(&e)));
+    if cmp.has_ground_truth() {
+        out.say(&format!("  {}", fmt_errors(&cmp.errors)));
     } else {
         out.say(&format!(
             "  no ground truth ({}) in the logs: no trajectory error",
             r.ir.pose_columns().join(", ")
         ));
     }
-    let innov: Vec<Vec<Innovation>> = all
-        .iter()
-        .zip(&tracks)
-        .map(|(run, t)| innovations::innovations(r, &r.p, run, t))
-        .collect();
-    let lm_stats = innovations::stats(&innov.concat());
-    if let Some(s) = &lm_stats {
+    if let Some(s) = &cmp.landmarks {
         out.say(&format!("  {}", fmt_landmarks(s)));
     }
-    say_where_it_fails(&out, &regimes, &segments);
-    // Gyrodometry (seed 000 eq. 13-18) on the runs that log a gyro.
-    let gyro_tracks: Vec<Option<Recipe>> = all
-        .iter()
-        .map(|run| {
-            run.gyro.is_some().then(|| Recipe {
-                r,
-                p: r.p.clone(),
-                offset: [0.0; 3],
-                heading: Heading::Gyro,
-            })
-        })
-        .collect();
-    let gyro_pairs: Vec<(&Run, &dyn TrackRows)> = all
-        .iter()
-        .zip(&gyro_tracks)
-        .filter_map(|(run, t)| t.as_ref().map(|t| (run, t as &dyn TrackRows)))
-        // errors need the ground truth to compare with
-        .filter(|(run, _)| run.gt.is_some())
-        .collect();
-    let gyro_errors = (!gyro_pairs.is_empty()).then(|| errors(&gyro_pairs));
-    if let Some(g) = &gyro_errors {
+    say_where_it_fails(&out, &cmp.regimes, &cmp.segments);
+    if let Some((n, g)) = &cmp.gyrodometry {
         out.say(&format!(
             "gyrodometry (heading from the gyro, seed 000 eq. 13-18), {} run(s):\n  position RMSE {:.4} m, heading RMSE {:.4} rad; final error {:.4} m / {:.4} rad",
-            gyro_pairs.len(),
+            n,
             g.rmse,
             g.heading_rmse_rad,
             g.final_position_error_m,
             g.final_heading_error_rad
         ));
     }
-    let per_run: Vec<Value> = all
+    let per_run: Vec<Value> = cmp
+        .runs
         .iter()
-        .zip(&each)
+        .zip(&cmp.per_run)
         .map(|(run, e)| json!({"run": run.name, "errors": e}))
         .collect();
     let doc = json!({
-        "model": r.ir.name, "metric": metric_name(&all),
-        "errors": e, "rmse": if all.iter().any(|x| x.gt.is_some()) { e.rmse } else { lm_stats.as_ref().map_or(e.rmse, |s| s.range_rmse_m) },
-        "landmarks": lm_stats, "regimes": regimes, "worst_segments": segments, "runs": per_run,
-        "gyrodometry": gyro_errors.as_ref().map(|g| json!({"rmse": g.rmse, "errors": g})),
+        "model": r.ir.name, "metric": metric_name(&cmp.runs),
+        "errors": cmp.errors, "rmse": cmp.rmse(),
+        "landmarks": cmp.landmarks, "regimes": cmp.regimes, "worst_segments": cmp.segments, "runs": per_run,
+        "gyrodometry": cmp.gyrodometry.as_ref().map(|(_, g)| json!({"rmse": g.rmse, "errors": g})),
         "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
         "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) =
-            crate::report::compare_report(dir, r, &all, &tracks, &gyro_tracks, &innov, &doc)
-        {
+        if let Err(e) = crate::report::compare_report(
+            dir,
+            r,
+            &cmp.runs,
+            &cmp.tracks,
+            &cmp.gyro_tracks,
+            &cmp.innovations,
+            &doc,
+        ) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -809,7 +431,15 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     };
     if a.method != "lm" {
         say_warnings(&out, &prep.warnings);
-        return run_methods(&c, &out, &prep, a, &fo, &truth);
+        let job = MethodsJob {
+            method: &a.method,
+            side: a.side,
+            mu: a.mu,
+            fit: &fo,
+            hidden: &a.hidden,
+            truth: &truth,
+        };
+        return run_methods(&c, &out, &prep, &job);
     }
     run_lm(&c, &out, &prep, a, &fo, export.as_deref())
 }
@@ -863,106 +493,71 @@ fn truth_values(r: &Runner, truth: &[String]) -> Result<Vec<(String, f64)>, Stri
     Ok(truth)
 }
 
-/// The methods `--method` names (all of them for `all`), each with a run per
-/// `--hidden` size where the method has one (neural gyrodometry).
-fn method_jobs(a: &FitArgs) -> Result<Vec<(String, &'static dyn Method, usize)>, String> {
-    let methods: Vec<&dyn Method> = if a.method == "all" {
-        METHODS.to_vec()
-    } else {
-        match by_name(&a.method) {
-            Some(m) => vec![m],
-            None => return Err(format!("--method: unknown method `{}`", a.method)),
-        }
-    };
-    Ok(methods
-        .iter()
-        .flat_map(|m| {
-            if m.per_hidden_size() {
-                a.hidden
-                    .iter()
-                    .map(|&h| (format!("{}-{h}", m.name()), *m, h as usize))
-                    .collect::<Vec<_>>()
-            } else {
-                vec![(m.name().to_string(), *m, 0)]
-            }
-        })
-        .collect())
-}
-
 /// `fit --method M` (or all): each method's calibration, compared.
-fn run_methods(
-    c: &Common,
-    out: &Out,
-    prep: &Prepared,
-    a: &FitArgs,
-    fo: &FitOptions,
-    truth: &[(String, f64)],
-) -> ExitCode {
+fn run_methods(c: &Common, out: &Out, prep: &Loaded, job: &MethodsJob) -> ExitCode {
     let r = &prep.runner;
-    let jobs = match method_jobs(a) {
-        Ok(j) => j,
+    let count = fit_job::method_runs(job).map_or(0, |j| j.len());
+    let bar = crate::progress::Progress::bar(count as u64, "calibration methods", quiet(c));
+    let started = std::cell::Cell::new(false);
+    let progress = |name: &str| {
+        if started.replace(true) {
+            bar.inc();
+        }
+        bar.message(name);
+    };
+    let compared = match fit_job::compare_methods(prep, job, &progress) {
+        Ok(x) => x,
         Err(e) => return bad(e),
     };
-    let mut rows = Vec::new();
-    let bar = crate::progress::Progress::bar(jobs.len() as u64, "calibration methods", quiet(c));
-    for (name, m, h) in jobs {
-        bar.message(&name);
-        let settings = Settings {
-            side: a.side,
-            mu: a.mu,
-            fit: fo,
-            hidden: h,
-        };
-        let result = m.calibrate(r, &prep.runs, &settings);
-        bar.inc();
-        match result {
-            Ok(res) => rows.push((name, res)),
-            Err(e) if a.method == "all" => out.say(&format!("{name}: not applicable here: {e}")),
-            Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
-        }
+    drop(bar);
+    for (name, e) in &compared.not_applicable {
+        out.say(&format!("{name}: not applicable here: {e}"));
     }
-    let before = evaluation(r, &r.p, &prep.runs);
     out.say(&format!(
         "{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m",
         r.ir.name,
-        rows.len(),
+        compared.rows.len(),
         prep.runs.len(),
-        before.errors.rmse
+        compared.before.errors.rmse
     ));
-    let compared = MethodComparison::new(r, prep, truth);
     let mut methods_json = serde_json::Map::new();
-    let mut per_method: Vec<(String, Vec<Recipe>)> = Vec::new();
-    let mut best: Option<(f64, &str)> = None;
-    for (name, m) in &rows {
-        let (entry, tracks, dist) = compared.method(out, name, m, &before);
-        if let Some(d) = dist {
-            if best.is_none_or(|b| d < b.0) {
-                best = Some((d, name.as_str()));
-            }
-        }
-        methods_json.insert(name.to_string(), entry);
-        per_method.push((name.to_string(), tracks));
+    for m in &compared.rows {
+        say_method(out, r, m);
+        methods_json.insert(m.name.clone(), method_json(r, m));
     }
-    if let Some((d, name)) = best {
+    if let Some((d, name)) = &compared.closest {
         out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
     }
     // the top-level result is the first method's
-    let first = rows.first().map(|(name, _)| &methods_json[name.as_str()]);
+    let first = compared
+        .rows
+        .first()
+        .map(|m| &methods_json[m.name.as_str()]);
     let doc = json!({
         "model": r.ir.name, "metric": metric_name(&prep.runs),
-        "before": {"rmse": before.errors.rmse},
-        "holdout_before": compared.hold_nominal().map(|h| json!({"rmse": h})),
+        "before": {"rmse": compared.before.errors.rmse},
+        "holdout_before": compared.holdout_before.map(|h| json!({"rmse": h})),
         "after": {"rmse": first.map(|m| m["after"]["rmse"].clone())},
         "parameters": first.map(|m| m["parameters"].clone()),
         "methods": methods_json,
-        "closest_to_truth": best.map(|b| b.1),
-        "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
+        "closest_to_truth": compared.closest.as_ref().map(|b| b.1.clone()),
+        "truth": job.truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
         "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) =
-            crate::report::methods_report(dir, r, &prep.runs, &before.tracks, &per_method, &doc)
-        {
+        let per_method: Vec<(String, &[Recipe])> = compared
+            .rows
+            .iter()
+            .map(|m| (m.name.clone(), m.after.tracks.as_slice()))
+            .collect();
+        if let Err(e) = crate::report::methods_report(
+            dir,
+            r,
+            &prep.runs,
+            &compared.before.tracks,
+            &per_method,
+            &doc,
+        ) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -973,122 +568,38 @@ fn run_methods(
     }
 }
 
-/// What each method of `fit --method` is compared with: the nominal values
-/// (on the fitted and the held-out runs) and the known truth.
-struct MethodComparison<'a> {
-    r: &'a Runner,
-    prep: &'a Prepared,
-    truth: &'a [(String, f64)],
-    /// the nominal values' distance to the truth
-    d0: f64,
-    /// the nominal values on the fitted and the held-out runs, with held-out runs
-    nominal: Option<(Evaluation<'a>, Evaluation<'a>)>,
-}
-
-impl<'a> MethodComparison<'a> {
-    fn new(r: &'a Runner, prep: &'a Prepared, truth: &'a [(String, f64)]) -> Self {
-        let mut me = MethodComparison {
-            r,
-            prep,
-            truth,
-            d0: 0.0,
-            nominal: (!prep.holdout.is_empty()).then(|| {
-                (
-                    evaluation(r, &r.p, &prep.runs),
-                    evaluation(r, &r.p, &prep.holdout),
-                )
-            }),
-        };
-        me.d0 = me.scaled(&r.p);
-        me
-    }
-
-    /// Distance to the truth, each parameter scaled by its size (so a 2 mm
-    /// offset of a 0.3 m axis and of a 0 m axis weigh the same).
-    fn scaled(&self, p: &[f64]) -> f64 {
-        let r = self.r;
-        self.truth
-            .iter()
-            .filter_map(|(n, v)| {
-                r.param_index(n)
-                    .map(|i| ((p[i] - v) / r.p[i].abs().max(v.abs()).max(1e-12)).powi(2))
-            })
-            .sum::<f64>()
-            .sqrt()
-    }
-
-    /// The nominal values' RMSE on the held-out runs, if any.
-    fn hold_nominal(&self) -> Option<f64> {
-        self.nominal.as_ref().map(|x| x.1.errors.rmse)
-    }
-
-    /// One method's lines, its JSON entry, its tracks and its distance to the
-    /// truth as a fraction of where the nominal values started (< 1: moved
-    /// toward the truth).
-    fn method(
-        &self,
-        out: &Out,
-        name: &str,
-        m: &kinegen_analysis::methods::Calibration,
-        before: &Evaluation,
-    ) -> (Value, Vec<Recipe<'a>>, Option<f64>) {
-        let (r, prep) = (self.r, self.prep);
-        let Evaluation {
-            tracks: after_tracks,
-            errors: after,
-            ..
-        } = method_evaluation(r, m, &prep.runs);
-        let hold =
-            (!prep.holdout.is_empty()).then(|| method_evaluation(r, m, &prep.holdout).errors);
-        // a method that ends worse than the nominal values says so (on the
-        // held-out runs when there are some)
-        let (what, now, nominal) = match (&hold, self.hold_nominal()) {
-            (Some(h), Some(b)) => ("held-out runs", h.rmse, b),
-            _ => ("fitted runs", after.rmse, before.errors.rmse),
-        };
-        let mut note = m.note.clone();
-        let held_worse = self.nominal.as_ref().and_then(|(f, h)| {
-            held_out_worse(
-                r,
-                (&prep.runs, &f.tracks),
-                (&prep.holdout, &h.tracks),
-                nominal,
-                now,
-            )
-        });
-        if let Some(w) = held_worse {
-            note += &format!("\n      WARNING: {w}: do not use these values");
-        } else if now > 1.001 * nominal {
-            note += &format!("\n      WARNING: worse than the nominal parameters on the {what} ({nominal:.4} m -> {now:.4} m): do not use these values");
-        }
-        let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": m.p[i], "std": m.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
-        let dist = (!self.truth.is_empty()).then(|| {
-            if self.d0 > 0.0 {
-                self.scaled(&m.p) / self.d0
-            } else {
-                self.scaled(&m.p)
-            }
-        });
-        out.say(&format!(
-            "  {:<8} position RMSE {:.4} m{}{}  ({})",
-            name,
-            after.rmse,
-            hold.as_ref()
-                .map(|h| format!(", held-out {:.4} m", h.rmse))
-                .unwrap_or_default(),
-            dist.map(|d| format!(
+/// One method's lines: its error (held-out too), its distance to the truth,
+/// its note and its parameters.
+fn say_method(out: &Out, r: &Runner, m: &MethodRow) {
+    out.say(&format!(
+        "  {:<8} position RMSE {:.4} m{}{}  ({})",
+        m.name,
+        m.after.errors.rmse,
+        m.holdout
+            .as_ref()
+            .map(|h| format!(", held-out {:.4} m", h.rmse))
+            .unwrap_or_default(),
+        m.distance_to_truth
+            .map(|d| format!(
                 ", {:.1}% of the nominal's distance to truth left",
                 100.0 * d
             ))
             .unwrap_or_default(),
-            note
+        m.note
+    ));
+    for &i in &r.free {
+        out.say(&format!(
+            "      {:<14} {:.6}",
+            r.names[i], m.calibration.p[i]
         ));
-        for &i in &r.free {
-            out.say(&format!("      {:<14} {:.6}", r.names[i], m.p[i]));
-        }
-        let entry = json!({"after": {"rmse": after.rmse}, "holdout": hold.map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": note, "distance_to_truth": dist});
-        (entry, after_tracks, dist)
     }
+}
+
+/// One method's JSON entry.
+fn method_json(r: &Runner, m: &MethodRow) -> Value {
+    let c = &m.calibration;
+    let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": c.p[i], "std": c.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
+    json!({"after": {"rmse": m.after.errors.rmse}, "holdout": m.holdout.as_ref().map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": m.distance_to_truth})
 }
 
 /// `fit` (Levenberg-Marquardt, the default): the calibration, judged, with
@@ -1096,63 +607,30 @@ impl<'a> MethodComparison<'a> {
 fn run_lm(
     c: &Common,
     out: &Out,
-    prep: &Prepared,
+    prep: &Loaded,
     a: &FitArgs,
     fo: &FitOptions,
     export: Option<&Path>,
 ) -> ExitCode {
     let r = &prep.runner;
     let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(c));
-    // through the registry like every method; lm's Calibration carries the
-    // whole fit, which the rest of this report reads
-    let lm = kinegen_analysis::methods::by_name("lm").expect("lm is registered");
-    let settings = Settings {
-        side: a.side,
-        mu: a.mu,
-        fit: fo,
-        hidden: 0,
+    let cal = match fit_job::calibrate(prep, fo) {
+        Ok(x) => x,
+        Err(e) => return bad(e),
     };
-    let mut res = match lm.calibrate(r, &prep.runs, &settings) {
-        Ok(kinegen_analysis::methods::Calibration { fit: Some(x), .. }) => x,
-        Ok(_) => unreachable!("lm's calibration is a fit"),
-        Err(e) => return bad(format!("{}: {e}", logs_named(&prep.runs))),
-    };
-    res.warnings.splice(0..0, prep.warnings.iter().cloned());
     drop(spin);
-    // both scored with the start headings refined for their own parameters, as
-    // the fit refines them (within what the measured start allows)
-    let offsets_before = kinegen_analysis::fit::fitted_offsets(r, &r.p, &prep.runs, fo);
-    let (eval_before, eval_after) = (
-        evaluation_from(
-            r,
-            &r.p,
-            &prep.runs,
-            &kinegen_analysis::fit::run_offsets(&prep.runs, &offsets_before),
-        ),
-        evaluation_from(
-            r,
-            &res.p,
-            &prep.runs,
-            &kinegen_analysis::fit::run_offsets(&prep.runs, &res.starts),
-        ),
-    );
-    say_calibration(out, prep, &res, &eval_before.errors, &eval_after.errors);
-    let unusable = judge_fit(
-        out,
-        prep,
-        &mut res,
-        (&eval_before, &eval_after),
-        &offsets_before,
-    );
-    let (before, after) = (&eval_before.errors, &eval_after.errors);
-    let mut doc = fit_json(r, &res, before, after, metric_name(&prep.runs));
-    doc["unusable"] = json!(unusable);
+    let res = &cal.fit;
+    say_calibration(out, prep, res, &cal.before.errors, &cal.after.errors);
+    say_judgement(out, &cal);
+    let (before, after) = (&cal.before.errors, &cal.after.errors);
+    let mut doc = fit_json(r, res, before, after, metric_name(&prep.runs));
+    doc["unusable"] = json!(cal.unusable);
     doc["loss"] = json!(a.loss);
     doc["residual_kinds"] = json!(["pose", "gyro", "landmarks"]
         .iter()
         .filter(|k| uses_residuals(a, k))
         .collect::<Vec<_>>());
-    if let (Some(lb), Some(la)) = (&eval_before.landmarks, &eval_after.landmarks) {
+    if let (Some(lb), Some(la)) = (&cal.before.landmarks, &cal.after.landmarks) {
         out.say(&format!(
             "  before: {}\n  after:  {}",
             fmt_landmarks(lb),
@@ -1160,16 +638,24 @@ fn run_lm(
         ));
         doc["landmarks"] = json!({"before": lb, "after": la});
     }
-    let runs = fit_runs(out, prep, &res, (&eval_before, &eval_after), &mut doc);
+    let runs = fit_runs(out, prep, &cal, &mut doc);
     doc["runs"] = json!(runs);
-    say_leave_one_out(out, r, &res.p, &prep.runs, fo, &mut doc);
+    if let Some(w) = &cal.leave_one_out_warning {
+        out.say(&format!("warning: {w}"));
+        if let Some(list) = doc["warnings"].as_array_mut() {
+            list.push(json!(w));
+        }
+    }
+    if !cal.leave_one_out.is_empty() {
+        doc["leave_one_out"] = json!(cal.leave_one_out);
+    }
     if let Some(dir) = &c.report {
         if let Err(e) = crate::report::fit_report(
             dir,
             r,
             &prep.runs,
-            &eval_before.tracks,
-            &eval_after.tracks,
+            &cal.before.tracks,
+            &cal.after.tracks,
             &doc,
         ) {
             return bad(e);
@@ -1177,12 +663,12 @@ fn run_lm(
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
     if let Some(path) = export {
-        if let Err(e) = export_fit(out, &c.spec, r, &res, path, &unusable) {
+        if let Err(e) = export_fit(out, &c.spec, r, res, path, &cal.unusable) {
             return bad(e);
         }
     }
     match out.json(c.json.as_deref(), &doc) {
-        Ok(()) if unusable.is_empty() => ExitCode::SUCCESS,
+        Ok(()) if cal.unusable.is_empty() => ExitCode::SUCCESS,
         Ok(()) => ExitCode::from(1),
         Err(e) => bad(e),
     }
@@ -1190,7 +676,7 @@ fn run_lm(
 
 /// The calibration's headline: what was fitted, the error before and after,
 /// and each parameter's estimate.
-fn say_calibration(out: &Out, prep: &Prepared, res: &FitResult, before: &Errors, after: &Errors) {
+fn say_calibration(out: &Out, prep: &Loaded, res: &FitResult, before: &Errors, after: &Errors) {
     let r = &prep.runner;
     out.say(&format!(
         "{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)",
@@ -1221,147 +707,52 @@ fn say_calibration(out: &Out, prep: &Prepared, res: &FitResult, before: &Errors,
     }
 }
 
-/// Why the calibration cannot be used, if it cannot (said plainly, never shown
-/// as a success), with its warnings said and added to `res`.
-fn judge_fit(
-    out: &Out,
-    prep: &Prepared,
-    res: &mut FitResult,
-    (eval_before, eval_after): (&Evaluation, &Evaluation),
-    offsets_before: &[[f64; 3]],
-) -> Vec<String> {
-    let r = &prep.runner;
-    let (before, after) = (&eval_before.errors, &eval_after.errors);
-    let mut unusable =
-        kinegen_analysis::metrics::degenerate(&pairs(&prep.runs, &eval_after.tracks));
-    let (worse, worse_warnings) = kinegen_analysis::metrics::short_term_worse(before, after);
-    unusable.extend(worse);
-    let implausible = kinegen_analysis::metrics::implausible(
-        res.free
-            .iter()
-            .map(|&i| (r.names[i].as_str(), r.p[i], res.p[i])),
-    );
-    res.warnings
-        .extend(worse_warnings.into_iter().chain(implausible));
-    for w in &res.warnings {
+/// The judgement of the calibration: its warnings, what the whole-run
+/// error's growth means, and why it cannot be used, if it cannot (said
+/// plainly, never shown as a success).
+fn say_judgement(out: &Out, cal: &Calibrated) {
+    for w in &cal.fit.warnings[..cal.warnings_before_growth] {
         out.say(&format!("warning: {w}"));
     }
-    if after.rmse.is_finite() && after.rmse > 1.001 * before.rmse {
-        if let Some(u) = judge_growth(out, prep, res, (before.rmse, after.rmse), offsets_before) {
-            unusable.push(u);
-        }
+    match &cal.growth {
+        Some(Growth::Note(n)) => out.say(&format!("note: {n}")),
+        Some(Growth::Warning(w)) => out.say(&format!("warning: {w}")),
+        None => {}
     }
-    if !after.rmse.is_finite() || res.p.iter().any(|v| !v.is_finite()) {
-        unusable.push("the calibrated model gives non-finite results".into());
-    }
-    for u in &unusable {
+    for u in &cal.unusable {
         out.say(&format!("FIT UNUSABLE: {u}"));
     }
-    if !unusable.is_empty() {
+    if !cal.unusable.is_empty() {
         out.say("  no parameter values make this model follow these logs: it is likely missing a physical effect (`kinegen diagnose` with the same --spec and --data names it)");
     }
-    unusable
-}
-
-/// A whole-run position error that grew from `before` to `after`: explained
-/// (a note or a warning), or the reason the fit is unusable.
-fn judge_growth(
-    out: &Out,
-    prep: &Prepared,
-    res: &mut FitResult,
-    (before, after): (f64, f64),
-    offsets_before: &[[f64; 3]],
-) -> Option<String> {
-    let r = &prep.runner;
-    // Long runs are fitted as re-anchored segments (fit::SEGMENT_S): judge the
-    // fit on what it minimised; over a whole long run the absolute error is a
-    // random walk the parameters cannot remove.
-    let seg = kinegen_analysis::fit::segmented(&prep.runs);
-    let (sb, sa) = (
-        evaluation_from(r, &r.p, &seg, offsets_before).errors.rmse,
-        evaluation_from(r, &res.p, &seg, &res.starts).errors.rmse,
-    );
-    if seg.len() > prep.runs.len() && sa <= 1.001 * sb {
-        out.say(&format!(
-            "note: over whole runs the position error grew ({before:.4} m -> {after:.4} m) while over the {:.0} s segments the fit works on it fell ({sb:.4} m -> {sa:.4} m): the remaining long-run drift is noise the parameters cannot remove",
-            kinegen_analysis::fit::SEGMENT_S
-        ));
-        return None;
-    }
-    if after <= 1.05 * before {
-        // within 5%: the starting values were already as good as these logs
-        // can tell; the fit traded a little whole-track error for its cost
-        out.say(&format!(
-            "note: the position error grew slightly ({before:.4} m -> {after:.4} m): the starting values were already about as good as these logs can tell"
-        ));
-        return None;
-    }
-    let with_prior: Vec<&str> = res
-        .free
-        .iter()
-        .filter(|&&i| r.ir.runtime_params()[i].tolerance.is_some())
-        .map(|&i| r.names[i].as_str())
-        .collect();
-    let grew = format!("{before:.4} m -> {after:.4} m");
-    if with_prior.is_empty() {
-        return Some(format!(
-            "calibration made the position error worse ({grew})"
-        ));
-    }
-    // a prior may rightly cost some fit: the spec says what is known
-    let w = format!(
-        "the position error grew ({grew}) under the spec's tolerances on {}: the log pulls them further than the tolerances allow; loosen a tolerance if the robot can differ from nominal that much",
-        with_prior.join(", ")
-    );
-    out.say(&format!("warning: {w}"));
-    res.warnings.push(w);
-    None
 }
 
 /// Each run's errors before and after (the fitted ones, then the held-out
 /// ones, which also go in `doc["holdout"]` with a warning where the
 /// calibration does worse on them), said as a table when there are several.
-fn fit_runs(
-    out: &Out,
-    prep: &Prepared,
-    res: &FitResult,
-    (eval_before, eval_after): (&Evaluation, &Evaluation),
-    doc: &mut Value,
-) -> Vec<Value> {
-    let r = &prep.runner;
-    let starts = kinegen_analysis::fit::run_starts(r, &res.p, &prep.runs, &res.starts);
+fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<Value> {
     let mut runs = per_run(
         &prep.runs,
-        &eval_before.per_run,
-        &eval_after.per_run,
-        &starts,
+        &cal.before.per_run,
+        &cal.after.per_run,
+        &cal.starts,
         false,
     );
-    if !prep.holdout.is_empty() {
-        let (hb, ha) = (
-            evaluation(r, &r.p, &prep.holdout),
-            evaluation(r, &res.p, &prep.holdout),
-        );
+    if let Some(h) = &cal.holdout {
+        let (hb, ha) = (&h.before, &h.after);
         out.say(&format!(
             "  holdout before: {}\n  holdout after:  {}",
             fmt_errors(&hb.errors),
             fmt_errors(&ha.errors)
         ));
-        let measured = kinegen_analysis::fit::run_starts(r, &res.p, &prep.holdout, &[]);
         runs.extend(per_run(
             &prep.holdout,
             &hb.per_run,
             &ha.per_run,
-            &measured,
+            &h.starts,
             true,
         ));
-        if let Some(w) = held_out_worse(
-            r,
-            (&prep.runs, &eval_before.tracks),
-            (&prep.holdout, &hb.tracks),
-            hb.errors.rmse,
-            ha.errors.rmse,
-        ) {
+        if let Some(w) = &h.worse {
             out.say(&format!("warning: {w}"));
             if let Some(list) = doc["warnings"].as_array_mut() {
                 list.push(json!(w));

@@ -1,11 +1,12 @@
 //! `kinegen diagnose`.
-use crate::analysis_cmd::{bad, prepare, quiet, Common, Prepared};
+use crate::analysis_cmd::{bad, prepare, quiet, Common};
 use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use kinegen_analysis::derivation::EffectChains;
 use kinegen_analysis::diagnose::Diagnosis;
 use kinegen_analysis::diagnose_job::{diagnose_job, Hooks, Job, Outcome};
 use kinegen_analysis::effects::catalogue;
+use kinegen_analysis::load::Loaded;
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_model::spec::Model;
 use serde_json::json;
@@ -147,7 +148,7 @@ pub fn run(c: Common) -> ExitCode {
 /// Pieces of a log cut at its gaps that are too short to diagnose are left
 /// out (with a warning), as long as the log leaves enough: diagnosis pools
 /// the rest.
-fn pool_pieces(prep: &mut Prepared) {
+fn pool_pieces(prep: &mut Loaded) {
     let min = kinegen_analysis::diagnose::MIN_ROWS;
     if prep.runs.iter().any(|r| r.t.len() >= min) {
         let (keep, short): (Vec<_>, Vec<_>) = prep.runs.drain(..).partition(|r| r.t.len() >= min);
@@ -164,7 +165,7 @@ fn pool_pieces(prep: &mut Prepared) {
 }
 
 /// A robot that never moves shows no effect (every ratio would be 0/0): refused.
-fn check_moves(prep: &Prepared) -> Result<(), String> {
+fn check_moves(prep: &Loaded) -> Result<(), String> {
     if prep.runs.iter().all(|r| r.rest_steps() == r.steps()) {
         let cols: Vec<&str> = prep
             .runner

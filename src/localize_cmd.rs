@@ -1,9 +1,10 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
 //! (kinegen_analysis::localize), with its consistency checks.
-use crate::analysis_cmd::{bad, evaluate, prepare, Common};
+use crate::analysis_cmd::{bad, prepare, Common};
 use crate::localize_report::Summary;
 use crate::output::Out;
 use clap::Args;
+use kinegen_analysis::evaluation::evaluate;
 use kinegen_analysis::localize::{
     localize_runs, mean_bounds, nees_of, EkfOptions, Localization, NoiseSource,
 };
@@ -245,7 +246,7 @@ fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::sweep::SweepPoint
 
 /// Mapped landmarks no log ever observes are probably a mapping mistake (an id
 /// spelled differently in the map and the observations).
-fn warn_unseen_landmarks(c: &Common, prep: &crate::analysis_cmd::Prepared) {
+fn warn_unseen_landmarks(c: &Common, prep: &kinegen_analysis::load::Loaded) {
     let Some(m) = &c.landmarks else { return };
     let Ok(map) = kinegen_analysis::landmarks::read_map(m) else {
         return;

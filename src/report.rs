@@ -755,7 +755,7 @@ pub fn methods_report(
     r: &Runner,
     runs: &[Run],
     nominal: &[Recipe<'_>],
-    methods: &[(String, Vec<Recipe<'_>>)],
+    methods: &[(String, &[Recipe<'_>])],
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();

@@ -52,14 +52,17 @@ pub mod logs {
 /// The model on a log: a runnable model, a log as steps, the commands as
 /// executed, dead reckoning, innovations and error metrics.
 pub mod model_on_log {
+    pub mod comparison;
     pub mod coverage;
     pub mod dataset;
     pub mod deadreckon;
     pub mod derivation;
+    pub mod evaluation;
     pub mod innovations;
     pub mod input_range;
     pub mod interp;
     pub mod landmarks;
+    pub mod load;
     pub mod metrics;
     pub mod model;
     pub mod run;
@@ -73,6 +76,7 @@ pub mod model_on_log {
 pub mod estimation {
     pub mod discretisation;
     pub mod fit;
+    pub mod fit_job;
     pub mod lag;
     pub mod methods;
     pub mod neural;
@@ -101,11 +105,11 @@ pub mod applications {
 
 pub use applications::{grid, holdout_bench, inverse, localize, navigate, simulate, sweep};
 pub use diagnosis::{diagnose, diagnose_job};
-pub use estimation::{discretisation, fit, lag, methods, neural, periodic, seed_methods};
+pub use estimation::{discretisation, fit, fit_job, lag, methods, neural, periodic, seed_methods};
 pub use logs::{bag, column, log, rosdyn, rosmsg, rows};
 pub use model_on_log::{
-    coverage, dataset, deadreckon, derivation, innovations, input_range, interp, landmarks,
-    metrics, model, run, steering, timeline, track_rows,
+    comparison, coverage, dataset, deadreckon, derivation, evaluation, innovations, input_range,
+    interp, landmarks, load, metrics, model, run, steering, timeline, track_rows,
 };
 
 pub use kinegen_model::effects;

@@ -1,0 +1,93 @@
+//! `kinegen compare` as one library call: the model with its current
+//! parameters dead-reckoned over every run, where its error grows, the
+//! landmark innovations, and gyrodometry (seed 000 eq. 13-18) on the runs
+//! that log a gyro.
+use crate::evaluation::{pairs, tracks};
+use crate::innovations::{self, Innovation, InnovationStats};
+use crate::metrics::{self, errors_each, where_it_fails, Errors, RegimeShare, Segment};
+use crate::model::Runner;
+use crate::run::Run;
+use crate::track_rows::{Heading, Recipe, TrackRows};
+
+/// The model against its logs.
+pub struct Comparison<'r> {
+    /// The runs compared (fitted and held-out alike).
+    pub runs: Vec<Run>,
+    pub tracks: Vec<Recipe<'r>>,
+    pub errors: Errors,
+    pub per_run: Vec<Errors>,
+    /// Each driving regime's share of the error growth.
+    pub regimes: Vec<RegimeShare>,
+    /// The worst 1 s segments.
+    pub segments: Vec<Segment>,
+    /// Each run's landmark innovations.
+    pub innovations: Vec<Vec<Innovation>>,
+    pub landmarks: Option<InnovationStats>,
+    /// Gyrodometry's track of each run that logs a gyro.
+    pub gyro_tracks: Vec<Option<Recipe<'r>>>,
+    /// Gyrodometry's errors on the runs with a gyro and ground truth, and
+    /// how many runs that is.
+    pub gyrodometry: Option<(usize, Errors)>,
+}
+
+impl Comparison<'_> {
+    /// Whether any run has ground truth to compare the track with.
+    pub fn has_ground_truth(&self) -> bool {
+        self.runs.iter().any(|x| x.gt.is_some())
+    }
+
+    /// The headline figure: the position RMSE, or without ground truth the
+    /// landmark range innovation RMSE.
+    pub fn rmse(&self) -> f64 {
+        match (&self.landmarks, self.has_ground_truth()) {
+            (Some(s), false) => s.range_rmse_m,
+            _ => self.errors.rmse,
+        }
+    }
+}
+
+/// Compare `r` with its current parameters on `runs`.
+pub fn compare(r: &Runner, runs: Vec<Run>) -> Comparison<'_> {
+    let tracks = tracks(r, &r.p, &runs, &[]);
+    let read = pairs(&runs, &tracks);
+    let (errors, per_run) = errors_each(&read);
+    let (regimes, segments) = where_it_fails(&read);
+    let innovations: Vec<Vec<Innovation>> = runs
+        .iter()
+        .zip(&tracks)
+        .map(|(run, t)| innovations::innovations(r, &r.p, run, t))
+        .collect();
+    let landmarks = innovations::stats(&innovations.concat());
+    let gyro_tracks: Vec<Option<Recipe>> = runs
+        .iter()
+        .map(|run| {
+            run.gyro.is_some().then(|| Recipe {
+                r,
+                p: r.p.clone(),
+                offset: [0.0; 3],
+                heading: Heading::Gyro,
+            })
+        })
+        .collect();
+    let gyro_pairs: Vec<(&Run, &dyn TrackRows)> = runs
+        .iter()
+        .zip(&gyro_tracks)
+        .filter_map(|(run, t)| t.as_ref().map(|t| (run, t as &dyn TrackRows)))
+        // errors need the ground truth to compare with
+        .filter(|(run, _)| run.gt.is_some())
+        .collect();
+    let gyrodometry =
+        (!gyro_pairs.is_empty()).then(|| (gyro_pairs.len(), metrics::errors(&gyro_pairs)));
+    Comparison {
+        runs,
+        tracks,
+        errors,
+        per_run,
+        regimes,
+        segments,
+        innovations,
+        landmarks,
+        gyro_tracks,
+        gyrodometry,
+    }
+}

@@ -1,0 +1,283 @@
+//! The logs a job works on, read for one model: every `--data` and
+//! `--holdout` file (CSV or ROS 2 bag) as runs, landmark sightings attached,
+//! split at gaps longer than `max_gap`, and refused where the model's
+//! dead reckoning would stop being numbers. What compare, fit, diagnose and
+//! localize start from.
+use crate::bag::{Detection, TopicMap};
+use crate::input_range;
+use crate::landmarks::{from_detections, read_map, read_observations};
+use crate::log::LogError;
+use crate::model::{parse_sets, ModelError, Runner};
+use crate::run::Run;
+use crate::track_rows::{first_non_finite, Heading, Recipe};
+use kinegen_model::decl::ObservationRole::RangeBearing;
+use kinegen_model::ir::ModelIr;
+use std::path::{Path, PathBuf};
+
+/// Where a job's logs come from (the CLI's common options, as values).
+#[derive(Debug, Clone, Default)]
+pub struct Sources {
+    /// The spec the model was derived from, named in messages.
+    pub spec: PathBuf,
+    pub data: Vec<PathBuf>,
+    pub holdout: Vec<PathBuf>,
+    /// `--set NAME=VALUE` overrides of the nominal values, as written.
+    pub sets: Vec<String>,
+    /// The topic mapping of ROS 2 bags, if given.
+    pub topics: Option<PathBuf>,
+    /// Range-bearing observations, the k-th for the k-th `data` log.
+    pub observations: Vec<PathBuf>,
+    pub landmarks: Option<PathBuf>,
+    /// Split a log only at gaps longer than this, s.
+    pub max_gap: f64,
+}
+
+/// The model and its logs, ready for a job.
+pub struct Loaded {
+    pub runner: Runner,
+    pub runs: Vec<Run>,
+    pub holdout: Vec<Run>,
+    /// Things the user should know before reading any result (inputs outside
+    /// their declared range, logs split at gaps), said by every command and
+    /// kept in its JSON.
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    #[error("{0}")]
+    Model(#[from] ModelError),
+    #[error("{0}")]
+    Log(#[from] LogError),
+    #[error("{path}: [inputs] maps `{column}`, which is no input column of the spec (it reads: {reads})", path = .path.display())]
+    UnknownTopicColumn {
+        path: PathBuf,
+        column: String,
+        reads: String,
+    },
+    #[error("no run of 3 rows or more between the gaps of the logs (--data)")]
+    NoRun,
+    #[error("the bag's landmark topic (--topics [landmarks]) needs --landmarks MAP.csv (the landmark positions)")]
+    BagLandmarksWithoutMap,
+    #[error("--observations needs --landmarks MAP.csv (the landmark positions)")]
+    ObservationsWithoutMap,
+    #[error("--landmarks {} given without --observations (or a bag with a [landmarks] topic in --topics)", .0.display())]
+    MapWithoutObservations(PathBuf),
+    #[error("{}: the model has no `landmark` observation to predict range-bearing data with", .0.display())]
+    NoLandmarkObservation(PathBuf),
+    #[error("{files} --observations files for {logs} --data logs (one per log, in order)")]
+    TooManyObservationFiles { files: usize, logs: usize },
+    #[error("{run}: the run has landmark observations from its bag's topic `{topic}` and from --observations {}: give one", .file.display())]
+    TwoObservationSources {
+        run: String,
+        topic: String,
+        file: PathBuf,
+    },
+    #[error("{source_name}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s")]
+    NoObservationInSpan {
+        source_name: String,
+        t0: f64,
+        t1: f64,
+    },
+    /// A track that stops being numbers: the log, its line, what happened,
+    /// and the `--set` values as suspects.
+    #[error("{log}:{line}: {what}{suspects}")]
+    NonFinite {
+        log: String,
+        line: usize,
+        what: String,
+        suspects: String,
+    },
+}
+
+/// Told of each log before it is read; returns the callback that hears how
+/// many of a bag's messages are read (done, total).
+pub type ReadProgress<'a> = &'a dyn Fn(&Path) -> Box<dyn Fn(usize, usize)>;
+
+/// Read `sources` for the model `ir`, telling `progress` of each log.
+pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Loaded, LoadError> {
+    let sets = parse_sets(&sources.sets)?;
+    let runner = Runner::new(ir, &sets)?;
+    let topics = topic_map(sources, &runner)?;
+    let read = |paths: &[PathBuf]| {
+        paths
+            .iter()
+            .map(|p| Run::read_with(p, &runner, &topics, &*progress(p)))
+            .collect::<Result<Vec<_>, _>>()
+    };
+    let mut warnings: Vec<String> = Vec::new();
+    let (mut runs, found): (Vec<Run>, Vec<_>) = read(&sources.data)?.into_iter().unzip();
+    let (mut holdout, found_holdout): (Vec<Run>, Vec<_>) =
+        read(&sources.holdout)?.into_iter().unzip();
+    let mut logs = Logs {
+        runs: &mut runs,
+        found: &found,
+        holdout: &mut holdout,
+        found_holdout: &found_holdout,
+    };
+    logs.attach_landmarks(sources, &runner)?;
+    // a log with gaps becomes one run per piece between them
+    let mut split = |set: Vec<Run>| -> Vec<Run> {
+        set.into_iter()
+            .flat_map(|run| {
+                let (pieces, warning) = run.split_at_gaps(sources.max_gap);
+                warnings.extend(warning);
+                pieces
+            })
+            .collect()
+    };
+    let (runs, holdout) = (split(runs), split(holdout));
+    if runs.is_empty() {
+        return Err(LoadError::NoRun);
+    }
+    // results that would be NaN or infinite are refused here, with the row
+    for set in [&runs, &holdout] {
+        check_finite(&runner, set, &sources.sets)?;
+    }
+    warnings.extend(
+        runs.iter()
+            .chain(&holdout)
+            .flat_map(|run| input_range::excursions(run, &runner.ir.inputs))
+            .map(|e| e.to_string()),
+    );
+    Ok(Loaded {
+        runner,
+        runs,
+        holdout,
+        warnings,
+    })
+}
+
+/// The bags' topic mapping (`--topics`), its input columns checked against
+/// the spec's: an entry for a column the spec does not read would be ignored,
+/// most likely a misspelt column.
+fn topic_map(sources: &Sources, runner: &Runner) -> Result<TopicMap, LoadError> {
+    let Some(path) = &sources.topics else {
+        return Ok(TopicMap::default());
+    };
+    let t = TopicMap::read(path)?;
+    let columns: Vec<&str> = runner.ir.inputs.iter().map(|i| i.column.as_str()).collect();
+    if let Some(c) = t.inputs.keys().find(|k| !columns.contains(&k.as_str())) {
+        return Err(LoadError::UnknownTopicColumn {
+            path: path.clone(),
+            column: c.clone(),
+            reads: columns.join(", "),
+        });
+    }
+    Ok(t)
+}
+
+/// Refuse tracks with the nominal parameters that stop being numbers (see
+/// `track_rows::first_non_finite`), naming the log and its line; `sets` are
+/// the --set values, named as suspects.
+fn check_finite(r: &Runner, runs: &[Run], sets: &[String]) -> Result<(), LoadError> {
+    for run in runs {
+        let track = Recipe {
+            r,
+            p: r.p.clone(),
+            offset: [0.0; 3],
+            heading: Heading::Model,
+        };
+        if let Some((k, what)) = first_non_finite(&track, run) {
+            let suspects = if sets.is_empty() {
+                String::new()
+            } else {
+                format!(" (with --set {})", sets.join(" --set "))
+            };
+            return Err(LoadError::NonFinite {
+                log: run.path.clone(),
+                line: k + 2,
+                what,
+                suspects,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The runs as read, with the landmark detections each bag held.
+struct Logs<'a> {
+    runs: &'a mut [Run],
+    found: &'a [Vec<Detection>],
+    holdout: &'a mut [Run],
+    found_holdout: &'a [Vec<Detection>],
+}
+
+impl Logs<'_> {
+    /// Read --landmarks and attach range-bearing observations to the runs: the
+    /// k-th --observations file to the k-th run, or the detections of a bag's
+    /// landmark topic (--topics `[landmarks]`) to its run.
+    fn attach_landmarks(&mut self, s: &Sources, r: &Runner) -> Result<(), LoadError> {
+        let from_bags = self
+            .found
+            .iter()
+            .chain(self.found_holdout)
+            .any(|d| !d.is_empty());
+        let map_path = match (&s.landmarks, s.observations.is_empty(), from_bags) {
+            (None, true, false) => return Ok(()),
+            (None, _, true) => return Err(LoadError::BagLandmarksWithoutMap),
+            (None, false, false) => return Err(LoadError::ObservationsWithoutMap),
+            (Some(m), true, false) => return Err(LoadError::MapWithoutObservations(m.clone())),
+            (Some(m), _, _) => m,
+        };
+        if r.ir
+            .observation_kernels(RangeBearing)
+            .map(|o| o.value)
+            .is_none()
+        {
+            return Err(LoadError::NoLandmarkObservation(s.spec.clone()));
+        }
+        if s.observations.len() > self.runs.len() {
+            return Err(LoadError::TooManyObservationFiles {
+                files: s.observations.len(),
+                logs: self.runs.len(),
+            });
+        }
+        let map = read_map(map_path)?;
+        let files = s
+            .observations
+            .iter()
+            .map(Some)
+            .chain(std::iter::repeat(None));
+        let all = self.runs.iter_mut().zip(self.found).zip(files).chain(
+            self.holdout
+                .iter_mut()
+                .zip(self.found_holdout)
+                .zip(std::iter::repeat(None)),
+        );
+        for ((run, found), file) in all {
+            let (obs, source_name) = match (file, found.is_empty()) {
+                (Some(path), false) => {
+                    return Err(LoadError::TwoObservationSources {
+                        run: run.path.clone(),
+                        topic: found[0].topic.clone(),
+                        file: path.clone(),
+                    })
+                }
+                (Some(path), true) => (
+                    read_observations(path, &map, map_path),
+                    path.display().to_string(),
+                ),
+                (None, false) => (
+                    from_detections(Path::new(&run.path), found, &map, map_path),
+                    format!("{} (topic `{}`)", run.path, found[0].topic),
+                ),
+                (None, true) => continue,
+            };
+            let (t0, t1) = (run.t[0], *run.t.last().unwrap());
+            let inside: Vec<_> = obs?
+                .into_iter()
+                .filter(|o| o.t >= t0 && o.t <= t1)
+                .collect();
+            if inside.is_empty() {
+                return Err(LoadError::NoObservationInSpan {
+                    source_name,
+                    t0,
+                    t1,
+                });
+            }
+            run.landmarks = inside;
+        }
+        Ok(())
+    }
+}
