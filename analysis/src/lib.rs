@@ -29,7 +29,10 @@
 //! assert!((found / r_r - 1.01).abs() < 0.001, "{found} against {}", 1.01 * r_r);
 //! ```
 //!
-//! From there: [`localize`] runs the EKF on landmark sightings,
+//! From there, each command of the CLI is one call: [`load`] reads a job's
+//! logs for a model, [`comparison::compare`] compares the model with them,
+//! [`fit_job::calibrate`] calibrates and judges the result (held-out runs,
+//! leave-one-run-out), [`localize`] runs the EKF on landmark sightings,
 //! [`diagnose_job`] names the physical effects a spec is missing (its
 //! candidates derived through a [`derivation::Deriver`]), and
 //! [`holdout_bench`] scores calibrations on runs they were not fitted on.
