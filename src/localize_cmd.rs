@@ -87,6 +87,12 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             NoiseSource::Estimate
         },
         smooth: a.smooth,
+        // the spec's input delay is estimated with the noise unless --set fixes it
+        estimate_input_delay: r.input_delay.is_none_or(|i| {
+            !c.set
+                .iter()
+                .any(|s| s.split('=').next().map(str::trim) == Some(r.names[i].as_str()))
+        }),
         ..EkfOptions::default()
     };
     warn_unseen_landmarks(&c, &prep);
@@ -106,6 +112,12 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     for line in noise.describe() {
         out.say(&format!("  {line}"));
     }
+    // the report's noise table: the noise, and the delay it was estimated with
+    let mut described = noise.describe();
+    if let Some(d) = &done.input_delay {
+        out.say(&say_delay(d));
+        described.push(say_delay(d));
+    }
     let mut runs_json = Vec::new();
     let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
@@ -116,7 +128,10 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         runs_json.push(run_json(run, &loc, &summary));
         locs.push((run, loc, summary));
     }
-    let noise_json = noise_json(noise, note);
+    let mut noise_json = noise_json(noise, note);
+    if let Some(d) = &done.input_delay {
+        noise_json["input_delay"] = json!({"name": d.name, "spec_s": d.spec_s, "estimate_s": d.estimate_s, "likelihood_gain": d.gain});
+    }
     let sweep = if a.sweep {
         match kinegen_analysis::sweep::sweep(r, locs[0].0, &kinegen_analysis::sweep::LEVELS, &o) {
             Ok(s) => s,
@@ -136,7 +151,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         let doc =
             json!({"model": r.ir.name, "noise": noise_json, "runs": runs_json, "sweep": sweep});
         if let Err(e) =
-            crate::localize_report::localize_report(dir, r, &pages, &noise.describe(), &sweep, &doc)
+            crate::localize_report::localize_report(dir, r, &pages, &described, &sweep, &doc)
         {
             return bad(e);
         }
@@ -358,6 +373,21 @@ fn say_run(
         last[(1, 1)].sqrt(),
         last[(2, 2)].sqrt()
     ));
+}
+
+/// The input delay the filter ran with, and where it came from.
+fn say_delay(d: &kinegen_analysis::localize::delay::DelayEstimate) -> String {
+    if d.estimate_s == d.spec_s {
+        format!(
+            "input delay: `{}` = {:.3} s as the spec says (no other delay makes the sightings more likely)",
+            d.name, d.spec_s
+        )
+    } else {
+        format!(
+            "input delay: `{}` = {:.3} s, estimated from the sightings with the noise (the spec says {:.3} s; -2 log-likelihood {:.1} lower; --set {}=SECONDS fixes it)",
+            d.name, d.estimate_s, d.spec_s, d.gain, d.name
+        )
+    }
 }
 
 fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_json::Value {

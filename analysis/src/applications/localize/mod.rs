@@ -19,6 +19,7 @@
 //!   it and the model measures the body pose directly) against their
 //!   chi-square bounds; a fixed-interval RTS smoother over the same pass for
 //!   offline use ([`smoother`]).
+pub mod delay;
 mod filter;
 pub mod noise;
 mod smoother;
@@ -52,6 +53,10 @@ pub struct EkfOptions {
     pub noise: NoiseSource,
     /// Also run the RTS smoother over the filter's pass.
     pub smooth: bool,
+    /// Estimate the spec's input delay with the noise (see [`delay`]), when
+    /// the spec declares one and the noise is estimated; false: the spec's
+    /// (or `--set`'s) value.
+    pub estimate_input_delay: bool,
 }
 
 impl Default for EkfOptions {
@@ -62,6 +67,7 @@ impl Default for EkfOptions {
             noise_sigma: Vec::new(),
             noise: NoiseSource::Spec,
             smooth: false,
+            estimate_input_delay: false,
         }
     }
 }
@@ -139,6 +145,8 @@ pub fn noise_for(
 pub struct Localized {
     pub noise: NoiseModel,
     pub note: String,
+    /// The input delay the filter ran with, when it was estimated.
+    pub input_delay: Option<delay::DelayEstimate>,
     /// The filter over `runs`, then over `holdout`, in order.
     pub runs: Vec<Localization>,
 }
@@ -153,12 +161,25 @@ pub fn localize_runs(
     o: &EkfOptions,
 ) -> Result<Localized, LocalizeError> {
     let (noise, note) = noise_for(r, runs, o)?;
+    let f = Filter::new(r, o)?;
+    let (with_delay, noise, input_delay) =
+        if o.estimate_input_delay && r.input_delay.is_some() && noise::estimated(&f, runs, o) {
+            let (_, given) = noise::with_given(&f, o);
+            delay::estimate(r, runs, o, noise, &given)
+        } else {
+            (r.clone(), noise, None)
+        };
     let runs = runs
         .iter()
         .chain(holdout)
-        .map(|run| localize_with(r, run, &noise, o))
+        .map(|run| localize_with(&with_delay, run, &noise, o))
         .collect::<Result<_, _>>()?;
-    Ok(Localized { noise, note, runs })
+    Ok(Localized {
+        noise,
+        note,
+        input_delay,
+        runs,
+    })
 }
 
 /// Run the filter (and the smoother, with `o.smooth`) over one run with `noise`.

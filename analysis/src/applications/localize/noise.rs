@@ -50,7 +50,7 @@ const RESTARTS: usize = 4;
 
 /// A difference in the cost (-2 log-likelihood of the sightings) under this
 /// is no evidence for one noise over another (a likelihood ratio of 1.6).
-const SIGNIFICANT: f64 = 1.0;
+pub(super) const SIGNIFICANT: f64 = 1.0;
 
 /// Fewer sightings than this say too little about the noise: the spec's is kept.
 pub const MIN_SIGHTINGS: usize = 20;
@@ -122,14 +122,7 @@ pub fn choose(
     runs: &[Run],
     o: &EkfOptions,
 ) -> Result<(NoiseModel, String), LocalizeError> {
-    let mut m = f.declared_noise();
-    let mut given = vec![false; m.names.len()];
-    for (name, s) in &o.noise_sigma {
-        if let Some(i) = m.names.iter().position(|n| n == name) {
-            m.sigma[i] = *s;
-            given[i] = true;
-        }
-    }
+    let (m, given) = with_given(f, o);
     // every process noise given: the user has chosen the filter, the
     // observation sigmas are the spec's (estimating them alone against a
     // fixed process noise would let them explain the motion's errors)
@@ -156,6 +149,27 @@ pub fn choose(
             if given.iter().any(|g| *g) { " not given" } else { "" }
         ),
     ))
+}
+
+/// The spec's noise with the sigmas `o` gives, and which ones it gives.
+pub fn with_given(f: &Filter, o: &EkfOptions) -> (NoiseModel, Vec<bool>) {
+    let mut m = f.declared_noise();
+    let mut given = vec![false; m.names.len()];
+    for (name, s) in &o.noise_sigma {
+        if let Some(i) = m.names.iter().position(|n| n == name) {
+            m.sigma[i] = *s;
+            given[i] = true;
+        }
+    }
+    (m, given)
+}
+
+/// Whether [`choose`] estimates the noise of `runs` from their sightings
+/// (rather than taking the spec's or the user's).
+pub fn estimated(f: &Filter, runs: &[Run], o: &EkfOptions) -> bool {
+    let (_, given) = with_given(f, o);
+    let sightings: usize = runs.iter().map(|r| r.landmarks.len()).sum();
+    o.noise == NoiseSource::Estimate && !given.iter().all(|g| *g) && sightings >= MIN_SIGHTINGS
 }
 
 /// Maximise the innovations' likelihood over the sigmas not `given` (as
