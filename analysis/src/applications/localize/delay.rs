@@ -136,7 +136,9 @@ pub fn estimate(
     let spec_s = r.p[i];
     let at_spec = cost(r, runs, o, &noise, spec_s);
     let (tau, c) = best_delay(r, runs, o, &noise, i);
-    if !(c < at_spec - noise::SIGNIFICANT) {
+    // (a NaN cost is no evidence either: the spec's delay stays)
+    let preferred = c < at_spec - noise::SIGNIFICANT;
+    if !preferred {
         let kept = DelayEstimate {
             name: r.names[i].clone(),
             spec_s,
