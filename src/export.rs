@@ -19,7 +19,7 @@ fn twist_gains(r: &Runner, p: &[f64]) -> Vec<(f64, f64)> {
     let n = r.ir.inputs.len();
     let (mut out, mut scratch) = ([0.0; 3], Vec::new());
     let mut at = |u: &[f64]| {
-        tw.eval_into(&[u, p], &mut out, &mut scratch);
+        r.eval_into(tw, &[u, p], &mut out, &mut scratch);
         out
     };
     let zero = at(&vec![0.0; n]);

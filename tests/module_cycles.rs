@@ -126,9 +126,10 @@ fn cycle(g: &BTreeMap<String, BTreeSet<String>>, from: &str) -> Option<Vec<Strin
     go(g, &mut vec![from.to_string()], &mut BTreeSet::new())
 }
 
-const CRATES: [&str; 5] = [
+const CRATES: [&str; 6] = [
     "src",
     "model/src",
+    "jit/src",
     "codegen/src",
     "analysis/src",
     "verify/src",
@@ -138,7 +139,7 @@ const CRATES: [&str; 5] = [
 fn no_crate_has_a_module_cycle() {
     for krate in CRATES {
         let g = edges(&common::root().join(krate));
-        assert!(g.len() > 3, "{krate}: {g:?}");
+        assert!(g.len() >= 2, "{krate}: {g:?}");
         for m in g.keys() {
             if let Some(c) = cycle(&g, m) {
                 panic!("{krate}: module cycle {}", c.join(" -> "));
@@ -184,12 +185,13 @@ fn no_analysis_module_uses_a_later_stage_of_the_pipeline() {
 }
 
 /// The check sees a cycle where there is one: the model crate's IR reaching
-/// the JIT that compiles it (the cycle `code_slot` removed) is found.
+/// the fusion that builds on it (as its JIT cache once made the IR reach the
+/// compiler) is found.
 #[test]
 fn a_cycle_is_found() {
     let mut g = edges(&common::root().join("model/src"));
-    assert!(g["jit"].contains("ir"), "{:?}", g["jit"]);
-    g.get_mut("ir").unwrap().insert("jit".into());
+    assert!(g["fuse"].contains("ir"), "{:?}", g["fuse"]);
+    g.get_mut("ir").unwrap().insert("fuse".into());
     assert!(cycle(&g, "ir").is_some());
     // the analysis crate's grouping folders are looked through
     let a = edges(&common::root().join("analysis/src"));

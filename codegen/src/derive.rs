@@ -336,7 +336,6 @@ fn finish(spec: Spec, model: &Model, sym: &Sym) -> Result<Function, SymbolicErro
         tape,
         outputs,
         ops_tree,
-        native: Default::default(),
     })
 }
 
@@ -875,9 +874,8 @@ fn eval_at(a: &Atom, values: &[(Symbol, f64)], sym: &Sym) -> Result<f64, Symboli
         tape,
         outputs,
         ops_tree: 0,
-        native: Default::default(),
     };
-    Ok(f.eval(&[&vals])[0])
+    Ok(f.interpret(&[&vals])[0])
 }
 
 /// Deterministic pseudo-random sample points (no RNG dependency in the derive stage).

@@ -89,7 +89,6 @@ pub fn fuse(name: &str, parts: &[&Function]) -> Result<Function, FuseError> {
         tape,
         ops_tree: parts.iter().map(|f| f.ops_tree).sum(),
         outputs,
-        native: Default::default(),
     })
 }
 
@@ -131,7 +130,7 @@ mod tests {
                     .enumerate()
                     .map(|(a, s)| (0..s.names.len()).map(|i| value(a, i)).collect())
                     .collect();
-                let got = fused.eval(&values.iter().map(Vec::as_slice).collect::<Vec<_>>());
+                let got = fused.interpret(&values.iter().map(Vec::as_slice).collect::<Vec<_>>());
                 let mut want = Vec::new();
                 for f in &parts {
                     let args: Vec<&[f64]> = f
@@ -142,7 +141,7 @@ mod tests {
                             values[k].as_slice()
                         })
                         .collect();
-                    want.extend(f.eval(&args));
+                    want.extend(f.interpret(&args));
                 }
                 assert_eq!(got.len(), want.len());
                 for (k, (g, w)) in got.iter().zip(&want).enumerate() {
@@ -174,7 +173,6 @@ mod tests {
             tape: vec![Op::Arg(0, 0)],
             outputs: vec![0],
             ops_tree: 0,
-            native: Default::default(),
         };
         let err = fuse("both", &[&f(3), &f(2)]).unwrap_err();
         assert!(

@@ -5,7 +5,6 @@
 //! subexpressions shared. The same tape is emitted as Rust by kinegen-codegen and
 //! interpreted here by [`Function::eval`], so a freshly edited spec can be fitted
 //! without compiling anything.
-use crate::code_slot::NativeCache;
 use crate::decl::{
     Input, Noise, ObservationDecl, ObservationRole, Param, DEFAULT_GYRO_COLUMN,
     DEFAULT_POSE_COLUMNS,
@@ -134,11 +133,6 @@ pub struct Function {
     /// Arithmetic operations if every output were evaluated as its own tree
     /// (before common-subexpression elimination).
     pub ops_tree: usize,
-    /// The tape compiled to machine code once it is hot (see [`crate::jit`]): a
-    /// cache derived from `tape`, empty until then, so never serialised (a
-    /// loaded IR lacks nothing by it).
-    #[serde(skip)]
-    pub native: NativeCache,
 }
 
 impl Function {
@@ -182,8 +176,9 @@ impl Function {
         self.cols > 1
     }
 
-    /// Evaluate by interpreting the tape (the reference [`Function::eval_into`]
+    /// Evaluate by interpreting the tape (the reference kinegen-jit's machine code
     /// compiles).
+    #[inline]
     pub fn interpret_into(&self, args: &[&[f64]], out: &mut [f64], scratch: &mut Vec<f64>) {
         debug_assert_eq!(args.len(), self.args.len());
         scratch.clear();
@@ -240,10 +235,11 @@ impl Function {
         }
     }
 
-    /// Convenience allocation-per-call evaluation.
-    pub fn eval(&self, args: &[&[f64]]) -> Vec<f64> {
+    /// Interpret into a new vector (the analysis evaluates through
+    /// kinegen-jit, which compiles hot tapes to the same results).
+    pub fn interpret(&self, args: &[&[f64]]) -> Vec<f64> {
         let mut out = vec![0.0; self.rows * self.cols];
-        self.eval_into(args, &mut out, &mut Vec::new());
+        self.interpret_into(args, &mut out, &mut Vec::new());
         out
     }
 }
@@ -562,10 +558,9 @@ mod tests {
             tape,
             outputs: vec![8],
             ops_tree: 0,
-            native: Default::default(),
         };
-        assert_eq!(f.eval(&[&[0.0]])[0], 1.0);
-        assert!((f.eval(&[&[0.5]])[0] - 0.5f64.sin() / 0.5).abs() < 1e-15);
+        assert_eq!(f.interpret(&[&[0.0]])[0], 1.0);
+        assert!((f.interpret(&[&[0.5]])[0] - 0.5f64.sin() / 0.5).abs() < 1e-15);
         assert_eq!(f.ops_tape(), 6);
     }
 
@@ -589,7 +584,6 @@ mod tests {
             tape: vec![Op::Arg(0, 0), Op::Arg(1, 1), Op::Mul(0, 1)],
             outputs: vec![2],
             ops_tree: 0,
-            native: Default::default(),
         };
         assert!(f.reads(ArgRole::Params, 1));
         assert!(!f.reads(ArgRole::Params, 0));

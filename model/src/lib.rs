@@ -6,7 +6,8 @@
 //!   by the spec (which parses them) and the IR (which carries them).
 //! * [`expr`]: the math-expression language used inside specs (parser with spans).
 //! * [`ir`]: the serialisable model IR that the derivation stage (kinegen-codegen,
-//!   which owns symbolica) produces, and a fast evaluator for it. The Rust emitter,
+//!   which owns symbolica) produces, with an interpreter of its tapes (the
+//!   analysis evaluates it through kinegen-jit, which compiles hot tapes). The Rust emitter,
 //!   the verification suite and the analysis commands all consume this IR, so none of
 //!   them ever touches symbolica.
 //! * [`linalg`]: the pseudo-inverse with a rank check used by least-squares
@@ -58,10 +59,9 @@
 //!         _ => &[0.0, 0.0][..a.names.len()],
 //!     })
 //!     .collect();
-//! let pose = step.eval(&args);
+//! let pose = step.interpret(&args);
 //! assert!((pose[0] - 1.0).abs() < 1e-12 && (pose[1] - 1.0).abs() < 1e-12);
 //! ```
-pub mod code_slot;
 pub mod decl;
 pub mod effects;
 pub mod error;
@@ -69,7 +69,6 @@ pub mod expr;
 pub mod files;
 pub mod fuse;
 pub mod ir;
-pub mod jit;
 pub mod kernel;
 pub mod linalg;
 pub mod options;

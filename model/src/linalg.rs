@@ -104,7 +104,7 @@ pub fn rank_sym3(m: [f64; 6]) -> usize {
 /// trace for a positive semi-definite matrix), far above [`RANK_TOL`], so the
 /// matrix has full rank and the closed-form inverse loses at most about 1e-10
 /// relative to round-off.
-pub(crate) const WELL_CONDITIONED: f64 = tolerance(1e-6, 1e-2);
+pub const WELL_CONDITIONED: f64 = tolerance(1e-6, 1e-2);
 
 /// The inverse by cofactors (a dozen products and one division, against the
 /// Jacobi sweeps' square roots and divisions: 3x faster for seed 000's omni

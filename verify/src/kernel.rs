@@ -7,12 +7,13 @@ pub trait Kernel {
     fn label(&self) -> String;
 }
 
-/// The IR evaluator (what `fit` and `diagnose` use).
+/// The IR evaluator: the tape interpreted (`fit` and `diagnose` run its
+/// machine code, which kinegen-jit tests against it to the last bit).
 pub struct IrKernel;
 
 impl Kernel for IrKernel {
     fn eval(&self, f: &Function, args: &[&[f64]], out: &mut [f64]) -> bool {
-        f.eval_into(args, out, &mut Vec::new());
+        f.interpret_into(args, out, &mut Vec::new());
         true
     }
     fn label(&self) -> String {
@@ -77,9 +78,9 @@ impl Kernel for Corrupted {
                 outputs: self.outputs.clone(),
                 ..f.clone()
             };
-            g.eval_into(args, out, &mut Vec::new());
+            g.interpret_into(args, out, &mut Vec::new());
         } else {
-            f.eval_into(args, out, &mut Vec::new());
+            f.interpret_into(args, out, &mut Vec::new());
         }
         true
     }

@@ -30,7 +30,7 @@ pub fn twist_rows(ir: &ModelIr) -> [bool; 3] {
             .iter()
             .map(|_| rng.gen_range(-50.0..50.0))
             .collect();
-        let t = tw.eval(&[&u, &p]);
+        let t = tw.interpret(&[&u, &p]);
         for r in 0..3 {
             rows[r] |= t[r].abs() > 1e-12;
         }
@@ -127,7 +127,7 @@ impl<'a> Sampler<'a> {
                 _ => p,
             })
             .collect();
-        let out = inv.eval(&args);
+        let out = inv.interpret(&args);
         self.ir
             .inputs
             .iter()

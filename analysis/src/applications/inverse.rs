@@ -258,7 +258,7 @@ fn solve_steps(r: &Runner, path: &PlannedPath) -> Result<Steps, ProfileError> {
                 _ => &cfg[..],
             })
             .collect();
-        let mut u = inv.eval(&args);
+        let mut u = r.eval(inv, &args);
         u.extend(solve_idx.iter().map(|&k| tw_cfg[k]));
         if let Some(i) = u.iter().position(|v| !v.is_finite()) {
             return Err(ProfileError::NotFinite {
@@ -286,14 +286,10 @@ fn solve_steps(r: &Runner, path: &PlannedPath) -> Result<Steps, ProfileError> {
                         .unwrap_or(0.0)
                 })
                 .collect::<Vec<_>>();
-        let end = step.eval(&Runner::step_args(
+        let end = r.eval(
             step,
-            &[0.0, 0.0, 0.0],
-            &model_u,
-            &r.p,
-            &[dt],
-            &zeros,
-        ));
+            &Runner::step_args(step, &[0.0, 0.0, 0.0], &model_u, &r.p, &[dt], &zeros),
+        );
         misses.push(
             (end[0] - dpose[0]).hypot(end[1] - dpose[1])
                 / (MISS_ABS_M + MISS_REL * dpose[0].hypot(dpose[1])),

@@ -246,30 +246,29 @@ impl Mover<'_> {
                 _ => &self.belief.p[..],
             })
             .collect();
-        let cmd = self.inv.eval(&args);
+        let cmd = self.belief.eval(self.inv, &args);
         // what the motors really do this move (the encoders measure it)
         let done: Vec<f64> = cmd
             .iter()
             .map(|c| c * (1.0 + self.noise.sample(&mut self.rng)))
             .collect();
         for _ in 0..n {
-            let t = self.step_t.eval(&Runner::step_args(
+            let t = self.truth.eval(
                 self.step_t,
-                truth_pose,
-                &done,
-                &self.truth.p,
-                &[dt],
-                &[0.0; 16],
-            ));
+                &Runner::step_args(
+                    self.step_t,
+                    truth_pose,
+                    &done,
+                    &self.truth.p,
+                    &[dt],
+                    &[0.0; 16],
+                ),
+            );
             *truth_pose = [t[0], t[1], t[2]];
-            let b = self.step_b.eval(&Runner::step_args(
+            let b = self.belief.eval(
                 self.step_b,
-                odo,
-                &done,
-                &self.belief.p,
-                &[dt],
-                &[0.0; 16],
-            ));
+                &Runner::step_args(self.step_b, odo, &done, &self.belief.p, &[dt], &[0.0; 16]),
+            );
             *odo = [b[0], b[1], b[2]];
             out.truth.push(*truth_pose);
             out.odometry.push(*odo);

@@ -367,7 +367,7 @@ fn config_rates(base: &Runner, cfg: &[usize]) -> Vec<usize> {
 /// Can the base model turn in place (is the pure rotation in the image of its inputs)?
 pub fn can_spin(base: &Runner) -> bool {
     let u = command(base, &[0.0, 0.0, 1.0]);
-    let t = base.ir.twist().eval(&[&u, &base.p]);
+    let t = base.eval(base.ir.twist(), &[&u, &base.p]);
     (t[2] - 1.0).abs() < 1e-6 && t[0].abs() < 1e-9
 }
 
@@ -399,7 +399,7 @@ pub fn simulate(base: &Runner, truth: &Runner, o: &SimOptions) -> SimLog {
 fn route(base: &Runner, o: &SimOptions, rng: &mut SmallRng) -> (impl Fn(f64) -> [f64; 3], f64) {
     let lateral = {
         let u = command(base, &[0.0, 1.0, 0.0]);
-        base.ir.twist().eval(&[&u, &base.p])[1] > 0.5
+        base.eval(base.ir.twist(), &[&u, &base.p])[1] > 0.5
     };
     let spin = can_spin(base);
     let (plan1, dur0) = planner(o, spin, lateral, rng);
@@ -593,9 +593,10 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
             let u = self.inputs_at(t0, j, h);
             let dt = [h];
             self.x = {
-                let out = self.step.eval(&Runner::step_args(
-                    self.step, &self.x, &u, &truth.p, &dt, &zeros,
-                ));
+                let out = truth.eval(
+                    self.step,
+                    &Runner::step_args(self.step, &self.x, &u, &truth.p, &dt, &zeros),
+                );
                 [out[0], out[1], out[2]]
             };
             for (c, ui) in self.cum.iter_mut().zip(&u) {
@@ -605,7 +606,7 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
             self.history.push((self.t_now, self.x));
             if let Some(g) = self.obs_gyro {
                 self.gyro_mean +=
-                    g.eval(&Runner::obs_args(g, &self.x, &u, &truth.p, &[]))[0] / m as f64;
+                    truth.eval(g, &Runner::obs_args(g, &self.x, &u, &truth.p, &[]))[0] / m as f64;
             }
             self.last_u = u;
         }
@@ -670,7 +671,7 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
             at_time(&self.history, t - self.delay)
         };
         let pose = match self.obs_pose {
-            Some(h) => h.eval(&Runner::obs_args(h, &seen, &self.last_u, &truth.p, &[])),
+            Some(h) => truth.eval(h, &Runner::obs_args(h, &seen, &self.last_u, &truth.p, &[])),
             None => seen.to_vec(),
         };
         row.push(pose[0] + gaussian(o.pos_noise, rng));
@@ -678,7 +679,10 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
         row.push(wrap(pose[2] + gaussian(o.heading_noise, rng)));
         if let Some(g) = self.obs_gyro {
             let v = if k == 0 {
-                g.eval(&Runner::obs_args(g, &self.x, &self.last_u, &truth.p, &[]))[0]
+                truth.eval(
+                    g,
+                    &Runner::obs_args(g, &self.x, &self.last_u, &truth.p, &[]),
+                )[0]
             } else {
                 self.gyro_mean
             };
@@ -720,7 +724,7 @@ fn observe_landmarks(
             if ((lm[0] - x[0]).powi(2) + (lm[1] - x[1]).powi(2)).sqrt() > o.landmark_range {
                 continue;
             }
-            let v = h.eval(&Runner::obs_args(h, &x, &u0, &truth.p, lm));
+            let v = truth.eval(h, &Runner::obs_args(h, &x, &u0, &truth.p, lm));
             // a range sensor reports no negative range: right beside a
             // landmark the noise is drawn again (a truncated Gaussian), so
             // the simulator never writes what `localize` rightly refuses

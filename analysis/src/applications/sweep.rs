@@ -54,14 +54,10 @@ fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
     for k in 0..run.steps() {
         let w: Vec<f64> = sigmas.iter().map(|s| normal(*s).sample(&mut rng)).collect();
         let w = if w.is_empty() { vec![0.0] } else { w };
-        let next = step.eval(&Runner::step_args(
+        let next = r.eval(
             step,
-            &x,
-            &run.u[k],
-            &r.p,
-            &[run.dt[k]],
-            &w,
-        ));
+            &Runner::step_args(step, &x, &run.u[k], &r.p, &[run.dt[k]], &w),
+        );
         x = [next[0], next[1], next[2]];
         truth.push(x);
     }
@@ -72,13 +68,10 @@ fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
         .map(|z| {
             let k = run.t.partition_point(|t| *t < z.t).min(run.t.len() - 1);
             let k = k.max(1);
-            let pred = h.eval(&Runner::obs_args(
+            let pred = r.eval(
                 h,
-                &truth[k],
-                &run.u[k - 1],
-                &r.p,
-                &[z.xl, z.yl],
-            ));
+                &Runner::obs_args(h, &truth[k], &run.u[k - 1], &r.p, &[z.xl, z.yl]),
+            );
             LandmarkObs {
                 range: pred[0] + normal(sig[0]).sample(&mut rng),
                 bearing: crate::log::wrap(pred[1] + normal(sig[1]).sample(&mut rng)),

@@ -212,7 +212,9 @@ fn one_step(
     let tau = crate::timeline::delay(r, p);
     for run in runs {
         let Some(g) = &run.gt else { continue };
-        let twists: Vec<Vec<f64>> = (0..run.steps()).map(|k| tw.eval(&[&run.u[k], p])).collect();
+        let twists: Vec<Vec<f64>> = (0..run.steps())
+            .map(|k| r.eval(tw, &[&run.u[k], p]))
+            .collect();
         for k in 0..run.steps() {
             let dt = [run.dt[k]];
             // with delayed measurements the motion between rows k and k+1 was
@@ -229,16 +231,16 @@ fn one_step(
             };
             // from the body pose behind the measured one, to the predicted measurement
             let (x0, _) = crate::deadreckon::body_start(r, p, g[k], u_k);
-            let x1 = step.eval(&Runner::step_args(step, &x0, u_k, p, &dt, &zeros));
+            let x1 = r.eval(step, &Runner::step_args(step, &x0, u_k, p, &dt, &zeros));
             let pred = match r.ir.observation_kernels(Pose).map(|o| o.value) {
-                Some(h) => h.eval(&Runner::obs_args(h, &x1, &run.u[k], p, &[])),
+                Some(h) => r.eval(h, &Runner::obs_args(h, &x1, &run.u[k], p, &[])),
                 None => x1,
             };
             let (dx, dy) = (g[k + 1][0] - pred[0], g[k + 1][1] - pred[1]);
             let (c, s) = (g[k][2].cos(), g[k][2].sin());
             let gres = match (gyro, &run.gyro) {
                 (Some(h), Some(m)) => {
-                    m[k + 1] - h.eval(&Runner::obs_args(h, &x0, &run.u[k], p, &[]))[0]
+                    m[k + 1] - r.eval(h, &Runner::obs_args(h, &x0, &run.u[k], p, &[]))[0]
                 }
                 _ => 0.0,
             };

@@ -47,13 +47,13 @@ fn predicted(r: &Runner, p: &[f64], run: &Run, free: &[usize]) -> (Vec<f64>, Vec
         let u = &run.u[k];
         match jp {
             Some(jp) => {
-                w.push(h.eval(&Runner::obs_args(h, &x, u, p, &[]))[0]);
-                let d = jp.eval(&Runner::obs_args(jp, &x, u, p, &[]));
+                w.push(r.eval(h, &Runner::obs_args(h, &x, u, p, &[]))[0]);
+                let d = r.eval(jp, &Runner::obs_args(jp, &x, u, p, &[]));
                 g.push(free.iter().map(|&i| d[i]).collect());
             }
             None => {
                 // no gyro model: differentiate the twist's yaw rate numerically
-                let w0 = tw.eval(&[u, p])[2];
+                let w0 = r.eval(tw, &[u, p])[2];
                 w.push(w0);
                 g.push(
                     free.iter()
@@ -61,7 +61,7 @@ fn predicted(r: &Runner, p: &[f64], run: &Run, free: &[usize]) -> (Vec<f64>, Vec
                             let mut q = p.to_vec();
                             let hh = 1e-6 * q[i].abs().max(1e-6);
                             q[i] += hh;
-                            (tw.eval(&[u, &q])[2] - w0) / hh
+                            (r.eval(tw, &[u, &q])[2] - w0) / hh
                         })
                         .collect(),
                 );

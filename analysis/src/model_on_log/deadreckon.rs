@@ -76,7 +76,7 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
     };
     let mut x = measured;
     for _ in 0..5 {
-        let m = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
+        let m = r.eval(h, &Runner::obs_args(h, &x, u, p, &[]));
         for i in 0..3 {
             x[i] -= m[i] - measured[i];
         }
@@ -85,8 +85,8 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
         r.ir.observation_kernels(Pose)
             .and_then(|o| o.jac_p)
             .expect("derived with the pose observation");
-    let d = hp
-        .eval(&Runner::obs_args(hp, &x, u, p, &[]))
+    let d = r
+        .eval(hp, &Runner::obs_args(hp, &x, u, p, &[]))
         .iter()
         .map(|v| -v)
         .collect();
@@ -246,14 +246,10 @@ fn delay_response(
     let zeros = [0.0; 16];
     let at = |sign: f64| {
         let v: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u + sign * h * d).collect();
-        step.eval(&Runner::step_args(
+        r.eval(
             step,
-            &x,
-            &v,
-            p,
-            &[executed.dt[k]],
-            &zeros,
-        ))
+            &Runner::step_args(step, &x, &v, p, &[executed.dt[k]], &zeros),
+        )
     };
     let (a, b) = (at(1.0), at(-1.0));
     [0, 1, 2].map(|m| (a[m] - b[m]) / (2.0 * h))
@@ -307,7 +303,7 @@ pub(crate) struct Stepper<'a> {
     /// `data`'s inputs as executed ([`crate::timeline::executed`]).
     u: crate::rows::Rows,
     plan: Option<&'a [u8]>,
-    f: &'a kinegen_model::ir::Function,
+    f: &'a kinegen_jit::Evaluator,
     out: Vec<f64>,
     scratch: Vec<f64>,
     u_sub: Vec<f64>,
@@ -467,7 +463,7 @@ fn substeps(
             *slot = Runner::step_arg(a, &origin, buf, p, &dt, &zeros);
         }
         let mut out = [0.0; 3];
-        tw.eval_into(&args[..tw.args.len()], &mut out, scratch);
+        r.eval_into(tw, &args[..tw.args.len()], &mut out, scratch);
         out
     };
     let (a, m, b) = (at(-0.5), at(0.0), at(0.5));
@@ -499,29 +495,25 @@ fn predicted_gyro(
     let h = r.ir.observation_kernels(YawRate).map(|o| o.value);
     let mut scratch = Vec::new();
     (0..data.steps())
-        .map(|k| gyro_at(h, p, data, k, &pose[k], &twist[k], &mut scratch))
+        .map(|k| gyro_at(r, h, p, &data.u[k], &pose[k], &twist[k], &mut scratch))
         .collect()
 }
 
-/// What the gyro reads over step `k` (see [`Track::gyro`]) of a track at
-/// `pose` (row k) moving with `twist`, through the yaw-rate observation `h`
-/// when the model has one.
+/// What the gyro reads over a step (see [`Track::gyro`]) with inputs `u` of
+/// a track at `pose` (its first row) moving with `twist`, through the
+/// yaw-rate observation `h` when the model has one.
 pub(crate) fn gyro_at(
+    r: &Runner,
     h: Option<&kinegen_model::ir::Function>,
     p: &[f64],
-    data: &Run,
-    k: usize,
+    u: &[f64],
     pose: &[f64; 3],
     twist: &[f64; 3],
     scratch: &mut Vec<f64>,
 ) -> f64 {
     let Some(h) = h else { return twist[2] };
     let mut out = [0.0];
-    h.eval_into(
-        &Runner::obs_args(h, pose, &data.u[k], p, &[]),
-        &mut out,
-        scratch,
-    );
+    r.eval_into(h, &Runner::obs_args(h, pose, u, p, &[]), &mut out, scratch);
     out[0]
 }
 
@@ -541,7 +533,7 @@ fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) 
                 let (j, a) = crate::timeline::model_instant(data, k, tau);
                 lerp3(&pose[j], &pose[j + 1], a)
             };
-            sensed_at(h, p, data, k, &x)
+            sensed_at(r, h, p, data, k, &x)
         })
         .collect()
 }
@@ -550,6 +542,7 @@ fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) 
 /// when the measurement was taken: `x` through the pose observation `h` (an
 /// off-centre marker), or `x` itself when the model has none.
 pub(crate) fn sensed_at(
+    r: &Runner,
     h: Option<&kinegen_model::ir::Function>,
     p: &[f64],
     data: &Run,
@@ -559,7 +552,7 @@ pub(crate) fn sensed_at(
     match h {
         Some(h) => {
             let u = &data.u[k.min(data.steps().saturating_sub(1))];
-            let m = h.eval(&Runner::obs_args(h, x, u, p, &[]));
+            let m = r.eval(h, &Runner::obs_args(h, x, u, p, &[]));
             [m[0], m[1], m[2]]
         }
         None => *x,
@@ -584,7 +577,6 @@ pub fn gyrodometry_with(
     data: &Run,
     omega_of: &dyn Fn(usize) -> f64,
 ) -> Option<Track> {
-    let tg = r.ir.twist_gyro();
     let start = model_start(r, p, data);
     let mut pose = Vec::with_capacity(data.steps() + 1);
     pose.push(start);
@@ -595,7 +587,7 @@ pub fn gyrodometry_with(
     let mut scratch = Vec::new();
     for k in 0..data.steps() {
         let w = omega_of(k);
-        let (x, tw) = gyro_step(tg, p, data, k, w, *pose.last().unwrap(), &mut scratch);
+        let (x, tw) = gyro_step(r, p, data, k, w, *pose.last().unwrap(), &mut scratch);
         pose.push(x);
         omega.push(w);
         twist.push(tw);
@@ -613,7 +605,7 @@ pub fn gyrodometry_with(
 /// Step `k` of gyrodometry from pose `x` with yaw rate `w`: the next pose and
 /// the step's twist (the translation `twist_gyro` gives for that yaw rate).
 pub(crate) fn gyro_step(
-    tg: &kinegen_model::ir::Function,
+    r: &Runner,
     p: &[f64],
     data: &Run,
     k: usize,
@@ -622,7 +614,7 @@ pub(crate) fn gyro_step(
     scratch: &mut Vec<f64>,
 ) -> ([f64; 3], [f64; 3]) {
     let mut v = [0.0; 2];
-    tg.eval_into(&[&data.u[k], &[w], p], &mut v, scratch);
+    r.eval_into(r.ir.twist_gyro(), &[&data.u[k], &[w], p], &mut v, scratch);
     let tw = [v[0], v[1], w];
     (arc_step(x, tw, data.dt[k]), tw)
 }

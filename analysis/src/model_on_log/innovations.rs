@@ -30,6 +30,7 @@ pub fn locate_on(run: &Run, track: &Track, t: f64) -> (usize, f64, [f64; 3]) {
 /// The range and bearing the observation `h` predicts for `o` from body
 /// pose `x`, during step `j` of `run`.
 fn predict(
+    r: &Runner,
     h: &Function,
     p: &[f64],
     run: &Run,
@@ -38,7 +39,7 @@ fn predict(
     o: &LandmarkObs,
 ) -> [f64; 2] {
     let u = &run.u[j.min(run.steps() - 1)];
-    let v = h.eval(&Runner::obs_args(h, x, u, p, &[o.xl, o.yl]));
+    let v = r.eval(h, &Runner::obs_args(h, x, u, p, &[o.xl, o.yl]));
     [v[0], v[1]]
 }
 
@@ -80,7 +81,7 @@ pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &dyn TrackRows) -> V
         let (Some(next), Some(at)) = (cursor.get(j + 1), cursor.get(j)) else {
             continue;
         };
-        let v = predict(h, p, run, j, &lerp3(&at.pose, &next.pose, a), o);
+        let v = predict(r, h, p, run, j, &lerp3(&at.pose, &next.pose, a), o);
         out[i] = Some(Innovation {
             t: o.t,
             id: o.id.clone(),

@@ -172,10 +172,10 @@ pub fn start_from_landmarks(
         let mut c = DMatrix::zeros(3, if with_p { np } else { 0 });
         for o in &seen {
             let lm = [o.xl, o.yl];
-            let pred = h.eval(&Runner::obs_args(h, x, u, p, &lm));
+            let pred = r.eval(h, &Runner::obs_args(h, x, u, p, &lm));
             let res = [o.range - pred[0], wrap(o.bearing - pred[1])];
-            let jx = hx.eval(&Runner::obs_args(hx, x, u, p, &lm));
-            let jp = with_p.then(|| hp.eval(&Runner::obs_args(hp, x, u, p, &lm)));
+            let jx = r.eval(hx, &Runner::obs_args(hx, x, u, p, &lm));
+            let jp = with_p.then(|| r.eval(hp, &Runner::obs_args(hp, x, u, p, &lm)));
             for k in 0..2 {
                 for i in 0..3 {
                     b[i] += jx[k * 3 + i] * w[k] * res[k];

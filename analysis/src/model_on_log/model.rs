@@ -1,5 +1,6 @@
 //! A model ready to run: its IR, the runtime parameter vector (nominal values with
 //! `--set` overrides) and which parameters are free.
+use kinegen_jit::{Evaluator, IrCode};
 use kinegen_model::decl::ObservationRole;
 use kinegen_model::ir::{ArgRole, ArgSpec, Function, ModelIr, StepForm};
 
@@ -49,10 +50,12 @@ pub struct Runner {
     /// robot executes its commands that late (see [`crate::timeline::executed`]).
     pub input_delay: Option<usize>,
     /// One step's pose and twist in one tape (dead reckoning).
-    pub step_twist: Function,
+    pub step_twist: Evaluator,
     /// One step's pose, twist, state and parameter Jacobians in one tape
     /// (dead reckoning with sensitivities): [3 pose, 3 twist, 9 F_x, 3 x P F_p].
-    pub step_linearized: Function,
+    pub step_linearized: Evaluator,
+    /// The machine code of the IR's functions, kept beside it (see [`Runner::eval`]).
+    pub code: IrCode,
 }
 
 /// Parse the `NAME=VALUE` pairs of `--set` (or of `option`, see [`parse_pairs`]).
@@ -132,15 +135,36 @@ impl Runner {
         let delay = rp.iter().position(|q| q.measurement_delay);
         let input_delay = rp.iter().position(|q| q.input_delay);
         Ok(Runner {
+            code: IrCode::new(&ir),
             ir,
             p,
             names,
             free,
             delay,
             input_delay,
-            step_twist,
-            step_linearized,
+            step_twist: Evaluator::new(step_twist),
+            step_linearized: Evaluator::new(step_linearized),
         })
+    }
+
+    /// Evaluate `f`, one of this runner's IR functions (`self.ir`), into a
+    /// new vector: as machine code once it is hot (kinegen-jit).
+    pub fn eval(&self, f: &Function, args: &[&[f64]]) -> Vec<f64> {
+        let mut out = vec![0.0; f.rows * f.cols];
+        self.eval_into(f, args, &mut out, &mut Vec::new());
+        out
+    }
+
+    /// [`Runner::eval`] into `out`, reusing `scratch`.
+    #[inline]
+    pub fn eval_into(
+        &self,
+        f: &Function,
+        args: &[&[f64]],
+        out: &mut [f64],
+        scratch: &mut Vec<f64>,
+    ) {
+        self.code.eval_into(&self.ir, f, args, out, scratch)
     }
 
     /// The noise standard deviations the spec declares for the observation playing `role`.

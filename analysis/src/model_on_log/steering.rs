@@ -66,7 +66,7 @@ pub fn inputs_for(r: &Runner, twist: &[f64; 3], cfg: &[f64]) -> Vec<f64> {
             _ => &[][..],
         })
         .collect();
-    let out = inv.eval(&args);
+    let out = r.eval(inv, &args);
     let names = configuration_names(r);
     r.ir.inputs
         .iter()
@@ -101,7 +101,7 @@ pub fn solve(r: &Runner, twist: &[f64; 3], cfg: &mut [f64], solve: &[usize]) {
         .collect();
     let miss = |cfg: &[f64]| -> [f64; 3] {
         let u = inputs_for(r, twist, cfg);
-        let t = r.ir.twist().eval(&[&u, &r.p]);
+        let t = r.eval(r.ir.twist(), &[&u, &r.p]);
         [t[0] - twist[0], t[1] - twist[1], t[2] - twist[2]]
     };
     let norm = |m: &[f64; 3]| m.iter().map(|v| v * v).sum::<f64>();

@@ -128,12 +128,20 @@ impl<'s> Streamed<'s> {
             let x = self.window.back().expect("never empty").0;
             let (next, twist) = match (&self.recipe.heading, self.twist_gyro) {
                 (Heading::Model, _) | (_, None) => self.stepper.step(k, x, |_| {}),
-                (heading, Some(tg)) => {
+                (heading, Some(_)) => {
                     let w = match heading {
                         Heading::Learned(f) => f(&self.run.u[k]),
                         _ => self.run.gyro.as_ref().map_or(f64::NAN, |g| g[k + 1]),
                     };
-                    gyro_step(tg, &self.recipe.p, self.run, k, w, x, &mut self.scratch)
+                    gyro_step(
+                        self.recipe.r,
+                        &self.recipe.p,
+                        self.run,
+                        k,
+                        w,
+                        x,
+                        &mut self.scratch,
+                    )
                 }
             };
             self.window.back_mut().expect("never empty").1 = Some(twist);
@@ -166,13 +174,20 @@ impl Iterator for Streamed<'_> {
             (lerp3(&self.pose(j), &self.pose(j + 1), a), j)
         };
         let p = self.recipe.p.as_slice();
-        let measured = sensed_at(self.pose_obs, p, run, k, &x);
+        let measured = sensed_at(self.recipe.r, self.pose_obs, p, run, k, &x);
         let gyro = match (&self.recipe.heading, twist) {
             (_, None) => None,
-            (Heading::Model, Some(tw)) => run
-                .gyro
-                .is_some()
-                .then(|| gyro_at(self.gyro_obs, p, run, k, &pose, &tw, &mut self.scratch)),
+            (Heading::Model, Some(tw)) => run.gyro.is_some().then(|| {
+                gyro_at(
+                    self.recipe.r,
+                    self.gyro_obs,
+                    p,
+                    &run.u[k],
+                    &pose,
+                    &tw,
+                    &mut self.scratch,
+                )
+            }),
             (_, Some(tw)) => Some(tw[2]),
         };
         // rows before both this row's successor and this measurement's

@@ -5,6 +5,7 @@ use super::{EkfOptions, LocalizeError};
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::run::Run;
+use kinegen_jit::Evaluator;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::{ArgRole, Function, StepForm};
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
@@ -19,9 +20,9 @@ pub struct Filter<'a> {
     r: &'a Runner,
     /// [pose (3), F_w (3 x nw)] of the exact step from the origin (F_x
     /// follows from the pose: see [`Belief::advance`]).
-    step: Function,
+    step: Evaluator,
     /// [range, bearing (2), H_x (6)].
-    observe: Function,
+    observe: Evaluator,
     /// `[[noise]]` inputs of the spec (0: white noise on the body twist instead).
     nw: usize,
     obs_sigma: [f64; 2],
@@ -85,8 +86,8 @@ impl<'a> Filter<'a> {
         };
         Ok(Filter {
             r,
-            step: fuse("ekf_step", &parts),
-            observe: fuse("ekf_observe", &[obs.value, obs.jac_x]),
+            step: Evaluator::new(fuse("ekf_step", &parts)),
+            observe: Evaluator::new(fuse("ekf_observe", &[obs.value, obs.jac_x])),
             nw,
             obs_sigma: crate::landmarks::sigma(r),
             gate: o.gate,

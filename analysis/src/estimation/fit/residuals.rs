@@ -423,13 +423,13 @@ impl RunCx<'_> {
                 let (pred, hx, hp) = match tracker {
                     Some(t) => {
                         let h = t.value;
-                        let pred = h.eval(&Runner::obs_args(h, &x, u, p, &[]));
+                        let pred = r.eval(h, &Runner::obs_args(h, &x, u, p, &[]));
                         let (hx, hp) = if with_jac {
                             let fx = t.jac_x;
                             (
-                                fx.eval(&Runner::obs_args(fx, &x, u, p, &[])),
+                                r.eval(fx, &Runner::obs_args(fx, &x, u, p, &[])),
                                 t.jac_p.map_or(vec![0.0; 3 * np], |fp| {
-                                    fp.eval(&Runner::obs_args(fp, &x, u, p, &[]))
+                                    r.eval(fp, &Runner::obs_args(fp, &x, u, p, &[]))
                                 }),
                             )
                         } else {
@@ -484,13 +484,15 @@ impl RunCx<'_> {
                 res.push((track.gyro[k] - g[k + 1]) / o.gyro_sigma);
                 if with_jac {
                     if let Some(hp) = hp {
-                        hp.eval_into(
+                        r.eval_into(
+                            hp,
                             &Runner::obs_args(hp, &x, &inputs.u[k], p, &[]),
                             &mut jp,
                             &mut scratch,
                         );
                     }
-                    hx.eval_into(
+                    r.eval_into(
+                        hx,
                         &Runner::obs_args(hx, &x, &inputs.u[k], p, &[]),
                         &mut jx,
                         &mut scratch,
@@ -531,15 +533,15 @@ pub(super) fn landmark_residuals(
         let (j, a, x) = crate::innovations::locate_on(run, track, o.t);
         let u = &run.u[j.min(run.steps() - 1)];
         let lm = [o.xl, o.yl];
-        let pred = h.eval(&Runner::obs_args(h, &x, u, p, &lm));
+        let pred = r.eval(h, &Runner::obs_args(h, &x, u, p, &lm));
         res.push((pred[0] - o.range) / sig[0]);
         res.push(wrap(pred[1] - o.bearing) / sig[1]);
         if with_jac {
             let fx = sensor.jac_x;
-            let hx = fx.eval(&Runner::obs_args(fx, &x, u, p, &lm));
-            let hp = sensor
-                .jac_p
-                .map_or(vec![], |fp| fp.eval(&Runner::obs_args(fp, &x, u, p, &lm)));
+            let hx = r.eval(fx, &Runner::obs_args(fx, &x, u, p, &lm));
+            let hp = sensor.jac_p.map_or(vec![], |fp| {
+                r.eval(fp, &Runner::obs_args(fp, &x, u, p, &lm))
+            });
             let sens = track.sens.as_ref().unwrap();
             let (s0, s1) = (sens.at(j), sens.at(j + 1));
             for i in 0..2 {

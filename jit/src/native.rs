@@ -1,7 +1,5 @@
-//! The slot a [`crate::ir::Function`] keeps its machine code in, and that
-//! code: empty until [`crate::jit`] compiles the tape (and reads it to
-//! evaluate). The IR carries only the slot (never serialised, emptied by a
-//! clone); the compiler that fills it is not one of its dependencies.
+//! Machine code for one tape, and the cache an [`crate::Evaluator`] keeps it
+//! in beside its function: empty until the tape is hot, emptied by a clone.
 use cranelift_jit::JITModule;
 use std::sync::atomic::AtomicU32;
 use std::sync::{Arc, Mutex, OnceLock};

@@ -10,16 +10,17 @@
 //! selection for the series guards, the same pseudo-inverse helper. Results equal
 //! the interpreter's to the last bit (tested below on every bundled tape).
 //!
-//! [`NativeCache`] holds the compiled form next to the tape; `Function::eval_into`
-//! compiles once a tape has been evaluated [`HOT_CALLS`] times, and keeps
-//! interpreting when compilation is unavailable or switched off
-//! (`KINEGEN_JIT=0`).
+//! The IR (kinegen-model) is data: it interprets its own tapes and knows
+//! nothing of this crate. An [`Evaluator`] (one function) or an [`IrCode`]
+//! (every function of a model IR) keeps the compiled form in a
+//! [`NativeCache`] beside the tape, compiles it once it has been evaluated
+//! [`HOT_CALLS`] times, and keeps interpreting when compilation is
+//! unavailable or switched off (`KINEGEN_JIT=0`).
 
 mod libm_sincos;
 
-use crate::code_slot::{Entry, Native, NativeCache};
-use crate::ir::{Function, Op};
-use crate::schedule::{schedule, Group, Item};
+mod native;
+
 use cranelift_codegen::ir::condcodes::FloatCC;
 use cranelift_codegen::ir::{
     types, AbiParam, BlockArg, FuncRef, InstBuilder, MemFlagsData, StackSlot, StackSlotData,
@@ -28,6 +29,10 @@ use cranelift_codegen::ir::{
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, Linkage, Module};
+use kinegen_model::ir::{Function, ModelIr, Op};
+use kinegen_model::schedule::{schedule, Group, Item};
+use native::Entry;
+pub use native::{Native, NativeCache};
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -120,18 +125,109 @@ impl NativeCache {
     }
 }
 
-impl Function {
-    /// Evaluate into `out` (length rows*cols, row-major). `scratch` is reused
-    /// between calls to avoid allocation in loops. A hot tape runs as machine
-    /// code, with the interpreter's results to the last bit.
+/// Evaluate `f` into `out` (length rows*cols, row-major) with the machine
+/// code `cache` holds for it once it is hot, else by interpreting its tape
+/// (`scratch` is reused between calls). Both give the same results to the
+/// last bit.
+#[inline]
+pub fn eval_into(
+    f: &Function,
+    cache: &NativeCache,
+    args: &[&[f64]],
+    out: &mut [f64],
+    scratch: &mut Vec<f64>,
+) {
+    if let Some(native) = cache.get(f) {
+        if native.eval_into(args, out).is_some() {
+            return;
+        }
+    }
+    f.interpret_into(args, out, scratch)
+}
+
+/// A function with its machine code: one the analysis builds itself (a
+/// fused step) and evaluates in its loops. Derefs to the function.
+#[derive(Debug, Clone)]
+pub struct Evaluator {
+    f: Function,
+    cache: NativeCache,
+}
+
+impl Evaluator {
+    pub fn new(f: Function) -> Evaluator {
+        Evaluator {
+            f,
+            cache: NativeCache::default(),
+        }
+    }
+
+    /// Evaluate into `out` (see [`eval_into`]).
     #[inline]
     pub fn eval_into(&self, args: &[&[f64]], out: &mut [f64], scratch: &mut Vec<f64>) {
-        if let Some(native) = self.native.get(self) {
-            if native.eval_into(args, out).is_some() {
-                return;
-            }
+        eval_into(&self.f, &self.cache, args, out, scratch)
+    }
+
+    /// Evaluate into a new vector.
+    pub fn eval(&self, args: &[&[f64]]) -> Vec<f64> {
+        let mut out = vec![0.0; self.f.rows * self.f.cols];
+        self.eval_into(args, &mut out, &mut Vec::new());
+        out
+    }
+}
+
+impl std::ops::Deref for Evaluator {
+    type Target = Function;
+    fn deref(&self) -> &Function {
+        &self.f
+    }
+}
+
+/// The machine code of every function of one model IR, kept beside it (the
+/// IR stays data): the functions are found by reference into that IR, so
+/// the analysis passes `&ir.functions()[k]` as it reads it.
+#[derive(Debug, Clone, Default)]
+pub struct IrCode {
+    caches: Vec<NativeCache>,
+}
+
+impl IrCode {
+    pub fn new(ir: &ModelIr) -> IrCode {
+        IrCode {
+            caches: ir
+                .functions()
+                .iter()
+                .map(|_| NativeCache::default())
+                .collect(),
         }
-        self.interpret_into(args, out, scratch)
+    }
+
+    /// The cache of `f` when it is one of `ir`'s functions (by address: a
+    /// function from elsewhere, or a copy, is interpreted).
+    #[inline]
+    fn cache(&self, ir: &ModelIr, f: &Function) -> Option<&NativeCache> {
+        let all = ir.functions();
+        let size = std::mem::size_of::<Function>();
+        let offset = (f as *const Function as usize).checked_sub(all.as_ptr() as usize)?;
+        let i = offset / size;
+        (offset % size == 0 && i < all.len() && std::ptr::eq(&all[i], f))
+            .then(|| self.caches.get(i))
+            .flatten()
+    }
+
+    /// Evaluate `f`, a function of `ir`, into `out` (see [`eval_into`]).
+    #[inline]
+    pub fn eval_into(
+        &self,
+        ir: &ModelIr,
+        f: &Function,
+        args: &[&[f64]],
+        out: &mut [f64],
+        scratch: &mut Vec<f64>,
+    ) {
+        match self.cache(ir, f) {
+            Some(cache) => eval_into(f, cache, args, out, scratch),
+            None => f.interpret_into(args, out, scratch),
+        }
     }
 }
 
@@ -232,7 +328,7 @@ unsafe extern "C" fn host_sincos(x: f64, out: *mut f64) {
 /// `m` and `out` point at 6 values each (stack slots of the compiled code).
 unsafe extern "C" fn host_pinv_sym3(m: *const f64, out: *mut f64) {
     let m = unsafe { std::slice::from_raw_parts(m, 6) };
-    let p = crate::linalg::pinv_sym3([m[0], m[1], m[2], m[3], m[4], m[5]]);
+    let p = kinegen_model::linalg::pinv_sym3([m[0], m[1], m[2], m[3], m[4], m[5]]);
     unsafe { std::slice::from_raw_parts_mut(out, 6) }.copy_from_slice(&p);
 }
 
@@ -493,7 +589,7 @@ impl Translator<'_, '_> {
                 Some(slot) => *slot,
                 None => self.decompose(m),
             };
-            let k = crate::linalg::packed_index(i as usize, j as usize);
+            let k = kinegen_model::linalg::packed_index(i as usize, j as usize);
             return self
                 .b
                 .ins()
@@ -604,7 +700,7 @@ impl Translator<'_, '_> {
         let det = b.ins().fadd(det, cc);
         let trace = b.ins().fadd(a, d);
         let trace = b.ins().fadd(trace, f);
-        let k = b.ins().f64const(crate::linalg::WELL_CONDITIONED);
+        let k = b.ins().f64const(kinegen_model::linalg::WELL_CONDITIONED);
         let bound = b.ins().fmul(k, trace);
         let bound = b.ins().fmul(bound, trace);
         let bound = b.ins().fmul(bound, trace);
@@ -679,7 +775,7 @@ fn powi(b: &mut FunctionBuilder, x: Value, n: i32) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ir::{ArgRole, ArgSpec, Kernel};
+    use kinegen_model::ir::{ArgRole, ArgSpec, Kernel};
 
     fn function(tape: Vec<Op>, outputs: Vec<u32>, args: usize) -> Function {
         const ROLES: [ArgRole; 4] = [
@@ -705,7 +801,6 @@ mod tests {
             tape,
             outputs,
             ops_tree: 0,
-            native: NativeCache::default(),
         }
     }
 
@@ -903,38 +998,61 @@ mod tests {
     /// edited clone (as the mutation sweep makes) gets its own code.
     #[test]
     fn an_edited_clone_never_runs_the_originals_code() {
-        let f = function(vec![Op::Arg(0, 0), Op::Sin(0)], vec![1], 1);
+        let f = Evaluator::new(function(vec![Op::Arg(0, 0), Op::Sin(0)], vec![1], 1));
         let hot =
-            |g: &Function, x: f64| (0..=HOT_CALLS).map(|_| g.eval(&[&[x]])[0]).last().unwrap();
+            |g: &Evaluator, x: f64| (0..=HOT_CALLS).map(|_| g.eval(&[&[x]])[0]).last().unwrap();
         assert_eq!(hot(&f, 0.3), libm::sin(0.3));
         let same = f.clone();
         assert_eq!(hot(&same, 0.3), libm::sin(0.3));
-        let edited = Function {
+        let edited = Evaluator::new(Function {
             tape: vec![Op::Arg(0, 0), Op::Cos(0)],
-            ..f.clone()
-        };
+            ..(*f).clone()
+        });
         assert_eq!(hot(&edited, 0.3), libm::cos(0.3));
-        assert_eq!(format!("{:?}", edited.native), "NativeCache(compiled)");
+        assert_eq!(format!("{:?}", edited.cache), "NativeCache(compiled)");
     }
 
     #[test]
     fn a_hot_function_is_compiled_and_a_clone_starts_cold() {
-        let f = function(vec![Op::Arg(0, 0), Op::Sin(0)], vec![1], 1);
+        let f = Evaluator::new(function(vec![Op::Arg(0, 0), Op::Sin(0)], vec![1], 1));
         for _ in 0..=HOT_CALLS {
             assert_eq!(f.eval(&[&[0.5]])[0], libm::sin(0.5));
         }
-        assert_eq!(format!("{:?}", f.native), "NativeCache(compiled)");
-        assert_eq!(
-            format!("{:?}", f.clone().native),
-            "NativeCache(interpreted)"
-        );
+        assert_eq!(format!("{:?}", f.cache), "NativeCache(compiled)");
+        assert_eq!(format!("{:?}", f.clone().cache), "NativeCache(interpreted)");
+    }
+
+    /// An IR's functions are found by reference: its own are compiled once
+    /// hot, a copy of one is interpreted (never another function's code).
+    #[test]
+    fn an_irs_functions_are_compiled_by_reference_and_copies_interpreted() {
+        let text = include_str!("../../generated/ir/unicycle_ekf.json");
+        let ir = ModelIr::from_json(text).unwrap();
+        let code = IrCode::new(&ir);
+        let twist = ir.twist();
+        let copy = twist.clone();
+        let (u, p) = ([0.5, 0.1], [0.0; 8]);
+        let args: [&[f64]; 2] = [&u, &p[..ir.runtime_params().len()]];
+        let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
+        for _ in 0..=HOT_CALLS {
+            code.eval_into(&ir, twist, &args, &mut a, &mut Vec::new());
+            code.eval_into(&ir, &copy, &args, &mut b, &mut Vec::new());
+        }
+        assert_eq!(a, b);
+        let i = ir
+            .functions()
+            .iter()
+            .position(|f| std::ptr::eq(f, twist))
+            .unwrap();
+        assert_eq!(format!("{:?}", code.caches[i]), "NativeCache(compiled)");
+        assert!(code.cache(&ir, &copy).is_none());
     }
 }
 
 #[cfg(test)]
 mod bundled {
     use super::*;
-    use crate::ir::ModelIr;
+    use kinegen_model::ir::ModelIr;
 
     /// Every tape of every bundled model, compiled, gives the interpreter's
     /// outputs to the last bit on inputs across several scales (including the
