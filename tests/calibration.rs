@@ -217,10 +217,10 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
         ),
         (
             Box::leak(
-                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,NaN,0,0\n0.1,2,2,0,0,0\n")
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,NaN,0,0,0\n0.1,2,2,0,0,0\n")
                     .into_boxed_str(),
             ),
-            ":3: column `gt_x`".into(),
+            ":3: column `enc_l`".into(),
             "not finite",
         ),
         (
@@ -2033,4 +2033,87 @@ fn mean(v: &[f64]) -> f64 {
 fn spread_of(v: &[f64]) -> f64 {
     let m = mean(v);
     (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+}
+
+/// Motion capture that loses the robot leaves empty (or `nan`) pose cells:
+/// those rows are cut out, each stretch between them is a run of its own
+/// (said in a warning that names the lines), and the calibration is the one
+/// the stretches give as separate logs. An encoder cell left empty is still
+/// an error naming its line and column.
+#[test]
+fn rows_without_motion_capture_are_cut_out_and_said() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "log.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--set",
+            "r_r=0.0505",
+            "--trajectory",
+            "random",
+            "--seed",
+            "11",
+        ],
+    );
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let header: Vec<String> = lines[0].split(',').map(String::from).collect();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let (gx, gy, gth) = (col("gt_x"), col("gt_y"), col("gt_theta"));
+    // data rows 200-259 (file lines 202-261) lost by the tracker; one more as `nan`
+    for (k, line) in lines.iter_mut().enumerate().skip(201).take(60) {
+        let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+        for c in [gx, gy, gth] {
+            cells[c] = if k == 230 {
+                "nan".into()
+            } else {
+                String::new()
+            };
+        }
+        *line = cells.join(",");
+    }
+    let dropped = tmp.path().join("dropped.csv");
+    std::fs::write(&dropped, lines.join("\n") + "\n").unwrap();
+    let (a, b) = (tmp.path().join("a.csv"), tmp.path().join("b.csv"));
+    std::fs::write(&a, lines[..201].join("\n") + "\n").unwrap();
+    std::fs::write(&b, [&lines[..1], &lines[261..]].concat().join("\n") + "\n").unwrap();
+    let fit = |args: &[&str]| {
+        let mut all = vec!["fit", "--spec", "spec/diff_drive.toml"];
+        all.extend(args);
+        kinegen_json(&all)
+    };
+    let whole = fit(&["--data", dropped.to_str().unwrap()]);
+    let said = whole["warnings"].to_string();
+    assert!(
+        said.contains("60 row(s) without a measurement") && said.contains("lines 202-261"),
+        "{said}"
+    );
+    let parts = fit(&["--data", a.to_str().unwrap(), "--data", b.to_str().unwrap()]);
+    let r_r = |d: &serde_json::Value| d["parameters"]["r_r"]["estimate"].as_f64().unwrap();
+    // the same rows, the same calibration (to round-off)
+    assert!(
+        (r_r(&whole) - r_r(&parts)).abs() < 1e-12,
+        "{} vs {}",
+        r_r(&whole),
+        r_r(&parts)
+    );
+    assert!((r_r(&whole) - 0.0505).abs() < 1e-4, "{}", r_r(&whole));
+    // an input left empty is no missing measurement
+    let mut broken = lines.clone();
+    let enc = col("enc_l");
+    let mut cells: Vec<String> = broken[100].split(',').map(String::from).collect();
+    cells[enc] = String::new();
+    broken[100] = cells.join(",");
+    let bad = tmp.path().join("bad.csv");
+    std::fs::write(&bad, broken.join("\n") + "\n").unwrap();
+    let msg = refused(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(msg.contains("bad.csv:101: column `enc_l`"), "{msg}");
 }

@@ -152,6 +152,25 @@ impl CsvHeader {
         })
     }
 
+    /// Cell `i` of a record as a finite number, or NaN where the cell is
+    /// empty or `nan` and `missing_ok` (a measurement not taken in that row:
+    /// motion capture that lost the robot).
+    pub fn number_or_missing(
+        &self,
+        line: usize,
+        rec: &csv::StringRecord,
+        i: usize,
+        missing_ok: bool,
+    ) -> Result<f64, LogError> {
+        if missing_ok {
+            let cell = self.text(line, rec, i)?.trim();
+            if cell.is_empty() || cell.eq_ignore_ascii_case("nan") {
+                return Ok(f64::NAN);
+            }
+        }
+        self.number(line, rec, i)
+    }
+
     /// Cell `i` of a record as a finite number.
     pub fn number(&self, line: usize, rec: &csv::StringRecord, i: usize) -> Result<f64, LogError> {
         let cell = self.text(line, rec, i)?;
@@ -231,8 +250,10 @@ impl Log {
         h.join(", ")
     }
 
-    /// Read a log, keeping only `wanted` columns (others are ignored, as the contract says).
-    pub fn read(path: &Path, wanted: &[&str]) -> Result<Log, LogError> {
+    /// Read a log, keeping only `wanted` columns (others are ignored, as the
+    /// contract says). Cells of the `measured` columns may be empty or `nan`
+    /// (read as NaN: [`crate::run::Run::split_at_gaps`] cuts those rows out).
+    pub fn read(path: &Path, wanted: &[&str], measured: &[&str]) -> Result<Log, LogError> {
         let (header, mut rdr) = read_csv(path, "log")?;
         let idx: Vec<(usize, String)> = header
             .names
@@ -247,7 +268,7 @@ impl Log {
         for (n, rec) in rdr.records().enumerate() {
             let (line, rec) = header.record(n, rec)?;
             for (i, h) in &idx {
-                let v = header.number(line, &rec, *i)?;
+                let v = header.number_or_missing(line, &rec, *i, measured.contains(&h.as_str()))?;
                 columns.get_mut(h).unwrap().push(v);
             }
             len += 1;

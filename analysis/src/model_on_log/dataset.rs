@@ -29,6 +29,23 @@ impl Between {
     }
 }
 
+/// The measured pose of every row: NaN in all three where any of them is
+/// missing (see [`Log::read`]), the heading unwrapped across the rows that
+/// have one; None when no row has one (a log whose pose columns are empty).
+fn measured_pose(x: &[f64], y: &[f64], th: &[f64]) -> Option<Vec<[f64; 3]>> {
+    let complete = |k: usize| !(x[k].is_nan() || y[k].is_nan() || th[k].is_nan());
+    let rows: Vec<usize> = (0..x.len()).filter(|&k| complete(k)).collect();
+    if rows.is_empty() {
+        return None;
+    }
+    let heading = unwrap(&rows.iter().map(|&k| th[k]).collect::<Vec<_>>());
+    let mut pose = vec![[f64::NAN; 3]; x.len()];
+    for (&k, h) in rows.iter().zip(heading) {
+        pose[k] = [x[k], y[k], h];
+    }
+    Some(pose)
+}
+
 /// Shortest time step a log may have, s.
 pub const MIN_STEP_S: f64 = 1e-6;
 
@@ -187,12 +204,16 @@ impl Run {
         });
         let [cx, cy, cth] = r.ir.pose_columns();
         let gt = if log.has(&cx) && log.has(&cy) && log.has(&cth) {
-            let (x, y, th) = (log.col(&cx)?, log.col(&cy)?, unwrap(log.col(&cth)?));
-            Some((0..log.len).map(|k| [x[k], y[k], th[k]]).collect())
+            measured_pose(log.col(&cx)?, log.col(&cy)?, log.col(&cth)?)
         } else {
             None
         };
-        let gyro = log.columns.get(&r.ir.gyro_column()).cloned();
+        // a gyro column with no reading at all is no gyro
+        let gyro = log
+            .columns
+            .get(&r.ir.gyro_column())
+            .filter(|g| g.iter().any(|v| !v.is_nan()))
+            .cloned();
         let name = log
             .path
             .file_stem()
@@ -209,7 +230,7 @@ impl Run {
             t: t.into(),
             dt: dt.into(),
             u,
-            gt,
+            gt: gt.map(Column::from),
             gyro: gyro.map(Column::from),
             landmarks: Vec::new(),
             rate_inputs,
@@ -243,7 +264,10 @@ impl Run {
         } else {
             let wanted = Run::wanted(r);
             let w: Vec<&str> = wanted.iter().map(String::as_str).collect();
-            (Log::read(path, &w)?, Vec::new())
+            let mut measured: Vec<String> = r.ir.pose_columns().to_vec();
+            measured.push(r.ir.gyro_column());
+            let m: Vec<&str> = measured.iter().map(String::as_str).collect();
+            (Log::read(path, &w, &m)?, Vec::new())
         };
         Ok((Run::from_log(&log, r)?, detections))
     }

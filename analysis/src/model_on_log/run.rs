@@ -209,7 +209,81 @@ impl Run {
     /// times stays one run). Each piece of 3 rows or more becomes a run of its
     /// own, started from its own measured pose, with the warning that says
     /// where and what the split costs.
-    pub fn split_at_gaps(self, max_gap: f64) -> (Vec<Run>, Option<String>) {
+    ///
+    /// Rows without a measurement (motion capture or gyro cells left empty:
+    /// the tracker lost the robot) are cut out first, the same way: each
+    /// stretch of complete rows is a run of its own.
+    pub fn split_at_gaps(self, max_gap: f64) -> (Vec<Run>, Vec<String>) {
+        let (pieces, mut warnings) = match self.split_at_missing() {
+            (pieces, Some(w)) => (pieces, vec![w]),
+            (pieces, None) => (pieces, Vec::new()),
+        };
+        let mut runs = Vec::new();
+        for piece in pieces {
+            let (split, warning) = piece.split_at_time_gaps(max_gap);
+            runs.extend(split);
+            warnings.extend(warning);
+        }
+        (runs, warnings)
+    }
+
+    /// Whether row `k` lacks a measurement the run has (a NaN pose or gyro).
+    fn missing(&self, k: usize) -> bool {
+        self.gt.as_ref().is_some_and(|g| g[k][0].is_nan())
+            || self.gyro.as_ref().is_some_and(|g| g[k].is_nan())
+    }
+
+    /// The stretches of rows with every measurement (see [`Run::split_at_gaps`]).
+    fn split_at_missing(self) -> (Vec<Run>, Option<String>) {
+        let n = self.t.len();
+        let missing: Vec<usize> = (0..n).filter(|&k| self.missing(k)).collect();
+        if missing.is_empty() {
+            return (vec![self], None);
+        }
+        let mut pieces = Vec::new();
+        let mut a = 0;
+        for k in (0..=n).filter(|&k| k == n || self.missing(k)) {
+            if k >= a + 3 {
+                let mut piece = self.slice(a, k);
+                let span = format!("{:.2}-{:.2} s", self.t[a], self.t[k - 1]);
+                piece.name = format!("{} ({span})", self.name);
+                piece.path = format!("{} ({span})", self.path);
+                pieces.push(piece);
+            }
+            a = k + 1;
+        }
+        // the rows without a measurement, as line ranges (the header is line 1)
+        let mut stretches: Vec<(usize, usize)> = Vec::new();
+        for &k in &missing {
+            match stretches.last_mut() {
+                Some((_, b)) if *b + 1 == k => *b = k,
+                _ => stretches.push((k, k)),
+            }
+        }
+        let lines: Vec<String> = stretches
+            .iter()
+            .take(5)
+            .map(|&(a, b)| {
+                if a == b {
+                    format!("line {}", a + 2)
+                } else {
+                    format!("lines {}-{}", a + 2, b + 2)
+                }
+            })
+            .collect();
+        let warning = format!(
+            "{}: {} row(s) without a measurement (empty or nan in the pose or gyro columns: {}{}): the rows between are used as {} run(s), each started from its own measured pose (stretches under 3 rows dropped); nothing is compared where nothing was measured",
+            self.path,
+            missing.len(),
+            lines.join(", "),
+            if stretches.len() > 5 { ", ..." } else { "" },
+            pieces.len()
+        );
+        (pieces, Some(warning))
+    }
+
+    /// [`Run::split_at_gaps`] for the time between rows only.
+    fn split_at_time_gaps(self, max_gap: f64) -> (Vec<Run>, Option<String>) {
         let gaps: Vec<usize> = (0..self.dt.len())
             .filter(|&k| self.dt[k] > max_gap)
             .collect();
