@@ -227,8 +227,9 @@ impl Run {
         (runs, warnings)
     }
 
-    /// Whether row `k` lacks a measurement the run has (a NaN pose or gyro).
-    fn missing(&self, k: usize) -> bool {
+    /// Whether row `k` lacks a measurement the run has (a NaN pose or gyro:
+    /// an empty cell, see [`Run::split_at_gaps`]).
+    pub fn missing(&self, k: usize) -> bool {
         self.gt.as_ref().is_some_and(|g| g[k][0].is_nan())
             || self.gyro.as_ref().is_some_and(|g| g[k].is_nan())
     }

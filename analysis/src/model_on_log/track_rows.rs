@@ -247,6 +247,14 @@ impl<'s> Cursor<'s> {
 /// infinite, so commands refuse instead.
 pub fn first_non_finite(track: &dyn TrackRows, run: &Run) -> Option<(usize, String)> {
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    // a row without a measurement (an empty cell) is cut out by
+    // `Run::split_at_gaps`; a run read without that has no figures there
+    if let Some(k) = (0..run.t.len()).find(|&k| run.missing(k)) {
+        return Some((
+            k,
+            "no measurement in this row (an empty or nan pose or gyro cell): cut such rows out first (Run::split_at_gaps)".into(),
+        ));
+    }
     // a logged pose so large its square overflows is no position at all
     // (and the start pose, estimated from the first rows, inherits it)
     if let Some(g) = &run.gt {
