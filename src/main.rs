@@ -8,9 +8,11 @@ mod analysis_cmd;
 mod batch_cmd;
 mod bench_diagnose_cmd;
 mod bench_real_cmd;
+mod compare_cmd;
 mod diagnose_cmd;
 mod effects_cmd;
 mod export;
+mod fit_cmd;
 mod generate_cmd;
 mod inverse_cmd;
 mod ir_source;
@@ -115,7 +117,7 @@ enum Command {
         #[command(flatten)]
         common: analysis_cmd::Common,
         #[command(flatten)]
-        options: analysis_cmd::FitArgs,
+        options: fit_cmd::FitArgs,
     },
     /// Calibrate, then test each applicable effect of the catalogue (built in, plus --effects DIR),
     /// rank them, say which effect is missing (or that none is, or that unexplained
@@ -173,14 +175,14 @@ fn main() -> ExitCode {
             check,
         } => generate_cmd::run(&spec_dir, &out, check),
         Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
-        Command::Compare(c) => analysis_cmd::compare(c),
+        Command::Compare(c) => compare_cmd::compare(c),
         Command::Localize { common, options } => localize_cmd::run(common, &options),
         Command::Inverse(a) => inverse_cmd::run(&a),
         Command::Navigate(a) => navigate_cmd::run(&a),
         Command::BenchDiagnose(a) => bench_diagnose_cmd::run(&a),
         Command::BenchReal(a) => bench_real_cmd::run(&a),
         Command::Diagnose(c) => diagnose_cmd::run(c),
-        Command::Fit { common, options } => analysis_cmd::run_fit(common, &options),
+        Command::Fit { common, options } => fit_cmd::run_fit(common, &options),
         Command::Simulate(a) => effects_cmd::run_simulate(a),
         Command::AddEffect {
             spec,

@@ -1,0 +1,123 @@
+//! `kinegen compare`: the model with its current parameters against the
+//! logs (kinegen_analysis::comparison), rendered as text, JSON and a report.
+use crate::analysis_cmd::{bad, fmt_errors, fmt_landmarks, prepare, say_warnings, Common};
+use crate::output::Out;
+use kinegen_analysis::comparison;
+use kinegen_analysis::evaluation::metric_name;
+use kinegen_analysis::run::Run;
+use serde_json::{json, Value};
+use std::process::ExitCode;
+
+pub fn compare(c: Common) -> ExitCode {
+    let out = Out::new(c.json.as_deref());
+    let mut prep = match prepare(&c) {
+        Ok(p) => p,
+        Err(e) => return bad(e),
+    };
+    // moved, not cloned: a long log's runs are most of the memory
+    let mut all: Vec<Run> = std::mem::take(&mut prep.runs);
+    all.append(&mut prep.holdout);
+    let r = &prep.runner;
+    let cmp = comparison::compare(r, all);
+    let secs: f64 = cmp.runs.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
+    let which = if c.set.is_empty() {
+        "nominal parameters".to_string()
+    } else {
+        format!("nominal parameters with --set {}", c.set.join(" --set "))
+    };
+    out.say(&format!(
+        "{} against {} run(s), {:.1} s of data, {which}",
+        r.ir.name,
+        cmp.runs.len(),
+        secs
+    ));
+    say_warnings(&out, &prep.warnings);
+    if cmp.has_ground_truth() {
+        out.say(&format!("  {}", fmt_errors(&cmp.errors)));
+    } else {
+        out.say(&format!(
+            "  no ground truth ({}) in the logs: no trajectory error",
+            r.ir.pose_columns().join(", ")
+        ));
+    }
+    if let Some(s) = &cmp.landmarks {
+        out.say(&format!("  {}", fmt_landmarks(s)));
+    }
+    say_where_it_fails(&out, &cmp.regimes, &cmp.segments);
+    if let Some((n, g)) = &cmp.gyrodometry {
+        out.say(&format!(
+            "gyrodometry (heading from the gyro, seed 000 eq. 13-18), {} run(s):\n  position RMSE {:.4} m, heading RMSE {:.4} rad; final error {:.4} m / {:.4} rad",
+            n,
+            g.rmse,
+            g.heading_rmse_rad,
+            g.final_position_error_m,
+            g.final_heading_error_rad
+        ));
+    }
+    let per_run: Vec<Value> = cmp
+        .runs
+        .iter()
+        .zip(&cmp.per_run)
+        .map(|(run, e)| json!({"run": run.name, "errors": e}))
+        .collect();
+    let doc = json!({
+        "model": r.ir.name, "metric": metric_name(&cmp.runs),
+        "errors": cmp.errors, "rmse": cmp.rmse(),
+        "landmarks": cmp.landmarks, "regimes": cmp.regimes, "worst_segments": cmp.segments, "runs": per_run,
+        "gyrodometry": cmp.gyrodometry.as_ref().map(|(_, g)| json!({"rmse": g.rmse, "errors": g})),
+        "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
+        "warnings": prep.warnings,
+    });
+    if let Some(dir) = &c.report {
+        if let Err(e) = crate::report::compare_report(
+            dir,
+            r,
+            &cmp.runs,
+            &cmp.tracks,
+            &cmp.gyro_tracks,
+            &cmp.innovations,
+            &doc,
+        ) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
+
+/// Where the error grows: each driving regime's share of the error growth,
+/// and the worst 1 s segments.
+fn say_where_it_fails(
+    out: &Out,
+    regimes: &[kinegen_analysis::metrics::RegimeShare],
+    segments: &[kinegen_analysis::metrics::Segment],
+) {
+    if !regimes.is_empty() {
+        out.say("where the error grows (share of position / heading error growth):");
+        for g in regimes {
+            out.say(&format!(
+                "  {:<14} {:>7.1} s {:>7.2} m   {:>5.1}% / {:>5.1}%",
+                g.regime,
+                g.time_s,
+                g.distance_m,
+                100.0 * g.position_share,
+                100.0 * g.heading_share
+            ));
+        }
+        out.say("worst 1 s segments:");
+        for s in segments {
+            out.say(&format!(
+                "  {} {:.1}-{:.1} s ({}): position error +{:.4} m, heading error {:+.4} rad",
+                s.run,
+                s.t_start,
+                s.t_end,
+                s.regime,
+                s.position_error_growth_m,
+                s.heading_error_growth_rad
+            ));
+        }
+    }
+}

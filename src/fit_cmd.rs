@@ -1,0 +1,533 @@
+//! `kinegen fit`: one calibration (kinegen_analysis::fit_job::calibrate, the
+//! default) or several methods compared (fit_job::compare_methods), rendered
+//! as text, JSON, a report and an export.
+use crate::analysis_cmd::{
+    bad, fmt_errors, fmt_landmarks, non_negative, positive, prepare, quiet, say_warnings, Common,
+};
+use crate::output::Out;
+use clap::Args;
+use kinegen_analysis::evaluation::metric_name;
+use kinegen_analysis::fit::{FitOptions, FitResult};
+use kinegen_analysis::fit_job::{self, Calibrated, Growth, MethodRow, MethodsJob};
+use kinegen_analysis::load::Loaded;
+use kinegen_analysis::methods::Settings;
+use kinegen_analysis::metrics::Errors;
+use kinegen_analysis::model::Runner;
+use kinegen_analysis::run::Run;
+use kinegen_analysis::track_rows::Recipe;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// JSON for a finished fit (CONTRACT section 4).
+pub fn fit_json(
+    r: &Runner,
+    res: &FitResult,
+    before: &Errors,
+    after: &Errors,
+    metric: &str,
+) -> Value {
+    let params: serde_json::Map<String, Value> = res
+        .free
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| {
+            (
+                r.names[i].clone(),
+                json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k],
+                       "tolerance": r.ir.runtime_params()[i].tolerance}),
+            )
+        })
+        .collect();
+    let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
+    let corr: Vec<Vec<f64>> = (0..names.len())
+        .map(|a| (0..names.len()).map(|b| res.corr[(a, b)]).collect())
+        .collect();
+    json!({
+        "model": r.ir.name, "metric": metric,
+        "before": {"rmse": before.rmse, "errors": before}, "after": {"rmse": after.rmse, "errors": after},
+        "parameters": params, "correlation": {"parameters": names, "matrix": corr},
+        "warnings": res.warnings, "iterations": res.iterations, "residuals": res.n_residuals,
+    })
+}
+
+/// Every run's own figures, named by the path the user gave (CONTRACT section 4
+/// `runs`): after calibration at the top, before it under `before`, and for
+/// fitted runs the start pose the fit used (measured start plus its refinement).
+/// Each run's JSON: its errors before and after, whether it was held out,
+/// and the start pose its dead reckoning used (a fitted run's with its
+/// refined start heading, a held-out run's as measured).
+fn per_run(
+    runs: &[Run],
+    before: &[Errors],
+    after: &[Errors],
+    starts: &[[f64; 3]],
+    holdout: bool,
+) -> Vec<Value> {
+    runs.iter()
+        .enumerate()
+        .map(|(i, run)| {
+            let (b, a) = (&before[i], &after[i]);
+            json!({
+                "path": run.path, "holdout": holdout,
+                "rmse": a.rmse, "final_error": a.final_position_error_m,
+                "final_heading_error": a.final_heading_error_rad, "errors": a,
+                "before": {"rmse": b.rmse, "final_error": b.final_position_error_m},
+                "start_pose": starts.get(i),
+            })
+        })
+        .collect()
+}
+
+/// The options of `fit` besides the common ones.
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// Calibration method (the registry in kinegen_analysis::methods), or all
+    /// (every applicable method, compared).
+    #[arg(long, default_value = "lm", value_parser = method_names())]
+    pub method: String,
+    /// Square side (m) of the UMBMark runs.
+    #[arg(long, default_value_t = Settings::SIDE, value_parser = positive)]
+    pub side: f64,
+    /// EKF measurement-noise inflation mu (seed 000 eq. 26), rad/s.
+    #[arg(long, default_value_t = Settings::MU, value_parser = non_negative)]
+    pub mu: f64,
+    /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
+    #[arg(long)]
+    pub truth: Vec<String>,
+    /// Loss of the Levenberg-Marquardt fit: l2 (least squares) or huber
+    /// (residuals beyond 3 sigma count linearly: robust to outliers).
+    #[arg(long, default_value = "l2", value_parser = ["l2", "huber"])]
+    pub loss: String,
+    /// Residuals the Levenberg-Marquardt fit uses (repeatable): pose (ground
+    /// truth), gyro, landmarks. Default: every kind the logs have.
+    #[arg(long, value_parser = ["pose", "gyro", "landmarks"])]
+    pub residuals: Vec<String>,
+    /// What the Levenberg-Marquardt fit compares: track (each whole run
+    /// dead-reckoned from its start, as the odometry will run; found through
+    /// 60 s re-anchored segments, kept where it does not trade their
+    /// short-term accuracy; standard deviations that account for the track's
+    /// drift), segments (the re-anchored 60 s segments only, each start
+    /// heading refined) or increments (pose increments over 5 s windows,
+    /// each dead-reckoned from its measured start, with a sandwich
+    /// covariance; needs ground truth in every run). Over 50 simulated logs
+    /// each reports standard deviations within 30% of the estimates' spread.
+    #[arg(long, default_value = "track", value_parser = kinegen_analysis::fit::Likelihood::NAMES)]
+    pub likelihood: String,
+    /// Write the calibrated values for the robot's configuration: `--export
+    /// ros2-yaml PATH` (ROS 2 diff_drive_controller parameters for a differential
+    /// drive, every calibrated parameter with its standard deviation otherwise).
+    #[arg(long, num_args = 2, value_names = ["FORMAT", "PATH"])]
+    pub export: Vec<String>,
+    /// Hidden tanh units of the neural gyrodometry network (--method neural or
+    /// all); repeatable: one network per size (seed 000 compares 9 and 50).
+    #[arg(long, default_values_t = [50], value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub hidden: Vec<u32>,
+}
+
+/// `--method` values with their one-line descriptions, from the method registry.
+fn method_names() -> clap::builder::PossibleValuesParser {
+    use clap::builder::PossibleValue;
+    use kinegen_analysis::methods::METHODS;
+    clap::builder::PossibleValuesParser::new(
+        METHODS
+            .iter()
+            .map(|m| PossibleValue::new(m.name()).help(m.about()))
+            .chain([PossibleValue::new("all").help("every applicable method, compared")]),
+    )
+}
+
+pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
+    let export = match export_path(&a.export) {
+        Ok(e) => e,
+        Err(e) => return bad(e),
+    };
+    if export.is_some() && a.method != "lm" {
+        return bad("--export writes the Levenberg-Marquardt calibration: use it with --method lm");
+    }
+    let out = Out::new(c.json.as_deref());
+    let fo = fit_options(a);
+    let prep = match prepare(&c) {
+        Ok(p) => p,
+        Err(e) => return bad(e),
+    };
+    let truth = match truth_values(&prep.runner, &a.truth) {
+        Ok(t) => t,
+        Err(e) => return bad(e),
+    };
+    if a.method != "lm" {
+        say_warnings(&out, &prep.warnings);
+        let job = MethodsJob {
+            method: &a.method,
+            side: a.side,
+            mu: a.mu,
+            fit: &fo,
+            hidden: &a.hidden,
+            truth: &truth,
+        };
+        return run_methods(&c, &out, &prep, &job);
+    }
+    run_lm(&c, &out, &prep, a, &fo, export.as_deref())
+}
+
+/// `--export FORMAT PATH`: the path to write (checked writable), if any.
+fn export_path(export: &[String]) -> Result<Option<PathBuf>, String> {
+    match export {
+        [] => Ok(None),
+        [f, p] if f == "ros2-yaml" => {
+            let p = PathBuf::from(p);
+            crate::output::check_writable("--export ros2-yaml", &p)?;
+            Ok(Some(p))
+        }
+        [f, _] => Err(format!("--export {f}: unknown format (known: ros2-yaml)")),
+        _ => Err("--export takes a format and a path: --export ros2-yaml PATH".into()),
+    }
+}
+
+/// Whether `fit` uses residuals of `kind` (pose, gyro, landmarks): every kind
+/// when `--residuals` names none.
+fn uses_residuals(a: &FitArgs, kind: &str) -> bool {
+    a.residuals.is_empty() || a.residuals.iter().any(|r| r == kind)
+}
+
+/// The calibration options `fit`'s arguments ask for.
+fn fit_options(a: &FitArgs) -> FitOptions {
+    // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
+    let fo = FitOptions {
+        huber: (a.loss == "huber").then_some(3.0),
+        use_pose: uses_residuals(a, "pose"),
+        use_gyro: uses_residuals(a, "gyro"),
+        use_landmarks: uses_residuals(a, "landmarks"),
+        multi_start: true,
+        ..FitOptions::default()
+    };
+    kinegen_analysis::fit::Likelihood::parse(&a.likelihood)
+        .expect("clap checked the name")
+        .apply(fo)
+}
+
+/// `--truth NAME=VALUE` pairs, each naming a parameter of the spec.
+fn truth_values(r: &Runner, truth: &[String]) -> Result<Vec<(String, f64)>, String> {
+    let truth =
+        kinegen_analysis::model::parse_pairs("--truth", truth).map_err(|e| e.to_string())?;
+    if let Some((n, _)) = truth.iter().find(|(n, _)| r.param_index(n).is_none()) {
+        return Err(format!(
+            "--truth {n}: the spec has no parameter `{n}` (it has: {})",
+            r.names.join(", ")
+        ));
+    }
+    Ok(truth)
+}
+
+/// `fit --method M` (or all): each method's calibration, compared.
+fn run_methods(c: &Common, out: &Out, prep: &Loaded, job: &MethodsJob) -> ExitCode {
+    let r = &prep.runner;
+    let count = fit_job::method_runs(job).map_or(0, |j| j.len());
+    let bar = crate::progress::Progress::bar(count as u64, "calibration methods", quiet(c));
+    let started = std::cell::Cell::new(false);
+    let progress = |name: &str| {
+        if started.replace(true) {
+            bar.inc();
+        }
+        bar.message(name);
+    };
+    let compared = match fit_job::compare_methods(prep, job, &progress) {
+        Ok(x) => x,
+        Err(e) => return bad(e),
+    };
+    drop(bar);
+    for (name, e) in &compared.not_applicable {
+        out.say(&format!("{name}: not applicable here: {e}"));
+    }
+    out.say(&format!(
+        "{}: {} calibration method(s) on {} run(s); position RMSE with nominal parameters {:.4} m",
+        r.ir.name,
+        compared.rows.len(),
+        prep.runs.len(),
+        compared.before.errors.rmse
+    ));
+    let mut methods_json = serde_json::Map::new();
+    for m in &compared.rows {
+        say_method(out, r, m);
+        methods_json.insert(m.name.clone(), method_json(r, m));
+    }
+    if let Some((d, name)) = &compared.closest {
+        out.say(&format!("closest to the true parameters: {name} ({:.1}% of the nominal parameters' distance to the truth left)", 100.0 * d));
+    }
+    // the top-level result is the first method's
+    let first = compared
+        .rows
+        .first()
+        .map(|m| &methods_json[m.name.as_str()]);
+    let doc = json!({
+        "model": r.ir.name, "metric": metric_name(&prep.runs),
+        "before": {"rmse": compared.before.errors.rmse},
+        "holdout_before": compared.holdout_before.map(|h| json!({"rmse": h})),
+        "after": {"rmse": first.map(|m| m["after"]["rmse"].clone())},
+        "parameters": first.map(|m| m["parameters"].clone()),
+        "methods": methods_json,
+        "closest_to_truth": compared.closest.as_ref().map(|b| b.1.clone()),
+        "truth": job.truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
+        "warnings": prep.warnings,
+    });
+    if let Some(dir) = &c.report {
+        let per_method: Vec<(String, &[Recipe])> = compared
+            .rows
+            .iter()
+            .map(|m| (m.name.clone(), m.after.tracks.as_slice()))
+            .collect();
+        if let Err(e) = crate::report::methods_report(
+            dir,
+            r,
+            &prep.runs,
+            &compared.before.tracks,
+            &per_method,
+            &doc,
+        ) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => bad(e),
+    }
+}
+
+/// One method's lines: its error (held-out too), its distance to the truth,
+/// its note and its parameters.
+fn say_method(out: &Out, r: &Runner, m: &MethodRow) {
+    out.say(&format!(
+        "  {:<8} position RMSE {:.4} m{}{}  ({})",
+        m.name,
+        m.after.errors.rmse,
+        m.holdout
+            .as_ref()
+            .map(|h| format!(", held-out {:.4} m", h.rmse))
+            .unwrap_or_default(),
+        m.distance_to_truth
+            .map(|d| format!(
+                ", {:.1}% of the nominal's distance to truth left",
+                100.0 * d
+            ))
+            .unwrap_or_default(),
+        m.note
+    ));
+    for &i in &r.free {
+        out.say(&format!(
+            "      {:<14} {:.6}",
+            r.names[i], m.calibration.p[i]
+        ));
+    }
+}
+
+/// One method's JSON entry.
+fn method_json(r: &Runner, m: &MethodRow) -> Value {
+    let c = &m.calibration;
+    let params: serde_json::Map<String, Value> = r.free.iter().enumerate().map(|(k, &i)| (r.names[i].clone(), json!({"nominal": r.p[i], "estimate": c.p[i], "std": c.std.get(k).copied().filter(|v| v.is_finite())}))).collect();
+    json!({"after": {"rmse": m.after.errors.rmse}, "holdout": m.holdout.as_ref().map(|h| json!({"rmse": h.rmse})), "parameters": params, "note": m.note, "distance_to_truth": m.distance_to_truth})
+}
+
+/// `fit` (Levenberg-Marquardt, the default): the calibration, judged, with
+/// its per-run table, held-out runs, leave-one-out, report and export.
+fn run_lm(
+    c: &Common,
+    out: &Out,
+    prep: &Loaded,
+    a: &FitArgs,
+    fo: &FitOptions,
+    export: Option<&Path>,
+) -> ExitCode {
+    let r = &prep.runner;
+    let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(c));
+    let cal = match fit_job::calibrate(prep, fo) {
+        Ok(x) => x,
+        Err(e) => return bad(e),
+    };
+    drop(spin);
+    let res = &cal.fit;
+    say_calibration(out, prep, res, &cal.before.errors, &cal.after.errors);
+    say_judgement(out, &cal);
+    let (before, after) = (&cal.before.errors, &cal.after.errors);
+    let mut doc = fit_json(r, res, before, after, metric_name(&prep.runs));
+    doc["unusable"] = json!(cal.unusable);
+    doc["loss"] = json!(a.loss);
+    doc["residual_kinds"] = json!(["pose", "gyro", "landmarks"]
+        .iter()
+        .filter(|k| uses_residuals(a, k))
+        .collect::<Vec<_>>());
+    if let (Some(lb), Some(la)) = (&cal.before.landmarks, &cal.after.landmarks) {
+        out.say(&format!(
+            "  before: {}\n  after:  {}",
+            fmt_landmarks(lb),
+            fmt_landmarks(la)
+        ));
+        doc["landmarks"] = json!({"before": lb, "after": la});
+    }
+    let runs = fit_runs(out, prep, &cal, &mut doc);
+    doc["runs"] = json!(runs);
+    if let Some(w) = &cal.leave_one_out_warning {
+        out.say(&format!("warning: {w}"));
+        if let Some(list) = doc["warnings"].as_array_mut() {
+            list.push(json!(w));
+        }
+    }
+    if !cal.leave_one_out.is_empty() {
+        doc["leave_one_out"] = json!(cal.leave_one_out);
+    }
+    if let Some(dir) = &c.report {
+        if let Err(e) = crate::report::fit_report(
+            dir,
+            r,
+            &prep.runs,
+            &cal.before.tracks,
+            &cal.after.tracks,
+            &doc,
+        ) {
+            return bad(e);
+        }
+        out.say(&format!("report: {}", dir.join("index.html").display()));
+    }
+    if let Some(path) = export {
+        if let Err(e) = export_fit(out, &c.spec, r, res, path, &cal.unusable) {
+            return bad(e);
+        }
+    }
+    match out.json(c.json.as_deref(), &doc) {
+        Ok(()) if cal.unusable.is_empty() => ExitCode::SUCCESS,
+        Ok(()) => ExitCode::from(1),
+        Err(e) => bad(e),
+    }
+}
+
+/// The calibration's headline: what was fitted, the error before and after,
+/// and each parameter's estimate.
+fn say_calibration(out: &Out, prep: &Loaded, res: &FitResult, before: &Errors, after: &Errors) {
+    let r = &prep.runner;
+    out.say(&format!(
+        "{}: calibrated {} parameter(s) on {} run(s) ({} residuals, {} LM iterations)",
+        r.ir.name,
+        res.free.len(),
+        prep.runs.len(),
+        res.n_residuals,
+        res.iterations
+    ));
+    if prep.runs.iter().any(|x| x.gt.is_some()) {
+        out.say(&format!("  before: {}", fmt_errors(before)));
+        out.say(&format!("  after:  {}", fmt_errors(after)));
+    } else {
+        out.say("  no ground truth in the logs: calibrated on landmark (and gyro) residuals; the error is the landmark range innovation");
+    }
+    out.say(&format!(
+        "  {:<16} {:>12} {:>12} {:>12}",
+        "parameter", "nominal", "estimate", "std"
+    ));
+    for (k, &i) in res.free.iter().enumerate() {
+        out.say(&format!(
+            "  {:<16} {:>12.6} {:>12.6} {:>12}",
+            r.names[i],
+            r.p[i],
+            res.p[i],
+            crate::output::fmt_std(Some(res.std[k]))
+        ));
+    }
+}
+
+/// The judgement of the calibration: its warnings, what the whole-run
+/// error's growth means, and why it cannot be used, if it cannot (said
+/// plainly, never shown as a success).
+fn say_judgement(out: &Out, cal: &Calibrated) {
+    for w in &cal.fit.warnings[..cal.warnings_before_growth] {
+        out.say(&format!("warning: {w}"));
+    }
+    match &cal.growth {
+        Some(Growth::Note(n)) => out.say(&format!("note: {n}")),
+        Some(Growth::Warning(w)) => out.say(&format!("warning: {w}")),
+        None => {}
+    }
+    for u in &cal.unusable {
+        out.say(&format!("FIT UNUSABLE: {u}"));
+    }
+    if !cal.unusable.is_empty() {
+        out.say("  no parameter values make this model follow these logs: it is likely missing a physical effect (`kinegen diagnose` with the same --spec and --data names it)");
+    }
+}
+
+/// Each run's errors before and after (the fitted ones, then the held-out
+/// ones, which also go in `doc["holdout"]` with a warning where the
+/// calibration does worse on them), said as a table when there are several.
+fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<Value> {
+    let mut runs = per_run(
+        &prep.runs,
+        &cal.before.per_run,
+        &cal.after.per_run,
+        &cal.starts,
+        false,
+    );
+    if let Some(h) = &cal.holdout {
+        let (hb, ha) = (&h.before, &h.after);
+        out.say(&format!(
+            "  holdout before: {}\n  holdout after:  {}",
+            fmt_errors(&hb.errors),
+            fmt_errors(&ha.errors)
+        ));
+        runs.extend(per_run(
+            &prep.holdout,
+            &hb.per_run,
+            &ha.per_run,
+            &h.starts,
+            true,
+        ));
+        if let Some(w) = &h.worse {
+            out.say(&format!("warning: {w}"));
+            if let Some(list) = doc["warnings"].as_array_mut() {
+                list.push(json!(w));
+            }
+        }
+        doc["holdout"] = json!({"before": {"rmse": hb.errors.rmse, "errors": hb.errors}, "after": {"rmse": ha.errors.rmse, "errors": ha.errors}});
+    }
+    if runs.len() > 1 {
+        out.say(&format!(
+            "  {:<40} {:>8} {:>10} {:>10} {:>12}",
+            "run", "role", "RMSE m", "final m", "before m"
+        ));
+        for x in &runs {
+            out.say(&format!(
+                "  {:<40} {:>8} {:>10.4} {:>10.4} {:>12.4}",
+                x["path"].as_str().unwrap_or(""),
+                if x["holdout"] == json!(true) {
+                    "held out"
+                } else {
+                    "fitted"
+                },
+                x["rmse"].as_f64().unwrap_or(f64::NAN),
+                x["final_error"].as_f64().unwrap_or(f64::NAN),
+                x["before"]["rmse"].as_f64().unwrap_or(f64::NAN),
+            ));
+        }
+    }
+    runs
+}
+
+/// `--export ros2-yaml PATH`: the calibration written for the robot, unless
+/// it is unusable (then said, not written).
+fn export_fit(
+    out: &Out,
+    spec: &Path,
+    r: &Runner,
+    res: &FitResult,
+    path: &Path,
+    unusable: &[String],
+) -> Result<(), String> {
+    if !unusable.is_empty() {
+        out.say(&format!(
+            "not exported to {}: the fit is unusable",
+            path.display()
+        ));
+        return Ok(());
+    }
+    crate::export::ros2_yaml(spec, r, res)
+        .and_then(|y| kinegen_model::files::write_atomic(path, &y).map_err(|e| e.to_string()))?;
+    out.say(&format!("exported: {}", path.display()));
+    Ok(())
+}
