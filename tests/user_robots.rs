@@ -240,6 +240,36 @@ fn car_like_rover_whose_steering_angle_kinegen_solves() {
     );
 }
 
+/// A car whose two rear encoders both measure its speed: no inverse
+/// kinematics can be derived (it was a derivation error that stopped every
+/// command), so everything runs but `inverse`, which says why.
+#[test]
+fn car_with_two_rear_encoders_and_no_derivable_inverse() {
+    user_robot(
+        "car2enc",
+        "steering_offset=0.03",
+        &["r=0.061"],
+        "steering_offset",
+        "steer_offset_delta",
+        0.03,
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("path.csv");
+    std::fs::write(&path, "t,x,y,theta\n0,0,0,0\n1,0.5,0,0\n2,1,0.1,0.2\n").unwrap();
+    let spec = root().join("tests/user_specs/car2enc.toml");
+    let said = refused(&[
+        "inverse",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--path",
+        path.to_str().unwrap(),
+    ]);
+    assert!(
+        said.contains("linearly dependent in the rates of wl, wr") && said.contains("[inverse]"),
+        "{said}"
+    );
+}
+
 #[test]
 fn differential_drive_with_a_tracker_far_ahead() {
     user_robot(

@@ -927,6 +927,11 @@ pub enum NoInverse {
         inputs: Vec<String>,
         needed: usize,
     },
+    #[error("cannot derive inverse kinematics: the twist is linearly dependent in the rates of {} (they drive fewer independent rows than there are of them, as two encoders that both measure one speed), and the robot steers by what it reads; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)", inputs.join(", "))]
+    Singular {
+        /// The inputs the inverse would give.
+        inputs: Vec<String>,
+    },
 }
 
 /// An inverse found: the inputs it gives (expressions of the twist), their
@@ -1146,9 +1151,19 @@ impl<'a> InverseCx<'a> {
         let k = rate_syms.len();
         let (chosen, any_square) = self.invertible_rows(&candidates);
         let Some((rows, inv)) = chosen else {
+            if any_square && !self.cfg_names.is_empty() {
+                // a robot that steers by a read angle and has more wheel
+                // rates than the rows they drive (a car's two rear encoders
+                // that both measure its speed): a real robot, whose inverse
+                // the derivation cannot choose
+                return Ok(Err(NoInverse::Singular {
+                    inputs: self.rates.iter().map(|i| i.name.clone()).collect(),
+                }));
+            }
             if any_square {
-                // linear but singular everywhere: almost always a slip in the
-                // spec (a sum where a difference was meant), so an error
+                // linear but singular everywhere with nothing else to steer
+                // by: almost always a slip in the spec (a sum where a
+                // difference was meant), so an error
                 return Err(err_kin(model, "inverse kinematics is singular everywhere: the twist rows are linearly dependent in the input rates (det = 0), as with two encoders that both measure one speed; declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)"));
             }
             let rates = &self.rates;
