@@ -3,8 +3,9 @@
 //! Each derived function is a straight-line tape of [`Op`]s in SSA form (every op
 //! writes a new slot and reads earlier ones), already simplified and with common
 //! subexpressions shared. The same tape is emitted as Rust by kinegen-codegen and
-//! interpreted here by [`Function::eval`], so a freshly edited spec can be fitted
-//! without compiling anything.
+//! interpreted here by [`Function::interpret`] (and compiled, once hot, by
+//! kinegen-jit, which keeps the machine code beside the IR), so a freshly
+//! edited spec can be fitted without compiling anything.
 use crate::decl::{
     Input, Noise, ObservationDecl, ObservationRole, Param, DEFAULT_GYRO_COLUMN,
     DEFAULT_POSE_COLUMNS,
