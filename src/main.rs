@@ -73,7 +73,10 @@ enum Command {
     Compare(analysis_cmd::Common),
     /// EKF localisation with mapped landmarks (seed 001 eq. 1-9) on the model's
     /// step and observation Jacobians: the track with its covariance, gating of
-    /// outliers, NIS and NEES against their chi-square bounds.
+    /// outliers, NIS and NEES against their chi-square bounds. The noise is
+    /// estimated from the sightings unless given, and so is the spec's input
+    /// delay when it declares one (`add-effect --effect input_delay`; `--set`
+    /// fixes it).
     ///
     /// Example: kinegen localize --spec spec/unicycle_ekf.toml --data run.csv --observations obs.csv --landmarks map.csv --track track.csv
     Localize {
