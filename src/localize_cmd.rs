@@ -60,40 +60,9 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         Err(e) => return bad(e),
     };
     let r = &prep.runner;
-    let noise_sigma = match kinegen_analysis::model::parse_pairs("--noise", &a.noise) {
-        Ok(v) => v,
+    let o = match ekf_options(&c, a, r) {
+        Ok(o) => o,
         Err(e) => return bad(e),
-    };
-    for (n, s) in &noise_sigma {
-        if !r.ir.noise.iter().any(|x| &x.name == n) {
-            let known: Vec<&str> = r.ir.noise.iter().map(|x| x.name.as_str()).collect();
-            return bad(format!(
-                "--noise {n}: the spec has no [[noise]] `{n}` (it has: {})",
-                known.join(", ")
-            ));
-        }
-        if *s < 0.0 {
-            return bad(format!(
-                "--noise {n}={s}: a standard deviation is 0 or more"
-            ));
-        }
-    }
-    let o = EkfOptions {
-        gate: a.gate,
-        noise_sigma,
-        noise: if a.spec_noise {
-            NoiseSource::Spec
-        } else {
-            NoiseSource::Estimate
-        },
-        smooth: a.smooth,
-        // the spec's input delay is estimated with the noise unless --set fixes it
-        estimate_input_delay: r.input_delay.is_none_or(|i| {
-            !c.set
-                .iter()
-                .any(|s| s.split('=').next().map(str::trim) == Some(r.names[i].as_str()))
-        }),
-        ..EkfOptions::default()
     };
     warn_unseen_landmarks(&c, &prep);
     if prep.runs.iter().all(|r| r.landmarks.is_empty()) {
@@ -261,6 +230,49 @@ fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::sweep::SweepPoint
 }
 
 /// Mapped landmarks no log ever observes are probably a mapping mistake (an id
+/// The filter's options from the command line: `--noise` checked against
+/// the spec's `[[noise]]`, and the input delay estimated unless `--set`
+/// fixes it.
+fn ekf_options(
+    c: &Common,
+    a: &LocalizeArgs,
+    r: &kinegen_analysis::model::Runner,
+) -> Result<EkfOptions, String> {
+    let noise_sigma =
+        kinegen_analysis::model::parse_pairs("--noise", &a.noise).map_err(|e| e.to_string())?;
+    for (n, s) in &noise_sigma {
+        if !r.ir.noise.iter().any(|x| &x.name == n) {
+            let known: Vec<&str> = r.ir.noise.iter().map(|x| x.name.as_str()).collect();
+            return Err(format!(
+                "--noise {n}: the spec has no [[noise]] `{n}` (it has: {})",
+                known.join(", ")
+            ));
+        }
+        if *s < 0.0 {
+            return Err(format!(
+                "--noise {n}={s}: a standard deviation is 0 or more"
+            ));
+        }
+    }
+    Ok(EkfOptions {
+        gate: a.gate,
+        noise_sigma,
+        noise: if a.spec_noise {
+            NoiseSource::Spec
+        } else {
+            NoiseSource::Estimate
+        },
+        smooth: a.smooth,
+        // the spec's input delay is estimated with the noise unless --set fixes it
+        estimate_input_delay: r.input_delay.is_none_or(|i| {
+            !c.set
+                .iter()
+                .any(|s| s.split('=').next().map(str::trim) == Some(r.names[i].as_str()))
+        }),
+        ..EkfOptions::default()
+    })
+}
+
 /// spelled differently in the map and the observations).
 fn warn_unseen_landmarks(c: &Common, prep: &kinegen_analysis::load::Loaded) {
     let Some(m) = &c.landmarks else { return };
