@@ -1,13 +1,9 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
 //! (kinegen_analysis::localize), with its consistency checks.
 use crate::analysis_cmd::{bad, prepare, Common};
-use crate::localize_report::Summary;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::evaluation::evaluate;
-use kinegen_analysis::localize::{
-    localize_runs, mean_bounds, nees_of, EkfOptions, Localization, NoiseSource,
-};
+use kinegen_analysis::localize::{localize_runs, EkfOptions, Localization, NoiseSource, Summary};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -90,8 +86,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     let mut runs_json = Vec::new();
     let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
-    for (run, loc) in prep.runs.iter().chain(&prep.holdout).zip(done.runs) {
-        let summary = summarise(r, run, &loc);
+    for (run, (loc, summary)) in prep.runs.iter().chain(&prep.holdout).zip(done.runs) {
         say_run(&out, run, &loc, &summary, a.gate);
         csv += &track_rows(run, &loc);
         runs_json.push(run_json(run, &loc, &summary));
@@ -292,43 +287,6 @@ fn warn_unseen_landmarks(c: &Common, prep: &kinegen_analysis::load::Loaded) {
                 i + 2
             );
         }
-    }
-}
-
-fn position_rmse(run: &kinegen_analysis::run::Run, track: &[[f64; 3]]) -> Option<f64> {
-    run.gt.as_ref().map(|g| {
-        let s: f64 = track
-            .iter()
-            .zip(g)
-            .map(|(x, g)| (x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2))
-            .sum();
-        (s / g.len() as f64).sqrt()
-    })
-}
-
-fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
-    let (n, s) = v.fold((0usize, 0.0), |(n, s), x| (n + 1, s + x));
-    (n > 0).then(|| s / n as f64)
-}
-
-fn summarise(
-    r: &kinegen_analysis::model::Runner,
-    run: &kinegen_analysis::run::Run,
-    loc: &Localization,
-) -> Summary {
-    let dr = evaluate(r, &r.p, std::slice::from_ref(run));
-    let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
-        let nees = nees_of(r, run, track, cov);
-        (position_rmse(run, track), mean(nees.iter().map(|n| n.1)))
-    });
-    Summary {
-        rmse: position_rmse(run, &loc.track),
-        dead_reckoning: run.gt.as_ref().map(|_| dr.rmse),
-        nis: mean(loc.nis.iter().map(|n| n.1)),
-        nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
-        nees: mean(loc.nees.iter().map(|n| n.1)),
-        nees_bounds: (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0)),
-        smoothed,
     }
 }
 

@@ -4,24 +4,12 @@
 //! NIS over time with its chi-square band, and a table of the figures and
 //! the noise; the noise sweep (seed 001 Figs 6-7) when it was run.
 use crate::report::{axes, decimated, esc, page, series_of, squared, write, Series, H, W};
-use kinegen_analysis::localize::{mean_bounds, Localization};
+use kinegen_analysis::localize::{mean_bounds, Localization, Summary};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
 use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
-
-/// One run's figures: errors against ground truth, consistency.
-pub struct Summary {
-    pub rmse: Option<f64>,
-    pub dead_reckoning: Option<f64>,
-    pub nis: Option<f64>,
-    pub nis_bounds: Option<(f64, f64)>,
-    pub nees: Option<f64>,
-    pub nees_bounds: Option<(f64, f64)>,
-    /// The smoother's position RMSE and mean NEES.
-    pub smoothed: Option<(Option<f64>, Option<f64>)>,
-}
 
 /// Width of the legend strip beside a chart, px.
 const LEGEND_W: u32 = 170;

@@ -23,9 +23,11 @@ pub mod delay;
 mod filter;
 pub mod noise;
 mod smoother;
+pub mod summary;
 
 pub use filter::{Filter, Keep, Pass};
 pub use noise::{NoiseModel, NoiseSource};
+pub use summary::{summarise, Summary};
 
 use crate::log::wrap;
 use crate::model::Runner;
@@ -147,8 +149,9 @@ pub struct Localized {
     pub note: String,
     /// The input delay the filter ran with, when it was estimated.
     pub input_delay: Option<delay::DelayEstimate>,
-    /// The filter over `runs`, then over `holdout`, in order.
-    pub runs: Vec<Localization>,
+    /// The filter over `runs`, then over `holdout`, in order, each with its
+    /// figures.
+    pub runs: Vec<(Localization, Summary)>,
 }
 
 /// Localise one robot's runs: the noise from `runs` (estimated on their
@@ -172,7 +175,12 @@ pub fn localize_runs(
     let runs = runs
         .iter()
         .chain(holdout)
-        .map(|run| localize_with(&with_delay, run, &noise, o))
+        .map(|run| {
+            localize_with(&with_delay, run, &noise, o).map(|loc| {
+                let figures = summarise(r, run, &loc);
+                (loc, figures)
+            })
+        })
         .collect::<Result<_, _>>()?;
     Ok(Localized {
         noise,

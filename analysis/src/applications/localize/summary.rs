@@ -1,0 +1,55 @@
+//! One localised run's figures: position RMSE of the filter, of the
+//! smoother and of dead reckoning against the ground truth, and the mean
+//! NIS and NEES with their chi-square bounds.
+use super::{mean_bounds, nees_of, Localization};
+use crate::evaluation::evaluate;
+use crate::model::Runner;
+use crate::run::Run;
+
+/// One run's figures: errors against ground truth, consistency.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    pub rmse: Option<f64>,
+    pub dead_reckoning: Option<f64>,
+    pub nis: Option<f64>,
+    pub nis_bounds: Option<(f64, f64)>,
+    pub nees: Option<f64>,
+    pub nees_bounds: Option<(f64, f64)>,
+    /// The smoother's position RMSE and mean NEES.
+    pub smoothed: Option<(Option<f64>, Option<f64>)>,
+}
+
+/// Position RMSE of `track` against the run's ground truth, if it has one.
+pub fn position_rmse(run: &Run, track: &[[f64; 3]]) -> Option<f64> {
+    run.gt.as_ref().map(|g| {
+        let s: f64 = track
+            .iter()
+            .zip(g)
+            .map(|(x, g)| (x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2))
+            .sum();
+        (s / g.len() as f64).sqrt()
+    })
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let (n, s) = v.fold((0usize, 0.0), |(n, s), x| (n + 1, s + x));
+    (n > 0).then(|| s / n as f64)
+}
+
+/// The figures of `loc`, the filter's output on `run`.
+pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
+    let dr = evaluate(r, &r.p, std::slice::from_ref(run));
+    let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
+        let nees = nees_of(r, run, track, cov);
+        (position_rmse(run, track), mean(nees.iter().map(|n| n.1)))
+    });
+    Summary {
+        rmse: position_rmse(run, &loc.track),
+        dead_reckoning: run.gt.as_ref().map(|_| dr.rmse),
+        nis: mean(loc.nis.iter().map(|n| n.1)),
+        nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
+        nees: mean(loc.nees.iter().map(|n| n.1)),
+        nees_bounds: (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0)),
+        smoothed,
+    }
+}
