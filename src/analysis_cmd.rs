@@ -9,7 +9,6 @@ use kinegen_analysis::innovations::InnovationStats;
 use kinegen_analysis::load::{load, Loaded, Sources};
 use kinegen_analysis::metrics::Errors;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 #[derive(Args, Debug, Clone)]
 pub struct Common {
@@ -68,7 +67,6 @@ pub fn quiet(c: &Common) -> bool {
     c.json.as_deref() == Some(std::path::Path::new("-"))
 }
 
-/// Exit 2 with a message naming the problem.
 /// Say each of the warnings `prepare` found.
 pub fn say_warnings(out: &Out, warnings: &[String]) {
     for w in warnings {
@@ -76,10 +74,8 @@ pub fn say_warnings(out: &Out, warnings: &[String]) {
     }
 }
 
-pub fn bad(msg: impl std::fmt::Display) -> ExitCode {
-    eprintln!("error: {msg}");
-    ExitCode::from(2)
-}
+/// Exit 2 with a message naming the problem (where every command finds it).
+pub use crate::output::bad;
 
 /// The model of `c.spec` and the logs `c` names, read for a job (see
 /// [`kinegen_analysis::load`]), after the options that need no log are

@@ -82,10 +82,7 @@ pub fn compare(c: Common) -> ExitCode {
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
-    match out.json(c.json.as_deref(), &doc) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => bad(e),
-    }
+    out.finish(c.json.as_deref(), &doc)
 }
 
 /// Where the error grows: each driving regime's share of the error growth,

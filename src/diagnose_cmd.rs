@@ -139,10 +139,7 @@ pub fn run(c: Common) -> ExitCode {
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
-    match out.json(c.json.as_deref(), &doc) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => bad(e),
-    }
+    out.finish(c.json.as_deref(), &doc)
 }
 
 /// Pieces of a log cut at its gaps that are too short to diagnose are left

@@ -288,10 +288,7 @@ fn run_methods(c: &Common, out: &Out, prep: &Loaded, job: &MethodsJob) -> ExitCo
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
-    match out.json(c.json.as_deref(), &doc) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => bad(e),
-    }
+    out.finish(c.json.as_deref(), &doc)
 }
 
 /// One method's lines: its error (held-out too), its distance to the truth,

@@ -128,10 +128,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         out.say(&format!("track: {}", t.display()));
     }
     let doc = json!({"model": r.ir.name, "gate": a.gate, "noise": noise_json, "runs": runs_json, "sweep": sweep});
-    match out.json(c.json.as_deref(), &doc) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => bad(e),
-    }
+    out.finish(c.json.as_deref(), &doc)
 }
 
 /// The `--track` CSV rows of a run: the estimate (smoothed with --smooth)

@@ -34,6 +34,21 @@ impl Out {
             kinegen_model::files::write_atomic(path, &text).map_err(|e| e.to_string())
         }
     }
+
+    /// A command's last step: its JSON document written where `--json` says,
+    /// success, or exit 2 with the reason it could not be written.
+    pub fn finish(&self, json: Option<&Path>, value: &serde_json::Value) -> std::process::ExitCode {
+        match self.json(json, value) {
+            Ok(()) => std::process::ExitCode::SUCCESS,
+            Err(e) => bad(e),
+        }
+    }
+}
+
+/// Exit 2 with a message naming the problem (bad input or usage).
+pub fn bad(msg: impl std::fmt::Display) -> std::process::ExitCode {
+    eprintln!("error: {msg}");
+    std::process::ExitCode::from(2)
 }
 
 /// Whether `path` can be written later (its directory, or the nearest existing
