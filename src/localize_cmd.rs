@@ -170,7 +170,7 @@ fn run_json(
         "position_rmse_m": s.rmse, "dead_reckoning_rmse_m": s.dead_reckoning,
         "nis_mean": s.nis, "nis_bounds": s.nis_bounds.map(|b| [b.0, b.1]),
         "nees_mean": s.nees, "nees_bounds": s.nees_bounds.map(|b| [b.0, b.1]),
-        "ground_truth_noise": kinegen_analysis::localize::truth_noise(run).filter(|_| s.nees.is_some()).map(|n| json!({"position_m": n[0], "heading_rad": n[2]})),
+        "ground_truth_noise": s.truth_noise.map(|n| json!({"position_m": n[0], "heading_rad": n[2]})),
         "smoothed": s.smoothed.map(|(rmse, nees)| json!({"position_rmse_m": rmse, "nees_mean": nees})),
         "final_pose": loc.track.last(),
         "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
@@ -327,7 +327,7 @@ fn say_run(
     }
     out.say(&format!("  mean NIS  {}", verdict(s.nis, s.nis_bounds)));
     out.say(&format!("  mean NEES {}", verdict(s.nees, s.nees_bounds)));
-    if let (Some(_), Some(n)) = (s.nees, kinegen_analysis::localize::truth_noise(run)) {
+    if let Some(n) = s.truth_noise {
         out.say(&format!(
             "    (against the ground truth with its own noise counted: {:.2} mm, {:.2} mrad, from its third differences)",
             1e3 * n[0],

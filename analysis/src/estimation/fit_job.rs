@@ -481,15 +481,15 @@ pub fn method_evaluation<'r>(r: &'r Runner, m: &Calibration, runs: &[Run]) -> Ev
     }
 }
 
-/// What each method is compared with: the nominal values (on the fitted and
-/// the held-out runs) and the known truth.
+/// What each method is compared with: the nominal values (on the held-out
+/// runs here, on the fitted ones as `row`'s `before`) and the known truth.
 struct Against<'a, 't> {
     l: &'a Loaded,
     truth: &'t [(String, f64)],
     /// the nominal values' distance to the truth
     d0: f64,
-    /// the nominal values on the fitted and the held-out runs, with held-out runs
-    nominal: Option<(Evaluation<'a>, Evaluation<'a>)>,
+    /// the nominal values on the held-out runs, if there are any
+    held_nominal: Option<Evaluation<'a>>,
 }
 
 impl<'a, 't> Against<'a, 't> {
@@ -499,12 +499,7 @@ impl<'a, 't> Against<'a, 't> {
             l,
             truth,
             d0: 0.0,
-            nominal: (!l.holdout.is_empty()).then(|| {
-                (
-                    evaluation(r, &r.p, &l.runs),
-                    evaluation(r, &r.p, &l.holdout),
-                )
-            }),
+            held_nominal: (!l.holdout.is_empty()).then(|| evaluation(r, &r.p, &l.holdout)),
         };
         me.d0 = me.scaled(&r.p);
         me
@@ -526,12 +521,13 @@ impl<'a, 't> Against<'a, 't> {
 
     /// The nominal values' RMSE on the held-out runs, if any.
     fn hold_nominal(&self) -> Option<f64> {
-        self.nominal.as_ref().map(|x| x.1.errors.rmse)
+        self.held_nominal.as_ref().map(|h| h.errors.rmse)
     }
 
     /// One method's row: its errors, a warning in its note where it ends
     /// worse than the nominal values (on the held-out runs when there are
-    /// some), and its distance to the truth.
+    /// some), and its distance to the truth. `before`: the nominal values on
+    /// the fitted runs.
     fn row(&self, name: String, m: Calibration, before: &Evaluation) -> MethodRow<'a> {
         let (r, l) = (&self.l.runner, self.l);
         let after = method_evaluation(r, &m, &l.runs);
@@ -541,10 +537,10 @@ impl<'a, 't> Against<'a, 't> {
             _ => ("fitted runs", after.errors.rmse, before.errors.rmse),
         };
         let mut note = m.note.clone();
-        let held_worse = self.nominal.as_ref().and_then(|(f, h)| {
+        let held_worse = self.held_nominal.as_ref().and_then(|h| {
             held_out_worse(
                 r,
-                (&l.runs, &f.tracks),
+                (&l.runs, &before.tracks),
                 (&l.holdout, &h.tracks),
                 nominal,
                 now,

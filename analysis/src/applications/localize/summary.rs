@@ -1,7 +1,7 @@
 //! One localised run's figures: position RMSE of the filter, of the
 //! smoother and of dead reckoning against the ground truth, and the mean
 //! NIS and NEES with their chi-square bounds.
-use super::{mean_bounds, nees_of, Localization};
+use super::{mean_bounds, nees_of, truth_noise, Localization};
 use crate::evaluation::evaluate;
 use crate::model::Runner;
 use crate::run::Run;
@@ -17,6 +17,9 @@ pub struct Summary {
     pub nees_bounds: Option<(f64, f64)>,
     /// The smoother's position RMSE and mean NEES.
     pub smoothed: Option<(Option<f64>, Option<f64>)>,
+    /// The ground truth's own noise the NEES counts ([`truth_noise`]), when
+    /// there is a NEES.
+    pub truth_noise: Option<[f64; 3]>,
 }
 
 /// Position RMSE of `track` against the run's ground truth, if it has one.
@@ -49,6 +52,7 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
         nis: mean(loc.nis.iter().map(|n| n.1)),
         nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
         nees: mean(loc.nees.iter().map(|n| n.1)),
+        truth_noise: truth_noise(run).filter(|_| !loc.nees.is_empty()),
         nees_bounds: (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0)),
         smoothed,
     }
