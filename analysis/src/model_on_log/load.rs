@@ -4,12 +4,13 @@
 //! dead reckoning would stop being numbers. What compare, fit, diagnose and
 //! localize start from.
 use crate::bag::{Detection, TopicMap};
+use crate::evaluation::tracks;
 use crate::input_range;
 use crate::landmarks::{from_detections, read_map, read_observations};
 use crate::log::LogError;
 use crate::model::{parse_sets, ModelError, Runner};
 use crate::run::Run;
-use crate::track_rows::{first_non_finite, Heading, Recipe};
+use crate::track_rows::first_non_finite;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::ModelIr;
 use std::path::{Path, PathBuf};
@@ -171,13 +172,7 @@ fn topic_map(sources: &Sources, runner: &Runner) -> Result<TopicMap, LoadError> 
 /// `track_rows::first_non_finite`), naming the log and its line; `sets` are
 /// the --set values, named as suspects.
 fn check_finite(r: &Runner, runs: &[Run], sets: &[String]) -> Result<(), LoadError> {
-    for run in runs {
-        let track = Recipe {
-            r,
-            p: r.p.clone(),
-            offset: [0.0; 3],
-            heading: Heading::Model,
-        };
+    for (run, track) in runs.iter().zip(tracks(r, &r.p, runs, &[])) {
         if let Some((k, what)) = first_non_finite(&track, run) {
             let suspects = if sets.is_empty() {
                 String::new()

@@ -227,6 +227,16 @@ impl Run {
         (runs, warnings)
     }
 
+    /// Rows `a..b` as a run of their own, named by their time span (a piece
+    /// of a log split at a gap).
+    fn piece(&self, a: usize, b: usize) -> Run {
+        let mut piece = self.slice(a, b);
+        let span = format!("{:.2}-{:.2} s", self.t[a], self.t[b - 1]);
+        piece.name = format!("{} ({span})", self.name);
+        piece.path = format!("{} ({span})", self.path);
+        piece
+    }
+
     /// Whether row `k` lacks a measurement the run has (a NaN pose or gyro:
     /// an empty cell, see [`Run::split_at_gaps`]).
     pub fn missing(&self, k: usize) -> bool {
@@ -245,11 +255,7 @@ impl Run {
         let mut a = 0;
         for k in (0..=n).filter(|&k| k == n || self.missing(k)) {
             if k >= a + 3 {
-                let mut piece = self.slice(a, k);
-                let span = format!("{:.2}-{:.2} s", self.t[a], self.t[k - 1]);
-                piece.name = format!("{} ({span})", self.name);
-                piece.path = format!("{} ({span})", self.path);
-                pieces.push(piece);
+                pieces.push(self.piece(a, k));
             }
             a = k + 1;
         }
@@ -297,13 +303,7 @@ impl Run {
         let pieces: Vec<Run> = bounds
             .windows(2)
             .filter(|w| w[1] - w[0] >= 3)
-            .map(|w| {
-                let mut piece = self.slice(w[0], w[1]);
-                let span = format!("{:.2}-{:.2} s", self.t[w[0]], self.t[w[1] - 1]);
-                piece.name = format!("{} ({span})", self.name);
-                piece.path = format!("{} ({span})", self.path);
-                piece
-            })
+            .map(|w| self.piece(w[0], w[1]))
             .collect();
         let at: Vec<String> = gaps
             .iter()
