@@ -17,9 +17,10 @@ use std::process::{Command, Stdio};
 /// inverse whose whole expression got the series branch: 5; measurement delays
 /// found by name: 6; kernels and arguments named by string: 7; steps
 /// differentiated through the expanded twist: 8, which also divided by a
-/// denominator used once instead of multiplying by its reciprocal) is never
-/// reused.
-const IR_FORMAT: u32 = 9;
+/// denominator used once instead of multiplying by its reciprocal; |x|
+/// differentiated as x/|x|, NaN at x = 0 where it is now sign(x): 9) is
+/// never reused.
+const IR_FORMAT: u32 = 10;
 
 pub fn cache_dir() -> PathBuf {
     std::env::temp_dir().join("kinegen-ir-cache")

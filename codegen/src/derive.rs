@@ -175,7 +175,8 @@ fn regularize(a: &Atom, s: Symbol, fx: Funcs, order: i64) -> Result<Atom, Symbol
     if !has_vanishing_denominator(a.as_view(), s) {
         return Ok(a.clone());
     }
-    let own_fn = |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs, fx.pinv, fx.lsq].contains(&f);
+    let own_fn =
+        |f: Symbol| [fx.tan, fx.atan, fx.atan2, fx.abs, fx.sign, fx.pinv, fx.lsq].contains(&f);
     if !matches!(a.as_view(), AtomView::Fun(f) if own_fn(f.get_symbol())) {
         if let Ok(series) = a.series(s, Atom::num(0), SeriesDepth::absolute(order)) {
             let series = series.to_atom();

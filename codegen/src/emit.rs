@@ -223,6 +223,10 @@ fn op_expr(f: &Function, op: &Op, t: &dyn Fn(u32) -> TokenStream) -> TokenStream
             let a = t(a);
             quote!(crate::math::fabs(#a))
         }
+        Op::Sign(a) => {
+            let a = t(a);
+            quote!(crate::math::sign(#a))
+        }
         Op::NearZero { .. } | Op::PinvSym3 { .. } => {
             unreachable!("pseudo-inverse entries and series switches are assembled by the caller")
         }

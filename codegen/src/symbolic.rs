@@ -16,6 +16,7 @@ pub struct Funcs {
     pub atan: Symbol,
     pub atan2: Symbol,
     pub abs: Symbol,
+    pub sign: Symbol,
     /// `kg_near(s, series, closed)`: the series branch of a removable singularity
     /// at s = 0 (lowered to `Op::NearZero`; never differentiated).
     pub near: Symbol,
@@ -138,11 +139,20 @@ impl Funcs {
         let abs = symbol!(
             "kg_abs",
             der = |x, i, out| {
-                // d|a|/da = a/|a| (undefined at a = 0, like the function's kink)
+                // d|a|/da = sign(a), 0 at the kink: a/|a| would make every
+                // derivative through |a| NaN where a = 0 (a deadband's |u + d|
+                // at a stopped robot's command 0 and nominal d = 0)
                 if let (0, AtomView::Fun(f)) = (i, x) {
                     let a = f.iter().next().unwrap().to_owned();
-                    **out = &a * function!(symbol!("kg_abs"), a.clone()).pow(Atom::num(-1));
+                    **out = function!(symbol!("kg_sign"), a);
                 }
+            }
+        );
+        let sign = symbol!(
+            "kg_sign",
+            der = |_, _, out| {
+                // piecewise constant: 0 away from 0, where its jump has no derivative
+                **out = Atom::num(0);
             }
         );
         let near = symbol!("kg_near");
@@ -199,6 +209,7 @@ impl Funcs {
             atan,
             atan2,
             abs,
+            sign,
             near,
             pinv,
             lsq,
@@ -290,6 +301,7 @@ pub fn to_atom(e: &Expr, vars: &HashMap<String, Atom>, fx: &Funcs) -> Result<Ato
                 "atan" => function!(fx.atan, a[0]),
                 "atan2" => function!(fx.atan2, a[0], a[1]),
                 "abs" => function!(fx.abs, a[0]),
+                "sign" => function!(fx.sign, a[0]),
                 other => {
                     return Err(SymbolicError(format!(
                         "function `{other}` has no symbolic form"

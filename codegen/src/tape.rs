@@ -114,7 +114,7 @@ impl TapeBuilder {
         self.atom(crate::symbolic::lsq_expanded(k, &s, &q).as_view())
     }
 
-    /// A function call: sin, cos, exp, ln, sqrt, abs, tan, atan, atan2, the
+    /// A function call: sin, cos, exp, ln, sqrt, abs, sign, tan, atan, atan2, the
     /// pseudo-inverse entry and the series switch.
     fn function(&mut self, f: FunView, a: AtomView) -> Result<u32, SymbolicError> {
         let s = f.get_symbol();
@@ -131,6 +131,8 @@ impl TapeBuilder {
             Op::Sqrt(args[0])
         } else if s == Symbol::ABS || s == self.fx.abs {
             Op::Abs(args[0])
+        } else if s == self.fx.sign {
+            Op::Sign(args[0])
         } else if s == self.fx.tan {
             Op::Tan(args[0])
         } else if s == self.fx.atan {

@@ -34,6 +34,19 @@ unary! {
     fabs: fabs, fabsf, abs;
 }
 
+/// -1, 0 or 1; 0 at +-0 (`signum` gives +-1 there) and NaN for NaN: the
+/// derivative of `fabs`, and the spec language's `sign`.
+#[inline]
+pub fn sign(x: Real) -> Real {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        x * 0.0
+    }
+}
+
 #[inline]
 pub fn sin(x: Real) -> Real {
     #[cfg(not(feature = "f32"))]

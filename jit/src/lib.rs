@@ -637,6 +637,7 @@ impl Translator<'_, '_> {
             Op::PowI(x, n) => powi(b, v(x), n),
             Op::Sqrt(x) => b.ins().sqrt(v(x)),
             Op::Abs(x) => b.ins().fabs(v(x)),
+            Op::Sign(x) => sign(b, v(x)),
             Op::NearZero { .. } => unreachable!("guards are emitted as groups"),
             _ => unreachable!("host calls and the pseudo-inverse are handled above"),
         }
@@ -743,6 +744,18 @@ impl Translator<'_, '_> {
     }
 }
 
+/// -1, 0 or 1 as [`kinegen_model::ir::sign`]: two comparisons and selects, and
+/// `x * 0` where neither holds (0 for +-0, NaN for NaN).
+fn sign(b: &mut FunctionBuilder, x: Value) -> Value {
+    let zero = b.ins().f64const(0.0);
+    let (one, minus) = (b.ins().f64const(1.0), b.ins().f64const(-1.0));
+    let rest = b.ins().fmul(x, zero);
+    let neg = b.ins().fcmp(FloatCC::LessThan, x, zero);
+    let not_pos = b.ins().select(neg, minus, rest);
+    let pos = b.ins().fcmp(FloatCC::GreaterThan, x, zero);
+    b.ins().select(pos, one, not_pos)
+}
+
 /// `x^n` by the multiplication chain `f64::powi` uses (compiler-rt's `__powidf2`:
 /// square-and-multiply from the low bit, then one reciprocal for n < 0), so the
 /// compiled tape rounds exactly as the interpreter does.
@@ -817,6 +830,8 @@ mod tests {
             Op::Exp(0),
             Op::Ln(1),
             Op::Abs(0),
+            Op::Sign(0),
+            Op::Sign(2),
         ];
         tape.extend(unary);
         tape.extend([

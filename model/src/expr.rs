@@ -17,6 +17,7 @@ pub const FUNCTIONS: &[(&str, usize)] = &[
     ("exp", 1),
     ("ln", 1),
     ("abs", 1),
+    ("sign", 1),
 ];
 
 /// Named constants of the language.
@@ -383,6 +384,7 @@ fn apply_call(f: &str, a: &[f64]) -> f64 {
         "exp" => a[0].exp(),
         "ln" => a[0].ln(),
         "abs" => a[0].abs(),
+        "sign" => crate::ir::sign(a[0]),
         _ => f64::NAN,
     }
 }

@@ -36,6 +36,9 @@ pub enum Op {
     Exp(u32),
     Ln(u32),
     Abs(u32),
+    /// -1, 0 or 1 (0 at 0, unlike `f64::signum`): the derivative of `abs`, so
+    /// a kink at 0 (a deadband's) has a slope there instead of 0/0.
+    Sign(u32),
     /// `if |x| < eps { near } else { far }`: the series branch that replaces a
     /// removable singularity at x = 0.
     NearZero {
@@ -70,7 +73,8 @@ impl Op {
             | Atan(a)
             | Exp(a)
             | Ln(a)
-            | Abs(a) => vec![a],
+            | Abs(a)
+            | Sign(a) => vec![a],
             NearZero { x, near, far, .. } => vec![x, near, far],
             PinvSym3 { m, .. } => m.to_vec(),
         }
@@ -96,6 +100,7 @@ impl Op {
             Exp(a) => Exp(m(a)),
             Ln(a) => Ln(m(a)),
             Abs(a) => Abs(m(a)),
+            Sign(a) => Sign(m(a)),
             NearZero { x, eps, near, far } => NearZero {
                 x: m(x),
                 eps,
@@ -112,6 +117,21 @@ impl Op {
     /// reads do not).
     pub fn is_arithmetic(&self) -> bool {
         !matches!(self, Op::Const(_) | Op::Arg(..))
+    }
+}
+
+/// The sign of `x`: -1, 0 at 0 (either zero), or 1; NaN stays NaN. The one
+/// definition the interpreter, the spec language and (through `Op::Sign`) the
+/// JIT and the generated `math::sign` agree on.
+#[inline]
+pub fn sign(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        // 0 for +-0, NaN for NaN
+        x * 0.0
     }
 }
 
@@ -210,6 +230,7 @@ impl Function {
                 Op::Exp(a) => v(a).exp(),
                 Op::Ln(a) => v(a).ln(),
                 Op::Abs(a) => v(a).abs(),
+                Op::Sign(a) => sign(v(a)),
                 Op::NearZero { x, eps, near, far } => {
                     if v(x).abs() < eps {
                         v(near)

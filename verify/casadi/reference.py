@@ -31,7 +31,8 @@ SAMPLES = 40
 
 
 CASADI_FUNCTIONS = {"sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "atan": ca.atan, "atan2": ca.atan2,
-                    "sqrt": ca.sqrt, "exp": ca.exp, "ln": ca.log, "abs": ca.fabs}
+                    "sqrt": ca.sqrt, "exp": ca.exp, "ln": ca.log, "abs": ca.fabs,
+                    "sign": ca.sign}
 
 
 def to_sx(src, env, functions=None):
