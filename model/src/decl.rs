@@ -103,6 +103,13 @@ pub struct Param {
     /// delay. At most one parameter of a spec (kinegen_analysis::timeline).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub input_delay: bool,
+    /// The time constant, in s, of the robot's first-order response to its
+    /// commands: the executed command approaches each new one as 1 -
+    /// exp(-t/lag) (a motor controller's response, an acceleration limit),
+    /// after any input delay. At most one parameter of a spec
+    /// (kinegen_analysis::timeline).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub input_lag: bool,
     /// How far from its nominal value the parameter is known to lie (one
     /// standard deviation, in its unit; a spec's `"2%"` is resolved against
     /// the nominal value): `fit` adds it as a Gaussian prior, so a log that

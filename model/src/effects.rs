@@ -13,7 +13,7 @@
 //! patch uses it; `bounds = "robot_size"` makes its bounds scale with the
 //! robot's largest length), and patches: `[motion]` (templates over the original
 //! `{vx}`, `{vy}`, `{omega}`), `[[each_input]]` (a template over `{input}` for
-//! every input of a class: `steering`, `right_wheel`, `left_wheel`), and
+//! every input of a class: `steering`, `right_wheel`, `left_wheel`, `command`), and
 //! `[observation.ROLE]` (ROLE = `pose`, `yaw_rate`, `range_bearing`; `expr`
 //! templates over `{0}`, `{1}`..., `substitute` for state symbols).
 use crate::expr::{self, Expr};
@@ -25,6 +25,14 @@ use toml_edit::{value, Array, ArrayOfTables, DocumentMut, Item, Table, Value};
 
 /// The bundled catalogue, compiled in so every command works from any directory.
 const BUNDLED: &[(&str, &str)] = &[
+    (
+        "command_deadband.toml",
+        include_str!("../../spec/effects/command_deadband.toml"),
+    ),
+    (
+        "command_lag.toml",
+        include_str!("../../spec/effects/command_lag.toml"),
+    ),
     (
         "gyro_bias.toml",
         include_str!("../../spec/effects/gyro_bias.toml"),
@@ -97,6 +105,9 @@ pub enum InputClass {
     RightWheel,
     /// Cumulative inputs that turn the body clockwise when they advance.
     LeftWheel,
+    /// Commands: absolute inputs that hold from their row until the next
+    /// (a velocity-commanded robot's speed and turn-rate set points).
+    Command,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -377,6 +388,9 @@ pub fn inputs_of(m: &Model, class: InputClass) -> Vec<String> {
             InputClass::Steering => {
                 i.kind == InputKind::Absolute && i.between() == crate::decl::Between::Linear
             }
+            InputClass::Command => {
+                i.kind == InputKind::Absolute && i.between() == crate::decl::Between::Hold
+            }
             InputClass::RightWheel => signs.as_ref().is_some_and(|s| s[*k] > 0),
             InputClass::LeftWheel => signs.as_ref().is_some_and(|s| s[*k] < 0),
         })
@@ -515,18 +529,28 @@ impl Effect {
                 ));
             }
         }
-        if self.input_delay().is_some() {
-            if let Some(d) = m.params.iter().find(|p| p.input_delay) {
+        for (flag, declared, what) in [
+            (
+                self.input_delay(),
+                m.params.iter().find(|p| p.input_delay),
+                "an input delay",
+            ),
+            (
+                self.input_lag(),
+                m.params.iter().find(|p| p.input_lag),
+                "a command response lag",
+            ),
+        ] {
+            if flag.is_none() {
+                continue;
+            }
+            if let Some(d) = declared {
                 return Applicability::NotApplicable(format!(
-                    "the model already declares an input delay (`{}`)",
+                    "the model already declares {what} (`{}`)",
                     d.name
                 ));
             }
-            let commanded = m.inputs.iter().any(|i| {
-                i.kind == crate::decl::InputKind::Absolute
-                    && i.between() == crate::decl::Between::Hold
-            });
-            if !commanded {
+            if inputs_of(m, InputClass::Command).is_empty() {
                 return Applicability::NotApplicable(
                     "the model has no commands (absolute inputs that hold between rows): a delay of measured inputs is `time_offset`".into(),
                 );
@@ -571,6 +595,12 @@ impl Effect {
         self.flagged("input_delay")
     }
 
+    /// The parameter the analysis reads as the time constant of the robot's
+    /// response to its commands (see [`crate::decl::Param::input_lag`]).
+    pub fn input_lag(&self) -> Option<&str> {
+        self.flagged("input_lag")
+    }
+
     /// The name of the parameter marked `flag = true`, for an effect that
     /// patches no expression (a timing effect); None otherwise.
     fn flagged(&self, flag: &str) -> Option<&str> {
@@ -586,9 +616,11 @@ impl Effect {
     }
 
     /// The timing parameter of an effect that shifts a timeline instead of
-    /// patching expressions (`time_offset`, `input_delay`).
+    /// patching expressions (`time_offset`, `input_delay`, `command_lag`).
     pub fn timing(&self) -> Option<&str> {
-        self.measurement_delay().or(self.input_delay())
+        self.measurement_delay()
+            .or(self.input_delay())
+            .or(self.input_lag())
     }
 
     /// Observation roles this effect changes when it changes nothing else (a gyro

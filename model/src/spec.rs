@@ -90,6 +90,8 @@ struct RawParam {
     #[serde(default)]
     input_delay: bool,
     #[serde(default)]
+    input_lag: bool,
+    #[serde(default)]
     tolerance: Option<Spanned<RawTolerance>>,
 }
 
@@ -645,14 +647,16 @@ fn parse_params(cx: &Ctx, raw: &[RawParam]) -> Result<Vec<Param>, SourceError> {
                 constant: p.constant,
                 measurement_delay: p.measurement_delay,
                 input_delay: p.input_delay,
+                input_lag: p.input_lag,
                 tolerance,
             })
         })
         .collect()
 }
 
-/// At most one `measurement_delay` and one `input_delay` parameter, each
-/// free to change at run time and in seconds.
+/// At most one `measurement_delay`, one `input_delay` and one `input_lag`
+/// parameter, each free to change at run time and in seconds; a lag is a time
+/// constant, not negative.
 fn check_delays(cx: &Ctx, raw: &[RawParam]) -> Result<(), SourceError> {
     for (flag, is, what) in [
         (
@@ -661,6 +665,11 @@ fn check_delays(cx: &Ctx, raw: &[RawParam]) -> Result<(), SourceError> {
             "the measurements",
         ),
         ("input_delay", |p: &RawParam| p.input_delay, "the commands"),
+        (
+            "input_lag",
+            |p: &RawParam| p.input_lag,
+            "the commands' response",
+        ),
     ] {
         let delays: Vec<&RawParam> = raw.iter().filter(|p| is(p)).collect();
         if let Some(second) = delays.get(1) {
@@ -679,10 +688,27 @@ fn check_delays(cx: &Ctx, raw: &[RawParam]) -> Result<(), SourceError> {
                     format!("a `{flag}` parameter cannot be `const`: the analysis shifts {what} by its value at run time"),
                 ));
             }
-            if d.measurement_delay && d.input_delay {
+            if [d.measurement_delay, d.input_delay, d.input_lag]
+                .iter()
+                .filter(|f| **f)
+                .count()
+                > 1
+            {
                 return Err(cx.err_span(
                     &d.name,
-                    "a parameter is a `measurement_delay` or an `input_delay`, not both",
+                    "a parameter is one of `measurement_delay`, `input_delay` and `input_lag`, not several",
+                ));
+            }
+            if d.input_lag && *d.nominal.get_ref() < 0.0 {
+                return Err(cx.err_span(
+                    &d.nominal,
+                    "an `input_lag` is a time constant: its nominal value is 0 or more",
+                ));
+            }
+            if d.input_lag && d.min.is_some_and(|m| m < 0.0) {
+                return Err(cx.err_span(
+                    &d.name,
+                    "an `input_lag` is a time constant: its `min` is 0 or more",
                 ));
             }
             if !matches!(d.unit.as_str(), "s" | "") {

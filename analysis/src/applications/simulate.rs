@@ -472,6 +472,10 @@ struct Robot<'a, P: Fn(f64) -> [f64; 3]> {
     /// are kept to look back into.
     input_delay: f64,
     logged: Vec<(f64, Vec<f64>)>,
+    /// Under an input lag the robot follows the (delayed) commands with a
+    /// first-order response (crate::timeline): its state, one per command.
+    input_lag: f64,
+    responses: Vec<crate::timeline::Response>,
     /// The gyro reports the mean yaw rate over the sample interval (an
     /// integrating or low-pass-filtered MEMS gyro), which is what a step of the
     /// model predicts.
@@ -526,6 +530,8 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
             hold_idx,
             input_delay: crate::timeline::input_delay(truth, &truth.p),
             logged: Vec::new(),
+            input_lag: crate::timeline::input_lag(truth, &truth.p),
+            responses: Vec::new(),
             gyro_mean: 0.0,
         }
     }
@@ -575,8 +581,26 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
                 .get(n.saturating_sub(1))
                 .map_or(&self.held, |(_, c)| c)
         };
-        for &i in &self.hold_idx {
-            u[i] = executing[i];
+        if self.input_lag == 0.0 {
+            for &i in &self.hold_idx {
+                u[i] = executing[i];
+            }
+            return u;
+        }
+        if self.responses.is_empty() {
+            // the robot was executing its first command when the log began
+            self.responses = self
+                .hold_idx
+                .iter()
+                .map(|&i| crate::timeline::Response {
+                    y: executing[i],
+                    dy: 0.0,
+                })
+                .collect();
+        }
+        for (resp, &i) in self.responses.iter_mut().zip(&self.hold_idx) {
+            // the sub-step's mean response: exact for its held target
+            u[i] = resp.follow(executing[i], h, self.input_lag).0 / h;
         }
         u
     }

@@ -177,11 +177,22 @@ pub fn run_from(
     // the sensitivity of the current (sub)step's pose, and the next one's
     let mut cur: Vec<f64> = sens.as_ref().map_or_else(Vec::new, |s| s.data.clone());
     let mut next = vec![0.0; cur.len()];
-    let delay_col = r.input_delay.filter(|_| with_sens);
+    // d(executed inputs)/d q of the timing parameters (input delay, lag)
+    let timing = if with_sens {
+        crate::timeline::executed_rates(r, p, logged)
+    } else {
+        Vec::new()
+    };
+    let mut by_timing: Vec<(usize, [f64; 3])> = Vec::with_capacity(timing.len());
     for k in 0..data.steps() {
         let x = *pose.last().unwrap();
-        // the step's response to the input delay: F_u d(executed u)/d tau
-        let by_delay = delay_col.map(|_| delay_response(r, p, logged, data, k, x));
+        // the step's response to each timing parameter: F_u d(executed u)/d q
+        by_timing.clear();
+        by_timing.extend(
+            timing
+                .iter()
+                .map(|(q, du)| (*q, input_response(r, p, &du[k], data, k, x))),
+        );
         let (x, mean_twist) = stepper.step(k, x, |out| {
             if with_sens {
                 // S_{j+1} = F_x S_j + [F_p | 0], written out
@@ -190,8 +201,8 @@ pub fn run_from(
                     for c in 0..cols {
                         let prev = |i: usize| cur[i * cols + c];
                         let mut direct = if c < np { jp[m * np + c] } else { 0.0 };
-                        if let (Some(d), Some(ti)) = (by_delay, delay_col) {
-                            if c == ti {
+                        for (q, d) in &by_timing {
+                            if c == *q {
                                 direct += d[m];
                             }
                         }
@@ -218,25 +229,24 @@ pub fn run_from(
     }
 }
 
-/// How step k's end pose moves with the input delay: the exact step's
-/// directional derivative along d(executed inputs)/d tau
-/// ([`crate::timeline::executed_rate`]), by central differences (the fused
+/// How step k's end pose moves with a timing parameter (the input delay,
+/// the lag): the exact step's directional derivative along `du`, its
+/// executed inputs' derivative in the parameter
+/// ([`crate::timeline::executed_rates`]), by central differences (the fused
 /// tape has no input Jacobian; the step is smooth in its inputs, so the
-/// difference is accurate to ~1e-8 of the step). Zero where no command
-/// changes across the step's window.
-fn delay_response(
+/// difference is accurate to ~1e-8 of the step). Zero where the executed
+/// commands do not move with it.
+fn input_response(
     r: &Runner,
     p: &[f64],
-    logged: &Run,
+    du: &[f64],
     executed: &Run,
     k: usize,
     x: [f64; 3],
 ) -> [f64; 3] {
-    let Some(du) = crate::timeline::executed_rate(r, p, logged, k) else {
-        return [0.0; 3];
-    };
     let size = du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if size == 0.0 {
+    // a rate this small moves nothing (and 1/size would overflow)
+    if size < 1e-300 {
         return [0.0; 3];
     }
     let u = &executed.u[k];
@@ -245,7 +255,7 @@ fn delay_response(
     let step = r.ir.step(kinegen_model::ir::StepForm::Exact).value;
     let zeros = [0.0; 16];
     let at = |sign: f64| {
-        let v: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u + sign * h * d).collect();
+        let v: Vec<f64> = u.iter().zip(du).map(|(u, d)| u + sign * h * d).collect();
         r.eval(
             step,
             &Runner::step_args(step, &x, &v, p, &[executed.dt[k]], &zeros),

@@ -49,6 +49,9 @@ pub struct Runner {
     /// Index (into `p`) of the spec's input delay, if it declares one: the
     /// robot executes its commands that late (see [`crate::timeline::executed`]).
     pub input_delay: Option<usize>,
+    /// Index into `p` of the time constant of the robot's response to its
+    /// commands (`input_lag = true`), if the spec declares one.
+    pub input_lag: Option<usize>,
     /// One step's pose and twist in one tape (dead reckoning).
     pub step_twist: Evaluator,
     /// One step's pose, twist, state and parameter Jacobians in one tape
@@ -134,6 +137,7 @@ impl Runner {
         )?;
         let delay = rp.iter().position(|q| q.measurement_delay);
         let input_delay = rp.iter().position(|q| q.input_delay);
+        let input_lag = rp.iter().position(|q| q.input_lag);
         Ok(Runner {
             code: IrCode::new(&ir),
             ir,
@@ -142,6 +146,7 @@ impl Runner {
             free,
             delay,
             input_delay,
+            input_lag,
             step_twist: Evaluator::new(step_twist),
             step_linearized: Evaluator::new(step_linearized),
         })

@@ -129,9 +129,9 @@ pub fn noise_for(
     runs: &[Run],
     o: &EkfOptions,
 ) -> Result<(NoiseModel, String), LocalizeError> {
-    // the commands as the robot executed them (an input delay: timeline);
-    // without a delay the runs as they are, not copies
-    if crate::timeline::input_delay(r, &r.p) == 0.0 {
+    // the commands as the robot executed them (an input delay and lag:
+    // timeline); without either the runs as they are, not copies
+    if crate::timeline::input_delay(r, &r.p) == 0.0 && crate::timeline::input_lag(r, &r.p) == 0.0 {
         return noise::choose(&Filter::new(r, o)?, runs, o);
     }
     let executed: Vec<Run> = runs

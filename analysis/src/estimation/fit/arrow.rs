@@ -52,6 +52,10 @@ pub fn damped_step(
         s.ger(-1.0 / c, &b, &b, 1.0);
         rhs.axpy(g[k] / c, &b, 1.0);
     }
+    // nalgebra's SVD does not return on a NaN: a non-finite system has no step
+    if !s.iter().chain(rhs.iter()).all(|v| v.is_finite()) {
+        return None;
+    }
     let mut dp = if m == 0 {
         DVector::zeros(0) // only nuisances
     } else {

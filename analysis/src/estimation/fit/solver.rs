@@ -150,6 +150,15 @@ fn levenberg_marquardt_planned(
     if !it.c.is_finite() {
         return Err(FitError::Diverged("cost became non-finite".into()));
     }
+    // the covariance's decompositions do not return on a NaN
+    if !it
+        .jtj_raw
+        .iter()
+        .chain(it.jtr_raw.iter())
+        .all(|v| v.is_finite())
+    {
+        return Err(FitError::Diverged("the Jacobian became non-finite".into()));
+    }
     Ok(stage.report(it, cost_before, iterations))
 }
 
