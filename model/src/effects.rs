@@ -529,16 +529,18 @@ impl Effect {
                 ));
             }
         }
-        for (flag, declared, what) in [
+        for (flag, declared, what, measured) in [
             (
                 self.input_delay(),
                 m.params.iter().find(|p| p.input_delay),
                 "an input delay",
+                "a delay of measured inputs is `time_offset`",
             ),
             (
                 self.input_lag(),
                 m.params.iter().find(|p| p.input_lag),
                 "a command response lag",
+                "measured inputs (encoders) follow the motion as it happens",
             ),
         ] {
             if flag.is_none() {
@@ -551,9 +553,9 @@ impl Effect {
                 ));
             }
             if inputs_of(m, InputClass::Command).is_empty() {
-                return Applicability::NotApplicable(
-                    "the model has no commands (absolute inputs that hold between rows): a delay of measured inputs is `time_offset`".into(),
-                );
+                return Applicability::NotApplicable(format!(
+                    "the model has no commands (absolute inputs that hold between rows): {measured}"
+                ));
             }
         }
         if patches == 0 && !times {

@@ -221,7 +221,10 @@ pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitErr
     };
     let notes = std::mem::take(&mut res.search_notes);
     res.warnings.extend(notes);
-    Ok(res)
+    // "kept at its starting value" is the last stage's start: say so where
+    // that is not the value the user started from (a deadband slid into the
+    // kink at the commonest command by an earlier stage reads -0.067 there)
+    Ok(held_where_fitted(r, res))
 }
 
 /// [`FitOptions::whole_runs`]: `searched` (an optimum on the segments)
