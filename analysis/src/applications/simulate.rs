@@ -731,10 +731,9 @@ fn observe_landmarks(
     if o.landmarks.is_empty() {
         return vec![];
     }
-    let sig = truth
-        .obs_sigma(RangeBearing)
-        .filter(|s| s.len() == 2)
-        .unwrap_or(&crate::landmarks::DEFAULT_SIGMA);
+    // the noise localize and fit assume: a spec without `sigma` (zeros)
+    // gets the defaults, not exact sightings that no filter could weigh
+    let sig = crate::landmarks::sigma(truth);
     let u0 = vec![0.0; truth.ir.inputs.len()];
     let mut out = Vec::new();
     let mut next = times[0];

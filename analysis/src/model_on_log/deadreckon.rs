@@ -2,7 +2,7 @@
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
 use crate::interp::{chain, lerp3};
 use crate::model::Runner;
-use crate::run::Run;
+use crate::run::{LandmarkObs, Run};
 use kinegen_model::decl::ObservationRole::{Pose, YawRate};
 
 pub struct Track {
@@ -95,7 +95,10 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
 
 /// Without ground truth, the start pose is where the landmarks seen at the
 /// start place the robot through the model's own observation (a sensor off the
-/// body origin included): see [`crate::landmarks::start_from_landmarks`].
+/// body origin included): see [`crate::landmarks::start_from_landmarks`]; a
+/// robot that moves from its first row, where its first sightings and its
+/// odometry between them place it
+/// ([`crate::landmarks::start_from_moving_sightings`]).
 fn landmark_start(
     r: &Runner,
     p: &[f64],
@@ -105,7 +108,28 @@ fn landmark_start(
     if data.gt.is_some() || data.landmarks.is_empty() {
         return None;
     }
-    crate::landmarks::start_from_landmarks(r, p, data, guess)
+    crate::landmarks::start_from_landmarks(r, p, data, guess).or_else(|| moving_start(r, p, data))
+}
+
+/// [`crate::landmarks::start_from_moving_sightings`] with the model's
+/// odometry from the start (the origin of its frame) to each of the run's
+/// first sightings, interpolated between rows.
+fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<([f64; 3], Vec<f64>)> {
+    let seen = crate::landmarks::first_sightings(data)?;
+    let last = seen.iter().map(|o| o.t).fold(data.t[0], f64::max);
+    let rows = data.t.partition_point(|t| *t <= last).min(data.steps());
+    let mut stepper = Stepper::new(r, p, data, false, None);
+    let mut poses = vec![[0.0; 3]];
+    for k in 0..rows {
+        let (x, _) = stepper.step(k, poses[k], |_| {});
+        poses.push(x);
+    }
+    let moved = |o: &LandmarkObs| {
+        let (j, a) = data.locate(o.t);
+        let (p0, p1) = (poses[j.min(rows)], poses[(j + 1).min(rows)]);
+        [0, 1, 2].map(|i| p0[i] + a * (p1[i] - p0[i]))
+    };
+    crate::landmarks::start_from_moving_sightings(r, p, data, &seen, moved)
 }
 
 /// The body pose dead reckoning starts from: the measured start seen through

@@ -154,37 +154,119 @@ pub fn start_from_landmarks(
     run: &Run,
     guess: [f64; 3],
 ) -> Option<([f64; 3], Vec<f64>)> {
+    let seen = run.start_observations()?;
+    let at_rest: Vec<(&LandmarkObs, [f64; 3], &[f64])> = seen
+        .iter()
+        .map(|o| (*o, [0.0; 3], run.u.first().unwrap_or(&[])))
+        .collect();
+    solve_start(r, p, &at_rest, guess)
+}
+
+/// Longest stretch at a run's start whose odometry places a moving robot's
+/// first sightings: a few seconds of drift are centimetres.
+const MOVING_START_S: f64 = 20.0;
+/// Sightings that fix a moving robot's start (of two landmarks at least).
+const MOVING_START_SIGHTINGS: usize = 4;
+
+/// The first sightings of a robot that moves from its first row and sees no
+/// two landmarks at once there (a velocity-commanded robot's log without
+/// motion capture): up to [`MOVING_START_SIGHTINGS`] of two landmarks or more
+/// within [`MOVING_START_S`]. None when it sees fewer.
+pub fn first_sightings(run: &Run) -> Option<Vec<&LandmarkObs>> {
+    let t_end = run.t[0] + MOVING_START_S;
+    let mut seen: Vec<&LandmarkObs> = Vec::new();
+    let mut ids: Vec<&str> = Vec::new();
+    for o in run
+        .landmarks
+        .iter()
+        .filter(|o| o.t >= run.t[0] && o.t <= t_end)
+    {
+        seen.push(o);
+        if !ids.contains(&o.id.as_str()) {
+            ids.push(&o.id);
+        }
+        if ids.len() >= 2 && seen.len() >= MOVING_START_SIGHTINGS {
+            return Some(seen);
+        }
+    }
+    None
+}
+
+/// The start pose from sightings `seen` of a robot that moved between them:
+/// `moved(o)`, its pose at sighting `o` in the start's frame (the model's
+/// odometry from the start), places each; then [`solve_start`] as at rest.
+/// The derivative in the parameters leaves out the odometry's (over seconds
+/// it moves the start by a fraction of what the observation's parameters do).
+pub fn start_from_moving_sightings(
+    r: &Runner,
+    p: &[f64],
+    run: &Run,
+    seen: &[&LandmarkObs],
+    moved: impl Fn(&LandmarkObs) -> [f64; 3],
+) -> Option<([f64; 3], Vec<f64>)> {
+    let guess = crate::run::pose_from_sightings(seen, &moved)?;
+    let placed: Vec<(&LandmarkObs, [f64; 3], &[f64])> = seen
+        .iter()
+        .map(|o| {
+            let j = run.locate(o.t).0.min(run.steps() - 1);
+            (*o, moved(o), &run.u[j])
+        })
+        .collect();
+    solve_start(r, p, &placed, guess)
+}
+
+/// The pose `s` from which sightings, each seen from `s` moved by its
+/// relative pose (and with its inputs), fit the model's `landmark`
+/// observation best: Gauss-Newton from `guess`, with d s / d p by the
+/// implicit function theorem (see [`start_from_landmarks`]).
+fn solve_start(
+    r: &Runner,
+    p: &[f64],
+    seen: &[(&LandmarkObs, [f64; 3], &[f64])],
+    guess: [f64; 3],
+) -> Option<([f64; 3], Vec<f64>)> {
     use nalgebra::{DMatrix, Matrix3, Vector3};
     let h = r.ir.observation_kernels(RangeBearing).map(|o| o.value)?;
     let hx = r.ir.observation_kernels(RangeBearing).map(|o| o.jac_x)?;
     let hp =
         r.ir.observation_kernels(RangeBearing)
             .and_then(|o| o.jac_p)?;
-    let seen = run.start_observations()?;
     let sigma = sigma(r);
     let w = [1.0 / (sigma[0] * sigma[0]), 1.0 / (sigma[1] * sigma[1])];
-    let u = run.u.first()?;
     let np = p.len();
     let mut x = guess;
-    // normal equations of the weighted observations at x: (Hx' W Hx, Hx' W r, Hx' W Hp)
+    // normal equations of the weighted observations at x: (J' W J, J' W r, J' W Hp),
+    // J = Hx G with G = d(x moved by m)/dx
     let normal = |x: &[f64; 3], with_p: bool| {
         let (mut a, mut b) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
         let mut c = DMatrix::zeros(3, if with_p { np } else { 0 });
-        for o in &seen {
+        let (s, co) = x[2].sin_cos();
+        for (o, m, u) in seen {
+            let at = [
+                x[0] + co * m[0] - s * m[1],
+                x[1] + s * m[0] + co * m[1],
+                x[2] + m[2],
+            ];
             let lm = [o.xl, o.yl];
-            let pred = r.eval(h, &Runner::obs_args(h, x, u, p, &lm));
+            let pred = r.eval(h, &Runner::obs_args(h, &at, u, p, &lm));
             let res = [o.range - pred[0], wrap(o.bearing - pred[1])];
-            let jx = r.eval(hx, &Runner::obs_args(hx, x, u, p, &lm));
-            let jp = with_p.then(|| r.eval(hp, &Runner::obs_args(hp, x, u, p, &lm)));
+            let jx = r.eval(hx, &Runner::obs_args(hx, &at, u, p, &lm));
+            let (dx_dth, dy_dth) = (-s * m[0] - co * m[1], co * m[0] - s * m[1]);
+            let j = |k: usize, i: usize| match i {
+                0 => jx[k * 3],
+                1 => jx[k * 3 + 1],
+                _ => jx[k * 3] * dx_dth + jx[k * 3 + 1] * dy_dth + jx[k * 3 + 2],
+            };
+            let jp = with_p.then(|| r.eval(hp, &Runner::obs_args(hp, &at, u, p, &lm)));
             for k in 0..2 {
                 for i in 0..3 {
-                    b[i] += jx[k * 3 + i] * w[k] * res[k];
-                    for j in 0..3 {
-                        a[(i, j)] += jx[k * 3 + i] * w[k] * jx[k * 3 + j];
+                    b[i] += j(k, i) * w[k] * res[k];
+                    for jj in 0..3 {
+                        a[(i, jj)] += j(k, i) * w[k] * j(k, jj);
                     }
                     if let Some(jp) = &jp {
-                        for j in 0..np {
-                            c[(i, j)] += jx[k * 3 + i] * w[k] * jp[k * np + j];
+                        for q in 0..np {
+                            c[(i, q)] += j(k, i) * w[k] * jp[k * np + q];
                         }
                     }
                 }

@@ -356,9 +356,27 @@ impl Run {
 /// log has no ground truth.
 pub fn pose_from_landmarks(obs: &[LandmarkObs], t_until: f64) -> Option<[f64; 3]> {
     let seen = observations_until(obs, t_until)?;
+    pose_from_sightings(&seen, |_| [0.0; 3])
+}
+
+/// [`pose_from_landmarks`] for a robot that moved between its sightings:
+/// `moved(o)` is its pose at sighting `o` in the frame of the pose sought
+/// (odometry from it), so each sighting still places its landmark in that
+/// frame.
+pub fn pose_from_sightings(
+    seen: &[&LandmarkObs],
+    moved: impl Fn(&LandmarkObs) -> [f64; 3],
+) -> Option<[f64; 3]> {
+    if seen.is_empty() {
+        return None;
+    }
     let body: Vec<[f64; 2]> = seen
         .iter()
-        .map(|o| [o.range * o.bearing.cos(), o.range * o.bearing.sin()])
+        .map(|o| {
+            let [mx, my, mth] = moved(o);
+            let (s, c) = (mth + o.bearing).sin_cos();
+            [mx + o.range * c, my + o.range * s]
+        })
         .collect();
     let world: Vec<[f64; 2]> = seen.iter().map(|o| [o.xl, o.yl]).collect();
     let n = seen.len() as f64;
