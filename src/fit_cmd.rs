@@ -488,19 +488,28 @@ fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<
             "  {:<40} {:>8} {:>10} {:>10} {:>12}",
             "run", "role", "RMSE m", "final m", "before m"
         ));
-        for x in &runs {
-            out.say(&format!(
-                "  {:<40} {:>8} {:>10.4} {:>10.4} {:>12.4}",
-                x["path"].as_str().unwrap_or(""),
-                if x["holdout"] == json!(true) {
-                    "held out"
-                } else {
-                    "fitted"
-                },
-                x["rmse"].as_f64().unwrap_or(f64::NAN),
-                x["final_error"].as_f64().unwrap_or(f64::NAN),
-                x["before"]["rmse"].as_f64().unwrap_or(f64::NAN),
-            ));
+        // the fitted runs, then the held-out ones: each run's errors after, and before
+        let say = |runs: &[Run], before: &[Errors], after: &[Errors], role: &str| {
+            for (run, (b, a)) in runs.iter().zip(before.iter().zip(after)) {
+                out.say(&format!(
+                    "  {:<40} {:>8} {:>10.4} {:>10.4} {:>12.4}",
+                    run.path, role, a.rmse, a.final_position_error_m, b.rmse,
+                ));
+            }
+        };
+        say(
+            &prep.runs,
+            &cal.before.per_run,
+            &cal.after.per_run,
+            "fitted",
+        );
+        if let Some(h) = &cal.holdout {
+            say(
+                &prep.holdout,
+                &h.before.per_run,
+                &h.after.per_run,
+                "held out",
+            );
         }
     }
     runs

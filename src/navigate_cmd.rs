@@ -184,11 +184,13 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
                 )
             })
             .collect();
-        for (n, v) in &params {
+        // by name, as the JSON lists them
+        let mut shown = cal.free.clone();
+        shown.sort_by(|a, b| cal.names[*a].cmp(&cal.names[*b]));
+        for i in shown {
             out.say(&format!(
-                "      {n:<14} {:.6} (true {:.6})",
-                v["estimate"].as_f64().unwrap_or(0.0),
-                v["true"].as_f64().unwrap_or(0.0)
+                "      {:<14} {:.6} (true {:.6})",
+                cal.names[i], cal.p[i], truth.p[i]
             ));
         }
         calibration = Some(json!({"method": m, "note": note, "parameters": params}));

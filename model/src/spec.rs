@@ -641,7 +641,13 @@ fn parse_params(cx: &Ctx, raw: &[RawParam]) -> Result<Vec<Param>, SourceError> {
                 nominal,
                 unit: p.unit.clone(),
                 doc: p.doc.clone(),
-                min: p.min,
+                // a time constant is 0 or more even where the spec gives no
+                // bound: --set and the fit refuse a negative one
+                min: if p.input_lag {
+                    Some(p.min.unwrap_or(0.0))
+                } else {
+                    p.min
+                },
                 max: p.max,
                 free: p.free && !p.constant,
                 constant: p.constant,
