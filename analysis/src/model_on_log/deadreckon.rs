@@ -1,6 +1,7 @@
 //! Dead reckoning with the exact step, optionally with the sensitivities
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
 use crate::interp::{chain, lerp3};
+use crate::landmarks::PlacedStart;
 use crate::model::Runner;
 use crate::run::{LandmarkObs, Run};
 use kinegen_model::decl::ObservationRole::{Pose, YawRate};
@@ -99,12 +100,7 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
 /// robot that moves from its first row, where its first sightings and its
 /// odometry between them place it
 /// ([`crate::landmarks::start_from_moving_sightings`]).
-fn landmark_start(
-    r: &Runner,
-    p: &[f64],
-    data: &Run,
-    guess: [f64; 3],
-) -> Option<([f64; 3], Vec<f64>)> {
+fn landmark_start(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<PlacedStart> {
     if data.gt.is_some() || data.landmarks.is_empty() {
         return None;
     }
@@ -114,7 +110,7 @@ fn landmark_start(
 /// [`crate::landmarks::start_from_moving_sightings`] with the model's
 /// odometry from the start (the origin of its frame) to each of the run's
 /// first sightings, interpolated between rows.
-fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<([f64; 3], Vec<f64>)> {
+fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<PlacedStart> {
     let seen = crate::landmarks::first_sightings(data)?;
     let last = seen.iter().map(|o| o.t).fold(data.t[0], f64::max);
     let rows = data.t.partition_point(|t| *t <= last).min(data.steps());
@@ -138,6 +134,13 @@ pub fn model_start(r: &Runner, p: &[f64], data: &Run) -> [f64; 3] {
     placed_start(r, p, data, data.start_pose(), [0.0; 3]).0
 }
 
+/// How uncertain [`model_start`] is where landmark sightings placed it (a
+/// log without ground truth): their covariance ([`PlacedStart::cov`]). None
+/// where the start was measured.
+pub fn start_covariance(r: &Runner, p: &[f64], data: &Run) -> Option<[[f64; 3]; 3]> {
+    landmark_start(r, p, data, data.start_pose()).map(|s| s.cov)
+}
+
 /// The body start pose from the `measured` one (see [`model_start`]) plus a
 /// calibration's `offset`, with its derivative with respect to the parameters
 /// (3 x P, row-major).
@@ -149,7 +152,7 @@ pub fn placed_start(
     offset: [f64; 3],
 ) -> ([f64; 3], Vec<f64>) {
     match landmark_start(r, p, data, measured) {
-        Some((x, d)) => ([0, 1, 2].map(|i| x[i] + offset[i]), d),
+        Some(s) => ([0, 1, 2].map(|i| s.pose[i] + offset[i]), s.d_dp),
         None => {
             let u0 = data.u.first().map(<[f64]>::to_vec).unwrap_or_default();
             body_start(r, p, [0, 1, 2].map(|i| measured[i] + offset[i]), &u0)

@@ -141,6 +141,18 @@ pub fn from_detections(
     Ok(out)
 }
 
+/// A start pose placed by landmark sightings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlacedStart {
+    pub pose: [f64; 3],
+    /// d pose / d parameters, 3 x P row-major.
+    pub d_dp: Vec<f64>,
+    /// The pose's covariance: the inverse information of the sightings,
+    /// scaled up by their residuals where those exceed the spec's sigmas
+    /// (chi-square per degree of freedom over 1).
+    pub cov: [[f64; 3]; 3],
+}
+
 /// The start pose that explains the range-bearing observations of the start
 /// window through the model's own `landmark` observation (a sensor mounted off
 /// the body origin included), by Gauss-Newton from `guess` (the closed-form
@@ -153,7 +165,7 @@ pub fn start_from_landmarks(
     p: &[f64],
     run: &Run,
     guess: [f64; 3],
-) -> Option<([f64; 3], Vec<f64>)> {
+) -> Option<PlacedStart> {
     let seen = run.start_observations()?;
     let at_rest: Vec<(&LandmarkObs, [f64; 3], &[f64])> = seen
         .iter()
@@ -203,7 +215,7 @@ pub fn start_from_moving_sightings(
     run: &Run,
     seen: &[&LandmarkObs],
     moved: impl Fn(&LandmarkObs) -> [f64; 3],
-) -> Option<([f64; 3], Vec<f64>)> {
+) -> Option<PlacedStart> {
     let guess = crate::run::pose_from_sightings(seen, &moved)?;
     let placed: Vec<(&LandmarkObs, [f64; 3], &[f64])> = seen
         .iter()
@@ -224,7 +236,7 @@ fn solve_start(
     p: &[f64],
     seen: &[(&LandmarkObs, [f64; 3], &[f64])],
     guess: [f64; 3],
-) -> Option<([f64; 3], Vec<f64>)> {
+) -> Option<PlacedStart> {
     use nalgebra::{DMatrix, Matrix3, Vector3};
     let h = r.ir.observation_kernels(RangeBearing).map(|o| o.value)?;
     let hx = r.ir.observation_kernels(RangeBearing).map(|o| o.jac_x)?;
@@ -235,10 +247,11 @@ fn solve_start(
     let w = [1.0 / (sigma[0] * sigma[0]), 1.0 / (sigma[1] * sigma[1])];
     let np = p.len();
     let mut x = guess;
-    // normal equations of the weighted observations at x: (J' W J, J' W r, J' W Hp),
-    // J = Hx G with G = d(x moved by m)/dx
+    // normal equations of the weighted observations at x: (J' W J, J' W r, J' W Hp,
+    // r' W r), J = Hx G with G = d(x moved by m)/dx
     let normal = |x: &[f64; 3], with_p: bool| {
         let (mut a, mut b) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+        let mut chi2 = 0.0;
         let mut c = DMatrix::zeros(3, if with_p { np } else { 0 });
         let (s, co) = x[2].sin_cos();
         for (o, m, u) in seen {
@@ -258,6 +271,7 @@ fn solve_start(
                 _ => jx[k * 3] * dx_dth + jx[k * 3 + 1] * dy_dth + jx[k * 3 + 2],
             };
             let jp = with_p.then(|| r.eval(hp, &Runner::obs_args(hp, &at, u, p, &lm)));
+            chi2 += w[0] * res[0] * res[0] + w[1] * res[1] * res[1];
             for k in 0..2 {
                 for i in 0..3 {
                     b[i] += j(k, i) * w[k] * res[k];
@@ -272,10 +286,10 @@ fn solve_start(
                 }
             }
         }
-        (a, b, c)
+        (a, b, c, chi2)
     };
     for _ in 0..20 {
-        let (a, b, _) = normal(&x, false);
+        let (a, b, _, _) = normal(&x, false);
         let step: Vector3<f64> = a.try_inverse()? * b;
         if !step.iter().all(|v| v.is_finite()) {
             return None;
@@ -287,14 +301,21 @@ fn solve_start(
             break;
         }
     }
-    let (a, _, c) = normal(&x, true);
-    let d = -(a.try_inverse()? * c);
+    let (a, _, c, chi2) = normal(&x, true);
+    let a_inv = a.try_inverse()?;
+    let d = -(a_inv * c);
     // row-major 3 x P, as body_start gives it
-    let d: Vec<f64> = (0..3)
+    let d_dp: Vec<f64> = (0..3)
         .flat_map(|i| (0..np).map(move |j| (i, j)))
         .map(|(i, j)| d[(i, j)])
         .collect();
-    Some((x, d))
+    let dof = (2 * seen.len()).saturating_sub(3).max(1) as f64;
+    let cov = a_inv * (chi2 / dof).max(1.0);
+    Some(PlacedStart {
+        pose: x,
+        d_dp,
+        cov: [0, 1, 2].map(|i| [0, 1, 2].map(|j| cov[(i, j)])),
+    })
 }
 
 /// Range and bearing noise of the model's `landmark` observation (or the
