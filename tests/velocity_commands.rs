@@ -822,6 +822,49 @@ fn a_command_lag_is_named_and_calibrated() {
     );
 }
 
+/// (t, x, y) of a simulated or MRCLAM log's ground truth, from its text.
+fn ground_truth(log: &str) -> Vec<[f64; 3]> {
+    log.lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            [v[0], v[3], v[4]]
+        })
+        .collect()
+}
+
+/// A localize `--track` CSV's rows (t, x, y, theta, var_x, cov_xy, var_y,
+/// var_theta) and each row's position error against `truth`, interpolated.
+fn track_errors(track: &Path, truth: &[[f64; 3]]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let at = |t: f64| {
+        let k = truth
+            .partition_point(|r| r[0] <= t)
+            .clamp(1, truth.len() - 1);
+        let (a, b) = (truth[k - 1], truth[k]);
+        let w = (t - a[0]) / (b[0] - a[0]);
+        [a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])]
+    };
+    let rows: Vec<Vec<f64>> = std::fs::read_to_string(track)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(1).map(|x| x.parse().unwrap()).collect())
+        .collect();
+    let errors = rows
+        .iter()
+        .map(|v| {
+            let g = at(v[0]);
+            (v[1] - g[0]).hypot(v[2] - g[1])
+        })
+        .collect();
+    (rows, errors)
+}
+
+/// Root mean square of `errors`.
+fn rms(errors: &[f64]) -> f64 {
+    (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
+}
+
 /// Issue #34: a robot without motion capture that moves from its first row
 /// and sights one landmark at a time (a velocity-commanded robot's log as it
 /// comes): localize places its start where its first sightings and its
@@ -856,14 +899,7 @@ fn a_moving_start_without_ground_truth_is_placed_by_the_first_sightings() {
         ],
     );
     let full = std::fs::read_to_string(&log).unwrap();
-    let truth: Vec<[f64; 3]> = full
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-            [v[0], v[3], v[4]]
-        })
-        .collect();
+    let truth = ground_truth(&full);
     let cut = tmp.path().join("cut.csv");
     let mut rows = vec!["t,v,omega".to_string()];
     for l in full.lines().skip(1) {
@@ -913,31 +949,9 @@ fn a_moving_start_without_ground_truth_is_placed_by_the_first_sightings() {
         track.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let at = |t: f64| {
-        let k = truth
-            .partition_point(|r| r[0] <= t)
-            .clamp(1, truth.len() - 1);
-        let (a, b) = (truth[k - 1], truth[k]);
-        let w = (t - a[0]) / (b[0] - a[0]);
-        [a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])]
-    };
-    let errors: Vec<f64> = std::fs::read_to_string(&track)
-        .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let v: Vec<&str> = l.split(',').collect();
-            let (t, x, y): (f64, f64, f64) = (
-                v[1].parse().unwrap(),
-                v[2].parse().unwrap(),
-                v[3].parse().unwrap(),
-            );
-            let g = at(t);
-            (x - g[0]).hypot(y - g[1])
-        })
-        .collect();
+    let (_, errors) = track_errors(&track, &truth);
     assert!(errors[0] < 0.1, "start {} m from the truth", errors[0]);
-    let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    let rmse = rms(&errors);
     assert!(rmse < 0.05, "{rmse}");
 }
 
@@ -959,14 +973,7 @@ fn real_robots_without_motion_capture_are_started_where_their_sightings_put_them
     for robot in 1..=5 {
         let d = real.join(format!("robot{robot}"));
         let full = std::fs::read_to_string(d.join("log.csv")).unwrap();
-        let truth: Vec<[f64; 3]> = full
-            .lines()
-            .skip(1)
-            .map(|l| {
-                let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-                [v[0], v[3], v[4]]
-            })
-            .collect();
+        let truth = ground_truth(&full);
         let bare: Vec<String> = full
             .lines()
             .map(|l| l.split(',').take(3).collect::<Vec<_>>().join(","))
@@ -988,28 +995,8 @@ fn real_robots_without_motion_capture_are_started_where_their_sightings_put_them
             track.to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
-        let at = |t: f64| {
-            let k = truth
-                .partition_point(|r| r[0] <= t)
-                .clamp(1, truth.len() - 1);
-            let (a, b) = (truth[k - 1], truth[k]);
-            let w = (t - a[0]) / (b[0] - a[0]);
-            [a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])]
-        };
-        let rows: Vec<Vec<f64>> = std::fs::read_to_string(&track)
-            .unwrap()
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').skip(1).map(|x| x.parse().unwrap()).collect())
-            .collect();
-        let errors: Vec<f64> = rows
-            .iter()
-            .map(|v| {
-                let g = at(v[0]);
-                (v[1] - g[0]).hypot(v[2] - g[1])
-            })
-            .collect();
-        let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+        let (rows, errors) = track_errors(&track, &truth);
+        let rmse = rms(&errors);
         // t, x, y, theta, var_x, cov_xy, var_y, var_theta
         let start_sd = (rows[0][4] + rows[0][6]).sqrt();
         eprintln!(

@@ -48,6 +48,13 @@ impl Input {
             Between::Hold
         }
     }
+
+    /// A command: an absolute input that holds between rows (a speed or
+    /// turn-rate set point), which an input delay, a response lag and a
+    /// deadband act on.
+    pub fn is_command(&self) -> bool {
+        self.kind == InputKind::Absolute && self.between() == Between::Hold
+    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -388,9 +388,7 @@ pub fn inputs_of(m: &Model, class: InputClass) -> Vec<String> {
             InputClass::Steering => {
                 i.kind == InputKind::Absolute && i.between() == crate::decl::Between::Linear
             }
-            InputClass::Command => {
-                i.kind == InputKind::Absolute && i.between() == crate::decl::Between::Hold
-            }
+            InputClass::Command => i.is_command(),
             InputClass::RightWheel => signs.as_ref().is_some_and(|s| s[*k] > 0),
             InputClass::LeftWheel => signs.as_ref().is_some_and(|s| s[*k] < 0),
         })

@@ -9,8 +9,8 @@
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::steering;
+use kinegen_model::decl::InputKind;
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
-use kinegen_model::decl::{Between, InputKind};
 use kinegen_model::ir::StepForm;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -501,11 +501,7 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
         let cfg = vec![0.0; cfg_idx.len()];
         let last_u = command_at(base, &plan(0.0), &cfg);
         let hold_idx: Vec<usize> = (0..inputs.len())
-            .filter(|&i| {
-                inputs[i].kind == InputKind::Absolute
-                    && inputs[i].between() == Between::Hold
-                    && !cfg_idx.contains(&i)
-            })
+            .filter(|&i| inputs[i].is_command() && !cfg_idx.contains(&i))
             .collect();
         let x = [0.0, 0.0, 0.0];
         Robot {

@@ -16,7 +16,6 @@
 use crate::model::Runner;
 use crate::rows::Rows;
 use crate::run::Run;
-use kinegen_model::decl::{Between, InputKind};
 use std::borrow::Cow;
 
 /// The measurement delay under parameters `p`, s (0 when the spec declares none).
@@ -45,10 +44,7 @@ pub fn input_lag(r: &Runner, p: &[f64]) -> f64 {
 /// between rows).
 fn commands(r: &Runner) -> Vec<usize> {
     (0..r.ir.inputs.len())
-        .filter(|&i| {
-            let inp = &r.ir.inputs[i];
-            inp.kind == InputKind::Absolute && inp.between() == Between::Hold
-        })
+        .filter(|&i| r.ir.inputs[i].is_command())
         .collect()
 }
 
