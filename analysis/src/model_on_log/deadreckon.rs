@@ -5,6 +5,7 @@ use crate::landmarks::PlacedStart;
 use crate::model::Runner;
 use crate::run::{LandmarkObs, Run};
 use kinegen_model::decl::ObservationRole::{Pose, YawRate};
+use std::borrow::Cow;
 
 pub struct Track {
     pub pose: Vec<[f64; 3]>,
@@ -178,10 +179,9 @@ pub fn run_from(
     start_offset: [f64; 3],
     plan: Option<&[u8]>,
 ) -> Track {
-    // the commands as executed (an input delay), and as logged for their
-    // derivative in the delay
-    let logged = data;
-    let executed = crate::timeline::executed(r, p, data);
+    // the commands as executed (an input delay, a lag), with their
+    // derivatives in the timing parameters for the sensitivities
+    let (executed, timing) = crate::timeline::executed_with_rates(r, p, data, with_sens);
     let data: &Run = &executed;
     let (start, dstart) = reckoning_start(r, p, data, start_offset);
     let np = p.len();
@@ -200,16 +200,10 @@ pub fn run_from(
         Sens { cols, data }
     });
     let mut twist = Vec::with_capacity(data.steps());
-    let mut stepper = Stepper::new(r, p, logged, with_sens, plan);
+    let mut stepper = Stepper::with_inputs(r, p, data, Cow::Borrowed(&data.u), with_sens, plan);
     // the sensitivity of the current (sub)step's pose, and the next one's
     let mut cur: Vec<f64> = sens.as_ref().map_or_else(Vec::new, |s| s.data.clone());
     let mut next = vec![0.0; cur.len()];
-    // d(executed inputs)/d q of the timing parameters (input delay, lag)
-    let timing = if with_sens {
-        crate::timeline::executed_rates(r, p, logged)
-    } else {
-        Vec::new()
-    };
     let mut by_timing: Vec<(usize, [f64; 3])> = Vec::with_capacity(timing.len());
     for k in 0..data.steps() {
         let x = *pose.last().unwrap();
@@ -259,7 +253,7 @@ pub fn run_from(
 /// How step k's end pose moves with a timing parameter (the input delay,
 /// the lag): the exact step's directional derivative along `du`, its
 /// executed inputs' derivative in the parameter
-/// ([`crate::timeline::executed_rates`]), by central differences (the fused
+/// ([`crate::timeline::executed_with_rates`]), by central differences (the fused
 /// tape has no input Jacobian; the step is smooth in its inputs, so the
 /// difference is accurate to ~1e-8 of the step). Zero where the executed
 /// commands do not move with it.
@@ -338,7 +332,7 @@ pub(crate) struct Stepper<'a> {
     p: &'a [f64],
     data: &'a Run,
     /// `data`'s inputs as executed ([`crate::timeline::executed`]).
-    u: crate::rows::Rows,
+    u: Cow<'a, crate::rows::Rows>,
     plan: Option<&'a [u8]>,
     f: &'a kinegen_jit::Evaluator,
     out: Vec<f64>,
@@ -354,6 +348,23 @@ impl<'a> Stepper<'a> {
         with_sens: bool,
         plan: Option<&'a [u8]>,
     ) -> Self {
+        // the commands as the robot executed them (an input delay, a lag)
+        let u = match crate::timeline::executed(r, p, data) {
+            Cow::Borrowed(run) => Cow::Borrowed(&run.u),
+            Cow::Owned(run) => Cow::Owned(run.u),
+        };
+        Self::with_inputs(r, p, data, u, with_sens, plan)
+    }
+
+    /// [`Stepper::new`] with `data`'s inputs as executed already computed.
+    pub(crate) fn with_inputs(
+        r: &'a Runner,
+        p: &'a [f64],
+        data: &'a Run,
+        u: Cow<'a, crate::rows::Rows>,
+        with_sens: bool,
+        plan: Option<&'a [u8]>,
+    ) -> Self {
         let f = if with_sens {
             &r.step_linearized
         } else {
@@ -363,11 +374,7 @@ impl<'a> Stepper<'a> {
             r,
             p,
             data,
-            // the commands as the robot executed them (an input delay)
-            u: match crate::timeline::executed(r, p, data) {
-                std::borrow::Cow::Borrowed(run) => run.u.clone(),
-                std::borrow::Cow::Owned(run) => run.u,
-            },
+            u,
             plan,
             f,
             out: vec![0.0; f.rows],

@@ -149,41 +149,40 @@ fn execute(run: &Run, i: usize, delay: f64, lag: f64) -> ExecutedCommand {
 /// step, of the response to the commands logged `input_delay` earlier
 /// (instant without a lag). Without a delay or a lag, the run as it is.
 pub fn executed<'a>(r: &Runner, p: &[f64], run: &'a Run) -> Cow<'a, Run> {
-    let (delay, lag) = (input_delay(r, p), input_lag(r, p));
-    let held = commands(r);
-    if (delay == 0.0 && lag == 0.0) || run.steps() == 0 || held.is_empty() {
-        return Cow::Borrowed(run);
-    }
-    let (steps, width) = (run.steps(), run.u.width());
-    let mut u: Vec<f64> = (0..steps).flat_map(|k| run.u[k].to_vec()).collect();
-    for &i in &held {
-        for (k, m) in execute(run, i, delay, lag).mean.into_iter().enumerate() {
-            u[k * width + i] = m;
-        }
-    }
-    Cow::Owned(Run {
-        u: Rows::from_flat(steps, width, u),
-        ..run.clone()
-    })
+    executed_with_rates(r, p, run, false).0
 }
 
-/// d (executed inputs of each step) / d q for each timing parameter q the
-/// spec declares (the input delay, the lag), with q's index in `p`: zero
-/// for inputs that are not commands. At a delay the cost has a kink where a
-/// command changes; a lag is 0 or more, and its derivative at 0 is the
-/// limit from above.
-pub fn executed_rates(r: &Runner, p: &[f64], run: &Run) -> Vec<(usize, Rows)> {
+/// [`executed`], and with `rates` the derivatives of the executed inputs of
+/// each step, d u / d q, for each timing parameter q the spec declares (the
+/// input delay, the lag), with q's index in `p` (zero for inputs that are
+/// not commands), from the same pass over the commands. At a delay the cost
+/// has a kink where a command changes; a lag is 0 or more, and its
+/// derivative at 0 is the limit from above.
+pub fn executed_with_rates<'a>(
+    r: &Runner,
+    p: &[f64],
+    run: &'a Run,
+    rates: bool,
+) -> (Cow<'a, Run>, Vec<(usize, Rows)>) {
+    let (delay, lag) = (input_delay(r, p), input_lag(r, p));
     let held = commands(r);
     let (steps, width) = (run.steps(), run.u.width());
-    let mut delay_rows = r.input_delay.map(|q| (q, vec![0.0; steps * width]));
-    let mut lag_rows = r.input_lag.map(|q| (q, vec![0.0; steps * width]));
-    if steps == 0 || (delay_rows.is_none() && lag_rows.is_none()) {
-        return Vec::new();
+    let shifted = delay != 0.0 || lag != 0.0;
+    let timed = rates && (r.input_delay.is_some() || r.input_lag.is_some());
+    if steps == 0 || held.is_empty() || !(shifted || timed) {
+        return (Cow::Borrowed(run), Vec::new());
     }
-    let (delay, lag) = (input_delay(r, p), input_lag(r, p));
+    let rows = |q: Option<usize>| q.filter(|_| timed).map(|q| (q, vec![0.0; steps * width]));
+    let (mut delay_rows, mut lag_rows) = (rows(r.input_delay), rows(r.input_lag));
+    // at no delay and no lag the logged commands, exactly (not their means)
+    let mut u: Option<Vec<f64>> =
+        shifted.then(|| (0..steps).flat_map(|k| run.u[k].to_vec()).collect());
     for &i in &held {
         let e = execute(run, i, delay, lag);
         for k in 0..steps {
+            if let Some(u) = u.as_mut() {
+                u[k * width + i] = e.mean[k];
+            }
             if let Some((_, d)) = delay_rows.as_mut() {
                 d[k * width + i] = e.by_delay[k];
             }
@@ -192,11 +191,19 @@ pub fn executed_rates(r: &Runner, p: &[f64], run: &Run) -> Vec<(usize, Rows)> {
             }
         }
     }
-    delay_rows
+    let inputs = match u {
+        Some(u) => Cow::Owned(Run {
+            u: Rows::from_flat(steps, width, u),
+            ..run.clone()
+        }),
+        None => Cow::Borrowed(run),
+    };
+    let rates = delay_rows
         .into_iter()
         .chain(lag_rows)
         .map(|(q, v)| (q, Rows::from_flat(steps, width, v)))
-        .collect()
+        .collect();
+    (inputs, rates)
 }
 
 #[cfg(test)]
