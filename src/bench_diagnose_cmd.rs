@@ -144,12 +144,7 @@ fn effects_of(spec: &Model) -> Result<Vec<(String, String, f64)>, String> {
         let Some(p) = eff.parameters_for(spec).into_iter().next() else {
             continue;
         };
-        let num = |k: &str| {
-            p.table
-                .get(k)
-                .and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64)))
-        };
-        let bound = [num("min"), num("max")]
+        let bound = [p.min, p.max]
             .into_iter()
             .flatten()
             .map(f64::abs)

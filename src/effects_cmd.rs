@@ -227,7 +227,7 @@ pub fn run_add_effect(
             }
         }
         for (name, v) in &vals {
-            if let Some((lo, hi)) = effect_bounds(eff, name) {
+            if let Some((lo, hi)) = effect_bounds(eff, &model, name) {
                 if !(lo..=hi).contains(v) {
                     return Err(format!(
                         "--value {name}={v}: outside the bounds of `{effect}`'s parameter `{name}` [{lo}, {hi}] ({})",
@@ -237,8 +237,9 @@ pub fn run_add_effect(
             }
         }
         let new = eff
-            .apply(&model, &vals)
-            .map_err(|e| format!("--value: {e}"))?;
+            .with_values(&model, &vals)
+            .map_err(|e| format!("--value: {e}"))?
+            .source;
         // validate before writing; a problem is the combination of the user's
         // spec and the effect: the effect file's line where the message's
         // symbol is, else the user's file
@@ -278,19 +279,19 @@ pub fn run_add_effect(
     }
 }
 
-/// The declared [min, max] of an effect's parameter `name` (either side
-/// open when not declared), if it has one.
-fn effect_bounds(eff: &kinegen_model::effects::Effect, name: &str) -> Option<(f64, f64)> {
+/// The [min, max] of the parameter `name` an effect adds to `model`
+/// (either side open when not declared), if it adds one.
+fn effect_bounds(
+    eff: &kinegen_model::effects::Effect,
+    model: &Model,
+    name: &str,
+) -> Option<(f64, f64)> {
     let p = eff
-        .parameter
-        .iter()
-        .find(|p| p.get("name").and_then(|n| n.as_str()) == Some(name))?;
-    let bound = |k: &str| {
-        p.get(k)
-            .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
-    };
+        .parameters_for(model)
+        .into_iter()
+        .find(|p| p.name == name)?;
     Some((
-        bound("min").unwrap_or(f64::NEG_INFINITY),
-        bound("max").unwrap_or(f64::INFINITY),
+        p.min.unwrap_or(f64::NEG_INFINITY),
+        p.max.unwrap_or(f64::INFINITY),
     ))
 }

@@ -74,7 +74,11 @@ enum Tok {
     Op(char),
 }
 
-fn tokenize(src: &str) -> Result<Vec<(Tok, usize, usize)>, ParseError> {
+/// `holes`: an identifier may hold `{name}` parts (an effect template's
+/// `{vx}`, `{0}`, `deadband_{input}`), which stay in the variable's name.
+fn tokenize(src: &str, holes: bool) -> Result<Vec<(Tok, usize, usize)>, ParseError> {
+    let in_name =
+        |b: u8| b.is_ascii_alphanumeric() || b == b'_' || (holes && (b == b'{' || b == b'}'));
     let bytes = src.as_bytes();
     let mut out = Vec::new();
     let mut i = 0;
@@ -118,9 +122,9 @@ fn tokenize(src: &str) -> Result<Vec<(Tok, usize, usize)>, ParseError> {
                 Ok(_) => {}
             }
             out.push((Tok::Num(text.to_string()), start, i));
-        } else if c.is_ascii_alphabetic() || c == '_' {
+        } else if c.is_ascii_alphabetic() || c == '_' || (holes && c == '{') {
             let start = i;
-            while i < bytes.len() && (bytes[i].is_ascii_alphanumeric() || bytes[i] == b'_') {
+            while i < bytes.len() && in_name(bytes[i]) {
                 i += 1;
             }
             out.push((Tok::Ident(src[start..i].to_string()), start, i));
@@ -289,7 +293,18 @@ impl Parser<'_> {
 /// not finite reals (`0/0`, `sqrt(-1)`, `ln(0)`, `10^400`) and constant exponents
 /// beyond [`MAX_EXPONENT`].
 pub fn parse(src: &str) -> Result<Expr, ParseError> {
-    let toks = tokenize(src)?;
+    parse_with(src, false)
+}
+
+/// Parse an effect template: an expression whose names may hold `{hole}`
+/// parts (see `spec/README.md`, effects), filled by substituting parsed
+/// expressions, never by editing text.
+pub fn parse_template(src: &str) -> Result<Expr, ParseError> {
+    parse_with(src, true)
+}
+
+fn parse_with(src: &str, holes: bool) -> Result<Expr, ParseError> {
+    let toks = tokenize(src, holes)?;
     if toks.len() > MAX_TOKENS {
         return Err(ParseError {
             offset: 0,
@@ -492,9 +507,126 @@ impl Expr {
     }
 }
 
+/// Binding power of a node as a printed operand: how tightly it holds
+/// together (atoms most).
+fn binding(e: &Expr) -> u8 {
+    match &e.kind {
+        ExprKind::Bin(BinOp::Add | BinOp::Sub, ..) => 1,
+        ExprKind::Bin(BinOp::Mul | BinOp::Div, ..) => 3,
+        ExprKind::Neg(_) => 6,
+        ExprKind::Bin(BinOp::Pow, ..) => 8,
+        _ => 10,
+    }
+}
+
+/// The spec language as a person writes it: parentheses only where the
+/// grouping needs them, so `parse(e.to_string())` is `e` again (up to spans).
+/// What a spec file gets when an effect rewrites one of its expressions.
+impl std::fmt::Display for Expr {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let operand = |f: &mut std::fmt::Formatter<'_>, e: &Expr, wrap: bool| {
+            if wrap {
+                write!(f, "({e})")
+            } else {
+                write!(f, "{e}")
+            }
+        };
+        match &self.kind {
+            ExprKind::Num(n) => write!(f, "{n}"),
+            ExprKind::Var(v) => write!(f, "{v}"),
+            // a sign binds looser than `^` and tighter than `*`: -x^2 is -(x^2)
+            ExprKind::Neg(a) => {
+                write!(f, "-")?;
+                operand(f, a, binding(a) < 8)
+            }
+            ExprKind::Bin(op, a, b) => {
+                let (sym, left, right) = match op {
+                    BinOp::Add => (" + ", 1, 2),
+                    BinOp::Sub => (" - ", 1, 2),
+                    BinOp::Mul => ("*", 3, 4),
+                    BinOp::Div => ("/", 3, 4),
+                    BinOp::Pow => ("^", 9, 8), // right associative
+                };
+                // a signed operand is wrapped anywhere but first, so that
+                // `a*-b` and `a - -b` read as what they are
+                let signed = |e: &Expr| matches!(e.kind, ExprKind::Neg(_));
+                operand(f, a, binding(a) < left || (signed(a) && *op == BinOp::Pow))?;
+                write!(f, "{sym}")?;
+                operand(f, b, binding(b) < right || signed(b))
+            }
+            ExprKind::Call(name, args) => {
+                write!(f, "{name}(")?;
+                for (k, a) in args.iter().enumerate() {
+                    if k > 0 {
+                        write!(f, ", ")?;
+                    }
+                    write!(f, "{a}")?;
+                }
+                write!(f, ")")
+            }
+        }
+    }
+}
+
+impl Expr {
+    /// The same tree, wherever it was written: spans are ignored.
+    pub fn same_as(&self, other: &Expr) -> bool {
+        match (&self.kind, &other.kind) {
+            (ExprKind::Num(a), ExprKind::Num(b)) | (ExprKind::Var(a), ExprKind::Var(b)) => a == b,
+            (ExprKind::Neg(a), ExprKind::Neg(b)) => a.same_as(b),
+            (ExprKind::Bin(o, a, b), ExprKind::Bin(p, c, d)) => {
+                o == p && a.same_as(c) && b.same_as(d)
+            }
+            (ExprKind::Call(f, a), ExprKind::Call(g, b)) => {
+                f == g && a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.same_as(y))
+            }
+            _ => false,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Printing keeps the tree: every grouping the parser distinguishes
+    /// survives a round trip, with no more parentheses than it needs.
+    #[test]
+    fn printed_expressions_parse_back_to_the_same_tree() {
+        for (src, printed) in [
+            ("a + b*c^2^3 - -d", "a + b*c^2^3 - (-d)"),
+            ("(a + b)*(c - d)/(e*f)", "(a + b)*(c - d)/(e*f)"),
+            ("a - (b - c) - (d + e)", "a - (b - c) - (d + e)"),
+            ("a/(b/c)/d", "a/(b/c)/d"),
+            ("(a^b)^c + a^b^c", "(a^b)^c + a^b^c"),
+            (
+                "-x^2 + (-x)^2 + -(x*y) + (-x)*y",
+                "-x^2 + (-x)^2 + (-(x*y)) + -x*y",
+            ),
+            ("a*-b + a^-b + --a", "a*(-b) + a^(-b) + (-(-a))"),
+            (
+                "atan2(y - 1, -x)*sin(theta)^2",
+                "atan2(y - 1, -x)*sin(theta)^2",
+            ),
+            ("((r*(wr + wl))/2)", "r*(wr + wl)/2"),
+        ] {
+            let e = parse(src).unwrap();
+            assert_eq!(e.to_string(), printed, "{src}");
+            let back = parse(&e.to_string()).unwrap();
+            assert!(back.same_as(&e), "{src} -> {e} -> {back:?}");
+        }
+        assert!(!parse("a - b - c")
+            .unwrap()
+            .same_as(&parse("a - (b - c)").unwrap()));
+    }
+
+    #[test]
+    fn templates_keep_their_holes_in_names() {
+        let t = parse_template("({vx}) + k*{0} - deadband_{input}").unwrap();
+        let names: Vec<&str> = t.variables().into_iter().map(|v| v.0).collect();
+        assert_eq!(names, ["{vx}", "k", "{0}", "deadband_{input}"]);
+        assert!(parse("{vx} + 1").is_err());
+    }
 
     #[test]
     fn precedence_and_spans() {

@@ -436,6 +436,72 @@ impl Model {
         self.params.iter().filter(|p| !p.constant)
     }
 
+    /// Every name declared once and every expression's symbols declared
+    /// where it may use them: what [`Model::parse`] checks of a spec's
+    /// names, asked of a model built in memory (an effect added to it).
+    /// The message names the symbol in backticks.
+    pub fn check_names(&self) -> Result<(), String> {
+        let mut kinds: HashMap<&str, &str> = STATE.iter().map(|s| (*s, "state")).collect();
+        let declared = self
+            .inputs
+            .iter()
+            .map(|i| (i.name.as_str(), "input"))
+            .chain(self.params.iter().map(|p| (p.name.as_str(), "parameter")))
+            .chain(self.noise.iter().map(|n| (n.name.as_str(), "noise")))
+            .chain(self.defines.iter().map(|d| (d.0.as_str(), "definition")));
+        for (name, kind) in declared {
+            if let Some(first) = kinds.insert(name, kind) {
+                return Err(format!(
+                    "`{name}` is declared twice (a {first} and a {kind})"
+                ));
+            }
+        }
+        let kind = |v: &str| kinds.get(v).copied();
+        let check = |e: &Expr, allowed: &dyn Fn(&str) -> bool| match e
+            .variables()
+            .into_iter()
+            .find(|(v, _)| !(CONSTANTS.contains(v) || allowed(v)))
+        {
+            Some((v, _)) => Err(format!("unknown symbol `{v}`")),
+            None => Ok(()),
+        };
+        let motion = |v: &str| kind(v).is_some_and(|k| k != "state");
+        for d in &self.defines {
+            check(&d.1, &motion)?;
+        }
+        match &self.kinematics {
+            Kinematics::Twist(t) => t.iter().try_for_each(|e| check(e, &motion))?,
+            Kinematics::Constraints(c) => {
+                for e in c.rows.iter().flat_map(|r| r.1.iter()) {
+                    check(e, &|v| {
+                        kind(v).is_some_and(|k| k != "state" && k != "noise")
+                    })?;
+                }
+            }
+        }
+        for o in &self.observations {
+            let allowed = |v: &str| {
+                ["vx", "vy", "omega"].contains(&v)
+                    || (o.landmark && ["xl", "yl"].contains(&v))
+                    || kind(v).is_some_and(|k| k != "noise")
+            };
+            o.exprs.iter().try_for_each(|e| check(e, &allowed))?;
+        }
+        for e in self.inverse.iter().flat_map(|i| i.0.iter()) {
+            let bad = e.variables().into_iter().find(|(v, _)| {
+                !(CONSTANTS.contains(v)
+                    || ["vx", "vy", "omega"].contains(v)
+                    || kind(v) == Some("parameter"))
+            });
+            if let Some((v, _)) = bad {
+                return Err(format!(
+                    "inverse may use vx, vy, omega and parameters only, not `{v}`"
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// A stable fingerprint of the spec text (FNV-1a; not security relevant, only
     /// used to notice that generated code or a cached IR is stale).
     pub fn fingerprint(&self) -> String {
@@ -641,13 +707,7 @@ fn parse_params(cx: &Ctx, raw: &[RawParam]) -> Result<Vec<Param>, SourceError> {
                 nominal,
                 unit: p.unit.clone(),
                 doc: p.doc.clone(),
-                // a time constant is 0 or more even where the spec gives no
-                // bound: --set and the fit refuse a negative one
-                min: if p.input_lag {
-                    Some(p.min.unwrap_or(0.0))
-                } else {
-                    p.min
-                },
+                min: declared_min(p.input_lag, p.min),
                 max: p.max,
                 free: p.free && !p.constant,
                 constant: p.constant,
@@ -658,6 +718,16 @@ fn parse_params(cx: &Ctx, raw: &[RawParam]) -> Result<Vec<Param>, SourceError> {
             })
         })
         .collect()
+}
+
+/// A parameter's lower bound: a time constant is 0 or more even where the
+/// spec gives no bound, so `--set` and the fit refuse a negative one.
+pub(crate) fn declared_min(input_lag: bool, min: Option<f64>) -> Option<f64> {
+    if input_lag {
+        Some(min.unwrap_or(0.0))
+    } else {
+        min
+    }
 }
 
 /// At most one `measurement_delay`, one `input_delay` and one `input_lag`

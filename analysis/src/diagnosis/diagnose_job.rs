@@ -156,14 +156,9 @@ fn spec_changes(spec: &Model, cat: &[Effect], d: &Diagnosis) -> Vec<Option<Strin
                 .iter()
                 .map(|(k, v)| (k.clone(), v.estimate))
                 .collect();
+            let after = eff.with_values(&model, &values).ok()?;
             let change = eff.spec_change(&model, &values).ok();
-            if let Some(m) = eff
-                .apply(&model, &values)
-                .ok()
-                .and_then(|t| Model::parse(&spec.path, &t).ok())
-            {
-                model = m;
-            }
+            model = after;
             change
         })
         .collect()
