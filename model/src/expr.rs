@@ -569,6 +569,38 @@ impl std::fmt::Display for Expr {
 }
 
 impl Expr {
+    /// The same expression without the terms an effect's template leaves
+    /// when it fills a hole with a spec's `0` (`0 + k*vx`) or `1`: `0 + x`,
+    /// `x + 0`, `x - 0`, `1*x`, `x*1` and `x/1` become `x`, so a spec an
+    /// effect rewrote reads as a person would write it. The value is the
+    /// same everywhere.
+    pub fn without_identities(&self) -> Expr {
+        let is =
+            |e: &Expr, v: f64| matches!(&e.kind, ExprKind::Num(n) if n.parse::<f64>() == Ok(v));
+        let kind = match &self.kind {
+            ExprKind::Bin(op, a, b) => {
+                let (a, b) = (a.without_identities(), b.without_identities());
+                match op {
+                    BinOp::Add if is(&a, 0.0) => return b,
+                    BinOp::Add | BinOp::Sub if is(&b, 0.0) => return a,
+                    BinOp::Mul if is(&a, 1.0) => return b,
+                    BinOp::Mul | BinOp::Div if is(&b, 1.0) => return a,
+                    _ => ExprKind::Bin(op.clone(), Box::new(a), Box::new(b)),
+                }
+            }
+            ExprKind::Neg(a) => ExprKind::Neg(Box::new(a.without_identities())),
+            ExprKind::Call(f, args) => ExprKind::Call(
+                f.clone(),
+                args.iter().map(Expr::without_identities).collect(),
+            ),
+            k => k.clone(),
+        };
+        Expr {
+            kind,
+            span: self.span,
+        }
+    }
+
     /// The same tree, wherever it was written: spans are ignored.
     pub fn same_as(&self, other: &Expr) -> bool {
         match (&self.kind, &other.kind) {

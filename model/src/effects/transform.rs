@@ -313,7 +313,7 @@ impl Effect {
                 .map(|i| old[i].clone())
         };
         for (k, tpl) in &self.motion {
-            twist[*k] = tpl.fill(None, &component);
+            twist[*k] = tpl.fill(None, &component).without_identities();
         }
         Ok(())
     }
