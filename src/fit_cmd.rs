@@ -373,14 +373,7 @@ fn run_lm(
         doc["leave_one_out"] = json!(cal.leave_one_out);
     }
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::fit_report(
-            dir,
-            r,
-            &prep.runs,
-            &cal.before.tracks,
-            &cal.after.tracks,
-            &doc,
-        ) {
+        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &cal, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

@@ -369,34 +369,25 @@ pub(crate) fn write(dir: &Path, html: &str) -> Result<(), String> {
     kinegen_model::files::write_atomic(&dir.join("index.html"), html).map_err(|e| e.to_string())
 }
 
-fn worst_marks(doc: &Value, run: &str) -> Vec<(f64, f64)> {
-    doc["worst_segments"]
-        .as_array()
-        .map(|a| {
-            a.iter()
-                .filter(|s| s["run"] == run)
-                .map(|s| {
-                    (
-                        s["t_start"].as_f64().unwrap_or(0.0),
-                        s["t_end"].as_f64().unwrap_or(0.0),
-                    )
-                })
-                .collect()
-        })
-        .unwrap_or_default()
+fn worst_marks(segments: &[kinegen_analysis::metrics::Segment], run: &str) -> Vec<(f64, f64)> {
+    segments
+        .iter()
+        .filter(|s| s.run == run)
+        .map(|s| (s.t_start, s.t_end))
+        .collect()
 }
 
 /// The compare report's table of where the error grows, by regime.
-fn regime_table(doc: &Value) -> String {
+fn regime_table(regimes: &[kinegen_analysis::metrics::RegimeShare]) -> String {
     let mut t = String::from("<h2>Where the error grows</h2><table><tr><th>regime</th><th>time (s)</th><th>distance (m)</th><th>position error share</th><th>heading error share</th></tr>");
-    for g in doc["regimes"].as_array().into_iter().flatten() {
+    for g in regimes {
         t += &format!(
             "<tr><td>{}</td><td>{:.1}</td><td>{:.2}</td><td>{:.1}%</td><td>{:.1}%</td></tr>",
-            esc(g["regime"].as_str().unwrap_or("")),
-            g["time_s"].as_f64().unwrap_or(0.0),
-            g["distance_m"].as_f64().unwrap_or(0.0),
-            100.0 * g["position_share"].as_f64().unwrap_or(0.0),
-            100.0 * g["heading_share"].as_f64().unwrap_or(0.0)
+            esc(&g.regime),
+            g.time_s,
+            g.distance_m,
+            100.0 * g.position_share,
+            100.0 * g.heading_share
         );
     }
     t + "</table>"
@@ -431,17 +422,17 @@ fn innovation_charts(runs: &[Run], innov: &[Vec<Innovation>]) -> Result<Vec<Stri
     Ok(figs)
 }
 
+/// The compare page, from the comparison itself; `doc` is its JSON, shown
+/// on the page as it is.
 pub fn compare_report(
     dir: &Path,
     r: &Runner,
-    runs: &[Run],
-    tracks: &[Recipe<'_>],
-    gyro: &[Option<Recipe<'_>>],
-    innov: &[Vec<Innovation>],
+    cmp: &kinegen_analysis::comparison::Comparison<'_>,
     doc: &Value,
 ) -> Result<(), String> {
-    let mut figs = innovation_charts(runs, innov)?;
-    for ((run, tr), g) in runs.iter().zip(tracks).zip(gyro) {
+    let runs = &cmp.runs;
+    let mut figs = innovation_charts(runs, &cmp.innovations)?;
+    for ((run, tr), g) in runs.iter().zip(&cmp.tracks).zip(&cmp.gyro_tracks) {
         let d = drawn(run, tr);
         let mut series: Vec<Series> = vec![
             ("measured", BLACK, gt_xy(run)),
@@ -466,7 +457,7 @@ pub fn compare_report(
             &[("model (nominal)", RED, d.pos_err)],
             false,
             false,
-            &worst_marks(doc, &run.name),
+            &worst_marks(&cmp.segments, &run.name),
         )?);
         let [a, b, c] = d.scatter;
         figs.push(chart(
@@ -497,15 +488,15 @@ pub fn compare_report(
             &[],
         )?);
     }
-    let t = regime_table(doc);
-    let e = &doc["errors"];
+    let t = regime_table(&cmp.regimes);
+    let e = &cmp.errors;
     let intro = format!(
         "<p>Model <b>{}</b> with nominal parameters against {} run(s): position RMSE <b>{:.4} m</b>, heading RMSE {:.4} rad, final error {:.4} m.</p>",
         esc(&r.ir.name),
         runs.len(),
-        e["rmse"].as_f64().unwrap_or(0.0),
-        e["heading_rmse_rad"].as_f64().unwrap_or(0.0),
-        e["final_position_error_m"].as_f64().unwrap_or(0.0)
+        e.rmse,
+        e.heading_rmse_rad,
+        e.final_position_error_m
     );
     write(
         dir,
@@ -519,33 +510,33 @@ pub fn compare_report(
     )
 }
 
-pub fn param_table(doc: &Value) -> String {
+/// The calibrated parameters: nominal, estimate and standard deviation.
+pub fn param_table(r: &Runner, fit: &kinegen_analysis::fit::FitResult) -> String {
     let mut t = String::from("<h2>Parameters</h2><table><tr><th>parameter</th><th>nominal</th><th>estimate</th><th>std</th></tr>");
-    if let Some(ps) = doc["parameters"].as_object() {
-        for (n, p) in ps {
-            t += &format!(
-                "<tr><td>{}</td><td>{:.6}</td><td>{:.6}</td><td>{}</td></tr>",
-                esc(n),
-                p["nominal"].as_f64().unwrap_or(f64::NAN),
-                p["estimate"].as_f64().unwrap_or(f64::NAN),
-                crate::output::fmt_std(p["std"].as_f64())
-            );
-        }
+    for (k, &i) in fit.free.iter().enumerate() {
+        t += &format!(
+            "<tr><td>{}</td><td>{:.6}</td><td>{:.6}</td><td>{}</td></tr>",
+            esc(&r.names[i]),
+            r.p[i],
+            fit.p[i],
+            crate::output::fmt_std(fit.std.get(k).copied())
+        );
     }
     t += "</table>";
     t
 }
 
+/// The fit page, from the calibration itself; `doc` is its JSON, shown on
+/// the page as it is.
 pub fn fit_report(
     dir: &Path,
     r: &Runner,
     runs: &[Run],
-    before: &[Recipe<'_>],
-    after: &[Recipe<'_>],
+    cal: &kinegen_analysis::fit_job::Calibrated<'_>,
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();
-    for ((run, b), a) in runs.iter().zip(before).zip(after) {
+    for ((run, b), a) in runs.iter().zip(&cal.before.tracks).zip(&cal.after.tracks) {
         let (b, a) = (drawn(run, b), drawn(run, a));
         figs.push(chart(
             &format!("{}: trajectory", run.name),
@@ -586,8 +577,8 @@ pub fn fit_report(
         "<p>Model <b>{}</b> calibrated on {} run(s): position RMSE <b>{:.4} m</b> before, <b>{:.4} m</b> after.</p>",
         esc(&r.ir.name),
         runs.len(),
-        doc["before"]["rmse"].as_f64().unwrap_or(0.0),
-        doc["after"]["rmse"].as_f64().unwrap_or(0.0)
+        cal.before.errors.rmse,
+        cal.after.errors.rmse
     );
     write(
         dir,
@@ -595,7 +586,7 @@ pub fn fit_report(
             &format!("kinegen fit: {}", r.ir.name),
             &intro,
             &figs,
-            &param_table(doc),
+            &param_table(r, &cal.fit),
             doc,
         ),
     )
