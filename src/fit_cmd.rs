@@ -14,7 +14,6 @@ use kinegen_analysis::methods::Settings;
 use kinegen_analysis::metrics::Errors;
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
-use kinegen_analysis::track_rows::Recipe;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -271,19 +270,9 @@ fn run_methods(c: &Common, out: &Out, prep: &Loaded, job: &MethodsJob) -> ExitCo
         "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
-        let per_method: Vec<(String, &[Recipe])> = compared
-            .rows
-            .iter()
-            .map(|m| (m.name.clone(), m.after.tracks.as_slice()))
-            .collect();
-        if let Err(e) = crate::report::methods_report(
-            dir,
-            r,
-            &prep.runs,
-            &compared.before.tracks,
-            &per_method,
-            &doc,
-        ) {
+        if let Err(e) =
+            crate::report::methods_report(dir, r, &prep.runs, &compared, job.truth, &doc)
+        {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

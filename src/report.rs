@@ -745,23 +745,23 @@ pub fn methods_report(
     dir: &Path,
     r: &Runner,
     runs: &[Run],
-    nominal: &[Recipe<'_>],
-    methods: &[(String, &[Recipe<'_>])],
+    compared: &kinegen_analysis::fit_job::MethodsOutcome<'_>,
+    truth: &[(String, f64)],
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();
     for (k, run) in runs.iter().enumerate() {
-        let nominal_drawn = drawn(run, &nominal[k]);
+        let nominal_drawn = drawn(run, &compared.before.tracks[k]);
         let mut traj_series: Vec<Series> = vec![
             ("measured", BLACK, gt_xy(run)),
             ("nominal", RED, nominal_drawn.traj),
         ];
         let mut err_series: Vec<Series> = vec![("nominal", RED, nominal_drawn.pos_err)];
-        for (m, (name, tracks)) in methods.iter().enumerate() {
+        for (m, row) in compared.rows.iter().enumerate() {
             let color = METHOD_COLORS[m % METHOD_COLORS.len()];
-            let d = drawn(run, &tracks[k]);
-            traj_series.push((name.as_str(), color, d.traj));
-            err_series.push((name.as_str(), color, d.pos_err));
+            let d = drawn(run, &row.after.tracks[k]);
+            traj_series.push((row.name.as_str(), color, d.traj));
+            err_series.push((row.name.as_str(), color, d.pos_err));
         }
         figs.push(chart(
             &format!("{}: trajectory", run.name),
@@ -782,65 +782,13 @@ pub fn methods_report(
             &[],
         )?);
     }
-    let ms = doc["methods"].as_object().cloned().unwrap_or_default();
-    let mut t = String::from("<h2>Methods</h2><table><tr><th>method</th><th>position RMSE (m)</th><th>held-out RMSE (m)</th><th>distance to truth left</th><th>notes</th></tr>");
-    let num = |v: &Value, digits: usize| {
-        v.as_f64()
-            .map(|x| format!("{x:.digits$}"))
-            .unwrap_or_else(|| "-".into())
-    };
-    for (name, m) in &ms {
-        t += &format!(
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td style=\"text-align:left;white-space:pre-wrap\">{}</td></tr>",
-            esc(name),
-            num(&m["after"]["rmse"], 4),
-            num(&m["holdout"]["rmse"], 4),
-            m["distance_to_truth"].as_f64().map(|d| format!("{:.1}%", 100.0 * d)).unwrap_or_else(|| "-".into()),
-            esc(m["note"].as_str().unwrap_or(""))
-        );
-    }
-    t += "</table>";
-    if let Some(best) = doc["closest_to_truth"].as_str() {
-        t += &format!(
-            "<p>Closest to the true parameters: <b>{}</b>.</p>",
-            esc(best)
-        );
-    }
-    t += "<h2>Estimates</h2><table><tr><th>parameter</th><th>nominal</th>";
-    let truth = doc["truth"].as_object().cloned().unwrap_or_default();
-    if !truth.is_empty() {
-        t += "<th>truth</th>";
-    }
-    for name in ms.keys() {
-        t += &format!("<th>{}</th>", esc(name));
-    }
-    t += "</tr>";
-    for &i in &r.free {
-        let pname = &r.names[i];
-        t += &format!("<tr><td>{}</td><td>{:.6}</td>", esc(pname), r.p[i]);
-        if !truth.is_empty() {
-            t += &format!(
-                "<td>{}</td>",
-                num(&truth.get(pname).cloned().unwrap_or(Value::Null), 6)
-            );
-        }
-        for m in ms.values() {
-            let p = &m["parameters"][pname];
-            t += &format!(
-                "<td>{} &plusmn; {}</td>",
-                num(&p["estimate"], 6),
-                crate::output::fmt_std(p["std"].as_f64())
-            );
-        }
-        t += "</tr>";
-    }
-    t += "</table>";
+    let t = methods_table(r, compared, truth);
     let intro = format!(
         "<p>Model <b>{}</b>, {} run(s): {} calibration method(s) from the same nominal parameters (position RMSE {:.4} m).</p>",
         esc(&r.ir.name),
         runs.len(),
-        ms.len(),
-        doc["before"]["rmse"].as_f64().unwrap_or(0.0)
+        compared.rows.len(),
+        compared.before.errors.rmse
     );
     write(
         dir,
@@ -852,6 +800,64 @@ pub fn methods_report(
             doc,
         ),
     )
+}
+
+/// The methods' errors, distances to the truth and notes, then their
+/// estimates side by side (with the truth where it is known).
+fn methods_table(
+    r: &Runner,
+    compared: &kinegen_analysis::fit_job::MethodsOutcome<'_>,
+    truth: &[(String, f64)],
+) -> String {
+    let num = |v: Option<f64>, digits: usize| {
+        v.filter(|x| x.is_finite())
+            .map(|x| format!("{x:.digits$}"))
+            .unwrap_or_else(|| "-".into())
+    };
+    let mut t = String::from("<h2>Methods</h2><table><tr><th>method</th><th>position RMSE (m)</th><th>held-out RMSE (m)</th><th>distance to truth left</th><th>notes</th></tr>");
+    for m in &compared.rows {
+        t += &format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td style=\"text-align:left;white-space:pre-wrap\">{}</td></tr>",
+            esc(&m.name),
+            num(Some(m.after.errors.rmse), 4),
+            num(m.holdout.as_ref().map(|h| h.rmse), 4),
+            m.distance_to_truth.map(|d| format!("{:.1}%", 100.0 * d)).unwrap_or_else(|| "-".into()),
+            esc(&m.note)
+        );
+    }
+    t += "</table>";
+    if let Some((_, best)) = &compared.closest {
+        t += &format!(
+            "<p>Closest to the true parameters: <b>{}</b>.</p>",
+            esc(best)
+        );
+    }
+    t += "<h2>Estimates</h2><table><tr><th>parameter</th><th>nominal</th>";
+    if !truth.is_empty() {
+        t += "<th>truth</th>";
+    }
+    for m in &compared.rows {
+        t += &format!("<th>{}</th>", esc(&m.name));
+    }
+    t += "</tr>";
+    for (k, &i) in r.free.iter().enumerate() {
+        let pname = &r.names[i];
+        t += &format!("<tr><td>{}</td><td>{:.6}</td>", esc(pname), r.p[i]);
+        if !truth.is_empty() {
+            let v = truth.iter().find(|(n, _)| n == pname).map(|(_, v)| *v);
+            t += &format!("<td>{}</td>", num(v, 6));
+        }
+        for m in &compared.rows {
+            let c = &m.calibration;
+            t += &format!(
+                "<td>{} &plusmn; {}</td>",
+                num(c.p.get(i).copied(), 6),
+                crate::output::fmt_std(c.std.get(k).copied())
+            );
+        }
+        t += "</tr>";
+    }
+    t + "</table>"
 }
 
 /// `kinegen inverse --report`: the planned path, then per spec each input's
