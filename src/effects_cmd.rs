@@ -11,13 +11,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-/// Apply `--effect NAME=VALUE` / `NAME.PARAM=VALUE` to a spec; returns the new
-/// spec text and the effect parameter values.
+/// Apply `--effect NAME=VALUE` / `NAME.PARAM=VALUE` to a spec; returns the
+/// model with the effects and the effect parameter values.
 pub fn with_effects(
     spec: &Model,
     effects: &[String],
     extra: &[PathBuf],
-) -> Result<(String, Vec<(String, f64)>), String> {
+) -> Result<(Model, Vec<(String, f64)>), String> {
     let cat = catalogue(extra).map_err(|e| e.to_string())?;
     let mut model = spec.clone();
     let mut values = Vec::new();
@@ -53,7 +53,7 @@ pub fn with_effects(
             .map_err(|why| format!("--effect {e}: on {}, `{name}` {why}", spec.path.display()))?;
         values.push((param, v));
     }
-    Ok((model.source, values))
+    Ok((model, values))
 }
 
 #[derive(clap::Args, Debug)]
@@ -108,11 +108,15 @@ pub fn base_and_truth(
 ) -> Result<(Runner, Runner), String> {
     let spec = Model::load(spec_path).map_err(|e| e.to_string())?;
     let base = Runner::new(ir_source::load(spec_path)?, sets).map_err(|e| e.to_string())?;
-    let (truth_text, values) = with_effects(&spec, effects, dirs)?;
+    let (truth, values) = with_effects(&spec, effects, dirs)?;
     let truth_ir = if effects.is_empty() {
         base.ir.clone()
     } else {
-        ir_source::load(&ir_source::materialise(&truth_text, &base.ir.name)?)?
+        use kinegen_analysis::derivation::Deriver;
+        let label = format!("{} with {} added", spec_path.display(), effects.join(", "));
+        ir_source::ChildDeriver
+            .derive(&truth, &label)
+            .map_err(|e| e.to_string())?
     };
     let mut all = sets.to_vec();
     all.extend(values);

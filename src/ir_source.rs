@@ -94,19 +94,39 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
         // symbolica's banner is drained here rather than sent to /dev/null,
         // which is a plain file on some containers and would keep it.
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        // what the child says is ours to say: its error becomes this
+        // derivation's (the caller names the spec it came from, not a file
+        // in the cache); symbolica's own log lines (an infinity met while
+        // trying an inverse that does not exist) are not the user's
+        .stderr(Stdio::piped())
         .spawn()
         .map_err(|e| format!("cannot run `kinegen derive`: {e}"))?;
     crate::signals::child_started(child.id());
+    let said = child.stderr.take().map(|mut e| {
+        std::thread::spawn(move || {
+            let mut text = String::new();
+            // an error here only means the child closed its stderr early
+            let _ = std::io::Read::read_to_string(&mut e, &mut text);
+            text
+        })
+    });
     if let Some(mut banner) = child.stdout.take() {
         // an error here only means the child closed its stdout early
         let _ = std::io::copy(&mut banner, &mut std::io::sink());
     }
     let status = child.wait();
     crate::signals::child_finished(child.id());
+    let said = said.and_then(|t| t.join().ok()).unwrap_or_default();
     let status = status.map_err(|e| format!("`kinegen derive` did not finish: {e}"))?;
     if !status.success() {
-        return Err(format!("{}: derivation failed", spec.display()));
+        let why = said
+            .find("error: ")
+            .map_or("", |at| said[at + "error: ".len()..].trim());
+        return Err(if why.is_empty() {
+            format!("{}: derivation failed", spec.display())
+        } else {
+            why.to_string()
+        });
     }
     let text =
         std::fs::read_to_string(&cached).map_err(|e| format!("{}: {e}", cached.display()))?;

@@ -933,6 +933,11 @@ pub enum NoInverse {
         /// The inputs the inverse would give.
         inputs: Vec<String>,
     },
+    #[error("cannot derive inverse kinematics: with {} added, the twist rows linear in the input rates are dependent (det = 0); declare an [inverse] section giving each input from vx, vy and omega (spec/README.md)", effects.join(", "))]
+    SingularWithEffects {
+        /// The spec's effects.
+        effects: Vec<String>,
+    },
 }
 
 /// An inverse found: the inputs it gives (expressions of the twist), their
@@ -1159,6 +1164,15 @@ impl<'a> InverseCx<'a> {
                 // the derivation cannot choose
                 return Ok(Err(NoInverse::Singular {
                     inputs: self.rates.iter().map(|i| i.name.clone()).collect(),
+                }));
+            }
+            if any_square && !model.effects.is_empty() {
+                // the effects made it so (a toe angle that turns the speed
+                // into vx and vy alike, with a turn rate no longer linear):
+                // the spec as written inverted, and diagnosis, fit and
+                // localize never use the inverse
+                return Ok(Err(NoInverse::SingularWithEffects {
+                    effects: model.effects.clone(),
                 }));
             }
             if any_square {
