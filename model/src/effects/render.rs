@@ -206,6 +206,8 @@ fn write_observations(
             t.insert("columns", value(obs.columns.iter().collect::<Array>()));
             t.insert("angle", value(obs.angle.iter().copied().collect::<Array>()));
             t.insert("expr", value(exprs));
+            // patched expressions need not show the role: declare it
+            t.insert("role", value(role_key(obs.role)));
             arr.push(t);
             continue;
         };
