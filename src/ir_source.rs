@@ -119,13 +119,13 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
     let said = said.and_then(|t| t.join().ok()).unwrap_or_default();
     let status = status.map_err(|e| format!("`kinegen derive` did not finish: {e}"))?;
     if !status.success() {
-        let why = said
-            .find("error: ")
-            .map_or("", |at| said[at + "error: ".len()..].trim());
-        return Err(if why.is_empty() {
-            format!("{}: derivation failed", spec.display())
-        } else {
-            why.to_string()
+        // kinegen's own error, else the child's last word (a crash's)
+        return Err(match said.find("error: ") {
+            Some(at) => said[at + "error: ".len()..].trim().to_string(),
+            None => match said.lines().rev().find(|l| !l.trim().is_empty()) {
+                Some(last) => format!("{}: derivation failed: {}", spec.display(), last.trim()),
+                None => format!("{}: derivation failed", spec.display()),
+            },
         });
     }
     let text =

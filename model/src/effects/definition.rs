@@ -18,8 +18,6 @@ use std::path::Path;
 #[derive(Debug, Clone)]
 pub struct Template {
     expr: Expr,
-    /// As written in the effect file (for messages).
-    pub text: String,
 }
 
 impl Template {
@@ -47,10 +45,7 @@ impl Template {
                 ));
             }
         }
-        Ok(Template {
-            expr,
-            text: text.to_string(),
-        })
+        Ok(Template { expr })
     }
 
     /// The expression with every hole filled: `fill(hole)` for a whole-name
