@@ -240,14 +240,14 @@ pub fn run_add_effect(
                 }
             }
         }
-        let new = eff
+        let added = eff
             .with_values(&model, &vals)
-            .map_err(|e| format!("--value: {e}"))?
-            .source;
+            .map_err(|e| format!("--value: {e}"))?;
+        let new = &added.source;
         // validate before writing; a problem is the combination of the user's
         // spec and the effect: the effect file's line where the message's
         // symbol is, else the user's file
-        let checked = Model::parse(spec, &new).map_err(|e| {
+        let checked = Model::parse(spec, new).map_err(|e| {
             let at = eff
                 .locate(&e.message)
                 .map_or(String::new(), |l| format!(" (from {l})"));
@@ -266,12 +266,12 @@ pub fn run_add_effect(
                 p.name, p.nominal, p.min, p.max
             ));
         }
-        kinegen_model::files::write_atomic(out, &new).map_err(|e| e.to_string())?;
+        kinegen_model::files::write_atomic(out, new).map_err(|e| e.to_string())?;
         Ok(format!(
             "added `{effect}` to {} -> {}:\n{}",
             spec.display(),
             out.display(),
-            eff.spec_change(&model, &vals).map_err(|e| e.to_string())?
+            kinegen_model::effects::spec_change(&model, &added)
         ))
     };
     match go() {

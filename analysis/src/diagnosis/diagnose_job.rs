@@ -157,9 +157,9 @@ fn spec_changes(spec: &Model, cat: &[Effect], d: &Diagnosis) -> Vec<Option<Strin
                 .map(|(k, v)| (k.clone(), v.estimate))
                 .collect();
             let after = eff.with_values(&model, &values).ok()?;
-            let change = eff.spec_change(&model, &values).ok();
+            let change = crate::effects::spec_change(&model, &after);
             model = after;
-            change
+            Some(change)
         })
         .collect()
 }

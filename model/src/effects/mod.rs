@@ -30,7 +30,6 @@ pub use definition::{Bounds, Effect, InputPatch, ObservationPatch, ParamTemplate
 
 use crate::spec::{Model, ObservationRole};
 use definition::parse_effect;
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The bundled catalogue, compiled in so every command works from any directory.
@@ -213,17 +212,10 @@ pub fn catalogue(extra: &[PathBuf]) -> Result<Vec<Effect>, EffectError> {
     Ok(out)
 }
 
-impl Effect {
-    /// What adding the effect with `values` changes in `m`'s spec text, for
-    /// people: the lines that differ.
-    pub fn spec_change(
-        &self,
-        m: &Model,
-        values: &BTreeMap<String, f64>,
-    ) -> Result<String, ApplyError> {
-        let after = self.with_values(m, values)?;
-        Ok(render::line_change(&m.source, &after.source))
-    }
+/// What adding effects to `before` changed in its spec text, giving
+/// `after` ([`Effect::with_values`]), for people: the lines that differ.
+pub fn spec_change(before: &Model, after: &Model) -> String {
+    render::line_change(&before.source, &after.source)
 }
 
 /// Find an effect by name in a catalogue.

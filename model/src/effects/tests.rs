@@ -3,6 +3,7 @@
 use super::*;
 use crate::expr::Expr;
 use crate::spec::{Kinematics, DEFAULT_POSE_COLUMNS};
+use std::collections::BTreeMap;
 
 /// The compiled-in catalogue is every file of `spec/effects/`, each by
 /// its own name and text: an effect added there and not here (or the
