@@ -13,6 +13,9 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use toml::Spanned;
 
+mod scope;
+pub use scope::{NameKind, Place, Refusal};
+
 /// Names every spec may use without declaring them.
 /// `dt`: step length (s); `xl`, `yl`: landmark position of a landmark observation;
 /// `vx`, `vy`, `omega`: the body twist (only inside observations).
@@ -368,11 +371,6 @@ impl Model {
         check_delays(&cx, &raw.parameter)?;
         let names = Names {
             declared: &declared,
-            noise: raw
-                .noise
-                .iter()
-                .map(|n| n.name.get_ref().as_str())
-                .collect(),
         };
         // Parse definitions, check names, then order them (and reject cycles).
         let def_names: HashSet<&str> = raw
@@ -383,7 +381,7 @@ impl Model {
         let mut parsed_defs = Vec::new();
         for d in &raw.define {
             let e = cx.parse_expr(&d.expr)?;
-            names.check(&cx, &e, &not_state)?;
+            names.check(&cx, &e, Place::Definition)?;
             parsed_defs.push((d, e));
         }
         let defines = order_definitions(&cx, &parsed_defs, &def_names)?;
@@ -393,7 +391,7 @@ impl Model {
             let parsed = parse_observation(&cx, o, &names, &observations)?;
             observations.push(parsed);
         }
-        let inverse = parse_inverse(&cx, &raw)?;
+        let inverse = parse_inverse(&cx, &raw, &names)?;
         Ok(Model {
             path: path.to_path_buf(),
             source: text.to_string(),
@@ -441,14 +439,27 @@ impl Model {
     /// names, asked of a model built in memory (an effect added to it).
     /// The message names the symbol in backticks.
     pub fn check_names(&self) -> Result<(), String> {
-        let mut kinds: HashMap<&str, &str> = STATE.iter().map(|s| (*s, "state")).collect();
+        let mut kinds: HashMap<&str, NameKind> =
+            STATE.iter().map(|s| (*s, NameKind::State)).collect();
         let declared = self
             .inputs
             .iter()
-            .map(|i| (i.name.as_str(), "input"))
-            .chain(self.params.iter().map(|p| (p.name.as_str(), "parameter")))
-            .chain(self.noise.iter().map(|n| (n.name.as_str(), "noise")))
-            .chain(self.defines.iter().map(|d| (d.0.as_str(), "definition")));
+            .map(|i| (i.name.as_str(), NameKind::Input))
+            .chain(
+                self.params
+                    .iter()
+                    .map(|p| (p.name.as_str(), NameKind::Parameter)),
+            )
+            .chain(
+                self.noise
+                    .iter()
+                    .map(|n| (n.name.as_str(), NameKind::Noise)),
+            )
+            .chain(
+                self.defines
+                    .iter()
+                    .map(|d| (d.0.as_str(), NameKind::Definition)),
+            );
         for (name, kind) in declared {
             if let Some(first) = kinds.insert(name, kind) {
                 return Err(format!(
@@ -456,50 +467,34 @@ impl Model {
                 ));
             }
         }
-        let kind = |v: &str| kinds.get(v).copied();
-        let check = |e: &Expr, allowed: &dyn Fn(&str) -> bool| match e
-            .variables()
-            .into_iter()
-            .find(|(v, _)| !(CONSTANTS.contains(v) || allowed(v)))
-        {
-            Some((v, _)) => Err(format!("unknown symbol `{v}`")),
-            None => Ok(()),
+        let check = |e: &Expr, place: Place| {
+            e.variables().into_iter().try_for_each(|(v, _)| {
+                place
+                    .admits(v, kinds.get(v).copied())
+                    .map_err(|why| why.message(v))
+            })
         };
-        let motion = |v: &str| kind(v).is_some_and(|k| k != "state");
         for d in &self.defines {
-            check(&d.1, &motion)?;
+            check(&d.1, Place::Definition)?;
         }
         match &self.kinematics {
-            Kinematics::Twist(t) => t.iter().try_for_each(|e| check(e, &motion))?,
-            Kinematics::Constraints(c) => {
-                for e in c.rows.iter().flat_map(|r| r.1.iter()) {
-                    check(e, &|v| {
-                        kind(v).is_some_and(|k| k != "state" && k != "noise")
-                    })?;
-                }
-            }
+            Kinematics::Twist(t) => t.iter().try_for_each(|e| check(e, Place::Twist))?,
+            Kinematics::Constraints(c) => c
+                .rows
+                .iter()
+                .flat_map(|r| r.1.iter())
+                .try_for_each(|e| check(e, Place::Constraint))?,
         }
         for o in &self.observations {
-            let allowed = |v: &str| {
-                ["vx", "vy", "omega"].contains(&v)
-                    || (o.landmark && ["xl", "yl"].contains(&v))
-                    || kind(v).is_some_and(|k| k != "noise")
+            let place = Place::Observation {
+                landmark: o.landmark,
             };
-            o.exprs.iter().try_for_each(|e| check(e, &allowed))?;
+            o.exprs.iter().try_for_each(|e| check(e, place))?;
         }
-        for e in self.inverse.iter().flat_map(|i| i.0.iter()) {
-            let bad = e.variables().into_iter().find(|(v, _)| {
-                !(CONSTANTS.contains(v)
-                    || ["vx", "vy", "omega"].contains(v)
-                    || kind(v) == Some("parameter"))
-            });
-            if let Some((v, _)) = bad {
-                return Err(format!(
-                    "inverse may use vx, vy, omega and parameters only, not `{v}`"
-                ));
-            }
-        }
-        Ok(())
+        self.inverse
+            .iter()
+            .flat_map(|i| i.0.iter())
+            .try_for_each(|e| check(e, Place::Inverse))
     }
 
     /// A stable fingerprint of the spec text (FNV-1a; not security relevant, only
@@ -520,12 +515,7 @@ pub fn fingerprint(text: &str) -> String {
 }
 
 /// Every declared name: where it was declared (a byte offset) and what it is.
-type Declared = HashMap<String, (usize, &'static str)>;
-
-/// A name not a state, for the expressions that may not read the pose.
-fn not_state(v: &str) -> bool {
-    !STATE.contains(&v)
-}
+type Declared = HashMap<String, (usize, NameKind)>;
 
 /// The spec's state and model name.
 fn check_header(cx: &Ctx, raw: &RawSpec) -> Result<(), SourceError> {
@@ -555,7 +545,7 @@ fn declare(
     cx: &Ctx,
     declared: &mut Declared,
     name: &Spanned<String>,
-    what: &'static str,
+    what: NameKind,
 ) -> Result<(), SourceError> {
     let n = name.get_ref();
     if !is_identifier(n) {
@@ -585,20 +575,20 @@ fn declare(
 fn declare_names(cx: &Ctx, raw: &RawSpec) -> Result<Declared, SourceError> {
     let mut declared = Declared::new();
     for s in STATE {
-        declared.insert(s.to_string(), (raw.state.span().start, "state"));
+        declared.insert(s.to_string(), (raw.state.span().start, NameKind::State));
     }
     for i in &raw.input {
-        declare(cx, &mut declared, &i.name, "input")?;
+        declare(cx, &mut declared, &i.name, NameKind::Input)?;
         i.check(cx)?;
     }
     for p in &raw.parameter {
-        declare(cx, &mut declared, &p.name, "parameter")?;
+        declare(cx, &mut declared, &p.name, NameKind::Parameter)?;
     }
     for n in &raw.noise {
-        declare(cx, &mut declared, &n.name, "noise")?;
+        declare(cx, &mut declared, &n.name, NameKind::Noise)?;
     }
     for d in &raw.define {
-        declare(cx, &mut declared, &d.name, "definition")?;
+        declare(cx, &mut declared, &d.name, NameKind::Definition)?;
     }
     Ok(declared)
 }
@@ -798,27 +788,31 @@ fn check_delays(cx: &Ctx, raw: &[RawParam]) -> Result<(), SourceError> {
     Ok(())
 }
 
-/// What an expression may name: the declared names, and which are noise.
+/// What an expression may name: the declared names and what each is.
 struct Names<'a> {
     declared: &'a Declared,
-    noise: HashSet<&'a str>,
 }
 
 impl Names<'_> {
-    /// Every symbol of `e` a constant or a declared name that `allow` lets it use.
-    fn check(&self, cx: &Ctx, e: &Expr, allow: &dyn Fn(&str) -> bool) -> Result<(), SourceError> {
+    /// Every symbol of `e` one that `place` may read ([`scope`]), or an
+    /// error at the first that is not.
+    fn check(&self, cx: &Ctx, e: &Expr, place: Place) -> Result<(), SourceError> {
         for (v, span) in e.variables() {
-            if CONSTANTS.contains(&v) || self.declared.contains_key(v) && allow(v) {
-                continue;
-            }
-            let why = if self.declared.contains_key(v) || RESERVED.contains(&v) {
-                format!("`{v}` cannot be used here")
-            } else {
-                format!("unknown symbol `{v}`")
-            };
-            return Err(cx.err_at(span.0, why));
+            let kind = self.declared.get(v).map(|d| d.1);
+            place
+                .admits(v, kind)
+                .map_err(|why| cx.err_at(span.0, why.message(v)))?;
         }
         Ok(())
+    }
+
+    /// The noise inputs' names.
+    fn noise(&self) -> HashSet<&str> {
+        self.declared
+            .iter()
+            .filter(|(_, d)| d.1 == NameKind::Noise)
+            .map(|(n, _)| n.as_str())
+            .collect()
     }
 }
 
@@ -834,7 +828,7 @@ fn parse_kinematics(
             let mo = m.get_ref();
             let twist_exprs = [&mo.vx, &mo.vy, &mo.omega].map(|s| {
                 cx.parse_expr(s)
-                    .and_then(|e| names.check(cx, &e, &not_state).map(|_| e))
+                    .and_then(|e| names.check(cx, &e, Place::Twist).map(|_| e))
             });
             let [vx, vy, omega] = twist_exprs;
             Ok((
@@ -844,8 +838,8 @@ fn parse_kinematics(
             ))
         }
         (None, Some(c)) => {
-            let k = parse_constraints(cx, c, &raw.input, &names.noise, &|e: &Expr| {
-                names.check(cx, e, &|v: &str| not_state(v) && !names.noise.contains(v))
+            let k = parse_constraints(cx, c, &raw.input, &names.noise(), &|e: &Expr| {
+                names.check(cx, e, Place::Constraint)
             })?;
             let at = c.row.first().map_or(0, |r| r.rate.span().start);
             Ok((Kinematics::Constraints(k), at, c.doc.clone()))
@@ -935,9 +929,7 @@ fn parse_observation(
     })
 }
 
-/// One expression of an observation: it may read the twist, the state, the
-/// parameters, the inputs and definitions, and a landmark's xl, yl when it
-/// has one; not the noise.
+/// One expression of an observation ([`Place::Observation`]).
 fn observation_expr(
     cx: &Ctx,
     s: &Spanned<String>,
@@ -945,20 +937,7 @@ fn observation_expr(
     names: &Names,
 ) -> Result<Expr, SourceError> {
     let e = cx.parse_expr(s)?;
-    for (v, span) in e.variables() {
-        let ok = CONSTANTS.contains(&v)
-            || ["vx", "vy", "omega"].contains(&v)
-            || (["xl", "yl"].contains(&v) && landmark)
-            || names.declared.contains_key(v) && !names.noise.contains(v);
-        if !ok {
-            let msg = if ["xl", "yl"].contains(&v) {
-                format!("`{v}` needs `landmark = true` on this observation")
-            } else {
-                format!("unknown symbol `{v}`")
-            };
-            return Err(cx.err_at(span.0, msg));
-        }
-    }
+    names.check(cx, &e, Place::Observation { landmark })?;
     Ok(e)
 }
 
@@ -998,7 +977,11 @@ fn check_role(
 
 /// The `[inverse]` section: one expression per input, of the twist and the
 /// parameters only.
-fn parse_inverse(cx: &Ctx, raw: &RawSpec) -> Result<Option<(Vec<Expr>, String)>, SourceError> {
+fn parse_inverse(
+    cx: &Ctx,
+    raw: &RawSpec,
+    names: &Names,
+) -> Result<Option<(Vec<Expr>, String)>, SourceError> {
     let Some(inv) = &raw.inverse else {
         return Ok(None);
     };
@@ -1015,15 +998,7 @@ fn parse_inverse(cx: &Ctx, raw: &RawSpec) -> Result<Option<(Vec<Expr>, String)>,
     let mut es = Vec::new();
     for s in inv.inputs.get_ref() {
         let e = cx.parse_expr(s)?;
-        for (v, span) in e.variables() {
-            let is_param = raw.parameter.iter().any(|p| p.name.get_ref() == v);
-            if !(CONSTANTS.contains(&v) || ["vx", "vy", "omega"].contains(&v) || is_param) {
-                return Err(cx.err_at(
-                    span.0,
-                    format!("inverse may use vx, vy, omega and parameters only, not `{v}`"),
-                ));
-            }
-        }
+        names.check(cx, &e, Place::Inverse)?;
         es.push(e);
     }
     Ok(Some((es, inv.doc.clone())))
@@ -1112,7 +1087,7 @@ fn parse_constraints(
 fn declare_free_name(
     cx: &Ctx,
     name: &Spanned<String>,
-    declared: &HashMap<String, (usize, &'static str)>,
+    declared: &Declared,
 ) -> Result<(), SourceError> {
     if !is_identifier(name.get_ref()) {
         return Err(cx.err_span(name, "observation name must be an identifier"));
