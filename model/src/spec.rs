@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use toml::Spanned;
 
 mod scope;
-pub use scope::{NameKind, Place, Refusal};
+pub use scope::{NameError, NameKind, Place, Refusal};
 
 /// Names every spec may use without declaring them.
 /// `dt`: step length (s); `xl`, `yl`: landmark position of a landmark observation;
@@ -438,7 +438,7 @@ impl Model {
     /// where it may use them: what [`Model::parse`] checks of a spec's
     /// names, asked of a model built in memory (an effect added to it).
     /// The message names the symbol in backticks.
-    pub fn check_names(&self) -> Result<(), String> {
+    pub fn check_names(&self) -> Result<(), NameError> {
         let mut kinds: HashMap<&str, NameKind> =
             STATE.iter().map(|s| (*s, NameKind::State)).collect();
         let declared = self
@@ -462,16 +462,21 @@ impl Model {
             );
         for (name, kind) in declared {
             if let Some(first) = kinds.insert(name, kind) {
-                return Err(format!(
-                    "`{name}` is declared twice (a {first} and a {kind})"
-                ));
+                return Err(NameError::DeclaredTwice {
+                    name: name.to_string(),
+                    first,
+                    then: kind,
+                });
             }
         }
         let check = |e: &Expr, place: Place| {
             e.variables().into_iter().try_for_each(|(v, _)| {
                 place
                     .admits(v, kinds.get(v).copied())
-                    .map_err(|why| why.message(v))
+                    .map_err(|why| NameError::Refused {
+                        name: v.to_string(),
+                        why,
+                    })
             })
         };
         for d in &self.defines {

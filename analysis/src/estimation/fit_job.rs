@@ -139,8 +139,8 @@ fn judge(
     let mut growth = None;
     if after.rmse.is_finite() && after.rmse > 1.001 * before.rmse {
         match judge_growth(l, res, (before.rmse, after.rmse), offsets_before) {
-            Ok(g) => growth = g,
-            Err(u) => unusable.push(u),
+            Judged::Stands(g) => growth = Some(g),
+            Judged::Unusable(u) => unusable.push(u),
         }
     }
     if let Some(Growth::Warning(w)) = &growth {
@@ -197,14 +197,19 @@ fn turning_one_way(runs: &[Run]) -> Option<String> {
 /// figure-of-eight paths 50-85%.
 const ONE_WAY: f64 = 0.9;
 
-/// A whole-run position error that grew from `before` to `after`: explained
-/// (Ok), or the reason the fit is unusable (Err).
+/// A grown whole-run error judged: explained, or why the fit is unusable.
+enum Judged {
+    Stands(Growth),
+    Unusable(String),
+}
+
+/// A whole-run position error that grew from `before` to `after`.
 fn judge_growth(
     l: &Loaded,
     res: &FitResult,
     (before, after): (f64, f64),
     offsets_before: &[[f64; 3]],
-) -> Result<Option<Growth>, String> {
+) -> Judged {
     let r = &l.runner;
     // Long runs are fitted as re-anchored segments (fit::SEGMENT_S): judge the
     // fit on what it minimised; over a whole long run the absolute error is a
@@ -215,17 +220,17 @@ fn judge_growth(
         evaluation_from(r, &res.p, &seg, &res.starts).errors.rmse,
     );
     if seg.len() > l.runs.len() && sa <= 1.001 * sb {
-        return Ok(Some(Growth::Note(format!(
+        return Judged::Stands(Growth::Note(format!(
             "over whole runs the position error grew ({before:.4} m -> {after:.4} m) while over the {:.0} s segments the fit works on it fell ({sb:.4} m -> {sa:.4} m): the remaining long-run drift is noise the parameters cannot remove",
             crate::fit::SEGMENT_S
-        ))));
+        )));
     }
     if after <= 1.05 * before {
         // within 5%: the starting values were already as good as these logs
         // can tell; the fit traded a little whole-track error for its cost
-        return Ok(Some(Growth::Note(format!(
+        return Judged::Stands(Growth::Note(format!(
             "the position error grew slightly ({before:.4} m -> {after:.4} m): the starting values were already about as good as these logs can tell"
-        ))));
+        )));
     }
     let with_prior: Vec<&str> = res
         .free
@@ -235,15 +240,15 @@ fn judge_growth(
         .collect();
     let grew = format!("{before:.4} m -> {after:.4} m");
     if with_prior.is_empty() {
-        return Err(format!(
+        return Judged::Unusable(format!(
             "calibration made the position error worse ({grew})"
         ));
     }
     // a prior may rightly cost some fit: the spec says what is known
-    Ok(Some(Growth::Warning(format!(
+    Judged::Stands(Growth::Warning(format!(
         "the position error grew ({grew}) under the spec's tolerances on {}: the log pulls them further than the tolerances allow; loosen a tolerance if the robot can differ from nominal that much",
         with_prior.join(", ")
-    ))))
+    )))
 }
 
 /// The held-out runs before and after, and why they got worse if they did.

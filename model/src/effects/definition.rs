@@ -12,6 +12,19 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+/// Why an effect's template is refused.
+#[derive(Debug, Clone, thiserror::Error)]
+enum TemplateError {
+    #[error("`{text}`: {why}")]
+    Syntax { text: String, why: String },
+    #[error("`{text}`: `{hole}` is not a hole of this patch (it may use {may})")]
+    NotAHole {
+        text: String,
+        hole: String,
+        may: String,
+    },
+}
+
 /// A parsed expression with holes: variables named `{hole}` stand for
 /// expressions (`{vx}`, `{0}`, `{inverse}`, `{input}`), and `{input}` inside a
 /// longer name (`deadband_{input}`) for the input the patch is applied to.
@@ -21,8 +34,11 @@ pub struct Template {
 }
 
 impl Template {
-    fn parse(text: &str, holes: &[&str]) -> Result<Template, String> {
-        let expr = expr::parse_template(text).map_err(|e| format!("`{text}`: {}", e.message))?;
+    fn parse(text: &str, holes: &[&str]) -> Result<Template, TemplateError> {
+        let expr = expr::parse_template(text).map_err(|e| TemplateError::Syntax {
+            text: text.to_string(),
+            why: e.message,
+        })?;
         for (v, _) in expr.variables() {
             let allowed = match v.strip_prefix('{').and_then(|h| h.strip_suffix('}')) {
                 _ if !v.contains('{') => true,
@@ -35,14 +51,15 @@ impl Template {
             };
             if !allowed {
                 let may = holes.iter().map(|h| format!("{{{h}}}")).collect::<Vec<_>>();
-                return Err(format!(
-                    "`{text}`: `{v}` is not a hole of this patch (it may use {})",
-                    if may.is_empty() {
+                return Err(TemplateError::NotAHole {
+                    text: text.to_string(),
+                    hole: v.to_string(),
+                    may: if may.is_empty() {
                         "none".to_string()
                     } else {
                         may.join(", ")
-                    }
-                ));
+                    },
+                });
             }
         }
         Ok(Template { expr })
@@ -243,7 +260,7 @@ pub(super) fn parse_effect(file: &Path, text: &str) -> Result<Effect, EffectErro
         },
     })?;
     let template = |s: &toml::Spanned<String>, holes: &[&str]| {
-        Template::parse(s.get_ref(), holes).map_err(|m| at(s.span().start, m))
+        Template::parse(s.get_ref(), holes).map_err(|m| at(s.span().start, m.to_string()))
     };
     let mut motion = Vec::new();
     for (k, t) in &raw.motion {
@@ -297,7 +314,7 @@ pub(super) fn parse_effect(file: &Path, text: &str) -> Result<Effect, EffectErro
     for p in raw.parameter {
         let span = p.span();
         let p = p.into_inner();
-        check_parameter(&p).map_err(|m| at(span.start, m))?;
+        check_parameter(&p).map_err(|m| at(span.start, m.to_string()))?;
         parameters.push(p);
     }
     Ok(Effect {
@@ -312,26 +329,28 @@ pub(super) fn parse_effect(file: &Path, text: &str) -> Result<Effect, EffectErro
     })
 }
 
+/// What the spec language would refuse in a parameter.
+#[derive(Debug, Clone, thiserror::Error)]
+enum ParameterError {
+    #[error("parameter `{0}`: nominal, min, max and tolerance must be finite numbers")]
+    NotFinite(String),
+    #[error("parameter `{0}`: nominal {1} is outside its bounds")]
+    OutsideBounds(String, f64),
+    #[error("parameter `{0}`: a tolerance is a standard deviation above 0")]
+    Tolerance(String),
+}
+
 /// What the spec language would refuse in a parameter, refused here.
-fn check_parameter(p: &ParamTemplate) -> Result<(), String> {
+fn check_parameter(p: &ParamTemplate) -> Result<(), ParameterError> {
     let finite = |v: Option<f64>| v.is_none_or(f64::is_finite);
     if !(p.nominal.is_finite() && finite(p.min) && finite(p.max) && finite(p.tolerance)) {
-        return Err(format!(
-            "parameter `{}`: nominal, min, max and tolerance must be finite numbers",
-            p.name
-        ));
+        return Err(ParameterError::NotFinite(p.name.clone()));
     }
     if p.min.is_some_and(|m| p.nominal < m) || p.max.is_some_and(|m| p.nominal > m) {
-        return Err(format!(
-            "parameter `{}`: nominal {} is outside its bounds",
-            p.name, p.nominal
-        ));
+        return Err(ParameterError::OutsideBounds(p.name.clone(), p.nominal));
     }
     if p.tolerance.is_some_and(|t| t <= 0.0) {
-        return Err(format!(
-            "parameter `{}`: a tolerance is a standard deviation above 0",
-            p.name
-        ));
+        return Err(ParameterError::Tolerance(p.name.clone()));
     }
     Ok(())
 }

@@ -265,7 +265,8 @@ impl Effect {
         self.patch_observations(&mut out, &sub)?;
         out.params.extend(params);
         out.effects.push(self.name.clone());
-        if let Err(message) = out.check_names() {
+        if let Err(e) = out.check_names() {
+            let message = e.to_string();
             return Err(ApplyError::InvalidResult {
                 from: self.locate(&message),
                 message,

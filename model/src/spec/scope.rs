@@ -108,6 +108,20 @@ impl Refusal {
     }
 }
 
+/// A model built in memory whose names do not add up (a spec file's
+/// errors are [`crate::error::SourceError`]s at the symbol instead).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NameError {
+    #[error("`{name}` is declared twice (a {first} and a {then})")]
+    DeclaredTwice {
+        name: String,
+        first: NameKind,
+        then: NameKind,
+    },
+    #[error("{}", why.message(name))]
+    Refused { name: String, why: Refusal },
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
