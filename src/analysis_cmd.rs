@@ -88,9 +88,13 @@ pub fn prepare(c: &Common) -> Result<Loaded, String> {
         kinegen_analysis::effects::catalogue(&c.catalogue.effects).map_err(|e| e.to_string())?;
     }
     let ir = ir_source::load(&c.spec)?;
-    let quiet = quiet(c);
-    // a bag takes a while: a spinner counts its messages
-    let progress = |p: &Path| -> Box<dyn Fn(usize, usize)> {
+    load(ir, &c.sources(), &read_progress(quiet(c))).map_err(|e| e.to_string())
+}
+
+/// A spinner that counts a bag's messages while it is read (a bag takes a
+/// while; a CSV file needs none).
+pub fn read_progress(quiet: bool) -> impl Fn(&Path) -> Box<dyn Fn(usize, usize)> {
+    move |p: &Path| -> Box<dyn Fn(usize, usize)> {
         let bar = is_bag(p).then(|| {
             crate::progress::Progress::spinner(&format!("reading {}", p.display()), quiet)
         });
@@ -99,8 +103,7 @@ pub fn prepare(c: &Common) -> Result<Loaded, String> {
                 b.message(&format!("{done}/{total} messages"));
             }
         })
-    };
-    load(ir, &c.sources(), &progress).map_err(|e| e.to_string())
+    }
 }
 
 impl Common {

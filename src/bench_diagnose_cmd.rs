@@ -6,7 +6,6 @@
 //! spec's own parameters on these logs cannot be told apart from them and are
 //! counted separately, not as misses.
 use crate::analysis_cmd::bad;
-use crate::diagnose_cmd::run_diagnosis;
 use crate::effects_cmd::base_and_truth;
 use crate::output::Out;
 use clap::Args;
@@ -180,16 +179,17 @@ fn run_case(
         .to_run(&base, "bench")
         .map_err(|e| e.to_string())?;
     let spec = Model::load(spec_path).map_err(|e| e.to_string())?;
+    let cat = catalogue(&[]).map_err(|e| e.to_string())?;
     let t0 = Instant::now();
-    let outcome = run_diagnosis(
+    let outcome = kinegen_analysis::request::diagnose_runs(
         &spec,
-        &base,
-        std::slice::from_ref(&run),
-        &[],
+        (&base, std::slice::from_ref(&run)),
+        (&cat, &crate::ir_source::ChildDeriver),
         &[],
         false,
         &Hooks::none(),
-    )?;
+    )
+    .map_err(|e| e.to_string())?;
     let d = outcome.diagnosis;
     let names: Vec<String> = hidden.iter().map(|h| h.0.clone()).collect();
     Ok(Case {

@@ -1,78 +1,35 @@
 //! `kinegen diagnose`.
-use crate::analysis_cmd::{bad, prepare, quiet, Common};
+use crate::analysis_cmd::{bad, quiet, Common};
 use crate::ir_source::ChildDeriver;
 use crate::output::Out;
-use kinegen_analysis::derivation::EffectChains;
 use kinegen_analysis::diagnose::Diagnosis;
-use kinegen_analysis::diagnose_job::{diagnose_job, Hooks, Job, Outcome};
-use kinegen_analysis::effects::catalogue;
-use kinegen_analysis::load::Loaded;
-use kinegen_analysis::model::{parse_sets, Runner};
-use kinegen_model::spec::Model;
+use kinegen_analysis::diagnose_job::{Hooks, Outcome};
+use kinegen_analysis::model::Runner;
+use kinegen_analysis::request::{diagnose_files, Diagnosed, Request};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::process::ExitCode;
-use std::time::Instant;
 
 /// The share of the noise floor above which the model's own discretisation
 /// error is no longer "far below the noise" (issue 12 item 3).
 const DISCRETISATION_WARN: f64 = 0.3;
 
-/// Diagnose `runs` against every applicable and observable effect of the
-/// bundled catalogue and `dirs` (kinegen_analysis::diagnose_job), deriving
-/// the candidates with the command line's deriver.
-pub fn run_diagnosis(
-    spec: &Model,
-    runner: &Runner,
-    runs: &[kinegen_analysis::run::Run],
-    dirs: &[std::path::PathBuf],
-    sets: &[(String, f64)],
-    signature: bool,
-    hooks: &Hooks,
-) -> Result<Outcome, String> {
-    let cat = catalogue(dirs).map_err(|e| e.to_string())?;
-    let chains = EffectChains {
-        spec,
-        catalogue: &cat,
-        deriver: &ChildDeriver,
-        sets,
-    };
-    let job = Job {
-        runner,
-        runs,
-        chains: &chains,
-        signature,
-    };
-    diagnose_job(&job, hooks).map_err(|e| e.to_string())
-}
-
 pub fn run(c: Common) -> ExitCode {
     let out = Out::new(c.json.as_deref());
-    let t0 = Instant::now();
-    let mut prep = match prepare(&c) {
-        Ok(p) => p,
-        Err(e) => return bad(e),
-    };
-    pool_pieces(&mut prep);
-    crate::analysis_cmd::say_warnings(&out, &prep.warnings);
-    if let Err(e) = check_moves(&prep) {
+    if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
         return bad(e);
     }
-    let spec = match Model::load(&c.spec) {
-        Ok(m) => m,
-        Err(e) => return bad(e),
-    };
-    let sets = parse_sets(&c.set).unwrap_or_default();
-    let t_prep = t0.elapsed();
-    let t1 = Instant::now();
     let bar = crate::progress::Progress::bar(1, "diagnose", quiet(&c));
-    let outcome = match run_diagnosis(
-        &spec,
-        &prep.runner,
-        &prep.runs,
-        &c.catalogue.effects,
-        &sets,
-        c.report.is_some(),
+    let sources = c.sources();
+    let request = Request {
+        sources: &sources,
+        effect_dirs: &c.catalogue.effects,
+        signature: c.report.is_some(),
+    };
+    let done = diagnose_files(
+        &request,
+        &ChildDeriver,
+        &crate::analysis_cmd::read_progress(quiet(&c)),
         &Hooks {
             candidates: &|n| bar.set_length(n as u64 + 1),
             progress: &|step| {
@@ -80,13 +37,19 @@ pub fn run(c: Common) -> ExitCode {
                 bar.inc();
             },
         },
-    ) {
-        Ok(d) => d,
-        Err(e) => return bad(e),
-    };
+    );
     drop(bar);
+    let Diagnosed {
+        loaded: prep,
+        outcome,
+        preparing: t_prep,
+        diagnosing: t_diag,
+    } = match done {
+        Ok(d) => d,
+        Err(e) => return bad(e.to_string()),
+    };
+    crate::analysis_cmd::say_warnings(&out, &prep.warnings);
     let (d, n_candidates) = (&outcome.diagnosis, outcome.tried);
-    let t_diag = t1.elapsed();
     let r = &prep.runner;
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();
     out.say(&format!(
@@ -140,44 +103,6 @@ pub fn run(c: Common) -> ExitCode {
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
     out.finish(c.json.as_deref(), &doc)
-}
-
-/// Pieces of a log cut at its gaps that are too short to diagnose are left
-/// out (with a warning), as long as the log leaves enough: diagnosis pools
-/// the rest.
-fn pool_pieces(prep: &mut Loaded) {
-    let min = kinegen_analysis::diagnose::MIN_ROWS;
-    if prep.runs.iter().any(|r| r.t.len() >= min) {
-        let (keep, short): (Vec<_>, Vec<_>) = prep.runs.drain(..).partition(|r| r.t.len() >= min);
-        if !short.is_empty() {
-            prep.warnings.push(format!(
-                "{} piece(s) under {min} rows left out of the diagnosis ({}); it pools the other {}",
-                short.len(),
-                short.iter().take(3).map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
-                keep.len()
-            ));
-        }
-        prep.runs = keep;
-    }
-}
-
-/// A robot that never moves shows no effect (every ratio would be 0/0): refused.
-fn check_moves(prep: &Loaded) -> Result<(), String> {
-    if prep.runs.iter().all(|r| r.rest_steps() == r.steps()) {
-        let cols: Vec<&str> = prep
-            .runner
-            .ir
-            .inputs
-            .iter()
-            .map(|i| i.column.as_str())
-            .collect();
-        return Err(format!(
-            "{}: the inputs ({}) never change: the model robot never moves, so there is nothing to diagnose",
-            prep.runs.iter().map(|r| r.path.as_str()).collect::<Vec<_>>().join(", "),
-            cols.join(", ")
-        ));
-    }
-    Ok(())
 }
 
 /// The candidates on the spec as it is, most likely first, and those not tested.

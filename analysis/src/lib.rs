@@ -33,8 +33,9 @@
 //! logs for a model, [`comparison::compare`] compares the model with them,
 //! [`fit_job::calibrate`] calibrates and judges the result (held-out runs,
 //! leave-one-run-out), [`localize`] runs the EKF on landmark sightings,
-//! [`diagnose_job`] names the physical effects a spec is missing (its
-//! candidates derived through a [`derivation::Deriver`]), and
+//! [`request::diagnose_files`] names the physical effects a spec is
+//! missing from its files (its candidates derived through a
+//! [`derivation::Deriver`]; [`diagnose_job`] on runs already loaded), and
 //! [`holdout_bench`] scores calibrations on runs they were not fitted on.
 // The folders follow the pipeline, each using only the ones before it
 // (tests/module_cycles.rs holds them to it): reading logs, the model on a log,
@@ -91,6 +92,7 @@ pub mod estimation {
 pub mod diagnosis {
     pub mod diagnose;
     pub mod diagnose_job;
+    pub mod request;
 }
 
 /// The seed papers' applications and the benchmarks: localisation,
@@ -107,7 +109,7 @@ pub mod applications {
 }
 
 pub use applications::{grid, holdout_bench, inverse, localize, navigate, simulate, sweep};
-pub use diagnosis::{diagnose, diagnose_job};
+pub use diagnosis::{diagnose, diagnose_job, request};
 pub use estimation::{discretisation, fit, fit_job, lag, methods, neural, periodic, seed_methods};
 pub use logs::{bag, column, log, rosdyn, rosmsg, rows};
 pub use model_on_log::{
