@@ -55,6 +55,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
+    crate::analysis_cmd::say_warnings(&out, &prep.warnings);
     let r = &prep.runner;
     let o = match ekf_options(&c, a, r) {
         Ok(o) => o,
@@ -112,8 +113,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             .iter()
             .map(|(run, loc, summary)| crate::localize_report::RunPage { run, loc, summary })
             .collect();
-        let doc =
-            json!({"model": r.ir.name, "noise": noise_json, "runs": runs_json, "sweep": sweep});
+        let doc = json!({"model": r.ir.name, "noise": noise_json, "runs": runs_json, "sweep": sweep, "warnings": prep.warnings});
         if let Err(e) =
             crate::localize_report::localize_report(dir, r, &pages, &described, &sweep, &doc)
         {
@@ -127,7 +127,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         }
         out.say(&format!("track: {}", t.display()));
     }
-    let doc = json!({"model": r.ir.name, "gate": a.gate, "noise": noise_json, "runs": runs_json, "sweep": sweep});
+    let doc = json!({"model": r.ir.name, "gate": a.gate, "noise": noise_json, "runs": runs_json, "sweep": sweep, "warnings": prep.warnings});
     out.finish(c.json.as_deref(), &doc)
 }
 

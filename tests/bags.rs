@@ -404,10 +404,33 @@ fn landmark_topics_of_a_user_message_type() {
     );
     let e = fails(&array, &std::fs::read_to_string(&ta).unwrap(), false);
     assert!(e.contains("needs --landmarks MAP.csv"), "{e}");
+    // a map without some of the ids seen: those detections are left out and
+    // said with the first one's message; a map with none of them is an error
     std::fs::write(&map, "id,x,y\nL1,3,2\nL2,-1,4\n").unwrap();
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        array.to_str().unwrap(),
+        "--topics",
+        ta.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        said.contains("(topic `/landmarks`): ")
+            && said.contains("`L3`, `L4`, `L5` left out: not in the map")
+            && said.contains("(the first at topic `/landmarks` message"),
+        "{said}"
+    );
+    std::fs::write(&map, "id,x,y\nM1,3,2\n").unwrap();
     let e = fails(&array, &std::fs::read_to_string(&ta).unwrap(), true);
     assert!(
-        e.contains("topic `/landmarks` message") && e.contains("is not in the map"),
+        e.contains("no sighting's landmark is in the map: `L1`, `L2`, `L3`")
+            && e.contains("topic `/landmarks` message"),
         "{e}"
     );
 }

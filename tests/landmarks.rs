@@ -203,8 +203,8 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
     let (log, _, map) = landmark_log(tmp.path());
     let cases = [
         (
-            "t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,L9,2.0,0.2\n",
-            "obs.csv:3: column `id`",
+            "t,id,range,bearing\n0.5,L8,3.0,0.1\n0.6,L9,2.0,0.2\n",
+            "obs.csv: column `id`: no sighting's landmark is in the map: `L8`, `L9` (first at line 2)",
             "not in the map",
         ),
         (
@@ -249,6 +249,33 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
             "expected `{place}` and `{msg}` in: {err}"
         );
     }
+    // a camera that also reads ids the map does not have (other robots'
+    // barcodes): those sightings are left out, said, and the rest is used
+    let obs = tmp.path().join("obs.csv");
+    std::fs::write(
+        &obs,
+        "t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,R3,2.0,0.2\n0.7,L2,2.0,0.2\n",
+    )
+    .unwrap();
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        said.contains("obs.csv: 1 sighting(s) of `R3` left out: not in the map")
+            && said.contains("(the first at line 3)")
+            && said.contains("2 observations"),
+        "{said}"
+    );
     let dup = tmp.path().join("dup.csv");
     std::fs::write(&dup, "id,x,y\nA,1,2\nA,3,4\n").unwrap();
     let obs = tmp.path().join("obs.csv");

@@ -7,7 +7,7 @@ use crate::log::{read_csv, wrap, LogError};
 use crate::model::Runner;
 use crate::run::{LandmarkObs, Run};
 use kinegen_model::decl::ObservationRole::RangeBearing;
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 
 /// Range and bearing noise (m, rad) when the spec's `landmark` observation
@@ -49,36 +49,84 @@ pub fn read_map(path: &Path) -> Result<Map, LogError> {
     Ok(map)
 }
 
+/// Sightings whose id the map does not have, left out: a camera that reads
+/// barcodes also reads other robots' and the odd misread one, which a
+/// localisation ignores rather than stop at. Where they are and which ids.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Unmapped {
+    pub count: usize,
+    pub ids: BTreeSet<String>,
+    /// Where the first was: `line N` of a CSV file, `message N` of a topic.
+    pub first: String,
+}
+
+impl Unmapped {
+    fn add(&mut self, id: &str, at: impl FnOnce() -> String) {
+        if self.count == 0 {
+            self.first = at();
+        }
+        self.count += 1;
+        self.ids.insert(id.to_string());
+    }
+
+    /// The ids, a few of them, for a sentence.
+    pub fn some_ids(&self) -> String {
+        let mut v: Vec<String> = self.ids.iter().take(6).map(|i| format!("`{i}`")).collect();
+        if self.ids.len() > 6 {
+            v.push(format!("{} more", self.ids.len() - 6));
+        }
+        v.join(", ")
+    }
+
+    /// The error when no sighting at all is in the map (a map for another
+    /// room, or ids written differently): then nothing is left to use.
+    fn none_mapped(&self, source: &Path, map: &Map, map_path: &Path) -> LogError {
+        let has: Vec<&str> = map.ids.iter().take(6).map(String::as_str).collect();
+        LogError::new(
+            source,
+            None,
+            Some("id"),
+            format!(
+                "no sighting's landmark is in the map: {} (first at {}) are not in the map {}, which has {}{}",
+                self.some_ids(),
+                self.first,
+                map_path.display(),
+                has.join(", "),
+                if map.ids.len() > 6 { ", ..." } else { "" }
+            ),
+        )
+    }
+}
+
 /// Read `OBS.csv` (`t,id,range,bearing`): time non-decreasing (several landmarks
-/// may be seen at one instant), range positive, every id in the map.
+/// may be seen at one instant), range positive. Sightings of ids the map does
+/// not have are left out and counted; none in the map is an error.
 pub fn read_observations(
     path: &Path,
     map: &Map,
     map_path: &Path,
-) -> Result<Vec<LandmarkObs>, LogError> {
+) -> Result<(Vec<LandmarkObs>, Unmapped), LogError> {
     let (h, mut rdr) = read_csv(path, "landmark observations")?;
     let cols = h.require(&["t", "id", "range", "bearing"])?;
     let (t_i, id_i, range_i, bearing_i) = (cols[0], cols[1], cols[2], cols[3]);
     let mut out: Vec<LandmarkObs> = Vec::new();
+    let mut unmapped = Unmapped::default();
+    let mut last_t = f64::NEG_INFINITY;
     for (n, rec) in rdr.records().enumerate() {
         let (line, rec) = h.record(n, rec)?;
         let t = h.number(line, &rec, t_i)?;
-        if let Some(prev) = out.last() {
-            if t < prev.t {
-                return Err(h.err(
-                    Some(line),
-                    Some("t"),
-                    format!("time goes backwards: {t} follows {}", prev.t),
-                ));
-            }
-        }
-        let id = h.text(line, &rec, id_i)?.to_string();
-        let Some(&[xl, yl]) = map.xy.get(&id) else {
+        if t < last_t {
             return Err(h.err(
                 Some(line),
-                Some("id"),
-                format!("landmark `{id}` is not in the map {}", map_path.display()),
+                Some("t"),
+                format!("time goes backwards: {t} follows {last_t}"),
             ));
+        }
+        last_t = t;
+        let id = h.text(line, &rec, id_i)?.to_string();
+        let Some(&[xl, yl]) = map.xy.get(&id) else {
+            unmapped.add(&id, || format!("line {line}"));
+            continue;
         };
         let range = h.number(line, &rec, range_i)?;
         if range <= 0.0 {
@@ -99,34 +147,31 @@ pub fn read_observations(
         });
     }
     if out.is_empty() {
+        if unmapped.count > 0 {
+            return Err(unmapped.none_mapped(path, map, map_path));
+        }
         return Err(h.err(None, None, "no observations"));
     }
-    Ok(out)
+    Ok((out, unmapped))
 }
 
 /// Range-bearing observations from a bag's landmark topic (see
-/// [`crate::bag::LandmarkSource`]), every id in the map, ordered by time.
+/// [`crate::bag::LandmarkSource`]) whose ids the map has, ordered by time,
+/// and those it has not (as [`read_observations`]).
 pub fn from_detections(
     bag: &Path,
     found: &[crate::bag::Detection],
     map: &Map,
     map_path: &Path,
-) -> Result<Vec<LandmarkObs>, LogError> {
+) -> Result<(Vec<LandmarkObs>, Unmapped), LogError> {
     let mut out = Vec::with_capacity(found.len());
+    let mut unmapped = Unmapped::default();
     for d in found {
         let Some(&[xl, yl]) = map.xy.get(&d.id) else {
-            return Err(LogError::new(
-                bag,
-                None,
-                None,
-                format!(
-                    "topic `{}` message {} (counting from 0): landmark `{}` is not in the map {}",
-                    d.topic,
-                    d.index,
-                    d.id,
-                    map_path.display()
-                ),
-            ));
+            unmapped.add(&d.id, || {
+                format!("topic `{}` message {} (counting from 0)", d.topic, d.index)
+            });
+            continue;
         };
         out.push(LandmarkObs {
             t: d.t,
@@ -137,8 +182,11 @@ pub fn from_detections(
             bearing: d.bearing,
         });
     }
+    if out.is_empty() && unmapped.count > 0 {
+        return Err(unmapped.none_mapped(bag, map, map_path));
+    }
     out.sort_by(|a, b| a.t.total_cmp(&b.t));
-    Ok(out)
+    Ok((out, unmapped))
 }
 
 /// A start pose placed by landmark sightings.

@@ -116,7 +116,7 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
         holdout: &mut holdout,
         found_holdout: &found_holdout,
     };
-    logs.attach_landmarks(sources, &runner)?;
+    warnings.extend(logs.attach_landmarks(sources, &runner)?);
     // a log with gaps becomes one run per piece between them
     let mut split = |set: Vec<Run>| -> Vec<Run> {
         set.into_iter()
@@ -201,15 +201,16 @@ struct Logs<'a> {
 impl Logs<'_> {
     /// Read --landmarks and attach range-bearing observations to the runs: the
     /// k-th --observations file to the k-th run, or the detections of a bag's
-    /// landmark topic (--topics `[landmarks]`) to its run.
-    fn attach_landmarks(&mut self, s: &Sources, r: &Runner) -> Result<(), LoadError> {
+    /// landmark topic (--topics `[landmarks]`) to its run. Returns what the
+    /// user should know: sightings left out for ids the map does not have.
+    fn attach_landmarks(&mut self, s: &Sources, r: &Runner) -> Result<Vec<String>, LoadError> {
         let from_bags = self
             .found
             .iter()
             .chain(self.found_holdout)
             .any(|d| !d.is_empty());
         let map_path = match (&s.landmarks, s.observations.is_empty(), from_bags) {
-            (None, true, false) => return Ok(()),
+            (None, true, false) => return Ok(Vec::new()),
             (None, _, true) => return Err(LoadError::BagLandmarksWithoutMap),
             (None, false, false) => return Err(LoadError::ObservationsWithoutMap),
             (Some(m), true, false) => return Err(LoadError::MapWithoutObservations(m.clone())),
@@ -240,6 +241,7 @@ impl Logs<'_> {
                 .zip(self.found_holdout)
                 .zip(std::iter::repeat(None)),
         );
+        let mut warnings = Vec::new();
         for ((run, found), file) in all {
             let (obs, source_name) = match (file, found.is_empty()) {
                 (Some(path), false) => {
@@ -260,10 +262,17 @@ impl Logs<'_> {
                 (None, true) => continue,
             };
             let (t0, t1) = (run.t[0], *run.t.last().unwrap());
-            let inside: Vec<_> = obs?
-                .into_iter()
-                .filter(|o| o.t >= t0 && o.t <= t1)
-                .collect();
+            let (obs, unmapped) = obs?;
+            if unmapped.count > 0 {
+                warnings.push(format!(
+                    "{source_name}: {} sighting(s) of {} left out: not in the map {} (the first at {})",
+                    unmapped.count,
+                    unmapped.some_ids(),
+                    map_path.display(),
+                    unmapped.first
+                ));
+            }
+            let inside: Vec<_> = obs.into_iter().filter(|o| o.t >= t0 && o.t <= t1).collect();
             if inside.is_empty() {
                 return Err(LoadError::NoObservationInSpan {
                     source_name,
@@ -273,6 +282,6 @@ impl Logs<'_> {
             }
             run.landmarks = inside;
         }
-        Ok(())
+        Ok(warnings)
     }
 }
