@@ -34,7 +34,9 @@ fn committed_candidates(spec: &Path, name: &str) -> Vec<PathBuf> {
     v
 }
 
-/// Write an augmented spec where `ir_source` can derive it; returns its path.
+/// Write a spec text built into the binary (bench-diagnose's bundled specs,
+/// run outside a checkout) where a command can read it as a file; returns
+/// its path.
 pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> {
     let dir = cache_dir().join("specs");
     let path = dir.join(format!(
@@ -48,9 +50,9 @@ pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> 
 }
 
 /// The command line's [`Deriver`]: [`load`] (the committed IR, the cache, or
-/// `kinegen derive` in a child process) of the model's text, written to the
-/// cache first (a spec with effects added has no file of its own); errors
-/// name the model by `label` rather than by that cache file.
+/// `kinegen derive` in a child process) of a spec as its file has it; a
+/// model built in memory (a spec with effects added has no file of its own)
+/// goes to the child as text on stdin, and its errors name it by `label`.
 pub struct ChildDeriver;
 
 impl Deriver for ChildDeriver {
@@ -60,9 +62,19 @@ impl Deriver for ChildDeriver {
         if std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source) {
             return load(&model.path).map_err(DerivationFailed);
         }
-        let file = materialise(&model.source, &model.name).map_err(DerivationFailed)?;
-        load(&file).map_err(|e| DerivationFailed(e.replace(&file.display().to_string(), label)))
+        // a model built in memory (effects added): its text goes to the
+        // child on stdin, named by `label`; no spec file is written
+        derive_cached(model, Spec::Text(label)).map_err(DerivationFailed)
     }
+}
+
+/// How the derive child gets the spec.
+#[derive(Clone, Copy)]
+enum Spec<'a> {
+    /// The spec file itself.
+    File(&'a Path),
+    /// The model's text on stdin; the label names it in messages.
+    Text(&'a str),
 }
 
 /// Load and validate a spec and return its IR.
@@ -78,6 +90,13 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
             }
         }
     }
+    derive_cached(&model, Spec::File(spec))
+}
+
+/// The IR of `model` from the cache, or derived into it by `kinegen derive`
+/// in a child process.
+fn derive_cached(model: &Model, spec: Spec) -> Result<ModelIr, String> {
+    let fp = model.fingerprint();
     let cached = cache_dir().join(format!("{}-{fp}-ir{IR_FORMAT}.json", model.name));
     if let Ok(text) = std::fs::read_to_string(&cached) {
         if let Ok(ir) = ModelIr::from_json(&text) {
@@ -86,9 +105,19 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
     }
     let exe =
         std::env::current_exe().map_err(|e| format!("cannot find the kinegen binary: {e}"))?;
-    let mut child = Command::new(exe)
-        .args(["derive", "--spec"])
-        .arg(spec)
+    let mut command = Command::new(exe);
+    command.args(["derive", "--spec"]);
+    let named = match spec {
+        Spec::File(path) => {
+            command.arg(path);
+            path.display().to_string()
+        }
+        Spec::Text(label) => {
+            command.args(["-", "--label", label]).stdin(Stdio::piped());
+            label.to_string()
+        }
+    };
+    let mut child = command
         .arg("--ir-out")
         .arg(&cached)
         // symbolica's banner is drained here rather than sent to /dev/null,
@@ -102,6 +131,11 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
         .spawn()
         .map_err(|e| format!("cannot run `kinegen derive`: {e}"))?;
     crate::signals::child_started(child.id());
+    if let Some(mut input) = child.stdin.take() {
+        // a spec is a few kilobytes, under any pipe's buffer; an error
+        // means the child ended early, which its status and stderr say
+        let _ = std::io::Write::write_all(&mut input, model.source.as_bytes());
+    }
     let said = child.stderr.take().map(|mut e| {
         std::thread::spawn(move || {
             let mut text = String::new();
@@ -123,8 +157,8 @@ pub fn load(spec: &Path) -> Result<ModelIr, String> {
         return Err(match said.find("error: ") {
             Some(at) => said[at + "error: ".len()..].trim().to_string(),
             None => match said.lines().rev().find(|l| !l.trim().is_empty()) {
-                Some(last) => format!("{}: derivation failed: {}", spec.display(), last.trim()),
-                None => format!("{}: derivation failed", spec.display()),
+                Some(last) => format!("{named}: derivation failed: {}", last.trim()),
+                None => format!("{named}: derivation failed"),
             },
         });
     }
@@ -139,14 +173,23 @@ pub const NO_SYMBOLIC: &str = "this kinegen was built without its symbolic stage
 
 /// `kinegen derive`: derive one spec's IR into a file (used by `load`).
 #[cfg(not(feature = "symbolic"))]
-pub fn derive_to(_spec: &Path, _out: &Path) -> Result<(), String> {
+pub fn derive_to(_spec: &Path, _label: Option<&str>, _out: &Path) -> Result<(), String> {
     Err(NO_SYMBOLIC.into())
 }
 
-/// `kinegen derive`: derive one spec's IR into a file (used by `load`).
+/// `kinegen derive`: derive one spec's IR into a file (used by `load`); a
+/// spec `-` is read from stdin and named `label` in messages.
 #[cfg(feature = "symbolic")]
-pub fn derive_to(spec: &Path, out: &Path) -> Result<(), String> {
-    let model = Model::load(spec).map_err(|e| e.to_string())?;
+pub fn derive_to(spec: &Path, label: Option<&str>, out: &Path) -> Result<(), String> {
+    let model = if spec == Path::new("-") {
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+            .map_err(|e| format!("cannot read the spec from stdin: {e}"))?;
+        Model::parse(Path::new(label.unwrap_or("<stdin>")), &text)
+    } else {
+        Model::load(spec)
+    }
+    .map_err(|e| e.to_string())?;
     let ir =
         kinegen_codegen::derive_model(&model, &Default::default()).map_err(|e| e.to_string())?;
     kinegen_model::files::write_atomic(out, &ir.to_json()).map_err(|e| e.to_string())

@@ -161,8 +161,12 @@ enum Command {
     /// Derive one spec's IR into a file (used internally by the analysis commands).
     #[command(hide = true)]
     Derive {
+        /// The spec file, or `-` for its text on stdin.
         #[arg(long)]
         spec: PathBuf,
+        /// What messages call a spec read from stdin.
+        #[arg(long)]
+        label: Option<String>,
         #[arg(long)]
         ir_out: PathBuf,
     },
@@ -195,7 +199,11 @@ fn main() -> ExitCode {
             catalogue,
         } => effects_cmd::run_add_effect(&spec, &effect, &value, &out, &catalogue.effects),
         Command::Batch(a) => batch_cmd::run(&a),
-        Command::Derive { spec, ir_out } => match ir_source::derive_to(&spec, &ir_out) {
+        Command::Derive {
+            spec,
+            label,
+            ir_out,
+        } => match ir_source::derive_to(&spec, label.as_deref(), &ir_out) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => analysis_cmd::bad(e),
         },
