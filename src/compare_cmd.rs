@@ -69,7 +69,7 @@ pub fn compare(c: Common) -> ExitCode {
         "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::compare_report(dir, r, &cmp, &doc) {
+        if let Err(e) = crate::report::compare_report(dir, r, &cmp, &prep.warnings, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

@@ -95,9 +95,14 @@ pub fn run(c: Common) -> ExitCode {
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
     });
     if let Some(dir) = &c.report {
-        if let Err(e) =
-            crate::report::diagnose_report(dir, &prep.runner, &prep.runs, &outcome, &doc)
-        {
+        if let Err(e) = crate::report::diagnose_report(
+            dir,
+            &prep.runner,
+            &prep.runs,
+            &outcome,
+            &prep.warnings,
+            &doc,
+        ) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

@@ -270,9 +270,15 @@ fn run_methods(c: &Common, out: &Out, prep: &Loaded, job: &MethodsJob) -> ExitCo
         "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) =
-            crate::report::methods_report(dir, r, &prep.runs, &compared, job.truth, &doc)
-        {
+        if let Err(e) = crate::report::methods_report(
+            dir,
+            r,
+            &prep.runs,
+            &compared,
+            job.truth,
+            &prep.warnings,
+            &doc,
+        ) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -354,15 +360,22 @@ fn run_lm(
     doc["runs"] = json!(runs);
     if let Some(w) = &cal.leave_one_out_warning {
         out.say(&format!("warning: {w}"));
-        if let Some(list) = doc["warnings"].as_array_mut() {
-            list.push(json!(w));
-        }
     }
+    // what the user should know, in the order said: the fit's (the logs'
+    // among them), the held-out runs' and leave-one-out's
+    let warnings: Vec<String> = res
+        .warnings
+        .iter()
+        .chain(cal.holdout.as_ref().and_then(|h| h.worse.as_ref()))
+        .chain(&cal.leave_one_out_warning)
+        .cloned()
+        .collect();
+    doc["warnings"] = json!(warnings);
     if !cal.leave_one_out.is_empty() {
         doc["leave_one_out"] = json!(cal.leave_one_out);
     }
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &cal, &doc) {
+        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &cal, &warnings, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -459,9 +472,6 @@ fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<
         ));
         if let Some(w) = &h.worse {
             out.say(&format!("warning: {w}"));
-            if let Some(list) = doc["warnings"].as_array_mut() {
-                list.push(json!(w));
-            }
         }
         doc["holdout"] = json!({"before": {"rmse": hb.errors.rmse, "errors": hb.errors}, "after": {"rmse": ha.errors.rmse, "errors": ha.errors}});
     }

@@ -114,9 +114,15 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             .map(|(run, loc, summary)| crate::localize_report::RunPage { run, loc, summary })
             .collect();
         let doc = json!({"model": r.ir.name, "noise": noise_json, "runs": runs_json, "sweep": sweep, "warnings": prep.warnings});
-        if let Err(e) =
-            crate::localize_report::localize_report(dir, r, &pages, &described, &sweep, &doc)
-        {
+        if let Err(e) = crate::localize_report::localize_report(
+            dir,
+            r,
+            &pages,
+            &described,
+            &sweep,
+            &prep.warnings,
+            &doc,
+        ) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

@@ -29,6 +29,7 @@ pub fn localize_report(
     runs: &[RunPage],
     noise: &[String],
     sweep: &[kinegen_analysis::sweep::SweepPoint],
+    warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();
@@ -50,6 +51,7 @@ pub fn localize_report(
          the smoother (with --smooth) also uses the sightings after each moment.</p>",
         &figs,
         &tables(runs, noise),
+        warnings,
         doc,
     );
     write(dir, &html)

@@ -276,6 +276,7 @@ pub(crate) fn page(
     intro: &str,
     figures: &[String],
     tables: &str,
+    warnings: &[String],
     doc: &Value,
 ) -> String {
     let figs: String = figures
@@ -284,16 +285,9 @@ pub(crate) fn page(
         .collect();
     // every command's warnings (fit's identifiability, inputs out of range...)
     // stand above its results
-    let warnings: String = doc["warnings"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .map(|w| {
-            format!(
-                "<p class=\"warn\">warning: {}</p>",
-                esc(w.as_str().unwrap_or(""))
-            )
-        })
+    let warnings: String = warnings
+        .iter()
+        .map(|w| format!("<p class=\"warn\">warning: {}</p>", esc(w)))
         .collect();
     format!(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
@@ -428,6 +422,7 @@ pub fn compare_report(
     dir: &Path,
     r: &Runner,
     cmp: &kinegen_analysis::comparison::Comparison<'_>,
+    warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
     let runs = &cmp.runs;
@@ -505,6 +500,7 @@ pub fn compare_report(
             &intro,
             &figs,
             &t,
+            warnings,
             doc,
         ),
     )
@@ -533,6 +529,7 @@ pub fn fit_report(
     r: &Runner,
     runs: &[Run],
     cal: &kinegen_analysis::fit_job::Calibrated<'_>,
+    warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();
@@ -587,6 +584,7 @@ pub fn fit_report(
             &intro,
             &figs,
             &param_table(r, &cal.fit),
+            warnings,
             doc,
         ),
     )
@@ -599,6 +597,7 @@ pub fn diagnose_report(
     base: &Runner,
     runs: &[Run],
     outcome: &kinegen_analysis::diagnose_job::Outcome,
+    warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
     let d = &outcome.diagnosis;
@@ -692,6 +691,7 @@ pub fn diagnose_report(
             &intro,
             &figs,
             &t,
+            warnings,
             doc,
         ),
     )
@@ -747,6 +747,7 @@ pub fn methods_report(
     runs: &[Run],
     compared: &kinegen_analysis::fit_job::MethodsOutcome<'_>,
     truth: &[(String, f64)],
+    warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
     let mut figs = Vec::new();
@@ -797,6 +798,7 @@ pub fn methods_report(
             &intro,
             &figs,
             &t,
+            warnings,
             doc,
         ),
     )
@@ -949,6 +951,7 @@ pub fn inverse_report(
         ),
         &figs,
         &table,
+        &[],
         doc,
     );
     write(dir, &html)
@@ -1017,6 +1020,7 @@ pub fn navigate_report(
         "<p>Dark: obstacles; light: safety zone (obstacles enlarged by one cell); crosses: the robot touching an obstacle; magenta: the goal.</p>",
         &figs,
         "",
+        &[],
         doc,
     );
     write(dir, &html)
