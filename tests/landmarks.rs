@@ -197,6 +197,47 @@ sigma = [0.03, 0.01]
     );
 }
 
+/// `compare` of the diff-drive `log` with sightings `text` (written to
+/// `dir/obs.csv`) of the landmarks in `map`.
+fn compare_sightings(
+    dir: &std::path::Path,
+    log: &std::path::Path,
+    text: &str,
+    map: &std::path::Path,
+) -> std::process::Output {
+    let obs = dir.join("obs.csv");
+    std::fs::write(&obs, text).unwrap();
+    kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn sightings_of_ids_not_in_the_map_are_left_out_and_said() {
+    // a camera that also reads ids the map does not have (other robots'
+    // barcodes): those sightings are left out, said, and the rest is used
+    let tmp = tempfile::tempdir().unwrap();
+    let (log, _, map) = landmark_log(tmp.path());
+    let text = "t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,R3,2.0,0.2\n0.7,L2,2.0,0.2\n";
+    let o = compare_sightings(tmp.path(), &log, text, &map);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        said.contains("obs.csv: 1 sighting(s) of `R3` left out: not in the map")
+            && said.contains("(the first at line 3)")
+            && said.contains("2 observations"),
+        "{said}"
+    );
+}
+
 #[test]
 fn bad_landmark_files_are_rejected_with_file_row_and_column() {
     let tmp = tempfile::tempdir().unwrap();
@@ -229,19 +270,7 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
         ),
     ];
     for (text, place, msg) in cases {
-        let obs = tmp.path().join("obs.csv");
-        std::fs::write(&obs, text).unwrap();
-        let o = kinegen(&[
-            "compare",
-            "--spec",
-            "spec/diff_drive.toml",
-            "--data",
-            log.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-            "--landmarks",
-            map.to_str().unwrap(),
-        ]);
+        let o = compare_sightings(tmp.path(), &log, text, &map);
         let err = stderr(&o);
         assert_eq!(o.status.code(), Some(2), "{err}");
         assert!(
@@ -249,53 +278,20 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
             "expected `{place}` and `{msg}` in: {err}"
         );
     }
-    // a camera that also reads ids the map does not have (other robots'
-    // barcodes): those sightings are left out, said, and the rest is used
-    let obs = tmp.path().join("obs.csv");
-    std::fs::write(
-        &obs,
-        "t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,R3,2.0,0.2\n0.7,L2,2.0,0.2\n",
-    )
-    .unwrap();
-    let o = kinegen(&[
-        "compare",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-    ]);
-    let said = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    assert!(
-        said.contains("obs.csv: 1 sighting(s) of `R3` left out: not in the map")
-            && said.contains("(the first at line 3)")
-            && said.contains("2 observations"),
-        "{said}"
-    );
     let dup = tmp.path().join("dup.csv");
     std::fs::write(&dup, "id,x,y\nA,1,2\nA,3,4\n").unwrap();
-    let obs = tmp.path().join("obs.csv");
-    std::fs::write(&obs, "t,id,range,bearing\n0.5,A,3.0,0.1\n").unwrap();
-    let o = kinegen(&[
-        "compare",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        dup.to_str().unwrap(),
-    ]);
+    let o = compare_sightings(
+        tmp.path(),
+        &log,
+        "t,id,range,bearing\n0.5,A,3.0,0.1\n",
+        &dup,
+    );
     assert!(
         stderr(&o).contains("dup.csv:3: column `id`: landmark `A` is listed twice"),
         "{}",
         stderr(&o)
     );
+    let obs = tmp.path().join("obs.csv");
     let o = kinegen(&[
         "compare",
         "--spec",
