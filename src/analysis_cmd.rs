@@ -81,6 +81,12 @@ pub use crate::output::bad;
 /// [`kinegen_analysis::load`]), after the options that need no log are
 /// checked: the output paths and the user's effect catalogues.
 pub fn prepare(c: &Common) -> Result<Loaded, String> {
+    prepare_from(c, &c.sources())
+}
+
+/// [`prepare`] with the sources as given (localize keeps the rows its
+/// ground truth misses: there it only scores).
+pub fn prepare_from(c: &Common, sources: &Sources) -> Result<Loaded, String> {
     crate::output::check_outputs(c.json.as_deref(), c.report.as_deref())?;
     // --effects is read whatever the command: a broken catalogue is said now,
     // not on the day diagnose reads it
@@ -88,7 +94,7 @@ pub fn prepare(c: &Common) -> Result<Loaded, String> {
         kinegen_analysis::effects::catalogue(&c.catalogue.effects).map_err(|e| e.to_string())?;
     }
     let ir = ir_source::load(&c.spec)?;
-    load(ir, &c.sources(), &read_progress(quiet(c))).map_err(|e| e.to_string())
+    load(ir, sources, &read_progress(quiet(c))).map_err(|e| e.to_string())
 }
 
 /// A spinner that counts a bag's messages while it is read (a bag takes a
@@ -118,6 +124,7 @@ impl Common {
             observations: self.observations.clone(),
             landmarks: self.landmarks.clone(),
             max_gap: self.max_gap,
+            truth_scores_only: false,
         }
     }
 }

@@ -1,8 +1,9 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
 //! (kinegen_analysis::localize), with its consistency checks.
-use crate::analysis_cmd::{bad, prepare, Common};
+use crate::analysis_cmd::{bad, prepare_from, Common};
 use crate::output::Out;
 use clap::Args;
+use kinegen_analysis::load::Sources;
 use kinegen_analysis::localize::{localize_runs, EkfOptions, Localization, NoiseSource, Summary};
 use serde_json::json;
 use std::path::PathBuf;
@@ -51,7 +52,13 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             return bad(e);
         }
     }
-    let prep = match prepare(&c) {
+    // the ground truth only scores the filter: where the motion capture lost
+    // the robot, the filter runs on
+    let sources = Sources {
+        truth_scores_only: true,
+        ..c.sources()
+    };
+    let prep = match prepare_from(&c, &sources) {
         Ok(p) => p,
         Err(e) => return bad(e),
     };

@@ -155,7 +155,11 @@ fn map(r: &Runner, p: &RunPage) -> Result<String, String> {
         series.push((
             "ground truth",
             BLACK,
-            series_of(g.len(), g.iter().map(|p| (p[0], p[1]))),
+            // rows where the motion capture lost the robot have none
+            series_of(
+                g.len(),
+                g.iter().filter(|p| p[0].is_finite()).map(|p| (p[0], p[1])),
+            ),
         ));
     }
     series.push(("EKF estimate", BLUE, xy(&loc.track)));
@@ -194,12 +198,17 @@ fn error_over_time(p: &RunPage) -> Result<String, String> {
     let err = |track: &[[f64; 3]]| {
         series_of(
             track.len(),
-            track.iter().zip(g).enumerate().map(|(k, (x, g))| {
-                (
-                    run.t[k] - t0,
-                    ((x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2)).sqrt(),
-                )
-            }),
+            track
+                .iter()
+                .zip(g)
+                .enumerate()
+                .filter(|(_, (_, g))| g[0].is_finite())
+                .map(|(k, (x, g))| {
+                    (
+                        run.t[k] - t0,
+                        ((x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2)).sqrt(),
+                    )
+                }),
         )
     };
     let bound = |cov: &[kinegen_analysis::localize::Matrix3<f64>]| {

@@ -682,3 +682,72 @@ fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
         "NIS {nis} {b}"
     );
 }
+
+/// A motion capture that loses the robot (at the start and for a stretch in
+/// the middle) does not cut localisation: ground truth only scores it. The
+/// filter runs through the log as one run, starts from its sightings where
+/// the truth starts late, and is scored on the rows that have truth: about
+/// as well as with the truth complete. (With the log cut at the missing rows
+/// instead, it was two runs, each restarted from the measured pose.)
+#[test]
+fn localisation_runs_through_rows_the_motion_capture_missed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (log, obs, map) = landmark_log(tmp.path());
+    let text = std::fs::read_to_string(&log).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let gt: Vec<usize> = (0..header.len())
+        .filter(|&i| header[i].starts_with("gt_"))
+        .collect();
+    let rows = text.lines().count() - 1;
+    let lost = |k: usize| k < 40 || (rows / 2..rows / 2 + 100).contains(&k);
+    let mut blanked = String::from(text.lines().next().unwrap()) + "\n";
+    for (k, line) in text.lines().skip(1).enumerate() {
+        let cells: Vec<&str> = line.split(',').collect();
+        let kept: Vec<&str> = (0..cells.len())
+            .map(|i| {
+                if lost(k) && gt.contains(&i) {
+                    ""
+                } else {
+                    cells[i]
+                }
+            })
+            .collect();
+        blanked += &(kept.join(",") + "\n");
+    }
+    let gappy = tmp.path().join("gappy.csv");
+    std::fs::write(&gappy, blanked).unwrap();
+    let localize = |data: &Path| {
+        let o = kinegen(&[
+            "localize",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            data.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+            "--landmarks",
+            map.to_str().unwrap(),
+            "--json",
+            "-",
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        doc
+    };
+    let (full, gappy) = (localize(&log), localize(&gappy));
+    assert_eq!(gappy["runs"].as_array().unwrap().len(), 1, "{gappy}");
+    let warned = gappy["warnings"][0].as_str().unwrap();
+    assert!(
+        warned.contains("140 row(s) without ground truth") && warned.contains("lines 2-41"),
+        "{warned}"
+    );
+    let rmse = |d: &serde_json::Value| d["runs"][0]["position_rmse_m"].as_f64().unwrap();
+    let nees = |d: &serde_json::Value| d["runs"][0]["nees_mean"].as_f64().unwrap();
+    assert!(
+        rmse(&gappy) < 1.5 * rmse(&full) && nees(&gappy).is_finite(),
+        "with rows lost {} m (NEES {}), complete {} m",
+        rmse(&gappy),
+        nees(&gappy),
+        rmse(&full)
+    );
+}

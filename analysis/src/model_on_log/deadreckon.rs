@@ -102,7 +102,7 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
 /// odometry between them place it
 /// ([`crate::landmarks::start_from_moving_sightings`]).
 fn landmark_start(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<PlacedStart> {
-    if data.gt.is_some() || data.landmarks.is_empty() {
+    if data.start_measured() || data.landmarks.is_empty() {
         return None;
     }
     crate::landmarks::start_from_landmarks(r, p, data, guess).or_else(|| moving_start(r, p, data))

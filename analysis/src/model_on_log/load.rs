@@ -31,6 +31,10 @@ pub struct Sources {
     pub landmarks: Option<PathBuf>,
     /// Split a log only at gaps longer than this, s.
     pub max_gap: f64,
+    /// Ground truth only scores the job (localisation): rows where the motion
+    /// capture lost the robot stay in the run instead of cutting it (the job
+    /// runs through them and scores the rows that have it).
+    pub truth_scores_only: bool,
 }
 
 /// The model and its logs, ready for a job.
@@ -121,7 +125,11 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
     let mut split = |set: Vec<Run>| -> Vec<Run> {
         set.into_iter()
             .flat_map(|run| {
-                let (pieces, warning) = run.split_at_gaps(sources.max_gap);
+                let (pieces, warning) = if sources.truth_scores_only {
+                    run.split_at_time_gaps_only(sources.max_gap)
+                } else {
+                    run.split_at_gaps(sources.max_gap)
+                };
                 warnings.extend(warning);
                 pieces
             })
@@ -133,7 +141,14 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
     }
     // results that would be NaN or infinite are refused here, with the row
     for set in [&runs, &holdout] {
-        check_finite(&runner, set, &sources.sets)?;
+        if sources.truth_scores_only {
+            // rows without ground truth are the job's to skip: what must be
+            // finite is the model on the inputs
+            let unscored: Vec<Run> = set.iter().map(Run::inputs_only).collect();
+            check_finite(&runner, &unscored, &sources.sets)?;
+        } else {
+            check_finite(&runner, set, &sources.sets)?;
+        }
     }
     warnings.extend(
         runs.iter()

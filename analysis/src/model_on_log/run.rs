@@ -62,7 +62,7 @@ impl Run {
     /// rest (or the first 0.1 s) on the map, if at least two are seen.
     pub fn start_pose(&self) -> [f64; 3] {
         let rest_rows = self.rest_steps();
-        let Some(g) = &self.gt else {
+        let Some(g) = self.gt.as_ref().filter(|_| self.start_measured()) else {
             return pose_from_landmarks(&self.landmarks, self.start_window_end())
                 .unwrap_or([0.0; 3]);
         };
@@ -82,7 +82,7 @@ impl Run {
     /// sample, or no ground truth).
     pub fn start_heading_std(&self) -> Option<f64> {
         let rest = self.rest_steps();
-        let g = self.gt.as_ref()?;
+        let g = self.gt.as_ref().filter(|_| self.start_measured())?;
         if rest < 2 || self.t[rest] - self.t[0] < 0.5 {
             return None;
         }
@@ -259,34 +259,55 @@ impl Run {
             }
             a = k + 1;
         }
-        // the rows without a measurement, as line ranges (the header is line 1)
-        let mut stretches: Vec<(usize, usize)> = Vec::new();
-        for &k in &missing {
-            match stretches.last_mut() {
-                Some((_, b)) if *b + 1 == k => *b = k,
-                _ => stretches.push((k, k)),
-            }
-        }
-        let lines: Vec<String> = stretches
-            .iter()
-            .take(5)
-            .map(|&(a, b)| {
-                if a == b {
-                    format!("line {}", a + 2)
-                } else {
-                    format!("lines {}-{}", a + 2, b + 2)
-                }
-            })
-            .collect();
         let warning = format!(
-            "{}: {} row(s) without a measurement (empty or nan in the pose or gyro columns: {}{}): the rows between are used as {} run(s), each started from its own measured pose (stretches under 3 rows dropped); nothing is compared where nothing was measured",
+            "{}: {} row(s) without a measurement (empty or nan in the pose or gyro columns: {}): the rows between are used as {} run(s), each started from its own measured pose (stretches under 3 rows dropped); nothing is compared where nothing was measured",
             self.path,
             missing.len(),
-            lines.join(", "),
-            if stretches.len() > 5 { ", ..." } else { "" },
+            line_ranges(&missing),
             pieces.len()
         );
         (pieces, Some(warning))
+    }
+
+    /// [`Run::split_at_gaps`] for a job that ground truth only scores
+    /// (localisation): the run is cut at its time gaps only, and rows without
+    /// ground truth stay in it, said.
+    pub fn split_at_time_gaps_only(self, max_gap: f64) -> (Vec<Run>, Vec<String>) {
+        let missing: Vec<usize> = (0..self.t.len())
+            .filter(|&k| self.gt.as_ref().is_some_and(|g| g[k][0].is_nan()))
+            .collect();
+        let mut warnings = Vec::new();
+        if !missing.is_empty() {
+            warnings.push(format!(
+                "{}: {} row(s) without ground truth (empty or nan in the pose columns: {}): the filter runs through them, and only rows with ground truth are scored",
+                self.path,
+                missing.len(),
+                line_ranges(&missing)
+            ));
+        }
+        let (runs, warning) = self.split_at_time_gaps(max_gap);
+        warnings.extend(warning);
+        (runs, warnings)
+    }
+
+    /// The run with its measurements (ground truth, gyro) left out: the
+    /// model on the inputs alone.
+    pub fn inputs_only(&self) -> Run {
+        Run {
+            gt: None,
+            gyro: None,
+            ..self.clone()
+        }
+    }
+
+    /// Whether the run's start is measured: ground truth over its first rows
+    /// (the rest it starts with, or its first row). A run whose motion
+    /// capture starts late is placed by its landmarks instead.
+    pub fn start_measured(&self) -> bool {
+        self.gt.as_ref().is_some_and(|g| {
+            let rest = self.rest_steps().max(1).min(g.len());
+            g[..rest].iter().all(|p| p.iter().all(|v| v.is_finite()))
+        })
     }
 
     /// [`Run::split_at_gaps`] for the time between rows only.
@@ -408,6 +429,31 @@ pub fn observations_until(obs: &[LandmarkObs], t_until: f64) -> Option<Vec<&Land
     let seen: Vec<&LandmarkObs> = obs.iter().filter(|o| o.t <= t_until).collect();
     let distinct: std::collections::HashSet<&str> = seen.iter().map(|o| o.id.as_str()).collect();
     (distinct.len() >= 2).then_some(seen)
+}
+
+/// Rows (0-based, after the header) as the file's line ranges, the first
+/// five: `lines 2000-2099, line 2300, ...`.
+fn line_ranges(rows: &[usize]) -> String {
+    let mut stretches: Vec<(usize, usize)> = Vec::new();
+    for &k in rows {
+        match stretches.last_mut() {
+            Some((_, b)) if *b + 1 == k => *b = k,
+            _ => stretches.push((k, k)),
+        }
+    }
+    let lines: Vec<String> = stretches
+        .iter()
+        .take(5)
+        .map(|&(a, b)| {
+            if a == b {
+                format!("line {}", a + 2)
+            } else {
+                format!("lines {}-{}", a + 2, b + 2)
+            }
+        })
+        .collect();
+    let more = if stretches.len() > 5 { ", ..." } else { "" };
+    format!("{}{more}", lines.join(", "))
 }
 
 #[cfg(test)]

@@ -245,7 +245,9 @@ pub fn nees_of(
         s[1] * s[1],
         s[2] * s[2],
     ));
+    // (rows where the motion capture lost the robot are not scored)
     (1..track.len().min(g.len()))
+        .filter(|&k| g[k].iter().all(|v| v.is_finite()))
         .filter_map(|k| {
             let x = track[k];
             let e = nalgebra::Vector3::new(x[0] - g[k][0], x[1] - g[k][1], wrap(x[2] - g[k][2]));
@@ -269,7 +271,10 @@ pub fn truth_noise(run: &Run) -> Option<[f64; 3]> {
     let mut dt: Vec<f64> = run.dt.to_vec();
     dt.sort_by(f64::total_cmp);
     let median = *dt.get(dt.len() / 2)?;
-    let even = |k: usize| (k..k + 3).all(|j| (run.dt[j] - median).abs() < 0.2 * median);
+    let even = |k: usize| {
+        (k..k + 3).all(|j| (run.dt[j] - median).abs() < 0.2 * median)
+            && (k..k + 4).all(|j| g[j].iter().all(|v| v.is_finite()))
+    };
     let third = |k: usize, i: usize| {
         let v = |j: usize| if i == 2 { g[j][2] } else { g[j][i] };
         let d = v(k + 3) - 3.0 * v(k + 2) + 3.0 * v(k + 1) - v(k);

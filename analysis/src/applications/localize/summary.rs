@@ -22,16 +22,18 @@ pub struct Summary {
     pub truth_noise: Option<[f64; 3]>,
 }
 
-/// Position RMSE of `track` against the run's ground truth, if it has one.
+/// Position RMSE of `track` against the run's ground truth, if it has one,
+/// over the rows that have it (the motion capture may lose the robot).
 pub fn position_rmse(run: &Run, track: &[[f64; 3]]) -> Option<f64> {
-    run.gt.as_ref().map(|g| {
-        let s: f64 = track
-            .iter()
-            .zip(g)
-            .map(|(x, g)| (x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2))
-            .sum();
-        (s / g.len() as f64).sqrt()
-    })
+    let g = run.gt.as_ref()?;
+    let (n, s) = track
+        .iter()
+        .zip(g)
+        .filter(|(_, g)| g[0].is_finite() && g[1].is_finite())
+        .fold((0usize, 0.0), |(n, s), (x, g)| {
+            (n + 1, s + (x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2))
+        });
+    (n > 0).then(|| (s / n as f64).sqrt())
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
@@ -41,14 +43,24 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
 
 /// The figures of `loc`, the filter's output on `run`.
 pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
-    let dr = evaluate(r, &r.p, std::slice::from_ref(run));
+    // dead reckoning from the filter's start; where the motion capture lost
+    // the robot, against the rows that have it
+    let complete = run
+        .gt
+        .as_ref()
+        .is_some_and(|g| g.iter().all(|p| p[0].is_finite()));
+    let dead_reckoning = if complete {
+        Some(evaluate(r, &r.p, std::slice::from_ref(run)).rmse)
+    } else {
+        position_rmse(run, &crate::deadreckon::run(r, &r.p, run, false).pose)
+    };
     let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
         let nees = nees_of(r, run, track, cov);
         (position_rmse(run, track), mean(nees.iter().map(|n| n.1)))
     });
     Summary {
         rmse: position_rmse(run, &loc.track),
-        dead_reckoning: run.gt.as_ref().map(|_| dr.rmse),
+        dead_reckoning,
         nis: mean(loc.nis.iter().map(|n| n.1)),
         nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
         nees: mean(loc.nees.iter().map(|n| n.1)),
