@@ -182,7 +182,21 @@ pub fn run_from(
     // the commands as executed (an input delay, a lag), with their
     // derivatives in the timing parameters for the sensitivities
     let (executed, timing) = crate::timeline::executed_with_rates(r, p, data, with_sens);
-    let data: &Run = &executed;
+    run_executed(r, p, (&executed, &timing), with_sens, start_offset, plan)
+}
+
+/// [`run_from`] on a run whose inputs are already as executed
+/// ([`crate::timeline::executed_with_rates`], with their derivatives in the
+/// timing parameters when `with_sens`): for a caller that needs those inputs
+/// too (the fit's observations read them) and computes them once.
+pub fn run_executed(
+    r: &Runner,
+    p: &[f64],
+    (data, timing): (&Run, &[(usize, crate::rows::Rows)]),
+    with_sens: bool,
+    start_offset: [f64; 3],
+    plan: Option<&[u8]>,
+) -> Track {
     let (start, dstart) = reckoning_start(r, p, data, start_offset);
     let np = p.len();
     let mut pose = Vec::with_capacity(data.steps() + 1);

@@ -339,9 +339,10 @@ pub(super) fn run_residuals(
 ) -> (Vec<f64>, Rows) {
     let mut res = Vec::new();
     let mut jac = Rows::new(free.len() + usize::from(nuis));
-    let track = deadreckon::run_from(r, p, run, with_jac, start, plan);
-    // the inputs as executed (an input delay), for the observations' arguments
-    let inputs = crate::timeline::executed(r, p, run);
+    // the inputs as executed (an input delay, a lag): the track's, and the
+    // observations' arguments
+    let (inputs, timing) = crate::timeline::executed_with_rates(r, p, run, with_jac);
+    let track = deadreckon::run_executed(r, p, (&inputs, &timing), with_jac, start, plan);
     let np = p.len();
     // sensitivity columns to read: the free parameters, then the start heading
     let cols: Vec<usize> = free
