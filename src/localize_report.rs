@@ -36,7 +36,7 @@ pub fn localize_report(
     for p in runs {
         figs.push(map(r, p)?);
         if p.run.gt.is_some() {
-            figs.push(error_over_time(p)?);
+            figs.push(error_over_time(r, p)?);
         }
         if !p.loc.nis.is_empty() {
             figs.push(nis_over_time(p)?);
@@ -191,9 +191,10 @@ fn map(r: &Runner, p: &RunPage) -> Result<String, String> {
     )
 }
 
-fn error_over_time(p: &RunPage) -> Result<String, String> {
+fn error_over_time(r: &Runner, p: &RunPage) -> Result<String, String> {
     let (run, loc) = (p.run, p.loc);
     let g = run.gt.as_ref().expect("checked by the caller");
+    let sensor = kinegen_analysis::localize::Sensed::new(r, run);
     let t0 = run.t[0];
     let err = |track: &[[f64; 3]]| {
         series_of(
@@ -204,9 +205,11 @@ fn error_over_time(p: &RunPage) -> Result<String, String> {
                 .enumerate()
                 .filter(|(_, (_, g))| g[0].is_finite())
                 .map(|(k, (x, g))| {
+                    // where the motion capture sees the robot, as the table
+                    let m = sensor.at(k, x).0;
                     (
                         run.t[k] - t0,
-                        ((x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2)).sqrt(),
+                        ((m[0] - g[0]).powi(2) + (m[1] - g[1]).powi(2)).sqrt(),
                     )
                 }),
         )

@@ -224,19 +224,20 @@ pub fn localize(r: &Runner, run: &Run, o: &EkfOptions) -> Result<Localization, L
 }
 
 /// NEES of `track` with covariances `cov` (a filter's or a smoother's)
-/// against the run's ground truth at every row after the first, when the log
-/// has ground truth of the body pose (a model that observes an offset tracker
-/// has none to compare with). The ground truth's own noise
-/// ([`truth_noise`]) is added to the covariance: a filter more precise than
-/// the motion capture (a simulated robot seen by many landmarks: 1.3 mm
-/// against 1 mm of tracker noise) would otherwise read as overconfident.
+/// against the run's ground truth at every row after the first that has it.
+/// A model that observes an offset tracker (`sensor_offset`) is compared
+/// where the tracker sees it, with the covariance carried there by the
+/// observation's Jacobian. The ground truth's own noise ([`truth_noise`]) is
+/// added to the covariance: a filter more precise than the motion capture (a
+/// simulated robot seen by many landmarks: 1.3 mm against 1 mm of tracker
+/// noise) would otherwise read as overconfident.
 pub fn nees_of(
     r: &Runner,
     run: &Run,
     track: &[[f64; 3]],
     cov: &[Matrix3<f64>],
 ) -> Vec<(usize, f64)> {
-    let Some(g) = run.gt.as_ref().filter(|_| r.ir.observation(Pose).is_none()) else {
+    let Some(g) = run.gt.as_ref() else {
         return Vec::new();
     };
     let s = truth_noise(run).unwrap_or([0.0; 3]);
@@ -245,17 +246,53 @@ pub fn nees_of(
         s[1] * s[1],
         s[2] * s[2],
     ));
+    let sensor = Sensed::new(r, run);
     // (rows where the motion capture lost the robot are not scored)
     (1..track.len().min(g.len()))
         .filter(|&k| g[k].iter().all(|v| v.is_finite()))
         .filter_map(|k| {
-            let x = track[k];
-            let e = nalgebra::Vector3::new(x[0] - g[k][0], x[1] - g[k][1], wrap(x[2] - g[k][2]));
-            (cov[k] + truth)
+            let (m, h) = sensor.at(k, &track[k]);
+            let e = nalgebra::Vector3::new(m[0] - g[k][0], m[1] - g[k][1], wrap(m[2] - g[k][2]));
+            (h * cov[k] * h.transpose() + truth)
                 .try_inverse()
                 .map(|ci| (k, (e.transpose() * ci * e)[(0, 0)]))
         })
         .collect()
+}
+
+/// Where the motion capture sees a body pose: through the model's pose
+/// observation (an off-centre marker), or the pose itself.
+pub struct Sensed<'a> {
+    r: &'a Runner,
+    run: &'a Run,
+    kernels: Option<kinegen_model::ir::ObservationKernels<'a>>,
+}
+
+impl<'a> Sensed<'a> {
+    pub fn new(r: &'a Runner, run: &'a Run) -> Sensed<'a> {
+        Sensed {
+            r,
+            run,
+            kernels: r.ir.observation_kernels(Pose),
+        }
+    }
+
+    /// The sensed pose at row `k` for body pose `x`, and its Jacobian in
+    /// the body pose.
+    pub fn at(&self, k: usize, x: &[f64; 3]) -> ([f64; 3], Matrix3<f64>) {
+        let Some(h) = &self.kernels else {
+            return (*x, Matrix3::identity());
+        };
+        let u = &self.run.u[k.min(self.run.steps().saturating_sub(1))];
+        let p = &self.r.p;
+        let m = self
+            .r
+            .eval(h.value, &Runner::obs_args(h.value, x, u, p, &[]));
+        let j = self
+            .r
+            .eval(h.jac_x, &Runner::obs_args(h.jac_x, x, u, p, &[]));
+        ([m[0], m[1], m[2]], Matrix3::from_row_slice(&j[..9]))
+    }
 }
 
 /// The ground truth's own white noise (x, y and heading standard

@@ -1,7 +1,7 @@
 //! One localised run's figures: position RMSE of the filter, of the
 //! smoother and of dead reckoning against the ground truth, and the mean
 //! NIS and NEES with their chi-square bounds.
-use super::{mean_bounds, nees_of, truth_noise, Localization};
+use super::{mean_bounds, nees_of, truth_noise, Localization, Sensed};
 use crate::evaluation::evaluate;
 use crate::model::Runner;
 use crate::run::Run;
@@ -23,15 +23,19 @@ pub struct Summary {
 }
 
 /// Position RMSE of `track` against the run's ground truth, if it has one,
-/// over the rows that have it (the motion capture may lose the robot).
-pub fn position_rmse(run: &Run, track: &[[f64; 3]]) -> Option<f64> {
+/// where the motion capture sees the robot ([`Sensed`]), over the rows that
+/// have it (the motion capture may lose the robot).
+pub fn position_rmse(r: &Runner, run: &Run, track: &[[f64; 3]]) -> Option<f64> {
     let g = run.gt.as_ref()?;
+    let sensor = Sensed::new(r, run);
     let (n, s) = track
         .iter()
         .zip(g)
-        .filter(|(_, g)| g[0].is_finite() && g[1].is_finite())
-        .fold((0usize, 0.0), |(n, s), (x, g)| {
-            (n + 1, s + (x[0] - g[0]).powi(2) + (x[1] - g[1]).powi(2))
+        .enumerate()
+        .filter(|(_, (_, g))| g[0].is_finite() && g[1].is_finite())
+        .fold((0usize, 0.0), |(n, s), (k, (x, g))| {
+            let m = sensor.at(k, x).0;
+            (n + 1, s + (m[0] - g[0]).powi(2) + (m[1] - g[1]).powi(2))
         });
     (n > 0).then(|| (s / n as f64).sqrt())
 }
@@ -52,14 +56,14 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
     let dead_reckoning = if complete {
         Some(evaluate(r, &r.p, std::slice::from_ref(run)).rmse)
     } else {
-        position_rmse(run, &crate::deadreckon::run(r, &r.p, run, false).pose)
+        position_rmse(r, run, &crate::deadreckon::run(r, &r.p, run, false).pose)
     };
     let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
         let nees = nees_of(r, run, track, cov);
-        (position_rmse(run, track), mean(nees.iter().map(|n| n.1)))
+        (position_rmse(r, run, track), mean(nees.iter().map(|n| n.1)))
     });
     Summary {
-        rmse: position_rmse(run, &loc.track),
+        rmse: position_rmse(r, run, &loc.track),
         dead_reckoning,
         nis: mean(loc.nis.iter().map(|n| n.1)),
         nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
