@@ -683,6 +683,30 @@ fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
     );
 }
 
+/// `localize --json` of `log` with its sightings `obs` of the landmarks in
+/// `map`, and `extra` options.
+fn localize_json(
+    spec: &str,
+    log: &Path,
+    obs: &Path,
+    map: &Path,
+    extra: &[&str],
+) -> serde_json::Value {
+    let mut a = vec![
+        "localize",
+        "--spec",
+        spec,
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ];
+    a.extend_from_slice(extra);
+    kinegen_json(&a)
+}
+
 /// A motion capture that loses the robot (at the start and for a stretch in
 /// the middle) does not cut localisation: ground truth only scores it. The
 /// filter runs through the log as one run, starts from its sightings where
@@ -716,24 +740,7 @@ fn localisation_runs_through_rows_the_motion_capture_missed() {
     }
     let gappy = tmp.path().join("gappy.csv");
     std::fs::write(&gappy, blanked).unwrap();
-    let localize = |data: &Path| {
-        let o = kinegen(&[
-            "localize",
-            "--spec",
-            "spec/diff_drive.toml",
-            "--data",
-            data.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--json",
-            "-",
-        ]);
-        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-        let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        doc
-    };
+    let localize = |data: &Path| localize_json("spec/diff_drive.toml", data, &obs, &map, &[]);
     let (full, gappy) = (localize(&log), localize(&gappy));
     assert_eq!(gappy["runs"].as_array().unwrap().len(), 1, "{gappy}");
     let warned = gappy["warnings"][0].as_str().unwrap();
@@ -794,21 +801,8 @@ fn localisation_is_scored_where_an_offset_tracker_sees_the_robot() {
         spec.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    let localize = |spec: &str, set: &[&str]| {
-        let mut a = vec![
-            "localize",
-            "--spec",
-            spec,
-            "--data",
-            log.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-            "--landmarks",
-            map.to_str().unwrap(),
-        ];
-        a.extend_from_slice(set);
-        kinegen_json(&a)["runs"][0].clone()
-    };
+    let localize =
+        |spec: &str, set: &[&str]| localize_json(spec, &log, &obs, &map, set)["runs"][0].clone();
     let offset = localize(spec.to_str().unwrap(), &["--set", "sensor_dx=0.1"]);
     let (rmse, nees) = (
         offset["position_rmse_m"].as_f64().unwrap(),
