@@ -31,6 +31,8 @@ pub fn run(c: Common) -> ExitCode {
         &ChildDeriver,
         &crate::analysis_cmd::read_progress(quiet(&c)),
         &Hooks {
+            // said before the diagnosis starts, as the logs are read
+            warnings: &|w| crate::analysis_cmd::say_warnings(&out, w),
             candidates: &|n| bar.set_length(n as u64 + 1),
             progress: &|step| {
                 bar.message(step);
@@ -48,7 +50,6 @@ pub fn run(c: Common) -> ExitCode {
         Ok(d) => d,
         Err(e) => return bad(e.to_string()),
     };
-    crate::analysis_cmd::say_warnings(&out, &prep.warnings);
     let (d, n_candidates) = (&outcome.diagnosis, outcome.tried);
     let r = &prep.runner;
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();

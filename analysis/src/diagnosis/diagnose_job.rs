@@ -30,9 +30,11 @@ pub struct Job<'a> {
     pub signature: bool,
 }
 
-/// Told how many effects are tried, then each step's name (from worker
-/// threads), for a progress bar.
+/// Told what the logs' reading found that the user should know (before the
+/// long part starts: [`crate::request::diagnose_files`]), how many effects
+/// are tried, then each step's name (from worker threads), for a progress bar.
 pub struct Hooks<'a> {
+    pub warnings: &'a dyn Fn(&[String]),
     pub candidates: &'a dyn Fn(usize),
     pub progress: &'a (dyn Fn(&str) + Sync),
 }
@@ -41,6 +43,7 @@ impl Hooks<'_> {
     /// No progress reports.
     pub fn none() -> Hooks<'static> {
         Hooks {
+            warnings: &|_| {},
             candidates: &|_| {},
             progress: &|_| {},
         }

@@ -75,6 +75,7 @@ pub fn diagnose_files(
     let ir = deriver.derive(&spec, &spec_path.display().to_string())?;
     let mut loaded = load(ir, req.sources, progress)?;
     pool_pieces(&mut loaded);
+    (hooks.warnings)(&loaded.warnings);
     check_moves(&loaded)?;
     let sets = parse_sets(&req.sources.sets)?;
     let preparing = t0.elapsed();
