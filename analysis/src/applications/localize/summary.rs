@@ -2,7 +2,6 @@
 //! smoother and of dead reckoning against the ground truth, and the mean
 //! NIS and NEES with their chi-square bounds.
 use super::{mean_bounds, nees_of, truth_noise, Localization, Sensed};
-use crate::evaluation::evaluate;
 use crate::model::Runner;
 use crate::run::Run;
 
@@ -47,17 +46,10 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
 
 /// The figures of `loc`, the filter's output on `run`.
 pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
-    // dead reckoning from the filter's start; where the motion capture lost
-    // the robot, against the rows that have it
-    let complete = run
-        .gt
-        .as_ref()
-        .is_some_and(|g| g.iter().all(|p| p[0].is_finite()));
-    let dead_reckoning = if complete {
-        Some(evaluate(r, &r.p, std::slice::from_ref(run)).rmse)
-    } else {
-        position_rmse(r, run, &crate::deadreckon::run(r, &r.p, run, false).pose)
-    };
+    // dead reckoning from the filter's start, scored as the filter is (the
+    // same figure as `evaluate`'s to rounding, and it skips the rows where
+    // the motion capture lost the robot)
+    let dead_reckoning = position_rmse(r, run, &crate::deadreckon::run(r, &r.p, run, false).pose);
     let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
         let nees = nees_of(r, run, track, cov);
         (position_rmse(r, run, track), mean(nees.iter().map(|n| n.1)))
