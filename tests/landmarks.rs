@@ -20,29 +20,28 @@ fn write_map(dir: &Path, points: &[(f64, f64)]) -> PathBuf {
 
 /// A simulated diff-drive log with landmark observations; returns (log, obs, map).
 fn landmark_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    sighted_log(dir, "lm.csv", &["--set", "b=0.205", "--set", "r_l=0.0418"])
+}
+
+/// A diff-drive log of random driving (seed 4) simulated with `robot`'s
+/// options and sightings of [`MAP`]; returns (log, obs, map).
+fn sighted_log(dir: &Path, name: &str, robot: &[&str]) -> (PathBuf, PathBuf, PathBuf) {
     let map = dir.join("map.csv");
     std::fs::write(&map, MAP).unwrap();
     let obs = dir.join("obs.csv");
-    let log = simulate(
-        dir,
-        "lm.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "b=0.205",
-            "--set",
-            "r_l=0.0418",
-            "--trajectory",
-            "random",
-            "--seed",
-            "4",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
+    let mut a = vec!["--spec", "spec/diff_drive.toml"];
+    a.extend_from_slice(robot);
+    a.extend([
+        "--trajectory",
+        "random",
+        "--seed",
+        "4",
+        "--landmarks",
+        map.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+    ]);
+    let log = simulate(dir, name, &a);
     (log, obs, map)
 }
 
@@ -769,26 +768,10 @@ fn localisation_runs_through_rows_the_motion_capture_missed() {
 fn localisation_is_scored_where_an_offset_tracker_sees_the_robot() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let map = dir.join("map.csv");
-    std::fs::write(&map, MAP).unwrap();
-    let obs = dir.join("obs.csv");
-    let log = simulate(
+    let (log, obs, map) = sighted_log(
         dir,
         "offset.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--trajectory",
-            "random",
-            "--seed",
-            "4",
-            "--effect",
-            "sensor_offset.sensor_dx=0.1",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
+        &["--effect", "sensor_offset.sensor_dx=0.1"],
     );
     let spec = dir.join("offset.toml");
     let o = kinegen(&[
