@@ -1,12 +1,11 @@
-//! What the commands that read logs share: the common options, reading the
-//! model and its logs for a job (one library call), and the text every
-//! report prints (errors, landmark innovations, warnings).
-use crate::ir_source;
+//! What the commands that read logs share: the common options (as the
+//! library's `Sources`), the progress of reading a bag, and the text every
+//! command prints (errors, landmark innovations, warnings).
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::bag::is_bag;
 use kinegen_analysis::innovations::InnovationStats;
-use kinegen_analysis::load::{load, Loaded, Sources};
+use kinegen_analysis::load::Sources;
 use kinegen_analysis::metrics::Errors;
 use std::path::{Path, PathBuf};
 
@@ -67,7 +66,7 @@ pub fn quiet(c: &Common) -> bool {
     c.json.as_deref() == Some(std::path::Path::new("-"))
 }
 
-/// Say each of the warnings `prepare` found.
+/// Say each of the warnings the logs' reading found.
 pub fn say_warnings(out: &Out, warnings: &[String]) {
     for w in warnings {
         out.say(&format!("warning: {w}"));
@@ -76,26 +75,6 @@ pub fn say_warnings(out: &Out, warnings: &[String]) {
 
 /// Exit 2 with a message naming the problem (where every command finds it).
 pub use crate::output::bad;
-
-/// The model of `c.spec` and the logs `c` names, read for a job (see
-/// [`kinegen_analysis::load`]), after the options that need no log are
-/// checked: the output paths and the user's effect catalogues.
-pub fn prepare(c: &Common) -> Result<Loaded, String> {
-    prepare_from(c, &c.sources())
-}
-
-/// [`prepare`] with the sources as given (localize keeps the rows its
-/// ground truth misses: there it only scores).
-pub fn prepare_from(c: &Common, sources: &Sources) -> Result<Loaded, String> {
-    crate::output::check_outputs(c.json.as_deref(), c.report.as_deref())?;
-    // --effects is read whatever the command: a broken catalogue is said now,
-    // not on the day diagnose reads it
-    if !c.catalogue.effects.is_empty() {
-        kinegen_analysis::effects::catalogue(&c.catalogue.effects).map_err(|e| e.to_string())?;
-    }
-    let ir = ir_source::load(&c.spec)?;
-    load(ir, sources, &read_progress(quiet(c))).map_err(|e| e.to_string())
-}
 
 /// A spinner that counts a bag's messages while it is read (a bag takes a
 /// while; a CSV file needs none).

@@ -1,24 +1,41 @@
 //! `kinegen compare`: the model with its current parameters against the
 //! logs (kinegen_analysis::comparison), rendered as text, JSON and a report.
-use crate::analysis_cmd::{bad, fmt_errors, fmt_landmarks, prepare, say_warnings, Common};
+use crate::analysis_cmd::{
+    bad, fmt_errors, fmt_landmarks, quiet, read_progress, say_warnings, Common,
+};
+use crate::ir_source::ChildDeriver;
 use crate::output::Out;
-use kinegen_analysis::comparison;
+use kinegen_analysis::comparison::{self, Compared};
 use kinegen_analysis::evaluation::metric_name;
-use kinegen_analysis::run::Run;
+use kinegen_analysis::files::Files;
 use serde_json::{json, Value};
 use std::process::ExitCode;
 
 pub fn compare(c: Common) -> ExitCode {
     let out = Out::new(c.json.as_deref());
-    let mut prep = match prepare(&c) {
-        Ok(p) => p,
-        Err(e) => return bad(e),
+    if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
+        return bad(e);
+    }
+    let files = Files {
+        sources: &c.sources(),
+        effect_dirs: &c.catalogue.effects,
     };
-    // moved, not cloned: a long log's runs are most of the memory
-    let mut all: Vec<Run> = std::mem::take(&mut prep.runs);
-    all.append(&mut prep.holdout);
-    let r = &prep.runner;
-    let cmp = comparison::compare(r, all);
+    let progress = read_progress(quiet(&c));
+    match comparison::compare_files(&files, &ChildDeriver, &progress, |done| {
+        render(&c, &out, done)
+    }) {
+        Ok(code) => code,
+        Err(e) => bad(e.to_string()),
+    }
+}
+
+/// The comparison said as text, written as JSON and as a report.
+fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
+    let Compared {
+        runner: r,
+        warnings,
+        comparison: cmp,
+    } = done;
     let secs: f64 = cmp.runs.iter().map(|r| r.t.last().unwrap() - r.t[0]).sum();
     let which = if c.set.is_empty() {
         "nominal parameters".to_string()
@@ -31,7 +48,7 @@ pub fn compare(c: Common) -> ExitCode {
         cmp.runs.len(),
         secs
     ));
-    say_warnings(&out, &prep.warnings);
+    say_warnings(out, warnings);
     if cmp.has_ground_truth() {
         out.say(&format!("  {}", fmt_errors(&cmp.errors)));
     } else {
@@ -43,7 +60,7 @@ pub fn compare(c: Common) -> ExitCode {
     if let Some(s) = &cmp.landmarks {
         out.say(&format!("  {}", fmt_landmarks(s)));
     }
-    say_where_it_fails(&out, &cmp.regimes, &cmp.segments);
+    say_where_it_fails(out, &cmp.regimes, &cmp.segments);
     if let Some((n, g)) = &cmp.gyrodometry {
         out.say(&format!(
             "gyrodometry (heading from the gyro, seed 000 eq. 13-18), {} run(s):\n  position RMSE {:.4} m, heading RMSE {:.4} rad; final error {:.4} m / {:.4} rad",
@@ -66,10 +83,10 @@ pub fn compare(c: Common) -> ExitCode {
         "landmarks": cmp.landmarks, "regimes": cmp.regimes, "worst_segments": cmp.segments, "runs": per_run,
         "gyrodometry": cmp.gyrodometry.as_ref().map(|(_, g)| json!({"rmse": g.rmse, "errors": g})),
         "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
-        "warnings": prep.warnings,
+        "warnings": warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::compare_report(dir, r, &cmp, &prep.warnings, &doc) {
+        if let Err(e) = crate::report::compare_report(dir, r, &cmp, warnings, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

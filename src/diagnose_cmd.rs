@@ -4,6 +4,7 @@ use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use kinegen_analysis::diagnose::Diagnosis;
 use kinegen_analysis::diagnose_job::{Hooks, Outcome};
+use kinegen_analysis::files::Files;
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::request::{diagnose_files, Diagnosed, Request};
 use serde_json::json;
@@ -22,8 +23,10 @@ pub fn run(c: Common) -> ExitCode {
     let bar = crate::progress::Progress::bar(1, "diagnose", quiet(&c));
     let sources = c.sources();
     let request = Request {
-        sources: &sources,
-        effect_dirs: &c.catalogue.effects,
+        files: Files {
+            sources: &sources,
+            effect_dirs: &c.catalogue.effects,
+        },
         signature: c.report.is_some(),
     };
     let done = diagnose_files(

@@ -2,19 +2,25 @@
 //! default) or several methods compared (fit_job::compare_methods), rendered
 //! as text, JSON, a report and an export.
 use crate::analysis_cmd::{
-    bad, fmt_errors, fmt_landmarks, non_negative, positive, prepare, quiet, say_warnings, Common,
+    bad, fmt_errors, fmt_landmarks, non_negative, positive, quiet, read_progress, say_warnings,
+    Common,
 };
+use crate::ir_source::ChildDeriver;
 use crate::output::Out;
+use crate::progress::Progress;
 use clap::Args;
 use kinegen_analysis::evaluation::metric_name;
+use kinegen_analysis::files::Files;
 use kinegen_analysis::fit::{FitOptions, FitResult};
-use kinegen_analysis::fit_job::{self, Calibrated, Growth, MethodRow, MethodsJob};
+use kinegen_analysis::fit_job::{self, Calibrated, Growth, MethodRow, MethodsJob, MethodsOutcome};
+use kinegen_analysis::fit_request::{fit_files, FitHooks, FitRequest, Fitted};
 use kinegen_analysis::load::Loaded;
 use kinegen_analysis::methods::Settings;
 use kinegen_analysis::metrics::Errors;
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
 use serde_json::{json, Value};
+use std::cell::{Cell, RefCell};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -145,28 +151,83 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         return bad("--export writes the Levenberg-Marquardt calibration: use it with --method lm");
     }
     let out = Out::new(c.json.as_deref());
+    if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
+        return bad(e);
+    }
     let fo = fit_options(a);
-    let prep = match prepare(&c) {
-        Ok(p) => p,
-        Err(e) => return bad(e),
-    };
-    let truth = match truth_values(&prep.runner, &a.truth) {
+    let truth = match kinegen_analysis::model::parse_pairs("--truth", &a.truth) {
         Ok(t) => t,
-        Err(e) => return bad(e),
+        Err(e) => return bad(e.to_string()),
     };
-    if a.method != "lm" {
-        say_warnings(&out, &prep.warnings);
-        let job = MethodsJob {
+    let request = if a.method == "lm" {
+        FitRequest::Calibrate {
+            options: &fo,
+            truth: &truth,
+        }
+    } else {
+        FitRequest::Methods(MethodsJob {
             method: &a.method,
             side: a.side,
             mu: a.mu,
             fit: &fo,
             hidden: &a.hidden,
             truth: &truth,
-        };
-        return run_methods(&c, &out, &prep, &job);
+        })
+    };
+    let files = Files {
+        sources: &c.sources(),
+        effect_dirs: &c.catalogue.effects,
+    };
+    // the calibration's spinner (or the methods' bar) starts once the logs
+    // are read, and stops before the result is said
+    let busy: RefCell<Option<Progress>> = RefCell::new(None);
+    let started = Cell::new(false);
+    let hooks = FitHooks {
+        loaded: &|prep| *busy.borrow_mut() = Some(progress_for(&c, &out, &request, prep)),
+        method: &|name| {
+            if let Some(bar) = busy.borrow().as_ref() {
+                if started.replace(true) {
+                    bar.inc();
+                }
+                bar.message(name);
+            }
+        },
+    };
+    let progress = read_progress(quiet(&c));
+    let done = fit_files(
+        &files,
+        &request,
+        &ChildDeriver,
+        &progress,
+        &hooks,
+        |prep, fitted| {
+            busy.take();
+            match fitted {
+                Fitted::Calibrated(cal) => render_lm(&c, &out, prep, a, &cal, export.as_deref()),
+                Fitted::Methods(m) => render_methods(&c, &out, prep, &truth, &m),
+            }
+        },
+    );
+    match done {
+        Ok(code) => code,
+        Err(e) => bad(e.to_string()),
     }
-    run_lm(&c, &out, &prep, a, &fo, export.as_deref())
+}
+
+/// What shows the calibration running: a spinner for Levenberg-Marquardt,
+/// a bar over the methods otherwise (whose run the logs' warnings precede:
+/// Levenberg-Marquardt says them with its own).
+fn progress_for(c: &Common, out: &Out, request: &FitRequest, prep: &Loaded) -> Progress {
+    match request {
+        FitRequest::Calibrate { .. } => {
+            Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(c))
+        }
+        FitRequest::Methods(job) => {
+            say_warnings(out, &prep.warnings);
+            let count = fit_job::method_runs(job).map_or(0, |j| j.len());
+            Progress::bar(count as u64, "calibration methods", quiet(c))
+        }
+    }
 }
 
 /// `--export FORMAT PATH`: the path to write (checked writable), if any.
@@ -205,36 +266,15 @@ fn fit_options(a: &FitArgs) -> FitOptions {
         .apply(fo)
 }
 
-/// `--truth NAME=VALUE` pairs, each naming a parameter of the spec.
-fn truth_values(r: &Runner, truth: &[String]) -> Result<Vec<(String, f64)>, String> {
-    let truth =
-        kinegen_analysis::model::parse_pairs("--truth", truth).map_err(|e| e.to_string())?;
-    if let Some((n, _)) = truth.iter().find(|(n, _)| r.param_index(n).is_none()) {
-        return Err(format!(
-            "--truth {n}: the spec has no parameter `{n}` (it has: {})",
-            r.names.join(", ")
-        ));
-    }
-    Ok(truth)
-}
-
 /// `fit --method M` (or all): each method's calibration, compared.
-fn run_methods(c: &Common, out: &Out, prep: &Loaded, job: &MethodsJob) -> ExitCode {
+fn render_methods(
+    c: &Common,
+    out: &Out,
+    prep: &Loaded,
+    truth: &[(String, f64)],
+    compared: &MethodsOutcome,
+) -> ExitCode {
     let r = &prep.runner;
-    let count = fit_job::method_runs(job).map_or(0, |j| j.len());
-    let bar = crate::progress::Progress::bar(count as u64, "calibration methods", quiet(c));
-    let started = std::cell::Cell::new(false);
-    let progress = |name: &str| {
-        if started.replace(true) {
-            bar.inc();
-        }
-        bar.message(name);
-    };
-    let compared = match fit_job::compare_methods(prep, job, &progress) {
-        Ok(x) => x,
-        Err(e) => return bad(e),
-    };
-    drop(bar);
     for (name, e) in &compared.not_applicable {
         out.say(&format!("{name}: not applicable here: {e}"));
     }
@@ -266,19 +306,13 @@ fn run_methods(c: &Common, out: &Out, prep: &Loaded, job: &MethodsJob) -> ExitCo
         "parameters": first.map(|m| m["parameters"].clone()),
         "methods": methods_json,
         "closest_to_truth": compared.closest.as_ref().map(|b| b.1.clone()),
-        "truth": job.truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
+        "truth": truth.iter().map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<String, Value>>(),
         "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::methods_report(
-            dir,
-            r,
-            &prep.runs,
-            &compared,
-            job.truth,
-            &prep.warnings,
-            &doc,
-        ) {
+        if let Err(e) =
+            crate::report::methods_report(dir, r, &prep.runs, compared, truth, &prep.warnings, &doc)
+        {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -322,24 +356,18 @@ fn method_json(r: &Runner, m: &MethodRow) -> Value {
 
 /// `fit` (Levenberg-Marquardt, the default): the calibration, judged, with
 /// its per-run table, held-out runs, leave-one-out, report and export.
-fn run_lm(
+fn render_lm(
     c: &Common,
     out: &Out,
     prep: &Loaded,
     a: &FitArgs,
-    fo: &FitOptions,
+    cal: &Calibrated,
     export: Option<&Path>,
 ) -> ExitCode {
     let r = &prep.runner;
-    let spin = crate::progress::Progress::spinner("calibrating (Levenberg-Marquardt)", quiet(c));
-    let cal = match fit_job::calibrate(prep, fo) {
-        Ok(x) => x,
-        Err(e) => return bad(e),
-    };
-    drop(spin);
     let res = &cal.fit;
     say_calibration(out, prep, res, &cal.before.errors, &cal.after.errors);
-    say_judgement(out, &cal);
+    say_judgement(out, cal);
     let (before, after) = (&cal.before.errors, &cal.after.errors);
     let mut doc = fit_json(r, res, before, after, metric_name(&prep.runs));
     doc["unusable"] = json!(cal.unusable);
@@ -356,7 +384,7 @@ fn run_lm(
         ));
         doc["landmarks"] = json!({"before": lb, "after": la});
     }
-    let runs = fit_runs(out, prep, &cal, &mut doc);
+    let runs = fit_runs(out, prep, cal, &mut doc);
     doc["runs"] = json!(runs);
     if let Some(w) = &cal.leave_one_out_warning {
         out.say(&format!("warning: {w}"));
@@ -375,7 +403,7 @@ fn run_lm(
         doc["leave_one_out"] = json!(cal.leave_one_out);
     }
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, &cal, &warnings, &doc) {
+        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, cal, &warnings, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

@@ -1,10 +1,13 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
 //! (kinegen_analysis::localize), with its consistency checks.
-use crate::analysis_cmd::{bad, prepare_from, Common};
+use crate::analysis_cmd::{bad, Common};
+use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::load::Sources;
-use kinegen_analysis::localize::{localize_runs, EkfOptions, Localization, NoiseSource, Summary};
+use kinegen_analysis::files::Files;
+use kinegen_analysis::load::Loaded;
+use kinegen_analysis::localize::{EkfOptions, Localization, NoiseSource, Summary};
+use kinegen_analysis::localize_request::{localize_files, LocalizeRequest, LocalizedFiles};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -52,34 +55,43 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             return bad(e);
         }
     }
-    // the ground truth only scores the filter: where the motion capture lost
-    // the robot, the filter runs on
-    let sources = Sources {
-        truth_scores_only: true,
-        ..c.sources()
-    };
-    let prep = match prepare_from(&c, &sources) {
-        Ok(p) => p,
-        Err(e) => return bad(e),
-    };
-    crate::analysis_cmd::say_warnings(&out, &prep.warnings);
-    let r = &prep.runner;
-    let o = match ekf_options(&c, a, r) {
+    if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
+        return bad(e);
+    }
+    let options = match ekf_options(a) {
         Ok(o) => o,
         Err(e) => return bad(e),
     };
-    warn_unseen_landmarks(&c, &prep);
-    if prep.runs.iter().all(|r| r.landmarks.is_empty()) {
-        return bad(format!(
-            "{}: no landmark observations for these logs (give --observations OBS.csv --landmarks MAP.csv, one OBS per --data)",
-            c.data[0].display()
-        ));
-    }
-    // one robot, one noise: estimated on the --data runs, used on the held-out ones too
-    let done = match localize_runs(r, &prep.runs, &prep.holdout, &o) {
-        Ok(d) => d,
-        Err(e) => return bad(e),
+    let request = LocalizeRequest {
+        files: Files {
+            sources: &c.sources(),
+            effect_dirs: &c.catalogue.effects,
+        },
+        options,
+        sweep: a.sweep,
     };
+    let progress = crate::analysis_cmd::read_progress(crate::analysis_cmd::quiet(&c));
+    let said = |prep: &Loaded| crate::analysis_cmd::say_warnings(&out, &prep.warnings);
+    match localize_files(&request, &ChildDeriver, &progress, &said) {
+        Ok(done) => render(&c, a, &out, &done),
+        Err(e) => bad(e.to_string()),
+    }
+}
+
+/// The localisation said as text, written as JSON, a report and the
+/// `--track` CSV.
+fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> ExitCode {
+    let LocalizedFiles {
+        loaded: prep,
+        localized: done,
+        sweep,
+        unseen_landmarks,
+        ..
+    } = files;
+    for w in unseen_landmarks {
+        eprintln!("warning: {w}");
+    }
+    let r = &prep.runner;
     let (noise, note) = (&done.noise, &done.note);
     out.say(note);
     for line in noise.describe() {
@@ -94,31 +106,23 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     let mut runs_json = Vec::new();
     let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
-    for (run, (loc, summary)) in prep.runs.iter().chain(&prep.holdout).zip(done.runs) {
-        say_run(&out, run, &loc, &summary, a.gate);
-        csv += &track_rows(run, &loc);
-        runs_json.push(run_json(run, &loc, &summary));
+    for (run, (loc, summary)) in prep.runs.iter().chain(&prep.holdout).zip(&done.runs) {
+        say_run(out, run, loc, summary, a.gate);
+        csv += &track_rows(run, loc);
+        runs_json.push(run_json(run, loc, summary));
         locs.push((run, loc, summary));
     }
     let mut noise_json = noise_json(noise, note);
     if let Some(d) = &done.input_delay {
         noise_json["input_delay"] = json!({"name": d.name, "spec_s": d.spec_s, "estimate_s": d.estimate_s, "likelihood_gain": d.gain});
     }
-    let sweep = if a.sweep {
-        match kinegen_analysis::sweep::sweep(r, locs[0].0, &kinegen_analysis::sweep::LEVELS, &o) {
-            Ok(s) => s,
-            Err(e) => return bad(e),
-        }
-    } else {
-        Vec::new()
-    };
     if !sweep.is_empty() {
-        say_sweep(&out, &locs[0].0.path, &sweep);
+        say_sweep(out, &locs[0].0.path, sweep);
     }
     if let Some(dir) = &c.report {
         let pages: Vec<crate::localize_report::RunPage> = locs
             .iter()
-            .map(|(run, loc, summary)| crate::localize_report::RunPage { run, loc, summary })
+            .map(|&(run, loc, summary)| crate::localize_report::RunPage { run, loc, summary })
             .collect();
         let doc = json!({"model": r.ir.name, "noise": noise_json, "runs": runs_json, "sweep": sweep, "warnings": prep.warnings});
         if let Err(e) = crate::localize_report::localize_report(
@@ -126,7 +130,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
             r,
             &pages,
             &described,
-            &sweep,
+            sweep,
             &prep.warnings,
             &doc,
         ) {
@@ -234,70 +238,22 @@ fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::sweep::SweepPoint
     }
 }
 
-/// Mapped landmarks no log ever observes are probably a mapping mistake (an id
-/// The filter's options from the command line: `--noise` checked against
-/// the spec's `[[noise]]`, and the input delay estimated unless `--set`
-/// fixes it.
-fn ekf_options(
-    c: &Common,
-    a: &LocalizeArgs,
-    r: &kinegen_analysis::model::Runner,
-) -> Result<EkfOptions, String> {
-    let noise_sigma =
-        kinegen_analysis::model::parse_pairs("--noise", &a.noise).map_err(|e| e.to_string())?;
-    for (n, s) in &noise_sigma {
-        if !r.ir.noise.iter().any(|x| &x.name == n) {
-            let known: Vec<&str> = r.ir.noise.iter().map(|x| x.name.as_str()).collect();
-            return Err(format!(
-                "--noise {n}: the spec has no [[noise]] `{n}` (it has: {})",
-                known.join(", ")
-            ));
-        }
-        if *s < 0.0 {
-            return Err(format!(
-                "--noise {n}={s}: a standard deviation is 0 or more"
-            ));
-        }
-    }
+/// The filter's options from the arguments (checked against the spec by
+/// the library: `--noise` names and signs, whether the input delay is
+/// estimated).
+fn ekf_options(a: &LocalizeArgs) -> Result<EkfOptions, String> {
     Ok(EkfOptions {
         gate: a.gate,
-        noise_sigma,
+        noise_sigma: kinegen_analysis::model::parse_pairs("--noise", &a.noise)
+            .map_err(|e| e.to_string())?,
         noise: if a.spec_noise {
             NoiseSource::Spec
         } else {
             NoiseSource::Estimate
         },
         smooth: a.smooth,
-        // the spec's input delay is estimated with the noise unless --set fixes it
-        estimate_input_delay: r.input_delay.is_none_or(|i| {
-            !c.set
-                .iter()
-                .any(|s| s.split('=').next().map(str::trim) == Some(r.names[i].as_str()))
-        }),
         ..EkfOptions::default()
     })
-}
-
-/// spelled differently in the map and the observations).
-fn warn_unseen_landmarks(c: &Common, prep: &kinegen_analysis::load::Loaded) {
-    let Some(m) = &c.landmarks else { return };
-    let Ok(map) = kinegen_analysis::landmarks::read_map(m) else {
-        return;
-    };
-    for (i, id) in map.ids.iter().enumerate() {
-        let seen = prep
-            .runs
-            .iter()
-            .chain(&prep.holdout)
-            .any(|r| r.landmarks.iter().any(|z| &z.id == id));
-        if !seen {
-            eprintln!(
-                "warning: {}:{}: landmark `{id}` is never observed in the --observations files",
-                m.display(),
-                i + 2
-            );
-        }
-    }
 }
 
 fn verdict(m: Option<f64>, b: Option<(f64, f64)>) -> String {

@@ -29,14 +29,17 @@
 //! assert!((found / r_r - 1.01).abs() < 0.001, "{found} against {}", 1.01 * r_r);
 //! ```
 //!
-//! From there, each command of the CLI is one call: [`load`] reads a job's
-//! logs for a model, [`comparison::compare`] compares the model with them,
-//! [`fit_job::calibrate`] calibrates and judges the result (held-out runs,
-//! leave-one-run-out), [`localize`] runs the EKF on landmark sightings,
-//! [`request::diagnose_files`] names the physical effects a spec is
-//! missing from its files (its candidates derived through a
-//! [`derivation::Deriver`]; [`diagnose_job`] on runs already loaded), and
-//! [`holdout_bench`] scores calibrations on runs they were not fitted on.
+//! From there, each command of the CLI is one call that reads its files
+//! ([`files::read_files`]: the effect catalogue, the spec derived through a
+//! [`derivation::Deriver`], the logs) and runs the job:
+//! [`comparison::compare_files`] compares the model with the logs,
+//! [`fit_request::fit_files`] calibrates and judges the result (held-out
+//! runs, leave-one-run-out), [`localize_request::localize_files`] runs the
+//! EKF on landmark sightings, [`request::diagnose_files`] names the physical
+//! effects a spec is missing. Each job also runs on logs already loaded
+//! ([`load`], then [`comparison::compare`], [`fit_job::calibrate`],
+//! [`localize::localize_runs`], [`diagnose_job`]), and [`holdout_bench`]
+//! scores calibrations on runs they were not fitted on.
 // The folders follow the pipeline, each using only the ones before it
 // (tests/module_cycles.rs holds them to it): reading logs, the model on a log,
 // estimation, diagnosis, and the seed papers' applications. Every module is
@@ -62,6 +65,7 @@ pub mod model_on_log {
     pub mod deadreckon;
     pub mod derivation;
     pub mod evaluation;
+    pub mod files;
     pub mod innovations;
     pub mod input_range;
     pub mod interp;
@@ -81,6 +85,7 @@ pub mod estimation {
     pub mod discretisation;
     pub mod fit;
     pub mod fit_job;
+    pub mod fit_request;
     pub mod lag;
     pub mod methods;
     pub mod neural;
@@ -103,18 +108,23 @@ pub mod applications {
     pub mod holdout_bench;
     pub mod inverse;
     pub mod localize;
+    pub mod localize_request;
     pub mod navigate;
     pub mod simulate;
     pub mod sweep;
 }
 
-pub use applications::{grid, holdout_bench, inverse, localize, navigate, simulate, sweep};
+pub use applications::{
+    grid, holdout_bench, inverse, localize, localize_request, navigate, simulate, sweep,
+};
 pub use diagnosis::{diagnose, diagnose_job, request};
-pub use estimation::{discretisation, fit, fit_job, lag, methods, neural, periodic, seed_methods};
+pub use estimation::{
+    discretisation, fit, fit_job, fit_request, lag, methods, neural, periodic, seed_methods,
+};
 pub use logs::{bag, column, log, rosdyn, rosmsg, rows};
 pub use model_on_log::{
-    comparison, coverage, dataset, deadreckon, derivation, evaluation, innovations, input_range,
-    interp, landmarks, load, metrics, model, run, steering, timeline, track_rows,
+    comparison, coverage, dataset, deadreckon, derivation, evaluation, files, innovations,
+    input_range, interp, landmarks, load, metrics, model, run, steering, timeline, track_rows,
 };
 
 pub use kinegen_model::effects;

@@ -4,27 +4,25 @@
 //! directories), and [`diagnose_job`] run on them.
 //!
 //! ```ignore
-//! let request = Request { sources: &sources, effect_dirs: &[], signature: false };
+//! let files = Files { sources: &sources, effect_dirs: &[] };
+//! let request = Request { files, signature: false };
 //! let done = diagnose_files(&request, &my_deriver, &|_| Box::new(|_, _| {}), &Hooks::none())?;
 //! println!("{:?}", done.outcome.diagnosis.verdict());
 //! ```
-use crate::derivation::{DerivationFailed, Deriver, EffectChains};
+use crate::derivation::{Deriver, EffectChains};
 use crate::diagnose::{DiagnoseError, MIN_ROWS};
 use crate::diagnose_job::{diagnose_job, Hooks, Job, Outcome};
-use crate::load::{load, LoadError, Loaded, ReadProgress, Sources};
+use crate::files::{read_files, Files, FilesError, Read};
+use crate::load::{Loaded, ReadProgress};
 use crate::model::{parse_sets, ModelError, Runner};
 use crate::run::Run;
-use kinegen_model::effects::{catalogue, EffectError};
-use kinegen_model::error::SourceError;
 use kinegen_model::spec::Model;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 /// What to diagnose: the spec and logs, the user's effect directories, and
 /// whether the report's first-effect signature is wanted.
 pub struct Request<'a> {
-    pub sources: &'a Sources,
-    pub effect_dirs: &'a [PathBuf],
+    pub files: Files<'a>,
     pub signature: bool,
 }
 
@@ -42,13 +40,7 @@ pub struct Diagnosed {
 #[derive(Debug, thiserror::Error)]
 pub enum RequestError {
     #[error(transparent)]
-    Catalogue(#[from] EffectError),
-    #[error(transparent)]
-    Spec(#[from] SourceError),
-    #[error(transparent)]
-    Derivation(#[from] DerivationFailed),
-    #[error(transparent)]
-    Load(#[from] LoadError),
+    Files(#[from] FilesError),
     #[error(transparent)]
     Sets(#[from] ModelError),
     /// A robot that never moves shows no effect (every ratio would be 0/0).
@@ -67,17 +59,15 @@ pub fn diagnose_files(
     hooks: &Hooks,
 ) -> Result<Diagnosed, RequestError> {
     let t0 = Instant::now();
-    // the user's effects first: a broken effect file is said before the
-    // logs are read
-    let cat = catalogue(req.effect_dirs)?;
-    let spec_path = &req.sources.spec;
-    let spec = Model::load(spec_path)?;
-    let ir = deriver.derive(&spec, &spec_path.display().to_string())?;
-    let mut loaded = load(ir, req.sources, progress)?;
+    let Read {
+        spec,
+        catalogue: cat,
+        mut loaded,
+    } = read_files(&req.files, deriver, progress)?;
     pool_pieces(&mut loaded);
     (hooks.warnings)(&loaded.warnings);
     check_moves(&loaded)?;
-    let sets = parse_sets(&req.sources.sets)?;
+    let sets = parse_sets(&req.files.sources.sets)?;
     let preparing = t0.elapsed();
     let t1 = Instant::now();
     let outcome = diagnose_runs(

@@ -2,8 +2,11 @@
 //! parameters dead-reckoned over every run, where its error grows, the
 //! landmark innovations, and gyrodometry (seed 000 eq. 13-18) on the runs
 //! that log a gyro.
+use crate::derivation::Deriver;
 use crate::evaluation::{pairs, tracks};
+use crate::files::{read_files, Files, FilesError};
 use crate::innovations::{self, Innovation, InnovationStats};
+use crate::load::ReadProgress;
 use crate::metrics::{self, errors_each, where_it_fails, Errors, RegimeShare, Segment};
 use crate::model::Runner;
 use crate::run::Run;
@@ -44,6 +47,36 @@ impl Comparison<'_> {
             _ => self.errors.rmse,
         }
     }
+}
+
+/// What [`compare_files`] hands its caller to render: the model with the
+/// user's values, what the logs' reading found that the user should know,
+/// and the comparison (whose tracks borrow the model).
+pub struct Compared<'r> {
+    pub runner: &'r Runner,
+    pub warnings: &'r [String],
+    pub comparison: Comparison<'r>,
+}
+
+/// Read `files` (the spec derived by `deriver`), compare the model with its
+/// current parameters on every run, fitted and held-out alike, and give the
+/// result to `then`.
+pub fn compare_files<T>(
+    files: &Files,
+    deriver: &dyn Deriver,
+    progress: ReadProgress,
+    then: impl FnOnce(Compared) -> T,
+) -> Result<T, FilesError> {
+    let mut loaded = read_files(files, deriver, progress)?.loaded;
+    // moved, not cloned: a long log's runs are most of the memory
+    let mut all: Vec<Run> = std::mem::take(&mut loaded.runs);
+    all.append(&mut loaded.holdout);
+    let comparison = compare(&loaded.runner, all);
+    Ok(then(Compared {
+        runner: &loaded.runner,
+        warnings: &loaded.warnings,
+        comparison,
+    }))
 }
 
 /// Compare `r` with its current parameters on `runs`.
