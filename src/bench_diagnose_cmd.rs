@@ -7,6 +7,8 @@
 //! counted separately, not as misses.
 use crate::analysis_cmd::bad;
 use crate::effects_cmd::base_and_truth;
+use crate::ir_source::ChildDeriver;
+use kinegen_analysis::derivation::Deriver;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::diagnose_job::Hooks;
@@ -105,15 +107,23 @@ const BUNDLED: [(&str, &str); 6] = [
 ];
 
 /// spec/*.toml and tests/user_specs/*.toml under the working directory (a
-/// checkout), else the built-in bundled specs (written to the cache).
-fn default_specs() -> Result<Vec<PathBuf>, String> {
-    let mut v = local_specs();
-    if v.is_empty() {
-        for (name, text) in BUNDLED {
-            v.push(crate::ir_source::materialise(text, name)?);
-        }
+/// checkout), else the built-in bundled specs (named `NAME.toml (built into
+/// kinegen)`: they have no file, and none is written).
+fn default_specs() -> Result<Vec<Model>, String> {
+    let local = local_specs();
+    if !local.is_empty() {
+        return local
+            .iter()
+            .map(|p| Model::load(p).map_err(|e| e.to_string()))
+            .collect();
     }
-    Ok(v)
+    BUNDLED
+        .iter()
+        .map(|(name, text)| {
+            let label = PathBuf::from(format!("{name}.toml (built into kinegen)"));
+            Model::parse(&label, text).map_err(|e| e.to_string())
+        })
+        .collect()
 }
 
 fn local_specs() -> Vec<PathBuf> {
@@ -155,7 +165,7 @@ fn effects_of(spec: &Model) -> Result<Vec<(String, String, f64)>, String> {
 }
 
 fn run_case(
-    spec_path: &std::path::Path,
+    spec: &Model,
     hidden: &[(String, String, f64)],
     noise: f64,
     seed: u64,
@@ -165,7 +175,7 @@ fn run_case(
         .iter()
         .map(|(e, p, v)| format!("{e}.{p}={v}"))
         .collect();
-    let (base, truth) = base_and_truth(spec_path, &effects, &[], &[])?;
+    let (base, truth) = base_and_truth(spec, &effects, &[], &[])?;
     let o = SimOptions {
         trajectory: Trajectory::Random,
         seed,
@@ -178,11 +188,10 @@ fn run_case(
     let run = simulate(&base, &truth, &o)
         .to_run(&base, "bench")
         .map_err(|e| e.to_string())?;
-    let spec = Model::load(spec_path).map_err(|e| e.to_string())?;
     let cat = catalogue(&[]).map_err(|e| e.to_string())?;
     let t0 = Instant::now();
     let outcome = kinegen_analysis::request::diagnose_runs(
-        &spec,
+        spec,
         (&base, std::slice::from_ref(&run)),
         (&cat, &crate::ir_source::ChildDeriver),
         &[],
@@ -195,7 +204,7 @@ fn run_case(
     Ok(Case {
         index: 0,
         model: spec.name.clone(),
-        spec: spec_path.display().to_string(),
+        spec: spec.path.display().to_string(),
         redundant: d
             .skipped
             .iter()
@@ -232,12 +241,16 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
         };
     }
     let specs = if a.spec.is_empty() {
-        match default_specs() {
-            Ok(s) => s,
-            Err(e) => return bad(e),
-        }
+        default_specs()
     } else {
-        a.spec.clone()
+        a.spec
+            .iter()
+            .map(|p| Model::load(p).map_err(|e| e.to_string()))
+            .collect()
+    };
+    let specs = match specs {
+        Ok(s) => s,
+        Err(e) => return bad(e),
     };
     let known: Vec<String> = match catalogue(&[]) {
         Ok(c) => c.iter().map(|e| e.name.clone()).collect(),
@@ -251,17 +264,17 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
     }
     let mut cases = Vec::new();
     let mut index = 0u64;
-    for spec_path in &specs {
-        let spec = match Model::load(spec_path) {
-            Ok(m) => m,
-            Err(e) => return bad(e),
-        };
-        if let Err(e) = crate::ir_source::load(spec_path)
+    for spec in &specs {
+        // a spec that does not derive, or whose IR is unusable, stops the
+        // benchmark before its first case
+        if let Err(e) = ChildDeriver
+            .derive(spec, &spec.path.display().to_string())
+            .map_err(|e| e.to_string())
             .and_then(|ir| Runner::new(ir, &[]).map_err(|e| e.to_string()))
         {
             return bad(e);
         }
-        let mut effects = match effects_of(&spec) {
+        let mut effects = match effects_of(spec) {
             Ok(e) => e,
             Err(e) => return bad(e),
         };
@@ -277,7 +290,7 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
                         continue;
                     }
                     // every case its own trajectory
-                    match run_case(spec_path, hidden, noise, 1000 * j as u64 + seed, a.laps) {
+                    match run_case(spec, hidden, noise, 1000 * j as u64 + seed, a.laps) {
                         Ok(c) => cases.push(Case { index: i, ..c }),
                         Err(e) => out.say(&format!(
                             "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",

@@ -1,6 +1,7 @@
 //! `kinegen simulate` and `kinegen add-effect`.
 use crate::analysis_cmd::bad;
-use crate::ir_source;
+use crate::ir_source::ChildDeriver;
+use kinegen_analysis::derivation::Deriver;
 use kinegen_analysis::effects::{catalogue, find, Applicability};
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
@@ -99,22 +100,24 @@ pub struct SimArgs {
 
 /// The model of `spec` with `sets` (what commands the simulated robot) and the
 /// real robot: the same with the hidden `effects` (`NAME=VALUE` or
-/// `NAME.PARAM=VALUE`, from the bundled catalogue and `dirs`) added.
+/// `NAME.PARAM=VALUE`, from the bundled catalogue and `dirs`) added. Both are
+/// derived by the command line's [`Deriver`] (a spec built into the binary,
+/// with no file, goes to the derive child as text).
 pub fn base_and_truth(
-    spec_path: &Path,
+    spec: &Model,
     effects: &[String],
     sets: &[(String, f64)],
     dirs: &[PathBuf],
 ) -> Result<(Runner, Runner), String> {
-    let spec = Model::load(spec_path).map_err(|e| e.to_string())?;
-    let base = Runner::new(ir_source::load(spec_path)?, sets).map_err(|e| e.to_string())?;
-    let (truth, values) = with_effects(&spec, effects, dirs)?;
+    let named = spec.path.display().to_string();
+    let base_ir = ChildDeriver.derive(spec, &named).map_err(|e| e.to_string())?;
+    let base = Runner::new(base_ir, sets).map_err(|e| e.to_string())?;
+    let (truth, values) = with_effects(spec, effects, dirs)?;
     let truth_ir = if effects.is_empty() {
         base.ir.clone()
     } else {
-        use kinegen_analysis::derivation::Deriver;
-        let label = format!("{} with {} added", spec_path.display(), effects.join(", "));
-        ir_source::ChildDeriver
+        let label = format!("{named} with {} added", effects.join(", "));
+        ChildDeriver
             .derive(&truth, &label)
             .map_err(|e| e.to_string())?
     };
@@ -131,7 +134,8 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
         }
         let traj: Trajectory = a.trajectory.parse().map_err(|e| format!("{e}"))?;
         let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
-        let (base, truth) = base_and_truth(&a.spec, &a.effect, &sets, &a.catalogue.effects)?;
+        let spec = Model::load(&a.spec).map_err(|e| e.to_string())?;
+        let (base, truth) = base_and_truth(&spec, &a.effect, &sets, &a.catalogue.effects)?;
         let landmarks = match (&a.landmarks, &a.observations) {
             (Some(m), Some(_)) => {
                 if truth.ir.observation_kernels(RangeBearing).map(|o| o.value).is_none() {

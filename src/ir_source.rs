@@ -34,21 +34,6 @@ fn committed_candidates(spec: &Path, name: &str) -> Vec<PathBuf> {
     v
 }
 
-/// Write a spec text built into the binary (bench-diagnose's bundled specs,
-/// run outside a checkout) where a command can read it as a file; returns
-/// its path.
-pub fn materialise(spec_text: &str, name_hint: &str) -> Result<PathBuf, String> {
-    let dir = cache_dir().join("specs");
-    let path = dir.join(format!(
-        "{name_hint}-{}.toml",
-        kinegen_model::spec::fingerprint(spec_text)
-    ));
-    if !path.exists() {
-        kinegen_model::files::write_atomic(&path, spec_text).map_err(|e| e.to_string())?;
-    }
-    Ok(path)
-}
-
 /// The command line's [`Deriver`]: [`load`] (the committed IR, the cache, or
 /// `kinegen derive` in a child process) of a spec as its file has it; a
 /// model built in memory (a spec with effects added has no file of its own)
