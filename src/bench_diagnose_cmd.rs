@@ -8,9 +8,9 @@
 use crate::analysis_cmd::bad;
 use crate::effects_cmd::base_and_truth;
 use crate::ir_source::ChildDeriver;
-use kinegen_analysis::derivation::Deriver;
 use crate::output::Out;
 use clap::Args;
+use kinegen_analysis::derivation::Deriver;
 use kinegen_analysis::diagnose_job::Hooks;
 use kinegen_analysis::effects::{catalogue, Applicability};
 use kinegen_analysis::model::Runner;

@@ -110,7 +110,9 @@ pub fn base_and_truth(
     dirs: &[PathBuf],
 ) -> Result<(Runner, Runner), String> {
     let named = spec.path.display().to_string();
-    let base_ir = ChildDeriver.derive(spec, &named).map_err(|e| e.to_string())?;
+    let base_ir = ChildDeriver
+        .derive(spec, &named)
+        .map_err(|e| e.to_string())?;
     let base = Runner::new(base_ir, sets).map_err(|e| e.to_string())?;
     let (truth, values) = with_effects(spec, effects, dirs)?;
     let truth_ir = if effects.is_empty() {

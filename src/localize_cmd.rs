@@ -6,7 +6,9 @@ use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::files::Files;
 use kinegen_analysis::load::Loaded;
-use kinegen_analysis::localize::{EkfOptions, Localization, NoiseSource, Summary};
+use kinegen_analysis::localize::{
+    Consistency, EkfOptions, Localization, NoiseSource, Spread, Summary,
+};
 use kinegen_analysis::localize_request::{localize_files, LocalizeRequest, LocalizedFiles};
 use serde_json::json;
 use std::path::PathBuf;
@@ -187,11 +189,22 @@ fn run_json(
         "position_rmse_m": s.rmse, "dead_reckoning_rmse_m": s.dead_reckoning,
         "nis_mean": s.nis, "nis_bounds": s.nis_bounds.map(|b| [b.0, b.1]),
         "nees_mean": s.nees, "nees_bounds": s.nees_bounds.map(|b| [b.0, b.1]),
+        "nis_spread": s.nis_spread.map(spread_json), "nees_spread": s.nees_spread.map(spread_json),
+        "consistency": s.consistency().map(|c| match c {
+            Consistency::Agree => "agree",
+            Consistency::HeavyTails { pessimistic_core: true } => "heavy_tails_pessimistic_core",
+            Consistency::HeavyTails { pessimistic_core: false } => "heavy_tails_overconfident_core",
+            Consistency::Contradict => "contradict",
+        }),
         "ground_truth_noise": s.truth_noise.map(|n| json!({"position_m": n[0], "heading_rad": n[2]})),
         "smoothed": s.smoothed.map(|(rmse, nees)| json!({"position_rmse_m": rmse, "nees_mean": nees})),
         "final_pose": loc.track.last(),
         "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
     })
+}
+
+fn spread_json(x: Spread) -> serde_json::Value {
+    json!({"median": x.median, "chi2_median": x.chi2_median, "beyond_95": x.beyond_95, "point_95": x.point_95})
 }
 
 /// The noise sweep's table (seed 001 Figs 6-7) and which uncertainty costs most.
@@ -256,6 +269,33 @@ fn ekf_options(a: &LocalizeArgs) -> Result<EkfOptions, String> {
     })
 }
 
+/// A statistic's spread, one phrase: its median against chi-square's, and
+/// its share beyond the 95% point.
+fn fmt_spread(x: &Spread) -> String {
+    format!(
+        "median {:.2} (chi-square's {:.2}), {:.1}% beyond its 95% point {:.2} (5% expected)",
+        x.median,
+        x.chi2_median,
+        100.0 * x.beyond_95,
+        x.point_95
+    )
+}
+
+/// What NIS and NEES say together, when their means contradict each other.
+pub fn say_consistency(c: Consistency) -> Option<String> {
+    match c {
+        Consistency::Agree => None,
+        Consistency::HeavyTails { pessimistic_core } => Some(format!(
+            "the means contradict each other, the medians do not: most of the time the filter is {} (both medians {} chi-square's), and its errors have heavier tails than its Gaussian: at times it is far more wrong than its covariance says (the report's error chart shows when)",
+            if pessimistic_core { "pessimistic" } else { "overconfident" },
+            if pessimistic_core { "below" } else { "above" },
+        )),
+        Consistency::Contradict => Some(
+            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are (the innovations' likelihood that chose the noise does not see an error the spec leaves out: a camera offset, a landmark map error, a lag)".into(),
+        ),
+    }
+}
+
 fn verdict(m: Option<f64>, b: Option<(f64, f64)>) -> String {
     match (m, b) {
         (Some(m), Some((lo, hi))) if m < lo => {
@@ -302,6 +342,14 @@ fn say_run(
             1e3 * n[0],
             1e3 * n[2]
         ));
+    }
+    for (name, spread) in [("NIS ", s.nis_spread), ("NEES", s.nees_spread)] {
+        if let Some(x) = spread {
+            out.say(&format!("    {name} {}", fmt_spread(&x)));
+        }
+    }
+    if let Some(line) = s.consistency().and_then(say_consistency) {
+        out.say(&format!("    {line}"));
     }
     if let Some((rmse, nees)) = s.smoothed {
         out.say(&format!(

@@ -4,7 +4,7 @@
 //! NIS over time with its chi-square band, and a table of the figures and
 //! the noise; the noise sweep (seed 001 Figs 6-7) when it was run.
 use crate::report::{axes, decimated, esc, page, series_of, squared, write, Series, H, W};
-use kinegen_analysis::localize::{mean_bounds, Localization, Summary};
+use kinegen_analysis::localize::{mean_bounds, Localization, Spread, Summary};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
 use plotters::prelude::*;
@@ -309,7 +309,9 @@ fn num(v: Option<f64>, digits: usize) -> String {
 fn tables(runs: &[RunPage], noise: &[String]) -> String {
     let mut t = String::from(
         "<table><tr><th>run</th><th>position RMSE (m)</th><th>smoothed RMSE (m)</th><th>dead reckoning RMSE (m)</th>\
-         <th>mean NEES (95% bounds)</th><th>mean NIS (95% bounds)</th><th>sightings used</th><th>rejected</th><th>outside the log</th></tr>",
+         <th>mean NEES (95% bounds)</th><th>NEES median (chi-square's) / beyond 95% point</th>\
+         <th>mean NIS (95% bounds)</th><th>NIS median (chi-square's) / beyond 95% point</th>\
+         <th>sightings used</th><th>rejected</th><th>outside the log</th></tr>",
     );
     for p in runs {
         let s = p.summary;
@@ -317,20 +319,43 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
             (Some(m), Some((lo, hi))) => format!("{m:.2} ({lo:.2}-{hi:.2})"),
             _ => "n/a".into(),
         };
+        let spread = |x: Option<Spread>| {
+            x.map_or("n/a".into(), |x| {
+                format!(
+                    "{:.2} ({:.2}) / {:.1}%",
+                    x.median,
+                    x.chi2_median,
+                    100.0 * x.beyond_95
+                )
+            })
+        };
         t += &format!(
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             esc(&p.run.path),
             num(s.rmse, 4),
             num(s.smoothed.and_then(|x| x.0), 4),
             num(s.dead_reckoning, 4),
             bounded(s.nees, s.nees_bounds),
+            spread(s.nees_spread),
             bounded(s.nis, s.nis_bounds),
+            spread(s.nis_spread),
             p.loc.accepted,
             p.loc.rejected,
             p.loc.outside,
         );
     }
-    t += "</table><table><tr><th>noise the filter ran with</th></tr>";
+    t += "</table>";
+    // what NIS and NEES say together, where their means contradict each other
+    for p in runs {
+        if let Some(line) = p
+            .summary
+            .consistency()
+            .and_then(crate::localize_cmd::say_consistency)
+        {
+            t += &format!("<p>{}: {}</p>", esc(&p.run.path), esc(&line));
+        }
+    }
+    t += "<table><tr><th>noise the filter ran with</th></tr>";
     for line in noise {
         t += &format!("<tr><td>{}</td></tr>", esc(line));
     }

@@ -416,6 +416,19 @@ fn real_velocity_commanded_robots_localize_and_calibrate_as_logged() {
             "robot{robot}: smoothed {smoothed} m, filter {rmse} m"
         );
         assert!(loc["noise"]["process"]["dv"]["sigma"].as_f64().unwrap() > 0.0);
+        // means that contradict each other are read through the medians and
+        // tails, never left as two opposite verdicts
+        let side = |m: &str, b: &str| {
+            let (m, b) = (f(m), &r[b]);
+            (m > b[1].as_f64().unwrap()) as i8 - (m < b[0].as_f64().unwrap()) as i8
+        };
+        if side("nis_mean", "nis_bounds") * side("nees_mean", "nees_bounds") < 0 {
+            assert_ne!(r["consistency"], "agree", "robot{robot}: {r}");
+        }
+        assert!(
+            r["nees_spread"]["beyond_95"].as_f64().unwrap() < 0.3,
+            "robot{robot}: {r}"
+        );
         let cmp = run_in(dir, &["compare", "--spec", s, "--data", &log]);
         assert_eq!(
             cmp["runs"].as_array().unwrap().len(),
@@ -682,6 +695,13 @@ fn nees_counts_the_ground_truths_own_noise() {
         (1.5..4.5).contains(&nees),
         "mean NEES {nees} (3 if consistent)"
     );
+    // spread as chi-square's: medians near its, and NIS and NEES agree
+    for key in ["nis_spread", "nees_spread"] {
+        let s = &run[key];
+        let ratio = s["median"].as_f64().unwrap() / s["chi2_median"].as_f64().unwrap();
+        assert!((0.5..2.0).contains(&ratio), "{key}: {s}");
+    }
+    assert_eq!(run["consistency"], "agree", "{run}");
 }
 
 /// Issue #34: a robot that does not follow small commands. A commanded robot

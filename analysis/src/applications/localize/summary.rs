@@ -1,7 +1,9 @@
 //! One localised run's figures: position RMSE of the filter, of the
-//! smoother and of dead reckoning against the ground truth, and the mean
-//! NIS and NEES with their chi-square bounds.
-use super::{mean_bounds, nees_of, truth_noise, Localization, Sensed};
+//! smoother and of dead reckoning against the ground truth, the mean NIS and
+//! NEES with their chi-square bounds, and how their values spread (median,
+//! share in the tail), which tells a filter wrong at times from one wrong
+//! throughout.
+use super::{chi2_quantile, mean_bounds, nees_of, truth_noise, Localization, Sensed};
 use crate::model::Runner;
 use crate::run::Run;
 
@@ -19,6 +21,102 @@ pub struct Summary {
     /// The ground truth's own noise the NEES counts ([`truth_noise`]), when
     /// there is a NEES.
     pub truth_noise: Option<[f64; 3]>,
+    pub nis_spread: Option<Spread>,
+    pub nees_spread: Option<Spread>,
+}
+
+/// How a consistency statistic's values spread against their chi-square
+/// law. Its mean alone is dominated by its largest values: a filter right
+/// within its covariance most of the time and far off at times can have a
+/// mean above the bounds while most values lie below chi-square's median.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Spread {
+    pub median: f64,
+    /// Chi-square's median for the statistic's degrees of freedom.
+    pub chi2_median: f64,
+    /// The share of values beyond chi-square's 95% point (0.05 for a
+    /// consistent filter).
+    pub beyond_95: f64,
+    pub point_95: f64,
+}
+
+/// Chi-square's median and 95% point: exact for 2 degrees of freedom (a
+/// range-bearing sighting's NIS), Wilson-Hilferty otherwise (within 1% for
+/// 3, a planar pose's NEES).
+fn chi2_points(dof: f64) -> (f64, f64) {
+    if dof == 2.0 {
+        (2.0 * std::f64::consts::LN_2, -2.0 * 0.05f64.ln())
+    } else {
+        (chi2_quantile(dof, 0.0), chi2_quantile(dof, 1.644854))
+    }
+}
+
+/// The spread of `values` (NIS or NEES) against chi-square with `dof`
+/// degrees of freedom; None without values.
+pub fn spread(values: impl Iterator<Item = f64>, dof: f64) -> Option<Spread> {
+    let mut v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let (chi2_median, point_95) = chi2_points(dof);
+    let beyond = v.iter().filter(|&&x| x > point_95).count();
+    Some(Spread {
+        median: v[v.len() / 2],
+        chi2_median,
+        beyond_95: beyond as f64 / v.len() as f64,
+        point_95,
+    })
+}
+
+/// What NIS and NEES say together about the filter's covariance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Consistency {
+    /// Their means do not contradict each other.
+    Agree,
+    /// Their means contradict each other while their medians agree on the
+    /// side given (true: pessimistic) and their tails are heavier than
+    /// chi-square's: right within the covariance most of the time, far off
+    /// at times (errors with heavier tails than the filter's Gaussian).
+    HeavyTails { pessimistic_core: bool },
+    /// Their means contradict each other and so do their medians: the
+    /// observation errors and the motion's noise are out of balance.
+    Contradict,
+}
+
+/// Which side of its 95% bounds a mean lies on: -1 below (pessimistic), +1
+/// above (overconfident), 0 within.
+fn side(mean: Option<f64>, bounds: Option<(f64, f64)>) -> i8 {
+    match (mean, bounds) {
+        (Some(m), Some((lo, _))) if m < lo => -1,
+        (Some(m), Some((_, hi))) if m > hi => 1,
+        _ => 0,
+    }
+}
+
+impl Summary {
+    /// What NIS and NEES say together (None without a NEES).
+    pub fn consistency(&self) -> Option<Consistency> {
+        let (nis, nees) = (self.nis_spread?, self.nees_spread?);
+        let (a, b) = (
+            side(self.nis, self.nis_bounds),
+            side(self.nees, self.nees_bounds),
+        );
+        if a * b >= 0 {
+            return Some(Consistency::Agree);
+        }
+        let below = |s: Spread| s.median < s.chi2_median;
+        let heavy = |s: Spread| s.beyond_95 > 0.05;
+        Some(
+            if below(nis) == below(nees) && (heavy(nis) || heavy(nees)) {
+                Consistency::HeavyTails {
+                    pessimistic_core: below(nis),
+                }
+            } else {
+                Consistency::Contradict
+            },
+        )
+    }
 }
 
 /// Position RMSE of `track` against the run's ground truth, if it has one,
@@ -62,6 +160,81 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
         nees: mean(loc.nees.iter().map(|n| n.1)),
         truth_noise: truth_noise(run).filter(|_| !loc.nees.is_empty()),
         nees_bounds: (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0)),
+        nis_spread: spread(loc.nis.iter().map(|n| n.1), 2.0),
+        nees_spread: spread(loc.nees.iter().map(|n| n.1), 3.0),
         smoothed,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Chi-square with 2 degrees of freedom at evenly spaced probabilities:
+    /// its law, without sampling noise.
+    fn chi2_2(n: usize, scale: f64) -> Vec<f64> {
+        (0..n)
+            .map(|i| -2.0 * scale * (1.0 - (i as f64 + 0.5) / n as f64).ln())
+            .collect()
+    }
+
+    /// A summary whose NIS and NEES are the given values (NEES taken as 3
+    /// degrees of freedom, as localisation counts it).
+    fn summary_of(nis: &[f64], nees: &[f64]) -> Summary {
+        let m = |v: &[f64]| mean(v.iter().copied());
+        Summary {
+            rmse: None,
+            dead_reckoning: None,
+            nis: m(nis),
+            nis_bounds: Some(mean_bounds(nis.len(), 2.0)),
+            nees: m(nees),
+            nees_bounds: Some(mean_bounds(nees.len(), 3.0)),
+            smoothed: None,
+            truth_noise: None,
+            nis_spread: spread(nis.iter().copied(), 2.0),
+            nees_spread: spread(nees.iter().copied(), 3.0),
+        }
+    }
+
+    #[test]
+    fn a_consistent_statistic_spreads_as_chi_square() {
+        let s = spread(chi2_2(2000, 1.0).into_iter(), 2.0).unwrap();
+        assert!((s.median / s.chi2_median - 1.0).abs() < 0.01, "{s:?}");
+        assert!((s.beyond_95 - 0.05).abs() < 0.002, "{s:?}");
+        // 3 degrees of freedom: Wilson-Hilferty within 1% of the tables
+        let (median, p95) = chi2_points(3.0);
+        assert!((median / 2.366 - 1.0).abs() < 0.01 && (p95 / 7.815 - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn means_that_contradict_each_other_are_read_through_the_medians() {
+        // pessimistic throughout: NIS at half its law; NEES the same, far off
+        // in a fifth of the rows (heavy tails): its mean overconfident
+        let nis = chi2_2(2000, 0.5);
+        let mut nees = chi2_2(2000, 0.6);
+        for (i, x) in nees.iter_mut().enumerate() {
+            if i % 5 == 0 {
+                *x *= 12.0;
+            }
+        }
+        let s = summary_of(&nis, &nees);
+        assert!(s.nees.unwrap() > s.nees_bounds.unwrap().1, "{s:?}");
+        assert_eq!(
+            s.consistency(),
+            Some(Consistency::HeavyTails {
+                pessimistic_core: true
+            })
+        );
+        // the NEES overconfident in its median too: a contradiction
+        let nees = chi2_2(2000, 2.0);
+        assert_eq!(
+            summary_of(&nis, &nees).consistency(),
+            Some(Consistency::Contradict)
+        );
+        // both pessimistic: they agree
+        assert_eq!(
+            summary_of(&nis, &chi2_2(2000, 0.5)).consistency(),
+            Some(Consistency::Agree)
+        );
     }
 }
