@@ -1,7 +1,6 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
 //! (kinegen_analysis::localize), with its consistency checks.
 use crate::analysis_cmd::{bad, Common};
-use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::files::Files;
@@ -74,7 +73,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     };
     let progress = crate::analysis_cmd::read_progress(crate::analysis_cmd::quiet(&c));
     let said = |prep: &Loaded| crate::analysis_cmd::say_warnings(&out, &prep.warnings);
-    match localize_files(&request, &ChildDeriver, &progress, &said) {
+    match localize_files(&request, crate::ir_source::deriver(), &progress, &said) {
         Ok(done) => render(&c, a, &out, &done),
         Err(e) => bad(e.to_string()),
     }
@@ -281,21 +280,6 @@ fn fmt_spread(x: &Spread) -> String {
     )
 }
 
-/// What NIS and NEES say together, when their means contradict each other.
-pub fn say_consistency(c: Consistency) -> Option<String> {
-    match c {
-        Consistency::Agree => None,
-        Consistency::HeavyTails { pessimistic_core } => Some(format!(
-            "the means contradict each other, the medians do not: most of the time the filter is {} (both medians {} chi-square's), and its errors have heavier tails than its Gaussian: at times it is far more wrong than its covariance says (the report's error chart shows when)",
-            if pessimistic_core { "pessimistic" } else { "overconfident" },
-            if pessimistic_core { "below" } else { "above" },
-        )),
-        Consistency::Contradict => Some(
-            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are (the innovations' likelihood that chose the noise does not see an error the spec leaves out: a camera offset, a landmark map error, a lag)".into(),
-        ),
-    }
-}
-
 fn verdict(m: Option<f64>, b: Option<(f64, f64)>) -> String {
     match (m, b) {
         (Some(m), Some((lo, hi))) if m < lo => {
@@ -348,7 +332,10 @@ fn say_run(
             out.say(&format!("    {name} {}", fmt_spread(&x)));
         }
     }
-    if let Some(line) = s.consistency().and_then(say_consistency) {
+    if let Some(line) = s
+        .consistency()
+        .and_then(crate::localize_report::say_consistency)
+    {
         out.say(&format!("    {line}"));
     }
     if let Some((rmse, nees)) = s.smoothed {

@@ -4,7 +4,7 @@
 //! NIS over time with its chi-square band, and a table of the figures and
 //! the noise; the noise sweep (seed 001 Figs 6-7) when it was run.
 use crate::report::{axes, decimated, esc, page, series_of, squared, write, Series, H, W};
-use kinegen_analysis::localize::{mean_bounds, Localization, Spread, Summary};
+use kinegen_analysis::localize::{mean_bounds, Consistency, Localization, Spread, Summary};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
 use plotters::prelude::*;
@@ -347,11 +347,7 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
     t += "</table>";
     // what NIS and NEES say together, where their means contradict each other
     for p in runs {
-        if let Some(line) = p
-            .summary
-            .consistency()
-            .and_then(crate::localize_cmd::say_consistency)
-        {
+        if let Some(line) = p.summary.consistency().and_then(say_consistency) {
             t += &format!("<p>{}: {}</p>", esc(&p.run.path), esc(&line));
         }
     }
@@ -360,4 +356,19 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
         t += &format!("<tr><td>{}</td></tr>", esc(line));
     }
     t + "</table>"
+}
+
+/// What NIS and NEES say together, when their means contradict each other.
+pub fn say_consistency(c: Consistency) -> Option<String> {
+    match c {
+        Consistency::Agree => None,
+        Consistency::HeavyTails { pessimistic_core } => Some(format!(
+            "the means contradict each other, the medians do not: most of the time the filter is {} (both medians {} chi-square's), and its errors have heavier tails than its Gaussian: at times it is far more wrong than its covariance says (the report's error chart shows when)",
+            if pessimistic_core { "pessimistic" } else { "overconfident" },
+            if pessimistic_core { "below" } else { "above" },
+        )),
+        Consistency::Contradict => Some(
+            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are (the innovations' likelihood that chose the noise does not see an error the spec leaves out: a camera offset, a landmark map error, a lag)".into(),
+        ),
+    }
 }
