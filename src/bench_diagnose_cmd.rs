@@ -7,10 +7,8 @@
 //! counted separately, not as misses.
 use crate::analysis_cmd::bad;
 use crate::effects_cmd::base_and_truth;
-use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::derivation::Deriver;
 use kinegen_analysis::diagnose_job::Hooks;
 use kinegen_analysis::effects::{catalogue, Applicability};
 use kinegen_analysis::model::Runner;
@@ -193,7 +191,7 @@ fn run_case(
     let outcome = kinegen_analysis::request::diagnose_runs(
         spec,
         (&base, std::slice::from_ref(&run)),
-        (&cat, &crate::ir_source::ChildDeriver),
+        (&cat, crate::ir_source::deriver()),
         &[],
         false,
         &Hooks::none(),
@@ -267,7 +265,7 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
     for spec in &specs {
         // a spec that does not derive, or whose IR is unusable, stops the
         // benchmark before its first case
-        if let Err(e) = ChildDeriver
+        if let Err(e) = crate::ir_source::deriver()
             .derive(spec, &spec.path.display().to_string())
             .map_err(|e| e.to_string())
             .and_then(|ir| Runner::new(ir, &[]).map_err(|e| e.to_string()))

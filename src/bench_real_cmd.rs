@@ -71,7 +71,7 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
         &config,
         &a.session,
         a.max_gap,
-        &crate::ir_source::ChildDeriver,
+        crate::ir_source::deriver(),
     ) {
         Ok(l) => l,
         Err(e) => return bad(e),

@@ -3,7 +3,6 @@
 use crate::analysis_cmd::{
     bad, fmt_errors, fmt_landmarks, quiet, read_progress, say_warnings, Common,
 };
-use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use kinegen_analysis::comparison::{self, Compared};
 use kinegen_analysis::evaluation::metric_name;
@@ -21,7 +20,7 @@ pub fn compare(c: Common) -> ExitCode {
         effect_dirs: &c.catalogue.effects,
     };
     let progress = read_progress(quiet(&c));
-    match comparison::compare_files(&files, &ChildDeriver, &progress, |done| {
+    match comparison::compare_files(&files, crate::ir_source::deriver(), &progress, |done| {
         render(&c, &out, done)
     }) {
         Ok(code) => code,

@@ -1,6 +1,5 @@
 //! `kinegen diagnose`.
 use crate::analysis_cmd::{bad, quiet, Common};
-use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use kinegen_analysis::diagnose::Diagnosis;
 use kinegen_analysis::diagnose_job::{Hooks, Outcome};
@@ -31,7 +30,7 @@ pub fn run(c: Common) -> ExitCode {
     };
     let done = diagnose_files(
         &request,
-        &ChildDeriver,
+        crate::ir_source::deriver(),
         &crate::analysis_cmd::read_progress(quiet(&c)),
         &Hooks {
             // said before the diagnosis starts, as the logs are read

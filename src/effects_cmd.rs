@@ -1,7 +1,5 @@
 //! `kinegen simulate` and `kinegen add-effect`.
 use crate::analysis_cmd::bad;
-use crate::ir_source::ChildDeriver;
-use kinegen_analysis::derivation::Deriver;
 use kinegen_analysis::effects::{catalogue, find, Applicability};
 use kinegen_analysis::model::{parse_sets, Runner};
 use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
@@ -110,7 +108,7 @@ pub fn base_and_truth(
     dirs: &[PathBuf],
 ) -> Result<(Runner, Runner), String> {
     let named = spec.path.display().to_string();
-    let base_ir = ChildDeriver
+    let base_ir = crate::ir_source::deriver()
         .derive(spec, &named)
         .map_err(|e| e.to_string())?;
     let base = Runner::new(base_ir, sets).map_err(|e| e.to_string())?;
@@ -119,7 +117,7 @@ pub fn base_and_truth(
         base.ir.clone()
     } else {
         let label = format!("{named} with {} added", effects.join(", "));
-        ChildDeriver
+        crate::ir_source::deriver()
             .derive(&truth, &label)
             .map_err(|e| e.to_string())?
     };

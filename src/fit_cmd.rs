@@ -5,7 +5,6 @@ use crate::analysis_cmd::{
     bad, fmt_errors, fmt_landmarks, non_negative, positive, quiet, read_progress, say_warnings,
     Common,
 };
-use crate::ir_source::ChildDeriver;
 use crate::output::Out;
 use crate::progress::Progress;
 use clap::Args;
@@ -197,7 +196,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     let done = fit_files(
         &files,
         &request,
-        &ChildDeriver,
+        crate::ir_source::deriver(),
         &progress,
         &hooks,
         |prep, fitted| {

@@ -53,6 +53,16 @@ impl Deriver for ChildDeriver {
     }
 }
 
+/// The deriver every command uses, chosen here: the child process. Deriving
+/// in this process would hold symbolica's one machine-wide thread for as
+/// long as the process lives (a long fit or diagnosis would keep every other
+/// kinegen waiting), and the analyses here use threads freely; a child holds
+/// it only while it derives, and its output never reaches this process's
+/// stdout.
+pub fn deriver() -> &'static dyn Deriver {
+    &ChildDeriver
+}
+
 /// How the derive child gets the spec.
 #[derive(Clone, Copy)]
 enum Spec<'a> {
