@@ -6,11 +6,11 @@
 //! spec's own parameters on these logs cannot be told apart from them and are
 //! counted separately, not as misses.
 use crate::analysis_cmd::bad;
-use crate::effects_cmd::base_and_truth;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::diagnose_job::Hooks;
 use kinegen_analysis::effects::{catalogue, Applicability};
+use kinegen_analysis::hidden::{with_hidden, Hidden, Robots};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
 use kinegen_model::spec::Model;
@@ -169,11 +169,15 @@ fn run_case(
     seed: u64,
     laps: u64,
 ) -> Result<Case, String> {
-    let effects: Vec<String> = hidden
+    let effects: Vec<Hidden> = hidden
         .iter()
-        .map(|(e, p, v)| format!("{e}.{p}={v}"))
+        .map(|(e, p, v)| Hidden::new(e, p, *v))
         .collect();
-    let (base, truth) = base_and_truth(spec, &effects, &[], &[])?;
+    let Robots {
+        spec: base,
+        robot: truth,
+    } = with_hidden(spec, &effects, &[], &[], crate::ir_source::deriver())
+        .map_err(|e| e.to_string())?;
     let o = SimOptions {
         trajectory: Trajectory::Random,
         seed,

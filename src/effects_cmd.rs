@@ -1,7 +1,8 @@
 //! `kinegen simulate` and `kinegen add-effect`.
 use crate::analysis_cmd::bad;
 use kinegen_analysis::effects::{catalogue, find, Applicability};
-use kinegen_analysis::model::{parse_sets, Runner};
+use kinegen_analysis::hidden::{with_hidden, Hidden, Robots};
+use kinegen_analysis::model::parse_sets;
 use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
 use kinegen_model::decl::InputKind;
 use kinegen_model::decl::ObservationRole::RangeBearing;
@@ -9,51 +10,6 @@ use kinegen_model::spec::Model;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-
-/// Apply `--effect NAME=VALUE` / `NAME.PARAM=VALUE` to a spec; returns the
-/// model with the effects and the effect parameter values.
-pub fn with_effects(
-    spec: &Model,
-    effects: &[String],
-    extra: &[PathBuf],
-) -> Result<(Model, Vec<(String, f64)>), String> {
-    let cat = catalogue(extra).map_err(|e| e.to_string())?;
-    let mut model = spec.clone();
-    let mut values = Vec::new();
-    for e in effects {
-        let (key, v) = e
-            .split_once('=')
-            .ok_or_else(|| format!("--effect {e}: expected NAME=VALUE or NAME.PARAM=VALUE"))?;
-        let v: f64 = v
-            .parse()
-            .ok()
-            .filter(|v: &f64| v.is_finite())
-            .ok_or_else(|| format!("--effect {e}: `{v}` is not a finite number"))?;
-        let (name, param) = key
-            .split_once('.')
-            .map_or((key, None), |(a, b)| (a, Some(b)));
-        let eff = find(&cat, name).map_err(|m| format!("--effect {e}: {m}"))?;
-        let added: Vec<String> = eff
-            .parameters_for(&model)
-            .into_iter()
-            .map(|p| p.name)
-            .collect();
-        let param = match param {
-            Some(p) => p.to_string(),
-            // the first parameter this model gets (a per-wheel effect adds only
-            // the parameters of the wheels the model has)
-            None => added.first().cloned().unwrap_or_default(),
-        };
-        if eff.applicability(&model) == Applicability::Applies && !added.contains(&param) {
-            return Err(format!("--effect {e}: the effect `{name}` adds no parameter `{param}` to this model (it adds: {})", added.join(", ")));
-        }
-        model = eff
-            .added_to(&model)
-            .map_err(|why| format!("--effect {e}: on {}, `{name}` {why}", spec.path.display()))?;
-        values.push((param, v));
-    }
-    Ok((model, values))
-}
 
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
@@ -96,37 +52,6 @@ pub struct SimArgs {
     pub catalogue: crate::analysis_cmd::EffectDirs,
 }
 
-/// The model of `spec` with `sets` (what commands the simulated robot) and the
-/// real robot: the same with the hidden `effects` (`NAME=VALUE` or
-/// `NAME.PARAM=VALUE`, from the bundled catalogue and `dirs`) added. Both are
-/// derived by the command line's [`Deriver`] (a spec built into the binary,
-/// with no file, goes to the derive child as text).
-pub fn base_and_truth(
-    spec: &Model,
-    effects: &[String],
-    sets: &[(String, f64)],
-    dirs: &[PathBuf],
-) -> Result<(Runner, Runner), String> {
-    let named = spec.path.display().to_string();
-    let base_ir = crate::ir_source::deriver()
-        .derive(spec, &named)
-        .map_err(|e| e.to_string())?;
-    let base = Runner::new(base_ir, sets).map_err(|e| e.to_string())?;
-    let (truth, values) = with_effects(spec, effects, dirs)?;
-    let truth_ir = if effects.is_empty() {
-        base.ir.clone()
-    } else {
-        let label = format!("{named} with {} added", effects.join(", "));
-        crate::ir_source::deriver()
-            .derive(&truth, &label)
-            .map_err(|e| e.to_string())?
-    };
-    let mut all = sets.to_vec();
-    all.extend(values);
-    let truth = Runner::new(truth_ir, &all).map_err(|e| e.to_string())?;
-    Ok((base, truth))
-}
-
 pub fn run_simulate(a: SimArgs) -> ExitCode {
     let go = || -> Result<String, String> {
         if a.laps == 0 {
@@ -135,7 +60,23 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
         let traj: Trajectory = a.trajectory.parse().map_err(|e| format!("{e}"))?;
         let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
         let spec = Model::load(&a.spec).map_err(|e| e.to_string())?;
-        let (base, truth) = base_and_truth(&spec, &a.effect, &sets, &a.catalogue.effects)?;
+        let hidden = a
+            .effect
+            .iter()
+            .map(|e| e.parse::<Hidden>())
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| e.to_string())?;
+        let Robots {
+            spec: base,
+            robot: truth,
+        } = with_hidden(
+            &spec,
+            &hidden,
+            &sets,
+            &a.catalogue.effects,
+            crate::ir_source::deriver(),
+        )
+        .map_err(|e| e.to_string())?;
         let landmarks = match (&a.landmarks, &a.observations) {
             (Some(m), Some(_)) => {
                 if truth.ir.observation_kernels(RangeBearing).map(|o| o.value).is_none() {

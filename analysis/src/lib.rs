@@ -105,6 +105,7 @@ pub mod diagnosis {
 /// held-out sessions.
 pub mod applications {
     pub mod grid;
+    pub mod hidden;
     pub mod holdout_bench;
     pub mod inverse;
     pub mod localize;
@@ -115,7 +116,7 @@ pub mod applications {
 }
 
 pub use applications::{
-    grid, holdout_bench, inverse, localize, localize_request, navigate, simulate, sweep,
+    grid, hidden, holdout_bench, inverse, localize, localize_request, navigate, simulate, sweep,
 };
 pub use diagnosis::{diagnose, diagnose_job, request};
 pub use estimation::{
