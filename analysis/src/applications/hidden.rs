@@ -178,3 +178,32 @@ fn added(
     }
     Ok((model, values))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hidden_effects_are_read_as_the_user_writes_them() {
+        let h: Hidden = "lateral_slip=0.02".parse().unwrap();
+        assert_eq!(
+            (h.effect.as_str(), h.param, h.value),
+            ("lateral_slip", None, 0.02)
+        );
+        let h: Hidden = "sensor_offset.sensor_dx=-0.1".parse().unwrap();
+        assert_eq!(h.param.as_deref(), Some("sensor_dx"));
+        assert_eq!(h.value, -0.1);
+        assert_eq!(Hidden::new("sensor_offset", "sensor_dx", -0.1), h);
+        for (bad, says) in [
+            ("lateral_slip", "expected NAME=VALUE"),
+            ("lateral_slip=abc", "`abc` is not a finite number"),
+            ("lateral_slip=inf", "`inf` is not a finite number"),
+        ] {
+            let e = bad.parse::<Hidden>().unwrap_err().to_string();
+            assert!(
+                e.starts_with(&format!("--effect {bad}: ")) && e.contains(says),
+                "{e}"
+            );
+        }
+    }
+}
