@@ -2,14 +2,10 @@
 //! odometry (kinegen_analysis::navigate), before and after calibrating the
 //! odometry with UMBMark (or LM) squares run in simulation on the same robot.
 use crate::analysis_cmd::bad;
-use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::grid::Grid;
-use kinegen_analysis::methods::{by_name, Settings};
-use kinegen_analysis::model::{parse_sets, Runner};
-use kinegen_analysis::navigate::{drive, Drive, NavOptions};
-use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::mission::{navigate_files, CalibratedDrive, Mission, Navigated};
+use kinegen_analysis::navigate::{Drive, NavOptions};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -63,38 +59,6 @@ fn geometry_methods() -> clap::builder::PossibleValuesParser {
     )
 }
 
-/// Calibrate the believed parameters on 3 clockwise and 3 counter-clockwise
-/// simulated 1 m squares of the real robot.
-fn calibrate(method: &str, belief: &Runner, truth: &Runner) -> Result<(Vec<f64>, String), String> {
-    let mut runs = Vec::new();
-    for (k, traj) in [Trajectory::SquareCw, Trajectory::SquareCcw]
-        .into_iter()
-        .cycle()
-        .take(6)
-        .enumerate()
-    {
-        let o = SimOptions {
-            trajectory: traj,
-            seed: 100 + k as u64,
-            ..SimOptions::default()
-        };
-        // the real robot drives the squares (its commands from its true
-        // geometry, as a robot's own controller would close them); the log is
-        // its encoders and the tracker, read with the believed model
-        let sim = simulate(truth, truth, &o);
-        runs.push(
-            sim.to_run(belief, &format!("square-{k}"))
-                .map_err(|e| e.to_string())?,
-        );
-    }
-    let fo = kinegen_analysis::fit::FitOptions::default();
-    let m = by_name(method).expect("clap checked the name");
-    let c = m
-        .calibrate(belief, &runs, &Settings::defaults(&fo))
-        .map_err(|e| e.to_string())?;
-    Ok((c.p, c.note))
-}
-
 fn summary(d: &Drive) -> String {
     format!(
         "{} moves, {} collision(s), {} safety-zone intrusion(s), final distance to the goal {:.1} cm{}",
@@ -111,28 +75,30 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
         return bad(e);
     }
     let out = Out::new(a.json.as_deref());
-    let grid = match Grid::read(&a.grid, a.cell) {
-        Ok(g) => g,
+    let mission = Mission {
+        spec: &a.spec,
+        grid: &a.grid,
+        cell: a.cell,
+        sets: &a.set,
+        options: NavOptions {
+            recalc: a.recalc.map(|n| n as usize),
+            actuation: a.actuation,
+            seed: a.seed,
+            ..NavOptions::default()
+        },
+        calibrate: a.calibrate.as_deref(),
+    };
+    let done = match navigate_files(&mission, crate::ir_source::deriver()) {
+        Ok(d) => d,
         Err(e) => return bad(e),
     };
-    let ir = match ir_source::load(&a.spec) {
-        Ok(ir) => ir,
-        Err(e) => return bad(e),
-    };
-    let sets = match parse_sets(&a.set) {
-        Ok(s) => s,
-        Err(e) => return bad(e),
-    };
-    let (belief, truth) = match (Runner::new(ir.clone(), &[]), Runner::new(ir, &sets)) {
-        (Ok(b), Ok(t)) => (b, t),
-        (Err(e), _) | (_, Err(e)) => return bad(e),
-    };
-    let o = NavOptions {
-        recalc: a.recalc.map(|n| n as usize),
-        actuation: a.actuation,
-        seed: a.seed,
-        ..NavOptions::default()
-    };
+    let Navigated {
+        grid,
+        belief,
+        truth,
+        before,
+        calibrated,
+    } = &done;
     let how = match a.recalc {
         Some(n) => format!("recalculated every {n} move(s) from the odometry pose"),
         None => "planned once".into(),
@@ -147,32 +113,21 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
             format!("{:e}", a.cell)
         }
     ));
-    let before = match drive(&grid, &belief, &truth, &o) {
-        Ok(d) => d,
-        // (the grid's errors name it themselves; the rest is the spec's)
-        Err(e @ kinegen_analysis::navigate::NavigateError::CellTooLarge { .. }) => return bad(e),
-        Err(e) => return bad(format!("{}: {e}", a.spec.display())),
-    };
     out.say(&format!(
         "  odometry with the nominal parameters: {}",
-        summary(&before)
+        summary(before)
     ));
-    let mut after = None;
     let mut calibration = None;
-    if let Some(m) = &a.calibrate {
-        let (p, note) = match calibrate(m, &belief, &truth) {
-            Ok(x) => x,
-            Err(e) => return bad(e),
-        };
-        let mut cal = belief.clone();
-        cal.p = p;
-        let d = match drive(&grid, &cal, &truth, &o) {
-            Ok(d) => d,
-            Err(e) => return bad(e),
-        };
+    if let Some(CalibratedDrive {
+        method: m,
+        note,
+        odometry: cal,
+        drive: d,
+    }) = calibrated
+    {
         out.say(&format!(
             "  odometry calibrated by {m} ({note}): {}",
-            summary(&d)
+            summary(d)
         ));
         let params: serde_json::Map<String, serde_json::Value> = cal
             .free
@@ -194,8 +149,8 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
             ));
         }
         calibration = Some(json!({"method": m, "note": note, "parameters": params}));
-        after = Some(d);
     }
+    let after = calibrated.as_ref().map(|c| &c.drive);
     let doc = json!({
         "command": "navigate",
         "grid": a.grid.display().to_string(),
@@ -205,11 +160,11 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
         "calibration": calibration,
     });
     if let Some(dir) = &a.report {
-        let mut drives = vec![("nominal odometry", &before)];
-        if let Some(d) = &after {
+        let mut drives = vec![("nominal odometry", before)];
+        if let Some(d) = after {
             drives.push(("calibrated odometry", d));
         }
-        if let Err(e) = crate::report::navigate_report(dir, &grid, &drives, &doc) {
+        if let Err(e) = crate::report::navigate_report(dir, grid, &drives, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

@@ -110,13 +110,15 @@ pub mod applications {
     pub mod inverse;
     pub mod localize;
     pub mod localize_request;
+    pub mod mission;
     pub mod navigate;
     pub mod simulate;
     pub mod sweep;
 }
 
 pub use applications::{
-    grid, hidden, holdout_bench, inverse, localize, localize_request, navigate, simulate, sweep,
+    grid, hidden, holdout_bench, inverse, localize, localize_request, mission, navigate, simulate,
+    sweep,
 };
 pub use diagnosis::{diagnose, diagnose_job, request};
 pub use estimation::{
