@@ -2,11 +2,9 @@
 //! path (kinegen_analysis::inverse), with the stretches their actuators cannot
 //! deliver. Exit 1 when any robot cannot drive the path as planned.
 use crate::analysis_cmd::bad;
-use crate::ir_source;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::inverse::{profile, read_path};
-use kinegen_analysis::model::Runner;
+use kinegen_analysis::inverse::{profile_files, SpecProfile};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -32,24 +30,19 @@ pub fn run(a: &InverseArgs) -> ExitCode {
         return bad(e);
     }
     let out = Out::new(a.json.as_deref());
-    let path = match read_path(&a.path) {
+    let (path, profiled) = match profile_files(&a.path, &a.spec, crate::ir_source::deriver()) {
         Ok(p) => p,
         Err(e) => return bad(e),
     };
     let mut profiles = Vec::new();
     let mut specs_json = Vec::new();
     let mut feasible = true;
-    for spec in &a.spec {
-        let runner = match ir_source::load(spec)
-            .and_then(|ir| Runner::new(ir, &[]).map_err(|e| e.to_string()))
-        {
-            Ok(r) => r,
-            Err(e) => return bad(e),
-        };
-        let prof = match profile(&runner, &path) {
-            Ok(p) => p,
-            Err(e) => return bad(e),
-        };
+    for SpecProfile {
+        spec,
+        runner,
+        profile: prof,
+    } in profiled
+    {
         let name = runner.ir.name.clone();
         out.say(&format!(
             "{name} ({}): {} steps over {:.1} s",

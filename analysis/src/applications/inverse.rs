@@ -428,3 +428,47 @@ fn stretches(t: &[f64], t_end: &f64, x: &[f64], bad: impl Fn(f64) -> bool) -> Ve
     }
     out
 }
+
+/// One spec's input profile along a path.
+pub struct SpecProfile {
+    pub spec: PathBuf,
+    pub runner: Runner,
+    pub profile: Profile,
+}
+
+/// Why a path cannot be profiled for the specs.
+#[derive(Debug, thiserror::Error)]
+pub enum InverseFilesError {
+    #[error(transparent)]
+    Path(LogError),
+    #[error(transparent)]
+    Spec(#[from] kinegen_model::error::SourceError),
+    #[error(transparent)]
+    Derivation(#[from] crate::derivation::DerivationFailed),
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
+}
+
+/// `kinegen inverse` as one call: the planned path of `path` read, then
+/// each spec of `specs` derived by `deriver` and profiled along it.
+pub fn profile_files(
+    path: &Path,
+    specs: &[PathBuf],
+    deriver: &dyn crate::derivation::Deriver,
+) -> Result<(PlannedPath, Vec<SpecProfile>), InverseFilesError> {
+    let planned = read_path(path).map_err(InverseFilesError::Path)?;
+    let mut out = Vec::new();
+    for spec in specs {
+        let model = kinegen_model::spec::Model::load(spec)?;
+        let runner = Runner::new(deriver.derive(&model, &spec.display().to_string())?, &[])?;
+        let profile = profile(&runner, &planned)?;
+        out.push(SpecProfile {
+            spec: spec.clone(),
+            runner,
+            profile,
+        });
+    }
+    Ok((planned, out))
+}
