@@ -1,5 +1,6 @@
 //! `kinegen compare`: the model with its current parameters against the
-//! logs (kinegen_analysis::comparison), rendered as text, JSON and a report.
+//! logs (one call to kinegen_analysis::comparison::compare_files), rendered as
+//! text, JSON and a report.
 use crate::analysis_cmd::{
     bad, fmt_errors, fmt_landmarks, quiet, read_progress, say_warnings, Common,
 };

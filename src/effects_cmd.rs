@@ -1,4 +1,5 @@
-//! `kinegen simulate` and `kinegen add-effect`.
+//! `kinegen simulate` (its robot from kinegen_analysis::hidden::with_hidden)
+//! and `kinegen add-effect`.
 use crate::analysis_cmd::bad;
 use kinegen_analysis::effects::{catalogue, find, Applicability};
 use kinegen_analysis::hidden::{with_hidden, Hidden, Robots};

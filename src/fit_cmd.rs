@@ -1,6 +1,6 @@
-//! `kinegen fit`: one calibration (kinegen_analysis::fit_job::calibrate, the
-//! default) or several methods compared (fit_job::compare_methods), rendered
-//! as text, JSON, a report and an export.
+//! `kinegen fit`: one call to kinegen_analysis::fit_request::fit_files (the
+//! Levenberg-Marquardt calibration judged, the default, or several methods
+//! compared), rendered as text, JSON, a report and an export.
 use crate::analysis_cmd::{
     bad, fmt_errors, fmt_landmarks, non_negative, positive, quiet, read_progress, say_warnings,
     Common,

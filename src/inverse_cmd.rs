@@ -1,5 +1,5 @@
 //! `kinegen inverse`: the input profiles of one or more robots along a planned
-//! path (kinegen_analysis::inverse), with the stretches their actuators cannot
+//! path (one call to kinegen_analysis::inverse::profile_files), with the stretches their actuators cannot
 //! deliver. Exit 1 when any robot cannot drive the path as planned.
 use crate::analysis_cmd::bad;
 use crate::output::Out;

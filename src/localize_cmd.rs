@@ -1,5 +1,6 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
-//! (kinegen_analysis::localize), with its consistency checks.
+//! (one call to kinegen_analysis::localize_request::localize_files), rendered
+//! with its consistency checks as text, JSON, a report and a track.
 use crate::analysis_cmd::{bad, Common};
 use crate::output::Out;
 use clap::Args;

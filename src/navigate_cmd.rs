@@ -1,5 +1,5 @@
 //! `kinegen navigate`: seed 004's cellular-automaton navigation driven on
-//! odometry (kinegen_analysis::navigate), before and after calibrating the
+//! odometry (one call to kinegen_analysis::mission::navigate_files), before and after calibrating the
 //! odometry with UMBMark (or LM) squares run in simulation on the same robot.
 use crate::analysis_cmd::bad;
 use crate::output::Out;
