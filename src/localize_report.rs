@@ -3,7 +3,9 @@
 //! never over it), the position error over time with its 3-sigma bound, the
 //! NIS over time with its chi-square band, and a table of the figures and
 //! the noise; the noise sweep (seed 001 Figs 6-7) when it was run.
-use crate::report::{axes, decimated, esc, page, series_of, squared, write, Series, H, W};
+use crate::report::{
+    axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
+};
 use kinegen_analysis::localize::{mean_bounds, Consistency, Localization, Spread, Summary};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
@@ -11,8 +13,6 @@ use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
 
-/// Width of the legend strip beside a chart, px.
-const LEGEND_W: u32 = 170;
 /// Sightings averaged by the NIS curve.
 const NIS_WINDOW: usize = 50;
 
@@ -90,30 +90,8 @@ fn chart_beside(
         let entries = series
             .iter()
             .map(|s| (s.0, s.1, false))
-            .chain(points.iter().map(|s| (s.0, s.1, true)))
-            .filter(|e| !e.0.is_empty());
-        for (i, (name, color, dot)) in entries.enumerate() {
-            let y = 40 + 22 * i as i32;
-            if dot {
-                legend
-                    .draw(&Circle::new((14, y), 4, color.filled()))
-                    .map_err(|e| e.to_string())?;
-            } else {
-                legend
-                    .draw(&PathElement::new(
-                        vec![(4, y), (24, y)],
-                        color.stroke_width(2),
-                    ))
-                    .map_err(|e| e.to_string())?;
-            }
-            legend
-                .draw(&Text::new(
-                    name.to_string(),
-                    (30, y - 7),
-                    ("sans-serif", 13),
-                ))
-                .map_err(|e| e.to_string())?;
-        }
+            .chain(points.iter().map(|s| (s.0, s.1, true)));
+        legend_strip(&legend, entries)?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)

@@ -162,10 +162,15 @@ pub(crate) fn chart(
         let span = squared(legend_room(bounds(series), series), equal);
         let ((_, _), (y0, y1)) = span;
         let mut c = axes(&root, title, xl, yl, span)?;
+        // a stretch of a tenth of a second in a minute is under a pixel:
+        // every mark is drawn at least 0.6% of the span wide (3 px)
+        let ((x0, x1), _) = span;
+        let least = 0.006 * (x1 - x0);
         for (a, b) in marks {
+            let widen = (least - (b - a)).max(0.0) / 2.0;
             c.draw_series(std::iter::once(Rectangle::new(
-                [(*a, y0), (*b, y1)],
-                RGBColor(255, 200, 200).mix(0.5).filled(),
+                [(*a - widen, y0), (*b + widen, y1)],
+                RGBColor(255, 150, 150).mix(0.6).filled(),
             )))
             .map_err(|e| e.to_string())?;
         }
@@ -210,6 +215,40 @@ pub(crate) fn chart(
     Ok(svg)
 }
 
+/// Width of the legend strip beside a chart, px.
+pub(crate) const LEGEND_W: u32 = 170;
+
+/// A legend in its own strip beside a chart, where it covers no data: each
+/// named entry a line (or, `true`, a dot) in its colour and its name.
+pub(crate) fn legend_strip<'a>(
+    strip: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    entries: impl Iterator<Item = (&'a str, RGBColor, bool)>,
+) -> Result<(), String> {
+    for (i, (name, color, dot)) in entries.filter(|e| !e.0.is_empty()).enumerate() {
+        let y = 40 + 22 * i as i32;
+        if dot {
+            strip
+                .draw(&Circle::new((14, y), 4, color.filled()))
+                .map_err(|e| e.to_string())?;
+        } else {
+            strip
+                .draw(&PathElement::new(
+                    vec![(4, y), (24, y)],
+                    color.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?;
+        }
+        strip
+            .draw(&Text::new(
+                name.to_string(),
+                (30, y - 7),
+                ("sans-serif", 13),
+            ))
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
 /// `span` with room above the data for the legend, which plotters draws
 /// inside the plot at the upper right: without it the legend covers the
 /// data there (a flat wheel rate, a reference line at the top).
@@ -220,9 +259,11 @@ fn legend_room(span: ((f64, f64), (f64, f64)), series: &[Series]) -> ((f64, f64)
     }
     let ((x0, x1), (y0, y1)) = span;
     // each legend line takes about 20 px of the plot's height (H less the
-    // caption and the x labels), plus its border
+    // caption and the x labels), plus its border and the gap plotters leaves
+    // above it; measured in Chromium: 20 px a line and 16 px left a curve's
+    // peak under a two-line legend
     let plot = f64::from(H) - 80.0;
-    let frac = ((entries as f64 * 20.0 + 16.0) / plot).min(0.6);
+    let frac = ((entries as f64 * 22.0 + 30.0) / plot).min(0.6);
     ((x0, x1), (y0, y1 + (y1 - y0) * frac / (1.0 - frac)))
 }
 
@@ -969,13 +1010,21 @@ fn inverse_table(profiles: &[(String, kinegen_analysis::inverse::Profile)]) -> S
                 .filter(|s| s.input == inp.name)
                 .map(|s| format!("{:.2}-{:.2} s", s.t_start, s.t_end))
                 .collect();
+            // an absolute input's rate is its unit per second (a steering
+            // angle in rad changes in rad/s); a cumulative input's unit is
+            // already a rate
+            let rate_unit = match inp.kind {
+                kinegen_model::decl::InputKind::Absolute => format!("{}/s", inp.unit),
+                _ => inp.unit.clone(),
+            };
             table += &format!(
                 "<tr><td>{}</td><td>{}</td><td>{:.4} {}</td><td>{}</td><td>{}</td></tr>",
                 esc(model),
                 esc(&inp.name),
                 inp.peak_rate,
-                esc(&inp.unit),
-                inp.max_rate.map_or("-".into(), |m| m.to_string()),
+                esc(&rate_unit),
+                inp.max_rate
+                    .map_or("-".into(), |m| format!("{m} {}", esc(&rate_unit))),
                 if where_.is_empty() {
                     "none".into()
                 } else {
@@ -1038,10 +1087,13 @@ fn navigation_map(
     let mut svg = String::new();
     {
         let px = (W as f64 * 1.4) as u32;
-        let root = SVGBackend::with_string(&mut svg, (px, (px as f64 * h / w) as u32 + 60))
-            .into_drawing_area();
+        let root =
+            SVGBackend::with_string(&mut svg, (px + LEGEND_W, (px as f64 * h / w) as u32 + 60))
+                .into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut c = ChartBuilder::on(&root)
+        // the arena fills the plot: the legend stands beside it
+        let (area, strip) = root.split_horizontally(px);
+        let mut c = ChartBuilder::on(&area)
             .caption(
                 format!(
                     "{name}: {} collision(s), {:.1} cm from the goal",
@@ -1062,35 +1114,28 @@ fn navigation_map(
             .draw()
             .map_err(|e| e.to_string())?;
         draw_arena(&mut c, grid)?;
+        // named in the legend strip, in this order
         let line = |pts: Vec<(f64, f64)>,
                     color: RGBColor,
-                    label: &str,
                     c: &mut ChartContext<_, _>|
          -> Result<(), String> {
             c.draw_series(LineSeries::new(pts, color.stroke_width(2)))
-                .map_err(|e| e.to_string())?
-                .label(label.to_string())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
-                });
+                .map_err(|e| e.to_string())?;
             Ok(())
         };
         line(
             d.planned.iter().map(|p| (p[0], p[1])).collect(),
             GREEN,
-            "planned cells",
             &mut c,
         )?;
         line(
             series_of(d.odometry.len(), d.odometry.iter().map(|p| (p[0], p[1]))),
             BLUE,
-            "odometry (believed)",
             &mut c,
         )?;
         line(
             series_of(d.truth.len(), d.truth.iter().map(|p| (p[0], p[1]))),
             RED,
-            "true path",
             &mut c,
         )?;
         let touching: Vec<(f64, f64)> = d
@@ -1113,11 +1158,16 @@ fn navigation_map(
             MAGENTA.filled(),
         )))
         .map_err(|e| e.to_string())?;
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        legend_strip(
+            &strip,
+            [
+                ("planned cells", GREEN, false),
+                ("odometry (believed)", BLUE, false),
+                ("true path", RED, false),
+                ("goal", MAGENTA, true),
+            ]
+            .into_iter(),
+        )?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
