@@ -16,7 +16,7 @@
 //! `-- kernels`, `-- bag` or `-- fit` runs only that part.
 //! Figures are medians of repeated runs in this process; ratios compare numbers
 //! measured in the same run.
-use kinegen_analysis::fit::{fit, FitOptions};
+use kinegen_analysis::fit::{fit, FitOptions, Search};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
 use kinegen_model::ir::{ModelIr, StepForm};
@@ -456,7 +456,7 @@ fn million_sample_fit(r: &Runner) {
     let mut last = None;
     for _ in 0..3 {
         let t0 = Instant::now();
-        last = Some(fit(r, std::slice::from_ref(&run), &o).unwrap());
+        last = Some(fit(r, std::slice::from_ref(&run), &o, Search::Global).unwrap());
         times.push(t0.elapsed().as_secs_f64());
     }
     let res = last.unwrap();

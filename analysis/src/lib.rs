@@ -11,7 +11,7 @@
 //! finds the difference.
 //!
 //! ```
-//! use kinegen_analysis::fit::{fit, FitOptions};
+//! use kinegen_analysis::fit::{fit, FitOptions, Search};
 //! use kinegen_analysis::model::Runner;
 //! use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
 //! use kinegen_model::ir::ModelIr;
@@ -24,7 +24,7 @@
 //! let options = SimOptions { trajectory: Trajectory::Random, ..SimOptions::default() };
 //! let log = simulate(&spec, &robot, &options).to_run(&spec, "log").unwrap();
 //!
-//! let calibrated = fit(&spec, &[log], &FitOptions::default()).unwrap();
+//! let calibrated = fit(&spec, &[log], &FitOptions::default(), Search::Global).unwrap();
 //! let found = calibrated.p[spec.param_index("r_r").unwrap()];
 //! assert!((found / r_r - 1.01).abs() < 0.001, "{found} against {}", 1.01 * r_r);
 //! ```

@@ -1,6 +1,6 @@
 //! Refinement from an earlier calibration's optimum (`fit::refine_from`): what
 //! diagnosis does for every candidate effect (issue 12's speed target).
-use kinegen_analysis::fit::{fit, refine, refine_from, FitOptions};
+use kinegen_analysis::fit::{fit, FitOptions, Search};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
 use kinegen_model::ir::ModelIr;
@@ -32,11 +32,11 @@ fn a_refinement_from_an_optimum_and_its_start_headings_stays_there() {
     let run = simulate(&base, &truth, &o).to_run(&base, "r").unwrap();
     let runs = [run];
     let opts = FitOptions::default();
-    let first = fit(&base, &runs, &opts).unwrap();
+    let first = fit(&base, &runs, &opts, Search::Global).unwrap();
     let mut at = base.clone();
     at.p = first.p.clone();
-    let warm = refine_from(&at, &runs, &opts, &first.starts).unwrap();
-    let cold = refine(&at, &runs, &opts).unwrap();
+    let warm = fit(&at, &runs, &opts, Search::From(&first.starts)).unwrap();
+    let cold = fit(&at, &runs, &opts, Search::Local).unwrap();
     eprintln!(
         "warm: {} iterations, cost {} -> {}; cold: {} iterations, cost {}",
         warm.iterations, first.cost_after, warm.cost_after, cold.iterations, cold.cost_after
@@ -61,7 +61,7 @@ fn a_cost_tolerance_ends_within_it_of_the_optimum() {
         ..SimOptions::default()
     };
     let runs = [simulate(&base, &truth, &o).to_run(&base, "r").unwrap()];
-    let strict = fit(&base, &runs, &FitOptions::default()).unwrap();
+    let strict = fit(&base, &runs, &FitOptions::default(), Search::Global).unwrap();
     let loose = fit(
         &base,
         &runs,
@@ -69,6 +69,7 @@ fn a_cost_tolerance_ends_within_it_of_the_optimum() {
             cost_tolerance: 1e-6,
             ..FitOptions::default()
         },
+        Search::Global,
     )
     .unwrap();
     eprintln!(
@@ -107,7 +108,7 @@ fn a_misspecified_model_does_not_creep() {
         row[alpha] += 0.1;
     }
     let runs = [log.to_run(&base, "r").unwrap()];
-    let f = fit(&base, &runs, &FitOptions::default()).unwrap();
+    let f = fit(&base, &runs, &FitOptions::default(), Search::Global).unwrap();
     eprintln!(
         "{} passes, cost {} from {}",
         f.iterations, f.cost_after, f.cost_before

@@ -12,7 +12,7 @@
 //!    missing, and the channel and feature say where.
 use crate::derivation::EffectChains;
 use crate::discretisation::Discretisation;
-use crate::fit::{fit_continued, refine_from, residuals, FitError, FitOptions, FitResult};
+use crate::fit::{fit, residuals, FitError, FitOptions, FitResult, Search};
 use crate::interp::lerp_rows;
 use crate::log::wrap;
 use crate::model::Runner;
@@ -662,11 +662,11 @@ fn stage(
     o: &FitOptions,
 ) -> Result<Stage, FitError> {
     // The global search is the continuation ladder's, as each candidate's
-    // from nominal values (see `fit_continued`): fit's direct start from
+    // from nominal values (see `Search::Continued`): fit's direct start from
     // nominal values wandered 201-301 passes on omni_caster logs with 0.2 rad
     // steering offsets (over half of their diagnosis) without ever ending
     // below the ladder's; a log too short for the ladder gets fit's search.
-    let fit = fit_continued(&runner, runs, o)?;
+    let fit = fit(&runner, runs, o, Search::Continued)?;
     // The training part is the first 60% of the same runs: its calibration
     // starts where the whole log's ended, with the start headings of the
     // segments the two share, and refines locally, as each candidate's does
@@ -676,8 +676,12 @@ fn stage(
     // left out, most of the base model's calibration.
     let mut from = runner.clone();
     from.p = fit.p.clone();
-    let train_fit = crate::fit::refine_on_part(&from, runs, train, &fit.starts, o)
-        .or_else(|_| crate::fit::fit(&runner, train, o))?;
+    let on_part = Search::OnPart {
+        whole: runs,
+        starts: &fit.starts,
+    };
+    let train_fit = crate::fit::fit(&from, train, o, on_part)
+        .or_else(|_| crate::fit::fit(&runner, train, o, Search::Global))?;
     Ok(stage_from(runner, fit, train_fit, runs, test, o))
 }
 
@@ -981,7 +985,7 @@ impl Ranking<'_> {
         // journey from nominal for every candidate: 11 s of a 36 s diagnosis
         // for one of them on an omni_caster log with a 0.2 rad offset).
         let from_nominal = (self.from_nominal && !searched && !gyro_only(&start, &effect_params))
-            .then(|| fit_continued(aug, self.runs, self.o).ok())
+            .then(|| fit(aug, self.runs, self.o, Search::Continued).ok())
             .flatten();
         let cur_start_wins = match (&from_cur, &from_nominal) {
             (Some(a), Some(b)) => a.cost_after <= b.cost_after,
@@ -1002,7 +1006,7 @@ impl Ranking<'_> {
         if significant(self.cur, rmse, gain, None) {
             let mut at = start.clone();
             at.p = f.p.clone();
-            if let Ok(polished) = refine_from(&at, self.runs, self.strict, &f.starts) {
+            if let Ok(polished) = fit(&at, self.runs, self.strict, Search::From(&f.starts)) {
                 f = FitResult {
                     cost_before: f.cost_before,
                     iterations: f.iterations + polished.iterations,
@@ -1022,8 +1026,15 @@ impl Ranking<'_> {
             p: f.p.clone(),
             ..start.clone()
         };
-        let tr_fit =
-            crate::fit::refine_on_part(&tr_start, self.runs, self.train, &f.starts, self.o);
+        let tr_fit = fit(
+            &tr_start,
+            self.train,
+            self.o,
+            Search::OnPart {
+                whole: self.runs,
+                starts: &f.starts,
+            },
+        );
         let (train_fit, holdout_rmse) = match tr_fit {
             Ok(ft) => {
                 let h = weighted_rms(&tr_start, &ft.p, self.test, self.o);
@@ -1140,7 +1151,7 @@ fn local_refinement(
         ..o.clone()
     };
     let local_o = if first_round { &capped } else { o };
-    let from_cur = refine_from(start, runs, local_o, &cur.fit.starts)
+    let from_cur = fit(start, runs, local_o, Search::From(&cur.fit.starts))
         .ok()
         .map(scored);
     let plain = |fit| Local {
@@ -1164,7 +1175,7 @@ fn local_refinement(
     };
     let mut lagged = start.clone();
     lagged.p[d] = tau;
-    let from_lag = refine_from(&lagged, runs, local_o, &cur.fit.starts)
+    let from_lag = fit(&lagged, runs, local_o, Search::From(&cur.fit.starts))
         .ok()
         .map(scored);
     // the search runs only where the estimated delay is plainly there: its
@@ -1185,7 +1196,7 @@ fn local_refinement(
     for (i, q) in start.ir.runtime_params().iter().enumerate() {
         lagged.p[i] = if i == d { tau } else { q.nominal };
     }
-    let searched = fit_continued(&lagged, runs, o).ok().map(scored);
+    let searched = fit(&lagged, runs, o, Search::Continued).ok().map(scored);
     Local {
         fit: better(best, searched),
         searched: true,

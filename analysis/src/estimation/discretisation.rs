@@ -11,7 +11,7 @@
 //! is left is what could be mistaken for a missing effect. Diagnosis counts it
 //! with the sensor noise, so structure the model's own step leaves is never
 //! blamed on the robot (issue 12 item 3).
-use crate::fit::{refine_from, rms_with_fitted_starts, FitOptions};
+use crate::fit::{fit, rms_with_fitted_starts, FitOptions, Search};
 use crate::model::Runner;
 use crate::run::Run;
 use serde::Serialize;
@@ -37,7 +37,7 @@ pub struct Discretisation {
 }
 
 /// The discretisation error of `r` calibrated at `p` (with start offsets
-/// `starts`, see [`refine_from`]) on `runs`: pose residuals of fits at the logs'
+/// `starts`, see [`Search::From`]) on `runs`: pose residuals of fits at the logs'
 /// rate and at half of it, refined from there. Logs without ground truth, or
 /// too short to halve, give 0.
 pub fn estimate(
@@ -66,7 +66,7 @@ pub fn estimate(
     let mut from = r.clone();
     from.p = p.to_vec();
     let rms_at = |runs: &[Run]| {
-        refine_from(&from, runs, &pose, starts)
+        fit(&from, runs, &pose, Search::From(starts))
             .map(|f| rms_with_fitted_starts(&from, &f.p, runs, &pose))
             .unwrap_or(f64::NAN)
     };

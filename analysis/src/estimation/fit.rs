@@ -78,7 +78,7 @@ pub fn part_starts(runs: &[Run], part: &[Run], starts: &[[f64; 3]]) -> Option<Ve
 /// `starts` ([`FitResult::starts`]), refined locally on `part` (runs cut from
 /// the same starts, such as a training part): from the start headings of the
 /// segments the two share, or from the measured ones when they share none.
-pub fn refine_on_part(
+fn refine_on_part(
     at: &Runner,
     runs: &[Run],
     part: &[Run],
@@ -179,7 +179,49 @@ pub fn noise_floor(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
     (sum / n.max(1) as f64).sqrt()
 }
 
-/// Calibrate the free parameters of `r` (starting from `r.p`).
+/// Where a calibration starts and how far it searches (see [`fit`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub enum Search<'a> {
+    /// From the starting values and from every other start: the
+    /// continuation ladder, a gyro-only fit and scaled starts (`global`).
+    #[default]
+    Global,
+    /// The continuation ladder's part of the global search only
+    /// (`fit_continued`): a candidate effect's calibration in diagnosis.
+    Continued,
+    /// Locally from the starting values (`refine`): a start already in the
+    /// optimum's basin, such as the same model's fit on other data.
+    Local,
+    /// From an earlier optimum on the same runs, with its fitted start
+    /// offsets ([`FitResult::starts`], see `refine_from`).
+    From(&'a [[f64; 3]]),
+    /// From an optimum on `whole` with its start offsets, refined on the runs
+    /// given, a part cut from the same starts (`refine_on_part`).
+    OnPart {
+        whole: &'a [Run],
+        starts: &'a [[f64; 3]],
+    },
+}
+
+/// Calibrate the free parameters of `r` on `runs`, starting from `r.p` and
+/// searching as `search` says: the one entry point of calibration.
+pub fn fit(
+    r: &Runner,
+    runs: &[Run],
+    o: &FitOptions,
+    search: Search,
+) -> Result<FitResult, FitError> {
+    match search {
+        Search::Global => global(r, runs, o),
+        Search::Continued => fit_continued(r, runs, o),
+        Search::Local => refine(r, runs, o),
+        Search::From(starts) => refine_from(r, runs, o, starts),
+        Search::OnPart { whole, starts } => refine_on_part(r, whole, runs, starts, o),
+    }
+}
+
+/// The global search ([`Search::Global`]): calibrate the free parameters of
+/// `r` (starting from `r.p`).
 ///
 /// The fit from the nominal values is tried first. Unless it already explains
 /// the data down to the noise, it is also restarted from (a) the end of the
@@ -192,7 +234,7 @@ pub fn noise_floor(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
 /// (where it still looked determined: the first stage of [`fit_from`] has no
 /// start-heading nuisance, and a turn-in-place log then slid a speed scale to
 /// its bound), the whole fit is redone with that direction held.
-pub fn fit(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+fn global(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     let searched = held_where_undetermined(r, runs, o, fit_unheld)?;
     let mut res = if !o.whole_runs || o.increments.is_some() || r.free.is_empty() {
         searched
@@ -274,7 +316,7 @@ const SHORT_TERM_SLACK: f64 = 1.1;
 /// with a 0.2 rad steering offset left out, they were 283 of the 318 passes of
 /// a wrong candidate's search). Where no run is long enough for the ladder,
 /// [`fit`].
-pub fn fit_continued(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+fn fit_continued(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     held_where_undetermined(r, runs, o, continued_unheld)
 }
 
@@ -340,7 +382,7 @@ fn held_where_undetermined(
 /// Refine a calibration locally from `r.p` (no other starting points): for a
 /// start already in the optimum's basin, such as the same model's fit on
 /// other data.
-pub fn refine(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
+fn refine(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, FitError> {
     fit_from(r, &segmented(runs), o)
 }
 
@@ -352,7 +394,7 @@ pub fn refine(r: &Runner, runs: &[Run], o: &FitOptions) -> Result<FitResult, Fit
 /// stage to creep back to it (a misspecified model's Gauss-Newton steps shrink
 /// by a constant factor: 40 passes over a diagnosis log for a candidate that
 /// changes nothing). Without matching start offsets this is [`refine`].
-pub fn refine_from(
+fn refine_from(
     r: &Runner,
     runs: &[Run],
     o: &FitOptions,

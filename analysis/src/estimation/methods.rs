@@ -2,7 +2,7 @@
 //! ([`METHODS`]): the CLI's `--method` choices, `--method all` and the dispatch
 //! all read the registry, so a new method (issue #15's neural gyrodometry, say)
 //! is one `impl` and one line here.
-use crate::fit::{fit, FitOptions, FitResult};
+use crate::fit::{fit, FitOptions, FitResult, Search};
 use crate::model::Runner;
 use crate::run::Run;
 use crate::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
@@ -114,7 +114,7 @@ impl Method for Lm {
         runs: &[Run],
         s: &Settings,
     ) -> Result<Calibration, MethodError> {
-        let res = fit(r, runs, s.fit)?;
+        let res = fit(r, runs, s.fit, Search::Global)?;
         Ok(Calibration {
             p: res.p.clone(),
             std: res.std.clone(),

@@ -7,7 +7,7 @@
 //! and of the whole-run position RMSE. Beside them, the study's own
 //! in-sample figure: the largest final position error over the session's
 //! own runs.
-use crate::fit::{fit, FitOptions};
+use crate::fit::{fit, FitOptions, Search};
 use crate::metrics;
 use crate::model::Runner;
 use crate::run::Run;
@@ -154,7 +154,7 @@ pub fn benchmark(
         .map(|(i, s)| {
             progress(&s.name);
             let started = Instant::now();
-            let (ours, warnings) = match fit(&s.runner, &s.runs, o) {
+            let (ours, warnings) = match fit(&s.runner, &s.runs, o, Search::Global) {
                 Ok(res) => (
                     Some(Calibration {
                         method: KINEGEN.into(),

@@ -7,7 +7,7 @@
 //! runs that pull a parameter their own way (two real differential sessions
 //! of 19, 4 and 4 s runs calibrated their wheelbase 2% off, worse than
 //! nominal on every other session, and fit said nothing).
-use super::{refine, FitOptions};
+use super::{fit, FitOptions, Search};
 use crate::metrics;
 use crate::model::Runner;
 use crate::run::Run;
@@ -63,7 +63,7 @@ pub fn leave_one_out(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> Vec
                 .filter(|&j| j != i)
                 .map(|j| runs[j].clone())
                 .collect();
-            let refit = refine(&from, &others, o).ok()?;
+            let refit = fit(&from, &others, o, Search::Local).ok()?;
             Some(LeftOut {
                 path: runs[i].path.clone(),
                 nominal_rmse_m: metrics::from_measured_start(r, &r.p, &runs[i]).rmse,

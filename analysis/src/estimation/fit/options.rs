@@ -45,7 +45,7 @@ pub struct FitOptions {
     /// all its passes (see [`levenberg_marquardt`]). None: each pass chooses.
     pub substeps: Option<Arc<Vec<Option<Vec<u8>>>>>,
     /// Start-pose offsets a Levenberg-Marquardt stage begins from: an earlier
-    /// fit's [`FitResult::starts`] on the same runs (see [`refine_from`]).
+    /// fit's [`FitResult::starts`] on the same runs (see [`Search::From`](super::Search::From)).
     /// None, or a count that does not match the runs: the measured starts.
     pub start_offsets: Option<Arc<Vec<[f64; 3]>>>,
     /// A stage also ends when the decrease still to come, extrapolated from
