@@ -5,6 +5,24 @@
 //! machine-wide lock file, because unlicensed symbolica allows one thread per user
 //! machine-wide and aborts a second one. Concurrent callers (test threads, parallel
 //! processes) therefore queue instead of crashing.
+//!
+//! The stage in one example (not run here: a doctest would be a second
+//! process deriving beside the tests): spec -> model -> IR -> Rust.
+//!
+//! ```no_run
+//! use kinegen_codegen::{derive_model, emit::emit_module, generate};
+//! use kinegen_model::spec::Model;
+//! use std::path::Path;
+//!
+//! let model = Model::load(Path::new("spec/diff_drive.toml")).unwrap();
+//! // every symbolic step (Jacobians, the exact step, inverse kinematics,
+//! // removable singularities) on this crate's one symbolica thread
+//! let ir = derive_model(&model, &Default::default()).unwrap();
+//! // one model's Rust module, or a crate of every spec in a folder
+//! let module: String = emit_module(&ir, "spec/diff_drive.toml");
+//! let config = generate::Config::new(Path::new("spec"), Path::new("generated"), false);
+//! generate::generate(&config).unwrap();
+//! ```
 pub mod derive;
 pub mod emit;
 pub mod generate;

@@ -16,6 +16,26 @@
 //! [`NativeCache`] beside the tape, compiles it once it has been evaluated
 //! [`HOT_CALLS`] times, and keeps interpreting when compilation is
 //! unavailable or switched off (`KINEGEN_JIT=0`).
+//!
+//! ```
+//! use kinegen_jit::{Evaluator, HOT_CALLS};
+//! use kinegen_model::ir::{Kernel, ModelIr, StepForm};
+//!
+//! let ir = ModelIr::from_json(include_str!("../../generated/ir/diff_drive.json")).unwrap();
+//! let step = ir.kernel(Kernel::Step(StepForm::Exact, None)).unwrap();
+//! // some value for every argument (pose, inputs, parameters, dt...)
+//! let values: Vec<Vec<f64>> = step
+//!     .args
+//!     .iter()
+//!     .map(|a| (0..a.names.len()).map(|i| 1.0 + 0.1 * i as f64).collect())
+//!     .collect();
+//! let args: Vec<&[f64]> = values.iter().map(|v| &v[..]).collect();
+//! // interpreted until it is hot, then machine code: the same numbers
+//! let fast = Evaluator::new(step.clone());
+//! for _ in 0..=HOT_CALLS {
+//!     assert_eq!(fast.eval(&args), step.interpret(&args));
+//! }
+//! ```
 
 mod libm_sincos;
 
