@@ -1026,16 +1026,9 @@ impl Ranking<'_> {
             p: f.p.clone(),
             ..start.clone()
         };
-        let tr_fit = fit(
-            &tr_start,
-            self.train,
-            self.o,
-            Search::OnPart {
-                whole: self.runs,
-                starts: &f.starts,
-            },
-        );
-        let (train_fit, holdout_rmse) = match tr_fit {
+        let (whole, starts) = (self.runs, &f.starts);
+        let on_part = Search::OnPart { whole, starts };
+        let (train_fit, holdout_rmse) = match fit(&tr_start, self.train, self.o, on_part) {
             Ok(ft) => {
                 let h = weighted_rms(&tr_start, &ft.p, self.test, self.o);
                 (ft, h)
