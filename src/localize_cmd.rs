@@ -7,7 +7,7 @@ use clap::Args;
 use kinegen_analysis::files::Files;
 use kinegen_analysis::load::Loaded;
 use kinegen_analysis::localize::{
-    Consistency, EkfOptions, Localization, NoiseSource, Spread, Summary,
+    side, Consistency, EkfOptions, Localization, NoiseSource, Side, Spread, Summary,
 };
 use kinegen_analysis::localize_request::{localize_files, LocalizeRequest, LocalizedFiles};
 use serde_json::json;
@@ -282,15 +282,17 @@ fn fmt_spread(x: &Spread) -> String {
 }
 
 fn verdict(m: Option<f64>, b: Option<(f64, f64)>) -> String {
-    match (m, b) {
-        (Some(m), Some((lo, hi))) if m < lo => {
+    let (Some(m), Some((lo, hi)), Some(s)) = (m, b, side(m, b)) else {
+        return "n/a".into();
+    };
+    match s {
+        Side::Below => {
             format!("{m:.2} (below its 95% bounds {lo:.2}..{hi:.2}: the filter is pessimistic)")
         }
-        (Some(m), Some((lo, hi))) if m > hi => {
+        Side::Above => {
             format!("{m:.2} (above its 95% bounds {lo:.2}..{hi:.2}: the filter is overconfident)")
         }
-        (Some(m), Some((lo, hi))) => format!("{m:.2} (within its 95% bounds {lo:.2}..{hi:.2})"),
-        _ => "n/a".into(),
+        Side::Within => format!("{m:.2} (within its 95% bounds {lo:.2}..{hi:.2})"),
     }
 }
 

@@ -27,7 +27,7 @@ pub mod summary;
 
 pub use filter::{Filter, Keep, Pass};
 pub use noise::{NoiseModel, NoiseSource};
-pub use summary::{summarise, Consistency, Spread, Summary};
+pub use summary::{side, summarise, Consistency, Side, Spread, Summary};
 
 use crate::log::wrap;
 use crate::model::Runner;

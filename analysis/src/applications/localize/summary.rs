@@ -84,25 +84,40 @@ pub enum Consistency {
     Contradict,
 }
 
-/// Which side of its 95% bounds a mean lies on: -1 below (pessimistic), +1
-/// above (overconfident), 0 within.
-fn side(mean: Option<f64>, bounds: Option<(f64, f64)>) -> i8 {
-    match (mean, bounds) {
-        (Some(m), Some((lo, _))) if m < lo => -1,
-        (Some(m), Some((_, hi))) if m > hi => 1,
-        _ => 0,
-    }
+/// Where a consistency statistic's mean lies against its 95% bounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// Below: the filter is pessimistic.
+    Below,
+    Within,
+    /// Above: the filter is overconfident.
+    Above,
+}
+
+/// The side of its 95% `bounds` that `mean` lies on (None without either).
+pub fn side(mean: Option<f64>, bounds: Option<(f64, f64)>) -> Option<Side> {
+    let (m, (lo, hi)) = (mean?, bounds?);
+    Some(if m < lo {
+        Side::Below
+    } else if m > hi {
+        Side::Above
+    } else {
+        Side::Within
+    })
 }
 
 impl Summary {
     /// What NIS and NEES say together (None without a NEES).
     pub fn consistency(&self) -> Option<Consistency> {
         let (nis, nees) = (self.nis_spread?, self.nees_spread?);
-        let (a, b) = (
-            side(self.nis, self.nis_bounds),
-            side(self.nees, self.nees_bounds),
+        let opposite = matches!(
+            (
+                side(self.nis, self.nis_bounds),
+                side(self.nees, self.nees_bounds)
+            ),
+            (Some(Side::Below), Some(Side::Above)) | (Some(Side::Above), Some(Side::Below))
         );
-        if a * b >= 0 {
+        if !opposite {
             return Some(Consistency::Agree);
         }
         let below = |s: Spread| s.median < s.chi2_median;
