@@ -360,23 +360,20 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
     }
     std::fs::write(&obs, lines.join("\n") + "\n").unwrap();
     let track = dir.join("track.csv");
-    let doc = kinegen_json(&[
-        "localize",
-        "--spec",
+    let doc = localize_json(
         spec,
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        m.to_str().unwrap(),
-        "--noise",
-        "dv=0.05",
-        "--noise",
-        "domega=0.01",
-        "--track",
-        track.to_str().unwrap(),
-    ]);
+        &log,
+        &obs,
+        &m,
+        &[
+            "--noise",
+            "dv=0.05",
+            "--noise",
+            "domega=0.01",
+            "--track",
+            track.to_str().unwrap(),
+        ],
+    );
     let run = &doc["runs"][0];
     let (ekf, dr) = (
         run["position_rmse_m"].as_f64().unwrap(),
@@ -401,32 +398,15 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
         "one track row per log row (plus the header each)"
     );
     // with the spec's own, much smaller process noise the filter is overconfident and says so
-    let o = kinegen(&[
-        "localize",
-        "--spec",
-        spec,
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        m.to_str().unwrap(),
-        "--spec-noise",
-    ]);
+    let o = kinegen(&localize_args(spec, &log, &obs, &m, &["--spec-noise"]));
     assert!(stdout(&o).contains("overconfident"), "{}", stdout(&o));
-    let o = kinegen(&[
-        "localize",
-        "--spec",
+    let o = kinegen(&localize_args(
         spec,
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        m.to_str().unwrap(),
-        "--noise",
-        "wheel=1",
-    ]);
+        &log,
+        &obs,
+        &m,
+        &["--noise", "wheel=1"],
+    ));
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--noise wheel"), "{}", stderr(&o));
 }
@@ -536,20 +516,13 @@ fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
         ],
     );
     let report = t.join("report");
-    let d = kinegen_json(&[
-        "localize",
-        "--spec",
+    let d = localize_json(
         "spec/unicycle_ekf.toml",
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-        "--sweep",
-        "--report",
-        report.to_str().unwrap(),
-    ]);
+        &log,
+        &obs,
+        &map,
+        &["--sweep", "--report", report.to_str().unwrap()],
+    );
     let at = |noise: &str, sigma: f64| {
         d["sweep"]
             .as_array()
@@ -648,17 +621,7 @@ fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
         out += "\n";
     }
     std::fs::write(&obs, out).unwrap();
-    let doc = kinegen_json(&[
-        "localize",
-        "--spec",
-        spec,
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        m.to_str().unwrap(),
-    ]);
+    let doc = localize_json(spec, &log, &obs, &m, &[]);
     // the spec's range sigma is 0.05 m: the persistent part per metre of range
     let per_m = 0.05 * doc["noise"]["persistent"]["range_per_m"].as_f64().unwrap();
     let run = &doc["runs"][0];
@@ -682,15 +645,15 @@ fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
     );
 }
 
-/// `localize --json` of `log` with its sightings `obs` of the landmarks in
-/// `map`, and `extra` options.
-fn localize_json(
-    spec: &str,
-    log: &Path,
-    obs: &Path,
-    map: &Path,
-    extra: &[&str],
-) -> serde_json::Value {
+/// The arguments of `localize` on `log` with its sightings `obs` of the
+/// landmarks in `map`, and `extra` options.
+fn localize_args<'a>(
+    spec: &'a str,
+    log: &'a Path,
+    obs: &'a Path,
+    map: &'a Path,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
     let mut a = vec![
         "localize",
         "--spec",
@@ -703,7 +666,18 @@ fn localize_json(
         map.to_str().unwrap(),
     ];
     a.extend_from_slice(extra);
-    kinegen_json(&a)
+    a
+}
+
+/// `localize --json` with [`localize_args`].
+fn localize_json(
+    spec: &str,
+    log: &Path,
+    obs: &Path,
+    map: &Path,
+    extra: &[&str],
+) -> serde_json::Value {
+    kinegen_json(&localize_args(spec, log, obs, map, extra))
 }
 
 /// A motion capture that loses the robot (at the start and for a stretch in
