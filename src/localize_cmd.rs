@@ -90,7 +90,7 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         unseen_landmarks,
         ..
     } = files;
-    for w in unseen_landmarks {
+    if let Some(w) = unseen_landmarks {
         eprintln!("warning: {w}");
     }
     let r = &prep.runner;

@@ -202,6 +202,7 @@ fn real_optiodom_runs_compare_and_fit_with_holdout() {
 fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
     let ok_header = "t,enc_r,enc_l,gt_x,gt_y,gt_theta";
     vec![
+        ("", ":1".into(), "the file is empty"),
         (
             "t,enc_r,gt_x,gt_y,gt_theta\n0,0,0,0,0\n0.05,1,0,0,0\n0.1,2,0,0,0\n",
             ":1: column `enc_l`".into(),

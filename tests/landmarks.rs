@@ -220,19 +220,25 @@ fn compare_sightings(
 }
 
 #[test]
-fn sightings_of_ids_not_in_the_map_are_left_out_and_said() {
+fn sightings_not_to_use_are_left_out_and_said() {
     // a camera that also reads ids the map does not have (other robots'
-    // barcodes): those sightings are left out, said, and the rest is used
+    // barcodes), a frame written twice, a camera log that runs on after the
+    // odometry stopped: those sightings are left out, each kind said, and the
+    // rest is used
     let tmp = tempfile::tempdir().unwrap();
     let (log, _, map) = landmark_log(tmp.path());
-    let text = "t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,R3,2.0,0.2\n0.7,L2,2.0,0.2\n";
+    let text = "t,id,range,bearing\n0.5,L1,3.0,0.1\n0.6,R3,2.0,0.2\n0.7,L2,2.0,0.2\n\
+                0.7,L1,2.5,0.3\n0.7,L2,2.0,0.2\n99999,L1,3.0,0.1\n";
     let o = compare_sightings(tmp.path(), &log, text, &map);
     let said = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(
         said.contains("obs.csv: 1 sighting(s) of `R3` left out: not in the map")
             && said.contains("(the first at line 3)")
-            && said.contains("2 observations"),
+            && said.contains("1 sighting(s) left out: each repeats the one before it at the same time exactly (the first at line 6)")
+            && said.contains("1 sighting(s) left out: outside the log's time span")
+            && said.contains("(0 before it, 1 after it)")
+            && said.contains("3 observations"),
         "{said}"
     );
 }
@@ -780,4 +786,27 @@ fn localisation_is_scored_where_an_offset_tracker_sees_the_robot() {
             "{key}: {a} against {b}"
         );
     }
+}
+
+/// A map with landmarks the camera never sights (a map of the whole building,
+/// or ids spelled differently in the map): localize says which, with their
+/// lines in the map, in one warning, and localises with the rest.
+#[test]
+fn landmarks_never_sighted_are_named_in_one_warning() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (log, obs, _) = landmark_log(tmp.path());
+    let map = tmp.path().join("building.csv");
+    std::fs::write(&map, format!("{MAP}far1,40,40\nfar2,-40,40\n")).unwrap();
+    let o = kinegen(&localize_args(
+        "spec/diff_drive.toml",
+        &log,
+        &obs,
+        &map,
+        &[],
+    ));
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    let expected = "building.csv: 2 of its 7 landmarks are never observed in the --observations files: `far1` (line 7), `far2` (line 8)";
+    assert_eq!(err.matches("never observed").count(), 1, "{err}");
+    assert!(err.contains(expected), "{err}");
 }

@@ -12,7 +12,6 @@
 //! ```
 use crate::derivation::Deriver;
 use crate::files::{read_files, Files, FilesError};
-use crate::landmarks::read_map;
 use crate::load::{Loaded, ReadProgress, Sources};
 use crate::localize::{localize_runs, EkfOptions, LocalizeError, Localized};
 use crate::model::Runner;
@@ -29,15 +28,15 @@ pub struct LocalizeRequest<'a> {
 }
 
 /// A localisation done: the logs as loaded, the filter over them, the
-/// sweep (empty unless asked), and the map's landmarks no log sights (each
-/// said as a warning naming the map's line).
+/// sweep (empty unless asked), and the map's landmarks no log sights (one
+/// warning naming them and their lines in the map).
 pub struct LocalizedFiles {
     pub loaded: Loaded,
     /// The options the filter ran with.
     pub options: EkfOptions,
     pub localized: Localized,
     pub sweep: Vec<SweepPoint>,
-    pub unseen_landmarks: Vec<String>,
+    pub unseen_landmarks: Option<String>,
 }
 
 /// Why a localisation could not be made from the files.
@@ -134,31 +133,24 @@ fn checked_options(
 }
 
 /// The map's landmarks that no log sights (a map for another arena, or ids
-/// spelled differently in the map and the observations), each naming the
-/// map's line.
-fn unseen_landmarks(sources: &Sources, prep: &Loaded) -> Vec<String> {
-    let Some(m) = &sources.landmarks else {
-        return Vec::new();
+/// spelled differently in the map and the observations), in one sentence
+/// naming their lines in the map; none when every landmark is sighted.
+fn unseen_landmarks(sources: &Sources, prep: &Loaded) -> Option<String> {
+    let (path, map) = (sources.landmarks.as_ref()?, prep.map.as_ref()?);
+    let sighted = |id: &String| {
+        (prep.runs.iter().chain(&prep.holdout)).any(|r| r.landmarks.iter().any(|z| &z.id == id))
     };
-    let Ok(map) = read_map(m) else {
-        return Vec::new();
-    };
-    map.ids
-        .iter()
-        .enumerate()
-        .filter(|(_, id)| {
-            !prep
-                .runs
-                .iter()
-                .chain(&prep.holdout)
-                .any(|r| r.landmarks.iter().any(|z| &z.id == *id))
-        })
-        .map(|(i, id)| {
-            format!(
-                "{}:{}: landmark `{id}` is never observed in the --observations files",
-                m.display(),
-                i + 2
-            )
-        })
-        .collect()
+    let unseen: Vec<String> = (map.ids.iter().enumerate())
+        .filter(|(_, id)| !sighted(id))
+        .map(|(i, id)| format!("`{id}` (line {})", i + 2))
+        .collect();
+    (!unseen.is_empty()).then(|| {
+        format!(
+            "{}: {} of its {} landmarks are never observed in the --observations files: {}",
+            path.display(),
+            unseen.len(),
+            map.ids.len(),
+            unseen.join(", ")
+        )
+    })
 }

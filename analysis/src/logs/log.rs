@@ -63,6 +63,14 @@ pub fn read_csv(
         .iter()
         .map(str::to_string)
         .collect();
+    if names.iter().all(String::is_empty) {
+        return Err(e(
+            Some(1),
+            format!(
+                "the file is empty: a {what} file starts with a header line naming its columns"
+            ),
+        ));
+    }
     if names.len() == 1 {
         if let Some(sep) = [';', '\t', '|'].into_iter().find(|c| names[0].contains(*c)) {
             return Err(e(Some(1), format!("the header is one column `{}`: {what} files are comma-separated, this one looks {sep:?}-separated", names[0])));

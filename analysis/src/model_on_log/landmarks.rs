@@ -98,19 +98,58 @@ impl Unmapped {
     }
 }
 
+/// A sighting written twice (the same time, landmark, range and bearing): a
+/// frame logged twice, which counted twice would make the filter trust that
+/// frame double. Left out and counted.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Repeated {
+    pub count: usize,
+    /// Where the first was, as [`Unmapped::first`].
+    pub first: String,
+}
+
+impl Repeated {
+    fn add(&mut self, at: impl FnOnce() -> String) {
+        if self.count == 0 {
+            self.first = at();
+        }
+        self.count += 1;
+    }
+}
+
+/// The sightings of one source that a localisation uses, and those it left out.
+#[derive(Debug, Clone, Default)]
+pub struct Sightings {
+    pub obs: Vec<LandmarkObs>,
+    pub unmapped: Unmapped,
+    pub repeated: Repeated,
+}
+
+/// Whether `o` repeats a sighting of `same_time` (the sightings read so far
+/// at its time) exactly.
+fn repeats(same_time: &[LandmarkObs], o: &LandmarkObs) -> bool {
+    same_time
+        .iter()
+        .any(|p| p.id == o.id && p.range == o.range && p.bearing == o.bearing)
+}
+
+/// The sightings of `out` at time `t`, which are its last ones (`out` is in time order).
+fn at_time(out: &[LandmarkObs], t: f64) -> &[LandmarkObs] {
+    let first = out.iter().rposition(|p| p.t != t).map_or(0, |k| k + 1);
+    &out[first..]
+}
+
 /// Read `OBS.csv` (`t,id,range,bearing`): time non-decreasing (several landmarks
 /// may be seen at one instant), range positive. Sightings of ids the map does
-/// not have are left out and counted; none in the map is an error.
-pub fn read_observations(
-    path: &Path,
-    map: &Map,
-    map_path: &Path,
-) -> Result<(Vec<LandmarkObs>, Unmapped), LogError> {
+/// not have, and sightings written twice, are left out and counted; none in
+/// the map is an error.
+pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Sightings, LogError> {
     let (h, mut rdr) = read_csv(path, "landmark observations")?;
     let cols = h.require(&["t", "id", "range", "bearing"])?;
     let (t_i, id_i, range_i, bearing_i) = (cols[0], cols[1], cols[2], cols[3]);
     let mut out: Vec<LandmarkObs> = Vec::new();
     let mut unmapped = Unmapped::default();
+    let mut repeated = Repeated::default();
     let mut last_t = f64::NEG_INFINITY;
     for (n, rec) in rdr.records().enumerate() {
         let (line, rec) = h.record(n, rec)?;
@@ -137,14 +176,19 @@ pub fn read_observations(
             ));
         }
         let bearing = h.number(line, &rec, bearing_i)?;
-        out.push(LandmarkObs {
+        let o = LandmarkObs {
             t,
             id,
             xl,
             yl,
             range,
             bearing,
-        });
+        };
+        if repeats(at_time(&out, t), &o) {
+            repeated.add(|| format!("line {line}"));
+            continue;
+        }
+        out.push(o);
     }
     if out.is_empty() {
         if unmapped.count > 0 {
@@ -152,20 +196,27 @@ pub fn read_observations(
         }
         return Err(h.err(None, None, "no observations"));
     }
-    Ok((out, unmapped))
+    Ok(Sightings {
+        obs: out,
+        unmapped,
+        repeated,
+    })
 }
 
 /// Range-bearing observations from a bag's landmark topic (see
 /// [`crate::bag::LandmarkSource`]) whose ids the map has, ordered by time,
-/// and those it has not (as [`read_observations`]).
+/// and those it has not or that repeat one (as [`read_observations`]).
 pub fn from_detections(
     bag: &Path,
     found: &[crate::bag::Detection],
     map: &Map,
     map_path: &Path,
-) -> Result<(Vec<LandmarkObs>, Unmapped), LogError> {
-    let mut out = Vec::with_capacity(found.len());
+) -> Result<Sightings, LogError> {
+    let mut out: Vec<LandmarkObs> = Vec::with_capacity(found.len());
     let mut unmapped = Unmapped::default();
+    let mut repeated = Repeated::default();
+    let mut found: Vec<&crate::bag::Detection> = found.iter().collect();
+    found.sort_by(|a, b| a.t.total_cmp(&b.t));
     for d in found {
         let Some(&[xl, yl]) = map.xy.get(&d.id) else {
             unmapped.add(&d.id, || {
@@ -173,20 +224,28 @@ pub fn from_detections(
             });
             continue;
         };
-        out.push(LandmarkObs {
+        let o = LandmarkObs {
             t: d.t,
             id: d.id.clone(),
             xl,
             yl,
             range: d.range,
             bearing: d.bearing,
-        });
+        };
+        if repeats(at_time(&out, d.t), &o) {
+            repeated.add(|| format!("topic `{}` message {} (counting from 0)", d.topic, d.index));
+            continue;
+        }
+        out.push(o);
     }
     if out.is_empty() && unmapped.count > 0 {
         return Err(unmapped.none_mapped(bag, map, map_path));
     }
-    out.sort_by(|a, b| a.t.total_cmp(&b.t));
-    Ok((out, unmapped))
+    Ok(Sightings {
+        obs: out,
+        unmapped,
+        repeated,
+    })
 }
 
 /// A start pose placed by landmark sightings.

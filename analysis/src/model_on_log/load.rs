@@ -6,7 +6,7 @@
 use crate::bag::{Detection, TopicMap};
 use crate::evaluation::tracks;
 use crate::input_range;
-use crate::landmarks::{from_detections, read_map, read_observations};
+use crate::landmarks::{from_detections, read_map, read_observations, Map, Sightings};
 use crate::log::LogError;
 use crate::model::{parse_sets, ModelError, Runner};
 use crate::run::Run;
@@ -46,6 +46,8 @@ pub struct Loaded {
     /// their declared range, logs split at gaps), said by every command and
     /// kept in its JSON.
     pub warnings: Vec<String>,
+    /// The landmark map (`--landmarks`), where one was given.
+    pub map: Option<Map>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -120,7 +122,8 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
         holdout: &mut holdout,
         found_holdout: &found_holdout,
     };
-    warnings.extend(logs.attach_landmarks(sources, &runner)?);
+    let (said, map) = logs.attach_landmarks(sources, &runner)?;
+    warnings.extend(said);
     // a log with gaps becomes one run per piece between them
     let mut split = |set: Vec<Run>| -> Vec<Run> {
         set.into_iter()
@@ -161,6 +164,7 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
         runs,
         holdout,
         warnings,
+        map,
     })
 }
 
@@ -217,15 +221,20 @@ impl Logs<'_> {
     /// Read --landmarks and attach range-bearing observations to the runs: the
     /// k-th --observations file to the k-th run, or the detections of a bag's
     /// landmark topic (--topics `[landmarks]`) to its run. Returns what the
-    /// user should know: sightings left out for ids the map does not have.
-    fn attach_landmarks(&mut self, s: &Sources, r: &Runner) -> Result<Vec<String>, LoadError> {
+    /// user should know (sightings left out: for ids the map does not have,
+    /// written twice, or outside their log's time span) and the map.
+    fn attach_landmarks(
+        &mut self,
+        s: &Sources,
+        r: &Runner,
+    ) -> Result<(Vec<String>, Option<Map>), LoadError> {
         let from_bags = self
             .found
             .iter()
             .chain(self.found_holdout)
             .any(|d| !d.is_empty());
         let map_path = match (&s.landmarks, s.observations.is_empty(), from_bags) {
-            (None, true, false) => return Ok(Vec::new()),
+            (None, true, false) => return Ok((Vec::new(), None)),
             (None, _, true) => return Err(LoadError::BagLandmarksWithoutMap),
             (None, false, false) => return Err(LoadError::ObservationsWithoutMap),
             (Some(m), true, false) => return Err(LoadError::MapWithoutObservations(m.clone())),
@@ -277,17 +286,11 @@ impl Logs<'_> {
                 (None, true) => continue,
             };
             let (t0, t1) = (run.t[0], *run.t.last().unwrap());
-            let (obs, unmapped) = obs?;
-            if unmapped.count > 0 {
-                warnings.push(format!(
-                    "{source_name}: {} sighting(s) of {} left out: not in the map {} (the first at {})",
-                    unmapped.count,
-                    unmapped.some_ids(),
-                    map_path.display(),
-                    unmapped.first
-                ));
-            }
-            let inside: Vec<_> = obs.into_iter().filter(|o| o.t >= t0 && o.t <= t1).collect();
+            let sightings = obs?;
+            warnings.extend(left_out(&sightings, &source_name, map_path, (t0, t1)));
+            let inside: Vec<_> = (sightings.obs.into_iter())
+                .filter(|o| o.t >= t0 && o.t <= t1)
+                .collect();
             if inside.is_empty() {
                 return Err(LoadError::NoObservationInSpan {
                     source_name,
@@ -297,6 +300,38 @@ impl Logs<'_> {
             }
             run.landmarks = inside;
         }
-        Ok(warnings)
+        Ok((warnings, Some(map)))
     }
+}
+
+/// What the user should hear of the sightings of one source that are not
+/// used: ids the map does not have, sightings written twice, and sightings
+/// outside the log's time span `(t0, t1)` (a camera log that runs on after the
+/// odometry stopped, or one from another log).
+fn left_out(s: &Sightings, source: &str, map_path: &Path, (t0, t1): (f64, f64)) -> Vec<String> {
+    let mut said = Vec::new();
+    if s.unmapped.count > 0 {
+        said.push(format!(
+            "{source}: {} sighting(s) of {} left out: not in the map {} (the first at {})",
+            s.unmapped.count,
+            s.unmapped.some_ids(),
+            map_path.display(),
+            s.unmapped.first
+        ));
+    }
+    if s.repeated.count > 0 {
+        said.push(format!(
+            "{source}: {} sighting(s) left out: each repeats the one before it at the same time exactly (the first at {})",
+            s.repeated.count, s.repeated.first
+        ));
+    }
+    let before = s.obs.iter().filter(|o| o.t < t0).count();
+    let after = s.obs.iter().filter(|o| o.t > t1).count();
+    if before + after > 0 {
+        said.push(format!(
+            "{source}: {} sighting(s) left out: outside the log's time span {t0:.3}-{t1:.3} s ({before} before it, {after} after it)",
+            before + after
+        ));
+    }
+    said
 }
