@@ -204,6 +204,22 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
     vec![
         ("", ":1".into(), "the file is empty"),
         (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n10,1,1,0,0,0\n20,2,2,0,0,0\n30,3,3,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ": column `t`".into(),
+            "as milliseconds, the rows would be 0.010 s apart: divide `t` by 1000",
+        ),
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,178\n0.05,1,1,0,0,179.5\n0.1,2,2,0,0,-179\n0.15,3,3,0,0,-178\n")
+                    .into_boxed_str(),
+            ),
+            ":4: column `gt_theta`".into(),
+            "as an angle in degrees does where it wraps",
+        ),
+        (
             "t,enc_r,gt_x,gt_y,gt_theta\n0,0,0,0,0\n0.05,1,0,0,0\n0.1,2,0,0,0\n",
             ":1: column `enc_l`".into(),
             "missing column",

@@ -90,6 +90,17 @@ fn undeclared_wrap(c: &[f64]) -> Option<(usize, f64, u32)> {
     None
 }
 
+/// An angle column logged in degrees: the first step (index k: rows k to
+/// k + 1) where it jumps by 300-420, as a heading in degrees does where it
+/// wraps at +-180 (in radians the wrap is a jump of 2 pi, and an unwrapped
+/// heading does not jump). Read as radians, such a log dead-reckoned
+/// against a heading 57 times too large, and compare exited 0.
+fn degrees_wrap(c: &[f64]) -> Option<(usize, f64)> {
+    c.windows(2)
+        .position(|w| (300.0..=420.0).contains(&(w[1] - w[0]).abs()))
+        .map(|k| (k, c[k + 1] - c[k]))
+}
+
 /// Whether any run measures the observation that plays `role`, and if not, the
 /// data it would need. Roles kinegen does not read from logs count as measured.
 pub fn channel_missing(runs: &[Run], r: &Runner, role: ObservationRole) -> Option<String> {
@@ -203,6 +214,18 @@ impl Run {
             Inputs::from_flat(dt.len(), cols.len(), s)
         });
         let [cx, cy, cth] = r.ir.pose_columns();
+        for c in angle_cols.iter().copied().chain([cth.as_str()]) {
+            let Some(col) = log.columns.get(c) else {
+                continue;
+            };
+            if let Some((k, d)) = degrees_wrap(col) {
+                return Err(log.err(
+                    Some(k + 3),
+                    Some(c),
+                    format!("the angle jumps by {d:.1} from the line before, as an angle in degrees does where it wraps at +-180: angles are logged in radians"),
+                ));
+            }
+        }
         let gt = if log.has(&cx) && log.has(&cy) && log.has(&cth) {
             measured_pose(log.col(&cx)?, log.col(&cy)?, log.col(&cth)?)
         } else {

@@ -124,6 +124,9 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
     };
     let (said, map) = logs.attach_landmarks(sources, &runner)?;
     warnings.extend(said);
+    for run in runs.iter().chain(&holdout) {
+        seconds_apart(run, sources.max_gap)?;
+    }
     // a log with gaps becomes one run per piece between them
     let mut split = |set: Vec<Run>| -> Vec<Run> {
         set.into_iter()
@@ -166,6 +169,39 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
         warnings,
         map,
     })
+}
+
+/// A log whose rows are typically further apart than `max_gap` has no run
+/// at all between its gaps: its time is in another unit than seconds (a
+/// log at 100 Hz in milliseconds steps by 10), which the error says, with
+/// the unit that would make the steps a robot's.
+fn seconds_apart(run: &Run, max_gap: f64) -> Result<(), LogError> {
+    let mut dt = run.dt.to_vec();
+    let mid = dt.len() / 2;
+    let median = *dt.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if median <= max_gap {
+        return Ok(());
+    }
+    let hint = [
+        ("milliseconds", 1e3),
+        ("microseconds", 1e6),
+        ("nanoseconds", 1e9),
+    ]
+    .into_iter()
+    .find(|(_, per_s)| (1e-4..=1.0).contains(&(median / per_s)))
+    .map(|(unit, per_s)| {
+        format!(
+            " (as {unit}, the rows would be {:.3} s apart: divide `t` by {per_s:.0})",
+            median / per_s
+        )
+    })
+    .unwrap_or_default();
+    Err(LogError::new(
+        Path::new(&run.path),
+        None,
+        Some("t"),
+        format!("the rows are a median {median} apart, more than --max-gap {max_gap} s, so no stretch of the log is a run: `t` must be in seconds{hint}"),
+    ))
 }
 
 /// The bags' topic mapping (`--topics`), its input columns checked against
