@@ -234,7 +234,7 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
         ),
         (
             Box::leak(
-                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,NaN,0,0,0\n0.1,2,2,0,0,0\n")
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,inf,0,0,0\n0.1,2,2,0,0,0\n")
                     .into_boxed_str(),
             ),
             ":3: column `enc_l`".into(),
@@ -2124,22 +2124,107 @@ fn rows_without_motion_capture_are_cut_out_and_said() {
         r_r(&parts)
     );
     assert!((r_r(&whole) - 0.0505).abs() < 1e-4, "{}", r_r(&whole));
-    // an input left empty is no missing measurement
+    // an encoder cell left empty is no missing measurement: the counter is
+    // interpolated over it (its difference spreads over the two steps), said
     let mut broken = lines.clone();
     let enc = col("enc_l");
     let mut cells: Vec<String> = broken[100].split(',').map(String::from).collect();
     cells[enc] = String::new();
     broken[100] = cells.join(",");
-    let bad = tmp.path().join("bad.csv");
-    std::fs::write(&bad, broken.join("\n") + "\n").unwrap();
-    let msg = refused(&[
-        "fit",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--data",
-        bad.to_str().unwrap(),
-    ]);
-    assert!(msg.contains("bad.csv:101: column `enc_l`"), "{msg}");
+    let holed = tmp.path().join("holed.csv");
+    std::fs::write(&holed, broken.join("\n") + "\n").unwrap();
+    let filled = fit(&["--data", holed.to_str().unwrap()]);
+    let said = filled["warnings"].to_string();
+    assert!(
+        said.contains("holed.csv: 1 row(s) leave input column(s) `enc_l` empty"),
+        "{said}"
+    );
+    assert!(
+        (r_r(&filled) - r_r(&whole)).abs() < 1e-5,
+        "{}",
+        r_r(&filled)
+    );
+}
+
+/// A log merged from sources that log at their own times, as a table
+/// exported from several topics is: encoder rows and motion-capture rows at
+/// times of their own, each leaving the other's cells empty, the motion
+/// capture at half the encoders' rate. The counters are interpolated to the
+/// motion capture's rows and the motion capture to the encoders' rows, so the
+/// log calibrates as the complete one does (before, every row lacked a
+/// cell: refused, or cut into runs of one row).
+#[test]
+fn a_log_merged_from_sources_at_their_own_times_is_read_whole() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "log.csv",
+        &[
+            "--spec",
+            "spec/diff_drive.toml",
+            "--set",
+            "r_r=0.0505",
+            "--trajectory",
+            "random",
+            "--seed",
+            "11",
+        ],
+    );
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let cols: Vec<&str> = header.split(',').collect();
+    let is_gt = |i: usize| cols[i].starts_with("gt_");
+    let mut merged = format!("{header}\n");
+    for (k, line) in lines.enumerate() {
+        let cells: Vec<&str> = line.split(',').collect();
+        let t: f64 = cells[0].parse().unwrap();
+        let keep = |gt: bool| -> String {
+            (0..cells.len())
+                .map(|i| {
+                    if i == 0 || is_gt(i) == gt {
+                        cells[i]
+                    } else {
+                        ""
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        merged += &(keep(false) + "\n");
+        if k % 2 == 0 {
+            // the tracker's sample, taken at the encoders' time, logged 1 ms later
+            let mut row: Vec<String> = keep(true).split(',').map(String::from).collect();
+            row[0] = format!("{:.4}", t + 0.001);
+            merged += &(row.join(",") + "\n");
+        }
+    }
+    let path = tmp.path().join("merged.csv");
+    std::fs::write(&path, merged).unwrap();
+    let fit = |data: &std::path::Path| {
+        kinegen_json(&[
+            "fit",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            data.to_str().unwrap(),
+        ])
+    };
+    let (whole, read) = (fit(&log), fit(&path));
+    let said = read["warnings"].to_string();
+    assert!(
+        said.contains("merged.csv:")
+            && said.contains("leave input column(s) `enc_r`, `enc_l` empty"),
+        "{said}"
+    );
+    let r_r = |d: &serde_json::Value| d["parameters"]["r_r"]["estimate"].as_f64().unwrap();
+    assert!(
+        (r_r(&read) - 0.0505).abs() < 1e-4 && (r_r(&read) - r_r(&whole)).abs() < 2e-5,
+        "merged {} vs complete {}",
+        r_r(&read),
+        r_r(&whole)
+    );
+    assert_eq!(read["runs"].as_array().unwrap().len(), 1, "{read}");
 }
 
 /// A robot calibrated on runs that turn one way is warned: a scale and an

@@ -51,6 +51,7 @@ pub mod logs {
     pub mod bag;
     pub mod column;
     pub mod log;
+    pub mod merged;
     pub mod rosdyn;
     pub mod rosmsg;
     pub mod rows;
@@ -124,7 +125,7 @@ pub use diagnosis::{diagnose, diagnose_job, request};
 pub use estimation::{
     discretisation, fit, fit_job, fit_request, lag, methods, neural, periodic, seed_methods,
 };
-pub use logs::{bag, column, log, rosdyn, rosmsg, rows};
+pub use logs::{bag, column, log, merged, rosdyn, rosmsg, rows};
 pub use model_on_log::{
     comparison, coverage, dataset, deadreckon, derivation, evaluation, files, innovations,
     input_range, interp, landmarks, load, metrics, model, run, steering, timeline, track_rows,

@@ -3,6 +3,7 @@
 use crate::bag::{Detection, TopicMap};
 use crate::column::Column;
 use crate::log::{unwrap, Log, LogError};
+use crate::merged::{self, Fill, InputColumn, Measurement};
 use crate::model::Runner;
 use crate::rows::Inputs;
 use crate::run::Run;
@@ -264,34 +265,79 @@ impl Run {
     /// Read a log for a model: a CSV file, or a ROS 2 bag (MCAP) with the
     /// default topic mapping.
     pub fn read(path: &std::path::Path, r: &Runner) -> Result<Run, LogError> {
-        Run::read_with(path, r, &TopicMap::default(), &|_, _| {}).map(|(run, _)| run)
+        Run::read_with(path, r, &TopicMap::default(), &|_, _| {}).map(|read| read.run)
     }
 
     /// Read a log for a model; a bag through `topics`, reporting
     /// `progress(messages read, total)`, with the range-bearing detections of
     /// its landmark topic (none for a CSV log, whose observations are a file
-    /// of their own).
+    /// of their own). A CSV log's empty cells are filled as a log merged
+    /// from sources at their own times is ([`crate::merged`]), said in the
+    /// note.
     pub fn read_with(
         path: &std::path::Path,
         r: &Runner,
         topics: &TopicMap,
         progress: &dyn Fn(usize, usize),
-    ) -> Result<(Run, Vec<Detection>), LogError> {
-        let (log, detections) = if crate::bag::is_bag(path) {
+    ) -> Result<ReadLog, LogError> {
+        let (log, detections, note) = if crate::bag::is_bag(path) {
             let wanted = crate::bag::Wanted {
                 inputs: r.ir.inputs.iter().map(|i| i.column.clone()).collect(),
                 pose: r.ir.pose_columns(),
                 gyro: r.ir.gyro_column(),
             };
-            crate::bag::read(path, &wanted, topics, progress)?
+            let (log, detections) = crate::bag::read(path, &wanted, topics, progress)?;
+            (log, detections, None)
         } else {
             let wanted = Run::wanted(r);
             let w: Vec<&str> = wanted.iter().map(String::as_str).collect();
-            let mut measured: Vec<String> = r.ir.pose_columns().to_vec();
-            measured.push(r.ir.gyro_column());
-            let m: Vec<&str> = measured.iter().map(String::as_str).collect();
-            (Log::read(path, &w, &m)?, Vec::new())
+            // every column but time may have empty cells: filled below
+            let m: Vec<&str> = w.iter().copied().filter(|c| *c != "t").collect();
+            let mut log = Log::read(path, &w, &m)?;
+            let note = merged::fill(&mut log, &input_columns(r), &measurements(r))?;
+            (log, Vec::new(), note)
         };
-        Ok((Run::from_log(&log, r)?, detections))
+        Ok(ReadLog {
+            run: Run::from_log(&log, r)?,
+            detections,
+            note,
+        })
     }
+}
+
+/// A log as read for a model.
+pub struct ReadLog {
+    pub run: Run,
+    /// The detections of a bag's landmark topic.
+    pub detections: Vec<Detection>,
+    /// What the user should know of how it was read (empty cells filled).
+    pub note: Option<String>,
+}
+
+/// The model's input columns and how their empty cells are filled.
+fn input_columns(r: &Runner) -> Vec<InputColumn> {
+    (r.ir.inputs.iter())
+        .map(|i| InputColumn {
+            name: i.column.clone(),
+            fill: match Between::of(i) {
+                Between::Hold => Fill::Hold,
+                Between::Spread | Between::Linear => Fill::Interpolate,
+            },
+            angle: i.kind == InputKind::Absolute && i.unit == "rad",
+        })
+        .collect()
+}
+
+/// The measurements a log may carry for the model: the pose, the gyro.
+fn measurements(r: &Runner) -> [Measurement; 2] {
+    [
+        Measurement {
+            columns: r.ir.pose_columns().to_vec(),
+            angle: vec![false, false, true],
+        },
+        Measurement {
+            columns: vec![r.ir.gyro_column()],
+            angle: vec![false],
+        },
+    ]
 }

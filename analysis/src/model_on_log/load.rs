@@ -106,16 +106,19 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
     let sets = parse_sets(&sources.sets)?;
     let runner = Runner::new(ir, &sets)?;
     let topics = topic_map(sources, &runner)?;
-    let read = |paths: &[PathBuf]| {
-        paths
-            .iter()
-            .map(|p| Run::read_with(p, &runner, &topics, &*progress(p)))
-            .collect::<Result<Vec<_>, _>>()
-    };
     let mut warnings: Vec<String> = Vec::new();
-    let (mut runs, found): (Vec<Run>, Vec<_>) = read(&sources.data)?.into_iter().unzip();
-    let (mut holdout, found_holdout): (Vec<Run>, Vec<_>) =
-        read(&sources.holdout)?.into_iter().unzip();
+    let mut read = |paths: &[PathBuf]| -> Result<(Vec<Run>, Vec<Vec<Detection>>), LogError> {
+        let mut out = (Vec::new(), Vec::new());
+        for p in paths {
+            let read = Run::read_with(p, &runner, &topics, &*progress(p))?;
+            warnings.extend(read.note);
+            out.0.push(read.run);
+            out.1.push(read.detections);
+        }
+        Ok(out)
+    };
+    let (mut runs, found) = read(&sources.data)?;
+    let (mut holdout, found_holdout) = read(&sources.holdout)?;
     let mut logs = Logs {
         runs: &mut runs,
         found: &found,

@@ -1,0 +1,185 @@
+//! Logs merged from sources that log at their own times, as a table exported
+//! from several topics is: each row carries the cells of the sources that
+//! logged at its time and leaves the others empty (a command row, an encoder
+//! row, a motion-capture row). Each empty cell gets the value its source had
+//! at the row's time, by what its column is:
+//! - a command holds its last value (CONTRACT: it applies until the next);
+//! - a counter or a sampled angle is interpolated in time (a counter's
+//!   difference spreads over the interval, as between any two rows);
+//! - a measurement (the pose, the gyro) is interpolated between samples no
+//!   further apart than twice its typical interval. Longer stretches are a
+//!   tracker that lost the robot: those rows stay empty, to be cut out (or
+//!   run through by a localisation) as before.
+//!
+//! Rows before an input's first value hold that first value, rows after a
+//! counter's last value its last one: a log's first and last rows, said.
+use crate::log::{Log, LogError};
+use std::f64::consts::PI;
+
+/// How an input column's empty cells are filled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fill {
+    /// The last value holds (a command).
+    Hold,
+    /// Interpolated in time (a counter, a sampled angle).
+    Interpolate,
+}
+
+/// An input column of a log and how its empty cells are filled.
+#[derive(Debug, Clone)]
+pub struct InputColumn {
+    pub name: String,
+    pub fill: Fill,
+    /// An angle in radians, interpolated along the shorter arc.
+    pub angle: bool,
+}
+
+/// A measurement read from a log: its columns, filled together (a row has a
+/// pose when it has all three cells), and which of them is an angle.
+#[derive(Debug, Clone)]
+pub struct Measurement {
+    pub columns: Vec<String>,
+    pub angle: Vec<bool>,
+}
+
+/// What filling did, counted for the warning.
+#[derive(Debug, Default)]
+struct Filled {
+    input_rows: usize,
+    input_columns: Vec<String>,
+    ends: usize,
+    measured_rows: usize,
+}
+
+/// Fill the empty cells of `log`'s `inputs` and short gaps of its
+/// `measured` columns (see the module). Returns what the user should be
+/// told, None when nothing was empty. An input column without any value is
+/// an error naming it.
+pub fn fill(
+    log: &mut Log,
+    inputs: &[InputColumn],
+    measured: &[Measurement],
+) -> Result<Option<String>, LogError> {
+    let t = log.col("t")?.to_vec();
+    let mut done = Filled::default();
+    let mut empty_rows = vec![false; log.len];
+    for input in inputs {
+        let Some(c) = log.columns.get_mut(&input.name) else {
+            continue;
+        };
+        let known: Vec<usize> = (0..c.len()).filter(|&k| !c[k].is_nan()).collect();
+        if known.is_empty() {
+            return Err(log.err(
+                None,
+                Some(&input.name),
+                "no row has a value in this input column",
+            ));
+        }
+        if known.len() == c.len() {
+            continue;
+        }
+        for k in (0..c.len()).filter(|&k| c[k].is_nan()) {
+            empty_rows[k] = true;
+        }
+        done.input_columns.push(input.name.clone());
+        done.ends += fill_input(c, &t, &known, input);
+    }
+    done.input_rows = empty_rows.iter().filter(|&&e| e).count();
+    for m in measured {
+        done.measured_rows += fill_measurement(log, &t, m);
+    }
+    Ok((done.input_rows + done.measured_rows > 0).then(|| said(log, &done)))
+}
+
+/// Fill one input column from its `known` rows; returns how many rows lie
+/// before its first value or (interpolated) after its last one.
+fn fill_input(c: &mut [f64], t: &[f64], known: &[usize], input: &InputColumn) -> usize {
+    let (first, last) = (known[0], *known.last().unwrap());
+    let mut ends = first;
+    for k in 0..first {
+        c[k] = c[first];
+    }
+    match input.fill {
+        Fill::Hold => {
+            for k in first + 1..c.len() {
+                if c[k].is_nan() {
+                    c[k] = c[k - 1];
+                }
+            }
+        }
+        Fill::Interpolate => {
+            for w in known.windows(2) {
+                interpolate(c, t, w[0], w[1], input.angle);
+            }
+            ends += c.len() - 1 - last;
+            for k in last + 1..c.len() {
+                c[k] = c[last];
+            }
+        }
+    }
+    ends
+}
+
+/// Cells strictly between rows `a` and `b` of `c`, linear in time (along
+/// the shorter arc for an angle).
+fn interpolate(c: &mut [f64], t: &[f64], a: usize, b: usize, angle: bool) {
+    let mut d = c[b] - c[a];
+    if angle {
+        d -= 2.0 * PI * (d / (2.0 * PI)).round();
+    }
+    for k in a + 1..b {
+        c[k] = c[a] + d * (t[k] - t[a]) / (t[b] - t[a]);
+    }
+}
+
+/// Fill the short gaps of one measurement (see the module); returns the rows
+/// filled.
+fn fill_measurement(log: &mut Log, t: &[f64], m: &Measurement) -> usize {
+    if !m.columns.iter().all(|c| log.has(c)) {
+        return 0;
+    }
+    let has = |log: &Log, k: usize| m.columns.iter().all(|c| !log.columns[c][k].is_nan());
+    let known: Vec<usize> = (0..log.len).filter(|&k| has(log, k)).collect();
+    let mut intervals: Vec<f64> = known.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
+    if intervals.is_empty() {
+        return 0;
+    }
+    let mid = intervals.len() / 2;
+    let typical = *intervals.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let mut rows = 0;
+    for w in known.windows(2).filter(|w| w[1] > w[0] + 1) {
+        if t[w[1]] - t[w[0]] > 2.0 * typical {
+            continue;
+        }
+        rows += w[1] - w[0] - 1;
+        for (c, &angle) in m.columns.iter().zip(&m.angle) {
+            interpolate(log.columns.get_mut(c).unwrap(), t, w[0], w[1], angle);
+        }
+    }
+    rows
+}
+
+fn said(log: &Log, f: &Filled) -> String {
+    let mut parts = Vec::new();
+    if f.input_rows > 0 {
+        let columns: Vec<String> = f.input_columns.iter().map(|c| format!("`{c}`")).collect();
+        parts.push(format!(
+            "{} row(s) leave input column(s) {} empty, read as a log merged from sources at their own times: a command holds its last value, a counter or sampled angle is interpolated in time",
+            f.input_rows,
+            columns.join(", ")
+        ));
+    }
+    if f.ends > 0 {
+        parts.push(format!(
+            "{} cell(s) before an input's first value or after a counter's last one hold that value",
+            f.ends
+        ));
+    }
+    if f.measured_rows > 0 {
+        parts.push(format!(
+            "{} row(s) without a measurement between samples no further apart than twice their typical interval are interpolated",
+            f.measured_rows
+        ));
+    }
+    format!("{}: {}", log.path.display(), parts.join("; "))
+}
