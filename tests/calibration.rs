@@ -205,6 +205,14 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
         ("", ":1".into(), "the file is empty"),
         (
             Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,1,,,\n0.05,,,0.1,0,0\n0.1,2,2,0.2,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":4: column `t`".into(),
+            "each with cells the other leaves empty (two sources logged at the same time): merge them into one row",
+        ),
+        (
+            Box::leak(
                 format!("{ok_header}\n0,0,0,0,0,0\n10,1,1,0,0,0\n20,2,2,0,0,0\n30,3,3,0,0,0\n")
                     .into_boxed_str(),
             ),

@@ -292,9 +292,15 @@ impl Log {
         let t = log.col("t")?;
         for k in 1..t.len() {
             if t[k] <= t[k - 1] {
-                let same_row = t[k] == t[k - 1] && log.columns.values().all(|c| c[k] == c[k - 1]);
+                // an empty cell is NaN: two empty cells are the same cell
+                let same = |c: &Vec<f64>| c[k] == c[k - 1] || (c[k].is_nan() && c[k - 1].is_nan());
+                let fits = |c: &Vec<f64>| same(c) || c[k].is_nan() || c[k - 1].is_nan();
+                let same_row = t[k] == t[k - 1] && log.columns.values().all(same);
+                let complementary = t[k] == t[k - 1] && log.columns.values().all(fits);
                 let why = if same_row {
                     format!("time must increase strictly: line {} repeats line {} exactly (a sample logged twice?): remove one", k + 2, k + 1)
+                } else if complementary {
+                    format!("time must increase strictly: lines {} and {} are both at t = {}, each with cells the other leaves empty (two sources logged at the same time): merge them into one row", k + 1, k + 2, t[k])
                 } else if t[k] == t[k - 1] {
                     format!("time must increase strictly: lines {} and {} are both at t = {} with different values (which one holds?)", k + 1, k + 2, t[k])
                 } else {
