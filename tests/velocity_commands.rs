@@ -208,6 +208,47 @@ fn process_noise_per_second_gives_the_same_filter_at_twice_the_rate() {
     );
 }
 
+/// A model that stops being numbers in the second piece of a log split at a
+/// gap is refused at the line of the file where it happens, not at the
+/// line counted from the piece's start (line 5 of the piece was line 11).
+#[test]
+fn a_refusal_in_a_later_piece_names_the_files_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(commanded_spec(tmp.path(), "")).unwrap();
+    let spec = tmp.path().join("divides.toml");
+    std::fs::write(
+        &spec,
+        text.replace(
+            "vx = \"k_v*v_cmd + dv\"",
+            "vx = \"k_v*v_cmd/(w_cmd - 0.5) + dv\"",
+        ),
+    )
+    .unwrap();
+    // rows 0-5 at 10 Hz, a 10 s gap, rows 6-11; row 8 (line 10) commands the
+    // turn rate the model divides by zero at
+    let mut log = String::from("t,v,omega\n");
+    for k in 0..12 {
+        let t = 0.1 * k as f64 + if k >= 6 { 10.0 } else { 0.0 };
+        let w = if k == 8 { 0.5 } else { 0.1 };
+        log += &format!("{t:.1},0.2,{w}\n");
+    }
+    let path = tmp.path().join("log.csv");
+    std::fs::write(&path, log).unwrap();
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--data",
+        path.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("log.csv (10.60-11.10 s):11: the model's predicted pose is not finite"),
+        "{err}"
+    );
+}
+
 /// Commands hold from their row until the next: a command of 1 m/s logged at
 /// t = 0 and replaced at t = 1 s moves the robot 1 m (the mean of the two
 /// rows would say 0.5 m). A gap of 1 s is bridged; with --max-gap 0.5 the log

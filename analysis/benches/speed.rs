@@ -87,6 +87,7 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
         landmarks: Vec::new(),
         rate_inputs: Vec::new(),
         swing: None,
+        first_line: 2,
     };
     let track = kinegen_analysis::deadreckon::run(&truth, &truth.p, &run, false);
     run.gt = Some(

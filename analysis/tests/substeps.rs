@@ -49,6 +49,7 @@ fn run(steps: usize, swing: bool) -> Run {
         landmarks: Vec::new(),
         rate_inputs: vec![true, false],
         swing: swing.then(|| Inputs::from_flat(steps, 2, s)),
+        first_line: 2,
     }
 }
 

@@ -396,6 +396,7 @@ mod tests {
             landmarks: Vec::new(),
             rate_inputs: vec![true, true],
             swing: None,
+            first_line: 2,
         }
     }
 

@@ -299,6 +299,7 @@ pub fn ekf(r: &Runner, runs: &[Run], sigma_omega: f64, mu: f64) -> Result<SeedFi
                 landmarks: Vec::new(),
                 rate_inputs: Vec::new(),
                 swing: run.swing.as_ref().map(|s| std::iter::once(&s[k]).collect()),
+                first_line: run.first_line + k,
             };
             let (w, g) = predicted(r, &p, &one, &free);
             let hgrad = DVector::from_vec(g[0].clone());

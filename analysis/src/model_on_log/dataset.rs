@@ -259,6 +259,7 @@ impl Run {
             landmarks: Vec::new(),
             rate_inputs,
             swing,
+            first_line: 2,
         })
     }
 

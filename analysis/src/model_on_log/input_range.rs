@@ -156,6 +156,7 @@ mod tests {
             landmarks: vec![],
             rate_inputs: vec![false],
             swing: None,
+            first_line: 2,
         }
     }
 

@@ -239,7 +239,7 @@ fn check_finite(r: &Runner, runs: &[Run], sets: &[String]) -> Result<(), LoadErr
             };
             return Err(LoadError::NonFinite {
                 log: run.path.clone(),
-                line: k + 2,
+                line: run.first_line + k,
                 what,
                 suspects,
             });

@@ -29,6 +29,9 @@ pub struct Run {
     /// to sub-step where a fast-changing input bends the twist within a step
     /// (see `deadreckon::substeps`). None: the model has no absolute input.
     pub swing: Option<Inputs>,
+    /// The log file's line of row 0 (2, the row after the header; a piece's
+    /// where it starts in its log): messages name rows by their line.
+    pub first_line: usize,
 }
 
 /// One range-bearing observation, with the mapped landmark it refers to.
@@ -154,6 +157,7 @@ impl Run {
                 .collect(),
             rate_inputs: self.rate_inputs.clone(),
             swing: self.swing.as_ref().map(|s| s.slice(a, b - 1)),
+            first_line: self.first_line + a,
         }
     }
 
@@ -200,6 +204,8 @@ impl Run {
                 .swing
                 .as_ref()
                 .map(|_| Inputs::from_flat(steps, width, swing)),
+            // internal (the discretisation check): its rows are every other line
+            first_line: self.first_line,
         }
     }
 
@@ -263,7 +269,7 @@ impl Run {
             "{}: {} row(s) without a measurement (empty or nan in the pose or gyro columns: {}): the rows between are used as {} run(s), each started from its own measured pose (stretches under 3 rows dropped); nothing is compared where nothing was measured",
             self.path,
             missing.len(),
-            line_ranges(&missing),
+            line_ranges(self.first_line, &missing),
             pieces.len()
         );
         (pieces, Some(warning))
@@ -282,7 +288,7 @@ impl Run {
                 "{}: {} row(s) without ground truth (empty or nan in the pose columns: {}): the filter runs through them, and only rows with ground truth are scored",
                 self.path,
                 missing.len(),
-                line_ranges(&missing)
+                line_ranges(self.first_line, &missing)
             ));
         }
         let (runs, warning) = self.split_at_time_gaps(max_gap);
@@ -433,7 +439,7 @@ pub fn observations_until(obs: &[LandmarkObs], t_until: f64) -> Option<Vec<&Land
 
 /// Rows (0-based, after the header) as the file's line ranges, the first
 /// five: `lines 2000-2099, line 2300, ...`.
-fn line_ranges(rows: &[usize]) -> String {
+fn line_ranges(first_line: usize, rows: &[usize]) -> String {
     let mut stretches: Vec<(usize, usize)> = Vec::new();
     for &k in rows {
         match stretches.last_mut() {
@@ -446,9 +452,9 @@ fn line_ranges(rows: &[usize]) -> String {
         .take(5)
         .map(|&(a, b)| {
             if a == b {
-                format!("line {}", a + 2)
+                format!("line {}", first_line + a)
             } else {
-                format!("lines {}-{}", a + 2, b + 2)
+                format!("lines {}-{}", first_line + a, first_line + b)
             }
         })
         .collect();

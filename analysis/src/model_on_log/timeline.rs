@@ -232,6 +232,7 @@ mod tests {
             landmarks: Vec::new(),
             rate_inputs: vec![false],
             swing: None,
+            first_line: 2,
         }
     }
 
