@@ -2067,16 +2067,11 @@ fn spread_of(v: &[f64]) -> f64 {
     (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
 }
 
-/// Motion capture that loses the robot leaves empty (or `nan`) pose cells:
-/// those rows are cut out, each stretch between them is a run of its own
-/// (said in a warning that names the lines), and the calibration is the one
-/// the stretches give as separate logs. An encoder cell left empty is still
-/// an error naming its line and column.
-#[test]
-fn rows_without_motion_capture_are_cut_out_and_said() {
-    let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
+/// A diff drive with a right wheel of 0.0505 m (nominal 0.042) driving at
+/// random (seed 11), simulated into `dir/log.csv`.
+fn wide_right_wheel_log(dir: &std::path::Path) -> std::path::PathBuf {
+    simulate(
+        dir,
         "log.csv",
         &[
             "--spec",
@@ -2088,7 +2083,18 @@ fn rows_without_motion_capture_are_cut_out_and_said() {
             "--seed",
             "11",
         ],
-    );
+    )
+}
+
+/// Motion capture that loses the robot leaves empty (or `nan`) pose cells:
+/// those rows are cut out, each stretch between them is a run of its own
+/// (said in a warning that names the lines), and the calibration is the one
+/// the stretches give as separate logs. An encoder cell left empty is
+/// interpolated, and said.
+#[test]
+fn rows_without_motion_capture_are_cut_out_and_said() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = wide_right_wheel_log(tmp.path());
     let text = std::fs::read_to_string(&log).unwrap();
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
     let header: Vec<String> = lines[0].split(',').map(String::from).collect();
@@ -2164,20 +2170,7 @@ fn rows_without_motion_capture_are_cut_out_and_said() {
 #[test]
 fn a_log_merged_from_sources_at_their_own_times_is_read_whole() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "log.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "r_r=0.0505",
-            "--trajectory",
-            "random",
-            "--seed",
-            "11",
-        ],
-    );
+    let log = wide_right_wheel_log(tmp.path());
     let text = std::fs::read_to_string(&log).unwrap();
     let mut lines = text.lines();
     let header = lines.next().unwrap();
