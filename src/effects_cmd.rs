@@ -84,7 +84,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
                     return Err(format!("{}: the model has no `landmark` observation to simulate range-bearing data with", a.spec.display()));
                 }
                 let map = kinegen_analysis::landmarks::read_map(m).map_err(|e| e.to_string())?;
-                map.ids.iter().map(|id| (id.clone(), map.xy[id])).collect()
+                map.ids.iter().map(|id| (id.clone(), map.position(id))).collect()
             }
             (None, None) => Vec::new(),
             _ => return Err("--landmarks MAP.csv and --observations OBS.csv go together (the map to observe, the file to write)".into()),

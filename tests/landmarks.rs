@@ -810,3 +810,22 @@ fn landmarks_never_sighted_are_named_in_one_warning() {
     assert_eq!(err.matches("never observed").count(), 1, "{err}");
     assert!(err.contains(expected), "{err}");
 }
+
+/// Numeric landmark ids match however a tool spelt them: a table written by
+/// pandas turns the integer ids 1 and 2 into `1.0` and `2.0`, a hand-made one
+/// may pad them (`02`). All are the map's landmarks 1 and 2.
+#[test]
+fn numeric_landmark_ids_match_in_any_spelling() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (log, _, _) = landmark_log(tmp.path());
+    let map = tmp.path().join("numbered.csv");
+    std::fs::write(&map, "id,x,y\n1,3,2\n2,-1,4\n3,5,-2\n").unwrap();
+    let text = "t,id,range,bearing\n0.5,1.0,3.0,0.1\n0.7,02,2.0,0.2\n0.8,2.5,2.0,0.2\n";
+    let o = compare_sightings(tmp.path(), &log, text, &map);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        said.contains("2 observations") && said.contains("1 sighting(s) of `2.5` left out"),
+        "{said}"
+    );
+}

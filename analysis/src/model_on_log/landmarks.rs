@@ -17,8 +17,36 @@ pub const DEFAULT_SIGMA: [f64; 2] = [0.05, 0.02];
 /// Landmark positions by id.
 #[derive(Debug, Clone, Default)]
 pub struct Map {
+    /// The ids as the map spells them, in its order.
     pub ids: Vec<String>,
-    pub xy: HashMap<String, [f64; 2]>,
+    /// Positions by [`key`].
+    xy: HashMap<String, [f64; 2]>,
+    /// The map's spelling by [`key`].
+    spelled: HashMap<String, usize>,
+}
+
+/// The key an id is looked up by: an integral number in any spelling (`7`,
+/// `07`, `7.0`: a table written by another tool turns integer ids into
+/// floats) is that integer; any other id is its text.
+fn key(id: &str) -> String {
+    match id.parse::<f64>() {
+        Ok(v) if v.fract() == 0.0 && v.abs() < 1e15 => format!("{}", v as i64),
+        _ => id.to_string(),
+    }
+}
+
+impl Map {
+    /// Landmark `id`'s spelling in the map and its position, however a
+    /// number is spelt.
+    pub fn find(&self, id: &str) -> Option<(&str, [f64; 2])> {
+        let k = key(id);
+        Some((self.ids[*self.spelled.get(&k)?].as_str(), self.xy[&k]))
+    }
+
+    /// The position of landmark `id`, one of [`Map::ids`].
+    pub fn position(&self, id: &str) -> [f64; 2] {
+        self.xy[&key(id)]
+    }
 }
 
 /// Read `MAP.csv` (`id,x,y`); ids are text and must be unique.
@@ -34,13 +62,14 @@ pub fn read_map(path: &Path) -> Result<Map, LogError> {
             return Err(h.err(Some(line), Some("id"), "empty landmark id"));
         }
         let xy = [h.number(line, &rec, x_i)?, h.number(line, &rec, y_i)?];
-        if map.xy.insert(id.clone(), xy).is_some() {
+        if map.xy.insert(key(&id), xy).is_some() {
             return Err(h.err(
                 Some(line),
                 Some("id"),
                 format!("landmark `{id}` is listed twice"),
             ));
         }
+        map.spelled.insert(key(&id), map.ids.len());
         map.ids.push(id);
     }
     if map.ids.is_empty() {
@@ -163,7 +192,7 @@ pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Sigh
         }
         last_t = t;
         let id = h.text(line, &rec, id_i)?.to_string();
-        let Some(&[xl, yl]) = map.xy.get(&id) else {
+        let Some((id, [xl, yl])) = map.find(&id).map(|(s, p)| (s.to_string(), p)) else {
             unmapped.add(&id, || format!("line {line}"));
             continue;
         };
@@ -218,7 +247,7 @@ pub fn from_detections(
     let mut found: Vec<&crate::bag::Detection> = found.iter().collect();
     found.sort_by(|a, b| a.t.total_cmp(&b.t));
     for d in found {
-        let Some(&[xl, yl]) = map.xy.get(&d.id) else {
+        let Some((id, [xl, yl])) = map.find(&d.id).map(|(s, p)| (s.to_string(), p)) else {
             unmapped.add(&d.id, || {
                 format!("topic `{}` message {} (counting from 0)", d.topic, d.index)
             });
@@ -226,7 +255,7 @@ pub fn from_detections(
         };
         let o = LandmarkObs {
             t: d.t,
-            id: d.id.clone(),
+            id,
             xl,
             yl,
             range: d.range,
