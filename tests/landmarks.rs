@@ -273,6 +273,11 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
             "obs.csv:1: column `bearing`",
             "missing column",
         ),
+        (
+            "t,id,range,bearing\n99999,L1,2,0.1\n",
+            "obs.csv: no observation falls inside the log's time span",
+            "(the sightings span 99999.000-99999.000 s: is their time counted from the same origin as the log's?)",
+        ),
     ];
     for (text, place, msg) in cases {
         let o = compare_sightings(tmp.path(), &log, text, &map);

@@ -80,11 +80,13 @@ pub enum LoadError {
         topic: String,
         file: PathBuf,
     },
-    #[error("{source_name}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s")]
+    #[error("{source_name}: no observation falls inside the log's time span {t0:.3}-{t1:.3} s{}", .seen.map_or(String::new(), |(a, b)| format!(" (the sightings span {a:.3}-{b:.3} s: is their time counted from the same origin as the log's?)")))]
     NoObservationInSpan {
         source_name: String,
         t0: f64,
         t1: f64,
+        /// The sightings' own time span.
+        seen: Option<(f64, f64)>,
     },
     /// A track that stops being numbers: the log, its line, what happened,
     /// and the `--set` values as suspects.
@@ -327,6 +329,9 @@ impl Logs<'_> {
             let (t0, t1) = (run.t[0], *run.t.last().unwrap());
             let sightings = obs?;
             warnings.extend(left_out(&sightings, &source_name, map_path, (t0, t1)));
+            let seen = (sightings.obs.first())
+                .zip(sightings.obs.last())
+                .map(|(a, b)| (a.t, b.t));
             let inside: Vec<_> = (sightings.obs.into_iter())
                 .filter(|o| o.t >= t0 && o.t <= t1)
                 .collect();
@@ -335,6 +340,7 @@ impl Logs<'_> {
                     source_name,
                     t0,
                     t1,
+                    seen,
                 });
             }
             run.landmarks = inside;
