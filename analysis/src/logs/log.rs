@@ -313,6 +313,15 @@ impl Log {
     }
 }
 
+/// The typical value of `values`: their middle one (the upper of the two
+/// for an even count; no mean, so it is one of the values); None when empty.
+/// What a log's steps, a counter's increments or a sensor's sample interval
+/// usually are, whatever their outliers.
+pub fn typical(mut values: Vec<f64>) -> Option<f64> {
+    let mid = values.len() / 2;
+    (!values.is_empty()).then(|| *values.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
+
 /// Unwrap a wrapped angle series (contract: angles are logged in (-pi, pi]).
 pub fn unwrap(a: &[f64]) -> Vec<f64> {
     let mut out = Vec::with_capacity(a.len());

@@ -13,7 +13,7 @@
 //!
 //! Rows before an input's first value hold that first value, rows after a
 //! counter's last value its last one: a log's first and last rows, said.
-use crate::log::{Log, LogError};
+use crate::log::{typical, Log, LogError};
 use std::f64::consts::PI;
 
 /// How an input column's empty cells are filled.
@@ -60,11 +60,12 @@ pub fn fill(
     inputs: &[InputColumn],
     measured: &[Measurement],
 ) -> Result<Option<String>, LogError> {
-    let t = log.col("t")?.to_vec();
     let mut done = Filled::default();
     let mut empty_rows = vec![false; log.len];
     for input in inputs {
-        let Some(c) = log.columns.get_mut(&input.name) else {
+        // a complete column (the usual log) is left as it is, nothing allocated
+        let Some(c) = (log.columns.get(&input.name)).filter(|c| c.iter().any(|v| v.is_nan()))
+        else {
             continue;
         };
         let known: Vec<usize> = (0..c.len()).filter(|&k| !c[k].is_nan()).collect();
@@ -75,18 +76,18 @@ pub fn fill(
                 "no row has a value in this input column",
             ));
         }
-        if known.len() == c.len() {
-            continue;
-        }
         for k in (0..c.len()).filter(|&k| c[k].is_nan()) {
             empty_rows[k] = true;
         }
         done.input_columns.push(input.name.clone());
-        done.ends += fill_input(c, &t, &known, input);
+        // taken out while filled, so that time can be read beside it
+        let mut c = log.columns.remove(&input.name).unwrap();
+        done.ends += fill_input(&mut c, log.col("t")?, &known, input);
+        log.columns.insert(input.name.clone(), c);
     }
     done.input_rows = empty_rows.iter().filter(|&&e| e).count();
     for m in measured {
-        done.measured_rows += fill_measurement(log, &t, m);
+        done.measured_rows += fill_measurement(log, m)?;
     }
     Ok((done.input_rows + done.measured_rows > 0).then(|| said(log, &done)))
 }
@@ -134,29 +135,34 @@ fn interpolate(c: &mut [f64], t: &[f64], a: usize, b: usize, angle: bool) {
 
 /// Fill the short gaps of one measurement (see the module); returns the rows
 /// filled.
-fn fill_measurement(log: &mut Log, t: &[f64], m: &Measurement) -> usize {
-    if !m.columns.iter().all(|c| log.has(c)) {
-        return 0;
+fn fill_measurement(log: &mut Log, m: &Measurement) -> Result<usize, LogError> {
+    let columns: Option<Vec<&Vec<f64>>> = m.columns.iter().map(|c| log.columns.get(c)).collect();
+    let Some(columns) = columns else {
+        return Ok(0);
+    };
+    let has = |k: usize| columns.iter().all(|c| !c[k].is_nan());
+    // a measurement in every row (the usual log) is left as it is, nothing allocated
+    if (0..log.len).all(has) {
+        return Ok(0);
     }
-    let has = |log: &Log, k: usize| m.columns.iter().all(|c| !log.columns[c][k].is_nan());
-    let known: Vec<usize> = (0..log.len).filter(|&k| has(log, k)).collect();
-    let mut intervals: Vec<f64> = known.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
-    if intervals.is_empty() {
-        return 0;
-    }
-    let mid = intervals.len() / 2;
-    let typical = *intervals.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let mut rows = 0;
-    for w in known.windows(2).filter(|w| w[1] > w[0] + 1) {
-        if t[w[1]] - t[w[0]] > 2.0 * typical {
-            continue;
+    let known: Vec<usize> = (0..log.len).filter(|&k| has(k)).collect();
+    let t = log.col("t")?;
+    let Some(typical) = typical(known.windows(2).map(|w| t[w[1]] - t[w[0]]).collect()) else {
+        return Ok(0);
+    };
+    let short: Vec<[usize; 2]> = (known.windows(2))
+        .filter(|w| w[1] > w[0] + 1 && t[w[1]] - t[w[0]] <= 2.0 * typical)
+        .map(|w| [w[0], w[1]])
+        .collect();
+    for (name, &angle) in m.columns.iter().zip(&m.angle) {
+        // taken out while filled, so that time can be read beside it
+        let mut c = log.columns.remove(name).unwrap();
+        for &[a, b] in &short {
+            interpolate(&mut c, log.col("t")?, a, b, angle);
         }
-        rows += w[1] - w[0] - 1;
-        for (c, &angle) in m.columns.iter().zip(&m.angle) {
-            interpolate(log.columns.get_mut(c).unwrap(), t, w[0], w[1], angle);
-        }
+        log.columns.insert(name.clone(), c);
     }
-    rows
+    Ok(short.iter().map(|[a, b]| b - a - 1).sum())
 }
 
 fn said(log: &Log, f: &Filled) -> String {

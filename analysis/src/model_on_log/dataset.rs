@@ -2,7 +2,7 @@
 //! held values of absolute ones), step lengths, and the measurements.
 use crate::bag::{Detection, TopicMap};
 use crate::column::Column;
-use crate::log::{unwrap, Log, LogError};
+use crate::log::{typical, unwrap, Log, LogError};
 use crate::merged::{self, Fill, InputColumn, Measurement};
 use crate::model::Runner;
 use crate::rows::Inputs;
@@ -72,13 +72,8 @@ fn unwrap_counter(c: Vec<f64>, bits: Option<u32>) -> Vec<f64> {
 /// size while the counter's typical step is under 5% of it (20x smaller). Such
 /// a jump read as motion gave a yaw rate of 1e6 rad/s, and compare exited 0.
 fn undeclared_wrap(c: &[f64]) -> Option<(usize, f64, u32)> {
-    let mut steps: Vec<f64> = c.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-    if steps.is_empty() {
-        return None;
-    }
-    let jumps: Vec<f64> = steps.clone();
-    let mid = steps.len() / 2;
-    let typical = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let jumps: Vec<f64> = c.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let typical = typical(jumps.clone())?;
     for bits in [16u32, 32] {
         let m = 2f64.powi(bits as i32);
         if typical >= 0.05 * m {

@@ -7,7 +7,7 @@ use crate::bag::{Detection, TopicMap};
 use crate::evaluation::tracks;
 use crate::input_range;
 use crate::landmarks::{from_detections, read_map, read_observations, Map, Sightings};
-use crate::log::LogError;
+use crate::log::{typical, LogError};
 use crate::model::{parse_sets, ModelError, Runner};
 use crate::run::Run;
 use crate::track_rows::first_non_finite;
@@ -181,12 +181,9 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
 /// log at 100 Hz in milliseconds steps by 10), which the error says, with
 /// the unit that would make the steps a robot's.
 fn seconds_apart(run: &Run, max_gap: f64) -> Result<(), LogError> {
-    let mut dt = run.dt.to_vec();
-    let mid = dt.len() / 2;
-    let median = *dt.select_nth_unstable_by(mid, f64::total_cmp).1;
-    if median <= max_gap {
+    let Some(median) = typical(run.dt.to_vec()).filter(|m| *m > max_gap) else {
         return Ok(());
-    }
+    };
     let hint = [
         ("milliseconds", 1e3),
         ("microseconds", 1e6),
