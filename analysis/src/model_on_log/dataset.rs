@@ -161,7 +161,7 @@ impl Run {
         let angle_cols: Vec<&str> =
             r.ir.inputs
                 .iter()
-                .filter(|i| i.kind == InputKind::Absolute && i.unit == "rad")
+                .filter(|i| absolute_angle(i))
                 .map(|i| i.column.as_str())
                 .collect();
         let mut cols = Vec::new();
@@ -310,6 +310,12 @@ pub struct ReadLog {
     pub note: Option<String>,
 }
 
+/// Whether input `i` is an absolute angle (a steering encoder), logged
+/// wrapped to (-pi, pi].
+fn absolute_angle(i: &kinegen_model::decl::Input) -> bool {
+    i.kind == InputKind::Absolute && i.unit == "rad"
+}
+
 /// The model's input columns and how their empty cells are filled.
 fn input_columns(r: &Runner) -> Vec<InputColumn> {
     (r.ir.inputs.iter())
@@ -319,7 +325,7 @@ fn input_columns(r: &Runner) -> Vec<InputColumn> {
                 Between::Hold => Fill::Hold,
                 Between::Spread | Between::Linear => Fill::Interpolate,
             },
-            angle: i.kind == InputKind::Absolute && i.unit == "rad",
+            angle: absolute_angle(i),
         })
         .collect()
 }

@@ -19,10 +19,10 @@ pub const DEFAULT_SIGMA: [f64; 2] = [0.05, 0.02];
 pub struct Map {
     /// The ids as the map spells them, in its order.
     pub ids: Vec<String>,
-    /// Positions by [`key`].
-    xy: HashMap<String, [f64; 2]>,
-    /// The map's spelling by [`key`].
-    spelled: HashMap<String, usize>,
+    /// Positions, in the order of `ids`.
+    xy: Vec<[f64; 2]>,
+    /// Where in `ids` a landmark is, by [`key`].
+    index: HashMap<String, usize>,
 }
 
 /// The key an id is looked up by: an integral number in any spelling (`7`,
@@ -39,13 +39,13 @@ impl Map {
     /// Landmark `id`'s spelling in the map and its position, however a
     /// number is spelt.
     pub fn find(&self, id: &str) -> Option<(&str, [f64; 2])> {
-        let k = key(id);
-        Some((self.ids[*self.spelled.get(&k)?].as_str(), self.xy[&k]))
+        let &i = self.index.get(&key(id))?;
+        Some((self.ids[i].as_str(), self.xy[i]))
     }
 
     /// The position of landmark `id`, one of [`Map::ids`].
     pub fn position(&self, id: &str) -> [f64; 2] {
-        self.xy[&key(id)]
+        self.xy[self.index[&key(id)]]
     }
 }
 
@@ -62,14 +62,14 @@ pub fn read_map(path: &Path) -> Result<Map, LogError> {
             return Err(h.err(Some(line), Some("id"), "empty landmark id"));
         }
         let xy = [h.number(line, &rec, x_i)?, h.number(line, &rec, y_i)?];
-        if map.xy.insert(key(&id), xy).is_some() {
+        if map.index.insert(key(&id), map.ids.len()).is_some() {
             return Err(h.err(
                 Some(line),
                 Some("id"),
                 format!("landmark `{id}` is listed twice"),
             ));
         }
-        map.spelled.insert(key(&id), map.ids.len());
+        map.xy.push(xy);
         map.ids.push(id);
     }
     if map.ids.is_empty() {
