@@ -127,11 +127,12 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
         holdout: &mut holdout,
         found_holdout: &found_holdout,
     };
-    let (said, map) = logs.attach_landmarks(sources, &runner)?;
-    warnings.extend(said);
-    for run in runs.iter().chain(&holdout) {
+    // a log in another unit of time would have no sighting in its span either
+    for run in logs.runs.iter().chain(logs.holdout.iter()) {
         seconds_apart(run, sources.max_gap)?;
     }
+    let (said, map) = logs.attach_landmarks(sources, &runner)?;
+    warnings.extend(said);
     // a log with gaps becomes one run per piece between them
     let mut split = |set: Vec<Run>| -> Vec<Run> {
         set.into_iter()
