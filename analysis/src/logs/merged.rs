@@ -13,8 +13,7 @@
 //!
 //! Rows before an input's first value hold that first value, rows after a
 //! counter's last value its last one: a log's first and last rows, said.
-use crate::log::{typical, Log, LogError};
-use std::f64::consts::PI;
+use crate::log::{typical, wrap, Log, LogError};
 
 /// How an input column's empty cells are filled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,7 +60,8 @@ pub fn fill(
     measured: &[Measurement],
 ) -> Result<Option<String>, LogError> {
     let mut done = Filled::default();
-    let mut empty_rows = vec![false; log.len];
+    // grown to the log's length by the first column with an empty cell
+    let mut empty_rows: Vec<bool> = Vec::new();
     for input in inputs {
         // a complete column (the usual log) is left as it is, nothing allocated
         let Some(c) = (log.columns.get(&input.name)).filter(|c| c.iter().any(|v| v.is_nan()))
@@ -76,6 +76,7 @@ pub fn fill(
                 "no row has a value in this input column",
             ));
         }
+        empty_rows.resize(c.len(), false);
         for k in (0..c.len()).filter(|&k| c[k].is_nan()) {
             empty_rows[k] = true;
         }
@@ -124,10 +125,11 @@ fn fill_input(c: &mut [f64], t: &[f64], known: &[usize], input: &InputColumn) ->
 /// Cells strictly between rows `a` and `b` of `c`, linear in time (along
 /// the shorter arc for an angle).
 fn interpolate(c: &mut [f64], t: &[f64], a: usize, b: usize, angle: bool) {
-    let mut d = c[b] - c[a];
-    if angle {
-        d -= 2.0 * PI * (d / (2.0 * PI)).round();
-    }
+    let d = if angle {
+        wrap(c[b] - c[a])
+    } else {
+        c[b] - c[a]
+    };
     for k in a + 1..b {
         c[k] = c[a] + d * (t[k] - t[a]) / (t[b] - t[a]);
     }
