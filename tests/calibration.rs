@@ -285,7 +285,80 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
             "short.csv".into(),
             "at least 3",
         ),
+        // a log without its header
+        (
+            "0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n",
+            ":1".into(),
+            "the first line is numbers (0,0,0,0,0,0), not a header",
+        ),
+        // comment lines before the header count in the lines errors name
+        (
+            Box::leak(
+                format!("# robot 3\n# firmware 2.1\n{ok_header}\n0,0,0,0,0,0\n0.05,1,x1,0,0,0\n0.1,2,2,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":5: column `enc_l`".into(),
+            "not a number",
+        ),
+        (
+            Box::leak(
+                format!("# robot 3\n{ok_header}\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.05,2,2,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":5: column `t`".into(),
+            "increase strictly",
+        ),
+        // a comment among the data rows is no row
+        (
+            Box::leak(
+                format!("{ok_header}\n0,0,0,0,0,0\n# paused\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n")
+                    .into_boxed_str(),
+            ),
+            ":3".into(),
+            "1 cell(s) where the header has 6 (a `#` comment",
+        ),
+        ("# robot 3\n", ":2".into(), "the file ends after 1 comment line(s)"),
     ]
+}
+
+/// Loggers describe a file in `#` lines before its header, and numpy's
+/// `savetxt` writes the header itself as one (`# t,enc_r,...`): both read as
+/// the plain log does.
+#[test]
+fn comment_lines_before_the_header_are_read_past() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = simulate(
+        tmp.path(),
+        "log.csv",
+        &["--spec", "spec/diff_drive.toml", "--seed", "4"],
+    );
+    let text = std::fs::read_to_string(&log).unwrap();
+    let (header, rows) = text.split_once('\n').unwrap();
+    let variants = [
+        (
+            "described.csv",
+            format!("# robot 3, firmware 2.1\n#\n{text}"),
+        ),
+        ("savetxt.csv", format!("# {header}\n{rows}")),
+        ("bom.csv", format!("\u{feff}# robot 3\n{text}")),
+    ];
+    let rmse = |path: &std::path::Path| {
+        kinegen_json(&[
+            "compare",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            path.to_str().unwrap(),
+        ])["errors"]["rmse"]
+            .as_f64()
+            .unwrap()
+    };
+    let plain = rmse(&log);
+    for (name, content) in variants {
+        let path = tmp.path().join(name);
+        std::fs::write(&path, content).unwrap();
+        assert_eq!(rmse(&path), plain, "{name}");
+    }
 }
 
 /// Real logs have holes: a connection that dropped for seconds. A gap cuts

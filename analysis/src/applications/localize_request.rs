@@ -142,7 +142,7 @@ fn unseen_landmarks(sources: &Sources, prep: &Loaded) -> Option<String> {
     };
     let unseen: Vec<String> = (map.ids.iter().enumerate())
         .filter(|(_, id)| !sighted(id))
-        .map(|(i, id)| format!("`{id}` (line {})", i + 2))
+        .map(|(i, id)| format!("`{id}` (line {})", map.first_line + i))
         .collect();
     (!unseen.is_empty()).then(|| {
         format!(

@@ -115,6 +115,8 @@ impl SimLog {
             path: std::path::PathBuf::from(name),
             columns,
             len: self.rows.len(),
+            // the lines of the CSV this log is written as
+            first_line: 2,
         };
         crate::run::Run::from_log(&log, r)
     }

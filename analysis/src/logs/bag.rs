@@ -850,6 +850,8 @@ fn align(
             path: file.to_path_buf(),
             len: rows.len(),
             columns: out,
+            // as its CSV export would number them
+            first_line: 2,
         },
         t0,
     ))

@@ -40,67 +40,182 @@ fn location(row: &Option<usize>, column: &Option<String>) -> String {
 
 /// The header of a CSV file being read, and the rules every CSV input follows
 /// (logs, landmark maps, landmark observations): trimmed cells, 1-based line
-/// numbers (the header is line 1), finite numbers, errors naming file, line and
-/// column.
+/// numbers (the header is line 1 unless comment lines come first), finite
+/// numbers, errors naming file, line and column.
 pub struct CsvHeader {
     pub path: PathBuf,
     pub names: Vec<String>,
+    /// The file's line of the first data row (2 for a file that starts with
+    /// its header).
+    pub first_data_line: usize,
+}
+
+/// A CSV reader positioned at a file's first data row.
+pub type CsvReader = csv::Reader<Box<dyn std::io::Read>>;
+
+/// The lines before a CSV file's data: `#` comment lines, which loggers
+/// write to describe a file (`# robot 3, firmware 2.1`), and the first line
+/// after them.
+struct Preamble {
+    comments: Vec<String>,
+    first: String,
+}
+
+impl Preamble {
+    /// Read lines up to and including the first that is not a comment.
+    fn read(rdr: &mut impl std::io::BufRead) -> std::io::Result<Preamble> {
+        let mut comments = Vec::new();
+        loop {
+            let mut line = String::new();
+            if rdr.read_line(&mut line)? == 0 || !is_comment(&line) {
+                return Ok(Preamble {
+                    comments,
+                    first: line,
+                });
+            }
+            comments.push(line);
+        }
+    }
+}
+
+fn is_comment(line: &str) -> bool {
+    line.trim_start_matches('\u{feff}')
+        .trim_start()
+        .starts_with('#')
+}
+
+/// The trimmed cells of one CSV line.
+fn cells(line: &str) -> Vec<String> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .trim(csv::Trim::All)
+        .from_reader(line.trim_start_matches('\u{feff}').as_bytes());
+    rdr.records()
+        .next()
+        .and_then(Result::ok)
+        .map(|r| r.iter().map(str::to_string).collect())
+        .unwrap_or_default()
+}
+
+/// Whether a line's cells are all numbers (a data row, not a header).
+fn is_data(cells: &[String]) -> bool {
+    !cells.is_empty() && cells.iter().all(|c| c.parse::<f64>().is_ok())
+}
+
+/// What is wrong with a row the csv crate could not read, in the file's
+/// terms (its own message counts lines from where the reader started, after
+/// any comment lines, and would contradict the line the error names).
+fn malformed(x: &csv::Error) -> String {
+    match x.kind() {
+        csv::ErrorKind::UnequalLengths {
+            expected_len, len, ..
+        } => format!(
+            "malformed row: {len} cell(s) where the header has {expected_len} (a `#` comment or a line of another format among the data rows?)"
+        ),
+        csv::ErrorKind::Utf8 { .. } => "malformed row: not UTF-8 text".to_string(),
+        _ => format!("malformed row: {x}"),
+    }
 }
 
 /// Open a CSV file (`what` names it in the error) and read its header.
-pub fn read_csv(
-    path: &Path,
-    what: &str,
-) -> Result<(CsvHeader, csv::Reader<std::fs::File>), LogError> {
+///
+/// Comment lines (`#`) before the header are skipped. A header written as a
+/// comment, as numpy's `savetxt(..., header=...)` does (`# t,v,omega`), is
+/// the header when data follows it directly. The csv crate's own comment
+/// option is not used: it would also skip `#` lines among the data rows
+/// silently and make the rows' line numbers wrong in every later error.
+pub fn read_csv(path: &Path, what: &str) -> Result<(CsvHeader, CsvReader), LogError> {
     let e = |row: Option<usize>, m: String| LogError::new(path, row, None, m);
-    let mut rdr = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .from_path(path)
-        .map_err(|x| e(None, format!("cannot read {what}: {x}")))?;
-    let names: Vec<String> = rdr
-        .headers()
-        .map_err(|x| e(Some(1), format!("bad header: {x}")))?
-        .iter()
-        .map(str::to_string)
-        .collect();
-    if names.iter().all(String::is_empty) {
-        return Err(e(
-            Some(1),
-            format!(
-                "the file is empty: a {what} file starts with a header line naming its columns"
-            ),
-        ));
-    }
-    if names.len() == 1 {
-        if let Some(sep) = [';', '\t', '|'].into_iter().find(|c| names[0].contains(*c)) {
-            return Err(e(Some(1), format!("the header is one column `{}`: {what} files are comma-separated, this one looks {sep:?}-separated", names[0])));
-        }
-    }
-    // a repeated name would make every reader pick one of them silently
-    for (i, n) in names.iter().enumerate() {
-        if let Some(first) = names[..i].iter().position(|x| x == n) {
-            return Err(LogError::new(
-                path,
-                Some(1),
-                Some(n),
-                format!(
-                    "column `{n}` appears twice in the header (columns {} and {})",
-                    first + 1,
-                    i + 1
-                ),
-            ));
-        }
-    }
-    Ok((
-        CsvHeader {
-            path: path.to_path_buf(),
-            names,
-        },
-        rdr,
-    ))
+    let cannot = |x: std::io::Error| e(None, format!("cannot read {what}: {x}"));
+    let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(cannot)?);
+    let pre = Preamble::read(&mut file).map_err(cannot)?;
+    let header_line = pre.comments.len() + 1;
+    let first = cells(&pre.first);
+    let from_comment = pre
+        .comments
+        .last()
+        .map(|c| {
+            cells(
+                c.trim_start_matches('\u{feff}')
+                    .trim_start()
+                    .trim_start_matches('#'),
+            )
+        })
+        .filter(|h| is_data(&first) && h.len() == first.len() && !is_data(h));
+    let builder = |has_headers: bool| {
+        use std::io::Read;
+        let rest: Box<dyn Read> =
+            Box::new(std::io::Cursor::new(pre.first.clone().into_bytes()).chain(file));
+        csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .has_headers(has_headers)
+            .from_reader(rest)
+    };
+    let (names, rdr, first_data_line) = if let Some(names) = from_comment {
+        (names, builder(false), header_line)
+    } else {
+        let mut rdr = builder(true);
+        let names: Vec<String> = rdr
+            .headers()
+            .map_err(|x| e(Some(header_line), format!("bad header: {x}")))?
+            .iter()
+            .map(str::to_string)
+            .collect();
+        (names, rdr, header_line + 1)
+    };
+    let header = CsvHeader {
+        path: path.to_path_buf(),
+        names,
+        first_data_line,
+    };
+    header.check(what, header_line)?;
+    Ok((header, rdr))
 }
 
 impl CsvHeader {
+    /// What makes a header unusable, said at its line: none at all, one
+    /// column that is a whole line in another separator, numbers (a file
+    /// without a header), a name twice.
+    fn check(&self, what: &str, line: usize) -> Result<(), LogError> {
+        let e = |m: String| self.err(Some(line), None, m);
+        let names = &self.names;
+        if names.iter().all(String::is_empty) {
+            let what_is = match line - 1 {
+                0 => "the file is empty".to_string(),
+                n => format!("the file ends after {n} comment line(s)"),
+            };
+            return Err(e(format!(
+                "{what_is}: a {what} file starts with a header line naming its columns"
+            )));
+        }
+        if names.len() == 1 {
+            if let Some(sep) = [';', '\t', '|'].into_iter().find(|c| names[0].contains(*c)) {
+                return Err(e(format!("the header is one column `{}`: {what} files are comma-separated, this one looks {sep:?}-separated", names[0])));
+            }
+        }
+        if is_data(names) {
+            return Err(e(format!(
+                "the first line is numbers ({}), not a header: a {what} file starts with a header line naming its columns",
+                names.join(",")
+            )));
+        }
+        // a repeated name would make every reader pick one of them silently
+        for (i, n) in names.iter().enumerate() {
+            if let Some(first) = names[..i].iter().position(|x| x == n) {
+                return Err(self.err(
+                    Some(line),
+                    Some(n),
+                    format!(
+                        "column `{n}` appears twice in the header (columns {} and {})",
+                        first + 1,
+                        i + 1
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     pub fn err(
         &self,
         row: Option<usize>,
@@ -139,9 +254,9 @@ impl CsvHeader {
         n: usize,
         rec: csv::Result<csv::StringRecord>,
     ) -> Result<(usize, csv::StringRecord), LogError> {
-        let line = n + 2;
+        let line = self.first_data_line + n;
         rec.map(|r| (line, r))
-            .map_err(|x| self.err(Some(line), None, format!("malformed row: {x}")))
+            .map_err(|x| self.err(Some(line), None, malformed(&x)))
     }
 
     /// Cell `i` of a record as text.
@@ -226,6 +341,8 @@ pub struct Log {
     pub path: PathBuf,
     pub columns: HashMap<String, Vec<f64>>,
     pub len: usize,
+    /// The file's line of row 0 (2 below a header on line 1).
+    pub first_line: usize,
 }
 
 impl Log {
@@ -236,6 +353,11 @@ impl Log {
         message: impl Into<String>,
     ) -> LogError {
         LogError::new(&self.path, row, column, message)
+    }
+
+    /// The file's line of row `k`.
+    pub fn line(&self, k: usize) -> usize {
+        self.first_line + k
     }
 
     pub fn has(&self, c: &str) -> bool {
@@ -288,6 +410,7 @@ impl Log {
             path: path.to_path_buf(),
             columns,
             len,
+            first_line: header.first_data_line,
         };
         let t = log.col("t")?;
         for k in 1..t.len() {
@@ -298,15 +421,15 @@ impl Log {
                 let same_row = t[k] == t[k - 1] && log.columns.values().all(same);
                 let complementary = t[k] == t[k - 1] && log.columns.values().all(fits);
                 let why = if same_row {
-                    format!("time must increase strictly: line {} repeats line {} exactly (a sample logged twice?): remove one", k + 2, k + 1)
+                    format!("time must increase strictly: line {} repeats line {} exactly (a sample logged twice?): remove one", log.line(k), log.line(k - 1))
                 } else if complementary {
-                    format!("time must increase strictly: lines {} and {} are both at t = {}, each with cells the other leaves empty (two sources logged at the same time): merge them into one row", k + 1, k + 2, t[k])
+                    format!("time must increase strictly: lines {} and {} are both at t = {}, each with cells the other leaves empty (two sources logged at the same time): merge them into one row", log.line(k - 1), log.line(k), t[k])
                 } else if t[k] == t[k - 1] {
-                    format!("time must increase strictly: lines {} and {} are both at t = {} with different values (which one holds?)", k + 1, k + 2, t[k])
+                    format!("time must increase strictly: lines {} and {} are both at t = {} with different values (which one holds?)", log.line(k - 1), log.line(k), t[k])
                 } else {
                     format!("time must increase strictly: {} follows {}", t[k], t[k - 1])
                 };
-                return Err(log.err(Some(k + 2), Some("t"), why));
+                return Err(log.err(Some(log.line(k)), Some("t"), why));
             }
         }
         Ok(log)

@@ -132,7 +132,7 @@ impl Run {
         if log.len < 3 {
             // located at the log's last line, where more rows were expected
             return Err(log.err(
-                Some(log.len + 1),
+                Some(log.line(log.len) - 1),
                 None,
                 format!(
                     "the log ends after {} data row(s); the model needs at least 3",
@@ -147,7 +147,7 @@ impl Run {
         // the wrong unit, or rows are duplicated with rounding noise
         if let Some(k) = dt.iter().position(|&d| d < MIN_STEP_S) {
             return Err(log.err(
-                Some(k + 3),
+                Some(log.line(k + 1)),
                 Some("t"),
                 format!(
                     "time step of {:.3e} s (under {MIN_STEP_S} s): t must be in seconds",
@@ -169,7 +169,7 @@ impl Run {
             if i.kind == InputKind::Cumulative && i.wrap.is_none() {
                 if let Some((k, d, bits)) = undeclared_wrap(log.col(&i.column)?) {
                     return Err(log.err(
-                        Some(k + 3),
+                        Some(log.line(k + 1)),
                         Some(&i.column),
                         format!(
                             "the counter jumps by {d} from the line before, about 2^{bits}: it wraps like a {bits}-bit register; declare `wrap = {bits}` on input `{}` in the spec",
@@ -216,7 +216,7 @@ impl Run {
             };
             if let Some((k, d)) = degrees_wrap(col) {
                 return Err(log.err(
-                    Some(k + 3),
+                    Some(log.line(k + 1)),
                     Some(c),
                     format!("the angle jumps by {d:.1} from the line before, as an angle in degrees does where it wraps at +-180: angles are logged in radians"),
                 ));
@@ -254,7 +254,7 @@ impl Run {
             landmarks: Vec::new(),
             rate_inputs,
             swing,
-            first_line: 2,
+            first_line: log.first_line,
         })
     }
 

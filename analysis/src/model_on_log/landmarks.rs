@@ -23,6 +23,8 @@ pub struct Map {
     xy: Vec<[f64; 2]>,
     /// Where in `ids` a landmark is, by [`key`].
     index: HashMap<String, usize>,
+    /// The file's line of the first landmark.
+    pub first_line: usize,
 }
 
 /// The key an id is looked up by: an integral number in any spelling (`7`,
@@ -54,7 +56,10 @@ pub fn read_map(path: &Path) -> Result<Map, LogError> {
     let (h, mut rdr) = read_csv(path, "landmark map")?;
     let cols = h.require(&["id", "x", "y"])?;
     let (id_i, x_i, y_i) = (cols[0], cols[1], cols[2]);
-    let mut map = Map::default();
+    let mut map = Map {
+        first_line: h.first_data_line,
+        ..Map::default()
+    };
     for (n, rec) in rdr.records().enumerate() {
         let (line, rec) = h.record(n, rec)?;
         let id = h.text(line, &rec, id_i)?.to_string();
