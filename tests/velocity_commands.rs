@@ -314,6 +314,43 @@ fn commands_hold_between_rows_and_short_gaps_are_bridged() {
         out.contains("longer than --max-gap 0.5 s") && out.contains("not dead-reckoned"),
         "{out}"
     );
+    // localize split there (and after the first row, 1 s before the next):
+    // the sightings inside the gaps belong to no run, and the warning counts
+    // them (they were dropped silently)
+    std::fs::write(dir.join("map.csv"), "id,x,y\n7,5,1\n").unwrap();
+    let mut obs = String::from("t,id,range,bearing\n");
+    // the gaps run from t = 0 to 1 and from 1.67 to 2.67 s
+    for ts in [0.5f64, 1.2, 2.0, 2.9] {
+        let x = if ts < 1.0 { ts } else { 1.0 + 0.5 * (ts - 1.0) };
+        obs += &format!(
+            "{ts},7,{},{}\n",
+            (5.0 - x).hypot(1.0),
+            1.0f64.atan2(5.0 - x)
+        );
+    }
+    std::fs::write(dir.join("obs.csv"), obs).unwrap();
+    let o = kinegen_in(
+        dir,
+        &[
+            "localize",
+            "--spec",
+            spec.to_str().unwrap(),
+            "--data",
+            "held.csv",
+            "--observations",
+            "obs.csv",
+            "--landmarks",
+            "map.csv",
+            "--max-gap",
+            "0.5",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o) + &stderr(&o);
+    assert!(
+        out.contains("and the 2 landmark sighting(s) in them are not used"),
+        "{out}"
+    );
 }
 
 /// A spec whose twist is not linear in any input has no inverse kinematics:

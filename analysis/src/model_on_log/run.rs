@@ -338,14 +338,20 @@ impl Run {
             .map(|&k| format!("{:.3} s after t = {:.3} s", self.dt[k], self.t[k]))
             .collect();
         let lost: f64 = gaps.iter().map(|&k| self.dt[k]).sum();
+        // sightings in a gap (or in a dropped piece) belong to no run
+        let unused = self.landmarks.len() - pieces.iter().map(|p| p.landmarks.len()).sum::<usize>();
         let warning = format!(
-            "{}: {} gap(s) longer than --max-gap {max_gap} s ({}{}): used as {} run(s), each started from its own measured pose{}; the {lost:.1} s in the gaps are not dead-reckoned, so drift across them is not counted (a larger --max-gap bridges them)",
+            "{}: {} gap(s) longer than --max-gap {max_gap} s ({}{}): used as {} run(s), each started from its own measured pose{}; the {lost:.1} s in the gaps are not dead-reckoned, so drift across them is not counted{} (a larger --max-gap bridges them)",
             self.path,
             gaps.len(),
             at.join(", "),
             if gaps.len() > 5 { ", ..." } else { "" },
             pieces.len(),
-            if pieces.len() < gaps.len() + 1 { " (pieces under 3 rows dropped)" } else { "" }
+            if pieces.len() < gaps.len() + 1 { " (pieces under 3 rows dropped)" } else { "" },
+            match unused {
+                0 => String::new(),
+                n => format!(", and the {n} landmark sighting(s) in them are not used"),
+            }
         );
         (pieces, Some(warning))
     }
