@@ -318,6 +318,11 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
             "1 cell(s) where the header has 6 (a `#` comment",
         ),
         ("# robot 3\n", ":2".into(), "the file ends after 1 comment line(s)"),
+        (
+            "t enc_r enc_l gt_x gt_y gt_theta\n0 0 0 0 0 0\n0.05 1 1 0 0 0\n0.1 2 2 0 0 0\n",
+            ":1".into(),
+            "this one looks space-separated",
+        ),
     ]
 }
 

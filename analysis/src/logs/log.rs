@@ -192,6 +192,10 @@ impl CsvHeader {
             if let Some(sep) = [';', '\t', '|'].into_iter().find(|c| names[0].contains(*c)) {
                 return Err(e(format!("the header is one column `{}`: {what} files are comma-separated, this one looks {sep:?}-separated", names[0])));
             }
+            // numpy's savetxt and many loggers separate by spaces
+            if names[0].split_whitespace().count() > 1 {
+                return Err(e(format!("the header is one column `{}`: {what} files are comma-separated, this one looks space-separated", names[0])));
+            }
         }
         if is_data(names) {
             return Err(e(format!(
