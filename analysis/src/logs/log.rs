@@ -55,10 +55,11 @@ pub type CsvReader = csv::Reader<Box<dyn std::io::Read>>;
 
 /// The lines before a CSV file's data: `#` comment lines, which loggers
 /// write to describe a file (`# robot 3, firmware 2.1`), and the first line
-/// after them.
+/// after them, as bytes (the csv reader reads it again and says, at its line,
+/// if it is not text).
 struct Preamble {
     comments: Vec<String>,
-    first: String,
+    first: Vec<u8>,
 }
 
 impl Preamble {
@@ -66,14 +67,16 @@ impl Preamble {
     fn read(rdr: &mut impl std::io::BufRead) -> std::io::Result<Preamble> {
         let mut comments = Vec::new();
         loop {
-            let mut line = String::new();
-            if rdr.read_line(&mut line)? == 0 || !is_comment(&line) {
+            let mut line = Vec::new();
+            let n = rdr.read_until(b'\n', &mut line)?;
+            let text = String::from_utf8_lossy(&line);
+            if n == 0 || !is_comment(&text) {
                 return Ok(Preamble {
                     comments,
                     first: line,
                 });
             }
-            comments.push(line);
+            comments.push(text.into_owned());
         }
     }
 }
@@ -130,7 +133,7 @@ pub fn read_csv(path: &Path, what: &str) -> Result<(CsvHeader, CsvReader), LogEr
     let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(cannot)?);
     let pre = Preamble::read(&mut file).map_err(cannot)?;
     let header_line = pre.comments.len() + 1;
-    let first = cells(&pre.first);
+    let first = cells(&String::from_utf8_lossy(&pre.first));
     let from_comment = pre
         .comments
         .last()
@@ -144,8 +147,7 @@ pub fn read_csv(path: &Path, what: &str) -> Result<(CsvHeader, CsvReader), LogEr
         .filter(|h| is_data(&first) && h.len() == first.len() && !is_data(h));
     let builder = |has_headers: bool| {
         use std::io::Read;
-        let rest: Box<dyn Read> =
-            Box::new(std::io::Cursor::new(pre.first.clone().into_bytes()).chain(file));
+        let rest: Box<dyn Read> = Box::new(std::io::Cursor::new(pre.first).chain(file));
         csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
             .has_headers(has_headers)
