@@ -92,6 +92,11 @@ enum Edit {
     Semicolons,
     ByteOrderMark,
     KeepRows(usize),
+    /// A `#` line inserted before row r (before the header: a logger's
+    /// description; among the data: a row that is none).
+    Comment(usize),
+    /// The header written as a comment, as numpy's savetxt does.
+    CommentedHeader,
 }
 
 fn edit() -> impl Strategy<Value = Edit> {
@@ -108,6 +113,8 @@ fn edit() -> impl Strategy<Value = Edit> {
         1 => Just(Edit::Semicolons),
         1 => Just(Edit::ByteOrderMark),
         1 => u().prop_map(Edit::KeepRows),
+        1 => u().prop_map(Edit::Comment),
+        1 => Just(Edit::CommentedHeader),
     ]
 }
 
@@ -160,6 +167,13 @@ fn mutate(edits: &[Edit]) -> String {
             Edit::Semicolons => sep = ";",
             Edit::ByteOrderMark => bom = "\u{feff}",
             Edit::KeepRows(k) => rows.truncate(k % 8),
+            Edit::Comment(r) => {
+                let r = r % (n + 1);
+                rows.insert(r, vec!["# robot 3".into(), " firmware 2.1".into()]);
+            }
+            Edit::CommentedHeader if n > 0 && !rows[0].is_empty() => {
+                rows[0][0] = format!("# {}", rows[0][0]);
+            }
             _ => {}
         }
     }
