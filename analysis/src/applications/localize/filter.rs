@@ -1,5 +1,6 @@
 //! One pass of the extended Kalman filter over a run (seed 001 eq. 1-9), with
 //! the prediction cut at each sighting's own time.
+use super::active::{Slots, Taken, ACTIVE};
 use super::noise::NoiseModel;
 use super::{EkfOptions, LocalizeError};
 use crate::log::wrap;
@@ -382,7 +383,7 @@ impl<'a> Filter<'a> {
         let white = |j: usize| (self.obs_sigma[j] * noise.obs_scale[j]).powi(2);
         let rm = Matrix2::new(white(0), 0.0, 0.0, white(1));
         b.catch_up(z.t);
-        let l = plan.landmark[i];
+        let l = b.slot_for(plan.landmark[i], z.t);
         let (bias, pb, bb) = b.of(l);
         // the persistent range error is per metre of range: H = [hm | d at l]
         let d = Matrix2::new(o[0].abs(), 0.0, 0.0, 1.0);
@@ -606,7 +607,8 @@ struct Sightings<'p, 'q> {
 
 /// What the filter believes: the pose and its covariance, and (when the
 /// noise has a persistent part) the persistent error of each landmark's
-/// range and bearing, a first-order Gauss-Markov process (Gelb, Applied
+/// range and bearing (of the [`ACTIVE`] most recently sighted, see
+/// [`super::active`]), a first-order Gauss-Markov process (Gelb, Applied
 /// Optimal Estimation, 1974, sec. 3.8: a coloured measurement error as a
 /// state). Estimating it is what keeps a filter that sees one landmark for
 /// seconds from trusting the same error a hundred times.
@@ -620,8 +622,10 @@ struct Belief {
     /// sin and cos of the heading x[2], kept in step with it.
     sin_cos: (f64, f64),
     p: Matrix3<f64>,
-    /// Persistent errors, [range, bearing] per landmark.
+    /// Persistent errors, [range, bearing] per slot (see [`Slots`]).
     bias: Vec<Vector2<f64>>,
+    /// Which landmark's error each slot holds.
+    slots: Slots,
     /// Pose-error covariance (3 x 2 per landmark), as of `since`.
     pb: Vec<nalgebra::Matrix3x2<f64>>,
     /// Error covariance (2 x 2 blocks, row-major over landmarks), as of
@@ -649,7 +653,7 @@ impl Belief {
         t: f64,
     ) -> Belief {
         let n = if var.iter().any(|v| *v > 0.0) {
-            landmarks
+            landmarks.min(ACTIVE)
         } else {
             0
         };
@@ -658,6 +662,7 @@ impl Belief {
             sin_cos: x[2].sin_cos(),
             p,
             bias: vec![Vector2::zeros(); n],
+            slots: Slots::new(landmarks, n),
             pb: vec![nalgebra::Matrix3x2::zeros(); n],
             bb: vec![Matrix2::zeros(); n * n],
             bb_scale: 1.0,
@@ -741,7 +746,37 @@ impl Belief {
         self.since = t;
     }
 
-    /// Landmark `l`'s persistent error, its covariance with the pose, and its
+    /// The slot of landmark `l`, sighted at `t` (0, unused, without
+    /// persistent errors). A slot taken from another landmark starts from the
+    /// prior: no error, the stationary variance, no correlation.
+    fn slot_for(&mut self, l: usize, t: f64) -> usize {
+        if self.n() == 0 {
+            return 0;
+        }
+        match self.slots.take(l, t) {
+            Taken::Kept(s) | Taken::Fresh(s) => s,
+            Taken::Evicted(s) => {
+                self.reset(s);
+                s
+            }
+        }
+    }
+
+    /// Slot `s` back to the prior (as of `since`, the time the caller has
+    /// caught up to).
+    fn reset(&mut self, s: usize) {
+        let n = self.n();
+        self.bias[s] = Vector2::zeros();
+        self.pb[s] = nalgebra::Matrix3x2::zeros();
+        for j in 0..n {
+            let (a, b) = (s.min(j), s.max(j));
+            self.bb[a * n + b] = Matrix2::zeros();
+        }
+        // stored so that bb_at(s, s) is the stationary variance
+        self.bb[s * n + s] = self.var * ((1.0 - self.bb_diag) / self.bb_scale);
+    }
+
+    /// Slot `l`'s persistent error, its covariance with the pose, and its
     /// own covariance (zeros without persistent errors).
     fn of(&self, l: usize) -> (Vector2<f64>, nalgebra::Matrix3x2<f64>, Matrix2<f64>) {
         if self.n() == 0 {
@@ -754,7 +789,8 @@ impl Belief {
         (self.bias[l], self.pb[l], self.bb_at(l, l))
     }
 
-    /// The Kalman update with a sighting of landmark `l`: H = [hm | d at l],
+    /// The Kalman update with a sighting whose landmark's error is in slot
+    /// `l` ([`Belief::slot_for`]): H = [hm | d at l],
     /// `ph` the pose rows of P H^T, `sm` = H P H^T + R and its inverse `si`.
     fn fuse(
         &mut self,
@@ -789,5 +825,51 @@ impl Belief {
                 *b -= ki * kj.transpose();
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A landmark that takes the slot of one sighted longer ago starts from
+    /// the prior: no error, the stationary variance, no correlation with
+    /// the pose or with the other landmarks' errors.
+    #[test]
+    fn a_slot_given_to_another_landmark_starts_from_the_prior() {
+        let var = Vector2::new(0.01, 0.0004);
+        let mut b = Belief::new(
+            Vector3::zeros(),
+            Matrix3::identity(),
+            ACTIVE + 1,
+            var,
+            50.0,
+            0.0,
+        );
+        assert_eq!(b.n(), ACTIVE);
+        for l in 0..ACTIVE {
+            let s = b.slot_for(l, l as f64);
+            // what sightings would have left: an error, correlations
+            b.bias[s] = Vector2::new(0.3, -0.02);
+            b.pb[s] = nalgebra::Matrix3x2::from_element(0.001);
+        }
+        let n = b.n();
+        b.bb.iter_mut()
+            .for_each(|m| *m = Matrix2::from_element(-0.002));
+        b.catch_up(30.0);
+        // landmark 0 was sighted longest ago
+        let s = b.slot_for(ACTIVE, 30.0);
+        assert_eq!(s, b.slot_for(ACTIVE, 30.0));
+        assert_eq!(b.bias[s], Vector2::zeros());
+        assert_eq!(b.pb[s], nalgebra::Matrix3x2::zeros());
+        assert!((b.bb_at(s, s) - Matrix2::from_diagonal(&var)).abs().max() < 1e-15);
+        for j in (0..n).filter(|&j| j != s) {
+            assert_eq!(b.bb_at(s, j), Matrix2::zeros());
+            assert_eq!(b.bb_at(j, s), Matrix2::zeros());
+        }
+        // the others keep theirs
+        let other = b.slot_for(1, 31.0);
+        assert_ne!(other, s);
+        assert_ne!(b.bias[other], Vector2::zeros());
     }
 }

@@ -19,6 +19,7 @@
 //!   it and the model measures the body pose directly) against their
 //!   chi-square bounds; a fixed-interval RTS smoother over the same pass for
 //!   offline use ([`smoother`]).
+mod active;
 pub mod delay;
 mod filter;
 pub mod noise;
