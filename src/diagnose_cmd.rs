@@ -168,10 +168,17 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
             if !step.equivalent.is_empty() {
                 let others: Vec<String> =
                     step.equivalent.iter().map(|e| format!("`{e}`")).collect();
-                out.say(&format!(
-                    "     these logs cannot tell it apart from {}: it fits them as well (likelihood ratio under {}, 5%); a log with another channel (a gyro, landmarks) or the robot's documentation decides",
-                    others.join(" or "),
+                let per = match step.folds {
+                    Some(_) => ", each segment counted once",
+                    None => "",
+                };
+                let how = format!(
+                    "it fits them as well (likelihood ratio under {}, 5%{per})",
                     kinegen_analysis::diagnose::EQUIVALENT
+                );
+                out.say(&format!(
+                    "     these logs cannot tell it apart from {}: {how}; a log with another channel (a gyro, landmarks) or the robot's documentation decides",
+                    others.join(" or "),
                 ));
             }
             let vals: BTreeMap<String, f64> = step
@@ -186,6 +193,18 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
                 step.rmse_after,
                 before / step.rmse_after.max(1e-300)
             ));
+            if let Some(f) = &step.folds {
+                // what proved it: the whole log's error barely moves when
+                // random drift dominates it
+                out.say(&format!(
+                    "     proved fold by fold: calibrated without each of {} stretches of the log in turn, it predicts that stretch's motion over {} s better (mean square error {:.0}% lower over all; paired t = {:.1}, needs {:.1})",
+                    f.folds,
+                    kinegen_analysis::diagnosis::folds::WINDOW_S,
+                    100.0 * f.gain,
+                    f.t,
+                    f.critical
+                ));
+            }
             before = step.rmse_after;
             if let Some(change) = &outcome.spec_changes[k] {
                 out.say(&format!(

@@ -723,7 +723,7 @@ pub fn diagnose_report(
         esc(&base.ir.name),
         d.baseline_rmse,
         d.calibrated_rmse,
-        esc(&if d.chain.is_empty() { "no catalogue effect is significant".to_string() } else { d.chain.iter().map(|c| format!("{} (error after: {:.4})", c.effect, c.rmse_after)).collect::<Vec<_>>().join(", then ") })
+        esc(&if d.chain.is_empty() { "no catalogue effect is significant".to_string() } else { d.chain.iter().map(|c| format!("{} (error after: {:.4}{})", c.effect, c.rmse_after, if c.folds.is_some() { "; proved fold by fold" } else { "" })).collect::<Vec<_>>().join(", then ") })
     );
     write(
         dir,
@@ -741,16 +741,32 @@ pub fn diagnose_report(
 /// The diagnose report's candidates (table and evidence), the structure the
 /// residuals keep, and the effects not tested, as HTML.
 fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
-    let mut t = String::from("<h2>Candidates</h2><table><tr><th>effect</th><th>error</th><th>improvement</th><th>BIC gain</th><th>held-out error</th><th>significant</th></tr>");
+    let mut t = format!(
+        "<h2>Candidates</h2><table><tr><th>effect</th><th>error</th><th>improvement</th><th>BIC gain</th><th>held-out error</th><th>held out fold by fold ({} s motion)</th><th>significant</th></tr>",
+        kinegen_analysis::diagnosis::folds::WINDOW_S
+    );
     for c in &d.candidates {
+        let folds = c.folds.map_or("not run".to_string(), |f| {
+            format!(
+                "{:+.0}% (t {:.1}, needs {:.1})",
+                -100.0 * f.gain,
+                f.t,
+                f.critical
+            )
+        });
         t += &format!(
-            "<tr><td>{}</td><td>{:.4}</td><td>{:.0}%</td><td>{:.0}</td><td>{:.4}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{:.4}</td><td>{:.0}%</td><td>{:.0}</td><td>{:.4}</td><td>{}</td><td>{}</td></tr>",
             esc(&c.effect),
             c.rmse,
             100.0 * c.improvement,
             c.bic_gain,
             c.holdout_rmse,
-            if c.significant { "yes" } else { "no" }
+            folds,
+            match (c.significant, c.by_folds()) {
+                (true, true) => "yes (fold by fold)",
+                (true, false) => "yes",
+                _ => "no",
+            }
         );
     }
     t += "</table><ul>";

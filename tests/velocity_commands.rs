@@ -524,6 +524,32 @@ fn real_velocity_commanded_robots_localize_and_calibrate_as_logged() {
         &["diagnose", "--spec", s, "--data", d.to_str().unwrap()],
     );
     assert!(diag["verdict"].is_object(), "{diag}");
+    // the motion follows the commands some tenths of a second late (the
+    // dataset's yaw rates: 0.2 s): random drift dominates the whole log's
+    // error, and the lag is proved fold by fold on short increments, with
+    // the timing effects it cannot be told from named beside it
+    let timing = ["time_offset", "input_delay", "command_lag"];
+    let first = &diag["verdict"]["effects"][0];
+    let effect = first["effect"].as_str().unwrap_or("none");
+    assert!(timing.contains(&effect), "{}", diag["verdict"]);
+    let folds = &first["folds"];
+    assert!(
+        folds["t"].as_f64().unwrap() > folds["critical"].as_f64().unwrap(),
+        "{folds}"
+    );
+    let delay = first["parameters"]
+        .as_object()
+        .unwrap()
+        .values()
+        .next()
+        .unwrap()["estimate"]
+        .as_f64()
+        .unwrap();
+    assert!((0.1..0.4).contains(&delay), "{effect} = {delay}");
+    assert!(
+        !first["equivalent"].as_array().unwrap().is_empty(),
+        "{first}"
+    );
     // held commands make the twist constant over each step: the step is
     // exact (halving the log, as for counters, said the model's own step
     // erred by 1.9x the noise floor here: an error it does not have)
@@ -1115,5 +1141,105 @@ fn real_robots_without_motion_capture_are_started_where_their_sightings_put_them
             "robot{robot}: start {} m off, sd {start_sd}",
             errors[0]
         );
+    }
+}
+
+/// A velocity-commanded robot as real ones drive: commands at irregular
+/// times, executed `delay` s late, the speeds disturbed at random (slip, a
+/// controller that does not hold the command: white noise of `slip_v` m/s
+/// and `slip_w` rad/s per sqrt(s)), motion capture at 50 Hz with 1 mm and
+/// 2 mrad of noise. Written as the MRCLAM logs are (`t,v,omega,gt_*`).
+fn drifting_commanded_log(path: &Path, seconds: f64, delay: f64, slip: [f64; 2], seed: u64) {
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+    let n01 = Normal::new(0.0, 1.0).unwrap();
+    let dt = 0.02;
+    // the commands: (time issued, v, omega), a new one every 0.3-1.5 s
+    let mut cmds = vec![(0.0, 0.1, 0.0)];
+    while cmds.last().unwrap().0 < seconds {
+        let t = cmds.last().unwrap().0 + rng.gen_range(0.3..1.5);
+        let w = if rng.gen_bool(0.4) {
+            0.0
+        } else {
+            rng.gen_range(-0.4..0.4)
+        };
+        cmds.push((t, rng.gen_range(0.0..0.12), w));
+    }
+    let at = |t: f64| {
+        let k = cmds.partition_point(|c| c.0 <= t).max(1) - 1;
+        (cmds[k].1, cmds[k].2)
+    };
+    let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 0.0f64);
+    let mut text = String::from("t,v,omega,gt_x,gt_y,gt_theta\n");
+    let steps = (seconds / dt) as usize;
+    for k in 0..=steps {
+        let t = k as f64 * dt;
+        let (v, w) = at(t);
+        let noisy = |s: f64, rng: &mut rand::rngs::SmallRng| s * n01.sample(rng);
+        let gt = [
+            x + noisy(0.001, &mut rng),
+            y + noisy(0.001, &mut rng),
+            th + noisy(0.002, &mut rng),
+        ];
+        text += &format!(
+            "{t:.3},{v:.3},{w:.3},{:.5},{:.5},{:.5}\n",
+            gt[0], gt[1], gt[2]
+        );
+        // the robot executes the command of `delay` s ago, disturbed
+        let (ve, we) = at(t - delay);
+        let ve = ve + slip[0] / dt.sqrt() * n01.sample(&mut rng);
+        let we = we + slip[1] / dt.sqrt() * n01.sample(&mut rng);
+        x += ve * th.cos() * dt;
+        y += ve * th.sin() * dt;
+        th += we * dt;
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// Issue #34, item 5: on a real robot, random drift dominates the whole
+/// log's error and a late command explains a few percent of it: never most
+/// of the excess over the sensor noise, nor 20%. Diagnosis then proves the
+/// effect fold by fold (calibrated without each stretch of the log, it
+/// predicts that stretch's motion over a second better, in a paired t-test
+/// over the stretches): a 10 min simulated log of such a robot, its
+/// commands 0.25 s late, gets a timing effect named, its value near 0.25 s.
+/// The same log without the delay gets nothing named.
+#[test]
+fn a_late_command_under_random_drift_is_proved_fold_by_fold() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let spec = commanded_spec(dir, "");
+    let s = spec.to_str().unwrap();
+    let timing = ["time_offset", "input_delay", "command_lag"];
+    for (delay, name) in [(0.25, "late.csv"), (0.0, "prompt.csv")] {
+        let log = dir.join(name);
+        drifting_commanded_log(&log, 600.0, delay, [0.01, 0.03], 7);
+        let diag = run_in(
+            dir,
+            &["diagnose", "--spec", s, "--data", log.to_str().unwrap()],
+        );
+        let effects = diag["verdict"]["effects"].as_array().unwrap();
+        eprintln!("delay {delay}: {}", diag["verdict"]["effects"]);
+        if delay == 0.0 {
+            assert!(effects.is_empty(), "{}", diag["verdict"]);
+            continue;
+        }
+        let first = effects
+            .first()
+            .unwrap_or_else(|| panic!("nothing named: {}", diag["candidates"]));
+        let effect = first["effect"].as_str().unwrap();
+        assert!(timing.contains(&effect), "{}", diag["verdict"]);
+        // the whole log's error barely moves: the folds proved it
+        assert!(first["folds"].is_object(), "{first}");
+        let value = first["parameters"]
+            .as_object()
+            .unwrap()
+            .values()
+            .next()
+            .unwrap()["estimate"]
+            .as_f64()
+            .unwrap();
+        assert!((0.15..0.35).contains(&value), "{effect} = {value}");
     }
 }

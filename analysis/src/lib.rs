@@ -98,6 +98,7 @@ pub mod estimation {
 pub mod diagnosis {
     pub mod diagnose;
     pub mod diagnose_job;
+    pub mod folds;
     pub mod request;
 }
 

@@ -10,6 +10,7 @@
 //! 4. Whiteness: regress the one-step prediction residuals of the best model on
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
+use super::folds::{FoldTest, Folds};
 use crate::derivation::EffectChains;
 use crate::discretisation::Discretisation;
 use crate::fit::{fit, residuals, FitError, FitOptions, FitResult, Search};
@@ -23,6 +24,7 @@ use kinegen_model::kernel::ArgRole;
 use nalgebra::DVector;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::sync::OnceLock;
 
 /// A calibrated parameter: its estimate and standard deviation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -44,6 +46,9 @@ pub struct Candidate {
     pub evidence: String,
     pub bic_gain: f64,
     pub holdout_rmse: f64,
+    /// The cross-validation over the log's segments, when it was run (a
+    /// long log, and a candidate the other criteria leave unproven).
+    pub folds: Option<FoldTest>,
     pub doc: String,
     /// The calibration of the model with this effect on all runs, and on the
     /// training part: the next stage of the chain when the effect wins.
@@ -633,11 +638,14 @@ fn explains_excess(cur: &Stage, rmse: f64, holdout_rmse: Option<f64>) -> bool {
 fn significant(cur: &Stage, rmse: f64, gain: f64, holdout_rmse: Option<f64>) -> bool {
     let improvement = 1.0 - rmse / cur.rmse;
     let large = improvement > 0.2 && holdout_rmse.is_none_or(|h| h < 0.8 * cur.holdout_rmse);
+    evident(cur, rmse, gain) && (large || explains_excess(cur, rmse, holdout_rmse))
+}
+
+/// The evidence every significant effect needs: a BIC gain, and more
+/// explained than the model's own discretisation could account for.
+fn evident(cur: &Stage, rmse: f64, gain: f64) -> bool {
     let beyond_step = cur.rmse * cur.rmse - rmse * rmse > cur.step_error * cur.step_error;
-    gain > 10.0
-        && beyond_step
-        && (large || explains_excess(cur, rmse, holdout_rmse))
-        && rmse.is_finite()
+    gain > 10.0 && beyond_step && rmse.is_finite()
 }
 
 /// The current model of a diagnosis step: its runner, calibration and scores.
@@ -652,6 +660,9 @@ struct Stage {
     /// The model's own discretisation error at the log's rate (the base
     /// model's, see `crate::discretisation`), which no effect explains.
     step_error: f64,
+    /// Its held-out error in each fold of the log's segments, computed when
+    /// a candidate first needs it (see [`Folds::held_out`]).
+    fold_errors: OnceLock<Vec<f64>>,
 }
 
 fn stage(
@@ -707,6 +718,7 @@ fn stage_from(
         holdout_rmse,
         floor,
         step_error: 0.0,
+        fold_errors: OnceLock::new(),
     }
 }
 
@@ -718,7 +730,16 @@ fn stage_from(
 /// of each held-out part, where a late command and a late motion capture do
 /// differ, decided it by chance.)
 fn ranked_equivalents(ranked: &[Candidate], w: &Candidate) -> Vec<String> {
-    let n = w.fit.n_residuals as f64;
+    // The ratio counts each residual as independent, which a log that
+    // random drift dominates is far from: where the folds proved the winner,
+    // each segment counts once (they are dead-reckoned apart). On a real
+    // robot whose motion lags its commands, a late command and a late
+    // motion capture differ by 0.1-2% of the error, thousands in the ratio
+    // of residuals and under one in that of segments.
+    let n = match w.folds.filter(|_| w.by_folds()) {
+        Some(f) => f.segments as f64,
+        None => w.fit.n_residuals as f64,
+    };
     let s2 = (w.rmse * w.rmse).max(1e-300);
     ranked
         .iter()
@@ -740,6 +761,8 @@ pub struct ChainStep {
     /// their fit's likelihood ratio to its own under [`EQUIVALENT`] (a late
     /// command and a late motion capture move a pose-only log alike).
     pub equivalent: Vec<String>,
+    /// The fold-by-fold test, when it is what proved the effect.
+    pub folds: Option<FoldTest>,
 }
 
 /// The likelihood ratio (chi-square with one degree of freedom at 5%) under
@@ -887,6 +910,7 @@ fn rank(
     runs: &[Run],
     train: &[Run],
     test: &[Run],
+    folds: Option<&Folds>,
     o: &FitOptions,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<Candidate> {
@@ -924,6 +948,7 @@ fn rank(
         o,
         strict,
         from_nominal: from_nominal && !at_floor,
+        folds,
     };
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
@@ -942,6 +967,13 @@ fn rank(
     candidates
 }
 
+impl Candidate {
+    /// Significant by the fold-by-fold test alone (see [`super::folds`]).
+    pub fn by_folds(&self) -> bool {
+        self.significant && self.folds.as_ref().is_some_and(FoldTest::holds)
+    }
+}
+
 /// What ranking a diagnosis round's candidates holds fixed: the current
 /// stage, the runs (all, training and held-out parts) and the tolerances.
 struct Ranking<'a> {
@@ -954,6 +986,8 @@ struct Ranking<'a> {
     strict: &'a FitOptions,
     /// Whether candidates are also calibrated from nominal values.
     from_nominal: bool,
+    /// The log's segments in folds, when it is long enough for them.
+    folds: Option<&'a Folds>,
 }
 
 impl Ranking<'_> {
@@ -1038,7 +1072,12 @@ impl Ranking<'_> {
             Err(_) => (f.clone(), f64::INFINITY),
         };
         let improvement = 1.0 - rmse / self.cur.rmse;
-        let significant = significant(self.cur, rmse, gain, Some(holdout_rmse));
+        let mut significant = significant(self.cur, rmse, gain, Some(holdout_rmse));
+        let folds = (!significant && may_hold(self.cur, rmse, gain, holdout_rmse))
+            .then(|| self.fold_test(&tr_start, &f))
+            .flatten();
+        significant |= folds.is_some_and(|t| t.holds());
+        let folds_text = folds.map_or(String::new(), |t| format!(", {t}"));
         let parameters = effect_params
             .iter()
             .map(|&i| {
@@ -1053,7 +1092,7 @@ impl Ranking<'_> {
             })
             .collect();
         let evidence = format!(
-            "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}, noise floor {:.3}",
+            "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}{folds_text}, noise floor {:.3}",
             self.cur.rmse,
             rmse,
             self.cur.rmse / rmse.max(1e-300),
@@ -1071,11 +1110,34 @@ impl Ranking<'_> {
             evidence,
             bic_gain: gain,
             holdout_rmse,
+            folds,
             doc: doc.to_string(),
             fit: f,
             train_fit,
         })
     }
+
+    /// The candidate `aug`, calibrated as `f` on all runs, against the current
+    /// model fold by fold (None: the log is too short for folds).
+    fn fold_test(&self, aug: &Runner, f: &FitResult) -> Option<FoldTest> {
+        let folds = self.folds?;
+        let base = self
+            .cur
+            .fold_errors
+            .get_or_init(|| folds.held_out(&self.cur.runner, &self.cur.fit, self.o));
+        Some(super::folds::paired(
+            base,
+            &folds.held_out(aug, f, self.o),
+            folds.segments(),
+        ))
+    }
+}
+
+/// Whether a candidate the other criteria leave unproven may still hold fold
+/// by fold: it is [`evident`] and predicts the held-out part of the runs
+/// better, the cheap check before the folds' calibrations.
+fn may_hold(cur: &Stage, rmse: f64, gain: f64, holdout_rmse: f64) -> bool {
+    evident(cur, rmse, gain) && holdout_rmse < cur.holdout_rmse
 }
 
 /// Whether an effect's parameters change only what the gyro reads (its bias,
@@ -1261,6 +1323,7 @@ pub fn diagnose(
     }
     let baseline_rmse = weighted_rms(base, &base.p, runs, &o);
     let (train, test) = split(runs, 0.6);
+    let folds = Folds::of(runs);
     let first = stage(base.clone(), runs, &train, &test, &o)?;
     progress("base model calibrated");
     let mut disc = step_error(&first, runs, &o);
@@ -1306,6 +1369,7 @@ pub fn diagnose(
             runs,
             &train,
             &test,
+            folds.as_ref(),
             &o,
             progress,
         );
@@ -1341,6 +1405,7 @@ pub fn diagnose(
             rmse_after: w.rmse,
             doc: w.doc.clone(),
             equivalent,
+            folds: w.folds.filter(|_| w.by_folds()),
         });
         remaining.retain(|(n, _)| n != &w.effect);
         cur = next;
