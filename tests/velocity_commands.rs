@@ -528,24 +528,8 @@ fn real_velocity_commanded_robots_localize_and_calibrate_as_logged() {
     // dataset's yaw rates: 0.2 s): random drift dominates the whole log's
     // error, and the lag is proved fold by fold on short increments, with
     // the timing effects it cannot be told from named beside it
-    let timing = ["time_offset", "input_delay", "command_lag"];
-    let first = &diag["verdict"]["effects"][0];
-    let effect = first["effect"].as_str().unwrap_or("none");
-    assert!(timing.contains(&effect), "{}", diag["verdict"]);
-    let folds = &first["folds"];
-    assert!(
-        folds["t"].as_f64().unwrap() > folds["critical"].as_f64().unwrap(),
-        "{folds}"
-    );
-    let delay = first["parameters"]
-        .as_object()
-        .unwrap()
-        .values()
-        .next()
-        .unwrap()["estimate"]
-        .as_f64()
-        .unwrap();
-    assert!((0.1..0.4).contains(&delay), "{effect} = {delay}");
+    let (first, delay) = lag_proved_fold_by_fold(&diag);
+    assert!((0.1..0.4).contains(&delay), "{first}");
     assert!(
         !first["equivalent"].as_array().unwrap().is_empty(),
         "{first}"
@@ -1211,7 +1195,6 @@ fn a_late_command_under_random_drift_is_proved_fold_by_fold() {
     let dir = tmp.path();
     let spec = commanded_spec(dir, "");
     let s = spec.to_str().unwrap();
-    let timing = ["time_offset", "input_delay", "command_lag"];
     for (delay, name) in [(0.25, "late.csv"), (0.0, "prompt.csv")] {
         let log = dir.join(name);
         drifting_commanded_log(&log, 600.0, delay, [0.01, 0.03], 7);
@@ -1225,21 +1208,28 @@ fn a_late_command_under_random_drift_is_proved_fold_by_fold() {
             assert!(effects.is_empty(), "{}", diag["verdict"]);
             continue;
         }
-        let first = effects
-            .first()
-            .unwrap_or_else(|| panic!("nothing named: {}", diag["candidates"]));
-        let effect = first["effect"].as_str().unwrap();
-        assert!(timing.contains(&effect), "{}", diag["verdict"]);
-        // the whole log's error barely moves: the folds proved it
-        assert!(first["folds"].is_object(), "{first}");
-        let value = first["parameters"]
-            .as_object()
-            .unwrap()
-            .values()
-            .next()
-            .unwrap()["estimate"]
-            .as_f64()
-            .unwrap();
-        assert!((0.15..0.35).contains(&value), "{effect} = {value}");
+        let (first, value) = lag_proved_fold_by_fold(&diag);
+        assert!((0.15..0.35).contains(&value), "{first}");
     }
+}
+
+/// The first effect of a diagnosis's verdict, which must be a timing effect
+/// (a late motion capture, a late or lagging command) that the folds proved
+/// (see `diagnosis/folds.rs`), and its value, s.
+fn lag_proved_fold_by_fold(diag: &serde_json::Value) -> (serde_json::Value, f64) {
+    let timing = ["time_offset", "input_delay", "command_lag"];
+    let first = diag["verdict"]["effects"]
+        .get(0)
+        .unwrap_or_else(|| panic!("nothing named: {}", diag["candidates"]))
+        .clone();
+    let effect = first["effect"].as_str().unwrap();
+    assert!(timing.contains(&effect), "{}", diag["verdict"]);
+    // the whole log's error barely moves: the folds proved it
+    let folds = &first["folds"];
+    assert!(
+        folds["t"].as_f64().unwrap() > folds["critical"].as_f64().unwrap(),
+        "{first}"
+    );
+    let value = first["parameters"][effect]["estimate"].as_f64().unwrap();
+    (first, value)
 }
