@@ -234,8 +234,43 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
             ));
         }
         out.say(&format!("apply with:\n  {}", apply_cmds.join("\n  ")));
+        say_alternatives(out, d, &c.spec.display().to_string(), &r.ir.name);
     }
     apply_cmds
+}
+
+/// The commands that add, in place of the chain's first effect, each one
+/// these logs cannot tell apart from it, at its own calibrated values: which
+/// one the robot has, its documentation or another log decides, and a user
+/// should not have to write the command out (on MRCLAM, `time_offset` wins
+/// by a hair, while `input_delay` is what `localize` can use).
+fn say_alternatives(out: &Out, d: &Diagnosis, spec: &str, name: &str) {
+    let Some(first) = d.chain.first() else { return };
+    let alternatives: Vec<String> = first
+        .equivalent
+        .iter()
+        .filter_map(|e| d.candidates.iter().find(|c| &c.effect == e))
+        .map(|c| {
+            let values: Vec<String> = c
+                .parameters
+                .iter()
+                .map(|(k, v)| format!("--value {k}={:.6}", v.estimate))
+                .collect();
+            format!(
+                "kinegen add-effect --spec {spec} --effect {} {} --out {name}_{}.toml",
+                c.effect,
+                values.join(" "),
+                c.effect
+            )
+        })
+        .collect();
+    if !alternatives.is_empty() {
+        out.say(&format!(
+            "or, in place of `{}` (these logs cannot tell which the robot has):\n  {}",
+            first.effect,
+            alternatives.join("\n  ")
+        ));
+    }
 }
 
 /// What structure the residuals keep after the last effect.

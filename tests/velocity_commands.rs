@@ -1198,10 +1198,22 @@ fn a_late_command_under_random_drift_is_proved_fold_by_fold() {
     for (delay, name) in [(0.25, "late.csv"), (0.0, "prompt.csv")] {
         let log = dir.join(name);
         drifting_commanded_log(&log, 600.0, delay, [0.01, 0.03], 7);
-        let diag = run_in(
+        let json = dir.join("diagnosis.json");
+        let o = kinegen_in(
             dir,
-            &["diagnose", "--spec", s, "--data", log.to_str().unwrap()],
+            &[
+                "diagnose",
+                "--spec",
+                s,
+                "--data",
+                log.to_str().unwrap(),
+                "--json",
+                json.to_str().unwrap(),
+            ],
         );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let diag: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
         let effects = diag["verdict"]["effects"].as_array().unwrap();
         eprintln!("delay {delay}: {}", diag["verdict"]["effects"]);
         if delay == 0.0 {
@@ -1210,6 +1222,17 @@ fn a_late_command_under_random_drift_is_proved_fold_by_fold() {
         }
         let (first, value) = lag_proved_fold_by_fold(&diag);
         assert!((0.15..0.35).contains(&value), "{first}");
+        // each effect it cannot be told from comes with its own command
+        let text = stdout(&o);
+        let equivalent = first["equivalent"].as_array().unwrap();
+        assert!(!equivalent.is_empty(), "{first}");
+        for e in equivalent {
+            let e = e.as_str().unwrap();
+            assert!(
+                text.contains(&format!("add-effect --spec {s} --effect {e} --value")),
+                "{text}"
+            );
+        }
     }
 }
 
