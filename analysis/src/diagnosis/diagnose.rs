@@ -1072,33 +1072,21 @@ impl Ranking<'_> {
             Err(_) => (f.clone(), f64::INFINITY),
         };
         let improvement = 1.0 - rmse / self.cur.rmse;
-        let mut significant = significant(self.cur, rmse, gain, Some(holdout_rmse));
-        let folds = (!significant && may_hold(self.cur, rmse, gain, holdout_rmse))
+        let classic = significant(self.cur, rmse, gain, Some(holdout_rmse));
+        let folds = (!classic && may_hold(self.cur, rmse, gain, holdout_rmse))
             .then(|| self.fold_test(&tr_start, &f))
             .flatten();
-        significant |= folds.is_some_and(|t| t.holds());
-        let folds_text = folds.map_or(String::new(), |t| format!(", {t}"));
-        let parameters = effect_params
-            .iter()
-            .map(|&i| {
-                let k = f.free.iter().position(|&j| j == i).unwrap();
-                (
-                    start.names[i].clone(),
-                    Estimate {
-                        estimate: f.p[i],
-                        std: f.std[k],
-                    },
-                )
-            })
-            .collect();
+        let significant = classic || folds.is_some_and(|t| t.holds());
+        let parameters = estimates(&start, &effect_params, &f);
         let evidence = format!(
-            "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}{folds_text}, noise floor {:.3}",
+            "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}{}, noise floor {:.3}",
             self.cur.rmse,
             rmse,
             self.cur.rmse / rmse.max(1e-300),
             gain,
             self.cur.holdout_rmse,
             holdout_rmse,
+            folds.map_or(String::new(), |t| format!(", {t}")),
             self.cur.floor
         );
         Some(Candidate {
@@ -1131,6 +1119,18 @@ impl Ranking<'_> {
             folds.segments(),
         ))
     }
+}
+
+/// The calibrated values of parameters `which` of runner `r` in `f`.
+fn estimates(r: &Runner, which: &[usize], f: &FitResult) -> Estimates {
+    which
+        .iter()
+        .map(|&i| {
+            let k = f.free.iter().position(|&j| j == i).unwrap();
+            let (estimate, std) = (f.p[i], f.std[k]);
+            (r.names[i].clone(), Estimate { estimate, std })
+        })
+        .collect()
 }
 
 /// Whether a candidate the other criteria leave unproven may still hold fold
