@@ -10,9 +10,10 @@
 //! the BIC's gain (thousands) says nothing either. What does hold is that the
 //! effect, calibrated without a stretch of the log, predicts that stretch
 //! better, and does so in every stretch: a lag of the commands behind the
-//! motion is in every turn. Each segment's dead reckoning starts from its own
-//! fitted pose, so segments are nearly independent, and the test counts folds,
-//! not residuals.
+//! motion is in every turn. The folds are scored on the motion over a second
+//! (see [`WINDOW_S`]), which a minute's random drift does not swamp. Each
+//! segment is dead-reckoned from its own start, so segments are nearly
+//! independent, and the test counts folds, not residuals.
 use crate::fit::{fit, segmented, FitOptions, FitResult, Search};
 use crate::log::wrap;
 use crate::model::Runner;
