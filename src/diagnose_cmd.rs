@@ -216,27 +216,35 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
                         .join("\n")
                 ));
             }
-            let args: Vec<String> = vals
-                .iter()
-                .map(|(k, v)| format!("--value {k}={v:.6}"))
-                .collect();
             let from = if k == 0 {
                 c.spec.display().to_string()
             } else {
                 format!("{}_{}.toml", r.ir.name, d.chain[k - 1].effect)
             };
-            apply_cmds.push(format!(
-                "kinegen add-effect --spec {from} --effect {} {} --out {}_{}.toml",
-                step.effect,
-                args.join(" "),
-                r.ir.name,
-                step.effect
-            ));
+            apply_cmds.push(add_effect_command(&from, &step.effect, &vals, &r.ir.name));
         }
         out.say(&format!("apply with:\n  {}", apply_cmds.join("\n  ")));
         say_alternatives(out, d, &c.spec.display().to_string(), &r.ir.name);
     }
     apply_cmds
+}
+
+/// The `kinegen add-effect` command that adds `effect` at `values` to the
+/// spec `spec`, written as `{model}_{effect}.toml`.
+fn add_effect_command(
+    spec: &str,
+    effect: &str,
+    values: &BTreeMap<String, f64>,
+    model: &str,
+) -> String {
+    let args: Vec<String> = values
+        .iter()
+        .map(|(k, v)| format!("--value {k}={v:.6}"))
+        .collect();
+    format!(
+        "kinegen add-effect --spec {spec} --effect {effect} {} --out {model}_{effect}.toml",
+        args.join(" ")
+    )
 }
 
 /// The commands that add, in place of the chain's first effect, each one
@@ -251,17 +259,8 @@ fn say_alternatives(out: &Out, d: &Diagnosis, spec: &str, name: &str) {
         .iter()
         .filter_map(|e| d.candidates.iter().find(|c| &c.effect == e))
         .map(|c| {
-            let values: Vec<String> = c
-                .parameters
-                .iter()
-                .map(|(k, v)| format!("--value {k}={:.6}", v.estimate))
-                .collect();
-            format!(
-                "kinegen add-effect --spec {spec} --effect {} {} --out {name}_{}.toml",
-                c.effect,
-                values.join(" "),
-                c.effect
-            )
+            let values = c.parameters.iter().map(|(k, v)| (k.clone(), v.estimate));
+            add_effect_command(spec, &c.effect, &values.collect(), name)
         })
         .collect();
     if !alternatives.is_empty() {
