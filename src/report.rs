@@ -748,10 +748,11 @@ fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
     for c in &d.candidates {
         let folds = c.folds.map_or("not run".to_string(), |f| {
             format!(
-                "{:+.0}% (t {:.1}, needs {:.1})",
+                "{:+.0}% (t {:.1}, needs {:.1}{})",
                 -100.0 * f.gain,
                 f.t,
-                f.critical
+                f.critical,
+                f.too_small()
             )
         });
         t += &format!(

@@ -78,15 +78,31 @@ impl FoldTest {
     }
 }
 
+impl FoldTest {
+    /// Why a test that beats chance still does not hold, for people: empty
+    /// when it holds or does not beat chance.
+    pub fn too_small(&self) -> String {
+        if self.t > self.critical && self.gain <= MIN_GAIN {
+            format!(
+                "; consistent, but under the {:.0}% worth naming",
+                100.0 * MIN_GAIN
+            )
+        } else {
+            String::new()
+        }
+    }
+}
+
 impl std::fmt::Display for FoldTest {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "held out fold by fold: error {:+.1}% in {} folds (t = {:.1}, needs {:.1})",
+            "held out fold by fold: error {:+.1}% in {} folds (t = {:.1}, needs {:.1}{})",
             -100.0 * self.gain,
             self.folds,
             self.t,
-            self.critical
+            self.critical,
+            self.too_small()
         )
     }
 }
@@ -257,6 +273,7 @@ mod tests {
         assert!(!test.holds(), "{test:?}");
         // consistent but too small to matter
         let tiny: Vec<f64> = base.iter().map(|b| b * 0.995).collect();
-        assert!(!paired(&base, &tiny, 6).holds());
+        let test = paired(&base, &tiny, 6);
+        assert!(!test.holds() && !test.too_small().is_empty(), "{test:?}");
     }
 }
