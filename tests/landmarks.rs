@@ -18,6 +18,31 @@ fn write_map(dir: &Path, points: &[(f64, f64)]) -> PathBuf {
     path
 }
 
+/// `simulate --trajectory beacons` of `spec` touring the landmarks of `map`,
+/// its sightings written to `obs`, with `extra` simulate options; the log
+/// `name` in `dir`.
+fn beacon_tour(
+    dir: &Path,
+    name: &str,
+    spec: &str,
+    map: &Path,
+    obs: &Path,
+    extra: &[&str],
+) -> PathBuf {
+    let mut a = vec![
+        "--spec",
+        spec,
+        "--trajectory",
+        "beacons",
+        "--landmarks",
+        map.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+    ];
+    a.extend_from_slice(extra);
+    simulate(dir, name, &a)
+}
+
 /// A simulated diff-drive log with landmark observations; returns (log, obs, map).
 fn landmark_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     sighted_log(dir, "lm.csv", &["--set", "b=0.205", "--set", "r_l=0.0418"])
@@ -430,28 +455,10 @@ fn the_beacon_tour_visits_every_landmark_and_stops_at_the_last() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let lms = [(4.0, 3.0), (-3.0, 6.0), (-6.0, -2.0), (5.0, -5.0)];
-    let mut map = String::from("id,x,y\n");
-    for (i, (x, y)) in lms.iter().enumerate() {
-        map += &format!("B{i},{x},{y}\n");
-    }
-    let m = dir.join("map.csv");
-    std::fs::write(&m, map).unwrap();
+    let m = write_map(dir, &lms);
     for spec in ["spec/unicycle_ekf.toml", "spec/tricycle.toml"] {
         let obs = dir.join("obs.csv");
-        let log = simulate(
-            dir,
-            "tour.csv",
-            &[
-                "--spec",
-                spec,
-                "--trajectory",
-                "beacons",
-                "--landmarks",
-                m.to_str().unwrap(),
-                "--observations",
-                obs.to_str().unwrap(),
-            ],
-        );
+        let log = beacon_tour(dir, "tour.csv", spec, &m, &obs, &[]);
         let text = std::fs::read_to_string(&log).unwrap();
         let mut lines = text.lines();
         let head: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -506,24 +513,19 @@ fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
     let t = tmp.path();
     let map = root().join("data/seed001_beacons.csv");
     let obs = t.join("obs.csv");
-    let log = simulate(
+    let log = beacon_tour(
         t,
         "tour.csv",
+        "spec/unicycle_ekf.toml",
+        &map,
+        &obs,
         &[
-            "--spec",
-            "spec/unicycle_ekf.toml",
-            "--trajectory",
-            "beacons",
             "--speed",
             "5",
             "--landmark-hz",
             "1",
             "--landmark-range",
             "30",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
         ],
     );
     let report = t.join("report");
@@ -595,20 +597,9 @@ fn tour_with_range_errors(dir: &Path, points: &[(f64, f64)], extra: &[&str]) -> 
     let spec = "spec/unicycle_ekf.toml";
     let m = write_map(dir, points);
     let obs = dir.join("obs.csv");
-    let mut a = vec![
-        "--spec",
-        spec,
-        "--trajectory",
-        "beacons",
-        "--landmarks",
-        m.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmark-hz",
-        "2",
-    ];
+    let mut a = vec!["--landmark-hz", "2"];
     a.extend_from_slice(extra);
-    let log = simulate(dir, "run.csv", &a);
+    let log = beacon_tour(dir, "run.csv", spec, &m, &obs, &a);
     add_persistent_range_errors(&obs, RANGE_ERROR_PER_M, 3.0);
     localize_json(spec, &log, &obs, &m, &[])
 }
