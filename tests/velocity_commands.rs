@@ -662,6 +662,62 @@ fn a_late_command_is_named_and_calibrated() {
     );
 }
 
+/// A spec that already has the robot's input delay leaves only noise: the
+/// residuals diagnose searches for structure (and plots an effect's
+/// signature with) are those of the commands as the robot executed them.
+/// Before, they were the logged commands, and the right model of a robot
+/// 0.3 s late was reported with periodic heading residuals (74% of their
+/// variance) that its own delay explains.
+#[test]
+fn a_model_with_its_input_delay_leaves_no_structure() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let spec = commanded_spec(dir, "");
+    let s = spec.to_str().unwrap();
+    let args = [
+        "--spec",
+        s,
+        "--effect",
+        "input_delay=0.3",
+        "--trajectory",
+        "random",
+        "--seed",
+        "4",
+    ];
+    let log = simulate(dir, "late.csv", &args);
+    let delayed = dir.join("delayed.toml");
+    let o = kinegen(&[
+        "add-effect",
+        "--spec",
+        s,
+        "--effect",
+        "input_delay",
+        "--value",
+        "input_delay=0.3",
+        "--out",
+        delayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        delayed.to_str().unwrap(),
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        d["verdict"]["effects"],
+        serde_json::json!([]),
+        "{}",
+        d["verdict"]
+    );
+    assert_eq!(
+        d["verdict"]["unexplained_structure"], false,
+        "{}",
+        d["verdict"]["structure"]
+    );
+}
+
 /// Issue #34: localize estimates a declared input delay with the noise,
 /// from the sightings alone. A commanded robot simulated with a 0.3 s delay,
 /// its spec carrying `input_delay` at 0 (as add-effect adds it): the filter

@@ -216,6 +216,9 @@ fn one_step(
     let gyro = r.ir.observation_kernels(YawRate).map(|o| o.value);
     let tau = crate::timeline::delay(r, p);
     for run in runs {
+        // the inputs as the robot executed them (a late or lagging command)
+        let executed = crate::timeline::executed(r, p, run);
+        let run: &Run = &executed;
         let Some(g) = &run.gt else { continue };
         let twists: Vec<Vec<f64>> = (0..run.steps())
             .map(|k| r.eval(tw, &[&run.u[k], p]))
@@ -317,7 +320,13 @@ pub fn signature(
     let (r1, _, _) = one_step(&start, &moved, runs);
     let (rb, _, _) = one_step(base, pb, runs);
     let chans = ["along-track", "lateral", "heading", "gyro"];
-    let c = (0..4).max_by(|&a, &b| {
+    // only channels the logs measure: a log without a gyro has no gyro
+    // residual to plot, however large the effect's gyro signature
+    let measured = |c: &usize| match c {
+        3 => runs.iter().all(|r| r.gyro.is_some()),
+        _ => runs.iter().all(|r| r.gt.is_some()),
+    };
+    let c = (0..4).filter(measured).max_by(|&a, &b| {
         let e = |c: usize| {
             r0.iter()
                 .zip(&r1)
