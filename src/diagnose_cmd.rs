@@ -3,6 +3,7 @@ use crate::analysis_cmd::{bad, quiet, Common};
 use crate::output::Out;
 use kinegen_analysis::diagnose::Diagnosis;
 use kinegen_analysis::diagnose_job::{Hooks, Outcome};
+use kinegen_analysis::diagnosis::clock::ClockVerdict;
 use kinegen_analysis::files::Files;
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::request::{diagnose_files, Diagnosed, Request};
@@ -69,6 +70,12 @@ pub fn run(c: Common) -> ExitCode {
         d.calibrated_rmse, d.base_holdout_rmse
     ));
     out.say("  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)");
+    if let Some(clock) = &d.clock {
+        out.say(&format!(
+            "  timing: {clock}; a delay of the ground truth must lie within {:.3} s of {:+.3} s",
+            clock.resolution, clock.lag
+        ));
+    }
     say_candidates(&out, d);
     let apply_cmds = say_chain(&out, &c, r, &outcome);
     say_structure(&out, d);
@@ -94,6 +101,7 @@ pub fn run(c: Common) -> ExitCode {
         "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
         "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc_ratio <= DISCRETISATION_WARN},
         "warnings": prep.warnings,
+        "clock": d.clock,
         "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
     });
@@ -176,10 +184,19 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
                     "it fits them as well (likelihood ratio under {}, 5%{per})",
                     kinegen_analysis::diagnose::EQUIVALENT
                 );
+                // with sightings the motion capture's clock is measured
+                // already: what is left are rivals on the robot's side
+                let decides = match d.clock {
+                    Some(_) => "the landmark sightings time the ground truth, not the robot: a log of the speeds it executed or its documentation decides",
+                    None => "a log with another channel (a gyro, landmarks) or the robot's documentation decides",
+                };
                 out.say(&format!(
-                    "     these logs cannot tell it apart from {}: {how}; a log with another channel (a gyro, landmarks) or the robot's documentation decides",
+                    "     these logs cannot tell it apart from {}: {how}; {decides}",
                     others.join(" or "),
                 ));
+            }
+            if k == 0 {
+                say_clock_verdicts(out, d, &step.effect);
             }
             let vals: BTreeMap<String, f64> = step
                 .parameters
@@ -229,6 +246,26 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
     apply_cmds
 }
 
+/// What the landmark sightings said of the first round's candidates that
+/// change the ground truth's delay: the winner confirmed, rivals that fit
+/// the logs but need a ground truth later than the sightings allow.
+fn say_clock_verdicts(out: &Out, d: &Diagnosis, winner: &str) {
+    let Some(clock) = &d.clock else { return };
+    for c in &d.candidates {
+        match c.clock {
+            Some(ClockVerdict::Contradicted { delay }) => out.say(&format!(
+                "     ruled out by the landmark sightings: `{}` (error {:.4}, BIC gain {:.0}) needs the ground truth {delay:.3} s behind them; they put it at {:+.3} s (within {:.3})",
+                c.effect, c.rmse, c.bic_gain, clock.lag, clock.resolution
+            )),
+            Some(ClockVerdict::Confirmed { delay }) if c.effect == winner => out.say(&format!(
+                "     confirmed by the landmark sightings: they match the ground truth's pose {:+.3} s after their stamps (within {:.3}), as its {delay:.3} s needs: the ground truth is late, not the robot",
+                clock.lag, clock.resolution
+            )),
+            _ => {}
+        }
+    }
+}
+
 /// The `kinegen add-effect` command that adds `effect` at `values` to the
 /// spec `spec`, written as `{model}_{effect}.toml`.
 fn add_effect_command(
@@ -250,8 +287,9 @@ fn add_effect_command(
 /// The commands that add, in place of the chain's first effect, each one
 /// these logs cannot tell apart from it, at its own calibrated values: which
 /// one the robot has, its documentation or another log decides, and a user
-/// should not have to write the command out (on MRCLAM, `time_offset` wins
-/// by a hair, while `input_delay` is what `localize` can use).
+/// should not have to write the command out (on MRCLAM without its
+/// sightings, `time_offset` wins by a hair, while `input_delay` is what
+/// `localize` can use).
 fn say_alternatives(out: &Out, d: &Diagnosis, spec: &str, name: &str) {
     let Some(first) = d.chain.first() else { return };
     let alternatives: Vec<String> = first

@@ -1,5 +1,6 @@
 //! `--report DIR`: one self-contained HTML page (inline SVG figures drawn with
 //! plotters, no external files or scripts).
+use kinegen_analysis::diagnosis::clock::ClockVerdict;
 use kinegen_analysis::innovations::Innovation;
 use kinegen_analysis::log::wrap;
 use kinegen_analysis::metrics::regime;
@@ -763,14 +764,21 @@ fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
             c.bic_gain,
             c.holdout_rmse,
             folds,
-            match (c.significant, c.by_folds()) {
-                (true, true) => "yes (fold by fold)",
-                (true, false) => "yes",
+            match (c.significant, c.by_folds(), c.clock) {
+                (true, true, _) => "yes (fold by fold)",
+                (true, false, _) => "yes",
+                (false, _, Some(ClockVerdict::Contradicted { .. })) => {
+                    "no (the sightings contradict its delay)"
+                }
                 _ => "no",
             }
         );
     }
-    t += "</table><ul>";
+    t += "</table>";
+    if let Some(clock) = &d.clock {
+        t += &format!("<p>Timing: {}.</p>", esc(&clock.to_string()));
+    }
+    t += "<ul>";
     for c in &d.candidates {
         t += &format!("<li><b>{}</b>: {}</li>", esc(&c.effect), esc(&c.evidence));
     }

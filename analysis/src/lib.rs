@@ -96,6 +96,7 @@ pub mod estimation {
 
 /// Diagnosis: which physical effects the model is missing.
 pub mod diagnosis {
+    pub mod clock;
     pub mod diagnose;
     pub mod diagnose_job;
     pub mod folds;

@@ -10,6 +10,7 @@
 //! 4. Whiteness: regress the one-step prediction residuals of the best model on
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
+use super::clock::{ClockVerdict, SightingClock};
 use super::folds::{FoldTest, Folds};
 use crate::derivation::EffectChains;
 use crate::discretisation::Discretisation;
@@ -49,6 +50,12 @@ pub struct Candidate {
     /// The cross-validation over the log's segments, when it was run (a
     /// long log, and a candidate the other criteria leave unproven).
     pub folds: Option<FoldTest>,
+    /// What the landmark sightings say of the delay of the ground truth
+    /// behind the inputs that this candidate's calibration needs, when it
+    /// changes that delay (see [`super::clock`]). Contradicted: not
+    /// significant, however well it fits. Confirmed: it ranks before the
+    /// significant candidates the sightings do not confirm.
+    pub clock: Option<ClockVerdict>,
     pub doc: String,
     /// The calibration of the model with this effect on all runs, and on the
     /// training part: the next stage of the chain when the effect wins.
@@ -85,6 +92,9 @@ pub struct Diagnosis {
     /// discretisation error was estimated at.
     pub noise_floor: f64,
     pub skipped: Vec<(String, String)>,
+    /// How far the ground truth lags the landmark sightings, when the logs
+    /// have both (what tells a late motion capture from a late command).
+    pub clock: Option<SightingClock>,
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
     pub final_p: Vec<f64>,
@@ -750,9 +760,13 @@ fn ranked_equivalents(ranked: &[Candidate], w: &Candidate) -> Vec<String> {
         None => w.fit.n_residuals as f64,
     };
     let s2 = (w.rmse * w.rmse).max(1e-300);
+    // the sightings put the ground truth late by what the winner's delay is:
+    // a rival that leaves the ground truth on time does not explain that
+    let confirmed = w.confirmed_by_clock();
     ranked
         .iter()
         .filter(|c| c.effect != w.effect && c.significant)
+        .filter(|c| !confirmed || c.confirmed_by_clock())
         .filter(|c| n * (c.rmse * c.rmse - w.rmse * w.rmse).abs() / s2 < EQUIVALENT)
         .map(|c| c.effect.clone())
         .collect()
@@ -920,6 +934,7 @@ fn rank(
     train: &[Run],
     test: &[Run],
     folds: Option<&Folds>,
+    clock: Option<&SightingClock>,
     o: &FitOptions,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<Candidate> {
@@ -958,6 +973,7 @@ fn rank(
         strict,
         from_nominal: from_nominal && !at_floor,
         folds,
+        clock,
     };
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
@@ -971,12 +987,19 @@ fn rank(
     candidates.sort_by(|a, b| {
         b.significant
             .cmp(&a.significant)
+            .then(b.confirmed_by_clock().cmp(&a.confirmed_by_clock()))
             .then(b.bic_gain.total_cmp(&a.bic_gain))
     });
     candidates
 }
 
 impl Candidate {
+    /// Whether the sightings measure the ground truth's delay this
+    /// candidate needs (see [`ClockVerdict::Confirmed`]).
+    pub fn confirmed_by_clock(&self) -> bool {
+        matches!(self.clock, Some(ClockVerdict::Confirmed { .. }))
+    }
+
     /// Significant by the fold-by-fold test alone (see [`super::folds`]).
     pub fn by_folds(&self) -> bool {
         self.significant && self.folds.as_ref().is_some_and(FoldTest::holds)
@@ -997,6 +1020,8 @@ struct Ranking<'a> {
     from_nominal: bool,
     /// The log's segments in folds, when it is long enough for them.
     folds: Option<&'a Folds>,
+    /// The ground truth's lag behind the sightings, when the logs have both.
+    clock: Option<&'a SightingClock>,
 }
 
 impl Ranking<'_> {
@@ -1085,7 +1110,9 @@ impl Ranking<'_> {
         let folds = (!classic && may_hold(self.cur, rmse, gain, holdout_rmse))
             .then(|| self.fold_test(&tr_start, &f))
             .flatten();
-        let significant = classic || folds.is_some_and(|t| t.holds());
+        let clock = self.clock_verdict(&start, &f);
+        let contradicted = matches!(clock, Some(ClockVerdict::Contradicted { .. }));
+        let significant = (classic || folds.is_some_and(|t| t.holds())) && !contradicted;
         let parameters = estimates(&start, &effect_params, &f);
         let evidence = format!(
             "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}{}, noise floor {:.3}",
@@ -1097,7 +1124,14 @@ impl Ranking<'_> {
             holdout_rmse,
             folds.map_or(String::new(), |t| format!(", {t}")),
             self.cur.floor
-        );
+        ) + &self.clock.zip(clock).map_or(String::new(), |(c, v)| match v {
+            ClockVerdict::Contradicted { delay } => format!(
+                "; contradicted by the sightings: it needs the ground truth {delay:.3} s behind them, but {c}"
+            ),
+            ClockVerdict::Confirmed { delay } => {
+                format!("; confirmed by the sightings ({delay:.3} s): {c}")
+            }
+        });
         Some(Candidate {
             effect: name.to_string(),
             rmse,
@@ -1108,10 +1142,24 @@ impl Ranking<'_> {
             bic_gain: gain,
             holdout_rmse,
             folds,
+            clock,
             doc: doc.to_string(),
             fit: f,
             train_fit,
         })
+    }
+
+    /// What the sightings say of the ground truth's delay that candidate
+    /// `aug`, calibrated as `f`, needs. Only a candidate that adds a
+    /// measurement delay to the current model claims anything about the
+    /// ground truth's clock: the others leave it as the current model has it.
+    fn clock_verdict(&self, aug: &Runner, f: &FitResult) -> Option<ClockVerdict> {
+        let clock = self.clock?;
+        let adds_delay = aug.delay.is_some() && self.cur.runner.delay.is_none();
+        let before = crate::timeline::delay(&self.cur.runner, &self.cur.fit.p);
+        adds_delay
+            .then(|| clock.judge(before, crate::timeline::delay(aug, &f.p)))
+            .flatten()
     }
 
     /// The candidate `aug`, calibrated as `f` on all runs, against the current
@@ -1335,6 +1383,7 @@ pub fn diagnose(
     let folds = Folds::of(runs);
     let first = stage(base.clone(), runs, &train, &test, &o)?;
     progress("base model calibrated");
+    let clock = super::clock::measure(&first.runner, &first.fit.p, runs);
     let mut disc = step_error(&first, runs, &o);
     let first = Stage {
         step_error: disc.error,
@@ -1379,6 +1428,7 @@ pub fn diagnose(
             &train,
             &test,
             folds.as_ref(),
+            clock.as_ref(),
             &o,
             progress,
         );
@@ -1431,6 +1481,7 @@ pub fn diagnose(
         discretisation: disc,
         noise_floor,
         skipped,
+        clock,
         final_runner: cur.runner,
         final_p: cur.fit.p,
     })
