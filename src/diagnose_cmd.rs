@@ -76,6 +76,9 @@ pub fn run(c: Common) -> ExitCode {
             clock.resolution, clock.lag
         ));
     }
+    if let Some(why) = &d.clock_unmeasured {
+        out.say(&format!("  timing: {why}"));
+    }
     say_candidates(&out, d);
     let apply_cmds = say_chain(&out, &c, r, &outcome);
     say_structure(&out, d);
@@ -102,6 +105,7 @@ pub fn run(c: Common) -> ExitCode {
         "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc_ratio <= DISCRETISATION_WARN},
         "warnings": prep.warnings,
         "clock": d.clock,
+        "clock_unmeasured": d.clock_unmeasured,
         "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
     });

@@ -778,6 +778,9 @@ fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
     if let Some(clock) = &d.clock {
         t += &format!("<p>Timing: {}.</p>", esc(&clock.to_string()));
     }
+    if let Some(why) = &d.clock_unmeasured {
+        t += &format!("<p>Timing: {}.</p>", esc(&why.to_string()));
+    }
     t += "<ul>";
     for c in &d.candidates {
         t += &format!("<li><b>{}</b>: {}</li>", esc(&c.effect), esc(&c.evidence));

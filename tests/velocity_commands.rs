@@ -791,6 +791,31 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
             assert!(!time_offset["significant"].as_bool().unwrap());
         }
     }
+    // sightings stamped by a clock 3 s off line up with no shift tried:
+    // they time nothing, and diagnose says so rather than ruling
+    let text = std::fs::read_to_string(dir.join("obs_input_delay.csv")).unwrap();
+    let mut lines = text.lines();
+    let mut off = format!("{}\n", lines.next().unwrap());
+    for l in lines {
+        let (t, rest) = l.split_once(',').unwrap();
+        off += &format!("{},{rest}\n", t.parse::<f64>().unwrap() + 3.0);
+    }
+    let off_path = dir.join("obs_off.csv");
+    std::fs::write(&off_path, off).unwrap();
+    let log = dir.join("input_delay.csv");
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        s,
+        "--data",
+        log.to_str().unwrap(),
+        "--observations",
+        off_path.to_str().unwrap(),
+        "--landmarks",
+        m,
+    ]);
+    assert!(d["clock"].is_null(), "{}", d["clock"]);
+    assert_eq!(d["clock_unmeasured"]["reason"], "no_minimum", "{d}");
 }
 
 /// A spec that already has the robot's input delay leaves only noise: the

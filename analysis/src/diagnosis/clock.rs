@@ -108,10 +108,38 @@ impl std::fmt::Display for SightingClock {
     }
 }
 
+/// Why sightings beside a ground truth did not measure its lag.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "reason")]
+pub enum Unmeasured {
+    /// Fewer than [`MIN_PIECES`] pieces of the log hold sightings: too few
+    /// for a standard error.
+    TooShort { pieces: usize },
+    /// The best shift, on the whole log or without one of its pieces, lies at
+    /// the end of the range tried: the sightings do not line up with the
+    /// ground truth (another frame, another robot's sightings).
+    NoMinimum { sightings: usize },
+}
+
+impl std::fmt::Display for Unmeasured {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Unmeasured::TooShort { pieces } => write!(
+                f,
+                "the landmark sightings fill {pieces} minute(s) of the log; timing the ground truth by them needs {MIN_PIECES}"
+            ),
+            Unmeasured::NoMinimum { sightings } => write!(
+                f,
+                "the {sightings} landmark sightings line up best with the ground truth {REACH_S} s or more away from their stamps: not the same frame or not the same robot? They do not time the ground truth"
+            ),
+        }
+    }
+}
+
 /// Measure the ground truth's lag behind the sightings of `runs`, predicted
 /// through `r`'s landmark observation with parameters `p`. None: no run has
-/// both, the spec has no landmark observation, or the log is too short.
-pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<SightingClock> {
+/// both, or the spec has no landmark observation.
+pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<Result<SightingClock, Unmeasured>> {
     r.ir.observation_kernels(RangeBearing)?;
     let shifts: Vec<f64> = {
         let n = (REACH_S / STEP_S).round() as i64;
@@ -124,9 +152,17 @@ pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<SightingClock> {
         let set: std::collections::BTreeSet<usize> = piece_of.iter().copied().collect();
         set.into_iter().collect()
     };
-    if occupied.len() < MIN_PIECES {
+    if usable.is_empty() {
         return None;
     }
+    if occupied.len() < MIN_PIECES {
+        return Some(Err(Unmeasured::TooShort {
+            pieces: occupied.len(),
+        }));
+    }
+    let no_minimum = Unmeasured::NoMinimum {
+        sightings: usable.len(),
+    };
     // Each channel in units of its robust spread: first at no shift, then
     // again at the shift found (a ground truth 0.3 s late spreads the
     // bearings at no shift eight times wider than the camera's noise).
@@ -136,27 +172,33 @@ pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<SightingClock> {
         let at = nearest(&shifts, lag);
         let scale = [0, 1].map(|c| robust_sigma(residuals[at].iter().map(|e| e[c])));
         if scale.iter().any(|s| s.is_nan() || *s <= 0.0) {
-            return None;
+            return Some(Err(no_minimum));
         }
         cost = piece_costs(&residuals, &piece_of, pieces, scale);
-        lag = minimum_without(&shifts, &cost, None);
+        let Some(found) = minimum_without(&shifts, &cost, None) else {
+            return Some(Err(no_minimum));
+        };
+        lag = found;
     }
     // jackknife over the pieces
-    let drop_one: Vec<f64> = occupied
+    let Some(drop_one) = occupied
         .iter()
         .map(|&k| minimum_without(&shifts, &cost, Some(k)))
-        .collect();
+        .collect::<Option<Vec<f64>>>()
+    else {
+        return Some(Err(no_minimum));
+    };
     let m = drop_one.len() as f64;
     let mean = drop_one.iter().sum::<f64>() / m;
     let std = ((m - 1.0) / m * drop_one.iter().map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt();
     let row_interval = median(runs.iter().flat_map(|r| r.dt.iter().copied()).collect());
-    Some(SightingClock {
+    Some(Ok(SightingClock {
         lag,
         std,
         pieces: occupied.len(),
         sightings: usable.len(),
         resolution: (two_sided_critical(occupied.len() - 1) * std).max(row_interval),
-    })
+    }))
 }
 
 /// The sightings every shift can be tried on, as (run, sighting, piece of
@@ -234,8 +276,9 @@ fn piece_costs(
         .collect()
 }
 
-/// The shift that minimises the cost of every piece but `skip`.
-fn minimum_without(shifts: &[f64], cost: &[Vec<f64>], skip: Option<usize>) -> f64 {
+/// The shift that minimises the cost of every piece but `skip` (None: at an
+/// end of the range).
+fn minimum_without(shifts: &[f64], cost: &[Vec<f64>], skip: Option<usize>) -> Option<f64> {
     let total: Vec<f64> = cost
         .iter()
         .map(|row| row.iter().sum::<f64>() - skip.map_or(0.0, |k| row[k]))
@@ -277,13 +320,12 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// The minimum of `cost` over `shifts`, refined by the parabola through the
-/// grid's best point and its neighbours.
-fn refined_minimum(shifts: &[f64], cost: &[f64]) -> f64 {
-    let k = (0..cost.len())
-        .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
-        .unwrap_or(0);
+/// grid's best point and its neighbours; None when the best point is an end
+/// of the grid (the minimum, if any, lies beyond it).
+fn refined_minimum(shifts: &[f64], cost: &[f64]) -> Option<f64> {
+    let k = (0..cost.len()).min_by(|&a, &b| cost[a].total_cmp(&cost[b]))?;
     if k == 0 || k + 1 == cost.len() {
-        return shifts[k];
+        return None;
     }
     let (a, b, c) = (cost[k - 1], cost[k], cost[k + 1]);
     let curvature = a - 2.0 * b + c;
@@ -292,7 +334,7 @@ fn refined_minimum(shifts: &[f64], cost: &[f64]) -> f64 {
     } else {
         0.0
     };
-    shifts[k] + offset.clamp(-0.5, 0.5) * (shifts[k + 1] - shifts[k])
+    Some(shifts[k] + offset.clamp(-0.5, 0.5) * (shifts[k + 1] - shifts[k]))
 }
 
 /// The two-sided critical value of Student's t at [`LEVEL`] for `dof`
@@ -313,7 +355,10 @@ mod tests {
     fn the_minimum_is_refined_between_grid_points() {
         let shifts: Vec<f64> = (0..11).map(|k| k as f64 * 0.1).collect();
         let cost: Vec<f64> = shifts.iter().map(|s| (s - 0.43).powi(2)).collect();
-        assert!((refined_minimum(&shifts, &cost) - 0.43).abs() < 1e-9);
+        assert!((refined_minimum(&shifts, &cost).unwrap() - 0.43).abs() < 1e-9);
+        // a cost still falling at the end has no minimum in the range
+        let falling: Vec<f64> = shifts.iter().map(|s| -s).collect();
+        assert_eq!(refined_minimum(&shifts, &falling), None);
     }
 
     #[test]

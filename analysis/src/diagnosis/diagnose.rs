@@ -10,7 +10,7 @@
 //! 4. Whiteness: regress the one-step prediction residuals of the best model on
 //!    motion features; structure that motion explains means something is still
 //!    missing, and the channel and feature say where.
-use super::clock::{ClockVerdict, SightingClock};
+use super::clock::{ClockVerdict, SightingClock, Unmeasured};
 use super::folds::{FoldTest, Folds};
 use crate::derivation::EffectChains;
 use crate::discretisation::Discretisation;
@@ -95,6 +95,8 @@ pub struct Diagnosis {
     /// How far the ground truth lags the landmark sightings, when the logs
     /// have both (what tells a late motion capture from a late command).
     pub clock: Option<SightingClock>,
+    /// Why the logs' sightings and ground truth did not measure it.
+    pub clock_unmeasured: Option<Unmeasured>,
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
     pub final_p: Vec<f64>,
@@ -1383,7 +1385,11 @@ pub fn diagnose(
     let folds = Folds::of(runs);
     let first = stage(base.clone(), runs, &train, &test, &o)?;
     progress("base model calibrated");
-    let clock = super::clock::measure(&first.runner, &first.fit.p, runs);
+    let (clock, clock_unmeasured) = match super::clock::measure(&first.runner, &first.fit.p, runs) {
+        Some(Ok(c)) => (Some(c), None),
+        Some(Err(why)) => (None, Some(why)),
+        None => (None, None),
+    };
     let mut disc = step_error(&first, runs, &o);
     let first = Stage {
         step_error: disc.error,
@@ -1482,6 +1488,7 @@ pub fn diagnose(
         noise_floor,
         skipped,
         clock,
+        clock_unmeasured,
         final_runner: cur.runner,
         final_p: cur.fit.p,
     })
