@@ -126,7 +126,7 @@ enum Command {
     /// rank them, say which effect is missing (or that none is, or that unexplained
     /// structure remains) and print the spec change that adds the winner.
     ///
-    /// Example: kinegen diagnose --spec spec/diff_drive.toml --data data/hidden_effect.csv --report report
+    /// Example: kinegen diagnose --spec spec/diff_drive.toml --data data/mystery_robot.csv --report report
     Diagnose(analysis_cmd::Common),
     /// Synthetic logs in the real-log format, optionally with hidden effects.
     ///

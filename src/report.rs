@@ -679,14 +679,14 @@ pub fn diagnose_report(
             let (lo, hi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, p| {
                 (m.0.min(p.0), m.1.max(p.0))
             });
-            let line = vec![(lo, lo * est), (hi, hi * est)];
+            let line = vec![(lo, lo), (hi, hi)];
             figs.push(chart(
                 &format!("signature of {name}: {chan} one-step residual of the calibrated spec"),
-                &format!("change of the prediction per unit {param}"),
+                &format!("change of the prediction by {param} = {est:.4}"),
                 "residual",
                 &[
                     ("calibrated spec, per step", RED, pts),
-                    (&format!("slope = fitted {param}"), GREEN, line),
+                    ("residual = change (the effect explains it)", GREEN, line),
                 ],
                 true,
                 false,

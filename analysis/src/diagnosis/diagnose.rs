@@ -311,23 +311,32 @@ fn motion_around(twists: &[Vec<f64>], k: usize) -> [f64; 3] {
 /// A residual signature: its channel and the (change per unit, residual) points.
 pub type Signature = (String, Vec<(f64, f64)>);
 
-/// The effect's residual signature, for plotting: per step, x = how much one unit
-/// of the effect parameter changes the one-step prediction and y = the calibrated
-/// base model's one-step residual, in the channel where the signature is largest.
-/// For the missing effect the points line up along y = x * parameter.
+/// The effect's residual signature, for plotting: per step, x = how much the
+/// effect parameter at `value` (from the spec's nominal) changes the one-step
+/// prediction and y = the calibrated base model's one-step residual, in the
+/// channel where the change is largest. For the missing effect the points
+/// line up along y = x.
+///
+/// The change is taken at the fitted value, not per unit at nominal: a
+/// delay of 0.28 s moves a command by some twenty rows of a 65 Hz log,
+/// where its derivative at zero sees one row (its points then lay along a
+/// slope of one step's duration, far from the fitted delay's).
 pub fn signature(
     base: &Runner,
     pb: &[f64],
     aug: &Runner,
     runs: &[Run],
     param: &str,
+    value: f64,
 ) -> Option<Signature> {
     let i = aug.param_index(param)?;
     let start = seeded(aug, base, pb);
-    // one unit of the effect parameter, from zero (Runner::param_scale)
-    let h = aug.param_scale(i, 0.0);
     let mut moved = start.p.clone();
-    moved[i] += h;
+    moved[i] = value;
+    let h = value - start.p[i];
+    if h == 0.0 {
+        return None;
+    }
     let (r0, _, _) = one_step(&start, &start.p, runs);
     let (r1, _, _) = one_step(&start, &moved, runs);
     let (rb, _, _) = one_step(base, pb, runs);
@@ -342,7 +351,7 @@ pub fn signature(
         let e = |c: usize| {
             r0.iter()
                 .zip(&r1)
-                .map(|(x, y)| ((x[c] - y[c]) / h).powi(2))
+                .map(|(x, y)| (x[c] - y[c]).powi(2))
                 .sum::<f64>()
         };
         e(a).total_cmp(&e(b))
@@ -351,7 +360,7 @@ pub fn signature(
         .iter()
         .zip(&r1)
         .zip(&rb)
-        .map(|((x0, x1), b)| (-(x1[c] - x0[c]) / h, b[c]))
+        .map(|((x0, x1), b)| (x0[c] - x1[c], b[c]))
         .collect();
     Some((chans[c].to_string(), pts))
 }

@@ -183,6 +183,7 @@ fn first_signature(job: &Job, d: &Diagnosis) -> Option<FirstSignature> {
                 &aug,
                 std::slice::from_ref(run),
                 parameter,
+                est.estimate,
             )
         })
         .collect();
