@@ -793,7 +793,8 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
     }
     // sightings stamped by a clock 3 s off line up with no shift tried:
     // they time nothing, and diagnose says so rather than ruling
-    let text = std::fs::read_to_string(dir.join("obs_input_delay.csv")).unwrap();
+    let o_delay = dir.join("obs_input_delay.csv");
+    let text = std::fs::read_to_string(&o_delay).unwrap();
     let mut lines = text.lines();
     let mut off = format!("{}\n", lines.next().unwrap());
     for l in lines {
@@ -816,6 +817,30 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
     ]);
     assert!(d["clock"].is_null(), "{}", d["clock"]);
     assert_eq!(d["clock_unmeasured"]["reason"], "no_minimum", "{d}");
+    // without motion capture the sightings are all diagnose has: each
+    // candidate's evidence names the sighting channel its signature is in
+    let text = std::fs::read_to_string(&log).unwrap();
+    let commands_only: String = text
+        .lines()
+        .map(|l| l.split(',').take(3).collect::<Vec<_>>().join(",") + "\n")
+        .collect();
+    let blind = dir.join("commands_only.csv");
+    std::fs::write(&blind, commands_only).unwrap();
+    let d = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        s,
+        "--data",
+        blind.to_str().unwrap(),
+        "--observations",
+        o_delay.to_str().unwrap(),
+        "--landmarks",
+        m,
+    ]);
+    for c in d["candidates"].as_array().unwrap() {
+        let evidence = c["evidence"].as_str().unwrap();
+        assert!(evidence.contains("mostly in landmark"), "{evidence}");
+    }
 }
 
 /// A spec that already has the robot's input delay leaves only noise: the

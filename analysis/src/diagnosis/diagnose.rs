@@ -19,7 +19,7 @@ use crate::interp::lerp_rows;
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::run::Run;
-use kinegen_model::decl::ObservationRole::{Pose, YawRate};
+use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use kinegen_model::ir::StepForm;
 use kinegen_model::kernel::ArgRole;
 use nalgebra::DVector;
@@ -144,12 +144,20 @@ fn seeded(aug: &Runner, base: &Runner, p: &[f64]) -> Runner {
     a
 }
 
+/// The channel of each residual of `runs`, in the order fit's residuals
+/// come (per run: pose, landmark sightings, gyro).
 fn channel_names(r: &Runner, runs: &[Run], o: &FitOptions) -> Vec<&'static str> {
     let mut v = Vec::new();
+    let sees = r.ir.observation_kernels(RangeBearing).is_some();
     for run in runs {
         if o.use_pose && run.gt.is_some() {
             for _ in 1..run.t.len() {
                 v.extend(["x position", "y position", "heading"]);
+            }
+        }
+        if o.use_landmarks && sees {
+            for _ in &run.landmarks {
+                v.extend(["landmark range", "landmark bearing"]);
             }
         }
         if o.use_gyro
