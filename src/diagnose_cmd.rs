@@ -79,6 +79,16 @@ pub fn run(c: Common) -> ExitCode {
     if let Some(why) = &d.clock_unmeasured {
         out.say(&format!("  timing: {why}"));
     }
+    let spec_delay = r.delay.map(|i| r.names[i].as_str()).unwrap_or_default();
+    match d.spec_clock {
+        Some(ClockVerdict::Contradicted { delay }) => out.say(&format!(
+            "  timing: the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, which the sightings contradict: the ground truth is not that late; a late command (input_delay) or a lag (command_lag) may be what it stands in for"
+        )),
+        Some(ClockVerdict::Confirmed { delay }) => out.say(&format!(
+            "  timing: the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, as the sightings measure"
+        )),
+        None => {}
+    }
     say_candidates(&out, d);
     let apply_cmds = say_chain(&out, &c, r, &outcome);
     say_structure(&out, d);
@@ -106,6 +116,7 @@ pub fn run(c: Common) -> ExitCode {
         "warnings": prep.warnings,
         "clock": d.clock,
         "clock_unmeasured": d.clock_unmeasured,
+        "spec_clock": d.spec_clock,
         "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
     });

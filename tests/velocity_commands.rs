@@ -791,6 +791,44 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
             assert!(!time_offset["significant"].as_bool().unwrap());
         }
     }
+    // a spec that already declares a measurement delay hears what the
+    // sightings say of its calibrated value
+    let with_offset = dir.join("with_offset.toml");
+    let o = kinegen(&[
+        "add-effect",
+        "--spec",
+        s,
+        "--effect",
+        "time_offset",
+        "--out",
+        with_offset.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for (effect, verdict) in [
+        ("input_delay", "contradicted"),
+        ("time_offset", "confirmed"),
+    ] {
+        let (log, obs) = (
+            dir.join(format!("{effect}.csv")),
+            dir.join(format!("obs_{effect}.csv")),
+        );
+        let d = kinegen_json(&[
+            "diagnose",
+            "--spec",
+            with_offset.to_str().unwrap(),
+            "--data",
+            log.to_str().unwrap(),
+            "--observations",
+            obs.to_str().unwrap(),
+            "--landmarks",
+            m,
+        ]);
+        assert_eq!(
+            d["spec_clock"]["verdict"], verdict,
+            "{effect}: {}",
+            d["spec_clock"]
+        );
+    }
     // sightings stamped by a clock 3 s off line up with no shift tried:
     // they time nothing, and diagnose says so rather than ruling
     let o_delay = dir.join("obs_input_delay.csv");

@@ -97,6 +97,9 @@ pub struct Diagnosis {
     pub clock: Option<SightingClock>,
     /// Why the logs' sightings and ground truth did not measure it.
     pub clock_unmeasured: Option<Unmeasured>,
+    /// What the sightings say of the measurement delay the spec itself
+    /// declares, as calibrated (None: it declares none, or no clock).
+    pub spec_clock: Option<ClockVerdict>,
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
     pub final_p: Vec<f64>,
@@ -1407,6 +1410,9 @@ pub fn diagnose(
         Some(Err(why)) => (None, Some(why)),
         None => (None, None),
     };
+    let spec_clock = clock
+        .zip(first.runner.delay)
+        .and_then(|(c, _)| c.judge(0.0, crate::timeline::delay(&first.runner, &first.fit.p)));
     let mut disc = step_error(&first, runs, &o);
     let first = Stage {
         step_error: disc.error,
@@ -1506,6 +1512,7 @@ pub fn diagnose(
         skipped,
         clock,
         clock_unmeasured,
+        spec_clock,
         final_runner: cur.runner,
         final_p: cur.fit.p,
     })
