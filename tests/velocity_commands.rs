@@ -519,22 +519,12 @@ fn real_velocity_commanded_robots_localize_and_calibrate_as_logged() {
         assert!(k_v < 1.0 && k_v > 0.8, "robot{robot}: k_v {k_v}");
     }
     let d = real.join("robot1");
-    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    let (log, obs, map) = (p("log.csv"), p("observations.csv"), p("landmarks.csv"));
-    let diag = run_in(
-        dir,
-        &[
-            "diagnose",
-            "--spec",
-            s,
-            "--data",
-            &log,
-            "--observations",
-            &obs,
-            "--landmarks",
-            &map,
-        ],
+    let (log, obs, map) = (
+        d.join("log.csv"),
+        d.join("observations.csv"),
+        d.join("landmarks.csv"),
     );
+    let diag = diagnose_seen(&spec, &log, &obs, &map);
     assert!(diag["verdict"].is_object(), "{diag}");
     // the motion follows the commands some tenths of a second late (the
     // dataset's README: the commands lead the motion): random drift
@@ -721,6 +711,34 @@ fn landmarks_along(log: &Path, map: &Path) {
     std::fs::write(map, text).unwrap();
 }
 
+/// `diagnose` of `log` with its landmark sightings `obs` of the map `map`.
+fn diagnose_seen(spec: &Path, log: &Path, obs: &Path, map: &Path) -> serde_json::Value {
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    kinegen_json(&[
+        "diagnose",
+        "--spec",
+        &path(spec),
+        "--data",
+        &path(log),
+        "--observations",
+        &path(obs),
+        "--landmarks",
+        &path(map),
+    ])
+}
+
+/// Write `from`'s lines to `to`, each (its index, 0 the header, and text)
+/// through `line`.
+fn rewrite_lines(from: &Path, to: &Path, line: impl Fn(usize, &str) -> String) {
+    let text = std::fs::read_to_string(from).unwrap();
+    let out: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| line(i, l) + "\n")
+        .collect();
+    std::fs::write(to, out).unwrap();
+}
+
 /// Issue #34: which clock is late. A late command and a late motion capture
 /// move a pose-only log alike, but landmark sightings, stamped on the
 /// robot's clock as its commands are, see the ground truth's pose at their
@@ -729,7 +747,9 @@ fn landmarks_along(log: &Path, map: &Path) {
 /// and rules `time_offset` out (on a pose-only log it outscores the late
 /// command by BIC); simulated with its motion capture 0.3 s late instead:
 /// `time_offset` is named, confirmed by the sightings, with no late command
-/// offered in its place.
+/// offered in its place. A spec that declares the delay itself hears the
+/// same of its calibrated value; sightings stamped 3 s off time nothing;
+/// without the ground truth, the evidence names the sightings' channels.
 #[test]
 fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
     let tmp = tempfile::tempdir().unwrap();
@@ -741,25 +761,20 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
     let map = dir.join("map.csv");
     landmarks_along(&track, &map);
     let m = map.to_str().unwrap();
+    let files = |effect: &str| {
+        (
+            dir.join(format!("{effect}.csv")),
+            dir.join(format!("obs_{effect}.csv")),
+        )
+    };
     for (effect, late_clock) in [("input_delay", false), ("time_offset", true)] {
-        let obs = dir.join(format!("obs_{effect}.csv"));
-        let o = obs.to_str().unwrap();
+        let (log, obs) = files(effect);
         let hidden = format!("{effect}=0.3");
+        let o = obs.to_str().unwrap();
         let sightings = ["--landmarks", m, "--landmark-hz", "1", "--observations", o];
         let args = [&["--spec", s, "--effect", &hidden][..], &trip, &sightings].concat();
-        let log = simulate(dir, &format!("{effect}.csv"), &args);
-        let l = log.to_str().unwrap();
-        let d = kinegen_json(&[
-            "diagnose",
-            "--spec",
-            s,
-            "--data",
-            l,
-            "--observations",
-            o,
-            "--landmarks",
-            m,
-        ]);
+        simulate(dir, log.file_name().unwrap().to_str().unwrap(), &args);
+        let d = diagnose_seen(&spec, &log, &obs, &map);
         let lag = d["clock"]["lag"].as_f64().unwrap();
         let expected = if late_clock { 0.3 } else { 0.0 };
         assert!((lag - expected).abs() < 0.02, "{effect}: {}", d["clock"]);
@@ -770,111 +785,59 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
             .iter()
             .find(|c| c["effect"] == "time_offset")
             .unwrap();
+        let ruling = &time_offset["clock"]["verdict"];
         if late_clock {
             assert_eq!(first["effect"], "time_offset", "{}", d["verdict"]);
-            assert_eq!(
-                time_offset["clock"]["verdict"], "confirmed",
-                "{time_offset}"
-            );
+            assert_eq!(ruling, "confirmed", "{time_offset}");
             assert_eq!(first["equivalent"], serde_json::json!([]), "{first}");
         } else {
             let named = first["effect"].as_str().unwrap();
-            assert!(
-                ["input_delay", "command_lag"].contains(&named),
-                "{}",
-                d["verdict"]
-            );
-            assert_eq!(
-                time_offset["clock"]["verdict"], "contradicted",
-                "{time_offset}"
-            );
+            let late_command = ["input_delay", "command_lag"].contains(&named);
+            assert!(late_command, "{}", d["verdict"]);
+            assert_eq!(ruling, "contradicted", "{time_offset}");
             assert!(!time_offset["significant"].as_bool().unwrap());
         }
     }
     // a spec that already declares a measurement delay hears what the
     // sightings say of its calibrated value
     let with_offset = dir.join("with_offset.toml");
-    let o = kinegen(&[
+    let args = [
         "add-effect",
         "--spec",
         s,
         "--effect",
         "time_offset",
         "--out",
-        with_offset.to_str().unwrap(),
-    ]);
+    ];
+    let o = kinegen(&[&args[..], &[with_offset.to_str().unwrap()]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     for (effect, verdict) in [
         ("input_delay", "contradicted"),
         ("time_offset", "confirmed"),
     ] {
-        let (log, obs) = (
-            dir.join(format!("{effect}.csv")),
-            dir.join(format!("obs_{effect}.csv")),
-        );
-        let d = kinegen_json(&[
-            "diagnose",
-            "--spec",
-            with_offset.to_str().unwrap(),
-            "--data",
-            log.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-            "--landmarks",
-            m,
-        ]);
-        assert_eq!(
-            d["spec_clock"]["verdict"], verdict,
-            "{effect}: {}",
-            d["spec_clock"]
-        );
+        let (log, obs) = files(effect);
+        let d = diagnose_seen(&with_offset, &log, &obs, &map);
+        let said = &d["spec_clock"];
+        assert_eq!(said["verdict"], verdict, "{effect}: {said}");
     }
     // sightings stamped by a clock 3 s off line up with no shift tried:
     // they time nothing, and diagnose says so rather than ruling
-    let o_delay = dir.join("obs_input_delay.csv");
-    let text = std::fs::read_to_string(&o_delay).unwrap();
-    let mut lines = text.lines();
-    let mut off = format!("{}\n", lines.next().unwrap());
-    for l in lines {
-        let (t, rest) = l.split_once(',').unwrap();
-        off += &format!("{},{rest}\n", t.parse::<f64>().unwrap() + 3.0);
-    }
-    let off_path = dir.join("obs_off.csv");
-    std::fs::write(&off_path, off).unwrap();
-    let log = dir.join("input_delay.csv");
-    let d = kinegen_json(&[
-        "diagnose",
-        "--spec",
-        s,
-        "--data",
-        log.to_str().unwrap(),
-        "--observations",
-        off_path.to_str().unwrap(),
-        "--landmarks",
-        m,
-    ]);
+    let (log, obs) = files("input_delay");
+    let off = dir.join("obs_off.csv");
+    rewrite_lines(&obs, &off, |i, l| match (i, l.split_once(',')) {
+        (0, _) | (_, None) => l.to_string(),
+        (_, Some((t, rest))) => format!("{},{rest}", t.parse::<f64>().unwrap() + 3.0),
+    });
+    let d = diagnose_seen(&spec, &log, &off, &map);
     assert!(d["clock"].is_null(), "{}", d["clock"]);
     assert_eq!(d["clock_unmeasured"]["reason"], "no_minimum", "{d}");
     // without motion capture the sightings are all diagnose has: each
     // candidate's evidence names the sighting channel its signature is in
-    let text = std::fs::read_to_string(&log).unwrap();
-    let commands_only: String = text
-        .lines()
-        .map(|l| l.split(',').take(3).collect::<Vec<_>>().join(",") + "\n")
-        .collect();
     let blind = dir.join("commands_only.csv");
-    std::fs::write(&blind, commands_only).unwrap();
-    let d = kinegen_json(&[
-        "diagnose",
-        "--spec",
-        s,
-        "--data",
-        blind.to_str().unwrap(),
-        "--observations",
-        o_delay.to_str().unwrap(),
-        "--landmarks",
-        m,
-    ]);
+    rewrite_lines(&log, &blind, |_, l| {
+        l.split(',').take(3).collect::<Vec<_>>().join(",")
+    });
+    let d = diagnose_seen(&spec, &blind, &obs, &map);
     for c in d["candidates"].as_array().unwrap() {
         let evidence = c["evidence"].as_str().unwrap();
         assert!(evidence.contains("mostly in landmark"), "{evidence}");
