@@ -72,8 +72,9 @@ pub fn run(c: Common) -> ExitCode {
     out.say("  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)");
     if let Some(clock) = &d.clock {
         out.say(&format!(
-            "  timing: {clock}; a delay of the ground truth must lie within {:.3} s of {:+.3} s",
-            clock.resolution, clock.lag
+            "  timing: {clock}; a delay of the ground truth must lie within {:.3} s of {} s",
+            clock.resolution,
+            signed_ms(clock.lag)
         ));
     }
     if let Some(why) = &d.clock_unmeasured {
@@ -269,16 +270,21 @@ fn say_clock_verdicts(out: &Out, d: &Diagnosis, winner: &str) {
     for c in &d.candidates {
         match c.clock {
             Some(ClockVerdict::Contradicted { delay }) => out.say(&format!(
-                "     ruled out by the landmark sightings: `{}` (error {:.4}, BIC gain {:.0}) needs the ground truth {delay:.3} s behind them; they put it at {:+.3} s (within {:.3})",
-                c.effect, c.rmse, c.bic_gain, clock.lag, clock.resolution
+                "     ruled out by the landmark sightings: `{}` (error {:.4}, BIC gain {:.0}) needs the ground truth {delay:.3} s behind them; they put it at {} s (within {:.3})",
+                c.effect, c.rmse, c.bic_gain, signed_ms(clock.lag), clock.resolution
             )),
             Some(ClockVerdict::Confirmed { delay }) if c.effect == winner => out.say(&format!(
-                "     confirmed by the landmark sightings: they match the ground truth's pose {:+.3} s after their stamps (within {:.3}), as its {delay:.3} s needs: the ground truth is late, not the robot",
-                clock.lag, clock.resolution
+                "     confirmed by the landmark sightings: they match the ground truth's pose {} s after their stamps (within {:.3}), as its {delay:.3} s needs: the ground truth is late, not the robot",
+                signed_ms(clock.lag), clock.resolution
             )),
             _ => {}
         }
     }
+}
+
+/// Seconds to the millisecond with their sign, a rounded -0 as +0.000.
+fn signed_ms(s: f64) -> String {
+    format!("{:+.3}", (s * 1e3).round() / 1e3 + 0.0)
 }
 
 /// The `kinegen add-effect` command that adds `effect` at `values` to the

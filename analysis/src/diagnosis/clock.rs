@@ -95,15 +95,16 @@ pub enum ClockVerdict {
 
 impl std::fmt::Display for SightingClock {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // (a lag under half a millisecond reads as none: "-0.000 s before")
+        let when = match self.lag {
+            l if l.abs() < 5e-4 => "at".to_string(),
+            l if l < 0.0 => format!("{:.3} s before", -l),
+            l => format!("{l:.3} s after"),
+        };
         write!(
             f,
-            "the {} landmark sightings match the ground truth's pose {:.3} s {} their own stamps (std {:.3} s over {} pieces of the log; resolves {:.3} s)",
-            self.sightings,
-            self.lag.abs(),
-            if self.lag < 0.0 { "before" } else { "after" },
-            self.std,
-            self.pieces,
-            self.resolution
+            "the {} landmark sightings match the ground truth's pose {when} their own stamps (std {:.3} s over {} pieces of the log; resolves {:.3} s)",
+            self.sightings, self.std, self.pieces, self.resolution
         )
     }
 }
