@@ -70,26 +70,7 @@ pub fn run(c: Common) -> ExitCode {
         d.calibrated_rmse, d.base_holdout_rmse
     ));
     out.say("  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)");
-    if let Some(clock) = &d.clock {
-        out.say(&format!(
-            "  timing: {clock}; a delay of the ground truth must lie within {:.3} s of {} s",
-            clock.resolution,
-            signed_ms(clock.lag)
-        ));
-    }
-    if let Some(why) = &d.clock_unmeasured {
-        out.say(&format!("  timing: {why}"));
-    }
-    let spec_delay = r.delay.map(|i| r.names[i].as_str()).unwrap_or_default();
-    match d.spec_clock {
-        Some(ClockVerdict::Contradicted { delay }) => out.say(&format!(
-            "  timing: the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, which the sightings contradict: the ground truth is not that late; a late command (input_delay) or a lag (command_lag) may be what it stands in for"
-        )),
-        Some(ClockVerdict::Confirmed { delay }) => out.say(&format!(
-            "  timing: the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, as the sightings measure"
-        )),
-        None => {}
-    }
+    say_timing(&out, d, r);
     say_candidates(&out, d);
     let apply_cmds = say_chain(&out, &c, r, &outcome);
     say_structure(&out, d);
@@ -135,6 +116,31 @@ pub fn run(c: Common) -> ExitCode {
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
     out.finish(c.json.as_deref(), &doc)
+}
+
+/// What the landmark sightings said of the ground truth's clock, and of the
+/// spec's own measurement delay.
+fn say_timing(out: &Out, d: &Diagnosis, r: &Runner) {
+    if let Some(clock) = &d.clock {
+        out.say(&format!(
+            "  timing: {clock}; a delay of the ground truth must lie within {:.3} s of {} s",
+            clock.resolution,
+            signed_ms(clock.lag)
+        ));
+    }
+    if let Some(why) = &d.clock_unmeasured {
+        out.say(&format!("  timing: {why}"));
+    }
+    let spec_delay = r.delay.map(|i| r.names[i].as_str()).unwrap_or_default();
+    match d.spec_clock {
+        Some(ClockVerdict::Contradicted { delay }) => out.say(&format!(
+            "  timing: the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, which the sightings contradict: the ground truth is not that late; a late command (input_delay) or a lag (command_lag) may be what it stands in for"
+        )),
+        Some(ClockVerdict::Confirmed { delay }) => out.say(&format!(
+            "  timing: the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, as the sightings measure"
+        )),
+        None => {}
+    }
 }
 
 /// The candidates on the spec as it is, most likely first, and those not tested.

@@ -319,7 +319,8 @@ fn motion_around(twists: &[Vec<f64>], k: usize) -> [f64; 3] {
     m
 }
 
-/// A residual signature: its channel and the (change per unit, residual) points.
+/// A residual signature: its channel and the (change of the prediction by
+/// the effect, residual) points.
 pub type Signature = (String, Vec<(f64, f64)>);
 
 /// The effect's residual signature, for plotting: per step, x = how much the
@@ -1379,6 +1380,28 @@ pub const MIN_ROWS: usize = 20;
 /// are not told apart reliably by a log of ordinary length.
 pub const MAX_CHAIN: usize = 3;
 
+/// The sightings' clock on `runs` (see [`super::clock`]) through the base
+/// model's calibration, or why it was not measured; and what it says of the
+/// measurement delay the spec itself declares, as calibrated.
+fn read_clock(
+    first: &Stage,
+    runs: &[Run],
+) -> (
+    Option<SightingClock>,
+    Option<Unmeasured>,
+    Option<ClockVerdict>,
+) {
+    let (clock, unmeasured) = match super::clock::measure(&first.runner, &first.fit.p, runs) {
+        Some(Ok(c)) => (Some(c), None),
+        Some(Err(why)) => (None, Some(why)),
+        None => (None, None),
+    };
+    let spec = clock
+        .zip(first.runner.delay)
+        .and_then(|(c, _)| c.judge(0.0, crate::timeline::delay(&first.runner, &first.fit.p)));
+    (clock, unmeasured, spec)
+}
+
 /// Run the diagnosis: calibrate the base model, rank every applicable effect,
 /// add the best significant one, re-test the rest on the augmented model, and
 /// repeat until nothing is significant. `skipped` collects effects not tested,
@@ -1405,14 +1428,7 @@ pub fn diagnose(
     let folds = Folds::of(runs);
     let first = stage(base.clone(), runs, &train, &test, &o)?;
     progress("base model calibrated");
-    let (clock, clock_unmeasured) = match super::clock::measure(&first.runner, &first.fit.p, runs) {
-        Some(Ok(c)) => (Some(c), None),
-        Some(Err(why)) => (None, Some(why)),
-        None => (None, None),
-    };
-    let spec_clock = clock
-        .zip(first.runner.delay)
-        .and_then(|(c, _)| c.judge(0.0, crate::timeline::delay(&first.runner, &first.fit.p)));
+    let (clock, clock_unmeasured, spec_clock) = read_clock(&first, runs);
     let mut disc = step_error(&first, runs, &o);
     let first = Stage {
         step_error: disc.error,
