@@ -147,7 +147,6 @@ pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<Result<SightingClo
         (-n..=n).map(|k| k as f64 * STEP_S).collect()
     };
     let (usable, pieces) = usable_sightings(runs);
-    let residuals = shifted_residuals(r, p, runs, &usable, &shifts);
     let piece_of: Vec<usize> = usable.iter().map(|u| u.2).collect();
     let occupied: Vec<usize> = {
         let set: std::collections::BTreeSet<usize> = piece_of.iter().copied().collect();
@@ -161,6 +160,9 @@ pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<Result<SightingClo
             pieces: occupied.len(),
         }));
     }
+    // (the costly part, a prediction per sighting and shift, only once the
+    // log is known to be long enough)
+    let residuals = shifted_residuals(r, p, runs, &usable, &shifts);
     let no_minimum = Unmeasured::NoMinimum {
         sightings: usable.len(),
     };
