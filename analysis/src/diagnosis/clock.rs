@@ -343,11 +343,7 @@ fn refined_minimum(shifts: &[f64], cost: &[f64]) -> Option<f64> {
 /// The two-sided critical value of Student's t at [`LEVEL`] for `dof`
 /// degrees of freedom.
 fn two_sided_critical(dof: usize) -> f64 {
-    use statrs::distribution::{ContinuousCDF, StudentsT};
-    match StudentsT::new(0.0, 1.0, dof.max(1) as f64) {
-        Ok(t) => t.inverse_cdf(1.0 - LEVEL / 2.0),
-        Err(_) => f64::INFINITY,
-    }
+    super::folds::student_t_quantile(dof, 1.0 - LEVEL / 2.0)
 }
 
 #[cfg(test)]

@@ -243,9 +243,15 @@ pub fn paired(base: &[f64], aug: &[f64], segments: usize) -> FoldTest {
 /// The one-sided critical value of Student's t at [`LEVEL`] for `dof`
 /// degrees of freedom.
 fn t_critical(dof: usize) -> f64 {
+    student_t_quantile(dof, 1.0 - LEVEL)
+}
+
+/// The `p` quantile of Student's t with `dof` degrees of freedom (at least
+/// one), from `statrs`; infinite where it has none.
+pub(super) fn student_t_quantile(dof: usize, p: f64) -> f64 {
     use statrs::distribution::{ContinuousCDF, StudentsT};
     match StudentsT::new(0.0, 1.0, dof.max(1) as f64) {
-        Ok(t) => t.inverse_cdf(1.0 - LEVEL),
+        Ok(t) => t.inverse_cdf(p),
         Err(_) => f64::INFINITY,
     }
 }
