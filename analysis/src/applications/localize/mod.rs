@@ -23,6 +23,7 @@ mod active;
 pub mod delay;
 mod filter;
 pub mod noise;
+mod simplex;
 mod smoother;
 pub mod summary;
 

@@ -7,6 +7,7 @@
 //! scale of the observation sigmas. It needs no ground truth, so it works on
 //! any log with sightings; ground truth only judges it afterwards (NEES).
 use super::filter::{Filter, Pass};
+use super::simplex;
 use super::{EkfOptions, LocalizeError};
 
 use crate::run::Run;
@@ -238,21 +239,17 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
             (cost(&v), v)
         })
         .collect();
-    let best = scan
+    let (mut c, mut x) = scan
         .into_iter()
         .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|b| b.1)
-        .unwrap_or_else(|| vec![0.0; n]);
+        .expect("the scan has eleven points");
     // Nelder-Mead restarted from its own result until a restart gains
     // nothing: a simplex can collapse on a flat valley before its floor.
     // The cost is -2 log-likelihood: differences under SIGNIFICANT say
     // nothing about the noise, so both the simplex and the restarts stop there.
-    let mut x = best;
-    let mut c = cost(&x);
     for _ in 0..RESTARTS {
         let tol = SIGNIFICANT / (1.0 + c.abs());
-        let next = nelder_mead(&cost, x.clone(), 0.7, tol, 300);
-        let cn = cost(&next);
+        let (cn, next) = simplex::minimise(&cost, x.clone(), 0.7, tol, 300);
         let gained = c - cn;
         if cn < c {
             (x, c) = (next, cn);
@@ -264,86 +261,9 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
     at(&x)
 }
 
-/// Minimise `f` from `x0` by Nelder-Mead (the standard coefficients 1, 2,
-/// 1/2, 1/2) with an initial simplex of side `step`, until the simplex's
-/// values agree within `tol` or after `max_evals` evaluations.
-///
-/// Written here rather than taken from a crate: the objective is a whole
-/// filter pass over a log with a gate in it (piecewise smooth, no gradient),
-/// in 2 to 5 dimensions, and this is the textbook method in 40 lines;
-/// argmin's would bring its own math backend traits for that.
-pub fn nelder_mead(
-    f: &dyn Fn(&[f64]) -> f64,
-    x0: Vec<f64>,
-    step: f64,
-    tol: f64,
-    max_evals: usize,
-) -> Vec<f64> {
-    let n = x0.len();
-    let mut simplex: Vec<(f64, Vec<f64>)> = vec![(f(&x0), x0.clone())];
-    for i in 0..n {
-        let mut x = x0.clone();
-        x[i] += step;
-        simplex.push((f(&x), x));
-    }
-    let mut evals = n + 1;
-    let lerp = |a: &[f64], b: &[f64], t: f64| -> Vec<f64> {
-        a.iter().zip(b).map(|(a, b)| a + t * (b - a)).collect()
-    };
-    while evals < max_evals {
-        simplex.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (lo, hi) = (simplex[0].0, simplex[n].0);
-        if (hi - lo).abs() <= tol * (1.0 + lo.abs()) && hi.is_finite() {
-            break;
-        }
-        let centroid: Vec<f64> = (0..n)
-            .map(|j| simplex[..n].iter().map(|s| s.1[j]).sum::<f64>() / n as f64)
-            .collect();
-        let worst = simplex[n].1.clone();
-        let reflect = lerp(&centroid, &worst, -1.0);
-        let fr = f(&reflect);
-        evals += 1;
-        if fr < simplex[0].0 {
-            let expand = lerp(&centroid, &worst, -2.0);
-            let fe = f(&expand);
-            evals += 1;
-            simplex[n] = if fe < fr { (fe, expand) } else { (fr, reflect) };
-        } else if fr < simplex[n - 1].0 {
-            simplex[n] = (fr, reflect);
-        } else {
-            let towards = if fr < simplex[n].0 { &reflect } else { &worst };
-            let contract = lerp(&centroid, towards, 0.5);
-            let fc = f(&contract);
-            evals += 1;
-            if fc < simplex[n].0.min(fr) {
-                simplex[n] = (fc, contract);
-            } else {
-                let best = simplex[0].1.clone();
-                for s in simplex.iter_mut().skip(1) {
-                    s.1 = lerp(&best, &s.1, 0.5);
-                    s.0 = f(&s.1);
-                    evals += 1;
-                }
-            }
-        }
-    }
-    simplex.sort_by(|a, b| a.0.total_cmp(&b.0));
-    simplex.swap_remove(0).1
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn nelder_mead_finds_a_quadratic_minimum() {
-        let f = |x: &[f64]| (x[0] - 1.0).powi(2) + 10.0 * (x[1] + 2.0).powi(2) + 3.0;
-        let x = nelder_mead(&f, vec![0.0, 0.0], 0.5, 1e-12, 2000);
-        assert!(
-            (x[0] - 1.0).abs() < 1e-4 && (x[1] + 2.0).abs() < 1e-4,
-            "{x:?}"
-        );
-    }
 
     #[test]
     fn a_density_adds_the_same_variance_however_a_row_is_cut() {
