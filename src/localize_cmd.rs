@@ -6,6 +6,7 @@ use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::files::Files;
 use kinegen_analysis::load::Loaded;
+use kinegen_analysis::localize::timing::{Timing, TimingEstimate};
 use kinegen_analysis::localize::{
     side, Consistency, EkfOptions, Localization, NoiseSource, Side, Spread, Summary,
 };
@@ -101,9 +102,9 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
     }
     // the report's noise table: the noise, and the delay it was estimated with
     let mut described = noise.describe();
-    if let Some(d) = &done.input_delay {
-        out.say(&say_delay(d));
-        described.push(say_delay(d));
+    for d in &done.timing {
+        out.say(&say_timing(d));
+        described.push(say_timing(d));
     }
     let mut runs_json = Vec::new();
     let mut locs = Vec::new();
@@ -115,8 +116,12 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         locs.push((run, loc, summary));
     }
     let mut noise_json = noise_json(noise, note);
-    if let Some(d) = &done.input_delay {
-        noise_json["input_delay"] = json!({"name": d.name, "spec_s": d.spec_s, "estimate_s": d.estimate_s, "likelihood_gain": d.gain});
+    for d in &done.timing {
+        let key = match d.timing {
+            Timing::Delay => "input_delay",
+            Timing::Lag => "command_lag",
+        };
+        noise_json[key] = json!({"name": d.name, "spec_s": d.spec_s, "estimate_s": d.estimate_s, "likelihood_gain": d.gain});
     }
     if !sweep.is_empty() {
         say_sweep(out, &locs[0].0.path, sweep);
@@ -357,16 +362,17 @@ fn say_run(
     ));
 }
 
-/// The input delay the filter ran with, and where it came from.
-fn say_delay(d: &kinegen_analysis::localize::delay::DelayEstimate) -> String {
+/// A command-timing parameter the filter ran with, and where it came from.
+fn say_timing(d: &TimingEstimate) -> String {
+    let what = d.timing.what();
     if d.estimate_s == d.spec_s {
         format!(
-            "input delay: `{}` = {:.3} s as the spec says (no other delay makes the sightings more likely)",
+            "{what}: `{}` = {:.3} s as the spec says (no other value makes the sightings more likely)",
             d.name, d.spec_s
         )
     } else {
         format!(
-            "input delay: `{}` = {:.3} s, estimated from the sightings with the noise (the spec says {:.3} s; -2 log-likelihood {:.1} lower; --set {}=SECONDS fixes it)",
+            "{what}: `{}` = {:.3} s, estimated from the sightings with the noise (the spec says {:.3} s; -2 log-likelihood {:.1} lower; --set {}=SECONDS fixes it)",
             d.name, d.estimate_s, d.spec_s, d.gain, d.name
         )
     }

@@ -907,29 +907,44 @@ fn a_model_with_its_input_delay_leaves_no_structure() {
 /// spec's 0 fixed by --set (which it then keeps, and says nothing about).
 #[test]
 fn localize_estimates_a_declared_input_delay_from_the_sightings() {
+    localize_estimates_a_declared_timing("input_delay", 0.05);
+}
+
+/// The same for a command the robot follows with a 0.3 s time constant
+/// (`command_lag`): the lag is estimated like the delay.
+#[test]
+fn localize_estimates_a_declared_command_lag_from_the_sightings() {
+    localize_estimates_a_declared_timing("command_lag", 0.05);
+}
+
+/// Simulate the commanded robot with `effect` at 0.3 s, localize it with
+/// the effect declared at 0: estimated within `within` s, said in the JSON
+/// under the effect's name, and better than 0 fixed by --set.
+fn localize_estimates_a_declared_timing(effect: &str, within: f64) {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let spec = commanded_spec(dir, "m/s/sqrt(Hz)");
-    let delayed = dir.join("delayed.toml");
+    let timed = dir.join("timed.toml");
     let o = kinegen(&[
         "add-effect",
         "--spec",
         spec.to_str().unwrap(),
         "--effect",
-        "input_delay",
+        effect,
         "--out",
-        delayed.to_str().unwrap(),
+        timed.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (map, obs) = (root().join("data/beacons.csv"), dir.join("obs.csv"));
+    let truth = format!("{effect}=0.3");
     let log = simulate(
         dir,
         "late.csv",
         &[
             "--spec",
-            delayed.to_str().unwrap(),
+            timed.to_str().unwrap(),
             "--set",
-            "input_delay=0.3",
+            &truth,
             "--trajectory",
             "random",
             "--seed",
@@ -944,7 +959,7 @@ fn localize_estimates_a_declared_input_delay_from_the_sightings() {
         let mut args = vec![
             "localize",
             "--spec",
-            delayed.to_str().unwrap(),
+            timed.to_str().unwrap(),
             "--data",
             log.to_str().unwrap(),
             "--observations",
@@ -956,20 +971,21 @@ fn localize_estimates_a_declared_input_delay_from_the_sightings() {
         run_in(dir, &args)
     };
     let estimated = localize(&[]);
-    let d = &estimated["noise"]["input_delay"];
+    let d = &estimated["noise"][effect];
     let tau = d["estimate_s"].as_f64().unwrap();
-    assert!((tau - 0.3).abs() < 0.05, "estimated input delay {tau}");
+    assert!((tau - 0.3).abs() < within, "estimated {effect} {tau}");
     assert_eq!(d["spec_s"].as_f64(), Some(0.0));
-    let fixed = localize(&["--set", "input_delay=0"]);
+    let zero = format!("{effect}=0");
+    let fixed = localize(&["--set", &zero]);
     assert!(
-        fixed["noise"]["input_delay"].is_null(),
-        "--set fixes the delay: {}",
+        fixed["noise"][effect].is_null(),
+        "--set fixes the {effect}: {}",
         fixed["noise"]
     );
     let rmse = |d: &serde_json::Value| d["runs"][0]["position_rmse_m"].as_f64().unwrap();
     assert!(
         rmse(&estimated) < rmse(&fixed),
-        "with the delay estimated {} m, with 0 s {} m",
+        "with the {effect} estimated {} m, with 0 s {} m",
         rmse(&estimated),
         rmse(&fixed)
     );

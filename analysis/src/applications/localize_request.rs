@@ -13,6 +13,7 @@
 use crate::derivation::Deriver;
 use crate::files::{read_files, Files, FilesError};
 use crate::load::{Loaded, ReadProgress, Sources};
+use crate::localize::timing::Timing;
 use crate::localize::{localize_runs, EkfOptions, LocalizeError, Localized};
 use crate::model::Runner;
 use crate::sweep::{sweep, SweepError, SweepPoint, LEVELS};
@@ -98,7 +99,8 @@ pub fn localize_files(
 }
 
 /// The filter's options with its `--noise` checked against the spec, and
-/// the spec's input delay estimated unless `--set` fixes it.
+/// the spec's command timing (input delay, command lag) estimated unless
+/// `--set` fixes it.
 fn checked_options(
     r: &Runner,
     sources: &Sources,
@@ -125,10 +127,12 @@ fn checked_options(
             .iter()
             .any(|s| s.split('=').next().map(str::trim) == Some(r.names[i].as_str()))
     };
+    let estimate_timing = (Timing::ALL.into_iter())
+        .filter(|t| t.parameter(r).is_some_and(|i| !set_by_user(i)))
+        .collect();
     Ok(EkfOptions {
-        estimate_input_delay: r.input_delay.is_none_or(|i| !set_by_user(i)),
-        noise_sigma: o.noise_sigma.clone(),
-        ..*o
+        estimate_timing,
+        ..o.clone()
     })
 }
 

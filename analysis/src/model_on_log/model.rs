@@ -109,8 +109,11 @@ impl Runner {
                     known: names.join(", "),
                 })?;
             let decl = rp[i];
-            // strict at min (a radius of 0 divides by zero), inclusive at max
-            if decl.min.is_some_and(|m| *v <= m) || decl.max.is_some_and(|m| *v > m) {
+            // strict at min (a radius of 0 divides by zero), inclusive at
+            // max; a lag's time constant of 0 is no lag, as its nominal is
+            // once add-effect adds it, so the user can fix it there
+            let below = |m: f64| *v < m || (*v == m && !decl.input_lag);
+            if decl.min.is_some_and(below) || decl.max.is_some_and(|m| *v > m) {
                 return Err(ModelError::OutOfBounds {
                     name: n.clone(),
                     value: *v,

@@ -20,12 +20,12 @@
 //!   chi-square bounds; a fixed-interval RTS smoother over the same pass for
 //!   offline use ([`smoother`]).
 mod active;
-pub mod delay;
 mod filter;
 pub mod noise;
 mod simplex;
 mod smoother;
 pub mod summary;
+pub mod timing;
 
 pub use filter::{Filter, Keep, Pass};
 pub use noise::{NoiseModel, NoiseSource};
@@ -57,10 +57,10 @@ pub struct EkfOptions {
     pub noise: NoiseSource,
     /// Also run the RTS smoother over the filter's pass.
     pub smooth: bool,
-    /// Estimate the spec's input delay with the noise (see [`delay`]), when
-    /// the spec declares one and the noise is estimated; false: the spec's
-    /// (or `--set`'s) value.
-    pub estimate_input_delay: bool,
+    /// The command-timing parameters (input delay, command lag) to estimate
+    /// with the noise (see [`timing`]), where the spec declares them and the
+    /// noise is estimated; the others keep the spec's (or `--set`'s) value.
+    pub estimate_timing: Vec<timing::Timing>,
 }
 
 impl Default for EkfOptions {
@@ -71,7 +71,7 @@ impl Default for EkfOptions {
             noise_sigma: Vec::new(),
             noise: NoiseSource::Spec,
             smooth: false,
-            estimate_input_delay: false,
+            estimate_timing: Vec::new(),
         }
     }
 }
@@ -149,8 +149,8 @@ pub fn noise_for(
 pub struct Localized {
     pub noise: NoiseModel,
     pub note: String,
-    /// The input delay the filter ran with, when it was estimated.
-    pub input_delay: Option<delay::DelayEstimate>,
+    /// The command timing the filter ran with, for each parameter estimated.
+    pub timing: Vec<timing::TimingEstimate>,
     /// The filter over `runs`, then over `holdout`, in order, each with its
     /// figures.
     pub runs: Vec<(Localization, Summary)>,
@@ -167,18 +167,17 @@ pub fn localize_runs(
 ) -> Result<Localized, LocalizeError> {
     let (noise, note) = noise_for(r, runs, o)?;
     let f = Filter::new(r, o)?;
-    let (with_delay, noise, input_delay) =
-        if o.estimate_input_delay && r.input_delay.is_some() && noise::estimated(&f, runs, o) {
-            let (_, given) = noise::with_given(&f, o);
-            delay::estimate(r, runs, o, noise, &given)
-        } else {
-            (r.clone(), noise, None)
-        };
+    let (timed, noise, timing) = if noise::estimated(&f, runs, o) {
+        let (_, given) = noise::with_given(&f, o);
+        timing::estimate(r, runs, o, noise, (&given, &o.estimate_timing))
+    } else {
+        (r.clone(), noise, Vec::new())
+    };
     let runs = runs
         .iter()
         .chain(holdout)
         .map(|run| {
-            localize_with(&with_delay, run, &noise, o).map(|loc| {
+            localize_with(&timed, run, &noise, o).map(|loc| {
                 let figures = summarise(r, run, &loc);
                 (loc, figures)
             })
@@ -187,7 +186,7 @@ pub fn localize_runs(
     Ok(Localized {
         noise,
         note,
-        input_delay,
+        timing,
         runs,
     })
 }
