@@ -718,7 +718,7 @@ pub fn diagnose_report(
             )?,
         );
     }
-    let t = candidates_html(d);
+    let t = candidates_html(d, base);
     let intro = format!(
         "<p>Model <b>{}</b>: error {:.4} with nominal parameters, {:.4} after calibrating the spec as it is (error: RMS of the residuals in units of their sigma). Verdict: <b>{}</b>.</p>",
         esc(&base.ir.name),
@@ -741,7 +741,7 @@ pub fn diagnose_report(
 
 /// The diagnose report's candidates (table and evidence), the structure the
 /// residuals keep, and the effects not tested, as HTML.
-fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
+fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis, base: &Runner) -> String {
     let mut t = format!(
         "<h2>Candidates</h2><table><tr><th>effect</th><th>error</th><th>improvement</th><th>BIC gain</th><th>held-out error</th><th>held out fold by fold ({} s motion)</th><th>significant</th></tr>",
         kinegen_analysis::diagnosis::folds::WINDOW_S
@@ -780,6 +780,9 @@ fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
     }
     if let Some(why) = &d.clock_unmeasured {
         t += &format!("<p>Timing: {}.</p>", esc(&why.to_string()));
+    }
+    if let Some(said) = crate::diagnose_cmd::spec_clock_text(d, base) {
+        t += &format!("<p>Timing: {}.</p>", esc(&said));
     }
     t += "<ul>";
     for c in &d.candidates {

@@ -713,18 +713,32 @@ fn landmarks_along(log: &Path, map: &Path) {
 
 /// `diagnose` of `log` with its landmark sightings `obs` of the map `map`.
 fn diagnose_seen(spec: &Path, log: &Path, obs: &Path, map: &Path) -> serde_json::Value {
+    diagnose_seen_with(spec, log, obs, map, &[])
+}
+
+/// [`diagnose_seen`] with more options.
+fn diagnose_seen_with(
+    spec: &Path,
+    log: &Path,
+    obs: &Path,
+    map: &Path,
+    more: &[&str],
+) -> serde_json::Value {
     let path = |p: &Path| p.to_str().unwrap().to_string();
-    kinegen_json(&[
+    let (spec, log, obs, map) = (path(spec), path(log), path(obs), path(map));
+    let mut args = vec![
         "diagnose",
         "--spec",
-        &path(spec),
+        &spec,
         "--data",
-        &path(log),
+        &log,
         "--observations",
-        &path(obs),
+        &obs,
         "--landmarks",
-        &path(map),
-    ])
+        &map,
+    ];
+    args.extend(more);
+    kinegen_json(&args)
 }
 
 /// Write `from`'s lines to `to`, each (its index, 0 the header, and text)
@@ -816,9 +830,21 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
         ("time_offset", "confirmed"),
     ] {
         let (log, obs) = files(effect);
-        let d = diagnose_seen(&with_offset, &log, &obs, &map);
+        let report = dir.join(format!("report_{effect}"));
+        let more = ["--report", report.to_str().unwrap()];
+        let d = diagnose_seen_with(&with_offset, &log, &obs, &map, &more);
         let said = &d["spec_clock"];
         assert_eq!(said["verdict"], verdict, "{effect}: {said}");
+        // and the report says it beside the clock
+        let page = std::fs::read_to_string(report.join("index.html")).unwrap();
+        let tells = match verdict {
+            "contradicted" => "which the sightings contradict",
+            _ => "as the sightings measure",
+        };
+        assert!(
+            page.contains("measurement delay `time_offset` calibrates to") && page.contains(tells),
+            "{effect}: the report does not say what the sightings say of the spec's delay"
+        );
     }
     // sightings stamped by a clock 3 s off line up with no shift tried:
     // they time nothing, and diagnose says so rather than ruling
