@@ -2398,3 +2398,103 @@ omega = "(r_r*wr - r_l*wl)/b"
     assert!(real(&["run-01.csv"]).contains("turn one way"));
     assert!(!real(&["run-01.csv", "run-02.csv"]).contains("turn one way"));
 }
+
+/// A clean differential-drive log from a simulator written here, not
+/// kinegen's (issue #35.2 as its reporter made it): 200 s at 50 Hz, wheel
+/// speeds that wander smoothly, the pose integrated in exact arcs at 1 kHz,
+/// the encoders' cumulative counts floored to whole counts, motion capture
+/// with 1 mm and 2 mrad white noise, exactly the spec's nominal values.
+fn independent_clean_log(path: &std::path::Path, seed: u64) {
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+    let (r, b, counts_per_rev) = (0.042, 0.2, 64.0 * 43.7);
+    let mut wheel = || {
+        let base = rng.gen_range(3.0..6.0);
+        let parts: Vec<[f64; 3]> = (0..4)
+            .map(|_| {
+                let f = rng.gen_range(0.02..0.2);
+                let phase = rng.gen_range(0.0..std::f64::consts::TAU);
+                [f, phase, rng.gen_range(1.0..4.0)]
+            })
+            .collect();
+        move |t: f64| {
+            base + parts
+                .iter()
+                .map(|[f, ph, a]| a * (std::f64::consts::TAU * f * t + ph).sin())
+                .sum::<f64>()
+        }
+    };
+    let (right, left) = (wheel(), wheel());
+    let (pos, head) = (
+        Normal::new(0.0, 0.001).unwrap(),
+        Normal::new(0.0, 0.002).unwrap(),
+    );
+    let (mut x, mut y, mut th, mut ar, mut al, mut t) = (0.0f64, 0.0f64, 0.0f64, 0.0, 0.0, 0.0);
+    let dt = 0.001;
+    let mut text = String::from("t,enc_r,enc_l,gt_x,gt_y,gt_theta\n");
+    for _ in 0..=200 * 50 {
+        let count = |a: f64| (a / std::f64::consts::TAU * counts_per_rev).floor();
+        text += &format!(
+            "{t:.4},{},{},{:.6},{:.6},{:.6}\n",
+            count(ar),
+            count(al),
+            x + pos.sample(&mut rng),
+            y + pos.sample(&mut rng),
+            th + head.sample(&mut rng)
+        );
+        for _ in 0..20 {
+            let (wr, wl) = (right(t), left(t));
+            let (v, w) = (r * (wr + wl) / 2.0, r * (wr - wl) / b);
+            x += v / w * ((th + w * dt).sin() - th.sin());
+            y -= v / w * ((th + w * dt).cos() - th.cos());
+            (th, ar, al, t) = (th + w * dt, ar + wr * dt, al + wl * dt, t + dt);
+        }
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// Issue #35.2 on logs kinegen did not simulate: the clean 200 s logs of
+/// [`independent_clean_log`] keep their whole-run RMSE within 5% of the
+/// nominal values' and every estimate within 2 reported standard deviations
+/// of the truth. Fit used to keep the whole-run refinement only where the
+/// re-anchored segments' cost stayed within 10% of theirs at their own
+/// optimum; on these information-rich logs the whole-run estimate often
+/// cost more there, and the segments' estimate made the whole-run error
+/// worse than the nominal values' on 4 seeds of 40 (x1.10-2.01; seeds 15,
+/// 16, 19 and 40). It is now also kept where its 5 s drift is no worse:
+/// over the 40 seeds the error after the fit is 0.50-0.997 of the nominal
+/// values', every estimate within 1.6 standard deviations. The seeds here
+/// hold three of the four.
+#[test]
+fn clean_logs_from_another_simulator_keep_their_whole_run_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let truth = [("r_r", 0.042), ("r_l", 0.042), ("b", 0.2)];
+    for seed in 13..=20 {
+        let log = tmp.path().join(format!("clean{seed}.csv"));
+        independent_clean_log(&log, seed);
+        let doc = kinegen_json(&[
+            "fit",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            log.to_str().unwrap(),
+        ]);
+        let (before, after) = (
+            doc["before"]["rmse"].as_f64().unwrap(),
+            doc["after"]["rmse"].as_f64().unwrap(),
+        );
+        assert!(
+            after <= 1.05 * before,
+            "seed {seed}: whole-run RMSE {before} -> {after}"
+        );
+        for (name, value) in truth {
+            let p = &doc["parameters"][name];
+            let (e, sd) = (p["estimate"].as_f64().unwrap(), p["std"].as_f64().unwrap());
+            assert!(
+                (e - value).abs() <= 2.0 * sd,
+                "seed {seed}: {name} {e} ± {sd} (truth {value})"
+            );
+        }
+    }
+}

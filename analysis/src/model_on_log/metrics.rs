@@ -120,13 +120,22 @@ pub fn errors(runs: &[(&Run, &dyn TrackRows)]) -> Errors {
 /// start (how a held-out run is scored), a figure that stops being a number
 /// read as infinite: the worst.
 pub fn from_measured_start(r: &Runner, p: &[f64], run: &Run) -> Errors {
+    from_measured_starts(r, p, std::slice::from_ref(run))
+}
+
+/// [`from_measured_start`] over several runs together.
+pub fn from_measured_starts(r: &Runner, p: &[f64], runs: &[Run]) -> Errors {
     let track = Recipe {
         r,
         p: p.to_vec(),
         offset: [0.0; 3],
         heading: Heading::Model,
     };
-    let mut e = errors(&[(run, &track as &dyn TrackRows)]);
+    let pairs: Vec<(&Run, &dyn TrackRows)> = runs
+        .iter()
+        .map(|run| (run, &track as &dyn TrackRows))
+        .collect();
+    let mut e = errors(&pairs);
     for v in [&mut e.rmse, &mut e.final_position_error_m] {
         if !v.is_finite() {
             *v = f64::INFINITY;
