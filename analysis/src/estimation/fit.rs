@@ -21,6 +21,7 @@ mod drift;
 pub mod leave_one_out;
 mod options;
 mod residuals;
+mod rounding;
 mod search;
 mod solver;
 

@@ -22,7 +22,7 @@
 //! positions) is not a random walk; the sandwich only needs the model for the
 //! size of the uncertainty, and came within 30% of that spread.
 use super::{correlation, priors, psd_inverse, run_offsets, run_residuals, start_columns};
-use super::{FitOptions, FitResult};
+use super::{rounding, FitOptions, FitResult};
 use crate::model::Runner;
 use crate::rows::Rows;
 use crate::run::Run;
@@ -92,6 +92,11 @@ struct PoseRows<'a> {
     run: &'a Run,
     /// lever-arm factor in weighted units: heading sigma / position sigma
     lever: f64,
+    /// Per step, the pose change its inputs' rounding errors make, one
+    /// standard deviation each, in weighted units (see [`rounding`]), and
+    /// whether the step starts a run of rows logging the same value; empty
+    /// where the inputs are not rounded.
+    rounding: Vec<Vec<([f64; 3], bool)>>,
 }
 
 impl PoseRows<'_> {
@@ -142,6 +147,7 @@ impl PoseRows<'_> {
         // positions is already in theirs and is not carried over again.)
         let zero = || DVector::<f64>::zeros(width);
         let (mut sx, mut sy, mut sth, mut sxy, mut syx) = (zero(), zero(), zero(), zero(), zero());
+        let mut shared: Vec<DVector<f64>> = Vec::new();
         for k in (0..n).rev() {
             let p = self.at(k);
             let (jx, jy, jth) = (row(k, 0), row(k, 1), row(k, 2));
@@ -154,6 +160,23 @@ impl PoseRows<'_> {
             meat.ger(level(0).walk * dt, &sx, &sx, 1.0);
             meat.ger(level(1).walk * dt, &sy, &sy, 1.0);
             meat.ger(level(2).walk * dt, &sth, &sth, 1.0);
+            // an input's rounding in this step moves every later row: its
+            // position, and its heading with the lever arm from here. Rows
+            // that share one error (see rounding::held) add their moves up
+            // before they count, once per run of equal values.
+            if let Some(errors) = self.rounding.get(k).filter(|e| !e.is_empty()) {
+                let from = self.run.gt.as_ref().unwrap()[k];
+                let turn = &sth - (&sxy - &sx * from[1]) * self.lever
+                    + (&syx - &sy * from[0]) * self.lever;
+                shared.resize(errors.len(), zero());
+                for ((e, starts), sum) in errors.iter().zip(shared.iter_mut()) {
+                    *sum += &sx * e[0] + &sy * e[1] + &turn * e[2];
+                    if *starts {
+                        meat.ger(1.0, sum, sum, 1.0);
+                        sum.fill(0.0);
+                    }
+                }
+            }
         }
         // The start pose the track is anchored on: the mean of the rows it
         // rests on first (Run::start_pose), each with the white noise. Its
@@ -189,8 +212,54 @@ impl RunRows {
             jac: &self.pose.1,
             run,
             lever,
+            rounding: Vec::new(),
         }
     }
+}
+
+/// Per step of `run` with ground truth, the pose change of each rounded
+/// input's error at one standard deviation (`sd`, per input), in weighted
+/// units (position / `o.pos_sigma`, heading / `o.heading_sigma`), turned to
+/// the measured heading at the step's start; and whether the input's logged
+/// value changes there (a new error starts).
+fn rounding_effects(
+    r: &Runner,
+    run: &Run,
+    sd: &[f64],
+    o: &FitOptions,
+) -> Vec<Vec<([f64; 3], bool)>> {
+    let Some(gt) = run.gt.as_ref() else {
+        return Vec::new();
+    };
+    let rounded: Vec<usize> = (0..sd.len()).filter(|&i| sd[i] > 0.0).collect();
+    if rounded.is_empty() {
+        return Vec::new();
+    }
+    let steps = gt.len().saturating_sub(1);
+    let held: Vec<Vec<bool>> = rounded
+        .iter()
+        .map(|&i| rounding::held(run.u.iter().take(steps).map(|u| u[i])))
+        .collect();
+    (0..steps)
+        .map(|k| {
+            rounded
+                .iter()
+                .zip(&held)
+                .map(|(&i, shared)| {
+                    let e = rounding::effect(r, run, k, i, gt[k][2]);
+                    let weighted = [
+                        sd[i] * e[0] / o.pos_sigma,
+                        sd[i] * e[1] / o.pos_sigma,
+                        sd[i] * e[2] / o.heading_sigma,
+                    ];
+                    (
+                        weighted,
+                        !shared[k] || k == 0 || run.u[k][i] != run.u[k - 1][i],
+                    )
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// Replace `res`'s standard deviations and correlations by the drift-aware
@@ -224,13 +293,20 @@ pub(super) fn sandwich(r: &Runner, runs: &[Run], o: &FitOptions, res: &mut FitRe
         )
     });
     let rest_var = if count > 0 { sq / count as f64 } else { 1.0 };
+    let rounding_sd: Vec<f64> = rounding::variances(r, runs)
+        .into_iter()
+        .map(f64::sqrt)
+        .collect();
     let (mut h, mut meat) = (DMatrix::zeros(dims, dims), DMatrix::zeros(dims, dims));
     for (run, part) in runs.iter().zip(&parts) {
         let width = part.pose.1.width();
         let place = |c: usize| if c < m { c } else { part.start_col.unwrap() };
         let mut local_h = DMatrix::zeros(width, width);
         let mut local_m = DMatrix::zeros(width, width);
-        let pose = part.pose_rows(run, lever);
+        let pose = PoseRows {
+            rounding: rounding_effects(r, run, &rounding_sd, o),
+            ..part.pose_rows(run, lever)
+        };
         let triples = 3 * pose.rows();
         for (k, row) in part.pose.1.iter().enumerate() {
             let v = DVector::from_column_slice(row);
