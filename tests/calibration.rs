@@ -2435,13 +2435,13 @@ mod elsewhere {
         }
     }
 
-    /// Drive 200 s at 50 Hz from the origin: `step(wheels, t, dt)` moves the
-    /// wheel angles `wheels` over a millisecond and gives the body's (v,
+    /// Drive `seconds` at 50 Hz from the origin: `step(wheels, t, dt)` moves
+    /// the wheel angles `wheels` over a millisecond and gives the body's (v,
     /// omega) then; `row(wheels, t)` the logged inputs, as text. Writes
     /// `header` and one row every 20 ms.
     fn drive(
         path: &std::path::Path,
-        (rng, header): (&mut SmallRng, &str),
+        (rng, header, seconds): (&mut SmallRng, &str, usize),
         mut step: impl FnMut(&mut [f64; 2], f64, f64) -> (f64, f64),
         row: impl Fn(&[f64; 2], f64) -> String,
     ) {
@@ -2453,7 +2453,7 @@ mod elsewhere {
         let mut wheels = [0.0; 2];
         let dt = 0.001;
         let mut text = format!("{header},gt_x,gt_y,gt_theta\n");
-        for _ in 0..=200 * 50 {
+        for _ in 0..=seconds * 50 {
             text += &format!(
                 "{},{:.6},{:.6},{:.6}\n",
                 row(&wheels, t),
@@ -2471,9 +2471,9 @@ mod elsewhere {
         std::fs::write(path, text).unwrap();
     }
 
-    /// spec/diff_drive.toml at its nominal values, the encoders' cumulative
-    /// counts floored to whole counts.
-    pub fn diff_drive(path: &std::path::Path, seed: u64) {
+    /// spec/diff_drive.toml at its nominal values for `seconds`, the
+    /// encoders' cumulative counts floored to whole counts.
+    pub fn diff_drive(path: &std::path::Path, seed: u64, seconds: usize) {
         let mut rng = SmallRng::seed_from_u64(seed);
         let (r, b, counts_per_rev) = (0.042, 0.2, 64.0 * 43.7);
         let right = wander(&mut rng, Some((3.0, 6.0)), ((1.0, 4.0), (0.02, 0.2)));
@@ -2481,7 +2481,7 @@ mod elsewhere {
         let count = |a: f64| (a / TAU * counts_per_rev).floor();
         drive(
             path,
-            (&mut rng, "t,enc_r,enc_l"),
+            (&mut rng, "t,enc_r,enc_l", seconds),
             |wheels, t, dt| {
                 let (wr, wl) = (right(t), left(t));
                 (wheels[0], wheels[1]) = (wheels[0] + wr * dt, wheels[1] + wl * dt);
@@ -2491,7 +2491,7 @@ mod elsewhere {
         );
     }
 
-    /// spec/benchmarks/optiodom/tricycle.toml at its nominal values, the
+    /// spec/benchmarks/optiodom/tricycle.toml at its nominal values for 200 s, the
     /// drive wheel's angle floored to a 2048-count encoder, the steering
     /// rounded to a `steering_steps`-step encoder.
     pub fn tricycle(path: &std::path::Path, seed: u64, steering_steps: f64) {
@@ -2503,7 +2503,7 @@ mod elsewhere {
         let q = TAU / steering_steps;
         drive(
             path,
-            (&mut rng, "t,phi,alpha"),
+            (&mut rng, "t,phi,alpha", 200),
             |wheels, t, dt| {
                 let (w, a) = (wheel(t), steer(t));
                 wheels[0] += w * dt;
@@ -2535,7 +2535,7 @@ fn clean_logs_from_another_simulator_keep_their_whole_run_error() {
     let truth = [("r_r", 0.042), ("r_l", 0.042), ("b", 0.2)];
     for seed in 13..=20 {
         let log = tmp.path().join(format!("clean{seed}.csv"));
-        elsewhere::diff_drive(&log, seed);
+        elsewhere::diff_drive(&log, seed, 200);
         let doc = kinegen_json(&[
             "fit",
             "--spec",
@@ -2612,6 +2612,53 @@ fn a_rounded_steering_angle_is_counted_in_the_standard_deviations() {
             spread_of(&est[k]),
             mean(&std[k])
         );
+        assert!(
+            bias.abs() < 0.5,
+            "{n}: the estimates' mean is {bias:.2} std off"
+        );
+    }
+}
+
+/// Issue #35.2's standard deviations on long logs from a simulator other
+/// than kinegen's: 30 clean 600 s logs at 50 Hz ([`elsewhere::diff_drive`],
+/// quantised encoders). Each parameter's reported standard deviation
+/// matches the spread of its estimates over the seeds within 30%, their mean
+/// lies within half a standard deviation of the truth, and no fit leaves the
+/// whole-run error above the nominal values'.
+#[test]
+fn long_clean_logs_from_another_simulator_get_honest_standard_deviations() {
+    let tmp = tempfile::tempdir().unwrap();
+    let names = ["r_r", "r_l", "b"];
+    let truth = [0.042, 0.042, 0.2];
+    let (mut est, mut std) = (vec![vec![]; 3], vec![vec![]; 3]);
+    for seed in 101..=130 {
+        let log = tmp.path().join(format!("long{seed}.csv"));
+        elsewhere::diff_drive(&log, seed, 600);
+        let doc = kinegen_json(&[
+            "fit",
+            "--spec",
+            "spec/diff_drive.toml",
+            "--data",
+            log.to_str().unwrap(),
+        ]);
+        let (before, after) = (
+            doc["before"]["rmse"].as_f64().unwrap(),
+            doc["after"]["rmse"].as_f64().unwrap(),
+        );
+        assert!(
+            after <= before,
+            "seed {seed}: whole-run RMSE {before} -> {after}"
+        );
+        for (k, n) in names.iter().enumerate() {
+            est[k].push(doc["parameters"][n]["estimate"].as_f64().unwrap());
+            std[k].push(doc["parameters"][n]["std"].as_f64().unwrap());
+        }
+    }
+    for (k, n) in names.iter().enumerate() {
+        let ratio = spread_of(&est[k]) / mean(&std[k]);
+        let bias = (mean(&est[k]) - truth[k]) / mean(&std[k]);
+        eprintln!("{n}: spread / std {ratio:.2}, bias {bias:.2} std");
+        assert!((0.7..=1.3).contains(&ratio), "{n}: spread / std {ratio:.2}");
         assert!(
             bias.abs() < 0.5,
             "{n}: the estimates' mean is {bias:.2} std off"
