@@ -131,22 +131,8 @@ fn say_timing(out: &Out, d: &Diagnosis, r: &Runner) {
     if let Some(why) = &d.clock_unmeasured {
         out.say(&format!("  timing: {why}"));
     }
-    if let Some(said) = spec_clock_text(d, r) {
+    if let Some(said) = d.spec_clock_said(r) {
         out.say(&format!("  timing: {said}"));
-    }
-}
-
-/// What the sightings say of the spec's own measurement delay, if it
-/// declares one and they measured the clock (the CLI and the report).
-pub(crate) fn spec_clock_text(d: &Diagnosis, r: &Runner) -> Option<String> {
-    let spec_delay = r.delay.map(|i| r.names[i].as_str()).unwrap_or_default();
-    match d.spec_clock? {
-        ClockVerdict::Contradicted { delay } => Some(format!(
-            "the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, which the sightings contradict: the ground truth is not that late; a late command (input_delay) or a lag (command_lag) may be what it stands in for"
-        )),
-        ClockVerdict::Confirmed { delay } => Some(format!(
-            "the spec's measurement delay `{spec_delay}` calibrates to {delay:.3} s, as the sightings measure"
-        )),
     }
 }
 

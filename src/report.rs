@@ -781,7 +781,7 @@ fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis, base: &Runner) -> 
     if let Some(why) = &d.clock_unmeasured {
         t += &format!("<p>Timing: {}.</p>", esc(&why.to_string()));
     }
-    if let Some(said) = crate::diagnose_cmd::spec_clock_text(d, base) {
+    if let Some(said) = d.spec_clock_said(base) {
         t += &format!("<p>Timing: {}.</p>", esc(&said));
     }
     t += "<ul>";

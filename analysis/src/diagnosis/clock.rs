@@ -93,6 +93,22 @@ pub enum ClockVerdict {
     Confirmed { delay: f64 },
 }
 
+impl ClockVerdict {
+    /// What this verdict says of a spec's own measurement delay, the
+    /// parameter `name`, calibrated to the verdict's delay (the CLI's and
+    /// the report's sentence).
+    pub fn of_spec_delay(&self, name: &str) -> String {
+        match self {
+            ClockVerdict::Contradicted { delay } => format!(
+                "the spec's measurement delay `{name}` calibrates to {delay:.3} s, which the sightings contradict: the ground truth is not that late; a late command (input_delay) or a lag (command_lag) may be what it stands in for"
+            ),
+            ClockVerdict::Confirmed { delay } => format!(
+                "the spec's measurement delay `{name}` calibrates to {delay:.3} s, as the sightings measure"
+            ),
+        }
+    }
+}
+
 impl std::fmt::Display for SightingClock {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         // (a lag under half a millisecond reads as none: "-0.000 s before")

@@ -110,6 +110,13 @@ impl Diagnosis {
     pub fn verdict(&self) -> Option<&str> {
         self.chain.first().map(|c| c.effect.as_str())
     }
+
+    /// What the sightings say of the measurement delay `base` (the spec as
+    /// the user wrote it) declares, in words (see [`ClockVerdict::of_spec_delay`]).
+    pub fn spec_clock_said(&self, base: &Runner) -> Option<String> {
+        let name = base.delay.map(|i| base.names[i].as_str())?;
+        self.spec_clock.map(|v| v.of_spec_delay(name))
+    }
 }
 
 /// Weighted residual RMS of a parameter vector, each run (segment) anchored at
