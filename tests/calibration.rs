@@ -2536,17 +2536,7 @@ fn clean_logs_from_another_simulator_keep_their_whole_run_error() {
     for seed in 13..=20 {
         let log = tmp.path().join(format!("clean{seed}.csv"));
         elsewhere::diff_drive(&log, seed, 200);
-        let doc = kinegen_json(&[
-            "fit",
-            "--spec",
-            "spec/diff_drive.toml",
-            "--data",
-            log.to_str().unwrap(),
-        ]);
-        let (before, after) = (
-            doc["before"]["rmse"].as_f64().unwrap(),
-            doc["after"]["rmse"].as_f64().unwrap(),
-        );
+        let (doc, before, after) = fit_whole_run("spec/diff_drive.toml", &log);
         assert!(
             after <= 1.05 * before,
             "seed {seed}: whole-run RMSE {before} -> {after}"
@@ -2613,17 +2603,7 @@ fn long_clean_logs_from_another_simulator_get_honest_standard_deviations() {
     for seed in 101..=130 {
         let log = tmp.path().join(format!("long{seed}.csv"));
         elsewhere::diff_drive(&log, seed, 600);
-        let doc = kinegen_json(&[
-            "fit",
-            "--spec",
-            "spec/diff_drive.toml",
-            "--data",
-            log.to_str().unwrap(),
-        ]);
-        let (before, after) = (
-            doc["before"]["rmse"].as_f64().unwrap(),
-            doc["after"]["rmse"].as_f64().unwrap(),
-        );
+        let (doc, before, after) = fit_whole_run("spec/diff_drive.toml", &log);
         assert!(
             after <= before,
             "seed {seed}: whole-run RMSE {before} -> {after}"
@@ -2658,4 +2638,13 @@ fn assert_honest_spread(names: &[&str], truth: &[f64], est: &[Vec<f64>], std: &[
             "{n}: the estimates' mean is {bias:.2} std off"
         );
     }
+}
+
+/// `fit` of `log` with `spec`: its JSON, and the whole-run position RMSE
+/// before and after.
+fn fit_whole_run(spec: &str, log: &std::path::Path) -> (serde_json::Value, f64, f64) {
+    let doc = kinegen_json(&["fit", "--spec", spec, "--data", log.to_str().unwrap()]);
+    let before = doc["before"]["rmse"].as_f64().unwrap();
+    let after = doc["after"]["rmse"].as_f64().unwrap();
+    (doc, before, after)
 }
