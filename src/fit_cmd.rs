@@ -257,6 +257,7 @@ fn fit_options(a: &FitArgs) -> FitOptions {
         use_pose: uses_residuals(a, "pose"),
         use_gyro: uses_residuals(a, "gyro"),
         use_landmarks: uses_residuals(a, "landmarks"),
+        sightings_from_truth: uses_residuals(a, "pose"),
         multi_start: true,
         ..FitOptions::default()
     };

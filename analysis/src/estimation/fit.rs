@@ -23,17 +23,18 @@ mod options;
 mod residuals;
 mod rounding;
 mod search;
+pub mod sensor;
 mod solver;
 
 use covariance::{correlation, psd_inverse};
 pub use options::{FitError, FitOptions, FitResult, Likelihood, ParamEstimate, BASIN_TOLERANCE};
 use residuals::{has_start_nuisance, priors, run_residuals, start_columns};
-pub use residuals::{normal_equations, residual_sums, residuals, Sums};
+pub use residuals::{normal_equations, residual_sums, residuals, sightings_from_truth, Sums};
 
 use crate::deadreckon;
 use crate::model::Runner;
 use crate::run::Run;
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 use search::{continuation, fit_unheld};
 use solver::levenberg_marquardt;
 use std::sync::Arc;
@@ -206,7 +207,89 @@ pub enum Search<'a> {
 
 /// Calibrate the free parameters of `r` on `runs`, starting from `r.p` and
 /// searching as `search` says: the one entry point of calibration.
+///
+/// Where the sightings are seen from a ground truth, the parameters only the
+/// range-bearing sensor reads are calibrated apart, after the motion's
+/// ([`sensor`]): the motion's residuals do not depend on them.
 pub fn fit(
+    r: &Runner,
+    runs: &[Run],
+    o: &FitOptions,
+    search: Search,
+) -> Result<FitResult, FitError> {
+    let sensor = sensor_apart(r, runs, o);
+    if sensor.is_empty() {
+        return fit_motion(r, runs, o, search);
+    }
+    let mut motion = r.clone();
+    motion.free.retain(|i| !sensor.contains(i));
+    let res = fit_motion(&motion, runs, o, search)?;
+    Ok(with_sensor(r, runs, res, &sensor))
+}
+
+/// The free parameters of `r` that [`fit`] calibrates apart on the
+/// sightings seen from the ground truth (none where there are too few).
+fn sensor_apart(r: &Runner, runs: &[Run], o: &FitOptions) -> Vec<usize> {
+    let seen = o.use_landmarks && o.sightings_from_truth;
+    if !seen || sensor::Sightings::of(r, &r.p, runs).is_err() {
+        return Vec::new();
+    }
+    sensor::sensor_params(r)
+}
+
+/// The motion's calibration `res` (of `r` without the `sensor` parameters)
+/// with those calibrated on the sightings: their estimates and jackknife
+/// standard deviations, uncorrelated with the motion's (their residuals do
+/// not share a parameter).
+fn with_sensor(r: &Runner, runs: &[Run], res: FitResult, sensor: &[usize]) -> FitResult {
+    let mut at = r.clone();
+    at.p = res.p.clone();
+    let Ok(s) = sensor::Sightings::of(&at, &res.p, runs) else {
+        return res;
+    };
+    let cal = sensor::calibrate_with_folds(&s, &at, &res.p, sensor);
+    let free = r.free.clone();
+    // where each parameter of `free` was: the motion's k-th, or the sensor's
+    let from: Vec<Result<usize, usize>> = free
+        .iter()
+        .map(|i| match res.free.iter().position(|j| j == i) {
+            Some(k) => Ok(k),
+            None => Err(sensor
+                .iter()
+                .position(|j| j == i)
+                .expect("free is motion or sensor")),
+        })
+        .collect();
+    let m = free.len();
+    let std = from
+        .iter()
+        .map(|w| match *w {
+            Ok(k) => res.std[k],
+            Err(k) => cal.std[k],
+        })
+        .collect();
+    let corr = DMatrix::from_fn(m, m, |a, b| match (from[a], from[b]) {
+        (Ok(i), Ok(j)) => res.corr[(i, j)],
+        _ if a == b => 1.0,
+        _ => 0.0,
+    });
+    let undetermined = res
+        .undetermined
+        .iter()
+        .map(|u| DVector::from_fn(m, |a, _| from[a].map_or(0.0, |k| u[k])))
+        .collect();
+    FitResult {
+        p: cal.p,
+        free,
+        std,
+        corr,
+        undetermined,
+        ..res
+    }
+}
+
+/// [`fit`] of the parameters the motion's residuals depend on.
+fn fit_motion(
     r: &Runner,
     runs: &[Run],
     o: &FitOptions,

@@ -16,7 +16,7 @@ use std::collections::HashMap;
 /// Where time `t` falls among a run's steps: (step j, fraction a of it),
 /// within the run (an observation before the first row or after the last is
 /// seen at the track's end).
-fn step_at(run: &Run, t: f64) -> (usize, f64) {
+pub fn step_at(run: &Run, t: f64) -> (usize, f64) {
     let (j, a) = run.locate(t);
     (j, a.clamp(0.0, 1.0))
 }

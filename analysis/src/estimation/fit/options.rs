@@ -13,6 +13,12 @@ pub struct FitOptions {
     pub use_pose: bool,
     pub use_gyro: bool,
     pub use_landmarks: bool,
+    /// Predict each landmark sighting from the run's ground-truth pose where
+    /// it has one (see `residuals::SeenFrom`): the sightings then calibrate
+    /// the range-bearing sensor alone. False where the ground truth is not
+    /// to be used (`fit --residuals` without `pose`): they are then seen from
+    /// the model's track, and calibrate the motion through it.
+    pub sightings_from_truth: bool,
     pub max_iter: usize,
     /// Robust loss: residuals beyond this many sigmas count linearly instead of
     /// quadratically (Huber), so outliers (a motion-capture glitch, a wrong
@@ -129,6 +135,7 @@ impl Default for FitOptions {
             use_pose: true,
             use_gyro: true,
             use_landmarks: true,
+            sightings_from_truth: true,
             max_iter: 100,
             huber: None,
             estimate_start: true,
