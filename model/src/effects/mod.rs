@@ -35,6 +35,10 @@ use std::path::{Path, PathBuf};
 /// The bundled catalogue, compiled in so every command works from any directory.
 const BUNDLED: &[(&str, &str)] = &[
     (
+        "bearing_offset.toml",
+        include_str!("../../../spec/effects/bearing_offset.toml"),
+    ),
+    (
         "command_deadband.toml",
         include_str!("../../../spec/effects/command_deadband.toml"),
     ),
@@ -61,6 +65,14 @@ const BUNDLED: &[(&str, &str)] = &[
     (
         "longitudinal_slip.toml",
         include_str!("../../../spec/effects/longitudinal_slip.toml"),
+    ),
+    (
+        "range_as_depth.toml",
+        include_str!("../../../spec/effects/range_as_depth.toml"),
+    ),
+    (
+        "range_scale.toml",
+        include_str!("../../../spec/effects/range_scale.toml"),
     ),
     (
         "sensor_offset.toml",
