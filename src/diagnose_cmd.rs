@@ -99,6 +99,8 @@ pub fn run(c: Common) -> ExitCode {
         "clock": d.clock,
         "clock_unmeasured": d.clock_unmeasured,
         "spec_clock": d.spec_clock,
+        "sensor_candidates": d.sensor_candidates,
+        "sensor_unmeasured": d.sensor_unmeasured.as_ref().map(|w| w.to_string()),
         "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
         "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
     });
@@ -136,21 +138,22 @@ fn say_timing(out: &Out, d: &Diagnosis, r: &Runner) {
     }
 }
 
+/// Each estimate of `p` with its standard deviation ("unidentified" where
+/// it has none), as the candidates' lists write them.
+fn estimates_said(p: &kinegen_analysis::diagnose::Estimates) -> Vec<String> {
+    p.iter()
+        .map(|(k, v)| {
+            let std = crate::output::fmt_std(Some(v.std).filter(|s| s.is_finite()));
+            format!("{k} = {:.5} ± {std}", v.estimate)
+        })
+        .collect()
+}
+
 /// The candidates on the spec as it is, most likely first, and those not tested.
 fn say_candidates(out: &Out, d: &Diagnosis) {
     out.say("candidates on the spec as it is, most likely first:");
     for (i, cand) in d.candidates.iter().enumerate() {
-        let params: Vec<String> = cand
-            .parameters
-            .iter()
-            .map(|(k, v)| {
-                format!(
-                    "{k} = {:.5} ± {}",
-                    v.estimate,
-                    crate::output::fmt_std(Some(v.std).filter(|s| s.is_finite()))
-                )
-            })
-            .collect();
+        let params = estimates_said(&cand.parameters);
         out.say(&format!(
             "  {}. {:<24} error {:.4} ({:+.0}%), {}  [{}]",
             i + 1,
@@ -169,6 +172,44 @@ fn say_candidates(out: &Out, d: &Diagnosis) {
     for (n, why) in &d.skipped {
         out.say(&format!("  (not tested: {n}: {why})"));
     }
+    say_sensor(out, d);
+}
+
+/// The range-bearing sensor's candidates, tested on the sightings seen from
+/// the ground truth (or why they were not).
+fn say_sensor(out: &Out, d: &Diagnosis) {
+    if let Some(why) = &d.sensor_unmeasured {
+        out.say(&format!("  (sensor effects not tested: {why})"));
+    }
+    if d.sensor_candidates.is_empty() {
+        return;
+    }
+    out.say("the range-bearing sensor's candidates, on the sightings seen from the ground truth:");
+    for (i, c) in d.sensor_candidates.iter().enumerate() {
+        let params = estimates_said(&c.parameters);
+        let verdict = if c.significant {
+            "SIGNIFICANT"
+        } else {
+            "not significant"
+        };
+        out.say(&format!(
+            "  {}. {:<24} {verdict}  [{}]",
+            i + 1,
+            c.effect,
+            params.join(", ")
+        ));
+        out.say(&format!("     {}", sightings_said(&c.fit)));
+    }
+}
+
+/// How a sensor effect fits the sightings, in words.
+fn sightings_said(f: &kinegen_analysis::diagnosis::sensor::SightingFit) -> String {
+    let t = &f.folds;
+    format!(
+        "{} sightings: median range error {:.4} -> {:.4} m, bearing {:.4} -> {:.4} rad; calibrated without each of {} stretches of them in turn, it predicts that stretch {:.0}% better (robust loss; paired t = {:.1}, needs {:.1})",
+        f.sightings, f.range_before, f.range_after, f.bearing_before, f.bearing_after,
+        t.folds, 100.0 * t.gain, t.t, t.critical
+    )
 }
 
 /// The verdict: the effects found, in order, each with its estimates, the
@@ -219,12 +260,16 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
                 .map(|(k, v)| (k.clone(), v.estimate))
                 .collect();
             let pv: Vec<String> = vals.iter().map(|(k, v)| format!("{k} = {v:.5}")).collect();
-            out.say(&format!(
-                "     {}; error {before:.4} -> {:.4} ({:.1}x smaller)",
-                pv.join(", "),
-                step.rmse_after,
-                before / step.rmse_after.max(1e-300)
-            ));
+            if let Some(f) = &step.sightings {
+                out.say(&format!("     {}; {}", pv.join(", "), sightings_said(f)));
+            } else {
+                out.say(&format!(
+                    "     {}; error {before:.4} -> {:.4} ({:.1}x smaller)",
+                    pv.join(", "),
+                    step.rmse_after,
+                    before / step.rmse_after.max(1e-300)
+                ));
+            }
             if let Some(f) = &step.folds {
                 // what proved it: the whole log's error barely moves when
                 // random drift dominates it

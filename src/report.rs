@@ -724,8 +724,11 @@ pub fn diagnose_report(
         esc(&base.ir.name),
         d.baseline_rmse,
         d.calibrated_rmse,
-        esc(&if d.chain.is_empty() { "no catalogue effect is significant".to_string() } else { d.chain.iter().map(|c| format!("{} (error after: {:.4}{})", c.effect, c.rmse_after, if c.folds.is_some() { "; proved fold by fold" } else { "" })).collect::<Vec<_>>().join(", then ") })
+        esc(&if d.chain.is_empty() { "no catalogue effect is significant".to_string() } else { d.chain.iter().map(step_said).collect::<Vec<_>>().join(", then ") })
     );
+    if let Some(fig) = sensor_chart(d, base, runs)? {
+        figs.push(fig);
+    }
     write(
         dir,
         &page(
@@ -737,6 +740,109 @@ pub fn diagnose_report(
             doc,
         ),
     )
+}
+
+/// One effect of the verdict's chain, with what proved it.
+fn step_said(c: &kinegen_analysis::diagnose::ChainStep) -> String {
+    match &c.sightings {
+        Some(f) => format!(
+            "{} (the sightings' median range error {:.3} -> {:.3} m, bearing {:.4} -> {:.4} rad; proved stretch by stretch)",
+            c.effect, f.range_before, f.range_after, f.bearing_before, f.bearing_after
+        ),
+        None => format!(
+            "{} (error after: {:.4}{})",
+            c.effect,
+            c.rmse_after,
+            if c.folds.is_some() { "; proved fold by fold" } else { "" }
+        ),
+    }
+}
+
+/// The range error of every sighting against its bearing, seen from the
+/// ground truth, for the calibrated spec and for the model with the
+/// sensor's effects found: what a camera reading depth looks like (short
+/// at the edges of its view). None when the diagnosis found none.
+fn sensor_chart(
+    d: &kinegen_analysis::diagnose::Diagnosis,
+    base: &Runner,
+    runs: &[Run],
+) -> Result<Option<String>, String> {
+    if !d.chain.iter().any(|c| c.sightings.is_some()) {
+        return Ok(None);
+    }
+    let errors = |r: &Runner, p: &[f64]| -> Vec<(f64, f64)> {
+        let sig = kinegen_analysis::landmarks::sigma(r);
+        runs.iter()
+            .flat_map(|run| {
+                let (res, _) = kinegen_analysis::fit::sightings_from_truth(r, p, &[], run, false);
+                // measured minus predicted, m
+                let range = res.into_iter().step_by(2).map(move |e| -e * sig[0]);
+                run.landmarks
+                    .iter()
+                    .map(|o| o.bearing)
+                    .zip(range)
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    let series: Vec<Series> = vec![
+        ("calibrated spec", RED, errors(base, &d.base_fit.p)),
+        (
+            "with the sensor's effects",
+            GREEN,
+            errors(&d.final_runner, &d.final_p),
+        ),
+    ];
+    chart(
+        "landmark sightings seen from the ground truth: range error against bearing",
+        "bearing (rad)",
+        "range measured - predicted (m)",
+        &series,
+        true,
+        false,
+        &[],
+    )
+    .map(Some)
+}
+
+/// The range-bearing sensor's candidates, tested on the sightings seen from
+/// the ground truth, as an HTML table (empty when none were tested).
+fn sensor_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
+    let mut t = String::new();
+    if let Some(why) = &d.sensor_unmeasured {
+        t += &format!(
+            "<p>The range-bearing sensor's effects were not tested: {}.</p>",
+            esc(&why.to_string())
+        );
+    }
+    if d.sensor_candidates.is_empty() {
+        return t;
+    }
+    t += "<h2>The range-bearing sensor</h2><p>Its effects, calibrated on the landmark sightings seen from the ground truth (Huber's loss) and held out stretch by stretch of the sightings.</p>";
+    t += "<table><tr><th>effect</th><th>estimates (± jackknife sd)</th><th>median range error (m)</th><th>median bearing error (rad)</th><th>held out stretch by stretch</th><th>significant</th></tr>";
+    for c in &d.sensor_candidates {
+        let est: Vec<String> = c
+            .parameters
+            .iter()
+            .map(|(k, v)| format!("{k} = {:.4} ± {:.1e}", v.estimate, v.std))
+            .collect();
+        let (f, folds) = (&c.fit, &c.fit.folds);
+        t += &format!(
+            "<tr><td>{}</td><td>{}</td><td>{:.4} -> {:.4}</td><td>{:.4} -> {:.4}</td><td>{:+.0}% in {} stretches (t {:.1}, needs {:.1})</td><td>{}</td></tr>",
+            esc(&c.effect),
+            esc(&est.join(", ")),
+            f.range_before,
+            f.range_after,
+            f.bearing_before,
+            f.bearing_after,
+            -100.0 * folds.gain,
+            folds.folds,
+            folds.t,
+            folds.critical,
+            if c.significant { "yes" } else { "no" }
+        );
+    }
+    t + "</table>"
 }
 
 /// The diagnose report's candidates (table and evidence), the structure the
@@ -789,6 +895,7 @@ fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis, base: &Runner) -> 
         t += &format!("<li><b>{}</b>: {}</li>", esc(&c.effect), esc(&c.evidence));
     }
     t += "</ul>";
+    t += &sensor_html(d);
     for f in &d.structure.findings {
         t += &format!("<p class=\"warn\">structure left: {}</p>", esc(f));
     }

@@ -101,6 +101,7 @@ pub mod diagnosis {
     pub mod diagnose_job;
     pub mod folds;
     pub mod request;
+    pub mod sensor;
 }
 
 /// The seed papers' applications and the benchmarks: localisation,

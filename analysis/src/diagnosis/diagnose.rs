@@ -12,6 +12,7 @@
 //!    missing, and the channel and feature say where.
 use super::clock::{ClockVerdict, SightingClock, Unmeasured};
 use super::folds::{FoldTest, Folds};
+use super::sensor::{diagnose_sensor, sensor_only, SensorCandidate, SensorUnmeasured, SightingFit};
 use crate::derivation::EffectChains;
 use crate::discretisation::Discretisation;
 use crate::fit::{fit, residuals, FitError, FitOptions, FitResult, Search};
@@ -100,6 +101,12 @@ pub struct Diagnosis {
     /// What the sightings say of the measurement delay the spec itself
     /// declares, as calibrated (None: it declares none, or no clock).
     pub spec_clock: Option<ClockVerdict>,
+    /// The range-bearing sensor's effects, tested on the sightings seen from
+    /// the ground truth (see [`super::sensor`]): the first round's
+    /// candidates (their effects found are at the end of `chain`).
+    pub sensor_candidates: Vec<SensorCandidate>,
+    /// Why the sensor's effects were not tested, where the catalogue has some.
+    pub sensor_unmeasured: Option<SensorUnmeasured>,
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
     pub final_p: Vec<f64>,
@@ -816,6 +823,11 @@ pub struct ChainStep {
     pub equivalent: Vec<String>,
     /// The fold-by-fold test, when it is what proved the effect.
     pub folds: Option<FoldTest>,
+    /// For an effect of the range-bearing sensor, how it fits the sightings
+    /// seen from the ground truth, which is what proved it (the motion's
+    /// error, `rmse_after`, does not move).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sightings: Option<SightingFit>,
 }
 
 /// The likelihood ratio (chi-square with one degree of freedom at 5%) under
@@ -1409,6 +1421,57 @@ fn read_clock(
     (clock, unmeasured, spec)
 }
 
+/// The sensor's diagnosis after the motion's (see [`super::sensor`]): its
+/// first round's candidates, or why it did not run, and the final model.
+struct SensorOutcome {
+    candidates: Vec<SensorCandidate>,
+    unmeasured: Option<SensorUnmeasured>,
+    runner: Runner,
+    p: Vec<f64>,
+}
+
+/// Test the range-bearing sensor's `effects` on top of the motion's final
+/// stage `cur`, appending the ones found to `chain` (the motion's error does
+/// not move with them: they are proved on the sightings).
+fn sensor_chain(
+    cur: Stage,
+    runs: &[Run],
+    effects: &[(String, String)],
+    chains: &EffectChains,
+    chain: &mut Vec<ChainStep>,
+) -> SensorOutcome {
+    let unchanged = |unmeasured| SensorOutcome {
+        candidates: vec![],
+        unmeasured,
+        runner: cur.runner.clone(),
+        p: cur.fit.p.clone(),
+    };
+    if effects.is_empty() {
+        return unchanged(None);
+    }
+    let motion: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
+    match diagnose_sensor(&cur.runner, &cur.fit.p, runs, effects, chains, &motion) {
+        Ok(sd) => {
+            chain.extend(sd.found.iter().map(|c| ChainStep {
+                effect: c.effect.clone(),
+                parameters: c.parameters.clone(),
+                rmse_after: cur.rmse,
+                doc: c.doc.clone(),
+                equivalent: vec![],
+                folds: None,
+                sightings: Some(c.fit.clone()),
+            }));
+            SensorOutcome {
+                candidates: sd.candidates,
+                unmeasured: None,
+                runner: sd.runner,
+                p: sd.p,
+            }
+        }
+        Err(why) => unchanged(Some(why)),
+    }
+}
+
 /// Run the diagnosis: calibrate the base model, rank every applicable effect,
 /// add the best significant one, re-test the rest on the augmented model, and
 /// repeat until nothing is significant. `skipped` collects effects not tested,
@@ -1423,7 +1486,18 @@ pub fn diagnose(
     mut skipped: Vec<(String, String)>,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Diagnosis, DiagnoseError> {
-    let o = FitOptions::default();
+    // Beside a ground truth the sightings measure the sensor, not the motion
+    // (fit sees them from the truth's pose): they are the sensor's chain's
+    // to judge ([`super::sensor`]). In the motion's cost they only moved
+    // `sensor_offset`'s range-bearing half, which then stood in for a camera
+    // reading depth (named first on a simulated robot whose camera does).
+    // Without a ground truth they are the motion's only pose information.
+    let o = FitOptions {
+        use_landmarks: runs
+            .iter()
+            .any(|r| r.gt.is_none() && !r.landmarks.is_empty()),
+        ..FitOptions::default()
+    };
     if let Some(r) = runs.iter().find(|r| r.t.len() < MIN_ROWS) {
         return Err(DiagnoseError::TooFewRows {
             run: r.name.clone(),
@@ -1449,6 +1523,7 @@ pub fn diagnose(
     let mut chain: Vec<ChainStep> = Vec::new();
     let mut first_candidates: Option<Vec<Candidate>> = None;
     let mut remaining: Vec<(String, String)> = cat.effects.clone();
+    let mut sensor_effects: Vec<(String, String)> = Vec::new();
     while chain.len() < MAX_CHAIN
         && !remaining.is_empty()
         && (chain.is_empty() || !leaves_only_noise(&cur))
@@ -1462,6 +1537,12 @@ pub fn diagnose(
                 Ok(aug) => {
                     let start = seeded(&aug, &cur.runner, &cur.fit.p);
                     let effect_params = effect_params(&start, &cur.runner);
+                    if sensor_only(&start, &effect_params) {
+                        if chain.is_empty() {
+                            sensor_effects.push((name.clone(), doc.clone()));
+                        }
+                        continue;
+                    }
                     match redundancy(&start, &effect_params, runs, &o) {
                         Some(why) if chain.is_empty() => skipped.push((name.clone(), why)),
                         Some(_) => {}
@@ -1517,11 +1598,14 @@ pub fn diagnose(
             doc: w.doc.clone(),
             equivalent,
             folds: w.folds.filter(|_| w.by_folds()),
+            sightings: None,
         });
         remaining.retain(|(n, _)| n != &w.effect);
         cur = next;
     }
     let structure = whiteness(&cur.runner, &cur.fit.p, runs);
+    let sensor = sensor_chain(cur, runs, &sensor_effects, cat.chains, &mut chain);
+    progress("sensor effects tested");
     Ok(Diagnosis {
         baseline_rmse,
         calibrated_rmse,
@@ -1536,7 +1620,9 @@ pub fn diagnose(
         clock,
         clock_unmeasured,
         spec_clock,
-        final_runner: cur.runner,
-        final_p: cur.fit.p,
+        sensor_candidates: sensor.candidates,
+        sensor_unmeasured: sensor.unmeasured,
+        final_runner: sensor.runner,
+        final_p: sensor.p,
     })
 }

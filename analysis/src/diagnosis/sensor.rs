@@ -1,0 +1,218 @@
+//! What the range-bearing sensor itself misses: a camera that reads a
+//! landmark's depth in place of its range, a range scale, a sensor turned on
+//! its mount. These are the catalogue's effects whose parameters only the
+//! landmark observation reads ([`sensor_only`]).
+//!
+//! Why apart from the motion's ranking ([`super::diagnose`]): their residuals
+//! are the sightings', 2-3% of a log's (a camera at 2-4 Hz beside motion
+//! capture at 100 Hz), so what they explain never moves the weighted error
+//! the motion's candidates are judged by. Seen from the ground-truth pose,
+//! the sightings do not depend on the motion model at all, so the sensor's
+//! chain and the motion's are separate questions: each is calibrated and
+//! tested on its own residuals. On MRCLAM's five real robots the camera's
+//! range residual, seen from Vicon, falls from 5-12 cm to 2-4 cm (median
+//! absolute) once the range is read as depth: the range was the largest
+//! error the localisation's likelihood was paying for.
+//!
+//! Tested as the motion's long logs are: calibrated without each of
+//! [`FOLDS`] stretches of the sightings in turn, the effect must predict the
+//! held-out stretch better than the current model does, in a paired t-test
+//! over the stretches ([`super::folds::paired`]), because a camera's errors
+//! persist for seconds and its sightings are not independent. The loss is
+//! Huber's, so a misread barcode does not decide it; the standard deviations
+//! are the stretches' jackknife, for the same reason.
+use super::diagnose::{Estimate, Estimates};
+use super::folds::{paired, FoldTest};
+use crate::derivation::EffectChains;
+use crate::fit::sensor::{calibrate_with_folds, median, Sightings};
+pub use crate::fit::sensor::{sensor_only, SensorUnmeasured};
+use crate::model::Runner;
+use crate::run::Run;
+use serde::Serialize;
+
+/// Most sensor effects found in a row.
+const MAX_CHAIN: usize = 3;
+
+/// How an effect fits the sightings, seen from the ground truth.
+#[derive(Debug, Clone, Serialize)]
+pub struct SightingFit {
+    /// Sightings with a ground-truth pose beside them.
+    pub sightings: usize,
+    /// Median absolute range residual, m, before and after the effect.
+    pub range_before: f64,
+    pub range_after: f64,
+    /// Median absolute bearing residual, rad, before and after.
+    pub bearing_before: f64,
+    pub bearing_after: f64,
+    /// The stretch-by-stretch test against the current model.
+    pub folds: FoldTest,
+}
+
+/// A sensor effect, calibrated on the sightings and tested.
+#[derive(Debug, Clone, Serialize)]
+pub struct SensorCandidate {
+    pub effect: String,
+    #[serde(skip)]
+    pub doc: String,
+    pub parameters: Estimates,
+    pub fit: SightingFit,
+    pub significant: bool,
+    /// The calibrated parameter vector of its runner.
+    #[serde(skip)]
+    pub p: Vec<f64>,
+}
+
+/// Median absolute residual of each channel, in the spec's units.
+fn medians(r: &Runner, res: &[f64]) -> [f64; 2] {
+    let sig = crate::landmarks::sigma(r);
+    [0, 1].map(|c| {
+        let mut v: Vec<f64> = res
+            .iter()
+            .skip(c)
+            .step_by(2)
+            .map(|e| (e * sig[c]).abs())
+            .collect();
+        median(&mut v)
+    })
+}
+
+/// Calibrate the sensor parameters `free` of `aug` (started at `start`) on
+/// all the sightings and stretch by stretch, and test them against the
+/// current model's sightings (`base`); the estimates reported are those of
+/// `new`, the effect's own.
+#[allow(clippy::too_many_arguments)]
+fn candidate(
+    s: &Sightings,
+    name: &str,
+    doc: &str,
+    aug: &Runner,
+    start: &[f64],
+    free: &[usize],
+    base: &[f64],
+    new: &[usize],
+) -> SensorCandidate {
+    let fit = calibrate_with_folds(s, aug, start, free);
+    let (res, _) = s.residuals(aug, &fit.p, &[], false);
+    let base_loss: Vec<f64> = (0..s.folds).map(|k| s.loss(base, |f| f == k)).collect();
+    let aug_loss: Vec<f64> = fit.held_out.iter().map(|(l, _)| *l).collect();
+    let folds = paired(&base_loss, &aug_loss, s.folds);
+    let parameters = new
+        .iter()
+        .map(|&i| {
+            let k = free
+                .iter()
+                .position(|&j| j == i)
+                .expect("new ones are free");
+            let estimate = Estimate {
+                estimate: fit.p[i],
+                std: fit.std[k],
+            };
+            (aug.names[i].clone(), estimate)
+        })
+        .collect();
+    let ([range_before, bearing_before], [range_after, bearing_after]) =
+        (medians(aug, base), medians(aug, &res));
+    SensorCandidate {
+        effect: name.to_string(),
+        doc: doc.to_string(),
+        parameters,
+        fit: SightingFit {
+            sightings: s.count(),
+            range_before,
+            range_after,
+            bearing_before,
+            bearing_after,
+            folds,
+        },
+        significant: folds.holds(),
+        p: fit.p,
+    }
+}
+
+/// The sensor's diagnosis: its first round's candidates, the effects found
+/// in order (each calibrated with the ones before it), and the runner with
+/// all of them.
+pub struct SensorDiagnosis {
+    pub candidates: Vec<SensorCandidate>,
+    pub found: Vec<SensorCandidate>,
+    pub runner: Runner,
+    pub p: Vec<f64>,
+}
+
+/// Test the sensor effects `effects` (name, doc) on top of `motion` (the
+/// effects the motion's diagnosis found, `cur` its runner calibrated at
+/// `p`): rank them by their held-out gain, add the best that holds, re-test
+/// the rest, up to [`MAX_CHAIN`].
+pub fn diagnose_sensor(
+    cur: &Runner,
+    p: &[f64],
+    runs: &[Run],
+    effects: &[(String, String)],
+    chains: &EffectChains,
+    motion: &[String],
+) -> Result<SensorDiagnosis, SensorUnmeasured> {
+    let s = Sightings::of(cur, p, runs)?;
+    let (mut runner, mut p) = (cur.clone(), p.to_vec());
+    let (mut found, mut first): (Vec<SensorCandidate>, Option<Vec<SensorCandidate>>) =
+        (vec![], None);
+    let mut remaining = effects.to_vec();
+    while found.len() < MAX_CHAIN && !remaining.is_empty() {
+        let (base, _) = s.residuals(&runner, &p, &[], false);
+        let mut ranked: Vec<(SensorCandidate, Runner)> = remaining
+            .iter()
+            .filter_map(|(name, doc)| {
+                let mut list: Vec<String> = motion.to_vec();
+                list.extend(found.iter().map(|c| c.effect.clone()));
+                list.push(name.clone());
+                let aug = chains.runner(&list).ok()?;
+                let start = seeded(&aug, &runner, &p);
+                // the sensor's parameters: every one the motion's model lacks
+                let free: Vec<usize> = aug
+                    .free
+                    .iter()
+                    .copied()
+                    .filter(|&i| cur.param_index(&aug.names[i]).is_none())
+                    .collect();
+                // what the spec change sets: the effect's own parameters
+                let new: Vec<usize> = free
+                    .iter()
+                    .copied()
+                    .filter(|&i| runner.param_index(&aug.names[i]).is_none())
+                    .collect();
+                let c = candidate(&s, name, doc, &aug, &start, &free, &base, &new);
+                Some((c, aug))
+            })
+            .collect();
+        ranked.sort_by(|(a, _), (b, _)| {
+            b.significant
+                .cmp(&a.significant)
+                .then(b.fit.folds.gain.total_cmp(&a.fit.folds.gain))
+        });
+        if first.is_none() {
+            first = Some(ranked.iter().map(|(c, _)| c.clone()).collect());
+        }
+        let Some((w, aug)) = ranked.into_iter().next().filter(|(c, _)| c.significant) else {
+            break;
+        };
+        remaining.retain(|(n, _)| n != &w.effect);
+        (runner, p) = (aug, w.p.clone());
+        found.push(w);
+    }
+    Ok(SensorDiagnosis {
+        candidates: first.unwrap_or_default(),
+        found,
+        runner,
+        p,
+    })
+}
+
+/// `aug`'s parameters at `from`'s values where it has them.
+fn seeded(aug: &Runner, from: &Runner, p: &[f64]) -> Vec<f64> {
+    let mut q = aug.p.clone();
+    for (i, n) in from.names.iter().enumerate() {
+        if let Some(j) = aug.param_index(n) {
+            q[j] = p[i];
+        }
+    }
+    q
+}
