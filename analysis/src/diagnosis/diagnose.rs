@@ -22,7 +22,6 @@ use crate::model::Runner;
 use crate::run::Run;
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use kinegen_model::ir::StepForm;
-use kinegen_model::kernel::ArgRole;
 use nalgebra::DVector;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -1249,20 +1248,7 @@ fn may_hold(cur: &Stage, rmse: f64, gain: f64, holdout_rmse: f64) -> bool {
 /// omni_caster logs the gyro effects' searches took 2.5-3.4 s each and ended
 /// where their refinements from the current calibration did.
 fn gyro_only(aug: &Runner, effect_params: &[usize]) -> bool {
-    let reads = |f: &kinegen_model::ir::Function, i| f.reads(ArgRole::Params, i);
-    let motion = [aug.ir.twist(), aug.ir.step(StepForm::Exact).value];
-    let others: Vec<_> = (0..aug.ir.observations().len())
-        .map(|k| aug.ir.observation_kernels_at(k))
-        .filter(|o| o.decl.role != YawRate)
-        .map(|o| o.value)
-        .collect();
-    let gyro = aug.ir.observation_kernels(YawRate).map(|o| o.value);
-    !effect_params.is_empty()
-        && effect_params.iter().all(|&i| {
-            aug.delay != Some(i)
-                && gyro.is_some_and(|g| reads(g, i))
-                && !motion.iter().chain(&others).any(|f| reads(f, i))
-        })
+    aug.only_observed_by(effect_params, YawRate)
 }
 
 /// A candidate's calibration before any search from nominal values.

@@ -89,6 +89,30 @@ pub fn parse_pairs(
 }
 
 impl Runner {
+    /// Whether parameters `params` change only what the observation of
+    /// `role` reads: neither the motion (the twist, the step), nor a timing
+    /// (a measurement or input delay, a command lag), nor another
+    /// observation. A gyro's bias and scale are such parameters, and so are
+    /// a camera's range scale and mounting turn: what the sensor reads, not
+    /// where the robot goes.
+    pub fn only_observed_by(&self, params: &[usize], role: ObservationRole) -> bool {
+        let reads = |f: &Function, i| f.reads(ArgRole::Params, i);
+        let motion = [self.ir.twist(), self.ir.step(StepForm::Exact).value];
+        let others: Vec<&Function> = (0..self.ir.observations().len())
+            .map(|k| self.ir.observation_kernels_at(k))
+            .filter(|o| o.decl.role != role)
+            .map(|o| o.value)
+            .collect();
+        let sensor = self.ir.observation_kernels(role).map(|o| o.value);
+        let timing = [self.delay, self.input_delay, self.input_lag];
+        !params.is_empty()
+            && params.iter().all(|&i| {
+                !timing.contains(&Some(i))
+                    && sensor.is_some_and(|s| reads(s, i))
+                    && !motion.iter().chain(&others).any(|f| reads(f, i))
+            })
+    }
+
     pub fn new(ir: ModelIr, sets: &[(String, f64)]) -> Result<Runner, ModelError> {
         let rp = ir.runtime_params();
         let names: Vec<String> = rp.iter().map(|p| p.name.clone()).collect();

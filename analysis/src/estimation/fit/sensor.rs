@@ -17,8 +17,6 @@ use crate::model::Runner;
 use crate::rows::Rows;
 use crate::run::Run;
 use kinegen_model::decl::ObservationRole::RangeBearing;
-use kinegen_model::ir::StepForm;
-use kinegen_model::kernel::ArgRole;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -49,21 +47,7 @@ const PASSES: usize = 30;
 /// reads: neither the motion (twist, step), nor a timing, nor another
 /// observation.
 pub fn sensor_only(aug: &Runner, effect_params: &[usize]) -> bool {
-    let reads = |f: &kinegen_model::ir::Function, i| f.reads(ArgRole::Params, i);
-    let motion = [aug.ir.twist(), aug.ir.step(StepForm::Exact).value];
-    let others: Vec<_> = (0..aug.ir.observations().len())
-        .map(|k| aug.ir.observation_kernels_at(k))
-        .filter(|o| o.decl.role != RangeBearing)
-        .map(|o| o.value)
-        .collect();
-    let sensor = aug.ir.observation_kernels(RangeBearing).map(|o| o.value);
-    let timing = [aug.delay, aug.input_delay, aug.input_lag];
-    !effect_params.is_empty()
-        && effect_params.iter().all(|&i| {
-            !timing.contains(&Some(i))
-                && sensor.is_some_and(|s| reads(s, i))
-                && !motion.iter().chain(&others).any(|f| reads(f, i))
-        })
+    aug.only_observed_by(effect_params, RangeBearing)
 }
 
 /// Why the sensor's effects were not tested.
