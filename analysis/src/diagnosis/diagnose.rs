@@ -1407,6 +1407,52 @@ fn read_clock(
     (clock, unmeasured, spec)
 }
 
+/// Effects (or anything) by name, with a text: a doc, a reason.
+type Named = Vec<(String, String)>;
+
+/// The effects of `remaining` to rank on top of `cur` (with the chain
+/// `names` found so far), each with its runner. Left out: those the
+/// calibrated parameters already express on these logs and those that do
+/// not derive, said in `skipped` (in the first round only), and those only
+/// the range-bearing sensor reads, collected in `sensor` for the sensor's
+/// own chain (see [`super::sensor`]).
+fn to_rank(
+    cur: &Stage,
+    names: &[String],
+    remaining: &[(String, String)],
+    cat: &Catalogue,
+    runs: &[Run],
+    o: &FitOptions,
+    (skipped, sensor): (&mut Named, &mut Named),
+) -> Vec<(String, String, Runner)> {
+    let first_round = names.is_empty();
+    let mut augmented = Vec::new();
+    for (name, doc) in remaining {
+        let mut list = names.to_vec();
+        list.push(name.clone());
+        match cat.chains.runner(&list).map_err(|e| e.to_string()) {
+            Ok(aug) => {
+                let start = seeded(&aug, &cur.runner, &cur.fit.p);
+                let effect_params = effect_params(&start, &cur.runner);
+                if sensor_only(&start, &effect_params) {
+                    if first_round {
+                        sensor.push((name.clone(), doc.clone()));
+                    }
+                    continue;
+                }
+                match redundancy(&start, &effect_params, runs, o) {
+                    Some(why) if first_round => skipped.push((name.clone(), why)),
+                    Some(_) => {}
+                    None => augmented.push((name.clone(), doc.clone(), aug)),
+                }
+            }
+            Err(why) if first_round => skipped.push((name.clone(), why)),
+            Err(_) => {}
+        }
+    }
+    augmented
+}
+
 /// The sensor's diagnosis after the motion's (see [`super::sensor`]): its
 /// first round's candidates, or why it did not run, and the final model.
 struct SensorOutcome {
@@ -1515,30 +1561,8 @@ pub fn diagnose(
         && (chain.is_empty() || !leaves_only_noise(&cur))
     {
         let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
-        let mut augmented = Vec::new();
-        for (name, doc) in &remaining {
-            let mut list = names.clone();
-            list.push(name.clone());
-            match cat.chains.runner(&list).map_err(|e| e.to_string()) {
-                Ok(aug) => {
-                    let start = seeded(&aug, &cur.runner, &cur.fit.p);
-                    let effect_params = effect_params(&start, &cur.runner);
-                    if sensor_only(&start, &effect_params) {
-                        if chain.is_empty() {
-                            sensor_effects.push((name.clone(), doc.clone()));
-                        }
-                        continue;
-                    }
-                    match redundancy(&start, &effect_params, runs, &o) {
-                        Some(why) if chain.is_empty() => skipped.push((name.clone(), why)),
-                        Some(_) => {}
-                        None => augmented.push((name.clone(), doc.clone(), aug)),
-                    }
-                }
-                Err(why) if chain.is_empty() => skipped.push((name.clone(), why)),
-                Err(_) => {}
-            }
-        }
+        let first_round = (&mut skipped, &mut sensor_effects);
+        let augmented = to_rank(&cur, &names, &remaining, cat, runs, &o, first_round);
         let ranked = rank(
             &cur,
             chain.is_empty(),

@@ -15,7 +15,7 @@
 //! error the localisation's likelihood was paying for.
 //!
 //! Tested as the motion's long logs are: calibrated without each of
-//! [`FOLDS`] stretches of the sightings in turn, the effect must predict the
+//! [`crate::fit::sensor::FOLDS`] stretches of the sightings in turn, the effect must predict the
 //! held-out stretch better than the current model does, in a paired t-test
 //! over the stretches ([`super::folds::paired`]), because a camera's errors
 //! persist for seconds and its sightings are not independent. The loss is
@@ -142,7 +142,7 @@ pub struct SensorDiagnosis {
 /// Test the sensor effects `effects` (name, doc) on top of `motion` (the
 /// effects the motion's diagnosis found, `cur` its runner calibrated at
 /// `p`): rank them by their held-out gain, add the best that holds, re-test
-/// the rest, up to [`MAX_CHAIN`].
+/// the rest, up to three (`MAX_CHAIN`).
 pub fn diagnose_sensor(
     cur: &Runner,
     p: &[f64],
