@@ -1256,12 +1256,8 @@ fn fifty_seeds_spread_matches_the_reported_standard_deviation() {
             "increments",
         ]);
         let track = kinegen_json(&["fit", "--spec", spec, "--data", log]);
-        for (k, n) in names.iter().enumerate() {
-            est[k].push(doc["parameters"][n]["estimate"].as_f64().unwrap());
-            std[k].push(doc["parameters"][n]["std"].as_f64().unwrap());
-            track_std[k].push(track["parameters"][n]["std"].as_f64().unwrap());
-            track_est[k].push(track["parameters"][n]["estimate"].as_f64().unwrap());
-        }
+        push_estimates(&doc, &names, &mut est, &mut std);
+        push_estimates(&track, &names, &mut track_est, &mut track_std);
     }
     for (k, n) in names.iter().enumerate() {
         let spread = spread_of(&est[k]);
@@ -2580,10 +2576,7 @@ fn a_rounded_steering_angle_is_counted_in_the_standard_deviations() {
             "--data",
             log.to_str().unwrap(),
         ]);
-        for (k, n) in names.iter().enumerate() {
-            est[k].push(doc["parameters"][n]["estimate"].as_f64().unwrap());
-            std[k].push(doc["parameters"][n]["std"].as_f64().unwrap());
-        }
+        push_estimates(&doc, &names, &mut est, &mut std);
     }
     assert_honest_spread(&names, &truth, &est, &std);
 }
@@ -2608,12 +2601,23 @@ fn long_clean_logs_from_another_simulator_get_honest_standard_deviations() {
             after <= before,
             "seed {seed}: whole-run RMSE {before} -> {after}"
         );
-        for (k, n) in names.iter().enumerate() {
-            est[k].push(doc["parameters"][n]["estimate"].as_f64().unwrap());
-            std[k].push(doc["parameters"][n]["std"].as_f64().unwrap());
-        }
+        push_estimates(&doc, &names, &mut est, &mut std);
     }
     assert_honest_spread(&names, &truth, &est, &std);
+}
+
+/// Append each parameter of `names` that the fit document `doc` gives to
+/// its list of estimates `est` and of standard deviations `std`.
+fn push_estimates(
+    doc: &serde_json::Value,
+    names: &[&str],
+    est: &mut [Vec<f64>],
+    std: &mut [Vec<f64>],
+) {
+    for (k, n) in names.iter().enumerate() {
+        est[k].push(doc["parameters"][n]["estimate"].as_f64().unwrap());
+        std[k].push(doc["parameters"][n]["std"].as_f64().unwrap());
+    }
 }
 
 /// Each parameter's reported standard deviations (`std`, per parameter and

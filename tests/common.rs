@@ -79,6 +79,25 @@ pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
     out
 }
 
+/// `kinegen add-effect`: `spec` with the catalogue's `effect` added (at
+/// `values`, each `NAME=VALUE`), written to `out`, which is returned.
+pub fn add_effect(spec: &Path, effect: &str, values: &[&str], out: &Path) -> PathBuf {
+    let mut a = vec![
+        "add-effect",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--effect",
+        effect,
+    ];
+    for v in values {
+        a.extend(["--value", v]);
+    }
+    a.extend(["--out", out.to_str().unwrap()]);
+    let o = kinegen(&a);
+    assert!(o.status.success(), "add-effect {effect}: {}", stderr(&o));
+    out.to_path_buf()
+}
+
 /// The folder of real robot logs `name` (one of `../shared/real/`'s, e.g.
 /// "optiodom-diff-square"): `$KINEGEN_REAL_DATA/name` when that variable is
 /// set, else `../shared/real/name` beside the checkout. A user's clone has

@@ -636,16 +636,7 @@ fn a_late_command_is_named_and_calibrated() {
     assert!((tau - 0.3).abs() < 0.005, "{tau}");
     // with landmarks only, the delay shows in the sightings
     let delayed = tmp.path().join("delayed.toml");
-    let o = kinegen(&[
-        "add-effect",
-        "--spec",
-        s,
-        "--effect",
-        "input_delay",
-        "--out",
-        delayed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    add_effect(&spec, "input_delay", &[], &delayed);
     let (map, obs) = (root().join("data/beacons.csv"), tmp.path().join("obs.csv"));
     let lm_log = simulate(
         tmp.path(),
@@ -841,16 +832,7 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
     // a spec that already declares a measurement delay hears what the
     // sightings say of its calibrated value
     let with_offset = dir.join("with_offset.toml");
-    let args = [
-        "add-effect",
-        "--spec",
-        s,
-        "--effect",
-        "time_offset",
-        "--out",
-    ];
-    let o = kinegen(&[&args[..], &[with_offset.to_str().unwrap()]].concat());
-    assert!(o.status.success(), "{}", stderr(&o));
+    add_effect(&spec, "time_offset", &[], &with_offset);
     for (effect, verdict) in [
         ("input_delay", "contradicted"),
         ("time_offset", "confirmed"),
@@ -920,18 +902,7 @@ fn a_model_with_its_input_delay_leaves_no_structure() {
     ];
     let log = simulate(dir, "late.csv", &args);
     let delayed = dir.join("delayed.toml");
-    let o = kinegen(&[
-        "add-effect",
-        "--spec",
-        s,
-        "--effect",
-        "input_delay",
-        "--value",
-        "input_delay=0.3",
-        "--out",
-        delayed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    add_effect(&spec, "input_delay", &["input_delay=0.3"], &delayed);
     let d = kinegen_json(&[
         "diagnose",
         "--spec",
@@ -977,16 +948,7 @@ fn localize_estimates_a_declared_timing(effect: &str, within: f64) {
     let dir = tmp.path();
     let spec = commanded_spec(dir, "m/s/sqrt(Hz)");
     let timed = dir.join("timed.toml");
-    let o = kinegen(&[
-        "add-effect",
-        "--spec",
-        spec.to_str().unwrap(),
-        "--effect",
-        effect,
-        "--out",
-        timed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    add_effect(&spec, effect, &[], &timed);
     let (map, obs) = (root().join("data/beacons.csv"), dir.join("obs.csv"));
     let truth = format!("{effect}=0.3");
     let log = simulate(
@@ -1219,16 +1181,7 @@ fn a_command_lag_is_named_and_calibrated() {
     };
     assert!(rmse("input_delay") > 3.0 * rmse("command_lag"));
     let lagged = tmp.path().join("lagged.toml");
-    let o = kinegen(&[
-        "add-effect",
-        "--spec",
-        s,
-        "--effect",
-        "command_lag",
-        "--out",
-        lagged.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    add_effect(&spec, "command_lag", &[], &lagged);
     let fit = kinegen_json(&[
         "fit",
         "--spec",
@@ -1629,16 +1582,7 @@ fn a_camera_that_reads_depth_or_looks_aside_is_named_from_its_sightings() {
     // does not say: seen from the dead-reckoned track, the sightings are
     // the track's drift (a real robot's calibrated to 0.36, not the camera)
     let with = dir.join("with_depth.toml");
-    let add = [
-        "add-effect",
-        "--spec",
-        s,
-        "--effect",
-        "range_as_depth",
-        "--out",
-    ];
-    let o = kinegen(&[&add[..], &[with.to_str().unwrap()]].concat());
-    assert!(o.status.success(), "{}", stderr(&o));
+    add_effect(&spec, "range_as_depth", &[], &with);
     let all_slip = dir.join("all_slip.csv");
     let slip = [
         "--effect",
