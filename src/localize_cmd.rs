@@ -391,5 +391,5 @@ fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_j
             )
         })
         .collect();
-    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range_per_m": n.persistent[0], "bearing": n.persistent[1]}, "memory_s": n.memory_s, "source": note})
+    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range_per_m": n.persistent.factor[0], "bearing": n.persistent.factor[1]}, "memory_s": n.persistent.memory_s, "shared": {"range_per_m": n.shared.factor[0], "bearing": n.shared.factor[1], "memory_s": n.shared.memory_s}, "source": note})
 }

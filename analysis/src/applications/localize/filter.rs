@@ -1,15 +1,17 @@
 //! One pass of the extended Kalman filter over a run (seed 001 eq. 1-9), with
 //! the prediction cut at each sighting's own time.
-use super::active::{Slots, Taken, ACTIVE};
-use super::noise::NoiseModel;
+use super::active::ACTIVE;
+use super::belief::{Belief, ErrorPart, Owner};
+use super::noise::{Lingering, NoiseModel, PERSISTENT_START_S, SHARED_START_S};
 use super::{EkfOptions, LocalizeError};
 use crate::log::wrap;
 use crate::model::Runner;
+use crate::run::LandmarkObs;
 use crate::run::Run;
 use kinegen_jit::Evaluator;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::{ArgRole, Function, StepForm};
-use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
+use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
 
 /// A prediction shorter than this (s) moves nothing: a sighting at a row's
 /// time, several sightings in one camera frame.
@@ -107,9 +109,26 @@ impl<'a> Filter<'a> {
             sigma: self.r.ir.noise.iter().map(|n| n.sigma).collect(),
             density: self.r.ir.noise.iter().map(|n| n.is_density()).collect(),
             obs_scale: [1.0; 2],
-            persistent: [0.0; 2],
-            memory_s: 10.0,
+            persistent: Lingering::none(PERSISTENT_START_S),
+            shared: Lingering::none(SHARED_START_S),
         }
+    }
+
+    /// The lingering parts of the sightings' errors that `noise` gives, as
+    /// variances (the range's per metre of range).
+    fn error_parts(&self, noise: &NoiseModel) -> Vec<ErrorPart> {
+        [
+            (&noise.persistent, Owner::Landmark(ACTIVE)),
+            (&noise.shared, Owner::Sensor),
+        ]
+        .into_iter()
+        .filter(|(part, _)| !part.is_none())
+        .map(|(part, owner)| ErrorPart {
+            var: Vector2::from_fn(|j, _| (self.obs_sigma[j] * part.factor[j]).powi(2)),
+            memory_s: part.memory_s,
+            owner,
+        })
+        .collect()
     }
 
     /// How many noise inputs the filter maps: the spec's `[[noise]]`, or the
@@ -252,13 +271,11 @@ impl<'a> Filter<'a> {
         keep: Keep,
     ) -> Result<Pass, LocalizeError> {
         let mut s = Scratch::new(self);
-        let var = Vector2::from_fn(|j, _| (self.obs_sigma[j] * noise.persistent[j]).powi(2));
         let mut b = Belief::new(
             plan.start,
             plan.start_cov,
             plan.landmarks,
-            var,
-            noise.memory_s,
+            &self.error_parts(noise),
             run.t[0],
         );
         let mut pass = Pass {
@@ -361,44 +378,30 @@ impl<'a> Filter<'a> {
             s,
         } = at;
         let z = &run.landmarks[i];
-        let xs = [b.x[0], b.x[1], b.x[2]];
         let lm = [z.xl, z.yl];
-        {
-            let args: Vec<&[f64]> = self
-                .observe
-                .args
-                .iter()
-                .map(|a| match a.role {
-                    ArgRole::State => &xs[..],
-                    ArgRole::Inputs => u,
-                    ArgRole::Params => &self.r.p[..],
-                    ArgRole::Landmark => &lm[..],
-                    _ => &s.zeros[..a.names.len()],
-                })
-                .collect();
-            self.observe.eval_into(&args, &mut s.obs_out, &mut s.tape);
-        }
-        let o = &s.obs_out;
-        let hm = Matrix2x3::from_row_slice(&o[2..8]);
-        let white = |j: usize| (self.obs_sigma[j] * noise.obs_scale[j]).powi(2);
-        let rm = Matrix2::new(white(0), 0.0, 0.0, white(1));
         b.catch_up(z.t);
-        let l = b.slot_for(plan.landmark[i], z.t);
-        let (bias, pb, bb) = b.of(l);
-        // the persistent range error is per metre of range: H = [hm | d at l]
-        let d = Matrix2::new(o[0].abs(), 0.0, 0.0, 1.0);
-        let y = Vector2::new(
-            z.range - o[0] - d[(0, 0)] * bias[0],
-            wrap(z.bearing - o[1] - bias[1]),
-        );
-        // P H^T for the pose rows, and S
-        let ph = b.p * hm.transpose() + pb * d;
-        let sm = hm * ph + d * pb.transpose() * hm.transpose() + d * bb * d + rm;
-        let Some(si) = sm.try_inverse() else {
+        let held = b.slots_for(plan.landmark[i], z.t);
+        let white = |j: usize| (self.obs_sigma[j] * noise.obs_scale[j]).powi(2);
+        let (bias, pb, bb) = b.of(&held);
+        let prior = Prior {
+            bias,
+            pb,
+            bb,
+            rm: Matrix2::new(white(0), 0.0, 0.0, white(1)),
+        };
+        let e = self.expand(b, &prior, &b.x, (z, u, &lm), s);
+        let Some(si) = e.sm.try_inverse() else {
             pass.rejected += 1;
             return;
         };
-        let nis = (y.transpose() * si * y)[(0, 0)];
+        let nis = (e.y.transpose() * si * e.y)[(0, 0)];
+        if !(e.sm[(0, 0)] > 0.0 && e.sm.determinant() > 0.0 && nis >= 0.0) {
+            // rounding has left the covariance indefinite: this noise is not
+            // one the likelihood can judge
+            pass.cost = f64::INFINITY;
+            pass.rejected += 1;
+            return;
+        }
         // beyond the gate the cost grows with the log of the NIS (a robust
         // tail, continuous in value and slope at the gate): outliers do not
         // pull the noise up, and a filter that rejects everything is still
@@ -408,16 +411,134 @@ impl<'a> Filter<'a> {
         } else {
             self.gate * (1.0 + (nis / self.gate).ln())
         };
-        pass.cost += sm.determinant().max(1e-300).ln() + robust;
+        pass.cost += e.sm.determinant().max(1e-300).ln() + robust;
         if !nis.is_finite() || nis > self.gate {
             pass.rejected += 1;
             return;
         }
-        b.fuse(l, (&hm, &d), &ph, (&sm, &si), &y);
+        let (e, si) = if far_from_linear(b, e.h[0]) {
+            self.iterate(b, &prior, (e, si), (z, u, &lm), s)
+        } else {
+            (e, si)
+        };
+        b.fuse(&held, (&e.hm, &e.d), &e.ph, (&e.sm, &si), &e.y);
         pass.nis.push((z.t, nis));
         pass.accepted += 1;
     }
+
+    /// The sighting's first-order expansion at pose `x` (the prior's pose,
+    /// or an iterate's): H = [hm | d at each held slot], the lingering range
+    /// errors being per metre of range.
+    fn expand(
+        &self,
+        b: &Belief,
+        prior: &Prior,
+        x: &Vector3<f64>,
+        (z, u, lm): (&LandmarkObs, &[f64], &[f64; 2]),
+        s: &mut Scratch,
+    ) -> Expansion {
+        let xs = [x[0], x[1], x[2]];
+        let args: Vec<&[f64]> = self
+            .observe
+            .args
+            .iter()
+            .map(|a| match a.role {
+                ArgRole::State => &xs[..],
+                ArgRole::Inputs => u,
+                ArgRole::Params => &self.r.p[..],
+                ArgRole::Landmark => &lm[..],
+                _ => &s.zeros[..a.names.len()],
+            })
+            .collect();
+        self.observe.eval_into(&args, &mut s.obs_out, &mut s.tape);
+        let o = &s.obs_out;
+        let h = Vector2::new(o[0], o[1]);
+        let hm = Matrix2x3::from_row_slice(&o[2..8]);
+        let d = Matrix2::new(h[0].abs(), 0.0, 0.0, 1.0);
+        // the innovation as seen from the prior: at the prior's own pose the
+        // plain one, at an iterate's with the expansion carried back to it
+        let mut y =
+            Vector2::new(z.range - h[0], z.bearing - h[1]) - d * prior.bias + hm * (x - b.x);
+        y[1] = wrap(y[1]);
+        // P H^T for the pose rows, and S
+        let ph = b.p * hm.transpose() + prior.pb * d;
+        let sm = hm * ph + d * prior.pb.transpose() * hm.transpose() + d * prior.bb * d + prior.rm;
+        Expansion {
+            h,
+            hm,
+            d,
+            y,
+            ph,
+            sm,
+        }
+    }
+
+    /// The iterated update (Bell and Cathey, 1993: Gauss-Newton on the
+    /// update's least squares): the sighting expanded again at the updated
+    /// pose until the update stops moving it, the lingering errors taken at
+    /// their prior. Returns the last expansion and its S^-1, which
+    /// [`Belief::fuse`] applies to the prior.
+    fn iterate(
+        &self,
+        b: &Belief,
+        prior: &Prior,
+        first: (Expansion, Matrix2<f64>),
+        at: (&LandmarkObs, &[f64], &[f64; 2]),
+        s: &mut Scratch,
+    ) -> (Expansion, Matrix2<f64>) {
+        let (mut e, mut si) = first;
+        let mut x = b.x + e.ph * si * e.y;
+        for _ in 1..ITERATIONS {
+            let next = self.expand(b, prior, &x, at, s);
+            let Some(next_si) = next.sm.try_inverse() else {
+                break;
+            };
+            (e, si) = (next, next_si);
+            let moved = b.x + e.ph * si * e.y;
+            let step = (moved - x).abs().max();
+            x = moved;
+            if step < CONVERGED {
+                break;
+            }
+        }
+        (e, si)
+    }
 }
+
+/// Where a sighting's expansion starts: the lingering errors it reads (their
+/// sum, its covariance with the pose, its own) and the white part's R.
+struct Prior {
+    bias: Vector2<f64>,
+    pb: Matrix3x2<f64>,
+    bb: Matrix2<f64>,
+    rm: Matrix2<f64>,
+}
+
+/// A sighting's first-order expansion (see [`Filter::expand`]).
+struct Expansion {
+    h: Vector2<f64>,
+    hm: Matrix2x3<f64>,
+    d: Matrix2<f64>,
+    y: Vector2<f64>,
+    ph: Matrix3x2<f64>,
+    sm: Matrix2<f64>,
+}
+
+/// Whether a sighting at `range` m from a pose as uncertain as `b`'s is
+/// beyond the first-order expansion: the position's standard deviation over
+/// a tenth of the range, or the heading's over 0.1 rad (the neglected
+/// second-order term then exceeds about 1% of the correction). A robot
+/// started without motion capture begins so, put metres off by its first
+/// few sightings.
+fn far_from_linear(b: &Belief, range: f64) -> bool {
+    let position = b.p[(0, 0)] + b.p[(1, 1)];
+    position > (0.1 * range).powi(2) || b.p[(2, 2)] > 0.1f64.powi(2)
+}
+
+/// The iterated update's most expansions, and the move (m, rad) under which
+/// it has converged.
+const ITERATIONS: usize = 8;
+const CONVERGED: f64 = 1e-6;
 
 /// What a pass keeps besides its likelihood and counts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -603,273 +724,4 @@ struct Sightings<'p, 'q> {
     noise: &'p NoiseModel,
     pass: &'q mut Pass,
     s: &'q mut Scratch,
-}
-
-/// What the filter believes: the pose and its covariance, and (when the
-/// noise has a persistent part) the persistent error of each landmark's
-/// range and bearing (of the [`ACTIVE`] most recently sighted, see
-/// [`super::active`]), a first-order Gauss-Markov process (Gelb, Applied
-/// Optimal Estimation, 1974, sec. 3.8: a coloured measurement error as a
-/// state). Estimating it is what keeps a filter that sees one landmark for
-/// seconds from trusting the same error a hundred times.
-///
-/// The errors change only by decaying toward zero, so their covariance and
-/// their correlation with the pose are brought up to date only when a
-/// sighting needs them (`catch_up`): between sightings a step costs no more
-/// than without them.
-struct Belief {
-    x: Vector3<f64>,
-    /// sin and cos of the heading x[2], kept in step with it.
-    sin_cos: (f64, f64),
-    p: Matrix3<f64>,
-    /// Persistent errors, [range, bearing] per slot (see [`Slots`]).
-    bias: Vec<Vector2<f64>>,
-    /// Which landmark's error each slot holds.
-    slots: Slots,
-    /// Pose-error covariance (3 x 2 per landmark), as of `since`.
-    pb: Vec<nalgebra::Matrix3x2<f64>>,
-    /// Error covariance (2 x 2 blocks, row-major over landmarks), as of
-    /// `since`, stored scaled: the covariance is `bb_scale * bb` plus
-    /// `bb_diag` times the stationary variance on the diagonal blocks, so a
-    /// decay costs two multiplications instead of a pass over every block.
-    bb: Vec<Matrix2<f64>>,
-    bb_scale: f64,
-    bb_diag: f64,
-    /// The product of the transitions F since `since`.
-    f_acc: Matrix3<f64>,
-    since: f64,
-    /// Stationary variance of the persistent errors and their time constant.
-    var: Matrix2<f64>,
-    memory_s: f64,
-}
-
-impl Belief {
-    fn new(
-        x: Vector3<f64>,
-        p: Matrix3<f64>,
-        landmarks: usize,
-        var: Vector2<f64>,
-        memory_s: f64,
-        t: f64,
-    ) -> Belief {
-        let n = if var.iter().any(|v| *v > 0.0) {
-            landmarks.min(ACTIVE)
-        } else {
-            0
-        };
-        Belief {
-            x,
-            sin_cos: x[2].sin_cos(),
-            p,
-            bias: vec![Vector2::zeros(); n],
-            slots: Slots::new(landmarks, n),
-            pb: vec![nalgebra::Matrix3x2::zeros(); n],
-            bb: vec![Matrix2::zeros(); n * n],
-            bb_scale: 1.0,
-            bb_diag: 1.0,
-            f_acc: Matrix3::identity(),
-            since: t,
-            var: Matrix2::from_diagonal(&var),
-            memory_s,
-        }
-    }
-
-    fn n(&self) -> usize {
-        self.bias.len()
-    }
-
-    /// Move by `delta` (body frame; its heading change's sine and cosine
-    /// `turn`) and add the process noise `q` (world frame): P = F P F^T + Q
-    /// with F the identity but for its heading column (-wy, wx, 1), written
-    /// out (a third of the general product). The F's since the last sighting
-    /// add up instead of multiplying. Returns F.
-    fn advance(&mut self, delta: [f64; 3], turn: (f64, f64), q: Matrix3<f64>) -> Matrix3<f64> {
-        let (sn, cs) = self.sin_cos;
-        let [dx, dy, dth] = delta;
-        let (wx, wy) = (cs * dx - sn * dy, sn * dx + cs * dy);
-        let (a, c) = (-wy, wx);
-        let p = &self.p;
-        let (p02, p12, p22) = (p[(0, 2)], p[(1, 2)], p[(2, 2)]);
-        let n00 = p[(0, 0)] + 2.0 * a * p02 + a * a * p22;
-        let n01 = p[(0, 1)] + a * p12 + c * p02 + a * c * p22;
-        let n11 = p[(1, 1)] + 2.0 * c * p12 + c * c * p22;
-        let n02 = p02 + a * p22;
-        let n12 = p12 + c * p22;
-        self.p = Matrix3::new(n00, n01, n02, n01, n11, n12, n02, n12, p22) + q;
-        self.f_acc[(0, 2)] += a;
-        self.f_acc[(1, 2)] += c;
-        self.x += Vector3::new(wx, wy, dth);
-        let (sd, cd) = turn;
-        self.sin_cos = (sn * cd + cs * sd, cs * cd - sn * sd);
-        Matrix3::new(1.0, 0.0, a, 0.0, 1.0, c, 0.0, 0.0, 1.0)
-    }
-
-    /// Block (i, j) of the persistent errors' covariance (stored for i <= j
-    /// only: it is symmetric, and the update's cost is in these blocks).
-    fn bb_at(&self, i: usize, j: usize) -> Matrix2<f64> {
-        let n = self.n();
-        let block = if i <= j {
-            self.bb[i * n + j]
-        } else {
-            self.bb[j * n + i].transpose()
-        };
-        let stored = block * self.bb_scale;
-        if i == j {
-            stored + self.var * self.bb_diag
-        } else {
-            stored
-        }
-    }
-
-    /// Bring the persistent errors and their covariances up to time `t`:
-    /// each decays by phi = exp(-dt/memory) toward its stationary variance.
-    fn catch_up(&mut self, t: f64) {
-        if self.n() == 0 {
-            return;
-        }
-        let phi = (-(t - self.since).max(0.0) / self.memory_s).exp();
-        for v in &mut self.bias {
-            *v *= phi;
-        }
-        for c in &mut self.pb {
-            *c = self.f_acc * *c * phi;
-        }
-        self.bb_scale *= phi * phi;
-        self.bb_diag = phi * phi * self.bb_diag + (1.0 - phi * phi);
-        if self.bb_scale < 1e-6 {
-            // fold the scale in before it underflows
-            let k = self.bb_scale;
-            self.bb.iter_mut().for_each(|b| *b *= k);
-            self.bb_scale = 1.0;
-        }
-        self.f_acc = Matrix3::identity();
-        self.since = t;
-    }
-
-    /// The slot of landmark `l`, sighted at `t` (0, unused, without
-    /// persistent errors). A slot taken from another landmark starts from the
-    /// prior: no error, the stationary variance, no correlation.
-    fn slot_for(&mut self, l: usize, t: f64) -> usize {
-        if self.n() == 0 {
-            return 0;
-        }
-        match self.slots.take(l, t) {
-            Taken::Kept(s) | Taken::Fresh(s) => s,
-            Taken::Evicted(s) => {
-                self.reset(s);
-                s
-            }
-        }
-    }
-
-    /// Slot `s` back to the prior (as of `since`, the time the caller has
-    /// caught up to).
-    fn reset(&mut self, s: usize) {
-        let n = self.n();
-        self.bias[s] = Vector2::zeros();
-        self.pb[s] = nalgebra::Matrix3x2::zeros();
-        for j in 0..n {
-            let (a, b) = (s.min(j), s.max(j));
-            self.bb[a * n + b] = Matrix2::zeros();
-        }
-        // stored so that bb_at(s, s) is the stationary variance
-        self.bb[s * n + s] = self.var * ((1.0 - self.bb_diag) / self.bb_scale);
-    }
-
-    /// Slot `l`'s persistent error, its covariance with the pose, and its
-    /// own covariance (zeros without persistent errors).
-    fn of(&self, l: usize) -> (Vector2<f64>, nalgebra::Matrix3x2<f64>, Matrix2<f64>) {
-        if self.n() == 0 {
-            return (
-                Vector2::zeros(),
-                nalgebra::Matrix3x2::zeros(),
-                Matrix2::zeros(),
-            );
-        }
-        (self.bias[l], self.pb[l], self.bb_at(l, l))
-    }
-
-    /// The Kalman update with a sighting whose landmark's error is in slot
-    /// `l` ([`Belief::slot_for`]): H = [hm | d at l],
-    /// `ph` the pose rows of P H^T, `sm` = H P H^T + R and its inverse `si`.
-    fn fuse(
-        &mut self,
-        l: usize,
-        (hm, d): (&Matrix2x3<f64>, &Matrix2<f64>),
-        ph: &nalgebra::Matrix3x2<f64>,
-        (sm, si): (&Matrix2<f64>, &Matrix2<f64>),
-        y: &Vector2<f64>,
-    ) {
-        let n = self.n();
-        // the error rows of P H^T: P_bp H_x^T + P_b,l d
-        let eh: Vec<Matrix2<f64>> = (0..n)
-            .map(|j| self.pb[j].transpose() * hm.transpose() + self.bb_at(j, l) * d)
-            .collect();
-        let kp = ph * si;
-        let kb: Vec<Matrix2<f64>> = eh.iter().map(|e| e * si).collect();
-        self.x += kp * y;
-        self.sin_cos = self.x[2].sin_cos();
-        for (b, k) in self.bias.iter_mut().zip(&kb) {
-            *b += k * y;
-        }
-        let ks = kp * sm;
-        let p = self.p - ks * kp.transpose();
-        self.p = (p + p.transpose()) * 0.5;
-        for (c, k) in self.pb.iter_mut().zip(&kb) {
-            *c -= ks * k.transpose();
-        }
-        let unscale = 1.0 / self.bb_scale;
-        for (i, (row, ki)) in self.bb.chunks_mut(n.max(1)).zip(&kb).enumerate() {
-            let ki = ki * sm * unscale;
-            for (b, kj) in row.iter_mut().zip(&kb).skip(i) {
-                *b -= ki * kj.transpose();
-            }
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A landmark that takes the slot of one sighted longer ago starts from
-    /// the prior: no error, the stationary variance, no correlation with
-    /// the pose or with the other landmarks' errors.
-    #[test]
-    fn a_slot_given_to_another_landmark_starts_from_the_prior() {
-        let var = Vector2::new(0.01, 0.0004);
-        let mut b = Belief::new(
-            Vector3::zeros(),
-            Matrix3::identity(),
-            ACTIVE + 1,
-            var,
-            50.0,
-            0.0,
-        );
-        assert_eq!(b.n(), ACTIVE);
-        for l in 0..ACTIVE {
-            let s = b.slot_for(l, l as f64);
-            // what sightings would have left: an error, correlations
-            b.bias[s] = Vector2::new(0.3, -0.02);
-            b.pb[s] = nalgebra::Matrix3x2::from_element(0.001);
-        }
-        let n = b.n();
-        b.bb.iter_mut()
-            .for_each(|m| *m = Matrix2::from_element(-0.002));
-        b.catch_up(30.0);
-        // landmark 0 was sighted longest ago
-        let s = b.slot_for(ACTIVE, 30.0);
-        assert_eq!(s, b.slot_for(ACTIVE, 30.0));
-        assert_eq!(b.bias[s], Vector2::zeros());
-        assert_eq!(b.pb[s], nalgebra::Matrix3x2::zeros());
-        assert!((b.bb_at(s, s) - Matrix2::from_diagonal(&var)).abs().max() < 1e-15);
-        for j in (0..n).filter(|&j| j != s) {
-            assert_eq!(b.bb_at(s, j), Matrix2::zeros());
-            assert_eq!(b.bb_at(j, s), Matrix2::zeros());
-        }
-        // the others keep theirs
-        let other = b.slot_for(1, 31.0);
-        assert_ne!(other, s);
-        assert_ne!(b.bias[other], Vector2::zeros());
-    }
 }

@@ -11,15 +11,19 @@
 //!   row into. A model without `[[noise]]` gets white noise on its body twist.
 //! - Noise chosen from the log itself unless the user gives it
 //!   ([`noise::estimate`]: the innovations' likelihood, maximised over the
-//!   process-noise densities and a scale of the observation sigmas).
+//!   process-noise densities and the observation errors: a white part, a
+//!   persistent part per landmark and a part every landmark shares, the
+//!   lingering ones carried as states, see [`belief`]).
 //! - Update with the range-bearing observation and its Jacobian (H, eq. 6-7),
 //!   R from its sigmas; innovations beyond a chi-square gate are rejected and
-//!   counted.
+//!   counted. Where the pose is too uncertain for one expansion (a robot
+//!   started without motion capture), the update is iterated.
 //! - Consistency: NIS (always) and NEES (against ground truth, when the log has
 //!   it and the model measures the body pose directly) against their
 //!   chi-square bounds; a fixed-interval RTS smoother over the same pass for
 //!   offline use ([`smoother`]).
 mod active;
+mod belief;
 mod filter;
 pub mod noise;
 mod simplex;
@@ -28,7 +32,7 @@ pub mod summary;
 pub mod timing;
 
 pub use filter::{Filter, Keep, Pass};
-pub use noise::{NoiseModel, NoiseSource};
+pub use noise::{Lingering, NoiseModel, NoiseSource};
 pub use summary::{side, summarise, Consistency, Side, Spread, Summary};
 
 use crate::log::wrap;
