@@ -301,6 +301,11 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
             apply_cmds.push(add_effect_command(&from, &step.effect, &vals, &r.ir.name));
         }
         out.say(&format!("apply with:\n  {}", apply_cmds.join("\n  ")));
+        let last = d.chain.last().map_or(String::new(), |s| s.effect.clone());
+        out.say(&format!(
+            "then calibrate it, its values kept as the spec's nominals (what localize, compare and simulate run):\n  {}",
+            calibrate_command(c, &format!("{}_{last}.toml", r.ir.name), &r.ir.name)
+        ));
         say_alternatives(out, d, &c.spec.display().to_string(), &r.ir.name);
     }
     apply_cmds
@@ -347,6 +352,25 @@ fn add_effect_command(
         "kinegen add-effect --spec {spec} --effect {effect} {} --out {model}_{effect}.toml",
         args.join(" ")
     )
+}
+
+/// The `fit` that calibrates `spec` on the diagnosed logs and writes it back
+/// with the calibrated values (`--export spec`).
+fn calibrate_command(c: &Common, spec: &str, model: &str) -> String {
+    let mut a = vec![format!("kinegen fit --spec {spec}")];
+    a.extend(c.data.iter().map(|d| format!("--data {}", d.display())));
+    a.extend(
+        c.observations
+            .iter()
+            .map(|o| format!("--observations {}", o.display())),
+    );
+    a.extend(
+        c.landmarks
+            .iter()
+            .map(|l| format!("--landmarks {}", l.display())),
+    );
+    a.push(format!("--export spec {model}_fitted.toml"));
+    a.join(" ")
 }
 
 /// The commands that add, in place of the chain's first effect, each one

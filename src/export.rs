@@ -3,6 +3,10 @@
 //! standard ROS 2 `diff_drive_controller`; any other model a generic list of
 //! every calibrated parameter with its standard deviation.
 //!
+//! `fit --export spec PATH`: the spec itself with the calibrated values as
+//! its nominals, for the commands that run a model as its spec says
+//! (`localize`, `compare`, `simulate`).
+//!
 //! The YAML is written with `format!`: two flat, fixed layouts of numbers and
 //! identifiers, which a YAML library (serde_yaml is unmaintained) would not make
 //! safer.
@@ -131,4 +135,25 @@ pub fn ros2_yaml(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, Str
         ));
     }
     Ok(format!("{head}{calibration}"))
+}
+
+/// The spec at `spec` with every parameter `res` calibrated and identified
+/// at its calibrated value (one the logs did not identify keeps its
+/// nominal), headed by a comment saying so.
+pub fn fitted_spec(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, String> {
+    let model = Model::load(spec).map_err(|e| e.to_string())?;
+    let values: Vec<(&str, f64)> = res
+        .free
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| res.std.get(*k).is_some_and(|s| s.is_finite()))
+        .map(|(_, &i)| (r.names[i].as_str(), res.p[i]))
+        .collect();
+    let text = kinegen_model::effects::with_nominals(&model, &values).map_err(|e| e.to_string())?;
+    let names: Vec<&str> = values.iter().map(|v| v.0).collect();
+    Ok(format!(
+        "# calibrated by kinegen fit from {}: {}\n{text}",
+        spec.display(),
+        names.join(", ")
+    ))
 }

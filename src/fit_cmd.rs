@@ -120,7 +120,9 @@ pub struct FitArgs {
     pub likelihood: String,
     /// Write the calibrated values for the robot's configuration: `--export
     /// ros2-yaml PATH` (ROS 2 diff_drive_controller parameters for a differential
-    /// drive, every calibrated parameter with its standard deviation otherwise).
+    /// drive, every calibrated parameter with its standard deviation otherwise),
+    /// or `--export spec PATH` (a copy of the spec with the calibrated values as
+    /// its nominals, comments and layout kept: for localize, compare, simulate).
     #[arg(long, num_args = 2, value_names = ["FORMAT", "PATH"])]
     pub export: Vec<String>,
     /// Hidden tanh units of the neural gyrodometry network (--method neural or
@@ -202,7 +204,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         |prep, fitted| {
             busy.take();
             match fitted {
-                Fitted::Calibrated(cal) => render_lm(&c, &out, prep, a, &cal, export.as_deref()),
+                Fitted::Calibrated(cal) => render_lm(&c, &out, prep, a, &cal, export.as_ref()),
                 Fitted::Methods(m) => render_methods(&c, &out, prep, &truth, &m),
             }
         },
@@ -229,17 +231,33 @@ fn progress_for(c: &Common, out: &Out, request: &FitRequest, prep: &Loaded) -> P
     }
 }
 
-/// `--export FORMAT PATH`: the path to write (checked writable), if any.
-fn export_path(export: &[String]) -> Result<Option<PathBuf>, String> {
+/// What `--export` writes, and where.
+#[derive(Debug, Clone)]
+enum Export {
+    Ros2Yaml(PathBuf),
+    Spec(PathBuf),
+}
+
+/// `--export FORMAT PATH`: what to write where (checked writable), if any.
+fn export_path(export: &[String]) -> Result<Option<Export>, String> {
     match export {
         [] => Ok(None),
-        [f, p] if f == "ros2-yaml" => {
-            let p = PathBuf::from(p);
-            crate::output::check_writable("--export ros2-yaml", &p)?;
-            Ok(Some(p))
+        [f, p] if f == "ros2-yaml" || f == "spec" => {
+            let path = PathBuf::from(p);
+            crate::output::check_writable(&format!("--export {f}"), &path)?;
+            Ok(Some(if f == "spec" {
+                Export::Spec(path)
+            } else {
+                Export::Ros2Yaml(path)
+            }))
         }
-        [f, _] => Err(format!("--export {f}: unknown format (known: ros2-yaml)")),
-        _ => Err("--export takes a format and a path: --export ros2-yaml PATH".into()),
+        [f, _] => Err(format!(
+            "--export {f}: unknown format (known: ros2-yaml, spec)"
+        )),
+        _ => Err(
+            "--export takes a format and a path: --export ros2-yaml PATH, --export spec PATH"
+                .into(),
+        ),
     }
 }
 
@@ -362,7 +380,7 @@ fn render_lm(
     prep: &Loaded,
     a: &FitArgs,
     cal: &Calibrated,
-    export: Option<&Path>,
+    export: Option<&Export>,
 ) -> ExitCode {
     let r = &prep.runner;
     let res = &cal.fit;
@@ -535,16 +553,20 @@ fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<
     runs
 }
 
-/// `--export ros2-yaml PATH`: the calibration written for the robot, unless
+/// `--export FORMAT PATH`: the calibration written for the robot, unless
 /// it is unusable (then said, not written).
 fn export_fit(
     out: &Out,
     spec: &Path,
     r: &Runner,
     res: &FitResult,
-    path: &Path,
+    export: &Export,
     unusable: &[String],
 ) -> Result<(), String> {
+    let (text, path) = match export {
+        Export::Ros2Yaml(p) => (crate::export::ros2_yaml(spec, r, res), p),
+        Export::Spec(p) => (crate::export::fitted_spec(spec, r, res), p),
+    };
     if !unusable.is_empty() {
         out.say(&format!(
             "not exported to {}: the fit is unusable",
@@ -552,8 +574,7 @@ fn export_fit(
         ));
         return Ok(());
     }
-    crate::export::ros2_yaml(spec, r, res)
-        .and_then(|y| kinegen_model::files::write_atomic(path, &y).map_err(|e| e.to_string()))?;
+    text.and_then(|y| kinegen_model::files::write_atomic(path, &y).map_err(|e| e.to_string()))?;
     out.say(&format!("exported: {}", path.display()));
     Ok(())
 }

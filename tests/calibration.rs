@@ -1524,6 +1524,98 @@ fn calibrated_values_export_as_ros2_yaml() {
     }
 }
 
+/// `fit --export spec PATH` writes the user's spec with the calibrated values
+/// as its nominals, everything else as it was (comments included): its
+/// model, as written, is the calibrated one (its error before any fit is the
+/// first fit's after).
+#[test]
+fn calibrated_values_export_as_the_spec() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec_text = std::fs::read_to_string(root().join("spec/diff_drive.toml"))
+        .unwrap()
+        .replacen("\n", "\n# my robot, as I measured it\n", 1);
+    let spec = tmp.path().join("my robot.toml");
+    std::fs::write(&spec, &spec_text).unwrap();
+    let slipping = add_effect(
+        &spec,
+        "lateral_slip",
+        &[],
+        &tmp.path().join("slipping.toml"),
+    );
+    let log = simulate(
+        tmp.path(),
+        "run.csv",
+        &[
+            "--spec",
+            spec.to_str().unwrap(),
+            "--trajectory",
+            "random",
+            "--set",
+            "b=0.21",
+            "--effect",
+            "lateral_slip=0.1",
+        ],
+    );
+    let log = log.to_str().unwrap();
+    let fitted = tmp.path().join("fitted.toml");
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        slipping.to_str().unwrap(),
+        "--data",
+        log,
+        "--json",
+        "-",
+        "--export",
+        "spec",
+        fitted.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let fit: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let text = std::fs::read_to_string(&fitted).unwrap();
+    assert!(text.contains("# my robot, as I measured it"), "{text}");
+    assert!(text.starts_with("# calibrated by kinegen fit"), "{text}");
+    // fitted again from the exported spec, it starts where the first fit ended
+    let o = kinegen(&[
+        "fit",
+        "--spec",
+        fitted.to_str().unwrap(),
+        "--data",
+        log,
+        "--json",
+        "-",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let again: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let after = fit["after"]["rmse"].as_f64().unwrap();
+    let before = again["before"]["rmse"].as_f64().unwrap();
+    eprintln!("fit after {after:.6} m; the exported spec before fitting {before:.6} m");
+    assert!(
+        (before - after).abs() <= 1e-9 + 1e-6 * after,
+        "{before} vs {after}"
+    );
+    for (name, est) in fit["parameters"].as_object().unwrap() {
+        if est["std"].is_null() {
+            continue;
+        }
+        let v = est["estimate"].as_f64().unwrap();
+        // the nominal of its [[parameter]] table
+        let table = text
+            .split("[[parameter]]")
+            .find(|t| t.contains(&format!("name = \"{name}\"")))
+            .unwrap_or_else(|| panic!("no table for {name} in\n{text}"));
+        let nominal: f64 = table
+            .lines()
+            .find_map(|l| l.strip_prefix("nominal = "))
+            .and_then(|n| n.trim().parse().ok())
+            .unwrap_or_else(|| panic!("no nominal for {name} in\n{table}"));
+        assert!(
+            (nominal - v).abs() <= 1e-12 * v.abs().max(1.0),
+            "{name}: {nominal} vs {v}"
+        );
+    }
+}
+
 /// Issue #16: numeric options that would give NaN results or empty checks are
 /// refused by name (exit 2), and bounds read as numbers, not as `Some(0.0)`.
 #[test]

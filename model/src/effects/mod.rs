@@ -23,6 +23,7 @@
 mod capability;
 mod definition;
 mod render;
+pub use render::with_nominals;
 mod transform;
 
 pub use capability::{has, inputs_of, turn_signs, Capability, InputClass};

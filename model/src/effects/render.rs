@@ -1,7 +1,8 @@
 //! The spec text of a model an effect changed: the user's file with only
 //! what the typed change touched written in (`toml_edit`), so comments, key
 //! order and formatting survive. What `add-effect` writes, what diagnose
-//! shows as a spec change, and what a derivation reads.
+//! shows as a spec change, and what a derivation reads; and the spec with
+//! calibrated values as its nominals ([`with_nominals`]).
 use super::definition::role_key;
 use super::ApplyError;
 use crate::decl::Param;
@@ -33,6 +34,45 @@ pub(super) fn spec_text(before: &Model, after: &Model) -> Result<String, ApplyEr
         Some(a) => a.extend(added),
         None => {
             doc.insert("effects", value(Array::from_iter(added)));
+        }
+    }
+    Ok(doc.to_string())
+}
+
+/// `model`'s spec text with each parameter of `values` given that nominal
+/// value, written into its `[[parameter]]` table (the rest of the file as it
+/// was). What `fit --export spec` writes: the calibration as the spec's own
+/// values.
+pub fn with_nominals(model: &Model, values: &[(&str, f64)]) -> Result<String, ApplyError> {
+    let mut doc: DocumentMut = model
+        .source
+        .parse()
+        .map_err(|e: toml_edit::TomlError| ApplyError::NotToml(e.to_string()))?;
+    let arr = doc
+        .entry("parameter")
+        .or_insert(Item::ArrayOfTables(ArrayOfTables::new()))
+        .as_array_of_tables_mut()
+        .ok_or(ApplyError::Shape("`parameter` is not an array of tables"))?;
+    for &(name, v) in values {
+        let named = arr
+            .iter_mut()
+            .find(|t| t.get("name").and_then(|n| n.as_str()) == Some(name));
+        match named {
+            Some(t) => match t.get_mut("nominal").and_then(Item::as_value_mut) {
+                Some(old) => {
+                    let decor = old.decor().clone();
+                    *old = v.into();
+                    *old.decor_mut() = decor;
+                }
+                None => {
+                    t.insert("nominal", value(v));
+                }
+            },
+            None => {
+                return Err(ApplyError::Shape(
+                    "a calibrated parameter has no [[parameter]] table",
+                ))
+            }
         }
     }
     Ok(doc.to_string())
