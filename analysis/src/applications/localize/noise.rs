@@ -45,8 +45,9 @@ pub struct NoiseModel {
     pub shared: Lingering,
 }
 
-/// A part of the observation errors that lingers, per landmark (a
-/// first-order Gauss-Markov process, see [`super::belief`]): a factor on
+/// A part of the observation errors that lingers (a first-order
+/// Gauss-Markov process per landmark, or one for all: see
+/// [`super::belief`]): a factor on
 /// each of the spec's sigmas and how long it lasts. The range's part grows
 /// with the range: it is this factor on the spec's range sigma per metre of
 /// range (a camera that ranges by a target's apparent size errs in
@@ -238,9 +239,9 @@ pub fn estimated(f: &Filter, runs: &[Run], o: &EkfOptions) -> bool {
 ///
 /// The two lingering parts compete for the same errors, so the order they
 /// enter in matters (the likelihood has a basin for each). The shared part
-/// enters first: on the MRCLAM robots, entered second it found optima 80-490
-/// lower in -2 log-likelihood, with landmark errors lasting 10-15 minutes
-/// standing in for the camera's. The persistent part is then tried with
+/// enters first: on the MRCLAM robots with the persistent part first, the
+/// search settled 80-490 worse in -2 log-likelihood than with both at once,
+/// landmark errors lasting 10-15 minutes standing in for the camera's. The persistent part is then tried with
 /// the rest held, and kept (everything refined with it) only where it makes
 /// the sightings [`LINGERING_EVIDENCE`] more likely: a log whose sightings
 /// have no lingering errors (the speed bench's) costs one search of the
@@ -264,10 +265,10 @@ pub fn estimate(f: &Filter, runs: &[Run], start: &NoiseModel, given: &[bool]) ->
     let (tried, first): (Vec<usize>, Vec<usize>) =
         (0..space.dims()).partition(|k| persistent.contains(k));
     let (c, x) = search(&cost, scan(&space, &cost), &first);
-    let mut with = x.clone();
-    with[persistent.start] = 0.0;
-    with[persistent.start + 1] = 0.0;
-    let with = search(&cost, (cost(&with), with), &tried);
+    let mut trial = x.clone();
+    trial[persistent.start] = 0.0;
+    trial[persistent.start + 1] = 0.0;
+    let with = search(&cost, (cost(&trial), trial), &tried);
     if c - with.0 < LINGERING_EVIDENCE {
         return space.at(&x);
     }

@@ -3,7 +3,7 @@
 //!
 //! Written here rather than taken from a crate: the objective is a filter
 //! pass over a log with a gate in it (piecewise smooth, no gradient), in 2
-//! to 9 dimensions, and this is the textbook method in a page; argmin's
+//! to 11 dimensions, and this is the textbook method in a page; argmin's
 //! would bring its own math backend traits for that, and evaluates one
 //! point at a time.
 //!
