@@ -724,3 +724,62 @@ struct Sightings<'p, 'q> {
     pass: &'q mut Pass,
     s: &'q mut Scratch,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kinegen_model::ir::ModelIr;
+
+    /// The iterated update is the MAP pose of one sighting from a prior
+    /// metres uncertain (a robot started without motion capture): at its
+    /// result the normal equations hold, P^-1 (x - x0) = H^T R^-1 (z - h(x))
+    /// with H and h taken there. The single expansion's result is far from
+    /// them (it linearised the bearing 0.4 rad off).
+    #[test]
+    fn an_update_from_a_very_uncertain_pose_is_iterated_to_the_map_pose() {
+        let ir =
+            ModelIr::from_json(include_str!("../../../../generated/ir/unicycle_ekf.json")).unwrap();
+        let r = Runner::new(ir, &[]).unwrap();
+        let f = Filter::new(&r, &EkfOptions::default()).unwrap();
+        let p0 = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.25));
+        let b = Belief::new(Vector3::new(0.5, -0.3, 0.4), p0, 1, &[], 0.0);
+        // the robot is at the origin facing +x; the landmark 3 m ahead
+        let z = LandmarkObs {
+            t: 0.0,
+            id: "a".into(),
+            xl: 3.0,
+            yl: 0.0,
+            range: 3.0,
+            bearing: 0.0,
+        };
+        let (u, lm) = ([0.0; 2], [z.xl, z.yl]);
+        let prior = Prior {
+            bias: Vector2::zeros(),
+            pb: Matrix3x2::zeros(),
+            bb: Matrix2::zeros(),
+            rm: Matrix2::new(0.05f64.powi(2), 0.0, 0.0, 0.02f64.powi(2)),
+        };
+        let mut s = Scratch::new(&f);
+        assert!(far_from_linear(&b, 3.0));
+        let first = f.expand(&b, &prior, &b.x, (&z, &u, &lm), &mut s);
+        let si = first.sm.try_inverse().unwrap();
+        let once = b.x + first.ph * si * first.y;
+        let (e, si) = f.iterate(&b, &prior, (first, si), (&z, &u, &lm), &mut s);
+        let iterated = b.x + e.ph * si * e.y;
+        // the normal equations' residual at a pose
+        let mut residual = |x: &Vector3<f64>| -> f64 {
+            let at = f.expand(&b, &prior, x, (&z, &u, &lm), &mut s);
+            let mut miss = Vector2::new(z.range - at.h[0], z.bearing - at.h[1]);
+            miss[1] = wrap(miss[1]);
+            let g = p0.try_inverse().unwrap() * (x - b.x)
+                - at.hm.transpose() * prior.rm.try_inverse().unwrap() * miss;
+            g.norm()
+        };
+        let (at_once, at_iterated) = (residual(&once), residual(&iterated));
+        eprintln!(
+            "normal equations residual: one expansion {at_once:.3e}, iterated {at_iterated:.3e}"
+        );
+        assert!(at_iterated < 1e-6, "iterated: {at_iterated}");
+        assert!(at_once > 1.0, "one expansion: {at_once}");
+    }
+}
