@@ -574,18 +574,20 @@ fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
 #[test]
 fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
     let tmp = tempfile::tempdir().unwrap();
-    let corners = [
-        (-4.0, -3.0),
-        (5.0, -4.0),
-        (4.0, 5.0),
-        (-5.0, 4.0),
-        (0.0, 6.0),
-        (0.0, -6.0),
-    ];
-    let doc = tour_with_range_errors(tmp.path(), &corners, &["--laps", "3"]);
+    let doc = tour_with_range_errors(tmp.path(), &SIX_LANDMARKS, &["--laps", "3"]);
     let rmse = persistent_range_error_found(&doc);
     eprintln!("RMSE {rmse:.4} m");
 }
+
+/// A map around the `beacons` trajectory's tour, for the sighting-error tests.
+const SIX_LANDMARKS: [(f64, f64); 6] = [
+    (-4.0, -3.0),
+    (5.0, -4.0),
+    (4.0, 5.0),
+    (-5.0, 4.0),
+    (0.0, 6.0),
+    (0.0, -6.0),
+];
 
 /// The persistent range error [`tour_with_range_errors`] adds.
 const RANGE_ERROR_PER_M: f64 = 0.04;
@@ -687,15 +689,7 @@ fn add_gauss_markov_errors(
 fn a_camera_error_every_landmark_shares_is_estimated_once() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = "spec/unicycle_ekf.toml";
-    let corners = [
-        (-4.0, -3.0),
-        (5.0, -4.0),
-        (4.0, 5.0),
-        (-5.0, 4.0),
-        (0.0, 6.0),
-        (0.0, -6.0),
-    ];
-    let m = write_map(tmp.path(), &corners);
+    let m = write_map(tmp.path(), &SIX_LANDMARKS);
     let obs = tmp.path().join("obs.csv");
     let extra = ["--landmark-hz", "2", "--laps", "3"];
     let log = beacon_tour(tmp.path(), "run.csv", spec, &m, &obs, &extra);
