@@ -1,5 +1,6 @@
 //! `kinegen diagnose`.
 use crate::analysis_cmd::{bad, quiet, Common};
+use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
 use kinegen_analysis::diagnose::Diagnosis;
 use kinegen_analysis::diagnose_job::{Hooks, Outcome};
@@ -334,24 +335,6 @@ fn say_clock_verdicts(out: &Out, d: &Diagnosis, winner: &str) {
 /// Seconds to the millisecond with their sign, a rounded -0 as +0.000.
 fn signed_ms(s: f64) -> String {
     format!("{:+.3}", (s * 1e3).round() / 1e3 + 0.0)
-}
-
-/// The `kinegen add-effect` command that adds `effect` at `values` to the
-/// spec `spec`, written as `{model}_{effect}.toml`.
-fn add_effect_command(
-    spec: &str,
-    effect: &str,
-    values: &BTreeMap<String, f64>,
-    model: &str,
-) -> String {
-    let args: Vec<String> = values
-        .iter()
-        .map(|(k, v)| format!("--value {k}={v:.6}"))
-        .collect();
-    format!(
-        "kinegen add-effect --spec {spec} --effect {effect} {} --out {model}_{effect}.toml",
-        args.join(" ")
-    )
 }
 
 /// The `fit` that calibrates `spec` on the diagnosed logs and writes it back

@@ -2,6 +2,7 @@
 //! (one call to kinegen_analysis::localize_request::localize_files), rendered
 //! with its consistency checks as text, JSON, a report and a track.
 use crate::analysis_cmd::{bad, Common};
+use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::files::Files;
@@ -99,6 +100,9 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
     out.say(note);
     for line in noise.describe() {
         out.say(&format!("  {line}"));
+    }
+    if let Some(advice) = reading_advice(c, noise, &r.ir) {
+        out.say(&format!("  {advice}"));
     }
     // the report's noise table: the noise, and the delay it was estimated with
     let mut described = noise.describe();
@@ -378,6 +382,34 @@ fn say_timing(d: &TimingEstimate) -> String {
     }
 }
 
+/// What to do with the range reading the filter estimated (none where it
+/// read the spec's straight-line range): the `add-effect` that puts it into
+/// the spec, or, where the spec reads range so already, a new calibration.
+fn reading_advice(
+    c: &Common,
+    n: &kinegen_analysis::localize::NoiseModel,
+    ir: &kinegen_model::ir::ModelIr,
+) -> Option<String> {
+    let r = &n.range_reading;
+    if r.is_straight() {
+        return None;
+    }
+    const EFFECT: &str = "range_as_depth";
+    if ir.effects.iter().any(|e| e == EFFECT) {
+        return Some(format!(
+            "the spec reads range so already ({EFFECT}): the line above is on top of the spec's own reading; `kinegen fit` with the sightings calibrates the spec's against the ground truth"
+        ));
+    }
+    let values = [("range_depth", r.depth_share), ("depth_scale", r.scale)]
+        .map(|(k, v)| (k.to_string(), v))
+        .into();
+    let spec = c.spec.display().to_string();
+    let cmd = add_effect_command(&spec, EFFECT, &values, &ir.name);
+    Some(format!(
+        "to read range so in the spec (then `fit` calibrates it):\n    {cmd}"
+    ))
+}
+
 fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_json::Value {
     let process: serde_json::Map<String, serde_json::Value> = n
         .names
@@ -391,5 +423,9 @@ fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_j
             )
         })
         .collect();
-    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range_per_m": n.persistent.factor[0], "bearing": n.persistent.factor[1]}, "memory_s": n.persistent.memory_s, "shared": {"range_per_m": n.shared.factor[0], "bearing": n.shared.factor[1], "memory_s": n.shared.memory_s}, "source": note})
+    // null: the spec's straight-line range, as written
+    let r = &n.range_reading;
+    let range_reading = (!r.is_straight())
+        .then(|| json!({"effect": "range_as_depth", "range_depth": r.depth_share, "depth_scale": r.scale}));
+    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range_per_m": n.persistent.factor[0], "bearing": n.persistent.factor[1]}, "memory_s": n.persistent.memory_s, "shared": {"range_per_m": n.shared.factor[0], "bearing": n.shared.factor[1], "memory_s": n.shared.memory_s}, "range_reading": range_reading, "source": note})
 }

@@ -6,7 +6,7 @@ use super::noise::{Lingering, NoiseModel, PERSISTENT_START_S, SHARED_START_S};
 use super::{EkfOptions, LocalizeError};
 use crate::log::wrap;
 use crate::model::Runner;
-use crate::run::{LandmarkObs, Run};
+use crate::run::Run;
 use kinegen_jit::Evaluator;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::{ArgRole, Function, StepForm};
@@ -110,6 +110,7 @@ impl<'a> Filter<'a> {
             obs_scale: [1.0; 2],
             persistent: Lingering::none(PERSISTENT_START_S),
             shared: Lingering::none(SHARED_START_S),
+            range_reading: super::reading::RangeReading::STRAIGHT,
         }
     }
 
@@ -378,6 +379,17 @@ impl<'a> Filter<'a> {
         } = at;
         let z = &run.landmarks[i];
         let lm = [z.xl, z.yl];
+        if noise.range_reading.factor(z.bearing) <= 0.0 {
+            // a share of depth that reads this bearing's range as nothing
+            // or less: not a reading the likelihood can judge
+            pass.cost = f64::INFINITY;
+            pass.rejected += 1;
+            return;
+        }
+        let read = Vector2::new(
+            noise.range_reading.straight_range(z.range, z.bearing),
+            z.bearing,
+        );
         b.catch_up(z.t);
         let held = b.slots_for(plan.landmark[i], z.t);
         let white = |j: usize| (self.obs_sigma[j] * noise.obs_scale[j]).powi(2);
@@ -388,7 +400,7 @@ impl<'a> Filter<'a> {
             bb,
             rm: Matrix2::new(white(0), 0.0, 0.0, white(1)),
         };
-        let e = self.expand(b, &prior, &b.x, (z, u, &lm), s);
+        let e = self.expand(b, &prior, &b.x, (&read, u, &lm), s);
         let Some(si) = e.sm.try_inverse() else {
             pass.rejected += 1;
             return;
@@ -410,13 +422,14 @@ impl<'a> Filter<'a> {
         } else {
             self.gate * (1.0 + (nis / self.gate).ln())
         };
-        pass.cost += e.sm.determinant().max(1e-300).ln() + robust;
+        pass.cost +=
+            e.sm.determinant().max(1e-300).ln() + robust + noise.range_reading.cost(z.bearing);
         if !nis.is_finite() || nis > self.gate {
             pass.rejected += 1;
             return;
         }
         let (e, si) = if far_from_linear(b, e.h[0]) {
-            self.iterate(b, &prior, (e, si), (z, u, &lm), s)
+            self.iterate(b, &prior, (e, si), (&read, u, &lm), s)
         } else {
             (e, si)
         };
@@ -427,13 +440,15 @@ impl<'a> Filter<'a> {
 
     /// The sighting's first-order expansion at pose `x` (the prior's pose,
     /// or an iterate's): H = [hm | d at each held slot], the lingering range
-    /// errors being per metre of range.
+    /// errors being per metre of range. `read` is the sighting's [range,
+    /// bearing], its range taken back to straight-line by the noise's
+    /// [`RangeReading`](super::reading::RangeReading).
     fn expand(
         &self,
         b: &Belief,
         prior: &Prior,
         x: &Vector3<f64>,
-        (z, u, lm): (&LandmarkObs, &[f64], &[f64; 2]),
+        (read, u, lm): (&Vector2<f64>, &[f64], &[f64; 2]),
         s: &mut Scratch,
     ) -> Expansion {
         let xs = [x[0], x[1], x[2]];
@@ -456,8 +471,7 @@ impl<'a> Filter<'a> {
         let d = Matrix2::new(h[0].abs(), 0.0, 0.0, 1.0);
         // the innovation as seen from the prior: at the prior's own pose the
         // plain one, at an iterate's with the expansion carried back to it
-        let mut y =
-            Vector2::new(z.range - h[0], z.bearing - h[1]) - d * prior.bias + hm * (x - b.x);
+        let mut y = read - h - d * prior.bias + hm * (x - b.x);
         y[1] = wrap(y[1]);
         // P H^T for the pose rows, and S
         let ph = b.p * hm.transpose() + prior.pb * d;
@@ -482,7 +496,7 @@ impl<'a> Filter<'a> {
         b: &Belief,
         prior: &Prior,
         first: (Expansion, Matrix2<f64>),
-        at: (&LandmarkObs, &[f64], &[f64; 2]),
+        at: (&Vector2<f64>, &[f64], &[f64; 2]),
         s: &mut Scratch,
     ) -> (Expansion, Matrix2<f64>) {
         let (mut e, mut si) = first;
@@ -728,6 +742,7 @@ struct Sightings<'p, 'q> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::run::LandmarkObs;
     use kinegen_model::ir::ModelIr;
 
     /// The iterated update is the MAP pose of one sighting from a prior
@@ -752,7 +767,7 @@ mod tests {
             range: 3.0,
             bearing: 0.0,
         };
-        let (u, lm) = ([0.0; 2], [z.xl, z.yl]);
+        let (u, lm, read) = ([0.0; 2], [z.xl, z.yl], Vector2::new(z.range, z.bearing));
         let prior = Prior {
             bias: Vector2::zeros(),
             pb: Matrix3x2::zeros(),
@@ -761,14 +776,14 @@ mod tests {
         };
         let mut s = Scratch::new(&f);
         assert!(far_from_linear(&b, 3.0));
-        let first = f.expand(&b, &prior, &b.x, (&z, &u, &lm), &mut s);
+        let first = f.expand(&b, &prior, &b.x, (&read, &u, &lm), &mut s);
         let si = first.sm.try_inverse().unwrap();
         let once = b.x + first.ph * si * first.y;
-        let (e, si) = f.iterate(&b, &prior, (first, si), (&z, &u, &lm), &mut s);
+        let (e, si) = f.iterate(&b, &prior, (first, si), (&read, &u, &lm), &mut s);
         let iterated = b.x + e.ph * si * e.y;
         // the normal equations' residual at a pose
         let mut residual = |x: &Vector3<f64>| -> f64 {
-            let at = f.expand(&b, &prior, x, (&z, &u, &lm), &mut s);
+            let at = f.expand(&b, &prior, x, (&read, &u, &lm), &mut s);
             let mut miss = Vector2::new(z.range - at.h[0], z.bearing - at.h[1]);
             miss[1] = wrap(miss[1]);
             let g = p0.try_inverse().unwrap() * (x - b.x)

@@ -13,7 +13,9 @@
 //!   ([`noise::estimate`]: the innovations' likelihood, maximised over the
 //!   process-noise densities and the observation errors: a white part, a
 //!   persistent part per landmark and a part every landmark shares, the
-//!   lingering ones carried as states, see [`belief`]).
+//!   lingering ones carried as states, see [`belief`]), with the sensor's
+//!   range reading where the sightings show one ([`reading`]: a camera that
+//!   reads depth, not range).
 //! - Update with the range-bearing observation and its Jacobian (H, eq. 6-7),
 //!   R from its sigmas; innovations beyond a chi-square gate are rejected and
 //!   counted. Where the pose is too uncertain for one expansion (a robot
@@ -26,6 +28,7 @@ mod active;
 mod belief;
 mod filter;
 pub mod noise;
+pub mod reading;
 mod simplex;
 mod smoother;
 pub mod summary;
