@@ -141,3 +141,21 @@ pub fn real_runs() -> Option<Vec<PathBuf>> {
     let dir = real_data("optiodom-diff-square")?;
     Some((1..=6).map(|i| dir.join(format!("run-0{i}.csv"))).collect())
 }
+
+/// The sightings of `all` (`t,id,range,bearing`) within a camera's 0.6 rad
+/// half-field of view, each rewritten as `read(range, bearing)` reads it,
+/// written to `out`, which is returned.
+pub fn camera_view(all: &Path, out: &Path, read: fn(f64, f64) -> (f64, f64)) -> PathBuf {
+    let text = std::fs::read_to_string(all).unwrap();
+    let mut s = String::from("t,id,range,bearing\n");
+    for l in text.lines().skip(1) {
+        let f: Vec<&str> = l.split(',').collect();
+        let (r, b): (f64, f64) = (f[2].parse().unwrap(), f[3].parse().unwrap());
+        if b.abs() <= 0.6 {
+            let (r, b) = read(r, b);
+            s += &format!("{},{},{r:.4},{b:.4}\n", f[0], f[1]);
+        }
+    }
+    std::fs::write(out, s).unwrap();
+    out.to_path_buf()
+}

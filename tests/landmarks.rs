@@ -753,8 +753,8 @@ fn a_camera_that_reads_depth_is_estimated_from_the_sightings() {
     let all = dir.join("all.csv");
     let extra = ["--landmark-hz", "2", "--laps", "3"];
     let log = beacon_tour(dir, "run.csv", spec, &m, &all, &extra);
-    let depth = camera_view(&all, &dir.join("depth.csv"), |r, b| 1.03 * r * b.cos());
-    let straight = camera_view(&all, &dir.join("straight.csv"), |r, _| r);
+    let depth = camera_view(&all, &dir.join("depth.csv"), |r, b| (1.03 * r * b.cos(), b));
+    let straight = camera_view(&all, &dir.join("straight.csv"), |r, b| (r, b));
     let read = |obs: &Path| localize_json(spec, &log, obs, &m, &[]);
     let (d, s) = (read(&depth), read(&straight));
     let reading = &d["noise"]["range_reading"];
@@ -795,22 +795,6 @@ fn a_camera_that_reads_depth_is_estimated_from_the_sightings() {
     );
     assert!(w["noise"]["range_reading"].is_null(), "{}", w["noise"]);
     assert!(rmse(&w) < 0.011, "RMSE {} m", rmse(&w));
-}
-
-/// The sightings of `all` within a camera's 0.6 rad half-field, their
-/// ranges as `read(range, bearing)` reads them, written to `out`.
-fn camera_view(all: &Path, out: &Path, read: fn(f64, f64) -> f64) -> PathBuf {
-    let text = std::fs::read_to_string(all).unwrap();
-    let mut s = String::from("t,id,range,bearing\n");
-    for l in text.lines().skip(1) {
-        let f: Vec<&str> = l.split(',').collect();
-        let (r, b): (f64, f64) = (f[2].parse().unwrap(), f[3].parse().unwrap());
-        if b.abs() <= 0.6 {
-            s += &format!("{},{},{:.4},{b:.4}\n", f[0], f[1], read(r, b));
-        }
-    }
-    std::fs::write(out, s).unwrap();
-    out.to_path_buf()
 }
 
 /// A map of more landmarks than the filter carries persistent errors for

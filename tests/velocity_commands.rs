@@ -1555,19 +1555,7 @@ fn a_camera_that_reads_depth_or_looks_aside_is_named_from_its_sightings() {
     let log = simulate(dir, "log.csv", &args);
     // the sightings of `from` within the field of view, as `read` reads them
     let camera = |from: &Path, name: &str, read: fn(f64, f64) -> (f64, f64)| {
-        let path = dir.join(format!("{name}.csv"));
-        let text = std::fs::read_to_string(from).unwrap();
-        let mut out = String::from("t,id,range,bearing\n");
-        for l in text.lines().skip(1) {
-            let f: Vec<&str> = l.split(',').collect();
-            let (r, b): (f64, f64) = (f[2].parse().unwrap(), f[3].parse().unwrap());
-            if b.abs() <= 0.6 {
-                let (r, b) = read(r, b);
-                out += &format!("{},{},{r:.4},{b:.4}\n", f[0], f[1]);
-            }
-        }
-        std::fs::write(&path, out).unwrap();
-        path
+        camera_view(from, &dir.join(format!("{name}.csv")), read)
     };
     let depth: fn(f64, f64) -> (f64, f64) = |r, b| (1.03 * r * b.cos(), b);
     let seen = |name: &str, read| diagnose_seen(&spec, &log, &camera(&all, name, read), &map);
