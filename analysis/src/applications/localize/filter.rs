@@ -379,17 +379,14 @@ impl<'a> Filter<'a> {
         } = at;
         let z = &run.landmarks[i];
         let lm = [z.xl, z.yl];
-        if noise.range_reading.factor(z.bearing) <= 0.0 {
-            // a share of depth that reads this bearing's range as nothing
-            // or less: not a reading the likelihood can judge
+        let Some((straight, reading_cost)) = noise.range_reading.taken_back(z.range, z.bearing)
+        else {
+            // not a reading the likelihood can judge
             pass.cost = f64::INFINITY;
             pass.rejected += 1;
             return;
-        }
-        let read = Vector2::new(
-            noise.range_reading.straight_range(z.range, z.bearing),
-            z.bearing,
-        );
+        };
+        let read = Vector2::new(straight, z.bearing);
         b.catch_up(z.t);
         let held = b.slots_for(plan.landmark[i], z.t);
         let white = |j: usize| (self.obs_sigma[j] * noise.obs_scale[j]).powi(2);
@@ -422,8 +419,7 @@ impl<'a> Filter<'a> {
         } else {
             self.gate * (1.0 + (nis / self.gate).ln())
         };
-        pass.cost +=
-            e.sm.determinant().max(1e-300).ln() + robust + noise.range_reading.cost(z.bearing);
+        pass.cost += e.sm.determinant().max(1e-300).ln() + robust + reading_cost;
         if !nis.is_finite() || nis > self.gate {
             pass.rejected += 1;
             return;

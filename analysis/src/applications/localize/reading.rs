@@ -40,24 +40,16 @@ impl RangeReading {
         (-0.5..=1.5).contains(&self.depth_share) && (-0.5..=0.5).contains(&self.scale)
     }
 
-    /// The straight-line range a reading of `range` at `bearing` stands for.
-    pub fn straight_range(&self, range: f64, bearing: f64) -> f64 {
-        range / self.factor(bearing)
-    }
-
-    /// The range read per metre of straight-line range at `bearing`.
-    pub fn factor(&self, bearing: f64) -> f64 {
-        (1.0 + self.scale) * (1.0 - self.depth_share * (1.0 - bearing.cos()))
-    }
-
-    /// What a sighting at `bearing` adds to -2 log-likelihood for being
-    /// taken back to straight-line range: the density of the reading is
-    /// the straight range's over `factor` (the change of variables). Without
-    /// it the likelihood gains by shrinking the data: on the MRCLAM robots
-    /// it took the ranges as read 50% long (the bound), a lingering range
-    /// error lasting the whole log putting them back.
-    pub fn cost(&self, bearing: f64) -> f64 {
-        2.0 * self.factor(bearing).ln()
+    /// The straight-line range a reading of `range` at `bearing` stands for,
+    /// and what the sighting adds to -2 log-likelihood for being taken back
+    /// so: the reading's density is the straight range's over the reading's
+    /// factor (the change of variables; without it the likelihood gains by
+    /// shrinking the data, and on the MRCLAM robots it took the ranges as
+    /// read 29-50% long). None where the factor is not positive (a share of
+    /// depth that reads this bearing's range as nothing or less).
+    pub fn taken_back(&self, range: f64, bearing: f64) -> Option<(f64, f64)> {
+        let factor = (1.0 + self.scale) * (1.0 - self.depth_share * (1.0 - bearing.cos()));
+        (factor > 0.0).then(|| (range / factor, 2.0 * factor.ln()))
     }
 }
 
@@ -73,7 +65,18 @@ mod tests {
         };
         let (range, bearing) = (3.0f64, 0.4f64);
         let read = range * bearing.cos() * 1.03;
-        assert!((depth.straight_range(read, bearing) - range).abs() < 1e-12);
-        assert_eq!(RangeReading::STRAIGHT.straight_range(read, bearing), read);
+        let (straight, cost) = depth.taken_back(read, bearing).unwrap();
+        assert!((straight - range).abs() < 1e-12);
+        assert!((cost - 2.0 * (read / range).ln()).abs() < 1e-12);
+        assert_eq!(
+            RangeReading::STRAIGHT.taken_back(read, bearing),
+            Some((read, 0.0))
+        );
+        // a share of 1.5 reads a landmark behind as a negative range
+        let over = RangeReading {
+            depth_share: 1.5,
+            scale: 0.0,
+        };
+        assert_eq!(over.taken_back(read, 2.0), None);
     }
 }
