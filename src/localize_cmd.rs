@@ -7,6 +7,7 @@ use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::files::Files;
 use kinegen_analysis::load::Loaded;
+use kinegen_analysis::localize::reading::RangeReading;
 use kinegen_analysis::localize::timing::{Timing, TimingEstimate};
 use kinegen_analysis::localize::{
     side, Consistency, EkfOptions, Localization, NoiseSource, Side, Spread, Summary,
@@ -394,15 +395,13 @@ fn reading_advice(
     if r.is_straight() {
         return None;
     }
-    const EFFECT: &str = "range_as_depth";
+    const EFFECT: &str = RangeReading::EFFECT;
     if ir.effects.iter().any(|e| e == EFFECT) {
         return Some(format!(
             "the spec reads range so already ({EFFECT}): the line above is on top of the spec's own reading; `kinegen fit` with the sightings calibrates the spec's against the ground truth"
         ));
     }
-    let values = [("range_depth", r.depth_share), ("depth_scale", r.scale)]
-        .map(|(k, v)| (k.to_string(), v))
-        .into();
+    let values = r.parameters().map(|(k, v)| (k.to_string(), v)).into();
     let spec = c.spec.display().to_string();
     let cmd = add_effect_command(&spec, EFFECT, &values, &ir.name);
     Some(format!(
@@ -425,7 +424,12 @@ fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_j
         .collect();
     // null: the spec's straight-line range, as written
     let r = &n.range_reading;
-    let range_reading = (!r.is_straight())
-        .then(|| json!({"effect": "range_as_depth", "range_depth": r.depth_share, "depth_scale": r.scale}));
+    let range_reading = (!r.is_straight()).then(|| {
+        let mut j = json!({"effect": RangeReading::EFFECT});
+        for (k, v) in r.parameters() {
+            j[k] = json!(v);
+        }
+        j
+    });
     json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range_per_m": n.persistent.factor[0], "bearing": n.persistent.factor[1]}, "memory_s": n.persistent.memory_s, "shared": {"range_per_m": n.shared.factor[0], "bearing": n.shared.factor[1], "memory_s": n.shared.memory_s}, "range_reading": range_reading, "source": note})
 }

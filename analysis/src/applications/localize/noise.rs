@@ -170,8 +170,12 @@ impl NoiseModel {
         let r = &self.range_reading;
         if !r.is_straight() {
             out.push(format!(
-                "range read as {:.0}% depth along the sensor's axis, {:+.1}% long (the catalogue's range_as_depth: range_depth = {:.3}, depth_scale = {:.4})",
-                100.0 * r.depth_share, 100.0 * r.scale, r.depth_share, r.scale
+                "range read as {:.0}% depth along the sensor's axis, {:+.1}% long (the catalogue's {}: range_depth = {:.3}, depth_scale = {:.4})",
+                100.0 * r.depth_share,
+                100.0 * r.scale,
+                RangeReading::EFFECT,
+                r.depth_share,
+                r.scale
             ));
         }
         out

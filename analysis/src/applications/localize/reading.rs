@@ -30,6 +30,17 @@ impl RangeReading {
         scale: 0.0,
     };
 
+    /// The catalogue effect this reading is, and its parameters' names.
+    pub const EFFECT: &'static str = "range_as_depth";
+
+    /// The reading as the catalogue effect's parameter values.
+    pub fn parameters(&self) -> [(&'static str, f64); 2] {
+        [
+            ("range_depth", self.depth_share),
+            ("depth_scale", self.scale),
+        ]
+    }
+
     pub fn is_straight(&self) -> bool {
         *self == RangeReading::STRAIGHT
     }
