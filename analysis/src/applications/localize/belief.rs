@@ -105,6 +105,18 @@ pub struct Belief {
     /// The product of the transitions F since `since`.
     f_acc: Matrix3<f64>,
     since: f64,
+    /// Buffers [`Belief::fuse`] reuses (one slot each): an update allocates
+    /// nothing, and the noise estimate runs tens of thousands of them.
+    fuse_buffers: FuseBuffers,
+}
+
+/// Per-slot buffers of one update: the error rows of P H^T, the errors'
+/// gains, and each slot's stored-block unscaling.
+#[derive(Debug, Clone, Default)]
+struct FuseBuffers {
+    eh: Vec<Matrix2<f64>>,
+    kb: Vec<Matrix2<f64>>,
+    unscale: Vec<f64>,
 }
 
 /// A stored block's scale is folded in before it falls below this (so
@@ -155,6 +167,7 @@ impl Belief {
             bb: vec![Matrix2::zeros(); n * n],
             f_acc: Matrix3::identity(),
             since: t,
+            fuse_buffers: FuseBuffers::default(),
         }
     }
 
@@ -306,40 +319,40 @@ impl Belief {
         y: &Vector2<f64>,
     ) {
         let n = self.n();
+        let mut buf = std::mem::take(&mut self.fuse_buffers);
         // the error rows of P H^T: P_bp H_x^T + sum over held of P_b,h d
-        let eh: Vec<Matrix2<f64>> = (0..n)
-            .map(|j| {
-                let mut e = self.pb[j].transpose() * hm.transpose();
-                for h in held.iter() {
-                    e += self.bb_at(j, h) * d;
-                }
-                e
-            })
-            .collect();
+        buf.eh.clear();
+        buf.eh.extend((0..n).map(|j| {
+            let mut e = self.pb[j].transpose() * hm.transpose();
+            for h in held.iter() {
+                e += self.bb_at(j, h) * d;
+            }
+            e
+        }));
         let kp = ph * si;
-        let kb: Vec<Matrix2<f64>> = eh.iter().map(|e| e * si).collect();
+        buf.kb.clear();
+        buf.kb.extend(buf.eh.iter().map(|e| e * si));
         self.x += kp * y;
         self.sin_cos = self.x[2].sin_cos();
-        for (b, k) in self.bias.iter_mut().zip(&kb) {
+        for (b, k) in self.bias.iter_mut().zip(&buf.kb) {
             *b += k * y;
         }
         let ks = kp * sm;
         let p = self.p - ks * kp.transpose();
         self.p = (p + p.transpose()) * 0.5;
-        for (c, k) in self.pb.iter_mut().zip(&kb) {
+        for (c, k) in self.pb.iter_mut().zip(&buf.kb) {
             *c -= ks * k.transpose();
         }
-        let unscale: Vec<f64> = self
-            .part_of
-            .iter()
-            .map(|&k| 1.0 / self.parts[k].decay)
-            .collect();
-        for (i, (row, ki)) in self.bb.chunks_mut(n.max(1)).zip(&kb).enumerate() {
-            let ki = ki * sm * unscale[i];
-            for ((b, kj), uj) in row.iter_mut().zip(&kb).zip(&unscale).skip(i) {
+        buf.unscale.clear();
+        buf.unscale
+            .extend(self.part_of.iter().map(|&k| 1.0 / self.parts[k].decay));
+        for (i, (row, ki)) in self.bb.chunks_mut(n.max(1)).zip(&buf.kb).enumerate() {
+            let ki = ki * sm * buf.unscale[i];
+            for ((b, kj), uj) in row.iter_mut().zip(&buf.kb).zip(&buf.unscale).skip(i) {
                 *b -= ki * kj.transpose() * *uj;
             }
         }
+        self.fuse_buffers = buf;
     }
 }
 
