@@ -346,7 +346,7 @@ pub fn say_consistency(c: Consistency) -> Option<String> {
             if pessimistic_core { "below" } else { "above" },
         )),
         Consistency::Contradict => Some(
-            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are (the innovations' likelihood that chose the noise does not see an error the spec leaves out: a camera offset, a landmark map error, a lag)".into(),
+            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are (the innovations' likelihood that chose the noise does not see an error the spec leaves out: a motion error that lasts or grows with the commands, which white process noise does not describe; a camera offset; a landmark map error; a lag)".into(),
         ),
     }
 }
