@@ -110,14 +110,29 @@ impl Common {
 
 /// The landmark innovations' figures, one line.
 pub fn fmt_landmarks(s: &InnovationStats) -> String {
+    format!("landmark innovations: {}", fmt_sightings(s))
+}
+
+/// The sightings seen from the ground truth, one line: the sensor's own
+/// error (the innovations along the dead-reckoned track add its drift).
+pub fn fmt_landmarks_from_truth(s: &InnovationStats) -> String {
     format!(
-        "landmark innovations: {} observations of {} landmarks; range RMSE {:.4} m (bias {:+.4}), bearing RMSE {:.4} rad (bias {:+.4}){}",
+        "sightings seen from the ground truth (the sensor's own error): {}",
+        fmt_sightings(s)
+    )
+}
+
+fn fmt_sightings(s: &InnovationStats) -> String {
+    format!(
+        "{} observations of {} landmarks; range RMSE {:.4} m (bias {:+.4}, robust sd {:.4}), bearing RMSE {:.4} rad (bias {:+.4}, robust sd {:.4}){}",
         s.observations,
         s.landmarks,
         s.range_rmse_m,
         s.range_bias_m,
+        s.range_robust_sd_m,
         s.bearing_rmse_rad,
         s.bearing_bias_rad,
+        s.bearing_robust_sd_rad,
         s.worst_landmark.as_ref().map(|(id, v)| format!("; worst landmark `{id}` ({v:.4} m)")).unwrap_or_default()
     )
 }

@@ -2,7 +2,8 @@
 //! logs (one call to kinegen_analysis::comparison::compare_files), rendered as
 //! text, JSON and a report.
 use crate::analysis_cmd::{
-    bad, fmt_errors, fmt_landmarks, quiet, read_progress, say_warnings, Common,
+    bad, fmt_errors, fmt_landmarks, fmt_landmarks_from_truth, quiet, read_progress, say_warnings,
+    Common,
 };
 use crate::output::Out;
 use kinegen_analysis::comparison::{self, Compared};
@@ -60,6 +61,9 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
     if let Some(s) = &cmp.landmarks {
         out.say(&format!("  {}", fmt_landmarks(s)));
     }
+    if let Some(s) = &cmp.landmarks_from_truth {
+        out.say(&format!("  {}", fmt_landmarks_from_truth(s)));
+    }
     say_where_it_fails(out, &cmp.regimes, &cmp.segments);
     if let Some((n, g)) = &cmp.gyrodometry {
         out.say(&format!(
@@ -80,7 +84,7 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
     let doc = json!({
         "model": r.ir.name, "metric": metric_name(&cmp.runs),
         "errors": cmp.errors, "rmse": cmp.rmse(),
-        "landmarks": cmp.landmarks, "regimes": cmp.regimes, "worst_segments": cmp.segments, "runs": per_run,
+        "landmarks": cmp.landmarks, "landmarks_from_truth": cmp.landmarks_from_truth, "regimes": cmp.regimes, "worst_segments": cmp.segments, "runs": per_run,
         "gyrodometry": cmp.gyrodometry.as_ref().map(|(_, g)| json!({"rmse": g.rmse, "errors": g})),
         "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
         "warnings": warnings,

@@ -2,8 +2,8 @@
 //! Levenberg-Marquardt calibration judged, the default, or several methods
 //! compared), rendered as text, JSON, a report and an export.
 use crate::analysis_cmd::{
-    bad, fmt_errors, fmt_landmarks, non_negative, positive, quiet, read_progress, say_warnings,
-    Common,
+    bad, fmt_errors, fmt_landmarks, fmt_landmarks_from_truth, non_negative, positive, quiet,
+    read_progress, say_warnings, Common,
 };
 use crate::output::Out;
 use crate::progress::Progress;
@@ -401,6 +401,17 @@ fn render_lm(
             fmt_landmarks(la)
         ));
         doc["landmarks"] = json!({"before": lb, "after": la});
+    }
+    if let (Some(lb), Some(la)) = (
+        &cal.before.landmarks_from_truth,
+        &cal.after.landmarks_from_truth,
+    ) {
+        out.say(&format!(
+            "  before: {}\n  after:  {}",
+            fmt_landmarks_from_truth(lb),
+            fmt_landmarks_from_truth(la)
+        ));
+        doc["landmarks_from_truth"] = json!({"before": lb, "after": la});
     }
     let runs = fit_runs(out, prep, cal, &mut doc);
     doc["runs"] = json!(runs);

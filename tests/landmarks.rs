@@ -110,6 +110,17 @@ fn compare_reports_landmark_innovations() {
     assert_eq!(lm["landmarks"].as_u64().unwrap(), 5);
     // the nominal wheelbase is 2.5% off and a radius 0.5%: the innovations are far above the sensor noise (0.05 m)
     assert!(lm["range_rmse_m"].as_f64().unwrap() > 0.1, "{lm}");
+    // seen from the ground truth, the sightings show the sensor's own
+    // error alone: the simulator's 0.05 m and 0.02 rad
+    let seen = &doc["landmarks_from_truth"];
+    assert_eq!(seen["observations"], lm["observations"], "{seen}");
+    let rmse = |k: &str| seen[k].as_f64().unwrap();
+    assert!(
+        (0.04..0.06).contains(&rmse("range_rmse_m"))
+            && (0.04..0.06).contains(&rmse("range_robust_sd_m"))
+            && (0.016..0.024).contains(&rmse("bearing_rmse_rad")),
+        "{seen}"
+    );
 }
 
 #[test]

@@ -483,6 +483,7 @@ pub fn method_evaluation<'r>(r: &'r Runner, m: &Calibration, runs: &[Run]) -> Ev
         per_run,
         tracks,
         landmarks: None,
+        landmarks_from_truth: None,
     }
 }
 

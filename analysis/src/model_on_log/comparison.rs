@@ -26,6 +26,8 @@ pub struct Comparison<'r> {
     /// Each run's landmark innovations.
     pub innovations: Vec<Vec<Innovation>>,
     pub landmarks: Option<InnovationStats>,
+    /// The sightings seen from the ground truth: the sensor's own error.
+    pub landmarks_from_truth: Option<InnovationStats>,
     /// Gyrodometry's track of each run that logs a gyro.
     pub gyro_tracks: Vec<Option<Recipe<'r>>>,
     /// Gyrodometry's errors on the runs with a gyro and ground truth, and
@@ -91,6 +93,7 @@ pub fn compare(r: &Runner, runs: Vec<Run>) -> Comparison<'_> {
         .map(|(run, t)| innovations::innovations(r, &r.p, run, t))
         .collect();
     let landmarks = innovations::stats(&innovations.concat());
+    let landmarks_from_truth = innovations::stats_from_truth(r, &r.p, &runs);
     let gyro_tracks: Vec<Option<Recipe>> = runs
         .iter()
         .map(|run| {
@@ -120,6 +123,7 @@ pub fn compare(r: &Runner, runs: Vec<Run>) -> Comparison<'_> {
         segments,
         innovations,
         landmarks,
+        landmarks_from_truth,
         gyro_tracks,
         gyrodometry,
     }

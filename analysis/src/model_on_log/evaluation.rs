@@ -17,6 +17,9 @@ pub struct Evaluation<'r> {
     /// Each run's own error summary.
     pub per_run: Vec<Errors>,
     pub landmarks: Option<InnovationStats>,
+    /// The sightings seen from the ground truth: the sensor's own error
+    /// ([`innovations::from_truth`]).
+    pub landmarks_from_truth: Option<InnovationStats>,
 }
 
 /// Dead-reckoned tracks of every run with parameters `p`, each from its
@@ -73,6 +76,7 @@ pub fn evaluation_from<'r>(
         errors,
         per_run,
         landmarks,
+        landmarks_from_truth: innovations::stats_from_truth(r, p, runs),
     }
 }
 

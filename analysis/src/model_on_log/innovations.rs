@@ -6,6 +6,7 @@ use crate::deadreckon::Track;
 use crate::interp::lerp3;
 use crate::log::wrap;
 use crate::model::Runner;
+use crate::robust::robust_sd;
 use crate::run::{LandmarkObs, Run};
 use crate::track_rows::{Cursor, TrackRows};
 use kinegen_model::decl::ObservationRole::RangeBearing;
@@ -61,6 +62,11 @@ pub struct InnovationStats {
     pub bearing_rmse_rad: f64,
     pub range_bias_m: f64,
     pub bearing_bias_rad: f64,
+    /// Robust standard deviations ([`crate::robust::robust_sd`]): the spread
+    /// of most sightings, which a few misread ones do not move as they move
+    /// the RMSE.
+    pub range_robust_sd_m: f64,
+    pub bearing_robust_sd_rad: f64,
     /// The landmark with the largest RMS range innovation, and that RMS.
     pub worst_landmark: Option<(String, f64)>,
 }
@@ -92,6 +98,45 @@ pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &dyn TrackRows) -> V
     out.into_iter().flatten().collect()
 }
 
+/// The innovations of a run's observations seen from its ground truth (the
+/// measured pose interpolated to each sighting's time; none without one):
+/// the range-bearing sensor's own error, which the sightings along a
+/// dead-reckoned track mix with that track's drift (on MRCLAM's 15-minute
+/// logs metres of it against the camera's centimetres). What `fit`
+/// calibrates a sensor-only effect on ([`crate::fit::sensor`]).
+pub fn from_truth(r: &Runner, p: &[f64], run: &Run) -> Vec<Innovation> {
+    let (Some(h), Some(gt)) = (
+        r.ir.observation_kernels(RangeBearing).map(|o| o.value),
+        &run.gt,
+    ) else {
+        return Vec::new();
+    };
+    run.landmarks
+        .iter()
+        .filter_map(|o| {
+            let (j, a) = step_at(run, o.t);
+            let x = lerp3(&gt[j], &gt[j + 1], a);
+            // the motion capture may lose the robot
+            x.iter().all(|v| v.is_finite()).then(|| {
+                let v = predict(r, h, p, run, j, &x, o);
+                Innovation {
+                    t: o.t,
+                    id: o.id.clone(),
+                    range_m: o.range - v[0],
+                    bearing_rad: wrap(o.bearing - v[1]),
+                }
+            })
+        })
+        .collect()
+}
+
+/// The sightings of `runs` seen from their ground truth, summarised (None
+/// where no run has both).
+pub fn stats_from_truth(r: &Runner, p: &[f64], runs: &[Run]) -> Option<InnovationStats> {
+    let all: Vec<Innovation> = runs.iter().flat_map(|run| from_truth(r, p, run)).collect();
+    stats(&all)
+}
+
 pub fn stats(all: &[Innovation]) -> Option<InnovationStats> {
     if all.is_empty() {
         return None;
@@ -119,6 +164,8 @@ pub fn stats(all: &[Innovation]) -> Option<InnovationStats> {
             .sqrt(),
         range_bias_m: all.iter().map(|i| i.range_m).sum::<f64>() / n,
         bearing_bias_rad: all.iter().map(|i| i.bearing_rad).sum::<f64>() / n,
+        range_robust_sd_m: robust_sd(all.iter().map(|i| i.range_m)),
+        bearing_robust_sd_rad: robust_sd(all.iter().map(|i| i.bearing_rad)),
         worst_landmark: worst,
     })
 }

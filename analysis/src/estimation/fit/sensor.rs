@@ -14,6 +14,8 @@
 //! [`super::fit`] and `crate::diagnosis::sensor` both use this.
 use super::sightings_from_truth;
 use crate::model::Runner;
+pub use crate::robust::median;
+use crate::robust::robust_sd;
 use crate::rows::Rows;
 use crate::run::Run;
 use kinegen_model::decl::ObservationRole::RangeBearing;
@@ -196,26 +198,14 @@ fn huber(z: f64) -> f64 {
     }
 }
 
-/// 1.4826 times the median absolute deviation from the median (a Gaussian's
-/// standard deviation, unmoved by outliers); 1 where there is no spread.
+/// [`robust_sd`], or 1 where there is no spread (a scale to divide by).
 fn robust_scale(v: impl Iterator<Item = f64>) -> f64 {
-    let mut v: Vec<f64> = v.collect();
-    let med = median(&mut v);
-    let mut dev: Vec<f64> = v.iter().map(|x| (x - med).abs()).collect();
-    let s = 1.4826 * median(&mut dev);
+    let s = robust_sd(v);
     if s > 0.0 {
         s
     } else {
         1.0
     }
-}
-
-pub fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 /// A sensor calibration: the parameters, and each stretch's held out.
