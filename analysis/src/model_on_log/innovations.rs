@@ -99,7 +99,8 @@ pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &dyn TrackRows) -> V
 }
 
 /// The innovations of a run's observations seen from its ground truth (the
-/// measured pose interpolated to each sighting's time; none without one):
+/// measured pose interpolated to each sighting's time; none without one, nor
+/// for a sighting outside the run's time or where the truth lost the robot):
 /// the range-bearing sensor's own error, which the sightings along a
 /// dead-reckoned track mix with that track's drift (on MRCLAM's 15-minute
 /// logs metres of it against the camera's centimetres). What `fit`
@@ -114,10 +115,12 @@ pub fn from_truth(r: &Runner, p: &[f64], run: &Run) -> Vec<Innovation> {
     run.landmarks
         .iter()
         .filter_map(|o| {
-            let (j, a) = step_at(run, o.t);
+            let (j, a) = run.locate(o.t);
             let x = lerp3(&gt[j], &gt[j + 1], a);
-            // the motion capture may lose the robot
-            x.iter().all(|v| v.is_finite()).then(|| {
+            // seen where the truth is: within the run, and where the motion
+            // capture has the robot
+            let inside = (0.0..=1.0).contains(&a);
+            (inside && x.iter().all(|v| v.is_finite())).then(|| {
                 let v = predict(r, h, p, run, j, &x, o);
                 Innovation {
                     t: o.t,
