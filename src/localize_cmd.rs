@@ -291,16 +291,18 @@ fn fmt_spread(x: &Spread) -> String {
     )
 }
 
-fn verdict(m: Option<f64>, b: Option<(f64, f64)>) -> String {
+/// A mean NIS or NEES against its bounds, and what that says of `who` (the
+/// filter, or the smoother whose covariance `--track` writes).
+fn verdict(m: Option<f64>, b: Option<(f64, f64)>, who: &str) -> String {
     let (Some(m), Some((lo, hi)), Some(s)) = (m, b, side(m, b)) else {
         return "n/a".into();
     };
     match s {
         Side::Below => {
-            format!("{m:.2} (below its 95% bounds {lo:.2}..{hi:.2}: the filter is pessimistic)")
+            format!("{m:.2} (below its 95% bounds {lo:.2}..{hi:.2}: the {who} is pessimistic)")
         }
         Side::Above => {
-            format!("{m:.2} (above its 95% bounds {lo:.2}..{hi:.2}: the filter is overconfident)")
+            format!("{m:.2} (above its 95% bounds {lo:.2}..{hi:.2}: the {who} is overconfident)")
         }
         Side::Within => format!("{m:.2} (within its 95% bounds {lo:.2}..{hi:.2})"),
     }
@@ -331,8 +333,14 @@ fn say_run(
             "  position RMSE {e:.4} m (dead reckoning with the same model: {d:.4} m)"
         ));
     }
-    out.say(&format!("  mean NIS  {}", verdict(s.nis, s.nis_bounds)));
-    out.say(&format!("  mean NEES {}", verdict(s.nees, s.nees_bounds)));
+    out.say(&format!(
+        "  mean NIS  {}",
+        verdict(s.nis, s.nis_bounds, "filter")
+    ));
+    out.say(&format!(
+        "  mean NEES {}",
+        verdict(s.nees, s.nees_bounds, "filter")
+    ));
     if let Some(n) = s.truth_noise {
         out.say(&format!(
             "    (against the ground truth with its own noise counted: {:.2} mm, {:.2} mrad, from its third differences)",
@@ -352,10 +360,11 @@ fn say_run(
         out.say(&format!("    {line}"));
     }
     if let Some((rmse, nees)) = s.smoothed {
+        // the smoother's NEES counts the same rows as the filter's
         out.say(&format!(
             "  smoothed (RTS): position RMSE {}, mean NEES {}",
             rmse.map_or("n/a".into(), |e| format!("{e:.4} m")),
-            nees.map_or("n/a".into(), |n| format!("{n:.2}"))
+            verdict(nees, s.nees_bounds, "smoother")
         ));
     }
     let last = loc.cov.last().unwrap();
