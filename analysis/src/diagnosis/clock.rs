@@ -22,6 +22,7 @@ use crate::fit::SEGMENT_S;
 use crate::interp::lerp3;
 use crate::log::wrap;
 use crate::model::Runner;
+use crate::robust::{median, robust_sd};
 use crate::run::Run;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use rayon::prelude::*;
@@ -189,7 +190,7 @@ pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<Result<SightingClo
     let mut cost = Vec::new();
     for _ in 0..2 {
         let at = nearest(&shifts, lag);
-        let scale = [0, 1].map(|c| robust_sigma(residuals[at].iter().map(|e| e[c])));
+        let scale = [0, 1].map(|c| robust_sd(residuals[at].iter().map(|e| e[c])));
         if scale.iter().any(|s| s.is_nan() || *s <= 0.0) {
             return Some(Err(no_minimum));
         }
@@ -210,7 +211,12 @@ pub fn measure(r: &Runner, p: &[f64], runs: &[Run]) -> Option<Result<SightingClo
     let m = drop_one.len() as f64;
     let mean = drop_one.iter().sum::<f64>() / m;
     let std = ((m - 1.0) / m * drop_one.iter().map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt();
-    let row_interval = median(runs.iter().flat_map(|r| r.dt.iter().copied()).collect());
+    let row_interval = median(
+        &mut runs
+            .iter()
+            .flat_map(|r| r.dt.iter().copied())
+            .collect::<Vec<_>>(),
+    );
     Some(Ok(SightingClock {
         lag,
         std,
@@ -320,22 +326,6 @@ fn huber(z: f64) -> f64 {
     } else {
         HUBER_K * (a - 0.5 * HUBER_K)
     }
-}
-
-/// The spread of `values` about their median, as a standard deviation
-/// (1.4826 times the median absolute deviation).
-fn robust_sigma(values: impl Iterator<Item = f64>) -> f64 {
-    let v: Vec<f64> = values.collect();
-    let mid = median(v.clone());
-    1.4826 * median(v.iter().map(|x| (x - mid).abs()).collect())
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 /// The minimum of `cost` over `shifts`, refined by the parabola through the

@@ -24,9 +24,10 @@
 use super::diagnose::{Estimate, Estimates};
 use super::folds::{paired, FoldTest};
 use crate::derivation::EffectChains;
-use crate::fit::sensor::{calibrate_with_folds, median, Sightings};
+use crate::fit::sensor::{calibrate_with_folds, Sightings};
 pub use crate::fit::sensor::{sensor_only, SensorUnmeasured};
 use crate::model::Runner;
+use crate::robust::median;
 use crate::run::Run;
 use serde::Serialize;
 

@@ -14,7 +14,6 @@
 //! [`super::fit`] and `crate::diagnosis::sensor` both use this.
 use super::sightings_from_truth;
 use crate::model::Runner;
-pub use crate::robust::median;
 use crate::robust::robust_sd;
 use crate::rows::Rows;
 use crate::run::Run;
