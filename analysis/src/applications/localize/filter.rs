@@ -72,6 +72,15 @@ pub struct Pass {
     pub cost: f64,
 }
 
+impl Pass {
+    /// A sighting this noise cannot be judged on: rejected, and the noise
+    /// ruled out for the estimate (its cost infinite).
+    fn unjudgeable(&mut self) {
+        self.cost = f64::INFINITY;
+        self.rejected += 1;
+    }
+}
+
 impl<'a> Filter<'a> {
     pub fn new(r: &'a Runner, o: &EkfOptions) -> Result<Filter<'a>, LocalizeError> {
         let obs =
@@ -382,8 +391,7 @@ impl<'a> Filter<'a> {
         let Some((straight, reading_cost)) = noise.range_reading.taken_back(z.range, z.bearing)
         else {
             // not a reading the likelihood can judge
-            pass.cost = f64::INFINITY;
-            pass.rejected += 1;
+            pass.unjudgeable();
             return;
         };
         let read = Vector2::new(straight, z.bearing);
@@ -406,8 +414,7 @@ impl<'a> Filter<'a> {
         if !(e.sm[(0, 0)] > 0.0 && e.sm.determinant() > 0.0 && nis >= 0.0) {
             // rounding has left the covariance indefinite: this noise is not
             // one the likelihood can judge
-            pass.cost = f64::INFINITY;
-            pass.rejected += 1;
+            pass.unjudgeable();
             return;
         }
         // beyond the gate the cost grows with the log of the NIS (a robust
