@@ -169,13 +169,12 @@ impl NoiseModel {
         }
         let r = &self.range_reading;
         if !r.is_straight() {
+            let [(share, share_v), (scale, scale_v)] = r.parameters();
             out.push(format!(
-                "range read as {:.0}% depth along the sensor's axis, {:+.1}% long (the catalogue's {}: range_depth = {:.3}, depth_scale = {:.4})",
+                "range read as {:.0}% depth along the sensor's axis, {:+.1}% long (the catalogue's {}: {share} = {share_v:.3}, {scale} = {scale_v:.4})",
                 100.0 * r.depth_share,
                 100.0 * r.scale,
                 RangeReading::EFFECT,
-                r.depth_share,
-                r.scale
             ));
         }
         out
