@@ -10,7 +10,8 @@ use kinegen_analysis::load::Loaded;
 use kinegen_analysis::localize::reading::RangeReading;
 use kinegen_analysis::localize::timing::{Timing, TimingEstimate};
 use kinegen_analysis::localize::{
-    side, Consistency, EkfOptions, Localization, NoiseSource, Side, Spread, Summary,
+    side, Consistency, EkfOptions, Localization, NeesParts, NoiseSource, Overconfident, Side,
+    Spread, Summary,
 };
 use kinegen_analysis::localize_request::{localize_files, LocalizeRequest, LocalizedFiles};
 use serde_json::json;
@@ -206,6 +207,17 @@ fn run_json(
             Consistency::HeavyTails { pessimistic_core: false } => "heavy_tails_overconfident_core",
             Consistency::Contradict => "contradict",
         }),
+        "nees_parts": s.nees_parts.map(|p| json!({
+            "position_mean": p.position.0, "position_bounds": [p.position.1 .0, p.position.1 .1],
+            "heading_mean": p.heading.0, "heading_bounds": [p.heading.1 .0, p.heading.1 .1],
+            "near_sightings_mean": p.near_sightings, "far_from_sightings_mean": p.far_from_sightings,
+            "overconfident": s.overconfident_part().map(|o| match o {
+                Overconfident::Heading => "heading",
+                Overconfident::PositionNearSightings => "position_near_sightings",
+                Overconfident::PositionFarFromSightings => "position_far_from_sightings",
+                Overconfident::Position => "position",
+            }),
+        })),
         "ground_truth_noise": s.truth_noise.map(|n| json!({"position_m": n[0], "heading_rad": n[2]})),
         "smoothed": s.smoothed.map(|(rmse, nees)| json!({"position_rmse_m": rmse, "nees_mean": nees})),
         "final_pose": loc.track.last(),
@@ -353,10 +365,10 @@ fn say_run(
             out.say(&format!("    {name} {}", fmt_spread(&x)));
         }
     }
-    if let Some(line) = s
-        .consistency()
-        .and_then(crate::localize_report::say_consistency)
-    {
+    if let Some(p) = s.nees_parts {
+        out.say(&format!("    {}", say_parts(&p)));
+    }
+    if let Some(line) = crate::localize_report::say_consistency(s) {
         out.say(&format!("    {line}"));
     }
     if let Some((rmse, nees)) = s.smoothed {
@@ -374,6 +386,15 @@ fn say_run(
         last[(1, 1)].sqrt(),
         last[(2, 2)].sqrt()
     ));
+}
+
+/// The NEES's parts: which belief is wrong, and when.
+fn say_parts(p: &NeesParts) -> String {
+    let (pos, head) = (p.position, p.heading);
+    format!(
+        "NEES of the position alone {:.2} (bounds {:.2}..{:.2}), of the heading alone {:.2} (bounds {:.2}..{:.2}); of the pose just after the sightings {:.2}, far from them {:.2} (half the rows each)",
+        pos.0, pos.1 .0, pos.1 .1, head.0, head.1 .0, head.1 .1, p.near_sightings, p.far_from_sightings
+    )
 }
 
 /// A command-timing parameter the filter ran with, and where it came from.

@@ -6,7 +6,9 @@
 use crate::report::{
     axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
 };
-use kinegen_analysis::localize::{mean_bounds, Consistency, Localization, Spread, Summary};
+use kinegen_analysis::localize::{
+    mean_bounds, Consistency, Localization, Overconfident, Spread, Summary,
+};
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
 use plotters::prelude::*;
@@ -325,9 +327,10 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
         );
     }
     t += "</table>";
+    t += &nees_parts_table(runs);
     // what NIS and NEES say together, where their means contradict each other
     for p in runs {
-        if let Some(line) = p.summary.consistency().and_then(say_consistency) {
+        if let Some(line) = say_consistency(p.summary) {
             t += &format!("<p>{}: {}</p>", esc(&p.run.path), esc(&line));
         }
     }
@@ -338,17 +341,64 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
     t + "</table>"
 }
 
+/// The NEES taken apart (runs with a ground truth): which belief is
+/// overconfident, and when.
+fn nees_parts_table(runs: &[RunPage]) -> String {
+    let mut t = String::from(
+        "<table><tr><th>run</th><th>mean NEES of the position alone (95% bounds)</th>\
+         <th>of the heading alone (95% bounds)</th><th>of the pose, the half of the rows just after sightings</th>\
+         <th>the half far from them</th></tr>",
+    );
+    let mut any = false;
+    for p in runs {
+        let Some(n) = p.summary.nees_parts else {
+            continue;
+        };
+        any = true;
+        let bounded = |(m, (lo, hi)): (f64, (f64, f64))| format!("{m:.2} ({lo:.2}-{hi:.2})");
+        t += &format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td></tr>",
+            esc(&p.run.path),
+            bounded(n.position),
+            bounded(n.heading),
+            n.near_sightings,
+            n.far_from_sightings
+        );
+    }
+    if any {
+        t + "</table>"
+    } else {
+        String::new()
+    }
+}
+
 /// What NIS and NEES say together, when their means contradict each other.
-pub fn say_consistency(c: Consistency) -> Option<String> {
-    match c {
+pub fn say_consistency(s: &Summary) -> Option<String> {
+    match s.consistency()? {
         Consistency::Agree => None,
         Consistency::HeavyTails { pessimistic_core } => Some(format!(
             "the means contradict each other, the medians do not: most of the time the filter is {} (both medians {} chi-square's), and its errors have heavier tails than its Gaussian: at times it is far more wrong than its covariance says (the report's error chart shows when)",
             if pessimistic_core { "pessimistic" } else { "overconfident" },
             if pessimistic_core { "below" } else { "above" },
         )),
-        Consistency::Contradict => Some(
-            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are (the innovations' likelihood that chose the noise does not see an error the spec leaves out: a motion error that lasts or grows with the commands, which white process noise does not describe; a camera offset; a landmark map error; a lag)".into(),
-        ),
+        Consistency::Contradict => Some(format!(
+            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are; {}",
+            s.overconfident_part()
+                .map_or(UNSEEN_ERROR, what_is_overconfident)
+        )),
+    }
+}
+
+/// What the innovations' likelihood that chose the noise may not see, when
+/// the NEES's parts do not say which belief is wrong.
+const UNSEEN_ERROR: &str = "the innovations' likelihood that chose the noise does not see an error the spec leaves out (a motion error that lasts or grows with the commands, which white process noise does not describe; a camera offset; a landmark map error; a lag)";
+
+/// Where to look, by the belief the NEES's parts find overconfident.
+fn what_is_overconfident(o: Overconfident) -> &'static str {
+    match o {
+        Overconfident::Heading => "the heading is overconfident: the robot turns otherwise than the model and its noise say (a turn-rate error that grows with the commands, a deadband, a lag)",
+        Overconfident::PositionNearSightings => "the position is overconfident and the heading is not, most just after the sightings: the sightings place the robot more tightly than they should, by an error they share that their innovations cannot show (the camera's range reading or mounting, a landmark map error, an error that follows the viewing geometry)",
+        Overconfident::PositionFarFromSightings => "the position is overconfident and the heading is not, most far from the sightings: the motion between them errs more than its noise says (a speed error that lasts or grows with the commands, a lag)",
+        Overconfident::Position => "the position is overconfident and the heading is not, as much just after the sightings as far from them: both the sightings' shared errors (the camera's range reading or mounting, a landmark map error) and the motion's lasting errors (a speed error that grows with the commands, a lag) are candidates",
     }
 }

@@ -514,6 +514,16 @@ fn real_velocity_commanded_robots_localize_and_calibrate_as_logged() {
         if side("nis_mean", "nis_bounds") * side("nees_mean", "nees_bounds") < 0 {
             assert_ne!(r["consistency"], "agree", "robot{robot}: {r}");
         }
+        // an overconfident NEES is taken apart: the belief that is wrong is
+        // named (on these robots the position; the heading alone is at or
+        // below its bounds, as the NIS is)
+        if side("nees_mean", "nees_bounds") > 0 {
+            let parts = &r["nees_parts"];
+            assert!(
+                parts["overconfident"].as_str().is_some(),
+                "robot{robot}: {parts}"
+            );
+        }
         assert!(
             r["nees_spread"]["beyond_95"].as_f64().unwrap() < 0.3,
             "robot{robot}: {r}"
@@ -1101,6 +1111,13 @@ fn nees_counts_the_ground_truths_own_noise() {
         assert!((0.5..2.0).contains(&ratio), "{key}: {s}");
     }
     assert_eq!(run["consistency"], "agree", "{run}");
+    // each of the pose's parts against its own marginal: near its degrees
+    // of freedom (position 2, heading 1)
+    let parts = &run["nees_parts"];
+    for (key, dof) in [("position_mean", 2.0), ("heading_mean", 1.0)] {
+        let ratio = parts[key].as_f64().unwrap() / dof;
+        assert!((0.5..1.5).contains(&ratio), "{key}: {parts}");
+    }
 }
 
 /// Issue #34: a robot that does not follow small commands. A commanded robot

@@ -161,7 +161,7 @@ pub fn sweep(
                     .sum::<f64>()
                     / n)
                     .sqrt();
-                nees += loc.nees.iter().map(|(_, v)| v).sum::<f64>() / loc.nees.len().max(1) as f64;
+                nees += loc.nees.iter().map(|n| n.pose).sum::<f64>() / loc.nees.len().max(1) as f64;
             }
             let m = SEEDS as f64;
             Ok(SweepPoint {

@@ -36,13 +36,14 @@ pub mod timing;
 
 pub use filter::{Filter, Keep, Pass};
 pub use noise::{Lingering, NoiseModel, NoiseSource};
-pub use summary::{side, summarise, Consistency, Side, Spread, Summary};
+pub use summary::{side, summarise, Consistency, NeesParts, Overconfident, Side, Spread, Summary};
 
 use crate::log::wrap;
 use crate::model::Runner;
 use crate::run::Run;
 use kinegen_model::decl::ObservationRole::Pose;
 pub use nalgebra::Matrix3;
+use nalgebra::Vector3;
 
 /// The default gate on a sighting's NIS: the 99.9% point of chi-square with
 /// 2 degrees of freedom. A consistent filter rejects one good sighting in a
@@ -96,9 +97,8 @@ pub struct Localization {
     pub smoothed: Option<Smoothed>,
     /// Time and normalised innovation squared of each accepted observation.
     pub nis: Vec<(f64, f64)>,
-    /// Normalised estimation error squared at each row with ground truth
-    /// (row index, value).
-    pub nees: Vec<(usize, f64)>,
+    /// Normalised estimation error squared at each row with ground truth.
+    pub nees: Vec<Nees>,
     pub accepted: usize,
     pub rejected: usize,
     /// Sightings outside the run's time span.
@@ -239,12 +239,7 @@ pub fn localize(r: &Runner, run: &Run, o: &EkfOptions) -> Result<Localization, L
 /// added to the covariance: a filter more precise than the motion capture (a
 /// simulated robot seen by many landmarks: 1.3 mm against 1 mm of tracker
 /// noise) would otherwise read as overconfident.
-pub fn nees_of(
-    r: &Runner,
-    run: &Run,
-    track: &[[f64; 3]],
-    cov: &[Matrix3<f64>],
-) -> Vec<(usize, f64)> {
+pub fn nees_of(r: &Runner, run: &Run, track: &[[f64; 3]], cov: &[Matrix3<f64>]) -> Vec<Nees> {
     let Some(g) = run.gt.as_ref() else {
         return Vec::new();
     };
@@ -261,11 +256,39 @@ pub fn nees_of(
         .filter_map(|k| {
             let (m, h) = sensor.at(k, &track[k]);
             let e = nalgebra::Vector3::new(m[0] - g[k][0], m[1] - g[k][1], wrap(m[2] - g[k][2]));
-            (h * cov[k] * h.transpose() + truth)
-                .try_inverse()
-                .map(|ci| (k, (e.transpose() * ci * e)[(0, 0)]))
+            Nees::of(k, &e, &(h * cov[k] * h.transpose() + truth))
         })
         .collect()
+}
+
+/// One row's normalised estimation error squared: of the whole pose (3
+/// degrees of freedom), and of its position (2) and heading (1) alone, each
+/// against its own marginal covariance. The parts tell which of the
+/// filter's beliefs is wrong: on the MRCLAM robots the pose's NEES is
+/// overconfident while the heading's alone is pessimistic, as the NIS is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Nees {
+    pub row: usize,
+    pub pose: f64,
+    pub position: f64,
+    pub heading: f64,
+}
+
+impl Nees {
+    /// Row `row`'s NEES for pose error `e` (x, y, heading) with covariance
+    /// `c`: each part against its marginal (not its conditional: the
+    /// position's error is judged by all the position uncertainty the
+    /// filter believes in, whatever the heading's). None: `c` is singular.
+    pub fn of(row: usize, e: &Vector3<f64>, c: &Matrix3<f64>) -> Option<Nees> {
+        let position = c.fixed_view::<2, 2>(0, 0).into_owned().try_inverse()?;
+        let ep = e.fixed_rows::<2>(0);
+        Some(Nees {
+            row,
+            pose: (e.transpose() * c.try_inverse()? * e)[(0, 0)],
+            position: (ep.transpose() * position * ep)[(0, 0)],
+            heading: e[2] * e[2] / c[(2, 2)],
+        })
+    }
 }
 
 /// Where the motion capture sees a body pose: through the model's pose
@@ -358,5 +381,20 @@ mod tests {
         // 95% of chi2(30): 16.79 .. 46.98
         assert!((chi2_quantile(30.0, -1.959964) - 16.79).abs() < 0.3);
         assert!((chi2_quantile(30.0, 1.959964) - 46.98).abs() < 0.3);
+    }
+
+    #[test]
+    fn each_part_of_the_nees_is_judged_by_its_marginal() {
+        // heading and x correlated 0.9: an error of one sd in each, along
+        // that correlation, is one sd of each part's own marginal, and
+        // little of the pose's (the conditional heading's sd is 0.44)
+        let c = Matrix3::new(1.0, 0.0, 0.9, 0.0, 1.0, 0.0, 0.9, 0.0, 1.0);
+        let n = Nees::of(7, &Vector3::new(1.0, 0.0, 1.0), &c).unwrap();
+        assert_eq!(n.row, 7);
+        assert!((n.position - 1.0).abs() < 1e-12, "{n:?}");
+        assert!((n.heading - 1.0).abs() < 1e-12, "{n:?}");
+        // (1, 1) C^-1 (1, 1)^T for the [[1, .9], [.9, 1]] block: 2 / 1.9
+        assert!((n.pose - 2.0 / 1.9).abs() < 1e-12, "{n:?}");
+        assert!(Nees::of(0, &Vector3::zeros(), &Matrix3::zeros()).is_none());
     }
 }

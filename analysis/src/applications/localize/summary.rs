@@ -3,7 +3,7 @@
 //! NEES with their chi-square bounds, and how their values spread (median,
 //! share in the tail), which tells a filter wrong at times from one wrong
 //! throughout.
-use super::{chi2_quantile, mean_bounds, nees_of, truth_noise, Localization, Sensed};
+use super::{chi2_quantile, mean_bounds, nees_of, truth_noise, Localization, Nees, Sensed};
 use crate::model::Runner;
 use crate::run::Run;
 
@@ -23,6 +23,90 @@ pub struct Summary {
     pub truth_noise: Option<[f64; 3]>,
     pub nis_spread: Option<Spread>,
     pub nees_spread: Option<Spread>,
+    /// The NEES taken apart, when there is one.
+    pub nees_parts: Option<NeesParts>,
+}
+
+/// The NEES taken apart: which of the filter's beliefs is wrong, and when.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NeesParts {
+    /// Mean NEES of the position alone (2 degrees of freedom) and its 95%
+    /// bounds.
+    pub position: (f64, (f64, f64)),
+    /// The same for the heading alone (1 degree of freedom).
+    pub heading: (f64, (f64, f64)),
+    /// Mean NEES of the pose over the half of the rows nearest in time
+    /// after a sighting the filter used, and over the other half (rows
+    /// before the first sighting among them): a filter whose sightings
+    /// place it more tightly than they should is most overconfident just
+    /// after them; one whose motion errs more than its noise says, far from
+    /// them.
+    pub near_sightings: f64,
+    pub far_from_sightings: f64,
+}
+
+/// Which of the filter's beliefs its NEES finds overconfident.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Overconfident {
+    /// The heading (with the position or not).
+    Heading,
+    /// The position alone, most just after the sightings.
+    PositionNearSightings,
+    /// The position alone, most far from the sightings.
+    PositionFarFromSightings,
+    /// The position alone, as much near the sightings as far from them.
+    Position,
+}
+
+/// One half's mean NEES must exceed the other's by this factor for the
+/// report to say the filter is overconfident "most" in that half (a word,
+/// not a test: the rows are far from independent).
+const HALF_CONTRAST: f64 = 1.25;
+
+impl NeesParts {
+    /// The parts of `nees`, the NEES of a run with row times `t` and whose
+    /// used sightings came at `sightings` (s, in time order).
+    pub fn of(nees: &[Nees], t: &[f64], sightings: &[f64]) -> Option<NeesParts> {
+        let position = mean(nees.iter().map(|n| n.position))?;
+        let heading = mean(nees.iter().map(|n| n.heading))?;
+        // time since the last sighting used, at each row
+        let since = |n: &Nees| {
+            let at = t[n.row];
+            match sightings.partition_point(|&s| s <= at) {
+                0 => f64::INFINITY,
+                i => at - sightings[i - 1],
+            }
+        };
+        let mut by_time: Vec<(f64, f64)> = nees.iter().map(|n| (since(n), n.pose)).collect();
+        by_time.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (near, far) = by_time.split_at(by_time.len() / 2);
+        Some(NeesParts {
+            position: (position, mean_bounds(nees.len(), 2.0)),
+            heading: (heading, mean_bounds(nees.len(), 1.0)),
+            near_sightings: mean(near.iter().map(|x| x.1)).unwrap_or(f64::NAN),
+            far_from_sightings: mean(far.iter().map(|x| x.1))?,
+        })
+    }
+
+    /// The belief the parts find overconfident (None: neither part's mean
+    /// lies above its bounds).
+    pub fn overconfident(&self) -> Option<Overconfident> {
+        let above = |(m, b): (f64, (f64, f64))| side(Some(m), Some(b)) == Some(Side::Above);
+        if above(self.heading) {
+            return Some(Overconfident::Heading);
+        }
+        if !above(self.position) {
+            return None;
+        }
+        let (near, far) = (self.near_sightings, self.far_from_sightings);
+        Some(if near > HALF_CONTRAST * far {
+            Overconfident::PositionNearSightings
+        } else if far > HALF_CONTRAST * near {
+            Overconfident::PositionFarFromSightings
+        } else {
+            Overconfident::Position
+        })
+    }
 }
 
 /// How a consistency statistic's values spread against their chi-square
@@ -107,6 +191,14 @@ pub fn side(mean: Option<f64>, bounds: Option<(f64, f64)>) -> Option<Side> {
 }
 
 impl Summary {
+    /// The belief the NEES's parts find overconfident, where the pose's mean
+    /// NEES is above its bounds (None otherwise).
+    pub fn overconfident_part(&self) -> Option<Overconfident> {
+        (side(self.nees, self.nees_bounds) == Some(Side::Above))
+            .then(|| self.nees_parts?.overconfident())
+            .flatten()
+    }
+
     /// What NIS and NEES say together (None without a NEES).
     pub fn consistency(&self) -> Option<Consistency> {
         let (nis, nees) = (self.nis_spread?, self.nees_spread?);
@@ -165,18 +257,26 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
     let dead_reckoning = position_rmse(r, run, &crate::deadreckon::run(r, &r.p, run, false).pose);
     let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
         let nees = nees_of(r, run, track, cov);
-        (position_rmse(r, run, track), mean(nees.iter().map(|n| n.1)))
+        (
+            position_rmse(r, run, track),
+            mean(nees.iter().map(|n| n.pose)),
+        )
     });
     Summary {
         rmse: position_rmse(r, run, &loc.track),
         dead_reckoning,
         nis: mean(loc.nis.iter().map(|n| n.1)),
         nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
-        nees: mean(loc.nees.iter().map(|n| n.1)),
+        nees: mean(loc.nees.iter().map(|n| n.pose)),
         truth_noise: truth_noise(run).filter(|_| !loc.nees.is_empty()),
         nees_bounds: (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0)),
         nis_spread: spread(loc.nis.iter().map(|n| n.1), 2.0),
-        nees_spread: spread(loc.nees.iter().map(|n| n.1), 3.0),
+        nees_spread: spread(loc.nees.iter().map(|n| n.pose), 3.0),
+        nees_parts: NeesParts::of(
+            &loc.nees,
+            &run.t,
+            &loc.nis.iter().map(|n| n.0).collect::<Vec<_>>(),
+        ),
         smoothed,
     }
 }
@@ -208,6 +308,7 @@ mod tests {
             truth_noise: None,
             nis_spread: spread(nis.iter().copied(), 2.0),
             nees_spread: spread(nees.iter().copied(), 3.0),
+            nees_parts: None,
         }
     }
 
@@ -219,6 +320,53 @@ mod tests {
         // 3 degrees of freedom: Wilson-Hilferty within 1% of the tables
         let (median, p95) = chi2_points(3.0);
         assert!((median / 2.366 - 1.0).abs() < 0.01 && (p95 / 7.815 - 1.0).abs() < 0.01);
+    }
+
+    /// Rows one second apart, sightings every tenth second: the rows just
+    /// after a sighting (0-4 s since) and the others (5-9 s since) carry
+    /// `near` and `far` times chi-square's law in their position part, the
+    /// heading `heading` times its.
+    fn parts_of(near: f64, far: f64, heading: f64) -> Option<Overconfident> {
+        let n = 2000;
+        let (p2, h1) = (chi2_2(n, 1.0), chi2_2(n, 0.5));
+        let t: Vec<f64> = (0..n).map(|k| k as f64).collect();
+        let sightings: Vec<f64> = (0..n).step_by(10).map(|k| k as f64).collect();
+        let nees: Vec<Nees> = (0..n)
+            .map(|k| {
+                let position = p2[k] * if k % 10 < 5 { near } else { far };
+                // chi-square with 1 degree of freedom: half of one with 2,
+                // shuffled against the position's
+                let heading = h1[(k * 7919) % n] * heading;
+                Nees {
+                    row: k,
+                    pose: position + heading,
+                    position,
+                    heading,
+                }
+            })
+            .collect();
+        let parts = NeesParts::of(&nees, &t, &sightings).unwrap();
+        let (m, (lo, hi)) = parts.heading;
+        assert!(
+            m > lo / 1.1 * heading && m < hi * 1.1 * heading,
+            "{parts:?}"
+        );
+        parts.overconfident()
+    }
+
+    #[test]
+    fn the_nees_parts_name_the_belief_that_is_overconfident() {
+        assert_eq!(parts_of(1.0, 1.0, 1.0), None);
+        assert_eq!(
+            parts_of(3.0, 1.0, 0.5),
+            Some(Overconfident::PositionNearSightings)
+        );
+        assert_eq!(
+            parts_of(1.0, 3.0, 0.5),
+            Some(Overconfident::PositionFarFromSightings)
+        );
+        assert_eq!(parts_of(2.0, 2.0, 0.5), Some(Overconfident::Position));
+        assert_eq!(parts_of(1.0, 1.0, 2.0), Some(Overconfident::Heading));
     }
 
     #[test]
