@@ -66,7 +66,11 @@ const HALF_CONTRAST: f64 = 1.25;
 impl NeesParts {
     /// The parts of `nees`, the NEES of a run with row times `t` and whose
     /// used sightings came at `sightings` (s, in time order).
+    /// None with fewer than two rows (no halves to compare).
     pub fn of(nees: &[Nees], t: &[f64], sightings: &[f64]) -> Option<NeesParts> {
+        if nees.len() < 2 {
+            return None;
+        }
         let position = mean(nees.iter().map(|n| n.position))?;
         let heading = mean(nees.iter().map(|n| n.heading))?;
         // time since the last sighting used, at each row
@@ -83,7 +87,7 @@ impl NeesParts {
         Some(NeesParts {
             position: (position, mean_bounds(nees.len(), 2.0)),
             heading: (heading, mean_bounds(nees.len(), 1.0)),
-            near_sightings: mean(near.iter().map(|x| x.1)).unwrap_or(f64::NAN),
+            near_sightings: mean(near.iter().map(|x| x.1))?,
             far_from_sightings: mean(far.iter().map(|x| x.1))?,
         })
     }
@@ -367,6 +371,14 @@ mod tests {
         );
         assert_eq!(parts_of(2.0, 2.0, 0.5), Some(Overconfident::Position));
         assert_eq!(parts_of(1.0, 1.0, 2.0), Some(Overconfident::Heading));
+        // one row has no halves: no parts rather than a NaN half
+        let one = Nees {
+            row: 0,
+            pose: 3.0,
+            position: 2.0,
+            heading: 1.0,
+        };
+        assert_eq!(NeesParts::of(&[one], &[0.0], &[0.0]), None);
     }
 
     #[test]
