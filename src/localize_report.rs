@@ -282,6 +282,14 @@ fn sweep_chart(sweep: &[kinegen_analysis::sweep::SweepPoint]) -> Result<String, 
     )
 }
 
+/// A mean and its 95% bounds as a table cell.
+fn bounded(m: Option<f64>, b: Option<(f64, f64)>) -> String {
+    match (m, b) {
+        (Some(m), Some((lo, hi))) => format!("{m:.2} ({lo:.2}-{hi:.2})"),
+        _ => "n/a".into(),
+    }
+}
+
 fn num(v: Option<f64>, digits: usize) -> String {
     v.map_or("n/a".into(), |v| format!("{v:.digits$}"))
 }
@@ -295,10 +303,6 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
     );
     for p in runs {
         let s = p.summary;
-        let bounded = |m: Option<f64>, b: Option<(f64, f64)>| match (m, b) {
-            (Some(m), Some((lo, hi))) => format!("{m:.2} ({lo:.2}-{hi:.2})"),
-            _ => "n/a".into(),
-        };
         let spread = |x: Option<Spread>| {
             x.map_or("n/a".into(), |x| {
                 format!(
@@ -355,12 +359,11 @@ fn nees_parts_table(runs: &[RunPage]) -> String {
             continue;
         };
         any = true;
-        let bounded = |(m, (lo, hi)): (f64, (f64, f64))| format!("{m:.2} ({lo:.2}-{hi:.2})");
         t += &format!(
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td></tr>",
             esc(&p.run.path),
-            bounded(n.position),
-            bounded(n.heading),
+            bounded(Some(n.position.0), Some(n.position.1)),
+            bounded(Some(n.heading.0), Some(n.heading.1)),
             n.near_sightings,
             n.far_from_sightings
         );
