@@ -348,31 +348,28 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
 /// The NEES taken apart (runs with a ground truth): which belief is
 /// overconfident, and when.
 fn nees_parts_table(runs: &[RunPage]) -> String {
-    let mut t = String::from(
+    let rows: String = runs
+        .iter()
+        .filter_map(|p| {
+            let n = p.summary.nees_parts?;
+            Some(format!(
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td></tr>",
+                esc(&p.run.path),
+                bounded(Some(n.position.0), Some(n.position.1)),
+                bounded(Some(n.heading.0), Some(n.heading.1)),
+                n.near_sightings,
+                n.far_from_sightings
+            ))
+        })
+        .collect();
+    if rows.is_empty() {
+        return rows;
+    }
+    format!(
         "<table><tr><th>run</th><th>mean NEES of the position alone (95% bounds)</th>\
          <th>of the heading alone (95% bounds)</th><th>of the pose, the half of the rows just after sightings</th>\
-         <th>the half far from them</th></tr>",
-    );
-    let mut any = false;
-    for p in runs {
-        let Some(n) = p.summary.nees_parts else {
-            continue;
-        };
-        any = true;
-        t += &format!(
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td></tr>",
-            esc(&p.run.path),
-            bounded(Some(n.position.0), Some(n.position.1)),
-            bounded(Some(n.heading.0), Some(n.heading.1)),
-            n.near_sightings,
-            n.far_from_sightings
-        );
-    }
-    if any {
-        t + "</table>"
-    } else {
-        String::new()
-    }
+         <th>the half far from them</th></tr>{rows}</table>"
+    )
 }
 
 /// What NIS and NEES say together, when their means contradict each other.
