@@ -265,7 +265,8 @@ pub fn nees_of(r: &Runner, run: &Run, track: &[[f64; 3]], cov: &[Matrix3<f64>]) 
 /// degrees of freedom), and of its position (2) and heading (1) alone, each
 /// against its own marginal covariance. The parts tell which of the
 /// filter's beliefs is wrong: on the MRCLAM robots the pose's NEES is
-/// overconfident while the heading's alone is pessimistic, as the NIS is.
+/// overconfident while the heading's alone is at or below its bounds, on
+/// the NIS's side.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Nees {
     pub row: usize,
