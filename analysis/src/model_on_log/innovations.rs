@@ -115,22 +115,27 @@ pub fn from_truth(r: &Runner, p: &[f64], run: &Run) -> Vec<Innovation> {
     run.landmarks
         .iter()
         .filter_map(|o| {
-            let (j, a) = run.locate(o.t);
-            let x = lerp3(&gt[j], &gt[j + 1], a);
-            // seen where the truth is: within the run, and where the motion
-            // capture has the robot
-            let inside = (0.0..=1.0).contains(&a);
-            (inside && x.iter().all(|v| v.is_finite())).then(|| {
-                let v = predict(r, h, p, run, j, &x, o);
-                Innovation {
-                    t: o.t,
-                    id: o.id.clone(),
-                    range_m: o.range - v[0],
-                    bearing_rad: wrap(o.bearing - v[1]),
-                }
+            let (j, x) = truth_at(run, gt, o.t)?;
+            let v = predict(r, h, p, run, j, &x, o);
+            Some(Innovation {
+                t: o.t,
+                id: o.id.clone(),
+                range_m: o.range - v[0],
+                bearing_rad: wrap(o.bearing - v[1]),
             })
         })
         .collect()
+}
+
+/// The ground-truth pose `gt` of `run` at time `t` and the step it falls
+/// in: interpolated between the rows around `t`, and None outside the run's
+/// time (the nearest row's pose is not where the robot was then) or where
+/// the motion capture has lost the robot. The one place a sighting is "seen
+/// from the truth", for compare's figures and fit's sensor calibration alike.
+pub fn truth_at(run: &Run, gt: &[[f64; 3]], t: f64) -> Option<(usize, [f64; 3])> {
+    let (j, a) = run.locate(t);
+    let x = lerp3(&gt[j], &gt[j + 1], a);
+    ((0.0..=1.0).contains(&a) && x.iter().all(|v| v.is_finite())).then_some((j, x))
 }
 
 /// The sightings of `runs` seen from their ground truth, summarised (None
@@ -171,4 +176,43 @@ pub fn stats(all: &[Innovation]) -> Option<InnovationStats> {
         bearing_robust_sd_rad: robust_sd(all.iter().map(|i| i.bearing_rad)),
         worst_landmark: worst,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three rows 0.1 s apart, the truth moving 1 m per row along x, lost
+    /// (NaN) at the last row.
+    fn run() -> Run {
+        Run {
+            name: "r".into(),
+            path: "logs/r.csv".into(),
+            t: vec![0.0, 0.1, 0.2].into(),
+            dt: vec![0.1; 2].into(),
+            u: vec![[0.0]; 2].into_iter().collect(),
+            gt: Some(vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [f64::NAN; 3]].into()),
+            gyro: None,
+            landmarks: vec![],
+            rate_inputs: vec![false],
+            swing: None,
+            first_line: 2,
+        }
+    }
+
+    #[test]
+    fn the_truth_places_a_sighting_only_inside_the_run_where_it_has_the_robot() {
+        let r = run();
+        let gt = r.gt.clone().unwrap();
+        let (j, x) = truth_at(&r, &gt, 0.05).expect("inside, tracked");
+        assert_eq!(j, 0);
+        assert!((x[0] - 0.5).abs() < 1e-12, "{x:?}");
+        // at a row exactly: that row's pose
+        assert_eq!(truth_at(&r, &gt, 0.0).map(|(_, x)| x), Some([0.0; 3]));
+        // before the run, after it: the nearest rows' pose would be a guess
+        assert!(truth_at(&r, &gt, -0.01).is_none());
+        assert!(truth_at(&r, &gt, 0.21).is_none());
+        // where the motion capture lost the robot
+        assert!(truth_at(&r, &gt, 0.15).is_none());
+    }
 }

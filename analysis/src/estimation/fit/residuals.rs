@@ -551,10 +551,12 @@ pub(super) fn landmark_residuals(
     for o in &run.landmarks {
         let (j, a, x) = match seen_from {
             SeenFrom::Track(track) => crate::innovations::locate_on(run, track, o.t),
-            SeenFrom::Truth(gt) => {
-                let (j, a) = crate::innovations::step_at(run, o.t);
-                (j, a, lerp3(&gt[j], &gt[j + 1], a))
-            }
+            // a sighting the truth cannot place is no evidence about the sensor
+            SeenFrom::Truth(gt) => match crate::innovations::truth_at(run, gt, o.t) {
+                // (the fraction of the step matters only along the track)
+                Some((j, x)) => (j, 0.0, x),
+                None => continue,
+            },
         };
         let u = &run.u[j.min(run.steps() - 1)];
         let lm = [o.xl, o.yl];

@@ -79,22 +79,24 @@ impl<'a> Sightings<'a> {
             .iter()
             .filter(|x| x.gt.is_some() && !x.landmarks.is_empty())
             .collect();
-        let n: usize = runs.iter().map(|x| x.landmarks.len()).sum();
         if runs.is_empty() {
             return Err(SensorUnmeasured::NoTruth);
         }
-        if n < MIN_STRETCHES * MIN_PER_FOLD {
-            return Err(SensorUnmeasured::TooFew(n));
-        }
-        let folds = FOLDS.min(n / MIN_PER_FOLD);
-        let fold = (0..n).map(|k| k * folds / n).collect();
         let mut s = Sightings {
             runs,
             scale: [1.0, 1.0],
-            fold,
-            folds,
+            fold: Vec::new(),
+            folds: 0,
         };
+        // counted by their residuals: a sighting the truth cannot place
+        // (innovations::truth_at) has none
         let (res, _) = s.residuals(r, p, &[], false);
+        let n = res.len() / 2;
+        if n < MIN_STRETCHES * MIN_PER_FOLD {
+            return Err(SensorUnmeasured::TooFew(n));
+        }
+        s.folds = FOLDS.min(n / MIN_PER_FOLD);
+        s.fold = (0..n).map(|k| k * s.folds / n).collect();
         s.scale = [0, 1].map(|c| robust_scale(res.iter().skip(c).step_by(2).copied()));
         Ok(s)
     }
