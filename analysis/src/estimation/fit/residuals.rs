@@ -596,7 +596,8 @@ pub(super) fn cost(res: &[f64]) -> f64 {
 }
 
 /// The residuals of `run`'s landmark sightings seen from its ground-truth
-/// pose (empty without one), with their Jacobian in the `free` parameters
+/// pose (empty without one; none for a sighting the truth cannot place, see
+/// [`crate::innovations::truth_at`]), with their Jacobian in the `free` parameters
 /// when `with_jac`: what calibrates the range-bearing sensor alone
 /// (`crate::diagnosis::sensor`).
 pub fn sightings_from_truth(
