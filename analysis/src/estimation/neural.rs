@@ -386,17 +386,9 @@ mod tests {
                 .map(|u| 0.2 * (u[0] - u[1]) + 0.05 * (u[0] * u[1]).tanh()),
         );
         Run {
-            name: "r".into(),
-            path: "r".into(),
-            dt: t.windows(2).map(|w| w[1] - w[0]).collect(),
-            t: t.into(),
-            u: u.into_iter().collect(),
-            gt: None,
             gyro: Some(gyro.into()),
-            landmarks: Vec::new(),
             rate_inputs: vec![true, true],
-            swing: None,
-            first_line: 2,
+            ..Run::bare(t, u)
         }
     }
 

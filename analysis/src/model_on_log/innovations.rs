@@ -186,17 +186,8 @@ mod tests {
     /// (NaN) at the last row.
     fn run() -> Run {
         Run {
-            name: "r".into(),
-            path: "logs/r.csv".into(),
-            t: vec![0.0, 0.1, 0.2].into(),
-            dt: vec![0.1; 2].into(),
-            u: vec![[0.0]; 2].into_iter().collect(),
             gt: Some(vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [f64::NAN; 3]].into()),
-            gyro: None,
-            landmarks: vec![],
-            rate_inputs: vec![false],
-            swing: None,
-            first_line: 2,
+            ..Run::bare(vec![0.0, 0.1, 0.2], [[0.0]; 2])
         }
     }
 

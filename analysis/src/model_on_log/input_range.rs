@@ -145,18 +145,11 @@ mod tests {
     }
 
     fn run(values: &[f64]) -> Run {
+        let t = (0..=values.len()).map(|k| 0.1 * k as f64).collect();
         Run {
-            name: "r".into(),
             path: "logs/r.csv".into(),
-            t: (0..=values.len()).map(|k| 0.1 * k as f64).collect(),
             dt: vec![0.1; values.len()].into(),
-            u: values.iter().map(|v| [*v]).collect(),
-            gt: None,
-            gyro: None,
-            landmarks: vec![],
-            rate_inputs: vec![false],
-            swing: None,
-            first_line: 2,
+            ..Run::bare(t, values.iter().map(|v| [*v]))
         }
     }
 

@@ -468,6 +468,29 @@ fn line_ranges(first_line: usize, rows: &[usize]) -> String {
     format!("{}{more}", lines.join(", "))
 }
 
+/// What unit tests build on: rows at times `t` with one row of inputs per
+/// step (absolute inputs), and no measurements; a test sets the fields it
+/// needs on the result.
+#[cfg(test)]
+impl Run {
+    pub fn bare<R: AsRef<[f64]>>(t: Vec<f64>, u: impl IntoIterator<Item = R>) -> Run {
+        let u: Inputs = u.into_iter().collect();
+        Run {
+            name: "r".into(),
+            path: "r".into(),
+            dt: t.windows(2).map(|w| w[1] - w[0]).collect(),
+            rate_inputs: vec![false; u.width()],
+            t: t.into(),
+            u,
+            gt: None,
+            gyro: None,
+            landmarks: Vec::new(),
+            swing: None,
+            first_line: 2,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -221,19 +221,7 @@ mod tests {
         let u: Vec<Vec<f64>> = (0..t.len() - 1)
             .map(|k| vec![[0.0, 0.4, -0.2, 0.4, 0.1, 0.0, 0.3][(k / 3) % 7]])
             .collect();
-        Run {
-            name: "r".into(),
-            path: "r".into(),
-            dt: t.windows(2).map(|w| w[1] - w[0]).collect(),
-            t: t.into(),
-            u: u.into_iter().collect(),
-            gt: None,
-            gyro: None,
-            landmarks: Vec::new(),
-            rate_inputs: vec![false],
-            swing: None,
-            first_line: 2,
-        }
+        Run::bare(t, u)
     }
 
     /// The derivatives the fit's Jacobian takes from [`execute`] against
