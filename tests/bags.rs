@@ -272,15 +272,14 @@ fn bad_bags_are_located() {
 /// in both shapes a robot publishes (an array of detections per message, or
 /// one detection per message as a point in the robot frame); and every
 /// mistake in the mapping is located at the topic, message and field.
-#[test]
-fn landmark_topics_of_a_user_message_type() {
-    let tmp = tempfile::tempdir().unwrap();
-    let t = tmp.path();
-    let map = t.join("map.csv");
+/// A simulated diff-drive log (t, enc_r, enc_l, gt_*, gyro) of random
+/// driving with sightings of five landmarks, in `dir`: (log, sightings, map).
+fn sighted_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    let map = dir.join("map.csv");
     std::fs::write(&map, "id,x,y\nL1,3,2\nL2,-1,4\nL3,5,-2\nL4,0,-3\nL5,2,6\n").unwrap();
-    let obs = t.join("obs.csv");
+    let obs = dir.join("obs.csv");
     let csv = simulate(
-        t,
+        dir,
         "lm.csv",
         &[
             "--spec",
@@ -297,6 +296,72 @@ fn landmark_topics_of_a_user_message_type() {
             obs.to_str().unwrap(),
         ],
     );
+    (csv, obs, map)
+}
+
+/// A bag's landmark bearing in degrees is refused at its message, as a CSV
+/// one is at its line.
+#[test]
+fn a_bag_bearing_in_degrees_is_located() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let (csv, obs, map) = sighted_log(t);
+    let text = std::fs::read_to_string(&obs).unwrap();
+    let mut degrees = String::new();
+    for (k, l) in text.lines().enumerate() {
+        let c: Vec<&str> = l.split(',').collect();
+        degrees += &if k == 0 {
+            format!("{l}\n")
+        } else {
+            let b: f64 = c[3].parse().unwrap();
+            format!("{},{},{},{}\n", c[0], c[1], c[2], b.to_degrees())
+        };
+    }
+    let obs_deg = t.join("obs_deg.csv");
+    std::fs::write(&obs_deg, degrees).unwrap();
+    let deg = bag(
+        t,
+        &csv,
+        "deg",
+        &[
+            "--pose",
+            "none",
+            "--observations",
+            obs_deg.to_str().unwrap(),
+        ],
+    );
+    let topics = t.join("topics.toml");
+    std::fs::write(
+        &topics,
+        "[landmarks]\ntopic = \"/landmarks\"\nid = \"landmarks[].id\"\nrange = \"landmarks[].range\"\nbearing = \"landmarks[].bearing\"\n",
+    )
+    .unwrap();
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        deg.to_str().unwrap(),
+        "--topics",
+        topics.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("deg.mcap: topic `/landmarks` message 0 ")
+            && e.contains("(counting from 0): bearing ")
+            && e.contains("beyond a full turn (2 pi): bearings are in radians (is it in degrees?)"),
+        "{e}"
+    );
+}
+
+#[test]
+fn landmark_topics_of_a_user_message_type() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let (csv, obs, map) = sighted_log(t);
     // the CSV log without ground truth, so the landmarks alone calibrate
     let text = std::fs::read_to_string(&csv).unwrap();
     let no_gt: String = text

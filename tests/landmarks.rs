@@ -351,6 +351,92 @@ fn bad_landmark_files_are_rejected_with_file_row_and_column() {
     assert!(stderr(&o).contains("--observations needs --landmarks"));
 }
 
+/// Sightings `text` (as [`landmark_log`] simulated them) rewritten cell by
+/// cell by `edit(column, value)` (columns t, id, range, bearing), then
+/// compared.
+fn compare_edited(
+    dir: &Path,
+    (log, text, map): (&Path, &str, &Path),
+    edit: impl Fn(usize, &str) -> String,
+) -> std::process::Output {
+    let mut lines = text.lines();
+    let mut out = lines.next().unwrap().to_string() + "\n";
+    for l in lines {
+        let cells: Vec<String> = l.split(',').enumerate().map(|(c, v)| edit(c, v)).collect();
+        out += &(cells.join(",") + "\n");
+    }
+    compare_sightings(dir, log, &out, map)
+}
+
+/// Sightings in another unit than the map's, or with a bearing of the
+/// other sign than the spec's, run without error through a filter, which
+/// absorbs them into its noise: they are refused before any command runs,
+/// with what is wrong and what would fix it. Sightings whose time is not
+/// the log's get a warning.
+#[test]
+fn sightings_in_another_unit_or_sign_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (log, obs, map) = landmark_log(tmp.path());
+    let text = std::fs::read_to_string(&obs).unwrap();
+    let files = (log.as_path(), text.as_str(), map.as_path());
+    let scaled = |col: usize, by: f64| {
+        move |c: usize, v: &str| {
+            if c == col {
+                format!("{}", v.parse::<f64>().unwrap() * by)
+            } else {
+                v.to_string()
+            }
+        }
+    };
+    let as_is = compare_edited(tmp.path(), files, scaled(2, 1.0));
+    assert_eq!(as_is.status.code(), Some(0), "{}", stderr(&as_is));
+    assert!(!String::from_utf8_lossy(&as_is.stdout).contains("do not follow"));
+    let cases = [
+        (
+            compare_edited(tmp.path(), files, scaled(2, 1000.0)),
+            vec![
+                "obs.csv: columns `range` and `bearing`: landmarks seen together lie",
+                "(ranges in millimetres against a map in metres?)",
+            ],
+        ),
+        (
+            compare_edited(tmp.path(), files, scaled(3, -1.0)),
+            vec![
+                "obs.csv: column `bearing`: as the robot turns, the bearings change against",
+                "negate the column",
+            ],
+        ),
+        (
+            compare_edited(tmp.path(), files, scaled(3, 180.0 / std::f64::consts::PI)),
+            vec![
+                "column `bearing`: bearing",
+                "beyond a full turn",
+                "degrees?",
+            ],
+        ),
+    ];
+    for (o, said) in cases {
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(said.iter().all(|s| err.contains(s)), "{said:?} in: {err}");
+    }
+    // the sightings of five seconds later, as if their clock started late
+    let late = compare_edited(tmp.path(), files, |c, v| {
+        if c == 0 {
+            format!("{}", v.parse::<f64>().unwrap() + 5.0)
+        } else {
+            v.to_string()
+        }
+    });
+    assert_eq!(late.status.code(), Some(0), "{}", stderr(&late));
+    assert!(
+        String::from_utf8_lossy(&late.stdout)
+            .contains("obs.csv: the bearings do not follow the robot's turns"),
+        "{}",
+        String::from_utf8_lossy(&late.stdout)
+    );
+}
+
 /// Issue #14.1: `kinegen localize` (seed 001's EKF) on the generated model: with a
 /// 5% speed-scale error, dead reckoning drifts, the filter stays near the truth
 /// with its landmarks, rejects injected outliers at the gate, and reports NIS

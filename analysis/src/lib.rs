@@ -76,6 +76,7 @@ pub mod model_on_log {
     pub mod model;
     pub mod robust;
     pub mod run;
+    pub mod sighting_units;
     pub mod steering;
     pub mod timeline;
     pub mod track_rows;
@@ -132,8 +133,8 @@ pub use estimation::{
 pub use logs::{bag, column, log, merged, rosdyn, rosmsg, rows};
 pub use model_on_log::{
     comparison, coverage, dataset, deadreckon, derivation, evaluation, files, innovations,
-    input_range, interp, landmarks, load, metrics, model, robust, run, steering, timeline,
-    track_rows,
+    input_range, interp, landmarks, load, metrics, model, robust, run, sighting_units, steering,
+    timeline, track_rows,
 };
 
 pub use kinegen_model::effects;

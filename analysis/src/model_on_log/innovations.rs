@@ -74,28 +74,46 @@ pub struct InnovationStats {
 /// The innovations of a run's observations along `track`, in the run's
 /// order; read off the track as it passes them, in time order.
 pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &dyn TrackRows) -> Vec<Innovation> {
+    (run.landmarks.iter())
+        .zip(predicted_along(r, p, run, track))
+        .filter_map(|(o, v)| {
+            let v = v?;
+            Some(Innovation {
+                t: o.t,
+                id: o.id.clone(),
+                range_m: o.range - v[0],
+                bearing_rad: wrap(o.bearing - v[1]),
+            })
+        })
+        .collect()
+}
+
+/// The range and bearing the model predicts for each of a run's
+/// observations (in the run's order) from `track` interpolated to its time;
+/// None where the track does not reach it, or where the model has no
+/// landmark observation.
+pub fn predicted_along(
+    r: &Runner,
+    p: &[f64],
+    run: &Run,
+    track: &dyn TrackRows,
+) -> Vec<Option<[f64; 2]>> {
+    let mut out = vec![None; run.landmarks.len()];
     let Some(h) = r.ir.observation_kernels(RangeBearing).map(|o| o.value) else {
-        return Vec::new();
+        return out;
     };
     let mut order: Vec<usize> = (0..run.landmarks.len()).collect();
     order.sort_by(|&a, &b| run.landmarks[a].t.total_cmp(&run.landmarks[b].t));
     let mut cursor = Cursor::new(track, run);
-    let mut out: Vec<Option<Innovation>> = vec![None; run.landmarks.len()];
     for i in order {
         let o = &run.landmarks[i];
         let (j, a) = step_at(run, o.t);
         let (Some(next), Some(at)) = (cursor.get(j + 1), cursor.get(j)) else {
             continue;
         };
-        let v = predict(r, h, p, run, j, &lerp3(&at.pose, &next.pose, a), o);
-        out[i] = Some(Innovation {
-            t: o.t,
-            id: o.id.clone(),
-            range_m: o.range - v[0],
-            bearing_rad: wrap(o.bearing - v[1]),
-        });
+        out[i] = Some(predict(r, h, p, run, j, &lerp3(&at.pose, &next.pose, a), o));
     }
-    out.into_iter().flatten().collect()
+    out
 }
 
 /// The innovations of a run's observations seen from its ground truth (the

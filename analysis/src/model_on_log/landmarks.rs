@@ -210,6 +210,9 @@ pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Sigh
             ));
         }
         let bearing = h.number(line, &rec, bearing_i)?;
+        if let Some(why) = not_radians(bearing) {
+            return Err(h.err(Some(line), Some("bearing"), why));
+        }
         let o = LandmarkObs {
             t,
             id,
@@ -237,6 +240,16 @@ pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Sigh
     })
 }
 
+/// Why `bearing` cannot be an angle in radians, if it cannot: beyond a full
+/// turn either way (a bearing wrapped to (-pi, pi] or to [0, 2 pi) is
+/// within it). A column in degrees whose values all lie within 2 pi is
+/// caught by the spacing check ([`crate::sighting_units`]).
+fn not_radians(bearing: f64) -> Option<String> {
+    (bearing.abs() > std::f64::consts::TAU).then(|| {
+        format!("bearing {bearing} is beyond a full turn (2 pi): bearings are in radians (is it in degrees?)")
+    })
+}
+
 /// Range-bearing observations from a bag's landmark topic (see
 /// [`crate::bag::LandmarkSource`]) whose ids the map has, ordered by time,
 /// and those it has not or that repeat one (as [`read_observations`]).
@@ -252,6 +265,17 @@ pub fn from_detections(
     let mut found: Vec<&crate::bag::Detection> = found.iter().collect();
     found.sort_by(|a, b| a.t.total_cmp(&b.t));
     for d in found {
+        if let Some(why) = not_radians(d.bearing) {
+            return Err(LogError::new(
+                bag,
+                None,
+                None,
+                format!(
+                    "topic `{}` message {} (counting from 0): {why}",
+                    d.topic, d.index
+                ),
+            ));
+        }
         let Some((id, [xl, yl])) = map.find(&d.id).map(|(s, p)| (s.to_string(), p)) else {
             unmapped.add(&d.id, || {
                 format!("topic `{}` message {} (counting from 0)", d.topic, d.index)

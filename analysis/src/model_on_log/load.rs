@@ -10,6 +10,7 @@ use crate::landmarks::{from_detections, read_map, read_observations, Map, Sighti
 use crate::log::{typical, LogError};
 use crate::model::{parse_sets, ModelError, Runner};
 use crate::run::Run;
+use crate::sighting_units::{spacing, turning};
 use crate::track_rows::first_non_finite;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::ModelIr;
@@ -87,6 +88,21 @@ pub enum LoadError {
         t1: f64,
         /// The sightings' own time span.
         seen: Option<(f64, f64)>,
+    },
+    #[error("{source_name}: columns `range` and `bearing`: landmarks seen together lie {ratio:.3}x as far apart by their ranges and bearings (the law of cosines) as the map {} places them (the median of {pairs} pairs): the ranges must be in the map's unit and the bearings in radians{}", .map.display(), .hint.as_ref().map_or(String::new(), |h| format!(" ({h})")))]
+    SightingSpacing {
+        source_name: String,
+        map: PathBuf,
+        ratio: f64,
+        pairs: usize,
+        hint: Option<String>,
+    },
+    #[error("{source_name}: column `bearing`: as the robot turns, the bearings change against the way the spec's landmark observation predicts them (slope {slope:.2} +- {standard_error:.2} over {pairs} pairs of sightings of one landmark under a second apart, against 1): the column's sign is the other way round from the spec's bearing (counter-clockwise from the robot's heading): negate the column, or the spec's bearing expression (unless the model turns the other way than the robot: `compare` without the sightings shows that in its heading error)")]
+    BearingsTurnAgainst {
+        source_name: String,
+        slope: f64,
+        standard_error: f64,
+        pairs: usize,
     },
     /// A track that stops being numbers: the log, its line, what happened,
     /// and the `--set` values as suspects.
@@ -342,9 +358,47 @@ impl Logs<'_> {
                 });
             }
             run.landmarks = inside;
+            warnings.extend(units_checked(run, r, &source_name, map_path)?);
         }
         Ok((warnings, Some(map)))
     }
+}
+
+/// Refuse sightings in another unit than the map's, or with a bearing of
+/// the other sign than the spec's (see [`crate::sighting_units`]); warn of
+/// bearings that do not follow the robot's turns at all.
+fn units_checked(
+    run: &Run,
+    r: &Runner,
+    source_name: &str,
+    map_path: &Path,
+) -> Result<Option<String>, LoadError> {
+    if let Some(s) = spacing(&run.landmarks).filter(|s| s.in_another_unit()) {
+        return Err(LoadError::SightingSpacing {
+            source_name: source_name.to_string(),
+            map: map_path.to_path_buf(),
+            ratio: s.ratio,
+            pairs: s.pairs,
+            hint: s.unit_hint(),
+        });
+    }
+    let Some(turn) = turning(r, run) else {
+        return Ok(None);
+    };
+    if turn.against() {
+        return Err(LoadError::BearingsTurnAgainst {
+            source_name: source_name.to_string(),
+            slope: turn.slope,
+            standard_error: turn.standard_error,
+            pairs: turn.pairs,
+        });
+    }
+    Ok(turn.unrelated().then(|| {
+        format!(
+            "{source_name}: the bearings do not follow the robot's turns as the model predicts them (slope {:.2} +- {:.2} over {} pairs of sightings of one landmark under a second apart, against 1): is their time counted from the log's origin, and are they this log's? (Or the model at its nominal parameters turns far otherwise than the robot: `compare` shows that in its heading error.)",
+            turn.slope, turn.standard_error, turn.pairs
+        )
+    }))
 }
 
 /// What the user should hear of the sightings of one source that are not
