@@ -108,6 +108,34 @@ fn landmark_start(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<
     crate::landmarks::start_from_landmarks(r, p, data, guess).or_else(|| moving_start(r, p, data))
 }
 
+/// What the user should hear of a run's start where neither its ground
+/// truth nor its first seconds' sightings place it: placed by later
+/// sightings through the odometry before them (the track until then carries
+/// that odometry's drift), or not placed at all. None otherwise.
+pub fn start_note(r: &Runner, p: &[f64], data: &Run) -> Option<String> {
+    use crate::landmarks::{first_sightings, start_from_landmarks, MOVING_START_S};
+    if data.start_measured()
+        || data.landmarks.is_empty()
+        || start_from_landmarks(r, p, data, data.start_pose()).is_some()
+    {
+        return None;
+    }
+    let t0 = data.t[0];
+    let Some(seen) = first_sightings(data) else {
+        return Some(format!(
+            "{}: no ground truth at the start ({t0:.1} s) and too few sightings to place it (two landmarks within {MOVING_START_S} s): the run starts at the map's origin, heading 0",
+            data.path
+        ));
+    };
+    let (from, to) = (seen[0].t, seen[seen.len() - 1].t);
+    (from - t0 > MOVING_START_S).then(|| {
+        format!(
+            "{}: no ground truth at the start ({t0:.1} s) and no two landmarks seen within {MOVING_START_S} s of it: the start is placed by the sightings of {from:.1}-{to:.1} s through the model's odometry since, so the track before {from:.1} s carries that odometry's drift",
+            data.path
+        )
+    })
+}
+
 /// [`crate::landmarks::start_from_moving_sightings`] with the model's
 /// odometry from the start (the origin of its frame) to each of the run's
 /// first sightings, interpolated between rows.

@@ -339,31 +339,37 @@ pub fn start_from_landmarks(
     solve_start(r, p, &at_rest, guess)
 }
 
-/// Longest stretch at a run's start whose odometry places a moving robot's
-/// first sightings: a few seconds of drift are centimetres.
-const MOVING_START_S: f64 = 20.0;
+/// Longest stretch of a run whose odometry places a moving robot's first
+/// sightings: a few seconds of drift are centimetres.
+pub const MOVING_START_S: f64 = 20.0;
 /// Sightings that fix a moving robot's start (of two landmarks at least).
 const MOVING_START_SIGHTINGS: usize = 4;
 
 /// The first sightings of a robot that moves from its first row and sees no
 /// two landmarks at once there (a velocity-commanded robot's log without
 /// motion capture): up to [`MOVING_START_SIGHTINGS`] of two landmarks or more
-/// within [`MOVING_START_S`]. None when it sees fewer.
+/// within [`MOVING_START_S`] of the first of them. That stretch starts at the
+/// run's first sighting where it has enough, or else at the first sighting
+/// that begins one: a robot that sees nothing for its first minute is placed
+/// by what it sees next, through its odometry from the start, rather than
+/// left at the map's origin. None when no stretch has enough.
 pub fn first_sightings(run: &Run) -> Option<Vec<&LandmarkObs>> {
-    let t_end = run.t[0] + MOVING_START_S;
-    let mut seen: Vec<&LandmarkObs> = Vec::new();
+    let mut inside: Vec<&LandmarkObs> = run.landmarks.iter().filter(|o| o.t >= run.t[0]).collect();
+    inside.sort_by(|a, b| a.t.total_cmp(&b.t));
+    (0..inside.len()).find_map(|k| enough_within(&inside[k..]))
+}
+
+/// The leading sightings of `seen` (in time order) that fix a start, all
+/// within [`MOVING_START_S`] of the first; None where they do not suffice.
+fn enough_within<'a>(seen: &[&'a LandmarkObs]) -> Option<Vec<&'a LandmarkObs>> {
+    let t_end = seen.first()?.t + MOVING_START_S;
     let mut ids: Vec<&str> = Vec::new();
-    for o in run
-        .landmarks
-        .iter()
-        .filter(|o| o.t >= run.t[0] && o.t <= t_end)
-    {
-        seen.push(o);
+    for (k, o) in seen.iter().take_while(|o| o.t <= t_end).enumerate() {
         if !ids.contains(&o.id.as_str()) {
             ids.push(&o.id);
         }
-        if ids.len() >= 2 && seen.len() >= MOVING_START_SIGHTINGS {
-            return Some(seen);
+        if ids.len() >= 2 && k + 1 >= MOVING_START_SIGHTINGS {
+            return Some(seen[..=k].to_vec());
         }
     }
     None

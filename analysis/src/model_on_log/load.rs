@@ -167,6 +167,11 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
     if runs.is_empty() {
         return Err(LoadError::NoRun);
     }
+    warnings.extend(
+        runs.iter()
+            .chain(&holdout)
+            .filter_map(|run| crate::deadreckon::start_note(&runner, &runner.p, run)),
+    );
     // results that would be NaN or infinite are refused here, with the row
     for set in [&runs, &holdout] {
         if sources.truth_scores_only {
