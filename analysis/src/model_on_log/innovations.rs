@@ -53,6 +53,18 @@ pub struct Innovation {
     pub bearing_rad: f64,
 }
 
+impl Innovation {
+    /// Sighting `o` minus its `predicted` range and bearing.
+    fn of(o: &LandmarkObs, predicted: [f64; 2]) -> Innovation {
+        Innovation {
+            t: o.t,
+            id: o.id.clone(),
+            range_m: o.range - predicted[0],
+            bearing_rad: wrap(o.bearing - predicted[1]),
+        }
+    }
+}
+
 /// Innovation summary over runs.
 #[derive(Debug, Clone, Serialize, Default)]
 pub struct InnovationStats {
@@ -76,15 +88,7 @@ pub struct InnovationStats {
 pub fn innovations(r: &Runner, p: &[f64], run: &Run, track: &dyn TrackRows) -> Vec<Innovation> {
     (run.landmarks.iter())
         .zip(predicted_along(r, p, run, track))
-        .filter_map(|(o, v)| {
-            let v = v?;
-            Some(Innovation {
-                t: o.t,
-                id: o.id.clone(),
-                range_m: o.range - v[0],
-                bearing_rad: wrap(o.bearing - v[1]),
-            })
-        })
+        .filter_map(|(o, v)| Some(Innovation::of(o, v?)))
         .collect()
 }
 
@@ -134,13 +138,7 @@ pub fn from_truth(r: &Runner, p: &[f64], run: &Run) -> Vec<Innovation> {
         .iter()
         .filter_map(|o| {
             let (j, x) = truth_at(run, gt, o.t)?;
-            let v = predict(r, h, p, run, j, &x, o);
-            Some(Innovation {
-                t: o.t,
-                id: o.id.clone(),
-                range_m: o.range - v[0],
-                bearing_rad: wrap(o.bearing - v[1]),
-            })
+            Some(Innovation::of(o, predict(r, h, p, run, j, &x, o)))
         })
         .collect()
 }
