@@ -118,6 +118,101 @@ pub fn channel_missing(runs: &[Run], r: &Runner, role: ObservationRole) -> Optio
     (!measured).then_some(need)
 }
 
+/// A log's times and the steps between them: at least 3 rows, and no step
+/// under [`MIN_STEP_S`].
+fn steps_of(log: &Log) -> Result<(Vec<f64>, Vec<f64>), LogError> {
+    if log.len < 3 {
+        // located at the log's last line, where more rows were expected
+        return Err(log.err(
+            Some(log.line(log.len) - 1),
+            None,
+            format!(
+                "the log ends after {} data row(s); the model needs at least 3",
+                log.len
+            ),
+        ));
+    }
+    let t = log.col("t")?.to_vec();
+    let dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    // (gaps are cut out later, by Run::split_at_gaps, with a warning)
+    // a step under a microsecond is no sampling interval of a robot: t is in
+    // the wrong unit, or rows are duplicated with rounding noise
+    if let Some(k) = dt.iter().position(|&d| d < MIN_STEP_S) {
+        return Err(log.err(
+            Some(log.line(k + 1)),
+            Some("t"),
+            format!(
+                "time step of {:.3e} s (under {MIN_STEP_S} s): t must be in seconds",
+                dt[k]
+            ),
+        ));
+    }
+    Ok((t, dt))
+}
+
+/// Each input's column as the steps read it (angles in `angle_cols`
+/// unwrapped, counters unwrapped at their declared width), with how it
+/// becomes a step's value; a counter that wraps without a declared width is
+/// an error at the line where it jumps.
+fn step_columns(
+    log: &Log,
+    r: &Runner,
+    angle_cols: &[&str],
+) -> Result<Vec<(Vec<f64>, Between)>, LogError> {
+    let mut cols = Vec::new();
+    for i in &r.ir.inputs {
+        if i.kind == InputKind::Cumulative && i.wrap.is_none() {
+            if let Some((k, d, bits)) = undeclared_wrap(log.col(&i.column)?) {
+                return Err(log.err(
+                    Some(log.line(k + 1)),
+                    Some(&i.column),
+                    format!(
+                        "the counter jumps by {d} from the line before, about 2^{bits}: it wraps like a {bits}-bit register; declare `wrap = {bits}` on input `{}` in the spec",
+                        i.name
+                    ),
+                ));
+            }
+        }
+        let c = log.col(&i.column)?;
+        let c = if angle_cols.contains(&i.column.as_str()) {
+            unwrap(c)
+        } else {
+            c.to_vec()
+        };
+        cols.push((unwrap_counter(c, i.wrap), Between::of(i)));
+    }
+    Ok(cols)
+}
+
+/// Each step's input values from the columns, and, where an input is
+/// sampled linearly (a steering angle), how much each changes over the step.
+fn step_inputs(cols: &[(Vec<f64>, Between)], dt: &[f64]) -> (Inputs, Option<Inputs>) {
+    let mut u = Vec::with_capacity(dt.len() * cols.len());
+    for k in 0..dt.len() {
+        u.extend(cols.iter().map(|(c, between)| match between {
+            // a counter's difference spreads evenly over the interval, however long
+            Between::Spread => (c[k + 1] - c[k]) / dt[k],
+            // a command holds from its row until the next (CONTRACT.md, --max-gap)
+            Between::Hold => c[k],
+            // a sampled continuous angle: its mean over the step is best
+            // estimated by the mean of the two samples that bound it
+            Between::Linear => 0.5 * (c[k] + c[k + 1]),
+        }));
+    }
+    let u = Inputs::from_flat(dt.len(), cols.len(), u);
+    let swing = cols.iter().any(|(_, b)| *b == Between::Linear).then(|| {
+        let mut s = Vec::with_capacity(dt.len() * cols.len());
+        for k in 0..dt.len() {
+            s.extend(cols.iter().map(|(c, b)| match b {
+                Between::Linear => c[k + 1] - c[k],
+                Between::Hold | Between::Spread => 0.0,
+            }));
+        }
+        Inputs::from_flat(dt.len(), cols.len(), s)
+    });
+    (u, swing)
+}
+
 impl Run {
     /// Columns a model needs from a log.
     pub fn wanted(r: &Runner) -> Vec<String> {
@@ -129,32 +224,7 @@ impl Run {
     }
 
     pub fn from_log(log: &Log, r: &Runner) -> Result<Run, LogError> {
-        if log.len < 3 {
-            // located at the log's last line, where more rows were expected
-            return Err(log.err(
-                Some(log.line(log.len) - 1),
-                None,
-                format!(
-                    "the log ends after {} data row(s); the model needs at least 3",
-                    log.len
-                ),
-            ));
-        }
-        let t = log.col("t")?.to_vec();
-        let dt: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        // (gaps are cut out later, by Run::split_at_gaps, with a warning)
-        // a step under a microsecond is no sampling interval of a robot: t is in
-        // the wrong unit, or rows are duplicated with rounding noise
-        if let Some(k) = dt.iter().position(|&d| d < MIN_STEP_S) {
-            return Err(log.err(
-                Some(log.line(k + 1)),
-                Some("t"),
-                format!(
-                    "time step of {:.3e} s (under {MIN_STEP_S} s): t must be in seconds",
-                    dt[k]
-                ),
-            ));
-        }
+        let (t, dt) = steps_of(log)?;
         // Absolute angles (steering encoders) may be logged wrapped to (-pi, pi]:
         // unwrap them so held values and rates (a column may feed both, as the
         // steering angle and its rate of a caster wheel) do not jump by 2 pi.
@@ -164,51 +234,8 @@ impl Run {
                 .filter(|i| absolute_angle(i))
                 .map(|i| i.column.as_str())
                 .collect();
-        let mut cols = Vec::new();
-        for i in &r.ir.inputs {
-            if i.kind == InputKind::Cumulative && i.wrap.is_none() {
-                if let Some((k, d, bits)) = undeclared_wrap(log.col(&i.column)?) {
-                    return Err(log.err(
-                        Some(log.line(k + 1)),
-                        Some(&i.column),
-                        format!(
-                            "the counter jumps by {d} from the line before, about 2^{bits}: it wraps like a {bits}-bit register; declare `wrap = {bits}` on input `{}` in the spec",
-                            i.name
-                        ),
-                    ));
-                }
-            }
-            let c = log.col(&i.column)?;
-            let c = if angle_cols.contains(&i.column.as_str()) {
-                unwrap(c)
-            } else {
-                c.to_vec()
-            };
-            cols.push((unwrap_counter(c, i.wrap), Between::of(i)));
-        }
-        let mut u = Vec::with_capacity(dt.len() * cols.len());
-        for k in 0..dt.len() {
-            u.extend(cols.iter().map(|(c, between)| match between {
-                // a counter's difference spreads evenly over the interval, however long
-                Between::Spread => (c[k + 1] - c[k]) / dt[k],
-                // a command holds from its row until the next (CONTRACT.md, --max-gap)
-                Between::Hold => c[k],
-                // a sampled continuous angle: its mean over the step is best
-                // estimated by the mean of the two samples that bound it
-                Between::Linear => 0.5 * (c[k] + c[k + 1]),
-            }));
-        }
-        let u = Inputs::from_flat(dt.len(), cols.len(), u);
-        let swing = cols.iter().any(|(_, b)| *b == Between::Linear).then(|| {
-            let mut s = Vec::with_capacity(dt.len() * cols.len());
-            for k in 0..dt.len() {
-                s.extend(cols.iter().map(|(c, b)| match b {
-                    Between::Linear => c[k + 1] - c[k],
-                    Between::Hold | Between::Spread => 0.0,
-                }));
-            }
-            Inputs::from_flat(dt.len(), cols.len(), s)
-        });
+        let cols = step_columns(log, r, &angle_cols)?;
+        let (u, swing) = step_inputs(&cols, &dt);
         let [cx, cy, cth] = r.ir.pose_columns();
         for c in angle_cols.iter().copied().chain([cth.as_str()]) {
             let Some(col) = log.columns.get(c) else {
