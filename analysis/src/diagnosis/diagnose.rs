@@ -1504,6 +1504,45 @@ fn sensor_chain(
     }
 }
 
+/// The stage after `w` won a round ranked from `augmented`: the ranking
+/// calibrated the winner already, on all runs and on the training part.
+/// Its step error is the current stage's until it is measured again.
+fn winner_stage(
+    cur: &Stage,
+    augmented: &[(String, String, Runner)],
+    w: &Candidate,
+    runs: &[Run],
+    test: &[Run],
+    o: &FitOptions,
+) -> Stage {
+    let (_, _, aug) = augmented
+        .iter()
+        .find(|a| a.0 == w.effect)
+        .expect("ranked from augmented");
+    let mut runner = aug.clone();
+    runner.p = w.fit.p.clone();
+    Stage {
+        step_error: cur.step_error,
+        ..stage_from(runner, w.fit.clone(), w.train_fit.clone(), runs, test, o)
+    }
+}
+
+impl ChainStep {
+    /// The chain's step for a round's winner `w`, with the candidates the
+    /// logs cannot tell apart from it.
+    fn won(w: &Candidate, equivalent: Vec<String>) -> ChainStep {
+        ChainStep {
+            effect: w.effect.clone(),
+            parameters: w.parameters.clone(),
+            rmse_after: w.rmse,
+            doc: w.doc.clone(),
+            equivalent,
+            folds: w.folds.filter(|_| w.by_folds()),
+            sightings: None,
+        }
+    }
+}
+
 /// Run the diagnosis: calibrate the base model, rank every applicable effect,
 /// add the best significant one, re-test the rest on the augmented model, and
 /// repeat until nothing is significant. `skipped` collects effects not tested,
@@ -1584,32 +1623,12 @@ pub fn diagnose(
             first_candidates = Some(ranked);
         }
         let Some(w) = winner else { break };
-        let (_, _, aug) = augmented
-            .iter()
-            .find(|a| a.0 == w.effect)
-            .expect("ranked from augmented");
-        // the ranking calibrated the winner already, on all runs and on the
-        // training part: that is the next stage
-        let mut runner = aug.clone();
-        runner.p = w.fit.p.clone();
-        let mut next = Stage {
-            step_error: cur.step_error,
-            ..stage_from(runner, w.fit.clone(), w.train_fit.clone(), runs, &test, &o)
-        };
+        let mut next = winner_stage(&cur, &augmented, &w, runs, &test, &o);
         if next.step_error > RECHECK_STEP * next.floor {
             disc = step_error(&next, runs, &o);
             (next.step_error, noise_floor) = (disc.error, next.floor);
         }
-        let parameters = w.parameters.clone();
-        chain.push(ChainStep {
-            effect: w.effect.clone(),
-            parameters,
-            rmse_after: w.rmse,
-            doc: w.doc.clone(),
-            equivalent,
-            folds: w.folds.filter(|_| w.by_folds()),
-            sightings: None,
-        });
+        chain.push(ChainStep::won(&w, equivalent));
         remaining.retain(|(n, _)| n != &w.effect);
         cur = next;
     }
