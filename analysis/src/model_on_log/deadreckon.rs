@@ -95,17 +95,49 @@ pub fn body_start(r: &Runner, p: &[f64], measured: [f64; 3], u: &[f64]) -> ([f64
     (x, d)
 }
 
+/// Where the landmarks place the start of a run whose ground truth does
+/// not give it.
+enum Placed {
+    /// By the landmarks seen at rest at the start (`seen` None), or by the
+    /// first sightings of a moving robot, at the times `seen`, and its
+    /// odometry since the start.
+    At {
+        start: PlacedStart,
+        seen: Option<(f64, f64)>,
+    },
+    /// Not at all: too few sightings to place it.
+    Nowhere,
+}
+
 /// Without ground truth, the start pose is where the landmarks seen at the
 /// start place the robot through the model's own observation (a sensor off the
 /// body origin included): see [`crate::landmarks::start_from_landmarks`]; a
 /// robot that moves from its first row, where its first sightings and its
 /// odometry between them place it
-/// ([`crate::landmarks::start_from_moving_sightings`]).
-fn landmark_start(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<PlacedStart> {
+/// ([`crate::landmarks::start_from_moving_sightings`]). None where the
+/// ground truth gives the start, or the run has no sightings.
+fn placed_by_landmarks(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<Placed> {
     if data.start_measured() || data.landmarks.is_empty() {
         return None;
     }
-    crate::landmarks::start_from_landmarks(r, p, data, guess).or_else(|| moving_start(r, p, data))
+    if let Some(start) = crate::landmarks::start_from_landmarks(r, p, data, guess) {
+        return Some(Placed::At { start, seen: None });
+    }
+    Some(match moving_start(r, p, data) {
+        Some((start, seen)) => Placed::At {
+            start,
+            seen: Some(seen),
+        },
+        None => Placed::Nowhere,
+    })
+}
+
+/// The start the landmarks place (see [`placed_by_landmarks`]), if they do.
+fn landmark_start(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<PlacedStart> {
+    match placed_by_landmarks(r, p, data, guess)? {
+        Placed::At { start, .. } => Some(start),
+        Placed::Nowhere => None,
+    }
 }
 
 /// What the user should hear of a run's start where neither its ground
@@ -113,34 +145,31 @@ fn landmark_start(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<
 /// sightings through the odometry before them (the track until then carries
 /// that odometry's drift), or not placed at all. None otherwise.
 pub fn start_note(r: &Runner, p: &[f64], data: &Run) -> Option<String> {
-    use crate::landmarks::{first_sightings, start_from_landmarks, MOVING_START_S};
-    if data.start_measured()
-        || data.landmarks.is_empty()
-        || start_from_landmarks(r, p, data, data.start_pose()).is_some()
-    {
-        return None;
-    }
+    use crate::landmarks::MOVING_START_S;
     let t0 = data.t[0];
-    let Some(seen) = first_sightings(data) else {
-        return Some(format!(
+    match placed_by_landmarks(r, p, data, data.start_pose())? {
+        Placed::Nowhere => Some(format!(
             "{}: no ground truth at the start ({t0:.1} s) and too few sightings to place it (two landmarks within {MOVING_START_S} s): the run starts at the map's origin, heading 0",
             data.path
-        ));
-    };
-    let (from, to) = (seen[0].t, seen[seen.len() - 1].t);
-    (from - t0 > MOVING_START_S).then(|| {
-        format!(
+        )),
+        Placed::At {
+            seen: Some((from, to)),
+            ..
+        } if from - t0 > MOVING_START_S => Some(format!(
             "{}: no ground truth at the start ({t0:.1} s) and no two landmarks seen within {MOVING_START_S} s of it: the start is placed by the sightings of {from:.1}-{to:.1} s through the model's odometry since, so the track before {from:.1} s carries that odometry's drift",
             data.path
-        )
-    })
+        )),
+        Placed::At { .. } => None,
+    }
 }
 
 /// [`crate::landmarks::start_from_moving_sightings`] with the model's
 /// odometry from the start (the origin of its frame) to each of the run's
-/// first sightings, interpolated between rows.
-fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<PlacedStart> {
+/// first sightings, interpolated between rows; with the times of the first
+/// and the last of those sightings.
+fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<(PlacedStart, (f64, f64))> {
     let seen = crate::landmarks::first_sightings(data)?;
+    let first = seen.iter().map(|o| o.t).fold(f64::INFINITY, f64::min);
     let last = seen.iter().map(|o| o.t).fold(data.t[0], f64::max);
     let rows = data.t.partition_point(|t| *t <= last).min(data.steps());
     let mut stepper = Stepper::new(r, p, data, false, None);
@@ -155,6 +184,7 @@ fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<PlacedStart> {
         [0, 1, 2].map(|i| p0[i] + a * (p1[i] - p0[i]))
     };
     crate::landmarks::start_from_moving_sightings(r, p, data, &seen, moved)
+        .map(|s| (s, (first, last)))
 }
 
 /// The body pose dead reckoning starts from: the measured start seen through
