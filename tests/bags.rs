@@ -272,6 +272,10 @@ fn bad_bags_are_located() {
 /// in both shapes a robot publishes (an array of detections per message, or
 /// one detection per message as a point in the robot frame); and every
 /// mistake in the mapping is located at the topic, message and field.
+/// The `--topics` mapping of the test bags' landmark topic (an array of
+/// id, range and bearing per message).
+const ARRAY_TOPICS: &str = "[landmarks]\ntopic = \"/landmarks\"\nid = \"landmarks[].id\"\nrange = \"landmarks[].range\"\nbearing = \"landmarks[].bearing\"\n";
+
 /// A simulated diff-drive log (t, enc_r, enc_l, gt_*, gyro) of random
 /// driving with sightings of five landmarks, in `dir`: (log, sightings, map).
 fn sighted_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
@@ -331,11 +335,7 @@ fn a_bag_bearing_in_degrees_is_located() {
         ],
     );
     let topics = t.join("topics.toml");
-    std::fs::write(
-        &topics,
-        "[landmarks]\ntopic = \"/landmarks\"\nid = \"landmarks[].id\"\nrange = \"landmarks[].range\"\nbearing = \"landmarks[].bearing\"\n",
-    )
-    .unwrap();
+    std::fs::write(&topics, ARRAY_TOPICS).unwrap();
     let o = kinegen(&[
         "compare",
         "--spec",
@@ -410,10 +410,7 @@ fn landmark_topics_of_a_user_message_type() {
         std::fs::write(&p, text).unwrap();
         p
     };
-    let ta = topics(
-        "array.toml",
-        "[landmarks]\ntopic = \"/landmarks\"\nid = \"landmarks[].id\"\nrange = \"landmarks[].range\"\nbearing = \"landmarks[].bearing\"\n",
-    );
+    let ta = topics("array.toml", ARRAY_TOPICS);
     let tp = topics(
         "point.toml",
         "[landmarks]\ntopic = \"/landmarks\"\nid = \"id\"\nx = \"position.x\"\ny = \"position.y\"\n",
