@@ -1296,8 +1296,8 @@ fn rms(errors: &[f64]) -> f64 {
 /// `sigma` (the user left it out: the simulator then adds the defaults'
 /// noise, which localize assumes, not exact sightings), the log cut to start
 /// in motion at 10 s without its ground truth, one sighting a second, those
-/// before `sighted_from` s left out. Returns the spec, the map, the cut log,
-/// the sightings and the simulated truth (t, x, y).
+/// before `sighted_from` s left out. Returns the spec, the map, the cut log
+/// and the sightings; the simulated log with its truth is `dir/full.csv`.
 fn moving_start_case(dir: &Path, sighted_from: f64) -> [PathBuf; 4] {
     let spec = commanded_spec(dir, "");
     let text = std::fs::read_to_string(&spec).unwrap();
