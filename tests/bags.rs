@@ -311,16 +311,10 @@ fn a_bag_bearing_in_degrees_is_located() {
     let t = tmp.path();
     let (csv, obs, map) = sighted_log(t);
     let text = std::fs::read_to_string(&obs).unwrap();
-    let mut degrees = String::new();
-    for (k, l) in text.lines().enumerate() {
-        let c: Vec<&str> = l.split(',').collect();
-        degrees += &if k == 0 {
-            format!("{l}\n")
-        } else {
-            let b: f64 = c[3].parse().unwrap();
-            format!("{},{},{},{}\n", c[0], c[1], c[2], b.to_degrees())
-        };
-    }
+    let degrees = edit_cells(&text, |c, v| match c {
+        3 => v.parse::<f64>().unwrap().to_degrees().to_string(),
+        _ => v.to_string(),
+    });
     let obs_deg = t.join("obs_deg.csv");
     std::fs::write(&obs_deg, degrees).unwrap();
     let deg = bag(

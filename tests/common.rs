@@ -159,3 +159,16 @@ pub fn camera_view(all: &Path, out: &Path, read: fn(f64, f64) -> (f64, f64)) -> 
     std::fs::write(out, s).unwrap();
     out.to_path_buf()
 }
+
+/// A CSV text with its header kept and every data cell rewritten by
+/// `edit(column index, cell)`: a log or sightings file in another unit or
+/// convention, made from a simulated one.
+pub fn edit_cells(csv: &str, edit: impl Fn(usize, &str) -> String) -> String {
+    let mut lines = csv.lines();
+    let mut out = lines.next().unwrap_or_default().to_string() + "\n";
+    for l in lines {
+        let cells: Vec<String> = l.split(',').enumerate().map(|(c, v)| edit(c, v)).collect();
+        out += &(cells.join(",") + "\n");
+    }
+    out
+}

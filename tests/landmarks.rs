@@ -359,13 +359,7 @@ fn compare_edited(
     (log, text, map): (&Path, &str, &Path),
     edit: impl Fn(usize, &str) -> String,
 ) -> std::process::Output {
-    let mut lines = text.lines();
-    let mut out = lines.next().unwrap().to_string() + "\n";
-    for l in lines {
-        let cells: Vec<String> = l.split(',').enumerate().map(|(c, v)| edit(c, v)).collect();
-        out += &(cells.join(",") + "\n");
-    }
-    compare_sightings(dir, log, &out, map)
+    compare_sightings(dir, log, &edit_cells(text, edit), map)
 }
 
 /// Sightings in another unit than the map's, or with a bearing of the
