@@ -232,6 +232,12 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
             ":1: column `enc_l`".into(),
             "missing column",
         ),
+        // a column named in another case: the header listed as it is, and the name to use
+        (
+            "T,enc_l,enc_r,gt_x,gt_y,gt_theta\n0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n",
+            ":1: column `t`".into(),
+            "(the header has: T, enc_l, enc_r, gt_x, gt_y, gt_theta); `T` differs only in case: rename it `t`",
+        ),
         (
             Box::leak(
                 format!("{ok_header}\n0,0,0,0,0,0\n0.05,1,x1,0,0,0\n0.1,2,2,0,0,0\n")

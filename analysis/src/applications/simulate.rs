@@ -114,6 +114,7 @@ impl SimLog {
         let log = crate::log::Log {
             path: std::path::PathBuf::from(name),
             columns,
+            header: self.header.clone(),
             len: self.rows.len(),
             // the lines of the CSV this log is written as
             first_line: 2,

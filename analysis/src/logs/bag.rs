@@ -845,10 +845,13 @@ fn align(
         }
         out.insert(col.clone(), v);
     }
+    let mut header: Vec<String> = out.keys().cloned().collect();
+    header.sort();
     Ok((
         Log {
             path: file.to_path_buf(),
             len: rows.len(),
+            header,
             columns: out,
             // as its CSV export would number them
             first_line: 2,

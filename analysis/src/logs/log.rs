@@ -105,6 +105,21 @@ fn is_data(cells: &[String]) -> bool {
     !cells.is_empty() && cells.iter().all(|c| c.parse::<f64>().is_ok())
 }
 
+/// A missing column's message: the header as it is, and the column it has
+/// under another case, which the contract's exact names do not match (`T`
+/// for `t`; spaces around a name are trimmed on reading).
+fn missing_column(c: &str, header: &[String]) -> String {
+    let near = header
+        .iter()
+        .find(|h| h.eq_ignore_ascii_case(c))
+        .map(|h| format!("; `{h}` differs only in case: rename it `{c}`"))
+        .unwrap_or_default();
+    format!(
+        "missing column `{c}` (the header has: {}){near}",
+        header.join(", ")
+    )
+}
+
 /// What is wrong with a row the csv crate could not read, in the file's
 /// terms (its own message counts lines from where the reader started, after
 /// any comment lines, and would contradict the line the error names).
@@ -240,16 +255,8 @@ impl CsvHeader {
         columns
             .iter()
             .map(|c| {
-                self.position(c).ok_or_else(|| {
-                    self.err(
-                        Some(1),
-                        Some(c),
-                        format!(
-                            "missing column `{c}` (the header has: {})",
-                            self.names.join(", ")
-                        ),
-                    )
-                })
+                self.position(c)
+                    .ok_or_else(|| self.err(Some(1), Some(c), missing_column(c, &self.names)))
             })
             .collect()
     }
@@ -346,6 +353,9 @@ pub fn physical(x: f64) -> bool {
 pub struct Log {
     pub path: PathBuf,
     pub columns: HashMap<String, Vec<f64>>,
+    /// Every column the source has, kept or not, in its order: what a
+    /// missing column's error lists.
+    pub header: Vec<String>,
     pub len: usize,
     /// The file's line of row 0 (2 below a header on line 1).
     pub first_line: usize,
@@ -371,19 +381,10 @@ impl Log {
     }
 
     pub fn col(&self, c: &str) -> Result<&[f64], LogError> {
-        self.columns.get(c).map(|v| &v[..]).ok_or_else(|| {
-            self.err(
-                Some(1),
-                Some(c),
-                format!("missing column `{c}` (the header has: {})", self.header()),
-            )
-        })
-    }
-
-    fn header(&self) -> String {
-        let mut h: Vec<&str> = self.columns.keys().map(String::as_str).collect();
-        h.sort();
-        h.join(", ")
+        self.columns
+            .get(c)
+            .map(|v| &v[..])
+            .ok_or_else(|| self.err(Some(1), Some(c), missing_column(c, &self.header)))
     }
 
     /// Read a log, keeping only `wanted` columns (others are ignored, as the
@@ -415,6 +416,7 @@ impl Log {
         let log = Log {
             path: path.to_path_buf(),
             columns,
+            header: header.names.clone(),
             len,
             first_line: header.first_data_line,
         };
