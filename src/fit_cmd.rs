@@ -464,6 +464,8 @@ fn say_calibration(out: &Out, prep: &Loaded, res: &FitResult, before: &Errors, a
     if prep.runs.iter().any(|x| x.gt.is_some()) {
         out.say(&format!("  before: {}", fmt_errors(before)));
         out.say(&format!("  after:  {}", fmt_errors(after)));
+        // compare scores from the measured start, so its figure differs
+        out.say("  (each dead-reckoned from the runs' start headings as refined for its parameters, as the fit scores them; `compare` starts from the measured ones)");
     } else {
         out.say("  no ground truth in the logs: calibrated on landmark (and gyro) residuals; the error is the landmark range innovation");
     }
