@@ -10,8 +10,8 @@ use kinegen_analysis::load::Loaded;
 use kinegen_analysis::localize::reading::RangeReading;
 use kinegen_analysis::localize::timing::{Timing, TimingEstimate};
 use kinegen_analysis::localize::{
-    side, Consistency, EkfOptions, Localization, NeesParts, NoiseSource, Overconfident, Side,
-    Spread, Summary,
+    side, Bounds, Consistency, EkfOptions, Localization, NeesParts, NoiseSource, Overconfident,
+    Side, Spread, Summary,
 };
 use kinegen_analysis::localize_request::{localize_files, LocalizeRequest, LocalizedFiles};
 use serde_json::json;
@@ -198,8 +198,10 @@ fn run_json(
         "observations_used": loc.accepted, "observations_rejected": loc.rejected,
         "observations_outside_log": loc.outside,
         "position_rmse_m": s.rmse, "dead_reckoning_rmse_m": s.dead_reckoning,
-        "nis_mean": s.nis, "nis_bounds": s.nis_bounds.map(|b| [b.0, b.1]),
-        "nees_mean": s.nees, "nees_bounds": s.nees_bounds.map(|b| [b.0, b.1]),
+        "nis_mean": s.nis, "nis_bounds": s.nis_bounds.map(|b| [b.lo, b.hi]),
+        "nis_independent": s.nis_bounds.map(|b| b.independent),
+        "nees_mean": s.nees, "nees_bounds": s.nees_bounds.map(|b| [b.lo, b.hi]),
+        "nees_independent": s.nees_bounds.map(|b| b.independent),
         "nis_spread": s.nis_spread.map(spread_json), "nees_spread": s.nees_spread.map(spread_json),
         "consistency": s.consistency().map(|c| match c {
             Consistency::Agree => "agree",
@@ -208,8 +210,8 @@ fn run_json(
             Consistency::Contradict => "contradict",
         }),
         "nees_parts": s.nees_parts.map(|p| json!({
-            "position_mean": p.position.0, "position_bounds": [p.position.1 .0, p.position.1 .1],
-            "heading_mean": p.heading.0, "heading_bounds": [p.heading.1 .0, p.heading.1 .1],
+            "position_mean": p.position.0, "position_bounds": [p.position.1.lo, p.position.1.hi],
+            "heading_mean": p.heading.0, "heading_bounds": [p.heading.1.lo, p.heading.1.hi],
             "near_sightings_mean": p.near_sightings, "far_from_sightings_mean": p.far_from_sightings,
             "overconfident": s.overconfident_part().map(|o| match o {
                 Overconfident::Heading => "heading",
@@ -305,18 +307,22 @@ fn fmt_spread(x: &Spread) -> String {
 
 /// A mean NIS or NEES against its bounds, and what that says of `who` (the
 /// filter, or the smoother whose covariance `--track` writes).
-fn verdict(m: Option<f64>, b: Option<(f64, f64)>, who: &str) -> String {
-    let (Some(m), Some((lo, hi)), Some(s)) = (m, b, side(m, b)) else {
+/// A mean against its bounds, which count the `values` (rows, sightings)
+/// as the independent values they are worth.
+fn verdict(m: Option<f64>, b: Option<Bounds>, values: &str, who: &str) -> String {
+    let (Some(m), Some(b), Some(s)) = (m, b, side(m, b)) else {
         return "n/a".into();
     };
+    let (lo, hi) = (b.lo, b.hi);
+    let worth = format!("the {values} worth {:.0} independent ones", b.independent);
     match s {
-        Side::Below => {
-            format!("{m:.2} (below its 95% bounds {lo:.2}..{hi:.2}: the {who} is pessimistic)")
-        }
-        Side::Above => {
-            format!("{m:.2} (above its 95% bounds {lo:.2}..{hi:.2}: the {who} is overconfident)")
-        }
-        Side::Within => format!("{m:.2} (within its 95% bounds {lo:.2}..{hi:.2})"),
+        Side::Below => format!(
+            "{m:.2} (below its 95% bounds {lo:.2}..{hi:.2}, {worth}: the {who} is pessimistic)"
+        ),
+        Side::Above => format!(
+            "{m:.2} (above its 95% bounds {lo:.2}..{hi:.2}, {worth}: the {who} is overconfident)"
+        ),
+        Side::Within => format!("{m:.2} (within its 95% bounds {lo:.2}..{hi:.2}, {worth})"),
     }
 }
 
@@ -347,11 +353,11 @@ fn say_run(
     }
     out.say(&format!(
         "  mean NIS  {}",
-        verdict(s.nis, s.nis_bounds, "filter")
+        verdict(s.nis, s.nis_bounds, "sightings", "filter")
     ));
     out.say(&format!(
         "  mean NEES {}",
-        verdict(s.nees, s.nees_bounds, "filter")
+        verdict(s.nees, s.nees_bounds, "rows", "filter")
     ));
     if let Some(n) = s.truth_noise {
         out.say(&format!(
@@ -376,7 +382,7 @@ fn say_run(
         out.say(&format!(
             "  smoothed (RTS): position RMSE {}, mean NEES {}",
             rmse.map_or("n/a".into(), |e| format!("{e:.4} m")),
-            verdict(nees, s.nees_bounds, "smoother")
+            verdict(nees, s.nees_bounds, "rows", "smoother")
         ));
     }
     let last = loc.cov.last().unwrap();
@@ -393,7 +399,7 @@ fn say_parts(p: &NeesParts) -> String {
     let (pos, head) = (p.position, p.heading);
     format!(
         "NEES of the position alone {:.2} (bounds {:.2}..{:.2}), of the heading alone {:.2} (bounds {:.2}..{:.2}); of the pose just after the sightings {:.2}, far from them {:.2} (half the rows each)",
-        pos.0, pos.1 .0, pos.1 .1, head.0, head.1 .0, head.1 .1, p.near_sightings, p.far_from_sightings
+        pos.0, pos.1.lo, pos.1.hi, head.0, head.1.lo, head.1.hi, p.near_sightings, p.far_from_sightings
     )
 }
 

@@ -6,8 +6,9 @@
 use crate::report::{
     axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
 };
+use kinegen_analysis::localize::bounds::correlation_time;
 use kinegen_analysis::localize::{
-    mean_bounds, Consistency, Localization, Overconfident, Spread, Summary,
+    mean_bounds, Bounds, Consistency, Localization, Overconfident, Spread, Summary,
 };
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
@@ -234,7 +235,10 @@ fn nis_over_time(p: &RunPage) -> Result<String, String> {
             )
         })
         .collect();
-    let (lo, hi) = mean_bounds(w, 2.0);
+    // the band of a window's mean counts its sightings as the independent
+    // values they are worth, as the run's bounds do
+    let nis: Vec<f64> = pts.iter().map(|q| q.1).collect();
+    let (lo, hi) = mean_bounds((w as f64 / correlation_time(&nis)).max(1.0), 2.0);
     let (a, b) = (
         pts.first().map_or(0.0, |q| q.0),
         pts.last().map_or(1.0, |q| q.0),
@@ -283,9 +287,14 @@ fn sweep_chart(sweep: &[kinegen_analysis::sweep::SweepPoint]) -> Result<String, 
 }
 
 /// A mean and its 95% bounds as a table cell.
-fn bounded(m: Option<f64>, b: Option<(f64, f64)>) -> String {
+fn bounded(m: Option<f64>, b: Option<Bounds>) -> String {
     match (m, b) {
-        (Some(m), Some((lo, hi))) => format!("{m:.2} ({lo:.2}-{hi:.2})"),
+        // the rows or sightings counted as the independent values they are
+        // worth, which is what makes the bounds wide
+        (Some(m), Some(b)) => format!(
+            "{m:.2} ({:.2}-{:.2}, as {:.0} independent values)",
+            b.lo, b.hi, b.independent
+        ),
         _ => "n/a".into(),
     }
 }

@@ -26,6 +26,7 @@
 //!   offline use ([`smoother`]).
 mod active;
 mod belief;
+pub mod bounds;
 mod filter;
 pub mod noise;
 pub mod reading;
@@ -34,6 +35,7 @@ mod smoother;
 pub mod summary;
 pub mod timing;
 
+pub use bounds::{chi2_quantile, mean_bounds, Bounds};
 pub use filter::{Filter, Keep, Pass};
 pub use noise::{Lingering, NoiseModel, NoiseSource};
 pub use summary::{side, summarise, Consistency, NeesParts, Overconfident, Side, Spread, Summary};
@@ -103,22 +105,6 @@ pub struct Localization {
     pub rejected: usize,
     /// Sightings outside the run's time span.
     pub outside: usize,
-}
-
-/// Chi-square quantile (Wilson-Hilferty; within 1% for k >= 3): the p-quantile
-/// of a chi-square variable with k degrees of freedom, for the z-score of p.
-pub fn chi2_quantile(k: f64, z: f64) -> f64 {
-    let a = 2.0 / (9.0 * k);
-    k * (1.0 - a + z * a.sqrt()).powi(3)
-}
-
-/// 95% bounds of the mean of n chi-square values with `dof` degrees of freedom.
-pub fn mean_bounds(n: usize, dof: f64) -> (f64, f64) {
-    let k = n as f64 * dof;
-    (
-        chi2_quantile(k, -1.959964) / n as f64,
-        chi2_quantile(k, 1.959964) / n as f64,
-    )
 }
 
 /// A run the filter cannot work on.
@@ -374,15 +360,6 @@ pub fn truth_noise(run: &Run) -> Option<[f64; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn chi_square_bounds_bracket_the_degrees_of_freedom() {
-        let (lo, hi) = mean_bounds(100, 2.0);
-        assert!(lo < 2.0 && hi > 2.0 && (hi - lo) < 1.2, "{lo} {hi}");
-        // 95% of chi2(30): 16.79 .. 46.98
-        assert!((chi2_quantile(30.0, -1.959964) - 16.79).abs() < 0.3);
-        assert!((chi2_quantile(30.0, 1.959964) - 46.98).abs() < 0.3);
-    }
 
     #[test]
     fn each_part_of_the_nees_is_judged_by_its_marginal() {

@@ -3,7 +3,7 @@
 //! NEES with their chi-square bounds, and how their values spread (median,
 //! share in the tail), which tells a filter wrong at times from one wrong
 //! throughout.
-use super::{chi2_quantile, mean_bounds, nees_of, truth_noise, Localization, Nees, Sensed};
+use super::{chi2_quantile, nees_of, truth_noise, Bounds, Localization, Nees, Sensed};
 use crate::model::Runner;
 use crate::run::Run;
 
@@ -13,9 +13,9 @@ pub struct Summary {
     pub rmse: Option<f64>,
     pub dead_reckoning: Option<f64>,
     pub nis: Option<f64>,
-    pub nis_bounds: Option<(f64, f64)>,
+    pub nis_bounds: Option<Bounds>,
     pub nees: Option<f64>,
-    pub nees_bounds: Option<(f64, f64)>,
+    pub nees_bounds: Option<Bounds>,
     /// The smoother's position RMSE and mean NEES.
     pub smoothed: Option<(Option<f64>, Option<f64>)>,
     /// The ground truth's own noise the NEES counts ([`truth_noise`]), when
@@ -32,9 +32,9 @@ pub struct Summary {
 pub struct NeesParts {
     /// Mean NEES of the position alone (2 degrees of freedom) and its 95%
     /// bounds.
-    pub position: (f64, (f64, f64)),
+    pub position: (f64, Bounds),
     /// The same for the heading alone (1 degree of freedom).
-    pub heading: (f64, (f64, f64)),
+    pub heading: (f64, Bounds),
     /// Mean NEES of the pose over the half of the rows nearest in time
     /// after a sighting the filter used, and over the other half (rows
     /// before the first sighting among them): a filter whose sightings
@@ -84,9 +84,10 @@ impl NeesParts {
         let mut by_time: Vec<(f64, f64)> = nees.iter().map(|n| (since(n), n.pose)).collect();
         by_time.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (near, far) = by_time.split_at(by_time.len() / 2);
+        let series = |part: fn(&Nees) -> f64| nees.iter().map(part).collect::<Vec<_>>();
         Some(NeesParts {
-            position: (position, mean_bounds(nees.len(), 2.0)),
-            heading: (heading, mean_bounds(nees.len(), 1.0)),
+            position: (position, Bounds::of_series(&series(|n| n.position), 2.0)?),
+            heading: (heading, Bounds::of_series(&series(|n| n.heading), 1.0)?),
             near_sightings: mean(near.iter().map(|x| x.1))?,
             far_from_sightings: mean(far.iter().map(|x| x.1))?,
         })
@@ -95,7 +96,7 @@ impl NeesParts {
     /// The belief the parts find overconfident (None: neither part's mean
     /// lies above its bounds).
     pub fn overconfident(&self) -> Option<Overconfident> {
-        let above = |(m, b): (f64, (f64, f64))| side(Some(m), Some(b)) == Some(Side::Above);
+        let above = |(m, b): (f64, Bounds)| side(Some(m), Some(b)) == Some(Side::Above);
         if above(self.heading) {
             return Some(Overconfident::Heading);
         }
@@ -183,11 +184,11 @@ pub enum Side {
 }
 
 /// The side of its 95% `bounds` that `mean` lies on (None without either).
-pub fn side(mean: Option<f64>, bounds: Option<(f64, f64)>) -> Option<Side> {
-    let (m, (lo, hi)) = (mean?, bounds?);
-    Some(if m < lo {
+pub fn side(mean: Option<f64>, bounds: Option<Bounds>) -> Option<Side> {
+    let (m, b) = (mean?, bounds?);
+    Some(if m < b.lo {
         Side::Below
-    } else if m > hi {
+    } else if m > b.hi {
         Side::Above
     } else {
         Side::Within
@@ -270,10 +271,10 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
         rmse: position_rmse(r, run, &loc.track),
         dead_reckoning,
         nis: mean(loc.nis.iter().map(|n| n.1)),
-        nis_bounds: (!loc.nis.is_empty()).then(|| mean_bounds(loc.nis.len(), 2.0)),
+        nis_bounds: Bounds::of_series(&loc.nis.iter().map(|n| n.1).collect::<Vec<_>>(), 2.0),
         nees: mean(loc.nees.iter().map(|n| n.pose)),
         truth_noise: truth_noise(run).filter(|_| !loc.nees.is_empty()),
-        nees_bounds: (!loc.nees.is_empty()).then(|| mean_bounds(loc.nees.len(), 3.0)),
+        nees_bounds: Bounds::of_series(&loc.nees.iter().map(|n| n.pose).collect::<Vec<_>>(), 3.0),
         nis_spread: spread(loc.nis.iter().map(|n| n.1), 2.0),
         nees_spread: spread(loc.nees.iter().map(|n| n.pose), 3.0),
         nees_parts: NeesParts::of(
@@ -305,9 +306,10 @@ mod tests {
             rmse: None,
             dead_reckoning: None,
             nis: m(nis),
-            nis_bounds: Some(mean_bounds(nis.len(), 2.0)),
+            // the values sorted, not a time series: counted as independent
+            nis_bounds: Some(Bounds::independent(nis.len(), 2.0)),
             nees: m(nees),
-            nees_bounds: Some(mean_bounds(nees.len(), 3.0)),
+            nees_bounds: Some(Bounds::independent(nees.len(), 3.0)),
             smoothed: None,
             truth_noise: None,
             nis_spread: spread(nis.iter().copied(), 2.0),
@@ -337,9 +339,10 @@ mod tests {
         let sightings: Vec<f64> = (0..n).step_by(10).map(|k| k as f64).collect();
         let nees: Vec<Nees> = (0..n)
             .map(|k| {
-                let position = p2[k] * if k % 10 < 5 { near } else { far };
-                // chi-square with 1 degree of freedom: half of one with 2,
-                // shuffled against the position's
+                // chi-square's law shuffled (1 degree of freedom: half of
+                // 2), so that the series is as white as a consistent
+                // filter's, which its bounds count
+                let position = p2[(k * 6007) % n] * if k % 10 < 5 { near } else { far };
                 let heading = h1[(k * 7919) % n] * heading;
                 Nees {
                     row: k,
@@ -350,9 +353,9 @@ mod tests {
             })
             .collect();
         let parts = NeesParts::of(&nees, &t, &sightings).unwrap();
-        let (m, (lo, hi)) = parts.heading;
+        let (m, b) = parts.heading;
         assert!(
-            m > lo / 1.1 * heading && m < hi * 1.1 * heading,
+            m > b.lo / 1.1 * heading && m < b.hi * 1.1 * heading,
             "{parts:?}"
         );
         parts.overconfident()
@@ -393,7 +396,7 @@ mod tests {
             }
         }
         let s = summary_of(&nis, &nees);
-        assert!(s.nees.unwrap() > s.nees_bounds.unwrap().1, "{s:?}");
+        assert!(s.nees.unwrap() > s.nees_bounds.unwrap().hi, "{s:?}");
         assert_eq!(
             s.consistency(),
             Some(Consistency::HeavyTails {
