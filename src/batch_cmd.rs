@@ -179,8 +179,9 @@ fn run_job(job: &Job) -> Value {
 }
 
 /// The logs of `dir` a spec with these input `columns` can read: CSV files
-/// whose header has them, and `.mcap` bags, to one level down, sorted.
-fn logs_in(dir: &Path, columns: &[String]) -> Result<Vec<PathBuf>, String> {
+/// whose header has them, and `.mcap` bags, to one level down, sorted; and
+/// the CSV files left out, each with why.
+fn logs_in(dir: &Path, columns: &[String]) -> Result<(Vec<PathBuf>, Vec<String>), String> {
     let list = |d: &Path| -> Result<Vec<PathBuf>, String> {
         let mut v: Vec<PathBuf> = std::fs::read_dir(d)
             .map_err(|e| format!("{}: {e}", d.display()))?
@@ -189,31 +190,44 @@ fn logs_in(dir: &Path, columns: &[String]) -> Result<Vec<PathBuf>, String> {
         v.sort();
         Ok(v)
     };
-    let is_log = |p: &Path| -> bool {
-        match p.extension().and_then(|e| e.to_str()) {
-            Some("mcap") => true,
-            Some("csv") => std::fs::read_to_string(p).ok().is_some_and(|t| {
-                let header: Vec<&str> = t
-                    .lines()
-                    .next()
-                    .unwrap_or("")
-                    .split(',')
-                    .map(str::trim)
-                    .collect();
-                columns.iter().all(|c| header.contains(&c.as_str()))
-            }),
-            _ => false,
-        }
-    };
-    let mut out = Vec::new();
+    let mut files = Vec::new();
     for p in list(dir)? {
         if p.is_dir() {
-            out.extend(list(&p)?.into_iter().filter(|q| q.is_file() && is_log(q)));
-        } else if is_log(&p) {
-            out.push(p);
+            files.extend(list(&p)?.into_iter().filter(|q| q.is_file()));
+        } else {
+            files.push(p);
         }
     }
-    Ok(out)
+    let (mut logs, mut left_out) = (Vec::new(), Vec::new());
+    for p in files {
+        match p.extension().and_then(|e| e.to_str()) {
+            Some("mcap") => logs.push(p),
+            // the header as every command reads it (comment lines before
+            // it, a header written as a comment, a byte-order mark), without
+            // reading the rows
+            Some("csv") => match kinegen_analysis::log::read_csv(&p, "log") {
+                Ok((header, _)) => {
+                    let missing: Vec<&str> = columns
+                        .iter()
+                        .filter(|c| !header.names.contains(c))
+                        .map(String::as_str)
+                        .collect();
+                    if missing.is_empty() {
+                        logs.push(p);
+                    } else {
+                        left_out.push(format!(
+                            "{} (no column {})",
+                            p.display(),
+                            missing.join(", ")
+                        ));
+                    }
+                }
+                Err(e) => left_out.push(format!("{e}")),
+            },
+            _ => {}
+        }
+    }
+    Ok((logs, left_out))
 }
 
 /// `--plan`: write a job for every log of the directory.
@@ -229,10 +243,17 @@ fn plan(a: &BatchArgs, command: &str) -> ExitCode {
         Err(e) => return bad(e),
     };
     let columns: Vec<String> = model.inputs.iter().map(|i| i.column.clone()).collect();
-    let logs = match logs_in(&a.jobs_file, &columns) {
+    let (logs, left_out) = match logs_in(&a.jobs_file, &columns) {
         Ok(l) => l,
         Err(e) => return bad(e),
     };
+    if !left_out.is_empty() {
+        eprintln!(
+            "warning: {} CSV file(s) left out, not logs for this spec: {}",
+            left_out.len(),
+            left_out.join("; ")
+        );
+    }
     if logs.is_empty() {
         return bad(format!(
             "{}: no log there has the spec's input columns ({}) and no .mcap bag",

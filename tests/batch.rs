@@ -398,6 +398,14 @@ fn a_plan_writes_a_job_for_every_log_of_a_directory() {
         &["--spec", "spec/diff_drive.toml", "--trajectory", "figure8"],
     );
     std::fs::write(logs.join("map.csv"), "id,x,y\nA,1,2\n").unwrap();
+    // a log with a comment line above its header is a log, as every command
+    // reads it
+    let square = std::fs::read_to_string(logs.join("run-01.csv")).unwrap();
+    std::fs::write(
+        logs.join("noted.csv"),
+        format!("# robot 3, firmware 2.1\n{square}"),
+    )
+    .unwrap();
     let spec = root().join("spec/diff_drive.toml");
     let o = batch(
         dir,
@@ -414,8 +422,19 @@ fn a_plan_writes_a_job_for_every_log_of_a_directory() {
     assert!(o.status.success(), "{}", stderr(&o));
     let jobs = results(&dir.join("jobs.jsonl"));
     let ids: Vec<&str> = jobs.iter().map(|j| j["id"].as_str().unwrap()).collect();
-    assert_eq!(ids, ["robot2-run-01-fit", "run-01-fit"], "{jobs:?}");
+    assert_eq!(
+        ids,
+        ["noted-fit", "robot2-run-01-fit", "run-01-fit"],
+        "{jobs:?}"
+    );
+    // a CSV file left out is said, with the columns it lacks
+    assert!(
+        stderr(&o).contains("1 CSV file(s) left out")
+            && stderr(&o).contains("map.csv (no column enc_r, enc_l)"),
+        "{}",
+        stderr(&o)
+    );
     let o = batch(dir, &["jobs.jsonl", "--out", "res.jsonl"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(results(&dir.join("res.jsonl")).len(), 2);
+    assert_eq!(results(&dir.join("res.jsonl")).len(), 3);
 }
