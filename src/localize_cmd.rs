@@ -221,7 +221,11 @@ fn run_json(
             }),
         })),
         "ground_truth_noise": s.truth_noise.map(|n| json!({"position_m": n[0], "heading_rad": n[2]})),
-        "smoothed": s.smoothed.map(|(rmse, nees)| json!({"position_rmse_m": rmse, "nees_mean": nees})),
+        "smoothed": s.smoothed.map(|x| json!({
+            "position_rmse_m": x.rmse, "nees_mean": x.nees,
+            "nees_bounds": x.nees_bounds.map(|b| [b.lo, b.hi]),
+            "nees_independent": x.nees_bounds.map(|b| b.independent),
+        })),
         "final_pose": loc.track.last(),
         "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
     })
@@ -377,12 +381,11 @@ fn say_run(
     if let Some(line) = crate::localize_report::say_consistency(s) {
         out.say(&format!("    {line}"));
     }
-    if let Some((rmse, nees)) = s.smoothed {
-        // the smoother's NEES counts the same rows as the filter's
+    if let Some(x) = s.smoothed {
         out.say(&format!(
             "  smoothed (RTS): position RMSE {}, mean NEES {}",
-            rmse.map_or("n/a".into(), |e| format!("{e:.4} m")),
-            verdict(nees, s.nees_bounds, "rows", "smoother")
+            x.rmse.map_or("n/a".into(), |e| format!("{e:.4} m")),
+            verdict(x.nees, x.nees_bounds, "rows", "smoother")
         ));
     }
     let last = loc.cov.last().unwrap();

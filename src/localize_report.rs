@@ -306,7 +306,7 @@ fn num(v: Option<f64>, digits: usize) -> String {
 fn tables(runs: &[RunPage], noise: &[String]) -> String {
     let mut t = String::from(
         "<table><tr><th>run</th><th>position RMSE (m)</th><th>smoothed RMSE (m)</th><th>dead reckoning RMSE (m)</th>\
-         <th>mean NEES (95% bounds)</th><th>smoothed mean NEES</th><th>NEES median (chi-square's) / beyond 95% point</th>\
+         <th>mean NEES (95% bounds)</th><th>smoothed mean NEES (95% bounds)</th><th>NEES median (chi-square's) / beyond 95% point</th>\
          <th>mean NIS (95% bounds)</th><th>NIS median (chi-square's) / beyond 95% point</th>\
          <th>sightings used</th><th>rejected</th><th>outside the log</th></tr>",
     );
@@ -326,11 +326,10 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             esc(&p.run.path),
             num(s.rmse, 4),
-            num(s.smoothed.and_then(|x| x.0), 4),
+            num(s.smoothed.and_then(|x| x.rmse), 4),
             num(s.dead_reckoning, 4),
             bounded(s.nees, s.nees_bounds),
-            // against the same bounds: it counts the same rows
-            num(s.smoothed.and_then(|x| x.1), 2),
+            s.smoothed.map_or("n/a".into(), |x| bounded(x.nees, x.nees_bounds)),
             spread(s.nees_spread),
             bounded(s.nis, s.nis_bounds),
             spread(s.nis_spread),

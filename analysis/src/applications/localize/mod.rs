@@ -38,7 +38,9 @@ pub mod timing;
 pub use bounds::{chi2_quantile, mean_bounds, Bounds};
 pub use filter::{Filter, Keep, Pass};
 pub use noise::{Lingering, NoiseModel, NoiseSource};
-pub use summary::{side, summarise, Consistency, NeesParts, Overconfident, Side, Spread, Summary};
+pub use summary::{
+    side, summarise, Consistency, NeesParts, Overconfident, Side, SmoothedSummary, Spread, Summary,
+};
 
 use crate::log::wrap;
 use crate::model::Runner;

@@ -16,8 +16,8 @@ pub struct Summary {
     pub nis_bounds: Option<Bounds>,
     pub nees: Option<f64>,
     pub nees_bounds: Option<Bounds>,
-    /// The smoother's position RMSE and mean NEES.
-    pub smoothed: Option<(Option<f64>, Option<f64>)>,
+    /// The smoother's figures (with `--smooth`).
+    pub smoothed: Option<SmoothedSummary>,
     /// The ground truth's own noise the NEES counts ([`truth_noise`]), when
     /// there is a NEES.
     pub truth_noise: Option<[f64; 3]>,
@@ -25,6 +25,16 @@ pub struct Summary {
     pub nees_spread: Option<Spread>,
     /// The NEES taken apart, when there is one.
     pub nees_parts: Option<NeesParts>,
+}
+
+/// The smoother's figures: its errors last longer than the filter's (each
+/// estimate leans on the motion from both sides), so its NEES has bounds of
+/// its own.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmoothedSummary {
+    pub rmse: Option<f64>,
+    pub nees: Option<f64>,
+    pub nees_bounds: Option<Bounds>,
 }
 
 /// The NEES taken apart: which of the filter's beliefs is wrong, and when.
@@ -261,11 +271,12 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
     // the motion capture lost the robot)
     let dead_reckoning = position_rmse(r, run, &crate::deadreckon::run(r, &r.p, run, false).pose);
     let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
-        let nees = nees_of(r, run, track, cov);
-        (
-            position_rmse(r, run, track),
-            mean(nees.iter().map(|n| n.pose)),
-        )
+        let nees: Vec<f64> = nees_of(r, run, track, cov).iter().map(|n| n.pose).collect();
+        SmoothedSummary {
+            rmse: position_rmse(r, run, track),
+            nees: mean(nees.iter().copied()),
+            nees_bounds: Bounds::of_series(&nees, 3.0),
+        }
     });
     Summary {
         rmse: position_rmse(r, run, &loc.track),
