@@ -118,7 +118,7 @@ pub fn has(m: &Model, c: Capability) -> Result<(), &'static str> {
     }
     Err(match c {
         Capability::Twist => "it patches an explicit body twist ([motion]) and this model is given by kinematic constraints",
-        Capability::Nonholonomic => "it adds lateral velocity to a model whose twist has none (vy = 0), and this model already moves sideways",
+        Capability::Nonholonomic => "it gives lateral velocity to a model that has none (vy = 0), and this model already moves sideways (its vy is not 0)",
         Capability::Steering => "the model has no absolute steering input (an angle read between rows; commands that hold are not)",
         Capability::Differential => "the model has no wheels that turn the body in opposite directions",
         Capability::YawRate => "the model has no yaw-rate (gyro) observation",
