@@ -220,11 +220,21 @@ fn seconds_apart(run: &Run, max_gap: f64) -> Result<(), LogError> {
         )
     })
     .unwrap_or_default();
+    // rows a second or less apart are a robot's log in seconds: the gap
+    // allowed is what is too small
+    let remedy = if median <= 1.0 {
+        format!("raise --max-gap above {median:.3} s")
+    } else {
+        format!("`t` must be in seconds{hint}, or --max-gap above {median:.3} s if the rows are that many seconds apart")
+    };
+    // rounded: the median of differences of decimal times carries their
+    // binary noise (0.010000000000047748)
+    let median = (median * 1e4).round() / 1e4;
     Err(LogError::new(
         Path::new(&run.path),
         None,
         Some("t"),
-        format!("the rows are a median {median} apart, more than --max-gap {max_gap} s, so no stretch of the log is a run: `t` must be in seconds{hint}"),
+        format!("the rows are a median {median} apart, more than --max-gap {max_gap} s, so no stretch of the log is a run: {remedy}"),
     ))
 }
 
@@ -436,4 +446,32 @@ fn left_out(s: &Sightings, source: &str, map_path: &Path, (t0, t1): (f64, f64)) 
         ));
     }
     said
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn message(step: f64, max_gap: f64) -> String {
+        let t: Vec<f64> = (0..50).map(|k| k as f64 * step).collect();
+        let run = Run::bare(t, (0..50).map(|_| [0.0]));
+        seconds_apart(&run, max_gap).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn rows_further_apart_than_the_gap_say_what_to_change() {
+        // a log at 100 Hz in seconds: the gap allowed is what is too small
+        let m = message(0.01, 0.001);
+        assert!(
+            m.contains("a median 0.01 apart") && m.contains("raise --max-gap above 0.010 s"),
+            "{m}"
+        );
+        // the same log in milliseconds: its unit is
+        let m = message(10.0, 3.0);
+        assert!(
+            m.contains("divide `t` by 1000") && m.contains("--max-gap above 10.000 s"),
+            "{m}"
+        );
+        assert!(seconds_apart(&Run::bare(vec![0.0, 0.01, 0.02], [[0.0]; 3]), 3.0).is_ok());
+    }
 }
