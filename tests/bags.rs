@@ -420,7 +420,19 @@ fn landmark_topics_of_a_user_message_type() {
             );
         }
     }
-    // mistakes, each located
+    landmark_topic_mistakes_are_located(t, &array, &ta, &map);
+}
+
+/// Mistakes in a landmark topic mapping, each located: a topic the bag does
+/// not have, a field its messages do not have, no map, a map without some
+/// or all of the ids seen (`array`: a bag of LandmarkArray messages, `ta`
+/// its right mapping).
+fn landmark_topic_mistakes_are_located(t: &Path, array: &Path, ta: &Path, map: &Path) {
+    let topics = |name: &str, text: &str| {
+        let p = t.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
     let fails = |data: &Path, topics_text: &str, with_map: bool| {
         let tm = topics("bad.toml", topics_text);
         let mut a = vec![
@@ -440,7 +452,7 @@ fn landmark_topics_of_a_user_message_type() {
         stderr(&o)
     };
     let e = fails(
-        &array,
+        array,
         "[landmarks]\ntopic = \"/marks\"\nid = \"id\"\nrange = \"r\"\nbearing = \"b\"\n",
         true,
     );
@@ -449,7 +461,7 @@ fn landmark_topics_of_a_user_message_type() {
         "{e}"
     );
     let e = fails(
-        &array,
+        array,
         "[landmarks]\ntopic = \"/landmarks\"\nid = \"landmarks[].id\"\nrange = \"landmarks[].rng\"\nbearing = \"landmarks[].bearing\"\n",
         true,
     );
@@ -458,11 +470,11 @@ fn landmark_topics_of_a_user_message_type() {
             && e.contains("no field `rng` (it has: id, range, bearing)"),
         "{e}"
     );
-    let e = fails(&array, &std::fs::read_to_string(&ta).unwrap(), false);
+    let e = fails(array, &std::fs::read_to_string(ta).unwrap(), false);
     assert!(e.contains("needs --landmarks MAP.csv"), "{e}");
     // a map without some of the ids seen: those detections are left out and
     // said with the first one's message; a map with none of them is an error
-    std::fs::write(&map, "id,x,y\nL1,3,2\nL2,-1,4\n").unwrap();
+    std::fs::write(map, "id,x,y\nL1,3,2\nL2,-1,4\n").unwrap();
     let o = kinegen(&[
         "compare",
         "--spec",
@@ -482,8 +494,8 @@ fn landmark_topics_of_a_user_message_type() {
             && said.contains("(the first at topic `/landmarks` message"),
         "{said}"
     );
-    std::fs::write(&map, "id,x,y\nM1,3,2\n").unwrap();
-    let e = fails(&array, &std::fs::read_to_string(&ta).unwrap(), true);
+    std::fs::write(map, "id,x,y\nM1,3,2\n").unwrap();
+    let e = fails(array, &std::fs::read_to_string(ta).unwrap(), true);
     assert!(
         e.contains("no sighting's landmark is in the map: `L1`, `L2`, `L3`")
             && e.contains("topic `/landmarks` message"),

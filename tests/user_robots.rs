@@ -19,6 +19,10 @@ fn run_in(dir: &Path, args: &[&str]) -> std::process::Output {
     o
 }
 
+/// A user's robot through every stage: the spec `tests/user_specs/{spec}`
+/// in a directory of its own, a log simulated with the `hidden` effect, the
+/// fit that misses it, the diagnosis that must name `effect` with `param`
+/// near `value`, the spec with it added, and the crate generated from that.
 fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str, value: f64) {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
@@ -30,6 +34,22 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
     )
     .unwrap();
     let s = spec_path.file_name().unwrap().to_str().unwrap();
+    let fit = simulate_and_fit(dir, s, spec, hidden, sets);
+    let est = diagnosed(dir, s, spec, effect, param, value);
+    add_effect_keeping_comments(dir, &spec_path, spec, effect, param, est);
+    refit_with_the_effect(dir, spec, effect, param, value, &fit);
+    generated_crate_builds_and_verifies(dir, spec);
+}
+
+/// simulate with the hidden effect, compare, and fit the spec as it is
+/// (which misses the effect): its JSON.
+fn simulate_and_fit(
+    dir: &Path,
+    s: &str,
+    spec: &str,
+    hidden: &str,
+    sets: &[&str],
+) -> serde_json::Value {
     let mut sim = vec![
         "simulate",
         "--spec",
@@ -65,6 +85,12 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
         "{spec}: {}",
         fit["after"]
     );
+    fit
+}
+
+/// diagnose names `effect` first, its `param` within 10% of `value`, and
+/// accounts for every catalogue effect: the estimate.
+fn diagnosed(dir: &Path, s: &str, spec: &str, effect: &str, param: &str, value: f64) -> f64 {
     let d: serde_json::Value = serde_json::from_slice(
         &run_in(
             dir,
@@ -87,6 +113,20 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
         .unwrap()
         .count();
     assert_eq!(tested, catalogue, "{spec}: {d}");
+    est
+}
+
+/// add-effect writes `fixed.toml` with the estimate and keeps the user's
+/// comments.
+fn add_effect_keeping_comments(
+    dir: &Path,
+    spec_path: &Path,
+    spec: &str,
+    effect: &str,
+    param: &str,
+    est: f64,
+) {
+    let s = spec_path.file_name().unwrap().to_str().unwrap();
     let v = format!("{param}={est}");
     run_in(
         dir,
@@ -102,7 +142,7 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
             "fixed.toml",
         ],
     );
-    let before = std::fs::read_to_string(&spec_path).unwrap();
+    let before = std::fs::read_to_string(spec_path).unwrap();
     let after = std::fs::read_to_string(dir.join("fixed.toml")).unwrap();
     let comments = |t: &str| {
         t.lines()
@@ -115,6 +155,18 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
         comments(&after),
         "{spec}: add-effect must keep the user's comments"
     );
+}
+
+/// The augmented spec calibrates the effect and fits better than the spec
+/// as it was (`fit`).
+fn refit_with_the_effect(
+    dir: &Path,
+    spec: &str,
+    effect: &str,
+    param: &str,
+    value: f64,
+    fit: &serde_json::Value,
+) {
     // the augmented spec fits better than the spec as it was
     let fixed: serde_json::Value = serde_json::from_slice(
         &run_in(
@@ -146,6 +198,11 @@ fn user_robot(spec: &str, hidden: &str, sets: &[&str], effect: &str, param: &str
         );
         assert!(a < 0.5 * b, "{spec}: {a} vs {b}");
     }
+}
+
+/// The augmented spec generates a crate that builds outside the workspace,
+/// keeps a manifest the user edited, and verifies (with CasADi).
+fn generated_crate_builds_and_verifies(dir: &Path, spec: &str) {
     // the augmented spec generates a crate and its kernels verify
     std::fs::create_dir_all(dir.join("specs")).unwrap();
     std::fs::copy(dir.join("fixed.toml"), dir.join("specs/fixed.toml")).unwrap();
