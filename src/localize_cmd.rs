@@ -310,9 +310,9 @@ fn fmt_spread(x: &Spread) -> String {
 }
 
 /// A mean NIS or NEES against its bounds, and what that says of `who` (the
-/// filter, or the smoother whose covariance `--track` writes).
-/// A mean against its bounds, which count the `values` (rows, sightings)
-/// as the independent values they are worth.
+/// filter, or the smoother whose covariance `--track` writes); the bounds
+/// count the `values` (rows, sightings) as the independent ones they are
+/// worth.
 fn verdict(m: Option<f64>, b: Option<Bounds>, values: &str, who: &str) -> String {
     let (Some(m), Some(b), Some(s)) = (m, b, side(m, b)) else {
         return "n/a".into();

@@ -9,9 +9,9 @@
 //! of tau rows varies as much as the mean of n / tau independent ones
 //! (Sokal 1997, "Monte Carlo methods in statistical mechanics", eq. 2.20),
 //! so the bounds are chi-square's for n / tau values. Counted as
-//! independent, a 760 s run of 49,235 rows has NEES bounds 2.98-3.02; its
-//! errors lasting 16 s, they are worth about 30 independent values and the
-//! bounds are 2.1-3.9. A consistent filter's innovations are white, so the
+//! independent, MRCLAM robot 1's 760 s run of 49,235 rows has NEES bounds
+//! 2.98-3.02; its errors lasting about 16 s, the rows are worth 27
+//! independent values and the bounds are 2.15-3.99. A consistent filter's innovations are white, so the
 //! NIS's tau is near 1 and its bounds barely move; a filter whose
 //! innovations linger gets bounds as wide as its evidence is thin.
 
