@@ -120,7 +120,7 @@ struct RawNoise {
     #[serde(default)]
     sigma: f64,
     #[serde(default)]
-    unit: String,
+    unit: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -646,12 +646,29 @@ impl RawInput {
 impl RawNoise {
     fn to_noise(&self, cx: &Ctx) -> Result<Noise, SourceError> {
         if self.sigma.is_finite() && self.sigma >= 0.0 {
-            Ok(Noise {
+            let noise = Noise {
                 name: self.name.get_ref().clone(),
                 doc: self.doc.clone(),
                 sigma: self.sigma,
-                unit: self.unit.clone(),
-            })
+                unit: self
+                    .unit
+                    .as_ref()
+                    .map(|u| u.get_ref().clone())
+                    .unwrap_or_default(),
+            };
+            // a unit that means a density but is not read as one would make
+            // the filter add the noise per row, silently
+            match &self.unit {
+                Some(u) if !noise.is_density() && looks_like_density(u.get_ref()) => Err(cx.err_span(
+                    u,
+                    format!(
+                        "noise `{}`: unit `{}` reads as a per-row sigma: a density is written `.../sqrt(Hz)` or `...*sqrt(s)`",
+                        noise.name,
+                        u.get_ref()
+                    ),
+                )),
+                _ => Ok(noise),
+            }
         } else {
             Err(cx.err_span(
                 &self.name,
@@ -663,6 +680,13 @@ impl RawNoise {
             ))
         }
     }
+}
+
+/// Whether a noise unit speaks of a spectral density (a square root, hertz)
+/// in some form [`Noise::is_density`] does not read.
+fn looks_like_density(unit: &str) -> bool {
+    let u = unit.to_ascii_lowercase();
+    ["sqrt", "hz", "\u{221a}"].iter().any(|d| u.contains(d))
 }
 
 /// The parameters: finite nominal values within finite, ordered bounds, and
