@@ -100,14 +100,20 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
     let r = &prep.runner;
     let (noise, note) = (&done.noise, &done.note);
     out.say(note);
-    for line in noise.describe() {
+    let base = kinegen_analysis::landmarks::sigma(r);
+    let whose = if kinegen_analysis::landmarks::declares_sigma(r) {
+        "the spec's"
+    } else {
+        "the defaults'"
+    };
+    for line in noise.describe(base, whose) {
         out.say(&format!("  {line}"));
     }
     if let Some(advice) = reading_advice(c, noise, &r.ir) {
         out.say(&format!("  {advice}"));
     }
     // the report's noise table: the noise, and the delay it was estimated with
-    let mut described = noise.describe();
+    let mut described = noise.describe(base, whose);
     for d in &done.timing {
         out.say(&say_timing(d));
         described.push(say_timing(d));

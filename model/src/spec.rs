@@ -175,7 +175,7 @@ struct RawObservation {
     #[serde(default)]
     angle: Vec<bool>,
     #[serde(default)]
-    sigma: Vec<f64>,
+    sigma: Option<Spanned<Vec<f64>>>,
     #[serde(default)]
     landmark: bool,
     /// What the observation measures; inferred from its expressions when absent.
@@ -909,9 +909,8 @@ fn parse_observation(
             ),
         ));
     }
-    if !o.angle.is_empty() && o.angle.len() != ncols
-        || !o.sigma.is_empty() && o.sigma.len() != ncols
-    {
+    let sigma: &[f64] = o.sigma.as_ref().map_or(&[], |s| s.get_ref());
+    if !o.angle.is_empty() && o.angle.len() != ncols || !sigma.is_empty() && sigma.len() != ncols {
         return Err(cx.err_span(
             &o.columns,
             "`angle` and `sigma` must have one entry per column",
@@ -922,11 +921,18 @@ fn parse_observation(
         .iter()
         .map(|s| observation_expr(cx, s, o.landmark, names))
         .collect::<Result<Vec<_>, _>>()?;
-    if let Some(s) = o.sigma.iter().find(|s| !s.is_finite() || **s < 0.0) {
+    // a sigma of 0 would claim an exact sensor, which no filter or fit can
+    // weigh (the analysis took the defaults instead, without a word)
+    if let Some((s, at)) = o.sigma.as_ref().and_then(|at| {
+        Some((
+            at.get_ref().iter().find(|s| !s.is_finite() || **s <= 0.0)?,
+            at,
+        ))
+    }) {
         return Err(cx.err_span(
-            &o.columns,
+            at,
             format!(
-                "observation `{}`: sigma {s} must be a finite number >= 0",
+                "observation `{}`: sigma {s} must be a finite number above 0 (leave `sigma` out for the defaults)",
                 o.name.get_ref()
             ),
         ));
@@ -946,10 +952,10 @@ fn parse_observation(
             doc: o.doc.clone(),
             columns: o.columns.get_ref().clone(),
             angle,
-            sigma: if o.sigma.is_empty() {
+            sigma: if sigma.is_empty() {
                 vec![0.0; ncols]
             } else {
-                o.sigma.clone()
+                sigma.to_vec()
             },
             landmark: o.landmark,
             role,

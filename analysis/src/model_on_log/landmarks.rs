@@ -493,6 +493,13 @@ fn solve_start(
 /// defaults when it declares none).
 pub fn sigma(r: &Runner) -> [f64; 2] {
     r.obs_sigma(RangeBearing)
-        .filter(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0))
+        .filter(|_| declares_sigma(r))
         .map_or(DEFAULT_SIGMA, |s| [s[0], s[1]])
+}
+
+/// Whether the model's `landmark` observation declares its sigmas (the
+/// spec leaves them at 0 where it gives none, and refuses a 0 it is given).
+pub fn declares_sigma(r: &Runner) -> bool {
+    r.obs_sigma(RangeBearing)
+        .is_some_and(|s| s.len() == 2 && s.iter().all(|v| *v > 0.0))
 }

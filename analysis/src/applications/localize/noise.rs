@@ -133,8 +133,11 @@ impl NoiseModel {
         }
     }
 
-    /// A line per sigma, for people.
-    pub fn describe(&self) -> Vec<String> {
+    /// A line per sigma, for people: the observation errors in metres and
+    /// radians, and as the factors on `base`, the observation's range and
+    /// bearing sigmas ([`crate::landmarks::sigma`]), which are `whose`
+    /// ("the spec's", or the defaults' where the spec gives none).
+    pub fn describe(&self, base: [f64; 2], whose: &str) -> Vec<String> {
         let mut out: Vec<String> = self
             .names
             .iter()
@@ -151,19 +154,27 @@ impl NoiseModel {
                 }
             })
             .collect();
+        let [range, bearing] = base;
         out.push(format!(
-            "observation sigmas, white part: the spec's times {:.3} (range) and {:.3} (bearing)",
-            self.obs_scale[0], self.obs_scale[1]
+            "observation sigmas, white part: {:.4} m (range) and {:.4} rad (bearing), {whose} {range} m and {bearing} rad times {:.3} and {:.3}",
+            range * self.obs_scale[0],
+            bearing * self.obs_scale[1],
+            self.obs_scale[0],
+            self.obs_scale[1]
         ));
         let parts = [
             ("persistent", "per landmark", &self.persistent),
             ("shared", "one for every landmark", &self.shared),
         ];
-        for (what, whose, part) in parts {
+        for (what, which, part) in parts {
             if !part.is_none() {
                 out.push(format!(
-                    "observation errors, {what} part ({whose}, lasting about {}): the spec's range sigma times {:.3} per metre of range, its bearing sigma times {:.3}",
-                    seconds(part.memory_s), part.factor[0], part.factor[1]
+                    "observation errors, {what} part ({which}, lasting about {}): {:.4} m per metre of range and {:.4} rad of bearing, {whose} sigmas times {:.3} and {:.3}",
+                    seconds(part.memory_s),
+                    range * part.factor[0],
+                    bearing * part.factor[1],
+                    part.factor[0],
+                    part.factor[1]
                 ));
             }
         }
