@@ -200,6 +200,11 @@ fn real_optiodom_runs_compare_and_fit_with_holdout() {
 
 /// (file content, expected "file:row: column `c`" fragment, expected message)
 fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
+    [bad_cells_and_times(), bad_headers_and_comments()].concat()
+}
+
+/// Bad cells, times, lengths and column names.
+fn bad_cells_and_times() -> Vec<(&'static str, String, &'static str)> {
     let ok_header = "t,enc_r,enc_l,gt_x,gt_y,gt_theta";
     vec![
         ("", ":1".into(), "the file is empty"),
@@ -291,6 +296,14 @@ fn bad_logs() -> Vec<(&'static str, String, &'static str)> {
             "short.csv".into(),
             "at least 3",
         ),
+    ]
+}
+
+/// A missing, numeric or mis-separated header; comment lines before it and
+/// among the rows.
+fn bad_headers_and_comments() -> Vec<(&'static str, String, &'static str)> {
+    let ok_header = "t,enc_r,enc_l,gt_x,gt_y,gt_theta";
+    vec![
         // a log without its header
         (
             "0,0,0,0,0,0\n0.05,1,1,0,0,0\n0.1,2,2,0,0,0\n",
