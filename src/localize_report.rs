@@ -6,7 +6,6 @@
 use crate::report::{
     axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
 };
-use kinegen_analysis::localize::bounds::correlation_time;
 use kinegen_analysis::localize::{
     mean_bounds, Bounds, Consistency, Localization, Overconfident, Spread, Summary,
 };
@@ -236,9 +235,12 @@ fn nis_over_time(p: &RunPage) -> Result<String, String> {
         })
         .collect();
     // the band of a window's mean counts its sightings as the independent
-    // values they are worth, as the run's bounds do
-    let nis: Vec<f64> = pts.iter().map(|q| q.1).collect();
-    let (lo, hi) = mean_bounds((w as f64 / correlation_time(&nis)).max(1.0), 2.0);
+    // values they are worth, at the run's share ([`Bounds`])
+    let worth = p
+        .summary
+        .nis_bounds
+        .map_or(1.0, |b| b.independent / pts.len().max(1) as f64);
+    let (lo, hi) = mean_bounds((w as f64 * worth).max(1.0), 2.0);
     let (a, b) = (
         pts.first().map_or(0.0, |q| q.0),
         pts.last().map_or(1.0, |q| q.0),
