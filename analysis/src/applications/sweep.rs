@@ -45,10 +45,8 @@ fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
         r.ir.observation_kernels(RangeBearing)
             .map(|o| o.value)
             .expect("checked by the caller");
-    let sig = r
-        .obs_sigma(RangeBearing)
-        .filter(|s| s.len() == 2)
-        .map_or(crate::landmarks::DEFAULT_SIGMA.to_vec(), |s| s.to_vec());
+    // the sigmas the filter weighs the sightings with
+    let sig = crate::landmarks::sigma(r);
     let mut x = run.start_pose();
     let mut truth = vec![x];
     for k in 0..run.steps() {
