@@ -206,6 +206,10 @@ fn run_json(
         "position_rmse_m": s.rmse, "dead_reckoning_rmse_m": s.dead_reckoning,
         "nis_mean": s.nis, "nis_bounds": s.nis_bounds.map(|b| [b.lo, b.hi]),
         "nis_independent": s.nis_bounds.map(|b| b.independent),
+        "gate_tail": s.gate_tail.map(|g| json!({
+            "rejected_share": g.share(), "consistent_share": g.expected,
+            "consistent_share_bound": g.bound, "overconfident": g.overconfident(),
+        })),
         "nees_mean": s.nees, "nees_bounds": s.nees_bounds.map(|b| [b.lo, b.hi]),
         "nees_independent": s.nees_bounds.map(|b| b.independent),
         "nis_spread": s.nis_spread.map(spread_json), "nees_spread": s.nees_spread.map(spread_json),
@@ -365,6 +369,9 @@ fn say_run(
         "  mean NIS  {}",
         verdict(s.nis, s.nis_bounds, "sightings", "filter")
     ));
+    if let Some(line) = crate::localize_report::say_gate_tail(s) {
+        out.say(&format!("    {line}"));
+    }
     out.say(&format!(
         "  mean NEES {}",
         verdict(s.nees, s.nees_bounds, "rows", "filter")

@@ -7,7 +7,8 @@ use crate::report::{
     axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
 };
 use kinegen_analysis::localize::{
-    mean_bounds, Bounds, Consistency, Localization, Overconfident, Spread, Summary,
+    mean_bounds, side, Bounds, Consistency, GateTail, Localization, Overconfident, Side, Spread,
+    Summary,
 };
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
@@ -310,7 +311,7 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
         "<table><tr><th>run</th><th>position RMSE (m)</th><th>smoothed RMSE (m)</th><th>dead reckoning RMSE (m)</th>\
          <th>mean NEES (95% bounds)</th><th>smoothed mean NEES (95% bounds)</th><th>NEES median (chi-square's) / beyond 95% point</th>\
          <th>mean NIS (95% bounds)</th><th>NIS median (chi-square's) / beyond 95% point</th>\
-         <th>sightings used</th><th>rejected</th><th>outside the log</th></tr>",
+         <th>sightings used</th><th>rejected (a consistent filter's share, at most by chance)</th><th>outside the log</th></tr>",
     );
     for p in runs {
         let s = p.summary;
@@ -336,7 +337,7 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
             bounded(s.nis, s.nis_bounds),
             spread(s.nis_spread),
             p.loc.accepted,
-            p.loc.rejected,
+            rejected_cell(p.loc.rejected, s.gate_tail),
             p.loc.outside,
         );
     }
@@ -353,6 +354,24 @@ fn tables(runs: &[RunPage], noise: &[String]) -> String {
         t += &format!("<tr><td>{}</td></tr>", esc(line));
     }
     t + "</table>"
+}
+
+/// The gate's rejections with their share against a consistent filter's.
+fn rejected_cell(rejected: usize, tail: Option<GateTail>) -> String {
+    match tail {
+        Some(g) => format!(
+            "{rejected}: {:.2}% ({:.2}%, at most {:.2}%){}",
+            100.0 * g.share(),
+            100.0 * g.expected,
+            100.0 * g.bound,
+            if g.overconfident() {
+                ": the innovations' tail is overconfident"
+            } else {
+                ""
+            }
+        ),
+        None => rejected.to_string(),
+    }
 }
 
 /// The NEES taken apart (runs with a ground truth): which belief is
@@ -392,11 +411,37 @@ pub fn say_consistency(s: &Summary) -> Option<String> {
             if pessimistic_core { "below" } else { "above" },
         )),
         Consistency::Contradict => Some(format!(
-            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are; {}",
+            "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are{}; {}",
+            if tail_sides_with_the_nees(s) {
+                " (though the gate's rejections side with the NEES: the sightings' innovations are overconfident in their tail)"
+            } else {
+                ""
+            },
             s.overconfident_part()
                 .map_or(UNSEEN_ERROR, what_is_overconfident)
         )),
     }
+}
+
+/// The mean NIS says pessimistic and the NEES overconfident, while the
+/// gate rejected more than a consistent filter would: the NIS's own tail
+/// agrees with the NEES.
+fn tail_sides_with_the_nees(s: &Summary) -> bool {
+    side(s.nis, s.nis_bounds) == Some(Side::Below)
+        && side(s.nees, s.nees_bounds) == Some(Side::Above)
+        && s.gate_tail.is_some_and(|g| g.overconfident())
+}
+
+/// What the gate's rejections say (None where they are within what a
+/// consistent filter rejects by chance).
+pub fn say_gate_tail(s: &Summary) -> Option<String> {
+    let g = s.gate_tail.filter(|g| g.overconfident())?;
+    Some(format!(
+        "the gate rejected {:.2}% of the sightings, where a consistent filter rejects {:.2}% (at most {:.2}% by chance): the innovations have a heavier tail than the filter's covariance says (gross sensor errors, or moments the filter is far more wrong than it believes), which the mean NIS over the sightings let through does not count",
+        100.0 * g.share(),
+        100.0 * g.expected,
+        100.0 * g.bound
+    ))
 }
 
 /// What the innovations' likelihood that chose the noise may not see, when

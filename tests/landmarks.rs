@@ -526,7 +526,12 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
     );
     // with the spec's own, much smaller process noise the filter is overconfident and says so
     let o = kinegen(&localize_args(spec, &log, &obs, &m, &["--spec-noise"]));
-    assert!(stdout(&o).contains("overconfident"), "{}", stdout(&o));
+    assert!(
+        stdout(&o).contains("overconfident"),
+        "{}{}",
+        stdout(&o),
+        stderr(&o)
+    );
     let o = kinegen(&localize_args(
         spec,
         &log,

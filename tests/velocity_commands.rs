@@ -540,6 +540,15 @@ fn check_localized(robot: usize, loc: &Value) {
     if side("nis_mean", "nis_bounds") * side("nees_mean", "nees_bounds") < 0 {
         assert_ne!(r["consistency"], "agree", "robot{robot}: {r}");
     }
+    // the gate rejects 1.0-2.3% of these sightings, 10-23 times a
+    // consistent filter's 0.1%: the NIS's own tail is overconfident, which
+    // its mean over the sightings let through does not count
+    let tail = &r["gate_tail"];
+    assert_eq!(tail["overconfident"], true, "robot{robot}: {tail}");
+    assert!(
+        (tail["consistent_share"].as_f64().unwrap() - 0.001).abs() < 1e-4,
+        "robot{robot}: {tail}"
+    );
     // an overconfident NEES is taken apart: the belief that is wrong is
     // named (on these robots the position; the heading alone is at or
     // below its bounds, as the NIS is)
@@ -1130,6 +1139,8 @@ fn nees_counts_the_ground_truths_own_noise() {
         assert!((0.5..2.0).contains(&ratio), "{key}: {s}");
     }
     assert_eq!(run["consistency"], "agree", "{run}");
+    // the gate rejects no more than a consistent filter does by chance
+    assert_eq!(run["gate_tail"]["overconfident"], false, "{run}");
     // each of the pose's parts against its own marginal: near its degrees
     // of freedom (position 2, heading 1)
     let parts = &run["nees_parts"];

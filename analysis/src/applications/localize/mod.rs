@@ -28,6 +28,7 @@ mod active;
 mod belief;
 pub mod bounds;
 mod filter;
+pub mod gate_tail;
 pub mod noise;
 pub mod reading;
 mod simplex;
@@ -37,6 +38,7 @@ pub mod timing;
 
 pub use bounds::{chi2_quantile, mean_bounds, Bounds};
 pub use filter::{Filter, Keep, Pass};
+pub use gate_tail::GateTail;
 pub use noise::{Lingering, NoiseModel, NoiseSource};
 pub use summary::{
     side, summarise, Consistency, NeesParts, Overconfident, Side, SmoothedSummary, Spread, Summary,
@@ -105,6 +107,8 @@ pub struct Localization {
     pub nees: Vec<Nees>,
     pub accepted: usize,
     pub rejected: usize,
+    /// The NIS beyond which a sighting was rejected.
+    pub gate: f64,
     /// Sightings outside the run's time span.
     pub outside: usize,
 }
@@ -209,6 +213,7 @@ pub fn localize_with(
         nis: pass.nis,
         accepted: pass.accepted,
         rejected: pass.rejected,
+        gate: o.gate,
         outside: pass.outside,
     })
 }

@@ -3,7 +3,7 @@
 //! NEES with their chi-square bounds, and how their values spread (median,
 //! share in the tail), which tells a filter wrong at times from one wrong
 //! throughout.
-use super::{chi2_quantile, nees_of, truth_noise, Bounds, Localization, Nees, Sensed};
+use super::{chi2_quantile, nees_of, truth_noise, Bounds, GateTail, Localization, Nees, Sensed};
 use crate::model::Runner;
 use crate::run::Run;
 
@@ -14,6 +14,9 @@ pub struct Summary {
     pub dead_reckoning: Option<f64>,
     pub nis: Option<f64>,
     pub nis_bounds: Option<Bounds>,
+    /// The gate's rejections against a consistent filter's: the NIS's tail,
+    /// which its mean over the sightings let through does not count.
+    pub gate_tail: Option<GateTail>,
     pub nees: Option<f64>,
     pub nees_bounds: Option<Bounds>,
     /// The smoother's figures (with `--smooth`).
@@ -278,11 +281,13 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
             nees_bounds: Bounds::of_series(&nees, 3.0),
         }
     });
+    let nis_bounds = Bounds::of_series(&loc.nis.iter().map(|n| n.1).collect::<Vec<_>>(), 2.0);
     Summary {
         rmse: position_rmse(r, run, &loc.track),
         dead_reckoning,
         nis: mean(loc.nis.iter().map(|n| n.1)),
-        nis_bounds: Bounds::of_series(&loc.nis.iter().map(|n| n.1).collect::<Vec<_>>(), 2.0),
+        nis_bounds,
+        gate_tail: gate_tail(loc, nis_bounds),
         nees: mean(loc.nees.iter().map(|n| n.pose)),
         truth_noise: truth_noise(run).filter(|_| !loc.nees.is_empty()),
         nees_bounds: Bounds::of_series(&loc.nees.iter().map(|n| n.pose).collect::<Vec<_>>(), 3.0),
@@ -295,6 +300,15 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
         ),
         smoothed,
     }
+}
+
+/// The gate's rejections in `loc` against a consistent filter's, the
+/// judged sightings worth as many independent ones, in proportion, as the
+/// NIS of those let through (`nis_bounds`).
+fn gate_tail(loc: &Localization, nis_bounds: Option<Bounds>) -> Option<GateTail> {
+    let judged = loc.accepted + loc.rejected;
+    let worth = nis_bounds.map_or(1.0, |b| b.independent / loc.nis.len().max(1) as f64);
+    GateTail::new(loc.rejected, judged, loc.gate, 2.0, judged as f64 * worth)
 }
 
 #[cfg(test)]
@@ -319,6 +333,7 @@ mod tests {
             nis: m(nis),
             // the values sorted, not a time series: counted as independent
             nis_bounds: Some(Bounds::independent(nis.len(), 2.0)),
+            gate_tail: None,
             nees: m(nees),
             nees_bounds: Some(Bounds::independent(nees.len(), 3.0)),
             smoothed: None,
