@@ -447,3 +447,64 @@ fn bad_user_input_is_located() {
         stderr(&o)
     );
 }
+
+/// A three-wheel omni base in encoder ticks of 12,288 per wheel revolution
+/// (`tests/user_specs/omni3_ticks.toml`, written from OptiOdom's geometry):
+/// its map from tick rates to the twist is well conditioned but has entries
+/// near 2.6e-5, and an absolute test on its determinant (1e-14) called it
+/// singular everywhere, which stopped every command. Its inverse gives the
+/// tick rates of a straight drive (vx = r w sqrt(3)/2 on wheels 1 and 2, 0 on
+/// wheel 3), and on the real omni3 of `optiodom-dev` a fit of one session
+/// halves the position error on another's runs.
+#[test]
+fn three_wheel_omni_base_in_high_resolution_ticks() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let spec = dir.join("tri_omni.toml");
+    std::fs::copy(root().join("tests/user_specs/omni3_ticks.toml"), &spec).unwrap();
+    let path = dir.join("path.csv");
+    std::fs::write(&path, "t,x,y,theta\n0,0,0,0\n1,0.3,0,0\n2,0.6,0,0\n").unwrap();
+    let o = run_in(
+        dir,
+        &[
+            "inverse",
+            "--spec",
+            "tri_omni.toml",
+            "--path",
+            "path.csv",
+            "--json",
+            "-",
+        ],
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let peak = |i: usize| doc["specs"][0]["inputs"][i]["peak_rate"].as_f64().unwrap();
+    let expected = 0.3 * 3f64.sqrt() / 2.0 / 0.051 * 12288.0 / std::f64::consts::TAU;
+    assert!((peak(0) / expected - 1.0).abs() < 1e-9, "{doc}");
+    assert!((peak(1) / expected - 1.0).abs() < 1e-9, "{doc}");
+    assert!(peak(2).abs() < 1e-6 * expected, "{doc}");
+    let Some(real) = real_data("optiodom-dev") else {
+        return;
+    };
+    let runs = |session: &str, flag: &'static str| -> Vec<String> {
+        (1..=4)
+            .flat_map(|k| {
+                let f = real.join(format!("omni3-circular-{session}/run-0{k}.csv"));
+                [flag.to_string(), f.to_str().unwrap().to_string()]
+            })
+            .collect()
+    };
+    let mut args: Vec<String> = ["fit", "--spec", "tri_omni.toml", "--json", "-"]
+        .map(String::from)
+        .to_vec();
+    args.extend(runs("221220201643", "--data"));
+    args.extend(runs("221220201701", "--holdout"));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let fit: serde_json::Value = serde_json::from_slice(&run_in(dir, &args).stdout).unwrap();
+    let rmse = |when: &str| fit["holdout"][when]["rmse"].as_f64().unwrap();
+    assert!(
+        rmse("after") < 0.5 * rmse("before"),
+        "held-out RMSE {} -> {}",
+        rmse("before"),
+        rmse("after")
+    );
+}

@@ -1244,16 +1244,37 @@ impl<'a> InverseCx<'a> {
                 })
                 .collect();
             let (inv, det) = symbolic_inverse(&m);
-            let singular_everywhere = (0..6).all(|k| {
-                eval_at(&det, &self.point(k), self.sym)
-                    .map(|d| d.abs() < 1e-12)
-                    .unwrap_or(true)
-            });
+            let singular_everywhere = (0..6).all(|k| self.singular_at(&m, &det, &self.point(k)));
             if !singular_everywhere {
                 return (Some((rows, inv)), any_square);
             }
         }
         (None, any_square)
+    }
+
+    /// Whether the rows `m` (in the rates) with determinant `det` are
+    /// singular at `pt` (or cannot be evaluated there). The test is relative
+    /// to Hadamard's bound, the product of the rows' lengths, which |det|
+    /// never exceeds: an absolute one took the well-conditioned matrix of
+    /// a three-wheel omni base in encoder ticks (entries r 2 pi / 12,288 =
+    /// 2.6e-5) for singular, its determinant being 1e-14.
+    fn singular_at(&self, m: &[Vec<Atom>], det: &Atom, pt: &[(Symbol, f64)]) -> bool {
+        let Ok(d) = eval_at(det, pt, self.sym) else {
+            return true;
+        };
+        let lengths: Option<f64> = m
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .map(|e| eval_at(e, pt, self.sym).ok().map(|v| v * v))
+                    .sum::<Option<f64>>()
+                    .map(f64::sqrt)
+            })
+            .product();
+        match lengths {
+            Some(bound) if bound.is_finite() && bound > 0.0 => d.abs() <= 1e-10 * bound,
+            _ => true,
+        }
     }
 
     /// The inverse kernels: the rates for a twist, and for a pose increment.
