@@ -535,15 +535,22 @@ fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<
         doc["holdout"] = json!({"before": {"rmse": hb.errors.rmse, "errors": hb.errors}, "after": {"rmse": ha.errors.rmse, "errors": ha.errors}});
     }
     if runs.len() > 1 {
+        // the first column as wide as the longest path, so the figures line up
+        let width = (prep.runs.iter())
+            .chain(&prep.holdout)
+            .map(|r| r.path.chars().count())
+            .max()
+            .unwrap_or(0)
+            .max(40);
         out.say(&format!(
-            "  {:<40} {:>8} {:>10} {:>10} {:>12}",
+            "  {:<width$} {:>8} {:>10} {:>10} {:>12}",
             "run", "role", "RMSE m", "final m", "before m"
         ));
         // the fitted runs, then the held-out ones: each run's errors after, and before
         let say = |runs: &[Run], before: &[Errors], after: &[Errors], role: &str| {
             for (run, (b, a)) in runs.iter().zip(before.iter().zip(after)) {
                 out.say(&format!(
-                    "  {:<40} {:>8} {:>10.4} {:>10.4} {:>12.4}",
+                    "  {:<width$} {:>8} {:>10.4} {:>10.4} {:>12.4}",
                     run.path, role, a.rmse, a.final_position_error_m, b.rmse,
                 ));
             }
