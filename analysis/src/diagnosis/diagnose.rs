@@ -131,17 +131,36 @@ pub fn weighted_rms(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 
     crate::fit::rms_with_fitted_starts(r, p, runs, o)
 }
 
-/// Split every run at `frac` of its rows: (train, test).
+/// Split every run at `frac` of its evidence: (train, test). With a ground
+/// truth, at `frac` of its rows; without one, at the row of the sighting
+/// `frac` of the way through its sightings, the residuals a run without a
+/// ground truth has. Cut by rows, a robot that saw its landmarks only early
+/// on (a tour that leaves the mapped area) had a held-out part without a
+/// single residual, a held-out error of 0, and no effect could be
+/// significant however clear (a 0.03 rad toe, estimated to 1%, its error
+/// 60% lower: "no catalogue effect is significant").
 pub fn split(runs: &[Run], frac: f64) -> (Vec<Run>, Vec<Run>) {
     let mut tr = Vec::new();
     let mut te = Vec::new();
     for r in runs {
         let n = r.t.len();
-        let cut = ((n as f64 * frac) as usize).clamp(2, n - 2);
+        let cut = cut_row(r, frac).clamp(2, n - 2);
         tr.push(r.slice(0, cut + 1));
         te.push(r.slice(cut, n));
     }
     (tr, te)
+}
+
+/// The row at `frac` of run `r`'s evidence (see [`split`]).
+fn cut_row(r: &Run, frac: f64) -> usize {
+    let by_rows = (r.t.len() as f64 * frac) as usize;
+    if r.gt.is_some() || r.landmarks.is_empty() {
+        return by_rows;
+    }
+    let mut times: Vec<f64> = r.landmarks.iter().map(|o| o.t).collect();
+    times.sort_by(f64::total_cmp);
+    let at = times[((times.len() as f64 * frac) as usize).min(times.len() - 1)];
+    r.t.partition_point(|t| *t < at)
 }
 
 fn bic(cost: f64, n: usize, k: usize) -> f64 {
