@@ -90,6 +90,24 @@ fn strip_ground_truth(log: &Path, out: &Path) {
     std::fs::write(out, s).unwrap();
 }
 
+/// `command` (fit, diagnose) of the bundled diff drive on `log` without its
+/// ground truth, with its sightings `obs` of `map`: its JSON.
+fn on_sightings_alone(command: &str, log: &Path, obs: &Path, map: &Path) -> serde_json::Value {
+    let nogt = log.with_file_name("nogt.csv");
+    strip_ground_truth(log, &nogt);
+    kinegen_json(&[
+        command,
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        nogt.to_str().unwrap(),
+        "--observations",
+        obs.to_str().unwrap(),
+        "--landmarks",
+        map.to_str().unwrap(),
+    ])
+}
+
 #[test]
 fn compare_reports_landmark_innovations() {
     let tmp = tempfile::tempdir().unwrap();
@@ -127,19 +145,7 @@ fn compare_reports_landmark_innovations() {
 fn landmarks_alone_calibrate_the_wheelbase() {
     let tmp = tempfile::tempdir().unwrap();
     let (log, obs, map) = landmark_log(tmp.path());
-    let nogt = tmp.path().join("nogt.csv");
-    strip_ground_truth(&log, &nogt);
-    let doc = kinegen_json(&[
-        "fit",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--data",
-        nogt.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-    ]);
+    let doc = on_sightings_alone("fit", &log, &obs, &map);
     assert_eq!(doc["metric"], "landmark_range_rmse_m");
     let b = doc["parameters"]["b"]["estimate"].as_f64().unwrap();
     assert!((b - 0.205).abs() / 0.205 < 0.005, "b = {b}");
@@ -197,19 +203,7 @@ fn landmarks_alone_name_an_effect_seen_only_early_in_the_log() {
         last_sighting < 0.4 * last_row,
         "{last_sighting} of {last_row} s"
     );
-    let nogt = dir.join("nogt.csv");
-    strip_ground_truth(&log, &nogt);
-    let doc = kinegen_json(&[
-        "diagnose",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--data",
-        nogt.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-    ]);
+    let doc = on_sightings_alone("diagnose", &log, &obs, &map);
     assert_eq!(
         doc["verdict"]["effect"], "wheel_misalignment",
         "{}",
