@@ -90,15 +90,21 @@ fn strip_ground_truth(log: &Path, out: &Path) {
     std::fs::write(out, s).unwrap();
 }
 
-/// `command` (fit, diagnose) of the bundled diff drive on `log` without its
-/// ground truth, with its sightings `obs` of `map`: its JSON.
-fn on_sightings_alone(command: &str, log: &Path, obs: &Path, map: &Path) -> serde_json::Value {
+/// `command` (fit, diagnose) of `spec` on `log` without its ground truth,
+/// with its sightings `obs` of `map`: its JSON.
+fn on_sightings_alone(
+    command: &str,
+    spec: &str,
+    log: &Path,
+    obs: &Path,
+    map: &Path,
+) -> serde_json::Value {
     let nogt = log.with_file_name("nogt.csv");
     strip_ground_truth(log, &nogt);
     kinegen_json(&[
         command,
         "--spec",
-        "spec/diff_drive.toml",
+        spec,
         "--data",
         nogt.to_str().unwrap(),
         "--observations",
@@ -145,7 +151,7 @@ fn compare_reports_landmark_innovations() {
 fn landmarks_alone_calibrate_the_wheelbase() {
     let tmp = tempfile::tempdir().unwrap();
     let (log, obs, map) = landmark_log(tmp.path());
-    let doc = on_sightings_alone("fit", &log, &obs, &map);
+    let doc = on_sightings_alone("fit", "spec/diff_drive.toml", &log, &obs, &map);
     assert_eq!(doc["metric"], "landmark_range_rmse_m");
     let b = doc["parameters"]["b"]["estimate"].as_f64().unwrap();
     assert!((b - 0.205).abs() / 0.205 < 0.005, "b = {b}");
@@ -203,7 +209,7 @@ fn landmarks_alone_name_an_effect_seen_only_early_in_the_log() {
         last_sighting < 0.4 * last_row,
         "{last_sighting} of {last_row} s"
     );
-    let doc = on_sightings_alone("diagnose", &log, &obs, &map);
+    let doc = on_sightings_alone("diagnose", "spec/diff_drive.toml", &log, &obs, &map);
     assert_eq!(
         doc["verdict"]["effect"], "wheel_misalignment",
         "{}",
@@ -267,19 +273,7 @@ sigma = [0.03, 0.01]
             obs.to_str().unwrap(),
         ],
     );
-    let nogt = t.join("nogt.csv");
-    strip_ground_truth(&log, &nogt);
-    let doc = kinegen_json(&[
-        "fit",
-        "--spec",
-        spec_s,
-        "--data",
-        nogt.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-    ]);
+    let doc = on_sightings_alone("fit", spec_s, &log, &obs, &map);
     let est = |n: &str| doc["parameters"][n]["estimate"].as_f64().unwrap();
     assert!((est("radius") / 0.08 - 1.0).abs() < 0.005, "{doc}");
     assert!((est("track") / 0.6 - 1.0).abs() < 0.005, "{doc}");
