@@ -396,6 +396,13 @@ fn say_structure(out: &Out, d: &Diagnosis) {
         for f in &d.structure.findings {
             out.say(&format!("  {f}"));
         }
+    } else if !d.structure.findings.is_empty() {
+        // not tested (no ground truth to take one-step residuals from): not
+        // a clean bill
+        out.say(&format!(
+            "the residuals' structure is not tested: {}",
+            d.structure.findings.join("; ")
+        ));
     } else {
         out.say("the residuals left are noise (no structure explained by the motion)");
     }

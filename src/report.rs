@@ -896,8 +896,15 @@ fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis, base: &Runner) -> 
     }
     t += "</ul>";
     t += &sensor_html(d);
+    // findings of a structure test that did not run (no ground truth) say
+    // why, not what is left
+    let said = if d.structure.structured {
+        "structure left"
+    } else {
+        "structure not tested"
+    };
     for f in &d.structure.findings {
-        t += &format!("<p class=\"warn\">structure left: {}</p>", esc(f));
+        t += &format!("<p class=\"warn\">{said}: {}</p>", esc(f));
     }
     if !d.skipped.is_empty() {
         t += "<h2>Not tested</h2><ul>";
