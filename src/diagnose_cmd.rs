@@ -95,7 +95,7 @@ pub fn run(c: Common) -> ExitCode {
             "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
         "candidates": d.candidates,
         "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
-        "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc_ratio <= DISCRETISATION_WARN},
+        "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "measured": disc.measured, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc.measured.then_some(disc_ratio <= DISCRETISATION_WARN)},
         "warnings": prep.warnings,
         "clock": d.clock,
         "clock_unmeasured": d.clock_unmeasured,
@@ -413,7 +413,12 @@ fn say_structure(out: &Out, d: &Diagnosis) {
 fn say_discretisation(out: &Out, d: &Diagnosis) -> f64 {
     let disc = &d.discretisation;
     let disc_ratio = disc.error / d.noise_floor.max(1e-300);
-    if disc_ratio > DISCRETISATION_WARN {
+    if !disc.measured {
+        out.say(&format!(
+            "the model's own step at the log's {:.0} Hz is not measured (it takes a ground truth on every run, and runs of 10 rows or more)",
+            disc.rate_hz
+        ));
+    } else if disc_ratio > DISCRETISATION_WARN {
         out.say(&format!(
             "warning: the model's own step at the log's {:.0} Hz errs by about {:.3}, {disc_ratio:.1}x the noise floor {:.3} (estimated from the log at half its rate): its inputs change too fast between samples for a constant-twist step. Effects are named only beyond that error, and structure of its size may be the step's, not the robot's; a faster log would tell",
             disc.rate_hz, disc.error, d.noise_floor

@@ -218,6 +218,10 @@ fn landmarks_alone_name_an_effect_seen_only_early_in_the_log() {
     // the held-out part has sightings to score
     let held_out = doc["calibrated"]["holdout_rmse"].as_f64().unwrap();
     assert!(held_out > 0.5, "held-out error {held_out}");
+    // what takes a ground truth is said not to be measured, not to be 0
+    let step = &doc["discretisation"];
+    assert_eq!(step["measured"], false, "{step}");
+    assert!(step["far_below_noise"].is_null(), "{step}");
 }
 
 /// A user's robot whose lidar sits 0.35 m ahead of the body origin, and no

@@ -34,6 +34,10 @@ pub struct Discretisation {
     /// the fit's weighted pose residuals (as errors and the noise floor are
     /// given in diagnosis).
     pub error: f64,
+    /// Whether `error` was measured, or is 0 by construction (a log of held
+    /// commands, whose step is exact); false for a log without a ground
+    /// truth or too short to halve, of which `error` says nothing.
+    pub measured: bool,
 }
 
 /// The discretisation error of `r` calibrated at `p` (with start offsets
@@ -50,12 +54,13 @@ pub fn estimate(
     let mut dts: Vec<f64> = runs.iter().flat_map(|x| x.dt.iter().copied()).collect();
     dts.sort_by(f64::total_cmp);
     let rate_hz = dts.get(dts.len() / 2).map_or(0.0, |d| 1.0 / d);
-    let none = Discretisation {
-        rate_hz,
-        error: 0.0,
-    };
-    if runs.iter().any(|x| x.gt.is_none() || x.t.len() < 10) || runs.iter().all(commands_only) {
-        return none;
+    let exact = runs.iter().all(commands_only);
+    if runs.iter().any(|x| x.gt.is_none() || x.t.len() < 10) || exact {
+        return Discretisation {
+            rate_hz,
+            error: 0.0,
+            measured: exact,
+        };
     }
     let pose = FitOptions {
         use_gyro: false,
@@ -81,6 +86,7 @@ pub fn estimate(
         } else {
             0.0
         },
+        measured: true,
     }
 }
 
