@@ -175,7 +175,24 @@ pub(crate) fn chart(
             )))
             .map_err(|e| e.to_string())?;
         }
-        for (name, color, pts) in series {
+        if series.iter().all(|s| s.2.is_empty()) {
+            // an error chart of a run without a ground truth: empty axes
+            // under a legend read as a track that was drawn and lost
+            let style = ("sans-serif", 18).into_font().color(&BLACK.mix(0.6));
+            let (x, y) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+            c.draw_series(std::iter::once(Text::new(
+                "nothing to draw: no series has data in this run",
+                (x, y),
+                style.pos(plotters::style::text_anchor::Pos::new(
+                    plotters::style::text_anchor::HPos::Center,
+                    plotters::style::text_anchor::VPos::Center,
+                )),
+            )))
+            .map_err(|e| e.to_string())?;
+        }
+        // a series without points (the ground truth of a log that has none)
+        // gets no legend entry
+        for (name, color, pts) in series.iter().filter(|s| !s.2.is_empty()) {
             let color = *color;
             let pts = &decimated(pts);
             // in a scatter chart, a two-point series is a reference line
@@ -204,13 +221,16 @@ pub(crate) fn chart(
                 }
             }
         }
-        // at the top, in the room `legend_room` leaves above the data
-        c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        // at the top, in the room `legend_room` leaves above the data (none
+        // without an entry: an empty box)
+        if series.iter().any(|s| !s.0.is_empty() && !s.2.is_empty()) {
+            c.configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| e.to_string())?;
+        }
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
@@ -1372,5 +1392,36 @@ mod tests {
         assert!(d.windows(2).all(|w| w[0].0 < w[1].0), "order kept");
         let short = vec![(0.0, 1.0), (1.0, 2.0)];
         assert_eq!(decimated(&short), short);
+    }
+
+    /// A series without points (the ground truth of a log that has none)
+    /// gets no legend entry, and a chart none of whose series has points
+    /// says so instead of drawing empty axes under a legend.
+    #[test]
+    fn series_without_data_are_left_out_and_said() {
+        let track = vec![(0.0, 0.0), (1.0, 0.5), (2.0, 0.7)];
+        let svg = chart(
+            "trajectory",
+            "x",
+            "y",
+            &[("measured", BLACK, vec![]), ("model", RED, track)],
+            false,
+            true,
+            &[],
+        )
+        .unwrap();
+        assert!(svg.contains("model") && !svg.contains("measured"));
+        assert!(!svg.contains("nothing to draw"));
+        let empty = chart(
+            "position error",
+            "t",
+            "e",
+            &[("model", RED, vec![])],
+            false,
+            false,
+            &[],
+        )
+        .unwrap();
+        assert!(empty.contains("nothing to draw") && !empty.contains("model"));
     }
 }
