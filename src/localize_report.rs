@@ -7,8 +7,7 @@ use crate::report::{
     axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
 };
 use kinegen_analysis::localize::{
-    mean_bounds, side, Bounds, Consistency, GateTail, Localization, Overconfident, Side, Spread,
-    Summary,
+    mean_bounds, Bounds, Consistency, GateTail, Localization, Overconfident, Spread, Summary,
 };
 use kinegen_analysis::model::Runner;
 use kinegen_analysis::run::Run;
@@ -412,7 +411,7 @@ pub fn say_consistency(s: &Summary) -> Option<String> {
         )),
         Consistency::Contradict => Some(format!(
             "the medians contradict each other too: the sightings and the ground truth disagree about how large the errors are{}; {}",
-            if tail_sides_with_the_nees(s) {
+            if s.tail_sides_with_the_nees() {
                 " (though the gate's rejections side with the NEES: the sightings' innovations are overconfident in their tail)"
             } else {
                 ""
@@ -421,15 +420,6 @@ pub fn say_consistency(s: &Summary) -> Option<String> {
                 .map_or(UNSEEN_ERROR, what_is_overconfident)
         )),
     }
-}
-
-/// The mean NIS says pessimistic and the NEES overconfident, while the
-/// gate rejected more than a consistent filter would: the NIS's own tail
-/// agrees with the NEES.
-fn tail_sides_with_the_nees(s: &Summary) -> bool {
-    side(s.nis, s.nis_bounds) == Some(Side::Below)
-        && side(s.nees, s.nees_bounds) == Some(Side::Above)
-        && s.gate_tail.is_some_and(|g| g.overconfident())
 }
 
 /// What the gate's rejections say (None where they are within what a

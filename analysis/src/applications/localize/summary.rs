@@ -217,6 +217,15 @@ impl Summary {
             .flatten()
     }
 
+    /// The mean NIS says pessimistic and the NEES overconfident, while the
+    /// gate rejected more than a consistent filter would: the NIS's own tail
+    /// agrees with the NEES.
+    pub fn tail_sides_with_the_nees(&self) -> bool {
+        side(self.nis, self.nis_bounds) == Some(Side::Below)
+            && side(self.nees, self.nees_bounds) == Some(Side::Above)
+            && self.gate_tail.is_some_and(|g| g.overconfident())
+    }
+
     /// What NIS and NEES say together (None without a NEES).
     pub fn consistency(&self) -> Option<Consistency> {
         let (nis, nees) = (self.nis_spread?, self.nees_spread?);
