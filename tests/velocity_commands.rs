@@ -834,6 +834,14 @@ fn diagnose_seen_with(
     kinegen_json(&args)
 }
 
+/// `from`, a log written as the MRCLAM logs are (`t,v,omega,gt_*`), without
+/// its ground truth: its commands alone, in `to`.
+fn commands_only(from: &Path, to: &Path) {
+    rewrite_lines(from, to, |_, l| {
+        l.split(',').take(3).collect::<Vec<_>>().join(",")
+    });
+}
+
 /// Write `from`'s lines to `to`, each (its index, 0 the header, and text)
 /// through `line`.
 fn rewrite_lines(from: &Path, to: &Path, line: impl Fn(usize, &str) -> String) {
@@ -941,9 +949,7 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
     // without motion capture the sightings are all diagnose has: each
     // candidate's evidence names the sighting channel its signature is in
     let blind = dir.join("commands_only.csv");
-    rewrite_lines(&log, &blind, |_, l| {
-        l.split(',').take(3).collect::<Vec<_>>().join(",")
-    });
+    commands_only(&log, &blind);
     let d = diagnose_seen(&spec, &blind, &obs, &map);
     for c in d["candidates"].as_array().unwrap() {
         let evidence = c["evidence"].as_str().unwrap();
@@ -1471,12 +1477,8 @@ fn real_robots_without_motion_capture_are_started_where_their_sightings_put_them
         let d = real.join(format!("robot{robot}"));
         let full = std::fs::read_to_string(d.join("log.csv")).unwrap();
         let truth = ground_truth(&full);
-        let bare: Vec<String> = full
-            .lines()
-            .map(|l| l.split(',').take(3).collect::<Vec<_>>().join(","))
-            .collect();
         let log = tmp.path().join(format!("robot{robot}.csv"));
-        std::fs::write(&log, bare.join("\n") + "\n").unwrap();
+        commands_only(&d.join("log.csv"), &log);
         let track = tmp.path().join(format!("track{robot}.csv"));
         let o = kinegen(&[
             "localize",
@@ -1743,23 +1745,29 @@ fn a_calibration_on_drifting_sightings_says_it_is_biased() {
     let spec = create_spec(dir);
     let d = real.join("robot4");
     let blind = dir.join("no_vicon.csv");
-    rewrite_lines(&d.join("log.csv"), &blind, |_, l| {
-        l.split(',').take(3).collect::<Vec<_>>().join(",")
-    });
-    let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-    let args = [
-        "fit",
-        "--spec",
-        spec.to_str().unwrap(),
-        "--data",
-        blind.to_str().unwrap(),
-        "--observations",
-        &p("observations.csv"),
-        "--landmarks",
-        &p("landmarks.csv"),
-    ];
-    let fit = run_in(dir, &args);
-    let said = fit["warnings"].to_string();
+    commands_only(&d.join("log.csv"), &blind);
+    // fit on `log`'s sightings `obs` of `map`: its warnings
+    let warned = |log: &Path, obs: &Path, map: &Path| {
+        let s = |p: &Path| p.to_str().unwrap().to_string();
+        let (spec, log, obs, map) = (s(&spec), s(log), s(obs), s(map));
+        let args = [
+            "fit",
+            "--spec",
+            &spec,
+            "--data",
+            &log,
+            "--observations",
+            &obs,
+            "--landmarks",
+            &map,
+        ];
+        run_in(dir, &args)["warnings"].to_string()
+    };
+    let said = warned(
+        &blind,
+        &d.join("observations.csv"),
+        &d.join("landmarks.csv"),
+    );
     assert!(
         said.contains("drifts far beyond the sensor's noise"),
         "{said}"
@@ -1788,21 +1796,7 @@ fn a_calibration_on_drifting_sightings_says_it_is_biased() {
         ],
     );
     let clean = dir.join("sim_blind.csv");
-    rewrite_lines(&log, &clean, |_, l| {
-        l.split(',').take(3).collect::<Vec<_>>().join(",")
-    });
-    let args = [
-        "fit",
-        "--spec",
-        spec.to_str().unwrap(),
-        "--data",
-        clean.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-    ];
-    let fit = run_in(dir, &args);
-    let said = fit["warnings"].to_string();
+    commands_only(&log, &clean);
+    let said = warned(&clean, &obs, &map);
     assert!(!said.contains("drifts far beyond"), "{said}");
 }
