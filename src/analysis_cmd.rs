@@ -3,10 +3,10 @@
 //! command prints (errors, landmark innovations, warnings).
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::bag::is_bag;
-use kinegen_analysis::innovations::InnovationStats;
-use kinegen_analysis::load::Sources;
-use kinegen_analysis::metrics::Errors;
+use kinegen_analysis::logs::bag::is_bag;
+use kinegen_analysis::model_on_log::innovations::InnovationStats;
+use kinegen_analysis::model_on_log::load::Sources;
+use kinegen_analysis::model_on_log::metrics::Errors;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug, Clone)]
@@ -45,7 +45,7 @@ pub struct Common {
     /// Split a log into runs only at gaps longer than this (seconds); shorter
     /// gaps are bridged: a command holds its value, a counter's difference
     /// spreads over the interval.
-    #[arg(long, value_name = "SECONDS", default_value_t = kinegen_analysis::run::DEFAULT_MAX_GAP_S, value_parser = positive)]
+    #[arg(long, value_name = "SECONDS", default_value_t = kinegen_analysis::model_on_log::run::DEFAULT_MAX_GAP_S, value_parser = positive)]
     pub max_gap: f64,
     #[command(flatten)]
     pub catalogue: EffectDirs,

@@ -205,7 +205,7 @@ fn logs_in(dir: &Path, columns: &[String]) -> Result<(Vec<PathBuf>, Vec<String>)
             // the header as every command reads it (comment lines before
             // it, a header written as a comment, a byte-order mark), without
             // reading the rows
-            Some("csv") => match kinegen_analysis::log::read_csv(&p, "log") {
+            Some("csv") => match kinegen_analysis::logs::log::read_csv(&p, "log") {
                 Ok((header, _)) => {
                     let missing: Vec<&str> = columns
                         .iter()

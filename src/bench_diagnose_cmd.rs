@@ -8,11 +8,11 @@
 use crate::analysis_cmd::bad;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::diagnose_job::Hooks;
+use kinegen_analysis::applications::hidden::{with_hidden, Hidden, Robots};
+use kinegen_analysis::applications::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::diagnosis::diagnose_job::Hooks;
 use kinegen_analysis::effects::{catalogue, Applicability};
-use kinegen_analysis::hidden::{with_hidden, Hidden, Robots};
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_model::spec::Model;
 use serde_json::json;
 use std::path::PathBuf;
@@ -192,7 +192,7 @@ fn run_case(
         .map_err(|e| e.to_string())?;
     let cat = catalogue(&[]).map_err(|e| e.to_string())?;
     let t0 = Instant::now();
-    let outcome = kinegen_analysis::request::diagnose_runs(
+    let outcome = kinegen_analysis::diagnosis::request::diagnose_runs(
         spec,
         (&base, std::slice::from_ref(&run)),
         (&cat, crate::ir_source::deriver()),

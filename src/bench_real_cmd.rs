@@ -1,15 +1,15 @@
 //! `kinegen bench-real`: calibration judged on real runs it was not fitted
 //! on (issue 35), on sessions in the OptiOdom layout. The library reads the
-//! sessions and scores every method (`kinegen_analysis::holdout_bench`);
+//! sessions and scores every method (`kinegen_analysis::applications::holdout_bench`);
 //! this renders the table (markdown, as the README shows it) and the JSON.
 use crate::analysis_cmd::bad;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::fit::{FitOptions, Likelihood};
-use kinegen_analysis::holdout_bench::{
+use kinegen_analysis::applications::holdout_bench::{
     self, optiodom, Measure, SessionResult, HELD_OUT_FINAL, HELD_OUT_RMSE, IN_SAMPLE_FINAL,
     KINEGEN, NOMINAL,
 };
+use kinegen_analysis::estimation::fit::{FitOptions, Likelihood};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -32,7 +32,7 @@ pub struct BenchRealArgs {
     #[arg(long)]
     pub session: Vec<String>,
     /// Split a log where rows are more than this many seconds apart.
-    #[arg(long, value_name = "SECONDS", default_value_t = kinegen_analysis::run::DEFAULT_MAX_GAP_S, value_parser = crate::analysis_cmd::positive)]
+    #[arg(long, value_name = "SECONDS", default_value_t = kinegen_analysis::model_on_log::run::DEFAULT_MAX_GAP_S, value_parser = crate::analysis_cmd::positive)]
     pub max_gap: f64,
     /// What kinegen's calibration compares (as `fit --likelihood`).
     #[arg(long, default_value = "track", value_parser = Likelihood::NAMES)]

@@ -1,14 +1,14 @@
 //! `kinegen compare`: the model with its current parameters against the
-//! logs (one call to kinegen_analysis::comparison::compare_files), rendered as
+//! logs (one call to kinegen_analysis::model_on_log::comparison::compare_files), rendered as
 //! text, JSON and a report.
 use crate::analysis_cmd::{
     bad, fmt_errors, fmt_landmarks, fmt_landmarks_from_truth, quiet, read_progress, say_warnings,
     Common,
 };
 use crate::output::Out;
-use kinegen_analysis::comparison::{self, Compared};
-use kinegen_analysis::evaluation::metric_name;
-use kinegen_analysis::files::Files;
+use kinegen_analysis::model_on_log::comparison::{self, Compared};
+use kinegen_analysis::model_on_log::evaluation::metric_name;
+use kinegen_analysis::model_on_log::files::Files;
 use serde_json::{json, Value};
 use std::process::ExitCode;
 
@@ -102,8 +102,8 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
 /// and the worst 1 s segments.
 fn say_where_it_fails(
     out: &Out,
-    regimes: &[kinegen_analysis::metrics::RegimeShare],
-    segments: &[kinegen_analysis::metrics::Segment],
+    regimes: &[kinegen_analysis::model_on_log::metrics::RegimeShare],
+    segments: &[kinegen_analysis::model_on_log::metrics::Segment],
 ) {
     if !regimes.is_empty() {
         out.say("where the error grows (share of position / heading error growth):");

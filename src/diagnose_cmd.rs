@@ -2,12 +2,12 @@
 use crate::analysis_cmd::{bad, quiet, Common};
 use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
-use kinegen_analysis::diagnose::Diagnosis;
-use kinegen_analysis::diagnose_job::{Hooks, Outcome};
 use kinegen_analysis::diagnosis::clock::ClockVerdict;
-use kinegen_analysis::files::Files;
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::request::{diagnose_files, Diagnosed, Request};
+use kinegen_analysis::diagnosis::diagnose::Diagnosis;
+use kinegen_analysis::diagnosis::diagnose_job::{Hooks, Outcome};
+use kinegen_analysis::diagnosis::request::{diagnose_files, Diagnosed, Request};
+use kinegen_analysis::model_on_log::files::Files;
+use kinegen_analysis::model_on_log::model::Runner;
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::process::ExitCode;
@@ -141,7 +141,7 @@ fn say_timing(out: &Out, d: &Diagnosis, r: &Runner) {
 
 /// Each estimate of `p` with its standard deviation ("unidentified" where
 /// it has none), as the candidates' lists write them.
-fn estimates_said(p: &kinegen_analysis::diagnose::Estimates) -> Vec<String> {
+fn estimates_said(p: &kinegen_analysis::diagnosis::estimate::Estimates) -> Vec<String> {
     p.iter()
         .map(|(k, v)| {
             let std = crate::output::fmt_std(Some(v.std).filter(|s| s.is_finite()));
@@ -239,7 +239,7 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
                 };
                 let how = format!(
                     "it fits them as well (likelihood ratio under {}, 5%{per})",
-                    kinegen_analysis::diagnose::EQUIVALENT
+                    kinegen_analysis::diagnosis::diagnose::EQUIVALENT
                 );
                 // with sightings the motion capture's clock is measured
                 // already: what is left are rivals on the robot's side

@@ -1,10 +1,10 @@
-//! `kinegen simulate` (its robot from kinegen_analysis::hidden::with_hidden)
+//! `kinegen simulate` (its robot from kinegen_analysis::applications::hidden::with_hidden)
 //! and `kinegen add-effect`.
 use crate::analysis_cmd::bad;
+use kinegen_analysis::applications::hidden::{with_hidden, Hidden, Robots};
+use kinegen_analysis::applications::simulate::{simulate, to_csv, SimOptions, Trajectory};
 use kinegen_analysis::effects::{catalogue, find, Applicability};
-use kinegen_analysis::hidden::{with_hidden, Hidden, Robots};
-use kinegen_analysis::model::parse_sets;
-use kinegen_analysis::simulate::{simulate, to_csv, SimOptions, Trajectory};
+use kinegen_analysis::model_on_log::model::parse_sets;
 use kinegen_model::decl::InputKind;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::spec::Model;
@@ -83,7 +83,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
                 if truth.ir.observation_kernels(RangeBearing).map(|o| o.value).is_none() {
                     return Err(format!("{}: the model has no `landmark` observation to simulate range-bearing data with", a.spec.display()));
                 }
-                let map = kinegen_analysis::landmarks::read_map(m).map_err(|e| e.to_string())?;
+                let map = kinegen_analysis::model_on_log::landmarks::read_map(m).map_err(|e| e.to_string())?;
                 map.ids.iter().map(|id| (id.clone(), map.position(id))).collect()
             }
             (None, None) => Vec::new(),
@@ -166,8 +166,8 @@ pub fn run_add_effect(
                 ))
             }
         }
-        let pairs =
-            kinegen_analysis::model::parse_pairs("--value", values).map_err(|e| e.to_string())?;
+        let pairs = kinegen_analysis::model_on_log::model::parse_pairs("--value", values)
+            .map_err(|e| e.to_string())?;
         let mut vals: BTreeMap<String, f64> = BTreeMap::new();
         for (name, v) in pairs {
             if let Some(first) = vals.insert(name.clone(), v) {

@@ -10,8 +10,8 @@
 //! The YAML is written with `format!`: two flat, fixed layouts of numbers and
 //! identifiers, which a YAML library (serde_yaml is unmaintained) would not make
 //! safer.
-use kinegen_analysis::fit::FitResult;
-use kinegen_analysis::model::Runner;
+use kinegen_analysis::estimation::fit::FitResult;
+use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_model::effects::{has, inputs_of, Capability, InputClass};
 use kinegen_model::spec::Model;
 use std::path::Path;

@@ -1,4 +1,4 @@
-//! `kinegen fit`: one call to kinegen_analysis::fit_request::fit_files (the
+//! `kinegen fit`: one call to kinegen_analysis::estimation::fit_request::fit_files (the
 //! Levenberg-Marquardt calibration judged, the default, or several methods
 //! compared), rendered as text, JSON, a report and an export.
 use crate::analysis_cmd::{
@@ -8,16 +8,18 @@ use crate::analysis_cmd::{
 use crate::output::Out;
 use crate::progress::Progress;
 use clap::Args;
-use kinegen_analysis::evaluation::metric_name;
-use kinegen_analysis::files::Files;
-use kinegen_analysis::fit::{FitOptions, FitResult};
-use kinegen_analysis::fit_job::{self, Calibrated, Growth, MethodRow, MethodsJob, MethodsOutcome};
-use kinegen_analysis::fit_request::{fit_files, FitHooks, FitRequest, Fitted};
-use kinegen_analysis::load::Loaded;
-use kinegen_analysis::methods::Settings;
-use kinegen_analysis::metrics::Errors;
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::run::Run;
+use kinegen_analysis::estimation::fit::{FitOptions, FitResult};
+use kinegen_analysis::estimation::fit_job::{
+    self, Calibrated, Growth, MethodRow, MethodsJob, MethodsOutcome,
+};
+use kinegen_analysis::estimation::fit_request::{fit_files, FitHooks, FitRequest, Fitted};
+use kinegen_analysis::estimation::methods::Settings;
+use kinegen_analysis::model_on_log::evaluation::metric_name;
+use kinegen_analysis::model_on_log::files::Files;
+use kinegen_analysis::model_on_log::load::Loaded;
+use kinegen_analysis::model_on_log::metrics::Errors;
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::Run;
 use serde_json::{json, Value};
 use std::cell::{Cell, RefCell};
 use std::path::{Path, PathBuf};
@@ -86,7 +88,7 @@ fn per_run(
 /// The options of `fit` besides the common ones.
 #[derive(Args, Debug)]
 pub struct FitArgs {
-    /// Calibration method (the registry in kinegen_analysis::methods), or all
+    /// Calibration method (the registry in kinegen_analysis::estimation::methods), or all
     /// (every applicable method, compared).
     #[arg(long, default_value = "lm", value_parser = method_names())]
     pub method: String,
@@ -116,7 +118,7 @@ pub struct FitArgs {
     /// each dead-reckoned from its measured start, with a sandwich
     /// covariance; needs ground truth in every run). Over 50 simulated logs
     /// each reports standard deviations within 30% of the estimates' spread.
-    #[arg(long, default_value = "track", value_parser = kinegen_analysis::fit::Likelihood::NAMES)]
+    #[arg(long, default_value = "track", value_parser = kinegen_analysis::estimation::fit::Likelihood::NAMES)]
     pub likelihood: String,
     /// Write the calibrated values for the robot's configuration: `--export
     /// ros2-yaml PATH` (ROS 2 diff_drive_controller parameters for a differential
@@ -134,7 +136,7 @@ pub struct FitArgs {
 /// `--method` values with their one-line descriptions, from the method registry.
 fn method_names() -> clap::builder::PossibleValuesParser {
     use clap::builder::PossibleValue;
-    use kinegen_analysis::methods::METHODS;
+    use kinegen_analysis::estimation::methods::METHODS;
     clap::builder::PossibleValuesParser::new(
         METHODS
             .iter()
@@ -156,7 +158,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         return bad(e);
     }
     let fo = fit_options(a);
-    let truth = match kinegen_analysis::model::parse_pairs("--truth", &a.truth) {
+    let truth = match kinegen_analysis::model_on_log::model::parse_pairs("--truth", &a.truth) {
         Ok(t) => t,
         Err(e) => return bad(e.to_string()),
     };
@@ -279,7 +281,7 @@ fn fit_options(a: &FitArgs) -> FitOptions {
         multi_start: true,
         ..FitOptions::default()
     };
-    kinegen_analysis::fit::Likelihood::parse(&a.likelihood)
+    kinegen_analysis::estimation::fit::Likelihood::parse(&a.likelihood)
         .expect("clap checked the name")
         .apply(fo)
 }

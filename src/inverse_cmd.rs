@@ -1,10 +1,10 @@
 //! `kinegen inverse`: the input profiles of one or more robots along a planned
-//! path (one call to kinegen_analysis::inverse::profile_files), with the stretches their actuators cannot
+//! path (one call to kinegen_analysis::applications::inverse::profile_files), with the stretches their actuators cannot
 //! deliver. Exit 1 when any robot cannot drive the path as planned.
 use crate::analysis_cmd::bad;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::inverse::{profile_files, SpecProfile};
+use kinegen_analysis::applications::inverse::{profile_files, SpecProfile};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -5,7 +5,7 @@
 //! 3. Otherwise `kinegen derive` in a child process: symbolica's one-thread permit is
 //!    then held only while deriving, its output never reaches our stdout, and this
 //!    process (fitting, diagnosing) stays free to use threads.
-use kinegen_analysis::derivation::{DerivationFailed, Deriver};
+use kinegen_analysis::model_on_log::derivation::{DerivationFailed, Deriver};
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use std::path::{Path, PathBuf};

@@ -1,19 +1,21 @@
 //! `kinegen localize`: the EKF of seed 001 over logs with landmark observations
-//! (one call to kinegen_analysis::localize_request::localize_files), rendered
+//! (one call to kinegen_analysis::applications::localize_request::localize_files), rendered
 //! with its consistency checks as text, JSON, a report and a track.
 use crate::analysis_cmd::{bad, Common};
 use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::files::Files;
-use kinegen_analysis::load::Loaded;
-use kinegen_analysis::localize::reading::RangeReading;
-use kinegen_analysis::localize::timing::{Timing, TimingEstimate};
-use kinegen_analysis::localize::{
+use kinegen_analysis::applications::localize::reading::RangeReading;
+use kinegen_analysis::applications::localize::timing::{Timing, TimingEstimate};
+use kinegen_analysis::applications::localize::{
     side, Bounds, Consistency, EkfOptions, Localization, NeesParts, NoiseSource, Overconfident,
     Side, Spread, Summary,
 };
-use kinegen_analysis::localize_request::{localize_files, LocalizeRequest, LocalizedFiles};
+use kinegen_analysis::applications::localize_request::{
+    localize_files, LocalizeRequest, LocalizedFiles,
+};
+use kinegen_analysis::model_on_log::files::Files;
+use kinegen_analysis::model_on_log::load::Loaded;
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -25,7 +27,7 @@ pub struct LocalizeArgs {
     /// a consistent filter exceeds once in a thousand sightings; real
     /// cameras' errors have heavier tails than a Gaussian, and a tighter gate
     /// throws away good sightings with the bad: 9.21 is the 99% point).
-    #[arg(long, default_value_t = kinegen_analysis::localize::DEFAULT_GATE, value_parser = crate::analysis_cmd::positive)]
+    #[arg(long, default_value_t = kinegen_analysis::applications::localize::DEFAULT_GATE, value_parser = crate::analysis_cmd::positive)]
     pub gate: f64,
     /// Write the estimated track with its covariance (t, x, y, theta, var_x,
     /// cov_xy, var_y, var_theta) to this CSV (several runs: one after another,
@@ -100,8 +102,8 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
     let r = &prep.runner;
     let (noise, note) = (&done.noise, &done.note);
     out.say(note);
-    let base = kinegen_analysis::landmarks::sigma(r);
-    let whose = if kinegen_analysis::landmarks::declares_sigma(r) {
+    let base = kinegen_analysis::model_on_log::landmarks::sigma(r);
+    let whose = if kinegen_analysis::model_on_log::landmarks::declares_sigma(r) {
         "the spec's"
     } else {
         "the defaults'"
@@ -169,7 +171,7 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
 
 /// The `--track` CSV rows of a run: the estimate (smoothed with --smooth)
 /// and its covariance at every row.
-fn track_rows(run: &kinegen_analysis::run::Run, loc: &Localization) -> String {
+fn track_rows(run: &kinegen_analysis::model_on_log::run::Run, loc: &Localization) -> String {
     let (track, cov) = loc
         .smoothed
         .clone()
@@ -194,7 +196,7 @@ fn track_rows(run: &kinegen_analysis::run::Run, loc: &Localization) -> String {
 
 /// A run's entry in the JSON document.
 fn run_json(
-    run: &kinegen_analysis::run::Run,
+    run: &kinegen_analysis::model_on_log::run::Run,
     loc: &Localization,
     s: &Summary,
 ) -> serde_json::Value {
@@ -246,11 +248,11 @@ fn spread_json(x: Spread) -> serde_json::Value {
 }
 
 /// The noise sweep's table (seed 001 Figs 6-7) and which uncertainty costs most.
-fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::sweep::SweepPoint]) {
+fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::applications::sweep::SweepPoint]) {
     out.say(&format!(
         "noise sweep on {} ({} simulated repetitions per level): EKF position RMSE (m)",
         path,
-        kinegen_analysis::sweep::SEEDS
+        kinegen_analysis::applications::sweep::SEEDS
     ));
     let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
     names.dedup();
@@ -259,7 +261,7 @@ fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::sweep::SweepPoint
         "sigma",
         names.iter().map(|n| format!("{n:>12}")).collect::<String>()
     ));
-    for level in kinegen_analysis::sweep::LEVELS {
+    for level in kinegen_analysis::applications::sweep::LEVELS {
         let row: String = names
             .iter()
             .map(|n| {
@@ -295,7 +297,7 @@ fn say_sweep(out: &Out, path: &str, sweep: &[kinegen_analysis::sweep::SweepPoint
 fn ekf_options(a: &LocalizeArgs) -> Result<EkfOptions, String> {
     Ok(EkfOptions {
         gate: a.gate,
-        noise_sigma: kinegen_analysis::model::parse_pairs("--noise", &a.noise)
+        noise_sigma: kinegen_analysis::model_on_log::model::parse_pairs("--noise", &a.noise)
             .map_err(|e| e.to_string())?,
         noise: if a.spec_noise {
             NoiseSource::Spec
@@ -342,7 +344,7 @@ fn verdict(m: Option<f64>, b: Option<Bounds>, values: &str, who: &str) -> String
 
 fn say_run(
     out: &Out,
-    run: &kinegen_analysis::run::Run,
+    run: &kinegen_analysis::model_on_log::run::Run,
     loc: &Localization,
     s: &Summary,
     gate: f64,
@@ -440,7 +442,7 @@ fn say_timing(d: &TimingEstimate) -> String {
 /// the spec, or, where the spec reads range so already, a new calibration.
 fn reading_advice(
     c: &Common,
-    n: &kinegen_analysis::localize::NoiseModel,
+    n: &kinegen_analysis::applications::localize::NoiseModel,
     ir: &kinegen_model::ir::ModelIr,
 ) -> Option<String> {
     let r = &n.range_reading;
@@ -461,7 +463,10 @@ fn reading_advice(
     ))
 }
 
-fn noise_json(n: &kinegen_analysis::localize::NoiseModel, note: &str) -> serde_json::Value {
+fn noise_json(
+    n: &kinegen_analysis::applications::localize::NoiseModel,
+    note: &str,
+) -> serde_json::Value {
     let process: serde_json::Map<String, serde_json::Value> = n
         .names
         .iter()

@@ -6,11 +6,11 @@
 use crate::report::{
     axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
 };
-use kinegen_analysis::localize::{
+use kinegen_analysis::applications::localize::{
     mean_bounds, Bounds, Consistency, GateTail, Localization, Overconfident, Spread, Summary,
 };
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::run::Run;
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::Run;
 use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
@@ -30,7 +30,7 @@ pub fn localize_report(
     r: &Runner,
     runs: &[RunPage],
     noise: &[String],
-    sweep: &[kinegen_analysis::sweep::SweepPoint],
+    sweep: &[kinegen_analysis::applications::sweep::SweepPoint],
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -129,7 +129,7 @@ fn xy(track: &[[f64; 3]]) -> Vec<(f64, f64)> {
 
 fn map(r: &Runner, p: &RunPage) -> Result<String, String> {
     let (run, loc) = (p.run, p.loc);
-    let dead = kinegen_analysis::deadreckon::run(r, &r.p, run, false);
+    let dead = kinegen_analysis::model_on_log::deadreckon::run(r, &r.p, run, false);
     let mut series: Vec<Series> = vec![("dead reckoning", RGBColor(170, 170, 170), xy(&dead.pose))];
     if let Some(g) = &run.gt {
         series.push((
@@ -174,7 +174,7 @@ fn map(r: &Runner, p: &RunPage) -> Result<String, String> {
 fn error_over_time(r: &Runner, p: &RunPage) -> Result<String, String> {
     let (run, loc) = (p.run, p.loc);
     let g = run.gt.as_ref().expect("checked by the caller");
-    let sensor = kinegen_analysis::localize::Sensed::new(r, run);
+    let sensor = kinegen_analysis::applications::localize::Sensed::new(r, run);
     let t0 = run.t[0];
     let err = |track: &[[f64; 3]]| {
         series_of(
@@ -194,7 +194,7 @@ fn error_over_time(r: &Runner, p: &RunPage) -> Result<String, String> {
                 }),
         )
     };
-    let bound = |cov: &[kinegen_analysis::localize::Matrix3<f64>]| {
+    let bound = |cov: &[kinegen_analysis::applications::localize::Matrix3<f64>]| {
         series_of(
             cov.len(),
             cov.iter()
@@ -259,7 +259,9 @@ fn nis_over_time(p: &RunPage) -> Result<String, String> {
     )
 }
 
-fn sweep_chart(sweep: &[kinegen_analysis::sweep::SweepPoint]) -> Result<String, String> {
+fn sweep_chart(
+    sweep: &[kinegen_analysis::applications::sweep::SweepPoint],
+) -> Result<String, String> {
     const COLORS: [RGBColor; 4] = [BLUE, RED, GREEN, MAGENTA];
     let mut names: Vec<&str> = sweep.iter().map(|p| p.noise.as_str()).collect();
     names.dedup();

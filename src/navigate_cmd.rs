@@ -1,11 +1,13 @@
 //! `kinegen navigate`: seed 004's cellular-automaton navigation driven on
-//! odometry (one call to kinegen_analysis::mission::navigate_files), before and after calibrating the
+//! odometry (one call to kinegen_analysis::applications::mission::navigate_files), before and after calibrating the
 //! odometry with UMBMark (or LM) squares run in simulation on the same robot.
 use crate::analysis_cmd::bad;
 use crate::output::Out;
 use clap::Args;
-use kinegen_analysis::mission::{navigate_files, CalibratedDrive, Mission, Navigated};
-use kinegen_analysis::navigate::{Drive, NavOptions};
+use kinegen_analysis::applications::mission::{
+    navigate_files, CalibratedDrive, Mission, Navigated,
+};
+use kinegen_analysis::applications::navigate::{Drive, NavOptions};
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -50,7 +52,7 @@ pub struct NavigateArgs {
 /// The calibration methods that calibrate the parameters (not the ones
 /// that learn a virtual gyro), from the registry.
 fn geometry_methods() -> clap::builder::PossibleValuesParser {
-    use kinegen_analysis::methods::METHODS;
+    use kinegen_analysis::estimation::methods::METHODS;
     clap::builder::PossibleValuesParser::new(
         METHODS
             .iter()

@@ -1,12 +1,12 @@
 //! `--report DIR`: one self-contained HTML page (inline SVG figures drawn with
 //! plotters, no external files or scripts).
 use kinegen_analysis::diagnosis::clock::ClockVerdict;
-use kinegen_analysis::innovations::Innovation;
-use kinegen_analysis::log::wrap;
-use kinegen_analysis::metrics::regime;
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::run::Run;
-use kinegen_analysis::track_rows::{Heading, Recipe, TrackRows};
+use kinegen_analysis::logs::log::wrap;
+use kinegen_analysis::model_on_log::innovations::Innovation;
+use kinegen_analysis::model_on_log::metrics::regime;
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::Run;
+use kinegen_analysis::model_on_log::track_rows::{Heading, Recipe, TrackRows};
 use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
@@ -374,7 +374,7 @@ fn traj(run: &Run, tr: &dyn TrackRows) -> Vec<(f64, f64)> {
 }
 
 /// What the pages draw of one track, from one reading of it (a long log's
-/// track is computed as it is read, see `kinegen_analysis::track_rows`);
+/// track is computed as it is read, see `kinegen_analysis::model_on_log::track_rows`);
 /// [`traj`] alone for a track drawn only as a trajectory.
 struct Drawn {
     /// The track where the pose sensor sees it (see [`traj`]).
@@ -425,7 +425,10 @@ pub(crate) fn write(dir: &Path, html: &str) -> Result<(), String> {
     kinegen_model::files::write_atomic(&dir.join("index.html"), html).map_err(|e| e.to_string())
 }
 
-fn worst_marks(segments: &[kinegen_analysis::metrics::Segment], run: &str) -> Vec<(f64, f64)> {
+fn worst_marks(
+    segments: &[kinegen_analysis::model_on_log::metrics::Segment],
+    run: &str,
+) -> Vec<(f64, f64)> {
     segments
         .iter()
         .filter(|s| s.run == run)
@@ -434,7 +437,7 @@ fn worst_marks(segments: &[kinegen_analysis::metrics::Segment], run: &str) -> Ve
 }
 
 /// The compare report's table of where the error grows, by regime.
-fn regime_table(regimes: &[kinegen_analysis::metrics::RegimeShare]) -> String {
+fn regime_table(regimes: &[kinegen_analysis::model_on_log::metrics::RegimeShare]) -> String {
     let mut t = String::from("<h2>Where the error grows</h2><table><tr><th>regime</th><th>time (s)</th><th>distance (m)</th><th>position error share</th><th>heading error share</th></tr>");
     for g in regimes {
         t += &format!(
@@ -483,7 +486,7 @@ fn innovation_charts(runs: &[Run], innov: &[Vec<Innovation>]) -> Result<Vec<Stri
 pub fn compare_report(
     dir: &Path,
     r: &Runner,
-    cmp: &kinegen_analysis::comparison::Comparison<'_>,
+    cmp: &kinegen_analysis::model_on_log::comparison::Comparison<'_>,
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -569,7 +572,7 @@ pub fn compare_report(
 }
 
 /// The calibrated parameters: nominal, estimate and standard deviation.
-pub fn param_table(r: &Runner, fit: &kinegen_analysis::fit::FitResult) -> String {
+pub fn param_table(r: &Runner, fit: &kinegen_analysis::estimation::fit::FitResult) -> String {
     let mut t = String::from("<h2>Parameters</h2><table><tr><th>parameter</th><th>nominal</th><th>estimate</th><th>std</th></tr>");
     for (k, &i) in fit.free.iter().enumerate() {
         t += &format!(
@@ -590,7 +593,7 @@ pub fn fit_report(
     dir: &Path,
     r: &Runner,
     runs: &[Run],
-    cal: &kinegen_analysis::fit_job::Calibrated<'_>,
+    cal: &kinegen_analysis::estimation::fit_job::Calibrated<'_>,
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -658,7 +661,7 @@ pub fn diagnose_report(
     dir: &Path,
     base: &Runner,
     runs: &[Run],
-    outcome: &kinegen_analysis::diagnose_job::Outcome,
+    outcome: &kinegen_analysis::diagnosis::diagnose_job::Outcome,
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -763,7 +766,7 @@ pub fn diagnose_report(
 }
 
 /// One effect of the verdict's chain, with what proved it.
-fn step_said(c: &kinegen_analysis::diagnose::ChainStep) -> String {
+fn step_said(c: &kinegen_analysis::diagnosis::diagnose::ChainStep) -> String {
     match &c.sightings {
         Some(f) => format!(
             "{} (the sightings' median range error {:.3} -> {:.3} m, bearing {:.4} -> {:.4} rad; proved stretch by stretch)",
@@ -783,7 +786,7 @@ fn step_said(c: &kinegen_analysis::diagnose::ChainStep) -> String {
 /// sensor's effects found: what a camera reading depth looks like (short
 /// at the edges of its view). None when the diagnosis found none.
 fn sensor_chart(
-    d: &kinegen_analysis::diagnose::Diagnosis,
+    d: &kinegen_analysis::diagnosis::diagnose::Diagnosis,
     base: &Runner,
     runs: &[Run],
 ) -> Result<Option<String>, String> {
@@ -791,10 +794,11 @@ fn sensor_chart(
         return Ok(None);
     }
     let errors = |r: &Runner, p: &[f64]| -> Vec<(f64, f64)> {
-        let sig = kinegen_analysis::landmarks::sigma(r);
+        let sig = kinegen_analysis::model_on_log::landmarks::sigma(r);
         runs.iter()
             .flat_map(|run| {
-                let (res, _) = kinegen_analysis::fit::sightings_from_truth(r, p, &[], run, false);
+                let (res, _) =
+                    kinegen_analysis::estimation::fit::sightings_from_truth(r, p, &[], run, false);
                 // measured minus predicted, m
                 let range = res.into_iter().step_by(2).map(move |e| -e * sig[0]);
                 run.landmarks
@@ -827,7 +831,7 @@ fn sensor_chart(
 
 /// The range-bearing sensor's candidates, tested on the sightings seen from
 /// the ground truth, as an HTML table (empty when none were tested).
-fn sensor_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
+fn sensor_html(d: &kinegen_analysis::diagnosis::diagnose::Diagnosis) -> String {
     let mut t = String::new();
     if let Some(why) = &d.sensor_unmeasured {
         t += &format!(
@@ -867,7 +871,7 @@ fn sensor_html(d: &kinegen_analysis::diagnose::Diagnosis) -> String {
 
 /// The diagnose report's candidates (table and evidence), the structure the
 /// residuals keep, and the effects not tested, as HTML.
-fn candidates_html(d: &kinegen_analysis::diagnose::Diagnosis, base: &Runner) -> String {
+fn candidates_html(d: &kinegen_analysis::diagnosis::diagnose::Diagnosis, base: &Runner) -> String {
     let mut t = format!(
         "<h2>Candidates</h2><table><tr><th>effect</th><th>error</th><th>improvement</th><th>BIC gain</th><th>held-out error</th><th>held out fold by fold ({} s motion)</th><th>significant</th></tr>",
         kinegen_analysis::diagnosis::folds::WINDOW_S
@@ -951,7 +955,7 @@ pub fn methods_report(
     dir: &Path,
     r: &Runner,
     runs: &[Run],
-    compared: &kinegen_analysis::fit_job::MethodsOutcome<'_>,
+    compared: &kinegen_analysis::estimation::fit_job::MethodsOutcome<'_>,
     truth: &[(String, f64)],
     warnings: &[String],
     doc: &Value,
@@ -1014,7 +1018,7 @@ pub fn methods_report(
 /// estimates side by side (with the truth where it is known).
 fn methods_table(
     r: &Runner,
-    compared: &kinegen_analysis::fit_job::MethodsOutcome<'_>,
+    compared: &kinegen_analysis::estimation::fit_job::MethodsOutcome<'_>,
     truth: &[(String, f64)],
 ) -> String {
     let num = |v: Option<f64>, digits: usize| {
@@ -1073,8 +1077,8 @@ fn methods_table(
 /// the stretches the robot cannot drive shaded.
 pub fn inverse_report(
     dir: &Path,
-    path: &kinegen_analysis::inverse::PlannedPath,
-    profiles: &[(String, kinegen_analysis::inverse::Profile)],
+    path: &kinegen_analysis::applications::inverse::PlannedPath,
+    profiles: &[(String, kinegen_analysis::applications::inverse::Profile)],
     doc: &Value,
 ) -> Result<(), String> {
     const COLORS: [RGBColor; 6] = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
@@ -1165,7 +1169,9 @@ pub fn inverse_report(
 
 /// The inverse report's table: each robot's inputs (peak rate, limit, the
 /// stretches beyond it), and the motion it cannot make at all.
-fn inverse_table(profiles: &[(String, kinegen_analysis::inverse::Profile)]) -> String {
+fn inverse_table(
+    profiles: &[(String, kinegen_analysis::applications::inverse::Profile)],
+) -> String {
     let mut table = String::from("<table><tr><th>model</th><th>input</th><th>peak rate</th><th>max_rate</th><th>infeasible stretches</th></tr>");
     for (model, prof) in profiles {
         for inp in &prof.inputs {
@@ -1221,8 +1227,8 @@ fn inverse_table(profiles: &[(String, kinegen_analysis::inverse::Profile)]) -> S
 /// and the odometry (where it believed it was), collisions marked.
 pub fn navigate_report(
     dir: &Path,
-    grid: &kinegen_analysis::grid::Grid,
-    drives: &[(&str, &kinegen_analysis::navigate::Drive)],
+    grid: &kinegen_analysis::applications::grid::Grid,
+    drives: &[(&str, &kinegen_analysis::applications::navigate::Drive)],
     doc: &Value,
 ) -> Result<(), String> {
     let figs = drives
@@ -1243,9 +1249,9 @@ pub fn navigate_report(
 /// One drive on the arena: the planned cells, the odometry, the true path,
 /// where it touched an obstacle, and the goal (an SVG).
 fn navigation_map(
-    grid: &kinegen_analysis::grid::Grid,
+    grid: &kinegen_analysis::applications::grid::Grid,
     name: &str,
-    d: &kinegen_analysis::navigate::Drive,
+    d: &kinegen_analysis::applications::navigate::Drive,
 ) -> Result<String, String> {
     let (rows, cols) = grid.size();
     let (w, h) = (cols as f64 * grid.cell, rows as f64 * grid.cell);
@@ -1348,9 +1354,9 @@ pub(crate) type RealChart<'a, 'b> = ChartContext<
 /// The arena's obstacles and safety zone, cell by cell.
 fn draw_arena(
     c: &mut RealChart<'_, '_>,
-    grid: &kinegen_analysis::grid::Grid,
+    grid: &kinegen_analysis::applications::grid::Grid,
 ) -> Result<(), String> {
-    use kinegen_analysis::grid::Cell;
+    use kinegen_analysis::applications::grid::Cell;
     let (rows, cols) = grid.size();
     for r in 0..rows {
         for col in 0..cols {

@@ -1,102 +1,293 @@
-//! No crate of the workspace has a module cycle: no module reaches, directly or
-//! through others, a module that reaches it back. Read from the sources: in
-//! each crate every `crate::NAME` outside comments and test modules is an
-//! edge; a module with a folder of submodules is one module, and the folders
-//! that only group modules (`analysis/src/logs/`...) are looked through.
-//! The analysis crate's folders are also held in pipeline order: a module
-//! never uses a module of a later stage.
+//! No crate of the workspace has a module cycle, at any level of its module
+//! tree: for every module, its child modules (each standing for itself and
+//! everything below it) never reach one another in a circle. A module may use
+//! its own children and its children may use it (the facade a `mod.rs` or a
+//! `fit.rs` beside `fit/` is); siblings, cousins and stages may not go round.
+//!
+//! The sources are parsed with `syn`, and every path is resolved as rustc
+//! would: `crate::`, `super::` (repeated), `self::`, a child module's name,
+//! grouped `use a::{b, c::d}` trees, and names a module re-exports with
+//! `pub use` (followed to the module that defines them). Test modules
+//! (`#[cfg(test)]`) may use anything and are left out.
+//!
+//! The analysis crate's top-level folders are also held in pipeline order: a
+//! module never uses a module of a later stage.
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use syn::visit::Visit;
 
 mod common;
 
-/// A module's source and the grouping folder it sits in ("" at the top).
-#[derive(Default)]
-struct Source {
-    group: String,
-    text: String,
+/// A module path inside its crate (`["estimation", "fit", "solver"]`).
+type ModPath = Vec<String>;
+
+/// One module: where it is written, its child modules, the names it
+/// re-exports (name -> the path it stands for, relative to this module) and
+/// the paths its code names (with the file they are in, for the message).
+#[derive(Default, Debug)]
+struct Module {
+    #[allow(dead_code)] // shown by Debug when a test fails
+    file: PathBuf,
+    children: BTreeSet<String>,
+    reexports: BTreeMap<String, Vec<String>>,
+    imports: BTreeMap<String, Vec<String>>,
+    paths: Vec<Vec<String>>,
 }
 
-/// A crate's modules.
-fn modules(src: &Path) -> BTreeMap<String, Source> {
-    let mut found = BTreeMap::new();
-    collect(src, src, &mut found);
-    found
+/// A crate's module tree, read from its root file.
+#[derive(Default, Debug)]
+struct Crate {
+    modules: BTreeMap<ModPath, Module>,
 }
 
-/// A crate's modules and the modules each uses.
-fn edges(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
-    let text = modules(src);
-    let modules: BTreeSet<String> = text.keys().cloned().collect();
-    text.iter()
-        .map(|(m, Source { text: body, .. })| {
-            let mut to = BTreeSet::new();
-            for line in body.lines().filter(|l| !l.trim_start().starts_with("//")) {
-                for (i, _) in line.match_indices("crate::") {
-                    let name: String = line[i + 7..]
-                        .chars()
-                        .take_while(|c| c.is_alphanumeric() || *c == '_')
-                        .collect();
-                    if modules.contains(&name) && &name != m {
-                        to.insert(name);
+fn is_test(attrs: &[syn::Attribute]) -> bool {
+    attrs.iter().any(|a| {
+        a.path().is_ident("cfg")
+            && a.meta
+                .require_list()
+                .is_ok_and(|l| l.tokens.to_string().contains("test"))
+    })
+}
+
+fn path_attr(attrs: &[syn::Attribute]) -> Option<String> {
+    attrs
+        .iter()
+        .find(|a| a.path().is_ident("path"))
+        .and_then(|a| {
+            let nv = a.meta.require_name_value().ok()?;
+            match &nv.value {
+                syn::Expr::Lit(syn::ExprLit {
+                    lit: syn::Lit::Str(s),
+                    ..
+                }) => Some(s.value()),
+                _ => None,
+            }
+        })
+}
+
+/// The leaves of a `use` tree: (name bound, full path).
+fn use_leaves(tree: &syn::UseTree, prefix: &mut Vec<String>, out: &mut Vec<(String, Vec<String>)>) {
+    match tree {
+        syn::UseTree::Path(p) => {
+            prefix.push(p.ident.to_string());
+            use_leaves(&p.tree, prefix, out);
+            prefix.pop();
+        }
+        syn::UseTree::Name(n) => {
+            let name = n.ident.to_string();
+            if name == "self" {
+                if let Some(last) = prefix.last() {
+                    out.push((last.clone(), prefix.clone()));
+                }
+            } else {
+                let mut p = prefix.clone();
+                p.push(name.clone());
+                out.push((name, p));
+            }
+        }
+        syn::UseTree::Rename(r) => {
+            let mut p = prefix.clone();
+            p.push(r.ident.to_string());
+            out.push((r.rename.to_string(), p));
+        }
+        syn::UseTree::Glob(_) => out.push(("*".into(), prefix.clone())),
+        syn::UseTree::Group(g) => {
+            for t in &g.items {
+                use_leaves(t, prefix, out);
+            }
+        }
+    }
+}
+
+/// Collects one module's paths and `use`s, without entering nested modules
+/// (they are modules of their own).
+struct Collector<'a> {
+    module: &'a mut Module,
+}
+
+impl<'ast> Visit<'ast> for Collector<'_> {
+    fn visit_item_mod(&mut self, _: &'ast syn::ItemMod) {}
+    fn visit_item_use(&mut self, u: &'ast syn::ItemUse) {
+        let mut leaves = Vec::new();
+        use_leaves(&u.tree, &mut Vec::new(), &mut leaves);
+        let public = !matches!(u.vis, syn::Visibility::Inherited);
+        for (name, path) in leaves {
+            if public && name != "*" {
+                self.module.reexports.insert(name.clone(), path.clone());
+            }
+            if name != "*" {
+                self.module.imports.insert(name, path.clone());
+            }
+            self.module.paths.push(path);
+        }
+    }
+    fn visit_path(&mut self, p: &'ast syn::Path) {
+        let segs: Vec<String> = p.segments.iter().map(|s| s.ident.to_string()).collect();
+        if segs.len() >= 2 {
+            self.module.paths.push(segs);
+        }
+        syn::visit::visit_path(self, p);
+    }
+    fn visit_item_fn(&mut self, f: &'ast syn::ItemFn) {
+        if !is_test(&f.attrs) {
+            syn::visit::visit_item_fn(self, f);
+        }
+    }
+}
+
+impl Crate {
+    fn read(root_file: &Path) -> Crate {
+        let mut c = Crate::default();
+        let dir = root_file.parent().unwrap().to_path_buf();
+        c.read_file(Vec::new(), root_file, &dir);
+        c
+    }
+
+    /// Read a module's file; `child_dir` is where its `mod x;` files live.
+    fn read_file(&mut self, path: ModPath, file: &Path, child_dir: &Path) {
+        let text = std::fs::read_to_string(file).unwrap_or_else(|e| panic!("{file:?}: {e}"));
+        let parsed = syn::parse_file(&text).unwrap_or_else(|e| panic!("{file:?}: {e}"));
+        self.read_items(path, file, &parsed.items, child_dir);
+    }
+
+    fn read_items(&mut self, path: ModPath, file: &Path, items: &[syn::Item], child_dir: &Path) {
+        let mut module = Module {
+            file: file.to_path_buf(),
+            ..Module::default()
+        };
+        for item in items {
+            match item {
+                syn::Item::Mod(m) if is_test(&m.attrs) => {}
+                syn::Item::Mod(m) => {
+                    let name = m.ident.to_string();
+                    module.children.insert(name.clone());
+                    let mut sub = path.clone();
+                    sub.push(name.clone());
+                    if let Some((_, inner)) = &m.content {
+                        self.read_items(sub, file, inner, &child_dir.join(&name));
+                    } else if let Some(p) = path_attr(&m.attrs) {
+                        let f = child_dir.join(p);
+                        let d = f.with_extension("");
+                        self.read_file(sub, &f, &d);
+                    } else if child_dir.join(format!("{name}.rs")).is_file() {
+                        let f = child_dir.join(format!("{name}.rs"));
+                        self.read_file(sub, &f, &child_dir.join(&name));
+                    } else {
+                        let d = child_dir.join(&name);
+                        self.read_file(sub, &d.join("mod.rs"), &d);
+                    }
+                }
+                other => Collector {
+                    module: &mut module,
+                }
+                .visit_item(other),
+            }
+        }
+        self.modules.insert(path, module);
+    }
+
+    /// The module a path names (the deepest module it passes through,
+    /// following re-exports), or None for another crate's or a local name.
+    fn resolve(&self, from: &[String], segs: &[String], depth: usize) -> Option<ModPath> {
+        if depth > 16 || segs.is_empty() {
+            return None;
+        }
+        let here = &self.modules[from];
+        let (mut at, mut rest): (ModPath, &[String]) = match segs[0].as_str() {
+            "crate" => (Vec::new(), &segs[1..]),
+            "self" => (from.to_vec(), &segs[1..]),
+            "super" => {
+                let mut at = from.to_vec();
+                let mut rest = segs;
+                while rest.first().is_some_and(|s| s == "super") {
+                    at.pop()?;
+                    rest = &rest[1..];
+                }
+                (at, rest)
+            }
+            s if here.children.contains(s) => (from.to_vec(), segs),
+            // a name a `use` brought in: the path it stands for
+            s if here.imports.contains_key(s) && segs.len() > 1 => {
+                let mut full = here.imports[s].clone();
+                full.extend(segs[1..].iter().cloned());
+                return self.resolve(from, &full, depth + 1);
+            }
+            _ => return None,
+        };
+        loop {
+            let Some(next) = rest.first() else {
+                return Some(at);
+            };
+            let m = &self.modules[&at];
+            if m.children.contains(next) {
+                at.push(next.clone());
+                rest = &rest[1..];
+            } else if let Some(target) = m.reexports.get(next) {
+                let mut full = target.clone();
+                full.extend(rest[1..].iter().cloned());
+                return self.resolve(&at, &full, depth + 1).or(Some(at));
+            } else {
+                return Some(at);
+            }
+        }
+    }
+
+    /// Every module's edges to the modules it names (itself left out).
+    fn edges(&self) -> BTreeMap<ModPath, BTreeSet<ModPath>> {
+        self.modules
+            .iter()
+            .map(|(m, module)| {
+                let to = module
+                    .paths
+                    .iter()
+                    .filter_map(|p| self.resolve(m, p, 0))
+                    .filter(|t| t != m)
+                    .collect();
+                (m.clone(), to)
+            })
+            .collect()
+    }
+}
+
+/// The child of `parent` that `m` lies under, if it lies under one.
+fn child_under(parent: &[String], m: &[String]) -> Option<String> {
+    (m.len() > parent.len() && m.starts_with(parent)).then(|| m[parent.len()].clone())
+}
+
+/// For every module, the graph of its children (each standing for its whole
+/// subtree), and a cycle in it if there is one.
+fn cycles(c: &Crate) -> Vec<String> {
+    let edges = c.edges();
+    let mut found = Vec::new();
+    for (parent, module) in &c.modules {
+        let mut g: BTreeMap<String, BTreeSet<String>> = module
+            .children
+            .iter()
+            .map(|k| (k.clone(), BTreeSet::new()))
+            .collect();
+        for (from, to) in &edges {
+            let Some(a) = child_under(parent, from) else {
+                continue;
+            };
+            for t in to {
+                if let Some(b) = child_under(parent, t) {
+                    if a != b {
+                        g.get_mut(&a).unwrap().insert(b);
                     }
                 }
             }
-            (m.clone(), to)
-        })
-        .collect()
-}
-
-/// The modules under `dir`: a file is a module; a folder is one module when
-/// a file or `mod.rs` makes it one (`fit.rs` beside `fit/`), and a group of
-/// modules otherwise.
-fn collect(root: &Path, dir: &Path, text: &mut BTreeMap<String, Source>) {
-    let group = dir
-        .strip_prefix(root)
-        .unwrap()
-        .to_string_lossy()
-        .to_string();
-    for e in std::fs::read_dir(dir).unwrap().flatten() {
-        let p = e.path();
-        let name = p.file_stem().unwrap().to_string_lossy().to_string();
-        if p.extension().is_some_and(|x| x == "rs") {
-            if dir == root && (name == "lib" || name == "main") {
-                continue;
-            }
-            add(text, &name, &group, &p);
-        } else if p.is_dir() {
-            let is_module = p.join("mod.rs").is_file() || dir.join(format!("{name}.rs")).is_file();
-            if is_module {
-                for f in walk(&p) {
-                    add(text, &name, &group, &f);
-                }
+        }
+        if let Some(cy) = g.keys().find_map(|k| cycle(&g, k)) {
+            let at = if parent.is_empty() {
+                "crate".to_string()
             } else {
-                collect(root, &p, text);
-            }
+                parent.join("::")
+            };
+            found.push(format!("in {at}: {}", cy.join(" -> ")));
         }
     }
-}
-
-fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
-    let mut out = Vec::new();
-    for e in std::fs::read_dir(dir).unwrap().flatten() {
-        let p = e.path();
-        if p.is_dir() {
-            out.extend(walk(&p));
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
-    out
-}
-
-fn add(text: &mut BTreeMap<String, Source>, module: &str, group: &str, path: &Path) {
-    let body = std::fs::read_to_string(path).unwrap();
-    // test modules may use anything
-    let body = body.split("#[cfg(test)]").next().unwrap().to_string();
-    let entry = text.entry(module.to_string()).or_default();
-    entry.group = group.to_string();
-    entry.text.push_str(&body);
+    found
 }
 
 /// A cycle through `from`, if any (depth-first search).
@@ -127,28 +318,26 @@ fn cycle(g: &BTreeMap<String, BTreeSet<String>>, from: &str) -> Option<Vec<Strin
 }
 
 const CRATES: [&str; 6] = [
-    "src",
-    "model/src",
-    "jit/src",
-    "codegen/src",
-    "analysis/src",
-    "verify/src",
+    "src/main.rs",
+    "model/src/lib.rs",
+    "jit/src/lib.rs",
+    "codegen/src/lib.rs",
+    "analysis/src/lib.rs",
+    "verify/src/lib.rs",
 ];
 
 #[test]
-fn no_crate_has_a_module_cycle() {
+fn no_crate_has_a_module_cycle_at_any_level() {
+    let mut all = Vec::new();
     for krate in CRATES {
-        let g = edges(&common::root().join(krate));
-        assert!(g.len() >= 2, "{krate}: {g:?}");
-        for m in g.keys() {
-            if let Some(c) = cycle(&g, m) {
-                panic!("{krate}: module cycle {}", c.join(" -> "));
-            }
-        }
+        let c = Crate::read(&common::root().join(krate));
+        assert!(c.modules.len() >= 3, "{krate}: {:?}", c.modules.keys());
+        all.extend(cycles(&c).into_iter().map(|s| format!("{krate}: {s}")));
     }
+    assert!(all.is_empty(), "module cycles:\n{}", all.join("\n"));
 }
 
-/// The analysis crate's folders: the pipeline's stages, in order.
+/// The analysis crate's top-level folders: the pipeline's stages, in order.
 const STAGES: [&str; 5] = [
     "logs",
     "model_on_log",
@@ -159,41 +348,110 @@ const STAGES: [&str; 5] = [
 
 #[test]
 fn no_analysis_module_uses_a_later_stage_of_the_pipeline() {
-    let src = common::root().join("analysis/src");
-    let stage: BTreeMap<String, usize> = modules(&src)
-        .into_iter()
-        .map(|(m, s)| {
-            let k = STAGES.iter().position(|g| *g == s.group);
-            (
-                m.clone(),
-                k.unwrap_or_else(|| panic!("analysis/src: `{m}` is in no stage of the pipeline")),
-            )
-        })
-        .collect();
+    let c = Crate::read(&common::root().join("analysis/src/lib.rs"));
+    let stage = |m: &ModPath| {
+        m.first()
+            .and_then(|g| STAGES.iter().position(|s| s == g))
+            .unwrap_or_else(|| panic!("analysis/src: `{}` is in no stage", m.join("::")))
+    };
     let mut back = Vec::new();
-    for (m, to) in edges(&src) {
-        for t in to {
-            if stage[&t] > stage[&m] {
-                back.push(format!(
-                    "{m} ({}) uses {t} ({})",
-                    STAGES[stage[&m]], STAGES[stage[&t]]
-                ));
+    for (m, to) in c.edges() {
+        if m.is_empty() {
+            continue; // lib.rs itself: its doc example and declarations
+        }
+        for t in to.iter().filter(|t| !t.is_empty()) {
+            if stage(t) > stage(&m) {
+                back.push(format!("{} uses {}", m.join("::"), t.join("::")));
             }
         }
     }
     assert!(back.is_empty(), "{back:#?}");
 }
 
-/// The check sees a cycle where there is one: the model crate's IR reaching
-/// the fusion that builds on it (as its JIT cache once made the IR reach the
-/// compiler) is found.
+/// Write a small crate to a temporary folder; each entry is (file, text).
+fn scratch(files: &[(&str, &str)]) -> (tempfile::TempDir, Crate) {
+    let dir = tempfile::tempdir().unwrap();
+    for (f, text) in files {
+        let p = dir.path().join(f);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        std::fs::write(p, text).unwrap();
+    }
+    let c = Crate::read(&dir.path().join("lib.rs"));
+    (dir, c)
+}
+
+/// The check sees cycles through every kind of path: `super::`, grouped
+/// `use` trees, re-exports, and a child module named from its parent's
+/// sibling; and lets a module and its own children use each other.
 #[test]
-fn a_cycle_is_found() {
-    let mut g = edges(&common::root().join("model/src"));
-    assert!(g["fuse"].contains("ir"), "{:?}", g["fuse"]);
-    g.get_mut("ir").unwrap().insert("fuse".into());
-    assert!(cycle(&g, "ir").is_some());
-    // the analysis crate's grouping folders are looked through
-    let a = edges(&common::root().join("analysis/src"));
-    assert!(a["deadreckon"].contains("run"), "{:?}", a.keys());
+fn a_cycle_through_any_kind_of_path_is_found() {
+    let cases: [(&str, &[(&str, &str)]); 4] = [
+        (
+            "super",
+            &[
+                ("lib.rs", "pub mod g { pub mod a; pub mod b; }"),
+                ("g/a.rs", "pub struct A; pub fn f(_: super::b::B) {}"),
+                ("g/b.rs", "pub struct B; pub fn f(_: super::a::A) {}"),
+            ],
+        ),
+        (
+            "grouped use",
+            &[
+                ("lib.rs", "pub mod a; pub mod b;"),
+                ("a.rs", "use crate::{b::{B, f}, a as _x}; pub struct A;"),
+                ("b.rs", "pub struct B; pub fn f() { let _ = crate::a::A; }"),
+            ],
+        ),
+        (
+            "re-export",
+            &[
+                ("lib.rs", "pub mod p;"),
+                ("p.rs", "mod a; mod b; pub use a::A; pub use b::B;"),
+                ("p/a.rs", "use super::B; pub struct A;"),
+                ("p/b.rs", "pub struct B; fn f(_: super::A) {}"),
+            ],
+        ),
+        (
+            "super::super",
+            &[
+                (
+                    "lib.rs",
+                    "pub mod x { pub mod deep { pub mod d; } } pub mod y;",
+                ),
+                (
+                    "x/deep/d.rs",
+                    "use super::super::super::y::Y; pub struct D;",
+                ),
+                ("y.rs", "pub struct Y; fn f(_: crate::x::deep::d::D) {}"),
+            ],
+        ),
+    ];
+    for (kind, files) in cases {
+        let (_dir, c) = scratch(files);
+        assert!(!cycles(&c).is_empty(), "{kind}: no cycle found in {c:#?}");
+    }
+    // a facade and its children are not a cycle; a test module is left out
+    let (_dir, c) = scratch(&[
+        ("lib.rs", "pub mod p;"),
+        ("p.rs", "mod a; pub use a::A; pub struct Shared; #[cfg(test)] mod t { use super::b::*; }\nmod b;"),
+        ("p/a.rs", "pub struct A(pub super::Shared);"),
+        ("p/b.rs", "#[cfg(test)] mod tests { use super::super::a::A; }"),
+    ]);
+    assert!(cycles(&c).is_empty(), "{:?}", cycles(&c));
+}
+
+/// The real crates' edges include paths of each kind: a `super::` path
+/// between siblings and a path through a grouping folder.
+#[test]
+fn the_real_crates_edges_are_read() {
+    let c = Crate::read(&common::root().join("analysis/src/lib.rs"));
+    let e = c.edges();
+    let p = |s: &str| s.split("::").map(String::from).collect::<ModPath>();
+    assert!(
+        e[&p("model_on_log::deadreckon")].contains(&p("model_on_log::run")),
+        "{:?}",
+        e[&p("model_on_log::deadreckon")]
+    );
+    let m = Crate::read(&common::root().join("model/src/lib.rs"));
+    assert!(m.edges()[&p("fuse")].contains(&p("ir")));
 }

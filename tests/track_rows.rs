@@ -7,13 +7,13 @@
 //! steering, gyrodometry with the logged gyro and with a learned yaw rate.
 mod common;
 
-use kinegen_analysis::deadreckon;
-use kinegen_analysis::innovations::innovations;
-use kinegen_analysis::metrics::{degenerate, errors, where_it_fails};
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::run::{LandmarkObs, Run};
-use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
-use kinegen_analysis::track_rows::{Heading, Recipe, Row, TrackRows};
+use kinegen_analysis::applications::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::model_on_log::deadreckon;
+use kinegen_analysis::model_on_log::innovations::innovations;
+use kinegen_analysis::model_on_log::metrics::{degenerate, errors, where_it_fails};
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::{LandmarkObs, Run};
+use kinegen_analysis::model_on_log::track_rows::{Heading, Recipe, Row, TrackRows};
 use kinegen_model::ir::ModelIr;
 use std::path::Path;
 use std::sync::Arc;

@@ -16,9 +16,9 @@
 //! `-- kernels`, `-- bag` or `-- fit` runs only that part.
 //! Figures are medians of repeated runs in this process; ratios compare numbers
 //! measured in the same run.
-use kinegen_analysis::fit::{fit, FitOptions, Search};
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::run::Run;
+use kinegen_analysis::estimation::fit::{fit, FitOptions, Search};
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::Run;
 use kinegen_model::ir::{ModelIr, StepForm};
 use rand::{Rng, SeedableRng};
 use std::hint::black_box;
@@ -89,7 +89,7 @@ fn log(r: &Runner, n: usize, seed: u64) -> Run {
         swing: None,
         first_line: 2,
     };
-    let track = kinegen_analysis::deadreckon::run(&truth, &truth.p, &run, false);
+    let track = kinegen_analysis::model_on_log::deadreckon::run(&truth, &truth.p, &run, false);
     run.gt = Some(
         track
             .pose
@@ -336,7 +336,7 @@ fn bag_reading(r: &Runner, run: &Run, dir: &std::path::Path) {
             run.t[k],
             g[0],
             g[1],
-            kinegen_analysis::log::wrap(yaw)
+            kinegen_analysis::logs::log::wrap(yaw)
         ));
     }
     w.finish().unwrap();
@@ -464,12 +464,12 @@ fn million_sample_fit(r: &Runner) {
     let t = median(times);
     // the baseline of the same run: one evaluation pass over the same log (dead
     // reckoning of every row and its residuals, no Jacobian), as the fit cuts it
-    let pieces = kinegen_analysis::fit::segmented(std::slice::from_ref(&run));
+    let pieces = kinegen_analysis::estimation::fit::segmented(std::slice::from_ref(&run));
     let starts = vec![[0.0; 3]; pieces.len()];
     let mut passes = Vec::new();
     for _ in 0..3 {
         let t0 = Instant::now();
-        black_box(kinegen_analysis::fit::residual_sums(
+        black_box(kinegen_analysis::estimation::fit::residual_sums(
             r, &r.p, &r.free, &pieces, &o, &starts,
         ));
         passes.push(t0.elapsed().as_secs_f64());
@@ -509,8 +509,8 @@ fn localize_speed(r: &Runner) {
 /// `landmarks` landmarks: with the noise estimated, and one pass with the
 /// spec's.
 fn localize_among(r: &Runner, landmarks: usize) -> (f64, f64) {
-    use kinegen_analysis::localize::{localize, EkfOptions, NoiseSource};
-    use kinegen_analysis::run::LandmarkObs;
+    use kinegen_analysis::applications::localize::{localize, EkfOptions, NoiseSource};
+    use kinegen_analysis::model_on_log::run::LandmarkObs;
     let mut run = log(r, 60_000, 5);
     let mut rng = rand::rngs::SmallRng::seed_from_u64(9);
     let marks: Vec<[f64; 2]> = (0..landmarks)
@@ -557,7 +557,7 @@ fn localize_among(r: &Runner, landmarks: usize) -> (f64, f64) {
 /// cells) and a 1 x 1,000,000 corridor: near 1 each, bounded at 5 and 10 (the sweep it replaced
 /// took a pass per cell of path: 1000 x 1000 over two minutes).
 fn grid_distances() {
-    use kinegen_analysis::grid::Grid;
+    use kinegen_analysis::applications::grid::Grid;
     let room = |n: usize| {
         let mut text = String::with_capacity((n + 1) * n);
         for r in 0..n {

@@ -11,9 +11,9 @@
 //! finds the difference.
 //!
 //! ```
-//! use kinegen_analysis::fit::{fit, FitOptions, Search};
-//! use kinegen_analysis::model::Runner;
-//! use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+//! use kinegen_analysis::estimation::fit::{fit, FitOptions, Search};
+//! use kinegen_analysis::model_on_log::model::Runner;
+//! use kinegen_analysis::applications::simulate::{simulate, SimOptions, Trajectory};
 //! use kinegen_model::ir::ModelIr;
 //!
 //! let ir = ModelIr::from_json(include_str!("../../generated/ir/diff_drive.json")).unwrap();
@@ -30,20 +30,22 @@
 //! ```
 //!
 //! From there, each command of the CLI is one call that reads its files
-//! ([`files::read_files`]: the effect catalogue, the spec derived through a
-//! [`derivation::Deriver`], the logs) and runs the job:
-//! [`comparison::compare_files`] compares the model with the logs,
-//! [`fit_request::fit_files`] calibrates and judges the result (held-out
-//! runs, leave-one-run-out), [`localize_request::localize_files`] runs the
-//! EKF on landmark sightings, [`request::diagnose_files`] names the physical
+//! ([`model_on_log::files::read_files`]: the effect catalogue, the spec derived through a
+//! [`model_on_log::derivation::Deriver`], the logs) and runs the job:
+//! [`model_on_log::comparison::compare_files`] compares the model with the logs,
+//! [`estimation::fit_request::fit_files`] calibrates and judges the result (held-out
+//! runs, leave-one-run-out), [`applications::localize_request::localize_files`] runs the
+//! EKF on landmark sightings, [`diagnosis::request::diagnose_files`] names the physical
 //! effects a spec is missing. Each job also runs on logs already loaded
-//! ([`load`], then [`comparison::compare`], [`fit_job::calibrate`],
-//! [`localize::localize_runs`], [`diagnose_job`]), and [`holdout_bench`]
+//! ([`model_on_log::load`], then [`model_on_log::comparison::compare`],
+//! [`estimation::fit_job::calibrate`],
+//! [`applications::localize::localize_runs`], [`diagnosis::diagnose_job`]),
+//! and [`applications::holdout_bench`]
 //! scores calibrations on runs they were not fitted on.
 // The folders follow the pipeline, each using only the ones before it
 // (tests/module_cycles.rs holds them to it): reading logs, the model on a log,
 // estimation, diagnosis, and the seed papers' applications. Every module is
-// also reachable at the crate's top level (`kinegen_analysis::fit`).
+// also reachable at the crate's top level (`kinegen_analysis::estimation::fit`).
 
 /// Reading logs: CSV columns and rows, ROS 2 bags (MCAP, CDR, dynamic
 /// message definitions).
@@ -101,6 +103,7 @@ pub mod diagnosis {
     pub mod clock;
     pub mod diagnose;
     pub mod diagnose_job;
+    pub mod estimate;
     pub mod folds;
     pub mod request;
     pub mod sensor;
@@ -121,21 +124,6 @@ pub mod applications {
     pub mod simulate;
     pub mod sweep;
 }
-
-pub use applications::{
-    grid, hidden, holdout_bench, inverse, localize, localize_request, mission, navigate, simulate,
-    sweep,
-};
-pub use diagnosis::{diagnose, diagnose_job, request};
-pub use estimation::{
-    discretisation, fit, fit_job, fit_request, lag, methods, neural, periodic, seed_methods,
-};
-pub use logs::{bag, column, log, merged, rosdyn, rosmsg, rows};
-pub use model_on_log::{
-    comparison, coverage, dataset, deadreckon, derivation, evaluation, files, innovations,
-    input_range, interp, landmarks, load, metrics, model, robust, run, sighting_units, steering,
-    timeline, track_rows,
-};
 
 pub use kinegen_model::effects;
 pub use kinegen_model::ir::ModelIr;

@@ -2,10 +2,10 @@
 //! which diagnosis starts the `time_offset` effect from: a model calibrated
 //! without a delay absorbs part of it, and a refinement from no delay stays
 //! near zero (issue 12's speed target).
-use kinegen_analysis::lag::delay_estimate;
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::run::Run;
-use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::applications::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::estimation::lag::delay_estimate;
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::Run;
 use kinegen_model::ir::ModelIr;
 use std::path::Path;
 

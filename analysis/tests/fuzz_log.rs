@@ -11,9 +11,9 @@
 //! Bounded in time for CI: cases stop being checked after
 //! `KINEGEN_FUZZ_SECONDS` (default 20) seconds; `PROPTEST_CASES` raises the
 //! number of cases for a longer local run.
-use kinegen_analysis::run::Run;
-use kinegen_analysis::track_rows::{first_non_finite, Heading, Recipe, TrackRows};
-use kinegen_analysis::{deadreckon, metrics, model::Runner};
+use kinegen_analysis::model_on_log::run::Run;
+use kinegen_analysis::model_on_log::track_rows::{first_non_finite, Heading, Recipe, TrackRows};
+use kinegen_analysis::model_on_log::{deadreckon, metrics, model::Runner};
 use kinegen_model::ir::ModelIr;
 use proptest::prelude::*;
 use std::path::Path;
@@ -196,7 +196,7 @@ fn check(text: &str) -> Result<(), TestCaseError> {
         let track = deadreckon::run(r, &r.p, &run, false);
         Ok((run, track))
     });
-    let read: Result<_, kinegen_analysis::log::LogError> = match outcome {
+    let read: Result<_, kinegen_analysis::logs::log::LogError> = match outcome {
         Ok(x) => x,
         Err(_) => return Err(TestCaseError::fail("reading the log panicked")),
     };

@@ -1,8 +1,8 @@
 //! Refinement from an earlier calibration's optimum (`fit::refine_from`): what
 //! diagnosis does for every candidate effect (issue 12's speed target).
-use kinegen_analysis::fit::{fit, FitOptions, Search};
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::applications::simulate::{simulate, SimOptions, Trajectory};
+use kinegen_analysis::estimation::fit::{fit, FitOptions, Search};
+use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_model::ir::ModelIr;
 use std::path::Path;
 

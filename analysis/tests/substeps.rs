@@ -1,10 +1,10 @@
 //! Dead reckoning sub-steps a step whose absolute input (a steering angle)
 //! swings across it: the bundled tricycle steering at 2.5 rad/s, logged at 10 Hz,
 //! against the same motion logged at 320 Hz (issue 12 item 3).
-use kinegen_analysis::deadreckon;
-use kinegen_analysis::model::Runner;
-use kinegen_analysis::rows::Inputs;
-use kinegen_analysis::run::Run;
+use kinegen_analysis::logs::rows::Inputs;
+use kinegen_analysis::model_on_log::deadreckon;
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::Run;
 use kinegen_model::ir::ModelIr;
 use std::path::Path;
 

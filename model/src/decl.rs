@@ -102,19 +102,19 @@ pub struct Param {
     /// The delay, in s, of every measurement (poses, gyro) relative to the
     /// inputs: measurement k, logged at t_k, is compared with the model at
     /// t_k - delay. At most one parameter of a spec; the analysis handles it in
-    /// one place (kinegen_analysis::timeline).
+    /// one place (kinegen_analysis::model_on_log::timeline).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub measurement_delay: bool,
     /// The delay, in s, with which the robot executes its commands (absolute
     /// inputs that hold between rows): the command logged at t acts from t +
-    /// delay. At most one parameter of a spec (kinegen_analysis::timeline).
+    /// delay. At most one parameter of a spec (kinegen_analysis::model_on_log::timeline).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub input_delay: bool,
     /// The time constant, in s, of the robot's first-order response to its
     /// commands: the executed command approaches each new one as 1 -
     /// exp(-t/lag) (a motor controller's response, an acceleration limit),
     /// after any input delay. At most one parameter of a spec
-    /// (kinegen_analysis::timeline).
+    /// (kinegen_analysis::model_on_log::timeline).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub input_lag: bool,
     /// How far from its nominal value the parameter is known to lie (one

@@ -6,7 +6,7 @@
 //! obstacle, `S` start, `G` goal (each exactly once). Lines starting with `;`
 //! are comments. Row 0 is the top line; y grows upwards, so the bottom line is
 //! y = 0.
-use crate::log::LogError;
+use crate::logs::log::LogError;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -9,8 +9,8 @@
 //! let robots = with_hidden(&spec, &[hidden], &[], &[], &my_deriver)?;
 //! let log = simulate(&robots.spec, &robots.robot, &SimOptions::default());
 //! ```
-use crate::derivation::{DerivationFailed, Deriver};
-use crate::model::{ModelError, Runner};
+use crate::model_on_log::derivation::{DerivationFailed, Deriver};
+use crate::model_on_log::model::{ModelError, Runner};
 use kinegen_model::effects::{catalogue, find, Applicability, EffectError};
 use kinegen_model::spec::Model;
 use std::path::PathBuf;

@@ -4,9 +4,9 @@
 //! against what the actuators can deliver: each input's `range` (its value: a
 //! wheel's rate, a steering lock) and `max_rate` (a wheel's rate, or how fast an
 //! absolute input such as a steering angle can change).
-use crate::log::{read_csv, unwrap, LogError};
-use crate::model::Runner;
-use crate::steering;
+use crate::logs::log::{read_csv, unwrap, LogError};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::steering;
 use kinegen_model::decl::InputKind;
 use kinegen_model::ir::{ArgRole, StepForm};
 use serde::Serialize;
@@ -217,7 +217,7 @@ fn solve_steps(r: &Runner, path: &PlannedPath) -> Result<Steps, ProfileError> {
         .unwrap_or_default();
     let mut cfg = vec![0.0; cfg_names.len()];
     // absolute inputs the inverse only reads (a car-like robot's steering
-    // angle, see crate::steering): solved for each step's twist and reported
+    // angle, see crate::model_on_log::steering): solved for each step's twist and reported
     // with the rates
     let tw_names = steering::configuration_names(r);
     let solve_idx = steering::to_solve(r, &[]);
@@ -444,9 +444,9 @@ pub enum InverseFilesError {
     #[error(transparent)]
     Spec(#[from] kinegen_model::error::SourceError),
     #[error(transparent)]
-    Derivation(#[from] crate::derivation::DerivationFailed),
+    Derivation(#[from] crate::model_on_log::derivation::DerivationFailed),
     #[error(transparent)]
-    Model(#[from] crate::model::ModelError),
+    Model(#[from] crate::model_on_log::model::ModelError),
     #[error(transparent)]
     Profile(#[from] ProfileError),
 }
@@ -456,7 +456,7 @@ pub enum InverseFilesError {
 pub fn profile_files(
     path: &Path,
     specs: &[PathBuf],
-    deriver: &dyn crate::derivation::Deriver,
+    deriver: &dyn crate::model_on_log::derivation::Deriver,
 ) -> Result<(PlannedPath, Vec<SpecProfile>), InverseFilesError> {
     let planned = read_path(path).map_err(InverseFilesError::Path)?;
     let mut out = Vec::new();

@@ -10,13 +10,13 @@
 //! let done = localize_files(&request, &my_deriver, &|_| Box::new(|_, _| {}), &|_| {})?;
 //! println!("{}", done.localized.note);
 //! ```
-use crate::derivation::Deriver;
-use crate::files::{read_files, Files, FilesError};
-use crate::load::{Loaded, ReadProgress, Sources};
-use crate::localize::timing::Timing;
-use crate::localize::{localize_runs, EkfOptions, LocalizeError, Localized};
-use crate::model::Runner;
-use crate::sweep::{sweep, SweepError, SweepPoint, LEVELS};
+use crate::applications::localize::timing::Timing;
+use crate::applications::localize::{localize_runs, EkfOptions, LocalizeError, Localized};
+use crate::applications::sweep::{sweep, SweepError, SweepPoint, LEVELS};
+use crate::model_on_log::derivation::Deriver;
+use crate::model_on_log::files::{read_files, Files, FilesError};
+use crate::model_on_log::load::{Loaded, ReadProgress, Sources};
+use crate::model_on_log::model::Runner;
 use std::path::PathBuf;
 
 /// What to localise: the files, the filter's options (`noise_sigma` names

@@ -10,13 +10,13 @@
 //! let done = navigate_files(&mission, &my_deriver)?;
 //! println!("{} collisions before, {:?} after", done.before.collisions, done.calibrated.map(|c| c.drive.collisions));
 //! ```
-use crate::derivation::{DerivationFailed, Deriver};
-use crate::grid::Grid;
-use crate::log::LogError;
-use crate::methods::{by_name, MethodError, Settings};
-use crate::model::{parse_sets, ModelError, Runner};
-use crate::navigate::{drive, Drive, NavOptions, NavigateError};
-use crate::simulate::{simulate, SimOptions, Trajectory};
+use crate::applications::grid::Grid;
+use crate::applications::navigate::{drive, Drive, NavOptions, NavigateError};
+use crate::applications::simulate::{simulate, SimOptions, Trajectory};
+use crate::estimation::methods::{by_name, MethodError, Settings};
+use crate::logs::log::LogError;
+use crate::model_on_log::derivation::{DerivationFailed, Deriver};
+use crate::model_on_log::model::{parse_sets, ModelError, Runner};
 use kinegen_model::error::SourceError;
 use kinegen_model::spec::Model;
 use std::path::Path;
@@ -151,7 +151,7 @@ fn calibrate(
                 .map_err(MissionError::Squares)?,
         );
     }
-    let fo = crate::fit::FitOptions::default();
+    let fo = crate::estimation::fit::FitOptions::default();
     let c = m.calibrate(belief, &runs, &Settings::defaults(&fo))?;
     Ok((c.p, c.note))
 }

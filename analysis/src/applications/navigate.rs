@@ -7,8 +7,8 @@
 //! the move sequence is fixed at the start; recalculated every n moves (Oliveira
 //! et al.), the robot re-plans from the cell its odometry puts it in and aims
 //! each move from its odometry pose.
-use crate::grid::Grid;
-use crate::model::Runner;
+use crate::applications::grid::Grid;
+use crate::model_on_log::model::Runner;
 use kinegen_model::ir::{ArgRole, StepForm};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -69,7 +69,7 @@ pub struct Drive {
 pub const MAX_STEPS_PER_MOVE: f64 = 1e5;
 
 fn wrap(a: f64) -> f64 {
-    crate::log::wrap(a)
+    crate::logs::log::wrap(a)
 }
 
 /// A drive that cannot start.
@@ -98,7 +98,7 @@ pub fn drive(
     truth: &Runner,
     o: &NavOptions,
 ) -> Result<Drive, NavigateError> {
-    if !crate::simulate::can_spin(belief) {
+    if !crate::applications::simulate::can_spin(belief) {
         return Err(NavigateError::CannotSpin(belief.ir.name.clone()));
     }
     // one move to a diagonal neighbour, in integration steps: a cell of 1e300 m

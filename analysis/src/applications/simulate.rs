@@ -6,9 +6,9 @@
 //! sub-steps per sample between jittered time stamps. Sensors: quantised cumulative
 //! encoder counts, quantised wheel angles, noisy steering encoder, noisy motion
 //! capture with wrapped heading, noisy gyro.
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::steering;
+use crate::logs::log::wrap;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::steering;
 use kinegen_model::decl::InputKind;
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use kinegen_model::ir::StepForm;
@@ -104,14 +104,18 @@ pub struct SimLog {
 impl SimLog {
     /// The log as a run of `r`'s model, read as its CSV would be (`name` names
     /// it in messages), without writing a file.
-    pub fn to_run(&self, r: &Runner, name: &str) -> Result<crate::run::Run, crate::log::LogError> {
+    pub fn to_run(
+        &self,
+        r: &Runner,
+        name: &str,
+    ) -> Result<crate::model_on_log::run::Run, crate::logs::log::LogError> {
         let columns = self
             .header
             .iter()
             .enumerate()
             .map(|(j, h)| (h.clone(), self.rows.iter().map(|row| row[j]).collect()))
             .collect();
-        let log = crate::log::Log {
+        let log = crate::logs::log::Log {
             path: std::path::PathBuf::from(name),
             columns,
             header: self.header.clone(),
@@ -119,7 +123,7 @@ impl SimLog {
             // the lines of the CSV this log is written as
             first_line: 2,
         };
-        crate::run::Run::from_log(&log, r)
+        crate::model_on_log::run::Run::from_log(&log, r)
     }
 }
 
@@ -209,7 +213,7 @@ fn beacon_tour(
             next += 1;
             continue;
         }
-        let err = crate::log::wrap((ly - y).atan2(lx - x) - th);
+        let err = crate::logs::log::wrap((ly - y).atan2(lx - x) - th);
         let t = twists.len() as f64 * DT;
         // smooth start, slow down into the last landmark, slow in sharp turns
         let mut v = speed * smooth(t / 2.0) * (1.0 - 0.8 * err.abs() / PI);
@@ -313,7 +317,7 @@ fn planner(
 /// Inputs (as the robot's sensors read them) that realise `twist` in `base`, with
 /// the configuration inputs (e.g. caster steering angles, see [`config_inputs`])
 /// at `cfg`, one value per configuration input. Absolute inputs the inverse
-/// only reads (a car-like robot's steering angle, see [`crate::steering`]) are
+/// only reads (a car-like robot's steering angle, see [`crate::model_on_log::steering`]) are
 /// solved for so that the model drives `twist`.
 pub fn command_at(base: &Runner, twist: &[f64; 3], cfg: &[f64]) -> Vec<f64> {
     let cfg_idx = config_inputs(base);
@@ -471,14 +475,14 @@ struct Robot<'a, P: Fn(f64) -> [f64; 3]> {
     hold_idx: Vec<usize>,
     held: Vec<f64>,
     /// Under an input delay the robot executes, at time s, the command logged
-    /// at the last row before s - delay (crate::timeline): the rows' commands
+    /// at the last row before s - delay (crate::model_on_log::timeline): the rows' commands
     /// are kept to look back into.
     input_delay: f64,
     logged: Vec<(f64, Vec<f64>)>,
     /// Under an input lag the robot follows the (delayed) commands with a
-    /// first-order response (crate::timeline): its state, one per command.
+    /// first-order response (crate::model_on_log::timeline): its state, one per command.
     input_lag: f64,
-    responses: Vec<crate::timeline::Response>,
+    responses: Vec<crate::model_on_log::timeline::Response>,
     /// The gyro reports the mean yaw rate over the sample interval (an
     /// integrating or low-pass-filtered MEMS gyro), which is what a step of the
     /// model predicts.
@@ -520,16 +524,16 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
             cfg_idx,
             cfg_rate,
             written,
-            delay: crate::timeline::delay(truth, &truth.p),
+            delay: crate::model_on_log::timeline::delay(truth, &truth.p),
             history: vec![(0.0, x)],
             t_now: 0.0,
             cfg,
             held: last_u.clone(),
             last_u,
             hold_idx,
-            input_delay: crate::timeline::input_delay(truth, &truth.p),
+            input_delay: crate::model_on_log::timeline::input_delay(truth, &truth.p),
             logged: Vec::new(),
-            input_lag: crate::timeline::input_lag(truth, &truth.p),
+            input_lag: crate::model_on_log::timeline::input_lag(truth, &truth.p),
             responses: Vec::new(),
             gyro_mean: 0.0,
         }
@@ -591,7 +595,7 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
             self.responses = self
                 .hold_idx
                 .iter()
-                .map(|&i| crate::timeline::Response {
+                .map(|&i| crate::model_on_log::timeline::Response {
                     y: executing[i],
                     dy: 0.0,
                 })
@@ -732,7 +736,7 @@ fn observe_landmarks(
     }
     // the noise localize and fit assume: a spec without `sigma` (zeros)
     // gets the defaults, not exact sightings that no filter could weigh
-    let sig = crate::landmarks::sigma(truth);
+    let sig = crate::model_on_log::landmarks::sigma(truth);
     let u0 = vec![0.0; truth.ir.inputs.len()];
     let mut out = Vec::new();
     let mut next = times[0];

@@ -5,10 +5,10 @@
 //! observed again at the log's observation times with the sensor's noise, and
 //! the filter, told the true noise, localises it; the position error against
 //! this simulated truth is averaged over seeds.
-use crate::localize::{localize, EkfOptions};
-use crate::model::Runner;
-use crate::run::LandmarkObs;
-use crate::run::Run;
+use crate::applications::localize::{localize, EkfOptions};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::LandmarkObs;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::StepForm;
 use rand::SeedableRng;
@@ -46,7 +46,7 @@ fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
             .map(|o| o.value)
             .expect("checked by the caller");
     // the sigmas the filter weighs the sightings with
-    let sig = crate::landmarks::sigma(r);
+    let sig = crate::model_on_log::landmarks::sigma(r);
     let mut x = run.start_pose();
     let mut truth = vec![x];
     for k in 0..run.steps() {
@@ -72,7 +72,7 @@ fn resimulate(r: &Runner, run: &Run, sigmas: &[f64], seed: u64) -> Run {
             );
             LandmarkObs {
                 range: pred[0] + normal(sig[0]).sample(&mut rng),
-                bearing: crate::log::wrap(pred[1] + normal(sig[1]).sample(&mut rng)),
+                bearing: crate::logs::log::wrap(pred[1] + normal(sig[1]).sample(&mut rng)),
                 ..z.clone()
             }
         })
@@ -92,7 +92,7 @@ pub enum SweepError {
     #[error("{0}: the sweep re-observes the log's landmark observations, and it has none")]
     NoSightings(String),
     #[error(transparent)]
-    Filter(#[from] crate::localize::LocalizeError),
+    Filter(#[from] crate::applications::localize::LocalizeError),
 }
 
 /// The sweep over every `[[noise]]` channel and level in `levels`.
@@ -155,7 +155,7 @@ pub fn sweep(
                     .track
                     .iter()
                     .zip(g)
-                    .map(|(x, g)| crate::log::wrap(x[2] - g[2]).powi(2))
+                    .map(|(x, g)| crate::logs::log::wrap(x[2] - g[2]).powi(2))
                     .sum::<f64>()
                     / n)
                     .sqrt();

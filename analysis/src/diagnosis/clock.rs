@@ -18,12 +18,12 @@
 //! jackknife over the log's minutes (sighting errors persist for seconds, a
 //! robot turns for tens of them: the sightings are not independent, the
 //! minutes nearly are).
-use crate::fit::SEGMENT_S;
-use crate::interp::lerp3;
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::robust::{median, robust_sd};
-use crate::run::Run;
+use crate::estimation::fit::SEGMENT_S;
+use crate::logs::log::wrap;
+use crate::model_on_log::interp::lerp3;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::robust::{median, robust_sd};
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use rayon::prelude::*;
 use serde::Serialize;

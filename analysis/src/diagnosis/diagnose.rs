@@ -13,13 +13,13 @@
 use super::clock::{ClockVerdict, SightingClock, Unmeasured};
 use super::folds::{FoldTest, Folds};
 use super::sensor::{diagnose_sensor, sensor_only, SensorCandidate, SensorUnmeasured, SightingFit};
-use crate::derivation::EffectChains;
-use crate::discretisation::Discretisation;
-use crate::fit::{fit, residuals, FitError, FitOptions, FitResult, Search};
-use crate::interp::lerp_rows;
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::estimation::discretisation::Discretisation;
+use crate::estimation::fit::{fit, residuals, FitError, FitOptions, FitResult, Search};
+use crate::logs::log::wrap;
+use crate::model_on_log::derivation::EffectChains;
+use crate::model_on_log::interp::lerp_rows;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use kinegen_model::ir::StepForm;
 use nalgebra::DVector;
@@ -27,15 +27,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::OnceLock;
 
-/// A calibrated parameter: its estimate and standard deviation.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Estimate {
-    pub estimate: f64,
-    pub std: f64,
-}
-
-/// An effect's parameters by name, as calibrated.
-pub type Estimates = std::collections::BTreeMap<String, Estimate>;
+use super::estimate::{Estimate, Estimates};
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Candidate {
@@ -128,7 +120,7 @@ impl Diagnosis {
 /// Weighted residual RMS of a parameter vector, each run (segment) anchored at
 /// its best start pose (see `FitOptions::estimate_start`).
 pub fn weighted_rms(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {
-    crate::fit::rms_with_fitted_starts(r, p, runs, o)
+    crate::estimation::fit::rms_with_fitted_starts(r, p, runs, o)
 }
 
 /// Split every run at `frac` of its evidence: (train, test). With a ground
@@ -269,10 +261,10 @@ fn one_step(
     let mut feat = Vec::new();
     let mut regimes = Vec::new();
     let gyro = r.ir.observation_kernels(YawRate).map(|o| o.value);
-    let tau = crate::timeline::delay(r, p);
+    let tau = crate::model_on_log::timeline::delay(r, p);
     for run in runs {
         // the inputs as the robot executed them (a late or lagging command)
-        let executed = crate::timeline::executed(r, p, run);
+        let executed = crate::model_on_log::timeline::executed(r, p, run);
         let run: &Run = &executed;
         let Some(g) = &run.gt else { continue };
         let twists: Vec<Vec<f64>> = (0..run.steps())
@@ -286,14 +278,14 @@ fn one_step(
             let u_k: &[f64] = if tau == 0.0 {
                 &run.u[k]
             } else {
-                let (j, a) = crate::timeline::model_instant(run, k, tau);
+                let (j, a) = crate::model_on_log::timeline::model_instant(run, k, tau);
                 let a = a.clamp(0.0, 1.0);
                 let j1 = (j + 1).min(run.steps() - 1);
                 shifted_u = lerp_rows(&run.u[j], &run.u[j1], a);
                 &shifted_u
             };
             // from the body pose behind the measured one, to the predicted measurement
-            let (x0, _) = crate::deadreckon::body_start(r, p, g[k], u_k);
+            let (x0, _) = crate::model_on_log::deadreckon::body_start(r, p, g[k], u_k);
             let x1 = r.eval(step, &Runner::step_args(step, &x0, u_k, p, &dt, &zeros));
             let pred = match r.ir.observation_kernels(Pose).map(|o| o.value) {
                 Some(h) => r.eval(h, &Runner::obs_args(h, &x1, &run.u[k], p, &[])),
@@ -319,7 +311,10 @@ fn one_step(
             feat.push([v * d, w * d, v * w * d, w.abs() * d, d, v * v * d]);
             // (the gyro channel is a rate: its regression uses the same features / dt,
             // see `whiteness`)
-            regimes.push(crate::metrics::regime(&[t[0], t[1], t[2]], 0.2));
+            regimes.push(crate::model_on_log::metrics::regime(
+                &[t[0], t[1], t[2]],
+                0.2,
+            ));
         }
     }
     (res, feat, regimes)
@@ -429,7 +424,7 @@ pub fn whiteness(r: &Runner, p: &[f64], runs: &[Run]) -> Structure {
             r2: 0.0,
         };
     }
-    let coords = crate::periodic::coordinates(r, runs);
+    let coords = crate::estimation::periodic::coordinates(r, runs);
     let features = residual_features(r, runs, &feat, &coords);
     let mut findings = Vec::new();
     let mut worst = 0.0f64;
@@ -487,7 +482,7 @@ fn residual_features(
     r: &Runner,
     runs: &[Run],
     feat: &[[f64; 6]],
-    coords: &[crate::periodic::Coordinate],
+    coords: &[crate::estimation::periodic::Coordinate],
 ) -> Vec<(String, Vec<f64>)> {
     let n = feat.len();
     // features per step: v, omega, v*omega (from feat = [v dt, w dt, v w dt, ...]), heading, time
@@ -614,7 +609,7 @@ const MAX_PERIODIC: usize = 3;
 /// looking again, so one out-of-round wheel is not reported a second time as a
 /// weaker echo in the other wheel or in time (they move together).
 fn periodic_findings(
-    coords: &[crate::periodic::Coordinate],
+    coords: &[crate::estimation::periodic::Coordinate],
     res: &[[f64; 4]],
     chans: &[&str; 4],
 ) -> Vec<(String, f64)> {
@@ -626,7 +621,7 @@ fn periodic_findings(
         .map(|c| (0..res.len()).filter(|&i| c.moving[i]).collect())
         .collect();
     // (coordinate, period, channels, strongest peak) per finding
-    let mut found: Vec<(usize, f64, Vec<usize>, crate::periodic::Peak)> = Vec::new();
+    let mut found: Vec<(usize, f64, Vec<usize>, crate::estimation::periodic::Peak)> = Vec::new();
     for _ in 0..MAX_PERIODIC {
         let best = coords
             .par_iter()
@@ -638,7 +633,7 @@ fn periodic_findings(
                     .iter()
                     .map(|y| idx.iter().map(|&i| y[i]).collect())
                     .collect();
-                crate::periodic::scan(&coord, &ys)
+                crate::estimation::periodic::scan(&coord, &ys)
                     .into_iter()
                     .enumerate()
                     .filter_map(|(ch, p)| p.map(|p| (ci, ch, p)))
@@ -674,7 +669,7 @@ fn periodic_findings(
                     "{} {} periodic: {} (amplitude {:.2e} in {}, {:.1}% of its variance, chi2 = {:.0})",
                     names.join(" and "),
                     if names.len() > 1 { "residuals are" } else { "residual is" },
-                    crate::periodic::describe(&coords[ci], p.period),
+                    crate::estimation::periodic::describe(&coords[ci], p.period),
                     p.amplitude,
                     names[0],
                     100.0 * p.eta2,
@@ -732,7 +727,7 @@ struct Stage {
     /// The error a model explaining every structure would reach (white noise).
     floor: f64,
     /// The model's own discretisation error at the log's rate (the base
-    /// model's, see `crate::discretisation`), which no effect explains.
+    /// model's, see `crate::estimation::discretisation`), which no effect explains.
     step_error: f64,
     /// Its held-out error in each fold of the log's segments, computed when
     /// a candidate first needs it (see [`Folds::held_out`]).
@@ -765,8 +760,8 @@ fn stage(
         whole: runs,
         starts: &fit.starts,
     };
-    let train_fit = crate::fit::fit(&from, train, o, on_part)
-        .or_else(|_| crate::fit::fit(&runner, train, o, Search::Global))?;
+    let train_fit = crate::estimation::fit::fit(&from, train, o, on_part)
+        .or_else(|_| crate::estimation::fit::fit(&runner, train, o, Search::Global))?;
     Ok(stage_from(runner, fit, train_fit, runs, test, o))
 }
 
@@ -783,7 +778,7 @@ fn stage_from(
     let rmse = weighted_rms(&runner, &fit.p, runs, o);
     let bic = bic(fit.cost_after, fit.n_residuals, fit.free.len());
     let holdout_rmse = weighted_rms(&runner, &train_fit.p, test, o);
-    let floor = crate::fit::noise_floor(&runner, &fit.p, runs, o);
+    let floor = crate::estimation::fit::noise_floor(&runner, &fit.p, runs, o);
     Stage {
         runner,
         fit,
@@ -1216,9 +1211,9 @@ impl Ranking<'_> {
     fn clock_verdict(&self, aug: &Runner, f: &FitResult) -> Option<ClockVerdict> {
         let clock = self.clock?;
         let adds_delay = aug.delay.is_some() && self.cur.runner.delay.is_none();
-        let before = crate::timeline::delay(&self.cur.runner, &self.cur.fit.p);
+        let before = crate::model_on_log::timeline::delay(&self.cur.runner, &self.cur.fit.p);
         adds_delay
-            .then(|| clock.judge(before, crate::timeline::delay(aug, &f.p)))
+            .then(|| clock.judge(before, crate::model_on_log::timeline::delay(aug, &f.p)))
             .flatten()
     }
 
@@ -1284,7 +1279,7 @@ struct Local {
 ///
 /// An effect that brings a measurement delay is also started from the delay
 /// the motion's cross-correlation suggests
-/// ([`crate::lag::delay_estimate`]), and the best kept: from the current
+/// ([`crate::estimation::lag::delay_estimate`]), and the best kept: from the current
 /// calibration and no delay the refinement stays near zero (10,921-row
 /// omni_caster logs lagging 0.05-0.2 s: error 1.1-4.0 against floors of
 /// 0.3-0.35), and every candidate then needed its global search from nominal
@@ -1322,8 +1317,8 @@ fn local_refinement(
     };
     let q = start.ir.runtime_params()[d];
     let bounds = (q.min.unwrap_or(-1.0), q.max.unwrap_or(1.0));
-    let Some(tau) =
-        crate::lag::delay_estimate(start, &start.p, runs, bounds).filter(|t| *t != start.p[d])
+    let Some(tau) = crate::estimation::lag::delay_estimate(start, &start.p, runs, bounds)
+        .filter(|t| *t != start.p[d])
     else {
         return plain(from_cur);
     };
@@ -1373,10 +1368,15 @@ fn leaves_only_noise(cur: &Stage) -> bool {
 }
 
 /// The discretisation error of `stage`'s calibration at the log's rate (see
-/// `crate::discretisation`).
+/// `crate::estimation::discretisation`).
 fn step_error(stage: &Stage, runs: &[Run], o: &FitOptions) -> Discretisation {
-    let mut d =
-        crate::discretisation::estimate(&stage.runner, &stage.fit.p, &stage.fit.starts, runs, o);
+    let mut d = crate::estimation::discretisation::estimate(
+        &stage.runner,
+        &stage.fit.p,
+        &stage.fit.starts,
+        runs,
+        o,
+    );
     // the asymptotic e(2h) = 4 e(h) overstates the error of a coarse log
     // (larger steps err faster than that); the step cannot leave more than
     // what the calibrated model leaves above the noise
@@ -1420,9 +1420,12 @@ fn read_clock(
         Some(Err(why)) => (None, Some(why)),
         None => (None, None),
     };
-    let spec = clock
-        .zip(first.runner.delay)
-        .and_then(|(c, _)| c.judge(0.0, crate::timeline::delay(&first.runner, &first.fit.p)));
+    let spec = clock.zip(first.runner.delay).and_then(|(c, _)| {
+        c.judge(
+            0.0,
+            crate::model_on_log::timeline::delay(&first.runner, &first.fit.p),
+        )
+    });
     (clock, unmeasured, spec)
 }
 

@@ -1,6 +1,6 @@
 //! A whole diagnosis as a user asks for it, in one call: which catalogue
 //! effects apply to the spec and are observable in the logs (the others are
-//! skipped with the reason), the ranking and chain of [`crate::diagnose`],
+//! skipped with the reason), the ranking and chain of [`crate::diagnosis::diagnose`],
 //! the spec change each effect found makes, and the first effect's residual
 //! signature for the report.
 //!
@@ -10,12 +10,14 @@
 //! let out = diagnose_job(&job, &Hooks::none())?;
 //! println!("{:?}", out.diagnosis.verdict());
 //! ```
-use crate::dataset::channel_missing;
-use crate::derivation::EffectChains;
-use crate::diagnose::{diagnose, signature, Catalogue, DiagnoseError, Diagnosis, Signature};
+use crate::diagnosis::diagnose::{
+    diagnose, signature, Catalogue, DiagnoseError, Diagnosis, Signature,
+};
 use crate::effects::{Applicability, Effect};
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::dataset::channel_missing;
+use crate::model_on_log::derivation::EffectChains;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::spec::Model;
 use std::collections::BTreeMap;
 
@@ -31,7 +33,7 @@ pub struct Job<'a> {
 }
 
 /// Told what the logs' reading found that the user should know (before the
-/// long part starts: [`crate::request::diagnose_files`]), how many effects
+/// long part starts: [`crate::diagnosis::request::diagnose_files`]), how many effects
 /// are tried, then each step's name (from worker threads), for a progress bar.
 pub struct Hooks<'a> {
     pub warnings: &'a dyn Fn(&[String]),

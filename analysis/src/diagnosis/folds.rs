@@ -14,10 +14,10 @@
 //! (see [`WINDOW_S`]), which a minute's random drift does not swamp. Each
 //! segment is dead-reckoned from its own start, so segments are nearly
 //! independent, and the test counts folds, not residuals.
-use crate::fit::{fit, segmented, FitOptions, FitResult, Search};
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::estimation::fit::{fit, segmented, FitOptions, FitResult, Search};
+use crate::logs::log::wrap;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use rayon::prelude::*;
 
 /// Fewest folds the test is run on: with fewer segments (a log under about
@@ -181,7 +181,7 @@ fn relative_motion_errors(r: &Runner, p: &[f64], run: &Run, o: &FitOptions) -> (
     let Some(gt) = &run.gt else {
         return (0.0, 0);
     };
-    let track = crate::deadreckon::run(r, p, run, false);
+    let track = crate::model_on_log::deadreckon::run(r, p, run, false);
     let model = track.measured();
     let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
     let relative = |a: &[f64; 3], b: &[f64; 3]| {

@@ -9,13 +9,13 @@
 //! let done = diagnose_files(&request, &my_deriver, &|_| Box::new(|_, _| {}), &Hooks::none())?;
 //! println!("{:?}", done.outcome.diagnosis.verdict());
 //! ```
-use crate::derivation::{Deriver, EffectChains};
-use crate::diagnose::{DiagnoseError, MIN_ROWS};
-use crate::diagnose_job::{diagnose_job, Hooks, Job, Outcome};
-use crate::files::{read_files, Files, FilesError, Read};
-use crate::load::{Loaded, ReadProgress};
-use crate::model::{parse_sets, ModelError, Runner};
-use crate::run::Run;
+use crate::diagnosis::diagnose::{DiagnoseError, MIN_ROWS};
+use crate::diagnosis::diagnose_job::{diagnose_job, Hooks, Job, Outcome};
+use crate::model_on_log::derivation::{Deriver, EffectChains};
+use crate::model_on_log::files::{read_files, Files, FilesError, Read};
+use crate::model_on_log::load::{Loaded, ReadProgress};
+use crate::model_on_log::model::{parse_sets, ModelError, Runner};
+use crate::model_on_log::run::Run;
 use kinegen_model::spec::Model;
 use std::time::{Duration, Instant};
 

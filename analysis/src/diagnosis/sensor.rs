@@ -15,20 +15,20 @@
 //! error the localisation's likelihood was paying for.
 //!
 //! Tested as the motion's long logs are: calibrated without each of
-//! [`crate::fit::sensor::FOLDS`] stretches of the sightings in turn, the effect must predict the
+//! [`crate::estimation::fit::sensor::FOLDS`] stretches of the sightings in turn, the effect must predict the
 //! held-out stretch better than the current model does, in a paired t-test
 //! over the stretches ([`super::folds::paired`]), because a camera's errors
 //! persist for seconds and its sightings are not independent. The loss is
 //! Huber's, so a misread barcode does not decide it; the standard deviations
 //! are the stretches' jackknife, for the same reason.
-use super::diagnose::{Estimate, Estimates};
+use super::estimate::{Estimate, Estimates};
 use super::folds::{paired, FoldTest};
-use crate::derivation::EffectChains;
-use crate::fit::sensor::{calibrate_with_folds, Sightings};
-pub use crate::fit::sensor::{sensor_only, SensorUnmeasured};
-use crate::model::Runner;
-use crate::robust::median;
-use crate::run::Run;
+use crate::estimation::fit::sensor::{calibrate_with_folds, Sightings};
+pub use crate::estimation::fit::sensor::{sensor_only, SensorUnmeasured};
+use crate::model_on_log::derivation::EffectChains;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::robust::median;
+use crate::model_on_log::run::Run;
 use serde::Serialize;
 
 /// Most sensor effects found in a row.
@@ -65,7 +65,7 @@ pub struct SensorCandidate {
 
 /// Median absolute residual of each channel, in the spec's units.
 fn medians(r: &Runner, res: &[f64]) -> [f64; 2] {
-    let sig = crate::landmarks::sigma(r);
+    let sig = crate::model_on_log::landmarks::sigma(r);
     [0, 1].map(|c| {
         let mut v: Vec<f64> = res
             .iter()

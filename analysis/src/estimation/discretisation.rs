@@ -11,9 +11,9 @@
 //! is left is what could be mistaken for a missing effect. Diagnosis counts it
 //! with the sensor noise, so structure the model's own step leaves is never
 //! blamed on the robot (issue 12 item 3).
-use crate::fit::{fit, rms_with_fitted_starts, FitOptions, Search};
-use crate::model::Runner;
-use crate::run::Run;
+use crate::estimation::fit::{fit, rms_with_fitted_starts, FitOptions, Search};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use serde::Serialize;
 
 /// Most iterations of each of the two refinements. Both start from the

@@ -31,9 +31,9 @@ pub use options::{FitError, FitOptions, FitResult, Likelihood, ParamEstimate, BA
 use residuals::{has_start_nuisance, priors, run_residuals, start_columns};
 pub use residuals::{normal_equations, residual_sums, residuals, sightings_from_truth, Sums};
 
-use crate::deadreckon;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::deadreckon;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
 use search::{continuation, fit_unheld};
 use solver::levenberg_marquardt;
@@ -409,7 +409,7 @@ const DRIFT_SLACK: f64 = 1.05;
 /// `segments` (the relative pose over a window does not depend on the
 /// start). False where the runs are too short to say.
 fn drifts_as_little(r: &Runner, (whole, segments): (&[f64], &[f64]), runs: &[Run]) -> bool {
-    let drift = |p: &[f64]| crate::metrics::from_measured_starts(r, p, runs).rpe_5s_m;
+    let drift = |p: &[f64]| crate::model_on_log::metrics::from_measured_starts(r, p, runs).rpe_5s_m;
     match (drift(whole), drift(segments)) {
         (Some(a), Some(b)) => a.is_finite() && a <= DRIFT_SLACK * b,
         _ => false,

@@ -4,16 +4,18 @@
 //! used at all); [`compare_methods`] runs several registered methods on the
 //! same logs and compares them with the nominal values and a known truth.
 //! The CLI renders what these return.
-use crate::coverage;
-use crate::evaluation::{evaluation, evaluation_from, pairs, Evaluation};
-use crate::fit::leave_one_out::{leave_one_out, LeftOut};
-use crate::fit::{fitted_offsets, run_offsets, run_starts, segmented, FitOptions, FitResult};
-use crate::load::Loaded;
-use crate::methods::{by_name, Calibration, Method, MethodError, Settings, METHODS};
-use crate::metrics::{degenerate, errors_each, implausible, short_term_worse};
-use crate::model::Runner;
-use crate::run::Run;
-use crate::track_rows::{Heading, Recipe};
+use crate::estimation::fit::leave_one_out::{leave_one_out, LeftOut};
+use crate::estimation::fit::{
+    fitted_offsets, run_offsets, run_starts, segmented, FitOptions, FitResult,
+};
+use crate::estimation::methods::{by_name, Calibration, Method, MethodError, Settings, METHODS};
+use crate::model_on_log::coverage;
+use crate::model_on_log::evaluation::{evaluation, evaluation_from, pairs, Evaluation};
+use crate::model_on_log::load::Loaded;
+use crate::model_on_log::metrics::{degenerate, errors_each, implausible, short_term_worse};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
+use crate::model_on_log::track_rows::{Heading, Recipe};
 
 /// Why a calibration job could not run.
 #[derive(Debug, thiserror::Error)]
@@ -174,7 +176,7 @@ fn drift_dominates(l: &Loaded, after: &Evaluation) -> Option<String> {
         return None;
     }
     let s = after.landmarks.as_ref()?;
-    let sigma = crate::landmarks::sigma(&l.runner);
+    let sigma = crate::model_on_log::landmarks::sigma(&l.runner);
     let times = [
         s.range_robust_sd_m / sigma[0],
         s.bearing_robust_sd_rad / sigma[1],
@@ -201,7 +203,7 @@ fn turning_one_way(runs: &[Run]) -> Option<String> {
     let (mut ccw, mut cw) = (0.0, 0.0);
     for g in runs.iter().filter_map(|r| r.gt.as_ref()) {
         for k in 1..g.len() {
-            let d = crate::log::wrap(g[k][2] - g[k - 1][2]);
+            let d = crate::logs::log::wrap(g[k][2] - g[k - 1][2]);
             if d > 0.0 {
                 ccw += d;
             } else {
@@ -253,7 +255,7 @@ fn judge_growth(
     if seg.len() > l.runs.len() && sa <= 1.001 * sb {
         return Judged::Stands(Growth::Note(format!(
             "over whole runs the position error grew ({before:.4} m -> {after:.4} m) while over the {:.0} s segments the fit works on it fell ({sb:.4} m -> {sa:.4} m): the remaining long-run drift is noise the parameters cannot remove",
-            crate::fit::SEGMENT_S
+            crate::estimation::fit::SEGMENT_S
         )));
     }
     if after <= 1.05 * before {
@@ -392,7 +394,7 @@ pub struct MethodRow<'r> {
     /// On the fitted runs.
     pub after: Evaluation<'r>,
     /// On the held-out runs, if any.
-    pub holdout: Option<crate::metrics::Errors>,
+    pub holdout: Option<crate::model_on_log::metrics::Errors>,
     /// How it went, with a warning appended when it ends worse than nominal.
     pub note: String,
     /// Distance to the truth as a fraction of the nominal values' (when a

@@ -12,13 +12,13 @@
 //!         Fitted::Methods(m) => m.before.errors.rmse,
 //!     })?;
 //! ```
-use crate::derivation::Deriver;
-use crate::files::{read_files, Files, FilesError};
-use crate::fit::FitOptions;
-use crate::fit_job::{
+use crate::estimation::fit::FitOptions;
+use crate::estimation::fit_job::{
     calibrate, compare_methods, Calibrated, FitJobError, MethodsJob, MethodsOutcome,
 };
-use crate::load::{Loaded, ReadProgress};
+use crate::model_on_log::derivation::Deriver;
+use crate::model_on_log::files::{read_files, Files, FilesError};
+use crate::model_on_log::load::{Loaded, ReadProgress};
 
 /// What to calibrate with.
 pub enum FitRequest<'a> {

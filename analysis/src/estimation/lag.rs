@@ -1,9 +1,9 @@
 //! A first estimate of a measurement delay, from the data alone: where the
 //! motion measured lines up with the motion the inputs drive (see
-//! [`crate::timeline`] for what the delay means). Diagnosis starts the
+//! [`crate::model_on_log::timeline`] for what the delay means). Diagnosis starts the
 //! `time_offset` effect's calibration from it.
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 
 /// Lags tried by [`delay_estimate`] on each side of zero, at most: longer
 /// series are averaged over blocks of rows first, so the search costs a few
@@ -38,14 +38,14 @@ pub fn delay_estimate(r: &Runner, p: &[f64], runs: &[Run], bounds: (f64, f64)) -
     // per channel: (measured, model), each averaged over blocks of rows
     let mut channels: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
     for run in runs.iter().filter(|x| x.steps() > 1) {
-        let twist = crate::deadreckon::run(r, p, run, false).twist;
+        let twist = crate::model_on_log::deadreckon::run(r, p, run, false).twist;
         let model_yaw: Vec<f64> = twist.iter().map(|w| w[2]).collect();
         let model_speed: Vec<f64> = twist.iter().map(|w| w[0].hypot(w[1])).collect();
         if let Some(g) = &run.gt {
             let step = |k: usize| (g[k + 1], g[k], run.dt[k]);
             let yaw = (0..run.steps()).map(|k| {
                 let (b, a, h) = step(k);
-                crate::log::wrap(b[2] - a[2]) / h
+                crate::logs::log::wrap(b[2] - a[2]) / h
             });
             let speed = (0..run.steps()).map(|k| {
                 let (b, a, h) = step(k);

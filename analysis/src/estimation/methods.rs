@@ -2,10 +2,10 @@
 //! ([`METHODS`]): the CLI's `--method` choices, `--method all` and the dispatch
 //! all read the registry, so a new method (issue #15's neural gyrodometry, say)
 //! is one `impl` and one line here.
-use crate::fit::{fit, FitOptions, FitResult, Search};
-use crate::model::Runner;
-use crate::run::Run;
-use crate::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
+use crate::estimation::fit::{fit, FitOptions, FitResult, Search};
+use crate::estimation::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::YawRate;
 
 /// What every method may read besides the model and the logs.
@@ -38,17 +38,17 @@ impl<'a> Settings<'a> {
 }
 
 /// A learned yaw rate (rad/s) from one step's inputs: a virtual gyro.
-pub type YawRateModel = crate::track_rows::LearnedYawRate;
+pub type YawRateModel = crate::model_on_log::track_rows::LearnedYawRate;
 
 /// Why a method does not apply to these logs or this model.
 #[derive(Debug, thiserror::Error)]
 pub enum MethodError {
     #[error(transparent)]
-    Fit(#[from] crate::fit::FitError),
+    Fit(#[from] crate::estimation::fit::FitError),
     #[error(transparent)]
-    Seed(#[from] crate::seed_methods::SeedError),
+    Seed(#[from] crate::estimation::seed_methods::SeedError),
     #[error(transparent)]
-    Neural(#[from] crate::neural::TrainError),
+    Neural(#[from] crate::estimation::neural::TrainError),
 }
 
 /// One method's outcome.
@@ -244,7 +244,7 @@ impl Method for Neural {
                 .iter()
                 .map(|i| i.kind == kinegen_model::decl::InputKind::Absolute && i.unit == "rad")
                 .collect();
-        let (net, t) = crate::neural::train(runs, &angles, s.hidden, 0)?;
+        let (net, t) = crate::estimation::neural::train(runs, &angles, s.hidden, 0)?;
         let note = format!(
             "{} hidden units, {} LM iterations (weights of iteration {} kept: best on the validation split), yaw-rate RMSE {:.4} rad/s on the training steps, {:.4} on the validation steps ({} training samples)",
             net.hidden(),

@@ -5,7 +5,7 @@
 //! early stopping on a validation split (the last 20% of every run) and a
 //! deterministic initialisation. It is the black-box baseline the paper sets
 //! against the calibrated kinematic model.
-use crate::run::Run;
+use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};

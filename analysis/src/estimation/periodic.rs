@@ -7,8 +7,8 @@
 //! over the coordinate adds it up coherently. The coordinate need not be sampled
 //! evenly or grow monotonically (wheels stop and reverse), so this is a direct
 //! non-uniform Fourier sum, not an FFT.
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::InputKind;
 
 /// The strongest sinusoid found in one residual channel.

@@ -12,10 +12,10 @@
 //! The yaw-rate methods use the gyro column when the log has one; otherwise the
 //! yaw rate measured by the ground-truth heading, (theta_{k+1} - theta_k)/dt: the
 //! reference heading that seed 000 takes from its laser gyro.
-use crate::deadreckon;
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::logs::log::wrap;
+use crate::model_on_log::deadreckon;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::YawRate;
 use nalgebra::{DMatrix, DVector};
 
@@ -335,7 +335,7 @@ fn square_check(run: &Run, gt: &[[f64; 3]], side: f64) -> Result<(), SeedError> 
     let turn = (gt.last().unwrap()[2] - gt[0][2]).abs().to_degrees();
     // every n/200-th row, so measurement noise does not add length
     let every = (gt.len() / 200).max(1);
-    let length = crate::metrics::path_length(gt.iter().map(|p| (p[0], p[1])), every);
+    let length = crate::model_on_log::metrics::path_length(gt.iter().map(|p| (p[0], p[1])), every);
     let pts: Vec<&[f64; 3]> = gt.iter().step_by(every).collect();
     // a square's sides are driven at four headings 90 degrees apart; a circle
     // or a free path spreads its heading evenly (20 degrees each side of the

@@ -7,8 +7,8 @@
 //! their stamps, and rows outside any stream's span are dropped. Time is the
 //! messages' header stamps (or the bag's receive time, if asked), minus the first
 //! row's.
-use crate::log::{wrap, Log, LogError};
-use crate::rosmsg::{self, decode};
+use crate::logs::log::{wrap, Log, LogError};
+use crate::logs::rosmsg::{self, decode};
 use serde::Deserialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -365,9 +365,13 @@ impl Bag<'_> {
 /// The field paths of a landmark topic's detections: the landmark's id, the
 /// stamp, and either range and bearing or x and y (`polar.2` says which).
 struct DetectionFields {
-    id: crate::rosdyn::FieldPath,
-    stamp: crate::rosdyn::FieldPath,
-    polar: (crate::rosdyn::FieldPath, crate::rosdyn::FieldPath, bool),
+    id: crate::logs::rosdyn::FieldPath,
+    stamp: crate::logs::rosdyn::FieldPath,
+    polar: (
+        crate::logs::rosdyn::FieldPath,
+        crate::logs::rosdyn::FieldPath,
+        bool,
+    ),
 }
 
 impl DetectionFields {
@@ -376,7 +380,7 @@ impl DetectionFields {
         file: &Path,
         l: &LandmarkSource,
         t: &Topic,
-    ) -> Result<(crate::rosdyn::Schema, DetectionFields), LogError> {
+    ) -> Result<(crate::logs::rosdyn::Schema, DetectionFields), LogError> {
         let topic = l.topic.as_str();
         let err = |m: String| LogError::new(file, None, None, format!("topic `{topic}`: {m}"));
         if t.encoding != "cdr" {
@@ -386,8 +390,10 @@ impl DetectionFields {
             )));
         }
         let schema = match &t.definition {
-            Some((enc, text)) if enc == "ros2msg" => crate::rosdyn::Schema::parse(&t.schema, text)
-                .map_err(|e| err(format!("its message definition ({}): {e}", t.schema)))?,
+            Some((enc, text)) if enc == "ros2msg" => {
+                crate::logs::rosdyn::Schema::parse(&t.schema, text)
+                    .map_err(|e| err(format!("its message definition ({}): {e}", t.schema)))?
+            }
             Some((enc, _)) => {
                 return Err(err(format!(
                     "its message definition is `{enc}`; kinegen reads `ros2msg` definitions"
@@ -397,10 +403,10 @@ impl DetectionFields {
         };
         let path = |field: &str,
                     p: &Option<String>|
-         -> Result<Option<crate::rosdyn::FieldPath>, LogError> {
+         -> Result<Option<crate::logs::rosdyn::FieldPath>, LogError> {
             p.as_deref()
                 .map(|p| {
-                    crate::rosdyn::FieldPath::parse(p)
+                    crate::logs::rosdyn::FieldPath::parse(p)
                         .map_err(|e| err(format!("[landmarks] {field}: {e}")))
                 })
                 .transpose()
@@ -462,7 +468,8 @@ fn landmark_detections(
                     ))
                 })?,
         };
-        let get = |p: &crate::rosdyn::FieldPath| p.values(&v).map_err(|e| here(e.to_string()));
+        let get =
+            |p: &crate::logs::rosdyn::FieldPath| p.values(&v).map_err(|e| here(e.to_string()));
         let (ids, a, b) = (get(&id)?, get(&polar.0)?, get(&polar.1)?);
         let n = ids.len().max(a.len()).max(b.len());
         for (what, vals) in [(&id, &ids), (&polar.0, &a), (&polar.1, &b)] {
@@ -475,17 +482,20 @@ fn landmark_detections(
             }
         }
         // a field with one value serves every detection of the message
-        fn pick<'v>(vals: &[&'v crate::rosdyn::Value], k: usize) -> &'v crate::rosdyn::Value {
+        fn pick<'v>(
+            vals: &[&'v crate::logs::rosdyn::Value],
+            k: usize,
+        ) -> &'v crate::logs::rosdyn::Value {
             vals[if vals.len() == 1 { 0 } else { k }]
         }
         for k in 0..n {
             let ident = pick(&ids, k)
                 .as_id()
                 .ok_or_else(|| here(format!("`{}` is neither text nor an integer", id.text())))?;
-            let num = |vals: &[&crate::rosdyn::Value], p: &crate::rosdyn::FieldPath| {
+            let num = |vals: &[&crate::logs::rosdyn::Value], p: &crate::logs::rosdyn::FieldPath| {
                 pick(vals, k)
                     .as_f64()
-                    .filter(|x| crate::log::physical(*x))
+                    .filter(|x| crate::logs::log::physical(*x))
                     .ok_or_else(|| here(format!("`{}` is not a finite number", p.text())))
             };
             let (p, q) = (num(&a, &polar.0)?, num(&b, &polar.1)?);
@@ -727,7 +737,7 @@ fn pose_series(file: &Path, p: &PoseSource, t: &Topic, stamps: Stamps) -> Result
     }
     // headings are interpolated unwrapped (and wrapped again in the log)
     let yaw: Vec<f64> = s.values.iter().map(|v| v[2]).collect();
-    for (v, y) in s.values.iter_mut().zip(crate::log::unwrap(&yaw)) {
+    for (v, y) in s.values.iter_mut().zip(crate::logs::log::unwrap(&yaw)) {
         v[2] = y;
     }
     Ok(s)
@@ -775,7 +785,7 @@ fn align(
         if let Some(k) = s
             .values
             .iter()
-            .position(|v| !v.iter().all(|x| crate::log::physical(*x)))
+            .position(|v| !v.iter().all(|x| crate::logs::log::physical(*x)))
         {
             return Err(at(
                 file,

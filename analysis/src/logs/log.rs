@@ -389,7 +389,7 @@ impl Log {
 
     /// Read a log, keeping only `wanted` columns (others are ignored, as the
     /// contract says). Cells of the `measured` columns may be empty or `nan`
-    /// (read as NaN: [`crate::run::Run::split_at_gaps`] cuts those rows out).
+    /// (read as NaN: [`crate::model_on_log::run::Run::split_at_gaps`] cuts those rows out).
     pub fn read(path: &Path, wanted: &[&str], measured: &[&str]) -> Result<Log, LogError> {
         let (header, mut rdr) = read_csv(path, "log")?;
         let idx: Vec<(usize, String)> = header

@@ -13,7 +13,7 @@
 //!
 //! Rows before an input's first value hold that first value, rows after a
 //! counter's last value its last one: a log's first and last rows, said.
-use crate::log::{typical, wrap, Log, LogError};
+use crate::logs::log::{typical, wrap, Log, LogError};
 
 /// How an input column's empty cells are filled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -779,10 +779,10 @@ MSG: my_msgs/Detection\nuint16 id # the tag\nfloat64 range\nfloat64 bearing\n";
         b.extend(0xffff_fff0u32.to_le_bytes()); // frame_id length
         b.extend(b"base\0");
         let t0 = std::time::Instant::now();
-        assert!(crate::rosmsg::decode::<crate::rosmsg::Header>(&b).is_err());
+        assert!(crate::logs::rosmsg::decode::<crate::logs::rosmsg::Header>(&b).is_err());
         assert!(t0.elapsed().as_secs_f64() < 0.5, "{:?}", t0.elapsed());
         b[12..16].copy_from_slice(&5u32.to_le_bytes());
-        let h: crate::rosmsg::Header = crate::rosmsg::decode(&b).unwrap();
+        let h: crate::logs::rosmsg::Header = crate::logs::rosmsg::decode(&b).unwrap();
         assert_eq!(h.frame_id, "base");
     }
 

@@ -21,7 +21,7 @@ impl Time {
 #[derive(Debug, Clone, Deserialize)]
 pub struct Header {
     pub stamp: Time,
-    #[serde(deserialize_with = "crate::rosdyn::cdr_string")]
+    #[serde(deserialize_with = "crate::logs::rosdyn::cdr_string")]
     pub frame_id: String,
 }
 
@@ -66,7 +66,7 @@ type Covariance36 = [[f64; 18]; 2];
 #[derive(Debug, Clone, Deserialize)]
 pub struct JointState {
     pub header: Header,
-    #[serde(deserialize_with = "crate::rosdyn::cdr_strings")]
+    #[serde(deserialize_with = "crate::logs::rosdyn::cdr_strings")]
     pub name: Vec<String>,
     pub position: Vec<f64>,
     pub velocity: Vec<f64>,
@@ -117,7 +117,7 @@ pub struct TwistWithCovariance {
 #[derive(Debug, Clone, Deserialize)]
 pub struct Odometry {
     pub header: Header,
-    #[serde(deserialize_with = "crate::rosdyn::cdr_string")]
+    #[serde(deserialize_with = "crate::logs::rosdyn::cdr_string")]
     pub child_frame_id: String,
     pub pose: PoseWithCovariance,
     pub twist: TwistWithCovariance,
@@ -134,7 +134,7 @@ pub struct Transform {
 #[derive(Debug, Clone, Deserialize)]
 pub struct TransformStamped {
     pub header: Header,
-    #[serde(deserialize_with = "crate::rosdyn::cdr_string")]
+    #[serde(deserialize_with = "crate::logs::rosdyn::cdr_string")]
     pub child_frame_id: String,
     pub transform: Transform,
 }

@@ -3,7 +3,7 @@
 //! millions of steps, and a `Vec` per row would cost an allocation (and its
 //! bookkeeping, more than the values) each. The values are a [`Column`], so a
 //! slice shares them.
-use crate::column::Column;
+use crate::logs::column::Column;
 use std::ops::Index;
 
 /// Per-step model inputs of a run, in the spec's order.

@@ -2,15 +2,17 @@
 //! parameters dead-reckoned over every run, where its error grows, the
 //! landmark innovations, and gyrodometry (seed 000 eq. 13-18) on the runs
 //! that log a gyro.
-use crate::derivation::Deriver;
-use crate::evaluation::{pairs, tracks};
-use crate::files::{read_files, Files, FilesError};
-use crate::innovations::{self, Innovation, InnovationStats};
-use crate::load::ReadProgress;
-use crate::metrics::{self, errors_each, where_it_fails, Errors, RegimeShare, Segment};
-use crate::model::Runner;
-use crate::run::Run;
-use crate::track_rows::{Heading, Recipe, TrackRows};
+use crate::model_on_log::derivation::Deriver;
+use crate::model_on_log::evaluation::{pairs, tracks};
+use crate::model_on_log::files::{read_files, Files, FilesError};
+use crate::model_on_log::innovations::{self, Innovation, InnovationStats};
+use crate::model_on_log::load::ReadProgress;
+use crate::model_on_log::metrics::{
+    self, errors_each, where_it_fails, Errors, RegimeShare, Segment,
+};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
+use crate::model_on_log::track_rows::{Heading, Recipe, TrackRows};
 
 /// The model against its logs.
 pub struct Comparison<'r> {

@@ -5,10 +5,10 @@
 //! the held-out error went 0.74 m -> 17.6 m). When a calibration makes runs it
 //! was not fitted on worse, this names the motions and inputs those runs use
 //! and the fitted ones do not, so that the user knows which runs to add.
-use crate::metrics::{sample_every, sampled_twists};
-use crate::model::Runner;
-use crate::run::Run;
-use crate::track_rows::TrackRows;
+use crate::model_on_log::metrics::{sample_every, sampled_twists};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
+use crate::model_on_log::track_rows::TrackRows;
 
 /// A held-out motion counts as not covered when its typical size is this many
 /// times the fitted runs'.

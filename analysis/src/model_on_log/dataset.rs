@@ -1,12 +1,12 @@
 //! A log turned into model steps: per-step inputs (rates of cumulative columns,
 //! held values of absolute ones), step lengths, and the measurements.
-use crate::bag::{Detection, TopicMap};
-use crate::column::Column;
-use crate::log::{typical, unwrap, Log, LogError};
-use crate::merged::{self, Fill, InputColumn, Measurement};
-use crate::model::Runner;
-use crate::rows::Inputs;
-use crate::run::Run;
+use crate::logs::bag::{Detection, TopicMap};
+use crate::logs::column::Column;
+use crate::logs::log::{typical, unwrap, Log, LogError};
+use crate::logs::merged::{self, Fill, InputColumn, Measurement};
+use crate::logs::rows::Inputs;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::{InputKind, ObservationRole};
 
 /// How a log column becomes a step's input value.
@@ -295,7 +295,7 @@ impl Run {
     /// `progress(messages read, total)`, with the range-bearing detections of
     /// its landmark topic (none for a CSV log, whose observations are a file
     /// of their own). A CSV log's empty cells are filled as a log merged
-    /// from sources at their own times is ([`crate::merged`]), said in the
+    /// from sources at their own times is ([`crate::logs::merged`]), said in the
     /// note.
     pub fn read_with(
         path: &std::path::Path,
@@ -303,13 +303,13 @@ impl Run {
         topics: &TopicMap,
         progress: &dyn Fn(usize, usize),
     ) -> Result<ReadLog, LogError> {
-        let (log, detections, note) = if crate::bag::is_bag(path) {
-            let wanted = crate::bag::Wanted {
+        let (log, detections, note) = if crate::logs::bag::is_bag(path) {
+            let wanted = crate::logs::bag::Wanted {
                 inputs: r.ir.inputs.iter().map(|i| i.column.clone()).collect(),
                 pose: r.ir.pose_columns(),
                 gyro: r.ir.gyro_column(),
             };
-            let (log, detections) = crate::bag::read(path, &wanted, topics, progress)?;
+            let (log, detections) = crate::logs::bag::read(path, &wanted, topics, progress)?;
             (log, detections, None)
         } else {
             let wanted = Run::wanted(r);

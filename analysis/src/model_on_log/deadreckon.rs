@@ -1,9 +1,9 @@
 //! Dead reckoning with the exact step, optionally with the sensitivities
 //! d pose_k / d p (forward sensitivity: S_{k+1} = Fx S_k + Fp) that calibration needs.
-use crate::interp::{chain, lerp3};
-use crate::landmarks::PlacedStart;
-use crate::model::Runner;
-use crate::run::{LandmarkObs, Run};
+use crate::model_on_log::interp::{chain, lerp3};
+use crate::model_on_log::landmarks::PlacedStart;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::{LandmarkObs, Run};
 use kinegen_model::decl::ObservationRole::{Pose, YawRate};
 use std::borrow::Cow;
 
@@ -111,16 +111,16 @@ enum Placed {
 
 /// Without ground truth, the start pose is where the landmarks seen at the
 /// start place the robot through the model's own observation (a sensor off the
-/// body origin included): see [`crate::landmarks::start_from_landmarks`]; a
+/// body origin included): see [`crate::model_on_log::landmarks::start_from_landmarks`]; a
 /// robot that moves from its first row, where its first sightings and its
 /// odometry between them place it
-/// ([`crate::landmarks::start_from_moving_sightings`]). None where the
+/// ([`crate::model_on_log::landmarks::start_from_moving_sightings`]). None where the
 /// ground truth gives the start, or the run has no sightings.
 fn placed_by_landmarks(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<Placed> {
     if data.start_measured() || data.landmarks.is_empty() {
         return None;
     }
-    if let Some(start) = crate::landmarks::start_from_landmarks(r, p, data, guess) {
+    if let Some(start) = crate::model_on_log::landmarks::start_from_landmarks(r, p, data, guess) {
         return Some(Placed::At { start, seen: None });
     }
     Some(match moving_start(r, p, data) {
@@ -145,7 +145,7 @@ fn landmark_start(r: &Runner, p: &[f64], data: &Run, guess: [f64; 3]) -> Option<
 /// sightings through the odometry before them (the track until then carries
 /// that odometry's drift), or not placed at all. None otherwise.
 pub fn start_note(r: &Runner, p: &[f64], data: &Run) -> Option<String> {
-    use crate::landmarks::MOVING_START_S;
+    use crate::model_on_log::landmarks::MOVING_START_S;
     let t0 = data.t[0];
     match placed_by_landmarks(r, p, data, data.start_pose())? {
         Placed::Nowhere => Some(format!(
@@ -163,12 +163,12 @@ pub fn start_note(r: &Runner, p: &[f64], data: &Run) -> Option<String> {
     }
 }
 
-/// [`crate::landmarks::start_from_moving_sightings`] with the model's
+/// [`crate::model_on_log::landmarks::start_from_moving_sightings`] with the model's
 /// odometry from the start (the origin of its frame) to each of the run's
 /// first sightings, interpolated between rows; with the times of the first
 /// and the last of those sightings.
 fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<(PlacedStart, (f64, f64))> {
-    let seen = crate::landmarks::first_sightings(data)?;
+    let seen = crate::model_on_log::landmarks::first_sightings(data)?;
     let first = seen.iter().map(|o| o.t).fold(f64::INFINITY, f64::min);
     let last = seen.iter().map(|o| o.t).fold(data.t[0], f64::max);
     let rows = data.t.partition_point(|t| *t <= last).min(data.steps());
@@ -183,7 +183,7 @@ fn moving_start(r: &Runner, p: &[f64], data: &Run) -> Option<(PlacedStart, (f64,
         let (p0, p1) = (poses[j.min(rows)], poses[(j + 1).min(rows)]);
         [0, 1, 2].map(|i| p0[i] + a * (p1[i] - p0[i]))
     };
-    crate::landmarks::start_from_moving_sightings(r, p, data, &seen, moved)
+    crate::model_on_log::landmarks::start_from_moving_sightings(r, p, data, &seen, moved)
         .map(|s| (s, (first, last)))
 }
 
@@ -239,18 +239,19 @@ pub fn run_from(
 ) -> Track {
     // the commands as executed (an input delay, a lag), with their
     // derivatives in the timing parameters for the sensitivities
-    let (executed, timing) = crate::timeline::executed_with_rates(r, p, data, with_sens);
+    let (executed, timing) =
+        crate::model_on_log::timeline::executed_with_rates(r, p, data, with_sens);
     run_executed(r, p, (&executed, &timing), with_sens, start_offset, plan)
 }
 
 /// [`run_from`] on a run whose inputs are already as executed
-/// ([`crate::timeline::executed_with_rates`], with their derivatives in the
+/// ([`crate::model_on_log::timeline::executed_with_rates`], with their derivatives in the
 /// timing parameters when `with_sens`): for a caller that needs those inputs
 /// too (the fit's observations read them) and computes them once.
 pub fn run_executed(
     r: &Runner,
     p: &[f64],
-    (data, timing): (&Run, &[(usize, crate::rows::Rows)]),
+    (data, timing): (&Run, &[(usize, crate::logs::rows::Rows)]),
     with_sens: bool,
     start_offset: [f64; 3],
     plan: Option<&[u8]>,
@@ -329,7 +330,7 @@ pub fn run_executed(
 /// How step k's end pose moves with a timing parameter (the input delay,
 /// the lag): the exact step's directional derivative along `du`, its
 /// executed inputs' derivative in the parameter
-/// ([`crate::timeline::executed_with_rates`]), by central differences (the fused
+/// ([`crate::model_on_log::timeline::executed_with_rates`]), by central differences (the fused
 /// tape has no input Jacobian; the step is smooth in its inputs, so the
 /// difference is accurate to ~1e-8 of the step). Zero where the executed
 /// commands do not move with it.
@@ -402,13 +403,13 @@ pub(crate) fn reckoning_start(
 /// One step of dead reckoning at a time, through the model's fused step tape
 /// (pose and twist, then with sensitivities F_x and F_p): what [`run_from`]
 /// keeps for a whole track, and what a track read a row at a time
-/// (`crate::track_rows`) does not.
+/// (`crate::model_on_log::track_rows`) does not.
 pub(crate) struct Stepper<'a> {
     r: &'a Runner,
     p: &'a [f64],
     data: &'a Run,
-    /// `data`'s inputs as executed ([`crate::timeline::executed`]).
-    u: Cow<'a, crate::rows::Rows>,
+    /// `data`'s inputs as executed ([`crate::model_on_log::timeline::executed`]).
+    u: Cow<'a, crate::logs::rows::Rows>,
     plan: Option<&'a [u8]>,
     f: &'a kinegen_jit::Evaluator,
     out: Vec<f64>,
@@ -442,7 +443,7 @@ impl<'a> Stepper<'a> {
         plan: Option<&'a [u8]>,
     ) -> Self {
         // the commands as the robot executed them (an input delay, a lag)
-        let u = match crate::timeline::executed(r, p, data) {
+        let u = match crate::model_on_log::timeline::executed(r, p, data) {
             Cow::Borrowed(run) => Cow::Borrowed(&run.u),
             Cow::Owned(run) => Cow::Owned(run.u),
         };
@@ -454,7 +455,7 @@ impl<'a> Stepper<'a> {
         r: &'a Runner,
         p: &'a [f64],
         data: &'a Run,
-        u: Cow<'a, crate::rows::Rows>,
+        u: Cow<'a, crate::logs::rows::Rows>,
         with_sens: bool,
         plan: Option<&'a [u8]>,
     ) -> Self {
@@ -738,7 +739,7 @@ pub(crate) fn gyro_at(
 /// The pose measurements a track predicts (see [`Track::measured`]); empty
 /// when they are the track's poses themselves (no delay, no pose observation).
 fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    let tau = crate::timeline::delay(r, p);
+    let tau = crate::model_on_log::timeline::delay(r, p);
     let h = r.ir.observation_kernels(Pose).map(|o| o.value);
     if h.is_none() && (tau == 0.0 || pose.len() < 2) {
         return Vec::new();
@@ -748,7 +749,7 @@ fn predicted_measurements(r: &Runner, p: &[f64], data: &Run, pose: &[[f64; 3]]) 
             let x = if tau == 0.0 || pose.len() < 2 {
                 pose[k]
             } else {
-                let (j, a) = crate::timeline::model_instant(data, k, tau);
+                let (j, a) = crate::model_on_log::timeline::model_instant(data, k, tau);
                 lerp3(&pose[j], &pose[j + 1], a)
             };
             sensed_at(r, h, p, data, k, &x)

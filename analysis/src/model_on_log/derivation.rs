@@ -5,8 +5,8 @@
 //! process, as symbolica allows one thread per user and machine; a program
 //! that owns symbolica's thread can derive in-process behind the same trait.
 use crate::effects::{with_chain, ApplyError, Effect};
-use crate::model::ModelError;
-use crate::model::Runner;
+use crate::model_on_log::model::ModelError;
+use crate::model_on_log::model::Runner;
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 

@@ -1,11 +1,11 @@
 //! A parameter set judged on runs: each run dead-reckoned from its start, the
 //! errors against the ground truth and the landmark innovations. What every
 //! job reports before and after it changes the parameters.
-use crate::innovations::{self, Innovation, InnovationStats};
-use crate::metrics::{errors_each, Errors};
-use crate::model::Runner;
-use crate::run::Run;
-use crate::track_rows::{Heading, Recipe, TrackRows};
+use crate::model_on_log::innovations::{self, Innovation, InnovationStats};
+use crate::model_on_log::metrics::{errors_each, Errors};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
+use crate::model_on_log::track_rows::{Heading, Recipe, TrackRows};
 
 /// Parameters `p` on `runs`: the dead-reckoned tracks, the errors they make and
 /// the landmark innovations.
@@ -25,7 +25,7 @@ pub struct Evaluation<'r> {
 /// Dead-reckoned tracks of every run with parameters `p`, each from its
 /// measured start plus its offset in `offsets` (none: the measured start):
 /// described, and computed each time they are read (a long log's tracks are
-/// never held, see [`crate::track_rows`]).
+/// never held, see [`crate::model_on_log::track_rows`]).
 pub fn tracks<'r>(r: &'r Runner, p: &[f64], runs: &[Run], offsets: &[[f64; 3]]) -> Vec<Recipe<'r>> {
     (0..runs.len())
         .map(|i| Recipe {

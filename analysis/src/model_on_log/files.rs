@@ -2,8 +2,8 @@
 //! the user's directories), the spec, its IR through the caller's
 //! [`Deriver`], and the logs for that model. Every command that works on
 //! logs (compare, fit, diagnose, localize) starts its one library call here.
-use crate::derivation::{DerivationFailed, Deriver};
-use crate::load::{load, LoadError, Loaded, ReadProgress, Sources};
+use crate::model_on_log::derivation::{DerivationFailed, Deriver};
+use crate::model_on_log::load::{load, LoadError, Loaded, ReadProgress, Sources};
 use kinegen_model::effects::{catalogue, Effect, EffectError};
 use kinegen_model::error::SourceError;
 use kinegen_model::spec::Model;

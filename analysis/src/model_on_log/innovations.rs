@@ -2,13 +2,13 @@
 //! predicted through the model's `landmark` observation (seed 001 eq. 6) at the
 //! track interpolated to its time, so the innovations (seed 001's EKF update)
 //! measure the model's error.
-use crate::deadreckon::Track;
-use crate::interp::lerp3;
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::robust::robust_sd;
-use crate::run::{LandmarkObs, Run};
-use crate::track_rows::{Cursor, TrackRows};
+use crate::logs::log::wrap;
+use crate::model_on_log::deadreckon::Track;
+use crate::model_on_log::interp::lerp3;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::robust::robust_sd;
+use crate::model_on_log::run::{LandmarkObs, Run};
+use crate::model_on_log::track_rows::{Cursor, TrackRows};
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::Function;
 use serde::Serialize;
@@ -74,7 +74,7 @@ pub struct InnovationStats {
     pub bearing_rmse_rad: f64,
     pub range_bias_m: f64,
     pub bearing_bias_rad: f64,
-    /// Robust standard deviations ([`crate::robust::robust_sd`]): the spread
+    /// Robust standard deviations ([`crate::model_on_log::robust::robust_sd`]): the spread
     /// of most sightings, which a few misread ones do not move as they move
     /// the RMSE.
     pub range_robust_sd_m: f64,
@@ -126,7 +126,7 @@ pub fn predicted_along(
 /// the range-bearing sensor's own error, which the sightings along a
 /// dead-reckoned track mix with that track's drift (on MRCLAM's 15-minute
 /// logs metres of it against the camera's centimetres). What `fit`
-/// calibrates a sensor-only effect on ([`crate::fit::sensor`]).
+/// calibrates a sensor-only effect on ([`crate::estimation::fit::sensor`]).
 pub fn from_truth(r: &Runner, p: &[f64], run: &Run) -> Vec<Innovation> {
     let (Some(h), Some(gt)) = (
         r.ir.observation_kernels(RangeBearing).map(|o| o.value),

@@ -4,7 +4,7 @@
 //! and diagnose say so (with the rows) instead of letting a fit blame
 //! identifiability.
 
-use crate::run::Run;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::{Input, InputKind};
 
 /// Stretches listed by name before the rest are only counted.
@@ -120,7 +120,7 @@ pub fn excursions(run: &Run, inputs: &[Input]) -> Vec<Excursion> {
             stretches,
             extreme,
             times,
-            csv: !crate::bag::is_bag(std::path::Path::new(&run.path)),
+            csv: !crate::logs::bag::is_bag(std::path::Path::new(&run.path)),
         });
     }
     out

@@ -2,10 +2,10 @@
 //! with `t,id,range,bearing` (bearing relative to the robot heading) and `MAP.csv`
 //! with `id,x,y`, or detections read from a bag; and the start pose they fix
 //! through the model's own `landmark` observation (seed 001 eq. 6). Their
-//! innovations along a track are [`crate::innovations`].
-use crate::log::{read_csv, wrap, LogError};
-use crate::model::Runner;
-use crate::run::{LandmarkObs, Run};
+//! innovations along a track are [`crate::model_on_log::innovations`].
+use crate::logs::log::{read_csv, wrap, LogError};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::{LandmarkObs, Run};
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
@@ -243,7 +243,7 @@ pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Sigh
 /// Why `bearing` cannot be an angle in radians, if it cannot: beyond a full
 /// turn either way (a bearing wrapped to (-pi, pi] or to [0, 2 pi) is
 /// within it). A column in degrees whose values all lie within 2 pi is
-/// caught by the spacing check ([`crate::sighting_units`]).
+/// caught by the spacing check ([`crate::model_on_log::sighting_units`]).
 fn not_radians(bearing: f64) -> Option<String> {
     (bearing.abs() > std::f64::consts::TAU).then(|| {
         format!("bearing {bearing} is beyond a full turn (2 pi): bearings are in radians (is it in degrees?)")
@@ -251,18 +251,18 @@ fn not_radians(bearing: f64) -> Option<String> {
 }
 
 /// Range-bearing observations from a bag's landmark topic (see
-/// [`crate::bag::LandmarkSource`]) whose ids the map has, ordered by time,
+/// [`crate::logs::bag::LandmarkSource`]) whose ids the map has, ordered by time,
 /// and those it has not or that repeat one (as [`read_observations`]).
 pub fn from_detections(
     bag: &Path,
-    found: &[crate::bag::Detection],
+    found: &[crate::logs::bag::Detection],
     map: &Map,
     map_path: &Path,
 ) -> Result<Sightings, LogError> {
     let mut out: Vec<LandmarkObs> = Vec::with_capacity(found.len());
     let mut unmapped = Unmapped::default();
     let mut repeated = Repeated::default();
-    let mut found: Vec<&crate::bag::Detection> = found.iter().collect();
+    let mut found: Vec<&crate::logs::bag::Detection> = found.iter().collect();
     found.sort_by(|a, b| a.t.total_cmp(&b.t));
     for d in found {
         if let Some(why) = not_radians(d.bearing) {
@@ -321,7 +321,7 @@ pub struct PlacedStart {
 /// The start pose that explains the range-bearing observations of the start
 /// window through the model's own `landmark` observation (a sensor mounted off
 /// the body origin included), by Gauss-Newton from `guess` (the closed-form
-/// pose of a sensor at the origin, [`crate::run::pose_from_landmarks`]); with its
+/// pose of a sensor at the origin, [`crate::model_on_log::run::pose_from_landmarks`]); with its
 /// derivative with respect to the parameters (3 x P, row-major), from the
 /// implicit function theorem: d x0 / d p = -(Hx' W Hx)^-1 Hx' W Hp.
 /// None when the model has no such observation or too few are seen.
@@ -387,7 +387,7 @@ pub fn start_from_moving_sightings(
     seen: &[&LandmarkObs],
     moved: impl Fn(&LandmarkObs) -> [f64; 3],
 ) -> Option<PlacedStart> {
-    let guess = crate::run::pose_from_sightings(seen, &moved)?;
+    let guess = crate::model_on_log::run::pose_from_sightings(seen, &moved)?;
     let placed: Vec<(&LandmarkObs, [f64; 3], &[f64])> = seen
         .iter()
         .map(|o| {

@@ -3,15 +3,17 @@
 //! split at gaps longer than `max_gap`, and refused where the model's
 //! dead reckoning would stop being numbers. What compare, fit, diagnose and
 //! localize start from.
-use crate::bag::{Detection, TopicMap};
-use crate::evaluation::tracks;
-use crate::input_range;
-use crate::landmarks::{from_detections, read_map, read_observations, Map, Sightings};
-use crate::log::{typical, LogError};
-use crate::model::{parse_sets, ModelError, Runner};
-use crate::run::Run;
-use crate::sighting_units::{spacing, turning};
-use crate::track_rows::first_non_finite;
+use crate::logs::bag::{Detection, TopicMap};
+use crate::logs::log::{typical, LogError};
+use crate::model_on_log::evaluation::tracks;
+use crate::model_on_log::input_range;
+use crate::model_on_log::landmarks::{
+    from_detections, read_map, read_observations, Map, Sightings,
+};
+use crate::model_on_log::model::{parse_sets, ModelError, Runner};
+use crate::model_on_log::run::Run;
+use crate::model_on_log::sighting_units::{spacing, turning};
+use crate::model_on_log::track_rows::first_non_finite;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::ModelIr;
 use std::path::{Path, PathBuf};
@@ -170,7 +172,7 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
     warnings.extend(
         runs.iter()
             .chain(&holdout)
-            .filter_map(|run| crate::deadreckon::start_note(&runner, &runner.p, run)),
+            .filter_map(|run| crate::model_on_log::deadreckon::start_note(&runner, &runner.p, run)),
     );
     // results that would be NaN or infinite are refused here, with the row
     for set in [&runs, &holdout] {
@@ -380,7 +382,7 @@ impl Logs<'_> {
 }
 
 /// Refuse sightings in another unit than the map's, or with a bearing of
-/// the other sign than the spec's (see [`crate::sighting_units`]); warn of
+/// the other sign than the spec's (see [`crate::model_on_log::sighting_units`]); warn of
 /// bearings that do not follow the robot's turns at all.
 fn units_checked(
     run: &Run,

@@ -1,10 +1,10 @@
 //! How wrong is the model, and where: absolute trajectory error, relative pose
 //! error over distance and time windows, gyro residuals, and which motion regimes
 //! and segments carry the error.
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::run::Run;
-use crate::track_rows::{Cursor, Heading, Recipe, TrackRows};
+use crate::logs::log::wrap;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
+use crate::model_on_log::track_rows::{Cursor, Heading, Recipe, TrackRows};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -441,7 +441,7 @@ pub fn turning(heading: impl Iterator<Item = f64>, every: usize) -> f64 {
     let mut h = heading.step_by(every.max(1));
     let Some(mut last) = h.next() else { return 0.0 };
     h.map(|x| {
-        let d = crate::log::wrap(x - last).abs();
+        let d = crate::logs::log::wrap(x - last).abs();
         last = x;
         d
     })

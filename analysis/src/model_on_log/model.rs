@@ -44,10 +44,10 @@ pub struct Runner {
     /// Indices (into `p`) of the parameters `fit` calibrates.
     pub free: Vec<usize>,
     /// Index (into `p`) of the spec's measurement delay, if it declares one
-    /// (see [`crate::timeline`]).
+    /// (see [`crate::model_on_log::timeline`]).
     pub delay: Option<usize>,
     /// Index (into `p`) of the spec's input delay, if it declares one: the
-    /// robot executes its commands that late (see [`crate::timeline::executed`]).
+    /// robot executes its commands that late (see [`crate::model_on_log::timeline::executed`]).
     pub input_delay: Option<usize>,
     /// Index into `p` of the time constant of the robot's response to its
     /// commands (`input_lag = true`), if the spec declares one.

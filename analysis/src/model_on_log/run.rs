@@ -1,9 +1,9 @@
 //! A run: one log as model steps (per-step inputs, step lengths) with its
 //! measurements, and what follows from the run alone (where it rests, where a
 //! time falls among its rows, its pieces). Reading logs into runs is
-//! [`crate::dataset`]; everything that runs a model over a run sits above both.
-use crate::column::Column;
-use crate::rows::Inputs;
+//! [`crate::model_on_log::dataset`]; everything that runs a model over a run sits above both.
+use crate::logs::column::Column;
+use crate::logs::rows::Inputs;
 
 #[derive(Debug, Clone)]
 pub struct Run {

@@ -19,11 +19,11 @@
 //!   spec's observation predicts along the model's own dead reckoning.
 //!   Over a second or less, dead reckoning is good however far it drifts
 //!   later. This catches a bearing of the other sign.
-use crate::evaluation::tracks;
-use crate::innovations::predicted_along;
-use crate::log::{typical, wrap};
-use crate::model::Runner;
-use crate::run::{LandmarkObs, Run};
+use crate::logs::log::{typical, wrap};
+use crate::model_on_log::evaluation::tracks;
+use crate::model_on_log::innovations::predicted_along;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::{LandmarkObs, Run};
 use std::collections::HashMap;
 
 /// Sightings at most this far apart in time are seen together (one camera

@@ -5,7 +5,7 @@
 //! tangent, which symbolic inversion does not undo). To drive a planned twist
 //! (`simulate`, `inverse`) the angle is solved for numerically: Gauss-Newton on
 //! the model's own twist, starting from the previous solution.
-use crate::model::Runner;
+use crate::model_on_log::model::Runner;
 use kinegen_model::decl::InputKind;
 use kinegen_model::ir::ArgRole;
 

@@ -13,9 +13,9 @@
 //! takes them from [`executed`], so the shift is made in one place; and so
 //! is the robot's first-order response to them (`input_lag = true`; the
 //! catalogue's `command_lag` effect), which follows the delay.
-use crate::model::Runner;
-use crate::rows::Rows;
-use crate::run::Run;
+use crate::logs::rows::Rows;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use std::borrow::Cow;
 
 /// The measurement delay under parameters `p`, s (0 when the spec declares none).

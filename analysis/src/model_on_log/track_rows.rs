@@ -6,10 +6,12 @@
 //! 11 item 5). A reader that needs the rows again reads the track again: dead
 //! reckoning without sensitivities is cheap next to a calibration. A computed
 //! [`Track`] (a calibration's segments) reads the same way.
-use crate::deadreckon::{gyro_at, gyro_step, reckoning_start, sensed_at, Stepper, Track};
-use crate::interp::lerp3;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::deadreckon::{
+    gyro_at, gyro_step, reckoning_start, sensed_at, Stepper, Track,
+};
+use crate::model_on_log::interp::lerp3;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::{Pose, YawRate};
 use kinegen_model::ir::Function;
 use std::collections::VecDeque;
@@ -47,16 +49,16 @@ impl TrackRows for Track {
 }
 
 /// A yaw rate learned as a function of a step's inputs (seed 000 sec. 3.2's
-/// virtual gyro, `crate::neural`).
+/// virtual gyro, `crate::estimation::neural`).
 pub type LearnedYawRate = Arc<dyn Fn(&[f64]) -> f64 + Send + Sync>;
 
 /// What turns a [`Recipe`]'s track.
 #[derive(Clone)]
 pub enum Heading {
-    /// The model's own dead reckoning ([`crate::deadreckon::run_from`]).
+    /// The model's own dead reckoning ([`crate::model_on_log::deadreckon::run_from`]).
     Model,
     /// Gyrodometry with the logged gyro (seed 000 eq. 13-18,
-    /// [`crate::deadreckon::gyrodometry`]).
+    /// [`crate::model_on_log::deadreckon::gyrodometry`]).
     Gyro,
     /// Gyrodometry with a learned yaw rate of the inputs (seed 000 sec. 3.2).
     Learned(LearnedYawRate),
@@ -103,8 +105,8 @@ impl<'s> Streamed<'s> {
         let (r, p) = (recipe.r, recipe.p.as_slice());
         let start = match recipe.heading {
             Heading::Model => reckoning_start(r, p, run, recipe.offset).0,
-            // as gyrodometry starts (crate::deadreckon::gyrodometry_with)
-            _ => crate::deadreckon::model_start(r, p, run),
+            // as gyrodometry starts (crate::model_on_log::deadreckon::gyrodometry_with)
+            _ => crate::model_on_log::deadreckon::model_start(r, p, run),
         };
         Streamed {
             recipe,
@@ -113,7 +115,7 @@ impl<'s> Streamed<'s> {
             twist_gyro: (!matches!(recipe.heading, Heading::Model)).then(|| r.ir.twist_gyro()),
             pose_obs: r.ir.observation_kernels(Pose).map(|o| o.value),
             gyro_obs: r.ir.observation_kernels(YawRate).map(|o| o.value),
-            delay: crate::timeline::delay(r, p),
+            delay: crate::model_on_log::timeline::delay(r, p),
             window: VecDeque::from([(start, None)]),
             first: 0,
             next: 0,
@@ -169,7 +171,7 @@ impl Iterator for Streamed<'_> {
         let (x, oldest) = if self.delay == 0.0 || run.t.len() < 2 {
             (pose, k)
         } else {
-            let (j, a) = crate::timeline::model_instant(run, k, self.delay);
+            let (j, a) = crate::model_on_log::timeline::model_instant(run, k, self.delay);
             self.reach(j + 1);
             (lerp3(&self.pose(j), &self.pose(j + 1), a), j)
         };

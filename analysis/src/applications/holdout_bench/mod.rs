@@ -7,10 +7,10 @@
 //! and of the whole-run position RMSE. Beside them, the study's own
 //! in-sample figure: the largest final position error over the session's
 //! own runs.
-use crate::fit::{fit, FitOptions, Search};
-use crate::metrics;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::estimation::fit::{fit, FitOptions, Search};
+use crate::model_on_log::metrics;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;

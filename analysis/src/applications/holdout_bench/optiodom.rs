@@ -6,9 +6,9 @@
 //! spec its user would write and how the study's parameter names map onto
 //! the spec's.
 use super::{Calibration, Session};
-use crate::derivation::Deriver;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::derivation::Deriver;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use serde::Deserialize;
@@ -79,7 +79,7 @@ pub enum BenchError {
     #[error("{0}")]
     Spec(String),
     #[error(transparent)]
-    Log(#[from] crate::log::LogError),
+    Log(#[from] crate::logs::log::LogError),
 }
 
 /// Where a session's folder says what it is.

@@ -359,7 +359,7 @@ impl Belief {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::localize::active::ACTIVE;
+    use crate::applications::localize::active::ACTIVE;
 
     fn persistent(var: Vector2<f64>) -> ErrorPart {
         ErrorPart {

@@ -2,11 +2,11 @@
 //! the prediction cut at each sighting's own time.
 use super::active::ACTIVE;
 use super::belief::{Belief, ErrorPart, Owner};
-use super::noise::{Lingering, NoiseModel, PERSISTENT_START_S, SHARED_START_S};
+use super::noise_model::{Lingering, NoiseModel, PERSISTENT_START_S, SHARED_START_S};
 use super::{EkfOptions, LocalizeError};
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::logs::log::wrap;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_jit::Evaluator;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::ir::{ArgRole, Function, StepForm};
@@ -100,7 +100,7 @@ impl<'a> Filter<'a> {
             step: Evaluator::new(fuse("ekf_step", &parts)),
             observe: Evaluator::new(fuse("ekf_observe", &[obs.value, obs.jac_x])),
             nw,
-            obs_sigma: crate::landmarks::sigma(r),
+            obs_sigma: crate::model_on_log::landmarks::sigma(r),
             gate: o.gate,
             start_sigma: o.start_sigma,
         })
@@ -177,11 +177,13 @@ impl<'a> Filter<'a> {
         // sightings that placed it where the log has no ground truth (0.3-0.9
         // m on the MRCLAM robots, which a 5 cm prior made overconfident)
         let mut start_cov = Matrix3::from_diagonal(&Vector3::from(self.start_sigma.map(|s| s * s)));
-        if let Some(c) = crate::deadreckon::start_covariance(self.r, &self.r.p, run) {
+        if let Some(c) = crate::model_on_log::deadreckon::start_covariance(self.r, &self.r.p, run) {
             start_cov += Matrix3::from_fn(|i, j| c[i][j]);
         }
         let mut plan = Plan {
-            start: Vector3::from(crate::deadreckon::model_start(self.r, &self.r.p, run)),
+            start: Vector3::from(crate::model_on_log::deadreckon::model_start(
+                self.r, &self.r.p, run,
+            )),
             start_cov,
             segments: Vec::with_capacity(run.steps() + run.landmarks.len()),
             sightings: Vec::with_capacity(run.landmarks.len()),
@@ -745,7 +747,7 @@ struct Sightings<'p, 'q> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::run::LandmarkObs;
+    use crate::model_on_log::run::LandmarkObs;
     use kinegen_model::ir::ModelIr;
 
     /// The iterated update is the MAP pose of one sighting from a prior

@@ -30,6 +30,7 @@ pub mod bounds;
 mod filter;
 pub mod gate_tail;
 pub mod noise;
+pub mod noise_model;
 pub mod reading;
 mod simplex;
 mod smoother;
@@ -39,14 +40,14 @@ pub mod timing;
 pub use bounds::{chi2_quantile, mean_bounds, Bounds};
 pub use filter::{Filter, Keep, Pass};
 pub use gate_tail::GateTail;
-pub use noise::{Lingering, NoiseModel, NoiseSource};
+pub use noise_model::{Lingering, NoiseModel, NoiseSource};
 pub use summary::{
     side, summarise, Consistency, NeesParts, Overconfident, Side, SmoothedSummary, Spread, Summary,
 };
 
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::logs::log::wrap;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::Pose;
 pub use nalgebra::Matrix3;
 use nalgebra::Vector3;
@@ -132,12 +133,14 @@ pub fn noise_for(
 ) -> Result<(NoiseModel, String), LocalizeError> {
     // the commands as the robot executed them (an input delay and lag:
     // timeline); without either the runs as they are, not copies
-    if crate::timeline::input_delay(r, &r.p) == 0.0 && crate::timeline::input_lag(r, &r.p) == 0.0 {
+    if crate::model_on_log::timeline::input_delay(r, &r.p) == 0.0
+        && crate::model_on_log::timeline::input_lag(r, &r.p) == 0.0
+    {
         return noise::choose(&Filter::new(r, o)?, runs, o);
     }
     let executed: Vec<Run> = runs
         .iter()
-        .map(|run| crate::timeline::executed(r, &r.p, run).into_owned())
+        .map(|run| crate::model_on_log::timeline::executed(r, &r.p, run).into_owned())
         .collect();
     noise::choose(&Filter::new(r, o)?, &executed, o)
 }
@@ -198,7 +201,7 @@ pub fn localize_with(
     o: &EkfOptions,
 ) -> Result<Localization, LocalizeError> {
     let f = Filter::new(r, o)?;
-    let executed = crate::timeline::executed(r, &r.p, run);
+    let executed = crate::model_on_log::timeline::executed(r, &r.p, run);
     let run: &Run = &executed;
     let keep = if o.smooth { Keep::Nodes } else { Keep::Rows };
     let pass = f.run(run, noise, keep)?;

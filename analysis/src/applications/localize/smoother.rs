@@ -2,7 +2,7 @@
 //! estimate also uses the sightings after it (offline use: mapping,
 //! calibration targets, judging a log afterwards).
 use super::filter::Pass;
-use crate::log::wrap;
+use crate::logs::log::wrap;
 use nalgebra::{Matrix3, Vector3};
 
 /// The smoothed pose and covariance at every row of a pass kept with its nodes.

@@ -4,8 +4,8 @@
 //! share in the tail), which tells a filter wrong at times from one wrong
 //! throughout.
 use super::{chi2_quantile, nees_of, truth_noise, Bounds, GateTail, Localization, Nees, Sensed};
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 
 /// One run's figures: errors against ground truth, consistency.
 #[derive(Debug, Clone, PartialEq)]
@@ -281,7 +281,11 @@ pub fn summarise(r: &Runner, run: &Run, loc: &Localization) -> Summary {
     // dead reckoning from the filter's start, scored as the filter is (the
     // same figure as `evaluate`'s to rounding, and it skips the rows where
     // the motion capture lost the robot)
-    let dead_reckoning = position_rmse(r, run, &crate::deadreckon::run(r, &r.p, run, false).pose);
+    let dead_reckoning = position_rmse(
+        r,
+        run,
+        &crate::model_on_log::deadreckon::run(r, &r.p, run, false).pose,
+    );
     let smoothed = loc.smoothed.as_ref().map(|(track, cov)| {
         let nees: Vec<f64> = nees_of(r, run, track, cov).iter().map(|n| n.pose).collect();
         SmoothedSummary {

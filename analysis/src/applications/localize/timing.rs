@@ -13,16 +13,17 @@
 //! section inside the best step's neighbours refines it; a step of the cost
 //! smaller than [`super::noise::SIGNIFICANT`] is no evidence for either side.
 use super::filter::{Filter, Keep, Pass};
-use super::noise::{self, NoiseModel};
+use super::noise;
+use super::noise_model::NoiseModel;
 use super::EkfOptions;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 
 /// The scan's step, s: a tenth of the delays seen on real velocity-commanded
 /// robots (0.1-0.5 s), and finer than the 0.26-1.4 s between their rows.
 pub const STEP_S: f64 = 0.05;
 
-/// A command-timing parameter a spec may declare (see [`crate::timeline`]).
+/// A command-timing parameter a spec may declare (see [`crate::model_on_log::timeline`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Timing {
     /// The command logged at t acts from t + delay (`input_delay = true`).
@@ -83,7 +84,7 @@ fn executed(r: &Runner, runs: &[Run], i: usize, value: f64) -> (Runner, Vec<Run>
     at.p[i] = value;
     let runs = runs
         .iter()
-        .map(|run| crate::timeline::executed(&at, &at.p, run).into_owned())
+        .map(|run| crate::model_on_log::timeline::executed(&at, &at.p, run).into_owned())
         .collect();
     (at, runs)
 }

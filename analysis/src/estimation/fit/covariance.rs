@@ -2,8 +2,8 @@
 //! the information on its determined subspace, correlations, and the
 //! variance components of the residual kinds.
 use super::{residuals, run_residuals, FitOptions, FitResult};
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 

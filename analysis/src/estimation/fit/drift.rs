@@ -23,9 +23,9 @@
 //! size of the uncertainty, and came within 30% of that spread.
 use super::{correlation, priors, psd_inverse, run_offsets, run_residuals, start_columns};
 use super::{rounding, FitOptions, FitResult};
-use crate::model::Runner;
-use crate::rows::Rows;
-use crate::run::Run;
+use crate::logs::rows::Rows;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 

@@ -8,9 +8,9 @@
 //! of 19, 4 and 4 s runs calibrated their wheelbase 2% off, worse than
 //! nominal on every other session, and fit said nothing).
 use super::{fit, FitOptions, Search};
-use crate::metrics;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::metrics;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use rayon::prelude::*;
 use serde::Serialize;
 

@@ -60,7 +60,7 @@ pub struct FitOptions {
     /// this fraction of the cost. 0: only the statistical test (steps below a
     /// hundredth of a standard deviation) and round-off end it. For fits
     /// whose optimum is only a starting point ([`BASIN_TOLERANCE`]) or only
-    /// compared ([`crate::diagnose`]'s ranking).
+    /// compared ([`crate::diagnosis::diagnose`]'s ranking).
     pub cost_tolerance: f64,
     /// End [`fit`] on the whole runs: the search works on re-anchored
     /// [`SEGMENT_S`] segments (a long track from rough values is outside any

@@ -1,13 +1,13 @@
 //! The weighted residuals a calibration minimises, their Jacobian, and the
 //! Gauss-Newton normal equations summed run by run without forming it.
 use super::FitOptions;
-use crate::column::Column;
-use crate::deadreckon;
-use crate::interp::{chain, lerp3};
-use crate::log::wrap;
-use crate::model::Runner;
-use crate::rows::Rows;
-use crate::run::Run;
+use crate::logs::column::Column;
+use crate::logs::log::wrap;
+use crate::logs::rows::Rows;
+use crate::model_on_log::deadreckon;
+use crate::model_on_log::interp::{chain, lerp3};
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -342,7 +342,7 @@ pub(super) fn run_residuals(
     let mut jac = Rows::new(free.len() + usize::from(nuis));
     // the inputs as executed (an input delay, a lag): the track's, and the
     // observations' arguments
-    let (inputs, timing) = crate::timeline::executed_with_rates(r, p, run, with_jac);
+    let (inputs, timing) = crate::model_on_log::timeline::executed_with_rates(r, p, run, with_jac);
     let track = deadreckon::run_executed(r, p, (&inputs, &timing), with_jac, start, plan);
     let np = p.len();
     // sensitivity columns to read: the free parameters, then the start heading
@@ -407,12 +407,12 @@ impl RunCx<'_> {
             (self.r, self.p, self.free, self.run, self.o, self.with_jac);
         let (track, inputs) = (self.track, self.inputs);
         let np = p.len();
-        // A measurement delay (crate::timeline): measurement k is compared with the
+        // A measurement delay (crate::model_on_log::timeline): measurement k is compared with the
         // model at t_k - delay, linearly interpolated between rows (exact sensitivities
         // of the interpolation, and d/d delay = minus the interpolated velocity).
         let tau_i = r.delay;
-        let tau = crate::timeline::delay(r, p);
-        let shifted = |k: usize| crate::timeline::model_instant(run, k, tau);
+        let tau = crate::model_on_log::timeline::delay(r, p);
+        let shifted = |k: usize| crate::model_on_log::timeline::model_instant(run, k, tau);
         if let Some(gt) = &run.gt {
             let tracker = r.ir.observation_kernels(Pose);
             let first = if o.endpoints_only { gt.len() - 1 } else { 1 };
@@ -546,13 +546,13 @@ pub(super) fn landmark_residuals(
         return;
     };
     let h = sensor.value;
-    let sig = crate::landmarks::sigma(r);
+    let sig = crate::model_on_log::landmarks::sigma(r);
     let np = p.len();
     for o in &run.landmarks {
         let (j, a, x) = match seen_from {
-            SeenFrom::Track(track) => crate::innovations::locate_on(run, track, o.t),
+            SeenFrom::Track(track) => crate::model_on_log::innovations::locate_on(run, track, o.t),
             // a sighting the truth cannot place is no evidence about the sensor
-            SeenFrom::Truth(gt) => match crate::innovations::truth_at(run, gt, o.t) {
+            SeenFrom::Truth(gt) => match crate::model_on_log::innovations::truth_at(run, gt, o.t) {
                 // (the fraction of the step matters only along the track)
                 Some((j, x)) => (j, 0.0, x),
                 None => continue,
@@ -597,7 +597,7 @@ pub(super) fn cost(res: &[f64]) -> f64 {
 
 /// The residuals of `run`'s landmark sightings seen from its ground-truth
 /// pose (empty without one; none for a sighting the truth cannot place, see
-/// [`crate::innovations::truth_at`]), with their Jacobian in the `free` parameters
+/// [`crate::model_on_log::innovations::truth_at`]), with their Jacobian in the `free` parameters
 /// when `with_jac`: what calibrates the range-bearing sensor alone
 /// (`crate::diagnosis::sensor`).
 pub fn sightings_from_truth(

@@ -14,8 +14,8 @@
 //! The step is read from the log: the finest gap between the distinct values
 //! of the input. A cumulative input (a wheel's count) is left out: its
 //! rounding does not add up along the track, the next count takes it back.
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::InputKind;
 
 /// Per input, the variance of its rounding error (0: a cumulative input, or

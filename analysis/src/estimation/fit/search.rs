@@ -10,8 +10,8 @@
 use super::covariance::{sandwich, variance_components};
 use super::{cost_at_start, fit_from, fit_stage, fit_stage_from, segmented, Start};
 use super::{FitError, FitOptions, FitResult, BASIN_TOLERANCE};
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::YawRate;
 use rayon::prelude::*;
 

@@ -13,10 +13,10 @@
 //! was called unidentified and left at 0.01, its scale at -0.04 (true 0.03).
 //! [`super::fit`] and `crate::diagnosis::sensor` both use this.
 use super::sightings_from_truth;
-use crate::model::Runner;
-use crate::robust::robust_sd;
-use crate::rows::Rows;
-use crate::run::Run;
+use crate::logs::rows::Rows;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::robust::robust_sd;
+use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::RangeBearing;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;

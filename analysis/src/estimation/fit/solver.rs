@@ -11,9 +11,9 @@ use super::{
     start_columns, FitError, FitOptions, FitResult, Start, Sums, MAX_DOUBLINGS, PERSISTENT,
     STEP_TOLERANCE, UNDETERMINED_INFORMATION,
 };
-use crate::deadreckon;
-use crate::model::Runner;
-use crate::run::Run;
+use crate::model_on_log::deadreckon;
+use crate::model_on_log::model::Runner;
+use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use std::sync::Arc;
