@@ -47,7 +47,7 @@ $k generate --spec-dir $out/spec --out $out/generated
 python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt 2>/dev/null \
   || echo "(could not install the CasADi tooling: verify will skip its CasADi cross-check)"
 say kinegen verify --spec $out/spec/diff_drive.toml --samples 50
-$k verify --spec $out/spec/diff_drive.toml --samples 50 | tail -5
+$k verify --spec $out/spec/diff_drive.toml --samples 50
 
 echo
 echo "reports: $out/compare/index.html $out/diagnose/index.html $out/fit-before/index.html $out/fit-after/index.html"

@@ -65,6 +65,10 @@ enum Command {
         /// Samples per property (at least 1: a check on no samples proves nothing).
         #[arg(long, default_value_t = 200, value_parser = at_least_one)]
         samples: usize,
+        /// Print every check's table (function, check, samples, error, status),
+        /// not only each model's line and the verdict.
+        #[arg(short, long)]
+        verbose: bool,
     },
     /// Run the model against logs with nominal parameters: how large the error is,
     /// and where and when it grows.
@@ -181,7 +185,11 @@ fn main() -> ExitCode {
             out,
             check,
         } => generate_cmd::run(&spec_dir, &out, check),
-        Command::Verify { spec, samples } => verify_cmd::run(spec.as_deref(), samples),
+        Command::Verify {
+            spec,
+            samples,
+            verbose,
+        } => verify_cmd::run(spec.as_deref(), samples, verbose),
         Command::Compare(c) => compare_cmd::compare(c),
         Command::Localize { common, options } => localize_cmd::run(common, &options),
         Command::Inverse(a) => inverse_cmd::run(&a),

@@ -5,7 +5,9 @@ use kinegen_verify::{run_all, IrKernel};
 use std::path::Path;
 use std::process::ExitCode;
 
-pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
+/// Verify each spec's kernels; print a line per model (and every check's
+/// table with `verbose`), each failure, and one verdict line last.
+pub fn run(spec: Option<&Path>, samples: usize, verbose: bool) -> ExitCode {
     let specs = match spec {
         Some(s) => vec![s.to_path_buf()],
         None => match spec_files(Path::new("spec")) {
@@ -16,7 +18,7 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
             }
         },
     };
-    let mut failed = false;
+    let (mut checks, mut failed_checks, mut models) = (0usize, 0usize, 0usize);
     for path in specs {
         // the committed IR when it is current, else derived (in a child process)
         let ir = match crate::ir_source::load(&path) {
@@ -26,33 +28,56 @@ pub fn run(spec: Option<&Path>, samples: usize) -> ExitCode {
                 return ExitCode::from(2);
             }
         };
-        println!(
-            "== {} ({}): the IR tapes `kinegen generate` emits, {samples} samples per property",
-            ir.name,
-            path.display()
-        );
+        if verbose {
+            println!(
+                "== {} ({}): the IR tapes `kinegen generate` emits, {samples} samples per property",
+                ir.name,
+                path.display()
+            );
+        }
         let mut report = run_all(&ir, &IrKernel, samples, 1);
+        let mut casadi = String::from("CasADi skipped");
         match casadi_reference(&path) {
             Ok(dir) => {
                 match kinegen_verify::casadi::load(&dir, &ir.name) {
-                    Some(fx) => report
-                        .findings
-                        .extend(kinegen_verify::casadi::compare(&ir, &fx, &IrKernel)),
-                    None => eprintln!("CasADi check skipped: no reference was written"),
+                    Some(fx) => {
+                        let against = kinegen_verify::casadi::compare(&ir, &fx, &IrKernel);
+                        casadi = format!("{} of them vs CasADi", against.len());
+                        report.findings.extend(against);
+                    }
+                    None => {
+                        eprintln!("CasADi check skipped: no reference was written")
+                    }
                 }
                 let _ = std::fs::remove_dir_all(&dir);
             }
-            Err(why) => eprintln!("CasADi check skipped: {why}"),
+            Err(why) => {
+                eprintln!("CasADi check skipped: {why}")
+            }
         }
-        print!("{}", report.table());
-        for f in report.failures() {
-            failed = true;
+        if verbose {
+            print!("{}", report.table());
+        }
+        let failures = report.failures();
+        println!(
+            "{:<16} {:>4} checks, {:>3} failed ({casadi}; {samples} samples each)",
+            ir.name,
+            report.findings.len(),
+            failures.len()
+        );
+        for f in &failures {
             eprintln!("FAILED {}: {}", f.check, where_(f));
         }
+        models += 1;
+        checks += report.findings.len();
+        failed_checks += failures.len();
     }
-    if failed {
+    let s = if models == 1 { "" } else { "s" };
+    if failed_checks > 0 {
+        println!("verify: FAILED: {failed_checks} of {checks} checks on {models} model{s} (the lines above name each; -v for every check)");
         ExitCode::from(1)
     } else {
+        println!("verify: passed: all {checks} checks on {models} model{s} (-v for every check)");
         ExitCode::SUCCESS
     }
 }

@@ -3,7 +3,7 @@
 use kinegen_model::ir::{Kernel, StepForm, Wrt};
 use kinegen_verify::casadi::{compare, fixture_dir, load};
 use kinegen_verify::checks::where_;
-use kinegen_verify::{models, Corrupted, Generated};
+use kinegen_verify::{models, Corrupted, Generated, Kernel as _};
 
 #[test]
 fn generated_kernels_match_casadi() {
@@ -54,4 +54,35 @@ fn the_casadi_check_fails_a_corrupted_kernel() {
         "{}",
         where_(f)
     );
+}
+
+/// A Jacobian entry off by a small fraction of its column fails: the floor
+/// that lets rounding through where an entry's terms cancel (1e-4 of the
+/// column, at a relative tolerance of 1e-10) lets nothing larger through.
+#[test]
+fn the_casadi_check_fails_an_entry_off_by_a_millionth_of_its_column() {
+    struct Nudged;
+    impl kinegen_verify::Kernel for Nudged {
+        fn eval(&self, f: &kinegen_model::ir::Function, args: &[&[f64]], out: &mut [f64]) -> bool {
+            let ok = Generated("diff_drive".into()).eval(f, args, out);
+            if f.kernel == Kernel::Step(StepForm::Exact, Some(Wrt::Inputs)) {
+                let col = (0..f.rows).fold(0.0f64, |m, r| m.max(out[r * f.cols].abs()));
+                out[f.cols] += 1e-6 * col; // entry (1, 0)
+            }
+            ok
+        }
+        fn label(&self) -> String {
+            "nudged".into()
+        }
+    }
+    let ir = models::load("diff_drive");
+    let fx = load(&fixture_dir(), "diff_drive").unwrap();
+    let found = compare(&ir, &fx, &Nudged);
+    let jac_u = Kernel::Step(StepForm::Exact, Some(Wrt::Inputs));
+    let f = found.iter().find(|f| f.kernel == jac_u).unwrap();
+    assert!(!f.passed(), "{}", where_(f));
+    assert!(where_(f).contains("entry (1, 0)"), "{}", where_(f));
+    // and the kernel as generated passes
+    let found = compare(&ir, &fx, &Generated("diff_drive".into()));
+    assert!(found.iter().all(|f| f.passed()));
 }
