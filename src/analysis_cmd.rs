@@ -14,11 +14,12 @@ pub struct Common {
     /// The model spec.
     #[arg(long)]
     pub spec: PathBuf,
-    /// Measurement log (CSV, CONTRACT section 2); repeat for several runs.
+    /// Measurement log: CSV with a header row, `t` in seconds and the spec's
+    /// columns, or a ROS 2 bag (.mcap); repeat for several runs.
     #[arg(long, required = true)]
     pub data: Vec<PathBuf>,
     /// Topic mapping for ROS 2 bags given as --data (TOML: `stamps`, `[inputs]`,
-    /// `[pose]`, `[gyro]`; see the README). Without it: the bag's only
+    /// `[pose]`, `[gyro]`; see the guide's "Read a ROS 2 bag"). Without it: the bag's only
     /// JointState, PoseStamped/Odometry and Imu topics, joints named as the
     /// spec's input columns.
     #[arg(long, value_name = "FILE.toml")]
@@ -49,6 +50,10 @@ pub struct Common {
     pub max_gap: f64,
     #[command(flatten)]
     pub catalogue: EffectDirs,
+    /// Print every figure and the evidence behind the answer, not only the
+    /// answer and its table (the JSON and the report always have them all).
+    #[arg(short, long)]
+    pub verbose: bool,
 }
 
 /// `--effects DIR`: the user's own effect catalogues (commands that use effects).

@@ -43,12 +43,20 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
     } else {
         format!("nominal parameters with --set {}", c.set.join(" --set "))
     };
-    out.say(&format!(
+    let header = format!(
         "{} against {} run(s), {:.1} s of data, {which}",
         r.ir.name,
         cmp.runs.len(),
         secs
-    ));
+    );
+    if !c.verbose {
+        crate::compare_text::say_summary(out, &header, &cmp, warnings);
+    }
+    // the detail: said with -v, in the JSON either way
+    let detail = &out.detail(c.verbose);
+    let out_all = out;
+    let out = detail;
+    out.say(&header);
     say_warnings(out, warnings);
     if cmp.has_ground_truth() {
         out.say(&format!("  {}", fmt_errors(&cmp.errors)));
@@ -67,7 +75,7 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
     say_where_it_fails(out, &cmp.regimes, &cmp.segments);
     if let Some((n, g)) = &cmp.gyrodometry {
         out.say(&format!(
-            "gyrodometry (heading from the gyro, seed 000 eq. 13-18), {} run(s):\n  position RMSE {:.4} m, heading RMSE {:.4} rad; final error {:.4} m / {:.4} rad",
+            "gyrodometry (heading from the gyro), {} run(s):\n  position RMSE {:.4} m, heading RMSE {:.4} rad; final error {:.4} m / {:.4} rad",
             n,
             g.rmse,
             g.heading_rmse_rad,
@@ -93,9 +101,9 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
         if let Err(e) = crate::report::compare_report(dir, r, &cmp, warnings, &doc) {
             return bad(e);
         }
-        out.say(&format!("report: {}", dir.join("index.html").display()));
+        out_all.say(&format!("report: {}", dir.join("index.html").display()));
     }
-    out.finish(c.json.as_deref(), &doc)
+    out_all.finish(c.json.as_deref(), &doc)
 }
 
 /// Where the error grows: each driving regime's share of the error growth,

@@ -12,9 +12,13 @@ use serde_json::json;
 use std::collections::BTreeMap;
 use std::process::ExitCode;
 
+/// What diagnose's errors are measured in.
+pub const ERROR_UNIT: &str =
+    "  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)";
+
 /// The share of the noise floor above which the model's own discretisation
 /// error is no longer "far below the noise" (issue 12 item 3).
-const DISCRETISATION_WARN: f64 = 0.3;
+pub const DISCRETISATION_WARN: f64 = 0.3;
 
 pub fn run(c: Common) -> ExitCode {
     let out = Out::new(c.json.as_deref());
@@ -57,35 +61,40 @@ pub fn run(c: Common) -> ExitCode {
     let (d, n_candidates) = (&outcome.diagnosis, outcome.tried);
     let r = &prep.runner;
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();
-    out.say(&format!(
-        "{}: diagnosis on {} run(s), {samples} samples, {n_candidates} candidate effect(s)",
-        r.ir.name,
-        prep.runs.len()
-    ));
-    out.say(&format!(
-        "  error with nominal parameters: {:.4}",
-        d.baseline_rmse
-    ));
-    out.say(&format!(
-        "  error after calibrating the spec as it is: {:.4} (held-out {:.4})",
-        d.calibrated_rmse, d.base_holdout_rmse
-    ));
-    out.say("  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)");
-    say_timing(&out, d, r);
-    say_candidates(&out, d);
-    let apply_cmds = say_chain(&out, &c, r, &outcome);
-    say_structure(&out, d);
-    let disc_ratio = say_discretisation(&out, d);
+    let (apply_cmds, disc_ratio) = if c.verbose {
+        out.say(&format!(
+            "{}: diagnosis on {} run(s), {samples} samples, {n_candidates} candidate effect(s)",
+            r.ir.name,
+            prep.runs.len()
+        ));
+        out.say(&format!(
+            "  error with nominal parameters: {:.4}",
+            d.baseline_rmse
+        ));
+        out.say(&format!(
+            "  error after calibrating the spec as it is: {:.4} (held-out {:.4})",
+            d.calibrated_rmse, d.base_holdout_rmse
+        ));
+        out.say(ERROR_UNIT);
+        say_timing(&out, d, r);
+        say_candidates(&out, d);
+        let apply_cmds = say_chain(&out, &c, r, &outcome);
+        say_structure(&out, d);
+        let disc_ratio = say_discretisation(&out, d);
+        out.say(&format!(
+            "time: {:.2} s preparing, {:.2} s diagnosing",
+            t_prep.as_secs_f64(),
+            t_diag.as_secs_f64()
+        ));
+        (apply_cmds, disc_ratio)
+    } else {
+        crate::diagnose_text::say_summary(&out, &c, &prep.runs, r, &outcome)
+    };
     let per_candidate = if n_candidates == 0 {
         0.0
     } else {
         t_diag.as_secs_f64() / n_candidates as f64
     };
-    out.say(&format!(
-        "time: {:.2} s preparing, {:.2} s diagnosing",
-        t_prep.as_secs_f64(),
-        t_diag.as_secs_f64()
-    ));
     let disc = &d.discretisation;
     let doc = json!({
         "model": r.ir.name,
@@ -141,7 +150,7 @@ fn say_timing(out: &Out, d: &Diagnosis, r: &Runner) {
 
 /// Each estimate of `p` with its standard deviation ("unidentified" where
 /// it has none), as the candidates' lists write them.
-fn estimates_said(p: &kinegen_analysis::diagnosis::estimate::Estimates) -> Vec<String> {
+pub fn estimates_said(p: &kinegen_analysis::diagnosis::estimate::Estimates) -> Vec<String> {
     p.iter()
         .map(|(k, v)| {
             let std = crate::output::fmt_std(Some(v.std).filter(|s| s.is_finite()));
@@ -339,7 +348,7 @@ fn signed_ms(s: f64) -> String {
 
 /// The `fit` that calibrates `spec` on the diagnosed logs and writes it back
 /// with the calibrated values (`--export spec`).
-fn calibrate_command(c: &Common, spec: &str, model: &str) -> String {
+pub fn calibrate_command(c: &Common, spec: &str, model: &str) -> String {
     let mut a = vec![format!("kinegen fit --spec {spec}")];
     a.extend(c.data.iter().map(|d| format!("--data {}", d.display())));
     a.extend(
@@ -362,7 +371,7 @@ fn calibrate_command(c: &Common, spec: &str, model: &str) -> String {
 /// should not have to write the command out (on MRCLAM without its
 /// sightings, `time_offset` wins by a hair, while `input_delay` is what
 /// `localize` can use).
-fn say_alternatives(out: &Out, d: &Diagnosis, spec: &str, name: &str) {
+pub fn say_alternatives(out: &Out, d: &Diagnosis, spec: &str, name: &str) {
     let Some(first) = d.chain.first() else { return };
     let alternatives: Vec<String> = first
         .equivalent

@@ -46,7 +46,7 @@ pub struct SimArgs {
     /// Farthest landmark observed, m.
     #[arg(long, default_value_t = 10.0, value_parser = crate::analysis_cmd::positive)]
     pub landmark_range: f64,
-    /// Cruise speed of the beacons tour, m/s (seed 001: 5).
+    /// Cruise speed of the beacons tour, m/s (the EKF paper's tour: 5).
     #[arg(long, default_value_t = 0.5, value_parser = crate::analysis_cmd::positive)]
     pub speed: f64,
     #[command(flatten)]

@@ -95,7 +95,7 @@ pub struct FitArgs {
     /// Square side (m) of the UMBMark runs.
     #[arg(long, default_value_t = Settings::SIDE, value_parser = positive)]
     pub side: f64,
-    /// EKF measurement-noise inflation mu (seed 000 eq. 26), rad/s.
+    /// EKF measurement-noise inflation mu of the parameter EKF, rad/s.
     #[arg(long, default_value_t = Settings::MU, value_parser = non_negative)]
     pub mu: f64,
     /// Known true values NAME=VALUE (simulated logs): the report says which method got closest.
@@ -128,7 +128,7 @@ pub struct FitArgs {
     #[arg(long, num_args = 2, value_names = ["FORMAT", "PATH"])]
     pub export: Vec<String>,
     /// Hidden tanh units of the neural gyrodometry network (--method neural or
-    /// all); repeatable: one network per size (seed 000 compares 9 and 50).
+    /// all); repeatable: one network per size (e.g. 9 and 50).
     #[arg(long, default_values_t = [50], value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub hidden: Vec<u32>,
 }
@@ -386,8 +386,13 @@ fn render_lm(
 ) -> ExitCode {
     let r = &prep.runner;
     let res = &cal.fit;
-    say_calibration(out, prep, res, &cal.before.errors, &cal.after.errors);
-    say_judgement(out, cal);
+    if !c.verbose {
+        crate::fit_text::say_summary(out, prep, cal);
+    }
+    // the detail: said with -v, in the JSON either way
+    let detail = &out.detail(c.verbose);
+    say_calibration(detail, prep, res, &cal.before.errors, &cal.after.errors);
+    say_judgement(detail, cal);
     let (before, after) = (&cal.before.errors, &cal.after.errors);
     let mut doc = fit_json(r, res, before, after, metric_name(&prep.runs));
     doc["unusable"] = json!(cal.unusable);
@@ -397,7 +402,7 @@ fn render_lm(
         .filter(|k| uses_residuals(a, k))
         .collect::<Vec<_>>());
     if let (Some(lb), Some(la)) = (&cal.before.landmarks, &cal.after.landmarks) {
-        out.say(&format!(
+        detail.say(&format!(
             "  before: {}\n  after:  {}",
             fmt_landmarks(lb),
             fmt_landmarks(la)
@@ -408,17 +413,17 @@ fn render_lm(
         &cal.before.landmarks_from_truth,
         &cal.after.landmarks_from_truth,
     ) {
-        out.say(&format!(
+        detail.say(&format!(
             "  before: {}\n  after:  {}",
             fmt_landmarks_from_truth(lb),
             fmt_landmarks_from_truth(la)
         ));
         doc["landmarks_from_truth"] = json!({"before": lb, "after": la});
     }
-    let runs = fit_runs(out, prep, cal, &mut doc);
+    let runs = fit_runs(detail, prep, cal, &mut doc);
     doc["runs"] = json!(runs);
     if let Some(w) = &cal.leave_one_out_warning {
-        out.say(&format!("warning: {w}"));
+        detail.say(&format!("warning: {w}"));
     }
     // what the user should know, in the order said: the fit's (the logs'
     // among them), the held-out runs' and leave-one-out's

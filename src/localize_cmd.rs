@@ -49,7 +49,7 @@ pub struct LocalizeArgs {
     /// the sightings after it too); its track goes to --track and the report.
     #[arg(long)]
     pub smooth: bool,
-    /// Noise sweep (seed 001 Figs 6-7): drive the first log's robot again with
+    /// Noise sweep: drive the first log's robot again with
     /// each [[noise]] sigma in turn raised from 0.001 to 0.1, re-observe its
     /// landmarks, and report the EKF's position error for each.
     #[arg(long)]
@@ -101,6 +101,20 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
     }
     let r = &prep.runner;
     let (noise, note) = (&done.noise, &done.note);
+    if !c.verbose {
+        let runs: Vec<&kinegen_analysis::model_on_log::run::Run> =
+            prep.runs.iter().chain(&prep.holdout).collect();
+        crate::localize_text::say_summary(
+            out,
+            &r.ir.name,
+            &runs,
+            done,
+            reading_step(c, noise, &r.ir),
+        );
+    }
+    // the detail: said with -v, in the JSON either way
+    let out_all = out;
+    let out = &out.detail(c.verbose);
     out.say(note);
     let base = kinegen_analysis::model_on_log::landmarks::sigma(r);
     let whose = if kinegen_analysis::model_on_log::landmarks::declares_sigma(r) {
@@ -157,16 +171,16 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         ) {
             return bad(e);
         }
-        out.say(&format!("report: {}", dir.join("index.html").display()));
+        out_all.say(&format!("report: {}", dir.join("index.html").display()));
     }
     if let Some(t) = &a.track {
         if let Err(e) = kinegen_model::files::write_atomic(t, &csv) {
             return bad(e);
         }
-        out.say(&format!("track: {}", t.display()));
+        out_all.say(&format!("track: {}", t.display()));
     }
     let doc = json!({"model": r.ir.name, "gate": a.gate, "noise": noise_json, "runs": runs_json, "sweep": sweep, "warnings": prep.warnings});
-    out.finish(c.json.as_deref(), &doc)
+    out_all.finish(c.json.as_deref(), &doc)
 }
 
 /// The `--track` CSV rows of a run: the estimate (smoothed with --smooth)
@@ -455,13 +469,36 @@ fn reading_advice(
             "the spec reads range so already ({EFFECT}): the line above is on top of the spec's own reading; `kinegen fit` with the sightings calibrates the spec's against the ground truth"
         ));
     }
+    let (_, cmd) = reading_step(c, n, ir)?;
+    Some(format!("{READING_WHY}\n    {cmd}"))
+}
+
+/// The range reading the filter estimated, as a step to take: why, and the
+/// `add-effect` that puts it into the spec (None where the filter read
+/// straight-line range, or the spec reads range so already).
+fn reading_step(
+    c: &Common,
+    n: &kinegen_analysis::applications::localize::NoiseModel,
+    ir: &kinegen_model::ir::ModelIr,
+) -> Option<(String, String)> {
+    let r = &n.range_reading;
+    const EFFECT: &str = RangeReading::EFFECT;
+    if r.is_straight() || ir.effects.iter().any(|e| e == EFFECT) {
+        return None;
+    }
     let values = r.parameters().map(|(k, v)| (k.to_string(), v)).into();
     let spec = c.spec.display().to_string();
     let cmd = add_effect_command(&spec, EFFECT, &values, &ir.name);
-    Some(format!(
-        "to read range so in the spec (then `fit` calibrates it):\n    {cmd}"
-    ))
+    let why = format!(
+        "the camera reads range as {:.0}% depth along its axis, {:+.1}% long; to put it in the spec:",
+        100.0 * r.depth_share,
+        100.0 * r.scale
+    );
+    Some((why, cmd))
 }
+
+/// The verbose text's wording of the same step.
+const READING_WHY: &str = "to read range so in the spec (then `fit` calibrates it):";
 
 fn noise_json(
     n: &kinegen_analysis::applications::localize::NoiseModel,

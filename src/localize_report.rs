@@ -281,7 +281,7 @@ fn sweep_chart(
         })
         .collect();
     chart_beside(
-        "noise sweep (seed 001 Figs 6-7): position RMSE against each sigma",
+        "noise sweep: position RMSE against each sigma",
         "log10(sigma)",
         "position RMSE (m)",
         &series,

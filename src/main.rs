@@ -9,15 +9,19 @@ mod batch_cmd;
 mod bench_diagnose_cmd;
 mod bench_real_cmd;
 mod compare_cmd;
+mod compare_text;
 mod diagnose_cmd;
+mod diagnose_text;
 mod effects_cmd;
 mod export;
 mod fit_cmd;
+mod fit_text;
 mod generate_cmd;
 mod inverse_cmd;
 mod ir_source;
 mod localize_cmd;
 mod localize_report;
+mod localize_text;
 mod navigate_cmd;
 mod output;
 mod progress;
@@ -75,7 +79,7 @@ enum Command {
     ///
     /// Example: kinegen compare --spec spec/diff_drive.toml --data ../shared/real/optiodom-diff-square/run-01.csv --report report
     Compare(analysis_cmd::Common),
-    /// EKF localisation with mapped landmarks (seed 001 eq. 1-9) on the model's
+    /// EKF localisation with mapped landmarks on the model's
     /// step and observation Jacobians: the track with its covariance, gating of
     /// outliers, NIS and NEES against their chi-square bounds. The noise is
     /// estimated from the sightings unless given, and so is the spec's input
@@ -89,13 +93,13 @@ enum Command {
         #[command(flatten)]
         options: localize_cmd::LocalizeArgs,
     },
-    /// Integrated inverse kinematics along a planned path (seed 001 eq. 12-18):
+    /// Integrated inverse kinematics along a planned path:
     /// each robot's input profile, checked against its inputs' `max_rate` and
     /// `range`; exit 1 when a robot cannot drive the path as planned.
     ///
     /// Example: kinegen inverse --spec spec/diff_drive.toml --spec spec/tricycle.toml --spec spec/omni3.toml --path tour.csv --report report/inverse
     Inverse(inverse_cmd::InverseArgs),
-    /// Cellular-automaton navigation on a grid (seed 004), driven on odometry
+    /// Cellular-automaton navigation on a grid, driven on odometry
     /// by a real robot with hidden geometry errors: collisions, safety-zone
     /// intrusions and the final distance to the goal, before and after
     /// calibrating the odometry (--calibrate umbmark|lm).

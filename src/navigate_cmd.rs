@@ -14,14 +14,14 @@ use std::process::ExitCode;
 
 #[derive(Args, Debug)]
 pub struct NavigateArgs {
-    /// The robot's spec (a differential drive that turns in place; the seed's
-    /// e-puck is data/seed004/epuck.toml).
+    /// The robot's spec (a differential drive that turns in place; the bundled
+    /// e-puck is data/seed004/epuck.toml in the checkout).
     #[arg(long)]
     pub spec: PathBuf,
     /// The grid: rows of `.` free, `#` obstacle, `S` start, `G` goal.
     #[arg(long)]
     pub grid: PathBuf,
-    /// Cell side, m (seed 004: 7 cm, the e-puck's diameter).
+    /// Cell side, m (7 cm: the e-puck's diameter).
     #[arg(long, default_value_t = 0.07, value_parser = crate::analysis_cmd::positive)]
     pub cell: f64,
     /// Re-plan from the odometry pose every N moves (default: planned once).
@@ -32,7 +32,7 @@ pub struct NavigateArgs {
     #[arg(long = "set")]
     pub set: Vec<String>,
     /// Also drive after calibrating the odometry on simulated square runs of
-    /// the real robot with this `fit` method: umbmark (seed 004), lm...
+    /// the real robot with this `fit` method: umbmark (Borenstein's square), lm...
     #[arg(long, value_parser = geometry_methods())]
     pub calibrate: Option<String>,
     /// Motors' relative error per move (what the encoders see and an open-loop

@@ -5,16 +5,31 @@ use std::path::Path;
 
 pub struct Out {
     json_to_stdout: bool,
+    /// Says nothing: the detail a command's `-v` text gives, while the
+    /// default text says its summary (the JSON is built either way).
+    mute: bool,
 }
 
 impl Out {
     pub fn new(json: Option<&Path>) -> Out {
         Out {
             json_to_stdout: json.is_some_and(|p| p == Path::new("-")),
+            mute: false,
+        }
+    }
+
+    /// This output when `verbose`, else one that says nothing.
+    pub fn detail(&self, verbose: bool) -> Out {
+        Out {
+            json_to_stdout: self.json_to_stdout,
+            mute: !verbose,
         }
     }
 
     pub fn say(&self, text: &str) {
+        if self.mute {
+            return;
+        }
         if self.json_to_stdout {
             eprintln!("{text}");
         } else {
@@ -116,5 +131,125 @@ pub fn fmt_std(std: Option<f64>) -> String {
     match std {
         Some(s) if s.is_finite() => format!("{s:.1e}"),
         _ => "unidentified".into(),
+    }
+}
+
+/// The widest line a command prints by default: a terminal's 100 columns.
+pub const WIDTH: usize = 100;
+
+/// A command line for people, wrapped at spaces to at most `WIDTH` columns
+/// with shell continuations, indented by `indent`, so it can be pasted as it
+/// is printed.
+pub fn command_lines(cmd: &str, indent: usize) -> Vec<String> {
+    let pad = " ".repeat(indent);
+    let mut lines = Vec::new();
+    let mut line = pad.clone();
+    for word in cmd.split(' ') {
+        let first = line.trim().is_empty();
+        // room for " word \"
+        if !first && line.chars().count() + 1 + word.chars().count() + 2 > WIDTH {
+            lines.push(format!("{line} \\"));
+            line = format!("{pad}    {word}");
+        } else if first {
+            line.push_str(word);
+        } else {
+            line.push(' ');
+            line.push_str(word);
+        }
+    }
+    lines.push(line);
+    lines
+}
+
+/// A value with its standard deviation, to the digits the deviation leaves
+/// meaningful: `0.1006 ± 0.0004`; "unidentified" where there is none.
+pub fn with_std(value: f64, std: f64) -> String {
+    if !std.is_finite() || std <= 0.0 {
+        return format!("{value:.4} (unidentified)");
+    }
+    // two significant digits of the deviation
+    let digits = (-(std.log10().floor()) + 1.0).clamp(0.0, 12.0) as usize;
+    format!("{value:.digits$} ± {std:.digits$}")
+}
+
+/// An aligned table without borders, as wide as its contents: the shape of
+/// every command's default table.
+pub fn table(header: &[&str]) -> comfy_table::Table {
+    let mut t = comfy_table::Table::new();
+    t.load_preset(comfy_table::presets::NOTHING)
+        .set_content_arrangement(comfy_table::ContentArrangement::Disabled)
+        .set_header(header.iter().map(comfy_table::Cell::new));
+    // figures line up on their last digit: every column but the first
+    for i in 1..header.len() {
+        if let Some(c) = t.column_mut(i) {
+            c.set_cell_alignment(comfy_table::CellAlignment::Right);
+        }
+    }
+    t
+}
+
+/// A table's lines, each cut at `WIDTH` columns (with `…`), without the
+/// padding comfy-table leaves at either end.
+pub fn table_lines(t: &comfy_table::Table) -> Vec<String> {
+    t.lines()
+        .map(|l| {
+            let l = l.trim_end().to_string();
+            let l = l.strip_prefix(' ').unwrap_or(&l).to_string();
+            let line = format!("  {l}");
+            if line.chars().count() > WIDTH {
+                line.chars().take(WIDTH - 1).collect::<String>() + "…"
+            } else {
+                line
+            }
+        })
+        .collect()
+}
+
+/// Warnings for people: each said once, wrapped to the width, the first
+/// `lines` lines of each (the rest with -v and in the JSON).
+pub fn say_warnings_short(out: &Out, warnings: &[String], lines: usize) {
+    let mut seen = std::collections::BTreeSet::new();
+    for w in warnings.iter().filter(|w| seen.insert(w.as_str())) {
+        let text = format!("warning: {w}");
+        let wrapped = textwrap::wrap(&text, textwrap::Options::new(WIDTH).subsequent_indent("  "));
+        for (i, l) in wrapped.iter().enumerate() {
+            if i + 1 == lines && wrapped.len() > lines {
+                let cut: String = l.chars().take(WIDTH - 8).collect();
+                out.say(&format!("{cut} … (-v)"));
+                break;
+            }
+            out.say(l);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_long_command_wraps_with_continuations_within_the_width() {
+        let cmd = format!(
+            "kinegen fit --spec {} --data log.csv --export spec x.toml",
+            "a/".repeat(40)
+        );
+        let lines = command_lines(&cmd, 2);
+        assert!(lines.len() >= 2, "{lines:?}");
+        assert!(
+            lines.iter().all(|l| l.chars().count() <= WIDTH),
+            "{lines:?}"
+        );
+        assert!(lines[..lines.len() - 1].iter().all(|l| l.ends_with(" \\")));
+        let joined: Vec<&str> = lines
+            .iter()
+            .map(|l| l.trim().trim_end_matches('\\').trim())
+            .collect();
+        assert_eq!(joined.join(" "), cmd);
+    }
+
+    #[test]
+    fn a_value_keeps_the_digits_its_deviation_leaves() {
+        assert_eq!(with_std(0.100599, 0.00039), "0.10060 ± 0.00039");
+        assert_eq!(with_std(1.5, f64::INFINITY), "1.5000 (unidentified)");
     }
 }

@@ -1156,7 +1156,7 @@ pub fn inverse_report(
     let html = page(
         "Inverse kinematics along a planned path",
         &format!(
-            "<p>{} (seed 001 eq. 12-18). Shaded: stretches the robot cannot drive as planned.</p>",
+            "<p>{} (the integrated inverse kinematics). Shaded: stretches the robot cannot drive as planned.</p>",
             esc(&path.file.display().to_string())
         ),
         &figs,
@@ -1236,7 +1236,7 @@ pub fn navigate_report(
         .map(|(name, d)| navigation_map(grid, name, d))
         .collect::<Result<Vec<_>, _>>()?;
     let html = page(
-        "Cellular-automaton navigation on odometry (seed 004)",
+        "Cellular-automaton navigation on odometry",
         "<p>Dark: obstacles; light: safety zone (obstacles enlarged by one cell); crosses: the robot touching an obstacle; magenta: the goal.</p>",
         &figs,
         "",

@@ -477,6 +477,7 @@ fn landmark_topic_mistakes_are_located(t: &Path, array: &Path, ta: &Path, map: &
     std::fs::write(map, "id,x,y\nL1,3,2\nL2,-1,4\n").unwrap();
     let o = kinegen(&[
         "compare",
+        "-v",
         "--spec",
         "spec/diff_drive.toml",
         "--data",

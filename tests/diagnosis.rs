@@ -322,7 +322,14 @@ fn the_whole_story_through_the_cli() {
         .as_f64()
         .unwrap();
     // the human output prints the spec change
-    let o = kinegen(&["diagnose", "--spec", "spec/diff_drive.toml", "--data", l]);
+    let o = kinegen(&[
+        "diagnose",
+        "-v",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        l,
+    ]);
     assert!(
         stdout(&o).contains("spec change:") && stdout(&o).contains("k_slip"),
         "{}",
@@ -817,7 +824,14 @@ fn the_models_own_step_is_checked_against_the_noise() {
                 .collect();
             let slow = tmp.path().join("clean1_5hz.csv");
             std::fs::write(&slow, coarse.join("\n") + "\n").unwrap();
-            let out = kinegen(&["diagnose", "--spec", spec, "--data", slow.to_str().unwrap()]);
+            let out = kinegen(&[
+                "diagnose",
+                "-v",
+                "--spec",
+                spec,
+                "--data",
+                slow.to_str().unwrap(),
+            ]);
             let text = stdout(&out);
             assert!(
                 text.contains("warning: the model's own step at the log's 5 Hz"),

@@ -299,8 +299,10 @@ fn compare_sightings(
 ) -> std::process::Output {
     let obs = dir.join("obs.csv");
     std::fs::write(&obs, text).unwrap();
+    // -v: the warnings in full, one line each
     kinegen(&[
         "compare",
+        "-v",
         "--spec",
         "spec/diff_drive.toml",
         "--data",
@@ -582,7 +584,13 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
         "one track row per log row (plus the header each)"
     );
     // with the spec's own, much smaller process noise the filter is overconfident and says so
-    let o = kinegen(&localize_args(spec, &log, &obs, &m, &["--spec-noise"]));
+    let o = kinegen(&localize_args(
+        spec,
+        &log,
+        &obs,
+        &m,
+        &["--spec-noise", "-v"],
+    ));
     assert!(
         stdout(&o).contains("overconfident"),
         "{}{}",

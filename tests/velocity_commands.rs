@@ -284,6 +284,7 @@ fn commands_hold_between_rows_and_short_gaps_are_bridged() {
         dir,
         &[
             "compare",
+            "-v",
             "--spec",
             spec.to_str().unwrap(),
             "--data",
@@ -301,6 +302,7 @@ fn commands_hold_between_rows_and_short_gaps_are_bridged() {
         dir,
         &[
             "compare",
+            "-v",
             "--spec",
             spec.to_str().unwrap(),
             "--data",

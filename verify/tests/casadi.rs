@@ -3,7 +3,7 @@
 use kinegen_model::ir::{Kernel, StepForm, Wrt};
 use kinegen_verify::casadi::{compare, fixture_dir, load};
 use kinegen_verify::checks::where_;
-use kinegen_verify::{models, Corrupted, Generated, Kernel as _};
+use kinegen_verify::{models, Corrupted, Generated};
 
 #[test]
 fn generated_kernels_match_casadi() {

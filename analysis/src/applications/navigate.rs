@@ -75,9 +75,9 @@ fn wrap(a: f64) -> f64 {
 /// A drive that cannot start.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum NavigateError {
-    #[error("model `{0}` cannot turn in place: seed 004's moves turn toward the next cell first")]
+    #[error("model `{0}` cannot turn in place: each move of the navigation turns toward the next cell first")]
     CannotSpin(String),
-    #[error("--cell {cell:e} m: a move to the next cell would take {steps:.3e} integration steps of {dt} s at {speed} m/s (at most {MAX_STEPS_PER_MOVE:.0e}): cells are about the robot's size (seed 004: 7 cm for the e-puck)")]
+    #[error("--cell {cell:e} m: a move to the next cell would take {steps:.3e} integration steps of {dt} s at {speed} m/s (at most {MAX_STEPS_PER_MOVE:.0e}): cells are about the robot's size (7 cm for the e-puck)")]
     CellTooLarge {
         cell: f64,
         steps: f64,

@@ -130,7 +130,7 @@ impl Method for Gd {
         "gd"
     }
     fn about(&self) -> &'static str {
-        "gradient descent on the yaw-rate error, seed 000 eq. 19-21"
+        "gradient descent on the yaw-rate error (gyrodometry calibration)"
     }
     fn calibrate(
         &self,
@@ -161,7 +161,7 @@ impl Method for Ekf {
         "ekf"
     }
     fn about(&self) -> &'static str {
-        "parameter EKF on the yaw rate, seed 000 eq. 22-26"
+        "parameter EKF on the yaw rate (gyrodometry calibration)"
     }
     fn calibrate(
         &self,
@@ -225,7 +225,7 @@ impl Method for Neural {
         "neural"
     }
     fn about(&self) -> &'static str {
-        "neural gyrodometry, seed 000 sec. 3.2: a tanh MLP (--hidden N units) trained by LM maps the joint rates to the yaw rate and replaces the gyro; the model's parameters stay nominal"
+        "neural gyrodometry: a tanh MLP (--hidden N units) trained by LM maps the joint rates to the yaw rate and replaces the gyro; the model's parameters stay nominal"
     }
     fn per_hidden_size(&self) -> bool {
         true

@@ -122,7 +122,7 @@ impl NoiseModel {
                         s * s
                     )
                 } else {
-                    format!("{n} = {s:.4e} per row (seed 001 eq. 5)")
+                    format!("{n} = {s:.4e} per row (a sigma per log row)")
                 }
             })
             .collect();

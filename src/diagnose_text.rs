@@ -1,0 +1,252 @@
+//! diagnose's default text: the answer first (which effect, how large, the
+//! commands that add it and calibrate it), then one aligned table of the
+//! effects tested, within 25 lines of 100 columns. `-v` prints the
+//! evidence behind each line (diagnose_cmd.rs); the JSON and the report
+//! keep every figure.
+use crate::analysis_cmd::Common;
+use crate::diagnose_cmd::{calibrate_command, DISCRETISATION_WARN};
+use crate::effects_cmd::add_effect_command;
+use crate::output::{command_lines, table as new_table, table_lines, with_std, Out};
+use kinegen_analysis::diagnosis::diagnose::Diagnosis;
+use kinegen_analysis::diagnosis::diagnose_job::Outcome;
+use kinegen_analysis::diagnosis::estimate::Estimates;
+use kinegen_analysis::model_on_log::model::Runner;
+use kinegen_analysis::model_on_log::run::Run;
+use std::collections::BTreeMap;
+
+/// Say the summary; returns the add-effect commands (for the JSON) and the
+/// model's own step error against the noise floor.
+pub fn say_summary(
+    out: &Out,
+    c: &Common,
+    runs: &[Run],
+    r: &Runner,
+    outcome: &Outcome,
+) -> (Vec<String>, f64) {
+    let d = &outcome.diagnosis;
+    let mut head = vec![header(r, runs, outcome.tried)];
+    let apply = say_answer(&mut head, c, r, d);
+    let mut tail = Vec::new();
+    say_leftovers(&mut tail, d);
+    let disc = &d.discretisation;
+    let ratio = disc.error / d.noise_floor.max(1e-300);
+    if disc.measured && ratio > DISCRETISATION_WARN {
+        tail.push(format!(
+            "warning: the model's own step at {:.0} Hz errs {ratio:.1}x the noise floor (-v: why)",
+            disc.rate_hz
+        ));
+    }
+    tail.push(
+        "errors: RMS residuals in sigmas (pose 0.01 m, 0.01 rad; gyro 0.01 rad/s); -v: evidence"
+            .into(),
+    );
+    // the table gets what the answer and the notes leave of 25 lines
+    // (a blank, its header and a "more" line beside its rows), two rows
+    // at least
+    let rows = LINES.saturating_sub(head.len() + tail.len() + 3).max(2);
+    for l in head.iter().chain(&table(d, rows)).chain(&tail) {
+        out.say(l);
+    }
+    (apply, ratio)
+}
+
+/// The most lines diagnose says by default.
+const LINES: usize = 25;
+
+/// "error 1.189 -> 0.370 (3.2x smaller)", or "(-2%)" for a small fall.
+fn fall(before: f64, after: f64) -> String {
+    let x = before / after.max(1e-300);
+    if x >= 1.5 {
+        format!("error {before:.3} -> {after:.3} ({x:.1}x smaller)")
+    } else {
+        format!(
+            "error {before:.3} -> {after:.3} ({:+.0}%)",
+            100.0 * (after / before.max(1e-300) - 1.0)
+        )
+    }
+}
+
+/// "skid4: 1 run, 1821 rows (91.0 s), 9 effects tested"
+fn header(r: &Runner, runs: &[Run], tried: usize) -> String {
+    let rows: usize = runs.iter().map(|x| x.t.len()).sum();
+    let seconds: f64 = runs
+        .iter()
+        .map(|x| x.t.last().copied().unwrap_or(0.0) - x.t.first().copied().unwrap_or(0.0))
+        .sum();
+    let s = |n: usize| if n == 1 { "" } else { "s" };
+    format!(
+        "{}: {} run{}, {rows} rows ({seconds:.1} s); {tried} effect{} tested",
+        r.ir.name,
+        runs.len(),
+        s(runs.len()),
+        s(tried)
+    )
+}
+
+/// "k_slip = 0.10060 ± 0.00039, ..."
+fn values(p: &Estimates) -> String {
+    p.iter()
+        .map(|(k, v)| format!("{k} = {}", with_std(v.estimate, v.std)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The parameters' cell of the table: at most `PARAMS_WIDTH` characters,
+/// cut with `…` (each value in full with -v and in the JSON).
+fn values_cell(p: &Estimates) -> String {
+    let s = values(p);
+    if s.chars().count() <= PARAMS_WIDTH {
+        s
+    } else {
+        s.chars().take(PARAMS_WIDTH - 1).collect::<String>() + "…"
+    }
+}
+
+/// Room left for the parameters beside the other columns within 100.
+const PARAMS_WIDTH: usize = 46;
+
+/// The verdict and the commands that act on it; returns the add-effect
+/// commands.
+fn say_answer(out: &mut Vec<String>, c: &Common, r: &Runner, d: &Diagnosis) -> Vec<String> {
+    if d.chain.is_empty() {
+        out.push(format!(
+            "answer: no catalogue effect is significant; calibrated error {:.3} (nominal {:.3})",
+            d.calibrated_rmse, d.baseline_rmse
+        ));
+        return Vec::new();
+    }
+    let mut apply = Vec::new();
+    let mut before = d.calibrated_rmse;
+    for (k, step) in d.chain.iter().enumerate() {
+        let lead = if k == 0 { "answer: missing" } else { "  then" };
+        let named = format!("{lead} `{}`: {}", step.effect, values(&step.parameters));
+        if k == 0 {
+            out.push(named);
+            out.push(format!(
+                "    {}; nominal {:.3}, noise floor {:.3}",
+                fall(before, step.rmse_after),
+                d.baseline_rmse,
+                d.noise_floor
+            ));
+        } else {
+            // a later step on one line where it fits
+            let one = format!("{named}; {}", fall(before, step.rmse_after));
+            if one.chars().count() <= crate::output::WIDTH {
+                out.push(one);
+            } else {
+                out.push(named);
+                out.push(format!("    {}", fall(before, step.rmse_after)));
+            }
+        }
+        if !step.equivalent.is_empty() {
+            let others: Vec<String> = step.equivalent.iter().map(|e| format!("`{e}`")).collect();
+            out.push(format!(
+                "    these logs cannot tell it from {} (-v: which log would)",
+                others.join(" or ")
+            ));
+        }
+        before = step.rmse_after;
+        let from = if k == 0 {
+            c.spec.display().to_string()
+        } else {
+            format!("{}_{}.toml", r.ir.name, d.chain[k - 1].effect)
+        };
+        let vals: BTreeMap<String, f64> = step
+            .parameters
+            .iter()
+            .map(|(k, v)| (k.clone(), v.estimate))
+            .collect();
+        apply.push(add_effect_command(&from, &step.effect, &vals, &r.ir.name));
+    }
+    out.push(
+        if apply.len() == 1 {
+            "add it:"
+        } else {
+            "add them:"
+        }
+        .into(),
+    );
+    for cmd in &apply {
+        out.extend(command_lines(cmd, 2));
+    }
+    let last = d.chain.last().map_or(String::new(), |s| s.effect.clone());
+    out.push("then calibrate:".into());
+    let fit = calibrate_command(c, &format!("{}_{last}.toml", r.ir.name), &r.ir.name);
+    out.extend(command_lines(&fit, 2));
+    apply
+}
+
+/// The effects tested, most likely first: the motion's, then the sensor's;
+/// at most `shown` rows (the rest behind -v).
+fn table(d: &Diagnosis, shown: usize) -> Vec<String> {
+    let mut t = new_table(&["effect", "error", "change", "significant", "parameters"]);
+    let mut rows = 0;
+    for cand in &d.candidates {
+        t.add_row(vec![
+            cand.effect.clone(),
+            format!("{:.3}", cand.rmse),
+            format!("{:+.0}%", -100.0 * cand.improvement),
+            if cand.significant { "yes" } else { "no" }.to_string(),
+            values_cell(&cand.parameters),
+        ]);
+        rows += 1;
+    }
+    for s in &d.sensor_candidates {
+        t.add_row(vec![
+            format!("{} (sightings)", s.effect),
+            "-".into(),
+            "-".into(),
+            if s.significant { "yes" } else { "no" }.to_string(),
+            values_cell(&s.parameters),
+        ]);
+        rows += 1;
+    }
+    if rows == 0 {
+        return Vec::new();
+    }
+    if let Some(c) = t.column_mut(4) {
+        c.set_cell_alignment(comfy_table::CellAlignment::Left);
+    }
+    let mut out = vec![String::new()];
+    out.extend(table_lines(&t).into_iter().take(shown + 1));
+    if rows > shown {
+        out.push(format!("  ... {} more (-v)", rows - shown));
+    }
+    out
+}
+
+/// The effects not tested (counted by reason), and what the residuals keep.
+fn say_leftovers(out: &mut Vec<String>, d: &Diagnosis) {
+    let redundant = d
+        .skipped
+        .iter()
+        .filter(|(_, w)| w.starts_with("redundant"))
+        .count();
+    let other = d.skipped.len() - redundant;
+    if !d.skipped.is_empty() {
+        out.push(format!(
+            "not tested: {other} that do not apply, {redundant} redundant with the calibration (-v)"
+        ));
+    }
+    if let Some(why) = &d.sensor_unmeasured {
+        out.push(short(&format!("sensor effects not tested: {why}")));
+    }
+    let left = if d.structure.structured {
+        let first = d.structure.findings.first().cloned().unwrap_or_default();
+        format!("structure remains in the residuals: {first}")
+    } else if !d.structure.findings.is_empty() {
+        "residual structure not tested (too little ground truth)".to_string()
+    } else {
+        "residuals left: noise".to_string()
+    };
+    out.push(short(&left));
+}
+
+/// A line cut to the width, with `…` (the whole text is behind -v).
+fn short(s: &str) -> String {
+    if s.chars().count() <= crate::output::WIDTH {
+        s.to_string()
+    } else {
+        s.chars().take(crate::output::WIDTH - 1).collect::<String>() + "…"
+    }
+}

@@ -1,0 +1,167 @@
+//! Every command's default text is read at a glance: the answer first, at
+//! most 25 lines of at most 100 characters, on the bundled log and on the
+//! real logs (MRCLAM, OptiOdom) with specs a user writes; `-v` says more.
+mod common;
+use common::*;
+use std::path::Path;
+
+const LINES: usize = 25;
+const WIDTH: usize = 100;
+
+/// Run kinegen (in `dir`), check the shape of what it prints by default,
+/// and that `-v` prints more; returns the default text.
+fn shaped(dir: &Path, args: &[&str]) -> String {
+    let o = kinegen_in(dir, args);
+    assert!(o.status.success(), "kinegen {args:?}: {}", stderr(&o));
+    let text = stdout(&o) + &stderr(&o);
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(
+        lines.len() <= LINES,
+        "kinegen {args:?}: {} lines:\n{text}",
+        lines.len()
+    );
+    let wide: Vec<&&str> = lines.iter().filter(|l| l.chars().count() > WIDTH).collect();
+    assert!(
+        wide.is_empty(),
+        "kinegen {args:?}: lines over {WIDTH}: {wide:#?}"
+    );
+    if matches!(args[0], "compare" | "fit" | "diagnose" | "localize") {
+        assert!(
+            lines.iter().any(|l| l.starts_with("answer: ")),
+            "kinegen {args:?}: no answer line:\n{text}"
+        );
+        let mut v = args.to_vec();
+        v.push("-v");
+        let o = kinegen_in(dir, &v);
+        let more = stdout(&o) + &stderr(&o);
+        assert!(
+            more.lines().count() > lines.len() || more.len() > text.len(),
+            "kinegen {args:?} -v says no more than without it"
+        );
+    }
+    text
+}
+
+#[test]
+fn the_bundled_story_reads_at_a_glance() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = root().join("data/mystery_robot.csv");
+    let spec = root().join("spec/diff_drive.toml");
+    let (log, spec) = (log.to_str().unwrap(), spec.to_str().unwrap());
+    let d = tmp.path();
+    shaped(d, &["compare", "--spec", spec, "--data", log]);
+    let text = shaped(d, &["diagnose", "--spec", spec, "--data", log]);
+    assert!(text.contains("kinegen add-effect"), "{text}");
+    shaped(
+        d,
+        &[
+            "add-effect",
+            "--spec",
+            spec,
+            "--effect",
+            "lateral_slip",
+            "--out",
+            "slip.toml",
+        ],
+    );
+    shaped(d, &["fit", "--spec", "slip.toml", "--data", log]);
+    shaped(
+        d,
+        &[
+            "simulate",
+            "--spec",
+            "slip.toml",
+            "--trajectory",
+            "square",
+            "--out",
+            "sim.csv",
+        ],
+    );
+}
+
+/// A velocity-commanded robot with a camera, as a user writes it.
+const CART: &str = r#"name = "cart"
+state = ["x", "y", "theta"]
+[[input]]
+name = "speed_sp"
+column = "v"
+kind = "absolute"
+unit = "m/s"
+[[input]]
+name = "yaw_sp"
+column = "omega"
+kind = "absolute"
+unit = "rad/s"
+[[parameter]]
+name = "gain_speed"
+nominal = 1.0
+min = 0.0
+[[parameter]]
+name = "gain_yaw"
+nominal = 1.0
+min = 0.0
+[[noise]]
+name = "n_speed"
+sigma = 0.03
+unit = "m/s/sqrt(Hz)"
+[[noise]]
+name = "n_yaw"
+sigma = 0.03
+unit = "rad/s/sqrt(Hz)"
+[motion]
+vx = "gain_speed*speed_sp + n_speed"
+vy = "0"
+omega = "gain_yaw*yaw_sp + n_yaw"
+[[observation]]
+name = "cam"
+landmark = true
+columns = ["range", "bearing"]
+expr = ["sqrt((xl - x)^2 + (yl - y)^2)", "atan2(yl - y, xl - x) - theta"]
+angle = [false, true]
+sigma = [0.1, 0.03]
+"#;
+
+#[test]
+fn real_logs_read_at_a_glance() {
+    let (Some(mrclam), Some(square)) = (
+        real_data("mrclam-dataset6"),
+        real_data("optiodom-diff-square"),
+    ) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    std::fs::write(d.join("cart.toml"), CART).unwrap();
+    let robot = mrclam.join("robot3");
+    let files = |f: &str| robot.join(f).to_str().unwrap().to_string();
+    let (log, obs, map) = (
+        files("log.csv"),
+        files("observations.csv"),
+        files("landmarks.csv"),
+    );
+    let with_sightings = ["--observations", &obs, "--landmarks", &map];
+    for cmd in ["compare", "fit", "diagnose", "localize"] {
+        let mut a = vec![cmd, "--spec", "cart.toml", "--data", &log];
+        a.extend(with_sightings);
+        shaped(d, &a);
+    }
+    let runs: Vec<String> = ["run-01.csv", "run-04.csv"]
+        .iter()
+        .map(|r| square.join(r).to_str().unwrap().to_string())
+        .collect();
+    let spec = root().join("spec/diff_drive.toml");
+    for cmd in ["compare", "fit", "diagnose"] {
+        shaped(
+            d,
+            &[
+                cmd,
+                "--spec",
+                spec.to_str().unwrap(),
+                "--data",
+                &runs[0],
+                "--data",
+                &runs[1],
+            ],
+        );
+    }
+}
