@@ -12,8 +12,9 @@ say() { printf '\n\033[1m$ %s\033[0m\n' "$*"; }
 # First result without symbolica: comparing a bundled spec with a log runs on
 # its committed IR, so a binary without the derivation stage (minutes less to
 # build on a fresh clone) shows it while symbolica is still to be compiled.
-echo "building kinegen without its symbolic stage (first result) ..."
-cargo build -q --no-default-features --bin kinegen
+# cargo shows its progress (a bar on a terminal, a line per crate otherwise)
+echo "building kinegen without its symbolic stage (first result; 3-5 min on a fresh clone) ..."
+cargo build --no-default-features --bin kinegen
 mkdir -p target/story && cp target/debug/kinegen target/story/kinegen-analysis
 say kinegen compare --spec spec/diff_drive.toml --data $data --report $out/compare
 target/story/kinegen-analysis compare --spec spec/diff_drive.toml --data $data --report $out/compare
@@ -21,7 +22,7 @@ target/story/kinegen-analysis compare --spec spec/diff_drive.toml --data $data -
 # Diagnosis derives the spec with each catalogue effect added: the full binary.
 echo
 echo "building kinegen with its symbolic stage (symbolica: 5-12 min on a fresh clone) ..."
-cargo build -q --bin kinegen
+cargo build --bin kinegen
 k=target/debug/kinegen
 
 say kinegen diagnose --spec spec/diff_drive.toml --data $data --report $out/diagnose --json $out/diagnose.json
@@ -40,6 +41,16 @@ say kinegen fit --spec spec/diff_drive.toml --data $data --report $out/fit-befor
 $k fit --spec spec/diff_drive.toml --data $data --report $out/fit-before
 say kinegen fit --spec $out/spec/diff_drive.toml --data $data --report $out/fit-after
 $k fit --spec $out/spec/diff_drive.toml --data $data --report $out/fit-after
+
+# the README's picture: the position error before (nominal) and after (the
+# effect added, calibrated), as the last report draws it
+python3 - "$out/fit-after/index.html" "$out/story.svg" <<'PY'
+import re, sys
+html = open(sys.argv[1]).read()
+svg = next(s for s in re.findall(r"<svg.*?</svg>", html, re.S) if "position error" in s)
+open(sys.argv[2], "w").write(svg)
+PY
+echo "the README's picture, redrawn: $out/story.svg (docs/src/img/story.svg)"
 
 say kinegen generate --spec-dir $out/spec --out $out/generated
 $k generate --spec-dir $out/spec --out $out/generated
