@@ -6,7 +6,8 @@
 #     CasADi, wrenfold and SymForce kernels)
 #     from the specs and fail if they differ from the committed ones (the
 #     check is live, not frozen)
-#  3. fail if generated/ is stale (kinegen generate --check)
+#  3. build the guide (docs/, mdBook) and fail if generated/ is stale
+#     (kinegen generate --check)
 #  4. cargo test over the whole workspace. Tests that use symbolica run it only in
 #     child processes that queue on a machine-wide lock, so the default parallel
 #     test runner is safe; do not use cargo-nextest (it runs tests as processes
@@ -15,6 +16,7 @@
 #  clone without it passes, and each skipped test prints a SKIPPED line.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+started=$(date +%s)
 real="${KINEGEN_REAL_DATA:-../shared/real}"
 if [ ! -d "$real" ]; then
   echo "note: no real robot logs at $real: the real-data tests will print SKIPPED and pass without checking"
@@ -31,14 +33,20 @@ if [ ! -c /dev/null ]; then
     echo "warning: /dev/null is a plain file here and could not be restored; the generated-crate tests may fail" >&2
   fi
 fi
-python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt
+python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt -r docs/requirements.txt
 python3 verify/casadi/reference.py --check
 python3 verify/peers/wrenfold_kernels.py --check
 python3 verify/peers/symforce_kernels.py --check
 python3 verify/casadi/reference.py --check-c
 python3 verify/precision/reference.py --check
+# the guide (mdBook): its internal links are checked by tests/docs.rs
+# pip puts mdbook in Python's scripts folder, which need not be on the PATH
+mdbook="$(python3 -c 'import sysconfig; print(sysconfig.get_path("scripts"))')/mdbook"
+[ -x "$mdbook" ] || mdbook=mdbook
+"$mdbook" build docs
 cargo build --workspace --all-targets
 # the binary the workspace build just made: `cargo run --bin kinegen` resolves
 # features for the one package and would compile symbolica a second time (~10 min)
 "${CARGO_TARGET_DIR:-target}/debug/kinegen" generate --check
 cargo test --workspace
+echo "scripts/test.sh: the whole suite took $(( $(date +%s) - started )) s"
