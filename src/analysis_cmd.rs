@@ -98,6 +98,29 @@ pub fn read_progress(quiet: bool) -> impl Fn(&Path) -> Box<dyn Fn(usize, usize)>
 
 impl Common {
     /// Where the job's logs come from, as the library takes it.
+    /// A log given twice (as --data, --holdout, or both) would be counted
+    /// twice: refused, naming both places.
+    pub fn check_repeated_logs(&self) -> Result<(), String> {
+        let given: Vec<(&str, &PathBuf)> = (self.data.iter().map(|p| ("--data", p)))
+            .chain(self.holdout.iter().map(|p| ("--holdout", p)))
+            .collect();
+        for (k, (opt, p)) in given.iter().enumerate() {
+            let same = |q: &PathBuf| {
+                q == *p
+                    || std::fs::canonicalize(q)
+                        .ok()
+                        .is_some_and(|c| std::fs::canonicalize(p).is_ok_and(|d| c == d))
+            };
+            if let Some((first, _)) = given[..k].iter().find(|(_, q)| same(q)) {
+                return Err(format!(
+                    "{opt} {}: already given as {first}; give each log once",
+                    p.display()
+                ));
+            }
+        }
+        Ok(())
+    }
+
     pub fn sources(&self) -> Sources {
         Sources {
             spec: self.spec.clone(),

@@ -101,27 +101,74 @@ fn read_jobs(path: &Path) -> Result<Vec<Job>, String> {
     Ok(jobs)
 }
 
-/// The ids RESULTS.jsonl already holds. A last line cut short by a kill is
-/// dropped from the file, so the job runs again and the file stays one JSON
-/// object a line.
-fn done_ids(out: &Path) -> Result<HashSet<String>, String> {
-    let Ok(text) = std::fs::read_to_string(out) else {
-        return Ok(HashSet::new());
-    };
-    let whole = text.rfind('\n').map_or(0, |i| i + 1);
-    if whole < text.len() {
-        let f = std::fs::OpenOptions::new()
-            .write(true)
-            .open(out)
-            .map_err(|e| format!("{}: {e}", out.display()))?;
-        f.set_len(whole as u64)
-            .map_err(|e| format!("{}: {e}", out.display()))?;
+/// What RESULTS.jsonl already holds: the ids of its result lines, and how
+/// many of those jobs failed (a resumed batch still owes them in its exit
+/// status).
+struct Journal {
+    done: HashSet<String>,
+    failed_before: usize,
+}
+
+/// Read the results file through the handle that holds its lock. A last
+/// line without its newline (cut short by a kill) is dropped, so its job
+/// runs again; any other line that is not a result line (`{"id": "...",
+/// "exit": N or null, ...}`) stops the batch at that line: the file is not
+/// one kinegen wrote, and resuming from it could skip jobs never run.
+fn read_journal(file: &mut std::fs::File, out: &Path) -> Result<Journal, String> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    file.read_to_end(&mut bytes)
+        .map_err(|e| format!("--out {}: {e}", out.display()))?;
+    let whole = bytes.iter().rposition(|b| *b == b'\n').map_or(0, |i| i + 1);
+    if whole < bytes.len() {
+        file.set_len(whole as u64)
+            .map_err(|e| format!("--out {}: {e}", out.display()))?;
     }
-    Ok(text[..whole]
-        .lines()
-        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
-        .filter_map(|v| v["id"].as_str().map(str::to_string))
-        .collect())
+    let mut journal = Journal {
+        done: HashSet::new(),
+        failed_before: 0,
+    };
+    for (k, line) in bytes[..whole].split(|b| *b == b'\n').enumerate() {
+        let at = format!("{}:{}", out.display(), k + 1);
+        if line.iter().all(u8::is_ascii_whitespace) {
+            continue;
+        }
+        let v: Value = std::str::from_utf8(line)
+            .map_err(|_| format!("{at}: not UTF-8: not a result line of kinegen batch"))
+            .and_then(|l| {
+                serde_json::from_str(l)
+                    .map_err(|e| format!("{at}: not a result line of kinegen batch ({e})"))
+            })?;
+        let (Some(id), Some(exit)) = (v["id"].as_str(), v.get("exit")) else {
+            return Err(format!(
+                "{at}: a result line has \"id\" and \"exit\": this one does not; is --out the right file?"
+            ));
+        };
+        if !(exit.is_null() || exit.is_i64()) {
+            return Err(format!("{at}: \"exit\" is {exit}, not a number or null"));
+        }
+        journal.done.insert(id.to_string());
+        journal.failed_before += usize::from(exit != &json!(0));
+    }
+    Ok(journal)
+}
+
+/// The jobs file and the results file must be two files: appending results
+/// to the jobs would destroy them (a hard link or a symbolic link counts as
+/// the same file).
+fn check_distinct(jobs: &Path, out: &Path) -> Result<(), String> {
+    use std::os::unix::fs::MetadataExt;
+    let (Ok(a), Ok(b)) = (std::fs::metadata(jobs), std::fs::metadata(out)) else {
+        return Ok(()); // the results file does not exist yet
+    };
+    if a.dev() == b.dev() && a.ino() == b.ino() {
+        return Err(format!(
+            "--out {}: that is the jobs file {}; the results go to a file of their own",
+            out.display(),
+            jobs.display()
+        ));
+    }
+    Ok(())
 }
 
 /// Run one job and describe its outcome as a result line.
@@ -313,27 +360,45 @@ pub fn run(a: &BatchArgs) -> ExitCode {
         Ok(j) => j,
         Err(e) => return bad(e),
     };
-    let done = match done_ids(&a.out) {
-        Ok(d) => d,
-        Err(e) => return bad(e),
-    };
+    if let Err(e) = check_distinct(&a.jobs_file, &a.out)
+        .and_then(|_| crate::output::check_writable("--out", &a.out))
+    {
+        return bad(e);
+    }
     let file = match std::fs::OpenOptions::new()
         .create(true)
+        .read(true)
         .append(true)
         .open(&a.out)
     {
         Ok(f) => f,
         Err(e) => return bad(format!("--out {}: {e}", a.out.display())),
     };
+    // one batch at a time per results file: two would run every job twice
+    let mut lock = fd_lock::RwLock::new(file);
+    let Ok(mut file) = lock.try_write() else {
+        return bad(format!(
+            "--out {}: another kinegen batch is writing to it; wait for it to end, or give another results file",
+            a.out.display()
+        ));
+    };
+    let journal = match read_journal(&mut file, &a.out) {
+        Ok(j) => j,
+        Err(e) => return bad(e),
+    };
     let pending: VecDeque<Job> = jobs
         .iter()
-        .filter(|j| !done.contains(&j.id))
+        .filter(|j| !journal.done.contains(&j.id))
         .cloned()
         .collect();
     let to_run = pending.len();
+    // never more workers than jobs: a huge --jobs would spawn threads for
+    // nothing
     let n = a
         .parallel
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .min(pending.len())
+        .max(1);
     eprintln!(
         "batch: {} job(s), {} already in {}, {} to run, {} at once",
         jobs.len(),
@@ -344,7 +409,7 @@ pub fn run(a: &BatchArgs) -> ExitCode {
     );
     let bar = crate::progress::Progress::bar(pending.len() as u64, "batch", false);
     let queue = Mutex::new(pending);
-    let sink = Mutex::new((file, 0usize, None::<String>));
+    let sink = Mutex::new((&mut *file, 0usize, None::<String>));
     std::thread::scope(|s| {
         for _ in 0..n {
             s.spawn(|| loop {
@@ -367,11 +432,15 @@ pub fn run(a: &BatchArgs) -> ExitCode {
     if let Some(e) = write_error {
         return bad(e);
     }
+    let earlier = match journal.failed_before {
+        0 => String::new(),
+        k => format!(", and {k} failed in an earlier run"),
+    };
     eprintln!(
-        "batch: {to_run} job(s) run, {failed} failed; results in {}",
+        "batch: {to_run} job(s) run, {failed} failed{earlier}; results in {}",
         a.out.display()
     );
-    if failed > 0 {
+    if failed + journal.failed_before > 0 {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS

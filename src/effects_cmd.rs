@@ -67,6 +67,18 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
             .map(|e| e.parse::<Hidden>())
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| e.to_string())?;
+        // one effect (and parameter) given twice is a mistake, not a choice
+        for (k, h) in hidden.iter().enumerate() {
+            if let Some(first) = hidden[..k]
+                .iter()
+                .find(|f| f.effect == h.effect && f.param == h.param)
+            {
+                return Err(format!(
+                    "--effect {}: already given (--effect {}); give it once",
+                    h.text, first.text
+                ));
+            }
+        }
         let Robots {
             spec: base,
             robot: truth,

@@ -931,7 +931,8 @@ fn a_camera_that_reads_depth_is_estimated_from_the_sightings() {
     assert!((value("depth_scale") - 0.03).abs() < 0.01, "{reading}");
     assert!(rmse(&d) < 0.011, "RMSE {} m", rmse(&d));
     assert!(s["noise"]["range_reading"].is_null(), "{}", s["noise"]);
-    let said = |obs: &Path| stdout(&kinegen(&localize_args(spec, &log, obs, &m, &[])));
+    // -v: the command on one line
+    let said = |obs: &Path| stdout(&kinegen(&localize_args(spec, &log, obs, &m, &["-v"])));
     let command = "--effect range_as_depth --value depth_scale=";
     assert!(said(&depth).contains(command), "{}", said(&depth));
     assert!(!said(&straight).contains(command));
@@ -1136,12 +1137,13 @@ fn landmarks_never_sighted_are_named_in_one_warning() {
     let (log, obs, _) = landmark_log(tmp.path());
     let map = tmp.path().join("building.csv");
     std::fs::write(&map, format!("{MAP}far1,40,40\nfar2,-40,40\n")).unwrap();
+    // -v: the warning on one line, in full
     let o = kinegen(&localize_args(
         "spec/diff_drive.toml",
         &log,
         &obs,
         &map,
-        &[],
+        &["-v"],
     ));
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(0), "{err}");

@@ -1588,6 +1588,7 @@ fn a_late_command_under_random_drift_is_proved_fold_by_fold() {
             dir,
             &[
                 "diagnose",
+                "-v",
                 "--spec",
                 s,
                 "--data",

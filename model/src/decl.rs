@@ -49,6 +49,19 @@ impl Input {
         }
     }
 
+    /// Whether the input counts whole events (encoder ticks, counts,
+    /// pulses): its unit's first word, before any `/s`, names one. Such a
+    /// counter reads integers, and `simulate` writes them so.
+    pub fn counts_events(&self) -> bool {
+        let unit = self.unit.trim().to_ascii_lowercase();
+        let head = unit.split('/').next().unwrap_or("");
+        const EVENTS: [&str; 9] = [
+            "count", "counts", "tick", "ticks", "pulse", "pulses", "cnt", "step", "steps",
+        ];
+        head.split(|c: char| !c.is_ascii_alphanumeric())
+            .any(|w| EVENTS.contains(&w))
+    }
+
     /// A command: an absolute input that holds between rows (a speed or
     /// turn-rate set point), which an input delay, a response lag and a
     /// deadband act on.
@@ -200,4 +213,37 @@ pub struct ObservationDecl {
     /// Whether the kernels take a landmark position `lm` = (xl, yl).
     pub landmark: bool,
     pub role: ObservationRole,
+}
+
+#[cfg(test)]
+mod counting_tests {
+    use super::*;
+
+    fn input(unit: &str) -> Input {
+        Input {
+            unit: unit.into(),
+            ..serde_json::from_str(
+                r#"{"name": "u", "column": "u", "kind": "cumulative", "unit": "", "doc": ""}"#,
+            )
+            .unwrap()
+        }
+    }
+
+    #[test]
+    fn every_count_like_unit_counts_events_and_angles_do_not() {
+        for u in [
+            "count/s",
+            "counts",
+            "tick/s",
+            "ticks",
+            "pulse/s",
+            "encoder count/s",
+            "Tick/s",
+        ] {
+            assert!(input(u).counts_events(), "{u}");
+        }
+        for u in ["rad/s", "m/s", "rad", "", "1/s"] {
+            assert!(!input(u).counts_events(), "{u}");
+        }
+    }
 }

@@ -665,7 +665,7 @@ impl<'a, P: Fn(f64) -> [f64; 3]> Robot<'a, P> {
                 continue;
             }
             row.push(match inp.kind {
-                InputKind::Cumulative if inp.unit.contains("count") => self.cum[i].floor(),
+                InputKind::Cumulative if inp.counts_events() => self.cum[i].floor(),
                 // wheel-angle encoders
                 InputKind::Cumulative => (self.cum[i] / ENCODER_LINE).floor() * ENCODER_LINE,
                 // absolute angle sensors (steering encoders, 12 bit like the caster

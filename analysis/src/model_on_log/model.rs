@@ -14,6 +14,13 @@ pub enum ModelError {
     },
     #[error("{0} {1}: expected NAME=VALUE with a finite number")]
     BadSet(&'static str, String),
+    #[error("{option} {name}={second}: `{name}` is given twice (first {option} {name}={first}); give it once")]
+    Repeated {
+        option: &'static str,
+        name: String,
+        first: f64,
+        second: f64,
+    },
     #[error("--set {name}={value}: outside the declared bounds of `{name}` ({})", bounds_text(*.min, *.max))]
     OutOfBounds {
         name: String,
@@ -71,7 +78,8 @@ pub fn parse_pairs(
     option: &'static str,
     sets: &[String],
 ) -> Result<Vec<(String, f64)>, ModelError> {
-    sets.iter()
+    let pairs = sets
+        .iter()
         .map(|s| {
             let (n, v) = s
                 .split_once('=')
@@ -85,7 +93,19 @@ pub fn parse_pairs(
             }
             Ok((n.trim().to_string(), v))
         })
-        .collect()
+        .collect::<Result<Vec<_>, _>>()?;
+    // a name given twice is a mistake, not a choice for the last one
+    for (k, (name, second)) in pairs.iter().enumerate() {
+        if let Some((_, first)) = pairs[..k].iter().find(|(n, _)| n == name) {
+            return Err(ModelError::Repeated {
+                option,
+                name: name.clone(),
+                first: *first,
+                second: *second,
+            });
+        }
+    }
+    Ok(pairs)
 }
 
 impl Runner {

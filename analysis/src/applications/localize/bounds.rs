@@ -103,7 +103,8 @@ pub fn correlation_time(x: &[f64]) -> f64 {
 /// every lag would take seconds on an hour's rows.
 fn autocorrelation(x: &[f64]) -> Vec<f64> {
     let n = x.len();
-    if n < 2 {
+    // a non-finite value has no autocorrelation (the FFT would panic on it)
+    if n < 2 || x.iter().any(|v| !v.is_finite()) {
         return Vec::new();
     }
     let mean = x.iter().sum::<f64>() / n as f64;

@@ -121,6 +121,8 @@ pub enum LocalizeError {
     NoLandmarkObservation,
     #[error("{path}: the filter diverged at t = {t}")]
     Diverged { path: String, t: f64 },
+    #[error("{path}: at t = {t} the filter's covariance is no longer one (not finite, or not positive semi-definite): the process noise is too large to compute with; give a smaller --noise or [[noise]] sigma")]
+    NotACovariance { path: String, t: f64 },
 }
 
 /// The noise for the runs of one robot (`o` says where it comes from; an
@@ -208,6 +210,15 @@ pub fn localize_with(
     let smoothed = o.smooth.then(|| smoother::smooth(&pass));
     let track: Vec<[f64; 3]> = pass.rows.iter().map(|n| n.x).collect();
     let cov: Vec<Matrix3<f64>> = pass.rows.iter().map(|n| n.p).collect();
+    // a noise too large for f64 (a sigma of 1e6 or 1e100) leaves a
+    // covariance that is no covariance: said, not reported as a NEES of -966
+    // (one row estimate per log row)
+    if let Some(k) = pass.rows.iter().position(|n| !is_covariance(&n.p)) {
+        return Err(LocalizeError::NotACovariance {
+            path: run.path.clone(),
+            t: run.t[k.min(run.t.len() - 1)],
+        });
+    }
     Ok(Localization {
         nees: nees_of(r, run, &track, &cov),
         track,
@@ -365,6 +376,19 @@ pub fn truth_noise(run: &Run) -> Option<[f64; 3]> {
         .collect());
     let heading = mad(windows.iter().map(|&k| third(k, 2).abs()).collect());
     Some([position, position, heading])
+}
+
+/// Whether `p` is a covariance to within rounding: finite, a non-negative
+/// diagonal, and every 2x2 principal minor non-negative (relative to its
+/// diagonal, so a zero covariance at a known start passes).
+fn is_covariance(p: &Matrix3<f64>) -> bool {
+    if p.iter().any(|v| !v.is_finite()) || (0..3).any(|i| p[(i, i)] < 0.0) {
+        return false;
+    }
+    [(0, 1), (0, 2), (1, 2)].iter().all(|&(i, j)| {
+        let (a, b, c) = (p[(i, i)], p[(j, j)], p[(i, j)]);
+        a * b - c * c >= -1e-9 * a * b - f64::MIN_POSITIVE
+    })
 }
 
 #[cfg(test)]

@@ -1,0 +1,227 @@
+//! Issue #67's reproductions: each ends in a located exit 2 or a correct
+//! result, never in data lost, a hang or a silent choice.
+mod common;
+use common::*;
+use std::path::Path;
+
+fn batch(dir: &Path, args: &[&str]) -> std::process::Output {
+    let mut a = vec!["batch"];
+    a.extend_from_slice(args);
+    kinegen_in(dir, &a)
+}
+
+/// One quick job: compare on a simulated log.
+fn one_job(dir: &Path) -> String {
+    let log = dir.join("r.csv");
+    let o = kinegen_in(
+        dir,
+        &[
+            "simulate",
+            "--spec",
+            root().join("spec/diff_drive.toml").to_str().unwrap(),
+            "--out",
+            "r.csv",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let spec = root().join("spec/diff_drive.toml");
+    let job = serde_json::json!({"id": "a", "args": ["compare", "--spec", spec, "--data", log]});
+    let jobs = format!("{job}\n");
+    std::fs::write(dir.join("jobs.jsonl"), &jobs).unwrap();
+    jobs
+}
+
+#[test]
+fn batch_refuses_its_jobs_file_as_results_and_keeps_it_whole() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let jobs = one_job(d);
+    let e = stderr(&batch(d, &["jobs.jsonl", "--out", "jobs.jsonl"]));
+    assert!(e.contains("that is the jobs file"), "{e}");
+    std::fs::hard_link(d.join("jobs.jsonl"), d.join("linked.jsonl")).unwrap();
+    let o = batch(d, &["jobs.jsonl", "--out", "linked.jsonl"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(d.join("jobs.jsonl")).unwrap(), jobs);
+}
+
+#[test]
+fn batch_with_a_huge_jobs_count_ends() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    one_job(d);
+    let t0 = std::time::Instant::now();
+    let o = batch(
+        d,
+        &["jobs.jsonl", "--out", "out.jsonl", "--jobs", "100000000"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(t0.elapsed().as_secs() < 60, "{:?}", t0.elapsed());
+    assert!(stderr(&o).contains("1 at once"), "{}", stderr(&o));
+}
+
+#[test]
+fn batch_refuses_a_read_only_or_foreign_results_file() {
+    use std::os::unix::fs::PermissionsExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    one_job(d);
+    // read-only: refused, not appended to
+    let ro = d.join("ro.jsonl");
+    std::fs::write(&ro, "").unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o444)).unwrap();
+    let o = batch(d, &["jobs.jsonl", "--out", "ro.jsonl"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&ro).unwrap(), "");
+    // a line that is no result line is named, and nothing is run
+    for (text, says) in [
+        ("{\"id\": \"a\"}\n", "has \"id\" and \"exit\""),
+        ("not json\n", "not a result line"),
+    ] {
+        std::fs::write(d.join("x.jsonl"), text).unwrap();
+        let e = stderr(&batch(d, &["jobs.jsonl", "--out", "x.jsonl"]));
+        assert!(e.contains("x.jsonl:1: ") && e.contains(says), "{e}");
+        assert_eq!(std::fs::read_to_string(d.join("x.jsonl")).unwrap(), text);
+    }
+}
+
+#[test]
+fn a_resumed_batch_owes_its_earlier_failures_in_its_exit_status() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    one_job(d);
+    std::fs::write(
+        d.join("out.jsonl"),
+        "{\"id\": \"a\", \"exit\": 2, \"error\": \"bad\", \"seconds\": 0.1}\n",
+    )
+    .unwrap();
+    let o = batch(d, &["jobs.jsonl", "--out", "out.jsonl"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("1 failed in an earlier run"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn an_option_given_twice_is_refused_naming_both() {
+    let log = root().join("data/mystery_robot.csv");
+    let l = log.to_str().unwrap();
+    let e = refused(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        l,
+        "--set",
+        "b=0.3",
+        "--set",
+        "b=0.2",
+    ]);
+    assert!(
+        e.contains("--set b=0.2") && e.contains("--set b=0.3"),
+        "{e}"
+    );
+    let e = refused(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        l,
+        "--holdout",
+        l,
+    ]);
+    assert!(e.contains("already given as --data"), "{e}");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("s.csv");
+    let e = refused(&[
+        "simulate",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--effect",
+        "lateral_slip=0.1",
+        "--effect",
+        "lateral_slip=0.2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(e.contains("already given"), "{e}");
+    assert!(!out.exists());
+    let e = refused(&[
+        "add-effect",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--effect",
+        "lateral_slip",
+        "--value",
+        "k_slip=0.1",
+        "--value",
+        "k_slip=0.2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(e.contains("given twice"), "{e}");
+}
+
+/// A process noise too large for f64 ends in a located exit 2, not a panic
+/// (1e100) nor a negative NEES (1e6).
+#[test]
+fn localize_with_an_absurd_process_noise_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let spec = root().join("spec/unicycle_ekf.toml");
+    let s = spec.to_str().unwrap();
+    let map = root().join("data/seed001_beacons.csv");
+    let o = kinegen_in(
+        d,
+        &[
+            "simulate",
+            "--spec",
+            s,
+            "--trajectory",
+            "random",
+            "--landmarks",
+            map.to_str().unwrap(),
+            "--observations",
+            "obs.csv",
+            "--out",
+            "lm.csv",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let noise = kinegen_model::spec::Model::load(&spec).unwrap();
+    let name = noise.noise[0].name.clone();
+    for sigma in ["1e100", "1e6"] {
+        let set = format!("{name}={sigma}");
+        let o = kinegen_in(
+            d,
+            &[
+                "localize",
+                "--spec",
+                s,
+                "--data",
+                "lm.csv",
+                "--observations",
+                "obs.csv",
+                "--landmarks",
+                map.to_str().unwrap(),
+                "--noise",
+                &set,
+                "--json",
+                "out.json",
+            ],
+        );
+        let e = stderr(&o);
+        if o.status.code() == Some(0) {
+            // a correct result: every NEES a NEES
+            let doc: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(d.join("out.json")).unwrap())
+                    .unwrap();
+            let nees = doc["runs"][0]["nees_mean"].as_f64().unwrap_or(0.0);
+            assert!(nees >= 0.0, "--noise {set}: NEES {nees}");
+        } else {
+            assert_eq!(o.status.code(), Some(2), "--noise {set}: {e}");
+            assert!(e.contains("lm.csv") && e.contains("--noise"), "{e}");
+        }
+    }
+}
