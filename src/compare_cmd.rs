@@ -17,6 +17,9 @@ pub fn compare(c: Common) -> ExitCode {
     if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
         return bad(e);
     }
+    if let Err(e) = c.check_repeated_logs() {
+        return bad(e);
+    }
     let files = Files {
         sources: &c.sources(),
         effect_dirs: &c.catalogue.effects,
@@ -49,8 +52,12 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
         cmp.runs.len(),
         secs
     );
+    // the answer: said by default, and the report's first box
+    let kept = Out::keeping();
+    crate::compare_text::say_summary(&kept, &header, &cmp, warnings);
+    let answer = kept.lines();
     if !c.verbose {
-        crate::compare_text::say_summary(out, &header, &cmp, warnings);
+        answer.iter().for_each(|l| out.say(l));
     }
     // the detail: said with -v, in the JSON either way
     let detail = &out.detail(c.verbose);
@@ -98,7 +105,7 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
         "warnings": warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::compare_report(dir, r, &cmp, warnings, &doc) {
+        if let Err(e) = crate::report::compare_report(dir, r, &cmp, &answer, warnings, &doc) {
             return bad(e);
         }
         out_all.say(&format!("report: {}", dir.join("index.html").display()));

@@ -1,5 +1,6 @@
 //! `kinegen diagnose`.
 use crate::analysis_cmd::{bad, quiet, Common};
+use crate::diagnose_text::{calibrate_command, DISCRETISATION_WARN};
 use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
 use kinegen_analysis::diagnosis::clock::ClockVerdict;
@@ -16,13 +17,12 @@ use std::process::ExitCode;
 pub const ERROR_UNIT: &str =
     "  (error = RMS of residuals in units of their sigma: pose 0.01 m / 0.01 rad, gyro 0.01 rad/s)";
 
-/// The share of the noise floor above which the model's own discretisation
-/// error is no longer "far below the noise" (issue 12 item 3).
-pub const DISCRETISATION_WARN: f64 = 0.3;
-
 pub fn run(c: Common) -> ExitCode {
     let out = Out::new(c.json.as_deref());
     if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
+        return bad(e);
+    }
+    if let Err(e) = c.check_repeated_logs() {
         return bad(e);
     }
     let bar = crate::progress::Progress::bar(1, "diagnose", quiet(&c));
@@ -61,6 +61,10 @@ pub fn run(c: Common) -> ExitCode {
     let (d, n_candidates) = (&outcome.diagnosis, outcome.tried);
     let r = &prep.runner;
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();
+    // the answer: said by default, and the report's first box
+    let kept = Out::keeping();
+    let short = crate::diagnose_text::say_summary(&kept, &c, &prep.runs, r, &outcome);
+    let answer = kept.lines();
     let (apply_cmds, disc_ratio) = if c.verbose {
         out.say(&format!(
             "{}: diagnosis on {} run(s), {samples} samples, {n_candidates} candidate effect(s)",
@@ -88,7 +92,8 @@ pub fn run(c: Common) -> ExitCode {
         ));
         (apply_cmds, disc_ratio)
     } else {
-        crate::diagnose_text::say_summary(&out, &c, &prep.runs, r, &outcome)
+        answer.iter().for_each(|l| out.say(l));
+        short
     };
     let per_candidate = if n_candidates == 0 {
         0.0
@@ -120,6 +125,7 @@ pub fn run(c: Common) -> ExitCode {
             &prep.runner,
             &prep.runs,
             &outcome,
+            &answer,
             &prep.warnings,
             &doc,
         ) {
@@ -248,7 +254,7 @@ fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String
                 };
                 let how = format!(
                     "it fits them as well (likelihood ratio under {}, 5%{per})",
-                    kinegen_analysis::diagnosis::diagnose::EQUIVALENT
+                    kinegen_analysis::diagnosis::ranking::EQUIVALENT
                 );
                 // with sightings the motion capture's clock is measured
                 // already: what is left are rivals on the robot's side
@@ -344,25 +350,6 @@ fn say_clock_verdicts(out: &Out, d: &Diagnosis, winner: &str) {
 /// Seconds to the millisecond with their sign, a rounded -0 as +0.000.
 fn signed_ms(s: f64) -> String {
     format!("{:+.3}", (s * 1e3).round() / 1e3 + 0.0)
-}
-
-/// The `fit` that calibrates `spec` on the diagnosed logs and writes it back
-/// with the calibrated values (`--export spec`).
-pub fn calibrate_command(c: &Common, spec: &str, model: &str) -> String {
-    let mut a = vec![format!("kinegen fit --spec {spec}")];
-    a.extend(c.data.iter().map(|d| format!("--data {}", d.display())));
-    a.extend(
-        c.observations
-            .iter()
-            .map(|o| format!("--observations {}", o.display())),
-    );
-    a.extend(
-        c.landmarks
-            .iter()
-            .map(|l| format!("--landmarks {}", l.display())),
-    );
-    a.push(format!("--export spec {model}_fitted.toml"));
-    a.join(" ")
 }
 
 /// The commands that add, in place of the chain's first effect, each one

@@ -4,7 +4,6 @@
 //! evidence behind each line (diagnose_cmd.rs); the JSON and the report
 //! keep every figure.
 use crate::analysis_cmd::Common;
-use crate::diagnose_cmd::{calibrate_command, DISCRETISATION_WARN};
 use crate::effects_cmd::add_effect_command;
 use crate::output::{command_lines, table as new_table, table_lines, with_std, Out};
 use kinegen_analysis::diagnosis::diagnose::Diagnosis;
@@ -249,4 +248,27 @@ fn short(s: &str) -> String {
     } else {
         s.chars().take(crate::output::WIDTH - 1).collect::<String>() + "…"
     }
+}
+
+/// The share of the noise floor above which the model's own discretisation
+/// error is no longer "far below the noise" (issue 12 item 3).
+pub const DISCRETISATION_WARN: f64 = 0.3;
+
+/// The `fit` that calibrates `spec` on the diagnosed logs and writes it back
+/// with the calibrated values (`--export spec`).
+pub fn calibrate_command(c: &Common, spec: &str, model: &str) -> String {
+    let mut a = vec![format!("kinegen fit --spec {spec}")];
+    a.extend(c.data.iter().map(|d| format!("--data {}", d.display())));
+    a.extend(
+        c.observations
+            .iter()
+            .map(|o| format!("--observations {}", o.display())),
+    );
+    a.extend(
+        c.landmarks
+            .iter()
+            .map(|l| format!("--landmarks {}", l.display())),
+    );
+    a.push(format!("--export spec {model}_fitted.toml"));
+    a.join(" ")
 }

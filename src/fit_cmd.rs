@@ -13,7 +13,7 @@ use kinegen_analysis::estimation::fit_job::{
     self, Calibrated, Growth, MethodRow, MethodsJob, MethodsOutcome,
 };
 use kinegen_analysis::estimation::fit_request::{fit_files, FitHooks, FitRequest, Fitted};
-use kinegen_analysis::estimation::methods::Settings;
+use kinegen_analysis::estimation::methods::{MethodChoice, Settings};
 use kinegen_analysis::model_on_log::evaluation::metric_name;
 use kinegen_analysis::model_on_log::files::Files;
 use kinegen_analysis::model_on_log::load::Loaded;
@@ -150,11 +150,18 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         Ok(e) => e,
         Err(e) => return bad(e),
     };
-    if export.is_some() && a.method != "lm" {
+    // parsed once, here: the registry's method (or all), then by type
+    let Some(method) = MethodChoice::parse(&a.method) else {
+        return bad(format!("--method {}: no such method", a.method));
+    };
+    if export.is_some() && !method.is_full_fit() {
         return bad("--export writes the Levenberg-Marquardt calibration: use it with --method lm");
     }
     let out = Out::new(c.json.as_deref());
     if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
+        return bad(e);
+    }
+    if let Err(e) = c.check_repeated_logs() {
         return bad(e);
     }
     let fo = fit_options(a);
@@ -162,17 +169,20 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         Ok(t) => t,
         Err(e) => return bad(e.to_string()),
     };
-    let request = if a.method == "lm" {
+    let request = if method.is_full_fit() {
         FitRequest::Calibrate {
             options: &fo,
             truth: &truth,
         }
     } else {
         FitRequest::Methods(MethodsJob {
-            method: &a.method,
-            side: a.side,
-            mu: a.mu,
-            fit: &fo,
+            method,
+            settings: Settings {
+                side: a.side,
+                mu: a.mu,
+                fit: &fo,
+                hidden: 0,
+            },
             hidden: &a.hidden,
             truth: &truth,
         })
@@ -386,8 +396,12 @@ fn render_lm(
 ) -> ExitCode {
     let r = &prep.runner;
     let res = &cal.fit;
+    // the answer: said by default, and the report's first box
+    let kept = Out::keeping();
+    crate::fit_text::say_summary(&kept, prep, cal);
+    let answer = kept.lines();
     if !c.verbose {
-        crate::fit_text::say_summary(out, prep, cal);
+        answer.iter().for_each(|l| out.say(l));
     }
     // the detail: said with -v, in the JSON either way
     let detail = &out.detail(c.verbose);
@@ -439,7 +453,8 @@ fn render_lm(
         doc["leave_one_out"] = json!(cal.leave_one_out);
     }
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, cal, &warnings, &doc) {
+        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, cal, &answer, &warnings, &doc)
+        {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

@@ -66,6 +66,9 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     if let Err(e) = crate::output::check_outputs(c.json.as_deref(), c.report.as_deref()) {
         return bad(e);
     }
+    if let Err(e) = c.check_repeated_logs() {
+        return bad(e);
+    }
     let options = match ekf_options(a) {
         Ok(o) => o,
         Err(e) => return bad(e),
@@ -97,20 +100,30 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         ..
     } = files;
     if let Some(w) = unseen_landmarks {
-        eprintln!("warning: {w}");
+        if c.verbose {
+            eprintln!("warning: {w}");
+        } else {
+            for l in crate::output::warning_lines(w, 2) {
+                eprintln!("{l}");
+            }
+        }
     }
     let r = &prep.runner;
     let (noise, note) = (&done.noise, &done.note);
+    // the answer: said by default, and the report's first box
+    let runs: Vec<&kinegen_analysis::model_on_log::run::Run> =
+        prep.runs.iter().chain(&prep.holdout).collect();
+    let kept = Out::keeping();
+    crate::localize_text::say_summary(
+        &kept,
+        &r.ir.name,
+        &runs,
+        done,
+        reading_step(c, noise, &r.ir),
+    );
+    let answer = kept.lines();
     if !c.verbose {
-        let runs: Vec<&kinegen_analysis::model_on_log::run::Run> =
-            prep.runs.iter().chain(&prep.holdout).collect();
-        crate::localize_text::say_summary(
-            out,
-            &r.ir.name,
-            &runs,
-            done,
-            reading_step(c, noise, &r.ir),
-        );
+        answer.iter().for_each(|l| out.say(l));
     }
     // the detail: said with -v, in the JSON either way
     let out_all = out;
@@ -166,6 +179,7 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
             &pages,
             &described,
             sweep,
+            &answer,
             &prep.warnings,
             &doc,
         ) {

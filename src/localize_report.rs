@@ -25,12 +25,15 @@ pub struct RunPage<'a> {
     pub summary: &'a Summary,
 }
 
+// the page's parts, each its own argument as the other reports take them
+#[allow(clippy::too_many_arguments)]
 pub fn localize_report(
     dir: &Path,
     r: &Runner,
     runs: &[RunPage],
     noise: &[String],
     sweep: &[kinegen_analysis::applications::sweep::SweepPoint],
+    answer: &[String],
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -49,7 +52,8 @@ pub fn localize_report(
     }
     let html = page(
         "EKF localisation",
-        "<p>Extended Kalman filter on the model's own kernels (seed 001 eq. 1-9), predicting to each sighting's own time; \
+        answer,
+        "<p>Extended Kalman filter on the model's own kernels, predicting to each sighting's own time; \
          the smoother (with --smooth) also uses the sightings after each moment.</p>",
         &figs,
         &tables(runs, noise),

@@ -88,7 +88,11 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
             seed: a.seed,
             ..NavOptions::default()
         },
-        calibrate: a.calibrate.as_deref(),
+        // the registry's method, parsed once here (clap already limits the names)
+        calibrate: a
+            .calibrate
+            .as_deref()
+            .and_then(kinegen_analysis::estimation::methods::by_name),
     };
     let done = match navigate_files(&mission, crate::ir_source::deriver()) {
         Ok(d) => d,

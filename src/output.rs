@@ -8,6 +8,9 @@ pub struct Out {
     /// Says nothing: the detail a command's `-v` text gives, while the
     /// default text says its summary (the JSON is built either way).
     mute: bool,
+    /// Keeps what is said instead of printing it: the answer a command
+    /// prints is also the box its report opens with.
+    kept: Option<std::cell::RefCell<Vec<String>>>,
 }
 
 impl Out {
@@ -15,7 +18,30 @@ impl Out {
         Out {
             json_to_stdout: json.is_some_and(|p| p == Path::new("-")),
             mute: false,
+            kept: None,
         }
+    }
+
+    /// An output that keeps its lines (`lines`) instead of printing them.
+    pub fn keeping() -> Out {
+        Out {
+            json_to_stdout: false,
+            mute: false,
+            kept: Some(Default::default()),
+        }
+    }
+
+    /// The lines kept so far (an output made by `keeping`).
+    pub fn lines(&self) -> Vec<String> {
+        self.kept
+            .as_ref()
+            .map(|k| {
+                k.borrow()
+                    .iter()
+                    .flat_map(|l| l.lines().map(String::from))
+                    .collect()
+            })
+            .unwrap_or_default()
     }
 
     /// This output when `verbose`, else one that says nothing.
@@ -23,11 +49,16 @@ impl Out {
         Out {
             json_to_stdout: self.json_to_stdout,
             mute: !verbose,
+            kept: None,
         }
     }
 
     pub fn say(&self, text: &str) {
         if self.mute {
+            return;
+        }
+        if let Some(k) = &self.kept {
+            k.borrow_mut().push(text.to_string());
             return;
         }
         if self.json_to_stdout {
@@ -144,7 +175,18 @@ pub fn command_lines(cmd: &str, indent: usize) -> Vec<String> {
     let pad = " ".repeat(indent);
     let mut lines = Vec::new();
     let mut line = pad.clone();
-    for word in cmd.split(' ') {
+    // an option and its value stay on one line
+    let mut words: Vec<String> = Vec::new();
+    for w in cmd.split(' ') {
+        match words.last_mut() {
+            Some(last) if last.starts_with("--") && !last.contains(' ') && !w.starts_with("--") => {
+                last.push(' ');
+                last.push_str(w);
+            }
+            _ => words.push(w.to_string()),
+        }
+    }
+    for word in &words {
         let first = line.trim().is_empty();
         // room for " word \"
         if !first && line.chars().count() + 1 + word.chars().count() + 2 > WIDTH {
@@ -210,17 +252,26 @@ pub fn table_lines(t: &comfy_table::Table) -> Vec<String> {
 pub fn say_warnings_short(out: &Out, warnings: &[String], lines: usize) {
     let mut seen = std::collections::BTreeSet::new();
     for w in warnings.iter().filter(|w| seen.insert(w.as_str())) {
-        let text = format!("warning: {w}");
-        let wrapped = textwrap::wrap(&text, textwrap::Options::new(WIDTH).subsequent_indent("  "));
-        for (i, l) in wrapped.iter().enumerate() {
-            if i + 1 == lines && wrapped.len() > lines {
-                let cut: String = l.chars().take(WIDTH - 8).collect();
-                out.say(&format!("{cut} … (-v)"));
-                break;
-            }
-            out.say(l);
+        for l in warning_lines(w, lines) {
+            out.say(&l);
         }
     }
+}
+
+/// One warning wrapped to the width, cut to its first `lines` lines.
+pub fn warning_lines(w: &str, lines: usize) -> Vec<String> {
+    let text = format!("warning: {w}");
+    let wrapped = textwrap::wrap(&text, textwrap::Options::new(WIDTH).subsequent_indent("  "));
+    let mut out = Vec::new();
+    for (i, l) in wrapped.iter().enumerate() {
+        if i + 1 == lines && wrapped.len() > lines {
+            let cut: String = l.chars().take(WIDTH - 8).collect();
+            out.push(format!("{cut} … (-v)"));
+            break;
+        }
+        out.push(l.to_string());
+    }
+    out
 }
 
 #[cfg(test)]

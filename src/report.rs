@@ -335,6 +335,7 @@ pub(crate) fn esc(s: &str) -> String {
 
 pub(crate) fn page(
     title: &str,
+    answer: &[String],
     intro: &str,
     figures: &[String],
     tables: &str,
@@ -351,13 +352,23 @@ pub(crate) fn page(
         .iter()
         .map(|w| format!("<p class=\"warn\">warning: {}</p>", esc(w)))
         .collect();
+    // the answer the terminal gives, in a box above everything else
+    let answer = if answer.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "<div class=\"answer\"><pre>{}</pre></div>",
+            esc(&answer.join("\n"))
+        )
+    };
     format!(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
 body{{font-family:sans-serif;margin:24px;color:#222;max-width:1200px}}\
 figure{{display:inline-block;margin:6px;border:1px solid #ddd}}\
 table{{border-collapse:collapse;margin:12px 0}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
 th{{background:#f3f3f3}}td:first-child{{text-align:left}}.warn{{color:#a40}}pre{{background:#f7f7f7;padding:8px;overflow:auto;max-height:300px}}\
-</style></head><body><h1>{t}</h1>{intro}{warnings}{tables}<div>{figs}</div>\
+.answer{{border:2px solid #2a6;border-radius:6px;background:#f2fbf5;margin:12px 0}}.answer pre{{background:none;max-height:none;margin:0}}\
+</style></head><body><h1>{t}</h1>{answer}{intro}{warnings}{tables}<div>{figs}</div>\
 <details><summary>JSON</summary><pre>{json}</pre></details></body></html>\n",
         t = esc(title),
         json = esc(&serde_json::to_string_pretty(doc).unwrap_or_default())
@@ -487,6 +498,7 @@ pub fn compare_report(
     dir: &Path,
     r: &Runner,
     cmp: &kinegen_analysis::model_on_log::comparison::Comparison<'_>,
+    answer: &[String],
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -562,6 +574,7 @@ pub fn compare_report(
         dir,
         &page(
             &format!("kinegen compare: {}", r.ir.name),
+            answer,
             &intro,
             &figs,
             &t,
@@ -594,6 +607,7 @@ pub fn fit_report(
     r: &Runner,
     runs: &[Run],
     cal: &kinegen_analysis::estimation::fit_job::Calibrated<'_>,
+    answer: &[String],
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -646,6 +660,7 @@ pub fn fit_report(
         dir,
         &page(
             &format!("kinegen fit: {}", r.ir.name),
+            answer,
             &intro,
             &figs,
             &param_table(r, &cal.fit),
@@ -662,6 +677,7 @@ pub fn diagnose_report(
     base: &Runner,
     runs: &[Run],
     outcome: &kinegen_analysis::diagnosis::diagnose_job::Outcome,
+    answer: &[String],
     warnings: &[String],
     doc: &Value,
 ) -> Result<(), String> {
@@ -752,10 +768,23 @@ pub fn diagnose_report(
     if let Some(fig) = sensor_chart(d, base, runs)? {
         figs.push(fig);
     }
+    // each effect's change to the spec, as add-effect writes it (the
+    // commands that apply them are in the answer box)
+    let mut t = t;
+    for (step, change) in d.chain.iter().zip(&outcome.spec_changes) {
+        if let Some(c) = change {
+            t += &format!(
+                "<h2>Spec change: <code>{}</code></h2><pre>{}</pre>",
+                esc(&step.effect),
+                esc(c)
+            );
+        }
+    }
     write(
         dir,
         &page(
             &format!("kinegen diagnose: {}", base.ir.name),
+            answer,
             &intro,
             &figs,
             &t,
@@ -1005,6 +1034,7 @@ pub fn methods_report(
         dir,
         &page(
             &format!("kinegen fit: methods compared on {}", r.ir.name),
+            &[],
             &intro,
             &figs,
             &t,
@@ -1155,6 +1185,7 @@ pub fn inverse_report(
     let table = inverse_table(profiles);
     let html = page(
         "Inverse kinematics along a planned path",
+        &[],
         &format!(
             "<p>{} (the integrated inverse kinematics). Shaded: stretches the robot cannot drive as planned.</p>",
             esc(&path.file.display().to_string())
@@ -1237,6 +1268,7 @@ pub fn navigate_report(
         .collect::<Result<Vec<_>, _>>()?;
     let html = page(
         "Cellular-automaton navigation on odometry",
+        &[],
         "<p>Dark: obstacles; light: safety zone (obstacles enlarged by one cell); crosses: the robot touching an obstacle; magenta: the goal.</p>",
         &figs,
         "",

@@ -455,3 +455,43 @@ fn the_real_crates_edges_are_read() {
     let m = Crate::read(&common::root().join("model/src/lib.rs"));
     assert!(m.edges()[&p("fuse")].contains(&p("ir")));
 }
+
+/// Calibration methods are chosen by type: the CLI parses `--method` once
+/// (`MethodChoice::parse`), and no code compares a method's name with a
+/// string or looks one up by a literal name.
+#[test]
+fn no_method_is_chosen_by_a_string() {
+    let mut found = Vec::new();
+    for dir in ["src", "analysis/src"] {
+        let mut files = Vec::new();
+        fn walk(d: &Path, out: &mut Vec<PathBuf>) {
+            for e in std::fs::read_dir(d).unwrap().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    walk(&p, out);
+                } else if p.extension().is_some_and(|x| x == "rs") {
+                    out.push(p);
+                }
+            }
+        }
+        walk(&common::root().join(dir), &mut files);
+        for f in files {
+            let text = std::fs::read_to_string(&f).unwrap();
+            for (n, line) in text.lines().enumerate() {
+                let code = line.split("//").next().unwrap_or("");
+                let named = code.contains("by_name(\"")
+                    || ["method ==", "method !=", "method.as_str() =="]
+                        .iter()
+                        .any(|p| code.contains(p) && code.contains('"'));
+                if named {
+                    found.push(format!("{}:{}: {}", f.display(), n + 1, line.trim()));
+                }
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "methods chosen by string:\n{}",
+        found.join("\n")
+    );
+}

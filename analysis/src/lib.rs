@@ -105,8 +105,11 @@ pub mod diagnosis {
     pub mod diagnose_job;
     pub mod estimate;
     pub mod folds;
+    pub mod ranking;
     pub mod request;
     pub mod sensor;
+    pub mod stage;
+    pub mod structure;
 }
 
 /// The seed papers' applications and the benchmarks: localisation,

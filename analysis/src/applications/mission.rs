@@ -6,14 +6,14 @@
 //!
 //! ```ignore
 //! let mission = Mission { spec: Path::new("epuck.toml"), grid: Path::new("grid.txt"), cell: 0.07,
-//!     sets: &["b=0.054".into()], options: NavOptions::default(), calibrate: Some("umbmark") };
+//!     sets: &["b=0.054".into()], options: NavOptions::default(), calibrate: by_name("umbmark") };
 //! let done = navigate_files(&mission, &my_deriver)?;
 //! println!("{} collisions before, {:?} after", done.before.collisions, done.calibrated.map(|c| c.drive.collisions));
 //! ```
 use crate::applications::grid::Grid;
 use crate::applications::navigate::{drive, Drive, NavOptions, NavigateError};
 use crate::applications::simulate::{simulate, SimOptions, Trajectory};
-use crate::estimation::methods::{by_name, MethodError, Settings};
+use crate::estimation::methods::{Method, MethodError, Settings};
 use crate::logs::log::LogError;
 use crate::model_on_log::derivation::{DerivationFailed, Deriver};
 use crate::model_on_log::model::{parse_sets, ModelError, Runner};
@@ -30,7 +30,7 @@ pub struct Mission<'a> {
     pub cell: f64,
     pub sets: &'a [String],
     pub options: NavOptions,
-    pub calibrate: Option<&'a str>,
+    pub calibrate: Option<&'static dyn Method>,
 }
 
 /// The odometry calibrated by a method, and the crossing with it.
@@ -67,8 +67,6 @@ pub enum MissionError {
     /// it; the rest are the spec's, named by its path).
     #[error("{}", drive_error(.spec, .error))]
     Drive { spec: String, error: NavigateError },
-    #[error("--calibrate: unknown method `{0}`")]
-    UnknownMethod(String),
     #[error(transparent)]
     Squares(LogError),
     #[error(transparent)]
@@ -105,7 +103,7 @@ pub fn navigate_files(mission: &Mission, deriver: &dyn Deriver) -> Result<Naviga
             let drive = drive(&grid, &odometry, &truth, &mission.options)
                 .map_err(MissionError::CalibratedDrive)?;
             Some(CalibratedDrive {
-                method: method.to_string(),
+                method: method.name().to_string(),
                 note,
                 odometry,
                 drive,
@@ -125,11 +123,10 @@ pub fn navigate_files(mission: &Mission, deriver: &dyn Deriver) -> Result<Naviga
 /// Calibrate the believed parameters on 3 clockwise and 3 counter-clockwise
 /// simulated 1 m squares of the real robot.
 fn calibrate(
-    method: &str,
+    m: &dyn Method,
     belief: &Runner,
     truth: &Runner,
 ) -> Result<(Vec<f64>, String), MissionError> {
-    let m = by_name(method).ok_or_else(|| MissionError::UnknownMethod(method.to_string()))?;
     let mut runs = Vec::new();
     for (k, traj) in [Trajectory::SquareCw, Trajectory::SquareCcw]
         .into_iter()

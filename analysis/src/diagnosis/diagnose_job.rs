@@ -10,9 +10,8 @@
 //! let out = diagnose_job(&job, &Hooks::none())?;
 //! println!("{:?}", out.diagnosis.verdict());
 //! ```
-use crate::diagnosis::diagnose::{
-    diagnose, signature, Catalogue, DiagnoseError, Diagnosis, Signature,
-};
+use crate::diagnosis::diagnose::{diagnose, Catalogue, DiagnoseError, Diagnosis};
+use crate::diagnosis::structure::{signature, Signature};
 use crate::effects::{Applicability, Effect};
 use crate::model_on_log::dataset::channel_missing;
 use crate::model_on_log::derivation::EffectChains;

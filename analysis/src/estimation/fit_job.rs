@@ -8,7 +8,9 @@ use crate::estimation::fit::leave_one_out::{leave_one_out, LeftOut};
 use crate::estimation::fit::{
     fitted_offsets, run_offsets, run_starts, segmented, FitOptions, FitResult,
 };
-use crate::estimation::methods::{by_name, Calibration, Method, MethodError, Settings, METHODS};
+use crate::estimation::methods::{
+    full_fit, Calibration, Method, MethodChoice, MethodError, Settings,
+};
 use crate::model_on_log::coverage;
 use crate::model_on_log::evaluation::{evaluation, evaluation_from, pairs, Evaluation};
 use crate::model_on_log::load::Loaded;
@@ -23,8 +25,6 @@ pub enum FitJobError {
     /// The method does not apply to these logs (named) or this model.
     #[error("{logs}: {source}")]
     Method { logs: String, source: MethodError },
-    #[error("--method: unknown method `{0}`")]
-    UnknownMethod(String),
 }
 
 /// What a whole-run error that grew under calibration means.
@@ -74,10 +74,9 @@ pub struct Calibrated<'r> {
 /// `fo`), through the method registry like every method, and judge it.
 pub fn calibrate<'r>(l: &'r Loaded, fo: &FitOptions) -> Result<Calibrated<'r>, FitJobError> {
     let r = &l.runner;
-    let lm = by_name("lm").expect("lm is registered");
-    let mut res = match lm.calibrate(r, &l.runs, &Settings::defaults(fo)) {
+    let mut res = match full_fit().calibrate(r, &l.runs, &Settings::defaults(fo)) {
         Ok(Calibration { fit: Some(x), .. }) => x,
-        Ok(_) => unreachable!("lm's calibration is a fit"),
+        Ok(_) => unreachable!("a full fit's calibration carries its fit"),
         Err(source) => {
             return Err(FitJobError::Method {
                 logs: logs_named(&l.runs),
@@ -374,12 +373,11 @@ fn logs_named(runs: &[Run]) -> String {
 
 /// Which methods `fit --method` runs and with what.
 pub struct MethodsJob<'a> {
-    /// A registered method's name, or `all`.
-    pub method: &'a str,
-    pub side: f64,
-    pub mu: f64,
-    /// Options of the Levenberg-Marquardt fit.
-    pub fit: &'a FitOptions,
+    /// The method, or all of them.
+    pub method: MethodChoice,
+    /// What every method reads (its `hidden` is set per run for the methods
+    /// that run once per size).
+    pub settings: Settings<'a>,
     /// Hidden sizes of the methods that run once per size.
     pub hidden: &'a [u32],
     /// Known true values (simulated logs), NAME=VALUE.
@@ -420,14 +418,7 @@ pub struct MethodsOutcome<'r> {
 pub fn method_runs(
     job: &MethodsJob,
 ) -> Result<Vec<(String, &'static dyn Method, usize)>, FitJobError> {
-    let methods: Vec<&dyn Method> = if job.method == "all" {
-        METHODS.to_vec()
-    } else {
-        match by_name(job.method) {
-            Some(m) => vec![m],
-            None => return Err(FitJobError::UnknownMethod(job.method.to_string())),
-        }
-    };
+    let methods: Vec<&dyn Method> = job.method.methods();
     Ok(methods
         .iter()
         .flat_map(|m| {
@@ -456,14 +447,12 @@ pub fn compare_methods<'r>(
     for (name, m, hidden) in method_runs(job)? {
         progress(&name);
         let settings = Settings {
-            side: job.side,
-            mu: job.mu,
-            fit: job.fit,
             hidden,
+            ..job.settings
         };
         match m.calibrate(r, &l.runs, &settings) {
             Ok(c) => done.push((name, c)),
-            Err(e) if job.method == "all" => not_applicable.push((name, e)),
+            Err(e) if matches!(job.method, MethodChoice::All) => not_applicable.push((name, e)),
             Err(source) => {
                 return Err(FitJobError::Method {
                     logs: logs_named(&l.runs),

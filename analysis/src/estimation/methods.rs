@@ -85,6 +85,12 @@ pub trait Method: Sync {
     fn calibrates_parameters(&self) -> bool {
         true
     }
+    /// Whether the method gives a full fit (covariance, identifiability,
+    /// held-out and leave-one-run-out judgement) that `fit` reports and
+    /// exports on its own; the others are compared beside each other.
+    fn full_fit(&self) -> bool {
+        false
+    }
 }
 
 /// Every calibration method, in the order `--method all` runs and reports them.
@@ -93,6 +99,56 @@ pub static METHODS: &[&dyn Method] = &[&Lm, &Gd, &Ekf, &UmbMark, &Neural];
 /// The method called `name`.
 pub fn by_name(name: &str) -> Option<&'static dyn Method> {
     METHODS.iter().copied().find(|m| m.name() == name)
+}
+
+/// The method that gives a full fit (the default calibration).
+pub fn full_fit() -> &'static dyn Method {
+    METHODS
+        .iter()
+        .copied()
+        .find(|m| m.full_fit())
+        .unwrap_or(&Lm)
+}
+
+/// What `--method` asks for, parsed once where the user wrote it: one
+/// registered method, or every one compared.
+#[derive(Clone, Copy)]
+pub enum MethodChoice {
+    One(&'static dyn Method),
+    All,
+}
+
+impl MethodChoice {
+    /// `all`, or a registered method's name (None: no such method).
+    pub fn parse(name: &str) -> Option<MethodChoice> {
+        if name == "all" {
+            Some(MethodChoice::All)
+        } else {
+            by_name(name).map(MethodChoice::One)
+        }
+    }
+
+    /// The methods chosen, in the registry's order.
+    pub fn methods(&self) -> Vec<&'static dyn Method> {
+        match self {
+            MethodChoice::One(m) => vec![*m],
+            MethodChoice::All => METHODS.to_vec(),
+        }
+    }
+
+    /// A method whose full fit `fit` reports and exports on its own.
+    pub fn is_full_fit(&self) -> bool {
+        matches!(self, MethodChoice::One(m) if m.full_fit())
+    }
+}
+
+impl std::fmt::Debug for MethodChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MethodChoice::One(m) => write!(f, "{}", m.name()),
+            MethodChoice::All => write!(f, "all"),
+        }
+    }
 }
 
 struct Lm;
@@ -107,6 +163,9 @@ impl Method for Lm {
     }
     fn about(&self) -> &'static str {
         "Levenberg-Marquardt on pose, gyro and landmark residuals"
+    }
+    fn full_fit(&self) -> bool {
+        true
     }
     fn calibrate(
         &self,
