@@ -38,7 +38,7 @@ impl Out {
             .map(|k| {
                 k.borrow()
                     .iter()
-                    .flat_map(|l| l.lines().map(String::from))
+                    .flat_map(|l| l.split('\n').map(String::from))
                     .collect()
             })
             .unwrap_or_default()

@@ -225,3 +225,40 @@ fn localize_with_an_absurd_process_noise_says_so() {
         }
     }
 }
+
+/// A held-out log without a ground truth is refused, not scored 0.
+#[test]
+fn a_held_out_log_without_ground_truth_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = root().join("data/mystery_robot.csv");
+    let text = std::fs::read_to_string(&log).unwrap();
+    // the log without its gt_ columns
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|&i| !header[i].starts_with("gt_"))
+        .collect();
+    let pick = |l: &str| {
+        let cells: Vec<&str> = l.split(',').collect();
+        keep.iter().map(|&i| cells[i]).collect::<Vec<_>>().join(",")
+    };
+    let mut out = pick(&header.join(",")) + "\n";
+    for l in lines {
+        out += &(pick(l) + "\n");
+    }
+    let nogt = tmp.path().join("nogt.csv");
+    std::fs::write(&nogt, out).unwrap();
+    let e = refused(&[
+        "fit",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--holdout",
+        nogt.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("nogt.csv") && e.contains("no ground truth"),
+        "{e}"
+    );
+}

@@ -67,6 +67,8 @@ pub enum LoadError {
     },
     #[error("no run of 3 rows or more between the gaps of the logs (--data)")]
     NoRun,
+    #[error("--holdout {path}: no ground truth ({columns}) to score it against; a held-out run needs one (pass it as --data to fit on it instead)")]
+    HoldoutWithoutTruth { path: String, columns: String },
     #[error("the bag's landmark topic (--topics [landmarks]) needs --landmarks MAP.csv (the landmark positions)")]
     BagLandmarksWithoutMap,
     #[error("--observations needs --landmarks MAP.csv (the landmark positions)")]
@@ -139,6 +141,14 @@ pub fn load(ir: ModelIr, sources: &Sources, progress: ReadProgress) -> Result<Lo
     };
     let (mut runs, found) = read(&sources.data)?;
     let (mut holdout, found_holdout) = read(&sources.holdout)?;
+    // a held-out run is scored against its ground truth: without one its
+    // error would read 0, a score it never earned
+    if let Some(run) = holdout.iter().find(|r| r.gt.is_none()) {
+        return Err(LoadError::HoldoutWithoutTruth {
+            path: run.path.clone(),
+            columns: runner.ir.pose_columns().join(", "),
+        });
+    }
     let mut logs = Logs {
         runs: &mut runs,
         found: &found,
