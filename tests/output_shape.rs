@@ -165,3 +165,25 @@ fn real_logs_read_at_a_glance() {
         );
     }
 }
+
+/// The short text changes nothing else: the JSON document is the same with
+/// and without -v (times aside), so every figure stays available.
+#[test]
+fn the_json_is_the_same_with_and_without_verbose() {
+    let log = root().join("data/mystery_robot.csv");
+    let l = log.to_str().unwrap();
+    let strip = |mut v: serde_json::Value| {
+        if let Some(o) = v.as_object_mut() {
+            o.remove("timing");
+        }
+        v
+    };
+    for cmd in ["compare", "fit", "diagnose"] {
+        let args = [cmd, "--spec", "spec/diff_drive.toml", "--data", l];
+        let short = strip(kinegen_json(&args));
+        let mut v = args.to_vec();
+        v.push("-v");
+        let long = strip(kinegen_json(&v));
+        assert_eq!(short, long, "{cmd}: the JSON differs with -v");
+    }
+}

@@ -143,3 +143,48 @@ fn a_shown_line_that_is_not_printed_fails() {
     assert!(shows("a\nd", "a\nb\nc\n").is_err());
     assert!(shows("c\na", "a\nb\nc\n").is_err());
 }
+
+/// The guide's tutorial runs as written: its shell blocks, in order, as one
+/// script from a temporary home (the bag step needs Python's rosbags, which
+/// scripts/test.sh installs).
+#[test]
+fn the_tutorial_runs_as_written() {
+    let text = std::fs::read_to_string(root().join("docs/src/tutorial/own-robot.md")).unwrap();
+    let mut script = String::new();
+    let mut lines = text.lines();
+    while let Some(line) = lines.next() {
+        if line == "```sh" {
+            for l in lines.by_ref().take_while(|l| !l.starts_with("```")) {
+                script += l;
+                script.push('\n');
+            }
+        }
+    }
+    assert!(script.contains("csv_to_bag.py") && script.contains("kinegen verify"));
+    let have_rosbags = Command::new("python3")
+        .args(["-c", "import rosbags"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !have_rosbags {
+        assert!(std::env::var("CI").is_err(), "CI must have rosbags (scripts/test.sh)");
+        eprintln!("SKIPPED the_tutorial_runs_as_written: python3 has no rosbags");
+        return;
+    }
+    let home = tempfile::tempdir().unwrap();
+    let script = script.replace("/path/to/kinegen", &root().display().to_string());
+    let o = Command::new("bash")
+        .args(["-euo", "pipefail", "-c", &script])
+        .env("HOME", home.path())
+        .env("PATH", path_with_kinegen())
+        .current_dir(home.path())
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "the tutorial failed:\n{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.contains("lateral_slip"), "{out}");
+    assert!(out.lines().any(|l| l.starts_with("verify: passed")), "{out}");
+}
