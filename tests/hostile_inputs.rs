@@ -262,3 +262,44 @@ fn a_held_out_log_without_ground_truth_is_refused() {
         "{e}"
     );
 }
+
+/// A wheel counter that starts again from 0 mid-log (a reboot) is refused at
+/// its line, not read as a huge step backwards; the log as logged is not.
+#[test]
+fn a_counter_reset_mid_log_is_refused_at_its_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = root().join("data/mystery_robot.csv");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let col = header.iter().position(|h| *h == "enc_r").unwrap();
+    let at = lines.len() / 2;
+    let base: f64 = lines[at].split(',').nth(col).unwrap().parse().unwrap();
+    for l in lines.iter_mut().skip(at) {
+        let mut cells: Vec<String> = l.split(',').map(String::from).collect();
+        let v: f64 = cells[col].parse().unwrap();
+        cells[col] = format!("{}", v - base);
+        *l = cells.join(",");
+    }
+    let reset = tmp.path().join("reset.csv");
+    std::fs::write(&reset, lines.join("\n") + "\n").unwrap();
+    let e = refused(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        reset.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("reset.csv") && e.contains("enc_r") && e.contains("starts again from 0"),
+        "{e}"
+    );
+    let o = kinegen(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}

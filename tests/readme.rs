@@ -166,7 +166,10 @@ fn the_tutorial_runs_as_written() {
         .output()
         .is_ok_and(|o| o.status.success());
     if !have_rosbags {
-        assert!(std::env::var("CI").is_err(), "CI must have rosbags (scripts/test.sh)");
+        assert!(
+            std::env::var("CI").is_err(),
+            "CI must have rosbags (scripts/test.sh)"
+        );
         eprintln!("SKIPPED the_tutorial_runs_as_written: python3 has no rosbags");
         return;
     }
@@ -186,5 +189,8 @@ fn the_tutorial_runs_as_written() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(out.contains("lateral_slip"), "{out}");
-    assert!(out.lines().any(|l| l.starts_with("verify: passed")), "{out}");
+    assert!(
+        out.lines().any(|l| l.starts_with("verify: passed")),
+        "{out}"
+    );
 }

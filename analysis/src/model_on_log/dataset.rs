@@ -86,6 +86,27 @@ fn undeclared_wrap(c: &[f64]) -> Option<(usize, f64, u32)> {
     None
 }
 
+/// A counter that starts again from 0 mid-log (the robot's controller
+/// rebooted): the first step (index k: rows k to k + 1) that lands within a
+/// few typical steps of 0 from a value over 100 typical steps away, a jump
+/// of over 100 typical steps. Read as motion, the reset is one step of a
+/// huge speed backwards (compare 13.97 m, fit "missing a physical effect",
+/// and exit 0).
+fn counter_reset(c: &[f64]) -> Option<(usize, f64, f64)> {
+    let jumps: Vec<f64> = c.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    // the typical step while moving: a robot that mostly stands has a
+    // median step of 0, against which any step would look huge
+    let moving: Vec<f64> = jumps.iter().copied().filter(|d| *d > 0.0).collect();
+    let typical = typical(moving)?;
+    jumps
+        .iter()
+        .enumerate()
+        .position(|(k, d)| {
+            *d > 100.0 * typical && c[k].abs() > 100.0 * typical && c[k + 1].abs() <= 3.0 * typical
+        })
+        .map(|k| (k, c[k], c[k + 1]))
+}
+
 /// An angle column logged in degrees: the first step (index k: rows k to
 /// k + 1) where it jumps by 300-420, as a heading in degrees does where it
 /// wraps at +-180 (in radians the wrap is a jump of 2 pi, and an unwrapped
@@ -169,6 +190,17 @@ fn step_columns(
                     format!(
                         "the counter jumps by {d} from the line before, about 2^{bits}: it wraps like a {bits}-bit register; declare `wrap = {bits}` on input `{}` in the spec",
                         i.name
+                    ),
+                ));
+            }
+        }
+        if i.kind == InputKind::Cumulative && i.wrap.is_none() {
+            if let Some((k, from, to)) = counter_reset(log.col(&i.column)?) {
+                return Err(log.err(
+                    Some(log.line(k + 1)),
+                    Some(&i.column),
+                    format!(
+                        "the counter drops from {from} to {to} from the line before: it starts again from 0 (a reboot?), which no motion does; split the log at this line and give each part as its own --data"
                     ),
                 ));
             }
