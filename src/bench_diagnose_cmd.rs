@@ -238,7 +238,9 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
     let out = Out::new(a.json.as_deref());
     if !a.merge.is_empty() {
         return match merged(&a.merge) {
-            Ok((seeds, laps, cases)) => finish(&out, a, seeds, laps, &cases, Some(a.merge.len())),
+            Ok((seeds, laps, cases)) => {
+                finish(&out, a, seeds, laps, &cases, Some(a.merge.len()), None)
+            }
             Err(e) => bad(e),
         };
     }
@@ -265,6 +267,7 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
         ));
     }
     let mut cases = Vec::new();
+    let mut failed: Vec<u64> = Vec::new();
     let mut index = 0u64;
     for spec in &specs {
         // a spec that does not derive, or whose IR is unusable, stops the
@@ -294,16 +297,44 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
                     // every case its own trajectory
                     match run_case(spec, hidden, noise, 1000 * j as u64 + seed, a.laps) {
                         Ok(c) => cases.push(Case { index: i, ..c }),
-                        Err(e) => out.say(&format!(
-                            "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",
-                            spec.name
-                        )),
+                        Err(e) => {
+                            out.say(&format!(
+                                "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",
+                                spec.name
+                            ));
+                            failed.push(i);
+                        }
                     }
                 }
             }
         }
     }
-    finish(&out, a, a.seeds, a.laps, &cases, None)
+    // what a merge checks the shards against: the whole benchmark's size,
+    // which cases of this slice failed, and what was selected
+    let whole = Whole {
+        total: index,
+        failed,
+        selection: selection(a, &specs),
+    };
+    finish(&out, a, a.seeds, a.laps, &cases, None, Some(&whole))
+}
+
+/// The benchmark a shard belongs to: how many cases the whole has, the
+/// cases of this shard that failed, and the specs and effects selected. A
+/// merge joins only shards of one whole, and only a whole one.
+struct Whole {
+    total: u64,
+    failed: Vec<u64>,
+    selection: serde_json::Value,
+}
+
+/// The specs (by name and path) and effects the benchmark was run on.
+fn selection(a: &BenchDiagnoseArgs, specs: &[Model]) -> serde_json::Value {
+    let specs: Vec<String> = specs
+        .iter()
+        .map(|s| format!("{} ({})", s.name, s.path.display()))
+        .collect();
+    json!({"specs": specs, "effects": a.effect})
 }
 
 /// The hidden effects of a spec's cases: each effect at each magnitude,
@@ -365,6 +396,7 @@ fn finish(
     laps: u64,
     cases: &[Case],
     shards: Option<usize>,
+    whole: Option<&Whole>,
 ) -> ExitCode {
     let mut specs: Vec<(&str, &str)> = Vec::new();
     for c in cases {
@@ -413,8 +445,13 @@ fn finish(
         })
         .collect();
     let shard = a.shard.map(|(k, n)| format!("{k}/{n}"));
-    let doc = json!({"command": "bench-diagnose", "seeds": seeds, "laps": laps, "shard": shard, "merged_shards": shards,
+    let mut doc = json!({"command": "bench-diagnose", "seeds": seeds, "laps": laps, "shard": shard, "merged_shards": shards,
         "magnitudes_of_bound": MAGNITUDES, "noise_levels": NOISE, "models": table, "cases": cases_json});
+    if let Some(w) = whole {
+        doc["cases_total"] = json!(w.total);
+        doc["failed_cases"] = json!(w.failed);
+        doc["selection"] = w.selection.clone();
+    }
     match out.json(a.json.as_deref(), &doc) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => bad(e),
@@ -425,6 +462,9 @@ fn finish(
 fn merged(files: &[PathBuf]) -> Result<(u64, u64, Vec<Case>), String> {
     let mut cases: Vec<Case> = Vec::new();
     let mut settings = None;
+    let mut whole = None;
+    let mut slices: Vec<u64> = Vec::new();
+    let mut failed = 0u64;
     for f in files {
         let text = std::fs::read_to_string(f).map_err(|e| format!("{}: {e}", f.display()))?;
         let doc: serde_json::Value = serde_json::from_str(&text)
@@ -436,6 +476,44 @@ fn merged(files: &[PathBuf]) -> Result<(u64, u64, Vec<Case>), String> {
                 f.display()
             ));
         }
+        // one benchmark's shards: the same N, the same whole, the same
+        // selection of specs and effects
+        let (k, n) = doc["shard"]
+            .as_str()
+            .and_then(|s| parse_shard(s).ok())
+            .ok_or_else(|| {
+                format!(
+                    "{}: not a shard (write shards with --shard K/N --json)",
+                    f.display()
+                )
+            })?;
+        let this = (n, doc["cases_total"].as_u64(), doc["selection"].clone());
+        if this.1.is_none() {
+            return Err(format!(
+                "{}: no `cases_total` (a shard of an older kinegen: run it again)",
+                f.display()
+            ));
+        }
+        match &whole {
+            None => whole = Some(this),
+            Some(w) if w.0 != n => {
+                return Err(format!(
+                    "{}: a shard of {n}, the others are of {}",
+                    f.display(),
+                    w.0
+                ))
+            }
+            Some(w) if *w != this => return Err(format!(
+                "{}: a shard of another benchmark (other specs, effects or size than the others')",
+                f.display()
+            )),
+            Some(_) => {}
+        }
+        if slices.contains(&k) {
+            return Err(format!("{}: shard {k}/{n} is given twice", f.display()));
+        }
+        slices.push(k);
+        failed += doc["failed_cases"].as_array().map_or(0, |v| v.len() as u64);
         let list = doc["cases"]
             .as_array()
             .ok_or_else(|| format!("{}: no `cases` (write shards with --json)", f.display()))?;
@@ -464,6 +542,24 @@ fn merged(files: &[PathBuf]) -> Result<(u64, u64, Vec<Case>), String> {
                 redundant: strings(&c["redundant"]),
                 seconds: c["seconds"].as_f64().unwrap_or(0.0),
             });
+        }
+    }
+    if let Some((n, Some(total), _)) = &whole {
+        let missing: Vec<String> = (1..=*n)
+            .filter(|k| !slices.contains(k))
+            .map(|k| format!("{k}/{n}"))
+            .collect();
+        if !missing.is_empty() {
+            return Err(format!(
+                "--merge: shard(s) {} missing: the table would not be the whole benchmark",
+                missing.join(", ")
+            ));
+        }
+        if cases.len() as u64 + failed != *total {
+            return Err(format!(
+                "--merge: {} cases and {failed} failed, where the benchmark has {total}",
+                cases.len()
+            ));
         }
     }
     cases.sort_by_key(|c| c.index);

@@ -303,3 +303,49 @@ fn a_counter_reset_mid_log_is_refused_at_its_line() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+/// bench-diagnose --merge joins only the whole of one benchmark: one shard
+/// of two, or shards of another selection, are refused rather than shown as
+/// the whole table.
+#[test]
+fn a_merge_of_part_of_a_benchmark_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let spec = root().join("spec/diff_drive.toml");
+    let s = spec.to_str().unwrap();
+    let shard = |effect: &str, k: &str, json: &str| {
+        let o = kinegen_in(
+            d,
+            &[
+                "bench-diagnose",
+                "--spec",
+                s,
+                "--effect",
+                effect,
+                "--seeds",
+                "1",
+                "--shard",
+                k,
+                "--json",
+                json,
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    shard("gyro_bias", "1/2", "a1.json");
+    shard("gyro_bias", "2/2", "a2.json");
+    shard("gyro_scale", "2/2", "b2.json");
+    let merge = |files: &[&str]| {
+        let mut a = vec!["bench-diagnose", "--merge"];
+        a.extend_from_slice(files);
+        kinegen_in(d, &a)
+    };
+    let o = merge(&["a1.json"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("2/2 missing"), "{}", stderr(&o));
+    let o = merge(&["a1.json", "b2.json"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("another benchmark"), "{}", stderr(&o));
+    let o = merge(&["a1.json", "a2.json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
