@@ -247,6 +247,19 @@ fn logs_in(dir: &Path, columns: &[String]) -> Result<(Vec<PathBuf>, Vec<String>)
     }
     let (mut logs, mut left_out) = (Vec::new(), Vec::new());
     for p in files {
+        // a job's arguments are JSON strings: a name that is not UTF-8 cannot
+        // be written into one
+        if p.to_str().is_none() {
+            left_out.push(format!("{} (its name is not UTF-8)", p.display()));
+            continue;
+        }
+        // a named pipe or a device would never end being read
+        if !std::fs::metadata(&p).is_ok_and(|m| m.is_file()) {
+            if matches!(p.extension().and_then(|e| e.to_str()), Some("csv" | "mcap")) {
+                left_out.push(format!("{} (not a regular file)", p.display()));
+            }
+            continue;
+        }
         match p.extension().and_then(|e| e.to_str()) {
             Some("mcap") => logs.push(p),
             // the header as every command reads it (comment lines before
@@ -285,6 +298,10 @@ fn plan(a: &BatchArgs, command: &str) -> ExitCode {
         ));
     }
     let spec = a.spec.as_ref().expect("clap requires --spec with --plan");
+    // every job would fail on a mapping that is not there
+    if let Some(t) = a.topics.as_ref().filter(|t| !t.is_file()) {
+        return bad(format!("--topics {}: no such file", t.display()));
+    }
     let model = match kinegen_model::spec::Model::load(spec) {
         Ok(m) => m,
         Err(e) => return bad(e),
@@ -308,25 +325,34 @@ fn plan(a: &BatchArgs, command: &str) -> ExitCode {
             columns.join(", ")
         ));
     }
-    // ids from the file names, or from the paths below DIR when two logs share
-    // a name (run-01.csv of two robots' folders)
+    // ids from the file names, or, when two logs share a name (run-01.csv
+    // of two robots' folders, run1.csv beside run1.mcap), from their paths
+    // below DIR as they are (two paths are never the same, and `x/run.csv`
+    // stays apart from `x-run.csv`)
     let stem = |p: &Path| {
         p.file_stem()
             .map(|s| s.to_string_lossy().to_string())
             .unwrap_or_default()
     };
-    let stems: HashSet<String> = logs.iter().map(|l| stem(l)).collect();
-    let unique = stems.len() == logs.len();
+    let below = |p: &Path| p.strip_prefix(&a.jobs_file).unwrap_or(p).to_path_buf();
+    let dashed = |p: &Path| {
+        below(p)
+            .with_extension("")
+            .to_string_lossy()
+            .replace(['/', '\\'], "-")
+    };
+    let unique = |f: &dyn Fn(&Path) -> String| {
+        logs.iter().map(|l| f(l)).collect::<HashSet<String>>().len() == logs.len()
+    };
+    let (by_stem, by_dashes) = (unique(&stem), unique(&dashed));
     let mut text = String::new();
     for log in &logs {
-        let name = if unique {
+        let name = if by_stem {
             stem(log)
+        } else if by_dashes {
+            dashed(log)
         } else {
-            log.strip_prefix(&a.jobs_file)
-                .unwrap_or(log)
-                .with_extension("")
-                .to_string_lossy()
-                .replace(['/', '\\'], "-")
+            below(log).to_string_lossy().to_string()
         };
         let id = format!("{name}-{command}");
         let mut args = vec![

@@ -503,10 +503,12 @@ fn merged(files: &[PathBuf]) -> Result<(u64, u64, Vec<Case>), String> {
                     w.0
                 ))
             }
-            Some(w) if *w != this => return Err(format!(
+            Some(w) if *w != this => {
+                return Err(format!(
                 "{}: a shard of another benchmark (other specs, effects or size than the others')",
                 f.display()
-            )),
+            ))
+            }
             Some(_) => {}
         }
         if slices.contains(&k) {

@@ -349,3 +349,60 @@ fn a_merge_of_part_of_a_benchmark_is_refused() {
     let o = merge(&["a1.json", "a2.json"]);
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+/// batch --plan writes ids batch accepts (no two alike), leaves out what it
+/// cannot write or read (a named pipe), and refuses a --topics file that is
+/// not there.
+#[test]
+fn a_plan_never_writes_two_jobs_under_one_id() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let logs = d.join("logs");
+    std::fs::create_dir_all(logs.join("x")).unwrap();
+    let log = root().join("data/mystery_robot.csv");
+    std::fs::copy(&log, logs.join("x/run.csv")).unwrap();
+    std::fs::copy(&log, logs.join("x-run.csv")).unwrap();
+    // a named pipe that no one writes: reading it would never end
+    let fifo = logs.join("pipe.csv");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    let spec = root().join("spec/diff_drive.toml");
+    let s = spec.to_str().unwrap();
+    let plan = |extra: &[&str]| {
+        let mut a = vec![
+            "batch",
+            "--plan",
+            "fit",
+            "--spec",
+            s,
+            "logs",
+            "--out",
+            "jobs.jsonl",
+        ];
+        a.extend_from_slice(extra);
+        kinegen_in(d, &a)
+    };
+    let o = plan(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    if made.is_ok_and(|s| s.success()) {
+        assert!(
+            stderr(&o).contains("pipe.csv (not a regular file)"),
+            "{}",
+            stderr(&o)
+        );
+    }
+    let jobs = std::fs::read_to_string(d.join("jobs.jsonl")).unwrap();
+    let ids: Vec<String> = jobs
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["id"]
+                .as_str()
+                .unwrap()
+                .to_string()
+        })
+        .collect();
+    let unique: std::collections::HashSet<&String> = ids.iter().collect();
+    assert_eq!(unique.len(), ids.len(), "{ids:?}");
+    assert_eq!(ids.len(), 2, "{ids:?}");
+    let e = stderr(&plan(&["--topics", "nowhere.toml"]));
+    assert!(e.contains("--topics nowhere.toml: no such file"), "{e}");
+}
