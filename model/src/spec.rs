@@ -369,6 +369,8 @@ impl Model {
         let declared = declare_names(&cx, &raw)?;
         let params = parse_params(&cx, &raw.parameter)?;
         check_delays(&cx, &raw.parameter)?;
+        let inputs: Vec<Input> = raw.input.iter().map(RawInput::to_input).collect();
+        check_command_timing(&cx, &raw.parameter, &inputs)?;
         let names = Names {
             declared: &declared,
         };
@@ -396,7 +398,7 @@ impl Model {
             path: path.to_path_buf(),
             source: text.to_string(),
             name: raw.name.get_ref().clone(),
-            inputs: raw.input.iter().map(RawInput::to_input).collect(),
+            inputs,
             params,
             noise: raw
                 .noise
@@ -659,6 +661,15 @@ impl RawNoise {
             // a unit that means a density but is not read as one would make
             // the filter add the noise per row, silently
             match &self.unit {
+                Some(u) if density_factors(u.get_ref()) > 1 => Err(cx.err_span(
+                    u,
+                    format!(
+                        "noise `{}`: unit `{}` has {} density factors; a density has one: `m/s/sqrt(Hz)`",
+                        noise.name,
+                        u.get_ref(),
+                        density_factors(u.get_ref())
+                    ),
+                )),
                 Some(u) if !noise.is_density() && looks_like_density(u.get_ref()) => Err(cx.err_span(
                     u,
                     format!(
@@ -680,6 +691,20 @@ impl RawNoise {
             ))
         }
     }
+}
+
+/// How many square roots of a frequency or a time a unit has (a density
+/// has one).
+fn density_factors(unit: &str) -> usize {
+    let u: String = unit
+        .to_ascii_lowercase()
+        .chars()
+        .filter(|c| !c.is_whitespace())
+        .collect();
+    ["sqrt(hz)", "\u{221a}hz", "rthz", "sqrt(s)", "\u{221a}s"]
+        .iter()
+        .map(|d| u.matches(d).count())
+        .sum()
 }
 
 /// Whether a noise unit speaks of a spectral density (a square root, hertz)
@@ -746,6 +771,27 @@ pub(crate) fn declared_min(input_lag: bool, min: Option<f64>) -> Option<f64> {
         Some(min.unwrap_or(0.0))
     } else {
         min
+    }
+}
+
+/// An `input_delay` or `input_lag` acts on the commands (absolute inputs
+/// that hold between rows): a model without any has nothing for it to
+/// delay, and the analysis would ignore it without a word (`add-effect`
+/// refuses `input_delay` there for the same reason).
+fn check_command_timing(cx: &Ctx, raw: &[RawParam], inputs: &[Input]) -> Result<(), SourceError> {
+    if inputs.iter().any(Input::is_command) {
+        return Ok(());
+    }
+    match raw.iter().find(|p| p.input_delay || p.input_lag) {
+        Some(p) => Err(cx.err_span(
+            &p.name,
+            format!(
+                "`{}` is an `{}`, but the model has no commands (absolute inputs that hold between rows): measured inputs follow the motion as it happens; a delay of the measurements is a `measurement_delay`",
+                p.name.get_ref(),
+                if p.input_delay { "input_delay" } else { "input_lag" }
+            ),
+        )),
+        None => Ok(()),
     }
 }
 
@@ -1233,6 +1279,14 @@ fn tolerance(cx: &Ctx, t: &Spanned<RawTolerance>, nominal: f64) -> Result<f64, S
         return Err(cx.err_span(
             t,
             format!("tolerance {value}: a standard deviation above 0"),
+        ));
+    }
+    // fit weighs the prior by 1/tolerance^2, which must be a number (1e-320
+    // made it infinite, and the fit then blamed the log)
+    if !(1.0 / (value * value)).is_finite() {
+        return Err(cx.err_span(
+            t,
+            format!("tolerance {value:e}: too small to weigh (its inverse square is not finite); a parameter known that well is `free = false`"),
         ));
     }
     Ok(value)
