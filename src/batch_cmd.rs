@@ -66,8 +66,11 @@ const WITH_JSON: [&str; 7] = [
 
 /// Read JOBS.jsonl: every problem names the file and line.
 fn read_jobs(path: &Path) -> Result<Vec<Job>, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read the jobs: {e}", path.display()))?;
+    // bounded, and a byte that is not UTF-8 named at its line
+    let text = kinegen_model::files::read_text(path).map_err(|(at, e)| match at {
+        Some((line, col)) => format!("{}:{line}:{col}: {e}", path.display()),
+        None => format!("{}: cannot read the jobs: {e}", path.display()),
+    })?;
     let mut jobs = Vec::new();
     let mut seen = HashSet::new();
     for (n, line) in text.lines().enumerate() {
@@ -386,6 +389,13 @@ pub fn run(a: &BatchArgs) -> ExitCode {
         Ok(j) => j,
         Err(e) => return bad(e),
     };
+    // results are a journal in a file: a device or a pipe is none
+    if std::fs::metadata(&a.out).is_ok_and(|m| !m.is_file()) {
+        return bad(format!(
+            "--out {}: not a regular file; the results go to a file of their own",
+            a.out.display()
+        ));
+    }
     if let Err(e) = check_distinct(&a.jobs_file, &a.out)
         .and_then(|_| crate::output::check_writable("--out", &a.out))
     {

@@ -406,3 +406,37 @@ fn a_plan_never_writes_two_jobs_under_one_id() {
     let e = stderr(&plan(&["--topics", "nowhere.toml"]));
     assert!(e.contains("--topics nowhere.toml: no such file"), "{e}");
 }
+
+/// A device that never ends, given as a log, a map or a batch's results,
+/// ends in a located exit 2 at the input limit, not in exhausted memory.
+#[test]
+fn an_endless_device_as_input_stops_at_the_limit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_kinegen"))
+            .args(args)
+            .current_dir(root())
+            .env("KINEGEN_INPUT_LIMIT_MB", "4")
+            .output()
+            .unwrap()
+    };
+    let o = run(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        "/dev/zero",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("/dev/zero") && stderr(&o).contains("more than 4 MiB"),
+        "{}",
+        stderr(&o)
+    );
+    one_job(d);
+    let jobs = d.join("jobs.jsonl");
+    let o = run(&["batch", jobs.to_str().unwrap(), "--out", "/dev/zero"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+}

@@ -19,10 +19,84 @@ fn err(path: &Path) -> impl FnOnce(std::io::Error) -> WriteError + '_ {
     }
 }
 
+/// The most bytes kinegen reads from one input file: a quarter of the
+/// machine's memory (from /proc/meminfo), at least 1 GiB; 8 GiB where the
+/// machine does not say; `KINEGEN_INPUT_LIMIT_MB` sets another. What is read is held in memory (a few times its
+/// size once parsed), so an input past this would exhaust the machine.
+pub fn input_limit() -> u64 {
+    const GIB: u64 = 1 << 30;
+    // a smaller limit for tests and shared machines
+    if let Some(mb) = std::env::var("KINEGEN_INPUT_LIMIT_MB")
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        return mb << 20;
+    }
+    let total_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        m.lines()
+            .find(|l| l.starts_with("MemTotal:"))
+            .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+    });
+    match total_kib {
+        Some(k) => (k * 1024 / 4).max(GIB),
+        None => 8 * GIB,
+    }
+}
+
+/// A reader that fails, naming the limit, once more than `limit` bytes have
+/// come through: a pipe or a device that never ends stops there.
+pub struct Bounded<R> {
+    inner: R,
+    left: u64,
+    limit: u64,
+}
+
+impl<R: std::io::Read> std::io::Read for Bounded<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        if n as u64 > self.left {
+            return Err(std::io::Error::other(format!(
+                "more than {} MiB: kinegen reads at most that from one input (a quarter of this machine's memory, or KINEGEN_INPUT_LIMIT_MB): is it a device or a pipe that never ends?",
+                self.limit >> 20
+            )));
+        }
+        self.left -= n as u64;
+        Ok(n)
+    }
+}
+
+/// `path` opened to be read through [`Bounded`]: a regular file larger than
+/// [`input_limit`] is refused before any byte is read.
+pub fn open_bounded(path: &Path) -> std::io::Result<Bounded<std::fs::File>> {
+    let limit = input_limit();
+    let file = std::fs::File::open(path)?;
+    if let Ok(m) = file.metadata() {
+        if m.is_file() && m.len() > limit {
+            return Err(std::io::Error::other(format!(
+                "{} MiB, more than the {} MiB kinegen reads from one input (a quarter of this machine's memory)",
+                m.len() >> 20,
+                limit >> 20
+            )));
+        }
+    }
+    Ok(Bounded {
+        inner: file,
+        left: limit,
+        limit,
+    })
+}
+
+/// A file's bytes, read through [`open_bounded`].
+pub fn read_bounded(path: &Path) -> std::io::Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut open_bounded(path)?, &mut bytes)?;
+    Ok(bytes)
+}
+
 /// A text file's contents. Err: (where the first byte that is not UTF-8 is,
 /// as a 1-based line and column, if that is the trouble; the message).
 pub fn read_text(path: &Path) -> Result<String, (Option<(usize, usize)>, String)> {
-    let bytes = std::fs::read(path).map_err(|e| (None, e.to_string()))?;
+    let bytes = read_bounded(path).map_err(|e| (None, e.to_string()))?;
     String::from_utf8(bytes).map_err(|e| {
         let bytes = e.as_bytes();
         let ok = &bytes[..e.utf8_error().valid_up_to()];
@@ -210,4 +284,23 @@ pub fn write_atomic(path: &Path, content: &str) -> Result<(), WriteError> {
     }
     temporaries().retain(|p| p != &tmp);
     done.map_err(err(asked))
+}
+
+#[cfg(test)]
+mod bounded_tests {
+    use super::*;
+    use std::io::Read;
+
+    #[test]
+    fn a_reader_past_its_limit_fails_naming_it() {
+        let mut r = Bounded {
+            inner: std::io::repeat(b'x'),
+            left: 1000,
+            limit: 1000,
+        };
+        let mut out = Vec::new();
+        let e = r.read_to_end(&mut out).unwrap_err();
+        assert!(e.to_string().contains("more than"), "{e}");
+        assert!(out.len() <= 1000);
+    }
 }

@@ -345,7 +345,7 @@ fn is_identifier(s: &str) -> bool {
 impl Model {
     /// Read and validate a spec file.
     pub fn load(path: &Path) -> Result<Model, SourceError> {
-        let bytes = std::fs::read(path)
+        let bytes = crate::files::read_bounded(path)
             .map_err(|e| SourceError::new(path, None, format!("cannot read spec: {e}")))?;
         let text = std::str::from_utf8(&bytes).map_err(|e| {
             let ok = std::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or_default();

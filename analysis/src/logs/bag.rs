@@ -190,7 +190,7 @@ pub fn read(
     progress: &dyn Fn(usize, usize),
 ) -> Result<(Log, Vec<Detection>), LogError> {
     let file = resolve(path)?;
-    let buf = std::fs::read(&file)
+    let buf = kinegen_model::files::read_bounded(&file)
         .map_err(|e| LogError::new(&file, None, None, format!("cannot read the bag: {e}")))?;
     let keep = map.landmarks.as_ref().map(|l| l.topic.as_str());
     let (topics, all) = collect(&file, &buf, keep, progress)?;

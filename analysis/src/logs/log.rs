@@ -145,7 +145,9 @@ fn malformed(x: &csv::Error) -> String {
 pub fn read_csv(path: &Path, what: &str) -> Result<(CsvHeader, CsvReader), LogError> {
     let e = |row: Option<usize>, m: String| LogError::new(path, row, None, m);
     let cannot = |x: std::io::Error| e(None, format!("cannot read {what}: {x}"));
-    let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(cannot)?);
+    // bounded: a device or a pipe as a log stops at the machine's limit
+    let mut file =
+        std::io::BufReader::new(kinegen_model::files::open_bounded(path).map_err(cannot)?);
     let pre = Preamble::read(&mut file).map_err(cannot)?;
     let header_line = pre.comments.len() + 1;
     let first = cells(&String::from_utf8_lossy(&pre.first));
