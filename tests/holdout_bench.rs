@@ -157,6 +157,12 @@ fn bench_real_refuses_bad_input_with_its_location() {
         "[robot.diff]\nspec = {spec:?}\npublished.wheel = {{ name = \"L (m)\" }}\n"
     ));
     assert!(e.contains("published.wheel"), "{e}");
+    // a scale that is no number to multiply by (nan gave a method an
+    // infinite error, and kinegen a win)
+    let e = refused_config(&format!(
+        "[robot.diff]\nspec = {spec:?}\npublished.b = {{ name = \"b (m)\", scale = nan }}\n"
+    ));
+    assert!(e.contains("robot.diff.published.b.scale"), "{e}");
     assert!(!json.exists());
 }
 

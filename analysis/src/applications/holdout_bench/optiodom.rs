@@ -121,6 +121,21 @@ pub fn load(
         return Err(BenchError::NoFolder(dir.to_path_buf()));
     }
     let config = Config::read(config_path)?;
+    // a scale that is not a finite number other than 0 made a method's
+    // error infinite (and kinegen "win") or its scores null
+    for (robot, r) in &config.robot {
+        for (key, m) in &r.published {
+            if !(m.scale.is_finite() && m.scale != 0.0) {
+                return Err(BenchError::Unread {
+                    path: config_path.to_path_buf(),
+                    message: format!(
+                        "robot.{robot}.published.{key}.scale = {}: a finite number other than 0",
+                        m.scale
+                    ),
+                });
+            }
+        }
+    }
     let base = config_path.parent().unwrap_or(Path::new("."));
     let published = read_json(&dir.join("published.json"))?;
     let mut folders: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -129,11 +144,31 @@ pub fn load(
             message: e.to_string(),
         })?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.join("metadata.json").is_file())
+        .filter(|p| p.is_dir())
         .collect();
     folders.sort();
     let mut irs: BTreeMap<String, ModelIr> = BTreeMap::new();
     let (mut sessions, mut warnings) = (Vec::new(), Vec::new());
+    // a session folder without its metadata is left out, and said
+    let (folders, bare): (Vec<PathBuf>, Vec<PathBuf>) = folders
+        .into_iter()
+        .partition(|p| p.join("metadata.json").is_file());
+    if !bare.is_empty() {
+        let names: Vec<String> = bare
+            .iter()
+            .map(|p| {
+                p.file_name()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+                    .to_string()
+            })
+            .collect();
+        warnings.push(format!(
+            "{} folder(s) without a metadata.json left out: {}",
+            names.len(),
+            names.join(", ")
+        ));
+    }
     for folder in folders {
         let name = folder.file_name().unwrap().to_string_lossy().to_string();
         if !only.is_empty() && !only.iter().any(|o| name.starts_with(o.as_str())) {
@@ -257,7 +292,7 @@ fn calibrations(methods: &[Value], robot: &RobotConfig, r: &Runner) -> Vec<Calib
         .filter(|m| m["variant"] == "session")
         .filter_map(|m| {
             let cal = m["params_cal"].as_object().filter(|c| !c.is_empty())?;
-            let values = robot
+            let values: Vec<(usize, f64)> = robot
                 .published
                 .iter()
                 .filter_map(|(spec_name, mapped)| {
@@ -265,6 +300,18 @@ fn calibrations(methods: &[Value], robot: &RobotConfig, r: &Runner) -> Vec<Calib
                     Some((k, cal.get(&mapped.name)?.as_f64()? * mapped.scale))
                 })
                 .collect();
+            // a published value of 0, or one outside the spec's bounds, is
+            // no calibration of this robot (it scored null): left out
+            let usable = values.iter().all(|&(k, v)| {
+                let p = &r.ir.runtime_params()[k];
+                v.is_finite()
+                    && v != 0.0
+                    && p.min.is_none_or(|m| v > m)
+                    && p.max.is_none_or(|m| v <= m)
+            });
+            if !usable {
+                return None;
+            }
             Some(Calibration {
                 method: m["sheet"].as_str()?.to_string(),
                 values,
