@@ -189,7 +189,21 @@ fn run_job(job: &Job) -> Value {
         args.extend(["--json".into(), "-".into()]);
     }
     let exe = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("kinegen"));
-    let out = Command::new(exe).args(&args).output();
+    let mut cmd = Command::new(exe);
+    cmd.args(&args);
+    // a job dies with the batch (SIGTERM when the thread that started it
+    // ends, as it does when the batch is killed): a killed batch leaves no
+    // job running for nobody. Linux's prctl; the closure runs in the child
+    // between fork and exec and calls only that async-signal-safe function.
+    #[cfg(target_os = "linux")]
+    unsafe {
+        use std::os::unix::process::CommandExt;
+        cmd.pre_exec(|| {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            Ok(())
+        });
+    }
+    let out = cmd.output();
     let seconds = t0.elapsed().as_secs_f64();
     let out = match out {
         Ok(o) => o,
@@ -198,13 +212,7 @@ fn run_job(job: &Job) -> Value {
         }
     };
     let stderr = String::from_utf8_lossy(&out.stderr);
-    let message = stderr
-        .lines()
-        .rev()
-        .find(|l| l.starts_with("error"))
-        .or_else(|| stderr.lines().rev().find(|l| !l.trim().is_empty()))
-        .unwrap_or("")
-        .to_string();
+    let message = failure_message(&stderr, &out.status);
     let doc: Option<Value> = json
         .then(|| serde_json::from_slice(&out.stdout).ok())
         .flatten();
@@ -226,6 +234,43 @@ fn run_job(job: &Job) -> Value {
         }
     }
     line
+}
+
+/// Why a job failed, in one line: its located error; for a crash, the
+/// panic's message (not rust's "note: run with RUST_BACKTRACE=1" after it);
+/// for a process ended by a signal, the signal.
+fn failure_message(stderr: &str, status: &std::process::ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    let lines: Vec<&str> = stderr.lines().collect();
+    if let Some(l) = lines.iter().rev().find(|l| l.starts_with("error")) {
+        return l.to_string();
+    }
+    if let Some(k) = lines
+        .iter()
+        .position(|l| l.starts_with("thread '") && l.contains("panicked"))
+    {
+        let what = lines.get(k + 1).copied().unwrap_or("").trim();
+        return format!(
+            "kinegen crashed (a bug: please report it): {} {what}",
+            lines[k].trim()
+        );
+    }
+    if let Some(sig) = status.signal() {
+        return format!(
+            "ended by signal {sig}{}",
+            if sig == 9 {
+                " (killed: out of memory?)"
+            } else {
+                ""
+            }
+        );
+    }
+    lines
+        .iter()
+        .rev()
+        .find(|l| !l.trim().is_empty() && !l.starts_with("note: run with"))
+        .unwrap_or(&"")
+        .to_string()
 }
 
 /// The logs of `dir` a spec with these input `columns` can read: CSV files
@@ -480,5 +525,28 @@ pub fn run(a: &BatchArgs) -> ExitCode {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::process::ExitStatusExt;
+
+    #[test]
+    fn a_crashed_job_is_said_by_its_panic_or_its_signal() {
+        let panic = "thread 'main' (1) panicked at src/x.rs:3:5:\nindex out of bounds\nnote: run with `RUST_BACKTRACE=1` environment variable to display a backtrace\n";
+        let m = failure_message(panic, &std::process::ExitStatus::from_raw(101 << 8));
+        assert!(
+            m.contains("crashed") && m.contains("index out of bounds"),
+            "{m}"
+        );
+        let m = failure_message("", &std::process::ExitStatus::from_raw(9));
+        assert!(m.contains("signal 9"), "{m}");
+        let m = failure_message(
+            "warning: x\nerror: a.csv:3:2: bad\n",
+            &std::process::ExitStatus::from_raw(2 << 8),
+        );
+        assert_eq!(m, "error: a.csv:3:2: bad");
     }
 }

@@ -440,3 +440,60 @@ fn an_endless_device_as_input_stops_at_the_limit() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
 }
+
+/// A batch killed while its jobs run takes them with it.
+#[test]
+fn a_killed_batch_leaves_no_job_running() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let spec = root().join("spec/diff_drive.toml");
+    // two slow jobs (a recovery benchmark each)
+    let mut jobs = String::new();
+    for id in ["slow1", "slow2"] {
+        let job = serde_json::json!({"id": id, "args": ["bench-diagnose", "--spec", spec, "--seeds", "3"]});
+        jobs += &format!("{job}\n");
+    }
+    std::fs::write(d.join("jobs.jsonl"), jobs).unwrap();
+    let mut batch = std::process::Command::new(env!("CARGO_BIN_EXE_kinegen"))
+        .args(["batch", "jobs.jsonl", "--out", "out.jsonl", "--jobs", "2"])
+        .current_dir(d)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let children = |pid: u32| -> Vec<u32> {
+        std::fs::read_dir(format!("/proc/{pid}/task"))
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|t| std::fs::read_to_string(t.path().join("children")).ok())
+            .flat_map(|c| {
+                c.split_whitespace()
+                    .filter_map(|p| p.parse().ok())
+                    .collect::<Vec<u32>>()
+            })
+            .collect()
+    };
+    let mut jobs_seen = Vec::new();
+    for _ in 0..100 {
+        jobs_seen = children(batch.id());
+        if jobs_seen.len() == 2 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    assert_eq!(jobs_seen.len(), 2, "the jobs did not start");
+    batch.kill().unwrap();
+    batch.wait().unwrap();
+    // each job's process is gone (or a zombie about to be reaped), soon
+    let alive = |pid: u32| {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .is_ok_and(|s| !s.split_whitespace().nth(2).is_some_and(|st| st == "Z"))
+    };
+    for _ in 0..50 {
+        if !jobs_seen.iter().any(|p| alive(*p)) {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    panic!("jobs still running after the batch was killed: {jobs_seen:?}");
+}
