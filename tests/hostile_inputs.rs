@@ -487,7 +487,7 @@ fn a_killed_batch_leaves_no_job_running() {
     // each job's process is gone (or a zombie about to be reaped), soon
     let alive = |pid: u32| {
         std::fs::read_to_string(format!("/proc/{pid}/stat"))
-            .is_ok_and(|s| !s.split_whitespace().nth(2).is_some_and(|st| st == "Z"))
+            .is_ok_and(|s| s.split_whitespace().nth(2).is_none_or(|st| st != "Z"))
     };
     for _ in 0..50 {
         if !jobs_seen.iter().any(|p| alive(*p)) {
