@@ -127,6 +127,20 @@ pub fn check_writable(option: &str, path: &Path) -> Result<(), String> {
         ),
         _ => {}
     }
+    // a link that points nowhere (the path itself, or a folder on the way)
+    // would be followed when written, creating its target's folders
+    for p in path.ancestors() {
+        if p.exists() {
+            break;
+        }
+        if let Ok(target) = std::fs::read_link(p) {
+            return fail(format!(
+                "{} is a link to {}, which does not exist",
+                p.display(),
+                target.display()
+            ));
+        }
+    }
     let mut dir = path.parent().unwrap_or(Path::new("."));
     if dir.as_os_str().is_empty() {
         dir = Path::new(".");

@@ -497,3 +497,40 @@ fn a_killed_batch_leaves_no_job_running() {
     }
     panic!("jobs still running after the batch was killed: {jobs_seen:?}");
 }
+
+/// An output through a link that points nowhere is refused (it created the
+/// link target's folders), and so is a navigation cell shorter than one
+/// integration step (1e-300 m was accepted).
+#[test]
+fn a_dangling_link_output_and_a_vanishing_cell_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let target = d.join("nowhere/deep");
+    std::os::unix::fs::symlink(&target, d.join("rep")).unwrap();
+    let log = root().join("data/mystery_robot.csv");
+    let rep = d.join("rep");
+    let e = refused(&[
+        "compare",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--data",
+        log.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(e.contains("which does not exist"), "{e}");
+    assert!(!d.join("nowhere").exists());
+    let e = refused(&[
+        "navigate",
+        "--spec",
+        "data/seed004/epuck.toml",
+        "--grid",
+        "data/seed004/arena.txt",
+        "--cell",
+        "1e-300",
+    ]);
+    assert!(
+        e.contains("--cell 1e-300") && e.contains("one integration step"),
+        "{e}"
+    );
+}

@@ -77,6 +77,8 @@ fn wrap(a: f64) -> f64 {
 pub enum NavigateError {
     #[error("model `{0}` cannot turn in place: each move of the navigation turns toward the next cell first")]
     CannotSpin(String),
+    #[error("--cell {cell:e} m: shorter than the robot travels in one integration step ({travel} m): cells are about the robot's size (7 cm for the e-puck)")]
+    CellTooSmall { cell: f64, travel: f64 },
     #[error("--cell {cell:e} m: a move to the next cell would take {steps:.3e} integration steps of {dt} s at {speed} m/s (at most {MAX_STEPS_PER_MOVE:.0e}): cells are about the robot's size (7 cm for the e-puck)")]
     CellTooLarge {
         cell: f64,
@@ -104,6 +106,14 @@ pub fn drive(
     // one move to a diagonal neighbour, in integration steps: a cell of 1e300 m
     // made each move allocate until the process aborted
     let per_move = grid.cell * std::f64::consts::SQRT_2 / (o.speed * o.dt);
+    // and one shorter than a single integration step cannot be driven as a
+    // move at all (1e-300 m was accepted)
+    if per_move < 1.0 {
+        return Err(NavigateError::CellTooSmall {
+            cell: grid.cell,
+            travel: o.speed * o.dt,
+        });
+    }
     if per_move.is_nan() || per_move > MAX_STEPS_PER_MOVE {
         return Err(NavigateError::CellTooLarge {
             cell: grid.cell,
