@@ -225,11 +225,35 @@ pub fn run_add_effect(
             ));
         }
         kinegen_model::files::write_atomic(out, new).map_err(|e| e.to_string())?;
+        // the change as a diff, each line within the terminal's width (the
+        // whole of it is in the file written)
+        let change = kinegen_model::effects::spec_change(&model, &added);
+        let width = crate::output::WIDTH;
+        let mut cut = false;
+        let lines: Vec<String> = change
+            .lines()
+            .map(|l| {
+                if l.chars().count() > width {
+                    cut = true;
+                    l.chars().take(width - 1).collect::<String>() + "…"
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect();
+        let whole = if cut {
+            format!(
+                "\n(lines cut at {width} columns: {} has them whole)",
+                out.display()
+            )
+        } else {
+            String::new()
+        };
         Ok(format!(
-            "added `{effect}` to {} -> {}:\n{}",
+            "added `{effect}` to {} -> {}:\n{}{whole}",
             spec.display(),
             out.display(),
-            kinegen_model::effects::spec_change(&model, &added)
+            lines.join("\n")
         ))
     };
     match go() {

@@ -187,3 +187,36 @@ fn the_json_is_the_same_with_and_without_verbose() {
         assert_eq!(short, long, "{cmd}: the JSON differs with -v");
     }
 }
+
+/// add-effect's diff stays within the width however long the expressions
+/// it writes, and says the file has them whole.
+#[test]
+fn add_effect_cuts_long_lines_of_its_diff_and_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let fx = d.join("fx");
+    std::fs::create_dir_all(&fx).unwrap();
+    std::fs::write(
+        fx.join("turn_rate_loss.toml"),
+        "name = \"turn_rate_loss\"\ndoc = \"Scrub.\"\nrequires = [\"twist\"]\n[[parameter]]\nname = \"k_scrub\"\nnominal = 0.0\nunit = \"s\"\nmin = -1.0\nmax = 1.0\n[motion]\nomega = \"({omega}) - k_scrub*({omega})*abs({omega})\"\n",
+    )
+    .unwrap();
+    let spec = root().join("tests/user_specs/skid4.toml");
+    let text = shaped(
+        d,
+        &[
+            "add-effect",
+            "--spec",
+            spec.to_str().unwrap(),
+            "--effects",
+            "fx",
+            "--effect",
+            "turn_rate_loss",
+            "--out",
+            "s.toml",
+        ],
+    );
+    assert!(text.contains("s.toml has them whole"), "{text}");
+    let written = std::fs::read_to_string(d.join("s.toml")).unwrap();
+    assert!(written.lines().any(|l| l.chars().count() > 100));
+}
