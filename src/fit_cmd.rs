@@ -439,15 +439,7 @@ fn render_lm(
     if let Some(w) = &cal.leave_one_out_warning {
         detail.say(&format!("warning: {w}"));
     }
-    // what the user should know, in the order said: the fit's (the logs'
-    // among them), the held-out runs' and leave-one-out's
-    let warnings: Vec<String> = res
-        .warnings
-        .iter()
-        .chain(cal.holdout.as_ref().and_then(|h| h.worse.as_ref()))
-        .chain(&cal.leave_one_out_warning)
-        .cloned()
-        .collect();
+    let warnings = cal.warnings();
     doc["warnings"] = json!(warnings);
     if !cal.leave_one_out.is_empty() {
         doc["leave_one_out"] = json!(cal.leave_one_out);

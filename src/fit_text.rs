@@ -83,14 +83,7 @@ pub fn say_summary(out: &Out, prep: &Loaded, cal: &Calibrated) {
     if res.free.len() > PARAMETERS {
         out.say(&format!("  ... {} more (-v)", res.free.len() - PARAMETERS));
     }
-    let warnings: Vec<String> = res
-        .warnings
-        .iter()
-        .chain(cal.holdout.as_ref().and_then(|h| h.worse.as_ref()))
-        .chain(&cal.leave_one_out_warning)
-        .cloned()
-        .collect();
-    say_warnings_short(out, &warnings, 2);
+    say_warnings_short(out, &cal.warnings(), 2);
     if truth {
         out.say(
             "errors from start headings the fit refines; `compare` starts from the logged one (-v)",

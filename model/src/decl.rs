@@ -156,16 +156,22 @@ impl Noise {
     /// `sqrt(s)`): white noise whose variance over an interval is sigma^2
     /// times its length, whatever the log's rate.
     pub fn is_density(&self) -> bool {
-        let u: String = self
-            .unit
-            .to_ascii_lowercase()
-            .chars()
-            .filter(|c| !c.is_whitespace())
-            .collect();
-        ["sqrt(hz)", "\u{221a}hz", "rthz", "sqrt(s)", "\u{221a}s"]
-            .iter()
-            .any(|d| u.contains(d))
+        density_factors(&self.unit) > 0
     }
+}
+
+/// How many square roots of a frequency or a time a unit has (a density,
+/// `m/s/sqrt(Hz)`, has one).
+pub fn density_factors(unit: &str) -> usize {
+    let u: String = unit
+        .to_ascii_lowercase()
+        .chars()
+        .filter(|c| !c.is_whitespace())
+        .collect();
+    ["sqrt(hz)", "\u{221a}hz", "rthz", "sqrt(s)", "\u{221a}s"]
+        .iter()
+        .map(|d| u.matches(d).count())
+        .sum()
 }
 
 /// What an observation measures. The analysis finds the pose tracker, the gyro

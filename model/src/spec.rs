@@ -661,13 +661,13 @@ impl RawNoise {
             // a unit that means a density but is not read as one would make
             // the filter add the noise per row, silently
             match &self.unit {
-                Some(u) if density_factors(u.get_ref()) > 1 => Err(cx.err_span(
+                Some(u) if crate::decl::density_factors(u.get_ref()) > 1 => Err(cx.err_span(
                     u,
                     format!(
                         "noise `{}`: unit `{}` has {} density factors; a density has one: `m/s/sqrt(Hz)`",
                         noise.name,
                         u.get_ref(),
-                        density_factors(u.get_ref())
+                        crate::decl::density_factors(u.get_ref())
                     ),
                 )),
                 Some(u) if !noise.is_density() && looks_like_density(u.get_ref()) => Err(cx.err_span(
@@ -691,20 +691,6 @@ impl RawNoise {
             ))
         }
     }
-}
-
-/// How many square roots of a frequency or a time a unit has (a density
-/// has one).
-fn density_factors(unit: &str) -> usize {
-    let u: String = unit
-        .to_ascii_lowercase()
-        .chars()
-        .filter(|c| !c.is_whitespace())
-        .collect();
-    ["sqrt(hz)", "\u{221a}hz", "rthz", "sqrt(s)", "\u{221a}s"]
-        .iter()
-        .map(|d| u.matches(d).count())
-        .sum()
 }
 
 /// Whether a noise unit speaks of a spectral density (a square root, hertz)

@@ -70,6 +70,20 @@ pub struct Calibrated<'r> {
     pub leave_one_out_warning: Option<String>,
 }
 
+impl Calibrated<'_> {
+    /// What the user should know, in the order said: the fit's (the logs'
+    /// among them), the held-out runs' and leave-one-run-out's.
+    pub fn warnings(&self) -> Vec<String> {
+        self.fit
+            .warnings
+            .iter()
+            .chain(self.holdout.as_ref().and_then(|h| h.worse.as_ref()))
+            .chain(&self.leave_one_out_warning)
+            .cloned()
+            .collect()
+    }
+}
+
 /// Calibrate `l`'s model on its runs with Levenberg-Marquardt (options
 /// `fo`), through the method registry like every method, and judge it.
 pub fn calibrate<'r>(l: &'r Loaded, fo: &FitOptions) -> Result<Calibrated<'r>, FitJobError> {
