@@ -5,7 +5,7 @@
 //! keep every figure.
 use crate::analysis_cmd::Common;
 use crate::effects_cmd::add_effect_command;
-use crate::output::{command_lines, table as new_table, table_lines, with_std, Out};
+use crate::output::{command_lines, cut, table as new_table, table_lines, with_std, Out};
 use kinegen_analysis::diagnosis::diagnose::Diagnosis;
 use kinegen_analysis::diagnosis::diagnose_job::Outcome;
 use kinegen_analysis::diagnosis::estimate::Estimates;
@@ -228,7 +228,7 @@ fn say_leftovers(out: &mut Vec<String>, d: &Diagnosis) {
         ));
     }
     if let Some(why) = &d.sensor_unmeasured {
-        out.push(short(&format!("sensor effects not tested: {why}")));
+        out.push(cut(&format!("sensor effects not tested: {why}")));
     }
     let left = if d.structure.structured {
         let first = d.structure.findings.first().cloned().unwrap_or_default();
@@ -238,16 +238,7 @@ fn say_leftovers(out: &mut Vec<String>, d: &Diagnosis) {
     } else {
         "residuals left: noise".to_string()
     };
-    out.push(short(&left));
-}
-
-/// A line cut to the width, with `…` (the whole text is behind -v).
-fn short(s: &str) -> String {
-    if s.chars().count() <= crate::output::WIDTH {
-        s.to_string()
-    } else {
-        s.chars().take(crate::output::WIDTH - 1).collect::<String>() + "…"
-    }
+    out.push(cut(&left));
 }
 
 /// The share of the noise floor above which the model's own discretisation

@@ -229,19 +229,8 @@ pub fn run_add_effect(
         // whole of it is in the file written)
         let change = kinegen_model::effects::spec_change(&model, &added);
         let width = crate::output::WIDTH;
-        let mut cut = false;
-        let lines: Vec<String> = change
-            .lines()
-            .map(|l| {
-                if l.chars().count() > width {
-                    cut = true;
-                    l.chars().take(width - 1).collect::<String>() + "…"
-                } else {
-                    l.to_string()
-                }
-            })
-            .collect();
-        let whole = if cut {
+        let lines: Vec<String> = change.lines().map(crate::output::cut).collect();
+        let whole = if change.lines().any(|l| l.chars().count() > width) {
             format!(
                 "\n(lines cut at {width} columns: {} has them whole)",
                 out.display()

@@ -122,7 +122,7 @@ fn span(pts: &[(f64, f64)]) -> ((f64, f64), (f64, f64)) {
 
 /// The last two parts of a run's path (`robot3/log.csv`): enough to tell
 /// runs apart in a chart's title.
-fn short(path: &str) -> String {
+pub(crate) fn short(path: &str) -> String {
     let parts: Vec<&str> = path.rsplit('/').take(2).collect();
     parts.into_iter().rev().collect::<Vec<_>>().join("/")
 }

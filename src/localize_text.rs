@@ -4,7 +4,7 @@
 //! to put in the spec), within 25 lines of 100 columns. `-v` says the noise
 //! estimate and every consistency figure (localize_cmd.rs); the JSON and
 //! the report keep them all.
-use crate::output::{command_lines, table, table_lines, Out, WIDTH};
+use crate::output::{command_lines, cut, table, table_lines, Out};
 use kinegen_analysis::applications::localize::summary::{side, Side, Summary};
 use kinegen_analysis::applications::localize::{Localization, Localized};
 use kinegen_analysis::model_on_log::run::Run;
@@ -21,12 +21,6 @@ fn judged(m: Option<f64>, b: Option<kinegen_analysis::applications::localize::Bo
         (Some(m), None) => format!("{m:.2}"),
         _ => "-".into(),
     }
-}
-
-/// A run's name for a table: its path's last two parts.
-fn short_name(path: &str) -> String {
-    let parts: Vec<&str> = path.rsplit('/').take(2).collect();
-    parts.into_iter().rev().collect::<Vec<_>>().join("/")
 }
 
 pub fn say_summary(
@@ -81,7 +75,7 @@ pub fn say_summary(
     for (run, (loc, sum)) in runs.iter().zip(&done.runs).take(RUNS) {
         let total = (loc.accepted + loc.rejected).max(1);
         t.add_row(vec![
-            short_name(&run.path),
+            crate::localize_report::short(&run.path),
             sum.rmse.map_or("-".into(), |e| format!("{e:.4}")),
             sum.dead_reckoning.map_or("-".into(), |e| format!("{e:.4}")),
             loc.accepted.to_string(),
@@ -102,13 +96,5 @@ pub fn say_summary(
         for l in command_lines(&cmd, 2) {
             out.say(&l);
         }
-    }
-}
-
-fn cut(s: &str) -> String {
-    if s.chars().count() <= WIDTH {
-        s.to_string()
-    } else {
-        s.chars().take(WIDTH - 1).collect::<String>() + "…"
     }
 }

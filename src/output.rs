@@ -228,6 +228,16 @@ pub fn with_std(value: f64, std: f64) -> String {
     format!("{value:.digits$} ± {std:.digits$}")
 }
 
+/// A line cut to `WIDTH` columns, with `…` where it is cut (the whole text
+/// is behind -v, in the JSON or in a file).
+pub fn cut(s: &str) -> String {
+    if s.chars().count() <= WIDTH {
+        s.to_string()
+    } else {
+        s.chars().take(WIDTH - 1).collect::<String>() + "…"
+    }
+}
+
 /// An aligned table without borders, as wide as its contents: the shape of
 /// every command's default table.
 pub fn table(header: &[&str]) -> comfy_table::Table {
@@ -251,12 +261,7 @@ pub fn table_lines(t: &comfy_table::Table) -> Vec<String> {
         .map(|l| {
             let l = l.trim_end().to_string();
             let l = l.strip_prefix(' ').unwrap_or(&l).to_string();
-            let line = format!("  {l}");
-            if line.chars().count() > WIDTH {
-                line.chars().take(WIDTH - 1).collect::<String>() + "…"
-            } else {
-                line
-            }
+            cut(&format!("  {l}"))
         })
         .collect()
 }

@@ -40,6 +40,22 @@ fn bin_dir() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_kinegen")).parent().unwrap()
 }
 
+/// Run a shell script as written (bash -euo pipefail) in a fresh temporary
+/// home, with kinegen on the PATH and `/path/to/kinegen` standing for this
+/// checkout: the home (kept for the caller to look into) and the output.
+fn run_in_home(script: &str) -> (tempfile::TempDir, std::process::Output) {
+    let home = tempfile::tempdir().unwrap();
+    let script = script.replace("/path/to/kinegen", &root().display().to_string());
+    let o = Command::new("bash")
+        .args(["-euo", "pipefail", "-c", &script])
+        .env("HOME", home.path())
+        .env("PATH", path_with_kinegen())
+        .current_dir(home.path())
+        .output()
+        .unwrap();
+    (home, o)
+}
+
 fn path_with_kinegen() -> String {
     format!(
         "{}:{}",
@@ -54,15 +70,7 @@ fn the_own_robot_block_runs_as_written() {
     let b = blocks(&readme, "Your own robot");
     let (_, script) = b.iter().find(|(l, _)| l == "sh").expect("an sh block");
     assert!(script.contains("kinegen verify"), "{script}");
-    let home = tempfile::tempdir().unwrap();
-    let script = script.replace("/path/to/kinegen", &root().display().to_string());
-    let o = Command::new("bash")
-        .args(["-euo", "pipefail", "-c", &script])
-        .env("HOME", home.path())
-        .env("PATH", path_with_kinegen())
-        .current_dir(home.path())
-        .output()
-        .unwrap();
+    let (home, o) = run_in_home(script);
     let out = String::from_utf8_lossy(&o.stdout);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "the block failed:\n{out}\n{err}");
@@ -173,15 +181,7 @@ fn the_tutorial_runs_as_written() {
         eprintln!("SKIPPED the_tutorial_runs_as_written: python3 has no rosbags");
         return;
     }
-    let home = tempfile::tempdir().unwrap();
-    let script = script.replace("/path/to/kinegen", &root().display().to_string());
-    let o = Command::new("bash")
-        .args(["-euo", "pipefail", "-c", &script])
-        .env("HOME", home.path())
-        .env("PATH", path_with_kinegen())
-        .current_dir(home.path())
-        .output()
-        .unwrap();
+    let (_home, o) = run_in_home(&script);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
         o.status.success(),
