@@ -176,8 +176,14 @@ fn run_case(
     let Robots {
         spec: base,
         robot: truth,
-    } = with_hidden(spec, &effects, &[], &[], crate::ir_source::deriver())
-        .map_err(|e| e.to_string())?;
+    } = with_hidden(
+        spec,
+        &effects,
+        &[],
+        &[],
+        crate::ir_source::analysis_deriver(),
+    )
+    .map_err(|e| e.to_string())?;
     let o = SimOptions {
         trajectory: Trajectory::Random,
         seed,
@@ -195,7 +201,7 @@ fn run_case(
     let outcome = kinegen_analysis::diagnosis::request::diagnose_runs(
         spec,
         (&base, std::slice::from_ref(&run)),
-        (&cat, crate::ir_source::deriver()),
+        (&cat, crate::ir_source::analysis_deriver()),
         &[],
         false,
         &Hooks::none(),
@@ -272,7 +278,7 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
     for spec in &specs {
         // a spec that does not derive, or whose IR is unusable, stops the
         // benchmark before its first case
-        if let Err(e) = crate::ir_source::deriver()
+        if let Err(e) = crate::ir_source::analysis_deriver()
             .derive(spec, &spec.path.display().to_string())
             .map_err(|e| e.to_string())
             .and_then(|ir| Runner::new(ir, &[]).map_err(|e| e.to_string()))

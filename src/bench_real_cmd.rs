@@ -71,7 +71,7 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
         &config,
         &a.session,
         a.max_gap,
-        crate::ir_source::deriver(),
+        crate::ir_source::analysis_deriver(),
     ) {
         Ok(l) => l,
         Err(e) => return bad(e),

@@ -25,9 +25,12 @@ pub fn compare(c: Common) -> ExitCode {
         effect_dirs: &c.catalogue.effects,
     };
     let progress = read_progress(quiet(&c));
-    match comparison::compare_files(&files, crate::ir_source::deriver(), &progress, |done| {
-        render(&c, &out, done)
-    }) {
+    match comparison::compare_files(
+        &files,
+        crate::ir_source::analysis_deriver(),
+        &progress,
+        |done| render(&c, &out, done),
+    ) {
         Ok(code) => code,
         Err(e) => bad(e.to_string()),
     }

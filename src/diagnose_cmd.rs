@@ -36,7 +36,7 @@ pub fn run(c: Common) -> ExitCode {
     };
     let done = diagnose_files(
         &request,
-        crate::ir_source::deriver(),
+        crate::ir_source::analysis_deriver(),
         &crate::analysis_cmd::read_progress(quiet(&c)),
         &Hooks {
             // said before the diagnosis starts, as the logs are read

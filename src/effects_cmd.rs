@@ -87,7 +87,7 @@ pub fn run_simulate(a: SimArgs) -> ExitCode {
             &hidden,
             &sets,
             &a.catalogue.effects,
-            crate::ir_source::deriver(),
+            crate::ir_source::analysis_deriver(),
         )
         .map_err(|e| e.to_string())?;
         let landmarks = match (&a.landmarks, &a.observations) {

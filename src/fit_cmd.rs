@@ -210,7 +210,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
     let done = fit_files(
         &files,
         &request,
-        crate::ir_source::deriver(),
+        crate::ir_source::analysis_deriver(),
         &progress,
         &hooks,
         |prep, fitted| {

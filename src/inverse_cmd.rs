@@ -30,10 +30,11 @@ pub fn run(a: &InverseArgs) -> ExitCode {
         return bad(e);
     }
     let out = Out::new(a.json.as_deref());
-    let (path, profiled) = match profile_files(&a.path, &a.spec, crate::ir_source::deriver()) {
-        Ok(p) => p,
-        Err(e) => return bad(e),
-    };
+    let (path, profiled) =
+        match profile_files(&a.path, &a.spec, crate::ir_source::symbolic_deriver()) {
+            Ok(p) => p,
+            Err(e) => return bad(e),
+        };
     let mut profiles = Vec::new();
     let mut specs_json = Vec::new();
     let mut feasible = true;

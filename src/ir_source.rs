@@ -1,10 +1,18 @@
-//! Getting a spec's IR without running symbolica in this process.
+//! Getting a spec's IR.
 //!
+//! The analysis (simulate, compare, fit, diagnose, localize, batches and
+//! benchmarks) runs on [`analysis_deriver`]: the committed IR of a bundled
+//! spec when it is current, else the spec differentiated in this process by
+//! `kinegen_model::autodiff`, which needs no symbolica, takes milliseconds
+//! and may run on every thread.
+//!
+//! The symbolic IR (closed-form inverse kinematics, the simplified kernels
+//! `generate` emits and `verify` checks) comes from [`symbolic_deriver`]:
 //! 1. The committed IR of the generated crate, when its spec fingerprint matches.
 //! 2. A cache of earlier derivations (temp dir, keyed by fingerprint).
 //! 3. Otherwise `kinegen derive` in a child process: symbolica's one-thread permit is
 //!    then held only while deriving, its output never reaches our stdout, and this
-//!    process (fitting, diagnosing) stays free to use threads.
+//!    process stays free to use threads.
 use kinegen_analysis::model_on_log::derivation::{DerivationFailed, Deriver};
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
@@ -34,7 +42,7 @@ fn committed_candidates(spec: &Path, name: &str) -> Vec<PathBuf> {
     v
 }
 
-/// The command line's [`Deriver`]: [`load`] (the committed IR, the cache, or
+/// The symbolic [`Deriver`]: [`load`] (the committed IR, the cache, or
 /// `kinegen derive` in a child process) of a spec as its file has it; a
 /// model built in memory (a spec with effects added has no file of its own)
 /// goes to the child as text on stdin, and its errors name it by `label`.
@@ -53,14 +61,58 @@ impl Deriver for ChildDeriver {
     }
 }
 
-/// The deriver every command uses, chosen here: the child process. Deriving
-/// in this process would hold symbolica's one machine-wide thread for as
-/// long as the process lives (a long fit or diagnosis would keep every other
-/// kinegen waiting), and the analyses here use threads freely; a child holds
-/// it only while it derives, and its output never reaches this process's
-/// stdout.
-pub fn deriver() -> &'static dyn Deriver {
+/// The analysis's [`Deriver`]: a bundled spec's committed IR when it is
+/// current (the kernels `generate` emits, so the analysis and the embedded
+/// code compute alike), else automatic differentiation in this process.
+pub struct AutodiffDeriver;
+
+impl Deriver for AutodiffDeriver {
+    fn derive(&self, model: &Model, label: &str) -> Result<ModelIr, DerivationFailed> {
+        let as_in_its_file =
+            std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source);
+        if as_in_its_file {
+            if let Some(ir) = committed(&model.path, model) {
+                return Ok(ir);
+            }
+        }
+        kinegen_model::autodiff::derive(model, &Default::default()).map_err(|e| {
+            DerivationFailed(if as_in_its_file {
+                e.to_string()
+            } else {
+                // a spec with effects added has no file whose lines the
+                // position could name: the label names it
+                format!("{label}: {}", e.message)
+            })
+        })
+    }
+}
+
+/// The deriver the analysis commands use: in-process automatic
+/// differentiation, no symbolica, no lock, any number of threads.
+pub fn analysis_deriver() -> &'static dyn Deriver {
+    &AutodiffDeriver
+}
+
+/// The deriver of commands that need closed forms only the symbolic stage
+/// gives (`inverse`, `navigate`): a child process, as symbolica allows one
+/// thread per user and machine and holding it for a whole command would
+/// keep every other kinegen waiting. A kinegen built without the symbolic
+/// stage says so (exit 2) for a spec without a committed IR.
+pub fn symbolic_deriver() -> &'static dyn Deriver {
     &ChildDeriver
+}
+
+/// The committed IR of the spec at `spec`, when it is `model`'s.
+fn committed(spec: &Path, model: &Model) -> Option<ModelIr> {
+    let fp = model.fingerprint();
+    committed_candidates(spec, &model.name)
+        .into_iter()
+        .find_map(|c| {
+            let text = std::fs::read_to_string(&c).ok()?;
+            ModelIr::from_json(&text)
+                .ok()
+                .filter(|ir| ir.spec_fingerprint == fp)
+        })
 }
 
 /// How the derive child gets the spec.
@@ -72,20 +124,13 @@ enum Spec<'a> {
     Text(&'a str),
 }
 
-/// Load and validate a spec and return its IR.
+/// Load and validate a spec and return its symbolic IR.
 pub fn load(spec: &Path) -> Result<ModelIr, String> {
     let model = Model::load(spec).map_err(|e| e.to_string())?;
-    let fp = model.fingerprint();
-    for c in committed_candidates(spec, &model.name) {
-        if let Ok(text) = std::fs::read_to_string(&c) {
-            if let Ok(ir) = ModelIr::from_json(&text) {
-                if ir.spec_fingerprint == fp {
-                    return Ok(ir);
-                }
-            }
-        }
+    match committed(spec, &model) {
+        Some(ir) => Ok(ir),
+        None => derive_cached(&model, Spec::File(spec)),
     }
-    derive_cached(&model, Spec::File(spec))
 }
 
 /// The IR of `model` from the cache, or derived into it by `kinegen derive`
@@ -164,7 +209,7 @@ fn derive_cached(model: &Model, spec: Spec) -> Result<ModelIr, String> {
 
 /// What a binary built without the derivation stage says when it needs it.
 #[cfg_attr(feature = "symbolic", allow(dead_code))]
-pub const NO_SYMBOLIC: &str = "this kinegen was built without its symbolic stage (the `symbolic` feature): it runs on the committed IR of the bundled specs only; build it with `cargo build --bin kinegen` (the default features) to derive a new or edited spec";
+pub const NO_SYMBOLIC: &str = "this kinegen was built without its symbolic stage (the `symbolic` feature), which `generate`, `verify` and `derive` need, as do `inverse` and `navigate` for a spec whose closed-form inverse kinematics are not committed; every analysis command works without it; build the full kinegen with `cargo build --bin kinegen` (the default features)";
 
 /// `kinegen derive`: derive one spec's IR into a file (used by `load`).
 #[cfg(not(feature = "symbolic"))]

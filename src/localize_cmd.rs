@@ -83,7 +83,12 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
     };
     let progress = crate::analysis_cmd::read_progress(crate::analysis_cmd::quiet(&c));
     let said = |prep: &Loaded| crate::analysis_cmd::say_warnings(&out, &prep.warnings);
-    match localize_files(&request, crate::ir_source::deriver(), &progress, &said) {
+    match localize_files(
+        &request,
+        crate::ir_source::analysis_deriver(),
+        &progress,
+        &said,
+    ) {
         Ok(done) => render(&c, a, &out, &done),
         Err(e) => bad(e.to_string()),
     }

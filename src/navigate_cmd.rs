@@ -94,7 +94,7 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
             .as_deref()
             .and_then(kinegen_analysis::estimation::methods::by_name),
     };
-    let done = match navigate_files(&mission, crate::ir_source::deriver()) {
+    let done = match navigate_files(&mission, crate::ir_source::symbolic_deriver()) {
         Ok(d) => d,
         Err(e) => return bad(e),
     };

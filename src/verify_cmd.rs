@@ -1,6 +1,9 @@
 //! `kinegen verify`.
+use kinegen_model::autodiff;
 use kinegen_model::files::spec_files;
+use kinegen_model::spec::Model;
 use kinegen_verify::checks::where_;
+use kinegen_verify::crosscheck::autodiff_agrees;
 use kinegen_verify::{run_all, IrKernel};
 use std::path::Path;
 use std::process::ExitCode;
@@ -36,6 +39,17 @@ pub fn run(spec: Option<&Path>, samples: usize, verbose: bool) -> ExitCode {
             );
         }
         let mut report = run_all(&ir, &IrKernel, samples, 1);
+        // the analysis's own IR (automatic differentiation) against this one,
+        // kernel by kernel, value and every Jacobian
+        match Model::load(&path).and_then(|m| autodiff::derive(&m, &Default::default())) {
+            Ok(ad) => report
+                .findings
+                .extend(autodiff_agrees(&ir, &ad, samples, 2)),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(2);
+            }
+        }
         let mut casadi = String::from("CasADi skipped");
         match casadi_reference(&path) {
             Ok(dir) => {

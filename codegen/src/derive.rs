@@ -322,7 +322,7 @@ fn has_negative_power(a: AtomView, s: Symbol) -> bool {
 
 fn finish(spec: Spec, model: &Model, sym: &Sym) -> Result<Function, SymbolicError> {
     let (tape, outputs) = lower(&spec, sym.fx, &sym.options, true)?;
-    let ops_tree = tree_size(&tape, &outputs);
+    let ops_tree = kinegen_model::passes::tree_size(&tape, &outputs);
     Ok(Function {
         kernel: spec.kernel,
         name: spec
@@ -338,24 +338,6 @@ fn finish(spec: Spec, model: &Model, sym: &Sym) -> Result<Function, SymbolicErro
         outputs,
         ops_tree,
     })
-}
-
-/// Arithmetic operations if every output were evaluated as its own expression tree,
-/// with no sharing (the "before CSE" count). Counted on the shared tape: an op's
-/// tree costs itself plus its operands' trees. Equal to lowering without CSE, but
-/// without building a tree that can have millions of nodes.
-fn tree_size(tape: &[Op], outputs: &[u32]) -> usize {
-    let mut size = vec![0usize; tape.len()];
-    for (i, op) in tape.iter().enumerate() {
-        let own = usize::from(op.is_arithmetic());
-        size[i] = op
-            .operands()
-            .iter()
-            .fold(own, |acc, &o| acc.saturating_add(size[o as usize]));
-    }
-    outputs
-        .iter()
-        .fold(0usize, |acc, &o| acc.saturating_add(size[o as usize]))
 }
 
 /// Jacobian of `outs` w.r.t. `vars` (row-major) when the outputs are written in

@@ -118,6 +118,46 @@ impl Op {
     pub fn is_arithmetic(&self) -> bool {
         !matches!(self, Op::Const(_) | Op::Arg(..))
     }
+
+    /// The op's value with its operands' values read by `v`: the one
+    /// definition of what each op computes, for the interpreter and for
+    /// constant folding ([`crate::autodiff`]). An argument reads as NaN here
+    /// (the interpreter reads arguments itself).
+    #[inline]
+    pub fn apply(&self, v: impl Fn(u32) -> f64) -> f64 {
+        match *self {
+            Op::Const(c) => c,
+            Op::Arg(..) => f64::NAN,
+            Op::Add(a, b) => v(a) + v(b),
+            Op::Sub(a, b) => v(a) - v(b),
+            Op::Mul(a, b) => v(a) * v(b),
+            Op::Div(a, b) => v(a) / v(b),
+            Op::Neg(a) => -v(a),
+            Op::PowI(a, n) => v(a).powi(n),
+            Op::Pow(a, b) => v(a).powf(v(b)),
+            Op::Sqrt(a) => v(a).sqrt(),
+            // libm's, as the generated kernels and the JIT call them (and
+            // its sincos gives bit for bit the same pair): one result everywhere
+            Op::Sin(a) => libm::sin(v(a)),
+            Op::Cos(a) => libm::cos(v(a)),
+            Op::Tan(a) => v(a).tan(),
+            Op::Atan(a) => v(a).atan(),
+            Op::Atan2(a, b) => v(a).atan2(v(b)),
+            Op::Exp(a) => v(a).exp(),
+            Op::Ln(a) => v(a).ln(),
+            Op::Abs(a) => v(a).abs(),
+            Op::Sign(a) => sign(v(a)),
+            Op::NearZero { x, eps, near, far } => {
+                if v(x).abs() < eps {
+                    v(near)
+                } else {
+                    v(far)
+                }
+            }
+            Op::PinvSym3 { m, i, j } => crate::linalg::pinv_sym3(m.map(v))
+                [crate::linalg::packed_index(i as usize, j as usize)],
+        }
+    }
 }
 
 /// The sign of `x`: -1, 0 at 0 (either zero), or 1; NaN stays NaN. The one
@@ -210,34 +250,6 @@ impl Function {
             let s = &*scratch;
             let v = |i: u32| s[i as usize];
             let val = match *op {
-                Op::Const(c) => c,
-                Op::Arg(a, i) => args[a as usize][i as usize],
-                Op::Add(a, b) => v(a) + v(b),
-                Op::Sub(a, b) => v(a) - v(b),
-                Op::Mul(a, b) => v(a) * v(b),
-                Op::Div(a, b) => v(a) / v(b),
-                Op::Neg(a) => -v(a),
-                Op::PowI(a, n) => v(a).powi(n),
-                Op::Pow(a, b) => v(a).powf(v(b)),
-                Op::Sqrt(a) => v(a).sqrt(),
-                // libm's, as the generated kernels and the JIT call them (and
-                // its sincos gives bit for bit the same pair): one result everywhere
-                Op::Sin(a) => libm::sin(v(a)),
-                Op::Cos(a) => libm::cos(v(a)),
-                Op::Tan(a) => v(a).tan(),
-                Op::Atan(a) => v(a).atan(),
-                Op::Atan2(a, b) => v(a).atan2(v(b)),
-                Op::Exp(a) => v(a).exp(),
-                Op::Ln(a) => v(a).ln(),
-                Op::Abs(a) => v(a).abs(),
-                Op::Sign(a) => sign(v(a)),
-                Op::NearZero { x, eps, near, far } => {
-                    if v(x).abs() < eps {
-                        v(near)
-                    } else {
-                        v(far)
-                    }
-                }
                 Op::PinvSym3 { m, i, j } => {
                     let p = match pinv_cache {
                         Some((key, p)) if key == m => p,
@@ -249,6 +261,8 @@ impl Function {
                     };
                     p[crate::linalg::packed_index(i as usize, j as usize)]
                 }
+                Op::Arg(a, i) => args[a as usize][i as usize],
+                ref other => other.apply(v),
             };
             scratch.push(val);
         }

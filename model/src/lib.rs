@@ -62,6 +62,7 @@
 //! let pose = step.interpret(&args);
 //! assert!((pose[0] - 1.0).abs() < 1e-12 && (pose[1] - 1.0).abs() < 1e-12);
 //! ```
+pub mod autodiff;
 pub mod decl;
 pub mod effects;
 pub mod error;
@@ -72,6 +73,7 @@ pub mod ir;
 pub mod kernel;
 pub mod linalg;
 pub mod options;
+pub mod passes;
 pub mod schedule;
 pub mod spec;
 

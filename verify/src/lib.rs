@@ -27,6 +27,7 @@
 //! ```
 pub mod casadi;
 pub mod checks;
+pub mod crosscheck;
 pub mod kernel;
 #[cfg(feature = "compiled")]
 pub mod models;

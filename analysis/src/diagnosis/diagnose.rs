@@ -19,6 +19,7 @@ use crate::model_on_log::derivation::EffectChains;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use nalgebra::DVector;
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::estimate::Estimates;
@@ -282,31 +283,48 @@ fn to_rank(
     (skipped, sensor): (&mut Named, &mut Named),
 ) -> Vec<(String, String, Runner)> {
     let first_round = names.is_empty();
-    let mut augmented = Vec::new();
-    for (name, doc) in remaining {
-        let mut list = names.to_vec();
-        list.push(name.clone());
-        match cat.chains.runner(&list).map_err(|e| e.to_string()) {
-            Ok(aug) => {
-                let start = seeded(&aug, &cur.runner, &cur.fit.p);
-                let effect_params = effect_params(&start, &cur.runner);
-                if sensor_only(&start, &effect_params) {
-                    if first_round {
-                        sensor.push((name.clone(), doc.clone()));
-                    }
-                    continue;
-                }
-                match redundancy(&start, &effect_params, runs, o) {
-                    Some(why) if first_round => skipped.push((name.clone(), why)),
-                    Some(_) => {}
-                    None => augmented.push((name.clone(), doc.clone(), aug)),
-                }
+    // each candidate derived and tried on its own thread: derivation is
+    // in-process automatic differentiation, with no lock to wait for
+    let tried: Vec<Tried> = remaining
+        .par_iter()
+        .map(|(name, _)| {
+            let mut list = names.to_vec();
+            list.push(name.clone());
+            let aug = match cat.chains.runner(&list) {
+                Ok(aug) => aug,
+                Err(why) => return Tried::Failed(why.to_string()),
+            };
+            let start = seeded(&aug, &cur.runner, &cur.fit.p);
+            let effect_params = effect_params(&start, &cur.runner);
+            if sensor_only(&start, &effect_params) {
+                return Tried::SensorOnly;
             }
-            Err(why) if first_round => skipped.push((name.clone(), why)),
-            Err(_) => {}
+            match redundancy(&start, &effect_params, runs, o) {
+                Some(why) => Tried::Failed(why),
+                None => Tried::Ranked(Box::new(aug)),
+            }
+        })
+        .collect();
+    let mut augmented = Vec::new();
+    for ((name, doc), tried) in remaining.iter().zip(tried) {
+        match tried {
+            Tried::Ranked(aug) => augmented.push((name.clone(), doc.clone(), *aug)),
+            Tried::SensorOnly if first_round => sensor.push((name.clone(), doc.clone())),
+            Tried::Failed(why) if first_round => skipped.push((name.clone(), why)),
+            _ => {}
         }
     }
     augmented
+}
+
+/// What became of one candidate effect before ranking.
+enum Tried {
+    /// To be ranked, with its runner.
+    Ranked(Box<Runner>),
+    /// Only the range-bearing sensor reads it: for the sensor's own chain.
+    SensorOnly,
+    /// Not derived, or redundant with the calibration: why.
+    Failed(String),
 }
 
 /// The sensor's diagnosis after the motion's (see [`super::sensor`]): its

@@ -29,6 +29,7 @@ use crate::model_on_log::derivation::EffectChains;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::robust::median;
 use crate::model_on_log::run::Run;
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Most sensor effects found in a row.
@@ -159,8 +160,9 @@ pub fn diagnose_sensor(
     let mut remaining = effects.to_vec();
     while found.len() < MAX_CHAIN && !remaining.is_empty() {
         let (base, _) = s.residuals(&runner, &p, &[], false);
+        // each candidate on its own thread (derivation takes no lock)
         let mut ranked: Vec<(SensorCandidate, Runner)> = remaining
-            .iter()
+            .par_iter()
             .filter_map(|(name, doc)| {
                 let mut list: Vec<String> = motion.to_vec();
                 list.extend(found.iter().map(|c| c.effect.clone()));
