@@ -9,21 +9,18 @@ mkdir -p "$out"
 data=data/mystery_robot.csv
 say() { printf '\n\033[1m$ %s\033[0m\n' "$*"; }
 
-# First result without symbolica: comparing a bundled spec with a log runs on
-# its committed IR, so a binary without the derivation stage (minutes less to
-# build on a fresh clone) shows it while symbolica is still to be compiled.
+# The answer first: the analysis differentiates a spec by itself (automatic
+# differentiation, no symbolica), so a binary without the symbolic stage
+# (minutes less to build on a fresh clone) compares, diagnoses, adds the
+# effect and calibrates. Only generate and verify, whose product is the
+# symbolically simplified kernels, need the full binary, built afterwards.
 # cargo shows its progress (a bar on a terminal, a line per crate otherwise)
-echo "building kinegen without its symbolic stage (first result; 3-5 min on a fresh clone) ..."
+echo "building kinegen without its symbolic stage (the analysis; 3-7 min on a fresh clone) ..."
 cargo build --no-default-features --bin kinegen
 mkdir -p target/story && cp target/debug/kinegen target/story/kinegen-analysis
+k=target/story/kinegen-analysis
 say kinegen compare --spec spec/diff_drive.toml --data $data --report $out/compare
-target/story/kinegen-analysis compare --spec spec/diff_drive.toml --data $data --report $out/compare
-
-# Diagnosis derives the spec with each catalogue effect added: the full binary.
-echo
-echo "building kinegen with its symbolic stage (symbolica: 5-12 min on a fresh clone) ..."
-cargo build --bin kinegen
-k=target/debug/kinegen
+$k compare --spec spec/diff_drive.toml --data $data --report $out/compare
 
 say kinegen diagnose --spec spec/diff_drive.toml --data $data --report $out/diagnose --json $out/diagnose.json
 $k diagnose --spec spec/diff_drive.toml --data $data --report $out/diagnose --json $out/diagnose.json
@@ -51,6 +48,12 @@ svg = next(s for s in re.findall(r"<svg.*?</svg>", html, re.S) if "position erro
 open(sys.argv[2], "w").write(svg)
 PY
 echo "the README's picture, redrawn: $out/story.svg (docs/src/img/story.svg)"
+
+# The kernels to embed: simplified and shared by the symbolic stage.
+echo
+echo "building kinegen with its symbolic stage (symbolica: 5-12 min on a fresh clone) ..."
+cargo build --bin kinegen
+k=target/debug/kinegen
 
 say kinegen generate --spec-dir $out/spec --out $out/generated
 $k generate --spec-dir $out/spec --out $out/generated

@@ -41,15 +41,19 @@ pub fn run(spec: Option<&Path>, samples: usize, verbose: bool) -> ExitCode {
         let mut report = run_all(&ir, &IrKernel, samples, 1);
         // the analysis's own IR (automatic differentiation) against this one,
         // kernel by kernel, value and every Jacobian
-        match Model::load(&path).and_then(|m| autodiff::derive(&m, &Default::default())) {
-            Ok(ad) => report
-                .findings
-                .extend(autodiff_agrees(&ir, &ad, samples, 2)),
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::from(2);
-            }
-        }
+        let vs_autodiff =
+            match Model::load(&path).and_then(|m| autodiff::derive(&m, &Default::default())) {
+                Ok(ad) => {
+                    let against = autodiff_agrees(&ir, &ad, samples, 2);
+                    let n = against.len();
+                    report.findings.extend(against);
+                    n
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(2);
+                }
+            };
         let mut casadi = String::from("CasADi skipped");
         match casadi_reference(&path) {
             Ok(dir) => {
@@ -74,7 +78,7 @@ pub fn run(spec: Option<&Path>, samples: usize, verbose: bool) -> ExitCode {
         }
         let failures = report.failures();
         println!(
-            "{:<16} {:>4} checks, {:>3} failed ({casadi}; {samples} samples each)",
+            "{:<16} {:>4} checks, {:>3} failed ({vs_autodiff} vs autodiff, {casadi}; {samples} samples each)",
             ir.name,
             report.findings.len(),
             failures.len()

@@ -1,9 +1,10 @@
 //! Derivation behind a trait. Nothing in this crate runs symbolica (so it may
 //! use threads freely); a caller that needs a spec's IR that is not derived
 //! yet (diagnosis's candidate effects, a benchmark's robots) asks a
-//! [`Deriver`]. The command line's deriver runs `kinegen derive` in a child
-//! process, as symbolica allows one thread per user and machine; a program
-//! that owns symbolica's thread can derive in-process behind the same trait.
+//! [`Deriver`]. The command line's analysis deriver differentiates in-process
+//! (`kinegen_model::autodiff`, any thread); a symbolic one runs `kinegen
+//! derive` in a child process, as symbolica allows one thread per user and
+//! machine.
 use crate::effects::{with_chain, ApplyError, Effect};
 use crate::model_on_log::model::ModelError;
 use crate::model_on_log::model::Runner;
