@@ -88,9 +88,18 @@ impl Deriver for AutodiffDeriver {
 }
 
 /// The deriver the analysis commands use: in-process automatic
-/// differentiation, no symbolica, no lock, any number of threads.
+/// differentiation, no symbolica, no lock, any number of threads. For a
+/// same-run baseline, `KINEGEN_ANALYSIS_DERIVER=symbolic` (full build only)
+/// runs the analysis on the symbolic IR instead, derived in a child process
+/// as before automatic differentiation (`scripts/bench_derivers.py` compares
+/// the two).
 pub fn analysis_deriver() -> &'static dyn Deriver {
-    &AutodiffDeriver
+    let symbolic = std::env::var("KINEGEN_ANALYSIS_DERIVER").is_ok_and(|v| v == "symbolic");
+    if symbolic && cfg!(feature = "symbolic") {
+        &ChildDeriver
+    } else {
+        &AutodiffDeriver
+    }
 }
 
 /// The deriver of commands that need closed forms only the symbolic stage

@@ -948,3 +948,85 @@ fn a_users_own_effect_on_a_users_own_robot_is_named_and_quiet() {
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(doc["verdict"]["effect"], "track_skid", "{doc}");
 }
+
+/// A differential drive whose camera sits 0.15 m ahead of and 0.03 m beside
+/// the axle, seen with ground truth: the sightings name `sensor_offset`
+/// (its range-bearing mounting calibrated on them, competing with the
+/// camera's own effects on the same footing), with the offset within two
+/// standard deviations; no effect whose estimate is outside its physical
+/// range (a negative depth share) is named.
+#[test]
+fn a_camera_mounted_off_the_axle_is_named_sensor_offset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let map = d.join("map.csv");
+    let mut text = String::from("id,x,y\n");
+    for i in 0..12 {
+        let a = i as f64 * 0.52;
+        let r = 2.0 + (i % 3) as f64;
+        text += &format!("{i},{:.3},{:.3}\n", r * a.cos(), r * a.sin());
+    }
+    std::fs::write(&map, text).unwrap();
+    let obs = d.join("obs.csv");
+    let (m, o) = (map.to_str().unwrap(), obs.to_str().unwrap());
+    let spec = "spec/diff_drive.toml";
+    let log = simulate(
+        d,
+        "log.csv",
+        &[
+            "--spec",
+            spec,
+            "--effect",
+            "sensor_offset.rb_sensor_dx=0.15",
+            "--effect",
+            "sensor_offset.rb_sensor_dy=0.03",
+            "--trajectory",
+            "random",
+            "--seed",
+            "4",
+            "--laps",
+            "3",
+            "--landmarks",
+            m,
+            "--observations",
+            o,
+        ],
+    );
+    let l = log.to_str().unwrap();
+    let doc = kinegen_json(&[
+        "diagnose",
+        "--spec",
+        spec,
+        "--data",
+        l,
+        "--observations",
+        o,
+        "--landmarks",
+        m,
+    ]);
+    let effects = doc["verdict"]["effects"].as_array().unwrap();
+    let names: Vec<&str> = effects
+        .iter()
+        .map(|e| e["effect"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["sensor_offset"], "{}", doc["verdict"]);
+    for (param, truth) in [("rb_sensor_dx", 0.15), ("rb_sensor_dy", 0.03)] {
+        let e = &effects[0]["parameters"][param];
+        let (est, sd) = (e["estimate"].as_f64().unwrap(), e["std"].as_f64().unwrap());
+        assert!(sd > 0.0 && sd.is_finite(), "{param}: {e}");
+        assert!(
+            (est - truth).abs() <= 2.0 * sd.max(0.003),
+            "{param}: {est} ± {sd}, truth {truth}"
+        );
+    }
+    // range_as_depth, if tried, is not named with a share outside 0..1
+    for c in doc["sensor_candidates"].as_array().unwrap() {
+        if c["effect"] == "range_as_depth" {
+            let share = c["parameters"]["range_depth"]["estimate"].as_f64().unwrap();
+            assert!(
+                !c["significant"].as_bool().unwrap() || (-0.05..=1.05).contains(&share),
+                "{c}"
+            );
+        }
+    }
+}

@@ -1724,7 +1724,8 @@ fn a_camera_that_reads_depth_or_looks_aside_is_named_from_its_sightings() {
     );
     let d = seen("plain", |r, b| (r, b));
     assert_eq!(found(&d), Vec::<String>::new(), "{}", d["verdict"]);
-    assert_eq!(d["sensor_candidates"].as_array().unwrap().len(), 3, "{d}");
+    // the camera's three effects and sensor_offset's range-bearing mounting
+    assert_eq!(d["sensor_candidates"].as_array().unwrap().len(), 4, "{d}");
     let d = seen("turned", |r, b| (r, b + 0.02));
     assert_eq!(found(&d), ["bearing_offset"], "{}", d["verdict"]);
     let offset = d["verdict"]["effects"][0]["parameters"]["bearing_offset"]["estimate"].as_f64();

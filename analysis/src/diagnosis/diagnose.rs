@@ -290,27 +290,52 @@ fn to_rank(
         .map(|(name, _)| {
             let mut list = names.to_vec();
             list.push(name.clone());
-            let aug = match cat.chains.runner(&list) {
+            let mut aug = match cat.chains.runner(&list) {
                 Ok(aug) => aug,
                 Err(why) => return Tried::Failed(why.to_string()),
             };
             let start = seeded(&aug, &cur.runner, &cur.fit.p);
-            let effect_params = effect_params(&start, &cur.runner);
-            if sensor_only(&start, &effect_params) {
+            let added = effect_params(&start, &cur.runner);
+            if sensor_only(&start, &added) {
                 return Tried::SensorOnly;
             }
-            match redundancy(&start, &effect_params, runs, o) {
+            // an effect on the motion or the tracker that also moves the
+            // range-bearing sensor (a sensor_offset has both mountings):
+            // the sensor's share is calibrated and tested on the sightings,
+            // in the sensor's chain; the motion's ranking, whose residuals
+            // do not see it, holds it at its nominal value
+            let sensor_part: Vec<usize> = added
+                .iter()
+                .copied()
+                .filter(|&i| sensor_only(&start, &[i]))
+                .collect();
+            aug.free.retain(|i| !sensor_part.contains(i));
+            let start = seeded(&aug, &cur.runner, &cur.fit.p);
+            let motion_part = effect_params(&start, &cur.runner);
+            let also_sensor = !sensor_part.is_empty();
+            match redundancy(&start, &motion_part, runs, o) {
+                Some(why) if also_sensor => Tried::SensorAndFailed(why),
                 Some(why) => Tried::Failed(why),
-                None => Tried::Ranked(Box::new(aug)),
+                None => Tried::Ranked(Box::new(aug), also_sensor),
             }
         })
         .collect();
     let mut augmented = Vec::new();
     for ((name, doc), tried) in remaining.iter().zip(tried) {
+        let to_sensor = matches!(
+            tried,
+            Tried::SensorOnly | Tried::SensorAndFailed(_) | Tried::Ranked(_, true)
+        );
+        if to_sensor && first_round {
+            sensor.push((name.clone(), doc.clone()));
+        }
         match tried {
-            Tried::Ranked(aug) => augmented.push((name.clone(), doc.clone(), *aug)),
-            Tried::SensorOnly if first_round => sensor.push((name.clone(), doc.clone())),
+            Tried::Ranked(aug, _) => augmented.push((name.clone(), doc.clone(), *aug)),
             Tried::Failed(why) if first_round => skipped.push((name.clone(), why)),
+            Tried::SensorAndFailed(why) if first_round => skipped.push((
+                name.clone(),
+                format!("{why} (its range-bearing mounting is tested on the sightings)"),
+            )),
             _ => {}
         }
     }
@@ -319,10 +344,14 @@ fn to_rank(
 
 /// What became of one candidate effect before ranking.
 enum Tried {
-    /// To be ranked, with its runner.
-    Ranked(Box<Runner>),
+    /// To be ranked, with its runner; and tried in the sensor's chain too
+    /// (true) when part of it only the range-bearing sensor reads.
+    Ranked(Box<Runner>, bool),
     /// Only the range-bearing sensor reads it: for the sensor's own chain.
     SensorOnly,
+    /// Its motion part redundant with the calibration (why); its sensor
+    /// part for the sensor's chain.
+    SensorAndFailed(String),
     /// Not derived, or redundant with the calibration: why.
     Failed(String),
 }
@@ -485,6 +514,7 @@ pub fn diagnose(
             &test,
             folds.as_ref(),
             clock.as_ref(),
+            cat.chains.catalogue,
             &o,
             progress,
         );

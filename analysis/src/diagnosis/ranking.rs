@@ -200,6 +200,7 @@ pub(crate) fn rank(
     test: &[Run],
     folds: Option<&Folds>,
     clock: Option<&SightingClock>,
+    catalogue: &[kinegen_model::effects::Effect],
     o: &FitOptions,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<Candidate> {
@@ -239,6 +240,7 @@ pub(crate) fn rank(
         from_nominal: from_nominal && !at_floor,
         folds,
         clock,
+        catalogue,
     };
     let mut candidates: Vec<Candidate> = augmented
         .par_iter()
@@ -287,6 +289,8 @@ pub(crate) struct Ranking<'a> {
     pub(crate) folds: Option<&'a Folds>,
     /// The ground truth's lag behind the sightings, when the logs have both.
     pub(crate) clock: Option<&'a SightingClock>,
+    /// The effects' definitions (their parameters' physical ranges).
+    pub(crate) catalogue: &'a [kinegen_model::effects::Effect],
 }
 
 impl Ranking<'_> {
@@ -377,8 +381,10 @@ impl Ranking<'_> {
             .flatten();
         let clock = self.clock_verdict(&start, &f);
         let contradicted = matches!(clock, Some(ClockVerdict::Contradicted { .. }));
-        let significant = (classic || folds.is_some_and(|t| t.holds())) && !contradicted;
         let parameters = estimates(&start, &effect_params, &f);
+        let unphysical = super::estimate::unphysical(self.catalogue, name, &parameters);
+        let significant =
+            (classic || folds.is_some_and(|t| t.holds())) && !contradicted && unphysical.is_none();
         let evidence = format!(
             "{ev}; error {:.3} -> {:.3} (x{:.1}), BIC gain {:.0}, held-out error {:.3} -> {:.3}{}, noise floor {:.3}",
             self.cur.rmse,
@@ -396,7 +402,7 @@ impl Ranking<'_> {
             ClockVerdict::Confirmed { delay } => {
                 format!("; confirmed by the sightings ({delay:.3} s): {c}")
             }
-        });
+        }) + &unphysical.map_or(String::new(), |why| format!("; not the physical effect: {why}"));
         Some(Candidate {
             effect: name.to_string(),
             rmse,

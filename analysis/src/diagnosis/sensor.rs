@@ -59,6 +59,9 @@ pub struct SensorCandidate {
     pub parameters: Estimates,
     pub fit: SightingFit,
     pub significant: bool,
+    /// Why its estimates are not the physical effect (never a verdict then).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unphysical: Option<String>,
     /// The calibrated parameter vector of its runner.
     #[serde(skip)]
     pub p: Vec<f64>,
@@ -85,6 +88,7 @@ fn medians(r: &Runner, res: &[f64]) -> [f64; 2] {
 #[allow(clippy::too_many_arguments)]
 fn candidate(
     s: &Sightings,
+    catalogue: &[kinegen_model::effects::Effect],
     name: &str,
     doc: &str,
     aug: &Runner,
@@ -114,6 +118,7 @@ fn candidate(
         .collect();
     let ([range_before, bearing_before], [range_after, bearing_after]) =
         (medians(aug, base), medians(aug, &res));
+    let unphysical = super::estimate::unphysical(catalogue, name, &parameters);
     SensorCandidate {
         effect: name.to_string(),
         doc: doc.to_string(),
@@ -126,7 +131,8 @@ fn candidate(
             bearing_after,
             folds,
         },
-        significant: folds.holds(),
+        significant: folds.holds() && unphysical.is_none(),
+        unphysical,
         p: fit.p,
     }
 }
@@ -175,6 +181,9 @@ pub fn diagnose_sensor(
                     .iter()
                     .copied()
                     .filter(|&i| cur.param_index(&aug.names[i]).is_none())
+                    // the sensor's own: a mixed effect's other parameters
+                    // (a tracker's offset) the sightings do not see
+                    .filter(|&i| sensor_only(&aug, &[i]))
                     .collect();
                 // what the spec change sets: the effect's own parameters
                 let new: Vec<usize> = free
@@ -182,7 +191,17 @@ pub fn diagnose_sensor(
                     .copied()
                     .filter(|&i| runner.param_index(&aug.names[i]).is_none())
                     .collect();
-                let c = candidate(&s, name, doc, &aug, &start, &free, &base, &new);
+                let c = candidate(
+                    &s,
+                    chains.catalogue,
+                    name,
+                    doc,
+                    &aug,
+                    &start,
+                    &free,
+                    &base,
+                    &new,
+                );
                 Some((c, aug))
             })
             .collect();

@@ -30,7 +30,7 @@
 //! name = "w"
 //! column = "w_cmd"
 //! kind = "absolute"
-//! [[param]]
+//! [[parameter]]
 //! name = "k"
 //! nominal = 1.0
 //! [motion]

@@ -146,6 +146,12 @@ pub struct ParamTemplate {
     /// `"2%"` means nothing for an effect whose nominal value is 0).
     #[serde(default)]
     pub tolerance: Option<f64>,
+    /// Where the parameter means what the effect says, `[low, high]` (a
+    /// share between 0 and 1), when its bounds are wider for the
+    /// calibration's sake: diagnosis never names an effect whose estimate
+    /// lies outside this by more than two standard deviations.
+    #[serde(default)]
+    pub physical: Option<[f64; 2]>,
 }
 
 fn yes() -> bool {
@@ -338,6 +344,8 @@ enum ParameterError {
     OutsideBounds(String, f64),
     #[error("parameter `{0}`: a tolerance is a standard deviation above 0")]
     Tolerance(String),
+    #[error("parameter `{0}`: `physical` is [low, high] with finite low < high")]
+    Physical(String),
 }
 
 /// What the spec language would refuse in a parameter, refused here.
@@ -351,6 +359,11 @@ fn check_parameter(p: &ParamTemplate) -> Result<(), ParameterError> {
     }
     if p.tolerance.is_some_and(|t| t <= 0.0) {
         return Err(ParameterError::Tolerance(p.name.clone()));
+    }
+    if p.physical
+        .is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && lo < hi))
+    {
+        return Err(ParameterError::Physical(p.name.clone()));
     }
     Ok(())
 }
