@@ -14,6 +14,7 @@ use kinegen_analysis::diagnosis::diagnose_job::Hooks;
 use kinegen_analysis::effects::{catalogue, Applicability};
 use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_model::spec::Model;
+use rayon::prelude::*;
 use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -272,8 +273,8 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
             known.join(", ")
         ));
     }
-    let mut cases = Vec::new();
-    let mut failed: Vec<u64> = Vec::new();
+    // every case of this shard, in benchmark order
+    let mut todo = Vec::new();
     let mut index = 0u64;
     for spec in &specs {
         // a spec that does not derive, or whose IR is unusable, stops the
@@ -292,7 +293,7 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
         if !a.effect.is_empty() {
             effects.retain(|(e, _, _)| a.effect.contains(e));
         }
-        for (j, hidden) in hidden_sets(&effects).iter().enumerate() {
+        for (j, hidden) in hidden_sets(&effects).into_iter().enumerate() {
             for &noise in &NOISE {
                 for seed in 1..=a.seeds {
                     let i = index;
@@ -301,17 +302,30 @@ pub fn run(a: &BenchDiagnoseArgs) -> ExitCode {
                         continue;
                     }
                     // every case its own trajectory
-                    match run_case(spec, hidden, noise, 1000 * j as u64 + seed, a.laps) {
-                        Ok(c) => cases.push(Case { index: i, ..c }),
-                        Err(e) => {
-                            out.say(&format!(
-                                "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",
-                                spec.name
-                            ));
-                            failed.push(i);
-                        }
-                    }
+                    todo.push((i, spec, hidden.clone(), noise, seed, 1000 * j as u64 + seed));
                 }
+            }
+        }
+    }
+    // the cases on every core: derivation takes no lock, and each
+    // diagnosis shares the threads it does not use
+    let done: Vec<_> = todo
+        .par_iter()
+        .map(|(_, spec, hidden, noise, _, trajectory)| {
+            run_case(spec, hidden, *noise, *trajectory, a.laps)
+        })
+        .collect();
+    let mut cases = Vec::new();
+    let mut failed: Vec<u64> = Vec::new();
+    for ((i, spec, hidden, noise, seed, _), result) in todo.iter().zip(done) {
+        match result {
+            Ok(c) => cases.push(Case { index: *i, ..c }),
+            Err(e) => {
+                out.say(&format!(
+                    "  {}: {hidden:?} noise x{noise} seed {seed}: {e}",
+                    spec.name
+                ));
+                failed.push(*i);
             }
         }
     }

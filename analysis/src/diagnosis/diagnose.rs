@@ -312,7 +312,9 @@ fn to_rank(
             aug.free.retain(|i| !sensor_part.contains(i));
             let start = seeded(&aug, &cur.runner, &cur.fit.p);
             let motion_part = effect_params(&start, &cur.runner);
-            let also_sensor = !sensor_part.is_empty();
+            // (tried there only where the logs have sightings to try it on)
+            let also_sensor =
+                !sensor_part.is_empty() && runs.iter().any(|r| !r.landmarks.is_empty());
             match redundancy(&start, &motion_part, runs, o) {
                 Some(why) if also_sensor => Tried::SensorAndFailed(why),
                 Some(why) => Tried::Failed(why),
