@@ -55,6 +55,12 @@ pub struct Drive {
     /// The planned cells (the first plan), as cell centres.
     pub planned: Vec<[f64; 2]>,
     pub moves: usize,
+    /// Integration steps taken, and the stride at which `truth` and
+    /// `odometry` keep them (see [`Drive::keep`]).
+    #[serde(skip)]
+    pub steps: usize,
+    #[serde(skip)]
+    pub stride: usize,
     /// Times the robot's disc newly touched an obstacle or the grid's border.
     pub collisions: usize,
     /// Times its centre newly entered a safety-zone cell.
@@ -63,6 +69,40 @@ pub struct Drive {
     pub final_error_m: f64,
     /// Whether the robot believes it reached the goal cell.
     pub reached: bool,
+}
+
+/// Most poses a drive keeps of each track: enough to draw it, and a bound
+/// on its memory whatever the number of moves (every step kept, a corridor
+/// of a million cells took 3.6 GB).
+pub const MAX_TRACK_POINTS: usize = 100_000;
+
+impl Drive {
+    /// Keep one integration step's true and odometry poses: every
+    /// `stride`-th step, the stride doubling (and every other pose kept so
+    /// far dropped) whenever the tracks reach [`MAX_TRACK_POINTS`].
+    fn keep(&mut self, truth: [f64; 3], odometry: [f64; 3]) {
+        self.steps += 1;
+        if !self.steps.is_multiple_of(self.stride) {
+            return;
+        }
+        if self.truth.len() >= MAX_TRACK_POINTS {
+            // pose j >= 1 is step j*stride (pose 0 the start): the even
+            // ones are the steps of the doubled stride
+            for track in [&mut self.truth, &mut self.odometry] {
+                let mut j = 0;
+                track.retain(|_| {
+                    j += 1;
+                    (j - 1) % 2 == 0
+                });
+            }
+            self.stride *= 2;
+            if !self.steps.is_multiple_of(self.stride) {
+                return;
+            }
+        }
+        self.truth.push(truth);
+        self.odometry.push(odometry);
+    }
 }
 
 /// Integration steps one move may take (see [`drive`]).
@@ -151,6 +191,8 @@ pub fn drive(
         odometry: vec![odo],
         planned: first.iter().map(|&c| grid.centre(c)).collect(),
         moves: 0,
+        steps: 0,
+        stride: 1,
         collisions: 0,
         safety_intrusions: 0,
         final_error_m: 0.0,
@@ -203,6 +245,11 @@ pub fn drive(
             out.reached = true;
             break;
         }
+    }
+    // the tracks end where the robot did, whatever their stride
+    if out.truth.last() != Some(&truth_pose) {
+        out.truth.push(truth_pose);
+        out.odometry.push(odo);
     }
     let g = grid.centre(grid.goal);
     out.final_error_m = (truth_pose[0] - g[0]).hypot(truth_pose[1] - g[1]);
@@ -280,8 +327,7 @@ impl Mover<'_> {
                 &Runner::step_args(self.step_b, odo, &done, &self.belief.p, &[dt], &[0.0; 16]),
             );
             *odo = [b[0], b[1], b[2]];
-            out.truth.push(*truth_pose);
-            out.odometry.push(*odo);
+            out.keep(*truth_pose, *odo);
             let hit = self.grid.collides(truth_pose[0], truth_pose[1], o.radius);
             if hit && !self.touching {
                 out.collisions += 1;
@@ -293,5 +339,38 @@ impl Mover<'_> {
             }
             self.in_safety = safe;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A million integration steps keep at most MAX_TRACK_POINTS poses of
+    /// each track, each kept pose the step its index and stride say.
+    #[test]
+    fn the_tracks_stay_bounded_whatever_the_drive() {
+        let mut d = Drive {
+            truth: vec![[0.0; 3]],
+            odometry: vec![[0.0; 3]],
+            planned: vec![],
+            moves: 0,
+            steps: 0,
+            stride: 1,
+            collisions: 0,
+            safety_intrusions: 0,
+            final_error_m: 0.0,
+            reached: false,
+        };
+        for step in 1..=1_000_000u32 {
+            let p = [f64::from(step), 0.0, 0.0];
+            d.keep(p, p);
+        }
+        assert!(d.truth.len() <= MAX_TRACK_POINTS + 1, "{}", d.truth.len());
+        assert!(d.truth.len() > MAX_TRACK_POINTS / 3);
+        for (j, p) in d.truth.iter().enumerate().skip(1) {
+            assert_eq!(p[0], (j * d.stride) as f64);
+        }
+        assert_eq!(d.truth.len(), d.odometry.len());
     }
 }

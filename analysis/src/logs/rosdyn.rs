@@ -262,10 +262,13 @@ impl Schema {
         let Some((head, body)) = data.split_at_checked(4) else {
             return Err(DecodeError::TooShort(data.len()));
         };
+        let budget = Budget::for_message(body.len());
+        let root = Ty::Msg(self.root.clone());
         let seed = Elem {
             schema: self,
-            ty: &Ty::Msg(self.root.clone()),
+            ty: &root,
             limit: body.len(),
+            budget: &budget,
         };
         let limit = cdr::Bounded(body.len() as u64);
         let value = match head[1] {
@@ -289,6 +292,46 @@ struct Elem<'a> {
     schema: &'a Schema,
     ty: &'a Ty,
     limit: usize,
+    budget: &'a Budget,
+}
+
+/// How many values one message may still decode into, shared by all its
+/// arrays: [`VALUES_PER_BYTE`] per byte of the message. Each array alone is
+/// bounded by the message's length, but nested arrays of elements that take
+/// no bytes (40,000 of 1,000,000 empty arrays each, in 2.6 MB) multiply those
+/// bounds; this bounds their product, so a message's values (and memory)
+/// stay a fixed multiple of its size.
+struct Budget {
+    left: std::cell::Cell<usize>,
+    of: usize,
+}
+
+/// Values a message may decode into per byte: a value of real data takes at
+/// least one byte, so honest messages stay far below; elements that take
+/// none get this much slack before the message is refused.
+const VALUES_PER_BYTE: usize = 8;
+
+impl Budget {
+    fn for_message(bytes: usize) -> Budget {
+        let of = VALUES_PER_BYTE * bytes.max(16);
+        Budget {
+            left: std::cell::Cell::new(of),
+            of,
+        }
+    }
+
+    fn take<E: de::Error>(&self) -> Result<(), E> {
+        match self.left.get().checked_sub(1) {
+            Some(left) => {
+                self.left.set(left);
+                Ok(())
+            }
+            None => Err(E::custom(format!(
+                "more than {} values in one message ({VALUES_PER_BYTE} per byte): nested arrays of a corrupt or hostile length",
+                self.of
+            ))),
+        }
+    }
 }
 
 /// A field: one value, a fixed array or a sequence.
@@ -296,12 +339,14 @@ struct Slot<'a> {
     schema: &'a Schema,
     field: &'a Field,
     limit: usize,
+    budget: &'a Budget,
 }
 
 struct Fields<'a> {
     schema: &'a Schema,
     fields: &'a [Field],
     limit: usize,
+    budget: &'a Budget,
 }
 
 struct List<'a> {
@@ -312,6 +357,7 @@ impl<'de> DeserializeSeed<'de> for Elem<'_> {
     type Value = Value;
     fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
         use Prim::*;
+        self.budget.take()?;
         Ok(match self.ty {
             Ty::Prim(Bool) => Value::Bool(bool::deserialize(d)?),
             Ty::Prim(I8) => Value::Int(i8::deserialize(d)?.into()),
@@ -341,6 +387,7 @@ impl<'de> DeserializeSeed<'de> for Elem<'_> {
                             schema: self.schema,
                             fields,
                             limit: self.limit,
+                            budget: self.budget,
                         },
                     )?
                 }
@@ -356,6 +403,7 @@ impl<'de> DeserializeSeed<'de> for Slot<'_> {
             schema: self.schema,
             ty: &self.field.ty,
             limit: self.limit,
+            budget: self.budget,
         };
         match self.field.arity {
             Arity::One => elem.deserialize(d),
@@ -378,6 +426,7 @@ impl<'de> Visitor<'de> for Fields<'_> {
                     schema: self.schema,
                     field,
                     limit: self.limit,
+                    budget: self.budget,
                 })?
                 .ok_or_else(|| de::Error::custom(format!("field `{}` missing", field.name)))?;
             out.push((field.name.clone(), v));
@@ -399,6 +448,7 @@ impl<'de> Visitor<'de> for List<'_> {
             schema: self.elem.schema,
             ty: self.elem.ty,
             limit: self.elem.limit,
+            budget: self.elem.budget,
         })? {
             if out.len() >= self.elem.limit {
                 return Err(de::Error::custom(format!(
@@ -805,6 +855,33 @@ MSG: my_msgs/Nothing\nfloat64[0] none\n";
         let mut ok = vec![0u8, 1, 0, 0];
         ok.extend(0u32.to_le_bytes());
         assert!(s.decode(&ok).is_ok());
+    }
+
+    /// Issue #67.2: nested sequences of elements that take no bytes pass
+    /// each array's own bound (no more elements than the message has bytes)
+    /// but multiply: 1,000 sequences of 1,000 empty elements in 4 kB (40,000
+    /// of 1,000,000 in a 2.6 MB bag exhausted any memory). The message's
+    /// values are bounded by a multiple of its size, so it is refused.
+    #[test]
+    fn nested_sequences_of_empty_elements_cannot_multiply_past_the_message() {
+        let def = "my_msgs/Inner[] items\n\
+================================================================================\n\
+MSG: my_msgs/Inner\nmy_msgs/Nothing[] nothings\n\
+================================================================================\n\
+MSG: my_msgs/Nothing\nfloat64[0] none\n";
+        let s = Schema::parse("my_msgs/msg/Nested", def).unwrap();
+        let message = |outer: u32, inner: u32| {
+            let mut b = vec![0u8, 1, 0, 0];
+            b.extend(outer.to_le_bytes());
+            for _ in 0..outer {
+                b.extend(inner.to_le_bytes());
+            }
+            b
+        };
+        let e = s.decode(&message(1000, 1000)).unwrap_err();
+        assert!(e.to_string().contains("values in one message"), "{e}");
+        // an honest nesting of the same shape decodes
+        assert!(s.decode(&message(1000, 3)).is_ok());
     }
 
     #[test]
