@@ -43,4 +43,6 @@ stage "full (symbolica)" cargo build --locked --bin kinegen --timings
 if [ "$tests" = 1 ]; then
   stage "tests (workspace)" cargo build --locked --workspace --all-targets --timings
 fi
-[ "$keep" = 1 ] && echo "kept: $work/kinegen (timings in target/cargo-timings)"
+if [ "$keep" = 1 ]; then
+  echo "kept: $work/kinegen (timings in target/cargo-timings)"
+fi
