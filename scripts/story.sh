@@ -15,7 +15,7 @@ say() { printf '\n\033[1m$ %s\033[0m\n' "$*"; }
 # effect and calibrates. Only generate and verify, whose product is the
 # symbolically simplified kernels, need the full binary, built afterwards.
 # cargo shows its progress (a bar on a terminal, a line per crate otherwise)
-echo "building kinegen without its symbolic stage (the analysis; 3-7 min on a fresh clone) ..."
+echo "building kinegen without its symbolic stage (the analysis; about 7 min on a fresh clone, 2 cores) ..."
 cargo build --no-default-features --bin kinegen
 mkdir -p target/story && cp target/debug/kinegen target/story/kinegen-analysis
 k=target/story/kinegen-analysis

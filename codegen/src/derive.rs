@@ -16,7 +16,7 @@ use crate::symbolic::{
 };
 use crate::tape::TapeBuilder;
 use kinegen_model::expr::Expr;
-use kinegen_model::ir::{ArgRole, ArgSpec, Function, IrFile, Kernel, ModelIr, Op, StepForm, Wrt};
+use kinegen_model::ir::{ArgRole, ArgSpec, Function, Kernel, ModelIr, Op, StepForm, Wrt};
 use kinegen_model::options::GenOptions;
 use kinegen_model::spec::{Constraints, InputKind, Kinematics, Model, STATE};
 use kinegen_model::{SourceError, SourcePos};
@@ -456,20 +456,8 @@ pub fn derive(model: &Model, options: &GenOptions) -> Result<ModelIr, SourceErro
     for s in fns {
         functions.push(finish(s, model, &sym).map_err(se)?);
     }
-    ModelIr::try_from(IrFile {
-        name: model.name.clone(),
-        doc: model.doc.clone(),
-        seed: model.seed.clone(),
-        spec_fingerprint: model.fingerprint(),
-        inputs: model.inputs.clone(),
-        params: model.params.clone(),
-        noise: model.noise.clone(),
-        observations: model.observations.iter().map(|o| o.decl.clone()).collect(),
-        effects: model.effects.clone(),
-        no_inverse,
-        functions,
-    })
-    .map_err(|e| se(SymbolicError(e.to_string())))
+    ModelIr::try_from(model.ir_file(no_inverse, functions))
+        .map_err(|e| se(SymbolicError(e.to_string())))
 }
 
 /// A symbol for every name a kernel may read (the state, inputs, noise,

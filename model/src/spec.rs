@@ -431,6 +431,28 @@ impl Model {
         go(e, &map)
     }
 
+    /// The IR of this model with its derived `functions`: what both
+    /// derivations (symbolic and automatic) hand over.
+    pub fn ir_file(
+        &self,
+        no_inverse: Option<String>,
+        functions: Vec<crate::ir::Function>,
+    ) -> crate::ir::IrFile {
+        crate::ir::IrFile {
+            name: self.name.clone(),
+            doc: self.doc.clone(),
+            seed: self.seed.clone(),
+            spec_fingerprint: self.fingerprint(),
+            inputs: self.inputs.clone(),
+            params: self.params.clone(),
+            noise: self.noise.clone(),
+            observations: self.observations.iter().map(|o| o.decl.clone()).collect(),
+            effects: self.effects.clone(),
+            no_inverse,
+            functions,
+        }
+    }
+
     /// Parameters that are runtime arguments (everything not `const`).
     pub fn runtime_params(&self) -> impl Iterator<Item = &Param> {
         self.params.iter().filter(|p| !p.constant)

@@ -255,19 +255,7 @@ fn twist(
     scope: &Scope,
     noisy: bool,
 ) -> Result<[u32; 3], SourceError> {
-    // its own scope: a definition that reads the noise has one value with
-    // it and another without
-    let mut s = Scope::new(model);
-    for n in model
-        .inputs
-        .iter()
-        .map(|i| &i.name)
-        .chain(model.params.iter().map(|p| &p.name))
-    {
-        if let Some(slot) = scope.slot(n) {
-            s.bind(n, slot);
-        }
-    }
+    let mut s = motion_scope(model, scope);
     for n in &model.noise {
         match scope.slot(&n.name) {
             Some(slot) if noisy => s.bind(&n.name, slot),
@@ -303,6 +291,24 @@ fn twist(
             Ok(z)
         }
     }
+}
+
+/// A scope of its own for the twist, with `scope`'s inputs and parameters:
+/// a definition lowered there that reads the noise has one value with it
+/// and another without.
+fn motion_scope<'m>(model: &'m Model, scope: &Scope) -> Scope<'m> {
+    let mut s = Scope::new(model);
+    for n in model
+        .inputs
+        .iter()
+        .map(|i| &i.name)
+        .chain(model.params.iter().map(|p| &p.name))
+    {
+        if let Some(slot) = scope.slot(n) {
+            s.bind(n, slot);
+        }
+    }
+    s
 }
 
 /// Each constraint row's measured rate and coefficients [S_vx, S_vy, S_omega]
@@ -370,17 +376,7 @@ fn gyro_twist(model: &Model, b: &mut Builder, scope: &mut Scope) -> Result<Vec<u
         return Ok(twist(model, b, scope, false)?[..2].to_vec());
     };
     let omega = scope.slot("omega").expect("the yaw-rate argument is bound");
-    let mut s = Scope::new(model);
-    for n in model
-        .inputs
-        .iter()
-        .map(|i| &i.name)
-        .chain(model.params.iter().map(|p| &p.name))
-    {
-        if let Some(slot) = scope.slot(n) {
-            s.bind(n, slot);
-        }
-    }
+    let mut s = motion_scope(model, scope);
     let rows = constraint_rows(b, &mut s, c)?;
     let m = normal_matrix(b, &rows, 2);
     let rhs: Vec<u32> = (0..2)

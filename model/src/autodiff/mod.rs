@@ -60,7 +60,7 @@ mod forward;
 mod kernels;
 mod lower;
 
-use crate::ir::{IrFile, ModelIr};
+use crate::ir::ModelIr;
 use crate::options::GenOptions;
 use crate::spec::Model;
 use crate::SourceError;
@@ -74,18 +74,6 @@ pub const NO_INVERSE: &str = "its closed-form inverse kinematics come from kineg
 /// near omega*dt = 0 as `options` say.
 pub fn derive(model: &Model, options: &GenOptions) -> Result<ModelIr, SourceError> {
     let functions = kernels::all(model, options)?;
-    ModelIr::try_from(IrFile {
-        name: model.name.clone(),
-        doc: model.doc.clone(),
-        seed: model.seed.clone(),
-        spec_fingerprint: model.fingerprint(),
-        inputs: model.inputs.clone(),
-        params: model.params.clone(),
-        noise: model.noise.clone(),
-        observations: model.observations.iter().map(|o| o.decl.clone()).collect(),
-        effects: model.effects.clone(),
-        no_inverse: Some(NO_INVERSE.into()),
-        functions,
-    })
-    .map_err(|e| SourceError::new(&model.path, None, e.to_string()))
+    ModelIr::try_from(model.ir_file(Some(NO_INVERSE.into()), functions))
+        .map_err(|e| SourceError::new(&model.path, None, e.to_string()))
 }
