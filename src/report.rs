@@ -892,7 +892,11 @@ fn sensor_html(d: &kinegen_analysis::diagnosis::diagnose::Diagnosis) -> String {
             folds.folds,
             folds.t,
             folds.critical,
-            if c.significant { "yes" } else { "no" }
+            match (&c.unphysical, c.significant) {
+                (Some(why), _) => format!("no: {}", esc(why)),
+                (None, true) => "yes".to_string(),
+                (None, false) => "no".to_string(),
+            }
         );
     }
     t + "</table>"
