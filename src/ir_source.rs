@@ -52,7 +52,7 @@ impl Deriver for ChildDeriver {
     fn derive(&self, model: &Model, label: &str) -> Result<ModelIr, DerivationFailed> {
         // a spec read from its file as it is there: the file itself (next to
         // its generated/ir, if it has one)
-        if std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source) {
+        if as_in_its_file(model) {
             return load(&model.path).map_err(DerivationFailed);
         }
         // a model built in memory (effects added): its text goes to the
@@ -68,8 +68,7 @@ pub struct AutodiffDeriver;
 
 impl Deriver for AutodiffDeriver {
     fn derive(&self, model: &Model, label: &str) -> Result<ModelIr, DerivationFailed> {
-        let as_in_its_file =
-            std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source);
+        let as_in_its_file = as_in_its_file(model);
         if as_in_its_file {
             if let Some(ir) = committed(&model.path, model) {
                 return Ok(ir);
@@ -109,6 +108,12 @@ pub fn analysis_deriver() -> &'static dyn Deriver {
 /// stage says so (exit 2) for a spec without a committed IR.
 pub fn symbolic_deriver() -> &'static dyn Deriver {
     &ChildDeriver
+}
+
+/// Whether `model` is its spec file as that file has it (not a model built
+/// in memory, with effects added).
+fn as_in_its_file(model: &Model) -> bool {
+    std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source)
 }
 
 /// The committed IR of the spec at `spec`, when it is `model`'s.

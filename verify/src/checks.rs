@@ -671,23 +671,15 @@ pub fn singularities(ir: &ModelIr, k: &dyn Kernel, n: usize, seed: u64) -> Vec<F
             let tw0 = sampler.twist();
             let rng0 = sampler.rng.clone();
             let mut eval_at = |s: f64| {
-                let mut a = base.clone();
-                if increment {
+                let a = if increment {
+                    let mut a = base.clone();
                     a[0][2] = s;
+                    a
                 } else {
-                    let (ui, pi, dti) = (
-                        f.arg(ArgRole::Inputs).unwrap(),
-                        f.arg(ArgRole::Params).unwrap(),
-                        f.arg(ArgRole::Dt).unwrap(),
-                    );
-                    let mut tw = tw0.clone();
-                    tw[2] = s / a[dti][0];
                     sampler.rng = rng0.clone();
-                    a[ui] = sampler.inputs_for(&tw, &a[pi]);
-                    if let Some(wi) = f.arg(ArgRole::Noise) {
-                        a[wi].iter_mut().for_each(|w| *w = 0.0);
-                    }
-                }
+                    crate::sample::at_turn(&mut sampler, f, &base, &tw0, s)
+                        .expect("an exact step has inputs, parameters and dt")
+                };
                 (eval(k, f, &a), a)
             };
             let (f0, _) = eval_at(0.0);

@@ -6,8 +6,8 @@
 //! limit (omega*dt at 0, a hair from 0, either side of the series switch).
 //! A wrong derivative rule in either path shows up as a disagreement.
 use crate::checks::Finding;
-use crate::sample::Sampler;
-use kinegen_model::ir::{ArgRole, Function, Kernel as KernelId, ModelIr, StepForm};
+use crate::sample::{at_turn, Sampler};
+use kinegen_model::ir::{Function, Kernel as KernelId, ModelIr, StepForm};
 
 /// How far apart the two may be, relative to an entry (or to 1e-6 of the
 /// matrix's largest magnitude, whichever is larger): both compute the same
@@ -52,7 +52,8 @@ pub fn autodiff_agrees(
                     switch * (1.0 - 1e-9),
                     switch * (1.0 + 1e-9),
                 ] {
-                    if let Some(at) = with_turn(&mut sampler, f, &args, s) {
+                    let twist = sampler.twist();
+                    if let Some(at) = at_turn(&mut sampler, f, &args, &twist, s) {
                         compare_at(&mut fd, f, g, &at);
                     }
                 }
@@ -83,27 +84,4 @@ fn compare_at(fd: &mut Finding, f: &Function, g: &Function, args: &[Vec<f64>]) {
         );
         fd.note(err, err / TOLERANCE, Some((r, c, name)), args, f);
     }
-}
-
-/// `args` with the inputs re-sampled so the twist turns by `s` over the
-/// step (omega = s/dt), the noise at zero: the exact step's singular limit.
-fn with_turn(
-    sampler: &mut Sampler,
-    f: &Function,
-    args: &[Vec<f64>],
-    s: f64,
-) -> Option<Vec<Vec<f64>>> {
-    let (ui, pi, dti) = (
-        f.arg(ArgRole::Inputs)?,
-        f.arg(ArgRole::Params)?,
-        f.arg(ArgRole::Dt)?,
-    );
-    let mut at = args.to_vec();
-    let mut tw = sampler.twist();
-    tw[2] = s / at[dti][0];
-    at[ui] = sampler.inputs_for(&tw, &at[pi]);
-    if let Some(wi) = f.arg(ArgRole::Noise) {
-        at[wi].iter_mut().for_each(|w| *w = 0.0);
-    }
-    Some(at)
 }

@@ -212,3 +212,30 @@ impl<'a> Sampler<'a> {
             .collect()
     }
 }
+
+/// `args` of the step kernel `f` re-aimed at the twist `twist` turning by
+/// `s` over the step (omega = s/dt), the inputs from the model's own
+/// inverse and the noise at zero: the exact step's singular limit, as
+/// `checks::singularities` and `crosscheck` probe it. None for a kernel
+/// without inputs, parameters or a step.
+pub fn at_turn(
+    sampler: &mut Sampler,
+    f: &Function,
+    args: &[Vec<f64>],
+    twist: &[f64],
+    s: f64,
+) -> Option<Vec<Vec<f64>>> {
+    let (ui, pi, dti) = (
+        f.arg(ArgRole::Inputs)?,
+        f.arg(ArgRole::Params)?,
+        f.arg(ArgRole::Dt)?,
+    );
+    let mut at = args.to_vec();
+    let mut tw = twist.to_vec();
+    tw[2] = s / at[dti][0];
+    at[ui] = sampler.inputs_for(&tw, &at[pi]);
+    if let Some(wi) = f.arg(ArgRole::Noise) {
+        at[wi].iter_mut().for_each(|w| *w = 0.0);
+    }
+    Some(at)
+}

@@ -218,13 +218,16 @@ fn build(model: &Model, r: Recipe) -> Result<Function, SourceError> {
             (values.len(), wrt_slots.len(), col_names, j)
         }
     };
+    let name = r
+        .kernel
+        .name(|o| model.observations[o as usize].name.clone());
     if b.nonfinite {
         return Err(SourceError::new(
             &model.path,
             None,
             format!(
                 "{}: an expression divides by zero where the kernels evaluate it, at zero noise (a noise input in a denominator, such as `w/dv`); noise must leave the model defined at zero (add it, or scale by 1 + noise)",
-                r.kernel.name(|o| model.observations[o as usize].name.clone())
+                name
             ),
         ));
     }
@@ -232,9 +235,7 @@ fn build(model: &Model, r: Recipe) -> Result<Function, SourceError> {
     let ops_tree = crate::passes::tree_size(&tape, &outputs);
     Ok(Function {
         kernel: r.kernel,
-        name: r
-            .kernel
-            .name(|o| model.observations[o as usize].name.clone()),
+        name,
         doc: r.doc,
         args: r.args,
         rows,
