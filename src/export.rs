@@ -67,6 +67,9 @@ fn geometry(r: &Runner, p: &[f64], right: &[usize], left: &[usize]) -> (f64, f64
 /// The YAML text for `res`, calibrated from `r` (nominal values in `r.p`).
 pub fn ros2_yaml(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, String> {
     let model = Model::load(spec).map_err(|e| e.to_string())?;
+    if let Some(target) = &model.controller {
+        return controller_yaml(spec, &model, target, r, res);
+    }
     let index = |names: Vec<String>| -> Vec<usize> {
         names
             .iter()
@@ -135,6 +138,77 @@ pub fn ros2_yaml(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, Str
         ));
     }
     Ok(format!("{head}{calibration}"))
+}
+
+/// A spec with a `[controller]` (written by `kinegen init`): the controller
+/// file it came from with each of its values set from the calibration, every
+/// other line as it was; a fresh file of the same structure when the original
+/// is not where the spec says.
+fn controller_yaml(
+    spec: &Path,
+    model: &Model,
+    target: &kinegen_model::decl::ControllerTarget,
+    r: &Runner,
+    res: &FitResult,
+) -> Result<String, String> {
+    let value_of = |name: &str| -> Option<f64> {
+        match r.names.iter().position(|n| n == name) {
+            Some(i) => Some(res.p[i]),
+            None => model
+                .params
+                .iter()
+                .find(|p| p.name == name)
+                .map(|p| p.nominal),
+        }
+    };
+    let mut values = Vec::new();
+    for (key, e) in &target.values {
+        let v = e.eval(&value_of).filter(|v| v.is_finite()).ok_or_else(|| {
+            format!(
+                "{}: [controller.values] {key}: not a finite number at the calibrated parameters",
+                spec.display()
+            )
+        })?;
+        // always a decimal point: ROS 2 types `1` as an integer, and the
+        // controllers refuse an integer where they declare a double
+        let mut text = format!("{v:.9}").trim_end_matches('0').to_string();
+        if text.ends_with('.') {
+            text.push('0');
+        }
+        values.push((key.clone(), text));
+    }
+    let mut head = format!(
+        "# calibrated by kinegen fit: model `{}` from {}\n",
+        r.ir.name,
+        spec.display()
+    );
+    for (k, &i) in res.free.iter().enumerate() {
+        let std = res.std.get(k).copied().filter(|s| s.is_finite());
+        head += &format!(
+            "#   {} = {} {} (nominal {})\n",
+            r.names[i],
+            res.p[i],
+            std.map_or("(not identified by these logs)".into(), |s| format!(
+                "+- {s:.2e}"
+            )),
+            r.p[i]
+        );
+    }
+    let file = spec.parent().unwrap_or(Path::new("")).join(&target.file);
+    let original = (!target.file.is_empty())
+        .then(|| std::fs::read_to_string(&file).ok())
+        .flatten();
+    let body = match original
+        .as_deref()
+        .and_then(|t| kinegen_init::controller_write::rewrite(t, &target.node, &values))
+    {
+        Some(b) => {
+            head += &format!("# from {} with the calibrated values\n", file.display());
+            b
+        }
+        None => kinegen_init::controller_write::fresh(&target.node, &target.type_name, &values),
+    };
+    Ok(format!("{head}{body}"))
 }
 
 /// The spec at `spec` with every parameter `res` calibrated and identified

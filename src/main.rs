@@ -17,6 +17,7 @@ mod export;
 mod fit_cmd;
 mod fit_text;
 mod generate_cmd;
+mod init_cmd;
 mod inverse_cmd;
 mod ir_source;
 mod localize_cmd;
@@ -166,6 +167,13 @@ enum Command {
     /// Example: kinegen batch jobs.jsonl --out results.jsonl --jobs 2
     /// with jobs.jsonl lines like {"id": "r17-fit", "args": ["fit", "--spec", "robot.toml", "--data", "r17.csv"]}
     Batch(batch_cmd::BatchArgs),
+    /// Write a spec (and a --topics mapping for bags) from a robot's URDF and its
+    /// ros2_control controller configuration: wheels, radii, track, wheelbase,
+    /// steering joints, casters and the kinematic class, every nominal value the
+    /// description's own number.
+    ///
+    /// Example: kinegen init --urdf robot.urdf --controller controllers.yaml --out robot.toml --topics-out topics.toml
+    Init(init_cmd::InitArgs),
     /// Derive one spec's IR into a file (used internally by the analysis commands).
     #[command(hide = true)]
     Derive {
@@ -211,6 +219,7 @@ fn main() -> ExitCode {
             catalogue,
         } => effects_cmd::run_add_effect(&spec, &effect, &value, &out, &catalogue.effects),
         Command::Batch(a) => batch_cmd::run(&a),
+        Command::Init(a) => init_cmd::run(&a),
         Command::Derive {
             spec,
             label,

@@ -51,6 +51,21 @@ struct RawSpec {
     inverse: Option<RawInverse>,
     #[serde(default)]
     effects: Vec<String>,
+    #[serde(default)]
+    controller: Option<RawController>,
+}
+
+/// `[controller]`: where `fit --export ros2-yaml` writes calibrated values.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawController {
+    node: String,
+    #[serde(rename = "type")]
+    type_name: String,
+    #[serde(default)]
+    file: String,
+    #[serde(default)]
+    values: std::collections::BTreeMap<String, Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -274,6 +289,8 @@ pub struct Model {
     /// inputs do not enter the twist linearly; verified by the generator.
     pub inverse: Option<(Vec<Expr>, String)>,
     pub effects: Vec<String>,
+    /// The ros2_control controller the calibrated values go to (`[controller]`).
+    pub controller: Option<crate::decl::ControllerTarget>,
 }
 
 struct Ctx<'a> {
@@ -394,6 +411,7 @@ impl Model {
             observations.push(parsed);
         }
         let inverse = parse_inverse(&cx, &raw, &names)?;
+        let controller = parse_controller(&cx, &raw, &names)?;
         Ok(Model {
             path: path.to_path_buf(),
             source: text.to_string(),
@@ -414,6 +432,7 @@ impl Model {
             observations,
             inverse,
             effects: raw.effects,
+            controller,
         })
     }
 
@@ -1091,6 +1110,29 @@ fn parse_inverse(
         es.push(e);
     }
     Ok(Some((es, inv.doc.clone())))
+}
+
+/// Validate `[controller]`: every value an expression over the parameters.
+fn parse_controller(
+    cx: &Ctx,
+    raw: &RawSpec,
+    names: &Names,
+) -> Result<Option<crate::decl::ControllerTarget>, SourceError> {
+    let Some(c) = &raw.controller else {
+        return Ok(None);
+    };
+    let mut values = Vec::new();
+    for (key, text) in &c.values {
+        let e = cx.parse_expr(text)?;
+        names.check(cx, &e, Place::Controller)?;
+        values.push((key.clone(), e));
+    }
+    Ok(Some(crate::decl::ControllerTarget {
+        node: c.node.clone(),
+        type_name: c.type_name.clone(),
+        file: c.file.clone(),
+        values,
+    }))
 }
 
 /// Validate a `[constraints]` section: every row constrains a distinct cumulative

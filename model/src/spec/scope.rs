@@ -43,6 +43,8 @@ pub enum Place {
     Observation { landmark: bool },
     /// The `[inverse]`: the twist and the parameters only.
     Inverse,
+    /// A `[controller.values]` entry: the parameters only.
+    Controller,
 }
 
 /// Why a name may not stand where it does.
@@ -56,6 +58,8 @@ pub enum Refusal {
     NeedsLandmark,
     /// The inverse reads the twist and the parameters only.
     InverseOnly,
+    /// A controller value is a function of the parameters only.
+    ParametersOnly,
 }
 
 const TWIST: [&str; 3] = ["vx", "vy", "omega"];
@@ -83,6 +87,11 @@ impl Place {
                     .then_some(())
                     .ok_or(Refusal::InverseOnly);
             }
+            Place::Controller => {
+                return (kind == Some(Parameter))
+                    .then_some(())
+                    .ok_or(Refusal::ParametersOnly);
+            }
         };
         match (ok, kind) {
             (true, _) => Ok(()),
@@ -103,6 +112,9 @@ impl Refusal {
             Refusal::NeedsLandmark => format!("`{v}` needs `landmark = true` on this observation"),
             Refusal::InverseOnly => {
                 format!("inverse may use vx, vy, omega and parameters only, not `{v}`")
+            }
+            Refusal::ParametersOnly => {
+                format!("a controller value is computed from parameters only, not `{v}`")
             }
         }
     }

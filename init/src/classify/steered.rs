@@ -1,0 +1,269 @@
+//! Bases that steer: a tricycle whose steered wheel drives, and Ackermann /
+//! bicycle / tricycle bases whose rear wheels drive (seed 001 eq. 14-16 for
+//! the bicycle form). The twist is written at the rear axle centre C (where
+//! the lateral velocity is zero) and moved to the base link.
+use super::*;
+use crate::robot::{Class, ControllerOut, Kinematics, ParamOut};
+use crate::wheels::Steer;
+
+fn steering_input(s: &Steer) -> InputOut {
+    InputOut {
+        name: identifier(&s.joint),
+        column: s.joint.clone(),
+        steering: true,
+        range: s.limits,
+        doc: format!(
+            "steering joint `{}` (URDF line {}): its angle",
+            s.joint, s.line
+        ),
+    }
+}
+
+/// The rear axle: the wheels that are not steered, and their centre.
+fn rear_axle<'a>(cx: &'a Context) -> Result<(Vec<&'a Wheel>, Vector2<f64>), InitError> {
+    let rear: Vec<&Wheel> = cx
+        .wheels
+        .iter()
+        .filter(|w| w.steer.is_none() && !w.caster)
+        .collect();
+    if rear.is_empty() {
+        return Err(InitError::at(
+            cx.file,
+            None,
+            "every wheel is steered: kinegen writes steered bases with a fixed rear axle",
+        ));
+    }
+    let c = Vector2::new(
+        mean(rear.iter().map(|w| w.position.x)),
+        mean(rear.iter().map(|w| w.position.y)),
+    );
+    Ok((rear, c))
+}
+
+fn wheelbase(
+    cx: &Context,
+    steered: &[&Wheel],
+    c: Vector2<f64>,
+    ctl: Option<&Controller>,
+    notes: &mut Vec<String>,
+) -> Result<ParamOut, InitError> {
+    let l = mean(steered.iter().map(|w| w.position.x)) - c.x;
+    let lines: Vec<String> = steered
+        .iter()
+        .map(|w| format!("`{}` line {}", w.joint, w.line))
+        .collect();
+    if l <= 0.0 {
+        return Err(InitError::at(cx.file, Some(steered[0].line), "the steered wheels are behind the fixed axle: kinegen writes front-steered bases (x forward, REP 103)"));
+    }
+    Quantity {
+        name: "wheelbase",
+        unit: "m",
+        doc: "Distance from the rear axle to the steered wheels' axle.".into(),
+        floor: 0.01,
+        urdf: FromUrdf {
+            value: l,
+            text: num(l),
+            source: format!(
+                "x of the steered wheels ({}) minus the rear axle's",
+                lines.join(", ")
+            ),
+        },
+        controller: controller_value(ctl, "wheelbase", None)?,
+    }
+    .resolve(ctl, notes)
+}
+
+/// A tricycle whose steered wheel drives: at steering angle d, with the
+/// wheel at (L, y_f) from C, omega = r w sin(d)/L and
+/// vx_C = r w (L cos(d) + y_f sin(d))/L.
+pub fn front_driven_tricycle(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
+    let (_, c) = rear_axle(cx)?;
+    let front: Vec<&Wheel> = cx.wheels.iter().filter(|w| w.steer.is_some()).collect();
+    let w = front[0];
+    let steer = w.steer.as_ref().expect("a steered wheel");
+    let ctl = cx.controller.filter(|k| k.kind == ControllerKind::Tricycle);
+    let mut params = vec![Quantity {
+        name: "wheel_radius",
+        unit: "m",
+        doc: "Radius of the steered, driven wheel.".into(),
+        floor: 0.01,
+        urdf: radius_of(w),
+        controller: controller_value(ctl, "wheel_radius", None)?,
+    }
+    .resolve(ctl, notes)?];
+    params.push(wheelbase(cx, &front, c, ctl, notes)?);
+    let yf = w.position.y - c.y;
+    let (wn, sn) = (identifier(&w.joint), identifier(&steer.joint));
+    let delta = signed(steer.sign, &sn);
+    let defines = vec![
+        (
+            "wheel_speed".into(),
+            format!("wheel_radius*{}", signed(forward_sign(w), &wn)),
+            "Rim speed of the driven wheel (m/s).".into(),
+        ),
+        (
+            "yaw_rate".into(),
+            format!("wheel_speed*sin({delta})/wheelbase"),
+            "Turn rate of the base.".into(),
+        ),
+    ];
+    let vx_c = if yf.abs() > 1e-12 {
+        format!(
+            "wheel_speed*(wheelbase*cos({delta}) + {}*sin({delta}))/wheelbase",
+            num(yf)
+        )
+    } else {
+        format!("wheel_speed*cos({delta})")
+    };
+    let [vx, vy, omega] = at_base(&vx_c, c, "yaw_rate", NOISE);
+    let mut robot = Robot {
+        name: String::new(),
+        class: Class::TricycleFrontDriven,
+        doc: String::new(),
+        inputs: vec![
+            wheel_input(w, format!("driven, steered wheel joint `{}` (URDF line {}): its angle's rate", w.joint, w.line)),
+            steering_input(steer),
+        ],
+        params,
+        defines,
+        kinematics: Kinematics::Twist { vx, vy, omega, doc: "Tricycle, steered wheel driven: the wheel rolls along its heading, the rear axle has no lateral velocity.".into() },
+        gyro: None,
+        landmark_sensor: None,
+        controller: None,
+        notes: Vec::new(),
+    };
+    robot.controller = ctl.map(|k| ControllerOut {
+        node: k.node.clone(),
+        type_name: k.type_name.clone(),
+        file: String::new(),
+        values: vec![
+            ("wheel_radius".into(), "wheel_radius".into()),
+            ("wheelbase".into(), "wheelbase".into()),
+        ],
+    });
+    Ok(robot)
+}
+
+/// Steered front wheel(s), driven rear wheels: each steered wheel at
+/// (L, y_i) from C points at the turn centre, so the curvature is
+/// tan(d_i)/(L + y_i tan(d_i)); the spec averages it over the steered
+/// wheels it reads, and vx_C is the driven wheels' mean rim speed.
+pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
+    let (rear, c) = rear_axle(cx)?;
+    let driven: Vec<&Wheel> = rear
+        .iter()
+        .copied()
+        .filter(|w| cx.driven.contains(&w.joint) && !w.mimic)
+        .collect();
+    if driven.is_empty() {
+        return Err(InitError::at(cx.file, Some(rear[0].line), "no rear wheel is driven (neither the controller nor a <ros2_control> block commands one)"));
+    }
+    let steered: Vec<&Wheel> = cx.wheels.iter().filter(|w| w.steer.is_some()).collect();
+    let read: Vec<&Wheel> = steered
+        .iter()
+        .copied()
+        .filter(|w| {
+            !w.steer
+                .as_ref()
+                .is_some_and(|s| cx.mimics.contains(&s.joint))
+        })
+        .collect();
+    let ctl = cx.controller.filter(|k| k.kind == ControllerKind::Steering);
+    let radius_key = ["rear_wheels_radius", "traction_wheels_radius"]
+        .into_iter()
+        .find(|k| ctl.is_some_and(|c| c.params.contains_key(*k)))
+        .unwrap_or("rear_wheels_radius");
+    let mut params = vec![Quantity {
+        name: "rear_wheel_radius",
+        unit: "m",
+        doc: "Radius of the driven rear wheels.".into(),
+        floor: 0.01,
+        urdf: radius_of(driven[0]),
+        controller: controller_value(ctl, radius_key, None)?,
+    }
+    .resolve(ctl, notes)?];
+    params.push(wheelbase(cx, &steered, c, ctl, notes)?);
+    let mut inputs = Vec::new();
+    let terms: Vec<String> = driven
+        .iter()
+        .map(|w| {
+            inputs.push(wheel_input(
+                w,
+                format!(
+                    "driven rear wheel joint `{}` (URDF line {}): its angle's rate",
+                    w.joint, w.line
+                ),
+            ));
+            signed(forward_sign(w), &identifier(&w.joint))
+        })
+        .collect();
+    let mut curvatures = Vec::new();
+    for w in &read {
+        let s = w.steer.as_ref().expect("steered");
+        inputs.push(steering_input(s));
+        let d = signed(s.sign, &identifier(&s.joint));
+        let y = w.position.y - c.y;
+        curvatures.push(if y.abs() > 1e-12 {
+            format!("tan({d})/(wheelbase + {}*tan({d}))", num(y))
+        } else {
+            format!("tan({d})/wheelbase")
+        });
+    }
+    let n = driven.len();
+    let ybar = mean(driven.iter().map(|w| w.position.y - c.y));
+    let sum = terms.join(" + ").replace("+ -", "- ");
+    let mut speed = if n == 1 {
+        format!("rear_wheel_radius*{sum}")
+    } else {
+        format!("rear_wheel_radius*({sum})/{n}")
+    };
+    if ybar.abs() > 1e-12 {
+        speed = format!("({speed})/(1 - {}*curvature)", num(ybar));
+    }
+    let curvature = if curvatures.len() == 1 {
+        curvatures[0].clone()
+    } else {
+        format!("({})/{}", curvatures.join(" + "), curvatures.len())
+    };
+    let defines = vec![
+        (
+            "curvature".into(),
+            curvature,
+            "Curvature of the rear axle centre's path (1/m).".into(),
+        ),
+        (
+            "speed".into(),
+            speed,
+            "Speed of the rear axle centre (m/s).".into(),
+        ),
+        (
+            "yaw_rate".into(),
+            "speed*curvature".into(),
+            "Turn rate of the base.".into(),
+        ),
+    ];
+    let [vx, vy, omega] = at_base("speed", c, "yaw_rate", NOISE);
+    let mut robot = Robot {
+        name: String::new(),
+        class: Class::RearDrivenSteering,
+        doc: String::new(),
+        inputs,
+        params,
+        defines,
+        kinematics: Kinematics::Twist { vx, vy, omega, doc: "Steered front, driven rear (seed 001 eq. 14 for one steered wheel): each steered wheel points at the turn centre on the rear axle line.".into() },
+        gyro: None,
+        landmark_sensor: None,
+        controller: None,
+        notes: Vec::new(),
+    };
+    robot.controller = ctl.map(|k| ControllerOut {
+        node: k.node.clone(),
+        type_name: k.type_name.clone(),
+        file: String::new(),
+        values: vec![
+            (radius_key.into(), "rear_wheel_radius".into()),
+            ("wheelbase".into(), "wheelbase".into()),
+        ],
+    });
+    Ok(robot)
+}

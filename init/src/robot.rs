@@ -1,0 +1,118 @@
+//! The spec-to-be, as types: inputs, parameters with where each number came
+//! from, the kinematics, observations, and the controller values a calibration
+//! writes back. `classify` builds it; `write` prints it.
+
+/// The kinematic class chosen from the wheels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Class {
+    DiffDrive,
+    SkidSteer,
+    Mecanum,
+    Omni,
+    /// One steered wheel that is also driven (rear wheels passive).
+    TricycleFrontDriven,
+    /// Steered front wheel(s), driven rear wheels: Ackermann, bicycle, tricycle.
+    RearDrivenSteering,
+}
+
+impl Class {
+    pub fn describe(self) -> &'static str {
+        match self {
+            Class::DiffDrive => "differential drive",
+            Class::SkidSteer => "skid steer",
+            Class::Mecanum => "mecanum",
+            Class::Omni => "omnidirectional (omni wheels)",
+            Class::TricycleFrontDriven => "tricycle (steered wheel driven)",
+            Class::RearDrivenSteering => "Ackermann / bicycle (steered front, driven rear)",
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct InputOut {
+    pub name: String,
+    /// The joint_states name.
+    pub column: String,
+    /// A steering angle (absolute, rad) rather than a wheel angle (cumulative).
+    pub steering: bool,
+    pub range: Option<[f64; 2]>,
+    pub doc: String,
+}
+
+#[derive(Debug, Clone)]
+pub struct ParamOut {
+    pub name: String,
+    pub nominal: f64,
+    pub unit: &'static str,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    /// Absolute; `None`: no prior.
+    pub tolerance: Option<f64>,
+    /// Calibrated by fit (free) or held (free = false).
+    pub free: bool,
+    pub doc: String,
+    /// Where the number came from (a comment above it).
+    pub source: String,
+}
+
+#[derive(Debug, Clone)]
+pub enum Kinematics {
+    Twist {
+        vx: String,
+        vy: String,
+        omega: String,
+        doc: String,
+    },
+    /// rate = coeffs . (vx, vy, omega), one row per wheel.
+    Constraints {
+        rows: Vec<(String, [String; 3])>,
+        doc: String,
+    },
+}
+
+/// Where the calibrated values go in the controller's configuration.
+#[derive(Debug, Clone)]
+pub struct ControllerOut {
+    pub node: String,
+    pub type_name: String,
+    /// The file read, relative to the spec when it can be.
+    pub file: String,
+    /// Controller key -> expression over the spec's parameters.
+    pub values: Vec<(String, String)>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Robot {
+    pub name: String,
+    pub class: Class,
+    pub doc: String,
+    pub inputs: Vec<InputOut>,
+    pub params: Vec<ParamOut>,
+    /// Named intermediate quantities ([[define]]): name, expression, doc.
+    pub defines: Vec<(String, String, String)>,
+    pub kinematics: Kinematics,
+    /// The sign of omega in the IMU's z (-1: mounted upside down), and its link.
+    pub gyro: Option<(f64, String)>,
+    /// The exteroceptive sensor's link and its mounting (x, y) in the base frame.
+    pub landmark_sensor: Option<(String, [f64; 2])>,
+    pub controller: Option<ControllerOut>,
+    /// Facts the user should read: disagreements, choices, what was ignored.
+    pub notes: Vec<String>,
+}
+
+/// One standard deviation of what a printed number says about the quantity:
+/// half a unit of its last printed digit, but never less than `floor` of its
+/// value (a CAD number printed to the micrometre still says nothing finer
+/// than how a real tyre deforms).
+pub fn tolerance(text: &str, value: f64, floor: f64) -> f64 {
+    let t = text.trim().to_ascii_lowercase();
+    let mantissa = t.split('e').next().unwrap_or("");
+    let exp: i32 = t
+        .split('e')
+        .nth(1)
+        .and_then(|e| e.parse().ok())
+        .unwrap_or(0);
+    let decimals = mantissa.split('.').nth(1).map_or(0, str::len) as i32;
+    let printed = 0.5 * 10f64.powi(exp - decimals);
+    printed.max(floor * value.abs())
+}
