@@ -33,7 +33,7 @@ if [ ! -c /dev/null ]; then
     echo "warning: /dev/null is a plain file here and could not be restored; the generated-crate tests may fail" >&2
   fi
 fi
-python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt -r docs/requirements.txt
+python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt -r verify/init/requirements.txt -r docs/requirements.txt
 python3 verify/casadi/reference.py --check
 python3 verify/peers/wrenfold_kernels.py --check
 python3 verify/peers/symforce_kernels.py --check

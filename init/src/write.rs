@@ -217,7 +217,7 @@ pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
         quote(base_frame)
     );
     if r.gyro.is_some() {
-        let _ = writeln!(out, "\n# the IMU (sensor_msgs/Imu): its angular_velocity.z is gyro_z\n[gyro]\ntopic = \"/imu\"");
+        let _ = writeln!(out, "\n# the IMU (sensor_msgs/Imu): its angular_velocity.z is gyro_z\n[gyro]\ntopic = \"/imu/data\"");
     }
     out
 }

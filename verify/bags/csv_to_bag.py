@@ -6,7 +6,7 @@ kinegen's decoder, so a bag read back by kinegen checks its message layouts
 against ROS 2's. Test tooling only (pip: verify/bags/requirements.txt).
 
   csv_to_bag.py LOG.csv OUT_DIR --joints enc_r,enc_l [--pose posestamped|odometry|tf|none]
-                [--imu gyro_z|none] [--swap-stamps TOPIC:K] [--extra-topic]
+                [--imu gyro_z|none] [--frame BASE] [--swap-stamps TOPIC:K] [--extra-topic]
                 [--observations OBS.csv [--observation-form array|point]]
 
 Range-bearing observations (`t,id,range,bearing`) go on `/landmarks` in a
@@ -44,6 +44,7 @@ def main():
     ap.add_argument('--joints', required=True, help='CSV columns written as JointState joints (same names)')
     ap.add_argument('--pose', default='posestamped', choices=['posestamped', 'odometry', 'tf', 'none'])
     ap.add_argument('--pose-columns', default='gt_x,gt_y,gt_theta')
+    ap.add_argument('--frame', default='base_link', help="the robot's frame: child of the TF and Odometry poses")
     ap.add_argument('--imu', default='gyro_z', help="CSV column of the yaw rate, or 'none'")
     ap.add_argument('--swap-stamps', default=None, help='TOPIC:K swaps the header stamps of messages K and K+1')
     ap.add_argument('--extra-topic', action='store_true', help='also write a second JointState topic')
@@ -91,7 +92,7 @@ def main():
                 tw = T['geometry_msgs/msg/Twist'](linear=T['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0),
                                                   angular=T['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0))
                 msgs.append((recv(), '/mocap/odom', 'nav_msgs/msg/Odometry', T['nav_msgs/msg/Odometry'](
-                    header=mhdr, child_frame_id='base_link',
+                    header=mhdr, child_frame_id=a.frame,
                     pose=T['geometry_msgs/msg/PoseWithCovariance'](pose=pose, covariance=cov),
                     twist=T['geometry_msgs/msg/TwistWithCovariance'](twist=tw, covariance=cov))))
             else:
@@ -100,7 +101,7 @@ def main():
                     transform=T['geometry_msgs/msg/Transform'](
                         translation=T['geometry_msgs/msg/Vector3'](x=pos.x, y=pos.y, z=0.0), rotation=q))
                 msgs.append((recv(), '/tf', 'tf2_msgs/msg/TFMessage', T['tf2_msgs/msg/TFMessage'](
-                    transforms=[tr('odom', T['geometry_msgs/msg/Point'](x=0.0, y=0.0, z=0.0)), tr('base_link', p)])))
+                    transforms=[tr('odom', T['geometry_msgs/msg/Point'](x=0.0, y=0.0, z=0.0)), tr(a.frame, p)])))
         if a.imu != 'none':
             v3 = T['geometry_msgs/msg/Vector3']
             msgs.append((recv(), '/imu/data', 'sensor_msgs/msg/Imu', T['sensor_msgs/msg/Imu'](

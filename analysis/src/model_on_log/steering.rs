@@ -120,10 +120,16 @@ pub fn solve(r: &Runner, twist: &[f64; 3], cfg: &mut [f64], solve: &[usize]) {
                 jac[(row, c)] = (moved[row] - now[row]) / h;
             }
         }
-        let g = jac.transpose() * nalgebra::DVector::from_row_slice(&now);
-        let jtj = jac.transpose() * &jac;
-        let damped = &jtj + nalgebra::DMatrix::identity(n, n) * (1e-12 * jtj.trace().max(1e-300));
-        let Some(step) = damped.lu().solve(&g) else {
+        // the minimum-norm Gauss-Newton step: with more inputs than the twist
+        // constrains (an Ackermann car's two knuckles set one curvature, its
+        // two rear wheels one speed) they move together from where they are.
+        // Directions the forward differences cannot tell from the null space
+        // (singular values below their ~1e-7 relative precision) are left out:
+        // inverting them sends the knuckles to opposite locks and the wheels
+        // to thousands of rad/s.
+        let svd = jac.svd(true, true);
+        let floor = 1e-6 * svd.singular_values.max().max(1e-300);
+        let Ok(step) = svd.solve(&nalgebra::DVector::from_row_slice(&now), floor) else {
             return;
         };
         let before: Vec<f64> = solve.iter().map(|&k| cfg[k]).collect();

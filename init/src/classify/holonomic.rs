@@ -217,7 +217,7 @@ pub fn omni(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
         let turn = if round {
             linear(cross(centre, d), &[(cross(q / l, d), "base_radius")])
         } else {
-            num(cross(p, d))
+            num(tidy(cross(p, d)))
         };
         inputs.push(wheel_input(
             w,
@@ -229,8 +229,8 @@ pub fn omni(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
         rows.push((
             identifier(&w.joint),
             [
-                format!("{}/wheel_radius", num(d.x)),
-                format!("{}/wheel_radius", num(d.y)),
+                format!("{}/wheel_radius", num(tidy(d.x))),
+                format!("{}/wheel_radius", num(tidy(d.y))),
                 format!("({turn})/wheel_radius"),
             ],
         ));

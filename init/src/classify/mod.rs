@@ -25,6 +25,16 @@ pub struct Context<'a> {
     pub controller: Option<&'a Controller>,
 }
 
+/// A number computed from the description (a direction cosine, an offset)
+/// without the last bits of rounding: 15 significant digits, and 0 below
+/// 1e-12 (an axis that is "0 1 0" after rotating by pi/2 gives 6e-17).
+pub fn tidy(v: f64) -> f64 {
+    if v.abs() < 1e-12 {
+        return 0.0;
+    }
+    format!("{v:.14e}").parse().unwrap_or(v)
+}
+
 /// A number printed so that reading it back gives the same f64.
 pub fn num(v: f64) -> String {
     let s = format!("{v:?}");
@@ -107,13 +117,9 @@ pub(crate) fn at_base(
     omega: &str,
     noise: (&str, &str, &str),
 ) -> [String; 3] {
-    let vx = if c.y.abs() > 1e-12 {
-        format!("{vx_c} + {}*{omega} + {}", num(c.y), noise.0)
-    } else {
-        format!("{vx_c} + {}", noise.0)
-    };
+    let vx = linear(0.0, &[(1.0, vx_c), (c.y, omega), (1.0, noise.0)]);
     let vy = if c.x.abs() > 1e-12 {
-        format!("{}*{omega} + {}", num(-c.x), noise.1)
+        linear(0.0, &[(-c.x, omega), (1.0, noise.1)])
     } else {
         "0".to_string()
     };
@@ -125,8 +131,12 @@ pub(crate) const NOISE: (&str, &str, &str) = ("n_vx", "n_vy", "n_omega");
 /// `c0 + c1*a + c2*b` with zero terms left out.
 pub fn linear(c0: f64, terms: &[(f64, &str)]) -> String {
     let mut out = String::new();
-    for (c, name) in terms.iter().filter(|(c, _)| *c != 0.0) {
-        let term = match *c {
+    for (c, name) in terms
+        .iter()
+        .map(|(c, n)| (tidy(*c), n))
+        .filter(|(c, _)| *c != 0.0)
+    {
+        let term = match c {
             1.0 => name.to_string(),
             -1.0 => format!("-{name}"),
             c => format!("{}*{name}", num(c)),

@@ -204,7 +204,10 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
         let d = signed(s.sign, &identifier(&s.joint));
         let y = w.position.y - c.y;
         curvatures.push(if y.abs() > 1e-12 {
-            format!("tan({d})/(wheelbase + {}*tan({d}))", num(y))
+            format!(
+                "tan({d})/({})",
+                linear(0.0, &[(1.0, "wheelbase"), (y, &format!("tan({d})"))])
+            )
         } else {
             format!("tan({d})/wheelbase")
         });
@@ -218,7 +221,7 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
         format!("rear_wheel_radius*({sum})/{n}")
     };
     if ybar.abs() > 1e-12 {
-        speed = format!("({speed})/(1 - {}*curvature)", num(ybar));
+        speed = format!("({speed})/({})", linear(1.0, &[(-ybar, "curvature")]));
     }
     let curvature = if curvatures.len() == 1 {
         curvatures[0].clone()

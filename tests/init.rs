@@ -1,0 +1,479 @@
+//! `kinegen init`: six robot descriptions (tests/robots/, written from the
+//! published dimensions of six robots of different kinds, with joint and
+//! link names unlike the usual ones) become specs whose geometry is the
+//! description's to 1e-9, that every analysis command runs without edits,
+//! and whose calibration goes back into the controller file read. Bad
+//! descriptions are refused at their line, writing nothing.
+mod common;
+use common::*;
+use kinegen_model::spec::{Kinematics, Model};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+fn robot(name: &str) -> PathBuf {
+    root().join("tests/robots").join(name)
+}
+
+/// `kinegen init` for a fixture, run from a folder outside the checkout;
+/// the spec's path.
+fn init(name: &str, dir: &Path) -> PathBuf {
+    let r = robot(name);
+    let urdf = r.join("robot.urdf");
+    let ctl = r.join("controllers.yaml");
+    let spec = dir.join(format!("{name}.toml"));
+    let mut args = vec![
+        "init",
+        "--urdf",
+        urdf.to_str().unwrap(),
+        "--out",
+        spec.to_str().unwrap(),
+    ];
+    if ctl.exists() {
+        args.extend(["--controller", ctl.to_str().unwrap()]);
+    }
+    let topics = dir.join(format!("{name}_topics.toml"));
+    args.extend(["--topics-out", topics.to_str().unwrap()]);
+    let o = kinegen_in(dir, &args);
+    assert!(o.status.success(), "init {name}: {}", stderr(&o));
+    spec
+}
+
+/// Evaluate a spec expression with its definitions expanded, parameters at
+/// nominal, noise at zero.
+fn eval(m: &Model, e: &kinegen_model::expr::Expr, inputs: &HashMap<&str, f64>) -> f64 {
+    let params: HashMap<&str, f64> = m
+        .params
+        .iter()
+        .map(|p| (p.name.as_str(), p.nominal))
+        .collect();
+    m.expand(e)
+        .eval(&|v| {
+            inputs
+                .get(v)
+                .or_else(|| params.get(v))
+                .copied()
+                .or_else(|| m.noise.iter().any(|n| n.name == v).then_some(0.0))
+                .or((v == "pi").then_some(std::f64::consts::PI))
+        })
+        .unwrap_or_else(|| panic!("cannot evaluate {e:?}"))
+}
+
+fn twist(m: &Model, inputs: &HashMap<&str, f64>) -> [f64; 3] {
+    let Kinematics::Twist(t) = &m.kinematics else {
+        panic!("{}: expected a twist", m.name)
+    };
+    [
+        eval(m, &t[0], inputs),
+        eval(m, &t[1], inputs),
+        eval(m, &t[2], inputs),
+    ]
+}
+
+/// Each constraint row at nominal parameters, in the order of `joints`.
+fn rows(m: &Model, joints: &[&str]) -> Vec<[f64; 3]> {
+    let Kinematics::Constraints(c) = &m.kinematics else {
+        panic!("{}: expected constraints", m.name)
+    };
+    let none = HashMap::new();
+    joints
+        .iter()
+        .map(|j| {
+            let (_, row) = c
+                .rows
+                .iter()
+                .find(|(r, _)| r == j)
+                .unwrap_or_else(|| panic!("no row for {j}"));
+            [
+                eval(m, &row[0], &none),
+                eval(m, &row[1], &none),
+                eval(m, &row[2], &none),
+            ]
+        })
+        .collect()
+}
+
+fn close(a: f64, b: f64, what: &str) {
+    assert!(
+        (a - b).abs() <= 1e-9 * (1.0 + b.abs()),
+        "{what}: spec {a}, description {b}"
+    );
+}
+
+/// Inputs spread over a robot's range (a few rad/s, steering within its lock).
+fn samples() -> Vec<[f64; 4]> {
+    (0..20)
+        .map(|k| {
+            let s = |i: usize| ((k * 7 + i * 13) as f64 * 0.61).sin();
+            [3.0 * s(1), 3.0 * s(2), 0.4 * s(3), 0.4 * s(4)]
+        })
+        .collect()
+}
+
+#[test]
+fn a_two_wheel_diff_drive_with_a_caster_is_its_turtlebot_geometry() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("burger", dir.path())).unwrap();
+    assert_eq!(
+        m.inputs
+            .iter()
+            .map(|i| i.column.as_str())
+            .collect::<Vec<_>>(),
+        ["propulsor_port", "propulsor_stbd"]
+    );
+    for [wl, wr, ..] in samples() {
+        let t = twist(
+            &m,
+            &HashMap::from([("propulsor_port", wl), ("propulsor_stbd", wr)]),
+        );
+        close(t[0], 0.033 * (wl + wr) / 2.0, "vx");
+        close(t[1], 0.0, "vy");
+        close(t[2], 0.033 * (wr - wl) / 0.160, "omega");
+    }
+}
+
+#[test]
+fn a_four_wheel_skid_steer_is_its_husky_geometry_with_the_controllers_effective_track() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("hauler", dir.path())).unwrap();
+    let b = m
+        .params
+        .iter()
+        .find(|p| p.name == "wheel_separation")
+        .unwrap();
+    assert_eq!(b.tolerance, None, "a skid-steer track has no prior");
+    for [a, b2, c, d] in samples() {
+        let u = HashMap::from([
+            ("corner_fp", a),
+            ("corner_ap", b2),
+            ("corner_fs", c),
+            ("corner_as", d),
+        ]);
+        let t = twist(&m, &u);
+        let (vl, vr) = (0.1651 * (a + b2) / 2.0, 0.1651 * (c + d) / 2.0);
+        close(t[0], (vl + vr) / 2.0, "vx");
+        close(t[2], (vr - vl) / (0.5708 * 1.875), "omega");
+    }
+}
+
+#[test]
+fn a_mecanum_base_has_the_ros2_controllers_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("sidestep", dir.path())).unwrap();
+    let (r, l) = (0.05, 0.085 + 0.134);
+    // ros2 mecanum_drive_controller's inverse kinematics, per wheel
+    let expect = [
+        [1.0, -1.0, -l],
+        [1.0, 1.0, l],
+        [1.0, 1.0, -l],
+        [1.0, -1.0, l],
+    ];
+    let got = rows(&m, &["paw_fl", "paw_fr", "paw_rl", "paw_rr"]);
+    for (g, e) in got.iter().zip(expect) {
+        for k in 0..3 {
+            close(g[k], e[k] / r, "mecanum row");
+        }
+    }
+}
+
+#[test]
+fn an_ackermann_car_is_its_f1tenth_geometry_seen_from_the_middle_of_the_car() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("racer", dir.path())).unwrap();
+    let steering: Vec<&str> = m
+        .inputs
+        .iter()
+        .filter(|i| i.kind == kinegen_model::decl::InputKind::Absolute)
+        .map(|i| i.name.as_str())
+        .collect();
+    let mut sorted = steering.clone();
+    sorted.sort();
+    assert_eq!(
+        sorted,
+        ["knuckle_l", "knuckle_r"],
+        "both steering joints are inputs"
+    );
+    let (r, wb, half) = (0.0508, 0.3302, 0.12);
+    for [wl, wr, dl, dr] in samples() {
+        let u = HashMap::from([
+            ("axle_drive_l", wl),
+            ("axle_drive_r", wr),
+            ("knuckle_l", dl),
+            ("knuckle_r", dr),
+        ]);
+        let t = twist(&m, &u);
+        let v = r * (wl + wr) / 2.0;
+        // each front wheel points at the turn centre on the rear axle line
+        let k = (dl.tan() / (wb + half * dl.tan()) + dr.tan() / (wb - half * dr.tan())) / 2.0;
+        close(t[0], v, "vx");
+        // the base link is 0.1651 m ahead of the rear axle
+        close(t[1], 0.1651 * v * k, "vy");
+        close(t[2], v * k, "omega");
+    }
+}
+
+#[test]
+fn a_tricycle_whose_steered_wheel_drives_uses_the_controllers_wheelbase() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("forklift", dir.path())).unwrap();
+    for [w, _, d, _] in samples() {
+        let t = twist(
+            &m,
+            &HashMap::from([("tread_drive", w), ("mast_turn", 2.0 * d)]),
+        );
+        let d = 2.0 * d;
+        close(t[0], 0.125 * w * d.cos(), "vx");
+        close(t[1], 0.0, "vy");
+        close(t[2], 0.125 * w * d.sin() / 1.21, "omega");
+    }
+}
+
+#[test]
+fn a_three_wheel_omni_base_has_its_robotino_rows_and_an_upside_down_gyro() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("trio", dir.path())).unwrap();
+    let (r, l) = (0.040, 0.135);
+    // wheels at 90, 210 and 330 degrees, axles radial: each rolls tangentially
+    let got = rows(&m, &["roll_a", "roll_b", "roll_c"]);
+    for (g, deg) in got.iter().zip([90.0f64, 210.0, 330.0]) {
+        let a = deg.to_radians();
+        close(g[0], a.sin() / r, "omni row x");
+        close(g[1], -a.cos() / r, "omni row y");
+        close(g[2], -l / r, "omni row omega");
+    }
+    assert!(
+        m.observations.iter().any(|o| o.name == "gyro"),
+        "a gyro from the IMU link"
+    );
+    assert!(
+        m.source.contains("expr = [\"-omega\"]"),
+        "the IMU is mounted upside down"
+    );
+}
+
+/// simulate (with landmarks), compare, fit, diagnose and localize on the
+/// spec init wrote, unedited, from a folder outside the checkout.
+fn every_command_runs(name: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let spec = init(name, d);
+    let map = root().join("data/beacons.csv");
+    let (s, m) = (spec.to_str().unwrap(), map.to_str().unwrap());
+    let run = |args: &[&str]| {
+        let o = kinegen_in(d, args);
+        assert!(
+            o.status.success(),
+            "{name}: kinegen {args:?}: {}",
+            stderr(&o)
+        );
+        stdout(&o)
+    };
+    run(&[
+        "simulate",
+        "--spec",
+        s,
+        "--trajectory",
+        "random",
+        "--seed",
+        "4",
+        "--landmarks",
+        m,
+        "--observations",
+        "obs.csv",
+        "--out",
+        "log.csv",
+    ]);
+    for cmd in ["compare", "fit", "diagnose"] {
+        let out = run(&[cmd, "--spec", s, "--data", "log.csv"]);
+        assert!(out.contains("answer:"), "{name} {cmd}: {out}");
+    }
+    let out = run(&[
+        "localize",
+        "--spec",
+        s,
+        "--data",
+        "log.csv",
+        "--observations",
+        "obs.csv",
+        "--landmarks",
+        m,
+    ]);
+    assert!(
+        out.contains("answer: position RMSE"),
+        "{name} localize: {out}"
+    );
+}
+
+#[test]
+fn the_diff_drive_spec_runs_every_command_unedited() {
+    every_command_runs("burger");
+}
+#[test]
+fn the_skid_steer_spec_runs_every_command_unedited() {
+    every_command_runs("hauler");
+}
+#[test]
+fn the_mecanum_spec_runs_every_command_unedited() {
+    every_command_runs("sidestep");
+}
+#[test]
+fn the_ackermann_spec_runs_every_command_unedited() {
+    every_command_runs("racer");
+}
+#[test]
+fn the_tricycle_spec_runs_every_command_unedited() {
+    every_command_runs("forklift");
+}
+#[test]
+fn the_omni_spec_runs_every_command_unedited() {
+    every_command_runs("trio");
+}
+
+/// The numbers under `node: ros__parameters:` of a controller file, by key.
+fn yaml_numbers(text: &str) -> HashMap<String, f64> {
+    text.lines()
+        .filter_map(|l| {
+            let (k, v) = l.trim().split_once(':')?;
+            Some((
+                k.trim().to_string(),
+                v.split('#').next()?.trim().parse().ok()?,
+            ))
+        })
+        .collect()
+}
+
+#[test]
+fn fit_writes_the_calibration_into_the_controller_file_init_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let spec = init("burger", d);
+    let s = spec.to_str().unwrap();
+    // the robot's real track is 3% wider and its right wheel 1% larger
+    let o = kinegen_in(
+        d,
+        &[
+            "simulate",
+            "--spec",
+            s,
+            "--trajectory",
+            "random",
+            "--seed",
+            "5",
+            "--set",
+            "wheel_separation=0.1648",
+            "--set",
+            "wheel_radius_right=0.03333",
+            "--out",
+            "log.csv",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = kinegen_in(
+        d,
+        &[
+            "fit",
+            "--spec",
+            s,
+            "--data",
+            "log.csv",
+            "--export",
+            "ros2-yaml",
+            "calibrated.yaml",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let original = std::fs::read_to_string(robot("burger").join("controllers.yaml")).unwrap();
+    let written = std::fs::read_to_string(d.join("calibrated.yaml")).unwrap();
+    // the same file, line for line, but for the calibrated numbers (and a head of comments)
+    let body: Vec<&str> = written.lines().skip_while(|l| l.starts_with('#')).collect();
+    let before: Vec<&str> = original.lines().collect();
+    assert_eq!(body.len(), before.len(), "{written}");
+    let changed: Vec<&str> = body
+        .iter()
+        .zip(&before)
+        .filter(|(a, b)| a != b)
+        .map(|(a, _)| a.trim())
+        .collect();
+    assert!(
+        changed
+            .iter()
+            .all(|l| l.contains("wheel_") && l.contains(": ")),
+        "only the calibrated keys change: {changed:?}"
+    );
+    let v = yaml_numbers(&written);
+    assert!((v["wheel_separation"] - 0.1648).abs() < 0.002, "{written}");
+    let right = v["wheel_radius"] * v["right_wheel_radius_multiplier"];
+    let left = v["wheel_radius"] * v["left_wheel_radius_multiplier"];
+    assert!(
+        (right - 0.03333).abs() < 0.0003 && (left - 0.033).abs() < 0.0003,
+        "{written}"
+    );
+    assert!(
+        written.contains("wheel_separation_multiplier: 1.0\n"),
+        "a double stays a double for ROS 2: {written}"
+    );
+}
+
+#[test]
+fn a_bag_with_the_descriptions_joint_names_calibrates_with_the_written_mapping() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let spec = init("burger", d);
+    let s = spec.to_str().unwrap();
+    let o = kinegen_in(
+        d,
+        &[
+            "simulate",
+            "--spec",
+            s,
+            "--trajectory",
+            "random",
+            "--seed",
+            "6",
+            "--set",
+            "wheel_separation=0.1648",
+            "--out",
+            "log.csv",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = std::process::Command::new("python3")
+        .arg(root().join("verify/bags/csv_to_bag.py"))
+        .args([
+            "log.csv",
+            "run_bag",
+            "--joints",
+            "propulsor_port,propulsor_stbd",
+            "--pose",
+            "tf",
+            "--frame",
+            "footprint_frame",
+        ])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "writing the bag (pip install -r verify/bags/requirements.txt): {}",
+        stderr(&o)
+    );
+    let o = kinegen_in(
+        d,
+        &[
+            "fit",
+            "--spec",
+            s,
+            "--data",
+            "run_bag",
+            "--topics",
+            "burger_topics.toml",
+            "--json",
+            "-",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let b = j["parameters"]["wheel_separation"]["estimate"]
+        .as_f64()
+        .unwrap();
+    assert!((b - 0.1648).abs() < 0.002, "calibrated from the bag: {b}");
+}
