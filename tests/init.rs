@@ -477,3 +477,283 @@ fn a_bag_with_the_descriptions_joint_names_calibrates_with_the_written_mapping()
         .unwrap();
     assert!((b - 0.1648).abs() < 0.002, "calibrated from the bag: {b}");
 }
+
+/// `init` on a description that must be refused: exit 2, the message names
+/// the file and `line`, and neither output file is written.
+fn refused_at(urdf: &str, controller: Option<&str>, line: usize, says: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("robot.urdf"), urdf).unwrap();
+    let mut args = vec![
+        "init",
+        "--urdf",
+        "robot.urdf",
+        "--out",
+        "spec.toml",
+        "--topics-out",
+        "topics.toml",
+    ];
+    if let Some(c) = controller {
+        std::fs::write(d.join("controllers.yaml"), c).unwrap();
+        args.extend(["--controller", "controllers.yaml"]);
+    }
+    let o = kinegen_in(d, &args);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let file = if controller.is_some() && says.contains("units") {
+        "controllers.yaml"
+    } else {
+        "robot.urdf"
+    };
+    assert!(
+        err.contains(&format!("{file}:{line}")),
+        "expected {file}:{line} in: {err}"
+    );
+    assert!(err.contains(says), "expected `{says}` in: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(
+        !d.join("spec.toml").exists() && !d.join("topics.toml").exists(),
+        "nothing is written"
+    );
+}
+
+fn burger_with(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(robot("burger").join("robot.urdf")).unwrap();
+    assert!(text.contains(from), "the fixture has `{from}`");
+    text.replacen(from, to, 1)
+}
+
+fn line_of(text: &str, what: &str) -> usize {
+    text.lines()
+        .position(|l| l.contains(what))
+        .unwrap_or_else(|| panic!("no `{what}`"))
+        + 1
+}
+
+#[test]
+fn malformed_xml_is_refused_at_its_line() {
+    let bad = burger_with("<link name=\"tyre_stbd\">", "<link name=\"tyre_stbd\"");
+    refused_at(
+        &bad,
+        None,
+        line_of(&bad, "<link name=\"tyre_stbd\"") + 1,
+        "not well-formed XML",
+    );
+}
+
+#[test]
+fn a_description_with_two_roots_asks_for_a_base_link() {
+    let bad = burger_with(
+        "<parent link=\"footprint_frame\"/>",
+        "<parent link=\"chassis_core\"/>",
+    );
+    // footprint_frame -> chassis_core made chassis_core its own parent's child: a loop
+    refused_at(
+        &bad,
+        None,
+        line_of(&bad, "name=\"footprint_to_core\""),
+        "loop",
+    );
+    let orphan = burger_with(
+        "<link name=\"footprint_frame\"/>",
+        "<link name=\"footprint_frame\"/>\n  <link name=\"stray_plate\"/>",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("robot.urdf"), &orphan).unwrap();
+    let o = kinegen_in(
+        dir.path(),
+        &["init", "--urdf", "robot.urdf", "--out", "spec.toml"],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--base-link") && stderr(&o).contains("stray_plate"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.path().join("spec.toml").exists());
+    // named, it goes through
+    let o = kinegen_in(
+        dir.path(),
+        &[
+            "init",
+            "--urdf",
+            "robot.urdf",
+            "--base-link",
+            "footprint_frame",
+            "--out",
+            "spec.toml",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = kinegen_in(
+        dir.path(),
+        &[
+            "init",
+            "--urdf",
+            "robot.urdf",
+            "--base-link",
+            "no_such",
+            "--out",
+            "other.toml",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--base-link") && stderr(&o).contains("no_such"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_description_without_wheels_is_refused() {
+    let text = std::fs::read_to_string(robot("burger").join("robot.urdf")).unwrap();
+    let bad = text.replace("type=\"continuous\"", "type=\"fixed\"");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("robot.urdf"), &bad).unwrap();
+    let o = kinegen_in(
+        dir.path(),
+        &["init", "--urdf", "robot.urdf", "--out", "spec.toml"],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("robot.urdf: no wheels found"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.path().join("spec.toml").exists());
+}
+
+#[test]
+fn a_wheel_without_geometry_is_refused_at_its_link() {
+    let bad = burger_with(
+        "<collision><geometry><cylinder length=\"0.018\" radius=\"0.033\"/></geometry></collision>",
+        "<visual><geometry><mesh filename=\"package://rover/tyre.stl\"/></geometry></visual>",
+    );
+    refused_at(
+        &bad,
+        None,
+        line_of(&bad, "<link name=\"tyre_port\">"),
+        "no cylinder or sphere geometry",
+    );
+}
+
+#[test]
+fn two_wheels_on_one_axle_at_different_radii_are_refused() {
+    let text = std::fs::read_to_string(robot("burger").join("robot.urdf")).unwrap();
+    let at = text.rfind("radius=\"0.033\"").unwrap();
+    let bad = format!(
+        "{}radius=\"0.036\"{}",
+        &text[..at],
+        &text[at + "radius=\"0.033\"".len()..]
+    );
+    refused_at(
+        &bad,
+        None,
+        line_of(&bad, "radius=\"0.036\""),
+        "share an axle but have different radii",
+    );
+}
+
+#[test]
+fn a_controller_in_millimetres_is_refused_as_inconsistent_units() {
+    let urdf = std::fs::read_to_string(robot("burger").join("robot.urdf")).unwrap();
+    let ctl = std::fs::read_to_string(robot("burger").join("controllers.yaml"))
+        .unwrap()
+        .replace("wheel_radius: 0.033", "wheel_radius: 33.0");
+    refused_at(
+        &urdf,
+        Some(&ctl),
+        line_of(&ctl, "wheel_radius: 33"),
+        "inconsistent units",
+    );
+}
+
+#[test]
+fn a_controller_naming_a_joint_the_urdf_lacks_is_refused_at_its_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let ctl = std::fs::read_to_string(robot("burger").join("controllers.yaml"))
+        .unwrap()
+        .replace("[\"propulsor_port\"]", "[\"left_wheel_joint\"]");
+    std::fs::write(d.join("c.yaml"), &ctl).unwrap();
+    let urdf = robot("burger").join("robot.urdf");
+    let o = kinegen_in(
+        d,
+        &[
+            "init",
+            "--urdf",
+            urdf.to_str().unwrap(),
+            "--controller",
+            "c.yaml",
+            "--out",
+            "s.toml",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let want = format!("c.yaml:{}", line_of(&ctl, "left_wheel_names"));
+    assert!(
+        stderr(&o).contains(&want) && stderr(&o).contains("left_wheel_joint"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::write(
+        d.join("c.yaml"),
+        "rover_base:\n  ros__parameters:\n    wheel_radius: [0.03\n",
+    )
+    .unwrap();
+    let o = kinegen_in(
+        d,
+        &[
+            "init",
+            "--urdf",
+            urdf.to_str().unwrap(),
+            "--controller",
+            "c.yaml",
+            "--out",
+            "s.toml",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("c.yaml:") && stderr(&o).contains("not valid YAML"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!d.join("s.toml").exists());
+}
+
+#[test]
+fn a_xacro_description_is_expanded_or_refused_with_how_to_expand_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let text = std::fs::read_to_string(robot("burger").join("robot.urdf")).unwrap();
+    // the wheel radius as a xacro property
+    let xacro = text
+        .replace("<robot name=\"pocket_rover\">", "<robot name=\"pocket_rover\" xmlns:xacro=\"http://www.ros.org/wiki/xacro\">\n  <xacro:property name=\"tyre_r\" value=\"0.034\"/>")
+        .replace("radius=\"0.033\"", "radius=\"${tyre_r}\"");
+    std::fs::write(d.join("robot.urdf.xacro"), xacro).unwrap();
+    let o = kinegen_in(
+        d,
+        &["init", "--urdf", "robot.urdf.xacro", "--out", "s.toml"],
+    );
+    let has_xacro = std::process::Command::new("python3")
+        .args(["-c", "import xacro"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if has_xacro {
+        assert!(o.status.success(), "{}", stderr(&o));
+        let m = Model::load(&d.join("s.toml")).unwrap();
+        assert_eq!(
+            m.params
+                .iter()
+                .find(|p| p.name == "wheel_radius_left")
+                .unwrap()
+                .nominal,
+            0.034
+        );
+    } else {
+        assert_eq!(o.status.code(), Some(2));
+        assert!(stderr(&o).contains("pip install xacro"), "{}", stderr(&o));
+    }
+}
