@@ -84,6 +84,13 @@ pub fn run(c: Common) -> ExitCode {
         say_candidates(&out, d);
         let apply_cmds = say_chain(&out, &c, r, &outcome);
         say_structure(&out, d);
+        if let Some(p) = &d.proposed {
+            out.say(&format!(
+                "proposed beyond the catalogue: {} (held-out {:.4} -> {:.4}); its effect file:",
+                p.name, p.held_out_before, p.held_out_after
+            ));
+            p.toml.lines().for_each(|l| out.say(&format!("  {l}")));
+        }
         let disc_ratio = say_discretisation(&out, d);
         out.say(&format!(
             "time: {:.2} s preparing, {:.2} s diagnosing",
@@ -108,7 +115,7 @@ pub fn run(c: Common) -> ExitCode {
         "calibrated": {"rmse": d.calibrated_rmse, "holdout_rmse": d.base_holdout_rmse,
             "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
         "candidates": d.candidates,
-        "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "apply": apply_cmds},
+        "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "proposed": d.proposed.iter().collect::<Vec<_>>(), "apply": apply_cmds},
         "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "measured": disc.measured, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc.measured.then_some(disc_ratio <= DISCRETISATION_WARN)},
         "warnings": prep.warnings,
         "clock": d.clock,
@@ -130,6 +137,13 @@ pub fn run(c: Common) -> ExitCode {
             &doc,
         ) {
             return bad(e);
+        }
+        // the proposal as an effect file `add-effect --effects DIR/proposed` reads
+        if let Some(p) = &d.proposed {
+            let file = dir.join("proposed").join(format!("{}.toml", p.name));
+            if let Err(e) = kinegen_model::files::write_atomic(&file, &p.toml) {
+                return bad(e);
+            }
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }

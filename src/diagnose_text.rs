@@ -112,6 +112,7 @@ fn say_answer(out: &mut Vec<String>, c: &Common, r: &Runner, d: &Diagnosis) -> V
             "answer: no catalogue effect is significant; calibrated error {:.3} (nominal {:.3})",
             d.calibrated_rmse, d.baseline_rmse
         ));
+        say_proposal(out, d);
         return Vec::new();
     }
     let mut apply = Vec::new();
@@ -168,11 +169,40 @@ fn say_answer(out: &mut Vec<String>, c: &Common, r: &Runner, d: &Diagnosis) -> V
     for cmd in &apply {
         out.extend(command_lines(cmd, 2));
     }
+    say_proposal(out, d);
     let last = d.chain.last().map_or(String::new(), |s| s.effect.clone());
     out.push("then calibrate:".into());
     let fit = calibrate_command(c, &format!("{}_{last}.toml", r.ir.name), &r.ir.name);
     out.extend(command_lines(&fit, 2));
     apply
+}
+
+/// A correction beyond the catalogue, when diagnose proposes one: its terms,
+/// its held-out fall and where its effect file is.
+fn say_proposal(out: &mut Vec<String>, d: &Diagnosis) {
+    let Some(p) = &d.proposed else { return };
+    let terms: Vec<String> = p
+        .terms
+        .iter()
+        .zip(&p.corrects)
+        .zip(&p.gains)
+        .map(|((t, c), g)| match p.parameters.get(g) {
+            Some(e) => format!("{c} += {} x {t}", with_std(e.estimate, e.std)),
+            None => format!("{c} += {g} x {t}"),
+        })
+        .collect();
+    out.push(cut(&format!(
+        "proposed beyond the catalogue: {}",
+        terms.join(", ")
+    )));
+    out.push(cut(&format!(
+        "    held-out {}; may be: {}",
+        fall(p.held_out_before, p.held_out_after),
+        p.reading
+    )));
+    out.push(
+        "    its effect file: -v, --json (verdict.proposed) or --report DIR (DIR/proposed/)".into(),
+    );
 }
 
 /// The effects tested, most likely first: the motion's, then the sensor's;

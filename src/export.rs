@@ -147,7 +147,7 @@ pub fn ros2_yaml(spec: &Path, r: &Runner, res: &FitResult) -> Result<String, Str
 fn controller_yaml(
     spec: &Path,
     model: &Model,
-    target: &kinegen_model::decl::ControllerTarget,
+    target: &kinegen_model::spec::ControllerTarget,
     r: &Runner,
     res: &FitResult,
 ) -> Result<String, String> {

@@ -105,6 +105,7 @@ pub mod diagnosis {
     pub mod diagnose_job;
     pub mod estimate;
     pub mod folds;
+    pub mod propose;
     pub mod ranking;
     pub mod request;
     pub mod sensor;

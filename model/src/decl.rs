@@ -253,17 +253,3 @@ mod counting_tests {
         }
     }
 }
-
-/// The ros2_control controller node a spec's calibrated values belong to
-/// (`[controller]`, written by `kinegen init`): `fit --export ros2-yaml`
-/// sets each key of the node's `ros__parameters` to its expression's value.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ControllerTarget {
-    pub node: String,
-    /// The controller's plugin type (`diff_drive_controller/DiffDriveController`).
-    pub type_name: String,
-    /// The controller file it was read from, relative to the spec ("" when none).
-    pub file: String,
-    /// Key (dotted for nested maps) and its value over the parameters.
-    pub values: Vec<(String, crate::expr::Expr)>,
-}

@@ -290,7 +290,7 @@ pub struct Model {
     pub inverse: Option<(Vec<Expr>, String)>,
     pub effects: Vec<String>,
     /// The ros2_control controller the calibrated values go to (`[controller]`).
-    pub controller: Option<crate::decl::ControllerTarget>,
+    pub controller: Option<ControllerTarget>,
 }
 
 struct Ctx<'a> {
@@ -1112,12 +1112,26 @@ fn parse_inverse(
     Ok(Some((es, inv.doc.clone())))
 }
 
+/// The ros2_control controller node a spec's calibrated values belong to
+/// (`[controller]`, written by `kinegen init`): `fit --export ros2-yaml`
+/// sets each key of the node's `ros__parameters` to its expression's value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControllerTarget {
+    pub node: String,
+    /// The controller's plugin type (`diff_drive_controller/DiffDriveController`).
+    pub type_name: String,
+    /// The controller file it was read from, relative to the spec ("" when none).
+    pub file: String,
+    /// Key (dotted for nested maps) and its value over the parameters.
+    pub values: Vec<(String, Expr)>,
+}
+
 /// Validate `[controller]`: every value an expression over the parameters.
 fn parse_controller(
     cx: &Ctx,
     raw: &RawSpec,
     names: &Names,
-) -> Result<Option<crate::decl::ControllerTarget>, SourceError> {
+) -> Result<Option<ControllerTarget>, SourceError> {
     let Some(c) = &raw.controller else {
         return Ok(None);
     };
@@ -1127,7 +1141,7 @@ fn parse_controller(
         names.check(cx, &e, Place::Controller)?;
         values.push((key.clone(), e));
     }
-    Ok(Some(crate::decl::ControllerTarget {
+    Ok(Some(ControllerTarget {
         node: c.node.clone(),
         type_name: c.type_name.clone(),
         file: c.file.clone(),

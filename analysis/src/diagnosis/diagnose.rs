@@ -60,6 +60,10 @@ pub struct Diagnosis {
     pub sensor_candidates: Vec<SensorCandidate>,
     /// Why the sensor's effects were not tested, where the catalogue has some.
     pub sensor_unmeasured: Option<SensorUnmeasured>,
+    /// A correction beyond the catalogue, when structure was left after its
+    /// last effect and a term of the proposal library explains it (see
+    /// [`super::propose`]).
+    pub proposed: Option<super::propose::Proposal>,
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
     pub final_p: Vec<f64>,
@@ -273,7 +277,7 @@ type Named = Vec<(String, String)>;
 /// not derive, said in `skipped` (in the first round only), and those only
 /// the range-bearing sensor reads, collected in `sensor` for the sensor's
 /// own chain (see [`super::sensor`]).
-fn to_rank(
+pub(crate) fn to_rank(
     cur: &Stage,
     names: &[String],
     remaining: &[(String, String)],
@@ -412,7 +416,7 @@ fn sensor_chain(
 /// The stage after `w` won a round ranked from `augmented`: the ranking
 /// calibrated the winner already, on all runs and on the training part.
 /// Its step error is the current stage's until it is measured again.
-fn winner_stage(
+pub(crate) fn winner_stage(
     cur: &Stage,
     augmented: &[(String, String, Runner)],
     w: &Candidate,
@@ -539,6 +543,21 @@ pub fn diagnose(
         cur = next;
     }
     let structure = whiteness(&cur.runner, &cur.fit.p, runs);
+    let proposed = if structure.structured {
+        let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
+        let cx = super::propose::Context {
+            chains: cat.chains,
+            chain: &names,
+            runs,
+            train: &train,
+            test: &test,
+            folds: folds.as_ref(),
+            o: &o,
+        };
+        super::propose::propose(&cur, &cx, progress)
+    } else {
+        None
+    };
     let sensor = sensor_chain(cur, runs, &sensor_effects, cat.chains, &mut chain);
     progress("sensor effects tested");
     Ok(Diagnosis {
@@ -557,6 +576,7 @@ pub fn diagnose(
         spec_clock,
         sensor_candidates: sensor.candidates,
         sensor_unmeasured: sensor.unmeasured,
+        proposed,
         final_runner: sensor.runner,
         final_p: sensor.p,
     })

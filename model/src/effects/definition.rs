@@ -249,6 +249,15 @@ struct RawObservationPatch {
 
 const TWIST: [&str; 3] = ["vx", "vy", "omega"];
 
+impl Effect {
+    /// An effect file's text read as the catalogue reads one (`file` names
+    /// it in errors): for effects made in memory, such as diagnose's
+    /// proposals.
+    pub fn parse(file: &Path, text: &str) -> Result<Effect, EffectError> {
+        parse_effect(file, text)
+    }
+}
+
 /// Read an effect file's text (`file` names it in errors).
 pub(super) fn parse_effect(file: &Path, text: &str) -> Result<Effect, EffectError> {
     let at = |offset: usize, m: String| {

@@ -1,0 +1,326 @@
+//! Corrections beyond the catalogue: when structure is left after the last
+//! catalogue effect, a sparse correction of the twist, chosen from a library
+//! of physically meaningful terms by forward selection, each term admitted
+//! only when it passes the same held-out and fold tests a catalogue effect
+//! must pass (so a clean log, or one the catalogue explains, gets none), and
+//! rendered as a complete effect file that `add-effect --effects DIR`
+//! applies.
+//!
+//! Forward selection rather than SINDy's thresholded least squares: each
+//! term's worth is judged on the whole trajectory (a term in the turn rate
+//! acts on the pose through the integration, which a regression on
+//! per-step residuals does not see), with the calibration and significance
+//! tests the catalogue's effects already have.
+use super::diagnose::{to_rank, winner_stage, Catalogue};
+use super::estimate::{Estimate, Estimates};
+use super::folds::Folds;
+use super::ranking::rank;
+use super::stage::{seeded, stage, Stage};
+use crate::estimation::fit::FitOptions;
+use crate::model_on_log::derivation::EffectChains;
+use crate::model_on_log::run::Run;
+use kinegen_model::effects::Effect;
+use serde::Serialize;
+
+/// At most this many terms in one proposal: more would fit noise before
+/// the held-out test could tell.
+const MAX_TERMS: usize = 2;
+
+/// One term of the library: the twist component it corrects (0 vx, 2 omega),
+/// its expression over the twist, the unit of its gain, and what a gain on
+/// it may be physically.
+struct Term {
+    component: usize,
+    short: &'static str,
+    expr: &'static str,
+    unit: &'static str,
+    reading: &'static str,
+}
+
+const LIBRARY: &[Term] = &[
+    Term {
+        component: 2,
+        short: "omega_abs_omega",
+        expr: "abs({omega})*({omega})",
+        unit: "s/rad",
+        reading: "turn rate lost in proportion to |omega|: tyre scrub or skidding in tight turns",
+    },
+    Term {
+        component: 2,
+        short: "sign_omega",
+        expr: "sign({omega})",
+        unit: "rad/s",
+        reading:
+            "a constant turn rate lost whenever the robot turns: friction or a deadband in turning",
+    },
+    Term {
+        component: 2,
+        short: "omega_cubed",
+        expr: "({omega})^3",
+        unit: "s^2/rad^2",
+        reading: "turn rate saturating at high rates: a motor or controller limit",
+    },
+    Term {
+        component: 2,
+        short: "speed_omega",
+        expr: "abs({vx})*({omega})",
+        unit: "s/m",
+        reading: "turn rate falling with speed: understeer",
+    },
+    Term {
+        component: 0,
+        short: "vx_abs_vx",
+        expr: "abs({vx})*({vx})",
+        unit: "s/m",
+        reading: "speed lost in proportion to speed squared: slip or drag growing with speed",
+    },
+    Term {
+        component: 0,
+        short: "sign_vx",
+        expr: "sign({vx})",
+        unit: "m/s",
+        reading: "a constant speed lost whenever the robot drives: a deadband or static friction",
+    },
+    Term {
+        component: 0,
+        short: "turning_vx",
+        expr: "abs({omega})*({vx})",
+        unit: "s/rad",
+        reading: "forward speed lost while turning: longitudinal slip in turns",
+    },
+    Term {
+        component: 0,
+        short: "vx_cubed",
+        expr: "({vx})^3",
+        unit: "s^2/m^2",
+        reading: "speed saturating at high commands: a motor limit",
+    },
+];
+
+const COMPONENTS: [&str; 3] = ["vx", "vy", "omega"];
+
+/// A correction diagnose proposes: a complete effect file, its terms, its
+/// calibrated gains and the held-out error before and after it.
+#[derive(Debug, Clone, Serialize)]
+pub struct Proposal {
+    pub name: String,
+    /// The effect file (`--effects DIR` format).
+    pub toml: String,
+    /// The terms, as the spec's twist writes them (`|omega|*omega`).
+    pub terms: Vec<String>,
+    /// The twist component each term is added to (`omega`), and its gain's name.
+    pub corrects: Vec<String>,
+    pub gains: Vec<String>,
+    pub parameters: Estimates,
+    pub held_out_before: f64,
+    pub held_out_after: f64,
+    /// What the terms may be physically.
+    pub reading: String,
+}
+
+fn gain_name(t: &Term) -> String {
+    format!("k_{}", t.short)
+}
+
+/// The effect file of one library term (its gain at 0, bounded).
+fn term_effect(t: &Term) -> String {
+    let c = COMPONENTS[t.component];
+    format!(
+        "name = \"term_{}\"\ndoc = \"{}\"\nrequires = [\"twist\"]\n\n[[parameter]]\nname = \"{}\"\nnominal = 0.0\nunit = \"{}\"\nmin = -100.0\nmax = 100.0\ndoc = \"Gain of {} in {c}.\"\n\n[motion]\n{c} = \"({{{c}}}) + {}*({})\"\n",
+        t.short,
+        t.reading,
+        gain_name(t),
+        t.unit,
+        t.expr,
+        gain_name(t),
+        t.expr
+    )
+}
+
+/// The library as effects (parsed like any effect file).
+fn library() -> Vec<Effect> {
+    LIBRARY
+        .iter()
+        .map(|t| {
+            Effect::parse(std::path::Path::new("(proposal library)"), &term_effect(t))
+                .expect("the library's effect files parse")
+        })
+        .collect()
+}
+
+/// The proposal's effect file: every selected term added to its component
+/// of the original twist.
+fn combined(name: &str, terms: &[&Term]) -> String {
+    let mut params = String::new();
+    let mut motion = String::new();
+    for c in [0, 2] {
+        let of: Vec<&&Term> = terms.iter().filter(|t| t.component == c).collect();
+        if of.is_empty() {
+            continue;
+        }
+        let comp = COMPONENTS[c];
+        let sum: Vec<String> = of
+            .iter()
+            .map(|t| format!("{}*({})", gain_name(t), t.expr))
+            .collect();
+        motion += &format!("{comp} = \"({{{comp}}}) + {}\"\n", sum.join(" + "));
+    }
+    for t in terms {
+        params += &format!(
+            "\n[[parameter]]\nname = \"{}\"\nnominal = 0.0\nunit = \"{}\"\nmin = -100.0\nmax = 100.0\ndoc = \"Gain of {}: {}.\"\n",
+            gain_name(t),
+            t.unit,
+            t.expr,
+            t.reading
+        );
+    }
+    let readings: Vec<&str> = terms.iter().map(|t| t.reading).collect();
+    format!(
+        "# proposed by kinegen diagnose: not a known physical effect, a correction the logs support\nname = \"{name}\"\ndoc = \"Proposed correction: {}.\"\nrequires = [\"twist\"]\n{params}\n[motion]\n{motion}",
+        readings.join("; ")
+    )
+}
+
+/// A term as the spec's twist writes it: `abs(omega)*omega`.
+fn shown(expr: &str) -> String {
+    expr.replace("{vx}", "vx")
+        .replace("{omega}", "omega")
+        .replace("abs(vx)", "|vx|")
+        .replace("abs(omega)", "|omega|")
+        .replace("(vx)", "vx")
+        .replace("(omega)", "omega")
+}
+
+fn proposal_name(terms: &[&Term]) -> String {
+    let speed = terms.iter().any(|t| t.component == 0);
+    let turn = terms.iter().any(|t| t.component == 2);
+    match (speed, turn) {
+        (true, true) => "proposed_twist_correction",
+        (true, false) => "proposed_speed_correction",
+        _ => "proposed_turn_rate_correction",
+    }
+    .to_string()
+}
+
+/// Everything the selection reads from the diagnosis it extends.
+pub(crate) struct Context<'a> {
+    pub chains: &'a EffectChains<'a>,
+    /// The catalogue effects the chain found (applied before any term).
+    pub chain: &'a [String],
+    pub runs: &'a [Run],
+    pub train: &'a [Run],
+    pub test: &'a [Run],
+    pub folds: Option<&'a Folds>,
+    pub o: &'a FitOptions,
+}
+
+/// The proposal on top of `cur` (the diagnosis's final motion stage), or
+/// None when no term of the library is significant.
+pub(crate) fn propose(
+    cur: &Stage,
+    cx: &Context,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Option<Proposal> {
+    let twist =
+        kinegen_model::effects::has(cx.chains.spec, kinegen_model::effects::Capability::Twist)
+            .is_ok();
+    if !twist {
+        return None;
+    }
+    let mut extended: Vec<Effect> = cx.chains.catalogue.to_vec();
+    let lib = library();
+    extended.extend(lib.iter().cloned());
+    let chains = EffectChains {
+        catalogue: &extended,
+        ..*cx.chains
+    };
+    let cat = Catalogue {
+        effects: lib
+            .iter()
+            .map(|e| (e.name.clone(), e.doc.clone()))
+            .collect(),
+        chains: &chains,
+    };
+    let mut names: Vec<String> = cx.chain.to_vec();
+    let mut chosen: Vec<&Term> = Vec::new();
+    let mut remaining = cat.effects.clone();
+    let mut stage_now: Option<Stage> = None;
+    while chosen.len() < MAX_TERMS && !remaining.is_empty() {
+        let at = stage_now.as_ref().unwrap_or(cur);
+        let (mut skipped, mut sensor) = (Vec::new(), Vec::new());
+        let augmented = to_rank(
+            at,
+            &names,
+            &remaining,
+            &cat,
+            cx.runs,
+            cx.o,
+            (&mut skipped, &mut sensor),
+        );
+        let ranked = rank(
+            at, false, &augmented, cx.runs, cx.train, cx.test, cx.folds, None, &extended, cx.o,
+            progress,
+        );
+        let Some(w) = ranked.first().filter(|c| c.significant) else {
+            break;
+        };
+        let next = winner_stage(at, &augmented, w, cx.runs, cx.test, cx.o);
+        let term = LIBRARY
+            .iter()
+            .find(|t| format!("term_{}", t.short) == w.effect)?;
+        chosen.push(term);
+        names.push(w.effect.clone());
+        remaining.retain(|(n, _)| n != &w.effect);
+        stage_now = Some(next);
+    }
+    let selected = stage_now?;
+    // the terms as one effect, calibrated afresh from the selection's values
+    let name = proposal_name(&chosen);
+    let toml = combined(&name, &chosen);
+    let effect = Effect::parse(std::path::Path::new("(proposal)"), &toml).ok()?;
+    let mut with: Vec<Effect> = cx.chains.catalogue.to_vec();
+    with.push(effect);
+    let final_chains = EffectChains {
+        catalogue: &with,
+        ..*cx.chains
+    };
+    let mut list = cx.chain.to_vec();
+    list.push(name.clone());
+    let runner = final_chains.runner(&list).ok()?;
+    let start = seeded(&runner, &selected.runner, &selected.fit.p);
+    let done = stage(start, cx.runs, cx.train, cx.test, cx.o).ok()?;
+    progress("proposed correction calibrated");
+    let parameters: Estimates = chosen
+        .iter()
+        .filter_map(|t| {
+            let g = gain_name(t);
+            let i = done.runner.param_index(&g)?;
+            let k = done.fit.free.iter().position(|&f| f == i)?;
+            Some((
+                g,
+                Estimate {
+                    estimate: done.fit.p[i],
+                    std: done.fit.std.get(k).copied().unwrap_or(f64::NAN),
+                },
+            ))
+        })
+        .collect();
+    Some(Proposal {
+        name,
+        terms: chosen.iter().map(|t| shown(t.expr)).collect(),
+        corrects: chosen
+            .iter()
+            .map(|t| COMPONENTS[t.component].to_string())
+            .collect(),
+        gains: chosen.iter().map(|t| gain_name(t)).collect(),
+        toml,
+        parameters,
+        held_out_before: cur.holdout_rmse,
+        held_out_after: done.holdout_rmse,
+        reading: chosen
+            .iter()
+            .map(|t| t.reading)
+            .collect::<Vec<_>>()
+            .join("; "),
+    })
+}
