@@ -111,6 +111,7 @@ pub mod diagnosis {
     pub mod sensor;
     pub mod stage;
     pub mod structure;
+    pub mod trial;
 }
 
 /// The seed papers' applications and the benchmarks: localisation,

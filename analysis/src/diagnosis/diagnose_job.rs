@@ -10,8 +10,9 @@
 //! let out = diagnose_job(&job, &Hooks::none())?;
 //! println!("{:?}", out.diagnosis.verdict());
 //! ```
-use crate::diagnosis::diagnose::{diagnose, Catalogue, DiagnoseError, Diagnosis};
+use crate::diagnosis::diagnose::{diagnose, DiagnoseError, Diagnosis};
 use crate::diagnosis::structure::{signature, Signature};
+use crate::diagnosis::trial::Catalogue;
 use crate::effects::{Applicability, Effect};
 use crate::model_on_log::dataset::channel_missing;
 use crate::model_on_log::derivation::EffectChains;

@@ -11,11 +11,11 @@
 //! acts on the pose through the integration, which a regression on
 //! per-step residuals does not see), with the calibration and significance
 //! tests the catalogue's effects already have.
-use super::diagnose::{to_rank, winner_stage, Catalogue};
 use super::estimate::{Estimate, Estimates};
 use super::folds::Folds;
 use super::ranking::rank;
 use super::stage::{seeded, stage, Stage};
+use super::trial::{to_rank, winner_stage, Catalogue};
 use crate::estimation::fit::FitOptions;
 use crate::model_on_log::derivation::EffectChains;
 use crate::model_on_log::run::Run;
