@@ -7,9 +7,8 @@ use crate::analysis_cmd::{
 };
 use crate::output::Out;
 use kinegen_analysis::model_on_log::comparison::{self, Compared};
-use kinegen_analysis::model_on_log::evaluation::metric_name;
 use kinegen_analysis::model_on_log::files::Files;
-use serde_json::{json, Value};
+
 use std::process::ExitCode;
 
 pub fn compare(c: Common) -> ExitCode {
@@ -38,6 +37,8 @@ pub fn compare(c: Common) -> ExitCode {
 
 /// The comparison said as text, written as JSON and as a report.
 fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
+    // the document the library builds (the Python package writes the same)
+    let doc = serde_json::to_value(done.document()).expect("the comparison serialises");
     let Compared {
         runner: r,
         warnings,
@@ -93,20 +94,6 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
             g.final_heading_error_rad
         ));
     }
-    let per_run: Vec<Value> = cmp
-        .runs
-        .iter()
-        .zip(&cmp.per_run)
-        .map(|(run, e)| json!({"run": run.name, "errors": e}))
-        .collect();
-    let doc = json!({
-        "model": r.ir.name, "metric": metric_name(&cmp.runs),
-        "errors": cmp.errors, "rmse": cmp.rmse(),
-        "landmarks": cmp.landmarks, "landmarks_from_truth": cmp.landmarks_from_truth, "regimes": cmp.regimes, "worst_segments": cmp.segments, "runs": per_run,
-        "gyrodometry": cmp.gyrodometry.as_ref().map(|(_, g)| json!({"rmse": g.rmse, "errors": g})),
-        "parameters": r.names.iter().zip(&r.p).map(|(n, v)| (n.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
-        "warnings": warnings,
-    });
     if let Some(dir) = &c.report {
         if let Err(e) = crate::report::compare_report(dir, r, &cmp, &answer, warnings, &doc) {
             return bad(e);

@@ -86,9 +86,10 @@ pub fn run(c: Common) -> ExitCode {
         say_structure(&out, d);
         if let Some(p) = &d.proposed {
             out.say(&format!(
-                "proposed beyond the catalogue: {} (held-out {:.4} -> {:.4}); its effect file:",
-                p.name, p.held_out_before, p.held_out_after
+                "proposed beyond the catalogue: {} (held-out {:.4} -> {:.4}); may be: {}",
+                p.name, p.held_out_before, p.held_out_after, p.reading
             ));
+            out.say("  its effect file (--report DIR writes it to DIR/proposed/; add-effect --effects DIR applies it):");
             p.toml.lines().for_each(|l| out.say(&format!("  {l}")));
         }
         let disc_ratio = say_discretisation(&out, d);

@@ -191,18 +191,13 @@ fn say_proposal(out: &mut Vec<String>, d: &Diagnosis) {
             None => format!("{c} += {g} x {t}"),
         })
         .collect();
+    // one line: the structure it explains is said in -v, with what the
+    // terms may be physically and the effect file
     out.push(cut(&format!(
-        "proposed beyond the catalogue: {}",
-        terms.join(", ")
+        "proposed beyond the catalogue: {}; held-out {:+.0}% (-v: its effect file)",
+        terms.join(", "),
+        100.0 * (p.held_out_after / p.held_out_before - 1.0)
     )));
-    out.push(cut(&format!(
-        "    held-out {}; may be: {}",
-        fall(p.held_out_before, p.held_out_after),
-        p.reading
-    )));
-    out.push(
-        "    its effect file: -v, --json (verdict.proposed) or --report DIR (DIR/proposed/)".into(),
-    );
 }
 
 /// The effects tested, most likely first: the motion's, then the sensor's;
@@ -260,7 +255,10 @@ fn say_leftovers(out: &mut Vec<String>, d: &Diagnosis) {
     if let Some(why) = &d.sensor_unmeasured {
         out.push(cut(&format!("sensor effects not tested: {why}")));
     }
-    let left = if d.structure.structured {
+    let left = if d.structure.structured && d.proposed.is_some() {
+        // the proposal's line says it (its finding is in -v)
+        return;
+    } else if d.structure.structured {
         let first = d.structure.findings.first().cloned().unwrap_or_default();
         format!("structure remains in the residuals: {first}")
     } else if !d.structure.findings.is_empty() {

@@ -13,7 +13,9 @@
 //! 3. Otherwise `kinegen derive` in a child process: symbolica's one-thread permit is
 //!    then held only while deriving, its output never reaches our stdout, and this
 //!    process stays free to use threads.
-use kinegen_analysis::model_on_log::derivation::{DerivationFailed, Deriver};
+use kinegen_analysis::model_on_log::derivation::{
+    as_in_its_file, committed, AutodiffDeriver, DerivationFailed, Deriver,
+};
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use std::path::{Path, PathBuf};
@@ -34,14 +36,6 @@ pub fn cache_dir() -> PathBuf {
     std::env::temp_dir().join("kinegen-ir-cache")
 }
 
-fn committed_candidates(spec: &Path, name: &str) -> Vec<PathBuf> {
-    let mut v = vec![PathBuf::from("generated/ir").join(format!("{name}.json"))];
-    if let Some(dir) = spec.parent() {
-        v.push(dir.join("../generated/ir").join(format!("{name}.json")));
-    }
-    v
-}
-
 /// The symbolic [`Deriver`]: [`load`] (the committed IR, the cache, or
 /// `kinegen derive` in a child process) of a spec as its file has it; a
 /// model built in memory (a spec with effects added has no file of its own)
@@ -58,31 +52,6 @@ impl Deriver for ChildDeriver {
         // a model built in memory (effects added): its text goes to the
         // child on stdin, named by `label`; no spec file is written
         derive_cached(model, Spec::Text(label)).map_err(DerivationFailed)
-    }
-}
-
-/// The analysis's [`Deriver`]: a bundled spec's committed IR when it is
-/// current (the kernels `generate` emits, so the analysis and the embedded
-/// code compute alike), else automatic differentiation in this process.
-pub struct AutodiffDeriver;
-
-impl Deriver for AutodiffDeriver {
-    fn derive(&self, model: &Model, label: &str) -> Result<ModelIr, DerivationFailed> {
-        let as_in_its_file = as_in_its_file(model);
-        if as_in_its_file {
-            if let Some(ir) = committed(&model.path, model) {
-                return Ok(ir);
-            }
-        }
-        kinegen_model::autodiff::derive(model, &Default::default()).map_err(|e| {
-            DerivationFailed(if as_in_its_file {
-                e.to_string()
-            } else {
-                // a spec with effects added has no file whose lines the
-                // position could name: the label names it
-                format!("{label}: {}", e.message)
-            })
-        })
     }
 }
 
@@ -108,25 +77,6 @@ pub fn analysis_deriver() -> &'static dyn Deriver {
 /// stage says so (exit 2) for a spec without a committed IR.
 pub fn symbolic_deriver() -> &'static dyn Deriver {
     &ChildDeriver
-}
-
-/// Whether `model` is its spec file as that file has it (not a model built
-/// in memory, with effects added).
-fn as_in_its_file(model: &Model) -> bool {
-    std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source)
-}
-
-/// The committed IR of the spec at `spec`, when it is `model`'s.
-fn committed(spec: &Path, model: &Model) -> Option<ModelIr> {
-    let fp = model.fingerprint();
-    committed_candidates(spec, &model.name)
-        .into_iter()
-        .find_map(|c| {
-            let text = std::fs::read_to_string(&c).ok()?;
-            ModelIr::from_json(&text)
-                .ok()
-                .filter(|ir| ir.spec_fingerprint == fp)
-        })
 }
 
 /// How the derive child gets the spec.

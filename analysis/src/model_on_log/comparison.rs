@@ -130,3 +130,72 @@ pub fn compare(r: &Runner, runs: Vec<Run>) -> Comparison<'_> {
         gyrodometry,
     }
 }
+
+/// `compare --json`: the comparison as one document (CONTRACT section 4),
+/// built here so the command line and the Python package write the same.
+#[derive(Debug, serde::Serialize)]
+pub struct CompareDocument<'a> {
+    pub model: &'a str,
+    pub metric: &'static str,
+    pub errors: &'a Errors,
+    pub rmse: f64,
+    pub landmarks: &'a Option<InnovationStats>,
+    pub landmarks_from_truth: &'a Option<InnovationStats>,
+    pub regimes: &'a [RegimeShare],
+    pub worst_segments: &'a [Segment],
+    pub runs: Vec<RunErrors<'a>>,
+    pub gyrodometry: Option<GyroErrors<'a>>,
+    pub parameters: std::collections::BTreeMap<&'a str, f64>,
+    pub warnings: &'a [String],
+}
+
+/// One run's errors in [`CompareDocument`].
+#[derive(Debug, serde::Serialize)]
+pub struct RunErrors<'a> {
+    pub run: &'a str,
+    pub errors: &'a Errors,
+}
+
+/// Gyrodometry's errors in [`CompareDocument`].
+#[derive(Debug, serde::Serialize)]
+pub struct GyroErrors<'a> {
+    pub rmse: f64,
+    pub errors: &'a Errors,
+}
+
+impl Compared<'_> {
+    /// The document `compare --json` writes.
+    pub fn document(&self) -> CompareDocument<'_> {
+        let (r, cmp) = (self.runner, &self.comparison);
+        CompareDocument {
+            model: &r.ir.name,
+            metric: crate::model_on_log::evaluation::metric_name(&cmp.runs),
+            errors: &cmp.errors,
+            rmse: cmp.rmse(),
+            landmarks: &cmp.landmarks,
+            landmarks_from_truth: &cmp.landmarks_from_truth,
+            regimes: &cmp.regimes,
+            worst_segments: &cmp.segments,
+            runs: cmp
+                .runs
+                .iter()
+                .zip(&cmp.per_run)
+                .map(|(run, errors)| RunErrors {
+                    run: &run.name,
+                    errors,
+                })
+                .collect(),
+            gyrodometry: cmp.gyrodometry.as_ref().map(|(_, g)| GyroErrors {
+                rmse: g.rmse,
+                errors: g,
+            }),
+            parameters: r
+                .names
+                .iter()
+                .map(String::as_str)
+                .zip(r.p.iter().copied())
+                .collect(),
+            warnings: self.warnings,
+        }
+    }
+}

@@ -10,6 +10,7 @@ use crate::model_on_log::model::ModelError;
 use crate::model_on_log::model::Runner;
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
+use std::path::{Path, PathBuf};
 
 /// Gives the IR of a validated model.
 pub trait Deriver: Sync {
@@ -60,4 +61,58 @@ impl EffectChains<'_> {
             .map_err(ChainError::Derive)?;
         Ok(Runner::new(ir, self.sets)?)
     }
+}
+
+/// The analysis's [`Deriver`]: a bundled spec's committed IR when it is
+/// current (the kernels `generate` emits, so the analysis and the embedded
+/// code compute alike), else automatic differentiation in this process.
+pub struct AutodiffDeriver;
+
+impl Deriver for AutodiffDeriver {
+    fn derive(&self, model: &Model, label: &str) -> Result<ModelIr, DerivationFailed> {
+        let as_in_its_file = as_in_its_file(model);
+        if as_in_its_file {
+            if let Some(ir) = committed(&model.path, model) {
+                return Ok(ir);
+            }
+        }
+        kinegen_model::autodiff::derive(model, &Default::default()).map_err(|e| {
+            DerivationFailed(if as_in_its_file {
+                e.to_string()
+            } else {
+                // a spec with effects added has no file whose lines the
+                // position could name: the label names it
+                format!("{label}: {}", e.message)
+            })
+        })
+    }
+}
+
+/// Where a spec's committed IR may be: `generated/ir/NAME.json` from the
+/// working directory, or beside the spec's folder.
+pub fn committed_candidates(spec: &Path, name: &str) -> Vec<PathBuf> {
+    let mut v = vec![PathBuf::from("generated/ir").join(format!("{name}.json"))];
+    if let Some(dir) = spec.parent() {
+        v.push(dir.join("../generated/ir").join(format!("{name}.json")));
+    }
+    v
+}
+
+/// Whether `model` is its spec file as that file has it (not a model built
+/// in memory, with effects added).
+pub fn as_in_its_file(model: &Model) -> bool {
+    std::fs::read_to_string(&model.path).is_ok_and(|text| text == model.source)
+}
+
+/// The committed IR of the spec at `spec`, when it is `model`'s.
+pub fn committed(spec: &Path, model: &Model) -> Option<ModelIr> {
+    let fp = model.fingerprint();
+    committed_candidates(spec, &model.name)
+        .into_iter()
+        .find_map(|c| {
+            let text = std::fs::read_to_string(&c).ok()?;
+            ModelIr::from_json(&text)
+                .ok()
+                .filter(|ir| ir.spec_fingerprint == fp)
+        })
 }
