@@ -8,7 +8,8 @@
 #     check is live, not frozen)
 #  3. build the guide (docs/, mdBook) and fail if generated/ is stale
 #     (kinegen generate --check)
-#  4. cargo test over the whole workspace. Tests that use symbolica run it only in
+#  4. cargo test over the whole workspace, then the Python package (pip
+#     install ./python, pytest, its example). Tests that use symbolica run it only in
 #     child processes that queue on a machine-wide lock, so the default parallel
 #     test runner is safe; do not use cargo-nextest (it runs tests as processes
 #     in parallel, which is also safe here, but is not what this project tests).
@@ -33,7 +34,7 @@ if [ ! -c /dev/null ]; then
     echo "warning: /dev/null is a plain file here and could not be restored; the generated-crate tests may fail" >&2
   fi
 fi
-python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt -r verify/init/requirements.txt -r docs/requirements.txt
+python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt -r verify/init/requirements.txt -r python/requirements-test.txt -r docs/requirements.txt
 python3 verify/casadi/reference.py --check
 python3 verify/peers/wrenfold_kernels.py --check
 python3 verify/peers/symforce_kernels.py --check
@@ -49,4 +50,9 @@ cargo build --workspace --all-targets
 # features for the one package and would compile symbolica a second time (~10 min)
 "${CARGO_TARGET_DIR:-target}/debug/kinegen" generate --check
 cargo test --workspace
+# the Python package (maturin, the dev profile: it reuses the workspace's
+# build), its tests against the command line, and its story example
+python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation ./python
+KINEGEN_BIN="${CARGO_TARGET_DIR:-target}/debug/kinegen" python3 -m pytest -q python/tests
+python3 python/examples/story.py "${TMPDIR:-/tmp}/kinegen-story.png"
 echo "scripts/test.sh: the whole suite took $(( $(date +%s) - started )) s"

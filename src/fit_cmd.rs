@@ -25,38 +25,6 @@ use std::cell::{Cell, RefCell};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-/// JSON for a finished fit (CONTRACT section 4).
-pub fn fit_json(
-    r: &Runner,
-    res: &FitResult,
-    before: &Errors,
-    after: &Errors,
-    metric: &str,
-) -> Value {
-    let params: serde_json::Map<String, Value> = res
-        .free
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| {
-            (
-                r.names[i].clone(),
-                json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k],
-                       "tolerance": r.ir.runtime_params()[i].tolerance}),
-            )
-        })
-        .collect();
-    let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
-    let corr: Vec<Vec<f64>> = (0..names.len())
-        .map(|a| (0..names.len()).map(|b| res.corr[(a, b)]).collect())
-        .collect();
-    json!({
-        "model": r.ir.name, "metric": metric,
-        "before": {"rmse": before.rmse, "errors": before}, "after": {"rmse": after.rmse, "errors": after},
-        "parameters": params, "correlation": {"parameters": names, "matrix": corr},
-        "warnings": res.warnings, "iterations": res.iterations, "residuals": res.n_residuals,
-    })
-}
-
 /// Every run's own figures, named by the path the user gave (CONTRACT section 4
 /// `runs`): after calibration at the top, before it under `before`, and for
 /// fitted runs the start pose the fit used (measured start plus its refinement).
@@ -282,6 +250,7 @@ fn uses_residuals(a: &FitArgs, kind: &str) -> bool {
 /// The calibration options `fit`'s arguments ask for.
 fn fit_options(a: &FitArgs) -> FitOptions {
     // Huber threshold in sigmas: 3 leaves Gaussian noise (99.7% inside) untouched
+    // (with no option given: FitOptions::command_default, the Python package's)
     let fo = FitOptions {
         huber: (a.loss == "huber").then_some(3.0),
         use_pose: uses_residuals(a, "pose"),
@@ -408,7 +377,13 @@ fn render_lm(
     say_calibration(detail, prep, res, &cal.before.errors, &cal.after.errors);
     say_judgement(detail, cal);
     let (before, after) = (&cal.before.errors, &cal.after.errors);
-    let mut doc = fit_json(r, res, before, after, metric_name(&prep.runs));
+    let mut doc = kinegen_analysis::estimation::fit_job::fit_document(
+        r,
+        res,
+        before,
+        after,
+        metric_name(&prep.runs),
+    );
     doc["unusable"] = json!(cal.unusable);
     doc["loss"] = json!(a.loss);
     doc["residual_kinds"] = json!(["pose", "gyro", "landmarks"]

@@ -158,6 +158,21 @@ pub struct ParamEstimate {
     pub std: f64,
 }
 
+impl FitOptions {
+    /// `kinegen fit`'s options when none is given: every kind of residual
+    /// the logs have, least squares, several starts, the whole track's
+    /// likelihood (the Python package calibrates with these too).
+    pub fn command_default() -> FitOptions {
+        let fo = FitOptions {
+            multi_start: true,
+            ..FitOptions::default()
+        };
+        crate::estimation::fit::Likelihood::parse("track")
+            .expect("a known likelihood")
+            .apply(fo)
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct FitResult {
     pub p: Vec<f64>,

@@ -1,0 +1,160 @@
+"""The Python package against the command line and against finite differences.
+
+Run from the workspace root after `pip install ./python` (scripts/test.sh
+does both); KINEGEN_BIN names the command line to compare with (default:
+target/debug/kinegen).
+"""
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import kinegen
+
+ROOT = Path(__file__).resolve().parents[2]
+SPEC = ROOT / "spec" / "diff_drive.toml"
+LOG = ROOT / "data" / "mystery_robot.csv"
+BIN = os.environ.get("KINEGEN_BIN", str(ROOT / os.environ.get("CARGO_TARGET_DIR", "target") / "debug" / "kinegen"))
+
+
+def cli_json(*args):
+    out = subprocess.run([BIN, *args, "--json", "-"], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return kinegen.Model.from_file(str(SPEC))
+
+
+@pytest.fixture(scope="module")
+def log(model):
+    return kinegen.read_log(str(LOG), model)
+
+
+def test_a_model_lists_what_its_spec_declares(model):
+    assert model.states == ["x", "y", "theta"]
+    assert [i.column for i in model.inputs] == ["enc_r", "enc_l"]
+    assert [p.name for p in model.parameters] == ["r_r", "r_l", "b", "counts_per_rev", "gear_ratio"]
+    b = model.parameters[2]
+    assert (b.nominal, b.unit, b.min, b.free) == (0.2, "m", 0.0, True)
+    assert model.nominal_parameters().tolist() == [p.nominal for p in model.parameters]
+
+
+def test_a_straight_step_moves_the_robot_by_the_wheels_distance(model):
+    # 1000 counts/s on both wheels for 0.1 s: r * 2 pi gear/counts * 1000 * 0.1 forward
+    p = model.nominal_parameters()
+    x = model.step(np.zeros((4, 3)), np.full((4, 2), 1000.0), 0.1)
+    k = 2 * np.pi * p[4] / p[3]
+    assert x.shape == (4, 3)
+    np.testing.assert_allclose(x[:, 0], 0.042 * k * 1000 * 0.1, rtol=1e-12)
+    np.testing.assert_allclose(x[:, 1:], 0.0, atol=1e-15)
+
+
+def finite_difference(f, z, h=1e-6):
+    cols = []
+    for j in range(z.shape[-1]):
+        e = np.zeros_like(z)
+        e[..., j] = h
+        cols.append((f(z + e) - f(z - e)) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
+def test_step_jacobians_agree_with_finite_differences(model):
+    rng = np.random.default_rng(1)
+    n = 50
+    x = rng.normal(size=(n, 3))
+    u = rng.normal(scale=3000.0, size=(n, 2))
+    dt = rng.uniform(0.01, 0.2, size=n)
+    p = model.nominal_parameters()
+    for exact in (True, False):
+        jx = model.step_jac_x(x, u, dt, exact=exact)
+        fd = finite_difference(lambda z: model.step(z, u, dt, exact=exact), x)
+        np.testing.assert_allclose(jx, fd, atol=1e-7)
+        jp = model.step_jac_p(x, u, dt, exact=exact)
+        pp = np.tile(p, (n, 1))
+        fdp = finite_difference(lambda q: model.step(x, u, dt, q, exact=exact), pp, h=1e-8)
+        np.testing.assert_allclose(jp, fdp, rtol=1e-5, atol=1e-6)
+
+
+def test_observations_and_their_jacobians(model):
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(20, 3))
+    lm = rng.normal(size=(20, 2)) + 3.0
+    z = model.observe("landmark", x, landmark=lm)
+    d = lm - x[:, :2]
+    np.testing.assert_allclose(z[:, 0], np.hypot(d[:, 0], d[:, 1]), rtol=1e-12)
+    j = model.observe("landmark", x, landmark=lm, jac_x=True)
+    fd = finite_difference(lambda s: model.observe("landmark", s, landmark=lm), x)
+    np.testing.assert_allclose(j, fd, atol=1e-6)
+    with pytest.raises(kinegen.UsageError, match="no observation `camera`"):
+        model.observe("camera", x)
+
+
+def test_compare_gives_the_command_lines_document(model, log):
+    r = model.compare(log)
+    cli = cli_json("compare", "--spec", str(SPEC), "--data", str(LOG))
+    assert json.loads(r.to_json()) == cli
+    assert r.position_rmse == cli["errors"]["rmse"]
+    assert r.track.shape == (len(log), 3)
+
+
+def test_fit_gives_the_command_lines_estimates(model, log):
+    f = model.fit([log])
+    cli = cli_json("fit", "--spec", str(SPEC), "--data", str(LOG))
+    assert f.after.position_rmse == pytest.approx(cli["after"]["rmse"], rel=1e-12)
+    for name, e in cli["parameters"].items():
+        assert f.parameters[name].estimate == pytest.approx(e["estimate"], rel=1e-12)
+        assert f.parameters[name].std == pytest.approx(e["std"], rel=1e-9)
+    mine = json.loads(f.to_json())
+    for key in ("model", "metric", "parameters", "correlation", "before", "after"):
+        assert mine[key] == cli[key], key
+    c = f.covariance
+    assert c.shape == (len(f.free), len(f.free))
+    np.testing.assert_allclose(np.sqrt(np.diag(c)), [f.parameters[n].std for n in f.free], rtol=1e-12)
+
+
+def test_diagnose_names_what_the_command_line_names(model, log):
+    d = model.diagnose([log])
+    cli = cli_json("diagnose", "--spec", str(SPEC), "--data", str(LOG))
+    assert d.verdict.effect == cli["verdict"]["effect"] == "lateral_slip"
+    assert [e["effect"] for e in d.verdict.effects] == [e["effect"] for e in cli["verdict"]["effects"]]
+    assert d.verdict.proposed == cli["verdict"]["proposed"]
+    assert [c["effect"] for c in d.candidates] == [c["effect"] for c in cli["candidates"]]
+
+
+def test_with_effect_adds_a_catalogue_effect(model):
+    slip = model.with_effect("lateral_slip", k_slip=0.1)
+    assert [p.name for p in slip.parameters][-1] == "k_slip"
+    assert slip.nominal_parameters()[-1] == 0.1
+    with pytest.raises(kinegen.UsageError):
+        model.with_effect("no_such_effect")
+
+
+def test_a_bad_spec_is_a_spec_error_with_its_place():
+    with pytest.raises(kinegen.SpecError) as e:
+        kinegen.Model.from_str('name = "r"\nstate = ["x", "y", "theta"]\n[motion]\nvx = "v +"\nvy = "0"\nomega = "0"\n', name="mine.toml")
+    assert isinstance(e.value, kinegen.Error)
+    assert (e.value.file, e.value.line) == ("mine.toml", 4)
+    assert e.value.column is not None
+
+
+def test_a_bad_log_is_a_log_error_with_its_row_and_column(model, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,enc_r,enc_l\n0,0,0\n0.1,oops,3\n0.2,5,6\n")
+    with pytest.raises(kinegen.LogError) as e:
+        kinegen.read_log(str(bad), model)
+    assert e.value.file.endswith("bad.csv")
+    assert e.value.line == 3
+    assert e.value.column == "enc_r"
+
+
+def test_bad_arrays_are_usage_errors(model):
+    with pytest.raises(kinegen.UsageError, match="x: expected shape"):
+        model.step(np.zeros((3, 4)), np.zeros((3, 2)), 0.1)
+    with pytest.raises(kinegen.UsageError, match="rows"):
+        model.step(np.zeros((3, 3)), np.zeros((2, 2)), 0.1)
