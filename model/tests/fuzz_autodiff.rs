@@ -173,7 +173,11 @@ proptest! {
             return Ok(());
         }
         let text = spec([&vx, &vy, &om], &obs);
-        let model = Model::parse(Path::new("fuzzed.toml"), &text).unwrap();
+        // an exponent beyond the language's bound is refused by the parser
+        // (its own fuzz test checks that): not a model to differentiate
+        let Ok(model) = Model::parse(Path::new("fuzzed.toml"), &text) else {
+            return Ok(());
+        };
         let ir = match autodiff::derive(&model, &Default::default()) {
             Ok(ir) => ir,
             // a located refusal (a constant that folds to infinity) is fine
@@ -197,7 +201,11 @@ proptest! {
             return Ok(());
         }
         let text = spec([&vx, "0", &om], &obs);
-        let model = Model::parse(Path::new("fuzzed.toml"), &text).unwrap();
+        // an exponent beyond the language's bound is refused by the parser
+        // (its own fuzz test checks that): not a model to differentiate
+        let Ok(model) = Model::parse(Path::new("fuzzed.toml"), &text) else {
+            return Ok(());
+        };
         if let Ok(ir) = autodiff::derive(&model, &Default::default()) {
             let [a, b, c, d, e, f, g] = point;
             for func in ir.functions() {

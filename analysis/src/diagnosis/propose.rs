@@ -14,10 +14,11 @@
 use super::estimate::{Estimate, Estimates};
 use super::folds::Folds;
 use super::ranking::rank;
-use super::stage::{seeded, stage, Stage};
+use super::stage::{seeded, stage_from, Stage};
 use super::trial::{to_rank, winner_stage, Catalogue};
 use crate::estimation::fit::FitOptions;
 use crate::model_on_log::derivation::EffectChains;
+use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use kinegen_model::effects::Effect;
 use serde::Serialize;
@@ -214,6 +215,91 @@ pub(crate) struct Context<'a> {
     pub o: &'a FitOptions,
 }
 
+/// `start` calibrated from its values on all runs and on the training part
+/// (the training part refined from the whole runs' optimum).
+fn refined(start: Runner, cx: &Context) -> Option<Stage> {
+    use crate::estimation::fit::{fit, Search};
+    let all = fit(&start, cx.runs, cx.o, Search::Local).ok()?;
+    let mut from = start.clone();
+    from.p = all.p.clone();
+    let part = Search::OnPart {
+        whole: cx.runs,
+        starts: &all.starts,
+    };
+    let train = fit(&from, cx.train, cx.o, part).ok()?;
+    Some(stage_from(start, all, train, cx.runs, cx.test, cx.o))
+}
+
+/// At most this many terms of a round are calibrated and tested: the ones
+/// whose first-order gain on the current residual is largest.
+const SCREENED: usize = 3;
+
+/// The terms of `augmented` worth calibrating: by how much of the current
+/// residual a Gauss-Newton step could remove with the term's gain and every
+/// free parameter, beyond what the free parameters alone remove (orthogonal
+/// matching pursuit's choice, the term's column taken orthogonal to the
+/// calibration's), the [`SCREENED`] largest. Calibrating and testing every
+/// term took 95 s of a 119 s diagnosis on a 61,000-row MRCLAM log.
+fn screened(
+    at: &Stage,
+    augmented: Vec<(String, String, Runner)>,
+    cx: &Context,
+) -> Vec<(String, String, Runner)> {
+    use rayon::prelude::*;
+    let mut gains: Vec<(f64, (String, String, Runner))> = augmented
+        .into_par_iter()
+        .map(|(name, doc, aug)| {
+            let start = seeded(&aug, &at.runner, &at.fit.p);
+            let term = super::ranking::effect_params(&start, &at.runner);
+            (explained_beyond(&start, &term, cx), (name, doc, aug))
+        })
+        .collect();
+    gains.sort_by(|a, b| b.0.total_cmp(&a.0));
+    gains.into_iter().take(SCREENED).map(|g| g.1).collect()
+}
+
+/// |J x|^2 - |J0 x0|^2: the residual's squared norm a linearised step
+/// removes with the free parameters and `term` (J), less what it removes
+/// with the free parameters alone (J0).
+fn explained_beyond(start: &Runner, term: &[usize], cx: &Context) -> f64 {
+    use crate::estimation::fit::residuals;
+    use nalgebra::{DMatrix, DVector};
+    let o = FitOptions {
+        estimate_start: false,
+        ..cx.o.clone()
+    };
+    let mut cols: Vec<usize> = start
+        .free
+        .iter()
+        .copied()
+        .filter(|i| !term.contains(i))
+        .collect();
+    let base = cols.len();
+    cols.extend(term);
+    let (res, jac) = residuals(start, &start.p, &cols, cx.runs, &o, true, &[]);
+    let Some(j) = jac else { return 0.0 };
+    let r = DVector::from_vec(res);
+    let explained = |m: DMatrix<f64>| -> f64 {
+        if m.ncols() == 0 {
+            return 0.0;
+        }
+        // scaled columns: the parameters' units differ by orders of magnitude
+        let scale: Vec<f64> = (0..m.ncols())
+            .map(|c| m.column(c).norm().max(1e-300))
+            .collect();
+        let mut s = m.clone();
+        for (c, k) in scale.iter().enumerate() {
+            s.column_mut(c).scale_mut(1.0 / k);
+        }
+        let svd = s.clone().svd(true, true);
+        let tol = 1e-9 * svd.singular_values.max();
+        svd.solve(&r, tol).map_or(0.0, |x| (&s * x).norm_squared())
+    };
+    let j_all = DMatrix::from_iterator(j.nrows(), j.ncols(), j.iter().copied());
+    let j_free = j_all.columns(0, base).into_owned();
+    explained(j_all) - explained(j_free)
+}
+
 /// The proposal on top of `cur` (the diagnosis's final motion stage), or
 /// None when no term of the library is significant.
 pub(crate) fn propose(
@@ -257,6 +343,7 @@ pub(crate) fn propose(
             cx.o,
             (&mut skipped, &mut sensor),
         );
+        let augmented = screened(at, augmented, cx);
         let ranked = rank(
             at, false, &augmented, cx.runs, cx.train, cx.test, cx.folds, None, &extended, cx.o,
             progress,
@@ -288,7 +375,10 @@ pub(crate) fn propose(
     list.push(name.clone());
     let runner = final_chains.runner(&list).ok()?;
     let start = seeded(&runner, &selected.runner, &selected.fit.p);
-    let done = stage(start, cx.runs, cx.train, cx.test, cx.o).ok()?;
+    // the selection's values are the optimum's basin already: refined
+    // locally (a global search again took two minutes on a 61,000-row
+    // MRCLAM log and found the same optimum)
+    let done = refined(start, cx)?;
     progress("proposed correction calibrated");
     let parameters: Estimates = chosen
         .iter()
