@@ -194,7 +194,7 @@ fn say_proposal(out: &mut Vec<String>, d: &Diagnosis) {
     // one line: the structure it explains is said in -v, with what the
     // terms may be physically and the effect file
     out.push(cut(&format!(
-        "proposed beyond the catalogue: {}; held-out {:+.0}% (-v: its effect file)",
+        "proposed: {} (held-out {:+.0}%; its effect file: -v)",
         terms.join(", "),
         100.0 * (p.held_out_after / p.held_out_before - 1.0)
     )));

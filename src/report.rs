@@ -780,6 +780,9 @@ pub fn diagnose_report(
             );
         }
     }
+    if let Some(p) = &d.proposed {
+        t += &proposal_html(p);
+    }
     write(
         dir,
         &page(
@@ -791,6 +794,38 @@ pub fn diagnose_report(
             warnings,
             doc,
         ),
+    )
+}
+
+/// A correction beyond the catalogue: its terms, its held-out fall, what it
+/// may be, and its effect file (written beside the page, `proposed/`).
+fn proposal_html(p: &kinegen_analysis::diagnosis::propose::Proposal) -> String {
+    let terms: Vec<String> = p
+        .terms
+        .iter()
+        .zip(&p.corrects)
+        .zip(&p.gains)
+        .map(|((t, c), g)| {
+            let v = p.parameters.get(g).map_or(String::new(), |e| {
+                format!(" = {}", crate::output::with_std(e.estimate, e.std))
+            });
+            format!(
+                "<li><code>{} += {g} &times; {}</code>{v}</li>",
+                esc(c),
+                esc(t)
+            )
+        })
+        .collect();
+    format!(
+        "<h2>Proposed beyond the catalogue: <code>{}</code></h2><p>Not a known physical effect: a correction these logs support. Held-out error {:.3} &rarr; {:.3}. It may be: {}.</p><ul>{}</ul><p>Its effect file, <code>proposed/{}.toml</code> beside this page (<code>kinegen add-effect --effects DIR/proposed --effect {}</code> adds it to the spec):</p><pre>{}</pre>",
+        esc(&p.name),
+        p.held_out_before,
+        p.held_out_after,
+        esc(&p.reading),
+        terms.join(""),
+        esc(&p.name),
+        esc(&p.name),
+        esc(&p.toml)
     )
 }
 

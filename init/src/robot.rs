@@ -100,6 +100,48 @@ pub struct Robot {
     pub notes: Vec<String>,
 }
 
+impl Robot {
+    /// A robot of `class` with its kinematics; the name, doc, sensors,
+    /// controller and notes are filled in after the class is chosen.
+    pub fn new(
+        class: Class,
+        inputs: Vec<InputOut>,
+        params: Vec<ParamOut>,
+        defines: Vec<(String, String, String)>,
+        kinematics: Kinematics,
+    ) -> Robot {
+        Robot {
+            name: String::new(),
+            class,
+            doc: String::new(),
+            inputs,
+            params,
+            defines,
+            kinematics,
+            gyro: None,
+            landmark_sensor: None,
+            controller: None,
+            notes: Vec::new(),
+        }
+    }
+}
+
+impl ControllerOut {
+    /// The node of `ctl` with `values` (key, expression over the parameters);
+    /// the file is set where the spec's path is known.
+    pub fn of(ctl: &crate::controller::Controller, values: &[(&str, &str)]) -> ControllerOut {
+        ControllerOut {
+            node: ctl.node.clone(),
+            type_name: ctl.type_name.clone(),
+            file: String::new(),
+            values: values
+                .iter()
+                .map(|(k, e)| (k.to_string(), e.to_string()))
+                .collect(),
+        }
+    }
+}
+
 /// One standard deviation of what a printed number says about the quantity:
 /// half a unit of its last printed digit, but never less than `floor` of its
 /// value (a CAD number printed to the micrometre still says nothing finer

@@ -136,35 +136,30 @@ pub fn differential(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, Init
         "Turn rate of the base.".into(),
     ));
     let [vx, vy, omega] = at_base("(v_right + v_left)/2", centre, "yaw_rate", NOISE);
-    let values = ctl.map(|c| ControllerOut {
-        node: c.node.clone(),
-        type_name: c.type_name.clone(),
-        file: String::new(),
-        values: vec![
-            ("wheel_separation".into(), "wheel_separation".into()),
-            ("wheel_separation_multiplier".into(), "1".into()),
-            (
-                "wheel_radius".into(),
-                "(wheel_radius_left + wheel_radius_right)/2".into(),
-            ),
-            (
-                "left_wheel_radius_multiplier".into(),
-                "2*wheel_radius_left/(wheel_radius_left + wheel_radius_right)".into(),
-            ),
-            (
-                "right_wheel_radius_multiplier".into(),
-                "2*wheel_radius_right/(wheel_radius_left + wheel_radius_right)".into(),
-            ),
-        ],
+    let controller = ctl.map(|c| {
+        ControllerOut::of(
+            c,
+            &[
+                ("wheel_separation", "wheel_separation"),
+                ("wheel_separation_multiplier", "1"),
+                ("wheel_radius", "(wheel_radius_left + wheel_radius_right)/2"),
+                (
+                    "left_wheel_radius_multiplier",
+                    "2*wheel_radius_left/(wheel_radius_left + wheel_radius_right)",
+                ),
+                (
+                    "right_wheel_radius_multiplier",
+                    "2*wheel_radius_right/(wheel_radius_left + wheel_radius_right)",
+                ),
+            ],
+        )
     });
-    Ok(Robot {
-        name: String::new(),
+    let mut robot = Robot::new(
         class,
-        doc: String::new(),
         inputs,
         params,
         defines,
-        kinematics: Kinematics::Twist {
+        Kinematics::Twist {
             vx,
             vy,
             omega,
@@ -178,9 +173,7 @@ pub fn differential(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, Init
                 }
             ),
         },
-        gyro: None,
-        landmark_sensor: None,
-        controller: values,
-        notes: Vec::new(),
-    })
+    );
+    robot.controller = controller;
+    Ok(robot)
 }

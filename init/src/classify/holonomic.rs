@@ -12,19 +12,13 @@ fn constraint_robot(
     rows: Vec<(String, [String; 3])>,
     doc: String,
 ) -> Robot {
-    Robot {
-        name: String::new(),
+    Robot::new(
         class,
-        doc: String::new(),
         inputs,
         params,
-        defines: Vec::new(),
-        kinematics: Kinematics::Constraints { rows, doc },
-        gyro: None,
-        landmark_sensor: None,
-        controller: None,
-        notes: Vec::new(),
-    }
+        Vec::new(),
+        Kinematics::Constraints { rows, doc },
+    )
 }
 
 /// Mecanum: wheel i at p = c + (sx lx, sy ly) with rollers in the X layout of
@@ -133,17 +127,17 @@ pub fn mecanum(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError
         rows,
         "Mecanum wheels (rollers at 45 degrees, X layout as ros2 mecanum_drive_controller): each wheel's rate from the twist; the twist is their least-squares solution.".into(),
     );
-    robot.controller = ctl.map(|c| ControllerOut {
-        node: c.node.clone(),
-        type_name: c.type_name.clone(),
-        file: String::new(),
-        values: vec![
-            ("kinematics.wheels_radius".into(), "wheel_radius".into()),
-            (
-                "kinematics.sum_of_robot_center_projection_on_X_Y_axis".into(),
-                "half_wheelbase + half_track".into(),
-            ),
-        ],
+    robot.controller = ctl.map(|c| {
+        ControllerOut::of(
+            c,
+            &[
+                ("kinematics.wheels_radius", "wheel_radius"),
+                (
+                    "kinematics.sum_of_robot_center_projection_on_X_Y_axis",
+                    "half_wheelbase + half_track",
+                ),
+            ],
+        )
     });
     Ok(robot)
 }

@@ -116,30 +116,21 @@ pub fn front_driven_tricycle(cx: &Context, notes: &mut Vec<String>) -> Result<Ro
         format!("wheel_speed*cos({delta})")
     };
     let [vx, vy, omega] = at_base(&vx_c, c, "yaw_rate", NOISE);
-    let mut robot = Robot {
-        name: String::new(),
-        class: Class::TricycleFrontDriven,
-        doc: String::new(),
-        inputs: vec![
+    let mut robot = Robot::new(
+        Class::TricycleFrontDriven,
+        vec![
             wheel_input(w, format!("driven, steered wheel joint `{}` (URDF line {}): its angle's rate", w.joint, w.line)),
             steering_input(steer),
         ],
         params,
         defines,
-        kinematics: Kinematics::Twist { vx, vy, omega, doc: "Tricycle, steered wheel driven: the wheel rolls along its heading, the rear axle has no lateral velocity.".into() },
-        gyro: None,
-        landmark_sensor: None,
-        controller: None,
-        notes: Vec::new(),
-    };
-    robot.controller = ctl.map(|k| ControllerOut {
-        node: k.node.clone(),
-        type_name: k.type_name.clone(),
-        file: String::new(),
-        values: vec![
-            ("wheel_radius".into(), "wheel_radius".into()),
-            ("wheelbase".into(), "wheelbase".into()),
-        ],
+        Kinematics::Twist { vx, vy, omega, doc: "Tricycle, steered wheel driven: the wheel rolls along its heading, the rear axle has no lateral velocity.".into() },
+    );
+    robot.controller = ctl.map(|k| {
+        ControllerOut::of(
+            k,
+            &[("wheel_radius", "wheel_radius"), ("wheelbase", "wheelbase")],
+        )
     });
     Ok(robot)
 }
@@ -246,27 +237,21 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
         ),
     ];
     let [vx, vy, omega] = at_base("speed", c, "yaw_rate", NOISE);
-    let mut robot = Robot {
-        name: String::new(),
-        class: Class::RearDrivenSteering,
-        doc: String::new(),
+    let mut robot = Robot::new(
+        Class::RearDrivenSteering,
         inputs,
         params,
         defines,
-        kinematics: Kinematics::Twist { vx, vy, omega, doc: "Steered front, driven rear (seed 001 eq. 14 for one steered wheel): each steered wheel points at the turn centre on the rear axle line.".into() },
-        gyro: None,
-        landmark_sensor: None,
-        controller: None,
-        notes: Vec::new(),
-    };
-    robot.controller = ctl.map(|k| ControllerOut {
-        node: k.node.clone(),
-        type_name: k.type_name.clone(),
-        file: String::new(),
-        values: vec![
-            (radius_key.into(), "rear_wheel_radius".into()),
-            ("wheelbase".into(), "wheelbase".into()),
-        ],
+        Kinematics::Twist { vx, vy, omega, doc: "Steered front, driven rear (seed 001 eq. 14 for one steered wheel): each steered wheel points at the turn centre on the rear axle line.".into() },
+    );
+    robot.controller = ctl.map(|k| {
+        ControllerOut::of(
+            k,
+            &[
+                (radius_key, "rear_wheel_radius"),
+                ("wheelbase", "wheelbase"),
+            ],
+        )
     });
     Ok(robot)
 }
