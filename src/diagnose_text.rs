@@ -122,20 +122,34 @@ fn say_answer(out: &mut Vec<String>, c: &Common, r: &Runner, d: &Diagnosis) -> V
         let named = format!("{lead} `{}`: {}", step.effect, values(&step.parameters));
         if k == 0 {
             out.push(named);
+            let change = match &step.sightings {
+                Some(f) => format!(
+                    "sightings' median range error {:.3} -> {:.3} m; motion error {:.3}",
+                    f.range_before, f.range_after, step.rmse_after
+                ),
+                None => fall(before, step.rmse_after),
+            };
             out.push(format!(
-                "    {}; nominal {:.3}, noise floor {:.3}",
-                fall(before, step.rmse_after),
-                d.baseline_rmse,
-                d.noise_floor
+                "    {change}; nominal {:.3}, noise floor {:.3}",
+                d.baseline_rmse, d.noise_floor
             ));
         } else {
-            // a later step on one line where it fits
-            let one = format!("{named}; {}", fall(before, step.rmse_after));
+            // a later step on one line where it fits; a sensor effect is
+            // proved on the sightings, which its figures are (the motion's
+            // error does not move with it)
+            let change = match &step.sightings {
+                Some(f) => format!(
+                    "sightings' median range error {:.3} -> {:.3} m",
+                    f.range_before, f.range_after
+                ),
+                None => fall(before, step.rmse_after),
+            };
+            let one = format!("{named}; {change}");
             if one.chars().count() <= crate::output::WIDTH {
                 out.push(one);
             } else {
                 out.push(named);
-                out.push(format!("    {}", fall(before, step.rmse_after)));
+                out.push(format!("    {change}"));
             }
         }
         if !step.equivalent.is_empty() {
