@@ -140,6 +140,19 @@ fn rows(
     }
 }
 
+/// The number of rows of arguments given as rows (None: one row for all);
+/// arguments with rows must agree.
+fn common_rows(args: &[(&str, Option<usize>)]) -> PyResult<usize> {
+    let n = args.iter().filter_map(|a| a.1).max().unwrap_or(1);
+    match args.iter().find(|a| a.1.is_some_and(|m| m != n)) {
+        Some((what, m)) => Err(usage(format!(
+            "{what}: {} rows where another argument has {n}",
+            m.unwrap_or(0)
+        ))),
+        None => Ok(n),
+    }
+}
+
 /// The i-th row of a broadcast array (one row for every i when `n` is None).
 fn row(data: &[f64], n: Option<usize>, width: usize, i: usize) -> &[f64] {
     match n {
@@ -344,15 +357,7 @@ impl PyModel {
             Some(l) => rows(l, 2, "landmark")?,
             None => (vec![0.0; 2], None),
         };
-        let n = [nx, nu, npn, nl].into_iter().flatten().max().unwrap_or(1);
-        for (what, m) in [("u", nu), ("p", npn), ("landmark", nl)] {
-            if m.is_some_and(|m| m != n) {
-                return Err(usage(format!(
-                    "{what}: {} rows where x has {n}",
-                    m.unwrap_or(0)
-                )));
-            }
-        }
+        let n = common_rows(&[("x", nx), ("u", nu), ("p", npn), ("landmark", nl)])?;
         let runner = self.runner.clone();
         let width = f.rows * f.cols;
         let out = py.allow_threads(|| {
@@ -421,15 +426,7 @@ impl PyModel {
                 (v, Some(len))
             }
         };
-        let n = [nx, nu, npn, ndt].into_iter().flatten().max().unwrap_or(1);
-        for (what, m) in [("x", nx), ("u", nu), ("p", npn), ("dt", ndt)] {
-            if m.is_some_and(|m| m != n) {
-                return Err(usage(format!(
-                    "{what}: {} rows where another argument has {n}",
-                    m.unwrap_or(0)
-                )));
-            }
-        }
+        let n = common_rows(&[("x", nx), ("u", nu), ("p", npn), ("dt", ndt)])?;
         let runner = self.runner.clone();
         let width = f.rows * f.cols;
         let zeros = vec![0.0; 16.max(runner.ir.noise.len())];

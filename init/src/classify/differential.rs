@@ -33,15 +33,6 @@ pub fn differential(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, Init
         .controller
         .filter(|c| c.kind == ControllerKind::DiffDrive);
     let track = mean(left.iter().map(|w| w.position.y)) - mean(right.iter().map(|w| w.position.y));
-    let (lines_l, lines_r): (Vec<String>, Vec<String>) = (
-        left.iter()
-            .map(|w| format!("`{}` line {}", w.joint, w.line))
-            .collect(),
-        right
-            .iter()
-            .map(|w| format!("`{}` line {}", w.joint, w.line))
-            .collect(),
-    );
     let separation = Quantity {
         name: "wheel_separation",
         unit: "m",
@@ -56,8 +47,8 @@ pub fn differential(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, Init
             text: num(track),
             source: format!(
                 "y of the wheel joints' origins, {} and {}",
-                lines_l.join(", "),
-                lines_r.join(", ")
+                joint_lines(&left),
+                joint_lines(&right)
             ),
         },
         controller: controller_value(ctl, "wheel_separation", Some("wheel_separation_multiplier"))?,

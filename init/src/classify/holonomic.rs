@@ -53,10 +53,7 @@ pub fn mecanum(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError
         controller: controller_value(ctl, "kinematics.wheels_radius", None)?,
     }
     .resolve(ctl, notes)?;
-    let lines: Vec<String> = wheels
-        .iter()
-        .map(|w| format!("`{}` line {}", w.joint, w.line))
-        .collect();
+    let lines = joint_lines(&wheels);
     let mut params = vec![radius];
     for (name, value, axis) in [("half_wheelbase", lx, "x"), ("half_track", ly, "y")] {
         let mut p = Quantity {
@@ -67,7 +64,7 @@ pub fn mecanum(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError
             urdf: FromUrdf {
                 value,
                 text: num(value),
-                source: format!("{axis} of the wheel joints' origins, {}", lines.join(", ")),
+                source: format!("{axis} of the wheel joints' origins, {}", lines),
             },
             controller: None,
         }
@@ -166,10 +163,7 @@ pub fn omni(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
             "omni: the wheels have different radii; kinegen expects one wheel size on an omni base",
         ));
     }
-    let lines: Vec<String> = wheels
-        .iter()
-        .map(|w| format!("`{}` line {}", w.joint, w.line))
-        .collect();
+    let lines = joint_lines(&wheels);
     let mut params = vec![Quantity {
         name: "wheel_radius",
         unit: "m",
@@ -189,7 +183,7 @@ pub fn omni(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
                 urdf: FromUrdf {
                     value: l,
                     text: num(l),
-                    source: format!("the wheel joints' origins, {}", lines.join(", ")),
+                    source: format!("the wheel joints' origins, {}", lines),
                 },
                 controller: None,
             }

@@ -104,6 +104,15 @@ pub(crate) fn radius_of(w: &Wheel) -> FromUrdf {
     }
 }
 
+/// The wheels' joints as a source comment names them: "`a` line 12, `b` line 20".
+pub(crate) fn joint_lines(wheels: &[&Wheel]) -> String {
+    let each: Vec<String> = wheels
+        .iter()
+        .map(|w| format!("`{}` line {}", w.joint, w.line))
+        .collect();
+    each.join(", ")
+}
+
 pub(crate) fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
     s / n.max(1) as f64

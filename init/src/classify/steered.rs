@@ -48,10 +48,7 @@ fn wheelbase(
     notes: &mut Vec<String>,
 ) -> Result<ParamOut, InitError> {
     let l = mean(steered.iter().map(|w| w.position.x)) - c.x;
-    let lines: Vec<String> = steered
-        .iter()
-        .map(|w| format!("`{}` line {}", w.joint, w.line))
-        .collect();
+    let lines = joint_lines(steered);
     if l <= 0.0 {
         return Err(InitError::at(cx.file, Some(steered[0].line), "the steered wheels are behind the fixed axle: kinegen writes front-steered bases (x forward, REP 103)"));
     }
@@ -63,10 +60,7 @@ fn wheelbase(
         urdf: FromUrdf {
             value: l,
             text: num(l),
-            source: format!(
-                "x of the steered wheels ({}) minus the rear axle's",
-                lines.join(", ")
-            ),
+            source: format!("x of the steered wheels ({}) minus the rear axle's", lines),
         },
         controller: controller_value(ctl, "wheelbase", None)?,
     }
