@@ -28,10 +28,62 @@ macro_rules! unary {
 
 unary! {
     tan: tan, tanf, tan;
-    sqrt: sqrt, sqrtf, sqrt;
     exp: exp, expf, exp;
     log: log, logf, ln;
     fabs: fabs, fabsf, abs;
+}
+
+/// The square root, correctly rounded. On x86 it is SSE2's instruction
+/// reached through `core::arch`, so that the compiler encodes it for the
+/// target: `vsqrtsd` in a build with AVX (`-C target-cpu=native`). libm's own
+/// x86 square root is inline assembly in the legacy SSE encoding; next to the
+/// AVX code of a native build each call then costs about a hundred
+/// nanoseconds on some Intel CPUs (an SSE/AVX transition), where `vsqrtsd`
+/// takes a few. Elsewhere it is std's (with `std`) or libm's (a hardware
+/// instruction where the target has one, software on an FPU-less core).
+#[inline]
+pub fn sqrt(x: Real) -> Real {
+    #[cfg(any(target_arch = "x86_64", all(target_arch = "x86", target_feature = "sse2")))]
+    return sse2::sqrt(x);
+    #[cfg(not(any(target_arch = "x86_64", all(target_arch = "x86", target_feature = "sse2"))))]
+    return portable_sqrt(x);
+}
+
+#[cfg(not(any(target_arch = "x86_64", all(target_arch = "x86", target_feature = "sse2"))))]
+#[inline]
+fn portable_sqrt(x: Real) -> Real {
+    #[cfg(all(not(feature = "f32"), feature = "std"))]
+    return x.sqrt();
+    #[cfg(all(not(feature = "f32"), not(feature = "std")))]
+    return libm::sqrt(x);
+    #[cfg(feature = "f32")]
+    return libm::sqrtf(x);
+}
+
+#[cfg(any(target_arch = "x86_64", all(target_arch = "x86", target_feature = "sse2")))]
+mod sse2 {
+    use crate::Real;
+    #[cfg(target_arch = "x86")]
+    use core::arch::x86 as arch;
+    #[cfg(target_arch = "x86_64")]
+    use core::arch::x86_64 as arch;
+
+    #[inline]
+    #[allow(unused_unsafe)] // safe to call where SSE2 is enabled in recent Rust; unsafe before
+    pub fn sqrt(x: Real) -> Real {
+        // SAFETY: the module exists only where SSE2 is enabled (x86-64
+        // always has it); the intrinsics touch no memory.
+        unsafe {
+            #[cfg(not(feature = "f32"))]
+            let root = {
+                let v = arch::_mm_set_sd(x);
+                arch::_mm_cvtsd_f64(arch::_mm_sqrt_sd(v, v))
+            };
+            #[cfg(feature = "f32")]
+            let root = arch::_mm_cvtss_f32(arch::_mm_sqrt_ss(arch::_mm_set_ss(x)));
+            root
+        }
+    }
 }
 
 /// -1, 0 or 1; 0 at +-0 (`signum` gives +-1 there) and NaN for NaN: the
