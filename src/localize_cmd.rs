@@ -6,17 +6,16 @@ use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::applications::localize::reading::RangeReading;
-use kinegen_analysis::applications::localize::timing::{Timing, TimingEstimate};
+use kinegen_analysis::applications::localize::timing::TimingEstimate;
 use kinegen_analysis::applications::localize::{
-    side, Bounds, Consistency, EkfOptions, Localization, NeesParts, NoiseSource, Overconfident,
-    Side, Spread, Summary,
+    side, Bounds, EkfOptions, Localization, NeesParts, NoiseSource, Side, Spread, Summary,
 };
+use kinegen_analysis::applications::localize_document::localize_document;
 use kinegen_analysis::applications::localize_request::{
     localize_files, LocalizeRequest, LocalizedFiles,
 };
 use kinegen_analysis::model_on_log::files::Files;
 use kinegen_analysis::model_on_log::load::Loaded;
-use serde_json::json;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -152,23 +151,14 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         out.say(&say_timing(d));
         described.push(say_timing(d));
     }
-    let mut runs_json = Vec::new();
     let mut locs = Vec::new();
     let mut csv = String::from("run,t,x,y,theta,var_x,cov_xy,var_y,var_theta\n");
     for (run, (loc, summary)) in prep.runs.iter().chain(&prep.holdout).zip(&done.runs) {
         say_run(out, run, loc, summary, a.gate);
         csv += &track_rows(run, loc);
-        runs_json.push(run_json(run, loc, summary));
         locs.push((run, loc, summary));
     }
-    let mut noise_json = noise_json(noise, note);
-    for d in &done.timing {
-        let key = match d.timing {
-            Timing::Delay => "input_delay",
-            Timing::Lag => "command_lag",
-        };
-        noise_json[key] = json!({"name": d.name, "spec_s": d.spec_s, "estimate_s": d.estimate_s, "likelihood_gain": d.gain});
-    }
+    let doc = localize_document(files);
     if !sweep.is_empty() {
         say_sweep(out, &locs[0].0.path, sweep);
     }
@@ -177,7 +167,6 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
             .iter()
             .map(|&(run, loc, summary)| crate::localize_report::RunPage { run, loc, summary })
             .collect();
-        let doc = json!({"model": r.ir.name, "noise": noise_json, "runs": runs_json, "sweep": sweep, "warnings": prep.warnings});
         if let Err(e) = crate::localize_report::localize_report(
             dir,
             r,
@@ -198,7 +187,6 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         }
         out_all.say(&format!("track: {}", t.display()));
     }
-    let doc = json!({"model": r.ir.name, "gate": a.gate, "noise": noise_json, "runs": runs_json, "sweep": sweep, "warnings": prep.warnings});
     out_all.finish(c.json.as_deref(), &doc)
 }
 
@@ -225,59 +213,6 @@ fn track_rows(run: &kinegen_analysis::model_on_log::run::Run, loc: &Localization
         );
     }
     csv
-}
-
-/// A run's entry in the JSON document.
-fn run_json(
-    run: &kinegen_analysis::model_on_log::run::Run,
-    loc: &Localization,
-    s: &Summary,
-) -> serde_json::Value {
-    let last = loc.cov.last().unwrap();
-    json!({
-        "path": run.path, "steps": run.steps(),
-        "observations_used": loc.accepted, "observations_rejected": loc.rejected,
-        "observations_outside_log": loc.outside,
-        "position_rmse_m": s.rmse, "dead_reckoning_rmse_m": s.dead_reckoning,
-        "nis_mean": s.nis, "nis_bounds": s.nis_bounds.map(|b| [b.lo, b.hi]),
-        "nis_independent": s.nis_bounds.map(|b| b.independent),
-        "gate_tail": s.gate_tail.map(|g| json!({
-            "rejected_share": g.share(), "consistent_share": g.expected,
-            "consistent_share_bound": g.bound, "overconfident": g.overconfident(),
-        })),
-        "nees_mean": s.nees, "nees_bounds": s.nees_bounds.map(|b| [b.lo, b.hi]),
-        "nees_independent": s.nees_bounds.map(|b| b.independent),
-        "nis_spread": s.nis_spread.map(spread_json), "nees_spread": s.nees_spread.map(spread_json),
-        "consistency": s.consistency().map(|c| match c {
-            Consistency::Agree => "agree",
-            Consistency::HeavyTails { pessimistic_core: true } => "heavy_tails_pessimistic_core",
-            Consistency::HeavyTails { pessimistic_core: false } => "heavy_tails_overconfident_core",
-            Consistency::Contradict => "contradict",
-        }),
-        "nees_parts": s.nees_parts.map(|p| json!({
-            "position_mean": p.position.0, "position_bounds": [p.position.1.lo, p.position.1.hi],
-            "heading_mean": p.heading.0, "heading_bounds": [p.heading.1.lo, p.heading.1.hi],
-            "near_sightings_mean": p.near_sightings, "far_from_sightings_mean": p.far_from_sightings,
-            "overconfident": s.overconfident_part().map(|o| match o {
-                Overconfident::Heading => "heading",
-                Overconfident::PositionNearSightings => "position_near_sightings",
-                Overconfident::PositionFarFromSightings => "position_far_from_sightings",
-                Overconfident::Position => "position",
-            }),
-        })),
-        "ground_truth_noise": s.truth_noise.map(|n| json!({"position_m": n[0], "heading_rad": n[2]})),
-        "smoothed": s.smoothed.map(|x| json!({
-            "position_rmse_m": x.rmse, "nees_mean": x.nees,
-            "nees_bounds": x.nees_bounds.map(|b| [b.lo, b.hi]),
-            "nees_independent": x.nees_bounds.map(|b| b.independent),
-        })),
-        "final_pose": loc.track.last(),
-        "final_std": [last[(0, 0)].sqrt(), last[(1, 1)].sqrt(), last[(2, 2)].sqrt()],
-    })
-}
-
-fn spread_json(x: Spread) -> serde_json::Value {
-    json!({"median": x.median, "chi2_median": x.chi2_median, "beyond_95": x.beyond_95, "point_95": x.point_95})
 }
 
 /// The noise sweep's table (seed 001 Figs 6-7) and which uncertainty costs most.
@@ -518,31 +453,3 @@ fn reading_step(
 
 /// The verbose text's wording of the same step.
 const READING_WHY: &str = "to read range so in the spec (then `fit` calibrates it):";
-
-fn noise_json(
-    n: &kinegen_analysis::applications::localize::NoiseModel,
-    note: &str,
-) -> serde_json::Value {
-    let process: serde_json::Map<String, serde_json::Value> = n
-        .names
-        .iter()
-        .zip(&n.sigma)
-        .zip(&n.density)
-        .map(|((name, s), d)| {
-            (
-                name.clone(),
-                json!({"sigma": s, "form": if *d { "density_per_sqrt_s" } else { "per_row" }}),
-            )
-        })
-        .collect();
-    // null: the spec's straight-line range, as written
-    let r = &n.range_reading;
-    let range_reading = (!r.is_straight()).then(|| {
-        let mut j = json!({"effect": RangeReading::EFFECT});
-        for (k, v) in r.parameters() {
-            j[k] = json!(v);
-        }
-        j
-    });
-    json!({"process": process, "observation_scale": {"range": n.obs_scale[0], "bearing": n.obs_scale[1]}, "persistent": {"range_per_m": n.persistent.factor[0], "bearing": n.persistent.factor[1]}, "memory_s": n.persistent.memory_s, "shared": {"range_per_m": n.shared.factor[0], "bearing": n.shared.factor[1], "memory_s": n.shared.memory_s}, "range_reading": range_reading, "source": note})
-}

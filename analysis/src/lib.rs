@@ -123,6 +123,7 @@ pub mod applications {
     pub mod holdout_bench;
     pub mod inverse;
     pub mod localize;
+    pub mod localize_document;
     pub mod localize_request;
     pub mod mission;
     pub mod navigate;

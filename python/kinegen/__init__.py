@@ -11,6 +11,7 @@ symbolica: the spec is differentiated in-process).
     >>> m.compare(log).position_rmse
     >>> f = m.fit([log]); f.parameters["b"].estimate, f.parameters["b"].std
     >>> d = m.diagnose([log]); d.verdict.effect, d.verdict.proposed
+    >>> m.localize(kinegen.read_log("run.csv", m, observations="obs.csv", landmarks="map.csv")).track
 
 Errors are ``kinegen.Error`` subclasses (``SpecError``, ``LogError``,
 ``UsageError``, ``AnalysisError``) carrying ``file``, ``line`` and ``column``.
@@ -24,10 +25,12 @@ from ._kinegen import (  # noqa: F401
     Estimate,
     Fit,
     Input,
+    Localization,
     Log,
     LogError,
     Model,
     Parameter,
+    RunLocalization,
     SpecError,
     UsageError,
     Verdict,
@@ -36,5 +39,5 @@ from ._kinegen import (  # noqa: F401
 
 __all__ = [
     "Model", "Parameter", "Input", "Log", "read_log", "Comparison", "Errors", "Fit", "Estimate",
-    "Diagnosis", "Verdict", "Error", "SpecError", "LogError", "UsageError", "AnalysisError",
+    "Diagnosis", "Verdict", "Localization", "RunLocalization", "Error", "SpecError", "LogError", "UsageError", "AnalysisError",
 ]

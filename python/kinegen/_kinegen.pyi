@@ -59,6 +59,31 @@ class Comparison:
     def to_json(self) -> str:
         """The document `kinegen compare --json` writes for the same inputs."""
 
+class RunLocalization:
+    path: str
+    position_rmse: Optional[float]
+    """Against the ground truth (m); None without one."""
+    dead_reckoning_rmse: Optional[float]
+    nis_mean: Optional[float]
+    nees_mean: Optional[float]
+    sightings_used: int
+    sightings_rejected: int
+    track: np.ndarray
+    """The filter's pose (x, y, theta) at every row, (N, 3)."""
+    covariance: np.ndarray
+    """Its covariance at every row, (N, 3, 3)."""
+    innovations: np.ndarray
+    """Time (s) and NIS of each accepted sighting, (M, 2)."""
+
+class Localization:
+    runs: list[RunLocalization]
+    noise_source: str
+    position_rmse: Optional[float]
+    track: np.ndarray
+    covariance: np.ndarray
+    def to_json(self) -> str:
+        """The document `kinegen localize --json` writes for the same inputs."""
+
 class Estimate:
     nominal: float
     estimate: float
@@ -117,6 +142,11 @@ class Model:
         """Calibrate the free parameters (Levenberg-Marquardt, `kinegen fit`'s defaults)."""
     def diagnose(self, logs: Logs, **sets: float) -> Diagnosis:
         """Which catalogue effect is missing, and beyond it a proposed correction."""
+    def localize(self, logs: Logs, holdout: Optional[Logs] = None, gate: Optional[float] = None,
+                 smooth: bool = False, spec_noise: bool = False, **noise: float) -> Localization:
+        """The EKF over logs read with observations and landmarks (`kinegen localize`):
+        the process noise estimated from the sightings unless `spec_noise` or `noise`
+        (name=sigma) gives it."""
 
 def read_log(path: str, model: Model, topics: Optional[str] = None, observations: Optional[str] = None, landmarks: Optional[str] = None) -> Log:
     """A CSV log, or a ROS 2 bag with its topic mapping (`topics`), read for `model`."""

@@ -35,11 +35,11 @@ pub struct PyLog {
     gt: Option<Vec<[f64; 3]>>,
 }
 
-fn no_progress(_: &Path) -> Box<dyn Fn(usize, usize)> {
+pub(crate) fn no_progress(_: &Path) -> Box<dyn Fn(usize, usize)> {
     Box::new(|_, _| {})
 }
 
-fn sources(m: &PyModel, logs: &[PyRef<PyLog>], sets: Vec<String>) -> PyResult<Sources> {
+pub(crate) fn sources(m: &PyModel, logs: &[PyRef<PyLog>], sets: Vec<String>) -> PyResult<Sources> {
     let first = logs.first().ok_or_else(|| usage("no log given"))?;
     if logs
         .iter()
@@ -83,7 +83,7 @@ fn sets_of(sets: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<String>> {
 }
 
 /// One log or a list of logs, as Python gives them.
-fn logs_of<'py>(logs: &Bound<'py, PyAny>) -> PyResult<Vec<PyRef<'py, PyLog>>> {
+pub(crate) fn logs_of<'py>(logs: &Bound<'py, PyAny>) -> PyResult<Vec<PyRef<'py, PyLog>>> {
     if let Ok(one) = logs.extract::<PyRef<PyLog>>() {
         return Ok(vec![one]);
     }

@@ -9,6 +9,7 @@
 //! ```
 mod analysis;
 mod errors;
+mod localization;
 mod model;
 mod results;
 
@@ -27,6 +28,8 @@ fn _kinegen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<results::PyEstimate>()?;
     m.add_class::<results::PyDiagnosis>()?;
     m.add_class::<results::PyVerdict>()?;
+    m.add_class::<localization::PyLocalization>()?;
+    m.add_class::<localization::PyRunLocalization>()?;
     m.add_function(wrap_pyfunction!(analysis::read_log, m)?)?;
     m.add("Error", py.get_type::<errors::Error>())?;
     m.add("SpecError", py.get_type::<errors::SpecError>())?;

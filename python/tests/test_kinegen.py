@@ -158,3 +158,34 @@ def test_bad_arrays_are_usage_errors(model):
         model.step(np.zeros((3, 4)), np.zeros((3, 2)), 0.1)
     with pytest.raises(kinegen.UsageError, match="rows"):
         model.step(np.zeros((3, 3)), np.zeros((2, 2)), 0.1)
+
+
+def test_localize_gives_the_command_lines_document(tmp_path):
+    spec = ROOT / "spec" / "unicycle_ekf.toml"
+    sim, obs = tmp_path / "sim.csv", tmp_path / "obs.csv"
+    beacons = ROOT / "data" / "beacons.csv"
+    made = subprocess.run([BIN, "simulate", "--spec", str(spec), "--trajectory", "random", "--seed", "7",
+                           "--landmarks", str(beacons), "--observations", str(obs), "--out", str(sim)],
+                          capture_output=True, text=True)
+    assert made.returncode == 0, made.stderr
+    m = kinegen.Model.from_file(str(spec))
+    log = kinegen.read_log(str(sim), m, observations=str(obs), landmarks=str(beacons))
+    loc = m.localize(log)
+    cli = cli_json("localize", "--spec", str(spec), "--data", str(sim), "--observations", str(obs),
+                   "--landmarks", str(beacons))
+    mine = json.loads(loc.to_json())
+    assert mine == cli
+    run = loc.runs[0]
+    assert run.track.shape == (len(log), 3)
+    assert run.covariance.shape == (len(log), 3, 3)
+    np.testing.assert_allclose(run.covariance, np.transpose(run.covariance, (0, 2, 1)))
+    assert run.innovations.shape == (cli["runs"][0]["observations_used"], 2)
+    assert loc.position_rmse == cli["runs"][0]["position_rmse_m"]
+    # the filter beats dead reckoning, and its estimate ends where the document says
+    assert run.position_rmse < run.dead_reckoning_rmse
+    np.testing.assert_array_equal(run.track[-1], cli["runs"][0]["final_pose"])
+
+
+def test_localize_refuses_a_log_without_sightings(model, log):
+    with pytest.raises(kinegen.Error):
+        model.localize(log)
