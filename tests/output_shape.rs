@@ -121,12 +121,11 @@ angle = [false, true]
 sigma = [0.1, 0.03]
 "#;
 
-#[test]
-fn real_logs_read_at_a_glance() {
-    let (Some(mrclam), Some(square)) = (
-        real_data("mrclam-dataset6"),
-        real_data("optiodom-diff-square"),
-    ) else {
+/// A user's spec on MRCLAM robot 3 (600 s of velocity commands with
+/// sightings) through `commands`, each shaped. Split over tests so that the
+/// test runner's threads run diagnose (the longest) beside the others.
+fn mrclam_reads_at_a_glance(commands: &[&str]) {
+    let Some(mrclam) = real_data("mrclam-dataset6") else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -140,11 +139,30 @@ fn real_logs_read_at_a_glance() {
         files("landmarks.csv"),
     );
     let with_sightings = ["--observations", &obs, "--landmarks", &map];
-    for cmd in ["compare", "fit", "diagnose", "localize"] {
+    for &cmd in commands {
         let mut a = vec![cmd, "--spec", "cart.toml", "--data", &log];
         a.extend(with_sightings);
         shaped(d, &a);
     }
+}
+
+#[test]
+fn a_real_robots_diagnosis_reads_at_a_glance() {
+    mrclam_reads_at_a_glance(&["diagnose"]);
+}
+
+#[test]
+fn a_real_robots_comparison_calibration_and_localisation_read_at_a_glance() {
+    mrclam_reads_at_a_glance(&["compare", "fit", "localize"]);
+}
+
+#[test]
+fn real_odometry_runs_read_at_a_glance() {
+    let Some(square) = real_data("optiodom-diff-square") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
     let runs: Vec<String> = ["run-01.csv", "run-04.csv"]
         .iter()
         .map(|r| square.join(r).to_str().unwrap().to_string())
