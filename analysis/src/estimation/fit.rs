@@ -24,6 +24,7 @@ mod residuals;
 mod rounding;
 mod search;
 pub mod sensor;
+mod sink;
 mod solver;
 
 use covariance::{correlation, psd_inverse};

@@ -24,25 +24,36 @@ pub struct Track {
     pub gyro: Vec<f64>,
 }
 
-/// Pose sensitivities along a track: per row, a 3 x `cols` matrix (the
-/// parameters, then the start pose), row-major in one flat vector (a
-/// million-row fit would otherwise allocate a matrix per row and pass).
+/// Pose sensitivities along a track: per row, a 3 x `width` matrix of the
+/// columns kept (of the parameters, then the start pose), row-major in one
+/// flat vector (a million-row fit would otherwise allocate a matrix per row
+/// and pass). Each column obeys its own recursion (S_{k+1} = F_x S_k + F_p
+/// column by column), so a fit keeps only the columns it reads: its free
+/// parameters and the start heading, half of a differential drive's or less.
 pub struct Sens {
-    cols: usize,
+    width: usize,
+    /// For each column (parameter, then start pose), its place in a row, or
+    /// `NOT_KEPT`.
+    place: Vec<usize>,
     data: Vec<f64>,
 }
 
-/// The sensitivity matrix of one row: `s[(m, c)]`, pose component m, column c.
+const NOT_KEPT: usize = usize::MAX;
+
+/// The sensitivity matrix of one row: `s[(m, c)]`, pose component m, column c
+/// (a column that was not kept is a bug of the caller's: it panics).
 pub struct SensAt<'a> {
-    cols: usize,
+    width: usize,
+    place: &'a [usize],
     d: &'a [f64],
 }
 
 impl Sens {
     pub fn at(&self, k: usize) -> SensAt<'_> {
-        let n = 3 * self.cols;
+        let n = 3 * self.width;
         SensAt {
-            cols: self.cols,
+            width: self.width,
+            place: &self.place,
             d: &self.data[k * n..(k + 1) * n],
         }
     }
@@ -51,7 +62,9 @@ impl Sens {
 impl std::ops::Index<(usize, usize)> for SensAt<'_> {
     type Output = f64;
     fn index(&self, (m, c): (usize, usize)) -> &f64 {
-        &self.d[m * self.cols + c]
+        let at = self.place[c];
+        assert!(at != NOT_KEPT, "sensitivity column {c} was not kept");
+        &self.d[m * self.width + at]
     }
 }
 
@@ -241,13 +254,24 @@ pub fn run_from(
     // derivatives in the timing parameters for the sensitivities
     let (executed, timing) =
         crate::model_on_log::timeline::executed_with_rates(r, p, data, with_sens);
-    run_executed(r, p, (&executed, &timing), with_sens, start_offset, plan)
+    run_executed(
+        r,
+        p,
+        (&executed, &timing),
+        with_sens,
+        start_offset,
+        plan,
+        None,
+    )
 }
 
 /// [`run_from`] on a run whose inputs are already as executed
 /// ([`crate::model_on_log::timeline::executed_with_rates`], with their derivatives in the
 /// timing parameters when `with_sens`): for a caller that needs those inputs
 /// too (the fit's observations read them) and computes them once.
+///
+/// `kept`: the sensitivity columns to keep (parameters, then the start pose
+/// at `p.len()..p.len() + 3`), all of them when None.
 pub fn run_executed(
     r: &Runner,
     p: &[f64],
@@ -255,22 +279,32 @@ pub fn run_executed(
     with_sens: bool,
     start_offset: [f64; 3],
     plan: Option<&[u8]>,
+    kept: Option<&[usize]>,
 ) -> Track {
     let (start, dstart) = reckoning_start(r, p, data, start_offset);
     let np = p.len();
     let mut pose = Vec::with_capacity(data.steps() + 1);
     pose.push(start);
     // columns: parameters, then the start pose (identity at the start)
-    let cols = np + 3;
+    let kept: Vec<usize> = kept.map_or_else(|| (0..np + 3).collect(), <[usize]>::to_vec);
+    let cols = kept.len();
     let mut sens = with_sens.then(|| {
+        let mut place = vec![NOT_KEPT; np + 3];
+        for (at, &c) in kept.iter().enumerate() {
+            place[c] = at;
+        }
         let mut data = Vec::with_capacity(3 * cols * (data.steps() + 1));
         for m in 0..3 {
-            data.extend((0..cols).map(|c| match c {
+            data.extend(kept.iter().map(|&c| match c {
                 c if c < np => dstart[m * np + c],
                 c => f64::from(u8::from(c == np + m)),
             }));
         }
-        Sens { cols, data }
+        Sens {
+            width: cols,
+            place,
+            data,
+        }
     });
     let mut twist = Vec::with_capacity(data.steps());
     let mut stepper = Stepper::with_inputs(r, p, data, Cow::Borrowed(&data.u), with_sens, plan);
@@ -295,15 +329,15 @@ pub fn run_executed(
                 // S_{j+1} = F_x S_j + [F_p | 0], written out
                 let (jx, jp) = (&out[6..15], &out[15..]);
                 for m in 0..3 {
-                    for c in 0..cols {
-                        let prev = |i: usize| cur[i * cols + c];
+                    for (at, &c) in kept.iter().enumerate() {
+                        let prev = |i: usize| cur[i * cols + at];
                         let mut direct = if c < np { jp[m * np + c] } else { 0.0 };
                         for (q, d) in by_timing.iter().filter(|_| first) {
                             if c == *q {
                                 direct += d[m];
                             }
                         }
-                        next[m * cols + c] = chain(&jx[m * 3..m * 3 + 3], prev, direct);
+                        next[m * cols + at] = chain(&jx[m * 3..m * 3 + 3], prev, direct);
                     }
                 }
                 std::mem::swap(&mut cur, &mut next);

@@ -1,5 +1,6 @@
 //! The weighted residuals a calibration minimises, their Jacobian, and the
 //! Gauss-Newton normal equations summed run by run without forming it.
+use super::sink::{Folded, Kept, Sink, Summed};
 use super::FitOptions;
 use crate::logs::column::Column;
 use crate::logs::log::wrap;
@@ -151,78 +152,36 @@ pub fn normal_equations(
     let m = free.len();
     let cols = start_columns(runs, o, m);
     let n = m + cols.iter().flatten().count();
-    // per run: residuals, A^T A, A^T b, b^T b, A^T r, b^T r (A: parameter columns, b: start heading)
-    type Part = (Sums, DMatrix<f64>, DVector<f64>, f64, DVector<f64>, f64);
-    let parts: Vec<Part> = runs
+    // per run: A^T A, A^T b, b^T b, A^T r, b^T r (A: parameter columns, b:
+    // start heading), folded in as the run's residuals are made
+    let parts: Vec<Folded> = runs
         .par_iter()
         .enumerate()
         .map(|(i, run)| {
             let nuis = cols[i].is_some();
-            let (mut rv, jv) = run_residuals(
-                r,
-                p,
-                free,
-                run,
-                o,
-                true,
-                starts.get(i).copied().unwrap_or([0.0; 3]),
-                nuis,
-                o.plan(i),
-            );
-            let (mut ata, mut atb, mut btb, mut atr, mut btr) = (
-                DMatrix::zeros(m, m),
-                DVector::zeros(m),
-                0.0,
-                DVector::zeros(m),
-                0.0,
-            );
-            // Rows are gathered in blocks and each block enters A^T A as one
-            // matrix product (blocked and vectorised by nalgebra), not as one
-            // rank-1 update and one allocation per residual.
-            const BLOCK: usize = 256;
-            let (mut a, mut b, mut rb) = (
-                DMatrix::zeros(BLOCK, m),
-                DVector::zeros(BLOCK),
-                DVector::zeros(BLOCK),
-            );
-            for (block, chunk_res) in rv.chunks_mut(BLOCK).enumerate() {
-                let n = chunk_res.len();
-                for (i, res) in chunk_res.iter_mut().enumerate() {
-                    let row = &jv[block * BLOCK + i];
-                    let w = o.huber.map_or(1.0, |k| huber_weight(*res, k));
-                    *res *= w;
-                    for (c, v) in row[..m].iter().enumerate() {
-                        a[(i, c)] = v * w;
-                    }
-                    b[i] = if nuis { row[m] * w } else { 0.0 };
-                    rb[i] = *res;
-                }
-                let (a, b, rb) = (a.rows(0, n), b.rows(0, n), rb.rows(0, n));
-                ata.gemm_tr(1.0, &a, &a, 1.0);
-                atb.gemv_tr(1.0, &a, &b, 1.0);
-                btb += b.dot(&b);
-                atr.gemv_tr(1.0, &a, &rb, 1.0);
-                btr += b.dot(&rb);
-            }
-            (Sums::of(&rv), ata, atb, btb, atr, btr)
+            let mut folded = Folded::new(m, nuis, o.huber);
+            let start = starts.get(i).copied().unwrap_or([0.0; 3]);
+            let track = (start, o.plan(i));
+            run_residuals_into(r, p, free, run, o, true, track, nuis, &mut folded);
+            folded.finish()
         })
         .collect();
     let mut sums = Sums::default();
     let mut jtj = DMatrix::zeros(n, n);
     let mut jtr = DVector::zeros(n);
-    for (i, (rv, ata, atb, btb, atr, btr)) in parts.into_iter().enumerate() {
-        sums.add(rv);
+    for (i, part) in parts.into_iter().enumerate() {
+        sums.add(part.squares.sums());
         let mut top = jtj.view_mut((0, 0), (m, m));
-        top += &ata;
+        top += &part.ata;
         let mut g = jtr.rows_mut(0, m);
-        g += &atr;
+        g += &part.atr;
         if let Some(c) = cols[i] {
             for k in 0..m {
-                jtj[(k, c)] += atb[k];
-                jtj[(c, k)] += atb[k];
+                jtj[(k, c)] += part.atb[k];
+                jtj[(c, k)] += part.atb[k];
             }
-            jtj[(c, c)] += btb;
-            jtr[c] += btr;
+            jtj[(c, c)] += part.btb;
+            jtr[c] += part.btr;
         }
     }
     for (c, value, slope) in priors(r, p, free) {
@@ -241,13 +200,6 @@ pub struct Sums {
 }
 
 impl Sums {
-    fn of(res: &[f64]) -> Sums {
-        Sums {
-            cost: cost(res),
-            n: res.len(),
-        }
-    }
-
     fn add(&mut self, other: Sums) {
         self.cost += other.cost;
         self.n += other.n;
@@ -270,21 +222,20 @@ pub fn residual_sums(
         .enumerate()
         .map(|(i, run)| {
             let start = starts.get(i).copied().unwrap_or([0.0; 3]);
-            let (mut rv, _) = run_residuals(
+            let mut summed = Summed::new(o.huber);
+            let track = (start, o.plan(i));
+            run_residuals_into(
                 r,
                 p,
                 free,
                 run,
                 o,
                 false,
-                start,
+                track,
                 cols[i].is_some(),
-                o.plan(i),
+                &mut summed,
             );
-            if let Some(k) = o.huber {
-                rv.iter_mut().for_each(|x| *x *= huber_weight(*x, k));
-            }
-            Sums::of(&rv)
+            summed.squares.sums()
         })
         .reduce(Sums::default, |mut a, b| {
             a.add(b);
@@ -323,10 +274,9 @@ pub(super) fn huber_weights(res: &mut [f64], jac: Option<&mut DMatrix<f64>>, k: 
     }
 }
 
-/// One run's residuals; Jacobian rows have the free parameters' columns, then
-/// (with `nuis`) the start-heading column.
+/// One run's residuals, kept; Jacobian rows have the free parameters'
+/// columns, then (with `nuis`) the start-heading column.
 #[allow(clippy::too_many_arguments)]
-#[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
 pub(super) fn run_residuals(
     r: &Runner,
     p: &[f64],
@@ -338,12 +288,30 @@ pub(super) fn run_residuals(
     nuis: bool,
     plan: Option<&[u8]>,
 ) -> (Vec<f64>, Rows) {
-    let mut res = Vec::new();
-    let mut jac = Rows::new(free.len() + usize::from(nuis));
+    let mut kept = Kept::new(free.len() + usize::from(nuis));
+    let track = (start, plan);
+    run_residuals_into(r, p, free, run, o, with_jac, track, nuis, &mut kept);
+    (kept.res, kept.jac)
+}
+
+/// One run's residuals (and with `with_jac` their Jacobian rows), each given
+/// to `sink` as it is made; the track starts at the measured start pose plus
+/// `start`, sub-stepped as `plan` says.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run_residuals_into(
+    r: &Runner,
+    p: &[f64],
+    free: &[usize],
+    run: &Run,
+    o: &FitOptions,
+    with_jac: bool,
+    (start, plan): ([f64; 3], Option<&[u8]>),
+    nuis: bool,
+    sink: &mut impl Sink,
+) {
     // the inputs as executed (an input delay, a lag): the track's, and the
     // observations' arguments
     let (inputs, timing) = crate::model_on_log::timeline::executed_with_rates(r, p, run, with_jac);
-    let track = deadreckon::run_executed(r, p, (&inputs, &timing), with_jac, start, plan);
     let np = p.len();
     // sensitivity columns to read: the free parameters, then the start heading
     let cols: Vec<usize> = free
@@ -351,6 +319,8 @@ pub(super) fn run_residuals(
         .copied()
         .chain(if nuis { vec![np + 2] } else { vec![] })
         .collect();
+    let track =
+        deadreckon::run_executed(r, p, (&inputs, &timing), with_jac, start, plan, Some(&cols));
     let cx = RunCx {
         r,
         p,
@@ -362,27 +332,24 @@ pub(super) fn run_residuals(
         inputs: &inputs,
     };
     if o.use_pose {
-        cx.pose_residuals(&mut res, &mut jac);
+        cx.pose_residuals(sink);
     }
     if let Some(sd) = start_prior(run, o).filter(|_| nuis) {
         // the start-heading offset against its measurement's uncertainty
-        res.push(start[2] / sd);
-        if with_jac {
-            let m = cols.len() - 1;
-            jac.push((0..=m).map(|c| if c == m { 1.0 / sd } else { 0.0 }));
-        }
+        let m = cols.len() - 1;
+        let row = (0..=m).map(|c| if c == m { 1.0 / sd } else { 0.0 });
+        sink.push(start[2] / sd, with_jac.then_some(row));
     }
     if o.use_landmarks && !run.landmarks.is_empty() {
         let seen_from = match &run.gt {
             Some(gt) if o.sightings_from_truth => SeenFrom::Truth(gt),
             _ => SeenFrom::Track(&track),
         };
-        landmark_residuals(r, p, &cols, run, seen_from, with_jac, &mut res, &mut jac);
+        landmark_residuals(r, p, &cols, run, seen_from, with_jac, sink);
     }
     if o.use_gyro {
-        cx.gyro_residuals(&mut res, &mut jac);
+        cx.gyro_residuals(sink);
     }
-    (res, jac)
 }
 
 /// One run's track and what its residuals read.
@@ -402,7 +369,8 @@ struct RunCx<'a> {
 impl RunCx<'_> {
     /// The pose residuals against the ground truth (through the model's pose
     /// observation where it has one).
-    fn pose_residuals(&self, res: &mut Vec<f64>, jac: &mut Rows) {
+    #[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
+    fn pose_residuals(&self, sink: &mut impl Sink) {
         let (r, p, free, run, o, with_jac) =
             (self.r, self.p, self.free, self.run, self.o, self.with_jac);
         let (track, inputs) = (self.track, self.inputs);
@@ -450,13 +418,13 @@ impl RunCx<'_> {
                     ),
                 };
                 let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
+                let (hx, hp, vel) = (&hx, &hp, &vel);
                 for i in 0..3 {
                     let d = pred[i] - gt[k][i];
-                    res.push(if i == 2 { wrap(d) } else { d } / sig[i]);
-                    if with_jac {
+                    let row = with_jac.then(|| {
                         let sens = track.sens.as_ref().unwrap();
                         let (s0, s1) = (sens.at(j), sens.at(j + 1));
-                        jac.push(free.iter().map(|&c| {
+                        free.iter().map(move |&c| {
                             let dx = |m: usize| {
                                 if Some(c) == tau_i {
                                     -vel[m]
@@ -466,15 +434,16 @@ impl RunCx<'_> {
                             };
                             let direct = if c < np { hp[i * np + c] } else { 0.0 };
                             chain(&hx[i * 3..i * 3 + 3], dx, direct) / sig[i]
-                        }));
-                    }
+                        })
+                    });
+                    sink.push(if i == 2 { wrap(d) } else { d } / sig[i], row);
                 }
             }
         }
     }
 
     /// The gyro residuals: the track's predicted readings against the gyro's.
-    fn gyro_residuals(&self, res: &mut Vec<f64>, jac: &mut Rows) {
+    fn gyro_residuals(&self, sink: &mut impl Sink) {
         let (r, p, free, run, o, with_jac) =
             (self.r, self.p, self.free, self.run, self.o, self.with_jac);
         let (track, inputs) = (self.track, self.inputs);
@@ -487,8 +456,10 @@ impl RunCx<'_> {
             for k in 0..run.steps() {
                 let x = track.pose[k];
                 // the track already predicted the reading (Track::gyro)
-                res.push((track.gyro[k] - g[k + 1]) / o.gyro_sigma);
-                if with_jac {
+                let value = (track.gyro[k] - g[k + 1]) / o.gyro_sigma;
+                if !with_jac {
+                    sink.push(value, None::<std::iter::Empty<f64>>);
+                } else {
                     if let Some(hp) = hp {
                         r.eval_into(
                             hp,
@@ -504,10 +475,11 @@ impl RunCx<'_> {
                         &mut scratch,
                     );
                     let s = track.sens.as_ref().unwrap().at(k);
-                    jac.push(free.iter().map(|&c| {
+                    let row = free.iter().map(|&c| {
                         let direct = if c < np { jp[c] } else { 0.0 };
                         chain(&jx, |m| s[(m, c)], direct) / o.gyro_sigma
-                    }));
+                    });
+                    sink.push(value, Some(row));
                 }
             }
         }
@@ -539,8 +511,7 @@ pub(super) fn landmark_residuals(
     run: &Run,
     seen_from: SeenFrom,
     with_jac: bool,
-    res: &mut Vec<f64>,
-    jac: &mut Rows,
+    sink: &mut impl Sink,
 ) {
     let Some(sensor) = r.ir.observation_kernels(RangeBearing) else {
         return;
@@ -561,9 +532,15 @@ pub(super) fn landmark_residuals(
         let u = &run.u[j.min(run.steps() - 1)];
         let lm = [o.xl, o.yl];
         let pred = r.eval(h, &Runner::obs_args(h, &x, u, p, &lm));
-        res.push((pred[0] - o.range) / sig[0]);
-        res.push(wrap(pred[1] - o.bearing) / sig[1]);
-        if with_jac {
+        let values = [
+            (pred[0] - o.range) / sig[0],
+            wrap(pred[1] - o.bearing) / sig[1],
+        ];
+        if !with_jac {
+            for v in values {
+                sink.push(v, None::<std::iter::Empty<f64>>);
+            }
+        } else {
             let hp = sensor.jac_p.map_or(vec![], |fp| {
                 r.eval(fp, &Runner::obs_args(fp, &x, u, p, &lm))
             });
@@ -577,22 +554,19 @@ pub(super) fn landmark_residuals(
                 }
                 SeenFrom::Truth(_) => None,
             };
-            for i in 0..2 {
-                jac.push(free.iter().map(|&c| match &through_track {
+            for (i, value) in values.into_iter().enumerate() {
+                let row = free.iter().map(|&c| match &through_track {
                     None => direct(i, c) / sig[i],
                     Some((sens, hx)) => {
                         let (s0, s1) = (sens.at(j), sens.at(j + 1));
                         let dx = |m: usize| s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)]);
                         chain(&hx[i * 3..i * 3 + 3], dx, direct(i, c)) / sig[i]
                     }
-                }));
+                });
+                sink.push(value, Some(row));
             }
         }
     }
-}
-
-pub(super) fn cost(res: &[f64]) -> f64 {
-    0.5 * res.iter().map(|r| r * r).sum::<f64>()
 }
 
 /// The residuals of `run`'s landmark sightings seen from its ground-truth
@@ -607,10 +581,10 @@ pub fn sightings_from_truth(
     run: &Run,
     with_jac: bool,
 ) -> (Vec<f64>, Rows) {
-    let (mut res, mut jac) = (Vec::new(), Rows::new(free.len()));
+    let mut kept = Kept::new(free.len());
     if let Some(gt) = &run.gt {
         let seen_from = SeenFrom::Truth(gt);
-        landmark_residuals(r, p, free, run, seen_from, with_jac, &mut res, &mut jac);
+        landmark_residuals(r, p, free, run, seen_from, with_jac, &mut kept);
     }
-    (res, jac)
+    (kept.res, kept.jac)
 }
