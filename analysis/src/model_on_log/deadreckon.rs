@@ -49,6 +49,7 @@ pub struct SensAt<'a> {
 }
 
 impl Sens {
+    #[inline]
     pub fn at(&self, k: usize) -> SensAt<'_> {
         let n = 3 * self.width;
         SensAt {
@@ -61,6 +62,7 @@ impl Sens {
 
 impl std::ops::Index<(usize, usize)> for SensAt<'_> {
     type Output = f64;
+    #[inline]
     fn index(&self, (m, c): (usize, usize)) -> &f64 {
         let at = self.place[c];
         assert!(at != NOT_KEPT, "sensitivity column {c} was not kept");

@@ -21,9 +21,10 @@
 //! track's deterministic discretisation error, heading errors integrated into
 //! positions) is not a random walk; the sandwich only needs the model for the
 //! size of the uncertainty, and came within 30% of that spread.
-use super::{correlation, priors, psd_inverse, run_offsets, run_residuals, start_columns};
+use super::residuals::run_residuals_into;
+use super::sink::{Kept, Sink};
+use super::{correlation, priors, psd_inverse, run_offsets, start_columns};
 use super::{rounding, FitOptions, FitResult};
-use crate::logs::rows::Rows;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
@@ -51,6 +52,10 @@ type Series = (Vec<f64>, Vec<f64>, f64);
 fn local_level(series: &[Series]) -> Level {
     let sums = |lambda: f64| {
         let (mut ss, mut logf, mut n) = (0.0, 0.0, 0.0);
+        // sum ln f as the ln of running products (f >= 1, so they only
+        // grow): one logarithm per few hundred rows instead of one a row,
+        // which on a million-row log was a tenth of the whole fit's time
+        let mut product = 1.0;
         for (dt, y, anchor) in series {
             let (mut w, mut p) = (0.0, *anchor);
             for (dt, y) in dt.iter().zip(y) {
@@ -58,14 +63,21 @@ fn local_level(series: &[Series]) -> Level {
                 let f = pred + 1.0;
                 let v = y - w;
                 ss += v * v / f;
-                logf += f.ln();
+                let grown = product * f;
+                if grown < 1e250 {
+                    product = grown;
+                } else {
+                    // before it could overflow (and a NaN goes on as one)
+                    logf += product.ln() + f.ln();
+                    product = 1.0;
+                }
                 n += 1.0;
                 let gain = pred / f;
                 w += gain * v;
                 p = pred * (1.0 - gain);
             }
         }
-        (ss, logf, n)
+        (ss, logf + product.ln(), n)
     };
     let mut best: Option<(f64, Level)> = None;
     let grid = std::iter::once(0.0).chain((0..=48).map(|i| 10f64.powf(-9.0 + 0.25 * i as f64)));
@@ -84,12 +96,145 @@ fn local_level(series: &[Series]) -> Level {
     best.map(|b| b.1).unwrap_or_default()
 }
 
-/// One run's pose residual rows: (x, y, heading) triples for ground-truth
-/// rows 1.., with their Jacobian rows.
-struct PoseRows<'a> {
-    res: &'a [f64],
-    jac: &'a Rows,
+/// The series of pose component `c` (x, y, heading) of a run's pose
+/// residuals (`values`: (x, y, heading) triples for ground-truth rows 1..).
+fn series(run: &Run, values: &[f64], c: usize) -> Series {
+    let n = pose_rows(run);
+    let anchor = 1.0 / run.rest_steps().max(1) as f64;
+    let dt = (0..n).map(|k| run.t[k + 1] - run.t[k]).collect();
+    (dt, (0..n).map(|k| values[3 * k + c]).collect(), anchor)
+}
+
+/// The number of pose residual triples of a run: one per ground-truth row
+/// after the first.
+fn pose_rows(run: &Run) -> usize {
+    run.gt.as_ref().map_or(0, |g| g.len().saturating_sub(1))
+}
+
+/// Per pose component, a sum of Jacobian rows over a run's triples: x, y and
+/// heading, and the x rows times the measured y and the y rows times the
+/// measured x (a heading error's lever arm).
+#[derive(Clone)]
+struct RowSums {
+    x: DVector<f64>,
+    y: DVector<f64>,
+    th: DVector<f64>,
+    xy: DVector<f64>,
+    yx: DVector<f64>,
+}
+
+impl RowSums {
+    fn zeros(width: usize) -> RowSums {
+        let z = DVector::zeros(width);
+        RowSums {
+            x: z.clone(),
+            y: z.clone(),
+            th: z.clone(),
+            xy: z.clone(),
+            yx: z,
+        }
+    }
+
+    /// Add triple k's rows, measured at position `at`.
+    fn add(&mut self, rows: &[DVector<f64>; 3], at: [f64; 2]) {
+        self.xy.axpy(at[1], &rows[0], 1.0);
+        self.yx.axpy(at[0], &rows[1], 1.0);
+        self.x += &rows[0];
+        self.y += &rows[1];
+        self.th += &rows[2];
+    }
+
+    /// `self` - `before`: the sums over the rows from here on.
+    fn minus(&self, before: &RowSums) -> RowSums {
+        RowSums {
+            x: &self.x - &before.x,
+            y: &self.y - &before.y,
+            th: &self.th - &before.th,
+            xy: &self.xy - &before.xy,
+            yx: &self.yx - &before.yx,
+        }
+    }
+
+    /// How the rows summed move with a heading error at `from`: the heading
+    /// rows, and the positions turned about `from` (in weighted units).
+    fn turn(&self, from: [f64; 3], lever: f64) -> DVector<f64> {
+        &self.th - (&self.xy - &self.x * from[1]) * lever + (&self.yx - &self.y * from[0]) * lever
+    }
+}
+
+/// The first pass over a run's pose rows with their Jacobian: J^T J of every
+/// row (the start heading's prior row too), and the sums of the triples' rows
+/// ([`RowSums`]), from which the second pass takes the sums over the rows
+/// after each step.
+struct Totals<'a> {
     run: &'a Run,
+    triples: usize,
+    seen: usize,
+    h: DMatrix<f64>,
+    sums: RowSums,
+    triple: [DVector<f64>; 3],
+}
+
+impl<'a> Totals<'a> {
+    fn new(run: &'a Run, width: usize) -> Totals<'a> {
+        Totals {
+            run,
+            triples: 3 * pose_rows(run),
+            seen: 0,
+            h: DMatrix::zeros(width, width),
+            sums: RowSums::zeros(width),
+            triple: std::array::from_fn(|_| DVector::zeros(width)),
+        }
+    }
+}
+
+/// Position (x, y) of residual triple k (ground-truth row k + 1).
+fn measured_at(run: &Run, k: usize) -> [f64; 2] {
+    let g = &run.gt.as_ref().unwrap()[k + 1];
+    [g[0], g[1]]
+}
+
+impl Sink for Totals<'_> {
+    fn push(&mut self, _: f64, row: Option<impl Iterator<Item = f64>>) {
+        let v = DVector::from_iterator(self.h.nrows(), row.expect("rows"));
+        self.h.ger(1.0, &v, &v, 1.0);
+        if self.seen < self.triples {
+            let (k, c) = (self.seen / 3, self.seen % 3);
+            self.triple[c] = v;
+            if c == 2 {
+                self.sums.add(&self.triple, measured_at(self.run, k));
+            }
+        }
+        self.seen += 1;
+    }
+}
+
+/// The rows other than the pose's (gyro, landmarks): white at `var`.
+struct Rest {
+    var: f64,
+    h: DMatrix<f64>,
+    meat: DMatrix<f64>,
+}
+
+impl Sink for Rest {
+    fn push(&mut self, _: f64, row: Option<impl Iterator<Item = f64>>) {
+        let v = DVector::from_iterator(self.h.nrows(), row.expect("rows"));
+        self.h.ger(1.0, &v, &v, 1.0);
+        self.meat.ger(self.var, &v, &v, 1.0);
+    }
+}
+
+/// The second pass over a run's pose rows: M, white noise on every row, each
+/// component's walk and the anchoring start pose's noise. A component's walk
+/// injected during the step that ends at triple k moves that component of
+/// every later row: it weighs the sum of the rows from k on, which is the
+/// run's total ([`Totals`]) minus the rows before k, so the rows are read
+/// once, forward, as they are made, and never held. (Each component's walk
+/// is fitted to its own series, so a heading walk's effect on the positions
+/// is already in theirs and is not carried over again.)
+struct Meat<'a> {
+    run: &'a Run,
+    noise: [Level; 2],
     /// lever-arm factor in weighted units: heading sigma / position sigma
     lever: f64,
     /// Per step, the pose change its inputs' rounding errors make, one
@@ -97,123 +242,94 @@ struct PoseRows<'a> {
     /// whether the step starts a run of rows logging the same value; empty
     /// where the inputs are not rounded.
     rounding: Vec<Vec<([f64; 3], bool)>>,
+    totals: RowSums,
+    before: RowSums,
+    triples: usize,
+    seen: usize,
+    triple: [DVector<f64>; 3],
+    /// Per rounded input, its current error's moves summed over the rows
+    /// that share it.
+    shared: Vec<DVector<f64>>,
+    meat: DMatrix<f64>,
 }
 
-impl PoseRows<'_> {
-    fn rows(&self) -> usize {
-        self.run
-            .gt
-            .as_ref()
-            .map_or(0, |g| g.len().saturating_sub(1))
+impl Meat<'_> {
+    fn level(&self, c: usize) -> Level {
+        self.noise[usize::from(c == 2)]
     }
 
-    /// Position (x, y) of residual row k (ground-truth row k + 1).
-    fn at(&self, k: usize) -> [f64; 2] {
-        let g = &self.run.gt.as_ref().unwrap()[k + 1];
-        [g[0], g[1]]
-    }
-
-    /// The time step that ends at residual row k.
-    fn dt(&self, k: usize) -> f64 {
-        self.run.t[k + 1] - self.run.t[k]
-    }
-
-    /// The series of component c (x, y, heading).
-    fn series(&self, c: usize) -> Series {
-        let n = self.rows();
-        let anchor = 1.0 / self.run.rest_steps().max(1) as f64;
-        let values = (0..n).map(|k| self.res[3 * k + c]).collect();
-        ((0..n).map(|k| self.dt(k)).collect(), values, anchor)
-    }
-
-    /// M for this run's pose rows: white noise on every row, each
-    /// component's walk, and the anchoring start pose's noise. `turned`: the
-    /// fit refines the run's start heading.
-    fn meat(&self, noise: &[Level; 2], width: usize, turned: bool) -> DMatrix<f64> {
-        let n = self.rows();
-        let mut meat = DMatrix::zeros(width, width);
-        let row = |k: usize, c: usize| DVector::from_column_slice(&self.jac[3 * k + c][..width]);
-        let level = |c: usize| noise[usize::from(c == 2)];
-        for k in 0..n {
-            for c in 0..3 {
-                let v = row(k, c);
-                meat.ger(level(c).white, &v, &v, 1.0);
-            }
+    /// Triple k's white noise, the walks it injects and its inputs'
+    /// rounding.
+    fn step(&mut self, k: usize) {
+        for c in 0..3 {
+            let white = self.level(c).white;
+            self.meat.ger(white, &self.triple[c], &self.triple[c], 1.0);
         }
-        // reverse cumulative sums over rows k >= j of J_x, J_y, J_th: each
-        // component's walk, injected during the step that ends at row j,
-        // moves that component of every later row. (Each component's walk is
-        // fitted to its own series, so a heading walk's effect on the
-        // positions is already in theirs and is not carried over again.)
-        let zero = || DVector::<f64>::zeros(width);
-        let (mut sx, mut sy, mut sth, mut sxy, mut syx) = (zero(), zero(), zero(), zero(), zero());
-        let mut shared: Vec<DVector<f64>> = Vec::new();
-        for k in (0..n).rev() {
-            let p = self.at(k);
-            let (jx, jy, jth) = (row(k, 0), row(k, 1), row(k, 2));
-            sxy += &jx * p[1];
-            syx += &jy * p[0];
-            sx += jx;
-            sy += jy;
-            sth += jth;
-            let dt = self.dt(k);
-            meat.ger(level(0).walk * dt, &sx, &sx, 1.0);
-            meat.ger(level(1).walk * dt, &sy, &sy, 1.0);
-            meat.ger(level(2).walk * dt, &sth, &sth, 1.0);
-            // an input's rounding in this step moves every later row: its
-            // position, and its heading with the lever arm from here. Rows
-            // that share one error (see rounding::held) add their moves up
-            // before they count, once per run of equal values.
-            if let Some(errors) = self.rounding.get(k).filter(|e| !e.is_empty()) {
-                let from = self.run.gt.as_ref().unwrap()[k];
-                let turn = &sth - (&sxy - &sx * from[1]) * self.lever
-                    + (&syx - &sy * from[0]) * self.lever;
-                shared.resize(errors.len(), zero());
-                for ((e, starts), sum) in errors.iter().zip(shared.iter_mut()) {
-                    *sum += &sx * e[0] + &sy * e[1] + &turn * e[2];
-                    if *starts {
-                        meat.ger(1.0, sum, sum, 1.0);
-                        sum.fill(0.0);
-                    }
+        let after = self.totals.minus(&self.before);
+        let dt = self.run.t[k + 1] - self.run.t[k];
+        for (c, s) in [&after.x, &after.y, &after.th].into_iter().enumerate() {
+            self.meat.ger(self.level(c).walk * dt, s, s, 1.0);
+        }
+        // an input's rounding in this step moves every later row: its
+        // position, and its heading with the lever arm from here. Rows that
+        // share one error (see rounding::held) add their moves up before they
+        // count, once per run of equal values.
+        if let Some(errors) = self.rounding.get(k).filter(|e| !e.is_empty()) {
+            let from = self.run.gt.as_ref().unwrap()[k];
+            let turn = after.turn(from, self.lever);
+            let width = self.meat.nrows();
+            self.shared.resize(errors.len(), DVector::zeros(width));
+            for ((e, starts), sum) in errors.iter().zip(self.shared.iter_mut()) {
+                if *starts {
+                    self.meat.ger(1.0, sum, sum, 1.0);
+                    sum.fill(0.0);
                 }
+                *sum += &after.x * e[0] + &after.y * e[1] + &turn * e[2];
             }
         }
-        // The start pose the track is anchored on: the mean of the rows it
-        // rests on first (Run::start_pose), each with the white noise. Its
-        // heading error turns the whole track about it (the lever arm of
-        // every later row), unless the fit refines the start heading: the
-        // offset then cancels it, and it is left only in the start heading's
-        // prior row, which carries it already.
-        let g = self.run.start_pose();
-        let rested = self.run.rest_steps().max(1) as f64;
-        meat.ger(level(0).white / rested, &sx, &sx, 1.0);
-        meat.ger(level(1).white / rested, &sy, &sy, 1.0);
-        if !turned {
-            let turn = sth - (sxy - &sx * g[1]) * self.lever + (syx - &sy * g[0]) * self.lever;
-            meat.ger(level(2).white / rested, &turn, &turn, 1.0);
+        self.before.add(&self.triple, measured_at(self.run, k));
+    }
+
+    /// M, with the last shared rounding errors and the start pose's noise.
+    /// The start pose the track is anchored on is the mean of the rows it
+    /// rests on first (Run::start_pose), each with the white noise. Its
+    /// heading error turns the whole track about it (the lever arm of every
+    /// later row), unless the fit refines the start heading (`turned`): the
+    /// offset then cancels it, and it is left only in the start heading's
+    /// prior row, which carries it already.
+    fn finish(mut self, turned: bool) -> DMatrix<f64> {
+        for sum in &self.shared {
+            self.meat.ger(1.0, sum, sum, 1.0);
         }
-        meat
+        if self.triples == 0 {
+            return self.meat;
+        }
+        let rested = self.run.rest_steps().max(1) as f64;
+        let t = &self.totals;
+        self.meat.ger(self.level(0).white / rested, &t.x, &t.x, 1.0);
+        self.meat.ger(self.level(1).white / rested, &t.y, &t.y, 1.0);
+        if !turned {
+            let turn = t.turn(self.run.start_pose(), self.lever);
+            self.meat
+                .ger(self.level(2).white / rested, &turn, &turn, 1.0);
+        }
+        self.meat
     }
 }
 
-/// One run's residual rows with their Jacobian (the free parameters, then the
-/// run's start heading when it has one): the pose rows, then the rest.
-struct RunRows {
-    pose: (Vec<f64>, Rows),
-    rest: (Vec<f64>, Rows),
-    /// the run's start-heading column among all runs', if any
-    start_col: Option<usize>,
-}
-
-impl RunRows {
-    fn pose_rows<'a>(&'a self, run: &'a Run, lever: f64) -> PoseRows<'a> {
-        PoseRows {
-            res: &self.pose.0,
-            jac: &self.pose.1,
-            run,
-            lever,
-            rounding: Vec::new(),
+impl Sink for Meat<'_> {
+    fn push(&mut self, _: f64, row: Option<impl Iterator<Item = f64>>) {
+        let v = DVector::from_iterator(self.meat.nrows(), row.expect("rows"));
+        if self.seen < self.triples {
+            let (k, c) = (self.seen / 3, self.seen % 3);
+            self.triple[c] = v;
+            if c == 2 {
+                self.step(k);
+            }
+        } else {
+            self.meat.ger(1.0, &v, &v, 1.0); // the start heading's prior
         }
+        self.seen += 1;
     }
 }
 
@@ -273,58 +389,52 @@ pub(super) fn sandwich(r: &Runner, runs: &[Run], o: &FitOptions, res: &mut FitRe
     }
     let cols = start_columns(runs, o, m);
     let dims = m + cols.iter().flatten().count();
-    let parts = run_rows(r, runs, o, res, &cols);
-    let lever = o.heading_sigma / o.pos_sigma;
+    let offsets = run_offsets(runs, &res.starts);
+    let passes = Passes::new(r, o, &res.free);
+    // the residuals alone first: the noise model is fitted to them
+    let values: Vec<(Vec<f64>, Vec<f64>)> = runs
+        .par_iter()
+        .zip(&cols)
+        .zip(&offsets)
+        .map(|((run, col), start)| passes.values(run, *start, col.is_some()))
+        .collect();
     let mut position = Vec::new();
     let mut heading = Vec::new();
-    for (run, part) in runs.iter().zip(&parts) {
+    for (run, (pose, _)) in runs.iter().zip(&values) {
         if run.gt.is_some() {
-            let rows = part.pose_rows(run, lever);
-            position.extend([rows.series(0), rows.series(1)]);
-            heading.push(rows.series(2));
+            position.extend([series(run, pose, 0), series(run, pose, 1)]);
+            heading.push(series(run, pose, 2));
         }
     }
     let noise = [local_level(&position), local_level(&heading)];
+    drop((position, heading));
     // the other residuals (gyro, landmarks) as white at their own variance
-    let (sq, count) = parts.iter().fold((0.0, 0usize), |(s, n), p| {
-        (
-            s + p.rest.0.iter().map(|v| v * v).sum::<f64>(),
-            n + p.rest.0.len(),
-        )
+    let (sq, count) = values.iter().fold((0.0, 0usize), |(s, n), (_, rest)| {
+        (s + rest.iter().map(|v| v * v).sum::<f64>(), n + rest.len())
     });
+    drop(values);
     let rest_var = if count > 0 { sq / count as f64 } else { 1.0 };
     let rounding_sd: Vec<f64> = rounding::variances(r, runs)
         .into_iter()
         .map(f64::sqrt)
         .collect();
+    let noise = RunNoise {
+        levels: noise,
+        rest_var,
+        rounding_sd,
+        lever: o.heading_sigma / o.pos_sigma,
+    };
     let (mut h, mut meat) = (DMatrix::zeros(dims, dims), DMatrix::zeros(dims, dims));
-    for (run, part) in runs.iter().zip(&parts) {
-        let width = part.pose.1.width();
-        let place = |c: usize| if c < m { c } else { part.start_col.unwrap() };
-        let mut local_h = DMatrix::zeros(width, width);
-        let mut local_m = DMatrix::zeros(width, width);
-        let pose = PoseRows {
-            rounding: rounding_effects(r, run, &rounding_sd, o),
-            ..part.pose_rows(run, lever)
-        };
-        let triples = 3 * pose.rows();
-        for (k, row) in part.pose.1.iter().enumerate() {
-            let v = DVector::from_column_slice(row);
-            local_h.ger(1.0, &v, &v, 1.0);
-            if k >= triples {
-                local_m.ger(1.0, &v, &v, 1.0); // the start heading's prior
-            }
-        }
-        if triples > 0 {
-            local_m += pose.meat(&noise, width, part.start_col.is_some());
-        }
-        for row in part.rest.1.iter() {
-            let v = DVector::from_column_slice(row);
-            local_h.ger(1.0, &v, &v, 1.0);
-            local_m.ger(rest_var, &v, &v, 1.0);
-        }
-        for a in 0..width {
-            for b in 0..width {
+    let locals: Vec<(DMatrix<f64>, DMatrix<f64>)> = runs
+        .par_iter()
+        .zip(&cols)
+        .zip(&offsets)
+        .map(|((run, col), start)| passes.information(run, *start, col.is_some(), &noise))
+        .collect();
+    for ((local_h, local_m), col) in locals.iter().zip(&cols) {
+        let place = |c: usize| if c < m { c } else { col.unwrap() };
+        for a in 0..local_h.nrows() {
+            for b in 0..local_h.nrows() {
                 h[(place(a), place(b))] += local_h[(a, b)];
                 meat[(place(a), place(b))] += local_m[(a, b)];
             }
@@ -350,44 +460,93 @@ pub(super) fn sandwich(r: &Runner, runs: &[Run], o: &FitOptions, res: &mut FitRe
     res.corr = correlation(&cov);
 }
 
-/// Each run's residual rows at the estimate, pose and the rest apart.
-fn run_rows(
-    r: &Runner,
-    runs: &[Run],
-    o: &FitOptions,
-    res: &FitResult,
-    cols: &[Option<usize>],
-) -> Vec<RunRows> {
-    let only = |pose: bool| FitOptions {
-        use_pose: pose,
-        use_gyro: !pose && o.use_gyro,
-        use_landmarks: !pose && o.use_landmarks,
-        ..o.clone()
-    };
-    let (pose_o, rest_o) = (only(true), only(false));
-    let offsets = run_offsets(runs, &res.starts);
-    runs.par_iter()
-        .zip(cols)
-        .zip(&offsets)
-        .map(|((run, col), start)| {
-            let rows = |opts: &FitOptions| {
-                run_residuals(
-                    r,
-                    &r.p,
-                    &res.free,
-                    run,
-                    opts,
-                    true,
-                    *start,
-                    col.is_some(),
-                    None,
-                )
-            };
-            RunRows {
-                pose: rows(&pose_o),
-                rest: rows(&rest_o),
-                start_col: *col,
-            }
-        })
-        .collect()
+/// The residual noise the sandwich's M is made of.
+struct RunNoise {
+    /// Position's and heading's local levels.
+    levels: [Level; 2],
+    /// The other residuals' variance (white).
+    rest_var: f64,
+    /// Per input, its rounding's standard deviation (0: not rounded).
+    rounding_sd: Vec<f64>,
+    /// heading sigma / position sigma
+    lever: f64,
+}
+
+/// The passes over each run's residuals at the estimate: pose and the rest
+/// apart, each made again by dead reckoning as it is read (a run's rows are
+/// never held: on a million-row log they were the fit's largest allocation).
+struct Passes<'a> {
+    r: &'a Runner,
+    free: &'a [usize],
+    pose: FitOptions,
+    rest: FitOptions,
+}
+
+impl<'a> Passes<'a> {
+    fn new(r: &'a Runner, o: &FitOptions, free: &'a [usize]) -> Passes<'a> {
+        let only = |pose: bool| FitOptions {
+            use_pose: pose,
+            use_gyro: !pose && o.use_gyro,
+            use_landmarks: !pose && o.use_landmarks,
+            ..o.clone()
+        };
+        Passes {
+            r,
+            free,
+            pose: only(true),
+            rest: only(false),
+        }
+    }
+
+    fn pass(&self, run: &Run, (start, nuis): ([f64; 3], bool), pose: bool, sink: &mut impl Sink) {
+        let (o, with_jac) = (if pose { &self.pose } else { &self.rest }, true);
+        let (r, free) = (self.r, self.free);
+        run_residuals_into(r, &r.p, free, run, o, with_jac, (start, None), nuis, sink);
+    }
+
+    /// A run's pose residuals and its other residuals.
+    fn values(&self, run: &Run, start: [f64; 3], nuis: bool) -> (Vec<f64>, Vec<f64>) {
+        let (r, free) = (self.r, self.free);
+        let values = |o: &FitOptions| {
+            let mut kept = Kept::new(0);
+            run_residuals_into(r, &r.p, free, run, o, false, (start, None), nuis, &mut kept);
+            kept.res
+        };
+        (values(&self.pose), values(&self.rest))
+    }
+
+    /// A run's H and M, in its own columns (the free parameters, then its
+    /// start heading when it has one).
+    fn information(
+        &self,
+        run: &Run,
+        start: [f64; 3],
+        nuis: bool,
+        noise: &RunNoise,
+    ) -> (DMatrix<f64>, DMatrix<f64>) {
+        let width = self.free.len() + usize::from(nuis);
+        let mut totals = Totals::new(run, width);
+        self.pass(run, (start, nuis), true, &mut totals);
+        let mut rest = Rest {
+            var: noise.rest_var,
+            h: DMatrix::zeros(width, width),
+            meat: DMatrix::zeros(width, width),
+        };
+        self.pass(run, (start, nuis), false, &mut rest);
+        let mut meat = Meat {
+            run,
+            noise: noise.levels,
+            lever: noise.lever,
+            rounding: rounding_effects(self.r, run, &noise.rounding_sd, &self.pose),
+            before: RowSums::zeros(width),
+            totals: totals.sums,
+            triples: totals.triples,
+            seen: 0,
+            triple: std::array::from_fn(|_| DVector::zeros(width)),
+            shared: Vec::new(),
+            meat: DMatrix::zeros(width, width),
+        };
+        self.pass(run, (start, nuis), true, &mut meat);
+        (totals.h + rest.h, meat.finish(nuis) + rest.meat)
+    }
 }

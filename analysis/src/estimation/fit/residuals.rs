@@ -352,6 +352,10 @@ pub(super) fn run_residuals_into(
     }
 }
 
+/// d pose / d pose: the pose residuals' Jacobian where the model has no pose
+/// observation of its own.
+const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
 /// One run's track and what its residuals read.
 struct RunCx<'a> {
     r: &'a Runner,
@@ -384,6 +388,8 @@ impl RunCx<'_> {
         if let Some(gt) = &run.gt {
             let tracker = r.ir.observation_kernels(Pose);
             let first = if o.endpoints_only { gt.len() - 1 } else { 1 };
+            let (mut pred, mut hx, mut hp) = ([0.0; 3], IDENTITY, vec![0.0; 3 * np]);
+            let scratch = &mut Vec::new();
             for k in first..gt.len() {
                 let (j, a) = if tau_i.is_some() {
                     shifted(k)
@@ -394,31 +400,26 @@ impl RunCx<'_> {
                 let vel: [f64; 3] =
                     [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
                 let u = &inputs.u[j.min(run.steps() - 1)];
-                let (pred, hx, hp) = match tracker {
+                // the pose observation and its Jacobians, into buffers made
+                // once (a million rows took three allocations each per pass)
+                match tracker {
                     Some(t) => {
                         let h = t.value;
-                        let pred = r.eval(h, &Runner::obs_args(h, &x, u, p, &[]));
-                        let (hx, hp) = if with_jac {
+                        r.eval_into(h, &Runner::obs_args(h, &x, u, p, &[]), &mut pred, scratch);
+                        if with_jac {
                             let fx = t.jac_x;
-                            (
-                                r.eval(fx, &Runner::obs_args(fx, &x, u, p, &[])),
-                                t.jac_p.map_or(vec![0.0; 3 * np], |fp| {
-                                    r.eval(fp, &Runner::obs_args(fp, &x, u, p, &[]))
-                                }),
-                            )
-                        } else {
-                            (vec![], vec![])
-                        };
-                        (pred, hx, hp)
+                            let args = Runner::obs_args(fx, &x, u, p, &[]);
+                            r.eval_into(fx, &args, &mut hx, scratch);
+                            if let Some(fp) = t.jac_p {
+                                let args = Runner::obs_args(fp, &x, u, p, &[]);
+                                r.eval_into(fp, &args, &mut hp, scratch);
+                            }
+                        }
                     }
-                    None => (
-                        x.to_vec(),
-                        vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-                        vec![0.0; 3 * np],
-                    ),
-                };
+                    None => pred = x,
+                }
                 let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
-                let (hx, hp, vel) = (&hx, &hp, &vel);
+                let (hx, hp, vel) = (&hx, &hp[..], &vel);
                 for i in 0..3 {
                     let d = pred[i] - gt[k][i];
                     let row = with_jac.then(|| {
