@@ -1,12 +1,9 @@
 //! `kinegen simulate` (its robot from kinegen_analysis::applications::hidden::with_hidden)
 //! and `kinegen add-effect`.
 use crate::analysis_cmd::bad;
-use kinegen_analysis::applications::hidden::{with_hidden, Hidden, Robots};
-use kinegen_analysis::applications::simulate::{simulate, to_csv, SimOptions, Trajectory};
+use kinegen_analysis::applications::simulate::{SimOptions, Trajectory};
+use kinegen_analysis::applications::simulate_request::{simulate_files, SimulateRequest};
 use kinegen_analysis::effects::{catalogue, find, Applicability};
-use kinegen_analysis::model_on_log::model::parse_sets;
-use kinegen_model::decl::InputKind;
-use kinegen_model::decl::ObservationRole::RangeBearing;
 use kinegen_model::spec::Model;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -55,89 +52,42 @@ pub struct SimArgs {
 
 pub fn run_simulate(a: SimArgs) -> ExitCode {
     let go = || -> Result<String, String> {
-        if a.laps == 0 {
-            return Err("--laps 0: at least one lap".into());
+        let trajectory: Trajectory = a.trajectory.parse().map_err(|e| format!("{e}"))?;
+        if a.landmarks.is_some() != a.observations.is_some() {
+            return Err("--landmarks MAP.csv and --observations OBS.csv go together (the map to observe, the file to write)".into());
         }
-        let traj: Trajectory = a.trajectory.parse().map_err(|e| format!("{e}"))?;
-        let sets = parse_sets(&a.set).map_err(|e| e.to_string())?;
-        let spec = Model::load(&a.spec).map_err(|e| e.to_string())?;
-        let hidden = a
-            .effect
-            .iter()
-            .map(|e| e.parse::<Hidden>())
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| e.to_string())?;
-        // one effect (and parameter) given twice is a mistake, not a choice
-        for (k, h) in hidden.iter().enumerate() {
-            if let Some(first) = hidden[..k]
-                .iter()
-                .find(|f| f.effect == h.effect && f.param == h.param)
-            {
-                return Err(format!(
-                    "--effect {}: already given (--effect {}); give it once",
-                    h.text, first.text
-                ));
-            }
-        }
-        let Robots {
-            spec: base,
-            robot: truth,
-        } = with_hidden(
-            &spec,
-            &hidden,
-            &sets,
-            &a.catalogue.effects,
-            crate::ir_source::analysis_deriver(),
-        )
-        .map_err(|e| e.to_string())?;
-        let landmarks = match (&a.landmarks, &a.observations) {
-            (Some(m), Some(_)) => {
-                if truth.ir.observation_kernels(RangeBearing).map(|o| o.value).is_none() {
-                    return Err(format!("{}: the model has no `landmark` observation to simulate range-bearing data with", a.spec.display()));
-                }
-                let map = kinegen_analysis::model_on_log::landmarks::read_map(m).map_err(|e| e.to_string())?;
-                map.ids.iter().map(|id| (id.clone(), map.position(id))).collect()
-            }
-            (None, None) => Vec::new(),
-            _ => return Err("--landmarks MAP.csv and --observations OBS.csv go together (the map to observe, the file to write)".into()),
+        let request = SimulateRequest {
+            spec: &a.spec,
+            effects: &a.effect,
+            sets: &a.set,
+            effect_dirs: &a.catalogue.effects,
+            landmarks: a.landmarks.as_deref(),
+            options: SimOptions {
+                trajectory,
+                seed: a.seed,
+                laps: a.laps,
+                landmark_hz: a.landmark_hz,
+                landmark_range: a.landmark_range,
+                cruise_speed: a.speed,
+                ..SimOptions::default()
+            },
         };
-        if traj == Trajectory::Beacons && landmarks.is_empty() {
-            return Err("--trajectory beacons tours the landmarks of --landmarks MAP.csv (with --observations OBS.csv)".into());
-        }
-        let o = SimOptions {
-            trajectory: traj,
-            seed: a.seed,
-            laps: a.laps,
-            landmarks,
-            landmark_hz: a.landmark_hz,
-            landmark_range: a.landmark_range,
-            cruise_speed: a.speed,
-            ..SimOptions::default()
-        };
-        let sim = simulate(&base, &truth, &o);
-        let counts: Vec<bool> = truth
-            .ir
-            .inputs
-            .iter()
-            .map(|i| i.kind == InputKind::Cumulative && i.unit.contains("count"))
-            .collect();
-        kinegen_model::files::write_atomic(&a.out, &to_csv(&sim.header, &sim.rows, &counts))
+        let sim = simulate_files(&request, crate::ir_source::analysis_deriver())
             .map_err(|e| e.to_string())?;
+        kinegen_model::files::write_atomic(&a.out, &sim.csv()).map_err(|e| e.to_string())?;
+        let rows = &sim.log.rows;
         let mut msg = format!(
             "wrote {} rows ({:.1} s) to {}",
-            sim.rows.len(),
-            sim.rows.last().map_or(0.0, |r| r[0]),
+            rows.len(),
+            rows.last().map_or(0.0, |r| r[0]),
             a.out.display()
         );
         if let Some(path) = &a.observations {
-            let mut text = String::from("t,id,range,bearing\n");
-            for (t, id, r, b) in &sim.observations {
-                text += &format!("{t:.9},{id},{r:.9},{b:.9}\n");
-            }
-            kinegen_model::files::write_atomic(path, &text).map_err(|e| e.to_string())?;
+            kinegen_model::files::write_atomic(path, &sim.observations_csv())
+                .map_err(|e| e.to_string())?;
             msg += &format!(
                 "\nwrote {} landmark observations to {}",
-                sim.observations.len(),
+                sim.log.observations.len(),
                 path.display()
             );
         }

@@ -128,6 +128,7 @@ pub mod applications {
     pub mod mission;
     pub mod navigate;
     pub mod simulate;
+    pub mod simulate_request;
     pub mod sweep;
 }
 

@@ -31,6 +31,7 @@ from ._kinegen import (  # noqa: F401
     Model,
     Parameter,
     RunLocalization,
+    Simulation,
     SpecError,
     UsageError,
     Verdict,
@@ -39,5 +40,5 @@ from ._kinegen import (  # noqa: F401
 
 __all__ = [
     "Model", "Parameter", "Input", "Log", "read_log", "Comparison", "Errors", "Fit", "Estimate",
-    "Diagnosis", "Verdict", "Localization", "RunLocalization", "Error", "SpecError", "LogError", "UsageError", "AnalysisError",
+    "Diagnosis", "Verdict", "Localization", "RunLocalization", "Simulation", "Error", "SpecError", "LogError", "UsageError", "AnalysisError",
 ]

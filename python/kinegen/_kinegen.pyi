@@ -84,6 +84,15 @@ class Localization:
     def to_json(self) -> str:
         """The document `kinegen localize --json` writes for the same inputs."""
 
+class Simulation:
+    columns: list[str]
+    data: np.ndarray
+    """The log's rows, (N, len(columns))."""
+    observations: list[tuple[float, str, float, float]]
+    def write(self, path: str, observations: Optional[str] = None) -> None:
+        """Write the log (and the sightings) as `kinegen simulate` writes them."""
+    def __len__(self) -> int: ...
+
 class Estimate:
     nominal: float
     estimate: float
@@ -142,6 +151,10 @@ class Model:
         """Calibrate the free parameters (Levenberg-Marquardt, `kinegen fit`'s defaults)."""
     def diagnose(self, logs: Logs, **sets: float) -> Diagnosis:
         """Which catalogue effect is missing, and beyond it a proposed correction."""
+    def simulate(self, trajectory: str = "square", seed: int = 1, laps: int = 1,
+                 effects: Optional[dict[str, float]] = None, landmarks: Optional[str] = None,
+                 **sets: float) -> Simulation:
+        """A simulated log of this robot with hidden `effects` and true parameter values `sets`."""
     def localize(self, logs: Logs, holdout: Optional[Logs] = None, gate: Optional[float] = None,
                  smooth: bool = False, spec_noise: bool = False, **noise: float) -> Localization:
         """The EKF over logs read with observations and landmarks (`kinegen localize`):

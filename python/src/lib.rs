@@ -12,6 +12,7 @@ mod errors;
 mod localization;
 mod model;
 mod results;
+mod simulation;
 
 use pyo3::prelude::*;
 
@@ -30,6 +31,7 @@ fn _kinegen(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<results::PyVerdict>()?;
     m.add_class::<localization::PyLocalization>()?;
     m.add_class::<localization::PyRunLocalization>()?;
+    m.add_class::<simulation::PySimulation>()?;
     m.add_function(wrap_pyfunction!(analysis::read_log, m)?)?;
     m.add("Error", py.get_type::<errors::Error>())?;
     m.add("SpecError", py.get_type::<errors::SpecError>())?;

@@ -189,3 +189,25 @@ def test_localize_gives_the_command_lines_document(tmp_path):
 def test_localize_refuses_a_log_without_sightings(model, log):
     with pytest.raises(kinegen.Error):
         model.localize(log)
+
+
+def test_simulate_writes_what_the_command_line_writes(model, tmp_path):
+    sim = model.simulate(trajectory="random", seed=2026, effects={"lateral_slip": 0.2}, b=0.205, r_l=0.0418)
+    mine, cli = tmp_path / "mine.csv", tmp_path / "cli.csv"
+    sim.write(str(mine))
+    made = subprocess.run([BIN, "simulate", "--spec", str(SPEC), "--effect", "lateral_slip=0.2", "--set", "b=0.205",
+                           "--set", "r_l=0.0418", "--trajectory", "random", "--seed", "2026", "--out", str(cli)],
+                          capture_output=True, text=True)
+    assert made.returncode == 0, made.stderr
+    assert mine.read_bytes() == cli.read_bytes()
+    assert sim.columns[0] == "t" and sim.data.shape == (len(sim), len(sim.columns))
+    # read back, the simulated robot's log runs through the analysis
+    log = kinegen.read_log(str(mine), model)
+    np.testing.assert_allclose(log.t, sim.data[:, 0] - sim.data[0, 0], atol=1e-8)  # 9 decimals in the file
+
+
+def test_simulate_refuses_an_unknown_effect_and_trajectory(model):
+    with pytest.raises(kinegen.UsageError):
+        model.simulate(effects={"no_such_effect": 0.1})
+    with pytest.raises(kinegen.UsageError):
+        model.simulate(trajectory="zigzag")
