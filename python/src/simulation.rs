@@ -92,6 +92,7 @@ impl PyModel {
     /// parameters' true values; `landmarks`, a map (id,x,y) to sight with the
     /// spec's `landmark` observation.
     #[pyo3(signature = (trajectory = "square", seed = 1, laps = 1, effects = None, landmarks = None, **sets))]
+    #[allow(clippy::too_many_arguments)] // Python's keyword arguments
     fn simulate(
         &self,
         py: Python<'_>,

@@ -87,11 +87,8 @@ pub fn simulate_files(
         .collect::<Result<Vec<_>, _>>()?;
     // one effect (and parameter) given twice is a mistake, not a choice
     for (k, h) in hidden.iter().enumerate() {
-        let earlier = hidden[..k].iter();
-        if let Some(first) = earlier
-            .filter(|f| f.effect == h.effect && f.param == h.param)
-            .next()
-        {
+        let mut earlier = hidden[..k].iter();
+        if let Some(first) = earlier.find(|f| f.effect == h.effect && f.param == h.param) {
             return Err(SimulateError::EffectTwice {
                 first: first.text.clone(),
                 again: h.text.clone(),
