@@ -202,6 +202,16 @@ impl PyModel {
         let files = match done {
             Ok(f) => f,
             Err(LocalizeRequestError::Files(e)) => return Err(errors::files(&e)),
+            // the keyword arguments' own names, not the command line's options
+            Err(LocalizeRequestError::UnknownNoise { name, known }) => {
+                let why = format!("{name}=: the spec has no [[noise]] `{name}` (it has: {known})");
+                return Err(usage(why));
+            }
+            Err(LocalizeRequestError::NegativeNoise { name, sigma }) => {
+                return Err(usage(format!(
+                    "{name}={sigma}: a standard deviation is 0 or more"
+                )));
+            }
             Err(e) => return Err(errors::analysis(e)),
         };
         let json =

@@ -124,6 +124,14 @@ impl PyModel {
             Ok(sim) => Ok(PySimulation { sim }),
             Err(SimulateError::Spec(e)) => Err(errors::spec(&e)),
             Err(SimulateError::Map(e)) => Err(errors::log(&e)),
+            // the keyword arguments' own names, not the command line's options
+            Err(SimulateError::NoLaps) => Err(usage("laps=0: at least one lap")),
+            Err(SimulateError::EffectTwice { first, again }) => Err(usage(format!(
+                "effects: {again} repeats {first}; give each effect once"
+            ))),
+            Err(SimulateError::BeaconsWithoutMap) => Err(usage(
+                "trajectory=\"beacons\" tours the landmarks of landmarks=\"map.csv\"",
+            )),
             Err(e) => Err(usage(e.to_string())),
         }
     }

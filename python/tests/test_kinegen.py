@@ -184,6 +184,8 @@ def test_localize_gives_the_command_lines_document(tmp_path):
     # the filter beats dead reckoning, and its estimate ends where the document says
     assert run.position_rmse < run.dead_reckoning_rmse
     np.testing.assert_array_equal(run.track[-1], cli["runs"][0]["final_pose"])
+    with pytest.raises(kinegen.UsageError, match="bogus="):
+        m.localize(log, bogus=0.1)
 
 
 def test_localize_refuses_a_log_without_sightings(model, log):
@@ -211,3 +213,5 @@ def test_simulate_refuses_an_unknown_effect_and_trajectory(model):
         model.simulate(effects={"no_such_effect": 0.1})
     with pytest.raises(kinegen.UsageError):
         model.simulate(trajectory="zigzag")
+    with pytest.raises(kinegen.UsageError, match="laps=0"):
+        model.simulate(laps=0)
