@@ -30,7 +30,8 @@ mod solver;
 use covariance::{correlation, psd_inverse};
 pub use options::{FitError, FitOptions, FitResult, Likelihood, ParamEstimate, BASIN_TOLERANCE};
 use residuals::{has_start_nuisance, priors, run_residuals, start_columns};
-pub use residuals::{normal_equations, residual_sums, residuals, sightings_from_truth, Sums};
+pub use residuals::{normal_equations, residual_sums, residuals, sightings_from_truth};
+pub use sink::Sums;
 
 use crate::model_on_log::deadreckon;
 use crate::model_on_log::model::Runner;

@@ -1,6 +1,6 @@
 //! The weighted residuals a calibration minimises, their Jacobian, and the
 //! Gauss-Newton normal equations summed run by run without forming it.
-use super::sink::{Folded, Kept, Sink, Summed};
+use super::sink::{huber_weight, Folded, Kept, Sink, Summed, Sums};
 use super::FitOptions;
 use crate::logs::column::Column;
 use crate::logs::log::wrap;
@@ -192,20 +192,6 @@ pub fn normal_equations(
     (sums, jtj, jtr)
 }
 
-/// The cost (half the sum of squares) of weighted residuals and their count.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Sums {
-    pub cost: f64,
-    pub n: usize,
-}
-
-impl Sums {
-    fn add(&mut self, other: Sums) {
-        self.cost += other.cost;
-        self.n += other.n;
-    }
-}
-
 /// The [`Sums`] of [`residuals`] without the residuals: each run's are summed
 /// and dropped as its thread finishes it.
 pub fn residual_sums(
@@ -245,18 +231,6 @@ pub fn residual_sums(
         sums.cost += 0.5 * value * value;
     }
     sums
-}
-
-/// Huber loss by iteratively reweighted least squares: a residual r beyond k is
-/// scaled by sqrt(k/|r|), so its squared contribution is k|r| (linear growth); its
-/// Jacobian row gets the same weight (the weight's own derivative is neglected, as
-/// IRLS does). Weights are recomputed at every evaluation.
-pub(super) fn huber_weight(r: f64, k: f64) -> f64 {
-    if r.abs() > k {
-        (k / r.abs()).sqrt()
-    } else {
-        1.0
-    }
 }
 
 /// [`huber_weight`] applied to residuals and their Jacobian rows.

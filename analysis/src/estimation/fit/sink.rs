@@ -3,9 +3,34 @@
 //! problem), or folded into the Gauss-Newton sums as they come, so that a
 //! million-row run's residuals and Jacobian rows (120 bytes a row for three
 //! parameters and a start heading) are never held at once.
-use super::residuals::{huber_weight, Sums};
 use crate::logs::rows::Rows;
 use nalgebra::{DMatrix, DVector};
+
+/// The cost (half the sum of squares) of weighted residuals and their count.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Sums {
+    pub cost: f64,
+    pub n: usize,
+}
+
+impl Sums {
+    pub(super) fn add(&mut self, other: Sums) {
+        self.cost += other.cost;
+        self.n += other.n;
+    }
+}
+
+/// Huber loss by iteratively reweighted least squares: a residual r beyond k is
+/// scaled by sqrt(k/|r|), so its squared contribution is k|r| (linear growth); its
+/// Jacobian row gets the same weight (the weight's own derivative is neglected, as
+/// IRLS does). Weights are recomputed at every evaluation.
+pub(super) fn huber_weight(r: f64, k: f64) -> f64 {
+    if r.abs() > k {
+        (k / r.abs()).sqrt()
+    } else {
+        1.0
+    }
+}
 
 /// Takes one weighted residual at a time, with its Jacobian row (the free
 /// parameters, then the run's start heading when it has one) when the caller
