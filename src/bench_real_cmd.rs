@@ -1,7 +1,8 @@
 //! `kinegen bench-real`: calibration judged on real runs it was not fitted
 //! on (issue 35), on sessions in the OptiOdom layout. The library reads the
 //! sessions and scores every method (`kinegen_analysis::applications::holdout_bench`);
-//! this renders the table (markdown, as the README shows it) and the JSON.
+//! this renders the answer and a short table (the whole markdown table, as
+//! the guide shows it, with `-v`) and the JSON.
 use crate::analysis_cmd::bad;
 use crate::output::Out;
 use clap::Args;
@@ -43,6 +44,9 @@ pub struct BenchRealArgs {
     /// No progress display.
     #[arg(long)]
     pub quiet: bool,
+    /// Also print every session's figures (the guide's markdown table).
+    #[arg(short, long)]
+    pub verbose: bool,
 }
 
 pub fn run(a: &BenchRealArgs) -> ExitCode {
@@ -92,18 +96,20 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
         });
     let results = holdout_bench::benchmark(&loaded.sessions, &options, &|s| spin.message(s));
     drop(spin);
-    for line in table(&results) {
+    let seconds = started.elapsed().as_secs_f64();
+    for line in answer(&results, seconds) {
         out.say(&line);
     }
-    out.say("");
-    for line in summary_lines(&results) {
-        out.say(&line);
+    if a.verbose {
+        out.say("");
+        for line in table(&results) {
+            out.say(&line);
+        }
+    } else {
+        for line in losses(&results) {
+            out.say(&line);
+        }
     }
-    out.say(&format!(
-        "({} sessions in {:.0} s)",
-        results.len(),
-        started.elapsed().as_secs_f64()
-    ));
     let doc = json!({
         "dir": a.dir.display().to_string(),
         "sessions": results,
@@ -200,14 +206,91 @@ fn wins(results: &[SessionResult], m: Measure) -> BTreeMap<&str, (usize, usize)>
     out
 }
 
-fn summary_lines(results: &[SessionResult]) -> Vec<String> {
-    let mut lines = vec!["kinegen at or below the best published method (sessions):".to_string()];
-    for (name, m) in MEASURES {
-        let parts: Vec<String> = wins(results, m)
-            .iter()
-            .map(|(robot, (w, of))| format!("{robot} {w} of {of}"))
-            .collect();
-        lines.push(format!("  {name:<22} {}", parts.join(", ")));
+/// The answer: how many sessions, and per robot type and measure, where
+/// kinegen is at or below the best published method.
+fn answer(results: &[SessionResult], seconds: f64) -> Vec<String> {
+    let mut robots: BTreeMap<&str, usize> = BTreeMap::new();
+    for s in results {
+        *robots.entry(s.robot.as_str()).or_default() += 1;
+    }
+    let kinds: Vec<String> = robots.iter().map(|(r, n)| format!("{r} {n}")).collect();
+    let (mut won, mut of) = (0, 0);
+    for (_, m) in MEASURES {
+        for (w, n) in wins(results, m).into_values() {
+            won += w;
+            of += n;
+        }
+    }
+    let mut lines = vec![
+        crate::output::cut(&format!(
+            "bench-real: {} sessions ({}) scored on other sessions' runs, in {seconds:.0} s",
+            results.len(),
+            kinds.join(", ")
+        )),
+        format!("answer: kinegen at or below the best published method in {won} of {of} session x measure pairs"),
+        String::new(),
+    ];
+    let mut t = crate::output::table(&[
+        "robot",
+        "held-out final",
+        "held-out RMSE",
+        "in-sample worst final",
+    ]);
+    for robot in robots.keys() {
+        let mut row = vec![robot.to_string()];
+        for (_, m) in MEASURES {
+            let (w, n) = wins(results, m).get(robot).copied().unwrap_or((0, 0));
+            row.push(format!("{w} of {n}"));
+        }
+        t.add_row(row);
+    }
+    lines.extend(crate::output::table_lines(&t));
+    lines
+}
+
+/// Rows shown by default where kinegen is above the best published method.
+const LOSSES_SHOWN: usize = 8;
+
+/// Where kinegen is above the best published method: session, measure and
+/// both figures, the first [`LOSSES_SHOWN`] of them (all with -v, in the
+/// table).
+fn losses(results: &[SessionResult]) -> Vec<String> {
+    let mut rows = Vec::new();
+    for s in results {
+        for (name, m) in MEASURES {
+            if s.kinegen_wins(m) == Some(false) {
+                let ours = s.score_of(KINEGEN).and_then(m);
+                let best = s.best_published(m);
+                rows.push((s.session.clone(), name, ours, best));
+            }
+        }
+    }
+    if rows.is_empty() {
+        return vec![];
+    }
+    let mut lines = vec![
+        String::new(),
+        "where kinegen is above the best published method (m):".to_string(),
+    ];
+    let mut t = crate::output::table(&["session", "measure", "kinegen", "best published"]);
+    if let Some(c) = t.column_mut(1) {
+        c.set_cell_alignment(comfy_table::CellAlignment::Left);
+    }
+    for (session, measure, ours, best) in rows.iter().take(LOSSES_SHOWN) {
+        let best = best.map_or("-".into(), |(name, v)| format!("{v:.3} ({})", short(name)));
+        t.add_row(vec![
+            session.clone(),
+            measure.to_string(),
+            ours.map_or("-".into(), |v| format!("{v:.3}")),
+            best,
+        ]);
+    }
+    lines.extend(crate::output::table_lines(&t));
+    if rows.len() > LOSSES_SHOWN {
+        lines.push(format!(
+            "  ({} more; every session's figures: -v)",
+            rows.len() - LOSSES_SHOWN
+        ));
     }
     lines
 }

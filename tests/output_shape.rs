@@ -25,7 +25,10 @@ fn shaped(dir: &Path, args: &[&str]) -> String {
         wide.is_empty(),
         "kinegen {args:?}: lines over {WIDTH}: {wide:#?}"
     );
-    if matches!(args[0], "compare" | "fit" | "diagnose" | "localize") {
+    if matches!(
+        args[0],
+        "compare" | "fit" | "diagnose" | "localize" | "bench-real"
+    ) {
         assert!(
             lines.iter().any(|l| l.starts_with("answer: ")),
             "kinegen {args:?}: no answer line:\n{text}"
@@ -154,6 +157,18 @@ fn a_real_robots_diagnosis_reads_at_a_glance() {
 #[test]
 fn a_real_robots_comparison_calibration_and_localisation_read_at_a_glance() {
     mrclam_reads_at_a_glance(&["compare", "fit", "localize"]);
+}
+
+#[test]
+fn a_real_benchmark_reads_at_a_glance() {
+    let Some(dev) = real_data("optiodom-dev") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = dev.to_str().unwrap();
+    let args = ["bench-real", dir, "--session", "diff-circular", "--quiet"];
+    let text = shaped(tmp.path(), &args);
+    assert!(text.contains("answer: kinegen at or below"), "{text}");
 }
 
 #[test]
