@@ -360,11 +360,23 @@ fn plan(a: &BatchArgs, command: &str) -> ExitCode {
         Err(e) => return bad(e),
     };
     if !left_out.is_empty() {
-        eprintln!(
-            "warning: {} CSV file(s) left out, not logs for this spec: {}",
+        // the first few by name: a folder of hundreds of other CSVs is one
+        // short warning, not a screenful
+        const NAMED: usize = 3;
+        let more = match left_out.len().saturating_sub(NAMED) {
+            0 => String::new(),
+            k => format!(" and {k} more"),
+        };
+        let w = format!(
+            "{} CSV file(s) left out, not logs for this spec: {}{more}",
             left_out.len(),
-            left_out.join("; ")
+            left_out[..left_out.len().min(NAMED)].join("; ")
         );
+        let text = format!("warning: {w}");
+        let wrapped = textwrap::wrap(&text, textwrap::Options::new(100).subsequent_indent("  "));
+        for line in wrapped {
+            eprintln!("{line}");
+        }
     }
     if logs.is_empty() {
         return bad(format!(
