@@ -16,7 +16,7 @@ use kinegen_analysis::model_on_log::derivation::AutodiffDeriver;
 use kinegen_analysis::model_on_log::files::Files;
 use kinegen_analysis::model_on_log::load::{load, Sources};
 use kinegen_analysis::model_on_log::track_rows::TrackRows;
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
@@ -68,7 +68,7 @@ pub(crate) fn sources(m: &PyModel, logs: &[PyRef<PyLog>], sets: Vec<String>) -> 
     })
 }
 
-fn sets_of(sets: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<String>> {
+pub(crate) fn sets_of(sets: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<String>> {
     let mut out = Vec::new();
     if let Some(d) = sets {
         for (k, v) in d.iter() {
@@ -80,6 +80,15 @@ fn sets_of(sets: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<String>> {
         }
     }
     Ok(out)
+}
+
+/// Fixed-width rows (poses, pairs) as an (N, W) array; (0, W) when empty.
+pub(crate) fn rows_array<'py, const W: usize>(
+    py: Python<'py>,
+    rows: &[[f64; W]],
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let flat: Vec<f64> = rows.iter().flatten().copied().collect();
+    flat.into_pyarray(py).reshape([rows.len(), W])
 }
 
 /// One log or a list of logs, as Python gives them.
@@ -163,11 +172,7 @@ impl PyLog {
     /// The ground-truth pose (N, 3), or None.
     #[getter]
     fn ground_truth<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.gt
-            .as_ref()
-            .map(|g| PyArray2::from_vec2(py, &g.iter().map(|p| p.to_vec()).collect::<Vec<_>>()))
-            .transpose()
-            .map_err(Into::into)
+        self.gt.as_ref().map(|g| rows_array(py, g)).transpose()
     }
 
     /// The log as a pandas DataFrame (t, the inputs, gt_x, gt_y, gt_theta), when pandas is installed.
@@ -226,20 +231,13 @@ impl PyComparison {
     /// The dead-reckoned track of the first log (N, 3: x, y, theta).
     #[getter]
     fn track<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows: Vec<Vec<f64>> = self.tracks[0].iter().map(|p| p.to_vec()).collect();
-        Ok(PyArray2::from_vec2(py, &rows)?)
+        rows_array(py, &self.tracks[0])
     }
 
     /// Every log's track, in order.
     #[getter]
     fn tracks<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
-        self.tracks
-            .iter()
-            .map(|t| {
-                PyArray2::from_vec2(py, &t.iter().map(|p| p.to_vec()).collect::<Vec<_>>())
-                    .map_err(Into::into)
-            })
-            .collect()
+        self.tracks.iter().map(|t| rows_array(py, t)).collect()
     }
 
     /// The document `kinegen compare --json` writes for the same inputs.

@@ -1,7 +1,7 @@
 //! `Model.localize`: the EKF over logs with landmark sightings, one call to
 //! the library entry `kinegen localize` calls (same options, same noise
 //! estimate), returned as NumPy series and the command line's document.
-use crate::analysis::{logs_of, no_progress, sources, PyLog};
+use crate::analysis::{logs_of, no_progress, rows_array, sources, PyLog};
 use crate::errors::{self, usage};
 use crate::model::PyModel;
 use kinegen_analysis::applications::localize::{EkfOptions, NoiseSource};
@@ -49,8 +49,7 @@ impl PyRunLocalization {
     /// The estimated pose (x, y, theta) at every row of the log, (N, 3).
     #[getter]
     fn track<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows: Vec<Vec<f64>> = self.track.iter().map(|r| r.to_vec()).collect();
-        PyArray2::from_vec2(py, &rows).map_err(Into::into)
+        rows_array(py, &self.track)
     }
 
     /// The estimate's covariance at every row, (N, 3, 3).
@@ -69,11 +68,7 @@ impl PyRunLocalization {
     /// Time (s) and NIS of each accepted sighting, (M, 2).
     #[getter]
     fn innovations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows: Vec<Vec<f64>> = self.nis.iter().map(|r| r.to_vec()).collect();
-        if rows.is_empty() {
-            return Ok(PyArray2::zeros(py, [0, 2], false));
-        }
-        PyArray2::from_vec2(py, &rows).map_err(Into::into)
+        rows_array(py, &self.nis)
     }
 
     fn __repr__(&self) -> String {

@@ -1,6 +1,7 @@
 //! `Model.simulate`: a simulated log of the spec's robot (with hidden
 //! effects and true parameter values of the caller's), one call to the
 //! library entry `kinegen simulate` calls.
+use crate::analysis::sets_of;
 use crate::errors::{self, usage};
 use crate::model::PyModel;
 use kinegen_analysis::applications::simulate::{SimOptions, Trajectory};
@@ -70,19 +71,6 @@ impl PySimulation {
     }
 }
 
-/// `NAME=VALUE` texts from a dict.
-fn pairs(d: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<String>> {
-    let mut out = Vec::new();
-    for (k, v) in d.iter().flat_map(|d| d.iter()) {
-        out.push(format!(
-            "{}={}",
-            k.extract::<String>()?,
-            v.extract::<f64>()?
-        ));
-    }
-    Ok(out)
-}
-
 #[pymethods]
 impl PyModel {
     /// Simulate the robot this spec describes driving `trajectory` (square,
@@ -106,7 +94,7 @@ impl PyModel {
         let trajectory: Trajectory = trajectory
             .parse()
             .map_err(|e| usage(format!("trajectory: {e}")))?;
-        let (effects, sets) = (pairs(effects)?, pairs(sets)?);
+        let (effects, sets) = (sets_of(effects)?, sets_of(sets)?);
         let request = SimulateRequest {
             spec: &self.path,
             effects: &effects,
