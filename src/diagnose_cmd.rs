@@ -1,15 +1,16 @@
 //! `kinegen diagnose`.
 use crate::analysis_cmd::{bad, quiet, Common};
-use crate::diagnose_text::{calibrate_command, DISCRETISATION_WARN};
-use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
 use kinegen_analysis::diagnosis::clock::ClockVerdict;
 use kinegen_analysis::diagnosis::diagnose::Diagnosis;
 use kinegen_analysis::diagnosis::diagnose_job::{Hooks, Outcome};
-use kinegen_analysis::diagnosis::request::{diagnose_files, Diagnosed, Request};
+use kinegen_analysis::diagnosis::document::{
+    diagnose_document, discretisation_ratio, DISCRETISATION_WARN,
+};
+use kinegen_analysis::diagnosis::next_steps::{Invocation, NextSteps};
+use kinegen_analysis::diagnosis::request::{diagnose_files, Request};
 use kinegen_analysis::model_on_log::files::Files;
 use kinegen_analysis::model_on_log::model::Runner;
-use serde_json::json;
 use std::collections::BTreeMap;
 use std::process::ExitCode;
 
@@ -49,23 +50,21 @@ pub fn run(c: Common) -> ExitCode {
         },
     );
     drop(bar);
-    let Diagnosed {
-        loaded: prep,
-        outcome,
-        preparing: t_prep,
-        diagnosing: t_diag,
-    } = match done {
+    let done = match done {
         Ok(d) => d,
         Err(e) => return bad(e.to_string()),
     };
+    let (prep, outcome) = (&done.loaded, &done.outcome);
     let (d, n_candidates) = (&outcome.diagnosis, outcome.tried);
     let r = &prep.runner;
+    let steps = NextSteps::of(d, &r.ir.name, &Invocation::of(&sources));
+    let doc = diagnose_document(&done, &steps);
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();
     // the answer: said by default, and the report's first box
     let kept = Out::keeping();
-    let short = crate::diagnose_text::say_summary(&kept, &c, &prep.runs, r, &outcome);
+    crate::diagnose_text::say_summary(&kept, &prep.runs, r, outcome, &steps);
     let answer = kept.lines();
-    let (apply_cmds, disc_ratio) = if c.verbose {
+    if c.verbose {
         out.say(&format!(
             "{}: diagnosis on {} run(s), {samples} samples, {n_candidates} candidate effect(s)",
             r.ir.name,
@@ -82,7 +81,7 @@ pub fn run(c: Common) -> ExitCode {
         out.say(ERROR_UNIT);
         say_timing(&out, d, r);
         say_candidates(&out, d);
-        let apply_cmds = say_chain(&out, &c, r, &outcome);
+        say_chain(&out, outcome, &steps);
         say_structure(&out, d);
         if let Some(p) = &d.proposed {
             out.say(&format!(
@@ -92,47 +91,21 @@ pub fn run(c: Common) -> ExitCode {
             out.say("  its effect file (--report DIR writes it to DIR/proposed/; add-effect --effects DIR applies it):");
             p.toml.lines().for_each(|l| out.say(&format!("  {l}")));
         }
-        let disc_ratio = say_discretisation(&out, d);
+        say_discretisation(&out, d);
         out.say(&format!(
             "time: {:.2} s preparing, {:.2} s diagnosing",
-            t_prep.as_secs_f64(),
-            t_diag.as_secs_f64()
+            done.preparing.as_secs_f64(),
+            done.diagnosing.as_secs_f64()
         ));
-        (apply_cmds, disc_ratio)
     } else {
         answer.iter().for_each(|l| out.say(l));
-        short
-    };
-    let per_candidate = if n_candidates == 0 {
-        0.0
-    } else {
-        t_diag.as_secs_f64() / n_candidates as f64
-    };
-    let disc = &d.discretisation;
-    let doc = json!({
-        "model": r.ir.name,
-        "metric": "weighted_residual_rms (pose residuals / 0.01 m and 0.01 rad, gyro / 0.01 rad/s)",
-        "baseline": {"rmse": d.baseline_rmse},
-        "calibrated": {"rmse": d.calibrated_rmse, "holdout_rmse": d.base_holdout_rmse,
-            "parameters": d.base_fit.free.iter().map(|&i| (r.names[i].clone(), json!(d.base_fit.p[i]))).collect::<serde_json::Map<_, _>>()},
-        "candidates": d.candidates,
-        "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured, "structure": d.structure.findings, "proposed": d.proposed.iter().collect::<Vec<_>>(), "apply": apply_cmds},
-        "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "measured": disc.measured, "noise_floor": d.noise_floor, "ratio": disc_ratio, "far_below_noise": disc.measured.then_some(disc_ratio <= DISCRETISATION_WARN)},
-        "warnings": prep.warnings,
-        "clock": d.clock,
-        "clock_unmeasured": d.clock_unmeasured,
-        "spec_clock": d.spec_clock,
-        "sensor_candidates": d.sensor_candidates,
-        "sensor_unmeasured": d.sensor_unmeasured.as_ref().map(|w| w.to_string()),
-        "skipped": d.skipped.iter().map(|(n, w)| json!({"effect": n, "reason": w})).collect::<Vec<_>>(),
-        "timing": {"prepare_s": t_prep.as_secs_f64(), "diagnose_s": t_diag.as_secs_f64(), "per_candidate_s": per_candidate},
-    });
+    }
     if let Some(dir) = &c.report {
         if let Err(e) = crate::report::diagnose_report(
             dir,
             &prep.runner,
             &prep.runs,
-            &outcome,
+            outcome,
             &answer,
             &prep.warnings,
             &doc,
@@ -244,102 +217,107 @@ fn sightings_said(f: &kinegen_analysis::diagnosis::sensor::SightingFit) -> Strin
 }
 
 /// The verdict: the effects found, in order, each with its estimates, the
-/// error it removes, the spec change and the command that applies it (the
-/// commands are returned).
-fn say_chain(out: &Out, c: &Common, r: &Runner, outcome: &Outcome) -> Vec<String> {
+/// error it removes, the spec change and the command that applies it.
+fn say_chain(out: &Out, outcome: &Outcome, steps: &NextSteps) {
     let d = &outcome.diagnosis;
-    let mut apply_cmds = Vec::new();
     if d.chain.is_empty() {
         out.say("verdict: no catalogue effect is significant");
-    } else {
-        let names: Vec<&str> = d.chain.iter().map(|s| s.effect.as_str()).collect();
-        out.say(&format!(
-            "verdict: missing from the model, in the order found: {}",
-            names.join(", then ")
-        ));
-        let mut before = d.calibrated_rmse;
-        for (k, step) in d.chain.iter().enumerate() {
-            out.say(&format!("  {}. `{}`: {}", k + 1, step.effect, step.doc));
-            if !step.equivalent.is_empty() {
-                let others: Vec<String> =
-                    step.equivalent.iter().map(|e| format!("`{e}`")).collect();
-                let per = match step.folds {
-                    Some(_) => ", each segment counted once",
-                    None => "",
-                };
-                let how = format!(
-                    "it fits them as well (likelihood ratio under {}, 5%{per})",
-                    kinegen_analysis::diagnosis::ranking::EQUIVALENT
-                );
-                // with sightings the motion capture's clock is measured
-                // already: what is left are rivals on the robot's side
-                let decides = match d.clock {
-                    Some(_) => "the landmark sightings time the ground truth, not the robot: a log of the speeds it executed or its documentation decides",
-                    None => "a log with another channel (a gyro, landmarks) or the robot's documentation decides",
-                };
-                out.say(&format!(
-                    "     these logs cannot tell it apart from {}: {how}; {decides}",
-                    others.join(" or "),
-                ));
-            }
-            if k == 0 {
-                say_clock_verdicts(out, d, &step.effect);
-            }
-            let vals: BTreeMap<String, f64> = step
-                .parameters
-                .iter()
-                .map(|(k, v)| (k.clone(), v.estimate))
-                .collect();
-            let pv: Vec<String> = vals.iter().map(|(k, v)| format!("{k} = {v:.5}")).collect();
-            if let Some(f) = &step.sightings {
-                out.say(&format!("     {}; {}", pv.join(", "), sightings_said(f)));
-            } else {
-                out.say(&format!(
-                    "     {}; error {before:.4} -> {:.4} ({:.1}x smaller)",
-                    pv.join(", "),
-                    step.rmse_after,
-                    before / step.rmse_after.max(1e-300)
-                ));
-            }
-            if let Some(f) = &step.folds {
-                // what proved it: the whole log's error barely moves when
-                // random drift dominates it
-                out.say(&format!(
-                    "     proved fold by fold: calibrated without each of {} stretches of the log in turn, it predicts that stretch's motion over {} s better (mean square error {:.0}% lower over all; paired t = {:.1}, needs {:.1})",
-                    f.folds,
-                    kinegen_analysis::diagnosis::folds::WINDOW_S,
-                    100.0 * f.gain,
-                    f.t,
-                    f.critical
-                ));
-            }
-            before = step.rmse_after;
-            if let Some(change) = &outcome.spec_changes[k] {
-                out.say(&format!(
-                    "     spec change:\n{}",
-                    change
-                        .lines()
-                        .map(|l| format!("       {l}"))
-                        .collect::<Vec<_>>()
-                        .join("\n")
-                ));
-            }
-            let from = if k == 0 {
-                c.spec.display().to_string()
-            } else {
-                format!("{}_{}.toml", r.ir.name, d.chain[k - 1].effect)
-            };
-            apply_cmds.push(add_effect_command(&from, &step.effect, &vals, &r.ir.name));
-        }
-        out.say(&format!("apply with:\n  {}", apply_cmds.join("\n  ")));
-        let last = d.chain.last().map_or(String::new(), |s| s.effect.clone());
-        out.say(&format!(
-            "then calibrate it, its values kept as the spec's nominals (what localize, compare and simulate run):\n  {}",
-            calibrate_command(c, &format!("{}_{last}.toml", r.ir.name), &r.ir.name)
-        ));
-        say_alternatives(out, d, &c.spec.display().to_string(), &r.ir.name);
+        return;
     }
-    apply_cmds
+    let names: Vec<&str> = d.chain.iter().map(|s| s.effect.as_str()).collect();
+    out.say(&format!(
+        "verdict: missing from the model, in the order found: {}",
+        names.join(", then ")
+    ));
+    let mut before = d.calibrated_rmse;
+    for (k, step) in d.chain.iter().enumerate() {
+        out.say(&format!("  {}. `{}`: {}", k + 1, step.effect, step.doc));
+        if !step.equivalent.is_empty() {
+            say_equivalent(out, d, step);
+        }
+        if k == 0 {
+            say_clock_verdicts(out, d, &step.effect);
+        }
+        let vals: BTreeMap<String, f64> = step
+            .parameters
+            .iter()
+            .map(|(k, v)| (k.clone(), v.estimate))
+            .collect();
+        let pv: Vec<String> = vals.iter().map(|(k, v)| format!("{k} = {v:.5}")).collect();
+        if let Some(f) = &step.sightings {
+            out.say(&format!("     {}; {}", pv.join(", "), sightings_said(f)));
+        } else {
+            out.say(&format!(
+                "     {}; error {before:.4} -> {:.4} ({:.1}x smaller)",
+                pv.join(", "),
+                step.rmse_after,
+                before / step.rmse_after.max(1e-300)
+            ));
+        }
+        if let Some(f) = &step.folds {
+            // what proved it: the whole log's error barely moves when
+            // random drift dominates it
+            out.say(&format!(
+                "     proved fold by fold: calibrated without each of {} stretches of the log in turn, it predicts that stretch's motion over {} s better (mean square error {:.0}% lower over all; paired t = {:.1}, needs {:.1})",
+                f.folds,
+                kinegen_analysis::diagnosis::folds::WINDOW_S,
+                100.0 * f.gain,
+                f.t,
+                f.critical
+            ));
+        }
+        before = step.rmse_after;
+        if let Some(change) = &outcome.spec_changes[k] {
+            out.say(&format!(
+                "     spec change:\n{}",
+                change
+                    .lines()
+                    .map(|l| format!("       {l}"))
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            ));
+        }
+    }
+    out.say(&format!("apply with:\n  {}", steps.apply.join("\n  ")));
+    if let Some(fit) = &steps.calibrate {
+        out.say(&format!(
+            "then calibrate it, its values kept as the spec's nominals (what localize, compare and simulate run):\n  {fit}"
+        ));
+    }
+    if !steps.alternatives.is_empty() {
+        out.say(&format!(
+            "or, in place of `{}` (these logs cannot tell which the robot has):\n  {}",
+            d.chain[0].effect,
+            steps.alternatives.join("\n  ")
+        ));
+    }
+}
+
+/// The rivals these logs fit as well as `step`, and what would decide.
+fn say_equivalent(
+    out: &Out,
+    d: &Diagnosis,
+    step: &kinegen_analysis::diagnosis::diagnose::ChainStep,
+) {
+    let others: Vec<String> = step.equivalent.iter().map(|e| format!("`{e}`")).collect();
+    let per = match step.folds {
+        Some(_) => ", each segment counted once",
+        None => "",
+    };
+    let how = format!(
+        "it fits them as well (likelihood ratio under {}, 5%{per})",
+        kinegen_analysis::diagnosis::ranking::EQUIVALENT
+    );
+    // with sightings the motion capture's clock is measured already: what
+    // is left are rivals on the robot's side
+    let decides = match d.clock {
+        Some(_) => "the landmark sightings time the ground truth, not the robot: a log of the speeds it executed or its documentation decides",
+        None => "a log with another channel (a gyro, landmarks) or the robot's documentation decides",
+    };
+    out.say(&format!(
+        "     these logs cannot tell it apart from {}: {how}; {decides}",
+        others.join(" or "),
+    ));
 }
 
 /// What the landmark sightings said of the first round's candidates that
@@ -365,32 +343,6 @@ fn say_clock_verdicts(out: &Out, d: &Diagnosis, winner: &str) {
 /// Seconds to the millisecond with their sign, a rounded -0 as +0.000.
 fn signed_ms(s: f64) -> String {
     format!("{:+.3}", (s * 1e3).round() / 1e3 + 0.0)
-}
-
-/// The commands that add, in place of the chain's first effect, each one
-/// these logs cannot tell apart from it, at its own calibrated values: which
-/// one the robot has, its documentation or another log decides, and a user
-/// should not have to write the command out (on MRCLAM without its
-/// sightings, `time_offset` wins by a hair, while `input_delay` is what
-/// `localize` can use).
-pub fn say_alternatives(out: &Out, d: &Diagnosis, spec: &str, name: &str) {
-    let Some(first) = d.chain.first() else { return };
-    let alternatives: Vec<String> = first
-        .equivalent
-        .iter()
-        .filter_map(|e| d.candidates.iter().find(|c| &c.effect == e))
-        .map(|c| {
-            let values = c.parameters.iter().map(|(k, v)| (k.clone(), v.estimate));
-            add_effect_command(spec, &c.effect, &values.collect(), name)
-        })
-        .collect();
-    if !alternatives.is_empty() {
-        out.say(&format!(
-            "or, in place of `{}` (these logs cannot tell which the robot has):\n  {}",
-            first.effect,
-            alternatives.join("\n  ")
-        ));
-    }
 }
 
 /// What structure the residuals keep after the last effect.
@@ -420,10 +372,10 @@ fn say_structure(out: &Out, d: &Diagnosis) {
 }
 
 /// How far the model's own step errs at the log's rate, against the noise
-/// floor; returns that ratio.
-fn say_discretisation(out: &Out, d: &Diagnosis) -> f64 {
+/// floor.
+fn say_discretisation(out: &Out, d: &Diagnosis) {
     let disc = &d.discretisation;
-    let disc_ratio = disc.error / d.noise_floor.max(1e-300);
+    let disc_ratio = discretisation_ratio(d);
     if !disc.measured {
         out.say(&format!(
             "the model's own step at the log's {:.0} Hz is not measured (it takes a ground truth on every run, and runs of 10 rows or more)",
@@ -440,5 +392,4 @@ fn say_discretisation(out: &Out, d: &Diagnosis) -> f64 {
             disc.rate_hz, disc.error, d.noise_floor
         ));
     }
-    disc_ratio
 }

@@ -3,32 +3,24 @@
 //! effects tested, within 25 lines of 100 columns. `-v` prints the
 //! evidence behind each line (diagnose_cmd.rs); the JSON and the report
 //! keep every figure.
-use crate::analysis_cmd::Common;
-use crate::effects_cmd::add_effect_command;
 use crate::output::{command_lines, cut, table as new_table, table_lines, with_std, Out};
 use kinegen_analysis::diagnosis::diagnose::Diagnosis;
 use kinegen_analysis::diagnosis::diagnose_job::Outcome;
+use kinegen_analysis::diagnosis::document::{discretisation_ratio, DISCRETISATION_WARN};
 use kinegen_analysis::diagnosis::estimate::Estimates;
+use kinegen_analysis::diagnosis::next_steps::NextSteps;
 use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_analysis::model_on_log::run::Run;
-use std::collections::BTreeMap;
 
-/// Say the summary; returns the add-effect commands (for the JSON) and the
-/// model's own step error against the noise floor.
-pub fn say_summary(
-    out: &Out,
-    c: &Common,
-    runs: &[Run],
-    r: &Runner,
-    outcome: &Outcome,
-) -> (Vec<String>, f64) {
+/// Say the summary, with the commands `steps` holds.
+pub fn say_summary(out: &Out, runs: &[Run], r: &Runner, outcome: &Outcome, steps: &NextSteps) {
     let d = &outcome.diagnosis;
     let mut head = vec![header(r, runs, outcome.tried)];
-    let apply = say_answer(&mut head, c, r, d);
+    say_answer(&mut head, d, steps);
     let mut tail = Vec::new();
     say_leftovers(&mut tail, d);
     let disc = &d.discretisation;
-    let ratio = disc.error / d.noise_floor.max(1e-300);
+    let ratio = discretisation_ratio(d);
     if disc.measured && ratio > DISCRETISATION_WARN {
         tail.push(format!(
             "warning: the model's own step at {:.0} Hz errs {ratio:.1}x the noise floor (-v: why)",
@@ -46,7 +38,6 @@ pub fn say_summary(
     for l in head.iter().chain(&table(d, rows)).chain(&tail) {
         out.say(l);
     }
-    (apply, ratio)
 }
 
 /// The most lines diagnose says by default.
@@ -104,18 +95,16 @@ fn values_cell(p: &Estimates) -> String {
 /// Room left for the parameters beside the other columns within 100.
 const PARAMS_WIDTH: usize = 46;
 
-/// The verdict and the commands that act on it; returns the add-effect
-/// commands.
-fn say_answer(out: &mut Vec<String>, c: &Common, r: &Runner, d: &Diagnosis) -> Vec<String> {
+/// The verdict and the commands that act on it.
+fn say_answer(out: &mut Vec<String>, d: &Diagnosis, steps: &NextSteps) {
     if d.chain.is_empty() {
         out.push(format!(
             "answer: no catalogue effect is significant; calibrated error {:.3} (nominal {:.3})",
             d.calibrated_rmse, d.baseline_rmse
         ));
         say_proposal(out, d);
-        return Vec::new();
+        return;
     }
-    let mut apply = Vec::new();
     let mut before = d.calibrated_rmse;
     for (k, step) in d.chain.iter().enumerate() {
         let lead = if k == 0 { "answer: missing" } else { "  then" };
@@ -160,35 +149,23 @@ fn say_answer(out: &mut Vec<String>, c: &Common, r: &Runner, d: &Diagnosis) -> V
             ));
         }
         before = step.rmse_after;
-        let from = if k == 0 {
-            c.spec.display().to_string()
-        } else {
-            format!("{}_{}.toml", r.ir.name, d.chain[k - 1].effect)
-        };
-        let vals: BTreeMap<String, f64> = step
-            .parameters
-            .iter()
-            .map(|(k, v)| (k.clone(), v.estimate))
-            .collect();
-        apply.push(add_effect_command(&from, &step.effect, &vals, &r.ir.name));
     }
     out.push(
-        if apply.len() == 1 {
+        if steps.apply.len() == 1 {
             "add it:"
         } else {
             "add them:"
         }
         .into(),
     );
-    for cmd in &apply {
+    for cmd in &steps.apply {
         out.extend(command_lines(cmd, 2));
     }
     say_proposal(out, d);
-    let last = d.chain.last().map_or(String::new(), |s| s.effect.clone());
-    out.push("then calibrate:".into());
-    let fit = calibrate_command(c, &format!("{}_{last}.toml", r.ir.name), &r.ir.name);
-    out.extend(command_lines(&fit, 2));
-    apply
+    if let Some(fit) = &steps.calibrate {
+        out.push("then calibrate:".into());
+        out.extend(command_lines(fit, 2));
+    }
 }
 
 /// A correction beyond the catalogue, when diagnose proposes one: its terms,
@@ -281,27 +258,4 @@ fn say_leftovers(out: &mut Vec<String>, d: &Diagnosis) {
         "residuals left: noise".to_string()
     };
     out.push(cut(&left));
-}
-
-/// The share of the noise floor above which the model's own discretisation
-/// error is no longer "far below the noise" (issue 12 item 3).
-pub const DISCRETISATION_WARN: f64 = 0.3;
-
-/// The `fit` that calibrates `spec` on the diagnosed logs and writes it back
-/// with the calibrated values (`--export spec`).
-pub fn calibrate_command(c: &Common, spec: &str, model: &str) -> String {
-    let mut a = vec![format!("kinegen fit --spec {spec}")];
-    a.extend(c.data.iter().map(|d| format!("--data {}", d.display())));
-    a.extend(
-        c.observations
-            .iter()
-            .map(|o| format!("--observations {}", o.display())),
-    );
-    a.extend(
-        c.landmarks
-            .iter()
-            .map(|l| format!("--landmarks {}", l.display())),
-    );
-    a.push(format!("--export spec {model}_fitted.toml"));
-    a.join(" ")
 }

@@ -220,21 +220,3 @@ fn effect_bounds(
         p.max.unwrap_or(f64::INFINITY),
     ))
 }
-
-/// The `kinegen add-effect` command that adds `effect` at `values` to the
-/// spec `spec`, written as `{model}_{effect}.toml`.
-pub(crate) fn add_effect_command(
-    spec: &str,
-    effect: &str,
-    values: &BTreeMap<String, f64>,
-    model: &str,
-) -> String {
-    let args: Vec<String> = values
-        .iter()
-        .map(|(k, v)| format!("--value {k}={v:.6}"))
-        .collect();
-    format!(
-        "kinegen add-effect --spec {spec} --effect {effect} {} --out {model}_{effect}.toml",
-        args.join(" ")
-    )
-}

@@ -9,6 +9,7 @@ use crate::output::Out;
 use crate::progress::Progress;
 use clap::Args;
 use kinegen_analysis::estimation::fit::{FitOptions, FitResult};
+use kinegen_analysis::estimation::fit_document::calibration_document;
 use kinegen_analysis::estimation::fit_job::{
     self, Calibrated, Growth, MethodRow, MethodsJob, MethodsOutcome,
 };
@@ -24,34 +25,6 @@ use serde_json::{json, Value};
 use std::cell::{Cell, RefCell};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-
-/// Every run's own figures, named by the path the user gave (CONTRACT section 4
-/// `runs`): after calibration at the top, before it under `before`, and for
-/// fitted runs the start pose the fit used (measured start plus its refinement).
-/// Each run's JSON: its errors before and after, whether it was held out,
-/// and the start pose its dead reckoning used (a fitted run's with its
-/// refined start heading, a held-out run's as measured).
-fn per_run(
-    runs: &[Run],
-    before: &[Errors],
-    after: &[Errors],
-    starts: &[[f64; 3]],
-    holdout: bool,
-) -> Vec<Value> {
-    runs.iter()
-        .enumerate()
-        .map(|(i, run)| {
-            let (b, a) = (&before[i], &after[i]);
-            json!({
-                "path": run.path, "holdout": holdout,
-                "rmse": a.rmse, "final_error": a.final_position_error_m,
-                "final_heading_error": a.final_heading_error_rad, "errors": a,
-                "before": {"rmse": b.rmse, "final_error": b.final_position_error_m},
-                "start_pose": starts.get(i),
-            })
-        })
-        .collect()
-}
 
 /// The options of `fit` besides the common ones.
 #[derive(Args, Debug)]
@@ -184,7 +157,7 @@ pub fn run_fit(c: Common, a: &FitArgs) -> ExitCode {
         |prep, fitted| {
             busy.take();
             match fitted {
-                Fitted::Calibrated(cal) => render_lm(&c, &out, prep, a, &cal, export.as_ref()),
+                Fitted::Calibrated(cal) => render_lm(&c, &out, prep, &fo, &cal, export.as_ref()),
                 Fitted::Methods(m) => render_methods(&c, &out, prep, &truth, &m),
             }
         },
@@ -359,7 +332,7 @@ fn render_lm(
     c: &Common,
     out: &Out,
     prep: &Loaded,
-    a: &FitArgs,
+    fo: &FitOptions,
     cal: &Calibrated,
     export: Option<&Export>,
 ) -> ExitCode {
@@ -376,27 +349,13 @@ fn render_lm(
     let detail = &out.detail(c.verbose);
     say_calibration(detail, prep, res, &cal.before.errors, &cal.after.errors);
     say_judgement(detail, cal);
-    let (before, after) = (&cal.before.errors, &cal.after.errors);
-    let mut doc = kinegen_analysis::estimation::fit_job::fit_document(
-        r,
-        res,
-        before,
-        after,
-        metric_name(&prep.runs),
-    );
-    doc["unusable"] = json!(cal.unusable);
-    doc["loss"] = json!(a.loss);
-    doc["residual_kinds"] = json!(["pose", "gyro", "landmarks"]
-        .iter()
-        .filter(|k| uses_residuals(a, k))
-        .collect::<Vec<_>>());
+    let doc = calibration_document(prep, cal, fo);
     if let (Some(lb), Some(la)) = (&cal.before.landmarks, &cal.after.landmarks) {
         detail.say(&format!(
             "  before: {}\n  after:  {}",
             fmt_landmarks(lb),
             fmt_landmarks(la)
         ));
-        doc["landmarks"] = json!({"before": lb, "after": la});
     }
     if let (Some(lb), Some(la)) = (
         &cal.before.landmarks_from_truth,
@@ -407,18 +366,12 @@ fn render_lm(
             fmt_landmarks_from_truth(lb),
             fmt_landmarks_from_truth(la)
         ));
-        doc["landmarks_from_truth"] = json!({"before": lb, "after": la});
     }
-    let runs = fit_runs(detail, prep, cal, &mut doc);
-    doc["runs"] = json!(runs);
+    say_runs(detail, prep, cal);
     if let Some(w) = &cal.leave_one_out_warning {
         detail.say(&format!("warning: {w}"));
     }
     let warnings = cal.warnings();
-    doc["warnings"] = json!(warnings);
-    if !cal.leave_one_out.is_empty() {
-        doc["leave_one_out"] = json!(cal.leave_one_out);
-    }
     if let Some(dir) = &c.report {
         if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, cal, &answer, &warnings, &doc)
         {
@@ -494,16 +447,9 @@ fn say_judgement(out: &Out, cal: &Calibrated) {
 }
 
 /// Each run's errors before and after (the fitted ones, then the held-out
-/// ones, which also go in `doc["holdout"]` with a warning where the
-/// calibration does worse on them), said as a table when there are several.
-fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<Value> {
-    let mut runs = per_run(
-        &prep.runs,
-        &cal.before.per_run,
-        &cal.after.per_run,
-        &cal.starts,
-        false,
-    );
+/// ones, with a warning where the calibration does worse on them), said as
+/// a table when there are several.
+fn say_runs(out: &Out, prep: &Loaded, cal: &Calibrated) {
     if let Some(h) = &cal.holdout {
         let (hb, ha) = (&h.before, &h.after);
         out.say(&format!(
@@ -511,19 +457,11 @@ fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<
             fmt_errors(&hb.errors),
             fmt_errors(&ha.errors)
         ));
-        runs.extend(per_run(
-            &prep.holdout,
-            &hb.per_run,
-            &ha.per_run,
-            &h.starts,
-            true,
-        ));
         if let Some(w) = &h.worse {
             out.say(&format!("warning: {w}"));
         }
-        doc["holdout"] = json!({"before": {"rmse": hb.errors.rmse, "errors": hb.errors}, "after": {"rmse": ha.errors.rmse, "errors": ha.errors}});
     }
-    if runs.len() > 1 {
+    if prep.runs.len() + prep.holdout.len() > 1 {
         // the first column as wide as the longest path, so the figures line up
         let width = (prep.runs.iter())
             .chain(&prep.holdout)
@@ -559,7 +497,6 @@ fn fit_runs(out: &Out, prep: &Loaded, cal: &Calibrated, doc: &mut Value) -> Vec<
             );
         }
     }
-    runs
 }
 
 /// `--export FORMAT PATH`: the calibration written for the robot, unless

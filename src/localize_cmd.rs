@@ -2,7 +2,6 @@
 //! (one call to kinegen_analysis::applications::localize_request::localize_files), rendered
 //! with its consistency checks as text, JSON, a report and a track.
 use crate::analysis_cmd::{bad, Common};
-use crate::effects_cmd::add_effect_command;
 use crate::output::Out;
 use clap::Args;
 use kinegen_analysis::applications::localize::reading::RangeReading;
@@ -14,6 +13,7 @@ use kinegen_analysis::applications::localize_document::localize_document;
 use kinegen_analysis::applications::localize_request::{
     localize_files, LocalizeRequest, LocalizedFiles,
 };
+use kinegen_analysis::diagnosis::next_steps::add_effect_command;
 use kinegen_analysis::model_on_log::files::Files;
 use kinegen_analysis::model_on_log::load::Loaded;
 use std::path::PathBuf;

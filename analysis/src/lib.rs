@@ -89,6 +89,7 @@ pub mod model_on_log {
 pub mod estimation {
     pub mod discretisation;
     pub mod fit;
+    pub mod fit_document;
     pub mod fit_job;
     pub mod fit_request;
     pub mod lag;
@@ -103,8 +104,10 @@ pub mod diagnosis {
     pub mod clock;
     pub mod diagnose;
     pub mod diagnose_job;
+    pub mod document;
     pub mod estimate;
     pub mod folds;
+    pub mod next_steps;
     pub mod propose;
     pub mod ranking;
     pub mod request;

@@ -112,6 +112,7 @@ class Verdict:
     effects: list[dict[str, Any]]
     proposed: list[dict[str, Any]]
     unexplained_structure: bool
+    apply: list[str]
 
 class Diagnosis:
     verdict: Verdict

@@ -314,7 +314,7 @@ impl PyModel {
             &no_progress,
             &hooks,
             |prep, fitted| match fitted {
-                Fitted::Calibrated(cal) => Ok(crate::results::PyFit::new(prep, &cal)),
+                Fitted::Calibrated(cal) => Ok(crate::results::PyFit::new(prep, &cal, &fo)),
                 Fitted::Methods(_) => Err(usage("a method comparison is not a calibration")),
             },
         );
@@ -345,7 +345,7 @@ impl PyModel {
         };
         let done = diagnose_files(&req, &AutodiffDeriver, &no_progress, &Hooks::none());
         match done {
-            Ok(d) => crate::results::PyDiagnosis::new(py, &d),
+            Ok(d) => crate::results::PyDiagnosis::new(py, &d, &src),
             Err(RequestError::Files(e)) => Err(errors::files(&e)),
             Err(e) => Err(errors::analysis(e)),
         }

@@ -1,13 +1,15 @@
 //! What `Model.fit` and `Model.diagnose` return: typed figures, NumPy
 //! arrays, and `to_json()`.
+use kinegen_analysis::diagnosis::document::diagnose_document;
+use kinegen_analysis::diagnosis::next_steps::{Invocation, NextSteps};
 use kinegen_analysis::diagnosis::request::Diagnosed;
+use kinegen_analysis::estimation::fit::FitOptions;
+use kinegen_analysis::estimation::fit_document::calibration_document;
 use kinegen_analysis::estimation::fit_job::Calibrated;
-use kinegen_analysis::model_on_log::evaluation::metric_name;
-use kinegen_analysis::model_on_log::load::Loaded;
+use kinegen_analysis::model_on_log::load::{Loaded, Sources};
 use kinegen_analysis::model_on_log::metrics::Errors;
 use numpy::PyArray2;
 use pyo3::prelude::*;
-use serde_json::json;
 use std::collections::BTreeMap;
 
 /// The error figures of one evaluation (position in m, heading in rad).
@@ -88,7 +90,7 @@ pub struct PyFit {
 }
 
 impl PyFit {
-    pub fn new(prep: &Loaded, cal: &Calibrated) -> PyFit {
+    pub fn new(prep: &Loaded, cal: &Calibrated, options: &FitOptions) -> PyFit {
         let r = &prep.runner;
         let res = &cal.fit;
         let std: Vec<Option<f64>> = (0..res.free.len())
@@ -119,15 +121,7 @@ impl PyFit {
                     .collect()
             })
             .collect();
-        let doc = kinegen_analysis::estimation::fit_job::fit_document(
-            r,
-            res,
-            &cal.before.errors,
-            &cal.after.errors,
-            metric_name(&prep.runs),
-        );
-        let mut doc = doc;
-        doc["unusable"] = json!(cal.unusable);
+        let doc = calibration_document(prep, cal, options);
         PyFit {
             before: (&cal.before.errors).into(),
             after: (&cal.after.errors).into(),
@@ -148,9 +142,8 @@ impl PyFit {
         Ok(PyArray2::from_vec2(py, &self.covariance)?)
     }
 
-    /// The calibration's JSON document: the fields of `kinegen fit --json`
-    /// for the calibration itself (model, metric, before, after, parameters,
-    /// correlation, warnings); the command line adds its per-run tables.
+    /// The calibration's JSON document: `kinegen fit --json`'s, built by the
+    /// same library function.
     fn to_json(&self) -> String {
         self.json.clone()
     }
@@ -175,6 +168,10 @@ pub struct PyVerdict {
     unexplained_structure: bool,
     effects: String,
     proposed: String,
+    /// The `kinegen add-effect` commands that add the effects found, in
+    /// order (the command line's `verdict.apply`).
+    #[pyo3(get)]
+    apply: Vec<String>,
 }
 
 #[pymethods]
@@ -218,31 +215,25 @@ pub struct PyDiagnosis {
 }
 
 impl PyDiagnosis {
-    pub fn new(py: Python<'_>, done: &Diagnosed) -> PyResult<PyDiagnosis> {
+    /// The diagnosis `done` of the logs `sources` names.
+    pub fn new(py: Python<'_>, done: &Diagnosed, sources: &Sources) -> PyResult<PyDiagnosis> {
         let d = &done.outcome.diagnosis;
         let r = &done.loaded.runner;
+        let steps = NextSteps::of(d, &r.ir.name, &Invocation::of(sources));
         let proposed: Vec<_> = d.proposed.iter().collect();
-        let doc = json!({
-            "model": r.ir.name,
-            "metric": "weighted_residual_rms (pose residuals / 0.01 m and 0.01 rad, gyro / 0.01 rad/s)",
-            "baseline": {"rmse": d.baseline_rmse},
-            "calibrated": {"rmse": d.calibrated_rmse, "holdout_rmse": d.base_holdout_rmse},
-            "candidates": d.candidates,
-            "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured,
-                        "structure": d.structure.findings, "proposed": proposed},
-        });
         let verdict = PyVerdict {
             effect: d.verdict().map(str::to_string),
             unexplained_structure: d.structure.structured,
             effects: serde_json::to_string(&d.chain).expect("serialises"),
             proposed: serde_json::to_string(&proposed).expect("serialises"),
+            apply: steps.apply.clone(),
         };
         Ok(PyDiagnosis {
             verdict: Py::new(py, verdict)?,
             baseline_error: d.baseline_rmse,
             calibrated_error: d.calibrated_rmse,
             candidates: serde_json::to_string(&d.candidates).expect("serialises"),
-            json: doc.to_string(),
+            json: diagnose_document(done, &steps).to_string(),
         })
     }
 }
@@ -255,9 +246,8 @@ impl PyDiagnosis {
         loads(py, &self.candidates)
     }
 
-    /// The diagnosis's JSON document: the fields of `kinegen diagnose --json`
-    /// CONTRACT section 4 names (model, metric, baseline, calibrated,
-    /// candidates, verdict); the command line adds timing and commands.
+    /// The diagnosis's JSON document: `kinegen diagnose --json`'s, built by
+    /// the same library function (its timing is this call's).
     fn to_json(&self) -> String {
         self.json.clone()
     }

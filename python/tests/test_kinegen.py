@@ -110,9 +110,7 @@ def test_fit_gives_the_command_lines_estimates(model, log):
     for name, e in cli["parameters"].items():
         assert f.parameters[name].estimate == pytest.approx(e["estimate"], rel=1e-12)
         assert f.parameters[name].std == pytest.approx(e["std"], rel=1e-9)
-    mine = json.loads(f.to_json())
-    for key in ("model", "metric", "parameters", "correlation", "before", "after"):
-        assert mine[key] == cli[key], key
+    assert json.loads(f.to_json()) == cli
     c = f.covariance
     assert c.shape == (len(f.free), len(f.free))
     np.testing.assert_allclose(np.sqrt(np.diag(c)), [f.parameters[n].std for n in f.free], rtol=1e-12)
@@ -125,6 +123,92 @@ def test_diagnose_names_what_the_command_line_names(model, log):
     assert [e["effect"] for e in d.verdict.effects] == [e["effect"] for e in cli["verdict"]["effects"]]
     assert d.verdict.proposed == cli["verdict"]["proposed"]
     assert [c["effect"] for c in d.candidates] == [c["effect"] for c in cli["candidates"]]
+    assert d.verdict.apply == cli["verdict"]["apply"]
+    assert without_timing(json.loads(d.to_json())) == without_timing(cli)
+
+
+def without_timing(doc):
+    """A diagnosis's document less its timing, which no two runs share."""
+    return {k: v for k, v in doc.items() if k != "timing"}
+
+
+REAL = Path(os.environ.get("KINEGEN_REAL_DATA", ROOT.parent / "shared" / "real"))
+
+# A user's own spec for the OptiOdom differential drive (not bundled): motor
+# encoders in ticks, its own parameter names.
+WHEELIE = """
+name = "wheelie"
+state = ["x", "y", "theta"]
+[[input]]
+name = "right_ticks"
+column = "enc_r"
+kind = "cumulative"
+unit = "tick"
+[[input]]
+name = "left_ticks"
+column = "enc_l"
+kind = "cumulative"
+unit = "tick"
+[[parameter]]
+name = "radius_right"
+nominal = 0.042
+unit = "m"
+min = 0.02
+max = 0.08
+[[parameter]]
+name = "radius_left"
+nominal = 0.042
+unit = "m"
+min = 0.02
+max = 0.08
+[[parameter]]
+name = "track"
+nominal = 0.205
+unit = "m"
+min = 0.1
+max = 0.4
+[[parameter]]
+name = "ticks_per_wheel_rev"
+nominal = 2796.8
+const = true
+[[define]]
+name = "wr"
+expr = "2*pi*right_ticks/ticks_per_wheel_rev"
+[[define]]
+name = "wl"
+expr = "2*pi*left_ticks/ticks_per_wheel_rev"
+[motion]
+vx = "(radius_right*wr + radius_left*wl)/2"
+vy = "0"
+omega = "(radius_right*wr - radius_left*wl)/track"
+"""
+
+
+def real_logs(folder, *names):
+    """Logs of ../shared/real (or $KINEGEN_REAL_DATA); skipped where absent,
+    failed where CI requires them."""
+    paths = [REAL / folder / n for n in names]
+    if not all(p.is_file() for p in paths):
+        if os.environ.get("KINEGEN_REQUIRE_REAL_DATA") == "1":
+            pytest.fail(f"the real logs are required and absent: {REAL / folder}")
+        pytest.skip(f"SKIPPED: no real logs at {REAL / folder}")
+    return paths
+
+
+def test_real_logs_give_the_command_lines_documents(tmp_path):
+    train, held = real_logs("optiodom-diff-square", "run-01.csv", "run-02.csv"), \
+        real_logs("optiodom-diff-square", "run-03.csv")
+    spec = tmp_path / "wheelie.toml"
+    spec.write_text(WHEELIE)
+    m = kinegen.Model.from_file(str(spec))
+    logs = [kinegen.read_log(str(p), m) for p in train]
+    data = [a for p in train for a in ("--data", str(p))]
+    assert json.loads(m.compare(logs).to_json()) == cli_json("compare", "--spec", str(spec), *data)
+    fit = m.fit(logs, holdout=[kinegen.read_log(str(held[0]), m)])
+    assert json.loads(fit.to_json()) == cli_json("fit", "--spec", str(spec), *data, "--holdout", str(held[0]))
+    assert fit.after.position_rmse < fit.before.position_rmse
+    d = m.diagnose(logs)
+    assert without_timing(json.loads(d.to_json())) == without_timing(cli_json("diagnose", "--spec", str(spec), *data))
 
 
 def test_with_effect_adds_a_catalogue_effect(model):

@@ -610,36 +610,3 @@ impl<'a, 't> Against<'a, 't> {
         }
     }
 }
-
-/// `fit --json`'s document of a finished calibration (CONTRACT section 4);
-/// the command line adds its per-run tables, the Python package returns it.
-pub fn fit_document(
-    r: &Runner,
-    res: &FitResult,
-    before: &crate::model_on_log::metrics::Errors,
-    after: &crate::model_on_log::metrics::Errors,
-    metric: &str,
-) -> serde_json::Value {
-    let params: serde_json::Map<String, serde_json::Value> = res
-        .free
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| {
-            (
-                r.names[i].clone(),
-                serde_json::json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k],
-                       "tolerance": r.ir.runtime_params()[i].tolerance}),
-            )
-        })
-        .collect();
-    let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
-    let corr: Vec<Vec<f64>> = (0..names.len())
-        .map(|a| (0..names.len()).map(|b| res.corr[(a, b)]).collect())
-        .collect();
-    serde_json::json!({
-        "model": r.ir.name, "metric": metric,
-        "before": {"rmse": before.rmse, "errors": before}, "after": {"rmse": after.rmse, "errors": after},
-        "parameters": params, "correlation": {"parameters": names, "matrix": corr},
-        "warnings": res.warnings, "iterations": res.iterations, "residuals": res.n_residuals,
-    })
-}
