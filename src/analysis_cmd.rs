@@ -78,6 +78,23 @@ pub fn say_warnings(out: &Out, warnings: &[String]) {
     }
 }
 
+/// The logs' warnings as a command says them before its answer: whole with
+/// `-v`, else each once in at most two lines of the width; returns how many
+/// lines were said (the answer's 25 lines count them).
+pub fn say_read_warnings(out: &Out, warnings: &[String], verbose: bool) -> usize {
+    if verbose {
+        say_warnings(out, warnings);
+        return warnings.len();
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    let lines: Vec<String> = (warnings.iter())
+        .filter(|w| seen.insert(w.as_str()))
+        .flat_map(|w| crate::output::warning_lines(w, 2))
+        .collect();
+    lines.iter().for_each(|l| out.say(l));
+    lines.len()
+}
+
 /// Exit 2 with a message naming the problem (where every command finds it).
 pub use crate::output::bad;
 

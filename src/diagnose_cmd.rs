@@ -35,13 +35,17 @@ pub fn run(c: Common) -> ExitCode {
         },
         signature: c.report.is_some(),
     };
+    let warned = std::cell::Cell::new(0);
     let done = diagnose_files(
         &request,
         crate::ir_source::analysis_deriver(),
         &crate::analysis_cmd::read_progress(quiet(&c)),
         &Hooks {
             // said before the diagnosis starts, as the logs are read
-            warnings: &|w| crate::analysis_cmd::say_warnings(&out, w),
+            warnings: &|w| {
+                let said = crate::analysis_cmd::say_read_warnings(&out, w, c.verbose);
+                warned.set(warned.get() + said);
+            },
             candidates: &|n| bar.set_length(n as u64 + 1),
             progress: &|step| {
                 bar.message(step);
@@ -62,7 +66,8 @@ pub fn run(c: Common) -> ExitCode {
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();
     // the answer: said by default, and the report's first box
     let kept = Out::keeping();
-    crate::diagnose_text::say_summary(&kept, &prep.runs, r, outcome, &steps);
+    let reserved = warned.get() + usize::from(c.report.is_some());
+    crate::diagnose_text::say_summary(&kept, &prep.runs, r, outcome, &steps, reserved);
     let answer = kept.lines();
     if c.verbose {
         out.say(&format!(

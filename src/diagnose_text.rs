@@ -12,8 +12,16 @@ use kinegen_analysis::diagnosis::next_steps::NextSteps;
 use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_analysis::model_on_log::run::Run;
 
-/// Say the summary, with the commands `steps` holds.
-pub fn say_summary(out: &Out, runs: &[Run], r: &Runner, outcome: &Outcome, steps: &NextSteps) {
+/// Say the summary, with the commands `steps` holds, in 25 lines less
+/// `reserved` (the lines the command says after it: the report's path).
+pub fn say_summary(
+    out: &Out,
+    runs: &[Run],
+    r: &Runner,
+    outcome: &Outcome,
+    steps: &NextSteps,
+    reserved: usize,
+) {
     let d = &outcome.diagnosis;
     let mut head = vec![header(r, runs, outcome.tried)];
     say_answer(&mut head, d, steps);
@@ -32,10 +40,8 @@ pub fn say_summary(out: &Out, runs: &[Run], r: &Runner, outcome: &Outcome, steps
             .into(),
     );
     // the table gets what the answer and the notes leave of 25 lines
-    // (a blank, its header and a "more" line beside its rows), two rows
-    // at least
-    let rows = LINES.saturating_sub(head.len() + tail.len() + 3).max(2);
-    for l in head.iter().chain(&table(d, rows)).chain(&tail) {
+    let room = LINES.saturating_sub(head.len() + tail.len() + reserved);
+    for l in head.iter().chain(&table(d, room)).chain(&tail) {
         out.say(l);
     }
 }
@@ -118,10 +124,17 @@ fn say_answer(out: &mut Vec<String>, d: &Diagnosis, steps: &NextSteps) {
                 ),
                 None => fall(before, step.rmse_after),
             };
-            out.push(format!(
-                "    {change}; nominal {:.3}, noise floor {:.3}",
+            let floor = format!(
+                "nominal {:.3}, noise floor {:.3}",
                 d.baseline_rmse, d.noise_floor
-            ));
+            );
+            let one = format!("    {change}; {floor}");
+            if one.chars().count() <= crate::output::WIDTH {
+                out.push(one);
+            } else {
+                out.push(format!("    {change}"));
+                out.push(format!("    {floor}"));
+            }
         } else {
             // a later step on one line where it fits; a sensor effect is
             // proved on the sightings, which its figures are (the motion's
@@ -191,9 +204,11 @@ fn say_proposal(out: &mut Vec<String>, d: &Diagnosis) {
     )));
 }
 
-/// The effects tested, most likely first: the motion's, then the sensor's;
-/// at most `shown` rows (the rest behind -v).
-fn table(d: &Diagnosis, shown: usize) -> Vec<String> {
+/// The effects tested, most likely first: the motion's, then the sensor's,
+/// in at most `room` lines (a blank and the header before the rows, a
+/// "more" line after them when some are left for -v); one line saying
+/// where they are when a table does not fit.
+fn table(d: &Diagnosis, room: usize) -> Vec<String> {
     let mut t = new_table(&["effect", "error", "change", "significant", "parameters"]);
     let mut rows = 0;
     for cand in &d.candidates {
@@ -216,9 +231,17 @@ fn table(d: &Diagnosis, shown: usize) -> Vec<String> {
         ]);
         rows += 1;
     }
-    if rows == 0 {
+    if rows == 0 || room == 0 {
         return Vec::new();
     }
+    // all rows, or as many as leave a line for "more", one at least
+    let shown = if room >= rows + 2 {
+        rows
+    } else if room >= 4 {
+        room - 3
+    } else {
+        return vec![format!("the {rows} effects tested, with their figures: -v")];
+    };
     if let Some(c) = t.column_mut(4) {
         c.set_cell_alignment(comfy_table::CellAlignment::Left);
     }

@@ -81,7 +81,9 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         sweep: a.sweep,
     };
     let progress = crate::analysis_cmd::read_progress(crate::analysis_cmd::quiet(&c));
-    let said = |prep: &Loaded| crate::analysis_cmd::say_warnings(&out, &prep.warnings);
+    let said = |prep: &Loaded| {
+        crate::analysis_cmd::say_read_warnings(&out, &prep.warnings, c.verbose);
+    };
     match localize_files(
         &request,
         crate::ir_source::analysis_deriver(),

@@ -1999,14 +1999,16 @@ fn calibration_never_leaves_held_out_runs_worse_than_nominal_without_saying_why(
     }
 }
 
-/// Issue #11.5: a million-sample log fits through the CLI, and its report stays
-/// under 5 MB whatever the log length (plots decimated, extremes kept): before,
-/// a million-sample fit wrote a 223 MB report. Also a check that the fit is
-/// right at that length: b within 0.1% of the simulated robot's.
+/// Issue #11.5: a long log fits through the CLI, and its report stays under
+/// 5 MB whatever the log length (plots decimated, extremes kept): before, a
+/// million-sample fit wrote a 223 MB report, about 45 MB at this log's
+/// 200,000 rows. Also a check that the fit is right at that length: b within
+/// 0.1% of the simulated robot's. (The million-row fit's time and memory are
+/// scripts/bench_memory.sh's, not a test's.)
 #[test]
-fn a_million_sample_fit_writes_a_report_under_5_mb() {
+fn a_long_fit_writes_a_report_under_5_mb() {
     let tmp = tempfile::tempdir().unwrap();
-    // 550 laps of 91 s at 20 Hz: 1,001,001 rows
+    // 110 laps of 91 s at 20 Hz: 200,201 rows
     let log = simulate(
         tmp.path(),
         "long.csv",
@@ -2016,7 +2018,7 @@ fn a_million_sample_fit_writes_a_report_under_5_mb() {
             "--trajectory",
             "random",
             "--laps",
-            "550",
+            "110",
             "--seed",
             "4",
             "--set",
@@ -2033,7 +2035,7 @@ fn a_million_sample_fit_writes_a_report_under_5_mb() {
         "--report",
         report.to_str().unwrap(),
     ]);
-    assert!(doc["residuals"].as_u64().unwrap() > 3_000_000);
+    assert!(doc["residuals"].as_u64().unwrap() > 600_000);
     let b = doc["parameters"]["b"]["estimate"].as_f64().unwrap();
     assert!((b / 0.204 - 1.0).abs() < 1e-3, "b = {b}");
     let size = std::fs::metadata(report.join("index.html")).unwrap().len();

@@ -51,9 +51,23 @@ pub fn refused(args: &[&str]) -> String {
 
 /// Run kinegen with `--json -` appended and parse stdout.
 pub fn kinegen_json(args: &[&str]) -> serde_json::Value {
-    let mut a = args.to_vec();
-    a.extend(["--json", "-"]);
-    let o = kinegen(&a);
+    json_of(args, &kinegen(&[args, &["--json", "-"]].concat()))
+}
+
+/// [`kinegen_json`] in `dir`, also checking that the text printed beside
+/// the JSON (stderr: the default text) reads at a glance, unless `args`
+/// ask for more with `-v`.
+pub fn kinegen_json_glanceable(dir: &Path, args: &[&str]) -> serde_json::Value {
+    let o = kinegen_in(dir, &[args, &["--json", "-"]].concat());
+    let doc = json_of(args, &o);
+    if !args.iter().any(|a| *a == "-v" || *a == "--verbose") {
+        assert_glanceable(args, &stderr(&o));
+    }
+    doc
+}
+
+/// The JSON document a successful run printed.
+fn json_of(args: &[&str], o: &Output) -> serde_json::Value {
     assert!(
         o.status.success(),
         "kinegen {:?} failed: {}",
@@ -63,7 +77,7 @@ pub fn kinegen_json(args: &[&str]) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
         panic!(
             "stdout of {args:?} is not one JSON document ({e}): {}",
-            stdout(&o)
+            stdout(o)
         )
     })
 }
@@ -171,4 +185,38 @@ pub fn edit_cells(csv: &str, edit: impl Fn(usize, &str) -> String) -> String {
         out += &(cells.join(",") + "\n");
     }
     out
+}
+
+/// The most lines, and the widest, a command prints by default.
+pub const GLANCE_LINES: usize = 25;
+pub const GLANCE_WIDTH: usize = 100;
+
+/// What `kinegen args` printed by default (`text`) reads at a glance: at
+/// most 25 lines of at most 100 characters, and for the analysis commands
+/// an answer line. Tests that run a command on a real log for its figures
+/// (its JSON on stdout, this text on stderr) check its shape too, so the
+/// long runs are made once.
+pub fn assert_glanceable(args: &[&str], text: &str) {
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(
+        lines.len() <= GLANCE_LINES,
+        "kinegen {args:?}: {} lines:\n{text}",
+        lines.len()
+    );
+    let wide: Vec<&&str> = (lines.iter())
+        .filter(|l| l.chars().count() > GLANCE_WIDTH)
+        .collect();
+    assert!(
+        wide.is_empty(),
+        "kinegen {args:?}: lines over {GLANCE_WIDTH}: {wide:#?}"
+    );
+    if matches!(
+        args[0],
+        "compare" | "fit" | "diagnose" | "localize" | "bench-real"
+    ) {
+        assert!(
+            lines.iter().any(|l| l.starts_with("answer: ")),
+            "kinegen {args:?}: no answer line:\n{text}"
+        );
+    }
 }

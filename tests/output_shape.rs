@@ -1,12 +1,11 @@
 //! Every command's default text is read at a glance: the answer first, at
 //! most 25 lines of at most 100 characters, on the bundled log and on the
-//! real logs (MRCLAM, OptiOdom) with specs a user writes; `-v` says more.
+//! real logs (OptiOdom here; MRCLAM's compare, fit, localize and diagnose
+//! with a user's spec are checked by tests/velocity_commands.rs on the runs
+//! it makes for their figures); `-v` says more.
 mod common;
 use common::*;
 use std::path::Path;
-
-const LINES: usize = 25;
-const WIDTH: usize = 100;
 
 /// Run kinegen (in `dir`), check the shape of what it prints by default,
 /// and that `-v` prints more; returns the default text.
@@ -14,31 +13,18 @@ fn shaped(dir: &Path, args: &[&str]) -> String {
     let o = kinegen_in(dir, args);
     assert!(o.status.success(), "kinegen {args:?}: {}", stderr(&o));
     let text = stdout(&o) + &stderr(&o);
-    let lines: Vec<&str> = text.lines().collect();
-    assert!(
-        lines.len() <= LINES,
-        "kinegen {args:?}: {} lines:\n{text}",
-        lines.len()
-    );
-    let wide: Vec<&&str> = lines.iter().filter(|l| l.chars().count() > WIDTH).collect();
-    assert!(
-        wide.is_empty(),
-        "kinegen {args:?}: lines over {WIDTH}: {wide:#?}"
-    );
+    assert_glanceable(args, &text);
     if matches!(
         args[0],
         "compare" | "fit" | "diagnose" | "localize" | "bench-real"
     ) {
-        assert!(
-            lines.iter().any(|l| l.starts_with("answer: ")),
-            "kinegen {args:?}: no answer line:\n{text}"
-        );
+        let lines = text.lines().count();
         let mut v = args.to_vec();
         v.push("-v");
         let o = kinegen_in(dir, &v);
         let more = stdout(&o) + &stderr(&o);
         assert!(
-            more.lines().count() > lines.len() || more.len() > text.len(),
+            more.lines().count() > lines || more.len() > text.len(),
             "kinegen {args:?} -v says no more than without it"
         );
     }
@@ -80,83 +66,6 @@ fn the_bundled_story_reads_at_a_glance() {
             "sim.csv",
         ],
     );
-}
-
-/// A velocity-commanded robot with a camera, as a user writes it.
-const CART: &str = r#"name = "cart"
-state = ["x", "y", "theta"]
-[[input]]
-name = "speed_sp"
-column = "v"
-kind = "absolute"
-unit = "m/s"
-[[input]]
-name = "yaw_sp"
-column = "omega"
-kind = "absolute"
-unit = "rad/s"
-[[parameter]]
-name = "gain_speed"
-nominal = 1.0
-min = 0.0
-[[parameter]]
-name = "gain_yaw"
-nominal = 1.0
-min = 0.0
-[[noise]]
-name = "n_speed"
-sigma = 0.03
-unit = "m/s/sqrt(Hz)"
-[[noise]]
-name = "n_yaw"
-sigma = 0.03
-unit = "rad/s/sqrt(Hz)"
-[motion]
-vx = "gain_speed*speed_sp + n_speed"
-vy = "0"
-omega = "gain_yaw*yaw_sp + n_yaw"
-[[observation]]
-name = "cam"
-landmark = true
-columns = ["range", "bearing"]
-expr = ["sqrt((xl - x)^2 + (yl - y)^2)", "atan2(yl - y, xl - x) - theta"]
-angle = [false, true]
-sigma = [0.1, 0.03]
-"#;
-
-/// A user's spec on MRCLAM robot 3 (600 s of velocity commands with
-/// sightings) through `commands`, each shaped. Split over tests so that the
-/// test runner's threads run diagnose (the longest) beside the others.
-fn mrclam_reads_at_a_glance(commands: &[&str]) {
-    let Some(mrclam) = real_data("mrclam-dataset6") else {
-        return;
-    };
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    std::fs::write(d.join("cart.toml"), CART).unwrap();
-    let robot = mrclam.join("robot3");
-    let files = |f: &str| robot.join(f).to_str().unwrap().to_string();
-    let (log, obs, map) = (
-        files("log.csv"),
-        files("observations.csv"),
-        files("landmarks.csv"),
-    );
-    let with_sightings = ["--observations", &obs, "--landmarks", &map];
-    for &cmd in commands {
-        let mut a = vec![cmd, "--spec", "cart.toml", "--data", &log];
-        a.extend(with_sightings);
-        shaped(d, &a);
-    }
-}
-
-#[test]
-fn a_real_robots_diagnosis_reads_at_a_glance() {
-    mrclam_reads_at_a_glance(&["diagnose"]);
-}
-
-#[test]
-fn a_real_robots_comparison_calibration_and_localisation_read_at_a_glance() {
-    mrclam_reads_at_a_glance(&["compare", "fit", "localize"]);
 }
 
 #[test]

@@ -77,12 +77,11 @@ sigma = [0.05, 0.02]
     path
 }
 
+/// `kinegen args --json -` in `dir`: its document, its default text checked
+/// to read at a glance (the real robots' runs are output_shape's MRCLAM
+/// cases too: each long run is made once).
 fn run_in(dir: &Path, args: &[&str]) -> serde_json::Value {
-    let mut a = args.to_vec();
-    a.extend(["--json", "-"]);
-    let o = kinegen_in(dir, &a);
-    assert!(o.status.success(), "kinegen {args:?}: {}", stderr(&o));
-    serde_json::from_slice(&o.stdout).unwrap()
+    kinegen_json_glanceable(dir, args)
 }
 
 /// The same log at twice its rate: a row between every two, its commands
@@ -346,6 +345,8 @@ fn commands_hold_between_rows_and_short_gaps_are_bridged() {
             "map.csv",
             "--max-gap",
             "0.5",
+            // the warning whole (by default its first two lines)
+            "-v",
         ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
@@ -853,7 +854,7 @@ fn diagnose_seen_with(
         &map,
     ];
     args.extend(more);
-    kinegen_json(&args)
+    kinegen_json_glanceable(&root(), &args)
 }
 
 /// `from`, a log written as the MRCLAM logs are (`t,v,omega,gt_*`), without
@@ -1435,6 +1436,8 @@ fn localize_moving_start(dir: &Path, sighted_from: f64) -> (String, Vec<(f64, f6
         map.to_str().unwrap(),
         "--track",
         track.to_str().unwrap(),
+        // the warnings whole (by default their first two lines)
+        "-v",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (rows, errors) = track_errors(&track, &truth);
