@@ -36,6 +36,8 @@ fn the_light_build_and_the_analysis_have_no_symbolica() {
         "kinegen-model",
         "kinegen-jit",
         "kinegen-verify",
+        // the Python extension: what `pip install ./python` builds
+        "kinegen-py",
     ] {
         assert!(
             !has_symbolica(&tree(&["-p", krate])),

@@ -211,6 +211,14 @@ def test_real_logs_give_the_command_lines_documents(tmp_path):
     assert without_timing(json.loads(d.to_json())) == without_timing(cli_json("diagnose", "--spec", str(spec), *data))
 
 
+def test_the_extension_holds_no_symbolica():
+    # the full command line's binary names symbolica's functions thousands of
+    # times (its panics, its symbols); the extension the package installs
+    # differentiates by itself and must not contain it
+    from kinegen import _kinegen
+    assert b"symbolica" not in Path(_kinegen.__file__).read_bytes()
+
+
 def test_with_effect_adds_a_catalogue_effect(model):
     slip = model.with_effect("lateral_slip", k_slip=0.1)
     assert [p.name for p in slip.parameters][-1] == "k_slip"
