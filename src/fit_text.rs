@@ -73,7 +73,7 @@ pub fn say_summary(out: &Out, prep: &Loaded, cal: &Calibrated) {
     for (k, &i) in res.free.iter().take(PARAMETERS).enumerate() {
         t.add_row(vec![
             r.names[i].clone(),
-            format!("{}", r.p[i]),
+            crate::output::number(r.p[i]),
             with_std(res.p[i], res.std[k]),
         ]);
     }

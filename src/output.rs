@@ -221,11 +221,29 @@ pub fn command_lines(cmd: &str, indent: usize) -> Vec<String> {
 /// meaningful: `0.1006 ± 0.0004`; "unidentified" where there is none.
 pub fn with_std(value: f64, std: f64) -> String {
     if !std.is_finite() || std <= 0.0 {
-        return format!("{value:.4} (unidentified)");
+        return match value.abs() >= 1e9 {
+            true => format!("{value:.4e} (unidentified)"),
+            false => format!("{value:.4} (unidentified)"),
+        };
+    }
+    if value.abs() >= 1e9 {
+        return format!("{value:.4e} ± {std:.1e}");
     }
     // two significant digits of the deviation
     let digits = (-(std.log10().floor()) + 1.0).clamp(0.0, 12.0) as usize;
     format!("{value:.digits$} ± {std:.digits$}")
+}
+
+/// A number as written in a spec, but in scientific notation when it is
+/// too large to read (a value of 1e308 is 309 digits).
+pub fn number(v: f64) -> String {
+    if v.abs() >= 1e9 {
+        format!("{v:.4e}")
+    } else if v.abs() < 1e-4 && v != 0.0 {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
 }
 
 /// A line cut to `WIDTH` columns, with `…` where it is cut (the whole text

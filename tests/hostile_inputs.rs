@@ -534,3 +534,76 @@ fn a_dangling_link_output_and_a_vanishing_cell_are_refused() {
         "{e}"
     );
 }
+
+/// Found by scripts/hostile_campaign.py: `simulate --laps 99999999999` asked
+/// for 1e15 bytes and aborted (exit 134). It is refused before any memory is
+/// taken, naming the option, the rows it would make and the bound, and
+/// writes nothing; so are 20,000 laps of the square (36 million rows), just
+/// over the bound (the suite simulates up to 550 laps elsewhere).
+#[test]
+fn a_simulation_too_long_for_memory_is_refused_up_front() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = root().join("spec/diff_drive.toml");
+    let spec = spec.to_str().unwrap();
+    let o = kinegen_in(
+        tmp.path(),
+        &[
+            "simulate",
+            "--spec",
+            spec,
+            "--out",
+            "s.csv",
+            "--laps",
+            "99999999999",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let said = stderr(&o);
+    assert!(
+        said.contains("--laps 99999999999:") && said.contains("rows, more than the 2e7"),
+        "{said}"
+    );
+    assert!(!tmp.path().join("s.csv").exists());
+    let o = kinegen_in(
+        tmp.path(),
+        &[
+            "simulate", "--spec", spec, "--out", "s.csv", "--laps", "20000",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("e7 rows"), "{}", stderr(&o));
+}
+
+/// Found by scripts/hostile_campaign.py: `fit --set b=1e308` spun for hours
+/// in nalgebra's SVD of a normal matrix that had overflowed (its iteration
+/// never converges on an infinity). The decompositions are bounded now
+/// (model_on_log/linalg.rs): the fit ends and says the wheelbase is not
+/// identifiable, printed in scientific notation, not as 309 digits.
+#[test]
+fn a_fit_from_an_overflowing_nominal_ends_and_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = std::fs::read_to_string(root().join("data/mystery_robot.csv")).unwrap();
+    let short: String = log.lines().take(301).map(|l| format!("{l}\n")).collect();
+    std::fs::write(tmp.path().join("short.csv"), short).unwrap();
+    let spec = root().join("spec/diff_drive.toml");
+    let t0 = std::time::Instant::now();
+    let o = kinegen_in(
+        tmp.path(),
+        &[
+            "fit",
+            "--spec",
+            spec.to_str().unwrap(),
+            "--data",
+            "short.csv",
+            "--set",
+            "b=1e308",
+        ],
+    );
+    assert!(t0.elapsed().as_secs() < 60, "{:?}", t0.elapsed());
+    let said = stdout(&o) + &stderr(&o);
+    assert!(o.status.code() == Some(0), "{said}");
+    assert!(
+        said.contains("1.0000e308") && said.contains("not identifiable from these logs: b"),
+        "{said}"
+    );
+}

@@ -73,6 +73,7 @@ pub mod model_on_log {
     pub mod input_range;
     pub mod interp;
     pub mod landmarks;
+    pub mod linalg;
     pub mod load;
     pub mod metrics;
     pub mod model;

@@ -114,6 +114,9 @@ impl PyModel {
             Err(SimulateError::Map(e)) => Err(errors::log(&e)),
             // the keyword arguments' own names, not the command line's options
             Err(SimulateError::NoLaps) => Err(usage("laps=0: at least one lap")),
+            Err(SimulateError::TooLong { laps, rows, max }) => Err(usage(format!(
+                "laps={laps}: {rows:.3e} rows, more than the {max:.0e} a simulation makes"
+            ))),
             Err(SimulateError::EffectTwice { first, again }) => Err(usage(format!(
                 "effects: {again} repeats {first}; give each effect once"
             ))),

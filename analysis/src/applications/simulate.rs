@@ -426,11 +426,27 @@ fn route(base: &Runner, o: &SimOptions, rng: &mut SmallRng) -> (impl Fn(f64) -> 
     (plan, dur0 + REST)
 }
 
+/// The most rows a simulation makes: about 2 GB of CSV, and what its rows
+/// take in memory while they are written.
+pub const MAX_ROWS: f64 = 20e6;
+
+/// How many rows `simulate(base, _, o)` makes (the same route, drawn from
+/// the same seed), so a request can be refused before it takes the memory.
+pub fn planned_rows(base: &Runner, o: &SimOptions) -> f64 {
+    let mut rng = SmallRng::seed_from_u64(o.seed);
+    let (_, dur) = route(base, o, &mut rng);
+    rows_of(o, dur)
+}
+
+/// The rows of `o.laps` laps of `dur` seconds at `o.rate_hz`.
+fn rows_of(o: &SimOptions, dur: f64) -> f64 {
+    (dur * o.laps as f64 * o.rate_hz).ceil() + 1.0
+}
+
 /// The rows' times: `o.laps` laps of `dur` at `o.rate_hz`, each but the first
 /// jittered by up to a tenth of a period.
 fn sample_times(o: &SimOptions, dur: f64, rng: &mut SmallRng) -> Vec<f64> {
-    let total = dur * o.laps as f64;
-    let n = (total * o.rate_hz).ceil() as usize + 1;
+    let n = rows_of(o, dur) as usize;
     let period = 1.0 / o.rate_hz;
     let jitter = 0.1 * period;
     (0..n)

@@ -2,7 +2,9 @@
 //! and Python's `Model.simulate` call, once. The spec gives the model the
 //! analysis will see; hidden effects and `sets` make the robot that drives.
 use crate::applications::hidden::{with_hidden, Hidden, HiddenError, Robots};
-use crate::applications::simulate::{simulate, to_csv, SimLog, SimOptions, Trajectory};
+use crate::applications::simulate::{
+    planned_rows, simulate, to_csv, SimLog, SimOptions, Trajectory, MAX_ROWS,
+};
 use crate::logs::log::LogError;
 use crate::model_on_log::derivation::Deriver;
 use crate::model_on_log::landmarks::read_map;
@@ -62,6 +64,8 @@ pub enum SimulateError {
     Map(#[from] LogError),
     #[error("--laps 0: at least one lap")]
     NoLaps,
+    #[error("--laps {laps}: {rows:.3e} rows, more than the {max:.0e} a simulation makes (about 2 GB of CSV); fewer laps, or several simulations with other seeds")]
+    TooLong { laps: usize, rows: f64, max: f64 },
     #[error("--effect {again}: already given (--effect {first}); give it once")]
     EffectTwice { first: String, again: String },
     #[error("{0}: the model has no `landmark` observation to simulate range-bearing data with")]
@@ -111,6 +115,11 @@ pub fn simulate_files(
     }
     if options.trajectory == Trajectory::Beacons && options.landmarks.is_empty() {
         return Err(SimulateError::BeaconsWithoutMap);
+    }
+    let rows = planned_rows(&base, &options);
+    if rows > MAX_ROWS {
+        let (laps, max) = (options.laps, MAX_ROWS);
+        return Err(SimulateError::TooLong { laps, rows, max });
     }
     let log = simulate(&base, &robot, &options);
     let counts = robot

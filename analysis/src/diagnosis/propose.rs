@@ -291,7 +291,9 @@ fn explained_beyond(start: &Runner, term: &[usize], cx: &Context) -> f64 {
         for (c, k) in scale.iter().enumerate() {
             s.column_mut(c).scale_mut(1.0 / k);
         }
-        let svd = s.clone().svd(true, true);
+        let Some(svd) = crate::model_on_log::linalg::svd(s.clone()) else {
+            return 0.0;
+        };
         let tol = 1e-9 * svd.singular_values.max();
         svd.solve(&r, tol).map_or(0.0, |x| (&s * x).norm_squared())
     };

@@ -67,7 +67,7 @@ pub fn redundancy(
         return None;
     }
     let b = nalgebra::DMatrix::from_columns(&cols.iter().map(|x| x.1.clone()).collect::<Vec<_>>());
-    let svd = b.clone().svd(true, true);
+    let svd = crate::model_on_log::linalg::svd(b.clone())?;
     let mut reasons = Vec::new();
     for &pi in effect_params {
         let c = start.free.iter().position(|&f| f == pi)?;

@@ -152,7 +152,9 @@ fn blind_basis(r: &Runner, p: &[f64], runs: &[Run]) -> (Vec<DVector<f64>>, DVect
     let hs = DMatrix::from_fn(free.len(), free.len(), |a, b| {
         h[(a, b)] * scale[a] * scale[b]
     });
-    let eig = nalgebra::SymmetricEigen::new(hs);
+    let Some(eig) = crate::model_on_log::linalg::symmetric_eigen(hs) else {
+        return (vec![], scale);
+    };
     let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
     let basis = (0..free.len())
         .filter(|&k| lmax > 0.0 && eig.eigenvalues[k] < 1e-9 * lmax)

@@ -127,7 +127,9 @@ pub fn solve(r: &Runner, twist: &[f64; 3], cfg: &mut [f64], solve: &[usize]) {
         // (singular values below their ~1e-7 relative precision) are left out:
         // inverting them sends the knuckles to opposite locks and the wheels
         // to thousands of rad/s.
-        let svd = jac.svd(true, true);
+        let Some(svd) = crate::model_on_log::linalg::svd(jac) else {
+            return;
+        };
         let floor = 1e-6 * svd.singular_values.max().max(1e-300);
         let Ok(step) = svd.solve(&nalgebra::DVector::from_row_slice(&now), floor) else {
             return;

@@ -5,6 +5,7 @@
 //! 1,000,000-sample log cut into 60 s segments has k = 833, and a dense
 //! eigen-decomposition and Cholesky factorisation of that size took most of
 //! the fit's time.
+use crate::model_on_log::linalg;
 use nalgebra::{DMatrix, DVector};
 
 /// A nuisance with less information than this is left where it is (its
@@ -61,7 +62,7 @@ pub fn damped_step(
     } else {
         match s.clone().cholesky() {
             Some(ch) => ch.solve(&rhs),
-            None => s.svd(true, true).solve(&rhs, 1e-14).ok()?,
+            None => linalg::svd(s)?.solve(&rhs, 1e-14).ok()?,
         }
     };
     for v in undetermined {

@@ -2,6 +2,7 @@
 //! the information on its determined subspace, correlations, and the
 //! variance components of the residual kinds.
 use super::{residuals, run_residuals, FitOptions, FitResult};
+use crate::model_on_log::linalg;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
@@ -68,7 +69,10 @@ pub(super) fn sandwich(r: &Runner, windows: &[Run], o: &FitOptions, res: &mut Fi
 /// pseudo-inverse would turn into correlations |r| > 1.
 pub(super) fn psd_inverse(a: &DMatrix<f64>, keep: impl Fn(f64, f64) -> bool) -> DMatrix<f64> {
     let n = a.nrows();
-    let eig = nalgebra::SymmetricEigen::new((a + a.transpose()) * 0.5);
+    let Some(eig) = linalg::symmetric_eigen((a + a.transpose()) * 0.5) else {
+        // not finite: nothing is known of any direction
+        return DMatrix::from_element(n, n, f64::NAN);
+    };
     let lmax = eig.eigenvalues.max();
     let mut inv = DMatrix::zeros(n, n);
     for (k, &l) in eig.eigenvalues.iter().enumerate() {

@@ -12,6 +12,7 @@ use super::{
     STEP_TOLERANCE, UNDETERMINED_INFORMATION,
 };
 use crate::model_on_log::deadreckon;
+use crate::model_on_log::linalg;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
@@ -343,7 +344,12 @@ impl Stage<'_> {
         if self.u.m == 0 {
             return Vec::new(); // only start headings are refined
         }
-        let eig = arrow::marginal(jtj, self.u.m).symmetric_eigen();
+        let Some(eig) = linalg::symmetric_eigen(arrow::marginal(jtj, self.u.m)) else {
+            // not finite: no direction is determined
+            return (0..self.u.m)
+                .map(|k| DVector::from_fn(self.u.m, |i, _| f64::from(i == k)))
+                .collect();
+        };
         let emax = eig.eigenvalues.max();
         let seen = (0..self.u.m)
             .filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax))
@@ -616,7 +622,9 @@ impl Stage<'_> {
     /// 1e11 that noise-level data still resolve.
     fn identifiability(&self, jtj: &DMatrix<f64>, s2: f64, names: &[&str]) -> Identifiability {
         let (m, scale) = (self.u.m, &self.u.scale);
-        let svd = jtj.clone().svd(true, true);
+        let Some(svd) = linalg::svd(jtj.clone()) else {
+            return Identifiability::none_finite(m, names);
+        };
         let smax = svd.singular_values.max();
         let cutoff = (s2 / 1.0).max(1e-14 * smax);
         let rank = svd.singular_values.iter().filter(|&&s| s > cutoff).count();
@@ -672,4 +680,21 @@ struct Identifiability {
     /// those directions, in unscaled parameter space
     null: Vec<DVector<f64>>,
     warnings: Vec<String>,
+}
+
+impl Identifiability {
+    /// When the normal equations are not finite (a parameter so large the
+    /// tracks overflow): no direction is determined, and the warning says
+    /// why.
+    fn none_finite(m: usize, names: &[&str]) -> Identifiability {
+        Identifiability {
+            cutoff: f64::INFINITY,
+            undetermined: vec![true; m],
+            null: (0..m).map(|k| DVector::from_fn(m, |i, _| f64::from(i == k))).collect(),
+            warnings: vec![format!(
+                "not identifiable from these logs: {} (the fit's normal equations are not finite: a value so far out that the tracks overflow?)",
+                names.join(", ")
+            )],
+        }
+    }
 }

@@ -1,0 +1,341 @@
+#!/usr/bin/env python3
+"""A campaign of hostile inputs over every command (issue 67): mutated logs,
+specs, sightings, maps, jobs files, topic mappings, robot descriptions and
+option values, each run through the command that reads it.
+
+Each case passes when kinegen ends with exit 0, 1 or 2 within the time limit
+and under the memory cap, and
+- never panics (exit 101) or dies of a signal (an abort is -6, an OOM kill -9);
+- with exit 2 says where (the file, a line/row, or the option) and leaves no
+  output file behind (the --json, --out and --report paths it was given);
+- with exit 0 writes no NaN or infinity into its JSON document (a silent NaN).
+Peak memory (the child's maximum resident set) is reported against the
+largest input's size.
+
+Usage: python3 scripts/hostile_campaign.py [--bin target/debug/kinegen]
+           [--cases 2000] [--seed 1] [--jobs 2] [--keep DIR]
+Failing cases are copied to DIR (default: a temporary folder that is kept
+when anything fails), each with the command that reproduces it.
+"""
+import argparse
+import concurrent.futures as cf
+import json
+import os
+import random
+import resource
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TIMEOUT_S = 120
+MEMORY_CAP = 4 << 30  # bytes of address space a case may take
+
+# ---------------------------------------------------------------- mutations
+
+NUMBERS = ["nan", "NaN", "inf", "-inf", "1e308", "-1e308", "1e-320", "0", "-0",
+           "", " ", "abc", "1,5", "0x10", "1e99999", "9" * 400, "--1", "1e", "∞"]
+
+
+def mutate_text(text, rng):
+    """One structural or byte-level change of a text file."""
+    lines = text.splitlines(keepends=True)
+    kind = rng.randrange(16)
+    if kind == 0 and text:  # truncate anywhere
+        return text[: rng.randrange(len(text))]
+    if kind == 1:  # random bytes inserted
+        at = rng.randrange(len(text) + 1)
+        junk = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 40)))
+        return text[:at] + junk.decode("latin-1") + text[at:]
+    if kind == 2 and len(lines) > 2:  # a line removed
+        del lines[rng.randrange(len(lines))]
+        return "".join(lines)
+    if kind == 3 and len(lines) > 2:  # a line repeated
+        i = rng.randrange(len(lines))
+        lines.insert(i, lines[i])
+        return "".join(lines)
+    if kind == 4 and len(lines) > 3:  # two lines swapped
+        i, j = rng.randrange(1, len(lines)), rng.randrange(1, len(lines))
+        lines[i], lines[j] = lines[j], lines[i]
+        return "".join(lines)
+    if kind == 5:  # a number replaced by a hostile value
+        return replace_number(text, rng, rng.choice(NUMBERS))
+    if kind == 6:  # empty
+        return ""
+    if kind == 7:  # a byte-order mark and CRLF line ends
+        return "\ufeff" + text.replace("\n", "\r\n")
+    if kind == 8:  # a very long line
+        at = rng.randrange(len(text) + 1)
+        return text[:at] + "1" * rng.choice([10_000, 1_000_000]) + text[at:]
+    if kind == 9:  # a field separator changed
+        return text.replace(",", rng.choice([";", "\t", " ", ",,"]), rng.randrange(1, 50))
+    if kind == 10:  # invalid UTF-8
+        at = rng.randrange(len(text) + 1)
+        return text[:at] + "\udcff" + text[at:]
+    if kind == 11 and lines:  # the first line (a header) doubled or cut
+        return lines[0] + text if rng.random() < 0.5 else "".join(lines[1:])
+    if kind == 12:  # a number scaled wildly
+        return replace_number(text, rng, None, scale=rng.choice([1e9, -1.0, 1e-9, 0.0]))
+    if kind == 13:  # deep nesting (an expression, a TOML array)
+        at = rng.randrange(len(text) + 1)
+        depth = rng.choice([100, 5000])
+        return text[:at] + "(" * depth + "1" + ")" * depth + text[at:]
+    if kind == 14:  # NUL bytes
+        at = rng.randrange(len(text) + 1)
+        return text[:at] + "\0" * rng.randrange(1, 8) + text[at:]
+    # several changes at once
+    for _ in range(rng.randrange(2, 5)):
+        text = mutate_text(text, rng)
+    return text
+
+
+def replace_number(text, rng, value, scale=None):
+    import re
+    spans = [m.span() for m in re.finditer(r"-?\d+(\.\d+)?([eE]-?\d+)?", text)]
+    if not spans:
+        return text
+    a, b = rng.choice(spans)
+    if scale is not None:
+        try:
+            value = repr(float(text[a:b]) * scale)
+        except ValueError:
+            value = "nan"
+    return text[:a] + value + text[b:]
+
+
+def write(path, text):
+    # surrogate escapes carry invalid UTF-8 bytes through Python's strings
+    path.write_bytes(text.encode("utf-8", "surrogateescape"))
+
+
+# ---------------------------------------------------------------- the cases
+
+class Base:
+    """The campaign's clean inputs, made once: a spec, a short log, its
+    sightings and map, a jobs file, a topic mapping, a URDF and its
+    controller configuration."""
+
+    def __init__(self, bin_, work):
+        self.bin, self.dir = bin_, work
+        self.spec = (ROOT / "spec" / "diff_drive.toml").read_text()
+        lines = (ROOT / "data" / "mystery_robot.csv").read_text().splitlines(keepends=True)
+        self.log = "".join(lines[:301])
+        subprocess.run([bin_, "simulate", "--spec", str(ROOT / "spec" / "diff_drive.toml"),
+                        "--landmarks", str(ROOT / "data" / "beacons.csv"), "--out", "sim.csv",
+                        "--observations", "obs.csv"], cwd=work, check=True, capture_output=True)
+        sim = (work / "sim.csv").read_text().splitlines(keepends=True)
+        self.sim = "".join(sim[:601])
+        self.obs = (work / "obs.csv").read_text()
+        self.map = (ROOT / "data" / "beacons.csv").read_text()
+        self.urdf = (ROOT / "tests" / "robots" / "burger" / "robot.urdf").read_text()
+        self.controllers = (ROOT / "tests" / "robots" / "burger" / "controllers.yaml").read_text()
+        self.topics = '[inputs]\nenc_r = "/joint_states:position[0]"\n'
+        self.job = {"id": "a", "args": ["compare", "--spec", "SPEC", "--data", "LOG"]}
+
+
+HOSTILE_OPTIONS = {
+    "--set": ["b=nan", "b=1e308", "b=-1", "nosuch=1", "b=", "=1", "b=1=2", "b=0"],
+    "--noise": ["dv=1e100", "dv=nan", "dv=-1", "dv=0", "nosuch=1", "dv=1e-320"],
+    "--gate": ["-1", "nan", "0", "1e308", "inf"],
+    "--max-gap": ["nan", "-1", "0", "1e-300", "inf"],
+    "--laps": ["0", "-1", "1e9", "nan", "99999999999"],
+    "--seed": ["-1", "x", "1e30"],
+    "--jobs": ["0", "-1", "100000000", "x"],
+    "--value": ["k_slip=nan", "k_slip=1e308", "nosuch=1", "k_slip"],
+}
+
+
+def case(base, rng, k, tmp):
+    """The k-th case: (command line, output paths, largest input size, what
+    was mutated)."""
+    kind = rng.choice(["log", "log", "spec", "spec", "sightings", "map", "jobs", "topics",
+                       "urdf", "controllers", "option", "option"])
+    files = {"spec.toml": base.spec, "log.csv": base.log, "sim.csv": base.sim,
+             "obs.csv": base.obs, "map.csv": base.map, "robot.urdf": base.urdf,
+             "controllers.yaml": base.controllers, "topics.toml": base.topics}
+    job = dict(base.job, args=["compare", "--spec", str(tmp / "spec.toml"), "--data", str(tmp / "log.csv")])
+    files["jobs.jsonl"] = json.dumps(job) + "\n"
+    target = {"log": rng.choice(["log.csv", "sim.csv"]), "spec": "spec.toml", "sightings": "obs.csv",
+              "map": "map.csv", "jobs": "jobs.jsonl", "topics": "topics.toml", "urdf": "robot.urdf",
+              "controllers": "controllers.yaml", "option": None}[kind]
+    if target:
+        files[target] = mutate_text(files[target], rng)
+    for name, text in files.items():
+        write(tmp / name, text)
+    out_json, out_file, report = tmp / "out.json", tmp / "out.csv", tmp / "report"
+    analysis = ["--spec", "spec.toml", "--data", "log.csv"]
+    seen = ["--spec", "spec.toml", "--data", "sim.csv", "--observations", "obs.csv", "--landmarks", "map.csv"]
+    commands = {
+        "log": [["compare", *analysis], ["fit", *analysis], ["diagnose", *analysis],
+                ["compare", *seen], ["localize", *seen]],
+        "spec": [["compare", *analysis], ["fit", *analysis], ["simulate", "--spec", "spec.toml", "--out", "out.csv"],
+                 ["add-effect", "--spec", "spec.toml", "--effect", "lateral_slip", "--out", "out.toml"]],
+        "sightings": [["localize", *seen], ["fit", *seen], ["diagnose", *seen]],
+        "map": [["localize", *seen], ["compare", *seen]],
+        "jobs": [["batch", "jobs.jsonl", "--out", "results.jsonl"]],
+        "topics": [["compare", *analysis, "--topics", "topics.toml"]],
+        "urdf": [["init", "--urdf", "robot.urdf", "--out", "out.toml"]],
+        "controllers": [["init", "--urdf", "robot.urdf", "--controller", "controllers.yaml", "--out", "out.toml"]],
+    }
+    if kind == "option":
+        opt = rng.choice(list(HOSTILE_OPTIONS))
+        value = rng.choice(HOSTILE_OPTIONS[opt])
+        cmd = {"--set": ["fit", *analysis], "--noise": ["localize", *seen], "--gate": ["localize", *seen],
+               "--max-gap": ["compare", *analysis],
+               "--laps": ["simulate", "--spec", "spec.toml", "--out", "out.csv"],
+               "--seed": ["simulate", "--spec", "spec.toml", "--out", "out.csv"],
+               "--jobs": ["batch", "jobs.jsonl", "--out", "results.jsonl"],
+               "--value": ["add-effect", "--spec", "spec.toml", "--effect", "lateral_slip", "--out", "out.toml"]}[opt]
+        args = [*cmd, opt, value]
+        what = f"{opt} {value}"
+    else:
+        args = list(rng.choice(commands[kind]))
+        what = f"mutated {target}"
+    if args[0] in ("compare", "fit", "diagnose", "localize"):
+        args += ["--json", str(out_json)]
+        if rng.random() < 0.2:
+            args += ["--report", str(report)]
+    outputs = [out_json, report, tmp / "out.toml"] + ([out_file] if args[0] == "simulate" else [])
+    size = max((tmp / n).stat().st_size for n in files)
+    return args, outputs, size, what
+
+
+def limit_memory():
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
+
+
+def run_case(bin_, base, seed, k, keep):
+    rng = random.Random(seed * 1_000_003 + k)
+    tmp = Path(tempfile.mkdtemp(prefix=f"hostile{k}-"))
+    try:
+        args, outputs, size, what = case(base, rng, k, tmp)
+        started = time.monotonic()
+        # GNU time reports the child's own peak resident set (%M, KiB) and the
+        # signal that killed it, if one did
+        timed = ["/usr/bin/time", "-f", "%M %x", "-o", str(tmp / ".rss"), bin_, *args]
+        # its own process group, so a hang's kill reaches kinegen under time
+        p = subprocess.Popen(timed, cwd=tmp, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             preexec_fn=limit_memory, start_new_session=True,
+                             env=dict(os.environ, NO_COLOR="1"))
+        try:
+            _, err = p.communicate(timeout=TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+            return verdict(k, args, what, "hang", "", size, 0, tmp, keep)
+        code, rss = child_status(tmp / ".rss", p.returncode)
+        text = err.decode("utf-8", "replace")
+        problem = judge(code, text, outputs)
+        return verdict(k, args, what, problem, text, size, rss, tmp, keep, code, time.monotonic() - started)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def child_status(path, returncode):
+    """kinegen's exit code (negative: the signal that killed it) and peak
+    resident set in bytes, from GNU time's report."""
+    lines = path.read_text().splitlines() if path.exists() else []
+    killed = next((int(l.split()[-1]) for l in lines if "terminated by signal" in l), None)
+    figures = lines[-1].split() if lines else []
+    rss = int(figures[0]) * 1024 if figures and figures[0].isdigit() else 0
+    return (-killed if killed else returncode), rss
+
+
+def judge(code, text, outputs):
+    """What is wrong with a finished run, or None."""
+    if code == 101 or "panicked at" in text:
+        return "panic"
+    if code < 0:
+        return f"signal {-code}"
+    if code not in (0, 1, 2):
+        return f"exit {code}"
+    stray = [str(o) for o in outputs if o.exists()]
+    if code == 2:
+        if stray:
+            return "stray output on exit 2: " + ", ".join(stray)
+        if not located(text):
+            return "unlocated error"
+    if code == 0 and outputs[0].exists():
+        doc = outputs[0].read_text()
+        if any(t in doc for t in ("NaN", "Infinity")):
+            return "NaN or infinity in the JSON document"
+    return None
+
+
+def located(text):
+    """An exit-2 message names a file (with a line, row or column), an
+    option, or an input by name."""
+    t = text.lower()
+    return any(s in t for s in (".csv", ".toml", ".jsonl", ".urdf", ".yaml", "--", "line", "row",
+                                "column", "option", "argument", "usage:"))
+
+
+def verdict(k, args, what, problem, text, size, rss, tmp, keep, code=None, seconds=0.0):
+    if problem and keep:
+        dest = keep / f"case{k:05d}"
+        shutil.copytree(tmp, dest, dirs_exist_ok=True)
+        (dest / "REPRODUCE").write_text(f"cd {dest} && kinegen {' '.join(args)}\n# {problem}\n{text}")
+    return {"k": k, "command": args[0], "what": what, "problem": problem, "exit": code,
+            "size": size, "rss": rss, "seconds": seconds, "message": text.strip().splitlines()[-1:] if text else []}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--bin", default=str(ROOT / "target" / "debug" / "kinegen"))
+    ap.add_argument("--cases", type=int, default=2000)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
+    ap.add_argument("--keep", type=Path)
+    a = ap.parse_args()
+    bin_ = str(Path(a.bin).resolve())
+    work = Path(tempfile.mkdtemp(prefix="hostile-base-"))
+    keep = a.keep or Path(tempfile.mkdtemp(prefix="hostile-failures-"))
+    keep.mkdir(parents=True, exist_ok=True)
+    base = Base(bin_, work)
+    started = time.monotonic()
+    with cf.ThreadPoolExecutor(a.jobs) as pool:
+        results = list(pool.map(lambda k: run_case(bin_, base, a.seed, k, keep), range(a.cases)))
+    shutil.rmtree(work, ignore_errors=True)
+    report(results, time.monotonic() - started, keep)
+    failed = [r for r in results if r["problem"]]
+    raise SystemExit(1 if failed else 0)
+
+
+def report(results, seconds, keep):
+    by = {}
+    for r in results:
+        row = by.setdefault(r["command"], {"cases": 0, 0: 0, 1: 0, 2: 0, "failed": 0})
+        row["cases"] += 1
+        if r["problem"]:
+            row["failed"] += 1
+        elif r["exit"] in (0, 1, 2):
+            row[r["exit"]] += 1
+    print(f"{len(results)} hostile cases in {seconds:.0f} s")
+    print(f"{'command':<11} {'cases':>6} {'exit 0':>7} {'exit 1':>7} {'exit 2':>7} {'failed':>7}")
+    for cmd, row in sorted(by.items()):
+        print(f"{cmd:<11} {row['cases']:>6} {row[0]:>7} {row[1]:>7} {row[2]:>7} {row['failed']:>7}")
+    failed = [r for r in results if r["problem"]]
+    # peak memory as a base (the binary, its tables) plus a multiple of the
+    # largest input: the base is the smallest input's peak
+    done = [r for r in results if r["rss"]]
+    if done:
+        base = min(r["rss"] for r in done)
+        big = [r for r in done if r["size"] >= 1 << 20]
+        print(f"peak memory: at most {max(r['rss'] for r in done) >> 20} MB; the base {base >> 20} MB")
+        if big:
+            worst = max(big, key=lambda r: (r["rss"] - base) / r["size"])
+            print(f"  above the base, at most {(worst['rss'] - base) / worst['size']:.1f}x the largest input "
+                  f"over the {len(big)} cases with an input of 1 MB or more ({worst['command']})")
+    for r in failed[:20]:
+        print(f"FAILED case {r['k']}: {r['command']} ({r['what']}): {r['problem']} {r['message']}")
+    if failed:
+        print(f"{len(failed)} failed; reproducers in {keep}")
+    else:
+        shutil.rmtree(keep, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
