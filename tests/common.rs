@@ -72,7 +72,7 @@ fn json_of(args: &[&str], o: &Output) -> serde_json::Value {
         o.status.success(),
         "kinegen {:?} failed: {}",
         args,
-        stderr(&o)
+        stderr(o)
     );
     serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
         panic!(
