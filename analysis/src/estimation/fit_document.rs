@@ -92,7 +92,10 @@ pub fn calibration_document(prep: &Loaded, cal: &Calibrated, fo: &FitOptions) ->
     doc
 }
 
-/// Each run's entry: its errors after the calibration, and before.
+/// Each run's entry, named by the path the user gave: its errors after the
+/// calibration at the top, before it under `before`, whether it was held
+/// out, and the start pose its dead reckoning used (a fitted run's measured
+/// start with its refined heading, a held-out run's as measured).
 fn per_run(
     runs: &[Run],
     before: &[Errors],
