@@ -86,13 +86,7 @@ pub fn say_read_warnings(out: &Out, warnings: &[String], verbose: bool) -> usize
         say_warnings(out, warnings);
         return warnings.len();
     }
-    let mut seen = std::collections::BTreeSet::new();
-    let lines: Vec<String> = (warnings.iter())
-        .filter(|w| seen.insert(w.as_str()))
-        .flat_map(|w| crate::output::warning_lines(w, 2))
-        .collect();
-    lines.iter().for_each(|l| out.say(l));
-    lines.len()
+    crate::output::say_warnings_short(out, warnings, 2)
 }
 
 /// Exit 2 with a message naming the problem (where every command finds it).

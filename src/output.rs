@@ -285,14 +285,18 @@ pub fn table_lines(t: &comfy_table::Table) -> Vec<String> {
 }
 
 /// Warnings for people: each said once, wrapped to the width, the first
-/// `lines` lines of each (the rest with -v and in the JSON).
-pub fn say_warnings_short(out: &Out, warnings: &[String], lines: usize) {
+/// `lines` lines of each (the rest with -v and in the JSON); returns how
+/// many lines were said.
+pub fn say_warnings_short(out: &Out, warnings: &[String], lines: usize) -> usize {
     let mut seen = std::collections::BTreeSet::new();
+    let mut said = 0;
     for w in warnings.iter().filter(|w| seen.insert(w.as_str())) {
         for l in warning_lines(w, lines) {
             out.say(&l);
+            said += 1;
         }
     }
+    said
 }
 
 /// One warning wrapped to the width, cut to its first `lines` lines.

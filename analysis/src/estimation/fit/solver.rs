@@ -346,9 +346,7 @@ impl Stage<'_> {
         }
         let Some(eig) = linalg::symmetric_eigen(arrow::marginal(jtj, self.u.m)) else {
             // not finite: no direction is determined
-            return (0..self.u.m)
-                .map(|k| DVector::from_fn(self.u.m, |i, _| f64::from(i == k)))
-                .collect();
+            return unit_vectors(self.u.m);
         };
         let emax = eig.eigenvalues.max();
         let seen = (0..self.u.m)
@@ -682,6 +680,13 @@ struct Identifiability {
     warnings: Vec<String>,
 }
 
+/// The `m` unit vectors: every direction, when none is determined.
+fn unit_vectors(m: usize) -> Vec<DVector<f64>> {
+    (0..m)
+        .map(|k| DVector::from_fn(m, |i, _| f64::from(i == k)))
+        .collect()
+}
+
 impl Identifiability {
     /// When the normal equations are not finite (a parameter so large the
     /// tracks overflow): no direction is determined, and the warning says
@@ -690,7 +695,7 @@ impl Identifiability {
         Identifiability {
             cutoff: f64::INFINITY,
             undetermined: vec![true; m],
-            null: (0..m).map(|k| DVector::from_fn(m, |i, _| f64::from(i == k))).collect(),
+            null: unit_vectors(m),
             warnings: vec![format!(
                 "not identifiable from these logs: {} (the fit's normal equations are not finite: a value so far out that the tracks overflow?)",
                 names.join(", ")
