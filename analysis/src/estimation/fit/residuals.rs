@@ -364,6 +364,11 @@ impl RunCx<'_> {
             let first = if o.endpoints_only { gt.len() - 1 } else { 1 };
             let (mut pred, mut hx, mut hp) = ([0.0; 3], IDENTITY, vec![0.0; 3 * np]);
             let scratch = &mut Vec::new();
+            // the state's sensitivities at the measurement's instant, d x_m /
+            // d column, made once per row for its three residuals (`ds[m *
+            // width + c]`: a third of the interpolations it took per residual)
+            let width = free.len();
+            let mut ds = vec![0.0; 3 * width];
             for k in first..gt.len() {
                 let (j, a) = if tau_i.is_some() {
                     shifted(k)
@@ -392,23 +397,27 @@ impl RunCx<'_> {
                     }
                     None => pred = x,
                 }
+                if with_jac {
+                    let sens = track.sens.as_ref().unwrap();
+                    let (s0, s1) = (sens.at(j), sens.at(j + 1));
+                    for (ci, &c) in free.iter().enumerate() {
+                        for m in 0..3 {
+                            ds[m * width + ci] = if Some(c) == tau_i {
+                                -vel[m]
+                            } else {
+                                s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
+                            };
+                        }
+                    }
+                }
                 let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
-                let (hx, hp, vel) = (&hx, &hp[..], &vel);
+                let (hx, hp, ds) = (&hx, &hp[..], &ds);
                 for i in 0..3 {
                     let d = pred[i] - gt[k][i];
                     let row = with_jac.then(|| {
-                        let sens = track.sens.as_ref().unwrap();
-                        let (s0, s1) = (sens.at(j), sens.at(j + 1));
-                        free.iter().map(move |&c| {
-                            let dx = |m: usize| {
-                                if Some(c) == tau_i {
-                                    -vel[m]
-                                } else {
-                                    s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
-                                }
-                            };
+                        free.iter().enumerate().map(move |(ci, &c)| {
                             let direct = if c < np { hp[i * np + c] } else { 0.0 };
-                            chain(&hx[i * 3..i * 3 + 3], dx, direct) / sig[i]
+                            chain(&hx[i * 3..i * 3 + 3], |m| ds[m * width + ci], direct) / sig[i]
                         })
                     });
                     sink.push(if i == 2 { wrap(d) } else { d } / sig[i], row);
