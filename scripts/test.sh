@@ -46,6 +46,12 @@ python3 verify/precision/reference.py --check
 mdbook="$(python3 -c 'import sysconfig; print(sysconfig.get_path("scripts"))')/mdbook"
 [ -x "$mdbook" ] || mdbook=mdbook
 "$mdbook" build docs
+# pyo3's build script reads these two; maturin sets them when it builds the
+# Python package below: set the same here, so that the package reuses this
+# build's pyo3 instead of compiling it (and rebuilding this one) again
+PYO3_PYTHON="$(python3 -c 'import sys; print(sys.executable)')"
+PYO3_ENVIRONMENT_SIGNATURE="$(python3 -c 'import platform, sys; print(f"cpython-{sys.version_info[0]}.{sys.version_info[1]}-{platform.architecture()[0]}")')"
+export PYO3_PYTHON PYO3_ENVIRONMENT_SIGNATURE
 cargo build --workspace --all-targets
 # the binary the workspace build just made: `cargo run --bin kinegen` resolves
 # features for the one package and would compile symbolica a second time (~10 min)
