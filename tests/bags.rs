@@ -503,3 +503,141 @@ fn landmark_topic_mistakes_are_located(t: &Path, array: &Path, ta: &Path, map: &
         "{e}"
     );
 }
+
+/// A velocity-commanded robot's spec, as a user writes it: its inputs are
+/// the commands it was sent (`v`, `omega` in its logs).
+const COMMANDED: &str = r#"name = "commanded_base"
+state = ["x", "y", "theta"]
+
+[[input]]
+name = "v_cmd"
+column = "v"
+kind = "absolute"
+unit = "m/s"
+
+[[input]]
+name = "w_cmd"
+column = "omega"
+kind = "absolute"
+unit = "rad/s"
+
+[[parameter]]
+name = "k_v"
+nominal = 1.0
+min = 0.0
+
+[[parameter]]
+name = "k_w"
+nominal = 1.0
+min = 0.0
+
+[[noise]]
+name = "dv"
+sigma = 0.02
+
+[[noise]]
+name = "dw"
+sigma = 0.02
+
+[motion]
+vx = "k_v*v_cmd + dv"
+vy = "0"
+omega = "k_w*w_cmd + dw"
+"#;
+
+/// Issue #68: a velocity-commanded robot's bag has no wheel joints, only
+/// the commands it was sent on `/cmd_vel`. Its input columns read a
+/// `Twist`'s (unstamped: timed by the bag's receive time) or a
+/// `TwistStamped`'s components, and calibrate as the CSV does; a mapping
+/// that names no component, or one a Twist lacks, is refused at its place.
+#[test]
+fn velocity_commands_are_read_from_cmd_vel() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = tmp.path().join("commanded_base.toml");
+    std::fs::write(&spec, COMMANDED).unwrap();
+    let s = spec.to_str().unwrap();
+    let csv = simulate(
+        tmp.path(),
+        "commanded.csv",
+        &[
+            "--spec",
+            s,
+            "--trajectory",
+            "random",
+            "--seed",
+            "5",
+            "--set",
+            "k_v=1.06",
+            "--set",
+            "k_w=0.93",
+        ],
+    );
+    let topics = tmp.path().join("topics.toml");
+    std::fs::write(
+        &topics,
+        "[inputs]\nv = { topic = \"/cmd_vel\", field = \"linear.x\" }\nomega = { topic = \"/cmd_vel\", field = \"angular.z\" }\n",
+    )
+    .unwrap();
+    let fit = |data: &Path, map: Option<&Path>| {
+        let mut a = vec!["fit", "--spec", s, "--data", data.to_str().unwrap()];
+        if let Some(m) = map {
+            a.extend(["--topics", m.to_str().unwrap()]);
+        }
+        estimates(&kinegen_json(&a))
+    };
+    let from_csv = fit(&csv, None);
+    assert!(
+        (from_csv[0].1 - 1.06).abs() < 0.01 && (from_csv[1].1 - 0.93).abs() < 0.01,
+        "{from_csv:?}"
+    );
+    for kind in ["twist", "stamped"] {
+        let extra = [
+            "--joints",
+            "none",
+            "--imu",
+            "none",
+            "--cmd-vel",
+            "v,omega",
+            "--cmd-vel-type",
+            kind,
+        ];
+        let b = bag(tmp.path(), &csv, &format!("cmd_{kind}"), &extra);
+        let from_bag = fit(&b, Some(&topics));
+        for ((n, c), (_, b)) in from_csv.iter().zip(&from_bag) {
+            assert!(((c - b) / c).abs() < 1e-6, "{kind}: {n}: CSV {c} bag {b}");
+        }
+    }
+    // mistakes: no component named; a component a Twist lacks; a joint's topic
+    let b = tmp.path().join("cmd_twist");
+    let refused = |text: &str, says: &[&str]| {
+        let m = tmp.path().join("bad_topics.toml");
+        std::fs::write(&m, text).unwrap();
+        let a = [
+            "compare",
+            "--spec",
+            s,
+            "--data",
+            b.to_str().unwrap(),
+            "--topics",
+            m.to_str().unwrap(),
+        ];
+        let o = kinegen(&a);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{text}: {e}");
+        for w in says {
+            assert!(e.contains(w), "{text}: `{w}` not in: {e}");
+        }
+    };
+    refused(
+        "[inputs]\nv = { topic = \"/cmd_vel\" }\nomega = { topic = \"/cmd_vel\", field = \"angular.z\" }\n",
+        &["input column `v`", "`/cmd_vel`", "field = \"linear.x\""],
+    );
+    refused(
+        "[inputs]\nv = { topic = \"/cmd_vel\", field = \"angular.x\" }\n",
+        &["bad_topics.toml:2", "linear.x"],
+    );
+    refused(
+        "[inputs]\nv = { topic = \"/mocap/pose\", field = \"linear.x\" }\nomega = { topic = \"/cmd_vel\", field = \"angular.z\" }\n",
+        &["`/mocap/pose` carries geometry_msgs/msg/PoseStamped", "JointState or geometry_msgs/msg/Twist"],
+    );
+}

@@ -5,7 +5,8 @@ The messages are serialised by `rosbags`' own ROS 2 type store, independently of
 kinegen's decoder, so a bag read back by kinegen checks its message layouts
 against ROS 2's. Test tooling only (pip: verify/bags/requirements.txt).
 
-  csv_to_bag.py LOG.csv OUT_DIR --joints enc_r,enc_l [--pose posestamped|odometry|tf|none]
+  csv_to_bag.py LOG.csv OUT_DIR --joints enc_r,enc_l|none [--pose posestamped|odometry|tf|none]
+                [--cmd-vel V,OMEGA [--cmd-vel-type twist|stamped]]
                 [--imu gyro_z|none] [--frame BASE] [--swap-stamps TOPIC:K] [--extra-topic]
                 [--observations OBS.csv [--observation-form array|point]]
 
@@ -15,6 +16,10 @@ user's own message type, as a robot would publish them, registered from its
 `Landmark[] landmarks` of `string id, float64 range, float64 bearing`) per
 instant; `point` writes one `test_msgs/msg/Sighting` (header, `string id`,
 `geometry_msgs/Point position` in the robot frame) per observation.
+
+`--cmd-vel` writes two CSV columns as a velocity-commanded robot's commands
+on `/cmd_vel` (`linear.x`, `angular.z`): `geometry_msgs/msg/Twist`, which has
+no stamp (its receive time is the log's t), or `TwistStamped`.
 
 Header stamps are the log's t plus an epoch; receive times lag them by a few
 milliseconds, and the topics are written interleaved by receive time.
@@ -50,6 +55,8 @@ def main():
     ap.add_argument('--extra-topic', action='store_true', help='also write a second JointState topic')
     ap.add_argument('--observations', default=None, help='range-bearing observations t,id,range,bearing')
     ap.add_argument('--observation-form', default='array', choices=['array', 'point'])
+    ap.add_argument('--cmd-vel', default=None, help='V,OMEGA: CSV columns written as /cmd_vel linear.x, angular.z')
+    ap.add_argument('--cmd-vel-type', default='twist', choices=['twist', 'stamped'])
     a = ap.parse_args()
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
@@ -63,7 +70,7 @@ def main():
     T = ts.types
     Header = T['std_msgs/msg/Header']
     rows = list(csv.DictReader(open(a.log)))
-    joints = a.joints.split(',')
+    joints = [] if a.joints == 'none' else a.joints.split(',')
     px, py, pth = a.pose_columns.split(',')
     rng = random.Random(1)
     empty = np.array([], dtype=np.float64)
@@ -72,9 +79,21 @@ def main():
         t = float(r['t'])
         hdr = Header(stamp=stamp_of(ts, t), frame_id='base_link')
         recv = lambda: int(round((EPOCH + t) * 1e9)) + rng.randint(1_000_000, 5_000_000)
-        msgs.append((recv(), '/joint_states', 'sensor_msgs/msg/JointState', T['sensor_msgs/msg/JointState'](
-            header=hdr, name=joints, position=np.array([float(r[j]) for j in joints]),
-            velocity=empty, effort=empty)))
+        if joints:
+            msgs.append((recv(), '/joint_states', 'sensor_msgs/msg/JointState', T['sensor_msgs/msg/JointState'](
+                header=hdr, name=joints, position=np.array([float(r[j]) for j in joints]),
+                velocity=empty, effort=empty)))
+        if a.cmd_vel:
+            v, w = a.cmd_vel.split(',')
+            v3 = T['geometry_msgs/msg/Vector3']
+            tw = T['geometry_msgs/msg/Twist'](linear=v3(x=float(r[v]), y=0.0, z=0.0),
+                                              angular=v3(x=0.0, y=0.0, z=float(r[w])))
+            if a.cmd_vel_type == 'twist':
+                # no stamp: the receive time is the command's time
+                msgs.append((int(round((EPOCH + t) * 1e9)), '/cmd_vel', 'geometry_msgs/msg/Twist', tw))
+            else:
+                msgs.append((recv(), '/cmd_vel', 'geometry_msgs/msg/TwistStamped',
+                             T['geometry_msgs/msg/TwistStamped'](header=hdr, twist=tw)))
         if a.extra_topic:
             msgs.append((recv(), '/other/joint_states', 'sensor_msgs/msg/JointState', T['sensor_msgs/msg/JointState'](
                 header=hdr, name=joints, position=np.array([0.0 for _ in joints]), velocity=empty, effort=empty)))

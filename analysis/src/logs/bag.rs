@@ -2,11 +2,13 @@
 //! columns of a CSV log (CONTRACT section 2) on one time base, so everything
 //! after reading (checks, runs, fits) is the same for a bag and a CSV.
 //!
-//! Rows are the messages of the first input's `JointState` topic; the other
-//! streams (more joint topics, the pose, the gyro) are interpolated linearly to
-//! their stamps, and rows outside any stream's span are dropped. Time is the
-//! messages' header stamps (or the bag's receive time, if asked), minus the first
-//! row's.
+//! Rows are the messages of the first input's topic: a `JointState` (wheel
+//! and steering joints) or a `Twist` / `TwistStamped` (velocity commands,
+//! `/cmd_vel`). The other streams (more joint topics, the pose, the gyro) are
+//! interpolated linearly to their stamps; velocity commands hold their value
+//! until the next one. Rows outside any stream's span are dropped. Time is
+//! the messages' header stamps (or the bag's receive time, if asked; an
+//! unstamped `Twist` has only that), minus the first row's.
 use crate::logs::log::{wrap, Log, LogError};
 use crate::logs::rosmsg::{self, decode};
 use serde::Deserialize;
@@ -19,6 +21,10 @@ const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
 const ODOMETRY: &str = "nav_msgs/msg/Odometry";
 const TF: &str = "tf2_msgs/msg/TFMessage";
 const POSE_TYPES: [&str; 3] = [POSE_STAMPED, ODOMETRY, TF];
+const TWIST: &str = "geometry_msgs/msg/Twist";
+const TWIST_STAMPED: &str = "geometry_msgs/msg/TwistStamped";
+/// What an input column can be read from.
+const INPUT_TYPES: [&str; 3] = [JOINT_STATE, TWIST, TWIST_STAMPED];
 
 /// Is this path a bag (an `.mcap` file, or a rosbag2 directory holding one)?
 pub fn is_bag(path: &Path) -> bool {
@@ -36,14 +42,40 @@ pub enum Stamps {
     Receive,
 }
 
-/// A joint of a `JointState` topic that feeds an input column.
+/// Where an input column comes from: a joint of a `JointState` topic (wheel
+/// encoders, steering angles), or a component of a `Twist` / `TwistStamped`
+/// topic (a velocity-commanded robot's `/cmd_vel`).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct JointSource {
+pub struct InputSource {
     /// Default: the bag's only `JointState` topic.
     pub topic: Option<String>,
-    /// Default: the log column's name.
+    /// For a `JointState` topic; default: the log column's name.
     pub joint: Option<String>,
+    /// For a `Twist` or `TwistStamped` topic: `linear.x`, `linear.y` or
+    /// `angular.z`.
+    pub field: Option<TwistField>,
+}
+
+/// The component of a velocity command an input column reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+pub enum TwistField {
+    #[serde(rename = "linear.x")]
+    LinearX,
+    #[serde(rename = "linear.y")]
+    LinearY,
+    #[serde(rename = "angular.z")]
+    AngularZ,
+}
+
+impl TwistField {
+    fn of(self, t: &rosmsg::Twist) -> f64 {
+        match self {
+            TwistField::LinearX => t.linear.x,
+            TwistField::LinearY => t.linear.y,
+            TwistField::AngularZ => t.angular.z,
+        }
+    }
 }
 
 /// Where the ground-truth pose comes from.
@@ -104,9 +136,9 @@ pub struct Detection {
 pub struct TopicMap {
     #[serde(default)]
     pub stamps: Stamps,
-    /// Log column (a spec input's `column`) -> joint.
+    /// Log column (a spec input's `column`) -> its joint or command.
     #[serde(default)]
-    pub inputs: BTreeMap<String, JointSource>,
+    pub inputs: BTreeMap<String, InputSource>,
     pub pose: Option<PoseSource>,
     pub gyro: Option<ImuSource>,
     pub landmarks: Option<LandmarkSource>,
@@ -177,6 +209,9 @@ struct Series {
     index: Vec<usize>,
     t: Vec<f64>,
     values: Vec<Vec<f64>>,
+    /// Each value holds until the next (velocity commands), rather than
+    /// changing linearly between them (measurements).
+    held: bool,
 }
 
 /// Read a bag as a log with the `wanted` columns. `progress(done, total)` is
@@ -200,46 +235,7 @@ pub fn read(
         all,
     };
     let file = bag.file;
-    // inputs: one series per JointState topic, with the joints each column needs
-    let mut joints: Vec<(String, String, String)> = Vec::new(); // (column, topic, joint)
-    for col in &wanted.inputs {
-        let src = map.inputs.get(col);
-        let topic = match src.and_then(|s| s.topic.clone()) {
-            Some(t) => t,
-            None => bag
-                .only(&[JOINT_STATE], "wheel and steering joints")?
-                .ok_or_else(|| {
-                    bag.err(format!(
-                        "no {JOINT_STATE} topic for the input column `{col}`; {}",
-                        bag.listing()
-                    ))
-                })?,
-        };
-        let joint = src
-            .and_then(|s| s.joint.clone())
-            .unwrap_or_else(|| col.clone());
-        joints.push((col.clone(), topic, joint));
-    }
-    let mut columns: HashMap<String, (usize, usize)> = HashMap::new(); // column -> (series, value)
-    let mut series: Vec<Series> = Vec::new();
-    for (col, topic, _) in &joints {
-        if series.iter().all(|s| &s.topic != topic) {
-            let names: Vec<&str> = joints
-                .iter()
-                .filter(|j| &j.1 == topic)
-                .map(|j| j.2.as_str())
-                .collect();
-            let t = bag.typed(topic, &[JOINT_STATE], &format!("input column `{col}`"))?;
-            series.push(joint_series(file, topic, t, &names, map.stamps)?);
-        }
-        let s = series.iter().position(|s| &s.topic == topic).unwrap();
-        let v = joints
-            .iter()
-            .filter(|j| &j.1 == topic)
-            .position(|j| &j.0 == col)
-            .unwrap();
-        columns.insert(col.clone(), (s, v));
-    }
+    let (mut series, mut columns) = input_series(&bag, wanted, map)?;
     let pose = match &map.pose {
         Some(p) => Some(p.clone()),
         None => bag
@@ -277,6 +273,89 @@ pub fn read(
         }
     };
     Ok((log, detections))
+}
+
+/// One input column's source: the topic and what to read in it.
+struct InputColumn {
+    column: String,
+    topic: String,
+    /// The joint (JointState topics).
+    joint: String,
+    /// The command component (Twist topics).
+    field: Option<TwistField>,
+}
+
+/// The input columns' series, one per topic (its first is the log's clock),
+/// and where each column is in them: (series, value).
+#[allow(clippy::type_complexity)]
+fn input_series(
+    bag: &Bag,
+    wanted: &Wanted,
+    map: &TopicMap,
+) -> Result<(Vec<Series>, HashMap<String, (usize, usize)>), LogError> {
+    let mut inputs: Vec<InputColumn> = Vec::new();
+    for col in &wanted.inputs {
+        let src = map.inputs.get(col);
+        let topic = match src.and_then(|s| s.topic.clone()) {
+            Some(t) => t,
+            None => bag
+                .only(&[JOINT_STATE], "wheel and steering joints")?
+                .ok_or_else(|| {
+                    bag.err(format!(
+                        "no {JOINT_STATE} topic for the input column `{col}` (a velocity command names its topic and component under [inputs] in --topics: `{col} = {{ topic = \"/cmd_vel\", field = \"linear.x\" }}`, or `\"linear.y\"`, `\"angular.z\"`); {}",
+                        bag.listing()
+                    ))
+                })?,
+        };
+        inputs.push(InputColumn {
+            column: col.clone(),
+            topic,
+            joint: src
+                .and_then(|s| s.joint.clone())
+                .unwrap_or_else(|| col.clone()),
+            field: src.and_then(|s| s.field),
+        });
+    }
+    let mut columns: HashMap<String, (usize, usize)> = HashMap::new();
+    let mut series: Vec<Series> = Vec::new();
+    for c in &inputs {
+        if series.iter().all(|s| s.topic != c.topic) {
+            let same: Vec<&InputColumn> = inputs.iter().filter(|o| o.topic == c.topic).collect();
+            let what = format!("input column `{}`", c.column);
+            let t = bag.typed(&c.topic, &INPUT_TYPES, &what)?;
+            series.push(if t.schema == JOINT_STATE {
+                if let Some(o) = same.iter().find(|o| o.field.is_some()) {
+                    return Err(bag.err(format!(
+                        "input column `{}`: topic `{}` is a {JOINT_STATE}: name a `joint`, not a `field`",
+                        o.column, c.topic
+                    )));
+                }
+                let names: Vec<&str> = same.iter().map(|o| o.joint.as_str()).collect();
+                joint_series(bag.file, &c.topic, t, &names, map.stamps)?
+            } else {
+                let fields = same
+                    .iter()
+                    .map(|o| {
+                        o.field.ok_or_else(|| {
+                            bag.err(format!(
+                                "input column `{}`: topic `{}` carries {}: say which component with `field = \"linear.x\"`, `\"linear.y\"` or `\"angular.z\"` under [inputs] in --topics",
+                                o.column, c.topic, t.schema
+                            ))
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                twist_series(bag.file, &c.topic, t, &fields, map.stamps)?
+            });
+        }
+        let s = series.iter().position(|s| s.topic == c.topic).unwrap();
+        let v = inputs
+            .iter()
+            .filter(|o| o.topic == c.topic)
+            .position(|o| o.column == c.column)
+            .unwrap();
+        columns.insert(c.column.clone(), (s, v));
+    }
+    Ok((series, columns))
 }
 
 /// A bag's topics as read: the decoded ones kinegen can use, and every
@@ -579,7 +658,8 @@ fn collect(
             all.push((ch.topic.clone(), schema.clone()));
         }
         let index = counts.entry(ch.topic.clone()).or_default();
-        if [JOINT_STATE, IMU].contains(&schema.as_str())
+        if INPUT_TYPES.contains(&schema.as_str())
+            || schema == IMU
             || POSE_TYPES.contains(&schema.as_str())
             || keep == Some(ch.topic.as_str())
         {
@@ -754,6 +834,33 @@ fn imu_series(file: &Path, topic: &str, t: &Topic, stamps: Stamps) -> Result<Ser
     Ok(s)
 }
 
+/// Velocity commands: the `fields` of each `Twist` or `TwistStamped`
+/// message. An unstamped `Twist` is timed by the bag's receive time, the only
+/// one it has. A command holds until the next one (a [`Series::held`]).
+fn twist_series(
+    file: &Path,
+    topic: &str,
+    t: &Topic,
+    fields: &[TwistField],
+    stamps: Stamps,
+) -> Result<Series, LogError> {
+    let mut s = Series::new(topic);
+    s.held = true;
+    for raw in &t.messages {
+        let (time, twist) = if t.schema == TWIST_STAMPED {
+            let m: rosmsg::TwistStamped = decoded(file, topic, t, raw)?;
+            (stamp(raw, &m.header, stamps), m.twist)
+        } else {
+            let m: rosmsg::Twist = decoded(file, topic, t, raw)?;
+            (raw.log_time as f64 * 1e-9, m)
+        };
+        s.index.push(raw.index);
+        s.t.push(time);
+        s.values.push(fields.iter().map(|f| f.of(&twist)).collect());
+    }
+    Ok(s)
+}
+
 impl Series {
     fn new(topic: &str) -> Series {
         Series {
@@ -761,11 +868,12 @@ impl Series {
             index: Vec::new(),
             t: Vec::new(),
             values: Vec::new(),
+            held: false,
         }
     }
 }
 
-/// Put every series on the time base of the first (the input joints), check
+/// Put every series on the time base of the first (the first input's), check
 /// the stamps, and build the log; with the stamp of its first row (its time 0).
 fn align(
     file: &Path,
@@ -838,7 +946,12 @@ fn align(
                     j += 1;
                 }
                 let a = ((t - s.t[j]) / (s.t[j + 1] - s.t[j])).clamp(0.0, 1.0);
-                let v = s.values[j][vi] + a * (s.values[j + 1][vi] - s.values[j][vi]);
+                let v = if s.held {
+                    // the command in force at t: the last one sent at or before it
+                    s.values[if a >= 1.0 { j + 1 } else { j }][vi]
+                } else {
+                    s.values[j][vi] + a * (s.values[j + 1][vi] - s.values[j][vi])
+                };
                 if col == heading {
                     wrap(v)
                 } else {
@@ -868,4 +981,47 @@ fn align(
         },
         t0,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn series(topic: &str, t: &[f64], v: &[f64], held: bool) -> Series {
+        Series {
+            topic: topic.into(),
+            index: (0..t.len()).collect(),
+            t: t.to_vec(),
+            values: v.iter().map(|x| vec![*x]).collect(),
+            held,
+        }
+    }
+
+    /// On the clock's rows, a measurement changes linearly between its
+    /// messages, a velocity command holds until the next one.
+    #[test]
+    fn commands_hold_and_measurements_interpolate() {
+        let clock = series(
+            "/joint_states",
+            &[0.0, 0.5, 1.0, 1.5, 2.0],
+            &[0.0; 5],
+            false,
+        );
+        let pose = series("/pose", &[0.0, 1.0, 2.0], &[0.0, 1.0, 2.0], false);
+        let cmd = series("/cmd_vel", &[0.0, 1.0, 2.0], &[0.1, 0.3, 0.5], true);
+        let columns = HashMap::from([
+            ("enc".to_string(), (0, 0)),
+            ("gt_x".to_string(), (1, 0)),
+            ("v".to_string(), (2, 0)),
+        ]);
+        let (log, _) = align(
+            Path::new("b.mcap"),
+            &[clock, pose, cmd],
+            &columns,
+            "gt_theta",
+        )
+        .unwrap();
+        assert_eq!(log.columns["gt_x"], vec![0.0, 0.5, 1.0, 1.5, 2.0]);
+        assert_eq!(log.columns["v"], vec![0.1, 0.1, 0.3, 0.3, 0.5]);
+    }
 }

@@ -106,6 +106,13 @@ pub struct Twist {
     pub angular: Vector3,
 }
 
+/// `geometry_msgs/msg/TwistStamped`
+#[derive(Debug, Clone, Deserialize)]
+pub struct TwistStamped {
+    pub header: Header,
+    pub twist: Twist,
+}
+
 /// `geometry_msgs/msg/TwistWithCovariance`
 #[derive(Debug, Clone, Deserialize)]
 pub struct TwistWithCovariance {
