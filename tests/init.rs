@@ -35,7 +35,33 @@ fn init(name: &str, dir: &Path) -> PathBuf {
     args.extend(["--topics-out", topics.to_str().unwrap()]);
     let o = kinegen_in(dir, &args);
     assert!(o.status.success(), "init {name}: {}", stderr(&o));
+    commands_mapping_reads(&topics);
     spec
+}
+
+/// The topics file's commented mapping of the controller's velocity
+/// commands (for a bag without the wheel joints), uncommented, is a
+/// mapping kinegen reads: each command input names a Twist component.
+fn commands_mapping_reads(topics: &Path) {
+    let text = std::fs::read_to_string(topics).unwrap();
+    let block = text
+        .split_once("# [inputs]\n")
+        .unwrap_or_else(|| panic!("no commands mapping in {text}"))
+        .1;
+    let toml = format!("[inputs]\n{}", block.replace("# ", ""));
+    let path = topics.with_extension("commands.toml");
+    std::fs::write(&path, &toml).unwrap();
+    let map = kinegen_analysis::logs::bag::TopicMap::read(&path)
+        .unwrap_or_else(|e| panic!("{e}: {toml}"));
+    assert!(
+        map.inputs.len() >= 2
+            && map
+                .inputs
+                .values()
+                .all(|i| i.field.is_some()
+                    && i.topic.as_deref().is_some_and(|t| t.ends_with("cmd_vel"))),
+        "{toml}"
+    );
 }
 
 /// Evaluate a spec expression with its definitions expanded, parameters at

@@ -4,7 +4,7 @@
 //! toml_edit: the comments carry as much as the values, and toml_edit's
 //! decor API would spread each comment over three calls.
 use crate::classify::{linear, num};
-use crate::robot::{Kinematics, ParamOut, Robot};
+use crate::robot::{Class, Kinematics, ParamOut, Robot};
 use std::fmt::Write;
 
 fn quote(s: &str) -> String {
@@ -219,5 +219,29 @@ pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
     if r.gyro.is_some() {
         let _ = writeln!(out, "\n# the IMU (sensor_msgs/Imu): its angular_velocity.z is gyro_z\n[gyro]\ntopic = \"/imu/data\"");
     }
+    let _ = writeln!(out, "{}", commands_hint(r));
     out
+}
+
+/// For a bag that logged the robot's velocity commands and not its wheel
+/// joints: the mapping of the controller's command topic, commented out (its
+/// inputs are a spec of commands, not this one's wheels).
+fn commands_hint(r: &Robot) -> String {
+    let topic = r
+        .controller
+        .as_ref()
+        .map_or("/cmd_vel".to_string(), |c| format!("/{}/cmd_vel", c.node));
+    let sideways = matches!(r.class, Class::Mecanum | Class::Omni);
+    let mut hint = format!(
+        "\n# A bag without the wheel joints, only the velocity commands the controller\n\
+         # was sent (geometry_msgs Twist or TwistStamped): give the spec command inputs\n\
+         # (kind = \"absolute\"; guide: how-to, Read a ROS 2 bag) and map them instead:\n\
+         # [inputs]\n\
+         # v = {{ topic = \"{topic}\", field = \"linear.x\" }}\n"
+    );
+    if sideways {
+        hint += &format!("# v_y = {{ topic = \"{topic}\", field = \"linear.y\" }}\n");
+    }
+    hint += &format!("# omega = {{ topic = \"{topic}\", field = \"angular.z\" }}");
+    hint
 }
