@@ -504,47 +504,6 @@ fn landmark_topic_mistakes_are_located(t: &Path, array: &Path, ta: &Path, map: &
     );
 }
 
-/// A velocity-commanded robot's spec, as a user writes it: its inputs are
-/// the commands it was sent (`v`, `omega` in its logs).
-const COMMANDED: &str = r#"name = "commanded_base"
-state = ["x", "y", "theta"]
-
-[[input]]
-name = "v_cmd"
-column = "v"
-kind = "absolute"
-unit = "m/s"
-
-[[input]]
-name = "w_cmd"
-column = "omega"
-kind = "absolute"
-unit = "rad/s"
-
-[[parameter]]
-name = "k_v"
-nominal = 1.0
-min = 0.0
-
-[[parameter]]
-name = "k_w"
-nominal = 1.0
-min = 0.0
-
-[[noise]]
-name = "dv"
-sigma = 0.02
-
-[[noise]]
-name = "dw"
-sigma = 0.02
-
-[motion]
-vx = "k_v*v_cmd + dv"
-vy = "0"
-omega = "k_w*w_cmd + dw"
-"#;
-
 /// Issue #68: a velocity-commanded robot's bag has no wheel joints, only
 /// the commands it was sent on `/cmd_vel`. Its input columns read a
 /// `Twist`'s (unstamped: timed by the bag's receive time) or a
@@ -553,8 +512,8 @@ omega = "k_w*w_cmd + dw"
 #[test]
 fn velocity_commands_are_read_from_cmd_vel() {
     let tmp = tempfile::tempdir().unwrap();
-    let spec = tmp.path().join("commanded_base.toml");
-    std::fs::write(&spec, COMMANDED).unwrap();
+    // the MRCLAM robots' spec as a user writes it (its camera unused here)
+    let spec = commanded_spec(tmp.path(), "");
     let s = spec.to_str().unwrap();
     let csv = simulate(
         tmp.path(),

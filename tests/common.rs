@@ -220,3 +220,70 @@ pub fn assert_glanceable(args: &[&str], text: &str) {
         );
     }
 }
+
+/// A velocity-commanded robot as its user would write it: commands in,
+/// gains to calibrate, a camera that reads landmarks; no `[inverse]`.
+/// `noise_unit` empty: seed 001's per-row sigmas.
+pub fn commanded_spec(dir: &Path, noise_unit: &str) -> PathBuf {
+    let unit = if noise_unit.is_empty() {
+        String::new()
+    } else {
+        format!("unit = \"{noise_unit}\"\n")
+    };
+    let text = format!(
+        r#"name = "my_create"
+doc = "A robot driven by forward and turn-rate commands."
+state = ["x", "y", "theta"]
+
+[[input]]
+name = "v_cmd"
+column = "v"
+kind = "absolute"
+unit = "m/s"
+
+[[input]]
+name = "w_cmd"
+column = "omega"
+kind = "absolute"
+unit = "rad/s"
+
+[[parameter]]
+name = "k_v"
+nominal = 1.0
+min = 0.0
+
+[[parameter]]
+name = "k_w"
+nominal = 1.0
+min = 0.0
+
+[[noise]]
+name = "dv"
+sigma = 0.02
+{unit}
+[[noise]]
+name = "dw"
+sigma = 0.02
+{unit}
+[motion]
+vx = "k_v*v_cmd + dv"
+vy = "0"
+omega = "k_w*w_cmd + dw"
+
+[[observation]]
+name = "camera"
+landmark = true
+columns = ["range", "bearing"]
+expr = ["sqrt((xl - x)^2 + (yl - y)^2)", "atan2(yl - y, xl - x) - theta"]
+angle = [false, true]
+sigma = [0.05, 0.02]
+"#
+    );
+    let path = dir.join(if noise_unit.is_empty() {
+        "per_row.toml"
+    } else {
+        "density.toml"
+    });
+    std::fs::write(&path, text).unwrap();
+    path
+}
