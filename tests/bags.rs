@@ -566,7 +566,8 @@ fn velocity_commands_are_read_from_cmd_vel() {
             assert!(((c - b) / c).abs() < 1e-6, "{kind}: {n}: CSV {c} bag {b}");
         }
     }
-    // mistakes: no component named; a component a Twist lacks; a joint's topic
+    // mistakes: no component named; a component a Twist lacks; a joint's
+    // topic; a joint named on a Twist (it would be ignored, not read)
     let b = tmp.path().join("cmd_twist");
     let refused = |text: &str, says: &[&str]| {
         let m = tmp.path().join("bad_topics.toml");
@@ -598,5 +599,9 @@ fn velocity_commands_are_read_from_cmd_vel() {
     refused(
         "[inputs]\nv = { topic = \"/mocap/pose\", field = \"linear.x\" }\nomega = { topic = \"/cmd_vel\", field = \"angular.z\" }\n",
         &["`/mocap/pose` carries geometry_msgs/msg/PoseStamped", "JointState or geometry_msgs/msg/Twist"],
+    );
+    refused(
+        "[inputs]\nv = { topic = \"/cmd_vel\", joint = \"left_wheel\", field = \"linear.x\" }\nomega = { topic = \"/cmd_vel\", field = \"angular.z\" }\n",
+        &["input column `v`", "`/cmd_vel`", "has no joints", "not a `joint`"],
     );
 }

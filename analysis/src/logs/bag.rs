@@ -279,8 +279,13 @@ pub fn read(
 struct InputColumn {
     column: String,
     topic: String,
-    /// The joint (JointState topics).
+    /// The joint (JointState topics): as given in --topics, else the
+    /// column's own name.
     joint: String,
+    /// Whether --topics named the joint: refused on a Twist topic, which
+    /// has no joints (silently reading the command instead would hide a
+    /// mapping error).
+    joint_given: bool,
     /// The command component (Twist topics).
     field: Option<TwistField>,
 }
@@ -313,6 +318,7 @@ fn input_series(
             joint: src
                 .and_then(|s| s.joint.clone())
                 .unwrap_or_else(|| col.clone()),
+            joint_given: src.is_some_and(|s| s.joint.is_some()),
             field: src.and_then(|s| s.field),
         });
     }
@@ -333,6 +339,12 @@ fn input_series(
                 let names: Vec<&str> = same.iter().map(|o| o.joint.as_str()).collect();
                 joint_series(bag.file, &c.topic, t, &names, map.stamps)?
             } else {
+                if let Some(o) = same.iter().find(|o| o.joint_given) {
+                    return Err(bag.err(format!(
+                        "input column `{}`: topic `{}` carries {}, which has no joints: name a `field` (\"linear.x\", \"linear.y\" or \"angular.z\"), not a `joint`",
+                        o.column, c.topic, t.schema
+                    )));
+                }
                 let fields = same
                     .iter()
                     .map(|o| {
