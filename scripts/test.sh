@@ -19,6 +19,16 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 started=$(date +%s)
+# Each stage's wall time, printed as a table at the end (CI's log shows where
+# the command's minutes go; the target is 15 minutes on 2 cores)
+stages=""
+timed() { # label, then the command
+  local label="$1" t0
+  shift
+  t0=$(date +%s)
+  "$@"
+  stages+="$(printf '%-34s %5d s' "$label" $(( $(date +%s) - t0 )))"$'\n'
+}
 real="${KINEGEN_REAL_DATA:-../shared/real}"
 if [ ! -d "$real" ]; then
   echo "note: no real robot logs at $real: the real-data tests will print SKIPPED and pass without checking"
@@ -35,34 +45,35 @@ if [ ! -c /dev/null ]; then
     echo "warning: /dev/null is a plain file here and could not be restored; the generated-crate tests may fail" >&2
   fi
 fi
-python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt -r verify/init/requirements.txt -r python/requirements-test.txt -r docs/requirements.txt
-python3 verify/casadi/reference.py --check
-python3 verify/peers/wrenfold_kernels.py --check
-python3 verify/peers/symforce_kernels.py --check
-python3 verify/casadi/reference.py --check-c
-python3 verify/precision/reference.py --check
+timed "pip (pinned Python tools)" python3 -m pip install --quiet --disable-pip-version-check -r verify/casadi/requirements.txt -r verify/bags/requirements.txt -r verify/peers/requirements.txt -r verify/precision/requirements.txt -r verify/batch/requirements.txt -r verify/init/requirements.txt -r python/requirements-test.txt -r docs/requirements.txt
+timed "CasADi fixtures" python3 verify/casadi/reference.py --check
+timed "wrenfold peer kernels" python3 verify/peers/wrenfold_kernels.py --check
+timed "SymForce peer kernels" python3 verify/peers/symforce_kernels.py --check
+timed "CasADi peer kernels" python3 verify/casadi/reference.py --check-c
+timed "precision references" python3 verify/precision/reference.py --check
 # the guide (mdBook): its internal links are checked by tests/docs.rs
 # pip puts mdbook in Python's scripts folder, which need not be on the PATH
 mdbook="$(python3 -c 'import sysconfig; print(sysconfig.get_path("scripts"))')/mdbook"
 [ -x "$mdbook" ] || mdbook=mdbook
-"$mdbook" build docs
+timed "the guide (mdBook)" "$mdbook" build docs
 # pyo3's build script reads these two; maturin sets them when it builds the
 # Python package below: set the same here, so that the package reuses this
 # build's pyo3 instead of compiling it (and rebuilding this one) again
 PYO3_PYTHON="$(python3 -c 'import sys; print(sys.executable)')"
 PYO3_ENVIRONMENT_SIGNATURE="$(python3 -c 'import platform, sys; print(f"cpython-{sys.version_info[0]}.{sys.version_info[1]}-{platform.architecture()[0]}")')"
 export PYO3_PYTHON PYO3_ENVIRONMENT_SIGNATURE
-cargo build --workspace --all-targets
+timed "cargo build (workspace)" cargo build --workspace --all-targets
 # the binary the workspace build just made: `cargo run --bin kinegen` resolves
 # features for the one package and would compile symbolica a second time (~10 min)
-"${CARGO_TARGET_DIR:-target}/debug/kinegen" generate --check
-cargo test --workspace
+timed "generate --check" "${CARGO_TARGET_DIR:-target}/debug/kinegen" generate --check
+timed "cargo test (workspace)" cargo test --workspace
 # the Python package (maturin, the dev profile: it reuses the workspace's
 # build), its tests against the command line, and its story example
-python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation ./python
-KINEGEN_BIN="${CARGO_TARGET_DIR:-target}/debug/kinegen" python3 -m pytest -q python/tests
-python3 python/examples/story.py "${TMPDIR:-/tmp}/kinegen-story.png"
+timed "Python package (build)" python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation ./python
+KINEGEN_BIN="${CARGO_TARGET_DIR:-target}/debug/kinegen" timed "Python package (tests)" python3 -m pytest -q python/tests
+timed "Python story example" python3 python/examples/story.py "${TMPDIR:-/tmp}/kinegen-story.png"
 # 400 hostile inputs over every command (about 15 s; the guide's results run
 # 2,000 a seed): no panic, abort, hang, unlocated error, stray file or NaN
-python3 scripts/hostile_campaign.py --bin "${CARGO_TARGET_DIR:-target}/debug/kinegen" --cases 400 --seed 3
+timed "hostile campaign" python3 scripts/hostile_campaign.py --bin "${CARGO_TARGET_DIR:-target}/debug/kinegen" --cases 400 --seed 3
+printf "\nwhere the time went:\n%s" "$stages"
 echo "scripts/test.sh: the whole suite took $(( $(date +%s) - started )) s"
