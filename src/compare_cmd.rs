@@ -95,7 +95,9 @@ fn render(c: &Common, out: &Out, done: Compared) -> ExitCode {
         ));
     }
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::compare_report(dir, r, &cmp, &answer, warnings, &doc) {
+        if let Err(e) =
+            crate::report::compare::compare_report(dir, r, &cmp, &answer, warnings, &doc)
+        {
             return bad(e);
         }
         out_all.say(&format!("report: {}", dir.join("index.html").display()));

@@ -33,7 +33,7 @@ pub fn run(c: Common) -> ExitCode {
             sources: &sources,
             effect_dirs: &c.catalogue.effects,
         },
-        signature: c.report.is_some(),
+        for_report: c.report.is_some(),
     };
     let warned = std::cell::Cell::new(0);
     let done = diagnose_files(
@@ -106,7 +106,7 @@ pub fn run(c: Common) -> ExitCode {
         answer.iter().for_each(|l| out.say(l));
     }
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::diagnose_report(
+        if let Err(e) = crate::report::diagnose::diagnose_report(
             dir,
             &prep.runner,
             &prep.runs,

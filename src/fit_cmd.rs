@@ -282,9 +282,15 @@ fn render_methods(
         "warnings": prep.warnings,
     });
     if let Some(dir) = &c.report {
-        if let Err(e) =
-            crate::report::methods_report(dir, r, &prep.runs, compared, truth, &prep.warnings, &doc)
-        {
+        if let Err(e) = crate::report::methods::methods_report(
+            dir,
+            r,
+            &prep.runs,
+            compared,
+            truth,
+            &prep.warnings,
+            &doc,
+        ) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));
@@ -373,7 +379,8 @@ fn render_lm(
     }
     let warnings = cal.warnings();
     if let Some(dir) = &c.report {
-        if let Err(e) = crate::report::fit_report(dir, r, &prep.runs, cal, &answer, &warnings, &doc)
+        if let Err(e) =
+            crate::report::fit::fit_report(dir, r, &prep.runs, cal, &answer, &warnings, &doc)
         {
             return bad(e);
         }

@@ -105,7 +105,7 @@ pub fn run(a: &InverseArgs) -> ExitCode {
     }
     let doc = json!({"command": "inverse", "path": a.path.display().to_string(), "feasible": feasible, "specs": specs_json});
     if let Some(dir) = &a.report {
-        if let Err(e) = crate::report::inverse_report(dir, &path, &profiles, &doc) {
+        if let Err(e) = crate::report::inverse::inverse_report(dir, &path, &profiles, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

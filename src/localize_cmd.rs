@@ -79,6 +79,7 @@ pub fn run(c: Common, a: &LocalizeArgs) -> ExitCode {
         },
         options,
         sweep: a.sweep,
+        for_report: c.report.is_some(),
     };
     let progress = crate::analysis_cmd::read_progress(crate::analysis_cmd::quiet(&c));
     let said = |prep: &Loaded| {
@@ -103,6 +104,7 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         localized: done,
         sweep,
         unseen_landmarks,
+        figures,
         ..
     } = files;
     if let Some(w) = unseen_landmarks {
@@ -165,13 +167,18 @@ fn render(c: &Common, a: &LocalizeArgs, out: &Out, files: &LocalizedFiles) -> Ex
         say_sweep(out, &locs[0].0.path, sweep);
     }
     if let Some(dir) = &c.report {
-        let pages: Vec<crate::localize_report::RunPage> = locs
-            .iter()
-            .map(|&(run, loc, summary)| crate::localize_report::RunPage { run, loc, summary })
+        let pages: Vec<crate::report::localize::RunPage> = (locs.iter().zip(figures))
+            .map(
+                |(&(run, loc, summary), figures)| crate::report::localize::RunPage {
+                    run,
+                    loc,
+                    summary,
+                    figures,
+                },
+            )
             .collect();
-        if let Err(e) = crate::localize_report::localize_report(
+        if let Err(e) = crate::report::localize::localize_report(
             dir,
-            r,
             &pages,
             &described,
             sweep,
@@ -341,7 +348,7 @@ fn say_run(
         "  mean NIS  {}",
         verdict(s.nis, s.nis_bounds, "sightings", "filter")
     ));
-    if let Some(line) = crate::localize_report::say_gate_tail(s) {
+    if let Some(line) = crate::report::localize::say_gate_tail(s) {
         out.say(&format!("    {line}"));
     }
     out.say(&format!(
@@ -363,7 +370,7 @@ fn say_run(
     if let Some(p) = s.nees_parts {
         out.say(&format!("    {}", say_parts(&p)));
     }
-    if let Some(line) = crate::localize_report::say_consistency(s) {
+    if let Some(line) = crate::report::localize::say_consistency(s) {
         out.say(&format!("    {line}"));
     }
     if let Some(x) = s.smoothed {

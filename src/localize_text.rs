@@ -75,7 +75,7 @@ pub fn say_summary(
     for (run, (loc, sum)) in runs.iter().zip(&done.runs).take(RUNS) {
         let total = (loc.accepted + loc.rejected).max(1);
         t.add_row(vec![
-            crate::localize_report::short(&run.path),
+            crate::report::localize::short(&run.path),
             sum.rmse.map_or("-".into(), |e| format!("{e:.4}")),
             sum.dead_reckoning.map_or("-".into(), |e| format!("{e:.4}")),
             loc.accepted.to_string(),

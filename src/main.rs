@@ -21,7 +21,6 @@ mod init_cmd;
 mod inverse_cmd;
 mod ir_source;
 mod localize_cmd;
-mod localize_report;
 mod localize_text;
 mod navigate_cmd;
 mod output;

@@ -170,7 +170,7 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
         if let Some(d) = after {
             drives.push(("calibrated odometry", d));
         }
-        if let Err(e) = crate::report::navigate_report(dir, grid, &drives, &doc) {
+        if let Err(e) = crate::report::navigate::navigate_report(dir, grid, &drives, &doc) {
             return bad(e);
         }
         out.say(&format!("report: {}", dir.join("index.html").display()));

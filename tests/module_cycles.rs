@@ -495,3 +495,78 @@ fn no_method_is_chosen_by_a_string() {
         found.join("\n")
     );
 }
+
+/// The library's functions a report module names (`use` leaves and paths
+/// under `kinegen_analysis`, whose last segment is a function's lowercase
+/// name), except `readers`.
+fn library_calls(text: &str, readers: &[&str]) -> Vec<String> {
+    struct Calls<'r> {
+        readers: &'r [&'r str],
+        found: Vec<String>,
+    }
+    impl Calls<'_> {
+        fn check(&mut self, path: &[String]) {
+            let last = path.last().map(String::as_str).unwrap_or("");
+            let function = last.starts_with(|c: char| c.is_ascii_lowercase());
+            if path.first().is_some_and(|s| s == "kinegen_analysis")
+                && function
+                && !self.readers.contains(&last)
+            {
+                self.found.push(path.join("::"));
+            }
+        }
+    }
+    impl<'ast> Visit<'ast> for Calls<'_> {
+        fn visit_item_use(&mut self, u: &'ast syn::ItemUse) {
+            let mut leaves = Vec::new();
+            use_leaves(&u.tree, &mut Vec::new(), &mut leaves);
+            for (_, path) in leaves {
+                self.check(&path);
+            }
+        }
+        fn visit_path(&mut self, p: &'ast syn::Path) {
+            let segs: Vec<String> = p.segments.iter().map(|s| s.ident.to_string()).collect();
+            self.check(&segs);
+            syn::visit::visit_path(self, p);
+        }
+    }
+    let file = syn::parse_file(text).expect("a report module parses");
+    let mut calls = Calls {
+        readers,
+        found: Vec::new(),
+    };
+    calls.visit_file(&file);
+    calls.found
+}
+
+/// A report only draws (issue 69 item 3): the modules of src/report/ call
+/// no function of the library. What a page shows is computed by the
+/// library and carried in the command's result (a diagnosis's sightings'
+/// range errors, a localisation's figures). The one reader allowed reads a
+/// result as it is computed: a long log's track is not held in memory
+/// (`model_on_log::track_rows`). A report that computes, as the diagnose
+/// page once did with `landmarks::sigma` and `fit::sightings_from_truth`,
+/// fails.
+#[test]
+fn reports_only_draw() {
+    const READERS: [&str; 1] = ["against_truth"];
+    let dir = common::root().join("src/report");
+    let mut found = Vec::new();
+    for e in std::fs::read_dir(&dir).unwrap().flatten() {
+        let text = std::fs::read_to_string(e.path()).unwrap();
+        for f in library_calls(&text, &READERS) {
+            found.push(format!("{}: {f}", e.path().display()));
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "reports that compute:\n{}",
+        found.join("\n")
+    );
+    // the check sees a call by its full path and one imported first
+    let computing = "use kinegen_analysis::estimation::fit::sightings_from_truth;\n\
+        fn chart(r: &Runner) { let s = kinegen_analysis::model_on_log::landmarks::sigma(r); }\n";
+    let seen = library_calls(computing, &READERS);
+    assert_eq!(seen.len(), 2, "{seen:?}");
+    assert!(seen[0].contains("sightings_from_truth") && seen[1].contains("landmarks::sigma"));
+}

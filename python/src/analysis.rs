@@ -341,7 +341,7 @@ impl PyModel {
                 sources: &src,
                 effect_dirs: &[],
             },
-            signature: false,
+            for_report: false,
         };
         let done = diagnose_files(&req, &AutodiffDeriver, &no_progress, &Hooks::none());
         match done {

@@ -191,6 +191,7 @@ impl PyModel {
             },
             options: options(gate, smooth, spec_noise, noise)?,
             sweep: false,
+            for_report: false,
         };
         let done =
             py.allow_threads(|| localize_files(&request, &AutodiffDeriver, &no_progress, &|_| {}));

@@ -6,10 +6,11 @@
 //!
 //! ```ignore
 //! let files = Files { sources: &sources, effect_dirs: &[] };
-//! let request = LocalizeRequest { files, options: EkfOptions::default(), sweep: false };
+//! let request = LocalizeRequest { files, options: EkfOptions::default(), sweep: false, for_report: false };
 //! let done = localize_files(&request, &my_deriver, &|_| Box::new(|_, _| {}), &|_| {})?;
 //! println!("{}", done.localized.note);
 //! ```
+use crate::applications::localize::figures::{run_figures, RunFigures};
 use crate::applications::localize::timing::Timing;
 use crate::applications::localize::{localize_runs, EkfOptions, LocalizeError, Localized};
 use crate::applications::sweep::{sweep, SweepError, SweepPoint, LEVELS};
@@ -21,11 +22,13 @@ use std::path::PathBuf;
 
 /// What to localise: the files, the filter's options (`noise_sigma` names
 /// the spec's `[[noise]]`; whether the spec's input delay is estimated is
-/// decided here: unless `--set` fixes it), and whether to sweep the noise.
+/// decided here: unless `--set` fixes it), whether to sweep the noise,
+/// and whether to compute what a report draws.
 pub struct LocalizeRequest<'a> {
     pub files: Files<'a>,
     pub options: EkfOptions,
     pub sweep: bool,
+    pub for_report: bool,
 }
 
 /// A localisation done: the logs as loaded, the filter over them, the
@@ -38,6 +41,9 @@ pub struct LocalizedFiles {
     pub localized: Localized,
     pub sweep: Vec<SweepPoint>,
     pub unseen_landmarks: Option<String>,
+    /// What a report draws of each run, in `localized.runs`' order (empty
+    /// unless [`LocalizeRequest::for_report`]).
+    pub figures: Vec<RunFigures>,
 }
 
 /// Why a localisation could not be made from the files.
@@ -89,12 +95,21 @@ pub fn localize_files(
         (true, Some(first)) => sweep(&prep.runner, first, &LEVELS, &options)?,
         _ => Vec::new(),
     };
+    let figures = if req.for_report {
+        let runs = prep.runs.iter().chain(&prep.holdout);
+        (runs.zip(&localized.runs))
+            .map(|(run, (loc, summary))| run_figures(&prep.runner, run, (loc, summary)))
+            .collect()
+    } else {
+        Vec::new()
+    };
     Ok(LocalizedFiles {
         loaded: prep,
         options,
         localized,
         sweep,
         unseen_landmarks,
+        figures,
     })
 }
 

@@ -6,11 +6,12 @@
 //!
 //! ```ignore
 //! let chains = EffectChains { spec: &spec, catalogue: &cat, deriver: &my_deriver, sets: &[] };
-//! let job = Job { runner: &runner, runs: &runs, chains: &chains, signature: false };
+//! let job = Job { runner: &runner, runs: &runs, chains: &chains, for_report: false };
 //! let out = diagnose_job(&job, &Hooks::none())?;
 //! println!("{:?}", out.diagnosis.verdict());
 //! ```
 use crate::diagnosis::diagnose::{diagnose, DiagnoseError, Diagnosis};
+use crate::diagnosis::sensor::range_errors_by_bearing;
 use crate::diagnosis::structure::{signature, Signature};
 use crate::diagnosis::trial::Catalogue;
 use crate::effects::{Applicability, Effect};
@@ -18,6 +19,7 @@ use crate::model_on_log::dataset::channel_missing;
 use crate::model_on_log::derivation::EffectChains;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
+use crate::model_on_log::track_rows::{Heading, Recipe};
 use kinegen_model::spec::Model;
 use std::collections::BTreeMap;
 
@@ -27,9 +29,10 @@ pub struct Job<'a> {
     pub runner: &'a Runner,
     pub runs: &'a [Run],
     pub chains: &'a EffectChains<'a>,
-    /// Also compute the first effect's signature (for a report: it derives
-    /// the spec with that effect once more).
-    pub signature: bool,
+    /// Also compute what a report draws: the first effect's signature (it
+    /// derives the spec with that effect once more) and the sightings'
+    /// range errors.
+    pub for_report: bool,
 }
 
 /// Told what the logs' reading found that the user should know (before the
@@ -63,7 +66,66 @@ pub struct Outcome {
     /// Per effect of the chain, the lines of the spec that adding it (at its
     /// estimates, after the ones before it) changes.
     pub spec_changes: Vec<Option<String>>,
+    /// For a report ([`Job::for_report`]): the first effect's signature.
     pub signature: Option<FirstSignature>,
+    /// For a report, when the chain holds a sensor effect: the sightings'
+    /// range errors against their bearing, seen from the ground truth.
+    pub sensor_errors: Option<SensorErrors>,
+}
+
+/// The sightings' range errors against their bearing
+/// ([`range_errors_by_bearing`]): the calibrated spec's, and the model's
+/// with the sensor's effects found.
+pub struct SensorErrors {
+    pub calibrated: Vec<(f64, f64)>,
+    pub with_effects: Vec<(f64, f64)>,
+}
+
+impl Outcome {
+    /// The calibrated spec's track (`base` is the spec's runner), computed
+    /// as it is read.
+    pub fn calibrated_track<'r>(&self, base: &'r Runner) -> Recipe<'r> {
+        model_track(base, &self.diagnosis.base_fit.p)
+    }
+
+    /// The track with the chain's effects at their estimates, computed as it
+    /// is read; None when the chain is empty.
+    pub fn chain_track(&self) -> Option<Recipe<'_>> {
+        let d = &self.diagnosis;
+        (!d.chain.is_empty()).then(|| model_track(&d.final_runner, &d.final_p))
+    }
+
+    /// The chain's effects joined for a legend: `lateral_slip + time_offset`.
+    pub fn chain_label(&self) -> String {
+        let names: Vec<&str> = self
+            .diagnosis
+            .chain
+            .iter()
+            .map(|c| c.effect.as_str())
+            .collect();
+        names.join(" + ")
+    }
+}
+
+/// The body's own track at `p` (no sensor offset, the model's heading).
+fn model_track<'r>(r: &'r Runner, p: &[f64]) -> Recipe<'r> {
+    Recipe {
+        r,
+        p: p.to_vec(),
+        offset: [0.0; 3],
+        heading: Heading::Model,
+    }
+}
+
+/// The sightings' range errors, when the chain holds a sensor effect.
+fn sensor_errors(base: &Runner, runs: &[Run], d: &Diagnosis) -> Option<SensorErrors> {
+    d.chain
+        .iter()
+        .any(|c| c.sightings.is_some())
+        .then(|| SensorErrors {
+            calibrated: range_errors_by_bearing(base, &d.base_fit.p, runs),
+            with_effects: range_errors_by_bearing(&d.final_runner, &d.final_p, runs),
+        })
 }
 
 /// The first effect's residual signature (see [`signature`]) on each run.
@@ -94,8 +156,13 @@ pub fn diagnose_job(job: &Job, hooks: &Hooks) -> Result<Outcome, DiagnoseError> 
     )?;
     Ok(Outcome {
         spec_changes: spec_changes(chains.spec, chains.catalogue, &diagnosis),
-        signature: if job.signature {
+        signature: if job.for_report {
             first_signature(job, &diagnosis)
+        } else {
+            None
+        },
+        sensor_errors: if job.for_report {
+            sensor_errors(job.runner, job.runs, &diagnosis)
         } else {
             None
         },

@@ -5,7 +5,7 @@
 //!
 //! ```ignore
 //! let files = Files { sources: &sources, effect_dirs: &[] };
-//! let request = Request { files, signature: false };
+//! let request = Request { files, for_report: false };
 //! let done = diagnose_files(&request, &my_deriver, &|_| Box::new(|_, _| {}), &Hooks::none())?;
 //! println!("{:?}", done.outcome.diagnosis.verdict());
 //! ```
@@ -20,10 +20,10 @@ use kinegen_model::spec::Model;
 use std::time::{Duration, Instant};
 
 /// What to diagnose: the spec and logs, the user's effect directories, and
-/// whether the report's first-effect signature is wanted.
+/// whether what a report draws is wanted ([`Job::for_report`]).
 pub struct Request<'a> {
     pub files: Files<'a>,
-    pub signature: bool,
+    pub for_report: bool,
 }
 
 /// A diagnosis done: the logs as loaded (their warnings included) and the
@@ -75,7 +75,7 @@ pub fn diagnose_files(
         (&loaded.runner, &loaded.runs),
         (&cat, deriver),
         &sets,
-        req.signature,
+        req.for_report,
         hooks,
     )?;
     Ok(Diagnosed {
@@ -95,7 +95,7 @@ pub fn diagnose_runs(
     (runner, runs): (&Runner, &[Run]),
     (cat, deriver): (&[kinegen_model::effects::Effect], &dyn Deriver),
     sets: &[(String, f64)],
-    signature: bool,
+    for_report: bool,
     hooks: &Hooks,
 ) -> Result<Outcome, DiagnoseError> {
     let chains = EffectChains {
@@ -108,7 +108,7 @@ pub fn diagnose_runs(
         runner,
         runs,
         chains: &chains,
-        signature,
+        for_report,
     };
     diagnose_job(&job, hooks)
 }

@@ -238,3 +238,27 @@ fn seeded(aug: &Runner, from: &Runner, p: &[f64]) -> Vec<f64> {
     }
     q
 }
+
+/// Every sighting's range error (measured - predicted, m) against its
+/// bearing, seen from the ground truth, for `r` at `p`: what a camera that
+/// reads depth looks like (short at the edges of its view). A sighting the
+/// truth cannot place is left out, as the sensor's calibration leaves it.
+pub fn range_errors_by_bearing(r: &Runner, p: &[f64], runs: &[Run]) -> Vec<(f64, f64)> {
+    let sigma_range = crate::model_on_log::landmarks::sigma(r)[0];
+    runs.iter()
+        .flat_map(|run| {
+            let (res, _) = crate::estimation::fit::sightings_from_truth(r, p, &[], run, false);
+            // the same sightings, in the same order, as the residuals
+            let placed = run.landmarks.iter().filter(|o| {
+                run.gt.as_ref().is_some_and(|gt| {
+                    crate::model_on_log::innovations::truth_at(run, gt, o.t).is_some()
+                })
+            });
+            let range = res
+                .chunks(2)
+                .map(|c| -c[0] * sigma_range)
+                .collect::<Vec<_>>();
+            placed.map(|o| o.bearing).zip(range).collect::<Vec<_>>()
+        })
+        .collect()
+}

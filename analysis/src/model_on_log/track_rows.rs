@@ -6,6 +6,7 @@
 //! 11 item 5). A reader that needs the rows again reads the track again: dead
 //! reckoning without sensitivities is cheap next to a calibration. A computed
 //! [`Track`] (a calibration's segments) reads the same way.
+use crate::logs::log::wrap;
 use crate::model_on_log::deadreckon::{
     gyro_at, gyro_step, reckoning_start, sensed_at, Stepper, Track,
 };
@@ -34,6 +35,56 @@ pub struct Row {
 /// A track over a run that can be read in order, as often as needed.
 pub trait TrackRows: Sync {
     fn rows<'s>(&'s self, run: &'s Run) -> Box<dyn Iterator<Item = Row> + 's>;
+}
+
+/// A row of a track against the run's ground truth, as the reports draw it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RowAgainstTruth {
+    /// Seconds from the run's start.
+    pub t: f64,
+    /// Where the pose sensor should read the model (see [`Row::measured`]).
+    pub measured: [f64; 2],
+    /// Distance from the measured position, m (None without ground truth).
+    pub position_error: Option<f64>,
+    /// The step to the next row's turn rate against the measured one (None
+    /// at the last row and without ground truth).
+    pub turn_rate: Option<TurnRateResidual>,
+}
+
+/// A step's model minus measured yaw rate (rad/s), beside what it may
+/// depend on: the model's speed and turn rate and the measured heading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TurnRateResidual {
+    pub speed: f64,
+    pub turn_rate: f64,
+    pub heading: f64,
+    pub residual: f64,
+}
+
+/// `tr`'s rows on `run` against its ground truth, read as they are computed.
+pub fn against_truth<'s>(
+    tr: &'s dyn TrackRows,
+    run: &'s Run,
+) -> impl Iterator<Item = RowAgainstTruth> + 's {
+    let gt = run.gt.as_ref();
+    tr.rows(run).enumerate().map(move |(k, row)| {
+        let m = row.measured;
+        let g = gt.map(|g| (g[k], g.get(k + 1)));
+        RowAgainstTruth {
+            t: run.t[k] - run.t[0],
+            measured: [m[0], m[1]],
+            position_error: g.map(|(g, _)| (g[0] - m[0]).hypot(g[1] - m[1])),
+            turn_rate: match (row.twist, g) {
+                (Some(tw), Some((g, Some(next)))) => Some(TurnRateResidual {
+                    speed: tw[0].hypot(tw[1]),
+                    turn_rate: tw[2],
+                    heading: wrap(g[2]),
+                    residual: tw[2] - wrap(next[2] - g[2]) / run.dt[k],
+                }),
+                _ => None,
+            },
+        }
+    })
 }
 
 impl TrackRows for Track {

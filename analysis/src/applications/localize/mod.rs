@@ -27,6 +27,7 @@
 mod active;
 mod belief;
 pub mod bounds;
+pub mod figures;
 mod filter;
 pub mod gate_tail;
 pub mod noise;

@@ -3,33 +3,30 @@
 //! never over it), the position error over time with its 3-sigma bound, the
 //! NIS over time with its chi-square band, and a table of the figures and
 //! the noise; the noise sweep (seed 001 Figs 6-7) when it was run.
-use crate::report::{
+use super::{
     axes, decimated, esc, legend_strip, page, series_of, squared, write, Series, H, LEGEND_W, W,
 };
+use kinegen_analysis::applications::localize::figures::{ErrorFigures, RunFigures};
 use kinegen_analysis::applications::localize::{
-    mean_bounds, Bounds, Consistency, GateTail, Localization, Overconfident, Spread, Summary,
+    Bounds, Consistency, GateTail, Localization, Overconfident, Spread, Summary,
 };
-use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_analysis::model_on_log::run::Run;
 use plotters::prelude::*;
 use serde_json::Value;
 use std::path::Path;
-
-/// Sightings averaged by the NIS curve.
-const NIS_WINDOW: usize = 50;
 
 /// One run's inputs to the page.
 pub struct RunPage<'a> {
     pub run: &'a Run,
     pub loc: &'a Localization,
     pub summary: &'a Summary,
+    pub figures: &'a RunFigures,
 }
 
 // the page's parts, each its own argument as the other reports take them
 #[allow(clippy::too_many_arguments)]
 pub fn localize_report(
     dir: &Path,
-    r: &Runner,
     runs: &[RunPage],
     noise: &[String],
     sweep: &[kinegen_analysis::applications::sweep::SweepPoint],
@@ -39,9 +36,9 @@ pub fn localize_report(
 ) -> Result<(), String> {
     let mut figs = Vec::new();
     for p in runs {
-        figs.push(map(r, p)?);
-        if p.run.gt.is_some() {
-            figs.push(error_over_time(r, p)?);
+        figs.push(map(p)?);
+        if let Some(errors) = &p.figures.errors {
+            figs.push(error_over_time(p, errors)?);
         }
         if !p.loc.nis.is_empty() {
             figs.push(nis_over_time(p)?);
@@ -131,10 +128,10 @@ fn xy(track: &[[f64; 3]]) -> Vec<(f64, f64)> {
     series_of(track.len(), track.iter().map(|p| (p[0], p[1])))
 }
 
-fn map(r: &Runner, p: &RunPage) -> Result<String, String> {
+fn map(p: &RunPage) -> Result<String, String> {
     let (run, loc) = (p.run, p.loc);
-    let dead = kinegen_analysis::model_on_log::deadreckon::run(r, &r.p, run, false);
-    let mut series: Vec<Series> = vec![("dead reckoning", RGBColor(170, 170, 170), xy(&dead.pose))];
+    let dead = &p.figures.dead_reckoning;
+    let mut series: Vec<Series> = vec![("dead reckoning", RGBColor(170, 170, 170), xy(dead))];
     if let Some(g) = &run.gt {
         series.push((
             "ground truth",
@@ -175,44 +172,20 @@ fn map(r: &Runner, p: &RunPage) -> Result<String, String> {
     )
 }
 
-fn error_over_time(r: &Runner, p: &RunPage) -> Result<String, String> {
-    let (run, loc) = (p.run, p.loc);
-    let g = run.gt.as_ref().expect("checked by the caller");
-    let sensor = kinegen_analysis::applications::localize::Sensed::new(r, run);
-    let t0 = run.t[0];
-    let err = |track: &[[f64; 3]]| {
-        series_of(
-            track.len(),
-            track
-                .iter()
-                .zip(g)
-                .enumerate()
-                .filter(|(_, (_, g))| g[0].is_finite())
-                .map(|(k, (x, g))| {
-                    // where the motion capture sees the robot, as the table
-                    let m = sensor.at(k, x).0;
-                    (
-                        run.t[k] - t0,
-                        ((m[0] - g[0]).powi(2) + (m[1] - g[1]).powi(2)).sqrt(),
-                    )
-                }),
-        )
-    };
-    let bound = |cov: &[kinegen_analysis::applications::localize::Matrix3<f64>]| {
-        series_of(
-            cov.len(),
-            cov.iter()
-                .enumerate()
-                .map(|(k, c)| (run.t[k] - t0, 3.0 * (c[(0, 0)] + c[(1, 1)]).max(0.0).sqrt())),
-        )
-    };
+fn error_over_time(p: &RunPage, e: &ErrorFigures) -> Result<String, String> {
+    let run = p.run;
+    let drawn = |pts: &[(f64, f64)]| series_of(pts.len(), pts.iter().copied());
     let mut series: Vec<Series> = vec![
-        ("EKF error", BLUE, err(&loc.track)),
-        ("EKF 3-sigma", RGBColor(120, 160, 255), bound(&loc.cov)),
+        ("EKF error", BLUE, drawn(&e.filter.error)),
+        (
+            "EKF 3-sigma",
+            RGBColor(120, 160, 255),
+            drawn(&e.filter.bound),
+        ),
     ];
-    if let Some((s, c)) = &loc.smoothed {
-        series.push(("smoothed error", RGBColor(0, 150, 60), err(s)));
-        series.push(("smoothed 3-sigma", RGBColor(140, 210, 160), bound(c)));
+    if let Some(s) = &e.smoothed {
+        series.push(("smoothed error", RGBColor(0, 150, 60), drawn(&s.error)));
+        series.push(("smoothed 3-sigma", RGBColor(140, 210, 160), drawn(&s.bound)));
     }
     chart_beside(
         &format!("{}: position error, 3-sigma bound", short(&run.path)),
@@ -225,26 +198,11 @@ fn error_over_time(r: &Runner, p: &RunPage) -> Result<String, String> {
 }
 
 fn nis_over_time(p: &RunPage) -> Result<String, String> {
-    let (run, loc) = (p.run, p.loc);
-    let t0 = run.t[0];
-    let pts: Vec<(f64, f64)> = loc.nis.iter().map(|(t, n)| (t - t0, *n)).collect();
-    let w = NIS_WINDOW.min(pts.len()).max(1);
-    let mean: Vec<(f64, f64)> = pts
-        .windows(w)
-        .map(|win| {
-            (
-                win[w / 2].0,
-                win.iter().map(|q| q.1).sum::<f64>() / w as f64,
-            )
-        })
-        .collect();
-    // the band of a window's mean counts its sightings as the independent
-    // values they are worth, at the run's share ([`Bounds`])
-    let worth = p
-        .summary
-        .nis_bounds
-        .map_or(1.0, |b| b.independent / pts.len().max(1) as f64);
-    let (lo, hi) = mean_bounds((w as f64 * worth).max(1.0), 2.0);
+    let run = p.run;
+    let nis = &p.figures.nis;
+    let (w, (lo, hi)) = (nis.window, nis.band);
+    let pts = &nis.points;
+    let mean = nis.mean.clone();
     let (a, b) = (
         pts.first().map_or(0.0, |q| q.0),
         pts.last().map_or(1.0, |q| q.0),
@@ -258,7 +216,7 @@ fn nis_over_time(p: &RunPage) -> Result<String, String> {
             ("95% band of the mean", RED, vec![(a, lo), (b, lo)]),
             ("", RED, vec![(a, hi), (b, hi)]),
         ],
-        &[("each sighting", RGBColor(150, 150, 150), decimated(&pts))],
+        &[("each sighting", RGBColor(150, 150, 150), decimated(pts))],
         false,
     )
 }
