@@ -108,9 +108,11 @@ enum Command {
     Navigate(navigate_cmd::NavigateArgs),
     /// Recovery benchmark of the diagnosis: every spec x applicable effect x 3
     /// magnitudes x 2 noise levels x seeds simulated and diagnosed, plus clean
-    /// and two-effect logs: top-1, full-chain and false-alarm rates per model.
+    /// and two-effect logs: top-1, full-chain and false-alarm rates per model;
+    /// with --beyond, effects outside the catalogue too, and how often the
+    /// diagnosis's proposal recovers them.
     ///
-    /// Example: kinegen bench-diagnose --seeds 5 --json bench.json
+    /// Example: kinegen bench-diagnose --seeds 5 --beyond tests/proposal_effects --json bench.json
     BenchDiagnose(bench_diagnose_cmd::BenchDiagnoseArgs),
     /// Calibration judged on real runs it was not fitted on: each session of
     /// the OptiOdom study calibrated by kinegen, scored with the nominal values

@@ -132,3 +132,61 @@ fn clean_logs_and_catalogue_effects_get_no_proposal() {
     let false_proposals = results.iter().filter(|p| **p).count();
     assert_eq!(false_proposals, 0, "{results:?}");
 }
+
+/// Issue 70 item 6: bench-diagnose hides effects written outside the
+/// catalogue (`--beyond`) and scores the proposals: each such case carries
+/// the held-out error of the spec as it is and with the true effect
+/// calibrated, the table counts the proposals that recover at least half
+/// of what the truth removes, and the clean cases' proposals as false.
+#[test]
+fn bench_diagnose_scores_proposals_beyond_the_catalogue() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = root().join("tests/proposal_effects");
+    let spec = root().join("spec/diff_drive.toml");
+    let o = kinegen_in(
+        tmp.path(),
+        &[
+            "bench-diagnose",
+            "--spec",
+            spec.to_str().unwrap(),
+            "--beyond",
+            fx.to_str().unwrap(),
+            "--effect",
+            "turn_saturation",
+            "--json",
+            "bench.json",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("beyond the catalogue: recovered"),
+        "{}",
+        stdout(&o)
+    );
+    let text = std::fs::read_to_string(tmp.path().join("bench.json")).unwrap();
+    let d: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(
+        d["selection"]["beyond"][0], "turn_saturation",
+        "{}",
+        d["selection"]
+    );
+    let cases = d["cases"].as_array().unwrap();
+    let beyond: Vec<&serde_json::Value> = cases.iter().filter(|c| c["beyond"] == true).collect();
+    // 3 magnitudes x 2 noise levels, each scored against the truth
+    assert_eq!(beyond.len(), 6);
+    for c in &beyond {
+        let (before, truth) = (
+            c["truth"]["held_out_before"].as_f64().unwrap(),
+            c["truth"]["held_out_true"].as_f64().unwrap(),
+        );
+        assert!(
+            truth < 0.5 * before,
+            "the true effect explains the log: {c}"
+        );
+    }
+    let m = &d["models"][0];
+    assert_eq!(m["beyond_recovered"]["of"], 6, "{m}");
+    assert!(m["beyond_recovered"]["found"].as_u64().unwrap() >= 5, "{m}");
+    assert_eq!(m["false_proposals"]["of"], 4, "{m}");
+    assert_eq!(m["false_proposals"]["found"], 0, "{m}");
+}

@@ -122,6 +122,7 @@ pub mod diagnosis {
 /// navigation, inverse kinematics on a path, simulation, calibration on
 /// held-out sessions.
 pub mod applications {
+    pub mod diagnose_bench;
     pub mod grid;
     pub mod hidden;
     pub mod holdout_bench;
