@@ -80,7 +80,7 @@ fn log(r: &Runner) -> Run {
         .iter()
         .map(|(t, id, range, bearing)| LandmarkObs {
             t: *t,
-            id: id.clone(),
+            id: id.as_str().into(),
             xl: at(id)[0],
             yl: at(id)[1],
             range: *range,

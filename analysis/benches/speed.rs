@@ -525,7 +525,7 @@ fn localize_among(r: &Runner, landmarks: usize) -> (f64, f64) {
             let (dx, dy) = (m[0] - g[0], m[1] - g[1]);
             LandmarkObs {
                 t: run.t[k],
-                id: format!("{m:?}"),
+                id: format!("{m:?}").into(),
                 xl: m[0],
                 yl: m[1],
                 range: dx.hypot(dy) + rng.gen_range(-0.05..0.05),

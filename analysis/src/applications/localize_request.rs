@@ -157,7 +157,7 @@ fn checked_options(
 fn unseen_landmarks(sources: &Sources, prep: &Loaded) -> Option<String> {
     let (path, map) = (sources.landmarks.as_ref()?, prep.map.as_ref()?);
     let sighted = |id: &String| {
-        (prep.runs.iter().chain(&prep.holdout)).any(|r| r.landmarks.iter().any(|z| &z.id == id))
+        (prep.runs.iter().chain(&prep.holdout)).any(|r| r.landmarks.iter().any(|z| *z.id == **id))
     };
     let unseen: Vec<String> = (map.ids.iter().enumerate())
         .filter(|(_, id)| !sighted(id))

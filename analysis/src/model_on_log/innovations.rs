@@ -58,7 +58,7 @@ impl Innovation {
     fn of(o: &LandmarkObs, predicted: [f64; 2]) -> Innovation {
         Innovation {
             t: o.t,
-            id: o.id.clone(),
+            id: o.id.to_string(),
             range_m: o.range - predicted[0],
             bearing_rad: wrap(o.bearing - predicted[1]),
         }

@@ -215,7 +215,7 @@ pub fn read_observations(path: &Path, map: &Map, map_path: &Path) -> Result<Sigh
         }
         let o = LandmarkObs {
             t,
-            id,
+            id: id.into(),
             xl,
             yl,
             range,
@@ -284,7 +284,7 @@ pub fn from_detections(
         };
         let o = LandmarkObs {
             t: d.t,
-            id,
+            id: id.into(),
             xl,
             yl,
             range: d.range,
@@ -365,7 +365,7 @@ fn enough_within<'a>(seen: &[&'a LandmarkObs]) -> Option<Vec<&'a LandmarkObs>> {
     let t_end = seen.first()?.t + MOVING_START_S;
     let mut ids: Vec<&str> = Vec::new();
     for (k, o) in seen.iter().take_while(|o| o.t <= t_end).enumerate() {
-        if !ids.contains(&o.id.as_str()) {
+        if !ids.contains(&&*o.id) {
             ids.push(&o.id);
         }
         if ids.len() >= 2 && k + 1 >= MOVING_START_SIGHTINGS {

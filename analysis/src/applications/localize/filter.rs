@@ -169,7 +169,7 @@ impl<'a> Filter<'a> {
             .iter()
             .map(|z| {
                 let n = ids.len();
-                *ids.entry(z.id.as_str()).or_insert(n)
+                *ids.entry(&*z.id).or_insert(n)
             })
             .collect();
         let t_first = run.t[0];
