@@ -66,7 +66,34 @@ timed "cargo build (workspace)" cargo build --workspace --all-targets
 # the binary the workspace build just made: `cargo run --bin kinegen` resolves
 # features for the one package and would compile symbolica a second time (~10 min)
 timed "generate --check" "${CARGO_TARGET_DIR:-target}/debug/kinegen" generate --check
-timed "cargo test (workspace)" cargo test --workspace
+# The tests that derive with symbolica (tests/autodiff.rs and
+# tests/generate.rs, `symbolic_stage::`) hold its machine-wide lock on one
+# thread: on 2 cores they run beside the others, not alone, which saves most
+# of their 45 s. cargo keeps its build lock while its tests run, so they run
+# as the binaries cargo built (from the root folder, as cargo would).
+symbolic_bins=$(cargo test --test autodiff --test generate --no-run --message-format=json 2>/dev/null \
+  | python3 -c 'import json, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["profile"]["test"]:
+        print(m["executable"])')
+beside_log="$(mktemp)"
+(
+  t0=$(date +%s) rc=0
+  for b in $symbolic_bins; do "$b" symbolic_stage:: || rc=1; done
+  echo "symbolic-stage tests (beside): $(( $(date +%s) - t0 )) s"
+  exit $rc
+) >"$beside_log" 2>&1 &
+beside=$!
+trap 'kill $beside 2>/dev/null; rm -f "$beside_log"' EXIT
+timed "cargo test (workspace)" cargo test --workspace -- --skip symbolic_stage::
+beside_rc=0
+wait $beside || beside_rc=$?
+trap - EXIT
+cat "$beside_log"
+stages+="$(tail -1 "$beside_log")"$'\n'
+rm -f "$beside_log"
+[ "$beside_rc" = 0 ] || { echo "scripts/test.sh: the symbolic-stage tests failed (above)" >&2; exit 1; }
 # the Python package (maturin, the dev profile: it reuses the workspace's
 # build), its tests against the command line, and its story example
 timed "Python package (build)" python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation ./python
