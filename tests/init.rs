@@ -1,5 +1,6 @@
-//! `kinegen init`: six robot descriptions (tests/robots/, written from the
-//! published dimensions of six robots of different kinds, with joint and
+//! `kinegen init`: eight robot descriptions (tests/robots/, six written
+//! from the published dimensions of robots of different kinds, a
+//! front-wheel-drive car and a swerve base of our own, with joint and
 //! link names unlike the usual ones) become specs whose geometry is the
 //! description's to 1e-9, that every analysis command runs without edits,
 //! and whose calibration goes back into the controller file read. Bad
@@ -237,6 +238,77 @@ fn an_ackermann_car_is_its_f1tenth_geometry_seen_from_the_middle_of_the_car() {
     }
 }
 
+/// A front-wheel-drive car (#68): its steered front wheels drive, the rear
+/// roll freely, and the right steering joint mimics the left, so only the
+/// left angle is an input; the right wheel's angle is the one that points
+/// it at the turn centre. Each front wheel rolls along its heading.
+#[test]
+fn a_front_wheel_drive_car_is_driven_by_its_steered_wheels() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("runabout", dir.path())).unwrap();
+    let mut names: Vec<&str> = m.inputs.iter().map(|i| i.name.as_str()).collect();
+    names.sort();
+    assert_eq!(names, ["drive_l", "drive_r", "pivot_l"], "{}", m.doc);
+    assert!(m.doc.contains("steered and driven front"), "{}", m.doc);
+    let (r, l, y, ahead) = (0.085, 0.52, 0.2, 0.12);
+    for [wl, wr, d, _] in samples() {
+        let u = HashMap::from([("drive_l", wl), ("drive_r", wr), ("pivot_l", d)]);
+        let t = twist(&m, &u);
+        // the left wheel points at the turn centre on the rear axle line;
+        // the right, through the linkage, at the same centre
+        let k = d.tan() / (l + y * d.tan());
+        let dr = (k * l).atan2(1.0 + k * y);
+        let v = (r * wl * (l * d.cos() + y * d.sin()) + r * wr * (l * dr.cos() - y * dr.sin()))
+            / (2.0 * l);
+        close(t[0], v, "vx");
+        close(t[1], ahead * v * k, "vy");
+        close(t[2], v * k, "omega");
+    }
+}
+
+/// A swerve base (#68): every module steers (continuous joints commanded by
+/// ros2_control, one axis pointing down) and drives; the twist is the
+/// least-squares solution of the modules' velocities, at the base link
+/// 0.05 m behind the modules' centre.
+#[test]
+fn a_swerve_base_is_the_least_squares_twist_of_its_modules() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = Model::load(&init("crab", dir.path())).unwrap();
+    assert!(
+        m.doc.contains("every wheel steered and driven"),
+        "{}",
+        m.doc
+    );
+    assert_eq!(m.inputs.len(), 8);
+    let (r, a, b, behind) = (0.0508, 0.30, 0.28, 0.05);
+    let modules = [
+        ("fl", a, b, 1.0),
+        ("fr", a, -b, 1.0),
+        ("rl", -a, b, 1.0),
+        ("rr", -a, -b, -1.0),
+    ];
+    for k in 0..20 {
+        let s = |i: usize| ((k * 7 + i * 13) as f64 * 0.61).sin();
+        let mut u = HashMap::new();
+        let (mut vx, mut vy, mut turn) = (0.0, 0.0, 0.0);
+        for (i, (name, qx, qy, sign)) in modules.iter().enumerate() {
+            let (w, joint_angle) = (3.0 * s(2 * i), 1.5 * s(2 * i + 1));
+            u.insert(format!("roll_{name}"), w);
+            u.insert(format!("turn_{name}"), joint_angle);
+            let d = sign * joint_angle;
+            vx += r * w * d.cos() / 4.0;
+            vy += r * w * d.sin() / 4.0;
+            turn += r * w * (qx * d.sin() - qy * d.cos());
+        }
+        let omega = turn / (4.0 * (a * a + b * b));
+        let u: HashMap<&str, f64> = u.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+        let t = twist(&m, &u);
+        close(t[0], vx, "vx");
+        close(t[1], vy - behind * omega, "vy");
+        close(t[2], omega, "omega");
+    }
+}
+
 #[test]
 fn a_tricycle_whose_steered_wheel_drives_uses_the_controllers_wheelbase() {
     let dir = tempfile::tempdir().unwrap();
@@ -345,6 +417,16 @@ fn the_mecanum_spec_runs_every_command_unedited() {
 fn the_ackermann_spec_runs_every_command_unedited() {
     every_command_runs("racer");
 }
+#[test]
+fn the_swerve_spec_runs_every_command_unedited() {
+    every_command_runs("crab");
+}
+
+#[test]
+fn the_front_wheel_drive_spec_runs_every_command_unedited() {
+    every_command_runs("runabout");
+}
+
 #[test]
 fn the_tricycle_spec_runs_every_command_unedited() {
     every_command_runs("forklift");

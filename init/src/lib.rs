@@ -174,10 +174,18 @@ fn choose_class(
     let parallel = rolling
         .iter()
         .all(|w| w.axis.cross(&rolling[0].axis).norm() < 1e-6);
+    if rolling.len() >= 3 && rolling.iter().all(|w| w.steer.is_some()) {
+        return classify::swerve(cx, notes);
+    }
     if wheels.iter().any(|w| w.steer.is_some()) {
         let steered: Vec<&Wheel> = wheels.iter().filter(|w| w.steer.is_some()).collect();
-        if steered.len() == 1 && cx.driven.contains(&steered[0].joint) {
+        let drives = |w: &&Wheel| cx.driven.contains(&w.joint);
+        if steered.len() == 1 && drives(&steered[0]) {
             return classify::front_driven_tricycle(cx, notes);
+        }
+        let rear_drives = (rolling.iter()).any(|w| w.steer.is_none() && drives(w));
+        if steered.iter().any(drives) && !rear_drives {
+            return classify::front_driven_steering(cx, notes);
         }
         return classify::rear_driven_steering(cx, notes);
     }

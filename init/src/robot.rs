@@ -13,6 +13,11 @@ pub enum Class {
     TricycleFrontDriven,
     /// Steered front wheel(s), driven rear wheels: Ackermann, bicycle, tricycle.
     RearDrivenSteering,
+    /// Steered front wheels that drive, passive rear wheels: a front-wheel
+    /// drive Ackermann car.
+    FrontDrivenSteering,
+    /// Every wheel steered and driven by itself (swerve modules).
+    Swerve,
 }
 
 impl Class {
@@ -24,6 +29,8 @@ impl Class {
             Class::Omni => "omnidirectional (omni wheels)",
             Class::TricycleFrontDriven => "tricycle (steered wheel driven)",
             Class::RearDrivenSteering => "Ackermann / bicycle (steered front, driven rear)",
+            Class::FrontDrivenSteering => "Ackermann (steered and driven front, passive rear)",
+            Class::Swerve => "swerve drive (every wheel steered and driven)",
         }
     }
 }

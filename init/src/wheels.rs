@@ -111,17 +111,18 @@ pub fn find(urdf: &Urdf, base: &str, named_wheels: &[String]) -> Result<Vec<Whee
             if !vertical(&caxis) {
                 continue;
             }
-            match c.kind {
-                JointType::Revolute => {
-                    steer = Some(Steer {
-                        joint: c.name.clone(),
-                        line: c.line,
-                        sign: caxis.z.signum(),
-                        limits: c.limits,
-                    })
-                }
-                JointType::Continuous => caster = true,
-                _ => {}
+            // a continuous joint about the vertical is a caster's swivel,
+            // unless ros2_control commands it: a swerve module's steering
+            let continuous = c.kind == JointType::Continuous;
+            if c.kind == JointType::Revolute || (continuous && urdf.commanded.contains(&c.name)) {
+                steer = Some(Steer {
+                    joint: c.name.clone(),
+                    line: c.line,
+                    sign: caxis.z.signum(),
+                    limits: c.limits,
+                });
+            } else if continuous {
+                caster = true;
             }
         }
         wheel_links.push(j.child.clone());

@@ -231,7 +231,7 @@ fn commands_hint(r: &Robot) -> String {
         .controller
         .as_ref()
         .map_or("/cmd_vel".to_string(), |c| format!("/{}/cmd_vel", c.node));
-    let sideways = matches!(r.class, Class::Mecanum | Class::Omni);
+    let sideways = matches!(r.class, Class::Mecanum | Class::Omni | Class::Swerve);
     let mut hint = format!(
         "\n# A bag without the wheel joints, only the velocity commands the controller\n\
          # was sent (geometry_msgs Twist or TwistStamped): give the spec command inputs\n\

@@ -173,6 +173,8 @@ pub fn linear(c0: f64, terms: &[(f64, &str)]) -> String {
 mod differential;
 mod holonomic;
 mod steered;
+mod swerve;
 pub use differential::differential;
 pub use holonomic::{mecanum, omni};
-pub use steered::{front_driven_tricycle, rear_driven_steering};
+pub use steered::{front_driven_steering, front_driven_tricycle, rear_driven_steering};
+pub use swerve::swerve;

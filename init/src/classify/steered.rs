@@ -1,12 +1,12 @@
-//! Bases that steer: a tricycle whose steered wheel drives, and Ackermann /
+//! Bases that steer: a tricycle whose steered wheel drives, Ackermann /
 //! bicycle / tricycle bases whose rear wheels drive (seed 001 eq. 14-16 for
-//! the bicycle form). The twist is written at the rear axle centre C (where
+//! the bicycle form), and Ackermann bases whose steered front wheels drive. The twist is written at the rear axle centre C (where
 //! the lateral velocity is zero) and moved to the base link.
 use super::*;
 use crate::robot::{Class, ControllerOut, Kinematics, ParamOut};
 use crate::wheels::Steer;
 
-fn steering_input(s: &Steer) -> InputOut {
+pub(super) fn steering_input(s: &Steer) -> InputOut {
     InputOut {
         name: identifier(&s.joint),
         column: s.joint.clone(),
@@ -129,6 +129,42 @@ pub fn front_driven_tricycle(cx: &Context, notes: &mut Vec<String>) -> Result<Ro
     Ok(robot)
 }
 
+/// The steered wheels whose angle is read (a steering joint that mimics
+/// another is not logged apart).
+fn read_steering<'a>(cx: &'a Context) -> Vec<&'a Wheel> {
+    (cx.wheels.iter())
+        .filter(|w| {
+            w.steer
+                .as_ref()
+                .is_some_and(|s| !cx.mimics.contains(&s.joint))
+        })
+        .collect()
+}
+
+/// The curvature of the rear axle centre `c`'s path: each steered wheel at
+/// (L, y_i) from C points at the turn centre on the rear axle line, so the
+/// curvature is tan(d_i)/(L + y_i tan(d_i)), averaged over the wheels read.
+fn curvature(read: &[&Wheel], c: Vector2<f64>) -> String {
+    let each: Vec<String> = (read.iter())
+        .map(|w| {
+            let s = w.steer.as_ref().expect("steered");
+            let d = signed(s.sign, &identifier(&s.joint));
+            let y = w.position.y - c.y;
+            if y.abs() > 1e-12 {
+                let to_centre = linear(0.0, &[(1.0, "wheelbase"), (y, &format!("tan({d})"))]);
+                format!("tan({d})/({to_centre})")
+            } else {
+                format!("tan({d})/wheelbase")
+            }
+        })
+        .collect();
+    if each.len() == 1 {
+        each[0].clone()
+    } else {
+        format!("({})/{}", each.join(" + "), each.len())
+    }
+}
+
 /// Steered front wheel(s), driven rear wheels: each steered wheel at
 /// (L, y_i) from C points at the turn centre, so the curvature is
 /// tan(d_i)/(L + y_i tan(d_i)); the spec averages it over the steered
@@ -144,15 +180,7 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
         return Err(InitError::at(cx.file, Some(rear[0].line), "no rear wheel is driven (neither the controller nor a <ros2_control> block commands one)"));
     }
     let steered: Vec<&Wheel> = cx.wheels.iter().filter(|w| w.steer.is_some()).collect();
-    let read: Vec<&Wheel> = steered
-        .iter()
-        .copied()
-        .filter(|w| {
-            !w.steer
-                .as_ref()
-                .is_some_and(|s| cx.mimics.contains(&s.joint))
-        })
-        .collect();
+    let read = read_steering(cx);
     let ctl = cx.controller.filter(|k| k.kind == ControllerKind::Steering);
     let radius_key = ["rear_wheels_radius", "traction_wheels_radius"]
         .into_iter()
@@ -182,21 +210,11 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
             signed(forward_sign(w), &identifier(&w.joint))
         })
         .collect();
-    let mut curvatures = Vec::new();
-    for w in &read {
-        let s = w.steer.as_ref().expect("steered");
-        inputs.push(steering_input(s));
-        let d = signed(s.sign, &identifier(&s.joint));
-        let y = w.position.y - c.y;
-        curvatures.push(if y.abs() > 1e-12 {
-            format!(
-                "tan({d})/({})",
-                linear(0.0, &[(1.0, "wheelbase"), (y, &format!("tan({d})"))])
-            )
-        } else {
-            format!("tan({d})/wheelbase")
-        });
-    }
+    inputs.extend(
+        read.iter()
+            .map(|w| steering_input(w.steer.as_ref().expect("steered"))),
+    );
+    let curvature = curvature(&read, c);
     let n = driven.len();
     let ybar = mean(driven.iter().map(|w| w.position.y - c.y));
     let sum = terms.join(" + ").replace("+ -", "- ");
@@ -208,11 +226,6 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
     if ybar.abs() > 1e-12 {
         speed = format!("({speed})/({})", linear(1.0, &[(-ybar, "curvature")]));
     }
-    let curvature = if curvatures.len() == 1 {
-        curvatures[0].clone()
-    } else {
-        format!("({})/{}", curvatures.join(" + "), curvatures.len())
-    };
     let defines = vec![
         (
             "curvature".into(),
@@ -243,6 +256,118 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
             k,
             &[
                 (radius_key, "rear_wheel_radius"),
+                ("wheelbase", "wheelbase"),
+            ],
+        )
+    });
+    Ok(robot)
+}
+
+/// Steered front wheels that drive (a front-wheel-drive car), the rear
+/// wheels passive: the curvature as for a rear-driven base, and each driven
+/// wheel i at (L, y_i) from C rolling along its heading d_i gives the rear
+/// axle centre's speed r w_i (L cos(d_i) + y_i sin(d_i))/L (the tricycle's
+/// form for each wheel); the spec averages it over the driven wheels. A
+/// driven wheel whose steering joint is not logged (it mimics the other)
+/// takes the angle the curvature gives it, atan2(k L, 1 - k y_i).
+pub fn front_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
+    let (_, c) = rear_axle(cx)?;
+    let steered: Vec<&Wheel> = cx.wheels.iter().filter(|w| w.steer.is_some()).collect();
+    let driven: Vec<&Wheel> = (steered.iter().copied())
+        .filter(|w| cx.driven.contains(&w.joint) && !w.mimic)
+        .collect();
+    let read = read_steering(cx);
+    let ctl = cx.controller.filter(|k| k.kind == ControllerKind::Steering);
+    let radius_key = ["front_wheels_radius", "traction_wheels_radius"]
+        .into_iter()
+        .find(|k| ctl.is_some_and(|c| c.params.contains_key(*k)))
+        .unwrap_or("front_wheels_radius");
+    let mut params = vec![Quantity {
+        name: "front_wheel_radius",
+        unit: "m",
+        doc: "Radius of the driven, steered front wheels.".into(),
+        floor: 0.01,
+        urdf: radius_of(driven[0]),
+        controller: controller_value(ctl, radius_key, None)?,
+    }
+    .resolve(ctl, notes)?];
+    params.push(wheelbase(cx, &steered, c, ctl, notes)?);
+    let mut inputs: Vec<InputOut> = (driven.iter())
+        .map(|w| {
+            let doc = format!(
+                "driven front wheel joint `{}` (URDF line {}): its angle's rate",
+                w.joint, w.line
+            );
+            wheel_input(w, doc)
+        })
+        .collect();
+    inputs.extend(
+        read.iter()
+            .map(|w| steering_input(w.steer.as_ref().expect("steered"))),
+    );
+    let speeds: Vec<String> = (driven.iter())
+        .map(|w| {
+            let s = w.steer.as_ref().expect("steered");
+            let y = w.position.y - c.y;
+            let d = if read.iter().any(|r| r.joint == w.joint) {
+                signed(s.sign, &identifier(&s.joint))
+            } else {
+                let across = linear(1.0, &[(-y, "curvature")]);
+                format!("atan2(curvature*wheelbase, {across})")
+            };
+            let rim = format!(
+                "front_wheel_radius*{}",
+                signed(forward_sign(w), &identifier(&w.joint))
+            );
+            if y.abs() > 1e-12 {
+                let along = linear(
+                    0.0,
+                    &[
+                        (1.0, &format!("wheelbase*cos({d})")),
+                        (y, &format!("sin({d})")),
+                    ],
+                );
+                format!("{rim}*({along})/wheelbase")
+            } else {
+                format!("{rim}*cos({d})")
+            }
+        })
+        .collect();
+    let speed = if speeds.len() == 1 {
+        speeds[0].clone()
+    } else {
+        format!("({})/{}", speeds.join(" + "), speeds.len())
+    };
+    let defines = vec![
+        (
+            "curvature".into(),
+            curvature(&read, c),
+            "Curvature of the rear axle centre's path (1/m).".into(),
+        ),
+        (
+            "speed".into(),
+            speed,
+            "Speed of the rear axle centre (m/s).".into(),
+        ),
+        (
+            "yaw_rate".into(),
+            "speed*curvature".into(),
+            "Turn rate of the base.".into(),
+        ),
+    ];
+    let [vx, vy, omega] = at_base("speed", c, "yaw_rate", NOISE);
+    let mut robot = Robot::new(
+        Class::FrontDrivenSteering,
+        inputs,
+        params,
+        defines,
+        Kinematics::Twist { vx, vy, omega, doc: "Steered, driven front wheels, passive rear axle: each front wheel points at the turn centre on the rear axle line and rolls along its heading.".into() },
+    );
+    robot.controller = ctl.map(|k| {
+        ControllerOut::of(
+            k,
+            &[
+                (radius_key, "front_wheel_radius"),
                 ("wheelbase", "wheelbase"),
             ],
         )
