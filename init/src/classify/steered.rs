@@ -165,6 +165,63 @@ fn curvature(read: &[&Wheel], c: Vector2<f64>) -> String {
     }
 }
 
+/// What a steered base with a fixed rear axle is written from: the rear
+/// axle centre's curvature and speed, moved to the base link, and the
+/// controller's radius key with the parameter it holds.
+struct AxleCentre<'a> {
+    class: Class,
+    curvature: String,
+    speed: String,
+    radius: (&'a str, &'a str),
+    doc: &'a str,
+}
+
+impl AxleCentre<'_> {
+    fn robot(
+        self,
+        (inputs, params): (Vec<InputOut>, Vec<ParamOut>),
+        c: Vector2<f64>,
+        ctl: Option<&Controller>,
+    ) -> Robot {
+        let defines = vec![
+            (
+                "curvature".into(),
+                self.curvature,
+                "Curvature of the rear axle centre's path (1/m).".into(),
+            ),
+            (
+                "speed".into(),
+                self.speed,
+                "Speed of the rear axle centre (m/s).".into(),
+            ),
+            (
+                "yaw_rate".into(),
+                "speed*curvature".into(),
+                "Turn rate of the base.".into(),
+            ),
+        ];
+        let [vx, vy, omega] = at_base("speed", c, "yaw_rate", NOISE);
+        let doc = self.doc.to_string();
+        let mut robot = Robot::new(
+            self.class,
+            inputs,
+            params,
+            defines,
+            Kinematics::Twist { vx, vy, omega, doc },
+        );
+        robot.controller =
+            ctl.map(|k| ControllerOut::of(k, &[self.radius, ("wheelbase", "wheelbase")]));
+        robot
+    }
+}
+
+/// The first of `keys` the steering controller gives (else the first).
+fn radius_key(ctl: Option<&Controller>, keys: [&'static str; 2]) -> &'static str {
+    (keys.into_iter())
+        .find(|k| ctl.is_some_and(|c| c.params.contains_key(*k)))
+        .unwrap_or(keys[0])
+}
+
 /// Steered front wheel(s), driven rear wheels: each steered wheel at
 /// (L, y_i) from C points at the turn centre, so the curvature is
 /// tan(d_i)/(L + y_i tan(d_i)); the spec averages it over the steered
@@ -182,10 +239,7 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
     let steered: Vec<&Wheel> = cx.wheels.iter().filter(|w| w.steer.is_some()).collect();
     let read = read_steering(cx);
     let ctl = cx.controller.filter(|k| k.kind == ControllerKind::Steering);
-    let radius_key = ["rear_wheels_radius", "traction_wheels_radius"]
-        .into_iter()
-        .find(|k| ctl.is_some_and(|c| c.params.contains_key(*k)))
-        .unwrap_or("rear_wheels_radius");
+    let radius_key = radius_key(ctl, ["rear_wheels_radius", "traction_wheels_radius"]);
     let mut params = vec![Quantity {
         name: "rear_wheel_radius",
         unit: "m",
@@ -226,41 +280,14 @@ pub fn rear_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Rob
     if ybar.abs() > 1e-12 {
         speed = format!("({speed})/({})", linear(1.0, &[(-ybar, "curvature")]));
     }
-    let defines = vec![
-        (
-            "curvature".into(),
-            curvature,
-            "Curvature of the rear axle centre's path (1/m).".into(),
-        ),
-        (
-            "speed".into(),
-            speed,
-            "Speed of the rear axle centre (m/s).".into(),
-        ),
-        (
-            "yaw_rate".into(),
-            "speed*curvature".into(),
-            "Turn rate of the base.".into(),
-        ),
-    ];
-    let [vx, vy, omega] = at_base("speed", c, "yaw_rate", NOISE);
-    let mut robot = Robot::new(
-        Class::RearDrivenSteering,
-        inputs,
-        params,
-        defines,
-        Kinematics::Twist { vx, vy, omega, doc: "Steered front, driven rear (seed 001 eq. 14 for one steered wheel): each steered wheel points at the turn centre on the rear axle line.".into() },
-    );
-    robot.controller = ctl.map(|k| {
-        ControllerOut::of(
-            k,
-            &[
-                (radius_key, "rear_wheel_radius"),
-                ("wheelbase", "wheelbase"),
-            ],
-        )
-    });
-    Ok(robot)
+    let axle = AxleCentre {
+        class: Class::RearDrivenSteering,
+        curvature,
+        speed,
+        radius: (radius_key, "rear_wheel_radius"),
+        doc: "Steered front, driven rear (seed 001 eq. 14 for one steered wheel): each steered wheel points at the turn centre on the rear axle line.",
+    };
+    Ok(axle.robot((inputs, params), c, ctl))
 }
 
 /// Steered front wheels that drive (a front-wheel-drive car), the rear
@@ -278,10 +305,7 @@ pub fn front_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Ro
         .collect();
     let read = read_steering(cx);
     let ctl = cx.controller.filter(|k| k.kind == ControllerKind::Steering);
-    let radius_key = ["front_wheels_radius", "traction_wheels_radius"]
-        .into_iter()
-        .find(|k| ctl.is_some_and(|c| c.params.contains_key(*k)))
-        .unwrap_or("front_wheels_radius");
+    let radius_key = radius_key(ctl, ["front_wheels_radius", "traction_wheels_radius"]);
     let mut params = vec![Quantity {
         name: "front_wheel_radius",
         unit: "m",
@@ -338,39 +362,12 @@ pub fn front_driven_steering(cx: &Context, notes: &mut Vec<String>) -> Result<Ro
     } else {
         format!("({})/{}", speeds.join(" + "), speeds.len())
     };
-    let defines = vec![
-        (
-            "curvature".into(),
-            curvature(&read, c),
-            "Curvature of the rear axle centre's path (1/m).".into(),
-        ),
-        (
-            "speed".into(),
-            speed,
-            "Speed of the rear axle centre (m/s).".into(),
-        ),
-        (
-            "yaw_rate".into(),
-            "speed*curvature".into(),
-            "Turn rate of the base.".into(),
-        ),
-    ];
-    let [vx, vy, omega] = at_base("speed", c, "yaw_rate", NOISE);
-    let mut robot = Robot::new(
-        Class::FrontDrivenSteering,
-        inputs,
-        params,
-        defines,
-        Kinematics::Twist { vx, vy, omega, doc: "Steered, driven front wheels, passive rear axle: each front wheel points at the turn centre on the rear axle line and rolls along its heading.".into() },
-    );
-    robot.controller = ctl.map(|k| {
-        ControllerOut::of(
-            k,
-            &[
-                (radius_key, "front_wheel_radius"),
-                ("wheelbase", "wheelbase"),
-            ],
-        )
-    });
-    Ok(robot)
+    let axle = AxleCentre {
+        class: Class::FrontDrivenSteering,
+        curvature: curvature(&read, c),
+        speed,
+        radius: (radius_key, "front_wheel_radius"),
+        doc: "Steered, driven front wheels, passive rear axle: each front wheel points at the turn centre on the rear axle line and rolls along its heading.",
+    };
+    Ok(axle.robot((inputs, params), c, ctl))
 }
