@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """A campaign of hostile inputs over every command (issue 67): mutated logs,
-specs, sightings, maps, jobs files, topic mappings, robot descriptions and
-option values, each run through the command that reads it.
+specs, sightings, maps, jobs files, topic mappings, robot descriptions,
+ROS 2 bags (their MCAP bytes and their metadata) and option values, each run
+through the command that reads it.
 
 Each case passes when kinegen ends with exit 0, 1 or 2 within the time limit
 and under the memory cap, and
@@ -131,11 +132,13 @@ class Base:
                         "--observations", "obs.csv"], cwd=work, check=True, capture_output=True)
         sim = (work / "sim.csv").read_text().splitlines(keepends=True)
         self.sim = "".join(sim[:601])
+        (work / "sim600.csv").write_text(self.sim)
         self.obs = (work / "obs.csv").read_text()
         self.map = (ROOT / "data" / "beacons.csv").read_text()
         self.urdf = (ROOT / "tests" / "robots" / "burger" / "robot.urdf").read_text()
         self.controllers = (ROOT / "tests" / "robots" / "burger" / "controllers.yaml").read_text()
         self.topics = '[inputs]\nenc_r = "/joint_states:position[0]"\n'
+        self.bag = make_bag(work)
         self.job = {"id": "a", "args": ["compare", "--spec", "SPEC", "--data", "LOG"]}
 
 
@@ -155,7 +158,7 @@ def case(base, rng, k, tmp):
     """The k-th case: (command line, output paths, largest input size, what
     was mutated)."""
     kind = rng.choice(["log", "log", "spec", "spec", "sightings", "map", "jobs", "topics",
-                       "urdf", "controllers", "option", "option"])
+                       "urdf", "controllers", "option", "option"] + (["bag", "bag"] if base.bag else []))
     files = {"spec.toml": base.spec, "log.csv": base.log, "sim.csv": base.sim,
              "obs.csv": base.obs, "map.csv": base.map, "robot.urdf": base.urdf,
              "controllers.yaml": base.controllers, "topics.toml": base.topics}
@@ -163,11 +166,20 @@ def case(base, rng, k, tmp):
     files["jobs.jsonl"] = json.dumps(job) + "\n"
     target = {"log": rng.choice(["log.csv", "sim.csv"]), "spec": "spec.toml", "sightings": "obs.csv",
               "map": "map.csv", "jobs": "jobs.jsonl", "topics": "topics.toml", "urdf": "robot.urdf",
-              "controllers": "controllers.yaml", "option": None}[kind]
+              "controllers": "controllers.yaml", "option": None, "bag": None}[kind]
     if target:
         files[target] = mutate_text(files[target], rng)
     for name, text in files.items():
         write(tmp / name, text)
+    if kind == "bag":
+        # the MCAP file's bytes, or now and then the metadata's text
+        (tmp / "run.bag").mkdir()
+        for name, data in base.bag.items():
+            if name.endswith(".mcap") and rng.random() < 0.85:
+                data = mutate_bytes(data, rng)
+            elif name.endswith(".yaml") and rng.random() < 0.5:
+                data = mutate_text(data.decode(), rng).encode("utf-8", "surrogateescape")
+            (tmp / "run.bag" / name).write_bytes(data)
     out_json, out_file, report = tmp / "out.json", tmp / "out.csv", tmp / "report"
     analysis = ["--spec", "spec.toml", "--data", "log.csv"]
     seen = ["--spec", "spec.toml", "--data", "sim.csv", "--observations", "obs.csv", "--landmarks", "map.csv"]
@@ -182,6 +194,8 @@ def case(base, rng, k, tmp):
         "topics": [["compare", *analysis, "--topics", "topics.toml"]],
         "urdf": [["init", "--urdf", "robot.urdf", "--out", "out.toml"]],
         "controllers": [["init", "--urdf", "robot.urdf", "--controller", "controllers.yaml", "--out", "out.toml"]],
+        "bag": [["compare", "--spec", "spec.toml", "--data", "run.bag"], ["fit", "--spec", "spec.toml", "--data", "run.bag"],
+                ["diagnose", "--spec", "spec.toml", "--data", "run.bag"]],
     }
     if kind == "option":
         opt = rng.choice(list(HOSTILE_OPTIONS))
@@ -196,14 +210,53 @@ def case(base, rng, k, tmp):
         what = f"{opt} {value}"
     else:
         args = list(rng.choice(commands[kind]))
-        what = f"mutated {target}"
+        what = f"mutated {target or 'bag'}"
     if args[0] in ("compare", "fit", "diagnose", "localize"):
         args += ["--json", str(out_json)]
         if rng.random() < 0.2:
             args += ["--report", str(report)]
     outputs = [out_json, report, tmp / "out.toml"] + ([out_file] if args[0] == "simulate" else [])
-    size = max((tmp / n).stat().st_size for n in files)
+    size = max([(tmp / n).stat().st_size for n in files]
+               + [f.stat().st_size for f in (tmp / "run.bag").glob("*")])
     return args, outputs, size, what
+
+
+def make_bag(work):
+    """The short simulated log as a ROS 2 bag (joints, pose, gyro and
+    sightings), written by the bag tests' own tool: {file name: bytes}, or
+    None without its Python packages (the bag cases are then left out)."""
+    out = work / "base.bag"
+    p = subprocess.run(["python3", str(ROOT / "verify" / "bags" / "csv_to_bag.py"), str(work / "sim600.csv"),
+                        str(out), "--joints", "enc_r,enc_l", "--observations", str(work / "obs.csv")],
+                       capture_output=True)
+    if p.returncode != 0:
+        print("note: no bag cases (pip install -r verify/bags/requirements.txt):",
+              p.stderr.decode(errors="replace").strip().splitlines()[-1:])
+        return None
+    return {f.name: f.read_bytes() for f in out.iterdir()}
+
+
+def mutate_bytes(data, rng):
+    """One byte-level change of a binary file: truncated, bytes flipped, a
+    length field made huge or zero, a stretch repeated or cut out."""
+    kind = rng.randrange(6)
+    at = rng.randrange(len(data))
+    if kind == 0:
+        return data[:at]
+    if kind == 1:
+        b = bytearray(data)
+        for _ in range(rng.randrange(1, 16)):
+            b[rng.randrange(len(b))] = rng.randrange(256)
+        return bytes(b)
+    if kind == 2:  # a little-endian u64 (an MCAP length or count) made huge
+        return data[:at] + rng.choice([b"\xff" * 8, (1 << 40).to_bytes(8, "little")]) + data[at + 8:]
+    if kind == 3:
+        return data[:at] + b"\0" * 8 + data[at + 8:]
+    if kind == 4:
+        n = rng.randrange(1, 4096)
+        return data[:at] + data[at:at + n] + data[at:]
+    n = rng.randrange(1, 4096)
+    return data[:at] + data[at + n:]
 
 
 def limit_memory():
@@ -274,7 +327,7 @@ def located(text):
     """An exit-2 message names a file (with a line, row or column), an
     option, or an input by name."""
     t = text.lower()
-    return any(s in t for s in (".csv", ".toml", ".jsonl", ".urdf", ".yaml", "--", "line", "row",
+    return any(s in t for s in (".csv", ".toml", ".jsonl", ".urdf", ".yaml", ".mcap", "bag", "--", "line", "row",
                                 "column", "option", "argument", "usage:"))
 
 
@@ -336,6 +389,11 @@ def report(results, seconds, keep):
             worst = max(big, key=lambda r: (r["rss"] - base) / r["size"])
             print(f"  above the base, at most {(worst['rss'] - base) / worst['size']:.1f}x the largest input "
                   f"over the {len(big)} cases with an input of 1 MB or more ({worst['command']})")
+    kinds = {}
+    for r in results:
+        kinds[r["what"].split()[-1] if r["what"].startswith("mutated") else "option"] = \
+            kinds.get(r["what"].split()[-1] if r["what"].startswith("mutated") else "option", 0) + 1
+    print("inputs mutated: " + ", ".join(f"{k} {n}" for k, n in sorted(kinds.items())))
     for r in failed[:20]:
         print(f"FAILED case {r['k']}: {r['command']} ({r['what']}): {r['problem']} {r['message']}")
     if failed:

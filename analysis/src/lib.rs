@@ -52,6 +52,7 @@
 pub mod logs {
     pub mod bag;
     pub mod column;
+    pub mod contained;
     pub mod log;
     pub mod merged;
     pub mod rosdyn;

@@ -9,6 +9,7 @@
 //! until the next one. Rows outside any stream's span are dropped. Time is
 //! the messages' header stamps (or the bag's receive time, if asked; an
 //! unstamped `Twist` has only that), minus the first row's.
+use crate::logs::contained::contained;
 use crate::logs::log::{wrap, Log, LogError};
 use crate::logs::rosmsg::{self, decode};
 use serde::Deserialize;
@@ -645,22 +646,32 @@ fn collect(
     progress: &dyn Fn(usize, usize),
 ) -> Result<(HashMap<String, Topic>, Vec<(String, String)>), LogError> {
     let err = |m: String| LogError::new(file, None, None, m);
-    let total = mcap::Summary::read(buf)
+    let total = contained(|| mcap::Summary::read(buf))
         .ok()
+        .and_then(Result::ok)
         .flatten()
         .and_then(|s| s.stats.map(|s| s.message_count as usize))
         .unwrap_or(0);
-    let stream =
-        mcap::MessageStream::new(buf).map_err(|e| err(format!("not a readable MCAP file: {e}")))?;
+    let mut stream = contained(|| mcap::MessageStream::new(buf))
+        .map_err(|why| {
+            err(format!(
+                "not a readable MCAP file: the MCAP reader failed ({why})"
+            ))
+        })?
+        .map_err(|e| err(format!("not a readable MCAP file: {e}")))?;
     let mut topics: HashMap<String, Topic> = HashMap::new();
     let mut all: Vec<(String, String)> = Vec::new();
     let mut counts: HashMap<String, usize> = HashMap::new();
-    for (n, m) in stream.enumerate() {
-        let m = m.map_err(|e| {
+    for n in 0.. {
+        let corrupt = |what: String| {
             err(format!(
-                "truncated or corrupt MCAP file after {n} messages: {e}"
+                "truncated or corrupt MCAP file after {n} messages: {what}"
             ))
-        })?;
+        };
+        let next = contained(|| stream.next())
+            .map_err(|why| corrupt(format!("the MCAP reader failed ({why})")))?;
+        let Some(m) = next else { break };
+        let m = m.map_err(|e| corrupt(e.to_string()))?;
         let ch = &m.channel;
         let schema = ch
             .schema
