@@ -28,6 +28,12 @@ pub struct InitArgs {
     /// The --topics mapping for the robot's bags
     #[arg(long)]
     pub topics_out: Option<PathBuf>,
+    /// Write a spec of the velocity commands (cmd_vel: forward speed and
+    /// turn rate, and sideways speed for a base that moves sideways, each
+    /// with a gain to calibrate) rather than of the wheel joints, for bags
+    /// that logged only what the controller was sent
+    #[arg(long)]
+    pub commands: bool,
     /// Also print every wheel found and every note in full
     #[arg(short, long)]
     pub verbose: bool,
@@ -47,6 +53,7 @@ pub fn run(a: &InitArgs) -> ExitCode {
     let options = kinegen_init::Options {
         base_link: a.base_link.clone(),
         spec_path: Some(a.out.clone()),
+        commands: a.commands,
     };
     let made = match kinegen_init::from_files(&a.urdf, a.controller.as_deref(), &options) {
         Ok(m) => m,
@@ -65,10 +72,15 @@ pub fn run(a: &InitArgs) -> ExitCode {
         return bad(e);
     }
     println!(
-        "{}: {} with {} wheel joints, base link `{}` -> {}{}",
+        "{}: {} with {} wheel joints{}, base link `{}` -> {}{}",
         made.name,
         made.class.describe(),
         made.wheels.len(),
+        if a.commands {
+            ", driven by its velocity commands"
+        } else {
+            ""
+        },
         made.base_link,
         a.out.display(),
         a.topics_out

@@ -27,6 +27,7 @@
 //! assert!(out.spec.contains("name = \"wheel_separation\"\nnominal = 0.3"));
 //! ```
 mod classify;
+mod commands;
 mod controller;
 pub mod controller_write;
 mod error;
@@ -55,6 +56,9 @@ pub struct Options {
     /// Where the spec will be written: the controller file is recorded
     /// relative to it.
     pub spec_path: Option<std::path::PathBuf>,
+    /// A spec of the velocity commands (`cmd_vel`) rather than the wheel
+    /// joints, for bags that logged only what the controller was sent.
+    pub commands: bool,
 }
 
 /// A spec and its topic mapping, with what the user should know about them.
@@ -278,6 +282,17 @@ pub fn from_text(
     });
     if let (Some(c), Some(out)) = (ctl, robot.controller.as_mut()) {
         out.file = relative_to(&c.file, options.spec_path.as_deref());
+    }
+    if let Some(c) = &robot.controller {
+        robot.command_topic = format!("/{}/cmd_vel", c.node);
+    }
+    if options.commands {
+        robot = commands::commanded(robot);
+        robot.doc = format!(
+            "{} `{}` driven by its velocity commands, written by kinegen init from its URDF.",
+            capital(robot.class.describe()),
+            urdf.name
+        );
     }
     finish(file, &urdf, &base, &wheels, robot, notes)
 }

@@ -35,13 +35,25 @@ impl Class {
     }
 }
 
+/// What an input is: a wheel's angle (cumulative), a steering angle
+/// (absolute, rad), or a velocity command (absolute, in `unit`) read from the
+/// controller's command topic at `field`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum InputRole {
+    Wheel,
+    Steering,
+    Command {
+        unit: &'static str,
+        field: &'static str,
+    },
+}
+
 #[derive(Debug, Clone)]
 pub struct InputOut {
     pub name: String,
     /// The joint_states name.
     pub column: String,
-    /// A steering angle (absolute, rad) rather than a wheel angle (cumulative).
-    pub steering: bool,
+    pub role: InputRole,
     pub range: Option<[f64; 2]>,
     pub doc: String,
 }
@@ -103,6 +115,8 @@ pub struct Robot {
     /// The exteroceptive sensor's link and its mounting (x, y) in the base frame.
     pub landmark_sensor: Option<(String, [f64; 2])>,
     pub controller: Option<ControllerOut>,
+    /// The topic the controller's velocity commands arrive on.
+    pub command_topic: String,
     /// Facts the user should read: disagreements, choices, what was ignored.
     pub notes: Vec<String>,
 }
@@ -128,6 +142,7 @@ impl Robot {
             gyro: None,
             landmark_sensor: None,
             controller: None,
+            command_topic: "/cmd_vel".into(),
             notes: Vec::new(),
         }
     }

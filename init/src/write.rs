@@ -4,7 +4,7 @@
 //! toml_edit: the comments carry as much as the values, and toml_edit's
 //! decor API would spread each comment over three calls.
 use crate::classify::{linear, num};
-use crate::robot::{Class, Kinematics, ParamOut, Robot};
+use crate::robot::{Class, InputRole, Kinematics, ParamOut, Robot};
 use std::fmt::Write;
 
 fn quote(s: &str) -> String {
@@ -159,13 +159,14 @@ pub fn spec(r: &Robot, header: &str) -> String {
             quote(&i.name),
             quote(&i.column)
         );
-        if i.steering {
-            let _ = writeln!(out, "kind = \"absolute\"\nunit = \"rad\"");
-            if let Some([lo, hi]) = i.range {
-                let _ = writeln!(out, "range = [{}, {}]", num(lo), num(hi));
-            }
-        } else {
-            let _ = writeln!(out, "kind = \"cumulative\"\nunit = \"rad/s\"");
+        let (kind, unit) = match i.role {
+            InputRole::Wheel => ("cumulative", "rad/s"),
+            InputRole::Steering => ("absolute", "rad"),
+            InputRole::Command { unit, .. } => ("absolute", unit),
+        };
+        let _ = writeln!(out, "kind = {}\nunit = {}", quote(kind), quote(unit));
+        if let Some([lo, hi]) = i.range {
+            let _ = writeln!(out, "range = [{}, {}]", num(lo), num(hi));
         }
         let _ = writeln!(out, "doc = {}", quote(&capitalise(&i.doc)));
     }
@@ -202,14 +203,29 @@ pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
     for l in header.lines() {
         let _ = writeln!(out, "# {l}");
     }
-    let _ = writeln!(out, "stamps = \"header\"\n\n# each input column is the joint of the same name in sensor_msgs/JointState\n[inputs]");
+    let commands = r
+        .inputs
+        .iter()
+        .any(|i| matches!(i.role, InputRole::Command { .. }));
+    let _ = writeln!(
+        out,
+        "stamps = \"header\"\n\n# {}\n[inputs]",
+        if commands {
+            "each input column is a component of the velocity commands (geometry_msgs Twist or TwistStamped)"
+        } else {
+            "each input column is the joint of the same name in sensor_msgs/JointState"
+        }
+    );
     for i in &r.inputs {
-        let _ = writeln!(
-            out,
-            "{} = {{ topic = \"/joint_states\", joint = {} }}",
-            quote(&i.column),
-            quote(&i.column)
-        );
+        let source = match i.role {
+            InputRole::Command { field, .. } => format!(
+                "topic = {}, field = {}",
+                quote(&r.command_topic),
+                quote(field)
+            ),
+            _ => format!("topic = \"/joint_states\", joint = {}", quote(&i.column)),
+        };
+        let _ = writeln!(out, "{} = {{ {source} }}", quote(&i.column));
     }
     let _ = writeln!(
         out,
@@ -219,7 +235,9 @@ pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
     if r.gyro.is_some() {
         let _ = writeln!(out, "\n# the IMU (sensor_msgs/Imu): its angular_velocity.z is gyro_z\n[gyro]\ntopic = \"/imu/data\"");
     }
-    let _ = writeln!(out, "{}", commands_hint(r));
+    if !commands {
+        let _ = writeln!(out, "{}", commands_hint(r));
+    }
     out
 }
 
@@ -227,15 +245,12 @@ pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
 /// joints: the mapping of the controller's command topic, commented out (its
 /// inputs are a spec of commands, not this one's wheels).
 fn commands_hint(r: &Robot) -> String {
-    let topic = r
-        .controller
-        .as_ref()
-        .map_or("/cmd_vel".to_string(), |c| format!("/{}/cmd_vel", c.node));
+    let topic = &r.command_topic;
     let sideways = matches!(r.class, Class::Mecanum | Class::Omni | Class::Swerve);
     let mut hint = format!(
         "\n# A bag without the wheel joints, only the velocity commands the controller\n\
          # was sent (geometry_msgs Twist or TwistStamped): give the spec command inputs\n\
-         # (kind = \"absolute\"; guide: how-to, Read a ROS 2 bag) and map them instead:\n\
+         # (`kinegen init --commands` writes that spec and this mapping) and map them:\n\
          # [inputs]\n\
          # v = {{ topic = \"{topic}\", field = \"linear.x\" }}\n"
     );

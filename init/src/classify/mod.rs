@@ -9,7 +9,7 @@
 use crate::controller::{Controller, ControllerKind};
 use crate::error::InitError;
 use crate::geometry::{controller_value, FromUrdf, Quantity};
-use crate::robot::{InputOut, Robot};
+use crate::robot::{InputOut, InputRole, Robot};
 use crate::wheels::Wheel;
 use nalgebra::Vector2;
 use std::path::Path;
@@ -69,7 +69,7 @@ pub(crate) fn wheel_input(w: &Wheel, doc: String) -> InputOut {
     InputOut {
         name: identifier(&w.joint),
         column: w.joint.clone(),
-        steering: false,
+        role: InputRole::Wheel,
         range: None,
         doc,
     }

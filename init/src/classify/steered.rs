@@ -10,7 +10,7 @@ pub(super) fn steering_input(s: &Steer) -> InputOut {
     InputOut {
         name: identifier(&s.joint),
         column: s.joint.clone(),
-        steering: true,
+        role: crate::robot::InputRole::Steering,
         range: s.limits,
         doc: format!(
             "steering joint `{}` (URDF line {}): its angle",
