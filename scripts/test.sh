@@ -71,7 +71,10 @@ timed "generate --check" "${CARGO_TARGET_DIR:-target}/debug/kinegen" generate --
 # thread: on 2 cores they run beside the others, not alone, which saves most
 # of their 45 s. cargo keeps its build lock while its tests run, so they run
 # as the binaries cargo built (from the root folder, as cargo would).
-symbolic_bins=$(cargo test --test autodiff --test generate --no-run --message-format=json 2>/dev/null \
+# (--workspace: the features the workspace build resolved, so nothing is
+# compiled again; without it cargo resolved the root package's alone and
+# built a second kinegen and its tests, 2 minutes on a fresh clone)
+symbolic_bins=$(cargo test --workspace --test autodiff --test generate --no-run --message-format=json 2>/dev/null \
   | python3 -c 'import json, sys
 for line in sys.stdin:
     m = json.loads(line)
