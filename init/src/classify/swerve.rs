@@ -24,21 +24,15 @@ fn rectangle(wheels: &[&Wheel], c: Vector2<f64>) -> Option<(f64, f64)> {
     (wheels.len() == 4 && on && a > 0.0 && b > 0.0).then_some((a, b))
 }
 
-pub fn swerve(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
-    let wheels: Vec<&Wheel> = cx.wheels.iter().filter(|w| !w.caster).collect();
-    let equal_radii = (wheels.iter()).all(|w| (w.radius - wheels[0].radius).abs() < 1e-12);
-    if !equal_radii {
-        return Err(InitError::at(
-            cx.file,
-            Some(wheels[1].radius_line),
-            "swerve: the modules' wheels have different radii; kinegen expects one wheel size",
-        ));
-    }
-    let c = Vector2::new(
-        mean(wheels.iter().map(|w| w.position.x)),
-        mean(wheels.iter().map(|w| w.position.y)),
-    );
-    let lines = joint_lines(&wheels);
+/// The modules' wheel radius, and their half wheelbase and half track when
+/// they sit on a rectangle about their centre (else a note: the positions
+/// are written as numbers).
+fn module_params(
+    wheels: &[&Wheel],
+    rect: Option<(f64, f64)>,
+    notes: &mut Vec<String>,
+) -> Result<Vec<ParamOut>, InitError> {
+    let lines = joint_lines(wheels);
     let mut params: Vec<ParamOut> = vec![Quantity {
         name: "wheel_radius",
         unit: "m",
@@ -48,7 +42,6 @@ pub fn swerve(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError>
         controller: None,
     }
     .resolve(None, notes)?];
-    let rect = rectangle(&wheels, c);
     if let Some((a, b)) = rect {
         for (name, value, doc) in [
             (
@@ -81,6 +74,25 @@ pub fn swerve(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError>
             "swerve: the modules are not on a rectangle about their centre; their positions are written as numbers".into(),
         );
     }
+    Ok(params)
+}
+
+pub fn swerve(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError> {
+    let wheels: Vec<&Wheel> = cx.wheels.iter().filter(|w| !w.caster).collect();
+    let equal_radii = (wheels.iter()).all(|w| (w.radius - wheels[0].radius).abs() < 1e-12);
+    if !equal_radii {
+        return Err(InitError::at(
+            cx.file,
+            Some(wheels[1].radius_line),
+            "swerve: the modules' wheels have different radii; kinegen expects one wheel size",
+        ));
+    }
+    let c = Vector2::new(
+        mean(wheels.iter().map(|w| w.position.x)),
+        mean(wheels.iter().map(|w| w.position.y)),
+    );
+    let rect = rectangle(&wheels, c);
+    let params = module_params(&wheels, rect, notes)?;
     let mut inputs = Vec::new();
     let (mut along_x, mut along_y, mut turn) = (Vec::new(), Vec::new(), Vec::new());
     let mut spread = 0.0;
