@@ -6,8 +6,13 @@
 use std::process::Command;
 
 fn tree(args: &[&str]) -> String {
+    cargo_tree(&[&["-e", "normal"], args].concat())
+}
+
+/// `cargo tree --locked --prefix none ARGS` in the workspace.
+fn cargo_tree(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO"))
-        .args(["tree", "--locked", "-e", "normal", "--prefix", "none"])
+        .args(["tree", "--locked", "--prefix", "none"])
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
@@ -53,20 +58,7 @@ fn the_light_build_and_the_analysis_have_no_symbolica() {
 /// Each dependency's feature sets, as `cargo tree -f "{p} [{f}]"` prints
 /// them: (name version) -> every set it is built with (host and target).
 fn feature_sets(args: &[&str]) -> std::collections::BTreeMap<String, Vec<String>> {
-    let text = {
-        let out = Command::new(env!("CARGO"))
-            .args(["tree", "--locked", "--prefix", "none", "-f", "{p} [{f}]"])
-            .args(args)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .output()
-            .expect("cargo tree runs");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        String::from_utf8(out.stdout).unwrap()
-    };
+    let text = cargo_tree(&[&["-f", "{p} [{f}]"], args].concat());
     let mut sets: std::collections::BTreeMap<String, Vec<String>> = Default::default();
     for line in text.lines() {
         let Some((package, features)) = line.split_once(" [") else {
