@@ -2,7 +2,7 @@
 //! its position error with the worst stretches shaded, the turn-rate
 //! residual against speed, turn rate and heading, the landmark innovations,
 //! and where the error grows.
-use super::{chart, drawn, esc, gt_xy, page, traj, write, Series};
+use super::{chart, drawn, error_chart, esc, gt_xy, page, traj, trajectory_chart, write, Series};
 use kinegen_analysis::model_on_log::comparison::Comparison;
 use kinegen_analysis::model_on_log::innovations::Innovation;
 use kinegen_analysis::model_on_log::metrics::{RegimeShare, Segment};
@@ -86,22 +86,10 @@ pub fn compare_report(
         if let Some(g) = g {
             series.push(("gyrodometry", RGBColor(0, 90, 200), traj(run, g)));
         }
-        figs.push(chart(
-            &format!("{}: trajectory", run.name),
-            "x (m)",
-            "y (m)",
-            &series,
-            false,
-            true,
-            &[],
-        )?);
-        figs.push(chart(
+        figs.push(trajectory_chart(run, &series)?);
+        figs.push(error_chart(
             &format!("{}: position error, worst 1 s segments shaded", run.name),
-            "t (s)",
-            "error (m)",
             &[("model (nominal)", RED, d.pos_err)],
-            false,
-            false,
             &worst_marks(&cmp.segments, &run.name),
         )?);
         let [a, b, c] = d.scatter;

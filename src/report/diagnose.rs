@@ -1,7 +1,7 @@
 //! `kinegen diagnose --report`: the calibrated spec's and the chain's tracks,
 //! the first effect's residual signature, the sightings' range errors, the
 //! candidates, the spec changes and a proposal beyond the catalogue.
-use super::{chart, drawn, esc, gt_xy, page, write, Series};
+use super::{chart, drawn, error_chart, esc, gt_xy, page, trajectory_chart, write, Series};
 use kinegen_analysis::diagnosis::clock::ClockVerdict;
 use kinegen_analysis::diagnosis::diagnose::{ChainStep, Diagnosis};
 use kinegen_analysis::diagnosis::diagnose_job::Outcome;
@@ -62,30 +62,9 @@ pub fn diagnose_report(
                 &[],
             )?);
         }
-        figs.insert(
-            0,
-            chart(
-                &format!("{}: trajectory", run.name),
-                "x (m)",
-                "y (m)",
-                &series,
-                false,
-                true,
-                &[],
-            )?,
-        );
-        figs.insert(
-            1,
-            chart(
-                &format!("{}: position error", run.name),
-                "t (s)",
-                "error (m)",
-                &errs,
-                false,
-                false,
-                &[],
-            )?,
-        );
+        figs.insert(0, trajectory_chart(run, &series)?);
+        let title = format!("{}: position error", run.name);
+        figs.insert(1, error_chart(&title, &errs, &[])?);
     }
     let t = candidates_html(d, base);
     let intro = format!(

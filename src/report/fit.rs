@@ -1,6 +1,6 @@
 //! `kinegen fit --report`: the tracks and position errors before and after
 //! calibration, the turn-rate residual against speed, and the parameters.
-use super::{chart, drawn, esc, gt_xy, page, write};
+use super::{chart, drawn, error_chart, esc, gt_xy, page, trajectory_chart, write};
 use kinegen_analysis::estimation::fit::FitResult;
 use kinegen_analysis::estimation::fit_job::Calibrated;
 use kinegen_analysis::model_on_log::model::Runner;
@@ -39,26 +39,17 @@ pub fn fit_report(
     let mut figs = Vec::new();
     for ((run, b), a) in runs.iter().zip(&cal.before.tracks).zip(&cal.after.tracks) {
         let (b, a) = (drawn(run, b), drawn(run, a));
-        figs.push(chart(
-            &format!("{}: trajectory", run.name),
-            "x (m)",
-            "y (m)",
+        figs.push(trajectory_chart(
+            run,
             &[
                 ("measured", BLACK, gt_xy(run)),
                 ("before calibration", RED, b.traj),
                 ("after calibration", GREEN, a.traj),
             ],
-            false,
-            true,
-            &[],
         )?);
-        figs.push(chart(
+        figs.push(error_chart(
             &format!("{}: position error", run.name),
-            "t (s)",
-            "error (m)",
             &[("before", RED, b.pos_err), ("after", GREEN, a.pos_err)],
-            false,
-            false,
             &[],
         )?);
         let [sb, _, _] = b.scatter;

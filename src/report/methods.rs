@@ -1,6 +1,6 @@
 //! `kinegen fit --method all` (or one seed method) `--report`: each method's
 //! track and error against the nominal model, and their estimates compared.
-use super::{chart, drawn, esc, gt_xy, page, write, Series};
+use super::{drawn, error_chart, esc, gt_xy, page, trajectory_chart, write, Series};
 use kinegen_analysis::estimation::fit_job::MethodsOutcome;
 use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_analysis::model_on_log::run::Run;
@@ -42,22 +42,10 @@ pub fn methods_report(
             traj_series.push((row.name.as_str(), color, d.traj));
             err_series.push((row.name.as_str(), color, d.pos_err));
         }
-        figs.push(chart(
-            &format!("{}: trajectory", run.name),
-            "x (m)",
-            "y (m)",
-            &traj_series,
-            false,
-            true,
-            &[],
-        )?);
-        figs.push(chart(
+        figs.push(trajectory_chart(run, &traj_series)?);
+        figs.push(error_chart(
             &format!("{}: position error", run.name),
-            "t (s)",
-            "error (m)",
             &err_series,
-            false,
-            false,
             &[],
         )?);
     }

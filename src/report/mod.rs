@@ -435,6 +435,21 @@ fn drawn(run: &Run, tr: &dyn TrackRows) -> Drawn {
     }
 }
 
+/// A run's trajectory chart: `series` on equal axes.
+pub(crate) fn trajectory_chart(run: &Run, series: &[Series]) -> Result<String, String> {
+    let title = format!("{}: trajectory", run.name);
+    chart(&title, "x (m)", "y (m)", series, false, true, &[])
+}
+
+/// A position-error-over-time chart titled `title`, `marks` shaded.
+pub(crate) fn error_chart(
+    title: &str,
+    series: &[Series],
+    marks: &[(f64, f64)],
+) -> Result<String, String> {
+    chart(title, "t (s)", "error (m)", series, false, false, marks)
+}
+
 pub(crate) fn gt_xy(run: &Run) -> Vec<(f64, f64)> {
     run.gt
         .as_ref()
