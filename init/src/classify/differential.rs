@@ -126,7 +126,7 @@ pub fn differential(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, Init
         "(v_right - v_left)/wheel_separation".into(),
         "Turn rate of the base.".into(),
     ));
-    let [vx, vy, omega] = at_base("(v_right + v_left)/2", centre, "yaw_rate", NOISE);
+    let [vx, vy, omega] = at_base(("(v_right + v_left)/2", None), centre, "yaw_rate", NOISE);
     let controller = ctl.map(|c| {
         ControllerOut::of(
             c,

@@ -119,18 +119,19 @@ pub(crate) fn mean(v: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// The twist at the base link from the twist at point c (base frame):
-/// v_base = v_c + omega x (base - c).
+/// v_base = v_c + omega x (base - c). `vy_c`: the lateral velocity at c,
+/// None where c has none (a fixed axle's centre).
 pub(crate) fn at_base(
-    vx_c: &str,
+    (vx_c, vy_c): (&str, Option<&str>),
     c: Vector2<f64>,
     omega: &str,
     noise: (&str, &str, &str),
 ) -> [String; 3] {
     let vx = linear(0.0, &[(1.0, vx_c), (c.y, omega), (1.0, noise.0)]);
-    let vy = if c.x.abs() > 1e-12 {
-        linear(0.0, &[(-c.x, omega), (1.0, noise.1)])
-    } else {
-        "0".to_string()
+    let vy = match vy_c {
+        Some(vy_c) => linear(0.0, &[(1.0, vy_c), (-c.x, omega), (1.0, noise.1)]),
+        None if c.x.abs() > 1e-12 => linear(0.0, &[(-c.x, omega), (1.0, noise.1)]),
+        None => "0".to_string(),
     };
     [vx, vy, format!("{omega} + {}", noise.2)]
 }

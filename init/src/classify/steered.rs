@@ -109,7 +109,7 @@ pub fn front_driven_tricycle(cx: &Context, notes: &mut Vec<String>) -> Result<Ro
     } else {
         format!("wheel_speed*cos({delta})")
     };
-    let [vx, vy, omega] = at_base(&vx_c, c, "yaw_rate", NOISE);
+    let [vx, vy, omega] = at_base((&vx_c, None), c, "yaw_rate", NOISE);
     let mut robot = Robot::new(
         Class::TricycleFrontDriven,
         vec![
@@ -200,7 +200,7 @@ impl AxleCentre<'_> {
                 "Turn rate of the base.".into(),
             ),
         ];
-        let [vx, vy, omega] = at_base("speed", c, "yaw_rate", NOISE);
+        let [vx, vy, omega] = at_base(("speed", None), c, "yaw_rate", NOISE);
         let doc = self.doc.to_string();
         let mut robot = Robot::new(
             self.class,

@@ -146,10 +146,7 @@ pub fn swerve(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError>
             "Turn rate of the base.".into(),
         ),
     ];
-    // v_base = v_c + omega x (base - c), base at the origin
-    let (n_vx, n_vy, n_omega) = NOISE;
-    let vx = linear(0.0, &[(1.0, "vx_centre"), (c.y, "yaw_rate"), (1.0, n_vx)]);
-    let vy = linear(0.0, &[(1.0, "vy_centre"), (-c.x, "yaw_rate"), (1.0, n_vy)]);
+    let [vx, vy, omega] = at_base(("vx_centre", Some("vy_centre")), c, "yaw_rate", NOISE);
     Ok(Robot::new(
         Class::Swerve,
         inputs,
@@ -158,7 +155,7 @@ pub fn swerve(cx: &Context, notes: &mut Vec<String>) -> Result<Robot, InitError>
         Kinematics::Twist {
             vx,
             vy,
-            omega: format!("yaw_rate + {n_omega}"),
+            omega,
             doc: "Swerve: each module's wheel rolls along its steered heading; the twist is the least-squares solution of the modules' velocities.".into(),
         },
     ))
