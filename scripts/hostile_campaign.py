@@ -391,8 +391,8 @@ def report(results, seconds, keep):
                   f"over the {len(big)} cases with an input of 1 MB or more ({worst['command']})")
     kinds = {}
     for r in results:
-        kinds[r["what"].split()[-1] if r["what"].startswith("mutated") else "option"] = \
-            kinds.get(r["what"].split()[-1] if r["what"].startswith("mutated") else "option", 0) + 1
+        kind = r["what"].split()[-1] if r["what"].startswith("mutated") else "option"
+        kinds[kind] = kinds.get(kind, 0) + 1
     print("inputs mutated: " + ", ".join(f"{k} {n}" for k, n in sorted(kinds.items())))
     for r in failed[:20]:
         print(f"FAILED case {r['k']}: {r['command']} ({r['what']}): {r['problem']} {r['message']}")
