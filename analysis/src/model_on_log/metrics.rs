@@ -1,10 +1,9 @@
 //! How wrong is the model, and where: absolute trajectory error, relative pose
 //! error over distance and time windows, gyro residuals, and which motion regimes
 //! and segments carry the error.
-use crate::logs::log::wrap;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
-use crate::model_on_log::track_rows::{Cursor, Heading, Recipe, TrackRows};
+use crate::model_on_log::track_rows::{row_error, Cursor, Heading, Recipe, TrackRows};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -52,14 +51,6 @@ pub struct Errors {
     pub rpe_5s_m: Option<f64>,
     pub gyro_rmse_rad_s: Option<f64>,
     pub samples: usize,
-}
-
-/// (position error, heading error) of a measured pose against the logged one.
-fn row_error(measured: &[f64; 3], gt: &[f64; 3]) -> (f64, f64) {
-    (
-        ((measured[0] - gt[0]).powi(2) + (measured[1] - gt[1]).powi(2)).sqrt(),
-        wrap(measured[2] - gt[2]),
-    )
 }
 
 /// Motion regime of a step from its body twist.

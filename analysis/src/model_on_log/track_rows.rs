@@ -37,6 +37,14 @@ pub trait TrackRows: Sync {
     fn rows<'s>(&'s self, run: &'s Run) -> Box<dyn Iterator<Item = Row> + 's>;
 }
 
+/// (position error, heading error) of a measured pose against the logged one.
+pub fn row_error(measured: &[f64; 3], gt: &[f64; 3]) -> (f64, f64) {
+    (
+        ((measured[0] - gt[0]).powi(2) + (measured[1] - gt[1]).powi(2)).sqrt(),
+        wrap(measured[2] - gt[2]),
+    )
+}
+
 /// A row of a track against the run's ground truth, as the reports draw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RowAgainstTruth {
@@ -73,7 +81,7 @@ pub fn against_truth<'s>(
         RowAgainstTruth {
             t: run.t[k] - run.t[0],
             measured: [m[0], m[1]],
-            position_error: g.map(|(g, _)| (g[0] - m[0]).hypot(g[1] - m[1])),
+            position_error: g.map(|(g, _)| row_error(&m, &g).0),
             turn_rate: match (row.twist, g) {
                 (Some(tw), Some((g, Some(next)))) => Some(TurnRateResidual {
                     speed: tw[0].hypot(tw[1]),
