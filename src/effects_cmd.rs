@@ -19,7 +19,7 @@ pub struct SimArgs {
     /// True parameter value NAME=VALUE (default: nominal); repeatable.
     #[arg(long = "set")]
     pub set: Vec<String>,
-    /// square (UMBMark, both directions), figure8, random, spin, beacons (a tour of the --landmarks in order, stopping at the last).
+    /// square (UMBMark, both directions), figure8, random, spin, back-and-forth (1.5 m along a line and back), beacons (a tour of the --landmarks in order, stopping at the last).
     #[arg(long, default_value = "square")]
     pub trajectory: String,
     #[arg(long, default_value_t = 1)]

@@ -30,6 +30,10 @@ pub enum Trajectory {
     Random,
     /// Turning in place, both ways (models that can).
     Spin,
+    /// Driving 1.5 m along a line and back in reverse, with the small heading
+    /// corrections of a robot's line following (Ivanjko's straight-line
+    /// calibration run): a log that barely turns.
+    BackAndForth,
     /// A smooth tour through the mapped landmarks in the map's order, stopping
     /// at the last (seed 001 sec. 3: the robot visits 12 beacons).
     Beacons,
@@ -37,7 +41,7 @@ pub enum Trajectory {
 
 /// A trajectory name `simulate` does not know.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("unknown trajectory `{0}` (square, square-cw, square-ccw, figure8, random, spin, beacons)")]
+#[error("unknown trajectory `{0}` (square, square-cw, square-ccw, figure8, random, spin, back-and-forth, beacons)")]
 pub struct UnknownTrajectory(pub String);
 
 impl std::str::FromStr for Trajectory {
@@ -50,6 +54,7 @@ impl std::str::FromStr for Trajectory {
             "figure8" | "figure-eight" => Ok(Trajectory::FigureEight),
             "random" => Ok(Trajectory::Random),
             "spin" | "turn-in-place" => Ok(Trajectory::Spin),
+            "back-and-forth" | "straight" => Ok(Trajectory::BackAndForth),
             "beacons" => Ok(Trajectory::Beacons),
             _ => Err(UnknownTrajectory(s.to_string())),
         }
@@ -190,6 +195,26 @@ fn square(can_spin: bool, dirs: &[f64]) -> Vec<Seg> {
     segs
 }
 
+/// [`Trajectory::BackAndForth`]: 1.5 m forward at 0.3 m/s, a pause, the
+/// same in reverse, and a pause, with heading corrections of 0.03 rad/s
+/// (a line follower's) while moving.
+fn back_and_forth() -> (Box<dyn Fn(f64) -> [f64; 3]>, f64) {
+    let (v, run) = (0.3, 1.5 * 1.35 / 0.3);
+    let leg = run + 1.0;
+    (
+        Box::new(move |t| {
+            let (back, at) = (t >= leg, t % leg);
+            if at >= run {
+                return [0.0; 3];
+            }
+            let k = profile(at, run);
+            let sign = if back { -1.0 } else { 1.0 };
+            [sign * v * k, 0.0, 0.03 * (2.0 * PI * t / 3.0).sin() * k]
+        }),
+        2.0 * leg,
+    )
+}
+
 /// Pure pursuit of the landmarks in order from the start pose (0, 0, 0),
 /// planned once on an ideal unicycle at 100 Hz: cruise at `speed` (m/s), turn toward
 /// the next landmark at up to 1 rad/s (and within the curvature limit of a robot
@@ -297,6 +322,7 @@ fn planner(
             )
         }
         Trajectory::Beacons => beacon_tour(&o.landmarks, can_spin, o.cruise_speed),
+        Trajectory::BackAndForth => back_and_forth(),
         Trajectory::Spin => (
             Box::new(|t| {
                 let k = smooth(t / 1.0);

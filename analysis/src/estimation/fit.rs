@@ -18,7 +18,9 @@
 mod arrow;
 mod covariance;
 mod drift;
+pub mod excitation;
 pub mod leave_one_out;
+pub mod nominal_prior;
 mod options;
 mod residuals;
 mod rounding;
@@ -205,6 +207,18 @@ pub enum Search<'a> {
         whole: &'a [Run],
         starts: &'a [[f64; 3]],
     },
+}
+
+/// A calibration of `r` on `runs` (by [`fit`]) as it is handed to the
+/// user: what the logs cannot tell stays near the nominal values
+/// ([`nominal_prior`]), and a log that turns one way only is said
+/// ([`excitation`]). Diagnosis compares [`fit`]'s maximum-likelihood costs
+/// and does not call this.
+pub fn for_use(r: &Runner, runs: &[Run], o: &FitOptions, res: FitResult) -> FitResult {
+    let mut res = nominal_prior::toward_nominal(r, runs, o, res);
+    res.warnings
+        .extend(excitation::one_way_warning(r, &res.p, runs));
+    res
 }
 
 /// Calibrate the free parameters of `r` on `runs`, starting from `r.p` and

@@ -2,7 +2,7 @@
 //! ([`METHODS`]): the CLI's `--method` choices, `--method all` and the dispatch
 //! all read the registry, so a new method (issue #15's neural gyrodometry, say)
 //! is one `impl` and one line here.
-use crate::estimation::fit::{fit, FitOptions, FitResult, Search};
+use crate::estimation::fit::{fit, for_use, FitOptions, FitResult, Search};
 use crate::estimation::seed_methods::{ekf, gradient_descent, umbmark, yaw_rate_blind_directions};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
@@ -173,7 +173,9 @@ impl Method for Lm {
         runs: &[Run],
         s: &Settings,
     ) -> Result<Calibration, MethodError> {
-        let res = fit(r, runs, s.fit, Search::Global)?;
+        // the user's calibration: the data combined with the nominal values
+        // as measurements of their own (what one log cannot tell stays near them)
+        let res = for_use(r, runs, s.fit, fit(r, runs, s.fit, Search::Global)?);
         Ok(Calibration {
             p: res.p.clone(),
             std: res.std.clone(),

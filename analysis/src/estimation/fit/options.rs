@@ -192,6 +192,9 @@ pub struct FitResult {
     /// What the search found on its way (a local minimum avoided): carried
     /// through later stages, and said with the warnings at the end of [`fit`].
     pub search_notes: Vec<String>,
+    /// The parameters the nominal values' default prior moved, with what the
+    /// data alone said ([`super::nominal_prior`]; empty before it is applied).
+    pub near_nominal: Vec<super::nominal_prior::HeldNearNominal>,
 }
 
 impl FitResult {

@@ -553,6 +553,7 @@ impl Stage<'_> {
             warnings: vec![],
             undetermined: vec![],
             search_notes: vec![],
+            near_nominal: vec![],
         };
         if m == 0 {
             // only start poses were refined: no parameter to report on
