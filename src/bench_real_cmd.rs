@@ -35,6 +35,11 @@ pub struct BenchRealArgs {
     /// Split a log where rows are more than this many seconds apart.
     #[arg(long, value_name = "SECONDS", default_value_t = kinegen_analysis::model_on_log::run::DEFAULT_MAX_GAP_S, value_parser = crate::analysis_cmd::positive)]
     pub max_gap: f64,
+    /// Calibrate on each run alone, scored on the robot's other sessions:
+    /// what a single run can tell (the published methods, calibrated on
+    /// whole sessions, are left out).
+    #[arg(long)]
+    pub each_run: bool,
     /// What kinegen's calibration compares (as `fit --likelihood`).
     #[arg(long, default_value = "track", value_parser = Likelihood::NAMES)]
     pub likelihood: String,
@@ -94,10 +99,15 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
             multi_start: true,
             ..FitOptions::default()
         });
-    let results = holdout_bench::benchmark(&loaded.sessions, &options, &|s| spin.message(s));
+    let sessions = if a.each_run {
+        holdout_bench::each_run_alone(loaded.sessions)
+    } else {
+        loaded.sessions
+    };
+    let results = holdout_bench::benchmark(&sessions, &options, &|s| spin.message(s));
     drop(spin);
     let seconds = started.elapsed().as_secs_f64();
-    for line in answer(&results, seconds) {
+    for line in answer(&results, seconds, a.each_run) {
         out.say(&line);
     }
     if a.verbose {
@@ -114,6 +124,10 @@ pub fn run(a: &BenchRealArgs) -> ExitCode {
         "dir": a.dir.display().to_string(),
         "sessions": results,
         "summary": summary(&results),
+        "worse_than_nominal": {
+            "held_out_final": holdout_bench::worse_than_nominal(&results, HELD_OUT_FINAL),
+            "held_out_rmse": holdout_bench::worse_than_nominal(&results, HELD_OUT_RMSE),
+        },
         "seconds": started.elapsed().as_secs_f64(),
     });
     match out.json(a.json.as_deref(), &doc) {
@@ -208,7 +222,7 @@ fn wins(results: &[SessionResult], m: Measure) -> BTreeMap<&str, (usize, usize)>
 
 /// The answer: how many sessions, and per robot type and measure, where
 /// kinegen is at or below the best published method.
-fn answer(results: &[SessionResult], seconds: f64) -> Vec<String> {
+fn answer(results: &[SessionResult], seconds: f64, each_run: bool) -> Vec<String> {
     let mut robots: BTreeMap<&str, usize> = BTreeMap::new();
     for s in results {
         *robots.entry(s.robot.as_str()).or_default() += 1;
@@ -221,15 +235,28 @@ fn answer(results: &[SessionResult], seconds: f64) -> Vec<String> {
             of += n;
         }
     }
-    let mut lines = vec![
-        crate::output::cut(&format!(
-            "bench-real: {} sessions ({}) scored on other sessions' runs, in {seconds:.0} s",
-            results.len(),
-            kinds.join(", ")
-        )),
-        format!("answer: kinegen at or below the best published method in {won} of {of} session x measure pairs"),
-        String::new(),
-    ];
+    let mut lines = vec![crate::output::cut(&format!(
+        "bench-real ({seconds:.0} s): {} {} ({}) scored on other sessions' runs",
+        results.len(),
+        if each_run {
+            "runs calibrated alone"
+        } else {
+            "sessions"
+        },
+        kinds.join(", ")
+    ))];
+    if of > 0 {
+        lines.push(format!("answer: kinegen at or below the best published method in {won} of {of} session x measure pairs"));
+    }
+    let worse = holdout_bench::worse_than_nominal(results, HELD_OUT_RMSE);
+    lines.push(format!(
+        "worse than the nominal values on the held-out runs (RMSE, by over 10%): {} of {} calibrations, {} of them without a warning",
+        worse.worse, worse.of, worse.unwarned
+    ));
+    lines.push(String::new());
+    if of == 0 {
+        return lines;
+    }
     let mut t = crate::output::table(&[
         "robot",
         "held-out final",

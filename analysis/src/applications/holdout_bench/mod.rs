@@ -7,7 +7,7 @@
 //! and of the whole-run position RMSE. Beside them, the study's own
 //! in-sample figure: the largest final position error over the session's
 //! own runs.
-use crate::estimation::fit::{fit, FitOptions, Search};
+use crate::estimation::fit::{fit, for_use, FitOptions, Search};
 use crate::model_on_log::metrics;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
@@ -23,6 +23,10 @@ pub mod optiodom;
 pub struct Session {
     /// e.g. `diff/square/230620202144`
     pub name: String,
+    /// The session its runs were recorded in (its own name, or the session
+    /// [`each_run_alone`] cut it from): runs recorded together never score
+    /// each other's calibration.
+    pub recorded: String,
     /// The robot it was recorded with; sessions of the same robot score each other.
     pub robot: String,
     pub runner: Runner,
@@ -154,7 +158,10 @@ pub fn benchmark(
         .map(|(i, s)| {
             progress(&s.name);
             let started = Instant::now();
-            let (ours, warnings) = match fit(&s.runner, &s.runs, o, Search::Global) {
+            // calibrated as `fit` calibrates (the `lm` method)
+            let fitted = fit(&s.runner, &s.runs, o, Search::Global)
+                .map(|res| for_use(&s.runner, &s.runs, o, res));
+            let (ours, warnings) = match fitted {
                 Ok(res) => (
                     Some(Calibration {
                         method: KINEGEN.into(),
@@ -174,7 +181,7 @@ pub fn benchmark(
             let others: Vec<&Session> = sessions
                 .iter()
                 .enumerate()
-                .filter(|(j, o)| *j != i && o.robot == s.robot)
+                .filter(|(j, o)| *j != i && o.robot == s.robot && o.recorded != s.recorded)
                 .map(|x| x.1)
                 .collect();
             let methods = ours
@@ -199,6 +206,66 @@ pub fn benchmark(
             }
         })
         .collect()
+}
+
+/// Each run of each session as a session of its own (`NAME/RUN`): what one
+/// run can tell, scored on the runs of the robot's other recorded sessions.
+/// The published calibrations, made from whole sessions, are left out.
+pub fn each_run_alone(sessions: Vec<Session>) -> Vec<Session> {
+    sessions
+        .into_iter()
+        .flat_map(|s| {
+            let Session {
+                name,
+                recorded,
+                robot,
+                runner,
+                runs,
+                ..
+            } = s;
+            runs.into_iter()
+                .map(|run| Session {
+                    name: format!("{name}/{}", run.name),
+                    recorded: recorded.clone(),
+                    robot: robot.clone(),
+                    runner: runner.clone(),
+                    runs: vec![run],
+                    published: vec![],
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// How much worse than the nominal values on the held-out runs a
+/// calibration may be before it counts as worse (issue 70: "none makes
+/// them worse by more than 10%").
+pub const WORSE_THAN_NOMINAL: f64 = 1.1;
+
+/// Calibrations worse than the nominal values on the held-out runs by
+/// `measure` (beyond [`WORSE_THAN_NOMINAL`]), of those measured, and how
+/// many of the worse ones fit gave no warning with.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct WorseThanNominal {
+    pub worse: usize,
+    pub unwarned: usize,
+    pub of: usize,
+}
+
+pub fn worse_than_nominal(results: &[SessionResult], measure: Measure) -> WorseThanNominal {
+    let mut w = WorseThanNominal::default();
+    for s in results {
+        let ours = s.score_of(KINEGEN).and_then(measure);
+        let nominal = s.score_of(NOMINAL).and_then(measure);
+        if let (Some(a), Some(b)) = (ours, nominal) {
+            w.of += 1;
+            if a > WORSE_THAN_NOMINAL * b {
+                w.worse += 1;
+                w.unwarned += usize::from(s.warnings.is_empty());
+            }
+        }
+    }
+    w
 }
 
 /// A calibration's values by parameter name.

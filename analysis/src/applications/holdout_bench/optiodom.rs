@@ -218,6 +218,7 @@ pub fn load(
             &mut warnings,
         )?;
         sessions.push(Session {
+            recorded: key.clone(),
             name: key,
             ..session
         });
@@ -275,6 +276,7 @@ fn session(
         .unwrap_or_default();
     Ok(Session {
         name: String::new(),
+        recorded: String::new(),
         robot: meta.robot.clone(),
         runner,
         runs,
