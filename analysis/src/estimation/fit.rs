@@ -144,6 +144,38 @@ fn at_fitted_starts(
     (fixed, seg, starts)
 }
 
+/// Each run's start offset refined for parameters `p` held fixed, in the
+/// layout of [`FitResult::starts`], with the cost there: on the whole runs
+/// where `o` fits whole runs (each run's first segment holds its offset, the
+/// later ones none, as [`on_whole_runs`] lays them out), else on the
+/// segments ([`fitted_offsets`]). For a calibration changed after its fit
+/// ([`nominal_prior`]), whose start headings were fitted with other values.
+pub(crate) fn starts_for(
+    r: &Runner,
+    p: &[f64],
+    runs: &[Run],
+    o: &FitOptions,
+) -> (Vec<[f64; 3]>, f64) {
+    let counts: Vec<usize> = runs.iter().map(|x| x.segments(SEGMENT_S).len()).collect();
+    let whole = o.whole_runs && o.increments.is_none() && counts.iter().any(|&c| c > 1);
+    let mut fixed = r.clone();
+    fixed.p = p.to_vec();
+    fixed.free = vec![];
+    if whole {
+        if let Ok(f) = fit_stage(&fixed, runs, o) {
+            let mut starts = Vec::with_capacity(counts.iter().sum());
+            for (c, s) in counts.iter().zip(&f.starts) {
+                starts.push(*s);
+                starts.extend(std::iter::repeat_n([0.0; 3], c - 1));
+            }
+            return (starts, f.cost_after);
+        }
+    }
+    let (fixed, seg, starts) = at_fitted_starts(r, p, runs, o);
+    let cost = residual_sums(&fixed, p, &[], &seg, o, &starts).cost;
+    (starts, cost)
+}
+
 /// Weighted residual RMS of `p` on `runs` (segmented as calibration sees them),
 /// after refining only the start poses.
 pub fn rms_with_fitted_starts(r: &Runner, p: &[f64], runs: &[Run], o: &FitOptions) -> f64 {

@@ -27,7 +27,7 @@
 //! costs by BIC and calls [`super::fit`], not this. This step is applied
 //! where a calibration is handed to the user: the `lm` method (`fit`, the
 //! Python API) and `bench-real`.
-use super::{correlation, fitted_offsets, residual_sums, segmented, FitOptions, FitResult};
+use super::{correlation, starts_for, FitOptions, FitResult};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use nalgebra::{DMatrix, DVector};
@@ -150,24 +150,30 @@ pub fn toward_nominal(r: &Runner, runs: &[Run], o: &FitOptions, mut res: FitResu
         .iter()
         .map(|&k| (res.p[res.free[k]], res.std[k]))
         .collect();
-    let params = r.ir.runtime_params();
-    for (a, &k) in known.iter().enumerate() {
+    // what the update moves: nothing worth a new start (a hundredth of a
+    // standard deviation) where the data determine every direction well
+    let moves = known.iter().enumerate().any(|(a, &k)| {
         let i = res.free[k];
-        let q = params[i];
-        let v = r.p[i] + moved[a];
-        res.p[i] = v.clamp(q.min.unwrap_or(f64::MIN), q.max.unwrap_or(f64::MAX));
-        res.std[k] = posterior[(a, a)].max(0.0).sqrt();
-    }
-    let corr = correlation(&posterior);
-    for (a, &ka) in known.iter().enumerate() {
-        for (b, &kb) in known.iter().enumerate() {
-            res.corr[(ka, kb)] = corr[(a, b)];
+        (r.p[i] + moved[a] - res.p[i]).abs() > 0.01 * res.std[k]
+    });
+    if moves {
+        let params = r.ir.runtime_params();
+        for (a, &k) in known.iter().enumerate() {
+            let i = res.free[k];
+            let q = params[i];
+            let v = r.p[i] + moved[a];
+            res.p[i] = v.clamp(q.min.unwrap_or(f64::MIN), q.max.unwrap_or(f64::MAX));
+            res.std[k] = posterior[(a, a)].max(0.0).sqrt();
         }
+        let corr = correlation(&posterior);
+        for (a, &ka) in known.iter().enumerate() {
+            for (b, &kb) in known.iter().enumerate() {
+                res.corr[(ka, kb)] = corr[(a, b)];
+            }
+        }
+        // the start headings refined for the new values, and the cost there
+        (res.starts, res.cost_after) = starts_for(r, &res.p, runs, o);
     }
-    // the start headings refined for the new values, and the cost there
-    let split = segmented(runs);
-    res.starts = fitted_offsets(r, &res.p, runs, o);
-    res.cost_after = residual_sums(r, &res.p, &r.free, &split, o, &res.starts).cost;
     let held: Vec<HeldNearNominal> = prior
         .iter()
         .zip(&tolerance)
