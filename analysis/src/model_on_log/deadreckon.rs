@@ -42,6 +42,7 @@ const NOT_KEPT: usize = usize::MAX;
 
 /// The sensitivity matrix of one row: `s[(m, c)]`, pose component m, column c
 /// (a column that was not kept is a bug of the caller's: it panics).
+#[derive(Clone, Copy)]
 pub struct SensAt<'a> {
     width: usize,
     place: &'a [usize],
@@ -277,45 +278,108 @@ pub fn run_from(
 pub fn run_executed(
     r: &Runner,
     p: &[f64],
-    (data, timing): (&Run, &[(usize, crate::logs::rows::Rows)]),
+    executed: (&Run, &[(usize, crate::logs::rows::Rows)]),
     with_sens: bool,
     start_offset: [f64; 3],
     plan: Option<&[u8]>,
     kept: Option<&[usize]>,
 ) -> Track {
+    let data = executed.0;
+    let mut pose = Vec::with_capacity(data.steps() + 1);
+    let mut twist = Vec::with_capacity(data.steps());
+    let mut flat = Vec::new();
+    let layout = reckon(r, p, executed, with_sens, start_offset, plan, kept, |s| {
+        if s.k == 0 {
+            pose.push(s.from);
+            flat.reserve_exact(s.sens_from.map_or(0, |x| x.d.len()) * (data.steps() + 1));
+            flat.extend_from_slice(s.sens_from.map_or(&[][..], |x| x.d));
+        }
+        pose.push(s.to);
+        twist.push(s.twist);
+        flat.extend_from_slice(s.sens_to.map_or(&[][..], |x| x.d));
+    });
+    if pose.is_empty() {
+        pose.push(layout.start);
+        flat = layout.sens_start;
+    }
+    let sens = with_sens.then_some(Sens {
+        width: layout.width,
+        place: layout.place,
+        data: flat,
+    });
+    let sensed = predicted_measurements(r, p, data, &pose);
+    let gyro = predicted_gyro(r, p, data, &pose, &twist);
+    Track {
+        pose,
+        sensed,
+        sens,
+        twist,
+        gyro,
+    }
+}
+
+/// One step of a dead reckoning as [`reckon`] makes it: step `k` from pose
+/// `from` to pose `to` at the mean body twist `twist`, with the pose's
+/// sensitivities at both ends (without sensitivities: None).
+pub struct StepMade<'a> {
+    pub k: usize,
+    pub from: [f64; 3],
+    pub to: [f64; 3],
+    pub twist: [f64; 3],
+    pub sens_from: Option<SensAt<'a>>,
+    pub sens_to: Option<SensAt<'a>>,
+}
+
+/// Where a dead reckoning started, and how its sensitivity rows are laid
+/// out (see [`Sens`]).
+pub struct Layout {
+    pub start: [f64; 3],
+    sens_start: Vec<f64>,
+    width: usize,
+    place: Vec<usize>,
+}
+
+/// The dead reckoning of [`run_executed`], each step given to `visit` as it
+/// is made and nothing kept: a caller that reads each step once (the fit's
+/// residuals) holds no track, which on a million-row log was 150 bytes a
+/// row.
+#[allow(clippy::too_many_arguments)]
+pub fn reckon(
+    r: &Runner,
+    p: &[f64],
+    (data, timing): (&Run, &[(usize, crate::logs::rows::Rows)]),
+    with_sens: bool,
+    start_offset: [f64; 3],
+    plan: Option<&[u8]>,
+    kept: Option<&[usize]>,
+    mut visit: impl FnMut(StepMade<'_>),
+) -> Layout {
     let (start, dstart) = reckoning_start(r, p, data, start_offset);
     let np = p.len();
-    let mut pose = Vec::with_capacity(data.steps() + 1);
-    pose.push(start);
     // columns: parameters, then the start pose (identity at the start)
     let kept: Vec<usize> = kept.map_or_else(|| (0..np + 3).collect(), <[usize]>::to_vec);
     let cols = kept.len();
-    let mut sens = with_sens.then(|| {
-        let mut place = vec![NOT_KEPT; np + 3];
-        for (at, &c) in kept.iter().enumerate() {
-            place[c] = at;
-        }
-        let mut data = Vec::with_capacity(3 * cols * (data.steps() + 1));
+    let mut place = vec![NOT_KEPT; np + 3];
+    for (at, &c) in kept.iter().enumerate() {
+        place[c] = at;
+    }
+    // the sensitivity of the current (sub)step's pose, and the next one's
+    let mut cur: Vec<f64> = Vec::new();
+    if with_sens {
         for m in 0..3 {
-            data.extend(kept.iter().map(|&c| match c {
+            cur.extend(kept.iter().map(|&c| match c {
                 c if c < np => dstart[m * np + c],
                 c => f64::from(u8::from(c == np + m)),
             }));
         }
-        Sens {
-            width: cols,
-            place,
-            data,
-        }
-    });
-    let mut twist = Vec::with_capacity(data.steps());
-    let mut stepper = Stepper::with_inputs(r, p, data, Cow::Borrowed(&data.u), with_sens, plan);
-    // the sensitivity of the current (sub)step's pose, and the next one's
-    let mut cur: Vec<f64> = sens.as_ref().map_or_else(Vec::new, |s| s.data.clone());
+    }
+    let sens_start = cur.clone();
+    let mut before = cur.clone();
     let mut next = vec![0.0; cur.len()];
+    let mut stepper = Stepper::with_inputs(r, p, data, Cow::Borrowed(&data.u), with_sens, plan);
     let mut by_timing: Vec<(usize, [f64; 3])> = Vec::with_capacity(timing.len());
+    let mut x = start;
     for k in 0..data.steps() {
-        let x = *pose.last().unwrap();
         // the step's response to each timing parameter: F_u d(executed u)/d q
         by_timing.clear();
         by_timing.extend(
@@ -326,7 +390,7 @@ pub fn run_executed(
         // the timing response is the whole step's, from its start pose: it
         // enters at the first sub-step and the later ones carry it on
         let mut first = true;
-        let (x, mean_twist) = stepper.step(k, x, |out| {
+        let (to, mean_twist) = stepper.step(k, x, |out| {
             if with_sens {
                 // S_{j+1} = F_x S_j + [F_p | 0], written out
                 let (jx, jp) = (&out[6..15], &out[15..]);
@@ -346,20 +410,27 @@ pub fn run_executed(
             }
             first = false;
         });
-        twist.push(mean_twist);
-        if let Some(s) = sens.as_mut() {
-            s.data.extend_from_slice(&cur);
-        }
-        pose.push(x);
+        let view = |d| SensAt {
+            width: cols,
+            place: &place,
+            d,
+        };
+        visit(StepMade {
+            k,
+            from: x,
+            to,
+            twist: mean_twist,
+            sens_from: with_sens.then(|| view(&before)),
+            sens_to: with_sens.then(|| view(&cur)),
+        });
+        before.copy_from_slice(&cur);
+        x = to;
     }
-    let sensed = predicted_measurements(r, p, data, &pose);
-    let gyro = predicted_gyro(r, p, data, &pose, &twist);
-    Track {
-        pose,
-        sensed,
-        sens,
-        twist,
-        gyro,
+    Layout {
+        start,
+        sens_start,
+        width: cols,
+        place,
     }
 }
 

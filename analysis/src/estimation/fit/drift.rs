@@ -39,9 +39,31 @@ struct Level {
     walk: f64,
 }
 
-/// A residual series: the time step before each row, the values, and the
-/// variance of the start it is anchored on, in units of the white variance.
-type Series = (Vec<f64>, Vec<f64>, f64);
+/// A residual series: one pose component of a run's pose residuals, read in
+/// place (a million-row log's three series were 48 MB as copies).
+struct Series<'a> {
+    /// the run's row times: the step before row k + 1 is `t[k + 1] - t[k]`
+    t: &'a [f64],
+    /// the run's pose residuals, (x, y, heading) triples for rows 1..
+    values: &'a [f64],
+    component: usize,
+    /// the variance of the start the series is anchored on, in units of
+    /// the white variance
+    anchor: f64,
+}
+
+impl Series<'_> {
+    /// Each row's time step and value.
+    fn rows(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        let n = self.values.len() / 3;
+        (0..n).map(|k| {
+            (
+                self.t[k + 1] - self.t[k],
+                self.values[3 * k + self.component],
+            )
+        })
+    }
+}
 
 /// The local-level model of residual series fitted by maximum likelihood: a
 /// scalar Kalman filter gives the likelihood for a ratio walk / white, with
@@ -56,9 +78,9 @@ fn local_level(series: &[Series]) -> Level {
         // grow): one logarithm per few hundred rows instead of one a row,
         // which on a million-row log was a tenth of the whole fit's time
         let mut product = 1.0;
-        for (dt, y, anchor) in series {
-            let (mut w, mut p) = (0.0, *anchor);
-            for (dt, y) in dt.iter().zip(y) {
+        for one in series {
+            let (mut w, mut p) = (0.0, one.anchor);
+            for (dt, y) in one.rows() {
                 let pred = p + lambda * dt;
                 let f = pred + 1.0;
                 let v = y - w;
@@ -98,11 +120,13 @@ fn local_level(series: &[Series]) -> Level {
 
 /// The series of pose component `c` (x, y, heading) of a run's pose
 /// residuals (`values`: (x, y, heading) triples for ground-truth rows 1..).
-fn series(run: &Run, values: &[f64], c: usize) -> Series {
-    let n = pose_rows(run);
-    let anchor = 1.0 / run.rest_steps().max(1) as f64;
-    let dt = (0..n).map(|k| run.t[k + 1] - run.t[k]).collect();
-    (dt, (0..n).map(|k| values[3 * k + c]).collect(), anchor)
+fn series<'a>(run: &'a Run, values: &'a [f64], component: usize) -> Series<'a> {
+    Series {
+        t: &run.t,
+        values: &values[..3 * pose_rows(run)],
+        component,
+        anchor: 1.0 / run.rest_steps().max(1) as f64,
+    }
 }
 
 /// The number of pose residual triples of a run: one per ground-truth row
@@ -507,12 +531,18 @@ impl<'a> Passes<'a> {
     /// A run's pose residuals and its other residuals.
     fn values(&self, run: &Run, start: [f64; 3], nuis: bool) -> (Vec<f64>, Vec<f64>) {
         let (r, free) = (self.r, self.free);
-        let values = |o: &FitOptions| {
+        let values = |o: &FitOptions, rows: usize| {
+            // a million rows' residuals, kept: reserved once, not doubled
             let mut kept = Kept::new(0);
+            kept.res.reserve_exact(rows + 1);
             run_residuals_into(r, &r.p, free, run, o, false, (start, None), nuis, &mut kept);
             kept.res
         };
-        (values(&self.pose), values(&self.rest))
+        let rest = run.gyro.as_ref().map_or(0, |_| run.steps()) + 2 * run.landmarks.len();
+        (
+            values(&self.pose, 3 * pose_rows(run)),
+            values(&self.rest, rest),
+        )
     }
 
     /// A run's H and M, in its own columns (the free parameters, then its

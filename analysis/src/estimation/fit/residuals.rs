@@ -271,8 +271,15 @@ pub(super) fn run_residuals(
 /// One run's residuals (and with `with_jac` their Jacobian rows), each given
 /// to `sink` as it is made; the track starts at the measured start pose plus
 /// `start`, sub-stepped as `plan` says.
+///
+/// In the order pose, start prior, landmarks, gyro; a sink that does not
+/// mind the order ([`Sink::ORDER_FREE`]) may get the pose and gyro
+/// residuals interleaved. Where no residual reads the track out of order
+/// (a measurement delay interpolates it, landmarks seen from it are
+/// sighted between rows), the track is not kept: each step's residuals are
+/// made as the dead reckoning makes it ([`deadreckon::reckon`]).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn run_residuals_into(
+pub(super) fn run_residuals_into<S: Sink>(
     r: &Runner,
     p: &[f64],
     free: &[usize],
@@ -281,7 +288,7 @@ pub(super) fn run_residuals_into(
     with_jac: bool,
     (start, plan): ([f64; 3], Option<&[u8]>),
     nuis: bool,
-    sink: &mut impl Sink,
+    sink: &mut S,
 ) {
     // the inputs as executed (an input delay, a lag): the track's, and the
     // observations' arguments
@@ -293,8 +300,6 @@ pub(super) fn run_residuals_into(
         .copied()
         .chain(if nuis { vec![np + 2] } else { vec![] })
         .collect();
-    let track =
-        deadreckon::run_executed(r, p, (&inputs, &timing), with_jac, start, plan, Some(&cols));
     let cx = RunCx {
         r,
         p,
@@ -302,27 +307,83 @@ pub(super) fn run_residuals_into(
         run,
         o,
         with_jac,
-        track: &track,
         inputs: &inputs,
     };
-    if o.use_pose {
-        cx.pose_residuals(sink);
+    let pose = o.use_pose && run.gt.is_some();
+    let gyro = o.use_gyro && run.gyro.is_some() && r.ir.observation_kernels(YawRate).is_some();
+    let landmarks = o.use_landmarks && !run.landmarks.is_empty();
+    let from_truth = match &run.gt {
+        Some(gt) if o.sightings_from_truth => Some(gt),
+        _ => None,
+    };
+    let streamed = r.delay.is_none()
+        && (!landmarks || from_truth.is_some())
+        && (S::ORDER_FREE || !(pose && gyro));
+    let prior = |sink: &mut S| {
+        if let Some(sd) = start_prior(run, o).filter(|_| nuis) {
+            // the start-heading offset against its measurement's uncertainty
+            let m = cols.len() - 1;
+            let row = (0..=m).map(|c| if c == m { 1.0 / sd } else { 0.0 });
+            sink.push(start[2] / sd, with_jac.then_some(row));
+        }
+    };
+    if streamed {
+        let seen = |sink: &mut S| {
+            if let (true, Some(gt)) = (landmarks, from_truth) {
+                landmark_residuals(r, p, &cols, run, SeenFrom::Truth(gt), with_jac, sink);
+            }
+        };
+        if !pose {
+            // no pose residuals: the gyro's come last, as when the track is kept
+            prior(sink);
+            seen(sink);
+        }
+        let mut rows = RowBuffers::new(np, cols.len());
+        let first = cx.first_pose_row();
+        deadreckon::reckon(
+            r,
+            p,
+            (&inputs, &timing),
+            with_jac,
+            start,
+            plan,
+            Some(&cols),
+            |s| {
+                let sens = s.sens_from.zip(s.sens_to);
+                if gyro {
+                    cx.gyro_row(&mut rows, s.k, (&s.from, &s.twist), s.sens_from, sink);
+                }
+                if pose && s.k + 1 >= first {
+                    cx.pose_row(&mut rows, s.k + 1, (s.k, 1.0), (&s.from, &s.to), sens, sink);
+                }
+            },
+        );
+        if pose {
+            prior(sink);
+            seen(sink);
+        }
+        return;
     }
-    if let Some(sd) = start_prior(run, o).filter(|_| nuis) {
-        // the start-heading offset against its measurement's uncertainty
-        let m = cols.len() - 1;
-        let row = (0..=m).map(|c| if c == m { 1.0 / sd } else { 0.0 });
-        sink.push(start[2] / sd, with_jac.then_some(row));
+    let track =
+        deadreckon::run_executed(r, p, (&inputs, &timing), with_jac, start, plan, Some(&cols));
+    if pose {
+        cx.pose_residuals(&track, sink);
     }
-    if o.use_landmarks && !run.landmarks.is_empty() {
-        let seen_from = match &run.gt {
-            Some(gt) if o.sightings_from_truth => SeenFrom::Truth(gt),
-            _ => SeenFrom::Track(&track),
+    prior(sink);
+    if landmarks {
+        let seen_from = match from_truth {
+            Some(gt) => SeenFrom::Truth(gt),
+            None => SeenFrom::Track(&track),
         };
         landmark_residuals(r, p, &cols, run, seen_from, with_jac, sink);
     }
-    if o.use_gyro {
-        cx.gyro_residuals(sink);
+    if gyro {
+        let mut rows = RowBuffers::new(np, cols.len());
+        let sens = track.sens.as_ref();
+        for k in 0..run.steps() {
+            let at = (&track.pose[k], &track.twist[k]);
+            cx.gyro_row(&mut rows, k, at, sens.map(|s| s.at(k)), sink);
+        }
     }
 }
 
@@ -330,7 +391,7 @@ pub(super) fn run_residuals_into(
 /// observation of its own.
 const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
 
-/// One run's track and what its residuals read.
+/// One run and what its residuals read besides the track.
 struct RunCx<'a> {
     r: &'a Runner,
     p: &'a [f64],
@@ -339,134 +400,172 @@ struct RunCx<'a> {
     run: &'a Run,
     o: &'a FitOptions,
     with_jac: bool,
-    track: &'a deadreckon::Track,
     /// the inputs as executed (an input delay)
     inputs: &'a Run,
 }
 
+/// What one row's residuals are made in, allocated once per run (a million
+/// rows took three allocations each per pass).
+struct RowBuffers {
+    pred: [f64; 3],
+    hx: [f64; 9],
+    hp: Vec<f64>,
+    /// the state's sensitivities at the measurement's instant, d x_m / d
+    /// column (`ds[m * width + c]`), made once per row for its residuals
+    ds: Vec<f64>,
+    jp: Vec<f64>,
+    jx: [f64; 3],
+    scratch: Vec<f64>,
+}
+
+impl RowBuffers {
+    fn new(np: usize, width: usize) -> RowBuffers {
+        RowBuffers {
+            pred: [0.0; 3],
+            hx: IDENTITY,
+            hp: vec![0.0; 3 * np],
+            ds: vec![0.0; 3 * width],
+            jp: vec![0.0; np],
+            jx: [0.0; 3],
+            scratch: Vec::new(),
+        }
+    }
+}
+
 impl RunCx<'_> {
-    /// The pose residuals against the ground truth (through the model's pose
-    /// observation where it has one).
-    #[allow(clippy::needless_range_loop)] // k indexes several per-row arrays of the run together
-    fn pose_residuals(&self, sink: &mut impl Sink) {
-        let (r, p, free, run, o, with_jac) =
-            (self.r, self.p, self.free, self.run, self.o, self.with_jac);
-        let (track, inputs) = (self.track, self.inputs);
-        let np = p.len();
-        // A measurement delay (crate::model_on_log::timeline): measurement k is compared with the
-        // model at t_k - delay, linearly interpolated between rows (exact sensitivities
-        // of the interpolation, and d/d delay = minus the interpolated velocity).
-        let tau_i = r.delay;
-        let tau = crate::model_on_log::timeline::delay(r, p);
-        let shifted = |k: usize| crate::model_on_log::timeline::model_instant(run, k, tau);
-        if let Some(gt) = &run.gt {
-            let tracker = r.ir.observation_kernels(Pose);
-            let first = if o.endpoints_only { gt.len() - 1 } else { 1 };
-            let (mut pred, mut hx, mut hp) = ([0.0; 3], IDENTITY, vec![0.0; 3 * np]);
-            let scratch = &mut Vec::new();
-            // the state's sensitivities at the measurement's instant, d x_m /
-            // d column, made once per row for its three residuals (`ds[m *
-            // width + c]`: a third of the interpolations it took per residual)
-            let width = free.len();
-            let mut ds = vec![0.0; 3 * width];
-            for k in first..gt.len() {
-                let (j, a) = if tau_i.is_some() {
-                    shifted(k)
-                } else {
-                    (k - 1, 1.0)
-                };
-                let x = lerp3(&track.pose[j], &track.pose[j + 1], a);
-                let vel: [f64; 3] =
-                    [0, 1, 2].map(|i| (track.pose[j + 1][i] - track.pose[j][i]) / run.dt[j]);
-                let u = &inputs.u[j.min(run.steps() - 1)];
-                // the pose observation and its Jacobians, into buffers made
-                // once (a million rows took three allocations each per pass)
-                match tracker {
-                    Some(t) => {
-                        let h = t.value;
-                        r.eval_into(h, &Runner::obs_args(h, &x, u, p, &[]), &mut pred, scratch);
-                        if with_jac {
-                            let fx = t.jac_x;
-                            let args = Runner::obs_args(fx, &x, u, p, &[]);
-                            r.eval_into(fx, &args, &mut hx, scratch);
-                            if let Some(fp) = t.jac_p {
-                                let args = Runner::obs_args(fp, &x, u, p, &[]);
-                                r.eval_into(fp, &args, &mut hp, scratch);
-                            }
-                        }
-                    }
-                    None => pred = x,
-                }
-                if with_jac {
-                    let sens = track.sens.as_ref().unwrap();
-                    let (s0, s1) = (sens.at(j), sens.at(j + 1));
-                    for (ci, &c) in free.iter().enumerate() {
-                        for m in 0..3 {
-                            ds[m * width + ci] = if Some(c) == tau_i {
-                                -vel[m]
-                            } else {
-                                s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
-                            };
-                        }
-                    }
-                }
-                let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
-                let (hx, hp, ds) = (&hx, &hp[..], &ds);
-                for i in 0..3 {
-                    let d = pred[i] - gt[k][i];
-                    let row = with_jac.then(|| {
-                        free.iter().enumerate().map(move |(ci, &c)| {
-                            let direct = if c < np { hp[i * np + c] } else { 0.0 };
-                            chain(&hx[i * 3..i * 3 + 3], |m| ds[m * width + ci], direct) / sig[i]
-                        })
-                    });
-                    sink.push(if i == 2 { wrap(d) } else { d } / sig[i], row);
-                }
-            }
+    /// The first row with a pose residual.
+    fn first_pose_row(&self) -> usize {
+        match &self.run.gt {
+            Some(gt) if self.o.endpoints_only => gt.len() - 1,
+            _ => 1,
         }
     }
 
-    /// The gyro residuals: the track's predicted readings against the gyro's.
-    fn gyro_residuals(&self, sink: &mut impl Sink) {
+    /// The pose residuals against the ground truth (through the model's pose
+    /// observation where it has one), read from a kept track.
+    fn pose_residuals(&self, track: &deadreckon::Track, sink: &mut impl Sink) {
+        let (r, p, run) = (self.r, self.p, self.run);
+        let Some(gt) = &run.gt else { return };
+        // A measurement delay (crate::model_on_log::timeline): measurement k is compared with the
+        // model at t_k - delay, linearly interpolated between rows (exact sensitivities
+        // of the interpolation, and d/d delay = minus the interpolated velocity).
+        let tau = crate::model_on_log::timeline::delay(r, p);
+        let shifted = |k: usize| crate::model_on_log::timeline::model_instant(run, k, tau);
+        let mut rows = RowBuffers::new(p.len(), self.free.len());
+        for k in self.first_pose_row()..gt.len() {
+            let (j, a) = if r.delay.is_some() {
+                shifted(k)
+            } else {
+                (k - 1, 1.0)
+            };
+            let ends = (&track.pose[j], &track.pose[j + 1]);
+            let sens = track.sens.as_ref().map(|s| (s.at(j), s.at(j + 1)));
+            self.pose_row(&mut rows, k, (j, a), ends, sens, sink);
+        }
+    }
+
+    /// Measurement `k`'s pose residuals: the model at `a` of the way along
+    /// step `j`, between poses `ends` with sensitivities `sens`.
+    fn pose_row(
+        &self,
+        b: &mut RowBuffers,
+        k: usize,
+        (j, a): (usize, f64),
+        ends: (&[f64; 3], &[f64; 3]),
+        sens: Option<(deadreckon::SensAt, deadreckon::SensAt)>,
+        sink: &mut impl Sink,
+    ) {
         let (r, p, free, run, o, with_jac) =
             (self.r, self.p, self.free, self.run, self.o, self.with_jac);
-        let (track, inputs) = (self.track, self.inputs);
+        let Some(gt) = &run.gt else { return };
         let np = p.len();
-        let mut scratch = Vec::new();
-        if let (Some(g), Some(gyro)) = (&run.gyro, r.ir.observation_kernels(YawRate)) {
-            let (hx, hp) = (gyro.jac_x, gyro.jac_p);
-            let mut jp = vec![0.0; np];
-            let mut jx = [0.0; 3];
-            for k in 0..run.steps() {
-                let x = track.pose[k];
-                // the track already predicted the reading (Track::gyro)
-                let value = (track.gyro[k] - g[k + 1]) / o.gyro_sigma;
-                if !with_jac {
-                    sink.push(value, None::<std::iter::Empty<f64>>);
-                } else {
-                    if let Some(hp) = hp {
-                        r.eval_into(
-                            hp,
-                            &Runner::obs_args(hp, &x, &inputs.u[k], p, &[]),
-                            &mut jp,
-                            &mut scratch,
-                        );
+        let tau_i = r.delay;
+        let x = lerp3(ends.0, ends.1, a);
+        let vel: [f64; 3] = [0, 1, 2].map(|i| (ends.1[i] - ends.0[i]) / run.dt[j]);
+        let u = &self.inputs.u[j.min(run.steps() - 1)];
+        match r.ir.observation_kernels(Pose) {
+            Some(t) => {
+                let h = t.value;
+                let args = Runner::obs_args(h, &x, u, p, &[]);
+                r.eval_into(h, &args, &mut b.pred, &mut b.scratch);
+                if with_jac {
+                    let fx = t.jac_x;
+                    let args = Runner::obs_args(fx, &x, u, p, &[]);
+                    r.eval_into(fx, &args, &mut b.hx, &mut b.scratch);
+                    if let Some(fp) = t.jac_p {
+                        let args = Runner::obs_args(fp, &x, u, p, &[]);
+                        r.eval_into(fp, &args, &mut b.hp, &mut b.scratch);
                     }
-                    r.eval_into(
-                        hx,
-                        &Runner::obs_args(hx, &x, &inputs.u[k], p, &[]),
-                        &mut jx,
-                        &mut scratch,
-                    );
-                    let s = track.sens.as_ref().unwrap().at(k);
-                    let row = free.iter().map(|&c| {
-                        let direct = if c < np { jp[c] } else { 0.0 };
-                        chain(&jx, |m| s[(m, c)], direct) / o.gyro_sigma
-                    });
-                    sink.push(value, Some(row));
+                }
+            }
+            None => b.pred = x,
+        }
+        let width = free.len();
+        if let (true, Some((s0, s1))) = (with_jac, sens) {
+            for (ci, &c) in free.iter().enumerate() {
+                for m in 0..3 {
+                    b.ds[m * width + ci] = if Some(c) == tau_i {
+                        -vel[m]
+                    } else {
+                        s0[(m, c)] + a * (s1[(m, c)] - s0[(m, c)])
+                    };
                 }
             }
         }
+        let sig = [o.pos_sigma, o.pos_sigma, o.heading_sigma];
+        let (hx, hp, ds) = (&b.hx, &b.hp[..], &b.ds);
+        for i in 0..3 {
+            let d = b.pred[i] - gt[k][i];
+            let row = with_jac.then(|| {
+                free.iter().enumerate().map(move |(ci, &c)| {
+                    let direct = if c < np { hp[i * np + c] } else { 0.0 };
+                    chain(&hx[i * 3..i * 3 + 3], |m| ds[m * width + ci], direct) / sig[i]
+                })
+            });
+            sink.push(if i == 2 { wrap(d) } else { d } / sig[i], row);
+        }
+    }
+
+    /// Step `k`'s gyro residual: the reading the step from pose `x` at
+    /// `twist` predicts (as [`deadreckon::Track::gyro`]) against the gyro's,
+    /// with `sens` the pose's sensitivities at `x`.
+    fn gyro_row(
+        &self,
+        b: &mut RowBuffers,
+        k: usize,
+        (x, twist): (&[f64; 3], &[f64; 3]),
+        sens: Option<deadreckon::SensAt>,
+        sink: &mut impl Sink,
+    ) {
+        let (r, p, free, run, o) = (self.r, self.p, self.free, self.run, self.o);
+        let (Some(g), Some(kernels)) = (&run.gyro, r.ir.observation_kernels(YawRate)) else {
+            return;
+        };
+        let np = p.len();
+        let u = &self.inputs.u[k];
+        let predicted = deadreckon::gyro_at(r, Some(kernels.value), p, u, x, twist, &mut b.scratch);
+        let value = (predicted - g[k + 1]) / o.gyro_sigma;
+        let Some(s) = sens.filter(|_| self.with_jac) else {
+            sink.push(value, None::<std::iter::Empty<f64>>);
+            return;
+        };
+        if let Some(hp) = kernels.jac_p {
+            let args = Runner::obs_args(hp, x, u, p, &[]);
+            r.eval_into(hp, &args, &mut b.jp, &mut b.scratch);
+        }
+        let hx = kernels.jac_x;
+        r.eval_into(
+            hx,
+            &Runner::obs_args(hx, x, u, p, &[]),
+            &mut b.jx,
+            &mut b.scratch,
+        );
+        let (jp, jx) = (&b.jp, &b.jx);
+        let row = free.iter().map(|&c| {
+            let direct = if c < np { jp[c] } else { 0.0 };
+            chain(jx, |m| s[(m, c)], direct) / o.gyro_sigma
+        });
+        sink.push(value, Some(row));
     }
 }
 

@@ -36,6 +36,9 @@ pub(super) fn huber_weight(r: f64, k: f64) -> f64 {
 /// parameters, then the run's start heading when it has one) when the caller
 /// computes one.
 pub trait Sink {
+    /// Whether the sink's result does not depend on the order the
+    /// residuals come in (sums do; a series read in time order does not).
+    const ORDER_FREE: bool = false;
     fn push(&mut self, res: f64, row: Option<impl Iterator<Item = f64>>);
 }
 
@@ -102,6 +105,7 @@ impl Summed {
 }
 
 impl Sink for Summed {
+    const ORDER_FREE: bool = true;
     fn push(&mut self, res: f64, _: Option<impl Iterator<Item = f64>>) {
         let w = self.huber.map_or(1.0, |k| huber_weight(res, k));
         self.squares.add(res * w);
@@ -172,6 +176,7 @@ impl Folded {
 }
 
 impl Sink for Folded {
+    const ORDER_FREE: bool = true;
     fn push(&mut self, res: f64, row: Option<impl Iterator<Item = f64>>) {
         let w = self.huber.map_or(1.0, |k| huber_weight(res, k));
         let res = res * w;
