@@ -24,11 +24,15 @@ pub fn fit_document(
         .iter()
         .enumerate()
         .map(|(k, &i)| {
-            (
-                r.names[i].clone(),
-                json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k],
-                       "tolerance": r.ir.runtime_params()[i].tolerance}),
-            )
+            let mut v = json!({"nominal": r.p[i], "estimate": res.p[i], "std": res.std[k],
+                               "tolerance": r.ir.runtime_params()[i].tolerance});
+            // where the nominal value's default prior took part: what the
+            // data alone said, and whether they knew it worse than the prior
+            if let Some(h) = res.near_nominal.iter().find(|h| h.param == i) {
+                v["nominal_prior"] = json!({"std": h.tolerance, "data_estimate": h.data_estimate,
+                    "data_std": h.data_std, "barely_determined": h.barely_determined()});
+            }
+            (r.names[i].clone(), v)
         })
         .collect();
     let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();

@@ -148,9 +148,6 @@ fn judge(
     );
     res.warnings.extend(worse_warnings.into_iter().chain(odd));
     res.warnings.extend(drift_dominates(l, eval_after));
-    if res.free.len() >= 2 {
-        res.warnings.extend(turning_one_way(&l.runs));
-    }
     let warnings_before_growth = res.warnings.len();
     let mut growth = None;
     if after.rmse.is_finite() && after.rmse > 1.001 * before.rmse {
@@ -201,47 +198,6 @@ fn drift_dominates(l: &Loaded, after: &Evaluation) -> Option<String> {
         )
     })
 }
-
-/// Turning in one direction is where a scale of the turn rate and an offset
-/// of it trade off (the wheelbase against a wheel-size difference, a
-/// steering offset against the axle length): UMBmark drives both ways for
-/// this reason. On the OptiOdom tricycle, a calibration on one clockwise
-/// circle gave a wheelbase of 0.173 m and an offset of -0.038 rad (both
-/// circles: 0.157 m, -0.019 rad) and dead-reckoned the counter-clockwise
-/// circle worse than the nominal values (0.91 m against 0.76 m). The share
-/// of the runs' measured heading change that one direction holds, when the
-/// runs turn at least a full circle in all and at least [`ONE_WAY`] of it
-/// one way, said as a warning.
-fn turning_one_way(runs: &[Run]) -> Option<String> {
-    let (mut ccw, mut cw) = (0.0, 0.0);
-    for g in runs.iter().filter_map(|r| r.gt.as_ref()) {
-        for k in 1..g.len() {
-            let d = crate::logs::log::wrap(g[k][2] - g[k - 1][2]);
-            if d > 0.0 {
-                ccw += d;
-            } else {
-                cw -= d;
-            }
-        }
-    }
-    let total: f64 = ccw + cw;
-    let (share, way, other) = if ccw > cw {
-        (ccw / total, "counter-clockwise", "clockwise")
-    } else {
-        (cw / total, "clockwise", "counter-clockwise")
-    };
-    (total >= std::f64::consts::TAU && share >= ONE_WAY).then(|| {
-        format!(
-            "the fitted runs turn one way: {:.0}% of their {total:.1} rad of turning is {way}. A scale and an offset of the turn rate (wheelbase and wheel-size difference, steering offset and axle length) trade off in such runs, so the calibration may not hold for turns the other way: add a run that turns {other} (UMBmark drives both ways)",
-            100.0 * share
-        )
-    })
-}
-
-/// The share of the turning in one direction from which [`turning_one_way`]
-/// warns: the OptiOdom circles hold 95-99% one way, its squares and
-/// figure-of-eight paths 50-85%.
-const ONE_WAY: f64 = 0.9;
 
 /// A grown whole-run error judged: explained, or why the fit is unusable.
 enum Judged {

@@ -1,26 +1,35 @@
 //! What the logs' motion cannot tell, however well they are fitted (issue
 //! 70, item 5).
 //!
-//! A log that turns one way only cannot separate a turn-rate parameter (a
-//! track, a wheelbase) from a left-right asymmetry (unequal wheel radii, a
-//! steering offset): turning left, both add to the same drift. Borenstein
-//! and Feng's UMBmark drives its square both ways for this reason. Single
-//! circle runs of a real differential drive (../shared/real/optiodom-dev)
-//! were fitted to a few millimetres, with the wheelbase "determined" to
-//! 2-3%, and made the robot's other sessions dead-reckon up to 2.6x worse
-//! than its nominal values. The standard deviation cannot show it: the
-//! confusion is a bias of the model, not noise.
+//! A log that turns one way only cannot separate a scale of the turn rate (a
+//! track, a wheelbase, an axle length) from an offset of it (unequal wheel
+//! radii, a steering offset): turning left, both add to the same drift.
+//! Borenstein and Feng's UMBmark drives its square both ways for this
+//! reason. On the real OptiOdom robots (../shared/real/optiodom-dev):
+//!
+//! - a calibration on one clockwise circle of the tricycle gave an axle of
+//!   0.173 m and a steering offset of -0.038 rad (both circles: 0.157 m,
+//!   -0.019 rad), and dead-reckoned the counter-clockwise circle worse than
+//!   the nominal values (0.91 m against 0.76 m);
+//! - single circle runs of the differential drive were fitted to a few
+//!   millimetres, the wheelbase "determined" to 2-3%, and made the robot's
+//!   other sessions dead-reckon up to 2.6x worse than its nominal values.
+//!
+//! The standard deviations cannot show it: the confusion is a bias of the
+//! model, not noise. The turning is the model's own (its twist's yaw rate),
+//! so a log without ground truth is judged too.
 use super::nominal_prior::{excited_by, Motion};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 
 /// Below this share of their turning the other way, logs turn one way only:
-/// a tenth.
+/// a tenth. The OptiOdom circles hold 95-99% one way, its squares and
+/// figure-of-eight paths 50-85%.
 const OTHER_WAY_SHARE: f64 = 0.1;
 
 /// Logs that turn less than this in all (rad) barely turn at all, which the
-/// turn-rate parameters' own standard deviations show: half a turn.
-const SOME_TURNING_RAD: f64 = std::f64::consts::PI;
+/// turn-rate parameters' own standard deviations show: a full circle.
+const SOME_TURNING_RAD: f64 = std::f64::consts::TAU;
 
 /// The window the turning is summed over before its sign is taken, s.
 const WINDOW_S: f64 = 1.0;
@@ -78,8 +87,12 @@ impl Turning {
 }
 
 /// The warning for a calibration at `p` of `r`'s free parameters on `runs`
-/// that turn one way only, where a free parameter acts on the turn rate.
+/// that turn one way only, where a scale and an offset could trade off: two
+/// free parameters at least, one of them acting on the turn rate.
 pub fn one_way_warning(r: &Runner, p: &[f64], runs: &[Run]) -> Option<String> {
+    if r.free.len() < 2 {
+        return None;
+    }
     let turning = Turning::of(r, p, runs);
     if !turning.one_way() {
         return None;
@@ -94,15 +107,14 @@ pub fn one_way_warning(r: &Runner, p: &[f64], runs: &[Run]) -> Option<String> {
         return None;
     }
     let total = turning.left + turning.right;
-    let (way, other) = if turning.left > turning.right {
-        ("left", turning.right)
+    let (share, way, other) = if turning.left > turning.right {
+        (turning.left / total, "counter-clockwise", "clockwise")
     } else {
-        ("right", turning.left)
+        (turning.right / total, "clockwise", "counter-clockwise")
     };
     Some(format!(
-        "these logs turn one way only ({:.0}% of their {:.1} turns to the {way}): {} cannot be told apart from a left-right difference of the robot, which adds to the same drift; runs turning the other way tell them apart",
-        100.0 * (1.0 - other / total),
-        total / std::f64::consts::TAU,
+        "the fitted runs turn one way: {:.0}% of their {total:.1} rad of turning is {way}. A scale and an offset of the turn rate (of {}) trade off in such runs, so the calibration may not hold for turns the other way: add a run that turns {other} (UMBmark drives both ways)",
+        100.0 * share,
         turn_rate.join(", "),
     ))
 }
