@@ -11,8 +11,8 @@ use crate::decl::{
     DEFAULT_POSE_COLUMNS,
 };
 pub use crate::kernel::{ArgKind, ArgRole, ArgSpec, Kernel, StepForm, Wrt};
+use fnv::FnvHashMap;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 
 /// One tape instruction. Operands are indices of earlier slots.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -301,7 +301,7 @@ pub struct ModelIr {
     /// the inputs and the spec declares no `[inverse]`); `None` when it has.
     pub no_inverse: Option<String>,
     functions: Vec<Function>,
-    index: HashMap<Kernel, usize>,
+    index: FnvHashMap<Kernel, usize>,
 }
 
 /// A model without inverse kinematics, asked for them (`inverse`, `navigate`).
@@ -347,7 +347,7 @@ impl TryFrom<IrFile> for ModelIr {
     type Error = IrError;
 
     fn try_from(f: IrFile) -> Result<ModelIr, IrError> {
-        let mut index = HashMap::new();
+        let mut index = FnvHashMap::default();
         for (i, k) in f.functions.iter().enumerate() {
             if let Kernel::Observation(o, _) = k.kernel {
                 if o as usize >= f.observations.len() {

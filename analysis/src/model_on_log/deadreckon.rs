@@ -839,7 +839,7 @@ pub(crate) fn gyro_at(
 ) -> f64 {
     let Some(h) = h else { return twist[2] };
     let mut out = [0.0];
-    r.eval_into(h, &Runner::obs_args(h, pose, u, p, &[]), &mut out, scratch);
+    r.eval_obs_into(h, (pose, u, p), &mut out, scratch);
     out[0]
 }
 

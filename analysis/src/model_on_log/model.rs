@@ -286,12 +286,46 @@ impl Runner {
     ) -> Vec<&'a [f64]> {
         f.args
             .iter()
-            .map(|a| match a.role {
-                ArgRole::State => x,
-                ArgRole::Inputs => u,
-                ArgRole::Params => p,
-                _ => lm,
-            })
+            .map(|a| Runner::obs_arg(a, x, u, p, lm))
             .collect()
+    }
+
+    /// One argument of an observation-shaped function (see [`Runner::obs_args`]).
+    #[inline]
+    pub fn obs_arg<'a>(
+        a: &ArgSpec,
+        x: &'a [f64],
+        u: &'a [f64],
+        p: &'a [f64],
+        lm: &'a [f64],
+    ) -> &'a [f64] {
+        match a.role {
+            ArgRole::State => x,
+            ArgRole::Inputs => u,
+            ArgRole::Params => p,
+            _ => lm,
+        }
+    }
+
+    /// Evaluate the observation-shaped `f` at (x, u, p) into `out`, its
+    /// arguments on the stack: the per-row observations of a fit (a
+    /// million rows took an allocation per call for the argument list).
+    #[inline]
+    pub fn eval_obs_into(
+        &self,
+        f: &Function,
+        (x, u, p): (&[f64], &[f64], &[f64]),
+        out: &mut [f64],
+        scratch: &mut Vec<f64>,
+    ) {
+        const MAX_ARGS: usize = 8;
+        if f.args.len() > MAX_ARGS {
+            return self.eval_into(f, &Runner::obs_args(f, x, u, p, &[]), out, scratch);
+        }
+        let mut args: [&[f64]; MAX_ARGS] = [&[]; MAX_ARGS];
+        for (slot, a) in args.iter_mut().zip(&f.args) {
+            *slot = Runner::obs_arg(a, x, u, p, &[]);
+        }
+        self.eval_into(f, &args[..f.args.len()], out, scratch)
     }
 }

@@ -101,18 +101,46 @@ fn local_level(series: &[Series]) -> Level {
         }
         (ss, logf + product.ln(), n)
     };
-    let mut best: Option<(f64, Level)> = None;
-    let grid = std::iter::once(0.0).chain((0..=48).map(|i| 10f64.powf(-9.0 + 0.25 * i as f64)));
-    for lambda in grid {
+    // the log-likelihood and level at the ratio `q` quarter decades above
+    // 1e-9 (None: 0, white only); None when the series are too short
+    let at = |q: Option<i32>| -> Option<(f64, Level)> {
+        let lambda = q.map_or(0.0, |q| 10f64.powf(-9.0 + 0.25 * f64::from(q)));
         let (ss, logf, n) = sums(lambda);
         if n < 2.0 || ss <= 0.0 {
-            return Level::default();
+            return None;
         }
         let white = ss / n;
         let loglik = -0.5 * n * white.ln() - 0.5 * logf;
+        Some((
+            loglik,
+            Level {
+                white,
+                walk: lambda * white,
+            },
+        ))
+    };
+    let mut best: Option<(f64, Level, Option<i32>)> = None;
+    // the grid's whole decades first, then its quarter decades within a
+    // decade of the best: the likelihood has one maximum in the ratio, so
+    // this is the whole grid's choice with 20 passes over the residuals
+    // instead of 50 (a tenth of a million-row fit's time)
+    let decades = std::iter::once(None).chain((0..=12).map(|d| Some(4 * d)));
+    for q in decades {
+        let Some((loglik, level)) = at(q) else {
+            return Level::default();
+        };
         if best.as_ref().is_none_or(|b| loglik > b.0) {
-            let walk = lambda * white;
-            best = Some((loglik, Level { white, walk }));
+            best = Some((loglik, level, q));
+        }
+    }
+    if let Some((_, _, Some(centre))) = best {
+        let quarters = (centre - 3..=centre + 3).filter(|q| q % 4 != 0 && (0..=48).contains(q));
+        for q in quarters {
+            if let Some((loglik, level)) = at(Some(q)) {
+                if best.as_ref().is_none_or(|b| loglik > b.0) {
+                    best = Some((loglik, level, Some(q)));
+                }
+            }
         }
     }
     best.map(|b| b.1).unwrap_or_default()

@@ -10,6 +10,7 @@ use crate::model_on_log::interp::{chain, lerp3};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use kinegen_model::decl::ObservationRole::{Pose, RangeBearing, YawRate};
+use kinegen_model::ir::ObservationKernels;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -308,6 +309,8 @@ pub(super) fn run_residuals_into<S: Sink>(
         o,
         with_jac,
         inputs: &inputs,
+        pose_kernels: r.ir.observation_kernels(Pose),
+        gyro_kernels: r.ir.observation_kernels(YawRate),
     };
     let pose = o.use_pose && run.gt.is_some();
     let gyro = o.use_gyro && run.gyro.is_some() && r.ir.observation_kernels(YawRate).is_some();
@@ -402,6 +405,9 @@ struct RunCx<'a> {
     with_jac: bool,
     /// the inputs as executed (an input delay)
     inputs: &'a Run,
+    /// the pose and yaw-rate observations' kernels, looked up once a run
+    pose_kernels: Option<ObservationKernels<'a>>,
+    gyro_kernels: Option<ObservationKernels<'a>>,
 }
 
 /// What one row's residuals are made in, allocated once per run (a million
@@ -483,7 +489,7 @@ impl RunCx<'_> {
         let x = lerp3(ends.0, ends.1, a);
         let vel: [f64; 3] = [0, 1, 2].map(|i| (ends.1[i] - ends.0[i]) / run.dt[j]);
         let u = &self.inputs.u[j.min(run.steps() - 1)];
-        match r.ir.observation_kernels(Pose) {
+        match &self.pose_kernels {
             Some(t) => {
                 let h = t.value;
                 let args = Runner::obs_args(h, &x, u, p, &[]);
@@ -538,7 +544,7 @@ impl RunCx<'_> {
         sink: &mut impl Sink,
     ) {
         let (r, p, free, run, o) = (self.r, self.p, self.free, self.run, self.o);
-        let (Some(g), Some(kernels)) = (&run.gyro, r.ir.observation_kernels(YawRate)) else {
+        let (Some(g), Some(kernels)) = (&run.gyro, &self.gyro_kernels) else {
             return;
         };
         let np = p.len();
