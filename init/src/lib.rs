@@ -280,6 +280,7 @@ pub fn from_text(
             [pose.translation.vector.x, pose.translation.vector.y],
         )
     });
+    robot.odometry_frame = ctl.and_then(|c| odometry_frame(&urdf, c, &base));
     if let (Some(c), Some(out)) = (ctl, robot.controller.as_mut()) {
         out.file = relative_to(&c.file, options.spec_path.as_deref());
     }
@@ -295,6 +296,25 @@ pub fn from_text(
         );
     }
     finish(file, &urdf, &base, &wheels, robot, notes)
+}
+
+/// The link the controller's odometry is of, where the controller
+/// publishes odometry (it names an `odom_frame_id` or a `base_frame_id`):
+/// its `base_frame_id` (ros2_control's default `base_link`) when the URDF
+/// has it, else the base; with its pose (x, y, yaw) in the base frame.
+fn odometry_frame(urdf: &Urdf, ctl: &Controller, base: &str) -> Option<(String, [f64; 3])> {
+    let named = ctl.text("base_frame_id");
+    if named.is_none() && ctl.text("odom_frame_id").is_none() {
+        return None;
+    }
+    let link = named
+        .or_else(|| Some("base_link".to_string()))
+        .filter(|l| urdf.links.contains_key(l))
+        .unwrap_or_else(|| base.to_string());
+    let (pose, _) = urdf.pose_in(base, &link);
+    let (_, _, yaw) = pose.rotation.euler_angles();
+    let at = pose.translation.vector;
+    Some((link, [at.x, at.y, yaw]))
 }
 
 pub(crate) fn capital(s: &str) -> String {

@@ -114,6 +114,10 @@ pub struct Robot {
     pub gyro: Option<(f64, String)>,
     /// The exteroceptive sensor's link and its mounting (x, y) in the base frame.
     pub landmark_sensor: Option<(String, [f64; 2])>,
+    /// The frame the controller's odometry is of (its `base_frame_id`) and
+    /// its pose (x, y, yaw) in the base frame: what a measured pose of the
+    /// robot is taken of.
+    pub odometry_frame: Option<(String, [f64; 3])>,
     pub controller: Option<ControllerOut>,
     /// The topic the controller's velocity commands arrive on.
     pub command_topic: String,
@@ -141,6 +145,7 @@ impl Robot {
             kinematics,
             gyro: None,
             landmark_sensor: None,
+            odometry_frame: None,
             controller: None,
             command_topic: "/cmd_vel".into(),
             notes: Vec::new(),

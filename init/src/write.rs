@@ -95,6 +95,9 @@ fn noise(out: &mut String, k: &Kinematics) {
 }
 
 fn observations(out: &mut String, r: &Robot) {
+    if let Some((link, [ox, oy, yaw])) = &r.odometry_frame {
+        pose_observation(out, link, [*ox, *oy, *yaw]);
+    }
     if let Some((sign, link)) = &r.gyro {
         let _ = writeln!(
             out,
@@ -200,6 +203,11 @@ fn capitalise(s: &str) -> String {
 /// ground truth would come from.
 pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
     let mut out = String::new();
+    // the frame the spec's pose observation is of, where it has one
+    let measured = r
+        .odometry_frame
+        .as_ref()
+        .map_or(base_frame, |(l, _)| l.as_str());
     for l in header.lines() {
         let _ = writeln!(out, "# {l}");
     }
@@ -229,8 +237,8 @@ pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
     }
     let _ = writeln!(
         out,
-        "\n# ground truth for compare/fit/diagnose: a motion-capture or map-localised pose of\n# `{base_frame}` (PoseStamped, Odometry or TF). Not the controller's own odometry:\n# that is the wheel model itself. Rename the topic to yours.\n[pose]\ntopic = \"/tf\"\nframe = {}",
-        quote(base_frame)
+        "\n# ground truth for compare/fit/diagnose: a motion-capture or map-localised pose of\n# `{measured}` (PoseStamped, Odometry or TF). Not the controller's own odometry:\n# that is the wheel model itself. Rename the topic to yours.\n[pose]\ntopic = \"/tf\"\nframe = {}",
+        quote(measured)
     );
     if r.gyro.is_some() {
         let _ = writeln!(out, "\n# the IMU (sensor_msgs/Imu): its angular_velocity.z is gyro_z\n[gyro]\ntopic = \"/imu/data\"");
@@ -239,6 +247,30 @@ pub fn topics(r: &Robot, base_frame: &str, header: &str) -> String {
         let _ = writeln!(out, "{}", commands_hint(r));
     }
     out
+}
+
+/// The pose observation of the controller's odometry frame `link`, at
+/// (x, y, yaw) in the base frame: what a motion-capture or map-localised
+/// pose of that frame (the topics file's `[pose]`) measures.
+fn pose_observation(out: &mut String, link: &str, [ox, oy, yaw]: [f64; 3]) {
+    let px = linear(0.0, &[(1.0, "x"), (ox, "cos(theta)"), (-oy, "sin(theta)")]);
+    let py = linear(0.0, &[(1.0, "y"), (ox, "sin(theta)"), (oy, "cos(theta)")]);
+    // rounded as the coefficients are: a yaw of 0.1 read back as 0.09999999999999999
+    let heading = linear(crate::classify::tidy(yaw), &[(1.0, "theta")]);
+    let place = if [ox, oy, yaw].iter().all(|v| v.abs() < 1e-12) {
+        "the base frame itself".to_string()
+    } else {
+        format!(
+            "at x {ox:.4} m, y {oy:.4} m, yaw {yaw:.4} rad in the base frame (the URDF's joints)"
+        )
+    };
+    let _ = writeln!(
+        out,
+        "\n# the controller's odometry frame `{link}` ({place}):\n# a measured pose of it (gt_x, gt_y, gt_theta) is seen through this observation\n[[observation]]\nname = \"pose\"\nrole = \"pose\"\ndoc = \"Pose of `{link}`, the frame the controller's odometry is of.\"\ncolumns = [\"gt_x\", \"gt_y\", \"gt_theta\"]\nexpr = [{}, {}, {}]\nangle = [false, false, true]\nsigma = [0.01, 0.01, 0.01]",
+        quote(&px),
+        quote(&py),
+        quote(&heading)
+    );
 }
 
 /// For a bag that logged the robot's velocity commands and not its wheel
