@@ -27,6 +27,7 @@
 //! costs by BIC and calls [`super::fit`], not this. This step is applied
 //! where a calibration is handed to the user: the `lm` method (`fit`, the
 //! Python API) and `bench-real`.
+pub use super::options::{HeldNearNominal, Motion};
 use super::{correlation, starts_for, FitOptions, FitResult};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
@@ -41,59 +42,6 @@ use nalgebra::{DMatrix, DVector};
 /// almost nothing: a parameter the data know to 3% keeps 99% of its fitted
 /// deviation ([`Update`]).
 pub const DEFAULT_TOLERANCE: f64 = 0.10;
-
-/// A parameter the nominal value's prior moved: what the data alone said.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HeldNearNominal {
-    /// Runtime parameter index.
-    pub param: usize,
-    /// The nominal value's standard deviation (absolute).
-    pub tolerance: f64,
-    /// The nominal value and the estimate reported.
-    pub nominal: f64,
-    pub estimate: f64,
-    /// The fit's estimate and standard deviation from the data alone.
-    pub data_estimate: f64,
-    pub data_std: f64,
-    /// What motion determines it (None: the model's twist could not say).
-    pub excited_by: Option<Motion>,
-}
-
-impl HeldNearNominal {
-    /// Whether the data alone knew the parameter worse than its nominal value
-    /// is known, and the estimate reported stayed nearer the nominal value
-    /// than the data put it: the user is told. (A nominal value the data
-    /// contradict is not held to, however poorly they know it.)
-    pub fn barely_determined(&self) -> bool {
-        self.data_std > self.tolerance
-            && (self.estimate - self.nominal).abs()
-                < 0.5 * (self.data_estimate - self.nominal).abs()
-    }
-}
-
-/// The body motion a parameter acts on, which is what a log must contain
-/// to determine it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Motion {
-    Forward,
-    Sideways,
-    Turning,
-}
-
-impl Motion {
-    /// The runs that determine a parameter acting on this motion.
-    pub fn runs_that_determine(self) -> &'static str {
-        match self {
-            Motion::Forward => "straight runs of measured length",
-            Motion::Sideways => "runs that drive sideways",
-            Motion::Turning => "runs turning both ways (in place or along arcs)",
-        }
-    }
-
-    fn of_twist_component(j: usize) -> Motion {
-        [Motion::Forward, Motion::Sideways, Motion::Turning][j]
-    }
-}
 
 /// The parameters of `res.free` that get the default prior: declared without
 /// a `tolerance`, a nominal value other than 0 (a relative tolerance needs a

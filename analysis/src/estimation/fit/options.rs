@@ -194,7 +194,7 @@ pub struct FitResult {
     pub search_notes: Vec<String>,
     /// The parameters the nominal values' default prior moved, with what the
     /// data alone said ([`super::nominal_prior`]; empty before it is applied).
-    pub near_nominal: Vec<super::nominal_prior::HeldNearNominal>,
+    pub near_nominal: Vec<HeldNearNominal>,
 }
 
 impl FitResult {
@@ -225,4 +225,57 @@ pub enum FitError {
     NoResiduals { pose: String, gyro: String },
     #[error("the fit diverged: {0}")]
     Diverged(String),
+}
+
+/// A parameter the nominal value's prior moved: what the data alone said.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldNearNominal {
+    /// Runtime parameter index.
+    pub param: usize,
+    /// The nominal value's standard deviation (absolute).
+    pub tolerance: f64,
+    /// The nominal value and the estimate reported.
+    pub nominal: f64,
+    pub estimate: f64,
+    /// The fit's estimate and standard deviation from the data alone.
+    pub data_estimate: f64,
+    pub data_std: f64,
+    /// What motion determines it (None: the model's twist could not say).
+    pub excited_by: Option<Motion>,
+}
+
+impl HeldNearNominal {
+    /// Whether the data alone knew the parameter worse than its nominal value
+    /// is known, and the estimate reported stayed nearer the nominal value
+    /// than the data put it: the user is told. (A nominal value the data
+    /// contradict is not held to, however poorly they know it.)
+    pub fn barely_determined(&self) -> bool {
+        self.data_std > self.tolerance
+            && (self.estimate - self.nominal).abs()
+                < 0.5 * (self.data_estimate - self.nominal).abs()
+    }
+}
+
+/// The body motion a parameter acts on, which is what a log must contain
+/// to determine it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Motion {
+    Forward,
+    Sideways,
+    Turning,
+}
+
+impl Motion {
+    /// The runs that determine a parameter acting on this motion.
+    pub fn runs_that_determine(self) -> &'static str {
+        match self {
+            Motion::Forward => "straight runs of measured length",
+            Motion::Sideways => "runs that drive sideways",
+            Motion::Turning => "runs turning both ways (in place or along arcs)",
+        }
+    }
+
+    pub(super) fn of_twist_component(j: usize) -> Motion {
+        [Motion::Forward, Motion::Sideways, Motion::Turning][j]
+    }
 }
