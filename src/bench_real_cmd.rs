@@ -250,7 +250,7 @@ fn answer(results: &[SessionResult], seconds: f64, each_run: bool) -> Vec<String
     }
     let worse = holdout_bench::worse_than_nominal(results, HELD_OUT_RMSE);
     lines.push(format!(
-        "worse than the nominal values on the held-out runs (RMSE, by over 10%): {} of {} calibrations, {} of them without a warning",
+        "worse than nominal on held-out runs (RMSE, >10%): {} of {}, {} of them unwarned",
         worse.worse, worse.of, worse.unwarned
     ));
     lines.push(String::new());
