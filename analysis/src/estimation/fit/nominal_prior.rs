@@ -21,7 +21,10 @@
 //! - directions the data pin down far better than the nominal is known keep
 //!   the fitted value;
 //! - directions the data know worse stay at the nominal value;
-//! - parameters correlated with those follow through the covariance.
+//! - parameters correlated with those follow through the covariance;
+//! - a nominal value the data contradict is not held to ([`kept_share`]),
+//!   and an update the covariance cannot be trusted for (a misspecified
+//!   model's) is not made.
 //!
 //! The fit's own search stays maximum likelihood: diagnosis compares its
 //! costs by BIC and calls [`super::fit`], not this. This step is applied
