@@ -268,10 +268,8 @@ impl Runner {
         zeros: &'a [f64],
     ) -> &'a [f64] {
         match a.role {
-            ArgRole::State => x,
-            ArgRole::Inputs => u,
-            ArgRole::Params => p,
             ArgRole::Dt => dt,
+            ArgRole::State | ArgRole::Inputs | ArgRole::Params => Runner::obs_arg(a, x, u, p, &[]),
             _ => &zeros[..a.names.len()],
         }
     }
