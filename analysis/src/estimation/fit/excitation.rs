@@ -18,7 +18,7 @@
 //! The standard deviations cannot show it: the confusion is a bias of the
 //! model, not noise. The turning is the model's own (its twist's yaw rate),
 //! so a log without ground truth is judged too.
-use super::nominal_prior::{excited_by, Motion};
+use super::nominal_prior::{excited_by, input_corners, Motion};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 
@@ -100,10 +100,11 @@ pub fn one_way_warning(r: &Runner, p: &[f64], runs: &[Run]) -> Option<String> {
     if !turning.one_way() {
         return None;
     }
+    let corners = input_corners(runs);
     let turn_rate: Vec<&str> = r
         .free
         .iter()
-        .filter(|&&i| excited_by(r, p, runs, i) == Some(Motion::Turning))
+        .filter(|&&i| excited_by(r, p, &corners, i) == Some(Motion::Turning))
         .map(|&i| r.names[i].as_str())
         .collect();
     if turn_rate.is_empty() {

@@ -145,6 +145,7 @@ pub fn toward_nominal(r: &Runner, runs: &[Run], o: &FitOptions, mut res: FitResu
         // the start headings refined for the new values, and the cost there
         (res.starts, res.cost_after) = starts_for(r, &res.p, runs, o);
     }
+    let corners = input_corners(runs);
     let held: Vec<HeldNearNominal> = prior
         .iter()
         .zip(&tolerance)
@@ -157,7 +158,7 @@ pub fn toward_nominal(r: &Runner, runs: &[Run], o: &FitOptions, mut res: FitResu
                 estimate: res.p[res.free[k]],
                 data_estimate,
                 data_std,
-                excited_by: excited_by(r, &res.p, runs, res.free[k]),
+                excited_by: excited_by(r, &res.p, &corners, res.free[k]),
             },
         )
         .collect();
@@ -300,14 +301,13 @@ fn warning(r: &Runner, h: &HeldNearNominal) -> String {
     )
 }
 
-/// Which body motion parameter `i` acts on most, relative to that motion's
-/// own size, over the corners of the box of inputs the logs reach (every
-/// input at plus or minus its largest magnitude): a wheelbase scales the
-/// turn rate and leaves the forward speed alone, which a log that never
-/// turns cannot show.
-pub(super) fn excited_by(r: &Runner, p: &[f64], runs: &[Run], i: usize) -> Option<Motion> {
-    let width = runs.first()?.u.width();
-    // 2^8 corners at most; beyond that, each input alone
+/// The corners of the box of inputs `runs` reach: every input at plus or
+/// minus its largest magnitude (2^8 corners at most; beyond that, each input
+/// alone). Made once for all the parameters [`excited_by`] is asked about.
+pub(super) fn input_corners(runs: &[Run]) -> Vec<Vec<f64>> {
+    let Some(width) = runs.first().map(|r| r.u.width()) else {
+        return Vec::new();
+    };
     let mut reach = vec![0.0f64; width];
     for run in runs {
         for k in 0..run.steps() {
@@ -316,7 +316,7 @@ pub(super) fn excited_by(r: &Runner, p: &[f64], runs: &[Run], i: usize) -> Optio
             }
         }
     }
-    let corners: Vec<Vec<f64>> = if width <= 8 {
+    if width <= 8 {
         (0..1usize << width)
             .map(|bits| {
                 (0..width)
@@ -340,13 +340,23 @@ pub(super) fn excited_by(r: &Runner, p: &[f64], runs: &[Run], i: usize) -> Optio
                 })
             })
             .collect()
-    };
+    }
+}
+
+/// Which body motion parameter `i` acts on most, relative to that motion's
+/// own size, over the `corners` of the logs' input box ([`input_corners`]):
+/// a wheelbase scales the turn rate and leaves the forward speed alone,
+/// which a log that never turns cannot show.
+pub(super) fn excited_by(r: &Runner, p: &[f64], corners: &[Vec<f64>], i: usize) -> Option<Motion> {
+    if corners.is_empty() {
+        return None;
+    }
     let tw = r.ir.twist();
     let h = 1e-4 * p[i].abs().max(1e-9);
     let mut moved = p.to_vec();
     moved[i] += h;
     let (mut change, mut size) = ([0.0f64; 3], [0.0f64; 3]);
-    for u in &corners {
+    for u in corners {
         let (a, b) = (r.eval(tw, &[u, p]), r.eval(tw, &[u, &moved]));
         if a.len() < 3 || b.len() < 3 {
             return None;
