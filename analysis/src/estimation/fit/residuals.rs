@@ -313,7 +313,7 @@ pub(super) fn run_residuals_into<S: Sink>(
         gyro_kernels: r.ir.observation_kernels(YawRate),
     };
     let pose = o.use_pose && run.gt.is_some();
-    let gyro = o.use_gyro && run.gyro.is_some() && r.ir.observation_kernels(YawRate).is_some();
+    let gyro = o.use_gyro && run.gyro.is_some() && cx.gyro_kernels.is_some();
     let landmarks = o.use_landmarks && !run.landmarks.is_empty();
     let from_truth = match &run.gt {
         Some(gt) if o.sightings_from_truth => Some(gt),
@@ -340,6 +340,10 @@ pub(super) fn run_residuals_into<S: Sink>(
             // no pose residuals: the gyro's come last, as when the track is kept
             prior(sink);
             seen(sink);
+        }
+        if !(pose || gyro) {
+            // nothing reads the track (a pass of the sightings alone)
+            return;
         }
         let mut rows = RowBuffers::new(np, cols.len());
         let first = cx.first_pose_row();
