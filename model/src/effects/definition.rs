@@ -224,7 +224,7 @@ struct RawEffect {
     #[serde(default)]
     each_input: Vec<RawInputPatch>,
     #[serde(default)]
-    observation: BTreeMap<String, RawObservationPatch>,
+    observation: BTreeMap<toml::Spanned<String>, RawObservationPatch>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -304,11 +304,14 @@ pub(super) fn parse_effect(file: &Path, text: &str) -> Result<Effect, EffectErro
         .collect::<Result<_, EffectError>>()?;
     let mut observation = Vec::new();
     for (key, p) in &raw.observation {
-        let role = role_of(key).ok_or_else(|| EffectError {
-            file: file.to_path_buf(),
-            message: format!(
-                "[observation.{key}]: the role must be pose, yaw_rate or range_bearing"
-            ),
+        let role = role_of(key.get_ref()).ok_or_else(|| {
+            at(
+                key.span().start,
+                format!(
+                    "[observation.{}]: the role must be pose, yaw_rate or range_bearing",
+                    key.get_ref()
+                ),
+            )
         })?;
         observation.push(ObservationPatch {
             role,
