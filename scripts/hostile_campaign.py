@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """A campaign of hostile inputs over every command (issue 67): mutated logs,
 specs, sightings, maps, jobs files, topic mappings, robot descriptions,
-ROS 2 bags (their MCAP bytes and their metadata) and option values, each run
-through the command that reads it.
+ROS 2 bags (their MCAP bytes and their metadata), occupancy grids, paths,
+benchmark shards, benchmark configurations and option values, each run
+through the command that reads it (generate and verify, which only the
+full build has, are covered by their own tests).
 
 Each case passes when kinegen ends with exit 0, 1 or 2 within the time limit
 and under the memory cap, and
@@ -23,6 +25,7 @@ import concurrent.futures as cf
 import json
 import os
 import random
+import re
 import resource
 import shutil
 import signal
@@ -140,6 +143,13 @@ class Base:
         self.topics = '[inputs]\nenc_r = "/joint_states:position[0]"\n'
         self.bag = make_bag(work)
         self.job = {"id": "a", "args": ["compare", "--spec", "SPEC", "--data", "LOG"]}
+        seed004 = ROOT / "data" / "seed004"
+        self.epuck, self.grid = (seed004 / "epuck.toml").read_text(), (seed004 / "arena.txt").read_text()
+        tour = (ROOT / "data" / "beacon_tour.csv").read_text().splitlines(keepends=True)
+        self.path = "".join(tour[:121])
+        self.shards = make_shards(bin_, work)
+        self.real = real_optiodom()
+        self.benchmark = benchmark_config()
 
 
 HOSTILE_OPTIONS = {
@@ -151,6 +161,10 @@ HOSTILE_OPTIONS = {
     "--seed": ["-1", "x", "1e30"],
     "--jobs": ["0", "-1", "100000000", "x"],
     "--value": ["k_slip=nan", "k_slip=1e308", "nosuch=1", "k_slip"],
+    "--cell": ["0", "-1", "nan", "1e-300", "1e300", "x"],
+    "--recalc": ["0", "-1", "nan", "x", "1e20"],
+    "--seeds": ["0", "-1", "x", "1e12"],
+    "--shard": ["0/2", "3/2", "1/0", "x", "1/-1", "2"],
 }
 
 
@@ -158,15 +172,19 @@ def case(base, rng, k, tmp):
     """The k-th case: (command line, output paths, largest input size, what
     was mutated)."""
     kind = rng.choice(["log", "log", "spec", "spec", "sightings", "map", "jobs", "topics",
-                       "urdf", "controllers", "option", "option"] + (["bag", "bag"] if base.bag else []))
+                       "urdf", "controllers", "option", "option", "grid", "path", "shard"]
+                      + (["bag", "bag"] if base.bag else []) + (["benchmark"] if base.real else []))
     files = {"spec.toml": base.spec, "log.csv": base.log, "sim.csv": base.sim,
              "obs.csv": base.obs, "map.csv": base.map, "robot.urdf": base.urdf,
-             "controllers.yaml": base.controllers, "topics.toml": base.topics}
+             "controllers.yaml": base.controllers, "topics.toml": base.topics,
+             "epuck.toml": base.epuck, "arena.txt": base.grid, "path.csv": base.path,
+             "benchmark.toml": base.benchmark, **base.shards}
     job = dict(base.job, args=["compare", "--spec", str(tmp / "spec.toml"), "--data", str(tmp / "log.csv")])
     files["jobs.jsonl"] = json.dumps(job) + "\n"
     target = {"log": rng.choice(["log.csv", "sim.csv"]), "spec": "spec.toml", "sightings": "obs.csv",
               "map": "map.csv", "jobs": "jobs.jsonl", "topics": "topics.toml", "urdf": "robot.urdf",
-              "controllers": "controllers.yaml", "option": None, "bag": None}[kind]
+              "controllers": "controllers.yaml", "option": None, "bag": None, "grid": "arena.txt",
+              "path": "path.csv", "shard": rng.choice(sorted(base.shards)), "benchmark": "benchmark.toml"}[kind]
     if target:
         files[target] = mutate_text(files[target], rng)
     for name, text in files.items():
@@ -196,6 +214,14 @@ def case(base, rng, k, tmp):
         "controllers": [["init", "--urdf", "robot.urdf", "--controller", "controllers.yaml", "--out", "out.toml"]],
         "bag": [["compare", "--spec", "spec.toml", "--data", "run.bag"], ["fit", "--spec", "spec.toml", "--data", "run.bag"],
                 ["diagnose", "--spec", "spec.toml", "--data", "run.bag"]],
+        "grid": [["navigate", "--spec", "epuck.toml", "--grid", "arena.txt"],
+                 ["navigate", "--spec", "epuck.toml", "--grid", "arena.txt", "--calibrate", "umbmark"]],
+        "path": [["inverse", "--spec", str(ROOT / "spec" / "diff_drive.toml"), "--path", "path.csv"],
+                 ["inverse", "--spec", str(ROOT / "spec" / "omni3.toml"), "--path", "path.csv"]],
+        "shard": [["bench-diagnose", "--merge", *sorted(base.shards)]],
+        # the real sessions are read, never written; one session keeps it short
+        "benchmark": [["bench-real", str(base.real), "--config", "benchmark.toml", "--session",
+                       "diff-square-230620202144", "--quiet"]],
     }
     if kind == "option":
         opt = rng.choice(list(HOSTILE_OPTIONS))
@@ -205,13 +231,19 @@ def case(base, rng, k, tmp):
                "--laps": ["simulate", "--spec", "spec.toml", "--out", "out.csv"],
                "--seed": ["simulate", "--spec", "spec.toml", "--out", "out.csv"],
                "--jobs": ["batch", "jobs.jsonl", "--out", "results.jsonl"],
-               "--value": ["add-effect", "--spec", "spec.toml", "--effect", "lateral_slip", "--out", "out.toml"]}[opt]
+               "--value": ["add-effect", "--spec", "spec.toml", "--effect", "lateral_slip", "--out", "out.toml"],
+               "--cell": ["navigate", "--spec", "epuck.toml", "--grid", "arena.txt"],
+               "--recalc": ["navigate", "--spec", "epuck.toml", "--grid", "arena.txt"],
+               "--seeds": ["bench-diagnose", "--spec", "spec.toml", "--effect", "lateral_slip", "--laps", "1"],
+               "--shard": ["bench-diagnose", "--spec", "spec.toml", "--effect", "lateral_slip", "--seeds", "1",
+                           "--laps", "1"]}[opt]
         args = [*cmd, opt, value]
         what = f"{opt} {value}"
     else:
         args = list(rng.choice(commands[kind]))
         what = f"mutated {target or 'bag'}"
-    if args[0] in ("compare", "fit", "diagnose", "localize"):
+    if args[0] in ("compare", "fit", "diagnose", "localize", "navigate", "inverse", "bench-diagnose",
+                   "bench-real"):
         args += ["--json", str(out_json)]
         if rng.random() < 0.2:
             args += ["--report", str(report)]
@@ -219,6 +251,34 @@ def case(base, rng, k, tmp):
     size = max([(tmp / n).stat().st_size for n in files]
                + [f.stat().st_size for f in (tmp / "run.bag").glob("*")])
     return args, outputs, size, what
+
+
+def make_shards(bin_, work):
+    """Two shards of a small recovery benchmark, for `bench-diagnose --merge`:
+    {file name: JSON text}."""
+    out = {}
+    for k in (1, 2):
+        name = f"shard{k}.json"
+        subprocess.run([bin_, "bench-diagnose", "--spec", str(ROOT / "spec" / "diff_drive.toml"), "--effect",
+                        "lateral_slip", "--seeds", "1", "--laps", "1", "--shard", f"{k}/2", "--json", name],
+                       cwd=work, check=True, capture_output=True)
+        out[name] = (work / name).read_text()
+    return out
+
+
+def benchmark_config():
+    """The bundled bench-real configuration, its spec paths made absolute so
+    that a copy anywhere reads the same specs."""
+    config = ROOT / "spec" / "benchmarks" / "optiodom" / "benchmark.toml"
+    return re.sub(r'^spec = "([^"]+)"', lambda m: f'spec = "{(config.parent / m[1]).resolve()}"',
+                  config.read_text(), flags=re.M)
+
+
+def real_optiodom():
+    """The OptiOdom sessions bench-real reads (../shared/real, or
+    $KINEGEN_REAL_DATA), or None: the benchmark cases are then left out."""
+    real = Path(os.environ.get("KINEGEN_REAL_DATA", ROOT.parent / "shared" / "real")) / "optiodom-dev"
+    return real if (real / "published.json").is_file() else None
 
 
 def make_bag(work):
@@ -317,17 +377,27 @@ def judge(code, text, outputs):
         if not located(text):
             return "unlocated error"
     if code == 0 and outputs[0].exists():
-        doc = outputs[0].read_text()
-        if any(t in doc for t in ("NaN", "Infinity")):
+        if not_finite_json(outputs[0].read_text(errors="replace")):
             return "NaN or infinity in the JSON document"
     return None
+
+
+def not_finite_json(doc):
+    """Whether a JSON document holds NaN or an infinity as a number (not as
+    text: a landmark may be named `BNaN`), or is no JSON at all."""
+    found = []
+    try:
+        json.loads(doc, parse_constant=lambda c: found.append(c))
+    except ValueError:
+        return True
+    return bool(found)
 
 
 def located(text):
     """An exit-2 message names a file (with a line, row or column), an
     option, or an input by name."""
     t = text.lower()
-    return any(s in t for s in (".csv", ".toml", ".jsonl", ".urdf", ".yaml", ".mcap", "bag", "--", "line", "row",
+    return any(s in t for s in (".csv", ".toml", ".json", ".txt", ".urdf", ".yaml", ".mcap", "bag", "--", "line", "row",
                                 "column", "option", "argument", "usage:"))
 
 

@@ -99,9 +99,9 @@ pub fn read_progress(quiet: bool) -> impl Fn(&Path) -> Box<dyn Fn(usize, usize)>
         let bar = is_bag(p).then(|| {
             crate::progress::Progress::spinner(&format!("reading {}", p.display()), quiet)
         });
-        Box::new(move |done: usize, total: usize| {
+        Box::new(move |done: usize, per_mille: usize| {
             if let Some(b) = &bar {
-                b.message(&format!("{done}/{total} messages"));
+                b.message(&format!("{done} messages, {}%", per_mille / 10));
             }
         })
     }

@@ -54,6 +54,7 @@ pub mod logs {
     pub mod column;
     pub mod contained;
     pub mod log;
+    pub mod mcap_messages;
     pub mod merged;
     pub mod rosdyn;
     pub mod rosmsg;

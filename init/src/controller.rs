@@ -150,10 +150,11 @@ fn flatten(text: &str, from: usize, prefix: &str, y: &Yaml, out: &mut BTreeMap<S
 
 impl Controller {
     pub fn read(file: &Path) -> Result<Controller, InitError> {
-        let text = std::fs::read_to_string(file).map_err(|e| {
+        // bounded, and a byte that is not UTF-8 named at its line
+        let text = kinegen_model::files::read_text(file).map_err(|(at, e)| {
             InitError::at(
                 file,
-                None,
+                at.map(|(line, _)| line),
                 format!("cannot read the controller configuration: {e}"),
             )
         })?;

@@ -9,8 +9,14 @@ const HOW: &str = "install it (`pip install xacro`) or expand the file yourself:
 pub fn read(path: &Path) -> Result<String, InitError> {
     let is_xacro = path.extension().is_some_and(|e| e == "xacro");
     if !is_xacro {
-        return std::fs::read_to_string(path)
-            .map_err(|e| InitError::at(path, None, format!("cannot read the URDF: {e}")));
+        // bounded, and a byte that is not UTF-8 named at its line
+        return kinegen_model::files::read_text(path).map_err(|(at, e)| {
+            InitError::at(
+                path,
+                at.map(|(line, _)| line),
+                format!("cannot read the URDF: {e}"),
+            )
+        });
     }
     if !path.is_file() {
         return Err(InitError::at(

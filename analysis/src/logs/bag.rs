@@ -9,8 +9,8 @@
 //! until the next one. Rows outside any stream's span are dropped. Time is
 //! the messages' header stamps (or the bag's receive time, if asked; an
 //! unstamped `Twist` has only that), minus the first row's.
-use crate::logs::contained::contained;
 use crate::logs::log::{wrap, Log, LogError};
+use crate::logs::mcap_messages::for_each_message;
 use crate::logs::rosmsg::{self, decode};
 use serde::Deserialize;
 use std::collections::{BTreeMap, HashMap};
@@ -215,8 +215,9 @@ struct Series {
     held: bool,
 }
 
-/// Read a bag as a log with the `wanted` columns. `progress(done, total)` is
-/// called as messages are read (total 0 when the bag has no summary).
+/// Read a bag as a log with the `wanted` columns. `progress(messages,
+/// per_mille)` is called as messages are read: how many so far, and how far
+/// into the file in thousandths.
 /// Range-bearing detections come with it when the mapping names a landmark
 /// topic.
 pub fn read(
@@ -646,32 +647,11 @@ fn collect(
     progress: &dyn Fn(usize, usize),
 ) -> Result<(HashMap<String, Topic>, Vec<(String, String)>), LogError> {
     let err = |m: String| LogError::new(file, None, None, m);
-    let total = contained(|| mcap::Summary::read(buf))
-        .ok()
-        .and_then(Result::ok)
-        .flatten()
-        .and_then(|s| s.stats.map(|s| s.message_count as usize))
-        .unwrap_or(0);
-    let mut stream = contained(|| mcap::MessageStream::new(buf))
-        .map_err(|why| {
-            err(format!(
-                "not a readable MCAP file: the MCAP reader failed ({why})"
-            ))
-        })?
-        .map_err(|e| err(format!("not a readable MCAP file: {e}")))?;
     let mut topics: HashMap<String, Topic> = HashMap::new();
     let mut all: Vec<(String, String)> = Vec::new();
     let mut counts: HashMap<String, usize> = HashMap::new();
-    for n in 0.. {
-        let corrupt = |what: String| {
-            err(format!(
-                "truncated or corrupt MCAP file after {n} messages: {what}"
-            ))
-        };
-        let next = contained(|| stream.next())
-            .map_err(|why| corrupt(format!("the MCAP reader failed ({why})")))?;
-        let Some(m) = next else { break };
-        let m = m.map_err(|e| corrupt(e.to_string()))?;
+    let mut n = 0usize;
+    for_each_message(buf, |m, bytes_read| {
         let ch = &m.channel;
         let schema = ch
             .schema
@@ -703,14 +683,25 @@ fn collect(
                 .push(Raw {
                     index: *index,
                     log_time: m.log_time,
-                    data: m.data.into_owned(),
+                    data: m.data.to_vec(),
                 });
         }
         *index += 1;
-        if n % 4096 == 0 {
-            progress(n, total);
+        if n.is_multiple_of(4096) {
+            progress(n, bytes_read * 1000 / buf.len().max(1));
         }
-    }
+        n += 1;
+    })
+    .map_err(|c| {
+        err(if c.after == 0 && all.is_empty() {
+            format!("not a readable MCAP file: {}", c.why)
+        } else {
+            format!(
+                "truncated or corrupt MCAP file after {} messages: {}",
+                c.after, c.why
+            )
+        })
+    })?;
     all.sort();
     Ok((topics, all))
 }

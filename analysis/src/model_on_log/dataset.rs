@@ -324,7 +324,7 @@ impl Run {
     }
 
     /// Read a log for a model; a bag through `topics`, reporting
-    /// `progress(messages read, total)`, with the range-bearing detections of
+    /// `progress(messages read, thousandths of the file read)`, with the range-bearing detections of
     /// its landmark topic (none for a CSV log, whose observations are a file
     /// of their own). A CSV log's empty cells are filled as a log merged
     /// from sources at their own times is ([`crate::logs::merged`]), said in the

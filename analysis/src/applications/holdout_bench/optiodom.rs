@@ -9,6 +9,7 @@ use super::{Calibration, Session};
 use crate::model_on_log::derivation::Deriver;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
+use kinegen_model::files::read_text;
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use serde::Deserialize;
@@ -52,8 +53,16 @@ impl Config {
             path: path.to_path_buf(),
             message,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| unread(e.to_string()))?;
+        let text = read_text(path).map_err(|e| unread(unreadable(e)))?;
         toml::from_str(&text).map_err(|e| unread(e.to_string()))
+    }
+}
+
+/// Why a text file could not be read ([`read_text`]'s error), for people.
+fn unreadable((at, why): (Option<(usize, usize)>, String)) -> String {
+    match at {
+        Some((line, column)) => format!("line {line}, column {column}: {why}"),
+        None => why,
     }
 }
 
@@ -237,7 +246,7 @@ fn read_json(path: &Path) -> Result<Value, BenchError> {
         path: path.to_path_buf(),
         message,
     };
-    let text = std::fs::read_to_string(path).map_err(|e| unread(e.to_string()))?;
+    let text = read_text(path).map_err(|e| unread(unreadable(e)))?;
     serde_json::from_str(&text).map_err(|e| unread(e.to_string()))
 }
 
