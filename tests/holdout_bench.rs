@@ -196,13 +196,16 @@ fn bench_real_refuses_bad_input_with_its_location() {
     let e = refused_config(&format!(
         "[robot.diff]\nspec = {spec:?}\npublished.wheel = {{ name = \"L (m)\" }}\n"
     ));
-    assert!(e.contains("published.wheel"), "{e}");
+    assert!(
+        e.contains("benchmark.toml:3: robot.diff.published.wheel"),
+        "{e}"
+    );
     // a scale that is no number to multiply by (nan gave a method an
     // infinite error, and kinegen a win)
     let e = refused_config(&format!(
         "[robot.diff]\nspec = {spec:?}\npublished.b = {{ name = \"b (m)\", scale = nan }}\n"
     ));
-    assert!(e.contains("robot.diff.published.b.scale"), "{e}");
+    assert!(e.contains("line 3: robot.diff.published.b.scale"), "{e}");
     assert!(!json.exists());
 }
 

@@ -18,29 +18,50 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The benchmark file.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug)]
 pub struct Config {
     /// Per robot type (a session's `type`).
     pub robot: BTreeMap<String, RobotConfig>,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug)]
 pub struct RobotConfig {
     /// The spec, relative to the benchmark file.
     pub spec: PathBuf,
     /// Spec parameter -> the study's parameter (value = study's * scale).
-    #[serde(default)]
     pub published: BTreeMap<String, Mapped>,
+}
+
+#[derive(Debug)]
+pub struct Mapped {
+    pub name: String,
+    pub scale: f64,
+    /// Where the mapping is written in the benchmark file (1-based), for
+    /// errors.
+    pub line: usize,
+}
+
+/// The benchmark file as written: a mapping's span gives its line.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    robot: BTreeMap<String, RawRobotConfig>,
 }
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Mapped {
-    pub name: String,
+struct RawRobotConfig {
+    spec: PathBuf,
+    #[serde(default)]
+    published: BTreeMap<String, toml::Spanned<RawMapped>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMapped {
+    name: String,
     #[serde(default = "one")]
-    pub scale: f64,
+    scale: f64,
 }
 
 fn one() -> f64 {
@@ -54,7 +75,33 @@ impl Config {
             message,
         };
         let text = read_text(path).map_err(|e| unread(unreadable(e)))?;
-        toml::from_str(&text).map_err(|e| unread(e.to_string()))
+        let raw: RawConfig = toml::from_str(&text).map_err(|e| unread(e.to_string()))?;
+        let line = |at: usize| text[..at.min(text.len())].matches('\n').count() + 1;
+        let robot = raw.robot.into_iter().map(|(name, r)| {
+            let published = r.published.into_iter().map(|(key, m)| {
+                let at = line(m.span().start);
+                let m = m.into_inner();
+                (
+                    key,
+                    Mapped {
+                        name: m.name,
+                        scale: m.scale,
+                        line: at,
+                    },
+                )
+            });
+            let published = published.collect();
+            (
+                name,
+                RobotConfig {
+                    spec: r.spec,
+                    published,
+                },
+            )
+        });
+        Ok(Config {
+            robot: robot.collect(),
+        })
     }
 }
 
@@ -74,9 +121,10 @@ pub enum BenchError {
     /// A file or folder that cannot be read or parsed, with what its reader says.
     #[error("{}: {message}", path.display())]
     Unread { path: PathBuf, message: String },
-    #[error("{}: robot.{robot}.published.{key}: {} has no parameter `{key}` (it has: {})", config.display(), spec.display(), known.join(", "))]
+    #[error("{}:{line}: robot.{robot}.published.{key}: {} has no parameter `{key}` (it has: {})", config.display(), spec.display(), known.join(", "))]
     UnknownPublished {
         config: PathBuf,
+        line: usize,
         robot: String,
         key: String,
         spec: PathBuf,
@@ -138,8 +186,8 @@ pub fn load(
                 return Err(BenchError::Unread {
                     path: config_path.to_path_buf(),
                     message: format!(
-                        "robot.{robot}.published.{key}.scale = {}: a finite number other than 0",
-                        m.scale
+                        "line {}: robot.{robot}.published.{key}.scale = {}: a finite number other than 0",
+                        m.line, m.scale
                     ),
                 });
             }
@@ -204,9 +252,10 @@ pub fn load(
                 .derive(&model, &spec.display().to_string())
                 .map_err(|e| BenchError::Spec(e.to_string()))?;
             let known: Vec<String> = ir.runtime_params().iter().map(|p| p.name.clone()).collect();
-            if let Some(k) = robot.published.keys().find(|k| !known.contains(k)) {
+            if let Some((k, m)) = robot.published.iter().find(|(k, _)| !known.contains(k)) {
                 return Err(BenchError::UnknownPublished {
                     config: config_path.to_path_buf(),
+                    line: m.line,
                     robot: meta.robot.clone(),
                     key: k.clone(),
                     spec,
