@@ -128,7 +128,7 @@ pub enum BenchError {
         robot: String,
         key: String,
         spec: PathBuf,
-        known: Vec<String>,
+        known: Box<[String]>,
     },
     #[error("{}: no session folders (with a metadata.json){}", dir.display(), if only.is_empty() { String::new() } else { format!(" named {}", only.join(", ")) })]
     NoSessions { dir: PathBuf, only: Vec<String> },
@@ -259,7 +259,7 @@ pub fn load(
                     robot: meta.robot.clone(),
                     key: k.clone(),
                     spec,
-                    known,
+                    known: known.into(),
                 });
             }
             irs.insert(meta.robot.clone(), ir);
