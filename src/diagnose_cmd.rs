@@ -61,7 +61,11 @@ pub fn run(c: Common) -> ExitCode {
     let (prep, outcome) = (&done.loaded, &done.outcome);
     let (d, n_candidates) = (&outcome.diagnosis, outcome.tried);
     let r = &prep.runner;
-    let steps = NextSteps::of(d, &r.ir.name, &Invocation::of(&sources));
+    let steps = NextSteps::of(
+        d,
+        &r.ir.name,
+        &Invocation::of(&sources, &c.catalogue.effects),
+    );
     let doc = diagnose_document(&done, &steps);
     let samples: usize = prep.runs.iter().map(|x| x.t.len()).sum();
     // the answer: said by default, and the report's first box

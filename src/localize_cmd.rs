@@ -451,7 +451,7 @@ fn reading_step(
     }
     let values = r.parameters().map(|(k, v)| (k.to_string(), v)).into();
     let spec = c.spec.display().to_string();
-    let cmd = add_effect_command(&spec, EFFECT, &values, &ir.name);
+    let cmd = add_effect_command(&spec, EFFECT, &values, &ir.name, &[]);
     let why = format!(
         "the camera reads range as {:.0}% depth along its axis, {:+.1}% long; to put it in the spec:",
         100.0 * r.depth_share,

@@ -61,15 +61,41 @@ fn geometry_methods() -> clap::builder::PossibleValuesParser {
     )
 }
 
-fn summary(d: &Drive) -> String {
+/// One row of the drives' table: odometry, moves, collisions, safety-zone
+/// intrusions, distance to the goal.
+fn drive_row(odometry: &str, d: &Drive) -> String {
     format!(
-        "{} moves, {} collision(s), {} safety-zone intrusion(s), final distance to the goal {:.1} cm{}",
+        "  {odometry:<12} {:>5} {:>10} {:>12} {:>9.1}{}",
         d.moves,
         d.collisions,
         d.safety_intrusions,
         100.0 * d.final_error_m,
-        if d.reached { "" } else { " (never believed it reached the goal)" }
+        if d.reached {
+            ""
+        } else {
+            "  never believed it reached the goal"
+        }
     )
+}
+
+/// The answer: how the last drive ended, against the nominal one.
+fn answer(before: &Drive, calibrated: Option<(&str, &Drive)>) -> String {
+    let ended = |d: &Drive| {
+        format!(
+            "{} collision(s), {:.1} cm from the goal",
+            d.collisions,
+            100.0 * d.final_error_m
+        )
+    };
+    match calibrated {
+        None => format!("answer: with the nominal parameters, {}", ended(before)),
+        Some((m, d)) => format!(
+            "answer: calibrated by {m}, {} (nominal: {} collisions, {:.1} cm)",
+            ended(d),
+            before.collisions,
+            100.0 * before.final_error_m
+        ),
+    }
 }
 
 pub fn run(a: &NavigateArgs) -> ExitCode {
@@ -119,22 +145,27 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
             format!("{:e}", a.cell)
         }
     ));
-    out.say(&format!(
-        "  odometry with the nominal parameters: {}",
-        summary(before)
+    out.say(&answer(
+        before,
+        calibrated.as_ref().map(|c| (c.method.as_str(), &c.drive)),
     ));
+    out.say("");
+    out.say("  odometry     moves  collisions  safety zone  goal cm");
+    out.say(&drive_row("nominal", before));
+    if let Some(c) = calibrated {
+        out.say(&drive_row(&c.method, &c.drive));
+    }
     let mut calibration = None;
     if let Some(CalibratedDrive {
         method: m,
         note,
         odometry: cal,
-        drive: d,
+        drive: _,
     }) = calibrated
     {
-        out.say(&format!(
-            "  odometry calibrated by {m} ({note}): {}",
-            summary(d)
-        ));
+        out.say("");
+        out.say(&format!("  {m}: {note}"));
+        out.say("  parameter    calibrated      true");
         let params: serde_json::Map<String, serde_json::Value> = cal
             .free
             .iter()
@@ -150,7 +181,7 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
         shown.sort_by(|a, b| cal.names[*a].cmp(&cal.names[*b]));
         for i in shown {
             out.say(&format!(
-                "      {:<14} {:.6} (true {:.6})",
+                "  {:<12} {:>10.6} {:>9.6}",
                 cal.names[i], cal.p[i], truth.p[i]
             ));
         }

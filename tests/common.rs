@@ -287,3 +287,50 @@ sigma = [0.05, 0.02]
     std::fs::write(&path, text).unwrap();
     path
 }
+
+// ---- documentation run as written (tests/readme.rs, tests/howtos.rs)
+
+pub fn bin_dir() -> &'static Path {
+    Path::new(env!("CARGO_BIN_EXE_kinegen")).parent().unwrap()
+}
+
+/// Run a shell script as written (bash -euo pipefail) in a fresh temporary
+/// home, with kinegen on the PATH and `/path/to/kinegen` standing for this
+/// checkout: the home (kept for the caller to look into) and the output.
+pub fn run_in_home(script: &str) -> (tempfile::TempDir, std::process::Output) {
+    let home = tempfile::tempdir().unwrap();
+    let script = script.replace("/path/to/kinegen", &root().display().to_string());
+    let o = Command::new("bash")
+        .args(["-euo", "pipefail", "-c", &script])
+        .env("HOME", home.path())
+        .env("PATH", path_with_kinegen())
+        .current_dir(home.path())
+        .output()
+        .unwrap();
+    (home, o)
+}
+
+pub fn path_with_kinegen() -> String {
+    format!(
+        "{}:{}",
+        bin_dir().display(),
+        std::env::var("PATH").unwrap_or_default()
+    )
+}
+
+/// Each line shown must be printed (`...` skips any number of lines), in
+/// order.
+pub fn shows(shown: &str, printed: &str) -> Result<(), String> {
+    let printed: Vec<&str> = printed.lines().map(str::trim_end).collect();
+    let mut at = 0;
+    for want in shown.lines().map(str::trim_end) {
+        if want == "..." {
+            continue;
+        }
+        match printed[at..].iter().position(|l| *l == want) {
+            Some(i) => at += i + 1,
+            None => return Err(format!("`{want}` is not printed (after line {at})")),
+        }
+    }
+    Ok(())
+}

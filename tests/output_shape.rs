@@ -66,6 +66,45 @@ fn the_bundled_story_reads_at_a_glance() {
             "sim.csv",
         ],
     );
+    let (epuck, arena, tour) = (
+        root().join("data/seed004/epuck.toml"),
+        root().join("data/seed004/arena.txt"),
+        root().join("data/beacon_tour.csv"),
+    );
+    let text = shaped(
+        d,
+        &[
+            "navigate",
+            "--spec",
+            epuck.to_str().unwrap(),
+            "--grid",
+            arena.to_str().unwrap(),
+            "--set",
+            "b=0.056",
+            "--calibrate",
+            "umbmark",
+        ],
+    );
+    assert!(
+        text.lines()
+            .nth(1)
+            .is_some_and(|l| l.starts_with("answer: ")),
+        "{text}"
+    );
+    let omni = root().join("spec/omni3.toml");
+    let omni = omni.to_str().unwrap();
+    shaped(
+        d,
+        &[
+            "inverse",
+            "--spec",
+            spec,
+            "--spec",
+            omni,
+            "--path",
+            tour.to_str().unwrap(),
+        ],
+    );
 }
 
 #[test]

@@ -9,11 +9,10 @@
 //!   and each line of the ```text block after it must be a line of what the
 //!   command prints (a line `...` stands for lines left out), so the output
 //!   the README shows is the program's.
-use std::path::Path;
 use std::process::Command;
 
 mod common;
-use common::root;
+use common::{path_with_kinegen, root, run_in_home, shows};
 
 /// The fenced blocks of a markdown section: (language, text).
 fn blocks(readme: &str, heading: &str) -> Vec<(String, String)> {
@@ -36,34 +35,6 @@ fn blocks(readme: &str, heading: &str) -> Vec<(String, String)> {
     out
 }
 
-fn bin_dir() -> &'static Path {
-    Path::new(env!("CARGO_BIN_EXE_kinegen")).parent().unwrap()
-}
-
-/// Run a shell script as written (bash -euo pipefail) in a fresh temporary
-/// home, with kinegen on the PATH and `/path/to/kinegen` standing for this
-/// checkout: the home (kept for the caller to look into) and the output.
-fn run_in_home(script: &str) -> (tempfile::TempDir, std::process::Output) {
-    let home = tempfile::tempdir().unwrap();
-    let script = script.replace("/path/to/kinegen", &root().display().to_string());
-    let o = Command::new("bash")
-        .args(["-euo", "pipefail", "-c", &script])
-        .env("HOME", home.path())
-        .env("PATH", path_with_kinegen())
-        .current_dir(home.path())
-        .output()
-        .unwrap();
-    (home, o)
-}
-
-fn path_with_kinegen() -> String {
-    format!(
-        "{}:{}",
-        bin_dir().display(),
-        std::env::var("PATH").unwrap_or_default()
-    )
-}
-
 #[test]
 fn the_own_robot_block_runs_as_written() {
     let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
@@ -84,23 +55,6 @@ fn the_own_robot_block_runs_as_written() {
         .unwrap_or("");
     assert!(last.starts_with("verify: passed"), "{out}\n{err}");
     assert!(home.path().join("my_robot/my_kernels/Cargo.toml").is_file());
-}
-
-/// Each line shown must be printed (`...` skips any number of lines), in
-/// order.
-fn shows(shown: &str, printed: &str) -> Result<(), String> {
-    let printed: Vec<&str> = printed.lines().map(str::trim_end).collect();
-    let mut at = 0;
-    for want in shown.lines().map(str::trim_end) {
-        if want == "..." {
-            continue;
-        }
-        match printed[at..].iter().position(|l| *l == want) {
-            Some(i) => at += i + 1,
-            None => return Err(format!("`{want}` is not printed (after line {at})")),
-        }
-    }
-    Ok(())
 }
 
 #[test]

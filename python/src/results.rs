@@ -219,7 +219,7 @@ impl PyDiagnosis {
     pub fn new(py: Python<'_>, done: &Diagnosed, sources: &Sources) -> PyResult<PyDiagnosis> {
         let d = &done.outcome.diagnosis;
         let r = &done.loaded.runner;
-        let steps = NextSteps::of(d, &r.ir.name, &Invocation::of(sources));
+        let steps = NextSteps::of(d, &r.ir.name, &Invocation::of(sources, &[]));
         let proposed: Vec<_> = d.proposed.iter().collect();
         let verdict = PyVerdict {
             effect: d.verdict().map(str::to_string),

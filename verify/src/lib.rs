@@ -37,3 +37,9 @@ pub use checks::{run_all, Finding, Report};
 #[cfg(feature = "compiled")]
 pub use kernel::Generated;
 pub use kernel::{Corrupted, IrKernel, Kernel};
+
+/// The guide's firmware page (docs/src/howto/embed.md): its Rust runs as a
+/// doctest against the generated crate, as the page shows it.
+#[cfg(all(doctest, feature = "compiled"))]
+#[doc = include_str!("../../docs/src/howto/embed.md")]
+pub struct EmbedHowto;

@@ -6,6 +6,7 @@
 use crate::diagnosis::diagnose::Diagnosis;
 use crate::model_on_log::load::Sources;
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 
 /// The inputs a diagnosis ran on, as the user named them: the commands
 /// repeat them so they run as printed.
@@ -17,18 +18,22 @@ pub struct Invocation {
     pub topics: Option<String>,
     pub observations: Vec<String>,
     pub landmarks: Option<String>,
+    /// The user's effect directories (`--effects DIR`): an effect of theirs
+    /// is added only by an add-effect that reads them too.
+    pub effects: Vec<String>,
 }
 
 impl Invocation {
-    /// The inputs as `sources` names them.
-    pub fn of(sources: &Sources) -> Invocation {
-        let shown = |p: &std::path::PathBuf| p.display().to_string();
+    /// The inputs as `sources` and `effect_dirs` name them.
+    pub fn of(sources: &Sources, effect_dirs: &[PathBuf]) -> Invocation {
+        let shown = |p: &PathBuf| p.display().to_string();
         Invocation {
             spec: shown(&sources.spec),
             data: sources.data.iter().map(shown).collect(),
             topics: sources.topics.as_ref().map(shown),
             observations: sources.observations.iter().map(shown).collect(),
             landmarks: sources.landmarks.as_ref().map(shown),
+            effects: effect_dirs.iter().map(shown).collect(),
         }
     }
 }
@@ -58,9 +63,8 @@ impl NextSteps {
             };
             let values = step.parameters.iter().map(|(n, v)| (n.clone(), v.estimate));
             let values: BTreeMap<String, f64> = values.collect();
-            steps
-                .apply
-                .push(add_effect_command(&from, &step.effect, &values, model));
+            let cmd = add_effect_command(&from, &step.effect, &values, model, &inv.effects);
+            steps.apply.push(cmd);
         }
         let Some(last) = d.chain.last() else {
             return steps;
@@ -71,7 +75,7 @@ impl NextSteps {
             .filter_map(|e| d.candidates.iter().find(|c| &c.effect == e))
             .map(|c| {
                 let values = c.parameters.iter().map(|(k, v)| (k.clone(), v.estimate));
-                add_effect_command(&inv.spec, &c.effect, &values.collect(), model)
+                add_effect_command(&inv.spec, &c.effect, &values.collect(), model, &inv.effects)
             })
             .collect();
         steps
@@ -84,22 +88,21 @@ fn written(model: &str, effect: &str) -> String {
 }
 
 /// The `kinegen add-effect` command that adds `effect` at `values` to the
-/// spec `spec`, written as `{model}_{effect}.toml`.
+/// spec `spec`, written as `{model}_{effect}.toml`, reading the user's
+/// effect directories `effect_dirs` as the diagnosis did.
 pub fn add_effect_command(
     spec: &str,
     effect: &str,
     values: &BTreeMap<String, f64>,
     model: &str,
+    effect_dirs: &[String],
 ) -> String {
-    let args: Vec<String> = values
-        .iter()
-        .map(|(k, v)| format!("--value {k}={v:.6}"))
-        .collect();
-    format!(
-        "kinegen add-effect --spec {spec} --effect {effect} {} --out {}",
-        args.join(" "),
-        written(model, effect)
-    )
+    let mut a = vec![format!("kinegen add-effect --spec {spec}")];
+    a.extend(effect_dirs.iter().map(|d| format!("--effects {d}")));
+    a.push(format!("--effect {effect}"));
+    a.extend(values.iter().map(|(k, v)| format!("--value {k}={v:.6}")));
+    a.push(format!("--out {}", written(model, effect)));
+    a.join(" ")
 }
 
 /// The `fit` that calibrates `spec` on the diagnosed logs and writes it back
