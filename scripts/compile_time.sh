@@ -10,15 +10,21 @@
 # everything it ran), and writes cargo's timings report of each stage
 # (target/cargo-timings in the clone, kept when --keep is given).
 #
-# Usage: scripts/compile_time.sh [--keep] [--no-tests]
+# With --story, it runs the README's first command (scripts/story.sh) in the
+# fresh clone instead, as a newcomer would, and prints when diagnose's
+# answer appeared and when the story ended, counted from the start (its
+# builds included).
+#
+# Usage: scripts/compile_time.sh [--keep] [--no-tests] [--story]
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
-keep=0 tests=1
+keep=0 tests=1 story=0
 for a in "$@"; do
   case "$a" in
     --keep) keep=1 ;;
     --no-tests) tests=0 ;;
-    *) echo "usage: scripts/compile_time.sh [--keep] [--no-tests]" >&2; exit 2 ;;
+    --story) story=1 ;;
+    *) echo "usage: scripts/compile_time.sh [--keep] [--no-tests] [--story]" >&2; exit 2 ;;
   esac
 done
 work="$(mktemp -d)"
@@ -37,6 +43,23 @@ stage() { # label, then the cargo command
   awk -v l="$label" -v w="$wall" -v u="$user" -v s="$sys" \
     'BEGIN { printf "%-28s %6.1f min wall %6.1f CPU-min\n", l, w / 60, (u + s) / 60 }'
 }
+
+if [ "$story" = 1 ]; then
+  # each line of the story's output stamped with the seconds since the start
+  start=$(date +%s.%N)
+  /usr/bin/time -f "%e %U %S" -o "$work/time-story" bash scripts/story.sh 2>&1 \
+    | while IFS= read -r line; do
+        awk -v now="$(date +%s.%N)" -v t0="$start" -v l="$line" 'BEGIN { printf "%7.1f %s\n", now - t0, l }'
+      done >"$work/log-story"
+  read -r wall user sys <"$work/time-story"
+  answer=$(grep -m1 -E '^ *[0-9.]+ answer: missing' "$work/log-story" | awk '{print $1}')
+  awk -v a="${answer:--1}" 'BEGIN { if (a < 0) print "diagnose printed no answer"; else printf "diagnose answer after %6.1f min\n", a / 60 }'
+  awk -v w="$wall" -v u="$user" -v s="$sys" \
+    'BEGIN { printf "story ended after  %6.1f min wall %6.1f CPU-min\n", w / 60, (u + s) / 60 }'
+  grep -m1 'answer: missing' "$work/log-story"
+  [ "$keep" = 1 ] && echo "kept: $work/kinegen (the story's output, stamped: $work/log-story)"
+  exit 0
+fi
 
 stage "light (the analysis)" cargo build --locked --no-default-features --bin kinegen --timings
 stage "full (symbolica)" cargo build --locked --bin kinegen --timings

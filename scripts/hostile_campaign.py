@@ -3,8 +3,8 @@
 specs, sightings, maps, jobs files, topic mappings, robot descriptions,
 ROS 2 bags (their MCAP bytes and their metadata), occupancy grids, paths,
 benchmark shards, benchmark configurations and option values, each run
-through the command that reads it (generate and verify, which only the
-full build has, are covered by their own tests).
+through the command that reads it; with the full build (symbolica), mutated
+specs also go through generate and verify.
 
 Each case passes when kinegen ends with exit 0, 1 or 2 within the time limit
 and under the memory cap, and
@@ -150,6 +150,9 @@ class Base:
         self.shards = make_shards(bin_, work)
         self.real = real_optiodom()
         self.benchmark = benchmark_config()
+        # generate and verify need the symbolic stage: the light build refuses them
+        self.symbolic = subprocess.run([bin_, "generate", "--spec", str(ROOT / "spec" / "diff_drive.toml"),
+                                        "--out", str(work / "generated")], capture_output=True).returncode == 0
 
 
 HOSTILE_OPTIONS = {
@@ -205,7 +208,9 @@ def case(base, rng, k, tmp):
         "log": [["compare", *analysis], ["fit", *analysis], ["diagnose", *analysis],
                 ["compare", *seen], ["localize", *seen]],
         "spec": [["compare", *analysis], ["fit", *analysis], ["simulate", "--spec", "spec.toml", "--out", "out.csv"],
-                 ["add-effect", "--spec", "spec.toml", "--effect", "lateral_slip", "--out", "out.toml"]],
+                 ["add-effect", "--spec", "spec.toml", "--effect", "lateral_slip", "--out", "out.toml"]]
+                + ([["generate", "--spec", "spec.toml", "--out", "generated"], ["verify", "--spec", "spec.toml"]]
+                   if base.symbolic else []),
         "sightings": [["localize", *seen], ["fit", *seen], ["diagnose", *seen]],
         "map": [["localize", *seen], ["compare", *seen]],
         "jobs": [["batch", "jobs.jsonl", "--out", "results.jsonl"]],
@@ -247,7 +252,7 @@ def case(base, rng, k, tmp):
         args += ["--json", str(out_json)]
         if rng.random() < 0.2:
             args += ["--report", str(report)]
-    outputs = [out_json, report, tmp / "out.toml"] + ([out_file] if args[0] == "simulate" else [])
+    outputs = [out_json, report, tmp / "out.toml", tmp / "generated"] + ([out_file] if args[0] == "simulate" else [])
     size = max([(tmp / n).stat().st_size for n in files]
                + [f.stat().st_size for f in (tmp / "run.bag").glob("*")])
     return args, outputs, size, what

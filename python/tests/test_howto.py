@@ -20,7 +20,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "src" / "howto" / "python.md"
-BIN = os.environ.get("KINEGEN_BIN", str(ROOT / os.environ.get("CARGO_TARGET_DIR", "target") / "debug" / "kinegen"))
+# resolved now: the test changes directory (scripts/test.sh gives a relative path)
+BIN = Path(os.environ.get("KINEGEN_BIN", ROOT / os.environ.get("CARGO_TARGET_DIR", "target") / "debug" / "kinegen")).resolve()
 
 
 def steps(text):
@@ -78,7 +79,7 @@ def test_the_python_page_runs_as_written(tmp_path, monkeypatch):
     for d in ("spec", "data"):
         (tmp_path / d).symlink_to(ROOT / d)
     monkeypatch.chdir(tmp_path)
-    env = dict(os.environ, PATH=f"{Path(BIN).parent}{os.pathsep}{os.environ.get('PATH', '')}")
+    env = dict(os.environ, PATH=f"{BIN.parent}{os.pathsep}{os.environ.get('PATH', '')}")
     namespace, printed, ran = {}, "", 0
     for kind, body, line in steps(PAGE.read_text()):
         if kind == "shell":
