@@ -151,7 +151,9 @@ class Base:
         self.real = real_optiodom()
         self.benchmark = benchmark_config()
         # generate and verify need the symbolic stage: the light build refuses them
-        self.symbolic = subprocess.run([bin_, "generate", "--spec", str(ROOT / "spec" / "diff_drive.toml"),
+        (work / "specs").mkdir()
+        (work / "specs" / "spec.toml").write_text(self.spec)
+        self.symbolic = subprocess.run([bin_, "generate", "--spec-dir", str(work / "specs"),
                                         "--out", str(work / "generated")], capture_output=True).returncode == 0
 
 
@@ -192,6 +194,9 @@ def case(base, rng, k, tmp):
         files[target] = mutate_text(files[target], rng)
     for name, text in files.items():
         write(tmp / name, text)
+    # generate reads a folder of specs: the (mutated) spec alone in one
+    (tmp / "specs").mkdir()
+    write(tmp / "specs" / "spec.toml", files["spec.toml"])
     if kind == "bag":
         # the MCAP file's bytes, or now and then the metadata's text
         (tmp / "run.bag").mkdir()
@@ -209,7 +214,7 @@ def case(base, rng, k, tmp):
                 ["compare", *seen], ["localize", *seen]],
         "spec": [["compare", *analysis], ["fit", *analysis], ["simulate", "--spec", "spec.toml", "--out", "out.csv"],
                  ["add-effect", "--spec", "spec.toml", "--effect", "lateral_slip", "--out", "out.toml"]]
-                + ([["generate", "--spec", "spec.toml", "--out", "generated"], ["verify", "--spec", "spec.toml"]]
+                + ([["generate", "--spec-dir", "specs", "--out", "generated"], ["verify", "--spec", "spec.toml"]]
                    if base.symbolic else []),
         "sightings": [["localize", *seen], ["fit", *seen], ["diagnose", *seen]],
         "map": [["localize", *seen], ["compare", *seen]],
