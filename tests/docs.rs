@@ -5,7 +5,10 @@
 //!   rewrites them, as `generate` rewrites the kernels);
 //! - every relative link of the guide, the README and ARCHITECTURE.md names a
 //!   file that exists, and an anchor a heading of that file;
-//! - the README fits on a screen or two (at most 250 lines).
+//! - the README fits on a screen or two (at most 250 lines);
+//! - every option the commands-by-example synopsis uses is an option of
+//!   its command (the synopsis holds placeholders, so it is not run: the
+//!   how-tos are, tests/howtos.rs).
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -265,4 +268,33 @@ fn a_broken_link_is_found() {
     assert_eq!(l.len(), 2, "{l:?}");
     assert_eq!(l[0].1, "no/such/file.md");
     assert!(anchors("# The spec format\n## Exit codes (2)").contains("exit-codes-2"));
+}
+
+/// The synopsis (docs/src/reference/commands-by-example.md) uses only
+/// options its commands have: each `kinegen COMMAND ... --option` line's
+/// options appear in `kinegen COMMAND --help`.
+#[test]
+fn the_synopsis_uses_only_options_the_commands_have() {
+    let page =
+        std::fs::read_to_string(root().join("docs/src/reference/commands-by-example.md")).unwrap();
+    let mut checked = 0;
+    for line in page.lines().filter(|l| l.starts_with("kinegen ")) {
+        let line = line.split("  #").next().unwrap();
+        let mut words = line.split_whitespace().skip(1);
+        let command = words.next().unwrap();
+        let help = stdout(&kinegen(&[command, "--help"]));
+        assert!(help.contains("Usage:"), "`kinegen {command}` is no command");
+        for w in words {
+            let option = w.trim_matches(|c| c == '[' || c == ']');
+            if !option.starts_with("--") {
+                continue;
+            }
+            assert!(
+                help.contains(&format!("{option} ")) || help.contains(&format!("{option}\n")),
+                "the synopsis gives `kinegen {command}` the option {option}, which it lacks: {line}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 50, "{checked} options checked");
 }
