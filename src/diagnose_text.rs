@@ -35,8 +35,10 @@ pub fn say_summary(
             disc.rate_hz
         ));
     }
+    // the weights are fit's fixed ones (docs/src/explanation/calibration.md
+    // says why): a user whose spec gives other sigmas reads it here
     tail.push(
-        "errors: RMS residuals in sigmas (pose 0.01 m, 0.01 rad; gyro 0.01 rad/s); -v: evidence"
+        "errors: RMS residuals in units of 0.01 m, rad and rad/s (fixed weights, not the spec's sigmas)"
             .into(),
     );
     // the table gets what the answer and the notes leave of 25 lines
