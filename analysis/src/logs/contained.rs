@@ -3,10 +3,11 @@
 //! The `mcap` crate (0.26, the newest) indexes and subtracts lengths it
 //! read from the file without checking them all: a corrupt chunk makes it
 //! panic ("attempt to subtract with overflow", found by the hostile-input
-//! campaign). Its records cannot be checked before it parses them, so its
-//! calls run here: a panic becomes the caller's located error, and its
-//! message is not printed (a panic hook that stays silent on this thread
-//! while a contained call runs, and defers to the one before it elsewhere).
+//! campaign). mcap_messages.rs checks the lengths it can before the crate
+//! parses a record, and every call into the crate still runs here: a panic
+//! becomes the caller's located error, and its message is not printed (a
+//! panic hook that stays silent on this thread while a contained call runs,
+//! and defers to the one before it elsewhere).
 use std::cell::Cell;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Once;
