@@ -101,11 +101,7 @@ fn check(path: &Path, text: &str) -> Result<(), TestCaseError> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig {
-        cases: std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(400),
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(mutation::config())]
 
     #[test]
     fn mutated_effects_read_or_fail_with_a_location_and_apply_without_panics(

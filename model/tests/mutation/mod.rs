@@ -17,6 +17,19 @@ pub fn deadline() -> Instant {
     *START.get_or_init(Instant::now) + Duration::from_secs(secs)
 }
 
+/// The fuzz tests' proptest settings: 400 cases (`PROPTEST_CASES` for a
+/// longer local run), no regression files written.
+pub fn config() -> ProptestConfig {
+    ProptestConfig {
+        cases: std::env::var("PROPTEST_CASES")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(400),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    }
+}
+
 /// Tokens of a spec: runs of identifier characters, runs of digits and dots,
 /// runs of spaces, and single other characters.
 pub fn tokens(text: &str) -> Vec<String> {
