@@ -1122,6 +1122,66 @@ fn fit_from_rough_nominal_values_reaches_the_optimum_of_a_fit_started_at_the_tru
     }
 }
 
+/// Issue #70.4: on a spec that lacks the effect the robot has (a misspecified
+/// model), fit from rough nominal values (the truth 2-3x off them) reaches
+/// the error a fit started at the true values reaches, within 10%, on four
+/// models. What is left is for diagnose, and fit says so: where the
+/// calibrated model still cannot follow the logs it exits 1 (the JSON
+/// written all the same), and the front-drive tricycle that collapses its
+/// wheel names what it could not reconcile.
+#[test]
+fn fit_from_rough_nominal_values_on_a_spec_missing_an_effect_reaches_what_the_truth_reaches() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cases: [(&str, &[&str], &str); 4] = [
+        (
+            "spec/diff_drive.toml",
+            &["b=0.5", "r_l=0.08", "r_r=0.08"],
+            "lateral_slip=0.2",
+        ),
+        (
+            "spec/tricycle.toml",
+            &["L=3.0", "r=0.06"],
+            "steering_offset=0.05",
+        ),
+        ("spec/tricycle_fwd.toml", &["L=0.3"], "steering_offset=0.08"),
+        ("spec/omni3.toml", &["L=0.3"], "wheel_radius_asymmetry=0.05"),
+    ];
+    for (k, (spec, truth, effect)) in cases.iter().enumerate() {
+        let mut sim = vec!["--spec", spec, "--effect", effect, "--trajectory", "random"];
+        sim.extend(["--seed", "11"]);
+        for s in *truth {
+            sim.extend(["--set", s]);
+        }
+        let log = simulate(tmp.path(), &format!("log{k}.csv"), &sim);
+        let log = log.to_str().unwrap();
+        let error = |doc: &serde_json::Value| doc["after"]["errors"]["rmse"].as_f64().unwrap();
+        // exit 0, or 1 for a fit the model cannot make usable: both write the JSON
+        let fitted = |args: &[&str]| {
+            let o = kinegen(&[args, &["--json", "-"]].concat());
+            assert!(
+                matches!(o.status.code(), Some(0 | 1)),
+                "{args:?}: {}",
+                stderr(&o)
+            );
+            serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+        };
+        let fit = fitted(&["fit", "--spec", spec, "--data", log]);
+        let mut at_truth = vec!["fit", "--spec", spec, "--data", log];
+        for s in *truth {
+            at_truth.extend(["--set", s]);
+        }
+        let (from_nominal, from_truth) = (error(&fit), error(&fitted(&at_truth)));
+        assert!(
+            from_nominal <= 1.1 * from_truth,
+            "{spec} with {effect}: {from_nominal} from nominal, {from_truth} from the truth"
+        );
+        if spec.ends_with("tricycle_fwd.toml") {
+            let warnings = fit["warnings"].to_string();
+            assert!(warnings.contains("cannot reconcile"), "{warnings}");
+        }
+    }
+}
+
 /// Issue #11.8: UMBMark refuses logs that are not square tests (it would give
 /// precise-looking nonsense), naming the file; in `--method all` it is reported
 /// as not applicable while the others run.
