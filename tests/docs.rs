@@ -225,8 +225,19 @@ fn every_link_of_the_guide_and_the_readme_resolves() {
 #[test]
 fn every_page_of_the_guide_is_in_its_summary() {
     let summary = std::fs::read_to_string(root().join("docs/src/SUMMARY.md")).unwrap();
-    let listed: BTreeSet<String> = links(&summary).into_iter().map(|(_, t)| t).collect();
+    let mut listed: BTreeSet<String> = links(&summary).into_iter().map(|(_, t)| t).collect();
     let src = root().join("docs/src");
+    // a fragment another page includes (`{{#include peers-table.md}}`) is
+    // part of that page
+    for f in markdown_files() {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for inc in text.split("{{#include ").skip(1) {
+            let name = inc.split("}}").next().unwrap().trim();
+            if let Ok(rel) = f.parent().unwrap().join(name).strip_prefix(&src) {
+                listed.insert(rel.display().to_string());
+            }
+        }
+    }
     let mut missing = Vec::new();
     for f in markdown_files() {
         let Ok(rel) = f.strip_prefix(&src) else {
@@ -297,4 +308,40 @@ fn the_synopsis_uses_only_options_the_commands_have() {
         }
     }
     assert!(checked > 50, "{checked} options checked");
+}
+
+/// The kernel benchmark's tables in the guide are the bench's own output
+/// (issue 66 item 5): the page scripts/bench_peers.sh writes, with its
+/// provenance (date, commit, cores, rustc) and both builds, included by
+/// results/speed.md rather than typed into it.
+#[test]
+fn the_speed_tables_are_the_benchs_output() {
+    let page = std::fs::read_to_string(root().join("docs/src/results/peers-table.md")).unwrap();
+    let mut lines = page.lines();
+    assert_eq!(
+        lines.next(),
+        Some("<!-- written by scripts/bench_peers.sh: do not edit; rerun it -->")
+    );
+    let provenance = lines.next().unwrap();
+    let date_commit = provenance
+        .strip_prefix("Provenance: ")
+        .and_then(|r| r.split_once(", commit "));
+    assert!(
+        date_commit.is_some_and(|(date, commit)| date.len() == 10
+            && commit.chars().take(7).all(|c| c.is_ascii_hexdigit())),
+        "{provenance}"
+    );
+    assert!(
+        page.contains(" cores of `") && page.contains("rustc "),
+        "{page}"
+    );
+    for build in ["### Generic build", "### Native build"] {
+        assert!(page.contains(build), "no {build} in the page");
+    }
+    let speed = std::fs::read_to_string(root().join("docs/src/results/speed.md")).unwrap();
+    assert!(speed.contains("{{#include peers-table.md}}"));
+    assert!(
+        !speed.contains("| kernel (ns per call)"),
+        "results/speed.md types the peer table of its own"
+    );
 }
