@@ -111,6 +111,15 @@ pub fn read_text(path: &Path) -> Result<String, (Option<(usize, usize)>, String)
     })
 }
 
+/// [`read_text`]'s error for people: "line L, column C: why" where it has a
+/// place, else the reason alone.
+pub fn unreadable((at, why): (Option<(usize, usize)>, String)) -> String {
+    match at {
+        Some((line, column)) => format!("line {line}, column {column}: {why}"),
+        None => why,
+    }
+}
+
 /// Spec files (`*.toml`) directly in `dir`, sorted.
 pub fn spec_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)?

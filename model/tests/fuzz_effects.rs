@@ -15,26 +15,12 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 mod mutation;
-use mutation::{deadline, edit, hostile_in_effects, mutate_with};
-
-fn texts(folder: &str) -> Vec<(PathBuf, String)> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join(folder);
-    let mut v: Vec<(PathBuf, String)> = std::fs::read_dir(&dir)
-        .unwrap()
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .map(|p| (p.clone(), std::fs::read_to_string(&p).unwrap()))
-        .collect();
-    v.sort();
-    v
-}
+use mutation::{deadline, edit, hostile_in_effects, mutate_with, toml_texts};
 
 fn effects() -> &'static [(PathBuf, String)] {
     static EFFECTS: OnceLock<Vec<(PathBuf, String)>> = OnceLock::new();
     EFFECTS.get_or_init(|| {
-        let v = texts("spec/effects");
+        let v = toml_texts("spec/effects");
         assert!(v.len() >= 10, "bundled effects not found");
         v
     })
@@ -43,7 +29,7 @@ fn effects() -> &'static [(PathBuf, String)] {
 fn models() -> &'static [Model] {
     static MODELS: OnceLock<Vec<Model>> = OnceLock::new();
     MODELS.get_or_init(|| {
-        texts("spec")
+        toml_texts("spec")
             .iter()
             .map(|(p, t)| Model::parse(p, t).unwrap())
             .collect()

@@ -15,20 +15,13 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 mod mutation;
-use mutation::{deadline, edit, hostile, mutate};
+use mutation::{deadline, edit, hostile, mutate, toml_texts};
 
 fn specs() -> &'static [(PathBuf, String)] {
     static SPECS: OnceLock<Vec<(PathBuf, String)>> = OnceLock::new();
     SPECS.get_or_init(|| {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../spec");
-        let mut v: Vec<(PathBuf, String)> = std::fs::read_dir(&dir)
-            .unwrap()
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .map(|p| (p.clone(), std::fs::read_to_string(&p).unwrap()))
-            .collect();
-        v.sort();
-        assert!(v.len() >= 5, "bundled specs not found in {}", dir.display());
+        let v = toml_texts("spec");
+        assert!(v.len() >= 5, "bundled specs not found");
         v
     })
 }

@@ -611,10 +611,8 @@ fn read_shard(file: &Path) -> Result<(Shard, Table), BenchError> {
         why,
     };
     // bounded, and a byte that is not UTF-8 named at its line
-    let text = kinegen_model::files::read_text(file).map_err(|(at, why)| match at {
-        Some((line, column)) => err(format!("line {line}, column {column}: {why}")),
-        None => err(why),
-    })?;
+    let text = kinegen_model::files::read_text(file)
+        .map_err(|e| err(kinegen_model::files::unreadable(e)))?;
     let doc: Table = serde_json::from_str(&text)
         .map_err(|e| err(format!("not a bench-diagnose JSON document: {e}")))?;
     let shard = (doc.shard.as_deref())

@@ -200,12 +200,9 @@ pub fn catalogue(extra: &[PathBuf]) -> Result<Vec<Effect>, EffectError> {
         // bundled effect, or one of an earlier directory)
         let mut here: Vec<(String, PathBuf)> = Vec::new();
         for f in files {
-            let text = crate::files::read_text(&f).map_err(|(at, message)| EffectError {
+            let text = crate::files::read_text(&f).map_err(|e| EffectError {
                 file: f.clone(),
-                message: match at {
-                    Some((l, c)) => format!("line {l}, column {c}: {message}"),
-                    None => message,
-                },
+                message: crate::files::unreadable(e),
             })?;
             let e = parse_effect(&f, &text)?;
             if let Some((_, first)) = here.iter().find(|(n, _)| *n == e.name) {

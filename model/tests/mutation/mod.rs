@@ -3,6 +3,7 @@
 //! proptest draws, and the time bound that keeps CI short.
 #![allow(dead_code)] // each fuzz test binary uses its own part of this module
 use proptest::prelude::*;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -15,6 +16,20 @@ pub fn deadline() -> Instant {
         .and_then(|s| s.parse().ok())
         .unwrap_or(20);
     *START.get_or_init(Instant::now) + Duration::from_secs(secs)
+}
+
+/// The `*.toml` files of the repository folder `folder` (`spec`,
+/// `spec/effects`) with their text: what the fuzzers mutate.
+pub fn toml_texts(folder: &str) -> Vec<(PathBuf, String)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(folder);
+    let files = kinegen_model::files::spec_files(&dir).unwrap();
+    let texts = files.into_iter().map(|p| {
+        let text = std::fs::read_to_string(&p).unwrap();
+        (p, text)
+    });
+    texts.collect()
 }
 
 /// The fuzz tests' proptest settings: 400 cases (`PROPTEST_CASES` for a

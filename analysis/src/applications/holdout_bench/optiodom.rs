@@ -9,7 +9,7 @@ use super::{Calibration, Session};
 use crate::model_on_log::derivation::Deriver;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
-use kinegen_model::files::read_text;
+use kinegen_model::files::{read_text, unreadable};
 use kinegen_model::ir::ModelIr;
 use kinegen_model::spec::Model;
 use serde::Deserialize;
@@ -102,14 +102,6 @@ impl Config {
         Ok(Config {
             robot: robot.collect(),
         })
-    }
-}
-
-/// Why a text file could not be read ([`read_text`]'s error), for people.
-fn unreadable((at, why): (Option<(usize, usize)>, String)) -> String {
-    match at {
-        Some((line, column)) => format!("line {line}, column {column}: {why}"),
-        None => why,
     }
 }
 
