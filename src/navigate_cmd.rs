@@ -61,21 +61,34 @@ fn geometry_methods() -> clap::builder::PossibleValuesParser {
     )
 }
 
-/// One row of the drives' table: odometry, moves, collisions, safety-zone
-/// intrusions, distance to the goal.
-fn drive_row(odometry: &str, d: &Drive) -> String {
-    format!(
-        "  {odometry:<12} {:>5} {:>10} {:>12} {:>9.1}{}",
-        d.moves,
-        d.collisions,
-        d.safety_intrusions,
-        100.0 * d.final_error_m,
-        if d.reached {
-            ""
-        } else {
-            "  never believed it reached the goal"
-        }
-    )
+/// The drives' table (the shape of every command's default table): per
+/// odometry, moves, collisions, safety-zone intrusions, distance to the
+/// goal, and whether it believed it reached the goal.
+fn drives_table(drives: &[(&str, &Drive)]) -> Vec<String> {
+    let mut t = crate::output::table(&[
+        "odometry",
+        "moves",
+        "collisions",
+        "safety zone",
+        "goal cm",
+        "reached",
+    ]);
+    for (odometry, d) in drives {
+        t.add_row(vec![
+            odometry.to_string(),
+            d.moves.to_string(),
+            d.collisions.to_string(),
+            d.safety_intrusions.to_string(),
+            format!("{:.1}", 100.0 * d.final_error_m),
+            if d.reached {
+                "yes"
+            } else {
+                "never believed it"
+            }
+            .to_string(),
+        ]);
+    }
+    crate::output::table_lines(&t)
 }
 
 /// The answer: how the last drive ended, against the nominal one.
@@ -150,10 +163,10 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
         calibrated.as_ref().map(|c| (c.method.as_str(), &c.drive)),
     ));
     out.say("");
-    out.say("  odometry     moves  collisions  safety zone  goal cm");
-    out.say(&drive_row("nominal", before));
-    if let Some(c) = calibrated {
-        out.say(&drive_row(&c.method, &c.drive));
+    let mut drives = vec![("nominal", before)];
+    drives.extend(calibrated.iter().map(|c| (c.method.as_str(), &c.drive)));
+    for l in drives_table(&drives) {
+        out.say(&l);
     }
     let mut calibration = None;
     if let Some(CalibratedDrive {
@@ -165,7 +178,7 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
     {
         out.say("");
         out.say(&format!("  {m}: {note}"));
-        out.say("  parameter    calibrated      true");
+        let mut t = crate::output::table(&["parameter", "calibrated", "true"]);
         let params: serde_json::Map<String, serde_json::Value> = cal
             .free
             .iter()
@@ -180,10 +193,14 @@ pub fn run(a: &NavigateArgs) -> ExitCode {
         let mut shown = cal.free.clone();
         shown.sort_by(|a, b| cal.names[*a].cmp(&cal.names[*b]));
         for i in shown {
-            out.say(&format!(
-                "  {:<12} {:>10.6} {:>9.6}",
-                cal.names[i], cal.p[i], truth.p[i]
-            ));
+            t.add_row(vec![
+                cal.names[i].clone(),
+                format!("{:.6}", cal.p[i]),
+                format!("{:.6}", truth.p[i]),
+            ]);
+        }
+        for l in crate::output::table_lines(&t) {
+            out.say(&l);
         }
         calibration = Some(json!({"method": m, "note": note, "parameters": params}));
     }
