@@ -92,10 +92,14 @@ pub fn run(c: Common) -> ExitCode {
         say_candidates(&out, d);
         say_chain(&out, outcome, &steps);
         say_structure(&out, d);
-        if let Some(p) = &d.proposed {
+        for p in &d.proposed {
             out.say(&format!(
-                "proposed beyond the catalogue: {} (held-out {:.4} -> {:.4}); may be: {}",
-                p.name, p.held_out_before, p.held_out_after, p.reading
+                "proposed beyond the catalogue: {} ({} held out: {:.4} -> {:.4}); may be: {}",
+                p.name,
+                crate::diagnose_text::scored_on(p),
+                p.held_out_before,
+                p.held_out_after,
+                p.reading
             ));
             out.say("  its effect file (--report DIR writes it to DIR/proposed/; add-effect --effects DIR applies it):");
             p.toml.lines().for_each(|l| out.say(&format!("  {l}")));
@@ -122,7 +126,7 @@ pub fn run(c: Common) -> ExitCode {
             return bad(e);
         }
         // the proposal as an effect file `add-effect --effects DIR/proposed` reads
-        if let Some(p) = &d.proposed {
+        for p in &d.proposed {
             let file = dir.join("proposed").join(format!("{}.toml", p.name));
             if let Err(e) = kinegen_model::files::write_atomic(&file, &p.toml) {
                 return bad(e);

@@ -9,6 +9,7 @@ use kinegen_analysis::diagnosis::diagnose_job::Outcome;
 use kinegen_analysis::diagnosis::document::{discretisation_ratio, DISCRETISATION_WARN};
 use kinegen_analysis::diagnosis::estimate::Estimates;
 use kinegen_analysis::diagnosis::next_steps::NextSteps;
+use kinegen_analysis::diagnosis::propose::proposal::{Proposal, ScoredOn};
 use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_analysis::model_on_log::run::Run;
 
@@ -183,27 +184,43 @@ fn say_answer(out: &mut Vec<String>, d: &Diagnosis, steps: &NextSteps) {
     }
 }
 
-/// A correction beyond the catalogue, when diagnose proposes one: its terms,
-/// its held-out fall and where its effect file is.
+/// What a proposal's held-out figures measure, for people.
+pub fn scored_on(p: &Proposal) -> &'static str {
+    match p.scored_on {
+        ScoredOn::Track => "the track's weighted error",
+        ScoredOn::Sightings => "the sightings' robust loss",
+    }
+}
+
+/// The corrections beyond the catalogue diagnose proposes, one line each:
+/// where it was found and its held-out fall first, then its terms (what
+/// they may be, and its effect file: -v).
 fn say_proposal(out: &mut Vec<String>, d: &Diagnosis) {
-    let Some(p) = &d.proposed else { return };
-    let terms: Vec<String> = p
-        .terms
-        .iter()
-        .zip(&p.corrects)
-        .zip(&p.gains)
-        .map(|((t, c), g)| match p.parameters.get(g) {
-            Some(e) => format!("{c} += {} x {t}", with_std(e.estimate, e.std)),
-            None => format!("{c} += {g} x {t}"),
-        })
-        .collect();
-    // one line: the structure it explains is said in -v, with what the
-    // terms may be physically and the effect file
-    out.push(cut(&format!(
-        "proposed: {} (held-out {:+.0}%; its effect file: -v)",
-        terms.join(", "),
-        100.0 * (p.held_out_after / p.held_out_before - 1.0)
-    )));
+    for p in &d.proposed {
+        let terms: Vec<String> = p
+            .terms
+            .iter()
+            .zip(&p.corrects)
+            .zip(&p.gains)
+            .map(|((t, c), g)| {
+                let gain = (p.parameters.get(g)).map_or(g.clone(), |e| with_std(e.estimate, e.std));
+                // a constant term is its gain alone
+                match t.as_str() {
+                    "1" => format!("{c} += {gain}"),
+                    _ => format!("{c} += {gain} x {t}"),
+                }
+            })
+            .collect();
+        let on = match p.scored_on {
+            ScoredOn::Track => "",
+            ScoredOn::Sightings => " on the sightings",
+        };
+        out.push(cut(&format!(
+            "proposed{on}, {:+.0}% held out (-v): {}",
+            100.0 * (p.held_out_after / p.held_out_before - 1.0),
+            terms.join(", "),
+        )));
+    }
 }
 
 /// The effects tested, most likely first: the motion's, then the sensor's,
@@ -271,7 +288,8 @@ fn say_leftovers(out: &mut Vec<String>, d: &Diagnosis) {
     if let Some(why) = &d.sensor_unmeasured {
         out.push(cut(&format!("sensor effects not tested: {why}")));
     }
-    let left = if d.structure.structured && d.proposed.is_some() {
+    let proposed_on_track = d.proposed.iter().any(|p| p.scored_on == ScoredOn::Track);
+    let left = if d.structure.structured && proposed_on_track {
         // the proposal's line says it (its finding is in -v)
         return;
     } else if d.structure.structured {

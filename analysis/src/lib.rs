@@ -111,7 +111,12 @@ pub mod diagnosis {
     pub mod estimate;
     pub mod folds;
     pub mod next_steps;
-    pub mod propose;
+    /// Corrections beyond the catalogue, of the twist and of the sensor.
+    pub mod propose {
+        pub mod proposal;
+        pub mod sightings;
+        pub mod twist;
+    }
     pub mod ranking;
     pub mod request;
     pub mod sensor;

@@ -220,12 +220,11 @@ impl PyDiagnosis {
         let d = &done.outcome.diagnosis;
         let r = &done.loaded.runner;
         let steps = NextSteps::of(d, &r.ir.name, &Invocation::of(sources, &[]));
-        let proposed: Vec<_> = d.proposed.iter().collect();
         let verdict = PyVerdict {
             effect: d.verdict().map(str::to_string),
             unexplained_structure: d.structure.structured,
             effects: serde_json::to_string(&d.chain).expect("serialises"),
-            proposed: serde_json::to_string(&proposed).expect("serialises"),
+            proposed: serde_json::to_string(&d.proposed).expect("serialises"),
             apply: steps.apply.clone(),
         };
         Ok(PyDiagnosis {

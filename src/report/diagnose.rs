@@ -5,7 +5,7 @@ use super::{chart, drawn, error_chart, esc, gt_xy, page, trajectory_chart, write
 use kinegen_analysis::diagnosis::clock::ClockVerdict;
 use kinegen_analysis::diagnosis::diagnose::{ChainStep, Diagnosis};
 use kinegen_analysis::diagnosis::diagnose_job::Outcome;
-use kinegen_analysis::diagnosis::propose::Proposal;
+use kinegen_analysis::diagnosis::propose::proposal::Proposal;
 use kinegen_analysis::model_on_log::model::Runner;
 use kinegen_analysis::model_on_log::run::Run;
 use plotters::prelude::*;
@@ -89,7 +89,7 @@ pub fn diagnose_report(
             );
         }
     }
-    if let Some(p) = &d.proposed {
+    for p in &d.proposed {
         t += &proposal_html(p);
     }
     write(
@@ -126,8 +126,9 @@ fn proposal_html(p: &Proposal) -> String {
         })
         .collect();
     format!(
-        "<h2>Proposed beyond the catalogue: <code>{}</code></h2><p>Not a known physical effect: a correction these logs support. Held-out error {:.3} &rarr; {:.3}. It may be: {}.</p><ul>{}</ul><p>Its effect file, <code>proposed/{}.toml</code> beside this page (<code>kinegen add-effect --effects DIR/proposed --effect {}</code> adds it to the spec):</p><pre>{}</pre>",
+        "<h2>Proposed beyond the catalogue: <code>{}</code></h2><p>Not a known physical effect: a correction these logs support. {} held out: {:.3} &rarr; {:.3}. It may be: {}.</p><ul>{}</ul><p>Its effect file, <code>proposed/{}.toml</code> beside this page (<code>kinegen add-effect --effects DIR/proposed --effect {}</code> adds it to the spec):</p><pre>{}</pre>",
         esc(&p.name),
+        crate::diagnose_text::scored_on(p),
         p.held_out_before,
         p.held_out_after,
         esc(&p.reading),

@@ -28,6 +28,7 @@
 use crate::applications::hidden::{with_hidden, Hidden, Robots};
 use crate::applications::simulate::{simulate, SimOptions, Trajectory};
 use crate::diagnosis::diagnose_job::Hooks;
+use crate::diagnosis::propose::proposal::ScoredOn;
 use crate::diagnosis::request::diagnose_runs;
 use crate::model_on_log::derivation::Deriver;
 use crate::model_on_log::model::Runner;
@@ -320,6 +321,8 @@ struct Planned<'s> {
     seed: u64,
     /// Every case its own trajectory.
     trajectory: u64,
+    /// Simulate landmark sightings ([`BENCH_MAP`]) beside the ground truth.
+    sightings: bool,
 }
 
 /// Every case of the benchmark (those of `settings.shard`), in its order,
@@ -356,6 +359,12 @@ fn plan<'s>(
         if !settings.effects.is_empty() {
             beyond.retain(|c| settings.effects.contains(&c.effect));
         }
+        // sightings for every case of a spec with a landmark observation
+        // when an effect hidden on it acts on the sensor: its clean logs
+        // must be as a hidden sensor effect's are, but for the effect
+        let on_sensor =
+            |c: &Candidate| (all()).any(|e| e.name == c.effect && !e.observation.is_empty());
+        let sightings = has_landmarks(spec) && effects.iter().chain(&beyond).any(on_sensor);
         for (j, hidden) in hidden_sets(&effects, &beyond).into_iter().enumerate() {
             for &noise in &NOISE {
                 for seed in 1..=settings.seeds {
@@ -371,12 +380,85 @@ fn plan<'s>(
                         noise,
                         seed,
                         trajectory: 1000 * j as u64 + seed,
+                        sightings,
                     });
                 }
             }
         }
     }
     Ok((todo, index))
+}
+
+/// The landmarks of a case with sightings: a 5 x 5 grid 3 m apart around
+/// the random driving's start, so that some are always in range.
+const BENCH_MAP: (usize, f64) = (5, 3.0);
+
+fn bench_map() -> Vec<(String, [f64; 2])> {
+    let (n, step) = BENCH_MAP;
+    let half = (n - 1) as f64 / 2.0;
+    (0..n * n)
+        .map(|k| {
+            let (i, j) = ((k / n) as f64 - half, (k % n) as f64 - half);
+            (format!("L{k}"), [i * step, j * step])
+        })
+        .collect()
+}
+
+/// The spec has a range-bearing observation of mapped landmarks.
+fn has_landmarks(spec: &Model) -> bool {
+    spec.observations.iter().any(|o| o.landmark)
+}
+
+/// The residuals an effect's proposal is scored on: the sightings' for an
+/// effect on the sensor, the track's for one on the motion.
+fn scored_on(e: &Effect) -> ScoredOn {
+    if e.observation.is_empty() {
+        ScoredOn::Track
+    } else {
+        ScoredOn::Sightings
+    }
+}
+
+/// The held-out errors a proposal for the hidden effect `e` is scored
+/// against: the spec calibrated as it is (from `d`, its diagnosis), and
+/// with `e` itself as the only catalogue effect, calibrated, on the
+/// residuals `e` acts on.
+fn truth_score(
+    spec: &Model,
+    (base, run): (&Runner, &crate::model_on_log::run::Run),
+    e: &Effect,
+    deriver: &dyn Deriver,
+    d: &crate::diagnosis::diagnose::Diagnosis,
+) -> Result<TruthScore, String> {
+    let with_truth = diagnose_runs(
+        spec,
+        (base, std::slice::from_ref(run)),
+        (std::slice::from_ref(e), deriver),
+        &[],
+        false,
+        &Hooks::none(),
+    )
+    .map_err(|e| e.to_string())?
+    .diagnosis;
+    Ok(match scored_on(e) {
+        ScoredOn::Track => TruthScore {
+            held_out_before: d.base_holdout_rmse,
+            held_out_true: (with_truth.candidates.iter())
+                .find(|c| c.effect == e.name)
+                .map_or(d.base_holdout_rmse, |c| c.holdout_rmse),
+        },
+        // both on the sightings at the motion's model, at one scale
+        ScoredOn::Sightings => {
+            let fit = (with_truth.sensor_candidates.iter())
+                .find(|c| c.effect == e.name)
+                .map(|c| &c.fit)
+                .ok_or("the true sensor effect was not tested on the sightings")?;
+            TruthScore {
+                held_out_before: fit.held_out_before,
+                held_out_true: fit.held_out_after,
+            }
+        }
+    })
 }
 
 /// Simulate one case's log and diagnose it.
@@ -400,11 +482,12 @@ fn run_case(
         pos_noise: 0.001 * c.noise,
         heading_noise: 0.002 * c.noise,
         gyro_noise: 0.005 * c.noise,
+        landmarks: if c.sightings { bench_map() } else { vec![] },
         ..SimOptions::default()
     };
-    let run = simulate(&base, &truth, &o)
-        .to_run(&base, "bench")
-        .map_err(|e| e.to_string())?;
+    let sim = simulate(&base, &truth, &o);
+    let mut run = sim.to_run(&base, "bench").map_err(|e| e.to_string())?;
+    run.landmarks = sim.sightings(&o.landmarks);
     let t0 = Instant::now();
     let outcome = diagnose_runs(
         c.spec,
@@ -418,37 +501,22 @@ fn run_case(
     let d = outcome.diagnosis;
     let names: Vec<String> = c.hidden.iter().map(|h| h.effect.clone()).collect();
     let is_beyond = c.hidden.iter().any(|h| h.beyond);
-    // the true effect calibrated, as a catalogue of its own: what a
-    // proposal is scored against
-    let truth = match c.hidden.iter().find(|h| h.beyond) {
-        Some(h) => {
-            let true_effect: Vec<Effect> = beyond
-                .iter()
-                .filter(|e| e.name == h.effect)
-                .cloned()
-                .collect();
-            let with_truth = diagnose_runs(
-                c.spec,
-                (&base, std::slice::from_ref(&run)),
-                (&true_effect, deriver),
-                &[],
-                false,
-                &Hooks::none(),
-            )
-            .map_err(|e| e.to_string())?;
-            let held_out_true = (with_truth.diagnosis.candidates.iter())
-                .find(|cand| cand.effect == h.effect)
-                .map_or(d.base_holdout_rmse, |cand| cand.holdout_rmse);
-            Some(TruthScore {
-                held_out_before: d.base_holdout_rmse,
-                held_out_true,
-            })
-        }
+    let hidden_beyond = (c.hidden.iter().find(|h| h.beyond))
+        .and_then(|h| beyond.iter().find(|e| e.name == h.effect));
+    let truth = match hidden_beyond {
+        Some(e) => Some(truth_score(c.spec, (&base, &run), e, deriver, &d)?),
         None => None,
+    };
+    // a case beyond the catalogue is scored by the proposal on the
+    // residuals its effect acts on; any other case's first proposal is a
+    // false one
+    let proposal = match hidden_beyond {
+        Some(e) => (d.proposed.iter()).find(|p| p.scored_on == scored_on(e)),
+        None => d.proposed.first(),
     };
     Ok(Case {
         beyond: is_beyond,
-        proposed: d.proposed.as_ref().map(|p| ProposedScore {
+        proposed: proposal.map(|p| ProposedScore {
             name: p.name.clone(),
             held_out_after: p.held_out_after,
         }),

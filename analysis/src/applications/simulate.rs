@@ -130,6 +130,27 @@ impl SimLog {
         };
         crate::model_on_log::run::Run::from_log(&log, r)
     }
+
+    /// Its sightings as a run holds them, placed on `map` (the landmarks it
+    /// was simulated with), as `--observations` and `--landmarks` are read.
+    pub fn sightings(
+        &self,
+        map: &[(String, [f64; 2])],
+    ) -> Vec<crate::model_on_log::run::LandmarkObs> {
+        (self.observations.iter())
+            .filter_map(|(t, id, range, bearing)| {
+                let (_, [xl, yl]) = map.iter().find(|(m, _)| m == id)?;
+                Some(crate::model_on_log::run::LandmarkObs {
+                    t: *t,
+                    id: id.as_str().into(),
+                    xl: *xl,
+                    yl: *yl,
+                    range: *range,
+                    bearing: *bearing,
+                })
+            })
+            .collect()
+    }
 }
 
 /// One line of a 12-bit angle encoder (4096 lines per revolution): wheel angles

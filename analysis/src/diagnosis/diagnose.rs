@@ -12,6 +12,7 @@
 //!    missing, and the channel and feature say where.
 use super::clock::{ClockVerdict, SightingClock, Unmeasured};
 use super::folds::{FoldTest, Folds};
+use super::propose::proposal::Proposal;
 use super::sensor::{diagnose_sensor, SensorCandidate, SensorUnmeasured, SightingFit};
 use crate::estimation::discretisation::Discretisation;
 use crate::estimation::fit::{FitError, FitOptions, FitResult};
@@ -59,10 +60,11 @@ pub struct Diagnosis {
     pub sensor_candidates: Vec<SensorCandidate>,
     /// Why the sensor's effects were not tested, where the catalogue has some.
     pub sensor_unmeasured: Option<SensorUnmeasured>,
-    /// A correction beyond the catalogue, when structure was left after its
-    /// last effect and a term of the proposal library explains it (see
-    /// [`super::propose`]).
-    pub proposed: Option<super::propose::Proposal>,
+    /// Corrections beyond the catalogue (see [`super::propose`]): of the
+    /// twist, when structure was left in the track after the last catalogue
+    /// effect and a library term explains it, then of the range-bearing
+    /// sensor, when a library term holds on the sightings.
+    pub proposed: Vec<Proposal>,
     /// The final model and its calibrated parameters.
     pub final_runner: Runner,
     pub final_p: Vec<f64>,
@@ -176,6 +178,8 @@ fn read_clock(
 /// first round's candidates, or why it did not run, and the final model.
 struct SensorOutcome {
     candidates: Vec<SensorCandidate>,
+    /// A correction beyond the catalogue the sightings support.
+    proposed: Option<Proposal>,
     unmeasured: Option<SensorUnmeasured>,
     runner: Runner,
     p: Vec<f64>,
@@ -193,6 +197,7 @@ fn sensor_chain(
 ) -> SensorOutcome {
     let unchanged = |unmeasured| SensorOutcome {
         candidates: vec![],
+        proposed: None,
         unmeasured,
         runner: cur.runner.clone(),
         p: cur.fit.p.clone(),
@@ -203,6 +208,7 @@ fn sensor_chain(
     let motion: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
     match diagnose_sensor(&cur.runner, &cur.fit.p, runs, effects, chains, &motion) {
         Ok(sd) => {
+            let proposed = super::propose::sightings::propose(&sd, &cur.runner, chains, &motion);
             chain.extend(sd.found.iter().map(|c| ChainStep {
                 effect: c.effect.clone(),
                 parameters: c.parameters.clone(),
@@ -214,6 +220,7 @@ fn sensor_chain(
             }));
             SensorOutcome {
                 candidates: sd.candidates,
+                proposed,
                 unmeasured: None,
                 runner: sd.runner,
                 p: sd.p,
@@ -330,9 +337,15 @@ pub fn diagnose(
         cur = next;
     }
     let structure = whiteness(&cur.runner, &cur.fit.p, runs);
-    let proposed = if structure.structured {
+    // tried where the one-step residuals show structure, or where the
+    // track's error is still above the noise floor: an effect on the turn
+    // rate that a noisy ground truth hides step by step (a curved command
+    // response under 3x the simulator's noise: no structure found, 5.6 ->
+    // 0.49 with the true effect) still moves the whole track. The
+    // proposal's own held-out and fold tests keep a clean log clean.
+    let proposed = if structure.structured || !leaves_only_noise(&cur) {
         let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
-        let cx = super::propose::Context {
+        let cx = super::propose::twist::Context {
             chains: cat.chains,
             chain: &names,
             runs,
@@ -341,7 +354,7 @@ pub fn diagnose(
             folds: folds.as_ref(),
             o: &o,
         };
-        super::propose::propose(&cur, &cx, progress)
+        super::propose::twist::propose(&cur, &cx, progress)
     } else {
         None
     };
@@ -363,7 +376,7 @@ pub fn diagnose(
         spec_clock,
         sensor_candidates: sensor.candidates,
         sensor_unmeasured: sensor.unmeasured,
-        proposed,
+        proposed: proposed.into_iter().chain(sensor.proposed).collect(),
         final_runner: sensor.runner,
         final_p: sensor.p,
     })

@@ -47,7 +47,7 @@ pub fn diagnose_document(done: &Diagnosed, steps: &NextSteps) -> Value {
             "parameters": calibrated.collect::<serde_json::Map<_, _>>()},
         "candidates": d.candidates,
         "verdict": {"effect": d.verdict(), "effects": d.chain, "unexplained_structure": d.structure.structured,
-            "structure": d.structure.findings, "proposed": d.proposed.iter().collect::<Vec<_>>(),
+            "structure": d.structure.findings, "proposed": d.proposed,
             "apply": steps.apply, "calibrate": steps.calibrate, "alternatives": steps.alternatives},
         "discretisation": {"rate_hz": disc.rate_hz, "error": disc.error, "measured": disc.measured,
             "noise_floor": d.noise_floor, "ratio": ratio,

@@ -46,6 +46,11 @@ pub struct SightingFit {
     /// Median absolute bearing residual, rad, before and after.
     pub bearing_before: f64,
     pub bearing_after: f64,
+    /// The mean robust loss of a stretch's sightings, in units of the
+    /// residuals' robust scale, before the effect and with it calibrated
+    /// without that stretch.
+    pub held_out_before: f64,
+    pub held_out_after: f64,
     /// The stretch-by-stretch test against the current model.
     pub folds: FoldTest,
 }
@@ -85,14 +90,11 @@ fn medians(r: &Runner, res: &[f64]) -> [f64; 2] {
 /// all the sightings and stretch by stretch, and test them against the
 /// current model's sightings (`base`); the estimates reported are those of
 /// `new`, the effect's own.
-#[allow(clippy::too_many_arguments)]
-fn candidate(
+pub(crate) fn candidate(
     s: &Sightings,
     catalogue: &[kinegen_model::effects::Effect],
-    name: &str,
-    doc: &str,
-    aug: &Runner,
-    start: &[f64],
+    (name, doc): (&str, &str),
+    (aug, start): (&Runner, &[f64]),
     free: &[usize],
     base: &[f64],
     new: &[usize],
@@ -102,6 +104,7 @@ fn candidate(
     let base_loss: Vec<f64> = (0..s.folds).map(|k| s.loss(base, |f| f == k)).collect();
     let aug_loss: Vec<f64> = fit.held_out.iter().map(|(l, _)| *l).collect();
     let folds = paired(&base_loss, &aug_loss, s.folds);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let parameters = new
         .iter()
         .map(|&i| {
@@ -129,6 +132,8 @@ fn candidate(
             range_after,
             bearing_before,
             bearing_after,
+            held_out_before: mean(&base_loss),
+            held_out_after: mean(&aug_loss),
             folds,
         },
         significant: folds.holds() && unphysical.is_none(),
@@ -138,39 +143,82 @@ fn candidate(
 }
 
 /// The sensor's diagnosis: its first round's candidates, the effects found
-/// in order (each calibrated with the ones before it), and the runner with
-/// all of them.
-pub struct SensorDiagnosis {
+/// in order (each calibrated with the ones before it), the runner with all
+/// of them, and the sightings they were judged on (what a proposal beyond
+/// the catalogue is judged on too, at the same scale).
+pub struct SensorDiagnosis<'a> {
     pub candidates: Vec<SensorCandidate>,
     pub found: Vec<SensorCandidate>,
     pub runner: Runner,
     pub p: Vec<f64>,
+    pub sightings: Sightings<'a>,
 }
 
 /// Test the sensor effects `effects` (name, doc) on top of `motion` (the
 /// effects the motion's diagnosis found, `cur` its runner calibrated at
 /// `p`): rank them by their held-out gain, add the best that holds, re-test
 /// the rest, up to three (`MAX_CHAIN`).
-pub fn diagnose_sensor(
+pub fn diagnose_sensor<'a>(
     cur: &Runner,
     p: &[f64],
-    runs: &[Run],
+    runs: &'a [Run],
     effects: &[(String, String)],
     chains: &EffectChains,
     motion: &[String],
-) -> Result<SensorDiagnosis, SensorUnmeasured> {
+) -> Result<SensorDiagnosis<'a>, SensorUnmeasured> {
     let s = Sightings::of(cur, p, runs)?;
-    let (mut runner, mut p) = (cur.clone(), p.to_vec());
-    let (mut found, mut first): (Vec<SensorCandidate>, Option<Vec<SensorCandidate>>) =
-        (vec![], None);
+    let start = Grown {
+        candidates: vec![],
+        found: vec![],
+        runner: cur.clone(),
+        p: p.to_vec(),
+    };
+    let grown = grow(&s, cur, (motion, start), effects, chains, MAX_CHAIN);
+    Ok(SensorDiagnosis {
+        candidates: grown.candidates,
+        found: grown.found,
+        runner: grown.runner,
+        p: grown.p,
+        sightings: s,
+    })
+}
+
+/// A sensor chain: its first round's candidates, the effects found, and
+/// the runner with all of them at their calibrated values.
+pub(crate) struct Grown {
+    pub candidates: Vec<SensorCandidate>,
+    pub found: Vec<SensorCandidate>,
+    pub runner: Runner,
+    pub p: Vec<f64>,
+}
+
+/// Grow the chain `from` (on top of the effects `before` it; `motion` the
+/// runner the sightings' parameters are counted against) with the best of
+/// `effects` that holds on `s`, re-testing the rest, up to `max` effects.
+pub(crate) fn grow(
+    s: &Sightings,
+    motion: &Runner,
+    (before, from): (&[String], Grown),
+    effects: &[(String, String)],
+    chains: &EffectChains,
+    max: usize,
+) -> Grown {
+    let Grown {
+        mut found,
+        mut runner,
+        mut p,
+        ..
+    } = from;
+    let at_start = found.len();
+    let mut first: Option<Vec<SensorCandidate>> = None;
     let mut remaining = effects.to_vec();
-    while found.len() < MAX_CHAIN && !remaining.is_empty() {
+    while found.len() - at_start < max && !remaining.is_empty() {
         let (base, _) = s.residuals(&runner, &p, &[], false);
         // each candidate on its own thread (derivation takes no lock)
         let mut ranked: Vec<(SensorCandidate, Runner)> = remaining
             .par_iter()
             .filter_map(|(name, doc)| {
-                let mut list: Vec<String> = motion.to_vec();
+                let mut list: Vec<String> = before.to_vec();
                 list.extend(found.iter().map(|c| c.effect.clone()));
                 list.push(name.clone());
                 let aug = chains.runner(&list).ok()?;
@@ -180,7 +228,7 @@ pub fn diagnose_sensor(
                     .free
                     .iter()
                     .copied()
-                    .filter(|&i| cur.param_index(&aug.names[i]).is_none())
+                    .filter(|&i| motion.param_index(&aug.names[i]).is_none())
                     // the sensor's own: a mixed effect's other parameters
                     // (a tracker's offset) the sightings do not see
                     .filter(|&i| sensor_only(&aug, &[i]))
@@ -192,12 +240,10 @@ pub fn diagnose_sensor(
                     .filter(|&i| runner.param_index(&aug.names[i]).is_none())
                     .collect();
                 let c = candidate(
-                    &s,
+                    s,
                     chains.catalogue,
-                    name,
-                    doc,
-                    &aug,
-                    &start,
+                    (name, doc),
+                    (&aug, &start),
                     &free,
                     &base,
                     &new,
@@ -220,16 +266,16 @@ pub fn diagnose_sensor(
         (runner, p) = (aug, w.p.clone());
         found.push(w);
     }
-    Ok(SensorDiagnosis {
+    Grown {
         candidates: first.unwrap_or_default(),
         found,
         runner,
         p,
-    })
+    }
 }
 
 /// `aug`'s parameters at `from`'s values where it has them.
-fn seeded(aug: &Runner, from: &Runner, p: &[f64]) -> Vec<f64> {
+pub(crate) fn seeded(aug: &Runner, from: &Runner, p: &[f64]) -> Vec<f64> {
     let mut q = aug.p.clone();
     for (i, n) in from.names.iter().enumerate() {
         if let Some(j) = aug.param_index(n) {

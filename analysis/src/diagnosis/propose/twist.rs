@@ -1,4 +1,4 @@
-//! Corrections beyond the catalogue: when structure is left after the last
+//! Corrections of the twist beyond the catalogue: when structure is left after the last
 //! catalogue effect, a sparse correction of the twist, chosen from a library
 //! of physically meaningful terms by forward selection, each term admitted
 //! only when it passes the same held-out and fold tests a catalogue effect
@@ -11,43 +11,32 @@
 //! acts on the pose through the integration, which a regression on
 //! per-step residuals does not see), with the calibration and significance
 //! tests the catalogue's effects already have.
-use super::estimate::{Estimate, Estimates};
-use super::folds::Folds;
-use super::ranking::rank;
-use super::stage::{seeded, stage_from, Stage};
-use super::trial::{to_rank, winner_stage, Catalogue};
+use super::proposal::{Proposal, ScoredOn, Term, HEADER};
+use crate::diagnosis::estimate::{Estimate, Estimates};
+use crate::diagnosis::folds::Folds;
+use crate::diagnosis::ranking::rank;
+use crate::diagnosis::stage::{seeded, stage_from, Stage};
+use crate::diagnosis::trial::{to_rank, winner_stage, Catalogue};
 use crate::estimation::fit::FitOptions;
 use crate::model_on_log::derivation::EffectChains;
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
 use kinegen_model::effects::Effect;
-use serde::Serialize;
 
 /// At most this many terms in one proposal: more would fit noise before
 /// the held-out test could tell.
 const MAX_TERMS: usize = 2;
 
-/// One term of the library: the twist component it corrects (0 vx, 2 omega),
-/// its expression over the twist, the unit of its gain, and what a gain on
-/// it may be physically.
-struct Term {
-    component: usize,
-    short: &'static str,
-    expr: &'static str,
-    unit: &'static str,
-    reading: &'static str,
-}
-
 const LIBRARY: &[Term] = &[
     Term {
-        component: 2,
+        output: "omega",
         short: "omega_abs_omega",
         expr: "abs({omega})*({omega})",
         unit: "s/rad",
         reading: "turn rate lost in proportion to |omega|: tyre scrub or skidding in tight turns",
     },
     Term {
-        component: 2,
+        output: "omega",
         short: "sign_omega",
         expr: "sign({omega})",
         unit: "rad/s",
@@ -55,42 +44,42 @@ const LIBRARY: &[Term] = &[
             "a constant turn rate lost whenever the robot turns: friction or a deadband in turning",
     },
     Term {
-        component: 2,
+        output: "omega",
         short: "omega_cubed",
         expr: "({omega})^3",
         unit: "s^2/rad^2",
         reading: "turn rate saturating at high rates: a motor or controller limit",
     },
     Term {
-        component: 2,
+        output: "omega",
         short: "speed_omega",
         expr: "abs({vx})*({omega})",
         unit: "s/m",
         reading: "turn rate falling with speed: understeer",
     },
     Term {
-        component: 0,
+        output: "vx",
         short: "vx_abs_vx",
         expr: "abs({vx})*({vx})",
         unit: "s/m",
         reading: "speed lost in proportion to speed squared: slip or drag growing with speed",
     },
     Term {
-        component: 0,
+        output: "vx",
         short: "sign_vx",
         expr: "sign({vx})",
         unit: "m/s",
         reading: "a constant speed lost whenever the robot drives: a deadband or static friction",
     },
     Term {
-        component: 0,
+        output: "vx",
         short: "turning_vx",
         expr: "abs({omega})*({vx})",
         unit: "s/rad",
         reading: "forward speed lost while turning: longitudinal slip in turns",
     },
     Term {
-        component: 0,
+        output: "vx",
         short: "vx_cubed",
         expr: "({vx})^3",
         unit: "s^2/m^2",
@@ -98,42 +87,15 @@ const LIBRARY: &[Term] = &[
     },
 ];
 
-const COMPONENTS: [&str; 3] = ["vx", "vy", "omega"];
-
-/// A correction diagnose proposes: a complete effect file, its terms, its
-/// calibrated gains and the held-out error before and after it.
-#[derive(Debug, Clone, Serialize)]
-pub struct Proposal {
-    pub name: String,
-    /// The effect file (`--effects DIR` format).
-    pub toml: String,
-    /// The terms, as the spec's twist writes them (`|omega|*omega`).
-    pub terms: Vec<String>,
-    /// The twist component each term is added to (`omega`), and its gain's name.
-    pub corrects: Vec<String>,
-    pub gains: Vec<String>,
-    pub parameters: Estimates,
-    pub held_out_before: f64,
-    pub held_out_after: f64,
-    /// What the terms may be physically.
-    pub reading: String,
-}
-
-fn gain_name(t: &Term) -> String {
-    format!("k_{}", t.short)
-}
-
 /// The effect file of one library term (its gain at 0, bounded).
 fn term_effect(t: &Term) -> String {
-    let c = COMPONENTS[t.component];
+    let c = t.output;
     format!(
-        "name = \"term_{}\"\ndoc = \"{}\"\nrequires = [\"twist\"]\n\n[[parameter]]\nname = \"{}\"\nnominal = 0.0\nunit = \"{}\"\nmin = -100.0\nmax = 100.0\ndoc = \"Gain of {} in {c}.\"\n\n[motion]\n{c} = \"({{{c}}}) + {}*({})\"\n",
+        "name = \"term_{}\"\ndoc = \"{}\"\nrequires = [\"twist\"]\n{}\n[motion]\n{c} = \"({{{c}}}) + {}*({})\"\n",
         t.short,
         t.reading,
-        gain_name(t),
-        t.unit,
-        t.expr,
-        gain_name(t),
+        t.parameter_table(),
+        t.gain(),
         t.expr
     )
 }
@@ -152,49 +114,27 @@ fn library() -> Vec<Effect> {
 /// The proposal's effect file: every selected term added to its component
 /// of the original twist.
 fn combined(name: &str, terms: &[&Term]) -> String {
-    let mut params = String::new();
     let mut motion = String::new();
-    for c in [0, 2] {
-        let of: Vec<&&Term> = terms.iter().filter(|t| t.component == c).collect();
-        if of.is_empty() {
-            continue;
-        }
-        let comp = COMPONENTS[c];
-        let sum: Vec<String> = of
-            .iter()
-            .map(|t| format!("{}*({})", gain_name(t), t.expr))
+    for c in ["vx", "omega"] {
+        let sum: Vec<String> = (terms.iter())
+            .filter(|t| t.output == c)
+            .map(|t| format!("{}*({})", t.gain(), t.expr))
             .collect();
-        motion += &format!("{comp} = \"({{{comp}}}) + {}\"\n", sum.join(" + "));
+        if !sum.is_empty() {
+            motion += &format!("{c} = \"({{{c}}}) + {}\"\n", sum.join(" + "));
+        }
     }
-    for t in terms {
-        params += &format!(
-            "\n[[parameter]]\nname = \"{}\"\nnominal = 0.0\nunit = \"{}\"\nmin = -100.0\nmax = 100.0\ndoc = \"Gain of {}: {}.\"\n",
-            gain_name(t),
-            t.unit,
-            t.expr,
-            t.reading
-        );
-    }
+    let params: String = terms.iter().map(|t| t.parameter_table()).collect();
     let readings: Vec<&str> = terms.iter().map(|t| t.reading).collect();
     format!(
-        "# proposed by kinegen diagnose: not a known physical effect, a correction the logs support\nname = \"{name}\"\ndoc = \"Proposed correction: {}.\"\nrequires = [\"twist\"]\n{params}\n[motion]\n{motion}",
+        "{HEADER}name = \"{name}\"\ndoc = \"Proposed correction: {}.\"\nrequires = [\"twist\"]\n{params}\n[motion]\n{motion}",
         readings.join("; ")
     )
 }
 
-/// A term as the spec's twist writes it: `abs(omega)*omega`.
-fn shown(expr: &str) -> String {
-    expr.replace("{vx}", "vx")
-        .replace("{omega}", "omega")
-        .replace("abs(vx)", "|vx|")
-        .replace("abs(omega)", "|omega|")
-        .replace("(vx)", "vx")
-        .replace("(omega)", "omega")
-}
-
 fn proposal_name(terms: &[&Term]) -> String {
-    let speed = terms.iter().any(|t| t.component == 0);
-    let turn = terms.iter().any(|t| t.component == 2);
+    let speed = terms.iter().any(|t| t.output == "vx");
+    let turn = terms.iter().any(|t| t.output == "omega");
     match (speed, turn) {
         (true, true) => "proposed_twist_correction",
         (true, false) => "proposed_speed_correction",
@@ -250,7 +190,7 @@ fn screened(
         .into_par_iter()
         .map(|(name, doc, aug)| {
             let start = seeded(&aug, &at.runner, &at.fit.p);
-            let term = super::ranking::effect_params(&start, &at.runner);
+            let term = crate::diagnosis::ranking::effect_params(&start, &at.runner);
             (explained_beyond(&start, &term, cx), (name, doc, aug))
         })
         .collect();
@@ -385,7 +325,7 @@ pub(crate) fn propose(
     let parameters: Estimates = chosen
         .iter()
         .filter_map(|t| {
-            let g = gain_name(t);
+            let g = t.gain();
             let i = done.runner.param_index(&g)?;
             let k = done.fit.free.iter().position(|&f| f == i)?;
             Some((
@@ -397,22 +337,12 @@ pub(crate) fn propose(
             ))
         })
         .collect();
-    Some(Proposal {
+    Some(Proposal::of_terms(
         name,
-        terms: chosen.iter().map(|t| shown(t.expr)).collect(),
-        corrects: chosen
-            .iter()
-            .map(|t| COMPONENTS[t.component].to_string())
-            .collect(),
-        gains: chosen.iter().map(|t| gain_name(t)).collect(),
         toml,
+        &chosen,
         parameters,
-        held_out_before: cur.holdout_rmse,
-        held_out_after: done.holdout_rmse,
-        reading: chosen
-            .iter()
-            .map(|t| t.reading)
-            .collect::<Vec<_>>()
-            .join("; "),
-    })
+        ScoredOn::Track,
+        (cur.holdout_rmse, done.holdout_rmse),
+    ))
 }
