@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The kernel benchmark against its peers (issue 66 item 5): runs
 # `cargo bench -p kinegen-peers` in the generic build and in the native one
-# (`-C target-cpu=native`, how firmware and x86 users build) and writes what
+# (`-C target-cpu=native`, how firmware and x86 users build), each measuring
+# in 3 processes one after the other (thread CPU time; every cell the
+# median and range over the processes), and writes what
 # the bench prints, verbatim, under a provenance header (date, commit,
 # machine, load, build, the command), to the page the guide includes
 # (docs/src/results/peers-table.md). No figure of it is typed by hand.

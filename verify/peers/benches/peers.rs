@@ -21,33 +21,63 @@
 //!   within 1e-9 of each output's scale on every class; a side that does not
 //!   is reported and left out of the ratios.
 //! - Median of 9 rounds; in each round every side runs once, in turns, so a
-//!   change of clock speed touches every side alike.
+//!   change of clock speed touches every side alike. Each round is timed in
+//!   the thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`), so time the thread
+//!   spent descheduled under load is not counted.
+//! - The whole measurement runs in [`PROCESSES`] processes one after the
+//!   other (code placement, alignment and the allocator's addresses differ
+//!   between processes); every cell is the median of the processes' figures
+//!   with their range, and every ratio the range of the processes' own
+//!   ratios.
+//! - The inputs of every row are also timed shuffled (random driving in
+//!   random order: no branch predictor or cache is helped by the order of
+//!   real motion).
 //!
 //! The last rows time the analytic parameter Jacobian against central
 //! differences of the step (two steps per parameter), both kinegen no_std.
 use kinegen_generated::{diff_drive as dd, omni_caster as oc};
 use kinegen_peers::inputs::{self, Sample};
 use kinegen_peers::{disagreement, sides, Args, Kernel, Layout, Model, Row, Side};
+use rand::seq::SliceRandom;
 use rand::SeedableRng;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
 use std::hint::black_box;
-use std::time::Instant;
 
 /// Motions drawn; each class of a step row is at most this long.
 const N: usize = 90_000;
 const REPS: usize = 9;
 
-/// ns per call of `k` over `args`.
+/// Processes the measurement runs in, one after the other
+/// (`PEERS_PROCESSES` overrides).
+const PROCESSES: usize = 3;
+
+/// The calling thread's CPU time, ns: what it ran, not what the clock on
+/// the wall did while it waited (libc's `clock_gettime`; std has no thread
+/// clock).
+fn thread_cpu_ns() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid timespec for the call to fill
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    assert_eq!(rc, 0, "CLOCK_THREAD_CPUTIME_ID is not available");
+    ts.tv_sec as f64 * 1e9 + ts.tv_nsec as f64
+}
+
+/// ns per call of `k` over `args`, in the thread's CPU time.
 fn time(k: Kernel, args: &[Args], out: &mut [f64]) -> f64 {
     let k = black_box(k);
     let o = out.as_mut_ptr();
-    let start = Instant::now();
+    let start = thread_cpu_ns();
     for a in args {
         // SAFETY: `a` points into live samples of the row's model and `out`
         // holds more than the row's outputs
         unsafe { k(black_box(a), o) };
     }
     black_box(out);
-    start.elapsed().as_secs_f64() * 1e9 / args.len() as f64
+    (thread_cpu_ns() - start) / args.len() as f64
 }
 
 /// Median ns per call of each kernel, timed in turns.
@@ -68,45 +98,97 @@ fn race(kernels: &[Kernel], args: &[Args]) -> Vec<f64> {
         .collect()
 }
 
-/// The input classes of a row: the realistic mix, and for a step each side
-/// of the series switch. At the logs' own rates nearly every step is under
-/// the switch, so the steps above it come from the same motions over 20
-/// times longer steps (a filter predicting only to sightings 0.2-1 s apart),
-/// those that turn by more than 0.05 rad.
-fn classes<'a>(
-    row: Row,
-    samples: &'a [Sample],
-    long: &'a [Sample],
-) -> Vec<(&'static str, Vec<Args>, f64)> {
-    let all: Vec<Args> = samples.iter().map(Sample::args).collect();
-    if !row.steps() {
-        return vec![("mix", all, 1.0)];
+/// The inputs of one model, owned: in time order, the same in random
+/// order, the same motions over 20 times longer steps, and half of them
+/// under the series switch and half over it, in random order.
+struct Inputs {
+    time_order: Vec<Sample>,
+    random_order: Vec<Sample>,
+    long: Vec<Sample>,
+    halves: Vec<Sample>,
+}
+
+impl Inputs {
+    fn of(time_order: Vec<Sample>, long: Vec<Sample>) -> Inputs {
+        let under = time_order.iter().filter(|s| s.turn.abs() <= 0.05);
+        let over: Vec<&Sample> = long.iter().filter(|s| s.turn.abs() > 0.05).collect();
+        let n = over.len().min(time_order.len() / 2);
+        let halves: Vec<Sample> = under
+            .take(n)
+            .chain(over.into_iter().take(n))
+            .cloned()
+            .collect();
+        Inputs {
+            random_order: shuffled(&time_order),
+            halves: shuffled(&halves),
+            time_order,
+            long,
+        }
     }
-    let series: Vec<Args> = samples
-        .iter()
+}
+
+/// The input classes of a row: the realistic mix in time order and in
+/// random order, and for a step each side of the series switch alone and
+/// both in equal parts in random order (a filter predicting to sightings
+/// at irregular intervals: the switch's branch at its least predictable).
+/// At the logs' own rates nearly every step is under the switch, so the
+/// steps above it come from the same motions over 20 times longer steps (a
+/// filter predicting only to sightings 0.2-1 s apart), those that turn by
+/// more than 0.05 rad.
+fn classes(row: Row, inputs: &Inputs) -> Vec<(&'static str, Vec<Args>, f64)> {
+    let args = |v: &[Sample]| v.iter().map(Sample::args).collect::<Vec<Args>>();
+    let (all, shuffled) = (args(&inputs.time_order), args(&inputs.random_order));
+    if !row.steps() {
+        return vec![("mix", all, 1.0), ("mix, random order", shuffled, 1.0)];
+    }
+    let series: Vec<Args> = (inputs.time_order.iter())
         .filter(|s| s.turn.abs() <= 0.05)
         .map(Sample::args)
         .collect();
-    let share = series.len() as f64 / samples.len() as f64;
-    let closed: Vec<Args> = long
-        .iter()
+    let share = series.len() as f64 / inputs.time_order.len() as f64;
+    let closed: Vec<Args> = (inputs.long.iter())
         .filter(|s| s.turn.abs() > 0.05)
         .map(Sample::args)
         .collect();
     vec![
         ("mix", all, 1.0),
+        ("mix, random order", shuffled, 1.0),
         ("series", series, share),
         ("closed form, 20x steps", closed, 1.0 - share),
+        ("half each side, random order", args(&inputs.halves), 1.0),
     ]
 }
 
-fn cell(ns: Option<f64>) -> String {
-    ns.map_or("-".to_string(), |v| format!("{v:.1}"))
+/// One measurement of one process: a table's row (its kernel and inputs),
+/// a side, and its ns per call (None: the side lacks the kernel or was left
+/// out). Written one per line, tab-separated, by a child process.
+struct Record {
+    row: String,
+    side: String,
+    ns: Option<f64>,
 }
 
-/// One row of the table per class: every side's ns per call and the ratios.
-fn bench_row(row: Row, samples: &[Sample], long: &[Sample], sides: &[Side]) {
-    let classes = classes(row, samples, long);
+impl Record {
+    fn line(&self) -> String {
+        let ns = self.ns.map_or("-".to_string(), |v| format!("{v}"));
+        format!("{}\t{}\t{ns}", self.row, self.side)
+    }
+
+    fn parse(line: &str) -> Option<Record> {
+        let mut f = line.split('\t');
+        let (row, side, ns) = (f.next()?, f.next()?, f.next()?);
+        Some(Record {
+            row: row.to_string(),
+            side: side.to_string(),
+            ns: ns.parse().ok(),
+        })
+    }
+}
+
+/// Every class of `row` timed on every side that has it and agrees with
+/// kinegen: one record per side and class.
+fn bench_row(row: Row, inputs: &Inputs, sides: &[Side]) -> Vec<Record> {
+    let classes = classes(row, inputs);
     let reference = (sides[0].kernel)(row).expect("kinegen has every kernel");
     // a side counts if it has the kernel and agrees with kinegen on every class
     let usable: Vec<Option<Kernel>> = sides
@@ -136,35 +218,27 @@ fn bench_row(row: Row, samples: &[Sample], long: &[Sample], sides: &[Side]) {
         })
         .collect();
     let timed: Vec<Kernel> = usable.iter().flatten().copied().collect();
+    let mut records = Vec::new();
     for (class, args, share) in &classes {
         if args.is_empty() {
             continue;
         }
         let mut ns = race(&timed, args).into_iter();
-        let per_side: Vec<Option<f64>> = usable.iter().map(|k| k.and_then(|_| ns.next())).collect();
-        let best_peer = sides
-            .iter()
-            .zip(&per_side)
-            .filter(|(s, _)| !s.kinegen)
-            .filter_map(|(_, t)| *t)
-            .fold(f64::INFINITY, f64::min);
-        let ratio = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{:.2}", t / best_peer));
         let inputs = match *class {
-            "mix" => "mix".to_string(),
-            _ => format!("{class} ({:.2}% of the mix)", share * 100.0),
+            "series" | "closed form, 20x steps" => {
+                format!("{class} ({:.2}% of the mix)", share * 100.0)
+            }
+            _ => class.to_string(),
         };
-        println!(
-            "| {} | {inputs} | {} | {} | {} |",
-            row.label(),
-            per_side
-                .iter()
-                .map(|t| cell(*t))
-                .collect::<Vec<_>>()
-                .join(" | "),
-            ratio(per_side[0]),
-            ratio(per_side[1]),
-        );
+        for (side, k) in sides.iter().zip(&usable) {
+            records.push(Record {
+                row: format!("{} | {inputs}", row.label()),
+                side: side.name.to_string(),
+                ns: k.and_then(|_| ns.next()),
+            });
+        }
     }
+    records
 }
 
 /// # Safety (of the two kernels below)
@@ -208,11 +282,23 @@ fn central<const P: usize>(p: [f64; P], step: impl Fn(&[f64; P]) -> [f64; 3]) ->
     j
 }
 
-fn main() {
+/// The same samples in random order (a fixed seed: every side and every
+/// process gets the same order), copied so that they lie in memory in that
+/// order: what is timed is the order of the values (the branch predictor
+/// and the series switch), not cache misses on scattered samples.
+fn shuffled(samples: &[Sample]) -> Vec<Sample> {
+    let mut order: Vec<usize> = (0..samples.len()).collect();
+    order.shuffle(&mut rand::rngs::SmallRng::seed_from_u64(66));
+    order.iter().map(|&i| samples[i].clone()).collect()
+}
+
+/// What one process measures: the inputs' provenance lines, then every
+/// record.
+fn measure() -> (Vec<String>, Vec<Record>) {
     let mut rng = rand::rngs::SmallRng::seed_from_u64(39);
     let (motions, sources) = inputs::motions(N, &mut rng);
     let sides = sides();
-    println!(
+    let mut notes = vec![format!(
         "inputs: {}",
         sources
             .used
@@ -220,22 +306,8 @@ fn main() {
             .map(|(n, k)| format!("{k} steps of {n}"))
             .collect::<Vec<_>>()
             .join(", ")
-    );
-    for m in &sources.missing {
-        println!("left out: {m}");
-    }
-    if !kinegen_peers::WRENFOLD_CPP {
-        println!("left out: wrenfold C++ (its span headers were not found at build time: pip install wrenfold)");
-    }
-    if !kinegen_peers::SYMFORCE_CPP {
-        println!("left out: SymForce C++ (Eigen's headers were not found at build time: apt-get install libeigen3-dev)");
-    }
-    println!("left out: SymForce Rust (its 0.12 generator's code for these kernels does not compile or computes something else: verify/peers/symforce_kernels.py)\n");
-    println!(
-        "| kernel (ns per call) | inputs | {} | kinegen no_std / best peer | kinegen std / best peer |",
-        sides.iter().map(|s| s.name).collect::<Vec<_>>().join(" | ")
-    );
-    println!("|---|---|{}---|---|", "---|".repeat(sides.len()));
+    )];
+    notes.extend(sources.missing.iter().map(|m| format!("left out: {m}")));
     let samples = |m: Model| inputs::samples(m, &motions, 7);
     let (dd_s, uc_s, oc_s) = (
         samples(Model::DiffDrive),
@@ -253,16 +325,18 @@ fn main() {
         inputs::samples(Model::DiffDrive, &long, 8),
         inputs::samples(Model::OmniCaster, &long, 8),
     );
+    let dd = Inputs::of(dd_s.clone(), dd_l);
+    let uc = Inputs::of(uc_s.clone(), uc_s.clone());
+    let oc = Inputs::of(oc_s.clone(), oc_l);
+    let mut records = Vec::new();
     for row in Row::ALL {
-        let (s, l) = match row.model() {
-            Model::DiffDrive => (&dd_s, &dd_l),
-            Model::Unicycle => (&uc_s, &uc_s),
-            Model::OmniCaster => (&oc_s, &oc_l),
+        let inputs = match row.model() {
+            Model::DiffDrive => &dd,
+            Model::Unicycle => &uc,
+            Model::OmniCaster => &oc,
         };
-        bench_row(row, s, l, &sides);
+        records.extend(bench_row(row, inputs, &sides));
     }
-    println!("\n| parameter Jacobian, kinegen no_std (ns per call, mix) | analytic | central differences | speed-up |");
-    println!("|---|---|---|---|");
     for (row, s, cd) in [
         (Row::DdJacP, &dd_s, dd_jac_p_central as Kernel),
         (Row::OcJacP, &oc_s, oc_jac_p_central as Kernel),
@@ -276,12 +350,209 @@ fn main() {
             &args,
         );
         let t = race(&[analytic, cd], &args);
-        println!(
-            "| {} | {:.1} | {:.1} | {:.1}x (agree within {worst:.0e}) |",
-            row.label(),
-            t[0],
-            t[1],
-            t[1] / t[0]
+        let label = format!("{} (agree within {worst:.0e})", row.label());
+        for (side, ns) in [("analytic", t[0]), ("central differences", t[1])] {
+            records.push(Record {
+                row: label.clone(),
+                side: side.to_string(),
+                ns: Some(ns),
+            });
+        }
+    }
+    (notes, records)
+}
+
+/// The median and the range of `v` (sorted here).
+fn spread(v: &mut [f64]) -> (f64, f64, f64) {
+    v.sort_by(f64::total_cmp);
+    (v[v.len() / 2], v[0], v[v.len() - 1])
+}
+
+/// "median (lo-hi)" at `digits` decimals, or the one figure when all agree
+/// to them.
+fn cell(v: &mut [f64], digits: usize) -> String {
+    if v.is_empty() {
+        return "-".into();
+    }
+    let (m, lo, hi) = spread(v);
+    let (lo_s, hi_s) = (format!("{lo:.digits$}"), format!("{hi:.digits$}"));
+    if lo_s == hi_s {
+        lo_s
+    } else {
+        format!("{m:.digits$} ({lo_s}-{hi_s})")
+    }
+}
+
+/// The tables of every process's records: each cell the median of the
+/// processes' figures and their range; each ratio the range of the
+/// processes' own ratios to the fastest peer of that process.
+fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
+    // row -> side -> one figure per process
+    let mut rows: Vec<String> = Vec::new();
+    let mut by: BTreeMap<(String, String), Vec<Option<f64>>> = BTreeMap::new();
+    for run in runs {
+        for r in run {
+            if !rows.contains(&r.row) {
+                rows.push(r.row.clone());
+            }
+            by.entry((r.row.clone(), r.side.clone()))
+                .or_default()
+                .push(r.ns);
+        }
+    }
+    let figures = |row: &str, side: &str| -> Vec<Option<f64>> {
+        by.get(&(row.to_string(), side.to_string()))
+            .cloned()
+            .unwrap_or_default()
+    };
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "| kernel (ns per call, thread CPU time; median of {} processes, range) | inputs | {} | kinegen no_std / best peer | kinegen std / best peer |",
+        runs.len(),
+        side_names.join(" | ")
+    );
+    let _ = writeln!(t, "|---|---|{}---|---|", "---|".repeat(side_names.len()));
+    let peers: Vec<&str> = side_names
+        .iter()
+        .copied()
+        .filter(|n| !n.starts_with("kinegen"))
+        .collect();
+    let mut central = Vec::new();
+    for row in &rows {
+        if figures(row, "analytic").iter().any(Option::is_some) {
+            central.push(row.clone());
+            continue;
+        }
+        let mut cells = Vec::new();
+        for side in side_names {
+            let mut v: Vec<f64> = figures(row, side).into_iter().flatten().collect();
+            cells.push(cell(&mut v, 1));
+        }
+        // per process: kinegen's figure over that process's fastest peer
+        let ratio = |side: &str| {
+            let mut v: Vec<f64> = (0..runs.len())
+                .filter_map(|k| {
+                    let mine = *figures(row, side).get(k)?;
+                    let best = (peers.iter())
+                        .filter_map(|p| *figures(row, p).get(k)?)
+                        .fold(f64::INFINITY, f64::min);
+                    mine.map(|m| m / best)
+                })
+                .collect();
+            cell(&mut v, 2)
+        };
+        let (label, inputs) = row.split_once(" | ").unwrap_or((row, ""));
+        let _ = writeln!(
+            t,
+            "| {label} | {inputs} | {} | {} | {} |",
+            cells.join(" | "),
+            ratio("kinegen no_std"),
+            ratio("kinegen std")
         );
     }
+    let _ = writeln!(t, "\n| parameter Jacobian, kinegen no_std (ns per call, mix) | analytic | central differences | speed-up |");
+    let _ = writeln!(t, "|---|---|---|---|");
+    for row in &central {
+        let (a, c) = (
+            figures(row, "analytic"),
+            figures(row, "central differences"),
+        );
+        let mut speedup: Vec<f64> = (a.iter().zip(&c))
+            .filter_map(|(a, c)| Some((*c)? / (*a)?))
+            .collect();
+        let (mut a, mut c): (Vec<f64>, Vec<f64>) = (
+            a.into_iter().flatten().collect(),
+            c.into_iter().flatten().collect(),
+        );
+        let (label, agree) = row.split_once(" (").unwrap_or((row, ""));
+        let _ = writeln!(
+            t,
+            "| {label} | {} | {} | {}x ({} |",
+            cell(&mut a, 1),
+            cell(&mut c, 1),
+            cell(&mut speedup, 1),
+            agree
+        );
+    }
+    t
+}
+
+/// The machine and the build, as the table was measured: the CPU, the load
+/// when the processes started, and the vector instructions the compiler
+/// was allowed (a generic x86-64 build has SSE2 only; `-C
+/// target-cpu=native` adds what this CPU has).
+fn machine() -> String {
+    let read = |p: &str| std::fs::read_to_string(p).unwrap_or_default();
+    let cpu = (read("/proc/cpuinfo").lines())
+        .find_map(|l| {
+            l.strip_prefix("model name")
+                .map(|v| v.trim_start_matches([' ', '\t', ':']).to_string())
+        })
+        .unwrap_or_else(|| "unknown".into());
+    let load = read("/proc/loadavg");
+    let load: Vec<&str> = load.split_whitespace().take(3).collect();
+    let features: Vec<&str> = [
+        ("sse4.2", cfg!(target_feature = "sse4.2")),
+        ("avx", cfg!(target_feature = "avx")),
+        ("avx2", cfg!(target_feature = "avx2")),
+        ("fma", cfg!(target_feature = "fma")),
+        ("avx512f", cfg!(target_feature = "avx512f")),
+    ]
+    .into_iter()
+    .filter_map(|(n, on)| on.then_some(n))
+    .collect();
+    format!(
+        "- machine: {cpu}; load average {} when the processes started; built with {}",
+        load.join(" "),
+        if features.is_empty() {
+            "the target's baseline instructions only".to_string()
+        } else {
+            features.join(", ")
+        }
+    )
+}
+
+fn main() {
+    // a child process: measure, and write the records for the parent
+    if std::env::var_os("KINEGEN_PEERS_CHILD").is_some() {
+        let (notes, records) = measure();
+        notes.iter().for_each(|n| println!("#{n}"));
+        records.iter().for_each(|r| println!("{}", r.line()));
+        return;
+    }
+    let processes: usize = std::env::var("PEERS_PROCESSES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(PROCESSES)
+        .max(1);
+    let exe = std::env::current_exe().expect("the bench's own executable");
+    let mut notes = Vec::new();
+    let mut runs = Vec::new();
+    // one after the other: two at once would share the cores they time on
+    for _ in 0..processes {
+        let out = std::process::Command::new(&exe)
+            .env("KINEGEN_PEERS_CHILD", "1")
+            .stderr(std::process::Stdio::inherit())
+            .output()
+            .expect("the bench runs itself as a child process");
+        assert!(out.status.success(), "a measuring process failed");
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        notes = text
+            .lines()
+            .filter_map(|l| l.strip_prefix('#').map(str::to_string))
+            .collect();
+        runs.push(text.lines().filter_map(Record::parse).collect::<Vec<_>>());
+    }
+    println!("{}", machine());
+    notes.iter().for_each(|n| println!("{n}"));
+    if !kinegen_peers::WRENFOLD_CPP {
+        println!("left out: wrenfold C++ (its span headers were not found at build time: pip install wrenfold)");
+    }
+    if !kinegen_peers::SYMFORCE_CPP {
+        println!("left out: SymForce C++ (Eigen's headers were not found at build time: apt-get install libeigen3-dev)");
+    }
+    println!("left out: SymForce Rust (its 0.12 generator's code for these kernels does not compile or computes something else: verify/peers/symforce_kernels.py)\n");
+    let side_names: Vec<&str> = sides().iter().map(|s| s.name).collect();
+    print!("{}", render(&runs, &side_names));
 }
