@@ -97,10 +97,34 @@ def small_angle_factors(a, sin, cos, fabs, where):
     return where(big, sin(a) / a, sinc), where(big, (1 - cos(a)) / a, cosc)
 
 
-def model(spec, guard=False):
+# The guard a user of a peer writes by hand around the chord form's division
+# by the turn rate (rad/s): the straight line below it.
+USERS_GUARD = 1e-6
+
+
+def chord_step(x, y, th, dt, twist, sin, cos, fabs, where):
+    """The exact step as a robotics user writes it in a peer's library
+    (issue 66): the chord form of motion at a constant twist, x + (vx
+    (sin(th + a) - sin th) + vy (cos(th + a) - cos th))/omega..., and the
+    straight line where |omega| is under USERS_GUARD, through the peer's own
+    conditional `where`. Cheaper than a series switch, and less accurate
+    near omega dt = 0, where the differences of sines cancel."""
+    vx, vy, om = twist
+    a = om * dt
+    s0, c0, s1, c1 = sin(th), cos(th), sin(th + a), cos(th + a)
+    ds, dc = s1 - s0, c1 - c0
+    turning = fabs(om) > USERS_GUARD
+    dx = where(turning, (vx * ds + vy * dc) / om, (vx * c0 - vy * s0) * dt)
+    dy = where(turning, (vy * ds - vx * dc) / om, (vx * s0 + vy * c0) * dt)
+    return [x + dx, y + dy, th + a]
+
+
+def model(spec, guard=False, users=False):
     """The spec's kernels as CasADi expressions. With `guard` the exact step
     switches to a series near omega dt = 0 (`small_angle_factors`), as the
-    peer benchmark's kernels do; without it, the plain closed form."""
+    peer benchmark's accuracy-matched kernels do; with `users` it is the
+    chord form a user writes (`chord_step`); with neither, the plain closed
+    form."""
     inputs = [i["name"] for i in spec.get("input", [])]
     noise = [n["name"] for n in spec.get("noise", [])]
     params = [p for p in spec.get("parameter", []) if not p.get("const", False)]
@@ -143,6 +167,8 @@ def model(spec, guard=False):
         s, c = sinc * dt, cosc * dt
     bx, by = s * vx - c * vy, c * vx + s * vy
     exact = ca.vertcat(x + ca.cos(th) * bx - ca.sin(th) * by, y + ca.sin(th) * bx + ca.cos(th) * by, th + a)
+    if users:
+        exact = ca.vertcat(*chord_step(x, y, th, dt, twist_noisy, ca.sin, ca.cos, ca.fabs, ca.if_else))
     groups = {"x": [sym[n] for n in STATE], "u": [sym[n] for n in inputs], "w": [sym[n] for n in noise],
               "p": [sym[p["name"]] for p in params], "dt": [dt], "lm": [sym["xl"], sym["yl"]], "omega": [omega_meas]}
     funcs = {}
@@ -229,7 +255,21 @@ PEER_KERNELS = [
     ("uc_obs_landmark_jac_x", "unicycle_ekf", ["obs_landmark_jac_x"]),
     ("oc_step_exact", "omni_caster", ["step_exact"]),
     ("oc_step_exact_jac_p", "omni_caster", ["step_exact_jac_p"]),
+    # the steps again as the peers' users write them (`chord_step`): the
+    # rows above are the accuracy-matched variants
+    ("dd_step_users", "diff_drive", ["step_exact", "step_exact_jac_x", "step_exact_jac_p"]),
+    ("oc_step_users", "omni_caster", ["step_exact", "step_exact_jac_p"]),
+    ("dd_step_exact_users", "diff_drive", ["step_exact"]),
+    ("dd_step_exact_jac_x_users", "diff_drive", ["step_exact_jac_x"]),
+    ("dd_step_exact_jac_p_users", "diff_drive", ["step_exact_jac_p"]),
+    ("oc_step_exact_users", "omni_caster", ["step_exact"]),
+    ("oc_step_exact_jac_p_users", "omni_caster", ["step_exact_jac_p"]),
 ]
+
+
+def users_form(name):
+    """Whether a PEER_KERNELS entry is the users' form of its step."""
+    return name.endswith("_users")
 
 
 def emit_c(out_dir):
@@ -238,10 +278,11 @@ def emit_c(out_dir):
     cg = ca.CodeGenerator("casadi_kernels.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long"})
     models = {}
     for name, model_name, outs in PEER_KERNELS:
-        if model_name not in models:
+        key = (model_name, users_form(name))
+        if key not in models:
             spec = tomllib.loads((ROOT / "spec" / f"{model_name}.toml").read_text())
-            models[model_name] = model(spec, guard=True)
-        groups, funcs, _ = models[model_name]
+            models[key] = model(spec, guard=True, users=key[1])
+        groups, funcs, _ = models[key]
         args = funcs[outs[0]][0]
         cg.add(ca.Function(name, [ca.vertcat(*groups[a]) for a in args], [funcs[o][1] for o in outs]))
     out_dir.mkdir(parents=True, exist_ok=True)

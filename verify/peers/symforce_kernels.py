@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "verify" / "casadi"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from peer_files import body_twist, write_or_check  # noqa: E402
-from reference import PEER_KERNELS, STATE, define, small_angle_factors, to_sx  # noqa: E402
+from reference import PEER_KERNELS, STATE, chord_step, define, small_angle_factors, to_sx, users_form  # noqa: E402
 
 OUT_DIR = Path(__file__).resolve().parent / "symforce"
 FUNCTIONS = {"sin": sf.sin, "cos": sf.cos, "tan": sf.tan, "atan": sf.atan, "atan2": sf.atan2,
@@ -78,6 +78,8 @@ def kernel(name, spec, arg_names, wanted):
         s, c = sinc * dt, cosc * dt
         bx, by = s * vx - c * vy, c * vx + s * vy
         step = sf.Matrix([x + sf.cos(th) * bx - sf.sin(th) * by, y + sf.sin(th) * bx + sf.cos(th) * by, th + a])
+        if users_form(name):
+            step = sf.Matrix(chord_step(x, y, th, dt, twist, sf.sin, sf.cos, sf.Abs, where))
         out["step_exact"] = step
         for g in ("x", "p"):
             out[f"step_exact_jac_{g}"] = step.jacobian(sf.Matrix([env[n] for n in groups[g]]))

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "verify" / "casadi"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from peer_files import body_twist, write_or_check  # noqa: E402
-from reference import PEER_KERNELS, STATE, define, small_angle_factors, to_sx  # noqa: E402
+from reference import PEER_KERNELS, STATE, chord_step, define, small_angle_factors, to_sx, users_form  # noqa: E402
 
 OUT_DIR = Path(__file__).resolve().parent / "wrenfold"
 # libm's names for the functions wrenfold calls (`abs` is `fabs` there, a
@@ -42,7 +42,7 @@ FUNCTIONS = {"sin": sym.sin, "cos": sym.cos, "tan": sym.tan, "atan": sym.atan, "
              "sqrt": sym.sqrt, "exp": sym.exp, "ln": sym.log, "abs": sym.abs}
 
 
-def kernels(spec, desc, arg_names, wanted):
+def kernels(spec, desc, arg_names, wanted, users=False):
     """Add the spec's arguments to `desc` (in `arg_names` order) and return
     the `wanted` outputs (and maybe more) as wrenfold expressions."""
     inputs = [i["name"] for i in spec.get("input", [])]
@@ -71,6 +71,8 @@ def kernels(spec, desc, arg_names, wanted):
         s, c = sinc * dt, cosc * dt
         bx, by = s * vx - c * vy, c * vx + s * vy
         step = [x + sym.cos(th) * bx - sym.sin(th) * by, y + sym.sin(th) * bx + sym.cos(th) * by, th + a]
+        if users:
+            step = chord_step(x, y, th, dt, twist, sym.sin, sym.cos, sym.abs, sym.where)
         out["step_exact"] = step
         for g in ("x", "p"):
             out[f"step_exact_jac_{g}"] = sym.jacobian(step, [env[n] for n in groups[g]])
@@ -104,7 +106,7 @@ def descriptions():
         _, funcs, _ = model(spec)
         arg_names = funcs[outs[0]][0]
         desc = cg.FunctionDescription(name)
-        exprs = kernels(spec, desc, arg_names, outs)
+        exprs = kernels(spec, desc, arg_names, outs, users_form(name))
         for o in outs:
             e = exprs[o]
             value = e if isinstance(e, sym.MatrixExpr) else sym.vector(*e)

@@ -11,15 +11,19 @@
 //!   reported per class as well: the realistic mix, the steps under the
 //!   series switch (|omega dt| <= 0.05; nearly all of them at the logs' own
 //!   rates), and steps above it (the same motions over 20 times longer steps).
-//! - Every peer switches to a series near omega dt = 0 with its own
-//!   conditional (the same switch and order as kinegen), so every side is
-//!   accurate there and none is timed on a NaN path.
+//! - Every step row comes twice. Its peers as their users write them: the
+//!   chord form (x + (vx (sin(th + a) - sin th) + ...)/omega), straight
+//!   where |omega| < 1e-6 rad/s, with each tool's own conditional. And
+//!   accuracy-matched: the same series switch near omega dt = 0 as kinegen's,
+//!   so that every side is as accurate there. A table gives each side's
+//!   error near omega dt = 0 against a 50-digit reference.
 //! - kinegen is timed in its default `no_std` build (libm, as on firmware)
 //!   and with `std`; the ratio that counts is the default build's against
 //!   the fastest peer build, whichever it is on that row.
 //! - Before timing, each side's outputs are checked to agree with kinegen's
-//!   within 1e-9 of each output's scale on every class; a side that does not
-//!   is reported and left out of the ratios.
+//!   within 1e-9 of each output's scale (the chord form where it is well
+//!   conditioned, |omega dt| > 0.05); a side that does not is reported and
+//!   left out of the ratios.
 //! - Median of 9 rounds; in each round every side runs once, in turns, so a
 //!   change of clock speed touches every side alike. Each round is timed in
 //!   the thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`), so time the thread
@@ -195,17 +199,19 @@ fn bench_row(row: Row, inputs: &Inputs, sides: &[Side]) -> Vec<Record> {
         .iter()
         .map(|side| {
             let k = (side.kernel)(row)?;
-            let worst = classes
-                .iter()
-                .map(|(_, args, _)| {
-                    disagreement(
-                        row,
-                        (reference, Layout::RowMajor),
-                        (k, side.layout),
-                        &args[..args.len().min(5_000)],
-                    )
-                })
-                .fold(0.0, f64::max);
+            // where the row's peers must agree (the users' chord form only
+            // away from omega dt = 0: its error there is the accuracy table's)
+            let checked: Vec<Args> = (inputs.time_order.iter().chain(&inputs.long))
+                .filter(|s| row.agrees_at(s.turn))
+                .take(10_000)
+                .map(Sample::args)
+                .collect();
+            let worst = disagreement(
+                row,
+                (reference, Layout::RowMajor),
+                (k, side.layout),
+                &checked,
+            );
             if worst > 1e-9 {
                 eprintln!(
                     "{}: {} disagrees with kinegen by {worst:.1e}: left out",
@@ -292,6 +298,101 @@ fn shuffled(samples: &[Sample]) -> Vec<Sample> {
     order.iter().map(|&i| samples[i].clone()).collect()
 }
 
+/// One step of the 50-digit reference: its inputs, and the pose and d pose
+/// / d p it should give (row-major).
+struct NearZero {
+    x: Vec<f64>,
+    u: Vec<f64>,
+    dt: f64,
+    pose: Vec<f64>,
+    jac_p: Vec<f64>,
+}
+
+/// Each side's error near omega dt = 0 on the diff_drive step and its
+/// parameter Jacobian, in both forms: the largest over the 13 steps of
+/// verify/precision/near_zero.json (omega dt from 0 to 1, a 50-digit mpmath
+/// reference), relative to each output's largest entry. A record per side,
+/// its figure in place of a time.
+fn accuracy(sides: &[Side]) -> Vec<Record> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../precision/near_zero.json");
+    let text = std::fs::read_to_string(path).expect("verify/precision/near_zero.json");
+    let doc: serde_json::Value = serde_json::from_str(&text).expect("near_zero.json is JSON");
+    let num = |v: &serde_json::Value| -> f64 {
+        v.as_f64()
+            .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
+            .expect("a number")
+    };
+    let p: Vec<f64> = doc["params"].as_array().unwrap().iter().map(num).collect();
+    let cases = doc["cases"].as_array().unwrap();
+    let arrays: Vec<NearZero> = cases
+        .iter()
+        .map(|c| {
+            let v = |k: &str| {
+                c[k].as_array()
+                    .unwrap()
+                    .iter()
+                    .map(num)
+                    .collect::<Vec<f64>>()
+            };
+            let jac: Vec<f64> = (c["jac_p"].as_array().unwrap().iter())
+                .flat_map(|r| r.as_array().unwrap().iter().map(num))
+                .collect();
+            NearZero {
+                x: v("x"),
+                u: v("u"),
+                dt: num(&c["dt"]),
+                pose: v("pose"),
+                jac_p: jac,
+            }
+        })
+        .collect();
+    let w = [0.0; 2];
+    let mut records = Vec::new();
+    for row in [Row::DdStepUsers, Row::DdStep, Row::DdJacPUsers, Row::DdJacP] {
+        for side in sides {
+            let err = (side.kernel)(row).map(|k| {
+                let mut out = vec![0.0; 64];
+                let mut worst = 0.0f64;
+                for case in &arrays {
+                    let a = Args {
+                        x: case.x.as_ptr(),
+                        u: case.u.as_ptr(),
+                        w: w.as_ptr(),
+                        p: p.as_ptr(),
+                        lm: w.as_ptr(),
+                        dt: case.dt,
+                    };
+                    // SAFETY: the arrays hold the diff_drive kernel's inputs
+                    // and `out` more than its outputs
+                    unsafe { k(&a, out.as_mut_ptr()) };
+                    let got = kinegen_peers::dense(row, side.layout, &out);
+                    let want = if row.matched() == Row::DdStep {
+                        &case.pose
+                    } else {
+                        &case.jac_p
+                    };
+                    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    for (g, r) in got.iter().zip(want) {
+                        let e = if g.is_finite() {
+                            (g - r).abs() / scale
+                        } else {
+                            f64::INFINITY
+                        };
+                        worst = worst.max(e);
+                    }
+                }
+                worst
+            });
+            records.push(Record {
+                row: format!("accuracy | {}", row.label()),
+                side: side.name.to_string(),
+                ns: err,
+            });
+        }
+    }
+    records
+}
+
 /// What one process measures: the inputs' provenance lines, then every
 /// record.
 fn measure() -> (Vec<String>, Vec<Record>) {
@@ -325,10 +426,10 @@ fn measure() -> (Vec<String>, Vec<Record>) {
         inputs::samples(Model::DiffDrive, &long, 8),
         inputs::samples(Model::OmniCaster, &long, 8),
     );
+    let mut records = accuracy(&sides);
     let dd = Inputs::of(dd_s.clone(), dd_l);
     let uc = Inputs::of(uc_s.clone(), uc_s.clone());
     let oc = Inputs::of(oc_s.clone(), oc_l);
-    let mut records = Vec::new();
     for row in Row::ALL {
         let inputs = match row.model() {
             Model::DiffDrive => &dd,
@@ -350,7 +451,7 @@ fn measure() -> (Vec<String>, Vec<Record>) {
             &args,
         );
         let t = race(&[analytic, cd], &args);
-        let label = format!("{} (agree within {worst:.0e})", row.label());
+        let label = format!("{} (agree within {worst:.0e})", row.what());
         for (side, ns) in [("analytic", t[0]), ("central differences", t[1])] {
             records.push(Record {
                 row: label.clone(),
@@ -418,10 +519,20 @@ fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
         .copied()
         .filter(|n| !n.starts_with("kinegen"))
         .collect();
-    let mut central = Vec::new();
+    let (mut central, mut accuracy) = (Vec::new(), Vec::new());
     for row in &rows {
         if figures(row, "analytic").iter().any(Option::is_some) {
             central.push(row.clone());
+            continue;
+        }
+        if let Some(label) = row.strip_prefix("accuracy | ") {
+            let errors: Vec<String> = (side_names.iter())
+                .map(|side| {
+                    let e = figures(row, side).first().copied().flatten();
+                    e.map_or("-".to_string(), |e| format!("{e:.0e}"))
+                })
+                .collect();
+            accuracy.push(format!("| {label} | {} |", errors.join(" | ")));
             continue;
         }
         let mut cells = Vec::new();
@@ -451,6 +562,15 @@ fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
             ratio("kinegen std")
         );
     }
+    let _ = writeln!(
+        t,
+        "\n| error near omega dt = 0 (largest over 13 steps with omega dt from 0 to 1, against 50 digits, relative to each output's largest entry) | {} |",
+        side_names.join(" | ")
+    );
+    let _ = writeln!(t, "|---|{}", "---|".repeat(side_names.len()));
+    accuracy.iter().for_each(|l| {
+        let _ = writeln!(t, "{l}");
+    });
     let _ = writeln!(t, "\n| parameter Jacobian, kinegen no_std (ns per call, mix) | analytic | central differences | speed-up |");
     let _ = writeln!(t, "|---|---|---|---|");
     for row in &central {

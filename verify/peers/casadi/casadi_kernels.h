@@ -215,6 +215,132 @@ int oc_step_exact_jac_p_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casad
 #define oc_step_exact_jac_p_SZ_RES 1
 #define oc_step_exact_jac_p_SZ_IW 0
 #define oc_step_exact_jac_p_SZ_W 0
+int dd_step_users(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int dd_step_users_checkout(void);
+void dd_step_users_release(int mem);
+void dd_step_users_incref(void);
+void dd_step_users_decref(void);
+casadi_int dd_step_users_n_in(void);
+casadi_int dd_step_users_n_out(void);
+casadi_real dd_step_users_default_in(casadi_int i);
+const char* dd_step_users_name_in(casadi_int i);
+const char* dd_step_users_name_out(casadi_int i);
+const casadi_int* dd_step_users_sparsity_in(casadi_int i);
+const casadi_int* dd_step_users_sparsity_out(casadi_int i);
+int dd_step_users_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int dd_step_users_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define dd_step_users_SZ_ARG 5
+#define dd_step_users_SZ_RES 3
+#define dd_step_users_SZ_IW 0
+#define dd_step_users_SZ_W 0
+int oc_step_users(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int oc_step_users_checkout(void);
+void oc_step_users_release(int mem);
+void oc_step_users_incref(void);
+void oc_step_users_decref(void);
+casadi_int oc_step_users_n_in(void);
+casadi_int oc_step_users_n_out(void);
+casadi_real oc_step_users_default_in(casadi_int i);
+const char* oc_step_users_name_in(casadi_int i);
+const char* oc_step_users_name_out(casadi_int i);
+const casadi_int* oc_step_users_sparsity_in(casadi_int i);
+const casadi_int* oc_step_users_sparsity_out(casadi_int i);
+int oc_step_users_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int oc_step_users_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define oc_step_users_SZ_ARG 5
+#define oc_step_users_SZ_RES 2
+#define oc_step_users_SZ_IW 0
+#define oc_step_users_SZ_W 0
+int dd_step_exact_users(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int dd_step_exact_users_checkout(void);
+void dd_step_exact_users_release(int mem);
+void dd_step_exact_users_incref(void);
+void dd_step_exact_users_decref(void);
+casadi_int dd_step_exact_users_n_in(void);
+casadi_int dd_step_exact_users_n_out(void);
+casadi_real dd_step_exact_users_default_in(casadi_int i);
+const char* dd_step_exact_users_name_in(casadi_int i);
+const char* dd_step_exact_users_name_out(casadi_int i);
+const casadi_int* dd_step_exact_users_sparsity_in(casadi_int i);
+const casadi_int* dd_step_exact_users_sparsity_out(casadi_int i);
+int dd_step_exact_users_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int dd_step_exact_users_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define dd_step_exact_users_SZ_ARG 5
+#define dd_step_exact_users_SZ_RES 1
+#define dd_step_exact_users_SZ_IW 0
+#define dd_step_exact_users_SZ_W 0
+int dd_step_exact_jac_x_users(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int dd_step_exact_jac_x_users_checkout(void);
+void dd_step_exact_jac_x_users_release(int mem);
+void dd_step_exact_jac_x_users_incref(void);
+void dd_step_exact_jac_x_users_decref(void);
+casadi_int dd_step_exact_jac_x_users_n_in(void);
+casadi_int dd_step_exact_jac_x_users_n_out(void);
+casadi_real dd_step_exact_jac_x_users_default_in(casadi_int i);
+const char* dd_step_exact_jac_x_users_name_in(casadi_int i);
+const char* dd_step_exact_jac_x_users_name_out(casadi_int i);
+const casadi_int* dd_step_exact_jac_x_users_sparsity_in(casadi_int i);
+const casadi_int* dd_step_exact_jac_x_users_sparsity_out(casadi_int i);
+int dd_step_exact_jac_x_users_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int dd_step_exact_jac_x_users_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define dd_step_exact_jac_x_users_SZ_ARG 5
+#define dd_step_exact_jac_x_users_SZ_RES 1
+#define dd_step_exact_jac_x_users_SZ_IW 0
+#define dd_step_exact_jac_x_users_SZ_W 0
+int dd_step_exact_jac_p_users(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int dd_step_exact_jac_p_users_checkout(void);
+void dd_step_exact_jac_p_users_release(int mem);
+void dd_step_exact_jac_p_users_incref(void);
+void dd_step_exact_jac_p_users_decref(void);
+casadi_int dd_step_exact_jac_p_users_n_in(void);
+casadi_int dd_step_exact_jac_p_users_n_out(void);
+casadi_real dd_step_exact_jac_p_users_default_in(casadi_int i);
+const char* dd_step_exact_jac_p_users_name_in(casadi_int i);
+const char* dd_step_exact_jac_p_users_name_out(casadi_int i);
+const casadi_int* dd_step_exact_jac_p_users_sparsity_in(casadi_int i);
+const casadi_int* dd_step_exact_jac_p_users_sparsity_out(casadi_int i);
+int dd_step_exact_jac_p_users_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int dd_step_exact_jac_p_users_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define dd_step_exact_jac_p_users_SZ_ARG 5
+#define dd_step_exact_jac_p_users_SZ_RES 1
+#define dd_step_exact_jac_p_users_SZ_IW 0
+#define dd_step_exact_jac_p_users_SZ_W 0
+int oc_step_exact_users(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int oc_step_exact_users_checkout(void);
+void oc_step_exact_users_release(int mem);
+void oc_step_exact_users_incref(void);
+void oc_step_exact_users_decref(void);
+casadi_int oc_step_exact_users_n_in(void);
+casadi_int oc_step_exact_users_n_out(void);
+casadi_real oc_step_exact_users_default_in(casadi_int i);
+const char* oc_step_exact_users_name_in(casadi_int i);
+const char* oc_step_exact_users_name_out(casadi_int i);
+const casadi_int* oc_step_exact_users_sparsity_in(casadi_int i);
+const casadi_int* oc_step_exact_users_sparsity_out(casadi_int i);
+int oc_step_exact_users_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int oc_step_exact_users_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define oc_step_exact_users_SZ_ARG 5
+#define oc_step_exact_users_SZ_RES 1
+#define oc_step_exact_users_SZ_IW 0
+#define oc_step_exact_users_SZ_W 0
+int oc_step_exact_jac_p_users(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int oc_step_exact_jac_p_users_checkout(void);
+void oc_step_exact_jac_p_users_release(int mem);
+void oc_step_exact_jac_p_users_incref(void);
+void oc_step_exact_jac_p_users_decref(void);
+casadi_int oc_step_exact_jac_p_users_n_in(void);
+casadi_int oc_step_exact_jac_p_users_n_out(void);
+casadi_real oc_step_exact_jac_p_users_default_in(casadi_int i);
+const char* oc_step_exact_jac_p_users_name_in(casadi_int i);
+const char* oc_step_exact_jac_p_users_name_out(casadi_int i);
+const casadi_int* oc_step_exact_jac_p_users_sparsity_in(casadi_int i);
+const casadi_int* oc_step_exact_jac_p_users_sparsity_out(casadi_int i);
+int oc_step_exact_jac_p_users_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int oc_step_exact_jac_p_users_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define oc_step_exact_jac_p_users_SZ_ARG 5
+#define oc_step_exact_jac_p_users_SZ_RES 1
+#define oc_step_exact_jac_p_users_SZ_IW 0
+#define oc_step_exact_jac_p_users_SZ_W 0
 void casadi_kernels_casadi_version(int* major, int* minor, int* patch);
 int casadi_kernels_casadi_int_size(void);
 int casadi_kernels_casadi_real_size(void);

@@ -44,7 +44,11 @@ pub enum Model {
     OmniCaster,
 }
 
-/// One row of the benchmark: a set of outputs computed in one call.
+/// One row of the benchmark: a set of outputs computed in one call. The
+/// step rows come twice: the peers' kernels accuracy-matched to kinegen's
+/// (the same series switch near omega dt = 0), and as the peers' users
+/// write them (`...Users`: the chord form, verify/casadi/reference.py's
+/// `chord_step`); kinegen computes both with its one kernel.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub enum Row {
     DdStepJacXJacP,
@@ -58,22 +62,56 @@ pub enum Row {
     UcJacX,
     OcStep,
     OcJacP,
+    DdStepJacXJacPUsers,
+    OcStepJacPUsers,
+    DdStepUsers,
+    DdJacXUsers,
+    DdJacPUsers,
+    OcStepUsers,
+    OcJacPUsers,
 }
 
 impl Row {
-    pub const ALL: [Row; 11] = [
+    pub const ALL: [Row; 18] = [
+        Row::DdStepJacXJacPUsers,
         Row::DdStepJacXJacP,
         Row::UcLandmarkJacX,
         Row::OcTwist,
+        Row::OcStepJacPUsers,
         Row::OcStepJacP,
+        Row::DdStepUsers,
         Row::DdStep,
+        Row::DdJacXUsers,
         Row::DdJacX,
+        Row::DdJacPUsers,
         Row::DdJacP,
         Row::UcLandmark,
         Row::UcJacX,
+        Row::OcStepUsers,
         Row::OcStep,
+        Row::OcJacPUsers,
         Row::OcJacP,
     ];
+
+    /// The row with the same outputs whose peers are accuracy-matched (the
+    /// row itself when it is one).
+    pub fn matched(self) -> Row {
+        match self {
+            Row::DdStepJacXJacPUsers => Row::DdStepJacXJacP,
+            Row::OcStepJacPUsers => Row::OcStepJacP,
+            Row::DdStepUsers => Row::DdStep,
+            Row::DdJacXUsers => Row::DdJacX,
+            Row::DdJacPUsers => Row::DdJacP,
+            Row::OcStepUsers => Row::OcStep,
+            Row::OcJacPUsers => Row::OcJacP,
+            r => r,
+        }
+    }
+
+    /// Whether the peers' kernels are the chord form their users write.
+    pub fn users(self) -> bool {
+        self.matched() != self
+    }
 
     /// The peers' function name (verify/casadi/reference.py's PEER_KERNELS).
     pub fn name(self) -> &'static str {
@@ -89,12 +127,19 @@ impl Row {
             Row::UcJacX => "uc_obs_landmark_jac_x",
             Row::OcStep => "oc_step_exact",
             Row::OcJacP => "oc_step_exact_jac_p",
+            Row::DdStepJacXJacPUsers => "dd_step_users",
+            Row::OcStepJacPUsers => "oc_step_users",
+            Row::DdStepUsers => "dd_step_exact_users",
+            Row::DdJacXUsers => "dd_step_exact_jac_x_users",
+            Row::DdJacPUsers => "dd_step_exact_jac_p_users",
+            Row::OcStepUsers => "oc_step_exact_users",
+            Row::OcJacPUsers => "oc_step_exact_jac_p_users",
         }
     }
 
-    /// What the row computes, for the table.
-    pub fn label(self) -> &'static str {
-        match self {
+    /// What the row computes.
+    pub fn what(self) -> &'static str {
+        match self.matched() {
             Row::DdStepJacXJacP => "diff_drive pose + F_x + F_p",
             Row::UcLandmarkJacX => "unicycle_ekf landmark h + H_x",
             Row::OcTwist => "omni_caster twist (least squares)",
@@ -105,20 +150,33 @@ impl Row {
             Row::UcLandmark => "unicycle_ekf obs_landmark",
             Row::UcJacX => "unicycle_ekf obs_landmark_jac_x",
             Row::OcStep => "omni_caster step_exact",
-            Row::OcJacP => "omni_caster step_exact_jac_p",
+            _ => "omni_caster step_exact_jac_p",
+        }
+    }
+
+    /// What the row computes, for the table; a step row says which form its
+    /// peers take.
+    pub fn label(self) -> String {
+        let what = self.what();
+        if self.users() {
+            format!("{what}, peers as their users write it (chord form)")
+        } else if self.steps() {
+            format!("{what}, peers accuracy-matched (series switch)")
+        } else {
+            what.to_string()
         }
     }
 
     /// Every output in one call (the like-for-like rows) rather than one kernel alone.
     pub fn one_call(self) -> bool {
         matches!(
-            self,
+            self.matched(),
             Row::DdStepJacXJacP | Row::UcLandmarkJacX | Row::OcTwist | Row::OcStepJacP
         )
     }
 
     pub fn model(self) -> Model {
-        match self {
+        match self.matched() {
             Row::DdStepJacXJacP | Row::DdStep | Row::DdJacX | Row::DdJacP => Model::DiffDrive,
             Row::UcLandmarkJacX | Row::UcLandmark | Row::UcJacX => Model::Unicycle,
             _ => Model::OmniCaster,
@@ -129,7 +187,7 @@ impl Row {
     /// side of the series switch at |omega dt| = 0.05.
     pub fn steps(self) -> bool {
         !matches!(
-            self,
+            self.matched(),
             Row::UcLandmarkJacX | Row::UcLandmark | Row::UcJacX | Row::OcTwist
         )
     }
@@ -137,7 +195,7 @@ impl Row {
     /// The outputs' shapes (rows, columns), stored one after the other,
     /// row-major, in the output buffer.
     pub fn outputs(self) -> &'static [(usize, usize)] {
-        match self {
+        match self.matched() {
             Row::DdStepJacXJacP => &[(3, 1), (3, 3), (3, 5)],
             Row::UcLandmarkJacX => &[(2, 1), (2, 3)],
             Row::OcTwist | Row::DdStep | Row::OcStep => &[(3, 1)],
@@ -146,8 +204,17 @@ impl Row {
             Row::DdJacP => &[(3, 5)],
             Row::UcLandmark => &[(2, 1)],
             Row::UcJacX => &[(2, 3)],
-            Row::OcJacP => &[(3, 12)],
+            _ => &[(3, 12)],
         }
+    }
+
+    /// Whether a step of `turn` = omega dt is where the row's peers must
+    /// agree with kinegen to 1e-9: everywhere for the accuracy-matched rows;
+    /// for the users' chord form only where it is well conditioned (|omega
+    /// dt| > 0.05; nearer zero its differences of sines cancel, which the
+    /// benchmark reports as its error against a 50-digit reference).
+    pub fn agrees_at(self, turn: f64) -> bool {
+        !self.users() || turn.abs() > 0.05
     }
 
     /// Entries in the output buffer.
@@ -302,11 +369,14 @@ unsafe fn put<T: Copy>(o: *mut f64, v: T) {
 }
 
 /// `kernel(row)` for a side whose adapters have the names below (kinegen's
-/// and wrenfold's Rust sides).
+/// and wrenfold's Rust sides), with the users' rows' own adapters where the
+/// side has them (wrenfold's; kinegen computes every row with its one
+/// kernel: see [`Row::matched`]).
 macro_rules! kernels_by_row {
-    () => {
+    ($( $users_row:pat => $users_fn:ident ),* $(,)?) => {
         pub fn kernel(row: Row) -> Option<Kernel> {
             Some(match row {
+                $( $users_row => $users_fn, )*
                 Row::DdStepJacXJacP => dd_all,
                 Row::UcLandmarkJacX => uc_all,
                 Row::OcTwist => oc_twist,
@@ -318,6 +388,8 @@ macro_rules! kernels_by_row {
                 Row::UcJacX => uc_jac_x,
                 Row::OcStep => oc_step,
                 Row::OcJacP => oc_jac_p,
+                #[allow(unreachable_patterns)]
+                other => return kernel(other.matched()),
             })
         }
     };
@@ -503,8 +575,56 @@ macro_rules! wrenfold_side {
             unsafe extern "C" fn oc_jac_p(a: &Args, o: *mut f64) {
                 wf_step!(wf, a, 9, 3, 12, oc_step_exact_jac_p, &mut Out::<3, 12>(o));
             }
+            unsafe extern "C" fn dd_all_users(a: &Args, o: *mut f64) {
+                wf_step!(
+                    wf,
+                    a,
+                    2,
+                    2,
+                    5,
+                    dd_step_users,
+                    &mut Out::<3, 1>(o),
+                    &mut Out::<3, 3>(o.add(3)),
+                    &mut Out::<3, 5>(o.add(12))
+                );
+            }
+            unsafe extern "C" fn oc_all_users(a: &Args, o: *mut f64) {
+                wf_step!(
+                    wf,
+                    a,
+                    9,
+                    3,
+                    12,
+                    oc_step_users,
+                    &mut Out::<3, 1>(o),
+                    &mut Out::<3, 12>(o.add(3))
+                );
+            }
+            unsafe extern "C" fn dd_step_users(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 2, 2, 5, dd_step_exact_users, &mut Out::<3, 1>(o));
+            }
+            unsafe extern "C" fn dd_jac_x_users(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 2, 2, 5, dd_step_exact_jac_x_users, &mut Out::<3, 3>(o));
+            }
+            unsafe extern "C" fn dd_jac_p_users(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 2, 2, 5, dd_step_exact_jac_p_users, &mut Out::<3, 5>(o));
+            }
+            unsafe extern "C" fn oc_step_users(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 9, 3, 12, oc_step_exact_users, &mut Out::<3, 1>(o));
+            }
+            unsafe extern "C" fn oc_jac_p_users(a: &Args, o: *mut f64) {
+                wf_step!(wf, a, 9, 3, 12, oc_step_exact_jac_p_users, &mut Out::<3, 12>(o));
+            }
 
-            kernels_by_row!();
+            kernels_by_row!(
+                Row::DdStepJacXJacPUsers => dd_all_users,
+                Row::OcStepJacPUsers => oc_all_users,
+                Row::DdStepUsers => dd_step_users,
+                Row::DdJacXUsers => dd_jac_x_users,
+                Row::DdJacPUsers => dd_jac_p_users,
+                Row::OcStepUsers => oc_step_users,
+                Row::OcJacPUsers => oc_jac_p_users,
+            );
         }
     };
 }
@@ -543,6 +663,13 @@ foreign_side!(wrenfold_cpp, cfg(wrenfold_cpp),
     UcJacX => wrenfold_cpp_uc_obs_landmark_jac_x,
     OcStep => wrenfold_cpp_oc_step_exact,
     OcJacP => wrenfold_cpp_oc_step_exact_jac_p,
+    DdStepJacXJacPUsers => wrenfold_cpp_dd_step_users,
+    OcStepJacPUsers => wrenfold_cpp_oc_step_users,
+    DdStepUsers => wrenfold_cpp_dd_step_exact_users,
+    DdJacXUsers => wrenfold_cpp_dd_step_exact_jac_x_users,
+    DdJacPUsers => wrenfold_cpp_dd_step_exact_jac_p_users,
+    OcStepUsers => wrenfold_cpp_oc_step_exact_users,
+    OcJacPUsers => wrenfold_cpp_oc_step_exact_jac_p_users,
 );
 
 foreign_side!(symforce_cpp, cfg(symforce_cpp),
@@ -557,6 +684,13 @@ foreign_side!(symforce_cpp, cfg(symforce_cpp),
     UcJacX => symforce_cpp_uc_obs_landmark_jac_x,
     OcStep => symforce_cpp_oc_step_exact,
     OcJacP => symforce_cpp_oc_step_exact_jac_p,
+    DdStepJacXJacPUsers => symforce_cpp_dd_step_users,
+    OcStepJacPUsers => symforce_cpp_oc_step_users,
+    DdStepUsers => symforce_cpp_dd_step_exact_users,
+    DdJacXUsers => symforce_cpp_dd_step_exact_jac_x_users,
+    DdJacPUsers => symforce_cpp_dd_step_exact_jac_p_users,
+    OcStepUsers => symforce_cpp_oc_step_exact_users,
+    OcJacPUsers => symforce_cpp_oc_step_exact_jac_p_users,
 );
 
 /// CasADi's adapters, and its sparse output layout.
@@ -604,6 +738,13 @@ mod casadi {
         UcJacX: casadi_adapter_uc_obs_landmark_jac_x, casadi_adapter_init_uc_obs_landmark_jac_x, uc_obs_landmark_jac_x_sparsity_out, uc_obs_landmark_jac_x_n_out;
         OcStep: casadi_adapter_oc_step_exact, casadi_adapter_init_oc_step_exact, oc_step_exact_sparsity_out, oc_step_exact_n_out;
         OcJacP: casadi_adapter_oc_step_exact_jac_p, casadi_adapter_init_oc_step_exact_jac_p, oc_step_exact_jac_p_sparsity_out, oc_step_exact_jac_p_n_out;
+        DdStepJacXJacPUsers: casadi_adapter_dd_step_users, casadi_adapter_init_dd_step_users, dd_step_users_sparsity_out, dd_step_users_n_out;
+        OcStepJacPUsers: casadi_adapter_oc_step_users, casadi_adapter_init_oc_step_users, oc_step_users_sparsity_out, oc_step_users_n_out;
+        DdStepUsers: casadi_adapter_dd_step_exact_users, casadi_adapter_init_dd_step_exact_users, dd_step_exact_users_sparsity_out, dd_step_exact_users_n_out;
+        DdJacXUsers: casadi_adapter_dd_step_exact_jac_x_users, casadi_adapter_init_dd_step_exact_jac_x_users, dd_step_exact_jac_x_users_sparsity_out, dd_step_exact_jac_x_users_n_out;
+        DdJacPUsers: casadi_adapter_dd_step_exact_jac_p_users, casadi_adapter_init_dd_step_exact_jac_p_users, dd_step_exact_jac_p_users_sparsity_out, dd_step_exact_jac_p_users_n_out;
+        OcStepUsers: casadi_adapter_oc_step_exact_users, casadi_adapter_init_oc_step_exact_users, oc_step_exact_users_sparsity_out, oc_step_exact_users_n_out;
+        OcJacPUsers: casadi_adapter_oc_step_exact_jac_p_users, casadi_adapter_init_oc_step_exact_jac_p_users, oc_step_exact_jac_p_users_sparsity_out, oc_step_exact_jac_p_users_n_out;
     }
 
     /// CasADi's compact sparsity: [rows, cols, 1] for a dense matrix, else

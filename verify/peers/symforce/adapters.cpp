@@ -63,4 +63,25 @@ void symforce_cpp_oc_step_exact(const Args* a, double* o) {
 void symforce_cpp_oc_step_exact_jac_p(const Args* a, double* o) {
   OcStepExactJacP<double>(OC_STEP, out<3, 12>(o));
 }
+void symforce_cpp_dd_step_users(const Args* a, double* o) {
+  DdStepUsers<double>(DD_STEP, out<3, 1>(o), out<3, 3>(o + 3), out<3, 5>(o + 12));
+}
+void symforce_cpp_oc_step_users(const Args* a, double* o) {
+  OcStepUsers<double>(OC_STEP, out<3, 1>(o), out<3, 12>(o + 3));
+}
+void symforce_cpp_dd_step_exact_users(const Args* a, double* o) {
+  DdStepExactUsers<double>(DD_STEP, out<3, 1>(o));
+}
+void symforce_cpp_dd_step_exact_jac_x_users(const Args* a, double* o) {
+  DdStepExactJacXUsers<double>(DD_STEP, out<3, 3>(o));
+}
+void symforce_cpp_dd_step_exact_jac_p_users(const Args* a, double* o) {
+  DdStepExactJacPUsers<double>(DD_STEP, out<3, 5>(o));
+}
+void symforce_cpp_oc_step_exact_users(const Args* a, double* o) {
+  OcStepExactUsers<double>(OC_STEP, out<3, 1>(o));
+}
+void symforce_cpp_oc_step_exact_jac_p_users(const Args* a, double* o) {
+  OcStepExactJacPUsers<double>(OC_STEP, out<3, 12>(o));
+}
 }

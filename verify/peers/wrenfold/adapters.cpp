@@ -60,4 +60,25 @@ void wrenfold_cpp_oc_step_exact(const Args* a, double* o) {
 void wrenfold_cpp_oc_step_exact_jac_p(const Args* a, double* o) {
   oc_step_exact_jac_p<double>(OC_STEP, out<3, 12>(o));
 }
+void wrenfold_cpp_dd_step_users(const Args* a, double* o) {
+  dd_step_users<double>(DD_STEP, out<3, 1>(o), out<3, 3>(o + 3), out<3, 5>(o + 12));
+}
+void wrenfold_cpp_oc_step_users(const Args* a, double* o) {
+  oc_step_users<double>(OC_STEP, out<3, 1>(o), out<3, 12>(o + 3));
+}
+void wrenfold_cpp_dd_step_exact_users(const Args* a, double* o) {
+  dd_step_exact_users<double>(DD_STEP, out<3, 1>(o));
+}
+void wrenfold_cpp_dd_step_exact_jac_x_users(const Args* a, double* o) {
+  dd_step_exact_jac_x_users<double>(DD_STEP, out<3, 3>(o));
+}
+void wrenfold_cpp_dd_step_exact_jac_p_users(const Args* a, double* o) {
+  dd_step_exact_jac_p_users<double>(DD_STEP, out<3, 5>(o));
+}
+void wrenfold_cpp_oc_step_exact_users(const Args* a, double* o) {
+  oc_step_exact_users<double>(OC_STEP, out<3, 1>(o));
+}
+void wrenfold_cpp_oc_step_exact_jac_p_users(const Args* a, double* o) {
+  oc_step_exact_jac_p_users<double>(OC_STEP, out<3, 12>(o));
+}
 }
