@@ -41,7 +41,7 @@
 //! differences of the step (two steps per parameter), both kinegen no_std.
 use kinegen_generated::{diff_drive as dd, omni_caster as oc};
 use kinegen_peers::inputs::{self, Sample};
-use kinegen_peers::{disagreement, sides, Args, Kernel, Layout, Model, Row, Side};
+use kinegen_peers::{disagreement, ops, sides, Args, Kernel, Layout, Model, Row, Side};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use std::collections::BTreeMap;
@@ -571,6 +571,18 @@ fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
     accuracy.iter().for_each(|l| {
         let _ = writeln!(t, "{l}");
     });
+    let _ = writeln!(
+        t,
+        "\n| operations in the generated code, as each tool counts them (`kinegen_peers::ops`) | {} |",
+        side_names.join(" | ")
+    );
+    let _ = writeln!(t, "|---|{}", "---|".repeat(side_names.len()));
+    for row in Row::ALL {
+        let counts: Vec<String> = (side_names.iter())
+            .map(|side| ops::operations(row, side).map_or("-".into(), |n| n.to_string()))
+            .collect();
+        let _ = writeln!(t, "| {} | {} |", row.label(), counts.join(" | "));
+    }
     let _ = writeln!(t, "\n| parameter Jacobian, kinegen no_std (ns per call, mix) | analytic | central differences | speed-up |");
     let _ = writeln!(t, "|---|---|---|---|");
     for row in &central {

@@ -17,6 +17,7 @@
 use wrenfold_traits::{OutputSpan2D, Span2D};
 
 pub mod inputs;
+pub mod ops;
 
 /// A kernel's arguments (the ones it does not take are ignored); the C and
 /// C++ adapters read the same layout from `args.h`.
