@@ -18,7 +18,8 @@ tmp=$(mktemp)
 trap 'rm -f "$tmp"' EXIT
 {
   echo "<!-- written by scripts/bench_peers.sh: do not edit; rerun it -->"
-  echo "Provenance: $(date -u +%F), commit $(git rev-parse --short HEAD)$(git diff --quiet HEAD || echo ' (with local changes)'),"
+  # the page itself is not a local change of the code measured
+  echo "Provenance: $(date -u +%F), commit $(git rev-parse --short HEAD)$(git diff --quiet HEAD -- . ":(exclude)$out" || echo ' (with local changes)'),"
   echo "$(nproc) cores of \`$cpu\`, load average $(cut -d' ' -f1-3 /proc/loadavg) before the runs,"
   echo "$(rustc --version). Reproduce with \`scripts/bench_peers.sh\`."
   for build in generic native; do
