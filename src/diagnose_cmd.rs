@@ -101,6 +101,12 @@ pub fn run(c: Common) -> ExitCode {
                 p.held_out_after,
                 p.reading
             ));
+            if !p.instead_of.is_empty() {
+                out.say(&format!(
+                    "  instead of the catalogue's {}: it predicts the held-out part better than they do (its effect file is for the spec without them)",
+                    p.instead_of.join(" and ")
+                ));
+            }
             out.say("  its effect file (--report DIR writes it to DIR/proposed/; add-effect --effects DIR applies it):");
             p.toml.lines().for_each(|l| out.say(&format!("  {l}")));
         }

@@ -198,22 +198,24 @@ pub fn scored_on(p: &Proposal) -> &'static str {
 fn say_proposal(out: &mut Vec<String>, d: &Diagnosis) {
     for p in &d.proposed {
         let terms: Vec<String> = p
-            .terms
-            .iter()
-            .zip(&p.corrects)
-            .zip(&p.gains)
-            .map(|((t, c), g)| {
-                let gain = (p.parameters.get(g)).map_or(g.clone(), |e| with_std(e.estimate, e.std));
+            .corrections()
+            .map(|c| {
+                let gain = (c.value).map_or(c.gain.to_string(), |e| with_std(e.estimate, e.std));
                 // a constant term is its gain alone
-                match t.as_str() {
-                    "1" => format!("{c} += {gain}"),
-                    _ => format!("{c} += {gain} x {t}"),
+                match c.term {
+                    "1" => format!("{} += {gain}", c.output),
+                    t => format!("{} += {gain} x {t}", c.output),
                 }
             })
             .collect();
         let on = match p.scored_on {
             ScoredOn::Track => "",
             ScoredOn::Sightings => " on the sightings",
+        };
+        let on = if p.instead_of.is_empty() {
+            on.to_string()
+        } else {
+            format!(" instead of {}", p.instead_of.join(" and "))
         };
         out.push(cut(&format!(
             "proposed{on}, {:+.0}% held out (-v): {}",

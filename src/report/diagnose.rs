@@ -110,24 +110,30 @@ pub fn diagnose_report(
 /// may be, and its effect file (written beside the page, `proposed/`).
 fn proposal_html(p: &Proposal) -> String {
     let terms: Vec<String> = p
-        .terms
-        .iter()
-        .zip(&p.corrects)
-        .zip(&p.gains)
-        .map(|((t, c), g)| {
-            let v = p.parameters.get(g).map_or(String::new(), |e| {
+        .corrections()
+        .map(|c| {
+            let v = c.value.map_or(String::new(), |e| {
                 format!(" = {}", crate::output::with_std(e.estimate, e.std))
             });
             format!(
-                "<li><code>{} += {g} &times; {}</code>{v}</li>",
-                esc(c),
-                esc(t)
+                "<li><code>{} += {} &times; {}</code>{v}</li>",
+                esc(c.output),
+                esc(c.gain),
+                esc(c.term)
             )
         })
         .collect();
     format!(
-        "<h2>Proposed beyond the catalogue: <code>{}</code></h2><p>Not a known physical effect: a correction these logs support. {} held out: {:.3} &rarr; {:.3}. It may be: {}.</p><ul>{}</ul><p>Its effect file, <code>proposed/{}.toml</code> beside this page (<code>kinegen add-effect --effects DIR/proposed --effect {}</code> adds it to the spec):</p><pre>{}</pre>",
+        "<h2>Proposed beyond the catalogue: <code>{}</code></h2><p>Not a known physical effect: a correction these logs support{}. Held out ({}): {:.3} &rarr; {:.3}. It may be: {}.</p><ul>{}</ul><p>Its effect file, <code>proposed/{}.toml</code> beside this page (<code>kinegen add-effect --effects DIR/proposed --effect {}</code> adds it to the spec):</p><pre>{}</pre>",
         esc(&p.name),
+        if p.instead_of.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", instead of the catalogue's {} (it predicts the held-out part better than they do; its effect file is for the spec without them)",
+                esc(&p.instead_of.join(" and "))
+            )
+        },
         crate::diagnose_text::scored_on(p),
         p.held_out_before,
         p.held_out_after,

@@ -246,6 +246,35 @@ impl ChainStep {
     }
 }
 
+/// The twist's proposal beyond the catalogue: on top of the chain's last
+/// stage `cur` (`cx.chain` its effects), or, where none holds there,
+/// instead of the chain, from the calibrated spec `base`, when it predicts
+/// the held-out part better than the chain does. A catalogue effect can
+/// stand in for one the catalogue cannot express (a command deadband as
+/// wide as the largest turn-rate commands, for a response that falls off
+/// at them), and once it is in, no term on top of it passes the tests.
+fn track_proposal(
+    cur: &Stage,
+    base: &Stage,
+    cx: &super::propose::twist::Context,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Option<Proposal> {
+    use super::propose::twist::{propose, Context};
+    if let Some(p) = propose(cur, cx, progress) {
+        return Some(p);
+    }
+    if cx.chain.is_empty() {
+        return None;
+    }
+    let from_base = Context { chain: &[], ..*cx };
+    let mut p = propose(base, &from_base, progress)?;
+    // instead of the chain only where it beats it on the held-out part
+    (p.held_out_after < cur.holdout_rmse).then(|| {
+        p.instead_of = cx.chain.to_vec();
+        p
+    })
+}
+
 /// Run the diagnosis: calibrate the base model, rank every applicable effect,
 /// add the best significant one, re-test the rest on the augmented model, and
 /// repeat until nothing is significant. `skipped` collects effects not tested,
@@ -293,6 +322,7 @@ pub fn diagnose(
         (first.rmse, first.fit.clone(), first.holdout_rmse);
     let mut noise_floor = first.floor;
 
+    let base_stage = first.clone();
     let mut cur = first;
     let mut chain: Vec<ChainStep> = Vec::new();
     let mut first_candidates: Option<Vec<Candidate>> = None;
@@ -354,7 +384,7 @@ pub fn diagnose(
             folds: folds.as_ref(),
             o: &o,
         };
-        super::propose::twist::propose(&cur, &cx, progress)
+        track_proposal(&cur, &base_stage, &cx, progress)
     } else {
         None
     };

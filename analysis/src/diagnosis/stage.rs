@@ -97,6 +97,7 @@ pub(crate) fn evident(cur: &Stage, rmse: f64, gain: f64) -> bool {
 }
 
 /// The current model of a diagnosis step: its runner, calibration and scores.
+#[derive(Clone)]
 pub(crate) struct Stage {
     pub(crate) runner: Runner,
     pub(crate) fit: FitResult,

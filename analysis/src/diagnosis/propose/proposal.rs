@@ -71,9 +71,34 @@ pub struct Proposal {
     pub held_out_after: f64,
     /// What the terms may be physically.
     pub reading: String,
+    /// The catalogue effects the proposal stands instead of: empty when it
+    /// is made on top of the diagnosis's chain; else the chain, which it
+    /// predicts the held-out part better than (its effect file is then for
+    /// the spec without them).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub instead_of: Vec<String>,
+}
+
+/// One term of a proposal as a reader wants it: the output it is added
+/// to, the term, its gain's name and the gain as calibrated.
+pub struct Correction<'a> {
+    pub output: &'a str,
+    pub term: &'a str,
+    pub gain: &'a str,
+    pub value: Option<&'a crate::diagnosis::estimate::Estimate>,
 }
 
 impl Proposal {
+    /// Its terms, each with its output and its calibrated gain.
+    pub fn corrections(&self) -> impl Iterator<Item = Correction<'_>> {
+        (self.terms.iter().zip(&self.corrects).zip(&self.gains)).map(|((t, c), g)| Correction {
+            output: c,
+            term: t,
+            gain: g,
+            value: self.parameters.get(g),
+        })
+    }
+
     /// The proposal's fields that follow from its terms alone.
     pub(crate) fn of_terms(
         name: String,
@@ -98,6 +123,7 @@ impl Proposal {
                 .map(|t| t.reading)
                 .collect::<Vec<_>>()
                 .join("; "),
+            instead_of: Vec::new(),
         }
     }
 }
