@@ -784,32 +784,8 @@ fn seed_methods_run_and_are_compared_on_umbmark_squares() {
 #[test]
 fn seed_000_setting_every_method_moves_toward_the_truth() {
     let tmp = tempfile::tempdir().unwrap();
-    let truth = [
-        "e1=0.042",
-        "e2=0.044",
-        "e3=0.043",
-        "r1=0.101",
-        "r2=0.1",
-        "r3=0.101",
-        "xa1=0.327",
-        "xa2=-0.329",
-        "xa3=0.002",
-        "ya1=0.188",
-        "ya2=0.186",
-        "ya3=-0.374",
-    ];
-    let mut args = vec![
-        "--spec",
-        "spec/omni_caster.toml",
-        "--trajectory",
-        "random",
-        "--seed",
-        "3",
-    ];
-    for t in &truth {
-        args.extend(["--set", t]);
-    }
-    let log = simulate(tmp.path(), "omni.csv", &args);
+    let truth = SEED_000_TRUTH;
+    let log = seed_000_log(tmp.path(), "omni.csv", "3");
     let report = tmp.path().join("report");
     let mut args = vec![
         "fit",
@@ -1840,34 +1816,7 @@ mod libc_sig {
 #[test]
 fn seed_000_neural_gyrodometry_loses_to_the_calibrated_model() {
     let tmp = tempfile::tempdir().unwrap();
-    let truth = [
-        "e1=0.042",
-        "e2=0.044",
-        "e3=0.043",
-        "r1=0.101",
-        "r2=0.1",
-        "r3=0.101",
-        "xa1=0.327",
-        "xa2=-0.329",
-        "xa3=0.002",
-        "ya1=0.188",
-        "ya2=0.186",
-        "ya3=-0.374",
-    ];
-    let log = |seed: &str| {
-        let mut args = vec![
-            "--spec",
-            "spec/omni_caster.toml",
-            "--trajectory",
-            "random",
-            "--seed",
-            seed,
-        ];
-        for t in &truth {
-            args.extend(["--set", t]);
-        }
-        simulate(tmp.path(), &format!("omni{seed}.csv"), &args)
-    };
+    let log = |seed: &str| seed_000_log(tmp.path(), &format!("omni{seed}.csv"), seed);
     let (a, b, c, held) = (log("3"), log("4"), log("5"), log("11"));
     let report = tmp.path().join("report");
     let doc = kinegen_json(&[

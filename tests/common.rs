@@ -93,6 +93,42 @@ pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
     out
 }
 
+// ---- named scenarios
+
+/// Seed 000's truth: the Omni robot's parameters as the paper identified
+/// them (eq. 28), where the spec's nominal values are eq. 27's.
+pub const SEED_000_TRUTH: [&str; 12] = [
+    "e1=0.042",
+    "e2=0.044",
+    "e3=0.043",
+    "r1=0.101",
+    "r2=0.1",
+    "r3=0.101",
+    "xa1=0.327",
+    "xa2=-0.329",
+    "xa3=0.002",
+    "ya1=0.188",
+    "ya2=0.186",
+    "ya3=-0.374",
+];
+
+/// A log of seed 000's Omni robot at its truth ([`SEED_000_TRUTH`]), random
+/// driving from `seed`, written to `dir/name`.
+pub fn seed_000_log(dir: &Path, name: &str, seed: &str) -> PathBuf {
+    let mut args = vec![
+        "--spec",
+        "spec/omni_caster.toml",
+        "--trajectory",
+        "random",
+        "--seed",
+        seed,
+    ];
+    for t in &SEED_000_TRUTH {
+        args.extend(["--set", t]);
+    }
+    simulate(dir, name, &args)
+}
+
 /// `kinegen add-effect`: `spec` with the catalogue's `effect` added (at
 /// `values`, each `NAME=VALUE`), written to `out`, which is returned.
 pub fn add_effect(spec: &Path, effect: &str, values: &[&str], out: &Path) -> PathBuf {
