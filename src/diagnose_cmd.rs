@@ -92,24 +92,7 @@ pub fn run(c: Common) -> ExitCode {
         say_candidates(&out, d);
         say_chain(&out, outcome, &steps);
         say_structure(&out, d);
-        for p in &d.proposed {
-            out.say(&format!(
-                "proposed beyond the catalogue: {} ({} held out: {:.4} -> {:.4}); may be: {}",
-                p.name,
-                crate::diagnose_text::scored_on(p),
-                p.held_out_before,
-                p.held_out_after,
-                p.reading
-            ));
-            if !p.instead_of.is_empty() {
-                out.say(&format!(
-                    "  instead of the catalogue's {}: it predicts the held-out part better than they do (its effect file is for the spec without them)",
-                    p.instead_of.join(" and ")
-                ));
-            }
-            out.say("  its effect file (--report DIR writes it to DIR/proposed/; add-effect --effects DIR applies it):");
-            p.toml.lines().for_each(|l| out.say(&format!("  {l}")));
-        }
+        say_proposals(&out, d);
         say_discretisation(&out, d);
         out.say(&format!(
             "time: {:.2} s preparing, {:.2} s diagnosing",
@@ -141,6 +124,29 @@ pub fn run(c: Common) -> ExitCode {
         out.say(&format!("report: {}", dir.join("index.html").display()));
     }
     out.finish(c.json.as_deref(), &doc)
+}
+
+/// The corrections beyond the catalogue in full (-v): their held-out
+/// figures, what they may be, and their effect files.
+fn say_proposals(out: &Out, d: &Diagnosis) {
+    for p in &d.proposed {
+        out.say(&format!(
+            "proposed beyond the catalogue: {} ({} held out: {:.4} -> {:.4}); may be: {}",
+            p.name,
+            crate::diagnose_text::scored_on(p),
+            p.held_out_before,
+            p.held_out_after,
+            p.reading
+        ));
+        if !p.instead_of.is_empty() {
+            out.say(&format!(
+                "  instead of the catalogue's {}: it predicts the held-out part better than they do (its effect file is for the spec without them)",
+                p.instead_of.join(" and ")
+            ));
+        }
+        out.say("  its effect file (--report DIR writes it to DIR/proposed/; add-effect --effects DIR applies it):");
+        p.toml.lines().for_each(|l| out.say(&format!("  {l}")));
+    }
 }
 
 /// What the landmark sightings said of the ground truth's clock, and of the

@@ -253,13 +253,24 @@ impl ChainStep {
 /// stand in for one the catalogue cannot express (a command deadband as
 /// wide as the largest turn-rate commands, for a response that falls off
 /// at them), and once it is in, no term on top of it passes the tests.
+///
+/// Tried where the one-step residuals show structure (`structured`), or
+/// where the track's error is still above the noise floor: an effect on the
+/// turn rate that a noisy ground truth hides step by step (a curved command
+/// response under 3x the simulator's noise: no structure found, 5.6 -> 0.49
+/// with the true effect) still moves the whole track. The proposal's own
+/// held-out and fold tests keep a clean log clean.
 fn track_proposal(
     cur: &Stage,
     base: &Stage,
+    structured: bool,
     cx: &super::propose::twist::Context,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Option<Proposal> {
     use super::propose::twist::{propose, Context};
+    if !structured && leaves_only_noise(cur) {
+        return None;
+    }
     if let Some(p) = propose(cur, cx, progress) {
         return Some(p);
     }
@@ -367,27 +378,17 @@ pub fn diagnose(
         cur = next;
     }
     let structure = whiteness(&cur.runner, &cur.fit.p, runs);
-    // tried where the one-step residuals show structure, or where the
-    // track's error is still above the noise floor: an effect on the turn
-    // rate that a noisy ground truth hides step by step (a curved command
-    // response under 3x the simulator's noise: no structure found, 5.6 ->
-    // 0.49 with the true effect) still moves the whole track. The
-    // proposal's own held-out and fold tests keep a clean log clean.
-    let proposed = if structure.structured || !leaves_only_noise(&cur) {
-        let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
-        let cx = super::propose::twist::Context {
-            chains: cat.chains,
-            chain: &names,
-            runs,
-            train: &train,
-            test: &test,
-            folds: folds.as_ref(),
-            o: &o,
-        };
-        track_proposal(&cur, &base_stage, &cx, progress)
-    } else {
-        None
+    let names: Vec<String> = chain.iter().map(|c| c.effect.clone()).collect();
+    let cx = super::propose::twist::Context {
+        chains: cat.chains,
+        chain: &names,
+        runs,
+        train: &train,
+        test: &test,
+        folds: folds.as_ref(),
+        o: &o,
     };
+    let proposed = track_proposal(&cur, &base_stage, structure.structured, &cx, progress);
     let sensor = sensor_chain(cur, runs, &sensor_effects, cat.chains, &mut chain);
     progress("sensor effects tested");
     Ok(Diagnosis {

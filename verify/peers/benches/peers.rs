@@ -484,28 +484,41 @@ fn cell(v: &mut [f64], digits: usize) -> String {
     }
 }
 
+/// Every process's figures by (row, side), one per process, and the rows
+/// in the order the processes wrote them.
+struct Figures {
+    rows: Vec<String>,
+    by: BTreeMap<(String, String), Vec<Option<f64>>>,
+}
+
+impl Figures {
+    fn of(runs: &[Vec<Record>]) -> Figures {
+        let mut f = Figures {
+            rows: Vec::new(),
+            by: BTreeMap::new(),
+        };
+        for r in runs.iter().flatten() {
+            if !f.rows.contains(&r.row) {
+                f.rows.push(r.row.clone());
+            }
+            (f.by.entry((r.row.clone(), r.side.clone())).or_default()).push(r.ns);
+        }
+        f
+    }
+
+    /// The figures of `side` on `row`, one per process.
+    fn get(&self, row: &str, side: &str) -> Vec<Option<f64>> {
+        (self.by.get(&(row.to_string(), side.to_string())))
+            .cloned()
+            .unwrap_or_default()
+    }
+}
+
 /// The tables of every process's records: each cell the median of the
 /// processes' figures and their range; each ratio the range of the
 /// processes' own ratios to the fastest peer of that process.
 fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
-    // row -> side -> one figure per process
-    let mut rows: Vec<String> = Vec::new();
-    let mut by: BTreeMap<(String, String), Vec<Option<f64>>> = BTreeMap::new();
-    for run in runs {
-        for r in run {
-            if !rows.contains(&r.row) {
-                rows.push(r.row.clone());
-            }
-            by.entry((r.row.clone(), r.side.clone()))
-                .or_default()
-                .push(r.ns);
-        }
-    }
-    let figures = |row: &str, side: &str| -> Vec<Option<f64>> {
-        by.get(&(row.to_string(), side.to_string()))
-            .cloned()
-            .unwrap_or_default()
-    };
+    let figures = Figures::of(runs);
     let mut t = String::new();
     let _ = writeln!(
         t,
@@ -520,15 +533,15 @@ fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
         .filter(|n| !n.starts_with("kinegen"))
         .collect();
     let (mut central, mut accuracy) = (Vec::new(), Vec::new());
-    for row in &rows {
-        if figures(row, "analytic").iter().any(Option::is_some) {
+    for row in &figures.rows {
+        if figures.get(row, "analytic").iter().any(Option::is_some) {
             central.push(row.clone());
             continue;
         }
         if let Some(label) = row.strip_prefix("accuracy | ") {
             let errors: Vec<String> = (side_names.iter())
                 .map(|side| {
-                    let e = figures(row, side).first().copied().flatten();
+                    let e = figures.get(row, side).first().copied().flatten();
                     e.map_or("-".to_string(), |e| format!("{e:.0e}"))
                 })
                 .collect();
@@ -537,16 +550,16 @@ fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
         }
         let mut cells = Vec::new();
         for side in side_names {
-            let mut v: Vec<f64> = figures(row, side).into_iter().flatten().collect();
+            let mut v: Vec<f64> = figures.get(row, side).into_iter().flatten().collect();
             cells.push(cell(&mut v, 1));
         }
         // per process: kinegen's figure over that process's fastest peer
         let ratio = |side: &str| {
             let mut v: Vec<f64> = (0..runs.len())
                 .filter_map(|k| {
-                    let mine = *figures(row, side).get(k)?;
+                    let mine = *figures.get(row, side).get(k)?;
                     let best = (peers.iter())
-                        .filter_map(|p| *figures(row, p).get(k)?)
+                        .filter_map(|p| *figures.get(row, p).get(k)?)
                         .fold(f64::INFINITY, f64::min);
                     mine.map(|m| m / best)
                 })
@@ -571,24 +584,32 @@ fn render(runs: &[Vec<Record>], side_names: &[&str]) -> String {
     accuracy.iter().for_each(|l| {
         let _ = writeln!(t, "{l}");
     });
-    let _ = writeln!(
-        t,
-        "\n| operations in the generated code, as each tool counts them (`kinegen_peers::ops`) | {} |",
-        side_names.join(" | ")
+    t + &operations_table(side_names) + &central_table(&central, &figures)
+}
+
+/// Each side's operation count on every row ([`ops::operations`]).
+fn operations_table(side_names: &[&str]) -> String {
+    let mut t = format!(
+        "\n| operations in the generated code, as each tool counts them (`kinegen_peers::ops`) | {} |\n|---|{}\n",
+        side_names.join(" | "),
+        "---|".repeat(side_names.len())
     );
-    let _ = writeln!(t, "|---|{}", "---|".repeat(side_names.len()));
     for row in Row::ALL {
         let counts: Vec<String> = (side_names.iter())
             .map(|side| ops::operations(row, side).map_or("-".into(), |n| n.to_string()))
             .collect();
         let _ = writeln!(t, "| {} | {} |", row.label(), counts.join(" | "));
     }
-    let _ = writeln!(t, "\n| parameter Jacobian, kinegen no_std (ns per call, mix) | analytic | central differences | speed-up |");
-    let _ = writeln!(t, "|---|---|---|---|");
-    for row in &central {
+    t
+}
+
+/// The analytic parameter Jacobians against central differences.
+fn central_table(rows: &[String], figures: &Figures) -> String {
+    let mut t = String::from("\n| parameter Jacobian, kinegen no_std (ns per call, mix) | analytic | central differences | speed-up |\n|---|---|---|---|\n");
+    for row in rows {
         let (a, c) = (
-            figures(row, "analytic"),
-            figures(row, "central differences"),
+            figures.get(row, "analytic"),
+            figures.get(row, "central differences"),
         );
         let mut speedup: Vec<f64> = (a.iter().zip(&c))
             .filter_map(|(a, c)| Some((*c)? / (*a)?))
