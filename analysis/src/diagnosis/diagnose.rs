@@ -209,7 +209,7 @@ fn sensor_chain(
     match diagnose_sensor(&cur.runner, &cur.fit.p, runs, effects, chains, &motion) {
         Ok(sd) => {
             let proposed = super::propose::sightings::propose(&sd, &cur.runner, chains, &motion);
-            chain.extend(sd.found.iter().map(|c| ChainStep {
+            chain.extend(sd.chain.found.iter().map(|c| ChainStep {
                 effect: c.effect.clone(),
                 parameters: c.parameters.clone(),
                 rmse_after: cur.rmse,
@@ -219,11 +219,11 @@ fn sensor_chain(
                 sightings: Some(c.fit.clone()),
             }));
             SensorOutcome {
-                candidates: sd.candidates,
+                candidates: sd.chain.candidates,
                 proposed,
                 unmeasured: None,
-                runner: sd.runner,
-                p: sd.p,
+                runner: sd.chain.runner,
+                p: sd.chain.p,
             }
         }
         Err(why) => unchanged(Some(why)),

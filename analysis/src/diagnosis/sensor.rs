@@ -142,15 +142,11 @@ pub(crate) fn candidate(
     }
 }
 
-/// The sensor's diagnosis: its first round's candidates, the effects found
-/// in order (each calibrated with the ones before it), the runner with all
-/// of them, and the sightings they were judged on (what a proposal beyond
-/// the catalogue is judged on too, at the same scale).
+/// The sensor's diagnosis: its chain, and the sightings it was judged on
+/// (what a proposal beyond the catalogue is judged on too, at the same
+/// scale).
 pub struct SensorDiagnosis<'a> {
-    pub candidates: Vec<SensorCandidate>,
-    pub found: Vec<SensorCandidate>,
-    pub runner: Runner,
-    pub p: Vec<f64>,
+    pub chain: SensorChain,
     pub sightings: Sightings<'a>,
 }
 
@@ -167,25 +163,24 @@ pub fn diagnose_sensor<'a>(
     motion: &[String],
 ) -> Result<SensorDiagnosis<'a>, SensorUnmeasured> {
     let s = Sightings::of(cur, p, runs)?;
-    let start = Grown {
+    let start = SensorChain {
         candidates: vec![],
         found: vec![],
         runner: cur.clone(),
         p: p.to_vec(),
     };
-    let grown = grow(&s, cur, (motion, start), effects, chains, MAX_CHAIN);
+    let chain = grow(&s, cur, (motion, start), effects, chains, MAX_CHAIN);
     Ok(SensorDiagnosis {
-        candidates: grown.candidates,
-        found: grown.found,
-        runner: grown.runner,
-        p: grown.p,
+        chain,
         sightings: s,
     })
 }
 
-/// A sensor chain: its first round's candidates, the effects found, and
-/// the runner with all of them at their calibrated values.
-pub(crate) struct Grown {
+/// A sensor chain: its first round's candidates, the effects found in
+/// order (each calibrated with the ones before it), and the runner with all
+/// of them at their calibrated values.
+#[derive(Clone)]
+pub struct SensorChain {
     pub candidates: Vec<SensorCandidate>,
     pub found: Vec<SensorCandidate>,
     pub runner: Runner,
@@ -194,16 +189,17 @@ pub(crate) struct Grown {
 
 /// Grow the chain `from` (on top of the effects `before` it; `motion` the
 /// runner the sightings' parameters are counted against) with the best of
-/// `effects` that holds on `s`, re-testing the rest, up to `max` effects.
+/// `effects` that holds on `s`, re-testing the rest, up to `max` effects;
+/// the candidates of the result are this growth's first round.
 pub(crate) fn grow(
     s: &Sightings,
     motion: &Runner,
-    (before, from): (&[String], Grown),
+    (before, from): (&[String], SensorChain),
     effects: &[(String, String)],
     chains: &EffectChains,
     max: usize,
-) -> Grown {
-    let Grown {
+) -> SensorChain {
+    let SensorChain {
         mut found,
         mut runner,
         mut p,
@@ -266,7 +262,7 @@ pub(crate) fn grow(
         (runner, p) = (aug, w.p.clone());
         found.push(w);
     }
-    Grown {
+    SensorChain {
         candidates: first.unwrap_or_default(),
         found,
         runner,

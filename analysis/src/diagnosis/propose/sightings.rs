@@ -13,7 +13,7 @@
 //! the same test the catalogue's sensor effects pass keeps the false
 //! proposal rate at theirs.
 use super::proposal::{Proposal, ScoredOn, Term, HEADER};
-use crate::diagnosis::sensor::{candidate, grow, seeded, Grown, SensorDiagnosis};
+use crate::diagnosis::sensor::{candidate, grow, seeded, SensorDiagnosis};
 use crate::estimation::fit::sensor::sensor_only;
 use crate::model_on_log::derivation::EffectChains;
 use crate::model_on_log::model::Runner;
@@ -147,22 +147,17 @@ pub(crate) fn propose(
     let effects: Vec<(String, String)> = (lib.iter())
         .map(|e| (e.name.clone(), e.doc.clone()))
         .collect();
-    let from = Grown {
-        candidates: vec![],
-        found: sd.found.clone(),
-        runner: sd.runner.clone(),
-        p: sd.p.clone(),
-    };
+    let at = &sd.chain;
     let s = &sd.sightings;
     let grown = grow(
         s,
         motion_runner,
-        (motion, from),
+        (motion, at.clone()),
         &effects,
         &library_chains,
         MAX_TERMS,
     );
-    let terms: Vec<&Term> = (grown.found[sd.found.len()..].iter())
+    let terms: Vec<&Term> = (grown.found[at.found.len()..].iter())
         .filter_map(|c| (LIBRARY.iter()).find(|t| format!("term_{}", t.short) == c.effect))
         .collect();
     if terms.is_empty() {
@@ -180,7 +175,7 @@ pub(crate) fn propose(
         ..*chains
     };
     let mut list: Vec<String> = motion.to_vec();
-    list.extend(sd.found.iter().map(|c| c.effect.clone()));
+    list.extend(at.found.iter().map(|c| c.effect.clone()));
     list.push(name.clone());
     let runner = final_chains.runner(&list).ok()?;
     let start = seeded(&runner, &grown.runner, &grown.p);
@@ -189,9 +184,9 @@ pub(crate) fn propose(
         .filter(|&i| sensor_only(&runner, &[i]))
         .collect();
     let new: Vec<usize> = (free.iter().copied())
-        .filter(|&i| sd.runner.param_index(&runner.names[i]).is_none())
+        .filter(|&i| at.runner.param_index(&runner.names[i]).is_none())
         .collect();
-    let (base, _) = s.residuals(&sd.runner, &sd.p, &[], false);
+    let (base, _) = s.residuals(&at.runner, &at.p, &[], false);
     let c = candidate(s, &with, (&name, ""), (&runner, &start), &free, &base, &new);
     c.significant.then(|| {
         Proposal::of_terms(
