@@ -362,8 +362,9 @@ fn plan<'s>(
         // sightings for every case of a spec with a landmark observation
         // when an effect hidden on it acts on the sensor: its clean logs
         // must be as a hidden sensor effect's are, but for the effect
-        let on_sensor =
-            |c: &Candidate| (all()).any(|e| e.name == c.effect && !e.observation.is_empty());
+        let on_sensor = |c: &Candidate| {
+            (all()).any(|e| e.name == c.effect && scored_on(e) == ScoredOn::Sightings)
+        };
         let sightings = has_landmarks(spec) && effects.iter().chain(&beyond).any(on_sensor);
         for (j, hidden) in hidden_sets(&effects, &beyond).into_iter().enumerate() {
             for &noise in &NOISE {
