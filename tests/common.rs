@@ -3,6 +3,13 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+// The scenarios the library's tests name (seed 000's truth, the real logs,
+// another simulator's logs), shared with these tests rather than copied.
+#[path = "../analysis/tests/scenarios/mod.rs"]
+pub mod scenarios;
+#[allow(unused_imports)] // each test file uses its own few
+pub use scenarios::{real_data, real_runs, SEED_000_TRUTH};
+
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -95,23 +102,6 @@ pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
 
 // ---- named scenarios
 
-/// Seed 000's truth: the Omni robot's parameters as the paper identified
-/// them (eq. 28), where the spec's nominal values are eq. 27's.
-pub const SEED_000_TRUTH: [&str; 12] = [
-    "e1=0.042",
-    "e2=0.044",
-    "e3=0.043",
-    "r1=0.101",
-    "r2=0.1",
-    "r3=0.101",
-    "xa1=0.327",
-    "xa2=-0.329",
-    "xa3=0.002",
-    "ya1=0.188",
-    "ya2=0.186",
-    "ya3=-0.374",
-];
-
 /// A log of seed 000's Omni robot at its truth ([`SEED_000_TRUTH`]), random
 /// driving from `seed`, written to `dir/name`.
 pub fn seed_000_log(dir: &Path, name: &str, seed: &str) -> PathBuf {
@@ -146,50 +136,6 @@ pub fn add_effect(spec: &Path, effect: &str, values: &[&str], out: &Path) -> Pat
     let o = kinegen(&a);
     assert!(o.status.success(), "add-effect {effect}: {}", stderr(&o));
     out.to_path_buf()
-}
-
-/// The folder of real robot logs `name` (one of `../shared/real/`'s, e.g.
-/// "optiodom-diff-square"): `$KINEGEN_REAL_DATA/name` when that variable is
-/// set, else `../shared/real/name` beside the checkout. A user's clone has
-/// neither: the test then says on the terminal which data it skipped and how
-/// to get it, and passes without asserting (`None`). CI sets
-/// `KINEGEN_REQUIRE_REAL_DATA` (`.ci/run`), so there a missing folder fails
-/// the test instead of skipping it silently.
-pub fn real_data(name: &str) -> Option<PathBuf> {
-    let base = match std::env::var_os("KINEGEN_REAL_DATA") {
-        Some(dir) => PathBuf::from(dir),
-        None => root().join("../shared/real"),
-    };
-    let dir = base.join(name);
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    let test = std::thread::current()
-        .name()
-        .unwrap_or("a real-data test")
-        .to_string();
-    assert!(
-        std::env::var_os("KINEGEN_REQUIRE_REAL_DATA").is_none(),
-        "{test}: the real logs are required here but {} does not exist",
-        dir.display()
-    );
-    // Straight to the terminal: libtest captures `eprintln!` of passing
-    // tests, and a skip must be seen.
-    use std::io::Write;
-    let _ = writeln!(
-        std::io::stderr(),
-        "SKIPPED {test}: real data `{name}` not found at {} \
-         (put shared/real/ beside the checkout or set KINEGEN_REAL_DATA to the folder holding {name}/)",
-        dir.display()
-    );
-    None
-}
-
-/// The six real UMBMark squares of `optiodom-diff-square`, or `None` (skip)
-/// where the real data is absent (see `real_data`).
-pub fn real_runs() -> Option<Vec<PathBuf>> {
-    let dir = real_data("optiodom-diff-square")?;
-    Some((1..=6).map(|i| dir.join(format!("run-0{i}.csv"))).collect())
 }
 
 /// The sightings of `all` (`t,id,range,bearing`) within a camera's 0.6 rad

@@ -1,0 +1,230 @@
+//! Named scenarios the library's tests share, each as the commands see it:
+//! a log simulated as `kinegen simulate` writes it ([`Sim`]), the logs read
+//! as `--data` and `--holdout` are read ([`load`]), and calibrated as `kinegen
+//! fit` calibrates ([`calibrated`]), one library call each and no process.
+//! The command-line tests keep what only the command has: options, exit
+//! codes, the JSON's shape.
+#![allow(dead_code)] // each test file uses its own few scenarios
+
+use kinegen_analysis::applications::simulate::{SimOptions, Trajectory};
+use kinegen_analysis::applications::simulate_request::{simulate_files, SimulateRequest};
+use kinegen_analysis::estimation::fit::FitOptions;
+use kinegen_analysis::estimation::fit_job::{calibrate, Calibrated};
+use kinegen_analysis::model_on_log::derivation::AutodiffDeriver;
+use kinegen_analysis::model_on_log::files::{read_files, Files};
+use kinegen_analysis::model_on_log::load::{Loaded, Sources};
+use kinegen_analysis::model_on_log::run::DEFAULT_MAX_GAP_S;
+use std::path::{Path, PathBuf};
+
+pub mod elsewhere;
+
+/// The workspace's root, where the bundled specs are (this module is also
+/// the command-line tests' scenarios, compiled in the root package).
+pub fn root() -> PathBuf {
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut up = here.ancestors().filter(|d| d.join("Cargo.lock").is_file());
+    up.next().expect("the workspace's root").to_path_buf()
+}
+
+/// A spec by its path from the workspace's root (as the command-line tests
+/// name them), or as given when absolute.
+pub fn spec(path: &str) -> PathBuf {
+    root().join(path)
+}
+
+/// Seed 000's truth: the Omni robot's parameters as the paper identified
+/// them (eq. 28), against spec/omni_caster.toml's nominal values (eq. 27).
+pub const SEED_000_TRUTH: [&str; 12] = [
+    "e1=0.042",
+    "e2=0.044",
+    "e3=0.043",
+    "r1=0.101",
+    "r2=0.1",
+    "r3=0.101",
+    "xa1=0.327",
+    "xa2=-0.329",
+    "xa3=0.002",
+    "ya1=0.188",
+    "ya2=0.186",
+    "ya3=-0.374",
+];
+
+/// The real robot logs' folder `name` (`../shared/real/NAME` beside the
+/// checkout, or `$KINEGEN_REAL_DATA/NAME`). Where it is absent the test says
+/// so on the terminal, with what to do to get it, and passes without
+/// asserting (`None`). CI sets `KINEGEN_REQUIRE_REAL_DATA` (`.ci/run`), so
+/// there a missing folder fails the test instead of skipping it silently.
+pub fn real_data(name: &str) -> Option<PathBuf> {
+    let base = match std::env::var_os("KINEGEN_REAL_DATA") {
+        Some(dir) => PathBuf::from(dir),
+        None => root().join("../shared/real"),
+    };
+    let dir = base.join(name);
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    let test = std::thread::current()
+        .name()
+        .unwrap_or("a real-data test")
+        .to_string();
+    assert!(
+        std::env::var_os("KINEGEN_REQUIRE_REAL_DATA").is_none(),
+        "{test}: the real logs are required here but {} does not exist",
+        dir.display()
+    );
+    // Straight to the terminal: libtest captures `eprintln!` of passing
+    // tests, and a skip must be seen.
+    use std::io::Write;
+    let _ = writeln!(
+        std::io::stderr(),
+        "SKIPPED {test}: real data `{name}` not found at {} \
+         (put shared/real/ beside the checkout or set KINEGEN_REAL_DATA to the folder holding {name}/)",
+        dir.display()
+    );
+    None
+}
+
+/// The six real UMBMark squares of `optiodom-diff-square`, or `None` (skip)
+/// where the real data is absent (see `real_data`).
+pub fn real_runs() -> Option<Vec<PathBuf>> {
+    let dir = real_data("optiodom-diff-square")?;
+    Some((1..=6).map(|i| dir.join(format!("run-0{i}.csv"))).collect())
+}
+
+/// A log to simulate: the spec, the robot's true values (`NAME=VALUE`) and
+/// hidden effects (`NAME=VALUE`), and the drive.
+#[derive(Clone)]
+pub struct Sim<'a> {
+    pub spec: &'a str,
+    pub sets: &'a [&'a str],
+    pub effects: &'a [&'a str],
+    pub trajectory: Trajectory,
+    pub seed: u64,
+    pub laps: usize,
+}
+
+impl<'a> Sim<'a> {
+    /// `spec` at its nominal values, driving at random (seed 1, one lap).
+    pub fn new(spec: &'a str) -> Sim<'a> {
+        Sim {
+            spec,
+            sets: &[],
+            effects: &[],
+            trajectory: Trajectory::Random,
+            seed: 1,
+            laps: 1,
+        }
+    }
+
+    /// Seed 000's setting: the Omni robot at its identified values (eq. 28)
+    /// driving at random with seed `seed`.
+    pub fn seed_000(seed: u64) -> Sim<'static> {
+        Sim {
+            sets: &SEED_000_TRUTH,
+            seed,
+            ..Sim::new("spec/omni_caster.toml")
+        }
+    }
+
+    /// The robot's true values.
+    pub fn sets(self, sets: &'a [&'a str]) -> Sim<'a> {
+        Sim { sets, ..self }
+    }
+
+    /// Effects the robot has beyond the spec.
+    pub fn effects(self, effects: &'a [&'a str]) -> Sim<'a> {
+        Sim { effects, ..self }
+    }
+
+    pub fn drive(self, trajectory: &str, seed: u64, laps: usize) -> Sim<'a> {
+        let trajectory = trajectory.parse().expect("a known trajectory");
+        Sim {
+            trajectory,
+            seed,
+            laps,
+            ..self
+        }
+    }
+
+    /// The log as `kinegen simulate` writes it, into `dir/name`.
+    pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        let owned = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let (effects, sets) = (owned(self.effects), owned(self.sets));
+        let request = SimulateRequest {
+            spec: &spec(self.spec),
+            effects: &effects,
+            sets: &sets,
+            effect_dirs: &[],
+            landmarks: None,
+            options: SimOptions {
+                trajectory: self.trajectory,
+                seed: self.seed,
+                laps: self.laps,
+                ..SimOptions::default()
+            },
+        };
+        let sim = simulate_files(&request, &AutodiffDeriver).expect("a simulation");
+        let path = dir.join(name);
+        std::fs::write(&path, sim.csv()).unwrap();
+        path
+    }
+}
+
+/// `data` and `holdout` read for `spec_path` (with `--set` values `sets`) as
+/// every command reads its `--data` and `--holdout`.
+pub fn load(spec_path: &str, sets: &[&str], data: &[&Path], holdout: &[&Path]) -> Loaded {
+    let paths = |v: &[&Path]| v.iter().map(|p| p.to_path_buf()).collect();
+    let sources = Sources {
+        spec: spec(spec_path),
+        data: paths(data),
+        holdout: paths(holdout),
+        sets: sets.iter().map(|s| s.to_string()).collect(),
+        topics: None,
+        observations: vec![],
+        landmarks: None,
+        max_gap: DEFAULT_MAX_GAP_S,
+        truth_scores_only: false,
+    };
+    let files = Files {
+        sources: &sources,
+        effect_dirs: &[],
+    };
+    match read_files(&files, &AutodiffDeriver, &|_| Box::new(|_, _| {})) {
+        Ok(read) => read.loaded,
+        Err(e) => panic!("{spec_path} on {data:?}: {e}"),
+    }
+}
+
+/// `kinegen fit`'s calibration of `l` with its default options.
+pub fn calibrated(l: &Loaded) -> Calibrated<'_> {
+    calibrated_with(l, &FitOptions::command_default())
+}
+
+/// `kinegen fit`'s calibration of `l` with options `fo`.
+pub fn calibrated_with<'r>(l: &'r Loaded, fo: &FitOptions) -> Calibrated<'r> {
+    calibrate(l, fo).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A calibrated parameter's estimate and standard deviation (NaN where the
+/// logs do not determine it: the JSON's null).
+pub fn estimate(c: &Calibrated, l: &Loaded, name: &str) -> (f64, f64) {
+    let i = l.runner.param_index(name).expect("a parameter of the spec");
+    let k = c
+        .fit
+        .free
+        .iter()
+        .position(|&f| f == i)
+        .expect("a free parameter");
+    (c.fit.p[i], c.fit.std[k])
+}
+
+/// The mean of `v`.
+pub fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// The sample standard deviation of `v`.
+pub fn spread_of(v: &[f64]) -> f64 {
+    let m = mean(v);
+    (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+}
