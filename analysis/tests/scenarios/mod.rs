@@ -8,6 +8,9 @@
 
 use kinegen_analysis::applications::simulate::{SimOptions, Trajectory};
 use kinegen_analysis::applications::simulate_request::{simulate_files, SimulateRequest};
+use kinegen_analysis::diagnosis::diagnose::Diagnosis;
+use kinegen_analysis::diagnosis::diagnose_job::Hooks;
+use kinegen_analysis::diagnosis::request::{diagnose_files, Diagnosed, Request};
 use kinegen_analysis::estimation::fit::FitOptions;
 use kinegen_analysis::estimation::fit_job::{calibrate, Calibrated};
 use kinegen_analysis::model_on_log::derivation::AutodiffDeriver;
@@ -101,6 +104,8 @@ pub struct Sim<'a> {
     pub trajectory: Trajectory,
     pub seed: u64,
     pub laps: usize,
+    /// A landmark map the robot's camera sights (`--landmarks`).
+    pub landmarks: Option<&'a Path>,
 }
 
 impl<'a> Sim<'a> {
@@ -113,6 +118,7 @@ impl<'a> Sim<'a> {
             trajectory: Trajectory::Random,
             seed: 1,
             laps: 1,
+            landmarks: None,
         }
     }
 
@@ -146,8 +152,23 @@ impl<'a> Sim<'a> {
         }
     }
 
+    /// Sighting the landmarks of `map` with the spec's camera.
+    pub fn sighting(self, map: &'a Path) -> Sim<'a> {
+        Sim {
+            landmarks: Some(map),
+            ..self
+        }
+    }
+
     /// The log as `kinegen simulate` writes it, into `dir/name`.
     pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        self.write_sighted(dir, name).0
+    }
+
+    /// The log and its sightings (`dir/name` and `dir/name.obs.csv`, the
+    /// latter empty without a map), as `kinegen simulate --observations`
+    /// writes them.
+    pub fn write_sighted(&self, dir: &Path, name: &str) -> (PathBuf, PathBuf) {
         let owned = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         let (effects, sets) = (owned(self.effects), owned(self.sets));
         let request = SimulateRequest {
@@ -155,7 +176,7 @@ impl<'a> Sim<'a> {
             effects: &effects,
             sets: &sets,
             effect_dirs: &[],
-            landmarks: None,
+            landmarks: self.landmarks,
             options: SimOptions {
                 trajectory: self.trajectory,
                 seed: self.seed,
@@ -164,35 +185,92 @@ impl<'a> Sim<'a> {
             },
         };
         let sim = simulate_files(&request, &AutodiffDeriver).expect("a simulation");
-        let path = dir.join(name);
+        let (path, obs) = (dir.join(name), dir.join(format!("{name}.obs.csv")));
         std::fs::write(&path, sim.csv()).unwrap();
-        path
+        std::fs::write(&obs, sim.observations_csv()).unwrap();
+        (path, obs)
+    }
+}
+
+/// The logs of a job, as its options name them.
+#[derive(Default)]
+pub struct Logs<'a> {
+    /// `--set NAME=VALUE`.
+    pub sets: &'a [&'a str],
+    pub data: &'a [&'a Path],
+    pub holdout: &'a [&'a Path],
+    /// `--observations`, the k-th for the k-th `data` log.
+    pub observations: &'a [&'a Path],
+    pub landmarks: Option<&'a Path>,
+}
+
+impl Logs<'_> {
+    fn sources(&self, spec_path: &str) -> Sources {
+        let paths = |v: &[&Path]| v.iter().map(|p| p.to_path_buf()).collect();
+        Sources {
+            spec: spec(spec_path),
+            data: paths(self.data),
+            holdout: paths(self.holdout),
+            sets: self.sets.iter().map(|s| s.to_string()).collect(),
+            topics: None,
+            observations: paths(self.observations),
+            landmarks: self.landmarks.map(Path::to_path_buf),
+            max_gap: DEFAULT_MAX_GAP_S,
+            truth_scores_only: false,
+        }
     }
 }
 
 /// `data` and `holdout` read for `spec_path` (with `--set` values `sets`) as
 /// every command reads its `--data` and `--holdout`.
 pub fn load(spec_path: &str, sets: &[&str], data: &[&Path], holdout: &[&Path]) -> Loaded {
-    let paths = |v: &[&Path]| v.iter().map(|p| p.to_path_buf()).collect();
-    let sources = Sources {
-        spec: spec(spec_path),
-        data: paths(data),
-        holdout: paths(holdout),
-        sets: sets.iter().map(|s| s.to_string()).collect(),
-        topics: None,
-        observations: vec![],
-        landmarks: None,
-        max_gap: DEFAULT_MAX_GAP_S,
-        truth_scores_only: false,
+    let logs = Logs {
+        sets,
+        data,
+        holdout,
+        ..Logs::default()
     };
+    load_logs(spec_path, &logs)
+}
+
+/// `logs` read for `spec_path` as every command reads them.
+pub fn load_logs(spec_path: &str, logs: &Logs) -> Loaded {
+    let sources = logs.sources(spec_path);
     let files = Files {
         sources: &sources,
         effect_dirs: &[],
     };
     match read_files(&files, &AutodiffDeriver, &|_| Box::new(|_, _| {})) {
         Ok(read) => read.loaded,
-        Err(e) => panic!("{spec_path} on {data:?}: {e}"),
+        Err(e) => panic!("{spec_path} on {:?}: {e}", logs.data),
     }
+}
+
+/// `kinegen diagnose`'s diagnosis of `logs` against `spec_path` (with the
+/// user's effect folders `effect_dirs`).
+pub fn diagnosed(spec_path: &str, logs: &Logs, effect_dirs: &[PathBuf]) -> Diagnosed {
+    let sources = logs.sources(spec_path);
+    let files = Files {
+        sources: &sources,
+        effect_dirs,
+    };
+    let request = Request {
+        files,
+        for_report: false,
+    };
+    let progress = &|_: &Path| -> Box<dyn Fn(usize, usize)> { Box::new(|_, _| {}) };
+    diagnose_files(&request, &AutodiffDeriver, progress, &Hooks::none())
+        .unwrap_or_else(|e| panic!("{spec_path} on {:?}: {e}", logs.data))
+}
+
+/// The diagnosis of `data` against `spec_path`, as `kinegen diagnose --spec
+/// SPEC --data ...` makes it.
+pub fn diagnosis(spec_path: &str, data: &[&Path]) -> Diagnosis {
+    let logs = Logs {
+        data,
+        ..Logs::default()
+    };
+    diagnosed(spec_path, &logs, &[]).outcome.diagnosis
 }
 
 /// `kinegen fit`'s calibration of `l` with its default options.
