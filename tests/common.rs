@@ -8,7 +8,7 @@ use std::process::{Command, Output};
 #[path = "../analysis/tests/scenarios/mod.rs"]
 pub mod scenarios;
 #[allow(unused_imports)] // each test file uses its own few
-pub use scenarios::{real_data, real_runs, SEED_000_TRUTH};
+pub use scenarios::{commanded_spec, mrclam_robot, real_data, real_runs, SEED_000_TRUTH};
 
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -201,73 +201,6 @@ pub fn assert_glanceable(args: &[&str], text: &str) {
             "kinegen {args:?}: no answer line:\n{text}"
         );
     }
-}
-
-/// A velocity-commanded robot as its user would write it: commands in,
-/// gains to calibrate, a camera that reads landmarks; no `[inverse]`.
-/// `noise_unit` empty: seed 001's per-row sigmas.
-pub fn commanded_spec(dir: &Path, noise_unit: &str) -> PathBuf {
-    let unit = if noise_unit.is_empty() {
-        String::new()
-    } else {
-        format!("unit = \"{noise_unit}\"\n")
-    };
-    let text = format!(
-        r#"name = "my_create"
-doc = "A robot driven by forward and turn-rate commands."
-state = ["x", "y", "theta"]
-
-[[input]]
-name = "v_cmd"
-column = "v"
-kind = "absolute"
-unit = "m/s"
-
-[[input]]
-name = "w_cmd"
-column = "omega"
-kind = "absolute"
-unit = "rad/s"
-
-[[parameter]]
-name = "k_v"
-nominal = 1.0
-min = 0.0
-
-[[parameter]]
-name = "k_w"
-nominal = 1.0
-min = 0.0
-
-[[noise]]
-name = "dv"
-sigma = 0.02
-{unit}
-[[noise]]
-name = "dw"
-sigma = 0.02
-{unit}
-[motion]
-vx = "k_v*v_cmd + dv"
-vy = "0"
-omega = "k_w*w_cmd + dw"
-
-[[observation]]
-name = "camera"
-landmark = true
-columns = ["range", "bearing"]
-expr = ["sqrt((xl - x)^2 + (yl - y)^2)", "atan2(yl - y, xl - x) - theta"]
-angle = [false, true]
-sigma = [0.05, 0.02]
-"#
-    );
-    let path = dir.join(if noise_unit.is_empty() {
-        "per_row.toml"
-    } else {
-        "density.toml"
-    });
-    std::fs::write(&path, text).unwrap();
-    path
 }
 
 // ---- documentation run as written (tests/readme.rs, tests/howtos.rs)

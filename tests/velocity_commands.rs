@@ -1,10 +1,11 @@
-//! Issue #34: real robots as they come. Velocity commands logged at irregular
-//! times hold between rows; a log is split only at gaps over --max-gap; a
-//! spec a user writes without `[inverse]` runs every analysis; the EKF's
-//! process noise given as a density is the same filter at any log rate, and
-//! its noise is estimated from the log. On the five real robots of
+//! Issue #34: real robots as they come, through the command line. Velocity
+//! commands logged at irregular times hold between rows; a log is split
+//! only at gaps over --max-gap; a spec a user writes without `[inverse]`
+//! runs every analysis. On the five real robots of
 //! `../shared/real/mrclam-dataset6/` every command runs on the logs as they
-//! are, with default options.
+//! are, with default options, and prints a text read at a glance. The
+//! simulated commanded robot's timing effects and filter are asserted on
+//! the library's values in analysis/tests/commanded.rs.
 mod common;
 use common::*;
 use serde_json::Value;
@@ -15,130 +16,6 @@ use std::path::{Path, PathBuf};
 /// cases too: each long run is made once).
 fn run_in(dir: &Path, args: &[&str]) -> serde_json::Value {
     kinegen_json_glanceable(dir, args)
-}
-
-/// The same log at twice its rate: a row between every two, its commands
-/// held from the row before (what the robot executed), its ground truth
-/// interpolated (the heading along the shorter arc).
-fn doubled(log: &Path, out: &Path) {
-    let text = std::fs::read_to_string(log).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap();
-    let cols: Vec<&str> = header.split(',').collect();
-    let rows: Vec<Vec<f64>> = lines
-        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
-        .collect();
-    let held: Vec<bool> = cols.iter().map(|c| ["v", "omega"].contains(c)).collect();
-    let mut s = format!("{header}\n");
-    let fmt = |r: &[f64]| {
-        r.iter()
-            .map(|v| format!("{v:.12}"))
-            .collect::<Vec<_>>()
-            .join(",")
-    };
-    for w in rows.windows(2) {
-        s += &(fmt(&w[0]) + "\n");
-        let mid: Vec<f64> = (0..cols.len())
-            .map(|i| {
-                if held[i] {
-                    w[0][i]
-                } else if cols[i] == "gt_theta" {
-                    let d = (w[1][i] - w[0][i] + std::f64::consts::PI)
-                        .rem_euclid(std::f64::consts::TAU)
-                        - std::f64::consts::PI;
-                    w[0][i] + d / 2.0
-                } else {
-                    (w[0][i] + w[1][i]) / 2.0
-                }
-            })
-            .collect();
-        s += &(fmt(&mid) + "\n");
-    }
-    s += &(fmt(rows.last().unwrap()) + "\n");
-    std::fs::write(out, s).unwrap();
-}
-
-/// Process noise given per second (a density) gives the same filter on a log
-/// and on the same log at twice its rate: the same track error and the same
-/// final uncertainty. Seed 001's per-row sigma does not (the check fails
-/// with it: half the variance at twice the rate).
-#[test]
-fn process_noise_per_second_gives_the_same_filter_at_twice_the_rate() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let map = dir.join("map.csv");
-    std::fs::write(&map, "id,x,y\nA,6,1\nB,-5,4\nC,2,-7\nD,-3,-5\n").unwrap();
-    let obs = dir.join("obs.csv");
-    let spec = commanded_spec(dir, "m/s/sqrt(Hz)");
-    let per_row = commanded_spec(dir, "");
-    let log = dir.join("log.csv");
-    let o = kinegen_in(
-        dir,
-        &[
-            "simulate",
-            "--spec",
-            spec.to_str().unwrap(),
-            "--set",
-            "k_v=1.05",
-            "--trajectory",
-            "random",
-            "--seed",
-            "3",
-            "--landmarks",
-            "map.csv",
-            "--observations",
-            "obs.csv",
-            "--out",
-            "log.csv",
-        ],
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let fast = dir.join("fast.csv");
-    doubled(&log, &fast);
-    let filter = |spec: &Path, data: &Path| {
-        let d = run_in(
-            dir,
-            &[
-                "localize",
-                "--spec",
-                spec.to_str().unwrap(),
-                "--data",
-                data.to_str().unwrap(),
-                "--observations",
-                obs.to_str().unwrap(),
-                "--landmarks",
-                map.to_str().unwrap(),
-                "--spec-noise",
-            ],
-        );
-        let r = &d["runs"][0];
-        let std: Vec<f64> = r["final_std"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
-        (r["position_rmse_m"].as_f64().unwrap(), std)
-    };
-    let (slow_rmse, slow_std) = filter(&spec, &log);
-    let (fast_rmse, fast_std) = filter(&spec, &fast);
-    assert!(
-        (fast_rmse / slow_rmse - 1.0).abs() < 0.02,
-        "density noise: RMSE {slow_rmse} at the log's rate, {fast_rmse} at twice it"
-    );
-    for i in 0..3 {
-        assert!(
-            (fast_std[i] / slow_std[i] - 1.0).abs() < 0.02,
-            "density noise: final sd {slow_std:?} at the log's rate, {fast_std:?} at twice it"
-        );
-    }
-    // the per-row form is not rate-independent, which the check above sees
-    let (_, slow_std) = filter(&per_row, &log);
-    let (_, fast_std) = filter(&per_row, &fast);
-    assert!(
-        (0..3).any(|i| (fast_std[i] / slow_std[i] - 1.0).abs() > 0.1),
-        "per-row noise should change with the rate: {slow_std:?} vs {fast_std:?}"
-    );
 }
 
 /// A model that stops being numbers in the second piece of a log split at a
@@ -384,17 +261,14 @@ fn real_velocity_commanded_robots_4_and_5_localize_and_calibrate_as_logged() {
 /// localize, compare and fit on MRCLAM's robots: split over tests so that
 /// the test runner's threads share them (each robot is a 15-minute log).
 fn real_robots_localize_and_calibrate(robots: std::ops::RangeInclusive<usize>) {
-    let Some(real) = real_data("mrclam-dataset6") else {
-        return;
-    };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let spec = create_spec(dir);
     let s = spec.to_str().unwrap();
     for robot in robots {
-        let d = real.join(format!("robot{robot}"));
-        let p = |f: &str| d.join(f).to_str().unwrap().to_string();
-        let (log, obs, map) = (p("log.csv"), p("observations.csv"), p("landmarks.csv"));
+        let Some(r) = mrclam_robot(robot) else { return };
+        let p = |f: &Path| f.to_str().unwrap().to_string();
+        let (log, obs, map) = (p(&r.log), p(&r.observations), p(&r.landmarks));
         let loc = run_in(
             dir,
             &[
@@ -426,18 +300,10 @@ fn real_robots_localize_and_calibrate(robots: std::ops::RangeInclusive<usize>) {
 
 #[test]
 fn a_real_velocity_commanded_robot_is_diagnosed_as_logged() {
-    let Some(real) = real_data("mrclam-dataset6") else {
-        return;
-    };
+    let Some(r) = mrclam_robot(1) else { return };
     let tmp = tempfile::tempdir().unwrap();
     let spec = create_spec(tmp.path());
-    let d = real.join("robot1");
-    let (log, obs, map) = (
-        d.join("log.csv"),
-        d.join("observations.csv"),
-        d.join("landmarks.csv"),
-    );
-    let diag = diagnose_seen(&spec, &log, &obs, &map);
+    let diag = diagnose_seen(&spec, &r.log, &r.observations, &r.landmarks);
     check_diagnosed_robot1(&diag);
 }
 
@@ -616,107 +482,6 @@ fn check_diagnosed_robot1(diag: &Value) {
         .map(|c| c["effect"].as_str().unwrap())
         .collect();
     assert!(!tested.contains(&"steering_offset"), "{tested:?}");
-}
-
-/// Issue #34 / CONTRACT section 3: `input_delay`, the robot executing its
-/// commands late. A commanded robot simulated with a 0.3 s delay: diagnose
-/// names it first (its estimate within 0.005 s) and says that these
-/// pose-only logs cannot tell it apart from `time_offset` (a late motion
-/// capture moves the track alike); with landmark sightings the two differ
-/// and `fit` of the spec with the effect recovers the delay from the
-/// sightings alone. A robot without commands (encoders only) does not get
-/// the candidate (a late measured input is `time_offset`).
-#[test]
-fn a_late_command_is_named_and_calibrated() {
-    let tmp = tempfile::tempdir().unwrap();
-    let spec = commanded_spec(tmp.path(), "");
-    let s = spec.to_str().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "late.csv",
-        &[
-            "--spec",
-            s,
-            "--effect",
-            "input_delay=0.3",
-            "--trajectory",
-            "random",
-            "--seed",
-            "3",
-        ],
-    );
-    let d = kinegen_json(&["diagnose", "--spec", s, "--data", log.to_str().unwrap()]);
-    let first = &d["verdict"]["effects"][0];
-    let named = first["effect"].as_str().unwrap();
-    let equivalent = first["equivalent"].to_string();
-    assert!(
-        named == "input_delay" || equivalent.contains("input_delay"),
-        "{named}, equivalent {equivalent}"
-    );
-    let candidate = d["candidates"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["effect"] == "input_delay")
-        .unwrap();
-    let tau = candidate["parameters"]["input_delay"]["estimate"]
-        .as_f64()
-        .unwrap();
-    assert!((tau - 0.3).abs() < 0.005, "{tau}");
-    // with landmarks only, the delay shows in the sightings
-    let delayed = tmp.path().join("delayed.toml");
-    add_effect(&spec, "input_delay", &[], &delayed);
-    let (map, obs) = (root().join("data/beacons.csv"), tmp.path().join("obs.csv"));
-    let lm_log = simulate(
-        tmp.path(),
-        "lm.csv",
-        &[
-            "--spec",
-            delayed.to_str().unwrap(),
-            "--set",
-            "input_delay=0.3",
-            "--trajectory",
-            "random",
-            "--seed",
-            "4",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
-    let fit = kinegen_json(&[
-        "fit",
-        "--spec",
-        delayed.to_str().unwrap(),
-        "--data",
-        lm_log.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-        "--residuals",
-        "landmarks",
-    ]);
-    let p = &fit["parameters"]["input_delay"];
-    let (est, sd) = (p["estimate"].as_f64().unwrap(), p["std"].as_f64().unwrap());
-    assert!(
-        (est - 0.3).abs() < 0.05 && (est - 0.3).abs() < 4.0 * sd.max(1e-3),
-        "{est} ± {sd}"
-    );
-    let encoders = kinegen_json(&[
-        "diagnose",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--data",
-        "data/mystery_robot.csv",
-    ]);
-    assert!(
-        !encoders["candidates"]
-            .to_string()
-            .contains("\"input_delay\""),
-        "an encoder robot got the input_delay candidate"
-    );
 }
 
 /// The random trip the sighting tests drive.
@@ -913,334 +678,6 @@ fn landmark_sightings_tell_a_late_motion_capture_from_a_late_command() {
     }
 }
 
-/// A spec that already has the robot's input delay leaves only noise: the
-/// residuals diagnose searches for structure (and plots an effect's
-/// signature with) are those of the commands as the robot executed them.
-/// Before, they were the logged commands, and the right model of a robot
-/// 0.3 s late was reported with periodic heading residuals (74% of their
-/// variance) that its own delay explains.
-#[test]
-fn a_model_with_its_input_delay_leaves_no_structure() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let spec = commanded_spec(dir, "");
-    let s = spec.to_str().unwrap();
-    let args = [
-        "--spec",
-        s,
-        "--effect",
-        "input_delay=0.3",
-        "--trajectory",
-        "random",
-        "--seed",
-        "4",
-    ];
-    let log = simulate(dir, "late.csv", &args);
-    let delayed = dir.join("delayed.toml");
-    add_effect(&spec, "input_delay", &["input_delay=0.3"], &delayed);
-    let d = kinegen_json(&[
-        "diagnose",
-        "--spec",
-        delayed.to_str().unwrap(),
-        "--data",
-        log.to_str().unwrap(),
-    ]);
-    assert_eq!(
-        d["verdict"]["effects"],
-        serde_json::json!([]),
-        "{}",
-        d["verdict"]
-    );
-    assert_eq!(
-        d["verdict"]["unexplained_structure"], false,
-        "{}",
-        d["verdict"]["structure"]
-    );
-}
-
-/// Issue #34: localize estimates a declared input delay with the noise,
-/// from the sightings alone. A commanded robot simulated with a 0.3 s delay,
-/// its spec carrying `input_delay` at 0 (as add-effect adds it): the filter
-/// finds the delay within 0.05 s, says so, and tracks better than with the
-/// spec's 0 fixed by --set (which it then keeps, and says nothing about).
-#[test]
-fn localize_estimates_a_declared_input_delay_from_the_sightings() {
-    localize_estimates_a_declared_timing("input_delay", 0.05);
-}
-
-/// The same for a command the robot follows with a 0.3 s time constant
-/// (`command_lag`): the lag is estimated like the delay.
-#[test]
-fn localize_estimates_a_declared_command_lag_from_the_sightings() {
-    localize_estimates_a_declared_timing("command_lag", 0.05);
-}
-
-/// Simulate the commanded robot with `effect` at 0.3 s, localize it with
-/// the effect declared at 0: estimated within `within` s, said in the JSON
-/// under the effect's name, and better than 0 fixed by --set.
-fn localize_estimates_a_declared_timing(effect: &str, within: f64) {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let spec = commanded_spec(dir, "m/s/sqrt(Hz)");
-    let timed = dir.join("timed.toml");
-    add_effect(&spec, effect, &[], &timed);
-    let (map, obs) = (root().join("data/beacons.csv"), dir.join("obs.csv"));
-    let truth = format!("{effect}=0.3");
-    let log = simulate(
-        dir,
-        "late.csv",
-        &[
-            "--spec",
-            timed.to_str().unwrap(),
-            "--set",
-            &truth,
-            "--trajectory",
-            "random",
-            "--seed",
-            "5",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
-    let localize = |extra: &[&str]| {
-        let mut args = vec![
-            "localize",
-            "--spec",
-            timed.to_str().unwrap(),
-            "--data",
-            log.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-            "--landmarks",
-            map.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        run_in(dir, &args)
-    };
-    let estimated = localize(&[]);
-    let d = &estimated["noise"][effect];
-    let tau = d["estimate_s"].as_f64().unwrap();
-    assert!((tau - 0.3).abs() < within, "estimated {effect} {tau}");
-    assert_eq!(d["spec_s"].as_f64(), Some(0.0));
-    let zero = format!("{effect}=0");
-    let fixed = localize(&["--set", &zero]);
-    assert!(
-        fixed["noise"][effect].is_null(),
-        "--set fixes the {effect}: {}",
-        fixed["noise"]
-    );
-    let rmse = |d: &serde_json::Value| d["runs"][0]["position_rmse_m"].as_f64().unwrap();
-    assert!(
-        rmse(&estimated) < rmse(&fixed),
-        "with the {effect} estimated {} m, with 0 s {} m",
-        rmse(&estimated),
-        rmse(&fixed)
-    );
-}
-
-/// NEES compares the filter with a ground truth that has noise of its own:
-/// the simulator's motion capture adds 1 mm and 2 mrad. A robot whose model
-/// is exact, seen by many landmarks, is localised to about a millimetre, and
-/// against the raw truth read as overconfident (mean NEES 16 of 3). The
-/// truth's noise, estimated from its third differences, is counted.
-#[test]
-fn nees_counts_the_ground_truths_own_noise() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let spec = commanded_spec(dir, "m/s/sqrt(Hz)");
-    let (map, obs) = (root().join("data/beacons.csv"), dir.join("obs.csv"));
-    let log = simulate(
-        dir,
-        "exact.csv",
-        &[
-            "--spec",
-            spec.to_str().unwrap(),
-            "--trajectory",
-            "random",
-            "--seed",
-            "2",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
-    let d = run_in(
-        dir,
-        &[
-            "localize",
-            "--spec",
-            spec.to_str().unwrap(),
-            "--data",
-            log.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-            "--landmarks",
-            map.to_str().unwrap(),
-        ],
-    );
-    let run = &d["runs"][0];
-    let noise = &run["ground_truth_noise"];
-    let (pos, heading) = (
-        noise["position_m"].as_f64().unwrap(),
-        noise["heading_rad"].as_f64().unwrap(),
-    );
-    assert!((pos / 0.001 - 1.0).abs() < 0.3, "{pos}");
-    assert!((heading / 0.002 - 1.0).abs() < 0.3, "{heading}");
-    let nees = run["nees_mean"].as_f64().unwrap();
-    assert!(
-        (1.5..4.5).contains(&nees),
-        "mean NEES {nees} (3 if consistent)"
-    );
-    // spread as chi-square's: medians near its, and NIS and NEES agree
-    for key in ["nis_spread", "nees_spread"] {
-        let s = &run[key];
-        let ratio = s["median"].as_f64().unwrap() / s["chi2_median"].as_f64().unwrap();
-        assert!((0.5..2.0).contains(&ratio), "{key}: {s}");
-    }
-    assert_eq!(run["consistency"], "agree", "{run}");
-    // the gate rejects no more than a consistent filter does by chance
-    assert_eq!(run["gate_tail"]["overconfident"], false, "{run}");
-    // each of the pose's parts against its own marginal: near its degrees
-    // of freedom (position 2, heading 1)
-    let parts = &run["nees_parts"];
-    for (key, dof) in [("position_mean", 2.0), ("heading_mean", 1.0)] {
-        let ratio = parts[key].as_f64().unwrap() / dof;
-        assert!((0.5..1.5).contains(&ratio), "{key}: {parts}");
-    }
-}
-
-/// Issue #34: a robot that does not follow small commands. A commanded robot
-/// simulated with a deadband of 0.03 m/s and 0.08 rad/s: diagnose names
-/// `command_deadband` first and estimates both widths within 5%; on the same
-/// robot without one it names nothing and the widths stay at 0 within their
-/// standard deviations. The kink at d = 0 has a slope (sign(0) = 0): with the
-/// derivative of |x| as x/|x| the Jacobians are NaN at the stopped robot's
-/// command 0 and the fit cannot start.
-#[test]
-fn a_command_deadband_is_named_and_calibrated() {
-    let tmp = tempfile::tempdir().unwrap();
-    let spec = commanded_spec(tmp.path(), "");
-    let s = spec.to_str().unwrap();
-    let width = |d: &serde_json::Value, p: &str| {
-        let c = d["candidates"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|c| c["effect"] == "command_deadband")
-            .expect("the deadband is a candidate for a commanded robot");
-        let q = &c["parameters"][p];
-        (q["estimate"].as_f64().unwrap(), q["std"].as_f64().unwrap())
-    };
-    let log = simulate(
-        tmp.path(),
-        "deadband.csv",
-        &[
-            "--spec",
-            s,
-            "--effect",
-            "command_deadband.deadband_v_cmd=0.03",
-            "--effect",
-            "command_deadband.deadband_w_cmd=0.08",
-            "--trajectory",
-            "random",
-            "--seed",
-            "3",
-        ],
-    );
-    let d = kinegen_json(&["diagnose", "--spec", s, "--data", log.to_str().unwrap()]);
-    assert_eq!(
-        d["verdict"]["effects"][0]["effect"], "command_deadband",
-        "{}",
-        d["verdict"]
-    );
-    for (p, truth) in [("deadband_v_cmd", 0.03), ("deadband_w_cmd", 0.08)] {
-        let (est, _) = width(&d, p);
-        assert!((est - truth).abs() < 0.05 * truth, "{p}: {est} for {truth}");
-    }
-    let clean = simulate(
-        tmp.path(),
-        "clean.csv",
-        &["--spec", s, "--trajectory", "random", "--seed", "3"],
-    );
-    let d = kinegen_json(&["diagnose", "--spec", s, "--data", clean.to_str().unwrap()]);
-    assert!(
-        d["verdict"]["effects"]
-            .as_array()
-            .is_none_or(|e| e.is_empty()),
-        "{}",
-        d["verdict"]
-    );
-    for p in ["deadband_v_cmd", "deadband_w_cmd"] {
-        let (est, sd) = width(&d, p);
-        assert!(est.abs() < 4.0 * sd.max(1e-6), "{p}: {est} ± {sd}");
-    }
-}
-
-/// Issue #34: a robot that reaches its commands through a first-order
-/// response (a motor controller, acceleration limits), which the MRCLAM
-/// robots show against Vicon (their turn rate follows the commands with a
-/// time constant of 0.1-0.3 s at a gain near 1). A commanded robot
-/// simulated with a 0.3 s time constant: diagnose names `command_lag`
-/// first, with the time constant within 0.01 s, and not the pure delay
-/// (which fits it six times worse); `fit` of the spec with the effect finds
-/// it too.
-#[test]
-fn a_command_lag_is_named_and_calibrated() {
-    let tmp = tempfile::tempdir().unwrap();
-    let spec = commanded_spec(tmp.path(), "");
-    let s = spec.to_str().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "lag.csv",
-        &[
-            "--spec",
-            s,
-            "--effect",
-            "command_lag=0.3",
-            "--trajectory",
-            "random",
-            "--seed",
-            "5",
-        ],
-    );
-    let d = kinegen_json(&["diagnose", "--spec", s, "--data", log.to_str().unwrap()]);
-    let first = &d["verdict"]["effects"][0];
-    assert_eq!(first["effect"], "command_lag", "{}", d["verdict"]);
-    let tau = first["parameters"]["command_lag"]["estimate"]
-        .as_f64()
-        .unwrap();
-    assert!((tau - 0.3).abs() < 0.01, "{tau}");
-    let rmse = |name: &str| {
-        d["candidates"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|c| c["effect"] == name)
-            .unwrap()["rmse"]
-            .as_f64()
-            .unwrap()
-    };
-    assert!(rmse("input_delay") > 3.0 * rmse("command_lag"));
-    let lagged = tmp.path().join("lagged.toml");
-    add_effect(&spec, "command_lag", &[], &lagged);
-    let fit = kinegen_json(&[
-        "fit",
-        "--spec",
-        lagged.to_str().unwrap(),
-        "--data",
-        log.to_str().unwrap(),
-    ]);
-    let p = &fit["parameters"]["command_lag"];
-    let (est, sd) = (p["estimate"].as_f64().unwrap(), p["std"].as_f64().unwrap());
-    assert!(
-        (est - 0.3).abs() < 0.01 && (est - 0.3).abs() < 4.0 * sd.max(1e-4),
-        "{est} ± {sd}"
-    );
-}
-
 /// (t, x, y) of a simulated or MRCLAM log's ground truth, from its text.
 fn ground_truth(log: &str) -> Vec<[f64; 3]> {
     log.lines()
@@ -1426,17 +863,14 @@ fn a_start_seen_only_later_is_placed_by_the_later_sightings() {
 /// none of their 0.28-0.92 m).
 #[test]
 fn real_robots_without_motion_capture_are_started_where_their_sightings_put_them() {
-    let Some(real) = real_data("mrclam-dataset6") else {
-        return;
-    };
     let tmp = tempfile::tempdir().unwrap();
     let spec = create_spec(tmp.path());
     for robot in 1..=5 {
-        let d = real.join(format!("robot{robot}"));
-        let full = std::fs::read_to_string(d.join("log.csv")).unwrap();
+        let Some(d) = mrclam_robot(robot) else { return };
+        let full = std::fs::read_to_string(&d.log).unwrap();
         let truth = ground_truth(&full);
         let log = tmp.path().join(format!("robot{robot}.csv"));
-        commands_only(&d.join("log.csv"), &log);
+        commands_only(&d.log, &log);
         let track = tmp.path().join(format!("track{robot}.csv"));
         let o = kinegen(&[
             "localize",
@@ -1445,9 +879,9 @@ fn real_robots_without_motion_capture_are_started_where_their_sightings_put_them
             "--data",
             log.to_str().unwrap(),
             "--observations",
-            d.join("observations.csv").to_str().unwrap(),
+            d.observations.to_str().unwrap(),
             "--landmarks",
-            d.join("landmarks.csv").to_str().unwrap(),
+            d.landmarks.to_str().unwrap(),
             "--track",
             track.to_str().unwrap(),
         ]);
@@ -1697,15 +1131,12 @@ fn a_camera_that_reads_depth_or_looks_aside_is_named_from_its_sightings() {
 /// (`tests/landmarks.rs` checks the estimates there).
 #[test]
 fn a_calibration_on_drifting_sightings_says_it_is_biased() {
-    let Some(real) = real_data("mrclam-dataset6") else {
-        return;
-    };
+    let Some(d) = mrclam_robot(4) else { return };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let spec = create_spec(dir);
-    let d = real.join("robot4");
     let blind = dir.join("no_vicon.csv");
-    commands_only(&d.join("log.csv"), &blind);
+    commands_only(&d.log, &blind);
     // fit on `log`'s sightings `obs` of `map`: its warnings
     let warned = |log: &Path, obs: &Path, map: &Path| {
         let s = |p: &Path| p.to_str().unwrap().to_string();
@@ -1725,8 +1156,8 @@ fn a_calibration_on_drifting_sightings_says_it_is_biased() {
     };
     let said = warned(
         &blind,
-        &d.join("observations.csv"),
-        &d.join("landmarks.csv"),
+        &d.observations,
+        &d.landmarks,
     );
     assert!(
         said.contains("drifts far beyond the sensor's noise"),

@@ -6,6 +6,10 @@
 //! codes, the JSON's shape.
 #![allow(dead_code)] // each test file uses its own few scenarios
 
+use kinegen_analysis::applications::localize::{EkfOptions, NoiseSource};
+use kinegen_analysis::applications::localize_request::{
+    localize_files, LocalizeRequest, LocalizedFiles,
+};
 use kinegen_analysis::applications::simulate::{SimOptions, Trajectory};
 use kinegen_analysis::applications::simulate_request::{simulate_files, SimulateRequest};
 use kinegen_analysis::diagnosis::diagnose::Diagnosis;
@@ -92,6 +96,105 @@ pub fn real_data(name: &str) -> Option<PathBuf> {
 pub fn real_runs() -> Option<Vec<PathBuf>> {
     let dir = real_data("optiodom-diff-square")?;
     Some((1..=6).map(|i| dir.join(format!("run-0{i}.csv"))).collect())
+}
+
+/// A velocity-commanded robot as its user would write it: commands in,
+/// gains to calibrate, a camera that reads landmarks; no `[inverse]`.
+/// `noise_unit` empty: seed 001's per-row sigmas.
+pub fn commanded_spec(dir: &Path, noise_unit: &str) -> PathBuf {
+    let unit = if noise_unit.is_empty() {
+        String::new()
+    } else {
+        format!("unit = \"{noise_unit}\"\n")
+    };
+    let text = format!(
+        r#"name = "my_create"
+doc = "A robot driven by forward and turn-rate commands."
+state = ["x", "y", "theta"]
+
+[[input]]
+name = "v_cmd"
+column = "v"
+kind = "absolute"
+unit = "m/s"
+
+[[input]]
+name = "w_cmd"
+column = "omega"
+kind = "absolute"
+unit = "rad/s"
+
+[[parameter]]
+name = "k_v"
+nominal = 1.0
+min = 0.0
+
+[[parameter]]
+name = "k_w"
+nominal = 1.0
+min = 0.0
+
+[[noise]]
+name = "dv"
+sigma = 0.02
+{unit}
+[[noise]]
+name = "dw"
+sigma = 0.02
+{unit}
+[motion]
+vx = "k_v*v_cmd + dv"
+vy = "0"
+omega = "k_w*w_cmd + dw"
+
+[[observation]]
+name = "camera"
+landmark = true
+columns = ["range", "bearing"]
+expr = ["sqrt((xl - x)^2 + (yl - y)^2)", "atan2(yl - y, xl - x) - theta"]
+angle = [false, true]
+sigma = [0.05, 0.02]
+"#
+    );
+    let path = dir.join(if noise_unit.is_empty() {
+        "per_row.toml"
+    } else {
+        "density.toml"
+    });
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// `spec` with the catalogue's `effect` added at `values` (`NAME=VALUE`;
+/// the effect's nominal values otherwise), written to `out`, as `kinegen
+/// add-effect` writes it.
+pub fn with_effect(spec: &Path, effect: &str, values: &[(&str, f64)], out: &Path) -> PathBuf {
+    let model = kinegen_model::spec::Model::load(spec).unwrap();
+    let catalogue = kinegen_model::effects::catalogue(&[]).unwrap();
+    let found = kinegen_model::effects::find(&catalogue, effect).unwrap();
+    let values = values.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let added = found.with_values(&model, &values).unwrap();
+    std::fs::write(out, &added.source).unwrap();
+    out.to_path_buf()
+}
+
+/// One robot of MRCLAM's dataset 6 (`../shared/real/mrclam-dataset6`): its
+/// log (commands and Vicon), its camera's sightings and the landmarks' map.
+pub struct MrclamRobot {
+    pub log: PathBuf,
+    pub observations: PathBuf,
+    pub landmarks: PathBuf,
+}
+
+/// MRCLAM's robot `n` (1-5), or `None` (skip) where the real data is
+/// absent (see [`real_data`]).
+pub fn mrclam_robot(n: usize) -> Option<MrclamRobot> {
+    let dir = real_data("mrclam-dataset6")?.join(format!("robot{n}"));
+    Some(MrclamRobot {
+        log: dir.join("log.csv"),
+        observations: dir.join("observations.csv"),
+        landmarks: dir.join("landmarks.csv"),
+    })
 }
 
 /// A log to simulate: the spec, the robot's true values (`NAME=VALUE`) and
@@ -294,6 +397,37 @@ pub fn estimate(c: &Calibrated, l: &Loaded, name: &str) -> (f64, f64) {
         .position(|&f| f == i)
         .expect("a free parameter");
     (c.fit.p[i], c.fit.std[k])
+}
+
+/// `kinegen localize`'s filter options (the noise estimated from the
+/// sightings), with `--spec-noise` where `spec_noise`.
+pub fn filter_options(spec_noise: bool) -> EkfOptions {
+    EkfOptions {
+        noise: if spec_noise {
+            NoiseSource::Spec
+        } else {
+            NoiseSource::Estimate
+        },
+        ..EkfOptions::default()
+    }
+}
+
+/// `kinegen localize`'s localisation of `logs` against `spec_path` with the
+/// filter's options `options`.
+pub fn localized(spec_path: &str, logs: &Logs, options: EkfOptions) -> LocalizedFiles {
+    let sources = logs.sources(spec_path);
+    let request = LocalizeRequest {
+        files: Files {
+            sources: &sources,
+            effect_dirs: &[],
+        },
+        options,
+        sweep: false,
+        for_report: false,
+    };
+    let progress = &|_: &Path| -> Box<dyn Fn(usize, usize)> { Box::new(|_, _| {}) };
+    localize_files(&request, &AutodiffDeriver, progress, &|_| {})
+        .unwrap_or_else(|e| panic!("{spec_path} on {:?}: {e}", logs.data))
 }
 
 /// The mean of `v`.
