@@ -1,6 +1,9 @@
 //! Range-bearing landmark data (CONTRACT section 2: OBS.csv t,id,range,bearing and
-//! MAP.csv id,x,y): simulate it, compare with innovations, calibrate from landmarks
-//! alone (no ground truth), and reject bad files with file, row and column.
+//! MAP.csv id,x,y) through the command line: simulate it, compare with
+//! innovations, localise, and reject bad files with file, row and column.
+//! Calibration and diagnosis from the sightings alone, and the filter's
+//! estimates of a camera's errors, are asserted on the library's values in
+//! analysis/tests/landmarks.rs.
 mod common;
 use common::*;
 use std::path::{Path, PathBuf};
@@ -70,50 +73,6 @@ fn sighted_log(dir: &Path, name: &str, robot: &[&str]) -> (PathBuf, PathBuf, Pat
     (log, obs, map)
 }
 
-/// The same log without its ground-truth columns (`gt_*`, or the skid-steer
-/// spec's `body_*`).
-fn strip_ground_truth(log: &Path, out: &Path) {
-    let text = std::fs::read_to_string(log).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let keep: Vec<usize> = (0..header.len())
-        .filter(|&i| !header[i].starts_with("gt_") && !header[i].starts_with("body_"))
-        .collect();
-    let pick = |l: &str| {
-        let cells: Vec<&str> = l.split(',').collect();
-        keep.iter().map(|&i| cells[i]).collect::<Vec<_>>().join(",")
-    };
-    let mut s = pick(&header.join(",")) + "\n";
-    for l in lines {
-        s += &(pick(l) + "\n");
-    }
-    std::fs::write(out, s).unwrap();
-}
-
-/// `command` (fit, diagnose) of `spec` on `log` without its ground truth,
-/// with its sightings `obs` of `map`: its JSON.
-fn on_sightings_alone(
-    command: &str,
-    spec: &str,
-    log: &Path,
-    obs: &Path,
-    map: &Path,
-) -> serde_json::Value {
-    let nogt = log.with_file_name("nogt.csv");
-    strip_ground_truth(log, &nogt);
-    kinegen_json(&[
-        command,
-        "--spec",
-        spec,
-        "--data",
-        nogt.to_str().unwrap(),
-        "--observations",
-        obs.to_str().unwrap(),
-        "--landmarks",
-        map.to_str().unwrap(),
-    ])
-}
-
 #[test]
 fn compare_reports_landmark_innovations() {
     let tmp = tempfile::tempdir().unwrap();
@@ -144,148 +103,6 @@ fn compare_reports_landmark_innovations() {
             && (0.04..0.06).contains(&rmse("range_robust_sd_m"))
             && (0.016..0.024).contains(&rmse("bearing_rmse_rad")),
         "{seen}"
-    );
-}
-
-#[test]
-fn landmarks_alone_calibrate_the_wheelbase() {
-    let tmp = tempfile::tempdir().unwrap();
-    let (log, obs, map) = landmark_log(tmp.path());
-    let doc = on_sightings_alone("fit", "spec/diff_drive.toml", &log, &obs, &map);
-    assert_eq!(doc["metric"], "landmark_range_rmse_m");
-    let b = doc["parameters"]["b"]["estimate"].as_f64().unwrap();
-    assert!((b - 0.205).abs() / 0.205 < 0.005, "b = {b}");
-    let (before, after) = (
-        doc["landmarks"]["before"]["range_rmse_m"].as_f64().unwrap(),
-        doc["landmarks"]["after"]["range_rmse_m"].as_f64().unwrap(),
-    );
-    assert!(
-        after * 5.0 < before,
-        "range innovations fell only from {before} to {after}"
-    );
-    // after calibration the innovations are at the sensor noise of the spec (0.05 m)
-    assert!(after < 0.07, "{after}");
-}
-
-/// Without a ground truth, diagnose holds out the last 40% of the sightings,
-/// not of the rows: a robot that sees its landmarks only in the first quarter
-/// of its log (a tour that leaves the mapped area) had a held-out part with
-/// no sighting in it, and no effect could be significant however clear (a
-/// 0.03 rad toe, estimated to 1%, the error 60% lower: "no catalogue effect
-/// is significant").
-#[test]
-fn landmarks_alone_name_an_effect_seen_only_early_in_the_log() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let (map, obs) = (root().join("data/beacons.csv"), dir.join("obs.csv"));
-    let log = simulate(
-        dir,
-        "toed.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--trajectory",
-            "random",
-            "--seed",
-            "6",
-            "--laps",
-            "3",
-            "--effect",
-            "wheel_misalignment=0.03",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
-    // the sightings end a quarter of the way through the log
-    let last_time = |f: &Path| -> f64 {
-        let text = std::fs::read_to_string(f).unwrap();
-        let last = text.lines().last().unwrap();
-        last.split(',').next().unwrap().parse().unwrap()
-    };
-    let (last_sighting, last_row) = (last_time(&obs), last_time(&log));
-    assert!(
-        last_sighting < 0.4 * last_row,
-        "{last_sighting} of {last_row} s"
-    );
-    let doc = on_sightings_alone("diagnose", "spec/diff_drive.toml", &log, &obs, &map);
-    assert_eq!(
-        doc["verdict"]["effect"], "wheel_misalignment",
-        "{}",
-        doc["verdict"]
-    );
-    // the held-out part has sightings to score
-    let held_out = doc["calibrated"]["holdout_rmse"].as_f64().unwrap();
-    assert!(held_out > 0.5, "held-out error {held_out}");
-    // what takes a ground truth is said not to be measured, not to be 0
-    let step = &doc["discretisation"];
-    assert_eq!(step["measured"], false, "{step}");
-    assert!(step["far_below_noise"].is_null(), "{step}");
-}
-
-/// A user's robot whose lidar sits 0.35 m ahead of the body origin, and no
-/// ground truth: the start pose comes from the landmarks seen at the start
-/// through the spec's own observation (offset included), so calibration from
-/// landmarks alone finds the wheel radius, the track and the offset, and the
-/// innovations fall to the sensor noise (0.03 m). With the start pose of a
-/// sensor at the origin, the fit stopped at 0.20 m with the radius 7% off.
-#[test]
-fn an_offset_sensor_calibrates_from_landmarks_alone() {
-    let tmp = tempfile::tempdir().unwrap();
-    let t = tmp.path();
-    let spec = t.join("my_skid.toml");
-    let mut text = std::fs::read_to_string(root().join("tests/user_specs/skid4.toml")).unwrap();
-    text += r#"
-[[parameter]]
-name = "lidar_dx"
-nominal = 0.0
-unit = "m"
-min = -1.0
-max = 1.0
-
-[[observation]]
-name = "reflectors"
-landmark = true
-columns = ["range", "bearing"]
-expr = ["sqrt((xl - x - lidar_dx*cos(theta))^2 + (yl - y - lidar_dx*sin(theta))^2)", "atan2(yl - y - lidar_dx*sin(theta), xl - x - lidar_dx*cos(theta)) - theta"]
-angle = [false, true]
-sigma = [0.03, 0.01]
-"#;
-    std::fs::write(&spec, text).unwrap();
-    let map = t.join("reflectors.csv");
-    std::fs::write(&map, "id,x,y\nR1,4,3\nR2,-2,5\nR3,6,-3\nR4,0,-4\nR5,3,7\n").unwrap();
-    let obs = t.join("seen.csv");
-    let spec_s = spec.to_str().unwrap();
-    let log = simulate(
-        t,
-        "drive.csv",
-        &[
-            "--spec",
-            spec_s,
-            "--set",
-            "lidar_dx=0.35",
-            "--set",
-            "track=0.6",
-            "--trajectory",
-            "random",
-            "--seed",
-            "2",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
-    let doc = on_sightings_alone("fit", spec_s, &log, &obs, &map);
-    let est = |n: &str| doc["parameters"][n]["estimate"].as_f64().unwrap();
-    assert!((est("radius") / 0.08 - 1.0).abs() < 0.005, "{doc}");
-    assert!((est("track") / 0.6 - 1.0).abs() < 0.005, "{doc}");
-    assert!((est("lidar_dx") - 0.35).abs() < 0.01, "{doc}");
-    let after = doc["landmarks"]["after"]["range_rmse_m"].as_f64().unwrap();
-    assert!(
-        after < 0.035,
-        "range innovations {after} m for 0.03 m of noise"
     );
 }
 
@@ -725,21 +542,6 @@ fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
     assert!(html.contains("noise sweep") && html.contains("3-sigma"));
 }
 
-/// A camera whose range error is persistent (per landmark, changing over
-/// seconds) and grows with the range, as the MRCLAM robots' cameras do:
-/// 4% of the range, a 3 s time constant, on top of the spec's white 5 cm.
-/// With the noise estimated from the sightings alone, the filter finds the
-/// persistent part per metre of range near the truth, and stays consistent.
-/// (A filter that carried the error as a constant, or the estimate wired to
-/// the wrong Jacobian, finds it several times too large and is overconfident.)
-#[test]
-fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
-    let tmp = tempfile::tempdir().unwrap();
-    let doc = tour_with_range_errors(tmp.path(), &SIX_LANDMARKS, &["--laps", "3"]);
-    let rmse = persistent_range_error_found(&doc);
-    eprintln!("RMSE {rmse:.4} m");
-}
-
 /// A map around the `beacons` trajectory's tour, for the sighting-error tests.
 const SIX_LANDMARKS: [(f64, f64); 6] = [
     (-4.0, -3.0),
@@ -749,150 +551,6 @@ const SIX_LANDMARKS: [(f64, f64); 6] = [
     (0.0, 6.0),
     (0.0, -6.0),
 ];
-
-/// The persistent range error [`tour_with_range_errors`] adds.
-const RANGE_ERROR_PER_M: f64 = 0.04;
-
-/// `localize --json` of the unicycle touring the landmarks at `points` (the
-/// `beacons` trajectory, 2 sightings a second, `extra` simulate options),
-/// its ranges wrong by a persistent [`RANGE_ERROR_PER_M`] per metre.
-fn tour_with_range_errors(dir: &Path, points: &[(f64, f64)], extra: &[&str]) -> serde_json::Value {
-    let spec = "spec/unicycle_ekf.toml";
-    let m = write_map(dir, points);
-    let obs = dir.join("obs.csv");
-    let mut a = vec!["--landmark-hz", "2"];
-    a.extend_from_slice(extra);
-    let log = beacon_tour(dir, "run.csv", spec, &m, &obs, &a);
-    add_persistent_range_errors(&obs, RANGE_ERROR_PER_M, 3.0);
-    localize_json(spec, &log, &obs, &m, &[])
-}
-
-/// Check that localize found the persistent range error and is consistent
-/// with its sightings; the position RMSE.
-fn persistent_range_error_found(doc: &serde_json::Value) -> f64 {
-    let fraction = RANGE_ERROR_PER_M;
-    // the spec's range sigma is 0.05 m: the persistent part per metre of range
-    let per_m = 0.05 * doc["noise"]["persistent"]["range_per_m"].as_f64().unwrap();
-    let run = &doc["runs"][0];
-    let nis = run["nis_mean"].as_f64().unwrap();
-    eprintln!("persistent range error {per_m:.4} per m (true {fraction}), NIS {nis:.2}");
-    assert!(
-        (0.5 * fraction..2.0 * fraction).contains(&per_m),
-        "persistent range error {per_m} per m, true {fraction}"
-    );
-    // consistent with its sightings (the ground truth's own noise makes NEES
-    // meaningless at the millimetre errors of a simulated robot)
-    let b = &run["nis_bounds"];
-    assert!(
-        nis > b[0].as_f64().unwrap() && nis < b[1].as_f64().unwrap(),
-        "NIS {nis} {b}"
-    );
-    run["position_rmse_m"].as_f64().unwrap()
-}
-
-/// Scale each sighting's range in `obs` by 1 + e, with e a first-order
-/// Gauss-Markov error per landmark (stationary sd `fraction`, time constant
-/// `memory` s): a camera that ranges by a target's apparent size.
-fn add_persistent_range_errors(obs: &Path, fraction: f64, memory: f64) {
-    let by_landmark = |f: &[String]| f[1].clone();
-    add_gauss_markov_errors(obs, (fraction, memory, 11), by_landmark, |f, e| {
-        let range: f64 = f[2].parse().unwrap();
-        f[2] = format!("{}", range * (1.0 + e));
-    });
-}
-
-/// Rewrite each sighting of `obs` by `apply(fields, e)`, with e the value
-/// at its time of a first-order Gauss-Markov process (stationary sd, time
-/// constant in s, random seed: `process`), one process for each `key` of
-/// the sighting's fields.
-fn add_gauss_markov_errors(
-    obs: &Path,
-    (sd, memory, seed): (f64, f64, u64),
-    key: impl Fn(&[String]) -> String,
-    apply: impl Fn(&mut [String], f64),
-) {
-    use rand::{Rng, SeedableRng};
-    use rand_distr::StandardNormal;
-    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
-    let mut error: std::collections::HashMap<String, (f64, f64)> = Default::default();
-    let text = std::fs::read_to_string(obs).unwrap();
-    let mut out = String::new();
-    for (i, line) in text.lines().enumerate() {
-        if i == 0 {
-            out += line;
-            out += "\n";
-            continue;
-        }
-        let mut f: Vec<String> = line.split(',').map(String::from).collect();
-        let t: f64 = f[0].parse().unwrap();
-        let e = error
-            .entry(key(&f))
-            .or_insert_with(|| (t, sd * rng.sample::<f64, _>(StandardNormal)));
-        let phi = (-(t - e.0) / memory).exp();
-        let kick: f64 = rng.sample(StandardNormal);
-        *e = (t, phi * e.1 + sd * (1.0 - phi * phi).sqrt() * kick);
-        apply(&mut f, e.1);
-        out += &f.join(",");
-        out += "\n";
-    }
-    std::fs::write(obs, out).unwrap();
-}
-
-/// A camera whose error every landmark in a frame shares (it tilts, it
-/// rocks: the MRCLAM robots' bearing errors of two landmarks in one frame
-/// correlate 0.68-0.87 against Vicon): a bearing error of 30 mrad common to
-/// all sightings at one time, changing over 5 s, beside the spec's white
-/// 20 mrad. The filter finds it as the shared part, near its size, is
-/// consistent with its sightings, and tracks to 6 mm. (Without the shared
-/// part, the likelihood spreads it over each landmark's own error, and the
-/// track is 4.4 times worse: 25 mm.)
-#[test]
-fn a_camera_error_every_landmark_shares_is_estimated_once() {
-    let tmp = tempfile::tempdir().unwrap();
-    let spec = "spec/unicycle_ekf.toml";
-    let m = write_map(tmp.path(), &SIX_LANDMARKS);
-    let obs = tmp.path().join("obs.csv");
-    let extra = ["--landmark-hz", "2", "--laps", "3"];
-    let log = beacon_tour(tmp.path(), "run.csv", spec, &m, &obs, &extra);
-    add_shared_bearing_errors(&obs, SHARED_BEARING_ERROR, 5.0);
-    let doc = localize_json(spec, &log, &obs, &m, &[]);
-    // the spec's bearing sigma is 0.02 rad
-    let shared = 0.02 * doc["noise"]["shared"]["bearing"].as_f64().unwrap();
-    let run = &doc["runs"][0];
-    let nis = run["nis_mean"].as_f64().unwrap();
-    let b = &run["nis_bounds"];
-    let rmse = run["position_rmse_m"].as_f64().unwrap();
-    eprintln!(
-        "shared bearing error {shared:.4} rad (true {SHARED_BEARING_ERROR}), NIS {nis:.2} {b}, RMSE {rmse:.4} m"
-    );
-    assert!(
-        (0.5 * SHARED_BEARING_ERROR..2.0 * SHARED_BEARING_ERROR).contains(&shared),
-        "shared bearing error {shared}, true {SHARED_BEARING_ERROR}"
-    );
-    assert!(
-        nis > b[0].as_f64().unwrap() && nis < b[1].as_f64().unwrap(),
-        "NIS {nis} {b}"
-    );
-    assert!(rmse < 0.012, "RMSE {rmse} m");
-}
-
-/// The shared bearing error [`add_shared_bearing_errors`] adds (rad).
-const SHARED_BEARING_ERROR: f64 = 0.03;
-
-/// Add to every bearing in `obs` an error e common to all sightings at one
-/// time, a first-order Gauss-Markov process (stationary sd `sd`, time
-/// constant `memory` s).
-fn add_shared_bearing_errors(obs: &Path, sd: f64, memory: f64) {
-    add_gauss_markov_errors(
-        obs,
-        (sd, memory, 12),
-        |_| String::new(),
-        |f, e| {
-            let bearing: f64 = f[3].parse().unwrap();
-            f[3] = format!("{}", bearing + e);
-        },
-    );
-}
 
 /// A camera that reads depth, not range (the catalogue's `range_as_depth`:
 /// a camera that ranges by a target's apparent size does; MRCLAM's reads
@@ -957,38 +615,6 @@ fn a_camera_that_reads_depth_is_estimated_from_the_sightings() {
     );
     assert!(w["noise"]["range_reading"].is_null(), "{}", w["noise"]);
     assert!(rmse(&w) < 0.011, "RMSE {} m", rmse(&w));
-}
-
-/// A map of more landmarks than the filter carries persistent errors for
-/// (`localize::active`: the most recently sighted 24) along a tour that
-/// passes them in turn: those let go restart from their prior when sighted
-/// again, and the filter stays as good as the six-landmark case above
-/// (persistent error found, NIS within its bounds, the drift of a robot 5%
-/// faster than its spec divided).
-#[test]
-fn a_map_larger_than_the_errors_carried_still_localises() {
-    let tmp = tempfile::tempdir().unwrap();
-    let ring: Vec<(f64, f64)> = (0..40)
-        .map(|k| {
-            let a = k as f64 * std::f64::consts::TAU / 40.0;
-            (7.0 * a.cos(), 7.0 * a.sin())
-        })
-        .collect();
-    // sighted only within 4 m, by a robot 5% faster than its spec (dead
-    // reckoning drifts)
-    let extra = ["--landmark-range", "4", "--set", "v_scale=1.05"];
-    let doc = tour_with_range_errors(tmp.path(), &ring, &extra);
-    let rmse = persistent_range_error_found(&doc);
-    let run = &doc["runs"][0];
-    let dr = run["dead_reckoning_rmse_m"].as_f64().unwrap();
-    let used = run["observations_used"].as_f64().unwrap();
-    let rejected = run["observations_rejected"].as_f64().unwrap();
-    eprintln!("RMSE {rmse:.4} m (dead reckoning {dr:.4}), {used} used, {rejected} rejected");
-    assert!(
-        used >= 0.97 * (used + rejected),
-        "{used} used, {rejected} rejected"
-    );
-    assert!(rmse < 0.5 * dr, "RMSE {rmse} against dead reckoning {dr}");
 }
 
 /// The arguments of `localize` on `log` with its sightings `obs` of the

@@ -1154,11 +1154,7 @@ fn a_calibration_on_drifting_sightings_says_it_is_biased() {
         ];
         run_in(dir, &args)["warnings"].to_string()
     };
-    let said = warned(
-        &blind,
-        &d.observations,
-        &d.landmarks,
-    );
+    let said = warned(&blind, &d.observations, &d.landmarks);
     assert!(
         said.contains("drifts far beyond the sensor's noise"),
         "{said}"

@@ -209,6 +209,9 @@ pub struct Sim<'a> {
     pub laps: usize,
     /// A landmark map the robot's camera sights (`--landmarks`).
     pub landmarks: Option<&'a Path>,
+    /// The camera's sightings per second of each landmark and its reach, m
+    /// (`--landmark-hz`, `--landmark-range`; none: simulate's defaults).
+    pub camera: Option<(f64, f64)>,
 }
 
 impl<'a> Sim<'a> {
@@ -222,6 +225,7 @@ impl<'a> Sim<'a> {
             seed: 1,
             laps: 1,
             landmarks: None,
+            camera: None,
         }
     }
 
@@ -263,6 +267,15 @@ impl<'a> Sim<'a> {
         }
     }
 
+    /// A camera that sights each landmark `hz` times a second within
+    /// `range` m.
+    pub fn camera(self, hz: f64, range: f64) -> Sim<'a> {
+        Sim {
+            camera: Some((hz, range)),
+            ..self
+        }
+    }
+
     /// The log as `kinegen simulate` writes it, into `dir/name`.
     pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
         self.write_sighted(dir, name).0
@@ -274,6 +287,7 @@ impl<'a> Sim<'a> {
     pub fn write_sighted(&self, dir: &Path, name: &str) -> (PathBuf, PathBuf) {
         let owned = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         let (effects, sets) = (owned(self.effects), owned(self.sets));
+        let defaults = SimOptions::default();
         let request = SimulateRequest {
             spec: &spec(self.spec),
             effects: &effects,
@@ -284,7 +298,9 @@ impl<'a> Sim<'a> {
                 trajectory: self.trajectory,
                 seed: self.seed,
                 laps: self.laps,
-                ..SimOptions::default()
+                landmark_hz: self.camera.map_or(defaults.landmark_hz, |c| c.0),
+                landmark_range: self.camera.map_or(defaults.landmark_range, |c| c.1),
+                ..defaults
             },
         };
         let sim = simulate_files(&request, &AutodiffDeriver).expect("a simulation");
