@@ -28,22 +28,11 @@ fn bag(dir: &Path, log: &Path, name: &str, extra: &[&str]) -> PathBuf {
 }
 
 fn hidden_slip_log(dir: &Path) -> PathBuf {
-    simulate(
-        dir,
-        "slip.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--effect",
-            "lateral_slip=0.2",
-            "--set",
-            "b=0.205",
-            "--trajectory",
-            "random",
-            "--seed",
-            "3",
-        ],
-    )
+    Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.205"])
+        .effects(&["lateral_slip=0.2"])
+        .drive("random", 3, 1)
+        .write(dir, "slip.csv")
 }
 
 fn estimates(d: &serde_json::Value) -> Vec<(String, f64)> {
@@ -282,24 +271,11 @@ fn sighted_log(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     let map = dir.join("map.csv");
     std::fs::write(&map, "id,x,y\nL1,3,2\nL2,-1,4\nL3,5,-2\nL4,0,-3\nL5,2,6\n").unwrap();
     let obs = dir.join("obs.csv");
-    let csv = simulate(
-        dir,
-        "lm.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "b=0.205",
-            "--trajectory",
-            "random",
-            "--seed",
-            "4",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
+    let csv = Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.205"])
+        .drive("random", 4, 1)
+        .sighting(&map)
+        .write_to(&dir.join("lm.csv"), &obs);
     (csv, obs, map)
 }
 
@@ -515,22 +491,10 @@ fn velocity_commands_are_read_from_cmd_vel() {
     // the MRCLAM robots' spec as a user writes it (its camera unused here)
     let spec = commanded_spec(tmp.path(), "");
     let s = spec.to_str().unwrap();
-    let csv = simulate(
-        tmp.path(),
-        "commanded.csv",
-        &[
-            "--spec",
-            s,
-            "--trajectory",
-            "random",
-            "--seed",
-            "5",
-            "--set",
-            "k_v=1.06",
-            "--set",
-            "k_w=0.93",
-        ],
-    );
+    let csv = Sim::new(s)
+        .sets(&["k_v=1.06", "k_w=0.93"])
+        .drive("random", 5, 1)
+        .write(tmp.path(), "commanded.csv");
     let topics = tmp.path().join("topics.toml");
     std::fs::write(
         &topics,

@@ -41,18 +41,10 @@ fn batch(dir: &Path, args: &[&str]) -> std::process::Output {
 fn a_batch_writes_one_line_a_job_and_resumes_after_a_kill() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let log = simulate(
-        dir,
-        "r1.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "b=0.205",
-            "--trajectory",
-            "square",
-        ],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.205"])
+        .drive("square", 1, 1)
+        .write(dir, "r1.csv");
     let spec = root().join("spec/diff_drive.toml");
     let s = spec.to_str().unwrap();
     // 200 jobs: fits, two diagnoses, a compare, and one that fails
@@ -286,30 +278,14 @@ fn the_dask_driver_gives_the_local_batch_results() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    simulate(
-        dir,
-        "a.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "b=0.205",
-            "--trajectory",
-            "square",
-        ],
-    );
-    simulate(
-        dir,
-        "b.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "r_l=0.0418",
-            "--trajectory",
-            "figure8",
-        ],
-    );
+    Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.205"])
+        .drive("square", 1, 1)
+        .write(dir, "a.csv");
+    Sim::new("spec/diff_drive.toml")
+        .sets(&["r_l=0.0418"])
+        .drive("figure8", 1, 1)
+        .write(dir, "b.csv");
     let spec = root().join("spec/diff_drive.toml");
     let s = spec.to_str().unwrap();
     let mut jobs = String::new();
@@ -387,16 +363,12 @@ fn a_plan_writes_a_job_for_every_log_of_a_directory() {
     let dir = tmp.path();
     let logs = dir.join("logs");
     std::fs::create_dir_all(logs.join("robot2")).unwrap();
-    simulate(
-        &logs,
-        "run-01.csv",
-        &["--spec", "spec/diff_drive.toml", "--trajectory", "square"],
-    );
-    simulate(
-        &logs.join("robot2"),
-        "run-01.csv",
-        &["--spec", "spec/diff_drive.toml", "--trajectory", "figure8"],
-    );
+    Sim::new("spec/diff_drive.toml")
+        .drive("square", 1, 1)
+        .write(&logs, "run-01.csv");
+    Sim::new("spec/diff_drive.toml")
+        .drive("figure8", 1, 1)
+        .write(&logs.join("robot2"), "run-01.csv");
     std::fs::write(logs.join("map.csv"), "id,x,y\nA,1,2\n").unwrap();
     // a log with a comment line above its header is a log, as every command
     // reads it

@@ -23,6 +23,52 @@ fn run_to_json(
     (o, doc)
 }
 
+/// `kinegen simulate` writes, byte for byte, the log and sightings the
+/// tests' scenarios write in-process (`Sim`, which the other tests use):
+/// the command adds only its options' parsing.
+#[test]
+fn simulate_writes_the_scenarios_logs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let map = root().join("data/beacons.csv");
+    let sim = Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.21"])
+        .effects(&["lateral_slip=0.1"])
+        .drive("figure8", 5, 2)
+        .sighting(&map)
+        .camera(2.0, 8.0);
+    let (log, obs) = sim.write_sighted(tmp.path(), "scenario.csv");
+    let (cli_log, cli_obs) = (tmp.path().join("cli.csv"), tmp.path().join("cli_obs.csv"));
+    let o = kinegen(&[
+        "simulate",
+        "--spec",
+        "spec/diff_drive.toml",
+        "--set",
+        "b=0.21",
+        "--effect",
+        "lateral_slip=0.1",
+        "--trajectory",
+        "figure8",
+        "--seed",
+        "5",
+        "--laps",
+        "2",
+        "--landmarks",
+        map.to_str().unwrap(),
+        "--landmark-hz",
+        "2",
+        "--landmark-range",
+        "8",
+        "--observations",
+        cli_obs.to_str().unwrap(),
+        "--out",
+        cli_log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let read = |p: &std::path::Path| std::fs::read_to_string(p).unwrap();
+    assert!(read(&log) == read(&cli_log), "the logs differ");
+    assert!(read(&obs) == read(&cli_obs) && read(&obs).lines().count() > 100);
+}
+
 /// `fit --json` as CONTRACT section 4 gives it (the values themselves are
 /// analysis/tests/calibration.rs's): the model, the metric, before and after,
 /// each free parameter's nominal value, estimate and standard deviation
@@ -34,11 +80,10 @@ fn fit_json_has_the_contract_shape() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = "spec/diff_drive.toml";
     let sim = |name: &str, traj: &str| {
-        simulate(
-            tmp.path(),
-            name,
-            &["--spec", spec, "--set", "b=0.21", "--trajectory", traj],
-        )
+        Sim::new(spec)
+            .sets(&["b=0.21"])
+            .drive(traj, 1, 1)
+            .write(tmp.path(), name)
     };
     let (square, spin) = (sim("square.csv", "square"), sim("spin.csv", "spin"));
     let (square, spin) = (square.to_str().unwrap(), spin.to_str().unwrap());
@@ -100,7 +145,9 @@ fn every_bundled_model_can_be_simulated_and_compared() {
         "unicycle_ekf",
     ] {
         let path = format!("spec/{spec}.toml");
-        let log = simulate(tmp.path(), &format!("{spec}.csv"), &["--spec", &path]);
+        let log = Sim::new(&path)
+            .drive("square", 1, 1)
+            .write(tmp.path(), &format!("{spec}.csv"));
         let cmp = kinegen_json(&["compare", "--spec", &path, "--data", log.to_str().unwrap()]);
         assert!(
             cmp["rmse"].as_f64().unwrap() >= 0.0,
@@ -122,7 +169,7 @@ fn every_bundled_model_can_be_simulated_and_compared() {
 #[test]
 fn methods_are_compared_in_the_json_and_the_report() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = seed_000_log(tmp.path(), "omni.csv", "3");
+    let log = seed_000_log(tmp.path(), "omni.csv", 3);
     let report = tmp.path().join("report");
     let mut args = vec![
         "fit",
@@ -168,11 +215,9 @@ fn methods_are_compared_in_the_json_and_the_report() {
 fn inputs_outside_their_declared_range_are_reported_with_their_lines() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = "spec/tricycle.toml";
-    let log = simulate(
-        tmp.path(),
-        "inside.csv",
-        &["--spec", spec, "--trajectory", "random", "--seed", "2"],
-    );
+    let log = Sim::new(spec)
+        .drive("random", 2, 1)
+        .write(tmp.path(), "inside.csv");
     let inside = kinegen_json(&["compare", "--spec", spec, "--data", log.to_str().unwrap()]);
     assert_eq!(inside["warnings"], serde_json::json!([]));
     // data rows 99..=119 (CSV lines 101-121) steer to 1.5 rad
@@ -402,11 +447,9 @@ fn bad_headers_and_comments() -> Vec<(&'static str, String, &'static str)> {
 #[test]
 fn comment_lines_before_the_header_are_read_past() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "log.csv",
-        &["--spec", "spec/diff_drive.toml", "--seed", "4"],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .drive("square", 4, 1)
+        .write(tmp.path(), "log.csv");
     let text = std::fs::read_to_string(&log).unwrap();
     let (header, rows) = text.split_once('\n').unwrap();
     let variants = [
@@ -444,18 +487,9 @@ fn comment_lines_before_the_header_are_read_past() {
 #[test]
 fn gaps_split_a_log_and_repeated_rows_are_named() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "log.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--trajectory",
-            "random",
-            "--seed",
-            "2",
-        ],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .drive("random", 2, 1)
+        .write(tmp.path(), "log.csv");
     let text = std::fs::read_to_string(&log).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     // lines 501-600 lost: a 5 s gap at 20 Hz
@@ -519,11 +553,9 @@ fn gaps_split_a_log_and_repeated_rows_are_named() {
 #[test]
 fn results_that_would_not_be_finite_are_refused_with_the_row() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "log.csv",
-        &["--spec", "spec/diff_drive.toml", "--trajectory", "random"],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .drive("random", 1, 1)
+        .write(tmp.path(), "log.csv");
     for set in ["b=1e-300", "r_r=1e300"] {
         for cmd in ["compare", "fit", "diagnose"] {
             let o = kinegen(&[
@@ -671,20 +703,10 @@ fn json_to_a_file_and_a_report_are_written_and_stdout_stays_human() {
 #[test]
 fn a_measurement_delay_is_calibrated_once_the_time_offset_effect_is_added() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "delay.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--effect",
-            "time_offset=0.08",
-            "--trajectory",
-            "random",
-            "--seed",
-            "7",
-        ],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .effects(&["time_offset=0.08"])
+        .drive("random", 7, 1)
+        .write(tmp.path(), "delay.csv");
     let spec = tmp.path().join("dd_delay.toml");
     let o = kinegen(&[
         "add-effect",
@@ -735,20 +757,10 @@ fn a_delay_declared_under_any_name_is_simulated_and_calibrated() {
         .unwrap();
     std::fs::write(&spec, format!("{}{lag}\n{}", &text[..at], &text[at..])).unwrap();
     let spec = spec.to_str().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "lagged.csv",
-        &[
-            "--spec",
-            spec,
-            "--set",
-            "mocap_lag=0.06",
-            "--trajectory",
-            "random",
-            "--seed",
-            "7",
-        ],
-    );
+    let log = Sim::new(spec)
+        .sets(&["mocap_lag=0.06"])
+        .drive("random", 7, 1)
+        .write(tmp.path(), "lagged.csv");
     let fit = kinegen_json(&["fit", "--spec", spec, "--data", log.to_str().unwrap()]);
     let tau = fit["parameters"]["mocap_lag"]["estimate"].as_f64().unwrap();
     assert!((tau - 0.06).abs() < 0.004, "mocap_lag {tau}");
@@ -761,16 +773,12 @@ fn a_delay_declared_under_any_name_is_simulated_and_calibrated() {
 fn umbmark_refuses_logs_that_are_not_square_tests() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = "spec/diff_drive.toml";
-    let f8 = simulate(
-        tmp.path(),
-        "eight.csv",
-        &["--spec", spec, "--trajectory", "figure8"],
-    );
-    let cw = simulate(
-        tmp.path(),
-        "cw.csv",
-        &["--spec", spec, "--trajectory", "square-cw"],
-    );
+    let f8 = Sim::new(spec)
+        .drive("figure8", 1, 1)
+        .write(tmp.path(), "eight.csv");
+    let cw = Sim::new(spec)
+        .drive("square-cw", 1, 1)
+        .write(tmp.path(), "cw.csv");
     let (f8, cw) = (f8.to_str().unwrap(), cw.to_str().unwrap());
     let o = kinegen(&[
         "fit", "--spec", spec, "--data", cw, "--data", f8, "--method", "umbmark",
@@ -782,11 +790,9 @@ fn umbmark_refuses_logs_that_are_not_square_tests() {
         stderr(&o)
     );
     // a wrong --side is caught too
-    let ccw = simulate(
-        tmp.path(),
-        "ccw.csv",
-        &["--spec", spec, "--trajectory", "square-ccw"],
-    );
+    let ccw = Sim::new(spec)
+        .drive("square-ccw", 1, 1)
+        .write(tmp.path(), "ccw.csv");
     let ccw = ccw.to_str().unwrap();
     let o = kinegen(&[
         "fit", "--spec", spec, "--data", cw, "--data", ccw, "--method", "umbmark", "--side", "3",
@@ -806,16 +812,9 @@ fn umbmark_refuses_logs_that_are_not_square_tests() {
 #[test]
 fn unwritable_outputs_and_unknown_truth_names_are_refused_up_front() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "cw.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--trajectory",
-            "square-cw",
-        ],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .drive("square-cw", 1, 1)
+        .write(tmp.path(), "cw.csv");
     let log = log.to_str().unwrap();
     let dir = tmp.path().to_str().unwrap();
     let file_as_dir = format!("{log}/x.json");
@@ -854,18 +853,10 @@ fn wrapping_encoder_counters_are_unwrapped_when_declared() {
     let (plain, wrapped) = (tmp.path().join("dd.toml"), tmp.path().join("dd_wrap.toml"));
     std::fs::write(&plain, &spec).unwrap();
     std::fs::write(&wrapped, &wrapped_spec).unwrap();
-    let log = simulate(
-        tmp.path(),
-        "log.csv",
-        &[
-            "--spec",
-            plain.to_str().unwrap(),
-            "--trajectory",
-            "random",
-            "--set",
-            "b=0.21",
-        ],
-    );
+    let log = Sim::new(plain.to_str().unwrap())
+        .sets(&["b=0.21"])
+        .drive("random", 1, 1)
+        .write(tmp.path(), "log.csv");
     // the counters as a 12-bit register would hold them
     let text = std::fs::read_to_string(&log).unwrap();
     let mut lines = text.lines();
@@ -958,11 +949,10 @@ fn wrapping_encoder_counters_are_unwrapped_when_declared() {
 fn calibrated_values_export_as_ros2_yaml() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = "spec/diff_drive.toml";
-    let log = simulate(
-        tmp.path(),
-        "cw.csv",
-        &["--spec", spec, "--trajectory", "random", "--set", "b=0.21"],
-    );
+    let log = Sim::new(spec)
+        .sets(&["b=0.21"])
+        .drive("random", 1, 1)
+        .write(tmp.path(), "cw.csv");
     let log = log.to_str().unwrap();
     let yaml = tmp.path().join("robot/controller.yaml");
     let o = kinegen(&[
@@ -1002,11 +992,9 @@ fn calibrated_values_export_as_ros2_yaml() {
     // any other model: the generic list
     let trike = root().join("tests/user_specs/fwd_tricycle.toml");
     let trike = trike.to_str().unwrap();
-    let tlog = simulate(
-        tmp.path(),
-        "trike.csv",
-        &["--spec", trike, "--trajectory", "random"],
-    );
+    let tlog = Sim::new(trike)
+        .drive("random", 1, 1)
+        .write(tmp.path(), "trike.csv");
     let generic = tmp.path().join("trike.yaml");
     let o = kinegen(&[
         "fit",
@@ -1065,20 +1053,11 @@ fn calibrated_values_export_as_the_spec() {
         &[],
         &tmp.path().join("slipping.toml"),
     );
-    let log = simulate(
-        tmp.path(),
-        "run.csv",
-        &[
-            "--spec",
-            spec.to_str().unwrap(),
-            "--trajectory",
-            "random",
-            "--set",
-            "b=0.21",
-            "--effect",
-            "lateral_slip=0.1",
-        ],
-    );
+    let log = Sim::new(spec.to_str().unwrap())
+        .sets(&["b=0.21"])
+        .effects(&["lateral_slip=0.1"])
+        .drive("random", 1, 1)
+        .write(tmp.path(), "run.csv");
     let log = log.to_str().unwrap();
     let fitted = tmp.path().join("fitted.toml");
     let o = kinegen(&[
@@ -1145,11 +1124,9 @@ fn calibrated_values_export_as_the_spec() {
 fn nonsensical_numeric_options_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = "spec/diff_drive.toml";
-    let log = simulate(
-        tmp.path(),
-        "cw.csv",
-        &["--spec", spec, "--trajectory", "square-cw"],
-    );
+    let log = Sim::new(spec)
+        .drive("square-cw", 1, 1)
+        .write(tmp.path(), "cw.csv");
     let log = log.to_str().unwrap();
     for (args, needle) in [
         (
@@ -1311,22 +1288,10 @@ fn a_reader_that_stops_reading_ends_the_run_quietly() {
 fn a_long_fit_writes_a_report_under_5_mb() {
     let tmp = tempfile::tempdir().unwrap();
     // 110 laps of 91 s at 20 Hz: 200,201 rows
-    let log = simulate(
-        tmp.path(),
-        "long.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--trajectory",
-            "random",
-            "--laps",
-            "110",
-            "--seed",
-            "4",
-            "--set",
-            "b=0.204",
-        ],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.204"])
+        .drive("random", 4, 110)
+        .write(tmp.path(), "long.csv");
     let report = tmp.path().join("report");
     let doc = kinegen_json(&[
         "fit",
@@ -1352,22 +1317,10 @@ fn a_long_fit_writes_a_report_under_5_mb() {
 #[test]
 fn a_calibration_that_triples_the_short_term_drift_is_unusable() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "rover.csv",
-        &[
-            "--spec",
-            "tests/user_specs/rover.toml",
-            "--trajectory",
-            "random",
-            "--laps",
-            "3",
-            "--seed",
-            "11",
-            "--effect",
-            "steering_offset=0.1",
-        ],
-    );
+    let log = Sim::new("tests/user_specs/rover.toml")
+        .effects(&["steering_offset=0.1"])
+        .drive("random", 11, 3)
+        .write(tmp.path(), "rover.csv");
     let (o, doc) = run_to_json(
         tmp.path(),
         "fit",
@@ -1392,20 +1345,10 @@ fn a_calibration_that_triples_the_short_term_drift_is_unusable() {
 /// A diff drive with a right wheel of 0.0505 m (nominal 0.042) driving at
 /// random (seed 11), simulated into `dir/log.csv`.
 fn wide_right_wheel_log(dir: &std::path::Path) -> std::path::PathBuf {
-    simulate(
-        dir,
-        "log.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "r_r=0.0505",
-            "--trajectory",
-            "random",
-            "--seed",
-            "11",
-        ],
-    )
+    Sim::new("spec/diff_drive.toml")
+        .sets(&["r_r=0.0505"])
+        .drive("random", 11, 1)
+        .write(dir, "log.csv")
 }
 
 /// Motion capture that loses the robot leaves empty (or `nan`) pose cells:

@@ -8,7 +8,7 @@ use std::process::{Command, Output};
 #[path = "../analysis/tests/scenarios/mod.rs"]
 pub mod scenarios;
 #[allow(unused_imports)] // each test file uses its own few
-pub use scenarios::{commanded_spec, mrclam_robot, real_data, real_runs, SEED_000_TRUTH};
+pub use scenarios::{commanded_spec, mrclam_robot, real_data, real_runs, Sim, SEED_000_TRUTH};
 
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -104,19 +104,8 @@ pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
 
 /// A log of seed 000's Omni robot at its truth ([`SEED_000_TRUTH`]), random
 /// driving from `seed`, written to `dir/name`.
-pub fn seed_000_log(dir: &Path, name: &str, seed: &str) -> PathBuf {
-    let mut args = vec![
-        "--spec",
-        "spec/omni_caster.toml",
-        "--trajectory",
-        "random",
-        "--seed",
-        seed,
-    ];
-    for t in &SEED_000_TRUTH {
-        args.extend(["--set", t]);
-    }
-    simulate(dir, name, &args)
+pub fn seed_000_log(dir: &Path, name: &str, seed: u64) -> PathBuf {
+    Sim::seed_000(seed).write(dir, name)
 }
 
 /// `kinegen add-effect`: `spec` with the catalogue's `effect` added (at

@@ -11,22 +11,11 @@ use common::*;
 fn the_whole_story_through_the_cli() {
     let tmp = tempfile::tempdir().unwrap();
     let t = tmp.path();
-    let log = simulate(
-        t,
-        "slip.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--effect",
-            "lateral_slip=0.2",
-            "--set",
-            "b=0.205",
-            "--trajectory",
-            "random",
-            "--seed",
-            "11",
-        ],
-    );
+    let log = Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.205"])
+        .effects(&["lateral_slip=0.2"])
+        .drive("random", 11, 1)
+        .write(t, "slip.csv");
     let l = log.to_str().unwrap();
     let cmp = kinegen_json(&["compare", "--spec", "spec/diff_drive.toml", "--data", l]);
     assert!(cmp["rmse"].as_f64().unwrap() > 0.05);
@@ -212,20 +201,9 @@ fn a_users_own_effect_on_a_users_own_robot_is_named_and_quiet() {
         ),
         "{written}"
     );
-    let log = simulate(
-        tmp.path(),
-        "log.csv",
-        &[
-            "--spec",
-            skidded.to_str().unwrap(),
-            "--trajectory",
-            "random",
-            "--laps",
-            "2",
-            "--seed",
-            "5",
-        ],
-    );
+    let log = Sim::new(skidded.to_str().unwrap())
+        .drive("random", 5, 2)
+        .write(tmp.path(), "log.csv");
     // the skid with a toe angle, hidden in a simulated robot: derived by a
     // child process from the cache, whose symbolica log (an infinity met
     // trying the inverse) and errors are not the user's to read
@@ -280,11 +258,9 @@ fn a_step_too_coarse_for_the_log_is_warned_about() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = root().join("tests/user_specs/fwd_tricycle.toml");
     let spec = spec.to_str().unwrap();
-    let log = simulate(
-        tmp.path(),
-        "clean1.csv",
-        &["--spec", spec, "--trajectory", "random", "--seed", "1"],
-    );
+    let log = Sim::new(spec)
+        .drive("random", 1, 1)
+        .write(tmp.path(), "clean1.csv");
     let text = std::fs::read_to_string(&log).unwrap();
     let coarse: Vec<&str> = (text.lines().enumerate())
         .filter(|(i, _)| *i == 0 || (i - 1) % 4 == 0)

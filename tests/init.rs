@@ -362,22 +362,10 @@ fn a_commands_spec_calibrates_what_the_robot_achieves_of_its_commands() {
     let (spec, inputs) = init_commands("burger");
     assert_eq!(inputs, ["v_cmd", "omega_cmd"]);
     let s = spec.to_str().unwrap();
-    let log = simulate(
-        d,
-        "commanded.csv",
-        &[
-            "--spec",
-            s,
-            "--trajectory",
-            "random",
-            "--seed",
-            "3",
-            "--set",
-            "k_v=0.94",
-            "--set",
-            "k_omega=1.07",
-        ],
-    );
+    let log = Sim::new(s)
+        .sets(&["k_v=0.94", "k_omega=1.07"])
+        .drive("random", 3, 1)
+        .write(d, "commanded.csv");
     let fit = kinegen_json(&["fit", "--spec", s, "--data", log.to_str().unwrap()]);
     for (name, truth) in [("k_v", 0.94), ("k_omega", 1.07)] {
         let est = fit["parameters"][name]["estimate"].as_f64().unwrap();

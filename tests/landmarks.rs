@@ -331,24 +331,11 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
         ],
     );
     let obs = dir.join("obs.csv");
-    let log = simulate(
-        dir,
-        "run.csv",
-        &[
-            "--spec",
-            spec,
-            "--trajectory",
-            "random",
-            "--laps",
-            "2",
-            "--set",
-            "v_scale=1.05",
-            "--landmarks",
-            m.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
+    let log = Sim::new(spec)
+        .sets(&["v_scale=1.05"])
+        .drive("random", 1, 2)
+        .sighting(&m)
+        .write_to(&dir.join("run.csv"), &obs);
     // every 40th range 5 m off: outliers
     let text = std::fs::read_to_string(&obs).unwrap();
     let mut lines: Vec<String> = text.lines().map(String::from).collect();

@@ -26,18 +26,9 @@ fn reports_render_in_headless_chromium() {
     };
     let tmp = tempfile::tempdir().unwrap();
     // any two runs of one robot: the bundled log and a simulated one
-    let second = simulate(
-        tmp.path(),
-        "second.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--trajectory",
-            "random",
-            "--seed",
-            "7",
-        ],
-    );
+    let second = Sim::new("spec/diff_drive.toml")
+        .drive("random", 7, 1)
+        .write(tmp.path(), "second.csv");
     let dir = tmp.path().join("report");
     let o = kinegen(&[
         "fit",

@@ -25,20 +25,10 @@ fn a_tolerance_keeps_a_weakly_determined_parameter_near_nominal() {
     let dir = tmp.path();
     std::fs::write(dir.join("free.toml"), with_tolerance("1e9")).unwrap();
     std::fs::write(dir.join("tight.toml"), with_tolerance("\"0.25%\"")).unwrap();
-    let whole = simulate(
-        dir,
-        "whole.csv",
-        &[
-            "--spec",
-            "spec/diff_drive.toml",
-            "--set",
-            "b=0.208",
-            "--trajectory",
-            "random",
-            "--seed",
-            "5",
-        ],
-    );
+    let whole = Sim::new("spec/diff_drive.toml")
+        .sets(&["b=0.208"])
+        .drive("random", 5, 1)
+        .write(dir, "whole.csv");
     // its first 3 s: a few gentle turns, little about the wheelbase
     let text = std::fs::read_to_string(&whole).unwrap();
     let log = dir.join("short.csv");

@@ -732,22 +732,10 @@ fn moving_start_case(dir: &Path, sighted_from: f64) -> [PathBuf; 4] {
     let text = std::fs::read_to_string(&spec).unwrap();
     std::fs::write(&spec, text.replace("sigma = [0.05, 0.02]\n", "")).unwrap();
     let (map, obs) = (root().join("data/beacons.csv"), dir.join("obs.csv"));
-    let log = simulate(
-        dir,
-        "full.csv",
-        &[
-            "--spec",
-            spec.to_str().unwrap(),
-            "--trajectory",
-            "random",
-            "--seed",
-            "4",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
+    let log = Sim::new(spec.to_str().unwrap())
+        .drive("random", 4, 1)
+        .sighting(&map)
+        .write_to(&dir.join("full.csv"), &obs);
     let full = std::fs::read_to_string(&log).unwrap();
     let cut = dir.join("cut.csv");
     let mut rows = vec!["t,v,omega".to_string()];
@@ -1166,22 +1154,10 @@ fn a_calibration_on_drifting_sightings_says_it_is_biased() {
         dir.join("sim_obs.csv"),
         root().join("data/beacons.csv"),
     );
-    simulate(
-        dir,
-        "sim.csv",
-        &[
-            "--spec",
-            spec.to_str().unwrap(),
-            "--trajectory",
-            "random",
-            "--seed",
-            "3",
-            "--landmarks",
-            map.to_str().unwrap(),
-            "--observations",
-            obs.to_str().unwrap(),
-        ],
-    );
+    Sim::new(spec.to_str().unwrap())
+        .drive("random", 3, 1)
+        .sighting(&map)
+        .write_to(&dir.join("sim.csv"), &obs);
     let clean = dir.join("sim_blind.csv");
     commands_only(&log, &clean);
     let said = warned(&clean, &obs, &map);

@@ -82,20 +82,10 @@ fn simulated_ranges_beside_a_landmark_stay_positive() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     std::fs::write(dir.join("map.csv"), "id,x,y\nhere,0,0\nfar,4,3\n").unwrap();
-    let log = simulate(
-        dir,
-        "log.csv",
-        &[
-            "--spec",
-            "spec/unicycle_ekf.toml",
-            "--trajectory",
-            "random",
-            "--landmarks",
-            dir.join("map.csv").to_str().unwrap(),
-            "--observations",
-            dir.join("obs.csv").to_str().unwrap(),
-        ],
-    );
+    let log = Sim::new("spec/unicycle_ekf.toml")
+        .drive("random", 1, 1)
+        .sighting(&dir.join("map.csv"))
+        .write_to(&dir.join("log.csv"), &dir.join("obs.csv"));
     let obs = std::fs::read_to_string(dir.join("obs.csv")).unwrap();
     let near: Vec<f64> = obs
         .lines()

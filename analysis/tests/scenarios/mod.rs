@@ -276,7 +276,8 @@ impl<'a> Sim<'a> {
         }
     }
 
-    /// The log as `kinegen simulate` writes it, into `dir/name`.
+    /// The log as `kinegen simulate` writes it, into `dir/name` (with its
+    /// sightings at `dir/name.obs.csv` where the robot sights a map).
     pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
         self.write_sighted(dir, name).0
     }
@@ -285,6 +286,13 @@ impl<'a> Sim<'a> {
     /// latter empty without a map), as `kinegen simulate --observations`
     /// writes them.
     pub fn write_sighted(&self, dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+        let (log, obs) = (dir.join(name), dir.join(format!("{name}.obs.csv")));
+        self.write_to(&log, &obs);
+        (log, obs)
+    }
+
+    /// The log to `log` (returned) and its sightings to `obs`.
+    pub fn write_to(&self, log: &Path, obs: &Path) -> PathBuf {
         let owned = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         let (effects, sets) = (owned(self.effects), owned(self.sets));
         let defaults = SimOptions::default();
@@ -303,11 +311,13 @@ impl<'a> Sim<'a> {
                 ..defaults
             },
         };
-        let sim = simulate_files(&request, &AutodiffDeriver).expect("a simulation");
-        let (path, obs) = (dir.join(name), dir.join(format!("{name}.obs.csv")));
-        std::fs::write(&path, sim.csv()).unwrap();
-        std::fs::write(&obs, sim.observations_csv()).unwrap();
-        (path, obs)
+        let sim = simulate_files(&request, &AutodiffDeriver)
+            .unwrap_or_else(|e| panic!("simulating {}: {e}", self.spec));
+        std::fs::write(log, sim.csv()).unwrap();
+        if self.landmarks.is_some() {
+            std::fs::write(obs, sim.observations_csv()).unwrap();
+        }
+        log.to_path_buf()
     }
 }
 
