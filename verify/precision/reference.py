@@ -12,7 +12,10 @@ It also writes atan2.json: atan2(y, x) at 50 digits on 2,800 points (every
 octant, radii from 1e-3 to 1e3, the generated crate's reduction cuts, the
 axes, the branch cut at pi and one-argument atan points), each as the double
 nearest the true value plus the remainder, so that the test can measure the
-generated crate's atan2 and libm's in fractions of an ulp.
+generated crate's atan2 and libm's in fractions of an ulp. And sincos.json:
+sin x and cos x at 50 digits on 3,000 points (headings in every quadrant,
+small angles, arguments up to 1e7, and those within a hair of a multiple
+of pi/2, where the reduction cancels), in the same form.
 
     python3 verify/precision/reference.py           # (re)write near_zero.json
     python3 verify/precision/reference.py --check   # fail if it differs
@@ -29,6 +32,7 @@ mp.mp.dps = 50
 HERE = Path(__file__).resolve().parent
 FIXTURE = HERE / "near_zero.json"
 ATAN2_FIXTURE = HERE / "atan2.json"
+SINCOS_FIXTURE = HERE / "sincos.json"
 # spec/diff_drive.toml's nominal values: r_r, r_l, b, counts_per_rev, gear_ratio
 PARAMS = [0.042, 0.042, 0.2, 64.0, 0.022883295194508008]
 S_VALUES = [0.0, 1e-12, -1e-12, 1e-8, 1e-5, -1e-3, 0.02, 0.0499, 0.05, 0.0501, -0.0501, 0.2, 1.0]
@@ -113,6 +117,33 @@ def atan2_fixture():
     }
 
 
+def sincos_points():
+    """Arguments x, from a fixed seed."""
+    rng = random.Random(2027)
+    pts = []
+    for _ in range(1200):  # headings, any quadrant
+        pts.append(rng.uniform(-4 * math.pi, 4 * math.pi))
+    for _ in range(600):  # small angles: a step's turn, a steering angle
+        pts.append(rng.choice([1, -1]) * 10 ** rng.uniform(-12, 0))
+    for _ in range(600):  # large: up to and past the one-round limit
+        pts.append(rng.choice([1, -1]) * 10 ** rng.uniform(1, 7))
+    for _ in range(600):  # within a hair of k pi/2, where the reduction cancels
+        k = rng.randint(-4000, 4000)
+        pts.append(float(k * mp.pi / 2) * (1 + rng.uniform(-1e-9, 1e-9)))
+    return pts
+
+
+def sincos_fixture():
+    rows = []
+    for x in sincos_points():
+        s, c = mp.sin(mp.mpf(x)), mp.cos(mp.mpf(x))
+        rows.append([repr(v) for v in (x, float(s), float(s - mp.mpf(float(s))), float(c), float(c - mp.mpf(float(c))))])
+    return {
+        "doc": "sin x and cos x at 50 digits: [x, nearest double to sin, remainder, nearest double to cos, remainder] (verify/precision/reference.py)",
+        "points": rows,
+    }
+
+
 def write_or_check(path, data, check):
     text = json.dumps(data, indent=1) + "\n"
     if "points" in data:  # one point per line
@@ -137,7 +168,8 @@ def main(argv):
     }
     check = "--check" in argv
     failed = write_or_check(FIXTURE, data, check)
-    return failed | write_or_check(ATAN2_FIXTURE, atan2_fixture(), check)
+    failed |= write_or_check(ATAN2_FIXTURE, atan2_fixture(), check)
+    return failed | write_or_check(SINCOS_FIXTURE, sincos_fixture(), check)
 
 
 if __name__ == "__main__":
