@@ -8,7 +8,9 @@ use std::process::{Command, Output};
 #[path = "../analysis/tests/scenarios/mod.rs"]
 pub mod scenarios;
 #[allow(unused_imports)] // each test file uses its own few
-pub use scenarios::{commanded_spec, mrclam_robot, real_data, real_runs, Sim, SEED_000_TRUTH};
+pub use scenarios::{
+    commanded_spec, landmark_map, mrclam_robot, real_data, real_runs, Sim, SEED_000_TRUTH,
+};
 
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

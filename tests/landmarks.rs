@@ -10,17 +10,6 @@ use std::path::{Path, PathBuf};
 
 const MAP: &str = "id,x,y\nL1,3,2\nL2,-1,4\nL3,5,-2\nL4,0,-3\nL5,2,6\n";
 
-/// A landmark map `id,x,y` of `points` (ids L0, L1, ...) written to DIR/map.csv.
-fn write_map(dir: &Path, points: &[(f64, f64)]) -> PathBuf {
-    let mut map = String::from("id,x,y\n");
-    for (i, (x, y)) in points.iter().enumerate() {
-        map += &format!("L{i},{x},{y}\n");
-    }
-    let path = dir.join("map.csv");
-    std::fs::write(&path, map).unwrap();
-    path
-}
-
 /// `simulate --trajectory beacons` of `spec` touring the landmarks of `map`,
 /// its sightings written to `obs`, with `extra` simulate options; the log
 /// `name` in `dir`.
@@ -317,7 +306,7 @@ fn ekf_localisation_with_landmarks_corrects_dead_reckoning_and_gates_outliers() 
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let spec = "spec/unicycle_ekf.toml";
-    let m = write_map(
+    let m = landmark_map(
         dir,
         &[
             (-8.0, -6.0),
@@ -420,7 +409,7 @@ fn the_beacon_tour_visits_every_landmark_and_stops_at_the_last() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let lms = [(4.0, 3.0), (-3.0, 6.0), (-6.0, -2.0), (5.0, -5.0)];
-    let m = write_map(dir, &lms);
+    let m = landmark_map(dir, &lms);
     for spec in ["spec/unicycle_ekf.toml", "spec/tricycle.toml"] {
         let obs = dir.join("obs.csv");
         let log = beacon_tour(dir, "tour.csv", spec, &m, &obs, &[]);
@@ -555,7 +544,7 @@ fn a_camera_that_reads_depth_is_estimated_from_the_sightings() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let spec = "spec/unicycle_ekf.toml";
-    let m = write_map(dir, &SIX_LANDMARKS);
+    let m = landmark_map(dir, &SIX_LANDMARKS);
     let all = dir.join("all.csv");
     let extra = ["--landmark-hz", "2", "--laps", "3"];
     let log = beacon_tour(dir, "run.csv", spec, &m, &all, &extra);

@@ -11,17 +11,6 @@ use std::path::{Path, PathBuf};
 
 const MAP: &str = "id,x,y\nL1,3,2\nL2,-1,4\nL3,5,-2\nL4,0,-3\nL5,2,6\n";
 
-/// A landmark map `id,x,y` of `points` (ids L0, L1, ...) written to DIR/map.csv.
-fn write_map(dir: &Path, points: &[(f64, f64)]) -> PathBuf {
-    let mut map = String::from("id,x,y\n");
-    for (i, (x, y)) in points.iter().enumerate() {
-        map += &format!("L{i},{x},{y}\n");
-    }
-    let path = dir.join("map.csv");
-    std::fs::write(&path, map).unwrap();
-    path
-}
-
 /// The same log without its ground-truth columns (`gt_*`, or the skid-steer
 /// spec's `body_*`), written beside it as `nogt.csv`.
 fn without_ground_truth(log: &Path) -> PathBuf {
@@ -262,7 +251,7 @@ fn persistent_range_error_found(l: &LocalizedFiles) -> f64 {
 #[test]
 fn a_range_error_that_grows_with_the_range_is_estimated_per_metre() {
     let tmp = tempfile::tempdir().unwrap();
-    let map = write_map(tmp.path(), &SIX_LANDMARKS);
+    let map = landmark_map(tmp.path(), &SIX_LANDMARKS);
     let (log, obs) = beacon_tour(tmp.path(), &map, (3, 10.0), &[]);
     add_persistent_range_errors(&obs, RANGE_ERROR_PER_M, 3.0);
     let rmse = persistent_range_error_found(&localize_tour(&log, &obs, &map));
@@ -284,7 +273,7 @@ fn a_map_larger_than_the_errors_carried_still_localises() {
             (7.0 * a.cos(), 7.0 * a.sin())
         })
         .collect();
-    let map = write_map(tmp.path(), &ring);
+    let map = landmark_map(tmp.path(), &ring);
     // sighted only within 4 m, by a robot 5% faster than its spec (dead
     // reckoning drifts)
     let (log, obs) = beacon_tour(tmp.path(), &map, (1, 4.0), &["v_scale=1.05"]);
@@ -313,7 +302,7 @@ fn a_map_larger_than_the_errors_carried_still_localises() {
 #[test]
 fn a_camera_error_every_landmark_shares_is_estimated_once() {
     let tmp = tempfile::tempdir().unwrap();
-    let map = write_map(tmp.path(), &SIX_LANDMARKS);
+    let map = landmark_map(tmp.path(), &SIX_LANDMARKS);
     let (log, obs) = beacon_tour(tmp.path(), &map, (3, 10.0), &[]);
     add_shared_bearing_errors(&obs, SHARED_BEARING_ERROR, 5.0);
     let l = localize_tour(&log, &obs, &map);

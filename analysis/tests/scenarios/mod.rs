@@ -197,6 +197,18 @@ pub fn mrclam_robot(n: usize) -> Option<MrclamRobot> {
     })
 }
 
+/// A landmark map `id,x,y` of `points` (ids L0, L1, ...) written to
+/// `dir/map.csv`, which is returned.
+pub fn landmark_map(dir: &Path, points: &[(f64, f64)]) -> PathBuf {
+    let mut map = String::from("id,x,y\n");
+    for (i, (x, y)) in points.iter().enumerate() {
+        map += &format!("L{i},{x},{y}\n");
+    }
+    let path = dir.join("map.csv");
+    std::fs::write(&path, map).unwrap();
+    path
+}
+
 /// A log to simulate: the spec, the robot's true values (`NAME=VALUE`) and
 /// hidden effects (`NAME=VALUE`), and the drive.
 #[derive(Clone)]
