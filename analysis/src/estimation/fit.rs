@@ -416,31 +416,44 @@ fn on_whole_runs(r: &Runner, runs: &[Run], o: &FitOptions, searched: FitResult) 
         start_offsets: Some(Arc::new(run_offsets(runs, &searched.starts))),
         ..holding(o, &searched)
     };
-    let whole = fit_stage_from(&at, runs, &warm, Start::NearOptimum).ok();
-    let kept = whole.filter(|w| {
-        // the segments' cost at the whole-run estimate (start headings
-        // refined for it) against theirs at their own optimum
-        let (_, _, starts) = at_fitted_starts(r, &w.p, runs, o);
-        let cost = residual_sums(r, &w.p, &[], &split, o, &starts).cost;
-        cost <= SHORT_TERM_SLACK * searched.cost_after
-            || drifts_as_little(r, (&w.p, &searched.p), runs)
-    });
-    let Some(whole) = kept else {
+    let Ok(whole) = fit_stage_from(&at, runs, &warm, Start::NearOptimum) else {
         let mut res = searched;
         drift::sandwich(&at, &split, o, &mut res);
         return res;
     };
-    let mut starts = Vec::with_capacity(counts.iter().sum());
-    for (c, s) in counts.iter().zip(&whole.starts) {
-        starts.push(*s);
-        starts.extend(std::iter::repeat_n([0.0; 3], c - 1));
+    // whether the refinement keeps the short-term accuracy, and its
+    // drift-aware standard deviations, side by side (on one long run each
+    // keeps a core busy alone; the latter is dropped when not kept)
+    let (kept, refined) = rayon::join(
+        || {
+            // the segments' cost at the whole-run estimate (start headings
+            // refined for it) against theirs at their own optimum
+            let (_, _, starts) = at_fitted_starts(r, &whole.p, runs, o);
+            let cost = residual_sums(r, &whole.p, &[], &split, o, &starts).cost;
+            cost <= SHORT_TERM_SLACK * searched.cost_after
+                || drifts_as_little(r, (&whole.p, &searched.p), runs)
+        },
+        || {
+            let mut starts = Vec::with_capacity(counts.iter().sum());
+            for (c, s) in counts.iter().zip(&whole.starts) {
+                starts.push(*s);
+                starts.extend(std::iter::repeat_n([0.0; 3], c - 1));
+            }
+            let mut res = FitResult {
+                starts,
+                ..whole.clone().continuing(&searched)
+            };
+            let mut at = r.clone();
+            at.p = res.p.clone();
+            drift::sandwich(&at, runs, o, &mut res);
+            res
+        },
+    );
+    if kept {
+        return refined;
     }
-    let mut res = FitResult {
-        starts,
-        ..whole.continuing(&searched)
-    };
-    at.p = res.p.clone();
-    drift::sandwich(&at, runs, o, &mut res);
+    let mut res = searched;
+    drift::sandwich(&at, &split, o, &mut res);
     res
 }
 

@@ -88,7 +88,20 @@ impl Calibrated<'_> {
 /// `fo`), through the method registry like every method, and judge it.
 pub fn calibrate<'r>(l: &'r Loaded, fo: &FitOptions) -> Result<Calibrated<'r>, FitJobError> {
     let r = &l.runner;
-    let mut res = match full_fit().calibrate(r, &l.runs, &Settings::defaults(fo)) {
+    // The nominal values' score does not wait for the calibration: on one
+    // long run the fit keeps a core busy alone for most of its time (a
+    // 1,000,001-row log: 1.5 s of 8 saved on 2 cores).
+    let (fitted, (offsets_before, before)) = rayon::join(
+        || full_fit().calibrate(r, &l.runs, &Settings::defaults(fo)),
+        || {
+            // scored with the start headings refined for the nominal values,
+            // as the fit refines them (within what the measured start allows)
+            let offsets = fitted_offsets(r, &r.p, &l.runs, fo);
+            let before = evaluation_from(r, &r.p, &l.runs, &run_offsets(&l.runs, &offsets));
+            (offsets, before)
+        },
+    );
+    let mut res = match fitted {
         Ok(Calibration { fit: Some(x), .. }) => x,
         Ok(_) => unreachable!("a full fit's calibration carries its fit"),
         Err(source) => {
@@ -99,10 +112,6 @@ pub fn calibrate<'r>(l: &'r Loaded, fo: &FitOptions) -> Result<Calibrated<'r>, F
         }
     };
     res.warnings.splice(0..0, l.warnings.iter().cloned());
-    // both scored with the start headings refined for their own parameters, as
-    // the fit refines them (within what the measured start allows)
-    let offsets_before = fitted_offsets(r, &r.p, &l.runs, fo);
-    let before = evaluation_from(r, &r.p, &l.runs, &run_offsets(&l.runs, &offsets_before));
     let after = evaluation_from(r, &res.p, &l.runs, &run_offsets(&l.runs, &res.starts));
     let judged = judge(l, &mut res, (&before, &after), &offsets_before);
     let holdout = (!l.holdout.is_empty()).then(|| held_out(l, &res, &before));
