@@ -56,6 +56,14 @@ const REPS: usize = 9;
 /// (`PEERS_PROCESSES` overrides).
 const PROCESSES: usize = 3;
 
+/// Whether row `label` is measured: every row, or those whose label holds
+/// `PEERS_ROWS` (one kernel over many processes in seconds, e.g.
+/// `PEERS_ROWS=obs_landmark PEERS_PROCESSES=10`: the ranges show how its
+/// time varies between processes).
+fn measured(label: &str) -> bool {
+    std::env::var("PEERS_ROWS").map_or(true, |only| label.contains(&only))
+}
+
 /// The calling thread's CPU time, ns: what it ran, not what the clock on
 /// the wall did while it waited (libc's `clock_gettime`; std has no thread
 /// clock).
@@ -430,7 +438,7 @@ fn measure() -> (Vec<String>, Vec<Record>) {
     let dd = Inputs::of(dd_s.clone(), dd_l);
     let uc = Inputs::of(uc_s.clone(), uc_s.clone());
     let oc = Inputs::of(oc_s.clone(), oc_l);
-    for row in Row::ALL {
+    for row in Row::ALL.into_iter().filter(|r| measured(&r.label())) {
         let inputs = match row.model() {
             Model::DiffDrive => &dd,
             Model::Unicycle => &uc,
@@ -441,7 +449,10 @@ fn measure() -> (Vec<String>, Vec<Record>) {
     for (row, s, cd) in [
         (Row::DdJacP, &dd_s, dd_jac_p_central as Kernel),
         (Row::OcJacP, &oc_s, oc_jac_p_central as Kernel),
-    ] {
+    ]
+    .into_iter()
+    .filter(|(row, ..)| measured(&row.label()))
+    {
         let args: Vec<Args> = s.iter().map(Sample::args).collect();
         let analytic = (sides[0].kernel)(row).unwrap();
         let worst = disagreement(
