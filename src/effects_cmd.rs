@@ -3,9 +3,7 @@
 use crate::analysis_cmd::bad;
 use kinegen_analysis::applications::simulate::{SimOptions, Trajectory};
 use kinegen_analysis::applications::simulate_request::{simulate_files, SimulateRequest};
-use kinegen_analysis::effects::{catalogue, find, Applicability};
-use kinegen_model::spec::Model;
-use std::collections::BTreeMap;
+use kinegen_analysis::effects::{add_effect, AddEffect};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -110,77 +108,21 @@ pub fn run_add_effect(
     extra: &[PathBuf],
 ) -> ExitCode {
     let go = || -> Result<String, String> {
-        let model = Model::load(spec).map_err(|e| e.to_string())?;
-        let cat = catalogue(extra).map_err(|e| e.to_string())?;
-        let eff = find(&cat, effect).map_err(|e| format!("--effect: {e}"))?;
-        match eff.applicability(&model) {
-            Applicability::Applies => {}
-            Applicability::AlreadyIn => {
-                return Err(format!(
-                    "{}: the spec already has `{effect}`",
-                    spec.display()
-                ))
-            }
-            Applicability::NotApplicable(why) => {
-                return Err(format!(
-                    "{}: `{effect}` does not apply to this model: {why}",
-                    spec.display()
-                ))
-            }
-        }
-        let pairs = kinegen_analysis::model_on_log::model::parse_pairs("--value", values)
+        let values = kinegen_analysis::model_on_log::model::parse_pairs("--value", values)
             .map_err(|e| e.to_string())?;
-        let mut vals: BTreeMap<String, f64> = BTreeMap::new();
-        for (name, v) in pairs {
-            if let Some(first) = vals.insert(name.clone(), v) {
-                return Err(format!(
-                    "--value {name}={v}: `{name}` is given twice (first {first}); give each parameter once"
-                ));
-            }
-        }
-        for (name, v) in &vals {
-            if let Some((lo, hi)) = effect_bounds(eff, &model, name) {
-                if !(lo..=hi).contains(v) {
-                    return Err(format!(
-                        "--value {name}={v}: outside the bounds of `{effect}`'s parameter `{name}` [{lo}, {hi}] ({})",
-                        eff.origin
-                    ));
-                }
-            }
-        }
-        let added = eff
-            .with_values(&model, &vals)
-            .map_err(|e| format!("--value: {e}"))?;
-        let new = &added.source;
-        // validate before writing; a problem is the combination of the user's
-        // spec and the effect: the effect file's line where the message's
-        // symbol is, else the user's file
-        let checked = Model::parse(spec, new).map_err(|e| {
-            let at = eff
-                .locate(&e.message)
-                .map_or(String::new(), |l| format!(" (from {l})"));
-            format!(
-                "adding `{effect}`{at} to {} gives an invalid spec: {}",
-                spec.display(),
-                e.message
-            )
-        })?;
-        if let Some(p) = checked.params.iter().find(|p| {
-            vals.contains_key(&p.name)
-                && (p.min.is_some_and(|m| p.nominal < m) || p.max.is_some_and(|m| p.nominal > m))
-        }) {
-            return Err(format!(
-                "--value {}={}: outside the effect's bounds [{:?}, {:?}]",
-                p.name, p.nominal, p.min, p.max
-            ));
-        }
-        kinegen_model::files::write_atomic(out, new).map_err(|e| e.to_string())?;
+        let request = AddEffect {
+            spec,
+            effect,
+            values: &values,
+            effect_dirs: extra,
+        };
+        let added = add_effect(&request).map_err(|e| e.to_string())?;
+        kinegen_model::files::write_atomic(out, &added.source).map_err(|e| e.to_string())?;
         // the change as a diff, each line within the terminal's width (the
         // whole of it is in the file written)
-        let change = kinegen_model::effects::spec_change(&model, &added);
         let width = crate::output::WIDTH;
-        let lines: Vec<String> = change.lines().map(crate::output::cut).collect();
-        let whole = if change.lines().any(|l| l.chars().count() > width) {
+        let lines: Vec<String> = added.change.lines().map(crate::output::cut).collect();
+        let whole = if added.change.lines().any(|l| l.chars().count() > width) {
             format!(
                 "\n(lines cut at {width} columns: {} has them whole)",
                 out.display()
@@ -202,21 +144,4 @@ pub fn run_add_effect(
         }
         Err(e) => bad(e),
     }
-}
-
-/// The [min, max] of the parameter `name` an effect adds to `model`
-/// (either side open when not declared), if it adds one.
-fn effect_bounds(
-    eff: &kinegen_model::effects::Effect,
-    model: &Model,
-    name: &str,
-) -> Option<(f64, f64)> {
-    let p = eff
-        .parameters_for(model)
-        .into_iter()
-        .find(|p| p.name == name)?;
-    Some((
-        p.min.unwrap_or(f64::NEG_INFINITY),
-        p.max.unwrap_or(f64::INFINITY),
-    ))
 }

@@ -169,11 +169,15 @@ sigma = [0.05, 0.02]
 /// the effect's nominal values otherwise), written to `out`, as `kinegen
 /// add-effect` writes it.
 pub fn with_effect(spec: &Path, effect: &str, values: &[(&str, f64)], out: &Path) -> PathBuf {
-    let model = kinegen_model::spec::Model::load(spec).unwrap();
-    let catalogue = kinegen_model::effects::catalogue(&[]).unwrap();
-    let found = kinegen_model::effects::find(&catalogue, effect).unwrap();
-    let values = values.iter().map(|(n, v)| (n.to_string(), *v)).collect();
-    let added = found.with_values(&model, &values).unwrap();
+    let values: Vec<(String, f64)> = values.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let request = kinegen_analysis::effects::AddEffect {
+        spec,
+        effect,
+        values: &values,
+        effect_dirs: &[],
+    };
+    let added = kinegen_analysis::effects::add_effect(&request)
+        .unwrap_or_else(|e| panic!("{effect} added to {}: {e}", spec.display()));
     std::fs::write(out, &added.source).unwrap();
     out.to_path_buf()
 }

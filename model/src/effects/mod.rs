@@ -20,12 +20,14 @@
 //! every input of a class: `steering`, `right_wheel`, `left_wheel`, `command`), and
 //! `[observation.ROLE]` (ROLE = `pose`, `yaw_rate`, `range_bearing`; `expr`
 //! templates over `{0}`, `{1}`..., `substitute` for state symbols).
+mod add;
 mod capability;
 mod definition;
 mod render;
 pub use render::with_nominals;
 mod transform;
 
+pub use add::{add_effect, AddEffect, AddEffectError, Added};
 pub use capability::{has, inputs_of, turn_signs, Capability, InputClass};
 pub use definition::{Bounds, Effect, InputPatch, ObservationPatch, ParamTemplate, Template};
 
