@@ -243,14 +243,14 @@ impl PyModel {
             )
         })?;
         let eff = kinegen_model::effects::find(&cat, name).map_err(|e| usage(e.to_string()))?;
-        let mut vals = std::collections::BTreeMap::new();
+        let mut vals = Vec::new();
         if let Some(d) = values {
             for (k, v) in d.iter() {
-                vals.insert(k.extract::<String>()?, v.extract::<f64>()?);
+                vals.push((k.extract::<String>()?, v.extract::<f64>()?));
             }
         }
-        let added = eff
-            .with_values(&self.spec, &vals)
+        // checked as `kinegen add-effect` checks it: applies, values in bounds
+        let added = kinegen_model::effects::added_to(&self.spec, eff, &vals)
             .map_err(|e| usage(e.to_string()))?;
         PyModel::from_text(&added.source, &self.path)
     }

@@ -225,6 +225,11 @@ def test_with_effect_adds_a_catalogue_effect(model):
     assert slip.nominal_parameters()[-1] == 0.1
     with pytest.raises(kinegen.UsageError):
         model.with_effect("no_such_effect")
+    # checked as `kinegen add-effect` checks it: in its bounds, and once
+    with pytest.raises(kinegen.UsageError, match="outside the bounds"):
+        model.with_effect("lateral_slip", k_slip=3.0)
+    with pytest.raises(kinegen.UsageError, match="already has"):
+        slip.with_effect("lateral_slip")
 
 
 def test_a_bad_spec_is_a_spec_error_with_its_place():

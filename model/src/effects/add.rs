@@ -83,19 +83,30 @@ pub fn add_effect(req: &AddEffect) -> Result<Added, AddEffectError> {
     let model = Model::load(req.spec)?;
     let cat = catalogue(req.effect_dirs)?;
     let eff = find(&cat, req.effect).map_err(AddEffectError::Unknown)?;
-    let (spec, effect) = (req.spec.to_path_buf(), req.effect.to_string());
-    match eff.applicability(&model) {
+    added_to(&model, eff, req.values)
+}
+
+/// `model` (a spec as read, from `model.path`) with `eff` added at `given`,
+/// checked as [`add_effect`] checks it: what Python's `Model.with_effect`
+/// calls on a spec it holds.
+pub fn added_to(
+    model: &Model,
+    eff: &Effect,
+    given: &[(String, f64)],
+) -> Result<Added, AddEffectError> {
+    let (spec, effect) = (model.path.clone(), eff.name.clone());
+    match eff.applicability(model) {
         Applicability::Applies => {}
         Applicability::AlreadyIn => return Err(AddEffectError::AlreadyIn { spec, effect }),
         Applicability::NotApplicable(why) => {
             return Err(AddEffectError::NotApplicable { spec, effect, why })
         }
     }
-    let values = checked_values(eff, &model, req.values)?;
+    let values = checked_values(eff, model, given)?;
     let added = eff
-        .with_values(&model, &values)
+        .with_values(model, &values)
         .map_err(AddEffectError::Values)?;
-    let checked = Model::parse(req.spec, &added.source).map_err(|e| {
+    let checked = Model::parse(&model.path, &added.source).map_err(|e| {
         let at = eff
             .locate(&e.message)
             .map_or(String::new(), |l| format!(" (from {l})"));
@@ -119,7 +130,7 @@ pub fn add_effect(req: &AddEffect) -> Result<Added, AddEffectError> {
         });
     }
     Ok(Added {
-        change: spec_change(&model, &added),
+        change: spec_change(model, &added),
         source: added.source,
     })
 }

@@ -27,7 +27,7 @@ mod render;
 pub use render::with_nominals;
 mod transform;
 
-pub use add::{add_effect, AddEffect, AddEffectError, Added};
+pub use add::{add_effect, added_to, AddEffect, AddEffectError, Added};
 pub use capability::{has, inputs_of, turn_signs, Capability, InputClass};
 pub use definition::{Bounds, Effect, InputPatch, ObservationPatch, ParamTemplate, Template};
 
