@@ -2,6 +2,11 @@
 //! data, and bad input.
 mod common;
 use common::*;
+// the library's scenarios, in-process (only this test binary links them);
+// its `Sim` is the library's writer beside `common`'s, which runs the binary
+#[path = "../analysis/tests/scenarios/mod.rs"]
+#[allow(clippy::duplicate_mod)]
+mod library_scenarios;
 
 /// Run `kinegen ARGS --json DIR/NAME.json` where the command may exit 1 (a fit
 /// named unusable): returns the output and the JSON it wrote.
@@ -24,46 +29,27 @@ fn run_to_json(
 }
 
 /// `kinegen simulate` writes, byte for byte, the log and sightings the
-/// tests' scenarios write in-process (`Sim`, which the other tests use):
-/// the command adds only its options' parsing.
+/// library's tests make in-process (`analysis/tests/scenarios`' `Sim`):
+/// the same description of a log, written by either side.
 #[test]
 fn simulate_writes_the_scenarios_logs() {
     let tmp = tempfile::tempdir().unwrap();
     let map = root().join("data/beacons.csv");
-    let sim = Sim::new("spec/diff_drive.toml")
-        .sets(&["b=0.21"])
-        .effects(&["lateral_slip=0.1"])
+    let (sets, effects) = (["b=0.21"], ["lateral_slip=0.1"]);
+    let cli = Sim::new("spec/diff_drive.toml")
+        .sets(&sets)
+        .effects(&effects)
         .drive("figure8", 5, 2)
         .sighting(&map)
         .camera(2.0, 8.0);
-    let (log, obs) = sim.write_sighted(tmp.path(), "scenario.csv");
-    let (cli_log, cli_obs) = (tmp.path().join("cli.csv"), tmp.path().join("cli_obs.csv"));
-    let o = kinegen(&[
-        "simulate",
-        "--spec",
-        "spec/diff_drive.toml",
-        "--set",
-        "b=0.21",
-        "--effect",
-        "lateral_slip=0.1",
-        "--trajectory",
-        "figure8",
-        "--seed",
-        "5",
-        "--laps",
-        "2",
-        "--landmarks",
-        map.to_str().unwrap(),
-        "--landmark-hz",
-        "2",
-        "--landmark-range",
-        "8",
-        "--observations",
-        cli_obs.to_str().unwrap(),
-        "--out",
-        cli_log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let (cli_log, cli_obs) = cli.write_sighted(tmp.path(), "cli.csv");
+    let library = library_scenarios::Sim::new("spec/diff_drive.toml")
+        .sets(&sets)
+        .effects(&effects)
+        .drive("figure8", 5, 2)
+        .sighting(&map)
+        .camera(2.0, 8.0);
+    let (log, obs) = library.write_sighted(tmp.path(), "library.csv");
     let read = |p: &std::path::Path| std::fs::read_to_string(p).unwrap();
     assert!(read(&log) == read(&cli_log), "the logs differ");
     assert!(read(&obs) == read(&cli_obs) && read(&obs).lines().count() > 100);

@@ -4,8 +4,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 // The scenarios the library's tests name (seed 000's truth, the real logs,
-// another simulator's logs), shared with these tests rather than copied.
-#[path = "../analysis/tests/scenarios/mod.rs"]
+// a simulated log's description), shared with these tests rather than
+// copied; the library's calls stay on its side, so that these test
+// binaries do not link the analysis (29 links of it took minutes in CI).
+#[path = "../analysis/tests/scenarios/named.rs"]
 pub mod scenarios;
 #[allow(unused_imports)] // each test file uses its own few
 pub use scenarios::{
@@ -103,6 +105,37 @@ pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
 }
 
 // ---- named scenarios
+
+impl Sim<'_> {
+    /// The log as `kinegen simulate` writes it, into `dir/name`.
+    pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        self.write_sighted(dir, name).0
+    }
+
+    /// The log and its sightings (`dir/name` and `dir/name.obs.csv`, the
+    /// latter only where the robot sights a map).
+    pub fn write_sighted(&self, dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+        let (log, obs) = (dir.join(name), dir.join(format!("{name}.obs.csv")));
+        self.write_to(&log, &obs);
+        (log, obs)
+    }
+
+    /// The log to `log` (returned) and its sightings to `obs`, by `kinegen
+    /// simulate`.
+    pub fn write_to(&self, log: &Path, obs: &Path) -> PathBuf {
+        let mut a = self.options();
+        if self.landmarks.is_some() {
+            a.extend(["--observations".into(), obs.display().to_string()]);
+        }
+        a.extend(["--out".into(), log.display().to_string()]);
+        let args: Vec<&str> = std::iter::once("simulate")
+            .chain(a.iter().map(String::as_str))
+            .collect();
+        let o = kinegen(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        log.to_path_buf()
+    }
+}
 
 /// A log of seed 000's Omni robot at its truth ([`SEED_000_TRUTH`]), random
 /// driving from `seed`, written to `dir/name`.
