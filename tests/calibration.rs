@@ -56,7 +56,7 @@ fn simulate_writes_the_scenarios_logs() {
 }
 
 /// `fit --json` as CONTRACT section 4 gives it (the values themselves are
-/// analysis/tests/calibration.rs's): the model, the metric, before and after,
+/// analysis/tests/results/calibration.rs's): the model, the metric, before and after,
 /// each free parameter's nominal value, estimate and standard deviation
 /// (null where the logs do not determine it, never a small number), each
 /// run by the path given, fitted and held out, with its start pose, and
@@ -151,7 +151,7 @@ fn every_bundled_model_can_be_simulated_and_compared() {
 /// the JSON with its note, parameters and distance to the truth, the one
 /// closest named, the network named by its size, and the report saying
 /// which method came closest (the comparison's values are
-/// analysis/tests/calibration.rs's).
+/// analysis/tests/results/calibration.rs's).
 #[test]
 fn methods_are_compared_in_the_json_and_the_report() {
     let tmp = tempfile::tempdir().unwrap();

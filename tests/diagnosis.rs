@@ -2,7 +2,7 @@
 //! the JSON as CONTRACT section 4 gives it, the recovery benchmark's
 //! document, a user's own effect folder, the text. What the diagnosis finds
 //! (verdicts, estimates, structure) is asserted on the library's values in
-//! analysis/tests/diagnosis.rs.
+//! analysis/tests/results/diagnosis.rs.
 mod common;
 use common::*;
 
@@ -250,7 +250,7 @@ fn a_users_own_effect_on_a_users_own_robot_is_named_and_quiet() {
 }
 
 /// The model's own step, too coarse for the log's rate, is warned about in
-/// the text (the check itself is analysis/tests/diagnosis.rs's): a clean
+/// the text (the check itself is analysis/tests/results/diagnosis.rs's): a clean
 /// log of the front-drive tricycle, every fourth row kept (5 Hz), where the
 /// steering swings between samples.
 #[test]

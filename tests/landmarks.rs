@@ -3,7 +3,7 @@
 //! innovations, localise, and reject bad files with file, row and column.
 //! Calibration and diagnosis from the sightings alone, and the filter's
 //! estimates of a camera's errors, are asserted on the library's values in
-//! analysis/tests/landmarks.rs.
+//! analysis/tests/results/landmarks.rs.
 mod common;
 use common::*;
 use std::path::{Path, PathBuf};

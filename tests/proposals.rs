@@ -3,7 +3,7 @@
 //! `diagnose --report`, `add-effect --effects` and `fit`. How often the
 //! proposals recover the effects written for the tests, and how rarely they
 //! are made on logs that need none, is the library's to show
-//! (analysis/tests/proposals.rs).
+//! (analysis/tests/results/proposals.rs).
 mod common;
 use common::*;
 

@@ -5,7 +5,7 @@
 //! `../shared/real/mrclam-dataset6/` every command runs on the logs as they
 //! are, with default options, and prints a text read at a glance. The
 //! simulated commanded robot's timing effects and filter are asserted on
-//! the library's values in analysis/tests/commanded.rs.
+//! the library's values in analysis/tests/results/commanded.rs.
 mod common;
 use common::*;
 use serde_json::Value;

@@ -38,7 +38,7 @@ pub struct FitOptions {
     /// model leaves, and their sandwich covariance does not rely on the track's
     /// residuals being white (with every start heading refined, the absolute
     /// track's least-squares deviations matched the estimates' spread over 50
-    /// simulated logs too; see analysis/tests/calibration.rs). None: absolute track.
+    /// simulated logs too; see analysis/tests/results/calibration.rs). None: absolute track.
     pub increments: Option<f64>,
     /// Pose residuals at the last row of each run only (see `increments`).
     pub endpoints_only: bool,

@@ -10,7 +10,7 @@
 //! other than kinegen's, with an 11-bit steering encoder, the offset's
 //! spread over 30 seeds was 2.2x its reported standard deviation (one
 //! estimate 10 standard deviations off); counted, 1.02x
-//! (`analysis/tests/calibration.rs`).
+//! (`analysis/tests/results/calibration.rs`).
 //! The step is read from the log: the finest gap between the distinct values
 //! of the input. A cumulative input (a wheel's count) is left out: its
 //! rounding does not add up along the track, the next count takes it back.

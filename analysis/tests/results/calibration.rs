@@ -2,12 +2,12 @@
 //! fit` computes, on the logs `kinegen simulate` writes (and on the real
 //! ones where they are present). tests/calibration.rs keeps what only the
 //! command has: options, exit codes, the JSON's shape, files written.
-mod scenarios;
+
+use crate::scenarios::*;
 use kinegen_analysis::estimation::fit::{FitOptions, Likelihood};
 use kinegen_analysis::estimation::fit_job::{compare_methods, MethodsJob, MethodsOutcome};
 use kinegen_analysis::estimation::methods::{MethodChoice, Settings};
 use kinegen_analysis::model_on_log::load::Loaded;
-use scenarios::*;
 
 /// `fit`'s options with `--likelihood NAME` (and `--loss huber`).
 fn options(likelihood: &str, huber: bool) -> FitOptions {

@@ -5,11 +5,11 @@
 //! outside the catalogue: not blamed with confidence, its structure said.
 //! tests/diagnosis.rs keeps what only the command has (the story through
 //! the CLI, the benchmark's JSON, a user's effect folder, the text).
-mod scenarios;
+
+use crate::scenarios::*;
 use kinegen_analysis::diagnosis::diagnose::Diagnosis;
 use kinegen_analysis::diagnosis::document::{discretisation_ratio, DISCRETISATION_WARN};
 use kinegen_analysis::diagnosis::ranking::Candidate;
-use scenarios::*;
 use std::path::Path;
 
 /// A hidden effect: its name, one of its parameters and that parameter's

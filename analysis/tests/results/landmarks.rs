@@ -4,9 +4,9 @@
 //! landmark, shared by a frame) from its innovations. tests/landmarks.rs
 //! keeps what only the command has (bad files, refusals, the text, the
 //! report, the track file).
-mod scenarios;
+
+use crate::scenarios::*;
 use kinegen_analysis::applications::localize_request::LocalizedFiles;
-use scenarios::*;
 use std::path::{Path, PathBuf};
 
 const MAP: &str = "id,x,y\nL1,3,2\nL2,-1,4\nL3,5,-2\nL4,0,-3\nL5,2,6\n";

@@ -5,12 +5,12 @@
 //! consistency counted against a ground truth with noise of its own.
 //! tests/velocity_commands.rs keeps what only the command has (the real
 //! robots' runs with their text, refusals, warnings, reports).
-mod scenarios;
+
+use crate::scenarios::*;
 use kinegen_analysis::applications::localize::{Consistency, EkfOptions, Localization, Summary};
 use kinegen_analysis::applications::localize_request::LocalizedFiles;
 use kinegen_analysis::diagnosis::diagnose::Diagnosis;
 use kinegen_analysis::diagnosis::ranking::Candidate;
-use scenarios::*;
 use std::path::Path;
 
 /// The landmark map the commanded robot's camera sights in these tests.
