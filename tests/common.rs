@@ -12,6 +12,7 @@ pub mod scenarios;
 #[allow(unused_imports)] // each test file uses its own few
 pub use scenarios::{
     commanded_spec, landmark_map, mrclam_robot, real_data, real_runs, Sim, SEED_000_TRUTH,
+    SIX_LANDMARKS,
 };
 
 pub fn root() -> PathBuf {
@@ -107,19 +108,6 @@ pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
 // ---- named scenarios
 
 impl Sim<'_> {
-    /// The log as `kinegen simulate` writes it, into `dir/name`.
-    pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
-        self.write_sighted(dir, name).0
-    }
-
-    /// The log and its sightings (`dir/name` and `dir/name.obs.csv`, the
-    /// latter only where the robot sights a map).
-    pub fn write_sighted(&self, dir: &Path, name: &str) -> (PathBuf, PathBuf) {
-        let (log, obs) = (dir.join(name), dir.join(format!("{name}.obs.csv")));
-        self.write_to(&log, &obs);
-        (log, obs)
-    }
-
     /// The log to `log` (returned) and its sightings to `obs`, by `kinegen
     /// simulate`.
     pub fn write_to(&self, log: &Path, obs: &Path) -> PathBuf {

@@ -518,16 +518,6 @@ fn the_noise_sweep_finds_angular_uncertainty_costlier_than_linear() {
     assert!(html.contains("noise sweep") && html.contains("3-sigma"));
 }
 
-/// A map around the `beacons` trajectory's tour, for the sighting-error tests.
-const SIX_LANDMARKS: [(f64, f64); 6] = [
-    (-4.0, -3.0),
-    (5.0, -4.0),
-    (4.0, 5.0),
-    (-5.0, 4.0),
-    (0.0, 6.0),
-    (0.0, -6.0),
-];
-
 /// A camera that reads depth, not range (the catalogue's `range_as_depth`:
 /// a camera that ranges by a target's apparent size does; MRCLAM's reads
 /// +2 to +5% ahead and -7 to -9% at the edges of its view). The tour's

@@ -179,16 +179,6 @@ sigma = [0.03, 0.01]
     );
 }
 
-/// A map around the `beacons` trajectory's tour, for the sighting-error tests.
-const SIX_LANDMARKS: [(f64, f64); 6] = [
-    (-4.0, -3.0),
-    (5.0, -4.0),
-    (4.0, 5.0),
-    (-5.0, 4.0),
-    (0.0, 6.0),
-    (0.0, -6.0),
-];
-
 /// The unicycle touring the landmarks of `map` (the `beacons` trajectory,
 /// `laps` laps) with a camera sighting each twice a second within `reach`
 /// m, driving `sets`; the log and its sightings in `dir`.

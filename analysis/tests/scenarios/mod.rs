@@ -28,22 +28,8 @@ mod named;
 pub use named::*;
 
 impl Sim<'_> {
-    /// The log as `kinegen simulate` writes it, into `dir/name` (with its
-    /// sightings at `dir/name.obs.csv` where the robot sights a map).
-    pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
-        self.write_sighted(dir, name).0
-    }
-
-    /// The log and its sightings (`dir/name` and `dir/name.obs.csv`, the
-    /// latter empty without a map), as `kinegen simulate --observations`
-    /// writes them.
-    pub fn write_sighted(&self, dir: &Path, name: &str) -> (PathBuf, PathBuf) {
-        let (log, obs) = (dir.join(name), dir.join(format!("{name}.obs.csv")));
-        self.write_to(&log, &obs);
-        (log, obs)
-    }
-
-    /// The log to `log` (returned) and its sightings to `obs`.
+    /// The log to `log` (returned) and its sightings to `obs`, as `kinegen
+    /// simulate` writes them, in-process.
     pub fn write_to(&self, log: &Path, obs: &Path) -> PathBuf {
         let owned = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         let (effects, sets) = (owned(self.effects), owned(self.sets));

@@ -168,6 +168,16 @@ pub fn mrclam_robot(n: usize) -> Option<MrclamRobot> {
     })
 }
 
+/// A map around the `beacons` trajectory's tour, for the sighting-error tests.
+pub const SIX_LANDMARKS: [(f64, f64); 6] = [
+    (-4.0, -3.0),
+    (5.0, -4.0),
+    (4.0, 5.0),
+    (-5.0, 4.0),
+    (0.0, 6.0),
+    (0.0, -6.0),
+];
+
 /// A landmark map `id,x,y` of `points` (ids L0, L1, ...) written to
 /// `dir/map.csv`, which is returned.
 pub fn landmark_map(dir: &Path, points: &[(f64, f64)]) -> PathBuf {
@@ -270,6 +280,22 @@ impl<'a> Sim<'a> {
             a.extend(["--landmark-range".into(), range.to_string()]);
         }
         a
+    }
+
+    /// The log into `dir/name` (with its sightings at `dir/name.obs.csv`
+    /// where the robot sights a map), by the including side's `write_to`:
+    /// in-process for the library's tests, `kinegen simulate` for the
+    /// command line's.
+    pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        self.write_sighted(dir, name).0
+    }
+
+    /// The log and its sightings (`dir/name` and `dir/name.obs.csv`, the
+    /// latter only where the robot sights a map).
+    pub fn write_sighted(&self, dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+        let (log, obs) = (dir.join(name), dir.join(format!("{name}.obs.csv")));
+        self.write_to(&log, &obs);
+        (log, obs)
     }
 
     /// A camera that sights each landmark `hz` times a second within
