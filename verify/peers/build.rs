@@ -28,8 +28,9 @@ fn main() {
         println!("cargo:rerun-if-changed={f}");
     }
     println!("cargo:rerun-if-env-changed=WRENFOLD_INCLUDE");
+    println!("cargo:rerun-if-env-changed=CARGO_ENCODED_RUSTFLAGS");
     println!("cargo:rerun-if-env-changed=EIGEN_INCLUDE");
-    cc::Build::new()
+    c_build()
         .file("casadi/adapters.c")
         .opt_level(3)
         .warnings(false)
@@ -48,10 +49,43 @@ fn main() {
     }
 }
 
+/// A C or C++ build for the same CPU as the Rust code beside it: with `-C
+/// target-cpu=native` in RUSTFLAGS (the bench's native build), the peers get
+/// `-march=native` as their users' native builds would. cc 1.11 reads the
+/// target CPU from RUSTFLAGS but does not pass it on to the C compiler, so
+/// without this the native table compared native Rust with generic C.
+fn c_build() -> cc::Build {
+    let mut build = cc::Build::new();
+    let rustflags = std::env::var("CARGO_ENCODED_RUSTFLAGS").unwrap_or_default();
+    let cpu = rustflags
+        .split('\x1f')
+        .collect::<Vec<_>>()
+        .windows(2)
+        .find_map(|w| match w {
+            [flag, value] if *flag == "-C" => value.strip_prefix("target-cpu="),
+            _ => None,
+        })
+        .or_else(|| {
+            rustflags
+                .split('\x1f')
+                .find_map(|f| f.strip_prefix("-Ctarget-cpu="))
+        });
+    let march = cpu.map(|cpu| format!("-march={cpu}"));
+    if let Some(flag) = &march {
+        build.flag(flag);
+    }
+    // the bench prints how the C and C++ peers were built
+    println!(
+        "cargo:rustc-env=PEERS_C_MARCH={}",
+        march.as_deref().unwrap_or("the compiler's default -march")
+    );
+    build
+}
+
 /// Compile `<peer>/adapters.cpp` and set cfg `<peer>_cpp`; without a C++
 /// compiler the peer is left out (a warning), not the build.
 fn cpp_peer(peer: &str, include: &Path) {
-    let built = cc::Build::new()
+    let built = c_build()
         .cpp(true)
         .std("c++17")
         .file(format!("{peer}/adapters.cpp"))

@@ -667,13 +667,14 @@ fn machine() -> String {
     .filter_map(|(n, on)| on.then_some(n))
     .collect();
     format!(
-        "- machine: {cpu}; load average {} when the processes started; built with {}",
+        "- machine: {cpu}; load average {} when the processes started; built with {}; the C and C++ peers with {}",
         load.join(" "),
         if features.is_empty() {
             "the target's baseline instructions only".to_string()
         } else {
             features.join(", ")
-        }
+        },
+        env!("PEERS_C_MARCH")
     )
 }
 
