@@ -30,6 +30,11 @@ fn main() {
     println!("cargo:rerun-if-env-changed=WRENFOLD_INCLUDE");
     println!("cargo:rerun-if-env-changed=CARGO_ENCODED_RUSTFLAGS");
     println!("cargo:rerun-if-env-changed=EIGEN_INCLUDE");
+    // the bench prints how the C and C++ peers were built
+    let march = target_cpu().map_or("the compiler's default -march".into(), |c| {
+        format!("-march={c}")
+    });
+    println!("cargo:rustc-env=PEERS_C_MARCH={march}");
     c_build()
         .file("casadi/adapters.c")
         .opt_level(3)
@@ -56,30 +61,30 @@ fn main() {
 /// without this the native table compared native Rust with generic C.
 fn c_build() -> cc::Build {
     let mut build = cc::Build::new();
-    let rustflags = std::env::var("CARGO_ENCODED_RUSTFLAGS").unwrap_or_default();
-    let cpu = rustflags
-        .split('\x1f')
-        .collect::<Vec<_>>()
-        .windows(2)
-        .find_map(|w| match w {
-            [flag, value] if *flag == "-C" => value.strip_prefix("target-cpu="),
-            _ => None,
-        })
-        .or_else(|| {
-            rustflags
-                .split('\x1f')
-                .find_map(|f| f.strip_prefix("-Ctarget-cpu="))
-        });
-    let march = cpu.map(|cpu| format!("-march={cpu}"));
-    if let Some(flag) = &march {
-        build.flag(flag);
+    if let Some(cpu) = target_cpu() {
+        build.flag(format!("-march={cpu}"));
     }
-    // the bench prints how the C and C++ peers were built
-    println!(
-        "cargo:rustc-env=PEERS_C_MARCH={}",
-        march.as_deref().unwrap_or("the compiler's default -march")
-    );
     build
+}
+
+/// The `-C target-cpu` RUSTFLAGS give (the last one, as rustc takes it),
+/// whether written `-C target-cpu=x` or `-Ctarget-cpu=x`.
+fn target_cpu() -> Option<String> {
+    let flags = std::env::var("CARGO_ENCODED_RUSTFLAGS").unwrap_or_default();
+    let mut after_c = false;
+    let mut cpu = None;
+    for flag in flags.split('\x1f') {
+        let option = if after_c {
+            Some(flag)
+        } else {
+            flag.strip_prefix("-C")
+        };
+        if let Some(name) = option.and_then(|o| o.strip_prefix("target-cpu=")) {
+            cpu = Some(name.to_string());
+        }
+        after_c = flag == "-C";
+    }
+    cpu
 }
 
 /// Compile `<peer>/adapters.cpp` and set cfg `<peer>_cpp`; without a C++
