@@ -31,38 +31,41 @@ fn main() {
     println!("cargo:rerun-if-env-changed=CARGO_ENCODED_RUSTFLAGS");
     println!("cargo:rerun-if-env-changed=EIGEN_INCLUDE");
     // the bench prints how the C and C++ peers were built
-    let march = target_cpu().map_or("the compiler's default -march".into(), |c| {
-        format!("-march={c}")
-    });
-    println!("cargo:rustc-env=PEERS_C_MARCH={march}");
-    c_build()
+    let march = target_cpu().map(|c| format!("-march={c}"));
+    println!(
+        "cargo:rustc-env=PEERS_C_MARCH={}",
+        march.as_deref().unwrap_or("the compiler's default -march")
+    );
+    let march = march.as_deref();
+    c_build(march)
         .file("casadi/adapters.c")
         .opt_level(3)
         .warnings(false)
         .compile("casadi_adapters");
     match wrenfold_include() {
-        Some(include) => cpp_peer("wrenfold", &include),
+        Some(include) => cpp_peer("wrenfold", &include, march),
         None => println!("cargo:warning=wrenfold's C++ headers not found (pip install wrenfold, or set WRENFOLD_INCLUDE): the benchmark leaves out wrenfold C++"),
     }
     let eigen = std::env::var_os("EIGEN_INCLUDE")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from("/usr/include/eigen3"));
     if eigen.join("Eigen").join("Core").is_file() {
-        cpp_peer("symforce", &eigen);
+        cpp_peer("symforce", &eigen, march);
     } else {
         println!("cargo:warning=Eigen's headers not found (apt-get install libeigen3-dev, or set EIGEN_INCLUDE): the benchmark leaves out SymForce C++");
     }
 }
 
-/// A C or C++ build for the same CPU as the Rust code beside it: with `-C
-/// target-cpu=native` in RUSTFLAGS (the bench's native build), the peers get
-/// `-march=native` as their users' native builds would. cc 1.11 reads the
+/// A C or C++ build for the same CPU as the Rust code beside it (`march`,
+/// from [`target_cpu`]): with `-C target-cpu=native` in RUSTFLAGS (the
+/// bench's native build), the peers get `-march=native` as their users'
+/// native builds would. cc 1.11 reads the
 /// target CPU from RUSTFLAGS but does not pass it on to the C compiler, so
 /// without this the native table compared native Rust with generic C.
-fn c_build() -> cc::Build {
+fn c_build(march: Option<&str>) -> cc::Build {
     let mut build = cc::Build::new();
-    if let Some(cpu) = target_cpu() {
-        build.flag(format!("-march={cpu}"));
+    if let Some(flag) = march {
+        build.flag(flag);
     }
     build
 }
@@ -89,8 +92,8 @@ fn target_cpu() -> Option<String> {
 
 /// Compile `<peer>/adapters.cpp` and set cfg `<peer>_cpp`; without a C++
 /// compiler the peer is left out (a warning), not the build.
-fn cpp_peer(peer: &str, include: &Path) {
-    let built = c_build()
+fn cpp_peer(peer: &str, include: &Path, march: Option<&str>) {
+    let built = c_build(march)
         .cpp(true)
         .std("c++17")
         .file(format!("{peer}/adapters.cpp"))
