@@ -23,11 +23,13 @@ pub mod leave_one_out;
 pub mod nominal_prior;
 mod options;
 mod residuals;
+mod round_off;
 mod rounding;
 mod search;
 pub mod sensor;
 mod sink;
 mod solver;
+mod square_root;
 
 use covariance::{correlation, psd_inverse};
 pub use options::{FitError, FitOptions, FitResult, Likelihood, ParamEstimate, BASIN_TOLERANCE};
@@ -421,6 +423,7 @@ fn on_whole_runs(r: &Runner, runs: &[Run], o: &FitOptions, searched: FitResult) 
         drift::sandwich(&at, &split, o, &mut res);
         return res;
     };
+    let whole = round_off::resolved_by_segments(whole, &searched);
     // whether the refinement keeps the short-term accuracy, and its
     // drift-aware standard deviations, side by side (on one long run each
     // keeps a core busy alone; the latter is dropped when not kept)
@@ -623,6 +626,12 @@ const STEP_TOLERANCE: f64 = 0.01;
 /// Information (in scaled units, residuals weighted by their sigmas) below which
 /// a parameter direction counts as undetermined by the data during the fit.
 const UNDETERMINED_INFORMATION: f64 = 1.0;
+
+/// Information below this fraction of the strongest direction's is
+/// round-off in normal equations summed over many rows: such a direction is
+/// held during the fit whatever the data say of it (see
+/// [`FitResult::below_round_off`]).
+const ROUND_OFF: f64 = 1e-14;
 
 /// Scaled displacement (in units of [`Runner::param_scale`]) along an
 /// undetermined direction below which a fit counts as not having moved along

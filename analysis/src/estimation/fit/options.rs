@@ -195,6 +195,23 @@ pub struct FitResult {
     /// The parameters the nominal values' default prior moved, with what the
     /// data alone said ([`super::nominal_prior`]; empty before it is applied).
     pub near_nominal: Vec<HeldNearNominal>,
+    /// Those of the `undetermined` directions the data do determine (their
+    /// information is well above the noise) but the normal equations cannot
+    /// resolve: below the round-off of a sum whose strongest direction
+    /// carries 1e14 times more. Held like the others and warned about, until
+    /// a later stage resolves them (see `fit::on_whole_runs`).
+    pub below_round_off: Vec<BelowRoundOff>,
+}
+
+/// An undetermined direction of a [`FitResult`] that only round-off hides.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BelowRoundOff {
+    /// the direction, as in [`FitResult::undetermined`]
+    pub direction: DVector<f64>,
+    /// the parameters taking part in it (indices into `free`)
+    pub params: Vec<usize>,
+    /// the warning said of it, among [`FitResult::warnings`]
+    pub warning: String,
 }
 
 impl FitResult {

@@ -6,10 +6,11 @@
 //! stage; [`levenberg_marquardt_planned`] runs one: a [`Stage`] (the problem:
 //! its [`Unknowns`] and how to evaluate them) iterates an [`Iterate`] and
 //! reports a [`FitResult`].
+use super::options::BelowRoundOff;
 use super::{
     arrow, correlation, cosine, normal_equations, orthonormal, psd_inverse, residual_sums,
     start_columns, FitError, FitOptions, FitResult, Start, Sums, MAX_DOUBLINGS, PERSISTENT,
-    STEP_TOLERANCE, UNDETERMINED_INFORMATION,
+    ROUND_OFF, STEP_TOLERANCE, UNDETERMINED_INFORMATION,
 };
 use crate::model_on_log::deadreckon;
 use crate::model_on_log::linalg;
@@ -350,7 +351,7 @@ impl Stage<'_> {
         };
         let emax = eig.eigenvalues.max();
         let seen = (0..self.u.m)
-            .filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(1e-14 * emax))
+            .filter(|&k| eig.eigenvalues[k] < UNDETERMINED_INFORMATION.max(ROUND_OFF * emax))
             .map(|k| eig.eigenvectors.column(k).into_owned());
         orthonormal(self.u.locked.iter().cloned().chain(seen))
     }
@@ -554,6 +555,7 @@ impl Stage<'_> {
             undetermined: vec![],
             search_notes: vec![],
             near_nominal: vec![],
+            below_round_off: vec![],
         };
         if m == 0 {
             // only start poses were refined: no parameter to report on
@@ -608,6 +610,7 @@ impl Stage<'_> {
             corr,
             warnings,
             undetermined: seen.null,
+            below_round_off: seen.below_round_off,
             ..bare
         }
     }
@@ -625,13 +628,14 @@ impl Stage<'_> {
             return Identifiability::none_finite(m, names);
         };
         let smax = svd.singular_values.max();
-        let cutoff = (s2 / 1.0).max(1e-14 * smax);
+        let cutoff = (s2 / 1.0).max(ROUND_OFF * smax);
         let rank = svd.singular_values.iter().filter(|&&s| s > cutoff).count();
         let mut seen = Identifiability {
             cutoff,
             undetermined: vec![false; m],
             null: Vec::new(),
             warnings: Vec::new(),
+            below_round_off: Vec::new(),
         };
         if rank == m {
             return seen;
@@ -646,10 +650,12 @@ impl Stage<'_> {
             let u = row
                 .transpose()
                 .component_mul(&DVector::from_row_slice(&scale[..m]));
-            seen.null.push(u.normalize());
+            let direction = u.normalize();
+            seen.null.push(direction.clone());
             for (j, v) in row.iter().enumerate() {
                 seen.undetermined[j] |= v.abs() > 0.2;
             }
+            let params: Vec<usize> = (0..m).filter(|&j| row[j].abs() > 0.2).collect();
             let mut parts: Vec<(f64, &str)> = row
                 .iter()
                 .zip(names)
@@ -658,13 +664,21 @@ impl Stage<'_> {
                 .collect();
             parts.sort_by(|a, b| b.0.total_cmp(&a.0));
             let names: Vec<&str> = parts.iter().map(|p| p.1).collect();
-            seen.warnings.push(match names.as_slice() {
+            let warning = match names.as_slice() {
                 [one] => format!("not identifiable from these logs: {one} (kept at its starting value)"),
                 _ => format!(
                     "not identifiable from these logs: the combination of {} cannot be separated (rank {rank} of {m}; kept at the starting values along it)",
                     names.join(" and ")
                 ),
-            });
+            };
+            if s > s2 {
+                seen.below_round_off.push(BelowRoundOff {
+                    direction,
+                    params,
+                    warning: warning.clone(),
+                });
+            }
+            seen.warnings.push(warning);
         }
         seen
     }
@@ -679,6 +693,8 @@ struct Identifiability {
     /// those directions, in unscaled parameter space
     null: Vec<DVector<f64>>,
     warnings: Vec<String>,
+    /// those of `null` only round-off hides
+    below_round_off: Vec<BelowRoundOff>,
 }
 
 /// The `m` unit vectors: every direction, when none is determined.
@@ -697,6 +713,7 @@ impl Identifiability {
             cutoff: f64::INFINITY,
             undetermined: vec![true; m],
             null: unit_vectors(m),
+            below_round_off: Vec::new(),
             warnings: vec![format!(
                 "not identifiable from these logs: {} (the fit's normal equations are not finite: a value so far out that the tracks overflow?)",
                 names.join(", ")
