@@ -24,7 +24,7 @@
 use super::residuals::run_residuals_into;
 use super::sink::{Kept, Sink};
 use super::square_root::SquareRoot;
-use super::{correlation, priors, run_offsets, start_columns};
+use super::{priors, run_offsets, set_correlation, start_columns};
 use super::{rounding, FitOptions, FitResult};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
@@ -500,7 +500,7 @@ pub(super) fn sandwich(r: &Runner, runs: &[Run], o: &FitOptions, res: &mut FitRe
             res.std[k] = cov[(k, k)].sqrt();
         }
     }
-    res.corr = correlation(&cov);
+    set_correlation(r, res, &cov);
 }
 
 /// The weakest singular value of the information's square root, in units of

@@ -8,9 +8,9 @@
 //! reports a [`FitResult`].
 use super::options::BelowRoundOff;
 use super::{
-    arrow, correlation, cosine, normal_equations, orthonormal, psd_inverse, residual_sums,
-    start_columns, FitError, FitOptions, FitResult, Start, Sums, MAX_DOUBLINGS, PERSISTENT,
-    ROUND_OFF, STEP_TOLERANCE, UNDETERMINED_INFORMATION,
+    arrow, correlation, correlation_warnings, cosine, normal_equations, orthonormal, psd_inverse,
+    residual_sums, start_columns, FitError, FitOptions, FitResult, Start, Sums, MAX_DOUBLINGS,
+    PERSISTENT, ROUND_OFF, STEP_TOLERANCE, UNDETERMINED_INFORMATION,
 };
 use crate::model_on_log::deadreckon;
 use crate::model_on_log::linalg;
@@ -587,14 +587,7 @@ impl Stage<'_> {
             })
             .collect();
         let corr = correlation(&cov);
-        for a in 0..m {
-            for b in a + 1..m {
-                // (pairs inside an undetermined direction are already warned about)
-                if corr[(a, b)].abs() > 0.98 && !(seen.undetermined[a] && seen.undetermined[b]) {
-                    warnings.push(format!("{} and {} are strongly correlated (r = {:.3}): this log barely tells them apart", names[a], names[b], corr[(a, b)]));
-                }
-            }
-        }
+        warnings.extend(correlation_warnings(&names, &corr, &std));
         for (k, &i) in self.u.free.iter().enumerate() {
             let (lo, hi) = self.u.bounds[k];
             let p = bare.p[i];
