@@ -15,7 +15,8 @@
 //!
 //! nalgebra's `GivensRotation` rotates two rows of one matrix; here one row
 //! is R's and the other a separate vector, so the rotation is applied by hand.
-use nalgebra::{DMatrix, DVector, SVD};
+use crate::model_on_log::linalg;
+use nalgebra::{DMatrix, DVector};
 
 /// R with R^T R = sum of the rows' w v v^T (see the module doc).
 #[derive(Debug, Clone)]
@@ -76,10 +77,12 @@ impl SquareRoot {
                 continue;
             }
             let a = r[i + i * n];
-            // not hypot: it guards against overflow beyond 1e154, far from
-            // any information's square root, and cost a tenth of a
-            // million-row fit's time
-            let h = (a * a + b * b).sqrt();
+            // hypot only where the squares overflow (a fit from b = 1e308):
+            // everywhere it cost a tenth of a million-row fit's time
+            let h = match (a * a + b * b).sqrt() {
+                h if h.is_finite() => h,
+                _ => a.hypot(b),
+            };
             let inv = 1.0 / h;
             let (c, s) = (a * inv, b * inv);
             r[i + i * n] = h;
@@ -115,8 +118,9 @@ impl SquareRoot {
             }),
         );
         let scaled = &self.r * DMatrix::from_diagonal(&d);
-        let svd = SVD::new(scaled, false, true);
-        let Some(vt) = svd.v_t else {
+        // bounded: nalgebra's own SVD never ends on a matrix with a NaN
+        let Some((svd, vt)) = linalg::svd(scaled).and_then(|s| s.v_t.clone().map(|v| (s, v)))
+        else {
             return DMatrix::from_element(n, n, f64::NAN);
         };
         let smax = svd.singular_values.max();
@@ -187,6 +191,18 @@ mod tests {
         merged.merge(1.0, &b, |c| if c == 3 { 4 } else { c });
         let g = whole.gram();
         assert!((merged.gram() - &g).norm() < 1e-12 * g.norm());
+    }
+
+    /// A fit from b = 1e308 (the hostile campaign's): the squares overflow
+    /// and the inverse of an information holding a NaN is all NaN, at once.
+    #[test]
+    fn overflowing_rows_end_in_a_nan_not_a_hang() {
+        let mut sq = SquareRoot::zeros(2);
+        sq.add(1.0, &DVector::from_vec(vec![1e200, 1.0]));
+        sq.add(1.0, &DVector::from_vec(vec![1e200, 2.0]));
+        assert!((sq.r[(0, 0)] / 1e200 - 2f64.sqrt()).abs() < 1e-12);
+        sq.add(1.0, &DVector::from_vec(vec![f64::NAN, 1.0]));
+        assert!(sq.inverse(1e-10).iter().all(|v| v.is_nan()));
     }
 
     /// Two unknowns whose difference has 1e-16 of the information of their
