@@ -645,18 +645,13 @@ impl Stage<'_> {
                 .component_mul(&DVector::from_row_slice(&scale[..m]));
             let direction = u.normalize();
             seen.null.push(direction.clone());
-            for (j, v) in row.iter().enumerate() {
-                seen.undetermined[j] |= v.abs() > 0.2;
+            // the parameters taking part in it, the largest share first
+            let mut params: Vec<usize> = (0..m).filter(|&j| row[j].abs() > 0.2).collect();
+            params.sort_by(|&a, &b| row[b].abs().total_cmp(&row[a].abs()));
+            for &j in &params {
+                seen.undetermined[j] = true;
             }
-            let params: Vec<usize> = (0..m).filter(|&j| row[j].abs() > 0.2).collect();
-            let mut parts: Vec<(f64, &str)> = row
-                .iter()
-                .zip(names)
-                .map(|(v, n)| (v.abs(), *n))
-                .filter(|(v, _)| *v > 0.2)
-                .collect();
-            parts.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let names: Vec<&str> = parts.iter().map(|p| p.1).collect();
+            let names: Vec<&str> = params.iter().map(|&j| names[j]).collect();
             let warning = match names.as_slice() {
                 [one] => format!("not identifiable from these logs: {one} (kept at its starting value)"),
                 _ => format!(
