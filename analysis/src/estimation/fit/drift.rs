@@ -223,9 +223,9 @@ struct Totals<'a> {
     run: &'a Run,
     triples: usize,
     seen: usize,
-    /// J^T J of the x, the y and the heading rows apart (M weighs each by
-    /// its own white variance), and of the other rows (the start heading's
-    /// prior)
+    /// J^T J, as square roots, of the x, the y and the heading rows apart
+    /// (M weighs each by its own white variance), and of the other rows
+    /// (the start heading's prior)
     parts: [SquareRoot; 4],
     sums: RowSums,
     triple: [DVector<f64>; 3],
@@ -253,14 +253,11 @@ fn measured_at(run: &Run, k: usize) -> [f64; 2] {
 impl Sink for Totals<'_> {
     fn push(&mut self, _: f64, row: Option<impl Iterator<Item = f64>>) {
         let v = DVector::from_iterator(self.parts[0].dim(), row.expect("rows"));
-        let part = if self.seen < self.triples {
-            self.seen % 3
+        if self.seen >= self.triples {
+            self.parts[3].add(1.0, &v);
         } else {
-            3
-        };
-        self.parts[part].add(1.0, &v);
-        if self.seen < self.triples {
             let (k, c) = (self.seen / 3, self.seen % 3);
+            self.parts[c].add(1.0, &v);
             self.triple[c] = v;
             if c == 2 {
                 self.sums.add(&self.triple, measured_at(self.run, k));
