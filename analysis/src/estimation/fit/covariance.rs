@@ -116,18 +116,17 @@ pub(super) fn correlation_warnings(
 /// sandwich replaces (on an OptiOdom square session the warning read 0.997
 /// where the reported matrix had 0.963).
 pub(super) fn set_correlation(r: &Runner, res: &mut FitResult, cov: &DMatrix<f64>) {
-    let names: Vec<String> = res.free.iter().map(|&i| r.names[i].clone()).collect();
+    let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
     set_correlation_named(&names, res, cov);
 }
 
 /// [`set_correlation`], the free parameters named `names`.
-fn set_correlation_named(names: &[String], res: &mut FitResult, cov: &DMatrix<f64>) {
-    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+fn set_correlation_named(names: &[&str], res: &mut FitResult, cov: &DMatrix<f64>) {
     let corr = correlation(cov);
-    let old = correlation_warnings(&names, &res.corr, &res.std);
+    let old = correlation_warnings(names, &res.corr, &res.std);
     res.warnings.retain(|w| !old.contains(w));
     res.warnings
-        .extend(correlation_warnings(&names, &corr, &res.std));
+        .extend(correlation_warnings(names, &corr, &res.std));
     res.corr = corr;
 }
 
@@ -195,27 +194,13 @@ mod tests {
 
     #[test]
     fn a_sandwich_replaces_the_correlation_warnings_with_the_correlations() {
-        let names = ["r_r".to_string(), "r_l".to_string(), "b".to_string()];
-        let plain = cov(0.997);
+        let names = ["r_r", "r_l", "b"];
         let mut res = FitResult {
-            p: vec![0.042, 0.042, 0.2],
-            free: vec![0, 1, 2],
-            std: vec![1e-4; 3],
-            corr: correlation(&plain),
-            cost_before: 2.0,
-            cost_after: 1.0,
-            iterations: 3,
-            n_residuals: 100,
-            warnings: vec!["another warning".into()],
-            starts: vec![],
-            undetermined: vec![],
-            search_notes: vec![],
-            near_nominal: vec![],
-            below_round_off: vec![],
+            corr: correlation(&cov(0.997)),
+            ..FitResult::of_three([1e-4; 3], &["another warning"])
         };
-        let named: Vec<&str> = names.iter().map(String::as_str).collect();
         res.warnings
-            .extend(correlation_warnings(&named, &res.corr, &res.std));
+            .extend(correlation_warnings(&names, &res.corr, &res.std));
         assert_eq!(res.warnings.len(), 2, "{:?}", res.warnings);
         set_correlation_named(&names, &mut res, &cov(0.963));
         assert_eq!(res.warnings, vec!["another warning".to_string()]);

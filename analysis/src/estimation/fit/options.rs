@@ -215,6 +215,29 @@ pub struct BelowRoundOff {
 }
 
 impl FitResult {
+    /// A fit of a differential drive's r_r, r_l and b (free parameters 0, 1,
+    /// 2) with standard deviations `std`, uncorrelated, and `warnings`: the
+    /// unit tests' fixture.
+    #[cfg(test)]
+    pub(super) fn of_three(std: [f64; 3], warnings: &[&str]) -> FitResult {
+        FitResult {
+            p: vec![0.042, 0.042, 0.2],
+            free: vec![0, 1, 2],
+            std: std.to_vec(),
+            corr: DMatrix::identity(3, 3),
+            cost_before: 2.0,
+            cost_after: 1.0,
+            iterations: 3,
+            n_residuals: 100,
+            warnings: warnings.iter().map(|w| w.to_string()).collect(),
+            starts: vec![[0.0; 3]],
+            undetermined: vec![],
+            search_notes: vec![],
+            near_nominal: vec![],
+            below_round_off: vec![],
+        }
+    }
+
     /// This fit as the continuation of `earlier` (a fit of the same data
     /// from the same starting values): the starting cost is the earlier one's,
     /// the iterations are both fits'.

@@ -41,26 +41,7 @@ pub(super) fn resolved_by_segments(mut whole: FitResult, searched: &FitResult) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{DMatrix, DVector};
-
-    fn result(std: [f64; 3], warnings: &[&str]) -> FitResult {
-        FitResult {
-            p: vec![0.042, 0.042, 0.2],
-            free: vec![0, 1, 2],
-            std: std.to_vec(),
-            corr: DMatrix::identity(3, 3),
-            cost_before: 2.0,
-            cost_after: 1.0,
-            iterations: 3,
-            n_residuals: 100,
-            warnings: warnings.iter().map(|w| w.to_string()).collect(),
-            starts: vec![[0.0; 3]],
-            undetermined: vec![],
-            search_notes: vec![],
-            near_nominal: vec![],
-            below_round_off: vec![],
-        }
-    }
+    use nalgebra::DVector;
 
     const HIDDEN: &str = "not identifiable from these logs: b (kept at its starting value)";
 
@@ -73,13 +54,13 @@ mod tests {
                 params: vec![2],
                 warning: HIDDEN.into(),
             }],
-            ..result([1e-6, 1e-6, f64::INFINITY], &[HIDDEN, "another warning"])
+            ..FitResult::of_three([1e-6, 1e-6, f64::INFINITY], &[HIDDEN, "another warning"])
         }
     }
 
     #[test]
     fn a_direction_the_segments_determined_is_taken_over() {
-        let taken = resolved_by_segments(whole(), &result([1e-6, 1e-6, 3e-5], &[]));
+        let taken = resolved_by_segments(whole(), &FitResult::of_three([1e-6, 1e-6, 3e-5], &[]));
         assert_eq!(taken.std[2], 3e-5);
         assert_eq!(taken.warnings, vec!["another warning".to_string()]);
         assert!(taken.undetermined.is_empty() && taken.below_round_off.is_empty());
@@ -87,7 +68,7 @@ mod tests {
 
     #[test]
     fn a_direction_the_segments_did_not_determine_stays_undetermined() {
-        let segments = result([1e-6, 1e-6, f64::INFINITY], &[HIDDEN]);
+        let segments = FitResult::of_three([1e-6, 1e-6, f64::INFINITY], &[HIDDEN]);
         let kept = resolved_by_segments(whole(), &segments);
         assert!(kept.std[2].is_infinite());
         assert_eq!(kept.warnings.len(), 2);
