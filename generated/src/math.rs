@@ -438,7 +438,7 @@ mod fast_atan {
         if !(larger < 1e300 && larger > 1e-290) {
             return libm::atan2(y, x);
         }
-        libm::copysign(atan_quadrant(ay, ax, x < 0.0), y)
+        atan_quadrant(ay, ax, x < 0.0).copysign(y)
     }
 }
 
