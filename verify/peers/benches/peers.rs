@@ -27,7 +27,11 @@
 //! - Median of 9 rounds; in each round every side runs once, in turns, so a
 //!   change of clock speed touches every side alike. Each round is timed in
 //!   the thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`), so time the thread
-//!   spent descheduled under load is not counted.
+//!   spent descheduled under load is not counted, in blocks of [`BLOCK`]
+//!   calls whose inputs are read, untimed, just before: every side finds
+//!   its inputs in cache, as in a filter, and no side is timed on the
+//!   memory's speed (one measured pair of clock reads is taken off each
+//!   block).
 //! - The whole measurement runs in [`PROCESSES`] processes one after the
 //!   other (code placement, alignment and the allocator's addresses differ
 //!   between processes); every cell is the median of the processes' figures
@@ -78,27 +82,71 @@ fn thread_cpu_ns() -> f64 {
     ts.tv_sec as f64 * 1e9 + ts.tv_nsec as f64
 }
 
-/// ns per call of `k` over `args`, in the thread's CPU time.
-fn time(k: Kernel, args: &[Args], out: &mut [f64]) -> f64 {
-    let k = black_box(k);
-    let o = out.as_mut_ptr();
-    let start = thread_cpu_ns();
-    for a in args {
-        // SAFETY: `a` points into live samples of the row's model and `out`
-        // holds more than the row's outputs
-        unsafe { k(black_box(a), o) };
+/// Calls timed between two reads of the clock, whose inputs are read just
+/// before (untimed): 1,024 samples of the largest model hold about 400 KB,
+/// within a core's L2. A filter calls its kernels on a state it has just
+/// computed, in cache; timing one stream through 16 MB of inputs timed the
+/// memory instead, which other tenants of a shared L3 slow in some
+/// processes and not others (speed.md, "The landmark's two speeds are the
+/// memory's"). `PEERS_BLOCK=0` times the whole stream at once, as before.
+const BLOCK: usize = 1024;
+
+/// The calls timed between two reads of the clock: [`BLOCK`], or every
+/// call of a class where `PEERS_BLOCK` says 0 (or another size).
+fn block() -> usize {
+    match std::env::var("PEERS_BLOCK")
+        .ok()
+        .and_then(|b| b.parse().ok())
+    {
+        Some(0) => usize::MAX,
+        Some(b) => b,
+        None => BLOCK,
+    }
+}
+
+/// What one pair of clock reads adds to a block's time: the median of 99
+/// back-to-back pairs (the thread clock is a system call, about 0.5 us on a
+/// virtual machine: 13% of a block of the fastest kernel).
+fn clock_cost() -> f64 {
+    let mut pairs: Vec<f64> = (0..99)
+        .map(|_| {
+            let start = thread_cpu_ns();
+            thread_cpu_ns() - start
+        })
+        .collect();
+    pairs.sort_by(f64::total_cmp);
+    pairs[pairs.len() / 2]
+}
+
+/// ns per call of `k` over `args` (samples of a model with `lengths`), in
+/// the thread's CPU time, block by block with each block's inputs read
+/// first.
+fn time(k: Kernel, args: &[Args], lengths: [usize; 5], out: &mut [f64]) -> f64 {
+    let (k, o, cost) = (black_box(k), out.as_mut_ptr(), clock_cost());
+    let mut total = 0.0;
+    for block in args.chunks(block()) {
+        // SAFETY: every sample holds its model's lengths of values
+        let read: f64 = block.iter().map(|a| unsafe { a.touch(lengths) }).sum();
+        black_box(read);
+        let start = thread_cpu_ns();
+        for a in block {
+            // SAFETY: `a` points into live samples of the row's model and
+            // `out` holds more than the row's outputs
+            unsafe { k(black_box(a), o) };
+        }
+        total += thread_cpu_ns() - start - cost;
     }
     black_box(out);
-    (thread_cpu_ns() - start) / args.len() as f64
+    total / args.len() as f64
 }
 
 /// Median ns per call of each kernel, timed in turns.
-fn race(kernels: &[Kernel], args: &[Args]) -> Vec<f64> {
+fn race(kernels: &[Kernel], args: &[Args], model: Model) -> Vec<f64> {
     let mut out = vec![0.0; 64];
     let mut rounds = vec![Vec::new(); kernels.len()];
     for _ in 0..REPS {
         for (k, r) in kernels.iter().zip(&mut rounds) {
-            r.push(time(*k, args, &mut out));
+            r.push(time(*k, args, model.lengths(), &mut out));
         }
     }
     rounds
@@ -237,7 +285,7 @@ fn bench_row(row: Row, inputs: &Inputs, sides: &[Side]) -> Vec<Record> {
         if args.is_empty() {
             continue;
         }
-        let mut ns = race(&timed, args).into_iter();
+        let mut ns = race(&timed, args, row.model()).into_iter();
         let inputs = match *class {
             "series" | "closed form, 20x steps" => {
                 format!("{class} ({:.2}% of the mix)", share * 100.0)
@@ -470,7 +518,7 @@ fn measure() -> (Vec<String>, Vec<Record>) {
             })
             .collect();
         let (median, _, worst) = spread(&mut per_call);
-        let t = race(&[analytic, cd], &args);
+        let t = race(&[analytic, cd], &args, row.model());
         let label = format!(
             "{} (apart by {median:.0e} in the median call, {worst:.0e} at worst: central differences' round-off)",
             row.what()

@@ -31,6 +31,44 @@ pub struct Args {
     pub dt: f64,
 }
 
+impl Args {
+    /// Reads every input these arguments point to (`lengths`: x, u, w, p,
+    /// lm, as [`Model::lengths`] gives them), so that the timed calls find
+    /// them in cache, as a filter's kernels find the state it just
+    /// computed. Returns their sum, for the caller to `black_box`.
+    ///
+    /// # Safety
+    /// Each pointer must hold at least its length of values.
+    pub unsafe fn touch(&self, lengths: [usize; 5]) -> f64 {
+        let [x, u, w, p, lm] = lengths;
+        let mut sum = self.dt;
+        for (ptr, n) in [
+            (self.x, x),
+            (self.u, u),
+            (self.w, w),
+            (self.p, p),
+            (self.lm, lm),
+        ] {
+            // SAFETY: the caller's promise
+            sum += unsafe { std::slice::from_raw_parts(ptr, n) }
+                .iter()
+                .sum::<f64>();
+        }
+        sum
+    }
+}
+
+impl Model {
+    /// How many values a sample holds: x, u, w, p, lm.
+    pub const fn lengths(self) -> [usize; 5] {
+        match self {
+            Model::DiffDrive => [3, 2, 2, 5, 0],
+            Model::Unicycle => [3, 2, 0, 1, 2],
+            Model::OmniCaster => [3, 9, 3, 12, 0],
+        }
+    }
+}
+
 /// The one calling convention of every side.
 pub type Kernel = unsafe extern "C" fn(&Args, *mut f64);
 
