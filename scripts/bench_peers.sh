@@ -33,7 +33,7 @@ trap 'rm -f "$tmp"' EXIT
     fi
     echo
     RUSTFLAGS="$flags" CARGO_TARGET_DIR="$target" cargo bench -q -p kinegen-peers 2>/dev/null \
-      | grep -v -E '^(running [0-9]+ tests?|test result: )' | cat -s \
+      | grep -v -E '^(running [0-9]+ tests?|test result: |[.i]+$)' | cat -s \
       | sed 's/^left out: /- left out: /; s/^inputs: /- inputs: /'
   done
 } >"$tmp"
