@@ -54,12 +54,7 @@ pub(super) fn sandwich(r: &Runner, windows: &[Run], o: &FitOptions, res: &mut Fi
     s *= g / (g - m as f64);
     let hinv = psd_inverse(&h, |l, lmax| l > 1e-12 * lmax);
     let cov = &hinv * s * &hinv;
-    for k in 0..m {
-        if res.std[k].is_finite() {
-            res.std[k] = cov[(k, k)].max(0.0).sqrt();
-        }
-    }
-    set_correlation(r, res, &cov);
+    set_covariance(r, res, &cov);
 }
 
 /// The inverse of a symmetric positive semi-definite matrix on the subspace of
@@ -84,20 +79,34 @@ pub(super) fn psd_inverse(a: &DMatrix<f64>, keep: impl Fn(f64, f64) -> bool) -> 
     inv
 }
 
+/// A correlation is worth a warning only while it leaves a parameter
+/// uncertain. On a long log two parameters can correlate at 0.999 and both
+/// be known to a ten-thousandth of their size (a million-row diff drive log:
+/// r_r to 6e-5 of itself, b to 3e-4, r = -1.000), where "this log barely
+/// tells them apart" would be false. A thousandth of a wheel radius is a
+/// millimetre of odometry per metre driven.
+const TOLD_APART: f64 = 1e-3;
+
 /// The warnings of the pairs of parameters (named `names`) correlated beyond
-/// 0.98 in `corr`, those with standard deviations `std`. A pair of
-/// undetermined parameters (infinite standard deviations) is left out: the
-/// undetermined direction's own warning names them.
+/// 0.98 in `corr`, those with standard deviations `std`, unless both are
+/// known within [`TOLD_APART`] of their `scale` (`Runner::param_scale`: the
+/// value's size, or a hundredth of the spec's range for a value near 0). A
+/// pair of undetermined parameters (infinite standard deviations) is left
+/// out: the undetermined direction's own warning names them.
 pub(super) fn correlation_warnings(
     names: &[&str],
+    scale: &[f64],
     corr: &DMatrix<f64>,
     std: &[f64],
 ) -> Vec<String> {
+    // a NaN standard deviation is not "known"
+    let known = |k: usize| std[k] <= TOLD_APART * scale[k];
     let mut warnings = Vec::new();
     for a in 0..names.len() {
         for b in a + 1..names.len() {
             let undetermined = std[a].is_infinite() && std[b].is_infinite();
-            if corr[(a, b)].abs() > 0.98 && !undetermined {
+            let matters = !known(a) || !known(b);
+            if corr[(a, b)].abs() > 0.98 && !undetermined && matters {
                 warnings.push(format!(
                     "{} and {} are strongly correlated (r = {:.3}): this log barely tells them apart",
                     names[a],
@@ -110,24 +119,32 @@ pub(super) fn correlation_warnings(
     warnings
 }
 
-/// Replace `res`'s correlations by those of `cov` (a covariance of its
-/// free parameters) and its correlation warnings with them: the stage that
-/// made `res` warned of the correlations of plain least squares, which a
+/// Replace `res`'s standard deviations (of the parameters it determines)
+/// and correlations by those of `cov` (a covariance of its free
+/// parameters), and its correlation warnings with them: the stage that made
+/// `res` warned of the correlations of plain least squares, which a
 /// sandwich replaces (on an OptiOdom square session the warning read 0.997
 /// where the reported matrix had 0.963).
-pub(super) fn set_correlation(r: &Runner, res: &mut FitResult, cov: &DMatrix<f64>) {
+pub(super) fn set_covariance(r: &Runner, res: &mut FitResult, cov: &DMatrix<f64>) {
     let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
-    set_correlation_named(&names, res, cov);
+    let scale: Vec<f64> = (res.free.iter())
+        .map(|&i| r.param_scale(i, res.p[i]))
+        .collect();
+    set_covariance_named(&names, &scale, res, cov);
 }
 
-/// [`set_correlation`], the free parameters named `names`.
-fn set_correlation_named(names: &[&str], res: &mut FitResult, cov: &DMatrix<f64>) {
-    let corr = correlation(cov);
-    let old = correlation_warnings(names, &res.corr, &res.std);
+/// [`set_covariance`], the free parameters named `names`, of sizes `scale`.
+fn set_covariance_named(names: &[&str], scale: &[f64], res: &mut FitResult, cov: &DMatrix<f64>) {
+    for (k, std) in res.std.iter_mut().enumerate() {
+        if std.is_finite() {
+            *std = cov[(k, k)].max(0.0).sqrt();
+        }
+    }
+    res.corr = correlation(cov);
+    let old = std::mem::take(&mut res.correlated);
     res.warnings.retain(|w| !old.contains(w));
-    res.warnings
-        .extend(correlation_warnings(names, &corr, &res.std));
-    res.corr = corr;
+    res.correlated = correlation_warnings(names, scale, &res.corr, &res.std);
+    res.warnings.extend(res.correlated.iter().cloned());
 }
 
 /// Correlations of a covariance matrix, within [-1, 1]; a parameter without
@@ -192,21 +209,74 @@ mod tests {
         DMatrix::from_row_slice(3, 3, &[1.0, r, 0.0, r, 1.0, 0.0, 0.0, 0.0, 1.0])
     }
 
+    const NAMES: [&str; 3] = ["r_r", "r_l", "b"];
+    const SCALE: [f64; 3] = [0.042, 0.042, 0.2];
+
+    /// A covariance of three parameters with standard deviations `std`
+    /// whose first two correlate `r`.
+    fn cov_of(std: [f64; 3], r: f64) -> DMatrix<f64> {
+        let d = DMatrix::from_diagonal(&DVector::from_row_slice(&std));
+        &d * cov(r) * &d
+    }
+
+    /// A fit as the solver leaves it: correlations `r` with standard
+    /// deviations `std`, warned of, beside another warning.
+    fn warned(std: [f64; 3], r: f64) -> FitResult {
+        let mut res = FitResult {
+            corr: correlation(&cov(r)),
+            ..FitResult::of_three(std, &["another warning"])
+        };
+        res.correlated = correlation_warnings(&NAMES, &SCALE, &res.corr, &res.std);
+        res.warnings.extend(res.correlated.iter().cloned());
+        res
+    }
+
     #[test]
     fn a_sandwich_replaces_the_correlation_warnings_with_the_correlations() {
-        let names = ["r_r", "r_l", "b"];
-        let mut res = FitResult {
-            corr: correlation(&cov(0.997)),
-            ..FitResult::of_three([1e-4; 3], &["another warning"])
-        };
-        res.warnings
-            .extend(correlation_warnings(&names, &res.corr, &res.std));
+        let mut res = warned([1e-4; 3], 0.997);
         assert_eq!(res.warnings.len(), 2, "{:?}", res.warnings);
-        set_correlation_named(&names, &mut res, &cov(0.963));
+        set_covariance_named(&NAMES, &SCALE, &mut res, &cov_of([1e-4; 3], 0.963));
         assert_eq!(res.warnings, vec!["another warning".to_string()]);
         assert!((res.corr[(0, 1)] - 0.963).abs() < 1e-12);
-        set_correlation_named(&names, &mut res, &cov(-0.99));
+        set_covariance_named(&NAMES, &SCALE, &mut res, &cov_of([1e-4; 3], -0.99));
         assert_eq!(res.warnings.len(), 2);
         assert!(res.warnings[1].contains("r = -0.990"), "{:?}", res.warnings);
+    }
+
+    #[test]
+    fn a_sandwich_that_tells_them_apart_takes_back_the_solvers_warning() {
+        // plain least squares: r_r and r_l known to 2% and correlated; the
+        // sandwich: known to 6e-5 of themselves, correlated still
+        let mut res = warned([1e-3, 1e-3, 1e-3], 0.999);
+        assert_eq!(res.warnings.len(), 2, "{:?}", res.warnings);
+        set_covariance_named(
+            &NAMES,
+            &SCALE,
+            &mut res,
+            &cov_of([2.7e-6, 2.7e-6, 6e-5], -0.9999),
+        );
+        assert_eq!(res.warnings, vec!["another warning".to_string()]);
+        assert!((res.std[0] - 2.7e-6).abs() < 1e-15, "{:?}", res.std);
+        // an undetermined parameter stays undetermined
+        let mut res = warned([1e-3, 1e-3, f64::INFINITY], 0.0);
+        set_covariance_named(&NAMES, &SCALE, &mut res, &cov_of([1e-3; 3], 0.0));
+        assert!(res.std[2].is_infinite());
+    }
+
+    #[test]
+    fn a_correlation_is_not_warned_of_where_both_are_known_to_a_thousandth() {
+        // r_r known to 6e-5 of itself, r_l to 9e-4: told apart
+        let corr = correlation(&cov(-0.9999));
+        let std = [2.7e-6, 3.9e-5, 1e-3];
+        assert_eq!(
+            correlation_warnings(&NAMES, &SCALE, &corr, &std),
+            Vec::<String>::new()
+        );
+        // r_l to 1.1e-3 of itself: the correlation is why
+        let std = [2.7e-6, 4.7e-5, 1e-3];
+        assert_eq!(correlation_warnings(&NAMES, &SCALE, &corr, &std).len(), 1);
+        // a NaN standard deviation is not "known"
+        let std = [2.7e-6, f64::NAN, 1e-3];
+        assert_eq!(correlation_warnings(&NAMES, &SCALE, &corr, &std).len(), 1);
     }
 }

@@ -24,7 +24,7 @@
 use super::residuals::run_residuals_into;
 use super::sink::{Kept, Sink};
 use super::square_root::SquareRoot;
-use super::{priors, run_offsets, set_correlation, start_columns};
+use super::{priors, run_offsets, set_covariance, start_columns};
 use super::{rounding, FitOptions, FitResult};
 use crate::model_on_log::model::Runner;
 use crate::model_on_log::run::Run;
@@ -492,12 +492,7 @@ pub(super) fn sandwich(r: &Runner, runs: &[Run], o: &FitOptions, res: &mut FitRe
     }
     let hinv = h.inverse(INVERSE_CUTOFF);
     let cov = meat.sandwiched(&hinv).view((0, 0), (m, m)).into_owned();
-    for k in 0..m {
-        if res.std[k].is_finite() {
-            res.std[k] = cov[(k, k)].sqrt();
-        }
-    }
-    set_correlation(r, res, &cov);
+    set_covariance(r, res, &cov);
 }
 
 /// The weakest singular value of the information's square root, in units of

@@ -201,6 +201,9 @@ pub struct FitResult {
     /// carries 1e14 times more. Held like the others and warned about, until
     /// a later stage resolves them (see `fit::on_whole_runs`).
     pub below_round_off: Vec<BelowRoundOff>,
+    /// Those of `warnings` that say two parameters are strongly correlated:
+    /// a later covariance (a sandwich's) replaces exactly these.
+    pub correlated: Vec<String>,
 }
 
 /// An undetermined direction of a [`FitResult`] that only round-off hides.
@@ -235,6 +238,7 @@ impl FitResult {
             search_notes: vec![],
             near_nominal: vec![],
             below_round_off: vec![],
+            correlated: vec![],
         }
     }
 

@@ -556,6 +556,7 @@ impl Stage<'_> {
             search_notes: vec![],
             near_nominal: vec![],
             below_round_off: vec![],
+            correlated: vec![],
         };
         if m == 0 {
             // only start poses were refined: no parameter to report on
@@ -587,7 +588,11 @@ impl Stage<'_> {
             })
             .collect();
         let corr = correlation(&cov);
-        warnings.extend(correlation_warnings(&names, &corr, &std));
+        let sizes: Vec<f64> = (self.u.free.iter())
+            .map(|&i| self.r.param_scale(i, bare.p[i]))
+            .collect();
+        let correlated = correlation_warnings(&names, &sizes, &corr, &std);
+        warnings.extend(correlated.iter().cloned());
         for (k, &i) in self.u.free.iter().enumerate() {
             let (lo, hi) = self.u.bounds[k];
             let p = bare.p[i];
@@ -604,6 +609,7 @@ impl Stage<'_> {
             warnings,
             undetermined: seen.null,
             below_round_off: seen.below_round_off,
+            correlated,
             ..bare
         }
     }
