@@ -96,3 +96,18 @@ fn a_kernel_off_by_a_micron_is_caught() {
     );
     assert!(worst > 1e-9, "a 1e-6 error went unseen ({worst:.1e})");
 }
+
+/// The bench reads each block's inputs before timing it through
+/// `Args::touch` with `Model::lengths`: those must be what every sample of
+/// the model holds, or the read would run past a sample's values.
+#[test]
+fn each_models_lengths_are_those_of_its_samples() {
+    for model in [Model::DiffDrive, Model::Unicycle, Model::OmniCaster] {
+        let [x, u, w, p, lm] = model.lengths();
+        for s in samples(model, &motions(), 3) {
+            let held = (s.x.len(), s.u.len(), s.w.len(), s.p.len());
+            assert_eq!(held, (x, u, w, p), "{model:?}");
+            assert!(lm <= s.lm.len(), "{model:?}");
+        }
+    }
+}
