@@ -118,15 +118,23 @@ fn clock_cost() -> f64 {
     pairs[pairs.len() / 2]
 }
 
-/// ns per call of `k` over `args` (samples of a model with `lengths`), in
-/// the thread's CPU time, block by block with each block's inputs read
-/// first.
-fn time(k: Kernel, args: &[Args], lengths: [usize; 5], out: &mut [f64]) -> f64 {
-    let (k, o, cost) = (black_box(k), out.as_mut_ptr(), clock_cost());
+/// How a race times its calls: the model's `lengths` (what each block's
+/// inputs hold), the calls in a block, and what a pair of clock reads adds
+/// to a block's time (found once a race).
+struct Timing {
+    lengths: [usize; 5],
+    block: usize,
+    clock_cost: f64,
+}
+
+/// ns per call of `k` over `args`, in the thread's CPU time, block by block
+/// with each block's inputs read first.
+fn time(k: Kernel, args: &[Args], t: &Timing, out: &mut [f64]) -> f64 {
+    let (k, o) = (black_box(k), out.as_mut_ptr());
     let mut total = 0.0;
-    for block in args.chunks(block()) {
+    for block in args.chunks(t.block) {
         // SAFETY: every sample holds its model's lengths of values
-        let read: f64 = block.iter().map(|a| unsafe { a.touch(lengths) }).sum();
+        let read: f64 = block.iter().map(|a| unsafe { a.touch(t.lengths) }).sum();
         black_box(read);
         let start = thread_cpu_ns();
         for a in block {
@@ -134,7 +142,7 @@ fn time(k: Kernel, args: &[Args], lengths: [usize; 5], out: &mut [f64]) -> f64 {
             // `out` holds more than the row's outputs
             unsafe { k(black_box(a), o) };
         }
-        total += thread_cpu_ns() - start - cost;
+        total += thread_cpu_ns() - start - t.clock_cost;
     }
     black_box(out);
     total / args.len() as f64
@@ -144,9 +152,14 @@ fn time(k: Kernel, args: &[Args], lengths: [usize; 5], out: &mut [f64]) -> f64 {
 fn race(kernels: &[Kernel], args: &[Args], model: Model) -> Vec<f64> {
     let mut out = vec![0.0; 64];
     let mut rounds = vec![Vec::new(); kernels.len()];
+    let timing = Timing {
+        lengths: model.lengths(),
+        block: block(),
+        clock_cost: clock_cost(),
+    };
     for _ in 0..REPS {
         for (k, r) in kernels.iter().zip(&mut rounds) {
-            r.push(time(*k, args, model.lengths(), &mut out));
+            r.push(time(*k, args, &timing, &mut out));
         }
     }
     rounds
