@@ -31,7 +31,7 @@ mod sink;
 mod solver;
 mod square_root;
 
-use covariance::{correlation, correlation_warnings, psd_inverse, set_covariance};
+use covariance::{correlation, correlation_warnings, psd_inverse, set_covariance, sizes};
 pub use options::{FitError, FitOptions, FitResult, Likelihood, ParamEstimate, BASIN_TOLERANCE};
 use residuals::{has_start_nuisance, priors, run_residuals, start_columns};
 pub use residuals::{normal_equations, residual_sums, residuals, sightings_from_truth};

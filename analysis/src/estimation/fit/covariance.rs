@@ -119,6 +119,12 @@ pub(super) fn correlation_warnings(
     warnings
 }
 
+/// The sizes of the free parameters `free` at `p`, against which
+/// [`correlation_warnings`] judges their standard deviations.
+pub(super) fn sizes(r: &Runner, free: &[usize], p: &[f64]) -> Vec<f64> {
+    free.iter().map(|&i| r.param_scale(i, p[i])).collect()
+}
+
 /// Replace `res`'s standard deviations (of the parameters it determines)
 /// and correlations by those of `cov` (a covariance of its free
 /// parameters), and its correlation warnings with them: the stage that made
@@ -127,9 +133,7 @@ pub(super) fn correlation_warnings(
 /// where the reported matrix had 0.963).
 pub(super) fn set_covariance(r: &Runner, res: &mut FitResult, cov: &DMatrix<f64>) {
     let names: Vec<&str> = res.free.iter().map(|&i| r.names[i].as_str()).collect();
-    let scale: Vec<f64> = (res.free.iter())
-        .map(|&i| r.param_scale(i, res.p[i]))
-        .collect();
+    let scale = sizes(r, &res.free, &res.p);
     set_covariance_named(&names, &scale, res, cov);
 }
 

@@ -9,8 +9,8 @@
 use super::options::BelowRoundOff;
 use super::{
     arrow, correlation, correlation_warnings, cosine, normal_equations, orthonormal, psd_inverse,
-    residual_sums, start_columns, FitError, FitOptions, FitResult, Start, Sums, MAX_DOUBLINGS,
-    PERSISTENT, ROUND_OFF, STEP_TOLERANCE, UNDETERMINED_INFORMATION,
+    residual_sums, sizes, start_columns, FitError, FitOptions, FitResult, Start, Sums,
+    MAX_DOUBLINGS, PERSISTENT, ROUND_OFF, STEP_TOLERANCE, UNDETERMINED_INFORMATION,
 };
 use crate::model_on_log::deadreckon;
 use crate::model_on_log::linalg;
@@ -588,10 +588,8 @@ impl Stage<'_> {
             })
             .collect();
         let corr = correlation(&cov);
-        let sizes: Vec<f64> = (self.u.free.iter())
-            .map(|&i| self.r.param_scale(i, bare.p[i]))
-            .collect();
-        let correlated = correlation_warnings(&names, &sizes, &corr, &std);
+        let scale = sizes(self.r, &self.u.free, &bare.p);
+        let correlated = correlation_warnings(&names, &scale, &corr, &std);
         warnings.extend(correlated.iter().cloned());
         for (k, &i) in self.u.free.iter().enumerate() {
             let (lo, hi) = self.u.bounds[k];
